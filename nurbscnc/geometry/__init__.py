@@ -1,0 +1,1 @@
+"""Geometry: path segments, NURBS evaluation, PH quintics."""

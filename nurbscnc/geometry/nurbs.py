@@ -1,0 +1,423 @@
+"""Vectorised NURBS evaluation, curvature and arc length (SPEC §2, §10 first bullet).
+
+Everything here works on whole arrays of parameter values at once: the Python loops run over
+the degree and derivative order (small), never over samples.
+
+References: L. Piegl & W. Tiller, *The NURBS Book*, 2nd ed. (A2.1 FindSpan, A2.3 DersBasisFuns,
+A4.2 RatCurveDerivs).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from functools import cached_property
+from math import comb
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:  # pragma: no cover - typing only
+    from nurbscnc.geometry.segments import Nurbs
+
+#: 16-point Gauss–Legendre nodes and weights on [-1, 1] (exact for polynomials of degree 31).
+GL_NODES, GL_WEIGHTS = np.polynomial.legendre.leggauss(16)
+GL_NODES.setflags(write=False)
+GL_WEIGHTS.setflags(write=False)
+
+#: A point whose speed |C'| is at most this fraction of the curve's characteristic speed
+#: (bounding-box diagonal / parameter range) is treated as a cusp: κ = +inf, dκ/du = 0.
+CUSP_SPEED_FRACTION = 1e-12
+
+
+def _as_params(u) -> np.ndarray:
+    """Parameters as a 1-D float64 array (a scalar becomes an array of length 1)."""
+    return np.atleast_1d(np.asarray(u, dtype=float)).ravel()
+
+
+# ---------------------------------------------------------------------------------------------
+# B-spline basis (Piegl & Tiller A2.1, A2.3), vectorised over samples
+# ---------------------------------------------------------------------------------------------
+
+
+def find_span(knots: np.ndarray, degree: int, u) -> np.ndarray:
+    """Knot span index i with knots[i] <= u < knots[i+1] for each u (P&T A2.1).
+
+    Vectorised with ``np.searchsorted``; u at (or beyond) the end maps to the last non-empty
+    span n-1 and u before the start to span p, so the result is always a valid span of a clamped
+    knot vector (n = len(knots) - p - 1 control points).
+    """
+    knots = np.asarray(knots, dtype=float)
+    n_ctrl = knots.size - degree - 1
+    span = np.searchsorted(knots, _as_params(u), side="right") - 1
+    return np.clip(span, degree, n_ctrl - 1)
+
+
+def basis_derivatives(
+    knots: np.ndarray, degree: int, u, n_ders: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Non-zero B-spline basis functions and derivatives at many parameters (P&T A2.3).
+
+    Returns ``(spans, ders)``: ``spans`` (m,) from :func:`find_span`, and ``ders`` of shape
+    (m, n_ders + 1, degree + 1) with ``ders[s, k, j]`` = d^k N_{spans[s]-p+j, p}/du^k (u_s).
+    Derivatives of order > p are zero.
+    """
+    knots = np.asarray(knots, dtype=float)
+    u = _as_params(u)
+    p = degree
+    m = u.size
+    spans = find_span(knots, p, u)
+
+    # Arrays keep the sample axis last so every per-(j, r) slice is contiguous.
+    # ndu[j, r] (r < j): knot differences; ndu[r, j] (r <= j): basis functions of degree j.
+    ndu = np.empty((p + 1, p + 1, m))
+    ndu[0, 0] = 1.0
+    left = np.empty((p + 1, m))
+    right = np.empty((p + 1, m))
+    for j in range(1, p + 1):
+        left[j] = u - knots[spans + 1 - j]
+        right[j] = knots[spans + j] - u
+        saved = np.zeros(m)
+        for r in range(j):
+            # The denominator covers [knots[span], knots[span+1]] (a non-empty span): never 0.
+            ndu[j, r] = right[r + 1] + left[j - r]
+            temp = ndu[r, j - 1] / ndu[j, r]
+            ndu[r, j] = saved + right[r + 1] * temp
+            saved = left[j - r] * temp
+        ndu[j, j] = saved
+
+    ders_t = np.zeros((n_ders + 1, p + 1, m))  # [k, r, sample]
+    ders_t[0] = ndu[:, p]
+    n_top = min(n_ders, p)
+    a = np.empty((2, p + 1, m))
+    for r in range(p + 1):
+        a[0, 0] = 1.0
+        s1, s2 = 0, 1
+        for k in range(1, n_top + 1):
+            d = np.zeros(m)
+            rk, pk = r - k, p - k
+            if r >= k:
+                a[s2, 0] = a[s1, 0] / ndu[pk + 1, rk]
+                d = a[s2, 0] * ndu[rk, pk]
+            j1 = 1 if rk >= -1 else -rk
+            j2 = k - 1 if r - 1 <= pk else p - r
+            for j in range(j1, j2 + 1):
+                a[s2, j] = (a[s1, j] - a[s1, j - 1]) / ndu[pk + 1, rk + j]
+                d += a[s2, j] * ndu[rk + j, pk]
+            if r <= pk:
+                a[s2, k] = -a[s1, k - 1] / ndu[pk + 1, r]
+                d += a[s2, k] * ndu[r, pk]
+            ders_t[k, r] = d
+            s1, s2 = s2, s1
+    factor = float(p)
+    for k in range(1, n_top + 1):
+        ders_t[k] *= factor  # p!/(p-k)!
+        factor *= p - k
+    ders = ders_t.transpose(2, 0, 1)
+    return spans, ders
+
+
+# ---------------------------------------------------------------------------------------------
+# Curvature from derivative arrays (shared by NURBS, lines and arcs)
+# ---------------------------------------------------------------------------------------------
+
+
+def curvature_from_derivatives(d: np.ndarray, speed_floor: float = 0.0) -> np.ndarray:
+    """κ = |C'×C''| / |C'|³ (SPEC §2, eq. 14) from ``d`` = [C, C', C'', ...] (k, m, 3).
+
+    Where |C'| <= ``speed_floor`` (a cusp or a point) κ = +inf, never NaN.
+    """
+    c1, c2 = d[1], d[2]
+    speed = np.linalg.norm(c1, axis=-1)
+    cross = np.linalg.norm(np.cross(c1, c2), axis=-1)
+    cusp = speed <= speed_floor
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        kappa = cross / speed**3
+    return np.where(cusp, np.inf, kappa)
+
+
+def curvature_derivative_from_derivatives(
+    d: np.ndarray, speed_floor: float = 0.0
+) -> np.ndarray:
+    """dκ/du of a 3-D curve from ``d`` = [C, C', C'', C''', ...] (k >= 4, m, 3).
+
+    With a = C'×C'' (so a' = C'×C''') and v = |C'|:
+    κ = |a|/v³,  d|a|/du = a·a'/|a|,  dv/du = C'·C''/v, hence
+    dκ/du = (a·a')/(|a| v³) − 3 |a| (C'·C'')/v⁵.
+    In the plane a = (0, 0, x'y''−y'x'') and this is sign(x'y''−y'x'') times SPEC §2's formula.
+    Where |a| = 0 (straight piece or inflection, where |κ| has a kink) the first term is taken as
+    0 (the mean of the one-sided derivatives); where v <= ``speed_floor`` (cusp) dκ/du = 0.
+    """
+    c1, c2, c3 = d[1], d[2], d[3]
+    a = np.cross(c1, c2)
+    a_dot = np.cross(c1, c3)
+    a_norm = np.linalg.norm(a, axis=-1)
+    speed = np.linalg.norm(c1, axis=-1)
+    # |a·a'|/|a| <= |a'|, so the quotient is bounded; only 0/0 needs guarding.
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        d_a_norm = np.where(a_norm > 0.0, np.einsum("ij,ij->i", a, a_dot) / a_norm, 0.0)
+        dkappa = d_a_norm / speed**3 - 3.0 * a_norm * np.einsum("ij,ij->i", c1, c2) / speed**5
+    dkappa = np.where(speed <= speed_floor, 0.0, dkappa)
+    return np.where(np.isfinite(dkappa), dkappa, 0.0)
+
+
+# ---------------------------------------------------------------------------------------------
+# Arc-length table (SPEC §10): Gauss–Legendre per knot span, Newton inversion
+# ---------------------------------------------------------------------------------------------
+
+
+def _gl_integral(speed: Callable[[np.ndarray], np.ndarray], a, b) -> np.ndarray:
+    """∫_a^b speed(u) du by 16-point Gauss–Legendre, elementwise over arrays a, b."""
+    a = np.asarray(a, dtype=float)
+    b = np.asarray(b, dtype=float)
+    half = 0.5 * (b - a)
+    nodes = (0.5 * (a + b))[..., None] + half[..., None] * GL_NODES
+    values = speed(nodes.ravel()).reshape(nodes.shape)
+    return half * (values @ GL_WEIGHTS)
+
+
+@dataclass(frozen=True, eq=False)
+class ArcLengthTable:
+    """Cumulative arc length s(u) [mm] at breakpoints, plus GL on the partial interval.
+
+    ``breaks`` (K+1,) increasing parameters (every knot span split into equal pieces);
+    ``cumulative_mm`` (K+1,) s at the breaks (0 first); ``speed`` the function u -> |C'(u)|
+    [mm per unit u] (array in, array out). Build with :meth:`build`.
+    """
+
+    breaks: np.ndarray
+    cumulative_mm: np.ndarray
+    speed: Callable[[np.ndarray], np.ndarray]
+
+    @classmethod
+    def build(
+        cls,
+        speed: Callable[[np.ndarray], np.ndarray],
+        breakpoints,
+        rel_tol: float = 1e-13,
+        max_pieces: int = 1024,
+    ) -> ArcLengthTable:
+        """Integrate ``speed`` over each interval of ``breakpoints`` (e.g. the distinct knots).
+
+        Each interval is split into k = 1, 2, 4, ... equal pieces with 16-point GL on each,
+        doubling k until two successive totals agree to ``rel_tol`` (relative to the interval's
+        length, with a floor of 1e-3 ``rel_tol`` × the whole length) or k reaches
+        ``max_pieces``; the finer split is kept. On smooth spans the error of the kept total is
+        far below ``rel_tol`` (GL-16 converges like h^32).
+        """
+        b = np.unique(np.asarray(breakpoints, dtype=float))
+        if b.size < 2:
+            b = np.array([b[0], b[0]]) if b.size else np.zeros(2)
+        lo, hi = b[:-1], b[1:]
+        n_span = lo.size
+        prev = _gl_integral(speed, lo, hi)
+        abs_floor = 1e-3 * rel_tol * float(np.sum(prev))
+        active = np.arange(n_span)
+        starts: list[np.ndarray] = []
+        lengths: list[np.ndarray] = []
+        k = 1
+        while active.size:
+            k *= 2
+            frac = np.arange(k) / k
+            width = (hi[active] - lo[active])[:, None]
+            a = lo[active][:, None] + width * frac
+            pieces = _gl_integral(speed, a, a + width / k)  # (n_active, k)
+            total = pieces.sum(axis=1)
+            done = np.abs(total - prev[active]) <= rel_tol * total + abs_floor
+            if 2 * k > max_pieces:
+                done[:] = True
+            starts.append(a[done].ravel())
+            lengths.append(pieces[done].ravel())
+            prev[active] = total
+            active = active[~done]
+        start = np.concatenate(starts)
+        length = np.concatenate(lengths)
+        order = np.argsort(start, kind="stable")
+        breaks = np.append(start[order], b[-1])
+        cumulative = np.concatenate(([0.0], np.cumsum(length[order])))
+        breaks.setflags(write=False)
+        cumulative.setflags(write=False)
+        return cls(breaks=breaks, cumulative_mm=cumulative, speed=speed)
+
+    @property
+    def length_mm(self) -> float:
+        """Total arc length [mm]."""
+        return float(self.cumulative_mm[-1])
+
+    def _interval(self, u: np.ndarray) -> np.ndarray:
+        last = self.breaks.size - 2
+        return np.clip(np.searchsorted(self.breaks, u, side="right") - 1, 0, last)
+
+    def arc_length(self, u) -> np.ndarray:
+        """s(u) [mm] from the start; u clamped to the table's range. Vectorised."""
+        u = np.clip(_as_params(u), self.breaks[0], self.breaks[-1])
+        j = self._interval(u)
+        return self.cumulative_mm[j] + _gl_integral(self.speed, self.breaks[j], u)
+
+    def param_at_length(self, s_mm, tol_mm: float = 1e-12, max_iter: int = 100) -> np.ndarray:
+        """u with s(u) = s_mm (clamped to [0, length]), vectorised safeguarded Newton.
+
+        Start from linear interpolation in the bracketing table interval, iterate
+        u <- u - (s(u) - s)/|C'(u)| and fall back to bisection of the bracket whenever the
+        Newton step leaves it (or the speed is 0); stop at |s(u) - s| <= ``tol_mm`` or when
+        the bracket or step is an ulp of u wide (or ``max_iter`` is reached). So s(u) = s_mm
+        to 1e-12 mm or to the resolution of u itself, |C'| ulp(u), whichever is larger.
+        """
+        s = np.clip(_as_params(s_mm), 0.0, self.length_mm)
+        cum, brk = self.cumulative_mm, self.breaks
+        j = np.clip(np.searchsorted(cum, s, side="right") - 1, 0, brk.size - 2)
+        base_u, base_s = brk[j], cum[j]
+        lo, hi = brk[j].copy(), brk[j + 1].copy()
+        ds = cum[j + 1] - base_s
+        with np.errstate(divide="ignore", invalid="ignore"):
+            frac = np.where(ds > 0.0, (s - base_s) / ds, 0.0)
+        u = lo + np.clip(frac, 0.0, 1.0) * (hi - lo)
+        active = np.flatnonzero((s > base_s) & (hi > lo))
+        # s(u) is only known to rounding (a few ulps of s): on very long curves tol_mm may be
+        # below that, so the tolerance never goes under 8 ulps of s.
+        eps = np.finfo(float).eps
+        tol = np.maximum(tol_mm, 8.0 * eps * s)
+        for _ in range(max_iter):
+            if not active.size:
+                break
+            ua = u[active]
+            f = base_s[active] + _gl_integral(self.speed, base_u[active], ua) - s[active]
+            conv = np.abs(f) <= tol[active]
+            lo_a = np.where(f < 0.0, ua, lo[active])
+            hi_a = np.where(f > 0.0, ua, hi[active])
+            lo[active], hi[active] = lo_a, hi_a
+            v = self.speed(ua)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                newton = ua - f / v
+            ok = (v > 0.0) & (newton > lo_a) & (newton < hi_a)
+            new_u = np.where(ok, newton, 0.5 * (lo_a + hi_a))
+            # Stop too when the bracket or the step is down to an ulp or two of u.
+            ulps = 2.0 * eps * np.maximum(np.abs(lo_a), np.abs(hi_a))
+            tiny = (hi_a - lo_a <= ulps) | (np.abs(new_u - ua) <= ulps)
+            u[active] = np.where(conv, ua, new_u)
+            active = active[~(conv | tiny)]
+        return u
+
+
+# ---------------------------------------------------------------------------------------------
+# The rational curve
+# ---------------------------------------------------------------------------------------------
+
+
+def _readonly(values, shape_tail=()) -> np.ndarray:
+    a = np.array(values, dtype=float)
+    if shape_tail:
+        a = a.reshape((-1, *shape_tail))
+    a.setflags(write=False)
+    return a
+
+
+@dataclass(frozen=True, eq=False)
+class NurbsCurve:
+    """A rational B-spline curve C(u) = Σ N_{i,p} w_i P_i / Σ N_{i,p} w_i (SPEC §2, eq. 1).
+
+    ``knots`` (n+p+1,) clamped; ``control_points_mm`` (n, 3) [mm]; ``weights`` (n,) > 0. The
+    input is assumed valid (the interpreter validates). Parameters passed to the evaluation
+    methods are clamped to [u_start, u_end]. The arc-length table is built lazily, once.
+    Satisfies :class:`nurbscnc.geometry.paths.PathGeometry`.
+    """
+
+    degree: int
+    knots: np.ndarray
+    control_points_mm: np.ndarray
+    weights: np.ndarray
+
+    def __post_init__(self):
+        object.__setattr__(self, "degree", int(self.degree))
+        object.__setattr__(self, "knots", _readonly(self.knots))
+        object.__setattr__(self, "control_points_mm", _readonly(self.control_points_mm, (3,)))
+        object.__setattr__(self, "weights", _readonly(self.weights))
+
+    @classmethod
+    def from_segment(cls, seg: Nurbs) -> NurbsCurve:
+        """The curve of a ``segments.Nurbs``."""
+        return cls(seg.degree, seg.knots, seg.control_points_mm, seg.weights)
+
+    @property
+    def u_start(self) -> float:
+        return float(self.knots[self.degree])
+
+    @property
+    def u_end(self) -> float:
+        return float(self.knots[-self.degree - 1])
+
+    @property
+    def breakpoints(self) -> np.ndarray:
+        """Distinct knots in [u_start, u_end] (where derivatives may jump)."""
+        k = self.knots[self.degree : self.knots.size - self.degree]
+        return np.unique(k)
+
+    @cached_property
+    def _homogeneous(self) -> np.ndarray:
+        """Control points in homogeneous form [w x, w y, w z, w] (n, 4)."""
+        w = self.weights[:, None]
+        return np.hstack((self.control_points_mm * w, w))
+
+    @cached_property
+    def speed_floor(self) -> float:
+        """Speed |C'| [mm/unit u] at or below which a point counts as a cusp (κ = inf)."""
+        diag_mm = float(np.linalg.norm(np.ptp(self.control_points_mm, axis=0)))
+        span = self.u_end - self.u_start
+        if diag_mm == 0.0 or not span > 0.0:
+            # All control points equal: the curve is a point; |C'| is pure rounding noise.
+            return np.inf
+        return CUSP_SPEED_FRACTION * diag_mm / span
+
+    def derivatives(self, u, order: int = 3) -> np.ndarray:
+        """[C, C', ..., C^(order)] at u: shape (order+1, len(u), 3) [mm / unit u^k].
+
+        Homogeneous B-spline derivatives A^(k), w^(k) from :func:`basis_derivatives`, then the
+        quotient rule (P&T A4.2): C^(k) = (A^(k) − Σ_{i=1..k} C(k,i) w^(i) C^(k−i)) / w.
+        """
+        u = np.clip(_as_params(u), self.u_start, self.u_end)
+        p = self.degree
+        spans, ders = basis_derivatives(self.knots, p, u, order)
+        idx = spans[:, None] - p + np.arange(p + 1)
+        hom = np.einsum("skj,sjd->ksd", ders, self._homogeneous[idx], optimize=True)
+        w = hom[..., 3]
+        out = np.empty((order + 1, u.size, 3))
+        for k in range(order + 1):
+            v = hom[k, :, :3].copy()
+            for i in range(1, k + 1):
+                v -= comb(k, i) * w[i][:, None] * out[k - i]
+            out[k] = v / w[0][:, None]
+        return out
+
+    def point(self, u) -> np.ndarray:
+        """C(u) [mm], shape (len(u), 3)."""
+        return self.derivatives(u, 0)[0]
+
+    def speed(self, u) -> np.ndarray:
+        """|C'(u)| [mm per unit u]."""
+        return np.linalg.norm(self.derivatives(u, 1)[1], axis=-1)
+
+    def curvature(self, u) -> np.ndarray:
+        """κ(u) = |C'×C''|/|C'|³ [1/mm] (SPEC §2, eq. 14); +inf at cusps, never NaN."""
+        return curvature_from_derivatives(self.derivatives(u, 2), self.speed_floor)
+
+    def curvature_derivative(self, u) -> np.ndarray:
+        """dκ/du [1/mm per unit u]; see :func:`curvature_derivative_from_derivatives`."""
+        return curvature_derivative_from_derivatives(self.derivatives(u, 3), self.speed_floor)
+
+    @cached_property
+    def arc_table(self) -> ArcLengthTable:
+        """The arc-length table over the knot spans (built on first use)."""
+        return ArcLengthTable.build(self.speed, self.breakpoints)
+
+    @property
+    def length_mm(self) -> float:
+        """Total arc length [mm] (SPEC §10)."""
+        return self.arc_table.length_mm
+
+    def arc_length(self, u) -> np.ndarray:
+        """s(u) [mm] from u_start."""
+        return self.arc_table.arc_length(u)
+
+    def param_at_length(self, s_mm) -> np.ndarray:
+        """u with s(u) = s_mm [mm] (to 1e-12 mm); s clamped to [0, length_mm]."""
+        return self.arc_table.param_at_length(s_mm)

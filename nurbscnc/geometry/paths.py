@@ -1,0 +1,278 @@
+"""One geometric interface for every segment kind: lines, arcs (circle/helix/spiral), NURBS.
+
+Later stages (corner detection, feed planning, interpolation) see a segment only through
+:class:`PathGeometry`: a parameter range [u_start, u_end], derivatives with respect to u,
+curvature, and the arc-length map s(u) with its inverse. For lines and constant-radius arcs u
+*is* the arc length [mm] (so ``param_at_length`` is exact); for a spiral arc (radius changing
+with angle) u = (angle fraction) × L and s(u) comes from a Gauss–Legendre table; for NURBS u is
+the knot parameter (:mod:`nurbscnc.geometry.nurbs`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+from nurbscnc.errors import GeometryError
+from nurbscnc.geometry import segments
+from nurbscnc.geometry.nurbs import (
+    ArcLengthTable,
+    NurbsCurve,
+    curvature_derivative_from_derivatives,
+    curvature_from_derivatives,
+)
+
+
+@runtime_checkable
+class PathGeometry(Protocol):
+    """What every segment's geometry offers (u arrays in, arrays out; scalars accepted).
+
+    ``derivatives(u, order)`` has shape (order+1, len(u), 3): C, C', ... [mm / unit u^k];
+    ``arc_length(u)`` [mm] from u_start; ``param_at_length(s_mm)`` its inverse;
+    ``curvature(u)`` κ [1/mm]; ``curvature_derivative(u)`` dκ/du.
+    """
+
+    @property
+    def u_start(self) -> float: ...
+
+    @property
+    def u_end(self) -> float: ...
+
+    @property
+    def length_mm(self) -> float: ...
+
+    def derivatives(self, u, order: int = 3) -> np.ndarray: ...
+
+    def point(self, u) -> np.ndarray: ...
+
+    def arc_length(self, u) -> np.ndarray: ...
+
+    def param_at_length(self, s_mm) -> np.ndarray: ...
+
+    def curvature(self, u) -> np.ndarray: ...
+
+    def curvature_derivative(self, u) -> np.ndarray: ...
+
+
+def _params(u) -> np.ndarray:
+    return np.atleast_1d(np.asarray(u, dtype=float)).ravel()
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / np.linalg.norm(v)
+
+
+@dataclass(frozen=True, eq=False)
+class LineGeometry:
+    """The segment from ``start_mm`` to ``end_mm`` [mm], parameterised by arc length u ∈ [0, L].
+
+    C(u) = start + u t with t the unit direction (t = 0 for a zero-length line). κ = 0.
+    """
+
+    start_mm: np.ndarray
+    end_mm: np.ndarray
+
+    def __post_init__(self):
+        object.__setattr__(self, "start_mm", segments.vec3(self.start_mm))
+        object.__setattr__(self, "end_mm", segments.vec3(self.end_mm))
+
+    u_start = 0.0
+
+    @cached_property
+    def length_mm(self) -> float:
+        return float(np.linalg.norm(self.end_mm - self.start_mm))
+
+    @property
+    def u_end(self) -> float:
+        return self.length_mm
+
+    @cached_property
+    def direction(self) -> np.ndarray:
+        """Unit tangent t (zero vector for a zero-length line)."""
+        length = self.length_mm
+        return (self.end_mm - self.start_mm) / length if length > 0.0 else np.zeros(3)
+
+    def derivatives(self, u, order: int = 3) -> np.ndarray:
+        """[C, C', 0, ...], shape (order+1, len(u), 3); u clamped to [0, L]."""
+        u = np.clip(_params(u), 0.0, self.length_mm)
+        out = np.zeros((order + 1, u.size, 3))
+        # Interpolate from both ends so u = L gives end_mm exactly (not start + L t).
+        length = self.length_mm
+        frac = u / length if length > 0.0 else np.zeros_like(u)
+        out[0] = self.start_mm + frac[:, None] * (self.end_mm - self.start_mm)
+        out[0][frac == 1.0] = self.end_mm
+        if order >= 1:
+            out[1] = self.direction
+        return out
+
+    def point(self, u) -> np.ndarray:
+        return self.derivatives(u, 0)[0]
+
+    def arc_length(self, u) -> np.ndarray:
+        return np.clip(_params(u), 0.0, self.length_mm)
+
+    def param_at_length(self, s_mm) -> np.ndarray:
+        return np.clip(_params(s_mm), 0.0, self.length_mm)
+
+    def curvature(self, u) -> np.ndarray:
+        return np.zeros(_params(u).size)
+
+    def curvature_derivative(self, u) -> np.ndarray:
+        return np.zeros(_params(u).size)
+
+
+def _rotated(cos_t: np.ndarray, sin_t: np.ndarray, quarter_turns: int) -> tuple:
+    """(cos, sin) of θ + k π/2, exactly (k-th derivative of (cos θ, sin θ) w.r.t. θ)."""
+    return [
+        (cos_t, sin_t),
+        (-sin_t, cos_t),
+        (-cos_t, -sin_t),
+        (sin_t, -cos_t),
+    ][quarter_turns % 4]
+
+
+@dataclass(frozen=True, eq=False)
+class ArcGeometry:
+    """A circular, helical or (slightly) spiral arc.
+
+    With fraction t ∈ [0, 1], θ = t Δθ, r(t) = r0 + t (r1 − r0):
+    C = origin + r(t) (cos θ e1 + sin θ e2) + t H n, where e1 is the in-plane start direction,
+    e2 = n × e1 (so positive Δθ is counter-clockwise about n, G3) and H the helical rise.
+    The parameter is u = t L ∈ [0, L] with L the true arc length: for constant radius
+    L = hypot(r Δθ, H) and u is exactly arc length; for a spiral L and s(u) come from a
+    Gauss–Legendre table (:class:`ArcLengthTable`).
+    """
+
+    origin_mm: np.ndarray
+    e1: np.ndarray
+    e2: np.ndarray
+    normal: np.ndarray
+    radius_start_mm: float
+    radius_end_mm: float
+    angle_rad: float
+    helix_mm: float
+
+    @classmethod
+    def from_segment(cls, seg: segments.Arc) -> ArcGeometry:
+        """Geometry of a ``segments.Arc`` (see its docstring for the conventions)."""
+        n = np.asarray(seg.normal, dtype=float)
+        n_norm = float(np.linalg.norm(n))
+        if not n_norm > 0.0:
+            raise GeometryError(f"arc on line {seg.line} has a zero normal")
+        n = n / n_norm
+        d = np.asarray(seg.start_mm, dtype=float) - np.asarray(seg.center_mm, dtype=float)
+        axial = float(d @ n)
+        d_in = d - axial * n
+        if not np.linalg.norm(d_in) > 0.0:
+            raise GeometryError(f"arc on line {seg.line} starts at its center")
+        e1 = _unit(d_in)
+        e2 = np.cross(n, e1)
+        # The axis point in the start's plane: start = origin + r0 e1 when r0 = |d_in|.
+        origin = np.asarray(seg.center_mm, dtype=float) + axial * n
+        return cls(
+            origin_mm=segments.vec3(origin),
+            e1=segments.vec3(e1),
+            e2=segments.vec3(e2),
+            normal=segments.vec3(n),
+            radius_start_mm=float(seg.radius_start_mm),
+            radius_end_mm=float(seg.radius_end_mm),
+            angle_rad=float(seg.angle_rad),
+            helix_mm=float(seg.helix_mm),
+        )
+
+    @property
+    def is_spiral(self) -> bool:
+        return self.radius_end_mm != self.radius_start_mm
+
+    u_start = 0.0
+
+    def _derivatives_t(self, t: np.ndarray, order: int) -> np.ndarray:
+        """d^k C / dt^k for t ∈ [0, 1] (Leibniz: r'' = 0, so two terms per order)."""
+        dtheta = self.angle_rad
+        dr = self.radius_end_mm - self.radius_start_mm
+        theta = t * dtheta
+        radius = self.radius_start_mm + t * dr
+        c, s = np.cos(theta), np.sin(theta)
+        e1, e2 = self.e1, self.e2
+        out = np.empty((order + 1, t.size, 3))
+        for k in range(order + 1):
+            ck, sk = _rotated(c, s, k)
+            # d^k/dt^k [r E(θ)] = r Δθ^k E(θ + kπ/2) + k r' Δθ^(k−1) E(θ + (k−1)π/2)
+            term = (radius * dtheta**k)[:, None] * (ck[:, None] * e1 + sk[:, None] * e2)
+            if k >= 1:
+                cm, sm = _rotated(c, s, k - 1)
+                term += (k * dr * dtheta ** (k - 1)) * (cm[:, None] * e1 + sm[:, None] * e2)
+            out[k] = term
+        out[0] += self.origin_mm + (t * self.helix_mm)[:, None] * self.normal
+        if order >= 1:
+            out[1] += self.helix_mm * self.normal
+        return out
+
+    def _speed_t(self, t: np.ndarray) -> np.ndarray:
+        return np.linalg.norm(self._derivatives_t(t, 1)[1], axis=-1)
+
+    @cached_property
+    def _table_t(self) -> ArcLengthTable:
+        """Arc-length table over t ∈ [0, 1], split at quarter turns (spirals only)."""
+        quarters = max(1, int(np.ceil(abs(self.angle_rad) / (0.5 * np.pi))))
+        return ArcLengthTable.build(self._speed_t, np.linspace(0.0, 1.0, quarters + 1))
+
+    @cached_property
+    def length_mm(self) -> float:
+        """True arc length [mm]; closed form hypot(r Δθ, H) for constant radius."""
+        if not self.is_spiral:
+            return float(np.hypot(self.radius_start_mm * self.angle_rad, self.helix_mm))
+        return self._table_t.length_mm
+
+    @property
+    def u_end(self) -> float:
+        return self.length_mm
+
+    @property
+    def _u_scale(self) -> float:
+        """L, or 1 for a degenerate zero-length arc (keeps every quotient finite)."""
+        return self.length_mm if self.length_mm > 0.0 else 1.0
+
+    def derivatives(self, u, order: int = 3) -> np.ndarray:
+        """[C, C', ...] w.r.t. u = t L, shape (order+1, len(u), 3); u clamped to [0, L]."""
+        scale = self._u_scale
+        t = np.clip(_params(u) / scale, 0.0, 1.0)
+        out = self._derivatives_t(t, order)
+        for k in range(1, order + 1):
+            out[k] /= scale**k
+        return out
+
+    def point(self, u) -> np.ndarray:
+        return self.derivatives(u, 0)[0]
+
+    def arc_length(self, u) -> np.ndarray:
+        if not self.is_spiral:
+            return np.clip(_params(u), 0.0, self.length_mm)
+        return self._table_t.arc_length(_params(u) / self._u_scale)
+
+    def param_at_length(self, s_mm) -> np.ndarray:
+        if not self.is_spiral:
+            return np.clip(_params(s_mm), 0.0, self.length_mm)
+        return self._u_scale * self._table_t.param_at_length(s_mm)
+
+    def curvature(self, u) -> np.ndarray:
+        """κ [1/mm]; r/(r² + c²) with c = H/Δθ on a helix, 1/r on a circle."""
+        return curvature_from_derivatives(self.derivatives(u, 2))
+
+    def curvature_derivative(self, u) -> np.ndarray:
+        """dκ/du [1/mm²] (0 for constant radius up to rounding)."""
+        return curvature_derivative_from_derivatives(self.derivatives(u, 3))
+
+
+def geometry_of(segment) -> PathGeometry:
+    """The :class:`PathGeometry` of a Line, Arc or Nurbs segment."""
+    if isinstance(segment, segments.Line):
+        return LineGeometry(segment.start_mm, segment.end_mm)
+    if isinstance(segment, segments.Arc):
+        return ArcGeometry.from_segment(segment)
+    if isinstance(segment, segments.Nurbs):
+        return NurbsCurve.from_segment(segment)
+    raise TypeError(f"no path geometry for a {type(segment).__name__}")

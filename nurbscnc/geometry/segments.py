@@ -1,0 +1,158 @@
+"""Path segments: the interpreter's output, in absolute mm with feeds in mm/s.
+
+Plain frozen data; numpy vectors are read-only ``float64`` arrays of shape ``(3,)`` (x, y, z).
+Every segment carries the 1-based source ``line`` it came from.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+def vec3(values) -> np.ndarray:
+    """A read-only float64 copy of a 3-vector [mm]."""
+    a = np.array(values, dtype=float).reshape(3)
+    a.setflags(write=False)
+    return a
+
+
+def frozen_array(values, dtype=float) -> np.ndarray:
+    """A read-only numpy copy of ``values``."""
+    a = np.array(values, dtype=dtype)
+    a.setflags(write=False)
+    return a
+
+
+#: The unit normal of each plane-select mode; G2 turns clockwise, i.e. a negative angle, about
+#: it (RS274/NGC: "clockwise as seen from the positive end of the axis normal to the plane").
+PLANE_NORMALS = {"XY": (0.0, 0.0, 1.0), "ZX": (0.0, 1.0, 0.0), "YZ": (1.0, 0.0, 0.0)}
+#: The two in-plane axis indices (first, second) of each plane, as RS274/NGC orders them.
+PLANE_AXES = {"XY": (0, 1), "ZX": (2, 0), "YZ": (1, 2)}
+
+
+@dataclass(frozen=True, eq=False, slots=True)
+class Line:
+    """A straight move from ``start_mm`` to ``end_mm`` [mm] at ``feed_mm_s`` [mm/s].
+
+    ``rapid`` marks G0 (the planner moves it at the machine's rapid rate; ``feed_mm_s`` is 0).
+    The end points are plain ``(x, y, z)`` tuples, not arrays: CAM programs hold millions of
+    lines, and a tuple costs a fraction of an array's memory and construction time.
+    """
+
+    start_mm: tuple
+    end_mm: tuple
+    feed_mm_s: float
+    line: int
+    rapid: bool = False
+
+    @property
+    def kind(self) -> str:
+        return "rapid" if self.rapid else "line"
+
+    @property
+    def length_mm(self) -> float:
+        return float(np.linalg.norm(np.subtract(self.end_mm, self.start_mm)))
+
+
+@dataclass(frozen=True, eq=False)
+class Arc:
+    """A circular or helical arc (G2/G3).
+
+    The tool turns by ``angle_rad`` (signed: positive is counter-clockwise about ``normal``)
+    around ``center_mm`` (in the plane of ``start_mm``), from ``start_mm`` to ``end_mm``, while
+    advancing ``helix_mm`` along ``normal``. ``radius_start_mm`` and ``radius_end_mm`` may differ
+    by the small amount RS274/NGC tolerates; the radius then changes linearly with the angle.
+    """
+
+    start_mm: np.ndarray
+    end_mm: np.ndarray
+    center_mm: np.ndarray
+    normal: np.ndarray
+    angle_rad: float
+    helix_mm: float
+    radius_start_mm: float
+    radius_end_mm: float
+    feed_mm_s: float
+    line: int
+    plane: str = "XY"
+
+    kind = "arc"
+
+    @property
+    def length_mm(self) -> float:
+        # Mean radius times angle, combined with the helical rise (exact for constant radius).
+        r_mm = 0.5 * (self.radius_start_mm + self.radius_end_mm)
+        return float(np.hypot(r_mm * self.angle_rad, self.helix_mm))
+
+
+@dataclass(frozen=True, eq=False)
+class Nurbs:
+    """A rational B-spline of ``degree`` p (order p + 1) in 3-D.
+
+    ``knots`` (n + p + 1,) clamped and non-decreasing; ``control_points_mm`` (n, 3) [mm];
+    ``weights`` (n,) > 0; ``plane`` the plane-select mode it was programmed in.
+    """
+
+    degree: int
+    knots: np.ndarray
+    control_points_mm: np.ndarray
+    weights: np.ndarray
+    feed_mm_s: float
+    line: int
+    plane: str = "XY"
+
+    kind = "nurbs"
+
+    @property
+    def start_mm(self) -> np.ndarray:
+        return self.control_points_mm[0]
+
+    @property
+    def end_mm(self) -> np.ndarray:
+        return self.control_points_mm[-1]
+
+
+@dataclass(frozen=True, eq=False)
+class Dwell:
+    """A timed stop (G4) of ``seconds`` [s] at ``position_mm`` (an ``(x, y, z)`` tuple)."""
+
+    seconds: float
+    position_mm: tuple
+    line: int
+
+    kind = "dwell"
+    feed_mm_s = 0.0
+    length_mm = 0.0
+
+    @property
+    def start_mm(self) -> tuple:
+        return self.position_mm
+
+    @property
+    def end_mm(self) -> tuple:
+        return self.position_mm
+
+
+Segment = Line | Arc | Nurbs | Dwell
+
+
+@dataclass(frozen=True)
+class Note:
+    """Something the user should know that is not an error (an ignored word, an assumption)."""
+
+    line: int
+    message: str
+
+
+@dataclass(frozen=True, eq=False)
+class Program:
+    """The interpreted program: ordered segments, start point, notes and block statistics."""
+
+    segments: tuple
+    start_mm: np.ndarray
+    notes: tuple = ()
+    blocks: int = 0
+    name: str = "<program>"
+    source_lines: tuple = field(default=(), repr=False)

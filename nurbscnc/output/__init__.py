@@ -1,0 +1,1 @@
+"""Writing results: files (CSV/NPZ) and streams."""

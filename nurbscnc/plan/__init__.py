@@ -1,0 +1,1 @@
+"""Look-ahead planning: corners, PH fits, feed profile, dynamics check."""

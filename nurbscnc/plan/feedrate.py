@@ -1,0 +1,291 @@
+"""Jerk-limited (S-curve) speed transitions along arc length: closed forms and inverses.
+
+SPEC §7. A *transition* takes the feed from ``v_a`` to ``v_b`` [mm/s] with the classic
+7-phase jerk-limited profile restricted to one direction of change: jerk ``±J`` for ``t_j``,
+constant acceleration ``a_p`` for ``t_c``, jerk ``∓J`` for ``t_j``. The acceleration starts
+and ends at zero (trapezoidal acceleration, triangular when ``A_max`` is not reached), so
+transitions can be chained at any speed without an acceleration jump. With
+``Δv = |v_b − v_a|``:
+
+- ``Δv ≥ A²/J`` (A reached):  ``t_j = A/J``, ``t_c = Δv/A − A/J``, ``T = Δv/A + A/J``
+- ``Δv < A²/J``:              ``t_j = √(Δv/J)``, ``t_c = 0``,        ``T = 2√(Δv/J)``
+- distance ``D = (v_a + v_b)·T/2`` (the acceleration is symmetric about ``T/2``, so the
+  speed is antisymmetric about its mean).
+
+``D`` grows strictly with ``v_b`` (both factors grow), so it can be inverted: the largest
+speed reachable from ``v_a`` within a distance (:func:`max_reachable_speed`, closed form) and
+the peak speed of a piece too short to cruise (:func:`peak_speed`, bisection as in SPEC §7).
+These replace the ``v² = v0² + 2·A·d`` rule of constant-acceleration look-ahead (Klipper's
+squared-velocity scan), which has no jerk limit.
+
+The array functions accept scalars or numpy arrays (broadcast) and return a ``float`` when
+every input is a scalar. :func:`max_reachable_speed_scalar` is the same closed form in plain
+``math`` for the planner's sequential scans, where numpy's per-call overhead would dominate.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from nurbscnc.errors import ConfigError, PlanningError
+
+__all__ = [
+    "check_limits",
+    "max_entry_speed",
+    "max_reachable_speed",
+    "max_reachable_speed_scalar",
+    "peak_speed",
+    "peak_speed_unchecked",
+    "scurve_distance_mm",
+    "scurve_duration_s",
+    "scurve_timing",
+]
+
+
+def check_limits(a_max_mm_s2: float, j_max_mm_s3: float) -> tuple[float, float]:
+    """Validate the acceleration [mm/s²] and jerk [mm/s³] limits; return them as floats.
+
+    Raises :class:`ConfigError` unless both are finite and > 0.
+    """
+    a = float(a_max_mm_s2)
+    j = float(j_max_mm_s3)
+    if not (math.isfinite(a) and a > 0.0):
+        raise ConfigError(f"a_max_mm_s2 must be finite and > 0, got {a_max_mm_s2!r}")
+    if not (math.isfinite(j) and j > 0.0):
+        raise ConfigError(f"j_max_mm_s3 must be finite and > 0, got {j_max_mm_s3!r}")
+    return a, j
+
+
+def _speeds(name: str, values) -> np.ndarray:
+    """float64 array of finite speeds/distances ≥ 0, or :class:`PlanningError`."""
+    arr = np.asarray(values, dtype=float)
+    if not np.all(np.isfinite(arr)) or np.any(arr < 0.0):
+        raise PlanningError(f"{name} must be finite and >= 0")
+    return arr
+
+
+def _out(x: np.ndarray, scalar: bool):
+    return float(x) if scalar else x
+
+
+# The two distance evaluations below (array and scalar) use the same operations in the same
+# order, so they round identically: the planner checks feasibility with one and builds the
+# motion with the other.
+def _distance_arr(v_a: np.ndarray, v_b: np.ndarray, a: float, j: float) -> np.ndarray:
+    dv = np.abs(v_b - v_a)
+    t = np.where(dv * j >= a * a, dv / a + a / j, 2.0 * np.sqrt(dv / j))
+    return 0.5 * (v_a + v_b) * t
+
+
+def _distance_scalar(v_a: float, v_b: float, a: float, j: float) -> float:
+    dv = abs(v_b - v_a)
+    t = dv / a + a / j if dv * j >= a * a else 2.0 * math.sqrt(dv / j)
+    return 0.5 * (v_a + v_b) * t
+
+
+def scurve_timing(v_a_mm_s, v_b_mm_s, a_max_mm_s2: float, j_max_mm_s3: float):
+    """Phase times of the S-curve transition ``v_a → v_b`` (SPEC §7).
+
+    Returns ``(t_jerk_s, t_const_s, a_peak_mm_s2)``: the duration of each of the two jerk
+    phases, of the constant-acceleration phase, and the peak |acceleration| (``= J·t_jerk``,
+    which equals ``A_max`` when it is reached). Total time ``2·t_jerk + t_const``.
+    """
+    a, j = check_limits(a_max_mm_s2, j_max_mm_s3)
+    scalar = np.ndim(v_a_mm_s) == 0 and np.ndim(v_b_mm_s) == 0
+    dv = np.abs(_speeds("v_b_mm_s", v_b_mm_s) - _speeds("v_a_mm_s", v_a_mm_s))
+    reached = dv * j >= a * a  # Δv ≥ A²/J
+    t_j = np.where(reached, a / j, np.sqrt(dv / j))
+    # Δv/A − A/J ≥ 0 on this branch; the clamp only removes a rounding -1 ulp at the boundary.
+    t_c = np.where(reached, np.maximum(dv / a - a / j, 0.0), 0.0)
+    a_p = j * t_j
+    return _out(t_j, scalar), _out(t_c, scalar), _out(a_p, scalar)
+
+
+def scurve_duration_s(v_a_mm_s, v_b_mm_s, a_max_mm_s2: float, j_max_mm_s3: float):
+    """Duration T [s] of the S-curve ``v_a → v_b``: ``Δv/A + A/J`` or ``2√(Δv/J)`` (SPEC §7)."""
+    a, j = check_limits(a_max_mm_s2, j_max_mm_s3)
+    scalar = np.ndim(v_a_mm_s) == 0 and np.ndim(v_b_mm_s) == 0
+    dv = np.abs(_speeds("v_b_mm_s", v_b_mm_s) - _speeds("v_a_mm_s", v_a_mm_s))
+    t = np.where(dv * j >= a * a, dv / a + a / j, 2.0 * np.sqrt(dv / j))
+    return _out(t, scalar)
+
+
+def scurve_distance_mm(v_a_mm_s, v_b_mm_s, a_max_mm_s2: float, j_max_mm_s3: float):
+    """Distance D [mm] covered by the S-curve ``v_a → v_b``: ``(v_a + v_b)·T/2`` (SPEC §7)."""
+    a, j = check_limits(a_max_mm_s2, j_max_mm_s3)
+    scalar = np.ndim(v_a_mm_s) == 0 and np.ndim(v_b_mm_s) == 0
+    d = _distance_arr(_speeds("v_a_mm_s", v_a_mm_s), _speeds("v_b_mm_s", v_b_mm_s), a, j)
+    return _out(d, scalar)
+
+
+def _reach_closed_form_scalar(v0: float, d: float, a: float, j: float) -> float:
+    """The closed form of :func:`max_reachable_speed` in plain math (``d > 0``)."""
+    a2j = a * a / j
+    if d > (2.0 * v0 + a2j) * a / j:
+        # A reached: Δv² + b·Δv + c = 0, b = 2v0 + A²/J, c = −2A(d − v0·A/J) < 0;
+        # the cancellation-free root 2|c| / (b + √(b² + 4|c|)).
+        b = 2.0 * v0 + a2j
+        c = 2.0 * a * (d - v0 * a / j)
+        return v0 + 2.0 * c / (b + math.sqrt(b * b + 4.0 * c))
+    # A not reached: x = √(Δv/J) solves x³ + p·x − r = 0, p = 2v0/J, r = d/J.
+    p = 2.0 * v0 / j
+    r = d / j
+    if p > 0.0:
+        z = 1.5 * r / p * math.sqrt(3.0 / p)
+        if z <= 1.0:
+            x = 2.0 * math.sqrt(p / 3.0) * math.sinh(math.asinh(z) / 3.0)
+            return v0 + j * x * x
+    u = math.cbrt(0.5 * r + math.sqrt(0.25 * r * r + p * p * p / 27.0))
+    x = u - p / (3.0 * u)
+    return v0 + j * x * x
+
+
+def max_reachable_speed_scalar(
+    v_from_mm_s: float, distance_mm: float, a_max_mm_s2: float, j_max_mm_s3: float
+) -> float:
+    """Largest ``v ≥ v_from`` [mm/s] with ``D(v_from → v) ≤ distance`` (closed form, plain math).
+
+    Same closed form and float guard as :func:`max_reachable_speed`, without input checks:
+    this is the inner loop of the look-ahead scans (the caller validated its inputs).
+    """
+    v0, d, a, j = v_from_mm_s, distance_mm, a_max_mm_s2, j_max_mm_s3
+    if d <= 0.0:
+        return v0
+    v = _reach_closed_form_scalar(v0, d, a, j)
+    # Float guard: D evaluated in floats must not exceed d. Near Δv = 0, D ~ 2v0·√(Δv/J)
+    # is so steep that one ulp of v can change D by several per cent, so step down (by a
+    # doubling number of ulps; v0 itself always fits) until it does.
+    step = 1
+    while v > v0 and _distance_scalar(v0, v, a, j) > d:
+        v = max(v0, v - step * math.ulp(v))
+        step *= 2
+    return v
+
+
+def max_reachable_speed(v_from_mm_s, distance_mm, a_max_mm_s2: float, j_max_mm_s3: float):
+    """Largest ``v_to ≥ v_from`` [mm/s] reachable by an S-curve within ``distance`` [mm].
+
+    Inverts ``D(v_from → v_to) = distance`` in closed form (SPEC §7 closed forms):
+
+    - ``distance > (2v0 + A²/J)·A/J`` (A reached): ``D = (2v0 + Δv)(Δv/A + A/J)/2`` is a
+      quadratic in Δv, solved by its cancellation-free root;
+    - otherwise ``D = (2v0 + Δv)·2√(Δv/J)/2``; with ``x = √(Δv/J)`` this is the depressed
+      cubic ``x³ + (2v0/J)·x − D/J = 0`` with one real root, taken in the hyperbolic form
+      ``x = 2√(p/3)·sinh(asinh(z)/3)``, ``z = (3r/2p)√(3/p)`` for ``z ≤ 1`` and Cardano's
+      ``x = u − p/(3u)``, ``u = ∛(r/2 + √(r²/4 + p³/27))`` otherwise (each is free of
+      cancellation on its side).
+
+    The result is then lowered by whole ulps, if needed, until :func:`scurve_distance_mm`
+    of it (in floats) is ≤ ``distance``: a planner chaining these speeds never gets a piece
+    that is a rounding too short. (When ``Δv`` is below one ulp of ``v_from`` the answer is
+    ``v_from`` or its next float.)
+
+    By the symmetry ``D(v_a → v_b) = D(v_b → v_a)`` this is also the largest speed from which
+    one can decelerate to ``v_from`` within ``distance`` (:func:`max_entry_speed`).
+    """
+    a, j = check_limits(a_max_mm_s2, j_max_mm_s3)
+    scalar = np.ndim(v_from_mm_s) == 0 and np.ndim(distance_mm) == 0
+    v0, d = np.broadcast_arrays(
+        _speeds("v_from_mm_s", v_from_mm_s), _speeds("distance_mm", distance_mm)
+    )
+    a2j = a * a / j
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        # A reached.
+        b = 2.0 * v0 + a2j
+        c = 2.0 * a * (d - v0 * a / j)
+        dv_reached = 2.0 * c / (b + np.sqrt(b * b + 4.0 * c))
+        # A not reached.
+        p = 2.0 * v0 / j
+        r = d / j
+        z = 1.5 * r / p * np.sqrt(3.0 / p)
+        x_hyp = 2.0 * np.sqrt(p / 3.0) * np.sinh(np.arcsinh(z) / 3.0)
+        u = np.cbrt(0.5 * r + np.sqrt(0.25 * r * r + p * p * p / 27.0))
+        x_car = u - p / (3.0 * u)
+        x = np.where((p > 0.0) & (z <= 1.0), x_hyp, x_car)
+        dv_free = j * x * x
+    dv = np.where(d > b * a / j, dv_reached, dv_free)
+    v = np.where(d > 0.0, v0 + dv, v0)
+    # Float guard (see max_reachable_speed_scalar).
+    step = 1.0
+    bad = np.flatnonzero((v > v0) & (_distance_arr(v0, v, a, j) > d))
+    while bad.size:
+        v_bad = np.maximum(v0[bad], v[bad] - step * np.spacing(v[bad]))
+        v[bad] = v_bad
+        bad = bad[(v_bad > v0[bad]) & (_distance_arr(v0[bad], v_bad, a, j) > d[bad])]
+        step *= 2.0
+    return _out(v, scalar)
+
+
+def max_entry_speed(v_to_mm_s, distance_mm, a_max_mm_s2: float, j_max_mm_s3: float):
+    """Largest speed [mm/s] from which an S-curve decelerates to ``v_to`` within ``distance``.
+
+    ``D`` is symmetric in its end speeds, so this is :func:`max_reachable_speed`.
+    """
+    return max_reachable_speed(v_to_mm_s, distance_mm, a_max_mm_s2, j_max_mm_s3)
+
+
+def _pair_distance_mm(v_s, v_p, v_e, a, j):
+    """``D(v_s → v_p) + D(v_p → v_e)`` for arrays already validated (``v_p ≥ v_s, v_e``)."""
+    return _distance_arr(v_s, v_p, a, j) + _distance_arr(v_p, v_e, a, j)
+
+
+def peak_speed_unchecked(v_s, v_e, length, v_cap, a: float, j: float) -> np.ndarray:
+    """:func:`peak_speed` on validated float arrays, without the feasibility check.
+
+    Returns the largest ``v_p`` in ``[max(v_s, v_e), v_cap]`` whose pair distance is ≤
+    ``length`` (``max(v_s, v_e)`` itself when even that does not fit: the caller's rounding).
+    The bisection keeps the feasible end, so the cruise left over is ≥ 0, and runs until the
+    bracket is two adjacent floats.
+    """
+    v_s, v_e, length, v_cap = np.broadcast_arrays(v_s, v_e, length, v_cap)
+    shape = v_s.shape
+    v_s, v_e, length, v_cap = (np.ravel(x) for x in (v_s, v_e, length, v_cap))
+    lo = np.maximum(v_s, v_e)
+    hi = np.maximum(v_cap, lo)
+    out = hi.astype(float, copy=True)
+    todo = np.flatnonzero(_pair_distance_mm(v_s, hi, v_e, a, j) > length)
+    out[todo] = lo[todo]
+    lo_t, hi_t = lo[todo], hi[todo]
+    vs_t, ve_t, len_t = v_s[todo], v_e[todo], length[todo]
+    for _ in range(1100):  # a float64 bracket collapses in ≤ ~1075 halvings; usually ~60
+        mid = 0.5 * (lo_t + hi_t)
+        live = (mid > lo_t) & (mid < hi_t)  # else lo, hi are adjacent floats: done
+        if not live.all():
+            todo, lo_t, hi_t, mid = todo[live], lo_t[live], hi_t[live], mid[live]
+            vs_t, ve_t, len_t = vs_t[live], ve_t[live], len_t[live]
+        if todo.size == 0:
+            break
+        ok = _pair_distance_mm(vs_t, mid, ve_t, a, j) <= len_t
+        lo_t = np.where(ok, mid, lo_t)
+        hi_t = np.where(ok, hi_t, mid)
+        out[todo] = lo_t
+    return out.reshape(shape)
+
+
+def peak_speed(v_s_mm_s, v_e_mm_s, length_mm, v_cap_mm_s, a_max_mm_s2, j_max_mm_s3):
+    """Highest speed [mm/s] a piece of ``length`` can peak at between ``v_s`` and ``v_e``.
+
+    ``v_cap`` when ``D(v_s → v_cap) + D(v_cap → v_e) ≤ length`` (the piece cruises at the
+    cap), else the ``v_p`` solving ``D(v_s → v_p) + D(v_p → v_e) = length`` by bisection on
+    ``[max(v_s, v_e), v_cap]`` (SPEC §7; the sum is strictly increasing in ``v_p``).
+
+    Raises :class:`PlanningError` if ``v_cap < max(v_s, v_e)`` or the piece is too short
+    even to go straight from ``v_s`` to ``v_e`` (relative slack 1e-12).
+    """
+    a, j = check_limits(a_max_mm_s2, j_max_mm_s3)
+    scalar = all(np.ndim(x) == 0 for x in (v_s_mm_s, v_e_mm_s, length_mm, v_cap_mm_s))
+    v_s, v_e, length, v_cap = np.broadcast_arrays(
+        _speeds("v_s_mm_s", v_s_mm_s),
+        _speeds("v_e_mm_s", v_e_mm_s),
+        _speeds("length_mm", length_mm),
+        _speeds("v_cap_mm_s", v_cap_mm_s),
+    )
+    lo = np.maximum(v_s, v_e)
+    if np.any(v_cap < lo):
+        raise PlanningError("peak_speed: v_cap is below an end speed")
+    need = _pair_distance_mm(v_s, lo, v_e, a, j)
+    if np.any(need > length * (1.0 + 1e-12) + 1e-300):
+        raise PlanningError("peak_speed: piece too short for its end speeds")
+    return _out(peak_speed_unchecked(v_s, v_e, length, v_cap, a, j), scalar)

@@ -1,0 +1,369 @@
+"""Jerk-limited feed profile over a sequence of pieces, with bidirectional look-ahead.
+
+SPEC §7 (bidirectional scan, S-curve per piece) and §10. Pure 1-D kinematics along the arc
+length ``s`` [mm]: a piece is only its length, its cruise cap and the caps at its two ends.
+
+Planning (Python per piece, O(k)):
+
+1. Junction caps: each junction's cap is lowered to the caps of the pieces on both sides
+   (the speed is continuous there). The first and last junctions are 0: rest.
+2. Backward scan from the program end at rest: ``w_i = min(cap_i, R(w_{i+1}, L_i))``, with
+   ``R(v, L)`` the largest speed an S-curve reaches from ``v`` within ``L``
+   (:func:`~nurbscnc.plan.feedrate.max_reachable_speed`; the jerk-limited counterpart of
+   the ``v² = v0² + 2·A·L`` rule in Klipper's look-ahead over squared velocities).
+3. Optional bounded look-ahead of ``N`` pieces: a controller that sees only ``N`` pieces
+   ahead must be able to stop at the end of what it sees, so junction ``i`` is also capped by
+   the backward scan started at rest at junction ``i + N``.
+4. Forward scan from the start at rest: ``v_{i+1} = min(w_{i+1}, R(v_i, L_i))``. After the
+   two scans every piece can join its end speeds (``D(v_i → v_{i+1}) ≤ L_i``) and each
+   junction speed is the largest such (it equals its cap or one of the two reach bounds).
+5. Per piece: S-curve up from ``v_i`` to the peak ``v_p`` (the piece cap, or the bisection
+   peak of SPEC §7 when the piece is too short to reach it), cruise at ``v_p``, S-curve down
+   to ``v_{i+1}``.
+
+Decision: every S-curve starts and ends at zero acceleration, so the acceleration is zero at
+every junction and at both ends of every cruise. This is a little slower than carrying
+acceleration across junctions (a chain of short accelerating pieces pays ``A/J`` of jerk
+ramps per piece), but it keeps pieces independent, makes a junction a single speed number and
+makes every joint trivially continuous in ``v`` and ``a``.
+
+The result, :class:`Profile`, holds the motion exactly: a list of phases of constant jerk,
+so ``s(t)`` is a cubic on each; :meth:`Profile.sample` evaluates it for any array of times.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from nurbscnc.errors import ConfigError, PlanningError
+from nurbscnc.plan.feedrate import (
+    check_limits,
+    max_reachable_speed,
+    max_reachable_speed_scalar,
+    peak_speed_unchecked,
+    scurve_distance_mm,
+    scurve_timing,
+)
+
+__all__ = ["Profile", "ProfileInput", "plan_profile"]
+
+
+def _frozen(values, dtype=float) -> np.ndarray:
+    a = np.array(values, dtype=dtype)
+    a.setflags(write=False)
+    return a
+
+
+@dataclass(frozen=True, eq=False)
+class ProfileInput:
+    """What the feed profile needs to know about ``k`` pieces (SPEC §7).
+
+    Attributes
+    ----------
+    length_mm : (k,) arc length of each piece, finite ≥ 0 [mm].
+    v_max_mm_s : (k,) cruise cap within each piece, finite > 0 [mm/s].
+    v_junction_max_mm_s : (k+1,) cap at each junction (piece starts, then the program end),
+        ≥ 0, may be ``inf`` [mm/s]. The first and last must be 0 (start and end at rest); a 0
+        inside is an exact stop.
+    a_max_mm_s2, j_max_mm_s3 : tangential acceleration [mm/s²] and jerk [mm/s³] limits.
+    lookahead_pieces : ``None`` (see the whole program) or how many pieces ahead the planner
+        sees (≥ 1); it then keeps the ability to stop within them.
+    """
+
+    length_mm: np.ndarray
+    v_max_mm_s: np.ndarray
+    v_junction_max_mm_s: np.ndarray
+    a_max_mm_s2: float
+    j_max_mm_s3: float
+    lookahead_pieces: int | None = None
+
+    def __post_init__(self):
+        a, j = check_limits(self.a_max_mm_s2, self.j_max_mm_s3)
+        length = _frozen(self.length_mm)
+        v_max = _frozen(self.v_max_mm_s)
+        v_junction = _frozen(self.v_junction_max_mm_s)
+        if length.ndim != 1 or length.size < 1:
+            raise PlanningError("length_mm must be a 1-D array of at least one piece")
+        k = length.size
+        if v_max.shape != (k,) or v_junction.shape != (k + 1,):
+            raise PlanningError(
+                f"shapes: length_mm {length.shape}, v_max_mm_s {v_max.shape} (need ({k},)), "
+                f"v_junction_max_mm_s {v_junction.shape} (need ({k + 1},))"
+            )
+        if not np.all(np.isfinite(length)) or np.any(length < 0.0):
+            raise PlanningError("length_mm must be finite and >= 0")
+        if not np.all(np.isfinite(v_max)) or np.any(v_max <= 0.0):
+            raise PlanningError("v_max_mm_s must be finite and > 0")
+        if np.any(np.isnan(v_junction)) or np.any(v_junction < 0.0):
+            raise PlanningError("v_junction_max_mm_s must be >= 0 (inf allowed)")
+        if v_junction[0] != 0.0 or v_junction[-1] != 0.0:
+            raise PlanningError("the first and last junction caps must be 0 (rest)")
+        n = self.lookahead_pieces
+        if n is not None:
+            if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < 1:
+                raise ConfigError(f"lookahead_pieces must be None or an integer >= 1, got {n!r}")
+            n = int(n)
+        for name, value in (
+            ("length_mm", length),
+            ("v_max_mm_s", v_max),
+            ("v_junction_max_mm_s", v_junction),
+            ("a_max_mm_s2", a),
+            ("j_max_mm_s3", j),
+            ("lookahead_pieces", n),
+        ):
+            object.__setattr__(self, name, value)
+
+    @property
+    def piece_count(self) -> int:
+        return int(self.length_mm.size)
+
+
+@dataclass(frozen=True, eq=False)
+class Profile:
+    """A planned feed profile: piecewise constant jerk along the path, exactly.
+
+    Phase ``p`` starts at ``phase_start_time_s[p]`` and lasts ``phase_duration_s[p]``; with
+    ``τ = t − t_p`` its motion is ``s = s0 + v0·τ + a0·τ²/2 + jerk·τ³/6``. Phases of zero
+    duration are omitted; ``phase_piece_index`` says which piece each belongs to. All arrays
+    are read-only.
+
+    Attributes
+    ----------
+    total_length_mm, duration_s : the whole path [mm] and its time [s].
+    junction_speeds_mm_s : (k+1,) planned speed at each junction [mm/s].
+    piece_peak_speed_mm_s : (k,) cruise (or peak) speed of each piece [mm/s].
+    piece_start_mm : (k,) arc length at each piece start [mm] (cumulative lengths).
+    piece_start_time_s : (k,) time at which each piece starts [s].
+    """
+
+    total_length_mm: float
+    duration_s: float
+    junction_speeds_mm_s: np.ndarray
+    piece_peak_speed_mm_s: np.ndarray
+    piece_start_mm: np.ndarray
+    piece_start_time_s: np.ndarray
+    phase_start_time_s: np.ndarray
+    phase_duration_s: np.ndarray
+    phase_s0_mm: np.ndarray
+    phase_v0_mm_s: np.ndarray
+    phase_a0_mm_s2: np.ndarray
+    phase_jerk_mm_s3: np.ndarray
+    phase_piece_index: np.ndarray
+
+    @property
+    def piece_count(self) -> int:
+        return int(self.piece_start_mm.size)
+
+    @property
+    def piece_start_s(self) -> np.ndarray:
+        """Arc length ``s`` [mm] at each piece start; the same array as ``piece_start_mm``."""
+        return self.piece_start_mm
+
+    def sample(self, t_s) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Evaluate the profile at times ``t_s`` [s] (any shape, any order).
+
+        Returns ``(s_mm, v_mm_s, a_mm_s2, j_mm_s3, piece_index)`` of the same shape. Before 0
+        the machine is at rest at ``s = 0``; from ``duration_s`` on it is at rest at exactly
+        ``total_length_mm`` (in the last piece). ``v`` is clipped at 0 and ``s`` to
+        ``[0, total_length_mm]`` (both only remove rounding: mathematically they hold).
+        """
+        t = np.asarray(t_s, dtype=float)
+        shape = t.shape
+        t = t.ravel()
+        n = self.phase_start_time_s.size
+        if n == 0:  # every piece has zero length: the machine never moves
+            z = np.zeros(shape)
+            return z, z.copy(), z.copy(), z.copy(), np.zeros(shape, dtype=np.int64)
+        idx = np.searchsorted(self.phase_start_time_s, t, side="right") - 1
+        np.clip(idx, 0, n - 1, out=idx)
+        tau = np.clip(t - self.phase_start_time_s[idx], 0.0, self.phase_duration_s[idx])
+        jerk = self.phase_jerk_mm_s3[idx]
+        a0 = self.phase_a0_mm_s2[idx]
+        v0 = self.phase_v0_mm_s[idx]
+        s = self.phase_s0_mm[idx] + tau * (v0 + tau * (0.5 * a0 + tau * (jerk / 6.0)))
+        v = v0 + tau * (a0 + (0.5 * tau) * jerk)
+        a = a0 + tau * jerk
+        piece = self.phase_piece_index[idx]
+        before = t < 0.0
+        after = t >= self.duration_s
+        if before.any():
+            s[before] = 0.0
+            v[before] = a[before] = jerk[before] = 0.0
+        if after.any():
+            s[after] = self.total_length_mm
+            v[after] = a[after] = jerk[after] = 0.0
+            piece[after] = self.piece_count - 1
+        np.maximum(v, 0.0, out=v)
+        np.clip(s, 0.0, self.total_length_mm, out=s)
+        return (
+            s.reshape(shape),
+            v.reshape(shape),
+            a.reshape(shape),
+            jerk.reshape(shape),
+            piece.reshape(shape),
+        )
+
+
+def _window_caps(
+    cap: np.ndarray, length: np.ndarray, w_back: np.ndarray, n: int, a: float, j: float
+) -> np.ndarray:
+    """Junction caps of an ``n``-piece look-ahead: stop-able at rest at junction ``i + n``.
+
+    All chains (one per junction ``i`` whose window ends before the program end) step back
+    together, vectorised over ``i``. A chain that meets the full backward scan ``w_back``
+    (equal at some junction, e.g. because a cap or an exact stop bounds both) would follow it
+    from there on, so its answer is ``w_back[i]`` and it is dropped early.
+    """
+    k = length.size
+    out = w_back.copy()
+    if n >= k:
+        return out
+    i = np.arange(1, k - n)  # junction i + n is inside the program (< k)
+    m = i + n
+    w = np.zeros(i.size)
+    for _ in range(n):
+        m = m - 1
+        w = np.minimum(cap[m], max_reachable_speed(w, length[m], a, j))
+        live = w < w_back[m]
+        if not live.all():
+            i, m, w = i[live], m[live], w[live]
+        if i.size == 0:
+            break
+    out[i] = np.minimum(w, w_back[i])
+    return out
+
+
+def _repair_junctions(v: np.ndarray, length: np.ndarray, a: float, j: float) -> np.ndarray:
+    """Make ``D(v_i → v_{i+1}) ≤ L_i`` hold in floats for every piece (in place; returned).
+
+    The scans satisfy it mathematically and, with the float guard of the reach function,
+    almost always in floats too; a rounding step at the A²/J branch switch of ``D`` can leave
+    a piece an ulp short. Such a piece gets the higher of its end speeds lowered by a
+    doubling number of ulps; a lowered junction re-checks its other piece.
+    """
+    bad = np.flatnonzero(scurve_distance_mm(v[:-1], v[1:], a, j) > length)
+    work = [int(x) for x in bad]
+    k = length.size
+    while work:
+        i = work.pop()
+        step = 1.0
+        while scurve_distance_mm(v[i], v[i + 1], a, j) > length[i]:
+            hi, lo = (i, i + 1) if v[i] > v[i + 1] else (i + 1, i)
+            v[hi] = max(v[lo], v[hi] - step * math.ulp(v[hi]))
+            step *= 2.0
+            other = i - 1 if hi == i else i + 1  # the other piece that touches junction hi
+            if 0 <= other < k:
+                work.append(other)
+    return v
+
+
+def plan_profile(inp: ProfileInput) -> Profile:
+    """Plan the jerk-limited feed profile of ``inp`` (SPEC §7; see the module docstring).
+
+    Cost O(k) Python steps for the two scans plus vectorised numpy for the peaks (bisection)
+    and the phases; a bounded look-ahead adds O(k·N) vectorised work at worst.
+    """
+    a, j = inp.a_max_mm_s2, inp.j_max_mm_s3
+    length = np.array(inp.length_mm)
+    v_max = np.array(inp.v_max_mm_s)
+    k = length.size
+
+    # 1. Junction caps, lowered to the neighbouring pieces' cruise caps.
+    cap = np.array(inp.v_junction_max_mm_s)
+    cap[:-1] = np.minimum(cap[:-1], v_max)
+    cap[1:] = np.minimum(cap[1:], v_max)
+
+    # 2. Backward scan from the end at rest (plain floats: numpy per element is slower).
+    reach = max_reachable_speed_scalar
+    length_l = length.tolist()
+    cap_l = cap.tolist()
+    w_back = [0.0] * (k + 1)
+    w = 0.0
+    for i in range(k - 1, -1, -1):
+        w = reach(w, length_l[i], a, j)
+        if cap_l[i] < w:
+            w = cap_l[i]
+        w_back[i] = w
+
+    # 3. Bounded look-ahead.
+    if inp.lookahead_pieces is not None and inp.lookahead_pieces < k:
+        w_back = _window_caps(cap, length, np.array(w_back), inp.lookahead_pieces, a, j).tolist()
+
+    # 4. Forward scan from the start at rest.
+    v_l = [0.0] * (k + 1)
+    w = 0.0
+    for i in range(k):
+        w = reach(w, length_l[i], a, j)
+        if w_back[i + 1] < w:
+            w = w_back[i + 1]
+        v_l[i + 1] = w
+    v = _repair_junctions(np.array(v_l), length, a, j)
+
+    # 5. Per piece: peak speed, then the seven phases.
+    v_s, v_e = v[:-1], v[1:]
+    v_p = peak_speed_unchecked(v_s, v_e, length, v_max, a, j)
+    tj1, tc1, ap1 = scurve_timing(v_s, v_p, a, j)
+    tj2, tc2, ap2 = scurve_timing(v_p, v_e, a, j)
+    d_acc = scurve_distance_mm(v_s, v_p, a, j)
+    d_dec = scurve_distance_mm(v_p, v_e, a, j)
+    cruise = np.maximum(length - d_acc - d_dec, 0.0)  # ≥ 0 up to an ulp, by the bisection
+    if np.any((cruise > 0.0) & (v_p <= 0.0)):
+        raise PlanningError("a piece has length but no reachable speed (length underflow)")
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t_cr = np.where(cruise > 0.0, cruise / v_p, 0.0)
+
+    bounds = np.concatenate(([0.0], np.cumsum(length)))
+    start, end = bounds[:-1], bounds[1:]
+    half_j1 = 0.5 * j * tj1 * tj1
+    half_j2 = 0.5 * j * tj2 * tj2
+    sixth_j1 = j * tj1**3 / 6.0
+    sixth_j2 = j * tj2**3 / 6.0
+    zero = np.zeros(k)
+    dur = np.stack([tj1, tc1, tj1, t_cr, tj2, tc2, tj2], axis=1)
+    jerk = np.broadcast_to(np.array([j, 0.0, -j, 0.0, -j, 0.0, j]), (k, 7))
+    a0 = np.stack([zero, ap1, ap1, zero, zero, -ap2, -ap2], axis=1)
+    v0 = np.stack([v_s, v_s + half_j1, v_p - half_j1, v_p, v_p, v_p - half_j2, v_e + half_j2], 1)
+    # Positions are anchored at both ends of the piece (the S-curves' closed-form distances),
+    # not accumulated, so each piece ends exactly where the next begins. Phase distances:
+    # jerk ramp up from v_s: v_s·t + J·t³/6; ramp down into v_p: v_p·t − J·t³/6 (and the
+    # mirror images for the deceleration).
+    s0 = np.stack(
+        [
+            start,
+            start + (v_s * tj1 + sixth_j1),
+            start + d_acc - (v_p * tj1 - sixth_j1),
+            start + d_acc,
+            end - d_dec,
+            end - d_dec + (v_p * tj2 - sixth_j2),
+            end - (v_e * tj2 + sixth_j2),
+        ],
+        axis=1,
+    )
+    # Times: cumulative sums, so phase starts never decrease (a piece's last phase start is
+    # ≤ its end because the row cumsum only adds non-negative durations).
+    t_in_piece = np.cumsum(dur, axis=1)
+    piece_dur = t_in_piece[:, -1]
+    piece_end_time = np.cumsum(piece_dur)
+    piece_start_time = np.concatenate(([0.0], piece_end_time[:-1]))
+    t0 = piece_start_time[:, None] + (t_in_piece - dur)
+
+    keep = (dur > 0.0).ravel()
+    piece_idx = np.repeat(np.arange(k, dtype=np.int64), 7)
+    return Profile(
+        total_length_mm=float(bounds[-1]),
+        duration_s=float(piece_end_time[-1]),
+        junction_speeds_mm_s=_frozen(v),
+        piece_peak_speed_mm_s=_frozen(v_p),
+        piece_start_mm=_frozen(start),
+        piece_start_time_s=_frozen(piece_start_time),
+        phase_start_time_s=_frozen(t0.ravel()[keep]),
+        phase_duration_s=_frozen(dur.ravel()[keep]),
+        phase_s0_mm=_frozen(s0.ravel()[keep]),
+        phase_v0_mm_s=_frozen(v0.ravel()[keep]),
+        phase_a0_mm_s2=_frozen(a0.ravel()[keep]),
+        phase_jerk_mm_s3=_frozen(jerk.ravel()[keep]),
+        phase_piece_index=_frozen(piece_idx[keep], dtype=np.int64),
+    )

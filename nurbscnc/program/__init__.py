@@ -1,0 +1,1 @@
+"""The language front end: parse G-code text, interpret modal state into path segments."""

@@ -1,0 +1,354 @@
+"""Parse G-code text into blocks (one per source line) with lark's LALR parser.
+
+The grammar lives in ``nurbscnc/grammars/gcode.lark``. The whole file is parsed in one call
+with an inline transformer, so no parse tree is built: each line becomes a :class:`Block`
+of words, parameter assignments and comments. Values are floats, or for anything involving
+parameters or operators a small expression made of tuples (see :func:`is_constant`), which
+the interpreter evaluates with the parameter values in force on that line.
+
+Expression tuples:
+``("#", ref)`` numbered parameter, ``("<", name)`` named parameter, ``("neg", v)``,
+``("op", OP, a, b)`` with OP one of + - * / MOD ** EQ NE GT GE LT LE AND OR XOR,
+``("fn", NAME, v)``, ``("atan", y, x)``, ``("exists", name)``.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import re
+from importlib import resources
+from typing import NamedTuple
+
+from lark import Lark, Transformer, UnexpectedCharacters, UnexpectedInput, UnexpectedToken
+from lark.exceptions import VisitError
+
+from nurbscnc.errors import GCodeSyntaxError, NurbsCncError, SourcePos, UnsupportedError
+
+
+class Word(NamedTuple):
+    """A letter and its value (float or expression tuple) at a 1-based column."""
+
+    letter: str
+    value: object
+    column: int
+
+
+class Assign(NamedTuple):
+    """``#ref = value``: ``ref`` is ``("#", value)`` or ``("<", name)``."""
+
+    target: tuple
+    value: object
+    column: int
+
+
+class Block(NamedTuple):
+    """One source line: block-delete flag, words, assignments, comments, tape mark."""
+
+    delete: bool
+    words: tuple
+    assigns: tuple
+    comments: tuple
+    percent: bool = False
+
+
+EMPTY_BLOCK = Block(False, (), (), ())
+
+
+def is_constant(value) -> bool:
+    """True when a word value is a plain number (no parameter or operator)."""
+    return type(value) is float
+
+
+def _number(token) -> float:
+    """A G-code decimal (blanks inside allowed, as LinuxCNC strips them) as a float."""
+    text = str(token)
+    if " " in text or "\t" in text:
+        text = text.replace(" ", "").replace("\t", "")
+    value = float(text)
+    if not math.isfinite(value):  # e.g. 400 digits: float() gives inf
+        raise GCodeSyntaxError(
+            f"number {text[:12]}... is out of range", SourcePos(token.line, token.column)
+        )
+    return value
+
+
+class _ToBlocks(Transformer):
+    """Inline transformer: callbacks run as the LALR parser reduces, building plain data."""
+
+    def start(self, lines):
+        return lines
+
+    def block(self, children):
+        delete = False
+        words = []
+        assigns = []
+        comments = []
+        for child in children:
+            kind = type(child)
+            if kind is Word:
+                words.append(child)
+            elif kind is Assign:
+                assigns.append(child)
+            elif kind is tuple:  # a comment: ("comment", text, column)
+                comments.append(child)
+            elif child.type == "SLASH":
+                delete = True
+            # LINE_NUMBER tokens are dropped: N words have no effect.
+        if not words and not assigns and not comments and not delete:
+            return EMPTY_BLOCK
+        return Block(delete, tuple(words), tuple(assigns), tuple(comments))
+
+    def percent(self, children):
+        return Block(False, (), (), (), True)
+
+    def comment(self, children):
+        tok = children[0]
+        return ("comment", str(tok), tok.column)
+
+    def word(self, children):
+        letter, value = children
+        return Word(letter.upper(), value, letter.column)
+
+    def assignment(self, children):
+        target, value = children
+        return Assign(target, value, 0)
+
+    def number(self, children):
+        return _number(children[0])
+
+    def param(self, children):
+        return children[0]
+
+    def named_ref(self, children):
+        return ("<", _param_name(children[0]))
+
+    def numbered_ref(self, children):
+        return ("#", children[0])
+
+    def neg(self, children):
+        v = children[0]
+        return -v if type(v) is float else ("neg", v)
+
+    def binop(self, children):
+        a, op, b = children
+        return ("op", op.upper(), a, b)
+
+    def power(self, children):
+        a, _, b = children
+        return ("op", "**", a, b)
+
+    def func(self, children):
+        name, v = children
+        return ("fn", name.upper(), v)
+
+    def atan2(self, children):
+        _, y, _, x = children
+        return ("atan", y, x)
+
+    def exists(self, children):
+        return ("exists", _param_name(children[1]))
+
+
+def _param_name(token) -> str:
+    """LinuxCNC folds case and drops blanks in parameter names: #<Feed Rate> is #<feedrate>."""
+    return str(token)[1:-1].replace(" ", "").replace("\t", "").lower()
+
+
+@functools.lru_cache(maxsize=1)
+def _parser() -> Lark:
+    grammar = resources.files("nurbscnc").joinpath("grammars/gcode.lark").read_text("utf-8")
+    return Lark(
+        grammar,
+        parser="lalr",
+        lexer="contextual",
+        transformer=_ToBlocks(),
+        maybe_placeholders=False,
+    )
+
+
+def grammar_text() -> str:
+    """The grammar source (for property tests and documentation)."""
+    return resources.files("nurbscnc").joinpath("grammars/gcode.lark").read_text("utf-8")
+
+
+# Human names for the grammar's terminals in error messages.
+_TERMINAL_NAMES = {
+    "LETTER": "a word letter",
+    "NUMBER": "a number",
+    "LSQB": "'['",
+    "RSQB": "']'",
+    "__ANON_0": "'#'",
+    "FUNC": "a function",
+    "ATAN": "ATAN",
+    "EXISTS": "EXISTS",
+    "NAMED_PARAM": "a parameter name <...>",
+    "COMMENT": "a comment",
+    "_NL": "end of line",
+    "$END": "end of file",
+    "EQUAL": "'='",
+    "MINUS": "'-'",
+    "PLUS": "'+'",
+    "SLASH": "'/'",
+    "ADD_OP": "'+' or '-'",
+    "MUL_OP": "'*' or MOD",
+    "COMPARE_OP": "a comparison",
+    "LOGIC_OP": "AND/OR/XOR",
+    "LINE_NUMBER": "a line number",
+    "PERCENT": "'%'",
+    "HASH": "'#'",
+    "POW": "'**'",
+}
+
+
+def _expected(names) -> str:
+    readable = sorted({_TERMINAL_NAMES.get(n, n) for n in names})
+    if not readable:
+        return ""
+    if len(readable) > 6:
+        readable = readable[:6] + ["..."]
+    return "; expected " + ", ".join(readable)
+
+
+def _split_lines(text: str) -> list[str]:
+    return text.replace("\r\n", "\n").replace("\r", "\n").split("\n")
+
+
+# The fast path. Most CAM output is lines of plain words ("G1 X1.5 Y-2 F300 (cut)"); for
+# those a regular expression that accepts exactly the plain-word subset of the grammar is ~5x
+# faster than lark. Every other line (parameters, expressions, "%", anything malformed) goes
+# to lark, which stays the definition of the language; a property test checks that both
+# paths give identical blocks on lines generated from the grammar.
+_NUM = r"[+-]?[ \t]*(?:[0-9][0-9 \t]*(?:\.[0-9 \t]*)?|\.[ \t]*[0-9][0-9 \t]*)"
+_SIMPLE_LINE = re.compile(
+    r"[ \t]*(/)?[ \t]*(?:[nN][ \t]*[0-9][0-9 \t]*(?:\.[0-9 \t]*)?)?"
+    r"((?:[ \t]*(?:[A-Za-z][ \t]*" + _NUM + r"|\([^()\n]*\)))*)[ \t]*(;.*)?"
+)
+_O_WORD = re.compile(r"[ \t]*(?:/[ \t]*)?(?:[nN][ \t]*[0-9][0-9 \t]*)?[oO][ \t]*[0-9<]")
+_SIMPLE_ITEM = re.compile(r"([A-Za-z])[ \t]*(" + _NUM + r")|(\([^()\n]*\))")
+
+
+def _fast_block(line: str, match) -> Block:
+    """Build the block of a line that :data:`_SIMPLE_LINE` accepted."""
+    words = []
+    comments = []
+    body_start = match.start(2)
+    for item in _SIMPLE_ITEM.finditer(match.group(2)):
+        letter = item.group(1)
+        column = body_start + item.start() + 1
+        if letter is not None:
+            text = item.group(2)
+            if " " in text or "\t" in text:
+                text = text.replace(" ", "").replace("\t", "")
+            value = float(text)
+            if not math.isfinite(value):
+                raise GCodeSyntaxError(
+                    f"number {text[:12]}... is out of range",
+                    SourcePos(0, column + item.start(2) - item.start()),
+                )
+            words.append(Word(letter.upper(), value, column))
+        else:
+            comments.append(("comment", item.group(3), column))
+    if match.group(3) is not None:
+        comments.append(("comment", match.group(3), match.start(3) + 1))
+    delete = match.group(1) is not None
+    if not words and not comments and not delete:
+        return EMPTY_BLOCK
+    return Block(delete, tuple(words), (), tuple(comments))
+
+
+def parse_text(text: str, fast: bool = True) -> list[Block]:
+    """Parse a whole program; return one :class:`Block` per physical line (index = line − 1).
+
+    Raises :class:`GCodeSyntaxError` with the line, column and source text of the first error.
+    A leading byte-order mark is dropped; CRLF and lone CR line ends are accepted. ``fast``
+    selects the regular-expression path for plain-word lines (same result, see above).
+    """
+    if text.startswith("\ufeff"):
+        text = text[1:]
+    if "\r" in text:
+        text = text.replace("\r\n", "\n").replace("\r", "\n")
+    if not fast:
+        return _parse_lark(text, 0)
+    lines = text.split("\n")
+    blocks = []
+    append = blocks.append
+    fullmatch = _SIMPLE_LINE.fullmatch
+    for index, line in enumerate(lines):
+        match = fullmatch(line)
+        if match is not None:
+            try:
+                append(_fast_block(line, match))
+            except GCodeSyntaxError as exc:
+                exc.pos = SourcePos(index + 1, exc.pos.column, line)
+                raise
+        else:
+            if _O_WORD.match(line):
+                raise UnsupportedError(
+                    "O-words (subroutines, loops, conditionals) are not supported",
+                    SourcePos(index + 1, line.lower().index("o") + 1, line),
+                )
+            append(_parse_lark(line, index)[0])
+    return blocks
+
+
+def _parse_lark(text: str, line_offset: int) -> list[Block]:
+    """Parse ``text`` (a whole file, or the one line at index ``line_offset``) with lark."""
+    try:
+        return _parse_lark_raw(text)
+    except NurbsCncError as exc:
+        if line_offset and exc.pos is not None:
+            exc.pos = SourcePos(exc.pos.line + line_offset, exc.pos.column, exc.pos.text)
+        raise
+
+
+def _parse_lark_raw(text: str) -> list[Block]:
+    try:
+        return _parser().parse(text)
+    except UnexpectedCharacters as exc:
+        lines = _split_lines(text)
+        line_text = lines[exc.line - 1] if 0 < exc.line <= len(lines) else ""
+        ch = text[exc.pos_in_stream] if exc.pos_in_stream < len(text) else ""
+        if ch == "(":
+            msg = "nested comment: '(' inside a comment"
+            if ")" not in line_text[exc.column - 1 :]:
+                msg = "unclosed comment: '(' with no ')' on the line"
+        elif ch == ")":
+            msg = "')' with no comment open"
+        elif not ch.isascii():
+            msg = f"unexpected character {ch!r} (G-code is ASCII)"
+        else:
+            msg = f"unexpected character {ch!r}" + _expected(exc.allowed or ())
+        raise GCodeSyntaxError(msg, SourcePos(exc.line, exc.column, line_text)) from None
+    except UnexpectedToken as exc:
+        lines = _split_lines(text)
+        line_no = exc.line if exc.line and exc.line > 0 else len(lines)
+        line_text = lines[line_no - 1] if 0 < line_no <= len(lines) else ""
+        tok = exc.token
+        if tok.type == "$END":
+            what = "unexpected end of line" if "\n" not in text else "unexpected end of file"
+            column = len(line_text) + 1
+        elif tok.type == "_NL":
+            what = "unexpected end of line"
+            column = len(line_text) + 1
+        elif "NUMBER" in exc.expected and tok.type in ("LETTER", "FUNC", "LOGIC_OP"):
+            what = f"expected a value (a number, [expression] or #parameter), got {str(tok)!r}"
+            column = exc.column if exc.column and exc.column > 0 else 1
+            raise GCodeSyntaxError(what, SourcePos(line_no, column, line_text)) from None
+        else:
+            what = f"unexpected {str(tok).strip()!r}"
+            column = exc.column if exc.column and exc.column > 0 else 1
+        raise GCodeSyntaxError(
+            what + _expected(exc.expected), SourcePos(line_no, column, line_text)
+        ) from None
+    except UnexpectedInput as exc:  # pragma: no cover - other lark input errors
+        raise GCodeSyntaxError(str(exc).splitlines()[0], SourcePos(1, 1, "")) from None
+    except (VisitError, NurbsCncError) as exc:
+        # A transformer callback raised (an out-of-range number): report it with its line.
+        inner = exc.orig_exc if isinstance(exc, VisitError) else exc
+        if not isinstance(inner, NurbsCncError) or inner.pos is None:
+            raise
+        lines = _split_lines(text)
+        line_no = inner.pos.line
+        inner.pos = SourcePos(line_no, inner.pos.column, lines[line_no - 1])
+        raise inner from None

@@ -1,0 +1,237 @@
+"""Machine profile: defaults = the paper's Tables 2 and 3, validation, derived feed formulas."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from nurbscnc.errors import ConfigError, OutputError
+from nurbscnc.machine import (
+    Machine,
+    chord_feed_mm_s,
+    curvature_feed_mm_s,
+    default_profile_text,
+    kappa_threshold_per_mm,
+    load_machine,
+    parse_machine,
+)
+
+# SPEC §8 Table 2 (paper Table 2), transcribed independently of the TOML file.
+TABLE2 = {
+    "x": dict(a0=1.938e9, a1=3.538e7, a2=2.135e5, a3=6.984e2, a4=1.0,
+              b0=1.938e9, b1=3.476e7, b2=1.471e5),
+    "y": dict(a0=1.904e9, a1=3.496e7, a2=2.120e5, a3=6.948e2, a4=1.0,
+              b0=1.904e9, b1=3.435e7, b2=1.466e5),
+}  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def machine() -> Machine:
+    return load_machine()
+
+
+def test_defaults_are_table3(machine):
+    lim = machine.limits
+    assert lim.v_max_mm_s == 3500.0 / 60.0
+    assert lim.rapid_mm_s == lim.v_max_mm_s  # no rapid rate in the paper: rapids at V_max
+    assert lim.a_max_mm_s2 == 2450.0
+    assert lim.j_max_mm_s3 == 5e4
+    assert lim.chord_tolerance_mm == pytest.approx(1e-3, rel=1e-15)
+    assert lim.kappa_ref_per_mm == 1.0
+    assert lim.contour_tolerance_mm == pytest.approx(15e-3, rel=1e-15)
+    assert lim.ph_tolerance_mm == pytest.approx(1e-3, rel=1e-15)
+    assert machine.servo.period_s == pytest.approx(1e-3, rel=1e-15)
+
+
+def test_defaults_are_table2(machine):
+    for axis, coeffs in TABLE2.items():
+        model = machine.servo.axis(axis)
+        for name, value in coeffs.items():
+            assert getattr(model, name) == value, (axis, name)
+        assert model.dc_gain == 1.0
+    assert machine.servo.z is None
+
+
+def test_defaults_steps_and_soft_limits(machine):
+    assert machine.steps.per_mm == (1000.0, 1000.0, 1000.0)
+    assert machine.steps.max_pulses_per_period == 127
+    assert machine.soft_limits.min_mm == (-1000.0,) * 3
+    assert machine.soft_limits.max_mm == (1000.0,) * 3
+    inside = machine.soft_limits.inside([[0, 0, 0], [1000, -1000, 0], [1000.001, 0, 0]])
+    assert inside.tolist() == [True, True, False]
+
+
+def test_parse_text_and_file_agree(machine, tmp_path):
+    path = tmp_path / "m.toml"
+    path.write_text(default_profile_text())
+    from_file = load_machine(str(path))
+    from_text = parse_machine(default_profile_text(), "x")
+    for m in (from_file, from_text):
+        assert (m.limits, m.servo, m.steps, m.soft_limits) == (
+            machine.limits, machine.servo, machine.steps, machine.soft_limits)  # fmt: skip
+    assert from_file.source == str(path)
+
+
+def test_missing_file_is_output_error(tmp_path):
+    with pytest.raises(OutputError, match="nope.toml"):
+        load_machine(str(tmp_path / "nope.toml"))
+
+
+def test_overrides():
+    m = load_machine(overrides={"limits.a_max_mm_s2": 1000, "limits.j_max_mm_s3": "2e4",
+                                "limits.rapid_mm_min": 6000.0, "servo.period_ms": 0.5})  # fmt: skip
+    assert m.limits.a_max_mm_s2 == 1000.0
+    assert m.limits.j_max_mm_s3 == 2e4
+    assert m.limits.rapid_mm_s == 100.0
+    assert m.servo.period_s == 0.5e-3
+    # a full z model through overrides
+    z = {f"servo.z.{k}": v for k, v in TABLE2["x"].items()}
+    assert load_machine(overrides=z).servo.z == load_machine().servo.x
+
+
+# Each invalid-value class: (overrides, key the message must name, words in the message).
+BAD_OVERRIDES = [
+    ({"limits.a_max_mm_s2": -5}, "limits.a_max_mm_s2", "must be > 0, got -5"),
+    ({"limits.v_max_mm_min": 0}, "limits.v_max_mm_min", "must be > 0"),
+    ({"limits.j_max_mm_s3": math.nan}, "limits.j_max_mm_s3", "finite"),
+    ({"limits.chord_tolerance_um": math.inf}, "limits.chord_tolerance_um", "finite"),
+    ({"servo.period_ms": "fast"}, "servo.period_ms", "not a value"),
+    ({"servo.period_ms": "'fast'"}, "servo.period_ms", "must be a number"),
+    ({"limits.kappa_ref_per_mm": True}, "limits.kappa_ref_per_mm", "must be a number"),
+    ({"steps.max_pulses_per_period": 12.5}, "steps.max_pulses_per_period", "integer"),
+    ({"steps.max_pulses_per_period": 0}, "steps.max_pulses_per_period", ">= 1"),
+    ({"steps.max_pulses_per_period": 50}, "steps.max_pulses_per_period", "too small"),
+    ({"limits.rapid_mm_min": 9000}, "steps.max_pulses_per_period", "too small"),
+    ({"steps.per_mm.y": -1000}, "steps.per_mm.y", "> 0"),
+    ({"soft_limits.x.min_mm": 5.0, "soft_limits.x.max_mm": 5.0}, "soft_limits.x.min_mm", "<"),
+    ({"soft_limits.z.max_mm": -2000.0}, "soft_limits.z.min_mm", "<"),
+    # all coefficients positive, yet not Hurwitz: a3·a2·a1 < a1² + a3²·a0 for this a0
+    ({"servo.x.a0": 1e13}, "servo.x", "unstable"),
+    ({"servo.y.a1": -3.496e7}, "servo.y", "unstable"),
+    ({"servo.y.b0": 0.0}, "servo.y.b0", "> 0"),
+    ({"servo.z.a0": 1.0}, "servo.z.a1", "missing"),
+    ({"limits.v_max": 1.0}, "limits.v_max", "unknown"),
+    ({"servo.x": 1.0}, "servo.x", "table"),
+]
+
+
+@pytest.mark.parametrize(("overrides", "key", "words"), BAD_OVERRIDES)
+def test_invalid_values_name_the_key(overrides, key, words):
+    with pytest.raises(ConfigError) as info:
+        load_machine(overrides=overrides)
+    assert key in info.value.message
+    assert words in info.value.message
+
+
+def _edit(old: str, new: str) -> str:
+    text = default_profile_text()
+    assert old in text
+    return text.replace(old, new, 1)
+
+
+BAD_TEXTS = [
+    (_edit("a_max_mm_s2 = 2450.0", 'a_max_mm_s2 = "2450"'), "limits.a_max_mm_s2", "number"),
+    (_edit("a_max_mm_s2 = 2450.0", "a_max_mm_s2 = nan"), "limits.a_max_mm_s2", "finite"),
+    (_edit("a_max_mm_s2 = 2450.0", "a_max_mm_s2 = -inf"), "limits.a_max_mm_s2", "finite"),
+    (_edit("a_max_mm_s2 = 2450.0\n", ""), "limits.a_max_mm_s2", "missing"),
+    (_edit("b2 = 1.466e5\n", ""), "servo.y.b2", "missing"),
+    (_edit("[servo.y]", "[servo.w]"), "servo.w", "not a known key"),
+    (_edit("x = 1000.0", "x = 1000.0\nq = 3.0"), "steps.per_mm.q", "not a known key"),
+    (_edit("[limits]", "[limit]"), "limit", "not a known key"),
+    (_edit("period_ms = 1.0", "period_ms = [1.0]"), "servo.period_ms", "number"),
+    ("limits = 3\n", "limits", "must be a table"),
+]
+
+
+@pytest.mark.parametrize(("text", "key", "words"), BAD_TEXTS)
+def test_invalid_files_name_the_key(text, key, words):
+    with pytest.raises(ConfigError) as info:
+        parse_machine(text, "bad.toml")
+    assert info.value.message.startswith("bad.toml: ")
+    assert key in info.value.message
+    assert words in info.value.message
+
+
+def test_toml_syntax_error_has_line():
+    text = _edit("j_max_mm_s3 = 5.0e4", "j_max_mm_s3 = = 5.0e4")
+    line = text.splitlines().index("j_max_mm_s3 = = 5.0e4") + 1
+    with pytest.raises(ConfigError, match=rf"bad.toml: invalid TOML: .*line {line}\b"):
+        parse_machine(text, "bad.toml")
+
+
+def test_overridden_key_is_marked():
+    with pytest.raises(ConfigError, match=r"set by override"):
+        load_machine(overrides={"limits.a_max_mm_s2": -1.0})
+
+
+# --- derived feed formulas (SPEC §5 and §7) ------------------------------------------------
+
+
+def test_kappa_threshold(machine):
+    f = 3500.0 / 60.0
+    assert machine.kappa_threshold_per_mm(f) == pytest.approx(2450.0 / f**2, rel=1e-15)
+    out = kappa_threshold_per_mm(np.array([0.0, 10.0, -1.0]), 2450.0)
+    assert out[0] == math.inf and out[2] == math.inf
+    assert out[1] == pytest.approx(24.5, rel=1e-15)
+
+
+def _chord_feed_geometry(kappa, period_s, delta):
+    # Independent derivation: on a circle of radius R the chord whose sagitta is δ has half
+    # length √(R² − (R − δ)²); the feed covers one such chord per period.
+    r = 1.0 / kappa
+    return 2.0 * math.sqrt(r * r - (r - delta) ** 2) / period_s
+
+
+def test_chord_feed_closed_form(machine):
+    for kappa in (1e-3, 0.1, 1.0, 10.0, 1000.0):
+        expected = _chord_feed_geometry(kappa, 1e-3, 1e-3)
+        assert machine.chord_feed_mm_s(kappa) == pytest.approx(expected, rel=1e-9)
+        assert machine.chord_feed_mm_s(-kappa) == machine.chord_feed_mm_s(kappa)
+    # R = 10 mm: V_af = 2000·√(0.02 − 1e-6) mm/s
+    assert machine.chord_feed_mm_s(0.1) == pytest.approx(2000.0 * math.sqrt(0.019999), rel=1e-14)
+
+
+def test_chord_feed_edges_never_nan():
+    k = np.array([0.0, 2.0 / 1e-3, 3.0 / 1e-3, np.inf, 1e-300, 1.999 / 1e-3])
+    v = chord_feed_mm_s(k, 1e-3, 1e-3)
+    assert isinstance(v, np.ndarray) and v.shape == k.shape
+    assert not np.any(np.isnan(v))
+    assert v[0] == np.inf and v[1] == 0.0 and v[2] == 0.0 and v[3] == 0.0
+    assert v[4] > 1e140 and 0.0 < v[5] < 100.0
+    assert isinstance(chord_feed_mm_s(0.5, 1e-3, 1e-3), float)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.floats(min_value=1e-4, max_value=1.0), st.floats(min_value=1e-4, max_value=1e-2))
+def test_chord_feed_has_sagitta_delta(kappa_delta, delta):
+    # The chord covered in one period deviates from the circle by exactly δ (for radius ≥ δ,
+    # i.e. κ ≤ 1/δ, where the chord cuts off the minor arc).
+    kappa = kappa_delta / delta
+    half_chord = chord_feed_mm_s(kappa, 1e-3, delta) * 1e-3 / 2.0
+    r = 1.0 / kappa
+    sagitta = r - math.sqrt(max(r * r - half_chord * half_chord, 0.0))
+    assert sagitta == pytest.approx(delta, rel=1e-6)
+
+
+def test_curvature_feed(machine):
+    v = machine.limits.v_max_mm_s
+    assert machine.curvature_feed_mm_s(0.0) == v
+    assert machine.curvature_feed_mm_s(1.0) == pytest.approx(v / 2.0, rel=1e-15)
+    assert machine.curvature_feed_mm_s(3.0, feed_mm_s=20.0) == pytest.approx(5.0, rel=1e-15)
+    out = curvature_feed_mm_s(np.array([np.inf, -1.0, 9.0]), 40.0, 1.0)
+    np.testing.assert_allclose(out, [0.0, 20.0, 4.0], rtol=1e-15)
+
+
+def test_corner_feed_is_the_minimum(machine):
+    k = np.array([0.01, 1.0, 10.0, 100.0])
+    expected = np.minimum(machine.chord_feed_mm_s(k), machine.curvature_feed_mm_s(k))
+    np.testing.assert_array_equal(machine.corner_feed_mm_s(k), expected)
+    # Table 3 machine at κ = 10 /mm: V_cf = 58.33/11 = 5.30 mm/s < V_af = 28.2 mm/s.
+    assert machine.corner_feed_mm_s(10.0) == pytest.approx(3500.0 / 60.0 / 11.0, rel=1e-15)
+    # δ = 0.01 um: V_af = 2000·√(2e-6 − 1e-10) = 2.83 mm/s governs.
+    fine = load_machine(overrides={"limits.chord_tolerance_um": 0.01})
+    assert fine.corner_feed_mm_s(10.0) == pytest.approx(2000.0 * math.sqrt(2e-6 - 1e-10), rel=1e-9)

@@ -1,0 +1,301 @@
+"""NURBS evaluation, curvature and arc length against independent references.
+
+Oracles: geomdl (P&T A4.2 in pure Python) and scipy.interpolate.BSpline on homogeneous
+coordinates [w x, w y, w z, w] with the quotient rule written out here; scipy.integrate.quad for
+arc length; closed forms for the circle and the semicubical-parabola cusp.
+"""
+
+from __future__ import annotations
+
+from math import comb
+
+import numpy as np
+import pytest
+from geomdl import NURBS
+from scipy.integrate import quad
+from scipy.interpolate import BSpline
+
+from nurbscnc.geometry import segments
+from nurbscnc.geometry.nurbs import (
+    NurbsCurve,
+    basis_derivatives,
+    curvature_derivative_from_derivatives,
+    find_span,
+)
+
+
+def random_curve(rng: np.random.Generator, degree: int) -> NurbsCurve:
+    """A random valid curve: clamped knots on [0, 1] with a repeated interior knot if possible."""
+    n = int(rng.integers(degree + 1, degree + 9))
+    inner = np.sort(rng.uniform(0.0, 1.0, n - degree - 1))
+    if inner.size >= 2 and degree >= 2:
+        inner[1] = inner[0]  # multiplicity 2 (<= p): C^(p-2) there
+    if inner.size >= 3 and degree >= 3:
+        inner[2] = inner[0]  # multiplicity 3
+    knots = np.r_[[0.0] * (degree + 1), inner, [1.0] * (degree + 1)]
+    points = rng.uniform(-50.0, 50.0, (n, 3))
+    weights = rng.uniform(0.2, 5.0, n)
+    return NurbsCurve(degree, knots, points, weights)
+
+
+def geomdl_derivatives(curve: NurbsCurve, u: np.ndarray, order: int) -> np.ndarray:
+    g = NURBS.Curve(normalize_kv=False)
+    g.degree = curve.degree
+    g.ctrlpts = curve.control_points_mm.tolist()
+    g.weights = curve.weights.tolist()
+    g.knotvector = curve.knots.tolist()
+    return np.array([g.derivatives(float(x), order) for x in u]).transpose(1, 0, 2)
+
+
+def scipy_derivatives(curve: NurbsCurve, u: np.ndarray, order: int) -> np.ndarray:
+    """Homogeneous B-spline by scipy (de Boor), then the rational quotient rule."""
+    w = curve.weights[:, None]
+    spline = BSpline(curve.knots, np.hstack((curve.control_points_mm * w, w)), curve.degree)
+    hom = np.array([spline(u, nu=k) for k in range(order + 1)])
+    out = np.empty((order + 1, u.size, 3))
+    for k in range(order + 1):
+        v = hom[k, :, :3].copy()
+        for i in range(1, k + 1):
+            v -= comb(k, i) * hom[i, :, 3:] * out[k - i]
+        out[k] = v / hom[0, :, 3:]
+    return out
+
+
+def assert_rel_close(actual: np.ndarray, expected: np.ndarray, rel: float):
+    """Per-sample vector error relative to the reference vector's norm."""
+    err = np.linalg.norm(actual - expected, axis=-1)
+    scale = np.linalg.norm(expected, axis=-1)
+    assert np.all(err <= rel * scale), float(np.max(err / scale))
+
+
+def circle(radius_mm: float) -> NurbsCurve:
+    r, h = radius_mm, np.sqrt(0.5)
+    points = [[r, 0, 0], [r, r, 0], [0, r, 0], [-r, r, 0], [-r, 0, 0],
+              [-r, -r, 0], [0, -r, 0], [r, -r, 0], [r, 0, 0]]  # fmt: skip
+    weights = [1, h, 1, h, 1, h, 1, h, 1]
+    knots = [0, 0, 0, 0.25, 0.25, 0.5, 0.5, 0.75, 0.75, 1, 1, 1]
+    return NurbsCurve(2, knots, points, weights)
+
+
+def cusp_cubic() -> NurbsCurve:
+    """Bezier form of (x, y) = (s², s³), s = 2u − 1: C'(½) = 0 (a cusp)."""
+    points = [[1, -1, 0], [-1 / 3, 1, 0], [-1 / 3, -1, 0], [1, 1, 0]]
+    return NurbsCurve(3, [0, 0, 0, 0, 1, 1, 1, 1], points, np.ones(4))
+
+
+# --------------------------------------------------------------------------------- basis
+
+
+def test_find_span_matches_definition_including_ends():
+    knots = np.array([0, 0, 0, 1, 2, 2, 3, 4, 4, 4], dtype=float)  # p = 2, n = 7
+    u = np.array([0.0, 0.5, 1.0, 1.999, 2.0, 2.5, 3.0, 3.9, 4.0])
+    expected = [2, 2, 3, 3, 5, 5, 6, 6, 6]  # knots[i] <= u < knots[i+1]; u = end -> last span
+    assert find_span(knots, 2, u).tolist() == expected
+
+
+@pytest.mark.parametrize("degree", [1, 2, 3, 4, 5])
+def test_basis_derivatives_match_scipy(degree):
+    rng = np.random.default_rng(degree)
+    curve = random_curve(rng, degree)
+    u = rng.uniform(0.0, 1.0, 40)
+    spans, ders = basis_derivatives(curve.knots, degree, u, degree + 1)
+    assert ders.shape == (40, degree + 2, degree + 1)
+    n = curve.weights.size
+    for j in range(degree + 1):
+        index = spans - degree + j
+        for k in range(degree + 1):
+            ref = np.array([
+                BSpline(curve.knots, np.eye(n)[i], degree)(x, nu=k) for i, x in zip(index, u)
+            ])  # fmt: skip
+            scale = np.max(np.abs(ders[:, k, :]), axis=1)
+            assert np.all(np.abs(ders[:, k, j] - ref) <= 1e-12 * scale)
+    np.testing.assert_allclose(ders[:, 0].sum(axis=1), 1.0, rtol=0, atol=1e-14)
+    assert np.all(ders[:, degree + 1] == 0.0)  # order > p vanishes
+
+
+# --------------------------------------------------------------------------- derivatives
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_derivatives_match_geomdl(seed):
+    rng = np.random.default_rng(seed)
+    curve = random_curve(rng, degree=seed % 5 + 1)
+    u = rng.uniform(0.0, 1.0, 25)
+    mine = curve.derivatives(u, 3)
+    assert mine.shape == (4, 25, 3)
+    ref = geomdl_derivatives(curve, u, 3)
+    for k in range(4):
+        assert_rel_close(mine[k], ref[k], 1e-12)
+    np.testing.assert_allclose(curve.point(u), mine[0], rtol=1e-14)
+
+
+@pytest.mark.parametrize("seed", range(20, 30))
+def test_derivatives_match_scipy_homogeneous(seed):
+    rng = np.random.default_rng(seed)
+    curve = random_curve(rng, degree=seed % 5 + 1)
+    u = rng.uniform(0.0, 1.0, 25)
+    mine, ref = curve.derivatives(u, 3), scipy_derivatives(curve, u, 3)
+    for k in range(4):
+        assert_rel_close(mine[k], ref[k], 1e-12)
+
+
+def test_end_points_scalars_and_clamping():
+    rng = np.random.default_rng(7)
+    curve = random_curve(rng, 3)
+    np.testing.assert_allclose(curve.point(0.0)[0], curve.control_points_mm[0], atol=1e-12)
+    np.testing.assert_allclose(curve.point(1.0)[0], curve.control_points_mm[-1], atol=1e-12)
+    assert curve.derivatives(0.3, 2).shape == (3, 1, 3)
+    outside = curve.derivatives([-0.5, 1.5], 3)
+    np.testing.assert_array_equal(outside, curve.derivatives([0.0, 1.0], 3))
+    assert (curve.u_start, curve.u_end) == (0.0, 1.0)
+
+
+def test_from_segment_copies_the_data():
+    seg = segments.Nurbs(
+        degree=2,
+        knots=segments.frozen_array([0, 0, 0, 1, 1, 1]),
+        control_points_mm=segments.frozen_array([[0, 0, 0], [1, 2, 0], [3, 0, 1]]),
+        weights=segments.frozen_array([1, 2, 1]),
+        feed_mm_s=10.0,
+        line=3,
+    )
+    curve = NurbsCurve.from_segment(seg)
+    # Quadratic Bezier, weights (1, 2, 1) at u = ½: (P0 + 4 P1 + P2)/6.
+    np.testing.assert_allclose(curve.point(0.5)[0], [7 / 6, 8 / 6, 1 / 6], rtol=1e-15)
+
+
+# ------------------------------------------------------------------------------ curvature
+
+
+def test_circle_curvature_and_length():
+    radius = 7.5
+    curve = circle(radius)
+    u = np.linspace(0.0, 1.0, 401)
+    np.testing.assert_allclose(np.linalg.norm(curve.point(u), axis=1), radius, rtol=1e-14)
+    np.testing.assert_allclose(curve.curvature(u), 1.0 / radius, rtol=1e-12)
+    np.testing.assert_allclose(curve.curvature_derivative(u), 0.0, atol=1e-12 / radius)
+    assert curve.length_mm == pytest.approx(2 * np.pi * radius, rel=1e-12, abs=0)
+    # Each quarter (a knot span) is a quarter of the circle.
+    quarters = curve.arc_length([0.25, 0.5, 0.75, 1.0])
+    np.testing.assert_allclose(quarters, np.pi * radius * np.array([0.5, 1, 1.5, 2]), rtol=1e-12)
+
+
+def test_cusp_gives_inf_not_nan():
+    curve = cusp_cubic()
+    np.testing.assert_array_equal(curve.derivatives(0.5, 1)[1], 0.0)
+    near = 0.5 + 2.0**-12  # s = 2^-11 exactly
+    u = np.r_[np.linspace(0.0, 1.0, 201), near]
+    kappa, dkappa = curve.curvature(u), curve.curvature_derivative(u)
+    assert not np.any(np.isnan(kappa)) and not np.any(np.isnan(dkappa))
+    assert kappa[100] == np.inf and dkappa[100] == 0.0
+    assert np.all(np.isfinite(np.delete(kappa, 100)))
+    # κ of (s², s³) is 6/(|s| (4 + 9 s²)^{3/2}): large but finite next to the cusp (the
+    # tolerance allows for cancellation in C' ~ s).
+    s_near = 2.0**-11
+    assert kappa[-1] == pytest.approx(6 / (s_near * (4 + 9 * s_near**2) ** 1.5), rel=1e-9)
+    # ∫_{-1}^{1} |s| sqrt(4 + 9 s²) ds = 2 (13^{3/2} − 8)/27.
+    assert curve.length_mm == pytest.approx(2 * (13**1.5 - 8) / 27, rel=1e-12, abs=0)
+    s = np.linspace(0.0, curve.length_mm, 51)
+    np.testing.assert_allclose(curve.arc_length(curve.param_at_length(s)), s, rtol=0, atol=1e-12)
+
+
+def test_repeated_control_points_stay_finite():
+    points = [[0, 0, 0], [0, 0, 0], [1, 2, 0], [3, 1, 1], [3, 1, 1], [4, 4, 4]]
+    curve = NurbsCurve(3, [0, 0, 0, 0, 0.4, 0.6, 1, 1, 1, 1], points, [1, 1, 2, 1, 3, 1])
+    u = np.linspace(0.0, 1.0, 101)
+    kappa, dkappa = curve.curvature(u), curve.curvature_derivative(u)
+    assert not np.any(np.isnan(kappa)) and np.all(np.isfinite(dkappa))
+    assert kappa[0] == np.inf  # C'(0) = 0 since P0 = P1
+    assert np.isfinite(curve.length_mm) and curve.length_mm > 0
+    s = np.linspace(0.0, curve.length_mm, 51)
+    np.testing.assert_allclose(curve.arc_length(curve.param_at_length(s)), s, rtol=0, atol=1e-12)
+
+
+def test_zero_length_curve_is_finite():
+    curve = NurbsCurve(2, [0, 0, 0, 0.5, 1, 1, 1], np.full((4, 3), 5.0), [1, 2, 3, 1])
+    assert curve.length_mm == pytest.approx(0.0, abs=1e-13)
+    u = curve.param_at_length([0.0, 1.0])
+    assert np.all(np.isfinite(u)) and np.all((u >= 0.0) & (u <= 1.0))
+    np.testing.assert_allclose(curve.point(np.linspace(0, 1, 11)), 5.0, rtol=1e-15)
+    assert not np.any(np.isnan(curve.curvature([0.0, 0.3, 1.0])))
+    assert np.all(np.isfinite(curve.curvature_derivative([0.0, 0.3, 1.0])))
+
+
+def planar_curve(rng: np.random.Generator, degree: int) -> NurbsCurve:
+    c = random_curve(rng, degree)
+    points = c.control_points_mm.copy()
+    points[:, 2] = 0.0
+    return NurbsCurve(degree, c.knots, points, c.weights)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_planar_curvature_derivative_matches_spec_formula(seed):
+    rng = np.random.default_rng(100 + seed)
+    curve = planar_curve(rng, degree=3 + seed % 3)
+    u = rng.uniform(0.05, 0.95, 30)
+    d = geomdl_derivatives(curve, u, 3)  # independent derivatives
+    (x1, y1), (x2, y2), (x3, y3) = (d[k, :, :2].T for k in (1, 2, 3))
+    speed2 = x1**2 + y1**2
+    cross = x1 * y2 - y1 * x2
+    # SPEC §2: dκ/du = [(x'y''' − y'x''')|C'|² − 3(x'y'' − y'x'')(C'·C'')] / |C'|⁵ (signed).
+    spec = ((x1 * y3 - y1 * x3) * speed2 - 3 * cross * (x1 * x2 + y1 * y2)) / speed2**2.5
+    mine = curve.curvature_derivative(u)
+    np.testing.assert_allclose(mine, np.sign(cross) * spec, rtol=1e-10, atol=0)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_curvature_derivative_matches_finite_difference(seed):
+    rng = np.random.default_rng(200 + seed)
+    curve = random_curve(rng, degree=3 + seed % 3)
+    # Stay inside knot spans (κ' jumps at low-continuity knots).
+    spans = np.unique(curve.knots)
+    mids = 0.5 * (spans[:-1] + spans[1:])
+    u, h = mids, 1e-5 * np.min(np.diff(spans))
+    fd = (curve.curvature(u + h) - curve.curvature(u - h)) / (2 * h)
+    mine = curve.curvature_derivative(u)
+    scale = np.maximum(np.abs(mine), curve.curvature(u) / np.diff(spans).min())
+    assert np.all(np.abs(mine - fd) <= 1e-5 * scale)
+    if seed == 0:  # the planar case too
+        planar = planar_curve(rng, 3)
+        fd = (planar.curvature(u + h) - planar.curvature(u - h)) / (2 * h)
+        np.testing.assert_allclose(planar.curvature_derivative(u), fd, rtol=1e-5)
+
+
+def test_curvature_derivative_is_zero_on_a_straight_line():
+    d = np.zeros((4, 3, 3))
+    d[1] = [1.0, 2.0, 3.0]
+    np.testing.assert_array_equal(curvature_derivative_from_derivatives(d), 0.0)
+
+
+# ------------------------------------------------------------------------------ arc length
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_length_matches_adaptive_quadrature(seed):
+    rng = np.random.default_rng(300 + seed)
+    curve = random_curve(rng, degree=seed % 5 + 1)
+    breaks = np.unique(curve.knots)
+    ref = sum(
+        quad(lambda x: curve.speed(x)[0], a, b, epsabs=0, epsrel=1e-13, limit=500)[0]
+        for a, b in zip(breaks[:-1], breaks[1:])
+    )
+    assert curve.length_mm == pytest.approx(ref, rel=1e-12, abs=0)
+    u = rng.uniform(0.0, 1.0, 5)
+    partial = [quad(lambda x: curve.speed(x)[0], 0.0, v, points=breaks[1:-1],
+                    epsabs=0, epsrel=1e-13, limit=500)[0] for v in u]  # fmt: skip
+    np.testing.assert_allclose(curve.arc_length(u), partial, rtol=1e-11)
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_param_at_length_inverts_arc_length(seed):
+    rng = np.random.default_rng(400 + seed)
+    curve = random_curve(rng, degree=seed % 5 + 1)
+    s = np.r_[0.0, rng.uniform(0.0, curve.length_mm, 200), curve.length_mm]
+    u = curve.param_at_length(s)
+    assert u[0] == 0.0 and u[-1] == pytest.approx(1.0, abs=1e-14)
+    # 1e-12 mm, or the resolution of u itself (an ulp of u moves the point |C'| ulp(u) mm;
+    # random knots put |C'| up to ~1e4 mm per unit u, where that is ~1e-12 mm).
+    resolution_mm = 2 * np.spacing(u) * curve.speed(u)
+    assert np.all(np.abs(curve.arc_length(u) - s) <= np.maximum(1e-12, resolution_mm))
+    v = rng.uniform(0.0, 1.0, 50)
+    np.testing.assert_allclose(curve.param_at_length(curve.arc_length(v)), v, atol=1e-12)

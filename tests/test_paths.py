@@ -1,0 +1,225 @@
+"""Lines and arcs through the PathGeometry interface, against closed forms."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.integrate import quad
+
+from nurbscnc.errors import GeometryError
+from nurbscnc.geometry import segments
+from nurbscnc.geometry.nurbs import NurbsCurve
+from nurbscnc.geometry.paths import ArcGeometry, LineGeometry, PathGeometry, geometry_of
+
+
+def make_arc(
+    center,
+    start,
+    normal,
+    angle_rad,
+    helix_mm=0.0,
+    radius_end_mm=None,
+    plane="XY",
+) -> segments.Arc:
+    """An Arc segment built the way the Arc docstring defines it (end point by closed form)."""
+    n = np.asarray(normal, float) / np.linalg.norm(normal)
+    c, p0 = np.asarray(center, float), np.asarray(start, float)
+    d = p0 - c
+    d_in = d - (d @ n) * n
+    r0 = float(np.linalg.norm(d_in))
+    r1 = r0 if radius_end_mm is None else radius_end_mm
+    e1 = d_in / r0
+    e2 = np.cross(n, e1)
+    end = c + (d @ n) * n + r1 * (np.cos(angle_rad) * e1 + np.sin(angle_rad) * e2)
+    end = end + helix_mm * n
+    return segments.Arc(
+        start_mm=segments.vec3(p0),
+        end_mm=segments.vec3(end),
+        center_mm=segments.vec3(c),
+        normal=segments.vec3(n),
+        angle_rad=angle_rad,
+        helix_mm=helix_mm,
+        radius_start_mm=r0,
+        radius_end_mm=r1,
+        feed_mm_s=20.0,
+        line=1,
+        plane=plane,
+    )
+
+
+def central_differences(geom, u: np.ndarray, order: int, h: float) -> np.ndarray:
+    """d^order C/du^order by central differences of the next lower derivative."""
+    lower = order - 1
+    return (geom.derivatives(u + h, lower)[lower] - geom.derivatives(u - h, lower)[lower]) / (
+        2 * h
+    )
+
+
+# ----------------------------------------------------------------------------------- lines
+
+
+def test_line_closed_forms():
+    line = LineGeometry([1.0, 2.0, 3.0], [4.0, 6.0, 3.0])
+    assert line.length_mm == 5.0 and line.u_start == 0.0 and line.u_end == 5.0
+    u = np.array([0.0, 1.0, 2.5, 5.0])
+    d = line.derivatives(u, 3)
+    assert d.shape == (4, 4, 3)
+    np.testing.assert_array_equal(d[0][[0, -1]], [[1, 2, 3], [4, 6, 3]])
+    np.testing.assert_allclose(d[0][2], [2.5, 4.0, 3.0], rtol=1e-15)
+    np.testing.assert_array_equal(d[1], np.tile([0.6, 0.8, 0.0], (4, 1)))
+    np.testing.assert_array_equal(d[2:], 0.0)
+    np.testing.assert_array_equal(line.arc_length(u), u)
+    np.testing.assert_array_equal(line.param_at_length([0.0, 3.3, 9.0]), [0.0, 3.3, 5.0])
+    np.testing.assert_array_equal(line.curvature(u), 0.0)
+    np.testing.assert_array_equal(line.point(2.0), d[0][[1]] * 0 + [[2.2, 3.6, 3.0]])
+
+
+def test_zero_length_line_is_finite():
+    line = LineGeometry([1.0, 1.0, 1.0], [1.0, 1.0, 1.0])
+    d = line.derivatives([0.0, 1.0], 3)
+    assert line.length_mm == 0.0 and np.all(np.isfinite(d))
+    np.testing.assert_array_equal(d[0], [[1, 1, 1], [1, 1, 1]])
+    assert np.all(line.curvature([0.0]) == 0.0)
+
+
+# ------------------------------------------------------------------------------------ arcs
+
+
+def test_circle_arc_closed_forms():
+    r = 12.5
+    seg = make_arc([10.0, -3.0, 2.0], [10.0 + r, -3.0, 2.0], (0, 0, 1), 2.0)
+    arc = ArcGeometry.from_segment(seg)
+    assert arc.length_mm == pytest.approx(2.0 * r, rel=1e-15)
+    assert arc.length_mm == pytest.approx(seg.length_mm, rel=1e-15)
+    u = np.linspace(0.0, arc.u_end, 57)
+    pts = arc.point(u)
+    np.testing.assert_allclose(np.linalg.norm(pts - seg.center_mm, axis=1), r, rtol=1e-15)
+    np.testing.assert_allclose(pts[[0, -1]], [seg.start_mm, seg.end_mm], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(arc.curvature(u), 1.0 / r, rtol=1e-12)
+    np.testing.assert_allclose(arc.curvature_derivative(u), 0.0, atol=1e-14)
+    # Unit speed: u is arc length, so the map and its inverse are the identity.
+    np.testing.assert_allclose(np.linalg.norm(arc.derivatives(u, 1)[1], axis=1), 1.0, rtol=1e-15)
+    np.testing.assert_array_equal(arc.arc_length(u), u)
+    np.testing.assert_array_equal(arc.param_at_length(u), u)
+    # Angle travelled is u/r: the point at u = r π/2 is a quarter turn from the start.
+    q = arc.point(r * np.pi / 2)[0]
+    np.testing.assert_allclose(q, [10.0, -3.0 + r, 2.0], rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("turns", [0.3, 1.0, 2.75])
+def test_helix_closed_forms(turns):
+    r, pitch_mm = 4.0, 3.0
+    angle = -2 * np.pi * turns  # G2
+    rise = pitch_mm * turns
+    seg = make_arc([0, 0, 0], [0, 0, r], (1, 0, 0), angle, helix_mm=rise, plane="YZ")
+    arc = ArcGeometry.from_segment(seg)
+    c = rise / angle  # pitch/(2π) with the sign of the turn
+    assert arc.length_mm == pytest.approx(np.hypot(r * angle, rise), rel=1e-15)
+    u = np.linspace(0.0, arc.length_mm, 41)
+    np.testing.assert_allclose(arc.curvature(u), r / (r**2 + c**2), rtol=1e-12)
+    np.testing.assert_allclose(
+        arc.point([0.0, arc.u_end]), [seg.start_mm, seg.end_mm], rtol=0, atol=1e-12
+    )
+    np.testing.assert_allclose(arc.point(u)[:, 0], rise * u / arc.length_mm, atol=1e-12)
+    d = arc.derivatives(u[1:-1], 3)
+    for order in (1, 2, 3):
+        fd = central_differences(arc, u[1:-1], order, 1e-5)
+        np.testing.assert_allclose(d[order], fd, rtol=0, atol=1e-8 * np.abs(d[order]).max())
+
+
+@pytest.mark.parametrize(
+    "plane,first,second",
+    [("XY", 0, 1), ("ZX", 2, 0), ("YZ", 1, 2)],
+)
+def test_g2_g3_orientation_in_each_plane(plane, first, second):
+    assert segments.PLANE_AXES[plane] == (first, second)
+    normal = segments.PLANE_NORMALS[plane]
+    start = np.zeros(3)
+    start[first] = 2.0
+    for angle, sign in ((np.pi / 2, 1.0), (-np.pi / 2, -1.0)):  # G3, G2 quarter turns
+        arc = ArcGeometry.from_segment(make_arc(np.zeros(3), start, normal, angle, plane=plane))
+        expected = np.zeros(3)
+        expected[second] = 2.0 * sign  # G3: first axis -> second axis (counter-clockwise)
+        np.testing.assert_allclose(arc.point(arc.u_end)[0], expected, rtol=0, atol=1e-15)
+        mid = arc.point(0.5 * arc.u_end)[0]
+        np.testing.assert_allclose(mid[[first, second]], np.sqrt(2) * np.array([1, sign]))
+        # The signed turn about the plane normal has the sign of the angle.
+        d = arc.derivatives(0.0, 1)
+        turn = np.cross(d[0][0], d[1][0]) @ np.asarray(normal)
+        assert np.sign(turn) == sign
+
+
+def test_arc_center_off_the_start_plane():
+    # The centre lies 5 mm below the start's plane: geometry uses the in-plane radius 3 and
+    # keeps the start's height; the helical rise is then added along the normal.
+    seg = make_arc([0.0, 0.0, -5.0], [3.0, 0.0, 0.0], (0, 0, 1), np.pi, helix_mm=1.0)
+    arc = ArcGeometry.from_segment(seg)
+    np.testing.assert_allclose(arc.point(0.0)[0], [3.0, 0.0, 0.0], atol=1e-15)
+    np.testing.assert_allclose(arc.point(arc.u_end)[0], [-3.0, 0.0, 1.0], atol=1e-14)
+
+
+def test_spiral_arc_length_and_inverse():
+    r0, r1, angle, rise = 5.0, 5.2, 1.5 * np.pi, 0.7
+    seg = make_arc([1, 2, 3], [6, 2, 3], (0, 0, 1), angle, helix_mm=rise, radius_end_mm=r1)
+    arc = ArcGeometry.from_segment(seg)
+
+    def speed_t(t):  # |d/dt (r(t) (cos, sin)(Δθ t), H t)| with r' = r1 − r0
+        return np.sqrt(((r0 + t * (r1 - r0)) * angle) ** 2 + (r1 - r0) ** 2 + rise**2)
+
+    ref = quad(speed_t, 0.0, 1.0, epsabs=0, epsrel=1e-14)[0]
+    assert arc.length_mm == pytest.approx(ref, rel=1e-13)
+    assert arc.u_end == arc.length_mm
+    np.testing.assert_allclose(
+        arc.point([0.0, arc.u_end]), [seg.start_mm, seg.end_mm], rtol=0, atol=1e-12
+    )
+    s = np.linspace(0.0, arc.length_mm, 33)
+    np.testing.assert_allclose(arc.arc_length(arc.param_at_length(s)), s, rtol=0, atol=1e-12)
+    t = np.array([0.2, 0.6])
+    partial = [quad(speed_t, 0.0, x, epsabs=0, epsrel=1e-14)[0] for x in t]
+    np.testing.assert_allclose(arc.arc_length(t * arc.length_mm), partial, rtol=1e-13)
+    u = np.linspace(0.1, 0.9, 9) * arc.length_mm
+    d = arc.derivatives(u, 3)
+    for order in (1, 2, 3):
+        fd = central_differences(arc, u, order, 1e-5)
+        np.testing.assert_allclose(d[order], fd, rtol=0, atol=1e-8 * np.abs(d[order]).max())
+    # Curvature of a plane spiral with a small rise stays near 1/r.
+    kappa = arc.curvature([0.0, arc.u_end])
+    assert 0.95 / r0 < kappa[0] < 1.0 / r0 and 0.95 / r1 < kappa[1] < 1.0 / r1
+    h = 1e-4
+    fd = (arc.curvature(u + h) - arc.curvature(u - h)) / (2 * h)
+    np.testing.assert_allclose(arc.curvature_derivative(u), fd, rtol=1e-6)
+
+
+def test_degenerate_arc_is_rejected():
+    seg = make_arc([0, 0, 0], [1, 0, 0], (0, 0, 1), 1.0)
+    bad = segments.Arc(
+        seg.start_mm, seg.end_mm, seg.start_mm, seg.normal, 1.0, 0.0, 0.0, 0.0, 1.0, 9
+    )
+    with pytest.raises(GeometryError):
+        ArcGeometry.from_segment(bad)
+
+
+# ---------------------------------------------------------------------------------- factory
+
+
+def test_geometry_of_each_segment_kind():
+    line = segments.Line(segments.vec3([0, 0, 0]), segments.vec3([1, 0, 0]), 5.0, 1)
+    arc = make_arc([0, 0, 0], [1, 0, 0], (0, 0, 1), 1.0)
+    nurbs = segments.Nurbs(
+        degree=1,
+        knots=segments.frozen_array([0, 0, 1, 1]),
+        control_points_mm=segments.frozen_array([[0, 0, 0], [3, 4, 0]]),
+        weights=segments.frozen_array([1, 1]),
+        feed_mm_s=5.0,
+        line=2,
+    )
+    geoms = [geometry_of(s) for s in (line, arc, nurbs)]
+    assert [type(g) for g in geoms] == [LineGeometry, ArcGeometry, NurbsCurve]
+    assert all(isinstance(g, PathGeometry) for g in geoms)
+    assert geoms[2].length_mm == pytest.approx(5.0, rel=1e-15)
+    for g in geoms:
+        d = g.derivatives(np.array([g.u_start, g.u_end]), 3)
+        assert d.shape == (4, 2, 3)
+        np.testing.assert_allclose(g.arc_length([g.u_start, g.u_end]), [0.0, g.length_mm])
+    with pytest.raises(TypeError):
+        geometry_of(segments.Dwell(1.0, segments.vec3([0, 0, 0]), 3))
