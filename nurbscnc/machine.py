@@ -89,8 +89,9 @@ def chord_feed_mm_s(kappa_per_mm, period_s: float, chord_tolerance_mm: float):
     """Chord-error feed V_af = (2/T_s)·√(2δ/κ − δ²) [mm/s] (SPEC §7, eq. 23; Yeh & Hsu 2002).
 
     The chord of one period on a circle of radius 1/κ whose sagitta is δ has half-length
-    √(2δ/κ − δ²) (for radius ≥ δ; the formula falls to 0 at radius δ/2). Curvature is unsigned here: ``|kappa|`` is used, so a signed curvature cannot
-    skip the slowdown. κ = 0 (straight) gives ``inf``; κ ≥ 2/δ (radius ≤ δ/2, no chord fits)
+    √(2δ/κ − δ²) (for radius ≥ δ; beyond, the formula falls to 0 at radius δ/2). Curvature is
+    unsigned here: ``|kappa|`` is used, so a signed curvature cannot skip the slowdown.
+    κ = 0 (straight) gives ``inf``; κ ≥ 2/δ (radius ≤ δ/2, no chord fits)
     gives 0. Never NaN for non-NaN input.
     """
     k = np.abs(np.asarray(kappa_per_mm, dtype=float))
@@ -203,7 +204,7 @@ class SoftLimits:
 
 @dataclass(frozen=True)
 class Machine:
-    """A validated machine profile in internal units (mm, s). ``source`` names where it came from."""
+    """A validated machine profile in internal units (mm, s); ``source``: where it came from."""
 
     limits: Limits
     servo: Servo

@@ -34,6 +34,8 @@ from nurbscnc.machine import AxisServo
 
 #: Settling tolerance of ``simulate_axis(..., settle=True)`` [mm].
 SETTLE_TOLERANCE_MM = 1e-6
+#: Longest tail ``settle=True`` may append before declaring the model unusable [samples].
+_MAX_SETTLE_SAMPLES = 10_000_000
 _HOLDS = ("foh", "zoh")
 
 
@@ -135,7 +137,7 @@ def discretise(model: AxisModel | AxisServo, period_s: float, hold: str = "foh")
 def _settle_chunk(model: AxisModel, period_s: float) -> int:
     # About five time constants of the slowest pole per chunk (at least 16 samples).
     slowest = float(np.min(np.abs(model.poles().real)))
-    return max(16, int(np.ceil(5.0 / (slowest * period_s))))
+    return int(np.clip(np.ceil(5.0 / (slowest * period_s)), 16, _MAX_SETTLE_SAMPLES // 10))
 
 
 def _run(disc: DiscreteAxis, reference_mm: np.ndarray, extra: int, auto_chunk: int):
@@ -159,11 +161,16 @@ def _run(disc: DiscreteAxis, reference_mm: np.ndarray, extra: int, auto_chunk: i
         final = disc.dc_gain * held
         # Extend by chunks until one whole chunk (≥ 5 slowest time constants) is within the
         # tolerance: the free response of a stable model decays, so it stays there afterwards.
-        for _ in range(100_000):
+        for _ in range(_MAX_SETTLE_SAMPLES // auto_chunk):
             yh, zf = signal.lfilter(disc.b, disc.a, np.full(auto_chunk, held), zi=zf)
             parts.append(yh)
             if np.all(np.abs(yh - final) <= SETTLE_TOLERANCE_MM):
                 break
+        else:
+            raise ConfigError(
+                f"servo model does not settle to {SETTLE_TOLERANCE_MM} mm within "
+                f"{_MAX_SETTLE_SAMPLES} samples"
+            )
         y_all = np.concatenate(parts)
         bad = np.nonzero(np.abs(y_all - final) > SETTLE_TOLERANCE_MM)[0]
         n_settle = max(0, int(bad[-1]) + 2 - r.size) if bad.size else 0

@@ -84,7 +84,7 @@ def test_step_overshoot_and_resonance():
 
 
 def test_error_series_closed_forms():
-    for axis, a in AXES.items():
+    for a in AXES.values():
         c = error_series(a, order=3)
         c1 = (a.a1 - a.b1) / a.a0  # eq. 28 at s → 0 with a0 = b0: velocity lag
         c2 = ((a.a2 - a.b2) - c1 * a.a1) / a.a0
@@ -293,4 +293,3 @@ def test_true_distance_small_cases():
     assert contour_error_true(np.array([0.5, 2.0, 0.0]), path) == 2.0
     assert contour_error_true(np.array([[3.0, 4.0, 0.0]]), path[:1]).tolist() == [5.0]
     assert contour_error_true(np.array([[-3.0, 4.0, 0.0]]), path).tolist() == [5.0]
-

@@ -136,9 +136,7 @@ def curvature_from_derivatives(d: np.ndarray, speed_floor: float = 0.0) -> np.nd
     return np.where(cusp, np.inf, kappa)
 
 
-def curvature_derivative_from_derivatives(
-    d: np.ndarray, speed_floor: float = 0.0
-) -> np.ndarray:
+def curvature_derivative_from_derivatives(d: np.ndarray, speed_floor: float = 0.0) -> np.ndarray:
     """dκ/du of a 3-D curve from ``d`` = [C, C', C'', C''', ...] (k >= 4, m, 3).
 
     With a = C'×C'' (so a' = C'×C''') and v = |C'|:

@@ -13,10 +13,21 @@ Planning (Python per piece, O(k)):
    the ``v² = v0² + 2·A·L`` rule in Klipper's look-ahead over squared velocities).
 3. Optional bounded look-ahead of ``N`` pieces: a controller that sees only ``N`` pieces
    ahead must be able to stop at the end of what it sees, so junction ``i`` is also capped by
-   the backward scan started at rest at junction ``i + N``.
-4. Forward scan from the start at rest: ``v_{i+1} = min(w_{i+1}, R(v_i, L_i))``. After the
-   two scans every piece can join its end speeds (``D(v_i → v_{i+1}) ≤ L_i``) and each
-   junction speed is the largest such (it equals its cap or one of the two reach bounds).
+   the backward scan started at rest at junction ``i + N``; a second backward scan makes the
+   lowered caps consistent again.
+4. Forward scan from the start at rest: ``v_{i+1} = min(w_{i+1}, R(v_i, L_i))``.
+
+Why this is feasible although ``R`` is *not* monotone in its start speed: with zero
+acceleration at both ends, ``D(v0 → v0 + Δv)`` grows with ``v0`` at fixed ``Δv`` (the same
+jerk ramps, at a higher speed), so a faster start can end slower within the same length
+(``dR/dv0 = (2v0 − Δv)/(2v0 + 3Δv)`` while A is not reached); likewise slowing from ``x`` to
+a full stop can take less distance than slowing to ``x/3``. What the scans need is only that
+``D(lo → hi)`` grows with the *upper* speed ``hi``: a piece of the forward scan either ends at
+``R(v_i)`` (fits by definition), or ends at ``w_{i+1}`` above ``v_i`` (below ``R(v_i)``: fits),
+or below ``v_i`` with ``v_i ≤ w_i ≤ R(w_{i+1})`` (fits). Every junction is locally maximal:
+``v_i ≥ min(cap_i, R(v_{i−1}, L_{i−1}), R(v_{i+1}, L_i))``, i.e. it cannot be raised alone.
+(A lower speed somewhere could, through the non-monotone ``R``, allow a higher one further
+on; the scans do not search for that: the gain is small and the result stays safe.)
 5. Per piece: S-curve up from ``v_i`` to the peak ``v_p`` (the piece cap, or the bisection
    peak of SPEC §7 when the piece is too short to reach it), cruise at ``v_p``, S-curve down
    to ``v_{i+1}``.
@@ -210,30 +221,47 @@ class Profile:
 def _window_caps(
     cap: np.ndarray, length: np.ndarray, w_back: np.ndarray, n: int, a: float, j: float
 ) -> np.ndarray:
-    """Junction caps of an ``n``-piece look-ahead: stop-able at rest at junction ``i + n``.
+    """Stop-within-the-window caps of an ``n``-piece look-ahead, (k+1,) [mm/s].
 
-    All chains (one per junction ``i`` whose window ends before the program end) step back
-    together, vectorised over ``i``. A chain that meets the full backward scan ``w_back``
-    (equal at some junction, e.g. because a cap or an exact stop bounds both) would follow it
-    from there on, so its answer is ``w_back[i]`` and it is dropped early.
+    Junction ``i`` gets the value at ``i`` of the backward scan started at rest at junction
+    ``i + n`` (``inf`` where the window reaches the program end: the full scan covers it).
+    All chains step back together, vectorised over ``i``. A chain that becomes *equal* to the
+    full backward scan ``w_back`` at some junction (typically both hit the same cap or exact
+    stop) runs through the same recurrence from there on, so its answer is ``w_back[i]`` and
+    it is dropped early.
     """
     k = length.size
-    out = w_back.copy()
-    if n >= k:
-        return out
-    i = np.arange(1, k - n)  # junction i + n is inside the program (< k)
+    out = np.full(k + 1, np.inf)
+    i = np.arange(1, k - n)  # junctions whose window ends inside the program (i + n < k)
     m = i + n
     w = np.zeros(i.size)
     for _ in range(n):
-        m = m - 1
-        w = np.minimum(cap[m], max_reachable_speed(w, length[m], a, j))
-        live = w < w_back[m]
-        if not live.all():
-            i, m, w = i[live], m[live], w[live]
         if i.size == 0:
             break
-    out[i] = np.minimum(w, w_back[i])
+        m = m - 1
+        w = np.minimum(cap[m], max_reachable_speed(w, length[m], a, j))
+        same = w == w_back[m]
+        if same.any():
+            out[i[same]] = w_back[i[same]]
+            live = ~same
+            i, m, w = i[live], m[live], w[live]
+    out[i] = w
     return out
+
+
+def _backward_scan(cap: list, length: list, a: float, j: float) -> list:
+    """``w_i = min(cap_i, R(w_{i+1}, L_i))`` from ``w_k = 0`` (plain floats: numpy per
+    element would be slower)."""
+    reach = max_reachable_speed_scalar
+    k = len(length)
+    w_back = [0.0] * (k + 1)
+    w = 0.0
+    for i in range(k - 1, -1, -1):
+        w = reach(w, length[i], a, j)
+        if cap[i] < w:
+            w = cap[i]
+        w_back[i] = w
+    return w_back
 
 
 def _repair_junctions(v: np.ndarray, length: np.ndarray, a: float, j: float) -> np.ndarray:
@@ -276,23 +304,20 @@ def plan_profile(inp: ProfileInput) -> Profile:
     cap[:-1] = np.minimum(cap[:-1], v_max)
     cap[1:] = np.minimum(cap[1:], v_max)
 
-    # 2. Backward scan from the end at rest (plain floats: numpy per element is slower).
-    reach = max_reachable_speed_scalar
+    # 2. Backward scan from the end at rest.
     length_l = length.tolist()
-    cap_l = cap.tolist()
-    w_back = [0.0] * (k + 1)
-    w = 0.0
-    for i in range(k - 1, -1, -1):
-        w = reach(w, length_l[i], a, j)
-        if cap_l[i] < w:
-            w = cap_l[i]
-        w_back[i] = w
+    w_back = _backward_scan(cap.tolist(), length_l, a, j)
 
-    # 3. Bounded look-ahead.
-    if inp.lookahead_pieces is not None and inp.lookahead_pieces < k:
-        w_back = _window_caps(cap, length, np.array(w_back), inp.lookahead_pieces, a, j).tolist()
+    # 3. Bounded look-ahead: cap by the stop-within-the-window speeds, then rescan so that
+    #    the caps are backward-consistent again (w_i ≤ R(w_{i+1}, L_i)), which is what makes
+    #    the forward scan's result feasible (R is not monotone in its start speed, see below).
+    n = inp.lookahead_pieces
+    if n is not None and n < k:
+        cap = np.minimum(cap, _window_caps(cap, length, np.array(w_back), n, a, j))
+        w_back = _backward_scan(cap.tolist(), length_l, a, j)
 
     # 4. Forward scan from the start at rest.
+    reach = max_reachable_speed_scalar
     v_l = [0.0] * (k + 1)
     w = 0.0
     for i in range(k):

@@ -1,0 +1,504 @@
+"""The command-line interface: one click command per pipeline stage.
+
+Only this module (and the serial backend) touches the outside world: it reads programs,
+writes outputs atomically, and turns :class:`~nurbscnc.errors.NurbsCncError` into
+``file:line:col: error: message`` with the source line and a caret, and an exit code.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import os
+import sys
+from collections import Counter
+
+import click
+import numpy as np
+from rich.console import Console
+from rich.table import Table
+
+from nurbscnc import __version__
+from nurbscnc.errors import (
+    EXIT_INPUT,
+    EXIT_INTERNAL,
+    EXIT_INTERRUPTED,
+    NurbsCncError,
+    OutputError,
+)
+from nurbscnc.geometry.segments import Program
+from nurbscnc.program.interpret import InterpretOptions, interpret_text
+
+# Tables keep their width when piped (rich would assume 80 columns and truncate numbers).
+out = Console(highlight=False, soft_wrap=True, width=None if sys.stdout.isatty() else 200)
+err = Console(stderr=True, highlight=False, soft_wrap=True)
+
+
+# -- error reporting ---------------------------------------------------------------------------
+def format_error(exc: NurbsCncError, filename: str) -> str:
+    """``file:line:col: error: message``, then the source line and a caret under the column."""
+    pos = exc.pos
+    if pos is None:
+        return f"{filename}: error: {exc.message}"
+    head = f"{filename}:{pos.line}:{pos.column}: error: {exc.message}"
+    if not pos.text:
+        return head
+    text = pos.text.replace("\t", " ")
+    caret = " " * (max(pos.column, 1) - 1) + "^"
+    return f"{head}\n    {text}\n    {caret}"
+
+
+class _Failed(Exception):
+    """Raised inside a command to exit with a code after the message was printed."""
+
+    def __init__(self, code: int):
+        self.code = code
+
+
+def handle_errors(func):
+    """Turn every exception into a message and an exit code: never a traceback for input."""
+
+    @functools.wraps(func)
+    def wrapper(*args, **kwargs):
+        filename = kwargs.get("program") or kwargs.get("source") or "-"
+        filename = getattr(filename, "name", filename)
+        try:
+            return func(*args, **kwargs)
+        except _Failed as exc:
+            sys.exit(exc.code)
+        except NurbsCncError as exc:
+            if kwargs.get("as_json"):
+                click.echo(json.dumps(_error_json(exc)))
+            err.print(format_error(exc, _display_name(filename)), markup=False)
+            sys.exit(exc.exit_code)
+        except KeyboardInterrupt:
+            err.print("interrupted", markup=False)
+            sys.exit(EXIT_INTERRUPTED)
+        except click.exceptions.Exit:
+            raise
+        except click.ClickException:
+            raise
+        except Exception as exc:  # a bug: say so, without a traceback unless asked
+            if os.environ.get("NURBSCNC_DEBUG"):
+                raise
+            err.print(
+                f"{_display_name(filename)}: internal error: {type(exc).__name__}: {exc}\n"
+                "This is a bug in nurbscnc; rerun with NURBSCNC_DEBUG=1 for a traceback.",
+                markup=False,
+            )
+            sys.exit(EXIT_INTERNAL)
+
+    return wrapper
+
+
+def _display_name(name) -> str:
+    return "<stdin>" if name in ("-", None) else str(name)
+
+
+def _error_json(exc: NurbsCncError) -> dict:
+    pos = exc.pos
+    entry = {"line": pos.line if pos else None, "column": pos.column if pos else None,
+             "message": exc.message}  # fmt: skip
+    return {"ok": False, "errors": [entry]}
+
+
+# -- reading programs --------------------------------------------------------------------------
+def read_program_text(path: str) -> str:
+    """The program text of ``path`` (``-`` for stdin). UTF-8 (BOM allowed), else Latin-1.
+
+    Non-ASCII bytes are harmless in comments; elsewhere the parser reports them.
+    """
+    try:
+        if path == "-":
+            data = sys.stdin.buffer.read()
+        else:
+            with open(path, "rb") as fh:
+                data = fh.read()
+    except OSError as exc:
+        raise OutputError(f"cannot read {path}: {exc.strerror or exc}") from None
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        return data.decode("latin-1")
+
+
+def load_program(path: str, block_delete: bool = True, tool_table: str | None = None) -> Program:
+    """Read, parse and interpret a program file."""
+    text = read_program_text(path)
+    tools = read_tool_table(tool_table) if tool_table else None
+    options = InterpretOptions(
+        block_delete=block_delete, tool_lengths_mm=tools, name=_display_name(path)
+    )
+    return interpret_text(text, options)
+
+
+def read_tool_table(path: str) -> dict[int, float]:
+    """A LinuxCNC tool table (``T1 P1 Z12.5 D6 ;comment`` lines) → {tool: Z length [mm]}."""
+    table: dict[int, float] = {}
+    try:
+        with open(path, encoding="utf-8", errors="replace") as fh:
+            lines = fh.read().splitlines()
+    except OSError as exc:
+        raise OutputError(f"cannot read tool table {path}: {exc.strerror or exc}") from None
+    for number, raw in enumerate(lines, 1):
+        body = raw.split(";", 1)[0].split()
+        if not body:
+            continue
+        fields = {}
+        for item in body:
+            letter, value = item[:1].upper(), item[1:]
+            try:
+                fields[letter] = float(value)
+            except ValueError:
+                raise OutputError(f"{path}:{number}: bad tool table field {item!r}") from None
+        if "T" not in fields:
+            raise OutputError(f"{path}:{number}: tool table line without a T word")
+        table[int(fields["T"])] = fields.get("Z", 0.0)
+    return table
+
+
+# -- the command group -------------------------------------------------------------------------
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="nurbscnc")
+def main():
+    """nurbscnc: NC programs (lines, arcs, NURBS) to reference points at the servo period.
+
+    Exit codes: 0 ok, 1 internal error (a bug), 2 bad program or option, 3 file or port
+    trouble, 130 interrupted.
+    """
+
+
+program_argument = click.argument("program", type=click.Path(dir_okay=False, allow_dash=True))
+json_option = click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
+block_delete_option = click.option(
+    "--no-block-delete", "no_block_delete", is_flag=True,
+    help="Execute lines starting with '/' (default: skip them, the switch is on).",
+)  # fmt: skip
+tool_table_option = click.option(
+    "--tool-table", type=click.Path(exists=False, dir_okay=False), default=None,
+    help="LinuxCNC tool table for G43 H (default: tool lengths are 0).",
+)  # fmt: skip
+
+
+# -- check -------------------------------------------------------------------------------------
+@main.command()
+@program_argument
+@json_option
+@block_delete_option
+@tool_table_option
+@handle_errors
+def check(program, as_json, no_block_delete, tool_table):
+    """Parse and validate PROGRAM ('-' for stdin) and summarise it.
+
+    Example: nurbscnc check programs/naca2415.nc
+    """
+    prog = load_program(program, not no_block_delete, tool_table)
+    summary = program_summary(prog)
+    if as_json:
+        click.echo(json.dumps(summary))
+        return
+    print_summary(prog, summary)
+
+
+def segment_length_mm(seg) -> float:
+    """Length of one segment [mm] (NURBS by Gauss–Legendre arc length)."""
+    if seg.kind == "nurbs":
+        from nurbscnc.geometry.nurbs import NurbsCurve
+
+        return float(NurbsCurve.from_segment(seg).length_mm)
+    return float(seg.length_mm)
+
+
+def program_summary(prog: Program) -> dict:
+    """The JSON-able summary of an interpreted program (``check --json``)."""
+    segments = []
+    feed_len = 0.0
+    rapid_len = 0.0
+    points = [np.asarray(prog.start_mm, dtype=float)]
+    feeds = []
+    for seg in prog.segments:
+        length = segment_length_mm(seg)
+        entry = {"kind": seg.kind, "line": seg.line, "length_mm": length}
+        if seg.kind == "nurbs":
+            entry.update(
+                degree=seg.degree,
+                control_points=len(seg.control_points_mm),
+                knots=len(seg.knots),
+                plane=seg.plane,
+            )
+            points.append(np.asarray(seg.control_points_mm))
+        elif seg.kind != "dwell":
+            points.append(np.asarray([seg.start_mm, seg.end_mm], dtype=float))
+        if seg.kind == "arc":
+            # The bounding box of an arc includes its extreme points: sample it finely.
+            from nurbscnc.geometry.paths import geometry_of
+
+            geom = geometry_of(seg)
+            u = np.linspace(geom.u_start, geom.u_end, 65)
+            points.append(geom.point(u))
+        if seg.kind == "rapid":
+            rapid_len += length
+        elif seg.kind != "dwell":
+            feed_len += length
+            feeds.append(seg.feed_mm_s)
+        segments.append(entry)
+    allpts = np.vstack([np.reshape(p, (-1, 3)) for p in points])
+    counts = Counter(s["kind"] for s in segments)
+    return {
+        "ok": True,
+        "program": prog.name,
+        "blocks": prog.blocks,
+        "segments": segments,
+        "counts": dict(counts),
+        "length_mm": feed_len,
+        "rapid_length_mm": rapid_len,
+        "bounding_box_mm": {
+            "min": allpts.min(axis=0).tolist(),
+            "max": allpts.max(axis=0).tolist(),
+        },
+        "feed_mm_min": {
+            "min": min(feeds) * 60.0 if feeds else None,
+            "max": max(feeds) * 60.0 if feeds else None,
+        },
+        "notes": [{"line": n.line, "message": n.message} for n in prog.notes],
+        "errors": [],
+    }
+
+
+def print_summary(prog: Program, s: dict) -> None:
+    out.print(f"[bold]{prog.name}[/]: ok — {s['blocks']} blocks, {len(s['segments'])} segments")
+    counts = ", ".join(f"{v} {k}" for k, v in sorted(s["counts"].items())) or "none"
+    out.print(f"  segments: {counts}")
+    out.print(
+        f"  path length: {s['length_mm']:.3f} mm at feed, {s['rapid_length_mm']:.3f} mm rapid"
+    )
+    lo, hi = s["bounding_box_mm"]["min"], s["bounding_box_mm"]["max"]
+    out.print(
+        "  bounding box \\[mm]: "
+        + "  ".join(f"{a} {lo[i]:.3f}..{hi[i]:.3f}" for i, a in enumerate("XYZ"))
+    )
+    f = s["feed_mm_min"]
+    if f["min"] is not None:
+        out.print(f"  feed \\[mm/min]: {f['min']:.6g}..{f['max']:.6g}")
+    nurbs = [e for e in s["segments"] if e["kind"] == "nurbs"]
+    if nurbs:
+        table = Table(title="NURBS blocks", show_edge=False)
+        for col in ("line", "plane", "degree", "control points", "knots", "length \\[mm]"):
+            table.add_column(col, justify="right")
+        for e in nurbs:
+            table.add_row(
+                str(e["line"]), e["plane"], str(e["degree"]), str(e["control_points"]),
+                str(e["knots"]), f"{e['length_mm']:.4f}",
+            )  # fmt: skip
+        out.print(table)
+    for n in s["notes"]:
+        out.print(f"  note (line {n['line']}): {n['message']}", markup=False)
+
+
+def run_cli():  # pragma: no cover - entry point helper
+    main(prog_name="nurbscnc")
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()
+
+
+__all__ = ["main", "format_error", "EXIT_INPUT"]
+
+
+# -- machine profile options -------------------------------------------------------------------
+def machine_options(func):
+    """``--machine FILE`` and repeatable ``--set KEY=VALUE`` (dotted profile keys)."""
+    func = click.option(
+        "--set", "overrides", multiple=True, metavar="KEY=VALUE",
+        help="Override one profile value, e.g. --set limits.a_max_mm_s2=1000.",
+    )(func)  # fmt: skip
+    func = click.option(
+        "--machine", type=click.Path(dir_okay=False), default=None,
+        help="Machine profile (TOML); default: the bundled paper machine (Tables 2, 3).",
+    )(func)  # fmt: skip
+    return func
+
+
+def load_machine_cli(path, overrides=(), extra: dict | None = None):
+    """The machine profile with ``--set`` and option overrides applied."""
+    from nurbscnc.errors import ConfigError
+    from nurbscnc.machine import load_machine
+
+    table = {}
+    for item in overrides:
+        if "=" not in item:
+            raise ConfigError(f"--set wants KEY=VALUE, got {item!r}")
+        key, value = item.split("=", 1)
+        table[key.strip()] = value.strip()
+    table.update({k: v for k, v in (extra or {}).items() if v is not None})
+    return load_machine(path, table or None)
+
+
+# -- corners -----------------------------------------------------------------------------------
+@main.command()
+@program_argument
+@json_option
+@click.option("--feed", type=float, default=None,
+              help="Feed F [mm/min] for the threshold (default: each block's F, capped by V_max).")
+@click.option("--amax", type=float, default=None, help="A_max [mm/s²] (default: the profile's).")
+@machine_options
+@handle_errors
+def corners(program, as_json, feed, amax, machine, overrides):
+    """Sharp corners of each NURBS block: curvature peaks above κ_th = A_max/F² (SPEC §5).
+
+    Example: nurbscnc corners programs/naca2415.nc --json
+    """
+    from nurbscnc.plan.corners import program_corners, tangent_junctions
+
+    mach = load_machine_cli(machine, overrides, {"limits.a_max_mm_s2": amax})
+    if feed is not None and not feed > 0:
+        raise click.BadParameter("must be > 0", param_hint="--feed")
+    prog = load_program(program)
+    result = program_corners(
+        prog.segments, mach.limits.a_max_mm_s2, mach.limits.v_max_mm_s,
+        feed / 60.0 if feed else None,
+    )  # fmt: skip
+    junctions = tangent_junctions(prog.segments)
+    if as_json:
+        click.echo(json.dumps(corners_json(result, junctions)))
+        return
+    table = Table(title=f"{prog.name}: sharp corners (κ > κ_th = A_max/F²)", show_edge=False)
+    for col in ("line", "κ_th \\[1/mm]", "peak κ \\[1/mm]", "x \\[mm]", "y \\[mm]", "z \\[mm]",
+                "u_a", "u_b", "length \\[mm]"):  # fmt: skip
+        table.add_column(col, justify="right")
+    count = 0
+    for sc in result:
+        for r in sc.regions:
+            count += 1
+            table.add_row(
+                str(sc.line), f"{sc.kappa_threshold_per_mm:.4g}", f"{r.kappa_peak_per_mm:.5g}",
+                *(f"{c:.4f}" for c in r.point_mm), f"{r.u_a:.6g}", f"{r.u_b:.6g}",
+                f"{r.length_mm:.4f}",
+            )  # fmt: skip
+    if count:
+        out.print(table)
+    else:
+        out.print(f"{prog.name}: no sharp corners in {len(result)} NURBS block(s)")
+    sharp = [j for j in junctions if j.angle_deg > 1e-3]
+    if sharp:
+        out.print(f"{len(sharp)} tangent discontinuities between segments "
+                  f"(largest {max(j.angle_deg for j in sharp):.2f}°)")  # fmt: skip
+
+
+def corners_json(result, junctions) -> dict:
+    return {
+        "ok": True,
+        "blocks": [
+            {
+                "line": sc.line,
+                "segment": sc.segment_index,
+                "feed_mm_s": sc.feed_mm_s,
+                "kappa_threshold_per_mm": sc.kappa_threshold_per_mm,
+                "corners": [
+                    {
+                        "kappa_peak_per_mm": r.kappa_peak_per_mm,
+                        "u_peak": r.u_peak,
+                        "point_mm": list(r.point_mm),
+                        "u_a": r.u_a,
+                        "u_b": r.u_b,
+                        "length_mm": r.length_mm,
+                    }
+                    for r in sc.regions
+                ],
+            }
+            for sc in result
+        ],
+        "junctions": [
+            {"segment": j.index, "line": j.line, "point_mm": list(j.point_mm),
+             "angle_deg": j.angle_deg}
+            for j in junctions
+        ],  # fmt: skip
+    }
+
+
+# -- ph ----------------------------------------------------------------------------------------
+@main.command()
+@program_argument
+@json_option
+@click.option("--tolerance-um", type=float, default=None,
+              help="PH fit tolerance e [µm] (default: the profile's, 1 µm).")
+@click.option("--no-split", is_flag=True, help="Fit one PH quintic per region (no splitting).")
+@machine_options
+@handle_errors
+def ph(program, as_json, tolerance_um, no_split, machine, overrides):
+    """PH quintic fits of every corner region: pieces, RMS and max deviation (Table 1 layout).
+
+    Example: nurbscnc ph programs/naca2415.nc --tolerance-um 1
+    """
+    from nurbscnc.geometry.nurbs import NurbsCurve
+    from nurbscnc.plan.corners import program_corners
+    from nurbscnc.plan.phfit import fit_region
+
+    mach = load_machine_cli(machine, overrides, {"limits.ph_tolerance_um": tolerance_um})
+    e_um = mach.limits.ph_tolerance_mm * 1000.0
+    prog = load_program(program)
+    rows = []
+    for sc in program_corners(prog.segments, mach.limits.a_max_mm_s2, mach.limits.v_max_mm_s):
+        curve = NurbsCurve.from_segment(prog.segments[sc.segment_index])
+        for r in sc.regions:
+            unsplit = fit_region(curve, r.u_a, r.u_b, tolerance_um=e_um, split=False)
+            fit = unsplit if no_split else fit_region(curve, r.u_a, r.u_b, tolerance_um=e_um)
+            rows.append((sc, r, unsplit, fit))
+    if as_json:
+        click.echo(json.dumps(ph_json(rows, e_um, no_split)))
+        return
+    table = Table(title=f"{prog.name}: PH quintic fits (e = {e_um:g} µm)", show_edge=False)
+    for col in ("line", "region", "length \\[mm]", "unsplit RMS \\[µm]", "unsplit max \\[µm]",
+                "pieces", "RMS \\[µm]", "max \\[µm]"):  # fmt: skip
+        table.add_column(col, justify="right")
+    for k, (sc, r, unsplit, fit) in enumerate(rows):
+        table.add_row(
+            str(sc.line), _region_name(k), f"{r.length_mm:.4f}", f"{unsplit.rms_um:.4f}",
+            f"{unsplit.max_um:.4f}", str(len(fit.pieces)), f"{fit.rms_um:.4f}",
+            f"{fit.max_um:.4f}",
+        )  # fmt: skip
+    if rows:
+        out.print(table)
+    else:
+        out.print(f"{prog.name}: no corner regions, nothing to fit")
+
+
+def _region_name(k: int) -> str:
+    """AB, CD, EF, ... as the paper names its regions."""
+    letters = "ABCDEFGHIJKLMNOPQRSTUVWXYZ"
+    a = (2 * k) % 26
+    suffix = "" if k < 13 else str(k // 13)
+    return letters[a] + letters[a + 1] + suffix
+
+
+def ph_json(rows, e_um: float, no_split: bool) -> dict:
+    regions = []
+    for k, (sc, r, unsplit, fit) in enumerate(rows):
+        regions.append({
+            "region": _region_name(k),
+            "line": sc.line,
+            "u_a": r.u_a,
+            "u_b": r.u_b,
+            "length_mm": r.length_mm,
+            "unsplit": {"rms_um": unsplit.rms_um, "max_um": unsplit.max_um},
+            "rms_um": fit.rms_um,
+            "max_um": fit.max_um,
+            "pieces": [
+                {
+                    "line": sc.line,
+                    "u_a": piece.u_a,
+                    "u_b": piece.u_b,
+                    "control_points": [
+                        [float(c) for c in pt[:2]] for pt in piece.ph.control_points_mm
+                    ],
+                    "control_points_mm": [
+                        [float(c) for c in pt] for pt in piece.ph.control_points_mm
+                    ],
+                    "rms_um": piece.rms_um,
+                    "max_um": piece.max_um,
+                }
+                for piece in fit.pieces
+            ],
+        })  # fmt: skip
+    return {"ok": True, "tolerance_um": e_um, "split": not no_split, "regions": regions}
