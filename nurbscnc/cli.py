@@ -502,3 +502,251 @@ def ph_json(rows, e_um: float, no_split: bool) -> dict:
             ],
         })  # fmt: skip
     return {"ok": True, "tolerance_um": e_um, "split": not no_split, "regions": regions}
+
+
+# -- plan / run --------------------------------------------------------------------------------
+def plan_options(func):
+    """Options shared by plan and run."""
+    func = click.option(
+        "--corner-feed", type=click.Choice(["piece", "peak"]), default="piece",
+        help="PH pieces capped by their own peak curvature (piece, default) or the whole "
+             "region by the corner's peak (peak, as the paper).",
+    )(func)  # fmt: skip
+    func = click.option(
+        "--dynamics", type=click.Choice(["local", "global", "off"]), default="local",
+        help="Contour-error check: lower the feed on offending pieces (local, default), for "
+             "the whole program (global, the paper's rule), or not at all (off).",
+    )(func)  # fmt: skip
+    func = click.option(
+        "--lookahead", type=click.IntRange(min=1), default=None,
+        help="Look-ahead depth in pieces (default: the whole program).",
+    )(func)  # fmt: skip
+    return machine_options(func)
+
+
+def make_plan(program: str, machine, overrides, dynamics, lookahead, corner_feed):
+    """Load, interpret and plan one program; validate soft limits. Returns (prog, mach, plan)."""
+    from nurbscnc.plan.lookahead import LookaheadOptions, plan_program
+    from nurbscnc.plan.pieces import PlanOptions
+
+    mach = load_machine_cli(machine, overrides)
+    prog = load_program(program)
+    options = LookaheadOptions(dynamics=dynamics, lookahead_pieces=lookahead,
+                               plan=PlanOptions(corner_feed=corner_feed))  # fmt: skip
+    plan = plan_program(prog, mach, options)
+    check_soft_limits(plan, mach, prog)
+    return prog, mach, plan
+
+
+def check_soft_limits(plan, mach, prog) -> None:
+    """Refuse a plan whose reference points leave the travel envelope (before any output)."""
+    from nurbscnc.errors import PlanningError, SourcePos
+
+    pts = plan.samples.points_mm
+    lo = np.asarray(mach.soft_limits.min_mm)
+    hi = np.asarray(mach.soft_limits.max_mm)
+    bad = np.flatnonzero(np.any((pts < lo) | (pts > hi), axis=1))
+    if bad.size:
+        k = int(bad[0])
+        axis = int(np.flatnonzero((pts[k] < lo) | (pts[k] > hi))[0])
+        line = int(plan.samples.line[k])
+        raise PlanningError(
+            f"the path leaves the soft limits: {'XYZ'[axis]} = {pts[k, axis]:.4f} mm outside "
+            f"[{lo[axis]:g}, {hi[axis]:g}] mm",
+            SourcePos(line, 1, ""),
+        )
+
+
+def plan_summary(prog, mach, plan) -> dict:
+    """Numbers that describe a plan (``plan --json``)."""
+    from nurbscnc.plan.lookahead import segment_times_s
+
+    kinds = Counter(p.kind for p in plan.pieces)
+    summary = {
+        "ok": True,
+        "program": prog.name,
+        "pieces": dict(kinds),
+        "piece_count": len(plan.pieces),
+        "corner_pieces": kinds.get("ph", 0),
+        "cycle_time_s": plan.cycle_time_s,
+        "samples": int(plan.samples.t_s.size),
+        "period_s": mach.servo.period_s,
+        "dynamics": plan.dynamics,
+        "dynamics_iterations": plan.iterations,
+        "feed_max_mm_s": float(plan.samples.v_mm_s.max()),
+        "segment_times_s": {str(k): v for k, v in segment_times_s(plan).items()},
+    }
+    lb = lower_bound_or_none(plan, mach)
+    if lb is not None:
+        summary["lower_bound_s"] = lb
+        summary["lower_bound_ratio"] = plan.cycle_time_s / lb if lb > 0 else None
+    r = plan.response
+    if r is not None:
+        cut = cutting_mask(plan)
+        c = r.contour_mm[cut] * 1000.0
+        summary.update(
+            contour_max_um=float(c.max()) if c.size else 0.0,
+            contour_rms_um=float(np.sqrt(np.mean(c * c))) if c.size else 0.0,
+            contour_eq29_max_um=float(np.abs(r.contour_eq29_mm[cut]).max() * 1000.0)
+            if c.size else 0.0,
+        )  # fmt: skip
+    return summary
+
+
+def cutting_mask(plan) -> np.ndarray:
+    """Which servo-response samples are cutting (not on a rapid): those are checked."""
+    rapid = np.array([p.kind == "rapid" for p in plan.pieces])
+    n = plan.samples.t_s.size
+    m = plan.response.contour_mm.size
+    return np.append(~rapid[plan.samples.piece], np.full(m - n, not rapid[-1]))
+
+
+def lower_bound_or_none(plan, mach):
+    """The kinematic lower bound on cycle time [s] (SPEC §10), or None if unavailable."""
+    try:
+        from nurbscnc.plan.lowerbound import plan_lower_bound_s
+    except ImportError:  # pragma: no cover - module not present
+        return None
+    return plan_lower_bound_s(plan, mach)
+
+
+@main.command()
+@program_argument
+@json_option
+@click.option("--dump-profile", type=click.Path(dir_okay=False, allow_dash=True), default=None,
+              help="Write t, s, v, a, j, piece at every servo period (CSV, or NPZ by extension).")
+@plan_options
+@handle_errors
+def plan(program, as_json, dump_profile, machine, overrides, dynamics, lookahead, corner_feed):
+    """Plan PROGRAM: pieces, corners, cycle time, lower bound, predicted contour error.
+
+    Example: nurbscnc plan programs/naca2415.nc --dump-profile profile.csv
+    """
+    from nurbscnc.output.files import write_profile
+
+    prog, mach, pl = make_plan(program, machine, overrides, dynamics, lookahead, corner_feed)
+    summary = plan_summary(prog, mach, pl)
+    if dump_profile:
+        s = pl.samples
+        from nurbscnc.interpolate import dwell_schedule, wall_to_profile_time
+
+        at, dur = dwell_schedule(pl.pieces, pl.profile)
+        _, v, a, j, piece = pl.profile.sample(wall_to_profile_time(s.t_s, at, dur))
+        write_profile(dump_profile, s.t_s, s.s_mm, v, a, j, piece)
+    if as_json:
+        click.echo(json.dumps(summary))
+        return
+    out.print(f"[bold]{prog.name}[/]: {summary['piece_count']} pieces "
+              f"({', '.join(f'{v} {k}' for k, v in sorted(summary['pieces'].items()))})",
+              markup=True)  # fmt: skip
+    out.print(f"  cycle time: {summary['cycle_time_s']:.4f} s "
+              f"({summary['samples']} reference points at T_s = "
+              f"{summary['period_s'] * 1000:g} ms)")  # fmt: skip
+    if "lower_bound_s" in summary:
+        out.print(f"  kinematic lower bound: {summary['lower_bound_s']:.4f} s "
+                  f"(plan / bound = {summary['lower_bound_ratio']:.3f})")  # fmt: skip
+    if "contour_max_um" in summary:
+        out.print(f"  predicted contour error: max {summary['contour_max_um']:.2f} µm, "
+                  f"RMS {summary['contour_rms_um']:.2f} µm "
+                  f"(ε_max {mach.limits.contour_tolerance_mm * 1000:g} µm; dynamics "
+                  f"{summary['dynamics']}, {summary['dynamics_iterations']} re-plans)")  # fmt: skip
+
+
+@main.command()
+@click.argument("programs", nargs=-1, required=True,
+                type=click.Path(dir_okay=False, allow_dash=True))
+@click.option("-o", "--output", type=click.Path(dir_okay=False, allow_dash=True), default=None,
+              help="Reference points: .csv, .npz or - (stdout). One program only.")
+@click.option("--output-dir", type=click.Path(file_okay=False), default=None,
+              help="Batch: write <name>.csv for every program into this folder.")
+@click.option("--jobs", type=click.IntRange(min=1), default=None,
+              help="Batch worker processes (default: the number of cores).")
+@click.option("--format", "fmt", type=click.Choice(["csv", "npz"]), default="csv",
+              help="Batch output format.")
+@click.option("--quiet", is_flag=True, help="No summary on stderr.")
+@json_option
+@plan_options
+@handle_errors
+def run(programs, output, output_dir, jobs, fmt, quiet, as_json, machine, overrides, dynamics,
+        lookahead, corner_feed):
+    """Run the whole pipeline: reference points at every servo period.
+
+    Example: nurbscnc run programs/naca2415.nc -o points.csv
+
+    The CSV header is t,x,y,z,feed,piece,line (s, mm, mm, mm, mm/s, piece index, source
+    line); the first row is the start point at t = 0, the last the end point at rest.
+    """
+    from nurbscnc.output.files import write_points
+
+    if output_dir is None:
+        if len(programs) != 1:
+            raise click.UsageError("several programs need --output-dir")
+        if output is None:
+            raise click.UsageError("give -o FILE (.csv, .npz or -) or --output-dir DIR")
+        program = programs[0]
+        prog, mach, pl = make_plan(program, machine, overrides, dynamics, lookahead,
+                                   corner_feed)  # fmt: skip
+        write_points(output, pl.samples)
+        summary = plan_summary(prog, mach, pl)
+        if as_json:
+            (err if output == "-" else out).print(json.dumps(summary), markup=False)
+        elif not quiet:
+            err.print(f"{prog.name}: {summary['samples']} points, cycle time "
+                      f"{summary['cycle_time_s']:.4f} s → {output}", markup=False)  # fmt: skip
+        return
+    run_batch(programs, output_dir, jobs, fmt, quiet, as_json,
+              (machine, overrides, dynamics, lookahead, corner_feed))  # fmt: skip
+
+
+def _batch_one(args):
+    """Worker: plan one program and write its output; returns a result row (never raises)."""
+    program, target, settings = args
+    machine, overrides, dynamics, lookahead, corner_feed = settings
+    from nurbscnc.output.files import write_points
+
+    try:
+        prog, mach, pl = make_plan(program, machine, overrides, dynamics, lookahead,
+                                   corner_feed)  # fmt: skip
+        write_points(target, pl.samples)
+        return {"program": program, "ok": True, "output": target,
+                "cycle_time_s": pl.cycle_time_s, "samples": int(pl.samples.t_s.size)}
+    except NurbsCncError as exc:
+        return {"program": program, "ok": False,
+                "error": format_error(exc, _display_name(program)),
+                "exit_code": exc.exit_code}  # fmt: skip
+    except Exception as exc:  # a bug: report it as such, keep the batch going
+        return {"program": program, "ok": False, "exit_code": EXIT_INTERNAL,
+                "error": f"{program}: internal error: {type(exc).__name__}: {exc}"}
+
+
+def run_batch(programs, output_dir, jobs, fmt, quiet, as_json, settings) -> None:
+    from concurrent.futures import ProcessPoolExecutor
+
+    os.makedirs(output_dir, exist_ok=True)
+    tasks = []
+    for program in programs:
+        stem = os.path.splitext(os.path.basename(program))[0]
+        tasks.append((program, os.path.join(output_dir, f"{stem}.{fmt}"), settings))
+    workers = min(jobs or os.cpu_count() or 1, len(tasks))
+    if workers == 1:
+        results = [_batch_one(t) for t in tasks]
+    else:
+        with ProcessPoolExecutor(max_workers=workers) as pool:
+            results = list(pool.map(_batch_one, tasks))
+    failed = [r for r in results if not r["ok"]]
+    if as_json:
+        click.echo(json.dumps({"ok": not failed, "results": results}))
+    else:
+        table = Table(title=f"batch: {len(results)} programs, {len(failed)} failed",
+                      show_edge=False)  # fmt: skip
+        for col in ("program", "result", "cycle time \\[s]", "points"):
+            table.add_column(col)
+        for r in results:
+            table.add_row(r["program"], "ok" if r["ok"] else "FAILED",
+                          f"{r['cycle_time_s']:.4f}" if r["ok"] else "",
+                          str(r["samples"]) if r["ok"] else "")  # fmt: skip
+        (err if quiet else out).print(table)
+        for r in failed:
+            err.print(r["error"], markup=False)
+    if failed:
+        raise _Failed(max(r["exit_code"] for r in failed))

@@ -190,6 +190,8 @@ def max_reachable_speed(v_from_mm_s, distance_mm, a_max_mm_s2: float, j_max_mm_s
     v0, d = np.broadcast_arrays(
         _speeds("v_from_mm_s", v_from_mm_s), _speeds("distance_mm", distance_mm)
     )
+    shape = v0.shape
+    v0, d = v0.ravel(), d.ravel()
     a2j = a * a / j
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         # A reached.
@@ -215,7 +217,7 @@ def max_reachable_speed(v_from_mm_s, distance_mm, a_max_mm_s2: float, j_max_mm_s
         v[bad] = v_bad
         bad = bad[(v_bad > v0[bad]) & (_distance_arr(v0[bad], v_bad, a, j) > d[bad])]
         step *= 2.0
-    return _out(v, scalar)
+    return _out(v.reshape(shape), scalar)
 
 
 def max_entry_speed(v_to_mm_s, distance_mm, a_max_mm_s2: float, j_max_mm_s3: float):
@@ -245,7 +247,9 @@ def peak_speed_unchecked(v_s, v_e, length, v_cap, a: float, j: float) -> np.ndar
     lo = np.maximum(v_s, v_e)
     hi = np.maximum(v_cap, lo)
     out = hi.astype(float, copy=True)
-    todo = np.flatnonzero(_pair_distance_mm(v_s, hi, v_e, a, j) > length)
+    # A piece of zero length keeps its (equal) end speeds: no bisection down to denormals.
+    out[length <= 0.0] = lo[length <= 0.0]
+    todo = np.flatnonzero((_pair_distance_mm(v_s, hi, v_e, a, j) > length) & (length > 0.0))
     out[todo] = lo[todo]
     lo_t, hi_t = lo[todo], hi[todo]
     vs_t, ve_t, len_t = v_s[todo], v_e[todo], length[todo]

@@ -373,7 +373,8 @@ def plan_profile(inp: ProfileInput) -> Profile:
     piece_dur = t_in_piece[:, -1]
     piece_end_time = np.cumsum(piece_dur)
     piece_start_time = np.concatenate(([0.0], piece_end_time[:-1]))
-    t0 = piece_start_time[:, None] + (t_in_piece - dur)
+    offsets = np.concatenate((np.zeros((k, 1)), t_in_piece[:, :-1]), axis=1)
+    t0 = piece_start_time[:, None] + offsets
 
     keep = (dur > 0.0).ravel()
     piece_idx = np.repeat(np.arange(k, dtype=np.int64), 7)

@@ -1,0 +1,288 @@
+"""Parse + interpret benchmark: lines per second and peak memory (issue 2, "Benchmark").
+
+Usage::
+
+    .venv/bin/python bench/run.py --out bench/results.json     # full run (make bench)
+    .venv/bin/python bench/run.py --quick --out /tmp/quick.json  # 10x smaller smoke test
+
+Generates, in a temporary folder, a CAM-style G1 program (an Archimedean spiral with a slow Z
+ramp, N numbers, modal X Y moves, feed changes and a comment every 1000 lines) and a G6.2
+program (a few long cubic rational NURBS blocks, ``G6.2 P4 K X Y R`` then ``K X Y R`` lines
+and four knot-only ``K`` lines each). Each case is also run at a quarter of its size, to show
+that memory grows linearly with the program.
+
+Every case runs in fresh subprocesses, so that the resident-set peak belongs to that case
+alone: one run times :func:`nurbscnc.program.interpret.interpret_text` on the text (already
+read; the LALR parser is built beforehand on a one-line program) and reads the peak RSS
+(``getrusage(...).ru_maxrss``) before and after; a second run measures the peak of Python
+allocations during the same call with ``tracemalloc`` (which slows Python down, so it is
+not timed). The results (date, machine, versions, per case: lines, seconds, lines_per_s,
+peak_mb, RSS) go to ``--out`` as JSON and a short table is printed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import json
+import math
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+MB = 1e6
+
+#: name -> (generator, lines in the full run). Quarter-size twins show linear memory growth.
+FULL_CASES = {
+    "g1_1M": ("g1", 1_000_000),
+    "g1_250k": ("g1", 250_000),
+    "g62_100k": ("g62", 100_000),
+    "g62_25k": ("g62", 25_000),
+}
+QUICK_DIVISOR = 10
+#: Pairs (large, quarter) compared for the linearity of memory.
+PAIRS = (("g1_1M", "g1_250k"), ("g62_100k", "g62_25k"))
+
+
+# -- program generators ----------------------------------------------------------------------
+def write_g1_program(path: Path, n_lines: int) -> None:
+    """A CAM-style spiral finishing pass of exactly ``n_lines`` lines.
+
+    Archimedean spiral r = 2 + 0.5 θ/(2π) mm at a 0.05 mm chord, Z ramping down 1 µm per move,
+    every line numbered (N, wrapping at 99990), modal G1 with X Y (and Z every tenth line),
+    a feed change every 250 moves and a comment every 1000 lines.
+    """
+    header = ["%", "(nurbscnc benchmark: CAM-style spiral, G1)", "G21 G17 G90 G94",
+              "G0 Z5", "G0 X2 Y0", "G1 Z0 F300"]  # fmt: skip
+    footer = ["G0 Z5", "M2", "%"]
+    body = n_lines - len(header) - len(footer)
+    out = list(header)
+    theta, z = 0.0, 0.0
+    for k in range(body):
+        line_no = len(out) + 1
+        if line_no % 1000 == 0:
+            out.append(f"(pass {line_no // 1000}: spiral r = {2 + 0.5 * theta / math.tau:.3f})")
+            continue
+        r = 2.0 + 0.5 * theta / math.tau
+        theta += 0.05 / r
+        z -= 0.001
+        n = 10 * (k % 9999 + 1)
+        words = f"N{n} X{r * math.cos(theta):.4f} Y{r * math.sin(theta):.4f}"
+        if k % 10 == 0:
+            words = f"N{n} G1 X{r * math.cos(theta):.4f} Y{r * math.sin(theta):.4f} Z{z:.4f}"
+        if k % 250 == 0:
+            words += f" F{1200 + 600 * ((k // 250) % 3)}"
+        out.append(words)
+    out.extend(footer)
+    assert len(out) == n_lines
+    path.write_text("\n".join(out) + "\n", encoding="ascii")
+
+
+def write_g62_program(path: Path, n_lines: int, blocks: int = 4) -> None:
+    """``blocks`` cubic rational NURBS blocks (G6.2 P4), chained, ``n_lines`` lines in all.
+
+    Each block: ``G6.2 P4 K0 X Y R1`` (its first control point is the current position), then
+    ``K X Y R`` lines and four knot-only ``K`` lines; clamped uniform knots 0,0,0,0,1,2,…
+    Control points follow a wavy spiral; weights vary in [0.8, 1.2].
+    """
+    header = ["%", "(nurbscnc benchmark: long G6.2 NURBS blocks)", "G21 G17 G90 G94",
+              "G0 X5 Y0", "F2000"]  # fmt: skip
+    footer = ["M2", "%"]
+    body = n_lines - len(header) - len(footer)
+    per_block = [body // blocks + (1 if b < body % blocks else 0) for b in range(blocks)]
+    out = list(header)
+    x, y = 5.0, 0.0
+    i = 0  # global control point index along the spiral
+    for lines in per_block:
+        n_ctrl = lines - 4
+        out.append(f"G6.2 P4 K0 X{x:.4f} Y{y:.4f} R1")
+        for k in range(1, n_ctrl):
+            i += 1
+            theta = 0.02 * i
+            r = 5.0 + 0.02 * theta + 0.3 * math.sin(7.0 * theta)
+            x, y = round(r * math.cos(theta), 4), round(r * math.sin(theta), 4)
+            weight = 1.0 + 0.2 * math.sin(0.37 * i) if k < n_ctrl - 1 else 1.0
+            knot = max(0, k - 3)
+            out.append(f"K{knot} X{x:.4f} Y{y:.4f} R{weight:.4f}")
+        last = n_ctrl - 3
+        out.extend(f"K{last}" for _ in range(4))
+    out.extend(footer)
+    assert len(out) == n_lines
+    path.write_text("\n".join(out) + "\n", encoding="ascii")
+
+
+GENERATORS = {"g1": write_g1_program, "g62": write_g62_program}
+
+
+# -- worker: one measurement in a fresh process ----------------------------------------------
+def _rss_mb() -> float:
+    """Peak resident set size of this process so far [MB] (ru_maxrss: KiB on Linux)."""
+    import resource
+
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return peak * (1.0 if sys.platform == "darwin" else 1024.0) / MB
+
+
+def worker(mode: str, program: str) -> dict:
+    """Measure one interpret_text call on ``program``: ``time`` (wall, RSS) or ``trace``."""
+    import time
+    import tracemalloc
+
+    from nurbscnc.program.interpret import interpret_text
+
+    text = Path(program).read_text(encoding="ascii")
+    interpret_text("G0 X0\n")  # builds (and caches) the LALR parser: not part of the rate
+    if mode == "time":
+        rss_base = _rss_mb()
+        t0 = time.perf_counter()
+        prog = interpret_text(text)
+        seconds = time.perf_counter() - t0
+        return {"seconds": seconds, "segments": len(prog.segments),
+                "rss_base_mb": rss_base, "rss_peak_mb": _rss_mb()}  # fmt: skip
+    tracemalloc.start()
+    prog = interpret_text(text)
+    current, peak = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
+    return {"peak_mb": peak / MB, "retained_mb": current / MB, "segments": len(prog.segments)}
+
+
+def run_worker(mode: str, program: Path) -> dict:
+    cmd = [sys.executable, str(Path(__file__).resolve()), "--worker", mode, str(program)]
+    done = subprocess.run(cmd, capture_output=True, text=True, check=False)
+    if done.returncode != 0:
+        raise SystemExit(f"benchmark worker failed ({mode} {program.name}):\n{done.stderr}")
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+# -- the driver ------------------------------------------------------------------------------
+def machine_info() -> dict:
+    info = {
+        "platform": platform.platform(),
+        "machine": platform.machine(),
+        "processor": platform.processor() or None,
+        "cpu_count": os.cpu_count(),
+    }
+    try:
+        with open("/proc/cpuinfo", encoding="ascii", errors="replace") as fh:
+            for line in fh:
+                if line.startswith("model name"):
+                    info["cpu"] = line.split(":", 1)[1].strip()
+                    break
+        with open("/proc/meminfo", encoding="ascii") as fh:
+            info["mem_total_mb"] = int(fh.readline().split()[1]) * 1024 / MB
+    except OSError:
+        pass
+    return info
+
+
+def versions() -> dict:
+    from importlib.metadata import PackageNotFoundError, version
+
+    found = {}
+    for name in ("nurbscnc", "lark", "numpy"):
+        try:
+            found[name] = version(name)
+        except PackageNotFoundError:
+            found[name] = None
+    return found
+
+
+def run_cases(quick: bool, workdir: Path) -> list[dict]:
+    results = []
+    for name, (kind, full_lines) in FULL_CASES.items():
+        lines = full_lines // QUICK_DIVISOR if quick else full_lines
+        program = workdir / f"{name}.ngc"
+        GENERATORS[kind](program, lines)
+        timed = run_worker("time", program)
+        traced = run_worker("trace", program)
+        assert timed["segments"] == traced["segments"]
+        results.append({
+            "case": name if not quick else f"{name}/{QUICK_DIVISOR}",
+            "program": kind.upper().replace("G62", "G6.2"),
+            "lines": lines,
+            "bytes": program.stat().st_size,
+            "segments": timed["segments"],
+            "seconds": timed["seconds"],
+            "lines_per_s": lines / timed["seconds"],
+            "peak_mb": traced["peak_mb"],
+            "retained_mb": traced["retained_mb"],
+            "peak_bytes_per_line": traced["peak_mb"] * MB / lines,
+            "rss_base_mb": timed["rss_base_mb"],
+            "rss_peak_mb": timed["rss_peak_mb"],
+            "rss_growth_mb": timed["rss_peak_mb"] - timed["rss_base_mb"],
+        })  # fmt: skip
+        print(f"  {results[-1]['case']}: {lines} lines in {timed['seconds']:.2f} s", flush=True)
+    return results
+
+
+def linearity(results: list[dict]) -> list[dict]:
+    """Per pair (large, quarter): the ratios of lines, tracemalloc peak and RSS growth."""
+    by_name = {r["case"].split("/")[0]: r for r in results}
+    rows = []
+    for big, small in PAIRS:
+        b, s = by_name[big], by_name[small]
+        rows.append({
+            "cases": [big, small],
+            "lines_ratio": b["lines"] / s["lines"],
+            "peak_mb_ratio": b["peak_mb"] / s["peak_mb"],
+            "rss_growth_ratio": b["rss_growth_mb"] / s["rss_growth_mb"],
+        })  # fmt: skip
+    return rows
+
+
+def print_table(report: dict) -> None:
+    head = (f"{'case':<14}{'lines':>10}{'seconds':>9}{'lines/s':>10}{'peak MB':>9}"
+            f"{'B/line':>8}{'RSS MB':>9}{'RSS +MB':>9}")  # fmt: skip
+    print(head)
+    print("-" * len(head))
+    for r in report["cases"]:
+        print(f"{r['case']:<14}{r['lines']:>10}{r['seconds']:>9.2f}{r['lines_per_s']:>10.0f}"
+              f"{r['peak_mb']:>9.1f}{r['peak_bytes_per_line']:>8.0f}{r['rss_peak_mb']:>9.1f}"
+              f"{r['rss_growth_mb']:>9.1f}")  # fmt: skip
+    for row in report["linearity"]:
+        print(f"{' / '.join(row['cases'])}: lines x{row['lines_ratio']:.2f}, "
+              f"tracemalloc peak x{row['peak_mb_ratio']:.2f}, "
+              f"RSS growth x{row['rss_growth_ratio']:.2f}")  # fmt: skip
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--out", type=Path, default=ROOT / "bench" / "results.json",
+                        help="JSON results file (default: bench/results.json)")  # fmt: skip
+    parser.add_argument("--quick", action="store_true",
+                        help=f"programs {QUICK_DIVISOR}x smaller (a smoke test)")  # fmt: skip
+    parser.add_argument("--worker", nargs=2, metavar=("MODE", "PROGRAM"), help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if args.worker:
+        print(json.dumps(worker(*args.worker)))
+        return 0
+    print(f"nurbscnc parse+interpret benchmark{' (quick)' if args.quick else ''}", flush=True)
+    with tempfile.TemporaryDirectory(prefix="nurbscnc-bench-") as tmp:
+        cases = run_cases(args.quick, Path(tmp))
+    report = {
+        "date": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
+        "machine": machine_info(),
+        "python": sys.version.split()[0],
+        "python_implementation": platform.python_implementation(),
+        "versions": versions(),
+        "quick": args.quick,
+        "measured": "nurbscnc.program.interpret.interpret_text(text): lark LALR parse with an "
+                    "inline transformer + interpretation to segments; text already in memory",
+        "cases": cases,
+        "linearity": linearity(cases),
+    }  # fmt: skip
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    tmp_out = args.out.with_name(args.out.name + ".tmp")
+    tmp_out.write_text(json.dumps(report, indent=1) + "\n", encoding="utf-8")
+    tmp_out.replace(args.out)
+    print_table(report)
+    print(f"results written to {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,335 @@
+"""A kinematic lower bound on cycle time (SPEC §10, third bullet).
+
+The fastest any controller could run a path, rest to rest, under the *point-wise* limits only:
+
+* speed:          v ≤ min(V_max, the piece's programmed feed)
+* chord error:    v ≤ V_af(κ) = (2/T_s)·√(2δ/κ − δ²)                  (SPEC §7, eq. 23)
+* normal accel.:  κ v² ≤ A_max
+* tangential:     |dv/dt| ≤ A_max, i.e. |d(v²)/ds| ≤ 2 A_max
+* exact stops:    v = 0 at the start, the end, and after every piece flagged ``stop_after``.
+
+There is no jerk limit and the normal and tangential limits are applied separately (not to
+|a| as a whole), so every real plan (jerk-limited S-curves, PH corners, re-planning after the
+dynamics check) takes at least this long: the bound says how far a plan is from the limit.
+
+Method. The path is sampled on an arc-length grid s_0 < ... < s_n (one grid over all pieces;
+each junction appears twice, as the last point of one piece and the first of the next, so a
+feed change or a stop acts exactly at the junction). ``cap²`` is the squared speed cap at the
+grid points and is taken linear in s between them. The optimum is then known in closed form:
+
+    v²(s) = min( cap²(s), min_j [cap²_j + 2A|s − s_j|] )
+
+(the min over a segment of a linear function plus a cone is attained at its ends or at s
+itself). At the grid points this is a forward and a backward pass over squared speeds
+(Klipper's look-ahead), done without a Python loop as running minima:
+
+    forward:  min_{j≤i} (cap²_j + 2A(s_i − s_j)) = 2A s_i + cummin_i (cap²_j − 2A s_j)
+    backward: min_{j≥i} (cap²_j + 2A(s_j − s_i)) = −2A s_i + reverse-cummin (cap²_j + 2A s_j)
+
+Inside a grid interval v² is the minimum of three lines (the interpolated cap, the cone up
+from the left point, the cone down to the right point), i.e. at most three stretches of
+constant acceleration; on each the time is exact: Δt = 2Δs/(v_a + v_b), also when one end is
+at rest. So the bound is *exact* (to rounding) for any cap that is piecewise linear in s²
+between grid points: constant caps (lines, circles) on any grid, whatever the grid spacing.
+
+The only approximation is the linear interpolation of cap² between samples. The grid starts
+at spacing ≤ ``ds_mm`` (default 0.01 mm, plus the knots of NURBS pieces) and every interval
+is bisected, level by level, while cap² at its midpoint differs from the mean of its ends by
+more than ``cap_rel_tol`` (default 1e-5) of its value; a relative error ε in v² is ε/2 in v
+and at most about that in time, so the bound is accurate to well below 0.01 % on smooth
+paths (measured on the 9 mm NACA 2415: changing ``ds_mm`` 0.01 → 0.0025 mm moves it by
+< 1e-6 relative).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from nurbscnc.errors import ConfigError, PlanningError
+from nurbscnc.machine import Machine, chord_feed_mm_s
+
+#: Default largest grid spacing [mm] (SPEC §10).
+DEFAULT_DS_MM = 0.01
+#: Default bisection tolerance on cap² (relative, at interval midpoints).
+DEFAULT_CAP_REL_TOL = 1e-5
+#: Bisection levels at most: the finest spacing is ds / 2^levels (0.01 mm → 2.4 nm).
+MAX_LEVELS = 12
+
+
+@dataclass(frozen=True, eq=False)
+class LowerBound:
+    """The time-optimal speed profile under point-wise limits (see the module docstring).
+
+    ``s_mm`` (n,) the arc-length grid from the path start, non-decreasing (junctions appear
+    twice); ``v_mm_s`` (n,) the optimal speed there; ``v_cap_mm_s`` (n,) the point-wise cap
+    (0 at rest points); ``t_s`` (n,) the time at which the optimal motion passes each point
+    (``t_s[-1] == time_s``); ``piece_start`` (k+1,) grid index of each piece's first point,
+    and n at the end (piece i is ``slice(piece_start[i], piece_start[i+1])``).
+    """
+
+    time_s: float
+    s_mm: np.ndarray
+    v_mm_s: np.ndarray
+    v_cap_mm_s: np.ndarray
+    t_s: np.ndarray
+    piece_start: np.ndarray
+
+    @property
+    def length_mm(self) -> float:
+        """Total path length [mm]."""
+        return float(self.s_mm[-1]) if self.s_mm.size else 0.0
+
+
+# ---------------------------------------------------------------------------------------------
+# The 1-D kernel: grid + cap² -> optimal v² and exact time.
+
+
+def optimal_v2(s_mm: np.ndarray, cap2: np.ndarray, a_max_mm_s2: float) -> np.ndarray:
+    """v²_i = min_j (cap²_j + 2A|s_i − s_j|) [mm²/s²] on a non-decreasing grid ``s_mm``.
+
+    The forward and backward passes over squared speeds as running minima (no Python loop);
+    ``cap2`` [mm²/s²] must be finite. O(n).
+    """
+    two_a = 2.0 * a_max_mm_s2
+    # Shift s to the grid's middle: halves the size of 2A s and so the cancellation error.
+    x = s_mm - 0.5 * (s_mm[0] + s_mm[-1])
+    fwd = two_a * x + np.minimum.accumulate(cap2 - two_a * x)
+    bwd = np.minimum.accumulate((cap2 + two_a * x)[::-1])[::-1] - two_a * x
+    return np.maximum(np.minimum(np.minimum(fwd, bwd), cap2), 0.0)
+
+
+def interval_times_s(
+    s_mm: np.ndarray, v2: np.ndarray, cap2: np.ndarray, a_max_mm_s2: float
+) -> np.ndarray:
+    """Exact time [s] of each grid interval (n−1,) for the profile of :func:`optimal_v2`.
+
+    ``v2`` the optimal v² at the grid points; ``cap2`` the path's cap² there, interpolated
+    linearly in between (without the rest points' zeros: those constrain the point only).
+
+    On [s_i, s_i + h] (x = s − s_i) v² is the minimum of three lines: the cone up from the left
+    point F = a + 2A x, the interpolated cap C = c0 + m x and the cone down to the right point
+    B = b + 2A(h − x). The minimum is concave, so its active lines come in order of decreasing
+    slope: F, then C (only if |m| < 2A and F meets C before B does: x_FC < x_BC), then B;
+    otherwise F then B, meeting at x_FB. So v² is linear (constant acceleration) on
+    [0, x1], [x1, x2], [x2, h], each timed exactly by Δt = 2Δx/(v_a + v_b). A zero-length
+    stretch takes no time; a stretch of positive length at v = 0 takes forever (inf).
+    """
+    two_a = 2.0 * a_max_mm_s2
+    h = np.diff(s_mm)
+    a, b = v2[:-1], v2[1:]
+    c0 = cap2[:-1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        m = np.where(h > 0.0, (cap2[1:] - c0) / h, 0.0)
+        x_fb = (b - a + two_a * h) / (2.0 * two_a)
+        x_fc = (c0 - a) / (two_a - m)
+        x_bc = (b + two_a * h - c0) / (two_a + m)
+    cap_active = (np.abs(m) < two_a) & (x_fc < x_bc)
+    x1 = np.clip(np.where(cap_active, x_fc, x_fb), 0.0, h)
+    x2 = np.clip(np.where(cap_active, x_bc, x_fb), x1, h)
+
+    def v_at(x):
+        w = np.minimum(np.minimum(a + two_a * x, b + two_a * (h - x)), c0 + m * x)
+        return np.sqrt(np.maximum(w, 0.0))
+
+    def stretch(dx, va, vb):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(dx > 0.0, 2.0 * dx / (va + vb), 0.0)
+
+    va, v1, v2_, vb = np.sqrt(a), v_at(x1), v_at(x2), np.sqrt(b)
+    return stretch(x1, va, v1) + stretch(x2 - x1, v1, v2_) + stretch(h - x2, v2_, vb)
+
+
+# ---------------------------------------------------------------------------------------------
+# Sampling the pieces.
+
+
+def _cap2(kappa_per_mm, v_top_mm_s: float, a_max_mm_s2: float, period_s, chord_mm) -> np.ndarray:
+    """cap² = min(v_top², V_af(κ)², A/κ) [mm²/s²]; κ = 0 leaves v_top², κ = inf gives 0."""
+    k = np.abs(np.asarray(kappa_per_mm, dtype=float))
+    v_af = np.asarray(chord_feed_mm_s(k, period_s, chord_mm), dtype=float)
+    with np.errstate(divide="ignore"):
+        normal = np.where(k > 0.0, a_max_mm_s2 / k, np.inf)
+    return np.minimum(np.minimum(v_top_mm_s * v_top_mm_s, v_af * v_af), normal)
+
+
+def _sample_piece(geom, ds_mm: float, cap2_of, rel_tol: float) -> tuple[np.ndarray, np.ndarray]:
+    """Arc-length grid (from 0) and cap² on it for one piece (see the module docstring)."""
+    length = float(geom.length_mm)
+    if not length > 0.0:
+        u = np.array([geom.u_start, geom.u_end], dtype=float)
+        return np.zeros(2), cap2_of(geom.curvature(u))
+    n = max(1, math.ceil(length / ds_mm))
+    s = np.linspace(0.0, length, n + 1)
+    knots = getattr(geom, "breakpoints", None)
+    if knots is not None:  # curvature may jump at knots: put them on the grid
+        s = np.union1d(s, np.clip(geom.arc_length(np.asarray(knots, dtype=float)), 0.0, length))
+    c2 = cap2_of(geom.curvature(geom.param_at_length(s)))
+    points, values = [s], [c2]
+    lo, hi, c_lo, c_hi = s[:-1], s[1:], c2[:-1], c2[1:]
+    for _ in range(MAX_LEVELS):
+        keep = hi > lo
+        lo, hi, c_lo, c_hi = lo[keep], hi[keep], c_lo[keep], c_hi[keep]
+        if not lo.size:
+            break
+        mid = 0.5 * (lo + hi)
+        c_mid = cap2_of(geom.curvature(geom.param_at_length(mid)))
+        mean = 0.5 * (c_lo + c_hi)
+        bad = np.abs(c_mid - mean) > rel_tol * np.maximum(c_mid, mean)
+        if not bad.any():
+            break
+        points.append(mid[bad])
+        values.append(c_mid[bad])
+        lo, hi, c_lo, c_hi = (
+            np.concatenate((lo[bad], mid[bad])),
+            np.concatenate((mid[bad], hi[bad])),
+            np.concatenate((c_lo[bad], c_mid[bad])),
+            np.concatenate((c_mid[bad], c_hi[bad])),
+        )
+    s_all = np.concatenate(points)
+    order = np.argsort(s_all, kind="stable")
+    return s_all[order], np.concatenate(values)[order]
+
+
+def _per_piece(values, n: int, name: str, dtype) -> np.ndarray:
+    arr = np.asarray(values, dtype=dtype)
+    if arr.ndim == 0:
+        return np.full(n, arr, dtype=dtype)
+    if arr.shape != (n,):
+        raise PlanningError(f"{name} must be a scalar or have one value per piece ({n})")
+    return arr
+
+
+def lower_bound_time_s(
+    geometries: Sequence,
+    v_program_mm_s,
+    *,
+    a_max_mm_s2: float,
+    period_s: float,
+    chord_tolerance_mm: float,
+    v_max_mm_s: float = math.inf,
+    stop_after=None,
+    ds_mm: float | None = None,
+    cap_rel_tol: float = DEFAULT_CAP_REL_TOL,
+) -> LowerBound:
+    """Kinematic lower bound on the time [s] to run ``geometries`` in order, rest to rest.
+
+    Parameters
+    ----------
+    geometries
+        The pieces, each a :class:`~nurbscnc.geometry.paths.PathGeometry`, end to end.
+    v_program_mm_s
+        Speed ceiling per piece [mm/s] (programmed feed, rapid rate), scalar or one per piece.
+    a_max_mm_s2
+        A_max, bounding both the tangential |dv/dt| and the normal κv² acceleration.
+    period_s, chord_tolerance_mm
+        T_s and δ of the chord-error feed V_af (SPEC §7, eq. 23).
+    v_max_mm_s
+        A global ceiling applied on top of ``v_program_mm_s`` (default none).
+    stop_after
+        Per-piece booleans: the tool must be at rest after that piece (e.g. a tangent
+        discontinuity). The start and the end are always at rest.
+    ds_mm
+        Largest grid spacing [mm] (default 0.01 mm); see the module docstring for the
+        adaptive refinement (``cap_rel_tol``) and the accuracy.
+
+    Raises ConfigError for bad limits or options, PlanningError for inconsistent inputs or
+    when the cap is zero over a stretch of path (the bound is then infinite).
+    """
+    ds = DEFAULT_DS_MM if ds_mm is None else float(ds_mm)
+    for name, value in (
+        ("a_max_mm_s2", a_max_mm_s2),
+        ("period_s", period_s),
+        ("chord_tolerance_mm", chord_tolerance_mm),
+        ("ds_mm", ds),
+        ("cap_rel_tol", cap_rel_tol),
+    ):
+        if not (math.isfinite(value) and value > 0.0):
+            raise ConfigError(f"{name} must be a finite number > 0, got {value!r}")
+    if not v_max_mm_s > 0.0:
+        raise ConfigError(f"v_max_mm_s must be > 0, got {v_max_mm_s!r}")
+    pieces = list(geometries)
+    k = len(pieces)
+    if k == 0:
+        raise PlanningError("lower bound of an empty path")
+    v_top = np.minimum(_per_piece(v_program_mm_s, k, "v_program_mm_s", float), v_max_mm_s)
+    if not np.all(np.isfinite(v_top) & (v_top > 0.0)):
+        raise PlanningError("every piece needs a finite speed ceiling > 0 [mm/s]")
+    stops = np.zeros(k, dtype=bool) if stop_after is None else (
+        _per_piece(stop_after, k, "stop_after", bool)
+    )
+
+    s_parts, c_parts = [], []
+    offset = 0.0
+    for geom, top in zip(pieces, v_top):
+
+        def cap2_of(kappa, top=float(top)):
+            return _cap2(kappa, top, a_max_mm_s2, period_s, chord_tolerance_mm)
+
+        s, c2 = _sample_piece(geom, ds, cap2_of, cap_rel_tol)
+        s_parts.append(s + offset)
+        c_parts.append(c2)
+        offset += float(s[-1])
+    sizes = np.array([p.size for p in s_parts])
+    piece_start = np.concatenate(([0], np.cumsum(sizes)))
+    s_mm = np.concatenate(s_parts)
+    path_cap2 = np.concatenate(c_parts)
+    # Rest at the start, at the end and at every exact stop (both copies of the junction):
+    # point constraints for the passes; between grid points the path's own cap still holds.
+    cap2 = path_cap2.copy()
+    cap2[0] = 0.0
+    cap2[-1] = 0.0
+    last = piece_start[1:] - 1
+    cap2[last[stops]] = 0.0
+    cap2[piece_start[1:-1][stops[:-1]]] = 0.0
+
+    v2 = optimal_v2(s_mm, cap2, a_max_mm_s2)
+    dt = interval_times_s(s_mm, v2, path_cap2, a_max_mm_s2)
+    if not np.all(np.isfinite(dt)):
+        i = int(np.flatnonzero(~np.isfinite(dt))[0])
+        raise PlanningError(
+            f"the speed cap is zero on the path from s = {s_mm[i]:.6g} mm to "
+            f"{s_mm[i + 1]:.6g} mm (curvature above 2/δ?): no finite cycle time"
+        )
+    t_s = np.concatenate(([0.0], np.cumsum(dt)))
+    return LowerBound(
+        time_s=float(t_s[-1]),
+        s_mm=s_mm,
+        v_mm_s=np.sqrt(v2),
+        v_cap_mm_s=np.sqrt(cap2),
+        t_s=t_s,
+        piece_start=piece_start,
+    )
+
+
+def machine_lower_bound(
+    geometries: Sequence,
+    v_program_mm_s,
+    machine: Machine,
+    *,
+    rapid=None,
+    stop_after=None,
+    ds_mm: float | None = None,
+) -> LowerBound:
+    """:func:`lower_bound_time_s` with ``machine``'s A_max, T_s, δ and V_max.
+
+    Feeds are capped at V_max; pieces flagged in ``rapid`` (per-piece booleans) run at the
+    machine's rapid rate instead, whatever ``v_program_mm_s`` says for them.
+    """
+    lim = machine.limits
+    k = len(geometries)
+    top = np.minimum(_per_piece(v_program_mm_s, k, "v_program_mm_s", float), lim.v_max_mm_s)
+    if rapid is not None:
+        top = np.where(_per_piece(rapid, k, "rapid", bool), lim.rapid_mm_s, top)
+    return lower_bound_time_s(
+        geometries,
+        top,
+        a_max_mm_s2=lim.a_max_mm_s2,
+        period_s=machine.servo.period_s,
+        chord_tolerance_mm=lim.chord_tolerance_mm,
+        stop_after=stop_after,
+        ds_mm=ds_mm,
+    )
