@@ -17,9 +17,13 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 demo: $(STAMP)
+	@mkdir -p $(OUT)
 	$(BIN)/nurbscnc check $(DEMO)
 	$(BIN)/nurbscnc corners $(DEMO)
 	$(BIN)/nurbscnc ph $(DEMO)
+	$(BIN)/nurbscnc plan $(DEMO) --dump-profile $(OUT)/naca2415-profile.csv
+	$(BIN)/nurbscnc run $(DEMO) -o $(OUT)/naca2415-points.csv
+	@echo "reference points: $(OUT)/naca2415-points.csv"
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

@@ -243,42 +243,58 @@ def brute_v2(s, cap2, a):
     return np.min(cap2[None, :] + 2 * a * np.abs(s[:, None] - s[None, :]), axis=1)
 
 
-def brute_time(s, cap2, a):
-    """∫ ds / v with v²(x) = min(c(x), min_j cap²_j + 2A|x − s_j|), c linear between points."""
+def brute_time(s, path_cap2, point_cap2, a):
+    """∫ ds / v, v²(x) = min(c(x), min_j point_cap²_j + 2A|x − s_j|), c = path cap² linear.
 
-    def v_at(x, i):
-        c = np.interp(x, s[i : i + 2], cap2[i : i + 2])
-        cones = np.min(cap2 + 2 * a * np.abs(x - s))
-        return math.sqrt(max(min(c, cones), 0.0))
-
+    Each grid interval is split at every pairwise crossing of all the lines involved (brute
+    force), so the integrand is 1/√(linear) on each part, and integrated by quad.
+    """
+    up = (np.full(s.size, 2 * a), point_cap2 - 2 * a * s)  # (slope, intercept) in x
+    down = (np.full(s.size, -2 * a), point_cap2 + 2 * a * s)
     total = 0.0
     for i in range(s.size - 1):
-        if s[i + 1] > s[i]:
-            total += quad(lambda x, i=i: 1.0 / v_at(x, i), s[i], s[i + 1], epsabs=0.0,
-                          epsrel=1e-11, limit=200)[0]
+        lo, hi = s[i], s[i + 1]
+        if not hi > lo:
+            continue
+        m = (path_cap2[i + 1] - path_cap2[i]) / (hi - lo)
+        # On [s_i, s_i+1], |x − s_j| = x − s_j for j ≤ i and s_j − x for j > i.
+        slopes = np.concatenate((up[0][: i + 1], down[0][i + 1 :], [m]))
+        inter = np.concatenate((up[1][: i + 1], down[1][i + 1 :], [path_cap2[i] - m * lo]))
+
+        def v_at(x, slopes=slopes, inter=inter):
+            return math.sqrt(max(np.min(slopes * x + inter), 0.0))
+
+        with np.errstate(divide="ignore", invalid="ignore"):
+            cross = (inter[None, :] - inter[:, None]) / (slopes[:, None] - slopes[None, :])
+        cross = cross[np.isfinite(cross) & (cross > lo) & (cross < hi)]
+        cuts = np.unique(np.concatenate(([lo, hi], cross)))
+        for x0, x1 in zip(cuts[:-1], cuts[1:]):
+            total += quad(lambda x: 1.0 / v_at(x), x0, x1, epsabs=0.0, epsrel=1e-12)[0]
     return total
 
 
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=30, deadline=None)
 @given(
     steps=st.lists(st.floats(0.0, 2.0), min_size=1, max_size=12),
     caps=st.lists(st.floats(1.0, 80.0), min_size=13, max_size=13),
+    stops=st.lists(st.booleans(), min_size=13, max_size=13),
     a=st.floats(50.0, 5000.0),
 )
-def test_kernel_matches_definition_and_quadrature(steps, caps, a):
+def test_kernel_matches_definition_and_quadrature(steps, caps, stops, a):
     s = np.concatenate(([0.0], np.cumsum(steps)))
-    cap2 = np.square(caps[: s.size])
-    cap2[0] = cap2[-1] = 0.0
+    path_cap2 = np.square(caps[: s.size])
+    # Rest at both ends and at random interior points (point constraints only).
+    at_rest = np.array(stops[: s.size])
+    at_rest[[0, -1]] = True
+    cap2 = np.where(at_rest, 0.0, path_cap2)
     v2 = optimal_v2(s, cap2, a)
     np.testing.assert_allclose(v2, brute_v2(s, cap2, a), rtol=1e-12, atol=1e-9)
     # Feasible: under the cap, |Δv²| ≤ 2A Δs.
     assert np.all(v2 <= cap2 + 1e-9)
     assert np.all(np.abs(np.diff(v2)) <= 2 * a * np.diff(s) + 1e-9)
-    dt = interval_times_s(s, v2, cap2, a)
-    if s[-1] > 0.0:
-        assert dt.sum() == pytest.approx(brute_time(s, cap2, a), rel=1e-8)
-    else:
-        assert dt.sum() == 0.0
+    dt = interval_times_s(s, v2, path_cap2, a)
+    assert np.all(np.isfinite(dt)) and np.all(dt >= 0.0)
+    assert dt.sum() == pytest.approx(brute_time(s, path_cap2, cap2, a), rel=1e-8, abs=1e-15)
 
 
 def test_zero_cap_over_a_stretch_is_an_error():
@@ -313,12 +329,13 @@ def test_unbounded_speed_is_an_error():
 
 def test_one_million_points_in_under_a_second():
     # A 10 m line at ds = 0.01 mm: 1e6 + 1 grid points, sampling included.
-    t0 = time.perf_counter()
+    # CPU time, not wall time: other test processes may share the machine.
+    t0 = time.process_time()
     lb = lower_bound_time_s([line(0.0, 1e4)], V, **LIMITS)
-    elapsed = time.perf_counter() - t0
+    elapsed = time.process_time() - t0
     assert lb.s_mm.size == 1_000_001
     assert lb.time_s == pytest.approx(1e4 / V + V / A, rel=1e-10)
-    assert elapsed < 1.5  # ~0.5 s measured; slack for a loaded machine
+    assert elapsed < 1.0  # ~0.45 s measured
 
 
 # --------------------------------------------------------------------------------------------

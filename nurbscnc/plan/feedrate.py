@@ -120,26 +120,7 @@ def scurve_distance_mm(v_a_mm_s, v_b_mm_s, a_max_mm_s2: float, j_max_mm_s3: floa
     return _out(d, scalar)
 
 
-def _reach_closed_form_scalar(v0: float, d: float, a: float, j: float) -> float:
-    """The closed form of :func:`max_reachable_speed` in plain math (``d > 0``)."""
-    a2j = a * a / j
-    if d > (2.0 * v0 + a2j) * a / j:
-        # A reached: Δv² + b·Δv + c = 0, b = 2v0 + A²/J, c = −2A(d − v0·A/J) < 0;
-        # the cancellation-free root 2|c| / (b + √(b² + 4|c|)).
-        b = 2.0 * v0 + a2j
-        c = 2.0 * a * (d - v0 * a / j)
-        return v0 + 2.0 * c / (b + math.sqrt(b * b + 4.0 * c))
-    # A not reached: x = √(Δv/J) solves x³ + p·x − r = 0, p = 2v0/J, r = d/J.
-    p = 2.0 * v0 / j
-    r = d / j
-    if p > 0.0:
-        z = 1.5 * r / p * math.sqrt(3.0 / p)
-        if z <= 1.0:
-            x = 2.0 * math.sqrt(p / 3.0) * math.sinh(math.asinh(z) / 3.0)
-            return v0 + j * x * x
-    u = math.cbrt(0.5 * r + math.sqrt(0.25 * r * r + p * p * p / 27.0))
-    x = u - p / (3.0 * u)
-    return v0 + j * x * x
+_sqrt, _sinh, _asinh, _cbrt, _ulp = math.sqrt, math.sinh, math.asinh, math.cbrt, math.ulp
 
 
 def max_reachable_speed_scalar(
@@ -148,18 +129,41 @@ def max_reachable_speed_scalar(
     """Largest ``v ≥ v_from`` [mm/s] with ``D(v_from → v) ≤ distance`` (closed form, plain math).
 
     Same closed form and float guard as :func:`max_reachable_speed`, without input checks:
-    this is the inner loop of the look-ahead scans (the caller validated its inputs).
+    this is the inner loop of the look-ahead scans (the caller validated its inputs), so it
+    is written flat, with the math functions bound at module level.
     """
     v0, d, a, j = v_from_mm_s, distance_mm, a_max_mm_s2, j_max_mm_s3
     if d <= 0.0:
         return v0
-    v = _reach_closed_form_scalar(v0, d, a, j)
-    # Float guard: D evaluated in floats must not exceed d. Near Δv = 0, D ~ 2v0·√(Δv/J)
-    # is so steep that one ulp of v can change D by several per cent, so step down (by a
-    # doubling number of ulps; v0 itself always fits) until it does.
+    a2j = a * a / j
+    if d > (2.0 * v0 + a2j) * a / j:
+        # A reached: Δv² + b·Δv + c = 0, b = 2v0 + A²/J, c = −2A(d − v0·A/J) < 0;
+        # the cancellation-free root 2|c| / (b + √(b² + 4|c|)).
+        b = 2.0 * v0 + a2j
+        c = 2.0 * a * (d - v0 * a / j)
+        v = v0 + 2.0 * c / (b + _sqrt(b * b + 4.0 * c))
+    else:
+        # A not reached: x = √(Δv/J) solves x³ + p·x − r = 0, p = 2v0/J, r = d/J.
+        p = 2.0 * v0 / j
+        r = d / j
+        z = 1.5 * r / p * _sqrt(3.0 / p) if p > 0.0 else 2.0
+        if z <= 1.0:
+            x = 2.0 * _sqrt(p / 3.0) * _sinh(_asinh(z) / 3.0)
+        else:
+            u = _cbrt(0.5 * r + _sqrt(0.25 * r * r + p * p * p / 27.0))
+            x = u - p / (3.0 * u)
+        v = v0 + j * x * x
+    # Float guard: D evaluated in floats (the same operations as _distance_scalar/_arr)
+    # must not exceed d. Near Δv = 0, D ~ 2v0·√(Δv/J) is so steep that one ulp of v can
+    # change D by several per cent, so step down (by a doubling number of ulps; v0 itself
+    # always fits) until it does.
+    dv = v - v0
+    t = dv / a + a / j if dv * j >= a * a else 2.0 * _sqrt(dv / j)
+    if 0.5 * (v0 + v) * t <= d:
+        return v
     step = 1
     while v > v0 and _distance_scalar(v0, v, a, j) > d:
-        v = max(v0, v - step * math.ulp(v))
+        v = max(v0, v - step * _ulp(v))
         step *= 2
     return v
 
