@@ -138,10 +138,10 @@ def worker(mode: str, program: str) -> dict:
     interpret_text("G0 X0\n")  # builds (and caches) the LALR parser: not part of the rate
     if mode == "time":
         rss_base = _rss_mb()
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         prog = interpret_text(text)
-        seconds = time.perf_counter() - t0
-        return {"seconds": seconds, "segments": len(prog.segments),
+        seconds, cpu_seconds = time.perf_counter() - t0, time.process_time() - c0
+        return {"seconds": seconds, "cpu_seconds": cpu_seconds, "segments": len(prog.segments),
                 "rss_base_mb": rss_base, "rss_peak_mb": _rss_mb()}  # fmt: skip
     tracemalloc.start()
     prog = interpret_text(text)
@@ -150,12 +150,17 @@ def worker(mode: str, program: str) -> dict:
     return {"peak_mb": peak / MB, "retained_mb": current / MB, "segments": len(prog.segments)}
 
 
-def run_worker(mode: str, program: Path) -> dict:
+def start_worker(mode: str, program: Path) -> subprocess.Popen:
+    """A fresh interpreter measuring ``program`` (see :func:`worker`)."""
     cmd = [sys.executable, str(Path(__file__).resolve()), "--worker", mode, str(program)]
-    done = subprocess.run(cmd, capture_output=True, text=True, check=False)
-    if done.returncode != 0:
-        raise SystemExit(f"benchmark worker failed ({mode} {program.name}):\n{done.stderr}")
-    return json.loads(done.stdout.strip().splitlines()[-1])
+    return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def finish_worker(proc: subprocess.Popen) -> dict:
+    stdout, stderr = proc.communicate()
+    if proc.returncode != 0:
+        raise SystemExit(f"benchmark worker failed ({' '.join(proc.args[-2:])}):\n{stderr}")
+    return json.loads(stdout.strip().splitlines()[-1])
 
 
 # -- the driver ------------------------------------------------------------------------------
@@ -192,13 +197,21 @@ def versions() -> dict:
 
 
 def run_cases(quick: bool, workdir: Path) -> list[dict]:
-    results = []
+    """Generate every case, time them one after the other (nothing else running), then run
+    the slow tracemalloc measurements side by side (their timing is not used)."""
+    programs, timings = {}, {}
     for name, (kind, full_lines) in FULL_CASES.items():
         lines = full_lines // QUICK_DIVISOR if quick else full_lines
-        program = workdir / f"{name}.ngc"
-        GENERATORS[kind](program, lines)
-        timed = run_worker("time", program)
-        traced = run_worker("trace", program)
+        programs[name] = (kind, lines, workdir / f"{name}.ngc")
+        GENERATORS[kind](programs[name][2], lines)
+    for name, (_, lines, program) in programs.items():
+        timings[name] = finish_worker(start_worker("time", program))
+        print(f"  {name}: {lines} lines in {timings[name]['seconds']:.2f} s", flush=True)
+    print("  tracemalloc runs ...", flush=True)
+    tracing = {name: start_worker("trace", program) for name, (_, _, program) in programs.items()}
+    results = []
+    for name, (kind, lines, program) in programs.items():
+        timed, traced = timings[name], finish_worker(tracing[name])
         assert timed["segments"] == traced["segments"]
         results.append({
             "case": name if not quick else f"{name}/{QUICK_DIVISOR}",
@@ -207,6 +220,7 @@ def run_cases(quick: bool, workdir: Path) -> list[dict]:
             "bytes": program.stat().st_size,
             "segments": timed["segments"],
             "seconds": timed["seconds"],
+            "cpu_seconds": timed["cpu_seconds"],
             "lines_per_s": lines / timed["seconds"],
             "peak_mb": traced["peak_mb"],
             "retained_mb": traced["retained_mb"],
@@ -215,7 +229,6 @@ def run_cases(quick: bool, workdir: Path) -> list[dict]:
             "rss_peak_mb": timed["rss_peak_mb"],
             "rss_growth_mb": timed["rss_peak_mb"] - timed["rss_base_mb"],
         })  # fmt: skip
-        print(f"  {results[-1]['case']}: {lines} lines in {timed['seconds']:.2f} s", flush=True)
     return results
 
 

@@ -249,33 +249,49 @@ def brute_time(s, path_cap2, point_cap2, a):
     Each grid interval is split at every pairwise crossing of all the lines involved (brute
     force), so the integrand is 1/√(linear) on each part, and integrated by quad.
     """
-    up = (np.full(s.size, 2 * a), point_cap2 - 2 * a * s)  # (slope, intercept) in x
-    down = (np.full(s.size, -2 * a), point_cap2 + 2 * a * s)
     total = 0.0
     for i in range(s.size - 1):
-        lo, hi = s[i], s[i + 1]
-        if not hi > lo:
+        h = s[i + 1] - s[i]
+        if not h > 0.0:
             continue
-        m = (path_cap2[i + 1] - path_cap2[i]) / (hi - lo)
-        # On [s_i, s_i+1], |x − s_j| = x − s_j for j ≤ i and s_j − x for j > i.
-        slopes = np.concatenate((up[0][: i + 1], down[0][i + 1 :], [m]))
-        inter = np.concatenate((up[1][: i + 1], down[1][i + 1 :], [path_cap2[i] - m * lo]))
+        # Lines in the local coordinate x = s − s_i ∈ [0, h]: (slope, value at x = 0).
+        # |s − s_j| = (s_i − s_j) + x for j ≤ i and (s_j − s_i) − x for j > i.
+        j_lo, j_hi = slice(0, i + 1), slice(i + 1, None)
+        slopes = np.concatenate(
+            (np.full(i + 1, 2 * a), np.full(s.size - i - 1, -2 * a), [(path_cap2[i + 1] - path_cap2[i]) / h])
+        )
+        at0 = np.concatenate(
+            (
+                point_cap2[j_lo] + 2 * a * (s[i] - s[j_lo]),
+                point_cap2[j_hi] + 2 * a * (s[j_hi] - s[i]),
+                [path_cap2[i]],
+            )
+        )
 
-        def v_at(x, slopes=slopes, inter=inter):
-            return math.sqrt(max(np.min(slopes * x + inter), 0.0))
+        def v_at(x, slopes=slopes, at0=at0):
+            return math.sqrt(max(np.min(at0 + slopes * x), 0.0))
 
         with np.errstate(divide="ignore", invalid="ignore"):
-            cross = (inter[None, :] - inter[:, None]) / (slopes[:, None] - slopes[None, :])
-        cross = cross[np.isfinite(cross) & (cross > lo) & (cross < hi)]
-        cuts = np.unique(np.concatenate(([lo, hi], cross)))
+            cross = (at0[None, :] - at0[:, None]) / (slopes[:, None] - slopes[None, :])
+        cross = cross[np.isfinite(cross) & (cross > 0.0) & (cross < h)]
+        cuts = np.unique(np.concatenate(([0.0, h], cross)))
         for x0, x1 in zip(cuts[:-1], cuts[1:]):
-            total += quad(lambda x: 1.0 / v_at(x), x0, x1, epsabs=0.0, epsrel=1e-12)[0]
+            # x = x0 + (x1 − x0)(1 − cos θ)/2 removes the 1/√ singularity at a rest end.
+            half = 0.5 * (x1 - x0)
+
+            def integrand(theta, x0=x0, half=half, v_at=v_at):
+                v = v_at(x0 + half * (1.0 - math.cos(theta)))
+                return half * math.sin(theta) / v if v > 0.0 else 0.0
+
+            total += quad(integrand, 0.0, math.pi, epsabs=0.0, epsrel=1e-11)[0]
     return total
 
 
 @settings(max_examples=30, deadline=None)
 @given(
-    steps=st.lists(st.floats(0.0, 2.0), min_size=1, max_size=12),
+    # Zero steps (duplicate points, as at junctions) or ≥ 1 µm: quad cannot resolve the
+    # near-singular 1/v of a stop a few ulps beyond a grid point.
+    steps=st.lists(st.just(0.0) | st.floats(1e-3, 2.0), min_size=1, max_size=12),
     caps=st.lists(st.floats(1.0, 80.0), min_size=13, max_size=13),
     stops=st.lists(st.booleans(), min_size=13, max_size=13),
     a=st.floats(50.0, 5000.0),

@@ -189,9 +189,9 @@ def _check_profile(prof, lengths, v_max, v_junction, a, j, lookahead=None):
     assert np.all(v0 >= -1e-9 * vscale) and np.all(v1 >= -1e-9 * vscale)
     # Continuity at every phase boundary (including the junctions), and the time chain.
     np.testing.assert_allclose(t0[1:], t0[:-1] + dt[:-1], rtol=1e-12, atol=1e-15)
-    np.testing.assert_allclose(s0[1:], s1[:-1], rtol=0, atol=1e-9)
-    np.testing.assert_allclose(v0[1:], v1[:-1], rtol=0, atol=1e-9 * vscale)
-    np.testing.assert_allclose(a0[1:], a1[:-1], rtol=0, atol=1e-6 * a)
+    np.testing.assert_allclose(s0[1:], s1[:-1], rtol=0, atol=1e-10)
+    np.testing.assert_allclose(v0[1:], v1[:-1], rtol=0, atol=1e-12 * vscale)
+    np.testing.assert_allclose(a0[1:], a1[:-1], rtol=0, atol=1e-12 * a)
     # At rest at both ends; total distance.
     assert s0[0] == 0.0 and v0[0] == 0.0 and a0[0] == 0.0
     assert abs(v1[-1]) <= 1e-9 * vscale and abs(a1[-1]) <= 1e-6 * a

@@ -16,21 +16,23 @@ Planning (Python per piece, O(k)):
    the backward scan started at rest at junction ``i + N``; a second backward scan makes the
    lowered caps consistent again.
 4. Forward scan from the start at rest: ``v_{i+1} = min(w_{i+1}, R(v_i, L_i))``.
-
-Why this is feasible although ``R`` is *not* monotone in its start speed: with zero
-acceleration at both ends, ``D(v0 → v0 + Δv)`` grows with ``v0`` at fixed ``Δv`` (the same
-jerk ramps, at a higher speed), so a faster start can end slower within the same length
-(``dR/dv0 = (2v0 − Δv)/(2v0 + 3Δv)`` while A is not reached); likewise slowing from ``x`` to
-a full stop can take less distance than slowing to ``x/3``. What the scans need is only that
-``D(lo → hi)`` grows with the *upper* speed ``hi``: a piece of the forward scan either ends at
-``R(v_i)`` (fits by definition), or ends at ``w_{i+1}`` above ``v_i`` (below ``R(v_i)``: fits),
-or below ``v_i`` with ``v_i ≤ w_i ≤ R(w_{i+1})`` (fits). Every junction is locally maximal:
-``v_i ≥ min(cap_i, R(v_{i−1}, L_{i−1}), R(v_{i+1}, L_i))``, i.e. it cannot be raised alone.
-(A lower speed somewhere could, through the non-monotone ``R``, allow a higher one further
-on; the scans do not search for that: the gain is small and the result stays safe.)
 5. Per piece: S-curve up from ``v_i`` to the peak ``v_p`` (the piece cap, or the bisection
    peak of SPEC §7 when the piece is too short to reach it), cruise at ``v_p``, S-curve down
    to ``v_{i+1}``.
+
+Why the scans give a feasible result although ``R`` is *not* monotone in its start speed:
+with zero acceleration at both ends, ``D(v0 → v0 + Δv)`` grows with ``v0`` at fixed ``Δv``
+(the same jerk ramps, at a higher speed), so a faster start can end slower within the same
+length (``dR/dv0 = (2v0 − Δv)/(2v0 + 3Δv)`` while A is not reached); likewise slowing from
+``x`` to a full stop can take less distance than slowing to ``x/3``. What the scans need is
+only that ``D(lo → hi)`` grows with the *upper* speed ``hi``: a piece of the forward scan
+either ends at ``R(v_i)`` (fits by definition), or ends at ``w_{i+1}`` above ``v_i`` (below
+``R(v_i)``: fits), or below ``v_i`` with ``v_i ≤ w_i ≤ R(w_{i+1})`` (fits). Every junction is
+locally maximal: ``v_i ≥ min(cap_i, R(v_{i−1}, L_{i−1}), R(v_{i+1}, L_i))``, i.e. it cannot be
+raised alone. (A lower speed somewhere could, through the non-monotone ``R``, allow a higher
+one further on; the scans do not search for that: the result stays safe, not globally
+time-optimal.) A float guard in ``R`` and a final repair pass make ``D(v_i → v_{i+1}) ≤ L_i``
+hold in floating point too, so every piece has a cruise length ≥ 0.
 
 Decision: every S-curve starts and ends at zero acceleration, so the acceleration is zero at
 every junction and at both ends of every cruise. This is a little slower than carrying
@@ -310,7 +312,7 @@ def plan_profile(inp: ProfileInput) -> Profile:
 
     # 3. Bounded look-ahead: cap by the stop-within-the-window speeds, then rescan so that
     #    the caps are backward-consistent again (w_i ≤ R(w_{i+1}, L_i)), which is what makes
-    #    the forward scan's result feasible (R is not monotone in its start speed, see below).
+    #    the forward scan's result feasible (R is not monotone in its start speed: module doc).
     n = inp.lookahead_pieces
     if n is not None and n < k:
         cap = np.minimum(cap, _window_caps(cap, length, np.array(w_back), n, a, j))

@@ -204,12 +204,20 @@ class _Interpreter:
             return self.named[v[1]]
         if tag == "neg":
             return -self._eval(v[1], column)
+        # Leaves (numbers, parameters) are finite, so checking each operation's result keeps
+        # every intermediate finite: SIN, ROUND or a parameter index never sees inf or nan.
         if tag == "op":
-            return self._binop(v[1], self._eval(v[2], column), self._eval(v[3], column), column)
-        if tag == "fn":
-            return self._func(v[1], self._eval(v[2], column), column)
-        if tag == "atan":
-            return math.degrees(math.atan2(self._eval(v[1], column), self._eval(v[2], column)))
+            r = self._binop(v[1], self._eval(v[2], column), self._eval(v[3], column), column)
+        elif tag == "fn":
+            r = self._func(v[1], self._eval(v[2], column), column)
+        elif tag == "atan":
+            r = math.degrees(math.atan2(self._eval(v[1], column), self._eval(v[2], column)))
+        else:
+            r = None
+        if r is not None:
+            if not math.isfinite(r):
+                raise self.error("expression value is not finite (overflow)", column)
+            return r
         if tag == "exists":
             return 1.0 if v[1] in self.named else 0.0
         raise AssertionError(f"unknown expression {v!r}")  # pragma: no cover
@@ -369,7 +377,13 @@ class _Interpreter:
                         column,
                         UnsupportedError,
                     )
-                if letter in "EO":
+                if letter == "O":
+                    raise self.error(
+                        "O-words (subroutines, loops, conditionals) are not supported",
+                        column,
+                        UnsupportedError,
+                    )
+                if letter == "E":
                     raise self.error(f"unknown word {letter}", column)
                 if letter == "N":
                     raise self.error("N (line number) must start the line", column)
@@ -402,8 +416,10 @@ class _Interpreter:
                 self.named[key] = value
 
     def _code(self, value: float, letter: str, column: int) -> int:
+        if not 0.0 <= value < 1e6:  # value * 10 must stay a modest integer
+            raise self.error(f"{letter}{value:g} is not a valid {letter} code", column)
         code = round(value * 10.0)
-        if abs(value * 10.0 - code) > 1e-6 or value < 0:
+        if abs(value * 10.0 - code) > 1e-6:
             raise self.error(f"{letter}{value:g} is not a valid {letter} code", column)
         return int(code)
 
@@ -427,6 +443,8 @@ class _Interpreter:
             if f < 0:
                 raise self.error(f"negative feed F{f:g}", col)
             self.feed_mm_s = f * self.scale / 60.0
+            if not math.isfinite(self.feed_mm_s):
+                raise self.error(f"feed F{f:g} is out of range", col)
         if "S" in words:
             used.add("S")
             if words["S"][0] < 0:
@@ -558,6 +576,8 @@ class _Interpreter:
                     out[i] = v + (self.tool_offset_mm if i == 2 else 0.0)
                 else:
                     out[i] = base[i] + v
+                if not math.isfinite(out[i]):  # G20 scaling or G91 sums can overflow
+                    raise self.error(f"{letter} coordinate is out of range", words[letter][1])
         return out
 
     def straight(self, words: dict, machine_coords: bool) -> None:
@@ -621,7 +641,8 @@ class _Interpreter:
                 r = half
             # Centre on the perpendicular bisector; which side follows from direction and the
             # sign of R (negative R: the arc longer than a half circle).
-            h = math.sqrt(max(r * r - half * half, 0.0))
+            # sqrt(r² − half²) as a product: r² alone overflows for |R| > 1e154.
+            h = math.sqrt(max(r - half, 0.0)) * math.sqrt(r + half)
             ma, mb = (sa + ea) / 2.0, (sb + eb) / 2.0
             ua, ub = (ea - sa) / chord, (eb - sb) / chord
             side = (1.0 if ccw else -1.0) * (1.0 if r_signed > 0 else -1.0)
@@ -644,6 +665,8 @@ class _Interpreter:
                 ca, cb = sa + offsets[a], sb + offsets[b]
         r0 = math.hypot(sa - ca, sb - cb)
         r1 = math.hypot(ea - ca, eb - cb)
+        if not all(map(math.isfinite, (ca, cb, r0, r1))):
+            raise self.error("arc centre or radius is out of range", col0, GeometryError)
         if r0 < 1e-9:
             raise self.error("arc radius is zero (centre at the start point)", col0)
         err = abs(r1 - r0)
@@ -671,6 +694,8 @@ class _Interpreter:
             if full:
                 sweep = -2.0 * math.pi
             sweep -= 2.0 * math.pi * (turns - 1)
+        if not math.isfinite(sweep):
+            raise self.error(f"arc turns P{turns} is out of range", col0, GeometryError)
         center = list(start)
         center[a], center[b] = ca, cb
         self.segments.append(

@@ -219,12 +219,16 @@ def _split_lines(text: str) -> list[str]:
 # faster than lark. Every other line (parameters, expressions, "%", anything malformed) goes
 # to lark, which stays the definition of the language; a property test checks that both
 # paths give identical blocks on lines generated from the grammar.
-_NUM = r"[+-]?[ \t]*(?:[0-9][0-9 \t]*(?:\.[0-9 \t]*)?|\.[ \t]*[0-9][0-9 \t]*)"
+# Every blank run and digit run is possessive (``*+``, Python 3.11): the blanks between words,
+# inside numbers and before a comment could otherwise be split in many ways, and a line that
+# fails to match (say 10,000 blanks and a "%") would backtrack for minutes. Possessive runs
+# accept the same lines here, because what a run gives back could never start the next part.
+_NUM = r"[+-]?[ \t]*+(?:[0-9][0-9 \t]*+(?:\.[0-9 \t]*+)?|\.[ \t]*+[0-9][0-9 \t]*+)"
 _SIMPLE_LINE = re.compile(
-    r"[ \t]*(/)?[ \t]*(?:[nN][ \t]*[0-9][0-9 \t]*(?:\.[0-9 \t]*)?)?"
-    r"((?:[ \t]*(?:[A-Za-z][ \t]*" + _NUM + r"|\([^()\n]*\)))*)[ \t]*(;.*)?"
+    r"[ \t]*+(/)?[ \t]*+(?:[nN][ \t]*+[0-9][0-9 \t]*+(?:\.[0-9 \t]*+)?)?"
+    r"((?:[ \t]*+(?:[A-Za-z][ \t]*+" + _NUM + r"|\([^()\n]*+\)))*+)[ \t]*+(;.*)?"
 )
-_O_WORD = re.compile(r"[ \t]*(?:/[ \t]*)?(?:[nN][ \t]*[0-9][0-9 \t]*)?[oO][ \t]*[0-9<]")
+_O_WORD = re.compile(r"[ \t]*+(?:/[ \t]*+)?(?:[nN][ \t]*+[0-9][0-9 \t]*+)?[oO][ \t]*+[0-9<]")
 _SIMPLE_ITEM = re.compile(r"([A-Za-z])[ \t]*(" + _NUM + r")|(\([^()\n]*\))")
 
 
