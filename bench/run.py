@@ -127,6 +127,16 @@ def _rss_mb() -> float:
     return peak * (1.0 if sys.platform == "darwin" else 1024.0) / MB
 
 
+def _current_rss_mb() -> float:
+    """Resident set size of this process now [MB] (/proc/self/statm; else the peak so far)."""
+    try:
+        with open("/proc/self/statm", encoding="ascii") as fh:
+            pages = int(fh.read().split()[1])
+        return pages * os.sysconf("SC_PAGE_SIZE") / MB
+    except (OSError, ValueError):
+        return _rss_mb()
+
+
 def worker(mode: str, program: str) -> dict:
     """Measure one interpret_text call on ``program``: ``time`` (wall, RSS) or ``trace``."""
     import time
@@ -137,7 +147,7 @@ def worker(mode: str, program: str) -> dict:
     text = Path(program).read_text(encoding="ascii")
     interpret_text("G0 X0\n")  # builds (and caches) the LALR parser: not part of the rate
     if mode == "time":
-        rss_base = _rss_mb()
+        rss_base = _current_rss_mb()
         t0, c0 = time.perf_counter(), time.process_time()
         prog = interpret_text(text)
         seconds, cpu_seconds = time.perf_counter() - t0, time.process_time() - c0
@@ -232,6 +242,10 @@ def run_cases(quick: bool, workdir: Path) -> list[dict]:
     return results
 
 
+def _ratio(a: float, b: float) -> float | None:
+    return a / b if b > 0.0 else None
+
+
 def linearity(results: list[dict]) -> list[dict]:
     """Per pair (large, quarter): the ratios of lines, tracemalloc peak and RSS growth."""
     by_name = {r["case"].split("/")[0]: r for r in results}
@@ -242,7 +256,7 @@ def linearity(results: list[dict]) -> list[dict]:
             "cases": [big, small],
             "lines_ratio": b["lines"] / s["lines"],
             "peak_mb_ratio": b["peak_mb"] / s["peak_mb"],
-            "rss_growth_ratio": b["rss_growth_mb"] / s["rss_growth_mb"],
+            "rss_growth_ratio": _ratio(b["rss_growth_mb"], s["rss_growth_mb"]),
         })  # fmt: skip
     return rows
 
@@ -259,7 +273,7 @@ def print_table(report: dict) -> None:
     for row in report["linearity"]:
         print(f"{' / '.join(row['cases'])}: lines x{row['lines_ratio']:.2f}, "
               f"tracemalloc peak x{row['peak_mb_ratio']:.2f}, "
-              f"RSS growth x{row['rss_growth_ratio']:.2f}")  # fmt: skip
+              f"RSS growth x{row['rss_growth_ratio'] or float('nan'):.2f}")  # fmt: skip
 
 
 def main(argv=None) -> int:

@@ -565,6 +565,7 @@ def plan_summary(prog, mach, plan) -> dict:
     summary = {
         "ok": True,
         "program": prog.name,
+        "machine": mach.source,
         "pieces": dict(kinds),
         "piece_count": len(plan.pieces),
         "corner_pieces": kinds.get("ph", 0),
@@ -576,7 +577,9 @@ def plan_summary(prog, mach, plan) -> dict:
         "feed_max_mm_s": float(plan.samples.v_mm_s.max()),
         "segment_times_s": {str(k): v for k, v in segment_times_s(plan).items()},
     }
-    lb = lower_bound_or_none(plan, mach)
+    from nurbscnc.plan.lowerbound import program_lower_bound_s
+
+    lb = program_lower_bound_s(prog.segments, mach)
     if lb is not None:
         summary["lower_bound_s"] = lb
         summary["lower_bound_ratio"] = plan.cycle_time_s / lb if lb > 0 else None
@@ -599,15 +602,6 @@ def cutting_mask(plan) -> np.ndarray:
     n = plan.samples.t_s.size
     m = plan.response.contour_mm.size
     return np.append(~rapid[plan.samples.piece], np.full(m - n, not rapid[-1]))
-
-
-def lower_bound_or_none(plan, mach):
-    """The kinematic lower bound on cycle time [s] (SPEC §10), or None if unavailable."""
-    try:
-        from nurbscnc.plan.lowerbound import plan_lower_bound_s
-    except ImportError:  # pragma: no cover - module not present
-        return None
-    return plan_lower_bound_s(plan, mach)
 
 
 @main.command()

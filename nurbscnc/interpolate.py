@@ -89,13 +89,31 @@ def place_points(pieces, profile, s_mm: np.ndarray, piece_idx: np.ndarray) -> np
         out[lin] = p0[idx] + d[idx] * loc[:, None]
     other = np.flatnonzero(~lin)
     if other.size:
-        # Piece indices are non-decreasing in time: each piece's samples are contiguous.
+        # Piece indices are non-decreasing in time, so samples come in runs. NURBS cells of one
+        # curve are evaluated together (one arc-length inversion over the whole run); every
+        # other piece by its own exact method over its samples.
         idx = piece_idx[other]
-        cuts = np.flatnonzero(np.diff(idx)) + 1
+        is_nurbs = np.array([p.kind == "nurbs" for p in pieces])
+        seg = np.array([p.segment for p in pieces])
+        s_a = np.array([p.s_a_mm for p in pieces])
+        key = np.where(is_nurbs[idx], -1 - seg[idx], idx)
+        cuts = np.flatnonzero(np.diff(key)) + 1
         for group in np.split(other, cuts):
-            piece = pieces[int(piece_idx[group[0]])]
-            out[group] = piece.points_mm(local[group])
+            first = int(piece_idx[group[0]])
+            piece = pieces[first]
+            if piece.kind == "nurbs":
+                gi = piece_idx[group]
+                s_curve = s_a[gi] + np.clip(local[group], 0.0, lengths_all(pieces)[gi])
+                curve = piece.geometry
+                out[group] = curve.point(curve.param_at_length(s_curve))
+            else:
+                out[group] = piece.points_mm(local[group])
     return out
+
+
+def lengths_all(pieces) -> np.ndarray:
+    """Piece lengths [mm] as an array."""
+    return np.array([p.length_mm for p in pieces])
 
 
 def sample_plan(pieces, profile, period_s: float, dwell_at_s=None, dwell_s=None) -> Samples:

@@ -193,8 +193,10 @@ def scurve_rest_to_rest_s(length_mm, v_mm_s, a_mm_s2, j_mm_s3):
     """Symmetric 7-phase S-curve rest to rest (SPEC §7 closed forms; bisection for the peak)."""
 
     def ramp_s(dv):
-        return dv / a_mm_s2 + a_mm_s2 / j_mm_s3 if dv >= a_mm_s2**2 / j_mm_s3 else 2 * (
-            math.sqrt(dv / j_mm_s3)
+        return (
+            dv / a_mm_s2 + a_mm_s2 / j_mm_s3
+            if dv >= a_mm_s2**2 / j_mm_s3
+            else 2.0 * math.sqrt(dv / j_mm_s3)
         )
 
     def dist_mm(v):  # D(0 → v) = v T/2
@@ -258,7 +260,11 @@ def brute_time(s, path_cap2, point_cap2, a):
         # |s − s_j| = (s_i − s_j) + x for j ≤ i and (s_j − s_i) − x for j > i.
         j_lo, j_hi = slice(0, i + 1), slice(i + 1, None)
         slopes = np.concatenate(
-            (np.full(i + 1, 2 * a), np.full(s.size - i - 1, -2 * a), [(path_cap2[i + 1] - path_cap2[i]) / h])
+            (
+                np.full(i + 1, 2 * a),
+                np.full(s.size - i - 1, -2 * a),
+                [(path_cap2[i + 1] - path_cap2[i]) / h],
+            )
         )
         at0 = np.concatenate(
             (
@@ -268,20 +274,25 @@ def brute_time(s, path_cap2, point_cap2, a):
             )
         )
 
-        def v_at(x, slopes=slopes, at0=at0):
-            return math.sqrt(max(np.min(at0 + slopes * x), 0.0))
+        def v2_at(x, slopes=slopes, at0=at0):
+            return max(float(np.min(at0 + slopes * x)), 0.0)
 
         with np.errstate(divide="ignore", invalid="ignore"):
             cross = (at0[None, :] - at0[:, None]) / (slopes[:, None] - slopes[None, :])
-        cross = cross[np.isfinite(cross) & (cross > 0.0) & (cross < h)]
+        # (Crossings within rounding of an end are dropped: they would leave a sliver of a
+        # piece whose ends both round to v = 0.)
+        tol = 1e-12 * h
+        cross = cross[np.isfinite(cross) & (cross > tol) & (cross < h - tol)]
         cuts = np.unique(np.concatenate(([0.0, h], cross)))
         for x0, x1 in zip(cuts[:-1], cuts[1:]):
-            # x = x0 + (x1 − x0)(1 − cos θ)/2 removes the 1/√ singularity at a rest end.
-            half = 0.5 * (x1 - x0)
+            # v² is linear between cuts: v² = w0 cos²(θ/2) + w1 sin²(θ/2) with
+            # x = x0 + (x1 − x0) sin²(θ/2), dx = (x1 − x0)/2 sin θ dθ; this removes the 1/√
+            # singularity at a rest end and the cancellation of evaluating v² near it.
+            w0, w1, half = v2_at(x0), v2_at(x1), 0.5 * (x1 - x0)
 
-            def integrand(theta, x0=x0, half=half, v_at=v_at):
-                v = v_at(x0 + half * (1.0 - math.cos(theta)))
-                return half * math.sin(theta) / v if v > 0.0 else 0.0
+            def integrand(theta, w0=w0, w1=w1, half=half):
+                c, s_ = math.cos(0.5 * theta), math.sin(0.5 * theta)
+                return half * math.sin(theta) / math.sqrt(w0 * c * c + w1 * s_ * s_)
 
             total += quad(integrand, 0.0, math.pi, epsabs=0.0, epsrel=1e-11)[0]
     return total
@@ -391,9 +402,7 @@ def test_naca_bound_converged_feasible_and_between_independent_bounds(naca):
         return naca.speed(u)[0] / v
 
     brk = naca.breakpoints
-    no_tangential = sum(
-        quad(inv_cap, a, b, epsrel=1e-10)[0] for a, b in zip(brk[:-1], brk[1:])
-    )
+    no_tangential = sum(quad(inv_cap, a, b, epsrel=1e-10)[0] for a, b in zip(brk[:-1], brk[1:]))
     assert lb.time_s > no_tangential
     # Above: the paper's PH look-ahead (Table 4, jerk-limited and contour-error-limited).
     assert lb.time_s < 0.9455

@@ -29,7 +29,7 @@ itself). At the grid points this is a forward and a backward pass over squared s
 Inside a grid interval v² is the minimum of three lines (the interpolated cap, the cone up
 from the left point, the cone down to the right point), i.e. at most three stretches of
 constant acceleration; on each the time is exact: Δt = 2Δs/(v_a + v_b), also when one end is
-at rest. So the bound is *exact* (to rounding) for any cap that is piecewise linear in s²
+at rest. So the bound is *exact* (to rounding) for any cap whose square is linear in s
 between grid points: constant caps (lines, circles) on any grid, whatever the grid spacing.
 
 The only approximation is the linear interpolation of cap² between samples. The grid starts
@@ -258,8 +258,10 @@ def lower_bound_time_s(
     v_top = np.minimum(_per_piece(v_program_mm_s, k, "v_program_mm_s", float), v_max_mm_s)
     if not np.all(np.isfinite(v_top) & (v_top > 0.0)):
         raise PlanningError("every piece needs a finite speed ceiling > 0 [mm/s]")
-    stops = np.zeros(k, dtype=bool) if stop_after is None else (
-        _per_piece(stop_after, k, "stop_after", bool)
+    stops = (
+        np.zeros(k, dtype=bool)
+        if stop_after is None
+        else _per_piece(stop_after, k, "stop_after", bool)
     )
 
     s_parts, c_parts = [], []
@@ -333,3 +335,34 @@ def machine_lower_bound(
         stop_after=stop_after,
         ds_mm=ds_mm,
     )
+
+
+def program_lower_bound_s(segments, machine: Machine) -> float:
+    """The lower bound [s] for a whole program's segments (SPEC §10): its own geometry (not
+    the PH replacements), rest to rest, with exact stops at tangent discontinuities and dwells
+    (whose durations are added). No jerk limit, no servo settling: nothing can be faster.
+    """
+    from nurbscnc.geometry.paths import geometry_of
+    from nurbscnc.plan.corners import tangent_junctions
+
+    moving = [(i, s) for i, s in enumerate(segments) if s.kind != "dwell"]
+    if not moving:
+        return float(sum(s.seconds for s in segments))
+    geoms = [geometry_of(s) for _, s in moving]
+    feeds = [s.feed_mm_s if s.kind != "rapid" else np.inf for _, s in moving]
+    rapid = [s.kind == "rapid" for _, s in moving]
+    position = {i: k for k, (i, _) in enumerate(moving)}
+    stop = np.zeros(len(moving), dtype=bool)
+    for j in tangent_junctions(segments, min_angle_deg=np.degrees(1e-6)):
+        stop[position[j.index]] = True
+    for k in range(len(moving) - 1):
+        i, a = moving[k]
+        b = moving[k + 1][1]
+        # Dwells in between, and rapid/feed changes, are stops too (as the planner does).
+        if moving[k + 1][0] != i + 1 or rapid[k] != rapid[k + 1]:
+            stop[k] = True
+        del a, b
+    bound = machine_lower_bound(geoms, np.where(np.isinf(feeds), 1.0, feeds), machine,
+                                rapid=rapid, stop_after=stop)  # fmt: skip
+    dwell = float(sum(s.seconds for s in segments if s.kind == "dwell"))
+    return float(bound.time_s) + dwell

@@ -12,11 +12,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from nurbscnc.errors import NurbsCncError, SourcePos
 from nurbscnc.geometry.nurbs import NurbsCurve
 from nurbscnc.geometry.paths import geometry_of
 from nurbscnc.machine import Machine, chord_feed_mm_s
 from nurbscnc.plan.corners import find_corner_regions
 from nurbscnc.plan.phfit import fit_region
+
+#: The lowest cruise cap a piece gets [mm/s].
+MIN_CAP_MM_S = 1e-3
 
 #: Junctions whose tangents turn by less than this [rad] are treated as smooth (no stop).
 SMOOTH_JUNCTION_RAD = 1e-6
@@ -121,6 +125,15 @@ def nurbs_pieces(seg, index: int, machine: Machine, options: PlanOptions) -> lis
     for region in regions:
         if region.u_a > u_prev:
             pieces.extend(_nurbs_stretch(curve, u_prev, region.u_a, seg, index, machine, feed))
+        if not np.isfinite(region.kappa_peak_per_mm):
+            # A cusp (C′ = 0): a true sharp corner of the programmed curve. No smooth curve
+            # can pass it at speed: stop exactly at the cusp (the junction between the two
+            # stretches turns by 180°, so its cap is 0), no PH replacement.
+            for ua, ub in ((region.u_a, region.u_peak), (region.u_peak, region.u_b)):
+                if ub > ua:
+                    pieces.extend(_nurbs_stretch(curve, ua, ub, seg, index, machine, feed))
+            u_prev = region.u_b
+            continue
         region_cap = _corner_cap(machine, region.kappa_peak_per_mm, feed)
         if options.ph:
             fit = fit_region(curve, region.u_a, region.u_b, tolerance_um=e_um)
@@ -139,7 +152,9 @@ def nurbs_pieces(seg, index: int, machine: Machine, options: PlanOptions) -> lis
         u_prev = region.u_b
     if u_prev < curve.u_end:
         pieces.extend(_nurbs_stretch(curve, u_prev, curve.u_end, seg, index, machine, feed))
-    return [p for p in pieces if p.length_mm > 0.0]
+    # Pieces shorter than a nanometre (a region clipped by a cusp at a curve end) carry no
+    # motion; dropping them changes the path length by less than 1e-9 mm.
+    return [p for p in pieces if p.length_mm > 1e-9]
 
 
 #: Longest NURBS cell [mm]: stretches between corners are cut into cells this long or shorter,
@@ -160,7 +175,12 @@ def _nurbs_stretch(curve, u_a, u_b, seg, index, machine, feed) -> list[Piece]:
     fine = (u_edges[:-1, None] + (u_edges[1:] - u_edges[:-1])[:, None]
             * np.linspace(0.0, 1.0, sub + 1)[None, :])  # fmt: skip
     kappa = curve.curvature(fine.ravel()).reshape(fine.shape)
-    cell_cap = _curvature_cap(machine, kappa, feed).min(axis=1)
+    # A cusp (κ = inf) sits at a cell end, where the junction is an exact stop anyway: cap the
+    # cell by its finite curvature samples (κ grows like s^(-1/2) towards a cusp, so the
+    # nearest sample already asks for a low feed).
+    kappa = np.where(np.isfinite(kappa), kappa, 0.0)
+    # Never a zero cap (κ ≥ 2/δ makes V_af zero): it would stall the tool; 1 µm/s is the floor.
+    cell_cap = np.maximum(_curvature_cap(machine, kappa, feed).min(axis=1), MIN_CAP_MM_S)
     k_cell = kappa.max(axis=1)
     return [Piece("nurbs", curve, float(s_edges[i + 1] - s_edges[i]), float(cell_cap[i]),
                   index, seg.line, float(u_edges[i]), float(u_edges[i + 1]),
@@ -185,7 +205,10 @@ def segment_pieces(segments, machine: Machine, options: PlanOptions | None = Non
                 pending_dwell += seg.seconds
             continue
         if kind == "nurbs":
-            new = nurbs_pieces(seg, index, machine, options)
+            try:
+                new = nurbs_pieces(seg, index, machine, options)
+            except NurbsCncError as exc:
+                raise exc.with_pos(SourcePos(seg.line)) from None
         else:
             geom = geometry_of(seg)
             length = float(geom.length_mm)

@@ -1,0 +1,2 @@
+; axis B is not supported @ 2:4
+G0 B5

@@ -1,0 +1,2 @@
+; G41 (cutter radius compensation) is not supported @ 2:1
+G41 D1

@@ -1,0 +1,2 @@
+; G4 dwell needs a P word @ 2:1
+G4

@@ -1,0 +1,6 @@
+; all knots are equal @ 3:1
+F100
+G6.2 P2 K0 X0 Y0 R1
+K0 X1 Y1 R1
+K0
+K0

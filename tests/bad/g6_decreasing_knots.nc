@@ -1,0 +1,9 @@
+; knots must be non-decreasing: K0.5 after K1 @ 7:1
+F100
+G6.2 P3 K0 X0 Y0 R1
+K0 X1 Y1 R1
+K0 X2 Y0 R1
+K1 X3 Y1 R1
+K0.5
+K2
+K2

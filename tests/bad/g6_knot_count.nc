@@ -1,0 +1,7 @@
+; knot count must equal control points + order @ 7:1
+F100
+G6.2 P3 K0 X0 Y0 R1
+K0 X1 Y1 R1
+K0 X2 Y0 R1
+K1
+G1 X0

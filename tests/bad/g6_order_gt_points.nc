@@ -1,0 +1,9 @@
+; order 4 exceeds the number of control points (3) @ 3:1
+F100
+G6.2 P4 K0 X0 Y0 R1
+K0 X1 Y1 R1
+K0 X2 Y0 R1
+K0
+K1
+K1
+K1

@@ -1,0 +1,3 @@
+; order P1 must be an integer in 2..8 @ 3:6
+F100
+G6.2 P1 K0 X0 Y0 R1

@@ -1,0 +1,5 @@
+; ends with 3 knots @ 3:1
+F100
+G6.2 P3 K0 X0 Y0 R1
+K0 X1 Y1 R1
+K0 X2 Y0 R1

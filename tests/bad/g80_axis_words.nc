@@ -1,0 +1,2 @@
+; axis words with G80 @ 2:1
+G80 X1

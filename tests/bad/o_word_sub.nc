@@ -1,0 +1,4 @@
+; O-words @ 2:1
+o100 sub
+G1 X1
+o100 endsub

@@ -1,0 +1,2 @@
+; unknown word E @ 2:11
+G1 F100 X1e3

@@ -1,0 +1,2 @@
+; expected a value @ 2:11
+G1 F100 X-inf

@@ -1,0 +1,2 @@
+; nested comment @ 2:12
+G1 F100 X1 (outer (inner) text)

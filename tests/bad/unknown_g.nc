@@ -1,0 +1,2 @@
+; unknown G code G15 @ 2:1
+G15

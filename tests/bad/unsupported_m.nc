@@ -1,0 +1,2 @@
+; M99 is not supported @ 2:1
+M99
