@@ -37,7 +37,8 @@ class Line:
     """A straight move from ``start_mm`` to ``end_mm`` [mm] at ``feed_mm_s`` [mm/s].
 
     ``rapid`` marks G0 (the planner moves it at the machine's rapid rate; ``feed_mm_s`` is 0).
-    The end points are plain ``(x, y, z)`` tuples, not arrays: CAM programs hold millions of
+    ``blend_mm`` is the path-control tolerance in force (G64 P) [mm]: 0 means stop exactly at
+    a tangent discontinuity at its end (G61, G61.1, or G64 without P). The end points are plain ``(x, y, z)`` tuples, not arrays: CAM programs hold millions of
     lines, and a tuple costs a fraction of an array's memory and construction time.
     """
 
@@ -46,6 +47,7 @@ class Line:
     feed_mm_s: float
     line: int
     rapid: bool = False
+    blend_mm: float = 0.0
 
     @property
     def kind(self) -> str:
@@ -77,6 +79,7 @@ class Arc:
     feed_mm_s: float
     line: int
     plane: str = "XY"
+    blend_mm: float = 0.0
 
     kind = "arc"
 
@@ -102,6 +105,7 @@ class Nurbs:
     feed_mm_s: float
     line: int
     plane: str = "XY"
+    blend_mm: float = 0.0
 
     kind = "nurbs"
 

@@ -157,6 +157,7 @@ class _Interpreter:
         self.arc_absolute = False  # G90.1
         self.feed_mm_s = 0.0
         self.tool_offset_mm = 0.0  # along Z, from G43
+        self.blend_mm = 0.0  # G64 P tolerance [mm]; 0: exact stop at corners (G61, G64 alone)
         self.params: dict[int, float] = {}
         self.named: dict[str, float] = {}
         self.segments: list = []
@@ -495,12 +496,16 @@ class _Interpreter:
         if 13 in gcodes:
             code, col = gcodes[13]
             if code == 640:
+                self.blend_mm = 0.0
                 if "P" in words:
                     used.add("P")
                     if words["P"][0] < 0:
                         raise self.error("G64 P tolerance must be >= 0", words["P"][1])
+                    self.blend_mm = words["P"][0] * self.scale
                 if "Q" in words:
                     used.add("Q")
+            else:
+                self.blend_mm = 0.0  # G61 / G61.1: exact path, exact stops
         if 3 in gcodes:
             self.absolute = gcodes[3][0] == 900
         if 4 in gcodes:
@@ -588,7 +593,7 @@ class _Interpreter:
         if end != self.pos:
             self.segments.append(
                 Line(tuple(self.pos), tuple(end), 0.0 if rapid else self.feed_mm_s,
-                     self.line_no, rapid)
+                     self.line_no, rapid, self.blend_mm)
             )  # fmt: skip
         self.pos = end
 
@@ -711,6 +716,7 @@ class _Interpreter:
                 feed_mm_s=self.feed_mm_s,
                 line=self.line_no,
                 plane=plane,
+                blend_mm=self.blend_mm,
             )
         )
         self.pos = end
@@ -962,6 +968,7 @@ class _Interpreter:
             feed_mm_s=build.feed_mm_s,
             line=start_line,
             plane=build.plane,
+            blend_mm=self.blend_mm,
         )
         self.segments.append(seg)
         self.pos = list(build.points[-1])

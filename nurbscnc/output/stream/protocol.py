@@ -1,0 +1,420 @@
+"""The card protocol: framing, CRC-16, message types; one codec for the sender and the card.
+
+A frame on the wire (all multi-byte integers little-endian except the CRC)::
+
+    SYNC 0xA5 | LEN u8 | SEQ u16 | TYPE u8 | PAYLOAD (LEN bytes) | CRC u16 big-endian
+
+``LEN`` counts only the payload, so a frame is ``LEN + 7`` bytes. The CRC is CRC-16/CCITT-FALSE
+(polynomial 0x1021, initial value 0xFFFF, no reflection, no final xor; check value
+``crc("123456789") = 0x29B1``) over ``LEN .. PAYLOAD`` (everything after the sync byte), sent
+most significant byte first. ``SEQ`` numbers the *sequenced* frames (BATCH, END) modulo 2¹⁶;
+every other frame carries 0 there. The full description, with the reliability rules, is
+``docs/protocol.md``.
+
+Everything here is pure (bytes in, values out) except :class:`FrameDecoder`, which keeps the
+bytes of an incomplete frame between calls.
+"""
+
+from __future__ import annotations
+
+import binascii
+import struct
+from dataclasses import dataclass
+from enum import IntEnum
+
+import numpy as np
+
+from nurbscnc.errors import StreamError
+
+SYNC = 0xA5
+PROTOCOL_VERSION = 1
+#: Sync (1) + LEN (1) + SEQ (2) + TYPE (1) + CRC (2).
+OVERHEAD_BYTES = 7
+MAX_PAYLOAD_BYTES = 255
+SEQ_MODULO = 1 << 16
+#: Bits per byte on an asynchronous serial line with 8N1 framing (start + 8 data + stop).
+BITS_PER_BYTE_8N1 = 10
+
+
+class MsgType(IntEnum):
+    """Frame types. Host → card below 0x80, card → host from 0x80."""
+
+    HELLO = 0x01  #: open a stream; payload: protocol version u8
+    BATCH = 0x02  #: sequenced: pulse counts of n periods
+    END = 0x03  #: sequenced: end of program (period count, final position)
+    STATUS_REQUEST = 0x04  #: ask for a STATUS
+    HOLD = 0x05  #: feed hold: stop executing periods at the next period boundary
+    RESUME = 0x06  #: leave a feed hold
+    ABORT = 0x07  #: stop now, drop the buffer (handled out of sequence)
+    CAPS = 0x81  #: hello reply / unsolicited after a card reset: capabilities and session
+    ACK = 0x82  #: next expected sequence number, free buffer
+    NAK = 0x83  #: next expected sequence number, free buffer, reason
+    STATUS = 0x84  #: state, buffer, executed periods, position
+    ALARM = 0x85  #: alarm code and text
+
+
+class CardState(IntEnum):
+    """What the card is doing."""
+
+    IDLE = 0  #: no stream open (after power-up or reset)
+    FILLING = 1  #: stream open, filling the buffer before the first period runs
+    RUNNING = 2  #: executing one period per period time
+    HOLD = 3  #: feed hold
+    DONE = 4  #: END executed: every period of the program ran
+    ABORTED = 5  #: ABORT received
+    ALARM = 6  #: stopped by an alarm
+
+
+class AlarmCode(IntEnum):
+    """Alarm codes (STATUS.alarm and ALARM.code)."""
+
+    NONE = 0
+    UNDERRUN = 1  #: a period was due and the buffer was empty before END
+    PULSE_LIMIT = 2  #: a period asks for more pulses than the card's maximum
+    END_MISMATCH = 3  #: END's period count or final position differs from what ran
+    PROTOCOL = 4  #: a malformed message (wrong axes, bad payload length)
+
+
+class NakReason(IntEnum):
+    """Why a NAK was sent."""
+
+    CRC = 1  #: a frame failed its CRC (or was misframed)
+    SEQUENCE = 2  #: a sequenced frame arrived after a gap (a frame was lost)
+    FULL = 3  #: a batch did not fit in the free buffer (the sender broke flow control)
+    STATE = 4  #: the card does not accept batches in its state
+
+
+# -- CRC ---------------------------------------------------------------------------------------
+def crc16_ccitt_false(data: bytes, init: int = 0xFFFF) -> int:
+    """CRC-16/CCITT-FALSE of ``data``: poly 0x1021, init 0xFFFF, MSB first, no final xor.
+
+    ``binascii.crc_hqx`` is exactly this CRC with the initial value as its second argument.
+    Check value (the CRC catalogue): ``crc16_ccitt_false(b"123456789") == 0x29B1``.
+    """
+    return binascii.crc_hqx(data, init)
+
+
+# -- frames ------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Frame:
+    """A CRC-valid frame: its type byte, sequence number and payload."""
+
+    type: int
+    seq: int
+    payload: bytes
+
+
+@dataclass(frozen=True)
+class BadFrame:
+    """A candidate frame whose CRC did not match (corrupted, or a sync byte inside noise)."""
+
+    raw: bytes
+
+
+def encode_frame(msg_type: int, payload: bytes = b"", seq: int = 0) -> bytes:
+    """The bytes of one frame (see the module docstring for the layout)."""
+    if len(payload) > MAX_PAYLOAD_BYTES:
+        raise ValueError(f"payload of {len(payload)} bytes exceeds {MAX_PAYLOAD_BYTES}")
+    body = struct.pack("<BHB", len(payload), seq % SEQ_MODULO, int(msg_type)) + bytes(payload)
+    return bytes((SYNC,)) + body + struct.pack(">H", crc16_ccitt_false(body))
+
+
+class FrameDecoder:
+    """Splits a byte stream into frames, resynchronising after corruption.
+
+    :meth:`feed` returns, in order, every :class:`Frame` whose CRC matches and a
+    :class:`BadFrame` for every candidate (a sync byte with enough bytes after it) whose CRC does
+    not; after a bad candidate the search restarts one byte after its sync byte, so a corrupted
+    length byte costs at most the frames it swallowed. Bytes before a sync byte are counted in
+    ``noise_bytes`` and dropped.
+    """
+
+    def __init__(self) -> None:
+        self._buf = bytearray()
+        self.noise_bytes = 0
+
+    def feed(self, data: bytes) -> list[Frame | BadFrame]:
+        buf = self._buf
+        buf += data
+        out: list[Frame | BadFrame] = []
+        i = 0
+        while True:
+            j = buf.find(SYNC, i)
+            if j < 0:
+                self.noise_bytes += len(buf) - i
+                i = len(buf)
+                break
+            self.noise_bytes += j - i
+            i = j
+            if len(buf) - j < 2:
+                break
+            total = buf[j + 1] + OVERHEAD_BYTES
+            if len(buf) - j < total:
+                break
+            body = bytes(buf[j + 1 : j + total - 2])
+            crc = (buf[j + total - 2] << 8) | buf[j + total - 1]
+            if crc16_ccitt_false(body) == crc:
+                seq = body[1] | (body[2] << 8)
+                out.append(Frame(body[3], seq, body[4:]))
+                i = j + total
+            else:
+                out.append(BadFrame(bytes(buf[j : j + total])))
+                i = j + 1
+        del buf[:i]
+        return out
+
+    @property
+    def pending_bytes(self) -> int:
+        """Bytes held back waiting for the rest of a frame."""
+        return len(self._buf)
+
+
+def seq_ahead(base: int, seq: int) -> int:
+    """How far ``seq`` is ahead of ``base`` modulo 2¹⁶ (0 … 65535)."""
+    return (seq - base) % SEQ_MODULO
+
+
+# -- messages ----------------------------------------------------------------------------------
+class ProtocolError(StreamError):
+    """A CRC-valid frame whose content is not a valid message."""
+
+
+@dataclass(frozen=True)
+class Hello:
+    """Host → card: open a stream (resets the card's sequence numbers and buffer)."""
+
+    version: int = PROTOCOL_VERSION
+
+
+@dataclass(frozen=True)
+class Caps:
+    """Card → host: capabilities, session and where the card is.
+
+    ``session_id`` changes every time the card powers up or resets: a CAPS with a new session
+    id in the middle of a stream means the card lost its buffer and position.
+    """
+
+    version: int
+    axes: int
+    max_pulses_per_period: int
+    buffer_periods: int
+    period_us: int
+    session_id: int
+    state: int
+    position_steps: tuple[int, ...]
+
+
+@dataclass(frozen=True, eq=False)
+class Batch:
+    """Host → card (sequenced): pulse counts, ``pulses`` (n_periods, axes) int."""
+
+    pulses: np.ndarray
+
+    def __eq__(self, other) -> bool:
+        return isinstance(other, Batch) and np.array_equal(self.pulses, other.pulses)
+
+    __hash__ = None  # type: ignore[assignment]
+
+
+@dataclass(frozen=True)
+class End:
+    """Host → card (sequenced): the program has ``periods`` periods and ends at this position."""
+
+    periods: int
+    position_steps: tuple[int, ...]
+
+
+@dataclass(frozen=True)
+class StatusRequest:
+    """Host → card: reply with a STATUS."""
+
+
+@dataclass(frozen=True)
+class Hold:
+    """Host → card: feed hold."""
+
+
+@dataclass(frozen=True)
+class Resume:
+    """Host → card: leave the feed hold."""
+
+
+@dataclass(frozen=True)
+class Abort:
+    """Host → card: stop now and drop the buffer."""
+
+
+@dataclass(frozen=True)
+class Ack:
+    """Card → host: every sequenced frame before ``next_seq`` was accepted."""
+
+    next_seq: int
+    free_periods: int
+
+
+@dataclass(frozen=True)
+class Nak:
+    """Card → host: resend from ``next_seq`` (``reason``: :class:`NakReason`)."""
+
+    next_seq: int
+    free_periods: int
+    reason: int
+
+
+@dataclass(frozen=True)
+class Status:
+    """Card → host: state, alarm code, buffer, executed period count and position [steps]."""
+
+    state: int
+    alarm: int
+    next_seq: int
+    free_periods: int
+    fill_periods: int
+    executed_periods: int
+    position_steps: tuple[int, ...]
+
+
+@dataclass(frozen=True)
+class Alarm:
+    """Card → host: an alarm stopped the card."""
+
+    code: int
+    text: str
+
+
+Message = (
+    Hello | Caps | Batch | End | StatusRequest | Hold | Resume | Abort | Ack | Nak | Status | Alarm
+)
+
+_EMPTY = {MsgType.STATUS_REQUEST: StatusRequest, MsgType.HOLD: Hold, MsgType.RESUME: Resume,
+          MsgType.ABORT: Abort}  # fmt: skip
+_EMPTY_TYPES = {cls: t for t, cls in _EMPTY.items()}
+_CAPS = struct.Struct("<BBHHIIB")
+_ACK = struct.Struct("<HH")
+_NAK = struct.Struct("<HHB")
+_STATUS = struct.Struct("<BBHHHI")
+_END = struct.Struct("<I")
+_POSITION_LIMIT = 1 << 31
+_WIDTH_DTYPES = {1: "<i1", 2: "<i2"}
+
+
+def pulse_width_bytes(max_abs_pulses: int) -> int:
+    """Bytes per pulse count: 1 (int8) up to 127 pulses, 2 (int16) up to 32767."""
+    if max_abs_pulses <= 127:
+        return 1
+    if max_abs_pulses <= 32767:
+        return 2
+    raise ValueError(f"{max_abs_pulses} pulses per period cannot be encoded (limit 32767)")
+
+
+def max_batch_periods(axes: int, width_bytes: int = 1) -> int:
+    """The most periods one BATCH frame can carry (payload ≤ 255 bytes, 1 format byte)."""
+    return (MAX_PAYLOAD_BYTES - 1) // (axes * width_bytes)
+
+
+def batch_frame_bytes(periods: int, axes: int, width_bytes: int = 1) -> int:
+    """Size on the wire of a BATCH frame of ``periods`` periods: 7 + 1 + periods·axes·width."""
+    return OVERHEAD_BYTES + 1 + periods * axes * width_bytes
+
+
+def _pack_position(position) -> bytes:
+    pos = [int(p) for p in position]
+    if any(not -_POSITION_LIMIT <= p < _POSITION_LIMIT for p in pos):
+        raise ValueError(f"position {pos} does not fit 32-bit steps")
+    return struct.pack(f"<{len(pos)}i", *pos)
+
+
+def _unpack_position(data: bytes, what: str) -> tuple[int, ...]:
+    if len(data) % 4:
+        raise ProtocolError(f"{what}: position of {len(data)} bytes is not whole int32s")
+    return tuple(int(v) for v in struct.unpack(f"<{len(data) // 4}i", data))
+
+
+def encode_message(msg: Message, seq: int = 0) -> bytes:
+    """One message as a frame; ``seq`` matters for BATCH and END only."""
+    if isinstance(msg, Batch):
+        return encode_frame(MsgType.BATCH, _batch_payload(msg.pulses), seq)
+    if isinstance(msg, End):
+        return encode_frame(MsgType.END, _END.pack(msg.periods) +
+                            _pack_position(msg.position_steps), seq)  # fmt: skip
+    if isinstance(msg, Hello):
+        return encode_frame(MsgType.HELLO, bytes((msg.version,)))
+    if type(msg) in _EMPTY_TYPES:
+        return encode_frame(_EMPTY_TYPES[type(msg)])
+    if isinstance(msg, Caps):
+        head = _CAPS.pack(msg.version, msg.axes, msg.max_pulses_per_period, msg.buffer_periods,
+                          msg.period_us, msg.session_id, msg.state)  # fmt: skip
+        return encode_frame(MsgType.CAPS, head + _pack_position(msg.position_steps))
+    if isinstance(msg, Ack):
+        return encode_frame(MsgType.ACK, _ACK.pack(msg.next_seq % SEQ_MODULO, msg.free_periods))
+    if isinstance(msg, Nak):
+        return encode_frame(
+            MsgType.NAK, _NAK.pack(msg.next_seq % SEQ_MODULO, msg.free_periods, msg.reason)
+        )
+    if isinstance(msg, Status):
+        head = _STATUS.pack(msg.state, msg.alarm, msg.next_seq % SEQ_MODULO, msg.free_periods,
+                            msg.fill_periods, msg.executed_periods)  # fmt: skip
+        return encode_frame(MsgType.STATUS, head + _pack_position(msg.position_steps))
+    if isinstance(msg, Alarm):
+        text = msg.text.encode("utf-8")[: MAX_PAYLOAD_BYTES - 1]
+        return encode_frame(MsgType.ALARM, bytes((msg.code,)) + text)
+    raise TypeError(f"not a message: {msg!r}")
+
+
+def _batch_payload(pulses) -> bytes:
+    """Format byte (bits 0-3 axes, bits 4-5 width−1), then the counts period by period."""
+    p = np.asarray(pulses)
+    if p.ndim != 2 or p.shape[0] < 1 or not 1 <= p.shape[1] <= 15:
+        raise ValueError(f"a batch needs (n >= 1, 1..15 axes) pulses, got shape {p.shape}")
+    width = pulse_width_bytes(int(np.abs(p).max()))
+    return bytes((p.shape[1] | ((width - 1) << 4),)) + p.astype(_WIDTH_DTYPES[width]).tobytes()
+
+
+def decode_message(frame: Frame) -> Message:
+    """The message in a CRC-valid frame; ProtocolError if its payload is malformed."""
+    t, data = frame.type, frame.payload
+    try:
+        kind = MsgType(t)
+    except ValueError:
+        raise ProtocolError(f"unknown frame type 0x{t:02x}") from None
+    if kind in _EMPTY:
+        if data:
+            raise ProtocolError(f"{kind.name} carries no payload, got {len(data)} bytes")
+        return _EMPTY[kind]()
+    try:
+        if kind is MsgType.BATCH:
+            return Batch(_batch_pulses(data))
+        if kind is MsgType.END:
+            (periods,) = _END.unpack_from(data)
+            return End(periods, _unpack_position(data[_END.size :], "END"))
+        if kind is MsgType.HELLO:
+            if len(data) != 1:
+                raise ProtocolError(f"HELLO carries 1 byte, got {len(data)}")
+            return Hello(data[0])
+        if kind is MsgType.CAPS:
+            head = _CAPS.unpack_from(data)
+            return Caps(*head, position_steps=_unpack_position(data[_CAPS.size :], "CAPS"))
+        if kind is MsgType.ACK:
+            return Ack(*_ACK.unpack(data))
+        if kind is MsgType.NAK:
+            return Nak(*_NAK.unpack(data))
+        if kind is MsgType.STATUS:
+            head = _STATUS.unpack_from(data)
+            return Status(*head, position_steps=_unpack_position(data[_STATUS.size :], "STATUS"))
+        if len(data) < 1:  # ALARM
+            raise ProtocolError("ALARM without a code")
+        return Alarm(data[0], data[1:].decode("utf-8", errors="replace"))
+    except struct.error as exc:
+        raise ProtocolError(f"{kind.name}: payload of {len(data)} bytes: {exc}") from None
+
+
+def _batch_pulses(data: bytes) -> np.ndarray:
+    if len(data) < 2:
+        raise ProtocolError("BATCH without pulse counts")
+    axes, width = data[0] & 0x0F, (data[0] >> 4) + 1
+    if axes == 0 or width not in _WIDTH_DTYPES:
+        raise ProtocolError(f"BATCH format byte 0x{data[0]:02x} is invalid")
+    body = data[1:]
+    if len(body) % (axes * width):
+        raise ProtocolError(f"BATCH of {len(body)} bytes is not whole periods of {axes} axes")
+    return np.frombuffer(body, dtype=_WIDTH_DTYPES[width]).astype(np.int64).reshape(-1, axes)

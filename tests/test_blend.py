@@ -1,0 +1,371 @@
+"""PH quintic corner blends (issue 7): end conditions, G2 continuity and the tolerance, checked
+against independent references (Bézier evaluation from the control points, closed-form circle
+points, a dense Hausdorff distance by k-d trees refined by scipy's bounded minimiser)."""
+
+from __future__ import annotations
+
+from math import comb
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.optimize import minimize_scalar
+from scipy.spatial import cKDTree
+from scipy.spatial.transform import Rotation
+
+from nurbscnc.errors import GeometryError
+from nurbscnc.geometry.paths import ArcGeometry, LineGeometry
+from nurbscnc.plan.blend import blend_corner, line_deviation_per_trim
+
+# --- independent references ------------------------------------------------------------------
+
+
+def _bezier(cp: np.ndarray, xi: np.ndarray, k: int = 0) -> np.ndarray:
+    """k-th derivative of the degree-5 Bézier with control points ``cp`` (6, 3) at ``xi``."""
+    n = cp.shape[0] - 1
+    diffs = cp.copy()
+    for _ in range(k):
+        diffs = np.diff(diffs, axis=0)
+    m = n - k
+    xi = np.asarray(xi, dtype=float)[:, None]
+    out = sum(comb(m, j) * xi**j * (1 - xi) ** (m - j) * diffs[j] for j in range(m + 1))
+    return out * (np.prod(range(n - k + 1, n + 1)) if k else 1.0)
+
+
+def _curvature(cp: np.ndarray, xi: np.ndarray, normal=None) -> np.ndarray:
+    """κ = |r′ × r″| / |r′|³ (signed by ``normal`` if given) from the control points."""
+    d1, d2 = _bezier(cp, xi, 1), _bezier(cp, xi, 2)
+    cross = np.cross(d1, d2)
+    num = cross @ normal if normal is not None else np.linalg.norm(cross, axis=1)
+    return num / np.linalg.norm(d1, axis=1) ** 3
+
+
+def _segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise distance from points p to segments [a, b] (all (m, 3))."""
+    ab = b - a
+    ab2 = np.einsum("ij,ij->i", ab, ab)
+    t = np.clip(np.einsum("ij,ij->i", p - a, ab) / np.where(ab2 > 0, ab2, 1.0), 0.0, 1.0)
+    return np.linalg.norm(p - a - t[:, None] * ab, axis=1)
+
+
+def _to_polyline(p: np.ndarray, poly: np.ndarray) -> np.ndarray:
+    """Distance from points p to the polyline ``poly``: the two segments next to the nearest
+    vertex (exact for straight pieces; chord sagitta elsewhere, < 1e-11 mm in these tests)."""
+    j = cKDTree(poly).query(p)[1]
+    last = len(poly) - 1
+    return np.min([_segment_distance(p, poly[np.clip(j + s, 0, last)],
+                                     poly[np.clip(j + s + 1, 0, last)])
+                   for s in (-1, 0)], axis=0)  # fmt: skip
+
+
+def _hausdorff(blend, geom_a, geom_b, n: int = 4001) -> float:
+    """Hausdorff distance between the blend and the corner path it replaces, densely."""
+    cp = blend.ph.control_points_mm
+    xi = np.linspace(0.0, 1.0, n)
+    blend_pts = _bezier(cp, xi)
+    la = geom_a.length_mm
+    path = np.concatenate((
+        geom_a.point(np.linspace(la - blend.trim_a_mm, la, n)),
+        geom_b.point(np.linspace(0.0, blend.trim_b_mm, n)),
+    ))  # fmt: skip
+    h_blend = _to_polyline(blend_pts, path).max()
+    dist = _to_polyline(path, blend_pts)
+    # Refine the farthest path point (the vertex, for a corner) by a bounded minimisation.
+    i = int(np.argmax(dist))
+    q = path[i]
+    k = int(np.argmin(np.linalg.norm(blend_pts - q, axis=1)))
+    lo, hi = xi[max(k - 2, 0)], xi[min(k + 2, n - 1)]
+    res = minimize_scalar(lambda x: float(np.sum((_bezier(cp, [x])[0] - q) ** 2)),
+                          bounds=(lo, hi), method="bounded", options={"xatol": 1e-13})  # fmt: skip
+    h_path = max(np.sqrt(res.fun), np.delete(dist, i).max())
+    return float(max(h_blend, h_path))
+
+
+def _arc(start, tangent, normal, radius, angle) -> ArcGeometry:
+    """Circular arc from ``start`` leaving along ``tangent``, counter-clockwise about
+    ``normal`` for angle > 0."""
+    n = np.asarray(normal, float) / np.linalg.norm(normal)
+    t = np.asarray(tangent, float) / np.linalg.norm(tangent)
+    e2 = t * np.sign(angle)
+    e1 = np.cross(e2, n)
+    return ArcGeometry(np.asarray(start, float) - radius * e1, e1, e2, n, radius, radius,
+                       angle, 0.0)  # fmt: skip
+
+
+def _circle_point(center, e1, e2, radius, phi):
+    """center + r(cos φ e1 + sin φ e2) (closed form)."""
+    return center + radius * (np.cos(phi) * e1 + np.sin(phi) * e2)
+
+
+def _corner_lines(turning_rad, rot=None, length=10.0, vertex=(0.0, 0.0, 0.0)):
+    v = np.asarray(vertex, float)
+    ta = np.array([1.0, 0.0, 0.0])
+    tb = np.array([np.cos(turning_rad), np.sin(turning_rad), 0.0])
+    if rot is not None:
+        ta, tb = rot @ ta, rot @ tb
+    return LineGeometry(v - length * ta, v), LineGeometry(v, v + length * tb), ta, tb
+
+
+def _ends(blend):
+    cp = blend.ph.control_points_mm
+    t0 = _bezier(cp, [0.0], 1)[0]
+    t1 = _bezier(cp, [1.0], 1)[0]
+    return cp[0], cp[-1], t0 / np.linalg.norm(t0), t1 / np.linalg.norm(t1)
+
+
+# --- line–line corners -----------------------------------------------------------------------
+
+
+def test_90_degree_line_corner():
+    tol = 0.01
+    a, b, ta, tb = _corner_lines(np.pi / 2, vertex=(3.0, -2.0, 1.5))
+    blend = blend_corner(a, b, tol, 5.0, 5.0)
+    v = np.array([3.0, -2.0, 1.5])
+    d = blend.trim_a_mm
+    assert blend.trim_b_mm == d
+    p0, p5, t0, t1 = _ends(blend)
+    assert np.abs(p0 - (v - d * ta)).max() < 1e-12
+    assert np.abs(p5 - (v + d * tb)).max() < 1e-12
+    assert np.abs(t0 - ta).max() < 1e-12 and np.abs(t1 - tb).max() < 1e-12
+    # Stays in the corner's plane z = 1.5 exactly (plane_frame gives the XY axes).
+    assert np.all(blend.ph.point_mm(np.linspace(0, 1, 11))[:, 2] == 1.5)
+    # G2 with the lines: zero curvature at both ends.
+    assert np.abs(_curvature(blend.ph.control_points_mm, np.array([0.0, 1.0]))).max() < 1e-9
+    dev = _hausdorff(blend, a, b)
+    assert 0.9 * tol <= dev <= tol
+    assert 0.995 * tol <= dev <= tol  # the search's window
+    assert abs(blend.deviation_mm - dev) < 1e-9 * tol
+    # Closed form of the symmetric blend: deviation = d · f(θ).
+    assert abs(d * line_deviation_per_trim(np.pi / 2) - dev) < 1e-9 * tol
+    assert blend.ph.length_mm < 2 * d  # it cuts the corner
+    assert abs(blend.turning_deg - 90.0) < 1e-12
+    kappa = np.abs(_curvature(blend.ph.control_points_mm, np.linspace(0, 1, 20001)))
+    assert abs(blend.kappa_max_per_mm - kappa.max()) < 1e-6 * kappa.max()
+    assert blend.kappa_jump_per_mm < 1e-9
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    turning_deg=st.floats(10.0, 170.0),
+    tol=st.floats(1e-3, 0.1),
+    rot_deg=st.floats(-180.0, 180.0),
+    left=st.booleans(),
+)
+def test_line_corners_10_to_170_degrees(turning_deg, tol, rot_deg, left):
+    turning = np.radians(turning_deg) * (1 if left else -1)
+    rot = Rotation.from_euler("z", rot_deg, degrees=True).as_matrix()
+    a, b, ta, tb = _corner_lines(turning, rot, length=100.0)
+    blend = blend_corner(a, b, tol, 50.0, 50.0)
+    d = blend.trim_a_mm
+    p0, p5, t0, t1 = _ends(blend)
+    assert np.abs(p0 - (-d * ta)).max() < 1e-12 and np.abs(p5 - d * tb).max() < 1e-12
+    assert np.abs(t0 - ta).max() < 1e-12 and np.abs(t1 - tb).max() < 1e-12
+    assert np.abs(_curvature(blend.ph.control_points_mm, np.array([0.0, 1.0]))).max() * d < 1e-9
+    dev = _hausdorff(blend, a, b)
+    assert 0.995 * tol <= dev <= tol * (1 + 1e-9)
+    assert abs(blend.deviation_mm - dev) < 1e-9 * tol
+    assert blend.ph.length_mm < 2 * d
+    # The unmeasured fast path: the closed-form deviation is the true one.
+    fast = blend_corner(a, b, tol, 50.0, 50.0, measure=False)
+    assert abs(fast.deviation_mm - _hausdorff(fast, a, b)) < 1e-9 * tol
+    assert 0.995 * tol <= fast.deviation_mm <= tol
+    assert abs(blend.turning_deg - turning_deg) < 1e-9
+    # No inflection: the curvature keeps one sign.
+    k = _curvature(blend.ph.control_points_mm, np.linspace(0.01, 0.99, 99), np.array([0, 0, 1.]))
+    assert np.all(k > 0) or np.all(k < 0)
+
+
+def test_trims_respect_the_max():
+    tol = 0.05
+    a, b, ta, tb = _corner_lines(np.pi / 2)
+    free = blend_corner(a, b, tol, 5.0, 5.0)
+    assert free.trim_a_mm > 0.1
+    for max_a, max_b in ((0.1, 5.0), (5.0, 0.1), (0.1, 0.1)):
+        blend = blend_corner(a, b, tol, max_a, max_b)
+        assert blend.trim_a_mm == blend.trim_b_mm == 0.1
+        dev = _hausdorff(blend, a, b)
+        assert dev < tol
+        assert abs(dev - 0.1 * line_deviation_per_trim(np.pi / 2)) < 1e-9
+        p0, p5, _, _ = _ends(blend)
+        assert np.abs(p0 + 0.1 * ta).max() < 1e-12 and np.abs(p5 - 0.1 * tb).max() < 1e-12
+    # A short segment: never more than its length.
+    short = LineGeometry((0, 0, 0), (0, 0.04, 0))
+    blend = blend_corner(a, short, tol, 5.0, 5.0)
+    assert blend.trim_b_mm == 0.04
+
+
+@pytest.mark.parametrize("turning", [1e-5, np.radians(0.5)])
+def test_near_collinear_polyline_corner(turning):
+    # CAM polyline: 0.1 mm segments, nearly collinear. The blend takes half of each segment
+    # and stays far inside the tolerance; its curvature is tiny (so the feed stays high).
+    a, b, ta, tb = _corner_lines(turning, length=0.1, vertex=(250.0, -120.0, 5.0))
+    blend = blend_corner(a, b, 0.01, 0.05, 0.05)
+    assert blend.trim_a_mm == blend.trim_b_mm == 0.05
+    dev = _hausdorff(blend, a, b)
+    assert abs(dev - blend.deviation_mm) < 1e-12
+    assert abs(dev - 0.05 * line_deviation_per_trim(turning)) < 1e-12
+    # Peak curvature (at ξ = ½ by symmetry): 64 sin(θ/2) / (α²(1 + c)²), α² = 30cd/(6c + 1),
+    # c = cos(θ/2); ≈ 3.73 × the mean curvature θ/L, the price of κ = 0 at both ends (G2).
+    c = np.cos(turning / 2)
+    k_peak = 64 * np.sin(turning / 2) / (30 * c * 0.05 / (6 * c + 1) * (1 + c) ** 2)
+    k_dense = np.abs(_curvature(blend.ph.control_points_mm, np.linspace(0, 1, 4001))).max()
+    assert abs(blend.kappa_max_per_mm - k_peak) < 1e-6 * k_peak
+    assert abs(k_dense - k_peak) < 1e-6 * k_peak
+    assert 3.7 < k_peak * blend.ph.length_mm / turning < 3.75
+
+
+@pytest.mark.parametrize("plane", ["ZX", "YZ"])
+def test_coordinate_planes(plane):
+    # XY corner with its axes permuted into the ZX (z, x) or YZ (y, z) plane.
+    perm = {"ZX": [2, 0, 1], "YZ": [1, 2, 0]}[plane]
+    m = np.zeros((3, 3))
+    m[perm, [0, 1, 2]] = 1.0
+    a, b, ta, tb = _corner_lines(np.radians(60.0), m, vertex=(1.0, 2.0, 3.0))
+    blend = blend_corner(a, b, 0.02, 5.0, 5.0)
+    normal_axis = perm[2]
+    pts = blend.ph.point_mm(np.linspace(0, 1, 101))
+    assert np.all(pts[:, normal_axis] == [1.0, 2.0, 3.0][normal_axis])
+    ref = blend_corner(*_corner_lines(np.radians(60.0))[:2], 0.02, 5.0, 5.0)
+    assert abs(blend.trim_a_mm - ref.trim_a_mm) < 1e-12
+    assert 0.995 * 0.02 <= _hausdorff(blend, a, b) <= 0.02
+
+
+def test_tilted_plane_3d():
+    rot = Rotation.from_rotvec([0.3, -0.7, 0.4]).as_matrix()
+    v = np.array([10.0, -5.0, 2.0])
+    a, b, ta, tb = _corner_lines(np.radians(75.0), rot, vertex=v)
+    tol = 0.01
+    blend = blend_corner(a, b, tol, 5.0, 5.0)
+    d = blend.trim_a_mm
+    p0, p5, t0, t1 = _ends(blend)
+    assert np.abs(p0 - (v - d * ta)).max() < 1e-12 and np.abs(p5 - (v + d * tb)).max() < 1e-12
+    assert np.abs(t0 - ta).max() < 1e-12 and np.abs(t1 - tb).max() < 1e-12
+    normal = rot[:, 2]
+    pts = blend.ph.point_mm(np.linspace(0, 1, 101))
+    assert np.abs((pts - v) @ normal).max() < 1e-12
+    dev = _hausdorff(blend, a, b)
+    assert 0.995 * tol <= dev <= tol
+    flat = blend_corner(*_corner_lines(np.radians(75.0))[:2], tol, 5.0, 5.0)
+    assert abs(d - flat.trim_a_mm) < 1e-12 * d  # rotation invariance
+
+
+# --- corners with arcs -----------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("radius, sense", [(10.0, 1), (10.0, -1), (2.0, 1), (0.5, 1)])
+@pytest.mark.parametrize("turning_deg", [30.0, 90.0, 135.0])
+def test_line_to_arc(radius, sense, turning_deg):
+    th = np.radians(turning_deg)
+    tb = np.array([np.cos(th), np.sin(th), 0.0])
+    a = LineGeometry((-10, 0, 0), (0, 0, 0))
+    b = _arc((0, 0, 0), tb, (0, 0, 1), radius, sense * 2.0)
+    tol = 0.01
+    blend = blend_corner(a, b, tol, 5.0, 0.5 * b.length_mm)
+    d = blend.trim_b_mm
+    assert blend.trim_a_mm == d <= 0.5 * b.length_mm
+    # Closed-form circle: centre at −sense·r·(tb rotated by −90°); the point at arc length d.
+    n_tb = np.array([-tb[1], tb[0], 0.0])  # tb rotated +90° about z
+    center = sense * radius * n_tb
+    e1 = -sense * n_tb
+    psi = d / radius  # angle swept from the vertex
+    p_arc = _circle_point(center, e1, tb, radius, psi)
+    t_arc = -np.sin(psi) * e1 + np.cos(psi) * tb
+    p0, p5, t0, t1 = _ends(blend)
+    assert np.abs(p0 - np.array([-d, 0, 0])).max() < 1e-12
+    assert np.abs(p5 - p_arc).max() < 1e-12
+    assert np.abs(t0 - [1, 0, 0]).max() < 1e-12 and np.abs(t1 - t_arc).max() < 1e-12
+    k = _curvature(blend.ph.control_points_mm, np.array([0.0, 1.0]), np.array([0, 0, 1.0]))
+    assert abs(k[0]) < 1e-9 / d  # G2 with the line
+    assert abs(k[1] - sense / radius) < 1e-9 / d  # G2 with the arc
+    assert blend.kappa_jump_per_mm < 1e-9 / d
+    dev = _hausdorff(blend, a, b)
+    assert dev <= tol * (1 + 1e-9)
+    assert dev >= 0.995 * tol
+    assert abs(blend.deviation_mm - dev) < 1e-6 * tol
+    assert blend.ph.length_mm < 2 * d
+
+
+@pytest.mark.parametrize("sense", [1, -1])
+def test_arc_to_line(sense):
+    radius, tol = 3.0, 0.02
+    # The arc ends at the origin heading along +x; the line then leaves at 100°.
+    a_rev = _arc((0, 0, 0), (-1, 0, 0), (0, 0, 1), radius, -sense * 1.5)
+    end = a_rev.point(a_rev.length_mm)[0]
+    # The same circle traversed the other way, ending at the origin with tangent +x.
+    a = _arc(end, -a_rev.derivatives([a_rev.length_mm], 1)[1][0], (0, 0, 1), radius, sense * 1.5)
+    assert np.abs(a.point(a.length_mm)[0]).max() < 1e-12
+    th = np.radians(100.0)
+    b = LineGeometry((0, 0, 0), (10 * np.cos(th), 10 * np.sin(th), 0))
+    blend = blend_corner(a, b, tol, 0.5 * a.length_mm, 5.0)
+    d = blend.trim_a_mm
+    p0, p5, t0, t1 = _ends(blend)
+    # The point d before the end of a is the point d after the start of the reversed arc.
+    assert np.abs(p0 - a_rev.point(d)[0]).max() < 1e-12
+    assert np.abs(t0 + a_rev.derivatives([d], 1)[1][0]).max() < 1e-12
+    assert np.abs(p5 - d * np.array([np.cos(th), np.sin(th), 0])).max() < 1e-12
+    k = _curvature(blend.ph.control_points_mm, np.array([0.0, 1.0]), np.array([0, 0, 1.0]))
+    assert abs(k[0] - sense / radius) < 1e-9 / d and abs(k[1]) < 1e-9 / d
+    dev = _hausdorff(blend, a, b)
+    assert 0.995 * tol <= dev <= tol * (1 + 1e-9)
+
+
+def test_arc_to_arc():
+    tol = 0.01
+    a = _arc((-5, -5, 0), (1, 0, 0), (0, 0, 1), 5.0, np.pi / 2)  # ends at (0, 0) heading +y
+    assert np.abs(a.point(a.length_mm)[0]).max() < 1e-12
+    b = _arc((0, 0, 0), (1, 0, 0), (0, 0, 1), 4.0, -1.0)  # a 90° right corner
+    blend = blend_corner(a, b, tol, 1.0, 1.0)
+    k = _curvature(blend.ph.control_points_mm, np.array([0.0, 1.0]), np.array([0, 0, 1.0]))
+    assert abs(k[0] - 1 / 5.0) < 1e-9 / blend.trim_a_mm
+    assert abs(k[1] + 1 / 4.0) < 1e-9 / blend.trim_a_mm
+    assert 0.995 * tol <= _hausdorff(blend, a, b) <= tol * (1 + 1e-9)
+
+
+def test_tight_arc_falls_back_within_tolerance():
+    # An arc much tighter than the blend: whatever continuity is reached, the tolerance holds
+    # and the reported curvature jump is the measured one.
+    th = np.radians(90.0)
+    a = LineGeometry((-10, 0, 0), (0, 0, 0))
+    b = _arc((0, 0, 0), (np.cos(th), np.sin(th), 0), (0, 0, 1), 0.1, -3.0)
+    blend = blend_corner(a, b, 0.01, 5.0, 0.5 * b.length_mm)
+    assert blend is not None
+    assert _hausdorff(blend, a, b) <= 0.01 * (1 + 1e-9)
+    k = _curvature(blend.ph.control_points_mm, np.array([0.0, 1.0]), np.array([0, 0, 1.0]))
+    assert abs(max(abs(k[0]), abs(k[1] + 10.0)) - blend.kappa_jump_per_mm) < 1e-6
+
+
+# --- no blend --------------------------------------------------------------------------------
+
+
+def test_reversal_and_smooth_junctions_give_none():
+    a = LineGeometry((0, 0, 0), (1, 0, 0))
+    assert blend_corner(a, LineGeometry((1, 0, 0), (0.5, 0, 0)), 0.01, 0.5, 0.25) is None
+    assert blend_corner(a, LineGeometry((1, 0, 0), (2, 0, 0)), 0.01, 0.5, 0.5) is None
+    almost = LineGeometry((1, 0, 0), (2, 1e-8, 0))
+    assert blend_corner(a, almost, 0.01, 0.5, 0.5) is None
+    corner = LineGeometry((1, 0, 0), (1, 1, 0))
+    assert blend_corner(a, corner, 0.0, 0.5, 0.5) is None  # zero tolerance: exact stop
+    assert blend_corner(a, corner, 0.01, 0.0, 0.5) is None  # degenerate trim
+
+
+def test_non_planar_corners_give_none():
+    a = LineGeometry((0, 0, -1), (0, 0, 0))  # a Z plunge into an XY arc
+    b = _arc((0, 0, 0), (1, 0, 0), (0, 0, 1), 2.0, 1.0)
+    assert blend_corner(a, b, 0.01, 0.5, 0.5) is None
+    helix = ArcGeometry(np.array([0.0, 2.0, 0.0]), np.array([0.0, -1.0, 0.0]),
+                        np.array([1.0, 0.0, 0.0]), np.array([0.0, 0.0, 1.0]), 2.0, 2.0, 1.0,
+                        0.5)  # fmt: skip
+    line = LineGeometry((-1, 0, 0), (0, 0, 0))
+    assert blend_corner(line, helix, 0.01, 0.5, 0.5) is None
+
+
+def test_bad_inputs_raise():
+    a = LineGeometry((0, 0, 0), (1, 0, 0))
+    b = LineGeometry((1, 0, 0), (1, 1, 0))
+    with pytest.raises(GeometryError):
+        blend_corner(a, b, -0.01, 0.5, 0.5)
+    with pytest.raises(GeometryError):
+        blend_corner(a, b, float("nan"), 0.5, 0.5)
+    with pytest.raises(GeometryError):
+        blend_corner(a, LineGeometry((1, 0.1, 0), (1, 1, 0)), 0.01, 0.5, 0.5)

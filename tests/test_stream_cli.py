@@ -1,0 +1,225 @@
+"""The `stream` and `card-sim` commands: safety before the port, exit codes, Ctrl-C, the log.
+
+`stream` runs in-process through click's CliRunner (or in a subprocess for Ctrl-C) against a
+card simulator that counts every byte it receives; `card-sim` runs as a subprocess once.
+The expected end positions come from the program text (its last point) and the expected
+pulses from Python's round() on the points written here, not from the code under test.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import serial
+from click.testing import CliRunner
+
+from nurbscnc.output.stream.card import CardConfig, CardSim, PtyEndpoint, TcpEndpoint, serve
+from nurbscnc.output.stream.commands import card_sim, stream
+
+ROOT = Path(__file__).resolve().parents[1]
+GOOD = "G21 G90 G17\nG0 X0 Y0\nG1 X5 Y2 F3000\nG1 X8 Y0\nM2\n"  # ends at X8 Y0 → 8000 steps
+LATE_ERROR = "G21 G90 G17\nG0 X0 Y0\nG1 X5 Y2 F3000\nG1 X8 Y0\nG2 X10 Y0\nM2\n"  # line 5
+
+
+@contextlib.contextmanager
+def card_on(kind: str, config: CardConfig | None = None):
+    card = CardSim(config or CardConfig(speed=None), seed=1)
+    endpoint = PtyEndpoint() if kind == "pty" else TcpEndpoint("127.0.0.1", 0)
+    stop = threading.Event()
+    thread = threading.Thread(target=serve, args=(card, endpoint, stop), daemon=True)
+    thread.start()
+    try:
+        yield card, endpoint
+    finally:
+        stop.set()
+        thread.join(5.0)
+        endpoint.close()
+
+
+def run_stream(args):
+    return CliRunner().invoke(stream, [str(a) for a in args])
+
+
+def write_points(path: Path, points: np.ndarray, period_s: float = 1e-3) -> None:
+    """A reference-point CSV as `run -o` writes it (t,x,y,z,feed,piece,line)."""
+    n = len(points)
+    table = np.column_stack([np.arange(n) * period_s, points, np.zeros(n), np.zeros(n),
+                             np.full(n, 3)])  # fmt: skip
+    with open(path, "w") as fh:
+        fh.write("t,x,y,z,feed,piece,line\n")
+        np.savetxt(fh, table, fmt=["%.6f", "%.9f", "%.9f", "%.9f", "%.6f", "%d", "%d"],
+                   delimiter=",")  # fmt: skip
+
+
+def expected_pulses(csv: Path) -> np.ndarray:
+    """Pulses of the points as written in ``csv`` (1000 steps/mm), by Python's round()."""
+    points = np.loadtxt(csv, delimiter=",", skiprows=1)[:, 1:4]
+    steps = [[round(float(v) * 1000.0) for v in row] for row in points]
+    return np.diff(np.array(steps), axis=0)
+
+
+def spiral(n: int) -> np.ndarray:
+    t = np.arange(n) * 1e-3
+    r = 2.0 + t
+    return np.column_stack([r * np.cos(8 * t) - 2.0, r * np.sin(8 * t), 0.5 * t])
+
+
+def test_stream_program_over_pty_exits_0_at_the_programs_end(tmp_path):
+    nc = tmp_path / "part.nc"
+    nc.write_text(GOOD)
+    with card_on("pty") as (card, ep):
+        result = run_stream([nc, "--port", ep.path, "--json"])
+    assert result.exit_code == 0, result.output
+    report = json.loads(result.stdout)
+    assert report["ok"] and report["final_position_steps"] == [8000, 0, 0]
+    assert report["expected_position_steps"] == [8000, 0, 0]
+    assert report["executed_periods"] == card.executed_periods == report["periods"]
+    assert card.position.tolist() == [8000, 0, 0] and card.state.name == "DONE"
+    assert set(report) >= {"frames_sent", "retransmits", "duration_s", "bytes_sent"}
+
+
+def test_stream_points_file_over_socket_url(tmp_path):
+    pts = spiral(600)
+    csv = tmp_path / "points.csv"
+    write_points(csv, pts)
+    with card_on("tcp") as (card, ep):
+        refused = run_stream([csv, "--port", ep.path])
+        assert refused.exit_code == 2 and "--allow-url" in refused.stderr
+        assert card.bytes_received == 0  # nothing reached the card
+        result = run_stream([csv, "--port", ep.path, "--allow-url"])
+    assert result.exit_code == 0, result.output
+    assert np.array_equal(card.executed_pulses(), expected_pulses(csv))
+    assert "599 periods streamed" in result.stdout
+
+
+@pytest.mark.parametrize(
+    "setup, args, message",
+    [
+        ("late", [], "5:4: error: arc with neither R nor I/J/K"),
+        ("good", ["--set", "soft_limits.x.max_mm=5"], "soft limits"),
+        ("jump", [], "period 250 (t = 0.2500 s) needs 200 pulses on Z, more than the card's "
+                     "limit of 127"),
+        ("slow", [], "2 ms apart; the machine's servo period is 1 ms"),
+    ],
+)
+def test_errors_anywhere_in_the_input_send_zero_bytes(tmp_path, setup, args, message):
+    if setup in ("late", "good"):
+        path = tmp_path / "p.nc"
+        path.write_text(LATE_ERROR if setup == "late" else GOOD)
+    else:
+        pts = spiral(300)
+        if setup == "jump":
+            pts[:, 2] = 0.0
+            pts[250:, 2] = 0.2  # one period near the end moves 0.2 mm = 200 steps
+        path = tmp_path / "p.csv"
+        write_points(path, pts, 2e-3 if setup == "slow" else 1e-3)
+    with card_on("pty") as (card, ep):
+        result = run_stream([path, "--port", ep.path, *args])
+        time.sleep(0.05)
+    assert result.exit_code == 2, result.output
+    assert message in result.stderr
+    assert card.bytes_received == 0
+
+
+def test_port_trouble_exits_3(tmp_path):
+    nc = tmp_path / "p.nc"
+    nc.write_text(GOOD)
+    result = run_stream([nc, "--port", tmp_path / "no-such-tty"])
+    assert result.exit_code == 3 and "cannot open port" in result.stderr
+    ep = PtyEndpoint()
+    try:
+        holder = serial.Serial(ep.path, exclusive=True)
+        result = run_stream([nc, "--port", ep.path])
+        holder.close()
+    finally:
+        ep.close()
+    assert result.exit_code == 3 and "busy" in result.stderr
+
+
+def test_unfit_card_exits_3_before_sending_a_batch(tmp_path):
+    nc = tmp_path / "p.nc"
+    nc.write_text(GOOD)
+    with card_on("pty", CardConfig(speed=None, position_steps=(0, 7, 0))) as (card, ep):
+        result = run_stream([nc, "--port", ep.path, "--timeout", "0.5"])
+    assert result.exit_code == 3
+    assert "the card is at [0, 7, 0] steps" in result.stderr
+    assert card.frames_received == 1 and card.executed_periods == 0
+
+
+def _stream_cmd(args):
+    """`nurbscnc stream ...` in a subprocess: the registered command, else the function."""
+    import nurbscnc.cli
+
+    if "stream" in nurbscnc.cli.main.commands:
+        return [sys.executable, "-m", "nurbscnc.cli", "stream", *args]
+    code = "from nurbscnc.output.stream.commands import stream; stream(prog_name='stream')"
+    return [sys.executable, "-c", code, *args]
+
+
+def test_ctrl_c_sends_abort_and_exits_130(tmp_path):
+    csv = tmp_path / "long.csv"
+    write_points(csv, spiral(8000))  # 8 s of motion: SIGINT arrives long before the end
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    with card_on("pty", CardConfig(speed=1.0)) as (card, ep):
+        proc = subprocess.Popen(_stream_cmd([str(csv), "--port", ep.path, "--quiet"]),
+                                stderr=subprocess.PIPE, stdout=subprocess.PIPE, env=env)  # fmt: skip
+        try:
+            deadline = time.monotonic() + 20.0
+            while card.executed_periods < 50 and time.monotonic() < deadline:
+                time.sleep(0.02)
+            assert card.executed_periods >= 50, "the stream did not start"
+            proc.send_signal(signal.SIGINT)
+            _, stderr = proc.communicate(timeout=10.0)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+        time.sleep(0.05)
+    assert proc.returncode == 130, stderr.decode()
+    assert b"interrupted: abort sent, the card stopped" in stderr
+    assert card.aborts_received >= 1 and card.state.name == "ABORTED"
+    assert card.executed_periods < 4000
+
+
+def test_card_sim_command_logs_what_it_executed(tmp_path):
+    pts = spiral(400)
+    csv = tmp_path / "points.csv"
+    write_points(csv, pts)
+    log, report = tmp_path / "executed.csv", tmp_path / "card.json"
+    code = "from nurbscnc.output.stream.commands import card_sim; card_sim(prog_name='card-sim')"
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen(
+        [sys.executable, "-c", code, "--listen", "127.0.0.1:0", "--fast", "--once",
+         "--log", str(log), "--report", str(report)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env,
+    )  # fmt: skip
+    try:
+        url = proc.stdout.readline().decode().strip()
+        assert url.startswith("socket://127.0.0.1:")
+        result = run_stream([csv, "--port", url, "--allow-url", "--json"])
+        proc.wait(timeout=10.0)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert result.exit_code == 0, result.output
+    assert proc.returncode == 0
+    logged = np.loadtxt(log, delimiter=",", skiprows=1, dtype=np.int64, ndmin=2)
+    assert np.array_equal(logged[:, 0], np.arange(1, 400))
+    assert np.array_equal(logged[:, 1:], expected_pulses(csv))
+    counters = json.loads(report.read_text())
+    assert counters["state"] == "DONE" and counters["executed_periods"] == 399
+    assert counters["bytes_received"] == json.loads(result.stdout)["bytes_sent"]
+
+
+def test_card_sim_listens_on_loopback_only():
+    result = CliRunner().invoke(card_sim, ["--listen", "0.0.0.0:0"])
+    assert result.exit_code == 2 and "loopback" in result.stderr
