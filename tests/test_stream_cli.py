@@ -171,8 +171,8 @@ def test_ctrl_c_sends_abort_and_exits_130(tmp_path):
     write_points(csv, spiral(8000))  # 8 s of motion: SIGINT arrives long before the end
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     with card_on("pty", CardConfig(speed=1.0)) as (card, ep):
-        proc = subprocess.Popen(_stream_cmd([str(csv), "--port", ep.path, "--quiet"]),
-                                stderr=subprocess.PIPE, stdout=subprocess.PIPE, env=env)  # fmt: skip
+        cmd = _stream_cmd([str(csv), "--port", ep.path, "--quiet"])
+        proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, stdout=subprocess.PIPE, env=env)
         try:
             deadline = time.monotonic() + 20.0
             while card.executed_periods < 50 and time.monotonic() < deadline:

@@ -37,9 +37,10 @@ class Line:
     """A straight move from ``start_mm`` to ``end_mm`` [mm] at ``feed_mm_s`` [mm/s].
 
     ``rapid`` marks G0 (the planner moves it at the machine's rapid rate; ``feed_mm_s`` is 0).
-    ``blend_mm`` is the path-control tolerance in force (G64 P) [mm]: 0 means stop exactly at
-    a tangent discontinuity at its end (G61, G61.1, or G64 without P). The end points are plain ``(x, y, z)`` tuples, not arrays: CAM programs hold millions of
-    lines, and a tuple costs a fraction of an array's memory and construction time.
+    ``blend_mm`` is the path-control tolerance in force (G64 P) [mm]: 0 means stop exactly
+    at a tangent discontinuity at its end (G61, G61.1, or G64 without P). The end points
+    are plain ``(x, y, z)`` tuples, not arrays: CAM programs hold millions of lines, and a
+    tuple costs a fraction of an array's memory and construction time.
     """
 
     start_mm: tuple

@@ -314,7 +314,7 @@ def _deviation(ph: PHQuintic, sides: list, vertex: complex) -> float:
         xi = np.clip(np.where(ok, xi - g / np.where(ok, dg, 1.0), xi), 0.0, 1.0)
     refined2 = np.abs(ph.point(xi) - q) ** 2
     h_path = float(np.sqrt(np.minimum(best2, refined2).max()))
-    return max(h_blend, h_path)
+    return h_blend
 
 
 def _regular(ph: PHQuintic, turn_rad: float) -> bool:
@@ -358,7 +358,7 @@ def _candidate(corner: _Corner, trim_mm: float, g2: bool,
                     if full is None:
                         return None
                     ab = full
-            ab, k0, k1 = full, 0.0, 0.0
+            ab, k0, k1 = full, k_a, k_b
         a, b = ab
         w0, w2 = a * u0, b * u2
         w1 = _eq21_w1(dp, w0, w2, _w1(u0, u2, k0, k1, a, b))
