@@ -518,13 +518,24 @@ def plan_options(func):
              "the whole program (global, the paper's rule), or not at all (off).",
     )(func)  # fmt: skip
     func = click.option(
+        "--blend-tolerance", type=click.FloatRange(min=0.0), default=None, metavar="MM",
+        help="Blend G1/G2/G3 corners by PH quintics within this distance [mm] (overrides the "
+             "program's G64 P; 0: stop exactly at every corner).",
+    )(func)  # fmt: skip
+    func = click.option(
+        "--interpolator", type=click.Choice(["exact", "taylor"]), default="exact",
+        help="NURBS pieces by exact arc-length inversion (default) or the paper's 2nd-order "
+             "Taylor formula.",
+    )(func)  # fmt: skip
+    func = click.option(
         "--lookahead", type=click.IntRange(min=1), default=None,
         help="Look-ahead depth in pieces (default: the whole program).",
     )(func)  # fmt: skip
     return machine_options(func)
 
 
-def make_plan(program: str, machine, overrides, dynamics, lookahead, corner_feed):
+def make_plan(program: str, machine, overrides, dynamics, lookahead, corner_feed,
+              interpolator="exact", blend_tolerance=None):
     """Load, interpret and plan one program; validate soft limits. Returns (prog, mach, plan)."""
     from nurbscnc.plan.lookahead import LookaheadOptions, plan_program
     from nurbscnc.plan.pieces import PlanOptions
@@ -532,7 +543,9 @@ def make_plan(program: str, machine, overrides, dynamics, lookahead, corner_feed
     mach = load_machine_cli(machine, overrides)
     prog = load_program(program)
     options = LookaheadOptions(dynamics=dynamics, lookahead_pieces=lookahead,
-                               plan=PlanOptions(corner_feed=corner_feed))  # fmt: skip
+                               interpolator=interpolator,
+                               plan=PlanOptions(corner_feed=corner_feed,
+                                                blend_tolerance_mm=blend_tolerance))  # fmt: skip
     plan = plan_program(prog, mach, options)
     check_soft_limits(plan, mach, prog)
     return prog, mach, plan
@@ -611,14 +624,16 @@ def cutting_mask(plan) -> np.ndarray:
               help="Write t, s, v, a, j, piece at every servo period (CSV, or NPZ by extension).")
 @plan_options
 @handle_errors
-def plan(program, as_json, dump_profile, machine, overrides, dynamics, lookahead, corner_feed):
+def plan(program, as_json, dump_profile, machine, overrides, dynamics, interpolator,
+         blend_tolerance, lookahead, corner_feed):
     """Plan PROGRAM: pieces, corners, cycle time, lower bound, predicted contour error.
 
     Example: nurbscnc plan programs/naca2415.nc --dump-profile profile.csv
     """
     from nurbscnc.output.files import write_profile
 
-    prog, mach, pl = make_plan(program, machine, overrides, dynamics, lookahead, corner_feed)
+    prog, mach, pl = make_plan(program, machine, overrides, dynamics, lookahead, corner_feed,
+                               interpolator, blend_tolerance)  # fmt: skip
     summary = plan_summary(prog, mach, pl)
     if dump_profile:
         s = pl.samples
@@ -662,7 +677,7 @@ def plan(program, as_json, dump_profile, machine, overrides, dynamics, lookahead
 @plan_options
 @handle_errors
 def run(programs, output, output_dir, jobs, fmt, quiet, as_json, machine, overrides, dynamics,
-        lookahead, corner_feed):
+        interpolator, blend_tolerance, lookahead, corner_feed):
     """Run the whole pipeline: reference points at every servo period.
 
     Example: nurbscnc run programs/naca2415.nc -o points.csv
@@ -679,7 +694,7 @@ def run(programs, output, output_dir, jobs, fmt, quiet, as_json, machine, overri
             raise click.UsageError("give -o FILE (.csv, .npz or -) or --output-dir DIR")
         program = programs[0]
         prog, mach, pl = make_plan(program, machine, overrides, dynamics, lookahead,
-                                   corner_feed)  # fmt: skip
+                                   corner_feed, interpolator, blend_tolerance)  # fmt: skip
         write_points(output, pl.samples)
         summary = plan_summary(prog, mach, pl)
         if as_json:
@@ -689,18 +704,17 @@ def run(programs, output, output_dir, jobs, fmt, quiet, as_json, machine, overri
                       f"{summary['cycle_time_s']:.4f} s → {output}", markup=False)  # fmt: skip
         return
     run_batch(programs, output_dir, jobs, fmt, quiet, as_json,
-              (machine, overrides, dynamics, lookahead, corner_feed))  # fmt: skip
+              (machine, overrides, dynamics, lookahead, corner_feed, interpolator,
+               blend_tolerance))  # fmt: skip
 
 
 def _batch_one(args):
     """Worker: plan one program and write its output; returns a result row (never raises)."""
     program, target, settings = args
-    machine, overrides, dynamics, lookahead, corner_feed = settings
     from nurbscnc.output.files import write_points
 
     try:
-        prog, mach, pl = make_plan(program, machine, overrides, dynamics, lookahead,
-                                   corner_feed)  # fmt: skip
+        prog, mach, pl = make_plan(program, *settings)
         write_points(target, pl.samples)
         return {"program": program, "ok": True, "output": target,
                 "cycle_time_s": pl.cycle_time_s, "samples": int(pl.samples.t_s.size)}

@@ -31,7 +31,8 @@ response and K = G(0): g is the running complement of the discrete impulse respo
 Δr_j = r_j − r_{j−1} (ramped over period j−1 → j) then contributes −g_{k−j+1} Δr_j at sample
 k ≥ j, and summing from the machine at rest at r_0 (equilibrium output K r_0):
 
-    y_k = K r_k − Σ_{j ≤ k} g_{k−j+1} Δr_j,    axis error E_k = r_k − y_k = (1 − K) r_k + (g ⋆ Δr)_k.
+    y_k = K r_k − Σ_{j ≤ k} g_{k−j+1} Δr_j,
+    axis error E_k = r_k − y_k = (1 − K) r_k + (g ⋆ Δr)_k.
 
 The kernel is cut where |g| and |h| fall below 1e-16 of their peaks (the dropped tail is below
 double rounding: |tail| ≤ 1e-16·max|g| / (1 − e^{−|Re p|T}), ~1e-15 relative for Table 2), and

@@ -43,10 +43,12 @@ parametric speed nearly vanishes (a cusp).
 Deviation and search
 --------------------
 The deviation is the Hausdorff distance between the blend and the corner path (cut point on
-a → vertex → cut point on b), measured on 129 blend samples against the path (lines exactly,
-arcs as 65-point polylines: error ≤ their sagitta) and from each path point to the blend
-(nearest sample refined by Newton on Re(conj(r − q) r′) = 0; distances to true blend points,
-so never underestimated). For a convex blend it is the vertex's distance to the blend.
+a → vertex → cut point on b), in the corner plane: from 129 blend samples to the path
+(exact distances to lines and circular arcs; spiral arcs as 33-point polylines) and from the
+path (its ends, the vertex, 33 points per arc) to the blend (nearest sample refined by Newton
+on Re(conj(r − q) r′) = 0; distances to true blend points, so never underestimated). For a
+convex blend it is the vertex's distance to the blend. A deviation is accepted up to
+tol(1 − 1e-6), a margin for the sampling (below 1e-8 relative in the tests).
 The trim d = d_a = d_b starts at the line estimate tol / (deviation per trim) and is updated
 by secant steps on deviation(d) = tol(1 − 0.0025), safeguarded by bisection, until
 tol(1 − 0.005) ≤ deviation ≤ tol, the trim reaches its cap, or the bracket is 2 % wide.
@@ -119,13 +121,12 @@ class Blend:
 
 @dataclass(frozen=True, eq=False)
 class _Corner:
-    """What every candidate of one corner shares: geometries, lengths, vertex, plane frame."""
+    """What every candidate of one corner shares: geometries, a's length, the plane frame
+    (origin, e1, e2, normal) and the vertex in plane coordinates."""
 
     geom_a: object
     geom_b: object
     length_a_mm: float
-    length_b_mm: float
-    vertex_mm: np.ndarray
     origin_mm: np.ndarray
     e1: np.ndarray
     e2: np.ndarray
@@ -314,7 +315,7 @@ def _deviation(ph: PHQuintic, sides: list, vertex: complex) -> float:
         xi = np.clip(np.where(ok, xi - g / np.where(ok, dg, 1.0), xi), 0.0, 1.0)
     refined2 = np.abs(ph.point(xi) - q) ** 2
     h_path = float(np.sqrt(np.minimum(best2, refined2).max()))
-    return h_blend
+    return max(h_blend, h_path)
 
 
 def _regular(ph: PHQuintic, turn_rad: float) -> bool:
@@ -474,7 +475,7 @@ def blend_corner(geom_a, geom_b, tolerance_mm: float, max_trim_a_mm: float,
     origin, e1, e2 = plane_frame(np.array([vertex - t_a, vertex, vertex + t_b]),
                                  tol_mm=1e-12 * scale)  # fmt: skip
     rel = vertex - origin
-    corner = _Corner(geom_a, geom_b, len_a, len_b, vertex, origin, e1, e2, _cross(e1, e2),
+    corner = _Corner(geom_a, geom_b, len_a, origin, e1, e2, _cross(e1, e2),
                      complex(rel @ e1, rel @ e2))
 
     d_line = tol * (1.0 - 0.5 * SEARCH_WINDOW) / line_deviation_per_trim(turning)

@@ -29,7 +29,7 @@ class Response:
     contour_eq29_mm: np.ndarray
 
 
-def dense_path_mm(pieces, profile, spacing_mm: float = 0.002) -> np.ndarray:
+def dense_path_mm(pieces, profile, spacing_mm: float = 0.002, table=None) -> np.ndarray:
     """The commanded path as a dense polyline [mm]: exact points every ``spacing_mm`` or
     closer (≥ 8 per piece), so its chord error is negligible beside micrometre errors."""
     from nurbscnc.interpolate import place_points
@@ -44,7 +44,7 @@ def dense_path_mm(pieces, profile, spacing_mm: float = 0.002) -> np.ndarray:
     frac = (np.arange(idx.size) - first) / np.repeat(np.maximum(counts - 1, 1), counts)
     s = starts[idx] + frac * lengths[idx]
     s = np.clip(s, 0.0, total)
-    return place_points(pieces, profile, s, idx)
+    return place_points(pieces, profile, s, idx, table=table)
 
 
 def servo_response(

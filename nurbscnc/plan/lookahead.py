@@ -14,7 +14,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from nurbscnc.errors import PlanningError
-from nurbscnc.interpolate import Samples, dwell_schedule, sample_plan, total_time_s
+from nurbscnc.interpolate import (
+    PieceTable,
+    Samples,
+    dwell_schedule,
+    sample_plan,
+    total_time_s,
+)
 from nurbscnc.machine import Machine
 from nurbscnc.plan.dynamics import Response, dense_path_mm, servo_response
 from nurbscnc.plan.pieces import PlanOptions, junction_caps, segment_pieces
@@ -28,10 +34,12 @@ BLAME_WINDOW_S = 0.03
 
 @dataclass(frozen=True)
 class LookaheadOptions:
-    """``dynamics``: "local" | "global" | "off"; ``max_iterations`` of the re-plan loop;
+    """``dynamics``: "local" | "global" | "off"; ``interpolator``: "exact" | "taylor" (NURBS
+    pieces by the paper's 2nd-order Taylor formula); ``max_iterations`` of the re-plan loop;
     ``lookahead_pieces``: None (whole program) or a window; ``plan``: piece options."""
 
     dynamics: str = "local"
+    interpolator: str = "exact"
     max_iterations: int = 40
     lookahead_pieces: int | None = None
     plan: PlanOptions = field(default_factory=PlanOptions)
@@ -76,13 +84,15 @@ def plan_program(program, machine: Machine, options: LookaheadOptions | None = N
     response = None
     iterations = 0
     path = None
+    table = PieceTable.of(pieces)  # per-piece arrays for the interpolator, built once
     while True:
         profile = _profile(pieces, caps, smooth, machine, options.lookahead_pieces)
-        samples = sample_plan(pieces, profile, period)
+        samples = sample_plan(pieces, profile, period, interpolator=options.interpolator,
+                              table=table)  # fmt: skip
         if options.dynamics == "off":
             break
         if path is None:
-            path = dense_path_mm(pieces, profile)
+            path = dense_path_mm(pieces, profile, table=table)
         response = servo_response(samples.points_mm, path, machine)
         n = samples.t_s.size
         # Contour error matters while cutting: samples on rapids (air moves) are not checked.

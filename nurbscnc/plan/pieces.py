@@ -36,6 +36,7 @@ class Piece:
     a PHQuintic, a LineGeometry or an ArcGeometry. ``length_mm`` [mm]; ``v_cap_mm_s`` the
     cruise cap [mm/s]; ``segment`` / ``line`` where it came from; ``dwell_after_s`` a dwell
     [s] at its end (G4). ``kappa_max_per_mm`` the largest curvature on it [1/mm].
+    ``blend_mm`` the G64 P tolerance of its segment [mm] (0: exact stop at corners).
     """
 
     kind: str
@@ -49,6 +50,7 @@ class Piece:
     s_a_mm: float = 0.0
     kappa_max_per_mm: float = 0.0
     dwell_after_s: float = 0.0
+    blend_mm: float = 0.0
 
     def points_mm(self, s_local_mm: np.ndarray) -> np.ndarray:
         """Exact points [mm] (m, 3) at arc lengths ``s_local_mm`` from the piece start."""
@@ -83,7 +85,8 @@ class Piece:
 
 @dataclass(frozen=True)
 class PlanOptions:
-    """Planner choices. ``corner_feed``: "piece" (each PH piece capped by its own peak
+    """Planner choices. ``blend_tolerance_mm``: overrides every segment's G64 P [mm]
+    (None: as programmed). ``corner_feed``: "piece" (each PH piece capped by its own peak
     curvature: faster, our default) or "peak" (the whole region at V_sp of the region's peak,
     as the paper does). ``ph``: replace corner regions by PH quintics (False: plan the NURBS
     as it is, capped by the same corner feed)."""
@@ -91,6 +94,7 @@ class PlanOptions:
     corner_feed: str = "piece"
     ph: bool = True
     tolerance_um: float | None = None
+    blend_tolerance_mm: float | None = None
 
 
 def _curvature_cap(machine: Machine, kappa, feed_mm_s: float) -> np.ndarray:
@@ -224,7 +228,8 @@ def segment_pieces(segments, machine: Machine, options: PlanOptions | None = Non
                 kappa = float(np.max(geom.curvature(np.array([geom.u_start, geom.u_end]))))
                 cap = float(_curvature_cap(machine, kappa, seg.feed_mm_s))
             new = [Piece(kind, geom, length, max(cap, 1e-6), index, seg.line,
-                         geom.u_start, geom.u_end, 0.0, kappa)]  # fmt: skip
+                         geom.u_start, geom.u_end, 0.0, kappa,
+                         blend_mm=blend_override(seg, options))]  # fmt: skip
         if new and pending_dwell and not pieces:
             pieces.append(Piece("line", geometry_of_point(new[0]), 0.0, 1.0, index, seg.line,
                                 dwell_after_s=pending_dwell))  # fmt: skip
@@ -234,7 +239,116 @@ def segment_pieces(segments, machine: Machine, options: PlanOptions | None = Non
             # cutting, so a rapid's stop overshoot never shows up as contour error.
             pieces[-1] = _with_dwell(pieces[-1], pieces[-1].dwell_after_s + settle_time_s(machine))
         pieces.extend(new)
-    return pieces
+    return apply_blends(pieces, machine)
+
+
+def blend_override(seg, options: PlanOptions) -> float:
+    """The blend tolerance [mm] for a segment: the option if given, else its G64 P."""
+    if options.blend_tolerance_mm is not None:
+        return float(options.blend_tolerance_mm)
+    return float(getattr(seg, "blend_mm", 0.0))
+
+
+def sub_geometry(piece: Piece, s0_mm: float, s1_mm: float):
+    """The geometry of ``piece`` between arc lengths s0 and s1 [mm] from its start (lines and
+    arcs: a new LineGeometry / ArcGeometry, exact)."""
+    from dataclasses import replace as dc_replace
+
+    from nurbscnc.geometry.paths import ArcGeometry, LineGeometry
+
+    g = piece.geometry
+    if isinstance(g, LineGeometry):
+        p = g.point(np.array([s0_mm, s1_mm]))
+        return LineGeometry(p[0], p[1])
+    assert isinstance(g, ArcGeometry)
+    u = g.param_at_length(np.array([s0_mm, s1_mm]))
+    t0, t1 = float(u[0] / g.u_end), float(u[1] / g.u_end)
+    th0 = t0 * g.angle_rad
+    e1 = np.cos(th0) * g.e1 + np.sin(th0) * g.e2
+    dr = g.radius_end_mm - g.radius_start_mm
+    return dc_replace(
+        g,
+        origin_mm=g.origin_mm + t0 * g.helix_mm * g.normal,
+        e1=e1,
+        e2=np.cross(g.normal, e1),
+        radius_start_mm=g.radius_start_mm + t0 * dr,
+        radius_end_mm=g.radius_start_mm + t1 * dr,
+        angle_rad=(t1 - t0) * g.angle_rad,
+        helix_mm=(t1 - t0) * g.helix_mm,
+    )
+
+
+def apply_blends(pieces: list[Piece], machine: Machine) -> list[Piece]:
+    """Replace corners between line/arc pieces under G64 P by PH quintic blends (issue 7).
+
+    A corner is blended when both pieces are feed lines or arcs with a blend tolerance > 0
+    (the smaller of the two is used), no dwell lies between them and their tangents turn;
+    the blend may trim at most half of each piece, so blends never overlap. The blend piece
+    is capped by its peak curvature like any curved piece (chord error, normal acceleration).
+    """
+    from dataclasses import replace as dc_replace
+
+    from nurbscnc.plan.blend import blend_corner
+
+    k = len(pieces)
+    blends: dict[int, object] = {}
+    for i in range(1, k):
+        a, b = pieces[i - 1], pieces[i]
+        if a.kind not in ("line", "arc") or b.kind not in ("line", "arc"):
+            continue
+        tol = min(a.blend_mm, b.blend_mm)
+        if tol <= 0.0 or a.dwell_after_s > 0.0:
+            continue
+        blend = blend_corner(a.geometry, b.geometry, tol, 0.5 * a.length_mm, 0.5 * b.length_mm,
+                             measure=False)  # fmt: skip
+        if blend is not None and _blend_pays(a, b, blend, machine):
+            blends[i] = blend
+    if not blends:
+        return pieces
+    out: list[Piece] = []
+    for i, p in enumerate(pieces):
+        trim_start = blends[i].trim_b_mm if i in blends else 0.0
+        trim_end = blends[i + 1].trim_a_mm if i + 1 in blends else 0.0
+        if i in blends:
+            bl = blends[i]
+            feed = min(pieces[i - 1].v_cap_mm_s, p.v_cap_mm_s)
+            cap = float(_curvature_cap(machine, bl.kappa_max_per_mm, feed))
+            out.append(Piece("ph", bl.ph, float(bl.ph.length_mm), max(cap, MIN_CAP_MM_S),
+                             p.segment, p.line, 0.0, 1.0, 0.0, bl.kappa_max_per_mm))  # fmt: skip
+        if trim_start or trim_end:
+            length = p.length_mm - trim_start - trim_end
+            if length <= 1e-9:
+                continue  # the two blends met in the middle of this piece
+            geom = sub_geometry(p, trim_start, p.length_mm - trim_end)
+            p = dc_replace(p, geometry=geom, length_mm=float(geom.length_mm),
+                           u_a=0.0, u_b=float(geom.u_end))  # fmt: skip
+        out.append(p)
+    return out
+
+
+def _blend_pays(a: Piece, b: Piece, blend, machine: Machine) -> bool:
+    """Is passing the corner on the blend faster than stopping exactly at it?
+
+    A blend's feed is capped by its peak curvature (√(A/κ), V_af); with a tight tolerance that
+    cap is low, and slowing to it, crossing the blend and speeding up again can take longer
+    than an exact stop. Compare both over the same stretch of the original path, with the
+    S-curve closed forms (SPEC §7) from the neighbours' cruise feed v.
+    """
+    from nurbscnc.plan.feedrate import scurve_distance_mm, scurve_duration_s
+
+    lim = machine.limits
+    v = min(a.v_cap_mm_s, b.v_cap_mm_s)
+    vb = min(float(_curvature_cap(machine, blend.kappa_max_per_mm, v)), v)
+    a_max, j_max = lim.a_max_mm_s2, lim.j_max_mm_s3
+    d_stop = 2.0 * float(scurve_distance_mm(v, 0.0, a_max, j_max))
+    t_stop = 2.0 * float(scurve_duration_s(v, 0.0, a_max, j_max))
+    d_slow = 2.0 * float(scurve_distance_mm(v, vb, a_max, j_max))
+    t_slow = 2.0 * float(scurve_duration_s(v, vb, a_max, j_max))
+    # Original path covered: the slow-down/speed-up stretches plus the trimmed corner.
+    d_blend = d_slow + blend.trim_a_mm + blend.trim_b_mm
+    t_blend = t_slow + float(blend.ph.length_mm) / vb
+    span = max(d_stop, d_blend)
+    return t_blend + (span - d_blend) / v < t_stop + (span - d_stop) / v
 
 
 def settle_time_s(machine: Machine) -> float:

@@ -105,7 +105,8 @@ class CardSim:
     ``frames_received`` (frames on the wire, before fault injection), ``crc_errors``,
     ``dropped_in``/``corrupted_in``/``dropped_out``/``corrupted_out``, ``duplicates``,
     ``overflows`` (batches refused for lack of room: a flow-control violation), ``naks_sent``,
-    ``acks_sent``, ``aborts_received``, ``holds_received``, ``resets``, ``max_fill``.
+    ``acks_sent``, ``aborts_received``, ``holds_received``, ``resets``, ``max_fill`` (most
+    periods held at once, buffer and early frames together).
     """
 
     def __init__(self, config: CardConfig | None = None, seed: int | None = None):
@@ -140,13 +141,18 @@ class CardSim:
         self._end: p.End | None = None
         self._started = False
         self._next_due = now
-        self._nak_sent_for = -1
+        self._early: dict[int, p.Batch | p.End] = {}  # frames after a gap, by sequence
+        self._early_periods = 0
         self._since_status = 0
         self.stream_executed = 0
 
     @property
     def free(self) -> int:
-        """Free buffer [periods]."""
+        """Free buffer [periods] reported to the sender: early frames are not subtracted.
+
+        The sender counts every unacknowledged frame (early ones included) against this
+        credit, so buffer + early frames can never exceed the buffer size.
+        """
         return self.config.buffer_periods - self.fill
 
     @property
@@ -255,7 +261,8 @@ class CardSim:
             self.aborts_received += 1
             if streaming:
                 self._buffer.clear()
-                self.fill = 0
+                self._early.clear()
+                self.fill = self._early_periods = 0
                 self.state = p.CardState.ABORTED
             self._send(self.status(), now)
         elif isinstance(msg, p.Hold):
@@ -278,6 +285,12 @@ class CardSim:
         self._send(p.Nak(self.expected % p.SEQ_MODULO, self.free, int(reason)), now)
 
     def _sequenced(self, seq: int, msg, now: float) -> None:
+        """A BATCH or END: accept it in order, keep it if it is early, re-ACK a duplicate.
+
+        Early frames (after a gap) are kept (selective repeat) as long as they fit beside the
+        buffer, so recovering a lost frame costs one retransmission, not a window of them;
+        they run only once every frame before them has arrived.
+        """
         if self.state is p.CardState.IDLE:
             self._send(self.caps(), now)  # "I was reset": the sender must not go on
             return
@@ -289,45 +302,68 @@ class CardSim:
             self._nak(p.NakReason.STATE, now)
             return
         ahead = p.seq_ahead(self.expected % p.SEQ_MODULO, seq)
-        if ahead != 0:
-            if ahead >= _HALF_SEQ:  # behind: a retransmission of a frame already accepted
-                self.duplicates += 1
-                self._ack(now)
-            elif self._nak_sent_for != self.expected:  # ahead: a frame was lost; say so once
-                self._nak_sent_for = self.expected
-                self._nak(p.NakReason.SEQUENCE, now)
+        if ahead >= _HALF_SEQ:  # behind: a retransmission of a frame already accepted
+            self.duplicates += 1
+            self._ack(now)
             return
+        size = len(msg.pulses) if isinstance(msg, p.Batch) else 0
+        if ahead > 0:  # early: a frame before it was lost
+            key = self.expected + ahead
+            if key in self._early:
+                self.duplicates += 1
+            elif self.fill + self._early_periods + size > self.config.buffer_periods:
+                self.overflows += 1
+                self._nak(p.NakReason.FULL, now)
+                return
+            else:
+                self._early[key] = msg
+                self._early_periods += size
+                self.max_fill = max(self.max_fill, self.fill + self._early_periods)
+            self._nak(p.NakReason.SEQUENCE, now)
+            return
+        if self.fill + self._early_periods + size > self.config.buffer_periods:
+            self.overflows += 1
+            self._nak(p.NakReason.FULL, now)
+            return
+        if not self._accept(msg, now):
+            return
+        while self.expected in self._early:  # the gap is filled: take the frames kept
+            kept = self._early.pop(self.expected)
+            self._early_periods -= len(kept.pulses) if isinstance(kept, p.Batch) else 0
+            if not self._accept(kept, now):
+                return
+        self._maybe_start(now)
+        self._run_fast(now)
+        self._ack(now)
+        if self._early:  # another gap after the frames taken
+            self._nak(p.NakReason.SEQUENCE, now)
+        self._maybe_finish(now)
+
+    def _accept(self, msg, now: float) -> bool:
+        """Put the next frame in order into the buffer (or take END); False on an alarm."""
         if self._end is not None:
             self._raise_alarm(p.AlarmCode.PROTOCOL, "sequenced frame after END", now)
-            return
+            return False
         if isinstance(msg, p.Batch):
             pulses = msg.pulses
             if pulses.shape[1] != self.config.axes:
                 self._raise_alarm(p.AlarmCode.PROTOCOL,
                                   f"batch of {pulses.shape[1]} axes, card has "
                                   f"{self.config.axes}", now)  # fmt: skip
-                return
-            if len(pulses) > self.free:
-                self.overflows += 1
-                self._nak(p.NakReason.FULL, now)
-                return
+                return False
             peak = int(np.abs(pulses).max())
             if peak > self.config.max_pulses_per_period:
                 self._raise_alarm(p.AlarmCode.PULSE_LIMIT,
                                   f"{peak} pulses in one period, limit "
                                   f"{self.config.max_pulses_per_period}", now)  # fmt: skip
-                return
+                return False
             self._buffer.append(pulses)
             self.fill += len(pulses)
-            self.max_fill = max(self.max_fill, self.fill)
+            self.max_fill = max(self.max_fill, self.fill + self._early_periods)
         else:
             self._end = msg
         self.expected += 1
-        self._nak_sent_for = -1
-        self._maybe_start(now)
-        self._run_fast(now)
-        self._ack(now)
-        self._maybe_finish(now)
+        return True
 
     def _run_fast(self, now: float) -> None:
         """As fast as possible: every buffered period runs at once (unless held)."""
@@ -412,7 +448,8 @@ class CardSim:
         self.state = p.CardState.ALARM
         self.alarm, self.alarm_text = p.AlarmCode(code), text
         self._buffer.clear()
-        self.fill = 0
+        self._early.clear()
+        self.fill = self._early_periods = 0
         self._send(p.Alarm(int(code), text), now)
         self._send(self.status(), now)
 

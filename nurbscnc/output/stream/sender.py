@@ -1,18 +1,23 @@
 """The reliable sender: streams a :class:`~.quantise.PulseProgram` to a card over a port.
 
-Go-back-N over the framed protocol (``docs/protocol.md``):
+Selective repeat over the framed protocol (``docs/protocol.md``):
 
-- BATCH and END frames carry sequence numbers; the card accepts only the next expected one and
-  acknowledges cumulatively (ACK: next expected sequence number and free buffer), so every
-  batch runs exactly once and in order.
-- A NAK (CRC failure or a gap) triggers an immediate retransmission of every unacknowledged
-  frame from the card's next expected one (fast retransmit, at most once per half timeout for
-  the same sequence number); with no progress for the retransmission timeout the same happens
-  and the timeout doubles (exponential back-off, capped). The timeout follows the measured
+- BATCH and END frames carry sequence numbers; the card runs them strictly in order (it keeps
+  frames that arrive after a gap until the gap is filled, drops duplicates) and acknowledges
+  cumulatively (ACK: next expected sequence number and free buffer), so every batch runs
+  exactly once and in order.
+- A NAK (CRC failure or a gap) names the frame the card expects: it is sent again at once
+  (fast retransmit, at most once per half timeout for the same frame). With no progress for
+  the retransmission timeout the oldest unacknowledged frame is sent again and the timeout
+  doubles (exponential back-off, capped; progress ends the back-off). The timeout follows the
+  measured
   round trip as TCP's does (RFC 6298: SRTT + 4·RTTVAR, samples only from frames sent once,
   the first one from HELLO → CAPS), counted from when the frame's last byte should have left
-  the port: the bytes still queued in the port (``out_waiting``) plus the frame, at the baud
-  rate (10 bits per byte), so a queue of frames in the port is not mistaken for a loss. A
+  the line, so a queue of frames is not mistaken for a loss. That time comes from a model of
+  the line at its baud rate (10 bits per byte): the bytes written before the frame, or those
+  the port reports still queued (``out_waiting``) if more; every ACK corrects the model (the
+  card has every byte up to the acknowledged frame, so at most the bytes written after it
+  are still on their way), which keeps it right on links faster than their nominal baud. A
   STATUS or ACK that shows no progress although the oldest frame should long have arrived
   counts as a NAK (the card's periodic STATUS then recovers a loss whose NAK was lost too).
 - Credit-based flow control: the periods in unacknowledged frames never exceed the free buffer
@@ -172,6 +177,7 @@ class Sender:
         self._last_rx = time.monotonic()
         baud = self.options.link_baud or getattr(port, "baudrate", None) or 115200
         self._byte_s = p.BITS_PER_BYTE_8N1 / float(baud)
+        self._line_free = 0.0  # when the line will have sent everything written (model)
         self._first_rtt_s: float | None = None
 
     # -- requests (safe to call from a signal handler or another thread) ----------------------
@@ -196,7 +202,9 @@ class Sender:
             queued = self.port.out_waiting  # bytes ahead of this frame (TIOCOUTQ)
         except Exception:  # noqa: BLE001 - URL ports have no queue count: take it as empty
             queued = 0
-        done_s = time.monotonic() + (queued + len(data)) * self._byte_s
+        now = time.monotonic()
+        start = max(now + queued * self._byte_s, self._line_free)
+        done_s = self._line_free = start + len(data) * self._byte_s
         try:
             self.port.write(data)
         except serial.SerialTimeoutException:
@@ -342,7 +350,8 @@ class Sender:
         base = nxt = in_flight = 0
         credit = caps.buffer_periods
         frames: dict[int, bytes] = {}
-        sent_at: dict[int, float] = {}  # when the last copy of the frame left the port
+        sent_at: dict[int, float] = {}  # when the last copy of the frame left the line
+        end_off: dict[int, int] = {}  # bytes_sent just after that copy
         resent: set[int] = set()
         rtt = _RoundTrip(opt)
         if self._first_rtt_s is not None:
@@ -351,11 +360,11 @@ class Sender:
         last_poll = last_progress = last_ctl = -math.inf
         self._last_rx = time.monotonic()
 
-        def resend_all() -> None:
-            for i in range(base, nxt):
-                sent_at[i] = self._write(frames[i])
-                resent.add(i)
-                self.retransmits += 1
+        def resend_oldest() -> None:
+            sent_at[base] = self._write(frames[base])
+            end_off[base] = self.bytes_sent
+            resent.add(base)
+            self.retransmits += 1
 
         while True:
             if self._abort_requested:
@@ -373,9 +382,11 @@ class Sender:
                             newest = base + ahead - 1
                             if newest not in resent:  # Karn: no samples from retransmissions
                                 rtt.sample(max(0.0, now - sent_at[newest]))
+                            self._correct_line_model(now, newest, nxt, sent_at, end_off)
+                            rtt.progress()
                         for i in range(base, base + ahead):
                             in_flight -= periods_of(i)
-                            del frames[i], sent_at[i]
+                            del frames[i], sent_at[i], end_off[i]
                             resent.discard(i)
                         base += ahead
                         credit = msg.free_periods
@@ -389,7 +400,7 @@ class Sender:
                 if resend and base < nxt and not (msg.next_seq == last_nak[0]
                                                   and now - last_nak[1] < rtt.rto / 2):  # fmt: skip
                     last_nak = (msg.next_seq, now)
-                    resend_all()
+                    resend_oldest()
                 if isinstance(msg, p.Status):
                     self.status = msg
                     self._check_state(msg)
@@ -409,6 +420,7 @@ class Sender:
                                    or in_flight + periods_of(nxt) <= credit):  # fmt: skip
                 frames[nxt] = encode(nxt)
                 sent_at[nxt] = self._write(frames[nxt])
+                end_off[nxt] = self.bytes_sent
                 in_flight += periods_of(nxt)
                 self.max_in_flight = max(self.max_in_flight, in_flight)
                 nxt += 1
@@ -416,7 +428,7 @@ class Sender:
             # Retransmission timeout with back-off.
             if base < nxt and now - sent_at[base] > rtt.rto:
                 self.timeouts += 1
-                resend_all()
+                resend_oldest()
                 rtt.back_off()
 
             # Feed hold / resume until the card's state confirms it.
@@ -445,6 +457,13 @@ class Sender:
                 break
 
         return self._finish(program, t0)
+
+    def _correct_line_model(self, now, newest, nxt, sent_at, end_off) -> None:
+        """Frame ``newest`` has arrived: at most the bytes written after it are still queued."""
+        done = end_off[newest]
+        self._line_free = min(self._line_free, now + (self.bytes_sent - done) * self._byte_s)
+        for i in range(newest + 1, nxt):
+            sent_at[i] = min(sent_at[i], now + max(0, end_off[i] - done) * self._byte_s)
 
     def _check_state(self, st: p.Status) -> None:
         if st.state == p.CardState.ALARM:
@@ -519,8 +538,7 @@ class _RoundTrip:
         self._backoff = 1.0
 
     def sample(self, r_s: float) -> None:
-        """A round trip of a frame sent once: update the estimate, end any back-off."""
-        self._backoff = 1.0
+        """A round trip of a frame sent once: update the estimate."""
         if self._srtt is None:
             self._srtt, self._rttvar = r_s, r_s / 2.0
         else:
@@ -529,6 +547,10 @@ class _RoundTrip:
 
     def back_off(self) -> None:
         self._backoff *= 2.0
+
+    def progress(self) -> None:
+        """The card acknowledged something new: the line works, end the back-off."""
+        self._backoff = 1.0
 
     @property
     def stale_s(self) -> float:
