@@ -121,7 +121,7 @@ def main() -> int:
     program = ROOT / "programs" / ("naca2415.nc" if args.quick else "butterfly.nc")
     pulses, mach = load_pulse_program(str(program), None, ())
     results = {
-        "date": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
+        "date": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
         "machine": {"platform": platform.platform(), "python": platform.python_version()},
         "program": program.name,
         "periods": pulses.periods,
@@ -134,8 +134,8 @@ def main() -> int:
     }
     for rate in (0.0, 0.01, 0.10):
         faults = Faults(corrupt_rate=rate)
-        results["fast"][f"corrupt_{rate:g}"] = run_once(pulses, CardConfig(speed=None,
-                                                                           faults=faults), None)
+        config = CardConfig(speed=None, faults=faults)
+        results["fast"][f"corrupt_{rate:g}"] = run_once(pulses, config, None)
     for rate in (0.0, 0.10):
         faults = Faults(corrupt_rate=rate)
         results["real_time_115200"][f"corrupt_{rate:g}"] = run_once(
@@ -151,8 +151,10 @@ def main() -> int:
     for part in ("fast", "real_time_115200"):
         print(f"\n{part}:")
         for name, r in results[part].items():
+            wire = (f", line busy {r['measured_line_use']:.1%} of the run"
+                    if part != "fast" else "")  # fmt: skip
             print(f"  {name:>12}: {r['bytes_per_period']:.3f} B/period → use "
-                  f"{r['line_use_at_1kHz']:.1%}, spare {r['spare_at_1kHz']:.1%}; "
+                  f"{r['line_use_at_1kHz']:.1%}, spare {r['spare_at_1kHz']:.1%}{wire}; "
                   f"{r['periods_per_s']:,.0f} periods/s; retransmits {r['retransmits']}; "
                   f"alarm {r['alarm']}; exact {r['executed_equals_sent']}")
     ok = all(r["executed_equals_sent"] and r["final_position_ok"] and r["alarm"] == "NONE"

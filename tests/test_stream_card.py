@@ -46,19 +46,31 @@ def test_hello_reports_capabilities():
 
 def test_in_order_exactly_once_with_duplicates_and_gaps():
     card = opened(speed=None)
-    a, b, c = [[1, 0, 0]] * 2, [[0, 2, 0]], [[0, 0, -3]] * 3
+    a, b, c, d = [[1, 0, 0]] * 2, [[0, 2, 0]], [[0, 0, -3]] * 3, [[4, 4, 4]]
     # Starting is a state change (a STATUS); as fast as possible, the ACK finds it all run.
     assert send(card, batch(a), seq=0) == [p.Status(p.CardState.RUNNING, 0, 1, 254, 2, 0,
                                                     (0, 0, 0)), p.Ack(1, 256)]  # fmt: skip
-    assert send(card, batch(c), seq=2) == [p.Nak(1, 256, p.NakReason.SEQUENCE)]  # gap
-    assert send(card, batch(c), seq=2) == []  # one NAK per missing frame
+    gap = p.Nak(1, 256, p.NakReason.SEQUENCE)
+    assert send(card, batch(c), seq=2) == [gap]  # frame 1 is missing: 2 is kept, not run
+    assert send(card, batch(d), seq=3) == [gap]
+    assert send(card, batch(c), seq=2) == [gap]  # a second copy of a kept frame
     assert send(card, batch(a), seq=0) == [p.Ack(1, 256)]  # duplicate: re-ACK, not re-run
-    assert send(card, batch(b), seq=1) == [p.Ack(2, 256)]
-    assert send(card, batch(c), seq=2) == [p.Ack(3, 256)]
-    assert card.executed_pulses().tolist() == a + b + c
-    assert card.duplicates == 1
-    out = send(card, p.End(6, (2, 2, -9)), seq=3)
-    assert out[-1] == p.Status(p.CardState.DONE, 0, 4, 256, 0, 6, (2, 2, -9))
+    assert card.executed_pulses().tolist() == a
+    assert send(card, batch(b), seq=1) == [p.Ack(4, 256)]  # the gap is filled: 1, 2, 3 run
+    assert card.executed_pulses().tolist() == a + b + c + d
+    assert card.duplicates == 2
+    out = send(card, p.End(7, (6, 6, -5)), seq=4)
+    assert out[-1] == p.Status(p.CardState.DONE, 0, 5, 256, 0, 7, (6, 6, -5))
+
+
+def test_early_frames_count_against_the_buffer():
+    card = opened(speed=1.0, buffer_periods=10)
+    send(card, batch([[0, 0, 0]] * 4), seq=0)  # 4 in the buffer
+    assert send(card, batch([[0, 0, 0]] * 5), seq=2) == [p.Nak(1, 6, p.NakReason.SEQUENCE)]
+    assert send(card, batch([[0, 0, 0]] * 2), seq=1) == [p.Nak(1, 6, p.NakReason.FULL)]
+    assert card.overflows == 1 and card.max_fill == 9
+    assert send(card, batch([[0, 0, 0]]), seq=1)[-1] == p.Ack(3, 0)
+    assert card.max_fill == 10
 
 
 def test_corrupted_frame_gets_a_crc_nak():

@@ -339,8 +339,9 @@ def machine_lower_bound(
 
 def program_lower_bound_s(segments, machine: Machine) -> float:
     """The lower bound [s] for a whole program's segments (SPEC §10): its own geometry (not
-    the PH replacements), rest to rest, with exact stops at tangent discontinuities and dwells
-    (whose durations are added). No jerk limit, no servo settling: nothing can be faster.
+    the PH replacements), rest to rest, with exact stops at tangent discontinuities (except
+    corners under G64 P, which a blend may pass at speed) and dwells (whose durations are
+    added). No jerk limit, no servo settling: nothing can be faster.
     """
     from nurbscnc.geometry.paths import geometry_of
     from nurbscnc.plan.corners import tangent_junctions
@@ -354,6 +355,9 @@ def program_lower_bound_s(segments, machine: Machine) -> float:
     position = {i: k for k, (i, _) in enumerate(moving)}
     stop = np.zeros(len(moving), dtype=bool)
     for j in tangent_junctions(segments, min_angle_deg=np.degrees(1e-6)):
+        nxt = moving[position[j.index] + 1][1]
+        if min(getattr(segments[j.index], "blend_mm", 0.0), getattr(nxt, "blend_mm", 0.0)) > 0:
+            continue  # G64 P: the planner may blend this corner, so the bound may not stop
         stop[position[j.index]] = True
     for k in range(len(moving) - 1):
         i, a = moving[k]

@@ -7,7 +7,7 @@ Selective repeat over the framed protocol (``docs/protocol.md``):
   cumulatively (ACK: next expected sequence number and free buffer), so every batch runs
   exactly once and in order.
 - A NAK (CRC failure or a gap) names the frame the card expects: it is sent again at once
-  (fast retransmit, at most once per half timeout for the same frame). With no progress for
+  (fast retransmit; once more only when the new copy should have arrived). With no progress for
   the retransmission timeout the oldest unacknowledged frame is sent again and the timeout
   doubles (exponential back-off, capped; progress ends the back-off). The timeout follows the
   measured
@@ -175,8 +175,14 @@ class Sender:
         self.retransmits = self.timeouts = self.naks_received = self.crc_errors = 0
         self.polls = self.protocol_errors = self.max_in_flight = 0
         self._last_rx = time.monotonic()
-        baud = self.options.link_baud or getattr(port, "baudrate", None) or 115200
-        self._byte_s = p.BITS_PER_BYTE_8N1 / float(baud)
+        import serial
+
+        # The line model needs a real line: a device's baud rate (or link_baud). A URL port
+        # (a TCP socket) has no baud rate, so it is modelled as instantaneous.
+        baud = self.options.link_baud or (port.baudrate if isinstance(port, serial.Serial)
+                                          else None)  # fmt: skip
+        self._byte_s = p.BITS_PER_BYTE_8N1 / float(baud) if baud else 0.0
+        self._last_resend_s = -math.inf
         self._line_free = 0.0  # when the line will have sent everything written (model)
         self._first_rtt_s: float | None = None
 
@@ -352,15 +358,16 @@ class Sender:
         frames: dict[int, bytes] = {}
         sent_at: dict[int, float] = {}  # when the last copy of the frame left the line
         end_off: dict[int, int] = {}  # bytes_sent just after that copy
+        written_at: dict[int, float] = {}  # when the first copy was written
         resent: set[int] = set()
         rtt = _RoundTrip(opt)
         if self._first_rtt_s is not None:
             rtt.sample(self._first_rtt_s)
-        last_nak = (-1, -math.inf)
         last_poll = last_progress = last_ctl = -math.inf
         self._last_rx = time.monotonic()
 
         def resend_oldest() -> None:
+            self._last_resend_s = time.monotonic()
             sent_at[base] = self._write(frames[base])
             end_off[base] = self.bytes_sent
             resent.add(base)
@@ -380,13 +387,15 @@ class Sender:
                     if ahead <= nxt - base:  # else stale or bogus: ignore it whole
                         if ahead:
                             newest = base + ahead - 1
-                            if newest not in resent:  # Karn: no samples from retransmissions
+                            # Karn: no samples from retransmitted frames, nor from frames
+                            # whose acknowledgement waited for a retransmission before them.
+                            if newest not in resent and written_at[newest] > self._last_resend_s:
                                 rtt.sample(max(0.0, now - sent_at[newest]))
                             self._correct_line_model(now, newest, nxt, sent_at, end_off)
                             rtt.progress()
                         for i in range(base, base + ahead):
                             in_flight -= periods_of(i)
-                            del frames[i], sent_at[i], end_off[i]
+                            del frames[i], sent_at[i], end_off[i], written_at[i]
                             resent.discard(i)
                         base += ahead
                         credit = msg.free_periods
@@ -396,10 +405,10 @@ class Sender:
                         last_poll = -math.inf  # ask what state the card is in
                     else:
                         resend = True
-                # Fast retransmit, once per half timeout for the same sequence number.
-                if resend and base < nxt and not (msg.next_seq == last_nak[0]
-                                                  and now - last_nak[1] < rtt.rto / 2):  # fmt: skip
-                    last_nak = (msg.next_seq, now)
+                # Fast retransmit; a frame already sent again is sent once more only when its
+                # new copy should have arrived (older NAKs may still be on their way).
+                if resend and base < nxt and (base not in resent
+                                              or now - sent_at[base] > rtt.stale_s):  # fmt: skip
                     resend_oldest()
                 if isinstance(msg, p.Status):
                     self.status = msg
@@ -419,6 +428,7 @@ class Sender:
             while nxt < total and (self._ignore_credit
                                    or in_flight + periods_of(nxt) <= credit):  # fmt: skip
                 frames[nxt] = encode(nxt)
+                written_at[nxt] = time.monotonic()
                 sent_at[nxt] = self._write(frames[nxt])
                 end_off[nxt] = self.bytes_sent
                 in_flight += periods_of(nxt)
