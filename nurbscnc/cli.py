@@ -20,7 +20,6 @@ from rich.table import Table
 
 from nurbscnc import __version__
 from nurbscnc.errors import (
-    EXIT_INPUT,
     EXIT_INTERNAL,
     EXIT_INTERRUPTED,
     NurbsCncError,
@@ -295,15 +294,6 @@ def print_summary(prog: Program, s: dict) -> None:
         out.print(f"  note (line {n['line']}): {n['message']}", markup=False)
 
 
-def run_cli():  # pragma: no cover - entry point helper
-    main(prog_name="nurbscnc")
-
-
-if __name__ == "__main__":  # pragma: no cover
-    main()
-
-
-__all__ = ["main", "format_error", "EXIT_INPUT"]
 
 
 # -- machine profile options -------------------------------------------------------------------
@@ -758,3 +748,152 @@ def run_batch(programs, output_dir, jobs, fmt, quiet, as_json, settings) -> None
             err.print(r["error"], markup=False)
     if failed:
         raise _Failed(max(r["exit_code"] for r in failed))
+
+
+# -- simulate ----------------------------------------------------------------------------------
+def plot_option(func):
+    return click.option(
+        "--plot", "plot_dir", type=click.Path(file_okay=False), default=None,
+        help="Write PNG figures into this folder (needs the 'plot' extra: matplotlib).",
+    )(func)  # fmt: skip
+
+
+@main.command()
+@click.argument("source", type=click.Path(dir_okay=False, allow_dash=True))
+@json_option
+@plot_option
+@click.option("--hold", type=click.Choice(["foh", "zoh"]), default="foh",
+              help="Reference between samples: linear (foh, as a pulse-train card) or steps.")
+@plan_options
+@handle_errors
+def simulate(source, as_json, plot_dir, hold, machine, overrides, dynamics, interpolator,
+             blend_tolerance, lookahead, corner_feed):
+    """Servo simulation of reference points (CSV/NPZ from `run`) or of a program (planned
+    first): axis errors, contour error (eq. 29 and true distance), cycle time.
+
+    Example: nurbscnc simulate points.csv --json
+    """
+    from nurbscnc.output.files import read_points
+    from nurbscnc.simulate import contour_errors, metrics, simulate_reference
+
+    lower = source.lower()
+    if lower.endswith((".csv", ".npz")):
+        mach = load_machine_cli(machine, overrides)
+        data = read_points(source)
+        points = np.column_stack([data["x"], data["y"], data["z"]])
+        path = points  # the commanded path: the reference polyline itself
+        name = source
+    else:
+        prog, mach, pl = make_plan(source, machine, overrides, dynamics, lookahead,
+                                   corner_feed, interpolator, blend_tolerance)  # fmt: skip
+        from nurbscnc.plan.dynamics import dense_path_mm
+
+        points = pl.samples.points_mm
+        path = dense_path_mm(pl.pieces, pl.profile)
+        name = prog.name
+    sim = simulate_reference(points, mach, hold=hold)
+    contour = contour_errors(sim, path)
+    m = metrics(sim, path, contour).as_dict()
+    if plot_dir:
+        from nurbscnc import plots
+
+        os.makedirs(plot_dir, exist_ok=True)
+        plots.plot_contour_error({"contour (true)": (sim.t_s, contour.true_mm * 1000.0),
+                                  "contour (eq. 29)": (sim.t_s, np.abs(contour.eq29_mm) * 1000)},
+                                 os.path.join(plot_dir, "contour_error.png"))  # fmt: skip
+        plots.plot_axis_errors({"servo": (sim.t_s, sim.axis_error_mm[:, 0] * 1000.0,
+                                          sim.axis_error_mm[:, 1] * 1000.0)},
+                               os.path.join(plot_dir, "axis_errors.png"))  # fmt: skip
+    if as_json:
+        click.echo(json.dumps({"ok": True, "source": name, "samples": int(points.shape[0]), **m}))
+        return
+    out.print(f"{name}: {points.shape[0]} reference points, cycle time {m['cycle_time_s']:.4f} s",
+              markup=False)  # fmt: skip
+    out.print(f"  axis error X: max {m['axis_x_max_um']:.2f} µm, RMS {m['axis_x_rms_um']:.2f} µm;"
+              f" Y: max {m['axis_y_max_um']:.2f} µm, RMS {m['axis_y_rms_um']:.2f} µm",
+              markup=False)  # fmt: skip
+    out.print(f"  contour error (eq. 29): max {m['contour_max_um']:.2f} µm, RMS "
+              f"{m['contour_rms_um']:.2f} µm, mean {m['contour_mean_um']:.2f} µm", markup=False)
+    out.print(f"  contour error (true distance): max {m['true_max_um']:.2f} µm, RMS "
+              f"{m['true_rms_um']:.2f} µm, mean {m['true_mean_um']:.2f} µm", markup=False)
+
+
+# -- compare -----------------------------------------------------------------------------------
+@main.command()
+@program_argument
+@json_option
+@plot_option
+@click.option("--rotate", "angles", type=float, multiple=True,
+              help="Rotate the block about Z by this angle [deg]; repeat for Table 5.")
+@click.option("--block", type=click.IntRange(min=1), default=1,
+              help="Which NURBS block of the program (1-based).")
+@click.option("--algorithm", "algorithms", multiple=True,
+              type=click.Choice(["adaptive", "curvature", "ph-lookahead", "ours"]),
+              help="Only these algorithms (default: all four).")
+@machine_options
+@handle_errors
+def compare(program, as_json, plot_dir, angles, block, algorithms, machine, overrides):
+    """The paper's Table 4 (and 5 with several --rotate): adaptive feed, curvature feed, the
+    paper's PH look-ahead and our best configuration, each simulated on the servo model.
+
+    Example: nurbscnc compare programs/naca2415.nc --rotate 0 --rotate 45 --rotate -45
+    """
+    from nurbscnc.compare import ALGORITHMS, compare_block, nurbs_block, row
+
+    mach = load_machine_cli(machine, overrides)
+    prog = load_program(program)
+    seg = nurbs_block(prog, block)
+    runs = compare_block(seg, mach, tuple(angles) or (0.0,), tuple(algorithms) or ALGORITHMS)
+    rows = [row(r) for r in runs]
+    if plot_dir:
+        write_compare_plots(runs, plot_dir)
+    if as_json:
+        click.echo(json.dumps({"ok": True, "program": prog.name, "rows": rows}))
+        return
+    table = Table(title=f"{prog.name}: NURBS block on line {seg.line} (µm, s)", show_edge=False)
+    for col in ("algorithm", "angle", "X max", "X RMS", "Y max", "Y RMS", "contour max",
+                "RMS", "mean", "true max", "time \\[s]"):  # fmt: skip
+        table.add_column(col, justify="right")
+    for r in rows:
+        table.add_row(r["algorithm"], f"{r['angle_deg']:g}°", *(f"{r[k]:.2f}" for k in (
+            "axis_x_max_um", "axis_x_rms_um", "axis_y_max_um", "axis_y_rms_um",
+            "contour_max_um", "contour_rms_um", "contour_mean_um", "contour_true_max_um")),
+            f"{r['cycle_time_s']:.4f}")  # fmt: skip
+    out.print(table)
+
+
+def write_compare_plots(runs, plot_dir: str) -> list[str]:
+    """Figures 1, 2/4/6 and 7 of the paper for a comparison (PNG files in ``plot_dir``)."""
+    from nurbscnc import plots
+
+    os.makedirs(plot_dir, exist_ok=True)
+    written = []
+    for angle in sorted({r.angle_deg for r in runs}):
+        tag = f"{angle:g}deg".replace("-", "m")
+        group = [r for r in runs if r.angle_deg == angle]
+        ours = next((r for r in group if r.plan is not None), None)
+        if ours is not None:
+            corners = [p.points_mm(np.linspace(0.0, p.length_mm, 50))
+                       for p in ours.plan.pieces if p.kind == "ph"]  # fmt: skip
+            written.append(plots.plot_path(ours.path_mm, corners,
+                                           os.path.join(plot_dir, f"path_{tag}.png")))
+        written.append(plots.plot_feed_profiles(
+            {r.algorithm: (r.samples.t_s, r.samples.v_mm_s) for r in group},
+            os.path.join(plot_dir, f"feed_{tag}.png")))  # fmt: skip
+        written.append(plots.plot_contour_error(
+            {r.algorithm: (r.sim_t_s, r.contour_true_um) for r in group},
+            os.path.join(plot_dir, f"contour_{tag}.png")))  # fmt: skip
+        written.append(plots.plot_axis_errors(
+            {r.algorithm: (r.sim_t_s, r.axis_error_um[:, 0], r.axis_error_um[:, 1])
+             for r in group}, os.path.join(plot_dir, f"axis_{tag}.png")))  # fmt: skip
+    return written
+
+
+# -- streaming (nurbscnc/output/stream) ---------------------------------------------------------
+from nurbscnc.output.stream.commands import card_sim, stream  # noqa: E402
+
+main.add_command(stream)
+main.add_command(card_sim)
+
+if __name__ == "__main__":  # pragma: no cover - `python -m nurbscnc.cli`
+    main()

@@ -39,6 +39,8 @@ import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 
+import serial
+
 from nurbscnc.errors import EXIT_INTERRUPTED, ConfigError, StreamError
 from nurbscnc.output.stream import protocol as p
 from nurbscnc.output.stream.quantise import PulseProgram
@@ -123,8 +125,6 @@ def open_port(port: str, baud: int = 115200, allow_url: bool = False,
     authentication, so they need an explicit opt-in. Raises ConfigError (a URL without
     ``allow_url``, an unknown scheme) or StreamError (cannot open, port busy).
     """
-    import serial
-
     try:
         if "://" in port:
             scheme = port.split("://", 1)[0].lower()
@@ -175,8 +175,6 @@ class Sender:
         self.retransmits = self.timeouts = self.naks_received = self.crc_errors = 0
         self.polls = self.protocol_errors = self.max_in_flight = 0
         self._last_rx = time.monotonic()
-        import serial
-
         # The line model needs a real line: a device's baud rate (or link_baud). A URL port
         # (a TCP socket) has no baud rate, so it is modelled as instantaneous.
         baud = self.options.link_baud or (port.baudrate if isinstance(port, serial.Serial)
@@ -202,8 +200,6 @@ class Sender:
     # -- port --------------------------------------------------------------------------------
     def _write(self, data: bytes) -> float:
         """Write one frame; return when its last byte should be on the line [monotonic s]."""
-        import serial
-
         try:
             queued = self.port.out_waiting  # bytes ahead of this frame (TIOCOUTQ)
         except Exception:  # noqa: BLE001 - URL ports have no queue count: take it as empty
@@ -225,8 +221,6 @@ class Sender:
         return done_s
 
     def _read(self) -> list:
-        import serial
-
         try:
             waiting = self.port.in_waiting
             data = self.port.read(waiting if waiting > 1 else 4096)
