@@ -98,14 +98,18 @@ def test_feed_fluctuation_on_exact_pieces_is_below_1e_6(airfoil_plan):
     kappa_k = 0.5 * (kappa[:-1] + kappa[1:]) if kappa.size > 1 else kappa
     c_k = c_k[:-1]
     ds_k = ds_planned[:-1] if ds_planned.size > c_k.size else ds_planned
-    piece = plan.samples.piece
-    same_piece = (piece[1:-2] == piece[2:-1]) & (piece[2:-1] == piece[3:]) & (
-        piece[:-3] == piece[1:-2])
-    on_curve = piece[1:-2] >= 1
-    sel = same_piece & on_curve & (ds_k > 1e-3)
+    # The four samples around an interval must lie on one smooth curve: NURBS cells of the
+    # programmed curve (one C² curve), or one PH piece; never across a NURBS/PH junction,
+    # where the curvature jumps.
+    kinds = np.array([p.kind for p in plan.pieces])
+    curve_key = np.where(kinds == "nurbs", -1, np.arange(kinds.size))[plan.samples.piece]
+    same = (curve_key[1:-2] == curve_key[2:-1]) & (curve_key[2:-1] == curve_key[3:]) & (
+        curve_key[:-3] == curve_key[1:-2])
+    on_curve = plan.samples.piece[1:-2] >= 1
+    sel = same & on_curve & (ds_k > 1e-3)
     arc = c_k * (1.0 + (kappa_k * c_k) ** 2 / 24.0)
     fluct = np.abs(arc[sel] / ds_k[sel] - 1.0)
-    assert sel.sum() > 500
+    assert sel.sum() > 400
     assert fluct.max() < 1e-6
 
 

@@ -15,7 +15,12 @@ from scipy.integrate import cumulative_trapezoid
 
 from nurbscnc.errors import ConfigError, PlanningError
 from nurbscnc.plan.feedrate import max_reachable_speed_scalar, scurve_distance_mm
-from nurbscnc.plan.profile import ProfileInput, _repair_junctions, plan_profile
+from nurbscnc.plan.profile import (
+    ProfileInput,
+    _repair_junctions,
+    plan_profile,
+    plan_profile_pieces,
+)
 
 A = 2450.0  # SPEC §9 Table 3
 J = 5.0e4
@@ -23,7 +28,10 @@ INF = math.inf
 
 
 def _plan(lengths, v_max, v_junction, a=A, j=J, lookahead=None):
-    return plan_profile(
+    """The per-piece planner (every piece boundary a zero-acceleration junction): the
+    junction-level properties below are stated for it; plan_profile's merging of
+    unconstrained junctions is tested separately (test_merged_*)."""
+    return plan_profile_pieces(
         ProfileInput(np.asarray(lengths, float), np.asarray(v_max, float),
                      np.asarray(v_junction, float), a, j, lookahead)
     )
@@ -337,3 +345,50 @@ def test_input_validation(kwargs, err):
     base.update(kwargs)
     with pytest.raises(err):
         ProfileInput(**base)
+
+
+@settings(max_examples=120, deadline=None)
+@given(_programs())
+def test_merged_profile_keeps_every_limit_and_is_never_slower(program):
+    """plan_profile plans runs of equal-cap pieces with unconstraining junctions as one
+    piece. Measured on the phases and on dense samples: caps of the piece under each sample,
+    |a| ≤ A, |j| ≤ J, continuity, rest at both ends, the exact total length — and it never
+    takes longer than planning every piece on its own."""
+    lengths, v_max, vj, a, j, _ = program
+    inp = ProfileInput(np.asarray(lengths, float), np.asarray(v_max, float),
+                       np.asarray(vj, float), a, j)
+    merged = plan_profile(inp)
+    pieces = plan_profile_pieces(inp)
+    assert merged.duration_s <= pieces.duration_s * (1 + 1e-12) + 1e-12
+    dt = merged.phase_duration_s
+    a0, jk = merged.phase_a0_mm_s2, merged.phase_jerk_mm_s3
+    a1 = a0 + dt * jk
+    assert np.all(np.abs(jk) <= j * (1 + 1e-6))
+    assert np.all(np.abs(a0) <= a * (1 + 1e-6)) and np.all(np.abs(a1) <= a * (1 + 1e-6))
+    total = float(np.sum(lengths))
+    assert merged.total_length_mm == pytest.approx(total, abs=1e-9)
+    t = np.linspace(0.0, merged.duration_s, 4001)
+    s, vel, acc, _, piece = merged.sample(t)
+    assert np.all(np.diff(s) >= -1e-12)
+    cap = np.asarray(v_max, float)[piece]
+    assert np.all(vel <= cap * (1 + 1e-9) + 1e-12)
+    # Junction caps hold where the path crosses a junction (speed at the piece start times).
+    v_at = merged.sample(merged.piece_start_time_s)[1]
+    jcap = np.minimum(np.asarray(vj, float)[:-1], np.inf)
+    assert np.all(v_at <= jcap * (1 + 1e-9) + 1e-9)
+    assert vel[0] == 0.0 and vel[-1] == 0.0 and s[-1] == merged.total_length_mm
+
+
+def test_merged_chain_of_short_cells_accelerates_like_one_move():
+    """30 cells of 0.02 mm with no constraint between them move like one 0.6 mm move."""
+    ell, k = 0.02, 30
+    jcap = np.array([0.0] + [INF] * (k - 1) + [0.0])
+    inp = ProfileInput(np.full(k, ell), np.full(k, 1e3), jcap, A, J)
+    one = plan_profile(ProfileInput(np.array([ell * k]), np.array([1e3]), np.array([0.0, 0.0]),
+                                    A, J))
+    merged = plan_profile(inp)
+    assert merged.duration_s == pytest.approx(one.duration_s, rel=1e-12)
+    assert merged.piece_start_mm.size == k
+    # Each cell's start time is where s(t) reaches it.
+    s_at = merged.sample(merged.piece_start_time_s)[0]
+    np.testing.assert_allclose(s_at, np.arange(k) * ell, atol=1e-12)

@@ -61,7 +61,7 @@ from nurbscnc.plan.feedrate import (
     scurve_timing,
 )
 
-__all__ = ["Profile", "ProfileInput", "plan_profile"]
+__all__ = ["Profile", "ProfileInput", "plan_profile", "plan_profile_pieces"]
 
 
 def _frozen(values, dtype=float) -> np.ndarray:
@@ -199,7 +199,9 @@ class Profile:
         s = self.phase_s0_mm[idx] + tau * (v0 + tau * (0.5 * a0 + tau * (jerk / 6.0)))
         v = v0 + tau * (a0 + (0.5 * tau) * jerk)
         a = a0 + tau * jerk
-        piece = self.phase_piece_index[idx]
+        # The piece is found from s (pieces may share phases: see plan_profile).
+        piece = np.searchsorted(self.piece_start_mm, s, side="right") - 1
+        np.clip(piece, 0, self.piece_count - 1, out=piece)
         before = t < 0.0
         after = t >= self.duration_s
         if before.any():
@@ -292,6 +294,91 @@ def _repair_junctions(v: np.ndarray, length: np.ndarray, a: float, j: float) -> 
 
 def plan_profile(inp: ProfileInput) -> Profile:
     """Plan the jerk-limited feed profile of ``inp`` (SPEC §7; see the module docstring).
+
+    Consecutive pieces with the same cruise cap whose junction does not constrain the speed
+    (its cap ≥ that cruise cap) are planned as ONE piece: the S-curve puts zero acceleration
+    at every planned junction, and a chain of short cells of one curve would otherwise
+    accelerate in small steps. The result is reported per original piece (start times found
+    by inverting s(t) at the piece boundaries), so callers never see the merging.
+    """
+    k = inp.piece_count
+    if k < 2 or inp.lookahead_pieces is not None:
+        # A bounded look-ahead counts programmed pieces (a controller's block buffer): keep
+        # every piece a planning unit then.
+        return plan_profile_pieces(inp)
+    v_max = np.asarray(inp.v_max_mm_s)
+    jcap = np.asarray(inp.v_junction_max_mm_s)
+    inner = np.arange(1, k)
+    transparent = (v_max[inner - 1] == v_max[inner]) & (jcap[inner] >= v_max[inner])
+    if not transparent.any():
+        return plan_profile_pieces(inp)
+    # Group g holds pieces first[g] .. first[g+1]-1.
+    first = np.concatenate(([0], inner[~transparent], [k]))
+    lengths = np.asarray(inp.length_mm)
+    cum = np.concatenate(([0.0], np.cumsum(lengths)))
+    merged = ProfileInput(
+        cum[first[1:]] - cum[first[:-1]],
+        v_max[first[:-1]],
+        jcap[first],
+        inp.a_max_mm_s2,
+        inp.j_max_mm_s3,
+        lookahead_pieces=inp.lookahead_pieces,
+    )
+    g = plan_profile_pieces(merged)
+    piece_start = cum[:-1]
+    # Times at which the path reaches each piece start (exact within a merged piece).
+    t_start = time_at_length(g, piece_start)
+    group_of = np.repeat(np.arange(first.size - 1), np.diff(first))
+    is_first = np.zeros(k, dtype=bool)
+    is_first[first[:-1]] = True
+    t_start = np.where(is_first, g.piece_start_time_s[group_of], t_start)
+    t_start = np.maximum.accumulate(t_start)
+    v_junction = np.empty(k + 1)
+    v_junction[:-1] = g.sample(t_start)[1]
+    v_junction[first] = g.junction_speeds_mm_s
+    v_junction[-1] = 0.0
+    return Profile(
+        total_length_mm=g.total_length_mm,
+        duration_s=g.duration_s,
+        junction_speeds_mm_s=_frozen(v_junction),
+        piece_peak_speed_mm_s=_frozen(g.piece_peak_speed_mm_s[group_of]),
+        piece_start_mm=_frozen(piece_start),
+        piece_start_time_s=_frozen(t_start),
+        phase_start_time_s=g.phase_start_time_s,
+        phase_duration_s=g.phase_duration_s,
+        phase_s0_mm=g.phase_s0_mm,
+        phase_v0_mm_s=g.phase_v0_mm_s,
+        phase_a0_mm_s2=g.phase_a0_mm_s2,
+        phase_jerk_mm_s3=g.phase_jerk_mm_s3,
+        phase_piece_index=_frozen(first[:-1][g.phase_piece_index], dtype=np.int64),
+    )
+
+
+def time_at_length(profile: Profile, s_mm: np.ndarray) -> np.ndarray:
+    """Times [s] at which the profile reaches arc lengths ``s_mm`` (first time; vectorised
+    bisection inside the phase, where s(t) is a monotone cubic)."""
+    s = np.asarray(s_mm, dtype=float)
+    n = profile.phase_s0_mm.size
+    if n == 0:
+        return np.zeros_like(s)
+    idx = np.clip(np.searchsorted(profile.phase_s0_mm, s, side="right") - 1, 0, n - 1)
+    s0 = profile.phase_s0_mm[idx]
+    v0 = profile.phase_v0_mm_s[idx]
+    a0 = profile.phase_a0_mm_s2[idx]
+    jk = profile.phase_jerk_mm_s3[idx]
+    lo = np.zeros_like(s)
+    hi = profile.phase_duration_s[idx].copy()
+    for _ in range(64):  # 2^-64 of a phase duration: far below a servo period
+        mid = 0.5 * (lo + hi)
+        val = s0 + mid * (v0 + mid * (0.5 * a0 + mid * (jk / 6.0)))
+        below = val < s
+        lo = np.where(below, mid, lo)
+        hi = np.where(below, hi, mid)
+    return profile.phase_start_time_s[idx] + hi
+
+
+def plan_profile_pieces(inp: ProfileInput) -> Profile:
+    """Plan with every piece boundary a junction of zero acceleration (the scans below).
 
     Cost O(k) Python steps for the two scans plus vectorised numpy for the peaks (bisection)
     and the phases; a bounded look-ahead adds O(k·N) vectorised work at worst.
