@@ -6,14 +6,14 @@ STAMP  := $(VENV)/.installed
 DEMO   := programs/naca2415.nc
 OUT    := out
 
-.PHONY: install demo test lint unit bench clean
+.PHONY: install demo test lint unit bench reproduce clean
 
 install: $(STAMP)
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[test]'
+	$(BIN)/python -m pip install --quiet -e '.[test,plot]'
 	touch $(STAMP)
 
 demo: $(STAMP)
@@ -35,6 +35,9 @@ test: lint unit
 
 bench: $(STAMP)
 	$(BIN)/python bench/run.py --out bench/results.json
+
+reproduce: $(STAMP)
+	$(BIN)/python docs/make_reproduction.py --out docs/reproduction.md
 
 clean:
 	rm -rf $(VENV) $(OUT) .pytest_cache .ruff_cache
