@@ -7,6 +7,7 @@ writes outputs atomically, and turns :class:`~nurbscnc.errors.NurbsCncError` int
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import json
 import os
@@ -582,6 +583,10 @@ def plan_summary(prog, mach, plan) -> dict:
     }
     from nurbscnc.plan.lowerbound import program_lower_bound_s
 
+    summary["interpolator"] = plan.samples.interpolator
+    fluct = feed_fluctuation(plan)
+    if fluct is not None:
+        summary["feed_fluctuation_max"] = fluct
     lb = program_lower_bound_s(prog.segments, mach)
     if lb is not None:
         summary["lower_bound_s"] = lb
@@ -597,6 +602,22 @@ def plan_summary(prog, mach, plan) -> dict:
             if c.size else 0.0,
         )  # fmt: skip
     return summary
+
+
+def feed_fluctuation(plan) -> float | None:
+    """Largest |Δs_true/Δs_planned − 1| over servo steps on NURBS pieces moving at ≥ 10 % of
+    V_max (SPEC §3; true arc length from the curves' exact tables), or None if none."""
+    from nurbscnc.interpolate import nurbs_step_lengths
+
+    smp = plan.samples
+    k, ds_true = nurbs_step_lengths(plan.pieces, smp)
+    if k.size == 0:
+        return None
+    planned = smp.s_mm[k + 1] - smp.s_mm[k]
+    fast = smp.v_mm_s[k] >= 0.1 * float(np.max(plan.caps_mm_s))
+    if not fast.any():
+        return None
+    return float(np.max(np.abs(ds_true[fast] / planned[fast] - 1.0)))
 
 
 def cutting_mask(plan) -> np.ndarray:
@@ -644,6 +665,9 @@ def plan(program, as_json, dump_profile, machine, overrides, dynamics, interpola
     if "lower_bound_s" in summary:
         out.print(f"  kinematic lower bound: {summary['lower_bound_s']:.4f} s "
                   f"(plan / bound = {summary['lower_bound_ratio']:.3f})")  # fmt: skip
+    if "feed_fluctuation_max" in summary:
+        out.print(f"  feed fluctuation on NURBS ({summary['interpolator']} interpolation): "
+                  f"max {summary['feed_fluctuation_max'] * 100:.2g} %")  # fmt: skip
     if "contour_max_um" in summary:
         out.print(f"  predicted contour error: max {summary['contour_max_um']:.2f} µm, "
                   f"RMS {summary['contour_rms_um']:.2f} µm "
@@ -683,9 +707,13 @@ def run(programs, output, output_dir, jobs, fmt, quiet, as_json, machine, overri
         if output is None:
             raise click.UsageError("give -o FILE (.csv, .npz or -) or --output-dir DIR")
         program = programs[0]
-        prog, mach, pl = make_plan(program, machine, overrides, dynamics, lookahead,
-                                   corner_feed, interpolator, blend_tolerance)  # fmt: skip
-        write_points(output, pl.samples)
+        show = not quiet and err.is_terminal
+        with err.status(f"planning {program} …") if show else contextlib.nullcontext():
+            prog, mach, pl = make_plan(program, machine, overrides, dynamics, lookahead,
+                                       corner_feed, interpolator, blend_tolerance)  # fmt: skip
+        with err.status(f"writing {pl.samples.t_s.size} points …") if show else (
+                contextlib.nullcontext()):
+            write_points(output, pl.samples)
         summary = plan_summary(prog, mach, pl)
         if as_json:
             (err if output == "-" else out).print(json.dumps(summary), markup=False)
