@@ -35,6 +35,9 @@ test: lint unit
 
 bench: $(STAMP)
 	$(BIN)/python bench/run.py --out bench/results.json
+	$(BIN)/python bench/interp_bench.py --out bench/interp_results.json
+	$(BIN)/python bench/stream_bench.py --out bench/stream_results.json
+	@if [ -f bench/plan_bench.py ]; then $(BIN)/python bench/plan_bench.py --out bench/plan_results.json; fi
 
 reproduce: $(STAMP)
 	$(BIN)/python docs/make_reproduction.py --out docs/reproduction.md
