@@ -495,9 +495,48 @@ def ph_json(rows, e_um: float, no_split: bool) -> dict:
     return {"ok": True, "tolerance_um": e_um, "split": not no_split, "regions": regions}
 
 
+# -- plots ----------------------------------------------------------------------------------
+def plot_option(func):
+    return click.option(
+        "--plot", "plot_dir", type=click.Path(file_okay=False), default=None,
+        help="Write PNG figures into this folder (needs the 'plot' extra: matplotlib).",
+    )(func)  # fmt: skip
+
+
+def write_plan_plots(plan, plot_dir: str) -> list[str]:
+    """Figures of one plan: the path with its PH pieces, the feed, the predicted contour
+    error (PNG files in ``plot_dir``)."""
+    from nurbscnc import plots
+
+    os.makedirs(plot_dir, exist_ok=True)
+    smp = plan.samples
+    written = [plots.plot_feed_profiles({"feed": (smp.t_s, smp.v_mm_s)},
+                                        os.path.join(plot_dir, "feed.png"))]  # fmt: skip
+    if hasattr(plan, "pieces"):
+        corners = [p.points_mm(np.linspace(0.0, p.length_mm, 50))
+                   for p in plan.pieces if p.kind == "ph"]  # fmt: skip
+        written.append(plots.plot_path(smp.points_mm, corners,
+                                       os.path.join(plot_dir, "path.png")))  # fmt: skip
+        if plan.response is not None:
+            t = np.arange(plan.response.contour_mm.size) * (smp.t_s[1] - smp.t_s[0])
+            written.append(plots.plot_contour_error(
+                {"predicted (true distance)": (t, plan.response.contour_mm * 1000.0)},
+                os.path.join(plot_dir, "contour_error.png")))  # fmt: skip
+    else:
+        written.append(plots.plot_path(smp.points_mm, [], os.path.join(plot_dir, "path.png")))
+    return written
+
+
 # -- plan / run --------------------------------------------------------------------------------
 def plan_options(func):
     """Options shared by plan and run."""
+    func = click.option(
+        "--algorithm", type=click.Choice(["ph-lookahead", "adaptive", "curvature"]),
+        default="ph-lookahead",
+        help="The look-ahead planner (default), or one of the paper's baselines: adaptive "
+             "(chord-error) feed or curvature feed, Taylor interpolation, no acceleration "
+             "limit (SPEC §9).",
+    )(func)  # fmt: skip
     func = click.option(
         "--corner-feed", type=click.Choice(["piece", "peak"]), default="piece",
         help="PH pieces capped by their own peak curvature (piece, default) or the whole "
@@ -525,14 +564,23 @@ def plan_options(func):
     return machine_options(func)
 
 
-def make_plan(program: str, machine, overrides, dynamics, lookahead, corner_feed,
-              interpolator="exact", blend_tolerance=None):
-    """Load, interpret and plan one program; validate soft limits. Returns (prog, mach, plan)."""
+def make_plan(program: str, machine=None, overrides=(), dynamics="local", lookahead=None,
+              corner_feed="piece", interpolator="exact", blend_tolerance=None,
+              algorithm="ph-lookahead"):
+    """Load, interpret and plan one program; validate soft limits. Returns (prog, mach, plan).
+
+    The keyword arguments are exactly the options of :func:`plan_options`."""
     from nurbscnc.plan.lookahead import LookaheadOptions, plan_program
     from nurbscnc.plan.pieces import PlanOptions
 
     mach = load_machine_cli(machine, overrides)
     prog = load_program(program)
+    if algorithm != "ph-lookahead":
+        from nurbscnc.plan.baselines import BaselinePlan, baseline_program_samples
+
+        plan = BaselinePlan(algorithm, baseline_program_samples(algorithm, prog, mach))
+        check_soft_limits(plan, mach, prog)
+        return prog, mach, plan
     options = LookaheadOptions(dynamics=dynamics, lookahead_pieces=lookahead,
                                interpolator=interpolator,
                                plan=PlanOptions(corner_feed=corner_feed,
@@ -564,6 +612,21 @@ def check_soft_limits(plan, mach, prog) -> None:
 def plan_summary(prog, mach, plan) -> dict:
     """Numbers that describe a plan (``plan --json``)."""
     from nurbscnc.plan.lookahead import segment_times_s
+    from nurbscnc.plan.lowerbound import program_lower_bound_s
+
+    if not hasattr(plan, "pieces"):  # a baseline: no pieces, simulate to see its errors
+        from nurbscnc.simulate import contour_errors, metrics, simulate_reference
+
+        sim = simulate_reference(plan.samples.points_mm, mach)
+        m = metrics(sim, None, contour_errors(sim, None)).as_dict()
+        lb = program_lower_bound_s(prog.segments, mach)
+        return {"ok": True, "program": prog.name, "machine": mach.source,
+                "algorithm": plan.algorithm, "cycle_time_s": plan.cycle_time_s,
+                "samples": int(plan.samples.t_s.size), "period_s": mach.servo.period_s,
+                "feed_max_mm_s": float(plan.samples.v_mm_s.max()), "lower_bound_s": lb,
+                "lower_bound_ratio": plan.cycle_time_s / lb if lb > 0 else None,
+                "contour_max_um": m["true_max_um"], "contour_rms_um": m["true_rms_um"],
+                "contour_eq29_max_um": m["contour_max_um"]}  # fmt: skip
 
     kinds = Counter(p.kind for p in plan.pieces)
     summary = {
@@ -633,19 +696,23 @@ def cutting_mask(plan) -> np.ndarray:
 @json_option
 @click.option("--dump-profile", type=click.Path(dir_okay=False, allow_dash=True), default=None,
               help="Write t, s, v, a, j, piece at every servo period (CSV, or NPZ by extension).")
+@plot_option
 @plan_options
 @handle_errors
-def plan(program, as_json, dump_profile, machine, overrides, dynamics, interpolator,
-         blend_tolerance, lookahead, corner_feed):
+def plan(program, as_json, dump_profile, plot_dir, **settings):
     """Plan PROGRAM: pieces, corners, cycle time, lower bound, predicted contour error.
 
     Example: nurbscnc plan programs/naca2415.nc --dump-profile profile.csv
     """
     from nurbscnc.output.files import write_profile
 
-    prog, mach, pl = make_plan(program, machine, overrides, dynamics, lookahead, corner_feed,
-                               interpolator, blend_tolerance)  # fmt: skip
+    prog, mach, pl = make_plan(program, **settings)
     summary = plan_summary(prog, mach, pl)
+    if plot_dir:
+        write_plan_plots(pl, plot_dir)
+    if dump_profile and not hasattr(pl, "profile"):
+        raise click.UsageError("--dump-profile needs the look-ahead planner (a baseline has "
+                               "no jerk-limited profile)")
     if dump_profile:
         s = pl.samples
         from nurbscnc.interpolate import dwell_schedule, wall_to_profile_time
@@ -656,23 +723,29 @@ def plan(program, as_json, dump_profile, machine, overrides, dynamics, interpola
     if as_json:
         click.echo(json.dumps(summary))
         return
-    out.print(f"[bold]{prog.name}[/]: {summary['piece_count']} pieces "
-              f"({', '.join(f'{v} {k}' for k, v in sorted(summary['pieces'].items()))})",
-              markup=True)  # fmt: skip
+    if "pieces" in summary:
+        out.print(f"[bold]{prog.name}[/]: {summary['piece_count']} pieces "
+                  f"({', '.join(f'{v} {k}' for k, v in sorted(summary['pieces'].items()))})",
+                  markup=True)  # fmt: skip
+    else:
+        out.print(f"[bold]{prog.name}[/]: baseline {summary['algorithm']} (no acceleration "
+                  "limit)", markup=True)  # fmt: skip
     out.print(f"  cycle time: {summary['cycle_time_s']:.4f} s "
               f"({summary['samples']} reference points at T_s = "
               f"{summary['period_s'] * 1000:g} ms)")  # fmt: skip
     if "lower_bound_s" in summary:
+        note = "" if "pieces" in summary else "; a baseline ignores A_max and may beat it"
         out.print(f"  kinematic lower bound: {summary['lower_bound_s']:.4f} s "
-                  f"(plan / bound = {summary['lower_bound_ratio']:.3f})")  # fmt: skip
+                  f"(plan / bound = {summary['lower_bound_ratio']:.3f}{note})")  # fmt: skip
     if "feed_fluctuation_max" in summary:
         out.print(f"  feed fluctuation on NURBS ({summary['interpolator']} interpolation): "
                   f"max {summary['feed_fluctuation_max'] * 100:.2g} %")  # fmt: skip
     if "contour_max_um" in summary:
-        out.print(f"  predicted contour error: max {summary['contour_max_um']:.2f} µm, "
-                  f"RMS {summary['contour_rms_um']:.2f} µm "
-                  f"(ε_max {mach.limits.contour_tolerance_mm * 1000:g} µm; dynamics "
-                  f"{summary['dynamics']}, {summary['dynamics_iterations']} re-plans)")  # fmt: skip
+        how = (f"dynamics {summary['dynamics']}, {summary['dynamics_iterations']} re-plans"
+               if "pieces" in summary else "no dynamics check: a baseline")
+        out.print(f"  {'predicted' if 'pieces' in summary else 'simulated'} contour error: "
+                  f"max {summary['contour_max_um']:.2f} µm, RMS {summary['contour_rms_um']:.2f} "
+                  f"µm (ε_max {mach.limits.contour_tolerance_mm * 1000:g} µm; {how})")
 
 
 @main.command()
@@ -688,10 +761,10 @@ def plan(program, as_json, dump_profile, machine, overrides, dynamics, interpola
               help="Batch output format.")
 @click.option("--quiet", is_flag=True, help="No summary on stderr.")
 @json_option
+@plot_option
 @plan_options
 @handle_errors
-def run(programs, output, output_dir, jobs, fmt, quiet, as_json, machine, overrides, dynamics,
-        interpolator, blend_tolerance, lookahead, corner_feed):
+def run(programs, output, output_dir, jobs, fmt, quiet, as_json, plot_dir, **settings):
     """Run the whole pipeline: reference points at every servo period.
 
     Example: nurbscnc run programs/naca2415.nc -o points.csv
@@ -709,11 +782,12 @@ def run(programs, output, output_dir, jobs, fmt, quiet, as_json, machine, overri
         program = programs[0]
         show = not quiet and err.is_terminal
         with err.status(f"planning {program} …") if show else contextlib.nullcontext():
-            prog, mach, pl = make_plan(program, machine, overrides, dynamics, lookahead,
-                                       corner_feed, interpolator, blend_tolerance)  # fmt: skip
+            prog, mach, pl = make_plan(program, **settings)
         with err.status(f"writing {pl.samples.t_s.size} points …") if show else (
                 contextlib.nullcontext()):
             write_points(output, pl.samples)
+        if plot_dir:
+            write_plan_plots(pl, plot_dir)
         summary = plan_summary(prog, mach, pl)
         if as_json:
             (err if output == "-" else out).print(json.dumps(summary), markup=False)
@@ -721,9 +795,7 @@ def run(programs, output, output_dir, jobs, fmt, quiet, as_json, machine, overri
             err.print(f"{prog.name}: {summary['samples']} points, cycle time "
                       f"{summary['cycle_time_s']:.4f} s → {output}", markup=False)  # fmt: skip
         return
-    run_batch(programs, output_dir, jobs, fmt, quiet, as_json,
-              (machine, overrides, dynamics, lookahead, corner_feed, interpolator,
-               blend_tolerance))  # fmt: skip
+    run_batch(programs, output_dir, jobs, fmt, quiet, as_json, settings)
 
 
 def _batch_one(args):
@@ -732,7 +804,7 @@ def _batch_one(args):
     from nurbscnc.output.files import write_points
 
     try:
-        prog, mach, pl = make_plan(program, *settings)
+        prog, mach, pl = make_plan(program, **settings)
         write_points(target, pl.samples)
         return {"program": program, "ok": True, "output": target,
                 "cycle_time_s": pl.cycle_time_s, "samples": int(pl.samples.t_s.size)}
@@ -778,14 +850,6 @@ def run_batch(programs, output_dir, jobs, fmt, quiet, as_json, settings) -> None
         raise _Failed(max(r["exit_code"] for r in failed))
 
 
-# -- simulate ----------------------------------------------------------------------------------
-def plot_option(func):
-    return click.option(
-        "--plot", "plot_dir", type=click.Path(file_okay=False), default=None,
-        help="Write PNG figures into this folder (needs the 'plot' extra: matplotlib).",
-    )(func)  # fmt: skip
-
-
 @main.command()
 @click.argument("source", type=click.Path(dir_okay=False, allow_dash=True))
 @json_option
@@ -794,8 +858,7 @@ def plot_option(func):
               help="Reference between samples: linear (foh, as a pulse-train card) or steps.")
 @plan_options
 @handle_errors
-def simulate(source, as_json, plot_dir, hold, machine, overrides, dynamics, interpolator,
-             blend_tolerance, lookahead, corner_feed):
+def simulate(source, as_json, plot_dir, hold, **settings):
     """Servo simulation of reference points (CSV/NPZ from `run`) or of a program (planned
     first): axis errors, contour error (eq. 29 and true distance), cycle time.
 
@@ -806,18 +869,17 @@ def simulate(source, as_json, plot_dir, hold, machine, overrides, dynamics, inte
 
     lower = source.lower()
     if lower.endswith((".csv", ".npz")):
-        mach = load_machine_cli(machine, overrides)
+        mach = load_machine_cli(settings["machine"], settings["overrides"])
         data = read_points(source)
         points = np.column_stack([data["x"], data["y"], data["z"]])
         path = points  # the commanded path: the reference polyline itself
         name = source
     else:
-        prog, mach, pl = make_plan(source, machine, overrides, dynamics, lookahead,
-                                   corner_feed, interpolator, blend_tolerance)  # fmt: skip
+        prog, mach, pl = make_plan(source, **settings)
         from nurbscnc.plan.dynamics import dense_path_mm
 
         points = pl.samples.points_mm
-        path = dense_path_mm(pl.pieces, pl.profile)
+        path = dense_path_mm(pl.pieces, pl.profile) if hasattr(pl, "pieces") else points
         name = prog.name
     sim = simulate_reference(points, mach, hold=hold)
     contour = contour_errors(sim, path)

@@ -131,3 +131,31 @@ def test_rows_have_the_documented_fields(table4):
     r = row(table4["ours"])
     assert set(r) >= {"algorithm", "angle_deg", "contour_max_um", "contour_rms_um",
                       "contour_mean_um", "axis_x_max_um", "axis_y_max_um", "cycle_time_s"}
+
+
+@pytest.mark.parametrize("algorithm", ["adaptive", "curvature"])
+def test_plan_and_run_accept_the_baselines(tmp_path, algorithm):
+    runner = CliRunner()
+    res = runner.invoke(main, ["plan", str(AIRFOIL), "--algorithm", algorithm, "--json"])
+    assert res.exit_code == 0, res.output
+    summary = json.loads(res.output)
+    assert summary["algorithm"] == algorithm and summary["contour_max_um"] > 15.0
+    out = tmp_path / "b.csv"
+    res = runner.invoke(main, ["run", str(AIRFOIL), "--algorithm", algorithm, "-o", str(out),
+                               "--plot", str(tmp_path / "figs")])
+    assert res.exit_code == 0, res.output
+    from nurbscnc.output.files import read_points
+
+    data = read_points(str(out))
+    prog = interpret_text(AIRFOIL.read_text())
+    np.testing.assert_allclose([data["x"][-1], data["y"][-1]], prog.segments[-1].end_mm[:2],
+                               atol=1e-9)
+    np.testing.assert_allclose(np.diff(data["t"]), MACHINE.servo.period_s, atol=1e-9)
+    assert (tmp_path / "figs" / "path.png").exists()
+
+
+def test_plan_plot_writes_path_feed_and_contour(tmp_path):
+    res = CliRunner().invoke(main, ["plan", str(AIRFOIL), "--plot", str(tmp_path)])
+    assert res.exit_code == 0, res.output
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["contour_error.png", "feed.png",
+                                                          "path.png"]

@@ -14,6 +14,8 @@ is the block's end point.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from nurbscnc.geometry.nurbs import NurbsCurve
@@ -79,3 +81,67 @@ def baseline_samples(algorithm: str, seg, machine: Machine, max_steps: int = 10_
         piece=np.zeros(n, dtype=np.int64),
         line=np.full(n, seg.line, dtype=np.int64),
     )
+
+
+def _constant_feed_samples(geom, v_mm_s: float, period: float) -> np.ndarray:
+    """Points [mm] every T_s at constant feed along a line or arc (no acceleration limit),
+    the segment's end point last."""
+    length = float(geom.length_mm)
+    n = max(int(np.ceil(length / (v_mm_s * period) - 1e-9)), 1)
+    s = np.minimum(np.arange(1, n + 1) * v_mm_s * period, length)
+    return geom.point(geom.param_at_length(s))
+
+
+def baseline_program_samples(algorithm: str, program, machine: Machine) -> Samples:
+    """A whole program under a baseline (SPEC §9): NURBS blocks by :func:`baseline_samples`,
+    lines and arcs at their programmed feed (rapids at the rapid rate), dwells held — all with
+    no acceleration or jerk limit, as the baselines are defined. Rest points between segments
+    are simply where one segment's samples end and the next one's begin."""
+    from nurbscnc.geometry.paths import geometry_of
+
+    period = machine.servo.period_s
+    lim = machine.limits
+    points = [np.asarray(program.start_mm, dtype=float)[None, :]]
+    feeds = [np.zeros(1)]
+    lines = [np.array([program.segments[0].line if program.segments else 0])]
+    for seg in program.segments:
+        if seg.kind == "dwell":
+            n = int(round(seg.seconds / period))
+            points.append(np.repeat(np.asarray(seg.position_mm, float)[None, :], n, 0))
+            feeds.append(np.zeros(n))
+        elif seg.kind == "nurbs":
+            smp = baseline_samples(algorithm, seg, machine)
+            points.append(smp.points_mm[1:])
+            feeds.append(smp.v_mm_s[1:])
+        else:
+            v = lim.rapid_mm_s if seg.kind == "rapid" else min(seg.feed_mm_s, lim.v_max_mm_s)
+            pts = _constant_feed_samples(geometry_of(seg), v, period)
+            points.append(pts)
+            feeds.append(np.full(len(pts), v))
+        lines.append(np.full(len(points[-1]), seg.line))
+    pts = np.vstack(points)
+    v = np.concatenate(feeds)
+    v[-1] = 0.0
+    n = pts.shape[0]
+    seg_len = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+    return Samples(
+        t_s=np.arange(n) * period,
+        points_mm=pts,
+        s_mm=np.concatenate(([0.0], np.cumsum(seg_len))),
+        v_mm_s=v,
+        a_mm_s2=np.gradient(v, period) if n > 1 else np.zeros(n),
+        piece=np.zeros(n, dtype=np.int64),
+        line=np.concatenate(lines).astype(np.int64),
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class BaselinePlan:
+    """A program run by a baseline: its reference samples and cycle time [s]."""
+
+    algorithm: str
+    samples: Samples
+
+    @property
+    def cycle_time_s(self) -> float:
+        return float(self.samples.t_s[-1])

@@ -157,18 +157,21 @@ def _eval(geom, s_mm: float, order: int) -> np.ndarray:
     return geom.derivatives(geom.param_at_length(np.array([s_mm])), order)[:, 0, :]
 
 
-def line_deviation_per_trim(turning_rad: float) -> float:
+def line_deviation_per_trim(turning_rad):
     """Deviation / trim of the symmetric line–line blend (w1 = 0) turning by θ [mm/mm].
 
     In a frame with t0 = e^{−iθ/2}, t1 = e^{iθ/2} (bisector 1) and d = 1: α² = 30c/(6c + 1)
     (c = cos θ/2, module doc with x = y = 1), and by symmetry the blend point nearest the
     vertex p0 + t0 is r(½), r(½) − p0 = α²(31/160 t0 + 1/30 + 1/160 t1) (∫₀^½ of the three
-    terms of w² = α²(e0²(1 − ξ)⁴ + 2e0e2 ξ²(1 − ξ)² + e2² ξ⁴)).
+    terms of w² = α²(e0²(1 − ξ)⁴ + 2e0e2 ξ²(1 − ξ)² + e2² ξ⁴)). Elementwise on arrays (a
+    float for a scalar).
     """
-    c = np.cos(0.5 * turning_rad)
-    t0, t1 = np.exp(-0.5j * turning_rad), np.exp(0.5j * turning_rad)
+    th = np.asarray(turning_rad, dtype=float)
+    c = np.cos(0.5 * th)
+    t0, t1 = np.exp(-0.5j * th), np.exp(0.5j * th)
     a2 = 30.0 * c / (6.0 * c + 1.0)
-    return float(abs(t0 - a2 * (31.0 / 160.0 * t0 + 1.0 / 30.0 + 1.0 / 160.0 * t1)))
+    out = np.abs(t0 - a2 * (31.0 / 160.0 * t0 + 1.0 / 30.0 + 1.0 / 160.0 * t1))
+    return float(out) if out.ndim == 0 else out
 
 
 def _w_line(dp: complex, e0: complex, e2: complex) -> tuple[float, float] | None:
@@ -505,3 +508,135 @@ def _kappa_max(k: np.ndarray) -> float:
         if denom < 0.0:
             return float(k0 - 0.125 * (kp - km) ** 2 / denom)
     return float(k[i])
+
+
+# ---------------------------------------------------------------------------------------------
+# Many line–line corners at once (CAM polylines)
+# ---------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class LineBlends:
+    """Symmetric PH quintic blends of m line–line corners, as arrays (one row a corner).
+
+    ``ok`` (m,) where a blend exists (else the row's other values are meaningless);
+    ``trim_mm`` (m,) d, cut off both lines [mm]; ``w`` (m, 3) complex preimage (α e0, 0, α e2)
+    [√mm]; ``p0`` (m,) complex start point in plane coordinates [mm]; ``origin_mm`` (m, 3)
+    (the vertex), ``e1``, ``e2`` (m, 3) the plane frame; ``turning_rad`` (m,) θ;
+    ``deviation_mm`` (m,) d · :func:`line_deviation_per_trim` (θ) [mm]; ``kappa_max_per_mm``
+    (m,) the peak curvature 64 sin(θ/2) / (α² (1 + c)²) [1/mm] (at ξ = ½).
+    """
+
+    ok: np.ndarray
+    trim_mm: np.ndarray
+    w: np.ndarray
+    p0: np.ndarray
+    origin_mm: np.ndarray
+    e1: np.ndarray
+    e2: np.ndarray
+    turning_rad: np.ndarray
+    deviation_mm: np.ndarray
+    kappa_max_per_mm: np.ndarray
+
+
+def _rows_dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return np.einsum("ij,ij->i", a, b)
+
+
+def line_corner_blends(vertex_mm, t_a, t_b, tolerance_mm, max_trim_mm) -> LineBlends:
+    """The blends :func:`blend_corner` gives line–line corners, for m corners at once.
+
+    ``vertex_mm`` (m, 3) the corner points [mm]; ``t_a``, ``t_b`` (m, 3) the unit directions
+    of the line ending and of the line starting there; ``tolerance_mm`` (m,) the blend
+    tolerance [mm]; ``max_trim_mm`` (m,) the largest trim allowed [mm] (the caller's rule:
+    the smaller of the two half lengths).
+
+    The closed form of the module doc, vectorised: with θ the turning, c = cos θ/2,
+    d = min(tol (1 − ½·SEARCH_WINDOW) / :func:`line_deviation_per_trim` (θ), max trim) — the
+    trim the scalar search accepts at its first evaluation — and cut points V − d t_a,
+    V + d t_b: x = y = d, so β = α with α² = 30cd / (6c + 1), w0 = α e0, w1 = 0, w2 = α e2
+    (e0 = √τ_a, e2 = ±√τ_b, Re(ē0 e2) = c > 0; τ the tangents in plane coordinates). The end
+    point is met in closed form: w0² + w0w2/3 + w2² = α² e0e2 (2c + ⅓) = 5 d (τ_a + τ_b).
+    The curvature is κ(ξ) = 4 s ξ(1 − ξ) / (α² f²) with f = (1 − ξ)⁴ + ξ⁴ + 2c ξ²(1 − ξ)²
+    (s = sin θ/2); with u = ξ(1 − ξ) ∈ [0, ¼], u/f² grows with u (its derivative has the sign
+    of 1 + 4u − 6(1 + c)u², positive on [0, ¼]), so the peak is at ξ = ½:
+    κ_max = 64 s / (α² (1 + c)²).
+
+    The plane: a corner in a coordinate plane (both tangents' components along its normal
+    within 1e-12) gets that plane's axes (XY, ZX, YZ as :func:`plane_frame`), so the blend
+    keeps the normal coordinate exactly; otherwise e1 = t_a, e2 = n × t_a. The origin is the
+    vertex. ``ok`` is False, as :func:`blend_corner` returns None, for smooth and reversed
+    junctions and trims ≤ MIN_TRIM_MM.
+    """
+    v = np.asarray(vertex_mm, dtype=float).reshape(-1, 3)
+    ta = np.asarray(t_a, dtype=float).reshape(-1, 3)
+    tb = np.asarray(t_b, dtype=float).reshape(-1, 3)
+    m = v.shape[0]
+    tol = np.broadcast_to(np.asarray(tolerance_mm, dtype=float), (m,))
+    d_max = np.broadcast_to(np.asarray(max_trim_mm, dtype=float), (m,))
+    cross = np.cross(ta, tb)
+    sin_t = np.sqrt(_rows_dot(cross, cross))
+    turning = np.arctan2(sin_t, _rows_dot(ta, tb))
+    ok = (turning >= MIN_TURNING_RAD) & (turning <= np.pi - MIN_REVERSAL_RAD) & (tol > 0.0)
+    # Frame: coordinate planes first (XY, ZX, YZ: e1, e2 axes and the normal axis).
+    e1 = np.empty((m, 3))
+    e2 = np.empty((m, 3))
+    free = np.ones(m, dtype=bool)
+    for i, j, k in ((0, 1, 2), (2, 0, 1), (1, 2, 0)):
+        lo = np.minimum(np.minimum(-ta[:, k], tb[:, k]), 0.0)
+        hi = np.maximum(np.maximum(-ta[:, k], tb[:, k]), 0.0)
+        sel = free & (hi - lo <= 1e-12)
+        e1[sel] = np.eye(3)[i]
+        e2[sel] = np.eye(3)[j]
+        free &= ~sel
+    if free.any():
+        n = cross[free] / np.where(sin_t[free] > 0.0, sin_t[free], 1.0)[:, None]
+        e1[free] = ta[free]
+        e2[free] = np.cross(n, ta[free])
+    tau_a = _rows_dot(ta, e1) + 1j * _rows_dot(ta, e2)
+    tau_b = _rows_dot(tb, e1) + 1j * _rows_dot(tb, e2)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        tau_a = tau_a / np.abs(tau_a)
+        tau_b = tau_b / np.abs(tau_b)
+        e0 = np.sqrt(tau_a)
+        e2c = np.sqrt(tau_b)
+        e2c = np.where((np.conj(e0) * e2c).real < 0.0, -e2c, e2c)
+        rel = np.conj(e0) * e2c
+        c = rel.real
+        s = np.abs(rel.imag)
+        ok &= (s >= 1e-12) & (c > 1e-12)
+        dpt = np.asarray(line_deviation_per_trim(turning))
+        d_line = tol * (1.0 - 0.5 * SEARCH_WINDOW) / dpt
+        d = np.minimum(d_line, d_max)
+        ok &= (d_max > MIN_TRIM_MM) & (d > MIN_TRIM_MM)
+        alpha2 = 30.0 * c * d / (6.0 * c + 1.0)
+        alpha = np.sqrt(alpha2)
+        kappa = 64.0 * s / (alpha2 * (1.0 + c) ** 2)
+    w = np.zeros((m, 3), dtype=complex)
+    w[:, 0] = alpha * e0
+    w[:, 2] = alpha * e2c
+    return LineBlends(ok, d, w, -d * tau_a, v, e1, e2, turning, d * dpt, kappa)
+
+
+def ph_tables(w: np.ndarray, p0: np.ndarray):
+    """Control points (m, 6) complex, σ (m, 5) and s (m, 6) Bernstein coefficients [mm] and
+    lengths (m,) [mm] of m PH quintics with preimages ``w`` (m, 3) and starts ``p0`` (m,).
+
+    The formulas of :class:`PHQuintic` (SPEC §4), vectorised: each row equals the object's
+    arrays to rounding (numpy's array complex arithmetic may fuse a multiply-add where the
+    scalar path does not, so the last bit can differ).
+    """
+    w0, w1, w2 = w[:, 0], w[:, 1], w[:, 2]
+    steps = np.stack([w0 * w0, w0 * w1, (2.0 * w1 * w1 + w0 * w2) / 3.0, w1 * w2, w2 * w2],
+                     axis=1)  # fmt: skip
+    points = p0[:, None] + np.concatenate((np.zeros((w.shape[0], 1)),
+                                           np.cumsum(steps / 5.0, axis=1)), axis=1)  # fmt: skip
+    sigma = np.stack([
+        np.abs(w0) ** 2,
+        (w0 * w1.conjugate()).real,
+        (2.0 * np.abs(w1) ** 2 + (w0 * w2.conjugate()).real) / 3.0,
+        (w1 * w2.conjugate()).real,
+        np.abs(w2) ** 2,
+    ], axis=1)  # fmt: skip
+    s = np.concatenate((np.zeros((w.shape[0], 1)), np.cumsum(sigma / 5.0, axis=1)), axis=1)
+    return points, sigma, s, s[:, -1].copy()
