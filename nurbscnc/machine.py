@@ -89,13 +89,15 @@ def chord_feed_mm_s(kappa_per_mm, period_s: float, chord_tolerance_mm: float):
     """Chord-error feed V_af = (2/T_s)·√(2δ/κ − δ²) [mm/s] (SPEC §7, eq. 23; Yeh & Hsu 2002).
 
     The chord of one period on a circle of radius 1/κ whose sagitta is δ has half-length
-    √(2δ/κ − δ²) (for radius ≥ δ; beyond, the formula falls to 0 at radius δ/2). Curvature is
+    √(2δ/κ − δ²), for radius ≥ δ. Below radius δ no chord can have a sagitta above the radius,
+    so the chord error cannot exceed δ whatever the step: the formula (which would fall to 0
+    at radius δ/2 and stall the tool) is held at its radius-δ value 2δ/T_s there, continuous
+    and never 0; the normal-acceleration limit governs such tight curves anyway. Curvature is
     unsigned here: ``|kappa|`` is used, so a signed curvature cannot skip the slowdown.
-    κ = 0 (straight) gives ``inf``; κ ≥ 2/δ (radius ≤ δ/2, no chord fits)
-    gives 0. Never NaN for non-NaN input.
+    κ = 0 (straight) gives ``inf``. Never NaN for non-NaN input.
     """
-    k = np.abs(np.asarray(kappa_per_mm, dtype=float))
     d = float(chord_tolerance_mm)
+    k = np.minimum(np.abs(np.asarray(kappa_per_mm, dtype=float)), 1.0 / d)
     with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
         half_chord_sq = d * (2.0 / k - d)  # 2δ/κ − δ², +inf for κ = 0
         v = (2.0 / period_s) * np.sqrt(np.maximum(half_chord_sq, 0.0))

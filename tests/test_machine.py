@@ -200,8 +200,12 @@ def test_chord_feed_edges_never_nan():
     v = chord_feed_mm_s(k, 1e-3, 1e-3)
     assert isinstance(v, np.ndarray) and v.shape == k.shape
     assert not np.any(np.isnan(v))
-    assert v[0] == np.inf and v[1] == 0.0 and v[2] == 0.0 and v[3] == 0.0
-    assert v[4] > 1e140 and 0.0 < v[5] < 100.0
+    # Radius ≤ δ: held at the radius-δ value 2δ/T (never 0: the chord error is at most the
+    # radius there), continuous with the formula at radius δ.
+    floor = 2.0 * 1e-3 / 1e-3
+    assert v[0] == np.inf and v[1] == v[2] == v[3] == floor and v[5] == floor
+    assert v[4] > 1e140
+    assert chord_feed_mm_s(1.0 / 1e-3 * (1 - 1e-12), 1e-3, 1e-3) == pytest.approx(floor)
     assert isinstance(chord_feed_mm_s(0.5, 1e-3, 1e-3), float)
 
 

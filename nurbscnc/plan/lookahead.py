@@ -5,6 +5,13 @@ predicted contour error is then checked with the servo model, and where it excee
 feed cap is lowered — on the offending pieces only (``dynamics="local"``, our default) or for
 the whole program (``"global"``, the paper's rule: V_max becomes the feed where the error
 occurred) — and the program re-planned, until the error is within the limit.
+
+Long programs. Everything per piece is whole-array work on the columns of the
+:class:`~nurbscnc.plan.pieces.PieceList` (junctions, dwells, blame), the contour error is
+measured near each reference point only (:func:`~nurbscnc.plan.dynamics.path_response`), and
+a local re-plan lowers the caps of all offending pieces at once by their measured ratio, so
+a program needs a few iterations, whatever its length. Runs of tiny tangent-continuous
+pieces at one cap are planned as one by :func:`~nurbscnc.plan.profile.plan_profile`.
 """
 
 from __future__ import annotations
@@ -14,16 +21,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from nurbscnc.errors import PlanningError
-from nurbscnc.interpolate import (
-    PieceTable,
-    Samples,
-    dwell_schedule,
-    sample_plan,
-    total_time_s,
-)
+from nurbscnc.interpolate import Samples, sample_plan, total_time_s
 from nurbscnc.machine import Machine
-from nurbscnc.plan.dynamics import Response, dense_path_mm, servo_response
-from nurbscnc.plan.pieces import PlanOptions, junction_caps, segment_pieces
+from nurbscnc.plan.dynamics import Response, path_response
+from nurbscnc.plan.pieces import PieceList, PlanOptions, junction_caps, segment_pieces
 from nurbscnc.plan.profile import Profile, ProfileInput, plan_profile
 
 #: Plan to this fraction of ε_max so the prediction has a little room (model, rounding).
@@ -50,7 +51,7 @@ class Plan:
     """A complete plan: pieces, their final caps, the profile, the samples and the predicted
     servo response; ``iterations`` of the dynamics loop; ``cycle_time_s`` including dwells."""
 
-    pieces: list
+    pieces: PieceList
     caps_mm_s: np.ndarray
     profile: Profile
     samples: Samples
@@ -60,40 +61,79 @@ class Plan:
     dynamics: str
 
 
-def _profile(pieces, caps, smooth, machine: Machine, window) -> Profile:
+def _profile(pieces: PieceList, caps: np.ndarray, smooth: np.ndarray, machine: Machine,
+             window: int | None) -> Profile:  # fmt: skip
+    """The jerk-limited profile (SPEC §7) over the pieces with cruise caps ``caps`` and the
+    junctions ``smooth`` (> 0: tangent-continuous, capped by the smaller neighbour)."""
     lim = machine.limits
-    lengths = np.array([p.length_mm for p in pieces])
-    jcaps = np.zeros(len(pieces) + 1)
-    inner = np.minimum(caps[:-1], caps[1:])
-    jcaps[1:-1] = np.where(smooth[1:-1] > 0, inner, 0.0)
-    return plan_profile(ProfileInput(lengths, caps, jcaps, lim.a_max_mm_s2, lim.j_max_mm_s3,
-                                     lookahead_pieces=window))  # fmt: skip
+    k = len(pieces)
+    jcaps = np.zeros(k + 1)
+    jcaps[1:-1] = np.where(smooth[1:-1] > 0, np.minimum(caps[:-1], caps[1:]), 0.0)
+    return plan_profile(ProfileInput(pieces.length_mm, caps, jcaps, lim.a_max_mm_s2,
+                                     lim.j_max_mm_s3, lookahead_pieces=window))  # fmt: skip
+
+
+def dwell_times(pieces: PieceList, profile: Profile) -> tuple[np.ndarray, np.ndarray]:
+    """Profile times [s] at which dwells start and their durations [s] (from the columns;
+    the same as :func:`nurbscnc.interpolate.dwell_schedule`)."""
+    i = np.flatnonzero(pieces.dwell_after_s > 0.0)
+    k = len(pieces)
+    nxt = np.minimum(i + 1, k - 1)
+    at = np.where(i + 1 < k, profile.piece_start_time_s[nxt], profile.duration_s)
+    return at.astype(float), pieces.dwell_after_s[i].astype(float)
+
+
+def _blame(err: np.ndarray, eps_mm: float, n: int, piece: np.ndarray, k: int,
+           window: int) -> np.ndarray:  # fmt: skip
+    """Largest over-limit error [mm] each piece shares the blame for (0: none).
+
+    A sample over the limit blames the pieces of the ``window`` samples up to it (the servo
+    remembers): per sample the largest over-limit error in the next ``window`` samples (a
+    sliding maximum), then the largest per piece. Runs of consecutive blamed pieces share
+    their largest blame, so a run of equal caps stays equal (one profile unit)."""
+    from scipy.ndimage import maximum_filter1d
+
+    over = np.flatnonzero(err > eps_mm)
+    e_over = np.zeros(n)
+    np.maximum.at(e_over, np.minimum(over, n - 1), err[over])
+    size = window + 1
+    reach = maximum_filter1d(e_over, size=size, mode="constant", cval=0.0,
+                             origin=-(size // 2))  # fmt: skip
+    blame = np.zeros(k)
+    np.maximum.at(blame, piece, reach)
+    hit = blame > 0.0
+    starts = np.flatnonzero(hit & ~np.concatenate(([False], hit[:-1])))
+    if starts.size:
+        run = np.cumsum(np.isin(np.arange(k), starts)) - 1
+        run_max = np.zeros(starts.size)
+        np.maximum.at(run_max, run[hit], blame[hit])
+        blame[hit] = run_max[run[hit]]
+    return blame
 
 
 def plan_program(program, machine: Machine, options: LookaheadOptions | None = None) -> Plan:
     """Plan a whole interpreted program (SPEC §1: modules 1–4, then the interpolator)."""
     options = options or LookaheadOptions()
     pieces = segment_pieces(program.segments, machine, options.plan)
-    if not pieces:
+    if not len(pieces):
         raise PlanningError("the program has no motion to plan")
-    caps = np.array([p.v_cap_mm_s for p in pieces], dtype=float)
+    lim = machine.limits
+    caps = pieces.v_cap_mm_s.copy()
     smooth = junction_caps(pieces)  # > 0 where the path is tangent-continuous
-    rapid = np.array([p.kind == "rapid" for p in pieces])
+    rapid = pieces.rapid
     period = machine.servo.period_s
-    eps_mm = machine.limits.contour_tolerance_mm * CONTOUR_MARGIN
+    eps_mm = lim.contour_tolerance_mm * CONTOUR_MARGIN
     response = None
     iterations = 0
-    path = None
-    table = PieceTable.of(pieces)  # per-piece arrays for the interpolator, built once
+    table = pieces.table()  # per-piece arrays for the interpolator, built once
     while True:
         profile = _profile(pieces, caps, smooth, machine, options.lookahead_pieces)
-        samples = sample_plan(pieces, profile, period, interpolator=options.interpolator,
-                              table=table)  # fmt: skip
+        dwell_at, dwell_s = dwell_times(pieces, profile)
+        samples = sample_plan(pieces, profile, period, dwell_at, dwell_s,
+                              interpolator=options.interpolator, table=table)  # fmt: skip
         if options.dynamics == "off":
             break
-        if path is None:
-            path = dense_path_mm(pieces, profile, table=table)
-        response = servo_response(samples.points_mm, path, machine)
+        response = path_response(samples, pieces, profile, machine, table=table)
         n = samples.t_s.size
         # Contour error matters while cutting: samples on rapids (air moves) are not checked.
         cutting = np.append(~rapid[samples.piece], np.full(response.contour_mm.size - n,
@@ -108,23 +148,18 @@ def plan_program(program, machine: Machine, options: LookaheadOptions | None = N
                 f"dynamics check: contour error {worst * 1000:.2f} µm still above ε_max after "
                 f"{options.max_iterations} re-plans"
             )
-        over = np.flatnonzero(err > eps_mm)
-        over_in = np.minimum(over, n - 1)
         if options.dynamics == "global":
             # The paper's rule: lower V_max for the whole program. Every cap (cruise and
             # corner: V_cf ∝ V_max) scales with it; error ∝ V²κ gives the factor.
             caps = caps * min(float(np.sqrt(eps_mm / worst)), 0.98)
         else:
+            # Every offending piece at once, by its measured ratio (error ∝ V²).
             window = max(int(round(BLAME_WINDOW_S / period)), 1)
-            blame = np.zeros(len(pieces))
-            for k, e in zip(over_in, err[over]):
-                lo = max(k - window, 0)
-                for p in np.unique(samples.piece[lo:k + 1]):
-                    blame[p] = max(blame[p], e)
+            blame = _blame(err, eps_mm, n, samples.piece, len(pieces), window)
             hit = blame > 0
             factor = np.clip(np.sqrt(eps_mm / np.where(hit, blame, eps_mm)) * 0.97, 0.5, 0.97)
             caps = np.where(hit, caps * factor, caps)
-    dwell_at, dwell_s = dwell_schedule(pieces, profile)
+    dwell_at, dwell_s = dwell_times(pieces, profile)
     return Plan(pieces, caps, profile, samples, response, iterations,
                 total_time_s(profile, dwell_s), options.dynamics)  # fmt: skip
 
@@ -133,7 +168,8 @@ def segment_times_s(plan: Plan) -> dict[int, float]:
     """Motion time [s] of each program segment (its pieces' span in the profile)."""
     prof = plan.profile
     ends = np.append(prof.piece_start_time_s[1:], prof.duration_s)
-    out: dict[int, float] = {}
-    for i, p in enumerate(plan.pieces):
-        out[p.segment] = out.get(p.segment, 0.0) + float(ends[i] - prof.piece_start_time_s[i])
-    return out
+    span = ends - prof.piece_start_time_s
+    seg = np.asarray(plan.pieces.segment)
+    present = np.unique(seg)
+    sums = np.bincount(seg, weights=span)
+    return {int(s): float(sums[s]) for s in present}

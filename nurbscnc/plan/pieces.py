@@ -1,21 +1,34 @@
 """Planner pieces: the program's path cut into pieces the feed profile treats as units.
 
 Each NURBS block is split into its sharp-corner regions (replaced by their PH quintic pieces,
-SPEC §6) and the NURBS stretches between them; lines, arcs and rapids are one piece each.
+SPEC §6) and the NURBS stretches between them; lines, arcs and rapids are one piece each;
+under G64 P the corners between lines and arcs are replaced by PH quintic blends (issue 7).
 Every piece knows its exact geometry (so the interpolator can place points on it), its
-length, its cruise cap (SPEC §7) and the cap of the junction at its start.
+length, its cruise cap (SPEC §7) and its unit tangents at both ends (for the junctions).
+
+Storage. CAM programs hold millions of G1 lines, so the pieces live in columns
+(:class:`PieceList`: one numpy row a piece) and the line path is built without a Python
+object per line: line pieces are their end points, line–line blends their PH preimage and
+plane frame (:func:`~nurbscnc.plan.blend.line_corner_blends`, all corners at once). Arcs,
+NURBS cells and the PH pieces of NURBS corners keep a geometry object per piece. Indexing a
+PieceList gives a :class:`Piece` (built on demand), so code written for a list of pieces
+still works; code that runs over every piece of a long program uses the columns.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from dataclasses import replace as dc_replace
 
 import numpy as np
 
-from nurbscnc.errors import NurbsCncError, SourcePos
+from nurbscnc.errors import GeometryError, NurbsCncError, SourcePos
 from nurbscnc.geometry.nurbs import NurbsCurve
-from nurbscnc.geometry.paths import geometry_of
+from nurbscnc.geometry.paths import ArcGeometry, LineGeometry, geometry_of
+from nurbscnc.geometry.ph import PHQuintic
 from nurbscnc.machine import Machine, chord_feed_mm_s
+from nurbscnc.plan.blend import ph_tables
 from nurbscnc.plan.corners import find_corner_regions
 from nurbscnc.plan.phfit import fit_region
 
@@ -25,6 +38,15 @@ MIN_CAP_MM_S = 1e-3
 #: Junctions whose tangents turn by less than this [rad] are treated as smooth (no stop).
 SMOOTH_JUNCTION_RAD = 1e-6
 
+#: What is left of a line or arc between two blends, if shorter than this [mm], is dropped:
+#: such a sliver (two blends that almost meet, e.g. 4e-9 mm) carries no motion worth a piece.
+#: The path then jumps by less than this from one blend's end to the next one's start.
+MIN_REMAINDER_MM = 1e-6
+
+#: Piece kinds; ``PieceList.kind`` holds indices into this tuple.
+KINDS = ("line", "rapid", "arc", "ph", "nurbs")
+K_LINE, K_RAPID, K_ARC, K_PH, K_NURBS = range(5)
+_KIND_INDEX = {name: i for i, name in enumerate(KINDS)}
 
 
 @dataclass(frozen=True, eq=False)
@@ -98,13 +120,14 @@ class PlanOptions:
 
 
 def _curvature_cap(machine: Machine, kappa, feed_mm_s: float) -> np.ndarray:
-    """Feed cap [mm/s] at curvature κ outside corners: min(F, V_max, V_af(κ), √(A/κ))."""
+    """Feed cap [mm/s] at curvature κ outside corners: min(F, V_max, V_af(κ), √(A/κ))
+    (elementwise; ``feed_mm_s`` a scalar or an array like ``kappa``)."""
     lim = machine.limits
     kappa = np.asarray(kappa, dtype=float)
     v_af = np.asarray(chord_feed_mm_s(kappa, machine.servo.period_s, lim.chord_tolerance_mm))
     with np.errstate(divide="ignore"):
         v_an = np.sqrt(lim.a_max_mm_s2 / np.maximum(kappa, 1e-300))
-    return np.minimum(np.minimum(v_af, v_an), min(feed_mm_s, lim.v_max_mm_s))
+    return np.minimum(np.minimum(v_af, v_an), np.minimum(feed_mm_s, lim.v_max_mm_s))
 
 
 def _corner_cap(machine: Machine, kappa_peak: float, feed_mm_s: float) -> float:
@@ -192,54 +215,334 @@ def _nurbs_stretch(curve, u_a, u_b, seg, index, machine, feed) -> list[Piece]:
             for i in range(n_cells)]  # fmt: skip
 
 
-def segment_pieces(segments, machine: Machine, options: PlanOptions | None = None) -> list[Piece]:
-    """All pieces of a program, in order; dwells become ``dwell_after_s`` of the piece before
-    (or of a zero-length marker when the program starts with a dwell)."""
+_VECTORS = ("start_mm", "end_mm", "tangent_start", "tangent_end")
+
+
+@dataclass(frozen=True, eq=False)
+class PieceList(Sequence):
+    """The pieces of a program as columns, one row a piece (module doc); ``pl[i]`` is a Piece.
+
+    Per row (k,): ``kind`` (int8 index into :data:`KINDS`), ``length_mm``, ``v_cap_mm_s``,
+    ``segment``, ``line``, ``kappa_max_per_mm``, ``dwell_after_s``, ``blend_mm`` (as in
+    :class:`Piece`); (3, k): ``start_mm``, ``end_mm`` the end points [mm] and
+    ``tangent_start``, ``tangent_end`` the unit tangents there (zero where the derivative
+    vanishes, at a cusp). Line and rapid rows are the segment from ``start_mm`` to
+    ``end_mm``. Columnar PH rows (line–line blends): ``ph_rows`` (m,) their rows (sorted),
+    ``ph_w`` (m, 3) complex preimages, ``ph_p0`` (m,) complex starts, ``ph_frame``
+    (m, 3, 3) origin, e1, e2 of their planes. Every other row has an entry in ``objects``:
+    row → (geometry, u_a, u_b, s_a_mm).
+    """
+
+    kind: np.ndarray
+    length_mm: np.ndarray
+    v_cap_mm_s: np.ndarray
+    segment: np.ndarray
+    line: np.ndarray
+    kappa_max_per_mm: np.ndarray
+    dwell_after_s: np.ndarray
+    blend_mm: np.ndarray
+    start_mm: np.ndarray
+    end_mm: np.ndarray
+    tangent_start: np.ndarray
+    tangent_end: np.ndarray
+    ph_rows: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    ph_w: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), dtype=complex))
+    ph_p0: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=complex))
+    ph_frame: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 3)))
+    objects: dict = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return int(self.kind.size)
+
+    def __getitem__(self, index):
+        if isinstance(index, slice):
+            return [self[i] for i in range(*index.indices(len(self)))]
+        i = int(index)
+        k = len(self)
+        if i < 0:
+            i += k
+        if not 0 <= i < k:
+            raise IndexError(f"piece {index} of {k}")
+        kind = KINDS[int(self.kind[i])]
+        obj = self.objects.get(i)
+        if obj is not None:
+            geom, u_a, u_b, s_a = obj
+        elif kind in ("line", "rapid"):
+            geom = LineGeometry(self.start_mm[:, i], self.end_mm[:, i])
+            u_a, u_b, s_a = 0.0, float(geom.u_end), 0.0
+        else:
+            j = int(np.searchsorted(self.ph_rows, i))
+            origin, e1, e2 = self.ph_frame[j]
+            geom = PHQuintic(self.ph_w[j], self.ph_p0[j], origin, e1, e2)
+            u_a, u_b, s_a = 0.0, 1.0, 0.0
+        return Piece(kind, geom, float(self.length_mm[i]), float(self.v_cap_mm_s[i]),
+                     int(self.segment[i]), int(self.line[i]), u_a, u_b, s_a,
+                     float(self.kappa_max_per_mm[i]), float(self.dwell_after_s[i]),
+                     float(self.blend_mm[i]))  # fmt: skip
+
+    def kind_names(self) -> np.ndarray:
+        """The kind of every piece as strings (k,)."""
+        return np.array(KINDS)[self.kind]
+
+    def kind_counts(self) -> dict[str, int]:
+        """How many pieces of each kind (kinds present only)."""
+        counts = np.bincount(self.kind, minlength=len(KINDS))
+        return {KINDS[i]: int(c) for i, c in enumerate(counts) if c}
+
+    @property
+    def rapid(self) -> np.ndarray:
+        """(k,) True on rapid pieces."""
+        return self.kind == K_RAPID
+
+    def table(self):
+        """The interpolator's per-piece arrays (:class:`~nurbscnc.interpolate.PieceTable`),
+        built from the columns: line rows share ``start_mm``/``end_mm``, columnar PH rows get
+        their power coefficients in chunks, object rows come from ``PieceTable.of`` on those
+        pieces alone; arrays no row needs are broadcast zeros (no memory)."""
+        from nurbscnc.interpolate import _B4, _B5, ARC, LINE, NURBS, PH, PieceTable
+
+        k = len(self)
+        code = np.array([LINE, LINE, ARC, PH, NURBS], dtype=np.int8)[self.kind]
+        rows_obj = np.array(sorted(self.objects), dtype=np.int64)
+        obj_kind = self.kind[rows_obj]
+        need_frame = self.ph_rows.size > 0 or bool(np.any(obj_kind != K_NURBS))
+        need_arc = bool(np.any(obj_kind == K_ARC))
+        need_ph = self.ph_rows.size > 0 or bool(np.any(obj_kind == K_PH))
+        need_nurbs = bool(np.any(obj_kind == K_NURBS))
+
+        def zeros(shape, needed, dtype=float):
+            if needed:
+                return np.zeros(shape, dtype=dtype)
+            return np.broadcast_to(np.zeros((), dtype=dtype), shape)
+
+        origin, e1, e2 = (zeros((3, k), need_frame) for _ in range(3))
+        normal = zeros((3, k), need_arc)
+        radius, angle, helix = (zeros(k, need_arc) for _ in range(3))
+        ph_s, ph_x, ph_y = (zeros((6, k), need_ph) for _ in range(3))
+        ph_sigma = zeros((5, k), need_ph)
+        s_a = zeros(k, need_nurbs)
+        curve_id = (np.full(k, -1, dtype=np.intp) if need_nurbs
+                    else np.broadcast_to(np.intp(-1), (k,)))  # fmt: skip
+        curves: tuple = ()
+        for lo in range(0, self.ph_rows.size, _CHUNK):
+            sl = slice(lo, lo + _CHUNK)
+            rows = self.ph_rows[sl]
+            pts, sigma, s, _ = ph_tables(self.ph_w[sl], self.ph_p0[sl])
+            ph_s[:, rows] = (s @ _B5).T
+            ph_sigma[:, rows] = (sigma @ _B4).T
+            ph_x[:, rows] = (pts.real @ _B5).T
+            ph_y[:, rows] = (pts.imag @ _B5).T
+            frame = self.ph_frame[sl]
+            origin[:, rows], e1[:, rows], e2[:, rows] = frame[:, 0].T, frame[:, 1].T, frame[:, 2].T
+        if rows_obj.size:
+            sub = PieceTable.of([self[int(r)] for r in rows_obj])
+            code[rows_obj] = sub.kind
+            curves = sub.curves
+            for mine, theirs in ((origin, sub.origin_mm), (e1, sub.e1), (e2, sub.e2),
+                                 (normal, sub.normal), (ph_s, sub.ph_s), (ph_x, sub.ph_x),
+                                 (ph_y, sub.ph_y), (ph_sigma, sub.ph_sigma)):  # fmt: skip
+                if mine.flags.writeable:
+                    mine[:, rows_obj] = theirs
+            for mine, theirs in ((radius, sub.radius_mm), (angle, sub.angle_rad),
+                                 (helix, sub.helix_mm), (s_a, sub.s_a_mm),
+                                 (curve_id, sub.curve_id)):  # fmt: skip
+                if mine.flags.writeable:
+                    mine[rows_obj] = theirs
+        arrays = (code, origin, e1, e2, normal, radius, angle, helix, ph_s, ph_sigma, ph_x,
+                  ph_y, s_a, curve_id)  # fmt: skip
+        for a in arrays:
+            if a.flags.writeable:
+                a.setflags(write=False)
+        return PieceTable(code, self.length_mm, s_a, curve_id, curves, self.line,
+                          self.start_mm, self.end_mm, origin, e1, e2, normal, radius, angle,
+                          helix, ph_s, ph_sigma, ph_x, ph_y)  # fmt: skip
+
+    @classmethod
+    def from_pieces(cls, pieces) -> PieceList:
+        """Columns of a list of :class:`Piece` objects (every row keeps its geometry)."""
+        pieces = list(pieces)
+        k = len(pieces)
+        cols = _empty_columns(k)
+        objects = {}
+        for i, p in enumerate(pieces):
+            cols["kind"][i] = _KIND_INDEX[p.kind]
+            for name in _SCALARS[1:]:
+                cols[name][i] = getattr(p, name)
+            objects[i] = (p.geometry, p.u_a, p.u_b, p.s_a_mm)
+        ends = _object_ends(pieces)
+        for name, arr in zip(_VECTORS, ends):
+            cols[name][:] = arr.T
+        return cls(**cols, objects=objects)
+
+
+#: Rows per chunk of the vectorised PH work (bounds the temporaries).
+_CHUNK = 1 << 16
+
+_SCALARS = ("kind", "length_mm", "v_cap_mm_s", "segment", "line", "kappa_max_per_mm",
+            "dwell_after_s", "blend_mm")  # fmt: skip
+_DTYPES = {"kind": np.int8, "segment": np.int64, "line": np.int64}
+
+
+def _empty_columns(k: int) -> dict:
+    cols = {name: np.zeros(k, dtype=_DTYPES.get(name, float)) for name in _SCALARS}
+    for name in _VECTORS:
+        cols[name] = np.zeros((3, k))
+    return cols
+
+
+def _unit_rows(d: np.ndarray) -> np.ndarray:
+    """Rows of ``d`` (m, 3) scaled to unit length (zero rows stay zero)."""
+    n = np.sqrt(np.einsum("ij,ij->i", d, d))
+    return d / np.where(n > 0.0, n, 1.0)[:, None]
+
+
+def _object_ends(pieces) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Start and end points (m, 3) [mm] and unit tangents (m, 3) of pieces with their own
+    geometry; the NURBS cells of one curve in one evaluation."""
+    m = len(pieces)
+    out = [np.zeros((m, 3)) for _ in range(4)]
+    by_curve: dict[int, list[int]] = {}
+    for i, p in enumerate(pieces):
+        g = p.geometry
+        if p.kind == "nurbs":
+            by_curve.setdefault(id(g), []).append(i)
+            continue
+        if p.kind == "ph":
+            d = g.derivatives_mm(np.array([0.0, 1.0]), 1)
+        else:  # line, rapid, arc
+            d = g.derivatives(np.array([p.u_a, p.u_b]), 1)
+        out[0][i], out[1][i] = d[0][0], d[0][1]
+        out[2][i], out[3][i] = d[1][0], d[1][1]
+    for rows in by_curve.values():
+        g = pieces[rows[0]].geometry
+        u = np.array([pieces[i].u_a for i in rows] + [pieces[i].u_b for i in rows])
+        d = g.derivatives(u, 1)
+        n = len(rows)
+        out[0][rows], out[1][rows] = d[0][:n], d[0][n:]
+        out[2][rows], out[3][rows] = d[1][:n], d[1][n:]
+    out[2], out[3] = _unit_rows(out[2]), _unit_rows(out[3])
+    return out[0], out[1], out[2], out[3]
+
+
+_SEG_CODE = {"line": K_LINE, "rapid": K_RAPID, "arc": K_ARC, "nurbs": K_NURBS, "dwell": -1}
+
+
+def _object_pieces(seg, index: int, machine: Machine, options: PlanOptions) -> list[Piece]:
+    """The pieces of an arc or NURBS segment (Piece objects; none for a zero-length arc)."""
+    if seg.kind == "nurbs":
+        try:
+            return nurbs_pieces(seg, index, machine, options)
+        except NurbsCncError as exc:
+            raise exc.with_pos(SourcePos(seg.line)) from None
+    geom = geometry_of(seg)
+    length = float(geom.length_mm)
+    if length <= 0.0:
+        return []
+    # Constant curvature (helix: r / (r² + c²)).
+    kappa = float(np.max(geom.curvature(np.array([geom.u_start, geom.u_end]))))
+    cap = float(_curvature_cap(machine, kappa, seg.feed_mm_s))
+    return [Piece("arc", geom, length, max(cap, 1e-6), index, seg.line, geom.u_start,
+                  geom.u_end, 0.0, kappa, blend_mm=blend_override(seg, options))]  # fmt: skip
+
+
+def segment_pieces(segments, machine: Machine, options: PlanOptions | None = None) -> PieceList:
+    """All pieces of a program, in order, as a :class:`PieceList`; corners under G64 P
+    blended (:func:`apply_blends`).
+
+    Lines and rapids are gathered into columns in one pass (no object per line); arcs and
+    NURBS blocks become pieces one segment at a time. Dwells become ``dwell_after_s`` of the
+    piece before (or of a zero-length marker when the program starts with a dwell); a rapid
+    followed by a feed move waits :func:`settle_time_s` (in-position check, as G61: a
+    rapid's stop overshoot never shows up as contour error).
+    """
     options = options or PlanOptions()
     lim = machine.limits
-    pieces: list[Piece] = []
-    pending_dwell = 0.0
-    for index, seg in enumerate(segments):
-        kind = seg.kind
-        if kind == "dwell":
-            if pieces:
-                last = pieces[-1]
-                pieces[-1] = _with_dwell(last, last.dwell_after_s + seg.seconds)
-            else:
-                pending_dwell += seg.seconds
+    segs = segments if isinstance(segments, list | tuple) else list(segments)
+    n = len(segs)
+    code = np.fromiter((_SEG_CODE[s.kind] for s in segs), dtype=np.int8, count=n)
+    seg_line = np.flatnonzero((code == K_LINE) | (code == K_RAPID))
+    lsegs = [segs[i] for i in seg_line.tolist()]
+    m = len(lsegs)
+    p0 = np.array([s.start_mm for s in lsegs], dtype=float).reshape(m, 3)
+    p1 = np.array([s.end_mm for s in lsegs], dtype=float).reshape(m, 3)
+    diff = p1 - p0
+    l_len = np.sqrt(np.einsum("ij,ij->i", diff, diff))
+    l_rapid = code[seg_line] == K_RAPID
+    l_feed = np.fromiter((s.feed_mm_s for s in lsegs), dtype=float, count=m)
+    l_cap = np.maximum(np.where(l_rapid, lim.rapid_mm_s, np.minimum(l_feed, lim.v_max_mm_s)),
+                       1e-6)  # fmt: skip
+    if options.blend_tolerance_mm is not None:
+        l_blend = np.full(m, float(options.blend_tolerance_mm))
+    else:
+        l_blend = np.fromiter((getattr(s, "blend_mm", 0.0) for s in lsegs), dtype=float, count=m)
+    l_keep = l_len > 0.0
+
+    counts = np.zeros(n, dtype=np.int64)
+    counts[seg_line] = l_keep
+    obj_pieces: dict[int, list[Piece]] = {}
+    for i in np.flatnonzero((code == K_ARC) | (code == K_NURBS)).tolist():
+        obj_pieces[i] = _object_pieces(segs[i], i, machine, options)
+        counts[i] = len(obj_pieces[i])
+    first_row = np.cumsum(counts) - counts
+    k = int(counts.sum())
+    cols = _empty_columns(k)
+
+    rows = first_row[seg_line[l_keep]]
+    sel = l_keep
+    cols["kind"][rows] = np.where(l_rapid[sel], K_RAPID, K_LINE)
+    cols["length_mm"][rows] = l_len[sel]
+    cols["v_cap_mm_s"][rows] = l_cap[sel]
+    cols["segment"][rows] = seg_line[sel]
+    cols["line"][rows] = np.fromiter((s.line for s in lsegs), dtype=np.int64, count=m)[sel]
+    cols["blend_mm"][rows] = l_blend[sel]
+    cols["start_mm"][:, rows] = p0[sel].T
+    cols["end_mm"][:, rows] = p1[sel].T
+    direction = diff[sel] / l_len[sel][:, None]
+    cols["tangent_start"][:, rows] = direction.T
+    cols["tangent_end"][:, rows] = direction.T
+    del p0, p1, diff, direction
+
+    objects = {}
+    for i, pieces in obj_pieces.items():
+        if not pieces:
             continue
-        if kind == "nurbs":
-            try:
-                new = nurbs_pieces(seg, index, machine, options)
-            except NurbsCncError as exc:
-                raise exc.with_pos(SourcePos(seg.line)) from None
+        r0 = int(first_row[i])
+        for j, p in enumerate(pieces):
+            r = r0 + j
+            cols["kind"][r] = _KIND_INDEX[p.kind]
+            for name in _SCALARS[1:]:
+                cols[name][r] = getattr(p, name)
+            objects[r] = (p.geometry, p.u_a, p.u_b, p.s_a_mm)
+        ends = _object_ends(pieces)
+        for name, arr in zip(_VECTORS, ends):
+            cols[name][:, r0 : r0 + len(pieces)] = arr.T
+
+    pending = 0.0
+    for i in np.flatnonzero(code == -1).tolist():
+        r = int(first_row[i]) - 1  # the last piece before the dwell
+        if r >= 0:
+            cols["dwell_after_s"][r] += segs[i].seconds
         else:
-            geom = geometry_of(seg)
-            length = float(geom.length_mm)
-            if length <= 0.0:
-                continue
-            if kind == "rapid":
-                cap = lim.rapid_mm_s
-                kappa = 0.0
-            elif kind == "line":
-                cap = min(seg.feed_mm_s, lim.v_max_mm_s)
-                kappa = 0.0
-            else:  # arc: constant curvature (helix: r / (r² + c²))
-                kappa = float(np.max(geom.curvature(np.array([geom.u_start, geom.u_end]))))
-                cap = float(_curvature_cap(machine, kappa, seg.feed_mm_s))
-            new = [Piece(kind, geom, length, max(cap, 1e-6), index, seg.line,
-                         geom.u_start, geom.u_end, 0.0, kappa,
-                         blend_mm=blend_override(seg, options))]  # fmt: skip
-        if new and pending_dwell and not pieces:
-            pieces.append(Piece("line", geometry_of_point(new[0]), 0.0, 1.0, index, seg.line,
-                                dwell_after_s=pending_dwell))  # fmt: skip
-            pending_dwell = 0.0
-        if new and pieces and pieces[-1].kind == "rapid" and new[0].kind != "rapid":
-            # In-position check (as G61): wait for the servo to settle after a rapid before
-            # cutting, so a rapid's stop overshoot never shows up as contour error.
-            pieces[-1] = _with_dwell(pieces[-1], pieces[-1].dwell_after_s + settle_time_s(machine))
-        pieces.extend(new)
-    return apply_blends(pieces, machine)
+            pending += segs[i].seconds
+    if k and pending:  # a zero-length marker at the first piece's start carries it
+        first = {name: cols[name][..., :1].copy() for name in cols}
+        first["kind"][0] = K_LINE
+        first["length_mm"][0] = 0.0
+        first["v_cap_mm_s"][0] = 1.0
+        first["kappa_max_per_mm"][0] = 0.0
+        first["dwell_after_s"][0] = pending
+        first["blend_mm"][0] = 0.0
+        first["end_mm"][:] = first["start_mm"]
+        first["tangent_start"][:] = 0.0
+        first["tangent_end"][:] = 0.0
+        cols = {name: np.concatenate((first[name], cols[name]), axis=-1) for name in cols}
+        objects = {r + 1: v for r, v in objects.items()}
+        k += 1
+    kind = cols["kind"]
+    settle = np.flatnonzero((kind[:-1] == K_RAPID) & (kind[1:] != K_RAPID))
+    if settle.size:
+        cols["dwell_after_s"][settle] += settle_time_s(machine)
+    return apply_blends(PieceList(**cols, objects=objects), machine)
 
 
 def blend_override(seg, options: PlanOptions) -> float:
@@ -252,10 +555,6 @@ def blend_override(seg, options: PlanOptions) -> float:
 def sub_geometry(piece: Piece, s0_mm: float, s1_mm: float):
     """The geometry of ``piece`` between arc lengths s0 and s1 [mm] from its start (lines and
     arcs: a new LineGeometry / ArcGeometry, exact)."""
-    from dataclasses import replace as dc_replace
-
-    from nurbscnc.geometry.paths import ArcGeometry, LineGeometry
-
     g = piece.geometry
     if isinstance(g, LineGeometry):
         p = g.point(np.array([s0_mm, s1_mm]))
@@ -278,76 +577,201 @@ def sub_geometry(piece: Piece, s0_mm: float, s1_mm: float):
     )
 
 
-def apply_blends(pieces: list[Piece], machine: Machine) -> list[Piece]:
+def apply_blends(pieces: PieceList, machine: Machine) -> PieceList:
     """Replace corners between line/arc pieces under G64 P by PH quintic blends (issue 7).
 
     A corner is blended when both pieces are feed lines or arcs with a blend tolerance > 0
-    (the smaller of the two is used), no dwell lies between them and their tangents turn;
-    the blend may trim at most half of each piece, so blends never overlap. The blend piece
-    is capped by its peak curvature like any curved piece (chord error, normal acceleration).
+    (the smaller of the two is used), no dwell lies between them, their tangents turn, and
+    the blend pays (:func:`blend_pays`); the blend may trim at most half of each piece, so
+    blends never overlap. Line–line corners are built all at once in closed form
+    (:func:`~nurbscnc.plan.blend.line_corner_blends`, the blends :func:`blend_corner` gives
+    them); corners with an arc one at a time by :func:`blend_corner`. The blend piece is
+    capped by its peak curvature like any curved piece (chord error, normal acceleration).
+    A piece trimmed at both ends to less than :data:`MIN_REMAINDER_MM` is dropped; the
+    blends' end tangents are the pieces' own (not recomputed from trimmed end points), so
+    the junctions of a blended polyline are exactly smooth.
     """
-    from dataclasses import replace as dc_replace
-
-    from nurbscnc.plan.blend import blend_corner
+    from nurbscnc.plan.blend import blend_corner, line_corner_blends
 
     k = len(pieces)
-    blends: dict[int, object] = {}
-    for i in range(1, k):
-        a, b = pieces[i - 1], pieces[i]
-        if a.kind not in ("line", "arc") or b.kind not in ("line", "arc"):
-            continue
-        tol = min(a.blend_mm, b.blend_mm)
-        if tol <= 0.0 or a.dwell_after_s > 0.0:
-            continue
-        blend = blend_corner(a.geometry, b.geometry, tol, 0.5 * a.length_mm, 0.5 * b.length_mm,
-                             measure=False)  # fmt: skip
-        if blend is not None and _blend_pays(a, b, blend, machine):
-            blends[i] = blend
-    if not blends:
+    if k < 2:
         return pieces
-    out: list[Piece] = []
-    for i, p in enumerate(pieces):
-        trim_start = blends[i].trim_b_mm if i in blends else 0.0
-        trim_end = blends[i + 1].trim_a_mm if i + 1 in blends else 0.0
-        if i in blends:
-            bl = blends[i]
-            feed = min(pieces[i - 1].v_cap_mm_s, p.v_cap_mm_s)
-            cap = float(_curvature_cap(machine, bl.kappa_max_per_mm, feed))
-            out.append(Piece("ph", bl.ph, float(bl.ph.length_mm), max(cap, MIN_CAP_MM_S),
-                             p.segment, p.line, 0.0, 1.0, 0.0, bl.kappa_max_per_mm))  # fmt: skip
-        if trim_start or trim_end:
-            length = p.length_mm - trim_start - trim_end
-            if length <= 1e-9:
-                continue  # the two blends met in the middle of this piece
-            geom = sub_geometry(p, trim_start, p.length_mm - trim_end)
-            p = dc_replace(p, geometry=geom, length_mm=float(geom.length_mm),
-                           u_a=0.0, u_b=float(geom.u_end))  # fmt: skip
-        out.append(p)
-    return out
+    kind, length = pieces.kind, pieces.length_mm
+    cut = (kind == K_LINE) | (kind == K_ARC)
+    tol = np.minimum(pieces.blend_mm[:-1], pieces.blend_mm[1:])
+    no_dwell = pieces.dwell_after_s[:-1] == 0.0
+    corner = np.flatnonzero(cut[:-1] & cut[1:] & (tol > 0.0) & no_dwell) + 1
+    if corner.size == 0:
+        return pieces
+    vertex = pieces.end_mm[:, corner - 1]
+    gap = np.sqrt(np.sum((vertex - pieces.start_mm[:, corner]) ** 2, axis=0))
+    scale = np.maximum(1.0, np.abs(vertex).max(axis=0))
+    if np.any(gap > 1e-6 * scale):
+        i = int(corner[np.argmax(gap > 1e-6 * scale)])
+        raise GeometryError(f"blend_corner: the geometries do not meet (gap "
+                            f"{gap.max():.3g} mm)", SourcePos(int(pieces.line[i])))  # fmt: skip
+    m = corner.size
+    ok = np.zeros(m, dtype=bool)
+    trim = np.zeros(m)
+    kappa = np.zeros(m)
+    ph_len = np.zeros(m)
+    both_lines = (kind[corner - 1] == K_LINE) & (kind[corner] == K_LINE)
+    half = 0.5 * np.minimum(length[corner - 1], length[corner])
+
+    ll = np.flatnonzero(both_lines)
+    lb = line_corner_blends(vertex[:, ll].T, pieces.tangent_end[:, corner[ll] - 1].T,
+                            pieces.tangent_start[:, corner[ll]].T, tol[corner[ll] - 1],
+                            half[ll])  # fmt: skip
+    ok[ll], trim[ll], kappa[ll] = lb.ok, lb.trim_mm, lb.kappa_max_per_mm
+    for lo in range(0, ll.size, _CHUNK):
+        sl = slice(lo, lo + _CHUNK)
+        ph_len[ll[sl]] = ph_tables(lb.w[sl], lb.p0[sl])[3]
+    arc_blends = {}
+    for j in np.flatnonzero(~both_lines).tolist():
+        i = int(corner[j])
+        a, b = pieces[i - 1], pieces[i]
+        bl = blend_corner(a.geometry, b.geometry, float(tol[i - 1]), 0.5 * a.length_mm,
+                          0.5 * b.length_mm, measure=False)  # fmt: skip
+        if bl is not None:
+            arc_blends[j] = bl
+            ok[j], trim[j], kappa[j], ph_len[j] = True, bl.trim_a_mm, bl.kappa_max_per_mm, \
+                bl.ph.length_mm
+    cap_a, cap_b = pieces.v_cap_mm_s[corner - 1], pieces.v_cap_mm_s[corner]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t_ok = np.where(ok, trim, 0.0)
+        ok &= blend_pays(cap_a, cap_b, np.where(ok, kappa, 0.0), t_ok, t_ok,
+                         np.where(ok, ph_len, 0.0), machine)  # fmt: skip
+    if not ok.any():
+        return pieces
+
+    # Which rows survive, and where everything goes.
+    has_blend = np.zeros(k, dtype=bool)
+    has_blend[corner[ok]] = True
+    trim_start = np.zeros(k)
+    trim_end = np.zeros(k)
+    trim_start[corner[ok]] = trim[ok]
+    trim_end[corner[ok] - 1] = trim[ok]
+    trimmed = (trim_start > 0.0) | (trim_end > 0.0)
+    remainder = length - trim_start - trim_end
+    keep = ~trimmed | (remainder >= MIN_REMAINDER_MM)
+    count = has_blend.astype(np.int64) + keep
+    first = np.cumsum(count) - count
+    new_row = first + has_blend  # new row of each kept piece
+    total = int(count.sum())
+    cols = _empty_columns(total)
+    kept = np.flatnonzero(keep)
+    dest = new_row[kept]
+    for name in _SCALARS:
+        cols[name][dest] = getattr(pieces, name)[kept]
+    for name in _VECTORS:
+        cols[name][:, dest] = getattr(pieces, name)[:, kept]
+    objects = {int(new_row[r]): v for r, v in pieces.objects.items() if keep[r]}
+
+    # Trimmed lines: the sub-segment, end points as LineGeometry.point gives them.
+    tl = np.flatnonzero(trimmed & keep & (kind == K_LINE))
+    if tl.size:
+        p, q = pieces.start_mm[:, tl], pieces.end_mm[:, tl]
+        f0 = trim_start[tl] / length[tl]
+        f1 = (length[tl] - trim_end[tl]) / length[tl]
+        a_pt = p + f0 * (q - p)
+        b_pt = np.where(f1 == 1.0, q, p + f1 * (q - p))
+        dest = new_row[tl]
+        cols["start_mm"][:, dest] = a_pt
+        cols["end_mm"][:, dest] = b_pt
+        cols["length_mm"][dest] = np.sqrt(np.sum((b_pt - a_pt) ** 2, axis=0))
+    # Trimmed arcs: exact sub-arcs.
+    ta = np.flatnonzero(trimmed & keep & (kind == K_ARC)).tolist()
+    sub_pieces = []
+    for r in ta:
+        p = pieces[r]
+        geom = sub_geometry(p, float(trim_start[r]), p.length_mm - float(trim_end[r]))
+        sub_pieces.append(dc_replace(p, geometry=geom, length_mm=float(geom.length_mm),
+                                     u_a=0.0, u_b=float(geom.u_end)))  # fmt: skip
+    _put_objects(cols, objects, [int(new_row[r]) for r in ta], sub_pieces)
+
+    # The blends.
+    sel = ok & both_lines
+    ll_ok = ok[ll]
+    dest = first[corner[sel]]
+    src = corner[sel]
+    feed = np.minimum(cap_a[sel], cap_b[sel])
+    cols["kind"][dest] = K_PH
+    cols["length_mm"][dest] = ph_len[sel]
+    cols["v_cap_mm_s"][dest] = np.maximum(_curvature_cap(machine, kappa[sel], feed), MIN_CAP_MM_S)
+    cols["segment"][dest] = pieces.segment[src]
+    cols["line"][dest] = pieces.line[src]
+    cols["kappa_max_per_mm"][dest] = kappa[sel]
+    cols["tangent_start"][:, dest] = pieces.tangent_end[:, src - 1]
+    cols["tangent_end"][:, dest] = pieces.tangent_start[:, src]
+    w, p0 = lb.w[ll_ok], lb.p0[ll_ok]
+    frame = np.stack([lb.origin_mm[ll_ok], lb.e1[ll_ok], lb.e2[ll_ok]], axis=1)
+    p5 = p0 + (w[:, 0] * w[:, 0] + w[:, 0] * w[:, 2] / 3.0 + w[:, 2] * w[:, 2]) / 5.0
+    for name, z in (("start_mm", p0), ("end_mm", p5)):
+        cols[name][:, dest] = (frame[:, 0] + z.real[:, None] * frame[:, 1]
+                               + z.imag[:, None] * frame[:, 2]).T  # fmt: skip
+    arc_rows, arc_pieces = [], []
+    for j, bl in arc_blends.items():
+        if not ok[j]:
+            continue
+        i = int(corner[j])
+        feed = min(float(cap_a[j]), float(cap_b[j]))
+        cap = max(float(_curvature_cap(machine, bl.kappa_max_per_mm, feed)), MIN_CAP_MM_S)
+        arc_rows.append(int(first[i]))
+        arc_pieces.append(Piece("ph", bl.ph, float(bl.ph.length_mm), cap,
+                                int(pieces.segment[i]), int(pieces.line[i]), 0.0, 1.0, 0.0,
+                                bl.kappa_max_per_mm))  # fmt: skip
+    _put_objects(cols, objects, arc_rows, arc_pieces)
+
+    # Columnar PH rows: the old ones (moved) and the new line–line blends, in row order.
+    ph_rows = np.concatenate((new_row[pieces.ph_rows], dest))
+    order = np.argsort(ph_rows, kind="stable")
+    return PieceList(**cols, ph_rows=ph_rows[order],
+                     ph_w=np.concatenate((pieces.ph_w, w))[order],
+                     ph_p0=np.concatenate((pieces.ph_p0, p0))[order],
+                     ph_frame=np.concatenate((pieces.ph_frame, frame))[order],
+                     objects=objects)  # fmt: skip
 
 
-def _blend_pays(a: Piece, b: Piece, blend, machine: Machine) -> bool:
-    """Is passing the corner on the blend faster than stopping exactly at it?
+def _put_objects(cols: dict, objects: dict, rows: list[int], new: list[Piece]) -> None:
+    """Write Piece objects ``new`` into the columns at ``rows`` (geometry kept as object)."""
+    if not new:
+        return
+    for r, p in zip(rows, new):
+        cols["kind"][r] = _KIND_INDEX[p.kind]
+        for name in _SCALARS[1:]:
+            cols[name][r] = getattr(p, name)
+        objects[r] = (p.geometry, p.u_a, p.u_b, p.s_a_mm)
+    ends = _object_ends(new)
+    for name, arr in zip(_VECTORS, ends):
+        cols[name][:, rows] = arr.T
+
+
+def blend_pays(cap_a_mm_s, cap_b_mm_s, kappa_max_per_mm, trim_a_mm, trim_b_mm,
+               blend_length_mm, machine: Machine) -> np.ndarray:  # fmt: skip
+    """Is passing each corner on its blend faster than stopping exactly at it? (arrays)
 
     A blend's feed is capped by its peak curvature (√(A/κ), V_af); with a tight tolerance that
     cap is low, and slowing to it, crossing the blend and speeding up again can take longer
     than an exact stop. Compare both over the same stretch of the original path, with the
-    S-curve closed forms (SPEC §7) from the neighbours' cruise feed v.
+    S-curve closed forms (SPEC §7) from the neighbours' cruise feed v = min(caps):
+    stop: 2 D(v → 0) in 2 T(v → 0); blend: 2 D(v → v_b) + the two trims, in
+    2 T(v → v_b) + L_blend / v_b; the shorter of the two is topped up at v.
     """
     from nurbscnc.plan.feedrate import scurve_distance_mm, scurve_duration_s
 
     lim = machine.limits
-    v = min(a.v_cap_mm_s, b.v_cap_mm_s)
-    vb = min(float(_curvature_cap(machine, blend.kappa_max_per_mm, v)), v)
+    v = np.minimum(np.asarray(cap_a_mm_s, dtype=float), np.asarray(cap_b_mm_s, dtype=float))
+    vb = np.minimum(_curvature_cap(machine, kappa_max_per_mm, v), v)
+    vb = np.maximum(vb, MIN_CAP_MM_S)
     a_max, j_max = lim.a_max_mm_s2, lim.j_max_mm_s3
-    d_stop = 2.0 * float(scurve_distance_mm(v, 0.0, a_max, j_max))
-    t_stop = 2.0 * float(scurve_duration_s(v, 0.0, a_max, j_max))
-    d_slow = 2.0 * float(scurve_distance_mm(v, vb, a_max, j_max))
-    t_slow = 2.0 * float(scurve_duration_s(v, vb, a_max, j_max))
+    d_stop = 2.0 * scurve_distance_mm(v, np.zeros_like(v), a_max, j_max)
+    t_stop = 2.0 * scurve_duration_s(v, np.zeros_like(v), a_max, j_max)
+    d_slow = 2.0 * scurve_distance_mm(v, vb, a_max, j_max)
+    t_slow = 2.0 * scurve_duration_s(v, vb, a_max, j_max)
     # Original path covered: the slow-down/speed-up stretches plus the trimmed corner.
-    d_blend = d_slow + blend.trim_a_mm + blend.trim_b_mm
-    t_blend = t_slow + float(blend.ph.length_mm) / vb
-    span = max(d_stop, d_blend)
+    d_blend = d_slow + trim_a_mm + trim_b_mm
+    t_blend = t_slow + blend_length_mm / vb
+    span = np.maximum(d_stop, d_blend)
     return t_blend + (span - d_blend) / v < t_stop + (span - d_stop) / v
 
 
@@ -361,33 +785,26 @@ def settle_time_s(machine: Machine) -> float:
     return 5.0 / slowest
 
 
-def geometry_of_point(piece: Piece):
-    """A zero-length line at the start of ``piece`` (carries a leading dwell)."""
-    from nurbscnc.geometry.paths import LineGeometry
+def junction_caps(pieces: PieceList) -> np.ndarray:
+    """Cap at each junction [mm/s] (k+1): 0 at the ends, at tangent discontinuities (turning
+    > :data:`SMOOTH_JUNCTION_RAD`, or a zero tangent: a cusp), at zero-length pieces, around
+    dwells and where rapids meet feed moves; else the smaller neighbouring cruise cap.
 
-    p = piece.points_mm(np.array([0.0]))[0]
-    return LineGeometry(p, p)
-
-
-def _with_dwell(piece: Piece, seconds: float) -> Piece:
-    from dataclasses import replace
-
-    return replace(piece, dwell_after_s=seconds)
-
-
-def junction_caps(pieces: list[Piece]) -> np.ndarray:
-    """Cap at each junction [mm/s] (k+1): 0 at the ends, at tangent discontinuities, around
-    dwells and where rapids meet feed moves; else the smaller neighbouring cruise cap."""
+    One vectorised pass over the cached unit tangents; the turning is
+    atan2(|t_a × t_b|, t_a · t_b), accurate for small angles (arccos of the dot is not).
+    """
     k = len(pieces)
     caps = np.zeros(k + 1)
-    for i in range(1, k):
-        a, b = pieces[i - 1], pieces[i]
-        if a.dwell_after_s > 0.0 or (a.kind == "rapid") != (b.kind == "rapid"):
-            continue
-        if a.length_mm == 0.0 or b.length_mm == 0.0:
-            continue
-        ta, tb = a.tangent_end(), b.tangent_start()
-        angle = float(np.arccos(np.clip(np.dot(ta, tb), -1.0, 1.0)))
-        if angle <= SMOOTH_JUNCTION_RAD:
-            caps[i] = min(a.v_cap_mm_s, b.v_cap_mm_s)
+    if k < 2:
+        return caps
+    ta, tb = pieces.tangent_end[:, :-1], pieces.tangent_start[:, 1:]
+    cross = np.cross(ta, tb, axis=0)
+    turning = np.arctan2(np.sqrt(np.sum(cross * cross, axis=0)), np.sum(ta * tb, axis=0))
+    regular = (np.sum(ta * ta, axis=0) > 0.0) & (np.sum(tb * tb, axis=0) > 0.0)
+    rapid = pieces.kind == K_RAPID
+    length = pieces.length_mm
+    smooth = (regular & (turning <= SMOOTH_JUNCTION_RAD) & (pieces.dwell_after_s[:-1] == 0.0)
+              & (rapid[:-1] == rapid[1:]) & (length[:-1] != 0.0) & (length[1:] != 0.0))  # fmt: skip
+    cap = pieces.v_cap_mm_s
+    caps[1:-1] = np.where(smooth, np.minimum(cap[:-1], cap[1:]), 0.0)
     return caps
