@@ -324,10 +324,14 @@ def test_kernel_matches_definition_and_quadrature(steps, caps, stops, a):
     assert dt.sum() == pytest.approx(brute_time(s, path_cap2, cap2, a), rel=1e-8, abs=1e-15)
 
 
-def test_zero_cap_over_a_stretch_is_an_error():
-    # A circle of radius 0.4 µm < δ/2: no chord fits, V_af = 0 all along.
-    with pytest.raises(PlanningError, match="cap is zero"):
-        lower_bound_time_s([circle(0.4e-3)], V, **LIMITS)
+def test_tiny_circle_runs_at_the_normal_acceleration_limit():
+    # Radius 0.4 µm < δ: the chord error cannot exceed δ, so V_af is held at 2δ/T (never 0)
+    # and √(A R) ≈ 0.99 mm/s governs: rest to rest, t = L/v + v/A exactly.
+    r = 0.4e-3
+    lb = lower_bound_time_s([circle(r)], V, **LIMITS)
+    a = LIMITS["a_max_mm_s2"]
+    v = math.sqrt(a * r)
+    assert lb.time_s == pytest.approx(2 * math.pi * r / v + v / a, rel=1e-9)
 
 
 @pytest.mark.parametrize(

@@ -8,13 +8,11 @@ pulses from Python's round() on the points written here, not from the code under
 
 from __future__ import annotations
 
-import contextlib
 import json
 import os
 import signal
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
@@ -23,27 +21,13 @@ import pytest
 import serial
 from click.testing import CliRunner
 
-from nurbscnc.output.stream.card import CardConfig, CardSim, PtyEndpoint, TcpEndpoint, serve
+from nurbscnc.output.stream.card import CardConfig, PtyEndpoint
 from nurbscnc.output.stream.commands import card_sim, stream
+from tests.stream_helpers import card_on
 
 ROOT = Path(__file__).resolve().parents[1]
 GOOD = "G21 G90 G17\nG0 X0 Y0\nG1 X5 Y2 F3000\nG1 X8 Y0\nM2\n"  # ends at X8 Y0 → 8000 steps
 LATE_ERROR = "G21 G90 G17\nG0 X0 Y0\nG1 X5 Y2 F3000\nG1 X8 Y0\nG2 X10 Y0\nM2\n"  # line 5
-
-
-@contextlib.contextmanager
-def card_on(kind: str, config: CardConfig | None = None):
-    card = CardSim(config or CardConfig(speed=None), seed=1)
-    endpoint = PtyEndpoint() if kind == "pty" else TcpEndpoint("127.0.0.1", 0)
-    stop = threading.Event()
-    thread = threading.Thread(target=serve, args=(card, endpoint, stop), daemon=True)
-    thread.start()
-    try:
-        yield card, endpoint
-    finally:
-        stop.set()
-        thread.join(5.0)
-        endpoint.close()
 
 
 def run_stream(args):

@@ -17,9 +17,10 @@ import pytest
 import serial
 
 from nurbscnc.errors import EXIT_INTERRUPTED, StreamError
-from nurbscnc.output.stream.card import CardConfig, CardSim, Faults, PtyEndpoint, TcpEndpoint, serve
+from nurbscnc.output.stream.card import CardConfig, CardSim, Faults, PtyEndpoint, serve
 from nurbscnc.output.stream.quantise import quantise
 from nurbscnc.output.stream.sender import Sender, SenderOptions, StreamInterrupted, open_port
+from tests.stream_helpers import card_on
 
 STEPS = (1000.0, 1000.0, 1000.0)
 
@@ -29,22 +30,6 @@ def circle_program(periods: int):
     t = np.arange(periods + 1) * 1e-3
     pts = np.column_stack([10 * np.sin(np.pi * t), 10 * np.cos(np.pi * t) - 10, 0.01 * t])
     return quantise(pts, STEPS, 1e-3)
-
-
-@contextlib.contextmanager
-def card_on(kind: str, config: CardConfig, seed: int = 1):
-    """A card serving on a pty or a loopback TCP port in a thread; yields (card, port path)."""
-    card = CardSim(config, seed=seed)
-    endpoint = PtyEndpoint() if kind == "pty" else TcpEndpoint("127.0.0.1", 0)
-    stop = threading.Event()
-    thread = threading.Thread(target=serve, args=(card, endpoint, stop), daemon=True)
-    thread.start()
-    try:
-        yield card, endpoint
-    finally:
-        stop.set()
-        thread.join(5.0)
-        endpoint.close()
 
 
 def stream_to(endpoint, program, options=None, **kwargs):
