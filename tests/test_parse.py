@@ -222,3 +222,14 @@ def test_long_failing_lines_parse_in_linear_time(fast, line):
     except NurbsCncError:
         pass
     assert time.perf_counter() - t0 < 1.0
+
+
+def test_operator_keywords_do_not_swallow_the_next_word():
+    """Found by the grammar fuzzer: in "G0GEXISTS[...]" LALR state merging offered the
+    operator GE right after the number 0; operator keywords may not run into a letter."""
+    from nurbscnc.program.parse import parse_text
+
+    words = parse_text("G0GEXISTS[<a>]")[0].words
+    assert [w.letter for w in words] == ["G", "G"]
+    assert words[1].value == ("exists", "a")
+    assert parse_text("X[1GE2]")[0].words[0].value == ("op", "GE", 1.0, 2.0)
