@@ -96,7 +96,8 @@ def fit_region(curve, u_a: float, u_b: float, tolerance_um: float = 1.0, max_dep
     ``tolerance_um`` or whose max exceeds ``max_factor`` × ``tolerance_um`` (the paper's rule:
     3; the planner asks 1, so every reference point is within e of the programmed curve) is
     split at its parameter midpoint, recursively; a piece still failing after ``max_depth``
-    halvings raises :class:`PlanningError`. Without ``split`` one piece is returned whatever its deviation.
+    halvings raises :class:`PlanningError`. Without ``split`` one piece is returned whatever
+    its deviation.
     """
     if not tolerance_um > 0.0:
         raise ConfigError(f"PH fit tolerance must be positive, got {tolerance_um} µm")
