@@ -16,7 +16,13 @@ from scipy.spatial.transform import Rotation
 
 from nurbscnc.errors import GeometryError
 from nurbscnc.geometry.paths import ArcGeometry, LineGeometry
-from nurbscnc.plan.blend import blend_corner, line_deviation_per_trim
+from nurbscnc.geometry.ph import PHQuintic
+from nurbscnc.plan.blend import (
+    blend_corner,
+    line_corner_blends,
+    line_deviation_per_trim,
+    ph_tables,
+)
 
 # --- independent references ------------------------------------------------------------------
 
@@ -369,3 +375,148 @@ def test_bad_inputs_raise():
         blend_corner(a, b, float("nan"), 0.5, 0.5)
     with pytest.raises(GeometryError):
         blend_corner(a, LineGeometry((1, 0.1, 0), (1, 1, 0)), 0.01, 0.5, 0.5)
+
+
+# --- many line–line corners at once (CAM polylines) ------------------------------------------
+
+
+def _batch_ph(b, i: int) -> PHQuintic:
+    return PHQuintic(b.w[i], b.p0[i], b.origin_mm[i], b.e1[i], b.e2[i])
+
+
+class _B:  # what _hausdorff needs of a blend
+    def __init__(self, ph, trim_a, trim_b):
+        self.ph, self.trim_a_mm, self.trim_b_mm = ph, trim_a, trim_b
+
+
+def _random_corners(rng, m: int, planar_every: int = 2):
+    v = rng.normal(size=(m, 3)) * 10.0
+    ta, tb = rng.normal(size=(m, 3)), rng.normal(size=(m, 3))
+    ta[::planar_every, 2] = tb[::planar_every, 2] = 0.0  # every other corner in an XY plane
+    ta /= np.linalg.norm(ta, axis=1)[:, None]
+    tb /= np.linalg.norm(tb, axis=1)[:, None]
+    return v, ta, tb
+
+
+def test_batch_blends_equal_the_scalar_ones_on_equal_trims():
+    """With equal maximum trims the batch gives blend_corner's blends (unmeasured path, the
+    closed form the scalar search accepts at once): same trims, control points to 1e-12 mm,
+    deviation d · f(θ), peak curvature to the scalar's sampled maximum."""
+    rng = np.random.default_rng(7)
+    m = 60
+    v, ta, tb = _random_corners(rng, m)
+    lengths = np.exp(rng.uniform(np.log(0.02), np.log(5.0), size=(m, 2)))
+    tol = 10.0 ** rng.uniform(-4, -1, size=m)
+    half = 0.5 * lengths.min(axis=1)
+    b = line_corner_blends(v, ta, tb, tol, half)
+    for i in range(m):
+        ga = LineGeometry(v[i] - lengths[i, 0] * ta[i], v[i])
+        gb = LineGeometry(v[i], v[i] + lengths[i, 1] * tb[i])
+        ref = blend_corner(ga, gb, tol[i], half[i], half[i], measure=False)
+        assert (ref is None) == (not b.ok[i])
+        if ref is None:
+            continue
+        assert b.trim_a_mm[i] == b.trim_b_mm[i]
+        assert b.trim_a_mm[i] == pytest.approx(ref.trim_a_mm, rel=1e-12)
+        cp = _batch_ph(b, i).control_points_mm
+        assert np.abs(cp - ref.ph.control_points_mm).max() < 1e-12 * np.abs(v[i]).max()
+        assert b.deviation_mm[i] == pytest.approx(ref.deviation_mm, rel=1e-12)
+        assert b.kappa_max_per_mm[i] == pytest.approx(ref.kappa_max_per_mm, rel=1e-6)
+        assert b.turning_rad[i] == pytest.approx(np.radians(ref.turning_deg), rel=1e-12)
+
+
+def test_batch_peak_curvature_is_at_the_midpoint_in_closed_form():
+    """κ_max = 64 sin(θ/2) / (α² (1 + cos θ/2)²) at ξ = ½, against the curvature of the
+    Bézier control points sampled densely (an independent evaluation)."""
+    turning = np.radians([1.0, 10.0, 45.0, 90.0, 135.0, 170.0])
+    m = turning.size
+    ta = np.tile([1.0, 0.0, 0.0], (m, 1))
+    tb = np.column_stack([np.cos(turning), np.sin(turning), np.zeros(m)])
+    b = line_corner_blends(np.zeros((m, 3)), ta, tb, np.full(m, 0.05), np.full(m, 1.0))
+    xi = np.linspace(0.0, 1.0, 200_001)
+    for i in range(m):
+        k = np.abs(_curvature(_batch_ph(b, i).control_points_mm, xi))
+        assert int(np.argmax(k)) == 100_000
+        assert b.kappa_max_per_mm[i] == pytest.approx(k.max(), rel=1e-12)
+
+
+def test_batch_unequal_trims_stay_within_the_tolerance():
+    """A short line next to a long one: each side trimmed up to half its own line, no sliver
+    left. The blend starts and ends on the lines, tangent to them with zero curvature (G2),
+    its dense Hausdorff distance to the corner path is at most the reported deviation, which
+    is at most the tolerance, and its peak curvature is the dense maximum."""
+    rng = np.random.default_rng(11)
+    m = 40
+    v, ta, tb = _random_corners(rng, m)
+    la = np.exp(rng.uniform(np.log(0.005), np.log(0.5), m))
+    lb = np.exp(rng.uniform(np.log(0.5), np.log(5.0), m))
+    tol = 10.0 ** rng.uniform(-3, -1, size=m)
+    b = line_corner_blends(v, ta, tb, tol, 0.5 * la, 0.5 * lb)
+    xi = np.linspace(0.0, 1.0, 100_001)
+    unequal = 0
+    for i in np.flatnonzero(b.ok):
+        ph = _batch_ph(b, i)
+        da, db = b.trim_a_mm[i], b.trim_b_mm[i]
+        assert da <= 0.5 * la[i] and db <= 0.5 * lb[i]
+        unequal += da != db
+        cp = ph.control_points_mm
+        assert np.abs(cp[0] - (v[i] - da * ta[i])).max() < 1e-12 * max(1, np.abs(v[i]).max())
+        assert np.abs(cp[-1] - (v[i] + db * tb[i])).max() < 1e-12 * max(1, np.abs(v[i]).max())
+        d0, d1 = _bezier(cp, [0.0], 1)[0], _bezier(cp, [1.0], 1)[0]
+        # Control-point differences lose digits: ~ulp(|v|) over |p1 − p0| = |d0|/5.
+        tol_t = 50 * np.finfo(float).eps * max(1.0, np.abs(v[i]).max())
+        assert np.abs(d0 / np.linalg.norm(d0) - ta[i]).max() < tol_t / np.linalg.norm(d0)
+        assert np.abs(d1 / np.linalg.norm(d1) - tb[i]).max() < tol_t / np.linalg.norm(d1)
+        k = np.abs(_curvature(cp, xi))
+        assert max(k[0], k[-1]) < 1e-9 * k.max()
+        assert b.kappa_max_per_mm[i] == pytest.approx(k.max(), rel=1e-7)
+        ga = LineGeometry(v[i] - la[i] * ta[i], v[i])
+        gb = LineGeometry(v[i], v[i] + lb[i] * tb[i])
+        h = _hausdorff(_B(ph, da, db), ga, gb)
+        assert h <= b.deviation_mm[i] * (1 + 1e-9) <= tol[i] * (1 + 1e-9)
+    assert unequal > m // 2
+
+
+def test_batch_unequal_trims_fall_back_to_equal_ones_beyond_the_tolerance():
+    """θ = 0.3 rad, a line 0.1 × the tolerance trim long before a long one: the unequal blend
+    would leave the tolerance (its bound), so both sides get the short side's trim."""
+    th, tol = 0.3, 0.2
+    d_line = tol * (1 - 0.0025) / line_deviation_per_trim(th)
+    b = line_corner_blends(np.zeros((1, 3)), [[1.0, 0.0, 0.0]], [[np.cos(th), np.sin(th), 0]],
+                           [tol], [0.1 * d_line], [10 * d_line])  # fmt: skip
+    assert b.ok[0] and b.trim_a_mm[0] == b.trim_b_mm[0] == 0.1 * d_line
+    assert b.deviation_mm[0] == pytest.approx(0.1 * tol * (1 - 0.0025), rel=1e-12)
+
+
+def test_batch_rejects_what_the_scalar_rejects():
+    """Smooth (< 1e-6 rad) and reversed junctions, zero tolerance, degenerate trims."""
+    ta = np.tile([1.0, 0.0, 0.0], (5, 1))
+    tb = np.array([[1.0, 0, 0], [np.cos(5e-7), np.sin(5e-7), 0], [-1.0, 1e-9, 0],
+                   [0.0, 1.0, 0], [0.0, 1.0, 0]])  # fmt: skip
+    b = line_corner_blends(np.zeros((5, 3)), ta, tb, [0.01, 0.01, 0.01, 0.0, 0.01],
+                           [0.5, 0.5, 0.5, 0.5, 1e-10])  # fmt: skip
+    assert not b.ok.any()
+
+
+def test_batch_frames_keep_coordinate_planes_exact():
+    """Corners in the XY, ZX and YZ planes at an offset keep that coordinate exactly."""
+    vertex = np.array([[1.25, -3.5, 7.75]] * 3)
+    ta = np.array([[1.0, 0, 0], [0, 0, 1.0], [0, 1.0, 0]])
+    tb = np.array([[0.6, 0.8, 0], [0.8, 0, 0.6], [0, 0.6, 0.8]])
+    b = line_corner_blends(vertex, ta, tb, np.full(3, 0.05), np.full(3, 0.5))
+    for i, axis in enumerate((2, 1, 0)):
+        pts = _batch_ph(b, i).point_mm(np.linspace(0, 1, 101))
+        assert np.all(pts[:, axis] == vertex[i, axis])
+
+
+def test_ph_tables_match_the_ph_quintic():
+    rng = np.random.default_rng(3)
+    w = rng.normal(size=(50, 3)) + 1j * rng.normal(size=(50, 3))
+    p0 = rng.normal(size=50) + 1j * rng.normal(size=50)
+    pts, sigma, s, length = ph_tables(w, p0)
+    for i in range(50):
+        ph = PHQuintic(w[i], p0[i])
+        np.testing.assert_allclose(pts[i], ph.control_points, rtol=1e-15, atol=1e-15)
+        np.testing.assert_allclose(sigma[i], ph.sigma_coeffs, rtol=1e-15, atol=1e-15)
+        np.testing.assert_allclose(s[i], ph.s_coeffs, rtol=1e-15, atol=1e-15)
+        assert length[i] == pytest.approx(ph.length_mm, rel=1e-15)

@@ -517,18 +517,21 @@ def _kappa_max(k: np.ndarray) -> float:
 
 @dataclass(frozen=True, eq=False)
 class LineBlends:
-    """Symmetric PH quintic blends of m line–line corners, as arrays (one row a corner).
+    """PH quintic blends of m line–line corners, as arrays (one row a corner).
 
     ``ok`` (m,) where a blend exists (else the row's other values are meaningless);
-    ``trim_mm`` (m,) d, cut off both lines [mm]; ``w`` (m, 3) complex preimage (α e0, 0, α e2)
-    [√mm]; ``p0`` (m,) complex start point in plane coordinates [mm]; ``origin_mm`` (m, 3)
-    (the vertex), ``e1``, ``e2`` (m, 3) the plane frame; ``turning_rad`` (m,) θ;
-    ``deviation_mm`` (m,) d · :func:`line_deviation_per_trim` (θ) [mm]; ``kappa_max_per_mm``
-    (m,) the peak curvature 64 sin(θ/2) / (α² (1 + c)²) [1/mm] (at ξ = ½).
+    ``trim_a_mm``, ``trim_b_mm`` (m,) cut off the end of the first line and the start of the
+    second [mm]; ``w`` (m, 3) complex preimage (α e0, 0, β e2) [√mm]; ``p0`` (m,) complex
+    start point in plane coordinates [mm]; ``origin_mm`` (m, 3) (the vertex), ``e1``, ``e2``
+    (m, 3) the plane frame; ``turning_rad`` (m,) θ; ``deviation_mm`` (m,) the Hausdorff
+    distance to the corner path (symmetric trims: d · :func:`line_deviation_per_trim` (θ),
+    exact; unequal trims: |r(½) − V|, a bound from above); ``kappa_max_per_mm`` (m,) the
+    peak curvature [1/mm].
     """
 
     ok: np.ndarray
-    trim_mm: np.ndarray
+    trim_a_mm: np.ndarray
+    trim_b_mm: np.ndarray
     w: np.ndarray
     p0: np.ndarray
     origin_mm: np.ndarray
@@ -543,24 +546,66 @@ def _rows_dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.einsum("ij,ij->i", a, b)
 
 
-def line_corner_blends(vertex_mm, t_a, t_b, tolerance_mm, max_trim_mm) -> LineBlends:
-    """The blends :func:`blend_corner` gives line–line corners, for m corners at once.
+def _line_ab(x: np.ndarray, y: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(α, β) of the w1 = 0 quintic with chord x τ_a + y τ_b (:func:`_w_line`, vectorised)."""
+    k = 1.0 / (30.0 * c)
+    qa, qb, qc = 0.2 * x, k * (x - y), -0.2 * y
+    disc = np.sqrt(qb * qb - 4.0 * qa * qc)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        r = np.where(qb >= 0.0, (-2.0 * qc) / (qb + disc), (disc - qb) / (2.0 * qa))
+    alpha = np.sqrt(x / (0.2 + k * r))
+    return alpha, alpha * r
+
+
+def _kappa_peak(alpha, beta, c, s, iterations: int = 52) -> np.ndarray:
+    """max over ξ of κ = 4αβ s ξ(1 − ξ) / Q², Q = α²(1 − ξ)⁴ + β²ξ⁴ + 2αβc ξ²(1 − ξ)²
+    (the curvature of w = α e0 (1 − ξ)² + β e2 ξ²), by bisection on the derivative of
+    ln ξ + ln(1 − ξ) − 2 ln Q, which falls from +∞ to −∞ once (one maximum: checked on
+    wide random samples; the tests compare with dense sampling)."""
+    lo = np.zeros_like(alpha)
+    hi = np.ones_like(alpha)
+    a2, b2, ab = alpha * alpha, beta * beta, alpha * beta * c
+    for _ in range(iterations):
+        x = 0.5 * (lo + hi)
+        u = 1.0 - x
+        q = a2 * u**4 + b2 * x**4 + 2.0 * ab * x * x * u * u
+        dq = -4.0 * a2 * u**3 + 4.0 * b2 * x**3 + 4.0 * ab * x * u * (u - x)
+        rising = 1.0 / x - 1.0 / u - 2.0 * dq / q > 0.0
+        lo = np.where(rising, x, lo)
+        hi = np.where(rising, hi, x)
+    x = 0.5 * (lo + hi)
+    u = 1.0 - x
+    q = a2 * u**4 + b2 * x**4 + 2.0 * ab * x * x * u * u
+    return 4.0 * alpha * beta * s * x * u / (q * q)
+
+
+def line_corner_blends(vertex_mm, t_a, t_b, tolerance_mm, max_trim_a_mm,
+                       max_trim_b_mm=None) -> LineBlends:  # fmt: skip
+    """The blends of m line–line corners at once (the line path of CAM polylines).
 
     ``vertex_mm`` (m, 3) the corner points [mm]; ``t_a``, ``t_b`` (m, 3) the unit directions
     of the line ending and of the line starting there; ``tolerance_mm`` (m,) the blend
-    tolerance [mm]; ``max_trim_mm`` (m,) the largest trim allowed [mm] (the caller's rule:
-    the smaller of the two half lengths).
+    tolerance [mm]; ``max_trim_a_mm``, ``max_trim_b_mm`` (m,) the largest trims allowed on
+    each line [mm] (the caller's rule: half of each line; ``max_trim_b_mm`` None: the same as
+    a, i.e. the symmetric blends :func:`blend_corner` gives line–line corners, to rounding).
 
-    The closed form of the module doc, vectorised: with θ the turning, c = cos θ/2,
-    d = min(tol (1 − ½·SEARCH_WINDOW) / :func:`line_deviation_per_trim` (θ), max trim) — the
-    trim the scalar search accepts at its first evaluation — and cut points V − d t_a,
-    V + d t_b: x = y = d, so β = α with α² = 30cd / (6c + 1), w0 = α e0, w1 = 0, w2 = α e2
-    (e0 = √τ_a, e2 = ±√τ_b, Re(ē0 e2) = c > 0; τ the tangents in plane coordinates). The end
-    point is met in closed form: w0² + w0w2/3 + w2² = α² e0e2 (2c + ⅓) = 5 d (τ_a + τ_b).
-    The curvature is κ(ξ) = 4 s ξ(1 − ξ) / (α² f²) with f = (1 − ξ)⁴ + ξ⁴ + 2c ξ²(1 − ξ)²
-    (s = sin θ/2); with u = ξ(1 − ξ) ∈ [0, ¼], u/f² grows with u (its derivative has the sign
-    of 1 + 4u − 6(1 + c)u², positive on [0, ¼]), so the peak is at ξ = ½:
-    κ_max = 64 s / (α² (1 + c)²).
+    The trims: d = tol (1 − ½·SEARCH_WINDOW) / :func:`line_deviation_per_trim` (θ) — the
+    trim the scalar search accepts at its first evaluation — capped on each side by its
+    maximum: d_a = min(d, max_a), d_b = min(d, max_b). With cut points V − d_a t_a and
+    V + d_b t_b the chord is x τ_a + y τ_b (x = d_a, y = d_b) and the w1 = 0 quintic has
+    w0 = α e0, w2 = β e2 in closed form (module doc; e0 = √τ_a, e2 = ±√τ_b with
+    Re(ē0 e2) = c = cos θ/2 > 0; τ the tangents in plane coordinates). It is G2 with both
+    lines (κ = 0 at the ends) and convex. Equal trims give β = α, α² = 30cd / (6c + 1), and
+    the curvature κ(ξ) = 4 s ξ(1 − ξ) / (α² f²), f = (1 − ξ)⁴ + ξ⁴ + 2c ξ²(1 − ξ)²
+    (s = sin θ/2): with u = ξ(1 − ξ) ∈ [0, ¼], u/f² grows with u (its derivative has the
+    sign of 1 + 4u − 6(1 + c)u², positive on [0, ¼]), so the peak is at ξ = ½:
+    κ_max = 64 s / (α² (1 + c)²), and the deviation is exactly d · deviation per trim.
+    Unequal trims (one line shorter than 2d: no sliver of line is left between two blends,
+    so a polyline of short chords becomes a chain of blends): κ_max by bisection
+    (:func:`_kappa_peak`), and the deviation bounded by the distance from the vertex to
+    r(½) = p0 + (31/160) α² τ_a + (1/30) αβ e0e2 + (1/160) β² τ_b (the Hausdorff distance of
+    a convex blend is the vertex's distance to it, which is at most that); if the bound
+    exceeds the tolerance the row falls back to equal trims min(d_a, d_b).
 
     The plane: a corner in a coordinate plane (both tangents' components along its normal
     within 1e-12) gets that plane's axes (XY, ZX, YZ as :func:`plane_frame`), so the blend
@@ -573,7 +618,9 @@ def line_corner_blends(vertex_mm, t_a, t_b, tolerance_mm, max_trim_mm) -> LineBl
     tb = np.asarray(t_b, dtype=float).reshape(-1, 3)
     m = v.shape[0]
     tol = np.broadcast_to(np.asarray(tolerance_mm, dtype=float), (m,))
-    d_max = np.broadcast_to(np.asarray(max_trim_mm, dtype=float), (m,))
+    max_a = np.broadcast_to(np.asarray(max_trim_a_mm, dtype=float), (m,))
+    max_b = max_a if max_trim_b_mm is None else np.broadcast_to(
+        np.asarray(max_trim_b_mm, dtype=float), (m,))
     cross = np.cross(ta, tb)
     sin_t = np.sqrt(_rows_dot(cross, cross))
     turning = np.arctan2(sin_t, _rows_dot(ta, tb))
@@ -605,17 +652,35 @@ def line_corner_blends(vertex_mm, t_a, t_b, tolerance_mm, max_trim_mm) -> LineBl
         c = rel.real
         s = np.abs(rel.imag)
         ok &= (s >= 1e-12) & (c > 1e-12)
+        c = np.where(ok, c, 1.0)
         dpt = np.asarray(line_deviation_per_trim(turning))
         d_line = tol * (1.0 - 0.5 * SEARCH_WINDOW) / dpt
-        d = np.minimum(d_line, d_max)
-        ok &= (d_max > MIN_TRIM_MM) & (d > MIN_TRIM_MM)
-        alpha2 = 30.0 * c * d / (6.0 * c + 1.0)
-        alpha = np.sqrt(alpha2)
-        kappa = 64.0 * s / (alpha2 * (1.0 + c) ** 2)
+        da = np.minimum(d_line, max_a)
+        db = np.minimum(d_line, max_b)
+        ok &= (np.minimum(max_a, max_b) > MIN_TRIM_MM) & (np.minimum(da, db) > MIN_TRIM_MM)
+        da, db = np.where(ok, da, 1.0), np.where(ok, db, 1.0)
+        alpha, beta = _line_ab(da, db, c)
+        p0 = -da * tau_a
+        mid = (p0 + (31.0 / 160.0) * alpha * alpha * tau_a + (alpha * beta / 30.0) * e0 * e2c
+               + (1.0 / 160.0) * beta * beta * tau_b)  # fmt: skip
+        dev = np.where(da == db, da * dpt, np.abs(mid))
+        # Unequal trims beyond the tolerance: back to equal trims (exact closed form).
+        back = (da != db) & (dev > tol * (1.0 - 1e-6))
+        if back.any():
+            d = np.minimum(da, db)
+            da, db = np.where(back, d, da), np.where(back, d, db)
+            a_b, b_b = _line_ab(d[back], d[back], c[back])
+            alpha[back], beta[back] = a_b, b_b
+            p0 = -da * tau_a
+            dev = np.where(back, d * dpt, dev)
+        kappa = 64.0 * s / (alpha * alpha * (1.0 + c) ** 2)
+        uneq = np.flatnonzero(ok & (da != db))
+        if uneq.size:
+            kappa[uneq] = _kappa_peak(alpha[uneq], beta[uneq], c[uneq], s[uneq])
     w = np.zeros((m, 3), dtype=complex)
     w[:, 0] = alpha * e0
-    w[:, 2] = alpha * e2c
-    return LineBlends(ok, d, w, -d * tau_a, v, e1, e2, turning, d * dpt, kappa)
+    w[:, 2] = beta * e2c
+    return LineBlends(ok, da, db, w, p0, v, e1, e2, turning, dev, kappa)
 
 
 def ph_tables(w: np.ndarray, p0: np.ndarray):

@@ -4,18 +4,19 @@ Each axis's closed-loop model (machine profile) is driven by the planned referen
 a first-order hold; the contour error is measured both by eq. 29 (from the axis errors and the
 tangent angle, XY plane) and as the true distance from the actual point to the commanded path.
 
-Long programs (:func:`path_response`, what the planner uses). The true distance is measured
-against the path *near the reference point of the same servo period*, not against the whole
-path: the reference r_k lies on the path, so the nearest path point to the actual point a_k
-is within |e_k| = |r_k − a_k| of a_k, hence within 2|e_k| of r_k, and along the path within
-2|e_k| of r_k's arc length s_k unless the path folds back onto itself closer than that. The
-distance is therefore computed exactly (point to segment) to a dense polyline of the path
-restricted to s ∈ [s_k − 2|e_k|, s_k + 2|e_k|] (with the segments crossing its ends). Parts of the path
-that come back within 2|e_k| (≈ 30 µm) from far along it are not looked at: the check is
-about following the path locally, and the window keeps it linear in the program length (the
-global nearest-segment search of :func:`~nurbscnc.servo.contour_error_true` is kept for
-short paths and tools). The polyline is exact on lines (their end points) and has a chord
-error below :data:`CHORD_MM` on curved pieces; it is built one slab of samples at a time.
+Long programs (:func:`path_response`, what the planner uses). The true distance is first
+measured against the path *near the reference point of the same servo period*: the
+reference r_k lies on the path, so the nearest path point to the actual point a_k is within
+|e_k| = |r_k − a_k| of a_k, hence within 2|e_k| of r_k, and along the path within 2|e_k| of
+r_k's arc length s_k unless the path comes back to it from farther along. That distance is
+computed exactly (point to segment) to a dense polyline of the path restricted to
+s ∈ [s_k − 2|e_k|, s_k + 2|e_k|] (plus the segments crossing its ends): linear in the
+program length, built one slab of samples at a time. It is never below the true distance.
+The samples where it exceeds the limit (the few that decide the check) are then measured
+against the whole path (pieces near them found by a k-d tree), so the decision
+to slow down uses the true distance as the SPEC defines it — an overshoot past the end of a
+closed contour onto its own start is no error. The polyline is exact on lines (their end
+points) and has a chord error below :data:`CHORD_MM` on curved pieces.
 """
 
 from __future__ import annotations
@@ -119,12 +120,12 @@ def path_counts(pieces) -> np.ndarray:
     return np.where(straight | (pieces.length_mm == 0.0), 2, counts)
 
 
-def windowed_contour_mm(actual_mm: np.ndarray, reference_mm: np.ndarray, s_ref_mm: np.ndarray,
+def windowed_contour_mm(actual_mm: np.ndarray, lag_mm: np.ndarray, s_ref_mm: np.ndarray,
                         pieces, profile, table=None) -> np.ndarray:  # fmt: skip
     """True distance [mm] from each actual point to the path near its reference (module doc).
 
-    ``actual_mm``, ``reference_mm`` (M, 3); ``s_ref_mm`` (M,) the path length of each
-    reference point. Exact point-to-segment distances to the dense polyline of
+    ``actual_mm`` (M, 3); ``lag_mm`` (M,) |reference − actual| [mm]; ``s_ref_mm`` (M,) the
+    path length of each reference point. Exact point-to-segment distances to the dense polyline of
     :func:`path_counts`, from its last point before s − W to its first point after s + W,
     W = 2|r − a|.
     """
@@ -137,7 +138,7 @@ def windowed_contour_mm(actual_mm: np.ndarray, reference_mm: np.ndarray, s_ref_m
     lengths = pieces.length_mm
     total = profile.total_length_mm
     k = lengths.size
-    lag = np.sqrt(np.sum((reference_mm - actual_mm) ** 2, axis=1))
+    lag = lag_mm
     for lo in range(0, m, SLAB):
         sl = slice(lo, min(lo + SLAB, m))
         s = s_ref_mm[sl]
@@ -174,12 +175,157 @@ def windowed_contour_mm(actual_mm: np.ndarray, reference_mm: np.ndarray, s_ref_m
     return out
 
 
-def path_response(samples, pieces, profile, machine, table=None, hold: str = "foh") -> Response:
-    """Simulate every axis on the planned samples and measure the contour error by the
-    windowed true distance (module doc) — linear in the program length."""
-    actual, ref = _simulate(samples.points_mm, machine, hold)
-    axis_err = ref - actual
-    n = samples.s_mm.size
+def points_at_fraction(pieces, table, idx: np.ndarray, frac: np.ndarray) -> np.ndarray:
+    """Points (m, 3) [mm] at fraction ``frac`` (m,) ∈ [0, 1] of the *parameter* range of the
+    pieces ``idx`` (m,): no arc-length inversion (a polyline does not need its points evenly
+    spaced in length). Lines, circular arcs and PH pieces in closed form from ``table``;
+    spiral arcs and NURBS by their geometry objects, one call per piece or curve."""
+    from nurbscnc.interpolate import ARC, LINE, NURBS, PH, SPIRAL, _horner_rows
+
+    out = np.empty((idx.size, 3))
+    code = table.kind[idx]
+    sel = np.flatnonzero(code == LINE)
+    if sel.size:
+        i, f = idx[sel], frac[sel][:, None]
+        a, b = table.start_mm[:, i].T, table.end_mm[:, i].T
+        out[sel] = np.where(f == 1.0, b, a + f * (b - a))
+    sel = np.flatnonzero(code == ARC)
+    if sel.size:
+        i, t = idx[sel], frac[sel]
+        th = t * table.angle_rad[i]
+        r = table.radius_mm[i]
+        out[sel] = (table.origin_mm[:, i] + r * np.cos(th) * table.e1[:, i]
+                    + r * np.sin(th) * table.e2[:, i]
+                    + t * table.helix_mm[i] * table.normal[:, i]).T  # fmt: skip
+    sel = np.flatnonzero(code == PH)
+    if sel.size:
+        i, x = idx[sel], frac[sel] - 0.5
+        px, py = _horner_rows(table.ph_x, i, x), _horner_rows(table.ph_y, i, x)
+        out[sel] = (table.origin_mm[:, i] + px * table.e1[:, i] + py * table.e2[:, i]).T
+    for c in (SPIRAL, NURBS):
+        sel = np.flatnonzero(code == c)
+        for j in np.unique(idx[sel]).tolist():
+            rows = sel[idx[sel] == j]
+            geom, u_a, u_b, _ = pieces.objects[j]
+            out[rows] = geom.point(u_a + frac[rows] * (u_b - u_a))
+    return out
+
+
+class PathIndex:
+    """Where the pieces of a path are, for the few global distance queries of the check.
+
+    A piece of length L from A to B lies in the ball of radius L/2 about (A + B)/2 (every
+    point P of it has |P − A| + |P − B| ≤ L). Short pieces (L ≤ ``short_mm``) are found by a
+    k-d tree over those centres, long ones by testing their balls directly. Built on first
+    use and kept across the re-plans of one program (the geometry does not change).
+    """
+
+    def __init__(self, pieces, table=None, short_mm: float = 1.0):
+        self._args = (pieces, table)
+        self._short_mm = short_mm
+        self._built = None
+
+    def _build(self):
+        from scipy.spatial import cKDTree
+
+        pieces = self._args[0]
+        centre = 0.5 * (pieces.start_mm + pieces.end_mm).T
+        radius = 0.5 * pieces.length_mm
+        short = np.flatnonzero(pieces.length_mm <= self._short_mm)
+        long_ = np.flatnonzero(pieces.length_mm > self._short_mm)
+        tree = cKDTree(centre[short]) if short.size else None
+        r_short = float(radius[short].max()) if short.size else 0.0
+        self._built = (centre, radius, short, long_, tree, r_short)
+
+    def candidates(self, q: np.ndarray, upper_mm: np.ndarray) -> np.ndarray:
+        """Pieces that may hold a path point closer to some point of ``q`` (m, 3) than
+        ``upper_mm`` (m,) (sorted piece indices)."""
+        if self._built is None:
+            self._build()
+        centre, radius, short, long_, tree, r_short = self._built
+        found = []
+        if tree is not None:
+            for lst in tree.query_ball_point(q, upper_mm + r_short):
+                found.append(short[np.asarray(lst, dtype=np.int64)])
+        if long_.size:
+            gap = np.sqrt(((q[:, None, :] - centre[long_][None, :, :]) ** 2).sum(axis=2))
+            near = np.any(gap - radius[long_][None, :] <= upper_mm[:, None], axis=0)
+            found.append(long_[near])
+        return np.unique(np.concatenate(found)) if found else np.zeros(0, dtype=np.int64)
+
+    def distance_mm(self, q: np.ndarray, upper_mm: np.ndarray, block: int = 256) -> np.ndarray:
+        """Distance [mm] from each point of ``q`` (m, 3) to the whole path, for points whose
+        distance is known to be at most ``upper_mm`` (m,): exact to the polyline of
+        :func:`path_counts` on the candidate pieces, never above ``upper_mm``."""
+        pieces, table = self._args
+        table = table if table is not None else pieces.table()
+        counts = path_counts(pieces)
+        out = np.array(upper_mm, dtype=float)
+        # Blocks of consecutive points (in the caller's order: time) at most ``block`` long
+        # and broken where the points jump by more than 1 mm, so each block is compact.
+        jump = np.flatnonzero(np.sqrt(np.sum(np.diff(q, axis=0) ** 2, axis=1)) > 1.0) + 1
+        edges = np.union1d(np.union1d(jump, np.arange(0, q.shape[0], block)), [q.shape[0]])
+        for lo, hi in zip(edges[:-1].tolist(), edges[1:].tolist()):
+            sl = slice(lo, hi)
+            cand = self.candidates(q[sl], out[sl])
+            if cand.size == 0:
+                continue
+            c = counts[cand]
+            piece = np.repeat(cand, c)
+            first = np.repeat(np.cumsum(c) - c, c)
+            frac = (np.arange(piece.size) - first) / np.repeat(c - 1, c)
+            pts = points_at_fraction(pieces, table, piece, frac)
+            # Segments within a piece whose bounding box meets the queries' (widened).
+            qb = q[sl]
+            reach = float(out[sl].max())
+            lo_q, hi_q = qb.min(axis=0) - reach, qb.max(axis=0) + reach
+            lo_s, hi_s = np.minimum(pts[:-1], pts[1:]), np.maximum(pts[:-1], pts[1:])
+            inside = np.flatnonzero((piece[1:] == piece[:-1])
+                                    & np.all((hi_s >= lo_q) & (lo_s <= hi_q), axis=1))
+            if inside.size == 0:
+                continue
+            a, d = pts[inside], pts[inside + 1] - pts[inside]
+            len2 = np.einsum("ij,ij->i", d, d)
+            rel = qb[:, None, :] - a[None, :, :]
+            t = np.einsum("mij,ij->mi", rel, d) / np.where(len2 > 0.0, len2, 1.0)
+            t = np.clip(t, 0.0, 1.0)
+            e = rel - t[:, :, None] * d[None, :, :]
+            dist = np.sqrt(np.einsum("mij,mij->mi", e, e)).min(axis=1)
+            out[sl] = np.minimum(out[sl], dist)
+        return out
+
+
+def path_response(samples, pieces, profile, machine, table=None, hold: str = "foh",
+                  refine_above_mm: float | None = None,
+                  index: PathIndex | None = None) -> Response:  # fmt: skip
+    """Simulate every axis on the planned samples and measure the contour error: the
+    windowed true distance (module doc), linear in the program length; where it exceeds
+    ``refine_above_mm`` (default: never), the distance to the whole path instead
+    (:class:`PathIndex`, ``index`` if the caller keeps one), so the samples that decide the
+    check get the global true distance (an overshoot past a closed contour's end onto its
+    own start is then no error, as with :func:`servo_response`)."""
+    ref = samples.points_mm
+    n = ref.shape[0]
+    servo = machine.servo
+    actual = simulate_axes([servo.x, servo.y, servo.z], ref, servo.period_s, hold=hold,
+                           settle=True)  # fmt: skip
+    axis_err = np.empty_like(actual)
+    np.subtract(ref, actual[:n], out=axis_err[:n])
+    np.subtract(ref[-1], actual[n:], out=axis_err[n:])
+    lag = np.sqrt(np.einsum("ij,ij->i", axis_err, axis_err))
     s_ref = np.concatenate((samples.s_mm, np.full(actual.shape[0] - n, samples.s_mm[-1])))
-    contour = windowed_contour_mm(actual, ref, s_ref, pieces, profile, table=table)
-    return Response(actual, axis_err, contour, _eq29(ref, axis_err))
+    contour = windowed_contour_mm(actual, lag, s_ref, pieces, profile, table=table)
+    del lag, s_ref
+    if refine_above_mm is not None:
+        sel = np.flatnonzero(contour > refine_above_mm)
+        if sel.size:
+            index = index or PathIndex(pieces, table)
+            contour[sel] = index.distance_mm(actual[sel], contour[sel])
+    # eq. 29 with the tangent angle of the reference's direction of travel (XY); the held
+    # tail does not move.
+    d = np.zeros((actual.shape[0], 2))
+    d[:n] = np.gradient(ref[:, :2], axis=0) if n > 1 else 0.0
+    phi = np.arctan2(d[:, 1], d[:, 0])
+    eq29 = contour_error_eq29(axis_err[:, 0], axis_err[:, 1], phi)
+    eq29 = np.where(np.hypot(d[:, 0], d[:, 1]) > 0, eq29, 0.0)
+    return Response(actual, axis_err, contour, eq29)

@@ -23,7 +23,7 @@ import numpy as np
 from nurbscnc.errors import PlanningError
 from nurbscnc.interpolate import Samples, sample_plan, total_time_s
 from nurbscnc.machine import Machine
-from nurbscnc.plan.dynamics import Response, path_response
+from nurbscnc.plan.dynamics import PathIndex, Response, path_response
 from nurbscnc.plan.pieces import PieceList, PlanOptions, junction_caps, segment_pieces
 from nurbscnc.plan.profile import Profile, ProfileInput, plan_profile
 
@@ -83,16 +83,20 @@ def dwell_times(pieces: PieceList, profile: Profile) -> tuple[np.ndarray, np.nda
     return at.astype(float), pieces.dwell_after_s[i].astype(float)
 
 
-def _blame(err: np.ndarray, eps_mm: float, n: int, piece: np.ndarray, k: int,
+def _blame(err: np.ndarray, eps_mm: float, piece: np.ndarray, joined: np.ndarray,
            window: int) -> np.ndarray:  # fmt: skip
     """Largest over-limit error [mm] each piece shares the blame for (0: none).
 
     A sample over the limit blames the pieces of the ``window`` samples up to it (the servo
     remembers): per sample the largest over-limit error in the next ``window`` samples (a
-    sliding maximum), then the largest per piece. Runs of consecutive blamed pieces share
-    their largest blame, so a run of equal caps stays equal (one profile unit)."""
+    sliding maximum), then the largest per piece. Blamed pieces that the profile plans as
+    one (``joined`` (k−1,): tangent-continuous junction, equal caps) share their largest
+    blame, so their caps stay equal and they stay one profile unit (a run of tiny CAM
+    pieces lowered piece by piece to slightly different caps would crawl)."""
     from scipy.ndimage import maximum_filter1d
 
+    n = piece.size
+    k = joined.size + 1
     over = np.flatnonzero(err > eps_mm)
     e_over = np.zeros(n)
     np.maximum.at(e_over, np.minimum(over, n - 1), err[over])
@@ -102,13 +106,37 @@ def _blame(err: np.ndarray, eps_mm: float, n: int, piece: np.ndarray, k: int,
     blame = np.zeros(k)
     np.maximum.at(blame, piece, reach)
     hit = blame > 0.0
-    starts = np.flatnonzero(hit & ~np.concatenate(([False], hit[:-1])))
-    if starts.size:
-        run = np.cumsum(np.isin(np.arange(k), starts)) - 1
-        run_max = np.zeros(starts.size)
-        np.maximum.at(run_max, run[hit], blame[hit])
-        blame[hit] = run_max[run[hit]]
+    link = hit[:-1] & hit[1:] & joined
+    if link.any():
+        run = np.concatenate(([0], np.cumsum(~link)))  # run label of each piece
+        run_max = np.zeros(int(run[-1]) + 1)
+        np.maximum.at(run_max, run, blame)
+        blame = np.where(hit, run_max[run], 0.0)
     return blame
+
+
+def local_factors(blame: np.ndarray, eps_mm: float, history=None):
+    """Cap factors (k,) of a local re-plan and the history for the next one.
+
+    Every offending piece (``blame`` > 0: the error [mm] it shares) is lowered at once, by
+    f = 0.97 (ε/e)^(1/p), clipped to [0.5, 0.97]. The exponent p of error ∝ V^p is 2 for a
+    piece hit for the first time (the normal acceleration V²κ drives the servo lag), and is
+    measured for a piece hit again, from its last factor and how much its error fell:
+    p = ln(e/e_prev) / ln(f_prev), kept in [0.25, 2]. Errors that depend on the feed weakly
+    (the overshoot of an exact stop grows with the deceleration, not with V²) thus get a
+    strong correction at the second try instead of 3 % per re-plan.
+    """
+    hit = blame > 0.0
+    p = np.full(blame.size, 2.0)
+    if history is not None:
+        prev_blame, prev_factor = history
+        again = hit & (prev_blame > 0.0) & (prev_factor < 1.0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            measured = np.log(blame / prev_blame) / np.log(prev_factor)
+        p = np.where(again & np.isfinite(measured), np.clip(measured, 0.25, 2.0), p)
+    ratio = eps_mm / np.where(hit, blame, eps_mm)
+    factor = np.where(hit, np.clip(0.97 * ratio ** (1.0 / p), 0.5, 0.97), 1.0)
+    return factor, (blame, factor)
 
 
 def plan_program(program, machine: Machine, options: LookaheadOptions | None = None) -> Plan:
@@ -126,14 +154,21 @@ def plan_program(program, machine: Machine, options: LookaheadOptions | None = N
     response = None
     iterations = 0
     table = pieces.table()  # per-piece arrays for the interpolator, built once
+    history = None  # the last local re-plan: blame and factor per piece
+    index = None  # where the pieces are, for global distances (built if needed)
     while True:
+        # The last iteration's samples and response go before the new ones are made (long
+        # programs: each is hundreds of MB).
+        samples = response = None
         profile = _profile(pieces, caps, smooth, machine, options.lookahead_pieces)
         dwell_at, dwell_s = dwell_times(pieces, profile)
         samples = sample_plan(pieces, profile, period, dwell_at, dwell_s,
                               interpolator=options.interpolator, table=table)  # fmt: skip
         if options.dynamics == "off":
             break
-        response = path_response(samples, pieces, profile, machine, table=table)
+        index = index or PathIndex(pieces, table)
+        response = path_response(samples, pieces, profile, machine, table=table,
+                                 refine_above_mm=eps_mm, index=index)  # fmt: skip
         n = samples.t_s.size
         # Contour error matters while cutting: samples on rapids (air moves) are not checked.
         cutting = np.append(~rapid[samples.piece], np.full(response.contour_mm.size - n,
@@ -153,12 +188,11 @@ def plan_program(program, machine: Machine, options: LookaheadOptions | None = N
             # corner: V_cf ∝ V_max) scales with it; error ∝ V²κ gives the factor.
             caps = caps * min(float(np.sqrt(eps_mm / worst)), 0.98)
         else:
-            # Every offending piece at once, by its measured ratio (error ∝ V²).
             window = max(int(round(BLAME_WINDOW_S / period)), 1)
-            blame = _blame(err, eps_mm, n, samples.piece, len(pieces), window)
-            hit = blame > 0
-            factor = np.clip(np.sqrt(eps_mm / np.where(hit, blame, eps_mm)) * 0.97, 0.5, 0.97)
-            caps = np.where(hit, caps * factor, caps)
+            joined = (smooth[1:-1] > 0) & (caps[:-1] == caps[1:])
+            blame = _blame(err, eps_mm, samples.piece, joined, window)
+            factor, history = local_factors(blame, eps_mm, history)
+            caps = caps * factor
     dwell_at, dwell_s = dwell_times(pieces, profile)
     return Plan(pieces, caps, profile, samples, response, iterations,
                 total_time_s(profile, dwell_s), options.dynamics)  # fmt: skip

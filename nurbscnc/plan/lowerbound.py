@@ -277,8 +277,15 @@ def lower_bound_time_s(
         offset += float(s[-1])
     sizes = np.array([p.size for p in s_parts])
     piece_start = np.concatenate(([0], np.cumsum(sizes)))
-    s_mm = np.concatenate(s_parts)
-    path_cap2 = np.concatenate(c_parts)
+    return _solve(np.concatenate(s_parts), np.concatenate(c_parts), piece_start, stops,
+                  a_max_mm_s2)  # fmt: skip
+
+
+def _solve(s_mm: np.ndarray, path_cap2: np.ndarray, piece_start: np.ndarray, stops: np.ndarray,
+           a_max_mm_s2: float) -> LowerBound:  # fmt: skip
+    """The bound on the grid ``s_mm`` (absolute s [mm], piece i on
+    ``piece_start[i]:piece_start[i+1]``) with the path's cap² ``path_cap2``, at rest at both
+    ends and after the pieces flagged in ``stops``."""
     # Rest at the start, at the end and at every exact stop (both copies of the junction):
     # point constraints for the passes; between grid points the path's own cap still holds.
     cap2 = path_cap2.copy()
@@ -339,34 +346,85 @@ def machine_lower_bound(
 
 def program_lower_bound_s(segments, machine: Machine) -> float:
     """The lower bound [s] for a whole program's segments (SPEC §10): its own geometry (not
-    the PH replacements), rest to rest, with exact stops at tangent discontinuities (except
-    corners under G64 P, which a blend may pass at speed) and dwells (whose durations are
-    added). No jerk limit, no servo settling: nothing can be faster.
-    """
-    from nurbscnc.geometry.paths import geometry_of
-    from nurbscnc.plan.corners import tangent_junctions
+    the PH replacements), rest to rest, with exact stops at tangent discontinuities (turning
+    > 1e-6 rad; except corners under G64 P, which a blend may pass at speed), at dwells
+    (whose durations are added) and where rapids meet feed moves. No jerk limit, no servo
+    settling: nothing can be faster.
 
+    Linear in the program length with small constants: lines (and rapids) are gathered into
+    arrays without a geometry object each, and pieces of constant curvature (lines, circular
+    and helical arcs) need no grid inside them — their cap is constant, and the bound is
+    exact on any grid for such caps (module doc) — so they are sampled at their two ends
+    only; NURBS and spiral arcs get the adaptive grid of :func:`lower_bound_time_s`.
+    """
+    from nurbscnc.geometry.paths import ArcGeometry, geometry_of
+
+    lim = machine.limits
+    period, chord, a_max = machine.servo.period_s, lim.chord_tolerance_mm, lim.a_max_mm_s2
     moving = [(i, s) for i, s in enumerate(segments) if s.kind != "dwell"]
-    if not moving:
-        return float(sum(s.seconds for s in segments))
-    geoms = [geometry_of(s) for _, s in moving]
-    feeds = [s.feed_mm_s if s.kind != "rapid" else np.inf for _, s in moving]
-    rapid = [s.kind == "rapid" for _, s in moving]
-    position = {i: k for k, (i, _) in enumerate(moving)}
-    stop = np.zeros(len(moving), dtype=bool)
-    for j in tangent_junctions(segments, min_angle_deg=np.degrees(1e-6)):
-        nxt = moving[position[j.index] + 1][1]
-        if min(getattr(segments[j.index], "blend_mm", 0.0), getattr(nxt, "blend_mm", 0.0)) > 0:
-            continue  # G64 P: the planner may blend this corner, so the bound may not stop
-        stop[position[j.index]] = True
-    for k in range(len(moving) - 1):
-        i, a = moving[k]
-        b = moving[k + 1][1]
-        # Dwells in between, and rapid/feed changes, are stops too (as the planner does).
-        if moving[k + 1][0] != i + 1 or rapid[k] != rapid[k + 1]:
-            stop[k] = True
-        del a, b
-    bound = machine_lower_bound(geoms, np.where(np.isinf(feeds), 1.0, feeds), machine,
-                                rapid=rapid, stop_after=stop)  # fmt: skip
     dwell = float(sum(s.seconds for s in segments if s.kind == "dwell"))
+    if not moving:
+        return dwell
+    m = len(moving)
+    index = np.fromiter((i for i, _ in moving), dtype=np.int64, count=m)
+    kinds = [s.kind for _, s in moving]
+    rapid = np.array([k == "rapid" for k in kinds], dtype=bool)
+    straight = np.array([k in ("line", "rapid") for k in kinds], dtype=bool)
+    feed = np.fromiter((1.0 if k == "rapid" else s.feed_mm_s for k, (_, s) in
+                        zip(kinds, moving)), dtype=float, count=m)  # fmt: skip
+    top = np.where(rapid, lim.rapid_mm_s, np.minimum(feed, lim.v_max_mm_s))
+    if not np.all(np.isfinite(top) & (top > 0.0)):
+        raise PlanningError("every piece needs a finite speed ceiling > 0 [mm/s]")
+    blend = np.fromiter((getattr(s, "blend_mm", 0.0) for _, s in moving), dtype=float, count=m)
+    length = np.zeros(m)
+    t_start = np.zeros((m, 3))
+    t_end = np.zeros((m, 3))
+    li = np.flatnonzero(straight)
+    p0 = np.array([moving[i][1].start_mm for i in li.tolist()], dtype=float).reshape(-1, 3)
+    p1 = np.array([moving[i][1].end_mm for i in li.tolist()], dtype=float).reshape(-1, 3)
+    t_start[li] = t_end[li] = p1 - p0
+    length[li] = np.sqrt(np.einsum("ij,ij->i", p1 - p0, p1 - p0))
+    cap2 = np.where(straight, top * top, 0.0)  # constant-cap pieces: their cap²
+    sampled: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+    for i in np.flatnonzero(~straight).tolist():
+        geom = geometry_of(moving[i][1])
+        d = geom.derivatives(np.array([geom.u_start, geom.u_end]), 1)[1]
+        t_start[i], t_end[i] = d[0], d[1]
+
+        def cap2_of(kappa, top_i=float(top[i])):
+            return _cap2(kappa, top_i, a_max, period, chord)
+
+        if isinstance(geom, ArcGeometry) and not geom.is_spiral:
+            length[i] = float(geom.length_mm)
+            cap2[i] = float(cap2_of(geom.curvature(np.array([geom.u_start]))[0]))
+        else:
+            s, c2 = _sample_piece(geom, DEFAULT_DS_MM, cap2_of, DEFAULT_CAP_REL_TOL)
+            sampled[i] = (s, c2)
+            length[i] = float(s[-1])
+    # Exact stops: tangent discontinuities not under G64 P, dwells, rapid/feed changes.
+    ta, tb = t_end[:-1], t_start[1:]
+    cross = np.cross(ta, tb)
+    turning = np.arctan2(np.sqrt(np.einsum("ij,ij->i", cross, cross)),
+                         np.einsum("ij,ij->i", ta, tb))  # fmt: skip
+    regular = (np.einsum("ij,ij->i", ta, ta) > 0.0) & (np.einsum("ij,ij->i", tb, tb) > 0.0)
+    corner = regular & (turning > 1e-6) & ~(np.minimum(blend[:-1], blend[1:]) > 0.0)
+    stop = np.zeros(m, dtype=bool)
+    stop[:-1] = corner | (index[1:] != index[:-1] + 1) | (rapid[1:] != rapid[:-1])
+    # Grids: two points on constant-cap pieces, the adaptive grid elsewhere.
+    offset = np.concatenate(([0.0], np.cumsum(length)))
+    sizes = np.full(m, 2, dtype=np.int64)
+    for i, (s, _) in sampled.items():
+        sizes[i] = s.size
+    piece_start = np.concatenate(([0], np.cumsum(sizes)))
+    s_mm = np.empty(int(piece_start[-1]))
+    path_cap2 = np.empty_like(s_mm)
+    simple = np.ones(m, dtype=bool)
+    simple[list(sampled)] = False
+    at = piece_start[:-1][simple]
+    s_mm[at], s_mm[at + 1] = offset[:-1][simple], offset[1:][simple]
+    path_cap2[at] = path_cap2[at + 1] = cap2[simple]
+    for i, (s, c2) in sampled.items():
+        s_mm[piece_start[i] : piece_start[i + 1]] = s + offset[i]
+        path_cap2[piece_start[i] : piece_start[i + 1]] = c2
+    bound = _solve(s_mm, path_cap2, piece_start, stop, a_max)
     return float(bound.time_s) + dwell

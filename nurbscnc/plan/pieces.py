@@ -357,23 +357,6 @@ class PieceList(Sequence):
                           self.start_mm, self.end_mm, origin, e1, e2, normal, radius, angle,
                           helix, ph_s, ph_sigma, ph_x, ph_y)  # fmt: skip
 
-    @classmethod
-    def from_pieces(cls, pieces) -> PieceList:
-        """Columns of a list of :class:`Piece` objects (every row keeps its geometry)."""
-        pieces = list(pieces)
-        k = len(pieces)
-        cols = _empty_columns(k)
-        objects = {}
-        for i, p in enumerate(pieces):
-            cols["kind"][i] = _KIND_INDEX[p.kind]
-            for name in _SCALARS[1:]:
-                cols[name][i] = getattr(p, name)
-            objects[i] = (p.geometry, p.u_a, p.u_b, p.s_a_mm)
-        ends = _object_ends(pieces)
-        for name, arr in zip(_VECTORS, ends):
-            cols[name][:] = arr.T
-        return cls(**cols, objects=objects)
-
 
 #: Rows per chunk of the vectorised PH work (bounds the temporaries).
 _CHUNK = 1 << 16
@@ -612,20 +595,30 @@ def apply_blends(pieces: PieceList, machine: Machine) -> PieceList:
                             f"{gap.max():.3g} mm)", SourcePos(int(pieces.line[i])))  # fmt: skip
     m = corner.size
     ok = np.zeros(m, dtype=bool)
-    trim = np.zeros(m)
+    trim_a = np.zeros(m)  # cut off the end of piece i − 1
+    trim_b = np.zeros(m)  # cut off the start of piece i
     kappa = np.zeros(m)
     ph_len = np.zeros(m)
     both_lines = (kind[corner - 1] == K_LINE) & (kind[corner] == K_LINE)
-    half = 0.5 * np.minimum(length[corner - 1], length[corner])
+    half_a, half_b = 0.5 * length[corner - 1], 0.5 * length[corner]
 
     ll = np.flatnonzero(both_lines)
-    lb = line_corner_blends(vertex[:, ll].T, pieces.tangent_end[:, corner[ll] - 1].T,
-                            pieces.tangent_start[:, corner[ll]].T, tol[corner[ll] - 1],
-                            half[ll])  # fmt: skip
-    ok[ll], trim[ll], kappa[ll] = lb.ok, lb.trim_mm, lb.kappa_max_per_mm
+    # Line–line corners in chunks (bounded temporaries); keep what the blend rows need.
+    l_w = np.empty((ll.size, 3), dtype=complex)
+    l_p0 = np.empty(ll.size, dtype=complex)
+    l_frame = np.empty((ll.size, 3, 3))
     for lo in range(0, ll.size, _CHUNK):
         sl = slice(lo, lo + _CHUNK)
-        ph_len[ll[sl]] = ph_tables(lb.w[sl], lb.p0[sl])[3]
+        c = corner[ll[sl]]
+        lb = line_corner_blends(vertex[:, ll[sl]].T, pieces.tangent_end[:, c - 1].T,
+                                pieces.tangent_start[:, c].T, tol[c - 1], half_a[ll[sl]],
+                                half_b[ll[sl]])  # fmt: skip
+        ok[ll[sl]], kappa[ll[sl]] = lb.ok, lb.kappa_max_per_mm
+        trim_a[ll[sl]], trim_b[ll[sl]] = lb.trim_a_mm, lb.trim_b_mm
+        ph_len[ll[sl]] = ph_tables(lb.w, lb.p0)[3]
+        l_w[sl], l_p0[sl] = lb.w, lb.p0
+        l_frame[sl, 0], l_frame[sl, 1], l_frame[sl, 2] = lb.origin_mm, lb.e1, lb.e2
+        del lb
     arc_blends = {}
     for j in np.flatnonzero(~both_lines).tolist():
         i = int(corner[j])
@@ -634,13 +627,12 @@ def apply_blends(pieces: PieceList, machine: Machine) -> PieceList:
                           0.5 * b.length_mm, measure=False)  # fmt: skip
         if bl is not None:
             arc_blends[j] = bl
-            ok[j], trim[j], kappa[j], ph_len[j] = True, bl.trim_a_mm, bl.kappa_max_per_mm, \
-                bl.ph.length_mm
+            ok[j], kappa[j], ph_len[j] = True, bl.kappa_max_per_mm, bl.ph.length_mm
+            trim_a[j], trim_b[j] = bl.trim_a_mm, bl.trim_b_mm
     cap_a, cap_b = pieces.v_cap_mm_s[corner - 1], pieces.v_cap_mm_s[corner]
     with np.errstate(invalid="ignore", divide="ignore"):
-        t_ok = np.where(ok, trim, 0.0)
-        ok &= blend_pays(cap_a, cap_b, np.where(ok, kappa, 0.0), t_ok, t_ok,
-                         np.where(ok, ph_len, 0.0), machine)  # fmt: skip
+        ok &= blend_pays(cap_a, cap_b, np.where(ok, kappa, 0.0), np.where(ok, trim_a, 0.0),
+                         np.where(ok, trim_b, 0.0), np.where(ok, ph_len, 0.0), machine)
     if not ok.any():
         return pieces
 
@@ -649,8 +641,8 @@ def apply_blends(pieces: PieceList, machine: Machine) -> PieceList:
     has_blend[corner[ok]] = True
     trim_start = np.zeros(k)
     trim_end = np.zeros(k)
-    trim_start[corner[ok]] = trim[ok]
-    trim_end[corner[ok] - 1] = trim[ok]
+    trim_start[corner[ok]] = trim_b[ok]
+    trim_end[corner[ok] - 1] = trim_a[ok]
     trimmed = (trim_start > 0.0) | (trim_end > 0.0)
     remainder = length - trim_start - trim_end
     keep = ~trimmed | (remainder >= MIN_REMAINDER_MM)
@@ -703,8 +695,8 @@ def apply_blends(pieces: PieceList, machine: Machine) -> PieceList:
     cols["kappa_max_per_mm"][dest] = kappa[sel]
     cols["tangent_start"][:, dest] = pieces.tangent_end[:, src - 1]
     cols["tangent_end"][:, dest] = pieces.tangent_start[:, src]
-    w, p0 = lb.w[ll_ok], lb.p0[ll_ok]
-    frame = np.stack([lb.origin_mm[ll_ok], lb.e1[ll_ok], lb.e2[ll_ok]], axis=1)
+    w, p0, frame = l_w[ll_ok], l_p0[ll_ok], l_frame[ll_ok]
+    del l_w, l_p0, l_frame
     p5 = p0 + (w[:, 0] * w[:, 0] + w[:, 0] * w[:, 2] / 3.0 + w[:, 2] * w[:, 2]) / 5.0
     for name, z in (("start_mm", p0), ("end_mm", p5)):
         cols[name][:, dest] = (frame[:, 0] + z.real[:, None] * frame[:, 1]
