@@ -121,17 +121,21 @@ def distance_to_path(points: np.ndarray, path, reach: float = 0.01) -> np.ndarra
         # A segment joins vertex j to j + 1 only inside one curve.
         inside = np.ones(len(verts), dtype=bool)
         inside[np.cumsum([len(c) for c in curves]) - 1] = False
-        _, near = cKDTree(verts).query(points, k=min(8, len(verts)))
+        # Vertices beyond `reach` + the longest chord cannot bound a segment within reach.
+        chord = max(float(np.linalg.norm(np.diff(c, axis=0), axis=1).max()) for c in curves)
+        _, near = cKDTree(verts).query(points, k=min(8, len(verts)),
+                                       distance_upper_bound=reach + chord)  # fmt: skip
         near = near.reshape(points.shape[0], -1)
         for col in range(near.shape[1]):
+            found = near[:, col] < len(verts)
             for off in (-1, 0):
-                j = np.clip(near[:, col] + off, 0, len(verts) - 2)
+                j = np.clip(np.where(found, near[:, col], 0) + off, 0, len(verts) - 2)
                 a, ab = verts[j], verts[j + 1] - verts[j]
                 ab2 = np.einsum("ij,ij->i", ab, ab)
                 t = np.clip(np.einsum("ij,ij->i", points - a, ab) / np.where(ab2 > 0, ab2, 1),
                             0.0, 1.0)  # fmt: skip
                 dist = np.linalg.norm(points - a - t[:, None] * ab, axis=1)
-                best = np.where(inside[j], np.minimum(best, dist), best)
+                best = np.where(found & inside[j], np.minimum(best, dist), best)
     return best
 
 

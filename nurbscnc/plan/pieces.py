@@ -130,11 +130,19 @@ def _curvature_cap(machine: Machine, kappa, feed_mm_s: float) -> np.ndarray:
     return np.minimum(np.minimum(v_af, v_an), np.minimum(feed_mm_s, lim.v_max_mm_s))
 
 
-def _corner_cap(machine: Machine, kappa_peak: float, feed_mm_s: float) -> float:
+def _corner_cap(machine: Machine, kappa_peak: float, feed_mm_s: float,
+                kappa_cf: float | None = None) -> float:
     """V_sp = min(V_af, V_cf) at a corner of peak curvature κ (SPEC §7), capped by F and by
-    the normal-acceleration limit √(A_max/κ)."""
+    the normal-acceleration limit √(A_max/κ). ``kappa_cf`` (default: the peak) is the
+    curvature given to V_cf: the physical limits (chord error, normal acceleration) always
+    see the peak, while the paper's heuristic slow-down V_cf = F κ̄/(κ + κ̄) may be given a
+    piece's mean curvature (turning / length) — at the peak of a near-cusp (κ ~ 1e6 /mm) it
+    would otherwise crawl the whole piece at F/κ."""
     lim = machine.limits
-    v_sp = float(machine.corner_feed_mm_s(kappa_peak, min(feed_mm_s, lim.v_max_mm_s)))
+    f = min(feed_mm_s, lim.v_max_mm_s)
+    v_af = float(machine.chord_feed_mm_s(kappa_peak))
+    v_cf = float(machine.curvature_feed_mm_s(kappa_peak if kappa_cf is None else kappa_cf, f))
+    v_sp = min(v_af, v_cf)
     v_an = float(np.sqrt(lim.a_max_mm_s2 / kappa_peak)) if kappa_peak > 0 else np.inf
     return max(min(v_sp, v_an, feed_mm_s, lim.v_max_mm_s), 1e-6)
 
@@ -163,12 +171,15 @@ def nurbs_pieces(seg, index: int, machine: Machine, options: PlanOptions) -> lis
             continue
         region_cap = _corner_cap(machine, region.kappa_peak_per_mm, feed)
         if options.ph:
-            fit = fit_region(curve, region.u_a, region.u_b, tolerance_um=e_um)
+            # max ≤ e (not the paper's 3e): every reference point within e of the curve.
+            fit = fit_region(curve, region.u_a, region.u_b, tolerance_um=e_um, max_factor=1.0)
             for p in fit.pieces:
                 xi = np.linspace(0.0, 1.0, 65)
                 k_max = float(np.max(np.abs(p.ph.curvature(xi))))
+                k_mean = abs(p.ph.turning_angle_rad()) / max(float(p.ph.length_mm), 1e-300)
                 cap = (region_cap if options.corner_feed == "peak"
-                       else _corner_cap(machine, max(k_max, kth), feed))  # fmt: skip
+                       else _corner_cap(machine, max(k_max, kth), feed,
+                                        max(k_mean, kth)))  # fmt: skip
                 pieces.append(Piece("ph", p.ph, float(p.ph.length_mm), cap, index, seg.line,
                                     p.u_a, p.u_b, 0.0, k_max))  # fmt: skip
         else:
@@ -565,13 +576,16 @@ def apply_blends(pieces: PieceList, machine: Machine) -> PieceList:
 
     A corner is blended when both pieces are feed lines or arcs with a blend tolerance > 0
     (the smaller of the two is used), no dwell lies between them, their tangents turn, and
-    the blend pays (:func:`blend_pays`); the blend may trim at most half of each piece, so
-    blends never overlap. Line–line corners are built all at once in closed form
-    (:func:`~nurbscnc.plan.blend.line_corner_blends`, the blends :func:`blend_corner` gives
-    them); corners with an arc one at a time by :func:`blend_corner`. The blend piece is
-    capped by its peak curvature like any curved piece (chord error, normal acceleration).
-    A piece trimmed at both ends to less than :data:`MIN_REMAINDER_MM` is dropped; the
-    blends' end tangents are the pieces' own (not recomputed from trimmed end points), so
+    the blend pays (:func:`blend_pays`); a blend trims at most half of each piece, so blends
+    never overlap. Line–line corners are built all at once in closed form
+    (:func:`~nurbscnc.plan.blend.line_corner_blends`), each side trimmed up to half of its
+    own line: a polyline of short chords becomes a chain of blends with no sliver of line
+    left between them (equal trims where the tolerance binds: then the blends of
+    :func:`blend_corner`). Corners with an arc go one at a time through
+    :func:`blend_corner` (equal trims ≤ half the shorter piece). The blend piece is capped
+    by its peak curvature like any curved piece (chord error, normal acceleration). A piece
+    trimmed at both ends to less than :data:`MIN_REMAINDER_MM` is dropped. The blends' end
+    tangents are the pieces' own unit tangents (not recomputed from trimmed end points), so
     the junctions of a blended polyline are exactly smooth.
     """
     from nurbscnc.plan.blend import blend_corner, line_corner_blends
