@@ -100,6 +100,24 @@ def plot_path(
     return _save(fig, out_png)
 
 
+def _time_series_plot(series: Mapping, out_png: str, title: str, ylabel: str, what: str,
+                      lw: float, figsize_in, zero_line: bool, y_from_zero: bool) -> str:
+    """One axes of ``{name: (t_s, y)}`` lines against time [s], saved to ``out_png``."""
+    fig, (ax,) = _figure(figsize_in)
+    for name, (t, y) in _series(series, 2, what):
+        ax.plot(t, y, lw=lw, label=name)
+    if zero_line:
+        ax.axhline(0.0, color="0.3", lw=0.5)
+    if y_from_zero:
+        ax.set_ylim(bottom=0.0)
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
+    ax.grid(True, lw=0.4, alpha=0.5)
+    ax.legend(loc="best")
+    return _save(fig, out_png)
+
+
 def plot_feed_profiles(
     profiles: Mapping,
     out_png: str,
@@ -107,17 +125,8 @@ def plot_feed_profiles(
     figsize_in=FIGSIZE_IN,
 ) -> str:
     """Fig. 2/4/6: feed v [mm/s] over time t [s], one line per ``{name: (t_s, v_mm_s)}``."""
-    series = _series(profiles, 2, "feed profiles")
-    fig, (ax,) = _figure(figsize_in)
-    for name, (t, v) in series:
-        ax.plot(t, v, lw=1.0, label=name)
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel("feed [mm/s]")
-    ax.set_title(title)
-    ax.set_ylim(bottom=0.0)
-    ax.grid(True, lw=0.4, alpha=0.5)
-    ax.legend(loc="best")
-    return _save(fig, out_png)
+    return _time_series_plot(profiles, out_png, title, "feed [mm/s]", "feed profiles", 1.0,
+                             figsize_in, zero_line=False, y_from_zero=True)
 
 
 def plot_contour_error(
@@ -127,17 +136,8 @@ def plot_contour_error(
     figsize_in=FIGSIZE_IN,
 ) -> str:
     """Fig. 7: contour error [µm] over time [s], one line per ``{name: (t_s, err_um)}``."""
-    series = _series(errors, 2, "contour errors")
-    fig, (ax,) = _figure(figsize_in)
-    for name, (t, e) in series:
-        ax.plot(t, e, lw=0.8, label=name)
-    ax.axhline(0.0, color="0.3", lw=0.5)
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel("contour error [µm]")
-    ax.set_title(title)
-    ax.grid(True, lw=0.4, alpha=0.5)
-    ax.legend(loc="best")
-    return _save(fig, out_png)
+    return _time_series_plot(errors, out_png, title, "contour error [µm]", "contour errors",
+                             0.8, figsize_in, zero_line=True, y_from_zero=False)
 
 
 def plot_axis_errors(
