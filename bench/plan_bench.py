@@ -15,7 +15,8 @@ Each case runs in a fresh subprocess (so the resident-set peak is its own) throu
 stages of ``nurbscnc run``, timed one by one: interpretation of the text (already in memory),
 ``plan_program`` (pieces, blends, look-ahead profile, interpolation to reference points,
 dynamics check), and writing the reference points to a temporary ``.npz`` (deleted after).
-Recorded: seconds per stage, lines per second for the plan (lines / plan seconds) and for
+Recorded: seconds per stage (wall; ``cpu_s`` the CPU time, to see whether the run had the
+machine to itself), lines per second for the plan (lines / plan seconds) and for
 the whole run (lines / (interpret + plan + write) seconds), reference points per second of
 the run, the pieces, samples and cycle time, the dynamics iterations, and the peak RSS
 (``ru_maxrss`` of the child) and VmHWM. ``--dynamics`` selects the check (default local,
@@ -85,16 +86,16 @@ def worker(program: str, dynamics: str) -> dict:
     text = Path(program).read_text()
     lines = text.count("\n")
     machine = load_machine()
-    t0 = time.perf_counter()
+    c0, t0 = time.process_time(), time.perf_counter()
     prog = interpret_text(text)
-    t1 = time.perf_counter()
+    c1, t1 = time.process_time(), time.perf_counter()
     del text
     rss_interp = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e3
     plan = plan_program(prog, machine, LookaheadOptions(dynamics=dynamics))
-    t2 = time.perf_counter()
+    c2, t2 = time.process_time(), time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
         write_points(os.path.join(tmp, "points.npz"), plan.samples)
-    t3 = time.perf_counter()
+    c3, t3 = time.process_time(), time.perf_counter()
     smp = plan.samples
     samples = int(smp.t_s.size)
     run_s = t3 - t0
@@ -112,6 +113,7 @@ def worker(program: str, dynamics: str) -> dict:
         "plan_s": t2 - t1,
         "write_s": t3 - t2,
         "run_s": run_s,
+        "cpu_s": {"interpret": c1 - c0, "plan": c2 - c1, "write": c3 - c2},
         "plan_lines_per_s": lines / (t2 - t1),
         "run_lines_per_s": lines / run_s,
         "run_samples_per_s": samples / run_s,

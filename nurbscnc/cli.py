@@ -628,7 +628,7 @@ def plan_summary(prog, mach, plan) -> dict:
                 "contour_max_um": m["true_max_um"], "contour_rms_um": m["true_rms_um"],
                 "contour_eq29_max_um": m["contour_max_um"]}  # fmt: skip
 
-    kinds = Counter(p.kind for p in plan.pieces)
+    kinds = Counter(plan.pieces.kind_counts())  # vectorised: no Piece object per row
     summary = {
         "ok": True,
         "program": prog.name,
@@ -685,7 +685,7 @@ def feed_fluctuation(plan) -> float | None:
 
 def cutting_mask(plan) -> np.ndarray:
     """Which servo-response samples are cutting (not on a rapid): those are checked."""
-    rapid = np.array([p.kind == "rapid" for p in plan.pieces])
+    rapid = np.asarray(plan.pieces.rapid)
     n = plan.samples.t_s.size
     m = plan.response.contour_mm.size
     return np.append(~rapid[plan.samples.piece], np.full(m - n, not rapid[-1]))

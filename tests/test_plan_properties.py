@@ -65,7 +65,8 @@ def _fd(s, period, order):
     return d / period**order
 
 
-@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=12, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.too_slow])
 @given(nurbs_programs())
 def test_random_nurbs_programs_keep_every_limit(text):
     prog = interpret_text(text)
@@ -75,7 +76,7 @@ def test_random_nurbs_programs_keep_every_limit(text):
     np.testing.assert_allclose(np.diff(smp.t_s), period, rtol=0, atol=1e-12)
     assert smp.v_mm_s[0] == 0.0 and smp.v_mm_s[-1] == 0.0
     np.testing.assert_allclose(smp.points_mm[-1], prog.segments[-1].end_mm, atol=1e-12)
-    np.testing.assert_array_equal(smp.points_mm[0], prog.start_mm)
+    np.testing.assert_allclose(smp.points_mm[0], prog.start_mm, rtol=0, atol=1e-12)
     top = max(lim.v_max_mm_s, lim.rapid_mm_s)
     assert _fd(smp.s_mm, period, 1).max() <= top * (1 + 1e-6)
     assert np.abs(_fd(smp.s_mm, period, 2)).max() <= lim.a_max_mm_s2 * (1 + 1e-6)
@@ -93,7 +94,8 @@ def test_random_nurbs_programs_keep_every_limit(text):
         assert np.max(np.abs(ds_true[moving] / planned[moving] - 1.0)) < 1e-6
 
 
-@settings(max_examples=4, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=4, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.too_slow])
 @given(nurbs_programs())
 def test_random_nurbs_programs_meet_the_contour_tolerance(text):
     """With the (default) local dynamics check the predicted true contour error of cutting

@@ -32,7 +32,7 @@ CHORD_MM = 1e-5
 #: Longest chord of the dense polyline on curved pieces [mm].
 MAX_SPACING_MM = 0.01
 #: Servo samples per slab of the windowed distance.
-SLAB = 1 << 15
+SLAB = 1 << 16
 
 
 @dataclass(frozen=True, eq=False)
@@ -159,18 +159,21 @@ def windowed_contour_mm(actual_mm: np.ndarray, lag_mm: np.ndarray, s_ref_mm: np.
         b_idx = np.maximum(b_idx, np.minimum(a_idx + 1, ps.size - 1))
         q = actual_mm[sl]
         best = np.full(s.size, np.inf)
-        for off in range(int((b_idx - a_idx).max())):
-            j = a_idx + off
-            live = j < b_idx
-            j = np.minimum(j, ps.size - 2)
+        # Offset by offset along the windows, only over the windows still that long.
+        count = b_idx - a_idx
+        order = np.argsort(-count, kind="stable")
+        ranked = count[order]
+        for off in range(int(ranked[0]) if ranked.size else 0):
+            rows = order[: int(np.count_nonzero(ranked > off))]
+            j = np.minimum(a_idx[rows] + off, ps.size - 2)
             a = pts[j]
             d = pts[j + 1] - a
+            qa = q[rows] - a
             len2 = np.einsum("ij,ij->i", d, d)
-            t = np.einsum("ij,ij->i", q - a, d) / np.where(len2 > 0.0, len2, 1.0)
+            t = np.einsum("ij,ij->i", qa, d) / np.where(len2 > 0.0, len2, 1.0)
             t = np.clip(np.where(len2 > 0.0, t, 0.0), 0.0, 1.0)
-            e = q - a - t[:, None] * d
-            dist = np.sqrt(np.einsum("ij,ij->i", e, e))
-            best = np.where(live, np.minimum(best, dist), best)
+            e = qa - t[:, None] * d
+            best[rows] = np.minimum(best[rows], np.sqrt(np.einsum("ij,ij->i", e, e)))
         out[sl] = best
     return out
 
