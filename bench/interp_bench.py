@@ -26,8 +26,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from nurbscnc.interpolate import sample_plan  # noqa: E402
-from nurbscnc.machine import load_machine  # noqa: E402
+from nurbscnc.interpolate.sample import sample_plan  # noqa: E402
+from nurbscnc.machine.profile import load_machine  # noqa: E402
 from nurbscnc.plan.lookahead import LookaheadOptions, plan_program  # noqa: E402
 from nurbscnc.program.interpret import interpret_text  # noqa: E402
 

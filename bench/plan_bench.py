@@ -78,7 +78,7 @@ def worker(program: str, dynamics: str) -> dict:
     """One case, in this (fresh) process: interpret, plan, write points; times and memory."""
     import numpy as np
 
-    from nurbscnc.machine import load_machine
+    from nurbscnc.machine.profile import load_machine
     from nurbscnc.output.files import write_points
     from nurbscnc.plan.lookahead import LookaheadOptions, plan_program
     from nurbscnc.program.interpret import interpret_text

@@ -37,6 +37,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from nurbscnc.cli.stream import load_pulse_program  # noqa: E402
 from nurbscnc.output.stream import protocol as p  # noqa: E402
 from nurbscnc.output.stream.card import (  # noqa: E402
     CardConfig,
@@ -45,7 +46,6 @@ from nurbscnc.output.stream.card import (  # noqa: E402
     PtyEndpoint,
     serve,
 )
-from nurbscnc.output.stream.commands import load_pulse_program  # noqa: E402
 from nurbscnc.output.stream.sender import Sender, SenderOptions, open_port  # noqa: E402
 
 BAUD = 115200

@@ -3,7 +3,7 @@
 Run by ``make reproduce`` (needs the ``plot`` extra). Every number in the report is measured
 by this script at generation time with the bundled default machine (the paper's Tables 2
 and 3, T_s = 1 ms) on the bundled airfoils (programs/naca2415*.nc); nothing is typed in by
-hand except the paper's own values (nurbscnc.compare.PAPER_TABLE4 / PAPER_TABLE5, SPEC §6).
+hand except the paper's own values (nurbscnc.studies.compare.PAPER_TABLE4 / PAPER_TABLE5, SPEC §6).
 """
 
 from __future__ import annotations
@@ -19,18 +19,18 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from nurbscnc.cli import write_compare_plots  # noqa: E402
-from nurbscnc.compare import (  # noqa: E402
+from nurbscnc.cli.main import write_compare_plots  # noqa: E402
+from nurbscnc.geometry.nurbs import NurbsCurve  # noqa: E402
+from nurbscnc.machine.profile import load_machine  # noqa: E402
+from nurbscnc.plan.corners import program_corners  # noqa: E402
+from nurbscnc.plan.phfit import fit_region  # noqa: E402
+from nurbscnc.program.interpret import interpret_text  # noqa: E402
+from nurbscnc.studies.compare import (  # noqa: E402
     PAPER_TABLE4,
     PAPER_TABLE5,
     compare_block,
     nurbs_block,
 )
-from nurbscnc.geometry.nurbs import NurbsCurve  # noqa: E402
-from nurbscnc.machine import load_machine  # noqa: E402
-from nurbscnc.plan.corners import program_corners  # noqa: E402
-from nurbscnc.plan.phfit import fit_region  # noqa: E402
-from nurbscnc.program.interpret import interpret_text  # noqa: E402
 
 PAPER_TABLE1 = {"AB": (4.9094, 13.41, 0.5205, 1.44), "CD": (4.3893, 9.79, 0.5562, 1.46)}
 EDGE_S = 0.03  # start/stop transients excluded in the "interior" columns [s]

@@ -22,7 +22,7 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
-from nurbscnc.cli import main
+from nurbscnc.cli.main import main
 from nurbscnc.errors import NurbsCncError
 from nurbscnc.program.interpret import interpret_text
 
@@ -102,7 +102,7 @@ def test_cli_check_json(case):
 def test_cli_subprocess(name):
     case = BAD / name
     proc = subprocess.run(
-        [sys.executable, "-m", "nurbscnc.cli", "check", str(case)],
+        [sys.executable, "-m", "nurbscnc", "check", str(case)],
         capture_output=True,
         text=True,
         encoding="utf-8",

@@ -15,14 +15,14 @@ from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 from nurbscnc.errors import GeometryError
-from nurbscnc.geometry.paths import ArcGeometry, LineGeometry
-from nurbscnc.geometry.ph import PHQuintic
-from nurbscnc.plan.blend import (
+from nurbscnc.geometry.blend import (
     blend_corner,
     line_corner_blends,
     line_deviation_per_trim,
     ph_tables,
 )
+from nurbscnc.geometry.paths import ArcGeometry, LineGeometry
+from nurbscnc.geometry.ph import PHQuintic
 
 # --- independent references ------------------------------------------------------------------
 

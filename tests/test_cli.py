@@ -18,8 +18,8 @@ from click.testing import CliRunner
 from scipy.interpolate import BSpline
 
 import nurbscnc
-import nurbscnc.cli as cli
-from nurbscnc.cli import main
+import nurbscnc.cli.main as cli
+from nurbscnc.cli.main import main
 
 ROOT = Path(__file__).resolve().parents[1]
 NACA = ROOT / "programs" / "naca2415.nc"

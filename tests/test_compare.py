@@ -14,12 +14,12 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from nurbscnc.cli import main
-from nurbscnc.compare import compare_block, nurbs_block, rotate_segment, row
+from nurbscnc.cli.main import main
 from nurbscnc.geometry.nurbs import NurbsCurve
-from nurbscnc.machine import chord_feed_mm_s, load_machine
+from nurbscnc.machine.profile import chord_feed_mm_s, load_machine
 from nurbscnc.plan.baselines import baseline_samples
 from nurbscnc.program.interpret import interpret_text
+from nurbscnc.studies.compare import compare_block, nurbs_block, rotate_segment, row
 
 ROOT = Path(__file__).resolve().parents[1]
 MACHINE = load_machine()

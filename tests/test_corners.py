@@ -24,10 +24,10 @@ from scipy.integrate import quad
 from scipy.interpolate import BSpline
 from scipy.spatial import cKDTree
 
-from nurbscnc.cli import main
+from nurbscnc.cli.main import main
 from nurbscnc.geometry.nurbs import NurbsCurve
 from nurbscnc.geometry.segments import Line
-from nurbscnc.machine import load_machine
+from nurbscnc.machine.profile import load_machine
 from nurbscnc.plan.corners import find_corner_regions, program_corners, tangent_junctions
 from nurbscnc.program.interpret import interpret_text
 

@@ -16,8 +16,8 @@ import pytest
 
 from nurbscnc.errors import ConfigError
 from nurbscnc.geometry.nurbs import NurbsCurve
-from nurbscnc.interpolate import nurbs_step_lengths, sample_plan, taylor_params
-from nurbscnc.machine import load_machine
+from nurbscnc.interpolate.sample import nurbs_step_lengths, sample_plan, taylor_params
+from nurbscnc.machine.profile import load_machine
 from nurbscnc.plan.lookahead import LookaheadOptions, plan_program
 from nurbscnc.plan.pieces import Piece
 from nurbscnc.plan.profile import ProfileInput, plan_profile

@@ -14,13 +14,13 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from nurbscnc.cli import main
+from nurbscnc.cli.main import main
 from nurbscnc.geometry.nurbs import NurbsCurve
-from nurbscnc.machine import load_machine
+from nurbscnc.machine.profile import load_machine
 from nurbscnc.output.files import read_points
 from nurbscnc.plan.lookahead import LookaheadOptions, plan_program, segment_times_s
 from nurbscnc.program.interpret import interpret_text
-from nurbscnc.servo import contour_error_true
+from nurbscnc.servo.model import contour_error_true
 
 ROOT = Path(__file__).resolve().parents[1]
 MACHINE = load_machine()

@@ -16,7 +16,7 @@ from scipy.optimize import brentq
 from nurbscnc.errors import ConfigError, PlanningError
 from nurbscnc.geometry.nurbs import NurbsCurve
 from nurbscnc.geometry.paths import ArcGeometry, LineGeometry
-from nurbscnc.machine import load_machine
+from nurbscnc.machine.profile import load_machine
 from nurbscnc.plan.lowerbound import (
     interval_times_s,
     lower_bound_time_s,

@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from nurbscnc.errors import ConfigError, OutputError
-from nurbscnc.machine import (
+from nurbscnc.machine.profile import (
     Machine,
     chord_feed_mm_s,
     curvature_feed_mm_s,

@@ -15,11 +15,11 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from scipy.interpolate import BSpline
 
-from nurbscnc.interpolate import nurbs_step_lengths
-from nurbscnc.machine import load_machine
+from nurbscnc.interpolate.sample import nurbs_step_lengths
+from nurbscnc.machine.profile import load_machine
 from nurbscnc.plan.lookahead import LookaheadOptions, plan_program
 from nurbscnc.program.interpret import interpret_text
-from nurbscnc.servo import contour_error_true
+from nurbscnc.servo.model import contour_error_true
 
 MACHINE = load_machine()
 

@@ -1,4 +1,4 @@
-"""Plots (nurbscnc.plots; issue 5): each writes a real, non-blank PNG of the expected size.
+"""Plots (nurbscnc.output.plots; issue 5): each writes a real, non-blank PNG of the expected size.
 
 The images are read back with matplotlib.image.imread (the oracle for "is a PNG of this size");
 the path plot is also checked for its highlight colour, present exactly when corner pieces are.
@@ -11,8 +11,8 @@ import sys
 import numpy as np
 import pytest
 
-from nurbscnc import plots
 from nurbscnc.errors import ConfigError, OutputError
+from nurbscnc.output import plots
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 WIDTH_PX = round(plots.FIGSIZE_IN[0] * plots.DPI)

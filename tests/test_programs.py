@@ -109,11 +109,23 @@ def test_naca_reference_matches_published_properties():
 # ----------------------------------------------------------------- reproducibility, format
 
 
-def test_regenerating_gives_byte_identical_files(tmp_path):
+_NUMBER = re.compile(r"-?\d+\.?\d*")
+
+
+def test_regenerating_gives_the_committed_files(tmp_path):
+    # Same text word for word; numbers equal to 1e-10 mm. The 12th decimal of a spline control
+    # point depends on the numpy/scipy build (LAPACK rounding), so bytes are not comparable
+    # across machines; the programs' geometry is.
     written = load_generator().write_programs(tmp_path)
     assert sorted(p.name for p in written) == sorted(NAMES)
     for name in NAMES:
-        assert (tmp_path / name).read_bytes() == (PROGRAMS / name).read_bytes(), name
+        new = (tmp_path / name).read_text()
+        old = (PROGRAMS / name).read_text()
+        assert _NUMBER.sub("#", new) == _NUMBER.sub("#", old), name
+        a = np.array([float(x) for x in _NUMBER.findall(new)])
+        b = np.array([float(x) for x in _NUMBER.findall(old)])
+        assert a.shape == b.shape, name
+        assert np.max(np.abs(a - b), initial=0.0) < 1e-10, name
 
 
 @pytest.mark.parametrize("name", NAMES)

@@ -12,8 +12,8 @@ import pytest
 from scipy import signal
 
 from nurbscnc.errors import ConfigError
-from nurbscnc.machine import load_machine
-from nurbscnc.servo import (
+from nurbscnc.machine.profile import load_machine
+from nurbscnc.servo.model import (
     SETTLE_TOLERANCE_MM,
     AxisModel,
     contour_error_eq29,

@@ -1,7 +1,7 @@
-"""Independent servo simulation (nurbscnc.simulate; SPEC §8, issue 5).
+"""Independent servo simulation (nurbscnc.servo.simulate; SPEC §8, issue 5).
 
 Oracles: scipy.signal.lsim (its default linear interpolation of the input is the first-order
-hold), the planner's own servo code path (nurbscnc.servo, IIR recurrence), the continuous
+hold), the planner's own servo code path (nurbscnc.servo.model, IIR recurrence), the continuous
 frequency response G(jω) via numpy.polyval (steady sinusoids, with the FOH's sinc² kernel
 and its aliases; the ZOH sawtooth's Fourier series), and closed forms of SPEC §8.
 """
@@ -15,10 +15,10 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from nurbscnc import servo
 from nurbscnc.errors import ConfigError
-from nurbscnc.machine import AxisServo, load_machine
-from nurbscnc.simulate import (
+from nurbscnc.machine.profile import AxisServo, load_machine
+from nurbscnc.servo import model as servo
+from nurbscnc.servo.simulate import (
     SETTLE_TOLERANCE_MM,
     Metrics,
     Simulation,

@@ -21,8 +21,8 @@ import pytest
 import serial
 from click.testing import CliRunner
 
+from nurbscnc.cli.stream import card_sim, stream
 from nurbscnc.output.stream.card import CardConfig, PtyEndpoint
-from nurbscnc.output.stream.commands import card_sim, stream
 from tests.stream_helpers import card_on
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -141,13 +141,8 @@ def test_unfit_card_exits_3_before_sending_a_batch(tmp_path):
 
 
 def _stream_cmd(args):
-    """`nurbscnc stream ...` in a subprocess: the registered command, else the function."""
-    import nurbscnc.cli
-
-    if "stream" in nurbscnc.cli.main.commands:
-        return [sys.executable, "-m", "nurbscnc.cli", "stream", *args]
-    code = "from nurbscnc.output.stream.commands import stream; stream(prog_name='stream')"
-    return [sys.executable, "-c", code, *args]
+    """`nurbscnc stream ...` in a subprocess."""
+    return [sys.executable, "-m", "nurbscnc", "stream", *args]
 
 
 def test_ctrl_c_sends_abort_and_exits_130(tmp_path):
@@ -179,7 +174,7 @@ def test_card_sim_command_logs_what_it_executed(tmp_path):
     csv = tmp_path / "points.csv"
     write_points(csv, pts)
     log, report = tmp_path / "executed.csv", tmp_path / "card.json"
-    code = "from nurbscnc.output.stream.commands import card_sim; card_sim(prog_name='card-sim')"
+    code = "from nurbscnc.cli.stream import card_sim; card_sim(prog_name='card-sim')"
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     proc = subprocess.Popen(
         [sys.executable, "-c", code, "--listen", "127.0.0.1:0", "--fast", "--once",

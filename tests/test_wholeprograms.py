@@ -23,7 +23,7 @@ import pytest
 from scipy.interpolate import BSpline
 from scipy.spatial import cKDTree
 
-from nurbscnc.machine import load_machine
+from nurbscnc.machine.profile import load_machine
 from nurbscnc.plan.lookahead import LookaheadOptions, plan_program
 from nurbscnc.program.interpret import interpret_text
 
@@ -261,7 +261,7 @@ def test_g64_p_corner_deviation_matches_the_blend_closed_form():
     deviation, tol (1 − ½·SEARCH_WINDOW) by construction (its closed form), to the chord
     error of the servo steps; the samples' farthest distance from the lines is at most that
     times sin 45° (the blend's midpoint lies on the bisector)."""
-    from nurbscnc.plan.blend import SEARCH_WINDOW, line_deviation_per_trim
+    from nurbscnc.geometry.blend import SEARCH_WINDOW, line_deviation_per_trim
 
     tol = 0.2
     prog = interpret_text(_polygon_program(np.array([[0, 0], [30, 0], [30, 30.0]]),

@@ -19,8 +19,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from nurbscnc.geometry.nurbs import NurbsCurve
-from nurbscnc.interpolate import Samples
-from nurbscnc.machine import Machine, chord_feed_mm_s, curvature_feed_mm_s
+from nurbscnc.interpolate.sample import Samples
+from nurbscnc.machine.profile import Machine, chord_feed_mm_s, curvature_feed_mm_s
 
 ALGORITHMS = ("adaptive", "curvature")
 

@@ -19,7 +19,7 @@ from scipy.optimize import brentq
 
 from nurbscnc.geometry.nurbs import NurbsCurve
 from nurbscnc.geometry.paths import geometry_of
-from nurbscnc.machine import kappa_threshold_per_mm
+from nurbscnc.machine.profile import kappa_threshold_per_mm
 
 #: Curvature samples per knot span used to bracket the peaks and the threshold crossings.
 SAMPLES_PER_SPAN = 32

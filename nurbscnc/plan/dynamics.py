@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from nurbscnc.servo import contour_error_eq29, contour_error_true, simulate_axes
+from nurbscnc.servo.model import contour_error_eq29, contour_error_true, simulate_axes
 
 #: Chord error of the dense polyline on curved pieces [mm] (0.01 µm).
 CHORD_MM = 1e-5
@@ -53,7 +53,7 @@ class Response:
 def dense_path_mm(pieces, profile, spacing_mm: float = 0.002, table=None) -> np.ndarray:
     """The commanded path as a dense polyline [mm]: exact points every ``spacing_mm`` or
     closer (≥ 8 per piece), so its chord error is negligible beside micrometre errors."""
-    from nurbscnc.interpolate import place_points
+    from nurbscnc.interpolate.sample import place_points
 
     total = profile.total_length_mm
     starts = profile.piece_start_mm
@@ -129,7 +129,7 @@ def windowed_contour_mm(actual_mm: np.ndarray, lag_mm: np.ndarray, s_ref_mm: np.
     :func:`path_counts`, from its last point before s − W to its first point after s + W,
     W = 2|r − a|.
     """
-    from nurbscnc.interpolate import place_points
+    from nurbscnc.interpolate.sample import place_points
 
     m = actual_mm.shape[0]
     out = np.empty(m)
@@ -183,7 +183,7 @@ def points_at_fraction(pieces, table, idx: np.ndarray, frac: np.ndarray) -> np.n
     pieces ``idx`` (m,): no arc-length inversion (a polyline does not need its points evenly
     spaced in length). Lines, circular arcs and PH pieces in closed form from ``table``;
     spiral arcs and NURBS by their geometry objects, one call per piece or curve."""
-    from nurbscnc.interpolate import ARC, LINE, NURBS, PH, SPIRAL, _horner_rows
+    from nurbscnc.interpolate.sample import ARC, LINE, NURBS, PH, SPIRAL, _horner_rows
 
     out = np.empty((idx.size, 3))
     code = table.kind[idx]

@@ -21,8 +21,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from nurbscnc.errors import PlanningError
-from nurbscnc.interpolate import Samples, sample_plan, total_time_s
-from nurbscnc.machine import Machine
+from nurbscnc.interpolate.sample import Samples, sample_plan, total_time_s
+from nurbscnc.machine.profile import Machine
 from nurbscnc.plan.dynamics import PathIndex, Response, path_response
 from nurbscnc.plan.pieces import PieceList, PlanOptions, junction_caps, segment_pieces
 from nurbscnc.plan.profile import Profile, ProfileInput, plan_profile
@@ -75,7 +75,7 @@ def _profile(pieces: PieceList, caps: np.ndarray, smooth: np.ndarray, machine: M
 
 def dwell_times(pieces: PieceList, profile: Profile) -> tuple[np.ndarray, np.ndarray]:
     """Profile times [s] at which dwells start and their durations [s] (from the columns;
-    the same as :func:`nurbscnc.interpolate.dwell_schedule`)."""
+    the same as :func:`nurbscnc.interpolate.sample.dwell_schedule`)."""
     i = np.flatnonzero(pieces.dwell_after_s > 0.0)
     k = len(pieces)
     nxt = np.minimum(i + 1, k - 1)

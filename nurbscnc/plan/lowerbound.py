@@ -50,7 +50,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from nurbscnc.errors import ConfigError, PlanningError
-from nurbscnc.machine import Machine, chord_feed_mm_s
+from nurbscnc.machine.profile import Machine, chord_feed_mm_s
 
 #: Default largest grid spacing [mm] (SPEC §10).
 DEFAULT_DS_MM = 0.01

@@ -9,7 +9,7 @@ length, its cruise cap (SPEC §7) and its unit tangents at both ends (for the ju
 Storage. CAM programs hold millions of G1 lines, so the pieces live in columns
 (:class:`PieceList`: one numpy row a piece) and the line path is built without a Python
 object per line: line pieces are their end points, line–line blends their PH preimage and
-plane frame (:func:`~nurbscnc.plan.blend.line_corner_blends`, all corners at once). Arcs,
+plane frame (:func:`~nurbscnc.geometry.blend.line_corner_blends`, all corners at once). Arcs,
 NURBS cells and the PH pieces of NURBS corners keep a geometry object per piece. Indexing a
 PieceList gives a :class:`Piece` (built on demand), so code written for a list of pieces
 still works; code that runs over every piece of a long program uses the columns.
@@ -24,11 +24,11 @@ from dataclasses import replace as dc_replace
 import numpy as np
 
 from nurbscnc.errors import GeometryError, NurbsCncError, SourcePos
+from nurbscnc.geometry.blend import ph_tables
 from nurbscnc.geometry.nurbs import NurbsCurve
 from nurbscnc.geometry.paths import ArcGeometry, LineGeometry, geometry_of
 from nurbscnc.geometry.ph import PHQuintic
-from nurbscnc.machine import Machine, chord_feed_mm_s
-from nurbscnc.plan.blend import ph_tables
+from nurbscnc.machine.profile import Machine, chord_feed_mm_s
 from nurbscnc.plan.corners import find_corner_regions
 from nurbscnc.plan.phfit import fit_region
 
@@ -306,11 +306,11 @@ class PieceList(Sequence):
         return self.kind == K_RAPID
 
     def table(self):
-        """The interpolator's per-piece arrays (:class:`~nurbscnc.interpolate.PieceTable`),
+        """The interpolator's per-piece arrays (:class:`~nurbscnc.interpolate.sample.PieceTable`),
         built from the columns: line rows share ``start_mm``/``end_mm``, columnar PH rows get
         their power coefficients in chunks, object rows come from ``PieceTable.of`` on those
         pieces alone; arrays no row needs are broadcast zeros (no memory)."""
-        from nurbscnc.interpolate import _B4, _B5, ARC, LINE, NURBS, PH, PieceTable
+        from nurbscnc.interpolate.sample import _B4, _B5, ARC, LINE, NURBS, PH, PieceTable
 
         k = len(self)
         code = np.array([LINE, LINE, ARC, PH, NURBS], dtype=np.int8)[self.kind]
@@ -578,7 +578,7 @@ def apply_blends(pieces: PieceList, machine: Machine) -> PieceList:
     (the smaller of the two is used), no dwell lies between them, their tangents turn, and
     the blend pays (:func:`blend_pays`); a blend trims at most half of each piece, so blends
     never overlap. Line–line corners are built all at once in closed form
-    (:func:`~nurbscnc.plan.blend.line_corner_blends`), each side trimmed up to half of its
+    (:func:`~nurbscnc.geometry.blend.line_corner_blends`), each side trimmed up to half of its
     own line: a polyline of short chords becomes a chain of blends with no sliver of line
     left between them (equal trims where the tolerance binds: then the blends of
     :func:`blend_corner`). Corners with an arc go one at a time through
@@ -588,7 +588,7 @@ def apply_blends(pieces: PieceList, machine: Machine) -> PieceList:
     tangents are the pieces' own unit tangents (not recomputed from trimmed end points), so
     the junctions of a blended polyline are exactly smooth.
     """
-    from nurbscnc.plan.blend import blend_corner, line_corner_blends
+    from nurbscnc.geometry.blend import blend_corner, line_corner_blends
 
     k = len(pieces)
     if k < 2:

@@ -314,7 +314,7 @@ def machine_options(func):
 def load_machine_cli(path, overrides=(), extra: dict | None = None):
     """The machine profile with ``--set`` and option overrides applied."""
     from nurbscnc.errors import ConfigError
-    from nurbscnc.machine import load_machine
+    from nurbscnc.machine.profile import load_machine
 
     table = {}
     for item in overrides:
@@ -506,7 +506,7 @@ def plot_option(func):
 def write_plan_plots(plan, plot_dir: str) -> list[str]:
     """Figures of one plan: the path with its PH pieces, the feed, the predicted contour
     error (PNG files in ``plot_dir``)."""
-    from nurbscnc import plots
+    from nurbscnc.output import plots
 
     os.makedirs(plot_dir, exist_ok=True)
     smp = plan.samples
@@ -615,7 +615,7 @@ def plan_summary(prog, mach, plan) -> dict:
     from nurbscnc.plan.lowerbound import program_lower_bound_s
 
     if not hasattr(plan, "pieces"):  # a baseline: no pieces, simulate to see its errors
-        from nurbscnc.simulate import contour_errors, metrics, simulate_reference
+        from nurbscnc.servo.simulate import contour_errors, metrics, simulate_reference
 
         sim = simulate_reference(plan.samples.points_mm, mach)
         m = metrics(sim, None, contour_errors(sim, None)).as_dict()
@@ -670,7 +670,7 @@ def plan_summary(prog, mach, plan) -> dict:
 def feed_fluctuation(plan) -> float | None:
     """Largest |Δs_true/Δs_planned − 1| over servo steps on NURBS pieces moving at ≥ 10 % of
     V_max (SPEC §3; true arc length from the curves' exact tables), or None if none."""
-    from nurbscnc.interpolate import nurbs_step_lengths
+    from nurbscnc.interpolate.sample import nurbs_step_lengths
 
     smp = plan.samples
     k, ds_true = nurbs_step_lengths(plan.pieces, smp)
@@ -715,7 +715,7 @@ def plan(program, as_json, dump_profile, plot_dir, **settings):
                                "no jerk-limited profile)")
     if dump_profile:
         s = pl.samples
-        from nurbscnc.interpolate import dwell_schedule, wall_to_profile_time
+        from nurbscnc.interpolate.sample import dwell_schedule, wall_to_profile_time
 
         at, dur = dwell_schedule(pl.pieces, pl.profile)
         _, v, a, j, piece = pl.profile.sample(wall_to_profile_time(s.t_s, at, dur))
@@ -865,7 +865,7 @@ def simulate(source, as_json, plot_dir, hold, **settings):
     Example: nurbscnc simulate points.csv --json
     """
     from nurbscnc.output.files import read_points
-    from nurbscnc.simulate import contour_errors, metrics, simulate_reference
+    from nurbscnc.servo.simulate import contour_errors, metrics, simulate_reference
 
     lower = source.lower()
     if lower.endswith((".csv", ".npz")):
@@ -885,7 +885,7 @@ def simulate(source, as_json, plot_dir, hold, **settings):
     contour = contour_errors(sim, path)
     m = metrics(sim, path, contour).as_dict()
     if plot_dir:
-        from nurbscnc import plots
+        from nurbscnc.output import plots
 
         os.makedirs(plot_dir, exist_ok=True)
         plots.plot_contour_error({"contour (true)": (sim.t_s, contour.true_mm * 1000.0),
@@ -928,7 +928,7 @@ def compare(program, as_json, plot_dir, angles, block, algorithms, machine, over
 
     Example: nurbscnc compare programs/naca2415.nc --rotate 0 --rotate 45 --rotate -45
     """
-    from nurbscnc.compare import ALGORITHMS, compare_block, nurbs_block, row
+    from nurbscnc.studies.compare import ALGORITHMS, compare_block, nurbs_block, row
 
     mach = load_machine_cli(machine, overrides)
     prog = load_program(program)
@@ -954,7 +954,7 @@ def compare(program, as_json, plot_dir, angles, block, algorithms, machine, over
 
 def write_compare_plots(runs, plot_dir: str) -> list[str]:
     """Figures 1, 2/4/6 and 7 of the paper for a comparison (PNG files in ``plot_dir``)."""
-    from nurbscnc import plots
+    from nurbscnc.output import plots
 
     os.makedirs(plot_dir, exist_ok=True)
     written = []
@@ -980,10 +980,10 @@ def write_compare_plots(runs, plot_dir: str) -> list[str]:
 
 
 # -- streaming (nurbscnc/output/stream) ---------------------------------------------------------
-from nurbscnc.output.stream.commands import card_sim, stream  # noqa: E402
+from nurbscnc.cli.stream import card_sim, stream  # noqa: E402
 
 main.add_command(stream)
 main.add_command(card_sim)
 
-if __name__ == "__main__":  # pragma: no cover - `python -m nurbscnc.cli`
+if __name__ == "__main__":  # pragma: no cover - `python -m nurbscnc.cli.main`
     main()

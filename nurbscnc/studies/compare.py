@@ -2,7 +2,7 @@
 
 For a NURBS block of a program (the first by default), optionally rotated about the origin,
 each algorithm produces reference points from rest at the block's start to its end; the
-independent servo simulation (:mod:`nurbscnc.simulate`) then gives the axis errors, the
+independent servo simulation (:mod:`nurbscnc.servo.simulate`) then gives the axis errors, the
 contour error (eq. 29 and the true distance to the programmed curve) and the cycle time.
 
 Algorithms:
@@ -26,12 +26,12 @@ import numpy as np
 from nurbscnc.errors import PlanningError
 from nurbscnc.geometry.nurbs import NurbsCurve
 from nurbscnc.geometry.segments import Program, frozen_array
-from nurbscnc.interpolate import Samples
-from nurbscnc.machine import Machine
+from nurbscnc.interpolate.sample import Samples
+from nurbscnc.machine.profile import Machine
 from nurbscnc.plan.baselines import baseline_samples
 from nurbscnc.plan.lookahead import LookaheadOptions, plan_program
 from nurbscnc.plan.pieces import PlanOptions
-from nurbscnc.simulate import contour_errors, metrics, simulate_reference
+from nurbscnc.servo.simulate import contour_errors, metrics, simulate_reference
 
 ALGORITHMS = ("adaptive", "curvature", "ph-lookahead", "ours")
 

@@ -30,7 +30,7 @@ from scipy import linalg, signal
 from scipy.spatial import cKDTree
 
 from nurbscnc.errors import ConfigError
-from nurbscnc.machine import AxisServo
+from nurbscnc.machine.profile import AxisServo
 
 #: Settling tolerance of ``simulate_axis(..., settle=True)`` [mm].
 SETTLE_TOLERANCE_MM = 1e-6

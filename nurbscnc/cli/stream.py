@@ -1,7 +1,7 @@
 """The ``stream`` and ``card-sim`` commands.
 
-``nurbscnc.cli`` registers them (``main.add_command``) and imports this module at its end, so
-nothing from ``nurbscnc.cli`` is imported here at module level (that would be an import
+``nurbscnc.cli.main`` registers them (``main.add_command``) and imports this module at its end, so
+nothing from ``nurbscnc.cli.main`` is imported here at module level (that would be an import
 cycle whichever module is imported first): the options are declared here and the CLI helpers
 (``handle_errors``, ``make_plan``, ``load_machine_cli``, the consoles) are imported when a
 command runs.
@@ -28,7 +28,7 @@ def _handle_errors(func):
 
     @functools.wraps(func)
     def wrapper(*args, **kwargs):
-        from nurbscnc.cli import handle_errors
+        from nurbscnc.cli.main import handle_errors
 
         return handle_errors(func)(*args, **kwargs)
 
@@ -36,7 +36,7 @@ def _handle_errors(func):
 
 
 def _plan_options(func):
-    """The planning options of ``run`` (same names, same defaults as ``nurbscnc.cli``)."""
+    """The planning options of ``run`` (same names, same defaults as ``nurbscnc.cli.main``)."""
     options = [
         click.option("--machine", type=click.Path(dir_okay=False), default=None,
                      help="Machine profile (TOML); default: the bundled paper machine."),
@@ -65,7 +65,7 @@ def load_pulse_program(path: str, machine, overrides, dynamics="local", lookahea
     """
     import numpy as np
 
-    from nurbscnc.cli import load_machine_cli, make_plan
+    from nurbscnc.cli.main import load_machine_cli, make_plan
     from nurbscnc.errors import ConfigError, PlanningError
     from nurbscnc.output.files import read_points
     from nurbscnc.output.stream.quantise import check_pulse_limit, quantise
@@ -133,7 +133,7 @@ def _progress_bar(enabled: bool, total: int):
         return
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from nurbscnc.cli import err
+    from nurbscnc.cli.main import err
 
     with Progress(TextColumn("streaming"), BarColumn(), TextColumn("{task.fields[info]}"),
                   TimeElapsedColumn(), console=err, transient=False) as bar:  # fmt: skip
@@ -175,7 +175,7 @@ def stream(program, port, allow_url, baud, batch, timeout_s, quiet, as_json, mac
 
     Example: nurbscnc stream part.nc --port /dev/ttyUSB0
     """
-    from nurbscnc.cli import err, out
+    from nurbscnc.cli.main import err, out
     from nurbscnc.output.stream.sender import Sender, SenderOptions, open_port
 
     pulses, _ = load_pulse_program(program, machine, overrides, dynamics, lookahead, corner_feed)

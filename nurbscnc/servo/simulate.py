@@ -1,9 +1,9 @@
 """Independent servo simulation of a reference-point stream (SPEC §8, eq. 25-29; issue 5).
 
 This is the check the ``simulate`` and ``compare`` commands run on a plan's output. It uses the
-same model as the planner's own servo check (:mod:`nurbscnc.servo`: per axis G(s) of SPEC eq. 25,
-first-order-hold input, exact at the samples) but shares none of its simulation code: the state
-space is built here, and the response is a convolution, not an IIR recurrence.
+same model as the planner's own servo check (:mod:`nurbscnc.servo.model`: per axis G(s) of SPEC
+eq. 25, first-order-hold input, exact at the samples) but shares none of its simulation code: the
+state space is built here, and the response is a convolution, not an IIR recurrence.
 
 Model. G(s) = (b2 s² + b1 s + b0) / (a4 s⁴ + a3 s³ + a2 s² + a1 s + a0) in controllable
 canonical form on the frequency-scaled state w_i = z^(i) / ω_n^i (z the canonical "phase"
@@ -51,8 +51,8 @@ import numpy as np
 from scipy import linalg, signal
 
 from nurbscnc.errors import ConfigError
-from nurbscnc.machine import AXES, AxisServo, Machine
-from nurbscnc.servo import contour_error_eq29, contour_error_true
+from nurbscnc.machine.profile import AXES, AxisServo, Machine
+from nurbscnc.servo.model import contour_error_eq29, contour_error_true
 
 #: Settling tolerance: the simulation ends when every axis is this close to rest [mm].
 SETTLE_TOLERANCE_MM = 1e-6

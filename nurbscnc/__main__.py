@@ -1,0 +1,3 @@
+from nurbscnc.cli.main import main
+
+main()

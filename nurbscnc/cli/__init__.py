@@ -1,0 +1,1 @@
+"""Command-line interface: parses options, calls one function per command, prints."""
