@@ -582,6 +582,29 @@ class Wire:
         start, data, taken = self._queue[0]
         return start + (taken + 1) * self.byte_s if self.byte_s else start
 
+    def done_s(self) -> float | None:
+        """When the oldest chunk on the line has arrived whole (None: nothing on the line)."""
+        if not self._queue:
+            return None
+        start, data, _ = self._queue[0]
+        return start + len(data) * self.byte_s if self.byte_s else start
+
+    def queued_bytes(self, now: float) -> int:
+        """Bytes pushed and not yet arrived by ``now``."""
+        if self.byte_s is None:
+            return sum(len(item[1]) for item in self._queue)
+        return max(0, round((self._free_at - now) / self.byte_s))
+
+    def drop_unsent(self, now: float) -> None:
+        """Forget the chunks not yet started by ``now`` (a port's output queue flushed)."""
+        while self._queue and self._queue[-1][0] > now:
+            self._queue.pop()
+        if self._queue:
+            start, data, _ = self._queue[-1]
+            self._free_at = start + len(data) * (self.byte_s or 0.0)
+        else:
+            self._free_at = min(self._free_at, now)
+
 
 # -- endpoints -----------------------------------------------------------------------------------
 class PtyEndpoint:

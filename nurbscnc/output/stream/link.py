@@ -274,9 +274,9 @@ class Link:
         if st.phase is Phase.HANDSHAKE:
             self._handshake_timers(now)
         elif st.phase is Phase.STREAMING:
+            self._hold_resume(now)  # before new batches: a hold must not wait behind them
             self._fill_window(now)
             self._retransmit_timer(now)
-            self._hold_resume(now)
             self._poll(now)
             self._check_contact(now, "from the card")
         elif st.phase is Phase.STOPPING:
@@ -305,16 +305,26 @@ class Link:
         return writes
 
     def next_wakeup_s(self, now: float) -> float:
-        """The latest time the driver should call :meth:`on_time` again."""
+        """The latest time the driver should call :meth:`on_time` again (a timer's expiry)."""
         st, opt = self.state, self.options
+        eps = 1e-9  # the timers fire strictly after their interval
         times = [now + opt.poll_s]
+        if st.phase in (Phase.HANDSHAKE, Phase.STREAMING):
+            times.append(st.last_rx_s + opt.timeout_s + eps)
         if self.decoder.expires_s is not None:
             times.append(self.decoder.expires_s)
-        if st.phase is Phase.STREAMING and st.base < st.nxt:
-            times.append(st.window[st.base].leaves_s + self.rtt.rto)
-        if st.phase is Phase.STOPPING:
+        if st.abort_requested:
+            times.append(now)
+        if st.phase is Phase.HANDSHAKE:
+            times.append(st.last_hello_s + opt.rto_s)
+        elif st.phase is Phase.STREAMING:
+            times.append(max(st.last_rx_s, st.last_poll_s) + opt.poll_s + eps)
+            if st.base < st.nxt:
+                times.append(st.window[st.base].leaves_s + self.rtt.rto + eps)
+            if st.want_hold is not None:
+                times.append(st.last_ctl_s + opt.rto_s + eps)
+        elif st.phase is Phase.STOPPING:
             times.append(min(st.last_abort_s + opt.abort_retry_s, st.stop_deadline_s))
-        times.append(st.last_rx_s + opt.timeout_s)
         return max(now, min(times))
 
     def progress(self) -> Progress:
