@@ -173,7 +173,7 @@ def test_a_stalled_partial_frame_is_abandoned_after_the_gap():
     dec = p.FrameDecoder(gap_s=0.01)
     assert dec.feed(false_sync + good, now=1.0) == []
     # … until the line has been quiet for the gap: then the frame behind it is found.
-    out = dec.feed(b"", now=1.0101)
+    out = dec.expire(1.0101)
     assert out[0].reason == "gap" and out[1:] == [p.Frame(p.MsgType.ACK, 0, good[6:-4])]
     assert dec.pending_bytes == 0
 

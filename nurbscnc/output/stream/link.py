@@ -507,10 +507,10 @@ class Link:
         st = self.state
         total = self.n_batches + 1  # the batches, then END
         while st.nxt < total:
-            rec = self._record(st.nxt)
-            if not self.ignore_credit and st.in_flight + rec.periods > st.credit:
+            periods = min(self.per_frame, self.program.periods - st.nxt * self.per_frame)
+            if not self.ignore_credit and st.in_flight + max(periods, 0) > st.credit:
                 break
-            st.window[st.nxt] = rec
+            rec = st.window[st.nxt] = self._record(st.nxt)
             self._send(None, rec)
             st.in_flight += rec.periods
             self.count.max_in_flight = max(self.count.max_in_flight, st.in_flight)

@@ -186,8 +186,13 @@ class FrameDecoder:
         self._last_s: float | None = None  # when the held bytes last grew
 
     def feed(self, data: bytes, now: float | None = None) -> list[Frame | BadFrame]:
-        """Frames completed by ``data`` (arrived at ``now`` [s], optional)."""
-        out = self.expire(now) if now is not None else []
+        """Frames completed by ``data`` (arrived at ``now`` [s], optional).
+
+        New bytes never expire the bytes held before them (a receiver that was busy must not
+        take its own delay for a gap on the line): the gap is enforced by :meth:`expire`,
+        which the receiver calls when no bytes come.
+        """
+        out: list[Frame | BadFrame] = []
         if data:
             self._buf += data
             self._last_s = now
