@@ -143,7 +143,8 @@ def matrix(pulses, seeds: int) -> dict:
                     row["completed"] += 1
                 elif not r.completed and r.stopped_cleanly(pulses):
                     row["failed_cleanly"] += 1
-                    row["errors"].append(f"drop {drop:g} seed {seed}: {r.error.message}")
+                    row["errors"].append(f"drop {drop:g} seed {seed}: {r.error.message} (card "
+                                         f"{r.state_at_end.name} when the sender ended)")
                 else:
                     row["unclean"] += 1
                     row["errors"].append(f"UNCLEAN drop {drop:g} seed {seed}: {r.error}")

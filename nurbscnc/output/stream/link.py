@@ -182,6 +182,7 @@ class LinkState:
     # timers [s]
     started_s: float = 0.0
     last_rx_s: float = 0.0
+    last_progress_s: float = 0.0  #: when the card last acknowledged a new frame
     last_poll_s: float = -math.inf
     last_hello_s: float = -math.inf
     hellos: int = 0
@@ -320,7 +321,9 @@ class Link:
         elif st.phase is Phase.STREAMING:
             times.append(max(st.last_rx_s, st.last_poll_s) + opt.poll_s + eps)
             if st.base < st.nxt:
-                times.append(st.window[st.base].leaves_s + self.rtt.rto + eps)
+                oldest = st.window[st.base]
+                times.append(oldest.leaves_s + self.rtt.rto + eps)
+                times.append(max(st.last_progress_s, oldest.written_s) + opt.timeout_s + eps)
             if st.want_hold is not None:
                 times.append(st.last_ctl_s + opt.rto_s + eps)
         elif st.phase is Phase.STOPPING:
@@ -366,10 +369,11 @@ class Link:
             st.last_hello_s = now
             st.hellos += 1
         if now - st.last_rx_s > self.options.timeout_s:
-            self._finish_error(StreamError(
+            # The card may have opened a stream on a HELLO whose CAPS was lost: abort it.
+            self._stop(StreamError(
                 f"lost communication with card: no answer to HELLO for "
                 f"{self.options.timeout_s:g} s (is it a card speaking protocol version "
-                f"{p.PROTOCOL_VERSION}?)"))  # fmt: skip
+                f"{p.PROTOCOL_VERSION}?)"), now)  # fmt: skip
 
     def _on_caps_in_handshake(self, caps: p.Caps, now: float) -> None:
         st = self.state
@@ -394,7 +398,7 @@ class Link:
             [np.zeros((1, axes), dtype=np.int64), np.cumsum(sums, axis=0)])
         st.credit = caps.buffer_periods
         st.phase = Phase.STREAMING
-        st.last_rx_s = now
+        st.last_rx_s = st.last_progress_s = now
 
     # -- streaming: input handlers -----------------------------------------------------------
     def _dispatch(self, msg, now: float) -> None:
@@ -445,6 +449,7 @@ class Link:
             for seq in range(st.base, st.base + ahead):
                 st.in_flight -= st.window.pop(seq).periods
             st.base += ahead
+            st.last_progress_s = now
         st.credit = msg.free_periods
 
     def _on_nak(self, msg: p.Nak, now: float) -> None:
@@ -555,10 +560,16 @@ class Link:
             st.last_poll_s = now
 
     def _check_contact(self, now: float, what: str) -> None:
-        st = self.state
-        if now - st.last_rx_s > self.options.timeout_s:
+        """No valid frame for the timeout; or frames in flight and none acknowledged for it
+        although the card answers (a line too noisy to carry a frame)."""
+        st, timeout = self.state, self.options.timeout_s
+        if now - st.last_rx_s > timeout:
             self._stop(StreamError(f"lost communication with card: no answer {what} for "
-                                   f"{self.options.timeout_s:g} s"), now)  # fmt: skip
+                                   f"{timeout:g} s"), now)  # fmt: skip
+        elif st.base < st.nxt and now - max(st.last_progress_s,
+                                            st.window[st.base].written_s) > timeout:
+            self._stop(StreamError(f"the card acknowledged no frame for {timeout:g} s though it "
+                                   "answers: the line is too noisy"), now)  # fmt: skip
 
     # -- the end -----------------------------------------------------------------------------
     def _stop(self, error: StreamError, now: float) -> None:

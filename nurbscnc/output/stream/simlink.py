@@ -72,7 +72,8 @@ class SimResult:
     error: StreamError | None
     card: CardSim
     link: Link
-    elapsed_s: float
+    elapsed_s: float  #: virtual time when the sender ended
+    state_at_end: p.CardState  #: the card's state then (the card is settled afterwards)
 
     @property
     def completed(self) -> bool:
@@ -85,24 +86,32 @@ class SimResult:
                 and np.array_equal(self.card.executed_pulses(), program.pulses))  # fmt: skip
 
     def stopped_cleanly(self, program: PulseProgram) -> bool:
-        """The card is not streaming, and what it executed is a prefix of the program."""
+        """The card does not move (any more), and what it executed is a prefix of the program.
+
+        Judged after the card was left alone for its whole buffer's time: a card the sender's
+        ABORT did not reach stops by itself (an underrun) once its buffer is empty; a FILLING
+        or HOLD card executes nothing.
+        """
         ran = self.card.executed_pulses()
-        streaming = self.card.state in (p.CardState.FILLING, p.CardState.RUNNING,
-                                        p.CardState.HOLD)  # fmt: skip
-        return not streaming and np.array_equal(ran, program.pulses[: len(ran)])
+        return (self.card.state is not p.CardState.RUNNING
+                and np.array_equal(ran, program.pulses[: len(ran)]))  # fmt: skip
 
 
 def simulate(  # noqa: PLR0913 - a test harness with everything optional
              program: PulseProgram, config: CardConfig | None = None, *,
-             options: SenderOptions | None = None, to_card: Relay | None = None,
-             to_host: Relay | None = None, baud: int | None = 115200, seed: int = 1,
+             options: SenderOptions | None = None,
+             to_card: Callable[[bytes], bytes] | None = None,
+             to_host: Callable[[bytes], bytes] | None = None,
+             baud: int | None = 115200, seed: int = 1,
              events: Sequence[tuple[float, Callable[[Link, CardSim], None]]] = (),
              max_time_s: float | None = None, ignore_credit: bool = False) -> SimResult:
     """Stream ``program`` to a simulated card over a simulated line; see the module docstring.
 
     ``events``: (time [s], action(link, card)) pairs run when virtual time reaches them (an
-    operator's hold, a relay going dead). ``max_time_s`` bounds the run (default: 3 × the
-    program's duration + 10 s); a run that reaches it ends with a StreamError.
+    operator's hold, a relay going dead). ``to_card`` / ``to_host`` pass every frame written in
+    that direction (a :class:`Relay`, or any bytes → bytes function). ``max_time_s`` bounds
+    the run (default: 3 × the program's duration + 10 s); a run that reaches it ends with a
+    StreamError. After the sender ends, the card is left alone for its buffer's time.
     """
     card = CardSim(config or CardConfig(speed=1.0), seed=seed)
     byte_s = p.BITS_PER_BYTE_8N1 / baud if baud else 0.0
@@ -140,10 +149,14 @@ def simulate(  # noqa: PLR0913 - a test harness with everything optional
         # Instantaneous lines deliver at the same time: a few turns at one time, then move on.
         same_time = same_time + 1 if t_next <= t else 0
         t = t_next if t_next > t else (t if same_time < 8 else t + 1e-6)
+    at_end = card.state
+    # Leave the card alone for its buffer's time: whatever it still holds runs (or it stops).
+    cfg = card.config
+    card.advance(t + cfg.buffer_periods * cfg.period_s / (cfg.speed or 1.0) + 0.05)
     if not link.finished:
         return SimResult(None, StreamError(f"simulation did not finish in {limit:g} s"), card,
-                         link, t)  # fmt: skip
+                         link, t, at_end)  # fmt: skip
     try:
-        return SimResult(link.result(), None, card, link, t)
+        return SimResult(link.result(), None, card, link, t, at_end)
     except StreamError as exc:
-        return SimResult(None, exc, card, link, t)
+        return SimResult(None, exc, card, link, t, at_end)
