@@ -52,6 +52,7 @@ from nurbscnc.output.stream.card import (  # noqa: E402
     PtyEndpoint,
     serve,
 )
+from nurbscnc.output.stream.quantise import quantise  # noqa: E402
 from nurbscnc.output.stream.sender import Sender, SenderOptions, open_port  # noqa: E402
 from nurbscnc.output.stream.simlink import Relay, simulate  # noqa: E402
 
@@ -154,6 +155,32 @@ def matrix(pulses, seeds: int) -> dict:
             "wall_s": time.perf_counter() - t0}  # fmt: skip
 
 
+STRESS = ((0.1, 0.05, 48), (0.2, 0.1, 256), (0.3, 0.2, 64), (0.5, 0.3, 256))
+
+
+def stress(seeds: int = 25) -> dict:
+    """Far past the matrix: (corrupt, drop, buffer) cells where streams may fail; every failure
+    must leave the card stopped having run a prefix of the program (no wrong pulse)."""
+    t = np.arange(501) * 1e-3  # a 10 mm circle at ≈ 31 mm/s, 500 periods
+    pts = np.column_stack([10 * np.sin(np.pi * t), 10 * np.cos(np.pi * t) - 10, 0.01 * t])
+    pulses = quantise(pts, (1000.0,) * 3, 1e-3)
+    out = {}
+    for corrupt, drop, buffer in STRESS:
+        row = {"streams": 0, "completed": 0, "failed_cleanly": 0, "unclean": 0}
+        for seed in range(seeds):
+            r = simulate(pulses, CardConfig(speed=1.0, buffer_periods=buffer,
+                                            start_fill_periods=buffer // 2),
+                         to_card=Relay(corrupt, drop, seed),
+                         to_host=Relay(corrupt, drop, 1000 + seed), seed=seed)  # fmt: skip
+            row["streams"] += 1
+            key = ("completed" if r.completed and r.exact(pulses) else
+                   "failed_cleanly" if not r.completed and r.stopped_cleanly(pulses)
+                   else "unclean")  # fmt: skip
+            row[key] += 1
+        out[f"corrupt_{corrupt:g}_drop_{drop:g}_buffer_{buffer}"] = row
+    return out
+
+
 def print_matrix(m: dict) -> bool:
     print(f"\nfault matrix ({m['periods']} periods, real-time card, 115200 baud, drop rates "
           f"{', '.join(f'{d:.1%}' for d in m['drop_rates'])} × {m['seeds']} seeds each, "
@@ -178,7 +205,16 @@ def main() -> int:
     ap.add_argument("--quick", action="store_true", help="short program (naca2415, ~1.1 s)")
     ap.add_argument("--seeds", type=int, default=4, help="fault matrix: seeds per cell")
     ap.add_argument("--matrix-only", action="store_true", help="only the fault matrix")
+    ap.add_argument("--stress", action="store_true",
+                    help="only the stress cells far past the matrix (10-50 %% corruption)")
     args = ap.parse_args()
+    if args.stress:
+        rows = stress()
+        for name, row in rows.items():
+            print(f"{name}: {row}")
+        ok = all(row["unclean"] == 0 for row in rows.values())
+        print(f"every failure with the card stopped after a prefix: {ok}")
+        return 0 if ok else 1
     program = ROOT / "programs" / ("naca2415.nc" if args.quick else "butterfly.nc")
     pulses, mach = load_pulse_program(str(program), None, ())
     naca, _ = load_pulse_program(str(ROOT / "programs" / "naca2415.nc"), None, ())
