@@ -52,3 +52,29 @@ def test_program_against_linuxcnc(name):
     assert hashlib.sha256(path.read_bytes()).hexdigest() == golden["sha256"]
     assert path.is_relative_to(REAL)
     check_golden(name, ROLES[name], golden, path)
+
+
+@pytest.mark.parametrize(
+    "perturb",
+    [
+        ("end", lambda m: m["end"].__setitem__(0, m["end"][0] + 2e-9)),
+        ("centre", lambda m: m["centre"].__setitem__(1, m["centre"][1] - 2e-9)),
+        ("rotation", lambda m: m.__setitem__("rotation", -m["rotation"])),
+        ("turns", lambda m: m.__setitem__("rotation", m["rotation"] * 2)),
+        ("normal", lambda m: m.__setitem__("normal", [0.0, 1.0, 0.0])),
+        ("feed", lambda m: m.__setitem__("feed_mm_s", m["feed_mm_s"] * (1 + 1e-8))),
+        ("line", lambda m: m.__setitem__("line", m["line"] + 1)),
+    ],
+    ids=lambda p: p[0],
+)
+def test_comparison_catches_a_small_difference(perturb):
+    """The harness fails on a 2e-9 mm change of one arc (it is not a test that cannot fail)."""
+    from tests.linuxcnc_compare import compare, run_nurbscnc
+
+    golden = load_golden("linuxcnc__nc_files__cds")
+    program = run_nurbscnc(ROOT / golden["program"])
+    compare(golden, program)  # agrees as recorded
+    arc = next(m for m in golden["moves"] if m["kind"] == "arc")
+    perturb[1](arc)
+    with pytest.raises(AssertionError):
+        compare(golden, program)

@@ -61,13 +61,17 @@ def main() -> int:
         except AssertionError as exc:
             message = " ".join(str(exc).split())
             gaps.append(f"{name}  {feature(message)}: {message[:160]}")
-    lines = ["# Real programs nurbscnc does not reproduce yet: golden name, missing feature: first",
-             "# difference. Written by tools/known_gaps.py; tests/test_linuxcnc_goldens.py expects",
-             "# each of these to fail (strict xfail), so the list must shrink as features land.",
-             *gaps]
+    lines = [
+        "# Real programs nurbscnc does not reproduce yet: golden name, missing feature: first",
+        "# difference. Written by tools/known_gaps.py; tests/test_linuxcnc_goldens.py expects",
+        "# each of these to fail (strict xfail), so the list must shrink as features land.",
+        *gaps,
+    ]
     KNOWN_GAPS.write_text("\n".join(lines) + "\n")
-    print(f"{len(golden_names())} programs, LinuxCNC accepts {accepted}, "
-          f"nurbscnc agrees with LinuxCNC on {agree}, {len(gaps)} known gaps")
+    print(
+        f"{len(golden_names())} programs, LinuxCNC accepts {accepted}, "
+        f"nurbscnc agrees with LinuxCNC on {agree}, {len(gaps)} known gaps"
+    )
     return 0
 
 
