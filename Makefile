@@ -46,6 +46,7 @@ reproduce: $(STAMP)
 # `gcode` module, and rs274). The goldens are committed; CI does not need LinuxCNC.
 goldens:
 	/usr/bin/python3 tools/record_goldens.py
+	/usr/bin/python3 tools/record_goldens.py --programs tests/programs/cycles --goldens tests/golden/linuxcnc_cycles
 
 clean:
 	rm -rf $(VENV) $(OUT) .pytest_cache .ruff_cache

@@ -547,6 +547,10 @@ def main(argv=None) -> int:
     ap.add_argument("--only", help="record only programs whose path contains this text")
     ap.add_argument("--stdout", metavar="FILE", help="record FILE and print its golden")
     ap.add_argument("--json-out", metavar="OUT", help="with --stdout: write the golden to OUT")
+    ap.add_argument(
+        "--programs", metavar="DIR", help="record every *.ngc of DIR (not the manifest)"
+    )
+    ap.add_argument("--goldens", metavar="DIR", help="with --programs: where the goldens go")
     args = ap.parse_args(argv)
     tools = read_tool_table(TOOLS)
     if args.stdout:
@@ -558,20 +562,24 @@ def main(argv=None) -> int:
         else:
             json.dump(golden, sys.stdout)
         return 0
-    os.makedirs(GOLDEN, exist_ok=True)
+    golden_dir, program_dir, programs = GOLDEN, REAL, manifest_programs()
+    if args.programs:
+        program_dir, golden_dir = os.path.abspath(args.programs), os.path.abspath(args.goldens)
+        programs = sorted(f for f in os.listdir(program_dir) if f.endswith(".ngc"))
+    os.makedirs(golden_dir, exist_ok=True)
     counts = {"accepted": 0, "refused": 0, "crashed": 0}
-    for rel in manifest_programs():
+    for rel in programs:
         if args.only and args.only not in rel:
             continue
         # One process per program: LinuxCNC's interpreter keeps state between parses (G10 L1
         # rewrites the tool table), and a crash of the module must not take the others along.
-        out = os.path.join(GOLDEN, golden_name(rel) + ".tmp")
+        out = os.path.join(golden_dir, golden_name(rel) + ".tmp")
         res = subprocess.run(
             [
                 sys.executable,
                 os.path.abspath(__file__),
                 "--stdout",
-                os.path.join(REAL, rel),
+                os.path.join(program_dir, rel),
                 "--json-out",
                 out,
             ],
@@ -579,14 +587,14 @@ def main(argv=None) -> int:
             text=True,
         )
         if res.returncode != 0 or not os.path.exists(out):
-            print(f"CRASH {rel}: exit {res.returncode}, no golden written")
+            print(f"CRASH {rel}: exit {res.returncode}, no golden written: {res.stderr[-1500:]}")
             counts["crashed"] += 1
             continue
         with open(out) as fh:
             golden = json.load(fh)
         os.remove(out)
         counts["accepted" if golden["accepted"] else "refused"] += 1
-        with open(os.path.join(GOLDEN, golden_name(rel) + ".json"), "w") as fh:
+        with open(os.path.join(golden_dir, golden_name(rel) + ".json"), "w") as fh:
             fh.write(golden_text(golden))
         state = "ok " if golden["accepted"] else "ERR"
         print(
