@@ -47,6 +47,7 @@ reproduce: $(STAMP)
 goldens:
 	/usr/bin/python3 tools/record_goldens.py
 	/usr/bin/python3 tools/record_goldens.py --programs tests/programs/cycles --goldens tests/golden/linuxcnc_cycles
+	/usr/bin/python3 tools/record_goldens.py --programs tests/programs/comp --goldens tests/golden/linuxcnc_comp
 
 clean:
 	rm -rf $(VENV) $(OUT) .pytest_cache .ruff_cache
