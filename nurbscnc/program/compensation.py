@@ -280,8 +280,9 @@ class CutterComp:
                 if halfcorner == 0.0:
                     raise ProgramError(MSG_ZERO_CORNER)
                 retreat = r / math.tan(halfcorner)
-                back = (cx + retreat * math.cos(theta + gamma), cy + retreat * math.sin(theta + gamma))
-                self._move_endpoint_and_flush(back[0], back[1], out)
+                back_x = cx + retreat * math.cos(theta + gamma)
+                back_y = cy + retreat * math.sin(theta + gamma)
+                self._move_endpoint_and_flush(back_x, back_y, out)
             else:  # arc -> line: where the offset arc meets the offset line
                 pcx, pcy = front.centre_mm
                 oldrad = math.hypot(pcy - front.end_mm[1], pcx - front.end_mm[0])
