@@ -166,3 +166,13 @@ def test_state_is_sticky_and_initial_level_kept():
     with pytest.raises(ProgramError, match="R clearance plane unspecified"):
         expand_cycle("G81", {"X": 3.0}, incremental=False, position_mm=first.position_mm,
                      plane="XY", retract="G98", feed_mm_s=5.0, state=CycleState())  # fmt: skip
+
+
+@pytest.mark.parametrize("plane", ["ZX", "YZ"])
+@pytest.mark.parametrize("code", ["G74", "G84"])
+def test_tapping_outside_xy_is_refused(code, plane):
+    """LinuxCNC 2.9 taps to interchanged coordinates in G18/G19: refused, not copied."""
+    with pytest.raises(ProgramError, match="only supported in the XY plane"):
+        expand_cycle(code, {"X": 1.0, "Y": 1.0, "Z": -1.0, "R": 2.0}, incremental=False,
+                     position_mm=(0.0, 0.0, 5.0), plane=plane, retract="G98",
+                     feed_mm_s=5.0, state=CycleState(), spindle="cw")  # fmt: skip

@@ -101,11 +101,7 @@ FILES = [
                 for p in (17, 18, 19)
                 for r in (98, 99)
             ],
-            *[
-                (f"g84/g{p}/g{r}/g{p}-g{r}-g84.ngc", f"g{p}-g{r}-g84")
-                for p in (17, 18, 19)
-                for r in (98, 99)
-            ],
+            *[(f"g84/g17/g{r}/g17-g{r}-g84.ngc", f"g17-g{r}-g84") for r in (98, 99)],
             *[
                 (f"good/good-arc.{s}.{u}.center-format.ngc", f"good-arc.{s}.{u}")
                 for s in ("big", "medium", "small")
@@ -161,6 +157,18 @@ FILES = [
         "refused",
         "lathe (G7/G18 comp)",
     ),
+    # LinuxCNC 2.9 taps to interchanged coordinates in G18/G19 (nurbscnc/program/cycles.py).
+    *[
+        (
+            LINUXCNC,
+            f"tests/interp/g84/g{p}/g{r}/g{p}-g{r}-g84.ngc",
+            f"linuxcnc/interp/g{p}-g{r}-g84.ngc",
+            "refused",
+            "G84 outside G17 (LinuxCNC interchanges the axes)",
+        )
+        for p in (18, 19)
+        for r in (98, 99)
+    ],
     (
         LINUXCNC,
         "tests/interp/g33.1/g33.1.ngc",

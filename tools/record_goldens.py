@@ -268,10 +268,11 @@ _EVENTS = {
 }
 
 
-def rs274_calls(path: str, tools: dict, params: str, tmp: str) -> list | None:
-    """The canonical calls of ``rs274 -g`` (block delete on): [(NAME, [numbers])]."""
+def rs274_calls(path: str, tools: dict, params: str, tmp: str) -> tuple[list | None, str]:
+    """The canonical calls of ``rs274 -g`` (block delete on): [(NAME, [numbers])], and the
+    text of the block it stopped at with an error ("" if none)."""
     if not os.path.exists(RS274):
-        return None
+        return None, ""
     # The stand-alone canon's machine is in inches: give it the same tools in inches.
     tbl = os.path.join(tmp, "rs274.tbl")
     with open(tbl, "w") as fh:
@@ -294,7 +295,9 @@ def rs274_calls(path: str, tools: dict, params: str, tmp: str) -> list | None:
             env=env,
         )
     except subprocess.TimeoutExpired:
-        return None
+        return None, ""
+    err_lines = [t for t in res.stderr.splitlines() if t.strip()]
+    failed_block = err_lines[-1].strip() if len(err_lines) >= 3 else ""
     calls = []
     for raw in res.stdout.splitlines():
         m = _CALL.match(raw)
@@ -317,7 +320,7 @@ def rs274_calls(path: str, tools: dict, params: str, tmp: str) -> list | None:
                 except ValueError:
                     pass
             calls.append((m.group(1), nums))
-    return calls
+    return calls, failed_block
 
 
 def replay_rs274(calls: list, tools: dict) -> Recorder:
@@ -447,6 +450,18 @@ class _ToolEntry(ctypes.Structure):
 _TOOLDATA = None  # libtooldata, once loaded
 
 
+def _error_line(path: str, reported: int, failed_block: str) -> int:
+    """The line LinuxCNC refused. The gcode module reports the line after it when the block
+    could not be read (a syntax or word error), the line itself when it could not be executed;
+    rs274 prints the refused block's text, which tells the two apart."""
+    with open(path, errors="replace") as fh:
+        lines = fh.read().splitlines()
+    if failed_block and 2 <= reported <= len(lines) + 1:
+        if lines[reported - 2].strip() == failed_block:
+            return reported - 1
+    return reported
+
+
 def load_tool_database(tools_path: str) -> None:
     """Give LinuxCNC 2.9's interpreter its tool table.
 
@@ -488,8 +503,10 @@ def record(path: str, tools: dict) -> dict:
         moves, alignment, tol_mm = canon.moves, "program refused", 1e-9
         if accepted:
             moves, alignment, tol_mm = merge_events(
-                canon.moves, rs274_calls(path, tools, PARAMS, tmp), tools
+                canon.moves, rs274_calls(path, tools, PARAMS, tmp)[0], tools
             )
+        else:
+            last_line = _error_line(path, last_line, rs274_calls(path, tools, PARAMS, tmp)[1])
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     golden = {

@@ -29,7 +29,10 @@ The rules are those of LinuxCNC's ``interp_cycles.cc`` (``convert_cycle``,
 G74/G84 (tapping) are LinuxCNC 2.9's *floating-chuck* cycles: a feed in, spindle stop and
 reverse, dwell P, feed out, stop and restore — no spindle synchronisation, so they are
 expanded here (the spindle events come out as moves of their own kinds; the planner may
-ignore them). G73/G83 back off by LinuxCNC's fixed 0.010 in = 0.254 mm.
+ignore them). Only in G17: LinuxCNC 2.9's G74/G84 in G18 and G19 pass the coordinates to its
+canon in the wrong order (the tool goes to a point with interchanged axes), which is refused
+rather than copied. G74 with an L word is refused, as LinuxCNC does. G73/G83 back off by
+LinuxCNC's fixed 0.010 in = 0.254 mm.
 """
 
 from __future__ import annotations
@@ -151,6 +154,16 @@ def expand_cycle(
     """
     if code not in CODES:
         raise ProgramError(f"{code} is not a canned cycle")
+    if code == "G74" and "L" in words:  # LinuxCNC's word check counts G74 out of L's codes
+        raise ProgramError(
+            "L word with no G10, cutter compensation, canned cycle, digital/analog input, "
+            "M98 or NURBS code"
+        )
+    if code in ("G74", "G84") and plane != "XY":
+        raise ProgramError(
+            f"{code} is only supported in the XY plane (G17): LinuxCNC 2.9 taps to "
+            "coordinates with the axes interchanged in G18 and G19"
+        )
     if feed_mm_s == 0.0:
         raise ProgramError("Cannot feed with zero feed rate")
     same = state.motion == code
@@ -331,11 +344,12 @@ def _g86(out, a, b, r, clear, c, p, q, ijk, spindle, code):
 
 
 def _g87(out, a, b, r, clear, c, p, q, ijk, spindle, code):
-    """Back boring: I, J offset the tool sideways; K is the top of the counterbore."""
+    """Back boring: the plane axes' words among I J K offset the tool sideways, the drilling
+    axis' word is the top of the counterbore (G17: I, J and K; G18: K, I and J; G19: J, K, I)."""
     _need_spindle(spindle, code)
-    i, j, k, incremental = ijk
-    middle = c + k if incremental else k
-    oa, ob = a + i, b + j
+    *offsets, incremental = ijk  # I, J, K: the offsets along X, Y, Z, whatever the plane
+    middle = offsets[out.ic] + (c if incremental else 0.0)
+    oa, ob = a + offsets[out.ia], b + offsets[out.ib]
     out.rapid(oa, ob, r)
     out.event("spindle-stop")
     out.event("spindle-orient")
