@@ -20,6 +20,7 @@ import shutil
 import subprocess
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from tests.linuxcnc_compare import ROOT, compare, load_golden, run_nurbscnc
@@ -223,3 +224,77 @@ def test_random_cycle_programs_match_linuxcnc(seed, tmp_path):
         return
     assert golden["tolerance_mm"] == 1e-9, golden["record"]
     assert_same_moves(drive(text), golden["moves"])
+
+
+def random_comp_program(seed: int) -> str:
+    """A G41.1/G42.1 stretch of random lines and arcs (often gouging: LinuxCNC's errors must
+    come out too), with Z-only moves, a rapid and a dwell now and then."""
+    rnd = random.Random(5000 + seed)
+    inch = rnd.random() < 0.2
+    k = 1 / 25.4 if inch else 1.0
+    lines = [f"{'G20' if inch else 'G21'} G17 G90 G40 F{rnd.uniform(100, 900) * k:.4f}",
+             f"G0 X{-30 * k:.4f} Y{-30 * k:.4f} Z0"]  # fmt: skip
+    side = rnd.choice(["G41.1", "G42.1"])
+    lines.append(f"{side} D{rnd.uniform(0.5, 6) * k:.4f}")
+    pos = [rnd.uniform(-10, 10), rnd.uniform(-10, 10)]
+    lines.append(f"G1 X{pos[0] * k:.4f} Y{pos[1] * k:.4f}")
+    pos = [float(f"{pos[0] * k:.4f}") / k, float(f"{pos[1] * k:.4f}") / k]
+    for _ in range(rnd.randint(3, 9)):
+        roll = rnd.random()
+        if roll < 0.1:
+            lines.append(f"G1 Z{rnd.uniform(-3, 1) * k:.4f}")
+            continue
+        if roll < 0.15:
+            lines.append(f"G4 P{rnd.uniform(0, 1):.3f}")
+            continue
+        if roll < 0.6:
+            code = "G0" if rnd.random() < 0.1 else "G1"
+            end = [pos[0] + rnd.uniform(-30, 30), pos[1] + rnd.uniform(-30, 30)]
+            end = [float(f"{e * k:.4f}") / k for e in end]
+            lines.append(f"{code} X{end[0] * k:.4f} Y{end[1] * k:.4f}")
+        else:
+            r = rnd.uniform(3, 25)
+            phi0 = rnd.uniform(0, 2 * math.pi)
+            centre = [pos[0] - r * math.cos(phi0), pos[1] - r * math.sin(phi0)]
+            phi1 = phi0 + rnd.uniform(0.2, 2 * math.pi - 0.2)
+            end = [centre[0] + r * math.cos(phi1), centre[1] + r * math.sin(phi1)]
+            end = [float(f"{e * k:.4f}") / k for e in end]
+            i, j = (centre[0] - pos[0]) * k, (centre[1] - pos[1]) * k
+            code = rnd.choice(["G2", "G3"])
+            lines.append(f"{code} X{end[0] * k:.4f} Y{end[1] * k:.4f} I{i:.4f} J{j:.4f}")
+        pos = end
+    lines.append("G40")
+    lines.append(f"G1 X{-30 * k:.4f} Y{-30 * k:.4f}")
+    lines.append("M2")
+    return "\n".join(lines) + "\n"
+
+
+@pytest.mark.parametrize("seed", range(60))
+def test_random_comp_programs_match_linuxcnc(seed, tmp_path):
+    """nurbscnc.program.compensation against LinuxCNC on random compensated paths: the same
+    moves to 1e-9 mm, or the same error at the same line."""
+    from nurbscnc.errors import ProgramError
+    from tests.test_compensation import drive
+
+    text = random_comp_program(seed)
+    program = tmp_path / f"comp{seed}.ngc"
+    program.write_text(text)
+    golden = linuxcnc_golden(program, tmp_path)
+    if not golden["accepted"]:
+        with pytest.raises(ProgramError) as info:
+            drive(text)
+        assert (info.value.line, info.value.message) == (
+            golden["error"]["line"],
+            golden["error"]["message"],
+        ), text
+        return
+    assert golden["tolerance_mm"] == 1e-9, golden["record"]
+    want = [m for m in golden["moves"] if m["kind"] != "spindle"]
+    got = drive(text)
+    assert [m["kind"] for m in got] == [m["kind"] for m in want], text
+    for g, m in zip(got, want):
+        if "end" in m:
+            assert np.allclose(g["end"], m["end"][:3], atol=1e-9, rtol=0), (text, g, m)
+        if m["kind"] == "arc":
+            assert np.allclose(g["centre"], m["centre"], atol=1e-9, rtol=0), (text, g, m)
+            assert g["rotation"] == m["rotation"], (text, g, m)
