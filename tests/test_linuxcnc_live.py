@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.linuxcnc_compare import ROOT, compare, load_golden, run_nurbscnc
+from tests.linuxcnc_compare import ROOT, compare, run_nurbscnc
 
 SYSTEM_PYTHON = "/usr/bin/python3"
 RS274 = "/usr/bin/rs274"
@@ -59,23 +59,29 @@ def linuxcnc_golden(program: Path, tmp_path: Path) -> dict:
 
 
 # One program of each kind of record: gcode module cross-checked, rs274 fallback (cutter
-# compensation after M6), refused by LinuxCNC, stopped at end of file, inch, cycles, arcs.
+# compensation after M6), refused by LinuxCNC, stopped at end of file, inch, cycles, arcs,
+# and the cycle and compensation goldens.
 SAMPLE = [
-    "linuxcnc__nc_files__cds",
-    "linuxcnc__nc_files__comp",
-    "linuxcnc__nc_files__comp311",
-    "linuxcnc__interp__g18-g99-g81",
-    "linuxcnc__interp__good-arc.small.imperial",
-    "linuxcnc__interp-bad__ccomp-gouging",
-    "linuxcnc__tp__arc-feed__full_xz",
-    "camotics__heart__cutout",
-    "camotics__cds__cds",
+    "linuxcnc/linuxcnc__nc_files__cds",
+    "linuxcnc/linuxcnc__nc_files__comp",
+    "linuxcnc/linuxcnc__nc_files__comp311",
+    "linuxcnc/linuxcnc__interp__g18-g99-g81",
+    "linuxcnc/linuxcnc__interp__good-arc.small.imperial",
+    "linuxcnc/linuxcnc__interp-bad__ccomp-gouging",
+    "linuxcnc/linuxcnc__tp__arc-feed__full_xz",
+    "linuxcnc/camotics__heart__cutout",
+    "linuxcnc/camotics__cds__cds",
+    "linuxcnc_cycles/g83_peck_inch",
+    "linuxcnc_cycles/g19_g87_inc",
+    "linuxcnc_cycles/err_g74_l",
+    "linuxcnc_comp/arcs_mixed",
+    "linuxcnc_comp/err_gouge_line",
 ]
 
 
 @pytest.mark.parametrize("name", SAMPLE)
 def test_committed_golden_is_what_linuxcnc_says(name, tmp_path):
-    committed = load_golden(name)
+    committed = json.loads((ROOT / "tests" / "golden" / f"{name}.json").read_text())
     now = linuxcnc_golden(ROOT / committed["program"], tmp_path)
     assert now == committed, f"{name}: LinuxCNC now records something else; run `make goldens`"
 
