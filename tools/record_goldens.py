@@ -37,6 +37,7 @@ Usage::
 from __future__ import annotations
 
 import argparse
+import atexit
 import ctypes
 import hashlib
 import json
@@ -471,7 +472,9 @@ def load_tool_database(tools_path: str) -> None:
     LinuxCNC processes on the machine are not disturbed, and load the tool table into it.
     """
     global _TOOLDATA
-    os.environ["HOME"] = tempfile.mkdtemp(prefix="goldens-home-")
+    home = tempfile.mkdtemp(prefix="goldens-home-")
+    atexit.register(shutil.rmtree, home, True)
+    os.environ["HOME"] = home
     lib = _TOOLDATA = ctypes.CDLL("/lib/libtooldata.so.0", mode=ctypes.RTLD_GLOBAL)
     lib._Z17tool_mmap_creatorPK13EMC_TOOL_STATi(None, 0)  # tool_mmap_creator(NULL, 0)
     lib._Z13tooldata_initb(0)  # tooldata_init(random_toolchanger = false)
