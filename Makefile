@@ -6,7 +6,7 @@ STAMP  := $(VENV)/.installed
 DEMO   := programs/naca2415.nc
 OUT    := out
 
-.PHONY: install demo test lint unit bench reproduce clean
+.PHONY: install demo test lint unit bench reproduce clean goldens
 
 install: $(STAMP)
 
@@ -41,6 +41,13 @@ bench: $(STAMP)
 
 reproduce: $(STAMP)
 	$(BIN)/python docs/make_reproduction.py --out docs/reproduction.md
+
+# LinuxCNC's moves for tests/programs/real/ (needs LinuxCNC 2.9: /usr/bin/python3 with its
+# `gcode` module, and rs274). The goldens are committed; CI does not need LinuxCNC.
+goldens:
+	/usr/bin/python3 tools/record_goldens.py
+	/usr/bin/python3 tools/record_goldens.py --programs tests/programs/cycles --goldens tests/golden/linuxcnc_cycles
+	/usr/bin/python3 tools/record_goldens.py --programs tests/programs/comp --goldens tests/golden/linuxcnc_comp
 
 clean:
 	rm -rf $(VENV) $(OUT) .pytest_cache .ruff_cache
