@@ -783,8 +783,9 @@ def plan(program, as_json, dump_profile, plot_dir, **settings):
               help="Batch: write <name>.csv for every program into this folder.")
 @click.option("--jobs", type=click.IntRange(min=1), default=None,
               help="Batch worker processes (default: the number of cores).")
-@click.option("--format", "fmt", type=click.Choice(["csv", "npz"]), default="csv",
-              help="Batch output format.")
+@click.option("--format", "fmt", type=click.Choice(["csv", "npz", "halstreamer"]),
+              default="csv", help="Output format: batch csv/npz (-o: by suffix), or "
+              "halstreamer (LinuxCNC streamer text, x y z per servo period; docs/linuxcnc.md).")
 @click.option("--quiet", is_flag=True, help="No summary on stderr.")
 @json_option
 @plot_option
@@ -798,7 +799,6 @@ def run(programs, output, output_dir, jobs, fmt, quiet, as_json, plot_dir, **set
     The CSV header is t,x,y,z,feed,piece,line (s, mm, mm, mm, mm/s, piece index, source
     line); the first row is the start point at t = 0, the last the end point at rest.
     """
-    from nurbscnc.output.files import write_points
 
     if output_dir is None:
         if len(programs) != 1:
@@ -811,7 +811,7 @@ def run(programs, output, output_dir, jobs, fmt, quiet, as_json, plot_dir, **set
             prog, mach, pl = make_plan(program, **settings)
         with err.status(f"writing {pl.samples.t_s.size} points …") if show else (
                 contextlib.nullcontext()):
-            write_points(output, pl.samples)
+            write_output(output, fmt, pl.samples, mach, prog.name)
         if plot_dir:
             write_plan_plots(pl, plot_dir)
         summary = plan_summary(prog, mach, pl)
@@ -824,14 +824,26 @@ def run(programs, output, output_dir, jobs, fmt, quiet, as_json, plot_dir, **set
     run_batch(programs, output_dir, jobs, fmt, quiet, as_json, settings)
 
 
+def write_output(path: str, fmt: str, samples, mach, name: str) -> None:
+    """Reference points to ``path``: a halstreamer file, or CSV/NPZ by suffix."""
+    if fmt == "halstreamer":
+        from nurbscnc.output.halstreamer import write_halstreamer
+
+        write_halstreamer(path, samples.points_mm, mach.servo.period_s, name)
+    else:
+        from nurbscnc.output.files import write_points
+
+        write_points(path, samples)
+
+
 def _batch_one(args):
     """Worker: plan one program and write its output; returns a result row (never raises)."""
     program, target, settings = args
-    from nurbscnc.output.files import write_points
 
     try:
         prog, mach, pl = make_plan(program, **settings)
-        write_points(target, pl.samples)
+        write_output(target, "halstreamer" if target.endswith(".hs") else "", pl.samples, mach,
+                     prog.name)  # fmt: skip
         return {"program": program, "ok": True, "output": target,
                 "cycle_time_s": pl.cycle_time_s, "samples": int(pl.samples.t_s.size)}
     except NurbsCncError as exc:
@@ -850,7 +862,8 @@ def run_batch(programs, output_dir, jobs, fmt, quiet, as_json, settings) -> None
     tasks = []
     for program in programs:
         stem = os.path.splitext(os.path.basename(program))[0]
-        tasks.append((program, os.path.join(output_dir, f"{stem}.{fmt}"), settings))
+        ext = "hs" if fmt == "halstreamer" else fmt
+        tasks.append((program, os.path.join(output_dir, f"{stem}.{ext}"), settings))
     workers = min(jobs or os.cpu_count() or 1, len(tasks))
     if workers == 1:
         results = [_batch_one(t) for t in tasks]
