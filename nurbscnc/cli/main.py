@@ -1028,6 +1028,9 @@ main.add_command(card_sim)
 from nurbscnc.cli.profile import profile  # noqa: E402
 
 main.add_command(profile)
+from nurbscnc.cli.identify import identify  # noqa: E402
+
+main.add_command(identify)
 
 if __name__ == "__main__":  # pragma: no cover - `python -m nurbscnc.cli.main`
     main()
