@@ -61,8 +61,11 @@ def paper_fit():
 def test_fit_recovers_the_papers_poles(paper_fit):
     fit, _, _ = paper_fit
     true = sorted_poles(np.roots(PAPER_X[1]))  # −93.7, −145 ± 211j, −315
-    got = sorted_poles(fit.poles)
-    assert np.all(np.abs(got - true) / np.abs(true) < 0.03)
+    rel = np.abs(sorted_poles(fit.poles) - true) / np.abs(true)
+    # −93.7 sits beside a zero of the model (−90.1): little of it shows in the output, so the
+    # noise moves it most (2.8 % here); the other three are within 1 %.
+    assert rel[0] < 0.05
+    assert np.all(rel[1:] < 0.01)
     assert fit.dc_gain == pytest.approx(1.0, abs=1e-3)
     assert fit.residual_rms_mm == pytest.approx(0.3e-3, rel=0.05)  # at the noise floor
     assert fit.r2 > 0.9999 and fit.fit > 0.99
@@ -113,7 +116,8 @@ def test_cli_prints_a_loadable_profile_section(tmp_path, paper_fit):
     profile += "\n[servo]\nperiod_ms = 1.0\n" + r.stdout
     m = parse_machine(profile)
     true = sorted_poles(np.roots(PAPER_X[1]))
-    assert np.all(np.abs(sorted_poles(m.servo.y.poles()) - true) / np.abs(true) < 0.03)
+    assert np.all(np.abs(sorted_poles(m.servo.y.poles()) - true) / np.abs(true) < 0.05)
+    assert np.allclose(sorted_poles(m.servo.y.poles()), sorted_poles(fit.poles), rtol=1e-5)
 
 
 def test_cli_csv_with_header_time_column_and_json(tmp_path):
