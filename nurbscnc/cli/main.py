@@ -336,7 +336,8 @@ def load_machine_cli(path, overrides=(), extra: dict | None = None):
     if ctx is not None and not ctx.meta.get("nurbscnc.machine_said"):
         ctx.meta["nurbscnc.machine_said"] = True
         if not (ctx.params.get("as_json") or ctx.params.get("quiet")):
-            err.print(f"machine: {mach.describe()}", markup=False)
+            changed = f"; overridden: {', '.join(sorted(table))}" if table else ""
+            err.print(f"machine: {mach.describe()}{changed}", markup=False)
             if not mach.contour_check:
                 err.print("contour check: off (no servo model in the profile)", markup=False)
     return mach
