@@ -87,6 +87,16 @@ def test_simple_form_recovered(f_bw, zeta):
     assert fit.damping == pytest.approx(zeta, rel=0.01)
 
 
+def test_delayed_feedback_is_shifted_back():
+    # The feedback recorded one period late (a LinuxCNC capture): --delay 1 recovers the model.
+    u, y = simulated(PAPER_X, 3000, 0.0, seed=4)
+    y_late = np.r_[y[0], y[:-1]]
+    fit = fit_axis(Trace(u, y_late, T_S), order=4, delay=1)
+    true = sorted_poles(np.roots(PAPER_X[1]))
+    assert np.max(np.abs(sorted_poles(fit.poles) - true) / np.abs(true)) < 1e-4
+    assert fit.samples == 2999 and fit.delay == 1
+
+
 def test_foh_matches_scipy():
     for num, den in (PAPER_X, ([1e4], [1.0, 140.0, 1e4]), ([1.0, 5.0], [1.0, 3.0, 2.0])):
         b, a = foh_discretise(num, den, T_S)
@@ -117,7 +127,8 @@ def test_cli_prints_a_loadable_profile_section(tmp_path, paper_fit):
     m = parse_machine(profile)
     true = sorted_poles(np.roots(PAPER_X[1]))
     assert np.all(np.abs(sorted_poles(m.servo.y.poles()) - true) / np.abs(true) < 0.05)
-    assert np.allclose(sorted_poles(m.servo.y.poles()), sorted_poles(fit.poles), rtol=1e-5)
+    # the file holds the samples to 1 nm and the section 7 digits: the same fit, nearly
+    assert np.allclose(sorted_poles(m.servo.y.poles()), sorted_poles(fit.poles), rtol=5e-4)
 
 
 def test_cli_csv_with_header_time_column_and_json(tmp_path):

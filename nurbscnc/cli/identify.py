@@ -42,9 +42,12 @@ def _handle_errors(func):
               help="Column of the time [s]; gives the sample period.")
 @click.option("--period-ms", type=click.FloatRange(min=0, min_open=True), default=None,
               help="Sample period [ms] (e.g. the servo period of a halsampler capture).")
+@click.option("--delay", type=click.IntRange(min=0), default=0, show_default=True,
+              help="Periods by which the feedback is recorded late (1 for a LinuxCNC capture "
+              "whose encoder is read before the period's command is written).")
 @click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
 @_handle_errors
-def identify(source, axis, order, cmd_col, fb_col, time_col, period_ms, as_json):
+def identify(source, axis, order, cmd_col, fb_col, time_col, period_ms, delay, as_json):
     """Fit the closed-loop position model of one axis from TRACE ('-' for stdin): commanded
     and actual position, one sample per line (whitespace or commas; '#' comments; an optional
     header line of column names), e.g. a LinuxCNC halsampler capture of pos-cmd and pos-fb.
@@ -65,13 +68,13 @@ def identify(source, axis, order, cmd_col, fb_col, time_col, period_ms, as_json)
         raise OutputError(f"cannot read {source}: {exc}") from exc
     trace = parse_trace(text, cmd_col, fb_col, time_col,
                         None if period_ms is None else period_ms * 1e-3)  # fmt: skip
-    fit = fit_axis(trace, int(order))
+    fit = fit_axis(trace, int(order), delay)
     name = "<stdin>" if source == "-" else source
     section = profile_section(fit, axis, name)
     if as_json:
         out = {
             "ok": True, "source": name, "axis": axis, "order": fit.order,
-            "samples": fit.samples, "period_s": fit.period_s,
+            "samples": fit.samples, "period_s": fit.period_s, "delay_samples": fit.delay,
             "numerator": fit.numerator.tolist(), "denominator": fit.denominator.tolist(),
             "poles": [[p.real, p.imag] for p in fit.poles], "dc_gain": fit.dc_gain,
             "offset_um": fit.offset_mm * 1e3, "fit": fit.fit, "r2": fit.r2,

@@ -298,6 +298,7 @@ class Fit:
     period_s: float
     bandwidth_hz: float | None = None
     damping: float | None = None
+    delay: int = 0  #: samples by which the actual position was shifted before the fit
 
 
 def bandwidth_hz(wn: float, zeta: float) -> float:
@@ -308,15 +309,21 @@ def bandwidth_hz(wn: float, zeta: float) -> float:
     return wn * math.sqrt(u2) / (2.0 * math.pi)
 
 
-def fit_axis(trace: Trace, order: int = 4) -> Fit:
+def fit_axis(trace: Trace, order: int = 4, delay: int = 0) -> Fit:
     """Fit the closed-loop model of one axis to ``trace`` (module docstring).
 
-    Raises TraceError when the command does not move (nothing to identify).
+    ``delay`` [samples]: the actual position is recorded that many periods late (e.g. 1 for a
+    LinuxCNC capture whose feedback is read at the start of the period, before the command
+    of that period is written): y_{k+delay} is paired with u_k, and the delay is not part of
+    the model. Raises TraceError when the command does not move (nothing to identify).
     """
     if order not in ORDERS:
         raise ValueError(f"order must be one of {ORDERS}, got {order}")
-    u = np.asarray(trace.command_mm, dtype=float)
-    y = np.asarray(trace.actual_mm, dtype=float)
+    if not 0 <= delay < trace.command_mm.size - 20:
+        raise TraceError(f"delay {delay} samples does not fit a trace of "
+                         f"{trace.command_mm.size} samples")  # fmt: skip
+    u = np.asarray(trace.command_mm, dtype=float)[: trace.command_mm.size - delay]
+    y = np.asarray(trace.actual_mm, dtype=float)[delay:]
     if not np.ptp(u) > 0:
         raise TraceError("the command does not move: nothing to identify")
     if not np.ptp(y) > 0:
@@ -361,6 +368,7 @@ def fit_axis(trace: Trace, order: int = 4) -> Fit:
         residual_rms_mm=math.sqrt(ss_res / y.size),
         following_error_rms_mm=float(np.sqrt(np.mean((u - y) ** 2))),
         samples=int(y.size),
+        delay=delay,
         period_s=float(trace.period_s),
         **extra,
     )
@@ -375,7 +383,8 @@ def profile_section(fit: Fit, axis: str = "x", source: str = "") -> str:
     poles = ", ".join(_pole_text(p) for p in sorted(fit.poles, key=lambda p: (abs(p), p.imag)))
     head = [
         f"# nurbscnc identify{': ' + source if source else ''}: {fit.samples} samples at "
-        f"T = {fit.period_s * 1e3:g} ms, order {fit.order}",
+        f"T = {fit.period_s * 1e3:g} ms, order {fit.order}"
+        + (f", feedback {fit.delay} period(s) late (removed)" if fit.delay else ""),
         f"# fit {fit.fit * 100:.2f} % (NRMSE), R^2 {fit.r2:.6f}, residual RMS "
         f"{fit.residual_rms_mm * 1e3:.3g} um (following error RMS "
         f"{fit.following_error_rms_mm * 1e3:.3g} um)",
