@@ -306,15 +306,22 @@ def machine_options(func):
     )(func)  # fmt: skip
     func = click.option(
         "--machine", type=click.Path(dir_okay=False), default=None,
-        help="Machine profile (TOML); default: the bundled paper machine (Tables 2, 3).",
+        help="Machine profile (TOML). Default: $NURBSCNC_MACHINE, ./nurbscnc.toml, "
+        "~/.config/nurbscnc/machine.toml, else the bundled paper machine (Tables 2, 3).",
     )(func)  # fmt: skip
     return func
 
 
 def load_machine_cli(path, overrides=(), extra: dict | None = None):
-    """The machine profile with ``--set`` and option overrides applied."""
+    """The machine profile with ``--set`` and option overrides applied.
+
+    Without ``--machine`` the profile is found as :func:`~nurbscnc.machine.profile.find_machine`
+    says ($NURBSCNC_MACHINE, ./nurbscnc.toml, the user's config folder, the bundled default).
+    Every command loads its profile here, so this is where it says which one it used: a
+    ``machine: FILE (how found)`` line on stderr (not with --json or --quiet, whose JSON
+    carries ``machine_profile`` instead; see :func:`machine_json`)."""
     from nurbscnc.errors import ConfigError
-    from nurbscnc.machine.profile import load_machine
+    from nurbscnc.machine.profile import find_machine, load_machine
 
     table = {}
     for item in overrides:
@@ -323,7 +330,24 @@ def load_machine_cli(path, overrides=(), extra: dict | None = None):
         key, value = item.split("=", 1)
         table[key.strip()] = value.strip()
     table.update({k: v for k, v in (extra or {}).items() if v is not None})
-    return load_machine(path, table or None)
+    found, how = find_machine(path)
+    mach = load_machine(found, table or None, how)
+    ctx = click.get_current_context(silent=True)
+    if ctx is not None and not ctx.meta.get("nurbscnc.machine_said"):
+        ctx.meta["nurbscnc.machine_said"] = True
+        if not (ctx.params.get("as_json") or ctx.params.get("quiet")):
+            changed = f"; overridden: {', '.join(sorted(table))}" if table else ""
+            err.print(f"machine: {mach.describe()}{changed}", markup=False)
+            if not mach.contour_check:
+                err.print("contour check: off (no servo model in the profile)", markup=False)
+    return mach
+
+
+def machine_json(mach) -> dict:
+    """``{"machine_profile": {path, found_by, contour_check}}`` for a command's JSON."""
+    from nurbscnc.machine.profile import profile_info
+
+    return {"machine_profile": profile_info(mach)}
 
 
 # -- corners -----------------------------------------------------------------------------------
@@ -352,7 +376,7 @@ def corners(program, as_json, feed, amax, machine, overrides):
     )  # fmt: skip
     junctions = tangent_junctions(prog.segments)
     if as_json:
-        click.echo(json.dumps(corners_json(result, junctions)))
+        click.echo(json.dumps({**corners_json(result, junctions), **machine_json(mach)}))
         return
     table = Table(title=f"{prog.name}: sharp corners (κ > κ_th = A_max/F²)", show_edge=False)
     for col in ("line", "κ_th \\[1/mm]", "peak κ \\[1/mm]", "x \\[mm]", "y \\[mm]", "z \\[mm]",
@@ -437,7 +461,7 @@ def ph(program, as_json, tolerance_um, no_split, machine, overrides):
             fit = unsplit if no_split else fit_region(curve, r.u_a, r.u_b, tolerance_um=e_um)
             rows.append((sc, r, unsplit, fit))
     if as_json:
-        click.echo(json.dumps(ph_json(rows, e_um, no_split)))
+        click.echo(json.dumps({**ph_json(rows, e_um, no_split), **machine_json(mach)}))
         return
     table = Table(title=f"{prog.name}: PH quintic fits (e = {e_um:g} µm)", show_edge=False)
     for col in ("line", "region", "length \\[mm]", "unsplit RMS \\[µm]", "unsplit max \\[µm]",
@@ -574,6 +598,8 @@ def make_plan(program: str, machine=None, overrides=(), dynamics="local", lookah
     from nurbscnc.plan.pieces import PlanOptions
 
     mach = load_machine_cli(machine, overrides)
+    if not mach.contour_check:
+        dynamics = "off"  # no servo model in the profile: no contour error to check
     prog = load_program(program)
     if algorithm != "ph-lookahead":
         from nurbscnc.plan.baselines import BaselinePlan, baseline_program_samples
@@ -620,7 +646,7 @@ def plan_summary(prog, mach, plan) -> dict:
         sim = simulate_reference(plan.samples.points_mm, mach)
         m = metrics(sim, None, contour_errors(sim, None)).as_dict()
         lb = program_lower_bound_s(prog.segments, mach)
-        return {"ok": True, "program": prog.name, "machine": mach.source,
+        return {"ok": True, "program": prog.name, "machine": mach.source, **machine_json(mach),
                 "algorithm": plan.algorithm, "cycle_time_s": plan.cycle_time_s,
                 "samples": int(plan.samples.t_s.size), "period_s": mach.servo.period_s,
                 "feed_max_mm_s": float(plan.samples.v_mm_s.max()), "lower_bound_s": lb,
@@ -633,6 +659,7 @@ def plan_summary(prog, mach, plan) -> dict:
         "ok": True,
         "program": prog.name,
         "machine": mach.source,
+        **machine_json(mach),
         "pieces": dict(kinds),
         "piece_count": len(plan.pieces),
         "corner_pieces": kinds.get("ph", 0),
@@ -757,8 +784,9 @@ def plan(program, as_json, dump_profile, plot_dir, **settings):
               help="Batch: write <name>.csv for every program into this folder.")
 @click.option("--jobs", type=click.IntRange(min=1), default=None,
               help="Batch worker processes (default: the number of cores).")
-@click.option("--format", "fmt", type=click.Choice(["csv", "npz"]), default="csv",
-              help="Batch output format.")
+@click.option("--format", "fmt", type=click.Choice(["csv", "npz", "halstreamer"]),
+              default="csv", help="Output format: batch csv/npz (-o: by suffix), or "
+              "halstreamer (LinuxCNC streamer text, x y z per servo period; docs/linuxcnc.md).")
 @click.option("--quiet", is_flag=True, help="No summary on stderr.")
 @json_option
 @plot_option
@@ -772,7 +800,6 @@ def run(programs, output, output_dir, jobs, fmt, quiet, as_json, plot_dir, **set
     The CSV header is t,x,y,z,feed,piece,line (s, mm, mm, mm, mm/s, piece index, source
     line); the first row is the start point at t = 0, the last the end point at rest.
     """
-    from nurbscnc.output.files import write_points
 
     if output_dir is None:
         if len(programs) != 1:
@@ -785,7 +812,7 @@ def run(programs, output, output_dir, jobs, fmt, quiet, as_json, plot_dir, **set
             prog, mach, pl = make_plan(program, **settings)
         with err.status(f"writing {pl.samples.t_s.size} points …") if show else (
                 contextlib.nullcontext()):
-            write_points(output, pl.samples)
+            write_output(output, fmt, pl.samples, mach, prog.name)
         if plot_dir:
             write_plan_plots(pl, plot_dir)
         summary = plan_summary(prog, mach, pl)
@@ -798,14 +825,26 @@ def run(programs, output, output_dir, jobs, fmt, quiet, as_json, plot_dir, **set
     run_batch(programs, output_dir, jobs, fmt, quiet, as_json, settings)
 
 
+def write_output(path: str, fmt: str, samples, mach, name: str) -> None:
+    """Reference points to ``path``: a halstreamer file, or CSV/NPZ by suffix."""
+    if fmt == "halstreamer":
+        from nurbscnc.output.halstreamer import write_halstreamer
+
+        write_halstreamer(path, samples.points_mm, mach.servo.period_s, name)
+    else:
+        from nurbscnc.output.files import write_points
+
+        write_points(path, samples)
+
+
 def _batch_one(args):
     """Worker: plan one program and write its output; returns a result row (never raises)."""
     program, target, settings = args
-    from nurbscnc.output.files import write_points
 
     try:
         prog, mach, pl = make_plan(program, **settings)
-        write_points(target, pl.samples)
+        write_output(target, "halstreamer" if target.endswith(".hs") else "", pl.samples, mach,
+                     prog.name)  # fmt: skip
         return {"program": program, "ok": True, "output": target,
                 "cycle_time_s": pl.cycle_time_s, "samples": int(pl.samples.t_s.size)}
     except NurbsCncError as exc:
@@ -824,7 +863,8 @@ def run_batch(programs, output_dir, jobs, fmt, quiet, as_json, settings) -> None
     tasks = []
     for program in programs:
         stem = os.path.splitext(os.path.basename(program))[0]
-        tasks.append((program, os.path.join(output_dir, f"{stem}.{fmt}"), settings))
+        ext = "hs" if fmt == "halstreamer" else fmt
+        tasks.append((program, os.path.join(output_dir, f"{stem}.{ext}"), settings))
     workers = min(jobs or os.cpu_count() or 1, len(tasks))
     if workers == 1:
         results = [_batch_one(t) for t in tasks]
@@ -895,7 +935,8 @@ def simulate(source, as_json, plot_dir, hold, **settings):
                                           sim.axis_error_mm[:, 1] * 1000.0)},
                                os.path.join(plot_dir, "axis_errors.png"))  # fmt: skip
     if as_json:
-        click.echo(json.dumps({"ok": True, "source": name, "samples": int(points.shape[0]), **m}))
+        click.echo(json.dumps({"ok": True, "source": name, "samples": int(points.shape[0]), **m,
+                               **machine_json(mach)}))
         return
     out.print(f"{name}: {points.shape[0]} reference points, cycle time {m['cycle_time_s']:.4f} s",
               markup=False)  # fmt: skip
@@ -938,7 +979,8 @@ def compare(program, as_json, plot_dir, angles, block, algorithms, machine, over
     if plot_dir:
         write_compare_plots(runs, plot_dir)
     if as_json:
-        click.echo(json.dumps({"ok": True, "program": prog.name, "rows": rows}))
+        click.echo(json.dumps({"ok": True, "program": prog.name, "rows": rows,
+                               **machine_json(mach)}))
         return
     table = Table(title=f"{prog.name}: NURBS block on line {seg.line} (µm, s)", show_edge=False)
     for col in ("algorithm", "angle", "X max", "X RMS", "Y max", "Y RMS", "contour max",
@@ -984,6 +1026,12 @@ from nurbscnc.cli.stream import card_sim, stream  # noqa: E402
 
 main.add_command(stream)
 main.add_command(card_sim)
+from nurbscnc.cli.profile import profile  # noqa: E402
+
+main.add_command(profile)
+from nurbscnc.cli.identify import identify  # noqa: E402
+
+main.add_command(identify)
 
 if __name__ == "__main__":  # pragma: no cover - `python -m nurbscnc.cli.main`
     main()
