@@ -299,7 +299,7 @@ def main():
     """nurbscnc: NC programs (lines, arcs, NURBS) to reference points at the servo period.
 
     Exit codes: 0 ok, 1 internal error (a bug), 2 bad program or option, 3 file or port
-    trouble, 130 interrupted.
+    trouble, 130 interrupted (143 SIGTERM, 129 SIGHUP), 141 stdout closed by its reader.
     """
 
 
