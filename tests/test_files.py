@@ -16,6 +16,7 @@ import stat
 import subprocess
 import sys
 import threading
+import time
 from pathlib import Path
 
 import numpy as np
@@ -375,3 +376,50 @@ def test_points_file_that_is_a_directory_exits_3(tmp_path):
     result = run(["simulate", folder])
     assert result.exit_code == 3, result.output
 
+
+
+def _children(pid: int) -> list[int]:
+    path = Path(f"/proc/{pid}/task/{pid}/children")
+    return [int(p) for p in path.read_text().split()] if path.exists() else []
+
+
+def _alive(pid: int) -> bool:
+    """Running (a zombie waiting for a reaper counts as gone)."""
+    try:
+        status = Path(f"/proc/{pid}/status").read_text()
+    except OSError:
+        return False
+    return "\nState:\tZ" not in status
+
+
+@pytest.mark.skipif(not Path("/proc/self/task").exists(), reason="needs Linux /proc")
+def test_sigterm_during_batch_stops_the_workers_and_leaves_no_temp(tmp_path):
+    programs = []
+    for k in range(3):
+        path = tmp_path / f"p{k}.nc"
+        path.write_text("G21 G90 G1 X300 F600\nM2\n")  # 30 s of motion: seconds to plan
+        programs.append(str(path))
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, "-m", "nurbscnc", "run", "--output-dir", str(out),
+                             "--jobs", "2", "--dynamics", "off", *programs],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)  # fmt: skip
+    try:
+        deadline = time.monotonic() + 60
+        while len(_children(proc.pid)) < 2 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        workers = _children(proc.pid)
+        assert len(workers) >= 2, "the batch did not start its workers"
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(30) == 143
+        at_exit = sorted(os.listdir(out))
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    deadline = time.monotonic() + 10
+    while any(_alive(w) for w in workers) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not any(_alive(w) for w in workers), "workers outlived the batch"
+    assert sorted(os.listdir(out)) == at_exit, "a worker wrote after the batch had ended"
+    assert not [n for n in os.listdir(out) if n.startswith(".nurbscnc-")]
+    assert b"Traceback" not in proc.stderr.read()

@@ -970,8 +970,20 @@ def batch_targets(programs, output_dir: str, fmt: str) -> list[str]:
     return targets
 
 
+def _worker_exit(signum, _frame):
+    sys.exit(128 + signum)  # SystemExit unwinds atomic_output: no temporary file stays
+
+
+def _worker_init() -> None:
+    """A batch worker ends quietly on SIGTERM/SIGHUP/SIGINT (the parent reports)."""
+    import signal
+
+    for sig in (signal.SIGTERM, signal.SIGHUP, signal.SIGINT):
+        signal.signal(sig, _worker_exit)
+
+
 def run_batch(programs, output_dir, jobs, fmt, quiet, as_json, settings) -> None:
-    from concurrent.futures import ProcessPoolExecutor
+    import multiprocessing
 
     targets = batch_targets(programs, output_dir, fmt)
     try:
@@ -984,8 +996,10 @@ def run_batch(programs, output_dir, jobs, fmt, quiet, as_json, settings) -> None
     if workers == 1:
         results = [_batch_one(t) for t in tasks]
     else:
-        with ProcessPoolExecutor(max_workers=workers) as pool:
-            results = list(pool.map(_batch_one, tasks))
+        # Leaving the block for any reason (a signal, Ctrl-C) terminates the workers: each
+        # removes its temporary file and exits; none goes on writing after we are gone.
+        with multiprocessing.Pool(workers, initializer=_worker_init) as pool:
+            results = pool.map(_batch_one, tasks, chunksize=1)
     failed = [r for r in results if not r["ok"]]
     if as_json:
         click.echo(json.dumps({"ok": not failed, "results": results}))
