@@ -423,3 +423,22 @@ def test_sigterm_during_batch_stops_the_workers_and_leaves_no_temp(tmp_path):
     assert sorted(os.listdir(out)) == at_exit, "a worker wrote after the batch had ended"
     assert not [n for n in os.listdir(out) if n.startswith(".nurbscnc-")]
     assert b"Traceback" not in proc.stderr.read()
+
+
+@pytest.mark.skipif(not os.path.exists("/dev/stdout"), reason="no /dev/stdout")
+@pytest.mark.parametrize("name", ["/dev/stdout", "/dev/fd/1"])
+def test_dev_stdout_to_a_pipe_and_to_a_file(tmp_path, program, name):
+    if not os.path.exists(name):
+        pytest.skip(f"no {name}")
+    args = [sys.executable, "-m", "nurbscnc", "run", str(program), "-o", name, "--quiet"]
+    piped = subprocess.run(args, capture_output=True, timeout=120)
+    assert piped.returncode == 0, piped.stderr
+    assert piped.stdout.decode().splitlines()[0] == ",".join(POINT_COLUMNS)
+    target = tmp_path / "redirected.csv"
+    with open(target, "wb") as fh:
+        inode = os.fstat(fh.fileno()).st_ino
+        redirected = subprocess.run(args, stdout=fh, stderr=subprocess.PIPE, timeout=120)
+    assert redirected.returncode == 0, redirected.stderr
+    assert os.stat(target).st_ino == inode  # written through the shell's file, not replaced
+    assert target.read_bytes() == piped.stdout
+    assert not [n for n in os.listdir(tmp_path) if n.startswith(".nurbscnc-")]

@@ -45,14 +45,20 @@ TEMP_PREFIX, TEMP_SUFFIX = ".nurbscnc-", ".tmp"
 
 def output_target(path: str) -> tuple[str, os.stat_result | None]:
     """Where ``-o path`` writes: the path with every symbolic link resolved, and its ``stat``
-    (None when it does not exist yet). Raises OutputError for what cannot be written."""
-    target = os.path.realpath(path)
+    (None when it does not exist yet). Raises OutputError for what cannot be written.
+
+    The type comes from ``stat(path)`` itself, so ``/dev/stdout`` or ``/dev/fd/N`` (links
+    into /proc that name an open file, not a path) are judged by what they reach: a pipe or a
+    terminal is written in place; such a link is also written in place when it reaches a
+    regular file (the shell's ``> file``), never replaced by a rename.
+    """
     try:
-        st = os.stat(target)
+        st = os.stat(path)
     except FileNotFoundError:
         st = None
     except OSError as exc:
         raise OutputError(f"cannot write {path}: {exc.strerror or exc}") from None
+    target = os.path.realpath(path)
     if st is None:
         folder = os.path.dirname(target)
         if not os.path.isdir(folder):
@@ -63,6 +69,28 @@ def output_target(path: str) -> tuple[str, os.stat_result | None]:
     if not (stat.S_ISREG(st.st_mode) or stat.S_ISCHR(st.st_mode) or stat.S_ISFIFO(st.st_mode)):
         raise OutputError(f"cannot write {path}: not a regular file, character device or FIFO")
     return target, st
+
+
+def _in_place(path: str, st: os.stat_result | None) -> bool:
+    """Write by opening the path (not by rename): devices, FIFOs, open files via /proc."""
+    if st is None:
+        return False
+    return not stat.S_ISREG(st.st_mode) or _through_proc(path)
+
+
+def _through_proc(path: str) -> bool:
+    """Whether resolving ``path`` passes through /proc (``/dev/stdout``, ``/dev/fd/1``)."""
+    current = os.path.abspath(path)
+    for _ in range(40):  # the kernel's own limit on a chain of links
+        folder, name = os.path.split(current)
+        folder = os.path.realpath(folder)
+        if folder == "/proc" or folder.startswith("/proc/"):
+            return True
+        current = os.path.join(folder, name)
+        if not os.path.islink(current):
+            return False
+        current = os.path.join(folder, os.readlink(current))
+    return False
 
 
 def _create_temp(folder: str, mode: int) -> tuple[int, str]:
@@ -85,11 +113,11 @@ def atomic_output(path: str, binary: bool = False):
         yield sys.stdout.buffer if binary else sys.stdout
         return
     target, st = output_target(path)
-    if st is not None and not os.access(target, os.W_OK):  # as a shell redirection would
+    if st is not None and not os.access(path, os.W_OK):  # as a shell redirection would
         raise OutputError(f"cannot write {path}: Permission denied")
     mode, newline = ("wb", None) if binary else ("w", "")
-    if st is not None and not stat.S_ISREG(st.st_mode):  # a device or a FIFO: write in place
-        with open(target, mode, newline=newline) as fh:
+    if _in_place(path, st):  # a device, a FIFO, /dev/stdout: write in place
+        with open(path, mode, newline=newline) as fh:
             yield fh
         return
     fd, tmp = _create_temp(os.path.dirname(target), 0o666)
