@@ -434,10 +434,14 @@ def test_head_on_run_output_is_quiet(tmp_path):
 
 
 @pytest.mark.skipif(not os.path.exists("/dev/full"), reason="no /dev/full")
-def test_check_to_dev_full_exits_3_with_a_message():
+@pytest.mark.parametrize("args, message", [
+    (["check", NACA], "cannot write to standard output: No space left on device"),
+    (["run", NACA, "-o", "-"], "cannot write standard output: No space left on device"),
+])  # fmt: skip
+def test_stdout_to_dev_full_exits_3_with_a_message(args, message):
     with open("/dev/full", "wb") as full:
-        proc = _nurbscnc(["check", NACA], stdout=full)
+        proc = _nurbscnc(args, stdout=full)
     assert proc.returncode == 3, proc.stderr
     text = proc.stderr.decode()
-    assert "cannot write to standard output: No space left on device" in text
+    assert message in text
     assert "Traceback" not in text and "Exception ignored" not in text

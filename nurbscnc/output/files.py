@@ -163,7 +163,8 @@ def write_table(path: str, names, columns, formats) -> None:
     except BrokenPipeError:
         raise  # a reader that went away (``| head``): the CLI ends quietly
     except OSError as exc:
-        raise OutputError(f"cannot write {path}: {exc.strerror or exc}") from None
+        name = "standard output" if path == "-" else path
+        raise OutputError(f"cannot write {name}: {exc.strerror or exc}") from None
 
 
 def write_points(path: str, samples) -> None:
