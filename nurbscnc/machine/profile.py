@@ -353,8 +353,10 @@ def _check_leaf(value, kind: str, key: str, rep: _Reporter) -> None:
     if kind == "count":
         if isinstance(value, bool) or not isinstance(value, int):
             raise rep.error(key, f"must be an integer, got {value!r}")
-        if not 1 <= value <= _COUNT_MAX:
-            raise rep.error(key, f"must be in [1, {_COUNT_MAX}], got {_short(value)}")
+        if value < 1:
+            raise rep.error(key, f"must be >= 1, got {_short(value)}")
+        if value > _COUNT_MAX:
+            raise rep.error(key, f"must be <= {_COUNT_MAX}, got {_short(value)}")
         return
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise rep.error(key, f"must be a number, got {value!r}")
