@@ -18,6 +18,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.interpolate import BSpline
 
 import nurbscnc
@@ -297,11 +299,26 @@ def test_cut_source_line_keeps_the_caret_on_its_character(column):
         assert caret == len(shown) - (1 if shown.endswith("…") else 0)
 
 
+@settings(max_examples=200, deadline=None, derandomize=True)
+@given(st.text(max_size=400), st.data())
+def test_cut_source_line_property(text, data):
+    column = data.draw(st.integers(1, len(text) + 1))
+    shown, caret = cli.echo_source_line(text, column, width=40)
+    visible = "".join(" " if c == "\t" else "\ufffd" if ord(c) < 0x20 or 0x7F <= ord(c) < 0xA0
+                      else c for c in text)  # fmt: skip
+    assert len(shown) <= 42
+    assert shown.strip("…") in visible
+    if column <= len(text):
+        assert shown[caret] == visible[column - 1]
+    if len(text) <= 40:
+        assert shown == visible
+
+
 def test_control_characters_in_source_line_are_not_echoed():
-    exc = NurbsCncError("bad", SourcePos(1, 9, "\x1b[2J\x07\tX\rG28"))
+    exc = NurbsCncError("bad", SourcePos(1, 9, "\x1b[2J\x07\tX\rG28\x9b1m"))
     shown = cli.format_error(exc, "f.nc").splitlines()[1]
     assert "\x1b" not in shown and "\x07" not in shown and "\r" not in shown
-    assert shown == "    " + "\ufffd[2J\ufffd X\ufffdG28"
+    assert shown == "    " + "\ufffd[2J\ufffd X\ufffdG28\ufffd1m"
 
 
 def test_cli_error_on_long_line_is_short(tmp_path):

@@ -66,7 +66,8 @@ err = _Console(stderr=True, highlight=False, markup=False, emoji=False, soft_wra
 SOURCE_ECHO_CHARS = 120
 #: A message longer than this is cut (a message quoting a 10 MB word stays readable).
 MESSAGE_CHARS = 1000
-_CONTROL = {c: "\ufffd" for c in (*range(0x20), 0x7F)}  # no terminal escapes from a file
+#: C0, DEL and C1 controls (0x9B is a CSI): no terminal escapes from a file reach the screen.
+_CONTROL = {c: "\ufffd" for c in (*range(0x20), *range(0x7F, 0xA0))}
 
 
 def echo_source_line(text: str, column: int, width: int = SOURCE_ECHO_CHARS) -> tuple[str, int]:
