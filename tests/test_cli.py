@@ -321,6 +321,14 @@ def test_control_characters_in_source_line_are_not_echoed():
     assert shown == "    " + "\ufffd[2J\ufffd X\ufffdG28\ufffd1m"
 
 
+def test_control_characters_in_file_name_and_message_are_not_echoed():
+    exc = NurbsCncError("bad word '\x1b]0;owned\x07'" + "x" * 5000, SourcePos(3, 1, "G1"))
+    head = cli.format_error(exc, "a\nb\x1b.nc").splitlines()[0]
+    assert head.startswith("a\ufffdb\ufffd.nc:3:1: error: bad word '\ufffd]0;owned\ufffd'")
+    assert head.endswith(f"… ({len(exc.message)} characters)")
+    assert len(head) < cli.MESSAGE_CHARS + 100
+
+
 def test_cli_error_on_long_line_is_short(tmp_path):
     path = tmp_path / "long.nc"
     path.write_text("G21 G90\n(" + "x" * 200_000 + ") G28\n")

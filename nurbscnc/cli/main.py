@@ -94,6 +94,7 @@ def format_error(exc: NurbsCncError, filename: str) -> str:
     message = exc.message
     if len(message) > MESSAGE_CHARS:
         message = message[:MESSAGE_CHARS] + f"… ({len(exc.message)} characters)"
+    message, filename = message.translate(_CONTROL), str(filename).translate(_CONTROL)
     pos = exc.pos
     if pos is None:
         return f"{filename}: error: {message}"
