@@ -450,6 +450,7 @@ def machine_options(func):
 
 
 def load_machine_cli(path, overrides=(), extra: dict | None = None):
+    """The machine profile with ``--set`` and option overrides applied."""
     from nurbscnc.errors import ConfigError
     from nurbscnc.machine.profile import load_machine
 
