@@ -1,7 +1,8 @@
 """Fuzzing the command line: no input ever makes nurbscnc crash (exit 1 or a traceback).
 
 Three generators feed ``nurbscnc check -`` (and, for mutants that pass and are small enough,
-``nurbscnc plan -``) in-process through click's CliRunner:
+``nurbscnc plan -`` and, with NURBS blocks, ``corners -``) in-process through click's
+CliRunner:
 
 - hypothesis with raw bytes;
 - hypothesis with grammar-shaped programs (G/M codes, axis words, numbers from tiny to
@@ -392,6 +393,11 @@ def test_mutation_fuzzer_over_the_corpus():
         plan = invoke(plan_args, data, PLAN_TIMEOUT_S)
         if plan is not None and problems_of(plan):
             failures.append((names[k], i, plan_args, data, problems_of(plan)))
+        if summary["counts"].get("nurbs"):  # the corner finder on the same NURBS blocks
+            corner_args = ["corners", "-", "--json"]
+            corners = invoke(corner_args, data, PLAN_TIMEOUT_S)
+            if corners is not None and problems_of(corners):
+                failures.append((names[k], i, corner_args, data, problems_of(corners)))
     STATS["mutants"] += i + 1 if EXAMPLES else 0
     unknown = []
     for name, i, args, data, found in failures:
