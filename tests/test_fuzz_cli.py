@@ -406,6 +406,8 @@ def test_mutation_fuzzer_over_the_corpus():
     for name, i, args, data, found in failures:
         owner = known_elsewhere(found)
         STATS["known_elsewhere" if owner else "failures"] += 1
+        if owner:
+            STATS[f"known: {owner}"] += 1
         FINDINGS.append({"kind": "known" if owner else "crash", "owner": owner,
                          "seed_program": name, "mutant": i, "args": args, "problems": found,
                          "input": _show(data)})  # fmt: skip
