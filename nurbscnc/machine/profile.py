@@ -24,6 +24,7 @@ from __future__ import annotations
 import copy
 import math
 import os
+import sys
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -441,6 +442,9 @@ def parse_machine(text: str, source: str = "<string>", overrides: dict | None = 
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{source}: invalid TOML: {exc}") from exc
+    except ValueError:  # an integer beyond Python's 4300-digit conversion limit
+        raise ConfigError(f"{source}: invalid TOML: an integer has more than "
+                          f"{sys.get_int_max_str_digits()} digits") from None
     overridden: set[str] = set()
     if overrides:
         data = copy.deepcopy(data)
@@ -482,8 +486,8 @@ def _apply_override(data: dict, key: str, value, source: str) -> None:
     if isinstance(value, str):
         try:
             value = tomllib.loads(f"v = {value}")["v"]
-        except tomllib.TOMLDecodeError as exc:
-            raise ConfigError(f"{source}: override {key}: {value!r} is not a value") from exc
+        except (tomllib.TOMLDecodeError, ValueError):
+            raise ConfigError(f"{source}: override {key}: {value[:80]!r} is not a value") from None
     if len(parts) == 3 and parts[0] == "servo":
         # Setting a key of one servo form replaces the other form in that axis's table, so
         # that --set servo.x.bandwidth_hz=… works on a profile with coefficients (and back).
@@ -515,15 +519,23 @@ def _check_table(data, schema: dict, prefix: str, rep: _Reporter) -> None:
             _check_leaf(data[key], sub, full, rep)
 
 
+#: Largest count a profile may give (a 32-bit signed integer: what a card register holds).
+_COUNT_MAX = 2**31 - 1
+
+
 def _check_leaf(value, kind: str, key: str, rep: _Reporter) -> None:
     if kind == "count":
         if isinstance(value, bool) or not isinstance(value, int):
             raise rep.error(key, f"must be an integer, got {value!r}")
         if value < 1:
-            raise rep.error(key, f"must be >= 1, got {value!r}")
+            raise rep.error(key, f"must be >= 1, got {_short(value)}")
+        if value > _COUNT_MAX:
+            raise rep.error(key, f"must be <= {_COUNT_MAX}, got {_short(value)}")
         return
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise rep.error(key, f"must be a number, got {value!r}")
+    if isinstance(value, int) and abs(value) > sys.float_info.max:  # float() would overflow
+        raise rep.error(key, f"is too large, got {_short(value)}")
     if not math.isfinite(value):
         raise rep.error(key, f"must be finite, got {value!r}")
     if kind == "pos" and not value > 0:
@@ -545,6 +557,12 @@ def _check_axis(data, key: str, rep: _Reporter) -> None:
     _check_table(data, schema, key, rep)
     if simple and data["damping"] > MAX_DAMPING:
         raise rep.error(f"{key}.damping", f"must be <= {MAX_DAMPING:g}, got {data['damping']!r}")
+
+
+def _short(value: int) -> str:
+    """An integer as text, its middle elided when it has more than 24 digits."""
+    text = str(value)
+    return text if len(text) <= 24 else f"{text[:10]}…{text[-6:]} ({len(text.lstrip('-'))} digits)"
 
 
 def _axis_servo(table: dict, key: str, rep: _Reporter) -> AxisServo:
