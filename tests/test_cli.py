@@ -343,7 +343,9 @@ def test_run_names_errors_with_the_file(tmp_path):
     path.write_text("G21 G90 G1 X1 F100\nG28\n")
     result = run(["run", path, "-o", tmp_path / "p.csv"])
     assert result.exit_code == 2
-    assert result.stderr.startswith(f"{path}:2:1: error: ")
+    # The first line says which machine profile `run` used; the error report follows it.
+    report = result.stderr.split("\n", 1)[1] if result.stderr.startswith("machine: ") else ""
+    assert report.startswith(f"{path}:2:1: error: ")
     assert "<stdin>" not in result.stderr
     assert not (tmp_path / "p.csv").exists()
 
