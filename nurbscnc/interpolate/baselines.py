@@ -14,8 +14,6 @@ is the block's end point.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from nurbscnc.geometry.nurbs import NurbsCurve
@@ -133,15 +131,3 @@ def baseline_program_samples(algorithm: str, program, machine: Machine) -> Sampl
         piece=np.zeros(n, dtype=np.int64),
         line=np.concatenate(lines).astype(np.int64),
     )
-
-
-@dataclass(frozen=True, eq=False)
-class BaselinePlan:
-    """A program run by a baseline: its reference samples and cycle time [s]."""
-
-    algorithm: str
-    samples: Samples
-
-    @property
-    def cycle_time_s(self) -> float:
-        return float(self.samples.t_s[-1])
