@@ -26,6 +26,15 @@ def _runs(keys: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(edges[:-1].tolist(), edges[1:].tolist()))
 
 
+def taylor_increment(v_mm_s: float, a_mm_s2: float, dt_s: float, speed: float,
+                     speed2: float, dot: float) -> float:
+    """Δu of one step of the 2nd-order Taylor interpolator (SPEC §3, eq. 4–5):
+    Δu = V Δt/|C′| + (Δt²/2)(A/|C′| − V² (C′·C″)/|C′|⁴), with ``speed`` = |C′|, ``speed2`` =
+    |C′|² and ``dot`` = C′·C″ at the current u (plain floats: it runs once per servo step)."""
+    return v_mm_s * dt_s / speed + 0.5 * dt_s * dt_s * (a_mm_s2 / speed - v_mm_s * v_mm_s * dot
+                                                        / (speed2 * speed2))
+
+
 def taylor_params(
     pf: PowerForm,
     u0: float,
@@ -103,7 +112,7 @@ def taylor_params(
         speed2 = dx * dx + dy * dy + dz * dz
         speed = sqrt(speed2)
         dot = 2.0 * (dx * ex + dy * ey + dz * ez)  # C'·C''
-        u += v * dt / speed + 0.5 * dt * dt * (acc / speed - v * v * dot / (speed2 * speed2))
+        u += taylor_increment(v, acc, dt, speed, speed2, dot)
         if u > u_max:
             u = u_max
         elif u < u_min:

@@ -30,13 +30,11 @@ from nurbscnc.geometry.nurbs import NurbsCurve
 from nurbscnc.geometry.path import Kind, PathTable, ph_power_rows
 from nurbscnc.geometry.paths import ArcGeometry, LineGeometry, geometry_of
 from nurbscnc.geometry.ph import PHQuintic
-from nurbscnc.machine.profile import Machine, chord_feed_mm_s
+from nurbscnc.machine.caps import MIN_CAP_MM_S, corner_cap_mm_s, curvature_cap_mm_s
+from nurbscnc.machine.profile import Machine
 from nurbscnc.plan.corners import find_corner_regions
 from nurbscnc.plan.options import CornerFeed, PlanOptions
 from nurbscnc.plan.phfit import fit_region
-
-#: The lowest cruise cap a piece gets [mm/s].
-MIN_CAP_MM_S = 1e-3
 
 #: Junctions whose tangents turn by less than this [rad] are treated as smooth (no stop).
 SMOOTH_JUNCTION_RAD = 1e-6
@@ -105,34 +103,6 @@ class Piece:
         return _object_ends([self])[3][0]
 
 
-def _curvature_cap(machine: Machine, kappa, feed_mm_s: float) -> np.ndarray:
-    """Feed cap [mm/s] at curvature κ outside corners: min(F, V_max, V_af(κ), √(A/κ))
-    (elementwise; ``feed_mm_s`` a scalar or an array like ``kappa``)."""
-    lim = machine.limits
-    kappa = np.asarray(kappa, dtype=float)
-    v_af = np.asarray(chord_feed_mm_s(kappa, machine.servo.period_s, lim.chord_tolerance_mm))
-    with np.errstate(divide="ignore"):
-        v_an = np.sqrt(lim.a_max_mm_s2 / np.maximum(kappa, 1e-300))
-    return np.minimum(np.minimum(v_af, v_an), np.minimum(feed_mm_s, lim.v_max_mm_s))
-
-
-def _corner_cap(machine: Machine, kappa_peak: float, feed_mm_s: float,
-                kappa_cf: float | None = None) -> float:
-    """V_sp = min(V_af, V_cf) at a corner of peak curvature κ (SPEC §7), capped by F and by
-    the normal-acceleration limit √(A_max/κ). ``kappa_cf`` (default: the peak) is the
-    curvature given to V_cf: the physical limits (chord error, normal acceleration) always
-    see the peak, while the paper's heuristic slow-down V_cf = F κ̄/(κ + κ̄) may be given a
-    piece's mean curvature (turning / length) — at the peak of a near-cusp (κ ~ 1e6 /mm) it
-    would otherwise crawl the whole piece at F/κ."""
-    lim = machine.limits
-    f = min(feed_mm_s, lim.v_max_mm_s)
-    v_af = float(machine.chord_feed_mm_s(kappa_peak))
-    v_cf = float(machine.curvature_feed_mm_s(kappa_peak if kappa_cf is None else kappa_cf, f))
-    v_sp = min(v_af, v_cf)
-    v_an = float(np.sqrt(lim.a_max_mm_s2 / kappa_peak)) if kappa_peak > 0 else np.inf
-    return max(min(v_sp, v_an, feed_mm_s, lim.v_max_mm_s), 1e-6)
-
-
 def nurbs_pieces(seg, index: int, machine: Machine, options: PlanOptions) -> list[Piece]:
     """A NURBS segment as pieces: PH corner pieces and capped NURBS stretches."""
     lim = machine.limits
@@ -155,7 +125,7 @@ def nurbs_pieces(seg, index: int, machine: Machine, options: PlanOptions) -> lis
                     pieces.extend(_nurbs_stretch(curve, ua, ub, seg, index, machine, feed))
             u_prev = region.u_b
             continue
-        region_cap = _corner_cap(machine, region.kappa_peak_per_mm, feed)
+        region_cap = corner_cap_mm_s(machine, region.kappa_peak_per_mm, feed)
         if options.ph:
             # max ≤ e (not the paper's 3e): every reference point within e of the curve.
             fit = fit_region(curve, region.u_a, region.u_b, tolerance_um=e_um, max_factor=1.0)
@@ -164,7 +134,7 @@ def nurbs_pieces(seg, index: int, machine: Machine, options: PlanOptions) -> lis
                 k_max = float(np.max(np.abs(p.ph.curvature(xi))))
                 k_mean = abs(p.ph.turning_angle_rad()) / max(float(p.ph.length_mm), 1e-300)
                 cap = (region_cap if options.corner_feed == CornerFeed.PEAK
-                       else _corner_cap(machine, max(k_max, kth), feed,
+                       else corner_cap_mm_s(machine, max(k_max, kth), feed,
                                         max(k_mean, kth)))  # fmt: skip
                 pieces.append(Piece(Kind.PH, p.ph, float(p.ph.length_mm), cap, index, seg.line,
                                     0.0, 1.0, 0.0, k_max))  # fmt: skip
@@ -204,7 +174,7 @@ def _nurbs_stretch(curve, u_a, u_b, seg, index, machine, feed) -> list[Piece]:
     # nearest sample already asks for a low feed).
     kappa = np.where(np.isfinite(kappa), kappa, 0.0)
     # Never a zero cap (κ ≥ 2/δ makes V_af zero): it would stall the tool; 1 µm/s is the floor.
-    cell_cap = np.maximum(_curvature_cap(machine, kappa, feed).min(axis=1), MIN_CAP_MM_S)
+    cell_cap = np.maximum(curvature_cap_mm_s(machine, kappa, feed).min(axis=1), MIN_CAP_MM_S)
     k_cell = kappa.max(axis=1)
     return [Piece(Kind.NURBS, curve, float(s_edges[i + 1] - s_edges[i]), float(cell_cap[i]),
                   index, seg.line, float(u_edges[i]), float(u_edges[i + 1]),
@@ -415,7 +385,7 @@ def _object_pieces(seg, index: int, machine: Machine, options: PlanOptions) -> l
         return []
     # Constant curvature (helix: r / (r² + c²)).
     kappa = float(np.max(geom.curvature(np.array([geom.u_start, geom.u_end]))))
-    cap = float(_curvature_cap(machine, kappa, seg.feed_mm_s))
+    cap = float(curvature_cap_mm_s(machine, kappa, seg.feed_mm_s))
     return [Piece(Kind.ARC, geom, length, max(cap, 1e-6), index, seg.line, geom.u_start,
                   geom.u_end, 0.0, kappa, blend_mm=blend_override(seg, options))]  # fmt: skip
 
@@ -559,36 +529,46 @@ def sub_geometry(piece: Piece, s0_mm: float, s1_mm: float):
     )
 
 
-def apply_blends(pieces: PieceList, machine: Machine) -> PieceList:
-    """Replace corners between line/arc pieces under G64 P by PH quintic blends (issue 7).
+@dataclass(eq=False)
+class _Corners:
+    """Candidate corners of :func:`apply_blends` and what blending each would do (arrays over
+    the m corners): ``row`` the piece after the corner; ``tol_mm`` the blend tolerance;
+    ``vertex_mm`` (3, m); ``lines`` whether both sides are lines; then, per corner, ``ok``
+    (a blend exists and pays), its peak curvature, trims of the piece before (``trim_a_mm``)
+    and after (``trim_b_mm``) and length; line–line blends' PH data (preimage ``w``, start
+    ``p0``, plane ``frame``, one row per line–line corner) and arc blends by corner."""
 
-    A corner is blended when both pieces are feed lines or arcs with a blend tolerance > 0
-    (the smaller of the two is used), no dwell lies between them, their tangents turn, and
-    the blend pays (:func:`blend_pays`); a blend trims at most half of each piece, so blends
-    never overlap. Line–line corners are built all at once in closed form
-    (:func:`~nurbscnc.geometry.blend.line_corner_blends`), each side trimmed up to half of its
-    own line: a polyline of short chords becomes a chain of blends with no sliver of line
-    left between them (equal trims where the tolerance binds: then the blends of
-    :func:`blend_corner`). Corners with an arc go one at a time through
-    :func:`blend_corner` (equal trims ≤ half the shorter piece). The blend piece is capped
-    by its peak curvature like any curved piece (chord error, normal acceleration). A piece
-    trimmed at both ends to less than :data:`MIN_REMAINDER_MM` is dropped. The blends' end
-    tangents are the pieces' own unit tangents (not recomputed from trimmed end points), so
-    the junctions of a blended polyline are exactly smooth.
-    """
-    from nurbscnc.geometry.blend import blend_corner, line_corner_blends
+    row: np.ndarray
+    tol_mm: np.ndarray
+    vertex_mm: np.ndarray
+    lines: np.ndarray
+    ok: np.ndarray = None
+    kappa_per_mm: np.ndarray = None
+    trim_a_mm: np.ndarray = None
+    trim_b_mm: np.ndarray = None
+    length_mm: np.ndarray = None
+    w: np.ndarray = None
+    p0: np.ndarray = None
+    frame: np.ndarray = None
+    arc_blends: dict = field(default_factory=dict)
 
-    k = len(pieces)
-    if k < 2:
-        return pieces
-    kind, length = pieces.kind, pieces.length_mm
-    # Feed lines and arcs (not rapids, not NURBS or PH pieces) are blended.
+    def __post_init__(self):
+        m = self.row.size
+        self.ok = np.zeros(m, dtype=bool)
+        self.kappa_per_mm, self.length_mm = np.zeros(m), np.zeros(m)
+        self.trim_a_mm, self.trim_b_mm = np.zeros(m), np.zeros(m)
+
+
+def _find_corners(pieces: PieceList) -> _Corners | None:
+    """Corners that may be blended: between feed lines or arcs (not rapids, NURBS or PH
+    pieces) with a blend tolerance > 0 (the smaller of the two), no stop between them. The
+    pieces must meet there (GeometryError otherwise)."""
+    kind = pieces.kind
     cut = ((kind == Kind.LINE) & ~pieces.rapid) | (kind == Kind.ARC)
     tol = np.minimum(pieces.blend_mm[:-1], pieces.blend_mm[1:])
-    no_dwell = ~pieces.stop_after[:-1]
-    corner = np.flatnonzero(cut[:-1] & cut[1:] & (tol > 0.0) & no_dwell) + 1
+    corner = np.flatnonzero(cut[:-1] & cut[1:] & (tol > 0.0) & ~pieces.stop_after[:-1]) + 1
     if corner.size == 0:
-        return pieces
+        return None
     vertex = pieces.end_mm[:, corner - 1]
     gap = np.sqrt(np.sum((vertex - pieces.start_mm[:, corner]) ** 2, axis=0))
     scale = np.maximum(1.0, np.abs(vertex).max(axis=0))
@@ -596,64 +576,104 @@ def apply_blends(pieces: PieceList, machine: Machine) -> PieceList:
         i = int(corner[np.argmax(gap > 1e-6 * scale)])
         raise GeometryError(f"blend_corner: the geometries do not meet (gap "
                             f"{gap.max():.3g} mm)", SourcePos(int(pieces.line[i])))  # fmt: skip
-    m = corner.size
-    ok = np.zeros(m, dtype=bool)
-    trim_a = np.zeros(m)  # cut off the end of piece i − 1
-    trim_b = np.zeros(m)  # cut off the start of piece i
-    kappa = np.zeros(m)
-    ph_len = np.zeros(m)
-    both_lines = (kind[corner - 1] == Kind.LINE) & (kind[corner] == Kind.LINE)
-    half_a, half_b = 0.5 * length[corner - 1], 0.5 * length[corner]
+    lines = (kind[corner - 1] == Kind.LINE) & (kind[corner] == Kind.LINE)
+    return _Corners(corner, tol[corner - 1], vertex, lines)
 
-    ll = np.flatnonzero(both_lines)
-    # Line–line corners in chunks (bounded temporaries); keep what the blend rows need.
-    l_w = np.empty((ll.size, 3), dtype=complex)
-    l_p0 = np.empty(ll.size, dtype=complex)
-    l_frame = np.empty((ll.size, 3, 3))
+
+def _blend_line_corners(pieces: PieceList, c: _Corners) -> None:
+    """Line–line corners in closed form, in chunks (bounded temporaries), each side trimmed
+    up to half of its own line (:func:`~nurbscnc.geometry.blend.line_corner_blends`)."""
+    from nurbscnc.geometry.blend import line_corner_blends
+
+    ll = np.flatnonzero(c.lines)
+    length = pieces.length_mm
+    c.w = np.empty((ll.size, 3), dtype=complex)
+    c.p0 = np.empty(ll.size, dtype=complex)
+    c.frame = np.empty((ll.size, 3, 3))
     for lo in range(0, ll.size, _CHUNK):
         sl = slice(lo, lo + _CHUNK)
-        c = corner[ll[sl]]
-        lb = line_corner_blends(vertex[:, ll[sl]].T, pieces.tangent_end[:, c - 1].T,
-                                pieces.tangent_start[:, c].T, tol[c - 1], half_a[ll[sl]],
-                                half_b[ll[sl]])  # fmt: skip
-        ok[ll[sl]], kappa[ll[sl]] = lb.ok, lb.kappa_max_per_mm
-        trim_a[ll[sl]], trim_b[ll[sl]] = lb.trim_a_mm, lb.trim_b_mm
-        ph_len[ll[sl]] = ph_tables(lb.w, lb.p0)[3]
-        l_w[sl], l_p0[sl] = lb.w, lb.p0
-        l_frame[sl, 0], l_frame[sl, 1], l_frame[sl, 2] = lb.origin_mm, lb.e1, lb.e2
+        j = ll[sl]
+        r = c.row[j]
+        lb = line_corner_blends(c.vertex_mm[:, j].T, pieces.tangent_end[:, r - 1].T,
+                                pieces.tangent_start[:, r].T, c.tol_mm[j], 0.5 * length[r - 1],
+                                0.5 * length[r])  # fmt: skip
+        c.ok[j], c.kappa_per_mm[j] = lb.ok, lb.kappa_max_per_mm
+        c.trim_a_mm[j], c.trim_b_mm[j] = lb.trim_a_mm, lb.trim_b_mm
+        c.length_mm[j] = ph_tables(lb.w, lb.p0)[3]
+        c.w[sl], c.p0[sl] = lb.w, lb.p0
+        c.frame[sl, 0], c.frame[sl, 1], c.frame[sl, 2] = lb.origin_mm, lb.e1, lb.e2
         del lb
-    arc_blends = {}
-    for j in np.flatnonzero(~both_lines).tolist():
-        i = int(corner[j])
+
+
+def _blend_arc_corners(pieces: PieceList, c: _Corners) -> None:
+    """Corners with an arc, one at a time (:func:`~nurbscnc.geometry.blend.blend_corner`,
+    equal trims ≤ half the shorter piece)."""
+    from nurbscnc.geometry.blend import blend_corner
+
+    for j in np.flatnonzero(~c.lines).tolist():
+        i = int(c.row[j])
         a, b = pieces[i - 1], pieces[i]
-        bl = blend_corner(a.geometry, b.geometry, float(tol[i - 1]), 0.5 * a.length_mm,
+        bl = blend_corner(a.geometry, b.geometry, float(c.tol_mm[j]), 0.5 * a.length_mm,
                           0.5 * b.length_mm, measure=False)  # fmt: skip
         if bl is not None:
-            arc_blends[j] = bl
-            ok[j], kappa[j], ph_len[j] = True, bl.kappa_max_per_mm, bl.ph.length_mm
-            trim_a[j], trim_b[j] = bl.trim_a_mm, bl.trim_b_mm
-    cap_a, cap_b = pieces.v_cap_mm_s[corner - 1], pieces.v_cap_mm_s[corner]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        ok &= blend_pays(cap_a, cap_b, np.where(ok, kappa, 0.0), np.where(ok, trim_a, 0.0),
-                         np.where(ok, trim_b, 0.0), np.where(ok, ph_len, 0.0), machine)
-    if not ok.any():
-        return pieces
+            c.arc_blends[j] = bl
+            c.ok[j], c.kappa_per_mm[j], c.length_mm[j] = True, bl.kappa_max_per_mm, bl.ph.length_mm
+            c.trim_a_mm[j], c.trim_b_mm[j] = bl.trim_a_mm, bl.trim_b_mm
 
+
+def apply_blends(pieces: PieceList, machine: Machine) -> PieceList:
+    """Replace corners between line/arc pieces under G64 P by PH quintic blends (issue 7).
+
+    A corner is blended when both pieces are feed lines or arcs with a blend tolerance > 0
+    (the smaller of the two is used), no dwell or pause lies between them, their tangents
+    turn, and the blend pays (:func:`blend_pays`); a blend trims at most half of each piece,
+    so blends never overlap. Line–line corners are built all at once in closed form
+    (:func:`_blend_line_corners`): a polyline of short chords becomes a chain of blends with
+    no sliver of line left between them (equal trims where the tolerance binds). Corners
+    with an arc go one at a time (:func:`_blend_arc_corners`). The blend piece is capped by
+    its peak curvature like any curved piece (chord error, normal acceleration). A piece
+    trimmed at both ends to less than :data:`MIN_REMAINDER_MM` is dropped. The blends' end
+    tangents are the pieces' own unit tangents (not recomputed from trimmed end points), so
+    the junctions of a blended polyline are exactly smooth. The new rows are written by
+    :func:`_blended_rows`.
+    """
+    if len(pieces) < 2:
+        return pieces
+    c = _find_corners(pieces)
+    if c is None:
+        return pieces
+    _blend_line_corners(pieces, c)
+    _blend_arc_corners(pieces, c)
+    cap_a, cap_b = pieces.v_cap_mm_s[c.row - 1], pieces.v_cap_mm_s[c.row]
+    ok = c.ok
+    with np.errstate(invalid="ignore", divide="ignore"):
+        c.ok = ok & blend_pays(cap_a, cap_b, np.where(ok, c.kappa_per_mm, 0.0),
+                               np.where(ok, c.trim_a_mm, 0.0), np.where(ok, c.trim_b_mm, 0.0),
+                               np.where(ok, c.length_mm, 0.0), machine)  # fmt: skip
+    if not c.ok.any():
+        return pieces
+    return _blended_rows(pieces, c, machine)
+
+
+def _blended_rows(pieces: PieceList, c: _Corners, machine: Machine) -> PieceList:
+    """The pieces with the accepted blends (``c.ok``) in place: kept rows moved, trimmed
+    lines and arcs shortened, blend rows inserted before the piece after their corner."""
+    k = len(pieces)
+    kind, length = pieces.kind, pieces.length_mm
+    ok, corner = c.ok, c.row
     # Which rows survive, and where everything goes.
     has_blend = np.zeros(k, dtype=bool)
     has_blend[corner[ok]] = True
     trim_start = np.zeros(k)
     trim_end = np.zeros(k)
-    trim_start[corner[ok]] = trim_b[ok]
-    trim_end[corner[ok] - 1] = trim_a[ok]
+    trim_start[corner[ok]] = c.trim_b_mm[ok]
+    trim_end[corner[ok] - 1] = c.trim_a_mm[ok]
     trimmed = (trim_start > 0.0) | (trim_end > 0.0)
-    remainder = length - trim_start - trim_end
-    keep = ~trimmed | (remainder >= MIN_REMAINDER_MM)
+    keep = ~trimmed | (length - trim_start - trim_end >= MIN_REMAINDER_MM)
     count = has_blend.astype(np.int64) + keep
     first = np.cumsum(count) - count
     new_row = first + has_blend  # new row of each kept piece
-    total = int(count.sum())
-    cols = _empty_columns(total)
+    cols = _empty_columns(int(count.sum()))
     kept = np.flatnonzero(keep)
     dest = new_row[kept]
     for name in _SCALARS:
@@ -684,33 +704,34 @@ def apply_blends(pieces: PieceList, machine: Machine) -> PieceList:
                                      u_a=0.0, u_b=float(geom.u_end)))  # fmt: skip
     _put_objects(cols, objects, [int(new_row[r]) for r in ta], sub_pieces)
 
-    # The blends.
-    sel = ok & both_lines
-    ll_ok = ok[ll]
+    # The line–line blends (columnar PH rows) and the arc blends (PH objects).
+    cap_a, cap_b = pieces.v_cap_mm_s[corner - 1], pieces.v_cap_mm_s[corner]
+    sel = ok & c.lines
     dest = first[corner[sel]]
     src = corner[sel]
     feed = np.minimum(cap_a[sel], cap_b[sel])
+    kappa = c.kappa_per_mm[sel]
     cols["kind"][dest] = Kind.PH
-    cols["length_mm"][dest] = ph_len[sel]
-    cols["v_cap_mm_s"][dest] = np.maximum(_curvature_cap(machine, kappa[sel], feed), MIN_CAP_MM_S)
+    cols["length_mm"][dest] = c.length_mm[sel]
+    cols["v_cap_mm_s"][dest] = np.maximum(curvature_cap_mm_s(machine, kappa, feed), MIN_CAP_MM_S)
     cols["segment"][dest] = pieces.segment[src]
     cols["line"][dest] = pieces.line[src]
-    cols["kappa_max_per_mm"][dest] = kappa[sel]
+    cols["kappa_max_per_mm"][dest] = kappa
     cols["tangent_start"][:, dest] = pieces.tangent_end[:, src - 1]
     cols["tangent_end"][:, dest] = pieces.tangent_start[:, src]
-    w, p0, frame = l_w[ll_ok], l_p0[ll_ok], l_frame[ll_ok]
-    del l_w, l_p0, l_frame
+    ll_ok = ok[np.flatnonzero(c.lines)]
+    w, p0, frame = c.w[ll_ok], c.p0[ll_ok], c.frame[ll_ok]
     p5 = p0 + (w[:, 0] * w[:, 0] + w[:, 0] * w[:, 2] / 3.0 + w[:, 2] * w[:, 2]) / 5.0
     for name, z in (("start_mm", p0), ("end_mm", p5)):
         cols[name][:, dest] = (frame[:, 0] + z.real[:, None] * frame[:, 1]
                                + z.imag[:, None] * frame[:, 2]).T  # fmt: skip
     arc_rows, arc_pieces = [], []
-    for j, bl in arc_blends.items():
+    for j, bl in c.arc_blends.items():
         if not ok[j]:
             continue
         i = int(corner[j])
-        feed = min(float(cap_a[j]), float(cap_b[j]))
-        cap = max(float(_curvature_cap(machine, bl.kappa_max_per_mm, feed)), MIN_CAP_MM_S)
+        feed_j = min(float(cap_a[j]), float(cap_b[j]))
+        cap = max(float(curvature_cap_mm_s(machine, bl.kappa_max_per_mm, feed_j)), MIN_CAP_MM_S)
         arc_rows.append(int(first[i]))
         arc_pieces.append(Piece(Kind.PH, bl.ph, float(bl.ph.length_mm), cap,
                                 int(pieces.segment[i]), int(pieces.line[i]), 0.0, 1.0, 0.0,
@@ -755,7 +776,7 @@ def blend_pays(cap_a_mm_s, cap_b_mm_s, kappa_max_per_mm, trim_a_mm, trim_b_mm,
 
     lim = machine.limits
     v = np.minimum(np.asarray(cap_a_mm_s, dtype=float), np.asarray(cap_b_mm_s, dtype=float))
-    vb = np.minimum(_curvature_cap(machine, kappa_max_per_mm, v), v)
+    vb = np.minimum(curvature_cap_mm_s(machine, kappa_max_per_mm, v), v)
     vb = np.maximum(vb, MIN_CAP_MM_S)
     a_max, j_max = lim.a_max_mm_s2, lim.j_max_mm_s3
     d_stop = 2.0 * scurve_distance_mm(v, np.zeros_like(v), a_max, j_max)
