@@ -346,20 +346,12 @@ def ph(program, as_json, tolerance_um, no_split, machine, overrides):
 
     Example: nurbscnc ph programs/naca2415.nc --tolerance-um 1
     """
-    from nurbscnc.geometry.nurbs import NurbsCurve
-    from nurbscnc.plan.corners import program_corners
-    from nurbscnc.plan.phfit import fit_region
+    from nurbscnc.plan.report import corner_fits
 
     mach = load_machine_cli(machine, overrides, {"limits.ph_tolerance_um": tolerance_um})
     e_um = mach.limits.ph_tolerance_mm * 1000.0
     prog = load_program(program)
-    rows = []
-    for sc in program_corners(prog.segments, mach.limits.a_max_mm_s2, mach.limits.v_max_mm_s):
-        curve = NurbsCurve.from_segment(prog.segments[sc.segment_index])
-        for r in sc.regions:
-            unsplit = fit_region(curve, r.u_a, r.u_b, tolerance_um=e_um, split=False)
-            fit = unsplit if no_split else fit_region(curve, r.u_a, r.u_b, tolerance_um=e_um)
-            rows.append((sc, r, unsplit, fit))
+    rows = corner_fits(prog, mach, split=not no_split)
     if as_json:
         click.echo(json.dumps(ph_json(rows, e_um, no_split)))
         return
@@ -449,10 +441,6 @@ def write_plan_plots(run, plot_dir: str) -> list[str]:
 
 
 # -- plan / run --------------------------------------------------------------------------------
-#: The planning options of every command that plans (shared with ``stream``).
-plan_options = planning_options
-
-
 def make_plan(program: str, machine=None, overrides=(), dynamics="local", lookahead=None,
               corner_feed="piece", interpolator="exact", blend_tolerance=None,
               algorithm="ph-lookahead"):
@@ -483,7 +471,7 @@ def summary_of(prog, mach, run) -> dict:
 @click.option("--dump-profile", type=click.Path(dir_okay=False, allow_dash=True), default=None,
               help="Write t, s, v, a, j, piece at every servo period (CSV, or NPZ by extension).")
 @plot_option
-@plan_options
+@planning_options
 @handle_errors
 def plan(program, as_json, dump_profile, plot_dir, **settings):
     """Plan PROGRAM: pieces, corners, cycle time, lower bound, predicted contour error.
@@ -548,7 +536,7 @@ def plan(program, as_json, dump_profile, plot_dir, **settings):
 @click.option("--quiet", is_flag=True, help="No summary on stderr.")
 @json_option
 @plot_option
-@plan_options
+@planning_options
 @handle_errors
 def run(programs, output, output_dir, jobs, fmt, quiet, as_json, plot_dir, **settings):
     """Run the whole pipeline: reference points at every servo period.
@@ -642,7 +630,7 @@ def run_batch(programs, output_dir, jobs, fmt, quiet, as_json, settings) -> None
 @plot_option
 @click.option("--hold", type=click.Choice(["foh", "zoh"]), default="foh",
               help="Reference between samples: linear (foh, as a pulse-train card) or steps.")
-@plan_options
+@planning_options
 @handle_errors
 def simulate(source, as_json, plot_dir, hold, **settings):
     """Servo simulation of reference points (CSV/NPZ from `run`) or of a program (planned

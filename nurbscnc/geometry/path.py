@@ -33,6 +33,15 @@ from numpy.polynomial import polynomial as npoly
 
 from nurbscnc.geometry.nurbs import BLOCK
 
+#: Program segment kinds that do not move: the tool stops at rest there (a dwell holds for
+#: its ``seconds``; a pause, M0/M1/M60, is a stop of zero duration that the operator ends).
+STOP_KINDS = ("dwell", "pause")
+
+
+def stop_seconds(segment) -> float:
+    """How long a stop segment holds [s] (0 for a pause, or any segment without ``seconds``)."""
+    return float(getattr(segment, "seconds", 0.0))
+
 
 class Kind(IntEnum):
     """The kind of a piece of path (the one numbering; ``PathTable.kind`` holds these)."""

@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from nurbscnc.geometry.nurbs import NurbsCurve
+from nurbscnc.geometry.path import STOP_KINDS, stop_seconds
 from nurbscnc.interpolate.sample import Samples
 from nurbscnc.interpolate.taylor import taylor_increment
 from nurbscnc.machine.caps import baseline_feed_mm_s
@@ -92,9 +93,9 @@ def baseline_program_samples(algorithm: str, program, machine: Machine) -> Sampl
     feeds = [np.zeros(1)]
     lines = [np.array([program.segments[0].line if program.segments else 0])]
     for seg in program.segments:
-        if seg.kind == "dwell":
-            n = int(round(seg.seconds / period))
-            points.append(np.repeat(np.asarray(seg.position_mm, float)[None, :], n, 0))
+        if seg.kind in STOP_KINDS:  # hold the point where the tool is (a pause: 0 s)
+            n = int(round(stop_seconds(seg) / period))
+            points.append(np.repeat(points[-1][-1:], n, 0))
             feeds.append(np.zeros(n))
         elif seg.kind == "nurbs":
             smp = baseline_samples(algorithm, seg, machine)

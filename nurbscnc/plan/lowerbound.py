@@ -50,6 +50,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from nurbscnc.errors import ConfigError, PlanningError
+from nurbscnc.geometry.path import STOP_KINDS, stop_seconds
 from nurbscnc.machine.caps import curvature_cap2_mm2_s2
 from nurbscnc.machine.profile import Machine
 
@@ -353,8 +354,8 @@ def program_lower_bound_s(segments, machine: Machine) -> float:
 
     lim = machine.limits
     period, chord, a_max = machine.servo.period_s, lim.chord_tolerance_mm, lim.a_max_mm_s2
-    moving = [(i, s) for i, s in enumerate(segments) if s.kind != "dwell"]
-    dwell = float(sum(s.seconds for s in segments if s.kind == "dwell"))
+    moving = [(i, s) for i, s in enumerate(segments) if s.kind not in STOP_KINDS]
+    dwell = float(sum(stop_seconds(s) for s in segments if s.kind in STOP_KINDS))
     if not moving:
         return dwell
     m = len(moving)

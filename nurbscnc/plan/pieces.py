@@ -27,7 +27,7 @@ import numpy as np
 from nurbscnc.errors import GeometryError, NurbsCncError, SourcePos
 from nurbscnc.geometry.blend import ph_tables
 from nurbscnc.geometry.nurbs import NurbsCurve
-from nurbscnc.geometry.path import Kind, PathTable, ph_power_rows
+from nurbscnc.geometry.path import STOP_KINDS, Kind, PathTable, ph_power_rows, stop_seconds
 from nurbscnc.geometry.paths import ArcGeometry, LineGeometry, geometry_of
 from nurbscnc.geometry.ph import PHQuintic
 from nurbscnc.machine.caps import MIN_CAP_MM_S, corner_cap_mm_s, curvature_cap_mm_s
@@ -368,8 +368,6 @@ def _object_ends(pieces) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray
     return out[0], out[1], out[2], out[3]
 
 
-#: Segment kinds at which the tool stops at rest (a dwell of ``seconds``; a pause: 0 s).
-STOP_KINDS = ("dwell", "pause")
 
 
 def _object_pieces(seg, index: int, machine: Machine, options: PlanOptions) -> list[Piece]:
@@ -467,7 +465,7 @@ def segment_pieces(segments, machine: Machine, options: PlanOptions | None = Non
     pending = 0.0
     for i in (i for i, kd in enumerate(kinds) if kd in STOP_KINDS):
         r = int(first_row[i]) - 1  # the last piece before the dwell or pause
-        seconds = float(getattr(segs[i], "seconds", 0.0))
+        seconds = stop_seconds(segs[i])
         if r >= 0:
             cols["dwell_after_s"][r] += seconds
             cols["stop_after"][r] = True

@@ -17,11 +17,10 @@ import numpy as np
 
 from nurbscnc.errors import PlanningError, SourcePos
 from nurbscnc.geometry.nurbs import NurbsCurve
-from nurbscnc.geometry.path import Kind
+from nurbscnc.geometry.path import STOP_KINDS, Kind
 from nurbscnc.geometry.paths import geometry_of
 from nurbscnc.machine.profile import Machine, SoftLimits
 from nurbscnc.plan.lowerbound import program_lower_bound_s
-from nurbscnc.plan.pieces import STOP_KINDS
 
 
 def check_soft_limits(points_mm: np.ndarray, lines: np.ndarray, limits: SoftLimits) -> None:
@@ -186,6 +185,25 @@ def plan_summary(prog, machine: Machine, samples, plan=None, check=None,
             contour_eq29_max_um=float(eq29.max()) if c.size else 0.0,
         )
     return summary
+
+
+def corner_fits(prog, machine: Machine, split: bool = True) -> list[tuple]:
+    """PH quintic fits of every corner region of the program's NURBS blocks (SPEC §5–§6,
+    Table 1): (block corners, region, unsplit fit, fit) per region, the fit split to the
+    profile's tolerance e unless ``split`` is False (then it is the unsplit one)."""
+    from nurbscnc.plan.corners import program_corners
+    from nurbscnc.plan.phfit import fit_region
+
+    e_um = machine.limits.ph_tolerance_mm * 1000.0
+    lim = machine.limits
+    rows = []
+    for sc in program_corners(prog.segments, lim.a_max_mm_s2, lim.v_max_mm_s):
+        curve = NurbsCurve.from_segment(prog.segments[sc.segment_index])
+        for r in sc.regions:
+            unsplit = fit_region(curve, r.u_a, r.u_b, tolerance_um=e_um, split=False)
+            fit = fit_region(curve, r.u_a, r.u_b, tolerance_um=e_um) if split else unsplit
+            rows.append((sc, r, unsplit, fit))
+    return rows
 
 
 def corner_polylines(pieces, points_per_piece: int = 50) -> list[np.ndarray]:
