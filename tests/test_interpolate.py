@@ -21,7 +21,8 @@ from nurbscnc.geometry.path import Kind
 from nurbscnc.interpolate.sample import sample_plan
 from nurbscnc.interpolate.taylor import taylor_params
 from nurbscnc.machine.profile import load_machine
-from nurbscnc.plan.lookahead import LookaheadOptions, plan_program
+from nurbscnc.plan.lookahead import plan_program
+from nurbscnc.plan.options import LookaheadOptions
 from nurbscnc.plan.pieces import Piece, PieceList
 from nurbscnc.plan.profile import ProfileInput, plan_profile
 from nurbscnc.plan.report import nurbs_step_lengths

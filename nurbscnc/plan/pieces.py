@@ -3,8 +3,11 @@
 Each NURBS block is split into its sharp-corner regions (replaced by their PH quintic pieces,
 SPEC §6) and the NURBS stretches between them; lines, arcs and rapids are one piece each;
 under G64 P the corners between lines and arcs are replaced by PH quintic blends (issue 7).
-Every piece knows its exact geometry (so the interpolator can place points on it), its
-length, its cruise cap (SPEC §7) and its unit tangents at both ends (for the junctions).
+Every piece knows its exact geometry, its length, its cruise cap (SPEC §7, formulas in
+:mod:`nurbscnc.machine.caps`) and its unit tangents at both ends (for the junctions). Its
+kind is the path model's :class:`~nurbscnc.geometry.path.Kind` (a rapid is a line with the
+``rapid`` flag); everything that samples the pieces goes through :attr:`PieceList.path`, the
+:class:`~nurbscnc.geometry.path.PathTable` of all rows.
 
 Storage. CAM programs hold millions of G1 lines, so the pieces live in columns
 (:class:`PieceList`: one numpy row a piece) and the line path is built without a Python
