@@ -206,3 +206,21 @@ def test_batch_run_reports_failures_and_writes_the_others(tmp_path):
     assert res.exit_code == 2
     assert (outdir / "good.csv").exists() and not (outdir / "bad.csv").exists()
     assert "bad.nc:3" in res.output
+
+
+@pytest.mark.parametrize("between", ["", "G4 P0\n"])
+def test_a_zero_second_dwell_is_a_stop_at_rest(between):
+    """A dwell stops the tool whatever its length (a pause is the zero-length case): two
+    collinear moves pass their junction at speed, and stop there with "G4 P0" between."""
+    prog = interpret_text(f"G21 G90\nG1 X10 F600\n{between}G1 X20\nM2\n")
+    run = _run(prog, dynamics="off")
+    smp = run.samples
+    v_junction = run.plan.profile.junction_speeds_mm_s[1]
+    # The sampled feed within 0.1 mm of the joint (from finite differences of s).
+    v_fd = np.diff(smp.s_mm) / MACHINE.servo.period_s
+    near = np.abs(smp.points_mm[:-1, 0] - 10.0) < 0.1
+    if between:
+        assert v_junction == 0.0 and v_fd[near].min() < 0.05
+    else:
+        assert v_junction == pytest.approx(10.0, rel=1e-12)
+        assert v_fd[near].min() == pytest.approx(10.0, rel=1e-9)
