@@ -28,7 +28,8 @@ sys.path.insert(0, str(ROOT))
 
 from nurbscnc.interpolate.sample import sample_plan  # noqa: E402
 from nurbscnc.machine.profile import load_machine  # noqa: E402
-from nurbscnc.plan.lookahead import LookaheadOptions, plan_program  # noqa: E402
+from nurbscnc.plan.lookahead import plan_program  # noqa: E402
+from nurbscnc.plan.options import LookaheadOptions  # noqa: E402
 from nurbscnc.program.interpret import interpret_text  # noqa: E402
 
 PROGRAMS = ("butterfly.nc", "naca2415_c40.nc", "corners.nc")

@@ -80,7 +80,9 @@ def worker(program: str, dynamics: str) -> dict:
 
     from nurbscnc.machine.profile import load_machine
     from nurbscnc.output.files import write_points
-    from nurbscnc.plan.lookahead import LookaheadOptions, plan_program
+    from nurbscnc.pipeline import RunOptions, run_program
+    from nurbscnc.plan.options import LookaheadOptions
+    from nurbscnc.plan.report import plan_summary
     from nurbscnc.program.interpret import interpret_text
 
     text = Path(program).read_text()
@@ -91,12 +93,15 @@ def worker(program: str, dynamics: str) -> dict:
     c1, t1 = time.process_time(), time.perf_counter()
     del text
     rss_interp = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e3
-    plan = plan_program(prog, machine, LookaheadOptions(dynamics=dynamics))
+    run = run_program(prog, machine, RunOptions(lookahead=LookaheadOptions(dynamics=dynamics)))
+    plan = run.plan
     c2, t2 = time.process_time(), time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
-        write_points(os.path.join(tmp, "points.npz"), plan.samples)
+        write_points(os.path.join(tmp, "points.npz"), run.samples)
     c3, t3 = time.process_time(), time.perf_counter()
-    smp = plan.samples
+    plan_summary(prog, machine, run.samples, run.plan, run.check)
+    t4 = time.perf_counter()
+    smp = run.samples
     samples = int(smp.t_s.size)
     run_s = t3 - t0
     return {
@@ -112,6 +117,7 @@ def worker(program: str, dynamics: str) -> dict:
         "interpret_s": t1 - t0,
         "plan_s": t2 - t1,
         "write_s": t3 - t2,
+        "summary_s": t4 - t3,
         "run_s": run_s,
         "cpu_s": {"interpret": c1 - c0, "plan": c2 - c1, "write": c3 - c2},
         "plan_lines_per_s": lines / (t2 - t1),
@@ -171,13 +177,14 @@ def main(argv=None) -> int:
         "date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
         "machine": machine_info(),
         "program": f"CAM-style G1 spiral, {n} lines, 0.05 mm chord, G64 P{args.blend:g}",
-        "measured": "interpret_text + plan_program + write_points(.npz), each timed; "
-                    "fresh subprocess per case",
+        "measured": "interpret_text + run_program (plan, check, interpolate) + "
+                    "write_points(.npz) + plan_summary, each timed; fresh subprocess per case",
         "cases": cases,
     }
     for c in cases:
         print(f"{c['lines']:>9} lines, dynamics {c['dynamics']}: interpret "
               f"{c['interpret_s']:.2f} s, plan {c['plan_s']:.2f} s, write {c['write_s']:.2f} s, "
+              f"summary {c['summary_s']:.2f} s, "
               f"run {c['run_s']:.2f} s | plan {c['plan_lines_per_s']:.0f} lines/s, run "
               f"{c['run_lines_per_s']:.0f} lines/s, {c['run_samples_per_s']:.0f} samples/s | "
               f"{c['pieces']} pieces, {c['samples']} samples, {c['dynamics_iterations']} it | "

@@ -10,17 +10,22 @@ quarter's bisector φ obeys tan(φ/2) = tan(α/2)(2t − 1), t ∈ [0, 1] the sp
 from __future__ import annotations
 
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 from nurbscnc.errors import ConfigError
 from nurbscnc.geometry.nurbs import NurbsCurve
-from nurbscnc.interpolate.sample import nurbs_step_lengths, sample_plan, taylor_params
+from nurbscnc.geometry.path import Kind
+from nurbscnc.interpolate.sample import sample_plan
+from nurbscnc.interpolate.taylor import taylor_params
 from nurbscnc.machine.profile import load_machine
-from nurbscnc.plan.lookahead import LookaheadOptions, plan_program
-from nurbscnc.plan.pieces import Piece
+from nurbscnc.plan.lookahead import plan_program
+from nurbscnc.plan.options import LookaheadOptions
+from nurbscnc.plan.pieces import Piece, PieceList
 from nurbscnc.plan.profile import ProfileInput, plan_profile
+from nurbscnc.plan.report import nurbs_step_lengths
 from nurbscnc.program.interpret import interpret_text
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -99,14 +104,21 @@ def test_fast_inversion_clamps_and_hits_the_ends():
 # ------------------------------------------------------------------------- exact placement
 
 
+def sampled_plan(name: str) -> SimpleNamespace:
+    """A plan (no dynamics check) with its exact reference points as ``samples``."""
+    plan = plan_program(program(name), MACHINE, LookaheadOptions(dynamics="off"))
+    samples = sample_plan(plan.pieces, plan.profile, MACHINE.servo.period_s)
+    return SimpleNamespace(pieces=plan.pieces, profile=plan.profile, samples=samples)
+
+
 @pytest.fixture(scope="module")
 def airfoil_plan():
-    return plan_program(program("naca2415.nc"), MACHINE, LookaheadOptions(dynamics="off"))
+    return sampled_plan("naca2415.nc")
 
 
 @pytest.fixture(scope="module")
 def corners_plan():
-    return plan_program(program("corners.nc"), MACHINE, LookaheadOptions(dynamics="off"))
+    return sampled_plan("corners.nc")
 
 
 @pytest.mark.parametrize("which", ["airfoil", "corners"])
@@ -118,20 +130,20 @@ def test_exact_samples_match_each_pieces_own_exact_placement(which, airfoil_plan
     plan = airfoil_plan if which == "airfoil" else corners_plan
     smp = plan.samples
     starts = plan.profile.piece_start_mm
-    kinds = np.array([p.kind for p in plan.pieces])[smp.piece]
+    kinds = np.array([p.name for p in plan.pieces])[smp.piece]
     assert set(kinds) >= ({"nurbs", "ph"} if which == "airfoil" else {"line", "arc"})
     for i in np.unique(smp.piece):
         sel = smp.piece == i
         piece, g = plan.pieces[i], plan.pieces[i].geometry
         local = np.clip(smp.s_mm[sel] - starts[i], 0.0, piece.length_mm)
-        if piece.kind == "ph":
+        if piece.kind == Kind.PH:
             ref = g.point_mm(g.param_at_length(local))
-        elif piece.kind == "nurbs":
+        elif piece.kind == Kind.NURBS:
             ref = g.point(g.arc_table.param_at_length(piece.s_a_mm + local))
         else:
             ref = g.point(g.param_at_length(local))
-        tol = 1e-9 if piece.kind == "nurbs" else 1e-12
-        assert np.abs(smp.points_mm[sel] - ref).max() <= tol, piece.kind
+        tol = 1e-9 if piece.kind == Kind.NURBS else 1e-12
+        assert np.abs(smp.points_mm[sel] - ref).max() <= tol, piece.name
     assert smp.interpolator == "exact"
 
 
@@ -223,9 +235,9 @@ def test_taylor_per_step_error_is_third_order(accel):
 def circle_plan(feed_mm_s: float):
     curve = circle(R_MM)
     length = curve.length_mm
-    piece = Piece("nurbs", curve, length, feed_mm_s, 0, 1, 0.0, 1.0, 0.0, 1.0 / R_MM)
+    piece = Piece(Kind.NURBS, curve, length, feed_mm_s, 0, 1, 0.0, 1.0, 0.0, 1.0 / R_MM)
     profile = plan_profile(ProfileInput([length], [feed_mm_s], [0.0, 0.0], 2000.0, 1e5))
-    return curve, [piece], profile
+    return curve, PieceList.of([piece]), profile
 
 
 def test_taylor_points_are_on_the_curve_and_end_exactly():
@@ -256,7 +268,7 @@ def test_taylor_on_the_airfoil_keeps_ph_pieces_exact(airfoil_plan):
     plan = airfoil_plan
     period = MACHINE.servo.period_s
     smp = sample_plan(plan.pieces, plan.profile, period, interpolator="taylor")
-    kinds = np.array([p.kind for p in plan.pieces])[smp.piece]
+    kinds = np.array([p.name for p in plan.pieces])[smp.piece]
     same = kinds != "nurbs"
     np.testing.assert_array_equal(smp.points_mm[same], plan.samples.points_mm[same])
     k, ds = nurbs_step_lengths(plan.pieces, smp)

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -24,14 +25,24 @@ from scipy.interpolate import BSpline
 from scipy.spatial import cKDTree
 
 from nurbscnc.machine.profile import load_machine
-from nurbscnc.plan.lookahead import LookaheadOptions, plan_program
+from nurbscnc.pipeline import RunOptions, run_program
+from nurbscnc.plan.options import LookaheadOptions
 from nurbscnc.program.interpret import interpret_text
+from tests.servo_reference import lsim_actual_mm
 
 ROOT = Path(__file__).resolve().parents[1]
 MACHINE = load_machine()
 LIM = MACHINE.limits
 PERIOD = MACHINE.servo.period_s
 EPS = np.finfo(float).eps
+
+
+def plan_program(prog, machine=MACHINE, lookahead: LookaheadOptions | None = None):
+    """The program through the pipeline, its plan's fields and its reference samples."""
+    run = run_program(prog, machine, RunOptions(lookahead=lookahead or LookaheadOptions()))
+    p = run.plan
+    return SimpleNamespace(samples=run.samples, pieces=p.pieces, profile=p.profile,
+                           caps_mm_s=p.caps_mm_s, cycle_time_s=run.cycle_time_s)
 
 
 def corpus_dir() -> Path:
@@ -194,12 +205,16 @@ def test_corpus_program_runs_end_to_end(rel):
     # (no G64 P blends in the corpus); the dense reference adds < 0.01 µm.
     d = distance_to_path(smp.points_mm, programmed_path(prog))
     assert d.max() <= 1.5 * LIM.ph_tolerance_mm + 1e-5
-    # The dynamics check held: cutting samples within ε_max.
-    r = plan.response
+    # The dynamics check held: the reference through an independent servo simulation
+    # (scipy.signal.lsim of eq. 25) stays within ε_max of the programmed path while cutting
+    # (reference on a feed move; the settling tail counts as cutting), allowing the corners'
+    # PH fit tolerance.
+    actual = lsim_actual_mm(smp.points_mm, MACHINE)
     rapid = plan.pieces.rapid
-    n = smp.t_s.size
-    cut = np.append(~rapid[smp.piece], np.full(r.contour_mm.size - n, not rapid[-1]))
-    assert np.all(r.contour_mm[cut] <= LIM.contour_tolerance_mm)
+    cut = np.append(~rapid[smp.piece], np.full(actual.shape[0] - smp.t_s.size, not rapid[-1]))
+    if cut.any():  # (a program of rapids only cuts nothing)
+        d = distance_to_path(actual[cut], programmed_path(prog), reach=0.1)
+        assert d.max() <= LIM.contour_tolerance_mm + 1.5 * LIM.ph_tolerance_mm + 1e-5
 
 
 # --- polygons with and without G64 P ---------------------------------------------------------

@@ -14,7 +14,6 @@ import io
 import json
 import os
 import sys
-from collections import Counter
 
 import click
 import numpy as np
@@ -23,6 +22,7 @@ from rich.table import Table
 from rich.text import Text
 
 from nurbscnc import __version__
+from nurbscnc.cli.options import machine_options, planning_options, run_options
 from nurbscnc.errors import (
     EXIT_INTERNAL,
     EXIT_INTERRUPTED,
@@ -329,77 +329,14 @@ def check(program, as_json, no_block_delete, tool_table):
 
     Example: nurbscnc check programs/naca2415.nc
     """
+    from nurbscnc.plan.report import program_summary
+
     prog = load_program(program, not no_block_delete, tool_table)
     summary = program_summary(prog)
     if as_json:
         click.echo(json.dumps(summary))
         return
     print_summary(prog, summary)
-
-
-def segment_length_mm(seg) -> float:
-    """Length of one segment [mm] (NURBS by Gauss–Legendre arc length)."""
-    if seg.kind == "nurbs":
-        from nurbscnc.geometry.nurbs import NurbsCurve
-
-        return float(NurbsCurve.from_segment(seg).length_mm)
-    return float(seg.length_mm)
-
-
-def program_summary(prog: Program) -> dict:
-    """The JSON-able summary of an interpreted program (``check --json``)."""
-    segments = []
-    feed_len = 0.0
-    rapid_len = 0.0
-    points = [np.asarray(prog.start_mm, dtype=float)]
-    feeds = []
-    for seg in prog.segments:
-        length = segment_length_mm(seg)
-        entry = {"kind": seg.kind, "line": seg.line, "length_mm": length}
-        if seg.kind == "nurbs":
-            entry.update(
-                degree=seg.degree,
-                control_points=len(seg.control_points_mm),
-                knots=len(seg.knots),
-                plane=seg.plane,
-            )
-            points.append(np.asarray(seg.control_points_mm))
-        elif seg.kind != "dwell":
-            points.append(np.asarray([seg.start_mm, seg.end_mm], dtype=float))
-        if seg.kind == "arc":
-            # The bounding box of an arc includes its extreme points: sample it finely.
-            from nurbscnc.geometry.paths import geometry_of
-
-            geom = geometry_of(seg)
-            u = np.linspace(geom.u_start, geom.u_end, 65)
-            points.append(geom.point(u))
-        if seg.kind == "rapid":
-            rapid_len += length
-        elif seg.kind != "dwell":
-            feed_len += length
-            feeds.append(seg.feed_mm_s)
-        segments.append(entry)
-    allpts = np.vstack([np.reshape(p, (-1, 3)) for p in points])
-    counts = Counter(s["kind"] for s in segments)
-    return {
-        "ok": True,
-        "program": prog.name,
-        "blocks": prog.blocks,
-        "segments": segments,
-        "counts": dict(counts),
-        "length_mm": feed_len,
-        "rapid_length_mm": rapid_len,
-        "bounding_box_mm": {
-            "min": allpts.min(axis=0).tolist(),
-            "max": allpts.max(axis=0).tolist(),
-        },
-        "feed_mm_min": {
-            "min": min(feeds) * 60.0 if feeds else None,
-            "max": max(feeds) * 60.0 if feeds else None,
-        },
-        "notes": [{"line": n.line, "message": n.message} for n in prog.notes],
-        "errors": [],
-    }
 
 
 def print_summary(prog: Program, s: dict) -> None:
@@ -436,20 +373,6 @@ def print_summary(prog: Program, s: dict) -> None:
 
 
 # -- machine profile options -------------------------------------------------------------------
-def machine_options(func):
-    """``--machine FILE`` and repeatable ``--set KEY=VALUE`` (dotted profile keys)."""
-    func = click.option(
-        "--set", "overrides", multiple=True, metavar="KEY=VALUE",
-        help="Override one profile value, e.g. --set limits.a_max_mm_s2=1000.",
-    )(func)  # fmt: skip
-    func = click.option(
-        "--machine", type=click.Path(), default=None,
-        help="Machine profile (TOML). Default: $NURBSCNC_MACHINE, ./nurbscnc.toml, "
-        "~/.config/nurbscnc/machine.toml, else the bundled paper machine (Tables 2, 3).",
-    )(func)  # fmt: skip
-    return func
-
-
 def load_machine_cli(path, overrides=(), extra: dict | None = None):
     """The machine profile with ``--set`` and option overrides applied.
 
@@ -584,20 +507,12 @@ def ph(program, as_json, tolerance_um, no_split, machine, overrides):
 
     Example: nurbscnc ph programs/naca2415.nc --tolerance-um 1
     """
-    from nurbscnc.geometry.nurbs import NurbsCurve
-    from nurbscnc.plan.corners import program_corners
-    from nurbscnc.plan.phfit import fit_region
+    from nurbscnc.plan.report import corner_fits
 
     mach = load_machine_cli(machine, overrides, {"limits.ph_tolerance_um": tolerance_um})
     e_um = mach.limits.ph_tolerance_mm * 1000.0
     prog = load_program(program)
-    rows = []
-    for sc in program_corners(prog.segments, mach.limits.a_max_mm_s2, mach.limits.v_max_mm_s):
-        curve = NurbsCurve.from_segment(prog.segments[sc.segment_index])
-        for r in sc.regions:
-            unsplit = fit_region(curve, r.u_a, r.u_b, tolerance_um=e_um, split=False)
-            fit = unsplit if no_split else fit_region(curve, r.u_a, r.u_b, tolerance_um=e_um)
-            rows.append((sc, r, unsplit, fit))
+    rows = corner_fits(prog, mach, split=not no_split)
     if as_json:
         click.echo(json.dumps({**ph_json(rows, e_um, no_split), **machine_json(mach)}))
         return
@@ -665,195 +580,51 @@ def plot_option(func):
     )(func)  # fmt: skip
 
 
-def write_plan_plots(plan, plot_dir: str) -> list[str]:
-    """Figures of one plan: the path with its PH pieces, the feed, the predicted contour
+def write_plan_plots(run, plot_dir: str) -> list[str]:
+    """Figures of one run: the path with its PH pieces, the feed, the predicted contour
     error (PNG files in ``plot_dir``)."""
     from nurbscnc.output import plots
+    from nurbscnc.plan.report import corner_polylines
 
     os.makedirs(plot_dir, exist_ok=True)
-    smp = plan.samples
+    smp = run.samples
     written = [plots.plot_feed_profiles({"feed": (smp.t_s, smp.v_mm_s)},
                                         os.path.join(plot_dir, "feed.png"))]  # fmt: skip
-    if hasattr(plan, "pieces"):
-        corners = [p.points_mm(np.linspace(0.0, p.length_mm, 50))
-                   for p in plan.pieces if p.kind == "ph"]  # fmt: skip
-        written.append(plots.plot_path(smp.points_mm, corners,
-                                       os.path.join(plot_dir, "path.png")))  # fmt: skip
-        if plan.response is not None:
-            t = np.arange(plan.response.contour_mm.size) * (smp.t_s[1] - smp.t_s[0])
-            written.append(plots.plot_contour_error(
-                {"predicted (true distance)": (t, plan.response.contour_mm * 1000.0)},
-                os.path.join(plot_dir, "contour_error.png")))  # fmt: skip
-    else:
-        written.append(plots.plot_path(smp.points_mm, [], os.path.join(plot_dir, "path.png")))
+    corners = corner_polylines(run.plan.pieces) if run.plan is not None else []
+    written.append(plots.plot_path(smp.points_mm, corners, os.path.join(plot_dir, "path.png")))
+    if run.check is not None:
+        contour = run.check.response.contour_mm
+        t = np.arange(contour.size) * (smp.t_s[1] - smp.t_s[0])
+        written.append(plots.plot_contour_error(
+            {"predicted (true distance)": (t, contour * 1000.0)},
+            os.path.join(plot_dir, "contour_error.png")))  # fmt: skip
     return written
 
 
 # -- plan / run --------------------------------------------------------------------------------
-def plan_options(func):
-    """Options shared by plan and run."""
-    func = click.option(
-        "--algorithm", type=click.Choice(["ph-lookahead", "adaptive", "curvature"]),
-        default="ph-lookahead",
-        help="The look-ahead planner (default), or one of the paper's baselines: adaptive "
-             "(chord-error) feed or curvature feed, Taylor interpolation, no acceleration "
-             "limit (SPEC §9).",
-    )(func)  # fmt: skip
-    func = click.option(
-        "--corner-feed", type=click.Choice(["piece", "peak"]), default="piece",
-        help="PH pieces capped by their own peak curvature (piece, default) or the whole "
-             "region by the corner's peak (peak, as the paper).",
-    )(func)  # fmt: skip
-    func = click.option(
-        "--dynamics", type=click.Choice(["local", "global", "off"]), default="local",
-        help="Contour-error check: lower the feed on offending pieces (local, default), for "
-             "the whole program (global, the paper's rule), or not at all (off).",
-    )(func)  # fmt: skip
-    func = click.option(
-        "--blend-tolerance", type=click.FloatRange(min=0.0), default=None, metavar="MM",
-        help="Blend G1/G2/G3 corners by PH quintics within this distance [mm] (overrides the "
-             "program's G64 P; 0: stop exactly at every corner).",
-    )(func)  # fmt: skip
-    func = click.option(
-        "--interpolator", type=click.Choice(["exact", "taylor"]), default="exact",
-        help="NURBS pieces by exact arc-length inversion (default) or the paper's 2nd-order "
-             "Taylor formula.",
-    )(func)  # fmt: skip
-    func = click.option(
-        "--lookahead", type=click.IntRange(min=1), default=None,
-        help="Look-ahead depth in pieces (default: the whole program).",
-    )(func)  # fmt: skip
-    return machine_options(func)
-
-
 def make_plan(program: str, machine=None, overrides=(), dynamics="local", lookahead=None,
               corner_feed="piece", interpolator="exact", blend_tolerance=None,
               algorithm="ph-lookahead"):
-    """Load, interpret and plan one program; validate soft limits. Returns (prog, mach, plan).
+    """Load, interpret, plan and interpolate one program; validate soft limits. Returns
+    (program, machine, :class:`~nurbscnc.pipeline.Run`).
 
-    The keyword arguments are exactly the options of :func:`plan_options`."""
-    from nurbscnc.plan.lookahead import LookaheadOptions, plan_program
-    from nurbscnc.plan.pieces import PlanOptions
+    The keyword arguments are exactly the options of :func:`planning_options`."""
+    from nurbscnc.pipeline import run_program
 
+    options = run_options(algorithm, corner_feed, dynamics, blend_tolerance, interpolator,
+                          lookahead)  # fmt: skip
     mach = load_machine_cli(machine, overrides)
-    if not mach.contour_check:
-        dynamics = "off"  # no servo model in the profile: no contour error to check
     prog = load_program(program)
-    if algorithm != "ph-lookahead":
-        from nurbscnc.plan.baselines import BaselinePlan, baseline_program_samples
-
-        plan = BaselinePlan(algorithm, baseline_program_samples(algorithm, prog, mach))
-        check_soft_limits(plan, mach, prog)
-        return prog, mach, plan
-    options = LookaheadOptions(dynamics=dynamics, lookahead_pieces=lookahead,
-                               interpolator=interpolator,
-                               plan=PlanOptions(corner_feed=corner_feed,
-                                                blend_tolerance_mm=blend_tolerance))  # fmt: skip
-    plan = plan_program(prog, mach, options)
-    check_soft_limits(plan, mach, prog)
-    return prog, mach, plan
+    return prog, mach, run_program(prog, mach, options)
 
 
-def check_soft_limits(plan, mach, prog) -> None:
-    """Refuse a plan whose reference points leave the travel envelope (before any output)."""
-    from nurbscnc.errors import PlanningError, SourcePos
+def summary_of(prog, mach, run) -> dict:
+    """The plan summary of a run (:func:`nurbscnc.plan.report.plan_summary`)."""
+    from nurbscnc.plan.report import plan_summary
 
-    pts = plan.samples.points_mm
-    lo = np.asarray(mach.soft_limits.min_mm)
-    hi = np.asarray(mach.soft_limits.max_mm)
-    bad = np.flatnonzero(np.any((pts < lo) | (pts > hi), axis=1))
-    if bad.size:
-        k = int(bad[0])
-        axis = int(np.flatnonzero((pts[k] < lo) | (pts[k] > hi))[0])
-        line = int(plan.samples.line[k])
-        raise PlanningError(
-            f"the path leaves the soft limits: {'XYZ'[axis]} = {pts[k, axis]:.4f} mm outside "
-            f"[{lo[axis]:g}, {hi[axis]:g}] mm",
-            SourcePos(line, 1, ""),
-        )
-
-
-def plan_summary(prog, mach, plan) -> dict:
-    """Numbers that describe a plan (``plan --json``)."""
-    from nurbscnc.plan.lookahead import segment_times_s
-    from nurbscnc.plan.lowerbound import program_lower_bound_s
-
-    if not hasattr(plan, "pieces"):  # a baseline: no pieces, simulate to see its errors
-        from nurbscnc.servo.simulate import contour_errors, metrics, simulate_reference
-
-        sim = simulate_reference(plan.samples.points_mm, mach)
-        m = metrics(sim, None, contour_errors(sim, None)).as_dict()
-        lb = program_lower_bound_s(prog.segments, mach)
-        return {"ok": True, "program": prog.name, "machine": mach.source, **machine_json(mach),
-                "algorithm": plan.algorithm, "cycle_time_s": plan.cycle_time_s,
-                "samples": int(plan.samples.t_s.size), "period_s": mach.servo.period_s,
-                "feed_max_mm_s": float(plan.samples.v_mm_s.max()), "lower_bound_s": lb,
-                "lower_bound_ratio": plan.cycle_time_s / lb if lb > 0 else None,
-                "contour_max_um": m["true_max_um"], "contour_rms_um": m["true_rms_um"],
-                "contour_eq29_max_um": m["contour_max_um"]}  # fmt: skip
-
-    kinds = Counter(plan.pieces.kind_counts())  # vectorised: no Piece object per row
-    summary = {
-        "ok": True,
-        "program": prog.name,
-        "machine": mach.source,
-        **machine_json(mach),
-        "pieces": dict(kinds),
-        "piece_count": len(plan.pieces),
-        "corner_pieces": kinds.get("ph", 0),
-        "cycle_time_s": plan.cycle_time_s,
-        "samples": int(plan.samples.t_s.size),
-        "period_s": mach.servo.period_s,
-        "dynamics": plan.dynamics,
-        "dynamics_iterations": plan.iterations,
-        "feed_max_mm_s": float(plan.samples.v_mm_s.max()),
-        "segment_times_s": {str(k): v for k, v in segment_times_s(plan).items()},
-    }
-    from nurbscnc.plan.lowerbound import program_lower_bound_s
-
-    summary["interpolator"] = plan.samples.interpolator
-    fluct = feed_fluctuation(plan)
-    if fluct is not None:
-        summary["feed_fluctuation_max"] = fluct
-    lb = program_lower_bound_s(prog.segments, mach)
-    if lb is not None:
-        summary["lower_bound_s"] = lb
-        summary["lower_bound_ratio"] = plan.cycle_time_s / lb if lb > 0 else None
-    r = plan.response
-    if r is not None:
-        cut = cutting_mask(plan)
-        c = r.contour_mm[cut] * 1000.0
-        summary.update(
-            contour_max_um=float(c.max()) if c.size else 0.0,
-            contour_rms_um=float(np.sqrt(np.mean(c * c))) if c.size else 0.0,
-            contour_eq29_max_um=float(np.abs(r.contour_eq29_mm[cut]).max() * 1000.0)
-            if c.size else 0.0,
-        )  # fmt: skip
-    return summary
-
-
-def feed_fluctuation(plan) -> float | None:
-    """Largest |Δs_true/Δs_planned − 1| over servo steps on NURBS pieces moving at ≥ 10 % of
-    V_max (SPEC §3; true arc length from the curves' exact tables), or None if none."""
-    from nurbscnc.interpolate.sample import nurbs_step_lengths
-
-    smp = plan.samples
-    k, ds_true = nurbs_step_lengths(plan.pieces, smp)
-    if k.size == 0:
-        return None
-    planned = smp.s_mm[k + 1] - smp.s_mm[k]
-    fast = smp.v_mm_s[k] >= 0.1 * float(np.max(plan.caps_mm_s))
-    if not fast.any():
-        return None
-    return float(np.max(np.abs(ds_true[fast] / planned[fast] - 1.0)))
-
-
-def cutting_mask(plan) -> np.ndarray:
-    """Which servo-response samples are cutting (not on a rapid): those are checked."""
-    rapid = np.asarray(plan.pieces.rapid)
-    n = plan.samples.t_s.size
-    m = plan.response.contour_mm.size
-    return np.append(~rapid[plan.samples.piece], np.full(m - n, not rapid[-1]))
+    summary = plan_summary(prog, mach, run.samples, run.plan, run.check, run.algorithm,
+                           run.cycle_time_s)  # fmt: skip
+    return {**summary, **machine_json(mach)}
 
 
 @main.command()
@@ -862,7 +633,7 @@ def cutting_mask(plan) -> np.ndarray:
 @click.option("--dump-profile", type=click.Path(allow_dash=True), default=None,
               help="Write t, s, v, a, j, piece at every servo period (CSV, or NPZ by extension).")
 @plot_option
-@plan_options
+@planning_options
 @handle_errors
 def plan(program, as_json, dump_profile, plot_dir, **settings):
     """Plan PROGRAM: pieces, corners, cycle time, lower bound, predicted contour error.
@@ -871,20 +642,20 @@ def plan(program, as_json, dump_profile, plot_dir, **settings):
     """
     from nurbscnc.output.files import write_profile
 
-    prog, mach, pl = make_plan(program, **settings)
-    summary = plan_summary(prog, mach, pl)
-    if plot_dir:
-        write_plan_plots(pl, plot_dir)
-    if dump_profile and not hasattr(pl, "profile"):
+    if dump_profile and settings.get("algorithm", "ph-lookahead") != "ph-lookahead":
         raise click.UsageError("--dump-profile needs the look-ahead planner (a baseline has "
                                "no jerk-limited profile)")
+    prog, mach, run = make_plan(program, **settings)
+    summary = summary_of(prog, mach, run)
+    if plot_dir:
+        write_plan_plots(run, plot_dir)
     if dump_profile:
-        s = pl.samples
-        from nurbscnc.interpolate.sample import dwell_schedule, wall_to_profile_time
+        from nurbscnc.plan.timing import servo_clock
 
-        at, dur = dwell_schedule(pl.pieces, pl.profile)
-        _, v, a, j, piece = pl.profile.sample(wall_to_profile_time(s.t_s, at, dur))
-        write_profile(dump_profile, s.t_s, s.s_mm, v, a, j, piece)
+        pl = run.plan
+        t, tau = servo_clock(pl.pieces, pl.profile, mach.servo.period_s)
+        s, v, a, j, piece = pl.profile.sample(tau)
+        write_profile(dump_profile, t, s, v, a, j, piece)
     if as_json:
         click.echo(json.dumps(summary))
         return
@@ -927,7 +698,7 @@ def plan(program, as_json, dump_profile, plot_dir, **settings):
 @click.option("--quiet", is_flag=True, help="No summary on stderr.")
 @json_option
 @plot_option
-@plan_options
+@planning_options
 @handle_errors
 def run(programs, output, output_dir, jobs, fmt, quiet, as_json, plot_dir, **settings):
     """Run the whole pipeline: reference points at every servo period.
@@ -946,13 +717,13 @@ def run(programs, output, output_dir, jobs, fmt, quiet, as_json, plot_dir, **set
         program = programs[0]
         show = not quiet and err.is_terminal
         with err.status(f"planning {program} …") if show else contextlib.nullcontext():
-            prog, mach, pl = make_plan(program, **settings)
-        with err.status(f"writing {pl.samples.t_s.size} points …") if show else (
+            prog, mach, run = make_plan(program, **settings)
+        with err.status(f"writing {run.samples.t_s.size} points …") if show else (
                 contextlib.nullcontext()):
-            write_output(output, fmt, pl.samples, mach, prog.name)
+            write_output(output, fmt, run.samples, mach, prog.name)
         if plot_dir:
-            write_plan_plots(pl, plot_dir)
-        summary = plan_summary(prog, mach, pl)
+            write_plan_plots(run, plot_dir)
+        summary = summary_of(prog, mach, run)
         if as_json:
             click.echo(json.dumps(summary), err=output == "-")
         elif not quiet:
@@ -979,11 +750,11 @@ def _batch_one(args):
     program, target, settings = args
 
     try:
-        prog, mach, pl = make_plan(program, **settings)
-        write_output(target, "halstreamer" if target.endswith(".hs") else "", pl.samples, mach,
+        prog, mach, run = make_plan(program, **settings)
+        write_output(target, "halstreamer" if target.endswith(".hs") else "", run.samples, mach,
                      prog.name)  # fmt: skip
         return {"program": program, "ok": True, "output": target,
-                "cycle_time_s": pl.cycle_time_s, "samples": int(pl.samples.t_s.size)}
+                "cycle_time_s": run.cycle_time_s, "samples": int(run.samples.t_s.size)}
     except NurbsCncError as exc:
         return {"program": program, "ok": False,
                 "error": format_error(exc, _display_name(program)),
@@ -1068,7 +839,7 @@ def run_batch(programs, output_dir, jobs, fmt, quiet, as_json, settings) -> None
 @plot_option
 @click.option("--hold", type=click.Choice(["foh", "zoh"]), default="foh",
               help="Reference between samples: linear (foh, as a pulse-train card) or steps.")
-@plan_options
+@planning_options
 @handle_errors
 def simulate(source, as_json, plot_dir, hold, **settings):
     """Servo simulation of reference points (CSV/NPZ from `run`) or of a program (planned
@@ -1087,11 +858,11 @@ def simulate(source, as_json, plot_dir, hold, **settings):
         path = points  # the commanded path: the reference polyline itself
         name = source
     else:
-        prog, mach, pl = make_plan(source, **settings)
+        prog, mach, run = make_plan(source, **settings)
         from nurbscnc.plan.dynamics import dense_path_mm
 
-        points = pl.samples.points_mm
-        path = dense_path_mm(pl.pieces, pl.profile) if hasattr(pl, "pieces") else points
+        points = run.samples.points_mm
+        path = points if run.plan is None else dense_path_mm(run.plan.pieces, run.plan.profile)
         name = prog.name
     sim = simulate_reference(points, mach, hold=hold)
     contour = contour_errors(sim, path)
@@ -1169,6 +940,7 @@ def compare(program, as_json, plot_dir, angles, block, algorithms, machine, over
 def write_compare_plots(runs, plot_dir: str) -> list[str]:
     """Figures 1, 2/4/6 and 7 of the paper for a comparison (PNG files in ``plot_dir``)."""
     from nurbscnc.output import plots
+    from nurbscnc.plan.report import corner_polylines
 
     os.makedirs(plot_dir, exist_ok=True)
     written = []
@@ -1177,8 +949,7 @@ def write_compare_plots(runs, plot_dir: str) -> list[str]:
         group = [r for r in runs if r.angle_deg == angle]
         ours = next((r for r in group if r.plan is not None), None)
         if ours is not None:
-            corners = [p.points_mm(np.linspace(0.0, p.length_mm, 50))
-                       for p in ours.plan.pieces if p.kind == "ph"]  # fmt: skip
+            corners = corner_polylines(ours.plan.pieces)
             written.append(plots.plot_path(ours.path_mm, corners,
                                            os.path.join(plot_dir, f"path_{tag}.png")))
         written.append(plots.plot_feed_profiles(
@@ -1191,19 +962,3 @@ def write_compare_plots(runs, plot_dir: str) -> list[str]:
             {r.algorithm: (r.sim_t_s, r.axis_error_um[:, 0], r.axis_error_um[:, 1])
              for r in group}, os.path.join(plot_dir, f"axis_{tag}.png")))  # fmt: skip
     return written
-
-
-# -- streaming (nurbscnc/output/stream) ---------------------------------------------------------
-from nurbscnc.cli.stream import card_sim, stream  # noqa: E402
-
-main.add_command(stream)
-main.add_command(card_sim)
-from nurbscnc.cli.profile import profile  # noqa: E402
-
-main.add_command(profile)
-from nurbscnc.cli.identify import identify  # noqa: E402
-
-main.add_command(identify)
-
-if __name__ == "__main__":  # pragma: no cover - `python -m nurbscnc.cli.main`
-    main()

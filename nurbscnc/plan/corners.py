@@ -18,6 +18,7 @@ import numpy as np
 from scipy.optimize import brentq
 
 from nurbscnc.geometry.nurbs import NurbsCurve
+from nurbscnc.geometry.path import STOP_KINDS
 from nurbscnc.geometry.paths import geometry_of
 from nurbscnc.machine.profile import kappa_threshold_per_mm
 
@@ -176,7 +177,7 @@ def tangent_junctions(segments, min_angle_deg: float = 1e-6) -> list[Junction]:
 
     The angle is between the end tangent of one segment and the start tangent of the next.
     """
-    moving = [(i, s) for i, s in enumerate(segments) if s.kind != "dwell"]
+    moving = [(i, s) for i, s in enumerate(segments) if s.kind not in STOP_KINDS]
     out = []
     for (i, a), (_, b) in zip(moving, moving[1:]):
         ga, gb = geometry_of(a), geometry_of(b)

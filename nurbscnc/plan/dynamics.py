@@ -25,7 +25,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from nurbscnc.servo.model import contour_error_eq29, contour_error_true, simulate_axes
+from nurbscnc.geometry.path import Kind
+from nurbscnc.servo.model import contour_error_eq29, simulate_axes
 
 #: Chord error of the dense polyline on curved pieces [mm] (0.01 µm).
 CHORD_MM = 1e-5
@@ -50,14 +51,12 @@ class Response:
     contour_eq29_mm: np.ndarray
 
 
-def dense_path_mm(pieces, profile, spacing_mm: float = 0.002, table=None) -> np.ndarray:
+def dense_path_mm(pieces, profile, spacing_mm: float = 0.002) -> np.ndarray:
     """The commanded path as a dense polyline [mm]: exact points every ``spacing_mm`` or
     closer (≥ 8 per piece), so its chord error is negligible beside micrometre errors."""
-    from nurbscnc.interpolate.sample import place_points
-
     total = profile.total_length_mm
     starts = profile.piece_start_mm
-    lengths = _lengths(pieces)
+    lengths = pieces.length_mm
     counts = np.maximum(np.ceil(lengths / spacing_mm).astype(np.int64), 8)
     counts[lengths == 0.0] = 1
     idx = np.repeat(np.arange(len(pieces)), counts)
@@ -65,43 +64,7 @@ def dense_path_mm(pieces, profile, spacing_mm: float = 0.002, table=None) -> np.
     frac = (np.arange(idx.size) - first) / np.repeat(np.maximum(counts - 1, 1), counts)
     s = starts[idx] + frac * lengths[idx]
     s = np.clip(s, 0.0, total)
-    return place_points(pieces, profile, s, idx, table=table)
-
-
-def _lengths(pieces) -> np.ndarray:
-    col = getattr(pieces, "length_mm", None)
-    if isinstance(col, np.ndarray):
-        return col
-    return np.array([p.length_mm for p in pieces])
-
-
-def _eq29(reference_mm: np.ndarray, axis_err: np.ndarray) -> np.ndarray:
-    """eq. 29 with the tangent angle of the reference's direction of travel (XY)."""
-    d = np.gradient(reference_mm[:, :2], axis=0)
-    phi = np.arctan2(d[:, 1], d[:, 0])
-    eq29 = contour_error_eq29(axis_err[:, 0], axis_err[:, 1], phi)
-    moving = np.hypot(d[:, 0], d[:, 1]) > 0
-    return np.where(moving, eq29, 0.0)
-
-
-def _simulate(reference_mm: np.ndarray, machine, hold: str):
-    servo = machine.servo
-    models = [servo.x, servo.y, servo.z]
-    actual = simulate_axes(models, reference_mm, servo.period_s, hold=hold, settle=True)
-    m = actual.shape[0]
-    ref = np.vstack([reference_mm, np.repeat(reference_mm[-1:], m - reference_mm.shape[0], 0)])
-    return actual, ref
-
-
-def servo_response(
-    reference_mm: np.ndarray, path_mm: np.ndarray, machine, hold: str = "foh"
-) -> Response:
-    """Simulate every axis on ``reference_mm`` (N, 3) and measure the contour error to the
-    whole polyline ``path_mm`` (global nearest-segment search)."""
-    actual, ref = _simulate(reference_mm, machine, hold)
-    axis_err = ref - actual
-    contour = contour_error_true(actual, path_mm)
-    return Response(actual, axis_err, contour, _eq29(ref, axis_err))
+    return pieces.path.place(starts, s, idx)[0]
 
 
 def path_counts(pieces) -> np.ndarray:
@@ -109,19 +72,17 @@ def path_counts(pieces) -> np.ndarray:
     else chords of at most min(:data:`MAX_SPACING_MM`, √(8 δ_p / κ)) with δ_p =
     :data:`CHORD_MM` (a chord h on curvature κ is off by κh²/8); κ is the piece's
     ``kappa_max_per_mm``, doubled on NURBS cells (their κ comes from 8 samples)."""
-    from nurbscnc.plan.pieces import K_LINE, K_NURBS, K_RAPID
-
     kind = pieces.kind
-    kappa = np.where(kind == K_NURBS, 2.0, 1.0) * np.abs(pieces.kappa_max_per_mm)
+    kappa = np.where(kind == Kind.NURBS, 2.0, 1.0) * np.abs(pieces.kappa_max_per_mm)
     with np.errstate(divide="ignore"):
         h = np.minimum(MAX_SPACING_MM, np.sqrt(8.0 * CHORD_MM / kappa))
     counts = np.maximum(np.ceil(pieces.length_mm / h).astype(np.int64) + 1, 3)
-    straight = (kind == K_LINE) | (kind == K_RAPID)
+    straight = kind == Kind.LINE
     return np.where(straight | (pieces.length_mm == 0.0), 2, counts)
 
 
 def windowed_contour_mm(actual_mm: np.ndarray, lag_mm: np.ndarray, s_ref_mm: np.ndarray,
-                        pieces, profile, table=None) -> np.ndarray:  # fmt: skip
+                        pieces, profile) -> np.ndarray:  # fmt: skip
     """True distance [mm] from each actual point to the path near its reference (module doc).
 
     ``actual_mm`` (M, 3); ``lag_mm`` (M,) |reference − actual| [mm]; ``s_ref_mm`` (M,) the
@@ -129,8 +90,6 @@ def windowed_contour_mm(actual_mm: np.ndarray, lag_mm: np.ndarray, s_ref_mm: np.
     :func:`path_counts`, from its last point before s − W to its first point after s + W,
     W = 2|r − a|.
     """
-    from nurbscnc.interpolate.sample import place_points
-
     m = actual_mm.shape[0]
     out = np.empty(m)
     counts = path_counts(pieces)
@@ -151,7 +110,7 @@ def windowed_contour_mm(actual_mm: np.ndarray, lag_mm: np.ndarray, s_ref_mm: np.
         first = np.repeat(np.cumsum(c) - c, c)
         frac = (np.arange(piece.size) - first) / np.repeat(c - 1, c)
         ps = np.minimum(starts[piece] + frac * lengths[piece], total)
-        pts = place_points(pieces, profile, ps, piece, table=table)
+        pts = pieces.path.place(starts, ps, piece)[0]
         # Polyline segments [j, j + 1] covering [s − w, s + w]: from the last point before
         # the window to the first one after it.
         a_idx = np.maximum(np.searchsorted(ps, s - w, side="left") - 1, 0)
@@ -178,42 +137,6 @@ def windowed_contour_mm(actual_mm: np.ndarray, lag_mm: np.ndarray, s_ref_mm: np.
     return out
 
 
-def points_at_fraction(pieces, table, idx: np.ndarray, frac: np.ndarray) -> np.ndarray:
-    """Points (m, 3) [mm] at fraction ``frac`` (m,) ∈ [0, 1] of the *parameter* range of the
-    pieces ``idx`` (m,): no arc-length inversion (a polyline does not need its points evenly
-    spaced in length). Lines, circular arcs and PH pieces in closed form from ``table``;
-    spiral arcs and NURBS by their geometry objects, one call per piece or curve."""
-    from nurbscnc.interpolate.sample import ARC, LINE, NURBS, PH, SPIRAL, _horner_rows
-
-    out = np.empty((idx.size, 3))
-    code = table.kind[idx]
-    sel = np.flatnonzero(code == LINE)
-    if sel.size:
-        i, f = idx[sel], frac[sel][:, None]
-        a, b = table.start_mm[:, i].T, table.end_mm[:, i].T
-        out[sel] = np.where(f == 1.0, b, a + f * (b - a))
-    sel = np.flatnonzero(code == ARC)
-    if sel.size:
-        i, t = idx[sel], frac[sel]
-        th = t * table.angle_rad[i]
-        r = table.radius_mm[i]
-        out[sel] = (table.origin_mm[:, i] + r * np.cos(th) * table.e1[:, i]
-                    + r * np.sin(th) * table.e2[:, i]
-                    + t * table.helix_mm[i] * table.normal[:, i]).T  # fmt: skip
-    sel = np.flatnonzero(code == PH)
-    if sel.size:
-        i, x = idx[sel], frac[sel] - 0.5
-        px, py = _horner_rows(table.ph_x, i, x), _horner_rows(table.ph_y, i, x)
-        out[sel] = (table.origin_mm[:, i] + px * table.e1[:, i] + py * table.e2[:, i]).T
-    for c in (SPIRAL, NURBS):
-        sel = np.flatnonzero(code == c)
-        for j in np.unique(idx[sel]).tolist():
-            rows = sel[idx[sel] == j]
-            geom, u_a, u_b, _ = pieces.objects[j]
-            out[rows] = geom.point(u_a + frac[rows] * (u_b - u_a))
-    return out
-
-
 class PathIndex:
     """Where the pieces of a path are, for the few global distance queries of the check.
 
@@ -223,15 +146,15 @@ class PathIndex:
     use and kept across the re-plans of one program (the geometry does not change).
     """
 
-    def __init__(self, pieces, table=None, short_mm: float = 1.0):
-        self._args = (pieces, table)
+    def __init__(self, pieces, short_mm: float = 1.0):
+        self._pieces = pieces
         self._short_mm = short_mm
         self._built = None
 
     def _build(self):
         from scipy.spatial import cKDTree
 
-        pieces = self._args[0]
+        pieces = self._pieces
         centre = 0.5 * (pieces.start_mm + pieces.end_mm).T
         radius = 0.5 * pieces.length_mm
         short = np.flatnonzero(pieces.length_mm <= self._short_mm)
@@ -260,8 +183,7 @@ class PathIndex:
         """Distance [mm] from each point of ``q`` (m, 3) to the whole path, for points whose
         distance is known to be at most ``upper_mm`` (m,): exact to the polyline of
         :func:`path_counts` on the candidate pieces, never above ``upper_mm``."""
-        pieces, table = self._args
-        table = table if table is not None else pieces.table()
+        pieces = self._pieces
         counts = path_counts(pieces)
         out = np.array(upper_mm, dtype=float)
         # Blocks of consecutive points (in the caller's order: time) at most ``block`` long
@@ -277,7 +199,7 @@ class PathIndex:
             piece = np.repeat(cand, c)
             first = np.repeat(np.cumsum(c) - c, c)
             frac = (np.arange(piece.size) - first) / np.repeat(c - 1, c)
-            pts = points_at_fraction(pieces, table, piece, frac)
+            pts = pieces.path.points_at_fraction(piece, frac)
             # Segments within a piece whose bounding box meets the queries' (widened).
             qb = q[sl]
             reach = float(out[sl].max())
@@ -298,7 +220,7 @@ class PathIndex:
         return out
 
 
-def path_response(samples, pieces, profile, machine, table=None, hold: str = "foh",
+def path_response(samples, pieces, profile, machine, hold: str = "foh",
                   refine_above_mm: float | None = None,
                   index: PathIndex | None = None) -> Response:  # fmt: skip
     """Simulate every axis on the planned samples and measure the contour error: the
@@ -306,7 +228,7 @@ def path_response(samples, pieces, profile, machine, table=None, hold: str = "fo
     ``refine_above_mm`` (default: never), the distance to the whole path instead
     (:class:`PathIndex`, ``index`` if the caller keeps one), so the samples that decide the
     check get the global true distance (an overshoot past a closed contour's end onto its
-    own start is then no error, as with :func:`servo_response`)."""
+    own start is then no error)."""
     ref = samples.points_mm
     n = ref.shape[0]
     servo = machine.servo
@@ -317,12 +239,12 @@ def path_response(samples, pieces, profile, machine, table=None, hold: str = "fo
     np.subtract(ref[-1], actual[n:], out=axis_err[n:])
     lag = np.sqrt(np.einsum("ij,ij->i", axis_err, axis_err))
     s_ref = np.concatenate((samples.s_mm, np.full(actual.shape[0] - n, samples.s_mm[-1])))
-    contour = windowed_contour_mm(actual, lag, s_ref, pieces, profile, table=table)
+    contour = windowed_contour_mm(actual, lag, s_ref, pieces, profile)
     del lag, s_ref
     if refine_above_mm is not None:
         sel = np.flatnonzero(contour > refine_above_mm)
         if sel.size:
-            index = index or PathIndex(pieces, table)
+            index = index or PathIndex(pieces)
             contour[sel] = index.distance_mm(actual[sel], contour[sel])
     # eq. 29 with the tangent angle of the reference's direction of travel (XY); the held
     # tail does not move.

@@ -16,16 +16,17 @@ pieces at one cap are planned as one by :func:`~nurbscnc.plan.profile.plan_profi
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
 from nurbscnc.errors import PlanningError
-from nurbscnc.interpolate.sample import Samples, sample_plan, total_time_s
 from nurbscnc.machine.profile import Machine
 from nurbscnc.plan.dynamics import PathIndex, Response, path_response
-from nurbscnc.plan.pieces import PieceList, PlanOptions, junction_caps, segment_pieces
+from nurbscnc.plan.options import Dynamics, LookaheadOptions
+from nurbscnc.plan.pieces import PieceList, junction_caps, segment_pieces
 from nurbscnc.plan.profile import Profile, ProfileInput, plan_profile
+from nurbscnc.plan.timing import Reference, dwell_times, exact_reference, total_time_s
 
 #: Plan to this fraction of ε_max so the prediction has a little room (model, rounding).
 CONTOUR_MARGIN = 0.99
@@ -33,32 +34,36 @@ CONTOUR_MARGIN = 0.99
 BLAME_WINDOW_S = 0.03
 
 
-@dataclass(frozen=True)
-class LookaheadOptions:
-    """``dynamics``: "local" | "global" | "off"; ``interpolator``: "exact" | "taylor" (NURBS
-    pieces by the paper's 2nd-order Taylor formula); ``max_iterations`` of the re-plan loop;
-    ``lookahead_pieces``: None (whole program) or a window; ``plan``: piece options."""
-
-    dynamics: str = "local"
-    interpolator: str = "exact"
-    max_iterations: int = 40
-    lookahead_pieces: int | None = None
-    plan: PlanOptions = field(default_factory=PlanOptions)
-
-
 @dataclass(frozen=True, eq=False)
 class Plan:
-    """A complete plan: pieces, their final caps, the profile, the samples and the predicted
-    servo response; ``iterations`` of the dynamics loop; ``cycle_time_s`` including dwells."""
+    """A complete plan: pieces, their final caps [mm/s], the profile; ``iterations`` of the
+    dynamics loop; ``cycle_time_s`` including dwells; the ``dynamics`` rule it was checked
+    with. The reference points come from the interpolator
+    (:func:`nurbscnc.interpolate.sample.interpolate`), the check's result from
+    :func:`plan_checked`."""
 
     pieces: PieceList
     caps_mm_s: np.ndarray
     profile: Profile
-    samples: Samples
-    response: Response | None
     iterations: int
     cycle_time_s: float
-    dynamics: str
+    dynamics: Dynamics
+
+
+@dataclass(frozen=True, eq=False)
+class Check:
+    """The dynamics check of the final plan (SPEC §8): the ``reference`` points it checked
+    (:class:`~nurbscnc.plan.timing.Reference`), the predicted servo ``response`` to them and
+    ``cutting`` (M,), which response samples are cutting (not on a rapid; the held tail after
+    the end counts as the last piece): those are checked."""
+
+    reference: Reference
+    response: Response
+    cutting: np.ndarray
+
+    def contour_um(self) -> np.ndarray:
+        """The true contour error [µm] of the cutting samples."""
+        return self.response.contour_mm[self.cutting] * 1000.0
 
 
 def _profile(pieces: PieceList, caps: np.ndarray, smooth: np.ndarray, machine: Machine,
@@ -71,16 +76,6 @@ def _profile(pieces: PieceList, caps: np.ndarray, smooth: np.ndarray, machine: M
     jcaps[1:-1] = np.where(smooth[1:-1] > 0, np.minimum(caps[:-1], caps[1:]), 0.0)
     return plan_profile(ProfileInput(pieces.length_mm, caps, jcaps, lim.a_max_mm_s2,
                                      lim.j_max_mm_s3, lookahead_pieces=window))  # fmt: skip
-
-
-def dwell_times(pieces: PieceList, profile: Profile) -> tuple[np.ndarray, np.ndarray]:
-    """Profile times [s] at which dwells start and their durations [s] (from the columns;
-    the same as :func:`nurbscnc.interpolate.sample.dwell_schedule`)."""
-    i = np.flatnonzero(pieces.dwell_after_s > 0.0)
-    k = len(pieces)
-    nxt = np.minimum(i + 1, k - 1)
-    at = np.where(i + 1 < k, profile.piece_start_time_s[nxt], profile.duration_s)
-    return at.astype(float), pieces.dwell_after_s[i].astype(float)
 
 
 def _blame(err: np.ndarray, eps_mm: float, piece: np.ndarray, joined: np.ndarray,
@@ -140,7 +135,20 @@ def local_factors(blame: np.ndarray, eps_mm: float, history=None):
 
 
 def plan_program(program, machine: Machine, options: LookaheadOptions | None = None) -> Plan:
-    """Plan a whole interpreted program (SPEC §1: modules 1–4, then the interpolator)."""
+    """Plan a whole interpreted program (SPEC §1: modules 1–4); :func:`plan_checked` without
+    the check's result."""
+    return plan_checked(program, machine, options)[0]
+
+
+def plan_checked(program, machine: Machine, options: LookaheadOptions | None = None,
+                 reference=exact_reference) -> tuple[Plan, Check | None]:  # fmt: skip
+    """Plan a whole interpreted program and check it (SPEC §1: modules 1–4, §8): pieces,
+    profile, then the dynamics check on the plan's reference points, re-planning until the
+    predicted contour error is within ε_max. ``reference``: (pieces, profile, period_s) →
+    :class:`~nurbscnc.plan.timing.Reference`, the points the check simulates (default: the
+    exact ones; the interpolator passes its own,
+    :func:`nurbscnc.interpolate.sample.reference_sampler`). Returns the plan and the final
+    check (None with ``dynamics="off"``)."""
     options = options or LookaheadOptions()
     pieces = segment_pieces(program.segments, machine, options.plan)
     if not len(pieces):
@@ -151,28 +159,26 @@ def plan_program(program, machine: Machine, options: LookaheadOptions | None = N
     rapid = pieces.rapid
     period = machine.servo.period_s
     eps_mm = lim.contour_tolerance_mm * CONTOUR_MARGIN
-    response = None
+    check = None
     iterations = 0
-    table = pieces.table()  # per-piece arrays for the interpolator, built once
     history = None  # the last local re-plan: blame and factor per piece
     index = None  # where the pieces are, for global distances (built if needed)
     while True:
-        # The last iteration's samples and response go before the new ones are made (long
+        # The last iteration's reference and response go before the new ones are made (long
         # programs: each is hundreds of MB).
-        samples = response = None
+        ref = check = None
         profile = _profile(pieces, caps, smooth, machine, options.lookahead_pieces)
-        dwell_at, dwell_s = dwell_times(pieces, profile)
-        samples = sample_plan(pieces, profile, period, dwell_at, dwell_s,
-                              interpolator=options.interpolator, table=table)  # fmt: skip
-        if options.dynamics == "off":
+        if options.dynamics == Dynamics.OFF:
             break
-        index = index or PathIndex(pieces, table)
-        response = path_response(samples, pieces, profile, machine, table=table,
-                                 refine_above_mm=eps_mm, index=index)  # fmt: skip
-        n = samples.t_s.size
+        ref = reference(pieces, profile, period)
+        index = index or PathIndex(pieces)
+        response = path_response(ref, pieces, profile, machine, refine_above_mm=eps_mm,
+                                 index=index)  # fmt: skip
+        n = ref.t_s.size
         # Contour error matters while cutting: samples on rapids (air moves) are not checked.
-        cutting = np.append(~rapid[samples.piece], np.full(response.contour_mm.size - n,
-                                                            not rapid[-1]))
+        cutting = np.append(~rapid[ref.piece], np.full(response.contour_mm.size - n,
+                                                        not rapid[-1]))
+        check = Check(ref, response, cutting)
         err = np.where(cutting, response.contour_mm, 0.0)
         worst = float(err.max())
         if worst <= eps_mm:
@@ -183,19 +189,20 @@ def plan_program(program, machine: Machine, options: LookaheadOptions | None = N
                 f"dynamics check: contour error {worst * 1000:.2f} µm still above ε_max after "
                 f"{options.max_iterations} re-plans"
             )
-        if options.dynamics == "global":
+        if options.dynamics == Dynamics.GLOBAL:
             # The paper's rule: lower V_max for the whole program. Every cap (cruise and
             # corner: V_cf ∝ V_max) scales with it; error ∝ V²κ gives the factor.
             caps = caps * min(float(np.sqrt(eps_mm / worst)), 0.98)
         else:
             window = max(int(round(BLAME_WINDOW_S / period)), 1)
             joined = (smooth[1:-1] > 0) & (caps[:-1] == caps[1:])
-            blame = _blame(err, eps_mm, samples.piece, joined, window)
+            blame = _blame(err, eps_mm, ref.piece, joined, window)
             factor, history = local_factors(blame, eps_mm, history)
             caps = caps * factor
-    dwell_at, dwell_s = dwell_times(pieces, profile)
-    return Plan(pieces, caps, profile, samples, response, iterations,
-                total_time_s(profile, dwell_s), options.dynamics)  # fmt: skip
+    _, dwell_s = dwell_times(pieces, profile)
+    plan = Plan(pieces, caps, profile, iterations, total_time_s(profile, dwell_s),
+                options.dynamics)  # fmt: skip
+    return plan, check
 
 
 def segment_times_s(plan: Plan) -> dict[int, float]:

@@ -50,7 +50,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from nurbscnc.errors import ConfigError, PlanningError
-from nurbscnc.machine.profile import Machine, chord_feed_mm_s
+from nurbscnc.geometry.path import STOP_KINDS, stop_seconds
+from nurbscnc.machine.caps import curvature_cap2_mm2_s2
+from nurbscnc.machine.profile import Machine
 
 #: Default largest grid spacing [mm] (SPEC §10).
 DEFAULT_DS_MM = 0.01
@@ -145,15 +147,6 @@ def interval_times_s(
 
 # ---------------------------------------------------------------------------------------------
 # Sampling the pieces.
-
-
-def _cap2(kappa_per_mm, v_top_mm_s: float, a_max_mm_s2: float, period_s, chord_mm) -> np.ndarray:
-    """cap² = min(v_top², V_af(κ)², A/κ) [mm²/s²]; κ = 0 leaves v_top², κ = inf gives 0."""
-    k = np.abs(np.asarray(kappa_per_mm, dtype=float))
-    v_af = np.asarray(chord_feed_mm_s(k, period_s, chord_mm), dtype=float)
-    with np.errstate(divide="ignore"):
-        normal = np.where(k > 0.0, a_max_mm_s2 / k, np.inf)
-    return np.minimum(np.minimum(v_top_mm_s * v_top_mm_s, v_af * v_af), normal)
 
 
 def _sample_piece(geom, ds_mm: float, cap2_of, rel_tol: float) -> tuple[np.ndarray, np.ndarray]:
@@ -269,7 +262,7 @@ def lower_bound_time_s(
     for geom, top in zip(pieces, v_top):
 
         def cap2_of(kappa, top=float(top)):
-            return _cap2(kappa, top, a_max_mm_s2, period_s, chord_tolerance_mm)
+            return curvature_cap2_mm2_s2(kappa, top, a_max_mm_s2, period_s, chord_tolerance_mm)
 
         s, c2 = _sample_piece(geom, ds, cap2_of, cap_rel_tol)
         s_parts.append(s + offset)
@@ -361,8 +354,8 @@ def program_lower_bound_s(segments, machine: Machine) -> float:
 
     lim = machine.limits
     period, chord, a_max = machine.servo.period_s, lim.chord_tolerance_mm, lim.a_max_mm_s2
-    moving = [(i, s) for i, s in enumerate(segments) if s.kind != "dwell"]
-    dwell = float(sum(s.seconds for s in segments if s.kind == "dwell"))
+    moving = [(i, s) for i, s in enumerate(segments) if s.kind not in STOP_KINDS]
+    dwell = float(sum(stop_seconds(s) for s in segments if s.kind in STOP_KINDS))
     if not moving:
         return dwell
     m = len(moving)
@@ -392,7 +385,7 @@ def program_lower_bound_s(segments, machine: Machine) -> float:
         t_start[i], t_end[i] = d[0], d[1]
 
         def cap2_of(kappa, top_i=float(top[i])):
-            return _cap2(kappa, top_i, a_max, period, chord)
+            return curvature_cap2_mm2_s2(kappa, top_i, a_max, period, chord)
 
         if isinstance(geom, ArcGeometry) and not geom.is_spiral:
             length[i] = float(geom.length_mm)

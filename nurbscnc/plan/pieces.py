@@ -3,8 +3,11 @@
 Each NURBS block is split into its sharp-corner regions (replaced by their PH quintic pieces,
 SPEC §6) and the NURBS stretches between them; lines, arcs and rapids are one piece each;
 under G64 P the corners between lines and arcs are replaced by PH quintic blends (issue 7).
-Every piece knows its exact geometry (so the interpolator can place points on it), its
-length, its cruise cap (SPEC §7) and its unit tangents at both ends (for the junctions).
+Every piece knows its exact geometry, its length, its cruise cap (SPEC §7, formulas in
+:mod:`nurbscnc.machine.caps`) and its unit tangents at both ends (for the junctions). Its
+kind is the path model's :class:`~nurbscnc.geometry.path.Kind` (a rapid is a line with the
+``rapid`` flag); everything that samples the pieces goes through :attr:`PieceList.path`, the
+:class:`~nurbscnc.geometry.path.PathTable` of all rows.
 
 Storage. CAM programs hold millions of G1 lines, so the pieces live in columns
 (:class:`PieceList`: one numpy row a piece) and the line path is built without a Python
@@ -17,6 +20,7 @@ still works; code that runs over every piece of a long program uses the columns.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from dataclasses import replace as dc_replace
@@ -26,14 +30,14 @@ import numpy as np
 from nurbscnc.errors import GeometryError, NurbsCncError, SourcePos
 from nurbscnc.geometry.blend import ph_tables
 from nurbscnc.geometry.nurbs import NurbsCurve
+from nurbscnc.geometry.path import STOP_KINDS, Kind, PathTable, ph_power_rows, stop_seconds
 from nurbscnc.geometry.paths import ArcGeometry, LineGeometry, geometry_of
 from nurbscnc.geometry.ph import PHQuintic
-from nurbscnc.machine.profile import Machine, chord_feed_mm_s
+from nurbscnc.machine.caps import MIN_CAP_MM_S, corner_cap_mm_s, curvature_cap_mm_s
+from nurbscnc.machine.profile import Machine
 from nurbscnc.plan.corners import find_corner_regions
+from nurbscnc.plan.options import CornerFeed, PlanOptions
 from nurbscnc.plan.phfit import fit_region
-
-#: The lowest cruise cap a piece gets [mm/s].
-MIN_CAP_MM_S = 1e-3
 
 #: Junctions whose tangents turn by less than this [rad] are treated as smooth (no stop).
 SMOOTH_JUNCTION_RAD = 1e-6
@@ -43,25 +47,27 @@ SMOOTH_JUNCTION_RAD = 1e-6
 #: The path then jumps by less than this from one blend's end to the next one's start.
 MIN_REMAINDER_MM = 1e-6
 
-#: Piece kinds; ``PieceList.kind`` holds indices into this tuple.
-KINDS = ("line", "rapid", "arc", "ph", "nurbs")
-K_LINE, K_RAPID, K_ARC, K_PH, K_NURBS = range(5)
-_KIND_INDEX = {name: i for i, name in enumerate(KINDS)}
+#: Summary names of the piece kinds, in summary order ("rapid": a rapid line).
+KIND_NAMES = ("line", "rapid", "arc", "ph", "nurbs")
+_NAME_OF = {Kind.LINE: "line", Kind.ARC: "arc", Kind.SPIRAL: "arc", Kind.PH: "ph",
+            Kind.NURBS: "nurbs"}  # fmt: skip
 
 
 @dataclass(frozen=True, eq=False)
 class Piece:
-    """One piece of the path.
+    """One piece of the path, as built (arcs, NURBS cells, PH pieces) or read from a row.
 
-    ``kind``: "nurbs" | "ph" | "line" | "arc" | "rapid". ``geometry`` evaluates it:
-    a NurbsCurve (``u_a``..``u_b`` of it, starting at arc length ``s_a_mm`` of the curve),
-    a PHQuintic, a LineGeometry or an ArcGeometry. ``length_mm`` [mm]; ``v_cap_mm_s`` the
-    cruise cap [mm/s]; ``segment`` / ``line`` where it came from; ``dwell_after_s`` a dwell
-    [s] at its end (G4). ``kappa_max_per_mm`` the largest curvature on it [1/mm].
-    ``blend_mm`` the G64 P tolerance of its segment [mm] (0: exact stop at corners).
+    ``kind`` its :class:`~nurbscnc.geometry.path.Kind`; ``geometry`` evaluates it: a
+    NurbsCurve (``u_a``..``u_b`` of it, starting at arc length ``s_a_mm`` of the curve), a
+    PHQuintic (ξ ∈ [0, 1]), a LineGeometry or an ArcGeometry (``u_a``..``u_b``).
+    ``length_mm`` [mm]; ``v_cap_mm_s`` the cruise cap [mm/s]; ``segment`` / ``line`` where
+    it came from; ``dwell_after_s`` a dwell [s] at its end (G4); ``stop_after``: the tool
+    comes to rest at its end (a dwell or a pause). ``kappa_max_per_mm`` the largest
+    curvature on it [1/mm]. ``blend_mm`` the G64 P tolerance of its segment [mm] (0: exact
+    stop at corners). ``rapid``: a rapid move (G0).
     """
 
-    kind: str
+    kind: Kind
     geometry: object
     length_mm: float
     v_cap_mm_s: float
@@ -73,78 +79,31 @@ class Piece:
     kappa_max_per_mm: float = 0.0
     dwell_after_s: float = 0.0
     blend_mm: float = 0.0
+    rapid: bool = False
+    stop_after: bool = False
+
+    @property
+    def name(self) -> str:
+        """"line", "rapid", "arc", "ph" or "nurbs" (summaries)."""
+        return "rapid" if self.rapid else _NAME_OF[Kind(self.kind)]
+
+    def path_row(self) -> tuple:
+        """The row of :meth:`PathTable.of <nurbscnc.geometry.path.PathTable.of>` for it."""
+        return (self.kind, self.geometry, self.length_mm, self.u_a, self.u_b, self.s_a_mm,
+                self.line)  # fmt: skip
 
     def points_mm(self, s_local_mm: np.ndarray) -> np.ndarray:
         """Exact points [mm] (m, 3) at arc lengths ``s_local_mm`` from the piece start."""
-        s = np.clip(np.asarray(s_local_mm, dtype=float), 0.0, self.length_mm)
-        g = self.geometry
-        if self.kind == "ph":
-            return g.point_mm(g.param_at_length(s))
-        if self.kind == "nurbs":
-            return g.point(g.param_at_length(self.s_a_mm + s))
-        return g.point(g.param_at_length(s))
+        s = np.ravel(np.asarray(s_local_mm, dtype=float))
+        return PathTable.of([self.path_row()]).points(np.zeros(s.size, np.intp), s)[0]
 
     def tangent_start(self) -> np.ndarray:
-        return self._tangent(0.0)
+        """Unit tangent at the start (zero at a cusp)."""
+        return _object_ends([self])[2][0]
 
     def tangent_end(self) -> np.ndarray:
-        return self._tangent(self.length_mm)
-
-    def _tangent(self, s_local: float) -> np.ndarray:
-        g = self.geometry
-        if self.kind == "ph":
-            xi = np.array([0.0 if s_local == 0.0 else 1.0])
-            d = g.derivatives_mm(xi, 1)[1][0]
-        elif self.kind == "nurbs":
-            u = np.array([self.u_a if s_local == 0.0 else self.u_b])
-            d = g.derivatives(u, 1)[1][0]
-        else:
-            u = np.array([g.u_start if s_local == 0.0 else g.u_end])
-            d = g.derivatives(u, 1)[1][0]
-        n = np.linalg.norm(d)
-        return d / n if n > 0 else d
-
-
-@dataclass(frozen=True)
-class PlanOptions:
-    """Planner choices. ``blend_tolerance_mm``: overrides every segment's G64 P [mm]
-    (None: as programmed). ``corner_feed``: "piece" (each PH piece capped by its own peak
-    curvature: faster, our default) or "peak" (the whole region at V_sp of the region's peak,
-    as the paper does). ``ph``: replace corner regions by PH quintics (False: plan the NURBS
-    as it is, capped by the same corner feed)."""
-
-    corner_feed: str = "piece"
-    ph: bool = True
-    tolerance_um: float | None = None
-    blend_tolerance_mm: float | None = None
-
-
-def _curvature_cap(machine: Machine, kappa, feed_mm_s: float) -> np.ndarray:
-    """Feed cap [mm/s] at curvature κ outside corners: min(F, V_max, V_af(κ), √(A/κ))
-    (elementwise; ``feed_mm_s`` a scalar or an array like ``kappa``)."""
-    lim = machine.limits
-    kappa = np.asarray(kappa, dtype=float)
-    v_af = np.asarray(chord_feed_mm_s(kappa, machine.servo.period_s, lim.chord_tolerance_mm))
-    with np.errstate(divide="ignore"):
-        v_an = np.sqrt(lim.a_max_mm_s2 / np.maximum(kappa, 1e-300))
-    return np.minimum(np.minimum(v_af, v_an), np.minimum(feed_mm_s, lim.v_max_mm_s))
-
-
-def _corner_cap(machine: Machine, kappa_peak: float, feed_mm_s: float,
-                kappa_cf: float | None = None) -> float:
-    """V_sp = min(V_af, V_cf) at a corner of peak curvature κ (SPEC §7), capped by F and by
-    the normal-acceleration limit √(A_max/κ). ``kappa_cf`` (default: the peak) is the
-    curvature given to V_cf: the physical limits (chord error, normal acceleration) always
-    see the peak, while the paper's heuristic slow-down V_cf = F κ̄/(κ + κ̄) may be given a
-    piece's mean curvature (turning / length) — at the peak of a near-cusp (κ ~ 1e6 /mm) it
-    would otherwise crawl the whole piece at F/κ."""
-    lim = machine.limits
-    f = min(feed_mm_s, lim.v_max_mm_s)
-    v_af = float(machine.chord_feed_mm_s(kappa_peak))
-    v_cf = float(machine.curvature_feed_mm_s(kappa_peak if kappa_cf is None else kappa_cf, f))
-    v_sp = min(v_af, v_cf)
-    v_an = float(np.sqrt(lim.a_max_mm_s2 / kappa_peak)) if kappa_peak > 0 else np.inf
-    return max(min(v_sp, v_an, feed_mm_s, lim.v_max_mm_s), 1e-6)
+        """Unit tangent at the end (zero at a cusp)."""
+        return _object_ends([self])[3][0]
 
 
 def nurbs_pieces(seg, index: int, machine: Machine, options: PlanOptions) -> list[Piece]:
@@ -154,7 +113,7 @@ def nurbs_pieces(seg, index: int, machine: Machine, options: PlanOptions) -> lis
     feed = min(seg.feed_mm_s, lim.v_max_mm_s)
     kth = lim.a_max_mm_s2 / (feed * feed)
     regions = find_corner_regions(curve, kth)
-    e_um = options.tolerance_um or lim.ph_tolerance_mm * 1000.0
+    e_um = (options.tolerance_mm or lim.ph_tolerance_mm) * 1000.0
     pieces: list[Piece] = []
     u_prev = curve.u_start
     for region in regions:
@@ -169,7 +128,7 @@ def nurbs_pieces(seg, index: int, machine: Machine, options: PlanOptions) -> lis
                     pieces.extend(_nurbs_stretch(curve, ua, ub, seg, index, machine, feed))
             u_prev = region.u_b
             continue
-        region_cap = _corner_cap(machine, region.kappa_peak_per_mm, feed)
+        region_cap = corner_cap_mm_s(machine, region.kappa_peak_per_mm, feed)
         if options.ph:
             # max ≤ e (not the paper's 3e): every reference point within e of the curve.
             fit = fit_region(curve, region.u_a, region.u_b, tolerance_um=e_um, max_factor=1.0)
@@ -177,14 +136,14 @@ def nurbs_pieces(seg, index: int, machine: Machine, options: PlanOptions) -> lis
                 xi = np.linspace(0.0, 1.0, 65)
                 k_max = float(np.max(np.abs(p.ph.curvature(xi))))
                 k_mean = abs(p.ph.turning_angle_rad()) / max(float(p.ph.length_mm), 1e-300)
-                cap = (region_cap if options.corner_feed == "peak"
-                       else _corner_cap(machine, max(k_max, kth), feed,
+                cap = (region_cap if options.corner_feed == CornerFeed.PEAK
+                       else corner_cap_mm_s(machine, max(k_max, kth), feed,
                                         max(k_mean, kth)))  # fmt: skip
-                pieces.append(Piece("ph", p.ph, float(p.ph.length_mm), cap, index, seg.line,
-                                    p.u_a, p.u_b, 0.0, k_max))  # fmt: skip
+                pieces.append(Piece(Kind.PH, p.ph, float(p.ph.length_mm), cap, index, seg.line,
+                                    0.0, 1.0, 0.0, k_max))  # fmt: skip
         else:
             s = curve.arc_length(np.array([region.u_a, region.u_b]))
-            pieces.append(Piece("nurbs", curve, float(s[1] - s[0]), region_cap, index,
+            pieces.append(Piece(Kind.NURBS, curve, float(s[1] - s[0]), region_cap, index,
                                 seg.line, region.u_a, region.u_b, float(s[0]),
                                 region.kappa_peak_per_mm))  # fmt: skip
         u_prev = region.u_b
@@ -218,9 +177,9 @@ def _nurbs_stretch(curve, u_a, u_b, seg, index, machine, feed) -> list[Piece]:
     # nearest sample already asks for a low feed).
     kappa = np.where(np.isfinite(kappa), kappa, 0.0)
     # Never a zero cap (κ ≥ 2/δ makes V_af zero): it would stall the tool; 1 µm/s is the floor.
-    cell_cap = np.maximum(_curvature_cap(machine, kappa, feed).min(axis=1), MIN_CAP_MM_S)
+    cell_cap = np.maximum(curvature_cap_mm_s(machine, kappa, feed).min(axis=1), MIN_CAP_MM_S)
     k_cell = kappa.max(axis=1)
-    return [Piece("nurbs", curve, float(s_edges[i + 1] - s_edges[i]), float(cell_cap[i]),
+    return [Piece(Kind.NURBS, curve, float(s_edges[i + 1] - s_edges[i]), float(cell_cap[i]),
                   index, seg.line, float(u_edges[i]), float(u_edges[i + 1]),
                   float(s_edges[i]), float(k_cell[i]))
             for i in range(n_cells)]  # fmt: skip
@@ -233,15 +192,16 @@ _VECTORS = ("start_mm", "end_mm", "tangent_start", "tangent_end")
 class PieceList(Sequence):
     """The pieces of a program as columns, one row a piece (module doc); ``pl[i]`` is a Piece.
 
-    Per row (k,): ``kind`` (int8 index into :data:`KINDS`), ``length_mm``, ``v_cap_mm_s``,
-    ``segment``, ``line``, ``kappa_max_per_mm``, ``dwell_after_s``, ``blend_mm`` (as in
-    :class:`Piece`); (3, k): ``start_mm``, ``end_mm`` the end points [mm] and
-    ``tangent_start``, ``tangent_end`` the unit tangents there (zero where the derivative
-    vanishes, at a cusp). Line and rapid rows are the segment from ``start_mm`` to
-    ``end_mm``. Columnar PH rows (line–line blends): ``ph_rows`` (m,) their rows (sorted),
-    ``ph_w`` (m, 3) complex preimages, ``ph_p0`` (m,) complex starts, ``ph_frame``
-    (m, 3, 3) origin, e1, e2 of their planes. Every other row has an entry in ``objects``:
-    row → (geometry, u_a, u_b, s_a_mm).
+    Per row (k,): ``kind`` (:class:`~nurbscnc.geometry.path.Kind` codes), ``length_mm``,
+    ``v_cap_mm_s``, ``segment``, ``line``, ``kappa_max_per_mm``, ``dwell_after_s``,
+    ``blend_mm``, ``rapid``, ``stop_after`` (as in :class:`Piece`); (3, k): ``start_mm``,
+    ``end_mm`` the end points [mm] and ``tangent_start``, ``tangent_end`` the unit tangents
+    there (zero where the derivative vanishes, at a cusp). Line rows are the segment from
+    ``start_mm`` to ``end_mm``. Columnar PH rows (line–line blends): ``ph_rows`` (m,) their
+    rows (sorted), ``ph_w`` (m, 3) complex preimages, ``ph_p0`` (m,) complex starts,
+    ``ph_frame`` (m, 3, 3) origin, e1, e2 of their planes. Every other row has an entry in
+    ``objects``: row → (geometry, u_a, u_b, s_a_mm). The geometry of every row, for
+    sampling, is :attr:`path`.
     """
 
     kind: np.ndarray
@@ -252,6 +212,8 @@ class PieceList(Sequence):
     kappa_max_per_mm: np.ndarray
     dwell_after_s: np.ndarray
     blend_mm: np.ndarray
+    rapid: np.ndarray
+    stop_after: np.ndarray
     start_mm: np.ndarray
     end_mm: np.ndarray
     tangent_start: np.ndarray
@@ -261,6 +223,14 @@ class PieceList(Sequence):
     ph_p0: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=complex))
     ph_frame: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 3)))
     objects: dict = field(default_factory=dict)
+
+    @classmethod
+    def of(cls, pieces: Sequence[Piece]) -> PieceList:
+        """The columns of a list of :class:`Piece` objects (each kept as its geometry)."""
+        cols = _empty_columns(len(pieces))
+        objects: dict = {}
+        _put_objects(cols, objects, list(range(len(pieces))), list(pieces))
+        return cls(**cols, objects=objects)
 
     def __len__(self) -> int:
         return int(self.kind.size)
@@ -274,11 +244,11 @@ class PieceList(Sequence):
             i += k
         if not 0 <= i < k:
             raise IndexError(f"piece {index} of {k}")
-        kind = KINDS[int(self.kind[i])]
+        kind = Kind(int(self.kind[i]))
         obj = self.objects.get(i)
         if obj is not None:
             geom, u_a, u_b, s_a = obj
-        elif kind in ("line", "rapid"):
+        elif kind == Kind.LINE:
             geom = LineGeometry(self.start_mm[:, i], self.end_mm[:, i])
             u_a, u_b, s_a = 0.0, float(geom.u_end), 0.0
         else:
@@ -289,92 +259,83 @@ class PieceList(Sequence):
         return Piece(kind, geom, float(self.length_mm[i]), float(self.v_cap_mm_s[i]),
                      int(self.segment[i]), int(self.line[i]), u_a, u_b, s_a,
                      float(self.kappa_max_per_mm[i]), float(self.dwell_after_s[i]),
-                     float(self.blend_mm[i]))  # fmt: skip
-
-    def kind_names(self) -> np.ndarray:
-        """The kind of every piece as strings (k,)."""
-        return np.array(KINDS)[self.kind]
+                     float(self.blend_mm[i]), bool(self.rapid[i]),
+                     bool(self.stop_after[i]))  # fmt: skip
 
     def kind_counts(self) -> dict[str, int]:
-        """How many pieces of each kind (kinds present only)."""
-        counts = np.bincount(self.kind, minlength=len(KINDS))
-        return {KINDS[i]: int(c) for i, c in enumerate(counts) if c}
+        """How many pieces of each kind (names of :data:`KIND_NAMES`, kinds present only)."""
+        counts = np.bincount(self.kind, minlength=len(Kind))
+        rapid = int(np.count_nonzero(self.rapid))
+        named = {name: 0 for name in KIND_NAMES}
+        for code, c in enumerate(counts.tolist()):
+            named[_NAME_OF[Kind(code)]] += c
+        named["line"] -= rapid
+        named["rapid"] = rapid
+        return {name: c for name, c in named.items() if c}
 
-    @property
-    def rapid(self) -> np.ndarray:
-        """(k,) True on rapid pieces."""
-        return self.kind == K_RAPID
-
-    def table(self):
-        """The interpolator's per-piece arrays (:class:`~nurbscnc.interpolate.sample.PieceTable`),
-        built from the columns: line rows share ``start_mm``/``end_mm``, columnar PH rows get
-        their power coefficients in chunks, object rows come from ``PieceTable.of`` on those
-        pieces alone; arrays no row needs are broadcast zeros (no memory)."""
-        from nurbscnc.interpolate.sample import _B4, _B5, ARC, LINE, NURBS, PH, PieceTable
-
+    @functools.cached_property
+    def path(self) -> PathTable:
+        """The geometry of every row as a :class:`~nurbscnc.geometry.path.PathTable` (built
+        once): line rows share ``start_mm``/``end_mm``, columnar PH rows get their power
+        coefficients in chunks, object rows come from ``PathTable.of`` on those rows alone;
+        columns no row needs are broadcast zeros (no memory)."""
         k = len(self)
-        code = np.array([LINE, LINE, ARC, PH, NURBS], dtype=np.int8)[self.kind]
         rows_obj = np.array(sorted(self.objects), dtype=np.int64)
         obj_kind = self.kind[rows_obj]
-        need_frame = self.ph_rows.size > 0 or bool(np.any(obj_kind != K_NURBS))
-        need_arc = bool(np.any(obj_kind == K_ARC))
-        need_ph = self.ph_rows.size > 0 or bool(np.any(obj_kind == K_PH))
-        need_nurbs = bool(np.any(obj_kind == K_NURBS))
+        need_frame = self.ph_rows.size > 0 or bool(np.any(obj_kind != Kind.NURBS))
+        need_arc = bool(np.any(obj_kind == Kind.ARC))
+        need_ph = self.ph_rows.size > 0 or bool(np.any(obj_kind == Kind.PH))
+        need_obj = bool(np.any((obj_kind == Kind.NURBS) | (obj_kind == Kind.ARC)))
 
         def zeros(shape, needed, dtype=float):
             if needed:
                 return np.zeros(shape, dtype=dtype)
             return np.broadcast_to(np.zeros((), dtype=dtype), shape)
 
+        code = self.kind.copy()
         origin, e1, e2 = (zeros((3, k), need_frame) for _ in range(3))
         normal = zeros((3, k), need_arc)
         radius, angle, helix = (zeros(k, need_arc) for _ in range(3))
         ph_s, ph_x, ph_y = (zeros((6, k), need_ph) for _ in range(3))
         ph_sigma = zeros((5, k), need_ph)
-        s_a = zeros(k, need_nurbs)
-        curve_id = (np.full(k, -1, dtype=np.intp) if need_nurbs
-                    else np.broadcast_to(np.intp(-1), (k,)))  # fmt: skip
-        curves: tuple = ()
+        u_a, u_b, s_a = (zeros(k, need_obj) for _ in range(3))
+        obj_id = (np.full(k, -1, dtype=np.intp) if need_obj
+                  else np.broadcast_to(np.intp(-1), (k,)))  # fmt: skip
+        objects: tuple = ()
         for lo in range(0, self.ph_rows.size, _CHUNK):
             sl = slice(lo, lo + _CHUNK)
             rows = self.ph_rows[sl]
             pts, sigma, s, _ = ph_tables(self.ph_w[sl], self.ph_p0[sl])
-            ph_s[:, rows] = (s @ _B5).T
-            ph_sigma[:, rows] = (sigma @ _B4).T
-            ph_x[:, rows] = (pts.real @ _B5).T
-            ph_y[:, rows] = (pts.imag @ _B5).T
+            ph_s[:, rows], ph_sigma[:, rows], ph_x[:, rows], ph_y[:, rows] = ph_power_rows(
+                s, sigma, pts)
             frame = self.ph_frame[sl]
             origin[:, rows], e1[:, rows], e2[:, rows] = frame[:, 0].T, frame[:, 1].T, frame[:, 2].T
         if rows_obj.size:
-            sub = PieceTable.of([self[int(r)] for r in rows_obj])
+            sub = PathTable.of([self[int(r)].path_row() for r in rows_obj])
             code[rows_obj] = sub.kind
-            curves = sub.curves
+            objects = sub.objects
             for mine, theirs in ((origin, sub.origin_mm), (e1, sub.e1), (e2, sub.e2),
                                  (normal, sub.normal), (ph_s, sub.ph_s), (ph_x, sub.ph_x),
                                  (ph_y, sub.ph_y), (ph_sigma, sub.ph_sigma)):  # fmt: skip
                 if mine.flags.writeable:
                     mine[:, rows_obj] = theirs
             for mine, theirs in ((radius, sub.radius_mm), (angle, sub.angle_rad),
-                                 (helix, sub.helix_mm), (s_a, sub.s_a_mm),
-                                 (curve_id, sub.curve_id)):  # fmt: skip
+                                 (helix, sub.helix_mm), (u_a, sub.u_a), (u_b, sub.u_b),
+                                 (s_a, sub.s_a_mm), (obj_id, sub.obj_id)):  # fmt: skip
                 if mine.flags.writeable:
                     mine[rows_obj] = theirs
-        arrays = (code, origin, e1, e2, normal, radius, angle, helix, ph_s, ph_sigma, ph_x,
-                  ph_y, s_a, curve_id)  # fmt: skip
-        for a in arrays:
-            if a.flags.writeable:
-                a.setflags(write=False)
-        return PieceTable(code, self.length_mm, s_a, curve_id, curves, self.line,
-                          self.start_mm, self.end_mm, origin, e1, e2, normal, radius, angle,
-                          helix, ph_s, ph_sigma, ph_x, ph_y)  # fmt: skip
+        return PathTable(code, self.length_mm, self.line, self.start_mm, self.end_mm, origin,
+                         e1, e2, normal, radius, angle, helix, ph_s, ph_sigma, ph_x, ph_y,
+                         obj_id, objects, u_a, u_b, s_a).frozen()  # fmt: skip
 
 
 #: Rows per chunk of the vectorised PH work (bounds the temporaries).
 _CHUNK = 1 << 16
 
 _SCALARS = ("kind", "length_mm", "v_cap_mm_s", "segment", "line", "kappa_max_per_mm",
-            "dwell_after_s", "blend_mm")  # fmt: skip
-_DTYPES = {"kind": np.int8, "segment": np.int64, "line": np.int64}
+            "dwell_after_s", "blend_mm", "rapid", "stop_after")  # fmt: skip
+_DTYPES = {"kind": np.int8, "segment": np.int64, "line": np.int64, "rapid": bool,
+           "stop_after": bool}  # fmt: skip
 
 
 def _empty_columns(k: int) -> dict:
@@ -392,22 +353,14 @@ def _unit_rows(d: np.ndarray) -> np.ndarray:
 
 def _object_ends(pieces) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Start and end points (m, 3) [mm] and unit tangents (m, 3) of pieces with their own
-    geometry; the NURBS cells of one curve in one evaluation."""
+    geometry, from the derivatives at their parameter ends ``u_a``, ``u_b`` (exact); the
+    pieces of one geometry (the NURBS cells of one curve) in one evaluation."""
     m = len(pieces)
     out = [np.zeros((m, 3)) for _ in range(4)]
-    by_curve: dict[int, list[int]] = {}
+    by_geometry: dict[int, list[int]] = {}
     for i, p in enumerate(pieces):
-        g = p.geometry
-        if p.kind == "nurbs":
-            by_curve.setdefault(id(g), []).append(i)
-            continue
-        if p.kind == "ph":
-            d = g.derivatives_mm(np.array([0.0, 1.0]), 1)
-        else:  # line, rapid, arc
-            d = g.derivatives(np.array([p.u_a, p.u_b]), 1)
-        out[0][i], out[1][i] = d[0][0], d[0][1]
-        out[2][i], out[3][i] = d[1][0], d[1][1]
-    for rows in by_curve.values():
+        by_geometry.setdefault(id(p.geometry), []).append(i)
+    for rows in by_geometry.values():
         g = pieces[rows[0]].geometry
         u = np.array([pieces[i].u_a for i in rows] + [pieces[i].u_b for i in rows])
         d = g.derivatives(u, 1)
@@ -418,7 +371,6 @@ def _object_ends(pieces) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray
     return out[0], out[1], out[2], out[3]
 
 
-_SEG_CODE = {"line": K_LINE, "rapid": K_RAPID, "arc": K_ARC, "nurbs": K_NURBS, "dwell": -1}
 
 
 def _object_pieces(seg, index: int, machine: Machine, options: PlanOptions) -> list[Piece]:
@@ -434,8 +386,8 @@ def _object_pieces(seg, index: int, machine: Machine, options: PlanOptions) -> l
         return []
     # Constant curvature (helix: r / (r² + c²)).
     kappa = float(np.max(geom.curvature(np.array([geom.u_start, geom.u_end]))))
-    cap = float(_curvature_cap(machine, kappa, seg.feed_mm_s))
-    return [Piece("arc", geom, length, max(cap, 1e-6), index, seg.line, geom.u_start,
+    cap = float(curvature_cap_mm_s(machine, kappa, seg.feed_mm_s))
+    return [Piece(Kind.ARC, geom, length, max(cap, 1e-6), index, seg.line, geom.u_start,
                   geom.u_end, 0.0, kappa, blend_mm=blend_override(seg, options))]  # fmt: skip
 
 
@@ -444,7 +396,8 @@ def segment_pieces(segments, machine: Machine, options: PlanOptions | None = Non
     blended (:func:`apply_blends`).
 
     Lines and rapids are gathered into columns in one pass (no object per line); arcs and
-    NURBS blocks become pieces one segment at a time. Dwells become ``dwell_after_s`` of the
+    NURBS blocks become pieces one segment at a time. Dwells and pauses (:data:`STOP_KINDS`)
+    become ``stop_after`` and ``dwell_after_s`` (their ``seconds``, 0 for a pause) of the
     piece before (or of a zero-length marker when the program starts with a dwell); a rapid
     followed by a feed move waits :func:`settle_time_s` (in-position check, as G61: a
     rapid's stop overshoot never shows up as contour error).
@@ -453,15 +406,16 @@ def segment_pieces(segments, machine: Machine, options: PlanOptions | None = Non
     lim = machine.limits
     segs = segments if isinstance(segments, list | tuple) else list(segments)
     n = len(segs)
-    code = np.fromiter((_SEG_CODE[s.kind] for s in segs), dtype=np.int8, count=n)
-    seg_line = np.flatnonzero((code == K_LINE) | (code == K_RAPID))
+    kinds = [s.kind for s in segs]
+    straight = np.fromiter((k in ("line", "rapid") for k in kinds), dtype=bool, count=n)
+    seg_line = np.flatnonzero(straight)
     lsegs = [segs[i] for i in seg_line.tolist()]
     m = len(lsegs)
     p0 = np.array([s.start_mm for s in lsegs], dtype=float).reshape(m, 3)
     p1 = np.array([s.end_mm for s in lsegs], dtype=float).reshape(m, 3)
     diff = p1 - p0
     l_len = np.sqrt(np.einsum("ij,ij->i", diff, diff))
-    l_rapid = code[seg_line] == K_RAPID
+    l_rapid = np.fromiter((s.kind == "rapid" for s in lsegs), dtype=bool, count=m)
     l_feed = np.fromiter((s.feed_mm_s for s in lsegs), dtype=float, count=m)
     l_cap = np.maximum(np.where(l_rapid, lim.rapid_mm_s, np.minimum(l_feed, lim.v_max_mm_s)),
                        1e-6)  # fmt: skip
@@ -474,7 +428,7 @@ def segment_pieces(segments, machine: Machine, options: PlanOptions | None = Non
     counts = np.zeros(n, dtype=np.int64)
     counts[seg_line] = l_keep
     obj_pieces: dict[int, list[Piece]] = {}
-    for i in np.flatnonzero((code == K_ARC) | (code == K_NURBS)).tolist():
+    for i in (i for i, kd in enumerate(kinds) if kd in ("arc", "nurbs")):
         obj_pieces[i] = _object_pieces(segs[i], i, machine, options)
         counts[i] = len(obj_pieces[i])
     first_row = np.cumsum(counts) - counts
@@ -483,7 +437,8 @@ def segment_pieces(segments, machine: Machine, options: PlanOptions | None = Non
 
     rows = first_row[seg_line[l_keep]]
     sel = l_keep
-    cols["kind"][rows] = np.where(l_rapid[sel], K_RAPID, K_LINE)
+    cols["kind"][rows] = Kind.LINE
+    cols["rapid"][rows] = l_rapid[sel]
     cols["length_mm"][rows] = l_len[sel]
     cols["v_cap_mm_s"][rows] = l_cap[sel]
     cols["segment"][rows] = seg_line[sel]
@@ -503,8 +458,7 @@ def segment_pieces(segments, machine: Machine, options: PlanOptions | None = Non
         r0 = int(first_row[i])
         for j, p in enumerate(pieces):
             r = r0 + j
-            cols["kind"][r] = _KIND_INDEX[p.kind]
-            for name in _SCALARS[1:]:
+            for name in _SCALARS:
                 cols[name][r] = getattr(p, name)
             objects[r] = (p.geometry, p.u_a, p.u_b, p.s_a_mm)
         ends = _object_ends(pieces)
@@ -512,15 +466,19 @@ def segment_pieces(segments, machine: Machine, options: PlanOptions | None = Non
             cols[name][:, r0 : r0 + len(pieces)] = arr.T
 
     pending = 0.0
-    for i in np.flatnonzero(code == -1).tolist():
-        r = int(first_row[i]) - 1  # the last piece before the dwell
+    for i in (i for i, kd in enumerate(kinds) if kd in STOP_KINDS):
+        r = int(first_row[i]) - 1  # the last piece before the dwell or pause
+        seconds = stop_seconds(segs[i])
         if r >= 0:
-            cols["dwell_after_s"][r] += segs[i].seconds
+            cols["dwell_after_s"][r] += seconds
+            cols["stop_after"][r] = True
         else:
-            pending += segs[i].seconds
+            pending += seconds
     if k and pending:  # a zero-length marker at the first piece's start carries it
         first = {name: cols[name][..., :1].copy() for name in cols}
-        first["kind"][0] = K_LINE
+        first["kind"][0] = Kind.LINE
+        first["rapid"][0] = False
+        first["stop_after"][0] = True
         first["length_mm"][0] = 0.0
         first["v_cap_mm_s"][0] = 1.0
         first["kappa_max_per_mm"][0] = 0.0
@@ -532,10 +490,11 @@ def segment_pieces(segments, machine: Machine, options: PlanOptions | None = Non
         cols = {name: np.concatenate((first[name], cols[name]), axis=-1) for name in cols}
         objects = {r + 1: v for r, v in objects.items()}
         k += 1
-    kind = cols["kind"]
-    settle = np.flatnonzero((kind[:-1] == K_RAPID) & (kind[1:] != K_RAPID))
+    rapid = cols["rapid"]
+    settle = np.flatnonzero(rapid[:-1] & ~rapid[1:])
     if settle.size:
         cols["dwell_after_s"][settle] += settle_time_s(machine)
+        cols["stop_after"][settle] = True
     return apply_blends(PieceList(**cols, objects=objects), machine)
 
 
@@ -571,35 +530,46 @@ def sub_geometry(piece: Piece, s0_mm: float, s1_mm: float):
     )
 
 
-def apply_blends(pieces: PieceList, machine: Machine) -> PieceList:
-    """Replace corners between line/arc pieces under G64 P by PH quintic blends (issue 7).
+@dataclass(eq=False)
+class _Corners:
+    """Candidate corners of :func:`apply_blends` and what blending each would do (arrays over
+    the m corners): ``row`` the piece after the corner; ``tol_mm`` the blend tolerance;
+    ``vertex_mm`` (3, m); ``lines`` whether both sides are lines; then, per corner, ``ok``
+    (a blend exists and pays), its peak curvature, trims of the piece before (``trim_a_mm``)
+    and after (``trim_b_mm``) and length; line–line blends' PH data (preimage ``w``, start
+    ``p0``, plane ``frame``, one row per line–line corner) and arc blends by corner."""
 
-    A corner is blended when both pieces are feed lines or arcs with a blend tolerance > 0
-    (the smaller of the two is used), no dwell lies between them, their tangents turn, and
-    the blend pays (:func:`blend_pays`); a blend trims at most half of each piece, so blends
-    never overlap. Line–line corners are built all at once in closed form
-    (:func:`~nurbscnc.geometry.blend.line_corner_blends`), each side trimmed up to half of its
-    own line: a polyline of short chords becomes a chain of blends with no sliver of line
-    left between them (equal trims where the tolerance binds: then the blends of
-    :func:`blend_corner`). Corners with an arc go one at a time through
-    :func:`blend_corner` (equal trims ≤ half the shorter piece). The blend piece is capped
-    by its peak curvature like any curved piece (chord error, normal acceleration). A piece
-    trimmed at both ends to less than :data:`MIN_REMAINDER_MM` is dropped. The blends' end
-    tangents are the pieces' own unit tangents (not recomputed from trimmed end points), so
-    the junctions of a blended polyline are exactly smooth.
-    """
-    from nurbscnc.geometry.blend import blend_corner, line_corner_blends
+    row: np.ndarray
+    tol_mm: np.ndarray
+    vertex_mm: np.ndarray
+    lines: np.ndarray
+    ok: np.ndarray = None
+    kappa_per_mm: np.ndarray = None
+    trim_a_mm: np.ndarray = None
+    trim_b_mm: np.ndarray = None
+    length_mm: np.ndarray = None
+    w: np.ndarray = None
+    p0: np.ndarray = None
+    frame: np.ndarray = None
+    arc_blends: dict = field(default_factory=dict)
 
-    k = len(pieces)
-    if k < 2:
-        return pieces
-    kind, length = pieces.kind, pieces.length_mm
-    cut = (kind == K_LINE) | (kind == K_ARC)
+    def __post_init__(self):
+        m = self.row.size
+        self.ok = np.zeros(m, dtype=bool)
+        self.kappa_per_mm, self.length_mm = np.zeros(m), np.zeros(m)
+        self.trim_a_mm, self.trim_b_mm = np.zeros(m), np.zeros(m)
+
+
+def _find_corners(pieces: PieceList) -> _Corners | None:
+    """Corners that may be blended: between feed lines or arcs (not rapids, NURBS or PH
+    pieces) with a blend tolerance > 0 (the smaller of the two), no stop between them. The
+    pieces must meet there (GeometryError otherwise)."""
+    kind = pieces.kind
+    cut = ((kind == Kind.LINE) & ~pieces.rapid) | (kind == Kind.ARC)
     tol = np.minimum(pieces.blend_mm[:-1], pieces.blend_mm[1:])
-    no_dwell = pieces.dwell_after_s[:-1] == 0.0
-    corner = np.flatnonzero(cut[:-1] & cut[1:] & (tol > 0.0) & no_dwell) + 1
+    corner = np.flatnonzero(cut[:-1] & cut[1:] & (tol > 0.0) & ~pieces.stop_after[:-1]) + 1
     if corner.size == 0:
-        return pieces
+        return None
     vertex = pieces.end_mm[:, corner - 1]
     gap = np.sqrt(np.sum((vertex - pieces.start_mm[:, corner]) ** 2, axis=0))
     scale = np.maximum(1.0, np.abs(vertex).max(axis=0))
@@ -607,64 +577,104 @@ def apply_blends(pieces: PieceList, machine: Machine) -> PieceList:
         i = int(corner[np.argmax(gap > 1e-6 * scale)])
         raise GeometryError(f"blend_corner: the geometries do not meet (gap "
                             f"{gap.max():.3g} mm)", SourcePos(int(pieces.line[i])))  # fmt: skip
-    m = corner.size
-    ok = np.zeros(m, dtype=bool)
-    trim_a = np.zeros(m)  # cut off the end of piece i − 1
-    trim_b = np.zeros(m)  # cut off the start of piece i
-    kappa = np.zeros(m)
-    ph_len = np.zeros(m)
-    both_lines = (kind[corner - 1] == K_LINE) & (kind[corner] == K_LINE)
-    half_a, half_b = 0.5 * length[corner - 1], 0.5 * length[corner]
+    lines = (kind[corner - 1] == Kind.LINE) & (kind[corner] == Kind.LINE)
+    return _Corners(corner, tol[corner - 1], vertex, lines)
 
-    ll = np.flatnonzero(both_lines)
-    # Line–line corners in chunks (bounded temporaries); keep what the blend rows need.
-    l_w = np.empty((ll.size, 3), dtype=complex)
-    l_p0 = np.empty(ll.size, dtype=complex)
-    l_frame = np.empty((ll.size, 3, 3))
+
+def _blend_line_corners(pieces: PieceList, c: _Corners) -> None:
+    """Line–line corners in closed form, in chunks (bounded temporaries), each side trimmed
+    up to half of its own line (:func:`~nurbscnc.geometry.blend.line_corner_blends`)."""
+    from nurbscnc.geometry.blend import line_corner_blends
+
+    ll = np.flatnonzero(c.lines)
+    length = pieces.length_mm
+    c.w = np.empty((ll.size, 3), dtype=complex)
+    c.p0 = np.empty(ll.size, dtype=complex)
+    c.frame = np.empty((ll.size, 3, 3))
     for lo in range(0, ll.size, _CHUNK):
         sl = slice(lo, lo + _CHUNK)
-        c = corner[ll[sl]]
-        lb = line_corner_blends(vertex[:, ll[sl]].T, pieces.tangent_end[:, c - 1].T,
-                                pieces.tangent_start[:, c].T, tol[c - 1], half_a[ll[sl]],
-                                half_b[ll[sl]])  # fmt: skip
-        ok[ll[sl]], kappa[ll[sl]] = lb.ok, lb.kappa_max_per_mm
-        trim_a[ll[sl]], trim_b[ll[sl]] = lb.trim_a_mm, lb.trim_b_mm
-        ph_len[ll[sl]] = ph_tables(lb.w, lb.p0)[3]
-        l_w[sl], l_p0[sl] = lb.w, lb.p0
-        l_frame[sl, 0], l_frame[sl, 1], l_frame[sl, 2] = lb.origin_mm, lb.e1, lb.e2
+        j = ll[sl]
+        r = c.row[j]
+        lb = line_corner_blends(c.vertex_mm[:, j].T, pieces.tangent_end[:, r - 1].T,
+                                pieces.tangent_start[:, r].T, c.tol_mm[j], 0.5 * length[r - 1],
+                                0.5 * length[r])  # fmt: skip
+        c.ok[j], c.kappa_per_mm[j] = lb.ok, lb.kappa_max_per_mm
+        c.trim_a_mm[j], c.trim_b_mm[j] = lb.trim_a_mm, lb.trim_b_mm
+        c.length_mm[j] = ph_tables(lb.w, lb.p0)[3]
+        c.w[sl], c.p0[sl] = lb.w, lb.p0
+        c.frame[sl, 0], c.frame[sl, 1], c.frame[sl, 2] = lb.origin_mm, lb.e1, lb.e2
         del lb
-    arc_blends = {}
-    for j in np.flatnonzero(~both_lines).tolist():
-        i = int(corner[j])
+
+
+def _blend_arc_corners(pieces: PieceList, c: _Corners) -> None:
+    """Corners with an arc, one at a time (:func:`~nurbscnc.geometry.blend.blend_corner`,
+    equal trims ≤ half the shorter piece)."""
+    from nurbscnc.geometry.blend import blend_corner
+
+    for j in np.flatnonzero(~c.lines).tolist():
+        i = int(c.row[j])
         a, b = pieces[i - 1], pieces[i]
-        bl = blend_corner(a.geometry, b.geometry, float(tol[i - 1]), 0.5 * a.length_mm,
+        bl = blend_corner(a.geometry, b.geometry, float(c.tol_mm[j]), 0.5 * a.length_mm,
                           0.5 * b.length_mm, measure=False)  # fmt: skip
         if bl is not None:
-            arc_blends[j] = bl
-            ok[j], kappa[j], ph_len[j] = True, bl.kappa_max_per_mm, bl.ph.length_mm
-            trim_a[j], trim_b[j] = bl.trim_a_mm, bl.trim_b_mm
-    cap_a, cap_b = pieces.v_cap_mm_s[corner - 1], pieces.v_cap_mm_s[corner]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        ok &= blend_pays(cap_a, cap_b, np.where(ok, kappa, 0.0), np.where(ok, trim_a, 0.0),
-                         np.where(ok, trim_b, 0.0), np.where(ok, ph_len, 0.0), machine)
-    if not ok.any():
-        return pieces
+            c.arc_blends[j] = bl
+            c.ok[j], c.kappa_per_mm[j], c.length_mm[j] = True, bl.kappa_max_per_mm, bl.ph.length_mm
+            c.trim_a_mm[j], c.trim_b_mm[j] = bl.trim_a_mm, bl.trim_b_mm
 
+
+def apply_blends(pieces: PieceList, machine: Machine) -> PieceList:
+    """Replace corners between line/arc pieces under G64 P by PH quintic blends (issue 7).
+
+    A corner is blended when both pieces are feed lines or arcs with a blend tolerance > 0
+    (the smaller of the two is used), no dwell or pause lies between them, their tangents
+    turn, and the blend pays (:func:`blend_pays`); a blend trims at most half of each piece,
+    so blends never overlap. Line–line corners are built all at once in closed form
+    (:func:`_blend_line_corners`): a polyline of short chords becomes a chain of blends with
+    no sliver of line left between them (equal trims where the tolerance binds). Corners
+    with an arc go one at a time (:func:`_blend_arc_corners`). The blend piece is capped by
+    its peak curvature like any curved piece (chord error, normal acceleration). A piece
+    trimmed at both ends to less than :data:`MIN_REMAINDER_MM` is dropped. The blends' end
+    tangents are the pieces' own unit tangents (not recomputed from trimmed end points), so
+    the junctions of a blended polyline are exactly smooth. The new rows are written by
+    :func:`_blended_rows`.
+    """
+    if len(pieces) < 2:
+        return pieces
+    c = _find_corners(pieces)
+    if c is None:
+        return pieces
+    _blend_line_corners(pieces, c)
+    _blend_arc_corners(pieces, c)
+    cap_a, cap_b = pieces.v_cap_mm_s[c.row - 1], pieces.v_cap_mm_s[c.row]
+    ok = c.ok
+    with np.errstate(invalid="ignore", divide="ignore"):
+        c.ok = ok & blend_pays(cap_a, cap_b, np.where(ok, c.kappa_per_mm, 0.0),
+                               np.where(ok, c.trim_a_mm, 0.0), np.where(ok, c.trim_b_mm, 0.0),
+                               np.where(ok, c.length_mm, 0.0), machine)  # fmt: skip
+    if not c.ok.any():
+        return pieces
+    return _blended_rows(pieces, c, machine)
+
+
+def _blended_rows(pieces: PieceList, c: _Corners, machine: Machine) -> PieceList:
+    """The pieces with the accepted blends (``c.ok``) in place: kept rows moved, trimmed
+    lines and arcs shortened, blend rows inserted before the piece after their corner."""
+    k = len(pieces)
+    kind, length = pieces.kind, pieces.length_mm
+    ok, corner = c.ok, c.row
     # Which rows survive, and where everything goes.
     has_blend = np.zeros(k, dtype=bool)
     has_blend[corner[ok]] = True
     trim_start = np.zeros(k)
     trim_end = np.zeros(k)
-    trim_start[corner[ok]] = trim_b[ok]
-    trim_end[corner[ok] - 1] = trim_a[ok]
+    trim_start[corner[ok]] = c.trim_b_mm[ok]
+    trim_end[corner[ok] - 1] = c.trim_a_mm[ok]
     trimmed = (trim_start > 0.0) | (trim_end > 0.0)
-    remainder = length - trim_start - trim_end
-    keep = ~trimmed | (remainder >= MIN_REMAINDER_MM)
+    keep = ~trimmed | (length - trim_start - trim_end >= MIN_REMAINDER_MM)
     count = has_blend.astype(np.int64) + keep
     first = np.cumsum(count) - count
     new_row = first + has_blend  # new row of each kept piece
-    total = int(count.sum())
-    cols = _empty_columns(total)
+    cols = _empty_columns(int(count.sum()))
     kept = np.flatnonzero(keep)
     dest = new_row[kept]
     for name in _SCALARS:
@@ -674,7 +684,7 @@ def apply_blends(pieces: PieceList, machine: Machine) -> PieceList:
     objects = {int(new_row[r]): v for r, v in pieces.objects.items() if keep[r]}
 
     # Trimmed lines: the sub-segment, end points as LineGeometry.point gives them.
-    tl = np.flatnonzero(trimmed & keep & (kind == K_LINE))
+    tl = np.flatnonzero(trimmed & keep & (kind == Kind.LINE))
     if tl.size:
         p, q = pieces.start_mm[:, tl], pieces.end_mm[:, tl]
         f0 = trim_start[tl] / length[tl]
@@ -686,7 +696,7 @@ def apply_blends(pieces: PieceList, machine: Machine) -> PieceList:
         cols["end_mm"][:, dest] = b_pt
         cols["length_mm"][dest] = np.sqrt(np.sum((b_pt - a_pt) ** 2, axis=0))
     # Trimmed arcs: exact sub-arcs.
-    ta = np.flatnonzero(trimmed & keep & (kind == K_ARC)).tolist()
+    ta = np.flatnonzero(trimmed & keep & (kind == Kind.ARC)).tolist()
     sub_pieces = []
     for r in ta:
         p = pieces[r]
@@ -695,35 +705,36 @@ def apply_blends(pieces: PieceList, machine: Machine) -> PieceList:
                                      u_a=0.0, u_b=float(geom.u_end)))  # fmt: skip
     _put_objects(cols, objects, [int(new_row[r]) for r in ta], sub_pieces)
 
-    # The blends.
-    sel = ok & both_lines
-    ll_ok = ok[ll]
+    # The line–line blends (columnar PH rows) and the arc blends (PH objects).
+    cap_a, cap_b = pieces.v_cap_mm_s[corner - 1], pieces.v_cap_mm_s[corner]
+    sel = ok & c.lines
     dest = first[corner[sel]]
     src = corner[sel]
     feed = np.minimum(cap_a[sel], cap_b[sel])
-    cols["kind"][dest] = K_PH
-    cols["length_mm"][dest] = ph_len[sel]
-    cols["v_cap_mm_s"][dest] = np.maximum(_curvature_cap(machine, kappa[sel], feed), MIN_CAP_MM_S)
+    kappa = c.kappa_per_mm[sel]
+    cols["kind"][dest] = Kind.PH
+    cols["length_mm"][dest] = c.length_mm[sel]
+    cols["v_cap_mm_s"][dest] = np.maximum(curvature_cap_mm_s(machine, kappa, feed), MIN_CAP_MM_S)
     cols["segment"][dest] = pieces.segment[src]
     cols["line"][dest] = pieces.line[src]
-    cols["kappa_max_per_mm"][dest] = kappa[sel]
+    cols["kappa_max_per_mm"][dest] = kappa
     cols["tangent_start"][:, dest] = pieces.tangent_end[:, src - 1]
     cols["tangent_end"][:, dest] = pieces.tangent_start[:, src]
-    w, p0, frame = l_w[ll_ok], l_p0[ll_ok], l_frame[ll_ok]
-    del l_w, l_p0, l_frame
+    ll_ok = ok[np.flatnonzero(c.lines)]
+    w, p0, frame = c.w[ll_ok], c.p0[ll_ok], c.frame[ll_ok]
     p5 = p0 + (w[:, 0] * w[:, 0] + w[:, 0] * w[:, 2] / 3.0 + w[:, 2] * w[:, 2]) / 5.0
     for name, z in (("start_mm", p0), ("end_mm", p5)):
         cols[name][:, dest] = (frame[:, 0] + z.real[:, None] * frame[:, 1]
                                + z.imag[:, None] * frame[:, 2]).T  # fmt: skip
     arc_rows, arc_pieces = [], []
-    for j, bl in arc_blends.items():
+    for j, bl in c.arc_blends.items():
         if not ok[j]:
             continue
         i = int(corner[j])
-        feed = min(float(cap_a[j]), float(cap_b[j]))
-        cap = max(float(_curvature_cap(machine, bl.kappa_max_per_mm, feed)), MIN_CAP_MM_S)
+        feed_j = min(float(cap_a[j]), float(cap_b[j]))
+        cap = max(float(curvature_cap_mm_s(machine, bl.kappa_max_per_mm, feed_j)), MIN_CAP_MM_S)
         arc_rows.append(int(first[i]))
-        arc_pieces.append(Piece("ph", bl.ph, float(bl.ph.length_mm), cap,
+        arc_pieces.append(Piece(Kind.PH, bl.ph, float(bl.ph.length_mm), cap,
                                 int(pieces.segment[i]), int(pieces.line[i]), 0.0, 1.0, 0.0,
                                 bl.kappa_max_per_mm))  # fmt: skip
     _put_objects(cols, objects, arc_rows, arc_pieces)
@@ -743,8 +754,7 @@ def _put_objects(cols: dict, objects: dict, rows: list[int], new: list[Piece]) -
     if not new:
         return
     for r, p in zip(rows, new):
-        cols["kind"][r] = _KIND_INDEX[p.kind]
-        for name in _SCALARS[1:]:
+        for name in _SCALARS:
             cols[name][r] = getattr(p, name)
         objects[r] = (p.geometry, p.u_a, p.u_b, p.s_a_mm)
     ends = _object_ends(new)
@@ -767,7 +777,7 @@ def blend_pays(cap_a_mm_s, cap_b_mm_s, kappa_max_per_mm, trim_a_mm, trim_b_mm,
 
     lim = machine.limits
     v = np.minimum(np.asarray(cap_a_mm_s, dtype=float), np.asarray(cap_b_mm_s, dtype=float))
-    vb = np.minimum(_curvature_cap(machine, kappa_max_per_mm, v), v)
+    vb = np.minimum(curvature_cap_mm_s(machine, kappa_max_per_mm, v), v)
     vb = np.maximum(vb, MIN_CAP_MM_S)
     a_max, j_max = lim.a_max_mm_s2, lim.j_max_mm_s3
     d_stop = 2.0 * scurve_distance_mm(v, np.zeros_like(v), a_max, j_max)
@@ -807,9 +817,9 @@ def junction_caps(pieces: PieceList) -> np.ndarray:
     cross = np.cross(ta, tb, axis=0)
     turning = np.arctan2(np.sqrt(np.sum(cross * cross, axis=0)), np.sum(ta * tb, axis=0))
     regular = (np.sum(ta * ta, axis=0) > 0.0) & (np.sum(tb * tb, axis=0) > 0.0)
-    rapid = pieces.kind == K_RAPID
+    rapid = pieces.rapid
     length = pieces.length_mm
-    smooth = (regular & (turning <= SMOOTH_JUNCTION_RAD) & (pieces.dwell_after_s[:-1] == 0.0)
+    smooth = (regular & (turning <= SMOOTH_JUNCTION_RAD) & ~pieces.stop_after[:-1]
               & (rapid[:-1] == rapid[1:]) & (length[:-1] != 0.0) & (length[1:] != 0.0))  # fmt: skip
     cap = pieces.v_cap_mm_s
     caps[1:-1] = np.where(smooth, np.minimum(cap[:-1], cap[1:]), 0.0)

@@ -26,11 +26,11 @@ import numpy as np
 from nurbscnc.errors import PlanningError
 from nurbscnc.geometry.nurbs import NurbsCurve
 from nurbscnc.geometry.segments import Program, frozen_array
-from nurbscnc.interpolate.sample import Samples
+from nurbscnc.interpolate.baselines import baseline_samples
+from nurbscnc.interpolate.sample import Interpolator, Samples, reference_sampler, samples_of
 from nurbscnc.machine.profile import Machine
-from nurbscnc.plan.baselines import baseline_samples
-from nurbscnc.plan.lookahead import LookaheadOptions, plan_program
-from nurbscnc.plan.pieces import PlanOptions
+from nurbscnc.plan.lookahead import plan_checked
+from nurbscnc.plan.options import CornerFeed, Dynamics, LookaheadOptions, PlanOptions
 from nurbscnc.servo.simulate import contour_errors, metrics, simulate_reference
 
 ALGORITHMS = ("adaptive", "curvature", "ph-lookahead", "ours")
@@ -95,20 +95,23 @@ def dense_curve_mm(seg, spacing_mm: float = 0.0005) -> np.ndarray:
     return curve.points_at_length(np.linspace(0.0, curve.length_mm, n + 1))[0]
 
 
-def _planned(seg, machine: Machine, options: LookaheadOptions):
+def _planned(seg, machine: Machine, options: tuple[LookaheadOptions, Interpolator]):
     prog = Program(segments=(seg,), start_mm=seg.start_mm, name="block")
-    plan = plan_program(prog, machine, options)
-    return plan.samples, plan
+    lookahead, interpolator = options
+    plan, check = plan_checked(prog, machine, lookahead, reference_sampler(interpolator))
+    return samples_of(check.reference, plan.pieces, interpolator), plan
 
 
-def algorithm_options(algorithm: str) -> LookaheadOptions:
-    """The planner settings of the two look-ahead algorithms."""
+def algorithm_options(algorithm: str) -> tuple[LookaheadOptions, Interpolator]:
+    """The planner and interpolator settings of the two look-ahead algorithms."""
     if algorithm == "ph-lookahead":
-        return LookaheadOptions(dynamics="global", interpolator="taylor",
-                                plan=PlanOptions(corner_feed="peak"))  # fmt: skip
+        return (LookaheadOptions(dynamics=Dynamics.GLOBAL,
+                                 plan=PlanOptions(corner_feed=CornerFeed.PEAK)),
+                Interpolator.TAYLOR)  # fmt: skip
     if algorithm == "ours":
-        return LookaheadOptions(dynamics="local", interpolator="exact",
-                                plan=PlanOptions(corner_feed="piece"))  # fmt: skip
+        return (LookaheadOptions(dynamics=Dynamics.LOCAL,
+                                 plan=PlanOptions(corner_feed=CornerFeed.PIECE)),
+                Interpolator.EXACT)  # fmt: skip
     raise ValueError(algorithm)
 
 

@@ -14,27 +14,16 @@ is the block's end point.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from nurbscnc.geometry.nurbs import NurbsCurve
+from nurbscnc.geometry.path import STOP_KINDS, stop_seconds
 from nurbscnc.interpolate.sample import Samples
-from nurbscnc.machine.profile import Machine, chord_feed_mm_s, curvature_feed_mm_s
+from nurbscnc.interpolate.taylor import taylor_increment
+from nurbscnc.machine.caps import baseline_feed_mm_s
+from nurbscnc.machine.profile import Machine
 
 ALGORITHMS = ("adaptive", "curvature")
-
-
-def baseline_feed_mm_s(algorithm: str, kappa_per_mm, feed_mm_s: float, machine: Machine):
-    """The baseline's feed [mm/s] at curvature κ [1/mm] (SPEC §9), programmed feed F."""
-    lim = machine.limits
-    f = min(feed_mm_s, lim.v_max_mm_s)
-    if algorithm == "adaptive":
-        v = chord_feed_mm_s(kappa_per_mm, machine.servo.period_s, lim.chord_tolerance_mm)
-        return np.minimum(np.asarray(v, dtype=float), f)
-    if algorithm == "curvature":
-        return np.asarray(curvature_feed_mm_s(kappa_per_mm, f, lim.kappa_ref_per_mm), dtype=float)
-    raise ValueError(f"unknown baseline {algorithm!r}")
 
 
 def baseline_samples(algorithm: str, seg, machine: Machine, max_steps: int = 10_000_000) -> Samples:
@@ -57,9 +46,8 @@ def baseline_samples(algorithm: str, seg, machine: Machine, max_steps: int = 10_
         kappa = float(np.linalg.norm(cross)) / (speed2 * speed) if speed > 0 else np.inf
         v = float(baseline_feed_mm_s(algorithm, kappa, seg.feed_mm_s, machine))
         vs.append(v)
-        u = u + v * period / speed - 0.5 * period * period * v * v * float(d1 @ d2) / (
-            speed2 * speed2
-        )
+        # The feed has no planned derivative: A = 0 in eq. 4.
+        u = u + taylor_increment(v, 0.0, period, speed, speed2, float(d1 @ d2))
         if u >= u_end:
             us.append(u_end)
             vs.append(0.0)
@@ -105,9 +93,9 @@ def baseline_program_samples(algorithm: str, program, machine: Machine) -> Sampl
     feeds = [np.zeros(1)]
     lines = [np.array([program.segments[0].line if program.segments else 0])]
     for seg in program.segments:
-        if seg.kind == "dwell":
-            n = int(round(seg.seconds / period))
-            points.append(np.repeat(np.asarray(seg.position_mm, float)[None, :], n, 0))
+        if seg.kind in STOP_KINDS:  # hold the point where the tool is (a pause: 0 s)
+            n = int(round(stop_seconds(seg) / period))
+            points.append(np.repeat(points[-1][-1:], n, 0))
             feeds.append(np.zeros(n))
         elif seg.kind == "nurbs":
             smp = baseline_samples(algorithm, seg, machine)
@@ -133,15 +121,3 @@ def baseline_program_samples(algorithm: str, program, machine: Machine) -> Sampl
         piece=np.zeros(n, dtype=np.int64),
         line=np.concatenate(lines).astype(np.int64),
     )
-
-
-@dataclass(frozen=True, eq=False)
-class BaselinePlan:
-    """A program run by a baseline: its reference samples and cycle time [s]."""
-
-    algorithm: str
-    samples: Samples
-
-    @property
-    def cycle_time_s(self) -> float:
-        return float(self.samples.t_s[-1])

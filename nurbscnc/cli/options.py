@@ -1,0 +1,84 @@
+"""Command-line options shared by every command that plans: one decorator, one builder.
+
+:func:`planning_options` declares the planning options (algorithm, corner feed, dynamics,
+blend tolerance, interpolator, look-ahead) and the machine options (``--machine``,
+``--set``); :func:`run_options` turns their values into the validated
+:class:`~nurbscnc.pipeline.RunOptions`. ``plan``, ``run``, ``simulate`` and ``stream`` use
+the same set.
+"""
+
+from __future__ import annotations
+
+import click
+
+from nurbscnc.interpolate.sample import Interpolator
+from nurbscnc.pipeline import Algorithm, RunOptions
+from nurbscnc.plan.options import CornerFeed, Dynamics, LookaheadOptions, PlanOptions
+
+#: The keyword names :func:`planning_options` adds to a command (besides machine, overrides).
+PLANNING_KEYS = ("algorithm", "corner_feed", "dynamics", "blend_tolerance", "interpolator",
+                 "lookahead")  # fmt: skip
+
+
+def _choices(enum_cls) -> click.Choice:
+    return click.Choice([m.value for m in enum_cls])
+
+
+def machine_options(func):
+    """``--machine FILE`` and repeatable ``--set KEY=VALUE`` (dotted profile keys)."""
+    func = click.option(
+        "--set", "overrides", multiple=True, metavar="KEY=VALUE",
+        help="Override one profile value, e.g. --set limits.a_max_mm_s2=1000.",
+    )(func)  # fmt: skip
+    func = click.option(
+        "--machine", type=click.Path(), default=None,
+        help="Machine profile (TOML). Default: $NURBSCNC_MACHINE, ./nurbscnc.toml, "
+        "~/.config/nurbscnc/machine.toml, else the bundled paper machine (Tables 2, 3).",
+    )(func)  # fmt: skip
+    return func
+
+
+def planning_options(func):
+    """The planning options of every command that plans, and the machine options."""
+    func = click.option(
+        "--algorithm", type=_choices(Algorithm), default=Algorithm.PH_LOOKAHEAD.value,
+        help="The look-ahead planner (default), or one of the paper's baselines: adaptive "
+             "(chord-error) feed or curvature feed, Taylor interpolation, no acceleration "
+             "limit (SPEC §9).",
+    )(func)  # fmt: skip
+    func = click.option(
+        "--corner-feed", type=_choices(CornerFeed), default=CornerFeed.PIECE.value,
+        help="PH pieces capped by their own peak curvature (piece, default) or the whole "
+             "region by the corner's peak (peak, as the paper).",
+    )(func)  # fmt: skip
+    func = click.option(
+        "--dynamics", type=_choices(Dynamics), default=Dynamics.LOCAL.value,
+        help="Contour-error check: lower the feed on offending pieces (local, default), for "
+             "the whole program (global, the paper's rule), or not at all (off).",
+    )(func)  # fmt: skip
+    func = click.option(
+        "--blend-tolerance", type=click.FloatRange(min=0.0), default=None, metavar="MM",
+        help="Blend G1/G2/G3 corners by PH quintics within this distance [mm] (overrides the "
+             "program's G64 P; 0: stop exactly at every corner).",
+    )(func)  # fmt: skip
+    func = click.option(
+        "--interpolator", type=_choices(Interpolator), default=Interpolator.EXACT.value,
+        help="NURBS pieces by exact arc-length inversion (default) or the paper's 2nd-order "
+             "Taylor formula.",
+    )(func)  # fmt: skip
+    func = click.option(
+        "--lookahead", type=click.IntRange(min=1), default=None,
+        help="Look-ahead depth in pieces (default: the whole program).",
+    )(func)  # fmt: skip
+    return machine_options(func)
+
+
+def run_options(algorithm="ph-lookahead", corner_feed="piece", dynamics="local",
+                blend_tolerance=None, interpolator="exact",
+                lookahead=None) -> RunOptions:  # fmt: skip
+    """The validated :class:`~nurbscnc.pipeline.RunOptions` of the values of
+    :func:`planning_options` (ConfigError on a bad value)."""
+    plan = PlanOptions(corner_feed=corner_feed, blend_tolerance_mm=blend_tolerance)
+    return RunOptions(algorithm=algorithm, interpolator=interpolator,
+                      lookahead=LookaheadOptions(dynamics=dynamics, lookahead_pieces=lookahead,
+                                                 plan=plan))  # fmt: skip

@@ -1,0 +1,93 @@
+"""The whole pipeline for one program: plan (or a baseline), interpolate, check soft limits.
+
+program → geometry → plan (pieces, profile, dynamics check) → interpolate (reference points).
+The CLI builds the option objects and calls :func:`run_program`; the outputs and reports
+are made from the :class:`Run` it returns. No I/O here.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from enum import StrEnum
+
+from nurbscnc.interpolate.baselines import baseline_program_samples
+from nurbscnc.interpolate.sample import (
+    Interpolator,
+    Samples,
+    reference_sampler,
+    sample_plan,
+    samples_of,
+)
+from nurbscnc.machine.profile import Machine
+from nurbscnc.plan.lookahead import Check, Plan, plan_checked
+from nurbscnc.plan.options import Dynamics, LookaheadOptions, parse_choice
+from nurbscnc.plan.report import check_soft_limits
+
+
+class Algorithm(StrEnum):
+    """The look-ahead planner, or one of the paper's baselines (SPEC §9): adaptive
+    (chord-error) feed or curvature feed, Taylor interpolation, no acceleration limit."""
+
+    PH_LOOKAHEAD = "ph-lookahead"
+    ADAPTIVE = "adaptive"
+    CURVATURE = "curvature"
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """Everything a command may choose about planning and interpolation (validated on
+    construction): the ``algorithm``, the look-ahead planner's options (``lookahead``, not
+    used by a baseline) and the ``interpolator`` of NURBS pieces."""
+
+    algorithm: Algorithm = Algorithm.PH_LOOKAHEAD
+    lookahead: LookaheadOptions = field(default_factory=LookaheadOptions)
+    interpolator: Interpolator = Interpolator.EXACT
+
+    def __post_init__(self):
+        set_ = object.__setattr__
+        set_(self, "algorithm", parse_choice(Algorithm, self.algorithm, "algorithm"))
+        set_(self, "interpolator", parse_choice(Interpolator, self.interpolator, "interpolator"))
+
+
+@dataclass(frozen=True, eq=False)
+class Run:
+    """One program through the pipeline: its reference ``samples``; for the look-ahead
+    planner also the ``plan`` and its dynamics ``check`` (None when the check was off); a
+    baseline has neither (``plan`` is None)."""
+
+    algorithm: Algorithm
+    samples: Samples
+    plan: Plan | None = None
+    check: Check | None = None
+
+    @property
+    def cycle_time_s(self) -> float:
+        """Cycle time [s] including dwells: the plan's, or a baseline's last sample time."""
+        if self.plan is not None:
+            return self.plan.cycle_time_s
+        return float(self.samples.t_s[-1])
+
+
+def run_program(program, machine: Machine, options: RunOptions | None = None) -> Run:
+    """Plan (or run a baseline on) an interpreted program, interpolate it at the servo period
+    and refuse reference points outside the soft limits (PlanningError at the first one)."""
+    options = options or RunOptions()
+    if options.algorithm == Algorithm.PH_LOOKAHEAD:
+        lookahead = options.lookahead
+        if not machine.contour_check:
+            # No servo model in the profile: there is no contour error to check.
+            lookahead = replace(lookahead, dynamics=Dynamics.OFF)
+        # The check runs on the interpolator's own points; its final reference is the output.
+        sampler = reference_sampler(options.interpolator)
+        plan, check = plan_checked(program, machine, lookahead, sampler)
+        if check is not None:
+            samples = samples_of(check.reference, plan.pieces, options.interpolator)
+        else:
+            samples = sample_plan(plan.pieces, plan.profile, machine.servo.period_s,
+                                  options.interpolator)  # fmt: skip
+        run = Run(options.algorithm, samples, plan, check)
+    else:
+        samples = baseline_program_samples(options.algorithm.value, program, machine)
+        run = Run(options.algorithm, samples)
+    check_soft_limits(run.samples.points_mm, run.samples.line, machine.soft_limits)
+    return run

@@ -1,0 +1,219 @@
+"""What the commands report about a program and its plan, each number computed once here.
+
+- :func:`program_summary`: the interpreted program (``check``): segment counts, lengths,
+  bounding box, feeds, notes;
+- :func:`plan_summary`: a plan and its reference points (``plan``, ``run``): pieces, cycle
+  time, lower bound (SPEC §10), feed fluctuation (SPEC §3), predicted contour error (SPEC §8);
+- :func:`check_soft_limits`: refuse reference points outside the travel envelope.
+
+No I/O: the CLI prints or serialises the dictionaries.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+
+import numpy as np
+
+from nurbscnc.errors import PlanningError, SourcePos
+from nurbscnc.geometry.nurbs import NurbsCurve
+from nurbscnc.geometry.path import STOP_KINDS, Kind
+from nurbscnc.geometry.paths import geometry_of
+from nurbscnc.machine.profile import Machine, SoftLimits
+from nurbscnc.plan.lowerbound import program_lower_bound_s
+
+
+def check_soft_limits(points_mm: np.ndarray, lines: np.ndarray, limits: SoftLimits) -> None:
+    """Refuse reference points ``points_mm`` (N, 3) [mm] that leave the travel envelope:
+    PlanningError at the first one, with its source line (``lines`` (N,))."""
+    bad = np.flatnonzero(~limits.inside(points_mm))
+    if not bad.size:
+        return
+    k = int(bad[0])
+    lo, hi = np.asarray(limits.min_mm), np.asarray(limits.max_mm)
+    axis = int(np.flatnonzero((points_mm[k] < lo) | (points_mm[k] > hi))[0])
+    raise PlanningError(
+        f"the path leaves the soft limits: {'XYZ'[axis]} = {points_mm[k, axis]:.4f} mm outside "
+        f"[{lo[axis]:g}, {hi[axis]:g}] mm",
+        SourcePos(int(lines[k]), 1, ""),
+    )
+
+
+def segment_length_mm(seg) -> float:
+    """Length of one segment [mm] (NURBS by Gauss–Legendre arc length)."""
+    if seg.kind == "nurbs":
+        return float(NurbsCurve.from_segment(seg).length_mm)
+    return float(seg.length_mm)
+
+
+def program_summary(prog) -> dict:
+    """The JSON-able summary of an interpreted program (``check --json``). The bounding box
+    holds every end point, the NURBS control points (the convex hull property) and 65
+    points of every arc (its extreme points)."""
+    segments = []
+    feed_len = 0.0
+    rapid_len = 0.0
+    points = [np.asarray(prog.start_mm, dtype=float)]
+    feeds = []
+    for seg in prog.segments:
+        moving = seg.kind not in STOP_KINDS
+        length = segment_length_mm(seg) if moving else 0.0
+        entry = {"kind": seg.kind, "line": seg.line, "length_mm": length}
+        if seg.kind == "nurbs":
+            entry.update(degree=seg.degree, control_points=len(seg.control_points_mm),
+                         knots=len(seg.knots), plane=seg.plane)  # fmt: skip
+            points.append(np.asarray(seg.control_points_mm))
+        elif moving:
+            points.append(np.asarray([seg.start_mm, seg.end_mm], dtype=float))
+        if seg.kind == "arc":
+            geom = geometry_of(seg)
+            points.append(geom.point(np.linspace(geom.u_start, geom.u_end, 65)))
+        if seg.kind == "rapid":
+            rapid_len += length
+        elif moving:
+            feed_len += length
+            feeds.append(seg.feed_mm_s)
+        segments.append(entry)
+    allpts = np.vstack([np.reshape(p, (-1, 3)) for p in points])
+    counts = Counter(s["kind"] for s in segments)
+    return {
+        "ok": True,
+        "program": prog.name,
+        "blocks": prog.blocks,
+        "segments": segments,
+        "counts": dict(counts),
+        "length_mm": feed_len,
+        "rapid_length_mm": rapid_len,
+        "bounding_box_mm": {"min": allpts.min(axis=0).tolist(), "max": allpts.max(axis=0).tolist()},
+        "feed_mm_min": {"min": min(feeds) * 60.0 if feeds else None,
+                        "max": max(feeds) * 60.0 if feeds else None},  # fmt: skip
+        "notes": [{"line": n.line, "message": n.message} for n in prog.notes],
+        "errors": [],
+    }
+
+
+def nurbs_step_lengths(pieces, samples) -> tuple[np.ndarray, np.ndarray]:
+    """True arc lengths of the servo steps on NURBS pieces, for the feed fluctuation.
+
+    Returns ``(k, ds_mm)``: the indices k of the steps k → k+1 with both samples on the same
+    NURBS curve, and Δs_true = s(u_{k+1}) − s(u_k) [mm] from the curves' exact arc-length
+    tables (SPEC §3: fluctuation |Δs/(V T_s) − 1| "measured with true arc length").
+    ``samples``: reference points with ``piece`` and ``param`` (N,)."""
+    path = pieces.path
+    kind = np.take(path.kind, samples.piece)
+    cid = np.where(kind == Kind.NURBS, np.take(path.obj_id, samples.piece), -1)
+    s_true = np.full(samples.piece.size, np.nan)
+    if cid.size:
+        cuts = np.flatnonzero(cid[1:] != cid[:-1]) + 1
+        edges = np.concatenate(([0], cuts, [cid.size])).tolist()
+        for a, z in zip(edges[:-1], edges[1:]):
+            if cid[a] >= 0:
+                s_true[a:z] = path.objects[int(cid[a])].arc_length(samples.param[a:z])
+    k = np.flatnonzero((cid[:-1] >= 0) & (cid[:-1] == cid[1:]))
+    return k, s_true[k + 1] - s_true[k]
+
+
+def feed_fluctuation(plan, samples) -> float | None:
+    """Largest |Δs_true/Δs_planned − 1| over servo steps on NURBS pieces moving at ≥ 10 % of
+    the highest cap (SPEC §3; true arc length from the curves' exact tables), or None if
+    there are none."""
+    k, ds_true = nurbs_step_lengths(plan.pieces, samples)
+    if k.size == 0:
+        return None
+    planned = samples.s_mm[k + 1] - samples.s_mm[k]
+    fast = samples.v_mm_s[k] >= 0.1 * float(np.max(plan.caps_mm_s))
+    if not fast.any():
+        return None
+    return float(np.max(np.abs(ds_true[fast] / planned[fast] - 1.0)))
+
+
+def _bound(summary: dict, lower_bound_s: float | None, cycle_time_s: float) -> None:
+    if lower_bound_s is not None:
+        summary["lower_bound_s"] = lower_bound_s
+        summary["lower_bound_ratio"] = cycle_time_s / lower_bound_s if lower_bound_s > 0 else None
+
+
+def plan_summary(prog, machine: Machine, samples, plan=None, check=None,
+                 algorithm: str = "ph-lookahead",
+                 cycle_time_s: float | None = None) -> dict:  # fmt: skip
+    """Numbers that describe a plan (``plan --json``): of the look-ahead ``plan`` with its
+    dynamics ``check`` (None: off), or — ``plan`` None — of a baseline ``algorithm``'s
+    ``samples``, simulated on the servo model to see its errors."""
+    from nurbscnc.plan.lookahead import segment_times_s
+
+    lb = program_lower_bound_s(prog.segments, machine)
+    if cycle_time_s is None:
+        cycle_time_s = plan.cycle_time_s if plan is not None else float(samples.t_s[-1])
+    head = {"ok": True, "program": prog.name, "machine": machine.source}
+    if plan is None:
+        from nurbscnc.servo.simulate import contour_errors, metrics, simulate_reference
+
+        sim = simulate_reference(samples.points_mm, machine)
+        m = metrics(sim, None, contour_errors(sim, None)).as_dict()
+        summary = {**head, "algorithm": str(algorithm), "cycle_time_s": cycle_time_s,
+                   "samples": int(samples.t_s.size), "period_s": machine.servo.period_s,
+                   "feed_max_mm_s": float(samples.v_mm_s.max())}  # fmt: skip
+        _bound(summary, lb, cycle_time_s)
+        summary.update(contour_max_um=m["true_max_um"], contour_rms_um=m["true_rms_um"],
+                       contour_eq29_max_um=m["contour_max_um"])  # fmt: skip
+        return summary
+    kinds = plan.pieces.kind_counts()  # vectorised: no Piece object per row
+    summary = {
+        **head,
+        "pieces": kinds,
+        "piece_count": len(plan.pieces),
+        "corner_pieces": kinds.get("ph", 0),
+        "cycle_time_s": cycle_time_s,
+        "samples": int(samples.t_s.size),
+        "period_s": machine.servo.period_s,
+        "dynamics": str(plan.dynamics),
+        "dynamics_iterations": plan.iterations,
+        "feed_max_mm_s": float(samples.v_mm_s.max()),
+        "segment_times_s": {str(k): v for k, v in segment_times_s(plan).items()},
+        "interpolator": str(samples.interpolator),
+    }
+    fluct = feed_fluctuation(plan, samples)
+    if fluct is not None:
+        summary["feed_fluctuation_max"] = fluct
+    _bound(summary, lb, cycle_time_s)
+    if check is not None:
+        c = check.contour_um()
+        eq29 = np.abs(check.response.contour_eq29_mm[check.cutting]) * 1000.0
+        summary.update(
+            contour_max_um=float(c.max()) if c.size else 0.0,
+            contour_rms_um=float(np.sqrt(np.mean(c * c))) if c.size else 0.0,
+            contour_eq29_max_um=float(eq29.max()) if c.size else 0.0,
+        )
+    return summary
+
+
+def corner_fits(prog, machine: Machine, split: bool = True) -> list[tuple]:
+    """PH quintic fits of every corner region of the program's NURBS blocks (SPEC §5–§6,
+    Table 1): (block corners, region, unsplit fit, fit) per region, the fit split to the
+    profile's tolerance e unless ``split`` is False (then it is the unsplit one)."""
+    from nurbscnc.plan.corners import program_corners
+    from nurbscnc.plan.phfit import fit_region
+
+    e_um = machine.limits.ph_tolerance_mm * 1000.0
+    lim = machine.limits
+    rows = []
+    for sc in program_corners(prog.segments, lim.a_max_mm_s2, lim.v_max_mm_s):
+        curve = NurbsCurve.from_segment(prog.segments[sc.segment_index])
+        for r in sc.regions:
+            unsplit = fit_region(curve, r.u_a, r.u_b, tolerance_um=e_um, split=False)
+            fit = fit_region(curve, r.u_a, r.u_b, tolerance_um=e_um) if split else unsplit
+            rows.append((sc, r, unsplit, fit))
+    return rows
+
+
+def corner_polylines(pieces, points_per_piece: int = 50) -> list[np.ndarray]:
+    """The PH pieces of a plan as polylines (one (n, 3) array [mm] each, evenly spaced in arc
+    length), for the path figures; all pieces in one call to the path model."""
+    rows = np.flatnonzero(pieces.kind == Kind.PH)
+    if rows.size == 0:
+        return []
+    n = points_per_piece
+    idx = np.repeat(rows, n)
+    s = (pieces.length_mm[rows][:, None] * np.linspace(0.0, 1.0, n)[None, :]).ravel()
+    pts = pieces.path.points(idx, s)[0]
+    return list(pts.reshape(rows.size, n, 3))

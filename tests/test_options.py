@@ -1,0 +1,72 @@
+"""Options are validated where they are built (issue 12; Ruckig's InputParameter::validate).
+
+A misspelt or differently capitalised choice, a negative tolerance, a zero look-ahead:
+ConfigError at construction, never a silent fallback in the planner. Valid strings become
+their enum members. Every command that plans declares the same planning options.
+"""
+
+from __future__ import annotations
+
+import math
+
+import click
+import pytest
+
+from nurbscnc.cli.main import main
+from nurbscnc.cli.options import PLANNING_KEYS, run_options
+from nurbscnc.errors import ConfigError
+from nurbscnc.interpolate.sample import Interpolator
+from nurbscnc.pipeline import Algorithm, RunOptions
+from nurbscnc.plan.options import CornerFeed, Dynamics, LookaheadOptions, PlanOptions
+
+
+@pytest.mark.parametrize("kwargs", [
+    {"dynamics": "Global"}, {"dynamics": "none"}, {"dynamics": 1},
+    {"max_iterations": -1}, {"max_iterations": 2.5}, {"max_iterations": True},
+    {"lookahead_pieces": 0}, {"lookahead_pieces": 3.0}, {"plan": "piece"},
+])  # fmt: skip
+def test_bad_lookahead_options_raise(kwargs):
+    with pytest.raises(ConfigError):
+        LookaheadOptions(**kwargs)
+
+
+@pytest.mark.parametrize("kwargs", [
+    {"corner_feed": "paek"}, {"corner_feed": "PEAK"}, {"ph": "yes"},
+    {"tolerance_mm": 0.0}, {"tolerance_mm": -1e-3}, {"tolerance_mm": math.nan},
+    {"blend_tolerance_mm": -0.1}, {"blend_tolerance_mm": math.inf}, {"blend_tolerance_mm": "1"},
+])  # fmt: skip
+def test_bad_plan_options_raise(kwargs):
+    with pytest.raises(ConfigError):
+        PlanOptions(**kwargs)
+
+
+@pytest.mark.parametrize("kwargs", [{"algorithm": "fast"}, {"interpolator": "euler"},
+                                    {"interpolator": "Taylor"}])
+def test_bad_run_options_raise(kwargs):
+    with pytest.raises(ConfigError):
+        RunOptions(**kwargs)
+
+
+def test_valid_strings_become_members_and_lengths_are_mm():
+    opt = LookaheadOptions(dynamics="global", lookahead_pieces=5,
+                           plan=PlanOptions(corner_feed="peak", tolerance_mm=1e-3,
+                                            blend_tolerance_mm=0))  # fmt: skip
+    assert opt.dynamics is Dynamics.GLOBAL and opt.plan.corner_feed is CornerFeed.PEAK
+    assert opt.plan.tolerance_mm == 1e-3 and opt.plan.blend_tolerance_mm == 0.0
+    assert not hasattr(opt.plan, "tolerance_um")
+    run = RunOptions(algorithm="adaptive", interpolator="taylor")
+    assert run.algorithm is Algorithm.ADAPTIVE and run.interpolator is Interpolator.TAYLOR
+    built = run_options("ph-lookahead", "peak", "off", 0.05, "exact", 7)
+    assert built.lookahead == LookaheadOptions(dynamics="off", lookahead_pieces=7,
+                                               plan=PlanOptions(corner_feed="peak",
+                                                                blend_tolerance_mm=0.05))
+
+
+def _params(command: str) -> set[str]:
+    return {p.name for p in main.commands[command].params if isinstance(p, click.Option)}
+
+
+def test_every_planning_command_has_the_same_planning_options():
+    want = set(PLANNING_KEYS) | {"machine", "overrides"}
+    for command in ("plan", "run", "simulate"):
+        assert want <= _params(command), command
