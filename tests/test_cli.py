@@ -32,6 +32,11 @@ NACA = ROOT / "programs" / "naca2415.nc"
 NUM = r"(-?\d+(?:\.\d+)?)"
 
 
+
+def error_report(stderr: str) -> str:
+    """stderr without the leading line that says which machine profile a planning command used."""
+    return stderr.split("\n", 1)[1] if stderr.startswith("machine: ") else stderr
+
 def run(args, **kwargs):
     return CliRunner().invoke(main, [str(a) for a in args], **kwargs)
 
@@ -340,20 +345,18 @@ def test_cli_error_on_long_line_is_short(tmp_path):
 
 def test_run_names_errors_with_the_file(tmp_path):
     path = tmp_path / "bad.nc"
-    path.write_text("G21 G90 G1 X1 F100\nG28\n")
+    path.write_text("G21 G90 G1 X1 F100\nG33\n")
     result = run(["run", path, "-o", tmp_path / "p.csv"])
     assert result.exit_code == 2
-    # The first line says which machine profile `run` used; the error report follows it.
-    report = result.stderr.split("\n", 1)[1] if result.stderr.startswith("machine: ") else ""
-    assert report.startswith(f"{path}:2:1: error: ")
+    assert error_report(result.stderr).startswith(f"{path}:2:1: error: ")
     assert "<stdin>" not in result.stderr
     assert not (tmp_path / "p.csv").exists()
 
 
 def test_run_from_stdin_is_named_stdin(tmp_path):
-    result = run(["run", "-", "-o", tmp_path / "p.csv"], input="G1 X1 F100\nG28\n")
+    result = run(["run", "-", "-o", tmp_path / "p.csv"], input="G1 X1 F100\nG33\n")
     assert result.exit_code == 2
-    assert result.stderr.startswith("<stdin>:2:1: error: ")
+    assert error_report(result.stderr).startswith("<stdin>:2:1: error: ")
 
 
 # ------------------------------------------------------------- hardening: files and exit codes

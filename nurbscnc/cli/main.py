@@ -380,7 +380,8 @@ def load_machine_cli(path, overrides=(), extra: dict | None = None):
     says ($NURBSCNC_MACHINE, ./nurbscnc.toml, the user's config folder, the bundled default).
     Every command loads its profile here, so this is where it says which one it used: a
     ``machine: FILE (how found)`` line on stderr (not with --json or --quiet, whose JSON
-    carries ``machine_profile`` instead; see :func:`machine_json`)."""
+    carries ``machine_profile`` instead, see :func:`machine_json`; nor when the command's data
+    goes to stdout, ``-o -``, where a pipeline wants nothing but that data and its errors)."""
     from nurbscnc.errors import ConfigError
     from nurbscnc.machine.profile import find_machine, load_machine
 
@@ -396,7 +397,8 @@ def load_machine_cli(path, overrides=(), extra: dict | None = None):
     ctx = click.get_current_context(silent=True)
     if ctx is not None and not ctx.meta.get("nurbscnc.machine_said"):
         ctx.meta["nurbscnc.machine_said"] = True
-        if not (ctx.params.get("as_json") or ctx.params.get("quiet")):
+        to_stdout = "-" in (ctx.params.get("output"), ctx.params.get("dump_profile"))
+        if not (ctx.params.get("as_json") or ctx.params.get("quiet") or to_stdout):
             changed = f"; overridden: {', '.join(sorted(table))}" if table else ""
             err.print(f"machine: {mach.describe()}{changed}", markup=False)
             if not mach.contour_check:
