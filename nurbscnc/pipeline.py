@@ -8,7 +8,6 @@ are made from the :class:`Run` it returns. No I/O here.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from enum import StrEnum
 
 from nurbscnc.interpolate.baselines import baseline_program_samples
 from nurbscnc.interpolate.sample import (
@@ -20,17 +19,8 @@ from nurbscnc.interpolate.sample import (
 )
 from nurbscnc.machine.profile import Machine
 from nurbscnc.plan.lookahead import Check, Plan, plan_checked
-from nurbscnc.plan.options import Dynamics, LookaheadOptions, parse_choice
+from nurbscnc.plan.options import Algorithm, Dynamics, LookaheadOptions, parse_choice
 from nurbscnc.plan.report import check_soft_limits
-
-
-class Algorithm(StrEnum):
-    """The look-ahead planner, or one of the paper's baselines (SPEC §9): adaptive
-    (chord-error) feed or curvature feed, Taylor interpolation, no acceleration limit."""
-
-    PH_LOOKAHEAD = "ph-lookahead"
-    ADAPTIVE = "adaptive"
-    CURVATURE = "curvature"
 
 
 @dataclass(frozen=True)

@@ -11,9 +11,14 @@ from __future__ import annotations
 
 import click
 
-from nurbscnc.interpolate.sample import Interpolator
-from nurbscnc.pipeline import Algorithm, RunOptions
-from nurbscnc.plan.options import CornerFeed, Dynamics, LookaheadOptions, PlanOptions
+from nurbscnc.plan.options import (
+    Algorithm,
+    CornerFeed,
+    Dynamics,
+    Interpolator,
+    LookaheadOptions,
+    PlanOptions,
+)
 
 #: The keyword names :func:`planning_options` adds to a command (besides machine, overrides).
 PLANNING_KEYS = ("algorithm", "corner_feed", "dynamics", "blend_tolerance", "interpolator",
@@ -75,9 +80,11 @@ def planning_options(func):
 
 def run_options(algorithm="ph-lookahead", corner_feed="piece", dynamics="local",
                 blend_tolerance=None, interpolator="exact",
-                lookahead=None) -> RunOptions:  # fmt: skip
+                lookahead=None):  # fmt: skip
     """The validated :class:`~nurbscnc.pipeline.RunOptions` of the values of
     :func:`planning_options` (ConfigError on a bad value)."""
+    from nurbscnc.pipeline import RunOptions  # the planner's imports, only when planning
+
     plan = PlanOptions(corner_feed=corner_feed, blend_tolerance_mm=blend_tolerance)
     return RunOptions(algorithm=algorithm, interpolator=interpolator,
                       lookahead=LookaheadOptions(dynamics=dynamics, lookahead_pieces=lookahead,

@@ -16,32 +16,12 @@ exactly these points.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from enum import StrEnum
 
 import numpy as np
 
-from nurbscnc.errors import ConfigError
 from nurbscnc.interpolate.taylor import taylor_nurbs
+from nurbscnc.plan.options import Interpolator  # noqa: F401  (re-exported)
 from nurbscnc.plan.timing import exact_reference
-
-
-class Interpolator(StrEnum):
-    """How NURBS pieces are sampled: ``exact`` arc-length inversion (SPEC §10) or the
-    paper's 2nd-order ``taylor`` recurrence (SPEC §3). Lines, arcs and PH pieces are exact
-    either way."""
-
-    EXACT = "exact"
-    TAYLOR = "taylor"
-
-    @classmethod
-    def parse(cls, value) -> Interpolator:
-        """The member for ``value`` (a member or its name); ConfigError otherwise."""
-        try:
-            return cls(value)
-        except ValueError:
-            names = tuple(m.value for m in cls)
-            raise ConfigError(f"interpolator must be one of {names}, not {value!r}") from None
-
 
 INTERPOLATORS = tuple(m.value for m in Interpolator)
 

@@ -106,3 +106,30 @@ class LookaheadOptions:
             raise ConfigError(f"lookahead_pieces must be None or an integer ≥ 1, not {n!r}")
         if not isinstance(self.plan, PlanOptions):
             raise ConfigError(f"plan must be PlanOptions, not {type(self.plan).__name__}")
+
+
+class Interpolator(StrEnum):
+    """How NURBS pieces are sampled: ``exact`` arc-length inversion (SPEC §10) or the
+    paper's 2nd-order ``taylor`` recurrence (SPEC §3). Lines, arcs and PH pieces are exact
+    either way."""
+
+    EXACT = "exact"
+    TAYLOR = "taylor"
+
+    @classmethod
+    def parse(cls, value) -> Interpolator:
+        """The member for ``value`` (a member or its name); ConfigError otherwise."""
+        try:
+            return cls(value)
+        except ValueError:
+            names = tuple(m.value for m in cls)
+            raise ConfigError(f"interpolator must be one of {names}, not {value!r}") from None
+
+
+class Algorithm(StrEnum):
+    """The look-ahead planner, or one of the paper's baselines (SPEC §9): adaptive
+    (chord-error) feed or curvature feed, Taylor interpolation, no acceleration limit."""
+
+    PH_LOOKAHEAD = "ph-lookahead"
+    ADAPTIVE = "adaptive"
+    CURVATURE = "curvature"
