@@ -140,7 +140,31 @@ class Dwell:
         return self.position_mm
 
 
-Segment = Line | Arc | Nurbs | Dwell
+@dataclass(frozen=True, eq=False)
+class Pause:
+    """A program stop (M0, M1 optional stop, M60 pallet change) at ``position_mm`` (an
+    ``(x, y, z)`` tuple): the machine stops there and waits for the operator to resume.
+    ``code`` is "M0", "M1" or "M60"."""
+
+    position_mm: tuple
+    line: int
+    code: str = "M0"
+
+    kind = "pause"
+    feed_mm_s = 0.0
+    length_mm = 0.0
+    seconds = 0.0
+
+    @property
+    def start_mm(self) -> tuple:
+        return self.position_mm
+
+    @property
+    def end_mm(self) -> tuple:
+        return self.position_mm
+
+
+Segment = Line | Arc | Nurbs | Dwell | Pause
 
 
 @dataclass(frozen=True)

@@ -23,7 +23,7 @@ from typing import NamedTuple
 from lark import Lark, Transformer, UnexpectedCharacters, UnexpectedInput, UnexpectedToken
 from lark.exceptions import VisitError
 
-from nurbscnc.errors import GCodeSyntaxError, NurbsCncError, SourcePos, UnsupportedError
+from nurbscnc.errors import GCodeSyntaxError, NurbsCncError, SourcePos
 
 
 class Word(NamedTuple):
@@ -42,14 +42,25 @@ class Assign(NamedTuple):
     column: int
 
 
+class OWord(NamedTuple):
+    """An O-word line: ``label`` ("100" or "<name>"), ``keyword`` ("sub", "call", ..., or
+    "" for a Fanuc program number), ``args`` (bracketed expressions), 1-based ``column``."""
+
+    label: str
+    keyword: str
+    args: tuple
+    column: int
+
+
 class Block(NamedTuple):
-    """One source line: block-delete flag, words, assignments, comments, tape mark."""
+    """One source line: block-delete flag, words, assignments, comments, tape mark, O-word."""
 
     delete: bool
     words: tuple
     assigns: tuple
     comments: tuple
     percent: bool = False
+    oword: OWord | None = None
 
 
 EMPTY_BLOCK = Block(False, (), (), ())
@@ -102,6 +113,29 @@ class _ToBlocks(Transformer):
     def percent(self, children):
         return Block(False, (), (), (), True)
 
+    def oword(self, children):
+        delete = False
+        label = None
+        keyword = ""
+        args = []
+        comments = []
+        for child in children:
+            kind = type(child)
+            if kind is tuple and child and child[0] == "comment":
+                comments.append(child)
+            elif kind is float or kind is tuple:
+                args.append(child)
+            elif child.type == "SLASH":
+                delete = True
+            elif child.type == "O_LABEL":
+                label = (_label_name(child), child.column)
+            elif child.type == "O_KEYWORD":
+                keyword = str(child).lower()
+            elif child.type == "COMMENT":
+                comments.append(("comment", str(child), child.column))
+        return Block(delete, (), (), tuple(comments), False,
+                     OWord(label[0], keyword, tuple(args), label[1]))  # fmt: skip
+
     def comment(self, children):
         tok = children[0]
         return ("comment", str(tok), tok.column)
@@ -148,6 +182,14 @@ class _ToBlocks(Transformer):
 
     def exists(self, children):
         return ("exists", _param_name(children[1]))
+
+
+def _label_name(token) -> str:
+    """An O label: "<name>" (case folded, blanks dropped) or the number without zeros."""
+    text = str(token)[1:].replace(" ", "").replace("\t", "")
+    if text.startswith("<"):
+        return text.lower()
+    return str(int(text))
 
 
 def _param_name(token) -> str:
@@ -211,7 +253,7 @@ def _expected(names) -> str:
 
 
 def _split_lines(text: str) -> list[str]:
-    return text.replace("\r\n", "\n").replace("\r", "\n").split("\n")
+    return split_lines(text)
 
 
 # The fast path. Most CAM output is lines of plain words ("G1 X1.5 Y-2 F300 (cut)"); for
@@ -228,7 +270,9 @@ _SIMPLE_LINE = re.compile(
     r"[ \t]*+(/)?[ \t]*+(?:[nN][ \t]*+[0-9][0-9 \t]*+(?:\.[0-9 \t]*+)?)?"
     r"((?:[ \t]*+(?:[A-Za-z][ \t]*+" + _NUM + r"|\([^()\n]*+\)))*+)[ \t]*+(;.*)?"
 )
-_O_WORD = re.compile(r"[ \t]*+(?:/[ \t]*+)?(?:[nN][ \t]*+[0-9][0-9 \t]*+)?[oO][ \t]*+[0-9<]")
+_O_WORD = re.compile(
+    r"[ \t]*+(?:/[ \t]*+)?(?:[nN][ \t]*+[0-9][0-9 \t]*+(?:\.[0-9 \t]*+)?)?[oO][ \t]*+[0-9<]"
+)
 _SIMPLE_ITEM = re.compile(r"([A-Za-z])[ \t]*(" + _NUM + r")|(\([^()\n]*\))")
 
 
@@ -261,39 +305,53 @@ def _fast_block(line: str, match) -> Block:
     return Block(delete, tuple(words), (), tuple(comments))
 
 
+#: Lines longer than this (outside the plain-word fast path) are refused: LinuxCNC refuses
+#: anything past 256 characters; this bound keeps the work on a hostile 10 MB line of
+#: nested brackets to a fraction of a second.
+MAX_LINE_CHARS = 65536
+
+_LINE_BREAKS = re.compile(r"\r+\n|\r")
+
+
+def split_lines(text: str) -> list[str]:
+    """The physical lines of a program text: LF, CRLF, CR CR LF (one line end, as LinuxCNC's
+    line reader counts it) and lone CR all end a line; a leading byte-order mark is dropped."""
+    if text.startswith("\ufeff"):
+        text = text[1:]
+    if "\r" in text:
+        text = _LINE_BREAKS.sub("\n", text)
+    return text.split("\n")
+
+
+def parse_line(line: str, line_no: int) -> Block:
+    """Parse one physical line (``line_no`` 1-based, for error positions) into a Block."""
+    match = _SIMPLE_LINE.fullmatch(line)
+    if match is not None and not (("o" in line or "O" in line) and _O_WORD.match(line)):
+        try:
+            return _fast_block(line, match)
+        except GCodeSyntaxError as exc:
+            exc.pos = SourcePos(line_no, exc.pos.column, line)
+            raise
+    if len(line) > MAX_LINE_CHARS:
+        raise GCodeSyntaxError(
+            f"line is too long ({len(line)} characters; at most {MAX_LINE_CHARS})",
+            SourcePos(line_no, 1, line),
+        )
+    return _parse_lark(line, line_no - 1)[0]
+
+
 def parse_text(text: str, fast: bool = True) -> list[Block]:
     """Parse a whole program; return one :class:`Block` per physical line (index = line − 1).
 
     Raises :class:`GCodeSyntaxError` with the line, column and source text of the first error.
-    A leading byte-order mark is dropped; CRLF and lone CR line ends are accepted. ``fast``
-    selects the regular-expression path for plain-word lines (same result, see above).
+    See :func:`split_lines` for line ends. ``fast`` selects the regular-expression path for
+    plain-word lines (same result, see above). The interpreter parses lazily instead, line
+    by line as it executes (:func:`parse_line`): text after M2 is never parsed.
     """
-    if text.startswith("\ufeff"):
-        text = text[1:]
-    if "\r" in text:
-        text = text.replace("\r\n", "\n").replace("\r", "\n")
+    lines = split_lines(text)
     if not fast:
-        return _parse_lark(text, 0)
-    lines = text.split("\n")
-    blocks = []
-    append = blocks.append
-    fullmatch = _SIMPLE_LINE.fullmatch
-    for index, line in enumerate(lines):
-        match = fullmatch(line)
-        if match is not None:
-            try:
-                append(_fast_block(line, match))
-            except GCodeSyntaxError as exc:
-                exc.pos = SourcePos(index + 1, exc.pos.column, line)
-                raise
-        else:
-            if _O_WORD.match(line):
-                raise UnsupportedError(
-                    "O-words (subroutines, loops, conditionals) are not supported",
-                    SourcePos(index + 1, line.lower().index("o") + 1, line),
-                )
-            append(_parse_lark(line, index)[0])
-    return blocks
+        return _parse_lark("\n".join(lines), 0)
+    return [parse_line(line, index + 1) for index, line in enumerate(lines)]
 
 
 def _parse_lark(text: str, line_offset: int) -> list[Block]:

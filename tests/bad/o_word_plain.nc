@@ -1,2 +1,3 @@
-; O-words @ 2:5
-N10 O100
+; O100 without a keyword @ 3:1
+G0 X1
+O100
