@@ -9,8 +9,9 @@ with ``origin`` and ``rotation`` the active G54…G59.3 system's offset and XY r
 interpreter keeps the PROGRAM position (as LinuxCNC's ``current_x``) and converts with
 :meth:`Coordinates.to_machine` / :meth:`Coordinates.to_program`.
 
-The numbered parameters that hold these values, in mm here and in the current units when a
-program reads or writes them (LinuxCNC converts them on G20/G21):
+The numbered parameters that hold these values are in MACHINE units (LinuxCNC keeps them so:
+checked with its interpreter on an inch and a mm machine); nurbscnc's machine unit is the mm,
+so a program reads and writes them in mm whatever G20/G21 is in force:
 
 - #5161–#5166 G28 home, #5181–#5186 G30 home (machine coordinates, X Y Z A B C);
 - #5210 G92 on (1) or off (0), #5211–#5219 the G92 offset (X Y Z A B C U V W);
@@ -42,15 +43,6 @@ def is_coordinate_parameter(index: int) -> bool:
             or G92_FLAG <= index <= SYSTEM_BASE + SYSTEM_STRIDE * N_SYSTEMS - 1)  # fmt: skip
 
 
-def _is_length(index: int) -> bool:
-    """Parameters that hold a length (converted with the units); not flags or angles."""
-    if index in (G92_FLAG, SYSTEM_INDEX):
-        return False
-    if index >= SYSTEM_BASE:
-        return (index - SYSTEM_BASE) % SYSTEM_STRIDE != 9
-    return True
-
-
 @dataclass
 class Coordinates:
     """Offsets and stored positions [mm], the parameter table behind them, the active system.
@@ -71,13 +63,12 @@ class Coordinates:
     def __post_init__(self):
         self.params.setdefault(SYSTEM_INDEX, 1.0)
 
-    # -- parameters (in program units: ``scale`` is mm per program unit) -------------------
-    def read(self, index: int, scale: float) -> float:
-        value = self.params.get(index, 0.0)
-        return value / scale if _is_length(index) else value
+    # -- parameters (machine units: mm) ---------------------------------------------------
+    def read(self, index: int) -> float:
+        return self.params.get(index, 0.0)
 
-    def write(self, index: int, value: float, scale: float) -> None:
-        self.params[index] = value * scale if _is_length(index) else value
+    def write(self, index: int, value: float) -> None:
+        self.params[index] = value
 
     def system_offset_mm(self, system: int) -> list:
         base = SYSTEM_BASE + SYSTEM_STRIDE * (system - 1)
@@ -118,7 +109,14 @@ class Coordinates:
 
     # -- changes ---------------------------------------------------------------------------
     def select(self, system: int) -> None:
-        """G54…G59.3: make ``system`` (1..9) active."""
+        """G54…G59.3: make ``system`` (1..9) active. Selecting the active system again
+        changes nothing (LinuxCNC: "continuing to use same coordinate system"), so a
+        parameter written since is not picked up."""
+        if system == self.system:
+            return
+        self._load(system)
+
+    def _load(self, system: int) -> None:
         self.system = system
         self.params[SYSTEM_INDEX] = float(system)
         self.origin_mm = self.system_offset_mm(system)
@@ -132,7 +130,7 @@ class Coordinates:
         if rotation_deg is not None:
             self.params[base + 9] = rotation_deg
         if system == self.system:
-            self.select(system)
+            self._load(system)
 
     def set_g92(self, offsets: dict) -> None:
         """G92: the offsets (axis → mm) of the given axes; the others keep theirs."""

@@ -183,7 +183,7 @@ class _Interpreter(NurbsBlocks, Splines):
         if index <= _N_LOCAL:
             return self.params.get(index, 0.0)
         if coords.is_coordinate_parameter(index):
-            return self.coords.read(index, self.m.scale)
+            return self.coords.read(index)
         if index == 5400:
             return float(self.m.tool_loaded)
         if 5420 <= index <= 5422:
@@ -192,7 +192,7 @@ class _Interpreter(NurbsBlocks, Splines):
 
     def write_numbered(self, index: int, value: float) -> None:
         if coords.is_coordinate_parameter(index):
-            self.coords.write(index, value, self.m.scale)
+            self.coords.write(index, value)
         else:
             self.params[index] = value
 
@@ -313,8 +313,25 @@ class _Interpreter(NurbsBlocks, Splines):
                 self.program_name = f"O{label}"
                 return
             raise self.error(f"O{label} without a keyword (sub, call, if, while, ...)", column)
+        if keyword in ("sub", "if", "do", "repeat") or (
+            keyword == "while" and not self._is_do_tail(label, here)
+        ):
+            self._check_unique(label, here, column)
         handler = getattr(self, "o_" + keyword)
         handler(label, args, column, frame, here)
+
+    def _check_unique(self, label: str, here: int, column: int) -> None:
+        """LinuxCNC: one label, one construct ("duplicate O-word label")."""
+        indexes, kinds = self.source.labels()[label]
+        for index, kind in zip(indexes, kinds):
+            if index == here or kind not in ("sub", "if", "while", "do", "repeat"):
+                continue
+            if kind == "while" and self._is_do_tail(label, index):
+                continue
+            if kind == "while" and index > here and self.source.block(here).oword.keyword == "do":
+                continue
+            raise self.error(f"duplicate O-word label o{label} (also defined on line {index + 1})",
+                             column)  # fmt: skip
 
     def _cond(self, args, column: int, keyword: str) -> float:
         if len(args) != 1:
@@ -1008,25 +1025,24 @@ class _Interpreter(NurbsBlocks, Splines):
         return out
 
     def polar(self, words: dict, base, out) -> None:
-        """``@`` radius and ``^`` angle [deg] in the XY plane: about the origin under G90,
-        about the current point under G91 (LinuxCNC)."""
+        """``@`` radius and ``^`` angle [deg] about the XY origin (LinuxCNC, checked): under
+        G91 both are added to the current point's radius and angle; a missing one keeps the
+        current value."""
         for letter in "XY":
             if letter in words:
                 raise self.error(f"polar coordinates (@ ^) with {letter}", words[letter][1])
-        scale = self.m.scale
-        if self.m.absolute:
-            r0 = math.hypot(base[0], base[1])
-            a0 = math.degrees(math.atan2(base[1], base[0]))
-            r = words["@"][0] * scale if "@" in words else r0
-            a = words["^"][0] if "^" in words else a0
-            out[0], out[1] = r * math.cos(math.radians(a)), r * math.sin(math.radians(a))
-        else:
-            if "@" not in words or "^" not in words:
-                col = words.get("@", words.get("^"))[1]
-                raise self.error("incremental polar moves need both @ and ^", col)
-            r, a = words["@"][0] * scale, words["^"][0]
-            out[0] = base[0] + r * math.cos(math.radians(a))
-            out[1] = base[1] + r * math.sin(math.radians(a))
+        if self.m.plane != "XY":
+            col = words.get("@", words.get("^"))[1]
+            raise self.error("polar coordinates (@ ^) are only allowed in the XY plane", col)
+        r = math.hypot(base[0], base[1])
+        a = math.degrees(math.atan2(base[1], base[0]))
+        if "@" in words:
+            value = words["@"][0] * self.m.scale
+            r = value if self.m.absolute else r + value
+        if "^" in words:
+            value = words["^"][0]
+            a = value if self.m.absolute else a + value
+        out[0], out[1] = r * math.cos(math.radians(a)), r * math.sin(math.radians(a))
 
     def target(self, words: dict, machine_coords: bool = False, base=None) -> list:
         """End point [mm, machine] of a move (``base`` a machine position)."""

@@ -268,12 +268,12 @@ def _split_lines(text: str) -> list[str]:
 _NUM = r"[+-]?[ \t]*+(?:[0-9][0-9 \t]*+(?:\.[0-9 \t]*+)?|\.[ \t]*+[0-9][0-9 \t]*+)"
 _SIMPLE_LINE = re.compile(
     r"[ \t]*+(/)?[ \t]*+(?:[nN][ \t]*+[0-9][0-9 \t]*+(?:\.[0-9 \t]*+)?)?"
-    r"((?:[ \t]*+(?:[A-Za-z][ \t]*+" + _NUM + r"|\([^()\n]*+\)))*+)[ \t]*+(;.*)?"
+    r"((?:[ \t]*+(?:[A-Za-z@^][ \t]*+" + _NUM + r"|\([^()\n]*+\)))*+)[ \t]*+(;.*)?"
 )
 _O_WORD = re.compile(
     r"[ \t]*+(?:/[ \t]*+)?(?:[nN][ \t]*+[0-9][0-9 \t]*+(?:\.[0-9 \t]*+)?)?[oO][ \t]*+[0-9<]"
 )
-_SIMPLE_ITEM = re.compile(r"([A-Za-z])[ \t]*(" + _NUM + r")|(\([^()\n]*\))")
+_SIMPLE_ITEM = re.compile(r"([A-Za-z@^])[ \t]*(" + _NUM + r")|(\([^()\n]*\))")
 
 
 def _fast_block(line: str, match) -> Block:

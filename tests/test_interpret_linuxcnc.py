@@ -1,0 +1,101 @@
+"""nurbscnc's segments against LinuxCNC 2.9's canonical moves, move by move.
+
+Programs and goldens live in tests/golden/interp_linuxcnc/: ``name.ngc`` and ``name.json``,
+the moves LinuxCNC's own interpreter made (its ``gcode`` Python module, full precision,
+recorded by tests/linuxcnc_canon.py and converted to machine mm there). The goldens are
+committed, so the comparison runs without LinuxCNC; ``test_live_*`` re-records each program
+with the installed LinuxCNC and skips, saying why, when it is not installed.
+
+Compared: the kind and source line of every move; end points and arc centres to 1e-9 mm;
+arc direction and turn count; feeds [mm/min] to 1e-9 relative (not under G93, whose F
+LinuxCNC passes through as given); dwell times. LinuxCNC emits moves that go nowhere
+(nurbscnc drops them) and no canon call for M0/M1/M60 (nurbscnc's Pause segments): both
+are skipped.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from nurbscnc.program.interpret import InterpretOptions, interpret_text
+from nurbscnc.program.tooltable import Tool
+
+HERE = Path(__file__).resolve().parent
+GOLDEN = HERE / "golden" / "interp_linuxcnc"
+PROGRAMS = sorted(GOLDEN.glob("*.ngc"))
+RECORDER = HERE / "linuxcnc_canon.py"
+SYSTEM_PYTHON = "/usr/bin/python3"
+TOOLS = {1: Tool(1, (0.0, 0.0, 5.0), 6.0), 2: Tool(2, (0.0, 0.0, 3.0), 4.0)}
+TOL_MM = 1e-9
+
+
+def ours(path: Path):
+    return interpret_text(path.read_text(), InterpretOptions(tools=TOOLS, name=path.name))
+
+
+def linuxcnc_moves(data: dict) -> list[dict]:
+    """LinuxCNC's moves without those that go nowhere (start = end, no arc)."""
+    pos = [0.0, 0.0, 0.0]
+    moves = []
+    for move in data["moves"]:
+        if move["kind"] in ("line", "rapid"):
+            if np.allclose(move["end"], pos, rtol=0, atol=1e-12):
+                continue
+            pos = move["end"]
+        elif move["kind"] == "arc":
+            pos = move["end"]
+        moves.append(move)
+    return moves
+
+
+def compare(path: Path, data: dict) -> None:
+    assert data["error"] is None, data["error"]
+    prog = ours(path)
+    segments = [s for s in prog.segments if s.kind != "pause"]
+    theirs = linuxcnc_moves(data)
+    assert [(s.kind, s.line) for s in segments] == [(m["kind"], m["line"]) for m in theirs]
+    inverse_time = "G93" in path.read_text()
+    for seg, move in zip(segments, theirs):
+        where = f"{path.name}:{seg.line} {seg.kind}"
+        if seg.kind == "dwell":
+            assert seg.seconds == pytest.approx(move["seconds"], rel=1e-12), where
+            continue
+        np.testing.assert_allclose(seg.end_mm, move["end"], rtol=0, atol=TOL_MM, err_msg=where)
+        if seg.kind == "arc":
+            np.testing.assert_allclose(seg.center_mm, move["center"], rtol=0, atol=TOL_MM,
+                                       err_msg=where)  # fmt: skip
+            turns = math.ceil(abs(seg.angle_rad) / (2 * math.pi) - 1e-9)
+            assert math.copysign(turns, seg.angle_rad) == move["turn"], where
+        if seg.kind in ("line", "arc") and not inverse_time:
+            assert seg.feed_mm_s * 60.0 == pytest.approx(move["feed_mm_min"], rel=1e-9), where
+
+
+@pytest.mark.parametrize("path", PROGRAMS, ids=[p.stem for p in PROGRAMS])
+def test_golden(path):
+    compare(path, json.loads(path.with_suffix(".json").read_text()))
+
+
+def _linuxcnc_missing() -> str | None:
+    if not os.path.exists(SYSTEM_PYTHON):
+        return f"{SYSTEM_PYTHON} is absent"
+    probe = subprocess.run([SYSTEM_PYTHON, "-c", "import gcode"], capture_output=True)
+    if probe.returncode != 0:
+        return "LinuxCNC's gcode module is not installed (apt-get install linuxcnc-uspace)"
+    return None
+
+
+@pytest.mark.parametrize("path", PROGRAMS, ids=[p.stem for p in PROGRAMS])
+def test_live(path):
+    why = _linuxcnc_missing()
+    if why:
+        pytest.skip(f"live LinuxCNC comparison skipped: {why}")
+    out = subprocess.run([SYSTEM_PYTHON, str(RECORDER), str(path)], capture_output=True,
+                         text=True, cwd=path.parent, check=True)  # fmt: skip
+    compare(path, json.loads(out.stdout))
