@@ -35,6 +35,9 @@ class Source:
         self.call_line = call_line
         self._blocks: list[Block | None] = [None] * len(lines)
         self._labels: dict[str, tuple[list[int], list[str]]] | None = None
+        #: Memos of facts about O lines that do not change while running (loops re-ask them).
+        self.checked: set[int] = set()  # construct heads whose label was found unique
+        self.do_tails: dict[int, bool] = {}  # line index of a while → closes a do loop?
 
     def block(self, index: int) -> Block:
         """The block of line ``index`` (0-based), parsed the first time it is asked for."""

@@ -57,6 +57,13 @@ _NORMAL_AXIS = {"XY": 2, "ZX": 1, "YZ": 0}
 _CENTER_LETTER = {0: "I", 1: "J", 2: "K"}
 _N_LOCAL = 30  # #1..#30 are a subroutine's own
 _MAX_PARAM = 5602
+# Bounds on values that are finite but no machine can act on (1e20 mm, a 1e300 s dwell): the
+# error names the value instead of letting it overflow or stall a later stage.
+MAX_COORD_MM = 1e9  # 1000 km
+MAX_DWELL_S = 1e6  # 11.6 days
+MAX_FEED_MM_MIN = 1e9
+MIN_FEED_MM_MIN = 1e-9  # below: zero-like feeds (denormals such as 1e-321)
+MAX_ARC_TURNS = 100_000
 
 
 @dataclass(frozen=True)
@@ -78,7 +85,7 @@ class InterpretOptions:
     tools: dict | None = None
     load_subroutine: Callable[[str], tuple[str, str] | None] | None = None
     max_call_depth: int = 100
-    max_loop_iterations: int = 1_000_000
+    max_loop_iterations: int = 250_000
 
 
 def interpret_text(text: str, options: InterpretOptions | None = None) -> Program:
@@ -322,6 +329,9 @@ class _Interpreter(NurbsBlocks, Splines):
 
     def _check_unique(self, label: str, here: int, column: int) -> None:
         """LinuxCNC: one label, one construct ("duplicate O-word label")."""
+        checked = self.source.checked
+        if here in checked:
+            return
         indexes, kinds = self.source.labels()[label]
         for index, kind in zip(indexes, kinds):
             if index == here or kind not in ("sub", "if", "while", "do", "repeat"):
@@ -332,6 +342,7 @@ class _Interpreter(NurbsBlocks, Splines):
                 continue
             raise self.error(f"duplicate O-word label o{label} (also defined on line {index + 1})",
                              column)  # fmt: skip
+        checked.add(here)
 
     def _cond(self, args, column: int, keyword: str) -> float:
         if len(args) != 1:
@@ -457,11 +468,15 @@ class _Interpreter(NurbsBlocks, Splines):
 
     def _is_do_tail(self, label: str, here: int) -> bool:
         """A ``while`` that closes a ``do`` loop (no endwhile follows for it)."""
-        do = self.source.find_before(label, here, ("do",))
-        if do is None:
-            return False
-        nxt = self.source.find(label, do, ("while", "endwhile"))
-        return nxt == here and self.source.find(label, here, ("endwhile",)) is None
+        tails = self.source.do_tails
+        if here not in tails:
+            do = self.source.find_before(label, here, ("do",))
+            tail = do is not None and (
+                self.source.find(label, do, ("while", "endwhile")) == here
+                and self.source.find(label, here, ("endwhile",)) is None
+            )
+            tails[here] = tail
+        return tails[here]
 
     def o_while(self, label, args, column, frame, here) -> None:
         if self._is_do_tail(label, here):
@@ -688,8 +703,13 @@ class _Interpreter(NurbsBlocks, Splines):
             used.add("F")
             if f < 0:
                 raise self.error(f"negative feed F{f:g}", col)
-            if not math.isfinite(f * self.m.scale / 60.0):
-                raise self.error(f"feed F{f:g} is out of range", col)
+            f_mm = f * self.m.scale
+            if not (f_mm == 0.0 or MIN_FEED_MM_MIN <= f_mm <= MAX_FEED_MM_MIN):
+                raise self.error(
+                    f"feed F{f:.6g} is out of range ({MIN_FEED_MM_MIN:g} to "
+                    f"{MAX_FEED_MM_MIN:g} mm/min, or 0)",
+                    col,
+                )
             self.m.feed = f
             self.m.feed_mm = f * self.m.scale
 
@@ -719,6 +739,10 @@ class _Interpreter(NurbsBlocks, Splines):
         used.add("P")
         if seconds < 0:
             raise self.error(f"negative dwell time P{seconds:g}", col)
+        if seconds > MAX_DWELL_S:
+            raise self.error(
+                f"dwell P{seconds:.6g} is out of range (at most {MAX_DWELL_S:g} s)", col
+            )
         self.segments.append(Dwell(float(seconds), tuple(self.pos), self.main_line()))
 
     def set_cutter_comp(self, gcodes: dict, words: dict, used: set) -> None:
@@ -1018,8 +1042,12 @@ class _Interpreter(NurbsBlocks, Splines):
             if letter in words:
                 v = words[letter][0] * scale
                 out[i] = v if absolute else base[i] + v
-                if not math.isfinite(out[i]):  # G20 scaling or G91 sums can overflow
-                    raise self.error(f"{letter} coordinate is out of range", words[letter][1])
+                if not abs(out[i]) <= MAX_COORD_MM:  # also inf / nan from G20 or G91 sums
+                    raise self.error(
+                        f"{letter}{words[letter][0]:.6g} is out of range (the position would "
+                        f"be beyond ±{MAX_COORD_MM:g} mm)",
+                        words[letter][1],
+                    )
         if "@" in words or "^" in words:
             self.polar(words, base, out)
         return out
@@ -1111,6 +1139,9 @@ class _Interpreter(NurbsBlocks, Splines):
             p, pcol = words["P"]
             if p != int(p) or p < 1:
                 raise self.error(f"arc turns P{p:g} must be a positive integer", pcol)
+            if p > MAX_ARC_TURNS:
+                raise self.error(f"arc turns P{p:.6g} is out of range (at most "
+                                 f"{MAX_ARC_TURNS})", pcol)  # fmt: skip
             turns = int(p)
         ccw = self.m.motion == 30
         spiral_tol, radius_tol = arcs.tolerances(self.m.inch)

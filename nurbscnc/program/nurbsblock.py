@@ -17,6 +17,18 @@ from nurbscnc.geometry.segments import PLANE_AXES, Nurbs, frozen_array
 _AXES = ("X", "Y", "Z")
 _NORMAL_AXIS = {"XY": 2, "ZX": 1, "YZ": 0}
 _FIRST_POINT_TOL_MM = 1e-6
+# NURBS weights beyond this range (either way) make the curve's rational arithmetic overflow
+# or lose all precision (1e308 gives NaN in a solver); LinuxCNC's examples stay within 1e3.
+MAX_WEIGHT = 1e9
+
+
+def _check_weight(interp, letter: str, w: float, col: int) -> None:
+    if not 1.0 / MAX_WEIGHT <= w <= MAX_WEIGHT:
+        raise interp.error(
+            f"NURBS weight {letter}{w:.6g} is out of range ({1 / MAX_WEIGHT:g} to "
+            f"{MAX_WEIGHT:g})",
+            col,
+        )
 
 
 @dataclass
@@ -134,6 +146,7 @@ class NurbsBlocks:
         w, col = words["P"]
         if not w > 0.0:
             raise self.error(f"NURBS weight P{w:g} must be > 0", col)
+        _check_weight(self, "P", w, col)
         self.nurbs.points.append(point)
         self.nurbs.weights.append(w)
         self.nurbs.point_lines.append(self.line_no)
@@ -216,6 +229,7 @@ class NurbsBlocks:
             w, col = words["R"]
             if not w > 0.0:
                 raise self.error(f"NURBS weight R{w:g} must be > 0", col)
+            _check_weight(self, "R", w, col)
         else:
             w = 1.0
         self._g6_knot(words["K"])
