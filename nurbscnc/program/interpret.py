@@ -334,7 +334,7 @@ class _Interpreter(NurbsBlocks, Splines):
             return
         indexes, kinds = self.source.labels()[label]
         for index, kind in zip(indexes, kinds):
-            if index == here or kind not in ("sub", "if", "while", "do", "repeat"):
+            if index >= here or kind not in ("sub", "if", "while", "do", "repeat"):
                 continue
             if kind == "while" and self._is_do_tail(label, index):
                 continue
@@ -988,7 +988,7 @@ class _Interpreter(NurbsBlocks, Splines):
                 self.arc(words, used)
         elif motion in (50, 51):
             if has_axes or motion_code is not None:
-                self.spline(words, used, motion)
+                self.spline(words, used, motion, motion_code)
         elif motion in CANNED_CYCLES:
             if has_axes or motion_code is not None:
                 self.canned_cycle(motion, words, used, motion_code)

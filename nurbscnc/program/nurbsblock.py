@@ -334,14 +334,14 @@ def bezier_nurbs_knots(degree: int) -> list[float]:
 class Splines:
     """G5 (cubic) and G5.1 (quadratic) splines as exact NURBS (mixin of the interpreter)."""
 
-    def spline(self, words: dict, used: set, motion: int) -> None:
+    def spline(self, words: dict, used: set, motion: int, motion_code=None) -> None:
         """G5 X Y I J P Q: cubic Bezier from the current point to X Y; the first control point
         is the start + (I, J), the second the end + (P, Q). I, J may be omitted after a G5:
         they are then −(P, Q) of that spline (a smooth join). G5.1 X Y I J: quadratic, the
         control point start + (I, J). I J P Q are incremental in any distance mode; only the
         XY plane (LinuxCNC)."""
         name = "G5" if motion == 50 else "G5.1"
-        col0 = min((c for _, c in words.values()), default=1)
+        col0 = motion_code[1] if motion_code else min((c for _, c in words.values()), default=1)
         if self.m.plane != "XY":
             raise self.error(f"{name} splines are only allowed in the XY plane (G17)", col0)
         if "Z" in words:
