@@ -29,7 +29,8 @@ from nurbscnc.program.tooltable import Tool
 
 HERE = Path(__file__).resolve().parent
 GOLDEN = HERE / "golden" / "interp_linuxcnc"
-PROGRAMS = sorted(GOLDEN.glob("*.ngc"))
+PROGRAMS = sorted(p for p in GOLDEN.glob("*.ngc") if p.stem != "splines")
+SPLINES = GOLDEN / "splines.ngc"
 RECORDER = HERE / "linuxcnc_canon.py"
 SYSTEM_PYTHON = "/usr/bin/python3"
 TOOLS = {1: Tool(1, (0.0, 0.0, 5.0), 6.0), 2: Tool(2, (0.0, 0.0, 3.0), 4.0)}
@@ -99,3 +100,21 @@ def test_live(path):
     out = subprocess.run([SYSTEM_PYTHON, str(RECORDER), str(path)], capture_output=True,
                          text=True, cwd=path.parent, check=True)  # fmt: skip
     compare(path, json.loads(out.stdout))
+
+
+def test_splines_are_linuxcnc_curves():
+    """G5 / G5.1: LinuxCNC samples each spline into N lines at the Bezier parameters k/N;
+    nurbscnc's exact NURBS (knots [0…0, 1…1], so u is the Bezier t) must pass through every
+    one of those points to 1e-9 mm."""
+    from nurbscnc.geometry.nurbs import NurbsCurve
+
+    data = json.loads(SPLINES.with_suffix(".json").read_text())
+    assert data["error"] is None
+    prog = ours(SPLINES)
+    curves = {s.line: s for s in prog.segments if s.kind == "nurbs"}
+    assert sorted(curves) == [4, 5, 6]
+    for line, seg in curves.items():
+        points = np.array([m["end"] for m in data["moves"] if m["line"] == line])
+        u = np.arange(1, len(points) + 1) / len(points)
+        ours_at_u = NurbsCurve.from_segment(seg).point(u)
+        np.testing.assert_allclose(ours_at_u, points, rtol=0, atol=TOL_MM, err_msg=str(line))
