@@ -289,3 +289,24 @@ G28
 
 def test_errors_are_project_errors():
     assert issubclass(ConfigError, NurbsCncError)
+
+
+def test_m70_m72_m73_save_and_restore_modal_state():
+    """LinuxCNC's nc_files/m70m72-demo.ngc in short: state saved, changed, restored."""
+    prog = """G21 G90 F200
+M70
+G20 G91 F5
+G1 X1
+M72
+G1 X1
+o1 sub
+  M73
+  G20 G91
+  G1 X1
+o1 endsub
+o1 call
+G1 X2
+"""
+    got = segs(prog)
+    np.testing.assert_allclose([s.end_mm[0] for s in got], [25.4, 1.0, 26.4, 2.0], atol=1e-12)
+    assert [s.feed_mm_s * 60 for s in got] == pytest.approx([5 * 25.4, 200, 200, 200])

@@ -114,3 +114,4 @@ class Frame:
     saved_params: list = field(default_factory=list)  # the caller's #1..#30
     named: dict = field(default_factory=dict)  # local named parameters
     repeat_left: dict = field(default_factory=dict)  # line index of repeat → turns left
+    m73_state: tuple | None = None  # modal state saved by M73, restored on return

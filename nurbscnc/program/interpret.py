@@ -43,6 +43,7 @@ from nurbscnc.program.modal import (
     INCH_MM,
     M_GROUP,
     PLANE_OF_G,
+    SAVED_BY_M70,
     SYSTEM_OF_G,
     ModalState,
 )
@@ -333,8 +334,12 @@ class _Interpreter(NurbsBlocks, Splines):
         if here in checked:
             return
         indexes, kinds = self.source.labels()[label]
+        # Subroutine names and control labels are separate name spaces (LinuxCNC accepts
+        # "O101 repeat" and "O101 sub" in one file).
+        heads = ("sub",) if self.source.block(here).oword.keyword == "sub" else (
+            "if", "while", "do", "repeat")  # fmt: skip
         for index, kind in zip(indexes, kinds):
-            if index >= here or kind not in ("sub", "if", "while", "do", "repeat"):
+            if index >= here or kind not in heads:
                 continue
             if kind == "while" and self._is_do_tail(label, index):
                 continue
@@ -380,6 +385,8 @@ class _Interpreter(NurbsBlocks, Splines):
             raise self.error(f"o{label} return/endsub outside a subroutine", column)
         value = self.evaluate(args[0], column) if args else None
         self.frames.pop()
+        if frame.m73_state is not None:
+            self.restore_state(frame.m73_state)
         caller = self.frames[-1]
         for k, v in enumerate(frame.saved_params, 1):
             if v is None:
@@ -660,6 +667,8 @@ class _Interpreter(NurbsBlocks, Splines):
         self.select_tool(words, used)
         if 6 in mcodes:
             self.m.tool_loaded = self.m.tool_selected  # M6
+        if 10 in mcodes:
+            self.modal_save_restore(*mcodes[10])
         self.dwell(gcodes, words, used)
         if 2 in gcodes:
             self.m.plane = PLANE_OF_G[gcodes[2][0]]
@@ -682,6 +691,32 @@ class _Interpreter(NurbsBlocks, Splines):
                 raise self.error(_unused_word_message(letter), col)
         if 4 in mcodes:
             self.stop(*mcodes[4])
+
+    def modal_save_restore(self, code: int, column: int) -> None:
+        """M70 save, M71 forget, M72 restore the modal state; M73 save it for an automatic
+        restore when the current subroutine returns (LinuxCNC)."""
+        frame = self.frames[-1]
+        if code in (70, 73):
+            state = ({name: getattr(self.m, name) for name in SAVED_BY_M70}, self.coords.system)
+            if code == 70:
+                self.m70_state = state
+            else:
+                if len(self.frames) == 1:
+                    raise self.error("M73 outside a subroutine (nothing to restore it)", column)
+                frame.m73_state = state
+        elif code == 71:
+            self.m70_state = None
+        else:
+            state = getattr(self, "m70_state", None)
+            if state is None:
+                raise self.error("M72 with no state saved by M70", column)
+            self.restore_state(state)
+
+    def restore_state(self, state) -> None:
+        values, system = state
+        for name, value in values.items():
+            setattr(self.m, name, value)
+        self.select_system(system)
 
     def set_feed_mode(self, gcodes: dict, words: dict) -> None:
         if 5 in gcodes:

@@ -54,11 +54,23 @@ G_REFUSED = {
     432: "G43.2 (additional tool length offset)",
     520: "G52 (local coordinate offset)",
     760: "G76 (threading cycle, spindle-synchronised)",
+    700: "G70 (lathe finishing cycle)",
+    710: "G71 (lathe roughing cycle)",
+    711: "G71.1 (lathe roughing cycle)",
+    712: "G71.2 (lathe roughing cycle)",
+    720: "G72 (lathe facing cycle)",
+    721: "G72.1 (lathe facing cycle)",
+    722: "G72.2 (lathe facing cycle)",
 }
 
 #: M codes: group as LinuxCNC numbers them (4 stop, 6 tool change, 7 spindle, 8 coolant).
 M_GROUP = {0: 4, 1: 4, 2: 4, 30: 4, 60: 4, 6: 6, 3: 7, 4: 7, 5: 7, 7: 8, 8: 8, 9: 8,
-           48: 9, 49: 9}  # fmt: skip
+           48: 9, 49: 9, 70: 10, 71: 10, 72: 10, 73: 10}  # fmt: skip
+
+#: What M70 / M73 save and M72 restores (LinuxCNC: units, plane, distance modes, feed mode,
+#: path control, F and S; the coordinate system is saved beside these, in the interpreter).
+SAVED_BY_M70 = ("plane", "scale", "absolute", "arc_absolute", "feed_mode", "feed", "feed_mm",
+                "spindle_rpm", "path_mode", "blend_mm")  # fmt: skip
 
 PLANE_OF_G = {170: "XY", 180: "ZX", 190: "YZ"}
 G_OF_PLANE = {"XY": 17, "ZX": 18, "YZ": 19}
