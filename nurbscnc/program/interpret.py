@@ -313,14 +313,13 @@ class _Interpreter(NurbsBlocks, Splines):
     # -- O-words (control flow) ---------------------------------------------------------------
     def oword(self, block: Block, frame: Frame) -> None:
         label, keyword, args, column = block.oword
-        source = frame.source
         here = frame.pc - 1
         if keyword == "":
-            if here == 0 or all(not source.block(i).words and source.block(i).oword is None
-                                for i in range(here)):  # fmt: skip
+            # A program number ("O1234", Fanuc style; LinuxCNC ignores it anywhere).
+            if not self.program_name:
                 self.program_name = f"O{label}"
-                return
-            raise self.error(f"O{label} without a keyword (sub, call, if, while, ...)", column)
+                self.note_once(("O", label), f"program number O{label} (a title; ignored)")
+            return
         if keyword in ("sub", "if", "do", "repeat") or (
             keyword == "while" and not self._is_do_tail(label, here)
         ):
@@ -805,7 +804,9 @@ class _Interpreter(NurbsBlocks, Splines):
                     tool = self.tools.get(number)
                     m.comp_radius_mm = tool.diameter_mm / 2.0 if tool is not None else 0.0
                 m.comp_d = d[0] if d is not None else None
-        if "D" in words:
+        if "D" in words and gcodes.get(14, (0,))[0] == 960:
+            used.add("D")  # G96 D: the spindle speed limit of constant surface speed
+        elif "D" in words:
             if 7 not in gcodes or gcodes[7][0] == 400:
                 raise self.error("D word with no G41/G42 to use it", words["D"][1])
             used.add("D")
@@ -933,18 +934,34 @@ class _Interpreter(NurbsBlocks, Splines):
         rotation = words["R"][0] if "R" in words else None
         machine = self.pos
         if level == 20.0:
-            # L20: the offsets that make the current position read as the given values.
-            c = self.coords
-            angle = rotation if rotation is not None else c.system_rotation_deg(system)
-            free = [machine[k] - c.tool_mm[k] for k in range(3)]
-            q = [given.get(k, self.prog[k]) + c.g92_mm[k] for k in range(3)]
-            rad = math.radians(angle)
-            qx = math.cos(rad) * q[0] - math.sin(rad) * q[1]
-            qy = math.sin(rad) * q[0] + math.cos(rad) * q[1]
-            rotated = [qx, qy, q[2]]
-            given = {k: free[k] - rotated[k] for k in given}
+            if rotation is not None:
+                raise self.error("R not allowed in G10 L20", words["R"][1])
+            given = self._l20_offsets(system, given, machine)
         self.coords.set_system(system, given, rotation)
         self.pos = machine
+
+    def _l20_offsets(self, system: int, given: dict, machine) -> dict:
+        """G10 L20: the offsets of ``system`` that make the current position read as the
+        given values there (LinuxCNC's convert_setup: X and Y through the system's rotation,
+        so both change; an axis not given keeps its current reading)."""
+        c = self.coords
+        origin = c.system_offset_mm(system)
+        rad = math.radians(c.system_rotation_deg(system))
+        cos, sin = math.cos(rad), math.sin(rad)
+        free = [machine[k] - c.tool_mm[k] - origin[k] for k in range(3)]
+        # the current position in the system's own (rotated) coordinates, G92 removed
+        now = [cos * free[0] + sin * free[1] - c.g92_mm[0],
+               -sin * free[0] + cos * free[1] - c.g92_mm[1],
+               free[2] - c.g92_mm[2]]  # fmt: skip
+        want = [given.get(k, now[k]) + c.g92_mm[k] for k in range(3)]
+        have = [now[k] + c.g92_mm[k] for k in range(3)]
+        out = {}
+        if 0 in given or 1 in given:
+            out[0] = origin[0] + (cos * have[0] - sin * have[1]) - (cos * want[0] - sin * want[1])
+            out[1] = origin[1] + (sin * have[0] + cos * have[1]) - (sin * want[0] + cos * want[1])
+        if 2 in given:
+            out[2] = origin[2] + have[2] - want[2]
+        return out
 
     def g92(self, words: dict, used: set, col: int) -> None:
         if not any(a in words for a in _AXES):

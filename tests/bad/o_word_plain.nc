@@ -1,3 +1,0 @@
-; O100 without a keyword @ 3:1
-G0 X1
-O100
