@@ -62,6 +62,16 @@ class Coordinates:
 
     def __post_init__(self):
         self.params.setdefault(SYSTEM_INDEX, 1.0)
+        self.plain = True  # no offset, rotation or tool offset: machine = program
+
+    def _update_plain(self) -> None:
+        self.plain = not (any(self.origin_mm) or any(self.g92_mm) or any(self.tool_mm)
+                          or self.rotation_deg)  # fmt: skip
+
+    def set_tool(self, offset_mm) -> None:
+        """G43 / G43.1 / G49: the tool offset [mm] along X, Y, Z."""
+        self.tool_mm = list(offset_mm)
+        self._update_plain()
 
     # -- parameters (machine units: mm) ---------------------------------------------------
     def read(self, index: int) -> float:
@@ -80,6 +90,8 @@ class Coordinates:
     # -- transforms --------------------------------------------------------------------------
     def to_machine(self, prog) -> list:
         """Machine position [mm] of a program position [mm] (see the module docstring)."""
+        if self.plain:
+            return list(prog)
         x = prog[0] + self.g92_mm[0]
         y = prog[1] + self.g92_mm[1]
         z = prog[2] + self.g92_mm[2]
@@ -92,6 +104,8 @@ class Coordinates:
 
     def to_program(self, machine) -> list:
         """Inverse of :meth:`to_machine`."""
+        if self.plain:
+            return list(machine)
         x = machine[0] - self.tool_mm[0] - self.origin_mm[0]
         y = machine[1] - self.tool_mm[1] - self.origin_mm[1]
         z = machine[2] - self.tool_mm[2] - self.origin_mm[2]
@@ -121,6 +135,7 @@ class Coordinates:
         self.params[SYSTEM_INDEX] = float(system)
         self.origin_mm = self.system_offset_mm(system)
         self.rotation_deg = self.system_rotation_deg(system)
+        self._update_plain()
 
     def set_system(self, system: int, offsets: dict, rotation_deg: float | None) -> None:
         """G10 L2 / L20: set axes (0..2 → mm) and the rotation of ``system`` (1..9)."""
@@ -137,10 +152,12 @@ class Coordinates:
         for axis, value in offsets.items():
             self.g92_mm[axis] = value
         self._store_g92(1.0)
+        self._update_plain()
 
     def clear_g92(self, keep_parameters: bool) -> None:
         """G92.1 (zero the parameters too) or G92.2 (keep them for G92.3)."""
         self.g92_mm = [0.0, 0.0, 0.0]
+        self._update_plain()
         if keep_parameters:
             self.params[G92_FLAG] = 0.0
         else:
@@ -152,6 +169,7 @@ class Coordinates:
         """G92.3: the offsets from #5211–#5213."""
         self.g92_mm = [self.params.get(G92_BASE + k, 0.0) for k in range(3)]
         self.params[G92_FLAG] = 1.0
+        self._update_plain()
 
     def _store_g92(self, flag: float) -> None:
         for k in range(3):

@@ -57,6 +57,9 @@ _AXES = ("X", "Y", "Z")
 _NORMAL_AXIS = {"XY": 2, "ZX": 1, "YZ": 0}
 _CENTER_LETTER = {0: "I", 1: "J", 2: "K"}
 _N_LOCAL = 30  # #1..#30 are a subroutine's own
+_PLAIN_WORDS = frozenset("XYZF")
+_COMMON_CODES = {float(v): 10 * v for v in (0, 1, 2, 3, 17, 18, 19, 20, 21, 40, 49, 54, 80,
+                                             90, 91, 94)}  # fmt: skip
 _MAX_PARAM = 5602
 # Bounds on values that are finite but no machine can act on (1e20 mm, a 1e300 s dwell): the
 # error names the value instead of letting it overflow or stall a later stage.
@@ -175,6 +178,8 @@ class _Interpreter(NurbsBlocks, Splines):
 
     def main_line(self) -> int:
         """The main program's line that is executing (the call line inside a called file)."""
+        if self.source is self.main:
+            return self.line_no
         for frame in self.frames:
             if frame.source is not self.main:
                 return frame.call_line
@@ -278,7 +283,7 @@ class _Interpreter(NurbsBlocks, Splines):
             self.line_no = pc + 1
             frame.pc = pc + 1
             try:
-                block = source.block(pc)
+                block = source._blocks[pc] or source.block(pc)
             except NurbsCncError as exc:
                 if source is not self.main and exc.pos is not None:
                     raise self.error(exc.message, exc.pos.column, type(exc)) from None
@@ -587,31 +592,33 @@ class _Interpreter(NurbsBlocks, Splines):
         gcodes: dict[int, tuple[int, int]] = {}  # group -> (code, column)
         mcodes: dict[int, tuple[int, int]] = {}
         for letter, raw, column in block.words:
-            value = self.evaluate(raw, column)
+            value = raw if type(raw) is float else self.evaluate(raw, column)
             if letter == "G":
                 self.read_g(value, column, gcodes)
             elif letter == "M":
                 self.read_m(value, column, mcodes)
+            elif letter in words:
+                raise self.error(f"{letter} word repeated in the block", column)
+            elif letter in "UVWOEN":
+                self._bad_letter(letter, column)
             else:
-                if letter in words:
-                    raise self.error(f"{letter} word repeated in the block", column)
-                if letter in "UVW":
-                    raise self.error(
-                        f"axis {letter} is not supported (nurbscnc drives X, Y and Z)",
-                        column,
-                        UnsupportedError,
-                    )
-                if letter == "O":
-                    raise self.error("O word must start the line (o<label> keyword)", column)
-                if letter == "E":
-                    raise self.error(f"unknown word {letter}", column)
-                if letter == "N":
-                    raise self.error("N (line number) must start the line", column)
                 words[letter] = (value, column)
         return words, gcodes, mcodes
 
+    def _bad_letter(self, letter: str, column: int):
+        if letter in "UVW":
+            raise self.error(f"axis {letter} is not supported (nurbscnc drives X, Y and Z)",
+                             column, UnsupportedError)  # fmt: skip
+        if letter == "O":
+            raise self.error("O word must start the line (o<label> keyword)", column)
+        if letter == "E":
+            raise self.error(f"unknown word {letter}", column)
+        raise self.error("N (line number) must start the line", column)
+
     def read_g(self, value: float, column: int, gcodes: dict) -> None:
-        code = self._code(value, "G", column)
+        code = _COMMON_CODES.get(value)
+        if code is None:
+            code = self._code(value, "G", column)
         if code == 22:
             # LinuxCNC's own sample G5_Curva_Stella_v1_G5.ngc opens its NURBS block with
             # "G2.2" and closes it with G5.3; we read it as G5.2 and say so.
@@ -659,6 +666,17 @@ class _Interpreter(NurbsBlocks, Splines):
     def execute(self, words: dict, gcodes: dict, mcodes: dict) -> None:
         """One block, in LinuxCNC's order (interp_execute.cc, execute_block)."""
         used: set = set()
+        # The fast path: most CAM lines are "G1 X.. Y.. F.." (same effect as the full order).
+        if not mcodes and len(gcodes) <= (1 in gcodes) and _PLAIN_WORDS.issuperset(words):
+            motion_code = gcodes.get(1)
+            motion = self.m.motion if motion_code is None else motion_code[0]
+            if (motion == 0 or motion == 10) and self.nurbs is None:
+                if "F" in words:
+                    self.set_feed(words, used)
+                self.m.motion = motion
+                if "X" in words or "Y" in words or "Z" in words:
+                    self.straight(words, False)
+                return
         self.set_feed_mode(gcodes, words)
         self.set_units(gcodes)
         self.set_feed(words, used)
@@ -842,7 +860,7 @@ class _Interpreter(NurbsBlocks, Splines):
                     used.add(letter)
         else:
             offset = [0.0, 0.0, 0.0]
-        self.coords.tool_mm = offset
+        self.coords.set_tool(offset)
         self.m.tool_offset_code = code
         self.pos = machine  # the machine stays; the program position changes
         if code == 431:
@@ -1080,8 +1098,10 @@ class _Interpreter(NurbsBlocks, Splines):
         )
 
     def emit(self, segment) -> None:
-        """Append a Line or Arc (through compensation)."""
-        self.segments.append(self.compensate(segment))
+        """Append a Line or Arc (through compensation when it is on)."""
+        if self.m.comp_mode != 400:
+            segment = self.compensate(segment)
+        self.segments.append(segment)
 
     def target_program(self, words: dict, base=None) -> list:
         """End point [mm, program coordinates] of a move: axis (or polar) words in the units
@@ -1154,21 +1174,29 @@ class _Interpreter(NurbsBlocks, Splines):
         return self.feed_mm_s
 
     def straight(self, words: dict, machine_coords: bool) -> None:
+        coords = self.coords
+        plain = coords.plain  # no offsets in force: program and machine positions agree
+        start = self.prog if plain else coords.to_machine(self.prog)
         if machine_coords:
             end = self.target(words, True)
+            end_prog = coords.to_program(end)
         else:
-            end = self.coords.to_machine(self.target_program(words))
-        start = self.pos
-        rapid = self.m.motion == 0
+            end_prog = self.target_program(words)
+            end = end_prog if plain else coords.to_machine(end_prog)
+        m = self.m
+        rapid = m.motion == 0
         feed = 0.0
         if not rapid:
-            feed = self.move_feed_mm_s(math.dist(start, end), words)
+            if m.feed_mode == 940:
+                feed = m.feed_mm / 60.0
+            else:
+                feed = self.move_feed_mm_s(math.dist(start, end), words)
             if feed <= 0.0:
                 raise self.error("G1 move with zero feed (set F first)", 1)
         if end != start:
-            self.emit(Line(tuple(start), tuple(end), feed, self.main_line(), rapid,
-                           self.m.blend_mm))  # fmt: skip
-        self.pos = end
+            line = self.line_no if self.source is self.main else self.main_line()
+            self.emit(Line(tuple(start), tuple(end), feed, line, rapid, m.blend_mm))
+        self.prog = end_prog
 
     def arc(self, words: dict, used: set) -> None:
         plane = self.m.plane

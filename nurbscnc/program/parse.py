@@ -276,33 +276,48 @@ _O_WORD = re.compile(
 _SIMPLE_ITEM = re.compile(r"([A-Za-z@^])[ \t]*(" + _NUM + r")|(\([^()\n]*\))")
 
 
+_INF = math.inf
+
+
 def _fast_block(line: str, match) -> Block:
-    """Build the block of a line that :data:`_SIMPLE_LINE` accepted."""
+    """Build the block of a line that :data:`_SIMPLE_LINE` accepted.
+
+    ``findall`` gives the items without match objects; each item's column is found with
+    ``str.find`` from the end of the previous one (a number holds no letter and no "(", so
+    the next item's first character cannot be found inside it; a comment is skipped whole).
+    """
     words = []
     comments = []
-    body_start = match.start(2)
-    for item in _SIMPLE_ITEM.finditer(match.group(2)):
-        letter = item.group(1)
-        column = body_start + item.start() + 1
-        if letter is not None:
-            text = item.group(2)
-            if " " in text or "\t" in text:
+    body = match.group(2)
+    body_start = match.start(2) + 1
+    pos = 0
+    find = body.find
+    for letter, text, comment in _SIMPLE_ITEM.findall(body):
+        if letter:
+            pos = find(letter, pos)
+            try:
+                value = float(text)  # leading / trailing blanks are fine for float()
+            except ValueError:  # blanks between digits ("1 2.5")
                 text = text.replace(" ", "").replace("\t", "")
-            value = float(text)
-            if not math.isfinite(value):
+                value = float(text)
+            if value == _INF or value == -_INF:  # e.g. 400 digits (no nan: digits only)
                 raise GCodeSyntaxError(
-                    f"number {text[:12]}... is out of range",
-                    SourcePos(0, column + item.start(2) - item.start()),
+                    f"number {text.strip()[:12]}... is out of range",
+                    SourcePos(0, body_start + pos + 1 + (len(body[pos + 1:]) -
+                                                         len(body[pos + 1:].lstrip(" \t")))),
                 )
-            words.append(Word(letter.upper(), value, column))
+            words.append(Word(letter.upper(), value, body_start + pos))
+            pos += 1
         else:
-            comments.append(("comment", item.group(3), column))
-    if match.group(3) is not None:
-        comments.append(("comment", match.group(3), match.start(3) + 1))
-    delete = match.group(1) is not None
-    if not words and not comments and not delete:
+            pos = find(comment, pos)
+            comments.append(("comment", comment, body_start + pos))
+            pos += len(comment)
+    delete, semicolon = match.group(1, 3)
+    if semicolon is not None:
+        comments.append(("comment", semicolon, match.start(3) + 1))
+    if not words and not comments and delete is None:
         return EMPTY_BLOCK
-    return Block(delete, tuple(words), (), tuple(comments))
+    return Block(delete is not None, tuple(words), (), tuple(comments))
 
 
 #: Lines longer than this (outside the plain-word fast path) are refused: LinuxCNC refuses
