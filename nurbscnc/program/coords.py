@@ -25,6 +25,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from nurbscnc.errors import UnsupportedError
+
+_AXES = ("X", "Y", "Z")
+
 G28_BASE = 5161
 G30_BASE = 5181
 G92_FLAG = 5210
@@ -191,3 +195,121 @@ class Coordinates:
 def _cos_sin(angle_deg: float) -> tuple[float, float]:
     a = math.radians(angle_deg)
     return math.cos(a), math.sin(a)
+
+
+class OffsetCommands:
+    """G10 L2/L20, G28/G30 (and .1), G92 family: a mixin of the interpreter (it provides
+    ``error``, ``m``, ``coords``, ``prog``, ``pos``, ``target_program``, ``rapid_to_program``).
+    The machine position never jumps when an offset changes: the program position follows.
+    """
+
+    def nonmodal(self, gcodes: dict, words: dict, used: set) -> bool:
+        """Group-0 codes other than G4; True when they consumed the axis words."""
+        if 0 not in gcodes:
+            return False
+        code, col = gcodes[0]
+        if code == 100:
+            self.g10(words, used, col)
+            return True
+        if code in (280, 300):
+            self.go_home(28 if code == 280 else 30, words, used)
+            return True
+        if code in (281, 301):
+            self.coords.store_home(28 if code == 281 else 30, self.pos)
+            return False
+        if code == 920:
+            self.g92(words, used, col)
+            return True
+        if code in (921, 922, 923):
+            machine = self.pos
+            if code == 923:
+                self.coords.restore_g92()
+            else:
+                self.coords.clear_g92(keep_parameters=code == 922)
+            self.pos = machine
+        return False
+
+    def g10(self, words: dict, used: set, col: int) -> None:
+        if "L" not in words:
+            raise self.error("G10 needs an L word (L2 or L20)", col)
+        level, lcol = words["L"]
+        if level not in (2.0, 20.0):
+            raise self.error(
+                f"G10 L{level:g} is not supported (tool table and other G10 forms); "
+                "only L2 and L20 (coordinate system offsets)",
+                lcol,
+                UnsupportedError,
+            )
+        if "P" not in words:
+            raise self.error(f"G10 L{level:g} needs P (0 = current, 1..9 = G54..G59.3)", col)
+        p, pcol = words["P"]
+        if p != int(p) or not 0 <= p <= 9:
+            raise self.error(f"G10 L{level:g} P{p:g}: P must be an integer 0..9", pcol)
+        used.update("LP" + ("R" if "R" in words else "") + "XYZ")
+        system = int(p) or self.coords.system
+        scale = self.m.scale
+        given = {i: words[a][0] * scale for i, a in enumerate(_AXES) if a in words}
+        rotation = words["R"][0] if "R" in words else None
+        machine = self.pos
+        if level == 20.0:
+            if rotation is not None:
+                raise self.error("R not allowed in G10 L20", words["R"][1])
+            given = self._l20_offsets(system, given, machine)
+        self.coords.set_system(system, given, rotation)
+        self.pos = machine
+
+    def _l20_offsets(self, system: int, given: dict, machine) -> dict:
+        """G10 L20: the offsets of ``system`` that make the current position read as the
+        given values there (LinuxCNC's convert_setup: X and Y through the system's rotation,
+        so both change; an axis not given keeps its current reading)."""
+        c = self.coords
+        origin = c.system_offset_mm(system)
+        rad = math.radians(c.system_rotation_deg(system))
+        cos, sin = math.cos(rad), math.sin(rad)
+        free = [machine[k] - c.tool_mm[k] - origin[k] for k in range(3)]
+        # the current position in the system's own (rotated) coordinates, G92 removed
+        now = [cos * free[0] + sin * free[1] - c.g92_mm[0],
+               -sin * free[0] + cos * free[1] - c.g92_mm[1],
+               free[2] - c.g92_mm[2]]  # fmt: skip
+        want = [given.get(k, now[k]) + c.g92_mm[k] for k in range(3)]
+        have = [now[k] + c.g92_mm[k] for k in range(3)]
+        out = {}
+        if 0 in given or 1 in given:
+            out[0] = origin[0] + (cos * have[0] - sin * have[1]) - (cos * want[0] - sin * want[1])
+            out[1] = origin[1] + (sin * have[0] + cos * have[1]) - (sin * want[0] + cos * want[1])
+        if 2 in given:
+            out[2] = origin[2] + have[2] - want[2]
+        return out
+
+    def g92(self, words: dict, used: set, col: int) -> None:
+        if not any(a in words for a in _AXES):
+            raise self.error("G92 needs at least one axis word", col)
+        machine = self.pos
+        c = self.coords
+        unshifted = [self.prog[k] + c.g92_mm[k] for k in range(3)]
+        offsets = {i: unshifted[i] - words[a][0] * self.m.scale
+                   for i, a in enumerate(_AXES) if a in words}  # fmt: skip
+        c.set_g92(offsets)
+        self.pos = machine
+        used.update(_AXES)
+
+    def go_home(self, which: int, words: dict, used: set) -> None:
+        """G28 / G30: rapid through the intermediate point (axis words) to the stored one.
+
+        With axis words only those axes go home (LinuxCNC); without, all do.
+        """
+        if self.m.comp_mode != 400:
+            raise self.error(f"G{which} with cutter compensation on")
+        home = self.coords.home_mm(which)
+        axes = [i for i, a in enumerate(_AXES) if a in words]
+        if axes:
+            middle = self.target_program(words)
+            self.rapid_to_program(middle)
+            machine = self.pos
+            for i in axes:
+                machine[i] = home[i]
+        else:
+            machine = list(home)
+        self.rapid_to_program(self.coords.to_program(machine))
+        used.update(_AXES)
+

@@ -16,7 +16,6 @@ plug in at :meth:`_Interpreter.canned_cycle` and :meth:`_Interpreter.compensate`
 from __future__ import annotations
 
 import math
-import os
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -33,7 +32,7 @@ from nurbscnc.geometry.segments import (
     vec3,
 )
 from nurbscnc.program import arcs, coords
-from nurbscnc.program.control import Frame, Source
+from nurbscnc.program.control import N_LOCAL, ControlFlow, Frame, Source
 from nurbscnc.program.expressions import ExpressionError, evaluate
 from nurbscnc.program.modal import (
     CANNED_CYCLES,
@@ -56,7 +55,6 @@ __all__ = ["InterpretOptions", "interpret", "interpret_text", "g5_knot_vector", 
 _AXES = ("X", "Y", "Z")
 _NORMAL_AXIS = {"XY": 2, "ZX": 1, "YZ": 0}
 _CENTER_LETTER = {0: "I", 1: "J", 2: "K"}
-_N_LOCAL = 30  # #1..#30 are a subroutine's own
 _PLAIN_WORDS = frozenset("XYZF")
 _COMMON_CODES = {float(v): 10 * v for v in (0, 1, 2, 3, 17, 18, 19, 20, 21, 40, 49, 54, 80,
                                              90, 91, 94)}  # fmt: skip
@@ -97,7 +95,7 @@ def interpret_text(text: str, options: InterpretOptions | None = None) -> Progra
     return interpret(None, split_lines(text), options or InterpretOptions())
 
 
-class _Interpreter(NurbsBlocks, Splines):
+class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
     """The executor. One instance per call of :func:`interpret` (local state)."""
 
     def __init__(self, lines, options: InterpretOptions):
@@ -120,6 +118,9 @@ class _Interpreter(NurbsBlocks, Splines):
         self.ended = False
         self.loop_count = 0
         self.program_name = ""
+        self.loaded: dict[str, Source] = {}  # subroutine files read, by label
+        self.m70_state = None  # modal state saved by M70
+        self.axes_consumed = False  # the block's axis words were data (G43.1), not a move
         tools = dict(options.tools or {})
         for number, length in (options.tool_lengths_mm or {}).items():
             tools.setdefault(int(number), Tool(int(number), (0.0, 0.0, float(length))))
@@ -193,7 +194,7 @@ class _Interpreter(NurbsBlocks, Splines):
     # -- parameters -----------------------------------------------------------------------
     def read_numbered(self, index_f: float) -> float:
         index = self._param_index(index_f)
-        if index <= _N_LOCAL:
+        if index <= N_LOCAL:
             return self.params.get(index, 0.0)
         if coords.is_coordinate_parameter(index):
             return self.coords.read(index)
@@ -314,248 +315,6 @@ class _Interpreter(NurbsBlocks, Splines):
                 f"knot count must equal control points + order "
                 f"({len(build.points)} + {build.order} = {len(build.points) + build.order})"
             )
-
-    # -- O-words (control flow) ---------------------------------------------------------------
-    def oword(self, block: Block, frame: Frame) -> None:
-        label, keyword, args, column = block.oword
-        here = frame.pc - 1
-        if keyword == "":
-            # A program number ("O1234", Fanuc style; LinuxCNC ignores it anywhere).
-            if not self.program_name:
-                self.program_name = f"O{label}"
-                self.note_once(("O", label), f"program number O{label} (a title; ignored)")
-            return
-        if keyword in ("sub", "if", "do", "repeat") or (
-            keyword == "while" and not self._is_do_tail(label, here)
-        ):
-            self._check_unique(label, here, column)
-        handler = getattr(self, "o_" + keyword)
-        handler(label, args, column, frame, here)
-
-    def _check_unique(self, label: str, here: int, column: int) -> None:
-        """LinuxCNC: one label, one construct ("duplicate O-word label")."""
-        checked = self.source.checked
-        if here in checked:
-            return
-        indexes, kinds = self.source.labels()[label]
-        # Subroutine names and control labels are separate name spaces (LinuxCNC accepts
-        # "O101 repeat" and "O101 sub" in one file).
-        heads = ("sub",) if self.source.block(here).oword.keyword == "sub" else (
-            "if", "while", "do", "repeat")  # fmt: skip
-        for index, kind in zip(indexes, kinds):
-            if index >= here or kind not in heads:
-                continue
-            if kind == "while" and self._is_do_tail(label, index):
-                continue
-            if kind == "while" and index > here and self.source.block(here).oword.keyword == "do":
-                continue
-            raise self.error(f"duplicate O-word label o{label} (also defined on line {index + 1})",
-                             column)  # fmt: skip
-        checked.add(here)
-
-    def _cond(self, args, column: int, keyword: str) -> float:
-        if len(args) != 1:
-            raise self.error(f"{keyword} needs one [condition]", column)
-        return self.evaluate(args[0], column)
-
-    def _jump_target(self, label, after, keywords, column, what) -> int:
-        target = self.source.find(label, after, keywords)
-        if target is None:
-            raise self.error(f"o{label} {what}", column)
-        return target
-
-    def _count_loop(self, column: int) -> None:
-        self.loop_count += 1
-        if self.loop_count > self.options.max_loop_iterations:
-            raise self.error(
-                f"more than {self.options.max_loop_iterations} loop iterations "
-                f"(an endless loop?)",
-                column,
-            )
-
-    def o_sub(self, label, args, column, frame, here) -> None:
-        # A definition met in the flow: skip to after its endsub.
-        end = self._jump_target(label, here, ("endsub",), column, "sub without endsub")
-        frame.pc = end + 1
-
-    def o_endsub(self, label, args, column, frame, here) -> None:
-        self._return(label, args, column, frame)
-
-    def o_return(self, label, args, column, frame, here) -> None:
-        self._return(label, args, column, frame)
-
-    def _return(self, label, args, column, frame) -> None:
-        if len(self.frames) == 1:
-            raise self.error(f"o{label} return/endsub outside a subroutine", column)
-        value = self.evaluate(args[0], column) if args else None
-        self.frames.pop()
-        if frame.m73_state is not None:
-            self.restore_state(frame.m73_state)
-        caller = self.frames[-1]
-        for k, v in enumerate(frame.saved_params, 1):
-            if v is None:
-                self.params.pop(k, None)
-            else:
-                self.params[k] = v
-        caller.pc = frame.return_to
-        self.globals["_value"] = value if value is not None else 0.0
-        self.globals["_value_returned"] = 1.0 if value is not None else 0.0
-
-    def o_call(self, label, args, column, frame, here) -> None:
-        if len(self.frames) > self.options.max_call_depth:
-            raise self.error(
-                f"o{label} call: more than {self.options.max_call_depth} nested calls "
-                f"(endless recursion?)",
-                column,
-            )
-        if len(args) > _N_LOCAL:
-            raise self.error(f"o{label} call with more than {_N_LOCAL} arguments", column)
-        values = [self.evaluate(a, column) for a in args]
-        source, start = self._find_sub(label, column)
-        saved = [self.params.get(k) for k in range(1, _N_LOCAL + 1)]
-        for k in range(1, _N_LOCAL + 1):
-            self.params[k] = values[k - 1] if k <= len(values) else 0.0
-        call_line = self.main_line() if self.source is self.main else self.main_line()
-        self.frames.append(Frame(source, start + 1, label, call_line, frame.pc, saved))
-        self.globals["_value_returned"] = 0.0
-
-    def _find_sub(self, label: str, column: int) -> tuple[Source, int]:
-        for source in (self.source, self.main):
-            start = source.sub_start(label)
-            if start is not None:
-                return source, start
-        loaded = getattr(self, "_loaded", {})
-        self._loaded = loaded
-        if label in loaded:
-            return loaded[label], loaded[label].sub_start(label)
-        load = self.options.load_subroutine
-        name = label[1:-1] if label.startswith("<") else label
-        found = load(name) if (load is not None and label.startswith("<")) else None
-        if found is None:
-            raise self.error(
-                f"subroutine o{label} is not defined"
-                + (f" (and no file {name}.ngc was found)" if label.startswith("<") else ""),
-                column,
-            )
-        text, file_name = found
-        source = Source(split_lines(text), os.path.basename(file_name), self.main_line())
-        start = source.sub_start(label)
-        if start is None:
-            raise self.error(f"file {file_name} does not define o{label} sub", column)
-        loaded[label] = source
-        return source, start
-
-    def o_if(self, label, args, column, frame, here) -> None:
-        if self._cond(args, column, "if"):
-            return
-        # Try the elseif conditions in turn, then else, then endif.
-        at = here
-        while True:
-            nxt = self._jump_target(label, at, ("elseif", "else", "endif"), column,
-                                    "if without endif")  # fmt: skip
-            blk = self.source.block(nxt)
-            if blk.oword.keyword == "elseif":
-                saved = self.line_no
-                self.line_no = nxt + 1
-                ok = self._cond(blk.oword.args, blk.oword.column, "elseif")
-                self.line_no = saved
-                if ok:
-                    frame.pc = nxt + 1
-                    return
-                at = nxt
-                continue
-            frame.pc = nxt + 1
-            return
-
-    def o_elseif(self, label, args, column, frame, here) -> None:
-        # Reached by running off the end of a taken branch: skip to endif.
-        frame.pc = self._jump_target(label, here, ("endif",), column, "elseif without endif") + 1
-
-    def o_else(self, label, args, column, frame, here) -> None:
-        frame.pc = self._jump_target(label, here, ("endif",), column, "else without endif") + 1
-
-    def o_endif(self, label, args, column, frame, here) -> None:
-        pass
-
-    def _is_do_tail(self, label: str, here: int) -> bool:
-        """A ``while`` that closes a ``do`` loop (no endwhile follows for it)."""
-        tails = self.source.do_tails
-        if here not in tails:
-            do = self.source.find_before(label, here, ("do",))
-            tail = do is not None and (
-                self.source.find(label, do, ("while", "endwhile")) == here
-                and self.source.find(label, here, ("endwhile",)) is None
-            )
-            tails[here] = tail
-        return tails[here]
-
-    def o_while(self, label, args, column, frame, here) -> None:
-        if self._is_do_tail(label, here):
-            if self._cond(args, column, "while"):
-                self._count_loop(column)
-                frame.pc = self.source.find_before(label, here, ("do",)) + 1
-            return
-        if not self._cond(args, column, "while"):
-            end = self._jump_target(label, here, ("endwhile",), column, "while without endwhile")
-            frame.pc = end + 1
-
-    def o_endwhile(self, label, args, column, frame, here) -> None:
-        head = self.source.find_before(label, here, ("while",))
-        if head is None:
-            raise self.error(f"o{label} endwhile without while", column)
-        self._count_loop(column)
-        frame.pc = head
-
-    def o_do(self, label, args, column, frame, here) -> None:
-        self._jump_target(label, here, ("while",), column, "do without while")
-
-    def o_repeat(self, label, args, column, frame, here) -> None:
-        count = self._cond(args, column, "repeat")
-        end = self._jump_target(label, here, ("endrepeat",), column, "repeat without endrepeat")
-        turns = int(count) if count > 0 else 0
-        if turns <= 0:
-            frame.pc = end + 1
-            return
-        frame.repeat_left[here] = turns
-
-    def o_endrepeat(self, label, args, column, frame, here) -> None:
-        head = self.source.find_before(label, here, ("repeat",))
-        if head is None:
-            raise self.error(f"o{label} endrepeat without repeat", column)
-        left = frame.repeat_left.get(head, 1) - 1
-        if left > 0:
-            self._count_loop(column)
-            frame.repeat_left[head] = left
-            frame.pc = head + 1
-        else:
-            frame.repeat_left.pop(head, None)
-
-    def _loop_of(self, label, here, column, what):
-        """(head index, keyword, end index) of the loop ``label`` that contains ``here``."""
-        head = self.source.find_before(label, here, ("while", "do", "repeat"))
-        if head is None:
-            raise self.error(f"o{label} {what} outside a loop", column)
-        kind = self.source.block(head).oword.keyword
-        if kind == "do":
-            end = self.source.find(label, head, ("while",))
-        elif kind == "while" and self._is_do_tail(label, head):
-            raise self.error(f"o{label} {what} outside a loop", column)
-        else:
-            end = self.source.find(label, head, ("endwhile" if kind == "while" else "endrepeat",))
-        if end is None:
-            raise self.error(f"o{label} {what}: the loop has no end", column)
-        return head, kind, end
-
-    def o_break(self, label, args, column, frame, here) -> None:
-        head, kind, end = self._loop_of(label, here, column, "break")
-        frame.repeat_left.pop(head, None)
-        frame.pc = end + 1
-
-    def o_continue(self, label, args, column, frame, here) -> None:
-        head, kind, end = self._loop_of(label, here, column, "continue")
-        self._count_loop(column)
-        # while: re-test at the head; do: test at the tail; repeat: count at endrepeat.
-        frame.pc = head if kind == "while" else end
 
     # -- the block ----------------------------------------------------------------------------
     def block(self, block: Block) -> None:
@@ -724,7 +483,7 @@ class _Interpreter(NurbsBlocks, Splines):
         elif code == 71:
             self.m70_state = None
         else:
-            state = getattr(self, "m70_state", None)
+            state = self.m70_state
             if state is None:
                 raise self.error("M72 with no state saved by M70", column)
             self.restore_state(state)
@@ -864,7 +623,7 @@ class _Interpreter(NurbsBlocks, Splines):
         self.m.tool_offset_code = code
         self.pos = machine  # the machine stays; the program position changes
         if code == 431:
-            self._consumed_axes = True  # its axis words were the offsets, not a move
+            self.axes_consumed = True  # its axis words were the offsets, not a move
 
     def select_system(self, system: int) -> None:
         machine = self.pos
@@ -902,117 +661,6 @@ class _Interpreter(NurbsBlocks, Splines):
                     )
                 used.add(letter)
 
-    # -- non-modal group 0: G10, G28, G30, G92, G53 ---------------------------------------------
-    def nonmodal(self, gcodes: dict, words: dict, used: set) -> bool:
-        """Group-0 codes other than G4; True when they consumed the axis words."""
-        if 0 not in gcodes:
-            return False
-        code, col = gcodes[0]
-        if code == 100:
-            self.g10(words, used, col)
-            return True
-        if code in (280, 300):
-            self.go_home(28 if code == 280 else 30, words, used)
-            return True
-        if code in (281, 301):
-            self.coords.store_home(28 if code == 281 else 30, self.pos)
-            return False
-        if code == 920:
-            self.g92(words, used, col)
-            return True
-        if code in (921, 922, 923):
-            machine = self.pos
-            if code == 923:
-                self.coords.restore_g92()
-            else:
-                self.coords.clear_g92(keep_parameters=code == 922)
-            self.pos = machine
-        return False
-
-    def g10(self, words: dict, used: set, col: int) -> None:
-        if "L" not in words:
-            raise self.error("G10 needs an L word (L2 or L20)", col)
-        level, lcol = words["L"]
-        if level not in (2.0, 20.0):
-            raise self.error(
-                f"G10 L{level:g} is not supported (tool table and other G10 forms); "
-                "only L2 and L20 (coordinate system offsets)",
-                lcol,
-                UnsupportedError,
-            )
-        if "P" not in words:
-            raise self.error(f"G10 L{level:g} needs P (0 = current, 1..9 = G54..G59.3)", col)
-        p, pcol = words["P"]
-        if p != int(p) or not 0 <= p <= 9:
-            raise self.error(f"G10 L{level:g} P{p:g}: P must be an integer 0..9", pcol)
-        used.update("LP" + ("R" if "R" in words else "") + "XYZ")
-        system = int(p) or self.coords.system
-        scale = self.m.scale
-        given = {i: words[a][0] * scale for i, a in enumerate(_AXES) if a in words}
-        rotation = words["R"][0] if "R" in words else None
-        machine = self.pos
-        if level == 20.0:
-            if rotation is not None:
-                raise self.error("R not allowed in G10 L20", words["R"][1])
-            given = self._l20_offsets(system, given, machine)
-        self.coords.set_system(system, given, rotation)
-        self.pos = machine
-
-    def _l20_offsets(self, system: int, given: dict, machine) -> dict:
-        """G10 L20: the offsets of ``system`` that make the current position read as the
-        given values there (LinuxCNC's convert_setup: X and Y through the system's rotation,
-        so both change; an axis not given keeps its current reading)."""
-        c = self.coords
-        origin = c.system_offset_mm(system)
-        rad = math.radians(c.system_rotation_deg(system))
-        cos, sin = math.cos(rad), math.sin(rad)
-        free = [machine[k] - c.tool_mm[k] - origin[k] for k in range(3)]
-        # the current position in the system's own (rotated) coordinates, G92 removed
-        now = [cos * free[0] + sin * free[1] - c.g92_mm[0],
-               -sin * free[0] + cos * free[1] - c.g92_mm[1],
-               free[2] - c.g92_mm[2]]  # fmt: skip
-        want = [given.get(k, now[k]) + c.g92_mm[k] for k in range(3)]
-        have = [now[k] + c.g92_mm[k] for k in range(3)]
-        out = {}
-        if 0 in given or 1 in given:
-            out[0] = origin[0] + (cos * have[0] - sin * have[1]) - (cos * want[0] - sin * want[1])
-            out[1] = origin[1] + (sin * have[0] + cos * have[1]) - (sin * want[0] + cos * want[1])
-        if 2 in given:
-            out[2] = origin[2] + have[2] - want[2]
-        return out
-
-    def g92(self, words: dict, used: set, col: int) -> None:
-        if not any(a in words for a in _AXES):
-            raise self.error("G92 needs at least one axis word", col)
-        machine = self.pos
-        c = self.coords
-        unshifted = [self.prog[k] + c.g92_mm[k] for k in range(3)]
-        offsets = {i: unshifted[i] - words[a][0] * self.m.scale
-                   for i, a in enumerate(_AXES) if a in words}  # fmt: skip
-        c.set_g92(offsets)
-        self.pos = machine
-        used.update(_AXES)
-
-    def go_home(self, which: int, words: dict, used: set) -> None:
-        """G28 / G30: rapid through the intermediate point (axis words) to the stored one.
-
-        With axis words only those axes go home (LinuxCNC); without, all do.
-        """
-        if self.m.comp_mode != 400:
-            raise self.error(f"G{which} with cutter compensation on")
-        home = self.coords.home_mm(which)
-        axes = [i for i, a in enumerate(_AXES) if a in words]
-        if axes:
-            middle = self.target_program(words)
-            self.rapid_to_program(middle)
-            machine = self.pos
-            for i in axes:
-                machine[i] = home[i]
-        else:
-            machine = list(home)
-        self.rapid_to_program(self.coords.to_program(machine))
-        used.update(_AXES)
-
     # -- motion ---------------------------------------------------------------------------------
     def motion_block(self, gcodes, words, used, axes_consumed: bool) -> None:
         motion_code = gcodes.get(1)
@@ -1033,8 +681,8 @@ class _Interpreter(NurbsBlocks, Splines):
                     raise self.error("axis words with G80 (motion cancelled)", col)
             else:
                 self.m.motion = code
-        if getattr(self, "_consumed_axes", False):
-            self._consumed_axes = False
+        if self.axes_consumed:
+            self.axes_consumed = False
             axes_consumed = True
         for letter in "@^":
             if letter in words:
