@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from nurbscnc.geometry.segments import Pause
 from nurbscnc.program.interpret import InterpretOptions, interpret_text
 from nurbscnc.program.tooltable import Tool
 
@@ -59,7 +60,7 @@ def linuxcnc_moves(data: dict) -> list[dict]:
 def compare(path: Path, data: dict) -> None:
     assert data["error"] is None, data["error"]
     prog = ours(path)
-    segments = [s for s in prog.segments if s.kind != "pause"]
+    segments = [s for s in prog.segments if not isinstance(s, Pause)]
     theirs = linuxcnc_moves(data)
     assert [(s.kind, s.line) for s in segments] == [(m["kind"], m["line"]) for m in theirs]
     inverse_time = "G93" in path.read_text()

@@ -241,7 +241,7 @@ def program_summary(prog: Program) -> dict:
                 plane=seg.plane,
             )
             points.append(np.asarray(seg.control_points_mm))
-        elif seg.kind not in ("dwell", "pause"):
+        elif seg.kind != "dwell":
             points.append(np.asarray([seg.start_mm, seg.end_mm], dtype=float))
         if seg.kind == "arc":
             # The bounding box of an arc includes its extreme points: sample it finely.
@@ -252,7 +252,7 @@ def program_summary(prog: Program) -> dict:
             points.append(geom.point(u))
         if seg.kind == "rapid":
             rapid_len += length
-        elif seg.kind not in ("dwell", "pause"):
+        elif seg.kind != "dwell":
             feed_len += length
             feeds.append(seg.feed_mm_s)
         segments.append(entry)
