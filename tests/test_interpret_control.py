@@ -312,3 +312,11 @@ G1 X2
     got = segs(prog)
     np.testing.assert_allclose([s.end_mm[0] for s in got], [25.4, 1.0, 26.4, 2.0], atol=1e-12)
     assert [s.feed_mm_s * 60 for s in got] == pytest.approx([5 * 25.4, 200, 200, 200])
+
+
+def test_exists_of_numbered_parameters():
+    """LinuxCNC's tests/interp/exists (its expected output: X1 Z1, then X1 Z0): EXISTS[#n]
+    says whether n is a parameter number."""
+    prog = ("#<a>=999\nG0 X EXISTS[#1] Y EXISTS[#99999] Z EXISTS[#<a>]\n#1=2\n#2=99999\n"
+            "G0 X EXISTS[##1] Y EXISTS[##2] Z EXISTS[###1]\n")  # fmt: skip
+    np.testing.assert_array_equal(ends(prog), [[1, 0, 1], [1, 0, 0]])

@@ -16,6 +16,9 @@ from collections.abc import Callable
 
 from nurbscnc.errors import ProgramError
 
+#: The highest parameter number (LinuxCNC: RS274NGC_MAX_PARAMETERS − 1).
+MAX_PARAMETER = 5602
+
 
 class ExpressionError(ProgramError):
     """An expression cannot be evaluated (division by zero, domain, overflow)."""
@@ -147,6 +150,8 @@ def _evaluate(expr, numbered, named, exists) -> float:
                 r = _binop(op[1], a, b)
             elif kind == "fn":
                 r = _func(op[1], values.pop())
+            elif kind == "existsn":
+                r = 1.0 if 1 <= round(values.pop()) <= MAX_PARAMETER else 0.0
             else:  # atan
                 x = values.pop()
                 y = values.pop()
@@ -166,7 +171,7 @@ def _evaluate(expr, numbered, named, exists) -> float:
             push(("apply", node))
             push(node[2])
             push(node[1])
-        else:  # "#", "neg", "fn": one operand (the last element)
+        else:  # "#", "neg", "fn", "existsn": one operand (the last element)
             push(("apply", node))
             push(node[-1])
     return values[-1]

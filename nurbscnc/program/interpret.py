@@ -33,7 +33,7 @@ from nurbscnc.geometry.segments import (
 )
 from nurbscnc.program import arcs, coords
 from nurbscnc.program.control import N_LOCAL, ControlFlow, Frame, Source
-from nurbscnc.program.expressions import ExpressionError, evaluate
+from nurbscnc.program.expressions import MAX_PARAMETER, ExpressionError, evaluate
 from nurbscnc.program.modal import (
     CANNED_CYCLES,
     G_GROUP,
@@ -58,7 +58,6 @@ _CENTER_LETTER = {0: "I", 1: "J", 2: "K"}
 _PLAIN_WORDS = frozenset("XYZF")
 _COMMON_CODES = {float(v): 10 * v for v in (0, 1, 2, 3, 17, 18, 19, 20, 21, 40, 49, 54, 80,
                                              90, 91, 94)}  # fmt: skip
-_MAX_PARAM = 5602
 # Bounds on values that are finite but no machine can act on (1e20 mm, a 1e300 s dwell): the
 # error names the value instead of letting it overflow or stall a later stage.
 MAX_COORD_MM = 1e9  # 1000 km
@@ -212,8 +211,8 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
 
     def _param_index(self, index_f: float) -> int:
         index = int(round(index_f))
-        if not 1 <= index <= _MAX_PARAM:
-            raise ExpressionError(f"parameter number #{index_f:g} out of range 1..{_MAX_PARAM}")
+        if not 1 <= index <= MAX_PARAMETER:
+            raise ExpressionError(f"parameter number #{index_f:g} out of range 1..{MAX_PARAMETER}")
         return index
 
     def read_named(self, name: str) -> float:

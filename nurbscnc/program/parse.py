@@ -9,7 +9,8 @@ the interpreter evaluates with the parameter values in force on that line.
 Expression tuples:
 ``("#", ref)`` numbered parameter, ``("<", name)`` named parameter, ``("neg", v)``,
 ``("op", OP, a, b)`` with OP one of + - * / MOD ** EQ NE GT GE LT LE AND OR XOR,
-``("fn", NAME, v)``, ``("atan", y, x)``, ``("exists", name)``.
+``("fn", NAME, v)``, ``("atan", y, x)``, ``("exists", name)``, ``("existsn", index)``
+(EXISTS[#n]: is n a parameter number).
 """
 
 from __future__ import annotations
@@ -182,6 +183,9 @@ class _ToBlocks(Transformer):
 
     def exists(self, children):
         return ("exists", _param_name(children[1]))
+
+    def exists_numbered(self, children):
+        return ("existsn", children[1])
 
 
 def _label_name(token) -> str:
