@@ -320,3 +320,27 @@ def test_exists_of_numbered_parameters():
     prog = ("#<a>=999\nG0 X EXISTS[#1] Y EXISTS[#99999] Z EXISTS[#<a>]\n#1=2\n#2=99999\n"
             "G0 X EXISTS[##1] Y EXISTS[##2] Z EXISTS[###1]\n")  # fmt: skip
     np.testing.assert_array_equal(ends(prog), [[1, 0, 1], [1, 0, 0]])
+
+
+def test_check_finds_subroutine_files(tmp_path):
+    """``check``: o<name> call reads name.ngc beside the program, then --subroutine-path."""
+    import json
+
+    from click.testing import CliRunner
+
+    from nurbscnc.cli.main import main
+
+    (tmp_path / "lib").mkdir()
+    (tmp_path / "beside.ngc").write_text("o<beside> sub\nG1 X#1 F100\no<beside> endsub\n")
+    (tmp_path / "lib" / "far.ngc").write_text("o<far> sub\nG1 Y#1 F100\no<far> endsub\nM2\n")
+    (tmp_path / "main.ngc").write_text("o<beside> call [2]\no<far> call [3]\nM2\n")
+    runner = CliRunner()
+    missing = runner.invoke(main, ["check", "--json", str(tmp_path / "main.ngc")])
+    assert missing.exit_code == 2
+    assert "no file far.ngc was found" in json.loads(missing.stdout)["errors"][0]["message"]
+    found = runner.invoke(main, ["check", "--json", "--subroutine-path", str(tmp_path / "lib"),
+                                 str(tmp_path / "main.ngc")])  # fmt: skip
+    assert found.exit_code == 0, found.stderr
+    data = json.loads(found.stdout)
+    assert [(s["kind"], s["line"]) for s in data["segments"]] == [("line", 1), ("line", 2)]
+    assert data["bounding_box_mm"]["max"] == [2.0, 3.0, 0.0]
