@@ -444,6 +444,8 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
             self.m.tool_loaded = self.m.tool_selected  # M6
         if 10 in mcodes:
             self.modal_save_restore(*mcodes[10])
+        if mcodes.get(7, (0,))[0] == 19:
+            used.update("RQP")  # M19 R<angle> Q<timeout> P<direction>: spindle orientation
         self.dwell(gcodes, words, used)
         if 2 in gcodes:
             self.m.plane = PLANE_OF_G[gcodes[2][0]]
