@@ -143,3 +143,29 @@ def record(path):
 
 if __name__ == "__main__":
     print(json.dumps(record(sys.argv[1])))
+
+
+def record_rs274(path, tool_table):
+    """The same moves from LinuxCNC's stand-alone ``rs274 -t TABLE -g FILE`` (4 decimals).
+
+    Used where the gcode module cannot go: it reads tool data from LinuxCNC's shared tool
+    database, absent outside a running LinuxCNC (a T word crashes it), while rs274 reads a
+    tool table file. rs274's machine unit is the inch (tool table values are inches) and it
+    prints program coordinates (mm here) without the tool length offset, which is added.
+    """
+    import re
+    import subprocess
+
+    out = subprocess.run(["rs274", "-t", str(tool_table), "-g", str(path)], capture_output=True,
+                         text=True, check=False).stdout  # fmt: skip
+    numbers = re.compile(r"-?\d+\.\d+")
+    tlo = [0.0, 0.0, 0.0]
+    moves = []
+    for text in out.splitlines():
+        if "USE_TOOL_LENGTH_OFFSET(" in text:
+            tlo = [float(v) for v in numbers.findall(text)[:3]]
+        for call, kind in (("STRAIGHT_TRAVERSE(", "rapid"), ("STRAIGHT_FEED(", "line")):
+            if call in text:
+                p = [float(v) for v in numbers.findall(text.split(call, 1)[1])[:3]]
+                moves.append({"kind": kind, "end": [p[k] + tlo[k] for k in range(3)]})
+    return {"moves": moves, "error": None if "PROGRAM_END" in out else "no PROGRAM_END"}

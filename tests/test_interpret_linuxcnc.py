@@ -122,3 +122,44 @@ def test_splines_are_linuxcnc_curves():
         u = np.arange(1, len(points) + 1) / len(points)
         ours_at_u = NurbsCurve.from_segment(seg).point(u)
         np.testing.assert_allclose(ours_at_u, points, rtol=0, atol=TOL_MM, err_msg=str(line))
+
+
+# -- tool length offsets, against rs274 (the gcode module has no tool table) ------------------
+RS274 = HERE / "golden" / "interp_rs274"
+
+
+def _rs274_tools() -> dict:
+    """The tool table of interp_rs274/tools.tbl: inches there (rs274's unit), mm here."""
+    from nurbscnc.program.tooltable import parse_tool_table
+
+    table = parse_tool_table((RS274 / "tools.tbl").read_text())
+    return {n: Tool(n, tuple(v * 25.4 for v in t.offset_mm), t.diameter_mm * 25.4)
+            for n, t in table.items()}  # fmt: skip
+
+
+def compare_rs274(data: dict) -> None:
+    assert data["error"] is None, data["error"]
+    prog = interpret_text((RS274 / "tools.ngc").read_text(), InterpretOptions(tools=_rs274_tools()))
+    assert [s.kind for s in prog.segments] == [m["kind"] for m in data["moves"]]
+    for seg, move in zip(prog.segments, data["moves"]):
+        # rs274 prints 4 decimals of mm: half a unit of the last digit
+        np.testing.assert_allclose(seg.end_mm, move["end"], rtol=0, atol=5e-5, err_msg=seg.line)
+
+
+def test_tool_offsets_golden():
+    compare_rs274(json.loads((RS274 / "tools.json").read_text()))
+
+
+def test_tool_offsets_live():
+    import shutil
+
+    if shutil.which("rs274") is None:
+        pytest.skip("live rs274 comparison skipped: LinuxCNC's rs274 is not installed")
+    import sys
+
+    sys.path.insert(0, str(HERE))
+    try:
+        import linuxcnc_canon
+    finally:
+        sys.path.remove(str(HERE))
+    compare_rs274(linuxcnc_canon.record_rs274(RS274 / "tools.ngc", RS274 / "tools.tbl"))
