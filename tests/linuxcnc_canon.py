@@ -31,6 +31,7 @@ class Canon:
         self.feed = 0.0
         self.plane = 1
         self.tlo = [0.0] * 3
+        self.feed_mode = 0  # CANON_FEED_MODE: 0 units/min, 1 inverse time, 2 units/rev
 
     def next_line(self, st):
         self.line = st.sequence_number
@@ -70,7 +71,7 @@ class Canon:
         self.feed = f
 
     def set_feed_mode(self, *a):
-        pass
+        self.feed_mode = a[-1]
 
     def set_traverse_rate(self, *a):
         pass
@@ -103,7 +104,7 @@ class Canon:
 
     def straight_feed(self, *a):
         self.out.append({"kind": "line", "line": self.line, "end": self.machine(a),
-                         "feed_mm_min": self.feed * IN})
+                         "feed_mm_min": self.feed * IN, "feed_mode": self.feed_mode})
 
     def straight_probe(self, *a):
         self.out.append({"kind": "probe", "line": self.line})
@@ -124,7 +125,7 @@ class Canon:
             end, cen = [e2, e3, e1], [c2, e3, c1]
         self.out.append({"kind": "arc", "line": self.line, "end": self.machine(end),
                          "center": self.machine(cen), "turn": turn,
-                         "feed_mm_min": self.feed * IN})
+                         "feed_mm_min": self.feed * IN, "feed_mode": self.feed_mode})
 
 
 def record(path):

@@ -128,12 +128,16 @@ def test_inch_input_equals_mm_input_times_25_4(seed):
 
 
 def test_units_switch_mid_program():
-    (line1, line2) = segs("G20 G1 X1 F10\nG21 X30")
+    """LinuxCNC (its gcode module, checked): F is read before G20/G21 in a block (RS274/NGC
+    order: feed rate at step 3, units at step 12), and a feed keeps its physical value when
+    the units change."""
+    (line1, line2, line3) = segs("G20 G1 X1 F10\nG21 X30\nG20\nF10 X2")
     assert line1.end_mm == (25.4, 0.0, 0.0)
-    assert line1.feed_mm_s == pytest.approx(10 * 25.4 / 60, rel=1e-15)
+    assert line1.feed_mm_s == pytest.approx(10 / 60, rel=1e-15)  # F10 in mm/min
     assert line2.end_mm == (30.0, 0.0, 0.0)
-    # The feed keeps its mm/s value: F was given in inches per minute.
     assert line2.feed_mm_s == line1.feed_mm_s
+    assert line3.end_mm == (50.8, 0.0, 0.0)
+    assert line3.feed_mm_s == pytest.approx(10 * 25.4 / 60, rel=1e-15)  # G20 was in force
 
 
 # -- G5.2 knots ------------------------------------------------------------------------------

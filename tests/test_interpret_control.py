@@ -297,7 +297,8 @@ def test_m70_m72_m73_save_and_restore_modal_state():
     """LinuxCNC's nc_files/m70m72-demo.ngc in short: state saved, changed, restored."""
     prog = """G21 G90 F200
 M70
-G20 G91 F5
+G20 G91
+F5
 G1 X1
 M72
 G1 X1
@@ -344,3 +345,15 @@ def test_check_finds_subroutine_files(tmp_path):
     data = json.loads(found.stdout)
     assert [(s["kind"], s["line"]) for s in data["segments"]] == [("line", 1), ("line", 2)]
     assert data["bounding_box_mm"]["max"] == [2.0, 3.0, 0.0]
+
+
+def test_inverse_time_and_per_revolution_feeds():
+    """G93: F is 1/minutes, so a move of length L takes 1/F min: feed = L·F/60 mm/s (arcs by
+    their length). G95: F mm per revolution at S rpm: F·S mm/min."""
+    got = segs("G93 G1 X30 Y40 F2\nG2 X50 Y40 I10 J0 F3\nG94 F600 G1 X0\n"
+               "S1000 G95 G1 X10 F0.2\nG20\nG1 X1 F0.01\n")  # fmt: skip
+    assert got[0].feed_mm_s == pytest.approx(50.0 * 2 / 60, rel=1e-15)
+    assert got[1].feed_mm_s == pytest.approx(np.pi * 10 * 3 / 60, rel=1e-14)
+    assert got[2].feed_mm_s == pytest.approx(10.0, rel=1e-15)
+    assert got[3].feed_mm_s == pytest.approx(0.2 * 1000 / 60, rel=1e-15)
+    assert got[4].feed_mm_s == pytest.approx(0.01 * 25.4 * 1000 / 60, rel=1e-15)

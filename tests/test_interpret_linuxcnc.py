@@ -7,8 +7,9 @@ committed, so the comparison runs without LinuxCNC; ``test_live_*`` re-records e
 with the installed LinuxCNC and skips, saying why, when it is not installed.
 
 Compared: the kind and source line of every move; end points and arc centres to 1e-9 mm;
-arc direction and turn count; feeds [mm/min] to 1e-9 relative (not under G93, whose F
-LinuxCNC passes through as given); dwell times. LinuxCNC emits moves that go nowhere
+arc direction and turn count; feeds [mm/min] to 1e-9 relative in units-per-minute mode (under
+G93 and G95 LinuxCNC passes F through as given; tests/test_interpret_control.py checks the
+conversions); dwell times. LinuxCNC emits moves that go nowhere
 (nurbscnc drops them) and no canon call for M0/M1/M60 (nurbscnc's Pause segments): both
 are skipped.
 """
@@ -18,6 +19,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import subprocess
 from pathlib import Path
 
@@ -57,13 +59,24 @@ def linuxcnc_moves(data: dict) -> list[dict]:
     return moves
 
 
+def units_per_minute_lines(text: str) -> dict[int, bool]:
+    """line → G94 in force there (the test programs switch feed modes on plain lines)."""
+    mode, out = "G94", {}
+    for number, line in enumerate(text.splitlines(), 1):
+        found = re.findall(r"G9[345](?![0-9.])", line.upper())
+        if found:
+            mode = found[-1]
+        out[number] = mode == "G94"
+    return out
+
+
 def compare(path: Path, data: dict) -> None:
     assert data["error"] is None, data["error"]
     prog = ours(path)
     segments = [s for s in prog.segments if not isinstance(s, Pause)]
     theirs = linuxcnc_moves(data)
     assert [(s.kind, s.line) for s in segments] == [(m["kind"], m["line"]) for m in theirs]
-    inverse_time = "G93" in path.read_text()
+    per_minute = units_per_minute_lines(path.read_text())
     for seg, move in zip(segments, theirs):
         where = f"{path.name}:{seg.line} {seg.kind}"
         if seg.kind == "dwell":
@@ -78,7 +91,7 @@ def compare(path: Path, data: dict) -> None:
             np.testing.assert_allclose(diff, 0.0, rtol=0, atol=TOL_MM, err_msg=where)
             turns = math.ceil(abs(seg.angle_rad) / (2 * math.pi) - 1e-9)
             assert math.copysign(turns, seg.angle_rad) == move["turn"], where
-        if seg.kind in ("line", "arc") and not inverse_time:
+        if seg.kind in ("line", "arc") and per_minute[seg.line]:
             assert seg.feed_mm_s * 60.0 == pytest.approx(move["feed_mm_min"], rel=1e-9), where
 
 

@@ -436,8 +436,8 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
                     self.straight(words, False)
                 return
         self.set_feed_mode(gcodes, words)
-        self.set_units(gcodes)
         self.set_feed(words, used)
+        self.set_units(gcodes)
         self.set_spindle(words, used)
         self.select_tool(words, used)
         if 6 in mcodes:
@@ -503,9 +503,8 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
             self.m.feed_mode = code
 
     def set_units(self, gcodes: dict) -> None:
-        # RS274/NGC sets F (step 3) before units (step 12), but the F word is in the units in
-        # force after the block (LinuxCNC converts the feed when G20/G21 changes), so units
-        # are read first.
+        # After F (LinuxCNC's order, checked with its interpreter): "G20 G1 X1 F10" from G21
+        # feeds at 10 mm/min, and a feed keeps its physical value when the units change.
         if 6 in gcodes:
             self.m.scale = INCH_MM if gcodes[6][0] == 200 else 1.0
 
