@@ -134,14 +134,14 @@ def test_check_reads_stdin():
 
 
 def test_check_program_error_json_and_caret():
-    result = run(["check", "-", "--json"], input="G1 X1 F100\nG28\n")
+    result = run(["check", "-", "--json"], input="G1 X1 F100\nG33\n")
     assert result.exit_code == 2
     data = json.loads(result.stdout)
     assert data["ok"] is False
     assert data["errors"] == [{"line": 2, "column": 1, "message": data["errors"][0]["message"]}]
-    assert "G28" in data["errors"][0]["message"]
+    assert "G33" in data["errors"][0]["message"]
     assert result.stderr.startswith("<stdin>:2:1: error: ")
-    assert result.stderr.splitlines()[1:3] == ["    G28", "    ^"]
+    assert result.stderr.splitlines()[1:3] == ["    G33", "    ^"]
 
 
 def test_missing_file_exits_3(tmp_path):

@@ -126,6 +126,8 @@ def fmt_value(value) -> str:
         return f"ATAN[{fmt_value(value[1])}]/[{fmt_value(value[2])}]"
     if tag == "exists":
         return f"EXISTS[#<{value[1]}>]"
+    if tag == "existsn":
+        return f"EXISTS[#{fmt_value(value[1])}]"
     raise AssertionError(value)
 
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import pytest
 
-from nurbscnc.errors import GCodeSyntaxError, NurbsCncError, UnsupportedError
+from nurbscnc.errors import GCodeSyntaxError, NurbsCncError
 from nurbscnc.program.parse import (
     EMPTY_BLOCK,
     Assign,
@@ -192,10 +192,15 @@ def test_overflowing_number_is_an_error(fast):
     assert (info.value.pos.line, info.value.pos.column) == (2, 8)
 
 
-def test_o_words_are_unsupported_in_the_fast_path():
-    with pytest.raises(UnsupportedError, match="O-words") as info:
-        parse_text("G0 X1\n/ N5 o100 sub\n")
-    assert (info.value.pos.line, info.value.pos.column) == (2, 6)
+@PATHS
+def test_o_word_lines(fast):
+    blocks = parse_text("G0 X1\n/ N5 o0100 sub\nO<My Sub> call [1] [#2+1] (c)\nO1234\n", fast)
+    assert blocks[1].delete and blocks[1].oword == ("100", "sub", (), 6)
+    label, keyword, args, column = blocks[2].oword
+    assert (label, keyword, column) == ("<mysub>", "call", 1)
+    assert args == (1.0, ("op", "+", ("#", 2.0), 1.0))
+    assert blocks[2].comments == (("comment", "(c)", 27),)
+    assert blocks[3].oword == ("1234", "", (), 1)
 
 
 def test_errors_are_project_errors():

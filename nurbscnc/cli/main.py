@@ -33,6 +33,7 @@ from nurbscnc.errors import (
 )
 from nurbscnc.geometry.segments import Program
 from nurbscnc.program.interpret import InterpretOptions, interpret_text
+from nurbscnc.program.tooltable import parse_tool_table
 
 
 class _Console(Console):
@@ -259,39 +260,46 @@ def read_program_text(path: str) -> str:
         return data.decode("latin-1")
 
 
-def load_program(path: str, block_delete: bool = True, tool_table: str | None = None) -> Program:
-    """Read, parse and interpret a program file."""
+def load_program(
+    path: str,
+    block_delete: bool = True,
+    tool_table: str | None = None,
+    subroutine_path: tuple = (),
+) -> Program:
+    """Read, parse and interpret a program file.
+
+    ``o<name> call`` of a subroutine the program does not define reads ``name.ngc`` from the
+    program's directory, then each directory of ``subroutine_path`` (LinuxCNC's
+    SUBROUTINE_PATH); the interpreter gets the reading as a callback and does no I/O itself.
+    """
     text = read_program_text(path)
     tools = read_tool_table(tool_table) if tool_table else None
+    dirs = [os.path.dirname(os.path.abspath(path)) if path != "-" else os.getcwd()]
+    dirs += [str(d) for d in subroutine_path]
+
+    def load_subroutine(name: str):
+        for folder in dirs:
+            for candidate in (name + ".ngc", name.lower() + ".ngc"):
+                file_path = os.path.join(folder, candidate)
+                if os.path.isfile(file_path):
+                    return read_program_text(file_path), file_path
+        return None
+
     options = InterpretOptions(
-        block_delete=block_delete, tool_lengths_mm=tools, name=_display_name(path)
-    )
+        block_delete=block_delete, tools=tools, name=_display_name(path),
+        load_subroutine=load_subroutine,
+    )  # fmt: skip
     return interpret_text(text, options)
 
 
-def read_tool_table(path: str) -> dict[int, float]:
-    """A LinuxCNC tool table (``T1 P1 Z12.5 D6 ;comment`` lines) → {tool: Z length [mm]}."""
-    table: dict[int, float] = {}
+def read_tool_table(path: str) -> dict:
+    """A LinuxCNC tool table file → ``{tool number: Tool}`` (see program/tooltable.py)."""
     try:
         with open(path, encoding="utf-8", errors="replace") as fh:
-            lines = fh.read().splitlines()
+            text = fh.read()
     except OSError as exc:
         raise OutputError(f"cannot read tool table {path}: {exc.strerror or exc}") from None
-    for number, raw in enumerate(lines, 1):
-        body = raw.split(";", 1)[0].split()
-        if not body:
-            continue
-        fields = {}
-        for item in body:
-            letter, value = item[:1].upper(), item[1:]
-            try:
-                fields[letter] = float(value)
-            except ValueError:
-                raise OutputError(f"{path}:{number}: bad tool table field {item!r}") from None
-        if "T" not in fields:
-            raise OutputError(f"{path}:{number}: tool table line without a T word")
-        table[int(fields["T"])] = fields.get("Z", 0.0)
-    return table
+    return parse_tool_table(text, path)
 
 
 # -- the command group -------------------------------------------------------------------------
@@ -315,6 +323,11 @@ tool_table_option = click.option(
     "--tool-table", type=click.Path(), default=None,
     help="LinuxCNC tool table for G43 H (default: tool lengths are 0).",
 )  # fmt: skip
+subroutine_path_option = click.option(
+    "--subroutine-path", multiple=True, type=click.Path(file_okay=False),
+    help="Directory searched for o<name> call files name.ngc after the program's own "
+         "(repeatable).",
+)  # fmt: skip
 
 
 # -- check -------------------------------------------------------------------------------------
@@ -323,15 +336,16 @@ tool_table_option = click.option(
 @json_option
 @block_delete_option
 @tool_table_option
+@subroutine_path_option
 @handle_errors
-def check(program, as_json, no_block_delete, tool_table):
+def check(program, as_json, no_block_delete, tool_table, subroutine_path):
     """Parse and validate PROGRAM ('-' for stdin) and summarise it.
 
     Example: nurbscnc check programs/naca2415.nc
     """
     from nurbscnc.plan.report import program_summary
 
-    prog = load_program(program, not no_block_delete, tool_table)
+    prog = load_program(program, not no_block_delete, tool_table, subroutine_path)
     summary = program_summary(prog)
     if as_json:
         click.echo(json.dumps(summary))

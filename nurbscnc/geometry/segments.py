@@ -140,7 +140,36 @@ class Dwell:
         return self.position_mm
 
 
-Segment = Line | Arc | Nurbs | Dwell
+@dataclass(frozen=True, eq=False)
+class Pause:
+    """A program stop (M0, M1 optional stop, M60 pallet change) at ``position_mm`` (an
+    ``(x, y, z)`` tuple): the machine stops there and waits for the operator to resume.
+    ``code`` is "M0", "M1" or "M60".
+
+    Its ``kind`` is "dwell" (a zero-second dwell): every stage that handles a dwell, an exact
+    stop, handles a pause unchanged; ``isinstance(seg, Pause)`` or ``seg.code`` tell the
+    operator's stop apart (for ``stream``, which waits there).
+    """
+
+    position_mm: tuple
+    line: int
+    code: str = "M0"
+
+    kind = "dwell"
+    feed_mm_s = 0.0
+    length_mm = 0.0
+    seconds = 0.0
+
+    @property
+    def start_mm(self) -> tuple:
+        return self.position_mm
+
+    @property
+    def end_mm(self) -> tuple:
+        return self.position_mm
+
+
+Segment = Line | Arc | Nurbs | Dwell | Pause
 
 
 @dataclass(frozen=True)

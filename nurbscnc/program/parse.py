@@ -9,7 +9,8 @@ the interpreter evaluates with the parameter values in force on that line.
 Expression tuples:
 ``("#", ref)`` numbered parameter, ``("<", name)`` named parameter, ``("neg", v)``,
 ``("op", OP, a, b)`` with OP one of + - * / MOD ** EQ NE GT GE LT LE AND OR XOR,
-``("fn", NAME, v)``, ``("atan", y, x)``, ``("exists", name)``.
+``("fn", NAME, v)``, ``("atan", y, x)``, ``("exists", name)``, ``("existsn", index)``
+(EXISTS[#n]: is n a parameter number).
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from typing import NamedTuple
 from lark import Lark, Transformer, UnexpectedCharacters, UnexpectedInput, UnexpectedToken
 from lark.exceptions import VisitError
 
-from nurbscnc.errors import GCodeSyntaxError, NurbsCncError, SourcePos, UnsupportedError
+from nurbscnc.errors import GCodeSyntaxError, NurbsCncError, SourcePos
 
 
 class Word(NamedTuple):
@@ -42,14 +43,25 @@ class Assign(NamedTuple):
     column: int
 
 
+class OWord(NamedTuple):
+    """An O-word line: ``label`` ("100" or "<name>"), ``keyword`` ("sub", "call", ..., or
+    "" for a Fanuc program number), ``args`` (bracketed expressions), 1-based ``column``."""
+
+    label: str
+    keyword: str
+    args: tuple
+    column: int
+
+
 class Block(NamedTuple):
-    """One source line: block-delete flag, words, assignments, comments, tape mark."""
+    """One source line: block-delete flag, words, assignments, comments, tape mark, O-word."""
 
     delete: bool
     words: tuple
     assigns: tuple
     comments: tuple
     percent: bool = False
+    oword: OWord | None = None
 
 
 EMPTY_BLOCK = Block(False, (), (), ())
@@ -102,6 +114,29 @@ class _ToBlocks(Transformer):
     def percent(self, children):
         return Block(False, (), (), (), True)
 
+    def oword(self, children):
+        delete = False
+        label = None
+        keyword = ""
+        args = []
+        comments = []
+        for child in children:
+            kind = type(child)
+            if kind is tuple and child and child[0] == "comment":
+                comments.append(child)
+            elif kind is float or kind is tuple:
+                args.append(child)
+            elif child.type == "SLASH":
+                delete = True
+            elif child.type == "O_LABEL":
+                label = (_label_name(child), child.column)
+            elif child.type == "O_KEYWORD":
+                keyword = str(child).lower()
+            elif child.type == "COMMENT":
+                comments.append(("comment", str(child), child.column))
+        return Block(delete, (), (), tuple(comments), False,
+                     OWord(label[0], keyword, tuple(args), label[1]))  # fmt: skip
+
     def comment(self, children):
         tok = children[0]
         return ("comment", str(tok), tok.column)
@@ -148,6 +183,17 @@ class _ToBlocks(Transformer):
 
     def exists(self, children):
         return ("exists", _param_name(children[1]))
+
+    def exists_numbered(self, children):
+        return ("existsn", children[1])
+
+
+def _label_name(token) -> str:
+    """An O label: "<name>" (case folded, blanks dropped) or the number without zeros."""
+    text = str(token)[1:].replace(" ", "").replace("\t", "")
+    if text.startswith("<"):
+        return text.lower()
+    return str(int(text))
 
 
 def _param_name(token) -> str:
@@ -211,7 +257,7 @@ def _expected(names) -> str:
 
 
 def _split_lines(text: str) -> list[str]:
-    return text.replace("\r\n", "\n").replace("\r", "\n").split("\n")
+    return split_lines(text)
 
 
 # The fast path. Most CAM output is lines of plain words ("G1 X1.5 Y-2 F300 (cut)"); for
@@ -226,74 +272,105 @@ def _split_lines(text: str) -> list[str]:
 _NUM = r"[+-]?[ \t]*+(?:[0-9][0-9 \t]*+(?:\.[0-9 \t]*+)?|\.[ \t]*+[0-9][0-9 \t]*+)"
 _SIMPLE_LINE = re.compile(
     r"[ \t]*+(/)?[ \t]*+(?:[nN][ \t]*+[0-9][0-9 \t]*+(?:\.[0-9 \t]*+)?)?"
-    r"((?:[ \t]*+(?:[A-Za-z][ \t]*+" + _NUM + r"|\([^()\n]*+\)))*+)[ \t]*+(;.*)?"
+    r"((?:[ \t]*+(?:[A-Za-z@^][ \t]*+" + _NUM + r"|\([^()\n]*+\)))*+)[ \t]*+(;.*)?"
 )
-_O_WORD = re.compile(r"[ \t]*+(?:/[ \t]*+)?(?:[nN][ \t]*+[0-9][0-9 \t]*+)?[oO][ \t]*+[0-9<]")
-_SIMPLE_ITEM = re.compile(r"([A-Za-z])[ \t]*(" + _NUM + r")|(\([^()\n]*\))")
+_O_WORD = re.compile(
+    r"[ \t]*+(?:/[ \t]*+)?(?:[nN][ \t]*+[0-9][0-9 \t]*+(?:\.[0-9 \t]*+)?)?[oO][ \t]*+[0-9<]"
+)
+_SIMPLE_ITEM = re.compile(r"([A-Za-z@^])[ \t]*(" + _NUM + r")|(\([^()\n]*\))")
+
+
+_INF = math.inf
 
 
 def _fast_block(line: str, match) -> Block:
-    """Build the block of a line that :data:`_SIMPLE_LINE` accepted."""
+    """Build the block of a line that :data:`_SIMPLE_LINE` accepted.
+
+    ``findall`` gives the items without match objects; each item's column is found with
+    ``str.find`` from the end of the previous one (a number holds no letter and no "(", so
+    the next item's first character cannot be found inside it; a comment is skipped whole).
+    """
     words = []
     comments = []
-    body_start = match.start(2)
-    for item in _SIMPLE_ITEM.finditer(match.group(2)):
-        letter = item.group(1)
-        column = body_start + item.start() + 1
-        if letter is not None:
-            text = item.group(2)
-            if " " in text or "\t" in text:
+    body = match.group(2)
+    body_start = match.start(2) + 1
+    pos = 0
+    find = body.find
+    for letter, text, comment in _SIMPLE_ITEM.findall(body):
+        if letter:
+            pos = find(letter, pos)
+            try:
+                value = float(text)  # leading / trailing blanks are fine for float()
+            except ValueError:  # blanks between digits ("1 2.5")
                 text = text.replace(" ", "").replace("\t", "")
-            value = float(text)
-            if not math.isfinite(value):
+                value = float(text)
+            if value == _INF or value == -_INF:  # e.g. 400 digits (no nan: digits only)
                 raise GCodeSyntaxError(
-                    f"number {text[:12]}... is out of range",
-                    SourcePos(0, column + item.start(2) - item.start()),
+                    f"number {text.strip()[:12]}... is out of range",
+                    SourcePos(0, body_start + pos + 1 + (len(body[pos + 1:]) -
+                                                         len(body[pos + 1:].lstrip(" \t")))),
                 )
-            words.append(Word(letter.upper(), value, column))
+            words.append(Word(letter.upper(), value, body_start + pos))
+            pos += 1
         else:
-            comments.append(("comment", item.group(3), column))
-    if match.group(3) is not None:
-        comments.append(("comment", match.group(3), match.start(3) + 1))
-    delete = match.group(1) is not None
-    if not words and not comments and not delete:
+            pos = find(comment, pos)
+            comments.append(("comment", comment, body_start + pos))
+            pos += len(comment)
+    delete, semicolon = match.group(1, 3)
+    if semicolon is not None:
+        comments.append(("comment", semicolon, match.start(3) + 1))
+    if not words and not comments and delete is None:
         return EMPTY_BLOCK
-    return Block(delete, tuple(words), (), tuple(comments))
+    return Block(delete is not None, tuple(words), (), tuple(comments))
+
+
+#: Lines longer than this (outside the plain-word fast path) are refused: LinuxCNC refuses
+#: anything past 256 characters; this bound keeps the work on a hostile 10 MB line of
+#: nested brackets to a fraction of a second.
+MAX_LINE_CHARS = 65536
+
+_LINE_BREAKS = re.compile(r"\r+\n|\r")
+
+
+def split_lines(text: str) -> list[str]:
+    """The physical lines of a program text: LF, CRLF, CR CR LF (one line end, as LinuxCNC's
+    line reader counts it) and lone CR all end a line; a leading byte-order mark is dropped."""
+    if text.startswith("\ufeff"):
+        text = text[1:]
+    if "\r" in text:
+        text = _LINE_BREAKS.sub("\n", text)
+    return text.split("\n")
+
+
+def parse_line(line: str, line_no: int) -> Block:
+    """Parse one physical line (``line_no`` 1-based, for error positions) into a Block."""
+    match = _SIMPLE_LINE.fullmatch(line)
+    if match is not None and not (("o" in line or "O" in line) and _O_WORD.match(line)):
+        try:
+            return _fast_block(line, match)
+        except GCodeSyntaxError as exc:
+            exc.pos = SourcePos(line_no, exc.pos.column, line)
+            raise
+    if len(line) > MAX_LINE_CHARS:
+        raise GCodeSyntaxError(
+            f"line is too long ({len(line)} characters; at most {MAX_LINE_CHARS})",
+            SourcePos(line_no, 1, line),
+        )
+    return _parse_lark(line, line_no - 1)[0]
 
 
 def parse_text(text: str, fast: bool = True) -> list[Block]:
     """Parse a whole program; return one :class:`Block` per physical line (index = line − 1).
 
     Raises :class:`GCodeSyntaxError` with the line, column and source text of the first error.
-    A leading byte-order mark is dropped; CRLF and lone CR line ends are accepted. ``fast``
-    selects the regular-expression path for plain-word lines (same result, see above).
+    See :func:`split_lines` for line ends. ``fast`` selects the regular-expression path for
+    plain-word lines (same result, see above). The interpreter parses lazily instead, line
+    by line as it executes (:func:`parse_line`): text after M2 is never parsed.
     """
-    if text.startswith("\ufeff"):
-        text = text[1:]
-    if "\r" in text:
-        text = text.replace("\r\n", "\n").replace("\r", "\n")
+    lines = split_lines(text)
     if not fast:
-        return _parse_lark(text, 0)
-    lines = text.split("\n")
-    blocks = []
-    append = blocks.append
-    fullmatch = _SIMPLE_LINE.fullmatch
-    for index, line in enumerate(lines):
-        match = fullmatch(line)
-        if match is not None:
-            try:
-                append(_fast_block(line, match))
-            except GCodeSyntaxError as exc:
-                exc.pos = SourcePos(index + 1, exc.pos.column, line)
-                raise
-        else:
-            if _O_WORD.match(line):
-                raise UnsupportedError(
-                    "O-words (subroutines, loops, conditionals) are not supported",
-                    SourcePos(index + 1, line.lower().index("o") + 1, line),
-                )
-            append(_parse_lark(line, index)[0])
-    return blocks
+        return _parse_lark("\n".join(lines), 0)
+    return [parse_line(line, index + 1) for index, line in enumerate(lines)]
 
 
 def _parse_lark(text: str, line_offset: int) -> list[Block]:

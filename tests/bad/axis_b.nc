@@ -1,2 +1,2 @@
-; axis B is not supported @ 2:4
+; rotary axis motion is not supported @ 2:4
 G0 B5

@@ -1,2 +1,3 @@
-; axis C is not supported @ 2:4
-G0 C5
+; rotary axis motion is not supported @ 3:8
+G91 G0 C0
+G90 G0 C5

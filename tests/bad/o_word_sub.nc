@@ -1,4 +1,2 @@
-; O-words @ 2:1
-o100 sub
-G1 X1
-o100 endsub
+; subroutine o200 is not defined @ 2:1
+o200 call

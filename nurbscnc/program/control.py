@@ -1,0 +1,366 @@
+"""O-word control flow: sources, label indexes and call frames (LinuxCNC's interp_o_word.cc).
+
+A :class:`Source` is one file's lines, parsed lazily (a line is parsed when execution reaches
+it, so a CAM trailer after M2 is never read). Its :class:`LabelIndex` lists, per O label,
+the lines that carry it and their keywords, found by a cheap scan for lines starting with
+an O word; control flow jumps along these lists:
+
+- ``sub`` … ``endsub``: a definition; execution skips it; ``call`` runs it in a new
+  :class:`Frame` (#1–#30 and local named parameters are the frame's own);
+- ``if`` / ``elseif`` / ``else`` / ``endif``; ``while`` … ``endwhile``; ``do`` … ``while``;
+  ``repeat`` … ``endrepeat``; ``break`` / ``continue`` act on the loop of the same label.
+"""
+
+from __future__ import annotations
+
+import bisect
+import os
+import re
+from dataclasses import dataclass, field
+
+from nurbscnc.errors import GCodeSyntaxError
+from nurbscnc.program.parse import Block, parse_line, split_lines
+
+N_LOCAL = 30  # #1..#30 are a subroutine's own
+
+_O_LINE = re.compile(
+    r"[ \t]*(?:/[ \t]*)?(?:[nN][ \t]*[0-9][0-9 \t]*(?:\.[0-9 \t]*)?)?[oO][ \t]*[0-9<]"
+)
+
+
+class Source:
+    """One program file: its lines, blocks parsed on demand, and its label index."""
+
+    def __init__(self, lines: list[str], name: str, call_line: int = 0):
+        self.lines = lines
+        self.name = name
+        #: The main program's line that first called this file (0 for the main program).
+        self.call_line = call_line
+        self._blocks: list[Block | None] = [None] * len(lines)
+        self._labels: dict[str, tuple[list[int], list[str]]] | None = None
+        #: Memos of facts about O lines that do not change while running (loops re-ask them).
+        self.checked: set[int] = set()  # construct heads whose label was found unique
+        self.do_tails: dict[int, bool] = {}  # line index of a while → closes a do loop?
+
+    def block(self, index: int) -> Block:
+        """The block of line ``index`` (0-based), parsed the first time it is asked for."""
+        block = self._blocks[index]
+        if block is None:
+            block = self._blocks[index] = parse_line(self.lines[index], index + 1)
+        return block
+
+    def labels(self) -> dict[str, tuple[list[int], list[str]]]:
+        """label → (sorted line indexes, their keywords), built on first use."""
+        if self._labels is None:
+            labels: dict[str, tuple[list[int], list[str]]] = {}
+            for index, line in enumerate(self.lines):
+                if ("o" in line or "O" in line) and _O_LINE.match(line):
+                    try:
+                        block = self.block(index)
+                    except GCodeSyntaxError:
+                        continue  # reported if execution ever reaches the line
+                    if block.oword is not None:
+                        entry = labels.setdefault(block.oword.label, ([], []))
+                        entry[0].append(index)
+                        entry[1].append(block.oword.keyword)
+            self._labels = labels
+        return self._labels
+
+    def find(self, label: str, after: int, keywords, stop=("sub", "endsub")) -> int | None:
+        """The first line index > ``after`` carrying ``label`` with a keyword in ``keywords``.
+
+        The search stops (None) at a keyword in ``stop`` that is not wanted: constructs do
+        not reach across subroutine definitions.
+        """
+        entry = self.labels().get(label)
+        if entry is None:
+            return None
+        indexes, kinds = entry
+        for k in range(bisect.bisect_right(indexes, after), len(indexes)):
+            if kinds[k] in keywords:
+                return indexes[k]
+            if kinds[k] in stop:
+                return None
+        return None
+
+    def find_before(self, label: str, before: int, keywords) -> int | None:
+        """The last line index < ``before`` carrying ``label`` with a keyword in ``keywords``."""
+        entry = self.labels().get(label)
+        if entry is None:
+            return None
+        indexes, kinds = entry
+        for k in range(bisect.bisect_left(indexes, before) - 1, -1, -1):
+            if kinds[k] in keywords:
+                return indexes[k]
+        return None
+
+    def sub_start(self, label: str) -> int | None:
+        """The line index of ``o<label> sub`` in this file."""
+        entry = self.labels().get(label)
+        if entry is None:
+            return None
+        for index, kind in zip(*entry):
+            if kind == "sub":
+                return index
+        return None
+
+
+@dataclass
+class Frame:
+    """One level of the call stack: where it runs and its local parameters."""
+
+    source: Source
+    pc: int
+    label: str = ""
+    call_line: int = 0  # line (in the caller's source) of the call, for errors
+    return_to: int = 0  # caller's pc after the call
+    saved_params: list = field(default_factory=list)  # the caller's #1..#30
+    named: dict = field(default_factory=dict)  # local named parameters
+    repeat_left: dict = field(default_factory=dict)  # line index of repeat → turns left
+    m73_state: tuple | None = None  # modal state saved by M73, restored on return
+
+
+class ControlFlow:
+    """The O-word handlers (a mixin of the interpreter: it provides ``error``, ``evaluate``,
+    ``frames``, ``source``, ``params``, ``globals``, ``options``, ``note_once``)."""
+
+    def oword(self, block: Block, frame: Frame) -> None:
+        label, keyword, args, column = block.oword
+        here = frame.pc - 1
+        if keyword == "":
+            # A program number ("O1234", Fanuc style; LinuxCNC ignores it anywhere).
+            if not self.program_name:
+                self.program_name = f"O{label}"
+                self.note_once(("O", label), f"program number O{label} (a title; ignored)")
+            return
+        if keyword in ("sub", "if", "do", "repeat") or (
+            keyword == "while" and not self._is_do_tail(label, here)
+        ):
+            self._check_unique(label, here, column)
+        handler = getattr(self, "o_" + keyword)
+        handler(label, args, column, frame, here)
+
+    def _check_unique(self, label: str, here: int, column: int) -> None:
+        """LinuxCNC: one label, one construct ("duplicate O-word label")."""
+        checked = self.source.checked
+        if here in checked:
+            return
+        indexes, kinds = self.source.labels()[label]
+        # Subroutine names and control labels are separate name spaces (LinuxCNC accepts
+        # "O101 repeat" and "O101 sub" in one file).
+        heads = ("sub",) if self.source.block(here).oword.keyword == "sub" else (
+            "if", "while", "do", "repeat")  # fmt: skip
+        for index, kind in zip(indexes, kinds):
+            if index >= here or kind not in heads:
+                continue
+            if kind == "while" and self._is_do_tail(label, index):
+                continue
+            if kind == "while" and index > here and self.source.block(here).oword.keyword == "do":
+                continue
+            raise self.error(f"duplicate O-word label o{label} (also defined on line {index + 1})",
+                             column)  # fmt: skip
+        checked.add(here)
+
+    def _cond(self, args, column: int, keyword: str) -> float:
+        if len(args) != 1:
+            raise self.error(f"{keyword} needs one [condition]", column)
+        return self.evaluate(args[0], column)
+
+    def _jump_target(self, label, after, keywords, column, what) -> int:
+        target = self.source.find(label, after, keywords)
+        if target is None:
+            raise self.error(f"o{label} {what}", column)
+        return target
+
+    def _count_loop(self, column: int) -> None:
+        self.loop_count += 1
+        if self.loop_count > self.options.max_loop_iterations:
+            raise self.error(
+                f"more than {self.options.max_loop_iterations} loop iterations "
+                f"(an endless loop?)",
+                column,
+            )
+
+    def o_sub(self, label, args, column, frame, here) -> None:
+        # A definition met in the flow: skip to after its endsub.
+        end = self._jump_target(label, here, ("endsub",), column, "sub without endsub")
+        frame.pc = end + 1
+
+    def o_endsub(self, label, args, column, frame, here) -> None:
+        self._return(label, args, column, frame)
+
+    def o_return(self, label, args, column, frame, here) -> None:
+        self._return(label, args, column, frame)
+
+    def _return(self, label, args, column, frame) -> None:
+        if len(self.frames) == 1:
+            raise self.error(f"o{label} return/endsub outside a subroutine", column)
+        value = self.evaluate(args[0], column) if args else None
+        self.frames.pop()
+        if frame.m73_state is not None:
+            self.restore_state(frame.m73_state)
+        caller = self.frames[-1]
+        for k, v in enumerate(frame.saved_params, 1):
+            if v is None:
+                self.params.pop(k, None)
+            else:
+                self.params[k] = v
+        caller.pc = frame.return_to
+        self.globals["_value"] = value if value is not None else 0.0
+        self.globals["_value_returned"] = 1.0 if value is not None else 0.0
+
+    def o_call(self, label, args, column, frame, here) -> None:
+        if len(self.frames) > self.options.max_call_depth:
+            raise self.error(
+                f"o{label} call: more than {self.options.max_call_depth} nested calls "
+                f"(endless recursion?)",
+                column,
+            )
+        if len(args) > N_LOCAL:
+            raise self.error(f"o{label} call with more than {N_LOCAL} arguments", column)
+        values = [self.evaluate(a, column) for a in args]
+        source, start = self._find_sub(label, column)
+        saved = [self.params.get(k) for k in range(1, N_LOCAL + 1)]
+        for k in range(1, N_LOCAL + 1):
+            self.params[k] = values[k - 1] if k <= len(values) else 0.0
+        call_line = self.main_line() if self.source is self.main else self.main_line()
+        self.frames.append(Frame(source, start + 1, label, call_line, frame.pc, saved))
+        self.globals["_value_returned"] = 0.0
+
+    def _find_sub(self, label: str, column: int) -> tuple[Source, int]:
+        for source in (self.source, self.main):
+            start = source.sub_start(label)
+            if start is not None:
+                return source, start
+        loaded = self.loaded
+        if label in loaded:
+            return loaded[label], loaded[label].sub_start(label)
+        load = self.options.load_subroutine
+        name = label[1:-1] if label.startswith("<") else label
+        found = load(name) if (load is not None and label.startswith("<")) else None
+        if found is None:
+            raise self.error(
+                f"subroutine o{label} is not defined"
+                + (f" (and no file {name}.ngc was found)" if label.startswith("<") else ""),
+                column,
+            )
+        text, file_name = found
+        source = Source(split_lines(text), os.path.basename(file_name), self.main_line())
+        start = source.sub_start(label)
+        if start is None:
+            raise self.error(f"file {file_name} does not define o{label} sub", column)
+        loaded[label] = source
+        return source, start
+
+    def o_if(self, label, args, column, frame, here) -> None:
+        if self._cond(args, column, "if"):
+            return
+        # Try the elseif conditions in turn, then else, then endif.
+        at = here
+        while True:
+            nxt = self._jump_target(label, at, ("elseif", "else", "endif"), column,
+                                    "if without endif")  # fmt: skip
+            blk = self.source.block(nxt)
+            if blk.oword.keyword == "elseif":
+                saved = self.line_no
+                self.line_no = nxt + 1
+                ok = self._cond(blk.oword.args, blk.oword.column, "elseif")
+                self.line_no = saved
+                if ok:
+                    frame.pc = nxt + 1
+                    return
+                at = nxt
+                continue
+            frame.pc = nxt + 1
+            return
+
+    def o_elseif(self, label, args, column, frame, here) -> None:
+        # Reached by running off the end of a taken branch: skip to endif.
+        frame.pc = self._jump_target(label, here, ("endif",), column, "elseif without endif") + 1
+
+    def o_else(self, label, args, column, frame, here) -> None:
+        frame.pc = self._jump_target(label, here, ("endif",), column, "else without endif") + 1
+
+    def o_endif(self, label, args, column, frame, here) -> None:
+        pass
+
+    def _is_do_tail(self, label: str, here: int) -> bool:
+        """A ``while`` that closes a ``do`` loop (no endwhile follows for it)."""
+        tails = self.source.do_tails
+        if here not in tails:
+            do = self.source.find_before(label, here, ("do",))
+            tail = do is not None and (
+                self.source.find(label, do, ("while", "endwhile")) == here
+                and self.source.find(label, here, ("endwhile",)) is None
+            )
+            tails[here] = tail
+        return tails[here]
+
+    def o_while(self, label, args, column, frame, here) -> None:
+        if self._is_do_tail(label, here):
+            if self._cond(args, column, "while"):
+                self._count_loop(column)
+                frame.pc = self.source.find_before(label, here, ("do",)) + 1
+            return
+        if not self._cond(args, column, "while"):
+            end = self._jump_target(label, here, ("endwhile",), column, "while without endwhile")
+            frame.pc = end + 1
+
+    def o_endwhile(self, label, args, column, frame, here) -> None:
+        head = self.source.find_before(label, here, ("while",))
+        if head is None:
+            raise self.error(f"o{label} endwhile without while", column)
+        self._count_loop(column)
+        frame.pc = head
+
+    def o_do(self, label, args, column, frame, here) -> None:
+        self._jump_target(label, here, ("while",), column, "do without while")
+
+    def o_repeat(self, label, args, column, frame, here) -> None:
+        count = self._cond(args, column, "repeat")
+        end = self._jump_target(label, here, ("endrepeat",), column, "repeat without endrepeat")
+        turns = int(count) if count > 0 else 0
+        if turns <= 0:
+            frame.pc = end + 1
+            return
+        frame.repeat_left[here] = turns
+
+    def o_endrepeat(self, label, args, column, frame, here) -> None:
+        head = self.source.find_before(label, here, ("repeat",))
+        if head is None:
+            raise self.error(f"o{label} endrepeat without repeat", column)
+        left = frame.repeat_left.get(head, 1) - 1
+        if left > 0:
+            self._count_loop(column)
+            frame.repeat_left[head] = left
+            frame.pc = head + 1
+        else:
+            frame.repeat_left.pop(head, None)
+
+    def _loop_of(self, label, here, column, what):
+        """(head index, keyword, end index) of the loop ``label`` that contains ``here``."""
+        head = self.source.find_before(label, here, ("while", "do", "repeat"))
+        if head is None:
+            raise self.error(f"o{label} {what} outside a loop", column)
+        kind = self.source.block(head).oword.keyword
+        if kind == "do":
+            end = self.source.find(label, head, ("while",))
+        elif kind == "while" and self._is_do_tail(label, head):
+            raise self.error(f"o{label} {what} outside a loop", column)
+        else:
+            end = self.source.find(label, head, ("endwhile" if kind == "while" else "endrepeat",))
+        if end is None:
+            raise self.error(f"o{label} {what}: the loop has no end", column)
+        return head, kind, end
+
+    def o_break(self, label, args, column, frame, here) -> None:
+        head, kind, end = self._loop_of(label, here, column, "break")
+        frame.repeat_left.pop(head, None)
+        frame.pc = end + 1
+
+    def o_continue(self, label, args, column, frame, here) -> None:
+        head, kind, end = self._loop_of(label, here, column, "continue")
+        self._count_loop(column)
+        # while: re-test at the head; do: test at the tail; repeat: count at endrepeat.
+        frame.pc = head if kind == "while" else end
+

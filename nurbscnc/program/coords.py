@@ -1,0 +1,315 @@
+"""Coordinate systems as LinuxCNC keeps them (interp_setup.cc, interp_convert.cc, G10/G92).
+
+A point's machine position [mm] is (LinuxCNC's emccanon ``rotate_and_offset_pos``)::
+
+    machine = R(rotation) · (program + g92) + origin + tool_offset
+
+with ``origin`` and ``rotation`` the active G54…G59.3 system's offset and XY rotation [deg]
+(G10 L2 R), ``g92`` the G92 offset and ``tool_offset`` the G43 tool length offset. The
+interpreter keeps the PROGRAM position (as LinuxCNC's ``current_x``) and converts with
+:meth:`Coordinates.to_machine` / :meth:`Coordinates.to_program`.
+
+The numbered parameters that hold these values are in MACHINE units (LinuxCNC keeps them so:
+checked with its interpreter on an inch and a mm machine); nurbscnc's machine unit is the mm,
+so a program reads and writes them in mm whatever G20/G21 is in force:
+
+- #5161–#5166 G28 home, #5181–#5186 G30 home (machine coordinates, X Y Z A B C);
+- #5210 G92 on (1) or off (0), #5211–#5219 the G92 offset (X Y Z A B C U V W);
+- #5220 the active system (1 = G54 … 9 = G59.3);
+- #5221 + 20·(n−1) + k: system n's offset on axis k (0..8: X Y Z A B C U V W), +9 its
+  rotation R [deg] (no units).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from nurbscnc.errors import UnsupportedError
+
+_AXES = ("X", "Y", "Z")
+
+G28_BASE = 5161
+G30_BASE = 5181
+G92_FLAG = 5210
+G92_BASE = 5211
+SYSTEM_INDEX = 5220
+SYSTEM_BASE = 5221
+SYSTEM_STRIDE = 20
+N_SYSTEMS = 9
+#: Names of the coordinate systems, 1-based.
+SYSTEM_NAMES = ("", "G54", "G55", "G56", "G57", "G58", "G59", "G59.1", "G59.2", "G59.3")
+
+
+def is_coordinate_parameter(index: int) -> bool:
+    """True for the parameters this module owns (they carry lengths that follow the units)."""
+    return (G28_BASE <= index <= G28_BASE + 5 or G30_BASE <= index <= G30_BASE + 5
+            or G92_FLAG <= index <= SYSTEM_BASE + SYSTEM_STRIDE * N_SYSTEMS - 1)  # fmt: skip
+
+
+@dataclass
+class Coordinates:
+    """Offsets and stored positions [mm], the parameter table behind them, the active system.
+
+    ``params`` holds #5161…#5400 in mm (lengths) or as plain numbers (flags, angles);
+    ``origin_mm`` / ``rotation_deg`` are the ACTIVE system's values, loaded when a system is
+    selected or the active one is changed by G10 (a plain parameter write does not move the
+    active origin, as in LinuxCNC).
+    """
+
+    params: dict = field(default_factory=dict)
+    system: int = 1
+    origin_mm: list = field(default_factory=lambda: [0.0, 0.0, 0.0])
+    rotation_deg: float = 0.0
+    g92_mm: list = field(default_factory=lambda: [0.0, 0.0, 0.0])
+    tool_mm: list = field(default_factory=lambda: [0.0, 0.0, 0.0])
+
+    def __post_init__(self):
+        self.params.setdefault(SYSTEM_INDEX, 1.0)
+        self.plain = True  # no offset, rotation or tool offset: machine = program
+
+    def _update_plain(self) -> None:
+        self.plain = not (any(self.origin_mm) or any(self.g92_mm) or any(self.tool_mm)
+                          or self.rotation_deg)  # fmt: skip
+
+    def set_tool(self, offset_mm) -> None:
+        """G43 / G43.1 / G49: the tool offset [mm] along X, Y, Z."""
+        self.tool_mm = list(offset_mm)
+        self._update_plain()
+
+    # -- parameters (machine units: mm) ---------------------------------------------------
+    def read(self, index: int) -> float:
+        return self.params.get(index, 0.0)
+
+    def write(self, index: int, value: float) -> None:
+        self.params[index] = value
+
+    def system_offset_mm(self, system: int) -> list:
+        base = SYSTEM_BASE + SYSTEM_STRIDE * (system - 1)
+        return [self.params.get(base + k, 0.0) for k in range(3)]
+
+    def system_rotation_deg(self, system: int) -> float:
+        return self.params.get(SYSTEM_BASE + SYSTEM_STRIDE * (system - 1) + 9, 0.0)
+
+    # -- transforms --------------------------------------------------------------------------
+    def to_machine(self, prog) -> list:
+        """Machine position [mm] of a program position [mm] (see the module docstring)."""
+        if self.plain:
+            return list(prog)
+        x = prog[0] + self.g92_mm[0]
+        y = prog[1] + self.g92_mm[1]
+        z = prog[2] + self.g92_mm[2]
+        if self.rotation_deg:
+            c, s = _cos_sin(self.rotation_deg)
+            x, y = c * x - s * y, s * x + c * y
+        return [x + self.origin_mm[0] + self.tool_mm[0],
+                y + self.origin_mm[1] + self.tool_mm[1],
+                z + self.origin_mm[2] + self.tool_mm[2]]  # fmt: skip
+
+    def to_program(self, machine) -> list:
+        """Inverse of :meth:`to_machine`."""
+        if self.plain:
+            return list(machine)
+        x = machine[0] - self.tool_mm[0] - self.origin_mm[0]
+        y = machine[1] - self.tool_mm[1] - self.origin_mm[1]
+        z = machine[2] - self.tool_mm[2] - self.origin_mm[2]
+        if self.rotation_deg:
+            c, s = _cos_sin(self.rotation_deg)
+            x, y = c * x + s * y, -s * x + c * y
+        return [x - self.g92_mm[0], y - self.g92_mm[1], z - self.g92_mm[2]]
+
+    def rotate_vector(self, v) -> list:
+        """A direction (an arc normal) from program to machine axes."""
+        if not self.rotation_deg:
+            return list(v)
+        c, s = _cos_sin(self.rotation_deg)
+        return [c * v[0] - s * v[1], s * v[0] + c * v[1], v[2]]
+
+    # -- changes ---------------------------------------------------------------------------
+    def select(self, system: int) -> None:
+        """G54…G59.3: make ``system`` (1..9) active. Selecting the active system again
+        changes nothing (LinuxCNC: "continuing to use same coordinate system"), so a
+        parameter written since is not picked up."""
+        if system == self.system:
+            return
+        self._load(system)
+
+    def _load(self, system: int) -> None:
+        self.system = system
+        self.params[SYSTEM_INDEX] = float(system)
+        self.origin_mm = self.system_offset_mm(system)
+        self.rotation_deg = self.system_rotation_deg(system)
+        self._update_plain()
+
+    def set_system(self, system: int, offsets: dict, rotation_deg: float | None) -> None:
+        """G10 L2 / L20: set axes (0..2 → mm) and the rotation of ``system`` (1..9)."""
+        base = SYSTEM_BASE + SYSTEM_STRIDE * (system - 1)
+        for axis, value in offsets.items():
+            self.params[base + axis] = value
+        if rotation_deg is not None:
+            self.params[base + 9] = rotation_deg
+        if system == self.system:
+            self._load(system)
+
+    def set_g92(self, offsets: dict) -> None:
+        """G92: the offsets (axis → mm) of the given axes; the others keep theirs."""
+        for axis, value in offsets.items():
+            self.g92_mm[axis] = value
+        self._store_g92(1.0)
+        self._update_plain()
+
+    def clear_g92(self, keep_parameters: bool) -> None:
+        """G92.1 (zero the parameters too) or G92.2 (keep them for G92.3)."""
+        self.g92_mm = [0.0, 0.0, 0.0]
+        self._update_plain()
+        if keep_parameters:
+            self.params[G92_FLAG] = 0.0
+        else:
+            for k in range(9):
+                self.params[G92_BASE + k] = 0.0
+            self.params[G92_FLAG] = 0.0
+
+    def restore_g92(self) -> None:
+        """G92.3: the offsets from #5211–#5213."""
+        self.g92_mm = [self.params.get(G92_BASE + k, 0.0) for k in range(3)]
+        self.params[G92_FLAG] = 1.0
+        self._update_plain()
+
+    def _store_g92(self, flag: float) -> None:
+        for k in range(3):
+            self.params[G92_BASE + k] = self.g92_mm[k]
+        self.params[G92_FLAG] = flag
+
+    def home_mm(self, which: int) -> list:
+        """The stored G28 (``which`` = 28) or G30 position [mm, machine]."""
+        base = G28_BASE if which == 28 else G30_BASE
+        return [self.params.get(base + k, 0.0) for k in range(3)]
+
+    def store_home(self, which: int, machine_mm) -> None:
+        """G28.1 / G30.1: store the current machine position."""
+        base = G28_BASE if which == 28 else G30_BASE
+        for k in range(3):
+            self.params[base + k] = float(machine_mm[k])
+
+
+def _cos_sin(angle_deg: float) -> tuple[float, float]:
+    a = math.radians(angle_deg)
+    return math.cos(a), math.sin(a)
+
+
+class OffsetCommands:
+    """G10 L2/L20, G28/G30 (and .1), G92 family: a mixin of the interpreter (it provides
+    ``error``, ``m``, ``coords``, ``prog``, ``pos``, ``target_program``, ``rapid_to_program``).
+    The machine position never jumps when an offset changes: the program position follows.
+    """
+
+    def nonmodal(self, gcodes: dict, words: dict, used: set) -> bool:
+        """Group-0 codes other than G4; True when they consumed the axis words."""
+        if 0 not in gcodes:
+            return False
+        code, col = gcodes[0]
+        if code == 100:
+            self.g10(words, used, col)
+            return True
+        if code in (280, 300):
+            self.go_home(28 if code == 280 else 30, words, used)
+            return True
+        if code in (281, 301):
+            self.coords.store_home(28 if code == 281 else 30, self.pos)
+            return False
+        if code == 920:
+            self.g92(words, used, col)
+            return True
+        if code in (921, 922, 923):
+            machine = self.pos
+            if code == 923:
+                self.coords.restore_g92()
+            else:
+                self.coords.clear_g92(keep_parameters=code == 922)
+            self.pos = machine
+        return False
+
+    def g10(self, words: dict, used: set, col: int) -> None:
+        if "L" not in words:
+            raise self.error("G10 needs an L word (L2 or L20)", col)
+        level, lcol = words["L"]
+        if level not in (2.0, 20.0):
+            raise self.error(
+                f"G10 L{level:g} is not supported (tool table and other G10 forms); "
+                "only L2 and L20 (coordinate system offsets)",
+                lcol,
+                UnsupportedError,
+            )
+        if "P" not in words:
+            raise self.error(f"G10 L{level:g} needs P (0 = current, 1..9 = G54..G59.3)", col)
+        p, pcol = words["P"]
+        if p != int(p) or not 0 <= p <= 9:
+            raise self.error(f"G10 L{level:g} P{p:g}: P must be an integer 0..9", pcol)
+        used.update("LP" + ("R" if "R" in words else "") + "XYZ")
+        system = int(p) or self.coords.system
+        scale = self.m.scale
+        given = {i: words[a][0] * scale for i, a in enumerate(_AXES) if a in words}
+        rotation = words["R"][0] if "R" in words else None
+        machine = self.pos
+        if level == 20.0:
+            if rotation is not None:
+                raise self.error("R not allowed in G10 L20", words["R"][1])
+            given = self._l20_offsets(system, given, machine)
+        self.coords.set_system(system, given, rotation)
+        self.pos = machine
+
+    def _l20_offsets(self, system: int, given: dict, machine) -> dict:
+        """G10 L20: the offsets of ``system`` that make the current position read as the
+        given values there (LinuxCNC's convert_setup: X and Y through the system's rotation,
+        so both change; an axis not given keeps its current reading)."""
+        c = self.coords
+        origin = c.system_offset_mm(system)
+        rad = math.radians(c.system_rotation_deg(system))
+        cos, sin = math.cos(rad), math.sin(rad)
+        free = [machine[k] - c.tool_mm[k] - origin[k] for k in range(3)]
+        # the current position in the system's own (rotated) coordinates, G92 removed
+        now = [cos * free[0] + sin * free[1] - c.g92_mm[0],
+               -sin * free[0] + cos * free[1] - c.g92_mm[1],
+               free[2] - c.g92_mm[2]]  # fmt: skip
+        want = [given.get(k, now[k]) + c.g92_mm[k] for k in range(3)]
+        have = [now[k] + c.g92_mm[k] for k in range(3)]
+        out = {}
+        if 0 in given or 1 in given:
+            out[0] = origin[0] + (cos * have[0] - sin * have[1]) - (cos * want[0] - sin * want[1])
+            out[1] = origin[1] + (sin * have[0] + cos * have[1]) - (sin * want[0] + cos * want[1])
+        if 2 in given:
+            out[2] = origin[2] + have[2] - want[2]
+        return out
+
+    def g92(self, words: dict, used: set, col: int) -> None:
+        if not any(a in words for a in _AXES):
+            raise self.error("G92 needs at least one axis word", col)
+        machine = self.pos
+        c = self.coords
+        unshifted = [self.prog[k] + c.g92_mm[k] for k in range(3)]
+        offsets = {i: unshifted[i] - words[a][0] * self.m.scale
+                   for i, a in enumerate(_AXES) if a in words}  # fmt: skip
+        c.set_g92(offsets)
+        self.pos = machine
+        used.update(_AXES)
+
+    def go_home(self, which: int, words: dict, used: set) -> None:
+        """G28 / G30: rapid through the intermediate point (axis words) to the stored one.
+
+        With axis words only those axes go home (LinuxCNC); without, all do.
+        """
+        if self.m.comp_mode != 400:
+            raise self.error(f"G{which} with cutter compensation on")
+        home = self.coords.home_mm(which)
+        axes = [i for i, a in enumerate(_AXES) if a in words]
+        if axes:
+            middle = self.target_program(words)
+            self.rapid_to_program(middle)
+            machine = self.pos
+            for i in axes:
+                machine[i] = home[i]
+        else:
+            machine = list(home)
+        self.rapid_to_program(self.coords.to_program(machine))
+        used.update(_AXES)
+

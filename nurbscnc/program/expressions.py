@@ -1,0 +1,177 @@
+"""Evaluate RS274/NGC expressions (LinuxCNC's interp_read.cc / interp_execute.cc semantics).
+
+The parser gives an expression as nested tuples (see :mod:`nurbscnc.program.parse`). Real
+programs nest them a few levels deep, hostile ones thousands (``ABS[ABS[...`` or ``####1``),
+so evaluation is ITERATIVE: an explicit stack of pending operations instead of Python
+recursion, and the depth is unbounded by anything but memory. Every intermediate result is
+checked to be finite, so SIN, ROUND or a parameter index never sees inf or nan.
+
+Angles are in degrees, as in RS274/NGC. Comparisons and logic give 1.0 or 0.0.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+from nurbscnc.errors import ProgramError
+
+#: The highest parameter number (LinuxCNC: RS274NGC_MAX_PARAMETERS − 1).
+MAX_PARAMETER = 5602
+
+
+class ExpressionError(ProgramError):
+    """An expression cannot be evaluated (division by zero, domain, overflow)."""
+
+
+def _binop(op: str, a: float, b: float) -> float:
+    if op == "+":
+        return a + b
+    if op == "-":
+        return a - b
+    if op == "*":
+        return a * b
+    if op == "/":
+        if b == 0.0:
+            raise ExpressionError("division by zero")
+        return a / b
+    if op == "MOD":
+        if b == 0.0:
+            raise ExpressionError("MOD by zero")
+        r = math.fmod(a, b)
+        return r + abs(b) if r < 0.0 else r  # LinuxCNC: result in [0, |b|)
+    if op == "**":
+        if a < 0.0 and b != int(b):
+            raise ExpressionError("negative number raised to a non-integer power")
+        if a == 0.0 and b < 0.0:
+            raise ExpressionError("zero raised to a negative power")
+        return float(a**b)
+    if op == "EQ":
+        return float(a == b)
+    if op == "NE":
+        return float(a != b)
+    if op == "GT":
+        return float(a > b)
+    if op == "GE":
+        return float(a >= b)
+    if op == "LT":
+        return float(a < b)
+    if op == "LE":
+        return float(a <= b)
+    if op == "AND":
+        return float(a != 0.0 and b != 0.0)
+    if op == "OR":
+        return float(a != 0.0 or b != 0.0)
+    if op == "XOR":
+        return float((a != 0.0) != (b != 0.0))
+    raise AssertionError(op)  # pragma: no cover
+
+
+def _func(name: str, x: float) -> float:
+    if name == "SIN":
+        return math.sin(math.radians(x))
+    if name == "COS":
+        return math.cos(math.radians(x))
+    if name == "TAN":
+        return math.tan(math.radians(x))
+    if name in ("ASIN", "ACOS"):
+        if not -1.0 <= x <= 1.0:
+            raise ExpressionError(f"{name} argument {x:g} outside [-1, 1]")
+        return math.degrees(math.asin(x) if name == "ASIN" else math.acos(x))
+    if name == "SQRT":
+        if x < 0.0:
+            raise ExpressionError(f"SQRT of a negative number ({x:g})")
+        return math.sqrt(x)
+    if name == "ABS":
+        return abs(x)
+    if name == "EXP":
+        return math.exp(x)
+    if name == "LN":
+        if x <= 0.0:
+            raise ExpressionError(f"LN of a non-positive number ({x:g})")
+        return math.log(x)
+    if name == "ROUND":
+        return float(math.floor(abs(x) + 0.5)) * (1.0 if x >= 0 else -1.0)
+    if name == "FIX":
+        return float(math.floor(x))
+    if name == "FUP":
+        return float(math.ceil(x))
+    raise AssertionError(name)  # pragma: no cover
+
+
+def evaluate(
+    expr,
+    numbered: Callable[[float], float],
+    named: Callable[[str], float],
+    exists: Callable[[str], bool],
+) -> float:
+    """The value of ``expr`` (a float or an expression tuple).
+
+    ``numbered(index)`` reads ``#index`` (it checks the range), ``named(name)`` reads
+    ``#<name>`` and ``exists(name)`` answers ``EXISTS[#<name>]``. Raises
+    :class:`ExpressionError` (without a position: the caller adds the word's) or whatever
+    the callbacks raise.
+    """
+    if type(expr) is float:
+        return expr
+    try:
+        result = _evaluate(expr, numbered, named, exists)
+    except OverflowError:
+        raise ExpressionError("arithmetic overflow in expression") from None
+    if not math.isfinite(result):
+        raise ExpressionError("expression value is not finite (overflow)")
+    return result
+
+
+def _evaluate(expr, numbered, named, exists) -> float:
+    # Post-order walk with two stacks: ``todo`` holds nodes to visit and ("apply", node)
+    # markers for operations whose operands are on ``values``.
+    values: list[float] = []
+    todo: list = [expr]
+    push_value = values.append
+    push = todo.append
+    pop = todo.pop
+    while todo:
+        node = pop()
+        if type(node) is float:
+            push_value(node)
+            continue
+        tag = node[0]
+        if tag == "apply":
+            op = node[1]
+            kind = op[0]
+            if kind == "#":
+                r = numbered(values.pop())
+            elif kind == "neg":
+                r = -values.pop()
+            elif kind == "op":
+                b = values.pop()
+                a = values.pop()
+                r = _binop(op[1], a, b)
+            elif kind == "fn":
+                r = _func(op[1], values.pop())
+            elif kind == "existsn":
+                r = 1.0 if 1 <= round(values.pop()) <= MAX_PARAMETER else 0.0
+            else:  # atan
+                x = values.pop()
+                y = values.pop()
+                r = math.degrees(math.atan2(y, x))
+            if not math.isfinite(r):
+                raise ExpressionError("expression value is not finite (overflow)")
+            push_value(r)
+        elif tag == "<":
+            push_value(named(node[1]))
+        elif tag == "exists":
+            push_value(1.0 if exists(node[1]) else 0.0)
+        elif tag == "op":
+            push(("apply", node))
+            push(node[3])
+            push(node[2])
+        elif tag == "atan":
+            push(("apply", node))
+            push(node[2])
+            push(node[1])
+        else:  # "#", "neg", "fn", "existsn": one operand (the last element)
+            push(("apply", node))
+            push(node[-1])
+    return values[-1]

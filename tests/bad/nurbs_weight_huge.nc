@@ -1,0 +1,5 @@
+; NURBS weight P1e+10 is out of range @ 3:7
+G5.2 F100 X0 Y0 P1 L3
+X1 Y1 P10000000000
+X2 Y0 P1
+G5.3

@@ -1,0 +1,2 @@
+; o3 break outside a loop @ 2:1
+o3 break

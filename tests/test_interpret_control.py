@@ -1,0 +1,359 @@
+"""O-words, coordinate systems, line reading and limits of the interpreter.
+
+References: hand-inlined programs (a subroutine call must give exactly the moves of its body
+written out), G90 programs (G91 increments summed by hand must give the same end points),
+closed forms (expression values), and LinuxCNC's rules as its interpreter applies them
+(checked with rs274 / the gcode module where noted; the move-by-move LinuxCNC comparison is
+tests/test_interpret_linuxcnc.py).
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from nurbscnc.errors import ConfigError, GCodeSyntaxError, NurbsCncError, ProgramError
+from nurbscnc.program.interpret import InterpretOptions, interpret_text
+from nurbscnc.program.tooltable import parse_tool_table
+
+from .test_interpret import assert_same_program, num
+
+
+def segs(text: str, **options):
+    return interpret_text(text, InterpretOptions(**options)).segments
+
+
+def ends(text: str, **options) -> np.ndarray:
+    return np.array([s.end_mm for s in segs(text, **options)], dtype=float)
+
+
+# -- subroutines equal their inlined form ---------------------------------------------------
+coord = st.integers(-50_000, 50_000).map(lambda k: k / 1000.0)
+moves = st.lists(st.tuples(st.sampled_from(["G0", "G1"]), coord, coord, coord), min_size=1,
+                 max_size=6)  # fmt: skip
+
+
+@settings(max_examples=60, deadline=None, derandomize=True)
+@given(body=moves, args=st.lists(coord, min_size=3, max_size=3), turns=st.integers(1, 3))
+def test_subroutine_equals_inlined(body, args, turns):
+    """A sub whose moves use #1..#3 as offsets, called in a repeat loop, equals the same
+    moves written out with the argument values added (segment lines aside)."""
+    sub_lines = [f"{g} X[#1 + {num(x)}] Y[#2 + {num(y)}] Z[#3 + {num(z)}]" for g, x, y, z in body]
+    called = "\n".join(
+        ["F600", "o<part> sub", *sub_lines, "o<part> endsub",
+         f"o1 repeat [{turns}]",
+         f"o<part> call [{num(args[0])}] [{num(args[1])}] [{num(args[2])}]",
+         "o1 endrepeat", "M2"]
+    )  # fmt: skip
+    a, b, c = args
+    inline_lines = [f"{g} X{num(a + x)} Y{num(b + y)} Z{num(c + z)}" for g, x, y, z in body]
+    inlined = "\n".join(["F600", *(inline_lines * turns), "M2"])
+    got, want = segs(called), segs(inlined)
+    assert [s.kind for s in got] == [s.kind for s in want]
+    for s, w in zip(got, want):
+        np.testing.assert_allclose(s.end_mm, w.end_mm, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(s.start_mm, w.start_mm, rtol=0, atol=1e-12)
+        assert s.feed_mm_s == w.feed_mm_s
+
+
+@settings(max_examples=60, deadline=None, derandomize=True)
+@given(points=st.lists(st.tuples(coord, coord, coord), min_size=1, max_size=8),
+       units=st.sampled_from(["G21", "G20"]))  # fmt: skip
+def test_g91_equals_g90(points, units):
+    """The same path as G91 increments and G90 positions (also in inches, also arcs)."""
+    absolute = [units, "G90 F100"]
+    incremental = [units, "G91 F100"]
+    prev = (0.0, 0.0, 0.0)
+    for x, y, z in points:
+        absolute.append(f"G1 X{num(x)} Y{num(y)} Z{num(z)}")
+        incremental.append(
+            f"G1 X[{num(x)} - {num(prev[0])}] Y[{num(y)} - {num(prev[1])}] "
+            f"Z[{num(z)} - {num(prev[2])}]"
+        )
+        prev = (x, y, z)
+    # a full circle about a centre 1 unit to the right, in both modes (I is incremental)
+    absolute.append("G2 I1 J0")
+    incremental.append("G2 I1 J0")
+    a, b = segs("\n".join(absolute)), segs("\n".join(incremental))
+    assert_same_program(a, b, rtol=0, atol=1e-9)
+
+
+# -- O-word behaviour -------------------------------------------------------------------------
+def test_call_arguments_are_local_and_restored():
+    prog = "#1 = 7\no1 sub\nG0 X#1 Y#2\n#1 = 99\no1 endsub\no1 call [3]\nG0 Z#1\n"
+    np.testing.assert_array_equal(ends(prog), [[3, 0, 0], [3, 0, 7]])
+
+
+def test_return_value_and_named_scopes():
+    prog = """#<_g> = 1
+o<f> sub
+  #<loc> = [#1 * 2]
+  #<_g> = [#<_g> + 1]
+  o<f> return [#<loc> + #<_g>]
+o<f> endsub
+o<f> call [5]
+G0 X#<_value> Y#<_value_returned> Z[EXISTS[#<loc>]]
+o<f> call [1]
+G0 X#<_value> Y#<_g>
+"""
+    np.testing.assert_array_equal(ends(prog), [[12, 1, 0], [5, 3, 0]])
+
+
+def test_if_elseif_else_and_loops():
+    prog = """#1 = 0
+o1 while [#1 LT 5]
+  #1 = [#1 + 1]
+  o2 if [#1 EQ 1]
+    G0 X1
+  o2 elseif [#1 EQ 2]
+    G0 X2
+  o2 elseif [#1 EQ 3]
+    o1 continue
+  o2 else
+    G0 X#1
+  o2 endif
+  o3 if [#1 EQ 4]
+    o1 break
+  o3 endif
+o1 endwhile
+o4 do
+  G0 Y[#1]
+  #1 = [#1 - 1]
+o4 while [#1 GT 2]
+o5 repeat [0]
+  G0 Z9
+o5 endrepeat
+o6 repeat [2.7]
+  G0 Z[#1]
+  #1 = [#1 + 1]
+o6 endrepeat
+"""
+    np.testing.assert_array_equal(
+        ends(prog), [[1, 0, 0], [2, 0, 0], [4, 0, 0], [4, 4, 0], [4, 3, 0], [4, 3, 2], [4, 3, 3]]
+    )
+
+
+def test_sub_defined_after_its_call_and_numbered():
+    np.testing.assert_array_equal(ends("o100 call [2]\nM2\no100 sub\nG0 X#1\no100 endsub\n"),
+                                  [[2, 0, 0]])  # fmt: skip
+
+
+def test_subroutine_file_through_the_loader():
+    files = {"pocket": ("o<pocket> sub\nG1 X#1 F100\nG1 Y#2 Q5\no<pocket> endsub\n", "pocket.ngc"),
+             "ok": ("o<ok> sub\nG0 Z#1\no<ok> endsub\nM2\n", "/lib/ok.ngc")}  # fmt: skip
+    asked = []
+
+    def load(name):
+        asked.append(name)
+        return files.get(name)
+
+    got = segs("o<ok> call [4]\no<ok> call [5]\nG0 X1\n", load_subroutine=load)
+    assert [s.end_mm for s in got] == [(0, 0, 4), (0, 0, 5), (1, 0, 5)]
+    assert asked == ["ok"]  # read once
+    with pytest.raises(ProgramError) as info:
+        segs("G0 X1\no<pocket> call [1] [2]\n", load_subroutine=load)
+    # The error names the file, line and column in it, and points at the call line.
+    assert info.value.message.startswith("pocket.ngc:3:")
+    assert "Q word" in info.value.message
+    assert info.value.pos.line == 2
+
+
+def test_endless_recursion_and_loops_end_quickly():
+    start = time.perf_counter()
+    with pytest.raises(ProgramError, match="nested calls") as info:
+        segs("o1 sub\nG0 X1\no1 call\no1 endsub\no1 call\n", max_call_depth=50)
+    assert info.value.pos.line == 3
+    with pytest.raises(ProgramError, match="loop iterations") as info:
+        segs("o1 do\no1 while [1]\n", max_loop_iterations=1000)
+    assert info.value.pos.line == 2
+    assert time.perf_counter() - start < 5.0
+
+
+def test_fanuc_program_number_at_the_top():
+    assert ends("%\nO1234 (PART 7)\nG0 X1\n%\n").tolist() == [[1, 0, 0]]
+
+
+# -- reading lines ----------------------------------------------------------------------------
+def test_cr_cr_lf_is_one_line_end():
+    with pytest.raises(ProgramError) as info:
+        segs("G0 X1\r\r\nG0 X2\r\r\nG1 X3\r\n")
+    assert info.value.pos.line == 3  # not 5
+
+
+def test_nothing_after_m2_or_the_closing_percent_is_read():
+    assert len(segs("G0 X1\nM2\nG1 X2 $$$ ((\n")) == 1
+    assert len(segs("%\nG0 X1\n%\nthis is not G-code\n")) == 1
+    # an error before the end is reported, whatever follows
+    with pytest.raises(GCodeSyntaxError) as info:
+        segs("G0 X1\nG0 X$\nM30\n@@@\n")
+    assert info.value.pos.line == 2
+
+
+def test_program_without_motion():
+    prog = interpret_text("G21 S300\nM2\n")
+    assert prog.segments == () and prog.blocks == 2
+
+
+def test_pauses():
+    """M0 / M1 / M60 are Pause segments: zero-second stops (kind "dwell") with their code."""
+    got = segs("G0 X1\nM0\nM1\nG0 Y2\nM60\n")
+    assert [(type(s).__name__, s.line, getattr(s, "code", "")) for s in got] == [
+        ("Line", 1, ""), ("Pause", 2, "M0"), ("Pause", 3, "M1"), ("Line", 4, ""),
+        ("Pause", 5, "M60")]  # fmt: skip
+    assert got[1].position_mm == (1.0, 0.0, 0.0)
+    assert got[1].kind == "dwell" and got[1].seconds == 0.0
+
+
+# -- expressions of any depth -----------------------------------------------------------------
+@pytest.mark.parametrize(
+    ("expr", "value"),
+    [
+        ("[1" + "+0.5" * 1000 + "]", 501.0),
+        ("#" * 1000 + "1", 1.0),  # #1 = 1, so every # reads #1 again
+        ("ABS[" * 1000 + "-2" + "]" * 1000, 2.0),
+        ("-" * 1001 + "3", -3.0),
+        ("[" * 2000 + "4" + "]" * 2000, 4.0),
+    ],
+    ids=["sum1000", "hash1000", "abs1000", "neg1001", "brackets2000"],
+)
+def test_deep_expressions_evaluate(expr, value):
+    (line,) = segs(f"#1 = 1\nG1 F100 X{expr}\n")
+    assert line.end_mm[0] == value
+
+
+def test_huge_line_is_refused_quickly():
+    start = time.perf_counter()
+    with pytest.raises(GCodeSyntaxError, match="line is too long"):
+        segs("G1 X" + "[" * 2_000_000 + "1" + "]" * 2_000_000 + "\n")
+    assert time.perf_counter() - start < 5.0
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("G4 P" + "9" * 300, "dwell P1e+300 is out of range"),
+        ("G1 F100 X99999999999999999999", "X1e+20 is out of range"),
+        ("F100 G5.2 X0 Y0 P1 L3\nX1 Y1 P1" + "0" * 300 + "\nX2 Y0 P1\nG5.3",
+         "NURBS weight P1e+300 is out of range"),
+        ("G1 X1 F0." + "0" * 320 + "1", "is out of range"),
+        ("F1 G2 X0 Y0 I1 J0 P1000000000", "arc turns P1e+09 is out of range"),
+    ],
+)  # fmt: skip
+def test_values_no_machine_can_use_are_named(text, message):
+    with pytest.raises(ProgramError, match=message.replace("+", r"\+")):
+        segs(text)
+
+
+# -- tool tables -----------------------------------------------------------------------------
+def test_tool_table_format_and_g43():
+    table = parse_tool_table("T1 P1 Z12.5 D6 ;end mill\n\nt2 p2 x0.5 z-3 d4.0\n; comment\n")
+    assert table[1].offset_mm == (0.0, 0.0, 12.5) and table[1].diameter_mm == 6.0
+    assert table[2].offset_mm == (0.5, 0.0, -3.0) and table[2].pocket == 2
+    got = ends("T1 M6 G43\nG0 Z0\nG43 H2\nG0 X0 Z0\nG49\nG0 X0 Z0\n", tools=table)
+    np.testing.assert_array_equal(got, [[0, 0, 12.5], [0.5, 0, -3], [0, 0, 0]])
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [("T1e400 Z1", "out of range"), ("T1 Zx", "not a number"), ("P1 Z1", "without a T"),
+     ("T1.5 Z1", "non-negative integer"), ("T1 K4", "unknown tool table field")],
+)  # fmt: skip
+def test_bad_tool_tables(text, message):
+    with pytest.raises(ConfigError, match=message) as info:
+        parse_tool_table(text, "tools.tbl")
+    assert "tools.tbl:1:" in info.value.message
+
+
+# -- coordinate systems -----------------------------------------------------------------------
+def test_offsets_parameters_and_machine_coordinates():
+    prog = """G10 L2 P2 X10 Y20 Z-5
+G55 G0 X1 Y1 Z1
+G0 X[#5241] Y#5242
+G92 X0 Y0
+G0 X1
+G53 G0 X0 Y0
+G92.1
+G54 G0 X3
+G28.1
+G0 X4
+G28
+"""
+    np.testing.assert_allclose(
+        ends(prog),
+        [[11, 21, -4], [20, 40, -4], [21, 40, -4], [0, 0, -4], [3, 0, -4], [4, 0, -4], [3, 0, -4]],
+        rtol=0, atol=1e-12,
+    )  # fmt: skip
+
+
+def test_errors_are_project_errors():
+    assert issubclass(ConfigError, NurbsCncError)
+
+
+def test_m70_m72_m73_save_and_restore_modal_state():
+    """LinuxCNC's nc_files/m70m72-demo.ngc in short: state saved, changed, restored."""
+    prog = """G21 G90 F200
+M70
+G20 G91
+F5
+G1 X1
+M72
+G1 X1
+o1 sub
+  M73
+  G20 G91
+  G1 X1
+o1 endsub
+o1 call
+G1 X2
+"""
+    got = segs(prog)
+    np.testing.assert_allclose([s.end_mm[0] for s in got], [25.4, 1.0, 26.4, 2.0], atol=1e-12)
+    assert [s.feed_mm_s * 60 for s in got] == pytest.approx([5 * 25.4, 200, 200, 200])
+
+
+def test_exists_of_numbered_parameters():
+    """LinuxCNC's tests/interp/exists (its expected output: X1 Z1, then X1 Z0): EXISTS[#n]
+    says whether n is a parameter number."""
+    prog = ("#<a>=999\nG0 X EXISTS[#1] Y EXISTS[#99999] Z EXISTS[#<a>]\n#1=2\n#2=99999\n"
+            "G0 X EXISTS[##1] Y EXISTS[##2] Z EXISTS[###1]\n")  # fmt: skip
+    np.testing.assert_array_equal(ends(prog), [[1, 0, 1], [1, 0, 0]])
+
+
+def test_check_finds_subroutine_files(tmp_path):
+    """``check``: o<name> call reads name.ngc beside the program, then --subroutine-path."""
+    import json
+
+    from click.testing import CliRunner
+
+    from nurbscnc.cli.main import main
+
+    (tmp_path / "lib").mkdir()
+    (tmp_path / "beside.ngc").write_text("o<beside> sub\nG1 X#1 F100\no<beside> endsub\n")
+    (tmp_path / "lib" / "far.ngc").write_text("o<far> sub\nG1 Y#1 F100\no<far> endsub\nM2\n")
+    (tmp_path / "main.ngc").write_text("o<beside> call [2]\no<far> call [3]\nM2\n")
+    runner = CliRunner()
+    missing = runner.invoke(main, ["check", "--json", str(tmp_path / "main.ngc")])
+    assert missing.exit_code == 2
+    assert "no file far.ngc was found" in json.loads(missing.stdout)["errors"][0]["message"]
+    found = runner.invoke(main, ["check", "--json", "--subroutine-path", str(tmp_path / "lib"),
+                                 str(tmp_path / "main.ngc")])  # fmt: skip
+    assert found.exit_code == 0, found.stderr
+    data = json.loads(found.stdout)
+    assert [(s["kind"], s["line"]) for s in data["segments"]] == [("line", 1), ("line", 2)]
+    assert data["bounding_box_mm"]["max"] == [2.0, 3.0, 0.0]
+
+
+def test_inverse_time_and_per_revolution_feeds():
+    """G93: F is 1/minutes, so a move of length L takes 1/F min: feed = L·F/60 mm/s (arcs by
+    their length). G95: F mm per revolution at S rpm: F·S mm/min."""
+    got = segs("G93 G1 X30 Y40 F2\nG2 X50 Y40 I10 J0 F3\nG94 F600 G1 X0\n"
+               "S1000 G95 G1 X10 F0.2\nG20\nG1 X1 F0.01\n")  # fmt: skip
+    assert got[0].feed_mm_s == pytest.approx(50.0 * 2 / 60, rel=1e-15)
+    assert got[1].feed_mm_s == pytest.approx(np.pi * 10 * 3 / 60, rel=1e-14)
+    assert got[2].feed_mm_s == pytest.approx(10.0, rel=1e-15)
+    assert got[3].feed_mm_s == pytest.approx(0.2 * 1000 / 60, rel=1e-15)
+    assert got[4].feed_mm_s == pytest.approx(0.01 * 25.4 * 1000 / 60, rel=1e-15)
