@@ -1,11 +1,12 @@
-"""Stream bandwidth benchmark: does 115200 baud carry 1 kHz periods of 3 axes with ≥ 30 % spare?
+"""Stream benchmark: line use at 1 kHz / 3 axes / 115200 baud, and the fault matrix.
 
 Usage::
 
     .venv/bin/python bench/stream_bench.py --out bench/stream_results.json
     .venv/bin/python bench/stream_bench.py --quick          # a short program, a few seconds
+    .venv/bin/python bench/stream_bench.py --matrix-only --seeds 20   # only the fault matrix
 
-Three parts:
+Four parts:
 
 1. **Computed** from the codec's frame sizes (frames actually encoded, not a formula): bytes
    per period sent to the card for several batch sizes, and the share of a 115200-baud 8N1 line
@@ -19,6 +20,11 @@ Three parts:
 3. **Real time on an emulated line**: the simulator runs at 1 kHz and paces both directions at
    115200 baud (``Wire``); with 0 % and 10 % corruption the stream must finish without an
    underrun, and the measured line use is bytes × 10 / (115200 × duration).
+4. **Fault matrix** in virtual time (:func:`~nurbscnc.output.stream.simlink.simulate`: sender
+   and real-time card over a 115200-baud line, relays flipping 1–4 bits of a frame or losing
+   frames / runs of bytes in both directions): corrupt 0.1–5 %, drop 0.1–2 %, several seeds.
+   Every stream must end with the card's executed pulses equal to the plan, or fail with the
+   card stopped having run a prefix of it; at ≤ 2 % corruption every stream must complete.
 """
 
 from __future__ import annotations
@@ -46,7 +52,9 @@ from nurbscnc.output.stream.card import (  # noqa: E402
     PtyEndpoint,
     serve,
 )
+from nurbscnc.output.stream.quantise import quantise  # noqa: E402
 from nurbscnc.output.stream.sender import Sender, SenderOptions, open_port  # noqa: E402
+from nurbscnc.output.stream.simlink import Relay, simulate  # noqa: E402
 
 BAUD = 115200
 RATE_HZ = 1000.0
@@ -54,13 +62,13 @@ AXES = 3
 LINE_BYTES_S = BAUD / p.BITS_PER_BYTE_8N1
 
 
-def computed(batch_sizes=(1, 2, 4, 8, 16, 32, 84)) -> list[dict]:
+def computed(batch_sizes=(1, 2, 4, 8, 16, 32, 80)) -> list[dict]:
     """Bytes per period and line use from encoded frames (int8 counts, 3 axes)."""
     rows = []
     status = len(p.encode_message(p.Status(2, 0, 0, 0, 0, 0, (0,) * AXES)))
     ack = len(p.encode_message(p.Ack(0, 0)))
     for b in batch_sizes:
-        frame = len(p.encode_message(p.Batch(np.full((b, AXES), 58))))
+        frame = len(p.encode_message(p.Batch(np.full((b, AXES), 58), (0,) * AXES)))
         per_period = frame / b
         use = per_period * RATE_HZ / LINE_BYTES_S
         back = (ack / b + status / 16.0) * RATE_HZ / LINE_BYTES_S
@@ -113,13 +121,109 @@ def run_once(pulses, config: CardConfig, baud: int | None, seed: int = 1) -> dic
     }
 
 
+CORRUPT_RATES = (0.001, 0.005, 0.01, 0.02, 0.05)
+DROP_RATES = (0.001, 0.005, 0.02)
+
+
+def matrix(pulses, seeds: int) -> dict:
+    """The fault matrix: outcome counts per corruption rate (all drop rates and seeds)."""
+    rows = {}
+    t0 = time.perf_counter()
+    for corrupt in CORRUPT_RATES:
+        row = {"streams": 0, "completed": 0, "failed_cleanly": 0, "unclean": 0,
+               "retransmits": 0, "virtual_s": 0.0, "errors": []}  # fmt: skip
+        for drop in DROP_RATES:
+            for seed in range(seeds):
+                r = simulate(pulses, CardConfig(speed=1.0),
+                             to_card=Relay(corrupt, drop, seed),
+                             to_host=Relay(corrupt, drop, 10_000 + seed), seed=seed)  # fmt: skip
+                row["streams"] += 1
+                row["virtual_s"] += r.elapsed_s
+                row["retransmits"] += r.link.count.retransmits
+                if r.completed and r.exact(pulses):
+                    row["completed"] += 1
+                elif not r.completed and r.stopped_cleanly(pulses):
+                    row["failed_cleanly"] += 1
+                    row["errors"].append(f"drop {drop:g} seed {seed}: {r.error.message} (card "
+                                         f"{r.state_at_end.name} when the sender ended)")
+                else:
+                    row["unclean"] += 1
+                    row["errors"].append(f"UNCLEAN drop {drop:g} seed {seed}: {r.error}")
+        rows[f"corrupt_{corrupt:g}"] = row
+    return {"corrupt_rates": CORRUPT_RATES, "drop_rates": DROP_RATES, "seeds": seeds,
+            "periods": pulses.periods, "rows": rows,
+            "wall_s": time.perf_counter() - t0}  # fmt: skip
+
+
+STRESS = ((0.1, 0.05, 48), (0.2, 0.1, 256), (0.3, 0.2, 64), (0.5, 0.3, 256))
+
+
+def stress(seeds: int = 25) -> dict:
+    """Far past the matrix: (corrupt, drop, buffer) cells where streams may fail; every failure
+    must leave the card stopped having run a prefix of the program (no wrong pulse)."""
+    t = np.arange(501) * 1e-3  # a 10 mm circle at ≈ 31 mm/s, 500 periods
+    pts = np.column_stack([10 * np.sin(np.pi * t), 10 * np.cos(np.pi * t) - 10, 0.01 * t])
+    pulses = quantise(pts, (1000.0,) * 3, 1e-3)
+    out = {}
+    for corrupt, drop, buffer in STRESS:
+        row = {"streams": 0, "completed": 0, "failed_cleanly": 0, "unclean": 0}
+        for seed in range(seeds):
+            r = simulate(pulses, CardConfig(speed=1.0, buffer_periods=buffer,
+                                            start_fill_periods=buffer // 2),
+                         to_card=Relay(corrupt, drop, seed),
+                         to_host=Relay(corrupt, drop, 1000 + seed), seed=seed)  # fmt: skip
+            row["streams"] += 1
+            key = ("completed" if r.completed and r.exact(pulses) else
+                   "failed_cleanly" if not r.completed and r.stopped_cleanly(pulses)
+                   else "unclean")  # fmt: skip
+            row[key] += 1
+        out[f"corrupt_{corrupt:g}_drop_{drop:g}_buffer_{buffer}"] = row
+    return out
+
+
+def print_matrix(m: dict) -> bool:
+    print(f"\nfault matrix ({m['periods']} periods, real-time card, 115200 baud, drop rates "
+          f"{', '.join(f'{d:.1%}' for d in m['drop_rates'])} × {m['seeds']} seeds each, "
+          f"{m['wall_s']:.1f} s):")
+    print(f"  {'corrupt':>7} {'streams':>7} {'done':>5} {'failed cleanly':>14} {'unclean':>7} "
+          f"{'retransmits/stream':>18}")
+    ok = True
+    for name, r in m["rows"].items():
+        rate = float(name.split("_")[1])
+        print(f"  {rate:>7.1%} {r['streams']:>7} {r['completed']:>5} {r['failed_cleanly']:>14} "
+              f"{r['unclean']:>7} {r['retransmits'] / r['streams']:>18.1f}")
+        for e in r["errors"][:3]:
+            print(f"          {e}")
+        ok = ok and r["unclean"] == 0 and (rate > 0.02 or r["completed"] == r["streams"])
+    print(f"  every stream exact or stopped cleanly, all complete at ≤ 2 %: {ok}")
+    return ok
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--out", default=None, help="write the results as JSON here")
     ap.add_argument("--quick", action="store_true", help="short program (naca2415, ~1.1 s)")
+    ap.add_argument("--seeds", type=int, default=4, help="fault matrix: seeds per cell")
+    ap.add_argument("--matrix-only", action="store_true", help="only the fault matrix")
+    ap.add_argument("--stress", action="store_true",
+                    help="only the stress cells far past the matrix (10-50 %% corruption)")
     args = ap.parse_args()
+    if args.stress:
+        rows = stress()
+        for name, row in rows.items():
+            print(f"{name}: {row}")
+        ok = all(row["unclean"] == 0 for row in rows.values())
+        print(f"every failure with the card stopped after a prefix: {ok}")
+        return 0 if ok else 1
     program = ROOT / "programs" / ("naca2415.nc" if args.quick else "butterfly.nc")
     pulses, mach = load_pulse_program(str(program), None, ())
+    naca, _ = load_pulse_program(str(ROOT / "programs" / "naca2415.nc"), None, ())
+    if args.matrix_only:
+        m = matrix(naca, args.seeds)
+        ok = print_matrix(m)
+        if args.out:
+            Path(args.out).write_text(json.dumps({"fault_matrix": m, "ok": ok}, indent=2) + "\n")
+        return 0 if ok else 1
     results = {
         "date": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
         "machine": {"platform": platform.platform(), "python": platform.python_version()},
@@ -161,6 +265,8 @@ def main() -> int:
              for part in ("fast", "real_time_115200")
              for r in results[part].values())  # fmt: skip
     ok = ok and results["fast"]["corrupt_0"]["spare_at_1kHz"] >= 0.30
+    results["fault_matrix"] = matrix(naca, args.seeds)
+    ok = print_matrix(results["fault_matrix"]) and ok
     results["ok"] = ok
     print(f"\nspare ≥ 30 % at 1 kHz and every run exact: {ok}")
     if args.out:

@@ -70,6 +70,11 @@ class ConfigError(NurbsCncError):
     """A bad machine profile or option value; the message names the key."""
 
 
+class DataError(NurbsCncError):
+    """A data file nurbscnc reads (reference points) has bad content; the message names the
+    line and the value."""
+
+
 class OutputError(NurbsCncError):
     """A file could not be read or written."""
 

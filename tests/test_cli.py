@@ -9,17 +9,23 @@ project's parser), with scipy's BSpline and Gauss–Legendre quadrature as the l
 from __future__ import annotations
 
 import json
+import os
 import re
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.interpolate import BSpline
 
 import nurbscnc
 import nurbscnc.cli.main as cli
 from nurbscnc.cli.main import main
+from nurbscnc.errors import NurbsCncError, SourcePos
 
 ROOT = Path(__file__).resolve().parents[1]
 NACA = ROOT / "programs" / "naca2415.nc"
@@ -216,3 +222,251 @@ def test_machine_with_bad_toml_exits_2(tmp_path, command):
     assert "invalid TOML" in result.stderr
     assert "line 1" in result.stderr
     assert "Traceback" not in result.output
+
+
+# ------------------------------------------------------------- hardening: user text is literal
+
+
+@pytest.fixture
+def bracket_program(tmp_path):
+    """The airfoil under a file name that is rich markup: the folder "[" and the file "].nc"."""
+    folder = tmp_path / "["
+    folder.mkdir()
+    path = folder / "].nc"
+    path.write_bytes(NACA.read_bytes())
+    return path
+
+
+@pytest.mark.parametrize("command", [["check"], ["corners"], ["ph"], ["plan", "--dynamics", "off"]])
+def test_markup_file_name_prints_literally(bracket_program, command):
+    result = run([command[0], bracket_program, *command[1:]])
+    assert result.exit_code == 0, result.output
+    assert str(bracket_program) in result.stdout
+    assert "Traceback" not in result.output
+
+
+def test_markup_file_name_in_batch(bracket_program, tmp_path):
+    result = run(["run", "--output-dir", tmp_path / "out", "--jobs", "1", "--dynamics", "off",
+                  bracket_program])  # fmt: skip
+    assert result.exit_code == 0, result.output
+    assert str(bracket_program) in result.stdout
+    assert (tmp_path / "out" / "].csv").exists()
+
+
+def test_emoji_codes_in_source_line_and_line_100_print_literally(tmp_path):
+    path = tmp_path / "part.nc"
+    lines = ["G21 G90 G1 X1 F100"] + ["X1"] * 98 + ["(:thumbs_up:) G28 (:smile:)"]
+    path.write_text("\n".join(lines) + "\n")
+    result = run(["check", path])
+    assert result.exit_code == 2
+    head, source, caret = result.stderr.splitlines()[:3]
+    assert head.startswith(f"{path}:100:15: error: ")  # ":100:" is the 💯 shortcode
+    assert source == "    (:thumbs_up:) G28 (:smile:)"
+    assert caret == "    " + " " * 14 + "^"
+
+
+def test_emoji_code_in_file_name_stays_in_json(tmp_path):
+    path = tmp_path / "a:thumbs_up:b.nc"
+    path.write_text("G21 G90 G1 X1 F600\nM2\n")
+    result = run(["run", path, "-o", tmp_path / "p.csv", "--json", "--dynamics", "off"])
+    assert result.exit_code == 0, result.output
+    assert json.loads(result.stdout)["program"] == str(path)
+
+
+# ------------------------------------------------------------- hardening: error reports
+
+
+def test_long_source_line_is_cut_around_the_column():
+    text = "(" + "a" * 5_000_000 + ") G28 (" + "b" * 5_000_000 + ")"
+    column = text.index("G28") + 1
+    exc = NurbsCncError("G28 is not supported", SourcePos(7, column, text))
+    report = cli.format_error(exc, "big.nc")
+    head, shown, caret = report.splitlines()
+    assert head == f"big.nc:7:{column}: error: G28 is not supported"
+    assert len(shown) <= 4 + cli.SOURCE_ECHO_CHARS + 2
+    assert shown.startswith("    …") and shown.endswith("…")
+    assert shown[len(caret) - 1 : len(caret) + 2] == "G28"  # the caret is under the G
+
+
+@pytest.mark.parametrize("column", [1, 2, 60, 119, 121, 500, 999, 1000, 1001])
+def test_cut_source_line_keeps_the_caret_on_its_character(column):
+    text = "".join(chr(ord("A") + k % 26) for k in range(1000))
+    shown, caret = cli.echo_source_line(text, column)
+    assert len(shown) <= cli.SOURCE_ECHO_CHARS + 2
+    if column <= len(text):
+        assert shown[caret] == text[column - 1]
+    else:
+        assert caret == len(shown) - (1 if shown.endswith("…") else 0)
+
+
+@settings(max_examples=200, deadline=None, derandomize=True)
+@given(st.text(max_size=400), st.data())
+def test_cut_source_line_property(text, data):
+    column = data.draw(st.integers(1, len(text) + 1))
+    shown, caret = cli.echo_source_line(text, column, width=40)
+    visible = "".join(" " if c == "\t" else "\ufffd" if ord(c) < 0x20 or 0x7F <= ord(c) < 0xA0
+                      else c for c in text)  # fmt: skip
+    assert len(shown) <= 42
+    assert shown.strip("…") in visible
+    if column <= len(text):
+        assert shown[caret] == visible[column - 1]
+    if len(text) <= 40:
+        assert shown == visible
+
+
+def test_control_characters_in_source_line_are_not_echoed():
+    exc = NurbsCncError("bad", SourcePos(1, 9, "\x1b[2J\x07\tX\rG28\x9b1m"))
+    shown = cli.format_error(exc, "f.nc").splitlines()[1]
+    assert "\x1b" not in shown and "\x07" not in shown and "\r" not in shown
+    assert shown == "    " + "\ufffd[2J\ufffd X\ufffdG28\ufffd1m"
+
+
+def test_control_characters_in_file_name_and_message_are_not_echoed():
+    exc = NurbsCncError("bad word '\x1b]0;owned\x07'" + "x" * 5000, SourcePos(3, 1, "G1"))
+    head = cli.format_error(exc, "a\nb\x1b.nc").splitlines()[0]
+    assert head.startswith("a\ufffdb\ufffd.nc:3:1: error: bad word '\ufffd]0;owned\ufffd'")
+    assert head.endswith(f"… ({len(exc.message)} characters)")
+    assert len(head) < cli.MESSAGE_CHARS + 100
+
+
+def test_cli_error_on_long_line_is_short(tmp_path):
+    path = tmp_path / "long.nc"
+    path.write_text("G21 G90\n(" + "x" * 200_000 + ") G28\n")
+    result = run(["check", path])
+    assert result.exit_code == 2
+    assert len(result.stderr) < 600
+    assert result.stderr.startswith(f"{path}:2:200004: error: ")
+
+
+def test_run_names_errors_with_the_file(tmp_path):
+    path = tmp_path / "bad.nc"
+    path.write_text("G21 G90 G1 X1 F100\nG28\n")
+    result = run(["run", path, "-o", tmp_path / "p.csv"])
+    assert result.exit_code == 2
+    assert result.stderr.startswith(f"{path}:2:1: error: ")
+    assert "<stdin>" not in result.stderr
+    assert not (tmp_path / "p.csv").exists()
+
+
+def test_run_from_stdin_is_named_stdin(tmp_path):
+    result = run(["run", "-", "-o", tmp_path / "p.csv"], input="G1 X1 F100\nG28\n")
+    assert result.exit_code == 2
+    assert result.stderr.startswith("<stdin>:2:1: error: ")
+
+
+# ------------------------------------------------------------- hardening: files and exit codes
+
+
+@pytest.mark.parametrize("command", ["check", "corners", "ph", "plan", "simulate"])
+def test_directory_input_exits_3(tmp_path, command):
+    result = run([command, tmp_path])
+    assert result.exit_code == 3, result.output
+    assert "Is a directory" in result.stderr
+
+
+@pytest.mark.parametrize("option", ["--machine", "--tool-table"])
+def test_directory_as_machine_or_tool_table_exits_3(tmp_path, option):
+    command = "check" if option == "--tool-table" else "corners"
+    result = run([command, NACA, option, tmp_path])
+    assert result.exit_code == 3, result.output
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root reads unreadable files")
+def test_unreadable_input_exits_3(tmp_path):
+    path = tmp_path / "secret.nc"
+    path.write_text("G1 X1 F100\n")
+    path.chmod(0)
+    result = run(["check", path])
+    assert result.exit_code == 3
+    assert "Permission denied" in result.stderr
+
+
+def test_machine_profile_with_400_digit_integer_exits_2(tmp_path):
+    text = cli_default_profile().replace("a_max_mm_s2 = 2450.0", "a_max_mm_s2 = " + "9" * 400)
+    path = tmp_path / "m.toml"
+    path.write_text(text)
+    result = run(["corners", NACA, "--machine", path])
+    assert result.exit_code == 2, result.output
+    assert "limits.a_max_mm_s2 is too large" in result.stderr
+    assert "(400 digits)" in result.stderr
+
+
+def test_machine_profile_with_5000_digit_integer_exits_2(tmp_path):
+    text = cli_default_profile().replace("a_max_mm_s2 = 2450.0", "a_max_mm_s2 = " + "9" * 5000)
+    path = tmp_path / "m.toml"
+    path.write_text(text)
+    result = run(["corners", NACA, "--machine", path])
+    assert result.exit_code == 2, result.output
+    assert "more than" in result.stderr and len(result.stderr) < 500
+
+
+def test_huge_count_and_huge_set_value_exit_2():
+    result = run(["corners", NACA, "--set", "steps.max_pulses_per_period=" + "9" * 400])
+    assert result.exit_code == 2, result.output
+    assert "steps.max_pulses_per_period must be <= 2147483647" in result.stderr
+    result = run(["corners", NACA, "--set", "limits.j_max_mm_s3=" + "9" * 5000])
+    assert result.exit_code == 2, result.output
+
+
+def cli_default_profile() -> str:
+    from nurbscnc.machine.profile import default_profile_text
+
+    text = default_profile_text()
+    assert "a_max_mm_s2 = 2450.0" in text
+    return text
+
+
+# ------------------------------------------------------------- hardening: pipes (subprocesses)
+
+
+def _nurbscnc(args, stdout, **kwargs):
+    return subprocess.run([sys.executable, "-m", "nurbscnc", *map(str, args)], stdout=stdout,
+                          stderr=subprocess.PIPE, timeout=120, **kwargs)  # fmt: skip
+
+
+def _closed_pipe():
+    """The write end of a pipe whose reader is already gone: the first write gets EPIPE."""
+    read_end, write_end = os.pipe()
+    os.close(read_end)
+    return write_end
+
+
+@pytest.mark.parametrize("args", [["check", NACA], ["run", NACA, "-o", "-"],
+                                  ["check", NACA, "--json"]])  # fmt: skip
+def test_closed_pipe_ends_quietly_with_141(args):
+    fd = _closed_pipe()
+    try:
+        proc = _nurbscnc(args, stdout=fd)
+    finally:
+        os.close(fd)
+    assert proc.returncode == 141, proc.stderr
+    assert proc.stderr == b""
+
+
+def test_head_on_run_output_is_quiet(tmp_path):
+    """A real reader that stops after one line, as ``| head -1``."""
+    path = tmp_path / "long.nc"
+    path.write_text("G21 G90 G1 X200 F600\nM2\n")  # 20 s: ~20000 rows, far beyond a pipe buffer
+    proc = subprocess.Popen([sys.executable, "-m", "nurbscnc", "run", str(path), "-o", "-",
+                             "--dynamics", "off"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)  # fmt: skip
+    first = proc.stdout.readline()
+    proc.stdout.close()
+    code = proc.wait(120)
+    assert first == b"t,x,y,z,feed,piece,line\n"
+    assert code == 141
+    assert proc.stderr.read() == b""
+
+
+@pytest.mark.skipif(not os.path.exists("/dev/full"), reason="no /dev/full")
+@pytest.mark.parametrize("args, message", [
+    (["check", NACA], "cannot write to standard output: No space left on device"),
+    (["run", NACA, "-o", "-"], "cannot write standard output: No space left on device"),
+])  # fmt: skip
+def test_stdout_to_dev_full_exits_3_with_a_message(args, message):
+    with open("/dev/full", "wb") as full:
+        proc = _nurbscnc(args, stdout=full)
+    assert proc.returncode == 3, proc.stderr
+    text = proc.stderr.decode()
+    assert message in text
+    assert "Traceback" not in text and "Exception ignored" not in text

@@ -239,3 +239,143 @@ def test_corner_feed_is_the_minimum(machine):
     # δ = 0.01 um: V_af = 2000·√(2e-6 − 1e-10) = 2.83 mm/s governs.
     fine = load_machine(overrides={"limits.chord_tolerance_um": 0.01})
     assert fine.corner_feed_mm_s(10.0) == pytest.approx(2000.0 * math.sqrt(2e-6 - 1e-10), rel=1e-9)
+
+
+# --- optional and simple servo models (issue 16) --------------------------------------------
+
+from scipy import signal  # noqa: E402
+
+from nurbscnc.machine.profile import (  # noqa: E402
+    FOUND_BY_DEFAULT,
+    FOUND_BY_ENV,
+    FOUND_BY_LOCAL,
+    FOUND_BY_OPTION,
+    FOUND_BY_USER,
+    AxisServo,
+    find_machine,
+    natural_frequency_rad_s,
+    profile_toml,
+)
+
+
+def _without_servo_axes(text: str) -> str:
+    """The default profile with its [servo.x] and [servo.y] tables removed."""
+    out, skip = [], False
+    for line in text.splitlines():
+        if line.startswith("["):
+            skip = line in ("[servo.x]", "[servo.y]")
+        if not skip:
+            out.append(line)
+    return "\n".join(out) + "\n"
+
+
+@pytest.mark.parametrize("zeta", [0.1, 0.3, 0.5, 1 / math.sqrt(2), 0.9, 1.0, 1.5, 2.0])
+@pytest.mark.parametrize("f_bw", [5.0, 40.0, 120.0])
+def test_simple_form_bandwidth_is_minus_3_db(zeta, f_bw):
+    # The closed form for ω_n against scipy.signal.freqs of the plain 2nd-order G(s).
+    wn = natural_frequency_rad_s(f_bw, zeta)
+    _, h = signal.freqs([wn * wn], [1.0, 2.0 * zeta * wn, wn * wn], worN=[2 * math.pi * f_bw])
+    assert abs(h[0]) == pytest.approx(1 / math.sqrt(2), rel=1e-12)
+    # ... and it is the only crossing: above f_bw the gain stays below 1/√2.
+    _, h = signal.freqs([wn * wn], [1.0, 2.0 * zeta * wn, wn * wn],
+                        worN=2 * math.pi * f_bw * np.linspace(1.001, 50, 400))  # fmt: skip
+    assert np.all(np.abs(h) < 1 / math.sqrt(2))
+
+
+def test_simple_form_at_butterworth_damping_has_wn_equal_bandwidth():
+    assert natural_frequency_rad_s(25.0, 1 / math.sqrt(2)) == pytest.approx(
+        2 * math.pi * 25.0, rel=1e-14)  # fmt: skip
+
+
+@pytest.mark.parametrize("zeta", [0.2, 0.7, 1.0, 2.0])
+def test_simple_form_in_eq25_is_the_same_transfer_function(zeta):
+    wn = natural_frequency_rad_s(30.0, zeta)
+    ax = AxisServo.second_order(30.0, zeta)
+    w = np.logspace(0, 5, 300)
+    _, h_min = signal.freqs([wn * wn], [1.0, 2 * zeta * wn, wn * wn], worN=w)
+    _, h_pad = signal.freqs(ax.numerator, ax.denominator, worN=w)
+    assert np.max(np.abs(h_pad - h_min)) < 1e-12
+    assert ax.dc_gain == pytest.approx(1.0, rel=1e-15)
+    expected = np.roots([1.0, 2 * zeta * wn, wn * wn])
+    assert np.sort_complex(ax.poles()) == pytest.approx(np.sort_complex(expected), rel=1e-12)
+
+
+def test_simple_form_simulates_as_scipy_lsim():
+    # The planner's and the simulator's code paths on the eq.-25 form of the simple model,
+    # against scipy.signal.lsim of the plain 2nd-order G(s) (lsim: input linear between
+    # samples, the first-order hold both use).
+    from nurbscnc.servo.model import simulate_axis
+    from nurbscnc.servo.simulate import simulate_reference
+
+    zeta, f_bw, T = 0.6, 35.0, 1e-3
+    wn = natural_frequency_rad_s(f_bw, zeta)
+    t = np.arange(400) * T
+    r = np.where(t < 0.1, 0.0, 5.0 * (t - 0.1)) + 0.3 * np.sin(2 * np.pi * 8 * t)
+    _, y_ref, _ = signal.lsim(([wn * wn], [1.0, 2 * zeta * wn, wn * wn]), r, t)
+    # An override of the simple form's keys replaces the file's coefficients of that axis.
+    m = parse_machine(default_profile_text(), overrides={
+        "servo.x.bandwidth_hz": f_bw, "servo.x.damping": str(zeta)})  # fmt: skip
+    assert m.servo.x == AxisServo.second_order(f_bw, zeta)
+    assert m.servo.y == load_machine().servo.y
+    y = simulate_axis(m.servo.x, r, T, settle=False)
+    assert np.max(np.abs(y - y_ref)) < 1e-9
+    sim = simulate_reference(np.column_stack([r, r, r]), m)
+    assert np.max(np.abs(sim.actual_mm[: r.size, 0] - y_ref)) < 1e-9
+    assert np.array_equal(sim.actual_mm[:, 2], sim.reference_mm[:, 2])  # z: no model, ideal
+
+
+def test_profile_without_servo_section_has_no_contour_check():
+    lines = default_profile_text().splitlines()
+    start = lines.index("[servo]")
+    stop = lines.index("[steps]")
+    m = parse_machine("\n".join(lines[:start] + lines[stop:]))
+    assert m.servo.period_s == 1e-3
+    assert (m.servo.x, m.servo.y, m.servo.z) == (None, None, None)
+    assert not m.servo.modelled and not m.contour_check
+    assert m.settings["servo"] == {"period_ms": 1.0}
+    assert "contour check off" in profile_toml(m)
+    assert load_machine().contour_check
+
+
+BAD_SIMPLE = [
+    ("bandwidth_hz = 40.0\ndamping = 0.7\na0 = 1.0\n", "servo.x", "mixes the two model forms"),
+    ("bandwidth_hz = 40.0\n", "servo.x.damping", "missing"),
+    ("bandwidth_hz = 40.0\ndamping = 2.5\n", "servo.x.damping", "<= 2"),
+    ("bandwidth_hz = -4.0\ndamping = 0.7\n", "servo.x.bandwidth_hz", "> 0"),
+    ("bandwidth_hz = 40.0\ndamping = 0.7\ngain = 1.0\n", "servo.x.gain", "not a known key"),
+]
+
+
+@pytest.mark.parametrize(("body", "key", "words"), BAD_SIMPLE)
+def test_bad_simple_forms_name_the_key(body, key, words):
+    text = _without_servo_axes(default_profile_text()) + "\n[servo.x]\n" + body
+    with pytest.raises(ConfigError) as info:
+        parse_machine(text, "bad.toml")
+    assert key in info.value.message and words in info.value.message
+
+
+def test_discovery_order(tmp_path):
+    cwd, home, xdg = tmp_path / "work", tmp_path / "home", tmp_path / "xdg"
+    for d in (cwd, home / ".config" / "nurbscnc", xdg / "nurbscnc"):
+        d.mkdir(parents=True)
+    env = {"HOME": str(home)}
+    assert find_machine(None, env, str(cwd)) == (None, FOUND_BY_DEFAULT)
+    home_user = home / ".config" / "nurbscnc" / "machine.toml"
+    home_user.write_text("")
+    assert find_machine(None, env, str(cwd)) == (str(home_user), FOUND_BY_USER)
+    env["XDG_CONFIG_HOME"] = "relative/ignored"  # the XDG spec: relative paths are ignored
+    assert find_machine(None, env, str(cwd)) == (str(home_user), FOUND_BY_USER)
+    env["XDG_CONFIG_HOME"] = str(xdg)
+    assert find_machine(None, env, str(cwd)) == (None, FOUND_BY_DEFAULT)
+    (xdg / "nurbscnc" / "machine.toml").write_text("")
+    assert find_machine(None, env, str(cwd)) == (str(xdg / "nurbscnc" / "machine.toml"),
+                                                 FOUND_BY_USER)  # fmt: skip
+    (cwd / "nurbscnc.toml").write_text("")
+    assert find_machine(None, env, str(cwd)) == (str(cwd / "nurbscnc.toml"), FOUND_BY_LOCAL)
+    env["NURBSCNC_MACHINE"] = ""  # empty: not set
+    assert find_machine(None, env, str(cwd))[1] == FOUND_BY_LOCAL
+    env["NURBSCNC_MACHINE"] = "/no/such/file.toml"  # set: used (and fails when read)
+    assert find_machine(None, env, str(cwd)) == ("/no/such/file.toml", FOUND_BY_ENV)
+    assert find_machine("m.toml", env, str(cwd)) == ("m.toml", FOUND_BY_OPTION)
+    with pytest.raises(OutputError, match=r"/no/such/file.toml \(from \$NURBSCNC_MACHINE\)"):
+        load_machine("/no/such/file.toml", found_by=FOUND_BY_ENV)

@@ -202,3 +202,42 @@ def test_card_sim_command_logs_what_it_executed(tmp_path):
 def test_card_sim_listens_on_loopback_only():
     result = CliRunner().invoke(card_sim, ["--listen", "0.0.0.0:0"])
     assert result.exit_code == 2 and "loopback" in result.stderr
+
+
+def test_sigusr1_while_planning_is_kept_and_holds_the_card(tmp_path):
+    """The operator presses hold while `stream` still plans: the command does not die (the
+    signal's default action); the card fills but holds until SIGUSR2, then the stream ends."""
+    nc = tmp_path / "part.nc"
+    nc.write_text(GOOD)
+    code = (
+        "import os, signal, sys\n"
+        "import nurbscnc.cli.stream as s\n"
+        "plan = s.load_pulse_program\n"
+        "def planning(*a, **k):\n"
+        "    os.kill(os.getpid(), signal.SIGUSR1)  # the hold arrives while planning\n"
+        "    return plan(*a, **k)\n"
+        "s.load_pulse_program = planning\n"
+        "from nurbscnc.cli.main import main\n"
+        "main(prog_name='nurbscnc')\n"
+    )
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    with card_on("pty", CardConfig(speed=1.0)) as (card, ep):
+        proc = subprocess.Popen([sys.executable, "-c", code, "stream", str(nc), "--port", ep.path,
+                                 "--quiet"], stderr=subprocess.PIPE, stdout=subprocess.PIPE,
+                                env=env)  # fmt: skip
+        try:
+            deadline = time.monotonic() + 20.0
+            while card.holds_received == 0 and time.monotonic() < deadline \
+                    and proc.poll() is None:  # fmt: skip
+                time.sleep(0.02)
+            time.sleep(0.2)
+            held = (card.state.name, card.executed_periods)
+            proc.send_signal(signal.SIGUSR2)
+            out, stderr = proc.communicate(timeout=20.0)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+    assert proc.returncode == 0, stderr.decode()
+    assert b"feed hold asked while planning" in stderr
+    assert held == ("HOLD", 0)
+    assert card.state.name == "DONE" and card.position.tolist() == [8000, 0, 0]

@@ -8,7 +8,9 @@ writes outputs atomically, and turns :class:`~nurbscnc.errors.NurbsCncError` int
 from __future__ import annotations
 
 import contextlib
+import errno
 import functools
+import io
 import json
 import os
 import sys
@@ -18,11 +20,14 @@ import click
 import numpy as np
 from rich.console import Console
 from rich.table import Table
+from rich.text import Text
 
 from nurbscnc import __version__
 from nurbscnc.errors import (
     EXIT_INTERNAL,
     EXIT_INTERRUPTED,
+    EXIT_IO,
+    ConfigError,
     NurbsCncError,
     OutputError,
 )
@@ -30,23 +35,75 @@ from nurbscnc.geometry.segments import Program
 from nurbscnc.program.interpret import InterpretOptions, interpret_text
 from nurbscnc.program.tooltable import parse_tool_table
 
+
+class _Console(Console):
+    """A rich Console that leaves a failed write to the caller: on stdout a closed pipe or a full
+    disk raises (handle_errors ends quietly with 141, or says so with 3; rich's default would
+    exit 1), on stderr it is ignored. The unwritten text is dropped either way."""
+
+    def on_broken_pipe(self) -> None:
+        raise BrokenPipeError(errno.EPIPE, "Broken pipe")
+
+    def _check_buffer(self) -> None:
+        try:
+            super()._check_buffer()
+        except OSError:
+            del self._buffer[:]
+            if not self.stderr:
+                raise
+
+
 # Tables keep their width when piped (rich would assume 80 columns and truncate numbers).
-out = Console(highlight=False, soft_wrap=True, width=None if sys.stdout.isatty() else 200)
-err = Console(stderr=True, highlight=False, soft_wrap=True)
+# Markup and emoji codes are off: file names, source lines, messages and JSON are user text and
+# must print literally (a file "[/].nc", "(:thumbs_up:)" in a comment, "part.nc:100:" would be
+# markup or emoji otherwise). Styling goes through rich.text.Text objects only.
+out = _Console(highlight=False, markup=False, emoji=False, soft_wrap=True,
+               width=None if sys.stdout.isatty() else 200)  # fmt: skip
+err = _Console(stderr=True, highlight=False, markup=False, emoji=False, soft_wrap=True)
 
 
 # -- error reporting ---------------------------------------------------------------------------
+#: An echoed source line is cut to about this many characters around the error's column.
+SOURCE_ECHO_CHARS = 120
+#: A message longer than this is cut (a message quoting a 10 MB word stays readable).
+MESSAGE_CHARS = 1000
+#: C0, DEL and C1 controls (0x9B is a CSI): no terminal escapes from a file reach the screen.
+_CONTROL = {c: "\ufffd" for c in (*range(0x20), *range(0x7F, 0xA0))}
+
+
+def echo_source_line(text: str, column: int, width: int = SOURCE_ECHO_CHARS) -> tuple[str, int]:
+    """The part of a source line shown under an error, and the 0-based caret offset in it.
+
+    Lines up to ``width`` characters are shown whole; longer ones as a ``width``-character
+    window around the column with ``…`` where text was cut. Tabs become spaces and control
+    characters U+FFFD, one for one, so the caret stays under the column.
+    """
+    text = text.replace("\t", " ").translate(_CONTROL)
+    col = min(max(column, 1) - 1, len(text))
+    if len(text) <= width:
+        return text, col
+    start = max(0, min(col - width // 2, len(text) - width))
+    end = start + width
+    prefix = "…" if start > 0 else ""
+    suffix = "…" if end < len(text) else ""
+    return prefix + text[start:end] + suffix, col - start + len(prefix)
+
+
 def format_error(exc: NurbsCncError, filename: str) -> str:
-    """``file:line:col: error: message``, then the source line and a caret under the column."""
+    """``file:line:col: error: message``, then the source line (cut around the column) and a
+    caret under the column."""
+    message = exc.message
+    if len(message) > MESSAGE_CHARS:
+        message = message[:MESSAGE_CHARS] + f"… ({len(exc.message)} characters)"
+    message, filename = message.translate(_CONTROL), str(filename).translate(_CONTROL)
     pos = exc.pos
     if pos is None:
-        return f"{filename}: error: {exc.message}"
-    head = f"{filename}:{pos.line}:{pos.column}: error: {exc.message}"
+        return f"{filename}: error: {message}"
+    head = f"{filename}:{pos.line}:{pos.column}: error: {message}"
     if not pos.text:
         return head
-    text = pos.text.replace("\t", " ")
-    caret = " " * (max(pos.column, 1) - 1) + "^"
-    return f"{head}\n    {text}\n    {caret}"
+    shown, caret = echo_source_line(pos.text, pos.column)
+    return f"{head}\n    {shown}\n    {' ' * caret}^"
 
 
 class _Failed(Exception):
@@ -56,34 +113,114 @@ class _Failed(Exception):
         self.code = code
 
 
+class _Terminated(BaseException):
+    """SIGTERM or SIGHUP arrived: unwind (temporary files are removed on the way), then exit
+    128 + the signal number, as a process killed by it would report."""
+
+    def __init__(self, signum: int):
+        self.signum = signum
+
+
+#: Exit code when the reader of stdout went away (``| head``): 128 + SIGPIPE, what a shell
+#: reports for a Unix tool killed by SIGPIPE (``seq 1 1000000 | head -1`` under pipefail).
+EXIT_BROKEN_PIPE = 141
+
+
+@contextlib.contextmanager
+def _terminate_on_signals():
+    """SIGTERM/SIGHUP raise :class:`_Terminated` while a command runs (main thread only), so
+    ``finally`` blocks and :func:`atomic_output` clean up; the old handlers come back after."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def raise_terminated(signum, _frame):
+        raise _Terminated(signum)
+
+    previous = {}
+    for sig in (signal.SIGTERM, signal.SIGHUP):
+        previous[sig] = signal.signal(sig, raise_terminated)
+    try:
+        yield
+    finally:
+        for sig, old in previous.items():
+            signal.signal(sig, old)
+
+
+def _silence_stdout() -> None:
+    """Point fd 1 at /dev/null so Python's final flush of a dead stdout says nothing."""
+    with contextlib.suppress(OSError, ValueError, AttributeError, io.UnsupportedOperation):
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+
+
+def _command_name(kwargs) -> str:
+    """The name errors are reported under: the program file (``<stdin>`` for ``-``), the single
+    program of ``run``, else ``nurbscnc``."""
+    name = kwargs.get("program") or kwargs.get("source")
+    programs = kwargs.get("programs")
+    if name is None and programs and len(programs) == 1:
+        name = programs[0]
+    if name is None:
+        return "nurbscnc"
+    return _display_name(getattr(name, "name", name))
+
+
 def handle_errors(func):
-    """Turn every exception into a message and an exit code: never a traceback for input."""
+    """Turn every exception into a message and an exit code: never a traceback for input.
+
+    NurbsCncError → its message and code (2 input, 3 files); a closed stdout pipe → quiet, 141;
+    another OSError writing stdout (``> /dev/full``) → a message, 3; Ctrl-C → 130; SIGTERM /
+    SIGHUP → 143 / 129 (after cleanup); anything else is a bug → a one-line report, 1.
+    """
 
     @functools.wraps(func)
     def wrapper(*args, **kwargs):
-        filename = kwargs.get("program") or kwargs.get("source") or "-"
-        filename = getattr(filename, "name", filename)
+        filename = _command_name(kwargs)
         try:
-            return func(*args, **kwargs)
+            with _terminate_on_signals():
+                result = func(*args, **kwargs)
+                sys.stdout.flush()  # a full disk or a closed pipe shows here, not at exit
+            return result
         except _Failed as exc:
             sys.exit(exc.code)
         except NurbsCncError as exc:
             if kwargs.get("as_json"):
-                click.echo(json.dumps(_error_json(exc)))
-            err.print(format_error(exc, _display_name(filename)), markup=False)
+                with contextlib.suppress(OSError):
+                    click.echo(json.dumps(_error_json(exc)))
+            err.print(format_error(exc, filename), markup=False)
             sys.exit(exc.exit_code)
+        except BrokenPipeError:
+            _silence_stdout()
+            sys.exit(EXIT_BROKEN_PIPE)
         except KeyboardInterrupt:
             err.print("interrupted", markup=False)
             sys.exit(EXIT_INTERRUPTED)
+        except _Terminated as exc:
+            sys.exit(128 + exc.signum)
         except click.exceptions.Exit:
             raise
         except click.ClickException:
             raise
+        except OSError as exc:
+            # Stages do no I/O and every file we open is wrapped in OutputError: an OSError
+            # without a file name is a write to stdout failing (a full disk, a dead device).
+            if os.environ.get("NURBSCNC_DEBUG"):
+                raise
+            if exc.filename is None:
+                _silence_stdout()
+            what = "write to standard output" if exc.filename is None else f"access {exc.filename}"
+            err.print(f"{filename}: error: cannot {what}: {exc.strerror or exc}", markup=False)
+            sys.exit(EXIT_IO)
         except Exception as exc:  # a bug: say so, without a traceback unless asked
             if os.environ.get("NURBSCNC_DEBUG"):
                 raise
             err.print(
-                f"{_display_name(filename)}: internal error: {type(exc).__name__}: {exc}\n"
+                f"{filename}: internal error: {type(exc).__name__}: {exc}\n"
                 "This is a bug in nurbscnc; rerun with NURBSCNC_DEBUG=1 for a traceback.",
                 markup=False,
             )
@@ -172,18 +309,18 @@ def main():
     """nurbscnc: NC programs (lines, arcs, NURBS) to reference points at the servo period.
 
     Exit codes: 0 ok, 1 internal error (a bug), 2 bad program or option, 3 file or port
-    trouble, 130 interrupted.
+    trouble, 130 interrupted (143 SIGTERM, 129 SIGHUP), 141 stdout closed by its reader.
     """
 
 
-program_argument = click.argument("program", type=click.Path(dir_okay=False, allow_dash=True))
+program_argument = click.argument("program", type=click.Path(allow_dash=True))
 json_option = click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
 block_delete_option = click.option(
     "--no-block-delete", "no_block_delete", is_flag=True,
     help="Execute lines starting with '/' (default: skip them, the switch is on).",
 )  # fmt: skip
 tool_table_option = click.option(
-    "--tool-table", type=click.Path(exists=False, dir_okay=False), default=None,
+    "--tool-table", type=click.Path(), default=None,
     help="LinuxCNC tool table for G43 H (default: tool lengths are 0).",
 )  # fmt: skip
 subroutine_path_option = click.option(
@@ -280,7 +417,8 @@ def program_summary(prog: Program) -> dict:
 
 
 def print_summary(prog: Program, s: dict) -> None:
-    out.print(f"[bold]{prog.name}[/]: ok — {s['blocks']} blocks, {len(s['segments'])} segments")
+    out.print(Text.assemble((prog.name, "bold"),
+                            f": ok — {s['blocks']} blocks, {len(s['segments'])} segments"))
     counts = ", ".join(f"{v} {k}" for k, v in sorted(s["counts"].items())) or "none"
     out.print(f"  segments: {counts}")
     out.print(
@@ -288,16 +426,16 @@ def print_summary(prog: Program, s: dict) -> None:
     )
     lo, hi = s["bounding_box_mm"]["min"], s["bounding_box_mm"]["max"]
     out.print(
-        "  bounding box \\[mm]: "
+        "  bounding box [mm]: "
         + "  ".join(f"{a} {lo[i]:.3f}..{hi[i]:.3f}" for i, a in enumerate("XYZ"))
     )
     f = s["feed_mm_min"]
     if f["min"] is not None:
-        out.print(f"  feed \\[mm/min]: {f['min']:.6g}..{f['max']:.6g}")
+        out.print(f"  feed [mm/min]: {f['min']:.6g}..{f['max']:.6g}")
     nurbs = [e for e in s["segments"] if e["kind"] == "nurbs"]
     if nurbs:
         table = Table(title="NURBS blocks", show_edge=False)
-        for col in ("line", "plane", "degree", "control points", "knots", "length \\[mm]"):
+        for col in ("line", "plane", "degree", "control points", "knots", "length [mm]"):
             table.add_column(col, justify="right")
         for e in nurbs:
             table.add_row(
@@ -319,16 +457,23 @@ def machine_options(func):
         help="Override one profile value, e.g. --set limits.a_max_mm_s2=1000.",
     )(func)  # fmt: skip
     func = click.option(
-        "--machine", type=click.Path(dir_okay=False), default=None,
-        help="Machine profile (TOML); default: the bundled paper machine (Tables 2, 3).",
+        "--machine", type=click.Path(), default=None,
+        help="Machine profile (TOML). Default: $NURBSCNC_MACHINE, ./nurbscnc.toml, "
+        "~/.config/nurbscnc/machine.toml, else the bundled paper machine (Tables 2, 3).",
     )(func)  # fmt: skip
     return func
 
 
 def load_machine_cli(path, overrides=(), extra: dict | None = None):
-    """The machine profile with ``--set`` and option overrides applied."""
+    """The machine profile with ``--set`` and option overrides applied.
+
+    Without ``--machine`` the profile is found as :func:`~nurbscnc.machine.profile.find_machine`
+    says ($NURBSCNC_MACHINE, ./nurbscnc.toml, the user's config folder, the bundled default).
+    Every command loads its profile here, so this is where it says which one it used: a
+    ``machine: FILE (how found)`` line on stderr (not with --json or --quiet, whose JSON
+    carries ``machine_profile`` instead; see :func:`machine_json`)."""
     from nurbscnc.errors import ConfigError
-    from nurbscnc.machine.profile import load_machine
+    from nurbscnc.machine.profile import find_machine, load_machine
 
     table = {}
     for item in overrides:
@@ -337,7 +482,24 @@ def load_machine_cli(path, overrides=(), extra: dict | None = None):
         key, value = item.split("=", 1)
         table[key.strip()] = value.strip()
     table.update({k: v for k, v in (extra or {}).items() if v is not None})
-    return load_machine(path, table or None)
+    found, how = find_machine(path)
+    mach = load_machine(found, table or None, how)
+    ctx = click.get_current_context(silent=True)
+    if ctx is not None and not ctx.meta.get("nurbscnc.machine_said"):
+        ctx.meta["nurbscnc.machine_said"] = True
+        if not (ctx.params.get("as_json") or ctx.params.get("quiet")):
+            changed = f"; overridden: {', '.join(sorted(table))}" if table else ""
+            err.print(f"machine: {mach.describe()}{changed}", markup=False)
+            if not mach.contour_check:
+                err.print("contour check: off (no servo model in the profile)", markup=False)
+    return mach
+
+
+def machine_json(mach) -> dict:
+    """``{"machine_profile": {path, found_by, contour_check}}`` for a command's JSON."""
+    from nurbscnc.machine.profile import profile_info
+
+    return {"machine_profile": profile_info(mach)}
 
 
 # -- corners -----------------------------------------------------------------------------------
@@ -366,11 +528,11 @@ def corners(program, as_json, feed, amax, machine, overrides):
     )  # fmt: skip
     junctions = tangent_junctions(prog.segments)
     if as_json:
-        click.echo(json.dumps(corners_json(result, junctions)))
+        click.echo(json.dumps({**corners_json(result, junctions), **machine_json(mach)}))
         return
     table = Table(title=f"{prog.name}: sharp corners (κ > κ_th = A_max/F²)", show_edge=False)
-    for col in ("line", "κ_th \\[1/mm]", "peak κ \\[1/mm]", "x \\[mm]", "y \\[mm]", "z \\[mm]",
-                "u_a", "u_b", "length \\[mm]"):  # fmt: skip
+    for col in ("line", "κ_th [1/mm]", "peak κ [1/mm]", "x [mm]", "y [mm]", "z [mm]",
+                "u_a", "u_b", "length [mm]"):  # fmt: skip
         table.add_column(col, justify="right")
     count = 0
     for sc in result:
@@ -451,11 +613,11 @@ def ph(program, as_json, tolerance_um, no_split, machine, overrides):
             fit = unsplit if no_split else fit_region(curve, r.u_a, r.u_b, tolerance_um=e_um)
             rows.append((sc, r, unsplit, fit))
     if as_json:
-        click.echo(json.dumps(ph_json(rows, e_um, no_split)))
+        click.echo(json.dumps({**ph_json(rows, e_um, no_split), **machine_json(mach)}))
         return
     table = Table(title=f"{prog.name}: PH quintic fits (e = {e_um:g} µm)", show_edge=False)
-    for col in ("line", "region", "length \\[mm]", "unsplit RMS \\[µm]", "unsplit max \\[µm]",
-                "pieces", "RMS \\[µm]", "max \\[µm]"):  # fmt: skip
+    for col in ("line", "region", "length [mm]", "unsplit RMS [µm]", "unsplit max [µm]",
+                "pieces", "RMS [µm]", "max [µm]"):  # fmt: skip
         table.add_column(col, justify="right")
     for k, (sc, r, unsplit, fit) in enumerate(rows):
         table.add_row(
@@ -512,7 +674,7 @@ def ph_json(rows, e_um: float, no_split: bool) -> dict:
 # -- plots ----------------------------------------------------------------------------------
 def plot_option(func):
     return click.option(
-        "--plot", "plot_dir", type=click.Path(file_okay=False), default=None,
+        "--plot", "plot_dir", type=click.Path(), default=None,
         help="Write PNG figures into this folder (needs the 'plot' extra: matplotlib).",
     )(func)  # fmt: skip
 
@@ -588,6 +750,8 @@ def make_plan(program: str, machine=None, overrides=(), dynamics="local", lookah
     from nurbscnc.plan.pieces import PlanOptions
 
     mach = load_machine_cli(machine, overrides)
+    if not mach.contour_check:
+        dynamics = "off"  # no servo model in the profile: no contour error to check
     prog = load_program(program)
     if algorithm != "ph-lookahead":
         from nurbscnc.plan.baselines import BaselinePlan, baseline_program_samples
@@ -634,7 +798,7 @@ def plan_summary(prog, mach, plan) -> dict:
         sim = simulate_reference(plan.samples.points_mm, mach)
         m = metrics(sim, None, contour_errors(sim, None)).as_dict()
         lb = program_lower_bound_s(prog.segments, mach)
-        return {"ok": True, "program": prog.name, "machine": mach.source,
+        return {"ok": True, "program": prog.name, "machine": mach.source, **machine_json(mach),
                 "algorithm": plan.algorithm, "cycle_time_s": plan.cycle_time_s,
                 "samples": int(plan.samples.t_s.size), "period_s": mach.servo.period_s,
                 "feed_max_mm_s": float(plan.samples.v_mm_s.max()), "lower_bound_s": lb,
@@ -647,6 +811,7 @@ def plan_summary(prog, mach, plan) -> dict:
         "ok": True,
         "program": prog.name,
         "machine": mach.source,
+        **machine_json(mach),
         "pieces": dict(kinds),
         "piece_count": len(plan.pieces),
         "corner_pieces": kinds.get("ph", 0),
@@ -708,7 +873,7 @@ def cutting_mask(plan) -> np.ndarray:
 @main.command()
 @program_argument
 @json_option
-@click.option("--dump-profile", type=click.Path(dir_okay=False, allow_dash=True), default=None,
+@click.option("--dump-profile", type=click.Path(allow_dash=True), default=None,
               help="Write t, s, v, a, j, piece at every servo period (CSV, or NPZ by extension).")
 @plot_option
 @plan_options
@@ -738,12 +903,11 @@ def plan(program, as_json, dump_profile, plot_dir, **settings):
         click.echo(json.dumps(summary))
         return
     if "pieces" in summary:
-        out.print(f"[bold]{prog.name}[/]: {summary['piece_count']} pieces "
-                  f"({', '.join(f'{v} {k}' for k, v in sorted(summary['pieces'].items()))})",
-                  markup=True)  # fmt: skip
+        out.print(Text.assemble((prog.name, "bold"), f": {summary['piece_count']} pieces "
+                  f"({', '.join(f'{v} {k}' for k, v in sorted(summary['pieces'].items()))})"))
     else:
-        out.print(f"[bold]{prog.name}[/]: baseline {summary['algorithm']} (no acceleration "
-                  "limit)", markup=True)  # fmt: skip
+        out.print(Text.assemble((prog.name, "bold"), f": baseline {summary['algorithm']} "
+                                "(no acceleration limit)"))  # fmt: skip
     out.print(f"  cycle time: {summary['cycle_time_s']:.4f} s "
               f"({summary['samples']} reference points at T_s = "
               f"{summary['period_s'] * 1000:g} ms)")  # fmt: skip
@@ -764,15 +928,16 @@ def plan(program, as_json, dump_profile, plot_dir, **settings):
 
 @main.command()
 @click.argument("programs", nargs=-1, required=True,
-                type=click.Path(dir_okay=False, allow_dash=True))
-@click.option("-o", "--output", type=click.Path(dir_okay=False, allow_dash=True), default=None,
+                type=click.Path(allow_dash=True))
+@click.option("-o", "--output", type=click.Path(allow_dash=True), default=None,
               help="Reference points: .csv, .npz or - (stdout). One program only.")
-@click.option("--output-dir", type=click.Path(file_okay=False), default=None,
+@click.option("--output-dir", type=click.Path(), default=None,
               help="Batch: write <name>.csv for every program into this folder.")
 @click.option("--jobs", type=click.IntRange(min=1), default=None,
               help="Batch worker processes (default: the number of cores).")
-@click.option("--format", "fmt", type=click.Choice(["csv", "npz"]), default="csv",
-              help="Batch output format.")
+@click.option("--format", "fmt", type=click.Choice(["csv", "npz", "halstreamer"]),
+              default="csv", help="Output format: batch csv/npz (-o: by suffix), or "
+              "halstreamer (LinuxCNC streamer text, x y z per servo period; docs/linuxcnc.md).")
 @click.option("--quiet", is_flag=True, help="No summary on stderr.")
 @json_option
 @plot_option
@@ -786,7 +951,6 @@ def run(programs, output, output_dir, jobs, fmt, quiet, as_json, plot_dir, **set
     The CSV header is t,x,y,z,feed,piece,line (s, mm, mm, mm, mm/s, piece index, source
     line); the first row is the start point at t = 0, the last the end point at rest.
     """
-    from nurbscnc.output.files import write_points
 
     if output_dir is None:
         if len(programs) != 1:
@@ -799,12 +963,12 @@ def run(programs, output, output_dir, jobs, fmt, quiet, as_json, plot_dir, **set
             prog, mach, pl = make_plan(program, **settings)
         with err.status(f"writing {pl.samples.t_s.size} points …") if show else (
                 contextlib.nullcontext()):
-            write_points(output, pl.samples)
+            write_output(output, fmt, pl.samples, mach, prog.name)
         if plot_dir:
             write_plan_plots(pl, plot_dir)
         summary = plan_summary(prog, mach, pl)
         if as_json:
-            (err if output == "-" else out).print(json.dumps(summary), markup=False)
+            click.echo(json.dumps(summary), err=output == "-")
         elif not quiet:
             err.print(f"{prog.name}: {summary['samples']} points, cycle time "
                       f"{summary['cycle_time_s']:.4f} s → {output}", markup=False)  # fmt: skip
@@ -812,14 +976,26 @@ def run(programs, output, output_dir, jobs, fmt, quiet, as_json, plot_dir, **set
     run_batch(programs, output_dir, jobs, fmt, quiet, as_json, settings)
 
 
+def write_output(path: str, fmt: str, samples, mach, name: str) -> None:
+    """Reference points to ``path``: a halstreamer file, or CSV/NPZ by suffix."""
+    if fmt == "halstreamer":
+        from nurbscnc.output.halstreamer import write_halstreamer
+
+        write_halstreamer(path, samples.points_mm, mach.servo.period_s, name)
+    else:
+        from nurbscnc.output.files import write_points
+
+        write_points(path, samples)
+
+
 def _batch_one(args):
     """Worker: plan one program and write its output; returns a result row (never raises)."""
     program, target, settings = args
-    from nurbscnc.output.files import write_points
 
     try:
         prog, mach, pl = make_plan(program, **settings)
-        write_points(target, pl.samples)
+        write_output(target, "halstreamer" if target.endswith(".hs") else "", pl.samples, mach,
+                     prog.name)  # fmt: skip
         return {"program": program, "ok": True, "output": target,
                 "cycle_time_s": pl.cycle_time_s, "samples": int(pl.samples.t_s.size)}
     except NurbsCncError as exc:
@@ -831,27 +1007,63 @@ def _batch_one(args):
                 "error": f"{program}: internal error: {type(exc).__name__}: {exc}"}
 
 
-def run_batch(programs, output_dir, jobs, fmt, quiet, as_json, settings) -> None:
-    from concurrent.futures import ProcessPoolExecutor
-
-    os.makedirs(output_dir, exist_ok=True)
-    tasks = []
+def batch_targets(programs, output_dir: str, fmt: str) -> list[str]:
+    """``output_dir/<stem>.<fmt>`` for every program. Two programs with one stem (``a/x.nc``
+    and ``b/x.nc``, or one file given twice) would write one file: refused before anything is
+    planned or written (ConfigError, exit 2, naming both), as is ``-`` (stdin has no name)."""
+    seen: dict[str, str] = {}
+    targets = []
     for program in programs:
+        if program == "-":
+            raise ConfigError("a batch (--output-dir) cannot read stdin ('-'); use -o")
         stem = os.path.splitext(os.path.basename(program))[0]
-        tasks.append((program, os.path.join(output_dir, f"{stem}.{fmt}"), settings))
+        ext = "hs" if fmt == "halstreamer" else fmt
+        target = os.path.join(output_dir, f"{stem}.{ext}")
+        if target in seen:
+            raise ConfigError(f"{seen[target]} and {program} would both write {target}; "
+                              "rename one or run them separately")  # fmt: skip
+        seen[target] = program
+        targets.append(target)
+    return targets
+
+
+def _worker_exit(signum, _frame):
+    sys.exit(128 + signum)  # SystemExit unwinds atomic_output: no temporary file stays
+
+
+def _worker_init() -> None:
+    """A batch worker ends quietly on SIGTERM/SIGHUP/SIGINT (the parent reports)."""
+    import signal
+
+    for sig in (signal.SIGTERM, signal.SIGHUP, signal.SIGINT):
+        signal.signal(sig, _worker_exit)
+
+
+def run_batch(programs, output_dir, jobs, fmt, quiet, as_json, settings) -> None:
+    import multiprocessing
+
+    targets = batch_targets(programs, output_dir, fmt)
+    try:
+        os.makedirs(output_dir, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"cannot create the output folder {output_dir}: "
+                          f"{exc.strerror or exc}") from None  # fmt: skip
+    tasks = [(program, target, settings) for program, target in zip(programs, targets)]
     workers = min(jobs or os.cpu_count() or 1, len(tasks))
     if workers == 1:
         results = [_batch_one(t) for t in tasks]
     else:
-        with ProcessPoolExecutor(max_workers=workers) as pool:
-            results = list(pool.map(_batch_one, tasks))
+        # Leaving the block for any reason (a signal, Ctrl-C) terminates the workers: each
+        # removes its temporary file and exits; none goes on writing after we are gone.
+        with multiprocessing.Pool(workers, initializer=_worker_init) as pool:
+            results = pool.map(_batch_one, tasks, chunksize=1)
     failed = [r for r in results if not r["ok"]]
     if as_json:
         click.echo(json.dumps({"ok": not failed, "results": results}))
     else:
         table = Table(title=f"batch: {len(results)} programs, {len(failed)} failed",
                       show_edge=False)  # fmt: skip
-        for col in ("program", "result", "cycle time \\[s]", "points"):
+        for col in ("program", "result", "cycle time [s]", "points"):
             table.add_column(col)
         for r in results:
             table.add_row(r["program"], "ok" if r["ok"] else "FAILED",
@@ -865,7 +1077,7 @@ def run_batch(programs, output_dir, jobs, fmt, quiet, as_json, settings) -> None
 
 
 @main.command()
-@click.argument("source", type=click.Path(dir_okay=False, allow_dash=True))
+@click.argument("source", type=click.Path(allow_dash=True))
 @json_option
 @plot_option
 @click.option("--hold", type=click.Choice(["foh", "zoh"]), default="foh",
@@ -909,7 +1121,8 @@ def simulate(source, as_json, plot_dir, hold, **settings):
                                           sim.axis_error_mm[:, 1] * 1000.0)},
                                os.path.join(plot_dir, "axis_errors.png"))  # fmt: skip
     if as_json:
-        click.echo(json.dumps({"ok": True, "source": name, "samples": int(points.shape[0]), **m}))
+        click.echo(json.dumps({"ok": True, "source": name, "samples": int(points.shape[0]), **m,
+                               **machine_json(mach)}))
         return
     out.print(f"{name}: {points.shape[0]} reference points, cycle time {m['cycle_time_s']:.4f} s",
               markup=False)  # fmt: skip
@@ -952,11 +1165,12 @@ def compare(program, as_json, plot_dir, angles, block, algorithms, machine, over
     if plot_dir:
         write_compare_plots(runs, plot_dir)
     if as_json:
-        click.echo(json.dumps({"ok": True, "program": prog.name, "rows": rows}))
+        click.echo(json.dumps({"ok": True, "program": prog.name, "rows": rows,
+                               **machine_json(mach)}))
         return
     table = Table(title=f"{prog.name}: NURBS block on line {seg.line} (µm, s)", show_edge=False)
     for col in ("algorithm", "angle", "X max", "X RMS", "Y max", "Y RMS", "contour max",
-                "RMS", "mean", "true max", "time \\[s]"):  # fmt: skip
+                "RMS", "mean", "true max", "time [s]"):  # fmt: skip
         table.add_column(col, justify="right")
     for r in rows:
         table.add_row(r["algorithm"], f"{r['angle_deg']:g}°", *(f"{r[k]:.2f}" for k in (
@@ -998,6 +1212,12 @@ from nurbscnc.cli.stream import card_sim, stream  # noqa: E402
 
 main.add_command(stream)
 main.add_command(card_sim)
+from nurbscnc.cli.profile import profile  # noqa: E402
+
+main.add_command(profile)
+from nurbscnc.cli.identify import identify  # noqa: E402
+
+main.add_command(identify)
 
 if __name__ == "__main__":  # pragma: no cover - `python -m nurbscnc.cli.main`
     main()

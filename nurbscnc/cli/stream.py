@@ -12,6 +12,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import json
+import os
 import signal
 import sys
 import threading
@@ -105,20 +106,60 @@ def load_pulse_program(path: str, machine, overrides, dynamics="local", lookahea
     return pulses, mach
 
 
+class _Operator:
+    """What the operator asks by signal: SIGUSR1 feed hold, SIGUSR2 resume, SIGINT/SIGTERM
+    abort (the last two only once the port is open; before, they end the command as usual).
+
+    A hold or resume asked while the program is still being planned is kept, with a message,
+    and given to the sender when the stream opens: the card then fills its buffer but does not
+    move until SIGUSR2.
+    """
+
+    def __init__(self) -> None:
+        self.sender = None
+        self.hold: bool | None = None  # asked before the sender existed
+
+    def attach(self, sender) -> None:
+        self.sender = sender
+        if self.hold is not None:
+            (sender.request_hold if self.hold else sender.request_resume)()
+
+    def on_hold(self, *_args) -> None:
+        self._feed(True)
+
+    def on_resume(self, *_args) -> None:
+        self._feed(False)
+
+    def on_abort(self, *_args) -> None:
+        self.sender.request_abort()
+
+    def _feed(self, hold: bool) -> None:
+        if self.sender is not None:
+            (self.sender.request_hold if hold else self.sender.request_resume)()
+            return
+        self.hold = hold
+        text = ("feed hold asked while planning: the card will hold as soon as the stream "
+                "opens (SIGUSR2 resumes)\n" if hold else
+                "resume asked while planning: no feed hold when the stream opens\n")  # fmt: skip
+        # os.write, not print: a signal handler may interrupt a print in progress.
+        with contextlib.suppress(OSError):
+            os.write(2, b"stream: " + text.encode())
+
+
 @contextlib.contextmanager
-def _signals_to(sender):
-    """SIGINT/SIGTERM → abort, SIGUSR1 → feed hold, SIGUSR2 → resume (main thread only)."""
+def _signals(operator: _Operator, names: tuple[str, ...]):
+    """Route the named signals to ``operator`` (main thread only); restore them after."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    wanted = {signal.SIGINT: sender.request_abort, signal.SIGTERM: sender.request_abort}
-    if hasattr(signal, "SIGUSR1"):
-        wanted[signal.SIGUSR1] = sender.request_hold
-        wanted[signal.SIGUSR2] = sender.request_resume
+    actions = {"SIGUSR1": operator.on_hold, "SIGUSR2": operator.on_resume,
+               "SIGINT": operator.on_abort, "SIGTERM": operator.on_abort}  # fmt: skip
     previous = {}
     try:
-        for sig, action in wanted.items():
-            previous[sig] = signal.signal(sig, lambda _s, _f, act=action: act())
+        for name in names:
+            if hasattr(signal, name):
+                sig = getattr(signal, name)
+                previous[sig] = signal.signal(sig, actions[name])
         yield
     finally:
         for sig, old in previous.items():
@@ -156,8 +197,8 @@ def _progress_bar(enabled: bool, total: int):
                    "These are unauthenticated network connections.")
 @click.option("--baud", type=click.IntRange(min=1), default=115200, show_default=True,
               help="Line rate.")
-@click.option("--batch", type=click.IntRange(1, 84), default=16, show_default=True,
-              help="Periods per frame.")
+@click.option("--batch", type=click.IntRange(1, 80), default=16, show_default=True,
+              help="Periods per frame (at most 80 with 3 axes).")
 @click.option("--timeout", "timeout_s", type=click.FloatRange(min=0.0, min_open=True),
               default=2.0, show_default=True,
               help="Seconds without an answer from the card before giving up.")
@@ -171,26 +212,33 @@ def stream(program, port, allow_url, baud, batch, timeout_s, quiet, as_json, mac
 
     The whole program is planned and checked (soft limits, the card's pulse limit) before the
     port is opened. Ctrl-C or SIGTERM aborts the card at once and exits 130; SIGUSR1 / SIGUSR2
-    hold / resume the feed. Exit 0 only when the card reports the program's end position.
+    hold / resume the feed (a hold asked while planning applies when the stream opens). Exit 0
+    only when the card reports DONE at the program's end position.
 
     Example: nurbscnc stream part.nc --port /dev/ttyUSB0
     """
     from nurbscnc.cli.main import err, out
     from nurbscnc.output.stream.sender import Sender, SenderOptions, open_port
 
-    pulses, _ = load_pulse_program(program, machine, overrides, dynamics, lookahead, corner_feed)
-    options = SenderOptions(batch_periods=batch, timeout_s=timeout_s)
-    ser = open_port(port, baud=baud, allow_url=allow_url, write_timeout_s=timeout_s,
-                    read_wait_s=options.read_wait_s)  # fmt: skip
-    show = not (quiet or as_json) and err.is_terminal
-    try:
-        with _progress_bar(show, pulses.periods) as progress:
-            sender = Sender(ser, options, progress=progress)
-            with _signals_to(sender):
-                report = sender.stream(pulses)
-    finally:
-        with contextlib.suppress(Exception):
-            ser.close()
+    operator = _Operator()
+    # Hold/resume are caught from the start: planning a long program takes time, and
+    # SIGUSR1's default action would end the command silently.
+    with _signals(operator, ("SIGUSR1", "SIGUSR2")):
+        pulses, _ = load_pulse_program(program, machine, overrides, dynamics, lookahead,
+                                       corner_feed)  # fmt: skip
+        options = SenderOptions(batch_periods=batch, timeout_s=timeout_s)
+        ser = open_port(port, baud=baud, allow_url=allow_url, write_timeout_s=timeout_s,
+                        read_wait_s=options.read_wait_s)  # fmt: skip
+        show = not (quiet or as_json) and err.is_terminal
+        try:
+            with _progress_bar(show, pulses.periods) as progress:
+                sender = Sender(ser, options, progress=progress)
+                operator.attach(sender)
+                with _signals(operator, ("SIGINT", "SIGTERM")):
+                    report = sender.stream(pulses)
+        finally:
+            with contextlib.suppress(Exception):
+                ser.close()
     if as_json:
         click.echo(json.dumps({"ok": True, "program": program, **report.to_json()}))
         return

@@ -1,46 +1,139 @@
 """Writing results: reference points and profile dumps as CSV or NPZ, atomically.
 
-Every writer goes through :func:`atomic_output`: the data is written to a temporary file in
-the destination's folder and renamed over the destination only when complete, so a failure
-never leaves a half-written file (and never clobbers a good one).
+Every writer goes through :func:`atomic_output`, which decides what ``-o PATH`` means:
+
+- ``-``: standard output.
+- a symbolic link is followed (as ``cp`` or a shell redirection do): the link stays, its final
+  target is what gets written (a dangling link creates its target);
+- a regular file (or a new name): the data goes to a temporary ``.nurbscnc-*.tmp`` in the
+  target's folder and is renamed over the target only when complete, so a failure never leaves
+  half a file nor clobbers a good one. An existing file keeps its permission bits (and, when
+  the process may, its owner); a new file gets ``0666`` minus the umask, as any Unix tool;
+- a character device or a FIFO (``/dev/null``, ``/dev/stdout``, a named pipe) is opened and
+  written directly: it is never replaced by a rename;
+- a directory, a block device or a socket is refused (:class:`OutputError`, exit 3).
+
+Nothing but the target (and, for a moment, the temporary file beside it) is ever touched.
 """
 
 from __future__ import annotations
 
 import contextlib
 import io
+import math
 import os
+import secrets
+import stat
 import sys
-import tempfile
+import warnings
 
 import numpy as np
 
-from nurbscnc.errors import OutputError
+from nurbscnc.errors import DataError, OutputError, SourcePos
 
 #: Column order of a reference-point file (units: s, mm, mm, mm, mm/s, index, source line).
 POINT_COLUMNS = ("t", "x", "y", "z", "feed", "piece", "line")
 #: Column order of a profile dump (s, mm, mm/s, mm/s², mm/s³, index).
 PROFILE_COLUMNS = ("t", "s", "v", "a", "j", "piece")
+#: Largest magnitude accepted in a reference-point file (1e9 mm = 1000 km for a coordinate,
+#: 1e9 s, 1e9 mm/s). Far beyond any machine, yet its square and sums of squares stay finite,
+#: so the servo simulation can never overflow on a point file it accepted.
+POINT_VALUE_LIMIT = 1e9
+#: Prefix and suffix of the temporary file beside a regular-file output.
+TEMP_PREFIX, TEMP_SUFFIX = ".nurbscnc-", ".tmp"
+
+
+def output_target(path: str) -> tuple[str, os.stat_result | None]:
+    """Where ``-o path`` writes: the path with every symbolic link resolved, and its ``stat``
+    (None when it does not exist yet). Raises OutputError for what cannot be written.
+
+    The type comes from ``stat(path)`` itself, so ``/dev/stdout`` or ``/dev/fd/N`` (links
+    into /proc that name an open file, not a path) are judged by what they reach: a pipe or a
+    terminal is written in place; such a link is also written in place when it reaches a
+    regular file (the shell's ``> file``), never replaced by a rename.
+    """
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        st = None
+    except OSError as exc:
+        raise OutputError(f"cannot write {path}: {exc.strerror or exc}") from None
+    target = os.path.realpath(path)
+    if st is None:
+        folder = os.path.dirname(target)
+        if not os.path.isdir(folder):
+            raise OutputError(f"cannot write {path}: folder {folder} does not exist")
+        return target, None
+    if stat.S_ISDIR(st.st_mode):
+        raise OutputError(f"cannot write {path}: it is a directory")
+    if not (stat.S_ISREG(st.st_mode) or stat.S_ISCHR(st.st_mode) or stat.S_ISFIFO(st.st_mode)):
+        raise OutputError(f"cannot write {path}: not a regular file, character device or FIFO")
+    return target, st
+
+
+def _in_place(path: str, st: os.stat_result | None) -> bool:
+    """Write by opening the path (not by rename): devices, FIFOs, open files via /proc."""
+    if st is None:
+        return False
+    return not stat.S_ISREG(st.st_mode) or _through_proc(path)
+
+
+def _through_proc(path: str) -> bool:
+    """Whether resolving ``path`` passes through /proc (``/dev/stdout``, ``/dev/fd/1``)."""
+    current = os.path.abspath(path)
+    for _ in range(40):  # the kernel's own limit on a chain of links
+        folder, name = os.path.split(current)
+        folder = os.path.realpath(folder)
+        if folder == "/proc" or folder.startswith("/proc/"):
+            return True
+        current = os.path.join(folder, name)
+        if not os.path.islink(current):
+            return False
+        current = os.path.join(folder, os.readlink(current))
+    return False
+
+
+def _create_temp(folder: str, mode: int) -> tuple[int, str]:
+    """A new, exclusive temporary file in ``folder`` created with ``mode`` (the kernel applies
+    the umask); returns (fd, path)."""
+    for _ in range(100):
+        tmp = os.path.join(folder, f"{TEMP_PREFIX}{secrets.token_hex(6)}{TEMP_SUFFIX}")
+        try:
+            return os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC, mode), tmp
+        except FileExistsError:
+            continue
+    raise FileExistsError(f"no free temporary name in {folder}")
 
 
 @contextlib.contextmanager
 def atomic_output(path: str, binary: bool = False):
-    """Yield a file object; on success it replaces ``path`` atomically (``-``: stdout)."""
+    """Yield a file object for ``path`` (module docstring: ``-``, links, regular files by
+    rename, devices and FIFOs directly). OSError passes through (callers name the file)."""
     if path == "-":
-        if binary:
-            yield sys.stdout.buffer
-        else:
-            yield sys.stdout
+        yield sys.stdout.buffer if binary else sys.stdout
         return
-    folder = os.path.dirname(os.path.abspath(path))
-    if not os.path.isdir(folder):
-        raise OutputError(f"cannot write {path}: folder {folder} does not exist")
-    fd, tmp = tempfile.mkstemp(prefix=".nurbscnc-", suffix=".tmp", dir=folder)
-    try:
-        with os.fdopen(fd, "wb" if binary else "w", newline="" if not binary else None) as fh:
+    target, st = output_target(path)
+    if st is not None and not os.access(path, os.W_OK):  # as a shell redirection would
+        raise OutputError(f"cannot write {path}: Permission denied")
+    mode, newline = ("wb", None) if binary else ("w", "")
+    if _in_place(path, st):  # a device, a FIFO, /dev/stdout: write in place
+        with open(path, mode, newline=newline) as fh:
             yield fh
-        os.replace(tmp, path)
+        return
+    fd, tmp = _create_temp(os.path.dirname(target), 0o666)
+    try:
+        if st is not None:  # keep the existing file's permissions (and owner if we may)
+            os.fchmod(fd, stat.S_IMODE(st.st_mode))
+            if (st.st_uid, st.st_gid) != (os.geteuid(), os.getegid()):
+                with contextlib.suppress(OSError):
+                    os.fchown(fd, st.st_uid, st.st_gid)
+        with os.fdopen(fd, mode, newline=newline) as fh:
+            fd = -1  # owned (and closed) by fh now
+            yield fh
+        os.replace(tmp, target)
     except BaseException:
+        if fd >= 0:
+            os.close(fd)
         with contextlib.suppress(OSError):
             os.unlink(tmp)
         raise
@@ -67,8 +160,11 @@ def write_table(path: str, names, columns, formats) -> None:
         else:
             with atomic_output(path) as fh:
                 _columns_csv(fh, names, columns, formats)
+    except BrokenPipeError:
+        raise  # a reader that went away (``| head``): the CLI ends quietly
     except OSError as exc:
-        raise OutputError(f"cannot write {path}: {exc.strerror or exc}") from None
+        name = "standard output" if path == "-" else path
+        raise OutputError(f"cannot write {name}: {exc.strerror or exc}") from None
 
 
 def write_points(path: str, samples) -> None:
@@ -85,23 +181,82 @@ def write_profile(path: str, t_s, s_mm, v, a, j, piece) -> None:
 
 
 def read_points(path: str) -> dict:
-    """Read a reference-point file (CSV with the header above, or NPZ) into arrays."""
+    """Read a reference-point file (CSV with the header above, or NPZ) into arrays.
+
+    OSError → OutputError (exit 3). Bad content → DataError (exit 2) at its line and column
+    where a CSV has them: the header, the column count, text that is not a number, a value
+    that is not finite or beyond ``POINT_VALUE_LIMIT`` (named).
+    """
     try:
         if path.endswith(".npz"):
-            with np.load(path) as data:
-                missing = [c for c in POINT_COLUMNS if c not in data]
-                if missing:
-                    raise OutputError(f"{path}: missing arrays {', '.join(missing)}")
-                return {c: np.asarray(data[c]) for c in POINT_COLUMNS}
-        with open(path, encoding="utf-8") as fh:
-            header = fh.readline().strip()
-            if tuple(header.split(",")) != POINT_COLUMNS:
-                raise OutputError(
-                    f"{path}:1: expected the header {','.join(POINT_COLUMNS)}, got {header[:60]!r}"
-                )
-            data = np.loadtxt(fh, delimiter=",", ndmin=2)
-    except (OSError, ValueError) as exc:
-        raise OutputError(f"cannot read {path}: {exc}") from None
+            return _read_points_npz(path)
+        with open(path, encoding="utf-8", errors="replace") as fh:
+            header = fh.readline().rstrip("\r\n")
+            if tuple(header.strip().split(",")) != POINT_COLUMNS:
+                raise DataError(f"expected the header {','.join(POINT_COLUMNS)}",
+                                SourcePos(1, 1, header))  # fmt: skip
+            try:
+                with warnings.catch_warnings():  # "input contained no data": reported below
+                    warnings.simplefilter("ignore", UserWarning)
+                    data = np.loadtxt(fh, delimiter=",", ndmin=2, comments=None)
+            except ValueError as exc:  # numpy names the row (0-based after the header)
+                raise DataError(f"not a table of numbers: {str(exc)[:200]}") from None
+    except OSError as exc:
+        raise OutputError(f"cannot read {path}: {exc.strerror or exc}") from None
+    if data.size == 0:
+        raise DataError("no reference points after the header")
     if data.shape[1] != len(POINT_COLUMNS):
-        raise OutputError(f"{path}: expected {len(POINT_COLUMNS)} columns, got {data.shape[1]}")
+        raise DataError(f"expected {len(POINT_COLUMNS)} columns, got {data.shape[1]}")
+    _check_values(data, lambda row, col: _csv_position(path, row, col))
     return {c: data[:, i] for i, c in enumerate(POINT_COLUMNS)}
+
+
+def _read_points_npz(path: str) -> dict:
+    try:
+        with np.load(path) as npz:
+            missing = [c for c in POINT_COLUMNS if c not in npz]
+            if missing:
+                raise DataError(f"missing arrays {', '.join(missing)}")
+            arrays = [np.asarray(npz[c]) for c in POINT_COLUMNS]
+    except ValueError as exc:  # not an NPZ, or pickled objects (refused)
+        raise DataError(f"not a reference-point NPZ file: {str(exc)[:200]}") from None
+    if any(a.ndim != 1 or a.shape != arrays[0].shape or a.dtype.kind not in "iuf"
+           for a in arrays) or arrays[0].size == 0:  # fmt: skip
+        raise DataError(f"the arrays {', '.join(POINT_COLUMNS)} must be numeric, 1-D, "
+                        "non-empty and of one length")  # fmt: skip
+    data = np.column_stack([a.astype(float) for a in arrays])
+    _check_values(data, lambda row, col: None, lambda row: f" (row {row + 1})")
+    return {c: data[:, i] for i, c in enumerate(POINT_COLUMNS)}
+
+
+def _check_values(data: np.ndarray, position, where=lambda row: "") -> None:
+    """Refuse NaN, ±inf and magnitudes beyond POINT_VALUE_LIMIT, naming the first one;
+    ``position(row, col)`` gives its SourcePos (or None), ``where(row)`` a suffix."""
+    with np.errstate(invalid="ignore"):
+        bad = ~(np.abs(data) <= POINT_VALUE_LIMIT)  # NaN compares False: caught too
+    if bad.any():
+        row, col = (int(k) for k in np.argwhere(bad)[0])
+        value = float(data[row, col])
+        what = "is not finite" if not math.isfinite(value) else (
+            f"is beyond ±{POINT_VALUE_LIMIT:g}")  # fmt: skip
+        raise DataError(f"{POINT_COLUMNS[col]} = {value!r} {what}{where(row)}",
+                        position(row, col))  # fmt: skip
+
+
+def _csv_position(path: str, row: int, col: int) -> SourcePos | None:
+    """Line, column and text of field ``col`` of data row ``row`` (np.loadtxt skips blank
+    lines, so the file is scanned again; only on an error)."""
+    with open(path, encoding="utf-8", errors="replace") as fh:
+        next(fh, None)
+        seen = -1
+        for number, text in enumerate(fh, 2):
+            if text.strip():
+                seen += 1
+                if seen == row:
+                    text = text.rstrip("\r\n")
+                    fields = text.split(",")
+                    column = 1 + sum(len(f) + 1 for f in fields[:col])
+                    if col < len(fields):  # under the value, not its leading spaces
+                        column += len(fields[col]) - len(fields[col].lstrip())
+                    return SourcePos(number, column, text)
+    return None

@@ -783,11 +783,11 @@ def blend_pays(cap_a_mm_s, cap_b_mm_s, kappa_max_per_mm, trim_a_mm, trim_b_mm,
 
 def settle_time_s(machine: Machine) -> float:
     """Time [s] for the slowest servo mode to decay to e⁻⁵ (< 1 %) of its amplitude."""
-    slowest = min(
+    slowest = min((
         float(np.min(np.abs(np.real(ax.poles()))))
         for ax in (machine.servo.x, machine.servo.y, machine.servo.z)
         if ax is not None
-    )
+    ), default=np.inf)  # no servo model: ideal axes, nothing to settle (0 s)
     return 5.0 / slowest
 
 

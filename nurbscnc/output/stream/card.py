@@ -64,6 +64,7 @@ class CardConfig:
     otherwise periods run every ``period_s / speed`` seconds of wall time. The card starts
     executing when ``start_fill_periods`` are buffered (default: half the buffer) or END has
     arrived, and pushes a STATUS every ``status_every_periods`` executed periods.
+    ``gap_s``: the receiver's limit on a stalled partial frame (see :class:`FrameDecoder`).
     """
 
     axes: int = 3
@@ -75,6 +76,9 @@ class CardConfig:
     status_every_periods: int = 16
     position_steps: tuple[int, ...] = (0, 0, 0)
     faults: Faults = field(default_factory=Faults)
+    #: an incomplete frame whose bytes stop arriving this long is abandoned [s]; 10 ms is
+    #: about 115 byte times at 115200 baud, far more than a UART leaves between bytes
+    gap_s: float = 0.01
 
     def __post_init__(self) -> None:
         if not 1 <= self.axes <= 15:
@@ -104,7 +108,8 @@ class CardSim:
     Counters (attributes) for tests and the ``--report``: ``bytes_received``,
     ``frames_received`` (frames on the wire, before fault injection), ``crc_errors``,
     ``dropped_in``/``corrupted_in``/``dropped_out``/``corrupted_out``, ``duplicates``,
-    ``overflows`` (batches refused for lack of room: a flow-control violation), ``naks_sent``,
+    ``overflows`` (batches refused for lack of room: a flow-control violation),
+    ``position_naks`` (frames refused: they do not continue the accepted ones), ``naks_sent``,
     ``acks_sent``, ``aborts_received``, ``holds_received``, ``resets``, ``max_fill`` (most
     periods held at once, buffer and early frames together).
     """
@@ -118,15 +123,19 @@ class CardSim:
         self.alarm = p.AlarmCode.NONE
         self.alarm_text = ""
         self._period_wall_s = None if cfg.speed is None else cfg.period_s / cfg.speed
-        self._wire = p.FrameDecoder()  # splits the clean wire into frames (fault injection)
-        self._decoder = p.FrameDecoder()  # the card's own decoder, after the faults
+        # The wire is split into frames so that faults are injected per frame; frames damaged
+        # before they reach the card go straight to it, intact ones pass the fault injection
+        # and the card's own decoder.
+        self._wire = p.FrameDecoder(gap_s=cfg.gap_s)
+        self._decoder = p.FrameDecoder()
         self._out: collections.deque[tuple[float, bytes]] = collections.deque()
         self._log: list[np.ndarray] = []
         self.stalled = False
         for name in ("bytes_received", "frames_received", "crc_errors", "protocol_errors",
                      "dropped_in", "corrupted_in", "dropped_out", "corrupted_out", "duplicates",
                      "overflows", "naks_sent", "acks_sent", "aborts_received", "holds_received",
-                     "resets", "max_fill", "executed_periods", "frames_sent"):  # fmt: skip
+                     "resets", "max_fill", "executed_periods", "frames_sent",
+                     "position_naks"):  # fmt: skip
             setattr(self, name, 0)
         self._open_stream(0.0)
         self.state = p.CardState.IDLE
@@ -145,6 +154,10 @@ class CardSim:
         self._early_periods = 0
         self._since_status = 0
         self.stream_executed = 0
+        # Where the card will stand after every accepted period, and how many there are: a
+        # BATCH must start there, END must name them (the continuity check).
+        self._tail = self.position.copy()
+        self._accepted_periods = 0
 
     @property
     def free(self) -> int:
@@ -187,10 +200,12 @@ class CardSim:
         self.bytes_received += len(data)
         if self.stalled:
             return
+        self._from_wire(self._wire.feed(data, now), now)
+
+    def _from_wire(self, items, now: float) -> None:
+        """Frames split from the wire: faults, resets and stalls, then the card's decoder."""
         faults = self.config.faults
-        for item in self._wire.feed(data):
-            raw = item.raw if isinstance(item, p.BadFrame) else \
-                p.encode_frame(item.type, item.payload, item.seq)  # fmt: skip
+        for item in items:
             self.frames_received += 1
             if faults.reset_after_frames is not None and self.resets == 0 \
                     and self.frames_received >= faults.reset_after_frames:  # fmt: skip
@@ -200,7 +215,10 @@ class CardSim:
                     and self.frames_received > faults.stall_after_frames:  # fmt: skip
                 self.stalled = True
                 return
-            raw = self._inject(raw, "in")
+            if isinstance(item, p.BadFrame):  # damaged on the wire already
+                self._handle(item, now)
+                continue
+            raw = self._inject(p.encode_frame(item.type, item.payload, item.seq), "in")
             if raw is None:
                 continue
             for ev in self._decoder.feed(raw):
@@ -325,45 +343,67 @@ class CardSim:
             self.overflows += 1
             self._nak(p.NakReason.FULL, now)
             return
-        if not self._accept(msg, now):
+        verdict = self._accept(msg, now)
+        if verdict == "refused":
+            self._nak(p.NakReason.POSITION, now)
+        if verdict != "ok":
             return
         while self.expected in self._early:  # the gap is filled: take the frames kept
             kept = self._early.pop(self.expected)
             self._early_periods -= len(kept.pulses) if isinstance(kept, p.Batch) else 0
-            if not self._accept(kept, now):
+            verdict = self._accept(kept, now)
+            if verdict == "alarm":
                 return
+            if verdict == "refused":  # dropped: the sender sends it again
+                break
         self._maybe_start(now)
         self._run_fast(now)
         self._ack(now)
-        if self._early:  # another gap after the frames taken
+        if verdict == "refused":
+            self._nak(p.NakReason.POSITION, now)
+        elif self._early:  # another gap after the frames taken
             self._nak(p.NakReason.SEQUENCE, now)
         self._maybe_finish(now)
 
-    def _accept(self, msg, now: float) -> bool:
-        """Put the next frame in order into the buffer (or take END); False on an alarm."""
+    def _accept(self, msg, now: float) -> str:
+        """Put the next frame in order into the buffer (or take END).
+
+        Returns "ok", "refused" (it does not continue from the accepted frames: the BATCH's
+        start position is not where they end, or END's period count or position is not
+        theirs; nothing changes, the caller NAKs) or "alarm".
+        """
         if self._end is not None:
             self._raise_alarm(p.AlarmCode.PROTOCOL, "sequenced frame after END", now)
-            return False
+            return "alarm"
+        tail = tuple(int(v) for v in self._tail)
         if isinstance(msg, p.Batch):
             pulses = msg.pulses
             if pulses.shape[1] != self.config.axes:
                 self._raise_alarm(p.AlarmCode.PROTOCOL,
                                   f"batch of {pulses.shape[1]} axes, card has "
                                   f"{self.config.axes}", now)  # fmt: skip
-                return False
+                return "alarm"
+            if tuple(msg.start_steps) != tail:
+                self.position_naks += 1
+                return "refused"
             peak = int(np.abs(pulses).max())
             if peak > self.config.max_pulses_per_period:
                 self._raise_alarm(p.AlarmCode.PULSE_LIMIT,
                                   f"{peak} pulses in one period, limit "
                                   f"{self.config.max_pulses_per_period}", now)  # fmt: skip
-                return False
+                return "alarm"
             self._buffer.append(pulses)
             self.fill += len(pulses)
+            self._tail += pulses.sum(axis=0)
+            self._accepted_periods += len(pulses)
             self.max_fill = max(self.max_fill, self.fill + self._early_periods)
         else:
+            if msg.periods != self._accepted_periods or tuple(msg.position_steps) != tail:
+                self.position_naks += 1
+                return "refused"
             self._end = msg
         self.expected += 1
-        return True
+        return "ok"
 
     def _run_fast(self, now: float) -> None:
         """As fast as possible: every buffered period runs at once (unless held)."""
@@ -386,7 +426,9 @@ class CardSim:
 
     # -- time --------------------------------------------------------------------------------
     def advance(self, now: float) -> None:
-        """Execute every period due by ``now`` [s] (real time / speed)."""
+        """Execute every period due by ``now`` [s] (real time / speed); abandon a stalled frame."""
+        if not self.stalled and self._wire.pending_bytes:
+            self._from_wire(self._wire.expire(now), now)
         if self.stalled or self.state is not p.CardState.RUNNING or self._period_wall_s is None:
             return
         due = int((now - self._next_due) // self._period_wall_s) + 1
@@ -462,19 +504,25 @@ class CardSim:
 
     def take_output(self, now: float) -> bytes:
         """Reply bytes due by ``now`` (delayed ones stay queued)."""
+        return b"".join(self.take_frames(now))
+
+    def take_frames(self, now: float) -> list[bytes]:
+        """Reply frames due by ``now``, one bytes object each (delayed ones stay queued)."""
         if self.stalled:
             self._out.clear()
-            return b""
-        chunks = []
+            return []
+        frames = []
         while self._out and self._out[0][0] <= now:
-            chunks.append(self._out.popleft()[1])
-        return b"".join(chunks)
+            frames.append(self._out.popleft()[1])
+        return frames
 
     def next_event_s(self) -> float | None:
         """When something happens next without input: a period or a delayed reply."""
         times = []
         if self._out:
             times.append(self._out[0][0])
+        if self._wire.expires_s is not None and not self.stalled:
+            times.append(self._wire.expires_s)
         if self.state is p.CardState.RUNNING and self._period_wall_s is not None \
                 and not self.stalled:  # fmt: skip
             times.append(self._next_due)
@@ -485,7 +533,8 @@ class CardSim:
         keys = ("bytes_received", "frames_received", "crc_errors", "protocol_errors",
                 "dropped_in", "corrupted_in", "dropped_out", "corrupted_out", "duplicates",
                 "overflows", "naks_sent", "acks_sent", "aborts_received", "holds_received",
-                "resets", "max_fill", "executed_periods", "frames_sent")  # fmt: skip
+                "resets", "max_fill", "executed_periods", "frames_sent",
+                "position_naks")  # fmt: skip
         out = {k: int(getattr(self, k)) for k in keys}
         out.update(state=self.state.name, alarm=self.alarm.name, alarm_text=self.alarm_text,
                    position_steps=[int(v) for v in self.position],
@@ -532,6 +581,29 @@ class Wire:
             return None
         start, data, taken = self._queue[0]
         return start + (taken + 1) * self.byte_s if self.byte_s else start
+
+    def done_s(self) -> float | None:
+        """When the oldest chunk on the line has arrived whole (None: nothing on the line)."""
+        if not self._queue:
+            return None
+        start, data, _ = self._queue[0]
+        return start + len(data) * self.byte_s if self.byte_s else start
+
+    def queued_bytes(self, now: float) -> int:
+        """Bytes pushed and not yet arrived by ``now``."""
+        if self.byte_s is None:
+            return sum(len(item[1]) for item in self._queue)
+        return max(0, round((self._free_at - now) / self.byte_s))
+
+    def drop_unsent(self, now: float) -> None:
+        """Forget the chunks not yet started by ``now`` (a port's output queue flushed)."""
+        while self._queue and self._queue[-1][0] > now:
+            self._queue.pop()
+        if self._queue:
+            start, data, _ = self._queue[-1]
+            self._free_at = start + len(data) * (self.byte_s or 0.0)
+        else:
+            self._free_at = min(self._free_at, now)
 
 
 # -- endpoints -----------------------------------------------------------------------------------

@@ -1,15 +1,28 @@
-"""The card protocol: framing, CRC-16, message types; one codec for the sender and the card.
+"""The card protocol (version 2): framing, header CRC-8, CRC-32, message types; one codec.
 
-A frame on the wire (all multi-byte integers little-endian except the CRC)::
+A frame on the wire (multi-byte integers little-endian)::
 
-    SYNC 0xA5 | LEN u8 | SEQ u16 | TYPE u8 | PAYLOAD (LEN bytes) | CRC u16 big-endian
+    SYNC 0xA5 | LEN u8 | SEQ u16 | TYPE u8 | HCRC u8 | PAYLOAD (LEN bytes) | CRC u32
 
-``LEN`` counts only the payload, so a frame is ``LEN + 7`` bytes. The CRC is CRC-16/CCITT-FALSE
-(polynomial 0x1021, initial value 0xFFFF, no reflection, no final xor; check value
-``crc("123456789") = 0x29B1``) over ``LEN .. PAYLOAD`` (everything after the sync byte), sent
-most significant byte first. ``SEQ`` numbers the *sequenced* frames (BATCH, END) modulo 2¹⁶;
-every other frame carries 0 there. The full description, with the reliability rules, is
-``docs/protocol.md``.
+``LEN`` counts only the payload, so a frame is ``LEN + 10`` bytes.
+
+- ``HCRC`` is CRC-8/SMBUS (polynomial 0x07, initial value 0, no reflection, no final xor;
+  check value ``crc8("123456789") = 0xF4``) over ``LEN SEQ TYPE``. A receiver trusts ``LEN``
+  only when the header checks, so a corrupted length byte is found after 6 bytes instead of
+  stalling the receiver until up to 265 bytes have arrived. CRC-8 with this polynomial detects
+  every error of up to 3 bits in the 40 header bits (Hamming distance 4).
+- ``CRC`` is CRC-32/ISO-HDLC (the CRC of zlib, Ethernet and PNG: polynomial 0x04C11DB7,
+  reflected, initial value and final xor 0xFFFFFFFF; check value
+  ``crc32("123456789") = 0xCBF43926``) over ``LEN … PAYLOAD`` (everything after SYNC). At the
+  lengths used here (≤ 2 112 bits) its Hamming distance is at least 5: every error of up to 4
+  bits in a frame is detected; ``tests/test_stream_protocol.py`` proves it for the longest frame
+  from the polynomial's linearity.
+- ``SEQ`` numbers the *sequenced* frames (BATCH, END) modulo 2¹⁶; every other frame carries 0.
+
+A receiver with a time source also abandons a frame whose bytes stop arriving for ``gap_s``
+(a byte lost on the line, or a sync byte inside noise whose header happened to check), so
+framing resynchronises in bounded time whatever was lost. ``docs/protocol.md`` has the full
+description with the reliability rules.
 
 Everything here is pure (bytes in, values out) except :class:`FrameDecoder`, which keeps the
 bytes of an incomplete frame between calls.
@@ -27,9 +40,11 @@ import numpy as np
 from nurbscnc.errors import StreamError
 
 SYNC = 0xA5
-PROTOCOL_VERSION = 1
-#: Sync (1) + LEN (1) + SEQ (2) + TYPE (1) + CRC (2).
-OVERHEAD_BYTES = 7
+PROTOCOL_VERSION = 2
+#: SYNC (1) + LEN (1) + SEQ (2) + TYPE (1) + HCRC (1), before the payload.
+HEADER_BYTES = 6
+#: Header + CRC-32 (4).
+OVERHEAD_BYTES = 10
 MAX_PAYLOAD_BYTES = 255
 SEQ_MODULO = 1 << 16
 #: Bits per byte on an asynchronous serial line with 8N1 framing (start + 8 data + stop).
@@ -78,20 +93,43 @@ class AlarmCode(IntEnum):
 class NakReason(IntEnum):
     """Why a NAK was sent."""
 
-    CRC = 1  #: a frame failed its CRC (or was misframed)
+    CRC = 1  #: a frame failed its header CRC or CRC-32, or stopped arriving
     SEQUENCE = 2  #: a sequenced frame arrived after a gap (a frame was lost)
     FULL = 3  #: a batch did not fit in the free buffer (the sender broke flow control)
     STATE = 4  #: the card does not accept batches in its state
+    POSITION = 5  #: a BATCH or END does not continue from where the accepted frames end
 
 
-# -- CRC ---------------------------------------------------------------------------------------
-def crc16_ccitt_false(data: bytes, init: int = 0xFFFF) -> int:
-    """CRC-16/CCITT-FALSE of ``data``: poly 0x1021, init 0xFFFF, MSB first, no final xor.
+# -- CRCs --------------------------------------------------------------------------------------
+def _crc8_table(poly: int) -> bytes:
+    """The 256 CRC-8 remainders of single bytes, MSB first (the CRC's definition, bytewise)."""
+    table = []
+    for byte in range(256):
+        crc = byte
+        for _ in range(8):
+            crc = ((crc << 1) ^ poly) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
+        table.append(crc)
+    return bytes(table)
 
-    ``binascii.crc_hqx`` is exactly this CRC with the initial value as its second argument.
-    Check value (the CRC catalogue): ``crc16_ccitt_false(b"123456789") == 0x29B1``.
+
+_CRC8_TABLE = _crc8_table(0x07)
+
+
+def crc8_smbus(data: bytes) -> int:
+    """CRC-8/SMBUS of ``data``: poly 0x07, init 0, MSB first, no final xor.
+
+    Check value (the CRC catalogue): ``crc8_smbus(b"123456789") == 0xF4``.
     """
-    return binascii.crc_hqx(data, init)
+    crc = 0
+    for byte in data:
+        crc = _CRC8_TABLE[crc ^ byte]
+    return crc
+
+
+def crc32_iso_hdlc(data: bytes) -> int:
+    """CRC-32/ISO-HDLC of ``data`` (``binascii.crc32``): poly 0x04C11DB7, reflected, init and
+    final xor 0xFFFFFFFF. Check value: ``crc32_iso_hdlc(b"123456789") == 0xCBF43926``."""
+    return binascii.crc32(data) & 0xFFFFFFFF
 
 
 # -- frames ------------------------------------------------------------------------------------
@@ -106,38 +144,74 @@ class Frame:
 
 @dataclass(frozen=True)
 class BadFrame:
-    """A candidate frame whose CRC did not match (corrupted, or a sync byte inside noise)."""
+    """A candidate frame that failed: ``reason`` "header" (HCRC), "crc" (CRC-32) or "gap"
+    (its bytes stopped arriving); ``raw`` the bytes from its sync byte on."""
 
     raw: bytes
+    reason: str = "crc"
+
+
+_HEADER = struct.Struct("<BHB")
 
 
 def encode_frame(msg_type: int, payload: bytes = b"", seq: int = 0) -> bytes:
     """The bytes of one frame (see the module docstring for the layout)."""
     if len(payload) > MAX_PAYLOAD_BYTES:
         raise ValueError(f"payload of {len(payload)} bytes exceeds {MAX_PAYLOAD_BYTES}")
-    body = struct.pack("<BHB", len(payload), seq % SEQ_MODULO, int(msg_type)) + bytes(payload)
-    return bytes((SYNC,)) + body + struct.pack(">H", crc16_ccitt_false(body))
+    head = _HEADER.pack(len(payload), seq % SEQ_MODULO, int(msg_type))
+    body = head + bytes((crc8_smbus(head),)) + bytes(payload)
+    return bytes((SYNC,)) + body + struct.pack("<I", crc32_iso_hdlc(body))
 
 
 class FrameDecoder:
-    """Splits a byte stream into frames, resynchronising after corruption.
+    """Splits a byte stream into frames, resynchronising after corruption in bounded time.
 
-    :meth:`feed` returns, in order, every :class:`Frame` whose CRC matches and a
-    :class:`BadFrame` for every candidate (a sync byte with enough bytes after it) whose CRC does
-    not; after a bad candidate the search restarts one byte after its sync byte, so a corrupted
-    length byte costs at most the frames it swallowed. Bytes before a sync byte are counted in
+    :meth:`feed` returns, in order, every :class:`Frame` whose CRCs match and a
+    :class:`BadFrame` for every candidate that fails: a sync byte whose header CRC does not
+    match (found after 6 bytes, so a corrupted ``LEN`` is never trusted), or a frame whose
+    CRC-32 does not. After a failure the search restarts one byte after the candidate's sync
+    byte, so a damaged frame costs only itself. Bytes before a sync byte are counted in
     ``noise_bytes`` and dropped.
+
+    With ``gap_s`` (and times passed to :meth:`feed` / :meth:`expire`), an incomplete frame
+    whose bytes stopped arriving for longer than ``gap_s`` is abandoned (a "gap" BadFrame) and
+    the bytes after its sync byte are searched again: a lost byte, or a false sync whose header
+    happened to check, stalls the receiver for ``gap_s`` at most.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, gap_s: float | None = None) -> None:
         self._buf = bytearray()
         self.noise_bytes = 0
+        self.gap_s = gap_s
+        self._last_s: float | None = None  # when the held bytes last grew
 
-    def feed(self, data: bytes) -> list[Frame | BadFrame]:
-        buf = self._buf
-        buf += data
+    def feed(self, data: bytes, now: float | None = None) -> list[Frame | BadFrame]:
+        """Frames completed by ``data`` (arrived at ``now`` [s], optional).
+
+        New bytes never expire the bytes held before them (a receiver that was busy must not
+        take its own delay for a gap on the line): the gap is enforced by :meth:`expire`,
+        which the receiver calls when no bytes come.
+        """
         out: list[Frame | BadFrame] = []
+        if data:
+            self._buf += data
+            self._last_s = now
+        self._scan(out, final=False)
+        return out
+
+    def expire(self, now: float) -> list[Frame | BadFrame]:
+        """Abandon an incomplete frame whose bytes stopped arriving ``gap_s`` before ``now``."""
+        out: list[Frame | BadFrame] = []
+        if (self.gap_s is not None and self._buf and self._last_s is not None
+                and now - self._last_s >= self.gap_s):  # fmt: skip
+            self._scan(out, final=True)
+        return out
+
+    def _scan(self, out: list, final: bool) -> None:
+        """Take every complete candidate from the buffer; with ``final`` nothing is kept."""
+        buf = self._buf
         i = 0
+        abandoned = False
         while True:
             j = buf.find(SYNC, i)
             if j < 0:
@@ -146,27 +220,42 @@ class FrameDecoder:
                 break
             self.noise_bytes += j - i
             i = j
-            if len(buf) - j < 2:
-                break
-            total = buf[j + 1] + OVERHEAD_BYTES
-            if len(buf) - j < total:
-                break
-            body = bytes(buf[j + 1 : j + total - 2])
-            crc = (buf[j + total - 2] << 8) | buf[j + total - 1]
-            if crc16_ccitt_false(body) == crc:
+            have = len(buf) - j
+            if have >= HEADER_BYTES and crc8_smbus(buf[j + 1 : j + 5]) != buf[j + 5]:
+                out.append(BadFrame(bytes(buf[j : j + HEADER_BYTES]), "header"))
+                i = j + 1
+                continue
+            total = buf[j + 1] + OVERHEAD_BYTES if have >= 2 else OVERHEAD_BYTES
+            if have < max(total, HEADER_BYTES):
+                if not final:
+                    break
+                if not abandoned:  # report the stale frame once; what follows is searched
+                    out.append(BadFrame(bytes(buf[j:]), "gap"))
+                    abandoned = True
+                i = j + 1
+                continue
+            body = bytes(buf[j + 1 : j + total - 4])
+            (crc,) = struct.unpack_from("<I", buf, j + total - 4)
+            if crc32_iso_hdlc(body) == crc:
                 seq = body[1] | (body[2] << 8)
-                out.append(Frame(body[3], seq, body[4:]))
+                out.append(Frame(body[3], seq, body[5:]))
                 i = j + total
             else:
-                out.append(BadFrame(bytes(buf[j : j + total])))
+                out.append(BadFrame(bytes(buf[j : j + total]), "crc"))
                 i = j + 1
         del buf[:i]
-        return out
 
     @property
     def pending_bytes(self) -> int:
         """Bytes held back waiting for the rest of a frame."""
         return len(self._buf)
+
+    @property
+    def expires_s(self) -> float | None:
+        """When the bytes held back will be abandoned (None: nothing held, or no gap limit)."""
+        if not self._buf or self.gap_s is None or self._last_s is None:
+            return None
+        return self._last_s + self.gap_s
 
 
 def seq_ahead(base: int, seq: int) -> int:
@@ -206,12 +295,17 @@ class Caps:
 
 @dataclass(frozen=True, eq=False)
 class Batch:
-    """Host → card (sequenced): pulse counts, ``pulses`` (n_periods, axes) int."""
+    """Host → card (sequenced): pulse counts ``pulses`` (n_periods, axes) int, and the
+    position [steps] the card stands at before the first of them, ``start_steps`` (the
+    program's start plus every pulse of the batches before): a card refuses a batch that does
+    not continue from where its accepted batches end."""
 
     pulses: np.ndarray
+    start_steps: tuple[int, ...]
 
     def __eq__(self, other) -> bool:
-        return isinstance(other, Batch) and np.array_equal(self.pulses, other.pulses)
+        return (isinstance(other, Batch) and np.array_equal(self.pulses, other.pulses)
+                and tuple(self.start_steps) == tuple(other.start_steps))  # fmt: skip
 
     __hash__ = None  # type: ignore[assignment]
 
@@ -308,13 +402,14 @@ def pulse_width_bytes(max_abs_pulses: int) -> int:
 
 
 def max_batch_periods(axes: int, width_bytes: int = 1) -> int:
-    """The most periods one BATCH frame can carry (payload ≤ 255 bytes, 1 format byte)."""
-    return (MAX_PAYLOAD_BYTES - 1) // (axes * width_bytes)
+    """The most periods one BATCH frame carries (payload ≤ 255 bytes: format byte, start
+    position 4·axes bytes, counts)."""
+    return (MAX_PAYLOAD_BYTES - 1 - 4 * axes) // (axes * width_bytes)
 
 
 def batch_frame_bytes(periods: int, axes: int, width_bytes: int = 1) -> int:
-    """Size on the wire of a BATCH frame of ``periods`` periods: 7 + 1 + periods·axes·width."""
-    return OVERHEAD_BYTES + 1 + periods * axes * width_bytes
+    """Size on the wire of a BATCH frame: 10 + 1 + 4·axes + periods·axes·width."""
+    return OVERHEAD_BYTES + 1 + 4 * axes + periods * axes * width_bytes
 
 
 def _pack_position(position) -> bytes:
@@ -333,7 +428,7 @@ def _unpack_position(data: bytes, what: str) -> tuple[int, ...]:
 def encode_message(msg: Message, seq: int = 0) -> bytes:
     """One message as a frame; ``seq`` matters for BATCH and END only."""
     if isinstance(msg, Batch):
-        return encode_frame(MsgType.BATCH, _batch_payload(msg.pulses), seq)
+        return encode_frame(MsgType.BATCH, _batch_payload(msg.pulses, msg.start_steps), seq)
     if isinstance(msg, End):
         return encode_frame(MsgType.END, _END.pack(msg.periods) +
                             _pack_position(msg.position_steps), seq)  # fmt: skip
@@ -361,13 +456,17 @@ def encode_message(msg: Message, seq: int = 0) -> bytes:
     raise TypeError(f"not a message: {msg!r}")
 
 
-def _batch_payload(pulses) -> bytes:
-    """Format byte (bits 0-3 axes, bits 4-5 width−1), then the counts period by period."""
+def _batch_payload(pulses, start_steps) -> bytes:
+    """Format byte (bits 0-3 axes, bits 4-5 width−1), the start position (axes × i32), then
+    the counts period by period."""
     p = np.asarray(pulses)
     if p.ndim != 2 or p.shape[0] < 1 or not 1 <= p.shape[1] <= 15:
         raise ValueError(f"a batch needs (n >= 1, 1..15 axes) pulses, got shape {p.shape}")
+    if len(start_steps) != p.shape[1]:
+        raise ValueError(f"a batch of {p.shape[1]} axes needs {p.shape[1]} start positions")
     width = pulse_width_bytes(int(np.abs(p).max()))
-    return bytes((p.shape[1] | ((width - 1) << 4),)) + p.astype(_WIDTH_DTYPES[width]).tobytes()
+    return (bytes((p.shape[1] | ((width - 1) << 4),)) + _pack_position(start_steps)
+            + p.astype(_WIDTH_DTYPES[width]).tobytes())  # fmt: skip
 
 
 def decode_message(frame: Frame) -> Message:
@@ -383,7 +482,7 @@ def decode_message(frame: Frame) -> Message:
         return _EMPTY[kind]()
     try:
         if kind is MsgType.BATCH:
-            return Batch(_batch_pulses(data))
+            return _batch(data)
         if kind is MsgType.END:
             (periods,) = _END.unpack_from(data)
             return End(periods, _unpack_position(data[_END.size :], "END"))
@@ -408,13 +507,16 @@ def decode_message(frame: Frame) -> Message:
         raise ProtocolError(f"{kind.name}: payload of {len(data)} bytes: {exc}") from None
 
 
-def _batch_pulses(data: bytes) -> np.ndarray:
+def _batch(data: bytes) -> Batch:
     if len(data) < 2:
         raise ProtocolError("BATCH without pulse counts")
     axes, width = data[0] & 0x0F, (data[0] >> 4) + 1
     if axes == 0 or width not in _WIDTH_DTYPES:
         raise ProtocolError(f"BATCH format byte 0x{data[0]:02x} is invalid")
-    body = data[1:]
-    if len(body) % (axes * width):
-        raise ProtocolError(f"BATCH of {len(body)} bytes is not whole periods of {axes} axes")
-    return np.frombuffer(body, dtype=_WIDTH_DTYPES[width]).astype(np.int64).reshape(-1, axes)
+    start = _unpack_position(data[1 : 1 + 4 * axes], "BATCH")
+    body = data[1 + 4 * axes :]
+    if len(start) != axes or not body or len(body) % (axes * width):
+        raise ProtocolError(f"BATCH of {len(data)} bytes is not a start position and whole "
+                            f"periods of {axes} axes")  # fmt: skip
+    pulses = np.frombuffer(body, dtype=_WIDTH_DTYPES[width]).astype(np.int64).reshape(-1, axes)
+    return Batch(pulses, start)

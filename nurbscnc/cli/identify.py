@@ -1,0 +1,89 @@
+"""``nurbscnc identify TRACE``: fit an axis's closed-loop model from a recorded trace and print
+it as a machine-profile section (:mod:`nurbscnc.servo.identify`).
+
+Like :mod:`nurbscnc.cli.stream`, helpers of :mod:`nurbscnc.cli.main` are imported when the
+command runs (main imports this module at its end).
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+
+import click
+
+from nurbscnc.errors import OutputError
+
+
+def _handle_errors(func):
+    """``nurbscnc.cli.main.handle_errors``, looked up when the command runs (errors name the
+    trace file: its parameter is called ``source``)."""
+
+    @functools.wraps(func)
+    def wrapper(*args, **kwargs):
+        from nurbscnc.cli.main import handle_errors
+
+        return handle_errors(func)(*args, **kwargs)
+
+    return wrapper
+
+
+@click.command()
+@click.argument("source", metavar="TRACE", type=click.Path(dir_okay=False, allow_dash=True))
+@click.option("--axis", type=click.Choice(["x", "y", "z"]), default="x", show_default=True,
+              help="Which [servo.<axis>] section to print.")
+@click.option("--order", type=click.Choice(["2", "4"]), default="4", show_default=True,
+              help="4: the paper's model (SPEC eq. 25); 2: bandwidth and damping.")
+@click.option("--cmd", "cmd_col", default="1", show_default=True,
+              help="Column of the commanded position (1-based number, or header name).")
+@click.option("--fb", "fb_col", default="2", show_default=True,
+              help="Column of the actual (feedback) position.")
+@click.option("--time", "time_col", default=None,
+              help="Column of the time [s]; gives the sample period.")
+@click.option("--period-ms", type=click.FloatRange(min=0, min_open=True), default=None,
+              help="Sample period [ms] (e.g. the servo period of a halsampler capture).")
+@click.option("--delay", type=click.IntRange(min=0), default=0, show_default=True,
+              help="Periods by which the feedback is recorded late (1 for a LinuxCNC capture "
+              "whose encoder is read before the period's command is written).")
+@click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
+@_handle_errors
+def identify(source, axis, order, cmd_col, fb_col, time_col, period_ms, delay, as_json):
+    """Fit the closed-loop position model of one axis from TRACE ('-' for stdin): commanded
+    and actual position, one sample per line (whitespace or commas; '#' comments; an optional
+    header line of column names), e.g. a LinuxCNC halsampler capture of pos-cmd and pos-fb.
+
+    Prints a [servo.AXIS] profile section with the fit's quality (NRMSE fit, R², residual
+    RMS) and poles. The trace should start at rest and move the axis through steps or fast
+    moves. Example: nurbscnc identify trace.txt --period-ms 1 --axis y
+    """
+    from nurbscnc.servo.identify import fit_axis, parse_trace, profile_section
+
+    try:
+        if source == "-":
+            text = click.get_text_stream("stdin").read()
+        else:
+            with open(source, encoding="utf-8") as fh:
+                text = fh.read()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise OutputError(f"cannot read {source}: {exc}") from exc
+    trace = parse_trace(text, cmd_col, fb_col, time_col,
+                        None if period_ms is None else period_ms * 1e-3)  # fmt: skip
+    fit = fit_axis(trace, int(order), delay)
+    name = "<stdin>" if source == "-" else source
+    section = profile_section(fit, axis, name)
+    if as_json:
+        out = {
+            "ok": True, "source": name, "axis": axis, "order": fit.order,
+            "samples": fit.samples, "period_s": fit.period_s, "delay_samples": fit.delay,
+            "numerator": fit.numerator.tolist(), "denominator": fit.denominator.tolist(),
+            "poles": [[p.real, p.imag] for p in fit.poles], "dc_gain": fit.dc_gain,
+            "offset_um": fit.offset_mm * 1e3, "fit": fit.fit, "r2": fit.r2,
+            "residual_rms_um": fit.residual_rms_mm * 1e3,
+            "following_error_rms_um": fit.following_error_rms_mm * 1e3,
+            "profile_section": section,
+        }  # fmt: skip
+        if fit.order == 2:
+            out.update(bandwidth_hz=fit.bandwidth_hz, damping=fit.damping)
+        click.echo(json.dumps(out))
+        return
+    click.echo(section, nl=False)

@@ -1,0 +1,104 @@
+"""``nurbscnc profile init`` and ``nurbscnc profile show``: the machine profile as a user sees it.
+
+``init`` writes the commented template (the bundled default profile: every key, its unit and
+meaning); ``show`` prints the profile a command would use, after discovery, ``--machine`` and
+``--set`` (TOML, or JSON). Like :mod:`nurbscnc.cli.stream`, helpers of :mod:`nurbscnc.cli.main`
+are imported when a command runs (main imports this module at its end).
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import os
+import sys
+
+import click
+
+from nurbscnc.errors import NurbsCncError, OutputError
+
+
+def _handle_errors(func):
+    """``nurbscnc.cli.main.handle_errors`` (looked up when the command runs), but a user error
+    is reported as ``nurbscnc profile: error: …`` (these commands read no program)."""
+
+    @functools.wraps(func)
+    def reported(*args, **kwargs):
+        from nurbscnc.cli.main import _error_json, err
+
+        try:
+            return func(*args, **kwargs)
+        except NurbsCncError as exc:
+            if kwargs.get("as_json"):
+                click.echo(json.dumps(_error_json(exc)))
+            err.print(f"nurbscnc profile: error: {exc.message}", markup=False)
+            sys.exit(exc.exit_code)
+
+    @functools.wraps(func)
+    def wrapper(*args, **kwargs):
+        from nurbscnc.cli.main import handle_errors
+
+        return handle_errors(reported)(*args, **kwargs)
+
+    return wrapper
+
+
+@click.group()
+def profile():
+    """The machine profile: write a template, show the one in effect.
+
+    A command finds its profile, first match wins: --machine FILE, $NURBSCNC_MACHINE,
+    ./nurbscnc.toml, $XDG_CONFIG_HOME/nurbscnc/machine.toml (~/.config/...), the bundled
+    paper machine. See docs/machine-profile.md.
+    """
+
+
+@profile.command("init")
+@click.argument("file", required=False, type=click.Path(dir_okay=False, allow_dash=True))
+@click.option("--force", is_flag=True, help="Overwrite FILE if it exists.")
+@_handle_errors
+def init(file, force):
+    """Write a commented profile template to FILE (default or '-': stdout).
+
+    Example: nurbscnc profile init nurbscnc.toml
+    """
+    from nurbscnc.cli.main import err
+    from nurbscnc.machine.profile import default_profile_text
+
+    text = default_profile_text()
+    if file in (None, "-"):
+        click.echo(text, nl=False)
+        return
+    if os.path.exists(file) and not force:
+        raise OutputError(f"{file} exists; use --force to overwrite it")
+    try:
+        with open(file, "w", encoding="utf-8") as f:
+            f.write(text)
+    except OSError as exc:
+        raise OutputError(f"cannot write {file}: {exc}") from exc
+    err.print(f"wrote {file}: edit it for your machine, then `nurbscnc profile show` "
+              f"(found without flags as ./nurbscnc.toml, or with --machine {file})",
+              markup=False)  # fmt: skip
+
+
+@profile.command("show")
+@click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
+@click.option("--machine", type=click.Path(dir_okay=False), default=None,
+              help="Machine profile (TOML); default: found as `nurbscnc profile` says.")
+@click.option("--set", "overrides", multiple=True, metavar="KEY=VALUE",
+              help="Override one profile value, e.g. --set limits.a_max_mm_s2=1000.")
+@_handle_errors
+def show(as_json, machine, overrides):
+    """Print the effective machine profile (after discovery, --machine and --set).
+
+    Example: nurbscnc profile show --set servo.x.bandwidth_hz=40 --set servo.x.damping=0.7
+    """
+    from nurbscnc.cli.main import load_machine_cli, machine_json
+    from nurbscnc.machine.profile import profile_toml
+
+    click.get_current_context().meta["nurbscnc.machine_said"] = True  # the header says it
+    mach = load_machine_cli(machine, overrides)
+    if as_json:
+        click.echo(json.dumps({"ok": True, **machine_json(mach), "profile": mach.settings}))
+        return
+    click.echo(profile_toml(mach), nl=False)

@@ -1,0 +1,62 @@
+"""Reference points as a LinuxCNC ``halstreamer`` file: one line per servo period.
+
+LinuxCNC's ``streamer`` HAL component (loaded as ``loadrt streamer depth=D cfg=fff``) exports
+one output pin per character of its cfg string and, every time its function runs (once per
+period of the thread it is added to), takes one line of its FIFO and writes the values to the
+pins; the user-space ``halstreamer`` program fills the FIFO from a text file. The file format,
+from the halstreamer(1) and streamer(9) manual pages: one line per sample, values separated by
+whitespace, in the order of the cfg string; floats as strtod(3) reads them; lines beginning with
+``#`` are comments. When the FIFO runs empty the pins keep their last values.
+
+This writer emits cfg ``fff``: x y z in mm (machine coordinates, the units of the profile), one
+line per servo period T_s, six decimals (1 nm, below any step size). The first line is the start
+point, the last the end point at rest, exactly the points of ``run -o points.csv``. A comment
+header says the program, T_s, the line count, the cfg string and the start point. The file is
+played at whatever rate the thread runs: the servo thread's period must equal T_s
+(docs/linuxcnc.md).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from nurbscnc.output.files import atomic_output
+
+#: streamer cfg string of the columns this writer emits (three float pins: x, y, z).
+STREAMER_CFG = "fff"
+#: Decimals per value [mm]: 1e-6 mm = 1 nm.
+DECIMALS = 6
+
+
+def halstreamer_header(points_mm: np.ndarray, period_s: float, program: str = "") -> str:
+    """The comment lines at the top of the file (each begins with ``#``)."""
+    start = " ".join(f"{v:.{DECIMALS}f}" for v in np.round(points_mm[0], DECIMALS) + 0.0)
+    return (
+        f"# nurbscnc reference points for LinuxCNC halstreamer{': ' + program if program else ''}\n"
+        f"# one line per servo period T_s = {period_s * 1e3:g} ms: x y z [mm, machine coords]\n"
+        f"# loadrt streamer depth=... cfg={STREAMER_CFG}; the servo thread period must be "
+        f"{round(period_s * 1e9)} ns\n"
+        f"# {points_mm.shape[0]} lines; start point {start} (the machine must be there)\n"
+    )
+
+
+def halstreamer_lines(points_mm: np.ndarray) -> str:
+    """The data lines ``x y z`` [mm] for points (N, 3), newline-terminated."""
+    p = np.asarray(points_mm, dtype=float)
+    # -0.000000 is harmless to strtod, but a clean file has no negative zeros: round first.
+    p = np.round(p, DECIMALS) + 0.0
+    # One %-format over the whole array (a line template repeated N times): the fastest way
+    # Python has to print floats, no per-row loop.
+    line = " ".join([f"%.{DECIMALS}f"] * p.shape[1]) + "\n"
+    return (line * p.shape[0]) % tuple(p.ravel().tolist())
+
+
+def write_halstreamer(path: str, points_mm, period_s: float, program: str = "") -> None:
+    """Write points (N, 3) [mm], one per period ``period_s`` [s], as a halstreamer file
+    (atomically; ``-`` is stdout)."""
+    p = np.asarray(points_mm, dtype=float)
+    if p.ndim != 2 or p.shape[1] != 3 or p.shape[0] == 0:
+        raise ValueError(f"points must be (N, 3) with N >= 1, got {p.shape}")
+    with atomic_output(path) as fh:
+        fh.write(halstreamer_header(p, period_s, program))
+        fh.write(halstreamer_lines(p))

@@ -1,0 +1,345 @@
+#!/usr/bin/env python3
+"""Copy the real NC programs of tests/programs/real/ out of local git mirrors; write
+``manifest.json`` and ``SOURCES.md``.
+
+The mirrors are the snapshots the search tools fetch (``/work/.mirror/<owner>+<name>/repo``);
+each file is taken at a fixed commit with ``git show``, never edited. Run it once when the
+collection changes; the copies, the manifest and SOURCES.md are committed, so nothing else needs
+the mirrors. ``role`` is ``program`` (recorded and compared), ``subroutine`` (called by a
+program beside it, not run alone) or ``refused`` (outside 3-axis milling: rotary motion, lathe,
+probing, spindle synchronisation — kept to check that nurbscnc refuses it clearly).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+REAL = os.path.join(ROOT, "tests", "programs", "real")
+MIRRORS = os.environ.get("NURBSCNC_MIRRORS", "/work/.mirror")
+
+LINUXCNC = ("LinuxCNC/linuxcnc", "f1270d6ed71521f6551397a98b7496027cd331b8", "GPL-2.0 (COPYING)")
+CAMOTICS = (
+    "CauldronDevelopmentLLC/CAMotics",
+    "e84665f2fa9d1151f03282ac7e01320bc65e015b",
+    "GPL-2.0-or-later (COPYING, LICENSE)",
+)
+
+TP = "tests/trajectory-planner/circular-arcs/nc_files/"
+# (repository tuple, source path, destination under tests/programs/real, role, what it is)
+FILES = [
+    *[
+        (LINUXCNC, f"nc_files/{n}.ngc", f"linuxcnc/nc_files/{n}.ngc", "program", "sample")
+        for n in [
+            "3dtest",
+            "arcspiral",
+            "cds",
+            "comp-g1",
+            "comp",
+            "comp311",
+            "comp311_2",
+            "cone",
+            "daisy",
+            "factorial",
+            "flowsnake",
+            "gmoccapy_2_tools_with_cutter_radius_compensation",
+            "hole-circle",
+            "mmount",
+            "nestedcall",
+            "offsets",
+            "polar",
+            "retval",
+            "skeleton",
+            "spiral",
+            "tort",
+            "useful-subroutines",
+            "3D_Chips",
+            "toplevel",
+            "roparams",
+        ]
+    ],
+    # (butterfly.ngc and systems.ngc use G5.2 NURBS, which the gcode module turns into a
+    # polyline: not comparable move by move; the corpus holds LinuxCNC's NURBS samples.)
+    (
+        LINUXCNC,
+        "nc_files/g20sub.ngc",
+        "linuxcnc/nc_files/g20sub.ngc",
+        "subroutine",
+        "called by nestedcall.ngc",
+    ),
+    *[
+        (LINUXCNC, f"nc_files/{n}.ngc", f"linuxcnc/nc_files/{n}.ngc", "refused", why)
+        for n, why in [
+            ("b-index", "rotary B axis motion"),
+            ("threading", "G33 spindle sync"),
+            ("g76", "G76 lathe threading"),
+            ("probe-hole", "G38 probing"),
+            ("lathecomp", "G7 lathe diameter mode"),
+        ]
+    ],
+    # tests/interp: each test.ngc under a name made from its directory.
+    *[
+        (LINUXCNC, f"tests/interp/{src}", f"linuxcnc/interp/{dst}.ngc", "program", "interp test")
+        for src, dst in [
+            ("cam-nisley/cam.ngc", "cam-nisley"),
+            ("crazy-paths/test.ngc", "crazy-paths"),
+            ("do-while-break/test.ngc", "do-while-break"),
+            ("exists/test.ngc", "exists"),
+            ("flowsnake/flowsnake.ngc", "flowsnake"),
+            ("fractional-linenumbers/test.ngc", "fractional-linenumbers"),
+            ("g10/g10-l1-l10/test.ngc", "g10-l1-l10"),
+            ("g10/g10-l11/test.ngc", "g10-l11"),
+            ("g10/g10-l2-while-active/test.ngc", "g10-l2-while-active"),
+            ("g10/g10-l20-while-active/test.ngc", "g10-l20-while-active"),
+            ("g10/g10-with-g92/test.ngc", "g10-with-g92"),
+            ("g52/g52-g92-interaction/g52-g92-interaction.ngc", "g52-g92-interaction"),
+            ("g6164/test.ngc", "g6164"),
+            *[
+                (f"g81/g{p}/g{r}/g{p}-g{r}-g81.ngc", f"g{p}-g{r}-g81")
+                for p in (17, 18, 19)
+                for r in (98, 99)
+            ],
+            *[(f"g84/g17/g{r}/g17-g{r}-g84.ngc", f"g17-g{r}-g84") for r in (98, 99)],
+            *[
+                (f"good/good-arc.{s}.{u}.center-format.ngc", f"good-arc.{s}.{u}")
+                for s in ("big", "medium", "small")
+                for u in ("imperial", "metric")
+            ],
+            ("inside-corners/test.ngc", "inside-corners"),
+            ("inverse-time-with-comp/inverse.ngc", "inverse-time-with-comp"),
+            ("namedparam-bug424/test.ngc", "namedparam-bug424"),
+            ("oword-bug315/test.ngc", "oword-bug315"),
+            ("oword-bug315-p2/test.ngc", "oword-bug315-p2"),
+            ("return-value/test.ngc", "return-value"),
+            ("rotation/abs-pts/test.ngc", "rotation-abs-pts"),
+            ("rotation/g28/g28.ngc", "rotation-g28"),
+            ("rotation/g53/g53.ngc", "rotation-g53"),
+            ("m98m99/01-basics/test.ngc", "m98m99-basics"),
+            ("m98m99/02-variables/test.ngc", "m98m99-variables"),
+            ("m98m99/05-M98-loops/test.ngc", "m98m99-loops"),
+            ("m98m99/07-nested-subs/test.ngc", "m98m99-nested-subs"),
+            ("m98m99/13-named-program/test-named.ngc", "m98m99-named-program"),
+            ("sequence-number/test.ngc", "sequence-number"),
+        ]
+    ],
+    # LinuxCNC's "bad" programs: LinuxCNC refuses them; nurbscnc must refuse them too.
+    *[
+        (
+            LINUXCNC,
+            f"tests/interp/bad/{n}.ngc",
+            f"linuxcnc/interp-bad/{n}.ngc",
+            "program",
+            "interp test LinuxCNC refuses",
+        )
+        for n in [
+            "a-in-canned-cycle",
+            "ccomp-arcexit",
+            "ccomp-gouging",
+            "no-feed-rate",
+            "no-ijr",
+            *[
+                f"bad-arc.{s}.{u}.center-format"
+                for s in ("big", "medium", "small")
+                for u in ("imperial", "metric")
+            ],
+        ]
+    ],
+    *[
+        (LINUXCNC, f"tests/ccomp/{n}/test.ngc", f"linuxcnc/ccomp/{n}.ngc", "program", "ccomp test")
+        for n in ["mill-g90g91g92", "mill-line-arc-entry", "mill-zchanges"]
+    ],
+    (
+        LINUXCNC,
+        "tests/ccomp/lathe-comp/test.ngc",
+        "linuxcnc/ccomp/lathe-comp.ngc",
+        "refused",
+        "lathe (G7/G18 comp)",
+    ),
+    # LinuxCNC 2.9 taps to interchanged coordinates in G18/G19 (nurbscnc/program/cycles.py).
+    *[
+        (
+            LINUXCNC,
+            f"tests/interp/g84/g{p}/g{r}/g{p}-g{r}-g84.ngc",
+            f"linuxcnc/interp/g{p}-g{r}-g84.ngc",
+            "refused",
+            "G84 outside G17 (LinuxCNC interchanges the axes)",
+        )
+        for p in (18, 19)
+        for r in (98, 99)
+    ],
+    (
+        LINUXCNC,
+        "tests/interp/g33.1/g33.1.ngc",
+        "linuxcnc/interp/g33.1.ngc",
+        "refused",
+        "G33.1 rigid tapping",
+    ),
+    (
+        LINUXCNC,
+        "tests/interp/g76/g76only.ngc",
+        "linuxcnc/interp/g76only.ngc",
+        "refused",
+        "G76 lathe threading",
+    ),
+    # Trajectory-planner test programs (several are CAM output).
+    *[
+        (LINUXCNC, TP + p, "linuxcnc/tp/" + p.replace("/", "__"), "program", "tp test")
+        for p in [
+            "arc-feed/basic_xy.ngc",
+            "arc-feed/full_xy.ngc",
+            "arc-feed/full_xz.ngc",
+            "arc-feed/full_yz.ngc",
+            "arc-feed/simple_arc2.ngc",
+            "arc-feed/simple_arc3.ngc",
+            "arc-feed/arc_time.ngc",
+            *[
+                f"quick-tests/{q}.ngc"
+                for q in [
+                    "arc-arc-sawtooth",
+                    "dodecagon_0.1in",
+                    "g0_corners",
+                    "linearc-stellabee",
+                    "naive_cam_corner1",
+                    "naive_cam_reversal",
+                    "rapid_3d_corners",
+                    "square_spiral",
+                    "spiral_tight_circular",
+                    "steve",
+                    "tangent_helix",
+                    "test_diamond",
+                    "zigzag_square",
+                    "zero_length_move",
+                    "arc-arc-planeswitch",
+                    "sam-tolerance-issue",
+                    "parabolic_varying",
+                    "ramp_test",
+                    "corner_decel",
+                ]
+            ],
+            *[
+                f"performance/{q}.ngc"
+                for q in [
+                    "cap",
+                    "bezel_ex_37tick",
+                    "test_12mmflat",
+                    "tight-corner-tolerance",
+                    "tort-sam-mach3",
+                    "spiral_lines",
+                    "line-contouring-xz",
+                ]
+            ],
+            *[
+                f"violation_checks/{q}.ngc"
+                for q in [
+                    "spreadsheeterrors",
+                    "maxvel_violation_helical",
+                    "tangent_lines_smooth",
+                    "sam_vel_violation",
+                    "machinekit_412",
+                ]
+            ],
+            *[
+                f"diagnostic/{q}.ngc"
+                for q in ["feed-tracking-test", "helix_slowdown", "modal_state_test", "lineno-test"]
+            ],
+            "spindle/g95_blend.ngc",
+        ]
+    ],
+    *[
+        (LINUXCNC, TP + p, "linuxcnc/tp/" + p.replace("/", "__"), "refused", why)
+        for p, why in [
+            ("spindle/rigidtap_test.ngc", "G33.1 rigid tapping"),
+            ("spindle/g33_simple.ngc", "G33 spindle sync"),
+            ("diagnostic/abc_tangent.ngc", "rotary A/B/C motion"),
+        ]
+    ],
+    # CAMotics examples: CAM output (pycam, CAMotics' own TPL CAM) and hand-written O-word code.
+    *[
+        (CAMOTICS, f"examples/{p}", "camotics/" + p.replace("/", "__"), "program", what)
+        for p, what in [
+            ("scorpion/scorpion.nc", "CAM output"),
+            ("slant_test/slant_test.nc", "hand-written"),
+            ("heart/cutout.ngc", "named parameters"),
+            ("heart/heart.ngc", "named parameters"),
+            ("genes-encoder/genes-encoder.ngc", "O-words (LinuxCNC user program)"),
+            ("compass/mt_kazbegi_2013.ngc", "engraving, named parameters"),
+            ("compass/sworn_brothers_llc.ngc", "engraving, named parameters"),
+            ("compass/text.ngc", "engraving"),
+            ("cds/cds.gcode", "CAMotics TPL CAM output"),
+            ("buildbotics/buildbotics.gcode", "CAMotics TPL CAM output"),
+            ("wave/wave.gcode", "CAMotics TPL CAM output"),
+            ("cat/tiny_cat_outline.ngc", "pycam 0.5.1 output"),
+            ("compass/top.ngc", "engraving"),
+            ("compass/bottom.ngc", "engraving"),
+            ("locket/engrave.ngc", "engraving"),
+        ]
+    ],
+]
+
+
+def main() -> None:
+    entries = []
+    for (repo, commit, licence), src, dst, role, what in FILES:
+        mirror = os.path.join(MIRRORS, repo.replace("/", "+"), "repo")
+        data = subprocess.run(
+            ["git", "-C", mirror, "show", f"{commit}:{src}"], capture_output=True, check=True
+        ).stdout
+        path = os.path.join(REAL, dst)
+        os.makedirs(os.path.dirname(path), exist_ok=True)
+        with open(path, "wb") as fh:
+            fh.write(data)
+        full = subprocess.run(
+            ["git", "-C", mirror, "rev-parse", commit], capture_output=True, text=True, check=True
+        ).stdout.strip()
+        entries.append(
+            {
+                "path": dst,
+                "repository": repo,
+                "source": src,
+                "commit": full,
+                "licence": licence,
+                "role": role,
+                "what": what,
+                "bytes": len(data),
+            }
+        )
+    with open(os.path.join(REAL, "manifest.json"), "w") as fh:
+        json.dump({"files": entries}, fh, indent=1)
+        fh.write("\n")
+    total = sum(e["bytes"] for e in entries)
+    lines = [
+        "# Real NC programs (issue 11)",
+        "",
+        "Copied unchanged from public repositories by `tools/collect_real_programs.py`;",
+        "`manifest.json` is the machine-readable form of this table. `role`: **program**",
+        "(LinuxCNC's moves are recorded in `tests/golden/linuxcnc/` and compared with nurbscnc's),",
+        "**subroutine**",
+        '(called by a program beside it), **refused** (outside 3-axis milling; kept as "stays',
+        'refused" examples). The programs are GPL data; they are redistributed under their',
+        "repositories' licences (GPL-2.0 / GPL-2.0-or-later), unchanged, with their origin.",
+        "",
+        "Initial state used for every program (`make goldens`): `tools.tbl` (LinuxCNC tool-table",
+        "format, mm: T1–T4 from LinuxCNC's `tests/interp/cam-nisley/test.tbl` in mm, T5–T99",
+        "length 0,",
+        "diameter 3 mm) and `params.var` (all offsets zero, G54 active); units G21, start at the",
+        "origin, block delete on.",
+        "",
+        f"{len(entries)} files, {total / 1e6:.2f} MB.",
+        "",
+        "| file | role | repository | path | commit | licence | what |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for e in entries:
+        lines.append(
+            f"| `{e['path']}` | {e['role']} | {e['repository']} | `{e['source']}` | "
+            f"{e['commit'][:12]} | {e['licence']} | {e['what']} |"
+        )
+    with open(os.path.join(REAL, "SOURCES.md"), "w") as fh:
+        fh.write("\n".join(lines) + "\n")
+    print(f"{len(entries)} files, {total} bytes")
+
+
+if __name__ == "__main__":
+    main()
