@@ -441,8 +441,8 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
                     self.straight(words, False)
                 return
         self.set_feed_mode(gcodes, words)
-        self.set_units(gcodes)
         self.set_feed(words, used)
+        self.set_units(gcodes)
         self.set_spindle(words, used)
         self.select_tool(words, used)
         if 7 in mcodes:
@@ -522,9 +522,9 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
             self.m.feed_mode = code
 
     def set_units(self, gcodes: dict) -> None:
-        # RS274/NGC sets F (step 3) before units (step 12), but the F word is in the units in
-        # force after the block (LinuxCNC converts the feed when G20/G21 changes), so units
-        # are read first.
+        # RS274/NGC sets F (step 3) before units (step 12) and LinuxCNC's canon keeps the
+        # feed as a length per minute in the units of the moment it was set: "G20 F60" in a
+        # block that starts in mm is 60 mm/min (its goldens: ccomp/mill-zchanges, comp311).
         if 6 in gcodes:
             self.m.scale = INCH_MM if gcodes[6][0] == 200 else 1.0
 
