@@ -606,7 +606,8 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
                 if code in (411, 421):
                     if d is None:
                         raise self.error(f"G{_fmt_code(code)} needs a D word (diameter)", col)
-                    m.comp_radius_mm = abs(d[0]) * m.scale / 2.0
+                    # signed: a negative D swaps the side (LinuxCNC; CutterComp does it)
+                    m.comp_radius_mm = d[0] * m.scale / 2.0
                 else:
                     number = int(d[0]) if d is not None else m.tool_loaded
                     if d is not None and (d[0] != int(d[0]) or d[0] < 0):
