@@ -935,7 +935,7 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
     def rapid_to_program(self, end_prog) -> None:
         start = self.pos
         end = self.coords.to_machine(end_prog)
-        if end != start:
+        if end != start or self.comp_exit is not None:
             self.emit(Line(tuple(start), tuple(end), 0.0, self.main_line(), True, self.m.blend_mm))
         self.prog = list(end_prog)
 
@@ -970,7 +970,7 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
                 feed = self.move_feed_mm_s(math.dist(start, end), words)
             if feed <= 0.0:
                 raise self.error("G1 move with zero feed (set F first)", 1)
-        if end != start:
+        if end != start or self.comp_exit is not None:  # the exit move may not be zero
             line = self.line_no if self.source is self.main else self.main_line()
             self.emit(Line(tuple(start), tuple(end), feed, line, rapid, m.blend_mm))
         self.prog = end_prog
