@@ -130,9 +130,12 @@ def test_inch_input_equals_mm_input_times_25_4(seed):
 def test_units_switch_mid_program():
     (line1, line2) = segs("G20 G1 X1 F10\nG21 X30")
     assert line1.end_mm == (25.4, 0.0, 0.0)
-    assert line1.feed_mm_s == pytest.approx(10 * 25.4 / 60, rel=1e-15)
+    # LinuxCNC sets F (step 3) before the units (step 12): "G20 ... F10" in a block that
+    # starts in mm is 10 mm/min (its goldens ccomp/mill-zchanges and nc_files/comp311,
+    # "g20 f60": 1 mm/s, recorded with the gcode module and rs274).
+    assert line1.feed_mm_s == pytest.approx(10 / 60, rel=1e-15)
     assert line2.end_mm == (30.0, 0.0, 0.0)
-    # The feed keeps its mm/s value: F was given in inches per minute.
+    # The feed keeps its mm/s value through the units change.
     assert line2.feed_mm_s == line1.feed_mm_s
 
 
