@@ -537,8 +537,7 @@ def test_cycle_follows_work_offsets():
         np.testing.assert_allclose(np.subtract(b.end_mm, a.end_mm), (100, -50, 3), atol=1e-12)
     # LinuxCNC's G81 under G98: rapid to the hole, down to R, feed to Z, rapid back to the
     # initial level (10).
-    assert [tuple(s.end_mm) for s in plain[1:5]] == [(5, 7, 10), (5, 7, 2), (5, 7, -2),
-                                                     (5, 7, 10)]
+    assert [tuple(s.end_mm) for s in plain[1:5]] == [(5, 7, 10), (5, 7, 2), (5, 7, -2), (5, 7, 10)]
     assert plain[3].rapid is False and plain[3].feed_mm_s == pytest.approx(2.0, rel=1e-15)
 
 
@@ -546,8 +545,7 @@ def test_comp_inside_square_is_the_offset_square():
     """G41.1 D4 (radius 2) on a counter-clockwise square 0..20 entered from inside: every
     corner is concave, so the tool path is the square 2..18 (closed form), with the entry
     and exit moves to and from the centre line of the first side."""
-    got = segs("G21 F600\nG0 X10 Y10\nG41.1 D4 G1 X10 Y0\nX20\nY20\nX0\nY0\nX10\n"
-               "G40 X10 Y10\n")
+    got = segs("G21 F600\nG0 X10 Y10\nG41.1 D4 G1 X10 Y0\nX20\nY20\nX0\nY0\nX10\nG40 X10 Y10\n")
     ends = [tuple(round(v, 12) for v in s.end_mm[:2]) for s in got[1:]]
     assert ends == [(12, 2), (18, 2), (18, 18), (2, 18), (2, 2), (10, 2), (10, 10)]
     assert got[-1].start_mm[:2] == (10, 2)  # the exit move leaves the compensated point
