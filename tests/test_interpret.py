@@ -133,8 +133,12 @@ def test_units_switch_mid_program():
     the units change."""
     (line1, line2, line3) = segs("G20 G1 X1 F10\nG21 X30\nG20\nF10 X2")
     assert line1.end_mm == (25.4, 0.0, 0.0)
-    assert line1.feed_mm_s == pytest.approx(10 / 60, rel=1e-15)  # F10 in mm/min
+    # LinuxCNC sets F (step 3) before the units (step 12): "G20 ... F10" in a block that
+    # starts in mm is 10 mm/min (its goldens ccomp/mill-zchanges and nc_files/comp311,
+    # "g20 f60": 1 mm/s, recorded with the gcode module and rs274).
+    assert line1.feed_mm_s == pytest.approx(10 / 60, rel=1e-15)
     assert line2.end_mm == (30.0, 0.0, 0.0)
+    # The feed keeps its mm/s value through the units change.
     assert line2.feed_mm_s == line1.feed_mm_s
     assert line3.end_mm == (50.8, 0.0, 0.0)
     assert line3.feed_mm_s == pytest.approx(10 * 25.4 / 60, rel=1e-15)  # G20 was in force
@@ -523,3 +527,30 @@ def test_huge_arc_radius_stays_finite(radius):
     for value in (arc.center_mm, arc.angle_rad, arc.radius_start_mm, arc.radius_end_mm):
         assert np.all(np.isfinite(value))
     assert math.hypot(*(arc.center_mm - arc.start_mm)) == pytest.approx(arc.radius_start_mm)
+
+
+# -- canned cycles and cutter compensation in the interpreter ----------------------------
+def test_cycle_follows_work_offsets():
+    """A G81 under G55 (set by G10 L2) makes the G54 program's moves shifted by the offset:
+    cycles.py works in program coordinates, the interpreter maps every move to the machine."""
+    body = "G0 X0 Y0 Z10\nG81 X5 Y7 Z-2 R2 F120\nX9\nG80\n"
+    plain = segs("G21 G90\n" + body)
+    shifted = segs("G21 G90\nG10 L2 P2 X100 Y-50 Z3\nG55\n" + body)
+    assert len(plain) == len(shifted) == 9  # rapid to 0,0 and two holes of 4 moves each
+    for a, b in zip(plain, shifted):
+        assert a.rapid == b.rapid and a.feed_mm_s == b.feed_mm_s
+        np.testing.assert_allclose(np.subtract(b.end_mm, a.end_mm), (100, -50, 3), atol=1e-12)
+    # LinuxCNC's G81 under G98: rapid to the hole, down to R, feed to Z, rapid back to the
+    # initial level (10).
+    assert [tuple(s.end_mm) for s in plain[1:5]] == [(5, 7, 10), (5, 7, 2), (5, 7, -2), (5, 7, 10)]
+    assert plain[3].rapid is False and plain[3].feed_mm_s == pytest.approx(2.0, rel=1e-15)
+
+
+def test_comp_inside_square_is_the_offset_square():
+    """G41.1 D4 (radius 2) on a counter-clockwise square 0..20 entered from inside: every
+    corner is concave, so the tool path is the square 2..18 (closed form), with the entry
+    and exit moves to and from the centre line of the first side."""
+    got = segs("G21 F600\nG0 X10 Y10\nG41.1 D4 G1 X10 Y0\nX20\nY20\nX0\nY0\nX10\nG40 X10 Y10\n")
+    ends = [tuple(round(v, 12) for v in s.end_mm[:2]) for s in got[1:]]
+    assert ends == [(12, 2), (18, 2), (18, 18), (2, 18), (2, 2), (10, 2), (10, 10)]
+    assert got[-1].start_mm[:2] == (10, 2)  # the exit move leaves the compensated point

@@ -312,7 +312,8 @@ G1 X2
 """
     got = segs(prog)
     np.testing.assert_allclose([s.end_mm[0] for s in got], [25.4, 1.0, 26.4, 2.0], atol=1e-12)
-    assert [s.feed_mm_s * 60 for s in got] == pytest.approx([5 * 25.4, 200, 200, 200])
+    # "G20 G91 F5" after G21: F is set before the units change (LinuxCNC), so 5 mm/min.
+    assert [s.feed_mm_s * 60 for s in got] == pytest.approx([5, 200, 200, 200])
 
 
 def test_exists_of_numbered_parameters():

@@ -32,7 +32,9 @@ from nurbscnc.geometry.segments import (
     vec3,
 )
 from nurbscnc.program import arcs, coords
+from nurbscnc.program.compensation import MSG_ARC_AFTER_EXIT, CompMove, CutterComp
 from nurbscnc.program.control import N_LOCAL, ControlFlow, Frame, Source
+from nurbscnc.program.cycles import CycleState, expand_cycle
 from nurbscnc.program.expressions import MAX_PARAMETER, ExpressionError, evaluate
 from nurbscnc.program.modal import (
     CANNED_CYCLES,
@@ -120,6 +122,8 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
         self.loaded: dict[str, Source] = {}  # subroutine files read, by label
         self.m70_state = None  # modal state saved by M70
         self.axes_consumed = False  # the block's axis words were data (G43.1), not a move
+        self.comp: CutterComp | None = None  # G41/G42 in force: the compensation stream
+        self.comp_exit = None  # after G40: the compensated tool position [mm, machine]
         tools = dict(options.tools or {})
         for number, length in (options.tool_lengths_mm or {}).items():
             tools.setdefault(int(number), Tool(int(number), (0.0, 0.0, float(length))))
@@ -303,6 +307,7 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
         self.finish()
 
     def finish(self) -> None:
+        self.comp_off()  # the end of the program ends compensation as G40 does
         if self.nurbs is not None:
             build = self.nurbs
             self.source = self.main
@@ -440,7 +445,12 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
         self.set_units(gcodes)
         self.set_spindle(words, used)
         self.select_tool(words, used)
+        if 7 in mcodes:
+            self.m.spindle = {3: "cw", 4: "ccw"}.get(mcodes[7][0], "off")  # M5, M19: stopped
         if 6 in mcodes:
+            if self.m.comp_mode != 400:
+                raise self.error("Cannot change tools with cutter radius compensation on",
+                                 mcodes[6][1])  # fmt: skip
             self.m.tool_loaded = self.m.tool_selected  # M6
         if 10 in mcodes:
             self.modal_save_restore(*mcodes[10])
@@ -448,7 +458,11 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
             used.update("RQP")  # M19 R<angle> Q<timeout> P<direction>: spindle orientation
         self.dwell(gcodes, words, used)
         if 2 in gcodes:
-            self.m.plane = PLANE_OF_G[gcodes[2][0]]
+            plane = PLANE_OF_G[gcodes[2][0]]
+            if self.m.comp_mode != 400 and plane != self.m.plane:
+                raise self.error("Cannot change planes with cutter radius compensation on",
+                                 gcodes[2][1])  # fmt: skip
+            self.m.plane = plane
         self.set_cutter_comp(gcodes, words, used)
         self.set_tool_offset(gcodes, words, used)
         if 12 in gcodes:
@@ -460,6 +474,13 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
             self.m.arc_absolute = gcodes[4][0] == 901
         if 10 in gcodes:
             self.m.retract_mode = gcodes[10][0]
+        motion = gcodes[1][0] if 1 in gcodes else self.m.motion
+        if motion in CANNED_CYCLES:
+            for letter in "ABC":
+                if letter in words:  # LinuxCNC: "Cannot put an a in canned cycle"
+                    article = "an" if letter == "A" else "a"
+                    raise self.error(f"Cannot put {article} {letter.lower()} in canned cycle",
+                                     words[letter][1])  # fmt: skip
         self.check_rotary(words, used)
         moved_by_nonmodal = self.nonmodal(gcodes, words, used)
         self.motion_block(gcodes, words, used, moved_by_nonmodal)
@@ -503,8 +524,9 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
             self.m.feed_mode = code
 
     def set_units(self, gcodes: dict) -> None:
-        # After F (LinuxCNC's order, checked with its interpreter): "G20 G1 X1 F10" from G21
-        # feeds at 10 mm/min, and a feed keeps its physical value when the units change.
+        # RS274/NGC sets F (step 3) before units (step 12) and LinuxCNC's canon keeps the
+        # feed as a length per minute in the units of the moment it was set: "G20 F60" in a
+        # block that starts in mm is 60 mm/min (its goldens: ccomp/mill-zchanges, comp311).
         if 6 in gcodes:
             self.m.scale = INCH_MM if gcodes[6][0] == 200 else 1.0
 
@@ -554,7 +576,12 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
             raise self.error(
                 f"dwell P{seconds:.6g} is out of range (at most {MAX_DWELL_S:g} s)", col
             )
-        self.segments.append(Dwell(float(seconds), tuple(self.pos), self.main_line()))
+        position = tuple(self.pos) if self.comp_exit is None else self.comp_exit
+        dwell = Dwell(float(seconds), position, self.main_line())
+        if self.comp is None:
+            self.segments.append(dwell)
+        else:
+            self.comp_moves(CompMove("dwell", position, line=dwell.line, seconds=dwell.seconds))
 
     def set_cutter_comp(self, gcodes: dict, words: dict, used: set) -> None:
         """G40 / G41 / G42 / G41.1 / G42.1 with D: tracked in ``self.m.comp_*``."""
@@ -566,14 +593,23 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
                                  col)  # fmt: skip
             if code == 400:
                 m.comp_mode, m.comp_side, m.comp_radius_mm, m.comp_d = 400, None, 0.0, None
+                self.comp_off()
             else:
+                if m.plane == "YZ":
+                    raise self.error("Cutter radius compensation allowed only in XY, XZ planes",
+                                     col)  # fmt: skip
+                if m.plane != "XY":
+                    raise self.error("cutter radius compensation in the XZ plane (G18) is not "
+                                     "supported (nurbscnc compensates in XY only)", col,
+                                     UnsupportedError)  # fmt: skip
                 m.comp_mode = code
                 m.comp_side = "left" if code in (410, 411) else "right"
                 d = words.get("D")
                 if code in (411, 421):
                     if d is None:
                         raise self.error(f"G{_fmt_code(code)} needs a D word (diameter)", col)
-                    m.comp_radius_mm = abs(d[0]) * m.scale / 2.0
+                    # signed: a negative D swaps the side (LinuxCNC; CutterComp does it)
+                    m.comp_radius_mm = d[0] * m.scale / 2.0
                 else:
                     number = int(d[0]) if d is not None else m.tool_loaded
                     if d is not None and (d[0] != int(d[0]) or d[0] < 0):
@@ -581,6 +617,9 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
                     tool = self.tools.get(number)
                     m.comp_radius_mm = tool.diameter_mm / 2.0 if tool is not None else 0.0
                 m.comp_d = d[0] if d is not None else None
+                start = tuple(self.pos) if self.comp_exit is None else self.comp_exit
+                self.comp = CutterComp(m.comp_side, m.comp_radius_mm, start, inch=m.inch)
+                self.comp_exit = None
         if "D" in words and gcodes.get(14, (0,))[0] == 960:
             used.add("D")  # G96 D: the spindle speed limit of constant surface speed
         elif "D" in words:
@@ -665,6 +704,9 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
     def motion_block(self, gcodes, words, used, axes_consumed: bool) -> None:
         motion_code = gcodes.get(1)
         machine_coords = gcodes.get(0, (None,))[0] == 530
+        # A run of cycle blocks keeps its initial level and sticky words; any other motion
+        # mode in between forgets them (LinuxCNC's cycle_il_flag).
+        fresh_cycle = self.m.motion not in CANNED_CYCLES
         if machine_coords:
             mode = motion_code[0] if motion_code else self.m.motion
             if mode not in (0, 10):
@@ -704,12 +746,16 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
         elif motion in (20, 30):
             if has_axes or motion_code is not None or any(k in words for k in "IJKR"):
                 self.arc(words, used)
+        elif motion in (50, 51, 52, 62) and self.comp is not None:
+            raise self.error(f"G{_fmt_code(motion)} with cutter radius compensation is not "
+                             "supported", motion_code[1] if motion_code else 1,
+                             UnsupportedError)  # fmt: skip
         elif motion in (50, 51):
             if has_axes or motion_code is not None:
                 self.spline(words, used, motion, motion_code)
         elif motion in CANNED_CYCLES:
             if has_axes or motion_code is not None:
-                self.canned_cycle(motion, words, used, motion_code)
+                self.canned_cycle(motion, words, used, motion_code, fresh_cycle)
         elif motion == 52:
             self.g5(words, used, motion_code)
         elif motion == 53:
@@ -718,37 +764,122 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
             self.g6(words, used, motion_code)
         used.update(_AXES)
 
-    def canned_cycle(self, code: int, words: dict, used: set, motion_code) -> None:
-        """THE call site for canned cycles (cycles.py, to be wired): expand G73/G81–G89 into
-        rapids, feeds and dwells. Tracks the sticky words in ``self.m.cycle_*`` first."""
+    def canned_cycle(self, code: int, words: dict, used: set, motion_code, fresh: bool) -> None:
+        """G73, G74, G81–G89: expanded by cycles.py (LinuxCNC's convert_cycle) in program
+        coordinates, then appended as rapids, feeds, dwells and pauses in machine coordinates
+        (its spindle stops and starts have no segment). ``fresh``: the first block of a run
+        of cycle blocks (a new initial level; sticky words forgotten)."""
         m = self.m
-        for letter, attr in (("R", "cycle_r"), ("Q", "cycle_q"), ("P", "cycle_p"),
-                             ("L", "cycle_l")):  # fmt: skip
-            if letter in words:
-                setattr(m, attr, words[letter][0])
-                used.add(letter)
-        if "Z" in words:
-            m.cycle_z = words["Z"][0]
         col = motion_code[1] if motion_code else min(c for _, c in words.values())
-        raise self.error(f"G{_fmt_code(code)} (canned cycle) is not supported", col,
-                         UnsupportedError)  # fmt: skip
+        if m.feed_mode == 930:
+            raise self.error("Cannot use inverse time feed with canned cycles", col)
+        if m.comp_mode != 400:
+            raise self.error("Cannot use canned cycles with cutter compensation on", col)
+        given = {}
+        for letter in "XYZRQIJK@PL^":
+            if letter in words:
+                value = words[letter][0]
+                given[letter] = value * m.scale if letter in "XYZRQIJK@" else value
+                used.add(letter)
+        try:
+            result = expand_cycle(
+                f"G{code // 10}", given, incremental=not m.absolute,
+                position_mm=tuple(self.prog), plane=m.plane,
+                retract="G98" if m.retract_mode == 980 else "G99", feed_mm_s=self.feed_mm_s,
+                state=CycleState() if fresh else m.cycle, spindle=m.spindle,
+            )  # fmt: skip
+        except ProgramError as exc:
+            raise self.error(exc.message, col) from None
+        line = self.main_line()
+        to_machine = self.coords.to_machine
+        start = tuple(self.pos)
+        for move in result.moves:
+            if move.kind in ("rapid", "feed"):
+                end = tuple(to_machine(list(move.end_mm)))
+                if end != start:
+                    self.segments.append(Line(start, end, move.feed_mm_s, line,
+                                              move.kind == "rapid", m.blend_mm))  # fmt: skip
+                start = end
+            elif move.kind == "dwell":
+                self.segments.append(Dwell(float(move.dwell_s), start, line))
+            elif move.kind == "pause":  # G88: the operator takes over (LinuxCNC: M0)
+                self.segments.append(Pause(start, line, "M0"))
+        self.prog = list(result.position_mm)
+        m.cycle = result.state
 
-    def compensate(self, segment):
-        """THE call site for cutter radius compensation (compensation.py, to be wired): every
-        Line and Arc of the program passes here before it is appended. With G40 in force the
-        segment is returned unchanged."""
-        if self.m.comp_mode == 400:
-            return segment
-        raise self.error(
-            f"G{_fmt_code(self.m.comp_mode)} (cutter radius compensation) is not supported",
-            1,
-            UnsupportedError,
-        )
+    # -- cutter radius compensation (compensation.py) -------------------------------------
+    def compensate(self, segment) -> None:
+        """A programmed Line or Arc (machine mm) into the compensation stream; appends the
+        compensated moves that are final so far (the last one is held back for its corner).
+        Compensation works in machine XY: offsets and the G10 R rotation about Z keep the
+        side of the path, so it is the same as compensating in program coordinates."""
+        if isinstance(segment, Arc):
+            turns = max(1, math.ceil(abs(segment.angle_rad) / (2.0 * math.pi) - 1e-9))
+            move = CompMove("arc", tuple(map(float, segment.end_mm)), segment.feed_mm_s,
+                            segment.line, (float(segment.center_mm[0]),
+                                           float(segment.center_mm[1])),
+                            turns if segment.angle_rad > 0 else -turns)  # fmt: skip
+        else:
+            move = CompMove("rapid" if segment.rapid else "feed", tuple(segment.end_mm),
+                            segment.feed_mm_s, segment.line)  # fmt: skip
+        self.comp_moves(move)
+
+    def comp_moves(self, move: CompMove) -> None:
+        try:
+            out = self.comp.move(move)
+        except ProgramError as exc:
+            raise self.error(exc.message) from None
+        self.append_compensated(out)
+
+    def comp_off(self) -> None:
+        """G40 (or the program's end): the held-back moves end where they are; the next
+        (exit) move starts from the compensated point and must be straight (LinuxCNC)."""
+        comp, self.comp = self.comp, None
+        if comp is None:
+            return
+        try:
+            out = comp.finish()
+        except ProgramError as exc:
+            raise self.error(exc.message) from None
+        self.append_compensated(out)
+        if not comp.first and comp.radius_mm > 0.0:
+            self.comp_exit = tuple(comp.position_mm)
+
+    def append_compensated(self, moves) -> None:
+        blend_mm = self.m.blend_mm
+        for mv in moves:
+            if mv.kind == "dwell":
+                self.segments.append(Dwell(mv.seconds, tuple(mv.end_mm), mv.line))
+            elif mv.kind == "arc":
+                start, end = tuple(mv.start_mm), tuple(mv.end_mm)
+                s2, e2 = start[:2], end[:2]
+                sweep = arcs.sweep_rad(s2, e2, mv.centre_mm, mv.turn > 0, abs(mv.turn))
+                self.segments.append(Arc(
+                    start_mm=vec3(start), end_mm=vec3(end),
+                    center_mm=vec3((*mv.centre_mm, start[2])), normal=vec3((0.0, 0.0, 1.0)),
+                    angle_rad=float(sweep), helix_mm=end[2] - start[2],
+                    radius_start_mm=math.dist(s2, mv.centre_mm),
+                    radius_end_mm=math.dist(e2, mv.centre_mm),
+                    feed_mm_s=mv.feed_mm_s, line=mv.line, plane="XY", blend_mm=blend_mm,
+                ))  # fmt: skip
+            elif tuple(mv.start_mm) != tuple(mv.end_mm):
+                self.segments.append(Line(tuple(mv.start_mm), tuple(mv.end_mm), mv.feed_mm_s,
+                                          mv.line, mv.kind == "rapid", blend_mm))  # fmt: skip
 
     def emit(self, segment) -> None:
-        """Append a Line or Arc (through compensation when it is on)."""
-        if self.m.comp_mode != 400:
-            segment = self.compensate(segment)
+        """Append a Line or Arc (through compensation when it is on; the move just after G40
+        starts from the compensated point)."""
+        if self.comp is not None:
+            self.compensate(segment)
+            return
+        if self.comp_exit is not None:
+            if isinstance(segment, Arc):
+                raise self.error(MSG_ARC_AFTER_EXIT)
+            segment = Line(self.comp_exit, segment.end_mm, segment.feed_mm_s, segment.line,
+                           segment.rapid, segment.blend_mm)  # fmt: skip
+            self.comp_exit = None
+            if segment.start_mm == segment.end_mm:
+                return
         self.segments.append(segment)
 
     def target_program(self, words: dict, base=None) -> list:
@@ -806,7 +937,7 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
     def rapid_to_program(self, end_prog) -> None:
         start = self.pos
         end = self.coords.to_machine(end_prog)
-        if end != start:
+        if end != start or self.comp_exit is not None:
             self.emit(Line(tuple(start), tuple(end), 0.0, self.main_line(), True, self.m.blend_mm))
         self.prog = list(end_prog)
 
@@ -841,7 +972,7 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
                 feed = self.move_feed_mm_s(math.dist(start, end), words)
             if feed <= 0.0:
                 raise self.error("G1 move with zero feed (set F first)", 1)
-        if end != start:
+        if end != start or self.comp_exit is not None:  # the exit move may not be zero
             line = self.line_no if self.source is self.main else self.main_line()
             self.emit(Line(tuple(start), tuple(end), feed, line, rapid, m.blend_mm))
         self.prog = end_prog

@@ -14,10 +14,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from nurbscnc.program.cycles import CycleState
+
 INCH_MM = 25.4
 
-#: Canned cycle motion codes (group 1): G73, G81–G89.
-CANNED_CYCLES = frozenset({730, 810, 820, 830, 840, 850, 860, 870, 880, 890})
+#: Canned cycle motion codes (group 1): G73, G74, G81–G89.
+CANNED_CYCLES = frozenset({730, 740, 810, 820, 830, 840, 850, 860, 870, 880, 890})
 
 G_GROUP = {
     # group 0: non-modal
@@ -81,10 +83,11 @@ SYSTEM_OF_G = {540: 1, 550: 2, 560: 3, 570: 4, 580: 5, 590: 6, 591: 7, 592: 8, 5
 class ModalState:
     """What persists from block to block. Lengths in mm; codes as G × 10.
 
-    Canned cycles (for cycles.py): ``cycle_r``, ``cycle_q``, ``cycle_p``, ``cycle_l`` are the
-    sticky R, Q, P, L words of the cycle in force (R, Q in program units as written, P in
-    seconds, L the repeat count of the block); ``cycle_z`` the sticky Z; ``retract_mode`` is
-    980 (G98: back to the start Z) or 990 (G99: to R).
+    Canned cycles (for cycles.py): ``cycle`` the sticky words and initial level of the run of
+    cycle blocks in force (a :class:`~nurbscnc.program.cycles.CycleState`, mm and s);
+    ``retract_mode`` is 980 (G98: back to the initial level) or 990 (G99: to R).
+    ``spindle`` is "cw" (M3), "ccw" (M4) or "off" (M5, M19, the start): cycles that stop and
+    restart the spindle (G74, G84, G86, G87) need it.
     Cutter compensation (for compensation.py): ``comp_mode`` 400 (G40), 410/420 (G41/G42,
     radius from the tool table by D), 411/421 (G41.1/G42.1, diameter from D);
     ``comp_side`` None, "left" or "right"; ``comp_radius_mm``; ``comp_d`` the D word.
@@ -106,11 +109,8 @@ class ModalState:
     path_mode: int = 640
     # canned cycles
     retract_mode: int = 980
-    cycle_r: float | None = None
-    cycle_q: float | None = None
-    cycle_p: float | None = None
-    cycle_l: float | None = None
-    cycle_z: float | None = None
+    cycle: CycleState = CycleState()
+    spindle: str = "off"
     # cutter compensation
     comp_mode: int = 400
     comp_side: str | None = None

@@ -1,3 +1,3 @@
-; G41 (cutter radius compensation) is not supported @ 3:1
-G41 D1
+; Length of cutter compensation entry move is not greater than the tool radius @ 3:1
+G41.1 D4
 G1 X1 F100

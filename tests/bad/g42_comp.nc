@@ -1,2 +1,4 @@
-; G42 (cutter radius compensation) is not supported @ 2:1
-G0 X1 G42
+; Tool radius not less than arc radius with comp @ 4:1
+G21 F100
+G42.1 D10 G1 X20 Y0
+G2 X30 Y0 R5

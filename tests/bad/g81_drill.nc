@@ -1,2 +1,2 @@
-; G81 (canned cycle) is not supported @ 2:1
-G81 X1 Y1 Z-1 R1 F100
+; R less than z in cycle in xy plane @ 2:1
+G81 X1 Y1 Z1 R-1 F100
