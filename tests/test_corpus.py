@@ -38,7 +38,7 @@ from nurbscnc.cli.main import main
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_CORPUS = ROOT / ".." / "shared" / "corpus"
 GOLDEN = Path(__file__).resolve().parent / "golden" / "corpus_segments.json"
-KINDS = ("line", "rapid", "arc", "nurbs", "dwell")
+KINDS = ("line", "rapid", "arc", "nurbs", "dwell", "pause")
 LENGTH_KEYS = ("length_mm", "rapid_length_mm")
 #: Lengths are sums of Gauss–Legendre arc lengths: stable to rounding, far below this.
 LENGTH_REL_TOL = 1e-6
@@ -124,7 +124,7 @@ def test_corpus_file_checks_ok(rel):
     assert data["counts"] == dict(Counter(s["kind"] for s in segments))
     # Feed length = sum over feed moves, rapid length = sum over rapids (same numbers, so
     # only summation-order rounding separates them).
-    feed = sum(s["length_mm"] for s in segments if s["kind"] not in ("rapid", "dwell"))
+    feed = sum(s["length_mm"] for s in segments if s["kind"] not in ("rapid", "dwell", "pause"))
     rapid = sum(s["length_mm"] for s in segments if s["kind"] == "rapid")
     assert data["length_mm"] == pytest.approx(feed, rel=1e-12, abs=1e-12)
     assert data["rapid_length_mm"] == pytest.approx(rapid, rel=1e-12, abs=1e-12)

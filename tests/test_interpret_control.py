@@ -199,13 +199,13 @@ def test_program_without_motion():
 
 
 def test_pauses():
-    """M0 / M1 / M60 are Pause segments: zero-second stops (kind "dwell") with their code."""
+    """M0 / M1 / M60 are Pause segments: zero-second stops (kind "pause") with their code."""
     got = segs("G0 X1\nM0\nM1\nG0 Y2\nM60\n")
     assert [(type(s).__name__, s.line, getattr(s, "code", "")) for s in got] == [
         ("Line", 1, ""), ("Pause", 2, "M0"), ("Pause", 3, "M1"), ("Line", 4, ""),
         ("Pause", 5, "M60")]  # fmt: skip
     assert got[1].position_mm == (1.0, 0.0, 0.0)
-    assert got[1].kind == "dwell" and got[1].seconds == 0.0
+    assert got[1].kind == "pause" and got[1].seconds == 0.0
 
 
 # -- expressions of any depth -----------------------------------------------------------------

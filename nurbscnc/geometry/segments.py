@@ -146,16 +146,16 @@ class Pause:
     ``(x, y, z)`` tuple): the machine stops there and waits for the operator to resume.
     ``code`` is "M0", "M1" or "M60".
 
-    Its ``kind`` is "dwell" (a zero-second dwell): every stage that handles a dwell, an exact
-    stop, handles a pause unchanged; ``isinstance(seg, Pause)`` or ``seg.code`` tell the
-    operator's stop apart (for ``stream``, which waits there).
+    Its ``kind`` is "pause"; every stage treats the stop kinds
+    (:data:`nurbscnc.geometry.path.STOP_KINDS`) alike: come to rest, hold ``seconds`` (0 here).
+    ``code`` tells the operator's stop apart (for ``stream``, which waits there).
     """
 
     position_mm: tuple
     line: int
     code: str = "M0"
 
-    kind = "dwell"
+    kind = "pause"
     feed_mm_s = 0.0
     length_mm = 0.0
     seconds = 0.0
