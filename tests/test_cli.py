@@ -260,13 +260,13 @@ def test_markup_file_name_in_batch(bracket_program, tmp_path):
 
 def test_emoji_codes_in_source_line_and_line_100_print_literally(tmp_path):
     path = tmp_path / "part.nc"
-    lines = ["G21 G90 G1 X1 F100"] + ["X1"] * 98 + ["(:thumbs_up:) G28 (:smile:)"]
+    lines = ["G21 G90 G1 X1 F100"] + ["X1"] * 98 + ["(:thumbs_up:) G33 (:smile:)"]
     path.write_text("\n".join(lines) + "\n")
     result = run(["check", path])
     assert result.exit_code == 2
     head, source, caret = result.stderr.splitlines()[:3]
     assert head.startswith(f"{path}:100:15: error: ")  # ":100:" is the 💯 shortcode
-    assert source == "    (:thumbs_up:) G28 (:smile:)"
+    assert source == "    (:thumbs_up:) G33 (:smile:)"
     assert caret == "    " + " " * 14 + "^"
 
 
@@ -336,7 +336,7 @@ def test_control_characters_in_file_name_and_message_are_not_echoed():
 
 def test_cli_error_on_long_line_is_short(tmp_path):
     path = tmp_path / "long.nc"
-    path.write_text("G21 G90\n(" + "x" * 200_000 + ") G28\n")
+    path.write_text("G21 G90\n(" + "x" * 200_000 + ") G33\n")
     result = run(["check", path])
     assert result.exit_code == 2
     assert len(result.stderr) < 600

@@ -297,8 +297,7 @@ def test_m70_m72_m73_save_and_restore_modal_state():
     """LinuxCNC's nc_files/m70m72-demo.ngc in short: state saved, changed, restored."""
     prog = """G21 G90 F200
 M70
-G20 G91
-F5
+G20 G91 F5
 G1 X1
 M72
 G1 X1
