@@ -127,11 +127,13 @@ def _refuse_points(times_s: np.ndarray, lines, period_s: float, max_points: int,
     """PlanningError at the line whose time is the largest when the total time ``times_s``
     [s] needs more than ``max_points`` reference points at ``period_s``."""
     total_s = float(np.sum(times_s))
-    points = total_s / period_s + 1.0
+    # As many as the servo clock makes (nurbscnc.plan.timing.servo_clock): t_k = k T_s from 0
+    # to the first at or after the end.
+    points = math.ceil(total_s / period_s - 1e-9) + 1 if math.isfinite(total_s) else math.inf
     if points <= max_points:
         return
     i = int(np.argmax(times_s))
-    count = f"{points:.3g}" if math.isfinite(points) else "unboundedly many"
+    count = str(points) if points < 1e9 else f"{points:.3g}"
     raise PlanningError(
         f"the program's motion takes {what}{total_s:.6g} s: {count} reference points at "
         f"T_s = {period_s * 1000:g} ms, more than limits.max_points = {max_points}; this line "
