@@ -19,7 +19,7 @@ from nurbscnc.interpolate.sample import (
     samples_of,
 )
 from nurbscnc.machine.profile import Machine
-from nurbscnc.plan.limits import check_geometry_limits, check_motion_time
+from nurbscnc.plan.limits import check_before_work
 from nurbscnc.plan.lookahead import Check, Plan, plan_checked
 from nurbscnc.plan.options import Dynamics, LookaheadOptions, parse_choice
 from nurbscnc.plan.report import check_soft_limits
@@ -77,8 +77,7 @@ def run_program(program, machine: Machine, options: RunOptions | None = None) ->
     options = options or RunOptions()
     # Checks before work (issue 14): the geometry inside the soft limits, the motion short
     # enough for limits.max_points, before anything is planned or sampled.
-    check_geometry_limits(program.segments, machine.soft_limits)
-    check_motion_time(program.segments, machine)
+    check_before_work(program.segments, machine)
     if options.algorithm == Algorithm.PH_LOOKAHEAD:
         lookahead = options.lookahead
         if not machine.contour_check:

@@ -333,13 +333,12 @@ def check(program, as_json, no_block_delete, tool_table, machine, overrides):
 
     Example: nurbscnc check programs/naca2415.nc
     """
-    from nurbscnc.plan.limits import check_geometry_limits, check_motion_time
+    from nurbscnc.plan.limits import check_before_work
     from nurbscnc.plan.report import program_summary
 
     mach = load_machine_cli(machine, overrides, announce=False)
     prog = load_program(program, not no_block_delete, tool_table)
-    check_geometry_limits(prog.segments, mach.soft_limits)
-    check_motion_time(prog.segments, mach)
+    check_before_work(prog.segments, mach)
     summary = program_summary(prog)
     if as_json:
         click.echo(json.dumps(summary))

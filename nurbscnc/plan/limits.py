@@ -59,32 +59,39 @@ def arc_box_mm(seg) -> tuple[np.ndarray, np.ndarray]:
     return lo, hi
 
 
-def segment_boxes_mm(segments) -> tuple[np.ndarray, np.ndarray]:
+def _ends_mm(segments) -> tuple[np.ndarray, np.ndarray]:
+    """Start and end points (n, 3) [mm] of the segments (a stop: its position, twice)."""
+    starts = np.array([seg.start_mm for seg in segments], dtype=float).reshape(-1, 3)
+    ends = np.array([seg.end_mm for seg in segments], dtype=float).reshape(-1, 3)
+    return starts, ends
+
+
+def _special(segments, kind: str) -> list[int]:
+    """Indices of the segments of one ``kind`` (few: arcs, NURBS and stops are not CAM's bulk)."""
+    return [i for i, seg in enumerate(segments) if seg.kind == kind]
+
+
+def segment_boxes_mm(segments, ends=None) -> tuple[np.ndarray, np.ndarray]:
     """Boxes (lo, hi) (n, 3) [mm] of the segments: lines (and rapids) their end points, arcs
     and helices exact (:func:`arc_box_mm`), NURBS their control points (convex hull; the
-    weights are positive), stops their position. Lines, the bulk of CAM programs, in arrays."""
-    n = len(segments)
-    lo, hi = np.empty((n, 3)), np.empty((n, 3))
-    starts, ends = np.empty((n, 3)), np.empty((n, 3))
-    for i, seg in enumerate(segments):
-        starts[i], ends[i] = seg.start_mm, seg.end_mm
-    np.minimum(starts, ends, out=lo)
-    np.maximum(starts, ends, out=hi)
-    for i, seg in enumerate(segments):
-        if seg.kind == "arc":
-            lo[i], hi[i] = arc_box_mm(seg)
-        elif seg.kind == "nurbs":
-            cp = np.asarray(seg.control_points_mm, dtype=float)
-            lo[i], hi[i] = cp.min(axis=0), cp.max(axis=0)
+    weights are positive), stops their position. Lines, the bulk of CAM programs, in arrays;
+    ``ends``: :func:`_ends_mm` if already known."""
+    starts, stops = ends if ends is not None else _ends_mm(segments)
+    lo, hi = np.minimum(starts, stops), np.maximum(starts, stops)
+    for i in _special(segments, "arc"):
+        lo[i], hi[i] = arc_box_mm(segments[i])
+    for i in _special(segments, "nurbs"):
+        cp = np.asarray(segments[i].control_points_mm, dtype=float)
+        lo[i], hi[i] = cp.min(axis=0), cp.max(axis=0)
     return lo, hi
 
 
-def check_geometry_limits(segments, soft_limits) -> None:
+def check_geometry_limits(segments, soft_limits, ends=None) -> None:
     """PlanningError at the source line of the first segment whose box
     (:func:`segment_boxes_mm`) leaves the soft limits, naming the axis and the value."""
     if not len(segments):
         return
-    lo, hi = segment_boxes_mm(segments)
+    lo, hi = segment_boxes_mm(segments, ends)
     lim_lo, lim_hi = np.asarray(soft_limits.min_mm), np.asarray(soft_limits.max_mm)
     below, above = lo < lim_lo, hi > lim_hi
     bad = np.flatnonzero((below | above).any(axis=1))
@@ -100,26 +107,26 @@ def check_geometry_limits(segments, soft_limits) -> None:
     )
 
 
-def segment_time_bounds_s(segments, machine) -> np.ndarray:
+def segment_time_bounds_s(segments, machine, ends=None) -> np.ndarray:
     """A lower bound [s] (n,) of each segment's motion time: its length (NURBS: the chord
     between its end points) over the fastest it may move, min(F, V_max) (G0: the rapid rate);
-    a dwell its seconds. A feed too small for its length gives inf."""
+    a stop its seconds. A feed too small for its length gives inf."""
     lim = machine.limits
-    n = len(segments)
-    length, speed = np.zeros(n), np.ones(n)
-    stop = np.zeros(n)
-    for i, seg in enumerate(segments):
-        if seg.kind in STOP_KINDS:
-            stop[i] = stop_seconds(seg)
-            continue
-        if seg.kind == "nurbs":
-            length[i] = math.dist(seg.start_mm, seg.end_mm)
-        else:
-            length[i] = seg.length_mm
-        speed[i] = lim.rapid_mm_s if seg.kind == "rapid" else min(seg.feed_mm_s, lim.v_max_mm_s)
+    starts, stops = ends if ends is not None else _ends_mm(segments)
+    length = np.sqrt(np.einsum("ij,ij->i", stops - starts, stops - starts))
+    for i in _special(segments, "arc"):
+        length[i] = segments[i].length_mm
+    speed = np.minimum(np.array([seg.feed_mm_s for seg in segments], dtype=float),
+                       lim.v_max_mm_s)  # fmt: skip
+    rapid = _special(segments, "rapid")
+    speed[rapid] = lim.rapid_mm_s
     with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
         t = np.where(length > 0.0, length / speed, 0.0)
-    return np.where(np.isnan(t), np.inf, t) + stop
+    t = np.where(np.isnan(t), np.inf, t)
+    for kind in STOP_KINDS:
+        for i in _special(segments, kind):
+            t[i] = stop_seconds(segments[i])
+    return t
 
 
 def _refuse_points(times_s: np.ndarray, lines, period_s: float, max_points: int,
@@ -142,13 +149,13 @@ def _refuse_points(times_s: np.ndarray, lines, period_s: float, max_points: int,
     )
 
 
-def check_motion_time(segments, machine) -> None:
+def check_motion_time(segments, machine, ends=None) -> None:
     """Refuse a program whose motion takes, at least (:func:`segment_time_bounds_s`), more
     than ``limits.max_points`` servo periods: PlanningError at the segment that takes the
     most time. Cheap: no planning, no sampling."""
     if not len(segments):
         return
-    times = segment_time_bounds_s(segments, machine)
+    times = segment_time_bounds_s(segments, machine, ends)
     endless = np.flatnonzero(~np.isfinite(times))
     if endless.size:
         # A feed so small (subnormal: 1e-321) that length / feed overflows.
@@ -159,6 +166,16 @@ def check_motion_time(segments, machine) -> None:
     lines = [seg.line for seg in segments]
     _refuse_points(times, lines, machine.servo.period_s, machine.limits.max_points,
                    "at least ")  # fmt: skip
+
+
+def check_before_work(segments, machine) -> None:
+    """Both checks before planning: :func:`check_geometry_limits` (the soft limits) then
+    :func:`check_motion_time` (``limits.max_points``), one pass over the segments' ends."""
+    if not len(segments):
+        return
+    ends = _ends_mm(segments)
+    check_geometry_limits(segments, machine.soft_limits, ends)
+    check_motion_time(segments, machine, ends)
 
 
 def check_point_count(pieces, profile, machine) -> None:
