@@ -116,7 +116,7 @@ def segment_time_bounds_s(segments, machine, ends=None) -> np.ndarray:
     length = np.sqrt(np.einsum("ij,ij->i", stops - starts, stops - starts))
     for i in _special(segments, "arc"):
         length[i] = segments[i].length_mm
-    speed = np.minimum(np.array([seg.feed_mm_s for seg in segments], dtype=float),
+    speed = np.minimum(np.array([getattr(seg, "feed_mm_s", 0.0) for seg in segments], float),
                        lim.v_max_mm_s)  # fmt: skip
     rapid = _special(segments, "rapid")
     speed[rapid] = lim.rapid_mm_s
