@@ -18,6 +18,7 @@ from nurbscnc.interpolate.sample import (
     samples_of,
 )
 from nurbscnc.machine.profile import Machine
+from nurbscnc.plan.limits import check_before_work
 from nurbscnc.plan.lookahead import Check, Plan, plan_checked
 from nurbscnc.plan.options import Algorithm, Dynamics, LookaheadOptions, parse_choice
 from nurbscnc.plan.report import check_soft_limits
@@ -60,8 +61,13 @@ class Run:
 
 def run_program(program, machine: Machine, options: RunOptions | None = None) -> Run:
     """Plan (or run a baseline on) an interpreted program, interpolate it at the servo period
-    and refuse reference points outside the soft limits (PlanningError at the first one)."""
+    and refuse reference points outside the soft limits (PlanningError at the first one).
+    Before any of that: the segments' boxes inside the soft limits, and the motion time's
+    lower bound within ``limits.max_points`` (:mod:`nurbscnc.plan.limits`)."""
     options = options or RunOptions()
+    # Checks before work (issue 14): the geometry inside the soft limits, the motion short
+    # enough for limits.max_points, before anything is planned or sampled.
+    check_before_work(program.segments, machine)
     if options.algorithm == Algorithm.PH_LOOKAHEAD:
         lookahead = options.lookahead
         if not machine.contour_check:

@@ -427,9 +427,6 @@ def test_mutation_fuzzer_over_the_corpus():
 #: any other crash fails it. Remove an entry when its fix is merged.
 KNOWN_ELSEWHERE = {
     "RecursionError": "deep expressions (issue 15, interpreter)",
-    # G5.2 ... P126107250882699979611 (a NURBS weight ~1e20): NaN arc length in
-    # plan/pieces.py _nurbs_stretch, int(NaN) (issue 15, huge numbers: interpreter/planner).
-    "cannot convert float NaN to integer": "huge NURBS weight, NaN in plan (issue 15, planner)",
 }
 
 

@@ -337,18 +337,25 @@ subroutine_path_option = click.option(
 @block_delete_option
 @tool_table_option
 @subroutine_path_option
+@machine_options
 @handle_errors
-def check(program, as_json, no_block_delete, tool_table, subroutine_path):
+def check(program, as_json, no_block_delete, tool_table, subroutine_path, machine, overrides):
     """Parse and validate PROGRAM ('-' for stdin) and summarise it.
+
+    Validation includes the machine profile's soft limits on the geometry and its
+    limits.max_points on a lower bound of the motion time (no planning).
 
     Example: nurbscnc check programs/naca2415.nc
     """
+    from nurbscnc.plan.limits import check_before_work
     from nurbscnc.plan.report import program_summary
 
+    mach = load_machine_cli(machine, overrides, announce=False)
     prog = load_program(program, not no_block_delete, tool_table, subroutine_path)
+    check_before_work(prog.segments, mach)
     summary = program_summary(prog)
     if as_json:
-        click.echo(json.dumps(summary))
+        click.echo(json.dumps({**summary, **machine_json(mach)}))
         return
     print_summary(prog, summary)
 
@@ -387,7 +394,7 @@ def print_summary(prog: Program, s: dict) -> None:
 
 
 # -- machine profile options -------------------------------------------------------------------
-def load_machine_cli(path, overrides=(), extra: dict | None = None):
+def load_machine_cli(path, overrides=(), extra: dict | None = None, announce: bool = True):
     """The machine profile with ``--set`` and option overrides applied.
 
     Without ``--machine`` the profile is found as :func:`~nurbscnc.machine.profile.find_machine`
@@ -395,7 +402,8 @@ def load_machine_cli(path, overrides=(), extra: dict | None = None):
     Every command loads its profile here, so this is where it says which one it used: a
     ``machine: FILE (how found)`` line on stderr (not with --json or --quiet, whose JSON
     carries ``machine_profile`` instead, see :func:`machine_json`; nor when the command's data
-    goes to stdout, ``-o -``, where a pipeline wants nothing but that data and its errors)."""
+    goes to stdout, ``-o -``, where a pipeline wants nothing but that data and its errors),
+    unless ``announce`` is False (``check``: its output is the program's summary)."""
     from nurbscnc.errors import ConfigError
     from nurbscnc.machine.profile import find_machine, load_machine
 
@@ -409,7 +417,7 @@ def load_machine_cli(path, overrides=(), extra: dict | None = None):
     found, how = find_machine(path)
     mach = load_machine(found, table or None, how)
     ctx = click.get_current_context(silent=True)
-    if ctx is not None and not ctx.meta.get("nurbscnc.machine_said"):
+    if announce and ctx is not None and not ctx.meta.get("nurbscnc.machine_said"):
         ctx.meta["nurbscnc.machine_said"] = True
         to_stdout = "-" in (ctx.params.get("output"), ctx.params.get("dump_profile"))
         if not (ctx.params.get("as_json") or ctx.params.get("quiet") or to_stdout):

@@ -648,6 +648,40 @@ def _readonly(values, shape_tail=()) -> np.ndarray:
     return a
 
 
+#: Largest ratio of a NURBS block's largest to smallest weight. Beyond it the curve is a
+#: polygon with corners of radius ~ (edge length) / ratio, whose arc-length tables need
+#: millions of cells (weight 1e9: 28 million, 2 GB), and past ~1e154 w·P overflows to NaN.
+#: CAM programs use weights within a factor of a few of 1.
+MAX_WEIGHT_RATIO = 1e6
+#: Weights are rescaled by a power of two (exact: the rational curve is unchanged, bit for bit)
+#: when the largest is outside [2^-20, 2^20], so w·P cannot overflow or lose precision.
+_WEIGHT_SCALE_RANGE = 20
+
+
+def sane_weights(seg) -> np.ndarray:
+    """The weights of a NURBS segment, refused (GeometryError at its line) when not all
+    finite and > 0 or when max/min exceeds :data:`MAX_WEIGHT_RATIO`; scaled by a power of two
+    when their size would overflow w·P (the curve Σ N w P / Σ N w is unchanged by a common
+    factor)."""
+    from nurbscnc.errors import GeometryError, SourcePos
+
+    w = np.asarray(seg.weights, dtype=float)
+    pos = SourcePos(int(seg.line), 1, "")
+    if w.size == 0 or not np.all(np.isfinite(w) & (w > 0.0)):
+        raise GeometryError("NURBS weights must be finite and > 0", pos)
+    hi, lo = float(w.max()), float(w.min())
+    if hi > MAX_WEIGHT_RATIO * lo:
+        raise GeometryError(
+            f"NURBS weights {lo:.6g} to {hi:.6g} differ by a factor of {hi / lo:.3g}, more than "
+            f"{MAX_WEIGHT_RATIO:g} (the curve would be a polygon with near-zero-radius corners)",
+            pos,
+        )
+    exp = int(np.frexp(hi)[1])
+    if abs(exp) > _WEIGHT_SCALE_RANGE:
+        w = np.ldexp(w, -exp)
+    return w
+
+
 @dataclass(frozen=True, eq=False)
 class NurbsCurve:
     """A rational B-spline curve C(u) = Σ N_{i,p} w_i P_i / Σ N_{i,p} w_i (SPEC §2, eq. 1).
@@ -671,8 +705,8 @@ class NurbsCurve:
 
     @classmethod
     def from_segment(cls, seg: Nurbs) -> NurbsCurve:
-        """The curve of a ``segments.Nurbs``."""
-        return cls(seg.degree, seg.knots, seg.control_points_mm, seg.weights)
+        """The curve of a ``segments.Nurbs`` (its weights checked: :func:`sane_weights`)."""
+        return cls(seg.degree, seg.knots, seg.control_points_mm, sane_weights(seg))
 
     @property
     def u_start(self) -> float:

@@ -85,16 +85,21 @@ _SCHEMA: dict = {
         "kappa_ref_per_mm": "pos",
         "contour_tolerance_um": "pos",
         "ph_tolerance_um": "pos",
+        "max_points": "count",
     },
     "servo": {"period_ms": "pos", "x": _AXIS_SCHEMA, "y": _AXIS_SCHEMA, "z": _AXIS_SCHEMA},
     "steps": {"max_pulses_per_period": "count", "per_mm": {a: "pos" for a in AXES}},
     "soft_limits": {a: {"min_mm": "finite", "max_mm": "finite"} for a in AXES},
 }
 _OPTIONAL = frozenset(
-    {"limits.rapid_mm_min", "servo", "servo.period_ms", "servo.x", "servo.y", "servo.z"}
+    {"limits.rapid_mm_min", "limits.max_points", "servo", "servo.period_ms", "servo.x",
+     "servo.y", "servo.z"}
 )
 
 _MM_PER_UM = 1e-3
+#: Default of ``limits.max_points``: 50 million reference points, 13.9 h of motion at 1 ms
+#: (a few GB of samples in memory today).
+DEFAULT_MAX_POINTS = 50_000_000
 _S_PER_MS = 1e-3
 _S_PER_MIN = 60.0
 
@@ -164,6 +169,9 @@ class Limits:
     kappa_ref_per_mm: float  #: κ̄, eq. 24
     contour_tolerance_mm: float  #: ε_max, SPEC §8
     ph_tolerance_mm: float  #: e, SPEC §6
+    #: Most reference points a program may make (one per servo period): checked before
+    #: anything is sampled, so a program whose motion takes days fails at its line, quickly.
+    max_points: int = DEFAULT_MAX_POINTS
 
 
 def natural_frequency_rad_s(bandwidth_hz: float, damping: float) -> float:
@@ -595,6 +603,7 @@ def _build(data: dict, rep: _Reporter) -> Machine:
         kappa_ref_per_mm=float(lim["kappa_ref_per_mm"]),
         contour_tolerance_mm=float(lim["contour_tolerance_um"]) * _MM_PER_UM,
         ph_tolerance_mm=float(lim["ph_tolerance_um"]) * _MM_PER_UM,
+        max_points=int(lim.get("max_points", DEFAULT_MAX_POINTS)),
     )
 
     srv = data.get("servo", {})
@@ -635,6 +644,7 @@ def _build(data: dict, rep: _Reporter) -> Machine:
     # The effective settings: the tables as given, optional keys filled in with their defaults.
     settings = copy.deepcopy(data)
     settings["limits"].setdefault("rapid_mm_min", lim["v_max_mm_min"])
+    settings["limits"].setdefault("max_points", DEFAULT_MAX_POINTS)
     settings.setdefault("servo", {}).setdefault("period_ms", DEFAULT_PERIOD_MS)
     settings["servo"] = {"period_ms": settings["servo"].pop("period_ms"), **settings["servo"]}
     return Machine(limits=limits, servo=servo, steps=steps, soft_limits=soft, source=rep.source,

@@ -23,6 +23,7 @@ import numpy as np
 from nurbscnc.errors import PlanningError
 from nurbscnc.machine.profile import Machine
 from nurbscnc.plan.dynamics import PathIndex, Response, path_response
+from nurbscnc.plan.limits import check_point_count
 from nurbscnc.plan.options import Dynamics, LookaheadOptions
 from nurbscnc.plan.pieces import PieceList, junction_caps, segment_pieces
 from nurbscnc.plan.profile import Profile, ProfileInput, plan_profile
@@ -168,6 +169,7 @@ def plan_checked(program, machine: Machine, options: LookaheadOptions | None = N
         # programs: each is hundreds of MB).
         ref = check = None
         profile = _profile(pieces, caps, smooth, machine, options.lookahead_pieces)
+        check_point_count(pieces, profile, machine)  # before anything is sampled
         if options.dynamics == Dynamics.OFF:
             break
         ref = reference(pieces, profile, period)
