@@ -10,10 +10,12 @@ from __future__ import annotations
 import math
 
 import click
+import numpy as np
 import pytest
+from click.testing import CliRunner
 
 from nurbscnc.cli.main import main
-from nurbscnc.cli.options import PLANNING_KEYS, run_options
+from nurbscnc.cli.options import PLANNING_KEYS, PROGRAM_INPUT_KEYS, run_options
 from nurbscnc.errors import ConfigError
 from nurbscnc.interpolate.sample import Interpolator
 from nurbscnc.pipeline import Algorithm, RunOptions
@@ -67,6 +69,29 @@ def _params(command: str) -> set[str]:
 
 
 def test_every_planning_command_has_the_same_planning_options():
-    want = set(PLANNING_KEYS) | {"machine", "overrides"}
-    for command in ("plan", "run", "simulate"):
+    want = set(PLANNING_KEYS) | set(PROGRAM_INPUT_KEYS) | {"machine", "overrides"}
+    for command in ("plan", "run", "simulate", "stream"):
         assert want <= _params(command), command
+
+
+def test_run_reads_the_tool_table_and_subroutine_path(tmp_path):
+    """`run` takes the program-input options of `check`: G43 H1 with a 10 mm tool moves the
+    machine Z by the tool length (LinuxCNC: machine = program + offset), and `o<lift> call`
+    finds lift.ngc on --subroutine-path."""
+    tools = tmp_path / "tools.tbl"
+    tools.write_text("T1 P1 Z10 D4 ;ten millimetre tool\n")
+    subs = tmp_path / "subs"
+    subs.mkdir()
+    (subs / "lift.ngc").write_text("o<lift> sub\nG0 Z#1\no<lift> endsub\nM2\n")
+    prog = tmp_path / "part.nc"
+    prog.write_text("G21 G90 T1 M6 G43 H1\nG0 X0 Y0 Z0\nG1 X5 F600\no<lift> call [2]\nM2\n")
+    out = tmp_path / "p.csv"
+    result = CliRunner().invoke(main, ["run", str(prog), "-o", str(out), "--dynamics", "off",
+                                       "--tool-table", str(tools),
+                                       "--subroutine-path", str(subs)])  # fmt: skip
+    assert result.exit_code == 0, result.output
+    rows = np.loadtxt(out, delimiter=",", skiprows=1)
+    assert rows[-1, 1:4] == pytest.approx([5.0, 0.0, 12.0], abs=1e-12)  # Z2 + 10 mm tool
+    # Where the G1 ends (X5) and the lift starts, Z is the program's 0 plus the 10 mm tool.
+    # (the stop falls between two servo periods: the next sample is 0.3 nm up the lift)
+    assert rows[rows[:, 1] == 5.0, 3].min() == pytest.approx(10.0, abs=1e-6)

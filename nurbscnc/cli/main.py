@@ -22,7 +22,14 @@ from rich.table import Table
 from rich.text import Text
 
 from nurbscnc import __version__
-from nurbscnc.cli.options import machine_options, planning_options, run_options
+from nurbscnc.cli.options import (
+    block_delete_option,
+    machine_options,
+    planning_options,
+    run_options,
+    subroutine_path_option,
+    tool_table_option,
+)
 from nurbscnc.errors import (
     EXIT_INTERNAL,
     EXIT_INTERRUPTED,
@@ -315,19 +322,6 @@ def main():
 
 program_argument = click.argument("program", type=click.Path(allow_dash=True))
 json_option = click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
-block_delete_option = click.option(
-    "--no-block-delete", "no_block_delete", is_flag=True,
-    help="Execute lines starting with '/' (default: skip them, the switch is on).",
-)  # fmt: skip
-tool_table_option = click.option(
-    "--tool-table", type=click.Path(), default=None,
-    help="LinuxCNC tool table for G43 H (default: tool lengths are 0).",
-)  # fmt: skip
-subroutine_path_option = click.option(
-    "--subroutine-path", multiple=True, type=click.Path(file_okay=False),
-    help="Directory searched for o<name> call files name.ngc after the program's own "
-         "(repeatable).",
-)  # fmt: skip
 
 
 # -- check -------------------------------------------------------------------------------------
@@ -628,7 +622,8 @@ def write_plan_plots(run, plot_dir: str) -> list[str]:
 # -- plan / run --------------------------------------------------------------------------------
 def make_plan(program: str, machine=None, overrides=(), dynamics="local", lookahead=None,
               corner_feed="piece", interpolator="exact", blend_tolerance=None,
-              algorithm="ph-lookahead"):
+              algorithm="ph-lookahead", no_block_delete=False, tool_table=None,
+              subroutine_path=()):
     """Load, interpret, plan and interpolate one program; validate soft limits. Returns
     (program, machine, :class:`~nurbscnc.pipeline.Run`).
 
@@ -638,7 +633,7 @@ def make_plan(program: str, machine=None, overrides=(), dynamics="local", lookah
     options = run_options(algorithm, corner_feed, dynamics, blend_tolerance, interpolator,
                           lookahead)  # fmt: skip
     mach = load_machine_cli(machine, overrides)
-    prog = load_program(program)
+    prog = load_program(program, not no_block_delete, tool_table, subroutine_path)
     return prog, mach, run_program(prog, mach, options)
 
 

@@ -20,9 +20,12 @@ from nurbscnc.plan.options import (
     PlanOptions,
 )
 
-#: The keyword names :func:`planning_options` adds to a command (besides machine, overrides).
+#: The keyword names :func:`planning_options` adds to a command (besides machine, overrides,
+#: and the program-input options no_block_delete, tool_table, subroutine_path).
 PLANNING_KEYS = ("algorithm", "corner_feed", "dynamics", "blend_tolerance", "interpolator",
                  "lookahead")  # fmt: skip
+#: The keyword names of :func:`program_input_options`.
+PROGRAM_INPUT_KEYS = ("no_block_delete", "tool_table", "subroutine_path")
 
 
 def _choices(enum_cls) -> click.Choice:
@@ -40,6 +43,28 @@ def machine_options(func):
         help="Machine profile (TOML). Default: $NURBSCNC_MACHINE, ./nurbscnc.toml, "
         "~/.config/nurbscnc/machine.toml, else the bundled paper machine (Tables 2, 3).",
     )(func)  # fmt: skip
+    return func
+
+
+block_delete_option = click.option(
+    "--no-block-delete", "no_block_delete", is_flag=True,
+    help="Execute lines starting with '/' (default: skip them, the switch is on).",
+)  # fmt: skip
+tool_table_option = click.option(
+    "--tool-table", type=click.Path(), default=None,
+    help="LinuxCNC tool table: lengths for G43 H, diameters for G41/G42 D (default: none).",
+)  # fmt: skip
+subroutine_path_option = click.option(
+    "--subroutine-path", multiple=True, type=click.Path(file_okay=False),
+    help="Directory searched for o<name> call files name.ngc after the program's own "
+         "(repeatable).",
+)  # fmt: skip
+
+
+def program_input_options(func):
+    """How a program file is read: block delete, the tool table, the subroutine path."""
+    for option in (subroutine_path_option, tool_table_option, block_delete_option):
+        func = option(func)
     return func
 
 
@@ -75,7 +100,7 @@ def planning_options(func):
         "--lookahead", type=click.IntRange(min=1), default=None,
         help="Look-ahead depth in pieces (default: the whole program).",
     )(func)  # fmt: skip
-    return machine_options(func)
+    return program_input_options(machine_options(func))
 
 
 def run_options(algorithm="ph-lookahead", corner_feed="piece", dynamics="local",

@@ -19,6 +19,7 @@ import threading
 
 import click
 
+from nurbscnc.cli.options import planning_options
 from nurbscnc.errors import NurbsCncError
 
 POINT_SUFFIXES = (".csv", ".npz")
@@ -36,33 +37,14 @@ def _handle_errors(func):
     return wrapper
 
 
-def _plan_options(func):
-    """The planning options of ``run`` (same names, same defaults as ``nurbscnc.cli.main``)."""
-    options = [
-        click.option("--machine", type=click.Path(dir_okay=False), default=None,
-                     help="Machine profile (TOML); default: the bundled paper machine."),
-        click.option("--set", "overrides", multiple=True, metavar="KEY=VALUE",
-                     help="Override one profile value, e.g. --set steps.per_mm.x=800."),
-        click.option("--dynamics", type=click.Choice(["local", "global", "off"]),
-                     default="local", help="Contour-error check (as for run)."),
-        click.option("--lookahead", type=click.IntRange(min=1), default=None,
-                     help="Look-ahead depth in pieces (default: the whole program)."),
-        click.option("--corner-feed", type=click.Choice(["piece", "peak"]), default="piece",
-                     help="Corner feed cap (as for run)."),
-    ]  # fmt: skip
-    for option in reversed(options):
-        func = option(func)
-    return func
-
-
 # -- building the pulse program (everything before the port is opened) --------------------------
-def load_pulse_program(path: str, machine, overrides, dynamics="local", lookahead=None,
-                       corner_feed="piece"):  # fmt: skip
+def load_pulse_program(path: str, machine=None, overrides=(), **settings):
     """Plan ``path`` (a program, or a reference-point file .csv/.npz) and quantise it.
 
-    Returns ``(PulseProgram, Machine)``. Everything that can be wrong with the input — syntax,
-    geometry, planning, soft limits, the servo period of a point file, the card's pulse limit
-    — raises here, before any port is touched.
+    ``settings`` are the values of :func:`~nurbscnc.cli.options.planning_options` (the same
+    planning options as ``run``). Returns ``(PulseProgram, Machine)``. Everything that can be
+    wrong with the input — syntax, geometry, planning, soft limits, the servo period of a point
+    file, the card's pulse limit — raises here, before any port is touched.
     """
     import numpy as np
 
@@ -98,7 +80,7 @@ def load_pulse_program(path: str, machine, overrides, dynamics="local", lookahea
             )
         pulses = quantise(points, mach.steps.per_mm, period_s)
     else:
-        _, mach, plan = make_plan(path, machine, overrides, dynamics, lookahead, corner_feed)
+        _, mach, plan = make_plan(path, machine, overrides, **settings)
         samples = plan.samples
         pulses = quantise(samples.points_mm, mach.steps.per_mm, mach.servo.period_s,
                           samples.line)  # fmt: skip
@@ -204,10 +186,9 @@ def _progress_bar(enabled: bool, total: int):
               help="Seconds without an answer from the card before giving up.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @click.option("--json", "as_json", is_flag=True, help="Print the final report as JSON.")
-@_plan_options
+@planning_options
 @_handle_errors
-def stream(program, port, allow_url, baud, batch, timeout_s, quiet, as_json, machine, overrides,
-           dynamics, lookahead, corner_feed):  # fmt: skip
+def stream(program, port, allow_url, baud, batch, timeout_s, quiet, as_json, **settings):
     """Stream PROGRAM (.nc/.ngc, or reference points .csv/.npz) to a pulse-train card.
 
     The whole program is planned and checked (soft limits, the card's pulse limit) before the
@@ -224,8 +205,7 @@ def stream(program, port, allow_url, baud, batch, timeout_s, quiet, as_json, mac
     # Hold/resume are caught from the start: planning a long program takes time, and
     # SIGUSR1's default action would end the command silently.
     with _signals(operator, ("SIGUSR1", "SIGUSR2")):
-        pulses, _ = load_pulse_program(program, machine, overrides, dynamics, lookahead,
-                                       corner_feed)  # fmt: skip
+        pulses, _ = load_pulse_program(program, **settings)
         options = SenderOptions(batch_periods=batch, timeout_s=timeout_s)
         ser = open_port(port, baud=baud, allow_url=allow_url, write_timeout_s=timeout_s,
                         read_wait_s=options.read_wait_s)  # fmt: skip
