@@ -24,24 +24,26 @@ from nurbscnc.program.interpret import interpret_text
 HEAD = "G21 G90 G17\n"
 NURBS = "G1 X0 Y0 F600\nG5.2 X0 Y0 P1 L3\nX10 Y10 P{w}\nX20 Y0 P1\nG5.3\nM2\n"
 
-#: (name, program, line of the error, words the message must hold)
+#: (name, program, "line:column" of the error, words the message must hold). Values no
+#: machine can use (a billion turns, a subnormal feed, weights beyond 1e±9) are refused by
+#: the interpreter at the word; the rest by the checks before work at the line.
 UNBOUNDED = [
-    ("beyond_soft_limits", HEAD + "G1 X1000000 F600\nM2\n", 2,
+    ("beyond_soft_limits", HEAD + "G1 X1000000 F600\nM2\n", "2:1",
      ["soft limits", "X reaches 1e+06 mm", "[-1000, 1000]"]),
-    ("tiny_feed", HEAD + "G1 X1 F0.001\nM2\n", 2,
+    ("tiny_feed", HEAD + "G1 X1 F0.001\nM2\n", "2:1",
      ["60000 s", "60000001 reference points", "limits.max_points = 50000000"]),
-    ("long_dwell", HEAD + "G1 X1 F600\nG4 P100000\nG1 X2\nM2\n", 3,
+    ("long_dwell", HEAD + "G1 X1 F600\nG4 P100000\nG1 X2\nM2\n", "3:1",
      ["100000 s", "limits.max_points"]),
-    ("billion_turns", HEAD + "G1 X0 Y0 F600\nG2 X0 Y0 I1 J0 P1000000000\nM2\n", 3,
-     ["6.28319e+08 s", "6.28e+11 reference points"]),
-    ("subnormal_feed", HEAD + "G1 X1 F0." + "0" * 320 + "1\nM2\n", 2,
-     ["too small", "never end"]),
-    ("weight_1e9", HEAD + NURBS.format(w="1000000000"), 3, ["factor of 1e+09"]),
-    ("weight_1e20", HEAD + NURBS.format(w="1" + "0" * 20), 3, ["factor of 1e+20"]),
-    ("weight_1e308", HEAD + NURBS.format(w="1" + "0" * 308), 3, ["factor of 1e+308"]),
+    ("billion_turns", HEAD + "G1 X0 Y0 F600\nG2 X0 Y0 I1 J0 P1000000000\nM2\n", "3:16",
+     ["arc turns P1e+09", "at most 100000"]),
+    ("subnormal_feed", HEAD + "G1 X1 F0." + "0" * 320 + "1\nM2\n", "2:7",
+     ["feed F9.98013e-322 is out of range"]),
+    ("weight_1e9", HEAD + NURBS.format(w="1000000000"), "3:1", ["factor of 1e+09"]),
+    ("weight_1e20", HEAD + NURBS.format(w="1" + "0" * 20), "4:9", ["weight P1e+20"]),
+    ("weight_1e308", HEAD + NURBS.format(w="1" + "0" * 308), "4:9", ["weight P1e+308"]),
     # The fuzzer's find: a weight ~1.26e20 on the G5.2 line made `plan` exit 1 (int(NaN)).
     ("weight_fuzz", HEAD + "G1 X0 Y0 F600\nG5.2 X0 Y0 P126107250882699979611 L3\nX10 Y10 P1\n"
-     "X20 Y0 P1\nG5.3\nM2\n", 3, ["factor of 1.26e+20"]),
+     "X20 Y0 P1\nG5.3\nM2\n", "3:12", ["weight P1.26107e+20"]),
 ]  # fmt: skip
 
 
@@ -50,26 +52,28 @@ def invoke(args):
 
 
 @pytest.mark.parametrize("command", ["check", "plan", "run"])
-@pytest.mark.parametrize("name, text, line, words", UNBOUNDED, ids=[u[0] for u in UNBOUNDED])
-def test_unbounded_work_fails_at_its_line(tmp_path, command, name, text, line, words):
+@pytest.mark.parametrize("name, text, at, words", UNBOUNDED, ids=[u[0] for u in UNBOUNDED])
+def test_unbounded_work_fails_at_its_line(tmp_path, command, name, text, at, words):
     src = tmp_path / f"{name}.nc"
     src.write_text(text)
     out = tmp_path / "x.csv"
     args = [command, src] + (["-o", out] if command == "run" else [])
     result = invoke(args)
     assert result.exit_code == 2, (result.exit_code, result.stderr, result.exception)
-    assert f"{src}:{line}:1: error: " in result.stderr
+    assert f"{src}:{at}: error: " in result.stderr
     for word in words:
         assert word in result.stderr
     assert not out.exists()
 
 
-def test_billion_turns_has_exactly_its_length_in_time(tmp_path):
-    """The bound is length / F: 10^9 turns of radius 1 at 600 mm/min = 2π·10^8 s."""
+def test_many_turns_have_exactly_their_length_in_time(tmp_path):
+    """The bound is length / F: 10^5 turns (the interpreter's most) of radius 1 at 600 mm/min
+    = 2π·10^4 s, 62.8 million points, over the 50 million cap."""
     src = tmp_path / "t.nc"
-    src.write_text(HEAD + "G1 X0 Y0 F600\nG2 X0 Y0 I1 J0 P1000000000\nM2\n")
+    src.write_text(HEAD + "G1 X0 Y0 F600\nG2 X0 Y0 I1 J0 P100000\nM2\n")
     result = invoke(["plan", src])
-    expected = 2.0 * math.pi * 1e9 / 10.0
+    assert result.exit_code == 2
+    expected = 2.0 * math.pi * 1e5 / 10.0
     assert f"at least {expected:.6g} s" in result.stderr
 
 
