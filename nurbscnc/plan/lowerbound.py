@@ -149,7 +149,7 @@ def interval_times_s(
 
 
 # ---------------------------------------------------------------------------------------------
-# Sampling the pieces.
+# Sampling the pieces: curvature from the path model (PathTable), whole arrays over all pieces.
 
 
 def _path_row(geom, line: int = 0) -> tuple:
@@ -268,7 +268,9 @@ def lower_bound_time_s(
     Parameters
     ----------
     geometries
-        The pieces, each a :class:`~nurbscnc.geometry.paths.PathGeometry`, end to end.
+        The pieces end to end, each a LineGeometry, ArcGeometry, NurbsCurve (whole) or
+        PHQuintic; they become rows of a :class:`~nurbscnc.geometry.path.PathTable`, the path
+        model every sample of curvature comes from.
     v_program_mm_s
         Speed ceiling per piece [mm/s] (programmed feed, rapid rate), scalar or one per piece.
     a_max_mm_s2
@@ -397,10 +399,14 @@ def program_lower_bound_s(segments, machine: Machine) -> float:
     settling: nothing can be faster.
 
     Linear in the program length with small constants: lines (and rapids) are gathered into
-    arrays without a geometry object each, and pieces of constant curvature (lines, circular
-    and helical arcs) need no grid inside them — their cap is constant, and the bound is
-    exact on any grid for such caps (module doc) — so they are sampled at their two ends
-    only; NURBS and spiral arcs get the adaptive grid of :func:`lower_bound_time_s`.
+    arrays (length and direction from their end points, κ = 0) without a geometry object
+    each; arcs and NURBS blocks become the rows of one path model
+    (:class:`~nurbscnc.geometry.path.PathTable`, the programmed geometry, one row a
+    segment), which gives their lengths, end tangents and curvature. Pieces of constant
+    curvature (lines, circular and helical arcs) need no grid inside them — their cap is
+    constant, and the bound is exact on any grid for such caps (module doc) — so they are
+    sampled at their two ends only; NURBS and spiral arcs get the adaptive grid of
+    :func:`lower_bound_time_s`, all such pieces at once.
     """
     lim = machine.limits
     period, chord, a_max = machine.servo.period_s, lim.chord_tolerance_mm, lim.a_max_mm_s2
