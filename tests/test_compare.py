@@ -17,7 +17,8 @@ from click.testing import CliRunner
 from nurbscnc.cli.main import main
 from nurbscnc.geometry.nurbs import NurbsCurve
 from nurbscnc.interpolate.baselines import baseline_samples
-from nurbscnc.machine.profile import chord_feed_mm_s, load_machine
+from nurbscnc.machine.caps import chord_feed_mm_s
+from nurbscnc.machine.profile import load_machine
 from nurbscnc.program.interpret import interpret_text
 from nurbscnc.studies.compare import compare_block, nurbs_block, rotate_segment, row
 

@@ -10,12 +10,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from nurbscnc.errors import ConfigError, OutputError
+from nurbscnc.machine.caps import chord_feed_mm_s, curvature_feed_mm_s, kappa_threshold_per_mm
 from nurbscnc.machine.profile import (
     Machine,
-    chord_feed_mm_s,
-    curvature_feed_mm_s,
     default_profile_text,
-    kappa_threshold_per_mm,
     load_machine,
     parse_machine,
 )

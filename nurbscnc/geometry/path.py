@@ -245,10 +245,9 @@ class PathTable:
                 for a, z in _runs(oid):
                     o[a:z], prm[a:z] = self.objects[int(oid[a])].points_at_length(s_curve[a:z])
             else:  # spiral arcs: their own arc-length table, one call per piece
+                prm = self._object_params(code, i, ls)
                 for a, z in _runs(i):
-                    g = self.objects[int(self.obj_id[i[a]])]
-                    prm[a:z] = g.param_at_length(ls[a:z])
-                    o[a:z] = g.point(prm[a:z])
+                    o[a:z] = self.objects[int(self.obj_id[i[a]])].point(prm[a:z])
             if sel is None:
                 return o, prm
             out[sel], param[sel] = o, prm
@@ -339,6 +338,26 @@ class PathTable:
             out[b] = self._ph_at(i, xi).T
             param[b] = xi
 
+    def _object_params(self, code: Kind, i: np.ndarray, ls: np.ndarray) -> np.ndarray:
+        """Own parameters u at arc lengths ``ls`` (clipped) on the NURBS or spiral rows ``i``
+        (all of kind ``code``), without the points (:meth:`points` uses the same u)."""
+        u = np.empty(i.size)
+        if code == Kind.NURBS:
+            oid = np.take(self.obj_id, i)
+            s_curve = np.take(self.s_a_mm, i) + ls
+            for a, z in _runs(oid):
+                u[a:z] = self.objects[int(oid[a])].param_at_length_fast(s_curve[a:z])
+        else:  # spirals: u = 0 and u = L at the ends exactly, the arc-length table inside
+            length = np.take(self.length_mm, i)
+            for a, z in _runs(i):
+                g = self.objects[int(self.obj_id[i[a]])]
+                s_run, u_run = ls[a:z], u[a:z]
+                inside = (s_run > 0.0) & (s_run < length[a])
+                u_run[:] = np.where(s_run > 0.0, g.u_end, g.u_start)
+                if inside.any():
+                    u_run[inside] = g.param_at_length(s_run[inside])
+        return u
+
     def params(self, idx, s_local_mm) -> np.ndarray:
         """Own parameters (N,) at arc lengths ``s_local_mm`` from the starts of pieces ``idx``."""
         return self.points(idx, s_local_mm)[1]
@@ -407,7 +426,7 @@ class PathTable:
                 ddy = _second_derivative_rows(self.ph_y, i, x)
                 d2[sel] = (ddx * e1 + ddy * e2).T
             else:
-                _, u = self.points(i, ls)
+                u = self._object_params(code, i, ls)
                 oid = np.take(self.obj_id, i)
                 a1, a2 = np.empty((i.size, 3)), np.empty((i.size, 3))
                 for a, z in _runs(oid):

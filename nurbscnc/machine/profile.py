@@ -7,8 +7,8 @@ named with its unit. Everything is validated on load: a bad value raises
 :class:`~nurbscnc.errors.ConfigError` whose message names the dotted key.
 
 The feed formulas the planner and the baselines share (chord-error feed, curvature feed,
-sharp-corner curvature threshold) are module-level pure functions here, and
-:class:`Machine` offers them with its own parameters filled in.
+sharp-corner curvature threshold) live in :mod:`nurbscnc.machine.caps`; :class:`Machine`
+offers them with its own parameters filled in.
 
 Which file: :func:`find_machine` implements the discovery order (``--machine``,
 ``$NURBSCNC_MACHINE``, ``./nurbscnc.toml``, the user's config folder, the bundled default);
@@ -33,6 +33,7 @@ from importlib import resources
 import numpy as np
 
 from nurbscnc.errors import ConfigError, OutputError
+from nurbscnc.machine import caps
 
 #: The machine axes, in the order every per-axis tuple uses.
 AXES = ("x", "y", "z")
@@ -105,52 +106,12 @@ _S_PER_MIN = 60.0
 
 
 # ---------------------------------------------------------------------------------------------
-# Derived feed formulas (pure, vectorised; SPEC §5 and §7).
+# Derived feed formulas: defined in nurbscnc.machine.caps (SPEC §5 and §7).
 
 
 def _as_result(values: np.ndarray):
     """A float for a 0-d result, else the array itself."""
     return float(values) if values.ndim == 0 else values
-
-
-def kappa_threshold_per_mm(feed_mm_s, a_max_mm_s2: float):
-    """Sharp-corner curvature threshold κ_th = A_max / F² [1/mm] (SPEC §5, eq. 15).
-
-    ``feed_mm_s`` [mm/s] scalar or array; a feed ≤ 0 gives ``inf`` (nothing is sharp at rest).
-    """
-    f = np.asarray(feed_mm_s, dtype=float)
-    safe = np.where(f > 0.0, f, 1.0)
-    return _as_result(np.where(f > 0.0, a_max_mm_s2 / (safe * safe), np.inf))
-
-
-def chord_feed_mm_s(kappa_per_mm, period_s: float, chord_tolerance_mm: float):
-    """Chord-error feed V_af = (2/T_s)·√(2δ/κ − δ²) [mm/s] (SPEC §7, eq. 23; Yeh & Hsu 2002).
-
-    The chord of one period on a circle of radius 1/κ whose sagitta is δ has half-length
-    √(2δ/κ − δ²), for radius ≥ δ. Below radius δ no chord can have a sagitta above the radius,
-    so the chord error cannot exceed δ whatever the step: the formula (which would fall to 0
-    at radius δ/2 and stall the tool) is held at its radius-δ value 2δ/T_s there, continuous
-    and never 0; the normal-acceleration limit governs such tight curves anyway. Curvature is
-    unsigned here: ``|kappa|`` is used, so a signed curvature cannot skip the slowdown.
-    κ = 0 (straight) gives ``inf``. Never NaN for non-NaN input.
-    """
-    d = float(chord_tolerance_mm)
-    k = np.minimum(np.abs(np.asarray(kappa_per_mm, dtype=float)), 1.0 / d)
-    with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
-        half_chord_sq = d * (2.0 / k - d)  # 2δ/κ − δ², +inf for κ = 0
-        v = (2.0 / period_s) * np.sqrt(np.maximum(half_chord_sq, 0.0))
-    return _as_result(np.where(k == 0.0, np.inf, v))
-
-
-def curvature_feed_mm_s(kappa_per_mm, v_max_mm_s: float, kappa_ref_per_mm: float):
-    """Curvature feed V_cf = V_max·κ̄/(κ + κ̄) [mm/s] (SPEC §7, eq. 24; Zhiming 2002).
-
-    ``|kappa|`` is used (unsigned curvature); κ = 0 gives V_max, κ → ∞ gives 0.
-    """
-    k = np.abs(np.asarray(kappa_per_mm, dtype=float))
-    with np.errstate(invalid="ignore"):
-        v = v_max_mm_s * kappa_ref_per_mm / (k + kappa_ref_per_mm)
-    return _as_result(np.where(np.isinf(k), 0.0, v))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -345,16 +306,17 @@ class Machine:
 
     def kappa_threshold_per_mm(self, feed_mm_s):
         """κ_th = A_max / F² [1/mm] at programmed feed ``feed_mm_s`` (SPEC §5)."""
-        return kappa_threshold_per_mm(feed_mm_s, self.limits.a_max_mm_s2)
+        return caps.kappa_threshold_per_mm(feed_mm_s, self.limits.a_max_mm_s2)
 
     def chord_feed_mm_s(self, kappa_per_mm):
         """V_af at curvature ``kappa_per_mm`` with this machine's T_s and δ (SPEC eq. 23)."""
-        return chord_feed_mm_s(kappa_per_mm, self.servo.period_s, self.limits.chord_tolerance_mm)
+        return caps.chord_feed_mm_s(kappa_per_mm, self.servo.period_s,
+                                    self.limits.chord_tolerance_mm)  # fmt: skip
 
     def curvature_feed_mm_s(self, kappa_per_mm, feed_mm_s: float | None = None):
         """V_cf with κ̄ of this machine (SPEC eq. 24); ``feed_mm_s`` defaults to V_max."""
         v = self.limits.v_max_mm_s if feed_mm_s is None else feed_mm_s
-        return curvature_feed_mm_s(kappa_per_mm, v, self.limits.kappa_ref_per_mm)
+        return caps.curvature_feed_mm_s(kappa_per_mm, v, self.limits.kappa_ref_per_mm)
 
     def corner_feed_mm_s(self, kappa_per_mm, feed_mm_s: float | None = None):
         """V_sp = min(V_af, V_cf) at a corner of peak curvature ``kappa_per_mm`` (SPEC §7)."""

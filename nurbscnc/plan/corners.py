@@ -20,7 +20,7 @@ from scipy.optimize import brentq
 from nurbscnc.geometry.nurbs import NurbsCurve
 from nurbscnc.geometry.path import STOP_KINDS
 from nurbscnc.geometry.paths import geometry_of
-from nurbscnc.machine.profile import kappa_threshold_per_mm
+from nurbscnc.machine.caps import kappa_threshold_per_mm
 
 #: Curvature samples per knot span used to bracket the peaks and the threshold crossings.
 SAMPLES_PER_SPAN = 32

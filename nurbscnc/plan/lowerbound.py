@@ -50,7 +50,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from nurbscnc.errors import ConfigError, PlanningError
-from nurbscnc.geometry.path import STOP_KINDS, stop_seconds
+from nurbscnc.geometry.nurbs import NurbsCurve
+from nurbscnc.geometry.path import STOP_KINDS, Kind, PathTable, stop_seconds
+from nurbscnc.geometry.paths import ArcGeometry, LineGeometry, geometry_of
+from nurbscnc.geometry.ph import PHQuintic
 from nurbscnc.machine.caps import curvature_cap2_mm2_s2
 from nurbscnc.machine.profile import Machine
 
@@ -146,45 +149,97 @@ def interval_times_s(
 
 
 # ---------------------------------------------------------------------------------------------
-# Sampling the pieces.
+# Sampling the pieces: curvature from the path model (PathTable), whole arrays over all pieces.
 
 
-def _sample_piece(geom, ds_mm: float, cap2_of, rel_tol: float) -> tuple[np.ndarray, np.ndarray]:
-    """Arc-length grid (from 0) and cap² on it for one piece (see the module docstring)."""
-    length = float(geom.length_mm)
-    if not length > 0.0:
-        u = np.array([geom.u_start, geom.u_end], dtype=float)
-        return np.zeros(2), cap2_of(geom.curvature(u))
-    n = max(1, math.ceil(length / ds_mm))
-    s = np.linspace(0.0, length, n + 1)
-    knots = getattr(geom, "breakpoints", None)
-    if knots is not None:  # curvature may jump at knots: put them on the grid
-        s = np.union1d(s, np.clip(geom.arc_length(np.asarray(knots, dtype=float)), 0.0, length))
-    c2 = cap2_of(geom.curvature(geom.param_at_length(s)))
-    points, values = [s], [c2]
-    lo, hi, c_lo, c_hi = s[:-1], s[1:], c2[:-1], c2[1:]
+def _path_row(geom, line: int = 0) -> tuple:
+    """The :meth:`PathTable.of <nurbscnc.geometry.path.PathTable.of>` row of one whole
+    geometry object (its full parameter range)."""
+    for cls, kind in ((LineGeometry, Kind.LINE), (ArcGeometry, Kind.ARC), (NurbsCurve, Kind.NURBS),
+                      (PHQuintic, Kind.PH)):  # fmt: skip
+        if isinstance(geom, cls):
+            u_a, u_b = (0.0, 1.0) if kind == Kind.PH else (geom.u_start, geom.u_end)
+            return (kind, geom, float(geom.length_mm), float(u_a), float(u_b), 0.0, line)
+    raise TypeError(f"no path-model row for a {type(geom).__name__}")
+
+
+def _sample_rows(path: PathTable, rows: np.ndarray, cap2_of, ds_mm: float,
+                 rel_tol: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+    """Arc-length grids (from each piece's start) and cap² on them for the pieces ``rows`` of
+    ``path``, all pieces at once (see the module docstring): ``(s, cap², sizes)`` with the
+    pieces' grids one after the other, ``sizes`` (len(rows),) their point counts.
+
+    ``cap2_of(kappa, j)`` gives cap² [mm²/s²] at curvatures ``kappa`` [1/mm] on the pieces
+    ``rows[j]``. Each piece starts on ``ceil(L/ds)`` equal steps plus its NURBS knots (where
+    the curvature may jump); then every interval whose midpoint cap² differs from the mean of
+    its ends by more than ``rel_tol`` is bisected, level by level, over all pieces together.
+    """
+    length = np.take(path.length_mm, rows)
+    steps = np.where(length > 0.0, np.maximum(1, np.ceil(length / ds_mm)), 1).astype(np.int64)
+    owner = np.repeat(np.arange(rows.size), steps + 1)
+    first = np.concatenate(([0], np.cumsum(steps + 1)))
+    s = (np.arange(owner.size) - first[owner]) * (length / steps)[owner]
+    s[first[1:] - 1] = length  # as np.linspace(0, L, n + 1): i·(L/n), exactly L at the end
+    # NURBS knots on the grid (their arc lengths from the curve's arc-length table).
+    knot_j, knot_s = [], []
+    for j in np.flatnonzero((np.take(path.kind, rows) == Kind.NURBS) & (length > 0.0)).tolist():
+        curve = path.objects[int(path.obj_id[rows[j]])]
+        at = np.clip(curve.arc_length(curve.breakpoints) - path.s_a_mm[rows[j]], 0.0, length[j])
+        knot_j.append(np.full(at.size, j))
+        knot_s.append(at)
+    if knot_s:
+        owner = np.concatenate([owner, *knot_j])
+        s = np.concatenate([s, *knot_s])
+        order = np.lexsort((s, owner))
+        owner, s = owner[order], s[order]
+        keep = np.ones(s.size, dtype=bool)
+        keep[1:] = (owner[1:] != owner[:-1]) | (s[1:] != s[:-1]) | (length[owner[1:]] == 0.0)
+        owner, s = owner[keep], s[keep]
+
+    is_line = np.take(path.kind, rows) == Kind.LINE
+
+    def cap2_at(j, s_local):
+        # κ = 0 on lines by definition, also on a zero-length one (whose C′ = 0 would
+        # otherwise read as a cusp, κ = inf, and stop the tool there).
+        kappa = np.zeros(j.size)
+        curved = np.flatnonzero(~is_line[j])
+        if curved.size:
+            kappa[curved] = path.curvature(np.take(rows, j[curved]), s_local[curved])
+        return cap2_of(kappa, j)
+
+    c2 = cap2_at(owner, s)
+    points, values, owners = [s], [c2], [owner]
+    inner = np.flatnonzero(owner[1:] == owner[:-1])  # intervals inside one piece
+    j, lo, hi = owner[inner], s[inner], s[inner + 1]
+    c_lo, c_hi = c2[inner], c2[inner + 1]
     for _ in range(MAX_LEVELS):
         keep = hi > lo
-        lo, hi, c_lo, c_hi = lo[keep], hi[keep], c_lo[keep], c_hi[keep]
+        j, lo, hi, c_lo, c_hi = j[keep], lo[keep], hi[keep], c_lo[keep], c_hi[keep]
         if not lo.size:
             break
         mid = 0.5 * (lo + hi)
-        c_mid = cap2_of(geom.curvature(geom.param_at_length(mid)))
+        c_mid = cap2_at(j, mid)
         mean = 0.5 * (c_lo + c_hi)
         bad = np.abs(c_mid - mean) > rel_tol * np.maximum(c_mid, mean)
         if not bad.any():
             break
         points.append(mid[bad])
         values.append(c_mid[bad])
-        lo, hi, c_lo, c_hi = (
-            np.concatenate((lo[bad], mid[bad])),
-            np.concatenate((mid[bad], hi[bad])),
-            np.concatenate((c_lo[bad], c_mid[bad])),
-            np.concatenate((c_mid[bad], c_hi[bad])),
-        )
-    s_all = np.concatenate(points)
-    order = np.argsort(s_all, kind="stable")
-    return s_all[order], np.concatenate(values)[order]
+        owners.append(j[bad])
+        # Both halves of every bad interval, grouped by piece (one run per piece for the
+        # path model's per-piece evaluations; the order within a level does not matter).
+        halves = np.argsort(np.concatenate((j[bad], j[bad])), kind="stable")
+        j = np.concatenate((j[bad], j[bad]))[halves]
+        lo = np.concatenate((lo[bad], mid[bad]))[halves]
+        hi = np.concatenate((mid[bad], hi[bad]))[halves]
+        c_lo = np.concatenate((c_lo[bad], c_mid[bad]))[halves]
+        c_hi = np.concatenate((c_mid[bad], c_hi[bad]))[halves]
+    if len(points) == 1:  # no refinement: the grid is in order already
+        return s, c2, np.bincount(owner, minlength=rows.size)
+    s_all, owner_all = np.concatenate(points), np.concatenate(owners)
+    order = np.lexsort((s_all, owner_all))
+    sizes = np.bincount(owner_all, minlength=rows.size)
+    return s_all[order], np.concatenate(values)[order], sizes
 
 
 def _per_piece(values, n: int, name: str, dtype) -> np.ndarray:
@@ -213,7 +268,9 @@ def lower_bound_time_s(
     Parameters
     ----------
     geometries
-        The pieces, each a :class:`~nurbscnc.geometry.paths.PathGeometry`, end to end.
+        The pieces end to end, each a LineGeometry, ArcGeometry, NurbsCurve (whole) or
+        PHQuintic; they become rows of a :class:`~nurbscnc.geometry.path.PathTable`, the path
+        model every sample of curvature comes from.
     v_program_mm_s
         Speed ceiling per piece [mm/s] (programmed feed, rapid rate), scalar or one per piece.
     a_max_mm_s2
@@ -257,21 +314,18 @@ def lower_bound_time_s(
         else _per_piece(stop_after, k, "stop_after", bool)
     )
 
-    s_parts, c_parts = [], []
-    offset = 0.0
-    for geom, top in zip(pieces, v_top):
+    path = PathTable.of([_path_row(g) for g in pieces])
 
-        def cap2_of(kappa, top=float(top)):
-            return curvature_cap2_mm2_s2(kappa, top, a_max_mm_s2, period_s, chord_tolerance_mm)
+    def cap2_of(kappa, j):
+        return curvature_cap2_mm2_s2(kappa, v_top[j], a_max_mm_s2, period_s, chord_tolerance_mm)
 
-        s, c2 = _sample_piece(geom, ds, cap2_of, cap_rel_tol)
-        s_parts.append(s + offset)
-        c_parts.append(c2)
-        offset += float(s[-1])
-    sizes = np.array([p.size for p in s_parts])
+    s_local, c2, sizes = _sample_rows(path, np.arange(k), cap2_of, ds, cap_rel_tol)
     piece_start = np.concatenate(([0], np.cumsum(sizes)))
-    return _solve(np.concatenate(s_parts), np.concatenate(c_parts), piece_start, stops,
-                  a_max_mm_s2)  # fmt: skip
+    # Piece offsets: the sum of the grids' last points (each piece's length), in order.
+    ends = s_local[piece_start[1:] - 1]
+    offset = np.concatenate(([0.0], np.cumsum(ends)[:-1]))
+    s_mm = s_local + np.repeat(offset, sizes)
+    return _solve(s_mm, c2, piece_start, stops, a_max_mm_s2)
 
 
 def _solve(s_mm: np.ndarray, path_cap2: np.ndarray, piece_start: np.ndarray, stops: np.ndarray,
@@ -345,13 +399,15 @@ def program_lower_bound_s(segments, machine: Machine) -> float:
     settling: nothing can be faster.
 
     Linear in the program length with small constants: lines (and rapids) are gathered into
-    arrays without a geometry object each, and pieces of constant curvature (lines, circular
-    and helical arcs) need no grid inside them — their cap is constant, and the bound is
-    exact on any grid for such caps (module doc) — so they are sampled at their two ends
-    only; NURBS and spiral arcs get the adaptive grid of :func:`lower_bound_time_s`.
+    arrays (length and direction from their end points, κ = 0) without a geometry object
+    each; arcs and NURBS blocks become the rows of one path model
+    (:class:`~nurbscnc.geometry.path.PathTable`, the programmed geometry, one row a
+    segment), which gives their lengths, end tangents and curvature. Pieces of constant
+    curvature (lines, circular and helical arcs) need no grid inside them — their cap is
+    constant, and the bound is exact on any grid for such caps (module doc) — so they are
+    sampled at their two ends only; NURBS and spiral arcs get the adaptive grid of
+    :func:`lower_bound_time_s`, all such pieces at once.
     """
-    from nurbscnc.geometry.paths import ArcGeometry, geometry_of
-
     lim = machine.limits
     period, chord, a_max = machine.servo.period_s, lim.chord_tolerance_mm, lim.a_max_mm_s2
     moving = [(i, s) for i, s in enumerate(segments) if s.kind not in STOP_KINDS]
@@ -378,22 +434,32 @@ def program_lower_bound_s(segments, machine: Machine) -> float:
     t_start[li] = t_end[li] = p1 - p0
     length[li] = np.sqrt(np.einsum("ij,ij->i", p1 - p0, p1 - p0))
     cap2 = np.where(straight, top * top, 0.0)  # constant-cap pieces: their cap²
-    sampled: dict[int, tuple[np.ndarray, np.ndarray]] = {}
-    for i in np.flatnonzero(~straight).tolist():
-        geom = geometry_of(moving[i][1])
-        d = geom.derivatives(np.array([geom.u_start, geom.u_end]), 1)[1]
-        t_start[i], t_end[i] = d[0], d[1]
+    # Arcs and NURBS blocks: one path-model row each (the programmed geometry, whole).
+    curved = np.flatnonzero(~straight)
+    path = PathTable.of([_path_row(geometry_of(moving[i][1]), moving[i][1].line)
+                         for i in curved.tolist()])  # fmt: skip
+    rows = np.arange(curved.size)
+    length[curved] = path.length_mm
+    # Unit tangents at both ends, one evaluation (start, end interleaved: one run a piece).
+    ends = path.tangents(np.repeat(rows, 2), np.column_stack((np.zeros(rows.size),
+                                                              path.length_mm)).ravel())
+    t_start[curved], t_end[curved] = ends[0::2], ends[1::2]
+    # Constant curvature (circles, helices): one cap² each; spirals and NURBS: a grid.
+    const = path.kind == Kind.ARC
+    cap2[curved[const]] = curvature_cap2_mm2_s2(
+        path.curvature(rows[const], np.zeros(int(const.sum()))), top[curved[const]], a_max,
+        period, chord)  # fmt: skip
+    grid_rows = rows[~const]
+    top_grid = top[curved[grid_rows]]
 
-        def cap2_of(kappa, top_i=float(top[i])):
-            return curvature_cap2_mm2_s2(kappa, top_i, a_max, period, chord)
+    def cap2_of(kappa, j):
+        return curvature_cap2_mm2_s2(kappa, top_grid[j], a_max, period, chord)
 
-        if isinstance(geom, ArcGeometry) and not geom.is_spiral:
-            length[i] = float(geom.length_mm)
-            cap2[i] = float(cap2_of(geom.curvature(np.array([geom.u_start]))[0]))
-        else:
-            s, c2 = _sample_piece(geom, DEFAULT_DS_MM, cap2_of, DEFAULT_CAP_REL_TOL)
-            sampled[i] = (s, c2)
-            length[i] = float(s[-1])
+    s_grid, c2_grid, grid_sizes = _sample_rows(path, grid_rows, cap2_of, DEFAULT_DS_MM,
+                                               DEFAULT_CAP_REL_TOL)  # fmt: skip
+    grid_start = np.concatenate(([0], np.cumsum(grid_sizes)))
+    sampled = curved[grid_rows]  # indices into ``moving`` of the gridded pieces
+    length[sampled] = s_grid[grid_start[1:] - 1]
     # Exact stops: tangent discontinuities not under G64 P, dwells, rapid/feed changes.
     ta, tb = t_end[:-1], t_start[1:]
     cross = np.cross(ta, tb)
@@ -406,18 +472,18 @@ def program_lower_bound_s(segments, machine: Machine) -> float:
     # Grids: two points on constant-cap pieces, the adaptive grid elsewhere.
     offset = np.concatenate(([0.0], np.cumsum(length)))
     sizes = np.full(m, 2, dtype=np.int64)
-    for i, (s, _) in sampled.items():
-        sizes[i] = s.size
+    sizes[sampled] = grid_sizes
     piece_start = np.concatenate(([0], np.cumsum(sizes)))
     s_mm = np.empty(int(piece_start[-1]))
     path_cap2 = np.empty_like(s_mm)
     simple = np.ones(m, dtype=bool)
-    simple[list(sampled)] = False
+    simple[sampled] = False
     at = piece_start[:-1][simple]
     s_mm[at], s_mm[at + 1] = offset[:-1][simple], offset[1:][simple]
     path_cap2[at] = path_cap2[at + 1] = cap2[simple]
-    for i, (s, c2) in sampled.items():
-        s_mm[piece_start[i] : piece_start[i + 1]] = s + offset[i]
-        path_cap2[piece_start[i] : piece_start[i + 1]] = c2
+    # The gridded pieces' points, scattered to their places in one step.
+    dest = np.repeat(piece_start[sampled] - grid_start[:-1], grid_sizes) + np.arange(s_grid.size)
+    s_mm[dest] = s_grid + np.repeat(offset[sampled], grid_sizes)
+    path_cap2[dest] = c2_grid
     bound = _solve(s_mm, path_cap2, piece_start, stop, a_max)
     return float(bound.time_s) + dwell
