@@ -106,7 +106,7 @@ def _blocks(n: int, size: int = BLOCK):
     return (slice(i, min(i + size, n)) for i in range(0, n, size))
 
 
-def _runs(keys: np.ndarray) -> list[tuple[int, int]]:
+def equal_runs(keys: np.ndarray) -> list[tuple[int, int]]:
     """[start, stop) of the runs of equal consecutive values of ``keys``."""
     if keys.size == 0:
         return []
@@ -242,11 +242,11 @@ class PathTable:
             elif code == Kind.NURBS:
                 oid = np.take(self.obj_id, i)
                 s_curve = np.take(self.s_a_mm, i) + ls
-                for a, z in _runs(oid):
+                for a, z in equal_runs(oid):
                     o[a:z], prm[a:z] = self.objects[int(oid[a])].points_at_length(s_curve[a:z])
             else:  # spiral arcs: their own arc-length table, one call per piece
                 prm = self._object_params(code, i, ls)
-                for a, z in _runs(i):
+                for a, z in equal_runs(i):
                     o[a:z] = self.objects[int(self.obj_id[i[a]])].point(prm[a:z])
             if sel is None:
                 return o, prm
@@ -345,11 +345,11 @@ class PathTable:
         if code == Kind.NURBS:
             oid = np.take(self.obj_id, i)
             s_curve = np.take(self.s_a_mm, i) + ls
-            for a, z in _runs(oid):
+            for a, z in equal_runs(oid):
                 u[a:z] = self.objects[int(oid[a])].param_at_length_fast(s_curve[a:z])
         else:  # spirals: u = 0 and u = L at the ends exactly, the arc-length table inside
             length = np.take(self.length_mm, i)
-            for a, z in _runs(i):
+            for a, z in equal_runs(i):
                 g = self.objects[int(self.obj_id[i[a]])]
                 s_run, u_run = ls[a:z], u[a:z]
                 inside = (s_run > 0.0) & (s_run < length[a])
@@ -429,7 +429,7 @@ class PathTable:
                 u = self._object_params(code, i, ls)
                 oid = np.take(self.obj_id, i)
                 a1, a2 = np.empty((i.size, 3)), np.empty((i.size, 3))
-                for a, z in _runs(oid):
+                for a, z in equal_runs(oid):
                     d = self.objects[int(oid[a])].derivatives(u[a:z], 2)
                     a1[a:z], a2[a:z] = d[1], d[2]
                 d1[sel], d2[sel] = a1, a2

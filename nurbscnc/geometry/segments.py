@@ -119,15 +119,9 @@ class Nurbs:
         return self.control_points_mm[-1]
 
 
-@dataclass(frozen=True, eq=False)
-class Dwell:
-    """A timed stop (G4) of ``seconds`` [s] at ``position_mm`` (an ``(x, y, z)`` tuple)."""
+class _AtRest:
+    """What the stops (Dwell, Pause) share: no length, no feed, start = end = position."""
 
-    seconds: float
-    position_mm: tuple
-    line: int
-
-    kind = "dwell"
     feed_mm_s = 0.0
     length_mm = 0.0
 
@@ -141,7 +135,18 @@ class Dwell:
 
 
 @dataclass(frozen=True, eq=False)
-class Pause:
+class Dwell(_AtRest):
+    """A timed stop (G4) of ``seconds`` [s] at ``position_mm`` (an ``(x, y, z)`` tuple)."""
+
+    seconds: float
+    position_mm: tuple
+    line: int
+
+    kind = "dwell"
+
+
+@dataclass(frozen=True, eq=False)
+class Pause(_AtRest):
     """A program stop (M0, M1 optional stop, M60 pallet change) at ``position_mm`` (an
     ``(x, y, z)`` tuple): the machine stops there and waits for the operator to resume.
     ``code`` is "M0", "M1" or "M60".
@@ -156,17 +161,7 @@ class Pause:
     code: str = "M0"
 
     kind = "pause"
-    feed_mm_s = 0.0
-    length_mm = 0.0
     seconds = 0.0
-
-    @property
-    def start_mm(self) -> tuple:
-        return self.position_mm
-
-    @property
-    def end_mm(self) -> tuple:
-        return self.position_mm
 
 
 Segment = Line | Arc | Nurbs | Dwell | Pause

@@ -14,16 +14,7 @@ from math import sqrt
 import numpy as np
 
 from nurbscnc.geometry.nurbs import PowerForm
-from nurbscnc.geometry.path import Kind, PathTable
-
-
-def _runs(keys: np.ndarray) -> list[tuple[int, int]]:
-    """[start, stop) of the runs of equal consecutive values of ``keys``."""
-    if keys.size == 0:
-        return []
-    cuts = np.flatnonzero(keys[1:] != keys[:-1]) + 1
-    edges = np.concatenate(([0], cuts, [keys.size]))
-    return list(zip(edges[:-1].tolist(), edges[1:].tolist()))
+from nurbscnc.geometry.path import Kind, PathTable, equal_runs
 
 
 def taylor_increment(v_mm_s: float, a_mm_s2: float, dt_s: float, speed: float,
@@ -132,7 +123,7 @@ def taylor_nurbs(path: PathTable, samples_piece, tau, v, a, out, param) -> None:
     kind = np.take(path.kind, samples_piece)
     cid = np.where(kind == Kind.NURBS, np.take(path.obj_id, samples_piece), -1)
     dt = np.diff(tau)
-    for a_, z in _runs(cid):
+    for a_, z in equal_runs(cid):
         c = int(cid[a_])
         if c < 0:
             continue
