@@ -241,3 +241,15 @@ def test_sigusr1_while_planning_is_kept_and_holds_the_card(tmp_path):
     assert b"feed hold asked while planning" in stderr
     assert held == ("HOLD", 0)
     assert card.state.name == "DONE" and card.position.tolist() == [8000, 0, 0]
+
+
+def test_unwritable_card_log_and_directory_program_exit_3(tmp_path):
+    """Files that cannot be read or written are exit 3 with a message, never a traceback."""
+    result = CliRunner().invoke(card_sim, ["--fast", "--once", "--log",
+                                           str(tmp_path / "missing" / "log.csv")])  # fmt: skip
+    assert result.exit_code == 3, result.output
+    assert "cannot write the log" in result.stderr
+    assert "Traceback" not in result.output
+    result = CliRunner().invoke(stream, [str(tmp_path), "--port", "/dev/null"])
+    assert result.exit_code == 3, result.output
+    assert "Is a directory" in result.stderr

@@ -20,7 +20,7 @@ import threading
 import click
 
 from nurbscnc.cli.options import planning_options
-from nurbscnc.errors import NurbsCncError
+from nurbscnc.errors import NurbsCncError, OutputError
 
 POINT_SUFFIXES = (".csv", ".npz")
 
@@ -171,7 +171,7 @@ def _progress_bar(enabled: bool, total: int):
 
 
 @click.command()
-@click.argument("program", type=click.Path(dir_okay=False))
+@click.argument("program", type=click.Path())
 @click.option("--port", required=True,
               help="The card's serial device, e.g. /dev/ttyUSB0 (opened exclusively).")
 @click.option("--allow-url", is_flag=True,
@@ -330,7 +330,13 @@ def card_sim(listen, speed, fast, buffer_periods, start_fill, max_pulses, period
         previous[sig] = signal.signal(sig, lambda _s, _f: stop.set())
     click.echo(endpoint.path)
     sys.stdout.flush()
-    log = open(log_path, "w", encoding="utf-8") if log_path else None  # noqa: SIM115
+    try:
+        log = open(log_path, "w", encoding="utf-8") if log_path else None  # noqa: SIM115
+    except OSError as exc:
+        endpoint.close()
+        for sig, old in previous.items():
+            signal.signal(sig, old)
+        raise OutputError(f"cannot write the log {log_path}: {exc.strerror or exc}") from None
     try:
         serve(card, endpoint, stop, once=once, baud=baud, log=log)
     finally:
