@@ -272,14 +272,17 @@ def load_program(
     block_delete: bool = True,
     tool_table: str | None = None,
     subroutine_path: tuple = (),
+    text: str | None = None,
 ) -> Program:
     """Read, parse and interpret a program file.
 
     ``o<name> call`` of a subroutine the program does not define reads ``name.ngc`` from the
     program's directory, then each directory of ``subroutine_path`` (LinuxCNC's
     SUBROUTINE_PATH); the interpreter gets the reading as a callback and does no I/O itself.
+    ``text``, when given, is the program already read (stdin that ``simulate -`` looked at).
     """
-    text = read_program_text(path)
+    if text is None:
+        text = read_program_text(path)
     tools = read_tool_table(tool_table) if tool_table else None
     dirs = [os.path.dirname(os.path.abspath(path)) if path != "-" else os.getcwd()]
     dirs += [str(d) for d in subroutine_path]
@@ -623,18 +626,29 @@ def write_plan_plots(run, plot_dir: str) -> list[str]:
 def make_plan(program: str, machine=None, overrides=(), dynamics="local", lookahead=None,
               corner_feed="piece", interpolator="exact", blend_tolerance=None,
               algorithm="ph-lookahead", no_block_delete=False, tool_table=None,
-              subroutine_path=()):
+              subroutine_path=(), text=None):
     """Load, interpret, plan and interpolate one program; validate soft limits. Returns
     (program, machine, :class:`~nurbscnc.pipeline.Run`).
 
-    The keyword arguments are exactly the options of :func:`planning_options`."""
+    The keyword arguments are the options of :func:`planning_options`, and ``text``: the
+    program already read (see :func:`load_program`)."""
     from nurbscnc.pipeline import run_program
 
     options = run_options(algorithm, corner_feed, dynamics, blend_tolerance, interpolator,
                           lookahead)  # fmt: skip
     mach = load_machine_cli(machine, overrides)
-    prog = load_program(program, not no_block_delete, tool_table, subroutine_path)
+    prog = load_program(program, not no_block_delete, tool_table, subroutine_path, text)
     return prog, mach, run_program(prog, mach, options)
+
+
+def clock_suffix(seconds: float) -> str:
+    """`` (h:mm:ss)`` for a time of a minute or more (human summaries only), else ``""``.
+    Rounded to whole seconds: 545.4 s → `` (0:09:05)``."""
+    if not seconds >= 60.0:
+        return ""
+    minutes, secs = divmod(int(round(seconds)), 60)
+    hours, minutes = divmod(minutes, 60)
+    return f" ({hours}:{minutes:02d}:{secs:02d})"
 
 
 def summary_of(prog, mach, run) -> dict:
@@ -661,6 +675,9 @@ def plan(program, as_json, dump_profile, plot_dir, **settings):
     """
     from nurbscnc.output.files import write_profile
 
+    if dump_profile == "-" and as_json:
+        raise click.UsageError("--dump-profile - and --json both want stdout; "
+                               "write the profile to a file or drop --json")
     if dump_profile and settings.get("algorithm", "ph-lookahead") != "ph-lookahead":
         raise click.UsageError("--dump-profile needs the look-ahead planner (a baseline has "
                                "no jerk-limited profile)")
@@ -678,15 +695,20 @@ def plan(program, as_json, dump_profile, plot_dir, **settings):
     if as_json:
         click.echo(json.dumps(summary))
         return
+    print_plan_summary(prog, mach, summary, err if dump_profile == "-" else out)
+
+
+def print_plan_summary(prog, mach, summary: dict, out: Console) -> None:
+    """The human summary of ``plan`` on ``out`` (stderr when the profile goes to stdout)."""
     if "pieces" in summary:
         out.print(Text.assemble((prog.name, "bold"), f": {summary['piece_count']} pieces "
                   f"({', '.join(f'{v} {k}' for k, v in sorted(summary['pieces'].items()))})"))
     else:
         out.print(Text.assemble((prog.name, "bold"), f": baseline {summary['algorithm']} "
                                 "(no acceleration limit)"))  # fmt: skip
-    out.print(f"  cycle time: {summary['cycle_time_s']:.4f} s "
-              f"({summary['samples']} reference points at T_s = "
-              f"{summary['period_s'] * 1000:g} ms)")  # fmt: skip
+    out.print(f"  cycle time: {summary['cycle_time_s']:.4f} s"
+              f"{clock_suffix(summary['cycle_time_s'])} ({summary['samples']} reference points "
+              f"at T_s = {summary['period_s'] * 1000:g} ms)")  # fmt: skip
     if "lower_bound_s" in summary:
         note = "" if "pieces" in summary else "; a baseline ignores A_max and may beat it"
         out.print(f"  kinematic lower bound: {summary['lower_bound_s']:.4f} s "
@@ -712,8 +734,10 @@ def plan(program, as_json, dump_profile, plot_dir, **settings):
 @click.option("--jobs", type=click.IntRange(min=1), default=None,
               help="Batch worker processes (default: the number of cores).")
 @click.option("--format", "fmt", type=click.Choice(["csv", "npz", "halstreamer"]),
-              default="csv", help="Output format: batch csv/npz (-o: by suffix), or "
-              "halstreamer (LinuxCNC streamer text, x y z per servo period; docs/linuxcnc.md).")
+              default=None, help="Output format (default: -o's suffix .npz/.hs, else csv; a "
+              "format that contradicts the suffix is an error; npz never goes to stdout): "
+              "csv, npz, or halstreamer (LinuxCNC streamer text, x y z per servo period; "
+              "docs/linuxcnc.md).")
 @click.option("--quiet", is_flag=True, help="No summary on stderr.")
 @json_option
 @plot_option
@@ -734,6 +758,7 @@ def run(programs, output, output_dir, jobs, fmt, quiet, as_json, plot_dir, **set
         if output is None:
             raise click.UsageError("give -o FILE (.csv, .npz or -) or --output-dir DIR")
         program = programs[0]
+        fmt = output_format(output, fmt)
         show = not quiet and err.is_terminal
         with err.status(f"planning {program} …") if show else contextlib.nullcontext():
             prog, mach, run = make_plan(program, **settings)
@@ -747,9 +772,30 @@ def run(programs, output, output_dir, jobs, fmt, quiet, as_json, plot_dir, **set
             click.echo(json.dumps(summary), err=output == "-")
         elif not quiet:
             err.print(f"{prog.name}: {summary['samples']} points, cycle time "
-                      f"{summary['cycle_time_s']:.4f} s → {output}", markup=False)  # fmt: skip
+                      f"{summary['cycle_time_s']:.4f} s{clock_suffix(summary['cycle_time_s'])}"
+                      f" → {output}", markup=False)  # fmt: skip
         return
-    run_batch(programs, output_dir, jobs, fmt, quiet, as_json, settings)
+    run_batch(programs, output_dir, jobs, fmt or "csv", quiet, as_json, settings)
+
+
+#: The format an output suffix names (``run -o``).
+SUFFIX_FORMATS = {".csv": "csv", ".npz": "npz", ".hs": "halstreamer"}
+
+
+def output_format(output: str, fmt: str | None) -> str:
+    """The format of ``run -o output``: ``--format`` if given, else the suffix's, else csv.
+    A ``--format`` that contradicts a known suffix, or npz to stdout (binary on a terminal or
+    a text pipe), is a usage error (exit 2): the two never silently disagree."""
+    suffix = os.path.splitext(output)[1].lower() if output != "-" else ""
+    implied = SUFFIX_FORMATS.get(suffix)
+    if fmt is not None and implied is not None and fmt != implied:
+        raise click.UsageError(f"--format {fmt} contradicts the suffix of -o {output} "
+                               f"({implied}); drop --format or rename the output")
+    fmt = fmt or implied or "csv"
+    if output == "-" and fmt == "npz":
+        raise click.UsageError("--format npz writes binary and is refused on stdout (-o -); "
+                               "give -o FILE.npz")
+    return fmt
 
 
 def write_output(path: str, fmt: str, samples, mach, name: str) -> None:
@@ -761,7 +807,7 @@ def write_output(path: str, fmt: str, samples, mach, name: str) -> None:
     else:
         from nurbscnc.output.files import write_points
 
-        write_points(path, samples)
+        write_points(path, samples, npz=fmt == "npz" if fmt else None)
 
 
 def _batch_one(args):
@@ -866,18 +912,20 @@ def simulate(source, as_json, plot_dir, hold, **settings):
 
     Example: nurbscnc simulate points.csv --json
     """
-    from nurbscnc.output.files import read_points
+    from nurbscnc.output.files import point_header, read_points, read_points_text
     from nurbscnc.servo.simulate import contour_errors, metrics, simulate_reference
 
     lower = source.lower()
-    if lower.endswith((".csv", ".npz")):
+    # stdin is recognised by its content: a points header (from `run -o -`) or a program
+    text = read_program_text("-") if source == "-" else None
+    if lower.endswith((".csv", ".npz")) or (text is not None and point_header(text)):
         mach = load_machine_cli(settings["machine"], settings["overrides"])
-        data = read_points(source)
+        data = read_points(source) if text is None else read_points_text(text)
         points = np.column_stack([data["x"], data["y"], data["z"]])
         path = points  # the commanded path: the reference polyline itself
-        name = source
+        name = _display_name(source)
     else:
-        prog, mach, run = make_plan(source, **settings)
+        prog, mach, run = make_plan(source, **settings, text=text)
         from nurbscnc.plan.dynamics import dense_path_mm
 
         points = run.samples.points_mm

@@ -151,10 +151,13 @@ def _columns_csv(fh, names, columns, formats) -> None:
         fh.write(buf.getvalue())
 
 
-def write_table(path: str, names, columns, formats) -> None:
-    """Write named columns to ``path``: NPZ when it ends in .npz, else CSV (``-``: stdout)."""
+def write_table(path: str, names, columns, formats, npz: bool | None = None) -> None:
+    """Write named columns to ``path`` (``-``: stdout): NPZ when ``npz`` (None: when the path
+    ends in .npz), else CSV."""
+    if npz is None:
+        npz = path.endswith(".npz")
     try:
-        if path.endswith(".npz"):
+        if npz:
             with atomic_output(path, binary=True) as fh:
                 np.savez_compressed(fh, **{n: np.asarray(c) for n, c in zip(names, columns)})
         else:
@@ -167,11 +170,13 @@ def write_table(path: str, names, columns, formats) -> None:
         raise OutputError(f"cannot write {name}: {exc.strerror or exc}") from None
 
 
-def write_points(path: str, samples) -> None:
-    """Reference points: ``t,x,y,z,feed,piece,line`` (s, mm, mm, mm, mm/s, index, line)."""
+def write_points(path: str, samples, npz: bool | None = None) -> None:
+    """Reference points: ``t,x,y,z,feed,piece,line`` (s, mm, mm, mm, mm/s, index, line);
+    NPZ when ``npz`` (None: by the path's suffix)."""
     p = samples.points_mm
     cols = (samples.t_s, p[:, 0], p[:, 1], p[:, 2], samples.v_mm_s, samples.piece, samples.line)
-    write_table(path, POINT_COLUMNS, cols, ["%.6f", "%.9f", "%.9f", "%.9f", "%.6f", "%d", "%d"])
+    formats = ["%.6f", "%.9f", "%.9f", "%.9f", "%.6f", "%d", "%d"]
+    write_table(path, POINT_COLUMNS, cols, formats, npz)
 
 
 def write_profile(path: str, t_s, s_mm, v, a, j, piece) -> None:
@@ -180,35 +185,61 @@ def write_profile(path: str, t_s, s_mm, v, a, j, piece) -> None:
                 ["%.6f", "%.9f", "%.6f", "%.4f", "%.2f", "%d"])  # fmt: skip
 
 
+def point_header(text: str) -> tuple[str, ...] | None:
+    """The columns of a reference-point CSV whose first line is ``text``'s: ``t,x,y``,
+    ``t,x,y,z`` or the full ``t,x,y,z,feed,piece,line`` (any leading prefix of POINT_COLUMNS
+    from ``t,x,y`` on); None when the first line is not such a header (a program, say)."""
+    first = text.lstrip("\ufeff").split("\n", 1)[0].rstrip("\r")
+    names = tuple(f.strip() for f in first.split(","))
+    if len(names) >= 3 and names == POINT_COLUMNS[: len(names)]:
+        return names
+    return None
+
+
 def read_points(path: str) -> dict:
-    """Read a reference-point file (CSV with the header above, or NPZ) into arrays.
+    """Read a reference-point file (CSV with a header as :func:`point_header` accepts, or NPZ;
+    ``-``: CSV from stdin) into arrays. A missing ``z`` column is 0 mm; missing ``feed``,
+    ``piece``, ``line`` are absent from the result.
 
     OSError → OutputError (exit 3). Bad content → DataError (exit 2) at its line and column
     where a CSV has them: the header, the column count, text that is not a number, a value
     that is not finite or beyond ``POINT_VALUE_LIMIT`` (named).
     """
     try:
-        if path.endswith(".npz"):
+        if path != "-" and path.endswith(".npz"):
             return _read_points_npz(path)
-        with open(path, encoding="utf-8", errors="replace") as fh:
-            header = fh.readline().rstrip("\r\n")
-            if tuple(header.strip().split(",")) != POINT_COLUMNS:
-                raise DataError(f"expected the header {','.join(POINT_COLUMNS)}",
-                                SourcePos(1, 1, header))  # fmt: skip
-            try:
-                with warnings.catch_warnings():  # "input contained no data": reported below
-                    warnings.simplefilter("ignore", UserWarning)
-                    data = np.loadtxt(fh, delimiter=",", ndmin=2, comments=None)
-            except ValueError as exc:  # numpy names the row (0-based after the header)
-                raise DataError(f"not a table of numbers: {str(exc)[:200]}") from None
+        if path == "-":
+            text = sys.stdin.buffer.read().decode("utf-8", errors="replace")
+        else:
+            with open(path, encoding="utf-8", errors="replace") as fh:
+                text = fh.read()
     except OSError as exc:
         raise OutputError(f"cannot read {path}: {exc.strerror or exc}") from None
+    return read_points_text(text)
+
+
+def read_points_text(text: str) -> dict:
+    """:func:`read_points` of a CSV already read into ``text``."""
+    names = point_header(text)
+    lines = text.lstrip("\ufeff").splitlines()
+    if names is None:
+        header = lines[0] if lines else ""
+        raise DataError(f"expected the header {','.join(POINT_COLUMNS)} (or t,x,y / t,x,y,z)",
+                        SourcePos(1, 1, header))  # fmt: skip
+    try:
+        with warnings.catch_warnings():  # "input contained no data": reported below
+            warnings.simplefilter("ignore", UserWarning)
+            data = np.loadtxt(lines[1:], delimiter=",", ndmin=2, comments=None)
+    except ValueError as exc:  # numpy names the row (0-based after the header)
+        raise DataError(f"not a table of numbers: {str(exc)[:200]}") from None
     if data.size == 0:
         raise DataError("no reference points after the header")
-    if data.shape[1] != len(POINT_COLUMNS):
-        raise DataError(f"expected {len(POINT_COLUMNS)} columns, got {data.shape[1]}")
-    _check_values(data, lambda row, col: _csv_position(path, row, col))
-    return {c: data[:, i] for i, c in enumerate(POINT_COLUMNS)}
+    if data.shape[1] != len(names):
+        raise DataError(f"expected {len(names)} columns, got {data.shape[1]}")
+    _check_values(data, lambda row, col: _csv_position(lines, row, col))
+    result = {c: data[:, i] for i, c in enumerate(names)}
+    result.setdefault("z", np.zeros(data.shape[0]))  # a planar file: z = 0 mm
+    return result
 
 
 def _read_points_npz(path: str) -> dict:
@@ -243,20 +274,17 @@ def _check_values(data: np.ndarray, position, where=lambda row: "") -> None:
                         position(row, col))  # fmt: skip
 
 
-def _csv_position(path: str, row: int, col: int) -> SourcePos | None:
+def _csv_position(lines: list[str], row: int, col: int) -> SourcePos | None:
     """Line, column and text of field ``col`` of data row ``row`` (np.loadtxt skips blank
-    lines, so the file is scanned again; only on an error)."""
-    with open(path, encoding="utf-8", errors="replace") as fh:
-        next(fh, None)
-        seen = -1
-        for number, text in enumerate(fh, 2):
-            if text.strip():
-                seen += 1
-                if seen == row:
-                    text = text.rstrip("\r\n")
-                    fields = text.split(",")
-                    column = 1 + sum(len(f) + 1 for f in fields[:col])
-                    if col < len(fields):  # under the value, not its leading spaces
-                        column += len(fields[col]) - len(fields[col].lstrip())
-                    return SourcePos(number, column, text)
+    lines, so the lines are scanned again; only on an error)."""
+    seen = -1
+    for number, text in enumerate(lines[1:], 2):
+        if text.strip():
+            seen += 1
+            if seen == row:
+                fields = text.split(",")
+                column = 1 + sum(len(f) + 1 for f in fields[:col])
+                if col < len(fields):  # under the value, not its leading spaces
+                    column += len(fields[col]) - len(fields[col].lstrip())
+                return SourcePos(number, column, text)
     return None
