@@ -13,6 +13,7 @@ reported with their turning angle for the planner.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from enum import IntEnum
 
 import numpy as np
 from scipy.optimize import brentq
@@ -67,6 +68,51 @@ class Junction:
     line: int
     point_mm: tuple
     angle_deg: float
+
+
+class CornerAction(IntEnum):
+    """What the planner did at a non-tangent junction (a corner) of the path."""
+
+    BLEND = 0  #: replaced by a blend within the path tolerance, passed at the blend's feed
+    PASS = 1  #: a break small enough to pass at speed within the tolerance, not blended
+    STOP = 2  #: an exact stop at the vertex
+
+
+class CornerWhy(IntEnum):
+    """Why a corner was treated as it was (the planner's reason, for ``plan --explain``)."""
+
+    BLENDED = 0  #: G64 (with or without P): blended
+    SMALL_BREAK = 1  #: the break is within the tolerance at full speed
+    EXACT_PATH = 2  #: G61: exact path, sharp corners stop
+    EXACT_STOP = 3  #: G61.1: every block end stops
+    ZERO_TOLERANCE = 4  #: G64 P0 (or --blend-tolerance 0)
+    NO_BLEND_FITS = 5  #: no blend within the tolerance fits the neighbouring pieces
+    NOT_BLENDABLE = 6  #: this kind of joint cannot be blended (for example a cusp or 3-D turn)
+    DWELL_OR_PAUSE = 7  #: a dwell, pause or program stop at the junction
+    RAPID_FEED = 8  #: a rapid meets a feed move (the tool stops between them)
+    PROGRAM_END = 9  #: start or end of the program
+
+
+@dataclass(frozen=True, eq=False)
+class CornerLog:
+    """Every corner of a planned path and what was done there, as columns (n,) each:
+    ``line`` the source line of the move that ends at the corner, ``point_mm`` (n, 3) the
+    vertex [mm], ``turning_rad`` the angle between the tangents, ``action``
+    (:class:`CornerAction` codes) and ``why`` (:class:`CornerWhy` codes)."""
+
+    line: np.ndarray
+    point_mm: np.ndarray
+    turning_rad: np.ndarray
+    action: np.ndarray
+    why: np.ndarray
+
+    @classmethod
+    def empty(cls) -> CornerLog:
+        z = np.zeros(0)
+        return cls(z.astype(np.int64), np.zeros((0, 3)), z, z.astype(np.int8), z.astype(np.int8))
+
+    def __len__(self) -> int:
+        return int(self.line.size)
 
 
 def _sample_params(curve: NurbsCurve, per_span: int) -> np.ndarray:

@@ -35,7 +35,7 @@ from nurbscnc.geometry.paths import ArcGeometry, LineGeometry, geometry_of
 from nurbscnc.geometry.ph import PHQuintic
 from nurbscnc.machine.caps import MIN_CAP_MM_S, corner_cap_mm_s, curvature_cap_mm_s
 from nurbscnc.machine.profile import Machine
-from nurbscnc.plan.corners import find_corner_regions
+from nurbscnc.plan.corners import CornerLog, find_corner_regions
 from nurbscnc.plan.options import CornerFeed, PlanOptions
 from nurbscnc.plan.phfit import fit_region
 
@@ -223,6 +223,8 @@ class PieceList(Sequence):
     ph_p0: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=complex))
     ph_frame: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 3)))
     objects: dict = field(default_factory=dict)
+    #: Every corner and what the planner did there (:class:`~nurbscnc.plan.corners.CornerLog`).
+    corners: CornerLog = field(default_factory=CornerLog.empty)
 
     @classmethod
     def of(cls, pieces: Sequence[Piece]) -> PieceList:
