@@ -45,6 +45,10 @@ LOCAL_ITERATIONS = 16
 FALLBACK_LOCAL_ITERATIONS = 8
 #: Factor of every lever per fallback re-plan.
 FALLBACK_FACTOR = 0.6
+#: Re-plans of the improvement phase (bisection of the shaped levers).
+IMPROVE_ITERATIONS = 6
+#: A lever within this ratio of its bracket's upper end is left alone.
+IMPROVE_RATIO = 1.005
 
 
 @dataclass(frozen=True, eq=False)
@@ -197,6 +201,45 @@ class _Levers:
     def limits(self) -> Limits:
         return Limits(self.a_up, self.j_up, self.a_dn, self.j_dn)
 
+    _SCALED = ("caps", "a_up", "j_up", "a_dn", "j_dn")
+
+    def copy(self) -> _Levers:
+        return _Levers(*(getattr(self, f).copy() for f in (*self._SCALED, "settle_s",
+                                                           "shaped")),
+                       self.cap_history, self.stop_history)  # fmt: skip
+
+    def toward(self, hi: _Levers) -> _Levers | None:
+        """Halfway to ``hi`` (geometric means of the scaled levers, arithmetic of the
+        settles); None when every lever is within 0.5 % of it."""
+        out = self.copy()
+        moved = False
+        for f in self._SCALED:
+            a, b = getattr(self, f), getattr(hi, f)
+            far = b > a * IMPROVE_RATIO
+            if far.any():
+                moved = True
+                getattr(out, f)[far] = np.sqrt(a[far] * b[far])
+        far = self.settle_s > hi.settle_s + 1e-4
+        if far.any():
+            moved = True
+            out.settle_s[far] = 0.5 * (self.settle_s[far] + hi.settle_s[far])
+        return out if moved else None
+
+    def narrowed(self, trial: _Levers, probe: _Levers) -> _Levers:
+        """These upper brackets with the levers that ``probe`` (the shaping rule applied
+        to ``trial``) lowered set to their ``trial`` values (infeasible there); when the
+        rule blames none, every tried lever."""
+        out = self.copy()
+        blamed = {f: getattr(probe, f) < getattr(trial, f) for f in self._SCALED}
+        blamed_settle = probe.settle_s > trial.settle_s
+        if not (any(b.any() for b in blamed.values()) or blamed_settle.any()):
+            blamed = {f: np.ones(trial.caps.size, dtype=bool) for f in self._SCALED}
+            blamed_settle = np.ones(trial.caps.size, dtype=bool)
+        for f, b in blamed.items():
+            getattr(out, f)[b] = getattr(trial, f)[b]
+        out.settle_s[blamed_settle] = trial.settle_s[blamed_settle]
+        return out
+
 
 def _runs(caps: np.ndarray, smooth: np.ndarray, lev: _Levers) -> np.ndarray:
     """Run label (k,) of each piece: the pieces the profile plans as one unit (tangent-
@@ -310,7 +353,7 @@ def _fallback(lev: _Levers, err: np.ndarray, eps_mm: float, ref: Reference, piec
         window = max(int(round(max(settle_max_s, BLAME_WINDOW_S) / period_s)), 1)
         piece = np.append(ref.piece, np.full(err.size - n, k - 1))
         blame = _blame(err, eps_mm, piece, np.zeros(k - 1, dtype=bool), window)
-        sel = blame > 0.0
+        sel = (blame > 0.0) & ~pieces.rapid
     else:
         sel = ~pieces.rapid
     lev.caps[sel] *= f
@@ -352,29 +395,43 @@ def plan_checked(program, machine: Machine, options: LookaheadOptions | None = N
     if options.dynamics == Dynamics.GLOBAL:
         lev.settle_s[settle_rows] = settle_max
     base_dwell = pieces.dwell_after_s
-    check = None
-    iterations = 0
+    after_rapid = np.zeros(k, dtype=bool)  # the first piece of a cut after a rapid
+    after_rapid[settle_rows + 1] = True
     index = None  # where the pieces are, for global distances (built if needed)
-    while True:
-        # The last iteration's reference and response go before the new ones are made (long
-        # programs: each is hundreds of MB).
-        ref = check = None
-        planned = _with_dwell(pieces, base_dwell + lev.settle_s) if settle_rows.size else pieces
-        profile = _profile(planned, lev.caps, smooth, lev.limits(), options.lookahead_pieces)
+
+    def evaluate(lv: _Levers):
+        """Plan with the levers ``lv`` and check: (planned pieces, profile, check, err)."""
+        nonlocal index
+        planned = _with_dwell(pieces, base_dwell + lv.settle_s) if settle_rows.size else pieces
+        profile = _profile(planned, lv.caps, smooth, lv.limits(), options.lookahead_pieces)
         check_point_count(planned, profile, machine)  # before anything is sampled
         if options.dynamics == Dynamics.OFF:
-            break
+            return planned, profile, None, None
         ref = reference(planned, profile, period)
         index = index or PathIndex(pieces)
         response = path_response(ref, planned, profile, machine, refine_above_mm=eps_mm,
                                  index=index)  # fmt: skip
         n = ref.t_s.size
-        # Contour error matters while cutting: samples on rapids (air moves) are not checked.
-        cutting = np.append(~rapid[ref.piece], np.full(response.contour_mm.size - n,
-                                                        not rapid[-1]))
+        # Contour error matters while cutting: samples on rapids (air moves) and during the
+        # settle after a rapid (the reference waits at the cut's start) are not checked.
+        waiting = after_rapid[ref.piece] & (ref.tau_s <= profile.piece_start_time_s[ref.piece])
+        cutting = np.append(~rapid[ref.piece] & ~waiting,
+                            np.full(response.contour_mm.size - n, not rapid[-1]))
+        _cut_distance_after_rapids(response, ref, profile, after_rapid, waiting, rapid, index)
         check = Check(ref, response, cutting)
-        err = np.where(cutting, response.contour_mm, 0.0)
-        worst = float(err.max())
+        return planned, profile, check, np.where(cutting, response.contour_mm, 0.0)
+
+    def shape(lv: _Levers, result) -> None:
+        _shape(lv, result[3], eps_mm, result[2].reference, result[1], pieces, smooth,
+               settle_rows, settle_max, period)  # fmt: skip
+
+    initial = lev.copy()
+    iterations = 0
+    while True:
+        result = evaluate(lev)
+        if result[2] is None:
+            break
+        worst = float(result[3].max())
         if worst <= eps_mm:
             break
         iterations += 1
@@ -389,15 +446,66 @@ def plan_checked(program, machine: Machine, options: LookaheadOptions | None = N
             lev.caps *= min(float(np.sqrt(eps_mm / worst)), 0.98)
             lev.shaped[:] = True
         elif iterations <= LOCAL_ITERATIONS:
-            _shape(lev, err, eps_mm, ref, profile, pieces, smooth, settle_rows, settle_max,
-                   period)  # fmt: skip
+            shape(lev, result)
         else:
             stage = 1 if iterations <= LOCAL_ITERATIONS + FALLBACK_LOCAL_ITERATIONS else 2
-            _fallback(lev, err, eps_mm, ref, pieces, settle_rows, settle_max, period, stage)
-    _, dwell_s = dwell_times(planned, profile)
-    plan = Plan(planned, lev.caps, profile, iterations, total_time_s(profile, dwell_s),
+            _fallback(lev, result[3], eps_mm, result[2].reference, pieces, settle_rows,
+                      settle_max, period, stage)  # fmt: skip
+        result = None  # the last reference and response go first (long programs: each is
+        #                hundreds of MB)
+    if options.dynamics == Dynamics.LOCAL and lev.shaped.any():
+        # Improvement: bisect every shaped lever between its feasible value and its value
+        # before shaping (geometric means; the settles arithmetically towards 0). A try
+        # within ε_max is kept; a failing one narrows the brackets of the levers that the
+        # shaping rule blames for it (found by applying the rule to a copy).
+        best, best_time = (lev.copy(), result), _cycle_time(result)
+        hi = initial
+        for _ in range(IMPROVE_ITERATIONS):
+            trial = best[0].toward(hi)
+            if trial is None:
+                break
+            res = evaluate(trial)
+            iterations += 1
+            if float(res[3].max()) <= eps_mm:
+                t = _cycle_time(res)
+                if t <= best_time:
+                    best, best_time = (trial, res), t
+                else:  # a feasible raise that is slower (rare): stop here
+                    break
+            else:
+                probe = trial.copy()
+                shape(probe, res)
+                hi = hi.narrowed(trial, probe)
+            res = None
+        lev, result = best
+    planned, profile, check, _ = result
+    plan = Plan(planned, lev.caps, profile, iterations, _cycle_time(result),
                 options.dynamics, lev.limits(), lev.shaped, lev.settle_s)  # fmt: skip
     return plan, check
+
+
+def _cut_distance_after_rapids(response: Response, ref: Reference, profile: Profile,
+                               after_rapid: np.ndarray, waiting: np.ndarray, rapid: np.ndarray,
+                               index: PathIndex) -> None:  # fmt: skip
+    """Measure the first cutting samples after a rapid against the cut only (in place).
+
+    The path the contour error is measured against includes the rapids, so a tool still
+    arriving along a rapid looks on the path although the cut has moved off; it is 'on the
+    path' only if it is on the cut. Only samples whose distance window (module doc of
+    :mod:`~nurbscnc.plan.dynamics`: ±2|e| of arc length) reaches back across the rapid's
+    end are affected; their reference lies on the cut, so |e| bounds the distance."""
+    n = ref.t_s.size
+    lag = np.sqrt(np.einsum("ij,ij->i", response.axis_error_mm[:n], response.axis_error_mm[:n]))
+    start = profile.piece_start_mm[ref.piece]
+    fix = np.flatnonzero(after_rapid[ref.piece] & ~waiting & (ref.s_mm - 2.0 * lag <= start))
+    if fix.size:
+        response.contour_mm[fix] = index.distance_mm(response.actual_mm[fix], lag[fix] + 1e-12,
+                                                     exclude=rapid)  # fmt: skip
+
+
+def _cycle_time(result) -> float:
+    planned, profile = result[0], result[1]
+    return total_time_s(profile, dwell_times(planned, profile)[1])
 
 
 def segment_times_s(plan: Plan) -> dict[int, float]:
