@@ -99,7 +99,8 @@ def test_g61_square_faster_at_higher_feed_and_stops_are_shaped_not_slowed():
     plan = fast.plan
     cut = ~plan.pieces.rapid
     np.testing.assert_array_equal(plan.caps_mm_s[cut], 50.0)
-    assert plan.shaped_by_contour[cut].any()
+    assert plan.shaped_by_contour[cut].any() and plan.contour_transition[cut].any()
+    assert not plan.contour_feed.any()
     j = MACHINE.limits.j_max_mm_s3
     assert np.all(plan.limits.j_down_mm_s3 <= j) and plan.limits.j_down_mm_s3[cut].min() < j
     # Every edge reaches its cruise: the time is the kinematic one plus a few ms per stop.

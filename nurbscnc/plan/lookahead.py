@@ -1,19 +1,45 @@
 """The look-ahead planner: pieces → jerk-limited profile → dynamics check → re-plan.
 
-SPEC §7–§8 and §10. The profile is planned over the whole program (bidirectional scan); the
-predicted contour error is then checked with the servo model, and where it exceeds ε_max the
-feed cap is lowered — on the offending pieces only (``dynamics="local"``, our default) or for
-the whole program (``"global"``, the paper's rule: V_max becomes the feed where the error
-occurred) — and the program re-planned, until the error is within the limit.
+SPEC §7–§8 and §10. The profile is planned over the whole program (bidirectional scan) with
+per-piece limits (:func:`~nurbscnc.plan.axes.piece_limits`: the axes' feed, acceleration and
+jerk along each piece); the predicted contour error is then checked with the servo model,
+and where it exceeds ε_max the plan is changed and re-planned until the error is within it.
+
+Local shaping (``dynamics="local"``, planner v2, issue 13). Each over-limit sample is
+answered where its error is caused, never by the cruise of a whole long piece:
+
+- near the end of a rapid that a cut follows: the settle there (the reference waits at the
+  cut's start; 0 until the check needs it, at most 5/|pole| :func:`settle_time_s`); while it
+  waits nothing is checked, and the first cut samples are measured against the cut only;
+- near a planned stop (from :data:`STOP_BEFORE_S` before to :data:`STOP_WINDOW_S` after
+  it): the overshoot of the stop and the corner cut after it. The descent jerk of the run
+  of pieces that ends there (and, for samples after the restart, the rise jerk of the run
+  that leaves it) is lowered, by 0.95 (ε/e)^(1/p) with p measured from the last try (the
+  jerk at the end of a stop is what excites the servo: a softer stop costs milliseconds);
+- else (a curve): the feed of the pieces in the blamed window (:func:`_blame`,
+  :func:`local_factors`): NURBS cells and PH corners are short, so this is the feed over
+  that window only.
+
+The check converges on every program: after :data:`LOCAL_ITERATIONS` re-plans a fallback
+scales every lever (feed, acceleration, jerk) of the blamed pieces, then of all cutting
+pieces, and waits the full settles; the servo error goes to 0 with v, a, j. Once a plan is
+within ε_max, an improvement phase bisects every shaped lever between its feasible value and
+its value before shaping (:data:`IMPROVE_ITERATIONS` re-plans) and keeps the fastest plan
+within ε_max. Shaping depends on the programmed feed only through the caps; the bisection
+leaves each lever within :data:`IMPROVE_RATIO` of its bound, so plans at two feeds agree to
+that resolution (a higher F is never slower by more than it).
+
+``dynamics="global"`` is the paper's rule (V_max becomes the feed where the error occurred,
+the whole program re-planned; full settles); ``"off"`` plans the kinematics only (no
+settles: nothing is checked).
 
 Long programs. Everything per piece is whole-array work on the columns of the
 :class:`~nurbscnc.plan.pieces.PieceList` (junctions, dwells, blame), the contour error is
 measured near each reference point only (:func:`~nurbscnc.plan.dynamics.path_response`), and
-a local re-plan lowers the caps of all offending pieces at once by their measured ratio, so
-a program needs a few iterations, whatever its length. Runs of tiny tangent-continuous
-pieces at one cap are planned as one by :func:`~nurbscnc.plan.profile.plan_profile`.
+a local re-plan changes the levers of all offending pieces at once, so a program needs a
+few iterations, whatever its length. Runs of tiny tangent-continuous pieces at one cap and
+one set of limits are planned as one by :func:`~nurbscnc.plan.profile.plan_profile`.
 """
-
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
@@ -64,9 +90,10 @@ class Limits:
 
 @dataclass(frozen=True, eq=False)
 class Plan:
-    """A complete plan: pieces, their final caps [mm/s], the profile; ``iterations`` of the
-    dynamics loop; ``cycle_time_s`` including dwells; the ``dynamics`` rule it was checked
-    with. The reference points come from the interpolator
+    """A complete plan: pieces (with the settles in their dwells), their final caps [mm/s],
+    the profile; ``iterations``: re-plans of the dynamics loop (improvement included);
+    ``cycle_time_s`` including dwells; the ``dynamics`` rule it was checked with. The
+    reference points come from the interpolator
     (:func:`nurbscnc.interpolate.sample.interpolate`), the check's result from
     :func:`plan_checked`."""
 
@@ -76,8 +103,18 @@ class Plan:
     iterations: int
     cycle_time_s: float
     dynamics: Dynamics
+    #: The per-piece acceleration and jerk limits the profile was planned with (the axes'
+    #: path limits, lowered where the contour check shaped a transition).
     limits: Limits | None = None
+    #: (k,) bool: the contour check changed this piece (its feed cap or a limit is below
+    #: the kinematic plan's) — a "contour error" limiting factor.
     shaped_by_contour: np.ndarray | None = None
+    #: (k,) bool: the check lowered this piece's feed cap (curve error).
+    contour_feed: np.ndarray | None = None
+    #: (k,) bool: the check softened this piece's rise or descent (stop overshoot).
+    contour_transition: np.ndarray | None = None
+    #: (k,) settle [s] waited after piece i (a rapid followed by a cut), set by the check;
+    #: included in ``pieces.dwell_after_s``.
     settle_s: np.ndarray | None = None
 
 
@@ -479,8 +516,13 @@ def plan_checked(program, machine: Machine, options: LookaheadOptions | None = N
             res = None
         lev, result = best
     planned, profile, check, _ = result
+    feed = lev.caps < initial.caps
+    transition = np.zeros(k, dtype=bool)
+    for f in ("a_up", "j_up", "a_dn", "j_dn"):
+        transition |= getattr(lev, f) < getattr(initial, f)
     plan = Plan(planned, lev.caps, profile, iterations, _cycle_time(result),
-                options.dynamics, lev.limits(), lev.shaped, lev.settle_s)  # fmt: skip
+                options.dynamics, lev.limits(), feed | transition, feed, transition,
+                lev.settle_s)  # fmt: skip
     return plan, check
 
 
