@@ -182,3 +182,40 @@ def test_cycle_time_non_increasing_in_feed(vertices, mode, feed, step):
         return run_program(interpret_text("\n".join(lines + ["M2"]) + "\n"),
                            MACHINE).cycle_time_s
     assert cycle(feed + step) <= cycle(feed) * 1.005
+
+
+def test_plan_uses_the_axes_piece_limits(monkeypatch):
+    """plan_checked plans with nurbscnc.plan.axes.piece_limits: a piece given a lower feed,
+    acceleration and jerk keeps them on the samples (finite differences of s)."""
+    from nurbscnc.plan import axes
+
+    real = axes.piece_limits
+
+    def lowered(pieces, machine):
+        lim = real(pieces, machine)
+        v, a, j = lim.v_mm_s.copy(), lim.a_mm_s2.copy(), lim.j_mm_s3.copy()
+        v[-1], a[-1], j[-1] = 20.0, 400.0, 8e3  # the last edge only
+        return axes.PieceLimits(v, a, j)
+
+    monkeypatch.setattr(lookahead, "piece_limits", lowered)
+    text = "G21 G90 G17\nG61\nG1 X20 F3000\nG1 X20 Y20\nM2\n"
+    run = run_program(interpret_text(text), MACHINE,
+                      RunOptions(lookahead=LookaheadOptions(dynamics="off")))
+    smp = run.samples
+    period = MACHINE.servo.period_s
+    v = np.diff(smp.s_mm) / period
+    a = np.diff(v) / period
+    jerk = np.diff(a) / period
+    last = run.plan.pieces.length_mm.size - 1
+    on_last = smp.piece[1:] == last  # interval k → k+1 ends on the last edge
+    assert v[on_last].max() <= 20.0 * (1 + 1e-9)
+    assert v[on_last].max() == pytest.approx(20.0, rel=1e-6)  # it cruises there
+    # A difference spanning the junction mixes both pieces: only wholly inside the last.
+    inside = (smp.piece[:-2] == last) & (smp.piece[2:] == last)
+    assert np.abs(a[inside]).max() <= 400.0 * (1 + 1e-6)
+    inside3 = inside[:-1] & (smp.piece[3:] == last)
+    assert np.abs(jerk[inside3]).max() <= 8e3 * (1 + 1e-6)
+    # The first edge keeps the machine's limits (and uses them).
+    first = (smp.piece[:-2] == 0) & (smp.piece[2:] == 0)
+    assert np.abs(a[first]).max() > 400.0
+    np.testing.assert_array_equal(run.plan.limits.a_up_mm_s2, [MACHINE.limits.a_max_mm_s2, 400.0])
