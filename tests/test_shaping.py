@@ -169,7 +169,8 @@ def test_airfoils_check_reaches_the_kinematic_plan_closely():
 _vertex = st.tuples(st.integers(-8, 8), st.integers(-8, 8))
 
 
-@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=12, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.too_slow])
 @given(st.lists(_vertex, min_size=2, max_size=4, unique=True), st.sampled_from(["G61", "G64"]),
        st.integers(300, 3000), st.integers(100, 500))
 def test_cycle_time_non_increasing_in_feed(vertices, mode, feed, step):

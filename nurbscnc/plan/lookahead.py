@@ -495,26 +495,31 @@ def plan_checked(program, machine: Machine, options: LookaheadOptions | None = N
         # before shaping (geometric means; the settles arithmetically towards 0). A try
         # within ε_max is kept; a failing one narrows the brackets of the levers that the
         # shaping rule blames for it (found by applying the rule to a copy).
-        best, best_time = (lev.copy(), result), _cycle_time(result)
+        # Only one plan's reference and response are held at a time (long programs): the
+        # best plan is re-made at the end if a later try replaced its result.
+        best, best_time = lev.copy(), _cycle_time(result)
         hi = initial
         for _ in range(IMPROVE_ITERATIONS):
-            trial = best[0].toward(hi)
+            trial = best.toward(hi)
             if trial is None:
                 break
-            res = evaluate(trial)
+            result = None
+            result = evaluate(trial)
             iterations += 1
-            if float(res[3].max()) <= eps_mm:
-                t = _cycle_time(res)
-                if t <= best_time:
-                    best, best_time = (trial, res), t
-                else:  # a feasible raise that is slower (rare): stop here
+            if float(result[3].max()) <= eps_mm:
+                t = _cycle_time(result)
+                if t > best_time:  # a feasible raise that is slower (rare): stop here
+                    result = None
                     break
+                best, best_time = trial, t
             else:
                 probe = trial.copy()
-                shape(probe, res)
+                shape(probe, result)
                 hi = hi.narrowed(trial, probe)
-            res = None
-        lev, result = best
+                result = None
+        lev = best
+        if result is None:
+            result = evaluate(lev)
     planned, profile, check, _ = result
     feed = lev.caps < initial.caps
     transition = np.zeros(k, dtype=bool)
