@@ -65,6 +65,9 @@ BLAME_WINDOW_S = 0.03
 STOP_BEFORE_S = 0.02
 #: ... or at most this long before it [s] (the overshoot and the corner cut after it).
 STOP_WINDOW_S = 0.03
+#: A stop whose error fell as (jerk factor)^p with p below this is not softened again.
+STOP_INEFFECTIVE_P = 0.2
+FEED_ONLY = ("feed",)
 #: Re-plans with the local levers before the fallback takes over.
 LOCAL_ITERATIONS = 16
 #: Fallback re-plans on the blamed pieces before all cutting pieces are scaled.
@@ -343,10 +346,18 @@ def _shape(lev: _Levers, err: np.ndarray, eps_mm: float, ref: Reference, profile
         hit = (near == j) & ~handled
         e = float(err[over[hit]].max())
         prev = stop_hist.get(j)
+        if prev == FEED_ONLY:  # found ineffective before: the feed lever answers it
+            new_hist[j] = prev
+            continue
         p = 1.0
         if prev is not None and prev[1] < 1.0 and e > 0.0:
             measured = np.log(e / prev[0]) / np.log(prev[1])
             if np.isfinite(measured):
+                if measured < STOP_INEFFECTIVE_P:
+                    # Softening this stop hardly helped: the error is the feed's (a tight
+                    # curve into the stop), so the feed lever below takes these samples.
+                    new_hist[j] = FEED_ONLY
+                    continue
                 p = float(np.clip(measured, 0.25, 2.0))
         f = float(np.clip(0.95 * (eps_mm / e) ** (1.0 / p), 0.3, 0.9))
         new_hist[j] = (e, f)
