@@ -2,7 +2,7 @@
 
 Each NURBS block is split into its sharp-corner regions (replaced by their PH quintic pieces,
 SPEC §6) and the NURBS stretches between them; lines, arcs and rapids are one piece each;
-under G64 P the corners between lines and arcs are replaced by PH quintic blends (issue 7).
+under G64 the corners between pieces are replaced by PH quintic blends (issues 7 and 13).
 Every piece knows its exact geometry, its length, its cruise cap (SPEC §7, formulas in
 :mod:`nurbscnc.machine.caps`) and its unit tangents at both ends (for the junctions). Its
 kind is the path model's :class:`~nurbscnc.geometry.path.Kind` (a rapid is a line with the
@@ -36,6 +36,7 @@ from nurbscnc.geometry.ph import PHQuintic
 from nurbscnc.machine.caps import MIN_CAP_MM_S, corner_cap_mm_s, curvature_cap_mm_s
 from nurbscnc.machine.profile import Machine
 from nurbscnc.plan.corners import CornerAction, CornerLog, CornerWhy, find_corner_regions
+from nurbscnc.plan.naive import merge_collinear
 from nurbscnc.plan.options import CornerFeed, PlanOptions
 from nurbscnc.plan.phfit import fit_region
 
@@ -383,9 +384,11 @@ def _object_pieces(seg, index: int, machine: Machine, options: PlanOptions) -> l
     """The pieces of an arc or NURBS segment (Piece objects; none for a zero-length arc)."""
     if seg.kind == "nurbs":
         try:
-            return nurbs_pieces(seg, index, machine, options)
+            pieces = nurbs_pieces(seg, index, machine, options)
         except NurbsCncError as exc:
             raise exc.with_pos(SourcePos(seg.line)) from None
+        blend = blend_override(seg, options)
+        return [dc_replace(p, blend_mm=blend) for p in pieces]
     geom = geometry_of(seg)
     length = float(geom.length_mm)
     if length <= 0.0:
@@ -398,8 +401,16 @@ def _object_pieces(seg, index: int, machine: Machine, options: PlanOptions) -> l
 
 
 def segment_pieces(segments, machine: Machine, options: PlanOptions | None = None) -> PieceList:
-    """All pieces of a program, in order, as a :class:`PieceList`; corners under G64 P
-    blended (:func:`apply_blends`).
+    """All pieces of a program, in order, as a :class:`PieceList`, with its corners decided
+    (path-control modes, LinuxCNC 2.9's meaning, issue 13) and logged in ``corners``.
+
+    Runs of nearly collinear feed lines under G64 Q are merged first
+    (:func:`~nurbscnc.plan.naive.merge_collinear`; the ``segment`` column keeps the
+    program's indices). Breaks small enough to pass at speed are marked ``pass_after``
+    (:func:`_small_break`, every mode but at G61.1 block ends); G61.1 stops at the end of
+    every block (``stop_after``); G64 corners are blended within their tolerance
+    (:func:`apply_blends`: P, or the machine's path tolerance without P); G61 and G64 P0
+    stop at every other break (:func:`junction_caps`); :func:`corner_log` records it all.
 
     Lines and rapids are gathered into columns in one pass (no object per line); arcs and
     NURBS blocks become pieces one segment at a time. Dwells and pauses (:data:`STOP_KINDS`)
@@ -410,7 +421,7 @@ def segment_pieces(segments, machine: Machine, options: PlanOptions | None = Non
     """
     options = options or PlanOptions()
     lim = machine.limits
-    segs = segments if isinstance(segments, list | tuple) else list(segments)
+    segs, source = merge_collinear(segments)  # G64 Q
     n = len(segs)
     kinds = [s.kind for s in segs]
     straight = np.fromiter((k in ("line", "rapid") for k in kinds), dtype=bool, count=n)
@@ -502,7 +513,7 @@ def segment_pieces(segments, machine: Machine, options: PlanOptions | None = Non
         cols["dwell_after_s"][settle] += settle_time_s(machine)
         cols["stop_after"][settle] = True
     # G61.1 (exact stop): the tool stops at the end of every block, tangent or not.
-    seg_col = cols["segment"]
+    seg_col = cols["segment"] = source[cols["segment"]]  # indices of the program's segments
     block_end = (cols["blend_mm"][:-1] < 0.0) & (seg_col[:-1] != seg_col[1:])
     cols["stop_after"][:-1] |= block_end
     pieces = PieceList(**cols, objects=objects)
@@ -850,6 +861,7 @@ def _blended_rows(pieces: PieceList, c: _Corners, machine: Machine) -> PieceList
     cols["line"][dest] = pieces.line[src]
     cols["kappa_max_per_mm"][dest] = kappa
     cols["rapid"][dest] = pieces.rapid[src]
+    cols["blend_mm"][dest] = pieces.blend_mm[src]
     cols["tangent_start"][:, dest] = pieces.tangent_end[:, src - 1]
     cols["tangent_end"][:, dest] = pieces.tangent_start[:, src]
     ll_ok = ok[np.flatnonzero(c.lines)]
@@ -868,7 +880,8 @@ def _blended_rows(pieces: PieceList, c: _Corners, machine: Machine) -> PieceList
         obj_rows.append(int(first[i]))
         obj_pieces.append(Piece(Kind.PH, bl.ph, float(bl.ph.length_mm), cap,
                                 int(pieces.segment[i]), int(pieces.line[i]), 0.0, 1.0, 0.0,
-                                bl.kappa_max_per_mm, rapid=bool(pieces.rapid[i])))  # fmt: skip
+                                bl.kappa_max_per_mm, blend_mm=float(pieces.blend_mm[i]),
+                                rapid=bool(pieces.rapid[i])))  # fmt: skip
     _put_objects(cols, objects, obj_rows, obj_pieces)
 
     # Columnar PH rows: the old ones (moved) and the new line–line blends, in row order.
