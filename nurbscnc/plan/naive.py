@@ -3,7 +3,8 @@
 CAM output often writes a straight or nearly straight stretch as many short G1 moves. Under
 ``G64 P- Q-`` LinuxCNC collapses consecutive linear feed moves at the same feed into one
 line while every intermediate vertex stays within Q of it (Q defaults to P; ``G64`` alone
-and ``Q0`` turn the detector off; LinuxCNC 2.9 g-code docs, "G64"). :func:`merge_collinear`
+and ``Q0`` turn the detector off, and it only works in continuous mode; LinuxCNC 2.9 g-code
+docs, "G64", and its canonical layer, emccanon.cc). :func:`merge_collinear`
 does the same, greedily from the first move of a run: a move joins the current chain when
 every vertex of the chain (its interior end points) lies within Q of the segment from the
 chain's start to the move's end (exact point-to-segment distances: a vertex beyond either
@@ -18,9 +19,9 @@ from dataclasses import replace
 
 import numpy as np
 
-#: Most moves merged into one line: bounds the cost of the distance checks (O(chain) each)
-#: on pathological programs (a 100,000-move straight line becomes lines of ≤ 256 moves).
-MAX_CHAIN = 256
+#: Most moves merged into one line, as LinuxCNC (emccanon.cc ``linkable``: a chain of more
+#: than 100 points takes no more); it also bounds the cost of the distance checks.
+MAX_CHAIN = 101
 
 
 def _mergeable(seg) -> bool:
