@@ -13,6 +13,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from nurbscnc.geometry.blend import sub_ph
 from nurbscnc.geometry.ph import PHQuintic
@@ -346,3 +348,51 @@ def test_default_mode_blends_like_g64():
     _, b = run(pentagram(""))
     assert a.cycle_time_s == pytest.approx(b.cycle_time_s, rel=1e-12)
     np.testing.assert_array_equal(a.plan.pieces.corners.action, b.plan.pieces.corners.action)
+
+
+# --- property: random polylines and arcs, every mode -------------------------------------------
+
+
+@st.composite
+def _random_program(draw):
+    """3–8 moves (lines and tangent-or-not arcs) at a random feed, in a random mode."""
+    mode = draw(st.sampled_from(["G61", "G61.1", "G64", "G64 P0.005", "G64 P0.05"]))
+    feed = draw(st.integers(300, 3500))
+    lines = [f"G21 G90 G17 {mode}", "G0 X0 Y0", f"F{feed}"]
+    x = y = 0.0
+    for _ in range(draw(st.integers(3, 8))):
+        dx = draw(st.floats(-20, 20, allow_nan=False)).__round__(3)
+        dy = draw(st.floats(-20, 20, allow_nan=False)).__round__(3)
+        if abs(dx) + abs(dy) < 0.5:
+            continue
+        if draw(st.booleans()):
+            lines.append(f"G1 X{x + dx:.3f} Y{y + dy:.3f}")
+        else:
+            r = 0.5 * float(np.hypot(dx, dy)) * draw(st.floats(1.05, 3.0))
+            lines.append(f"G{draw(st.sampled_from([2, 3]))} X{x + dx:.3f} Y{y + dy:.3f} R{r:.4f}")
+        x, y = x + dx, y + dy
+    lines.append(f"G1 X{x + 5:.3f} Y{y:.3f}")
+    return mode, "\n".join(lines + ["M2"]) + "\n"
+
+
+@given(_random_program())
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+def test_random_programs_stay_within_their_tolerance_and_stop_where_logged(case):
+    """Every reference point within the mode's tolerance of the programmed path (exact
+    distances to lines, dense arcs), 0 for G61 / G61.1; the tool at rest (plan's junction
+    speed 0) at every corner logged STOP, and every corner logged once per junction."""
+    mode, text = case
+    prog, r = run(text)
+    tol = {"G61": 0.0, "G61.1": 0.0, "G64": LIM.path_tolerance_mm}.get(mode)
+    tol = float(mode.split("P")[1]) if tol is None else tol
+    d = distance_to_path(r.samples.points_mm, programmed_path(prog), reach=1.0)
+    assert d.max() <= tol + 2e-6  # + the dense arc polylines' sagitta bound (1e-6 mm)
+    log = r.plan.pieces.corners
+    if mode.startswith("G61"):
+        assert not np.any(log.action == CornerAction.BLEND)
+    stops = log.point_mm[log.action == CornerAction.STOP]
+    junction_points = r.plan.pieces.start_mm.T
+    speeds = r.plan.profile.junction_speeds_mm_s[:-1]
+    for p in stops:
+        at = np.flatnonzero(np.linalg.norm(junction_points - p, axis=1) <= 1e-9)
+        assert at.size and np.all(speeds[at] == 0.0)
