@@ -935,9 +935,12 @@ def corner_log(pieces: PieceList, tried: _Corners | None, machine: Machine,
         corner = stopped | ~regular | (turning > SMOOTH_JUNCTION_RAD)
         j = np.flatnonzero(corner)
         if j.size:
-            act = np.where(passable[j] & ~stopped[j], CornerAction.PASS, CornerAction.STOP)
-            why = _stop_reasons(pieces, j, turning[j], regular[j], machine, options)
-            why = np.where(act == CornerAction.PASS, CornerWhy.SMALL_BREAK, why)
+            passed = passable[j] & ~stopped[j]
+            act = np.where(passed, CornerAction.PASS, CornerAction.STOP)
+            why = np.full(j.size, CornerWhy.SMALL_BREAK, dtype=np.int8)
+            st = ~passed
+            why[st] = _stop_reasons(pieces, j[st], turning[j[st]], regular[j[st]], machine,
+                                    options)  # fmt: skip
             keys.append(j + 1)  # the row after the junction (a blend row's junctions are smooth)
             lines.append(pieces.line[j])
             points.append(pieces.end_mm[:, j].T)
@@ -983,7 +986,10 @@ def _stop_reasons(pieces: PieceList, j: np.ndarray, turning: np.ndarray, regular
     degenerate = (~regular | (turning > np.pi - MIN_REVERSAL_RAD) | (length[j] == 0.0)
                   | (length[j + 1] == 0.0))  # fmt: skip
     why[degenerate] = CornerWhy.NOT_BLENDABLE
-    failed = np.flatnonzero(why == CornerWhy.NO_BLEND_FITS)
+    # Two lines always lie in one plane: only corners with a curved piece can be 3-D turns.
+    objects = np.zeros(len(pieces), dtype=bool)
+    objects[list(pieces.objects)] = True
+    failed = np.flatnonzero((why == CornerWhy.NO_BLEND_FITS) & (objects[j] | objects[j + 1]))
     why[failed[_out_of_plane(pieces, j[failed])]] = CornerWhy.NOT_BLENDABLE
     why[stop_after[j]] = CornerWhy.DWELL_OR_PAUSE
     block_end = (stop_after[j] & (blend[j] < 0.0) & (seg[j] != seg[j + 1])
