@@ -396,3 +396,22 @@ def test_random_programs_stay_within_their_tolerance_and_stop_where_logged(case)
     for p in stops:
         at = np.flatnonzero(np.linalg.norm(junction_points - p, axis=1) <= 1e-9)
         assert at.size and np.all(speeds[at] == 0.0)
+
+
+def test_g64_without_p_uses_the_profiles_path_tolerance():
+    """limits.path_tolerance_um (default ε_max) bounds G64's blends: 5 µm here, measured on
+    the samples (exact distances to the programmed pentagram; the tips' distance to the
+    samples' polyline, which may cut inside the blend by a chord's sagitta)."""
+    assert LIM.path_tolerance_mm == LIM.contour_tolerance_mm
+    machine = load_machine(overrides={"limits.path_tolerance_um": 5.0})
+    assert machine.limits.path_tolerance_mm == pytest.approx(0.005, rel=1e-15)
+    prog = interpret_text(pentagram("G64"))
+    r = run_program(prog, machine, RunOptions(lookahead=OFF))
+    smp = r.samples.points_mm
+    assert distance_to_path(smp, programmed_path(prog), reach=1.0).max() <= 0.005
+    tips = np.array([s.end_mm for s in prog.segments if s.kind == "line"][:-1], float)
+    dev = vertex_deviation(smp, tips)  # the corner deviation: the tip's distance to the path
+    pieces = r.plan.pieces
+    kappa = pieces.kappa_max_per_mm[pieces.kind == 3].max()
+    h = np.linalg.norm(np.diff(smp, axis=0), axis=1).max()
+    assert np.all(dev >= 0.0045) and np.all(dev <= 0.005 + kappa * h * h / 8)
