@@ -272,7 +272,7 @@ class PieceList(Sequence):
     def kind_counts(self) -> dict[str, int]:
         """How many pieces of each kind (names of :data:`KIND_NAMES`, kinds present only)."""
         counts = np.bincount(self.kind, minlength=len(Kind))
-        rapid = int(np.count_nonzero(self.rapid))
+        rapid = int(np.count_nonzero(self.rapid & (self.kind == Kind.LINE)))  # blends: "ph"
         named = {name: 0 for name in KIND_NAMES}
         for code, c in enumerate(counts.tolist()):
             named[_NAME_OF[Kind(code)]] += c
