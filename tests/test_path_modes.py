@@ -415,3 +415,28 @@ def test_g64_without_p_uses_the_profiles_path_tolerance():
     kappa = pieces.kappa_max_per_mm[pieces.kind == 3].max()
     h = np.linalg.norm(np.diff(smp, axis=0), axis=1).max()
     assert np.all(dev >= 0.0045) and np.all(dev <= 0.005 + kappa * h * h / 8)
+
+
+def test_trimmed_ph_and_nurbs_pieces_are_the_same_curve():
+    """A blend trims PH and NURBS pieces too: the trimmed piece's points at arc length t are
+    the original's at s0 + t (PH: its own arc-length inversion; NURBS: the same curve)."""
+    from nurbscnc.geometry.nurbs import NurbsCurve
+    from nurbscnc.geometry.path import Kind
+    from nurbscnc.plan.pieces import Piece, _trimmed
+
+    ph = PHQuintic(np.array([1.0 + 0.2j, 0.7 - 0.4j, 0.3 + 1.1j]), 2.0 - 1.0j)
+    piece = Piece(Kind.PH, ph, float(ph.length_mm), 10.0, 0, 1)
+    s0, s1 = 0.1 * ph.length_mm, 0.7 * ph.length_mm
+    cut = _trimmed(piece, s0, s1)
+    assert cut.length_mm == pytest.approx(s1 - s0, rel=1e-9)
+    t = np.linspace(0.0, s1 - s0, 9)
+    np.testing.assert_allclose(cut.points_mm(t), piece.points_mm(s0 + t), atol=1e-9)
+    prog = interpret_text("G21 G17\nG1 X10 Y0 F600\nG5.2 X15 Y0 P1 L3\nX15 Y5 P1\n"
+                          "X15 Y10 P1\nG5.3\nM2\n")  # fmt: skip
+    curve = NurbsCurve.from_segment(prog.segments[1])
+    s = curve.arc_length(np.array([curve.u_start, curve.u_end]))
+    piece = Piece(Kind.NURBS, curve, float(s[1] - s[0]), 10.0, 1, 3, curve.u_start,
+                  curve.u_end, 0.0)  # fmt: skip
+    cut = _trimmed(piece, 0.5, piece.length_mm - 0.25)
+    t = np.linspace(0.0, cut.length_mm, 9)
+    np.testing.assert_allclose(cut.points_mm(t), piece.points_mm(0.5 + t), atol=1e-9)
