@@ -248,9 +248,9 @@ def test_g64_p_blends_corners_faster_within_p(shape):
     prog_b, blended = plans[f"G64 P{tol}"]
     corners = len(vertices) - 2
     blends = blended.pieces.kind_counts().get("ph", 0)
-    # Every square corner is blended; the star's 144° tips are not (their blend would be
-    # so tight that stopping is faster: blend_pays), its 72° inner corners are.
-    assert blends == (corners if shape == "square" else corners // 2 + 1)
+    # Every corner is blended: under G64 a blend is always used where one fits (LinuxCNC's
+    # rule, issue 13; the star's 144° tips used to stop, when a blend had to beat a stop).
+    assert blends == corners
     assert "ph" not in exact.pieces.kind_counts()
     # Blending saves the stops' time in the kinematics (dynamics off). Under the contour
     # check a stop is now shaped to the servo (planner v2, issue 13) and costs little, while
@@ -316,7 +316,9 @@ def test_hundred_thousand_segment_circle_keeps_the_feed():
     n, radius, feed = 100_000, 50.0, 50.0
     th = np.linspace(0.0, 2 * np.pi, n + 1)
     pts = np.column_stack([radius * np.cos(th), radius * np.sin(th)]).round(6)
-    lines = ["G21 G90 G17 G64 P0.005", f"G0 X{pts[0, 0]:.6f} Y{pts[0, 1]:.6f}", "F3000"]
+    # Q0: LinuxCNC's naive CAM detector (Q defaults to P since issue 13) would merge the
+    # chords into a few hundred lines; this test is about blending 100,000 of them.
+    lines = ["G21 G90 G17 G64 P0.005 Q0", f"G0 X{pts[0, 0]:.6f} Y{pts[0, 1]:.6f}", "F3000"]
     lines += [f"G1 X{x:.6f} Y{y:.6f}" for x, y in pts[1:]]
     prog = interpret_text("\n".join(lines + ["M2"]) + "\n")
     plan = plan_program(prog, MACHINE)
