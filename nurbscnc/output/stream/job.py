@@ -132,6 +132,7 @@ class Job:
         self.notes: list[str] = []
         self.sections = 0
         self.executed_before = 0  #: periods of the finished sections
+        self.last_line = 0  #: source line of the last period of the finished sections
         # The frames' count width must fit the fastest section: the plan's peak speed at the
         # highest override (a hold or a lower override only slows down).
         v_peak = float(np.max(plan.profile.piece_peak_speed_mm_s))
@@ -208,6 +209,8 @@ class Job:
         sec = self.section
         self.executed_before += executed_periods
         self.last_point = sec.track.points_mm[-1].copy()
+        if sec.program.periods:
+            self.last_line = int(sec.program.line[-1])
         self.section = None
         if sec.held:
             self.motion = resume_motion(self.plan, self.machine, float(sec.track.s_mm[-1]),
@@ -357,3 +360,44 @@ def program_stops(program, plan) -> list[Stop]:
         r = int(np.searchsorted(seg, i, side="left")) - 1
         out.append(Stop(float(ends[r]) if r >= 0 else 0.0, int(s.line), str(s.code)))
     return out
+
+
+def start_at_line(program, line: int):
+    """The program run from source line ``line`` on, as LinuxCNC's run-from-line: the whole
+    program was interpreted (so the segments from ``line`` on carry every modal state set
+    before it: units, offsets, plane, feed, tool), the segments before it are dropped, and a
+    lead-in brings the tool from the program's start to the start of line ``line`` safely.
+
+    Lead-in (decision; docs/protocol.md): up to Z_safe = the highest Z of the program's start,
+    of every point the program reaches before ``line`` and of the target (the clearance the
+    program itself used, so it is known to be free and inside the soft limits; +Z is up), a
+    rapid across at Z_safe, then down to the target: a rapid when the first move of ``line``
+    is a rapid, else at that move's programmed feed (never a rapid plunge into material).
+    Raises ValueError when no motion starts at or after ``line``.
+    """
+    from dataclasses import replace
+
+    from nurbscnc.geometry.segments import Line
+
+    segs = list(program.segments)
+    first = next((i for i, s in enumerate(segs) if s.line >= line), None)
+    moving = next((i for i in range(first, len(segs)) if segs[i].kind not in ("dwell", "pause")),
+                  None) if first is not None else None  # fmt: skip
+    if moving is None:
+        raise ValueError(f"--from-line {line}: no motion at or after line {line}")
+    target = np.asarray(segs[moving].start_mm, dtype=float)
+    here = np.asarray(program.start_mm, dtype=float)
+    before = [np.asarray(s.end_mm, dtype=float)[2] for s in segs[:first]]
+    z_safe = float(max([here[2], target[2], *before]))
+    feed = segs[moving].feed_mm_s
+    plunge_rapid = segs[moving].kind == "rapid" or not feed > 0.0
+    path = [here, np.array([here[0], here[1], z_safe]), np.array([target[0], target[1], z_safe]),
+            target]  # fmt: skip
+    lead = []
+    for i, (a, b) in enumerate(zip(path[:-1], path[1:])):
+        if np.allclose(a, b, rtol=0.0, atol=1e-12):
+            continue
+        rapid = i < 2 or plunge_rapid
+        lead.append(Line(tuple(a.tolist()), tuple(b.tolist()), 0.0 if rapid else float(feed),
+                         int(segs[moving].line), rapid=rapid))  # fmt: skip
+    return replace(program, segments=tuple(lead + segs[first:]))

@@ -157,7 +157,8 @@ class Motion:
 
     def time_of(self, s_mm) -> np.ndarray:
         """Profile times [s] at which the motion reaches global path lengths ``s_mm``."""
-        return time_at_length(self.profile, np.atleast_1d(np.asarray(s_mm, dtype=float)) - self.s0_mm)
+        s = np.atleast_1d(np.asarray(s_mm, dtype=float))
+        return time_at_length(self.profile, s - self.s0_mm)
 
 
 def _dwells(dwell_after_s: np.ndarray, profile: Profile) -> tuple[np.ndarray, np.ndarray]:
