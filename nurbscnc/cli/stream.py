@@ -256,8 +256,10 @@ def _progress_bar(enabled: bool, total: int, keys: bool = False):
     def tell(pr) -> None:
         waiting = "waiting:" in pr.note
         if waiting and pr.note != last["note"]:
-            err.print(f"stream: {pr.note.split('waiting: ')[1]} (line {pr.line}): the card "
-                      f"is at rest; {how}", markup=False, highlight=False)
+            why = pr.note.split("waiting: ")[1]
+            where = f" at line {pr.line}" if why == "feed hold" and pr.line else ""
+            err.print(f"stream: {why}{where}: the card is at rest; {how}", markup=False,
+                      highlight=False)  # fmt: skip
         last["note"] = pr.note if waiting else ""
 
     if not enabled:

@@ -289,7 +289,10 @@ class CardSim:
                 self.state = p.CardState.HOLD
             self._send(self.status(), now)
         elif isinstance(msg, p.SetPosition):
-            if streaming or len(msg.position_steps) != self.config.axes:
+            # Allowed outside a stream, and in a stream that has accepted nothing yet (a
+            # HELLO opened it: nothing can have moved).
+            fresh = self.state is p.CardState.FILLING and self.expected == 0 and not self._early
+            if (streaming and not fresh) or len(msg.position_steps) != self.config.axes:
                 self._nak(p.NakReason.STATE, now)
                 return
             self.position[:] = msg.position_steps

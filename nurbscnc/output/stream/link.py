@@ -475,6 +475,8 @@ class Link:
         if st.phase is Phase.HANDSHAKE:
             if isinstance(msg, p.Caps) and st.zero_sent_s == -math.inf:
                 self._on_caps_in_handshake(msg, now)
+            elif isinstance(msg, p.Nak) and st.zero_sent_s > -math.inf:
+                self._stop(StreamError("the card refused the new position (--zero)"), now)
             elif isinstance(msg, p.Status) and st.zero_sent_s > -math.inf:
                 start = tuple(int(v) for v in self.program.start_steps)
                 if tuple(msg.position_steps) == start:
