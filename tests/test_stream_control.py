@@ -378,3 +378,18 @@ def test_from_line_without_motion_after_it_is_an_error():
     prog, _, _ = planned(FROM_LINE)
     with pytest.raises(ValueError, match="no motion at or after line 99"):
         start_at_line(prog, 99)
+
+
+@pytest.mark.parametrize("chunk", [4096, 500])
+def test_untouched_job_executes_exactly_the_plain_runs_pulses(monkeypatch, chunk):
+    """At 100 % with no operator, section by section and chunk by chunk (the periods are
+    computed ahead of the link in chunks), the card runs the plain run's pulses."""
+    import nurbscnc.output.stream.job as job_module
+    from nurbscnc.output.stream.quantise import quantise
+
+    monkeypatch.setattr(job_module, "CHUNK_PERIODS", chunk)
+    prog, mach, run = planned(SQUARE)
+    r = simulate_job(Job(run.plan, prog, mach), CardConfig(speed=None))
+    assert r.completed and len(r.reports) == 1
+    plain = quantise(run.samples.points_mm, mach.steps.per_mm, T)
+    assert np.array_equal(r.card.executed_pulses(), plain.pulses)

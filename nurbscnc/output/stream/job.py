@@ -45,6 +45,9 @@ from nurbscnc.output.stream.quantise import PulseProgram, quantise
 
 #: Override limits [fraction] and the step of the + / - keys.
 OVERRIDE_MIN, OVERRIDE_STEP = 0.10, 0.10
+#: A section's periods are computed in chunks of this many, ahead of what the link frames, so
+#: a hold or an override change re-times a bounded number of periods however long it is.
+CHUNK_PERIODS = 4096
 #: Where a ramp may start, after the first period not yet framed [s] (searched in order).
 RAMP_OFFSETS_S = tuple(np.round(np.arange(0.0, 2.0, 0.025), 3))
 
@@ -91,8 +94,10 @@ class Section:
     track: Track
     program: PulseProgram
     tau_b: float
-    rate: object  #: the override law over the track's motion time (:class:`Rate`-like)
+    rate: Rate  #: the override law; its motion time is 0 at the track's ``rate_u0_s``
     ends_at: int | None  #: index of the stop it ends at (None: the program's end)
+    complete: bool = True  #: the track reaches the section's end (else more chunks follow)
+    rate_u0_s: float = 0.0
     held: bool = False  #: a feed hold replaced its end
     hold_wait_s: float = 0.0  #: a dwell interrupted by the hold: what is left of it [s]
     override_deferred: bool = False  #: no ramp fitted: the override waits for the next one
@@ -177,12 +182,13 @@ class Job:
         tau_b = (float(motion.time_of(self.stops[stop].s_mm)[0]) if stop is not None
                  else motion.duration_s)  # fmt: skip
         rate = Rate(self.override)
-        track = play(motion, self.tau, tau_b, rate, self.period_s,
-                     wait_s=motion.wait_s if self.tau == 0.0 else 0.0,
-                     dwell_at_start=self.first_section)  # fmt: skip
+        track, complete = play(motion, self.tau, tau_b, rate, self.period_s,
+                               wait_s=motion.wait_s if self.tau == 0.0 else 0.0,
+                               dwell_at_start=self.first_section,
+                               max_samples=CHUNK_PERIODS)  # fmt: skip
         if self.last_point is not None:
             track.points_mm[0] = self.last_point  # exactly where the card stands
-        self.section = Section(track, self._pulses(track), tau_b, rate, stop)
+        self.section = Section(track, self._pulses(track), tau_b, rate, stop, complete)
         self.first_section = False
         self.sections += 1
         return self.section.program
@@ -200,9 +206,39 @@ class Job:
             return i
         return None
 
-    def _pulses(self, track: Track) -> PulseProgram:
-        line = np.take(self.plan.pieces.line, track.piece)
-        return quantise(track.points_mm, self.steps_per_mm, self.period_s, line)
+    @property
+    def section_open(self) -> bool:
+        """The section's periods are not all computed yet: END must wait (``program_open``
+        of the link)."""
+        return self.section is not None and not self.section.complete
+
+    def _pulses(self, track: Track, k: int = 0, program: PulseProgram | None = None):
+        """The pulses of ``track``: those of ``program`` up to sample ``k``, then the track's
+        own from there (quantised alike: the same point gives the same steps)."""
+        line = np.take(self.plan.pieces.line, track.piece[k:])
+        tail = quantise(track.points_mm[k:], self.steps_per_mm, self.period_s, line)
+        if program is None or k == 0:
+            return tail
+        return PulseProgram(program.start_steps, tail.end_steps,
+                            np.concatenate([program.pulses[:k], tail.pulses]), self.period_s,
+                            np.concatenate([program.line[:k], tail.line]))  # fmt: skip
+
+    def _extend(self, link) -> None:
+        """The next chunk of the section, once the link has framed half of the last one."""
+        sec = self.section
+        tr = sec.track
+        k = len(tr) - 1
+        if sec.complete or link.sent_periods < k - CHUNK_PERIODS // 2:
+            return
+        tail, sec.complete = play(self.motion, float(tr.tau_s[k]), sec.tau_b, sec.rate,
+                                  self.period_s, wait_s=self._wait_at(tr, k),
+                                  u0=float(tr.u_s[k]) - sec.rate_u0_s,
+                                  max_samples=CHUNK_PERIODS)  # fmt: skip
+        tail.points_mm[0] = tr.points_mm[k]
+        sec.track = tr.then(tail)
+        sec.program = self._pulses(sec.track, k, sec.program)
+        link.program_open = not sec.complete
+        link.replace_unsent(sec.program)
 
     def section_done(self, executed_periods: int) -> None:
         """The card reported DONE at the section's end: wait there, or go on."""
@@ -234,12 +270,17 @@ class Job:
 
     # -- changes while a section streams -------------------------------------------------------
     def update(self, link) -> None:
-        """Apply a pending hold or override change to ``link`` (streaming this section)."""
+        """Apply a pending hold or override change to ``link`` (streaming this section), and
+        compute the section's next chunk when the link needs it."""
         sec = self.section
-        if sec is None or link.state.caps is None or sec.held or link.end_framed:
+        if sec is None:
+            return
+        link.program_open = not sec.complete
+        if link.state.caps is None or sec.held or link.end_framed:
             return  # END framed: a hold waits at the section's end, an override at the next
         if link.state.phase.value != "streaming":
             return
+        self._extend(link)
         if self.hold_wanted:
             self._apply_hold(link)
         elif self.override_wanted is not None and not sec.override_deferred:
@@ -253,7 +294,9 @@ class Job:
         stop = stop_track(self.motion, tr, k, self.a_max, self.j_max, self.period_s,
                           float(tr.s_mm[-1]))  # fmt: skip
         track = tr.head(k + 1).then(stop)
-        program = self._pulses(track)
+        program = self._pulses(track, k, sec.program)
+        sec.complete = True
+        link.program_open = False
         link.replace_unsent(program)
         sec.hold_wait_s = self._wait_at(tr, k)
         sec.track, sec.program, sec.held = track, program, True
@@ -267,11 +310,12 @@ class Job:
         k = link.sent_periods
         tr = sec.track
         u_k = float(tr.u_s[k])
-        r_k = float(sec.rate.r(np.array([u_k]))[0])
+        r_k = float(sec.rate.r(np.array([u_k - sec.rate_u0_s]))[0])
         if abs(r1 - r_k) < 1e-12:
             self.override, self.override_wanted = r1, None
             return
-        busy_until = sec.rate.end_u - u_k  # a ramp in progress finishes first
+        # A ramp in progress finishes first.
+        busy_until = sec.rate.end_u + sec.rate_u0_s - u_k if sec.rate.ramping else 0.0
         v_max = float(np.max(self.plan.profile.piece_peak_speed_mm_s))
         d0 = ramp_duration_s(r1 - r_k, v_max, self.a_max, self.j_max)
         wait = self._wait_at(tr, k)
@@ -280,17 +324,23 @@ class Job:
                 continue
             for d in (d0, 2 * d0, 4 * d0):
                 rate = Rate(r_k, r1, float(offset), d)
-                tail = play(self.motion, float(tr.tau_s[k]), sec.tau_b, rate, self.period_s,
-                            wait_s=wait)  # fmt: skip
-                window = tail.head(int(math.ceil((offset + d + wait) / self.period_s)) + 2)
+                # Check the ramp's periods only (cheap), then time the whole rest once.
+                tau_w = min(sec.tau_b, float(tr.tau_s[k] + rate.integral(offset + d)))
+                window, _ = play(self.motion, float(tr.tau_s[k]), tau_w, rate, self.period_s,
+                                 wait_s=wait)  # fmt: skip
                 if not ramp_fits(window, self.a_max, self.j_max):
                     continue
+                tail, complete = play(self.motion, float(tr.tau_s[k]), sec.tau_b, rate,
+                                      self.period_s, wait_s=wait,
+                                      max_samples=CHUNK_PERIODS)  # fmt: skip
                 tail.points_mm[0] = tr.points_mm[k]
                 track = tr.head(k + 1).then(tail)
-                program = self._pulses(track)
+                program = self._pulses(track, k, sec.program)
+                sec.complete = complete
+                link.program_open = not complete
                 link.replace_unsent(program)
                 sec.track, sec.program = track, program
-                sec.rate = ShiftedRate(rate, u_k)
+                sec.rate, sec.rate_u0_s = rate, u_k
                 self.override, self.override_wanted = r1, None
                 return
         self.notes.append(f"no smooth change of the feed override to {r1:.0%} fits the "
@@ -331,21 +381,6 @@ class Job:
         """JSON-able summary: sections, holds (latency), notes, the final override."""
         return {"sections": self.sections, "feed_override": round(self.override, 6),
                 "holds": [h.to_json() for h in self.holds], "notes": list(self.notes)}
-
-
-@dataclass(frozen=True)
-class ShiftedRate:
-    """A :class:`Rate` over a track whose motion time is ``u0_s`` ahead of the rate's own."""
-
-    rate: Rate
-    u0_s: float
-
-    @property
-    def end_u(self) -> float:
-        return self.rate.end_u + self.u0_s if self.rate.ramping else 0.0
-
-    def r(self, u):
-        return self.rate.r(np.asarray(u) - self.u0_s)
 
 
 def program_stops(program, plan) -> list[Stop]:

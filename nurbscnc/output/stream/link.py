@@ -224,6 +224,8 @@ class Link:
         self.zero = zero
         #: the most pulses per period a replacement may bring (sets the frame size)
         self.peak_pulses = program.peak_pulses
+        #: more periods will follow (:meth:`replace_unsent`): no END, no partial batch yet
+        self.program_open = False
         self.options = options or SenderOptions()
         self.byte_s = byte_s
         self.ignore_credit = ignore_credit
@@ -585,9 +587,11 @@ class Link:
     def _fill_window(self, now: float) -> None:
         """New frames, as far as the credit goes."""
         st = self.state
-        total = self.n_batches + 1  # the batches, then END
+        total = self.n_batches + (0 if self.program_open else 1)  # the batches, then END
         while st.nxt < total:
             periods = min(self.per_frame, self.program.periods - st.nxt * self.per_frame)
+            if self.program_open and periods < self.per_frame:
+                break  # a partial batch waits for the periods that follow it
             if not self.ignore_credit and st.in_flight + max(periods, 0) > st.credit:
                 break
             rec = st.window[st.nxt] = self._record(st.nxt)

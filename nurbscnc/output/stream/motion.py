@@ -238,32 +238,42 @@ class Track:
 
 
 def play(motion: Motion, tau_a: float, tau_b: float, rate: Rate, period_s: float,
-         wait_s: float = 0.0, dwell_at_start: bool = False) -> Track:  # fmt: skip
+         wait_s: float = 0.0, dwell_at_start: bool = False, u0: float = 0.0,
+         max_samples: int | None = None) -> tuple[Track, bool]:  # fmt: skip
     """Servo periods from profile time ``tau_a`` (sample 0) until the motion reaches
-    ``tau_b`` at rest (the last sample, clamped there) at the override ``rate`` (its ``u``
-    counts from sample 0). ``wait_s``: a dwell at the start; dwells inside (tau_a, tau_b] are
-    held for their full length (at ``tau_a`` too with ``dwell_at_start``)."""
+    ``tau_b`` at rest (the last sample, clamped there) at the override ``rate``, whose motion
+    time is ``u0`` at sample 0. ``wait_s``: a dwell at the start; dwells inside
+    (tau_a, tau_b] are held for their full length (at ``tau_a`` too with ``dwell_at_start``).
+
+    ``max_samples``: stop after that many samples (a chunk; the next one continues from the
+    last sample). Returns the track (its ``u_s`` from 0) and whether it reached ``tau_b``.
+    """
     lo = (motion.dwell_at_s >= tau_a) if dwell_at_start else (motion.dwell_at_s > tau_a)
     sel = lo & (motion.dwell_at_s <= tau_b)
-    d_tau = motion.dwell_at_s[sel] - tau_a
+    f0 = float(rate.integral(u0))
     d_len = motion.dwell_s[sel]
-    d_u = rate.inverse(d_tau) if d_tau.size else d_tau
+    d_u = rate.inverse(f0 + motion.dwell_at_s[sel] - tau_a) - u0 if sel.any() else d_len * 0
     if wait_s > 0.0:
         d_u = np.concatenate(([0.0], d_u))
         d_len = np.concatenate(([wait_s], d_len))
-    u_end = float(rate.inverse(max(tau_b - tau_a, 0.0))[0])
+    u_end = float(rate.inverse(f0 + max(tau_b - tau_a, 0.0))[0]) - u0
     total = u_end + float(d_len.sum())
     n = int(math.ceil(total / period_s - 1e-9)) + 1
+    complete = max_samples is None or n <= max_samples
+    n = n if complete else max_samples
     t = np.arange(n) * period_s
     u = np.minimum(wall_to_profile_time(t, d_u, d_len), u_end)
-    tau = np.minimum(tau_a + rate.integral(u), tau_b)
-    tau[-1] = tau_b
-    u[-1] = u_end
+    tau = np.minimum(tau_a + (rate.integral(u0 + u) - f0), tau_b)
+    tau[0] = tau_a
+    if complete:
+        tau[-1] = tau_b
+        u[-1] = u_end
     s, v, a, j, piece = motion.state(tau)
-    r, dr, ddr = rate.r(u), rate.dr(u), rate.ddr(u)
+    r, dr, ddr = rate.r(u0 + u), rate.dr(u0 + u), rate.ddr(u0 + u)
     # Inside a dwell the motion stands: s', s'', s''' are 0 there anyway.
-    return Track(tau, u, s, v * r, a * r * r + v * dr, j * r**3 + 3.0 * a * r * dr + v * ddr,
-                 piece, motion.points(s, piece))  # fmt: skip
+    track = Track(tau, u, s, v * r, a * r * r + v * dr, j * r**3 + 3.0 * a * r * dr + v * ddr,
+                  piece, motion.points(s, piece))  # fmt: skip
+    return track, complete
 
 
 def ramp_fits(track: Track, a_max: float, j_max: float) -> bool:

@@ -192,6 +192,7 @@ class Sender:
             link = Link(program, self.options, self.byte_s, ignore_credit=self._ignore_credit,
                         session_id=session, zero=zero and not reports)  # fmt: skip
             link.peak_pulses = job.peak_pulses
+            link.program_open = job.section_open
             if self._abort:
                 link.request_abort()
             self.link = link

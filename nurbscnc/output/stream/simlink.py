@@ -228,6 +228,7 @@ def simulate_job(job, config: CardConfig | None = None, *, options: SenderOption
             continue
         link = Link(program, options, byte_s, session_id=session, zero=zero and not reports)
         link.peak_pulses = job.peak_pulses
+        link.program_open = job.section_open
         t = line.drive(link, t, t + max_time_s, pending, run_event, hook=job.update)
         try:
             report = link.result()
