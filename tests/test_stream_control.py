@@ -143,7 +143,7 @@ def test_without_the_operator_the_stream_keeps_waiting():
 def test_stops_sit_where_the_program_stops():
     prog, _, run = planned(PAUSES)
     stops = program_stops(prog, run.plan)
-    # Z5 → Z0 (5 mm), then X10 (10 mm): M0 at 15 + 5 (the G0 from Z0 to Z5 first) ...
+    # G0 Z5 (5 mm), G1 Z0 (5), X10 (10): M0 at 20 mm; Y10: M1 at 30; X0: M60 at 40.
     lengths = np.cumsum([5.0, 5.0, 10.0, 10.0, 10.0, 10.0])
     assert [s.code for s in stops] == ["M0", "M1", "M60"]
     np.testing.assert_allclose([s.s_mm for s in stops], lengths[[2, 3, 4]], atol=1e-9)
@@ -219,6 +219,7 @@ def test_the_hold_never_runs_faster_than_the_plan_at_the_same_place():
         np.linalg.norm(np.diff(seg, axis=0), axis=1))])  # fmt: skip
     v_hold = np.diff(s_hold) / T
     v_plan_there = np.interp(s_hold[1:], s_plain, v_plain)
+    # (0.5 mm/s: the plan's speed is interpolated between its 1 ms samples by s)
     assert np.all(v_hold <= v_plan_there + 0.5)
 
 
