@@ -328,3 +328,23 @@ def test_feed_override_and_from_line_on_the_command_line(tmp_path):
         assert pts.exit_code == 2 and "need a program" in pts.stderr
     # 50 % doubles the motion time (the program's periods, to a period or two).
     assert abs(periods[50] - 2 * periods[100]) <= 2
+
+
+def test_ctrl_c_while_waiting_at_m0_exits_130_with_the_cards_position(tmp_path):
+    nc = tmp_path / "part.nc"
+    nc.write_text(PAUSED)
+    with card_on("pty", CardConfig(speed=None)) as (card, ep):
+        proc = subprocess.Popen([sys.executable, "-m", "nurbscnc", "stream", str(nc), "--port",
+                                 ep.path, "--quiet"], stderr=subprocess.PIPE,
+                                stdout=subprocess.PIPE, env={**os.environ,
+                                                             "PYTHONPATH": str(ROOT)})  # fmt: skip
+        try:
+            proc.stderr.readline()  # waiting at M0
+            proc.send_signal(signal.SIGINT)
+            _, stderr = proc.communicate(timeout=30.0)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+    assert proc.returncode == 130
+    assert b"interrupted while waiting (M0 at line 4); the card stands at [5000, 0, 0]" in stderr
+    assert card.position.tolist() == [5000, 0, 0]
