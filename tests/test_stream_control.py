@@ -17,6 +17,7 @@ from nurbscnc.machine.profile import default_profile_text, parse_machine
 from nurbscnc.output.stream import protocol as p
 from nurbscnc.output.stream.card import CardConfig, CardSim
 from nurbscnc.output.stream.job import Job, program_stops, start_at_line
+from nurbscnc.output.stream.link import SenderOptions
 from nurbscnc.output.stream.motion import phase_states, stop_phases
 from nurbscnc.output.stream.simlink import simulate_job
 from nurbscnc.pipeline import RunOptions, run_program
@@ -164,12 +165,13 @@ def test_stop_phases_are_the_shortest_stop_within_a_and_j(v0, a0):
         assert total == pytest.approx(scurve_duration_s(v0, 0.0, a_max, j_max), rel=1e-9)
 
 
-def hold_run(hold_at: float, resume_at: float):
+def hold_run(hold_at: float, resume_at: float, lead: int | None = None):
     prog, mach, run = planned(SQUARE, FINE)
     job = Job(run.plan, prog, mach)
     cfg = CardConfig(speed=1.0, max_pulses_per_period=32767)
-    r = simulate_job(job, cfg, events=[(hold_at, lambda j, c: j.request_hold()),
-                                       (resume_at, lambda j, c: j.resume())])  # fmt: skip
+    r = simulate_job(job, cfg, options=SenderOptions(lead_periods=lead),
+                     events=[(hold_at, lambda j, c: j.request_hold()),
+                             (resume_at, lambda j, c: j.resume())])  # fmt: skip
     return prog, mach, run, job, r
 
 
@@ -221,6 +223,16 @@ def test_the_hold_never_runs_faster_than_the_plan_at_the_same_place():
     v_plan_there = np.interp(s_hold[1:], s_plain, v_plain)
     # (0.02 mm/s: the card's 10 nm steps over 1 ms are 0.01 mm/s)
     assert np.all(v_hold <= v_plan_there + 0.02)
+
+
+def test_a_shorter_lead_makes_the_hold_act_sooner():
+    """With --lead 128 the sender keeps at most 128 periods queued: the deceleration begins
+    about 128 ms after the request instead of a whole buffer's 256."""
+    _, _, _, job, r = hold_run(0.5, 1.5, lead=128)
+    assert r.completed and r.card.alarm.name == "NONE"
+    (hold,) = job.holds
+    assert hold.latency_s == pytest.approx(0.128, abs=0.02)
+    assert r.card.max_fill <= 128
 
 
 def test_a_hold_after_the_last_frame_waits_at_the_end_of_the_section():

@@ -295,6 +295,10 @@ def _progress_bar(enabled: bool, total: int, keys: bool = False):
 @click.option("--timeout", "timeout_s", type=click.FloatRange(min=0.0, min_open=True),
               default=2.0, show_default=True,
               help="Seconds without an answer from the card before giving up.")
+@click.option("--lead", "lead", type=click.IntRange(min=1), default=None, metavar="PERIODS",
+              help="Keep at most this many periods queued ahead of the card's execution "
+                   "(default: its whole buffer): a feed hold acts that much sooner; at least "
+                   "half the card's buffer.")
 @click.option("--optional-stop", is_flag=True,
               help="Wait at M1 (optional stop) too; without it M1 is passed.")
 @click.option("--feed-override", type=click.IntRange(10, 100), default=100, show_default=True,
@@ -311,8 +315,8 @@ def _progress_bar(enabled: bool, total: int, keys: bool = False):
 @click.option("--json", "as_json", is_flag=True, help="Print the final report as JSON.")
 @planning_options
 @_handle_errors
-def stream(program, port, allow_url, baud, batch, timeout_s, optional_stop, feed_override, zero,
-           from_line, quiet, as_json, **settings):  # fmt: skip
+def stream(program, port, allow_url, baud, batch, timeout_s, lead, optional_stop, feed_override,
+           zero, from_line, quiet, as_json, **settings):  # fmt: skip
     """Stream PROGRAM (.nc/.ngc, or reference points .csv/.npz) to a pulse-train card.
 
     The whole program is planned and checked (soft limits, the card's pulse limit) before the
@@ -350,7 +354,7 @@ def stream(program, port, allow_url, baud, batch, timeout_s, optional_stop, feed
         else:
             total = int(round(job.plan.cycle_time_s / job.period_s / job.override))
         operator.attach_job(job)
-        options = SenderOptions(batch_periods=batch, timeout_s=timeout_s)
+        options = SenderOptions(batch_periods=batch, timeout_s=timeout_s, lead_periods=lead)
         ser = open_port(port, baud=baud, allow_url=allow_url, write_timeout_s=timeout_s,
                         read_wait_s=options.read_wait_s)  # fmt: skip
         show = not (quiet or as_json) and err.is_terminal

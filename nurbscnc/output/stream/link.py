@@ -68,10 +68,16 @@ class SenderOptions:
     read_wait_s: float = 0.001  #: port read timeout: the driver's idle tick
     gap_s: float = 0.05  #: a reply whose bytes stop arriving this long is abandoned
     link_baud: int | None = None  #: line rate for the queue model (None: the port's baudrate)
+    #: most periods queued ahead of the card's execution (buffered + in flight); None: its
+    #: whole buffer. Less makes a feed hold act sooner, at the cost of margin against an
+    #: underrun; at least half the card's buffer (where a card starts executing).
+    lead_periods: int | None = None
 
     def __post_init__(self) -> None:
         if self.batch_periods < 1:
             raise ConfigError(f"--batch must be >= 1 period, got {self.batch_periods}")
+        if self.lead_periods is not None and self.lead_periods < 1:
+            raise ConfigError(f"--lead must be >= 1 period, got {self.lead_periods}")
         if not self.timeout_s > 0.0:
             raise ConfigError(f"--timeout must be > 0 s, got {self.timeout_s}")
 
@@ -438,6 +444,11 @@ class Link:
         start = tuple(int(v) for v in self.program.start_steps)
         try:
             check_caps(caps, self.program, position=not self.zero)
+            lead = self.options.lead_periods
+            if lead is not None and lead < caps.buffer_periods // 2:
+                raise StreamError(f"--lead {lead} is less than half the card's buffer of "
+                                  f"{caps.buffer_periods} periods: the card would wait for "
+                                  "periods the sender holds back")  # fmt: skip
             if self.zero and tuple(caps.position_steps) != start and caps.version < 3:
                 raise StreamError(f"--zero needs a card speaking protocol version 3; it "
                                   f"speaks {caps.version}")  # fmt: skip
@@ -457,7 +468,7 @@ class Link:
         self.per_frame = max(1, min(self.options.batch_periods,
                                     p.max_batch_periods(st.caps.axes, width)))  # fmt: skip
         self._layout()
-        st.credit = st.caps.buffer_periods
+        st.credit = self._credit(st.caps.buffer_periods)
         st.phase = Phase.STREAMING
         st.last_rx_s = st.last_progress_s = now
 
@@ -527,7 +538,15 @@ class Link:
                 st.in_flight -= st.window.pop(seq).periods
             st.base += ahead
             st.last_progress_s = now
-        st.credit = msg.free_periods
+        st.credit = self._credit(msg.free_periods)
+
+    def _credit(self, free: int) -> int:
+        """Periods the sender may have in flight: the card's free buffer, less what the lead
+        limit keeps back (buffered = buffer − free; buffered + in flight ≤ lead)."""
+        lead = self.options.lead_periods
+        if lead is None or self.state.caps is None:
+            return free
+        return max(0, min(free, lead - (self.state.caps.buffer_periods - free)))
 
     def _on_nak(self, msg: p.Nak, now: float) -> None:
         st = self.state
