@@ -18,7 +18,10 @@ stream (HELLO … END, the card DONE at rest at its end):
   the earliest quintic ramp of the override that keeps |a| ≤ A and |j| ≤ J on every period
   (:func:`~.motion.ramp_fits`); none within the section: it applies from the next section.
 
-Every section's periods are quantised to pulses (:func:`~.quantise.quantise`) with the same
+A section's periods are computed in chunks (:data:`CHUNK_PERIODS`) ahead of what the link
+frames (the link holds END back meanwhile: ``Link.program_open``), so a hold or an override
+change re-times a bounded number of periods however long the section. Every section's
+periods are quantised to pulses (:func:`~.quantise.quantise`) with the same
 rounding, and each section starts at the exact point where the previous one ended, so the
 card's position is continuous across sections.
 """
@@ -107,18 +110,17 @@ class Job:
     """A planned program streamed as a controller; see the module docstring.
 
     ``plan`` a :class:`~nurbscnc.plan.lookahead.Plan` of ``program``; ``machine`` its
-    machine; ``override`` the starting feed override (fraction, 0.1–``max_override``).
+    machine; ``override`` the starting feed override (fraction, 0.1–1: above 1 time scaling
+    would exceed the limits the plan respected).
     """
 
     def __init__(self, plan, program, machine, *, optional_stop: bool = False,
-                 override: float = 1.0, max_override: float = 1.0,
-                 lookahead_pieces: int | None = None):  # fmt: skip
+                 override: float = 1.0, lookahead_pieces: int | None = None):  # fmt: skip
         self.plan, self.machine = plan, machine
         self.period_s = machine.servo.period_s
         self.steps_per_mm = machine.steps.per_mm
         self.a_max = machine.limits.a_max_mm_s2
         self.j_max = machine.limits.j_max_mm_s3
-        self.max_override = max_override
         self.lookahead_pieces = lookahead_pieces
         self.optional_stop = optional_stop
         self.override = self._clamp(override)
@@ -138,10 +140,10 @@ class Job:
         self.sections = 0
         self.executed_before = 0  #: periods of the finished sections
         self.last_line = 0  #: source line of the last period of the finished sections
-        # The frames' count width must fit the fastest section: the plan's peak speed at the
-        # highest override (a hold or a lower override only slows down).
+        # The frames' count width must fit the fastest section: the plan's peak speed (a hold
+        # or an override ≤ 100 % only slows down; +2: rounding, a re-planned rest).
         v_peak = float(np.max(plan.profile.piece_peak_speed_mm_s))
-        self.peak_pulses = int(math.ceil(v_peak * max(max_override, 1.0) * self.period_s
+        self.peak_pulses = int(math.ceil(v_peak * self.period_s
                                          * float(np.max(self.steps_per_mm)))) + 2  # fmt: skip
 
     # -- requests (plain attribute writes: safe from a signal handler) -----------------------
@@ -164,7 +166,7 @@ class Job:
         return self.override_wanted
 
     def _clamp(self, fraction: float) -> float:
-        return float(min(max(fraction, OVERRIDE_MIN), self.max_override))
+        return float(min(max(fraction, OVERRIDE_MIN), 1.0))
 
     # -- sections ----------------------------------------------------------------------------
     def next_section(self) -> PulseProgram | None:
