@@ -406,3 +406,9 @@ def test_untouched_job_executes_exactly_the_plain_runs_pulses(monkeypatch, chunk
     assert r.completed and len(r.reports) == 1
     plain = quantise(run.samples.points_mm, mach.steps.per_mm, T)
     assert np.array_equal(r.card.executed_pulses(), plain.pulses)
+
+
+def test_continue_during_the_deceleration_goes_on_once_the_card_stands():
+    _, _, run, job, r = hold_run(0.5, 0.6)  # continue 100 ms after the hold, still queued
+    assert r.completed and r.waits == [] and len(job.holds) == 1 and len(r.reports) == 2
+    assert np.array_equal(r.card.position, np.rint(run.samples.points_mm[-1] * 1e5).astype(int))

@@ -1,4 +1,4 @@
-"""Card protocol codec (version 3 = 2 + SET_POSITION): CRC-8 and CRC-32 vectors, frame layout, round trips, resync.
+"""Card protocol codec (version 3 = 2 + SET_POSITION): CRC vectors, frames, round trips, resync.
 
 The CRC oracles are independent of the codec: bit-by-bit implementations written here from the
 algorithms' definitions, the CRC catalogue's check values, and ``zlib.crc32`` (the codec uses

@@ -134,6 +134,7 @@ class Job:
         self.finished = False
         self.last_point: np.ndarray | None = None
         self.hold_wanted = False
+        self.resume_early = False  #: continue asked while a hold was still decelerating
         self.override_wanted: float | None = None
         self.holds: list[HoldRecord] = []
         self.notes: list[str] = []
@@ -152,8 +153,10 @@ class Job:
             self.hold_wanted = True
 
     def resume(self) -> None:
-        """Continue after a program stop or a feed hold (or cancel a hold not yet applied)."""
+        """Continue after a program stop or a feed hold (or cancel a hold not yet applied;
+        during a hold's deceleration: go on as soon as the card stands)."""
         self.hold_wanted = False
+        self.resume_early = self.section is not None and self.section.held
         self.waiting = None
 
     def set_override(self, fraction: float) -> None:
@@ -254,8 +257,8 @@ class Job:
             self.motion = resume_motion(self.plan, self.machine, float(sec.track.s_mm[-1]),
                                         sec.hold_wait_s, self.lookahead_pieces)  # fmt: skip
             self.tau = 0.0
-            self.waiting = "feed hold"
-            self.hold_wanted = False
+            self.waiting = None if self.resume_early else "feed hold"
+            self.hold_wanted = self.resume_early = False
         elif sec.ends_at is not None:
             self.tau = sec.tau_b
             self.next_stop = sec.ends_at + 1
