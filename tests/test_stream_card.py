@@ -40,7 +40,7 @@ def test_hello_reports_capabilities():
                               position_steps=(1, -2, 3)), seed=5)  # fmt: skip
     (caps,) = send(card, p.Hello())
     assert (caps.version, caps.axes, caps.max_pulses_per_period, caps.buffer_periods,
-            caps.period_us, caps.position_steps) == (2, 3, 50, 100, 2000, (1, -2, 3))  # fmt: skip
+            caps.period_us, caps.position_steps) == (3, 3, 50, 100, 2000, (1, -2, 3))  # fmt: skip
     assert caps.session_id == card.session_id
 
 

@@ -204,19 +204,20 @@ def test_card_sim_listens_on_loopback_only():
     assert result.exit_code == 2 and "loopback" in result.stderr
 
 
-def test_sigusr1_while_planning_is_kept_and_holds_the_card(tmp_path):
+def test_sigusr1_while_planning_is_kept_and_the_stream_waits_at_the_start(tmp_path):
     """The operator presses hold while `stream` still plans: the command does not die (the
-    signal's default action); the card fills but holds until SIGUSR2, then the stream ends."""
+    signal's default action); it waits at the start, the card untouched, until SIGUSR2, then
+    the stream ends."""
     nc = tmp_path / "part.nc"
     nc.write_text(GOOD)
     code = (
         "import os, signal, sys\n"
         "import nurbscnc.cli.stream as s\n"
-        "plan = s.load_pulse_program\n"
+        "plan = s.plan_job\n"
         "def planning(*a, **k):\n"
         "    os.kill(os.getpid(), signal.SIGUSR1)  # the hold arrives while planning\n"
         "    return plan(*a, **k)\n"
-        "s.load_pulse_program = planning\n"
+        "s.plan_job = planning\n"
         "from nurbscnc.cli.main import main\n"
         "main(prog_name='nurbscnc')\n"
     )
@@ -226,20 +227,19 @@ def test_sigusr1_while_planning_is_kept_and_holds_the_card(tmp_path):
                                  "--quiet"], stderr=subprocess.PIPE, stdout=subprocess.PIPE,
                                 env=env)  # fmt: skip
         try:
-            deadline = time.monotonic() + 20.0
-            while card.holds_received == 0 and time.monotonic() < deadline \
-                    and proc.poll() is None:  # fmt: skip
-                time.sleep(0.02)
+            first = proc.stderr.readline()
+            waiting = proc.stderr.readline()  # printed once the stream waits
             time.sleep(0.2)
-            held = (card.state.name, card.executed_periods)
+            untouched = (card.frames_received, card.executed_periods)
             proc.send_signal(signal.SIGUSR2)
             out, stderr = proc.communicate(timeout=20.0)
         finally:
             if proc.poll() is None:
                 proc.kill()
     assert proc.returncode == 0, stderr.decode()
-    assert b"feed hold asked while planning" in stderr
-    assert held == ("HOLD", 0)
+    assert b"feed hold asked while planning" in first
+    assert b"feed hold" in waiting and b"SIGUSR2 continues" in waiting
+    assert untouched == (0, 0)
     assert card.state.name == "DONE" and card.position.tolist() == [8000, 0, 0]
 
 
@@ -253,3 +253,98 @@ def test_unwritable_card_log_and_directory_program_exit_3(tmp_path):
     result = CliRunner().invoke(stream, [str(tmp_path), "--port", "/dev/null"])
     assert result.exit_code == 3, result.output
     assert "Is a directory" in result.stderr
+
+
+PAUSED = "G21 G90 G17\nG0 X0 Y0\nG1 X5 F3000\nM0\nG1 X8\nM2\n"  # M0 at X5 (line 4)
+
+
+def test_m0_waits_at_rest_until_sigusr2(tmp_path):
+    """At M0 the card stops (DONE at X5: its buffer drained), the command says so and waits;
+    SIGUSR2 continues to the end."""
+    nc = tmp_path / "part.nc"
+    nc.write_text(PAUSED)
+    with card_on("pty", CardConfig(speed=None)) as (card, ep):
+        proc = subprocess.Popen([sys.executable, "-m", "nurbscnc", "stream", str(nc), "--port",
+                                 ep.path, "--quiet"], stderr=subprocess.PIPE,
+                                stdout=subprocess.PIPE, env={**os.environ,
+                                                             "PYTHONPATH": str(ROOT)})  # fmt: skip
+        try:
+            waiting = proc.stderr.readline()
+            time.sleep(0.3)
+            at_stop = (card.state.name, card.position.tolist())
+            proc.send_signal(signal.SIGUSR2)
+            out, stderr = proc.communicate(timeout=30.0)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+    assert proc.returncode == 0, stderr.decode()
+    assert waiting.decode() == "stream: M0 at line 4: the card is at rest; SIGUSR2 continues\n"
+    assert at_stop == ("DONE", [5000, 0, 0])
+    assert b"in 2 part(s)" in out and card.position.tolist() == [8000, 0, 0]
+
+
+def test_a_second_stream_needs_card_position_or_zero_not_a_restart(tmp_path):
+    from nurbscnc.cli.stream import card_position
+
+    nc = tmp_path / "part.nc"
+    nc.write_text(GOOD)
+    with card_on("pty", CardConfig(speed=None)) as (card, ep):
+        assert run_stream([nc, "--port", ep.path, "--quiet"]).exit_code == 0
+        again = run_stream([nc, "--port", ep.path, "--quiet"])
+        assert again.exit_code == 3 and "the card is at [8000, 0, 0] steps" in again.stderr
+        read = CliRunner().invoke(card_position, ["--port", ep.path])
+        # (the refused stream's HELLO opened a stream that accepted nothing: FILLING)
+        assert read.exit_code == 0
+        assert read.stdout == "card: FILLING, position [8000, 0, 0] steps\n"
+        zeroed = run_stream([nc, "--port", ep.path, "--quiet", "--zero", "--json"])
+        assert zeroed.exit_code == 0, zeroed.output
+        assert json.loads(zeroed.stdout)["final_position_steps"] == [8000, 0, 0]
+        assert card.positions_set == 1
+        moved = CliRunner().invoke(card_position, ["--port", ep.path, "--set", "0,0,0", "--json"])
+        assert json.loads(moved.stdout) == {"ok": True, "state": "DONE",
+                                            "position_steps": [0, 0, 0]}  # fmt: skip
+        assert run_stream([nc, "--port", ep.path, "--quiet"]).exit_code == 0
+        assert card.position.tolist() == [8000, 0, 0] and card.positions_set == 2
+
+
+def test_feed_override_and_from_line_on_the_command_line(tmp_path):
+    nc = tmp_path / "part.nc"
+    nc.write_text(GOOD)
+    periods = {}
+    with card_on("pty", CardConfig(speed=None)) as (card, ep):
+        for pct in (100, 50):
+            res = run_stream([nc, "--port", ep.path, "--json", "--zero", "--feed-override", pct])
+            assert res.exit_code == 0, res.output
+            body = json.loads(res.stdout)
+            assert body["feed_override"] == pct / 100 and body["sections"] == 1
+            periods[pct] = body["executed_periods"]
+        # Line 4 (G1 X8 Y0) starts at X5 Y2: the lead-in from X0 Y0 (Z stays 0: the highest Z)
+        res = run_stream([nc, "--port", ep.path, "--json", "--zero", "--from-line", "4"])
+        assert res.exit_code == 0, res.output
+        assert card.position.tolist() == [8000, 0, 0]
+        bad = run_stream([nc, "--port", ep.path, "--from-line", "99"])
+        assert bad.exit_code == 2 and "no motion at or after line 99" in bad.stderr
+        pts = run_stream([tmp_path / "x.csv", "--port", ep.path, "--feed-override", "50"])
+        assert pts.exit_code == 2 and "need a program" in pts.stderr
+    # 50 % doubles the motion time (the program's periods, to a period or two).
+    assert abs(periods[50] - 2 * periods[100]) <= 2
+
+
+def test_ctrl_c_while_waiting_at_m0_exits_130_with_the_cards_position(tmp_path):
+    nc = tmp_path / "part.nc"
+    nc.write_text(PAUSED)
+    with card_on("pty", CardConfig(speed=None)) as (card, ep):
+        proc = subprocess.Popen([sys.executable, "-m", "nurbscnc", "stream", str(nc), "--port",
+                                 ep.path, "--quiet"], stderr=subprocess.PIPE,
+                                stdout=subprocess.PIPE, env={**os.environ,
+                                                             "PYTHONPATH": str(ROOT)})  # fmt: skip
+        try:
+            proc.stderr.readline()  # waiting at M0
+            proc.send_signal(signal.SIGINT)
+            _, stderr = proc.communicate(timeout=30.0)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+    assert proc.returncode == 130
+    assert b"interrupted while waiting (M0 at line 4); the card stands at [5000, 0, 0]" in stderr
+    assert card.position.tolist() == [5000, 0, 0]

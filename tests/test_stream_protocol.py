@@ -1,4 +1,4 @@
-"""Card protocol codec (version 2): CRC-8 and CRC-32 vectors, frame layout, round trips, resync.
+"""Card protocol codec (version 3 = 2 + SET_POSITION): CRC vectors, frames, round trips, resync.
 
 The CRC oracles are independent of the codec: bit-by-bit implementations written here from the
 algorithms' definitions, the CRC catalogue's check values, and ``zlib.crc32`` (the codec uses
@@ -100,6 +100,7 @@ messages = st.one_of(
     st.builds(p.Caps, u8, st.integers(1, 15), u16, u16, st.integers(0, 2**32 - 1),
               st.integers(0, 2**32 - 1), u8, positions),
     st.builds(p.End, st.integers(0, 2**32 - 1), positions),
+    st.builds(p.SetPosition, positions),
     st.sampled_from([p.StatusRequest(), p.Hold(), p.Resume(), p.Abort()]),
     st.builds(p.Ack, u16, u16),
     st.builds(p.Nak, u16, u16, u8),

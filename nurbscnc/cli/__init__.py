@@ -13,5 +13,6 @@ import nurbscnc.cli.stream as _stream
 
 _main.main.add_command(_stream.stream)
 _main.main.add_command(_stream.card_sim)
+_main.main.add_command(_stream.card_position)
 _main.main.add_command(_profile.profile)
 _main.main.add_command(_identify.identify)

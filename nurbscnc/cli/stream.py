@@ -88,22 +88,68 @@ def load_pulse_program(path: str, machine=None, overrides=(), **settings):
     return pulses, mach
 
 
-class _Operator:
-    """What the operator asks by signal: SIGUSR1 feed hold, SIGUSR2 resume, SIGINT/SIGTERM
-    abort (the last two only once the port is open; before, they end the command as usual).
+def plan_job(path: str, machine=None, overrides=(), from_line: int | None = None,
+             optional_stop: bool = False, override: float = 1.0, **settings):
+    """Plan program ``path`` (from ``from_line`` on: :func:`start_at_line`) as a stream
+    :class:`~nurbscnc.output.stream.job.Job`. Returns ``(job, machine)``; everything that can
+    be wrong with the input raises here, before any port is touched (the pulse limit too).
+    A baseline ``--algorithm`` has no plan to re-plan from: None is returned for the job
+    then."""
+    from nurbscnc.cli.main import load_machine_cli, load_program
+    from nurbscnc.cli.options import run_options
+    from nurbscnc.errors import ConfigError
+    from nurbscnc.output.stream.job import Job, start_at_line
+    from nurbscnc.output.stream.quantise import check_pulse_limit, quantise
+    from nurbscnc.pipeline import run_program
 
-    A hold or resume asked while the program is still being planned is kept, with a message,
-    and given to the sender when the stream opens: the card then fills its buffer but does not
-    move until SIGUSR2.
+    keys = ("algorithm", "corner_feed", "dynamics", "blend_tolerance", "interpolator",
+            "lookahead")  # fmt: skip
+    options = run_options(**{k: settings[k] for k in keys if k in settings})
+    mach = load_machine_cli(machine, overrides)
+    prog = load_program(path, not settings.get("no_block_delete", False),
+                        settings.get("tool_table"), settings.get("subroutine_path", ()))
+    if from_line is not None:
+        try:
+            prog = start_at_line(prog, from_line)
+        except ValueError as exc:
+            raise ConfigError(str(exc)) from None
+    run = run_program(prog, mach, options)
+    samples = run.samples
+    # The plan at 100 %: a lower override and a hold only slow down.
+    check_pulse_limit(quantise(samples.points_mm, mach.steps.per_mm, mach.servo.period_s,
+                               samples.line), mach.steps.max_pulses_per_period)  # fmt: skip
+    if run.plan is None:
+        return None, mach
+    job = Job(run.plan, prog, mach, optional_stop=optional_stop, override=override,
+              lookahead_pieces=options.lookahead.lookahead_pieces)  # fmt: skip
+    return job, mach
+
+
+class _Operator:
+    """What the operator asks, by signal or key: SIGUSR1 / space feed hold, SIGUSR2 / Enter
+    continue (after a program stop or a hold), + / - feed override, SIGINT/SIGTERM abort (the
+    last two only once the port is open; before, they end the command as usual).
+
+    With a :class:`Job` (a planned program) hold and continue go to the job (a decelerating
+    hold along the path); for a point file to the card (HOLD/RESUME: the card stops at the
+    next period). A hold asked while the program is still being planned is kept, with a
+    message: the stream then waits at the start until continued.
     """
 
     def __init__(self) -> None:
         self.sender = None
+        self.job = None
         self.hold: bool | None = None  # asked before the sender existed
+
+    def attach_job(self, job) -> None:
+        self.job = job
+        if job is not None and self.hold:
+            job.request_hold()
+            self.hold = None
 
     def attach(self, sender) -> None:
         self.sender = sender
-        if self.hold is not None:
+        if self.hold is not None and self.job is None:
             (sender.request_hold if self.hold else sender.request_resume)()
 
     def on_hold(self, *_args) -> None:
@@ -115,13 +161,24 @@ class _Operator:
     def on_abort(self, *_args) -> None:
         self.sender.request_abort()
 
+    def on_key(self, key: bytes) -> None:
+        if key in (b" ", b"h"):
+            self._feed(True)
+        elif key in (b"\n", b"\r", b"c"):
+            self._feed(False)
+        elif key in (b"+", b"=", b"-", b"_") and self.job is not None:
+            self.job.step_override(1 if key in (b"+", b"=") else -1)
+
     def _feed(self, hold: bool) -> None:
+        if self.job is not None:
+            self.job.request_hold() if hold else self.job.resume()
+            return
         if self.sender is not None:
             (self.sender.request_hold if hold else self.sender.request_resume)()
             return
         self.hold = hold
-        text = ("feed hold asked while planning: the card will hold as soon as the stream "
-                "opens (SIGUSR2 resumes)\n" if hold else
+        text = ("feed hold asked while planning: the stream will wait at the start "
+                "(SIGUSR2 continues)\n" if hold else
                 "resume asked while planning: no feed hold when the stream opens\n")  # fmt: skip
         # os.write, not print: a signal handler may interrupt a print in progress.
         with contextlib.suppress(OSError):
@@ -149,23 +206,77 @@ def _signals(operator: _Operator, names: tuple[str, ...]):
 
 
 @contextlib.contextmanager
-def _progress_bar(enabled: bool, total: int):
-    """A rich progress bar on stderr; yields a callback for :class:`Sender` (or None)."""
+def _keys(operator: _Operator, enabled: bool):
+    """Read single keys from a terminal on stdin (cbreak mode, restored after) in a thread."""
     if not enabled:
-        yield None
+        yield
+        return
+    import select
+    import termios
+    import tty
+
+    fd = sys.stdin.fileno()
+    try:
+        saved = termios.tcgetattr(fd)
+        tty.setcbreak(fd)
+    except (termios.error, OSError):
+        yield
+        return
+    stop = threading.Event()
+
+    def read_keys() -> None:
+        while not stop.is_set():
+            ready, _, _ = select.select([fd], [], [], 0.1)
+            if ready:
+                key = os.read(fd, 1)
+                if not key:
+                    return
+                operator.on_key(key)
+
+    thread = threading.Thread(target=read_keys, daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        thread.join(1.0)
+        with contextlib.suppress(termios.error, OSError):
+            termios.tcsetattr(fd, termios.TCSADRAIN, saved)
+
+
+@contextlib.contextmanager
+def _progress_bar(enabled: bool, total: int, keys: bool = False):
+    """A rich progress line on stderr; yields a callback for :class:`Sender`. Without it, a
+    message still tells when the stream waits for the operator (and why)."""
+    from nurbscnc.cli.main import err
+
+    how = "Enter or SIGUSR2 continues" if keys else "SIGUSR2 continues"
+    last = {"note": ""}
+
+    def tell(pr) -> None:
+        waiting = "waiting:" in pr.note
+        if waiting and pr.note != last["note"]:
+            why = pr.note.split("waiting: ")[1]
+            where = f" at line {pr.line}" if why == "feed hold" and pr.line else ""
+            err.print(f"stream: {why}{where}: the card is at rest; {how}", markup=False,
+                      highlight=False)  # fmt: skip
+        last["note"] = pr.note if waiting else ""
+
+    if not enabled:
+        yield tell
         return
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
-
-    from nurbscnc.cli.main import err
 
     with Progress(TextColumn("streaming"), BarColumn(), TextColumn("{task.fields[info]}"),
                   TimeElapsedColumn(), console=err, transient=False) as bar:  # fmt: skip
         task = bar.add_task("stream", total=max(total, 1), info="")
 
         def update(pr) -> None:
-            info = (f"sent {pr.sent} · acked {pr.acked} · executed {pr.executed}/{pr.periods}"
-                    f" · buffer {pr.fill}/{pr.buffer}")  # fmt: skip
-            bar.update(task, completed=pr.executed, info=info)
+            tell(pr)
+            info = (f"line {pr.line} · executed {pr.executed} · buffer {pr.fill}/{pr.buffer}"
+                    + (f" · {pr.note}" if pr.note else ""))  # fmt: skip
+            bar.update(task, completed=pr.executed, total=max(pr.periods, total, 1),
+                       info=info.replace("[", "\\["))  # fmt: skip
 
         yield update
 
@@ -184,50 +295,142 @@ def _progress_bar(enabled: bool, total: int):
 @click.option("--timeout", "timeout_s", type=click.FloatRange(min=0.0, min_open=True),
               default=2.0, show_default=True,
               help="Seconds without an answer from the card before giving up.")
+@click.option("--lead", "lead", type=click.IntRange(min=1), default=None, metavar="PERIODS",
+              help="Keep at most this many periods queued ahead of the card's execution "
+                   "(default: its whole buffer): a feed hold acts that much sooner; at least "
+                   "half the card's buffer.")
+@click.option("--optional-stop", is_flag=True,
+              help="Wait at M1 (optional stop) too; without it M1 is passed.")
+@click.option("--feed-override", type=click.IntRange(10, 100), default=100, show_default=True,
+              metavar="PERCENT",
+              help="Feed override at the start [%]; + / - keys change it by 10 % while "
+                   "streaming (10-100 %).")
+@click.option("--zero", is_flag=True,
+              help="Declare that the card stands at the program's start (sets the card's "
+                   "position; protocol version 3) instead of refusing a card elsewhere.")
+@click.option("--from-line", type=click.IntRange(min=1), default=None, metavar="N",
+              help="Start at source line N (run from line): the program is interpreted "
+                   "whole, the tool goes up to a safe Z, across, and down to line N's start.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @click.option("--json", "as_json", is_flag=True, help="Print the final report as JSON.")
 @planning_options
 @_handle_errors
-def stream(program, port, allow_url, baud, batch, timeout_s, quiet, as_json, **settings):
+def stream(program, port, allow_url, baud, batch, timeout_s, lead, optional_stop, feed_override,
+           zero, from_line, quiet, as_json, **settings):  # fmt: skip
     """Stream PROGRAM (.nc/.ngc, or reference points .csv/.npz) to a pulse-train card.
 
     The whole program is planned and checked (soft limits, the card's pulse limit) before the
-    port is opened. Ctrl-C or SIGTERM aborts the card at once and exits 130; SIGUSR1 / SIGUSR2
-    hold / resume the feed (a hold asked while planning applies when the stream opens). Exit 0
-    only when the card reports DONE at the program's end position.
+    port is opened. At M0 / M60 (and M1 with --optional-stop) the card stops at rest and the
+    stream waits: Enter (on a terminal) or SIGUSR2 continues. SIGUSR1 or the space key is a
+    feed hold: the tool decelerates along the path within the acceleration and jerk limits,
+    stops, and continues on Enter / SIGUSR2 (the rest re-planned from rest). + / - change the
+    feed override. Ctrl-C or SIGTERM aborts the card at once and exits 130. Exit 0 only when
+    the card reports DONE at the program's end position.
 
-    Example: nurbscnc stream part.nc --port /dev/ttyUSB0
+    Example: nurbscnc stream part.nc --port /dev/ttyUSB0 --optional-stop
     """
     from nurbscnc.cli.main import err, out
+    from nurbscnc.errors import ConfigError
     from nurbscnc.output.stream.sender import Sender, SenderOptions, open_port
 
     operator = _Operator()
+    points_file = program.lower().endswith(POINT_SUFFIXES)
     # Hold/resume are caught from the start: planning a long program takes time, and
     # SIGUSR1's default action would end the command silently.
     with _signals(operator, ("SIGUSR1", "SIGUSR2")):
-        pulses, _ = load_pulse_program(program, **settings)
-        options = SenderOptions(batch_periods=batch, timeout_s=timeout_s)
+        job = None
+        if points_file and (from_line is not None or feed_override != 100):
+            raise ConfigError("--from-line and --feed-override need a program (.nc/.ngc), "
+                              "not a file of reference points")  # fmt: skip
+        if not points_file:
+            job, mach = plan_job(program, from_line=from_line, optional_stop=optional_stop,
+                                 override=feed_override / 100.0, **settings)  # fmt: skip
+        if job is None:
+            if from_line is not None or feed_override != 100:
+                raise ConfigError("--from-line and --feed-override need the look-ahead "
+                                  "planner (--algorithm ph-lookahead)")  # fmt: skip
+            pulses, mach = load_pulse_program(program, **settings)
+            total = pulses.periods
+        else:
+            total = int(round(job.plan.cycle_time_s / job.period_s / job.override))
+        operator.attach_job(job)
+        options = SenderOptions(batch_periods=batch, timeout_s=timeout_s, lead_periods=lead)
         ser = open_port(port, baud=baud, allow_url=allow_url, write_timeout_s=timeout_s,
                         read_wait_s=options.read_wait_s)  # fmt: skip
         show = not (quiet or as_json) and err.is_terminal
+        keys = not as_json and sys.stdin is not None and sys.stdin.isatty()
         try:
-            with _progress_bar(show, pulses.periods) as progress:
+            with _progress_bar(show, total, keys) as progress, _keys(operator, keys):
                 sender = Sender(ser, options, progress=progress)
                 operator.attach(sender)
                 with _signals(operator, ("SIGINT", "SIGTERM")):
-                    report = sender.stream(pulses)
+                    if job is None:
+                        reports = [sender.stream(pulses, zero=zero)]
+                    else:
+                        reports = sender.run_job(job, zero=zero)
         finally:
             with contextlib.suppress(Exception):
                 ser.close()
+    last = reports[-1]
+    executed = sum(r.executed_periods for r in reports)
+    extra = job.report() if job is not None else {"sections": 1}
     if as_json:
-        click.echo(json.dumps({"ok": True, "program": program, **report.to_json()}))
+        body = {**last.to_json(), "executed_periods": executed,
+                "frames_sent": sum(r.frames_sent for r in reports),
+                "bytes_sent": sum(r.bytes_sent for r in reports),
+                "retransmits": sum(r.retransmits for r in reports),
+                "duration_s": sum(r.duration_s for r in reports), **extra}  # fmt: skip
+        click.echo(json.dumps({"ok": True, "program": program, **body}))
         return
+    holds = extra.get("holds", [])
+    hold_text = "".join(f"; feed hold: deceleration began {h['latency_s'] * 1e3:.0f} ms after "
+                        f"the request, at rest after {h['stop_s'] * 1e3:.0f} ms"
+                        for h in holds)  # fmt: skip
     out.print(
-        f"{program}: {report.executed_periods} periods streamed in {report.duration_s:.3f} s; "
-        f"{report.frames_sent} frames ({report.bytes_sent} bytes), {report.retransmits} "
-        f"retransmitted; the card ended at {list(report.final_position_steps)} steps",
+        f"{program}: {executed} periods streamed in {extra['sections']} part(s), "
+        f"{sum(r.frames_sent for r in reports)} frames ({sum(r.bytes_sent for r in reports)} "
+        f"bytes), {sum(r.retransmits for r in reports)} retransmitted; the card ended at "
+        f"{list(last.final_position_steps)} steps{hold_text}",
         markup=False,
     )
+    for note in extra.get("notes", []):
+        err.print(f"stream: note: {note}", markup=False, highlight=False)
+
+
+@click.command("card-position")
+@click.option("--port", required=True, help="The card's serial device.")
+@click.option("--allow-url", is_flag=True, help="Accept a pyserial URL as --port.")
+@click.option("--baud", type=click.IntRange(min=1), default=115200, show_default=True)
+@click.option("--set", "set_to", default=None, metavar="X,Y,Z",
+              help="Set the card's position [steps] (protocol version 3; not while a stream "
+                   "runs), e.g. 0,0,0 after homing.")
+@click.option("--timeout", "timeout_s", type=click.FloatRange(min=0.0, min_open=True),
+              default=2.0, show_default=True)
+@click.option("--json", "as_json", is_flag=True, help="Print state and position as JSON.")
+@_handle_errors
+def card_position(port, allow_url, baud, set_to, timeout_s, as_json):
+    """Read (or --set) the card's position [steps] and state, e.g. to zero a card between two
+    streams without restarting it.
+
+    Example: nurbscnc card-position --port /dev/ttyUSB0 --set 0,0,0
+    """
+    from nurbscnc.output.stream import protocol as p
+    from nurbscnc.output.stream.sender import card_position as exchange
+    from nurbscnc.output.stream.sender import open_port
+
+    ser = open_port(port, baud=baud, allow_url=allow_url, write_timeout_s=timeout_s)
+    try:
+        target = _parse_position(set_to, len(set_to.split(","))) if set_to else None
+        status = exchange(ser, target, timeout_s)
+    finally:
+        with contextlib.suppress(Exception):
+            ser.close()
+    state = p.CardState(status.state).name
+    if as_json:
+        click.echo(json.dumps({"ok": True, "state": state,
+                               "position_steps": list(status.position_steps)}))  # fmt: skip
+        return
+    click.echo(f"card: {state}, position {list(status.position_steps)} steps")
 
 
 # -- card-sim ------------------------------------------------------------------------------------

@@ -135,7 +135,7 @@ class CardSim:
                      "dropped_in", "corrupted_in", "dropped_out", "corrupted_out", "duplicates",
                      "overflows", "naks_sent", "acks_sent", "aborts_received", "holds_received",
                      "resets", "max_fill", "executed_periods", "frames_sent",
-                     "position_naks"):  # fmt: skip
+                     "position_naks", "positions_set"):  # fmt: skip
             setattr(self, name, 0)
         self._open_stream(0.0)
         self.state = p.CardState.IDLE
@@ -287,6 +287,17 @@ class CardSim:
             self.holds_received += 1
             if self.state in (p.CardState.FILLING, p.CardState.RUNNING):
                 self.state = p.CardState.HOLD
+            self._send(self.status(), now)
+        elif isinstance(msg, p.SetPosition):
+            # Allowed outside a stream, and in a stream that has accepted nothing yet (a
+            # HELLO opened it: nothing can have moved).
+            fresh = self.state is p.CardState.FILLING and self.expected == 0 and not self._early
+            if (streaming and not fresh) or len(msg.position_steps) != self.config.axes:
+                self._nak(p.NakReason.STATE, now)
+                return
+            self.position[:] = msg.position_steps
+            self._tail = self.position.copy()
+            self.positions_set += 1
             self._send(self.status(), now)
         elif isinstance(msg, p.Resume):
             if self.state is p.CardState.HOLD:
@@ -534,7 +545,7 @@ class CardSim:
                 "dropped_in", "corrupted_in", "dropped_out", "corrupted_out", "duplicates",
                 "overflows", "naks_sent", "acks_sent", "aborts_received", "holds_received",
                 "resets", "max_fill", "executed_periods", "frames_sent",
-                "position_naks")  # fmt: skip
+                "position_naks", "positions_set")  # fmt: skip
         out = {k: int(getattr(self, k)) for k in keys}
         out.update(state=self.state.name, alarm=self.alarm.name, alarm_text=self.alarm_text,
                    position_steps=[int(v) for v in self.position],

@@ -68,17 +68,24 @@ class SenderOptions:
     read_wait_s: float = 0.001  #: port read timeout: the driver's idle tick
     gap_s: float = 0.05  #: a reply whose bytes stop arriving this long is abandoned
     link_baud: int | None = None  #: line rate for the queue model (None: the port's baudrate)
+    #: most periods queued ahead of the card's execution (buffered + in flight); None: its
+    #: whole buffer. Less makes a feed hold act sooner, at the cost of margin against an
+    #: underrun; at least half the card's buffer (where a card starts executing).
+    lead_periods: int | None = None
 
     def __post_init__(self) -> None:
         if self.batch_periods < 1:
             raise ConfigError(f"--batch must be >= 1 period, got {self.batch_periods}")
+        if self.lead_periods is not None and self.lead_periods < 1:
+            raise ConfigError(f"--lead must be >= 1 period, got {self.lead_periods}")
         if not self.timeout_s > 0.0:
             raise ConfigError(f"--timeout must be > 0 s, got {self.timeout_s}")
 
 
 @dataclass(frozen=True)
 class Progress:
-    """A progress snapshot [periods]."""
+    """A progress snapshot [periods]; ``line`` the source line of the period executing (0:
+    unknown), ``note`` what the controller is doing (waiting at a pause, holding…)."""
 
     periods: int
     sent: int
@@ -86,6 +93,8 @@ class Progress:
     executed: int
     fill: int
     buffer: int
+    line: int = 0
+    note: str = ""
 
 
 @dataclass(frozen=True)
@@ -192,6 +201,7 @@ class LinkState:
     line_free_s: float = 0.0
     stop_deadline_s: float = math.inf
     last_abort_s: float = -math.inf
+    zero_sent_s: float = -math.inf  #: when SET_POSITION was last sent (``zero`` handshake)
     # requests (set from signal handlers)
     abort_requested: bool = False
     want_hold: bool | None = None
@@ -206,12 +216,22 @@ class Link:
 
     ``byte_s``: seconds per byte on the line (0: an instantaneous link). ``ignore_credit``
     disables flow control; it exists only so the tests can show that the card catches a
-    sender that overruns its buffer.
+    sender that overruns its buffer. ``session_id``: the card's session the stream must
+    continue (a later section of one job: another id means the card reset in between).
+    ``zero``: declare the card's position to be the program's start (SET_POSITION, protocol
+    version 3) before streaming, instead of refusing a card that stands elsewhere.
     """
 
     def __init__(self, program: PulseProgram, options: SenderOptions | None = None,
-                 byte_s: float = 0.0, ignore_credit: bool = False):  # fmt: skip
+                 byte_s: float = 0.0, ignore_credit: bool = False,
+                 session_id: int | None = None, zero: bool = False):  # fmt: skip
         self.program = program
+        self.session_id = session_id
+        self.zero = zero
+        #: the most pulses per period a replacement may bring (sets the frame size)
+        self.peak_pulses = program.peak_pulses
+        #: more periods will follow (:meth:`replace_unsent`): no END, no partial batch yet
+        self.program_open = False
         self.options = options or SenderOptions()
         self.byte_s = byte_s
         self.ignore_credit = ignore_credit
@@ -334,10 +354,42 @@ class Link:
         st = self.state
         n = self.program.periods
         status = st.status
-        return Progress(n, min(st.nxt * self.per_frame, n), min(st.base * self.per_frame, n),
-                        status.executed_periods if status else 0,
+        executed = status.executed_periods if status else 0
+        line = int(self.program.line[min(executed, n - 1)]) if n else 0
+        return Progress(n, self.sent_periods, min(st.base * self.per_frame, n), executed,
                         status.fill_periods if status else 0,
-                        st.caps.buffer_periods if st.caps else 0)  # fmt: skip
+                        st.caps.buffer_periods if st.caps else 0, line)  # fmt: skip
+
+    @property
+    def sent_periods(self) -> int:
+        """Periods framed so far (sent or queued to be sent): they can no longer be changed."""
+        if self.state.phase is Phase.HANDSHAKE:
+            return 0
+        return min(self.state.nxt * self.per_frame, self.program.periods)
+
+    @property
+    def end_framed(self) -> bool:
+        """END has been framed: the stream's motion is fixed."""
+        return self.state.phase is not Phase.HANDSHAKE and self.state.nxt > self.n_batches
+
+    def replace_unsent(self, program: PulseProgram) -> None:
+        """Stream ``program`` instead: its first :attr:`sent_periods` periods must be the ones
+        already framed (a feed hold or an override replaces only what the card has not been
+        sent). Raises StreamError when END was framed already or the prefix differs."""
+        k = self.sent_periods
+        old = self.program
+        if self.end_framed:
+            raise StreamError("the stream's end has been sent already: nothing to replace")
+        if (program.periods < k or not np.array_equal(program.start_steps, old.start_steps)
+                or not np.array_equal(program.pulses[:k], old.pulses[:k])):  # fmt: skip
+            raise StreamError("the replacement does not continue the periods already sent")
+        axes = len(program.start_steps)
+        if program.periods and self.per_frame > p.max_batch_periods(
+                axes, p.pulse_width_bytes(program.peak_pulses)):  # fmt: skip
+            raise StreamError("the replacement needs wider pulse counts than the frames have")
+        self.program = program
+        if self.state.phase is not Phase.HANDSHAKE:
+            self._layout()
 
     def result(self) -> StreamReport:
         """The report of a successful stream; raises the stream's error otherwise."""
@@ -364,7 +416,11 @@ class Link:
     # -- handshake ---------------------------------------------------------------------------
     def _handshake_timers(self, now: float) -> None:
         st = self.state
-        if now - st.last_hello_s >= self.options.rto_s:
+        if st.zero_sent_s > -math.inf:  # SET_POSITION until a STATUS confirms it
+            if now - st.zero_sent_s >= self.options.rto_s:
+                self._send(p.SetPosition(tuple(int(v) for v in self.program.start_steps)))
+                st.zero_sent_s = now
+        elif now - st.last_hello_s >= self.options.rto_s:
             self._send(p.Hello())
             st.last_hello_s = now
             st.hellos += 1
@@ -380,32 +436,64 @@ class Link:
         if st.hellos == 1:  # an unambiguous round trip seeds the timeout
             self.rtt.sample(max(0.0, now - st.hello_leaves_s))
         st.caps = caps
+        if self.session_id is not None and caps.session_id != self.session_id:
+            self._finish_error(StreamError(
+                f"the card reset between two parts of the program (session "
+                f"{self.session_id:08x} → {caps.session_id:08x}): its position is lost"))
+            return  # fmt: skip
+        start = tuple(int(v) for v in self.program.start_steps)
         try:
-            check_caps(caps, self.program)
+            check_caps(caps, self.program, position=not self.zero)
+            lead = self.options.lead_periods
+            if lead is not None and lead < caps.buffer_periods // 2:
+                raise StreamError(f"--lead {lead} is less than half the card's buffer of "
+                                  f"{caps.buffer_periods} periods: the card would wait for "
+                                  "periods the sender holds back")  # fmt: skip
+            if self.zero and tuple(caps.position_steps) != start and caps.version < 3:
+                raise StreamError(f"--zero needs a card speaking protocol version 3; it "
+                                  f"speaks {caps.version}")  # fmt: skip
         except StreamError as exc:
             self._finish_error(exc)
             return
-        axes = caps.axes
-        width = p.pulse_width_bytes(self.program.peak_pulses)
-        k = self.per_frame = max(1, min(self.options.batch_periods,
-                                        p.max_batch_periods(axes, width)))  # fmt: skip
-        prog = self.program
+        if self.zero and tuple(caps.position_steps) != start:
+            self._send(p.SetPosition(start))  # confirmed by a STATUS at the start
+            st.zero_sent_s = now
+            return
+        self._start_streaming(now)
+
+    def _start_streaming(self, now: float) -> None:
+        st = self.state
+        self.zero = False
+        width = p.pulse_width_bytes(max(self.program.peak_pulses, self.peak_pulses))
+        self.per_frame = max(1, min(self.options.batch_periods,
+                                    p.max_batch_periods(st.caps.axes, width)))  # fmt: skip
+        self._layout()
+        st.credit = self._credit(st.caps.buffer_periods)
+        st.phase = Phase.STREAMING
+        st.last_rx_s = st.last_progress_s = now
+
+    def _layout(self) -> None:
+        """Batches of the program: their count and where each starts [steps]."""
+        prog, k, axes = self.program, self.per_frame, len(self.program.start_steps)
         self.n_batches = -(-prog.periods // k)
         # Where each batch starts: the program's start plus every pulse before it [steps].
         sums = (np.add.reduceat(prog.pulses, np.arange(0, prog.periods, k), axis=0)
                 if prog.periods else np.zeros((0, axes), dtype=np.int64))  # fmt: skip
         self._batch_starts = prog.start_steps + np.vstack(
             [np.zeros((1, axes), dtype=np.int64), np.cumsum(sums, axis=0)])
-        st.credit = caps.buffer_periods
-        st.phase = Phase.STREAMING
-        st.last_rx_s = st.last_progress_s = now
 
     # -- streaming: input handlers -----------------------------------------------------------
     def _dispatch(self, msg, now: float) -> None:
         st = self.state
         if st.phase is Phase.HANDSHAKE:
-            if isinstance(msg, p.Caps):
+            if isinstance(msg, p.Caps) and st.zero_sent_s == -math.inf:
                 self._on_caps_in_handshake(msg, now)
+            elif isinstance(msg, p.Nak) and st.zero_sent_s > -math.inf:
+                self._stop(StreamError("the card refused the new position (--zero)"), now)
+            elif isinstance(msg, p.Status) and st.zero_sent_s > -math.inf:
+                start = tuple(int(v) for v in self.program.start_steps)
+                if tuple(msg.position_steps) == start:
+                    self._start_streaming(now)
             return
         if st.phase is Phase.STOPPING:
             self._on_message_stopping(msg, now)
@@ -450,7 +538,15 @@ class Link:
                 st.in_flight -= st.window.pop(seq).periods
             st.base += ahead
             st.last_progress_s = now
-        st.credit = msg.free_periods
+        st.credit = self._credit(msg.free_periods)
+
+    def _credit(self, free: int) -> int:
+        """Periods the sender may have in flight: the card's free buffer, less what the lead
+        limit keeps back (buffered = buffer − free; buffered + in flight ≤ lead)."""
+        lead = self.options.lead_periods
+        if lead is None or self.state.caps is None:
+            return free
+        return max(0, min(free, lead - (self.state.caps.buffer_periods - free)))
 
     def _on_nak(self, msg: p.Nak, now: float) -> None:
         st = self.state
@@ -510,9 +606,11 @@ class Link:
     def _fill_window(self, now: float) -> None:
         """New frames, as far as the credit goes."""
         st = self.state
-        total = self.n_batches + 1  # the batches, then END
+        total = self.n_batches + (0 if self.program_open else 1)  # the batches, then END
         while st.nxt < total:
             periods = min(self.per_frame, self.program.periods - st.nxt * self.per_frame)
+            if self.program_open and periods < self.per_frame:
+                break  # a partial batch waits for the periods that follow it
             if not self.ignore_credit and st.in_flight + max(periods, 0) > st.credit:
                 break
             rec = st.window[st.nxt] = self._record(st.nxt)
@@ -651,13 +749,13 @@ def _with_suffix(error: StreamError | None, text: str) -> StreamError:
     return out
 
 
-def check_caps(caps: p.Caps, prog: PulseProgram) -> None:
-    """StreamError unless the card can run ``prog`` from where it stands."""
+def check_caps(caps: p.Caps, prog: PulseProgram, position: bool = True) -> None:
+    """StreamError unless the card can run ``prog`` (from where it stands: ``position``)."""
     axes = prog.pulses.shape[1] if prog.pulses.ndim == 2 else len(prog.start_steps)
     problems = []
-    if caps.version != p.PROTOCOL_VERSION:
+    if caps.version not in p.COMPATIBLE_VERSIONS:
         problems.append(f"it speaks protocol version {caps.version}, nurbscnc speaks "
-                        f"{p.PROTOCOL_VERSION}")  # fmt: skip
+                        f"{', '.join(map(str, p.COMPATIBLE_VERSIONS))}")  # fmt: skip
     if caps.axes != axes:
         problems.append(f"it has {caps.axes} axes, the program has {axes}")
     period_us = round(prog.period_s * 1e6)
@@ -672,10 +770,11 @@ def check_caps(caps: p.Caps, prog: PulseProgram) -> None:
     if problems:
         raise StreamError("the card cannot run this program: " + "; ".join(problems))
     start = tuple(int(v) for v in prog.start_steps)
-    if tuple(caps.position_steps) != start:
+    if position and tuple(caps.position_steps) != start:
         raise StreamError(
             f"the card is at {list(caps.position_steps)} steps, the program starts at "
-            f"{list(start)} steps: move or zero the card first"
+            f"{list(start)} steps: move the card there, or give --zero to declare that it "
+            "stands at the program's start"
         )
 
 

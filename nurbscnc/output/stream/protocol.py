@@ -40,7 +40,9 @@ import numpy as np
 from nurbscnc.errors import StreamError
 
 SYNC = 0xA5
-PROTOCOL_VERSION = 2
+PROTOCOL_VERSION = 3
+#: Versions whose frames this codec reads: 3 adds SET_POSITION to version 2 (same frames).
+COMPATIBLE_VERSIONS = (2, 3)
 #: SYNC (1) + LEN (1) + SEQ (2) + TYPE (1) + HCRC (1), before the payload.
 HEADER_BYTES = 6
 #: Header + CRC-32 (4).
@@ -61,6 +63,7 @@ class MsgType(IntEnum):
     HOLD = 0x05  #: feed hold: stop executing periods at the next period boundary
     RESUME = 0x06  #: leave a feed hold
     ABORT = 0x07  #: stop now, drop the buffer (handled out of sequence)
+    SET_POSITION = 0x08  #: version 3: declare where the card stands (not while streaming)
     CAPS = 0x81  #: hello reply / unsolicited after a card reset: capabilities and session
     ACK = 0x82  #: next expected sequence number, free buffer
     NAK = 0x83  #: next expected sequence number, free buffer, reason
@@ -339,6 +342,14 @@ class Abort:
 
 
 @dataclass(frozen=True)
+class SetPosition:
+    """Host → card (version 3): the card stands at ``position_steps`` from now on (a zero or
+    a re-home); refused (NAK reason STATE) while a stream is FILLING, RUNNING or HOLD."""
+
+    position_steps: tuple[int, ...]
+
+
+@dataclass(frozen=True)
 class Ack:
     """Card → host: every sequenced frame before ``next_seq`` was accepted."""
 
@@ -377,7 +388,8 @@ class Alarm:
 
 
 Message = (
-    Hello | Caps | Batch | End | StatusRequest | Hold | Resume | Abort | Ack | Nak | Status | Alarm
+    Hello | Caps | Batch | End | StatusRequest | Hold | Resume | Abort | SetPosition | Ack | Nak
+    | Status | Alarm
 )
 
 _EMPTY = {MsgType.STATUS_REQUEST: StatusRequest, MsgType.HOLD: Hold, MsgType.RESUME: Resume,
@@ -434,6 +446,8 @@ def encode_message(msg: Message, seq: int = 0) -> bytes:
                             _pack_position(msg.position_steps), seq)  # fmt: skip
     if isinstance(msg, Hello):
         return encode_frame(MsgType.HELLO, bytes((msg.version,)))
+    if isinstance(msg, SetPosition):
+        return encode_frame(MsgType.SET_POSITION, _pack_position(msg.position_steps))
     if type(msg) in _EMPTY_TYPES:
         return encode_frame(_EMPTY_TYPES[type(msg)])
     if isinstance(msg, Caps):
@@ -486,6 +500,10 @@ def decode_message(frame: Frame) -> Message:
         if kind is MsgType.END:
             (periods,) = _END.unpack_from(data)
             return End(periods, _unpack_position(data[_END.size :], "END"))
+        if kind is MsgType.SET_POSITION:
+            if not data:
+                raise ProtocolError("SET_POSITION without a position")
+            return SetPosition(_unpack_position(data, "SET_POSITION"))
         if kind is MsgType.HELLO:
             if len(data) != 1:
                 raise ProtocolError(f"HELLO carries 1 byte, got {len(data)}")

@@ -11,6 +11,7 @@ signal handler. The sender is the only code here that does I/O (through a pyseri
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import time
 from collections.abc import Callable
 
@@ -84,6 +85,8 @@ class Sender:
         self._clock = clock
         self.link: Link | None = None
         self._requests: list[str] = []  # before the link exists
+        self._abort = False  # asked while no link runs (a job waiting between sections)
+        self.job = None
         # The line model needs a real line: a device's baud rate (or link_baud). A URL port
         # (a TCP socket) has no baud rate, so it is modelled as instantaneous.
         baud = self.options.link_baud or (port.baudrate if isinstance(port, serial.Serial)
@@ -104,6 +107,8 @@ class Sender:
         self._request("resume")
 
     def _request(self, what: str) -> None:
+        if what == "abort":
+            self._abort = True
         if self.link is None:
             self._requests.append(what)
         else:
@@ -114,13 +119,15 @@ class Sender:
         return self.link is not None and self.link.state.abort_confirmed
 
     # -- streaming ---------------------------------------------------------------------------
-    def stream(self, program: PulseProgram) -> StreamReport:
+    def stream(self, program: PulseProgram, zero: bool = False) -> StreamReport:
         """Handshake and stream ``program``; the card's final state decides the outcome.
+        ``zero``: declare the card's position to be the program's start first.
 
         Raises StreamInterrupted (exit 130) after :meth:`request_abort`, StreamError when the
         stream failed (the card was sent ABORT until it confirmed, or for a bounded time).
         """
-        link = Link(program, self.options, self.byte_s, ignore_credit=self._ignore_credit)
+        link = Link(program, self.options, self.byte_s, ignore_credit=self._ignore_credit,
+                    zero=zero)  # fmt: skip
         for what in self._requests:
             getattr(link, f"request_{what}")()
         self._requests.clear()
@@ -136,7 +143,7 @@ class Sender:
                     self.port.write(p.encode_message(p.Abort()))
             raise
 
-    def _loop(self, link: Link) -> StreamReport:
+    def _loop(self, link: Link, hook=None) -> StreamReport:
         last_progress = -1.0
         while True:
             self._write(link)
@@ -147,11 +154,76 @@ class Sender:
             if data:
                 link.on_bytes(data, now)
             link.on_time(now)
+            if hook is not None:
+                hook(link)
             if self.progress is not None and now - last_progress > 0.1 and \
                     link.state.caps is not None:  # fmt: skip
                 last_progress = now
-                self.progress(link.progress())
+                self._report_progress(link.progress())
         return link.result()
+
+    def _report_progress(self, pr: Progress) -> None:
+        job = self.job
+        if job is not None:
+            pr = dataclasses.replace(pr, executed=job.executed_before + pr.executed,
+                                     periods=job.executed_before + pr.periods,
+                                     note=job.note())  # fmt: skip
+        self.progress(pr)
+
+    # -- a job: sections, program stops, feed hold and override ------------------------------
+    def run_job(self, job, zero: bool = False, idle_s: float = 0.02) -> list[StreamReport]:
+        """Stream a :class:`~nurbscnc.output.stream.job.Job` section by section; between
+        sections, while the job waits for the operator (a program stop, a feed hold), sleep
+        until :meth:`Job.resume <nurbscnc.output.stream.job.Job.resume>` or an abort.
+
+        ``zero``: the first section declares the card's position to be the program's start.
+        Returns every section's report; raises like :meth:`stream`.
+        """
+        self.job = job
+        reports: list[StreamReport] = []
+        session = None
+        while not job.finished:
+            program = job.next_section()
+            if program is None:
+                if job.finished:
+                    break
+                self._wait(job, idle_s, reports)
+                continue
+            link = Link(program, self.options, self.byte_s, ignore_credit=self._ignore_credit,
+                        session_id=session, zero=zero and not reports)  # fmt: skip
+            link.peak_pulses = job.peak_pulses
+            link.program_open = job.section_open
+            if self._abort:
+                link.request_abort()
+            self.link = link
+            with contextlib.suppress(Exception):
+                self.port.reset_input_buffer()
+            link.start(self._clock())
+            try:
+                report = self._loop(link, hook=job.update)
+            except BaseException:
+                if not link.finished:
+                    with contextlib.suppress(Exception):
+                        self.port.write(p.encode_message(p.Abort()))
+                raise
+            reports.append(report)
+            session = report.session_id
+            job.section_done(report.executed_periods)
+        return reports
+
+    def _wait(self, job, idle_s: float, reports: list) -> None:
+        """The card is DONE at rest: wait for the operator (or an abort)."""
+        last = -1.0
+        while job.waiting is not None:
+            if self._abort:
+                where = (f"; the card stands at {list(reports[-1].final_position_steps)} steps"
+                         if reports else "")  # fmt: skip
+                raise StreamInterrupted(f"interrupted while waiting ({job.waiting}){where}")
+            now = self._clock()
+            if self.progress is not None and now - last > 0.1:
+                last = now
+                self._report_progress(Progress(0, 0, 0, 0, 0, 0, job.last_line))
+            time.sleep(idle_s)
 
     def _write(self, link: Link) -> None:
         if link.flush_port:  # an abort: queued batches must not reach the card first
@@ -179,3 +251,37 @@ class Sender:
             return self.port.read(waiting if waiting > 1 else 4096)
         except (serial.SerialException, OSError) as exc:
             raise StreamError(f"lost the port: {exc}") from None
+
+
+def card_position(port, set_to=None, timeout_s: float = 2.0, retry_s: float = 0.1) -> p.Status:
+    """Read the card's state and position (STATUS_REQUEST), or set its position first
+    (SET_POSITION, protocol version 3; refused while a stream runs). Returns the STATUS that
+    answers; StreamError when the card refuses or does not answer within ``timeout_s``."""
+    msg = p.SetPosition(tuple(int(v) for v in set_to)) if set_to is not None else p.StatusRequest()
+    frame = p.encode_message(msg)
+    decoder = p.FrameDecoder()
+    deadline = time.monotonic() + timeout_s
+    last = -float("inf")
+    with contextlib.suppress(Exception):
+        port.reset_input_buffer()
+    while time.monotonic() < deadline:
+        now = time.monotonic()
+        if now - last >= retry_s:
+            port.write(frame)
+            last = now
+        for ev in decoder.feed(port.read(4096)):
+            if isinstance(ev, p.BadFrame):
+                continue
+            try:
+                reply = p.decode_message(ev)
+            except p.ProtocolError:
+                continue
+            if isinstance(reply, p.Nak) and set_to is not None:
+                raise StreamError("the card refused the new position: a stream is open on it "
+                                  "(FILLING, RUNNING or HOLD), or it has another axis count")
+            if isinstance(reply, p.Status) and (set_to is None or tuple(reply.position_steps)
+                                                == tuple(msg.position_steps)):  # fmt: skip
+                return reply
+    what = "SET_POSITION (does the card speak protocol version 3?)" if set_to is not None \
+        else "STATUS_REQUEST"  # fmt: skip
+    raise StreamError(f"lost communication with card: no answer to {what} for {timeout_s:g} s")

@@ -64,6 +64,52 @@ class Relay:
         return frame
 
 
+class _Line:
+    """A card and the two directions of its line, driven in virtual time."""
+
+    def __init__(self, card: CardSim, to_card, to_host, baud: int | None):
+        self.card, self.to_card, self.to_host = card, to_card, to_host
+        self.down, self.up = Wire(baud), Wire(baud)
+
+    def drive(self, link: Link, t: float, limit: float, pending: list, run_event,
+              hook=None) -> float:  # fmt: skip
+        """Run ``link`` from virtual time ``t`` until it finishes (or ``limit``): events
+        from ``pending`` when their time comes (``run_event(event)``), ``hook(link)`` after
+        every turn. Returns the time it ended."""
+        card, down, up = self.card, self.down, self.up
+        link.start(t)
+        same_time = 0
+        while not link.finished and t <= limit:
+            while pending and pending[0][0] <= t:
+                run_event(pending.pop(0))
+            data = down.pop(t)
+            if data:
+                card.on_bytes(data, t)
+            card.advance(t)
+            for frame in card.take_frames(t):
+                up.push(self.to_host(frame), t)
+            data = up.pop(t)
+            if data:
+                link.on_bytes(data, t)
+            link.on_time(t)
+            if hook is not None:
+                hook(link)
+            if link.flush_port:
+                link.flush_port = False
+                down.drop_unsent(t)
+            for frame in link.take_writes(t, down.queued_bytes(t)):
+                down.push(self.to_card(frame), t)
+            if link.finished:
+                break
+            wake = [link.next_wakeup_s(t), card.next_event_s(), down.done_s(), up.done_s(),
+                    pending[0][0] if pending else None]  # fmt: skip
+            t_next = min(w for w in wake if w is not None)
+            # Instantaneous lines deliver at the same time: a few turns at one time, then on.
+            same_time = same_time + 1 if t_next <= t else 0
+            t = t_next if t_next > t else (t if same_time < 8 else t + 1e-6)
+        return t
+
+
 @dataclass
 class SimResult:
     """How a simulated stream ended: the sender's report or error, the card, virtual time."""
@@ -116,39 +162,10 @@ def simulate(  # noqa: PLR0913 - a test harness with everything optional
     card = CardSim(config or CardConfig(speed=1.0), seed=seed)
     byte_s = p.BITS_PER_BYTE_8N1 / baud if baud else 0.0
     link = Link(program, options, byte_s, ignore_credit=ignore_credit)
-    to_card, to_host = to_card or Relay(), to_host or Relay()
-    down, up = Wire(baud), Wire(baud)
+    line = _Line(card, to_card or Relay(), to_host or Relay(), baud)
     pending = sorted(events, key=lambda e: e[0])
     limit = max_time_s if max_time_s is not None else 3.0 * program.periods * program.period_s + 10
-    t = 0.0
-    link.start(t)
-    same_time = 0
-    while not link.finished and t <= limit:
-        while pending and pending[0][0] <= t:
-            pending.pop(0)[1](link, card)
-        data = down.pop(t)
-        if data:
-            card.on_bytes(data, t)
-        card.advance(t)
-        for frame in card.take_frames(t):
-            up.push(to_host(frame), t)
-        data = up.pop(t)
-        if data:
-            link.on_bytes(data, t)
-        link.on_time(t)
-        if link.flush_port:
-            link.flush_port = False
-            down.drop_unsent(t)
-        for frame in link.take_writes(t, down.queued_bytes(t)):
-            down.push(to_card(frame), t)
-        if link.finished:
-            break
-        wake = [link.next_wakeup_s(t), card.next_event_s(), down.done_s(), up.done_s(),
-                pending[0][0] if pending else None]  # fmt: skip
-        t_next = min(w for w in wake if w is not None)
-        # Instantaneous lines deliver at the same time: a few turns at one time, then move on.
-        same_time = same_time + 1 if t_next <= t else 0
-        t = t_next if t_next > t else (t if same_time < 8 else t + 1e-6)
+    t = line.drive(link, 0.0, limit, pending, lambda ev: ev[1](link, card))
     at_end = card.state
     # Leave the card alone for its buffer's time: whatever it still holds runs (or it stops).
     cfg = card.config
@@ -160,3 +177,64 @@ def simulate(  # noqa: PLR0913 - a test harness with everything optional
         return SimResult(link.result(), None, card, link, t, at_end)
     except StreamError as exc:
         return SimResult(None, exc, card, link, t, at_end)
+
+
+@dataclass
+class JobSimResult:
+    """How a simulated job ended: the card, every section's report, the waits
+    (start [s], end [s] or None when still waiting, reason), the error if any."""
+
+    card: CardSim
+    reports: list
+    waits: list
+    error: StreamError | None
+    elapsed_s: float
+
+    @property
+    def completed(self) -> bool:
+        return self.error is None and bool(self.reports) and not (
+            self.waits and self.waits[-1][1] is None)  # fmt: skip
+
+
+def simulate_job(job, config: CardConfig | None = None, *, options: SenderOptions | None = None,
+                 baud: int | None = 115200, seed: int = 1, events=(),
+                 max_time_s: float = 600.0, zero: bool = False) -> JobSimResult:  # fmt: skip
+    """Stream a :class:`~.job.Job` to a simulated card in virtual time, section by section.
+
+    ``events``: (time [s], action(job, card)) pairs — the operator's hold, resume, override.
+    While the job waits (a program stop, a feed hold) virtual time jumps to the next event;
+    with none left the run ends, still waiting. ``zero``: the first section declares the
+    card's position to be its start (``stream --zero``).
+    """
+    card = CardSim(config or CardConfig(speed=1.0), seed=seed)
+    byte_s = p.BITS_PER_BYTE_8N1 / baud if baud else 0.0
+    line = _Line(card, Relay(), Relay(), baud)
+    pending = sorted(events, key=lambda e: e[0])
+    run_event = lambda ev: ev[1](job, card)  # noqa: E731
+    t, reports, waits, session = 0.0, [], [], None
+    while not job.finished:
+        program = job.next_section()
+        if program is None:
+            if job.finished:
+                break
+            waits.append([t, None, job.waiting])
+            while job.waiting is not None and pending:
+                t = max(t, pending[0][0])
+                card.advance(t)
+                run_event(pending.pop(0))
+            if job.waiting is not None:
+                return JobSimResult(card, reports, waits, None, t)
+            waits[-1][1] = t
+            continue
+        link = Link(program, options, byte_s, session_id=session, zero=zero and not reports)
+        link.peak_pulses = job.peak_pulses
+        link.program_open = job.section_open
+        t = line.drive(link, t, t + max_time_s, pending, run_event, hook=job.update)
+        try:
+            report = link.result()
+        except StreamError as exc:
+            return JobSimResult(card, reports, waits, exc, t)
+        reports.append(report)
+        session = report.session_id
+        job.section_done(report.executed_periods)
+    return JobSimResult(card, reports, waits, None, t)

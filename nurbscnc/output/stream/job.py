@@ -1,0 +1,443 @@
+"""The stream as a controller: program stops, feed hold, feed override, the line executing.
+
+:class:`Job` sits between a plan and the protocol's :class:`~.link.Link`, free of I/O and
+clocks like the link. It cuts the program into *sections*, each streamed to the card as one
+stream (HELLO … END, the card DONE at rest at its end):
+
+- a section ends at a program stop that waits — M0, M60, M1 with ``optional_stop`` — or at
+  the end of the program. The planner already brings the tool to rest there (SPEC §7: a stop
+  is a junction of speed 0), and the card is DONE only once its buffer has drained to that
+  point: the job then *waits* until :meth:`Job.resume` (Enter or SIGUSR2 in the CLI).
+- a **feed hold** (:meth:`Job.request_hold`) is applied by :meth:`Job.update` to the running
+  link: the periods not yet framed are replaced by the shortest jerk-limited stop along the
+  path from the state of the first of them (:func:`~.motion.stop_phases`), then END. What the
+  card has buffered runs first: that is the hold's latency, measured and reported
+  (:class:`HoldRecord`). On resume the rest of the program is re-planned from rest at the
+  hold point (:func:`~.motion.resume_motion`).
+- a **feed override** change (:meth:`Job.set_override`) re-times the periods not yet framed:
+  the earliest quintic ramp of the override that keeps |a| ≤ A and |j| ≤ J on every period
+  (:func:`~.motion.ramp_fits`); none within the section: it applies from the next section.
+
+A section's periods are computed in chunks (:data:`CHUNK_PERIODS`) ahead of what the link
+frames (the link holds END back meanwhile: ``Link.program_open``), so a hold or an override
+change re-times a bounded number of periods however long the section. Every section's
+periods are quantised to pulses (:func:`~.quantise.quantise`) with the same
+rounding, and each section starts at the exact point where the previous one ended, so the
+card's position is continuous across sections.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from nurbscnc.output.stream.motion import (
+    Motion,
+    Rate,
+    Track,
+    plan_motion,
+    play,
+    ramp_duration_s,
+    ramp_fits,
+    resume_motion,
+    stop_track,
+)
+from nurbscnc.output.stream.quantise import PulseProgram, quantise
+
+#: Override limits [fraction] and the step of the + / - keys.
+OVERRIDE_MIN, OVERRIDE_STEP = 0.10, 0.10
+#: A section's periods are computed in chunks of this many, ahead of what the link frames, so
+#: a hold or an override change re-times a bounded number of periods however long it is.
+CHUNK_PERIODS = 4096
+#: Where a ramp may start, after the first period not yet framed [s] (searched in order).
+RAMP_OFFSETS_S = tuple(np.round(np.arange(0.0, 2.0, 0.025), 3))
+
+
+@dataclass(frozen=True)
+class Stop:
+    """A program stop (M0/M1/M60) at global path length ``s_mm``, source ``line``."""
+
+    s_mm: float
+    line: int
+    code: str
+
+
+@dataclass
+class HoldRecord:
+    """One feed hold: asked when the card had executed ``asked_period`` periods of the
+    section, the deceleration begins after period ``decel_start_period`` (the periods
+    already framed run first) and lasts ``decel_periods``; ``latency_s`` from the request to
+    the start of the deceleration, ``stop_s`` to rest."""
+
+    asked_period: int
+    decel_start_period: int
+    decel_periods: int
+    period_s: float
+    s_mm: float = 0.0
+
+    @property
+    def latency_s(self) -> float:
+        return (self.decel_start_period - self.asked_period) * self.period_s
+
+    @property
+    def stop_s(self) -> float:
+        return self.latency_s + self.decel_periods * self.period_s
+
+    def to_json(self) -> dict:
+        return {"latency_s": round(self.latency_s, 6), "stop_s": round(self.stop_s, 6),
+                "stopped_at_mm": round(self.s_mm, 6)}  # fmt: skip
+
+
+@dataclass
+class Section:
+    """The section being streamed: its track, pulses and how it ends."""
+
+    track: Track
+    program: PulseProgram
+    tau_b: float
+    rate: Rate  #: the override law; its motion time is 0 at the track's ``rate_u0_s``
+    ends_at: int | None  #: index of the stop it ends at (None: the program's end)
+    complete: bool = True  #: the track reaches the section's end (else more chunks follow)
+    rate_u0_s: float = 0.0
+    held: bool = False  #: a feed hold replaced its end
+    hold_wait_s: float = 0.0  #: a dwell interrupted by the hold: what is left of it [s]
+    override_deferred: bool = False  #: no ramp fitted: the override waits for the next one
+
+
+class Job:
+    """A planned program streamed as a controller; see the module docstring.
+
+    ``plan`` a :class:`~nurbscnc.plan.lookahead.Plan` of ``program``; ``machine`` its
+    machine; ``override`` the starting feed override (fraction, 0.1–1: above 1 time scaling
+    would exceed the limits the plan respected).
+    """
+
+    def __init__(self, plan, program, machine, *, optional_stop: bool = False,
+                 override: float = 1.0, lookahead_pieces: int | None = None):  # fmt: skip
+        self.plan, self.machine = plan, machine
+        self.period_s = machine.servo.period_s
+        self.steps_per_mm = machine.steps.per_mm
+        self.a_max = machine.limits.a_max_mm_s2
+        self.j_max = machine.limits.j_max_mm_s3
+        self.lookahead_pieces = lookahead_pieces
+        self.optional_stop = optional_stop
+        self.override = self._clamp(override)
+        self.motion: Motion | None = plan_motion(plan)
+        self.tau = 0.0  #: where the next section starts, in the motion's profile time
+        self.first_section = True
+        self.stops = tuple(program_stops(program, plan))
+        self.next_stop = 0  #: the first stop not waited at yet
+        self.section: Section | None = None
+        self.waiting: str | None = None  #: why the job waits for the operator
+        self.finished = False
+        self.last_point: np.ndarray | None = None
+        self.hold_wanted = False
+        self.resume_early = False  #: continue asked while a hold was still decelerating
+        self.override_wanted: float | None = None
+        self.holds: list[HoldRecord] = []
+        self.notes: list[str] = []
+        self.sections = 0
+        self.executed_before = 0  #: periods of the finished sections
+        self.last_line = 0  #: source line of the last period of the finished sections
+        # The frames' count width must fit the fastest section: the plan's peak speed (a hold
+        # or an override ≤ 100 % only slows down; +2: rounding, a re-planned rest).
+        v_peak = float(np.max(plan.profile.piece_peak_speed_mm_s))
+        self.peak_pulses = int(math.ceil(v_peak * self.period_s
+                                         * float(np.max(self.steps_per_mm)))) + 2  # fmt: skip
+
+    # -- requests (plain attribute writes: safe from a signal handler) -----------------------
+    def request_hold(self) -> None:
+        if not self.finished:
+            self.hold_wanted = True
+
+    def resume(self) -> None:
+        """Continue after a program stop or a feed hold (or cancel a hold not yet applied;
+        during a hold's deceleration: go on as soon as the card stands)."""
+        self.hold_wanted = False
+        self.resume_early = self.section is not None and self.section.held
+        self.waiting = None
+
+    def set_override(self, fraction: float) -> None:
+        self.override_wanted = self._clamp(fraction)
+
+    def step_override(self, steps: int) -> float:
+        """+/- keys: change the wanted override by ``steps`` × 10 %; returns it."""
+        base = self.override_wanted if self.override_wanted is not None else self.override
+        self.set_override(round(base + steps * OVERRIDE_STEP, 6))
+        return self.override_wanted
+
+    def _clamp(self, fraction: float) -> float:
+        return float(min(max(fraction, OVERRIDE_MIN), 1.0))
+
+    # -- sections ----------------------------------------------------------------------------
+    def next_section(self) -> PulseProgram | None:
+        """The pulses of the next section, or None (finished, or waiting for the operator)."""
+        if self.finished or self.waiting is not None:
+            return None
+        if self.hold_wanted:  # a hold between sections: wait at rest
+            self.hold_wanted = False
+            self.waiting = "feed hold"
+            return None
+        if self.override_wanted is not None:  # at rest: a new override applies at once
+            self.override, self.override_wanted = self.override_wanted, None
+        motion = self.motion
+        stop = self._next_waiting_stop()
+        tau_b = (float(motion.time_of(self.stops[stop].s_mm)[0]) if stop is not None
+                 else motion.duration_s)  # fmt: skip
+        rate = Rate(self.override)
+        track, complete = play(motion, self.tau, tau_b, rate, self.period_s,
+                               wait_s=motion.wait_s if self.tau == 0.0 else 0.0,
+                               dwell_at_start=self.first_section,
+                               max_samples=CHUNK_PERIODS)  # fmt: skip
+        if self.last_point is not None:
+            track.points_mm[0] = self.last_point  # exactly where the card stands
+        self.section = Section(track, self._pulses(track), tau_b, rate, stop, complete)
+        self.first_section = False
+        self.sections += 1
+        return self.section.program
+
+    def _next_waiting_stop(self) -> int | None:
+        """Index of the next stop this section ends at (M1 only with ``optional_stop``)."""
+        s_now = float(self.motion.state(np.array([self.tau]))[0][0])
+        end = self.motion.end_mm
+        for i in range(self.next_stop, len(self.stops)):
+            stop = self.stops[i]
+            if stop.s_mm < s_now - 1e-9 or (stop.code == "M1" and not self.optional_stop):
+                continue
+            if stop.s_mm > end + 1e-9:
+                break
+            return i
+        return None
+
+    @property
+    def section_open(self) -> bool:
+        """The section's periods are not all computed yet: END must wait (``program_open``
+        of the link)."""
+        return self.section is not None and not self.section.complete
+
+    def _pulses(self, track: Track, k: int = 0, program: PulseProgram | None = None):
+        """The pulses of ``track``: those of ``program`` up to sample ``k``, then the track's
+        own from there (quantised alike: the same point gives the same steps)."""
+        line = np.take(self.plan.pieces.line, track.piece[k:])
+        tail = quantise(track.points_mm[k:], self.steps_per_mm, self.period_s, line)
+        if program is None or k == 0:
+            return tail
+        return PulseProgram(program.start_steps, tail.end_steps,
+                            np.concatenate([program.pulses[:k], tail.pulses]), self.period_s,
+                            np.concatenate([program.line[:k], tail.line]))  # fmt: skip
+
+    def _extend(self, link) -> None:
+        """The next chunk of the section, once the link has framed half of the last one."""
+        sec = self.section
+        tr = sec.track
+        k = len(tr) - 1
+        if sec.complete or link.sent_periods < k - CHUNK_PERIODS // 2:
+            return
+        tail, sec.complete = play(self.motion, float(tr.tau_s[k]), sec.tau_b, sec.rate,
+                                  self.period_s, wait_s=self._wait_at(tr, k),
+                                  u0=float(tr.u_s[k]) - sec.rate_u0_s,
+                                  max_samples=CHUNK_PERIODS)  # fmt: skip
+        tail.points_mm[0] = tr.points_mm[k]
+        sec.track = tr.then(tail)
+        sec.program = self._pulses(sec.track, k, sec.program)
+        link.program_open = not sec.complete
+        link.replace_unsent(sec.program)
+
+    def section_done(self, executed_periods: int) -> None:
+        """The card reported DONE at the section's end: wait there, or go on."""
+        sec = self.section
+        self.executed_before += executed_periods
+        self.last_point = sec.track.points_mm[-1].copy()
+        if sec.program.periods:
+            self.last_line = int(sec.program.line[-1])
+        self.section = None
+        if sec.held:
+            self.motion = resume_motion(self.plan, self.machine, float(sec.track.s_mm[-1]),
+                                        sec.hold_wait_s, self.lookahead_pieces)  # fmt: skip
+            self.tau = 0.0
+            self.waiting = None if self.resume_early else "feed hold"
+            self.hold_wanted = self.resume_early = False
+        elif sec.ends_at is not None:
+            self.tau = sec.tau_b
+            self.next_stop = sec.ends_at + 1
+            stop = self.stops[sec.ends_at]
+            self.waiting = f"{stop.code} at line {stop.line}"
+        else:
+            self.motion = None
+        if self.motion is None:
+            self.finished = True
+            self.waiting = None
+        elif self.hold_wanted and self.waiting is None:
+            self.hold_wanted = False
+            self.waiting = "feed hold"
+
+    # -- changes while a section streams -------------------------------------------------------
+    def update(self, link) -> None:
+        """Apply a pending hold or override change to ``link`` (streaming this section), and
+        compute the section's next chunk when the link needs it."""
+        sec = self.section
+        if sec is None:
+            return
+        link.program_open = not sec.complete
+        if link.state.caps is None or sec.held or link.end_framed:
+            return  # END framed: a hold waits at the section's end, an override at the next
+        if link.state.phase.value != "streaming":
+            return
+        self._extend(link)
+        if self.hold_wanted:
+            self._apply_hold(link)
+        elif self.override_wanted is not None and not sec.override_deferred:
+            self._apply_override(link)
+
+    def _apply_hold(self, link) -> None:
+        sec = self.section
+        k = link.sent_periods
+        executed = link.state.status.executed_periods if link.state.status else 0
+        tr = sec.track
+        stop = stop_track(self.motion, tr, k, self.a_max, self.j_max, self.period_s,
+                          float(tr.s_mm[-1]))  # fmt: skip
+        track = tr.head(k + 1).then(stop)
+        program = self._pulses(track, k, sec.program)
+        sec.complete = True
+        link.program_open = False
+        link.replace_unsent(program)
+        sec.hold_wait_s = self._wait_at(tr, k)
+        sec.track, sec.program, sec.held = track, program, True
+        self.holds.append(HoldRecord(executed, k, len(stop) - 1, self.period_s,
+                                     float(track.s_mm[-1])))  # fmt: skip
+        self.hold_wanted = False
+
+    def _apply_override(self, link) -> None:
+        sec = self.section
+        r1 = self.override_wanted
+        k = link.sent_periods
+        tr = sec.track
+        u_k = float(tr.u_s[k])
+        r_k = float(sec.rate.r(np.array([u_k - sec.rate_u0_s]))[0])
+        if abs(r1 - r_k) < 1e-12:
+            self.override, self.override_wanted = r1, None
+            return
+        # A ramp in progress finishes first.
+        busy_until = sec.rate.end_u + sec.rate_u0_s - u_k if sec.rate.ramping else 0.0
+        v_max = float(np.max(self.plan.profile.piece_peak_speed_mm_s))
+        d0 = ramp_duration_s(r1 - r_k, v_max, self.a_max, self.j_max)
+        wait = self._wait_at(tr, k)
+        for offset in RAMP_OFFSETS_S:
+            if offset < busy_until:
+                continue
+            for d in (d0, 2 * d0, 4 * d0):
+                rate = Rate(r_k, r1, float(offset), d)
+                # Check the ramp's periods only (cheap), then time the whole rest once.
+                tau_w = min(sec.tau_b, float(tr.tau_s[k] + rate.integral(offset + d)))
+                window, _ = play(self.motion, float(tr.tau_s[k]), tau_w, rate, self.period_s,
+                                 wait_s=wait)  # fmt: skip
+                if not ramp_fits(window, self.a_max, self.j_max):
+                    continue
+                tail, complete = play(self.motion, float(tr.tau_s[k]), sec.tau_b, rate,
+                                      self.period_s, wait_s=wait,
+                                      max_samples=CHUNK_PERIODS)  # fmt: skip
+                tail.points_mm[0] = tr.points_mm[k]
+                track = tr.head(k + 1).then(tail)
+                program = self._pulses(track, k, sec.program)
+                sec.complete = complete
+                link.program_open = not complete
+                link.replace_unsent(program)
+                sec.track, sec.program = track, program
+                sec.rate, sec.rate_u0_s = rate, u_k
+                self.override, self.override_wanted = r1, None
+                return
+        self.notes.append(f"no smooth change of the feed override to {r1:.0%} fits the "
+                          "limits in this section: it applies from the next one")  # fmt: skip
+        sec.override_deferred = True  # pending until the next section starts
+
+    def _wait_at(self, tr: Track, k: int) -> float:
+        """A dwell in progress at sample ``k``: the part still to wait [s] (0: none)."""
+        if tr.v_mm_s[k] != 0.0:
+            return 0.0
+        hit = np.flatnonzero(np.abs(self.motion.dwell_at_s - tr.tau_s[k]) <= 1e-12)
+        if not hit.size:
+            return 0.0
+        moved = np.flatnonzero(tr.tau_s[: k + 1] != tr.tau_s[k])
+        first = int(moved[-1]) + 1 if moved.size else 0
+        return max(0.0, float(self.motion.dwell_s[hit[0]]) - (k - first) * self.period_s)
+
+    # -- reporting -----------------------------------------------------------------------------
+    def line_of(self, executed_in_section: int) -> int:
+        """Source line of the period the card executes now."""
+        sec = self.section
+        if sec is None or not sec.program.periods:
+            return 0
+        return int(sec.program.line[min(executed_in_section, sec.program.periods - 1)])
+
+    def note(self) -> str:
+        """What the progress line says besides the counts."""
+        parts = [f"feed {self.override:.0%}"]
+        if self.override_wanted is not None:
+            parts.append(f"→ {self.override_wanted:.0%}")
+        if self.waiting:
+            parts.append(f"waiting: {self.waiting}")
+        elif self.section is not None and self.section.held:
+            parts.append("holding")
+        return " · ".join(parts)
+
+    def report(self) -> dict:
+        """JSON-able summary: sections, holds (latency), notes, the final override."""
+        return {"sections": self.sections, "feed_override": round(self.override, 6),
+                "holds": [h.to_json() for h in self.holds], "notes": list(self.notes)}
+
+
+def program_stops(program, plan) -> list[Stop]:
+    """The program stops (kind "pause": M0, M1, M60) at their path lengths in ``plan``: the
+    end of the last piece made from a segment before the stop."""
+    seg = np.asarray(plan.pieces.segment)
+    ends = np.asarray(plan.profile.piece_start_mm) + np.asarray(plan.pieces.length_mm)
+    out = []
+    for i, s in enumerate(program.segments):
+        if s.kind != "pause":
+            continue
+        r = int(np.searchsorted(seg, i, side="left")) - 1
+        out.append(Stop(float(ends[r]) if r >= 0 else 0.0, int(s.line), str(s.code)))
+    return out
+
+
+def start_at_line(program, line: int):
+    """The program run from source line ``line`` on, as LinuxCNC's run-from-line: the whole
+    program was interpreted (so the segments from ``line`` on carry every modal state set
+    before it: units, offsets, plane, feed, tool), the segments before it are dropped, and a
+    lead-in brings the tool from the program's start to the start of line ``line`` safely.
+
+    Lead-in (decision; docs/protocol.md): up to Z_safe = the highest Z of the program's start,
+    of every point the program reaches before ``line`` and of the target (the clearance the
+    program itself used, so it is known to be free and inside the soft limits; +Z is up), a
+    rapid across at Z_safe, then down to the target: a rapid when the first move of ``line``
+    is a rapid, else at that move's programmed feed (never a rapid plunge into material).
+    Raises ValueError when no motion starts at or after ``line``.
+    """
+    from dataclasses import replace
+
+    from nurbscnc.geometry.segments import Line
+
+    segs = list(program.segments)
+    first = next((i for i, s in enumerate(segs) if s.line >= line), None)
+    moving = next((i for i in range(first, len(segs)) if segs[i].kind not in ("dwell", "pause")),
+                  None) if first is not None else None  # fmt: skip
+    if moving is None:
+        raise ValueError(f"--from-line {line}: no motion at or after line {line}")
+    target = np.asarray(segs[moving].start_mm, dtype=float)
+    here = np.asarray(program.start_mm, dtype=float)
+    before = [np.asarray(s.end_mm, dtype=float)[2] for s in segs[:first]]
+    z_safe = float(max([here[2], target[2], *before]))
+    feed = segs[moving].feed_mm_s
+    plunge_rapid = segs[moving].kind == "rapid" or not feed > 0.0
+    path = [here, np.array([here[0], here[1], z_safe]), np.array([target[0], target[1], z_safe]),
+            target]  # fmt: skip
+    lead = []
+    for i, (a, b) in enumerate(zip(path[:-1], path[1:])):
+        if np.allclose(a, b, rtol=0.0, atol=1e-12):
+            continue
+        rapid = i < 2 or plunge_rapid
+        lead.append(Line(tuple(a.tolist()), tuple(b.tolist()), 0.0 if rapid else float(feed),
+                         int(segs[moving].line), rapid=rapid))  # fmt: skip
+    return replace(program, segments=tuple(lead + segs[first:]))
