@@ -160,13 +160,15 @@ def baseline_feed_mm_s(algorithm: str, kappa_per_mm, feed_mm_s: float, machine: 
     raise ValueError(f"unknown baseline {algorithm!r}")
 
 
-def axis_path_limits(t_bound, k_bound, g_bound, v_piece_mm_s, v_axis_mm_s, a_axis_mm_s2,
-                     j_axis_mm_s3, a_path_mm_s2: float, j_path_mm_s3: float):  # fmt: skip
+def axis_path_limits(t_bound, k_bound, g_bound, kappa_per_mm, v_piece_mm_s, v_axis_mm_s,
+                     a_axis_mm_s2, j_axis_mm_s3, a_path_mm_s2: float,
+                     j_path_mm_s3: float):  # fmt: skip
     """Path limits of k pieces that keep every axis within its own limits (issue 13).
 
     Inputs per piece and axis (k, 3): ``t_bound`` T_i ≥ |t_i| (unit tangent), ``k_bound``
     K_i ≥ |(κn)_i| [1/mm] (curvature vector) and ``g_bound`` G_i ≥ |d(κn)_i/ds| [1/mm²], each
-    over the whole piece; ``v_piece_mm_s`` (k,) the piece's own cruise cap [mm/s]; the axis
+    over the whole piece; ``kappa_per_mm`` (k,) κ̄ ≥ κ on the piece [1/mm];
+    ``v_piece_mm_s`` (k,) the piece's own cruise cap [mm/s]; the axis
     limits (3,) V_i [mm/s], A_i [mm/s²], J_i [mm/s³] (``inf``: none); the path limits A, J.
     Returns (k,) each: the feed cap v̄ [mm/s] (``inf`` when no axis caps the feed), the
     tangential acceleration ā [mm/s²] and jerk j̄ [mm/s³].
@@ -187,10 +189,15 @@ def axis_path_limits(t_bound, k_bound, g_bound, v_piece_mm_s, v_axis_mm_s, a_axi
     what the normal part leaves at the speed the piece can actually reach, v̄ (which also
     counts the piece's own cap: a slow piece leaves more to the tangential part):
 
-        ā ≤ (A_i − v̄² K_i) / T_i                      (≥ A_i / (2 T_i)),
+        ā ≤ max((A_i − v̄² K_i) / T_i, √(A_i² − v̄⁴ κ̄²))  (≥ A_i / (2 T_i)),
         R_i = J_i − v̄³ G_i                            (≥ J_i / 2),
         ā ≤ R_i / (6 v̄ K_i)                           (the term 3 v̄ ā K_i takes ≤ R_i / 2),
         j̄ ≤ (R_i − 3 v̄ ā K_i) / T_i                   (≥ R_i / (2 T_i)).
+
+    The second form of the acceleration bound: t and n are orthonormal, so t_i² + n_i² ≤ 1
+    and by Cauchy–Schwarz |a t_i + v²κ n_i| ≤ √(a² + v⁴κ²); it is the tighter one where an
+    axis sees both the whole tangent and the whole normal (T_i = 1, K_i = κ: a full circle),
+    giving ā = A_i √3/2 at the half split instead of A_i/2.
 
     The half split keeps the tangential limits at least half the axis limits on any curve, so
     the planner never crawls into a tight arc; on gentle curves (v̄² K_i small) nearly all of
@@ -213,6 +220,8 @@ def axis_path_limits(t_bound, k_bound, g_bound, v_piece_mm_s, v_axis_mm_s, a_axi
         normal_a = np.where(kb > 0.0, v_bar * v_bar * kb, 0.0)
         a_room = np.where(np.isfinite(a_i), a_i - normal_a, np.inf)
         a_t = np.where(t > 0.0, a_room / t, np.inf)
+        kap = np.asarray(kappa_per_mm, dtype=float)[:, None]
+        a_t = np.maximum(a_t, np.sqrt(np.maximum(a_i * a_i - (v_bar * v_bar * kap) ** 2, 0.0)))
         rest_j = np.where(np.isfinite(j_i), j_i - np.where(g > 0.0, v_bar**3 * g, 0.0), np.inf)
         coupling = 3.0 * v_bar * kb  # mm/s · 1/mm: the jerk per unit tangential acceleration
         a_t = np.minimum(a_t, np.where(coupling > 0.0, rest_j / (2.0 * coupling), np.inf))

@@ -64,32 +64,36 @@ def piece_limits(pieces, machine) -> PieceLimits:
     axis = machine.axis_limits
     if not axis.any:
         return PieceLimits(np.full(k, np.inf), np.full(k, a_path), np.full(k, j_path))
-    t_bound, k_bound, g_bound = axis_geometry_bounds(pieces)
+    t_bound, k_bound, g_bound, kappa = axis_geometry_bounds(pieces)
     v_i, a_i, j_i = axis.as_arrays()
-    v, a, j = axis_path_limits(t_bound, k_bound, g_bound, pieces.v_cap_mm_s, v_i, a_i, j_i,
-                               a_path, j_path)  # fmt: skip
+    v, a, j = axis_path_limits(t_bound, k_bound, g_bound, kappa, pieces.v_cap_mm_s, v_i, a_i,
+                               j_i, a_path, j_path)  # fmt: skip
     return PieceLimits(v, a, j)
 
 
-def axis_geometry_bounds(pieces) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def axis_geometry_bounds(pieces) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Per piece and axis (k, 3): bounds T of |t_i| (unit tangent), K of |(κn)_i| [1/mm]
-    (curvature vector) and G of |d(κn)_i/ds| [1/mm²] over the piece (module doc)."""
+    (curvature vector) and G of |d(κn)_i/ds| [1/mm²] over the piece (module doc); and per
+    piece (k,) a bound of the curvature κ [1/mm] (0 on lines)."""
     k = len(pieces)
     t_bound = np.abs(np.asarray(pieces.tangent_start, dtype=float).T).copy()  # lines: exact
     k_bound = np.zeros((k, 3))
     g_bound = np.zeros((k, 3))
+    kappa = np.zeros(k)
     curved = np.flatnonzero(np.asarray(pieces.kind) != Kind.LINE)
     path = pieces.path if curved.size else None
     for lo in range(0, curved.size, _CHUNK):
         rows = curved[lo:lo + _CHUNK]
-        t_bound[rows], k_bound[rows], g_bound[rows] = _sampled_bounds(
+        t_bound[rows], k_bound[rows], g_bound[rows], kappa[rows] = _sampled_bounds(
             path, rows, np.asarray(pieces.length_mm)[rows],
-            np.asarray(pieces.kappa_max_per_mm)[rows])
-    return t_bound, k_bound, g_bound
+            np.asarray(pieces.kappa_max_per_mm)[rows], np.asarray(pieces.kind)[rows] == Kind.ARC)
+    return t_bound, k_bound, g_bound, kappa
 
 
-def _sampled_bounds(path, rows: np.ndarray, length_mm: np.ndarray, kappa_max_per_mm):
-    """T, K, G (m, 3) of curved pieces ``rows`` from :data:`SAMPLES` samples each."""
+def _sampled_bounds(path, rows: np.ndarray, length_mm: np.ndarray, kappa_max_per_mm,
+                    exact_kappa: np.ndarray):  # fmt: skip
+    """T, K, G (m, 3) and κ (m,) of curved pieces ``rows`` from :data:`SAMPLES` samples
+    each; ``exact_kappa`` (m,): the recorded κ_max is exact (circular arcs and helices)."""
     m = rows.size
     frac = np.linspace(0.0, 1.0, SAMPLES)
     s = (length_mm[:, None] * frac[None, :]).ravel()
@@ -108,10 +112,14 @@ def _sampled_bounds(path, rows: np.ndarray, length_mm: np.ndarray, kappa_max_per
     with np.errstate(divide="ignore", invalid="ignore"):
         diff = np.diff(curv, axis=1) / np.where(h > 0.0, h, np.inf)[:, None, None]
     g = np.abs(diff).max(axis=1) + np.abs(np.diff(diff, axis=1)).max(axis=1, initial=0.0)
-    kappa = np.maximum(np.asarray(kappa_max_per_mm, dtype=float),
-                       np.sqrt((curv * curv).sum(axis=2)).max(axis=1))  # fmt: skip
+    # κ: exact on arcs and helices (constant); else the largest of the piece's recorded
+    # κ_max and the sampled one plus its change within h/2.
+    k_rec = np.asarray(kappa_max_per_mm, dtype=float)
+    sampled = np.sqrt((curv * curv).sum(axis=2)).max(axis=1)
+    kappa = np.where(exact_kappa, k_rec, np.maximum(k_rec, sampled + np.sqrt((g * g).sum(axis=1))
+                                                    * h / 2.0))  # fmt: skip
     k_b = np.minimum(np.abs(curv).max(axis=1) + g * (h / 2.0)[:, None], kappa[:, None])
     # |dt_i/ds| = |(κn)_i| ≤ K_i: within h/2 of a sample t_i changes by at most K_i h/2 (an
     # XY arc keeps T_z = 0, so a slow Z axis never caps it).
     t_b = np.minimum(np.abs(tan).max(axis=1) + k_b * (h / 2.0)[:, None], 1.0)
-    return t_b, k_b, g
+    return t_b, k_b, g, kappa
