@@ -392,7 +392,8 @@ def test_axis_limits_absent_by_default(machine):
 
 def test_axis_limits_in_internal_units():
     m = load_machine(overrides={"axis_limits.x.v_max_mm_min": 3500.0,
-                                "axis_limits.y.a_max_mm_s2": 1200, "axis_limits.z.j_max_mm_s3": "2e4",
+                                "axis_limits.y.a_max_mm_s2": 1200,
+                                "axis_limits.z.j_max_mm_s3": "2e4",
                                 "axis_limits.z.v_max_mm_min": 600})  # fmt: skip
     ax = m.axis_limits
     assert ax.any

@@ -199,9 +199,12 @@ def axis_path_limits(t_bound, k_bound, g_bound, kappa_per_mm, v_piece_mm_s, v_ax
     axis sees both the whole tangent and the whole normal (T_i = 1, K_i = κ: a full circle),
     giving ā = A_i √3/2 at the half split instead of A_i/2.
 
-    The half split keeps the tangential limits at least half the axis limits on any curve, so
-    the planner never crawls into a tight arc; on gentle curves (v̄² K_i small) nearly all of
-    A_i remains tangential. The results are capped by the path limits A and J.
+    Without axis jerk limits the half split keeps the tangential acceleration at least half
+    the axis's, so the planner never crawls into a tight arc; on gentle curves (v̄² K_i small)
+    nearly all of A_i remains tangential. With axis jerk limits the coupling 3 v̄ ā K_i can
+    be the binding one (speeding up along a curve turns the centripetal acceleration): on
+    R = 4 mm at 50 mm/s with J_i = 3e4 it leaves ā ≈ 280 mm/s²; that is the physics of the
+    limit, not a margin. The results are capped by the path limits A and J.
     """
     t = np.asarray(t_bound, dtype=float)
     kb = np.asarray(k_bound, dtype=float)
