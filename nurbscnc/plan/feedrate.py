@@ -33,6 +33,7 @@ from nurbscnc.errors import ConfigError, PlanningError
 
 __all__ = [
     "check_limits",
+    "check_limit_arrays",
     "max_entry_speed",
     "max_reachable_speed",
     "max_reachable_speed_scalar",
@@ -55,6 +56,20 @@ def check_limits(a_max_mm_s2: float, j_max_mm_s3: float) -> tuple[float, float]:
         raise ConfigError(f"a_max_mm_s2 must be finite and > 0, got {a_max_mm_s2!r}")
     if not (math.isfinite(j) and j > 0.0):
         raise ConfigError(f"j_max_mm_s3 must be finite and > 0, got {j_max_mm_s3!r}")
+    return a, j
+
+
+def check_limit_arrays(a_max_mm_s2, j_max_mm_s3):
+    """:func:`check_limits` for a scalar or an array of limits each (per piece, planner v2):
+    floats when both are scalars, else float64 arrays (every element finite and > 0)."""
+    if np.ndim(a_max_mm_s2) == 0 and np.ndim(j_max_mm_s3) == 0:
+        return check_limits(a_max_mm_s2, j_max_mm_s3)
+    a = np.asarray(a_max_mm_s2, dtype=float)
+    j = np.asarray(j_max_mm_s3, dtype=float)
+    if not (np.all(np.isfinite(a)) and np.all(a > 0.0)):
+        raise ConfigError("a_max_mm_s2 must be finite and > 0 (every element)")
+    if not (np.all(np.isfinite(j)) and np.all(j > 0.0)):
+        raise ConfigError("j_max_mm_s3 must be finite and > 0 (every element)")
     return a, j
 
 
@@ -92,8 +107,8 @@ def scurve_timing(v_a_mm_s, v_b_mm_s, a_max_mm_s2: float, j_max_mm_s3: float):
     phases, of the constant-acceleration phase, and the peak |acceleration| (``= J·t_jerk``,
     which equals ``A_max`` when it is reached). Total time ``2·t_jerk + t_const``.
     """
-    a, j = check_limits(a_max_mm_s2, j_max_mm_s3)
-    scalar = np.ndim(v_a_mm_s) == 0 and np.ndim(v_b_mm_s) == 0
+    a, j = check_limit_arrays(a_max_mm_s2, j_max_mm_s3)
+    scalar = all(np.ndim(x) == 0 for x in (v_a_mm_s, v_b_mm_s, a, j))
     dv = np.abs(_speeds("v_b_mm_s", v_b_mm_s) - _speeds("v_a_mm_s", v_a_mm_s))
     reached = dv * j >= a * a  # Δv ≥ A²/J
     t_j = np.where(reached, a / j, np.sqrt(dv / j))
@@ -105,8 +120,8 @@ def scurve_timing(v_a_mm_s, v_b_mm_s, a_max_mm_s2: float, j_max_mm_s3: float):
 
 def scurve_duration_s(v_a_mm_s, v_b_mm_s, a_max_mm_s2: float, j_max_mm_s3: float):
     """Duration T [s] of the S-curve ``v_a → v_b``: ``Δv/A + A/J`` or ``2√(Δv/J)`` (SPEC §7)."""
-    a, j = check_limits(a_max_mm_s2, j_max_mm_s3)
-    scalar = np.ndim(v_a_mm_s) == 0 and np.ndim(v_b_mm_s) == 0
+    a, j = check_limit_arrays(a_max_mm_s2, j_max_mm_s3)
+    scalar = all(np.ndim(x) == 0 for x in (v_a_mm_s, v_b_mm_s, a, j))
     dv = np.abs(_speeds("v_b_mm_s", v_b_mm_s) - _speeds("v_a_mm_s", v_a_mm_s))
     t = np.where(dv * j >= a * a, dv / a + a / j, 2.0 * np.sqrt(dv / j))
     return _out(t, scalar)
@@ -114,8 +129,8 @@ def scurve_duration_s(v_a_mm_s, v_b_mm_s, a_max_mm_s2: float, j_max_mm_s3: float
 
 def scurve_distance_mm(v_a_mm_s, v_b_mm_s, a_max_mm_s2: float, j_max_mm_s3: float):
     """Distance D [mm] covered by the S-curve ``v_a → v_b``: ``(v_a + v_b)·T/2`` (SPEC §7)."""
-    a, j = check_limits(a_max_mm_s2, j_max_mm_s3)
-    scalar = np.ndim(v_a_mm_s) == 0 and np.ndim(v_b_mm_s) == 0
+    a, j = check_limit_arrays(a_max_mm_s2, j_max_mm_s3)
+    scalar = all(np.ndim(x) == 0 for x in (v_a_mm_s, v_b_mm_s, a, j))
     d = _distance_arr(_speeds("v_a_mm_s", v_a_mm_s), _speeds("v_b_mm_s", v_b_mm_s), a, j)
     return _out(d, scalar)
 
@@ -189,13 +204,13 @@ def max_reachable_speed(v_from_mm_s, distance_mm, a_max_mm_s2: float, j_max_mm_s
     By the symmetry ``D(v_a → v_b) = D(v_b → v_a)`` this is also the largest speed from which
     one can decelerate to ``v_from`` within ``distance`` (:func:`max_entry_speed`).
     """
-    a, j = check_limits(a_max_mm_s2, j_max_mm_s3)
-    scalar = np.ndim(v_from_mm_s) == 0 and np.ndim(distance_mm) == 0
-    v0, d = np.broadcast_arrays(
-        _speeds("v_from_mm_s", v_from_mm_s), _speeds("distance_mm", distance_mm)
+    a, j = check_limit_arrays(a_max_mm_s2, j_max_mm_s3)
+    scalar = all(np.ndim(x) == 0 for x in (v_from_mm_s, distance_mm, a, j))
+    v0, d, a, j = np.broadcast_arrays(
+        _speeds("v_from_mm_s", v_from_mm_s), _speeds("distance_mm", distance_mm), a, j
     )
     shape = v0.shape
-    v0, d = v0.ravel(), d.ravel()
+    v0, d, a, j = v0.ravel(), d.ravel(), a.ravel(), j.ravel()
     a2j = a * a / j
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         # A reached.
@@ -219,7 +234,7 @@ def max_reachable_speed(v_from_mm_s, distance_mm, a_max_mm_s2: float, j_max_mm_s
     while bad.size:
         v_bad = np.maximum(v0[bad], v[bad] - step * np.spacing(v[bad]))
         v[bad] = v_bad
-        bad = bad[(v_bad > v0[bad]) & (_distance_arr(v0[bad], v_bad, a, j) > d[bad])]
+        bad = bad[(v_bad > v0[bad]) & (_distance_arr(v0[bad], v_bad, a[bad], j[bad]) > d[bad])]
         step *= 2.0
     return _out(v.reshape(shape), scalar)
 
@@ -232,40 +247,51 @@ def max_entry_speed(v_to_mm_s, distance_mm, a_max_mm_s2: float, j_max_mm_s3: flo
     return max_reachable_speed(v_to_mm_s, distance_mm, a_max_mm_s2, j_max_mm_s3)
 
 
-def _pair_distance_mm(v_s, v_p, v_e, a, j):
-    """``D(v_s → v_p) + D(v_p → v_e)`` for arrays already validated (``v_p ≥ v_s, v_e``)."""
-    return _distance_arr(v_s, v_p, a, j) + _distance_arr(v_p, v_e, a, j)
+def _pair_distance_mm(v_s, v_p, v_e, a, j, a_dn=None, j_dn=None):
+    """``D(v_s → v_p) + D(v_p → v_e)`` for arrays already validated (``v_p ≥ v_s, v_e``);
+    the descent with ``a_dn, j_dn`` when given (else ``a, j``)."""
+    a_dn = a if a_dn is None else a_dn
+    j_dn = j if j_dn is None else j_dn
+    return _distance_arr(v_s, v_p, a, j) + _distance_arr(v_p, v_e, a_dn, j_dn)
 
 
-def peak_speed_unchecked(v_s, v_e, length, v_cap, a: float, j: float) -> np.ndarray:
+def peak_speed_unchecked(v_s, v_e, length, v_cap, a, j, a_dn=None, j_dn=None) -> np.ndarray:
     """:func:`peak_speed` on validated float arrays, without the feasibility check.
 
     Returns the largest ``v_p`` in ``[max(v_s, v_e), v_cap]`` whose pair distance is ≤
     ``length`` (``max(v_s, v_e)`` itself when even that does not fit: the caller's rounding).
     The bisection keeps the feasible end, so the cruise left over is ≥ 0, and runs until the
-    bracket is two adjacent floats.
+    bracket is two adjacent floats. ``a, j`` (scalars or arrays) limit the rise to ``v_p``,
+    ``a_dn, j_dn`` (default: the same) the descent from it.
     """
-    v_s, v_e, length, v_cap = np.broadcast_arrays(v_s, v_e, length, v_cap)
+    a_dn = a if a_dn is None else a_dn
+    j_dn = j if j_dn is None else j_dn
+    v_s, v_e, length, v_cap, a, j, a_dn, j_dn = np.broadcast_arrays(
+        v_s, v_e, length, v_cap, a, j, a_dn, j_dn)
     shape = v_s.shape
-    v_s, v_e, length, v_cap = (np.ravel(x) for x in (v_s, v_e, length, v_cap))
+    v_s, v_e, length, v_cap, a, j, a_dn, j_dn = (
+        np.ravel(x) for x in (v_s, v_e, length, v_cap, a, j, a_dn, j_dn))
     lo = np.maximum(v_s, v_e)
     hi = np.maximum(v_cap, lo)
     out = hi.astype(float, copy=True)
     # A piece of zero length keeps its (equal) end speeds: no bisection down to denormals.
     out[length <= 0.0] = lo[length <= 0.0]
-    todo = np.flatnonzero((_pair_distance_mm(v_s, hi, v_e, a, j) > length) & (length > 0.0))
+    todo = np.flatnonzero((_pair_distance_mm(v_s, hi, v_e, a, j, a_dn, j_dn) > length)
+                          & (length > 0.0))  # fmt: skip
     out[todo] = lo[todo]
     lo_t, hi_t = lo[todo], hi[todo]
     vs_t, ve_t, len_t = v_s[todo], v_e[todo], length[todo]
+    lim_t = (a[todo], j[todo], a_dn[todo], j_dn[todo])
     for _ in range(1100):  # a float64 bracket collapses in ≤ ~1075 halvings; usually ~60
         mid = 0.5 * (lo_t + hi_t)
         live = (mid > lo_t) & (mid < hi_t)  # else lo, hi are adjacent floats: done
         if not live.all():
             todo, lo_t, hi_t, mid = todo[live], lo_t[live], hi_t[live], mid[live]
             vs_t, ve_t, len_t = vs_t[live], ve_t[live], len_t[live]
+            lim_t = tuple(x[live] for x in lim_t)
         if todo.size == 0:
             break
-        ok = _pair_distance_mm(vs_t, mid, ve_t, a, j) <= len_t
+        ok = _pair_distance_mm(vs_t, mid, ve_t, *lim_t) <= len_t
         lo_t = np.where(ok, mid, lo_t)
         hi_t = np.where(ok, hi_t, mid)
         out[todo] = lo_t

@@ -22,6 +22,7 @@ import numpy as np
 
 from nurbscnc.errors import PlanningError
 from nurbscnc.machine.profile import Machine
+from nurbscnc.plan.axes import piece_limits
 from nurbscnc.plan.dynamics import PathIndex, Response, path_response
 from nurbscnc.plan.limits import check_point_count
 from nurbscnc.plan.options import Dynamics, LookaheadOptions
@@ -33,6 +34,17 @@ from nurbscnc.plan.timing import Reference, dwell_times, exact_reference, total_
 CONTOUR_MARGIN = 0.99
 #: Samples before an over-limit sample whose pieces share the blame (servo memory ≈ 30 ms).
 BLAME_WINDOW_S = 0.03
+
+
+@dataclass(frozen=True, eq=False)
+class Limits:
+    """Acceleration [mm/s²] and jerk [mm/s³] limits of each of k pieces, (k,) each: for the
+    rise to its peak speed (``up``) and the descent from it (``down``)."""
+
+    a_up_mm_s2: np.ndarray
+    j_up_mm_s3: np.ndarray
+    a_down_mm_s2: np.ndarray
+    j_down_mm_s3: np.ndarray
 
 
 @dataclass(frozen=True, eq=False)
@@ -67,16 +79,18 @@ class Check:
         return self.response.contour_mm[self.cutting] * 1000.0
 
 
-def _profile(pieces: PieceList, caps: np.ndarray, smooth: np.ndarray, machine: Machine,
+def _profile(pieces: PieceList, caps: np.ndarray, smooth: np.ndarray, limits: Limits,
              window: int | None) -> Profile:  # fmt: skip
-    """The jerk-limited profile (SPEC §7) over the pieces with cruise caps ``caps`` and the
-    junctions ``smooth`` (> 0: tangent-continuous, capped by the smaller neighbour)."""
-    lim = machine.limits
+    """The jerk-limited profile (SPEC §7) over the pieces with cruise caps ``caps`` [mm/s],
+    the junctions ``smooth`` (> 0: tangent-continuous, capped by the smaller neighbour) and
+    the per-piece acceleration and jerk ``limits``."""
     k = len(pieces)
     jcaps = np.zeros(k + 1)
     jcaps[1:-1] = np.where(smooth[1:-1] > 0, np.minimum(caps[:-1], caps[1:]), 0.0)
-    return plan_profile(ProfileInput(pieces.length_mm, caps, jcaps, lim.a_max_mm_s2,
-                                     lim.j_max_mm_s3, lookahead_pieces=window))  # fmt: skip
+    return plan_profile(ProfileInput(pieces.length_mm, caps, jcaps, limits.a_up_mm_s2,
+                                     limits.j_up_mm_s3, lookahead_pieces=window,
+                                     a_decel_mm_s2=limits.a_down_mm_s2,
+                                     j_decel_mm_s3=limits.j_down_mm_s3))  # fmt: skip
 
 
 def _blame(err: np.ndarray, eps_mm: float, piece: np.ndarray, joined: np.ndarray,
@@ -155,7 +169,11 @@ def plan_checked(program, machine: Machine, options: LookaheadOptions | None = N
     if not len(pieces):
         raise PlanningError("the program has no motion to plan")
     lim = machine.limits
-    caps = pieces.v_cap_mm_s.copy()
+    path_lim = piece_limits(pieces, machine)  # the axes' limits along each piece
+    caps = np.minimum(pieces.v_cap_mm_s, path_lim.v_mm_s)
+    a_p = np.asarray(path_lim.a_mm_s2, dtype=float)
+    j_p = np.asarray(path_lim.j_mm_s3, dtype=float)
+    limits = Limits(a_p, j_p, a_p, j_p)
     smooth = junction_caps(pieces)  # > 0 where the path is tangent-continuous
     rapid = pieces.rapid
     period = machine.servo.period_s
@@ -168,7 +186,7 @@ def plan_checked(program, machine: Machine, options: LookaheadOptions | None = N
         # The last iteration's reference and response go before the new ones are made (long
         # programs: each is hundreds of MB).
         ref = check = None
-        profile = _profile(pieces, caps, smooth, machine, options.lookahead_pieces)
+        profile = _profile(pieces, caps, smooth, limits, options.lookahead_pieces)
         check_point_count(pieces, profile, machine)  # before anything is sampled
         if options.dynamics == Dynamics.OFF:
             break

@@ -40,6 +40,15 @@ acceleration across junctions (a chain of short accelerating pieces pays ``A/J``
 ramps per piece), but it keeps pieces independent, makes a junction a single speed number and
 makes every joint trivially continuous in ``v`` and ``a``.
 
+Per-piece limits (planner v2). Each piece has its own acceleration and jerk limits, and may
+have separate ones for its descent (the S-curve from its peak down to its end speed: the
+contour check softens the deceleration into a stop without touching the rise). Because the
+acceleration is zero at every junction, every transition lies inside one piece and obeys
+that piece's limits: the backward scan uses each piece's descent limits, the forward scan
+its rise limits, the peak bisection both; at a junction only the jerk's sign changes, so
+both neighbours' limits hold there. The feasibility argument above is unchanged (it is per
+piece). Pieces are merged into one planning unit only when their limits are equal too.
+
 The result, :class:`Profile`, holds the motion exactly: a list of phases of constant jerk,
 so ``s(t)`` is a cubic on each; :meth:`Profile.sample` evaluates it for any array of times.
 """
@@ -53,6 +62,7 @@ import numpy as np
 
 from nurbscnc.errors import ConfigError, PlanningError
 from nurbscnc.plan.feedrate import (
+    check_limit_arrays,
     check_limits,
     max_reachable_speed,
     max_reachable_speed_scalar,
@@ -81,26 +91,45 @@ class ProfileInput:
     v_junction_max_mm_s : (k+1,) cap at each junction (piece starts, then the program end),
         ≥ 0, may be ``inf`` [mm/s]. The first and last must be 0 (start and end at rest); a 0
         inside is an exact stop.
-    a_max_mm_s2, j_max_mm_s3 : tangential acceleration [mm/s²] and jerk [mm/s³] limits.
+    a_max_mm_s2, j_max_mm_s3 : tangential acceleration [mm/s²] and jerk [mm/s³] limits: one
+        number for every piece, or (k,) arrays, one limit per piece (planner v2: the path
+        limits of the axes on that piece, lowered by the contour check's shaping).
     lookahead_pieces : ``None`` (see the whole program) or how many pieces ahead the planner
         sees (≥ 1); it then keeps the ability to stop within them.
+    a_decel_mm_s2, j_decel_mm_s3 : ``None`` (the same as ``a_max_mm_s2``, ``j_max_mm_s3``) or
+        separate limits (scalar or (k,)) for the *deceleration* within each piece (its
+        S-curve down from the peak to the end speed); the others then limit its rise.
+
+    Where the limits apply: every speed transition lies inside one piece (the acceleration
+    is zero at every junction, see the module docstring), so a transition obeys the limits
+    of the piece it lies in, and a junction, where the acceleration is zero and only the
+    jerk's sign may change, respects both neighbours' limits.
     """
 
     length_mm: np.ndarray
     v_max_mm_s: np.ndarray
     v_junction_max_mm_s: np.ndarray
-    a_max_mm_s2: float
-    j_max_mm_s3: float
+    a_max_mm_s2: float | np.ndarray
+    j_max_mm_s3: float | np.ndarray
     lookahead_pieces: int | None = None
+    a_decel_mm_s2: float | np.ndarray | None = None
+    j_decel_mm_s3: float | np.ndarray | None = None
 
     def __post_init__(self):
-        a, j = check_limits(self.a_max_mm_s2, self.j_max_mm_s3)
         length = _frozen(self.length_mm)
+        k = length.size
+        a, j = _piece_limits(self.a_max_mm_s2, self.j_max_mm_s3, k)
+        a_dn = a if self.a_decel_mm_s2 is None else None
+        j_dn = j if self.j_decel_mm_s3 is None else None
+        if a_dn is None or j_dn is None:
+            a_dn, j_dn = _piece_limits(self.a_max_mm_s2 if self.a_decel_mm_s2 is None
+                                       else self.a_decel_mm_s2,
+                                       self.j_max_mm_s3 if self.j_decel_mm_s3 is None
+                                       else self.j_decel_mm_s3, k)  # fmt: skip
         v_max = _frozen(self.v_max_mm_s)
         v_junction = _frozen(self.v_junction_max_mm_s)
         if length.ndim != 1 or length.size < 1:
             raise PlanningError("length_mm must be a 1-D array of at least one piece")
-        k = length.size
         if v_max.shape != (k,) or v_junction.shape != (k + 1,):
             raise PlanningError(
                 f"shapes: length_mm {length.shape}, v_max_mm_s {v_max.shape} (need ({k},)), "
@@ -126,12 +155,40 @@ class ProfileInput:
             ("a_max_mm_s2", a),
             ("j_max_mm_s3", j),
             ("lookahead_pieces", n),
+            ("a_decel_mm_s2", a_dn),
+            ("j_decel_mm_s3", j_dn),
         ):
             object.__setattr__(self, name, value)
 
     @property
     def piece_count(self) -> int:
         return int(self.length_mm.size)
+
+    def piece_limits(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(k,) arrays ``(a_up, j_up, a_down, j_down)``: each piece's limits for its rise
+        and its descent [mm/s², mm/s³]."""
+        k = self.piece_count
+        return tuple(np.broadcast_to(np.asarray(x, dtype=float), (k,))
+                     for x in (self.a_max_mm_s2, self.j_max_mm_s3, self.a_decel_mm_s2,
+                               self.j_decel_mm_s3))  # fmt: skip
+
+    @property
+    def uniform_limits(self) -> bool:
+        """Whether every piece has the same limits, rising and falling."""
+        lims = (self.a_max_mm_s2, self.j_max_mm_s3, self.a_decel_mm_s2, self.j_decel_mm_s3)
+        return all(np.ndim(x) == 0 for x in lims) and lims[0] == lims[2] and lims[1] == lims[3]
+
+
+def _piece_limits(a_max, j_max, k: int):
+    """Validated limits: floats, or read-only (k,) arrays when either is per piece."""
+    if np.ndim(a_max) == 0 and np.ndim(j_max) == 0:
+        return check_limits(a_max, j_max)
+    a, j = check_limit_arrays(a_max, j_max)
+    for name, x in (("a_max_mm_s2", a), ("j_max_mm_s3", j)):
+        if x.ndim not in (0, 1) or (x.ndim == 1 and x.shape != (k,)):
+            raise PlanningError(f"{name} must be a number or one per piece ({k},), got "
+                                f"shape {x.shape}")  # fmt: skip
+    return (_frozen(np.broadcast_to(a, (k,))), _frozen(np.broadcast_to(j, (k,))))
 
 
 @dataclass(frozen=True, eq=False)
@@ -223,7 +280,8 @@ class Profile:
 
 
 def _window_caps(
-    cap: np.ndarray, length: np.ndarray, w_back: np.ndarray, n: int, a: float, j: float
+    cap: np.ndarray, length: np.ndarray, w_back: np.ndarray, n: int, a: np.ndarray,
+    j: np.ndarray,
 ) -> np.ndarray:
     """Stop-within-the-window caps of an ``n``-piece look-ahead, (k+1,) [mm/s].
 
@@ -243,7 +301,7 @@ def _window_caps(
         if i.size == 0:
             break
         m = m - 1
-        w = np.minimum(cap[m], max_reachable_speed(w, length[m], a, j))
+        w = np.minimum(cap[m], max_reachable_speed(w, length[m], a[m], j[m]))
         same = w == w_back[m]
         if same.any():
             out[i[same]] = w_back[i[same]]
@@ -253,36 +311,50 @@ def _window_caps(
     return out
 
 
-def _backward_scan(cap: list, length: list, a: float, j: float) -> list:
-    """``w_i = min(cap_i, R(w_{i+1}, L_i))`` from ``w_k = 0`` (plain floats: numpy per
-    element would be slower)."""
+def _backward_scan(cap: list, length: list, a: list, j: list) -> list:
+    """``w_i = min(cap_i, R(w_{i+1}, L_i))`` from ``w_k = 0``, ``R`` with piece i's descent
+    limits ``a[i], j[i]`` (plain floats: numpy per element would be slower)."""
     reach = max_reachable_speed_scalar
     k = len(length)
     w_back = [0.0] * (k + 1)
     w = 0.0
     for i in range(k - 1, -1, -1):
-        w = reach(w, length[i], a, j)
+        w = reach(w, length[i], a[i], j[i])
         if cap[i] < w:
             w = cap[i]
         w_back[i] = w
     return w_back
 
 
-def _repair_junctions(v: np.ndarray, length: np.ndarray, a: float, j: float) -> np.ndarray:
+def _transition_distance_mm(v_a, v_b, a, j, a_dn=None, j_dn=None):
+    """``D(v_a → v_b)`` [mm] with the rising limits ``a, j`` where ``v_b > v_a``, else the
+    descending ones (default: the same)."""
+    if a_dn is None:
+        return scurve_distance_mm(v_a, v_b, a, j)
+    up = v_b > v_a
+    return scurve_distance_mm(v_a, v_b, np.where(up, a, a_dn), np.where(up, j, j_dn))
+
+
+def _repair_junctions(v: np.ndarray, length: np.ndarray, a, j, a_dn=None,
+                      j_dn=None) -> np.ndarray:  # fmt: skip
     """Make ``D(v_i → v_{i+1}) ≤ L_i`` hold in floats for every piece (in place; returned).
 
     The scans satisfy it mathematically and, with the float guard of the reach function,
     almost always in floats too; a rounding step at the A²/J branch switch of ``D`` can leave
     a piece an ulp short. Such a piece gets the higher of its end speeds lowered by a
-    doubling number of ulps; a lowered junction re-checks its other piece.
+    doubling number of ulps; a lowered junction re-checks its other piece. ``a, j`` (and
+    ``a_dn, j_dn`` for descents, default the same): scalars or (k,) per piece.
     """
-    bad = np.flatnonzero(scurve_distance_mm(v[:-1], v[1:], a, j) > length)
-    work = [int(x) for x in bad]
     k = length.size
+    lims = [np.broadcast_to(np.asarray(x, dtype=float), (k,))
+            for x in (a, j, a if a_dn is None else a_dn, j if j_dn is None else j_dn)]
+    bad = np.flatnonzero(_transition_distance_mm(v[:-1], v[1:], *lims) > length)
+    work = [int(x) for x in bad]
     while work:
         i = work.pop()
         step = 1.0
-        while scurve_distance_mm(v[i], v[i + 1], a, j) > length[i]:
+        li = [float(x[i]) for x in lims]
+        while _transition_distance_mm(v[i], v[i + 1], *li) > length[i]:
             hi, lo = (i, i + 1) if v[i] > v[i + 1] else (i + 1, i)
             v[hi] = max(v[lo], v[hi] - step * math.ulp(v[hi]))
             step *= 2.0
@@ -310,19 +382,26 @@ def plan_profile(inp: ProfileInput) -> Profile:
     jcap = np.asarray(inp.v_junction_max_mm_s)
     inner = np.arange(1, k)
     transparent = (v_max[inner - 1] == v_max[inner]) & (jcap[inner] >= v_max[inner])
+    lims = inp.piece_limits()
+    for x in lims:  # merged pieces share one set of limits
+        transparent &= x[inner - 1] == x[inner]
     if not transparent.any():
         return plan_profile_pieces(inp)
     # Group g holds pieces first[g] .. first[g+1]-1.
     first = np.concatenate(([0], inner[~transparent], [k]))
     lengths = np.asarray(inp.length_mm)
     cum = np.concatenate(([0.0], np.cumsum(lengths)))
+    heads = first[:-1]
+    uniform = inp.uniform_limits
     merged = ProfileInput(
         cum[first[1:]] - cum[first[:-1]],
-        v_max[first[:-1]],
+        v_max[heads],
         jcap[first],
-        inp.a_max_mm_s2,
-        inp.j_max_mm_s3,
+        inp.a_max_mm_s2 if uniform else lims[0][heads],
+        inp.j_max_mm_s3 if uniform else lims[1][heads],
         lookahead_pieces=inp.lookahead_pieces,
+        a_decel_mm_s2=None if uniform else lims[2][heads],
+        j_decel_mm_s3=None if uniform else lims[3][heads],
     )
     g = plan_profile_pieces(merged)
     piece_start = cum[:-1]
@@ -383,7 +462,7 @@ def plan_profile_pieces(inp: ProfileInput) -> Profile:
     Cost O(k) Python steps for the two scans plus vectorised numpy for the peaks (bisection)
     and the phases; a bounded look-ahead adds O(k·N) vectorised work at worst.
     """
-    a, j = inp.a_max_mm_s2, inp.j_max_mm_s3
+    a, j, a_dn, j_dn = inp.piece_limits()  # (k,) each: rise and descent limits per piece
     length = np.array(inp.length_mm)
     v_max = np.array(inp.v_max_mm_s)
     k = length.size
@@ -395,34 +474,35 @@ def plan_profile_pieces(inp: ProfileInput) -> Profile:
 
     # 2. Backward scan from the end at rest.
     length_l = length.tolist()
-    w_back = _backward_scan(cap.tolist(), length_l, a, j)
+    a_l, j_l, a_dn_l, j_dn_l = a.tolist(), j.tolist(), a_dn.tolist(), j_dn.tolist()
+    w_back = _backward_scan(cap.tolist(), length_l, a_dn_l, j_dn_l)
 
     # 3. Bounded look-ahead: cap by the stop-within-the-window speeds, then rescan so that
     #    the caps are backward-consistent again (w_i ≤ R(w_{i+1}, L_i)), which is what makes
     #    the forward scan's result feasible (R is not monotone in its start speed: module doc).
     n = inp.lookahead_pieces
     if n is not None and n < k:
-        cap = np.minimum(cap, _window_caps(cap, length, np.array(w_back), n, a, j))
-        w_back = _backward_scan(cap.tolist(), length_l, a, j)
+        cap = np.minimum(cap, _window_caps(cap, length, np.array(w_back), n, a_dn, j_dn))
+        w_back = _backward_scan(cap.tolist(), length_l, a_dn_l, j_dn_l)
 
     # 4. Forward scan from the start at rest.
     reach = max_reachable_speed_scalar
     v_l = [0.0] * (k + 1)
     w = 0.0
     for i in range(k):
-        w = reach(w, length_l[i], a, j)
+        w = reach(w, length_l[i], a_l[i], j_l[i])
         if w_back[i + 1] < w:
             w = w_back[i + 1]
         v_l[i + 1] = w
-    v = _repair_junctions(np.array(v_l), length, a, j)
+    v = _repair_junctions(np.array(v_l), length, a, j, a_dn, j_dn)
 
     # 5. Per piece: peak speed, then the seven phases.
     v_s, v_e = v[:-1], v[1:]
-    v_p = peak_speed_unchecked(v_s, v_e, length, v_max, a, j)
+    v_p = peak_speed_unchecked(v_s, v_e, length, v_max, a, j, a_dn, j_dn)
     tj1, tc1, ap1 = scurve_timing(v_s, v_p, a, j)
-    tj2, tc2, ap2 = scurve_timing(v_p, v_e, a, j)
+    tj2, tc2, ap2 = scurve_timing(v_p, v_e, a_dn, j_dn)
     d_acc = scurve_distance_mm(v_s, v_p, a, j)
-    d_dec = scurve_distance_mm(v_p, v_e, a, j)
+    d_dec = scurve_distance_mm(v_p, v_e, a_dn, j_dn)
     cruise = np.maximum(length - d_acc - d_dec, 0.0)  # ≥ 0 up to an ulp, by the bisection
     if np.any((cruise > 0.0) & (v_p <= 0.0)):
         raise PlanningError("a piece has length but no reachable speed (length underflow)")
@@ -432,12 +512,12 @@ def plan_profile_pieces(inp: ProfileInput) -> Profile:
     bounds = np.concatenate(([0.0], np.cumsum(length)))
     start, end = bounds[:-1], bounds[1:]
     half_j1 = 0.5 * j * tj1 * tj1
-    half_j2 = 0.5 * j * tj2 * tj2
+    half_j2 = 0.5 * j_dn * tj2 * tj2
     sixth_j1 = j * tj1**3 / 6.0
-    sixth_j2 = j * tj2**3 / 6.0
+    sixth_j2 = j_dn * tj2**3 / 6.0
     zero = np.zeros(k)
     dur = np.stack([tj1, tc1, tj1, t_cr, tj2, tc2, tj2], axis=1)
-    jerk = np.broadcast_to(np.array([j, 0.0, -j, 0.0, -j, 0.0, j]), (k, 7))
+    jerk = np.stack([j, zero, -j, zero, -j_dn, zero, j_dn], axis=1)
     a0 = np.stack([zero, ap1, ap1, zero, zero, -ap2, -ap2], axis=1)
     v0 = np.stack([v_s, v_s + half_j1, v_p - half_j1, v_p, v_p, v_p - half_j2, v_e + half_j2], 1)
     # Positions are anchored at both ends of the piece (the S-curves' closed-form distances),
