@@ -212,7 +212,7 @@ def axis_path_limits(t_bound, k_bound, g_bound, kappa_per_mm, v_piece_mm_s, v_ax
     v_i = np.asarray(v_axis_mm_s, dtype=float)[None, :]
     a_i = np.asarray(a_axis_mm_s2, dtype=float)[None, :]
     j_i = np.asarray(j_axis_mm_s3, dtype=float)[None, :]
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         # Feed caps (k,): velocity, then half the acceleration and jerk for the normal part.
         v_cap = np.min(np.where(t > 0.0, v_i / t, np.inf), axis=1)
         v_cap = np.minimum(v_cap, np.min(np.where(kb > 0.0, np.sqrt(a_i / (2.0 * kb)), np.inf),
