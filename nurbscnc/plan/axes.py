@@ -39,6 +39,9 @@ from nurbscnc.machine.caps import axis_path_limits
 
 #: Samples per curved piece for its tangent and curvature-vector bounds (ends included).
 SAMPLES = 33
+#: Samples whose parametric speed |C′| is below this fraction of the piece's largest are
+#: treated as at a cusp (their curvature is not a number the axes can follow).
+CUSP_SPEED = 1e-6
 #: Curved pieces sampled at once (bounds the temporaries: SAMPLES × this × 3 floats each).
 _CHUNK = 1 << 13
 
@@ -90,6 +93,18 @@ def axis_geometry_bounds(pieces) -> tuple[np.ndarray, np.ndarray, np.ndarray, np
     return t_bound, k_bound, g_bound, kappa
 
 
+def _nearest_regular(ok: np.ndarray) -> np.ndarray:
+    """(m, n) index of the nearest True of each row of ``ok`` (its own where True; the first
+    one of the row by default)."""
+    m, n = ok.shape
+    col = np.arange(n)
+    prev = np.maximum.accumulate(np.where(ok, col, -1), axis=1)
+    nxt = np.minimum.accumulate(np.where(ok, col, n)[:, ::-1], axis=1)[:, ::-1]
+    use_prev = (prev >= 0) & ((nxt >= n) | (col - prev <= nxt - col))
+    out = np.where(use_prev, prev, nxt)
+    return np.where(out >= n, 0, out)
+
+
 def _sampled_bounds(path, rows: np.ndarray, length_mm: np.ndarray, kappa_max_per_mm,
                     exact_kappa: np.ndarray):  # fmt: skip
     """T, K, G (m, 3) and κ (m,) of curved pieces ``rows`` from :data:`SAMPLES` samples
@@ -99,15 +114,24 @@ def _sampled_bounds(path, rows: np.ndarray, length_mm: np.ndarray, kappa_max_per
     s = (length_mm[:, None] * frac[None, :]).ravel()
     idx = np.repeat(rows, SAMPLES)
     d1, d2 = path.derivatives(idx, s)
-    speed2 = np.einsum("ij,ij->i", d1, d1)
-    speed = np.sqrt(speed2)
-    ok = speed > 0.0  # a cusp (C′ = 0) has no tangent: its samples are left out
-    safe2 = np.where(ok, speed2, 1.0)
-    tan = d1 / np.sqrt(safe2)[:, None]
+    speed2 = np.einsum("ij,ij->i", d1, d1).reshape(m, SAMPLES)
+    # A cusp (C′ = 0, a doubled control point at a NURBS end) has no tangent, and samples
+    # where |C′| is 1e-6 of the piece's largest are numerically at one (κ ~ 1e19): they take
+    # the values of their nearest regular sample. The tool passes a cusp at rest (its
+    # junction turns by 180°, a stop) and κ grows like s^(-1/2) towards it, so the next
+    # sample already holds the feed down (the same rule as the NURBS cells' own caps).
+    ok = speed2 > (CUSP_SPEED * CUSP_SPEED) * speed2.max(axis=1, keepdims=True)
+    ok &= speed2 > 0.0
+    fill = _nearest_regular(ok)
+    d1 = d1.reshape(m, SAMPLES, 3)[np.arange(m)[:, None], fill]
+    d2 = d2.reshape(m, SAMPLES, 3)[np.arange(m)[:, None], fill]
+    safe2 = np.maximum(speed2[np.arange(m)[:, None], fill], 1e-300)[..., None]
+    tan = d1 / np.sqrt(safe2)
     # Curvature vector κn = dt/ds = (C″ − (C″·t) t) / |C′|² (any parametrisation).
-    curv = (d2 - np.einsum("ij,ij->i", d2, tan)[:, None] * tan) / safe2[:, None]
-    tan = np.where(ok[:, None], tan, 0.0).reshape(m, SAMPLES, 3)
-    curv = np.where(ok[:, None], curv, 0.0).reshape(m, SAMPLES, 3)
+    curv = (d2 - np.einsum("mij,mij->mi", d2, tan)[..., None] * tan) / safe2
+    none = ~ok.any(axis=1)  # a piece without a regular sample: no bound from it
+    tan[none] = 0.0
+    curv[none] = 0.0
     h = length_mm / (SAMPLES - 1)  # sample spacing [mm]
     with np.errstate(divide="ignore", invalid="ignore"):
         diff = np.diff(curv, axis=1) / np.where(h > 0.0, h, np.inf)[:, None, None]
