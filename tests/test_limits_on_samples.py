@@ -250,3 +250,18 @@ def test_circle_from_rest_uses_the_axis_acceleration_and_holds_it(r, start_deg):
     v_bar = min(3500.0 / 60.0, math.sqrt(2450.0 * r / 2.0))
     on_arc = result.samples.piece[1:] == 1
     assert np.linalg.norm(v[on_arc], axis=1).max() == pytest.approx(v_bar, rel=1e-3)
+
+
+@pytest.mark.parametrize("r", [1.0, 20.0])
+def test_circle_with_axis_jerk_limits_reaches_and_holds_them(r):
+    # The same with an axis jerk limit of 5e4 mm/s³: the jerk of speeding up along the curve
+    # (j t + 3 v a κn + v³ d(κn)/ds) stays within it, and comes within 2 % of it (from 45°,
+    # where the peak lands on an axis).
+    over = {**LINUXCNC_AXES, "axis_limits.x.j_max_mm_s3": 5e4, "axis_limits.y.j_max_mm_s3": 5e4}
+    x = y = r / math.sqrt(2.0)
+    text = (f"G21 G90 G17 G94 G61\nG0 X{x:.9f} Y{y:.9f}\nF6000\n"
+            f"G3 X{x:.9f} Y{y:.9f} I{-x:.9f} J{-y:.9f}\nM2\n")
+    result = check_samples(text, load_machine(overrides=over), "off")
+    _, _, j = finite_differences(result.samples.points_mm)
+    on_arc = result.samples.piece[3:] == 1
+    assert np.abs(j[on_arc]).max() == pytest.approx(5e4, rel=0.02)

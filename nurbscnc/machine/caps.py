@@ -41,6 +41,10 @@ class MachineLike(Protocol):
     def servo(self): ...
 
 
+#: Share of each axis's acceleration and jerk limit the normal (centripetal) part may take on
+#: a curve (:func:`axis_path_limits`, the feed cap); the tangential part gets the rest.
+NORMAL_SHARE = 0.5
+
 #: The lowest cruise cap a piece gets [mm/s]: never a zero cap, which would stall the tool.
 MIN_CAP_MM_S = 1e-3
 
@@ -184,10 +188,10 @@ def axis_path_limits(t_bound, k_bound, g_bound, kappa_per_mm, v_piece_mm_s, v_ax
 
     Lines have K = G = 0: v̄ = min V_i/T_i, ā = min A_i/T_i, j̄ = min J_i/T_i, exact (direction
     cosines). On curves the normal terms share the axis limits with the tangential ones. The
-    split chosen: the normal part may take at most half of each axis limit,
-    v̄ ≤ √(A_i / (2K_i)) and v̄ ≤ (J_i / (2G_i))^(1/3) (feed caps), and the tangential part gets
-    what the normal part leaves at the speed the piece can actually reach, v̄ (which also
-    counts the piece's own cap: a slow piece leaves more to the tangential part):
+    split chosen: the normal part may take at most half (:data:`NORMAL_SHARE`) of each axis
+    limit, v̄ ≤ √(A_i / (2K_i)) and v̄ ≤ (J_i / (2G_i))^(1/3) (feed caps), and the tangential
+    part gets what the normal part leaves at the speed the piece can actually reach, v̄
+    (which also counts the piece's own cap: a slow piece leaves more to the tangential part):
 
         ā ≤ max((A_i − v̄² K_i) / T_i, √(A_i² − v̄⁴ κ̄²))  (≥ A_i / (2 T_i)),
         R_i = J_i − v̄³ G_i                            (≥ J_i / 2),
@@ -215,9 +219,10 @@ def axis_path_limits(t_bound, k_bound, g_bound, kappa_per_mm, v_piece_mm_s, v_ax
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         # Feed caps (k,): velocity, then half the acceleration and jerk for the normal part.
         v_cap = np.min(np.where(t > 0.0, v_i / t, np.inf), axis=1)
-        v_cap = np.minimum(v_cap, np.min(np.where(kb > 0.0, np.sqrt(a_i / (2.0 * kb)), np.inf),
+        share = NORMAL_SHARE
+        v_cap = np.minimum(v_cap, np.min(np.where(kb > 0.0, np.sqrt(share * a_i / kb), np.inf),
                                          axis=1))  # fmt: skip
-        v_cap = np.minimum(v_cap, np.min(np.where(g > 0.0, np.cbrt(j_i / (2.0 * g)), np.inf),
+        v_cap = np.minimum(v_cap, np.min(np.where(g > 0.0, np.cbrt(share * j_i / g), np.inf),
                                          axis=1))  # fmt: skip
         v_bar = np.minimum(v_cap, np.asarray(v_piece_mm_s, dtype=float))[:, None]
         normal_a = np.where(kb > 0.0, v_bar * v_bar * kb, 0.0)
