@@ -252,7 +252,13 @@ def test_g64_p_blends_corners_faster_within_p(shape):
     # so tight that stopping is faster: blend_pays), its 72° inner corners are.
     assert blends == (corners if shape == "square" else corners // 2 + 1)
     assert "ph" not in exact.pieces.kind_counts()
-    assert blended.cycle_time_s < 0.95 * exact.cycle_time_s
+    # Blending saves the stops' time in the kinematics (dynamics off). Under the contour
+    # check a stop is now shaped to the servo (planner v2, issue 13) and costs little, while
+    # a P0.2 blend must slow to its servo limit: whether a blend beats a stop there is the
+    # blend decision's to make (corners/blend_pays), not this test's.
+    off = LookaheadOptions(dynamics="off")
+    assert (plan_program(prog_b, lookahead=off).cycle_time_s
+            < plan_program(prog_e, lookahead=off).cycle_time_s)
     for prog, plan in ((prog_e, exact), (prog_b, blended)):
         assert_limits(plan)
         np.testing.assert_allclose(plan.samples.points_mm[-1], end_point(prog), atol=1e-12)

@@ -16,7 +16,7 @@ pieces at one cap are planned as one by :func:`~nurbscnc.plan.profile.plan_profi
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -26,7 +26,7 @@ from nurbscnc.plan.axes import piece_limits
 from nurbscnc.plan.dynamics import PathIndex, Response, path_response
 from nurbscnc.plan.limits import check_point_count
 from nurbscnc.plan.options import Dynamics, LookaheadOptions
-from nurbscnc.plan.pieces import PieceList, junction_caps, segment_pieces
+from nurbscnc.plan.pieces import PieceList, junction_caps, segment_pieces, settle_time_s
 from nurbscnc.plan.profile import Profile, ProfileInput, plan_profile
 from nurbscnc.plan.timing import Reference, dwell_times, exact_reference, total_time_s
 
@@ -34,6 +34,17 @@ from nurbscnc.plan.timing import Reference, dwell_times, exact_reference, total_
 CONTOUR_MARGIN = 0.99
 #: Samples before an over-limit sample whose pieces share the blame (servo memory ≈ 30 ms).
 BLAME_WINDOW_S = 0.03
+#: An over-limit sample belongs to a stop planned at most this long after it [s] (profile
+#: time; the approach) ...
+STOP_BEFORE_S = 0.02
+#: ... or at most this long before it [s] (the overshoot and the corner cut after it).
+STOP_WINDOW_S = 0.03
+#: Re-plans with the local levers before the fallback takes over.
+LOCAL_ITERATIONS = 16
+#: Fallback re-plans on the blamed pieces before all cutting pieces are scaled.
+FALLBACK_LOCAL_ITERATIONS = 8
+#: Factor of every lever per fallback re-plan.
+FALLBACK_FACTOR = 0.6
 
 
 @dataclass(frozen=True, eq=False)
@@ -61,6 +72,9 @@ class Plan:
     iterations: int
     cycle_time_s: float
     dynamics: Dynamics
+    limits: Limits | None = None
+    shaped_by_contour: np.ndarray | None = None
+    settle_s: np.ndarray | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -155,6 +169,156 @@ def plan_program(program, machine: Machine, options: LookaheadOptions | None = N
     return plan_checked(program, machine, options)[0]
 
 
+def _with_dwell(pieces: PieceList, dwell_s: np.ndarray) -> PieceList:
+    """``pieces`` with the dwell column ``dwell_s`` (k,) [s]; the path model, already built
+    and independent of dwells, is shared rather than rebuilt."""
+    out = replace(pieces, dwell_after_s=dwell_s)
+    if "path" in pieces.__dict__:
+        out.__dict__["path"] = pieces.__dict__["path"]
+    return out
+
+
+@dataclass
+class _Levers:
+    """What the contour check may change, per piece (k,): the cruise ``caps`` [mm/s], the
+    rise and descent limits, the settle dwell after each rapid [s] and which pieces were
+    changed (``shaped``); ``history`` of the last factors, for the measured exponents."""
+
+    caps: np.ndarray
+    a_up: np.ndarray
+    j_up: np.ndarray
+    a_dn: np.ndarray
+    j_dn: np.ndarray
+    settle_s: np.ndarray
+    shaped: np.ndarray
+    cap_history: tuple | None = None
+    stop_history: dict | None = None
+
+    def limits(self) -> Limits:
+        return Limits(self.a_up, self.j_up, self.a_dn, self.j_dn)
+
+
+def _runs(caps: np.ndarray, smooth: np.ndarray, lev: _Levers) -> np.ndarray:
+    """Run label (k,) of each piece: the pieces the profile plans as one unit (tangent-
+    continuous junctions, equal caps and equal limits; see :func:`plan_profile`)."""
+    joined = (smooth[1:-1] > 0) & (caps[:-1] == caps[1:])
+    for x in (lev.a_up, lev.j_up, lev.a_dn, lev.j_dn):
+        joined &= x[:-1] == x[1:]
+    return np.concatenate(([0], np.cumsum(~joined)))
+
+
+def _stop_events(tau_s: np.ndarray, over: np.ndarray, profile: Profile, period_s: float):
+    """For the over-limit samples ``over`` (indices; profile times ``tau_s``), the stop
+    junction each is near (−1: none): a junction planned at rest whose profile time τ_j has
+    τ_j − :data:`STOP_BEFORE_S` ≤ τ ≤ τ_j + :data:`STOP_WINDOW_S` (the overshoot of a stop
+    and the corner cut while the servo still settles from it; during a dwell τ = τ_j)."""
+    v = profile.junction_speeds_mm_s
+    k = v.size - 1
+    stops = np.flatnonzero(v == 0.0)
+    stops = stops[stops > 0]  # the start at rest is no stop to soften
+    t_stop = np.append(profile.piece_start_time_s, profile.duration_s)[stops]
+    tau = tau_s[over]
+    if stops.size == 0:
+        return np.full(over.size, -1)
+    # The first stop at or after τ − window, if it is not later than τ + before.
+    i = np.searchsorted(t_stop, tau - STOP_WINDOW_S - 0.5 * period_s, side="left")
+    i = np.minimum(i, stops.size - 1)
+    near = (stops.size > 0) & (t_stop[i] <= tau + STOP_BEFORE_S)
+    near &= t_stop[i] >= tau - STOP_WINDOW_S - 0.5 * period_s
+    return np.where(near, np.minimum(stops[i], k), -1)
+
+
+def _shape(lev: _Levers, err: np.ndarray, eps_mm: float, ref: Reference, profile: Profile,
+           pieces: PieceList, smooth: np.ndarray, settle_rows: np.ndarray, settle_max_s: float,
+           period_s: float) -> None:  # fmt: skip
+    """One local re-plan (in place): each over-limit sample is answered where its error is
+    caused (module docstring): the settle after a rapid, the descent into and the rise out
+    of a stop, else the feed over the blamed window."""
+    n = ref.t_s.size
+    k = len(pieces)
+    over = np.flatnonzero(err > eps_mm)
+    tau = np.append(ref.tau_s, np.full(err.size - n, profile.duration_s))
+    near = _stop_events(tau, over, profile, period_s)
+    handled = np.zeros(over.size, dtype=bool)
+    # 1. Settle after a rapid: the rapid's own stop transient, not the cut's motion.
+    for r in settle_rows.tolist():
+        hit = near == r + 1
+        if not hit.any() or lev.settle_s[r] >= settle_max_s:
+            continue
+        # Move the restart past the last over-limit sample (plus one period).
+        t_restart = profile.piece_start_time_s[r + 1]
+        moving = over[hit & (tau[over] > t_restart)]
+        extra = period_s
+        if moving.size:
+            first_moving = int(np.searchsorted(tau, t_restart, side="right"))
+            extra = max((int(moving.max()) - first_moving + 2) * period_s, period_s)
+        lev.settle_s[r] = min(settle_max_s, lev.settle_s[r] + extra)
+        handled |= hit
+    # 2. Stops: soften the descent of the run that ends there and, for samples after the
+    #    restart, the rise of the run that leaves it.
+    runs = _runs(lev.caps, smooth, lev)
+    stop_hist = lev.stop_history or {}
+    new_hist = {}
+    for j in np.unique(near[(near > 0) & ~handled]).tolist():
+        hit = (near == j) & ~handled
+        e = float(err[over[hit]].max())
+        prev = stop_hist.get(j)
+        p = 1.0
+        if prev is not None and prev[1] < 1.0 and e > 0.0:
+            measured = np.log(e / prev[0]) / np.log(prev[1])
+            if np.isfinite(measured):
+                p = float(np.clip(measured, 0.25, 2.0))
+        f = float(np.clip(0.95 * (eps_mm / e) ** (1.0 / p), 0.3, 0.9))
+        new_hist[j] = (e, f)
+        if j - 1 >= 0 and not pieces.rapid[j - 1]:
+            sel = runs == runs[j - 1]
+            lev.j_dn[sel] *= f
+            lev.shaped |= sel
+        t_restart = profile.piece_start_time_s[j] if j < k else np.inf
+        if j < k and (tau[over[hit]] > t_restart).any() and not pieces.rapid[j]:
+            sel = runs == runs[j]
+            lev.j_up[sel] *= f
+            lev.shaped |= sel
+        handled |= hit
+    lev.stop_history = new_hist
+    # 3. Curves: the feed of the pieces in the blamed window only.
+    rest = over[~handled]
+    if rest.size:
+        e_rest = np.zeros(err.size)
+        e_rest[rest] = err[rest]
+        window = max(int(round(BLAME_WINDOW_S / period_s)), 1)
+        joined = (smooth[1:-1] > 0) & (lev.caps[:-1] == lev.caps[1:])
+        piece = np.append(ref.piece, np.full(err.size - n, k - 1))
+        blame = _blame(e_rest, eps_mm, piece, joined, window)
+        factor, lev.cap_history = local_factors(blame, eps_mm, lev.cap_history)
+        lev.caps *= factor
+        lev.shaped |= factor < 1.0
+
+
+def _fallback(lev: _Levers, err: np.ndarray, eps_mm: float, ref: Reference, pieces: PieceList,
+              settle_rows: np.ndarray, settle_max_s: float, period_s: float,
+              stage: int) -> None:  # fmt: skip
+    """The guaranteed-feasible fallback (in place): every lever of the blamed pieces (stage
+    1: within the servo's memory of each over-limit sample; stage 2: all cutting pieces)
+    scaled by :data:`FALLBACK_FACTOR` and the settles at their full length. Speed,
+    acceleration and jerk → 0 take the servo error → 0, so this ends within ε_max."""
+    n = ref.t_s.size
+    k = len(pieces)
+    f = FALLBACK_FACTOR
+    lev.settle_s[settle_rows] = np.maximum(lev.settle_s[settle_rows], settle_max_s)
+    if stage == 1:
+        window = max(int(round(max(settle_max_s, BLAME_WINDOW_S) / period_s)), 1)
+        piece = np.append(ref.piece, np.full(err.size - n, k - 1))
+        blame = _blame(err, eps_mm, piece, np.zeros(k - 1, dtype=bool), window)
+        sel = blame > 0.0
+    else:
+        sel = ~pieces.rapid
+    lev.caps[sel] *= f
+    for x in (lev.a_up, lev.a_dn, lev.j_up, lev.j_dn):
+        x[sel] *= f
+    lev.shaped |= sel
+
+
 def plan_checked(program, machine: Machine, options: LookaheadOptions | None = None,
                  reference=exact_reference) -> tuple[Plan, Check | None]:  # fmt: skip
     """Plan a whole interpreted program and check it (SPEC §1: modules 1–4, §8): pieces,
@@ -170,29 +334,39 @@ def plan_checked(program, machine: Machine, options: LookaheadOptions | None = N
         raise PlanningError("the program has no motion to plan")
     lim = machine.limits
     path_lim = piece_limits(pieces, machine)  # the axes' limits along each piece
-    caps = np.minimum(pieces.v_cap_mm_s, path_lim.v_mm_s)
-    a_p = np.asarray(path_lim.a_mm_s2, dtype=float)
-    j_p = np.asarray(path_lim.j_mm_s3, dtype=float)
-    limits = Limits(a_p, j_p, a_p, j_p)
+    a_p = np.array(path_lim.a_mm_s2, dtype=float)
+    j_p = np.array(path_lim.j_mm_s3, dtype=float)
+    k = len(pieces)
+    lev = _Levers(np.minimum(pieces.v_cap_mm_s, path_lim.v_mm_s), a_p, j_p, a_p.copy(),
+                  j_p.copy(), np.zeros(k), np.zeros(k, dtype=bool))  # fmt: skip
     smooth = junction_caps(pieces)  # > 0 where the path is tangent-continuous
     rapid = pieces.rapid
     period = machine.servo.period_s
     eps_mm = lim.contour_tolerance_mm * CONTOUR_MARGIN
+    # Rapids followed by a cut: the settle (in-position wait) there is the check's to set
+    # (zero while the error is within ε_max). Without the check (``off``: kinematics only)
+    # there is nothing to wait for; the paper's global rule has no local lever, so it waits
+    # the full settle (the rapid's overshoot then never counts).
+    settle_rows = np.flatnonzero(rapid[:-1] & ~rapid[1:])
+    settle_max = settle_time_s(machine)
+    if options.dynamics == Dynamics.GLOBAL:
+        lev.settle_s[settle_rows] = settle_max
+    base_dwell = pieces.dwell_after_s
     check = None
     iterations = 0
-    history = None  # the last local re-plan: blame and factor per piece
     index = None  # where the pieces are, for global distances (built if needed)
     while True:
         # The last iteration's reference and response go before the new ones are made (long
         # programs: each is hundreds of MB).
         ref = check = None
-        profile = _profile(pieces, caps, smooth, limits, options.lookahead_pieces)
-        check_point_count(pieces, profile, machine)  # before anything is sampled
+        planned = _with_dwell(pieces, base_dwell + lev.settle_s) if settle_rows.size else pieces
+        profile = _profile(planned, lev.caps, smooth, lev.limits(), options.lookahead_pieces)
+        check_point_count(planned, profile, machine)  # before anything is sampled
         if options.dynamics == Dynamics.OFF:
             break
-        ref = reference(pieces, profile, period)
+        ref = reference(planned, profile, period)
         index = index or PathIndex(pieces)
-        response = path_response(ref, pieces, profile, machine, refine_above_mm=eps_mm,
+        response = path_response(ref, planned, profile, machine, refine_above_mm=eps_mm,
                                  index=index)  # fmt: skip
         n = ref.t_s.size
         # Contour error matters while cutting: samples on rapids (air moves) are not checked.
@@ -212,16 +386,17 @@ def plan_checked(program, machine: Machine, options: LookaheadOptions | None = N
         if options.dynamics == Dynamics.GLOBAL:
             # The paper's rule: lower V_max for the whole program. Every cap (cruise and
             # corner: V_cf ∝ V_max) scales with it; error ∝ V²κ gives the factor.
-            caps = caps * min(float(np.sqrt(eps_mm / worst)), 0.98)
+            lev.caps *= min(float(np.sqrt(eps_mm / worst)), 0.98)
+            lev.shaped[:] = True
+        elif iterations <= LOCAL_ITERATIONS:
+            _shape(lev, err, eps_mm, ref, profile, pieces, smooth, settle_rows, settle_max,
+                   period)  # fmt: skip
         else:
-            window = max(int(round(BLAME_WINDOW_S / period)), 1)
-            joined = (smooth[1:-1] > 0) & (caps[:-1] == caps[1:])
-            blame = _blame(err, eps_mm, ref.piece, joined, window)
-            factor, history = local_factors(blame, eps_mm, history)
-            caps = caps * factor
-    _, dwell_s = dwell_times(pieces, profile)
-    plan = Plan(pieces, caps, profile, iterations, total_time_s(profile, dwell_s),
-                options.dynamics)  # fmt: skip
+            stage = 1 if iterations <= LOCAL_ITERATIONS + FALLBACK_LOCAL_ITERATIONS else 2
+            _fallback(lev, err, eps_mm, ref, pieces, settle_rows, settle_max, period, stage)
+    _, dwell_s = dwell_times(planned, profile)
+    plan = Plan(planned, lev.caps, profile, iterations, total_time_s(profile, dwell_s),
+                options.dynamics, lev.limits(), lev.shaped, lev.settle_s)  # fmt: skip
     return plan, check
 
 

@@ -401,8 +401,9 @@ def segment_pieces(segments, machine: Machine, options: PlanOptions | None = Non
     NURBS blocks become pieces one segment at a time. Dwells and pauses (:data:`STOP_KINDS`)
     become ``stop_after`` and ``dwell_after_s`` (their ``seconds``, 0 for a pause) of the
     piece before (or of a zero-length marker when the program starts with a dwell); a rapid
-    followed by a feed move waits :func:`settle_time_s` (in-position check, as G61: a
-    rapid's stop overshoot never shows up as contour error).
+    followed by a feed move stops exactly; the settle there (in-position wait) is set by
+    the planner's contour check (:func:`~nurbscnc.plan.lookahead.plan_checked`), at most
+    :func:`settle_time_s`, so a rapid's stop overshoot never shows up as contour error.
     """
     options = options or PlanOptions()
     lim = machine.limits
@@ -494,8 +495,7 @@ def segment_pieces(segments, machine: Machine, options: PlanOptions | None = Non
         k += 1
     rapid = cols["rapid"]
     settle = np.flatnonzero(rapid[:-1] & ~rapid[1:])
-    if settle.size:
-        cols["dwell_after_s"][settle] += settle_time_s(machine)
+    if settle.size:  # an exact stop; the settle dwell is the planner's (plan_checked)
         cols["stop_after"][settle] = True
     return apply_blends(PieceList(**cols, objects=objects), machine)
 
