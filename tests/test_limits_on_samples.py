@@ -175,13 +175,13 @@ def _jump_windows(result, n_jerk: int) -> np.ndarray:
     return bad
 
 
-@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(text=programs(), dynamics=st.sampled_from(["off", "local"]))
 def test_axis_limits_hold_on_the_samples(text, dynamics):
     check_samples(text, AXIS, dynamics, joints_ok=True)
 
 
-@settings(max_examples=8, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(text=programs(), dynamics=st.sampled_from(["off", "local"]))
 def test_path_limits_hold_on_the_samples(text, dynamics):
     check_samples(text, PATH, dynamics)
