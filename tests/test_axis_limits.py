@@ -223,3 +223,27 @@ def test_axis_path_limits_satisfy_every_axis_inequality(t, kfrac, kappa, g, v_pi
         acc_euclid = math.hypot(a[0], vb * vb * kappa)
         assert min(acc_sum, acc_euclid) <= a_i[i] * rel
         assert j[0] * t[0, i] + 3 * vb * a[0] * kb[0, i] + vb**3 * gb[0, i] <= j_i[i] * rel
+
+
+def test_runs_at_one_cap_share_their_smallest_limits():
+    # A NURBS at F600 (every cell at the feed cap, tangent-continuous): one run, so every cell
+    # gets the run's smallest acceleration and jerk (the profile plans the run as one unit
+    # only when the limits are equal), never more than its own; the line after a stop keeps
+    # its own.
+    from nurbscnc.machine.caps import axis_path_limits
+
+    m = machine(x_v=3500.0, x_a=2450.0, x_j=5e4, y_v=3500.0, y_a=1000.0, y_j=2e4)
+    text = ("F600\nG5.2 X1 Y1.5 P1 L4\nX4 Y3 P1\nX8 Y-2 P1\nX12 Y4 P1\nX16 Y0 P1\nG5.3\n"
+            "G1 X16 Y10\n")
+    pieces, lim = limits_of(text, m)
+    nurbs = np.flatnonzero(np.asarray(pieces.kind) == 4)
+    assert nurbs.size > 10
+    v, a, j = lim.v_mm_s, lim.a_mm_s2, lim.j_mm_s3
+    caps = np.minimum(pieces.v_cap_mm_s, v)
+    assert np.all(caps[nurbs] == 10.0)  # F600 everywhere on the curve
+    own = axis_path_limits(*axis_geometry_bounds(pieces), pieces.v_cap_mm_s,
+                           *m.axis_limits.as_arrays(), 1e5, 1e7)  # fmt: skip
+    assert np.all(a[nurbs] == own[1][nurbs].min()) and np.all(j[nurbs] == own[2][nurbs].min())
+    assert own[1][nurbs].max() > own[1][nurbs].min()  # the cells differ on their own
+    last = len(pieces) - 1  # the Y line after the curve's end (a corner: a stop)
+    assert a[last] == pytest.approx(1000.0) and j[last] == pytest.approx(2e4)

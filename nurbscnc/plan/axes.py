@@ -36,6 +36,7 @@ import numpy as np
 
 from nurbscnc.geometry.path import Kind
 from nurbscnc.machine.caps import axis_path_limits
+from nurbscnc.plan.pieces import junction_caps
 
 #: Samples per curved piece for its tangent and curvature-vector bounds (ends included).
 SAMPLES = 33
@@ -71,7 +72,31 @@ def piece_limits(pieces, machine) -> PieceLimits:
     v_i, a_i, j_i = axis.as_arrays()
     v, a, j = axis_path_limits(t_bound, k_bound, g_bound, kappa, pieces.v_cap_mm_s, v_i, a_i,
                                j_i, a_path, j_path)  # fmt: skip
+    a, j = _run_minimum(pieces, np.minimum(pieces.v_cap_mm_s, v), a, j)
     return PieceLimits(v, a, j)
+
+
+def _run_minimum(pieces, caps_mm_s: np.ndarray, a_mm_s2: np.ndarray, j_mm_s3: np.ndarray):
+    """``a``, ``j`` lowered to their minimum over each run of pieces with one cruise cap and
+    tangent-continuous junctions.
+
+    Why: the feed profile plans such a run (the cells of a NURBS at the programmed feed) as
+    one unit only when the pieces' limits are equal too (:func:`~nurbscnc.plan.profile.
+    plan_profile`); with the slightly different limits each cell gets from its own geometry,
+    it plans cell by cell, with zero acceleration at every cell junction — measured on the
+    9 mm NACA 2415 with LinuxCNC's sim axes: 0.85 s instead of 0.79 s. The minimum over the
+    run is conservative (every piece keeps within its own limits) and costs little: within a
+    run the curvature, hence the limits, changes slowly.
+    """
+    k = len(pieces)
+    if k < 2:
+        return a_mm_s2, j_mm_s3
+    joined = (junction_caps(pieces)[1:-1] > 0.0) & (caps_mm_s[:-1] == caps_mm_s[1:])
+    run = np.concatenate(([0], np.cumsum(~joined)))  # run label of each piece
+    starts = np.flatnonzero(np.concatenate(([True], ~joined)))
+    a_run = np.minimum.reduceat(a_mm_s2, starts)
+    j_run = np.minimum.reduceat(j_mm_s3, starts)
+    return a_run[run], j_run[run]
 
 
 def axis_geometry_bounds(pieces) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
