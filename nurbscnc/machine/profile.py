@@ -101,8 +101,10 @@ _SCHEMA: dict = {
 _OPTIONAL = frozenset(
     {"limits.rapid_mm_min", "limits.max_points", "servo", "servo.period_ms", "servo.x",
      "servo.y", "servo.z"}
-) | {"axis_limits", *(f"axis_limits.{a}" for a in AXES),
-     *(f"axis_limits.{a}.{k}" for a in AXES for k in AXIS_LIMIT_KEYS)}  # fmt: skip
+)
+# [axis_limits]: every table and every key optional.
+_OPTIONAL |= {"axis_limits", *(f"axis_limits.{a}" for a in AXES),
+              *(f"axis_limits.{a}.{k}" for a in AXES for k in AXIS_LIMIT_KEYS)}  # fmt: skip
 
 _MM_PER_UM = 1e-3
 #: Default of ``limits.max_points``: 50 million reference points, 13.9 h of motion at 1 ms
