@@ -71,8 +71,11 @@ def _arc(draw, p, cw):
 @st.composite
 def programs(draw):
     """2–6 moves from the origin: lines (XY, some with Z), arcs G2/G3 in XY, a G5.2 NURBS;
-    each move with its own feed (mixed feeds, some above V_max)."""
-    lines = ["G21 G90 G17 G94 G61", "G0 X0 Y0 Z0"]
+    each move with its own feed (mixed feeds, some above V_max); G61, G64 or G64 P."""
+    # Path mode: exact path (stops at breaks) or blending (G64: within the machine's path
+    # tolerance, G64 P: within P), so blends and passed joints are on the samples too.
+    mode = draw(st.sampled_from(["G61", "G64", "G64 P0.02"]))
+    lines = [f"G21 G90 G17 G94 {mode}", "G0 X0 Y0 Z0"]
     p = np.zeros(3)
     for _ in range(draw(st.integers(2, 6))):
         feed = draw(st.sampled_from([300.0, 900.0, 2000.0, 3500.0, 6000.0]))
