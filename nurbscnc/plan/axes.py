@@ -26,6 +26,11 @@ tangential and the normal parts: :func:`nurbscnc.machine.caps.axis_path_limits`)
 
 With no per-axis limit in the profile the result is the path limits alone (the planner's
 behaviour before issue 13).
+
+Not covered (per-piece limits cannot): a junction passed at speed where the curvature vector
+jumps (a line tangent into an arc) steps each axis's acceleration by v²|Δ(κn)_i| — a jerk
+impulse. Bounding it needs a junction speed cap v ≤ √(ΔA_i / |Δ(κn)_i|) in the planner's
+junction caps (tests/test_limits_on_samples.py keeps the case as a strict xfail).
 """
 
 from __future__ import annotations
