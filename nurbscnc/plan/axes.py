@@ -16,13 +16,15 @@ tangential and the normal parts: :func:`nurbscnc.machine.caps.axis_path_limits`)
 
 - Lines (and rapids): T_i = |t_i| exactly, K = G = 0: the caps are exact, e.g. v ≤ V_i/|t_i|.
 - Arcs, helices, spirals, PH pieces, NURBS cells: the tangent and the curvature vector are
-  sampled at :data:`SAMPLES` evenly spaced arc lengths of the piece (whole-array over all
-  curved pieces, in chunks), and each bound is the sampled maximum plus what the quantity can
-  change within half a sample spacing h: T_i + K_i h/2 (|dt_i/ds| = |(κn)_i|), K_i + G_i h/2
-  (never above κ_max), and G_i from the finite differences of κn between samples plus
-  the largest change between neighbouring differences (covers the chord-vs-arc deficit of a
-  circle's rotating κn). For a circle, κn turns at rate κ, so 33 samples over a full circle
-  leave T_i and K_i within 10 % of their exact value (less on shorter arcs).
+  sampled at evenly spaced arc lengths of the piece, at least :data:`SAMPLES` and
+  :data:`SAMPLES_PER_RADIUS` per radius of curvature 1/κ_max along it (whole-array over all
+  curved pieces, in buckets of equal counts), and each bound is the sampled maximum plus
+  what the quantity can change within half a sample spacing h: T_i + K_i h/2
+  (|dt_i/ds| = |(κn)_i|), K_i + G_i h/2 (never above κ_max), and G_i from the finite
+  differences of κn between samples plus the largest change between neighbouring
+  differences (covers the chord-vs-arc deficit of a circle's rotating κn). For a circle,
+  κn turns at rate κ, so 33 samples over a full circle leave T_i and K_i within 10 % of
+  their exact value (less on shorter arcs).
 
 With no per-axis limit in the profile the result is the path limits alone (the planner's
 behaviour before issue 13).
@@ -43,12 +45,19 @@ from nurbscnc.geometry.path import Kind
 from nurbscnc.machine.caps import axis_path_limits
 from nurbscnc.plan.pieces import junction_caps
 
-#: Samples per curved piece for its tangent and curvature-vector bounds (ends included).
+#: Fewest samples per curved piece for its tangent and curvature-vector bounds (ends
+#: included); more on pieces that turn a lot (:data:`SAMPLES_PER_RADIUS`).
 SAMPLES = 33
+#: Samples per radius of curvature 1/κ_max along a piece: the curvature vector changes on
+#: that length scale, so this resolves its peaks and its derivative.
+SAMPLES_PER_RADIUS = 8
+#: Most samples per piece (a near-cusp NURBS cell).
+MAX_SAMPLES = 4097
 #: Samples whose parametric speed |C′| is below this fraction of the piece's largest are
 #: treated as at a cusp (their curvature is not a number the axes can follow).
 CUSP_SPEED = 1e-6
-#: Curved pieces sampled at once (bounds the temporaries: SAMPLES × this × 3 floats each).
+#: Curved pieces of SAMPLES samples sampled at once (fewer with more samples: bounds the
+#: temporaries).
 _CHUNK = 1 << 13
 
 
@@ -113,13 +122,25 @@ def axis_geometry_bounds(pieces) -> tuple[np.ndarray, np.ndarray, np.ndarray, np
     k_bound = np.zeros((k, 3))
     g_bound = np.zeros((k, 3))
     kappa = np.zeros(k)
-    curved = np.flatnonzero(np.asarray(pieces.kind) != Kind.LINE)
+    kind = np.asarray(pieces.kind)
+    length = np.asarray(pieces.length_mm, dtype=float)
+    k_rec = np.asarray(pieces.kappa_max_per_mm, dtype=float)
+    curved = np.flatnonzero(kind != Kind.LINE)
     path = pieces.path if curved.size else None
-    for lo in range(0, curved.size, _CHUNK):
-        rows = curved[lo:lo + _CHUNK]
-        t_bound[rows], k_bound[rows], g_bound[rows], kappa[rows] = _sampled_bounds(
-            path, rows, np.asarray(pieces.length_mm)[rows],
-            np.asarray(pieces.kappa_max_per_mm)[rows], np.asarray(pieces.kind)[rows] == Kind.ARC)
+    # Samples per piece: at least SAMPLES, and SAMPLES_PER_RADIUS per radius of curvature
+    # 1/κ_max along it (a PH corner blend whose curvature peaks at 110 /mm over a few µm
+    # needs µm spacing); in power-of-two buckets so each bucket is one whole-array pass.
+    want = np.ceil(length[curved] * np.where(np.isfinite(k_rec[curved]), k_rec[curved], 0.0)
+                   * SAMPLES_PER_RADIUS)  # fmt: skip
+    level = np.ceil(np.log2(np.clip(want, SAMPLES - 1, MAX_SAMPLES - 1))).astype(int)
+    for lv in np.unique(level).tolist():
+        n = (1 << lv) + 1
+        group = curved[level == lv]
+        step = max(_CHUNK * SAMPLES // n, 1)
+        for lo in range(0, group.size, step):
+            rows = group[lo:lo + step]
+            t_bound[rows], k_bound[rows], g_bound[rows], kappa[rows] = _sampled_bounds(
+                path, rows, length[rows], k_rec[rows], kind[rows] == Kind.ARC, n)
     return t_bound, k_bound, g_bound, kappa
 
 
@@ -136,15 +157,15 @@ def _nearest_regular(ok: np.ndarray) -> np.ndarray:
 
 
 def _sampled_bounds(path, rows: np.ndarray, length_mm: np.ndarray, kappa_max_per_mm,
-                    exact_kappa: np.ndarray):  # fmt: skip
-    """T, K, G (m, 3) and κ (m,) of curved pieces ``rows`` from :data:`SAMPLES` samples
-    each; ``exact_kappa`` (m,): the recorded κ_max is exact (circular arcs and helices)."""
+                    exact_kappa: np.ndarray, samples: int):  # fmt: skip
+    """T, K, G (m, 3) and κ (m,) of curved pieces ``rows`` from ``samples`` samples each;
+    ``exact_kappa`` (m,): the recorded κ_max is exact (circular arcs and helices)."""
     m = rows.size
-    frac = np.linspace(0.0, 1.0, SAMPLES)
+    frac = np.linspace(0.0, 1.0, samples)
     s = (length_mm[:, None] * frac[None, :]).ravel()
-    idx = np.repeat(rows, SAMPLES)
+    idx = np.repeat(rows, samples)
     d1, d2 = path.derivatives(idx, s)
-    speed2 = np.einsum("ij,ij->i", d1, d1).reshape(m, SAMPLES)
+    speed2 = np.einsum("ij,ij->i", d1, d1).reshape(m, samples)
     # A cusp (C′ = 0, a doubled control point at a NURBS end) has no tangent, and samples
     # where |C′| is 1e-6 of the piece's largest are numerically at one (κ ~ 1e19): they take
     # the values of their nearest regular sample. The tool passes a cusp at rest (its
@@ -153,8 +174,8 @@ def _sampled_bounds(path, rows: np.ndarray, length_mm: np.ndarray, kappa_max_per
     ok = speed2 > (CUSP_SPEED * CUSP_SPEED) * speed2.max(axis=1, keepdims=True)
     ok &= speed2 > 0.0
     fill = _nearest_regular(ok)
-    d1 = d1.reshape(m, SAMPLES, 3)[np.arange(m)[:, None], fill]
-    d2 = d2.reshape(m, SAMPLES, 3)[np.arange(m)[:, None], fill]
+    d1 = d1.reshape(m, samples, 3)[np.arange(m)[:, None], fill]
+    d2 = d2.reshape(m, samples, 3)[np.arange(m)[:, None], fill]
     safe2 = np.maximum(speed2[np.arange(m)[:, None], fill], 1e-300)[..., None]
     tan = d1 / np.sqrt(safe2)
     # Curvature vector κn = dt/ds = (C″ − (C″·t) t) / |C′|² (any parametrisation).
@@ -162,7 +183,7 @@ def _sampled_bounds(path, rows: np.ndarray, length_mm: np.ndarray, kappa_max_per
     none = ~ok.any(axis=1)  # a piece without a regular sample: no bound from it
     tan[none] = 0.0
     curv[none] = 0.0
-    h = length_mm / (SAMPLES - 1)  # sample spacing [mm]
+    h = length_mm / (samples - 1)  # sample spacing [mm]
     with np.errstate(divide="ignore", invalid="ignore"):
         diff = np.diff(curv, axis=1) / np.where(h > 0.0, h, np.inf)[:, None, None]
     g = np.abs(diff).max(axis=1) + np.abs(np.diff(diff, axis=1)).max(axis=1, initial=0.0)
