@@ -179,10 +179,13 @@ class PathIndex:
             found.append(long_[near])
         return np.unique(np.concatenate(found)) if found else np.zeros(0, dtype=np.int64)
 
-    def distance_mm(self, q: np.ndarray, upper_mm: np.ndarray, block: int = 256) -> np.ndarray:
+    def distance_mm(self, q: np.ndarray, upper_mm: np.ndarray, block: int = 256,
+                    exclude: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
         """Distance [mm] from each point of ``q`` (m, 3) to the whole path, for points whose
         distance is known to be at most ``upper_mm`` (m,): exact to the polyline of
-        :func:`path_counts` on the candidate pieces, never above ``upper_mm``."""
+        :func:`path_counts` on the candidate pieces, never above ``upper_mm``. ``exclude``
+        (k,) bool: pieces that are not part of the path measured against (the rapids, for
+        the distance to the cut)."""
         pieces = self._pieces
         counts = path_counts(pieces)
         out = np.array(upper_mm, dtype=float)
@@ -193,6 +196,8 @@ class PathIndex:
         for lo, hi in zip(edges[:-1].tolist(), edges[1:].tolist()):
             sl = slice(lo, hi)
             cand = self.candidates(q[sl], out[sl])
+            if exclude is not None:
+                cand = cand[~exclude[cand]]
             if cand.size == 0:
                 continue
             c = counts[cand]

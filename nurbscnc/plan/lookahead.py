@@ -1,19 +1,45 @@
 """The look-ahead planner: pieces → jerk-limited profile → dynamics check → re-plan.
 
-SPEC §7–§8 and §10. The profile is planned over the whole program (bidirectional scan); the
-predicted contour error is then checked with the servo model, and where it exceeds ε_max the
-feed cap is lowered — on the offending pieces only (``dynamics="local"``, our default) or for
-the whole program (``"global"``, the paper's rule: V_max becomes the feed where the error
-occurred) — and the program re-planned, until the error is within the limit.
+SPEC §7–§8 and §10. The profile is planned over the whole program (bidirectional scan) with
+per-piece limits (:func:`~nurbscnc.plan.axes.piece_limits`: the axes' feed, acceleration and
+jerk along each piece); the predicted contour error is then checked with the servo model,
+and where it exceeds ε_max the plan is changed and re-planned until the error is within it.
+
+Local shaping (``dynamics="local"``, planner v2, issue 13). Each over-limit sample is
+answered where its error is caused, never by the cruise of a whole long piece:
+
+- near the end of a rapid that a cut follows: the settle there (the reference waits at the
+  cut's start; 0 until the check needs it, at most 5/|pole| :func:`settle_time_s`); while it
+  waits nothing is checked, and the first cut samples are measured against the cut only;
+- near a planned stop (from :data:`STOP_BEFORE_S` before to :data:`STOP_WINDOW_S` after
+  it): the overshoot of the stop and the corner cut after it. The descent jerk of the run
+  of pieces that ends there (and, for samples after the restart, the rise jerk of the run
+  that leaves it) is lowered, by 0.95 (ε/e)^(1/p) with p measured from the last try (the
+  jerk at the end of a stop is what excites the servo: a softer stop costs milliseconds);
+- else (a curve): the feed of the pieces in the blamed window (:func:`_blame`,
+  :func:`local_factors`): NURBS cells and PH corners are short, so this is the feed over
+  that window only.
+
+The check converges on every program: after :data:`LOCAL_ITERATIONS` re-plans a fallback
+scales every lever (feed, acceleration, jerk) of the blamed pieces, then of all cutting
+pieces, and waits the full settles; the servo error goes to 0 with v, a, j. Once a plan is
+within ε_max, an improvement phase bisects every shaped lever between its feasible value and
+its value before shaping (:data:`IMPROVE_ITERATIONS` re-plans) and keeps the fastest plan
+within ε_max. Shaping depends on the programmed feed only through the caps; the bisection
+leaves each lever within :data:`IMPROVE_RATIO` of its bound, so plans at two feeds agree to
+that resolution (a higher F is never slower by more than it).
+
+``dynamics="global"`` is the paper's rule (V_max becomes the feed where the error occurred,
+the whole program re-planned; full settles); ``"off"`` plans the kinematics only (no
+settles: nothing is checked).
 
 Long programs. Everything per piece is whole-array work on the columns of the
 :class:`~nurbscnc.plan.pieces.PieceList` (junctions, dwells, blame), the contour error is
 measured near each reference point only (:func:`~nurbscnc.plan.dynamics.path_response`), and
-a local re-plan lowers the caps of all offending pieces at once by their measured ratio, so
-a program needs a few iterations, whatever its length. Runs of tiny tangent-continuous
-pieces at one cap are planned as one by :func:`~nurbscnc.plan.profile.plan_profile`.
+a local re-plan changes the levers of all offending pieces at once, so a program needs a
+few iterations, whatever its length. Runs of tiny tangent-continuous pieces at one cap and
+one set of limits are planned as one by :func:`~nurbscnc.plan.profile.plan_profile`.
 """
-
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
@@ -45,6 +71,10 @@ LOCAL_ITERATIONS = 16
 FALLBACK_LOCAL_ITERATIONS = 8
 #: Factor of every lever per fallback re-plan.
 FALLBACK_FACTOR = 0.6
+#: Re-plans of the improvement phase (bisection of the shaped levers).
+IMPROVE_ITERATIONS = 6
+#: A lever within this ratio of its bracket's upper end is left alone.
+IMPROVE_RATIO = 1.005
 
 
 @dataclass(frozen=True, eq=False)
@@ -60,9 +90,10 @@ class Limits:
 
 @dataclass(frozen=True, eq=False)
 class Plan:
-    """A complete plan: pieces, their final caps [mm/s], the profile; ``iterations`` of the
-    dynamics loop; ``cycle_time_s`` including dwells; the ``dynamics`` rule it was checked
-    with. The reference points come from the interpolator
+    """A complete plan: pieces (with the settles in their dwells), their final caps [mm/s],
+    the profile; ``iterations``: re-plans of the dynamics loop (improvement included);
+    ``cycle_time_s`` including dwells; the ``dynamics`` rule it was checked with. The
+    reference points come from the interpolator
     (:func:`nurbscnc.interpolate.sample.interpolate`), the check's result from
     :func:`plan_checked`."""
 
@@ -72,8 +103,18 @@ class Plan:
     iterations: int
     cycle_time_s: float
     dynamics: Dynamics
+    #: The per-piece acceleration and jerk limits the profile was planned with (the axes'
+    #: path limits, lowered where the contour check shaped a transition).
     limits: Limits | None = None
+    #: (k,) bool: the contour check changed this piece (its feed cap or a limit is below
+    #: the kinematic plan's) — a "contour error" limiting factor.
     shaped_by_contour: np.ndarray | None = None
+    #: (k,) bool: the check lowered this piece's feed cap (curve error).
+    contour_feed: np.ndarray | None = None
+    #: (k,) bool: the check softened this piece's rise or descent (stop overshoot).
+    contour_transition: np.ndarray | None = None
+    #: (k,) settle [s] waited after piece i (a rapid followed by a cut), set by the check;
+    #: included in ``pieces.dwell_after_s``.
     settle_s: np.ndarray | None = None
 
 
@@ -197,6 +238,45 @@ class _Levers:
     def limits(self) -> Limits:
         return Limits(self.a_up, self.j_up, self.a_dn, self.j_dn)
 
+    _SCALED = ("caps", "a_up", "j_up", "a_dn", "j_dn")
+
+    def copy(self) -> _Levers:
+        return _Levers(*(getattr(self, f).copy() for f in (*self._SCALED, "settle_s",
+                                                           "shaped")),
+                       self.cap_history, self.stop_history)  # fmt: skip
+
+    def toward(self, hi: _Levers) -> _Levers | None:
+        """Halfway to ``hi`` (geometric means of the scaled levers, arithmetic of the
+        settles); None when every lever is within 0.5 % of it."""
+        out = self.copy()
+        moved = False
+        for f in self._SCALED:
+            a, b = getattr(self, f), getattr(hi, f)
+            far = b > a * IMPROVE_RATIO
+            if far.any():
+                moved = True
+                getattr(out, f)[far] = np.sqrt(a[far] * b[far])
+        far = self.settle_s > hi.settle_s + 1e-4
+        if far.any():
+            moved = True
+            out.settle_s[far] = 0.5 * (self.settle_s[far] + hi.settle_s[far])
+        return out if moved else None
+
+    def narrowed(self, trial: _Levers, probe: _Levers) -> _Levers:
+        """These upper brackets with the levers that ``probe`` (the shaping rule applied
+        to ``trial``) lowered set to their ``trial`` values (infeasible there); when the
+        rule blames none, every tried lever."""
+        out = self.copy()
+        blamed = {f: getattr(probe, f) < getattr(trial, f) for f in self._SCALED}
+        blamed_settle = probe.settle_s > trial.settle_s
+        if not (any(b.any() for b in blamed.values()) or blamed_settle.any()):
+            blamed = {f: np.ones(trial.caps.size, dtype=bool) for f in self._SCALED}
+            blamed_settle = np.ones(trial.caps.size, dtype=bool)
+        for f, b in blamed.items():
+            getattr(out, f)[b] = getattr(trial, f)[b]
+        out.settle_s[blamed_settle] = trial.settle_s[blamed_settle]
+        return out
+
 
 def _runs(caps: np.ndarray, smooth: np.ndarray, lev: _Levers) -> np.ndarray:
     """Run label (k,) of each piece: the pieces the profile plans as one unit (tangent-
@@ -310,7 +390,7 @@ def _fallback(lev: _Levers, err: np.ndarray, eps_mm: float, ref: Reference, piec
         window = max(int(round(max(settle_max_s, BLAME_WINDOW_S) / period_s)), 1)
         piece = np.append(ref.piece, np.full(err.size - n, k - 1))
         blame = _blame(err, eps_mm, piece, np.zeros(k - 1, dtype=bool), window)
-        sel = blame > 0.0
+        sel = (blame > 0.0) & ~pieces.rapid
     else:
         sel = ~pieces.rapid
     lev.caps[sel] *= f
@@ -352,29 +432,43 @@ def plan_checked(program, machine: Machine, options: LookaheadOptions | None = N
     if options.dynamics == Dynamics.GLOBAL:
         lev.settle_s[settle_rows] = settle_max
     base_dwell = pieces.dwell_after_s
-    check = None
-    iterations = 0
+    after_rapid = np.zeros(k, dtype=bool)  # the first piece of a cut after a rapid
+    after_rapid[settle_rows + 1] = True
     index = None  # where the pieces are, for global distances (built if needed)
-    while True:
-        # The last iteration's reference and response go before the new ones are made (long
-        # programs: each is hundreds of MB).
-        ref = check = None
-        planned = _with_dwell(pieces, base_dwell + lev.settle_s) if settle_rows.size else pieces
-        profile = _profile(planned, lev.caps, smooth, lev.limits(), options.lookahead_pieces)
+
+    def evaluate(lv: _Levers):
+        """Plan with the levers ``lv`` and check: (planned pieces, profile, check, err)."""
+        nonlocal index
+        planned = _with_dwell(pieces, base_dwell + lv.settle_s) if settle_rows.size else pieces
+        profile = _profile(planned, lv.caps, smooth, lv.limits(), options.lookahead_pieces)
         check_point_count(planned, profile, machine)  # before anything is sampled
         if options.dynamics == Dynamics.OFF:
-            break
+            return planned, profile, None, None
         ref = reference(planned, profile, period)
         index = index or PathIndex(pieces)
         response = path_response(ref, planned, profile, machine, refine_above_mm=eps_mm,
                                  index=index)  # fmt: skip
         n = ref.t_s.size
-        # Contour error matters while cutting: samples on rapids (air moves) are not checked.
-        cutting = np.append(~rapid[ref.piece], np.full(response.contour_mm.size - n,
-                                                        not rapid[-1]))
+        # Contour error matters while cutting: samples on rapids (air moves) and during the
+        # settle after a rapid (the reference waits at the cut's start) are not checked.
+        waiting = after_rapid[ref.piece] & (ref.tau_s <= profile.piece_start_time_s[ref.piece])
+        cutting = np.append(~rapid[ref.piece] & ~waiting,
+                            np.full(response.contour_mm.size - n, not rapid[-1]))
+        _cut_distance_after_rapids(response, ref, profile, after_rapid, waiting, rapid, index)
         check = Check(ref, response, cutting)
-        err = np.where(cutting, response.contour_mm, 0.0)
-        worst = float(err.max())
+        return planned, profile, check, np.where(cutting, response.contour_mm, 0.0)
+
+    def shape(lv: _Levers, result) -> None:
+        _shape(lv, result[3], eps_mm, result[2].reference, result[1], pieces, smooth,
+               settle_rows, settle_max, period)  # fmt: skip
+
+    initial = lev.copy()
+    iterations = 0
+    while True:
+        result = evaluate(lev)
+        if result[2] is None:
+            break
+        worst = float(result[3].max())
         if worst <= eps_mm:
             break
         iterations += 1
@@ -389,15 +483,76 @@ def plan_checked(program, machine: Machine, options: LookaheadOptions | None = N
             lev.caps *= min(float(np.sqrt(eps_mm / worst)), 0.98)
             lev.shaped[:] = True
         elif iterations <= LOCAL_ITERATIONS:
-            _shape(lev, err, eps_mm, ref, profile, pieces, smooth, settle_rows, settle_max,
-                   period)  # fmt: skip
+            shape(lev, result)
         else:
             stage = 1 if iterations <= LOCAL_ITERATIONS + FALLBACK_LOCAL_ITERATIONS else 2
-            _fallback(lev, err, eps_mm, ref, pieces, settle_rows, settle_max, period, stage)
-    _, dwell_s = dwell_times(planned, profile)
-    plan = Plan(planned, lev.caps, profile, iterations, total_time_s(profile, dwell_s),
-                options.dynamics, lev.limits(), lev.shaped, lev.settle_s)  # fmt: skip
+            _fallback(lev, result[3], eps_mm, result[2].reference, pieces, settle_rows,
+                      settle_max, period, stage)  # fmt: skip
+        result = None  # the last reference and response go first (long programs: each is
+        #                hundreds of MB)
+    if options.dynamics == Dynamics.LOCAL and lev.shaped.any():
+        # Improvement: bisect every shaped lever between its feasible value and its value
+        # before shaping (geometric means; the settles arithmetically towards 0). A try
+        # within ε_max is kept; a failing one narrows the brackets of the levers that the
+        # shaping rule blames for it (found by applying the rule to a copy).
+        # Only one plan's reference and response are held at a time (long programs): the
+        # best plan is re-made at the end if a later try replaced its result.
+        best, best_time = lev.copy(), _cycle_time(result)
+        hi = initial
+        for _ in range(IMPROVE_ITERATIONS):
+            trial = best.toward(hi)
+            if trial is None:
+                break
+            result = None
+            result = evaluate(trial)
+            iterations += 1
+            if float(result[3].max()) <= eps_mm:
+                t = _cycle_time(result)
+                if t > best_time:  # a feasible raise that is slower (rare): stop here
+                    result = None
+                    break
+                best, best_time = trial, t
+            else:
+                probe = trial.copy()
+                shape(probe, result)
+                hi = hi.narrowed(trial, probe)
+                result = None
+        lev = best
+        if result is None:
+            result = evaluate(lev)
+    planned, profile, check, _ = result
+    feed = lev.caps < initial.caps
+    transition = np.zeros(k, dtype=bool)
+    for f in ("a_up", "j_up", "a_dn", "j_dn"):
+        transition |= getattr(lev, f) < getattr(initial, f)
+    plan = Plan(planned, lev.caps, profile, iterations, _cycle_time(result),
+                options.dynamics, lev.limits(), feed | transition, feed, transition,
+                lev.settle_s)  # fmt: skip
     return plan, check
+
+
+def _cut_distance_after_rapids(response: Response, ref: Reference, profile: Profile,
+                               after_rapid: np.ndarray, waiting: np.ndarray, rapid: np.ndarray,
+                               index: PathIndex) -> None:  # fmt: skip
+    """Measure the first cutting samples after a rapid against the cut only (in place).
+
+    The path the contour error is measured against includes the rapids, so a tool still
+    arriving along a rapid looks on the path although the cut has moved off; it is 'on the
+    path' only if it is on the cut. Only samples whose distance window (module doc of
+    :mod:`~nurbscnc.plan.dynamics`: ±2|e| of arc length) reaches back across the rapid's
+    end are affected; their reference lies on the cut, so |e| bounds the distance."""
+    n = ref.t_s.size
+    lag = np.sqrt(np.einsum("ij,ij->i", response.axis_error_mm[:n], response.axis_error_mm[:n]))
+    start = profile.piece_start_mm[ref.piece]
+    fix = np.flatnonzero(after_rapid[ref.piece] & ~waiting & (ref.s_mm - 2.0 * lag <= start))
+    if fix.size:
+        response.contour_mm[fix] = index.distance_mm(response.actual_mm[fix], lag[fix] + 1e-12,
+                                                     exclude=rapid)  # fmt: skip
+
+
+def _cycle_time(result) -> float:
+    planned, profile = result[0], result[1]
+    return total_time_s(profile, dwell_times(planned, profile)[1])
 
 
 def segment_times_s(plan: Plan) -> dict[int, float]:
