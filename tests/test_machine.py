@@ -377,3 +377,93 @@ def test_discovery_order(tmp_path):
     assert find_machine("m.toml", env, str(cwd)) == ("m.toml", FOUND_BY_OPTION)
     with pytest.raises(OutputError, match=r"/no/such/file.toml \(from \$NURBSCNC_MACHINE\)"):
         load_machine("/no/such/file.toml", found_by=FOUND_BY_ENV)
+
+
+# ---------------------------------------------------------------------------------------------
+# Per-axis limits (issue 13): [axis_limits.x|y|z], every key optional.
+
+
+def test_axis_limits_absent_by_default(machine):
+    ax = machine.axis_limits
+    assert not ax.any
+    assert ax.v_max_mm_s == ax.a_max_mm_s2 == ax.j_max_mm_s3 == (math.inf,) * 3
+    assert "axis_limits" not in machine.settings
+
+
+def test_axis_limits_in_internal_units():
+    m = load_machine(overrides={"axis_limits.x.v_max_mm_min": 3500.0,
+                                "axis_limits.y.a_max_mm_s2": 1200,
+                                "axis_limits.z.j_max_mm_s3": "2e4",
+                                "axis_limits.z.v_max_mm_min": 600})  # fmt: skip
+    ax = m.axis_limits
+    assert ax.any
+    assert ax.v_max_mm_s == (3500.0 / 60.0, math.inf, 10.0)  # mm/min → mm/s
+    assert ax.a_max_mm_s2 == (math.inf, 1200.0, math.inf)
+    assert ax.j_max_mm_s3 == (math.inf, math.inf, 2e4)
+    v, a, j = ax.as_arrays()
+    assert v.shape == a.shape == j.shape == (3,)
+
+
+def test_axis_limits_from_a_file_and_shown_round_trip():
+    text = default_profile_text() + (
+        "\n[axis_limits.x]\nv_max_mm_min = 3000.0\na_max_mm_s2 = 800.0\nj_max_mm_s3 = 2.0e4\n"
+        "\n[axis_limits.z]\nv_max_mm_min = 1200.0\n")
+    m = parse_machine(text, "axes.toml")
+    assert m.axis_limits.v_max_mm_s == (50.0, math.inf, 20.0)
+    assert m.axis_limits.a_max_mm_s2 == (800.0, math.inf, math.inf)
+    shown = profile_toml(m)
+    assert "[axis_limits.x]\nv_max_mm_min = 3000.0\na_max_mm_s2 = 800.0\nj_max_mm_s3 = 20000.0" \
+        in shown
+    again = parse_machine(shown, "shown.toml")
+    assert again.axis_limits == m.axis_limits
+
+
+def test_axis_velocity_limit_relaxes_the_step_rate_check():
+    # 0.5 mm/step·period at 1000 steps/mm: 58.3 mm/s needs 59 steps per period, more than 50;
+    # an x axis limited to 45 mm/s (2700 mm/min) needs 45, which fits only if the check uses it.
+    base = {"steps.max_pulses_per_period": 50, "steps.per_mm.y": 100.0, "steps.per_mm.z": 100.0}
+    with pytest.raises(ConfigError, match="axis x"):
+        load_machine(overrides=base)
+    m = load_machine(overrides={**base, "axis_limits.x.v_max_mm_min": 2700.0})
+    assert m.axis_limits.v_max_mm_s[0] == 45.0
+
+
+BAD_AXIS = [
+    ({"axis_limits.x.v_max_mm_min": 0}, "axis_limits.x.v_max_mm_min", "must be > 0, got 0"),
+    ({"axis_limits.y.a_max_mm_s2": -2450}, "axis_limits.y.a_max_mm_s2", "must be > 0"),
+    ({"axis_limits.z.j_max_mm_s3": math.inf}, "axis_limits.z.j_max_mm_s3", "finite"),
+    ({"axis_limits.x.a_max_mm_s2": "'fast'"}, "axis_limits.x.a_max_mm_s2", "must be a number"),
+    ({"axis_limits.x.a_max_mm_s2": True}, "axis_limits.x.a_max_mm_s2", "must be a number"),
+    ({"axis_limits.x.accel": 1.0}, "axis_limits.x.accel", "unknown key"),
+    ({"axis_limits.w.v_max_mm_min": 1.0}, "axis_limits.w.v_max_mm_min", "unknown key"),
+    ({"axis_limits.x": 1.0}, "axis_limits.x", "names a table"),
+]
+
+
+@pytest.mark.parametrize(("overrides", "key", "words"), BAD_AXIS)
+def test_invalid_axis_limits_name_the_key(overrides, key, words):
+    with pytest.raises(ConfigError) as info:
+        load_machine(overrides=overrides)
+    assert key in info.value.message
+    assert words in info.value.message
+
+
+BAD_AXIS_TEXTS = [
+    ("[axis_limits.x]\nv_max_mm_min = -1.0\n", "axis_limits.x.v_max_mm_min", "> 0"),
+    ("[axis_limits.y]\na_max_mm_s2 = \"2450\"\n", "axis_limits.y.a_max_mm_s2", "number"),
+    ("[axis_limits.x]\nmax_velocity = 1.0\n", "axis_limits.x.max_velocity", "not a known key"),
+    ("[axis_limits.a]\nv_max_mm_min = 1.0\n", "axis_limits.a", "not a known key"),
+    ("[axis_limits]\nx = 3.0\n", "axis_limits.x", "must be a table"),
+    ("axis_limits = 3\n", "axis_limits", "must be a table"),
+]
+
+
+@pytest.mark.parametrize(("extra", "key", "words"), BAD_AXIS_TEXTS)
+def test_invalid_axis_limit_files_name_the_key(extra, key, words):
+    text = (extra + default_profile_text()) if extra.startswith("axis_limits =") else (
+        default_profile_text() + "\n" + extra)
+    with pytest.raises(ConfigError) as info:
+        parse_machine(text, "bad.toml")
+    assert info.value.message.startswith("bad.toml: ")
+    assert key in info.value.message
+    assert words in info.value.message

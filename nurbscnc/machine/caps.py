@@ -11,7 +11,9 @@ filled in). Built from them:
   lower bound integrates);
 - the corner cap V_sp = min(V_af, V_cf), bounded by F, V_max and √(A/κ)
   (:func:`corner_cap_mm_s`);
-- the baselines' feeds (SPEC §9, :func:`baseline_feed_mm_s`).
+- the baselines' feeds (SPEC §9, :func:`baseline_feed_mm_s`);
+- the path limits that keep every axis within its own velocity, acceleration and jerk
+  limits on a piece (issue 13, :func:`axis_path_limits`).
 
 All speeds in mm/s, curvatures in 1/mm, accelerations in mm/s².
 """
@@ -22,8 +24,8 @@ from typing import Protocol
 
 import numpy as np
 
-__all__ = ["MIN_CAP_MM_S", "baseline_feed_mm_s", "chord_feed_mm_s", "corner_cap_mm_s",
-           "curvature_cap2_mm2_s2", "curvature_cap_mm_s", "curvature_feed_mm_s",
+__all__ = ["MIN_CAP_MM_S", "axis_path_limits", "baseline_feed_mm_s", "chord_feed_mm_s",
+           "corner_cap_mm_s", "curvature_cap2_mm2_s2", "curvature_cap_mm_s", "curvature_feed_mm_s",
            "kappa_threshold_per_mm", "normal_feed_mm_s"]  # fmt: skip
 
 
@@ -38,6 +40,10 @@ class MachineLike(Protocol):
     @property
     def servo(self): ...
 
+
+#: Share of each axis's acceleration and jerk limit the normal (centripetal) part may take on
+#: a curve (:func:`axis_path_limits`, the feed cap); the tangential part gets the rest.
+NORMAL_SHARE = 0.5
 
 #: The lowest cruise cap a piece gets [mm/s]: never a zero cap, which would stall the tool.
 MIN_CAP_MM_S = 1e-3
@@ -156,3 +162,79 @@ def baseline_feed_mm_s(algorithm: str, kappa_per_mm, feed_mm_s: float, machine: 
     if algorithm == "curvature":
         return np.asarray(curvature_feed_mm_s(kappa_per_mm, f, lim.kappa_ref_per_mm), dtype=float)
     raise ValueError(f"unknown baseline {algorithm!r}")
+
+
+def axis_path_limits(t_bound, k_bound, g_bound, kappa_per_mm, v_piece_mm_s, v_axis_mm_s,
+                     a_axis_mm_s2, j_axis_mm_s3, a_path_mm_s2: float,
+                     j_path_mm_s3: float):  # fmt: skip
+    """Path limits of k pieces that keep every axis within its own limits (issue 13).
+
+    Inputs per piece and axis (k, 3): ``t_bound`` T_i ≥ |t_i| (unit tangent), ``k_bound``
+    K_i ≥ |(κn)_i| [1/mm] (curvature vector) and ``g_bound`` G_i ≥ |d(κn)_i/ds| [1/mm²], each
+    over the whole piece; ``kappa_per_mm`` (k,) κ̄ ≥ κ on the piece [1/mm];
+    ``v_piece_mm_s`` (k,) the piece's own cruise cap [mm/s]; the axis
+    limits (3,) V_i [mm/s], A_i [mm/s²], J_i [mm/s³] (``inf``: none); the path limits A, J.
+    Returns (k,) each: the feed cap v̄ [mm/s] (``inf`` when no axis caps the feed), the
+    tangential acceleration ā [mm/s²] and jerk j̄ [mm/s³].
+
+    Derivation. Along the path p(s(t)) with speed v = ṡ, tangential acceleration a = v̇ and
+    jerk j = ä, and dt/ds = κn (Frenet):
+
+        ṗ = v t,    p̈ = a t + v² κn,    p⃛ = j t + 3 v a κn + v³ d(κn)/ds.
+
+    With 0 ≤ v ≤ v̄, |a| ≤ ā, |j| ≤ j̄ on the piece, axis i is within its limits if
+
+        v̄ T_i ≤ V_i,    ā T_i + v̄² K_i ≤ A_i,    j̄ T_i + 3 v̄ ā K_i + v̄³ G_i ≤ J_i.
+
+    Lines have K = G = 0: v̄ = min V_i/T_i, ā = min A_i/T_i, j̄ = min J_i/T_i, exact (direction
+    cosines). On curves the normal terms share the axis limits with the tangential ones. The
+    split chosen: the normal part may take at most half (:data:`NORMAL_SHARE`) of each axis
+    limit, v̄ ≤ √(A_i / (2K_i)) and v̄ ≤ (J_i / (2G_i))^(1/3) (feed caps), and the tangential
+    part gets what the normal part leaves at the speed the piece can actually reach, v̄
+    (which also counts the piece's own cap: a slow piece leaves more to the tangential part):
+
+        ā ≤ max((A_i − v̄² K_i) / T_i, √(A_i² − v̄⁴ κ̄²))  (≥ A_i / (2 T_i)),
+        R_i = J_i − v̄³ G_i                            (≥ J_i / 2),
+        ā ≤ R_i / (6 v̄ K_i)                           (the term 3 v̄ ā K_i takes ≤ R_i / 2),
+        j̄ ≤ (R_i − 3 v̄ ā K_i) / T_i                   (≥ R_i / (2 T_i)).
+
+    The second form of the acceleration bound: t and n are orthonormal, so t_i² + n_i² ≤ 1
+    and by Cauchy–Schwarz |a t_i + v²κ n_i| ≤ √(a² + v⁴κ²); it is the tighter one where an
+    axis sees both the whole tangent and the whole normal (T_i = 1, K_i = κ: a full circle),
+    giving ā = A_i √3/2 at the half split instead of A_i/2.
+
+    Without axis jerk limits the half split keeps the tangential acceleration at least half
+    the axis's, so the planner never crawls into a tight arc; on gentle curves (v̄² K_i small)
+    nearly all of A_i remains tangential. With axis jerk limits the coupling 3 v̄ ā K_i can
+    be the binding one (speeding up along a curve turns the centripetal acceleration): on
+    R = 4 mm at 50 mm/s with J_i = 3e4 it leaves ā ≈ 280 mm/s²; that is the physics of the
+    limit, not a margin. The results are capped by the path limits A and J.
+    """
+    t = np.asarray(t_bound, dtype=float)
+    kb = np.asarray(k_bound, dtype=float)
+    g = np.asarray(g_bound, dtype=float)
+    v_i = np.asarray(v_axis_mm_s, dtype=float)[None, :]
+    a_i = np.asarray(a_axis_mm_s2, dtype=float)[None, :]
+    j_i = np.asarray(j_axis_mm_s3, dtype=float)[None, :]
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        # Feed caps (k,): velocity, then half the acceleration and jerk for the normal part.
+        v_cap = np.min(np.where(t > 0.0, v_i / t, np.inf), axis=1)
+        share = NORMAL_SHARE
+        v_cap = np.minimum(v_cap, np.min(np.where(kb > 0.0, np.sqrt(share * a_i / kb), np.inf),
+                                         axis=1))  # fmt: skip
+        v_cap = np.minimum(v_cap, np.min(np.where(g > 0.0, np.cbrt(share * j_i / g), np.inf),
+                                         axis=1))  # fmt: skip
+        v_bar = np.minimum(v_cap, np.asarray(v_piece_mm_s, dtype=float))[:, None]
+        normal_a = np.where(kb > 0.0, v_bar * v_bar * kb, 0.0)
+        a_room = np.where(np.isfinite(a_i), a_i - normal_a, np.inf)
+        a_t = np.where(t > 0.0, a_room / t, np.inf)
+        kap = np.asarray(kappa_per_mm, dtype=float)[:, None]
+        a_t = np.maximum(a_t, np.sqrt(np.maximum(a_i * a_i - (v_bar * v_bar * kap) ** 2, 0.0)))
+        rest_j = np.where(np.isfinite(j_i), j_i - np.where(g > 0.0, v_bar**3 * g, 0.0), np.inf)
+        coupling = 3.0 * v_bar * kb  # mm/s · 1/mm: the jerk per unit tangential acceleration
+        a_t = np.minimum(a_t, np.where(coupling > 0.0, rest_j / (2.0 * coupling), np.inf))
+        a_bar = np.minimum(a_t.min(axis=1), a_path_mm_s2)
+        j_room = rest_j - np.where(coupling > 0.0, coupling * a_bar[:, None], 0.0)
+        j_t = np.where(t > 0.0, j_room / t, np.inf)
+        j_bar = np.minimum(j_t.min(axis=1), j_path_mm_s3)
+    return v_cap, a_bar, j_bar

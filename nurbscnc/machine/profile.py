@@ -43,6 +43,9 @@ SERVO_COEFFICIENTS = ("a0", "a1", "a2", "a3", "a4", "b0", "b1", "b2")
 SERVO_SIMPLE = ("bandwidth_hz", "damping")
 #: Largest damping ratio of the simple form (see :meth:`AxisServo.second_order`).
 MAX_DAMPING = 2.0
+#: Keys of an ``[axis_limits.<axis>]`` table: velocity [mm/min] (like ``limits.v_max_mm_min``),
+#: acceleration [mm/s²] and jerk [mm/s³] of that axis alone.
+AXIS_LIMIT_KEYS = ("v_max_mm_min", "a_max_mm_s2", "j_max_mm_s3")
 #: Servo period when the profile gives none [ms] (SPEC §9).
 DEFAULT_PERIOD_MS = 1.0
 
@@ -92,11 +95,17 @@ _SCHEMA: dict = {
     "servo": {"period_ms": "pos", "x": _AXIS_SCHEMA, "y": _AXIS_SCHEMA, "z": _AXIS_SCHEMA},
     "steps": {"max_pulses_per_period": "count", "per_mm": {a: "pos" for a in AXES}},
     "soft_limits": {a: {"min_mm": "finite", "max_mm": "finite"} for a in AXES},
+    # Per-axis limits (issue 13), beside the path limits of [limits]: a table per axis, every
+    # key optional (an absent key leaves that axis to the path limits alone).
+    "axis_limits": {a: dict.fromkeys(AXIS_LIMIT_KEYS, "pos") for a in AXES},
 }
 _OPTIONAL = frozenset(
     {"limits.rapid_mm_min", "limits.max_points", "limits.path_tolerance_um", "servo",
      "servo.period_ms", "servo.x", "servo.y", "servo.z"}
 )
+# [axis_limits]: every table and every key optional.
+_OPTIONAL |= {"axis_limits", *(f"axis_limits.{a}" for a in AXES),
+              *(f"axis_limits.{a}.{k}" for a in AXES for k in AXIS_LIMIT_KEYS)}  # fmt: skip
 
 _MM_PER_UM = 1e-3
 #: Default of ``limits.max_points``: 50 million reference points, 13.9 h of motion at 1 ms
@@ -263,6 +272,28 @@ class Servo:
 
 
 @dataclass(frozen=True)
+class AxisLimits:
+    """Per-axis limits (x, y, z), each axis on its own [mm, s]; ``inf`` where the profile sets
+    none (that axis is then bounded by the path limits alone). The planner turns them into
+    path limits per piece (:func:`nurbscnc.plan.axes.piece_limits`)."""
+
+    v_max_mm_s: tuple[float, float, float] = (math.inf,) * 3  #: axis velocity limit
+    a_max_mm_s2: tuple[float, float, float] = (math.inf,) * 3  #: axis acceleration limit
+    j_max_mm_s3: tuple[float, float, float] = (math.inf,) * 3  #: axis jerk limit
+
+    @property
+    def any(self) -> bool:
+        """True when some axis has some limit (False: the path limits alone apply)."""
+        return any(math.isfinite(x) for x in (*self.v_max_mm_s, *self.a_max_mm_s2,
+                                              *self.j_max_mm_s3))  # fmt: skip
+
+    def as_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(3,) arrays of the velocity [mm/s], acceleration [mm/s²], jerk [mm/s³] limits."""
+        return (np.array(self.v_max_mm_s, dtype=float), np.array(self.a_max_mm_s2, dtype=float),
+                np.array(self.j_max_mm_s3, dtype=float))
+
+
+@dataclass(frozen=True)
 class Steps:
     """Step (pulse) resolution per axis (x, y, z) and the card's per-period pulse ceiling."""
 
@@ -290,7 +321,8 @@ class Machine:
     ``source`` is the file it came from (``"<default machine>"`` for the bundled one),
     ``found_by`` how it was chosen (one of the ``FOUND_BY_*`` constants), ``settings`` the
     effective profile in the file's units (the TOML tables after overrides, optional keys
-    filled in with their defaults), for ``profile show``.
+    filled in with their defaults), for ``profile show``. ``axis_limits`` the optional
+    per-axis limits (none: the path limits of ``limits`` alone).
     """
 
     limits: Limits
@@ -300,6 +332,7 @@ class Machine:
     source: str = "<default>"
     found_by: str = FOUND_BY_DEFAULT
     settings: dict = field(default_factory=dict, compare=False, repr=False)
+    axis_limits: AxisLimits = field(default_factory=AxisLimits)
 
     @property
     def contour_check(self) -> bool:
@@ -407,7 +440,7 @@ def load_machine(
 
 def _with_origin(machine: Machine, found_by: str) -> Machine:
     return Machine(machine.limits, machine.servo, machine.steps, machine.soft_limits,
-                   machine.source, found_by, machine.settings)  # fmt: skip
+                   machine.source, found_by, machine.settings, machine.axis_limits)  # fmt: skip
 
 
 def parse_machine(text: str, source: str = "<string>", overrides: dict | None = None) -> Machine:
@@ -589,10 +622,13 @@ def _build(data: dict, rep: _Reporter) -> Machine:
         per_mm=tuple(float(st["per_mm"][a]) for a in AXES),
         max_pulses_per_period=int(st["max_pulses_per_period"]),
     )
+    axis_limits = _axis_limits(data.get("axis_limits", {}))
     # A pulse-train card cannot emit more than max_pulses_per_period steps per period on an axis;
-    # an axis moving alone at the fastest rate (max of V_max and the rapid rate) must fit.
-    v_top_mm_s = max(limits.v_max_mm_s, limits.rapid_mm_s)
-    for a, per_mm in zip(AXES, steps.per_mm, strict=True):
+    # an axis moving alone at the fastest rate (max of V_max and the rapid rate, or that axis's
+    # own velocity limit when lower) must fit.
+    v_path_top_mm_s = max(limits.v_max_mm_s, limits.rapid_mm_s)
+    for a, per_mm, v_axis in zip(AXES, steps.per_mm, axis_limits.v_max_mm_s, strict=True):
+        v_top_mm_s = min(v_path_top_mm_s, v_axis)
         need = v_top_mm_s * servo.period_s * per_mm
         if need > steps.max_pulses_per_period:
             raise rep.error(
@@ -621,7 +657,18 @@ def _build(data: dict, rep: _Reporter) -> Machine:
     settings.setdefault("servo", {}).setdefault("period_ms", DEFAULT_PERIOD_MS)
     settings["servo"] = {"period_ms": settings["servo"].pop("period_ms"), **settings["servo"]}
     return Machine(limits=limits, servo=servo, steps=steps, soft_limits=soft, source=rep.source,
-                   settings=settings)  # fmt: skip
+                   settings=settings, axis_limits=axis_limits)  # fmt: skip
+
+
+def _axis_limits(tables: dict) -> AxisLimits:
+    """The validated ``[axis_limits]`` tables in internal units (absent keys: ``inf``)."""
+
+    def per_axis(key: str, scale: float) -> tuple[float, float, float]:
+        return tuple(float(tables.get(a, {}).get(key, math.inf)) * scale for a in AXES)
+
+    return AxisLimits(v_max_mm_s=per_axis("v_max_mm_min", 1.0 / _S_PER_MIN),
+                      a_max_mm_s2=per_axis("a_max_mm_s2", 1.0),
+                      j_max_mm_s3=per_axis("j_max_mm_s3", 1.0))  # fmt: skip
 
 
 # ---------------------------------------------------------------------------------------------

@@ -1,0 +1,270 @@
+"""Every limit holds on the samples (issue 13): random programs through the library pipeline,
+then each axis's velocity, acceleration and jerk by finite differences of the 1 ms reference
+points, against the machine's limits.
+
+Why the finite differences are a fair and tight test. For samples p_k = p(kT) of a motion
+whose velocity, acceleration and jerk are bounded by V, A, J at every instant, the divided
+differences are weighted averages of the derivative (B-spline kernels of degree 0, 1, 2, each
+positive with integral 1):
+
+    Δp/T = ∫ ṗ M₀,    Δ²p/T² = ∫ p̈ M₁,    Δ³p/T³ = ∫ p⃛ M₂,
+
+so |Δp/T| ≤ V, |Δ²p/T²| ≤ A, |Δ³p/T³| ≤ J hold exactly, with no discretisation allowance.
+The only allowance is the position error e of the points themselves (the NURBS arc-length
+inversion is within 1e-9 mm, SPEC §10; lines and arcs are exact to rounding), which moves the
+differences by at most 2e/T, 4e/T², 8e/T³: 2e-6 mm/s, 4e-3 mm/s², 8 mm/s³ at T = 1 ms (jerk
+limits here are ≥ 2e4 mm/s³), plus a relative 1e-9 for rounding of the limits themselves.
+
+A step of acceleration (a curvature jump passed at speed) is a jerk impulse: its third
+difference is 3/4 of the step over T (the kernel M₂'s peak), however small T. The planner
+caps nothing at such joints (a G1-continuous joint between a line and an arc, or between
+arcs turning opposite ways): measured, and kept as a strict xfail below until it does.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from nurbscnc.machine.profile import load_machine
+from nurbscnc.pipeline import RunOptions, run_program
+from nurbscnc.plan.options import LookaheadOptions
+from nurbscnc.program.interpret import interpret_text
+
+PERIOD_S = 1e-3
+#: Position error of the reference points [mm] (NURBS arc-length inversion, SPEC §10).
+POINT_ERROR_MM = 1e-9
+REL = 1e-9  # rounding of the limits
+TOL_V = 2 * POINT_ERROR_MM / PERIOD_S
+TOL_A = 4 * POINT_ERROR_MM / PERIOD_S**2
+TOL_J = 8 * POINT_ERROR_MM / PERIOD_S**3
+
+#: Per-axis limits unlike each other and below the path limits (V 58.3 mm/s, A 2450 mm/s²,
+#: J 5e4 mm/s³) on x and y, a slow Z: [mm/min], [mm/s²], [mm/s³].
+AXES = {"x": (3000.0, 1500.0, 3e4), "y": (2400.0, 1000.0, 2e4), "z": (900.0, 600.0, 2e4)}
+AXIS_OVERRIDES = {f"axis_limits.{a}.{k}": val for a, vals in AXES.items()
+                  for k, val in zip(("v_max_mm_min", "a_max_mm_s2", "j_max_mm_s3"), vals)}
+PATH = load_machine()
+AXIS = load_machine(overrides=AXIS_OVERRIDES)
+
+
+def finite_differences(points_mm: np.ndarray):
+    """Velocity (N−1, 3), acceleration (N−2, 3), jerk (N−3, 3) of the samples."""
+    return (np.diff(points_mm, 1, axis=0) / PERIOD_S, np.diff(points_mm, 2, axis=0) / PERIOD_S**2,
+            np.diff(points_mm, 3, axis=0) / PERIOD_S**3)  # fmt: skip
+
+
+def _arc(draw, p, cw):
+    r = draw(st.floats(0.5, 12.0))
+    phi0 = draw(st.floats(0.0, 2 * math.pi))
+    sweep = draw(st.floats(0.3, 5.5)) * (-1.0 if cw else 1.0)
+    centre = p[:2] - r * np.array([math.cos(phi0), math.sin(phi0)])
+    end = centre + r * np.array([math.cos(phi0 + sweep), math.sin(phi0 + sweep)])
+    i, j = centre - p[:2]
+    return end, f"G{2 if cw else 3} X{end[0]:.6f} Y{end[1]:.6f} I{i:.6f} J{j:.6f}"
+
+
+@st.composite
+def programs(draw):
+    """2–6 moves from the origin: lines (XY, some with Z), arcs G2/G3 in XY, a G5.2 NURBS;
+    each move with its own feed (mixed feeds, some above V_max); G61, G64 or G64 P."""
+    # Path mode: exact path (stops at breaks) or blending (G64: within the machine's path
+    # tolerance, G64 P: within P), so blends and passed joints are on the samples too.
+    mode = draw(st.sampled_from(["G61", "G64", "G64 P0.02"]))
+    lines = [f"G21 G90 G17 G94 {mode}", "G0 X0 Y0 Z0"]
+    p = np.zeros(3)
+    for _ in range(draw(st.integers(2, 6))):
+        feed = draw(st.sampled_from([300.0, 900.0, 2000.0, 3500.0, 6000.0]))
+        kind = draw(st.sampled_from(["line", "line3", "arc", "arc", "nurbs"]))
+        if kind.startswith("line"):
+            d = np.array([draw(st.floats(-15, 15)), draw(st.floats(-15, 15)),
+                          draw(st.floats(-3, 3)) if kind == "line3" else 0.0])  # fmt: skip
+            if np.linalg.norm(d) < 0.05:
+                d = np.array([1.0, 0.5, 0.0])
+            p = p + d
+            lines.append(f"G1 X{p[0]:.6f} Y{p[1]:.6f} Z{p[2]:.6f} F{feed:g}")
+        elif kind == "arc":
+            end, text = _arc(draw, p, draw(st.booleans()))
+            p = np.array([end[0], end[1], p[2]])
+            lines.append(f"{text} F{feed:g}")
+        else:
+            ctrl = [p[:2] + np.array([draw(st.floats(-8, 8)), draw(st.floats(-8, 8))])
+                    for _ in range(draw(st.integers(2, 4)))]  # fmt: skip
+            ctrl = [c + (k + 1) * np.array([1.5, 0.4]) for k, c in enumerate(ctrl)]  # no cusps
+            lines.append(f"F{feed:g}")
+            lines.append(f"G5.2 X{p[0]:.6f} Y{p[1]:.6f} P1 L{min(len(ctrl) + 1, 4)}")
+            lines += [f"X{c[0]:.6f} Y{c[1]:.6f} P{draw(st.floats(0.5, 2.0)):.4f}" for c in ctrl]
+            lines.append("G5.3")
+            p = np.array([ctrl[-1][0], ctrl[-1][1], p[2]])
+    lines.append("M2")
+    return "\n".join(lines) + "\n"
+
+
+def _feed_of_samples(result, segments, machine) -> np.ndarray:
+    """Per velocity difference (between samples k, k+1): the larger programmed feed of the
+    two samples' pieces, capped by V_max (rapids: the rapid rate) [mm/s]."""
+    pieces = result.plan.pieces
+    seg_feed = np.array([getattr(s, "feed_mm_s", 0.0) or 0.0 for s in segments])
+    feed = np.minimum(seg_feed[np.asarray(pieces.segment)], machine.limits.v_max_mm_s)
+    feed = np.where(pieces.rapid, machine.limits.rapid_mm_s, feed)
+    per_sample = feed[result.samples.piece]
+    return np.maximum(per_sample[:-1], per_sample[1:])
+
+
+def check_samples(text: str, machine, dynamics: str, joints_ok: bool = False):
+    """Plan and interpolate ``text``; assert the path speed ≤ feed, and per axis v, a, j ≤
+    the axis limits (with ``machine.axis_limits``) or the path acceleration vector ≤ √2·A_max
+    (path limits alone: A_max holds tangentially and normally, each). ``joints_ok``: skip the
+    jerk samples whose window holds a junction passed at speed with a curvature jump (the
+    known gap, see the module doc). Returns the run."""
+    program = interpret_text(text)
+    result = run_program(program, machine, RunOptions(lookahead=LookaheadOptions(
+        dynamics=dynamics)))  # fmt: skip
+    v, a, j = finite_differences(result.samples.points_mm)
+    speed = np.linalg.norm(v, axis=1)
+    feed = _feed_of_samples(result, program.segments, machine)
+    assert np.all(speed <= feed * (1 + REL) + TOL_V), ("feed", float(np.max(speed - feed)))
+    ax = machine.axis_limits
+    if ax.any:
+        v_i, a_i, j_i = ax.as_arrays()
+        over_v = np.abs(v) - (v_i * (1 + REL) + TOL_V)
+        over_a = np.abs(a) - (a_i * (1 + REL) + TOL_A)
+        over_j = np.abs(j) - (j_i * (1 + REL) + TOL_J)
+        if joints_ok:
+            over_j = over_j[~_jump_windows(result, j.shape[0])]
+        assert np.all(over_v <= 0.0), ("axis velocity", float(over_v.max()))
+        assert np.all(over_a <= 0.0), ("axis acceleration", float(over_a.max()))
+        assert over_j.size == 0 or np.all(over_j <= 0.0), ("axis jerk", float(over_j.max()))
+    else:
+        acc = np.linalg.norm(a, axis=1)
+        bound = math.sqrt(2.0) * machine.limits.a_max_mm_s2 * (1 + REL) + TOL_A
+        assert np.all(acc <= bound), ("path acceleration", float(acc.max()))
+    return result
+
+
+def _jump_windows(result, n_jerk: int) -> np.ndarray:
+    """(n_jerk,) True for third differences (samples k..k+3) whose window holds a junction
+    where the speed is > 0 and the curvature vector jumps (> 1e-9 /mm)."""
+    plan = result.plan
+    pieces = plan.pieces
+    k = len(pieces)
+    if k < 2:
+        return np.zeros(n_jerk, bool)
+    path = pieces.path
+    ends = np.asarray(pieces.length_mm)
+    i = np.arange(k)
+    curv = []
+    for rows, s in ((i[:-1], ends[:-1]), (i[1:], np.zeros(k - 1))):
+        d1, d2 = path.derivatives(rows, s)
+        sp2 = np.einsum("ij,ij->i", d1, d1)
+        t = d1 / np.sqrt(np.where(sp2 > 0, sp2, 1.0))[:, None]
+        curv.append((d2 - np.einsum("ij,ij->i", d2, t)[:, None] * t) / np.where(sp2 > 0, sp2,
+                                                                                  1.0)[:, None])
+    jump = np.linalg.norm(curv[0] - curv[1], axis=1) > 1e-9
+    t_junction = np.asarray(plan.profile.piece_start_time_s)[1:]
+    _, v_junction, *_ = plan.profile.sample(t_junction)
+    moving = np.asarray(v_junction) > 1e-9
+    # Sample times of the reference (dwells shift the wall clock; the tests use none).
+    t_samples = result.samples.t_s
+    bad = np.zeros(n_jerk, bool)
+    for tj in t_junction[jump & moving]:
+        kj = int(np.floor(tj / PERIOD_S + 1e-9))
+        bad[max(kj - 2, 0):min(kj + 2, n_jerk)] = True
+    assert t_samples.size >= n_jerk
+    return bad
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(text=programs(), dynamics=st.sampled_from(["off", "local"]))
+def test_axis_limits_hold_on_the_samples(text, dynamics):
+    check_samples(text, AXIS, dynamics, joints_ok=True)
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(text=programs(), dynamics=st.sampled_from(["off", "local"]))
+def test_path_limits_hold_on_the_samples(text, dynamics):
+    check_samples(text, PATH, dynamics)
+
+
+SQUARE_45 = ("G21 G90 G17 G94 G61\nG0 X0 Y0\nF6000\nG1 X10 Y10\nG1 X0 Y20\nG1 X-10 Y10\n"
+             "G1 X0 Y0\nM2\n")
+
+
+def test_diagonal_square_reaches_the_axis_caps_and_holds_them():
+    # LinuxCNC's sim axes (58.33 mm/s, 2450 mm/s² per axis, no jerk limit), path limits
+    # raised (J too: 5e4 would keep the S-curve below A on 14 mm edges): a 45° edge may run at
+    # √2·58.33 = 82.5 mm/s and accelerate at √2·2450; the samples show both axes at (almost)
+    # their limits and never above.
+    over = {"limits.v_max_mm_min": 6000.0, "limits.a_max_mm_s2": 1e4, "limits.j_max_mm_s3": 1e7,
+            "axis_limits.x.v_max_mm_min": 3500.0, "axis_limits.x.a_max_mm_s2": 2450.0,
+            "axis_limits.y.v_max_mm_min": 3500.0, "axis_limits.y.a_max_mm_s2": 2450.0}
+    m = load_machine(overrides=over)
+    result = check_samples(SQUARE_45, m, "off")
+    v, a, _ = finite_differences(result.samples.points_mm)
+    assert np.abs(v).max() == pytest.approx(3500.0 / 60.0, rel=1e-3)
+    assert np.abs(a).max() == pytest.approx(2450.0, rel=0.02)
+    assert np.linalg.norm(v, axis=1).max() == pytest.approx(3500.0 / 60.0 * math.sqrt(2), rel=1e-3)
+
+
+# A line into an arc and an S of two arcs, all tangent (G1-continuous), passed at speed: the
+# curvature vector jumps at the joints, so the axis acceleration steps by v²|Δ(κn)_i|.
+TANGENT = ("G21 G90 G17 G94 G61\nG0 X0 Y0\nF3000\nG1 X10\nG3 X15 Y5 I0 J5\nG2 X20 Y10 I5 J0\n"
+           "G1 X30\nM2\n")
+
+
+@pytest.mark.xfail(strict=True, reason="issue 13: at a curvature jump passed at speed the "
+                   "acceleration steps (a jerk impulse, 3/4·Δa/T on the samples); no junction "
+                   "cap limits it yet (PieceLimits carries per-piece limits only)")
+def test_axis_jerk_holds_at_curvature_jumps():
+    check_samples(TANGENT, AXIS, "off")
+
+
+def test_tangent_joints_hold_every_other_limit():
+    # The same program: velocity and acceleration hold everywhere, jerk away from the joints.
+    check_samples(TANGENT, AXIS, "off", joints_ok=True)
+
+
+LINUXCNC_AXES = {"limits.v_max_mm_min": 6000.0, "limits.a_max_mm_s2": 1e4,
+                 "limits.j_max_mm_s3": 1e7, "axis_limits.x.v_max_mm_min": 3500.0,
+                 "axis_limits.x.a_max_mm_s2": 2450.0, "axis_limits.y.v_max_mm_min": 3500.0,
+                 "axis_limits.y.a_max_mm_s2": 2450.0}  # fmt: skip
+
+
+@pytest.mark.parametrize(("r", "start_deg"), [(2.0, 0.0), (2.0, 40.0), (5.0, 20.0),
+                                              (20.0, 70.0)])
+def test_circle_from_rest_uses_the_axis_acceleration_and_holds_it(r, start_deg):
+    # A full circle started and ended at rest, F6000, LinuxCNC's sim axes, path limits out of
+    # the way: speeding up along the circle the tangential and centripetal parts add up on
+    # the axes; the samples reach the axis acceleration and never exceed it. The start angles
+    # put the acceleration vector's peak onto an axis (R 2 mm from 40°: an axis would see
+    # 2681 mm/s² if the tangential part were not reduced by the centripetal one).
+    th = math.radians(start_deg)
+    x, y = r * math.cos(th), r * math.sin(th)
+    text = (f"G21 G90 G17 G94 G61\nG0 X{x:.9f} Y{y:.9f}\nF6000\n"
+            f"G3 X{x:.9f} Y{y:.9f} I{-x:.9f} J{-y:.9f}\nM2\n")
+    result = check_samples(text, load_machine(overrides=LINUXCNC_AXES), "off")
+    v, a, _ = finite_differences(result.samples.points_mm)
+    assert np.abs(a).max() == pytest.approx(2450.0, rel=1e-3)
+    # The feed cap on the circle (the rapid to its start runs at the rapid rate).
+    v_bar = min(3500.0 / 60.0, math.sqrt(2450.0 * r / 2.0))
+    on_arc = result.samples.piece[1:] == 1
+    assert np.linalg.norm(v[on_arc], axis=1).max() == pytest.approx(v_bar, rel=1e-3)
+
+
+@pytest.mark.parametrize("r", [1.0, 20.0])
+def test_circle_with_axis_jerk_limits_reaches_and_holds_them(r):
+    # The same with an axis jerk limit of 5e4 mm/s³: the jerk of speeding up along the curve
+    # (j t + 3 v a κn + v³ d(κn)/ds) stays within it, and comes within 2 % of it (from 45°,
+    # where the peak lands on an axis).
+    over = {**LINUXCNC_AXES, "axis_limits.x.j_max_mm_s3": 5e4, "axis_limits.y.j_max_mm_s3": 5e4}
+    x = y = r / math.sqrt(2.0)
+    text = (f"G21 G90 G17 G94 G61\nG0 X{x:.9f} Y{y:.9f}\nF6000\n"
+            f"G3 X{x:.9f} Y{y:.9f} I{-x:.9f} J{-y:.9f}\nM2\n")
+    result = check_samples(text, load_machine(overrides=over), "off")
+    _, _, j = finite_differences(result.samples.points_mm)
+    on_arc = result.samples.piece[3:] == 1
+    assert np.abs(j[on_arc]).max() == pytest.approx(5e4, rel=0.02)
