@@ -201,10 +201,11 @@ def test_corpus_program_runs_end_to_end(rel):
     scale = max(1.0, float(np.abs(end_point(prog)).max()))
     np.testing.assert_allclose(smp.points_mm[-1], end_point(prog), rtol=0, atol=1e-12 * scale)
     assert_limits(plan)
-    # On the programmed path: NURBS corners are PH quintics within the fit tolerance e
-    # (no G64 P blends in the corpus); the dense reference adds < 0.01 µm.
+    # On the programmed path: NURBS corners are PH quintics within the fit tolerance e, and
+    # corners under G64 without P (LinuxCNC's default mode, the corpus's) are blended within
+    # the machine's path tolerance; the dense reference adds < 0.01 µm.
     d = distance_to_path(smp.points_mm, programmed_path(prog))
-    assert d.max() <= 1.5 * LIM.ph_tolerance_mm + 1e-5
+    assert d.max() <= max(1.5 * LIM.ph_tolerance_mm, LIM.path_tolerance_mm) + 1e-5
     # The dynamics check held: the reference through an independent servo simulation
     # (scipy.signal.lsim of eq. 25) stays within ε_max of the programmed path while cutting
     # (reference on a feed move; the settling tail counts as cutting), allowing the corners'
