@@ -28,7 +28,13 @@ from nurbscnc.plan.options import Algorithm, Dynamics, LookaheadOptions, parse_c
 from nurbscnc.plan.report import check_soft_limits
 from nurbscnc.plan.timing import Reference
 from nurbscnc.servo.model import AxisModel
-from nurbscnc.servo.precompensate import Compensated, perturbed_model, precompensate_points
+from nurbscnc.servo.precompensate import (
+    REFERENCE_TOLERANCE_MM,
+    Compensated,
+    limit_deviation,
+    perturbed_model,
+    precompensate_points,
+)
 
 
 @dataclass(frozen=True)
@@ -37,17 +43,23 @@ class RunOptions:
     construction): the ``algorithm``, the look-ahead planner's options (``lookahead``, not
     used by a baseline), the ``interpolator`` of NURBS pieces, and ``precompensate``: feed
     the servo the ZPETC pre-compensated reference (:mod:`nurbscnc.servo.precompensate`;
-    the dynamics check then simulates it, and it is the output)."""
+    the dynamics check then simulates it, and it is the output), kept within
+    ``reference_tolerance_mm`` of the path (inf: no limit)."""
 
     algorithm: Algorithm = Algorithm.PH_LOOKAHEAD
     lookahead: LookaheadOptions = field(default_factory=LookaheadOptions)
     interpolator: Interpolator = Interpolator.EXACT
     precompensate: bool = False
+    reference_tolerance_mm: float = REFERENCE_TOLERANCE_MM
 
     def __post_init__(self):
         set_ = object.__setattr__
         set_(self, "algorithm", parse_choice(Algorithm, self.algorithm, "algorithm"))
         set_(self, "interpolator", parse_choice(Interpolator, self.interpolator, "interpolator"))
+        tol = float(self.reference_tolerance_mm)
+        if not tol >= 0.0:
+            raise ConfigError(f"reference tolerance must be >= 0 mm, got {tol!r}")
+        set_(self, "reference_tolerance_mm", tol)
 
 
 @dataclass(frozen=True, eq=False)
@@ -95,13 +107,15 @@ class Precompensation:
     ``lead_s`` the start held before the compensated motion (the inverse's look-ahead) [s];
     ``tail_s`` the periods after the planned stop while the compensation decays [s];
     ``reference_deviation_max_mm`` the compensated points' largest distance from the path
-    [mm] (cutting samples); ``sensitivity`` (label, worst contour error [mm]) of the same
-    reference simulated through each model error of :data:`SENSITIVITY_CASES`."""
+    [mm] (cutting samples), kept within ``reference_tolerance_mm``; ``sensitivity`` (label,
+    worst contour error [mm]) of the same reference simulated through each model error of
+    :data:`SENSITIVITY_CASES`."""
 
     lead_s: float
     tail_s: float
     reference_deviation_max_mm: float
     sensitivity: tuple[tuple[str, float], ...]
+    reference_tolerance_mm: float = float("inf")
 
     @property
     def sensitivity_max_mm(self) -> float:
@@ -114,32 +128,39 @@ def _models(machine: Machine) -> list:
     return [servo.x, servo.y, servo.z]
 
 
-def precompensate_reference(ref: Reference, machine: Machine) -> tuple[Reference, Compensated]:
+def precompensate_reference(ref: Reference, machine: Machine,
+                            tolerance_mm: float = REFERENCE_TOLERANCE_MM,
+                            ) -> tuple[Reference, Compensated]:  # fmt: skip
     """The ZPETC pre-compensated version of a plan's reference (SPEC eq. 25 inverted,
-    :func:`~nurbscnc.servo.precompensate.precompensate_points`): the compensated points,
-    every other column padded to the new length (the start held ``lead_samples`` periods,
-    the end held through the tail), so the dynamics check maps each sample to its piece and
-    path length as before. Wall times restart at 0 with the servo period."""
+    :func:`~nurbscnc.servo.precompensate.precompensate_points`), kept within
+    ``tolerance_mm`` of the path (:func:`~nurbscnc.servo.precompensate.limit_deviation`;
+    inf: no limit): the compensated points, every other column padded to the new length
+    (the start held ``lead_samples`` periods, the end held through the tail), so the dynamics
+    check maps each sample to its piece and path length as before. Wall times restart at 0
+    with the servo period."""
     period = machine.servo.period_s
     comp = precompensate_points(_models(machine), ref.points_mm, period)
     pad = (comp.lead_samples, comp.tail_samples)
 
     def edge(x):
-        return np.pad(x, pad, mode="edge")
+        return np.pad(x, pad, mode="edge") if x.ndim == 1 else np.pad(x, (pad, (0, 0)), "edge")
 
-    n = comp.points_mm.shape[0]
+    points = limit_deviation(comp.points_mm, edge(ref.points_mm), tolerance_mm)
+    comp = replace(comp, points_mm=points)
+    n = points.shape[0]
     return Reference(np.arange(n) * period, edge(ref.tau_s), edge(ref.s_mm), edge(ref.v_mm_s),
-                     edge(ref.a_mm_s2), edge(ref.piece), comp.points_mm,
-                     edge(ref.param)), comp  # fmt: skip
+                     edge(ref.a_mm_s2), edge(ref.piece), points, edge(ref.param)), comp
 
 
-def precompensated_sampler(sampler, machine: Machine):
+def precompensated_sampler(sampler, machine: Machine,
+                           tolerance_mm: float = REFERENCE_TOLERANCE_MM):  # fmt: skip
     """The reference sampler (pieces, profile, period_s) → Reference of ``sampler`` followed
     by :func:`precompensate_reference`: what the dynamics check simulates with
     ``--precompensate`` (it needs no hook in the planner)."""
 
     def sample(pieces, profile, period_s: float):
-        return precompensate_reference(sampler(pieces, profile, period_s), machine)[0]
+        return precompensate_reference(sampler(pieces, profile, period_s), machine,
+                                       tolerance_mm)[0]  # fmt: skip
 
     sample.interpolator = getattr(sampler, "interpolator", None)
     return sample
@@ -158,7 +179,8 @@ def _servo_of(model: AxisModel) -> AxisServo:
 
 
 def precompensation_report(plan: Plan, planned: Reference, compensated: Reference,
-                           comp: Compensated, machine: Machine) -> Precompensation:  # fmt: skip
+                           comp: Compensated, machine: Machine,
+                           tolerance_mm: float = REFERENCE_TOLERANCE_MM) -> Precompensation:
     """The reference's own deviation from the path and the ±10 % model-error sensitivity.
 
     Deviation: the distance of each compensated point u_k from the path, measured near the
@@ -192,7 +214,7 @@ def precompensation_report(plan: Plan, planned: Reference, compensated: Referenc
         rows.append((label, float(err.max()) if err.size else 0.0))
     period = machine.servo.period_s
     return Precompensation(comp.lead_samples * period, comp.tail_samples * period, deviation,
-                           tuple(rows))  # fmt: skip
+                           tuple(rows), tolerance_mm)  # fmt: skip
 
 
 def run_program(program, machine: Machine, options: RunOptions | None = None) -> Run:
@@ -239,10 +261,11 @@ def _run_precompensated(program, machine: Machine, lookahead: LookaheadOptions,
                         options: RunOptions, sampler) -> Run:  # fmt: skip
     """Plan with the dynamics check on the pre-compensated reference, output that reference
     (the same transform on the interpolator's points) and report on it."""
+    tol = options.reference_tolerance_mm
     plan, check = plan_checked(program, machine, lookahead,
-                               precompensated_sampler(sampler, machine))  # fmt: skip
+                               precompensated_sampler(sampler, machine, tol))  # fmt: skip
     planned = sampler(plan.pieces, plan.profile, machine.servo.period_s)
-    compensated, comp = precompensate_reference(planned, machine)
+    compensated, comp = precompensate_reference(planned, machine, tol)
     samples = samples_of(compensated, plan.pieces, options.interpolator)
-    report = precompensation_report(plan, planned, compensated, comp, machine)
+    report = precompensation_report(plan, planned, compensated, comp, machine, tol)
     return Run(options.algorithm, samples, plan, check, report)

@@ -626,7 +626,7 @@ def write_plan_plots(run, plot_dir: str) -> list[str]:
 def make_plan(program: str, machine=None, overrides=(), dynamics="local", lookahead=None,
               corner_feed="piece", interpolator="exact", blend_tolerance=None,
               algorithm="ph-lookahead", no_block_delete=False, tool_table=None,
-              subroutine_path=(), text=None, precompensate=False):
+              subroutine_path=(), text=None, precompensate=False, reference_tolerance=3.0):
     """Load, interpret, plan and interpolate one program; validate soft limits. Returns
     (program, machine, :class:`~nurbscnc.pipeline.Run`).
 
@@ -635,7 +635,7 @@ def make_plan(program: str, machine=None, overrides=(), dynamics="local", lookah
     from nurbscnc.pipeline import run_program
 
     options = run_options(algorithm, corner_feed, dynamics, blend_tolerance, interpolator,
-                          lookahead, precompensate)  # fmt: skip
+                          lookahead, precompensate, reference_tolerance)  # fmt: skip
     mach = load_machine_cli(machine, overrides)
     prog = load_program(program, not no_block_delete, tool_table, subroutine_path, text)
     return prog, mach, run_program(prog, mach, options)
@@ -661,11 +661,18 @@ def summary_of(prog, mach, run) -> dict:
     if pre is not None:  # ``--precompensate``: the reference's own deviation, the sensitivity
         summary["precompensation"] = {
             "method": "zpetc", "lead_s": pre.lead_s, "tail_s": pre.tail_s,
+            "reference_tolerance_um": run_tolerance_um(run),
             "reference_deviation_max_um": pre.reference_deviation_max_mm * 1000.0,
             "sensitivity_contour_max_um": pre.sensitivity_max_mm * 1000.0,
             "sensitivity": [{"model_error": k, "contour_max_um": e * 1000.0}
                             for k, e in pre.sensitivity]}  # fmt: skip
     return {**summary, **machine_json(mach)}
+
+
+def run_tolerance_um(run) -> float | None:
+    """The reference tolerance [µm] a pre-compensated run used (None: no limit)."""
+    tol = run.precompensation.reference_tolerance_mm
+    return tol * 1000.0 if np.isfinite(tol) else None
 
 
 def precompensation_text(summary: dict) -> str | None:
@@ -675,9 +682,9 @@ def precompensation_text(summary: dict) -> str | None:
         return None
     return (f"  pre-compensated reference (ZPETC): {pre['reference_deviation_max_um']:.2f} µm "
             f"from the path at most; contour error with a ±10 % model error "
-            f"≤ {pre['sensitivity_contour_max_um']:.2f} µm; start held "
-            f"{pre['lead_s'] * 1000:g} ms, compensation settles {pre['tail_s'] * 1000:g} ms "
-            f"after the stop")
+            f"≤ {pre['sensitivity_contour_max_um']:.2f} µm; motion delayed "
+            f"{pre['lead_s'] * 1000:g} ms for the inverse's look-ahead, reference settles "
+            f"{pre['tail_s'] * 1000:g} ms after the stop")
 
 
 @main.command()
