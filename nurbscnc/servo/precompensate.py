@@ -105,8 +105,9 @@ def zpetc(disc: DiscreteAxis) -> InverseFilter:
     zeros = np.roots(b) if b.size > 1 else np.zeros(0)
     bad = np.abs(zeros) >= 1.0 - UNIT_CIRCLE_MARGIN
     stable, unstable = zeros[~bad], zeros[bad]
-    b_s = b[0] * np.real(np.poly(stable))  # B_s(z⁻¹) = b_0 Π (1 − z_i z⁻¹)
-    b_u = np.real(np.poly(unstable))  # B_u(z⁻¹) = Π (1 − z_j z⁻¹); B_u(z) has the same c_i
+    b_s = b[0] * np.atleast_1d(np.real(np.poly(stable)))  # B_s(z⁻¹) = b_0 Π (1 − z_i z⁻¹)
+    # B_u(z⁻¹) = Π (1 − z_j z⁻¹); B_u(z) has the same coefficients c_i, in powers of z.
+    b_u = np.atleast_1d(np.real(np.poly(unstable)))
     dc = a.sum() / (b_s.sum() * b_u.sum())  # F(1) = A(1) B_u(1) / (B_s(1) B_u(1)²)
     ahead = b_u / (b_u.sum() ** 2 * dc)
     slowest = float(np.abs(stable).max()) if stable.size else 0.0
