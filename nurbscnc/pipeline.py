@@ -104,7 +104,8 @@ SENSITIVITY_CASES = (
 class Precompensation:
     """What pre-compensation did to a plan's reference (``run --precompensate``).
 
-    ``lead_s`` the start held before the compensated motion (the inverse's look-ahead) [s];
+    ``lead_s`` how much later than planned the tool moves: the inverse's look-ahead, taken
+    as a delay so nothing moves before t = 0 [s] (counted in the cycle time);
     ``tail_s`` the periods after the planned stop while the compensation decays [s];
     ``reference_deviation_max_mm`` the compensated points' largest distance from the path
     [mm] (cutting samples), kept within ``reference_tolerance_mm``; ``sensitivity`` (label,
@@ -135,7 +136,7 @@ def precompensate_reference(ref: Reference, machine: Machine,
     :func:`~nurbscnc.servo.precompensate.precompensate_points`), kept within
     ``tolerance_mm`` of the path (:func:`~nurbscnc.servo.precompensate.limit_deviation`;
     inf: no limit): the compensated points, every other column padded to the new length
-    (the start held ``lead_samples`` periods, the end held through the tail), so the dynamics
+    (the start repeated ``lead_samples`` times, the end through the tail), so the dynamics
     check maps each sample to its piece and path length as before. Wall times restart at 0
     with the servo period."""
     period = machine.servo.period_s

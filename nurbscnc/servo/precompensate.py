@@ -29,10 +29,12 @@ the tool follows the reference exactly at the samples.
 Boundary conditions (the programmed start and end points are kept):
 
 - Start: the machine is at rest at the first point. F looks ahead n_u + d samples, so the
-  compensated reference would have to move that many periods before the planned motion does;
-  those periods are *prepended* (the start point held, then the compensated motion begins):
-  the whole reference runs ``lead_samples`` periods later, the first point is exactly the
-  programmed start and nothing moves before t = 0.
+  compensated reference must start moving that many periods before the planned motion does
+  (pre-actuation). Rather than move before t = 0, the planned reference is delayed by
+  ``lead_samples`` = n_u + d periods (its start point held), so the first compensated point is
+  exactly the programmed start, the machine at rest there, and the pre-actuation happens in
+  the held periods: the tool follows the planned motion ``lead_samples`` periods later
+  (1 ms on the paper's axes), which the cycle time counts.
 - End: after the planned motion stops the decaying modes of F (the stable zeros of H) still
   move the compensated reference by a little; periods are *appended* until it stays within
   ``tail_tolerance_mm`` of the end point, and the last point is exactly the programmed end point
