@@ -7,7 +7,7 @@ are made from the :class:`Run` it returns. No I/O here.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
@@ -148,9 +148,13 @@ def precompensate_reference(ref: Reference, machine: Machine,
 
     points = limit_deviation(comp.points_mm, edge(ref.points_mm), tolerance_mm)
     comp = replace(comp, points_mm=points)
-    n = points.shape[0]
-    return Reference(np.arange(n) * period, edge(ref.tau_s), edge(ref.s_mm), edge(ref.v_mm_s),
-                     edge(ref.a_mm_s2), edge(ref.piece), points, edge(ref.param)), comp
+    n_in, n = ref.points_mm.shape[0], points.shape[0]
+    # Every per-sample column padded alike (whatever columns the Reference has).
+    columns = {f.name: edge(getattr(ref, f.name)) for f in fields(ref)
+               if isinstance(getattr(ref, f.name), np.ndarray)
+               and getattr(ref, f.name).shape[:1] == (n_in,)}  # fmt: skip
+    columns.update(t_s=np.arange(n) * period, points_mm=points)
+    return replace(ref, **columns), comp
 
 
 def precompensated_sampler(sampler, machine: Machine,
