@@ -190,7 +190,8 @@ def precompensation_report(plan: Plan, planned: Reference, compensated: Referenc
 
     Deviation: the distance of each compensated point u_k from the path, measured near the
     planned point r_k of the same period (on the path; W = 2|u_k − r_k|,
-    :func:`~nurbscnc.plan.dynamics.windowed_contour_mm`: never below the true distance).
+    :func:`~nurbscnc.plan.dynamics.windowed_contour_mm`: never below the true distance), and
+    where that exceeds the tolerance, to the whole path (:class:`PathIndex`).
     Sensitivity: the compensated points simulated through each model of
     :data:`SENSITIVITY_CASES` (:func:`~nurbscnc.plan.dynamics.path_response`, true distance
     to the path), the largest contour error on cutting samples, as the dynamics check counts
@@ -202,9 +203,14 @@ def precompensation_report(plan: Plan, planned: Reference, compensated: Referenc
     lag = np.sqrt(np.sum((u - r) ** 2, axis=1))
     cut = ~pieces.rapid[compensated.piece]
     dev = windowed_contour_mm(u, lag, compensated.s_mm, pieces, profile)
+    index = PathIndex(pieces)
+    # Above the tolerance, the distance to the whole path (the window may miss a nearer
+    # stretch of path, e.g. the other leg of a hairpin): the true distance.
+    sel = np.flatnonzero(dev > min(tolerance_mm, float(lag.max())))
+    if sel.size:
+        dev[sel] = index.distance_mm(u[sel], dev[sel])
     deviation = float(dev[cut].max()) if cut.any() else 0.0
     eps = machine.limits.contour_tolerance_mm
-    index = PathIndex(pieces)
     rows = []
     for label, gains, bandwidths in SENSITIVITY_CASES:
         servo = machine.servo
