@@ -31,7 +31,8 @@ from nurbscnc.servo.model import AxisModel
 from nurbscnc.servo.precompensate import (
     REFERENCE_TOLERANCE_MM,
     Compensated,
-    limit_deviation,
+    along_path_offset_mm,
+    limit_to_path,
     perturbed_model,
     precompensate_points,
 )
@@ -129,16 +130,20 @@ def _models(machine: Machine) -> list:
     return [servo.x, servo.y, servo.z]
 
 
-def precompensate_reference(ref: Reference, machine: Machine,
+def precompensate_reference(ref: Reference, pieces, profile, machine: Machine,
                             tolerance_mm: float = REFERENCE_TOLERANCE_MM,
                             ) -> tuple[Reference, Compensated]:  # fmt: skip
     """The ZPETC pre-compensated version of a plan's reference (SPEC eq. 25 inverted,
     :func:`~nurbscnc.servo.precompensate.precompensate_points`), kept within
-    ``tolerance_mm`` of the path (:func:`~nurbscnc.servo.precompensate.limit_deviation`;
-    inf: no limit): the compensated points, every other column padded to the new length
-    (the start repeated ``lead_samples`` times, the end through the tail), so the dynamics
-    check maps each sample to its piece and path length as before. Wall times restart at 0
-    with the servo period."""
+    ``tolerance_mm`` of the path (inf: no limit): each compensated point u_k is limited to
+    that distance from the path point its lead d_t
+    (:func:`~nurbscnc.servo.precompensate.along_path_offset_mm`) ahead of the planned point,
+    placed exactly at path length s_k + d_t (clamped to the program's ends, so the
+    reference is never led past the end point along the path;
+    :func:`~nurbscnc.servo.precompensate.limit_to_path`). Every other per-sample column is
+    padded to the new length (the start repeated ``lead_samples`` times, the end through the
+    tail), so the dynamics check maps each sample to its piece and path length as before.
+    Wall times restart at 0 with the servo period."""
     period = machine.servo.period_s
     comp = precompensate_points(_models(machine), ref.points_mm, period)
     pad = (comp.lead_samples, comp.tail_samples)
@@ -146,8 +151,17 @@ def precompensate_reference(ref: Reference, machine: Machine,
     def edge(x):
         return np.pad(x, pad, mode="edge") if x.ndim == 1 else np.pad(x, (pad, (0, 0)), "edge")
 
-    points = limit_deviation(comp.points_mm, edge(ref.points_mm), tolerance_mm)
-    comp = replace(comp, points_mm=points)
+    points = comp.points_mm
+    s_mm = edge(ref.s_mm)
+    if np.isfinite(tolerance_mm):
+        lead_mm = along_path_offset_mm(points, edge(ref.points_mm))
+        s_foot = np.clip(s_mm + lead_mm, 0.0, profile.total_length_mm)
+        starts = profile.piece_start_mm
+        piece = np.clip(np.searchsorted(starts, s_foot, side="right") - 1, 0, starts.size - 1)
+        foot = pieces.path.place(starts, np.minimum(s_foot, starts[piece]
+                                                    + pieces.length_mm[piece]), piece)[0]
+        points = limit_to_path(points, foot, tolerance_mm)
+        comp = replace(comp, points_mm=points)
     n_in, n = ref.points_mm.shape[0], points.shape[0]
     # Every per-sample column padded alike (whatever columns the Reference has).
     columns = {f.name: edge(getattr(ref, f.name)) for f in fields(ref)
@@ -164,8 +178,8 @@ def precompensated_sampler(sampler, machine: Machine,
     ``--precompensate`` (it needs no hook in the planner)."""
 
     def sample(pieces, profile, period_s: float):
-        return precompensate_reference(sampler(pieces, profile, period_s), machine,
-                                       tolerance_mm)[0]  # fmt: skip
+        ref = sampler(pieces, profile, period_s)
+        return precompensate_reference(ref, pieces, profile, machine, tolerance_mm)[0]
 
     sample.interpolator = getattr(sampler, "interpolator", None)
     return sample
@@ -276,7 +290,8 @@ def _run_precompensated(program, machine: Machine, lookahead: LookaheadOptions,
     plan, check = plan_checked(program, machine, lookahead,
                                precompensated_sampler(sampler, machine, tol))  # fmt: skip
     planned = sampler(plan.pieces, plan.profile, machine.servo.period_s)
-    compensated, comp = precompensate_reference(planned, machine, tol)
+    compensated, comp = precompensate_reference(planned, plan.pieces, plan.profile, machine,
+                                                tol)  # fmt: skip
     samples = samples_of(compensated, plan.pieces, options.interpolator)
     report = precompensation_report(plan, planned, compensated, comp, machine, tol)
     return Run(options.algorithm, samples, plan, check, report)

@@ -32,7 +32,8 @@ from nurbscnc.program.interpret import interpret_text
 from nurbscnc.servo.model import AxisModel
 from nurbscnc.servo.precompensate import (
     TAIL_TOLERANCE_MM,
-    limit_deviation,
+    along_path_offset_mm,
+    limit_to_path,
     perturbed_model,
     precompensate_points,
 )
@@ -148,19 +149,27 @@ def test_perturbed_models_against_closed_forms():
         assert m.dc_gain == pytest.approx(servo.dc_gain, rel=1e-12)
 
 
-def test_limit_deviation_keeps_the_along_path_part_and_clips_the_across_part():
+def test_the_lead_along_the_path_and_the_limit_to_the_path_on_a_circle():
     theta = np.linspace(0.0, 1.0, 200)
     rho = 2.0
-    r = np.column_stack([rho * np.cos(theta), rho * np.sin(theta), np.zeros_like(theta)])
+
+    def circle(t):
+        return np.column_stack([rho * np.cos(t), rho * np.sin(t), np.zeros_like(t)])
+
+    r = circle(theta)
     radial = r / rho
     tangent = np.column_stack([-np.sin(theta), np.cos(theta), np.zeros_like(theta)])
     u = r + 0.010 * radial + 0.005 * tangent
-    out = limit_deviation(u, r, 0.003)
-    d = out - r
-    # Interior samples (central differences are the exact tangent direction up to O(h²)).
-    np.testing.assert_allclose(np.einsum("ij,ij->i", d, radial)[1:-1], 0.003, atol=2e-8)
-    np.testing.assert_allclose(np.einsum("ij,ij->i", d, tangent)[1:-1], 0.005, atol=2e-8)
-    assert np.array_equal(limit_deviation(u, r, np.inf), u)
+    lead = along_path_offset_mm(u, r)
+    # Central differences give the exact tangent direction up to O(h²) inside.
+    np.testing.assert_allclose(lead[1:-1], 0.005, rtol=0, atol=1e-8)
+    foot = circle(theta + lead / rho)  # the path point that far along
+    out = limit_to_path(u, foot, 0.003)
+    # Within the tolerance of the circle (by construction), and along the residual's line.
+    np.testing.assert_allclose(np.abs(np.linalg.norm(out, axis=1) - rho)[1:-1], 0.003,
+                               rtol=0, atol=1e-8)  # fmt: skip
+    assert np.all(np.linalg.norm(out - foot, axis=1) <= 0.003 + 1e-15)
+    assert np.array_equal(limit_to_path(u, foot, np.inf), u)
 
 
 # -- the pipeline ---------------------------------------------------------------------------------

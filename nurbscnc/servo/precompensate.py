@@ -62,7 +62,7 @@ from nurbscnc.servo.model import AxisModel, DiscreteAxis, _as_model, discretise
 #: (0.1 µm: a tenth of a 1000 steps/mm step; the last point is then set exactly).
 TAIL_TOLERANCE_MM = 1e-4
 #: Default largest distance of a pre-compensated reference from the path [mm] (issue 13's
-#: 3 µm, :func:`limit_deviation`): if the model is wrong, the reference itself is never far
+#: 3 µm, :func:`limit_to_path`): if the model is wrong, the reference itself is never far
 #: off the path.
 REFERENCE_TOLERANCE_MM = 0.003
 #: Zeros with |z| ≥ 1 − this are treated as unstable (phase-cancelled, not inverted).
@@ -216,39 +216,49 @@ def perturbed_model(model: AxisModel, loop_gain: float = 1.0,
     return AxisModel(tuple(np.trim_zeros(new_num * scale, "f")), tuple(new_den * scale))
 
 
-def limit_deviation(compensated_mm: np.ndarray, planned_mm: np.ndarray,
-                    tolerance_mm: float) -> np.ndarray:  # fmt: skip
-    """Keep a compensated reference within ``tolerance_mm`` of the path, across it.
+def along_path_offset_mm(compensated_mm: np.ndarray, planned_mm: np.ndarray) -> np.ndarray:
+    """d_t = (u_k − r_k)·t̂_k [mm] (M,): how far the compensated point u_k leads the planned
+    point r_k along the direction of travel t̂ = ṙ/|ṙ| (central differences; where r stands
+    still, the nearest earlier direction, or before the first motion the first one).
 
-    ``compensated_mm`` u_k and ``planned_mm`` r_k (M, k) [mm], sample for sample (r on the
-    path). The correction d = u − r is split along the direction of travel t̂ = ṙ/|ṙ|
-    (central differences; where r stands still, the nearest earlier direction, or before
-    the first motion the first one) into d_t t̂, which slides the point along the path (it
-    leaves it only by κ d_t²/2: 0.04 µm for a 4 µm lead on a 0.22 mm nose radius), and
-    d_n = d − d_t t̂, across it; d_n is scaled down to length ``tolerance_mm`` where longer.
-    The tool then follows the path only as far as the limited reference lets it: the
-    dynamics check, which simulates the limited reference, slows down where that is not
-    within ε_max. ``tolerance_mm`` inf: u unchanged.
+    Most of a ZPETC correction is this lead (≈ c_1·v, the velocity lag of eq. 25): the point
+    of the path that far along from r_k is where the correction mostly points, and the rest
+    (across the path) is what :func:`limit_to_path` bounds.
     """
     u = np.asarray(compensated_mm, dtype=float)
     r = np.asarray(planned_mm, dtype=float)
-    if not np.isfinite(tolerance_mm):
-        return u
-    d = u - r
     tangent = np.gradient(r, axis=0) if r.shape[0] > 1 else np.zeros_like(r)
     norm = np.sqrt(np.einsum("ij,ij->i", tangent, tangent))
     moving = np.flatnonzero(norm > 1e-12)
-    t_hat = np.zeros_like(tangent)
-    if moving.size:
-        # Index of the direction each sample uses: its own, else the last one before it,
-        # else (before any motion) the first one.
-        src = np.full(r.shape[0], -1)
-        src[moving] = moving
-        src = np.maximum.accumulate(src)
-        src[src < 0] = moving[0]
-        t_hat = tangent[src] / norm[src, None]
-    along = np.einsum("ij,ij->i", d, t_hat)[:, None] * t_hat
-    across = d - along
-    size = np.sqrt(np.einsum("ij,ij->i", across, across))
+    if moving.size == 0:
+        return np.zeros(r.shape[0])
+    # Index of the direction each sample uses: its own, else the last one before it, else
+    # (before any motion) the first one.
+    src = np.full(r.shape[0], -1)
+    src[moving] = moving
+    src = np.maximum.accumulate(src)
+    src[src < 0] = moving[0]
+    t_hat = tangent[src] / norm[src, None]
+    return np.einsum("ij,ij->i", u - r, t_hat)
+
+
+def limit_to_path(compensated_mm: np.ndarray, foot_mm: np.ndarray,
+                  tolerance_mm: float) -> np.ndarray:  # fmt: skip
+    """Keep a compensated reference within ``tolerance_mm`` of the path.
+
+    ``foot_mm`` (M, k) a point *of the path* for each compensated point u_k (the caller's: the
+    path point :func:`along_path_offset_mm` ahead of the planned point). The residual
+    e = u − foot is scaled down to length ``tolerance_mm`` where longer:
+    u' = foot + e·min(1, tol/|e|), so the distance from u' to the path is at most
+    ``tolerance_mm`` by construction. The tool then follows the path only as far as the
+    limited reference lets it: the dynamics check, which simulates the limited reference,
+    slows down where that is not within ε_max. ``tolerance_mm`` inf: u unchanged.
+    """
+    u = np.asarray(compensated_mm, dtype=float)
+    if not np.isfinite(tolerance_mm):
+        return u
+    foot = np.asarray(foot_mm, dtype=float)
+    e = u - foot
+    size = np.sqrt(np.einsum("ij,ij->i", e, e))
     scale = np.minimum(1.0, tolerance_mm / np.where(size > 0.0, size, 1.0))
-    return r + along + across * scale[:, None]
+    return foot + e * scale[:, None]
