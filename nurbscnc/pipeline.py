@@ -124,6 +124,17 @@ class Precompensation:
         """The worst contour error [mm] over the model errors."""
         return max((e for _, e in self.sensitivity), default=0.0)
 
+    def as_json(self) -> dict:
+        """The ``precompensation`` object of ``plan``/``run --json`` (µm, s; a tolerance of
+        None is no limit)."""
+        tol = self.reference_tolerance_mm
+        return {"method": "zpetc", "lead_s": self.lead_s, "tail_s": self.tail_s,
+                "reference_tolerance_um": tol * 1000.0 if np.isfinite(tol) else None,
+                "reference_deviation_max_um": self.reference_deviation_max_mm * 1000.0,
+                "sensitivity_contour_max_um": self.sensitivity_max_mm * 1000.0,
+                "sensitivity": [{"model_error": k, "contour_max_um": e * 1000.0}
+                                for k, e in self.sensitivity]}  # fmt: skip
+
 
 def _models(machine: Machine) -> list:
     servo = machine.servo

@@ -657,22 +657,9 @@ def summary_of(prog, mach, run) -> dict:
 
     summary = plan_summary(prog, mach, run.samples, run.plan, run.check, run.algorithm,
                            run.cycle_time_s)  # fmt: skip
-    pre = getattr(run, "precompensation", None)
-    if pre is not None:  # ``--precompensate``: the reference's own deviation, the sensitivity
-        summary["precompensation"] = {
-            "method": "zpetc", "lead_s": pre.lead_s, "tail_s": pre.tail_s,
-            "reference_tolerance_um": run_tolerance_um(run),
-            "reference_deviation_max_um": pre.reference_deviation_max_mm * 1000.0,
-            "sensitivity_contour_max_um": pre.sensitivity_max_mm * 1000.0,
-            "sensitivity": [{"model_error": k, "contour_max_um": e * 1000.0}
-                            for k, e in pre.sensitivity]}  # fmt: skip
+    if getattr(run, "precompensation", None) is not None:  # --precompensate
+        summary["precompensation"] = run.precompensation.as_json()
     return {**summary, **machine_json(mach)}
-
-
-def run_tolerance_um(run) -> float | None:
-    """The reference tolerance [µm] a pre-compensated run used (None: no limit)."""
-    tol = run.precompensation.reference_tolerance_mm
-    return tol * 1000.0 if np.isfinite(tol) else None
 
 
 def precompensation_text(summary: dict) -> str | None:
