@@ -626,7 +626,7 @@ def write_plan_plots(run, plot_dir: str) -> list[str]:
 def make_plan(program: str, machine=None, overrides=(), dynamics="local", lookahead=None,
               corner_feed="piece", interpolator="exact", blend_tolerance=None,
               algorithm="ph-lookahead", no_block_delete=False, tool_table=None,
-              subroutine_path=(), text=None):
+              subroutine_path=(), text=None, precompensate=False, reference_tolerance=3.0):
     """Load, interpret, plan and interpolate one program; validate soft limits. Returns
     (program, machine, :class:`~nurbscnc.pipeline.Run`).
 
@@ -635,7 +635,7 @@ def make_plan(program: str, machine=None, overrides=(), dynamics="local", lookah
     from nurbscnc.pipeline import run_program
 
     options = run_options(algorithm, corner_feed, dynamics, blend_tolerance, interpolator,
-                          lookahead)  # fmt: skip
+                          lookahead, precompensate, reference_tolerance)  # fmt: skip
     mach = load_machine_cli(machine, overrides)
     prog = load_program(program, not no_block_delete, tool_table, subroutine_path, text)
     return prog, mach, run_program(prog, mach, options)
@@ -657,7 +657,21 @@ def summary_of(prog, mach, run) -> dict:
 
     summary = plan_summary(prog, mach, run.samples, run.plan, run.check, run.algorithm,
                            run.cycle_time_s)  # fmt: skip
+    if getattr(run, "precompensation", None) is not None:  # --precompensate
+        summary["precompensation"] = run.precompensation.as_json()
     return {**summary, **machine_json(mach)}
+
+
+def precompensation_text(summary: dict) -> str | None:
+    """The human line of ``--precompensate`` (None without it)."""
+    pre = summary.get("precompensation")
+    if pre is None:
+        return None
+    return (f"  pre-compensated reference (ZPETC): {pre['reference_deviation_max_um']:.2f} µm "
+            f"from the path at most; contour error with a ±10 % model error "
+            f"≤ {pre['sensitivity_contour_max_um']:.2f} µm; motion delayed "
+            f"{pre['lead_s'] * 1000:g} ms for the inverse's look-ahead, reference settles "
+            f"{pre['tail_s'] * 1000:g} ms after the stop")
 
 
 @main.command()
@@ -722,6 +736,8 @@ def print_plan_summary(prog, mach, summary: dict, out: Console) -> None:
         out.print(f"  {'predicted' if 'pieces' in summary else 'simulated'} contour error: "
                   f"max {summary['contour_max_um']:.2f} µm, RMS {summary['contour_rms_um']:.2f} "
                   f"µm (ε_max {mach.limits.contour_tolerance_mm * 1000:g} µm; {how})")
+    if precompensation_text(summary):
+        out.print(precompensation_text(summary), markup=False)
 
 
 @main.command()
@@ -774,6 +790,8 @@ def run(programs, output, output_dir, jobs, fmt, quiet, as_json, plot_dir, **set
             err.print(f"{prog.name}: {summary['samples']} points, cycle time "
                       f"{summary['cycle_time_s']:.4f} s{clock_suffix(summary['cycle_time_s'])}"
                       f" → {output}", markup=False)  # fmt: skip
+            if precompensation_text(summary):
+                err.print(precompensation_text(summary), markup=False)
         return
     run_batch(programs, output_dir, jobs, fmt or "csv", quiet, as_json, settings)
 

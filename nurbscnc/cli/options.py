@@ -23,7 +23,7 @@ from nurbscnc.plan.options import (
 #: The keyword names :func:`planning_options` adds to a command (besides machine, overrides,
 #: and the program-input options no_block_delete, tool_table, subroutine_path).
 PLANNING_KEYS = ("algorithm", "corner_feed", "dynamics", "blend_tolerance", "interpolator",
-                 "lookahead")  # fmt: skip
+                 "lookahead", "precompensate", "reference_tolerance")  # fmt: skip
 #: The keyword names of :func:`program_input_options`.
 PROGRAM_INPUT_KEYS = ("no_block_delete", "tool_table", "subroutine_path")
 
@@ -100,12 +100,25 @@ def planning_options(func):
         "--lookahead", type=click.IntRange(min=1), default=None,
         help="Look-ahead depth in pieces (default: the whole program).",
     )(func)  # fmt: skip
+    func = click.option(
+        "--precompensate", is_flag=True, default=False,
+        help="Feed the servo a pre-compensated reference (zero-phase-error tracking inverse "
+             "of the profile's servo model) so the modelled tool follows the planned path; "
+             "the summary gives the reference's own deviation from the path and the contour "
+             "error under a ±10 % model error. Needs a servo model.",
+    )(func)  # fmt: skip
+    func = click.option(
+        "--reference-tolerance", type=click.FloatRange(min=0.0), default=3.0, metavar="UM",
+        help="With --precompensate: keep the reference within this distance of the path [µm] "
+             "(default 3; inf: no limit); the dynamics check slows down where the tool then "
+             "misses ε_max.",
+    )(func)  # fmt: skip
     return program_input_options(machine_options(func))
 
 
 def run_options(algorithm="ph-lookahead", corner_feed="piece", dynamics="local",
                 blend_tolerance=None, interpolator="exact",
-                lookahead=None):  # fmt: skip
+                lookahead=None, precompensate=False, reference_tolerance=3.0):  # fmt: skip
     """The validated :class:`~nurbscnc.pipeline.RunOptions` of the values of
     :func:`planning_options` (ConfigError on a bad value)."""
     from nurbscnc.pipeline import RunOptions  # the planner's imports, only when planning
@@ -113,4 +126,6 @@ def run_options(algorithm="ph-lookahead", corner_feed="piece", dynamics="local",
     plan = PlanOptions(corner_feed=corner_feed, blend_tolerance_mm=blend_tolerance)
     return RunOptions(algorithm=algorithm, interpolator=interpolator,
                       lookahead=LookaheadOptions(dynamics=dynamics, lookahead_pieces=lookahead,
-                                                 plan=plan))  # fmt: skip
+                                                 plan=plan),
+                      precompensate=bool(precompensate),
+                      reference_tolerance_mm=float(reference_tolerance) * 1e-3)  # fmt: skip
