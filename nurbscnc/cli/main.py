@@ -601,24 +601,48 @@ def plot_option(func):
     )(func)  # fmt: skip
 
 
-def write_plan_plots(run, plot_dir: str) -> list[str]:
-    """Figures of one run: the path with its PH pieces, the feed, the predicted contour
-    error (PNG files in ``plot_dir``)."""
+def write_plan_plots(run, plot_dir: str, prog, expl=None, mach=None) -> list[str]:
+    """Figures of one run (PNG files in ``plot_dir``), each titled with the program's name:
+    the path (rapids dashed, cuts coloured by feed, PH pieces marked), the feed over time,
+    the feed along the path with the programmed F, the path coloured by the limit that set
+    the feed (with an explanation ``expl``), the predicted contour error with ε_max."""
     from nurbscnc.output import plots
     from nurbscnc.plan.report import corner_polylines
 
     os.makedirs(plot_dir, exist_ok=True)
     smp = run.samples
+    name = prog.name
+    pl = run.plan
+    rapid = None
+    if pl is not None:
+        rapid = np.asarray(pl.pieces.rapid)[smp.piece]
     written = [plots.plot_feed_profiles({"feed": (smp.t_s, smp.v_mm_s)},
-                                        os.path.join(plot_dir, "feed.png"))]  # fmt: skip
-    corners = corner_polylines(run.plan.pieces) if run.plan is not None else []
-    written.append(plots.plot_path(smp.points_mm, corners, os.path.join(plot_dir, "path.png")))
+                                        os.path.join(plot_dir, "feed.png"),
+                                        title=f"{name}: feed over time")]  # fmt: skip
+    corners = corner_polylines(pl.pieces) if pl is not None else []
+    written.append(plots.plot_path(smp.points_mm, corners, os.path.join(plot_dir, "path.png"),
+                                   title=f"{name}: tool path", rapid=rapid,
+                                   feed_mm_s=smp.v_mm_s))  # fmt: skip
+    if pl is not None and expl is not None:
+        from nurbscnc.plan.explain import Limit
+
+        starts = np.asarray(pl.profile.piece_start_mm)
+        written.append(plots.plot_feed_along(
+            smp.s_mm, smp.v_mm_s, starts, starts + np.asarray(pl.pieces.length_mm),
+            expl.piece_feed_mm_s, os.path.join(plot_dir, "feed_along.png"),
+            cap_mm_s=expl.piece_cap_mm_s, title=f"{name}: feed along the program"))
+        written.append(plots.plot_path_limits(
+            smp.points_mm, expl.piece_limit[smp.piece], [m.text for m in Limit],
+            os.path.join(plot_dir, "limits.png"),
+            title=f"{name}: what limits the feed"))  # fmt: skip
     if run.check is not None:
         contour = run.check.response.contour_mm
         t = np.arange(contour.size) * (smp.t_s[1] - smp.t_s[0])
+        eps = None if mach is None else mach.limits.contour_tolerance_mm * 1000.0
         written.append(plots.plot_contour_error(
             {"predicted (true distance)": (t, contour * 1000.0)},
-            os.path.join(plot_dir, "contour_error.png")))  # fmt: skip
+            os.path.join(plot_dir, "contour_error.png"),
+            title=f"{name}: predicted contour error", eps_max_um=eps))  # fmt: skip
     return written
 
 
@@ -665,26 +689,44 @@ def summary_of(prog, mach, run) -> dict:
 @json_option
 @click.option("--dump-profile", type=click.Path(allow_dash=True), default=None,
               help="Write t, s, v, a, j, piece at every servo period (CSV, or NPZ by extension).")
+@click.option("--explain", is_flag=True,
+              help="Why the feed is what it is: per source line the time, the programmed and "
+                   "achieved feed and the limit that set it (the costliest lines), the time "
+                   "under each limit, the corners that stopped and why.")
+@click.option("--explain-all", is_flag=True,
+              help="As --explain, with every line in program order.")
 @plot_option
 @planning_options
 @handle_errors
-def plan(program, as_json, dump_profile, plot_dir, **settings):
+def plan(program, as_json, dump_profile, explain, explain_all, plot_dir, **settings):
     """Plan PROGRAM: pieces, corners, cycle time, lower bound, predicted contour error.
 
-    Example: nurbscnc plan programs/naca2415.nc --dump-profile profile.csv
+    Example: nurbscnc plan programs/naca2415.nc --explain
     """
     from nurbscnc.output.files import write_profile
 
-    if dump_profile == "-" and as_json:
-        raise click.UsageError("--dump-profile - and --json both want stdout; "
-                               "write the profile to a file or drop --json")
-    if dump_profile and settings.get("algorithm", "ph-lookahead") != "ph-lookahead":
+    explain = explain or explain_all
+    if dump_profile == "-" and (as_json or explain):
+        raise click.UsageError("--dump-profile - and --json/--explain both want stdout; "
+                               "write the profile to a file or drop --json/--explain")
+    baseline = settings.get("algorithm", "ph-lookahead") != "ph-lookahead"
+    if dump_profile and baseline:
         raise click.UsageError("--dump-profile needs the look-ahead planner (a baseline has "
                                "no jerk-limited profile)")
+    if explain and baseline:
+        raise click.UsageError("--explain needs the look-ahead planner (a baseline has no "
+                               "caps or profile to explain)")
     prog, mach, run = make_plan(program, **settings)
     summary = summary_of(prog, mach, run)
+    expl = None
+    if explain or plot_dir:
+        from nurbscnc.plan.explain import explain_plan
+
+        expl = explain_plan(prog, mach, run.plan) if run.plan is not None else None
+    if expl is not None and explain:
+        summary["explain"] = expl.as_dict()
     if plot_dir:
-        write_plan_plots(run, plot_dir)
+        write_plan_plots(run, plot_dir, prog, expl, mach)
     if dump_profile:
         from nurbscnc.plan.timing import servo_clock
 
@@ -696,6 +738,78 @@ def plan(program, as_json, dump_profile, plot_dir, **settings):
         click.echo(json.dumps(summary))
         return
     print_plan_summary(prog, mach, summary, err if dump_profile == "-" else out)
+    if explain:
+        print_explanation(expl, out, None if explain_all else EXPLAIN_LINES,
+                          source_lines_of(program))
+
+
+#: Lines ``plan --explain`` shows (the costliest); ``--explain-all`` shows every line.
+EXPLAIN_LINES = 20
+#: Stopped corners ``plan --explain`` lists.
+EXPLAIN_CORNERS = 10
+
+
+def source_lines_of(program: str) -> list[str]:
+    """The text lines of a program file (for --explain), [] for stdin or an unreadable file."""
+    if program == "-":
+        return []
+    try:
+        return read_program_text(program).splitlines()
+    except NurbsCncError:
+        return []
+
+
+def _feed_text(v_mm_s: float) -> str:
+    """A feed [mm/s] as mm/min, the unit of F words ("-" for none)."""
+    return "-" if not np.isfinite(v_mm_s) else f"{v_mm_s * 60.0:.0f}"
+
+
+def print_explanation(expl, out: Console, count: int | None, source: list[str]) -> None:
+    """The ``plan --explain`` text: time under each limit, the ``count`` costliest lines
+    (every line in program order when None), the corners that stopped and why."""
+    from nurbscnc.plan.explain import LIMIT_OF_KEY, Limit
+
+    total = expl.cycle_time_s if expl.cycle_time_s > 0 else 1.0
+    shares = ", ".join(f"{LIMIT_OF_KEY[k].text} {t / total:.1%} ({t:.3f} s)"
+                       for k, t in expl.total_by_limit_s().items())  # fmt: skip
+    out.print(f"  time by limit: {shares or 'none'}", markup=False)
+    n = expl.line.size
+    rows = np.arange(n) if count is None else expl.costliest(count)
+    table = Table(title=None if count is None else f"the {min(count, n)} costliest of {n} lines",
+                  show_edge=False)  # fmt: skip
+    for col, justify in (("line", "right"), ("source", "left"), ("time [s]", "right"),
+                         ("share", "right"), ("F [mm/min]", "right"), ("peak", "right"),
+                         ("mean", "right"), ("limit", "left")):  # fmt: skip
+        table.add_column(col, justify=justify)
+    for i in rows.tolist():
+        line = int(expl.line[i])
+        text = source[line - 1] if 0 < line <= len(source) else ""
+        shown = echo_source_line(text.strip(), 1, 32)[0]
+        t = float(expl.time_s[i] + expl.wait_s[i])
+        row = expl.limit_time_s[i]
+        limit = Limit(int(expl.limit[i])).text
+        if t > 0 and row.max() < t * 0.999:
+            limit += f" ({row.max() / t:.0%})"
+        table.add_row(str(line), Text(shown), f"{t:.4f}", f"{t / total:.1%}",
+                      _feed_text(float(expl.feed_mm_s[i])),
+                      _feed_text(float(expl.peak_mm_s[i])),
+                      _feed_text(float(expl.mean_mm_s[i])), limit)  # fmt: skip
+    out.print(table)
+    if count is not None and n > count:
+        out.print(f"  … {n - count} more lines (plan --explain-all shows every line)",
+                  markup=False)  # fmt: skip
+    counts = expl.corner_counts()
+    if counts:
+        out.print("  corners: " + ", ".join(f"{v} {k}" for k, v in sorted(counts.items())),
+                  markup=False)  # fmt: skip
+    stops = expl.corner_dicts(stops_only=True)
+    for c in stops[:EXPLAIN_CORNERS]:
+        x, y, z = c["point_mm"]
+        out.print(f"  stop at line {c['line']} ({x:.3f}, {y:.3f}, {z:.3f}), turning "
+                  f"{c['turning_deg']:.1f}°: {c['why'].replace('_', ' ')}", markup=False)
+    if len(stops) > EXPLAIN_CORNERS:
+        out.print(f"  … {len(stops) - EXPLAIN_CORNERS} more stopped corners (--json lists "
+                  "every corner)", markup=False)  # fmt: skip
 
 
 def print_plan_summary(prog, mach, summary: dict, out: Console) -> None:
@@ -766,7 +880,10 @@ def run(programs, output, output_dir, jobs, fmt, quiet, as_json, plot_dir, **set
                 contextlib.nullcontext()):
             write_output(output, fmt, run.samples, mach, prog.name)
         if plot_dir:
-            write_plan_plots(run, plot_dir)
+            from nurbscnc.plan.explain import explain_plan
+
+            expl = explain_plan(prog, mach, run.plan) if run.plan is not None else None
+            write_plan_plots(run, plot_dir, prog, expl, mach)
         summary = summary_of(prog, mach, run)
         if as_json:
             click.echo(json.dumps(summary), err=output == "-")
