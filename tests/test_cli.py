@@ -107,6 +107,9 @@ def test_check_json_fields(naca):
     assert data["length_mm"] == pytest.approx(naca["length_mm"], rel=1e-10)  # feed moves only
     assert data["rapid_length_mm"] == 9.0
     assert data["counts"] == {"rapid": 1, "nurbs": 1}
+    # Feeds are mm/s in every JSON (the program's F3500 is mm/min).
+    f = float(re.search(r"^F(\d+)", NACA.read_text(), re.M).group(1)) / 60.0
+    assert data["feed_range_mm_s"] == {"min": f, "max": f}
 
 
 def test_check_human_summary(naca):

@@ -370,9 +370,9 @@ def print_summary(prog: Program, s: dict) -> None:
         "  bounding box [mm]: "
         + "  ".join(f"{a} {lo[i]:.3f}..{hi[i]:.3f}" for i, a in enumerate("XYZ"))
     )
-    f = s["feed_mm_min"]
+    f = s["feed_range_mm_s"]
     if f["min"] is not None:
-        out.print(f"  feed [mm/min]: {f['min']:.6g}..{f['max']:.6g}")
+        out.print(f"  feed [mm/min]: {f['min'] * 60.0:.6g}..{f['max'] * 60.0:.6g}")
     nurbs = [e for e in s["segments"] if e["kind"] == "nurbs"]
     if nurbs:
         table = Table(title="NURBS blocks", show_edge=False)
@@ -578,9 +578,6 @@ def ph_json(rows, e_um: float, no_split: bool) -> dict:
                     "line": sc.line,
                     "u_a": piece.u_a,
                     "u_b": piece.u_b,
-                    "control_points": [
-                        [float(c) for c in pt[:2]] for pt in piece.ph.control_points_mm
-                    ],
                     "control_points_mm": [
                         [float(c) for c in pt] for pt in piece.ph.control_points_mm
                     ],
@@ -830,11 +827,12 @@ def print_plan_summary(prog, mach, summary: dict, out: Console) -> None:
     if "feed_fluctuation_max" in summary:
         out.print(f"  feed fluctuation on NURBS ({summary['interpolator']} interpolation): "
                   f"max {summary['feed_fluctuation_max'] * 100:.2g} %")  # fmt: skip
-    if "contour_max_um" in summary:
+    if "contour_true_max_um" in summary:
         how = (f"dynamics {summary['dynamics']}, {summary['dynamics_iterations']} re-plans"
                if "pieces" in summary else "no dynamics check: a baseline")
         out.print(f"  {'predicted' if 'pieces' in summary else 'simulated'} contour error: "
-                  f"max {summary['contour_max_um']:.2f} µm, RMS {summary['contour_rms_um']:.2f} "
+                  f"max {summary['contour_true_max_um']:.2f} µm, RMS "
+                  f"{summary['contour_true_rms_um']:.2f} "
                   f"µm (ε_max {mach.limits.contour_tolerance_mm * 1000:g} µm; {how})")
 
 
@@ -1062,8 +1060,10 @@ def simulate(source, as_json, plot_dir, hold, **settings):
                                           sim.axis_error_mm[:, 1] * 1000.0)},
                                os.path.join(plot_dir, "axis_errors.png"))  # fmt: skip
     if as_json:
-        click.echo(json.dumps({"ok": True, "source": name, "samples": int(points.shape[0]), **m,
-                               **machine_json(mach)}))
+        from nurbscnc.plan.report import metrics_json
+
+        click.echo(json.dumps({"ok": True, "program": name, "samples": int(points.shape[0]),
+                               **metrics_json(m), **machine_json(mach)}))
         return
     out.print(f"{name}: {points.shape[0]} reference points, cycle time {m['cycle_time_s']:.4f} s",
               markup=False)  # fmt: skip
@@ -1110,13 +1110,14 @@ def compare(program, as_json, plot_dir, angles, block, algorithms, machine, over
                                **machine_json(mach)}))
         return
     table = Table(title=f"{prog.name}: NURBS block on line {seg.line} (µm, s)", show_edge=False)
-    for col in ("algorithm", "angle", "X max", "X RMS", "Y max", "Y RMS", "contour max",
+    for col in ("algorithm", "angle", "X max", "X RMS", "Y max", "Y RMS", "eq. 29 max",
                 "RMS", "mean", "true max", "time [s]"):  # fmt: skip
         table.add_column(col, justify="right")
     for r in rows:
         table.add_row(r["algorithm"], f"{r['angle_deg']:g}°", *(f"{r[k]:.2f}" for k in (
             "axis_x_max_um", "axis_x_rms_um", "axis_y_max_um", "axis_y_rms_um",
-            "contour_max_um", "contour_rms_um", "contour_mean_um", "contour_true_max_um")),
+            "contour_eq29_max_um", "contour_eq29_rms_um", "contour_eq29_mean_um",
+            "contour_true_max_um")),
             f"{r['cycle_time_s']:.4f}")  # fmt: skip
     out.print(table)
 
