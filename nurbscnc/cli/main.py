@@ -313,7 +313,37 @@ def read_tool_table(path: str) -> dict:
 
 
 # -- the command group -------------------------------------------------------------------------
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+def usage_error_json(message: str) -> dict:
+    """The JSON of an option error (docs/json.md): the shape of a program error, without a
+    position."""
+    return {"ok": False, "errors": [{"line": None, "column": None, "message": message}]}
+
+
+class _Group(click.Group):
+    """The command group. With ``--json`` among the arguments, an option error (a click
+    usage error: unknown option, bad value, missing argument, two options that exclude each
+    other) is also printed as JSON on stdout, as a program error is (docs/json.md); the usual
+    message still goes to stderr and the exit code stays 2."""
+
+    def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
+        args = list(sys.argv[1:] if args is None else args)
+        if not standalone_mode or "--json" not in args:
+            return super().main(args, prog_name, complete_var, standalone_mode, **extra)
+        try:
+            code = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
+        except click.ClickException as exc:
+            with contextlib.suppress(OSError):
+                click.echo(json.dumps(usage_error_json(exc.format_message())))
+            exc.show()
+            sys.exit(exc.exit_code)
+        except click.exceptions.Abort:
+            err.print("Aborted!", markup=False)
+            sys.exit(1)
+        # A command returns None; click's Exit (--help, --version) gives its code.
+        sys.exit(code if isinstance(code, int) else 0)
+
+
+@click.group(cls=_Group, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="nurbscnc")
 def main():
     """nurbscnc: NC programs (lines, arcs, NURBS) to reference points at the servo period.
@@ -494,7 +524,9 @@ def corners_json(result, junctions) -> dict:
                 "kappa_threshold_per_mm": sc.kappa_threshold_per_mm,
                 "corners": [
                     {
-                        "kappa_peak_per_mm": r.kappa_peak_per_mm,
+                        # JSON has no infinity: a cusp's curvature is null.
+                        "kappa_peak_per_mm": (r.kappa_peak_per_mm
+                                              if np.isfinite(r.kappa_peak_per_mm) else None),
                         "u_peak": r.u_peak,
                         "point_mm": list(r.point_mm),
                         "u_a": r.u_a,

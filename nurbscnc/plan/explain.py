@@ -188,7 +188,6 @@ class Explanation:
     def as_dict(self) -> dict:
         """The ``explain`` object of ``plan --json --explain`` (every line, every corner)."""
         return {
-            "cycle_time_s": self.cycle_time_s,
             "limit_time_s": self.total_by_limit_s(),
             "lines": [self.line_dict(i) for i in range(self.line.size)],
             "corners": self.corner_dicts(),
