@@ -478,3 +478,71 @@ def test_stdout_to_dev_full_exits_3_with_a_message(args, message):
     text = proc.stderr.decode()
     assert message in text
     assert "Traceback" not in text and "Exception ignored" not in text
+
+
+# ---------------------------------------------------------------------------------- progress
+STAGE_WORDS = ("reading and interpreting", "dynamics check", "interpolating", "writing")
+
+
+def test_run_program_names_its_stages():
+    from nurbscnc.machine.profile import load_machine
+    from nurbscnc.pipeline import run_program
+    from nurbscnc.program.interpret import interpret_text
+
+    stages = []
+    prog = interpret_text("G1 X2 F3000\nG2 X2 Y0 I-2 J0\n")  # the check must re-plan it
+    run = run_program(prog, load_machine(), progress=stages.append)
+    assert stages[:3] == ["checking limits", "planning", "dynamics check"]
+    replans = [f"dynamics check, re-plan {i}" for i in range(1, run.plan.iterations + 1)]
+    assert run.plan.iterations >= 1 and stages[3:] == [*replans, "interpolating"]
+
+
+@pytest.mark.parametrize("args", [["plan", "{p}"], ["run", "{p}", "-o", "{o}"], ["check", "{p}"]])
+def test_no_progress_when_not_a_terminal(tmp_path, args):
+    prog = tmp_path / "p.nc"
+    prog.write_text("G1 X2 F3000\nG2 X2 Y0 I-2 J0\n")
+    res = run([a.format(p=prog, o=tmp_path / "o.csv") for a in args])
+    assert res.exit_code == 0, res.output
+    assert not any(word in res.stderr for word in STAGE_WORDS), res.stderr
+
+
+def _stderr_on_a_pty(args, cwd) -> bytes:
+    """Run the CLI in ``cwd`` with stderr on a pseudo-terminal; everything written there."""
+    import pty
+    import select
+
+    master, slave = pty.openpty()
+    proc = subprocess.Popen([sys.executable, "-m", "nurbscnc", *map(str, args)],
+                            stdout=subprocess.DEVNULL, stderr=slave, stdin=subprocess.DEVNULL,
+                            cwd=cwd, env={**os.environ, "PYTHONPATH": str(ROOT)})  # fmt: skip
+    os.close(slave)
+    data = b""
+    try:
+        while True:
+            ready, _, _ = select.select([master], [], [], 0.2)
+            if ready:
+                try:
+                    chunk = os.read(master, 65536)
+                except OSError:  # the child closed its end
+                    break
+                if not chunk:
+                    break
+                data += chunk
+            elif proc.poll() is not None:
+                break
+    finally:
+        os.close(master)
+        proc.wait(timeout=120)
+    assert proc.returncode == 0, data.decode(errors="replace")
+    return data
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="pseudo-terminal test")
+def test_progress_on_a_terminal_names_the_stages(tmp_path):
+    prog = tmp_path / "p.nc"
+    prog.write_text("G1 X2 F3000\nG2 X2 Y0 I-2 J0\n")
+    shown = _stderr_on_a_pty(["run", "p.nc", "-o", "o.csv"], tmp_path)
+    for word in ("dynamics check", "interpolating", "writing"):
+        assert word.encode() in shown, shown
+    quiet = _stderr_on_a_pty(["run", "p.nc", "-o", "o.csv", "--json"], tmp_path)
+    assert not any(word.encode() in quiet for word in STAGE_WORDS), quiet

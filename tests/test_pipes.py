@@ -52,7 +52,9 @@ def test_dump_profile_stdout_with_json_is_refused(short_nc):
     r = invoke(["plan", short_nc, "--dump-profile", "-", "--json"])
     assert r.exit_code == 2
     assert "--json" in r.stderr and "stdout" in r.stderr
-    assert r.stdout == ""
+    # With --json the option error is also the JSON error object (docs/json.md), no CSV.
+    error = json.loads(r.stdout)
+    assert error["ok"] is False and "stdout" in error["errors"][0]["message"]
 
 
 # -- 2. run -o - | simulate - ------------------------------------------------------------------

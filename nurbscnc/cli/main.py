@@ -69,6 +69,35 @@ out = _Console(highlight=False, markup=False, emoji=False, soft_wrap=True,
 err = _Console(stderr=True, highlight=False, markup=False, emoji=False, soft_wrap=True)
 
 
+# -- progress ----------------------------------------------------------------------------------
+def show_progress(as_json: bool = False, quiet: bool = False) -> bool:
+    """Progress is shown on a terminal only: not when stderr is piped or redirected, not with
+    --json or --quiet."""
+    return not (as_json or quiet) and err.is_terminal
+
+
+@contextlib.contextmanager
+def progress_display(show: bool, title: str):
+    """A one-line rich progress display on stderr (spinner, stage, elapsed time) while the
+    block runs, gone afterwards; yields the function that names the current stage (the
+    ``progress`` callback the stages are given; one that does nothing when not ``show``).
+    The stage and title are user text: printed literally, never as markup."""
+    if not show:
+        yield lambda _stage: None
+        return
+    from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+
+    with Progress(SpinnerColumn(), TextColumn("{task.description}", markup=False),
+                  TimeElapsedColumn(), console=err, transient=True) as bar:  # fmt: skip
+        # The stage first: a narrow terminal cuts the end of the line (a long file name).
+        task = bar.add_task(f"starting · {title}", total=None)
+
+        def say(stage: str) -> None:
+            bar.update(task, description=f"{stage} · {title}", refresh=True)
+
+        yield say
+
+
 # -- error reporting ---------------------------------------------------------------------------
 #: An echoed source line is cut to about this many characters around the error's column.
 SOURCE_ECHO_CHARS = 120
@@ -378,9 +407,12 @@ def check(program, as_json, no_block_delete, tool_table, subroutine_path, machin
     from nurbscnc.plan.report import program_summary
 
     mach = load_machine_cli(machine, overrides, announce=False)
-    prog = load_program(program, not no_block_delete, tool_table, subroutine_path)
-    check_before_work(prog.segments, mach)
-    summary = program_summary(prog)
+    with progress_display(show_progress(as_json), _display_name(program)) as say:
+        say("reading and interpreting")
+        prog = load_program(program, not no_block_delete, tool_table, subroutine_path)
+        say(f"checking {len(prog.segments)} segments")
+        check_before_work(prog.segments, mach)
+        summary = program_summary(prog)
     if as_json:
         click.echo(json.dumps({**summary, **machine_json(mach)}))
         return
@@ -679,19 +711,24 @@ def write_plan_plots(run, plot_dir: str, prog, expl=None, mach=None) -> list[str
 def make_plan(program: str, machine=None, overrides=(), dynamics="local", lookahead=None,
               corner_feed="piece", interpolator="exact", blend_tolerance=None,
               algorithm="ph-lookahead", no_block_delete=False, tool_table=None,
-              subroutine_path=(), text=None):
+              subroutine_path=(), text=None, progress=None):
     """Load, interpret, plan and interpolate one program; validate soft limits. Returns
     (program, machine, :class:`~nurbscnc.pipeline.Run`).
 
-    The keyword arguments are the options of :func:`planning_options`, and ``text``: the
-    program already read (see :func:`load_program`)."""
+    The keyword arguments are the options of :func:`planning_options`, ``text``: the
+    program already read (see :func:`load_program`), and ``progress``: None or the stage
+    callback of :func:`progress_display`."""
     from nurbscnc.pipeline import run_program
 
     options = run_options(algorithm, corner_feed, dynamics, blend_tolerance, interpolator,
                           lookahead)  # fmt: skip
+    if progress:
+        progress("loading the machine profile")
     mach = load_machine_cli(machine, overrides)
+    if progress:
+        progress("reading and interpreting")
     prog = load_program(program, not no_block_delete, tool_table, subroutine_path, text)
-    return prog, mach, run_program(prog, mach, options)
+    return prog, mach, run_program(prog, mach, options, progress)
 
 
 def clock_suffix(seconds: float) -> str:
@@ -745,8 +782,10 @@ def plan(program, as_json, dump_profile, explain, explain_all, plot_dir, **setti
     if explain and baseline:
         raise click.UsageError("--explain needs the look-ahead planner (a baseline has no "
                                "caps or profile to explain)")
-    prog, mach, run = make_plan(program, **settings)
-    summary = summary_of(prog, mach, run)
+    with progress_display(show_progress(as_json), _display_name(program)) as say:
+        prog, mach, run = make_plan(program, **settings, progress=say)
+        say("summarising")
+        summary = summary_of(prog, mach, run)
     expl = None
     if explain or plot_dir:
         from nurbscnc.plan.explain import explain_plan
@@ -755,7 +794,9 @@ def plan(program, as_json, dump_profile, explain, explain_all, plot_dir, **setti
     if expl is not None and explain:
         summary["explain"] = expl.as_dict()
     if plot_dir:
-        write_plan_plots(run, plot_dir, prog, expl, mach)
+        with progress_display(show_progress(as_json), prog.name) as say:
+            say("plotting")
+            write_plan_plots(run, plot_dir, prog, expl, mach)
     if dump_profile:
         from nurbscnc.plan.timing import servo_clock
 
@@ -903,17 +944,16 @@ def run(programs, output, output_dir, jobs, fmt, quiet, as_json, plot_dir, **set
             raise click.UsageError("give -o FILE (.csv, .npz or -) or --output-dir DIR")
         program = programs[0]
         fmt = output_format(output, fmt)
-        show = not quiet and err.is_terminal
-        with err.status(f"planning {program} …") if show else contextlib.nullcontext():
-            prog, mach, run = make_plan(program, **settings)
-        with err.status(f"writing {run.samples.t_s.size} points …") if show else (
-                contextlib.nullcontext()):
+        with progress_display(show_progress(as_json, quiet), _display_name(program)) as say:
+            prog, mach, run = make_plan(program, **settings, progress=say)
+            say(f"writing {run.samples.t_s.size} points")
             write_output(output, fmt, run.samples, mach, prog.name)
-        if plot_dir:
-            from nurbscnc.plan.explain import explain_plan
+            if plot_dir:
+                from nurbscnc.plan.explain import explain_plan
 
-            expl = explain_plan(prog, mach, run.plan) if run.plan is not None else None
-            write_plan_plots(run, plot_dir, prog, expl, mach)
+                say("plotting")
+                expl = explain_plan(prog, mach, run.plan) if run.plan is not None else None
+                write_plan_plots(run, plot_dir, prog, expl, mach)
         summary = summary_of(prog, mach, run)
         if as_json:
             click.echo(json.dumps(summary), err=output == "-")
