@@ -546,3 +546,19 @@ def test_progress_on_a_terminal_names_the_stages(tmp_path):
         assert word.encode() in shown, shown
     quiet = _stderr_on_a_pty(["run", "p.nc", "-o", "o.csv", "--json"], tmp_path)
     assert not any(word.encode() in quiet for word in STAGE_WORDS), quiet
+
+
+# ------------------------------------------------------------------------- shell completion
+@pytest.mark.parametrize("words, expected", [
+    ("nurbscnc pl", {"plan"}),
+    ("nurbscnc plan --expl", {"--explain", "--explain-all"}),
+    ("nurbscnc plan x.nc --dynamics ", {"local", "global", "off"}),
+])  # fmt: skip
+def test_bash_completion_as_the_readme_says(words, expected):
+    env = {"_NURBSCNC_COMPLETE": "bash_complete", "COMP_WORDS": words,
+           "COMP_CWORD": str(len(words.split(" ")) - 1)}  # fmt: skip
+    res = CliRunner().invoke(main, [], env=env, prog_name="nurbscnc")
+    assert res.exit_code == 0, res.output
+    got = {line.split(",", 1)[1] for line in res.stdout.splitlines() if "," in line}
+    assert expected <= got, res.stdout
+    assert "_NURBSCNC_COMPLETE=bash_source nurbscnc" in (ROOT / "README.md").read_text()
