@@ -248,9 +248,9 @@ def test_g64_p_blends_corners_faster_within_p(shape):
     prog_b, blended = plans[f"G64 P{tol}"]
     corners = len(vertices) - 2
     blends = blended.pieces.kind_counts().get("ph", 0)
-    # Every square corner is blended; the star's 144° tips are not (their blend would be
-    # so tight that stopping is faster: blend_pays), its 72° inner corners are.
-    assert blends == (corners if shape == "square" else corners // 2 + 1)
+    # Every corner is blended: under G64 a blend is always used where one fits (LinuxCNC's
+    # rule, issue 13; the star's 144° tips used to stop, when a blend had to beat a stop).
+    assert blends == corners
     assert "ph" not in exact.pieces.kind_counts()
     assert blended.cycle_time_s < 0.95 * exact.cycle_time_s
     for prog, plan in ((prog_e, exact), (prog_b, blended)):

@@ -426,13 +426,59 @@ def _search(corner: _Corner, tol: float, d_start: float, d_cap: float, g2: bool,
     return best
 
 
-def _planar_kind(geom, normal: np.ndarray) -> bool:
-    """A line, or a non-helical arc whose plane is the corner plane (normal ``normal``)."""
+class SubCurve:
+    """The stretch ``u_a``..``u_b`` of a NURBS curve or PH quintic (a planner piece) as a
+    geometry of its own for :func:`blend_corner`: arc length measured from ``u_a`` (where the
+    curve's own arc length is ``s_a_mm``), ``length_mm`` long. Its corner side is measured as
+    a 33-point polyline, as a spiral arc's (``is_spiral``)."""
+
+    is_spiral = True
+
+    def __init__(self, geometry, u_a: float, u_b: float, s_a_mm: float, length_mm: float):
+        self.geometry, self.u_a, self.u_b = geometry, float(u_a), float(u_b)
+        self.s_a_mm, self.length_mm = float(s_a_mm), float(length_mm)
+        self.u_start, self.u_end = self.u_a, self.u_b
+
+    def param_at_length(self, s_mm) -> np.ndarray:
+        s = np.clip(np.asarray(s_mm, dtype=float), 0.0, self.length_mm)
+        u = np.asarray(self.geometry.param_at_length(self.s_a_mm + s), dtype=float)
+        return np.clip(u, self.u_a, self.u_b)
+
+    def derivatives(self, u, order: int) -> np.ndarray:
+        return self.geometry.derivatives(np.asarray(u, dtype=float), order)
+
+    def point(self, u) -> np.ndarray:
+        return self.derivatives(u, 0)[0]
+
+
+def sub_ph(ph: PHQuintic, xi0: float, xi1: float) -> PHQuintic:
+    """The part ξ ∈ [xi0, xi1] of ``ph`` as a PH quintic of its own (ξ' ∈ [0, 1], exact).
+
+    With Δ = xi1 − xi0, r̃(t) = r(xi0 + Δt) has hodograph Δ w(xi0 + Δt)² = w̃(t)², so the new
+    preimage w̃ = √Δ w(xi0 + Δt) is quadratic in t: Bernstein coefficients w̃(0), w̃(0) +
+    w̃′(0)/2, w̃(1) with w̃′(0) = √Δ Δ w′(xi0)."""
+    delta = float(xi1) - float(xi0)
+    root = np.sqrt(delta)
+    ends = ph.preimage(np.array([xi0, xi1]))
+    dw0 = ph.preimage_derivative(np.array([xi0]))[0]
+    w = root * np.array([ends[0], ends[0] + 0.5 * delta * dw0, ends[1]])
+    p0 = ph.point(np.array([xi0]))[0]
+    return PHQuintic(w, p0, ph.origin_mm, ph.e1, ph.e2)
+
+
+def _planar_kind(geom, normal: np.ndarray, vertex_mm: np.ndarray | None = None) -> bool:
+    """A line, a non-helical arc whose plane is the corner plane (normal ``normal``), or a
+    :class:`SubCurve` whose 33 sample points lie in the plane through ``vertex_mm`` (to
+    1e-9 of the coordinates' scale)."""
     if isinstance(geom, LineGeometry):
         return True
     if isinstance(geom, ArcGeometry):
         flat = abs(geom.helix_mm) <= 1e-12 * max(1.0, geom.radius_start_mm)
         return flat and bool(np.linalg.norm(_cross(geom.normal, normal)) <= 1e-9)
+    if isinstance(geom, SubCurve) and vertex_mm is not None:
+        pts = geom.point(np.linspace(geom.u_a, geom.u_b, _N_ARC))
+        scale = max(1.0, float(np.abs(pts).max()))
+        return bool(np.abs((pts - vertex_mm) @ normal).max() <= 1e-9 * scale)
     return False
 
 
@@ -440,7 +486,8 @@ def blend_corner(geom_a, geom_b, tolerance_mm: float, max_trim_a_mm: float,
                  max_trim_b_mm: float, measure: bool = True) -> Blend | None:
     """The largest PH quintic blend of the corner within ``tolerance_mm`` [mm] (module doc).
 
-    ``geom_a``, ``geom_b``: consecutive LineGeometry / ArcGeometry; a ends where b starts.
+    ``geom_a``, ``geom_b``: consecutive LineGeometry / ArcGeometry / :class:`SubCurve` (a
+    NURBS or PH piece); a ends where b starts.
     The trims are equal, d_a = d_b = d ≤ min(max trims, lengths) [mm], with the measured
     Hausdorff deviation in [(1 − 0.005) tol, tol] unless d reached its cap. None for smooth
     (turning < 1e-6 rad) and reversed (> π − 1e-6 rad) junctions, non-planar corners
@@ -473,7 +520,7 @@ def blend_corner(geom_a, geom_b, tolerance_mm: float, max_trim_a_mm: float,
     if turning < MIN_TURNING_RAD or turning > np.pi - MIN_REVERSAL_RAD:
         return None
     n_c = _unit(n_c)
-    if not (_planar_kind(geom_a, n_c) and _planar_kind(geom_b, n_c)):
+    if not (_planar_kind(geom_a, n_c, vertex) and _planar_kind(geom_b, n_c, vertex)):
         return None
     origin, e1, e2 = plane_frame(np.array([vertex - t_a, vertex, vertex + t_b]),
                                  tol_mm=1e-12 * scale)  # fmt: skip

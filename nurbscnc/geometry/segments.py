@@ -32,13 +32,34 @@ PLANE_NORMALS = {"XY": (0.0, 0.0, 1.0), "ZX": (0.0, 1.0, 0.0), "YZ": (1.0, 0.0, 
 PLANE_AXES = {"XY": (0, 1), "ZX": (2, 0), "YZ": (1, 2)}
 
 
+#: ``blend_mm`` of G64 without P: blend within the machine's path tolerance
+#: (``limits.path_tolerance_mm``), LinuxCNC's default mode.
+BLEND_MACHINE = float("inf")
+#: ``blend_mm`` of G61.1 (exact stop): the tool stops at the end of every block.
+BLEND_EXACT_STOP = -1.0
+
+
+def path_control(path_mode: int, p_mm: float | None) -> float:
+    """The ``blend_mm`` a segment carries for path-control mode ``path_mode`` (G × 10: 610,
+    611, 640) and the G64 P value ``p_mm`` [mm] (None: no P word)."""
+    if path_mode == 611:
+        return BLEND_EXACT_STOP
+    if path_mode == 610:
+        return 0.0
+    return BLEND_MACHINE if p_mm is None else float(p_mm)
+
+
 @dataclass(frozen=True, eq=False, slots=True)
 class Line:
     """A straight move from ``start_mm`` to ``end_mm`` [mm] at ``feed_mm_s`` [mm/s].
 
     ``rapid`` marks G0 (the planner moves it at the machine's rapid rate; ``feed_mm_s`` is 0).
-    ``blend_mm`` is the path-control tolerance in force (G64 P) [mm]: 0 means stop exactly
-    at a tangent discontinuity at its end (G61, G61.1, or G64 without P). The end points
+    ``blend_mm`` is the path-control mode in force at its end (:func:`path_control`): the
+    G64 P tolerance [mm] (> 0), :data:`BLEND_MACHINE` (G64 without P: the machine's path
+    tolerance), 0 (G61, G64 P0: exact path, sharp corners stop) or :data:`BLEND_EXACT_STOP`
+    (G61.1: stop at the end of every block). ``naive_mm``: the G64 Q tolerance [mm] of the
+    naive CAM detector (consecutive feed lines within it of one line are merged; 0: off).
+    The end points
     are plain ``(x, y, z)`` tuples, not arrays: CAM programs hold millions of lines, and a
     tuple costs a fraction of an array's memory and construction time.
     """
@@ -49,6 +70,7 @@ class Line:
     line: int
     rapid: bool = False
     blend_mm: float = 0.0
+    naive_mm: float = 0.0
 
     @property
     def kind(self) -> str:

@@ -86,6 +86,7 @@ _SCHEMA: dict = {
         "kappa_ref_per_mm": "pos",
         "contour_tolerance_um": "pos",
         "ph_tolerance_um": "pos",
+        "path_tolerance_um": "pos",
         "max_points": "count",
     },
     "servo": {"period_ms": "pos", "x": _AXIS_SCHEMA, "y": _AXIS_SCHEMA, "z": _AXIS_SCHEMA},
@@ -93,8 +94,8 @@ _SCHEMA: dict = {
     "soft_limits": {a: {"min_mm": "finite", "max_mm": "finite"} for a in AXES},
 }
 _OPTIONAL = frozenset(
-    {"limits.rapid_mm_min", "limits.max_points", "servo", "servo.period_ms", "servo.x",
-     "servo.y", "servo.z"}
+    {"limits.rapid_mm_min", "limits.max_points", "limits.path_tolerance_um", "servo",
+     "servo.period_ms", "servo.x", "servo.y", "servo.z"}
 )
 
 _MM_PER_UM = 1e-3
@@ -133,6 +134,13 @@ class Limits:
     #: Most reference points a program may make (one per servo period): checked before
     #: anything is sampled, so a program whose motion takes days fails at its line, quickly.
     max_points: int = DEFAULT_MAX_POINTS
+    #: The machine's path tolerance [mm]: how far G64 without P may blend a corner away from
+    #: the programmed path (LinuxCNC's G64 "best speed", bounded here). None: ε_max.
+    path_tolerance_mm: float | None = None
+
+    def __post_init__(self):
+        if self.path_tolerance_mm is None:
+            object.__setattr__(self, "path_tolerance_mm", self.contour_tolerance_mm)
 
 
 def natural_frequency_rad_s(bandwidth_hz: float, damping: float) -> float:
@@ -566,6 +574,8 @@ def _build(data: dict, rep: _Reporter) -> Machine:
         contour_tolerance_mm=float(lim["contour_tolerance_um"]) * _MM_PER_UM,
         ph_tolerance_mm=float(lim["ph_tolerance_um"]) * _MM_PER_UM,
         max_points=int(lim.get("max_points", DEFAULT_MAX_POINTS)),
+        path_tolerance_mm=float(lim.get("path_tolerance_um", lim["contour_tolerance_um"]))
+        * _MM_PER_UM,
     )
 
     srv = data.get("servo", {})

@@ -2,7 +2,7 @@
 
 Each NURBS block is split into its sharp-corner regions (replaced by their PH quintic pieces,
 SPEC §6) and the NURBS stretches between them; lines, arcs and rapids are one piece each;
-under G64 P the corners between lines and arcs are replaced by PH quintic blends (issue 7).
+under G64 the corners between pieces are replaced by PH quintic blends (issues 7 and 13).
 Every piece knows its exact geometry, its length, its cruise cap (SPEC §7, formulas in
 :mod:`nurbscnc.machine.caps`) and its unit tangents at both ends (for the junctions). Its
 kind is the path model's :class:`~nurbscnc.geometry.path.Kind` (a rapid is a line with the
@@ -28,14 +28,15 @@ from dataclasses import replace as dc_replace
 import numpy as np
 
 from nurbscnc.errors import GeometryError, NurbsCncError, SourcePos
-from nurbscnc.geometry.blend import ph_tables
+from nurbscnc.geometry.blend import MIN_REVERSAL_RAD, ph_tables
 from nurbscnc.geometry.nurbs import NurbsCurve
 from nurbscnc.geometry.path import STOP_KINDS, Kind, PathTable, ph_power_rows, stop_seconds
 from nurbscnc.geometry.paths import ArcGeometry, LineGeometry, geometry_of
 from nurbscnc.geometry.ph import PHQuintic
 from nurbscnc.machine.caps import MIN_CAP_MM_S, corner_cap_mm_s, curvature_cap_mm_s
 from nurbscnc.machine.profile import Machine
-from nurbscnc.plan.corners import CornerLog, find_corner_regions
+from nurbscnc.plan.corners import CornerAction, CornerLog, CornerWhy, find_corner_regions
+from nurbscnc.plan.naive import merge_collinear
 from nurbscnc.plan.options import CornerFeed, PlanOptions
 from nurbscnc.plan.phfit import fit_region
 
@@ -62,9 +63,11 @@ class Piece:
     PHQuintic (ξ ∈ [0, 1]), a LineGeometry or an ArcGeometry (``u_a``..``u_b``).
     ``length_mm`` [mm]; ``v_cap_mm_s`` the cruise cap [mm/s]; ``segment`` / ``line`` where
     it came from; ``dwell_after_s`` a dwell [s] at its end (G4); ``stop_after``: the tool
-    comes to rest at its end (a dwell or a pause). ``kappa_max_per_mm`` the largest
-    curvature on it [1/mm]. ``blend_mm`` the G64 P tolerance of its segment [mm] (0: exact
-    stop at corners). ``rapid``: a rapid move (G0).
+    comes to rest at its end (a dwell, a pause, a G61.1 block end); ``pass_after``: the
+    break at its end is small enough to pass at speed (:func:`_small_break`).
+    ``kappa_max_per_mm`` the largest curvature on it [1/mm]. ``blend_mm`` the path-control
+    value of its segment (:class:`~nurbscnc.geometry.segments.Line`; :func:`tolerance_mm`
+    gives the blend tolerance). ``rapid``: a rapid move (G0).
     """
 
     kind: Kind
@@ -81,6 +84,7 @@ class Piece:
     blend_mm: float = 0.0
     rapid: bool = False
     stop_after: bool = False
+    pass_after: bool = False
 
     @property
     def name(self) -> str:
@@ -194,11 +198,11 @@ class PieceList(Sequence):
 
     Per row (k,): ``kind`` (:class:`~nurbscnc.geometry.path.Kind` codes), ``length_mm``,
     ``v_cap_mm_s``, ``segment``, ``line``, ``kappa_max_per_mm``, ``dwell_after_s``,
-    ``blend_mm``, ``rapid``, ``stop_after`` (as in :class:`Piece`); (3, k): ``start_mm``,
-    ``end_mm`` the end points [mm] and ``tangent_start``, ``tangent_end`` the unit tangents
-    there (zero where the derivative vanishes, at a cusp). Line rows are the segment from
-    ``start_mm`` to ``end_mm``. Columnar PH rows (line–line blends): ``ph_rows`` (m,) their
-    rows (sorted), ``ph_w`` (m, 3) complex preimages, ``ph_p0`` (m,) complex starts,
+    ``blend_mm``, ``rapid``, ``stop_after``, ``pass_after`` (as in :class:`Piece`); (3, k):
+    ``start_mm``, ``end_mm`` the end points [mm] and ``tangent_start``, ``tangent_end`` the
+    unit tangents there (zero where the derivative vanishes, at a cusp). Line rows are the
+    segment from ``start_mm`` to ``end_mm``. Columnar PH rows (line–line blends): ``ph_rows``
+    (m,) their rows (sorted), ``ph_w`` (m, 3) complex preimages, ``ph_p0`` (m,) complex starts,
     ``ph_frame`` (m, 3, 3) origin, e1, e2 of their planes. Every other row has an entry in
     ``objects``: row → (geometry, u_a, u_b, s_a_mm). The geometry of every row, for
     sampling, is :attr:`path`.
@@ -214,6 +218,7 @@ class PieceList(Sequence):
     blend_mm: np.ndarray
     rapid: np.ndarray
     stop_after: np.ndarray
+    pass_after: np.ndarray
     start_mm: np.ndarray
     end_mm: np.ndarray
     tangent_start: np.ndarray
@@ -262,7 +267,7 @@ class PieceList(Sequence):
                      int(self.segment[i]), int(self.line[i]), u_a, u_b, s_a,
                      float(self.kappa_max_per_mm[i]), float(self.dwell_after_s[i]),
                      float(self.blend_mm[i]), bool(self.rapid[i]),
-                     bool(self.stop_after[i]))  # fmt: skip
+                     bool(self.stop_after[i]), bool(self.pass_after[i]))  # fmt: skip
 
     def kind_counts(self) -> dict[str, int]:
         """How many pieces of each kind (names of :data:`KIND_NAMES`, kinds present only)."""
@@ -335,9 +340,9 @@ class PieceList(Sequence):
 _CHUNK = 1 << 16
 
 _SCALARS = ("kind", "length_mm", "v_cap_mm_s", "segment", "line", "kappa_max_per_mm",
-            "dwell_after_s", "blend_mm", "rapid", "stop_after")  # fmt: skip
+            "dwell_after_s", "blend_mm", "rapid", "stop_after", "pass_after")  # fmt: skip
 _DTYPES = {"kind": np.int8, "segment": np.int64, "line": np.int64, "rapid": bool,
-           "stop_after": bool}  # fmt: skip
+           "stop_after": bool, "pass_after": bool}  # fmt: skip
 
 
 def _empty_columns(k: int) -> dict:
@@ -379,9 +384,11 @@ def _object_pieces(seg, index: int, machine: Machine, options: PlanOptions) -> l
     """The pieces of an arc or NURBS segment (Piece objects; none for a zero-length arc)."""
     if seg.kind == "nurbs":
         try:
-            return nurbs_pieces(seg, index, machine, options)
+            pieces = nurbs_pieces(seg, index, machine, options)
         except NurbsCncError as exc:
             raise exc.with_pos(SourcePos(seg.line)) from None
+        blend = blend_override(seg, options)
+        return [dc_replace(p, blend_mm=blend) for p in pieces]
     geom = geometry_of(seg)
     length = float(geom.length_mm)
     if length <= 0.0:
@@ -394,8 +401,16 @@ def _object_pieces(seg, index: int, machine: Machine, options: PlanOptions) -> l
 
 
 def segment_pieces(segments, machine: Machine, options: PlanOptions | None = None) -> PieceList:
-    """All pieces of a program, in order, as a :class:`PieceList`; corners under G64 P
-    blended (:func:`apply_blends`).
+    """All pieces of a program, in order, as a :class:`PieceList`, with its corners decided
+    (path-control modes, LinuxCNC 2.9's meaning, issue 13) and logged in ``corners``.
+
+    Runs of nearly collinear feed lines under G64 Q are merged first
+    (:func:`~nurbscnc.plan.naive.merge_collinear`; the ``segment`` column keeps the
+    program's indices). Breaks small enough to pass at speed are marked ``pass_after``
+    (:func:`_small_break`, every mode but at G61.1 block ends); G61.1 stops at the end of
+    every block (``stop_after``); G64 corners are blended within their tolerance
+    (:func:`apply_blends`: P, or the machine's path tolerance without P); G61 and G64 P0
+    stop at every other break (:func:`junction_caps`); :func:`corner_log` records it all.
 
     Lines and rapids are gathered into columns in one pass (no object per line); arcs and
     NURBS blocks become pieces one segment at a time. Dwells and pauses (:data:`STOP_KINDS`)
@@ -406,7 +421,7 @@ def segment_pieces(segments, machine: Machine, options: PlanOptions | None = Non
     """
     options = options or PlanOptions()
     lim = machine.limits
-    segs = segments if isinstance(segments, list | tuple) else list(segments)
+    segs, source = merge_collinear(segments)  # G64 Q
     n = len(segs)
     kinds = [s.kind for s in segs]
     straight = np.fromiter((k in ("line", "rapid") for k in kinds), dtype=bool, count=n)
@@ -497,7 +512,16 @@ def segment_pieces(segments, machine: Machine, options: PlanOptions | None = Non
     if settle.size:
         cols["dwell_after_s"][settle] += settle_time_s(machine)
         cols["stop_after"][settle] = True
-    return apply_blends(PieceList(**cols, objects=objects), machine)
+    # G61.1 (exact stop): the tool stops at the end of every block, tangent or not.
+    seg_col = cols["segment"] = source[cols["segment"]]  # indices of the program's segments
+    block_end = (cols["blend_mm"][:-1] < 0.0) & (seg_col[:-1] != seg_col[1:])
+    cols["stop_after"][:-1] |= block_end
+    pieces = PieceList(**cols, objects=objects)
+    if k >= 2:
+        turning, regular = _turning(pieces)
+        pieces.pass_after[:-1] = _small_break(pieces, turning, regular, machine)
+    pieces, tried = apply_blends(pieces, machine)
+    return dc_replace(pieces, corners=corner_log(pieces, tried, machine, options))
 
 
 def blend_override(seg, options: PlanOptions) -> float:
@@ -536,16 +560,22 @@ def sub_geometry(piece: Piece, s0_mm: float, s1_mm: float):
 class _Corners:
     """Candidate corners of :func:`apply_blends` and what blending each would do (arrays over
     the m corners): ``row`` the piece after the corner; ``tol_mm`` the blend tolerance;
-    ``vertex_mm`` (3, m); ``lines`` whether both sides are lines; then, per corner, ``ok``
-    (a blend exists and pays), its peak curvature, trims of the piece before (``trim_a_mm``)
-    and after (``trim_b_mm``) and length; line–line blends' PH data (preimage ``w``, start
-    ``p0``, plane ``frame``, one row per line–line corner) and arc blends by corner."""
+    ``vertex_mm`` (3, m); ``turning_rad`` the tangent turning there; ``lines`` whether both
+    sides are lines; ``line`` the source line of the piece before; ``blend_row`` the row of
+    each accepted blend in the blended list; then, per corner, ``ok`` (a blend exists), its
+    peak curvature, trims of the piece before (``trim_a_mm``) and after (``trim_b_mm``) and
+    length; line–line blends'
+    PH data (preimage ``w``, start ``p0``, plane ``frame``, one row per line–line corner) and
+    the other blends (PH objects) by corner."""
 
     row: np.ndarray
     tol_mm: np.ndarray
     vertex_mm: np.ndarray
+    turning_rad: np.ndarray
     lines: np.ndarray
+    line: np.ndarray
     ok: np.ndarray = None
+    blend_row: np.ndarray = None
     kappa_per_mm: np.ndarray = None
     trim_a_mm: np.ndarray = None
     trim_b_mm: np.ndarray = None
@@ -553,7 +583,7 @@ class _Corners:
     w: np.ndarray = None
     p0: np.ndarray = None
     frame: np.ndarray = None
-    arc_blends: dict = field(default_factory=dict)
+    obj_blends: dict = field(default_factory=dict)
 
     def __post_init__(self):
         m = self.row.size
@@ -562,14 +592,92 @@ class _Corners:
         self.trim_a_mm, self.trim_b_mm = np.zeros(m), np.zeros(m)
 
 
-def _find_corners(pieces: PieceList) -> _Corners | None:
-    """Corners that may be blended: between feed lines or arcs (not rapids, NURBS or PH
-    pieces) with a blend tolerance > 0 (the smaller of the two), no stop between them. The
-    pieces must meet there (GeometryError otherwise)."""
+def pass_velocity_jump_mm_s(machine: Machine) -> float:
+    """The largest jump [mm/s] of the velocity vector at a tangent break that is passed at
+    full speed, with no blend and no slow-down: min(A_max·T, J_max·T², 4δ/T).
+
+    A break where the tangent turns by θ, passed at speed v, changes the velocity vector by
+    |Δv| = 2v sin(θ/2) between two servo periods T. On the reference points (one per T) that
+    is an acceleration |Δv|/T and a jerk |Δv|/T² (finite differences), and the straight step
+    between the two points that straddle the vertex cuts the corner by at most
+    (vT/2) sin(θ/2) = |Δv| T/4 (the points themselves stay on the programmed path). So a break
+    is within the machine's limits and its chord tolerance δ (SPEC eq. 23) at speed v exactly
+    when |Δv| ≤ min(A_max T, J_max T², 4δ/T). With the paper's machine (T = 1 ms, J_max =
+    5e4 mm/s³) the jerk term binds: 0.05 mm/s, i.e. θ ≤ 8.6e-4 rad at 58.3 mm/s. Rounded CAM
+    output (1e-5 rad) passes; anything larger is blended (G64) or stopped at (G61)."""
+    lim = machine.limits
+    period = machine.servo.period_s
+    return float(min(lim.a_max_mm_s2 * period, lim.j_max_mm_s3 * period**2,
+                     4.0 * lim.chord_tolerance_mm / period))  # fmt: skip
+
+
+def _turning(pieces: PieceList) -> tuple[np.ndarray, np.ndarray]:
+    """Tangent turning [rad] at each junction (k − 1): atan2(|t_a × t_b|, t_a · t_b)
+    (accurate for small angles, arccos of the dot is not), and whether both tangents exist
+    (``regular``: not at a cusp or a zero-length piece)."""
+    ta, tb = pieces.tangent_end[:, :-1], pieces.tangent_start[:, 1:]
+    cross = np.cross(ta, tb, axis=0)
+    turning = np.arctan2(np.sqrt(np.sum(cross * cross, axis=0)), np.sum(ta * tb, axis=0))
+    regular = (np.sum(ta * ta, axis=0) > 0.0) & (np.sum(tb * tb, axis=0) > 0.0)
+    return turning, regular
+
+
+def _small_break(pieces: PieceList, turning: np.ndarray, regular: np.ndarray,
+                 machine: Machine) -> np.ndarray:  # fmt: skip
+    """Junctions (k − 1) with a break small enough to pass at the smaller neighbouring cruise
+    cap v (no blend, no slow-down): 2v sin(θ/2) · max(1, vT / (L/2)) ≤
+    :func:`pass_velocity_jump_mm_s`, θ > :data:`SMOOTH_JUNCTION_RAD`, L the shorter
+    neighbouring piece (which a blend may later trim to half). The factor counts the breaks
+    one servo step vT can cross when the pieces are shorter than it (a dense polyline): their
+    jumps add up within one period. It also bounds the polyline's implied normal
+    acceleration, v²θ/L ≤ A_max, since the jump allowed is ≤ A_max T."""
+    cap, length = pieces.v_cap_mm_s, pieces.length_mm
+    v = np.minimum(cap[:-1], cap[1:])
+    half = 0.5 * np.minimum(length[:-1], length[1:])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        crowd = np.maximum(1.0, v * machine.servo.period_s / half)
+    jump = 2.0 * v * np.sin(0.5 * turning) * crowd
+    return regular & (turning > SMOOTH_JUNCTION_RAD) & (jump <= pass_velocity_jump_mm_s(machine))
+
+
+def _passable(pieces: PieceList, turning: np.ndarray, regular: np.ndarray) -> np.ndarray:
+    """Junctions (k − 1) the tool passes at speed as far as the geometry goes: tangent (≤
+    :data:`SMOOTH_JUNCTION_RAD`) or a small break (``pass_after``, :func:`_small_break`)."""
+    return regular & ((turning <= SMOOTH_JUNCTION_RAD) | pieces.pass_after[:-1])
+
+
+def _stopped(pieces: PieceList) -> np.ndarray:
+    """Junctions where the tool must stop whatever the geometry (k − 1): a dwell, pause or
+    exact stop (``stop_after``), a rapid meeting a feed move, a zero-length piece."""
+    rapid, length = pieces.rapid, pieces.length_mm
+    return (pieces.stop_after[:-1] | (rapid[:-1] != rapid[1:]) | (length[:-1] == 0.0)
+            | (length[1:] == 0.0))  # fmt: skip
+
+
+def tolerance_mm(blend_mm: np.ndarray, machine: Machine) -> np.ndarray:
+    """The blend tolerance [mm] of each row from its path-control value (``blend_mm``, see
+    :class:`~nurbscnc.geometry.segments.Line`): G64 P as given, G64 without P (inf) the
+    machine's ``limits.path_tolerance_mm``, G61 / G61.1 (≤ 0) none."""
+    b = np.asarray(blend_mm, dtype=float)
+    return np.where(np.isinf(b), machine.limits.path_tolerance_mm, np.maximum(b, 0.0))
+
+
+def _find_corners(pieces: PieceList, machine: Machine) -> _Corners | None:
+    """Corners that may be blended: any two pieces (lines, arcs, NURBS cells, PH pieces; not
+    the columnar line–line blends, which meet lines tangentially) of the same kind of motion
+    (feed or rapid), with a blend tolerance > 0 (the smaller of the two), no stop between
+    them, a break not small enough to pass (:func:`_passable`). The pieces must meet there
+    (GeometryError otherwise)."""
+    k = len(pieces)
     kind = pieces.kind
-    cut = ((kind == Kind.LINE) & ~pieces.rapid) | (kind == Kind.ARC)
-    tol = np.minimum(pieces.blend_mm[:-1], pieces.blend_mm[1:])
-    corner = np.flatnonzero(cut[:-1] & cut[1:] & (tol > 0.0) & ~pieces.stop_after[:-1]) + 1
+    tol_row = tolerance_mm(pieces.blend_mm, machine)
+    tol = np.minimum(tol_row[:-1], tol_row[1:])
+    turning, regular = _turning(pieces)
+    columnar = np.zeros(k, dtype=bool)
+    columnar[pieces.ph_rows] = True
+    cand = (~columnar[:-1] & ~columnar[1:] & ~_stopped(pieces) & (tol > 0.0) & regular
+            & ~_passable(pieces, turning, regular))  # fmt: skip
+    corner = np.flatnonzero(cand) + 1
     if corner.size == 0:
         return None
     vertex = pieces.end_mm[:, corner - 1]
@@ -579,8 +687,10 @@ def _find_corners(pieces: PieceList) -> _Corners | None:
         i = int(corner[np.argmax(gap > 1e-6 * scale)])
         raise GeometryError(f"blend_corner: the geometries do not meet (gap "
                             f"{gap.max():.3g} mm)", SourcePos(int(pieces.line[i])))  # fmt: skip
-    lines = (kind[corner - 1] == Kind.LINE) & (kind[corner] == Kind.LINE)
-    return _Corners(corner, tol[corner - 1], vertex, lines)
+    is_line = (kind == Kind.LINE) & ~np.isin(np.arange(k), list(pieces.objects))
+    lines = is_line[corner - 1] & is_line[corner]
+    return _Corners(corner, tol[corner - 1], vertex, turning[corner - 1], lines,
+                    pieces.line[corner - 1])
 
 
 def _blend_line_corners(pieces: PieceList, c: _Corners) -> None:
@@ -608,59 +718,89 @@ def _blend_line_corners(pieces: PieceList, c: _Corners) -> None:
         del lb
 
 
-def _blend_arc_corners(pieces: PieceList, c: _Corners) -> None:
-    """Corners with an arc, one at a time (:func:`~nurbscnc.geometry.blend.blend_corner`,
-    equal trims ≤ half the shorter piece)."""
+def _blend_geometry(piece: Piece):
+    """The geometry :func:`~nurbscnc.geometry.blend.blend_corner` blends for a piece: lines
+    and arcs as they are, NURBS cells and PH pieces as a
+    :class:`~nurbscnc.geometry.blend.SubCurve` of their parameter range."""
+    from nurbscnc.geometry.blend import SubCurve
+
+    if isinstance(piece.geometry, LineGeometry | ArcGeometry):
+        return piece.geometry
+    return SubCurve(piece.geometry, piece.u_a, piece.u_b, piece.s_a_mm, piece.length_mm)
+
+
+def _blend_object_corners(pieces: PieceList, c: _Corners) -> None:
+    """Corners with an arc, NURBS or PH piece, one at a time
+    (:func:`~nurbscnc.geometry.blend.blend_corner`, equal trims ≤ half the shorter piece)."""
     from nurbscnc.geometry.blend import blend_corner
 
     for j in np.flatnonzero(~c.lines).tolist():
         i = int(c.row[j])
         a, b = pieces[i - 1], pieces[i]
-        bl = blend_corner(a.geometry, b.geometry, float(c.tol_mm[j]), 0.5 * a.length_mm,
-                          0.5 * b.length_mm, measure=False)  # fmt: skip
+        bl = blend_corner(_blend_geometry(a), _blend_geometry(b), float(c.tol_mm[j]),
+                          0.5 * a.length_mm, 0.5 * b.length_mm, measure=False)  # fmt: skip
         if bl is not None:
-            c.arc_blends[j] = bl
+            c.obj_blends[j] = bl
             c.ok[j], c.kappa_per_mm[j], c.length_mm[j] = True, bl.kappa_max_per_mm, bl.ph.length_mm
             c.trim_a_mm[j], c.trim_b_mm[j] = bl.trim_a_mm, bl.trim_b_mm
 
 
-def apply_blends(pieces: PieceList, machine: Machine) -> PieceList:
-    """Replace corners between line/arc pieces under G64 P by PH quintic blends (issue 7).
+def apply_blends(pieces: PieceList, machine: Machine) -> tuple[PieceList, _Corners | None]:
+    """Replace corners by PH quintic blends within their tolerance (G64, issues 7 and 13).
 
-    A corner is blended when both pieces are feed lines or arcs with a blend tolerance > 0
-    (the smaller of the two is used), no dwell or pause lies between them, their tangents
-    turn, and the blend pays (:func:`blend_pays`); a blend trims at most half of each piece,
-    so blends never overlap. Line–line corners are built all at once in closed form
+    Every corner :func:`_find_corners` admits is blended when a blend fits: as LinuxCNC
+    under G64, blending is never weighed against stopping (a blend's feed is capped by its
+    peak curvature, and the look-ahead slows to that cap, which is never slower than slowing
+    to 0 over the same path). A blend trims at most half of each piece, so blends never
+    overlap. Line–line corners are built all at once in closed form
     (:func:`_blend_line_corners`): a polyline of short chords becomes a chain of blends with
     no sliver of line left between them (equal trims where the tolerance binds). Corners
-    with an arc go one at a time (:func:`_blend_arc_corners`). The blend piece is capped by
-    its peak curvature like any curved piece (chord error, normal acceleration). A piece
-    trimmed at both ends to less than :data:`MIN_REMAINDER_MM` is dropped. The blends' end
-    tangents are the pieces' own unit tangents (not recomputed from trimmed end points), so
-    the junctions of a blended polyline are exactly smooth. The new rows are written by
-    :func:`_blended_rows`.
+    with an arc, NURBS or PH piece go one at a time (:func:`_blend_object_corners`). The blend
+    piece is capped by its peak curvature like any curved piece (chord error, normal
+    acceleration). A piece trimmed at both ends to less than :data:`MIN_REMAINDER_MM` is
+    dropped. The blends' end tangents are the pieces' own unit tangents (not recomputed from
+    trimmed end points), so the junctions of a blended polyline are exactly smooth. The new
+    rows are written by :func:`_blended_rows`. Returns the pieces and the corners tried
+    (None if none).
     """
     if len(pieces) < 2:
-        return pieces
-    c = _find_corners(pieces)
+        return pieces, None
+    c = _find_corners(pieces, machine)
     if c is None:
-        return pieces
+        return pieces, None
     _blend_line_corners(pieces, c)
-    _blend_arc_corners(pieces, c)
-    cap_a, cap_b = pieces.v_cap_mm_s[c.row - 1], pieces.v_cap_mm_s[c.row]
-    ok = c.ok
-    with np.errstate(invalid="ignore", divide="ignore"):
-        c.ok = ok & blend_pays(cap_a, cap_b, np.where(ok, c.kappa_per_mm, 0.0),
-                               np.where(ok, c.trim_a_mm, 0.0), np.where(ok, c.trim_b_mm, 0.0),
-                               np.where(ok, c.length_mm, 0.0), machine)  # fmt: skip
+    _blend_object_corners(pieces, c)
     if not c.ok.any():
-        return pieces
-    return _blended_rows(pieces, c, machine)
+        return pieces, c
+    return _blended_rows(pieces, c, machine), c
+
+
+def _trimmed(piece: Piece, s0_mm: float, s1_mm: float) -> Piece:
+    """``piece`` between arc lengths s0 and s1 [mm] from its start: lines and arcs as new
+    geometries (:func:`sub_geometry`), NURBS cells as a narrower parameter range of the same
+    curve, PH pieces as the PH quintic of the sub-range
+    (:func:`~nurbscnc.geometry.blend.sub_ph`); exact in every case."""
+    from nurbscnc.geometry.blend import sub_ph
+
+    g = piece.geometry
+    if isinstance(g, LineGeometry | ArcGeometry):
+        geom = sub_geometry(piece, s0_mm, s1_mm)
+        return dc_replace(piece, geometry=geom, length_mm=float(geom.length_mm), u_a=0.0,
+                          u_b=float(geom.u_end))  # fmt: skip
+    full = s1_mm >= piece.length_mm
+    if isinstance(g, PHQuintic):
+        xi = g.param_at_length(np.array([s0_mm, s1_mm]))
+        sub = sub_ph(g, float(xi[0]) if s0_mm > 0.0 else 0.0, 1.0 if full else float(xi[1]))
+        return dc_replace(piece, geometry=sub, length_mm=float(sub.length_mm))
+    u = g.param_at_length(piece.s_a_mm + np.array([s0_mm, s1_mm]))
+    return dc_replace(piece, u_a=float(u[0]) if s0_mm > 0.0 else piece.u_a,
+                      u_b=piece.u_b if full else float(u[1]), s_a_mm=piece.s_a_mm + s0_mm,
+                      length_mm=float(s1_mm - s0_mm))  # fmt: skip
 
 
 def _blended_rows(pieces: PieceList, c: _Corners, machine: Machine) -> PieceList:
     """The pieces with the accepted blends (``c.ok``) in place: kept rows moved, trimmed
-    lines and arcs shortened, blend rows inserted before the piece after their corner."""
+    pieces shortened, blend rows inserted before the piece after their corner."""
     k = len(pieces)
     kind, length = pieces.kind, pieces.length_mm
     ok, corner = c.ok, c.row
@@ -676,6 +816,7 @@ def _blended_rows(pieces: PieceList, c: _Corners, machine: Machine) -> PieceList
     count = has_blend.astype(np.int64) + keep
     first = np.cumsum(count) - count
     new_row = first + has_blend  # new row of each kept piece
+    c.blend_row = first[corner[ok]]
     cols = _empty_columns(int(count.sum()))
     kept = np.flatnonzero(keep)
     dest = new_row[kept]
@@ -683,10 +824,13 @@ def _blended_rows(pieces: PieceList, c: _Corners, machine: Machine) -> PieceList
         cols[name][dest] = getattr(pieces, name)[kept]
     for name in _VECTORS:
         cols[name][:, dest] = getattr(pieces, name)[:, kept]
-    objects = {int(new_row[r]): v for r, v in pieces.objects.items() if keep[r]}
+    in_objects = np.zeros(k, dtype=bool)
+    in_objects[list(pieces.objects)] = True
+    objects = {int(new_row[r]): v for r, v in pieces.objects.items()
+               if keep[r] and not trimmed[r]}  # fmt: skip
 
-    # Trimmed lines: the sub-segment, end points as LineGeometry.point gives them.
-    tl = np.flatnonzero(trimmed & keep & (kind == Kind.LINE))
+    # Trimmed columnar lines: the sub-segment, end points as LineGeometry.point gives them.
+    tl = np.flatnonzero(trimmed & keep & (kind == Kind.LINE) & ~in_objects)
     if tl.size:
         p, q = pieces.start_mm[:, tl], pieces.end_mm[:, tl]
         f0 = trim_start[tl] / length[tl]
@@ -697,17 +841,13 @@ def _blended_rows(pieces: PieceList, c: _Corners, machine: Machine) -> PieceList
         cols["start_mm"][:, dest] = a_pt
         cols["end_mm"][:, dest] = b_pt
         cols["length_mm"][dest] = np.sqrt(np.sum((b_pt - a_pt) ** 2, axis=0))
-    # Trimmed arcs: exact sub-arcs.
-    ta = np.flatnonzero(trimmed & keep & (kind == Kind.ARC)).tolist()
-    sub_pieces = []
-    for r in ta:
-        p = pieces[r]
-        geom = sub_geometry(p, float(trim_start[r]), p.length_mm - float(trim_end[r]))
-        sub_pieces.append(dc_replace(p, geometry=geom, length_mm=float(geom.length_mm),
-                                     u_a=0.0, u_b=float(geom.u_end)))  # fmt: skip
-    _put_objects(cols, objects, [int(new_row[r]) for r in ta], sub_pieces)
+    # Trimmed object rows (arcs, NURBS cells, PH pieces): exact sub-pieces.
+    to = np.flatnonzero(trimmed & keep & in_objects).tolist()
+    sub_pieces = [_trimmed(pieces[r], float(trim_start[r]),
+                           float(length[r] - trim_end[r])) for r in to]  # fmt: skip
+    _put_objects(cols, objects, [int(new_row[r]) for r in to], sub_pieces)
 
-    # The line–line blends (columnar PH rows) and the arc blends (PH objects).
+    # The line–line blends (columnar PH rows) and the other blends (PH objects).
     cap_a, cap_b = pieces.v_cap_mm_s[corner - 1], pieces.v_cap_mm_s[corner]
     sel = ok & c.lines
     dest = first[corner[sel]]
@@ -720,6 +860,8 @@ def _blended_rows(pieces: PieceList, c: _Corners, machine: Machine) -> PieceList
     cols["segment"][dest] = pieces.segment[src]
     cols["line"][dest] = pieces.line[src]
     cols["kappa_max_per_mm"][dest] = kappa
+    cols["rapid"][dest] = pieces.rapid[src]
+    cols["blend_mm"][dest] = pieces.blend_mm[src]
     cols["tangent_start"][:, dest] = pieces.tangent_end[:, src - 1]
     cols["tangent_end"][:, dest] = pieces.tangent_start[:, src]
     ll_ok = ok[np.flatnonzero(c.lines)]
@@ -728,18 +870,19 @@ def _blended_rows(pieces: PieceList, c: _Corners, machine: Machine) -> PieceList
     for name, z in (("start_mm", p0), ("end_mm", p5)):
         cols[name][:, dest] = (frame[:, 0] + z.real[:, None] * frame[:, 1]
                                + z.imag[:, None] * frame[:, 2]).T  # fmt: skip
-    arc_rows, arc_pieces = [], []
-    for j, bl in c.arc_blends.items():
+    obj_rows, obj_pieces = [], []
+    for j, bl in c.obj_blends.items():
         if not ok[j]:
             continue
         i = int(corner[j])
         feed_j = min(float(cap_a[j]), float(cap_b[j]))
         cap = max(float(curvature_cap_mm_s(machine, bl.kappa_max_per_mm, feed_j)), MIN_CAP_MM_S)
-        arc_rows.append(int(first[i]))
-        arc_pieces.append(Piece(Kind.PH, bl.ph, float(bl.ph.length_mm), cap,
+        obj_rows.append(int(first[i]))
+        obj_pieces.append(Piece(Kind.PH, bl.ph, float(bl.ph.length_mm), cap,
                                 int(pieces.segment[i]), int(pieces.line[i]), 0.0, 1.0, 0.0,
-                                bl.kappa_max_per_mm))  # fmt: skip
-    _put_objects(cols, objects, arc_rows, arc_pieces)
+                                bl.kappa_max_per_mm, blend_mm=float(pieces.blend_mm[i]),
+                                rapid=bool(pieces.rapid[i])))  # fmt: skip
+    _put_objects(cols, objects, obj_rows, obj_pieces)
 
     # Columnar PH rows: the old ones (moved) and the new line–line blends, in row order.
     ph_rows = np.concatenate((new_row[pieces.ph_rows], dest))
@@ -764,33 +907,49 @@ def _put_objects(cols: dict, objects: dict, rows: list[int], new: list[Piece]) -
         cols[name][:, rows] = arr.T
 
 
-def blend_pays(cap_a_mm_s, cap_b_mm_s, kappa_max_per_mm, trim_a_mm, trim_b_mm,
-               blend_length_mm, machine: Machine) -> np.ndarray:  # fmt: skip
-    """Is passing each corner on its blend faster than stopping exactly at it? (arrays)
-
-    A blend's feed is capped by its peak curvature (√(A/κ), V_af); with a tight tolerance that
-    cap is low, and slowing to it, crossing the blend and speeding up again can take longer
-    than an exact stop. Compare both over the same stretch of the original path, with the
-    S-curve closed forms (SPEC §7) from the neighbours' cruise feed v = min(caps):
-    stop: 2 D(v → 0) in 2 T(v → 0); blend: 2 D(v → v_b) + the two trims, in
-    2 T(v → v_b) + L_blend / v_b; the shorter of the two is topped up at v.
-    """
-    from nurbscnc.plan.feedrate import scurve_distance_mm, scurve_duration_s
-
-    lim = machine.limits
-    v = np.minimum(np.asarray(cap_a_mm_s, dtype=float), np.asarray(cap_b_mm_s, dtype=float))
-    vb = np.minimum(curvature_cap_mm_s(machine, kappa_max_per_mm, v), v)
-    vb = np.maximum(vb, MIN_CAP_MM_S)
-    a_max, j_max = lim.a_max_mm_s2, lim.j_max_mm_s3
-    d_stop = 2.0 * scurve_distance_mm(v, np.zeros_like(v), a_max, j_max)
-    t_stop = 2.0 * scurve_duration_s(v, np.zeros_like(v), a_max, j_max)
-    d_slow = 2.0 * scurve_distance_mm(v, vb, a_max, j_max)
-    t_slow = 2.0 * scurve_duration_s(v, vb, a_max, j_max)
-    # Original path covered: the slow-down/speed-up stretches plus the trimmed corner.
-    d_blend = d_slow + trim_a_mm + trim_b_mm
-    t_blend = t_slow + blend_length_mm / vb
-    span = np.maximum(d_stop, d_blend)
-    return t_blend + (span - d_blend) / v < t_stop + (span - d_stop) / v
+def corner_log(pieces: PieceList, tried: _Corners | None, machine: Machine,
+               options: PlanOptions) -> CornerLog:  # fmt: skip
+    """Every corner and what was done there (:class:`~nurbscnc.plan.corners.CornerLog`), in
+    path order: the blended corners (``tried``, with the rows of ``pieces`` their blends
+    took), and every junction of the final ``pieces`` that is not tangent or where the tool
+    stops. Reasons for a stop, first that applies: a rapid meets a feed move; G61.1 block end;
+    a dwell or pause; a zero-length piece or a cusp or reversal (not blendable); G61.1 / G61
+    or G64 P0 (exact path) / ``--blend-tolerance 0`` (zero tolerance) where no tolerance
+    allows a blend; a columnar blend meeting a break (not blendable); else no blend fitted
+    within the tolerance (the pieces are too short for it, or the geometry is out of plane:
+    a helix, a 3-D turn)."""
+    k = len(pieces)
+    keys, lines, points, turns, acts, whys = [], [], [], [], [], []
+    if tried is not None and tried.ok.any():
+        ok = tried.ok
+        keys.append(tried.blend_row)  # the blend's row in ``pieces``
+        lines.append(tried.line[ok])
+        points.append(tried.vertex_mm[:, ok].T)
+        turns.append(tried.turning_rad[ok])
+        acts.append(np.full(int(ok.sum()), CornerAction.BLEND, np.int8))
+        whys.append(np.full(int(ok.sum()), CornerWhy.BLENDED, np.int8))
+    if k >= 2:
+        turning, regular = _turning(pieces)
+        stopped = _stopped(pieces)
+        passable = _passable(pieces, turning, regular)
+        corner = stopped | ~regular | (turning > SMOOTH_JUNCTION_RAD)
+        j = np.flatnonzero(corner)
+        if j.size:
+            act = np.where(passable[j] & ~stopped[j], CornerAction.PASS, CornerAction.STOP)
+            why = _stop_reasons(pieces, j, turning[j], regular[j], machine, options)
+            why = np.where(act == CornerAction.PASS, CornerWhy.SMALL_BREAK, why)
+            keys.append(j + 1)  # the row after the junction (a blend row's junctions are smooth)
+            lines.append(pieces.line[j])
+            points.append(pieces.end_mm[:, j].T)
+            turns.append(np.where(regular[j], turning[j], np.pi))
+            acts.append(act.astype(np.int8))
+            whys.append(why.astype(np.int8))
+    if not keys:
+        return CornerLog.empty()
+    order = np.argsort(np.concatenate(keys), kind="stable")
+    return CornerLog(np.concatenate(lines).astype(np.int64)[order],
+                     np.concatenate(points)[order], np.concatenate(turns)[order],
+                     np.concatenate(acts)[order], np.concatenate(whys)[order])  # fmt: skip
 
 
 def settle_time_s(machine: Machine) -> float:
@@ -803,26 +962,48 @@ def settle_time_s(machine: Machine) -> float:
     return 5.0 / slowest
 
 
-def junction_caps(pieces: PieceList) -> np.ndarray:
-    """Cap at each junction [mm/s] (k+1): 0 at the ends, at tangent discontinuities (turning
-    > :data:`SMOOTH_JUNCTION_RAD`, or a zero tangent: a cusp), at zero-length pieces, around
-    dwells and where rapids meet feed moves; else the smaller neighbouring cruise cap.
+def _stop_reasons(pieces: PieceList, j: np.ndarray, turning: np.ndarray, regular: np.ndarray,
+                  machine: Machine, options: PlanOptions) -> np.ndarray:  # fmt: skip
+    """Why the tool stops at junctions ``j`` (:class:`~nurbscnc.plan.corners.CornerWhy`
+    codes; :func:`corner_log` gives the order). Rules are applied last-first, so the first
+    rule that applies is the one left."""
+    blend, seg, rapid = pieces.blend_mm, pieces.segment, pieces.rapid
+    length, stop_after = pieces.length_mm, pieces.stop_after
+    tol_row = tolerance_mm(blend, machine)
+    tol = np.minimum(tol_row[j], tol_row[j + 1])
+    why = np.full(j.size, CornerWhy.NO_BLEND_FITS, dtype=np.int8)
+    columnar = np.isin(j, pieces.ph_rows) | np.isin(j + 1, pieces.ph_rows)
+    why[columnar] = CornerWhy.NOT_BLENDABLE
+    zero = tol == 0.0
+    why[zero] = CornerWhy.EXACT_PATH  # G61, G64 P0
+    if options.blend_tolerance_mm == 0.0:
+        why[zero] = CornerWhy.ZERO_TOLERANCE
+    exact_stop = (blend[j] < 0.0) | (blend[j + 1] < 0.0)
+    why[zero & exact_stop] = CornerWhy.EXACT_STOP
+    degenerate = (~regular | (turning > np.pi - MIN_REVERSAL_RAD) | (length[j] == 0.0)
+                  | (length[j + 1] == 0.0))  # fmt: skip
+    why[degenerate] = CornerWhy.NOT_BLENDABLE
+    why[stop_after[j]] = CornerWhy.DWELL_OR_PAUSE
+    block_end = (stop_after[j] & (blend[j] < 0.0) & (seg[j] != seg[j + 1])
+                 & (pieces.dwell_after_s[j] == 0.0))  # fmt: skip
+    why[block_end] = CornerWhy.EXACT_STOP
+    why[rapid[j] != rapid[j + 1]] = CornerWhy.RAPID_FEED
+    return why
 
-    One vectorised pass over the cached unit tangents; the turning is
-    atan2(|t_a × t_b|, t_a · t_b), accurate for small angles (arccos of the dot is not).
-    """
+
+def junction_caps(pieces: PieceList) -> np.ndarray:
+    """Cap at each junction [mm/s] (k+1): 0 at the ends and wherever the tool stops
+    (:func:`_stopped`: dwells, pauses, exact stops, rapid/feed changes, zero-length pieces),
+    at breaks it cannot pass (:func:`_passable`: a turning above :data:`SMOOTH_JUNCTION_RAD`
+    and above the small-break rule of :func:`pass_velocity_jump_mm_s`, or a zero tangent: a
+    cusp); else the smaller neighbouring cruise cap. One vectorised pass over the cached unit
+    tangents."""
     k = len(pieces)
     caps = np.zeros(k + 1)
     if k < 2:
         return caps
-    ta, tb = pieces.tangent_end[:, :-1], pieces.tangent_start[:, 1:]
-    cross = np.cross(ta, tb, axis=0)
-    turning = np.arctan2(np.sqrt(np.sum(cross * cross, axis=0)), np.sum(ta * tb, axis=0))
-    regular = (np.sum(ta * ta, axis=0) > 0.0) & (np.sum(tb * tb, axis=0) > 0.0)
-    rapid = pieces.rapid
-    length = pieces.length_mm
-    smooth = (regular & (turning <= SMOOTH_JUNCTION_RAD) & ~pieces.stop_after[:-1]
-              & (rapid[:-1] == rapid[1:]) & (length[:-1] != 0.0) & (length[1:] != 0.0))  # fmt: skip
+    turning, regular = _turning(pieces)
+    smooth = _passable(pieces, turning, regular) & ~_stopped(pieces)
     cap = pieces.v_cap_mm_s
     caps[1:-1] = np.where(smooth, np.minimum(cap[:-1], cap[1:]), 0.0)
     return caps

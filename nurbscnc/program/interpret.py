@@ -29,6 +29,7 @@ from nurbscnc.geometry.segments import (
     Note,
     Pause,
     Program,
+    path_control,
     vec3,
 )
 from nurbscnc.program import arcs, coords
@@ -670,19 +671,27 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
         self.pos = machine
 
     def set_path_mode(self, gcodes: dict, words: dict, used: set) -> None:
+        """G61 (exact path), G61.1 (exact stop), G64 [P-] [Q-] (blending), as LinuxCNC 2.9:
+        G64 without P blends within the machine's path tolerance; Q (naive CAM tolerance)
+        defaults to P, and G64 alone turns the naive CAM detector off."""
         if 13 not in gcodes:
             return
         code, col = gcodes[13]
-        self.m.path_mode = code
-        self.m.blend_mm = 0.0  # G61 / G61.1 / G64 without P: exact stops
+        p_mm = q_mm = None
         if code == 640:
-            if "P" in words:
-                used.add("P")
-                if words["P"][0] < 0:
-                    raise self.error("G64 P tolerance must be >= 0", words["P"][1])
-                self.m.blend_mm = words["P"][0] * self.m.scale
-            if "Q" in words:
-                used.add("Q")
+            for letter in "PQ":
+                if letter in words:
+                    used.add(letter)
+                    value, where = words[letter]
+                    if value < 0:
+                        raise self.error(f"G64 {letter} tolerance must be >= 0", where)
+                    if letter == "P":
+                        p_mm = value * self.m.scale
+                    else:
+                        q_mm = value * self.m.scale
+        self.m.path_mode = code
+        self.m.blend_mm = path_control(code, p_mm)
+        self.m.naive_mm = q_mm if q_mm is not None else (p_mm or 0.0)
 
     def check_rotary(self, words: dict, used: set) -> None:
         """A, B, C: carried while they do not move (``A0.`` in posts), refused when they do."""
@@ -974,7 +983,7 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
                 raise self.error("G1 move with zero feed (set F first)", 1)
         if end != start or self.comp_exit is not None:  # the exit move may not be zero
             line = self.line_no if self.source is self.main else self.main_line()
-            self.emit(Line(tuple(start), tuple(end), feed, line, rapid, m.blend_mm))
+            self.emit(Line(tuple(start), tuple(end), feed, line, rapid, m.blend_mm, m.naive_mm))
         self.prog = end_prog
 
     def arc(self, words: dict, used: set) -> None:

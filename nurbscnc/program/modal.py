@@ -72,7 +72,7 @@ M_GROUP = {0: 4, 1: 4, 2: 4, 30: 4, 60: 4, 6: 6, 3: 7, 4: 7, 5: 7, 7: 8, 8: 8, 9
 #: What M70 / M73 save and M72 restores (LinuxCNC: units, plane, distance modes, feed mode,
 #: path control, F and S; the coordinate system is saved beside these, in the interpreter).
 SAVED_BY_M70 = ("plane", "scale", "absolute", "arc_absolute", "feed_mode", "feed", "feed_mm",
-                "spindle_rpm", "path_mode", "blend_mm")  # fmt: skip
+                "spindle_rpm", "path_mode", "blend_mm", "naive_mm")  # fmt: skip
 
 PLANE_OF_G = {170: "XY", 180: "ZX", 190: "YZ"}
 G_OF_PLANE = {"XY": 17, "ZX": 18, "YZ": 19}
@@ -105,8 +105,12 @@ class ModalState:
     tool_selected: int = 0  # T
     tool_loaded: int = 0  # M6
     tool_offset_code: int = 490  # 430, 431, 490
-    blend_mm: float = 0.0  # G64 P [mm]; 0: exact stop at corners (G61, G61.1, G64 alone)
+    # Path control (group 13), as the segments carry it (geometry.segments.Line.blend_mm):
+    # G64 P [mm] > 0; inf for G64 without P (the machine's path tolerance, LinuxCNC's
+    # default mode); 0 for G61 and G64 P0 (exact path); BLEND_EXACT_STOP (< 0) for G61.1.
+    blend_mm: float = float("inf")
     path_mode: int = 640
+    naive_mm: float = 0.0  # G64 Q [mm]: the naive CAM detector's tolerance (0: off)
     # canned cycles
     retract_mode: int = 980
     cycle: CycleState = CycleState()

@@ -1,0 +1,310 @@
+"""Path-control modes with LinuxCNC 2.9's meaning (issue 13): G61, G61.1, G64, G64 P, G64 Q.
+
+References: the LinuxCNC 2.9 g-code documentation (G61 stops at breaks but not at co-linear
+joints, G61.1 at every block end, G64 blends, Q defaults to P); exact point-to-segment
+distances and scipy's BSpline for the programmed path (tests/test_wholeprograms.py helpers,
+not the blender's own numbers); finite differences of the reference samples; closed forms of
+the small-break rule (2v sin(θ/2) against the velocity jump allowed in one servo period).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from nurbscnc.geometry.blend import sub_ph
+from nurbscnc.geometry.ph import PHQuintic
+from nurbscnc.geometry.segments import BLEND_EXACT_STOP, Line
+from nurbscnc.machine.profile import load_machine
+from nurbscnc.pipeline import RunOptions, run_program
+from nurbscnc.plan.corners import CornerAction, CornerWhy
+from nurbscnc.plan.naive import merge_collinear
+from nurbscnc.plan.options import LookaheadOptions, PlanOptions
+from nurbscnc.plan.pieces import junction_caps, pass_velocity_jump_mm_s, segment_pieces
+from nurbscnc.program.interpret import interpret_text
+from tests.test_wholeprograms import distance_to_path, programmed_path, vertex_deviation
+
+MACHINE = load_machine()
+LIM = MACHINE.limits
+PERIOD = MACHINE.servo.period_s
+PROGRAMS = Path(__file__).resolve().parent / "programs" / "planner"
+OFF = LookaheadOptions(dynamics="off")
+
+
+def run(text: str, lookahead: LookaheadOptions = OFF):
+    prog = interpret_text(text)
+    return prog, run_program(prog, MACHINE, RunOptions(lookahead=lookahead))
+
+
+def pentagram(mode: str) -> str:
+    return (PROGRAMS / "modes_pentagram_g61.ngc").read_text().replace("G61", mode)
+
+
+# --- the interpreter: what each mode puts on the segments -------------------------------------
+
+
+@pytest.mark.parametrize(("words", "blend", "naive"), [
+    ("", np.inf, 0.0),  # LinuxCNC's default mode: G64 without P
+    ("G61", 0.0, 0.0),
+    ("G61.1", BLEND_EXACT_STOP, 0.0),
+    ("G64", np.inf, 0.0),
+    ("G64 P0.02", 0.02, 0.02),  # Q defaults to P
+    ("G64 P0.02 Q0", 0.02, 0.0),  # Q0 turns the naive CAM detector off
+    ("G64 P0.02 Q0.1", 0.02, 0.1),
+    ("G20 G64 P0.001 Q0.002", 0.0254, 0.0508),  # inch words in mm
+])  # fmt: skip
+def test_path_mode_words_on_the_segments(words, blend, naive):
+    prog = interpret_text(f"{words or 'G21'}\nG1 X1 F600\nX2 Y1\nM2\n")
+    lines = [s for s in prog.segments if s.kind == "line"]
+    assert len(lines) == 2
+    for seg in lines:
+        assert seg.blend_mm == pytest.approx(blend, rel=1e-12)
+        assert seg.naive_mm == pytest.approx(naive, rel=1e-12)
+
+
+def test_negative_q_is_a_clear_error():
+    from nurbscnc.errors import NurbsCncError
+
+    with pytest.raises(NurbsCncError, match="Q tolerance must be >= 0"):
+        interpret_text("G64 P0.01 Q-1\nG1 X1 F600\nM2\n")
+
+
+# --- the corner log ----------------------------------------------------------------------------
+
+
+def _log(text: str, options: PlanOptions | None = None):
+    prog = interpret_text(text)
+    return segment_pieces(prog.segments, MACHINE, options).corners
+
+
+def test_corner_log_of_the_pentagram_in_each_mode():
+    """Four corners (the fifth vertex is the program end) and the rapid's end, per mode."""
+    rapid_end = (CornerAction.STOP, CornerWhy.RAPID_FEED)
+    expect = {
+        "G61": (CornerAction.STOP, CornerWhy.EXACT_PATH),
+        "G61.1": (CornerAction.STOP, CornerWhy.EXACT_STOP),
+        "G64 P0": (CornerAction.STOP, CornerWhy.EXACT_PATH),
+        "G64 P0.02": (CornerAction.BLEND, CornerWhy.BLENDED),
+        "G64": (CornerAction.BLEND, CornerWhy.BLENDED),
+    }
+    for mode, (action, why) in expect.items():
+        log = _log(pentagram(mode))
+        assert len(log) == 5, mode
+        assert (log.action[0], log.why[0]) == rapid_end
+        assert np.all(log.action[1:] == action) and np.all(log.why[1:] == why), mode
+        # The star's tips turn by 144° (exterior angle of the {5/2} star polygon).
+        # (vertices written to 6 decimals: the angles agree to ~1e-8 rad)
+        np.testing.assert_allclose(log.turning_rad[1:], np.radians(144.0), atol=1e-7)
+        assert list(log.line) == [3, 5, 6, 7, 8]  # the move that ends at each corner
+    log = _log(pentagram("G64 P0.02"), PlanOptions(blend_tolerance_mm=0.0))
+    assert np.all(log.why[1:] == CornerWhy.ZERO_TOLERANCE)
+
+
+def test_corner_log_names_dwells_and_exact_stops_at_tangent_joints():
+    text = ("G21 G61.1 G0 X-5 Y0\nG1 X10 F600\nX20\nG64\nG4 P0.5\nG1 X20 Y10\nX30 Y10\nM2\n")
+    log = _log(text)
+    whys = [CornerWhy(w) for w in log.why]
+    # rapid end; the co-linear G61.1 joint at X10 stops; the dwell; the G64 90° corner blends
+    assert whys == [CornerWhy.RAPID_FEED, CornerWhy.EXACT_STOP, CornerWhy.DWELL_OR_PAUSE,
+                    CornerWhy.BLENDED]  # fmt: skip
+    np.testing.assert_allclose(log.turning_rad[1], 0.0, atol=1e-15)
+
+
+# --- blended output stays within the tolerance (independent distances) -------------------------
+
+
+@pytest.mark.parametrize("mode", ["G64 P0.02", "G64"])
+def test_blended_pentagram_within_the_tolerance(mode):
+    prog, r = run(pentagram(mode))
+    tol = 0.02 if "P" in mode else LIM.path_tolerance_mm
+    smp = r.samples.points_mm
+    d = distance_to_path(smp, programmed_path(prog), reach=1.0)
+    assert d.max() <= tol
+    tips = np.array([s.end_mm for s in prog.segments if s.kind == "line"][:-1], float)
+    dev = vertex_deviation(smp, tips)
+    # Each tip is cut by the blend (most of the tolerance used), never by more than it: the
+    # polyline through the samples may cut inside the blend by a chord's sagitta κh²/8.
+    pieces = r.plan.pieces
+    kappa = pieces.kappa_max_per_mm[pieces.kind == 3].max()
+    h = np.linalg.norm(np.diff(smp, axis=0), axis=1).max()
+    assert np.all(dev <= tol + kappa * h * h / 8) and np.all(dev >= 0.9 * tol)
+
+
+def test_line_nurbs_line_corners_are_blended_within_the_tolerance():
+    """A 90° line→NURBS and a 90° NURBS→line joint (never blended before issue 13)."""
+    text = ("G21 G90 G17 G64 P0.01\nG0 X10 Y-10\nG1 X10 Y0 F1200\n"
+            "G5.2 X15 Y0 P1 L3\nX15 Y5 P1\nX15 Y10 P1\nG5.3\nG1 X5 Y10\nM2\n")  # fmt: skip
+    prog, r = run(text)
+    log = r.plan.pieces.corners
+    blends = log.action == CornerAction.BLEND
+    assert int(blends.sum()) == 2
+    np.testing.assert_allclose(log.turning_rad[blends], np.pi / 2, rtol=1e-6)
+    smp = r.samples.points_mm
+    d = distance_to_path(smp, programmed_path(prog), reach=1.0)
+    assert d.max() <= 0.01 + 1e-6  # + the dense polyline's sagitta bound of the NURBS
+    dev = vertex_deviation(smp, np.array([[10.0, 0.0, 0.0], [15.0, 10.0, 0.0]]))
+    pieces = r.plan.pieces
+    kappa = pieces.kappa_max_per_mm[pieces.kind == 3].max()
+    h = np.linalg.norm(np.diff(smp, axis=0), axis=1).max()
+    assert np.all(dev <= 0.01 + kappa * h * h / 8) and np.all(dev > 0.005)  # + a sagitta
+    assert r.plan.profile.junction_speeds_mm_s[2:-1].min() > 0.0  # no stop after the rapid
+
+
+def test_sub_ph_is_the_same_curve():
+    """sub_ph(ph, a, b)(t) = ph(a + (b − a)t), its length the arc length between a and b."""
+    ph = PHQuintic(np.array([1.0 + 0.2j, 0.7 - 0.4j, 0.3 + 1.1j]), 2.0 - 1.0j)
+    a, b = 0.23, 0.81
+    sub = sub_ph(ph, a, b)
+    t = np.linspace(0.0, 1.0, 101)
+    np.testing.assert_allclose(sub.point(t), ph.point(a + (b - a) * t), atol=1e-13)
+    s = ph.arc_length(np.array([a, b]))
+    assert sub.length_mm == pytest.approx(s[1] - s[0], rel=1e-13)
+
+
+# --- G61.1 stops at every block end -------------------------------------------------------------
+
+
+def test_g61_1_stops_at_every_block_end_g61_at_breaks_only():
+    """Co-linear and tangent line–arc joints: G61.1 stops at each (samples at rest there),
+    G61 passes them at speed (LinuxCNC: exact path stops only where the path breaks)."""
+    body = "G0 X0 Y0\nG1 X10 F1800\nX20\nG3 X30 Y10 I0 J10\nG1 Y20\nM2\n"
+    ends = np.array([[10.0, 0, 0], [20.0, 0, 0], [30.0, 10, 0]])
+    speeds = {}
+    for mode in ("G61.1", "G61"):
+        prog, r = run(f"G21 G17 {mode}\n{body}")
+        p = r.samples.points_mm
+        v = np.linalg.norm(np.diff(p, axis=0), axis=1) / PERIOD
+        near = [int(np.argmin(np.linalg.norm(p - e, axis=1))) for e in ends]
+        # The speed over the servo steps on either side of the sample nearest each end.
+        speeds[mode] = np.array([max(v[i - 1], v[min(i, v.size - 1)]) for i in near])
+        log = r.plan.pieces.corners
+        feed = log.why != CornerWhy.RAPID_FEED
+        if mode == "G61.1":
+            assert np.all(log.why[feed] == CornerWhy.EXACT_STOP) and feed.sum() == 3
+        else:
+            assert feed.sum() == 0  # no corner at all: the joints are tangent
+    # At rest: a step of the S-curve stop around a vertex moves ≤ J T³/6-ish; 0.05 mm/s bounds.
+    assert np.all(speeds["G61.1"] <= 0.05)
+    assert np.all(speeds["G61"] >= 0.9 * 30.0)
+
+
+# --- small breaks pass at speed ------------------------------------------------------------------
+
+
+def _cam_polyline(breaks_rad: float, n: int = 200, step_mm: float = 0.5, mode: str = "G64"):
+    """A CAM polyline turning by ``breaks_rad`` at each of its n − 1 vertices."""
+    heading = np.arange(n) * breaks_rad
+    pts = np.cumsum(np.column_stack([np.cos(heading), np.sin(heading)]) * step_mm, axis=0)
+    lines = [f"G21 G90 {mode}", "G0 X0 Y0", "F3500"]
+    lines += [f"G1 X{x:.12f} Y{y:.12f}" for x, y in pts]
+    return "\n".join(lines + ["M2"]) + "\n"
+
+
+@pytest.mark.parametrize("mode", ["G64", "G61"])
+def test_cam_breaks_of_1e_5_rad_pass_at_full_speed(mode):
+    prog, r = run(_cam_polyline(1e-5, mode=mode))
+    log = r.plan.pieces.corners
+    feed = log.why != CornerWhy.RAPID_FEED
+    assert feed.sum() == 199 and np.all(log.action[feed] == CornerAction.PASS)
+    assert np.all(log.why[feed] == CornerWhy.SMALL_BREAK)
+    assert r.plan.pieces.kind_counts().get("ph", 0) == 0  # no blend needed
+    # The points stay on the polyline exactly (no blend cuts anything).
+    d = distance_to_path(r.samples.points_mm, programmed_path(prog))
+    assert d.max() <= 1e-9
+    # As fast as one straight move of the same length (the jerk-limited S-curve of 100 mm).
+    _, straight = run("G21 G90 G0 X0 Y0\nF3500\nG1 X100\nM2\n")
+    assert r.cycle_time_s == pytest.approx(straight.cycle_time_s, abs=2 * PERIOD)
+
+
+def test_small_break_rule_at_its_threshold():
+    """2v sin(θ/2) ≤ min(A T, J T², 4δ/T): the break just under θ* passes, just over stops
+    (G61, long lines: no crowding factor)."""
+    dv = min(LIM.a_max_mm_s2 * PERIOD, LIM.j_max_mm_s3 * PERIOD**2,
+             4 * LIM.chord_tolerance_mm / PERIOD)  # fmt: skip
+    assert pass_velocity_jump_mm_s(MACHINE) == pytest.approx(dv, rel=1e-15)
+    v = LIM.v_max_mm_s
+    theta = 2 * np.arcsin(dv / (2 * v))
+    for factor, action in ((0.999, CornerAction.PASS), (1.001, CornerAction.STOP)):
+        a = Line((0.0, 0.0, 0.0), (10.0, 0.0, 0.0), v, 1)
+        t = factor * theta
+        b = Line(a.end_mm, (10.0 + 10 * np.cos(t), 10 * np.sin(t), 0.0), v, 2)
+        pieces = segment_pieces([a, b], MACHINE)
+        assert list(pieces.corners.action) == [action]
+        caps = junction_caps(pieces)
+        assert (caps[1] > 0) == (action == CornerAction.PASS)
+
+
+def test_dense_polyline_breaks_add_up_within_a_servo_step():
+    """Breaks each under the threshold, on 1 µm moves (50 per servo step at 50 mm/s): their
+    jumps add up, so they are not passed at speed (blended under G64 instead)."""
+    theta = 0.5 * pass_velocity_jump_mm_s(MACHINE) / (2 * 50.0)
+    log = _log(_cam_polyline(theta, n=100, step_mm=0.001).replace("F3500", "F3000"))
+    feed = log.why != CornerWhy.RAPID_FEED
+    assert not np.any(log.action[feed] == CornerAction.PASS)
+
+
+# --- G64 Q: the naive CAM detector ---------------------------------------------------------------
+
+
+def test_g64_q_merges_within_q_of_every_original_vertex():
+    rng = np.random.default_rng(13)
+    q = 0.01
+    x = np.linspace(0.0, 50.0, 501)[1:]
+    y = np.where(x < 25.0, 0.0, x - 25.0) + rng.uniform(-0.4 * q, 0.4 * q, x.size)
+    text = (f"G21 G90 G64 P0.005 Q{q}\nG0 X0 Y0\nF1200\n"
+            + "".join(f"G1 X{a:.6f} Y{b:.6f}\n" for a, b in zip(x, y)) + "M2\n")  # fmt: skip
+    prog = interpret_text(text)
+    merged, source = merge_collinear(prog.segments)
+    lines = [s for s in merged if s.kind == "line"]
+    assert len(lines) < 20  # 500 moves, two straight stretches (≤ 256 moves a line)
+    # Every original vertex within Q of the merged polyline (exact point-to-segment).
+    starts = np.array([s.start_mm for s in lines], float)
+    ends = np.array([s.end_mm for s in lines], float)
+    orig = np.array([s.end_mm for s in prog.segments if s.kind == "line"], float)
+    d = distance_to_path(orig, (starts, ends, []), reach=1.0)
+    assert d.max() <= q
+    # The merged path is continuous and ends where the program ends.
+    np.testing.assert_array_equal(starts[1:], ends[:-1])
+    np.testing.assert_array_equal(ends[-1], orig[-1])
+    assert source[-1] == len(prog.segments) - 1
+    # Planned as merged: one piece per merged line or blend, samples within P + Q.
+    _, r = run(text)
+    smp = r.samples.points_mm
+    assert distance_to_path(smp, programmed_path(prog), reach=1.0).max() <= 0.005 + q
+
+
+def test_g64_q_does_not_merge_a_vertex_farther_than_q_or_a_feed_change():
+    base = "G21 G90 G64 P0.01 Q0.01\nG0 X0 Y0\n"
+    kept = interpret_text(base + "G1 X10 Y0.02 F600\nX20 Y0\nM2\n")
+    assert sum(s.kind == "line" for s in merge_collinear(kept.segments)[0]) == 2
+    feed = interpret_text(base + "G1 X10 Y0 F600\nX20 Y0 F700\nM2\n")
+    assert sum(s.kind == "line" for s in merge_collinear(feed.segments)[0]) == 2
+    merged = interpret_text(base + "G1 X10 Y0.005 F600\nX20 Y0\nM2\n")
+    assert sum(s.kind == "line" for s in merge_collinear(merged.segments)[0]) == 1
+
+
+# --- G64 P is no slower than G61 ------------------------------------------------------------------
+
+
+def test_blends_cost_at_most_2_percent_over_exact_stops_without_the_servo_check():
+    """The kinematic plans (dynamics off). Jerk-limited, slowing to a small blend's feed
+    (3.5 mm/s at the pentagram's 144° tips at P0.02, 12 mm/s at a square's 90° corners)
+    takes nearly as long as stopping, and the blend is then crossed at that feed: under G64
+    (always blended, as LinuxCNC) such corners cost at most 2 % over exact stops; a larger
+    tolerance (P0.2 at 90°) is faster than stopping."""
+    times = {m: run(pentagram(m))[1].cycle_time_s for m in ("G61", "G64 P0.02")}
+    assert times["G64 P0.02"] <= 1.02 * times["G61"]
+    square = "G21 G90 {}\nG0 X0 Y0\nF3500\nG1 X20\nY20\nX0\nY0\nM2\n"
+    t = {m: run(square.format(m))[1].cycle_time_s for m in ("G61", "G64 P0.02", "G64 P0.2")}
+    assert t["G64 P0.02"] <= 1.02 * t["G61"]
+    assert t["G64 P0.2"] < t["G61"]
+
+
+def test_default_mode_blends_like_g64():
+    """A program that sets no path mode runs in LinuxCNC's default, G64 without P."""
+    _, a = run(pentagram("G64"))
+    _, b = run(pentagram(""))
+    assert a.cycle_time_s == pytest.approx(b.cycle_time_s, rel=1e-12)
+    np.testing.assert_array_equal(a.plan.pieces.corners.action, b.plan.pieces.corners.action)
