@@ -232,3 +232,23 @@ def test_plan_explain_refuses_a_baseline(corner_program):
     res = CliRunner().invoke(main, ["plan", corner_program, "--explain", "--algorithm",
                                     "adaptive"])  # fmt: skip
     assert res.exit_code == 2
+
+
+def test_contour_shaping_reported_by_the_planner_is_used():
+    # A planner that shapes transitions (plan.shaped_by_contour) instead of lowering caps:
+    # a piece that no longer reaches its cap because of it is limited by the contour check.
+    import dataclasses
+
+    from nurbscnc.plan.explain import contour_limited
+
+    expl, run, mach = explain("G1 X1 F3000\n")  # the jerk-limited short line
+    plan = run.plan
+    shaped = type("ShapedPlan", (), {**{f.name: getattr(plan, f.name)
+                                        for f in dataclasses.fields(plan)},
+                                     "shaped_by_contour": np.array([True])})()  # fmt: skip
+    lowered, by_shape = contour_limited(shaped, plan.pieces.v_cap_mm_s)
+    assert not lowered.any() and by_shape.all()
+    prog = interpret_text("G1 X1 F3000\n")
+    again = explain_plan(prog, mach, shaped)
+    assert Limit(int(again.piece_limit[0])) == Limit.CONTOUR
+    assert Limit(int(expl.piece_limit[0])) == Limit.JERK

@@ -14,13 +14,14 @@ of :mod:`nurbscnc.machine.caps` (called, not copied), whole-array over the piece
   candidate was set by V_cf (the only formula left);
 
 then which of them is the piece's cruise cap (ties go to the first in :class:`Limit`
-order), whether the dynamics check lowered that cap (contour error, SPEC §8:
-:func:`contour_lowered`), and whether the profile reached the cap. A piece that does not
-reach its cap is limited by a corner stop at one of its ends (an exact stop at a tangent
-discontinuity), else by its length: the S-curve from its neighbours' junction speeds has no
-room to reach the cap — with the acceleration A_max reached on the way ("distance": the
-acceleration distance, or the look-ahead window), or without (“jerk”: J_max kept the
-acceleration from building up, SPEC §7's T = 2√(Δv/J) branch). A corner blend (G64 P) is
+order), whether the dynamics check lowered that cap or shaped the piece's transitions
+(contour error, SPEC §8: :func:`contour_limited`), and whether the profile reached the cap.
+A piece that does not reach its cap is limited by the check's shaping, else by a corner stop
+at one of its ends (an exact stop at a tangent discontinuity), else by its length: the
+S-curve from its neighbours' junction speeds has no room to reach the cap — with the
+acceleration limit reached on the way ("distance": the acceleration distance, or the
+look-ahead window), or without ("jerk": J_max kept the acceleration from building up,
+SPEC §7's T = 2√(Δv/J) branch). A corner blend (G64 P) is
 its own limit: its curvature sets its feed because the corner was blended (not stopped).
 
 Time waited at the end of a piece counts too: programmed dwells (G4; M0/M1/M60 pauses count
@@ -196,12 +197,28 @@ class Explanation:
 
 
 # -- attribution, one step each ----------------------------------------------------------------
-def contour_lowered(plan, cap_before_mm_s: np.ndarray) -> np.ndarray:
-    """Which pieces (k,) the dynamics check slowed (contour error, SPEC §8): their final cap
-    ``plan.caps_mm_s`` is below the cap they had before the check. The one place that says
-    what "lowered by the contour check" means (a check that shapes transitions instead of
-    lowering caps reports it here)."""
-    return np.asarray(plan.caps_mm_s) < np.asarray(cap_before_mm_s) * (1.0 - REL_TOL)
+def contour_limited(plan, cap_before_mm_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """What the dynamics check (contour error, SPEC §8) did to each piece, two masks (k,):
+    ``lowered``, its final cap ``plan.caps_mm_s`` is below the cap it had before the check;
+    ``shaped``, the check changed its speed transitions (a planner that shapes the descent
+    into and the rise out of a stop says so in ``plan.shaped_by_contour``; without that
+    field nothing is shaped). The one place that says what "limited by the contour check"
+    means."""
+    lowered = np.asarray(plan.caps_mm_s) < np.asarray(cap_before_mm_s) * (1.0 - REL_TOL)
+    shaped = getattr(plan, "shaped_by_contour", None)
+    shaped = np.zeros_like(lowered) if shaped is None else np.asarray(shaped, dtype=bool)
+    return lowered, shaped
+
+
+def acceleration_limits_mm_s2(plan, machine) -> np.ndarray:
+    """The tangential acceleration limit [mm/s²] each piece was planned with (k,): the
+    smaller of its rise and descent limits when the plan records them (``plan.limits``),
+    else the per-axis path limit of :func:`~nurbscnc.plan.axes.piece_limits`."""
+    lim = getattr(plan, "limits", None)
+    if lim is not None:
+        return np.minimum(np.asarray(lim.a_up_mm_s2, dtype=float),
+                          np.asarray(lim.a_down_mm_s2, dtype=float))  # fmt: skip
+    return np.asarray(piece_limits(plan.pieces, machine).a_mm_s2, dtype=float)
 
 
 def piece_feeds_mm_s(segments, pieces) -> np.ndarray:
@@ -324,13 +341,17 @@ def explain_plan(program, machine, plan) -> Explanation:
     pieces, profile = plan.pieces, plan.profile
     cap_code, before = cap_limits(segments, pieces, machine)
     final = np.asarray(plan.caps_mm_s, dtype=float)
-    code = np.where(contour_lowered(plan, before), Limit.CONTOUR, cap_code).astype(np.int8)
+    lowered, shaped = contour_limited(plan, before)
+    code = np.where(lowered, Limit.CONTOUR, cap_code).astype(np.int8)
     peak, a_peak = profile_extremes(profile)
     short = peak < final * (1.0 - REL_TOL)
-    a_lim = np.asarray(piece_limits(pieces, machine).a_mm_s2, dtype=float)
+    a_lim = acceleration_limits_mm_s2(plan, machine)
     stop = corner_stop_ends(pieces)
-    reason = np.where(stop, Limit.CORNER_STOP,
-                      np.where(a_peak >= a_lim * (1.0 - REL_TOL), Limit.DISTANCE, Limit.JERK))
+    # Below its cap: the check's shaping, else a corner stop, else its length (A reached or
+    # not on the way).
+    reason = np.where(shaped, Limit.CONTOUR, np.where(
+        stop, Limit.CORNER_STOP,
+        np.where(a_peak >= a_lim * (1.0 - REL_TOL), Limit.DISTANCE, Limit.JERK)))
     code = np.where(short & (np.asarray(pieces.length_mm) > 0.0), reason, code).astype(np.int8)
     t_piece = np.diff(np.append(profile.piece_start_time_s, profile.duration_s))
     feed = np.where(np.asarray(pieces.rapid), machine.limits.rapid_mm_s,
