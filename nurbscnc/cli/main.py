@@ -1127,10 +1127,13 @@ def simulate(source, as_json, plot_dir, hold, **settings):
         os.makedirs(plot_dir, exist_ok=True)
         plots.plot_contour_error({"contour (true)": (sim.t_s, contour.true_mm * 1000.0),
                                   "contour (eq. 29)": (sim.t_s, np.abs(contour.eq29_mm) * 1000)},
-                                 os.path.join(plot_dir, "contour_error.png"))  # fmt: skip
+                                 os.path.join(plot_dir, "contour_error.png"),
+                                 title=f"{name}: simulated contour error",
+                                 eps_max_um=mach.limits.contour_tolerance_mm * 1000.0)
         plots.plot_axis_errors({"servo": (sim.t_s, sim.axis_error_mm[:, 0] * 1000.0,
                                           sim.axis_error_mm[:, 1] * 1000.0)},
-                               os.path.join(plot_dir, "axis_errors.png"))  # fmt: skip
+                               os.path.join(plot_dir, "axis_errors.png"),
+                               title=f"{name}: simulated axis errors")  # fmt: skip
     if as_json:
         from nurbscnc.plan.report import metrics_json
 
@@ -1176,7 +1179,7 @@ def compare(program, as_json, plot_dir, angles, block, algorithms, machine, over
     runs = compare_block(seg, mach, tuple(angles) or (0.0,), tuple(algorithms) or ALGORITHMS)
     rows = [row(r) for r in runs]
     if plot_dir:
-        write_compare_plots(runs, plot_dir)
+        write_compare_plots(runs, plot_dir, prog.name, mach.limits.contour_tolerance_mm * 1e3)
     if as_json:
         click.echo(json.dumps({"ok": True, "program": prog.name, "rows": rows,
                                **machine_json(mach)}))
@@ -1194,8 +1197,12 @@ def compare(program, as_json, plot_dir, angles, block, algorithms, machine, over
     out.print(table)
 
 
-def write_compare_plots(runs, plot_dir: str) -> list[str]:
-    """Figures 1, 2/4/6 and 7 of the paper for a comparison (PNG files in ``plot_dir``)."""
+def write_compare_plots(runs, plot_dir: str, name: str | None = None,
+                        eps_max_um: float | None = None) -> list[str]:  # fmt: skip
+    """Figures 1, 2/4/6 and 7 of the paper for a comparison (PNG files in ``plot_dir``),
+    titled with the program's ``name`` when given; ``eps_max_um`` [µm] drawn on the contour
+    error figure."""
+    head = f"{name}: " if name else ""
     from nurbscnc.output import plots
     from nurbscnc.plan.report import corner_polylines
 
@@ -1208,14 +1215,20 @@ def write_compare_plots(runs, plot_dir: str) -> list[str]:
         if ours is not None:
             corners = corner_polylines(ours.plan.pieces)
             written.append(plots.plot_path(ours.path_mm, corners,
-                                           os.path.join(plot_dir, f"path_{tag}.png")))
+                                           os.path.join(plot_dir, f"path_{tag}.png"),
+                                           title=f"{head}tool path and corner regions, "
+                                                 f"{angle:g}°"))  # fmt: skip
         written.append(plots.plot_feed_profiles(
             {r.algorithm: (r.samples.t_s, r.samples.v_mm_s) for r in group},
-            os.path.join(plot_dir, f"feed_{tag}.png")))  # fmt: skip
+            os.path.join(plot_dir, f"feed_{tag}.png"),
+            title=f"{head}feed profiles, {angle:g}°"))  # fmt: skip
         written.append(plots.plot_contour_error(
             {r.algorithm: (r.sim_t_s, r.contour_true_um) for r in group},
-            os.path.join(plot_dir, f"contour_{tag}.png")))  # fmt: skip
+            os.path.join(plot_dir, f"contour_{tag}.png"),
+            title=f"{head}contour error (true distance), {angle:g}°",
+            eps_max_um=eps_max_um))  # fmt: skip
         written.append(plots.plot_axis_errors(
             {r.algorithm: (r.sim_t_s, r.axis_error_um[:, 0], r.axis_error_um[:, 1])
-             for r in group}, os.path.join(plot_dir, f"axis_{tag}.png")))  # fmt: skip
+             for r in group}, os.path.join(plot_dir, f"axis_{tag}.png"),
+            title=f"{head}axis tracking errors, {angle:g}°"))  # fmt: skip
     return written
