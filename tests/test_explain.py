@@ -252,3 +252,9 @@ def test_contour_shaping_reported_by_the_planner_is_used():
     again = explain_plan(prog, mach, shaped)
     assert Limit(int(again.piece_limit[0])) == Limit.CONTOUR
     assert Limit(int(expl.piece_limit[0])) == Limit.JERK
+
+
+def test_json_lines_equal_the_one_line_entries():
+    expl, _, _ = explain("G0 X10\nG1 X30 F600\nG4 P0.5\nG1 X40\nG2 X42 I1\n")
+    assert expl.line_dicts() == [expl.line_dict(i) for i in range(expl.line.size)]
+    assert [d["kind"] for d in expl.line_dicts()] == ["rapid", "line", "dwell", "line", "arc"]

@@ -170,13 +170,18 @@ class Explanation:
         }
 
     def corner_dicts(self, stops_only: bool = False) -> list[dict]:
-        """The corners as JSON entries (docs/json.md, ``explain.corners``)."""
+        """The corners as JSON entries (docs/json.md, ``explain.corners``), from whole
+        columns."""
         c = self.corners
-        rows = np.flatnonzero(c.action == CornerAction.STOP) if stops_only else range(len(c))
-        return [{"line": int(c.line[i]), "point_mm": [float(x) for x in c.point_mm[i]],
-                 "turning_deg": float(np.degrees(c.turning_rad[i])),
-                 "action": CornerAction(int(c.action[i])).name.lower(),
-                 "why": CornerWhy(int(c.why[i])).name.lower()} for i in rows]  # fmt: skip
+        rows = np.flatnonzero(c.action == CornerAction.STOP) if stops_only else slice(None)
+        actions = {int(a): a.name.lower() for a in CornerAction}
+        whys = {int(w): w.name.lower() for w in CornerWhy}
+        return [{"line": ln, "point_mm": pt, "turning_deg": deg, "action": actions[a],
+                 "why": whys[w]}
+                for ln, pt, deg, a, w in zip(
+                    c.line[rows].tolist(), c.point_mm[rows].tolist(),
+                    np.degrees(c.turning_rad[rows]).tolist(), c.action[rows].tolist(),
+                    c.why[rows].tolist())]  # fmt: skip
 
     def corner_counts(self) -> dict[str, int]:
         """How many corners got each (action, why): ``{"stop/exact_path": 3, ...}``."""
@@ -186,11 +191,29 @@ class Explanation:
         return {f"{CornerAction(int(a)).name.lower()}/{CornerWhy(int(w)).name.lower()}": int(n)
                 for (a, w), n in zip(keys.T.tolist(), counts.tolist())}  # fmt: skip
 
+    def line_dicts(self) -> list[dict]:
+        """Every line's JSON entry (as :meth:`line_dict`, built from whole columns)."""
+        keys = [m.key for m in Limit]
+        # The nonzero times of each line, in Limit order (most lines have one or two).
+        r, c = np.nonzero(self.limit_time_s > 0.0)
+        times: list[dict] = [{} for _ in range(self.line.size)]
+        for i, j, x in zip(r.tolist(), c.tolist(), self.limit_time_s[r, c].tolist()):
+            times[i][keys[j]] = x
+        feed = [None if not np.isfinite(f) else f for f in self.feed_mm_s.tolist()]
+        limit = [keys[c] for c in self.limit.tolist()]
+        return [{"line": ln, "kind": kd, "length_mm": le, "time_s": t, "wait_s": w,
+                 "feed_programmed_mm_s": f, "feed_peak_mm_s": pk, "feed_mean_mm_s": mn,
+                 "limit": lim, "limit_time_s": row}
+                for ln, kd, le, t, w, f, pk, mn, lim, row in zip(
+                    self.line.tolist(), self.kind, self.length_mm.tolist(), self.time_s.tolist(),
+                    self.wait_s.tolist(), feed, self.peak_mm_s.tolist(),
+                    self.mean_mm_s.tolist(), limit, times)]  # fmt: skip
+
     def as_dict(self) -> dict:
         """The ``explain`` object of ``plan --json --explain`` (every line, every corner)."""
         return {
             "limit_time_s": self.total_by_limit_s(),
-            "lines": [self.line_dict(i) for i in range(self.line.size)],
+            "lines": self.line_dicts(),
             "corners": self.corner_dicts(),
             "corner_counts": self.corner_counts(),
         }
@@ -221,14 +244,34 @@ def acceleration_limits_mm_s2(plan, machine) -> np.ndarray:
     return np.asarray(piece_limits(plan.pieces, machine).a_mm_s2, dtype=float)
 
 
-def piece_feeds_mm_s(segments, pieces) -> np.ndarray:
+@dataclass(frozen=True, eq=False)
+class SegmentColumns:
+    """What the explanation reads of the program's n segments, in one pass: ``kind`` (n,)
+    names (object array), ``feed_mm_s`` (n,) programmed feeds [mm/s] (0 without one),
+    ``line`` (n,) source lines, ``seconds`` (n,) the hold of dwells and pauses [s]."""
+
+    kind: np.ndarray
+    feed_mm_s: np.ndarray
+    line: np.ndarray
+    seconds: np.ndarray
+
+    @classmethod
+    def of(cls, segments) -> SegmentColumns:
+        rows = [(s.kind, getattr(s, "feed_mm_s", 0.0), s.line) for s in segments]
+        kind = np.array([r[0] for r in rows], dtype=object)
+        stop = np.flatnonzero(np.isin(kind, STOP_KINDS))
+        seconds = np.zeros(len(rows))
+        seconds[stop] = [stop_seconds(segments[i]) for i in stop.tolist()]
+        return cls(kind, np.array([r[1] for r in rows], dtype=float),
+                   np.array([r[2] for r in rows], dtype=np.int64), seconds)  # fmt: skip
+
+
+def piece_feeds_mm_s(seg: SegmentColumns, pieces) -> np.ndarray:
     """The programmed feed [mm/s] of each piece's segment (k,)."""
-    seg_feed = np.fromiter((getattr(s, "feed_mm_s", 0.0) for s in segments), dtype=float,
-                           count=len(segments))  # fmt: skip
-    return seg_feed[np.asarray(pieces.segment, dtype=np.intp)] if len(pieces) else seg_feed[:0]
+    return seg.feed_mm_s[np.asarray(pieces.segment, dtype=np.intp)]
 
 
-def cap_limits(segments, pieces, machine) -> tuple[np.ndarray, np.ndarray]:
+def cap_limits(seg: SegmentColumns, pieces, machine) -> tuple[np.ndarray, np.ndarray]:
     """What set each piece's cruise cap (k,) :class:`Limit` codes, and the cap [mm/s] before
     the dynamics check (the piece's own cap and its axis limit): candidates from
     :mod:`nurbscnc.machine.caps` (module doc)."""
@@ -237,7 +280,7 @@ def cap_limits(segments, pieces, machine) -> tuple[np.ndarray, np.ndarray]:
     rapid = np.asarray(pieces.rapid, dtype=bool)
     kappa = np.abs(np.asarray(pieces.kappa_max_per_mm, dtype=float))
     curved = np.asarray(pieces.kind) != Kind.LINE
-    feed = piece_feeds_mm_s(segments, pieces)
+    feed = piece_feeds_mm_s(seg, pieces)
     axis_v = np.asarray(piece_limits(pieces, machine).v_mm_s, dtype=float)
     inf = np.full(k, np.inf)
     cand = np.empty((6, k))
@@ -256,8 +299,7 @@ def cap_limits(segments, pieces, machine) -> tuple[np.ndarray, np.ndarray]:
     # Below every candidate the columns can recompute: V_cf (eq. 24) of a NURBS corner piece.
     code = np.where(before < lowest * (1.0 - REL_TOL), Limit.CURVATURE, code)
     # A blend of a G64 P corner (a PH piece on a line or arc segment) slowed by its curvature.
-    seg_kind = np.array([s.kind for s in segments], dtype=object)
-    on_nurbs = (seg_kind[np.asarray(pieces.segment, dtype=np.intp)] == "nurbs") if k else rapid
+    on_nurbs = seg.kind[np.asarray(pieces.segment, dtype=np.intp)] == "nurbs"
     blend = (np.asarray(pieces.kind) == Kind.PH) & ~on_nurbs
     slowed = np.isin(code, (Limit.CHORD, Limit.NORMAL, Limit.CURVATURE))
     code = np.where(blend & slowed, Limit.BLEND, code)
@@ -316,30 +358,28 @@ def corner_stop_ends(pieces) -> np.ndarray:
     return corner[:-1] | corner[1:]
 
 
-def waits_s(segments, pieces) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def waits_s(seg: SegmentColumns, pieces) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Programmed waits and settling: (dwell lines (m,), their seconds (m,), settle [s] after
     each piece (k,)). A dwell or pause segment charges the piece before it (the planner's
     rule: the last piece with a smaller segment index, else the first piece); what
     ``dwell_after_s`` holds beyond that is the planner's own settle time."""
-    stops = [(i, s) for i, s in enumerate(segments) if s.kind in STOP_KINDS]
-    lines = np.array([s.line for _, s in stops], dtype=np.int64)
-    seconds = np.array([stop_seconds(s) for _, s in stops], dtype=float)
+    idx = np.flatnonzero(np.isin(seg.kind, STOP_KINDS))
+    seconds = seg.seconds[idx]
     k = len(pieces)
     programmed = np.zeros(k)
-    if stops and k:
-        idx = np.array([i for i, _ in stops], dtype=np.int64)
+    if idx.size and k:
         row = np.maximum(np.searchsorted(np.asarray(pieces.segment), idx, side="left") - 1, 0)
         np.add.at(programmed, row, seconds)
     settle = np.maximum(np.asarray(pieces.dwell_after_s, dtype=float) - programmed, 0.0)
     settle[settle < 1e-12] = 0.0
-    return lines, seconds, settle
+    return seg.line[idx], seconds, settle
 
 
 def explain_plan(program, machine, plan) -> Explanation:
     """Why ``plan`` (of ``program`` on ``machine``) runs at the feed it does (module doc)."""
-    segments = program.segments
+    seg = SegmentColumns.of(program.segments)
     pieces, profile = plan.pieces, plan.profile
-    cap_code, before = cap_limits(segments, pieces, machine)
+    cap_code, before = cap_limits(seg, pieces, machine)
     final = np.asarray(plan.caps_mm_s, dtype=float)
     lowered, shaped = contour_limited(plan, before)
     code = np.where(lowered, Limit.CONTOUR, cap_code).astype(np.int8)
@@ -355,8 +395,8 @@ def explain_plan(program, machine, plan) -> Explanation:
     code = np.where(short & (np.asarray(pieces.length_mm) > 0.0), reason, code).astype(np.int8)
     t_piece = np.diff(np.append(profile.piece_start_time_s, profile.duration_s))
     feed = np.where(np.asarray(pieces.rapid), machine.limits.rapid_mm_s,
-                    piece_feeds_mm_s(segments, pieces))  # fmt: skip
-    dwell_lines, dwell_s, settle = waits_s(segments, pieces)
+                    piece_feeds_mm_s(seg, pieces))  # fmt: skip
+    dwell_lines, dwell_s, settle = waits_s(seg, pieces)
 
     # Per source line: every piece and every dwell of that line number.
     p_line = np.asarray(pieces.line, dtype=np.int64)
@@ -381,7 +421,10 @@ def explain_plan(program, machine, plan) -> Explanation:
     best = np.argmax(limit_time, axis=1)
     best = np.where(limit_time.max(axis=1) > 0.0, best,
                     np.where(np.isin(lines, dwell_lines), Limit.DWELL, code_of_line(pi, code, n)))
-    kinds = _line_kinds(segments, lines)
+    # The kind of each line's first segment.
+    order = np.argsort(seg.line, kind="stable")
+    first = order[np.searchsorted(seg.line[order], lines, side="left")]
+    kinds = tuple(seg.kind[first].tolist())
     return Explanation(code, cap_code, final, t_piece, peak, feed, lines, kinds, length, time,
                        wait, line_feed, line_peak, mean, limit_time, best.astype(np.int8),
                        pieces.corners, float(plan.cycle_time_s))  # fmt: skip
@@ -392,11 +435,3 @@ def code_of_line(piece_line_index: np.ndarray, code: np.ndarray, n: int) -> np.n
     out = np.full(n, Limit.FEED, dtype=np.int64)
     out[piece_line_index] = code
     return out
-
-
-def _line_kinds(segments, lines: np.ndarray) -> tuple:
-    """The kind of the first segment on each line of ``lines`` (sorted)."""
-    first: dict[int, str] = {}
-    for s in segments:
-        first.setdefault(s.line, s.kind)
-    return tuple(first.get(int(x), "line") for x in lines.tolist())
