@@ -194,6 +194,11 @@ def test_internal_error_exits_1_without_traceback(monkeypatch):
     assert "RuntimeError: simulated fault" in result.stderr
     assert "Traceback" not in result.output
     assert result.stdout == ""
+    # With --json the failure is also the JSON error object (docs/json.md), still exit 1.
+    result = run(["check", NACA, "--json"])
+    assert result.exit_code == 1
+    error = json.loads(result.stdout)
+    assert error["ok"] is False and "RuntimeError: simulated fault" in error["errors"][0]["message"]
 
 
 @pytest.mark.parametrize(

@@ -247,14 +247,19 @@ def handle_errors(func):
             # without a file name is a write to stdout failing (a full disk, a dead device).
             if os.environ.get("NURBSCNC_DEBUG"):
                 raise
+            what = "write to standard output" if exc.filename is None else f"access {exc.filename}"
+            message = f"cannot {what}: {exc.strerror or exc}"
             if exc.filename is None:
                 _silence_stdout()
-            what = "write to standard output" if exc.filename is None else f"access {exc.filename}"
-            err.print(f"{filename}: error: cannot {what}: {exc.strerror or exc}", markup=False)
+            elif kwargs.get("as_json"):
+                _echo_json_error(message)
+            err.print(f"{filename}: error: {message}", markup=False)
             sys.exit(EXIT_IO)
         except Exception as exc:  # a bug: say so, without a traceback unless asked
             if os.environ.get("NURBSCNC_DEBUG"):
                 raise
+            if kwargs.get("as_json"):
+                _echo_json_error(f"internal error: {type(exc).__name__}: {exc}")
             err.print(
                 f"{filename}: internal error: {type(exc).__name__}: {exc}\n"
                 "This is a bug in nurbscnc; rerun with NURBSCNC_DEBUG=1 for a traceback.",
@@ -263,6 +268,13 @@ def handle_errors(func):
             sys.exit(EXIT_INTERNAL)
 
     return wrapper
+
+
+def _echo_json_error(message: str) -> None:
+    """The JSON error object of a failure without a source position, on stdout (a dead
+    stdout is ignored: the message goes to stderr anyway)."""
+    with contextlib.suppress(OSError):
+        click.echo(json.dumps(usage_error_json(message)))
 
 
 def _display_name(name) -> str:
@@ -361,8 +373,7 @@ class _Group(click.Group):
         try:
             code = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
         except click.ClickException as exc:
-            with contextlib.suppress(OSError):
-                click.echo(json.dumps(usage_error_json(exc.format_message())))
+            _echo_json_error(exc.format_message())
             exc.show()
             sys.exit(exc.exit_code)
         except click.exceptions.Abort:
