@@ -793,8 +793,10 @@ def plan(program, as_json, dump_profile, explain, explain_all, plot_dir, **setti
     if explain and baseline:
         raise click.UsageError("--explain needs the look-ahead planner (a baseline has no "
                                "caps or profile to explain)")
+    # --explain shows the source lines: the program is read once, here (stdin too).
+    text = read_program_text(program) if explain else None
     with progress_display(show_progress(as_json), _display_name(program)) as say:
-        prog, mach, run = make_plan(program, **settings, progress=say)
+        prog, mach, run = make_plan(program, **settings, text=text, progress=say)
         say("summarising")
         summary = summary_of(prog, mach, run)
     expl = None
@@ -821,23 +823,13 @@ def plan(program, as_json, dump_profile, explain, explain_all, plot_dir, **setti
     print_plan_summary(prog, mach, summary, err if dump_profile == "-" else out)
     if explain:
         print_explanation(expl, out, None if explain_all else EXPLAIN_LINES,
-                          source_lines_of(program))
+                          text.splitlines())
 
 
 #: Lines ``plan --explain`` shows (the costliest); ``--explain-all`` shows every line.
 EXPLAIN_LINES = 20
 #: Stopped corners ``plan --explain`` lists.
 EXPLAIN_CORNERS = 10
-
-
-def source_lines_of(program: str) -> list[str]:
-    """The text lines of a program file (for --explain), [] for stdin or an unreadable file."""
-    if program == "-":
-        return []
-    try:
-        return read_program_text(program).splitlines()
-    except NurbsCncError:
-        return []
 
 
 def _feed_text(v_mm_s: float) -> str:
@@ -856,10 +848,10 @@ def print_explanation(expl, out: Console, count: int | None, source: list[str]) 
     out.print(f"  time by limit: {shares or 'none'}", markup=False)
     n = expl.line.size
     rows = np.arange(n) if count is None else expl.costliest(count)
-    table = Table(title=None if count is None else f"the {min(count, n)} costliest of {n} lines",
-                  show_edge=False)  # fmt: skip
+    which = f"all {n} lines" if count is None else f"the {min(count, n)} costliest of {n} lines"
+    table = Table(title=f"{which} (feeds in mm/min)", show_edge=False)
     for col, justify in (("line", "right"), ("source", "left"), ("time [s]", "right"),
-                         ("share", "right"), ("F [mm/min]", "right"), ("peak", "right"),
+                         ("share", "right"), ("F", "right"), ("peak", "right"),
                          ("mean", "right"), ("limit", "left")):  # fmt: skip
         table.add_column(col, justify=justify)
     for i in rows.tolist():
