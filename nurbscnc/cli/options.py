@@ -88,8 +88,8 @@ def planning_options(func):
     )(func)  # fmt: skip
     func = click.option(
         "--blend-tolerance", type=click.FloatRange(min=0.0), default=None, metavar="MM",
-        help="Blend G1/G2/G3 corners by PH quintics within this distance [mm] (overrides the "
-             "program's G64 P; 0: stop exactly at every corner).",
+        help="Blend every corner by PH quintics within this distance [mm] (overrides the "
+             "program's G61/G61.1/G64 P; 0: stop exactly at every corner).",
     )(func)  # fmt: skip
     func = click.option(
         "--interpolator", type=_choices(Interpolator), default=Interpolator.EXACT.value,

@@ -41,12 +41,14 @@ BLEND_EXACT_STOP = -1.0
 
 def path_control(path_mode: int, p_mm: float | None) -> float:
     """The ``blend_mm`` a segment carries for path-control mode ``path_mode`` (G × 10: 610,
-    611, 640) and the G64 P value ``p_mm`` [mm] (None: no P word)."""
+    611, 640) and the G64 P value ``p_mm`` [mm] (None: no P word). As LinuxCNC 2.9, whose
+    interpreter gives ``G64`` and ``G64 P0`` the same canonical call (continuous, tolerance
+    0: "best speed"), P0 means G64 without P."""
     if path_mode == 611:
         return BLEND_EXACT_STOP
     if path_mode == 610:
         return 0.0
-    return BLEND_MACHINE if p_mm is None else float(p_mm)
+    return BLEND_MACHINE if not p_mm else float(p_mm)
 
 
 @dataclass(frozen=True, eq=False, slots=True)
@@ -56,7 +58,7 @@ class Line:
     ``rapid`` marks G0 (the planner moves it at the machine's rapid rate; ``feed_mm_s`` is 0).
     ``blend_mm`` is the path-control mode in force at its end (:func:`path_control`): the
     G64 P tolerance [mm] (> 0), :data:`BLEND_MACHINE` (G64 without P: the machine's path
-    tolerance), 0 (G61, G64 P0: exact path, sharp corners stop) or :data:`BLEND_EXACT_STOP`
+    tolerance; also G64 P0), 0 (G61: exact path, sharp corners stop) or :data:`BLEND_EXACT_STOP`
     (G61.1: stop at the end of every block). ``naive_mm``: the G64 Q tolerance [mm] of the
     naive CAM detector (consecutive feed lines within it of one line are merged; 0: off).
     The end points

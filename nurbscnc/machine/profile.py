@@ -617,6 +617,7 @@ def _build(data: dict, rep: _Reporter) -> Machine:
     settings = copy.deepcopy(data)
     settings["limits"].setdefault("rapid_mm_min", lim["v_max_mm_min"])
     settings["limits"].setdefault("max_points", DEFAULT_MAX_POINTS)
+    settings["limits"].setdefault("path_tolerance_um", lim["contour_tolerance_um"])
     settings.setdefault("servo", {}).setdefault("period_ms", DEFAULT_PERIOD_MS)
     settings["servo"] = {"period_ms": settings["servo"].pop("period_ms"), **settings["servo"]}
     return Machine(limits=limits, servo=servo, steps=steps, soft_limits=soft, source=rep.source,

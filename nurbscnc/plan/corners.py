@@ -82,12 +82,12 @@ class CornerWhy(IntEnum):
     """Why a corner was treated as it was (the planner's reason, for ``plan --explain``)."""
 
     BLENDED = 0  #: G64 (with or without P): blended
-    SMALL_BREAK = 1  #: the break is within the tolerance at full speed
+    SMALL_BREAK = 1  #: the break is within the limits at full speed (passed, not blended)
     EXACT_PATH = 2  #: G61: exact path, sharp corners stop
     EXACT_STOP = 3  #: G61.1: every block end stops
-    ZERO_TOLERANCE = 4  #: G64 P0 (or --blend-tolerance 0)
+    ZERO_TOLERANCE = 4  #: --blend-tolerance 0 (G64 P0 is G64 without P, as in LinuxCNC)
     NO_BLEND_FITS = 5  #: no blend within the tolerance fits the neighbouring pieces
-    NOT_BLENDABLE = 6  #: this kind of joint cannot be blended (for example a cusp or 3-D turn)
+    NOT_BLENDABLE = 6  #: this kind of joint cannot be blended (a cusp, reversal or 3-D turn)
     DWELL_OR_PAUSE = 7  #: a dwell, pause or program stop at the junction
     RAPID_FEED = 8  #: a rapid meets a feed move (the tool stops between them)
     PROGRAM_END = 9  #: start or end of the program

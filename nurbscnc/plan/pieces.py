@@ -272,7 +272,7 @@ class PieceList(Sequence):
     def kind_counts(self) -> dict[str, int]:
         """How many pieces of each kind (names of :data:`KIND_NAMES`, kinds present only)."""
         counts = np.bincount(self.kind, minlength=len(Kind))
-        rapid = int(np.count_nonzero(self.rapid))
+        rapid = int(np.count_nonzero(self.rapid & (self.kind == Kind.LINE)))  # blends: "ph"
         named = {name: 0 for name in KIND_NAMES}
         for code, c in enumerate(counts.tolist()):
             named[_NAME_OF[Kind(code)]] += c
@@ -409,8 +409,8 @@ def segment_pieces(segments, machine: Machine, options: PlanOptions | None = Non
     program's indices). Breaks small enough to pass at speed are marked ``pass_after``
     (:func:`_small_break`, every mode but at G61.1 block ends); G61.1 stops at the end of
     every block (``stop_after``); G64 corners are blended within their tolerance
-    (:func:`apply_blends`: P, or the machine's path tolerance without P); G61 and G64 P0
-    stop at every other break (:func:`junction_caps`); :func:`corner_log` records it all.
+    (:func:`apply_blends`: P, or the machine's path tolerance without P or with P0); G61
+    stops at every other break (:func:`junction_caps`); :func:`corner_log` records it all.
 
     Lines and rapids are gathered into columns in one pass (no object per line); arcs and
     NURBS blocks become pieces one segment at a time. Dwells and pauses (:data:`STOP_KINDS`)
@@ -913,11 +913,11 @@ def corner_log(pieces: PieceList, tried: _Corners | None, machine: Machine,
     path order: the blended corners (``tried``, with the rows of ``pieces`` their blends
     took), and every junction of the final ``pieces`` that is not tangent or where the tool
     stops. Reasons for a stop, first that applies: a rapid meets a feed move; G61.1 block end;
-    a dwell or pause; a zero-length piece or a cusp or reversal (not blendable); G61.1 / G61
-    or G64 P0 (exact path) / ``--blend-tolerance 0`` (zero tolerance) where no tolerance
-    allows a blend; a columnar blend meeting a break (not blendable); else no blend fitted
-    within the tolerance (the pieces are too short for it, or the geometry is out of plane:
-    a helix, a 3-D turn)."""
+    a dwell or pause; a zero-length piece, a cusp, a reversal or a 3-D turn (a helix, an arc
+    or curve out of the corner plane: not blendable); G61.1 / G61 (exact path) /
+    ``--blend-tolerance 0`` (zero tolerance) where no tolerance allows a blend; a columnar
+    blend meeting a break (not blendable); else no blend fitted within the tolerance (the
+    pieces are too short for one, or its PH quintic has a loop or cusp)."""
     k = len(pieces)
     keys, lines, points, turns, acts, whys = [], [], [], [], [], []
     if tried is not None and tried.ok.any():
@@ -935,9 +935,12 @@ def corner_log(pieces: PieceList, tried: _Corners | None, machine: Machine,
         corner = stopped | ~regular | (turning > SMOOTH_JUNCTION_RAD)
         j = np.flatnonzero(corner)
         if j.size:
-            act = np.where(passable[j] & ~stopped[j], CornerAction.PASS, CornerAction.STOP)
-            why = _stop_reasons(pieces, j, turning[j], regular[j], machine, options)
-            why = np.where(act == CornerAction.PASS, CornerWhy.SMALL_BREAK, why)
+            passed = passable[j] & ~stopped[j]
+            act = np.where(passed, CornerAction.PASS, CornerAction.STOP)
+            why = np.full(j.size, CornerWhy.SMALL_BREAK, dtype=np.int8)
+            st = ~passed
+            why[st] = _stop_reasons(pieces, j[st], turning[j[st]], regular[j[st]], machine,
+                                    options)  # fmt: skip
             keys.append(j + 1)  # the row after the junction (a blend row's junctions are smooth)
             lines.append(pieces.line[j])
             points.append(pieces.end_mm[:, j].T)
@@ -975,7 +978,7 @@ def _stop_reasons(pieces: PieceList, j: np.ndarray, turning: np.ndarray, regular
     columnar = np.isin(j, pieces.ph_rows) | np.isin(j + 1, pieces.ph_rows)
     why[columnar] = CornerWhy.NOT_BLENDABLE
     zero = tol == 0.0
-    why[zero] = CornerWhy.EXACT_PATH  # G61, G64 P0
+    why[zero] = CornerWhy.EXACT_PATH  # G61
     if options.blend_tolerance_mm == 0.0:
         why[zero] = CornerWhy.ZERO_TOLERANCE
     exact_stop = (blend[j] < 0.0) | (blend[j + 1] < 0.0)
@@ -983,12 +986,35 @@ def _stop_reasons(pieces: PieceList, j: np.ndarray, turning: np.ndarray, regular
     degenerate = (~regular | (turning > np.pi - MIN_REVERSAL_RAD) | (length[j] == 0.0)
                   | (length[j + 1] == 0.0))  # fmt: skip
     why[degenerate] = CornerWhy.NOT_BLENDABLE
+    # Two lines always lie in one plane: only corners with a curved piece can be 3-D turns.
+    objects = np.zeros(len(pieces), dtype=bool)
+    objects[list(pieces.objects)] = True
+    failed = np.flatnonzero((why == CornerWhy.NO_BLEND_FITS) & (objects[j] | objects[j + 1]))
+    why[failed[_out_of_plane(pieces, j[failed])]] = CornerWhy.NOT_BLENDABLE
     why[stop_after[j]] = CornerWhy.DWELL_OR_PAUSE
     block_end = (stop_after[j] & (blend[j] < 0.0) & (seg[j] != seg[j + 1])
                  & (pieces.dwell_after_s[j] == 0.0))  # fmt: skip
     why[block_end] = CornerWhy.EXACT_STOP
     why[rapid[j] != rapid[j + 1]] = CornerWhy.RAPID_FEED
     return why
+
+
+def _out_of_plane(pieces: PieceList, j: np.ndarray) -> np.ndarray:
+    """Which junctions ``j`` join pieces that do not lie in the plane of their two tangents
+    (a helix, an arc or a curve leaving the corner plane: a 3-D turn no planar blend can
+    round). One geometry check per junction: call it on the few that failed to blend."""
+    from nurbscnc.geometry.blend import _planar_kind
+
+    out = np.zeros(j.size, dtype=bool)
+    for n, r in enumerate(j.tolist()):
+        normal = np.cross(pieces.tangent_end[:, r], pieces.tangent_start[:, r + 1])
+        size = float(np.linalg.norm(normal))
+        if size == 0.0:
+            continue
+        vertex = pieces.end_mm[:, r]
+        out[n] = not all(_planar_kind(_blend_geometry(pieces[i]), normal / size, vertex)
+                         for i in (r, r + 1))  # fmt: skip
+    return out
 
 
 def junction_caps(pieces: PieceList) -> np.ndarray:

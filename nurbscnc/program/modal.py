@@ -106,8 +106,8 @@ class ModalState:
     tool_loaded: int = 0  # M6
     tool_offset_code: int = 490  # 430, 431, 490
     # Path control (group 13), as the segments carry it (geometry.segments.Line.blend_mm):
-    # G64 P [mm] > 0; inf for G64 without P (the machine's path tolerance, LinuxCNC's
-    # default mode); 0 for G61 and G64 P0 (exact path); BLEND_EXACT_STOP (< 0) for G61.1.
+    # G64 P [mm] > 0; inf for G64 without P or with P0 (the machine's path tolerance,
+    # LinuxCNC's default mode); 0 for G61 (exact path); BLEND_EXACT_STOP (< 0) for G61.1.
     blend_mm: float = float("inf")
     path_mode: int = 640
     naive_mm: float = 0.0  # G64 Q [mm]: the naive CAM detector's tolerance (0: off)
