@@ -7,6 +7,7 @@ are made from the :class:`Run` it returns. No I/O here.
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
@@ -253,12 +254,31 @@ def precompensation_report(plan: Plan, planned: Reference, compensated: Referenc
                            tuple(rows), tolerance_mm)  # fmt: skip
 
 
-def run_program(program, machine: Machine, options: RunOptions | None = None) -> Run:
+def _announcing(sampler, say):
+    """``sampler`` that first says which pass of the planner's dynamics check it serves (the
+    planner calls it once per plan: the first check, then once per re-plan)."""
+    passes = itertools.count()
+
+    def sample(pieces, profile, period_s):
+        n = next(passes)
+        say("dynamics check" if n == 0 else f"dynamics check, re-plan {n}")
+        return sampler(pieces, profile, period_s)
+
+    return sample
+
+
+def run_program(program, machine: Machine, options: RunOptions | None = None,
+                progress=None) -> Run:  # fmt: skip
     """Plan (or run a baseline on) an interpreted program, interpolate it at the servo period
     and refuse reference points outside the soft limits (PlanningError at the first one).
     Before any of that: the segments' boxes inside the soft limits, and the motion time's
-    lower bound within ``limits.max_points`` (:mod:`nurbscnc.plan.limits`)."""
+    lower bound within ``limits.max_points`` (:mod:`nurbscnc.plan.limits`).
+
+    ``progress``: None, or a function called with a short text as each stage starts
+    (checking, planning, each dynamics check, interpolating) — the CLI's progress display;
+    the stages know nothing of it."""
     options = options or RunOptions()
+    say = progress or (lambda _stage: None)
     if options.precompensate:
         if options.algorithm != Algorithm.PH_LOOKAHEAD:
             raise ConfigError("pre-compensation needs the look-ahead planner (--algorithm "
@@ -268,6 +288,7 @@ def run_program(program, machine: Machine, options: RunOptions | None = None) ->
                               f"{machine.source} has no [servo.x], [servo.y] or [servo.z]")
     # Checks before work (issue 14): the geometry inside the soft limits, the motion short
     # enough for limits.max_points, before anything is planned or sampled.
+    say("checking limits")
     check_before_work(program.segments, machine)
     if options.algorithm == Algorithm.PH_LOOKAHEAD:
         lookahead = options.lookahead
@@ -276,10 +297,14 @@ def run_program(program, machine: Machine, options: RunOptions | None = None) ->
             lookahead = replace(lookahead, dynamics=Dynamics.OFF)
         # The check runs on the interpolator's own points; its final reference is the output.
         sampler = reference_sampler(options.interpolator)
+        if progress is not None:
+            sampler = _announcing(sampler, say)
+        say("planning")
         if options.precompensate:
             run = _run_precompensated(program, machine, lookahead, options, sampler)
         else:
             plan, check = plan_checked(program, machine, lookahead, sampler)
+            say("interpolating")
             if check is not None:
                 samples = samples_of(check.reference, plan.pieces, options.interpolator)
             else:
@@ -287,6 +312,7 @@ def run_program(program, machine: Machine, options: RunOptions | None = None) ->
                                       options.interpolator)  # fmt: skip
             run = Run(options.algorithm, samples, plan, check)
     else:
+        say(f"interpolating ({options.algorithm.value})")
         samples = baseline_program_samples(options.algorithm.value, program, machine)
         run = Run(options.algorithm, samples)
     check_soft_limits(run.samples.points_mm, run.samples.line, machine.soft_limits)

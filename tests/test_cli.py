@@ -107,6 +107,9 @@ def test_check_json_fields(naca):
     assert data["length_mm"] == pytest.approx(naca["length_mm"], rel=1e-10)  # feed moves only
     assert data["rapid_length_mm"] == 9.0
     assert data["counts"] == {"rapid": 1, "nurbs": 1}
+    # Feeds are mm/s in every JSON (the program's F3500 is mm/min).
+    f = float(re.search(r"^F(\d+)", NACA.read_text(), re.M).group(1)) / 60.0
+    assert data["feed_range_mm_s"] == {"min": f, "max": f}
 
 
 def test_check_human_summary(naca):
@@ -191,6 +194,11 @@ def test_internal_error_exits_1_without_traceback(monkeypatch):
     assert "RuntimeError: simulated fault" in result.stderr
     assert "Traceback" not in result.output
     assert result.stdout == ""
+    # With --json the failure is also the JSON error object (docs/json.md), still exit 1.
+    result = run(["check", NACA, "--json"])
+    assert result.exit_code == 1
+    error = json.loads(result.stdout)
+    assert error["ok"] is False and "RuntimeError: simulated fault" in error["errors"][0]["message"]
 
 
 @pytest.mark.parametrize(
@@ -475,3 +483,87 @@ def test_stdout_to_dev_full_exits_3_with_a_message(args, message):
     text = proc.stderr.decode()
     assert message in text
     assert "Traceback" not in text and "Exception ignored" not in text
+
+
+# ---------------------------------------------------------------------------------- progress
+STAGE_WORDS = ("reading and interpreting", "dynamics check", "interpolating", "writing")
+
+
+def test_run_program_names_its_stages():
+    from nurbscnc.machine.profile import load_machine
+    from nurbscnc.pipeline import run_program
+    from nurbscnc.program.interpret import interpret_text
+
+    stages = []
+    prog = interpret_text("G1 X2 F3000\nG2 X2 Y0 I-2 J0\n")  # the check must re-plan it
+    run = run_program(prog, load_machine(), progress=stages.append)
+    assert stages[:3] == ["checking limits", "planning", "dynamics check"]
+    replans = [f"dynamics check, re-plan {i}" for i in range(1, run.plan.iterations + 1)]
+    assert run.plan.iterations >= 1 and stages[3:] == [*replans, "interpolating"]
+
+
+@pytest.mark.parametrize("args", [["plan", "{p}"], ["run", "{p}", "-o", "{o}"], ["check", "{p}"]])
+def test_no_progress_when_not_a_terminal(tmp_path, args):
+    prog = tmp_path / "p.nc"
+    prog.write_text("G1 X2 F3000\nG2 X2 Y0 I-2 J0\n")
+    res = run([a.format(p=prog, o=tmp_path / "o.csv") for a in args])
+    assert res.exit_code == 0, res.output
+    assert not any(word in res.stderr for word in STAGE_WORDS), res.stderr
+
+
+def _stderr_on_a_pty(args, cwd) -> bytes:
+    """Run the CLI in ``cwd`` with stderr on a pseudo-terminal; everything written there."""
+    import pty
+    import select
+
+    master, slave = pty.openpty()
+    proc = subprocess.Popen([sys.executable, "-m", "nurbscnc", *map(str, args)],
+                            stdout=subprocess.DEVNULL, stderr=slave, stdin=subprocess.DEVNULL,
+                            cwd=cwd, env={**os.environ, "PYTHONPATH": str(ROOT)})  # fmt: skip
+    os.close(slave)
+    data = b""
+    try:
+        while True:
+            ready, _, _ = select.select([master], [], [], 0.2)
+            if ready:
+                try:
+                    chunk = os.read(master, 65536)
+                except OSError:  # the child closed its end
+                    break
+                if not chunk:
+                    break
+                data += chunk
+            elif proc.poll() is not None:
+                break
+    finally:
+        os.close(master)
+        proc.wait(timeout=120)
+    assert proc.returncode == 0, data.decode(errors="replace")
+    return data
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="pseudo-terminal test")
+def test_progress_on_a_terminal_names_the_stages(tmp_path):
+    prog = tmp_path / "p.nc"
+    prog.write_text("G1 X2 F3000\nG2 X2 Y0 I-2 J0\n")
+    shown = _stderr_on_a_pty(["run", "p.nc", "-o", "o.csv"], tmp_path)
+    for word in ("dynamics check", "interpolating", "writing"):
+        assert word.encode() in shown, shown
+    quiet = _stderr_on_a_pty(["run", "p.nc", "-o", "o.csv", "--json"], tmp_path)
+    assert not any(word.encode() in quiet for word in STAGE_WORDS), quiet
+
+
+# ------------------------------------------------------------------------- shell completion
+@pytest.mark.parametrize("words, expected", [
+    ("nurbscnc pl", {"plan"}),
+    ("nurbscnc plan --expl", {"--explain", "--explain-all"}),
+    ("nurbscnc plan x.nc --dynamics ", {"local", "global", "off"}),
+])  # fmt: skip
+def test_bash_completion_as_the_readme_says(words, expected):
+    env = {"_NURBSCNC_COMPLETE": "bash_complete", "COMP_WORDS": words,
+           "COMP_CWORD": str(len(words.split(" ")) - 1)}  # fmt: skip
+    res = CliRunner().invoke(main, [], env=env, prog_name="nurbscnc")
+    assert res.exit_code == 0, res.output
+    got = {line.split(",", 1)[1] for line in res.stdout.splitlines() if "," in line}
+    assert expected <= got, res.stdout
+    assert "_NURBSCNC_COMPLETE=bash_source nurbscnc" in (ROOT / "README.md").read_text()

@@ -99,8 +99,9 @@ def test_compare_cli_json_and_plots(tmp_path):
     assert res.exit_code == 0, res.output
     data = json.loads(res.output)
     assert [r["algorithm"] for r in data["rows"]] == ["adaptive", "ours"]
-    for key in ("angle_deg", "contour_max_um", "contour_rms_um", "contour_mean_um",
-                "axis_x_max_um", "axis_y_max_um", "cycle_time_s"):
+    for key in ("angle_deg", "contour_eq29_max_um", "contour_eq29_rms_um",
+                "contour_eq29_mean_um", "contour_true_max_um", "axis_x_max_um", "axis_y_max_um",
+                "cycle_time_s"):
         assert all(isinstance(r[key], float) for r in data["rows"])
     pngs = sorted(p.name for p in tmp_path.iterdir())
     assert pngs == ["axis_0deg.png", "contour_0deg.png", "feed_0deg.png", "path_0deg.png"]
@@ -130,8 +131,9 @@ def test_compare_rejects_programs_without_nurbs(tmp_path):
 
 def test_rows_have_the_documented_fields(table4):
     r = row(table4["ours"])
-    assert set(r) >= {"algorithm", "angle_deg", "contour_max_um", "contour_rms_um",
-                      "contour_mean_um", "axis_x_max_um", "axis_y_max_um", "cycle_time_s"}
+    assert set(r) >= {"algorithm", "angle_deg", "contour_eq29_max_um", "contour_eq29_rms_um",
+                      "contour_eq29_mean_um", "contour_true_max_um", "axis_x_max_um",
+                      "axis_y_max_um", "cycle_time_s"}
 
 
 @pytest.mark.parametrize("algorithm", ["adaptive", "curvature"])
@@ -140,7 +142,7 @@ def test_plan_and_run_accept_the_baselines(tmp_path, algorithm):
     res = runner.invoke(main, ["plan", str(AIRFOIL), "--algorithm", algorithm, "--json"])
     assert res.exit_code == 0, res.output
     summary = json.loads(res.output)
-    assert summary["algorithm"] == algorithm and summary["contour_max_um"] > 15.0
+    assert summary["algorithm"] == algorithm and summary["contour_true_max_um"] > 15.0
     out = tmp_path / "b.csv"
     res = runner.invoke(main, ["run", str(AIRFOIL), "--algorithm", algorithm, "-o", str(out),
                                "--plot", str(tmp_path / "figs")])
@@ -159,4 +161,5 @@ def test_plan_plot_writes_path_feed_and_contour(tmp_path):
     res = CliRunner().invoke(main, ["plan", str(AIRFOIL), "--plot", str(tmp_path)])
     assert res.exit_code == 0, res.output
     assert sorted(p.name for p in tmp_path.iterdir()) == ["contour_error.png", "feed.png",
+                                                          "feed_along.png", "limits.png",
                                                           "path.png"]

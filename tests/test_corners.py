@@ -261,6 +261,14 @@ def naca_ph():
     return ph_json()
 
 
+def xy(piece) -> np.ndarray:
+    """The XY control points of a PH piece of ``ph --json`` (its ``control_points_mm`` are
+    [x, y, z]; the airfoil lies in z = 0)."""
+    ctrl = np.asarray(piece["control_points_mm"], dtype=float)
+    assert ctrl.shape == (6, 3) and np.all(ctrl[:, 2] == 0.0)
+    return ctrl[:, :2]
+
+
 def test_ph_fits_meet_the_tolerance(naca_ph, naca_oracle):
     assert naca_ph["ok"] is True and naca_ph["split"] is True
     assert naca_ph["tolerance_um"] == 1.0
@@ -269,18 +277,18 @@ def test_ph_fits_meet_the_tolerance(naca_ph, naca_oracle):
         assert region["rms_um"] <= 1.0 and region["max_um"] <= 3.0
         pieces = region["pieces"]
         assert pieces[0]["u_a"] == region["u_a"] and pieces[-1]["u_b"] == region["u_b"]
-        first = np.asarray(pieces[0]["control_points"])
+        first = xy(pieces[0])
         np.testing.assert_allclose(first[0], naca_oracle["point"](region["u_a"]), atol=1e-12)
-        last = np.asarray(pieces[-1]["control_points"])
+        last = xy(pieces[-1])
         np.testing.assert_allclose(last[5], naca_oracle["point"](region["u_b"]), atol=1e-12)
         for piece in pieces:
             assert piece["line"] == region["line"] == 5
-            ctrl = piece["control_points"]
+            ctrl = xy(piece)
             assert len(ctrl) == 6 and all(len(p) == 2 for p in ctrl)
             assert piece["rms_um"] <= 1.0 and piece["max_um"] <= 3.0
         for left, right in zip(pieces, pieces[1:]):
             assert left["u_b"] == right["u_a"]
-            p, q = np.asarray(left["control_points"]), np.asarray(right["control_points"])
+            p, q = np.asarray(xy(left)), np.asarray(xy(right))
             np.testing.assert_allclose(p[5], q[0], atol=1e-12)
             # G1 join: the end tangent p5 − p4 and the start tangent q1 − q0 are parallel.
             t0, t1 = p[5] - p[4], q[1] - q[0]
@@ -296,7 +304,7 @@ def test_ph_deviation_recomputed_independently(naca_ph, naca_oracle):
     for region in naca_ph["regions"]:
         all_dev = []
         for piece in region["pieces"]:
-            tree = cKDTree(bezier(piece["control_points"], np.linspace(0.0, 1.0, 40_001)))
+            tree = cKDTree(bezier(xy(piece), np.linspace(0.0, 1.0, 40_001)))
             samples = naca_oracle["point"](np.linspace(piece["u_a"], piece["u_b"], 200))
             dev_um = 1e3 * tree.query(samples)[0]
             assert dev_um.max() == pytest.approx(piece["max_um"], abs=1e-4)
@@ -307,7 +315,7 @@ def test_ph_deviation_recomputed_independently(naca_ph, naca_oracle):
         # Between the samples too: the whole region stays within 3e.
         dense = naca_oracle["point"](np.linspace(region["u_a"], region["u_b"], 4001))
         pts = np.vstack(
-            [bezier(p["control_points"], np.linspace(0, 1, 40_001)) for p in region["pieces"]]
+            [bezier(xy(p), np.linspace(0, 1, 40_001)) for p in region["pieces"]]
         )
         assert 1e3 * cKDTree(pts).query(dense)[0].max() <= 3.0
 

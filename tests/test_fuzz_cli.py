@@ -335,8 +335,8 @@ def mutate(data: bytes, rng: random.Random, others: list[bytes]) -> bytes:
 def motion_estimate_s(summary: dict) -> float:
     """A generous time estimate of a checked program [s]: feed moves at the slowest feed,
     rapids at 10 mm/s, 0.2 s per segment for acceleration, plus every dwell."""
-    feed = summary["feed_mm_min"]["min"]
-    time_s = summary["length_mm"] / (feed / 60.0) if feed else 0.0
+    feed = summary["feed_range_mm_s"]["min"]
+    time_s = summary["length_mm"] / feed if feed else 0.0
     time_s += summary["rapid_length_mm"] / 10.0 + 0.2 * len(summary["segments"])
     return time_s + summary.get("dwell_s", 0.0)
 

@@ -52,7 +52,9 @@ def test_dump_profile_stdout_with_json_is_refused(short_nc):
     r = invoke(["plan", short_nc, "--dump-profile", "-", "--json"])
     assert r.exit_code == 2
     assert "--json" in r.stderr and "stdout" in r.stderr
-    assert r.stdout == ""
+    # With --json the option error is also the JSON error object (docs/json.md), no CSV.
+    error = json.loads(r.stdout)
+    assert error["ok"] is False and "stdout" in error["errors"][0]["message"]
 
 
 # -- 2. run -o - | simulate - ------------------------------------------------------------------
@@ -63,8 +65,9 @@ def test_simulate_stdin_points_equals_simulate_file(short_nc, tmp_path):
     from_stdin = invoke(["simulate", "-", "--json"], input=points.read_text())
     assert from_stdin.exit_code == 0, from_stdin.output
     a, b = json.loads(from_file.stdout), json.loads(from_stdin.stdout)
-    assert b["source"] == "<stdin>"
-    for key in ("samples", "cycle_time_s", "contour_max_um", "axis_x_max_um"):
+    assert b["program"] == "<stdin>"
+    for key in ("samples", "cycle_time_s", "contour_eq29_max_um", "contour_true_max_um",
+                "axis_x_max_um"):
         assert b[key] == a[key]
 
 
@@ -89,7 +92,7 @@ def test_pipeline_run_to_simulate_subprocess(short_nc, tmp_path):
     assert consumer.returncode == 0, consumer.stderr
     got = json.loads(consumer.stdout)
     assert got["samples"] == expected["samples"]
-    assert got["contour_max_um"] == expected["contour_max_um"]
+    assert got["contour_true_max_um"] == expected["contour_true_max_um"]
 
 
 @pytest.mark.parametrize("columns", [3, 4])

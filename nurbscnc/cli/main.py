@@ -69,6 +69,35 @@ out = _Console(highlight=False, markup=False, emoji=False, soft_wrap=True,
 err = _Console(stderr=True, highlight=False, markup=False, emoji=False, soft_wrap=True)
 
 
+# -- progress ----------------------------------------------------------------------------------
+def show_progress(as_json: bool = False, quiet: bool = False) -> bool:
+    """Progress is shown on a terminal only: not when stderr is piped or redirected, not with
+    --json or --quiet."""
+    return not (as_json or quiet) and err.is_terminal
+
+
+@contextlib.contextmanager
+def progress_display(show: bool, title: str):
+    """A one-line rich progress display on stderr (spinner, stage, elapsed time) while the
+    block runs, gone afterwards; yields the function that names the current stage (the
+    ``progress`` callback the stages are given; one that does nothing when not ``show``).
+    The stage and title are user text: printed literally, never as markup."""
+    if not show:
+        yield lambda _stage: None
+        return
+    from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+
+    with Progress(SpinnerColumn(), TextColumn("{task.description}", markup=False),
+                  TimeElapsedColumn(), console=err, transient=True) as bar:  # fmt: skip
+        # The stage first: a narrow terminal cuts the end of the line (a long file name).
+        task = bar.add_task(f"starting · {title}", total=None)
+
+        def say(stage: str) -> None:
+            bar.update(task, description=f"{stage} · {title}", refresh=True)
+
+        yield say
+
+
 # -- error reporting ---------------------------------------------------------------------------
 #: An echoed source line is cut to about this many characters around the error's column.
 SOURCE_ECHO_CHARS = 120
@@ -218,14 +247,19 @@ def handle_errors(func):
             # without a file name is a write to stdout failing (a full disk, a dead device).
             if os.environ.get("NURBSCNC_DEBUG"):
                 raise
+            what = "write to standard output" if exc.filename is None else f"access {exc.filename}"
+            message = f"cannot {what}: {exc.strerror or exc}"
             if exc.filename is None:
                 _silence_stdout()
-            what = "write to standard output" if exc.filename is None else f"access {exc.filename}"
-            err.print(f"{filename}: error: cannot {what}: {exc.strerror or exc}", markup=False)
+            elif kwargs.get("as_json"):
+                _echo_json_error(message)
+            err.print(f"{filename}: error: {message}", markup=False)
             sys.exit(EXIT_IO)
         except Exception as exc:  # a bug: say so, without a traceback unless asked
             if os.environ.get("NURBSCNC_DEBUG"):
                 raise
+            if kwargs.get("as_json"):
+                _echo_json_error(f"internal error: {type(exc).__name__}: {exc}")
             err.print(
                 f"{filename}: internal error: {type(exc).__name__}: {exc}\n"
                 "This is a bug in nurbscnc; rerun with NURBSCNC_DEBUG=1 for a traceback.",
@@ -234,6 +268,13 @@ def handle_errors(func):
             sys.exit(EXIT_INTERNAL)
 
     return wrapper
+
+
+def _echo_json_error(message: str) -> None:
+    """The JSON error object of a failure without a source position, on stdout (a dead
+    stdout is ignored: the message goes to stderr anyway)."""
+    with contextlib.suppress(OSError):
+        click.echo(json.dumps(usage_error_json(message)))
 
 
 def _display_name(name) -> str:
@@ -313,7 +354,36 @@ def read_tool_table(path: str) -> dict:
 
 
 # -- the command group -------------------------------------------------------------------------
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+def usage_error_json(message: str) -> dict:
+    """The JSON of an option error (docs/json.md): the shape of a program error, without a
+    position."""
+    return {"ok": False, "errors": [{"line": None, "column": None, "message": message}]}
+
+
+class _Group(click.Group):
+    """The command group. With ``--json`` among the arguments, an option error (a click
+    usage error: unknown option, bad value, missing argument, two options that exclude each
+    other) is also printed as JSON on stdout, as a program error is (docs/json.md); the usual
+    message still goes to stderr and the exit code stays 2."""
+
+    def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
+        args = list(sys.argv[1:] if args is None else args)
+        if not standalone_mode or "--json" not in args:
+            return super().main(args, prog_name, complete_var, standalone_mode, **extra)
+        try:
+            code = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
+        except click.ClickException as exc:
+            _echo_json_error(exc.format_message())
+            exc.show()
+            sys.exit(exc.exit_code)
+        except click.exceptions.Abort:
+            err.print("Aborted!", markup=False)
+            sys.exit(1)
+        # A command returns None; click's Exit (--help, --version) gives its code.
+        sys.exit(code if isinstance(code, int) else 0)
+
+
+@click.group(cls=_Group, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="nurbscnc")
 def main():
     """nurbscnc: NC programs (lines, arcs, NURBS) to reference points at the servo period.
@@ -348,9 +418,12 @@ def check(program, as_json, no_block_delete, tool_table, subroutine_path, machin
     from nurbscnc.plan.report import program_summary
 
     mach = load_machine_cli(machine, overrides, announce=False)
-    prog = load_program(program, not no_block_delete, tool_table, subroutine_path)
-    check_before_work(prog.segments, mach)
-    summary = program_summary(prog)
+    with progress_display(show_progress(as_json), _display_name(program)) as say:
+        say("reading and interpreting")
+        prog = load_program(program, not no_block_delete, tool_table, subroutine_path)
+        say(f"checking {len(prog.segments)} segments")
+        check_before_work(prog.segments, mach)
+        summary = program_summary(prog)
     if as_json:
         click.echo(json.dumps({**summary, **machine_json(mach)}))
         return
@@ -370,9 +443,9 @@ def print_summary(prog: Program, s: dict) -> None:
         "  bounding box [mm]: "
         + "  ".join(f"{a} {lo[i]:.3f}..{hi[i]:.3f}" for i, a in enumerate("XYZ"))
     )
-    f = s["feed_mm_min"]
+    f = s["feed_range_mm_s"]
     if f["min"] is not None:
-        out.print(f"  feed [mm/min]: {f['min']:.6g}..{f['max']:.6g}")
+        out.print(f"  feed [mm/min]: {f['min'] * 60.0:.6g}..{f['max'] * 60.0:.6g}")
     nurbs = [e for e in s["segments"] if e["kind"] == "nurbs"]
     if nurbs:
         table = Table(title="NURBS blocks", show_edge=False)
@@ -494,7 +567,9 @@ def corners_json(result, junctions) -> dict:
                 "kappa_threshold_per_mm": sc.kappa_threshold_per_mm,
                 "corners": [
                     {
-                        "kappa_peak_per_mm": r.kappa_peak_per_mm,
+                        # JSON has no infinity: a cusp's curvature is null.
+                        "kappa_peak_per_mm": (r.kappa_peak_per_mm
+                                              if np.isfinite(r.kappa_peak_per_mm) else None),
                         "u_peak": r.u_peak,
                         "point_mm": list(r.point_mm),
                         "u_a": r.u_a,
@@ -578,9 +653,6 @@ def ph_json(rows, e_um: float, no_split: bool) -> dict:
                     "line": sc.line,
                     "u_a": piece.u_a,
                     "u_b": piece.u_b,
-                    "control_points": [
-                        [float(c) for c in pt[:2]] for pt in piece.ph.control_points_mm
-                    ],
                     "control_points_mm": [
                         [float(c) for c in pt] for pt in piece.ph.control_points_mm
                     ],
@@ -601,24 +673,48 @@ def plot_option(func):
     )(func)  # fmt: skip
 
 
-def write_plan_plots(run, plot_dir: str) -> list[str]:
-    """Figures of one run: the path with its PH pieces, the feed, the predicted contour
-    error (PNG files in ``plot_dir``)."""
+def write_plan_plots(run, plot_dir: str, prog, expl=None, mach=None) -> list[str]:
+    """Figures of one run (PNG files in ``plot_dir``), each titled with the program's name:
+    the path (rapids dashed, cuts coloured by feed, PH pieces marked), the feed over time,
+    the feed along the path with the programmed F, the path coloured by the limit that set
+    the feed (with an explanation ``expl``), the predicted contour error with ε_max."""
     from nurbscnc.output import plots
     from nurbscnc.plan.report import corner_polylines
 
     os.makedirs(plot_dir, exist_ok=True)
     smp = run.samples
+    name = prog.name
+    pl = run.plan
+    rapid = None
+    if pl is not None:
+        rapid = np.asarray(pl.pieces.rapid)[smp.piece]
     written = [plots.plot_feed_profiles({"feed": (smp.t_s, smp.v_mm_s)},
-                                        os.path.join(plot_dir, "feed.png"))]  # fmt: skip
-    corners = corner_polylines(run.plan.pieces) if run.plan is not None else []
-    written.append(plots.plot_path(smp.points_mm, corners, os.path.join(plot_dir, "path.png")))
+                                        os.path.join(plot_dir, "feed.png"),
+                                        title=f"{name}: feed over time")]  # fmt: skip
+    corners = corner_polylines(pl.pieces) if pl is not None else []
+    written.append(plots.plot_path(smp.points_mm, corners, os.path.join(plot_dir, "path.png"),
+                                   title=f"{name}: tool path", rapid=rapid,
+                                   feed_mm_s=smp.v_mm_s))  # fmt: skip
+    if pl is not None and expl is not None:
+        from nurbscnc.plan.explain import Limit
+
+        starts = np.asarray(pl.profile.piece_start_mm)
+        written.append(plots.plot_feed_along(
+            smp.s_mm, smp.v_mm_s, starts, starts + np.asarray(pl.pieces.length_mm),
+            expl.piece_feed_mm_s, os.path.join(plot_dir, "feed_along.png"),
+            cap_mm_s=expl.piece_cap_mm_s, title=f"{name}: feed along the program"))
+        written.append(plots.plot_path_limits(
+            smp.points_mm, expl.piece_limit[smp.piece], [m.text for m in Limit],
+            os.path.join(plot_dir, "limits.png"),
+            title=f"{name}: what limits the feed"))  # fmt: skip
     if run.check is not None:
         contour = run.check.response.contour_mm
         t = np.arange(contour.size) * (smp.t_s[1] - smp.t_s[0])
+        eps = None if mach is None else mach.limits.contour_tolerance_mm * 1000.0
         written.append(plots.plot_contour_error(
             {"predicted (true distance)": (t, contour * 1000.0)},
-            os.path.join(plot_dir, "contour_error.png")))  # fmt: skip
+            os.path.join(plot_dir, "contour_error.png"),
+            title=f"{name}: predicted contour error", eps_max_um=eps))  # fmt: skip
     return written
 
 
@@ -626,19 +722,25 @@ def write_plan_plots(run, plot_dir: str) -> list[str]:
 def make_plan(program: str, machine=None, overrides=(), dynamics="local", lookahead=None,
               corner_feed="piece", interpolator="exact", blend_tolerance=None,
               algorithm="ph-lookahead", no_block_delete=False, tool_table=None,
-              subroutine_path=(), text=None, precompensate=False, reference_tolerance=3.0):
+              subroutine_path=(), text=None, precompensate=False, reference_tolerance=3.0,
+              progress=None):  # fmt: skip
     """Load, interpret, plan and interpolate one program; validate soft limits. Returns
     (program, machine, :class:`~nurbscnc.pipeline.Run`).
 
-    The keyword arguments are the options of :func:`planning_options`, and ``text``: the
-    program already read (see :func:`load_program`)."""
+    The keyword arguments are the options of :func:`planning_options`, ``text``: the
+    program already read (see :func:`load_program`), and ``progress``: None or the stage
+    callback of :func:`progress_display`."""
     from nurbscnc.pipeline import run_program
 
     options = run_options(algorithm, corner_feed, dynamics, blend_tolerance, interpolator,
                           lookahead, precompensate, reference_tolerance)  # fmt: skip
+    if progress:
+        progress("loading the machine profile")
     mach = load_machine_cli(machine, overrides)
+    if progress:
+        progress("reading and interpreting")
     prog = load_program(program, not no_block_delete, tool_table, subroutine_path, text)
-    return prog, mach, run_program(prog, mach, options)
+    return prog, mach, run_program(prog, mach, options, progress)
 
 
 def clock_suffix(seconds: float) -> str:
@@ -679,26 +781,50 @@ def precompensation_text(summary: dict) -> str | None:
 @json_option
 @click.option("--dump-profile", type=click.Path(allow_dash=True), default=None,
               help="Write t, s, v, a, j, piece at every servo period (CSV, or NPZ by extension).")
+@click.option("--explain", is_flag=True,
+              help="Why the feed is what it is: per source line the time, the programmed and "
+                   "achieved feed and the limit that set it (the costliest lines), the time "
+                   "under each limit, the corners that stopped and why.")
+@click.option("--explain-all", is_flag=True,
+              help="As --explain, with every line in program order.")
 @plot_option
 @planning_options
 @handle_errors
-def plan(program, as_json, dump_profile, plot_dir, **settings):
+def plan(program, as_json, dump_profile, explain, explain_all, plot_dir, **settings):
     """Plan PROGRAM: pieces, corners, cycle time, lower bound, predicted contour error.
 
-    Example: nurbscnc plan programs/naca2415.nc --dump-profile profile.csv
+    Example: nurbscnc plan programs/naca2415.nc --explain
     """
     from nurbscnc.output.files import write_profile
 
-    if dump_profile == "-" and as_json:
-        raise click.UsageError("--dump-profile - and --json both want stdout; "
-                               "write the profile to a file or drop --json")
-    if dump_profile and settings.get("algorithm", "ph-lookahead") != "ph-lookahead":
+    explain = explain or explain_all
+    if dump_profile == "-" and (as_json or explain):
+        raise click.UsageError("--dump-profile - and --json/--explain both want stdout; "
+                               "write the profile to a file or drop --json/--explain")
+    baseline = settings.get("algorithm", "ph-lookahead") != "ph-lookahead"
+    if dump_profile and baseline:
         raise click.UsageError("--dump-profile needs the look-ahead planner (a baseline has "
                                "no jerk-limited profile)")
-    prog, mach, run = make_plan(program, **settings)
-    summary = summary_of(prog, mach, run)
+    if explain and baseline:
+        raise click.UsageError("--explain needs the look-ahead planner (a baseline has no "
+                               "caps or profile to explain)")
+    # --explain shows the source lines: the program is read once, here (stdin too).
+    text = read_program_text(program) if explain else None
+    with progress_display(show_progress(as_json), _display_name(program)) as say:
+        prog, mach, run = make_plan(program, **settings, text=text, progress=say)
+        say("summarising")
+        summary = summary_of(prog, mach, run)
+    expl = None
+    if explain or plot_dir:
+        from nurbscnc.plan.explain import explain_plan
+
+        expl = explain_plan(prog, mach, run.plan) if run.plan is not None else None
+    if expl is not None and explain:
+        summary["explain"] = expl.as_dict()
     if plot_dir:
-        write_plan_plots(run, plot_dir)
+        with progress_display(show_progress(as_json), prog.name) as say:
+            say("plotting")
+            write_plan_plots(run, plot_dir, prog, expl, mach)
     if dump_profile:
         from nurbscnc.plan.timing import servo_clock
 
@@ -710,6 +836,68 @@ def plan(program, as_json, dump_profile, plot_dir, **settings):
         click.echo(json.dumps(summary))
         return
     print_plan_summary(prog, mach, summary, err if dump_profile == "-" else out)
+    if explain:
+        print_explanation(expl, out, None if explain_all else EXPLAIN_LINES,
+                          text.splitlines())
+
+
+#: Lines ``plan --explain`` shows (the costliest); ``--explain-all`` shows every line.
+EXPLAIN_LINES = 20
+#: Stopped corners ``plan --explain`` lists.
+EXPLAIN_CORNERS = 10
+
+
+def _feed_text(v_mm_s: float) -> str:
+    """A feed [mm/s] as mm/min, the unit of F words ("-" for none)."""
+    return "-" if not np.isfinite(v_mm_s) else f"{v_mm_s * 60.0:.0f}"
+
+
+def print_explanation(expl, out: Console, count: int | None, source: list[str]) -> None:
+    """The ``plan --explain`` text: time under each limit, the ``count`` costliest lines
+    (every line in program order when None), the corners that stopped and why."""
+    from nurbscnc.plan.explain import LIMIT_OF_KEY, Limit
+
+    total = expl.cycle_time_s if expl.cycle_time_s > 0 else 1.0
+    shares = ", ".join(f"{LIMIT_OF_KEY[k].text} {t / total:.1%} ({t:.3f} s)"
+                       for k, t in expl.total_by_limit_s().items())  # fmt: skip
+    out.print(f"  time by limit: {shares or 'none'}", markup=False)
+    n = expl.line.size
+    rows = np.arange(n) if count is None else expl.costliest(count)
+    which = f"all {n} lines" if count is None else f"the {min(count, n)} costliest of {n} lines"
+    table = Table(title=f"{which} (feeds in mm/min)", show_edge=False)
+    for col, justify in (("line", "right"), ("source", "left"), ("time [s]", "right"),
+                         ("share", "right"), ("F", "right"), ("peak", "right"),
+                         ("mean", "right"), ("limit", "left")):  # fmt: skip
+        table.add_column(col, justify=justify)
+    for i in rows.tolist():
+        line = int(expl.line[i])
+        text = source[line - 1] if 0 < line <= len(source) else ""
+        shown = echo_source_line(text.strip(), 1, 32)[0]
+        t = float(expl.time_s[i] + expl.wait_s[i])
+        row = expl.limit_time_s[i]
+        limit = Limit(int(expl.limit[i])).text
+        if t > 0 and row.max() < t * 0.999:
+            limit += f" ({row.max() / t:.0%})"
+        table.add_row(str(line), Text(shown), f"{t:.4f}", f"{t / total:.1%}",
+                      _feed_text(float(expl.feed_mm_s[i])),
+                      _feed_text(float(expl.peak_mm_s[i])),
+                      _feed_text(float(expl.mean_mm_s[i])), limit)  # fmt: skip
+    out.print(table)
+    if count is not None and n > count:
+        out.print(f"  … {n - count} more lines (plan --explain-all shows every line)",
+                  markup=False)  # fmt: skip
+    counts = expl.corner_counts()
+    if counts:
+        out.print("  corners: " + ", ".join(f"{v} {k}" for k, v in sorted(counts.items())),
+                  markup=False)  # fmt: skip
+    stops = expl.corner_dicts(stops_only=True)
+    for c in stops[:EXPLAIN_CORNERS]:
+        x, y, z = c["point_mm"]
+        out.print(f"  stop at line {c['line']} ({x:.3f}, {y:.3f}, {z:.3f}), turning "
+                  f"{c['turning_deg']:.1f}°: {c['why'].replace('_', ' ')}", markup=False)
+    if len(stops) > EXPLAIN_CORNERS:
+        out.print(f"  … {len(stops) - EXPLAIN_CORNERS} more stopped corners (--json lists "
+                  "every corner)", markup=False)  # fmt: skip
 
 
 def print_plan_summary(prog, mach, summary: dict, out: Console) -> None:
@@ -730,11 +918,12 @@ def print_plan_summary(prog, mach, summary: dict, out: Console) -> None:
     if "feed_fluctuation_max" in summary:
         out.print(f"  feed fluctuation on NURBS ({summary['interpolator']} interpolation): "
                   f"max {summary['feed_fluctuation_max'] * 100:.2g} %")  # fmt: skip
-    if "contour_max_um" in summary:
+    if "contour_true_max_um" in summary:
         how = (f"dynamics {summary['dynamics']}, {summary['dynamics_iterations']} re-plans"
                if "pieces" in summary else "no dynamics check: a baseline")
         out.print(f"  {'predicted' if 'pieces' in summary else 'simulated'} contour error: "
-                  f"max {summary['contour_max_um']:.2f} µm, RMS {summary['contour_rms_um']:.2f} "
+                  f"max {summary['contour_true_max_um']:.2f} µm, RMS "
+                  f"{summary['contour_true_rms_um']:.2f} "
                   f"µm (ε_max {mach.limits.contour_tolerance_mm * 1000:g} µm; {how})")
     if precompensation_text(summary):
         out.print(precompensation_text(summary), markup=False)
@@ -775,14 +964,16 @@ def run(programs, output, output_dir, jobs, fmt, quiet, as_json, plot_dir, **set
             raise click.UsageError("give -o FILE (.csv, .npz or -) or --output-dir DIR")
         program = programs[0]
         fmt = output_format(output, fmt)
-        show = not quiet and err.is_terminal
-        with err.status(f"planning {program} …") if show else contextlib.nullcontext():
-            prog, mach, run = make_plan(program, **settings)
-        with err.status(f"writing {run.samples.t_s.size} points …") if show else (
-                contextlib.nullcontext()):
+        with progress_display(show_progress(as_json, quiet), _display_name(program)) as say:
+            prog, mach, run = make_plan(program, **settings, progress=say)
+            say(f"writing {run.samples.t_s.size} points")
             write_output(output, fmt, run.samples, mach, prog.name)
-        if plot_dir:
-            write_plan_plots(run, plot_dir)
+            if plot_dir:
+                from nurbscnc.plan.explain import explain_plan
+
+                say("plotting")
+                expl = explain_plan(prog, mach, run.plan) if run.plan is not None else None
+                write_plan_plots(run, plot_dir, prog, expl, mach)
         summary = summary_of(prog, mach, run)
         if as_json:
             click.echo(json.dumps(summary), err=output == "-")
@@ -958,13 +1149,18 @@ def simulate(source, as_json, plot_dir, hold, **settings):
         os.makedirs(plot_dir, exist_ok=True)
         plots.plot_contour_error({"contour (true)": (sim.t_s, contour.true_mm * 1000.0),
                                   "contour (eq. 29)": (sim.t_s, np.abs(contour.eq29_mm) * 1000)},
-                                 os.path.join(plot_dir, "contour_error.png"))  # fmt: skip
+                                 os.path.join(plot_dir, "contour_error.png"),
+                                 title=f"{name}: simulated contour error",
+                                 eps_max_um=mach.limits.contour_tolerance_mm * 1000.0)
         plots.plot_axis_errors({"servo": (sim.t_s, sim.axis_error_mm[:, 0] * 1000.0,
                                           sim.axis_error_mm[:, 1] * 1000.0)},
-                               os.path.join(plot_dir, "axis_errors.png"))  # fmt: skip
+                               os.path.join(plot_dir, "axis_errors.png"),
+                               title=f"{name}: simulated axis errors")  # fmt: skip
     if as_json:
-        click.echo(json.dumps({"ok": True, "source": name, "samples": int(points.shape[0]), **m,
-                               **machine_json(mach)}))
+        from nurbscnc.plan.report import metrics_json
+
+        click.echo(json.dumps({"ok": True, "program": name, "samples": int(points.shape[0]),
+                               **metrics_json(m), **machine_json(mach)}))
         return
     out.print(f"{name}: {points.shape[0]} reference points, cycle time {m['cycle_time_s']:.4f} s",
               markup=False)  # fmt: skip
@@ -1005,25 +1201,30 @@ def compare(program, as_json, plot_dir, angles, block, algorithms, machine, over
     runs = compare_block(seg, mach, tuple(angles) or (0.0,), tuple(algorithms) or ALGORITHMS)
     rows = [row(r) for r in runs]
     if plot_dir:
-        write_compare_plots(runs, plot_dir)
+        write_compare_plots(runs, plot_dir, prog.name, mach.limits.contour_tolerance_mm * 1e3)
     if as_json:
         click.echo(json.dumps({"ok": True, "program": prog.name, "rows": rows,
                                **machine_json(mach)}))
         return
     table = Table(title=f"{prog.name}: NURBS block on line {seg.line} (µm, s)", show_edge=False)
-    for col in ("algorithm", "angle", "X max", "X RMS", "Y max", "Y RMS", "contour max",
+    for col in ("algorithm", "angle", "X max", "X RMS", "Y max", "Y RMS", "eq. 29 max",
                 "RMS", "mean", "true max", "time [s]"):  # fmt: skip
         table.add_column(col, justify="right")
     for r in rows:
         table.add_row(r["algorithm"], f"{r['angle_deg']:g}°", *(f"{r[k]:.2f}" for k in (
             "axis_x_max_um", "axis_x_rms_um", "axis_y_max_um", "axis_y_rms_um",
-            "contour_max_um", "contour_rms_um", "contour_mean_um", "contour_true_max_um")),
+            "contour_eq29_max_um", "contour_eq29_rms_um", "contour_eq29_mean_um",
+            "contour_true_max_um")),
             f"{r['cycle_time_s']:.4f}")  # fmt: skip
     out.print(table)
 
 
-def write_compare_plots(runs, plot_dir: str) -> list[str]:
-    """Figures 1, 2/4/6 and 7 of the paper for a comparison (PNG files in ``plot_dir``)."""
+def write_compare_plots(runs, plot_dir: str, name: str | None = None,
+                        eps_max_um: float | None = None) -> list[str]:  # fmt: skip
+    """Figures 1, 2/4/6 and 7 of the paper for a comparison (PNG files in ``plot_dir``),
+    titled with the program's ``name`` when given; ``eps_max_um`` [µm] drawn on the contour
+    error figure."""
+    head = f"{name}: " if name else ""
     from nurbscnc.output import plots
     from nurbscnc.plan.report import corner_polylines
 
@@ -1036,14 +1237,20 @@ def write_compare_plots(runs, plot_dir: str) -> list[str]:
         if ours is not None:
             corners = corner_polylines(ours.plan.pieces)
             written.append(plots.plot_path(ours.path_mm, corners,
-                                           os.path.join(plot_dir, f"path_{tag}.png")))
+                                           os.path.join(plot_dir, f"path_{tag}.png"),
+                                           title=f"{head}tool path and corner regions, "
+                                                 f"{angle:g}°"))  # fmt: skip
         written.append(plots.plot_feed_profiles(
             {r.algorithm: (r.samples.t_s, r.samples.v_mm_s) for r in group},
-            os.path.join(plot_dir, f"feed_{tag}.png")))  # fmt: skip
+            os.path.join(plot_dir, f"feed_{tag}.png"),
+            title=f"{head}feed profiles, {angle:g}°"))  # fmt: skip
         written.append(plots.plot_contour_error(
             {r.algorithm: (r.sim_t_s, r.contour_true_um) for r in group},
-            os.path.join(plot_dir, f"contour_{tag}.png")))  # fmt: skip
+            os.path.join(plot_dir, f"contour_{tag}.png"),
+            title=f"{head}contour error (true distance), {angle:g}°",
+            eps_max_um=eps_max_um))  # fmt: skip
         written.append(plots.plot_axis_errors(
             {r.algorithm: (r.sim_t_s, r.axis_error_um[:, 0], r.axis_error_um[:, 1])
-             for r in group}, os.path.join(plot_dir, f"axis_{tag}.png")))  # fmt: skip
+             for r in group}, os.path.join(plot_dir, f"axis_{tag}.png"),
+            title=f"{head}axis tracking errors, {angle:g}°"))  # fmt: skip
     return written

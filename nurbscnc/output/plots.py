@@ -6,9 +6,16 @@ Agg canvas (no pyplot, no global state, no display needed) and writes through
 matplotlib is imported only when a plot is made; without it a :class:`ConfigError` says how to
 install the extra.
 
-- :func:`plot_path`: the tool path in XY with the corner regions / PH pieces marked (Fig. 1).
+- :func:`plot_path`: the tool path in XY with the corner regions / PH pieces marked (Fig. 1),
+  rapids dashed, cuts coloured by feed;
+- :func:`plot_path_limits`: the tool path coloured by the limit that set the feed
+  (``plan --explain``);
+- :func:`plot_feed_along`: the feed along the path length with the programmed F drawn in;
 - :func:`plot_feed_profiles`: feed over time per algorithm (Fig. 2, 4, 6).
-- :func:`plot_contour_error`: contour error over time per algorithm (Fig. 7).
+- :func:`plot_contour_error`: contour error over time per algorithm (Fig. 7), ε_max drawn.
+
+Every ``plot_*`` has a ``*_figure`` twin or builder returning the unsaved Figure (tests
+inspect titles and artists there). The CLI puts the program's name in every title.
 - :func:`plot_axis_errors`: x and y axis errors over time per algorithm.
 """
 
@@ -69,22 +76,46 @@ def _series(series: Mapping, width: int, what: str) -> list[tuple[str, list[np.n
     return out
 
 
-def plot_path(
-    path_mm,
-    corner_pieces: Sequence,
-    out_png: str,
-    title: str = "Tool path and corner regions",
-    figsize_in=FIGSIZE_IN,
-) -> str:
-    """Fig. 1: the path (N, 2|3) [mm] in XY, with each corner piece (m, 2|3) highlighted.
+def _segments_xy(xy: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Line segments (m, 2, 2) between consecutive points where both ends are in ``mask``."""
+    keep = mask[:-1] & mask[1:]
+    return np.stack([xy[:-1][keep], xy[1:][keep]], axis=1)
 
-    Corner pieces (the PH quintics replacing the sharp-corner regions, SPEC §5-§6) are drawn
-    over the path in a second colour with their end points marked. Returns ``out_png``.
-    """
+
+def path_figure(path_mm, corner_pieces: Sequence, title: str = "Tool path and corner regions",
+                figsize_in=FIGSIZE_IN, rapid=None, feed_mm_s=None):  # fmt: skip
+    """The Figure of :func:`plot_path` (not saved)."""
+    from matplotlib.collections import LineCollection
+
     path = _xy(path_mm, "path_mm")
     pieces = [_xy(p, "corner piece") for p in corner_pieces]
     fig, (ax,) = _figure(figsize_in)
-    ax.plot(path[:, 0], path[:, 1], color="0.45", lw=1.0, label="path")
+    n = path.shape[0]
+    rapid = np.zeros(n, dtype=bool) if rapid is None else np.asarray(rapid, dtype=bool)
+    if rapid.shape != (n,):
+        raise ConfigError(f"rapid must have one flag per point ({n}), got {rapid.shape}")
+    if rapid.any():
+        # A point is on a rapid when the move that reaches it is one: the segment between two
+        # points is drawn as the later point's move.
+        segs = np.stack([path[:-1], path[1:]], axis=1)[rapid[1:]]
+        ax.add_collection(LineCollection(segs, colors="0.55", linestyles="dashed", lw=0.9,
+                                         label="rapid (G0)"))  # fmt: skip
+    cut = np.concatenate(([True], ~rapid[1:]))
+    if feed_mm_s is not None:
+        feed = np.asarray(feed_mm_s, dtype=float)
+        if feed.shape != (n,):
+            raise ConfigError(f"feed_mm_s must have one value per point ({n}), got {feed.shape}")
+        keep = ~rapid[1:]
+        segs = np.stack([path[:-1], path[1:]], axis=1)[keep]
+        lc = LineCollection(segs, cmap="viridis", lw=1.4)
+        lc.set_array(feed[1:][keep] * 60.0)
+        ax.add_collection(lc)
+        fig.colorbar(lc, ax=ax, label="feed [mm/min]")
+        ax.autoscale_view()
+    else:
+        ax.add_collection(LineCollection(_segments_xy(path, cut), colors="0.45", lw=1.0,
+                                         label="path"))  # fmt: skip
+        ax.autoscale_view()
     for i, piece in enumerate(pieces):
         ax.plot(piece[:, 0], piece[:, 1], color="tab:red", lw=2.2,
                 label="corner region (PH piece)" if i == 0 else None)  # fmt: skip
@@ -96,18 +127,134 @@ def plot_path(
     count = f"{len(pieces)} corner piece" + ("" if len(pieces) == 1 else "s")
     ax.set_title(f"{title} ({count})")
     ax.grid(True, lw=0.4, alpha=0.5)
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(loc="best")
+    return fig
+
+
+def plot_path(
+    path_mm,
+    corner_pieces: Sequence,
+    out_png: str,
+    title: str = "Tool path and corner regions",
+    figsize_in=FIGSIZE_IN,
+    rapid=None,
+    feed_mm_s=None,
+) -> str:
+    """Fig. 1: the path (N, 2|3) [mm] in XY, with each corner piece (m, 2|3) highlighted.
+
+    Corner pieces (the PH quintics replacing the sharp-corner regions, SPEC §5-§6) are drawn
+    over the path in a second colour with their end points marked. ``rapid`` (N,) marks the
+    points reached by a rapid move: those moves are drawn dashed; ``feed_mm_s`` (N,), when
+    given, colours the cutting moves by their feed (a colour bar in mm/min). Returns
+    ``out_png``.
+    """
+    return _save(path_figure(path_mm, corner_pieces, title, figsize_in, rapid, feed_mm_s),
+                 out_png)  # fmt: skip
+
+
+#: Colours of the limiting factors (tab10 and tab20 entries; index = Limit code).
+LIMIT_COLOURS = ("tab:green", "tab:olive", "0.6", "tab:purple", "tab:blue", "tab:brown",
+                 "tab:pink", "tab:cyan", "tab:red", "black", "tab:orange", "gold",
+                 "0.3", "0.3")  # fmt: skip
+
+
+def limits_figure(path_mm, limit_code, names: Sequence[str], title: str,
+                  figsize_in=FIGSIZE_IN):  # fmt: skip
+    """The Figure of :func:`plot_path_limits` (not saved)."""
+    from matplotlib.collections import LineCollection
+
+    path = _xy(path_mm, "path_mm")
+    code = np.asarray(limit_code, dtype=np.int64)
+    if code.shape != (path.shape[0],):
+        raise ConfigError(f"limit_code must have one code per point ({path.shape[0]})")
+    fig, (ax,) = _figure(figsize_in)
+    segs = np.stack([path[:-1], path[1:]], axis=1)
+    seg_code = code[1:]
+    for c in np.unique(seg_code).tolist():
+        ax.add_collection(LineCollection(segs[seg_code == c], lw=1.6, label=names[c],
+                                         colors=LIMIT_COLOURS[c % len(LIMIT_COLOURS)]))
+    ax.autoscale_view()
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("x [mm]")
+    ax.set_ylabel("y [mm]")
+    ax.set_title(title)
+    ax.grid(True, lw=0.4, alpha=0.5)
+    if seg_code.size:
+        ax.legend(loc="best", fontsize="small")
+    return fig
+
+
+def plot_path_limits(path_mm, limit_code, names: Sequence[str], out_png: str,
+                     title: str = "Tool path by limiting factor",
+                     figsize_in=FIGSIZE_IN) -> str:  # fmt: skip
+    """The path (N, 2|3) [mm] in XY, each move coloured by the limit that set its feed:
+    ``limit_code`` (N,) the code of the move reaching each point, ``names`` the legend
+    names by code (:class:`nurbscnc.plan.explain.Limit`)."""
+    return _save(limits_figure(path_mm, limit_code, names, title, figsize_in), out_png)
+
+
+def feed_along_figure(s_mm, v_mm_s, piece_start_mm, piece_end_mm, programmed_mm_s,
+                      cap_mm_s=None, title: str = "Feed along the program",
+                      figsize_in=FIGSIZE_IN):  # fmt: skip
+    """The Figure of :func:`plot_feed_along` (not saved)."""
+    s, v = (np.asarray(a, dtype=float) for a in (s_mm, v_mm_s))
+    if s.ndim != 1 or s.shape != v.shape:
+        raise ConfigError("feed along: s_mm and v_mm_s must be equally long 1-D arrays")
+    a, b, f = (np.asarray(x, dtype=float) for x in (piece_start_mm, piece_end_mm,
+                                                    programmed_mm_s))
+    fig, (ax,) = _figure(figsize_in)
+
+    def steps(y):
+        # Horizontal steps: each piece's value over [start, end], gaps (NaN) between pieces.
+        xs = np.column_stack([a, b, np.full(a.size, np.nan)]).ravel()
+        ys = np.column_stack([y, y, np.full(a.size, np.nan)]).ravel()
+        return xs, ys * 60.0
+
+    ax.plot(*steps(f), color="tab:gray", lw=1.2, ls="--", label="programmed F")
+    if cap_mm_s is not None:
+        ax.plot(*steps(np.asarray(cap_mm_s, dtype=float)), color="tab:orange", lw=0.8,
+                ls=":", label="cap")  # fmt: skip
+    ax.plot(s, v * 60.0, color="tab:blue", lw=1.0, label="planned feed")
+    ax.set_ylim(bottom=0.0)
+    ax.set_xlabel("path length [mm]")
+    ax.set_ylabel("feed [mm/min]")
+    ax.set_title(title)
+    ax.grid(True, lw=0.4, alpha=0.5)
     ax.legend(loc="best")
-    return _save(fig, out_png)
+    return fig
+
+
+def plot_feed_along(s_mm, v_mm_s, piece_start_mm, piece_end_mm, programmed_mm_s, out_png: str,
+                    cap_mm_s=None, title: str = "Feed along the program",
+                    figsize_in=FIGSIZE_IN) -> str:  # fmt: skip
+    """The planned feed v [mm/s] over the path length s [mm] (drawn in mm/min), with each
+    piece's programmed F (``piece_start_mm``..``piece_end_mm``, ``programmed_mm_s``) as a
+    dashed step and, optionally, its final cap ``cap_mm_s`` dotted."""
+    return _save(feed_along_figure(s_mm, v_mm_s, piece_start_mm, piece_end_mm, programmed_mm_s,
+                                   cap_mm_s, title, figsize_in), out_png)  # fmt: skip
 
 
 def _time_series_plot(series: Mapping, out_png: str, title: str, ylabel: str, what: str,
-                      lw: float, figsize_in, zero_line: bool, y_from_zero: bool) -> str:
+                      lw: float, figsize_in, zero_line: bool, y_from_zero: bool,
+                      limit: tuple | None = None) -> str:  # fmt: skip
     """One axes of ``{name: (t_s, y)}`` lines against time [s], saved to ``out_png``."""
+    return _save(_time_series_figure(series, title, ylabel, what, lw, figsize_in, zero_line,
+                                     y_from_zero, limit), out_png)  # fmt: skip
+
+
+def _time_series_figure(series: Mapping, title: str, ylabel: str, what: str, lw: float,
+                        figsize_in, zero_line: bool, y_from_zero: bool,
+                        limit: tuple | None = None):  # fmt: skip
+    """The Figure of :func:`_time_series_plot`; ``limit`` (value, label): a red dashed
+    horizontal line (ε_max on the contour plot)."""
     fig, (ax,) = _figure(figsize_in)
     for name, (t, y) in _series(series, 2, what):
         ax.plot(t, y, lw=lw, label=name)
     if zero_line:
         ax.axhline(0.0, color="0.3", lw=0.5)
+    if limit is not None:
+        ax.axhline(limit[0], color="tab:red", lw=0.9, ls="--", label=limit[1])
     if y_from_zero:
         ax.set_ylim(bottom=0.0)
     ax.set_xlabel("time [s]")
@@ -115,7 +262,7 @@ def _time_series_plot(series: Mapping, out_png: str, title: str, ylabel: str, wh
     ax.set_title(title)
     ax.grid(True, lw=0.4, alpha=0.5)
     ax.legend(loc="best")
-    return _save(fig, out_png)
+    return fig
 
 
 def plot_feed_profiles(
@@ -134,10 +281,13 @@ def plot_contour_error(
     out_png: str,
     title: str = "Contour error",
     figsize_in=FIGSIZE_IN,
+    eps_max_um: float | None = None,
 ) -> str:
-    """Fig. 7: contour error [µm] over time [s], one line per ``{name: (t_s, err_um)}``."""
+    """Fig. 7: contour error [µm] over time [s], one line per ``{name: (t_s, err_um)}``;
+    ``eps_max_um``, when given, the limit ε_max [µm] as a red dashed line."""
+    limit = None if eps_max_um is None else (float(eps_max_um), f"ε_max = {eps_max_um:g} µm")
     return _time_series_plot(errors, out_png, title, "contour error [µm]", "contour errors",
-                             0.8, figsize_in, zero_line=True, y_from_zero=False)
+                             0.8, figsize_in, zero_line=True, y_from_zero=False, limit=limit)
 
 
 def plot_axis_errors(

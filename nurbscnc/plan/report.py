@@ -85,8 +85,8 @@ def program_summary(prog) -> dict:
         "length_mm": feed_len,
         "rapid_length_mm": rapid_len,
         "bounding_box_mm": {"min": allpts.min(axis=0).tolist(), "max": allpts.max(axis=0).tolist()},
-        "feed_mm_min": {"min": min(feeds) * 60.0 if feeds else None,
-                        "max": max(feeds) * 60.0 if feeds else None},  # fmt: skip
+        "feed_range_mm_s": {"min": min(feeds) if feeds else None,
+                            "max": max(feeds) if feeds else None},  # fmt: skip
         "notes": [{"line": n.line, "message": n.message} for n in prog.notes],
         "errors": [],
     }
@@ -144,7 +144,7 @@ def plan_summary(prog, machine: Machine, samples, plan=None, check=None,
     lb = program_lower_bound_s(prog.segments, machine)
     if cycle_time_s is None:
         cycle_time_s = plan.cycle_time_s if plan is not None else float(samples.t_s[-1])
-    head = {"ok": True, "program": prog.name, "machine": machine.source}
+    head = {"ok": True, "program": prog.name}
     if plan is None:
         from nurbscnc.servo.simulate import contour_errors, metrics, simulate_reference
 
@@ -154,7 +154,8 @@ def plan_summary(prog, machine: Machine, samples, plan=None, check=None,
                    "samples": int(samples.t_s.size), "period_s": machine.servo.period_s,
                    "feed_max_mm_s": float(samples.v_mm_s.max())}  # fmt: skip
         _bound(summary, lb, cycle_time_s)
-        summary.update(contour_max_um=m["true_max_um"], contour_rms_um=m["true_rms_um"],
+        summary.update(contour_true_max_um=m["true_max_um"],
+                       contour_true_rms_um=m["true_rms_um"],
                        contour_eq29_max_um=m["contour_max_um"])  # fmt: skip
         return summary
     kinds = plan.pieces.kind_counts()  # vectorised: no Piece object per row
@@ -180,11 +181,30 @@ def plan_summary(prog, machine: Machine, samples, plan=None, check=None,
         c = check.contour_um()
         eq29 = np.abs(check.response.contour_eq29_mm[check.cutting]) * 1000.0
         summary.update(
-            contour_max_um=float(c.max()) if c.size else 0.0,
-            contour_rms_um=float(np.sqrt(np.mean(c * c))) if c.size else 0.0,
+            contour_true_max_um=float(c.max()) if c.size else 0.0,
+            contour_true_rms_um=float(np.sqrt(np.mean(c * c))) if c.size else 0.0,
             contour_eq29_max_um=float(eq29.max()) if c.size else 0.0,
         )
     return summary
+
+
+#: The JSON names (docs/json.md) of the servo metrics
+#: (:class:`~nurbscnc.servo.simulate.Metrics` fields): the contour error is
+#: ``contour_true_*`` (the distance from the actual point to the path) or ``contour_eq29_*``
+#: (|ε| of SPEC eq. 29) in every command.
+METRIC_KEYS = {
+    "axis_x_max_um": "axis_x_max_um", "axis_x_rms_um": "axis_x_rms_um",
+    "axis_y_max_um": "axis_y_max_um", "axis_y_rms_um": "axis_y_rms_um",
+    "contour_max_um": "contour_eq29_max_um", "contour_rms_um": "contour_eq29_rms_um",
+    "contour_mean_um": "contour_eq29_mean_um", "true_max_um": "contour_true_max_um",
+    "true_rms_um": "contour_true_rms_um", "true_mean_um": "contour_true_mean_um",
+    "cycle_time_s": "cycle_time_s", "settle_time_s": "settle_time_s",
+}  # fmt: skip
+
+
+def metrics_json(metrics: dict) -> dict:
+    """Servo metrics (``Metrics.as_dict()``) under their JSON names (:data:`METRIC_KEYS`)."""
+    return {METRIC_KEYS[k]: v for k, v in metrics.items()}
 
 
 def corner_fits(prog, machine: Machine, split: bool = True) -> list[tuple]:

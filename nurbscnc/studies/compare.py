@@ -143,18 +143,10 @@ def compare_block(seg, machine: Machine, angles_deg=(0.0,), algorithms=ALGORITHM
 
 def row(run: Run) -> dict:
     """The JSON row of a run (``compare --json``)."""
-    m = run.metrics
-    return {
-        "algorithm": run.algorithm,
-        "angle_deg": run.angle_deg,
-        "contour_max_um": m["contour_max_um"],
-        "contour_rms_um": m["contour_rms_um"],
-        "contour_mean_um": m["contour_mean_um"],
-        "contour_true_max_um": m["true_max_um"],
-        "contour_true_rms_um": m["true_rms_um"],
-        "axis_x_max_um": m["axis_x_max_um"],
-        "axis_x_rms_um": m["axis_x_rms_um"],
-        "axis_y_max_um": m["axis_y_max_um"],
-        "axis_y_rms_um": m["axis_y_rms_um"],
-        "cycle_time_s": m["cycle_time_s"],
-    }
+    from nurbscnc.plan.report import metrics_json
+
+    m = metrics_json(run.metrics)
+    keys = ("contour_eq29_max_um", "contour_eq29_rms_um", "contour_eq29_mean_um",
+            "contour_true_max_um", "contour_true_rms_um", "axis_x_max_um", "axis_x_rms_um",
+            "axis_y_max_um", "axis_y_rms_um", "cycle_time_s")  # fmt: skip
+    return {"algorithm": run.algorithm, "angle_deg": run.angle_deg, **{k: m[k] for k in keys}}
