@@ -38,6 +38,8 @@ class Source:
         self.call_line = call_line
         self._blocks: list[Block | None] = [None] * len(lines)
         self._labels: dict[str, tuple[list[int], list[str]]] | None = None
+        #: Lines with words that the fast lane ran (1), for the block count; None: none yet.
+        self.worded: bytearray | None = None
         #: Memos of facts about O lines that do not change while running (loops re-ask them).
         self.checked: set[int] = set()  # construct heads whose label was found unique
         self.do_tails: dict[int, bool] = {}  # line index of a while → closes a do loop?

@@ -25,6 +25,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from nurbscnc.errors import UnsupportedError
 
 _AXES = ("X", "Y", "Z")
@@ -105,6 +107,21 @@ class Coordinates:
         return [x + self.origin_mm[0] + self.tool_mm[0],
                 y + self.origin_mm[1] + self.tool_mm[1],
                 z + self.origin_mm[2] + self.tool_mm[2]]  # fmt: skip
+
+    def to_machine_array(self, prog_mm: np.ndarray) -> np.ndarray:
+        """:meth:`to_machine` of each row of ``prog_mm`` (n, 3) [mm]: the same operations in
+        the same order, elementwise, so each row is the same to the bit."""
+        if self.plain:
+            return prog_mm
+        x = prog_mm[:, 0] + self.g92_mm[0]
+        y = prog_mm[:, 1] + self.g92_mm[1]
+        z = prog_mm[:, 2] + self.g92_mm[2]
+        if self.rotation_deg:
+            c, s = _cos_sin(self.rotation_deg)
+            x, y = c * x - s * y, s * x + c * y
+        return np.column_stack([x + self.origin_mm[0] + self.tool_mm[0],
+                                y + self.origin_mm[1] + self.tool_mm[1],
+                                z + self.origin_mm[2] + self.tool_mm[2]])  # fmt: skip
 
     def to_program(self, machine) -> list:
         """Inverse of :meth:`to_machine`."""

@@ -15,9 +15,12 @@ plug in at :meth:`_Interpreter.canned_cycle` and :meth:`_Interpreter.compensate`
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+
+import numpy as np
 
 from nurbscnc.errors import GeometryError, NurbsCncError, ProgramError, SourcePos, UnsupportedError
 from nurbscnc.geometry.segments import (
@@ -36,6 +39,7 @@ from nurbscnc.program.compensation import MSG_ARC_AFTER_EXIT, CompMove, CutterCo
 from nurbscnc.program.control import N_LOCAL, ControlFlow, Frame, Source
 from nurbscnc.program.cycles import CycleState, expand_cycle
 from nurbscnc.program.expressions import MAX_PARAMETER, ExpressionError, evaluate
+from nurbscnc.program.fastlane import BulkState, pause_cyclic_gc, plain_run
 from nurbscnc.program.modal import (
     CANNED_CYCLES,
     G_GROUP,
@@ -89,6 +93,8 @@ class InterpretOptions:
     load_subroutine: Callable[[str], tuple[str, str] | None] | None = None
     max_call_depth: int = 100
     max_loop_iterations: int = 250_000
+    #: Interpret runs of plain G0/G1 lines in bulk (fastlane.py; same segments, faster).
+    fast_lane: bool = True
 
 
 def interpret_text(text: str, options: InterpretOptions | None = None) -> Program:
@@ -274,6 +280,7 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
     def run(self) -> None:
         percent_seen = False
         block_delete = self.options.block_delete
+        fast = self.options.fast_lane
         while not self.ended:
             frame = self.frames[-1]
             source = frame.source
@@ -284,6 +291,12 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
                     raise self.error(f"end of file inside subroutine o{frame.label}")
                 break
             self.source = source
+            if fast and source._blocks[pc] is None and self.comp is None and self.nurbs is None \
+                    and self.comp_exit is None and self.m.feed_mode == 940 and self.m.absolute:
+                count = self.bulk(source, pc)
+                if count:
+                    frame.pc = pc + count
+                    continue
             self.line_no = pc + 1
             frame.pc = pc + 1
             try:
@@ -305,6 +318,33 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
             elif block.words or block.assigns or block.comments:
                 self.block(block)
         self.finish()
+
+    def bulk(self, source: Source, pc: int) -> int:
+        """Interpret the run of plain straight-move lines at ``source.lines[pc]`` in bulk
+        (fastlane.py: the same segments as line by line); returns the lines consumed (0:
+        the line is not one the fast lane takes)."""
+        m = self.m
+        state = BulkState(m.motion, m.feed, m.feed_mm, tuple(self.prog), m.scale)
+        run = plain_run(source.lines, pc, state, self.coords.to_machine_array,
+                        (MAX_COORD_MM, MIN_FEED_MM_MIN, MAX_FEED_MM_MIN))  # fmt: skip
+        if run is None:
+            return 0
+        if source.worded is None:
+            source.worded = bytearray(len(source.lines))
+        np.frombuffer(source.worded, dtype=np.uint8)[run.worded] = 1
+        blend_mm = m.blend_mm
+        if source is self.main:
+            numbers = [k + 1 for k in run.index]
+        else:  # in a called file the moves carry the main program's call line
+            numbers = [self.main_line()] * len(run.index)
+        with pause_cyclic_gc():
+            self.segments.extend(map(Line, run.starts_mm, run.ends_mm, run.feeds_mm_s, numbers,
+                                     run.rapid, itertools.repeat(blend_mm)))  # fmt: skip
+        new = run.state
+        m.motion, m.feed, m.feed_mm = new.motion, new.feed, new.feed_mm
+        self.prog = list(new.prog_mm)
+        self.line_no = pc + run.count
+        return run.count
 
     def finish(self) -> None:
         self.comp_off()  # the end of the program ends compensation as G40 does
@@ -1095,10 +1135,14 @@ def interpret(blocks, lines, options: InterpretOptions) -> Program:
     state = _Interpreter(list(lines), options)
     state.run()
     parsed = state.main._blocks
+    blocks = sum(1 for b in parsed if b is not None and (b.words or b.assigns))
+    if state.main.worded is not None:  # lines run by the fast lane (and never parsed)
+        worded = np.flatnonzero(np.frombuffer(state.main.worded, dtype=np.uint8)).tolist()
+        blocks += sum(1 for k in worded if parsed[k] is None)
     return Program(
         segments=tuple(state.segments),
         start_mm=vec3(options.start_mm),
         notes=tuple(state.notes),
-        blocks=sum(1 for b in parsed if b is not None and (b.words or b.assigns)),
+        blocks=blocks,
         name=options.name,
     )
