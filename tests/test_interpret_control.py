@@ -357,3 +357,29 @@ def test_inverse_time_and_per_revolution_feeds():
     assert got[2].feed_mm_s == pytest.approx(10.0, rel=1e-15)
     assert got[3].feed_mm_s == pytest.approx(0.2 * 1000 / 60, rel=1e-15)
     assert got[4].feed_mm_s == pytest.approx(0.01 * 25.4 * 1000 / 60, rel=1e-15)
+
+
+@settings(max_examples=40, deadline=None, derandomize=True)
+@given(body=moves, turns=st.integers(0, 4))
+def test_fanuc_m98_equals_inlined(body, turns):
+    """M98 P<n> L<k> runs the O<n> … M99 block k times (L0: not at all) and returns after
+    the M98, as the body written out k times; #1..#30 are global (a counter survives)."""
+    sub = [f"{g} X[#1 * 0.5 + {num(x)}] Y{num(y)} Z{num(z)}" for g, x, y, z in body]
+    called = "\n".join(["F600", "#1 = 0", f"M98 P17 L{turns}", "G0 X[#1]", "M30", "",
+                        "O17", *sub, "#1 = [#1 + 1]", "M99"])  # fmt: skip
+    inline = []
+    for k in range(turns):
+        inline += [f"{g} X{num(k * 0.5 + x)} Y{num(y)} Z{num(z)}" for g, x, y, z in body]
+    inlined = "\n".join(["F600", *inline, f"G0 X{turns}", "M30"])
+    got, want = segs(called), segs(inlined)
+    assert [s.kind for s in got] == [s.kind for s in want]
+    for s, w in zip(got, want):
+        np.testing.assert_allclose(s.end_mm, w.end_mm, rtol=0, atol=1e-12)
+        assert s.feed_mm_s == w.feed_mm_s
+
+
+def test_fanuc_m98_lines_and_nesting():
+    text = "G0 X0\nM98 P2 L2\nM30\nO2\nM98 P1 L3\nM99\nO1\nG91 G0 X1\nG90\nM99\n"
+    prog = interpret_text(text)
+    assert [s.end_mm[0] for s in prog.segments] == [float(k) for k in range(1, 7)]
+    assert {s.line for s in prog.segments} == {8}  # the moves carry the sub's own line

@@ -522,13 +522,21 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
                     raise self.error(f"Cannot put {article} {letter.lower()} in canned cycle",
                                      words[letter][1])  # fmt: skip
         self.check_rotary(words, used)
+        if mcodes.get(4, (0,))[0] == 98:
+            used.update("PL")  # M98 P<O number> L<repeats>: the call, after the block's moves
         moved_by_nonmodal = self.nonmodal(gcodes, words, used)
         self.motion_block(gcodes, words, used, moved_by_nonmodal)
         for letter, (_, col) in words.items():
             if letter not in used:
                 raise self.error(_unused_word_message(letter), col)
         if 4 in mcodes:
-            self.stop(*mcodes[4])
+            code, col = mcodes[4]
+            if code == 98:
+                self.m98(words, col)
+            elif code == 99:
+                self.m99(col)
+            else:
+                self.stop(code, col)
 
     def modal_save_restore(self, code: int, column: int) -> None:
         """M70 save, M71 forget, M72 restore the modal state; M73 save it for an automatic
