@@ -383,3 +383,15 @@ def test_fanuc_m98_lines_and_nesting():
     prog = interpret_text(text)
     assert [s.end_mm[0] for s in prog.segments] == [float(k) for k in range(1, 7)]
     assert {s.line for s in prog.segments} == {8}  # the moves carry the sub's own line
+
+
+def test_g80_beside_a_motion_code():
+    """LinuxCNC (rs274 -g, checked): G80 with G0/G1/G2/G81 in one block gives way to the other
+    code; G80 alone with axis words stays an error."""
+    assert ends("G80 G0 X1\nM2").tolist() == [[1, 0, 0]]
+    assert ends("G0 G80 X1\nM2").tolist() == [[1, 0, 0]]
+    assert ends("G80 G1 X1 F10\nM2").tolist() == [[1, 0, 0]]
+    assert [s.kind for s in segs("G80 G2 X1 I.5 F10\nM2")] == ["arc"]
+    assert len(segs("G81 G80 X1 Z-1 R1 F10\nM2")) == 4
+    with pytest.raises(ProgramError, match="G80"):
+        segs("G80 X1\nM2")

@@ -434,6 +434,12 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
             raise self.error(f"unknown G code G{_fmt_code(code)}", column)
         if group in gcodes:
             other = gcodes[group][0]
+            if group == 1 and 800 in (code, other):
+                # LinuxCNC accepts G80 beside another motion code ("G80 G0" in CAM headers
+                # and its own tests): the other code is the block's motion.
+                if code != 800:
+                    gcodes[group] = (code, column)
+                return
             raise self.error(
                 f"G{_fmt_code(other)} and G{_fmt_code(code)} are in the same modal "
                 f"group ({group}) and cannot share a block",
