@@ -395,3 +395,10 @@ def test_g80_beside_a_motion_code():
     assert len(segs("G81 G80 X1 Z-1 R1 F10\nM2")) == 4
     with pytest.raises(ProgramError, match="G80"):
         segs("G80 X1\nM2")
+
+
+def test_m61_sets_the_loaded_tool_for_g43():
+    tools = parse_tool_table("T3 P3 Z2.5 D6\nT4 P4 Z-1 D4\n")
+    prog = interpret_text("M61 Q3\nG43\nG0 X0 Y0 Z0\nM61 Q4 G43\nG0 Z0\nM2",
+                          InterpretOptions(tools=tools))  # fmt: skip
+    assert [tuple(s.end_mm) for s in prog.segments] == [(0.0, 0.0, 2.5), (0.0, 0.0, -1.0)]

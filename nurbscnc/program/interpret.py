@@ -497,7 +497,10 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
             if self.m.comp_mode != 400:
                 raise self.error("Cannot change tools with cutter radius compensation on",
                                  mcodes[6][1])  # fmt: skip
-            self.m.tool_loaded = self.m.tool_selected  # M6
+            if mcodes[6][0] == 6:
+                self.m.tool_loaded = self.m.tool_selected  # M6
+            else:  # M61 Q<tool>: the tool in the spindle is Q (no change is made)
+                self.m.tool_loaded = self.m61_tool(words, mcodes[6][1], used)
         if 10 in mcodes:
             self.modal_save_restore(*mcodes[10])
         if mcodes.get(7, (0,))[0] == 19:
@@ -543,6 +546,15 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
                 self.m99(col)
             else:
                 self.stop(code, col)
+
+    def m61_tool(self, words: dict, column: int, used: set) -> int:
+        if "Q" not in words:
+            raise self.error("M61 needs a Q word (the tool number)", column)
+        q, qcol = words["Q"]
+        used.add("Q")
+        if q != int(q) or q < 0 or q >= 2**31:
+            raise self.error(f"M61 Q{q:g}: Q must be a tool number", qcol)
+        return int(q)
 
     def modal_save_restore(self, code: int, column: int) -> None:
         """M70 save, M71 forget, M72 restore the modal state; M73 save it for an automatic

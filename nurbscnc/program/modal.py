@@ -66,7 +66,7 @@ G_REFUSED = {
 }
 
 #: M codes: group as LinuxCNC numbers them (4 stop, 6 tool change, 7 spindle, 8 coolant).
-M_GROUP = {0: 4, 1: 4, 2: 4, 30: 4, 60: 4, 98: 4, 99: 4, 6: 6, 3: 7, 4: 7, 5: 7, 7: 8, 8: 8,
+M_GROUP = {0: 4, 1: 4, 2: 4, 30: 4, 60: 4, 98: 4, 99: 4, 6: 6, 61: 6, 3: 7, 4: 7, 5: 7, 7: 8, 8: 8,
            9: 8, 19: 7, 48: 9, 49: 9, 70: 10, 71: 10, 72: 10, 73: 10}  # fmt: skip
 
 #: What M70 / M73 save and M72 restores (LinuxCNC: units, plane, distance modes, feed mode,
