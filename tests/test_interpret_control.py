@@ -402,3 +402,21 @@ def test_m61_sets_the_loaded_tool_for_g43():
     prog = interpret_text("M61 Q3\nG43\nG0 X0 Y0 Z0\nM61 Q4 G43\nG0 Z0\nM2",
                           InterpretOptions(tools=tools))  # fmt: skip
     assert [tuple(s.end_mm) for s in prog.segments] == [(0.0, 0.0, 2.5), (0.0, 0.0, -1.0)]
+
+
+def test_g10_l1_l10_l11_write_the_tool_table():
+    """Offsets as LinuxCNC's interp test g10-l1-l10 prints them (#5401..#5403, rs274):
+    L10 X1 at X.1 makes the entry -.9; under G10 L2 R45, L10 X1 at the origin makes it
+    (-.707, -.707); L11 works in G59.3 without G92. The offset in force changes at G43."""
+    tools = parse_tool_table("T1 P1 Z0 D2\n")
+    run = lambda text: interpret_text(text, InterpretOptions(tools=tools)).segments  # noqa: E731
+    segments = run("T1 M6 G43\nG0 X.1 Y.2 Z.3\nG10 L10 P1 X1\nG0 X2\nG43\nG0 X3\nM2")
+    assert [s.end_mm[0] for s in segments] == [0.1, 2.0, pytest.approx(2.1, abs=1e-15)]
+    segments = run("G10 L2 P1 R45\nT1 M6 G43\nG10 L10 P1 X1\nG43\nG0 X2 Y0\nM2")
+    # entry (-1/√2, -1/√2): program (2, 0) → machine R45·(2, 0) + entry = (1/√2, 1/√2)
+    np.testing.assert_allclose(segments[-1].end_mm, [0.5**0.5, 0.5**0.5, 0.0], atol=1e-15)
+    segments = run("G10 L2 P9 Z-27\nG92 Z5\nT1 M6\nG0 G53 Z-30\nG10 L11 P1 Z0\nG43\nG0 Z0\nM2")
+    # L11: the entry is -30 - (-27) = -3 (G92 ignored); Z0 is then 0 + G92 (-5) + (-3)
+    assert segments[-1].end_mm[2] == -8.0
+    segments = run("T1 M6\nG10 L1 P1 Z2.5 R4\nG43\nG0 Z0\nM2")
+    assert segments[-1].end_mm[2] == 2.5
