@@ -420,3 +420,11 @@ def test_g10_l1_l10_l11_write_the_tool_table():
     assert segments[-1].end_mm[2] == -8.0
     segments = run("T1 M6\nG10 L1 P1 Z2.5 R4\nG43\nG0 Z0\nM2")
     assert segments[-1].end_mm[2] == 2.5
+
+
+def test_g52_local_offset_shares_the_g92_registers():
+    """End points recorded from LinuxCNC 2.9 (tools/record_goldens.py on this program)."""
+    text = ("G21\nG0 X1\nG52 X2 Y3\nG0 X0 Y0\nG52 Z1\nG0 X1 Z0\nG92.2\nG0 X0\nG92.3\nG0 X0.5\n"
+            "G52 X0\nG0 X0\nG92.1\nG0 X0 Y0\nM2\n")  # fmt: skip
+    linuxcnc = [[1, 0, 0], [2, 3, 0], [3, 3, 1], [0, 3, 1], [2.5, 3, 1], [0, 3, 1], [0, 0, 1]]
+    np.testing.assert_allclose(ends(text), linuxcnc, rtol=0, atol=1e-9)

@@ -238,6 +238,9 @@ class OffsetCommands:
         if code == 920:
             self.g92(words, used, col)
             return True
+        if code == 520:
+            self.g52(words, used)
+            return True
         if code in (921, 922, 923):
             machine = self.pos
             if code == 923:
@@ -346,6 +349,16 @@ class OffsetCommands:
         if 2 in given:
             out[2] = origin[2] + have[2] - want[2]
         return out
+
+    def g52(self, words: dict, used: set) -> None:
+        """G52 X Y Z: a local origin at the given program coordinates (LinuxCNC keeps it in
+        the G92 offsets: it sets them directly, raises #5210, and G92.1/.2/.3 act on it);
+        axes not given keep their offset; the machine does not move."""
+        machine = self.pos
+        self.coords.set_g92({i: words[a][0] * self.m.scale
+                             for i, a in enumerate(_AXES) if a in words})  # fmt: skip
+        used.update(_AXES)
+        self.pos = machine
 
     def g92(self, words: dict, used: set, col: int) -> None:
         if not any(a in words for a in _AXES):

@@ -23,7 +23,7 @@ CANNED_CYCLES = frozenset({730, 740, 810, 820, 830, 840, 850, 860, 870, 880, 890
 
 G_GROUP = {
     # group 0: non-modal
-    40: 0, 100: 0, 280: 0, 281: 0, 300: 0, 301: 0, 530: 0, 920: 0, 921: 0, 922: 0, 923: 0,
+    40: 0, 100: 0, 280: 0, 281: 0, 300: 0, 301: 0, 520: 0, 530: 0, 920: 0, 921: 0, 922: 0, 923: 0,
     # group 1: motion
     0: 1, 10: 1, 20: 1, 30: 1, 50: 1, 51: 1, 52: 1, 53: 1, 62: 1, 800: 1,
     **{code: 1 for code in CANNED_CYCLES},
@@ -54,7 +54,6 @@ G_REFUSED = {
     384: "G38.4 (probing needs a probe input)",
     385: "G38.5 (probing needs a probe input)",
     432: "G43.2 (additional tool length offset)",
-    520: "G52 (local coordinate offset)",
     760: "G76 (threading cycle, spindle-synchronised)",
     700: "G70 (lathe finishing cycle)",
     710: "G71 (lathe roughing cycle)",
