@@ -428,3 +428,12 @@ def test_g52_local_offset_shares_the_g92_registers():
             "G52 X0\nG0 X0\nG92.1\nG0 X0 Y0\nM2\n")  # fmt: skip
     linuxcnc = [[1, 0, 0], [2, 3, 0], [3, 3, 1], [0, 3, 1], [2.5, 3, 1], [0, 3, 1], [0, 0, 1]]
     np.testing.assert_allclose(ends(text), linuxcnc, rtol=0, atol=1e-9)
+
+
+def test_computed_o_label_call():
+    """LinuxCNC's interp test oword-bug315-p2: ``o#<sub> call`` calls the sub numbered #<sub>;
+    an expression works too."""
+    text = "o5 sub\nG0 X[#1]\no5 endsub\n#<n> = 5\no#<n> call [7]\n#3=2\no[#3*2+1] call [8]\nM2"
+    assert ends(text)[:, 0].tolist() == [7.0, 8.0]
+    with pytest.raises(ProgramError, match="not an O number"):
+        segs("o5 sub\no5 endsub\no[2.5] call\nM2")

@@ -141,6 +141,14 @@ class ControlFlow:
     def oword(self, block: Block, frame: Frame) -> None:
         label, keyword, args, column = block.oword
         here = frame.pc - 1
+        if type(label) is tuple:  # "o#<sub> call": the number is computed (LinuxCNC)
+            if keyword != "call":
+                raise self.error(f"a computed O label (o#… or o[…]) only works with call, "
+                                 f"not {keyword}", column)  # fmt: skip
+            value = self.evaluate(label[1], column)
+            if value != int(value) or value < 0:
+                raise self.error(f"computed O label {value:g} is not an O number", column)
+            label = str(int(value))
         if keyword == "":
             # A program number ("O1234", Fanuc style; LinuxCNC ignores it anywhere).
             if not self.program_name:
