@@ -130,6 +130,7 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
         self.axes_consumed = False  # the block's axis words were data (G43.1), not a move
         self.comp: CutterComp | None = None  # G41/G42 in force: the compensation stream
         self.comp_exit = None  # after G40: the compensated tool position [mm, machine]
+        self.comp_plane = "XY"  # the plane of the compensation in force (XY or ZX)
         tools = dict(options.tools or {})
         for number, length in (options.tool_lengths_mm or {}).items():
             tools.setdefault(int(number), Tool(int(number), (0.0, 0.0, float(length))))
@@ -647,7 +648,8 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
         if self.comp is None:
             self.segments.append(dwell)
         else:
-            self.comp_moves(CompMove("dwell", position, line=dwell.line, seconds=dwell.seconds))
+            self.comp_moves(CompMove("dwell", self.to_comp(position), line=dwell.line,
+                                     seconds=dwell.seconds))  # fmt: skip
 
     def set_cutter_comp(self, gcodes: dict, words: dict, used: set) -> None:
         """G40 / G41 / G42 / G41.1 / G42.1 with D: tracked in ``self.m.comp_*``."""
@@ -664,10 +666,11 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
                 if m.plane == "YZ":
                     raise self.error("Cutter radius compensation allowed only in XY, XZ planes",
                                      col)  # fmt: skip
-                if m.plane != "XY":
-                    raise self.error("cutter radius compensation in the XZ plane (G18) is not "
-                                     "supported (nurbscnc compensates in XY only)", col,
-                                     UnsupportedError)  # fmt: skip
+                if m.plane == "ZX" and self.coords.rotation_deg:
+                    raise self.error("cutter radius compensation in the XZ plane (G18) with a "
+                                     "rotated coordinate system (G10 L2 R) is not supported",
+                                     col, UnsupportedError)  # fmt: skip
+                self.comp_plane = m.plane
                 m.comp_mode = code
                 m.comp_side = "left" if code in (410, 411) else "right"
                 d = words.get("D")
@@ -684,7 +687,8 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
                     m.comp_radius_mm = tool.diameter_mm / 2.0 if tool is not None else 0.0
                 m.comp_d = d[0] if d is not None else None
                 start = tuple(self.pos) if self.comp_exit is None else self.comp_exit
-                self.comp = CutterComp(m.comp_side, m.comp_radius_mm, start, inch=m.inch)
+                self.comp = CutterComp(m.comp_side, m.comp_radius_mm, self.to_comp(start),
+                                       inch=m.inch)  # fmt: skip
                 self.comp_exit = None
         if "D" in words and gcodes.get(14, (0,))[0] == 960:
             used.add("D")  # G96 D: the spindle speed limit of constant surface speed
@@ -874,19 +878,34 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
         m.cycle = result.state
 
     # -- cutter radius compensation (compensation.py) -------------------------------------
+    def to_comp(self, point) -> tuple:
+        """A machine point in the frame compensation.py works in (its first two axes are the
+        plane): XY as is; for G18 (ZX) the cyclic permutation (x, y, z) → (z, x, y), which
+        keeps the handedness, so +Y (the G18 normal) becomes +Z and left stays left."""
+        if self.comp_plane == "ZX":
+            return (float(point[2]), float(point[0]), float(point[1]))
+        return tuple(map(float, point))
+
+    def from_comp(self, point) -> tuple:
+        """Inverse of :meth:`to_comp`."""
+        if self.comp_plane == "ZX":
+            return (float(point[1]), float(point[2]), float(point[0]))
+        return tuple(map(float, point))
+
     def compensate(self, segment) -> None:
         """A programmed Line or Arc (machine mm) into the compensation stream; appends the
         compensated moves that are final so far (the last one is held back for its corner).
-        Compensation works in machine XY: offsets and the G10 R rotation about Z keep the
-        side of the path, so it is the same as compensating in program coordinates."""
+        Compensation works in the machine plane (XY, or ZX for G18 through :meth:`to_comp`):
+        offsets and the G10 R rotation about Z keep the side of the path, so it is the same
+        as compensating in program coordinates (G18 with a rotation is refused)."""
         if isinstance(segment, Arc):
             turns = max(1, math.ceil(abs(segment.angle_rad) / (2.0 * math.pi) - 1e-9))
-            move = CompMove("arc", tuple(map(float, segment.end_mm)), segment.feed_mm_s,
-                            segment.line, (float(segment.center_mm[0]),
-                                           float(segment.center_mm[1])),
+            centre = self.to_comp(segment.center_mm)
+            move = CompMove("arc", self.to_comp(segment.end_mm), segment.feed_mm_s,
+                            segment.line, (centre[0], centre[1]),
                             turns if segment.angle_rad > 0 else -turns)  # fmt: skip
         else:
-            move = CompMove("rapid" if segment.rapid else "feed", tuple(segment.end_mm),
+            move = CompMove("rapid" if segment.rapid else "feed", self.to_comp(segment.end_mm),
                             segment.feed_mm_s, segment.line)  # fmt: skip
         self.comp_moves(move)
 
@@ -909,27 +928,30 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
             raise self.error(exc.message) from None
         self.append_compensated(out)
         if not comp.first and comp.radius_mm > 0.0:
-            self.comp_exit = tuple(comp.position_mm)
+            self.comp_exit = self.from_comp(comp.position_mm)
 
     def append_compensated(self, moves) -> None:
         blend_mm = self.m.blend_mm
+        plane = self.comp_plane
+        back = self.from_comp
         for mv in moves:
             if mv.kind == "dwell":
-                self.segments.append(Dwell(mv.seconds, tuple(mv.end_mm), mv.line))
+                self.segments.append(Dwell(mv.seconds, back(mv.end_mm), mv.line))
             elif mv.kind == "arc":
                 start, end = tuple(mv.start_mm), tuple(mv.end_mm)
                 s2, e2 = start[:2], end[:2]
                 sweep = arcs.sweep_rad(s2, e2, mv.centre_mm, mv.turn > 0, abs(mv.turn))
                 self.segments.append(Arc(
-                    start_mm=vec3(start), end_mm=vec3(end),
-                    center_mm=vec3((*mv.centre_mm, start[2])), normal=vec3((0.0, 0.0, 1.0)),
+                    start_mm=vec3(back(start)), end_mm=vec3(back(end)),
+                    center_mm=vec3(back((*mv.centre_mm, start[2]))),
+                    normal=vec3(PLANE_NORMALS[plane]),
                     angle_rad=float(sweep), helix_mm=end[2] - start[2],
                     radius_start_mm=math.dist(s2, mv.centre_mm),
                     radius_end_mm=math.dist(e2, mv.centre_mm),
-                    feed_mm_s=mv.feed_mm_s, line=mv.line, plane="XY", blend_mm=blend_mm,
+                    feed_mm_s=mv.feed_mm_s, line=mv.line, plane=plane, blend_mm=blend_mm,
                 ))  # fmt: skip
             elif tuple(mv.start_mm) != tuple(mv.end_mm):
-                self.segments.append(Line(tuple(mv.start_mm), tuple(mv.end_mm), mv.feed_mm_s,
+                self.segments.append(Line(back(mv.start_mm), back(mv.end_mm), mv.feed_mm_s,
                                           mv.line, mv.kind == "rapid", blend_mm))  # fmt: skip
 
     def emit(self, segment) -> None:
