@@ -76,9 +76,10 @@ FILES = [
             ("threading", "G33 spindle sync"),
             ("g76", "G76 lathe threading"),
             ("probe-hole", "G38 probing"),
-            ("lathecomp", "G7 lathe diameter mode"),
         ]
     ],
+    (LINUXCNC, "nc_files/lathecomp.ngc", "linuxcnc/nc_files/lathecomp.ngc", "program",
+     "G18 (XZ) cutter compensation, lathe profile"),
     # tests/interp: each test.ngc under a name made from its directory.
     *[
         (LINUXCNC, f"tests/interp/{src}", f"linuxcnc/interp/{dst}.ngc", "program", "interp test")
@@ -154,8 +155,8 @@ FILES = [
         LINUXCNC,
         "tests/ccomp/lathe-comp/test.ngc",
         "linuxcnc/ccomp/lathe-comp.ngc",
-        "refused",
-        "lathe (G7/G18 comp)",
+        "program",
+        "G18 (XZ) cutter compensation, lathe profile",
     ),
     # LinuxCNC 2.9 taps to interchanged coordinates in G18/G19 (nurbscnc/program/cycles.py).
     *[
