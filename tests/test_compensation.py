@@ -187,3 +187,18 @@ def test_g18_compensation_is_g17_with_the_axes_turned():
             np.testing.assert_allclose(np.asarray(sb.center_mm)[turn], sa.center_mm, atol=1e-12)
             assert sb.angle_rad == pytest.approx(sa.angle_rad, abs=1e-14)
             assert sb.plane == "ZX" and tuple(sb.normal) == (0.0, 1.0, 0.0)
+
+
+def test_pause_after_g40_is_where_the_tool_is():
+    """After G40 the tool stays at the compensated point until the exit move (LinuxCNC's
+    gmoccapy sample: M1 between G40 and the exit move); the pause is there, and the exit
+    move starts there."""
+    from nurbscnc.program.interpret import InterpretOptions, interpret_text
+    from nurbscnc.program.tooltable import parse_tool_table
+
+    text = "G21 F100\nG0 X0 Y-10\nG41 D1\nG1 X0 Y0\nX10\nG40\nM1\nG0 X20 Y20\nM2"
+    segs = interpret_text(text, InterpretOptions(tools=parse_tool_table("T1 P1 D4\n"))).segments
+    pause = next(s for s in segs if s.kind == "pause")
+    assert pause.position_mm == pytest.approx((10.0, 2.0, 0.0), abs=1e-12)  # left of +X
+    exit_move = segs[segs.index(pause) + 1]
+    assert exit_move.start_mm == pause.position_mm and exit_move.end_mm == (20.0, 20.0, 0.0)

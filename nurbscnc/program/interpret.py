@@ -1152,7 +1152,9 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
             return
         if self.nurbs is not None:
             self.finish_nurbs_by_other(None, column)
-        self.segments.append(Pause(tuple(self.pos), self.main_line(), f"M{code}"))
+        # After G40 the tool stands at the compensated point until the exit move.
+        position = tuple(self.pos) if self.comp_exit is None else self.comp_exit
+        self.segments.append(Pause(position, self.main_line(), f"M{code}"))
 
 
 def _fmt_code(code: int) -> str:
