@@ -14,7 +14,7 @@ precision where the golden had to come from rs274):
 
 * kind: traverse ↔ rapid Line, feed ↔ Line, arc ↔ Arc, dwell ↔ Dwell, pause ↔ a segment of kind
   ``pause`` (probe and rigid-tap have no nurbscnc counterpart and fail the comparison);
-* the source line (where the golden knows it);
+* the source line (where the golden knows it: LinuxCNC's line 0 means it does not);
 * end point (x, y, z) within tol; A/B/C must not move (nurbscnc is 3-axis: a program whose
   golden moves A, B or C must be refused);
 * arc: centre within tol, normal equal to 1e-12, and the turn: the sign of ``angle_rad`` is the
@@ -138,8 +138,12 @@ def linuxcnc_angle_rad(start, centre, end, normal, rotation: int) -> float:
     return theta + 2.0 * math.pi * (abs(rotation) - 1)
 
 
-def compare(golden: dict, program) -> None:
-    """Raise AssertionError naming the first move where nurbscnc differs from LinuxCNC."""
+def compare(golden: dict, program, held_back: int = 0) -> None:
+    """Raise AssertionError naming the first move where nurbscnc differs from LinuxCNC.
+
+    ``held_back``: how many moves nurbscnc may make past LinuxCNC's last one (see
+    :func:`check_golden`: a file without M2 ends LinuxCNC with an error while its cutter
+    compensation still holds the last move back; nurbscnc runs the file to its end)."""
     tol = golden["tolerance_mm"]
     want = expected_moves(golden)
     got = actual_segments(program)
@@ -151,7 +155,9 @@ def compare(golden: dict, program) -> None:
         where = f"move {i} (LinuxCNC line {m.get('line')}, nurbscnc line {seg.line})"
         kind = _segment_kind(seg)
         assert kind == m["kind"], f"{where}: LinuxCNC makes a {m['kind']}, nurbscnc a {kind}"
-        if m.get("line") is not None:
+        # LinuxCNC numbers lines from 1; 0 is its "no line", which moves its cutter
+        # compensation queue emits carry after some corners (comp-g1, mill-g90g91g92).
+        if m.get("line"):
             assert seg.line == m["line"], f"{where}: source line differs"
         if "end" in m:
             end = np.asarray(seg.end_mm, float)
@@ -184,6 +190,8 @@ def compare(golden: dict, program) -> None:
             assert abs(seg.seconds - m["seconds"]) <= 1e-12, (
                 f"{where}: dwell {seg.seconds} s != LinuxCNC {m['seconds']} s"
             )
+    if len(want) < len(got) <= len(want) + held_back:
+        return
     assert len(got) == len(want), (
         f"nurbscnc makes {len(got)} moves, LinuxCNC {len(want)} "
         f"(first extra: {(got[len(want)] if len(got) > len(want) else want[len(got)])})"
@@ -210,7 +218,10 @@ def check_golden(name: str, role: str, golden: dict, program_path: Path) -> None
         except ProgramError as exc:
             line = exc.pos.line if exc.pos else "?"
             raise AssertionError(f"nurbscnc refuses it (line {line}): {exc.message}") from None
-        compare(golden, program)
+        # LinuxCNC's compensation queue holds one move back; its EOF error loses it.
+        comp = lenient and any(m.get("kind") == "arc" or m.get("kind") == "feed"
+                               for m in golden["moves"]) and _has_comp(program_path)
+        compare(golden, program, held_back=1 if comp else 0)
         return
     try:
         run_nurbscnc(program_path)
@@ -224,3 +235,10 @@ def check_golden(name: str, role: str, golden: dict, program_path: Path) -> None
         return
     why = "outside 3-axis milling" if must_refuse else golden["error"]["message"]
     raise AssertionError(f"nurbscnc accepts a program it must refuse ({why})")
+
+
+def _has_comp(path: Path) -> bool:
+    """Does the program turn cutter compensation on (G41/G42, any form)?"""
+    import re
+
+    return re.search(r"[gG]\s*4\s*[12]", path.read_text(errors="replace")) is not None

@@ -162,3 +162,43 @@ def test_negative_radius_swaps_side():
         comp.move(CompMove("feed", (10.0, 10.0, 0.0), 1.0, 2))
     assert a.finish() == b.finish()
     assert a.position_mm == pytest.approx((12.0, 10.0, 0.0), abs=1e-12)
+
+
+def test_g18_compensation_is_g17_with_the_axes_turned():
+    """G18 (ZX plane, normal +Y) compensation equals G17 compensation of the same profile
+    written with X→Z, Y→X, Z→Y (I→K, J→I): the cyclic permutation keeps the handedness, so
+    left is left (LinuxCNC compensates in XZ the same way; its goldens inside-corners, comp,
+    lathecomp agree move by move)."""
+    from nurbscnc.program.interpret import InterpretOptions, interpret_text
+    from nurbscnc.program.tooltable import parse_tool_table
+
+    xy = ("G17 G21 F100\nG0 X0 Y-5 Z1\nG41 D1\nG1 X10 Y0\nG3 X20 Y10 I0 J10\nG1 Y20 Z2\n"
+          "G2 X10 Y30 I-10 J0\nG1 X0 Y20\nG40\nG0 X-5 Y-5\nM2")  # fmt: skip
+    swap = {"X": "Z", "Y": "X", "Z": "Y", "I": "K", "J": "I"}
+    zx = "".join(swap.get(ch, ch) for ch in xy).replace("G17", "G18")
+    options = InterpretOptions(tools=parse_tool_table("T1 P1 D4\n"))
+    a = interpret_text(xy, options).segments
+    b = interpret_text(zx, options).segments
+    assert [s.kind for s in a] == [s.kind for s in b] and len(a) > 6
+    turn = [2, 0, 1]  # a G18 point (x, y, z) read as the G17 point (z, x, y)
+    for sa, sb in zip(a, b):
+        np.testing.assert_allclose(np.asarray(sb.end_mm)[turn], sa.end_mm, rtol=0, atol=1e-12)
+        if sa.kind == "arc":
+            np.testing.assert_allclose(np.asarray(sb.center_mm)[turn], sa.center_mm, atol=1e-12)
+            assert sb.angle_rad == pytest.approx(sa.angle_rad, abs=1e-14)
+            assert sb.plane == "ZX" and tuple(sb.normal) == (0.0, 1.0, 0.0)
+
+
+def test_pause_after_g40_is_where_the_tool_is():
+    """After G40 the tool stays at the compensated point until the exit move (LinuxCNC's
+    gmoccapy sample: M1 between G40 and the exit move); the pause is there, and the exit
+    move starts there."""
+    from nurbscnc.program.interpret import InterpretOptions, interpret_text
+    from nurbscnc.program.tooltable import parse_tool_table
+
+    text = "G21 F100\nG0 X0 Y-10\nG41 D1\nG1 X0 Y0\nX10\nG40\nM1\nG0 X20 Y20\nM2"
+    segs = interpret_text(text, InterpretOptions(tools=parse_tool_table("T1 P1 D4\n"))).segments
+    pause = next(s for s in segs if s.kind == "pause")
+    assert pause.position_mm == pytest.approx((10.0, 2.0, 0.0), abs=1e-12)  # left of +X
+    exit_move = segs[segs.index(pause) + 1]
+    assert exit_move.start_mm == pause.position_mm and exit_move.end_mm == (20.0, 20.0, 0.0)

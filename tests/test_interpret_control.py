@@ -357,3 +357,83 @@ def test_inverse_time_and_per_revolution_feeds():
     assert got[2].feed_mm_s == pytest.approx(10.0, rel=1e-15)
     assert got[3].feed_mm_s == pytest.approx(0.2 * 1000 / 60, rel=1e-15)
     assert got[4].feed_mm_s == pytest.approx(0.01 * 25.4 * 1000 / 60, rel=1e-15)
+
+
+@settings(max_examples=40, deadline=None, derandomize=True)
+@given(body=moves, turns=st.integers(0, 4))
+def test_fanuc_m98_equals_inlined(body, turns):
+    """M98 P<n> L<k> runs the O<n> … M99 block k times (L0: not at all) and returns after
+    the M98, as the body written out k times; #1..#30 are global (a counter survives)."""
+    sub = [f"{g} X[#1 * 0.5 + {num(x)}] Y{num(y)} Z{num(z)}" for g, x, y, z in body]
+    called = "\n".join(["F600", "#1 = 0", f"M98 P17 L{turns}", "G0 X[#1]", "M30", "",
+                        "O17", *sub, "#1 = [#1 + 1]", "M99"])  # fmt: skip
+    inline = []
+    for k in range(turns):
+        inline += [f"{g} X{num(k * 0.5 + x)} Y{num(y)} Z{num(z)}" for g, x, y, z in body]
+    inlined = "\n".join(["F600", *inline, f"G0 X{turns}", "M30"])
+    got, want = segs(called), segs(inlined)
+    assert [s.kind for s in got] == [s.kind for s in want]
+    for s, w in zip(got, want):
+        np.testing.assert_allclose(s.end_mm, w.end_mm, rtol=0, atol=1e-12)
+        assert s.feed_mm_s == w.feed_mm_s
+
+
+def test_fanuc_m98_lines_and_nesting():
+    text = "G0 X0\nM98 P2 L2\nM30\nO2\nM98 P1 L3\nM99\nO1\nG91 G0 X1\nG90\nM99\n"
+    prog = interpret_text(text)
+    assert [s.end_mm[0] for s in prog.segments] == [float(k) for k in range(1, 7)]
+    assert {s.line for s in prog.segments} == {8}  # the moves carry the sub's own line
+
+
+def test_g80_beside_a_motion_code():
+    """LinuxCNC (rs274 -g, checked): G80 with G0/G1/G2/G81 in one block gives way to the other
+    code; G80 alone with axis words stays an error."""
+    assert ends("G80 G0 X1\nM2").tolist() == [[1, 0, 0]]
+    assert ends("G0 G80 X1\nM2").tolist() == [[1, 0, 0]]
+    assert ends("G80 G1 X1 F10\nM2").tolist() == [[1, 0, 0]]
+    assert [s.kind for s in segs("G80 G2 X1 I.5 F10\nM2")] == ["arc"]
+    assert len(segs("G81 G80 X1 Z-1 R1 F10\nM2")) == 4
+    with pytest.raises(ProgramError, match="G80"):
+        segs("G80 X1\nM2")
+
+
+def test_m61_sets_the_loaded_tool_for_g43():
+    tools = parse_tool_table("T3 P3 Z2.5 D6\nT4 P4 Z-1 D4\n")
+    prog = interpret_text("M61 Q3\nG43\nG0 X0 Y0 Z0\nM61 Q4 G43\nG0 Z0\nM2",
+                          InterpretOptions(tools=tools))  # fmt: skip
+    assert [tuple(s.end_mm) for s in prog.segments] == [(0.0, 0.0, 2.5), (0.0, 0.0, -1.0)]
+
+
+def test_g10_l1_l10_l11_write_the_tool_table():
+    """Offsets as LinuxCNC's interp test g10-l1-l10 prints them (#5401..#5403, rs274):
+    L10 X1 at X.1 makes the entry -.9; under G10 L2 R45, L10 X1 at the origin makes it
+    (-.707, -.707); L11 works in G59.3 without G92. The offset in force changes at G43."""
+    tools = parse_tool_table("T1 P1 Z0 D2\n")
+    run = lambda text: interpret_text(text, InterpretOptions(tools=tools)).segments  # noqa: E731
+    segments = run("T1 M6 G43\nG0 X.1 Y.2 Z.3\nG10 L10 P1 X1\nG0 X2\nG43\nG0 X3\nM2")
+    assert [s.end_mm[0] for s in segments] == [0.1, 2.0, pytest.approx(2.1, abs=1e-15)]
+    segments = run("G10 L2 P1 R45\nT1 M6 G43\nG10 L10 P1 X1\nG43\nG0 X2 Y0\nM2")
+    # entry (-1/√2, -1/√2): program (2, 0) → machine R45·(2, 0) + entry = (1/√2, 1/√2)
+    np.testing.assert_allclose(segments[-1].end_mm, [0.5**0.5, 0.5**0.5, 0.0], atol=1e-15)
+    segments = run("G10 L2 P9 Z-27\nG92 Z5\nT1 M6\nG0 G53 Z-30\nG10 L11 P1 Z0\nG43\nG0 Z0\nM2")
+    # L11: the entry is -30 - (-27) = -3 (G92 ignored); Z0 is then 0 + G92 (-5) + (-3)
+    assert segments[-1].end_mm[2] == -8.0
+    segments = run("T1 M6\nG10 L1 P1 Z2.5 R4\nG43\nG0 Z0\nM2")
+    assert segments[-1].end_mm[2] == 2.5
+
+
+def test_g52_local_offset_shares_the_g92_registers():
+    """End points recorded from LinuxCNC 2.9 (tools/record_goldens.py on this program)."""
+    text = ("G21\nG0 X1\nG52 X2 Y3\nG0 X0 Y0\nG52 Z1\nG0 X1 Z0\nG92.2\nG0 X0\nG92.3\nG0 X0.5\n"
+            "G52 X0\nG0 X0\nG92.1\nG0 X0 Y0\nM2\n")  # fmt: skip
+    linuxcnc = [[1, 0, 0], [2, 3, 0], [3, 3, 1], [0, 3, 1], [2.5, 3, 1], [0, 3, 1], [0, 0, 1]]
+    np.testing.assert_allclose(ends(text), linuxcnc, rtol=0, atol=1e-9)
+
+
+def test_computed_o_label_call():
+    """LinuxCNC's interp test oword-bug315-p2: ``o#<sub> call`` calls the sub numbered #<sub>;
+    an expression works too."""
+    text = "o5 sub\nG0 X[#1]\no5 endsub\n#<n> = 5\no#<n> call [7]\n#3=2\no[#3*2+1] call [8]\nM2"
+    assert ends(text)[:, 0].tolist() == [7.0, 8.0]
+    with pytest.raises(ProgramError, match="not an O number"):
+        segs("o5 sub\no5 endsub\no[2.5] call\nM2")

@@ -26,6 +26,7 @@ CAMOTICS = (
     "e84665f2fa9d1151f03282ac7e01320bc65e015b",
     "GPL-2.0-or-later (COPYING, LICENSE)",
 )
+CNCJS = ("cncjs/cncjs", "48550474bd6b0bf375997f2d779f1f440b16aa4d", "MIT (LICENSE)")
 
 TP = "tests/trajectory-planner/circular-arcs/nc_files/"
 # (repository tuple, source path, destination under tests/programs/real, role, what it is)
@@ -76,9 +77,10 @@ FILES = [
             ("threading", "G33 spindle sync"),
             ("g76", "G76 lathe threading"),
             ("probe-hole", "G38 probing"),
-            ("lathecomp", "G7 lathe diameter mode"),
         ]
     ],
+    (LINUXCNC, "nc_files/lathecomp.ngc", "linuxcnc/nc_files/lathecomp.ngc", "program",
+     "G18 (XZ) cutter compensation, lathe profile"),
     # tests/interp: each test.ngc under a name made from its directory.
     *[
         (LINUXCNC, f"tests/interp/{src}", f"linuxcnc/interp/{dst}.ngc", "program", "interp test")
@@ -154,8 +156,8 @@ FILES = [
         LINUXCNC,
         "tests/ccomp/lathe-comp/test.ngc",
         "linuxcnc/ccomp/lathe-comp.ngc",
-        "refused",
-        "lathe (G7/G18 comp)",
+        "program",
+        "G18 (XZ) cutter compensation, lathe profile",
     ),
     # LinuxCNC 2.9 taps to interchanged coordinates in G18/G19 (nurbscnc/program/cycles.py).
     *[
@@ -276,6 +278,25 @@ FILES = [
             ("locket/engrave.ngc", "engraving"),
         ]
     ],
+    # cncjs examples (a G-code sender for Grbl and friends): jscut CAM output, calibration and
+    # arc samples as hobby machines run them.
+    *[
+        (CNCJS, f"examples/gcode/{p}", "cncjs/" + p.replace("/", "__"), "program", what)
+        for p, what in [
+            ("jsdc.gcode", "jscut CAM output"),
+            ("tball/tball.gcode", "jscut CAM output"),
+            ("tball/tball-engrave.gcode", "jscut CAM output, engraving"),
+            ("Circle_Diamond_Square_Calibration.gcode", "Shapeoko calibration, numbered lines"),
+            ("circle.gcode", "arc sample"),
+            ("circle-inch.gcode", "arc sample, inch"),
+            ("full-circle-without-xyz.gcode", "full circles without axis words"),
+            ("g2-arc.gcode", "arc sample"),
+            ("helical-thread-milling.gcode", "helical thread milling, G91"),
+            ("arc-ijk.gcode", "arc sample"),
+            ("arc-xz-plane.gcode", "G18 arc"),
+            ("arc-yz-plane.gcode", "G19 arc"),
+        ]
+    ],
 ]
 
 
@@ -317,8 +338,8 @@ def main() -> None:
         "(LinuxCNC's moves are recorded in `tests/golden/linuxcnc/` and compared with nurbscnc's),",
         "**subroutine**",
         '(called by a program beside it), **refused** (outside 3-axis milling; kept as "stays',
-        'refused" examples). The programs are GPL data; they are redistributed under their',
-        "repositories' licences (GPL-2.0 / GPL-2.0-or-later), unchanged, with their origin.",
+        'refused" examples). The programs are redistributed under their repositories\'',
+        "licences (GPL-2.0 / GPL-2.0-or-later; MIT for cncjs), unchanged, with their origin.",
         "",
         "Initial state used for every program (`make goldens`): `tools.tbl` (LinuxCNC tool-table",
         "format, mm: T1–T4 from LinuxCNC's `tests/interp/cam-nisley/test.tbl` in mm, T5–T99",

@@ -17,9 +17,9 @@ plane coordinates x(ξ), y(ξ) and of its arc length s(ξ), with its plane frame
 
 Parameters: lines, circular arcs and helices use u = s (closed forms); PH pieces ξ ∈ [0, 1]
 found by Newton on the polynomial arc length (SPEC §4, eq. 10–12); NURBS pieces the curve
-parameter u via the curve's quintic Hermite inversion table (SPEC §10); spiral arcs their own
-arc-length table. Per-sample work is whole-array numpy over all rows of one kind at once;
-the Python loops run over kinds, curves and cache-sized blocks of samples.
+parameter u via the curve's quintic Hermite inversion table (SPEC §10); spiral arcs by Newton
+on their closed-form arc length (paths.py). Per-sample work is whole-array numpy over all rows
+of one kind at once; the Python loops run over kinds, curves and cache-sized blocks of samples.
 """
 
 from __future__ import annotations
@@ -48,7 +48,7 @@ class Kind(IntEnum):
 
     LINE = 0
     ARC = 1  # circular arc or helix (constant radius): closed form, u = s
-    SPIRAL = 2  # arc whose radius changes along it: its own arc-length table
+    SPIRAL = 2  # arc whose radius changes along it: closed-form arc length, Newton inverse
     PH = 3  # planar PH quintic in 3-D (SPEC §4)
     NURBS = 4  # a span [u_a, u_b] of a NURBS curve (SPEC §2)
 

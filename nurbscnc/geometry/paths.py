@@ -4,8 +4,8 @@ Later stages (corner detection, feed planning, interpolation) see a segment only
 :class:`PathGeometry`: a parameter range [u_start, u_end], derivatives with respect to u,
 curvature, and the arc-length map s(u) with its inverse. For lines and constant-radius arcs u
 *is* the arc length [mm] (so ``param_at_length`` is exact); for a spiral arc (radius changing
-with angle) u = (angle fraction) × L and s(u) comes from a Gauss–Legendre table; for NURBS u is
-the knot parameter (:mod:`nurbscnc.geometry.nurbs`).
+with angle) u = (angle fraction) × L and s(u) is a closed form (an elementary integral); for
+NURBS u is the knot parameter (:mod:`nurbscnc.geometry.nurbs`).
 """
 
 from __future__ import annotations
@@ -19,7 +19,6 @@ import numpy as np
 from nurbscnc.errors import GeometryError
 from nurbscnc.geometry import segments
 from nurbscnc.geometry.nurbs import (
-    ArcLengthTable,
     NurbsCurve,
     curvature_derivative_from_derivatives,
     curvature_from_derivatives,
@@ -142,8 +141,8 @@ class ArcGeometry:
     C = origin + r(t) (cos θ e1 + sin θ e2) + t H n, where e1 is the in-plane start direction,
     e2 = n × e1 (so positive Δθ is counter-clockwise about n, G3) and H the helical rise.
     The parameter is u = t L ∈ [0, L] with L the true arc length: for constant radius
-    L = hypot(r Δθ, H) and u is exactly arc length; for a spiral L and s(u) come from a
-    Gauss–Legendre table (:class:`ArcLengthTable`).
+    L = hypot(r Δθ, H) and u is exactly arc length; for a spiral L and s(u) are the closed
+    form of :func:`segments.spiral_arc_length_mm` (an elementary integral).
     """
 
     origin_mm: np.ndarray
@@ -211,21 +210,43 @@ class ArcGeometry:
             out[1] += self.helix_mm * self.normal
         return out
 
-    def _speed_t(self, t: np.ndarray) -> np.ndarray:
-        return np.linalg.norm(self._derivatives_t(t, 1)[1], axis=-1)
-
-    @cached_property
-    def _table_t(self) -> ArcLengthTable:
-        """Arc-length table over t ∈ [0, 1], split at quarter turns (spirals only)."""
-        quarters = max(1, int(np.ceil(abs(self.angle_rad) / (0.5 * np.pi))))
-        return ArcLengthTable.build(self._speed_t, np.linspace(0.0, 1.0, quarters + 1))
+    def _length_t(self, t) -> np.ndarray:
+        """s(t) [mm] from the start, closed form (segments.spiral_arc_length_mm)."""
+        return segments.spiral_arc_length_mm(self.radius_start_mm, self.radius_end_mm,
+                                             self.angle_rad, self.helix_mm, t)  # fmt: skip
 
     @cached_property
     def length_mm(self) -> float:
-        """True arc length [mm]; closed form hypot(r Δθ, H) for constant radius."""
+        """True arc length [mm], closed form: hypot(r Δθ, H) for constant radius, the
+        elementary spiral integral otherwise (segments.spiral_arc_length_mm)."""
         if not self.is_spiral:
             return float(np.hypot(self.radius_start_mm * self.angle_rad, self.helix_mm))
-        return self._table_t.length_mm
+        return float(self._length_t(1.0))
+
+    def _param_t_at_length(self, s_mm: np.ndarray, max_iter: int = 50) -> np.ndarray:
+        """t ∈ [0, 1] with s(t) = s_mm (clamped): Newton on the closed form, t ← t − (s(t) −
+        s)/|C'(t)|, from t = s/L. s is increasing with a convex or concave speed profile
+        √(a² + w(t)²) (w linear in t), so after the first step Newton closes in from one
+        side; it stops at |s(t) − s| ≤ max(1e-12 mm, 8 ulps of s) or at an ulp of t."""
+        length = self.length_mm
+        s = np.clip(s_mm, 0.0, length)
+        t = s / length if length > 0.0 else np.zeros_like(s)
+        dr = self.radius_end_mm - self.radius_start_mm
+        a2 = dr * dr + self.helix_mm * self.helix_mm
+        eps = np.finfo(float).eps
+        tol = np.maximum(1e-12, 8.0 * eps * s)
+        active = np.flatnonzero((s > 0.0) & (s < length))
+        for _ in range(max_iter):
+            if not active.size:
+                break
+            ta = t[active]
+            f = self._length_t(ta) - s[active]
+            w = self.angle_rad * (self.radius_start_mm + ta * dr)
+            new_t = np.clip(ta - f / np.sqrt(a2 + w * w), 0.0, 1.0)
+            done = (np.abs(f) <= tol[active]) | (np.abs(new_t - ta) <= 2.0 * eps)
+            t[active] = np.where(np.abs(f) <= tol[active], ta, new_t)
+            active = active[~done]
+        return t
 
     @property
     def u_end(self) -> float:
@@ -251,12 +272,12 @@ class ArcGeometry:
     def arc_length(self, u) -> np.ndarray:
         if not self.is_spiral:
             return np.clip(_params(u), 0.0, self.length_mm)
-        return self._table_t.arc_length(_params(u) / self._u_scale)
+        return self._length_t(np.clip(_params(u) / self._u_scale, 0.0, 1.0))
 
     def param_at_length(self, s_mm) -> np.ndarray:
         if not self.is_spiral:
             return np.clip(_params(s_mm), 0.0, self.length_mm)
-        return self._u_scale * self._table_t.param_at_length(s_mm)
+        return self._u_scale * self._param_t_at_length(_params(s_mm))
 
     def curvature(self, u) -> np.ndarray:
         """κ [1/mm]; r/(r² + c²) with c = H/Δθ on a helix, 1/r on a circle."""

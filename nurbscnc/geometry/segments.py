@@ -6,6 +6,7 @@ Every segment carries the 1-based source ``line`` it came from.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -51,6 +52,49 @@ def path_control(path_mode: int, p_mm: float | None) -> float:
     return BLEND_MACHINE if not p_mm else float(p_mm)
 
 
+def spiral_arc_length_mm(radius_start_mm, radius_end_mm, angle_rad, helix_mm, t=1.0):
+    """Arc length [mm] from the start to fraction ``t`` ∈ [0, 1] of a circular, helical or
+    spiral arc, in closed form (vectorised over every argument).
+
+    The arc (see :class:`Arc` and geometry/paths.py) is C(t) = r(t) E(θ) + t H n with
+    r(t) = r0 + t Δr, θ = t Δθ, E(θ) the in-plane unit radius vector. Its speed is
+    |C'(t)| = √(a² + w²) with a² = Δr² + H² and w(t) = Δθ r(t) (the three terms Δr E,
+    r Δθ E⊥ and H n are orthogonal), and since dw/dt = Δθ Δr the integral is elementary:
+    s(t) = [F(w(t)) − F(w0)] / (Δθ Δr) with F(w) = ½ (w √(a² + w²) + a² asinh(w / a)).
+    Circles and helices (Δr = 0) give s = t √((r Δθ)² + H²).
+
+    The quotient is written as a divided difference without cancellation (LinuxCNC's spirals
+    have Δr of a micrometre): with S = √(a² + w²), w1 = w(t),
+        (F(w1) − F(w0)) / (w1 − w0) = (S0 + S1)/4 + (w0 + w1)² / (4 (S0 + S1))
+                                      + a²/2 · asinh(D)/D · (w0 + w1) / (w1 S0 + w0 S1),
+    D = (w1 − w0)(w1 + w0) / (w1 S0 + w0 S1) (from asinh x − asinh y =
+    asinh(x √(1+y²) − y √(1+x²))), and s = t Δθ Δr / (Δθ Δr) × that = t × that.
+    """
+    r0 = np.asarray(radius_start_mm, dtype=float)
+    dr = np.asarray(radius_end_mm, dtype=float) - r0
+    dtheta = np.asarray(angle_rad, dtype=float)
+    h = np.asarray(helix_mm, dtype=float)
+    t = np.asarray(t, dtype=float)
+    a2 = dr * dr + h * h
+    w0 = dtheta * r0
+    w1 = dtheta * (r0 + t * dr)
+    s0 = np.sqrt(a2 + w0 * w0)
+    s1 = np.sqrt(a2 + w1 * w1)
+    ssum = s0 + s1
+    wsum = w0 + w1
+    cross = w1 * s0 + w0 * s1  # same sign as Δθ (r > 0); 0 only when Δθ = 0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        d = (w1 - w0) * wsum / cross
+        asinh_ratio = np.where(d == 0.0, 1.0, np.arcsinh(d) / d)
+        log_term = np.where(cross != 0.0, 0.5 * a2 * asinh_ratio * wsum / cross, 0.0)
+        mean_speed = 0.25 * ssum + np.where(ssum > 0.0, wsum * wsum / (4.0 * ssum), 0.0)
+    # Δθ = 0: the speed is a everywhere (s0 = s1 = a, w = 0): the terms above give a/2 + 0
+    # + 0, so the log term's share (a/2) is added back.
+    mean_speed = mean_speed + np.where(cross != 0.0, log_term, 0.5 * np.sqrt(a2))
+    circle = np.hypot(w0, h)  # Δr = 0: exactly √((r Δθ)² + H²)
+    return t * np.where(dr == 0.0, circle, mean_speed)
+
+
 @dataclass(frozen=True, eq=False, slots=True)
 class Line:
     """A straight move from ``start_mm`` to ``end_mm`` [mm] at ``feed_mm_s`` [mm/s].
@@ -80,7 +124,7 @@ class Line:
 
     @property
     def length_mm(self) -> float:
-        return float(np.linalg.norm(np.subtract(self.end_mm, self.start_mm)))
+        return math.dist(self.end_mm, self.start_mm)
 
 
 @dataclass(frozen=True, eq=False)
@@ -110,9 +154,9 @@ class Arc:
 
     @property
     def length_mm(self) -> float:
-        # Mean radius times angle, combined with the helical rise (exact for constant radius).
-        r_mm = 0.5 * (self.radius_start_mm + self.radius_end_mm)
-        return float(np.hypot(r_mm * self.angle_rad, self.helix_mm))
+        # Closed form for circles, helices and spirals (:func:`spiral_arc_length_mm`).
+        return float(spiral_arc_length_mm(self.radius_start_mm, self.radius_end_mm,
+                                          self.angle_rad, self.helix_mm))  # fmt: skip
 
 
 @dataclass(frozen=True, eq=False)

@@ -38,6 +38,8 @@ class Source:
         self.call_line = call_line
         self._blocks: list[Block | None] = [None] * len(lines)
         self._labels: dict[str, tuple[list[int], list[str]]] | None = None
+        #: Lines with words that the fast lane ran (1), for the block count; None: none yet.
+        self.worded: bytearray | None = None
         #: Memos of facts about O lines that do not change while running (loops re-ask them).
         self.checked: set[int] = set()  # construct heads whose label was found unique
         self.do_tails: dict[int, bool] = {}  # line index of a while → closes a do loop?
@@ -94,6 +96,16 @@ class Source:
                 return indexes[k]
         return None
 
+    def fanuc_start(self, label: str) -> int | None:
+        """The line index of the Fanuc subroutine ``O<label>`` (a bare O line) in this file."""
+        entry = self.labels().get(label)
+        if entry is None:
+            return None
+        for index, kind in zip(*entry):
+            if kind == "":
+                return index
+        return None
+
     def sub_start(self, label: str) -> int | None:
         """The line index of ``o<label> sub`` in this file."""
         entry = self.labels().get(label)
@@ -118,6 +130,8 @@ class Frame:
     named: dict = field(default_factory=dict)  # local named parameters
     repeat_left: dict = field(default_factory=dict)  # line index of repeat → turns left
     m73_state: tuple | None = None  # modal state saved by M73, restored on return
+    fanuc: bool = False  # an M98 call (returns with M99; #1..#30 are not local)
+    fanuc_left: int = 0  # M98 L: repeats still to run after this one
 
 
 class ControlFlow:
@@ -127,6 +141,14 @@ class ControlFlow:
     def oword(self, block: Block, frame: Frame) -> None:
         label, keyword, args, column = block.oword
         here = frame.pc - 1
+        if type(label) is tuple:  # "o#<sub> call": the number is computed (LinuxCNC)
+            if keyword != "call":
+                raise self.error(f"a computed O label (o#… or o[…]) only works with call, "
+                                 f"not {keyword}", column)  # fmt: skip
+            value = self.evaluate(label[1], column)
+            if value != int(value) or value < 0:
+                raise self.error(f"computed O label {value:g} is not an O number", column)
+            label = str(int(value))
         if keyword == "":
             # A program number ("O1234", Fanuc style; LinuxCNC ignores it anywhere).
             if not self.program_name:
@@ -226,6 +248,55 @@ class ControlFlow:
         call_line = self.main_line() if self.source is self.main else self.main_line()
         self.frames.append(Frame(source, start + 1, label, call_line, frame.pc, saved))
         self.globals["_value_returned"] = 0.0
+
+    def m98(self, words: dict, column: int) -> None:
+        """``M98 P<n> [L<k>]``: run the Fanuc subroutine that starts at the line ``O<n>`` of
+        this file (or the main program) k times (default 1, L0 none), each run ending at its
+        M99 (LinuxCNC 2.9's Fanuc-style subroutines). Parameters stay global: #1..#30 are
+        not saved and restored as for ``o<n> call``."""
+        if "P" not in words:
+            raise self.error("M98 needs a P word (the O number of the subroutine)", column)
+        p, pcol = words["P"]
+        if p != int(p) or p < 0:
+            raise self.error(f"M98 P{p:g}: P must be an O number", pcol)
+        repeats, lcol = words.get("L", (1.0, column))
+        if repeats != int(repeats) or repeats < 0:
+            raise self.error(f"M98 L{repeats:g}: L must be a repeat count (0 or more)", lcol)
+        if repeats == 0:
+            return
+        label = str(int(p))
+        if len(self.frames) > self.options.max_call_depth:
+            raise self.error(f"M98 P{label}: more than {self.options.max_call_depth} nested "
+                             f"calls (endless recursion?)", column)  # fmt: skip
+        for source in (self.source, self.main):
+            start = source.fanuc_start(label)
+            if start is not None:
+                break
+        else:
+            raise self.error(f"M98 P{label}: no subroutine O{label} in the program", pcol)
+        caller = self.frames[-1]
+        self.frames.append(Frame(source, start + 1, label, self.main_line(), caller.pc,
+                                 fanuc=True, fanuc_left=int(repeats) - 1))  # fmt: skip
+
+    def m99(self, column: int) -> None:
+        """M99: the end of a Fanuc subroutine run: again from its O line while M98's L count
+        lasts, then back to the line after the M98."""
+        frame = self.frames[-1]
+        if not frame.fanuc:
+            if len(self.frames) == 1:
+                raise self.error("M99 in the main program (LinuxCNC restarts the program: an "
+                                 "endless loop nurbscnc cannot plan)", column)  # fmt: skip
+            raise self.error(f"M99 in subroutine o{frame.label} (it ends with endsub or "
+                             f"return; M99 ends an M98 subroutine)", column)  # fmt: skip
+        if frame.fanuc_left > 0:
+            self._count_loop(column)
+            frame.fanuc_left -= 1
+            frame.pc = frame.source.fanuc_start(frame.label) + 1
+            return
+        self.frames.pop()
+        if frame.m73_state is not None:
+            self.restore_state(frame.m73_state)
+        self.frames[-1].pc = frame.return_to
 
     def _find_sub(self, label: str, column: int) -> tuple[Source, int]:
         for source in (self.source, self.main):

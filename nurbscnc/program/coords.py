@@ -25,7 +25,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from nurbscnc.errors import UnsupportedError
+from nurbscnc.program.tooltable import Tool
 
 _AXES = ("X", "Y", "Z")
 
@@ -105,6 +108,21 @@ class Coordinates:
         return [x + self.origin_mm[0] + self.tool_mm[0],
                 y + self.origin_mm[1] + self.tool_mm[1],
                 z + self.origin_mm[2] + self.tool_mm[2]]  # fmt: skip
+
+    def to_machine_array(self, prog_mm: np.ndarray) -> np.ndarray:
+        """:meth:`to_machine` of each row of ``prog_mm`` (n, 3) [mm]: the same operations in
+        the same order, elementwise, so each row is the same to the bit."""
+        if self.plain:
+            return prog_mm
+        x = prog_mm[:, 0] + self.g92_mm[0]
+        y = prog_mm[:, 1] + self.g92_mm[1]
+        z = prog_mm[:, 2] + self.g92_mm[2]
+        if self.rotation_deg:
+            c, s = _cos_sin(self.rotation_deg)
+            x, y = c * x - s * y, s * x + c * y
+        return np.column_stack([x + self.origin_mm[0] + self.tool_mm[0],
+                                y + self.origin_mm[1] + self.tool_mm[1],
+                                z + self.origin_mm[2] + self.tool_mm[2]])  # fmt: skip
 
     def to_program(self, machine) -> list:
         """Inverse of :meth:`to_machine`."""
@@ -220,6 +238,9 @@ class OffsetCommands:
         if code == 920:
             self.g92(words, used, col)
             return True
+        if code == 520:
+            self.g52(words, used)
+            return True
         if code in (921, 922, 923):
             machine = self.pos
             if code == 923:
@@ -233,10 +254,13 @@ class OffsetCommands:
         if "L" not in words:
             raise self.error("G10 needs an L word (L2 or L20)", col)
         level, lcol = words["L"]
+        if level in (1.0, 10.0, 11.0):
+            self._g10_tool(int(level), words, used, col)
+            return
         if level not in (2.0, 20.0):
             raise self.error(
-                f"G10 L{level:g} is not supported (tool table and other G10 forms); "
-                "only L2 and L20 (coordinate system offsets)",
+                f"G10 L{level:g} is not supported (LinuxCNC's G10 forms for milling are L1, "
+                "L2, L10, L11 and L20)",
                 lcol,
                 UnsupportedError,
             )
@@ -257,6 +281,51 @@ class OffsetCommands:
             given = self._l20_offsets(system, given, machine)
         self.coords.set_system(system, given, rotation)
         self.pos = machine
+
+    def _g10_tool(self, level: int, words: dict, used: set, col: int) -> None:
+        """G10 L1 / L10 / L11 P<tool>: write the tool table entry (LinuxCNC; checked against
+        its interp tests g10-l1-l10 and g10-l11). The table changes; the offset in force
+        changes at the next G43, as in LinuxCNC.
+
+        L1: the given axes are the offsets, R the radius. L10: the offsets that make the
+        current position read as the given values once G43 applies them; L11 the same in
+        G59.3 with G92 ignored (a tool-setter fixture). For L10/L11 an axis not given keeps
+        its reading computed with the entry's own offsets, and X and Y change together when
+        the system is rotated (both go through the rotation)."""
+        if "P" not in words:
+            raise self.error(f"G10 L{level} needs P (the tool number)", col)
+        p, pcol = words["P"]
+        if p != int(p) or p < 0:
+            raise self.error(f"G10 L{level} P{p:g}: P must be a tool number", pcol)
+        used.update("LP" + "".join(a for a in "XYZRIJQ" if a in words))
+        number = int(p)
+        scale = self.m.scale
+        old = self.tools.get(number) or Tool(number)
+        offset = list(old.offset_mm)
+        given = {i: words[a][0] * scale for i, a in enumerate(_AXES) if a in words}
+        if level == 1:
+            for axis, value in given.items():
+                offset[axis] = value
+        else:
+            c = self.coords
+            machine = self.pos
+            if level == 11:
+                origin, rot, g92 = c.system_offset_mm(9), c.system_rotation_deg(9), [0.0] * 3
+            else:
+                origin, rot, g92 = c.origin_mm, c.rotation_deg, c.g92_mm
+            cos, sin = _cos_sin(rot)
+            free = [machine[k] - offset[k] - origin[k] for k in range(3)]
+            now = [cos * free[0] + sin * free[1] - g92[0],
+                   -sin * free[0] + cos * free[1] - g92[1], free[2] - g92[2]]  # fmt: skip
+            want = [given.get(k, now[k]) + g92[k] for k in range(3)]
+            turned = [cos * want[0] - sin * want[1], sin * want[0] + cos * want[1], want[2]]
+            new = [machine[k] - origin[k] - turned[k] for k in range(3)]
+            if 0 in given or 1 in given:
+                offset[0], offset[1] = new[0], new[1]
+            if 2 in given:
+                offset[2] = new[2]
+        diameter = 2.0 * words["R"][0] * scale if "R" in words else old.diameter_mm
+        self.tools[number] = Tool(number, tuple(offset), diameter, old.pocket)
 
     def _l20_offsets(self, system: int, given: dict, machine) -> dict:
         """G10 L20: the offsets of ``system`` that make the current position read as the
@@ -280,6 +349,16 @@ class OffsetCommands:
         if 2 in given:
             out[2] = origin[2] + have[2] - want[2]
         return out
+
+    def g52(self, words: dict, used: set) -> None:
+        """G52 X Y Z: a local origin at the given program coordinates (LinuxCNC keeps it in
+        the G92 offsets: it sets them directly, raises #5210, and G92.1/.2/.3 act on it);
+        axes not given keep their offset; the machine does not move."""
+        machine = self.pos
+        self.coords.set_g92({i: words[a][0] * self.m.scale
+                             for i, a in enumerate(_AXES) if a in words})  # fmt: skip
+        used.update(_AXES)
+        self.pos = machine
 
     def g92(self, words: dict, used: set, col: int) -> None:
         if not any(a in words for a in _AXES):

@@ -15,9 +15,12 @@ plug in at :meth:`_Interpreter.canned_cycle` and :meth:`_Interpreter.compensate`
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+
+import numpy as np
 
 from nurbscnc.errors import GeometryError, NurbsCncError, ProgramError, SourcePos, UnsupportedError
 from nurbscnc.geometry.segments import (
@@ -37,6 +40,7 @@ from nurbscnc.program.compensation import MSG_ARC_AFTER_EXIT, CompMove, CutterCo
 from nurbscnc.program.control import N_LOCAL, ControlFlow, Frame, Source
 from nurbscnc.program.cycles import CycleState, expand_cycle
 from nurbscnc.program.expressions import MAX_PARAMETER, ExpressionError, evaluate
+from nurbscnc.program.fastlane import BulkState, pause_cyclic_gc, plain_run
 from nurbscnc.program.modal import (
     CANNED_CYCLES,
     G_GROUP,
@@ -90,6 +94,8 @@ class InterpretOptions:
     load_subroutine: Callable[[str], tuple[str, str] | None] | None = None
     max_call_depth: int = 100
     max_loop_iterations: int = 250_000
+    #: Interpret runs of plain G0/G1 lines in bulk (fastlane.py; same segments, faster).
+    fast_lane: bool = True
 
 
 def interpret_text(text: str, options: InterpretOptions | None = None) -> Program:
@@ -125,6 +131,7 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
         self.axes_consumed = False  # the block's axis words were data (G43.1), not a move
         self.comp: CutterComp | None = None  # G41/G42 in force: the compensation stream
         self.comp_exit = None  # after G40: the compensated tool position [mm, machine]
+        self.comp_plane = "XY"  # the plane of the compensation in force (XY or ZX)
         tools = dict(options.tools or {})
         for number, length in (options.tool_lengths_mm or {}).items():
             tools.setdefault(int(number), Tool(int(number), (0.0, 0.0, float(length))))
@@ -275,6 +282,7 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
     def run(self) -> None:
         percent_seen = False
         block_delete = self.options.block_delete
+        fast = self.options.fast_lane
         while not self.ended:
             frame = self.frames[-1]
             source = frame.source
@@ -285,6 +293,12 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
                     raise self.error(f"end of file inside subroutine o{frame.label}")
                 break
             self.source = source
+            if fast and source._blocks[pc] is None and self.comp is None and self.nurbs is None \
+                    and self.comp_exit is None and self.m.feed_mode == 940 and self.m.absolute:
+                count = self.bulk(source, pc)
+                if count:
+                    frame.pc = pc + count
+                    continue
             self.line_no = pc + 1
             frame.pc = pc + 1
             try:
@@ -306,6 +320,33 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
             elif block.words or block.assigns or block.comments:
                 self.block(block)
         self.finish()
+
+    def bulk(self, source: Source, pc: int) -> int:
+        """Interpret the run of plain straight-move lines at ``source.lines[pc]`` in bulk
+        (fastlane.py: the same segments as line by line); returns the lines consumed (0:
+        the line is not one the fast lane takes)."""
+        m = self.m
+        state = BulkState(m.motion, m.feed, m.feed_mm, tuple(self.prog), m.scale)
+        run = plain_run(source.lines, pc, state, self.coords.to_machine_array,
+                        (MAX_COORD_MM, MIN_FEED_MM_MIN, MAX_FEED_MM_MIN))  # fmt: skip
+        if run is None:
+            return 0
+        if source.worded is None:
+            source.worded = bytearray(len(source.lines))
+        np.frombuffer(source.worded, dtype=np.uint8)[run.worded] = 1
+        blend_mm = m.blend_mm
+        if source is self.main:
+            numbers = [k + 1 for k in run.index]
+        else:  # in a called file the moves carry the main program's call line
+            numbers = [self.main_line()] * len(run.index)
+        with pause_cyclic_gc():
+            self.segments.extend(map(Line, run.starts_mm, run.ends_mm, run.feeds_mm_s, numbers,
+                                     run.rapid, itertools.repeat(blend_mm)))  # fmt: skip
+        new = run.state
+        m.motion, m.feed, m.feed_mm = new.motion, new.feed, new.feed_mm
+        self.prog = list(new.prog_mm)
+        self.line_no = pc + run.count
+        return run.count
 
     def finish(self) -> None:
         self.comp_off()  # the end of the program ends compensation as G40 does
@@ -395,6 +436,12 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
             raise self.error(f"unknown G code G{_fmt_code(code)}", column)
         if group in gcodes:
             other = gcodes[group][0]
+            if group == 1 and 800 in (code, other):
+                # LinuxCNC accepts G80 beside another motion code ("G80 G0" in CAM headers
+                # and its own tests): the other code is the block's motion.
+                if code != 800:
+                    gcodes[group] = (code, column)
+                return
             raise self.error(
                 f"G{_fmt_code(other)} and G{_fmt_code(code)} are in the same modal "
                 f"group ({group}) and cannot share a block",
@@ -452,7 +499,10 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
             if self.m.comp_mode != 400:
                 raise self.error("Cannot change tools with cutter radius compensation on",
                                  mcodes[6][1])  # fmt: skip
-            self.m.tool_loaded = self.m.tool_selected  # M6
+            if mcodes[6][0] == 6:
+                self.m.tool_loaded = self.m.tool_selected  # M6
+            else:  # M61 Q<tool>: the tool in the spindle is Q (no change is made)
+                self.m.tool_loaded = self.m61_tool(words, mcodes[6][1], used)
         if 10 in mcodes:
             self.modal_save_restore(*mcodes[10])
         if mcodes.get(7, (0,))[0] == 19:
@@ -483,13 +533,30 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
                     raise self.error(f"Cannot put {article} {letter.lower()} in canned cycle",
                                      words[letter][1])  # fmt: skip
         self.check_rotary(words, used)
+        if mcodes.get(4, (0,))[0] == 98:
+            used.update("PL")  # M98 P<O number> L<repeats>: the call, after the block's moves
         moved_by_nonmodal = self.nonmodal(gcodes, words, used)
         self.motion_block(gcodes, words, used, moved_by_nonmodal)
         for letter, (_, col) in words.items():
             if letter not in used:
                 raise self.error(_unused_word_message(letter), col)
         if 4 in mcodes:
-            self.stop(*mcodes[4])
+            code, col = mcodes[4]
+            if code == 98:
+                self.m98(words, col)
+            elif code == 99:
+                self.m99(col)
+            else:
+                self.stop(code, col)
+
+    def m61_tool(self, words: dict, column: int, used: set) -> int:
+        if "Q" not in words:
+            raise self.error("M61 needs a Q word (the tool number)", column)
+        q, qcol = words["Q"]
+        used.add("Q")
+        if q != int(q) or q < 0 or q >= 2**31:
+            raise self.error(f"M61 Q{q:g}: Q must be a tool number", qcol)
+        return int(q)
 
     def modal_save_restore(self, code: int, column: int) -> None:
         """M70 save, M71 forget, M72 restore the modal state; M73 save it for an automatic
@@ -582,7 +649,8 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
         if self.comp is None:
             self.segments.append(dwell)
         else:
-            self.comp_moves(CompMove("dwell", position, line=dwell.line, seconds=dwell.seconds))
+            self.comp_moves(CompMove("dwell", self.to_comp(position), line=dwell.line,
+                                     seconds=dwell.seconds))  # fmt: skip
 
     def set_cutter_comp(self, gcodes: dict, words: dict, used: set) -> None:
         """G40 / G41 / G42 / G41.1 / G42.1 with D: tracked in ``self.m.comp_*``."""
@@ -599,10 +667,11 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
                 if m.plane == "YZ":
                     raise self.error("Cutter radius compensation allowed only in XY, XZ planes",
                                      col)  # fmt: skip
-                if m.plane != "XY":
-                    raise self.error("cutter radius compensation in the XZ plane (G18) is not "
-                                     "supported (nurbscnc compensates in XY only)", col,
-                                     UnsupportedError)  # fmt: skip
+                if m.plane == "ZX" and self.coords.rotation_deg:
+                    raise self.error("cutter radius compensation in the XZ plane (G18) with a "
+                                     "rotated coordinate system (G10 L2 R) is not supported",
+                                     col, UnsupportedError)  # fmt: skip
+                self.comp_plane = m.plane
                 m.comp_mode = code
                 m.comp_side = "left" if code in (410, 411) else "right"
                 d = words.get("D")
@@ -619,7 +688,8 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
                     m.comp_radius_mm = tool.diameter_mm / 2.0 if tool is not None else 0.0
                 m.comp_d = d[0] if d is not None else None
                 start = tuple(self.pos) if self.comp_exit is None else self.comp_exit
-                self.comp = CutterComp(m.comp_side, m.comp_radius_mm, start, inch=m.inch)
+                self.comp = CutterComp(m.comp_side, m.comp_radius_mm, self.to_comp(start),
+                                       inch=m.inch)  # fmt: skip
                 self.comp_exit = None
         if "D" in words and gcodes.get(14, (0,))[0] == 960:
             used.add("D")  # G96 D: the spindle speed limit of constant surface speed
@@ -817,19 +887,34 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
         m.cycle = result.state
 
     # -- cutter radius compensation (compensation.py) -------------------------------------
+    def to_comp(self, point) -> tuple:
+        """A machine point in the frame compensation.py works in (its first two axes are the
+        plane): XY as is; for G18 (ZX) the cyclic permutation (x, y, z) → (z, x, y), which
+        keeps the handedness, so +Y (the G18 normal) becomes +Z and left stays left."""
+        if self.comp_plane == "ZX":
+            return (float(point[2]), float(point[0]), float(point[1]))
+        return tuple(map(float, point))
+
+    def from_comp(self, point) -> tuple:
+        """Inverse of :meth:`to_comp`."""
+        if self.comp_plane == "ZX":
+            return (float(point[1]), float(point[2]), float(point[0]))
+        return tuple(map(float, point))
+
     def compensate(self, segment) -> None:
         """A programmed Line or Arc (machine mm) into the compensation stream; appends the
         compensated moves that are final so far (the last one is held back for its corner).
-        Compensation works in machine XY: offsets and the G10 R rotation about Z keep the
-        side of the path, so it is the same as compensating in program coordinates."""
+        Compensation works in the machine plane (XY, or ZX for G18 through :meth:`to_comp`):
+        offsets and the G10 R rotation about Z keep the side of the path, so it is the same
+        as compensating in program coordinates (G18 with a rotation is refused)."""
         if isinstance(segment, Arc):
             turns = max(1, math.ceil(abs(segment.angle_rad) / (2.0 * math.pi) - 1e-9))
-            move = CompMove("arc", tuple(map(float, segment.end_mm)), segment.feed_mm_s,
-                            segment.line, (float(segment.center_mm[0]),
-                                           float(segment.center_mm[1])),
+            centre = self.to_comp(segment.center_mm)
+            move = CompMove("arc", self.to_comp(segment.end_mm), segment.feed_mm_s,
+                            segment.line, (centre[0], centre[1]),
                             turns if segment.angle_rad > 0 else -turns)  # fmt: skip
         else:
-            move = CompMove("rapid" if segment.rapid else "feed", tuple(segment.end_mm),
+            move = CompMove("rapid" if segment.rapid else "feed", self.to_comp(segment.end_mm),
                             segment.feed_mm_s, segment.line)  # fmt: skip
         self.comp_moves(move)
 
@@ -852,27 +937,30 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
             raise self.error(exc.message) from None
         self.append_compensated(out)
         if not comp.first and comp.radius_mm > 0.0:
-            self.comp_exit = tuple(comp.position_mm)
+            self.comp_exit = self.from_comp(comp.position_mm)
 
     def append_compensated(self, moves) -> None:
         blend_mm = self.m.blend_mm
+        plane = self.comp_plane
+        back = self.from_comp
         for mv in moves:
             if mv.kind == "dwell":
-                self.segments.append(Dwell(mv.seconds, tuple(mv.end_mm), mv.line))
+                self.segments.append(Dwell(mv.seconds, back(mv.end_mm), mv.line))
             elif mv.kind == "arc":
                 start, end = tuple(mv.start_mm), tuple(mv.end_mm)
                 s2, e2 = start[:2], end[:2]
                 sweep = arcs.sweep_rad(s2, e2, mv.centre_mm, mv.turn > 0, abs(mv.turn))
                 self.segments.append(Arc(
-                    start_mm=vec3(start), end_mm=vec3(end),
-                    center_mm=vec3((*mv.centre_mm, start[2])), normal=vec3((0.0, 0.0, 1.0)),
+                    start_mm=vec3(back(start)), end_mm=vec3(back(end)),
+                    center_mm=vec3(back((*mv.centre_mm, start[2]))),
+                    normal=vec3(PLANE_NORMALS[plane]),
                     angle_rad=float(sweep), helix_mm=end[2] - start[2],
                     radius_start_mm=math.dist(s2, mv.centre_mm),
                     radius_end_mm=math.dist(e2, mv.centre_mm),
-                    feed_mm_s=mv.feed_mm_s, line=mv.line, plane="XY", blend_mm=blend_mm,
+                    feed_mm_s=mv.feed_mm_s, line=mv.line, plane=plane, blend_mm=blend_mm,
                 ))  # fmt: skip
             elif tuple(mv.start_mm) != tuple(mv.end_mm):
-                self.segments.append(Line(tuple(mv.start_mm), tuple(mv.end_mm), mv.feed_mm_s,
+                self.segments.append(Line(back(mv.start_mm), back(mv.end_mm), mv.feed_mm_s,
                                           mv.line, mv.kind == "rapid", blend_mm))  # fmt: skip
 
     def emit(self, segment) -> None:
@@ -1073,7 +1161,9 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
             return
         if self.nurbs is not None:
             self.finish_nurbs_by_other(None, column)
-        self.segments.append(Pause(tuple(self.pos), self.main_line(), f"M{code}"))
+        # After G40 the tool stands at the compensated point until the exit move.
+        position = tuple(self.pos) if self.comp_exit is None else self.comp_exit
+        self.segments.append(Pause(position, self.main_line(), f"M{code}"))
 
 
 def _fmt_code(code: int) -> str:
@@ -1104,10 +1194,14 @@ def interpret(blocks, lines, options: InterpretOptions) -> Program:
     state = _Interpreter(list(lines), options)
     state.run()
     parsed = state.main._blocks
+    blocks = sum(1 for b in parsed if b is not None and (b.words or b.assigns))
+    if state.main.worded is not None:  # lines run by the fast lane (and never parsed)
+        worded = np.flatnonzero(np.frombuffer(state.main.worded, dtype=np.uint8)).tolist()
+        blocks += sum(1 for k in worded if parsed[k] is None)
     return Program(
         segments=tuple(state.segments),
         start_mm=vec3(options.start_mm),
         notes=tuple(state.notes),
-        blocks=sum(1 for b in parsed if b is not None and (b.words or b.assigns)),
+        blocks=blocks,
         name=options.name,
     )

@@ -23,7 +23,7 @@ CANNED_CYCLES = frozenset({730, 740, 810, 820, 830, 840, 850, 860, 870, 880, 890
 
 G_GROUP = {
     # group 0: non-modal
-    40: 0, 100: 0, 280: 0, 281: 0, 300: 0, 301: 0, 530: 0, 920: 0, 921: 0, 922: 0, 923: 0,
+    40: 0, 100: 0, 280: 0, 281: 0, 300: 0, 301: 0, 520: 0, 530: 0, 920: 0, 921: 0, 922: 0, 923: 0,
     # group 1: motion
     0: 1, 10: 1, 20: 1, 30: 1, 50: 1, 51: 1, 52: 1, 53: 1, 62: 1, 800: 1,
     **{code: 1 for code in CANNED_CYCLES},
@@ -54,7 +54,6 @@ G_REFUSED = {
     384: "G38.4 (probing needs a probe input)",
     385: "G38.5 (probing needs a probe input)",
     432: "G43.2 (additional tool length offset)",
-    520: "G52 (local coordinate offset)",
     760: "G76 (threading cycle, spindle-synchronised)",
     700: "G70 (lathe finishing cycle)",
     710: "G71 (lathe roughing cycle)",
@@ -66,8 +65,8 @@ G_REFUSED = {
 }
 
 #: M codes: group as LinuxCNC numbers them (4 stop, 6 tool change, 7 spindle, 8 coolant).
-M_GROUP = {0: 4, 1: 4, 2: 4, 30: 4, 60: 4, 6: 6, 3: 7, 4: 7, 5: 7, 7: 8, 8: 8, 9: 8,
-           19: 7, 48: 9, 49: 9, 70: 10, 71: 10, 72: 10, 73: 10}  # fmt: skip
+M_GROUP = {0: 4, 1: 4, 2: 4, 30: 4, 60: 4, 98: 4, 99: 4, 6: 6, 61: 6, 3: 7, 4: 7, 5: 7, 7: 8, 8: 8,
+           9: 8, 19: 7, 48: 9, 49: 9, 70: 10, 71: 10, 72: 10, 73: 10}  # fmt: skip
 
 #: What M70 / M73 save and M72 restores (LinuxCNC: units, plane, distance modes, feed mode,
 #: path control, F and S; the coordinate system is saved beside these, in the interpreter).

@@ -114,9 +114,8 @@ class _ToBlocks(Transformer):
     def percent(self, children):
         return Block(False, (), (), (), True)
 
-    def oword(self, children):
+    def oword(self, children, label=None):
         delete = False
-        label = None
         keyword = ""
         args = []
         comments = []
@@ -136,6 +135,14 @@ class _ToBlocks(Transformer):
                 comments.append(("comment", str(child), child.column))
         return Block(delete, (), (), tuple(comments), False,
                      OWord(label[0], keyword, tuple(args), label[1]))  # fmt: skip
+
+    def oword_computed(self, children):
+        # The child after O_COMPUTED is the label's value; the rest as in ``oword``.
+        at = next(k for k, c in enumerate(children)
+                  if type(c) is not float and type(c) is not tuple and c.type == "O_COMPUTED")
+        marker, value = children[at], children[at + 1]
+        block = self.oword([*children[:at], *children[at + 2:]], (("#", value), marker.column))
+        return block
 
     def comment(self, children):
         tok = children[0]

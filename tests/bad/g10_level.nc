@@ -1,2 +1,2 @@
-; G10 L1 is not supported @ 2:5
-G10 L1 P1 Z5
+; G10 L3 is not supported @ 2:5
+G10 L3 P1 Z5

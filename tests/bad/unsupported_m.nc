@@ -1,2 +1,2 @@
-; M99 is not supported @ 2:1
-M99
+; M62 is not supported @ 2:1
+M62 P1

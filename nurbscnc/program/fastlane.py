@@ -1,0 +1,250 @@
+"""The fast lane: runs of plain straight-move lines interpreted in bulk (issue 14).
+
+CAM output is mostly lines such as ``N120 G1 X12.5 Y-3.25 Z-1 F600`` or ``X12.5 Y-3.25``:
+straight moves under G0/G1 with constant words and nothing else. Interpreting them one at a
+time costs a parse, a dictionary of words and a pass through the execution order per line;
+here a run of them is recognised with ONE regular expression over a chunk of lines, the
+numbers are converted once, and the modal values (position, motion, feed) are carried down
+the run with numpy (a forward fill is a cumulative count into the given values).
+
+The lane is exact: it does only what the interpreter's general path does on such a line
+(interpret.py ``execute``: set F, set the motion mode, ``straight``), with the same float
+operations in the same order, so the segments are the same to the bit (a test interprets
+the corpus and the real programs both ways). It accepts a strict subset of the language:
+
+``[N<int>[.<digits>]] [G0|G1] [X<num>] [Y<num>] [Z<num>] [F<num>] [(comment) | ;comment]``
+
+in this order, any case, blanks between words (not inside numbers), a comment that is not a
+``(MSG, …)``. Every other line (other words, expressions, block delete, ``%``, O-words, a
+malformed line) ends the run and goes to the general path, which also reports every error:
+the run stops BEFORE any line the general path would refuse (a G1 with no feed, a feed or a
+coordinate out of range, an axis word under another motion mode).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import gc
+import re
+from typing import NamedTuple
+
+import numpy as np
+
+# Groups: 1 the motion digit of G0/G1 (G00, G01), 2-5 the X Y Z F numbers. A number here is
+# any run of digits and points with a sign; the runs float() refuses ("1.2.3", ".") are not
+# G-code numbers either, and make the line not plain (see _rows). The pattern does not
+# match a line that is not plain, so findall over a chunk returns fewer rows than lines
+# exactly when one is not.
+_NUM = r"([+-]?[0-9.]+)"
+_PLAIN = re.compile(
+    r"^[ \t]*(?:[nN][0-9]+[ \t]*)?"
+    r"(?:[gG]0?([01])(?![0-9.])[ \t]*)?"
+    r"(?:[xX]" + _NUM + r"[ \t]*)?"
+    r"(?:[yY]" + _NUM + r"[ \t]*)?"
+    r"(?:[zZ]" + _NUM + r"[ \t]*)?"
+    r"(?:[fF]" + _NUM + r"[ \t]*)?"
+    r"(?:\((?!\s*[mM][sS][gG],)[^()\n]*\)[ \t]*|;.*)?$",
+    re.M,
+)
+
+#: A run is read in chunks that start small (a run may be one line between two others) and
+#: double while every line of the chunk is plain.
+FIRST_CHUNK = 32
+MAX_CHUNK = 8192
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _plain_row(line: str):
+    """The row (g, x, y, z, f) of one line, or None when it is not plain."""
+    match = _PLAIN.match(line)
+    if match is None:
+        return None
+    row = match.groups()
+    if not all(_is_number(v) for v in row[1:] if v):
+        return None
+    return row
+
+
+def _rows(lines, start: int, n: int) -> list:
+    """Rows (g, x, y, z, f) of the plain lines from ``lines[start]`` on, at most ``n``,
+    up to the first line that is not plain."""
+    chunk = lines[start : start + n]
+    rows = _PLAIN.findall("\n".join(chunk))
+    if len(rows) == len(chunk):
+        return rows  # (numbers float() refuses: plain_run checks them, see _strict_rows)
+    return _strict_rows(chunk, len(chunk))
+
+
+def _strict_rows(lines, n: int) -> list:
+    """Rows of the plain lines at the head of ``lines``, at most ``n``, each line checked
+    alone (its numbers too)."""
+    rows = []
+    for line in lines[:n]:
+        row = _plain_row(line)
+        if row is None:
+            break
+        rows.append(row)
+    return rows
+
+
+class BulkState(NamedTuple):
+    """The interpreter state a run needs and changes: ``motion`` code ×10 (None: none),
+    ``feed`` (F as written), ``feed_mm`` [mm/min], ``prog_mm`` program position [mm],
+    ``scale`` [mm per program unit]; limits as in interpret.py."""
+
+    motion: int | None
+    feed: float
+    feed_mm: float
+    prog_mm: tuple
+    scale: float
+
+
+class BulkRun(NamedTuple):
+    """The result of :func:`plain_run`: ``count`` lines consumed; ``worded`` their indexes
+    that carry words; per move (a line whose end differs from its start): ``starts_mm``,
+    ``ends_mm`` (machine, lists of (x, y, z) tuples), ``feeds_mm_s``, ``rapid``, ``index`` (line
+    index); and the state after the run."""
+
+    count: int
+    worded: np.ndarray
+    starts_mm: list
+    ends_mm: list
+    feeds_mm_s: list
+    rapid: list
+    index: list
+    state: BulkState
+
+
+def _filled(given: list, initial: float, scale: float | None) -> tuple[np.ndarray, np.ndarray]:
+    """Forward fill of one column: (values per line, mask of lines that give it).
+
+    ``given`` holds the column's strings ('' where absent). The k-th given value goes to
+    every line from its own to the next given one; lines before the first keep ``initial``.
+    ``scale`` multiplies the given values (units), as the general path does value by value.
+    """
+    mask = np.fromiter(map(bool, given), dtype=bool, count=len(given))
+    values = np.fromiter(map(float, filter(None, given)), dtype=float)
+    if scale is not None:
+        values = values * scale
+    table = np.concatenate(([initial], values))
+    return table[np.cumsum(mask)], mask
+
+
+def plain_run(lines, start: int, state: BulkState, to_machine, limits) -> BulkRun | None:
+    """Interpret the run of plain lines starting at ``lines[start]`` (see the module doc).
+
+    ``to_machine(prog (n, 3)) -> (n, 3)``: the coordinate transform in force, array form;
+    ``limits``: (MAX_COORD_MM, MIN_FEED_MM_MIN, MAX_FEED_MM_MIN). Returns None when the first
+    line is not one the lane takes.
+    """
+    max_coord, min_feed, max_feed = limits
+    first = _plain_row(lines[start])
+    if first is None or (state.motion not in (0, 10) and not first[0] and any(first[1:])):
+        return None  # not plain, or a plain line for another motion mode (G81 X Y): cheap no
+    rows: list = []
+    size = FIRST_CHUNK
+    pos = start
+    while pos < len(lines):
+        chunk = _rows(lines, pos, size)
+        rows += chunk
+        pos += len(chunk)
+        if len(chunk) < size:
+            break
+        size = min(2 * size, MAX_CHUNK)
+    try:
+        return _run(rows, start, state, to_machine, limits)
+    except ValueError:  # a run of digits and points that is not a number ("1.2.3")
+        rows = _strict_rows(lines[start:], len(rows))
+        return _run(rows, start, state, to_machine, limits) if rows else None
+
+
+def _triples(points: np.ndarray) -> list:
+    """(n, 3) array → list of n (x, y, z) tuples of floats."""
+    flat = iter(points.ravel().tolist())
+    return list(zip(flat, flat, flat))
+
+
+def _run(rows, start: int, state: BulkState, to_machine, limits) -> BulkRun | None:
+    max_coord, min_feed, max_feed = limits
+    n = len(rows)
+    g, x, y, z, f = zip(*rows)
+    scale = state.scale
+    # Motion: None is -1, G0 is 0, G1 is 10.
+    motion0 = -1 if state.motion is None else state.motion
+    motion, has_g = _filled(g, motion0, 10.0)
+    feed_mm, has_f = _filled(f, state.feed_mm, scale)
+    feed_raw, _ = _filled(f, state.feed, None)
+    prog = [_filled(col, state.prog_mm[i], scale) for i, col in enumerate((x, y, z))]
+    has_axes = prog[0][1] | prog[1][1] | prog[2][1]
+    worded = has_axes | has_g | has_f
+    # Lines the general path refuses or treats otherwise end the run before them.
+    bad = worded & (motion != 0.0) & (motion != 10.0)
+    bad |= has_f & ((feed_raw < 0.0) | ((feed_mm != 0.0) & ((feed_mm < min_feed) |
+                                                            (feed_mm > max_feed))))  # fmt: skip
+    bad |= has_axes & (motion == 10.0) & ~(feed_mm > 0.0)
+    for values, given in prog:
+        bad |= given & ~(np.abs(values) <= max_coord)
+    first_bad = np.flatnonzero(bad)
+    if first_bad.size:
+        n = int(first_bad[0])
+        if n == 0:
+            return None
+    ends_prog = np.column_stack([values[:n] for values, _ in prog])
+    ends = to_machine(ends_prog)
+    starts = np.empty_like(ends)
+    starts[0] = to_machine(np.array([state.prog_mm], dtype=float))[0]
+    starts[1:] = ends[:-1]
+    moves = np.flatnonzero(has_axes[:n] & (ends != starts).any(axis=1))
+    rapid = motion[moves] == 0.0
+    feeds = np.where(rapid, 0.0, feed_mm[moves] / 60.0)
+    # A move starts where the line before it ended: when that line is a move too (nearly
+    # always) its end tuple is shared (equal values; one object instead of two).
+    ends_t = _triples(ends[moves])
+    follows = np.zeros(moves.size, dtype=bool)
+    follows[1:] = moves[1:] - 1 == moves[:-1]
+    fresh = iter(_triples(starts[moves[~follows]]))
+    starts_t = [ends_t[k - 1] if shared else next(fresh)
+                for k, shared in enumerate(follows.tolist())]  # fmt: skip
+    last = n - 1
+    new_motion = int(motion[last])
+    return BulkRun(
+        count=n,
+        worded=np.flatnonzero(worded[:n]) + start,
+        starts_mm=starts_t,
+        ends_mm=ends_t,
+        feeds_mm_s=feeds.tolist(),
+        rapid=rapid.tolist(),
+        index=(moves + start).tolist(),
+        state=BulkState(
+            motion=None if new_motion < 0 else new_motion,
+            feed=float(feed_raw[last]),
+            feed_mm=float(feed_mm[last]),
+            prog_mm=tuple(ends_prog[last].tolist()),
+            scale=scale,
+        ),
+    )
+
+
+@contextlib.contextmanager
+def pause_cyclic_gc():
+    """Pause CPython's cycle collector while a run's segments are made (restored after).
+
+    The segments hold no reference cycles, but the collector cannot know: building 200,000
+    Line objects triggers a dozen full collections, each walking every object made so far
+    (measured: a third of the interpretation time of a 200,000-line program). Reference
+    counting still frees everything; only the cycle search waits until the run is built.
+    """
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if enabled:
+            gc.enable()

@@ -1,0 +1,3 @@
+; M98 needs a P word @ 2:1
+M98 L2
+M2

@@ -1,0 +1,132 @@
+"""The fast lane (program/fastlane.py) gives the same program as line-by-line interpretation,
+to the bit: every real program, the corpus, the sample programs and generated edge cases are
+interpreted both ways and compared field by field (floats by their bit pattern, so even the
+sign of a zero counts); error programs must fail with the same message at the same place."""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from nurbscnc.cli.main import load_program
+from nurbscnc.errors import NurbsCncError
+from nurbscnc.program import fastlane
+from nurbscnc.program import interpret as interpret_module
+from nurbscnc.program.interpret import InterpretOptions, interpret_text
+
+ROOT = Path(__file__).resolve().parents[1]
+CORPUS = Path(os.environ.get("NURBSCNC_CORPUS") or ROOT / ".." / "shared" / "corpus").resolve()
+TOOLS = ROOT / "tests" / "programs" / "real" / "tools.tbl"
+
+
+def _bits(value):
+    """A comparable, exact form of a segment field (floats by bit pattern)."""
+    if isinstance(value, float):
+        return ("f", value.hex(), math.copysign(1.0, value))
+    if isinstance(value, np.ndarray):
+        return ("a", value.shape, tuple(_bits(float(v)) for v in value.ravel()))
+    if isinstance(value, tuple | list):
+        return ("t", tuple(_bits(v) for v in value))
+    return (type(value).__name__, value)
+
+
+def _key(program):
+    out = []
+    for seg in program.segments:
+        fields = getattr(seg, "__slots__", None) or tuple(vars(seg))
+        out.append((type(seg).__name__,
+                    tuple((name, _bits(getattr(seg, name))) for name in fields)))  # fmt: skip
+    return out, program.blocks, [(n.line, n.message) for n in program.notes]
+
+
+def _both(run):
+    """``run()`` with the fast lane and without it: (result or error) twice."""
+    results = []
+    for slow in (False, True):
+        with pytest.MonkeyPatch.context() as mp:
+            if slow:
+                mp.setattr(interpret_module, "plain_run", lambda *a, **k: None)
+            try:
+                results.append(("ok", _key(run())))
+            except NurbsCncError as exc:
+                results.append(("error", type(exc).__name__, exc.message, exc.pos))
+    return results
+
+
+def _files():
+    files = sorted((ROOT / "tests" / "programs").rglob("*.ngc"))
+    files += sorted((ROOT / "tests" / "programs").rglob("*.nc"))
+    files += sorted((ROOT / "programs").glob("*.nc"))
+    if CORPUS.is_dir():
+        files += sorted(CORPUS.rglob("*.ngc"))
+    return files
+
+
+@pytest.mark.parametrize("path", _files(), ids=lambda p: str(p.relative_to(p.parents[1])))
+def test_fast_lane_equals_line_by_line(path):
+    fast, slow = _both(lambda: load_program(str(path), tool_table=str(TOOLS)))
+    assert fast == slow
+
+
+def test_the_corpus_is_there_or_skipped():
+    if not CORPUS.is_dir():
+        pytest.skip(f"corpus not found at {CORPUS} (set NURBSCNC_CORPUS)")
+    assert any(CORPUS.rglob("*.ngc"))
+
+
+EDGE_CASES = [
+    # modal runs, units, offsets, rotation, tool offsets, zero-length and signed-zero moves
+    "G21 G90 G1 F300\nX1 Y2\nX1 Y2\nX-0 Y2\nX0\nZ-1.5 F200\nG0 Z5\nX.5\ny-.25 z+1.\nM2",
+    "G20 G90 F10\nG1 X1 Y1\nx2.5\nF0.5\nY3 (a comment)\nY4 ; semicolon\nG0 X0\nM2",
+    "G10 L2 P1 X10 Y-3 Z1 R30\nG54 G1 F100\nX1 Y1\nX2\nY3 Z-1\nG92 X0 Y0\nX1\nX2 Y2\nM2",
+    "G43.1 Z2.5\nG55\nG1 F50 X1\nX2\nG49\nX3\nM2",
+    "N10 G01 X1 F100\nN20 X2\nN30.5 X3\nn40 g00 x0\nG1 X1\nM2",
+    # lines the lane must leave to the general path, and errors at the right line
+    "G1 X1 F100\nX2\nX1.2.3\nM2",
+    "G1 X1 F100\nX2\nG1 X3 F-1\nM2",
+    "G0 X1\nX2\nG1 X3\nM2",
+    "G1 X1 F100\nX2\nX2000000000\nM2",
+    "G1 X1 F100\nX2\n(MSG, hello)\nX3 (msg,again)\nX4\nM2",
+    "G1 X1 F100\nG91\nX1\nX1\nG90 X0\nG93 G1 X1 F2\nX2 F3\nG94 X3 F100\nM2",
+    "G81 R1 Z-1 F100\nX1 Y1\nX2 Y2\nG80\nG0 X0\nX1 Y1\nM2",
+    "G1 X1 F100\nG2 X2 Y1 I0.5\nX3 Y0 I0.5\nG1 X4\nX5\nM2",
+    "G1 X1 F100\nX2 F1e9\nM2",
+    "G0 X1\nG80\nX2\nM2",
+    "G1 X1 F100\nX2\n/X3\nX4\nM2\nX5 garbage",
+]
+
+
+@pytest.mark.parametrize("text", EDGE_CASES)
+def test_fast_lane_edge_cases(text):
+    fast, slow = _both(lambda: interpret_text(text))
+    assert fast == slow
+
+
+def test_fast_lane_runs_in_bulk():
+    """A long plain program goes through plain_run in a few calls, not one per line (the
+    lane is really used, so the equality tests above compare two different paths)."""
+    calls = []
+    real = fastlane.plain_run
+
+    def counting(*args, **kwargs):
+        calls.append(args[1])
+        return real(*args, **kwargs)
+
+    lines = ["G21 G90 G1 F600"] + [f"X{k * 0.01:.3f} Y{math.sin(k / 50):.4f}" for k in range(5000)]
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(interpret_module, "plain_run", counting)
+        prog = interpret_text("\n".join(lines + ["M2"]))
+    assert len(prog.segments) == 4999  # X0 Y0 from X0 Y0 goes nowhere
+    assert len(calls) <= 3
+    assert prog.blocks == 5002
+
+
+def test_options_can_turn_the_lane_off():
+    text = "G1 F100\nX1\nX2\nM2"
+    on = interpret_text(text)
+    off = interpret_text(text, InterpretOptions(fast_lane=False))
+    assert _key(on) == _key(off)
