@@ -224,15 +224,26 @@ def contour_errors_um(
     period_s: float = SERVO_PERIOD_S,
     settle_s: float = 0.3,
     models: dict | None = None,
+    cutting: np.ndarray | None = None,
 ) -> dict:
-    """Simulated tool vs path: max and RMS contour error [µm] over the whole run (settle
-    included), and the reference's own largest distance from the path [µm]."""
+    """Simulated tool vs path [µm]: ``contour_max_um`` / ``contour_rms_um`` over the samples
+    where ``cutting`` (N,) is true (default all; the settle after the end takes the last
+    sample's flag), ``contour_max_all_um`` over the whole run, and the reference's own
+    largest distance from the path (``reference_deviation_max_um``, cutting samples)."""
     tool = simulate_tool_mm(reference_mm, period_s, settle_s, models)
     err = distance_to_polyline_mm(tool, polyline_mm)
     ref_dev = distance_to_polyline_mm(reference_mm, polyline_mm)
+    n = reference_mm.shape[0]
+    mask = np.ones(n, bool) if cutting is None else np.asarray(cutting, bool)
+    mask_all = np.concatenate([mask, np.repeat(mask[-1:], err.size - n)])
+    cut = err[mask_all] if mask_all.any() else err
     return {
-        "contour_max_um": float(err.max() * 1e3),
-        "contour_rms_um": float(np.sqrt(np.mean(err**2)) * 1e3),
-        "contour_argmax_s": float(np.argmax(err) * period_s),
-        "reference_deviation_max_um": float(ref_dev.max() * 1e3),
+        "contour_max_um": float(cut.max() * 1e3),
+        "contour_rms_um": float(np.sqrt(np.mean(cut**2)) * 1e3),
+        "contour_argmax_s": float(np.flatnonzero(mask_all)[np.argmax(cut)] * period_s)
+        if mask_all.any() else float(np.argmax(err) * period_s),
+        "contour_max_all_um": float(err.max() * 1e3),
+        "contour_argmax_all_s": float(np.argmax(err) * period_s),
+        "reference_deviation_max_um": float(
+            (ref_dev[mask] if mask.any() else ref_dev).max() * 1e3),
     }

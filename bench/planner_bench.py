@@ -126,16 +126,25 @@ def sha256(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
-def programmed_path(path: Path) -> np.ndarray:
-    """The program's path (nurbscnc's interpreter: the input stage, not the planner)."""
+def programmed_path(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """The program's path as a dense polyline, and the source lines of its rapids (G0).
+
+    The segments come from nurbscnc's interpreter (the input stage, not the planner)."""
     from nurbscnc.program.interpret import interpret_text
 
-    return path_polyline_mm(interpret_text(path.read_text(errors="replace")).segments)
+    segments = interpret_text(path.read_text(errors="replace")).segments
+    rapid_lines = sorted({s.line for s in segments if getattr(s, "kind", "") == "rapid"})
+    return path_polyline_mm(segments), np.array(rapid_lines, dtype=int)
 
 
-def measure(points_mm: np.ndarray, lines: np.ndarray, polyline: np.ndarray,
-            block: int | None) -> dict:  # fmt: skip
-    """Time (motion span, and the block's when ``block``) and contour errors of a stream."""
+def measure(points_mm: np.ndarray, lines: np.ndarray, path, block: int | None) -> dict:
+    """Time (motion span, and the block's when ``block``) and contour errors of a stream.
+
+    The contour error that carries the goals is taken where the stream's source line is not
+    a rapid's (the cut: a rapid's own overshoot while the controller waits at its end is not
+    the part's error, but a cut that starts before the tool settled is); the whole run's
+    maximum is recorded beside it (``contour_max_all_um``)."""
+    polyline, rapid_lines = path
     span = motion_span(points_mm)
     out = {"motion_s": span.seconds, "samples": int(points_mm.shape[0])}
     out["time_s"] = span.seconds
@@ -143,7 +152,8 @@ def measure(points_mm: np.ndarray, lines: np.ndarray, polyline: np.ndarray,
         start = block_start_index(lines, block)
         out["block_from_s"] = start * span.period_s
         out["time_s"] = (span.end_index - start) * span.period_s
-    out.update(contour_errors_um(points_mm, polyline))
+    cutting = ~np.isin(lines, rapid_lines)
+    out.update(contour_errors_um(points_mm, polyline, cutting=cutting))
     return out
 
 
@@ -167,7 +177,7 @@ def run_nurbscnc(path: Path, extra: list[str], tmp: Path) -> dict:
     return {"summary": summary, "points": points, "lines": lines, "wall_s": wall}
 
 
-def nurbscnc_case(case: Case, path: Path, polyline, block, variant: list[str], tmp) -> dict:
+def nurbscnc_case(case: Case, path: Path, programmed, block, variant: list[str], tmp) -> dict:
     res = run_nurbscnc(path, variant, tmp)
     if "error" in res:
         return {"options": variant, **res}
@@ -176,7 +186,7 @@ def nurbscnc_case(case: Case, path: Path, polyline, block, variant: list[str], t
     for key in ("cycle_time_s", "contour_max_um", "dynamics_iterations", "lower_bound_s"):
         if key in s:
             row[{"contour_max_um": "predicted_contour_max_um"}.get(key, key)] = s[key]
-    row.update(measure(res["points"], res["lines"], polyline, block))
+    row.update(measure(res["points"], res["lines"], programmed, block))
     return row
 
 
@@ -213,7 +223,7 @@ def linuxcnc_config() -> dict:
             "ini_sha256": sha256(ini) if ini.is_file() else None, "settings": keys}  # fmt: skip
 
 
-def run_linuxcnc(path: Path, polyline, block, tmp: Path) -> dict:
+def run_linuxcnc(path: Path, programmed, block, tmp: Path) -> dict:
     out = tmp / "linuxcnc.csv"
     t0 = time.perf_counter()
     proc = subprocess.run([str(LINUXCNC_SIM), str(path), str(out)], capture_output=True,
@@ -229,7 +239,7 @@ def run_linuxcnc(path: Path, polyline, block, tmp: Path) -> dict:
     row = {"program": str(path.relative_to(ROOT)) if path.is_relative_to(ROOT) else path.name,
            "program_sha256": sha256(path), "wall_s": wall,
            "recorder_cycle_time_s": status.get("cycle_time_s")}  # fmt: skip
-    row.update(measure(data[:, 1:4], data[:, 4].astype(int), polyline, block))
+    row.update(measure(data[:, 1:4], data[:, 4].astype(int), programmed, block))
     return row
 
 
@@ -352,7 +362,7 @@ def main(argv=None) -> int:
             continue
         print(f"{case.name}: {path}", file=sys.stderr)
         block = block_line(path) if case.block else None
-        polyline = programmed_path(path)
+        programmed = programmed_path(path)
         entry = {"program": str(path.relative_to(ROOT)) if path.is_relative_to(ROOT)
                  else f"$NURBSCNC_CORPUS/…/{case.program}",
                  "block_line": block, "published": case.published, "nurbscnc": {}}  # fmt: skip
@@ -363,13 +373,13 @@ def main(argv=None) -> int:
             variants["precompensate"] = ["--precompensate"]
         with tempfile.TemporaryDirectory() as tmp:
             for key, extra in variants.items():
-                entry["nurbscnc"][key] = nurbscnc_case(case, path, polyline, block, extra,
+                entry["nurbscnc"][key] = nurbscnc_case(case, path, programmed, block, extra,
                                                        Path(tmp))  # fmt: skip
             lpath = ROOT / case.linuxcnc if case.linuxcnc else path
             lblock = block_line(lpath) if case.block else None
             if live and (not case.corpus or args.linuxcnc_long):
-                lpoly = programmed_path(lpath) if case.linuxcnc else polyline
-                lrow = run_linuxcnc(lpath, lpoly, lblock, Path(tmp))
+                lprogrammed = programmed_path(lpath) if case.linuxcnc else programmed
+                lrow = run_linuxcnc(lpath, lprogrammed, lblock, Path(tmp))
                 reference["cases"][case.name] = lrow
             lrow = reference["cases"].get(case.name)
             if lrow and "error" not in lrow and lrow.get("program_sha256") != sha256(lpath):
