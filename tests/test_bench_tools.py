@@ -77,10 +77,10 @@ def test_arc_path_lies_on_its_circle():
     np.testing.assert_allclose(np.hypot(first[:, 0], first[:, 1]), 10.0, atol=1e-9)
     assert first[:, 1].min() == pytest.approx(0.0, abs=1e-9)
     assert first[:, 1].max() == pytest.approx(10.0, abs=1e-6)
-    second = contour.path_polyline_mm(arcs[1:])  # G2 about (−20, 0) from X−10: upper half
+    second = contour.path_polyline_mm(arcs[1:])  # G2 about (−20, 0) from X−10: lower half
     np.testing.assert_allclose(np.hypot(second[:, 0] + 20.0, second[:, 1]), 10.0, atol=1e-9)
-    assert second[:, 1].min() == pytest.approx(0.0, abs=1e-9)
-    assert second[:, 1].max() == pytest.approx(10.0, abs=1e-6)
+    assert second[:, 1].max() == pytest.approx(0.0, abs=1e-9)
+    assert second[:, 1].min() == pytest.approx(-10.0, abs=1e-6)
     np.testing.assert_allclose(second[[0, -1], 0], [-10.0, -30.0], atol=1e-9)
 
 
