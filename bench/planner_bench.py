@@ -223,8 +223,9 @@ def linuxcnc_config() -> dict:
             "ini_sha256": sha256(ini) if ini.is_file() else None, "settings": keys}  # fmt: skip
 
 
-def run_linuxcnc(path: Path, programmed, block, tmp: Path) -> dict:
+def run_linuxcnc_once(path: Path, programmed, block, tmp: Path) -> dict:
     out = tmp / "linuxcnc.csv"
+    out.unlink(missing_ok=True)
     t0 = time.perf_counter()
     proc = subprocess.run([str(LINUXCNC_SIM), str(path), str(out)], capture_output=True,
                           text=True, check=False)  # fmt: skip
@@ -232,8 +233,9 @@ def run_linuxcnc(path: Path, programmed, block, tmp: Path) -> dict:
     status = {}
     if Path(str(out) + ".status.json").is_file():
         status = json.loads(Path(str(out) + ".status.json").read_text())
-    if not out.is_file() or status.get("errors"):
-        return {"error": (status.get("errors") or proc.stderr.strip()[-1000:]),
+    if not out.is_file() or status.get("errors") or status.get("overruns"):
+        return {"error": (status.get("errors") or f"overruns {status.get('overruns')}"
+                          if status else proc.stderr.strip()[-1000:]),
                 "exit": proc.returncode}  # fmt: skip
     data = np.loadtxt(out, delimiter=",", skiprows=1, ndmin=2)
     row = {"program": str(path.relative_to(ROOT)) if path.is_relative_to(ROOT) else path.name,
@@ -241,6 +243,23 @@ def run_linuxcnc(path: Path, programmed, block, tmp: Path) -> dict:
            "recorder_cycle_time_s": status.get("cycle_time_s")}  # fmt: skip
     row.update(measure(data[:, 1:4], data[:, 4].astype(int), programmed, block))
     return row
+
+
+def run_linuxcnc(path: Path, programmed, block, tmp: Path, repeat: int) -> dict:
+    """LinuxCNC on ``path``, ``repeat`` times: the fastest run, with every run's time.
+
+    LinuxCNC runs in real time; on a loaded machine its task may not queue the many short
+    moves of a NURBS block fast enough and the planner starves (stops mid-curve), so one
+    program's time varies between runs. The fastest run is LinuxCNC's planner undisturbed;
+    ``runs_time_s`` keeps them all."""
+    runs = [run_linuxcnc_once(path, programmed, block, tmp) for _ in range(repeat)]
+    good = [r for r in runs if "error" not in r]
+    if not good:
+        return runs[-1]
+    best = dict(min(good, key=lambda r: r["time_s"]))
+    best["runs_time_s"] = [r.get("time_s") for r in runs]
+    best["runs_contour_max_um"] = [r.get("contour_max_um") for r in runs]
+    return best
 
 
 # --------------------------------------------------------------------------- goals
@@ -337,6 +356,8 @@ def main(argv=None) -> int:
     parser.add_argument("--out", default=None, help="write the results (JSON) here")
     parser.add_argument("--only", action="append", default=None, help="run only this case")
     parser.add_argument("--no-linuxcnc", action="store_true", help="never run LinuxCNC live")
+    parser.add_argument("--linuxcnc-repeat", type=int, default=3,
+                        help="LinuxCNC runs per program (the fastest counts; default 3)")
     parser.add_argument("--linuxcnc-long", action="store_true",
                         help="also run the corpus programs on LinuxCNC (real time, ~15 min)")
     args = parser.parse_args(argv)
@@ -350,6 +371,7 @@ def main(argv=None) -> int:
                  "config": linuxcnc_config(), "cases": dict(stored.get("cases", {}))}  # fmt: skip
     precompensate = has_option("--precompensate")
     results = {}
+    live_runs = {}
     for case in CASES:
         if args.only and case.name not in args.only:
             continue
@@ -379,8 +401,11 @@ def main(argv=None) -> int:
             lblock = block_line(lpath) if case.block else None
             if live and (not case.corpus or args.linuxcnc_long):
                 lprogrammed = programmed_path(lpath) if case.linuxcnc else programmed
-                lrow = run_linuxcnc(lpath, lprogrammed, lblock, Path(tmp))
-                reference["cases"][case.name] = lrow
+                key = sha256(lpath)
+                if key not in live_runs:  # one program (the G5.2 airfoil) serves two cases
+                    repeat = 1 if case.corpus else args.linuxcnc_repeat
+                    live_runs[key] = run_linuxcnc(lpath, lprogrammed, lblock, Path(tmp), repeat)
+                reference["cases"][case.name] = live_runs[key]
             lrow = reference["cases"].get(case.name)
             if lrow and "error" not in lrow and lrow.get("program_sha256") != sha256(lpath):
                 lrow = {**lrow, "stale": "the program changed since this LinuxCNC run"}
