@@ -149,9 +149,15 @@ def measure(points_mm: np.ndarray, lines: np.ndarray, path, block: int | None) -
     out = {"motion_s": span.seconds, "samples": int(points_mm.shape[0])}
     out["time_s"] = span.seconds
     if block is not None:
-        start = block_start_index(lines, block)
-        out["block_from_s"] = start * span.period_s
-        out["time_s"] = (span.end_index - start) * span.period_s
+        # the end of the move before the block, then any wait at the block's start point (a
+        # settle after the rapid): the block is timed from the last sample at rest there
+        arrive = block_start_index(lines, block)
+        step = np.linalg.norm(np.diff(points_mm[arrive + 1 :], axis=0), axis=1)
+        rest = int(np.argmax(step > 0)) if np.any(step > 0) else 0  # rest samples after it
+        leave = arrive + 1 + rest if rest else arrive
+        out["block_from_s"] = leave * span.period_s
+        out["wait_before_block_s"] = (leave - arrive) * span.period_s
+        out["time_s"] = (span.end_index - leave) * span.period_s
     cutting = ~np.isin(lines, rapid_lines)
     out.update(contour_errors_um(points_mm, polyline, cutting=cutting))
     return out
