@@ -167,8 +167,9 @@ def check_and_run(path: Path, lines: int, tmp: Path, caps) -> dict:
     check = measure([*NURBSCNC, "check", str(path)], *caps)
     run = measure([*NURBSCNC, "run", str(path), "-o", str(tmp / "points.npz"), "--json"], *caps)
     (tmp / "points.npz").unlink(missing_ok=True)
-    check["lines_per_s"] = lines / check["wall_s"]
-    run["lines_per_s"] = lines / run["wall_s"]
+    for row in (check, run):
+        row["lines_per_s"] = lines / row["wall_s"]
+        row["lines_per_s_cpu"] = lines / row["cpu_s"] if row["cpu_s"] > 0 else None
     motion = _motion_s(run)
     if motion is not None and run["exit"] == 0:
         run["motion_s"] = motion
