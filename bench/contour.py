@@ -218,6 +218,17 @@ def block_start_index(lines: np.ndarray, block_line: int) -> int:
     return int(before[-1]) if before.size else 0
 
 
+def block_leave_index(points_mm: np.ndarray, lines: np.ndarray, block_line: int) -> tuple:
+    """``(arrive, leave)``: the last sample of the move before the block at ``block_line``
+    (:func:`block_start_index`), and the last sample at rest at the block's start after it
+    (a wait there, e.g. a settle after the rapid; ``leave == arrive`` when the block starts
+    at once). The block's own time runs from ``leave``."""
+    arrive = block_start_index(lines, block_line)
+    step = np.linalg.norm(np.diff(points_mm[arrive + 1 :], axis=0), axis=1)
+    rest = int(np.argmax(step > 0)) if np.any(step > 0) else 0  # rest samples after arrive+1
+    return arrive, (arrive + 1 + rest if rest else arrive)
+
+
 def contour_errors_um(
     reference_mm: np.ndarray,
     polyline_mm: np.ndarray,

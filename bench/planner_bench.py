@@ -48,7 +48,7 @@ ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
 
 from contour import (  # noqa: E402
-    block_start_index,
+    block_leave_index,
     contour_errors_um,
     motion_span,
     path_polyline_mm,
@@ -151,10 +151,7 @@ def measure(points_mm: np.ndarray, lines: np.ndarray, path, block: int | None) -
     if block is not None:
         # the end of the move before the block, then any wait at the block's start point (a
         # settle after the rapid): the block is timed from the last sample at rest there
-        arrive = block_start_index(lines, block)
-        step = np.linalg.norm(np.diff(points_mm[arrive + 1 :], axis=0), axis=1)
-        rest = int(np.argmax(step > 0)) if np.any(step > 0) else 0  # rest samples after it
-        leave = arrive + 1 + rest if rest else arrive
+        arrive, leave = block_leave_index(points_mm, lines, block)
         out["block_from_s"] = leave * span.period_s
         out["wait_before_block_s"] = (leave - arrive) * span.period_s
         out["time_s"] = (span.end_index - leave) * span.period_s

@@ -103,3 +103,14 @@ def test_motion_span_and_block_start():
     assert span.seconds == pytest.approx(0.004)
     lines = np.array([3, 3, 3, 3, 0, 5, 5, 0, 5, 5])
     assert contour.block_start_index(lines, 5) == 3
+
+
+def test_block_timed_from_the_last_rest_at_its_start():
+    """A rapid (line 3) arrives at x = 2, the reference waits there 3 samples (labelled with
+    the block's line 5), then the block moves: the block starts at the last rest sample."""
+    x = np.array([0.0, 1.0, 1.9, 2.0, 2.0, 2.0, 2.0, 2.5, 3.0, 3.0])
+    pts = np.column_stack([x, np.zeros_like(x), np.zeros_like(x)])
+    lines = np.array([3, 3, 3, 5, 5, 5, 5, 5, 5, 5])
+    assert contour.block_leave_index(pts, lines, 5) == (2, 6)
+    lines_blend = np.array([3, 3, 3, 3, 3, 3, 3, 5, 5, 5])  # no wait labelled as the block
+    assert contour.block_leave_index(pts, lines_blend, 5) == (6, 6)
