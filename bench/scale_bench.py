@@ -239,6 +239,9 @@ def issue_rows(tmp: Path, caps, quick: bool) -> dict:
         r["realtime_factor_cpu"] = motion / r["cpu_s"]
         after = r["wall_s"] - startup["wall_s"]
         r["realtime_factor_after_startup"] = motion / after if after > 0 else None
+        # the same on CPU seconds: wall start-up times swing by seconds on a loaded machine
+        after_cpu = r["cpu_s"] - startup["cpu_s"]
+        r["realtime_factor_cpu_after_startup"] = motion / after_cpu if after_cpu > 0 else None
         r["pass"] = bool(r["realtime_factor_after_startup"]
                          and r["realtime_factor_after_startup"] >= 300)  # fmt: skip
     rows["ten_airfoils_60mm"] = {"goal": "≥ 300× real time after start-up",
@@ -304,10 +307,14 @@ def main(argv=None) -> int:
                 "check": {"goal": "≥ 200k lines/s", "published_before": "6.3 s (32k lines/s); "
                           "LinuxCNC rs274 -g 1.07 s", "wall_s": big["check"]["wall_s"],
                           "lines_per_s": big["check"]["lines_per_s"],
+                          "cpu_s": big["check"]["cpu_s"],
+                          "lines_per_s_cpu": big["check"]["lines_per_s_cpu"],
                           "pass": big["check"]["lines_per_s"] >= GOALS["check_lines_per_s"]},
                 "run": {"goal": "≥ 300× real time, ≤ 0.5 GB", "published_before":
                         "74.6 s, 0.87 GB (32× real time)", "wall_s": big["run"]["wall_s"],
-                        "peak_rss_mb": big["run"]["peak_rss_mb"],
+                        "peak_rss_mb": big["run"]["peak_rss_mb"], "cpu_s": big["run"]["cpu_s"],
+                        "motion_s": big["run"].get("motion_s"),
+                        "realtime_factor_cpu": big["run"].get("realtime_factor_cpu"),
                         "realtime_factor": big["run"].get("realtime_factor"),
                         "pass": bool((big["run"].get("realtime_factor") or 0) >= 300
                                      and big["run"]["peak_rss_mb"] <= 500)},
