@@ -114,3 +114,30 @@ def test_block_timed_from_the_last_rest_at_its_start():
     assert contour.block_leave_index(pts, lines, 5) == (2, 6)
     lines_blend = np.array([3, 3, 3, 3, 3, 3, 3, 5, 5, 5])  # no wait labelled as the block
     assert contour.block_leave_index(pts, lines_blend, 5) == (6, 6)
+
+
+def _bench_generator():
+    import importlib.util
+
+    path = Path(__file__).resolve().parents[1] / "bench" / "programs" / "make_bench_programs.py"
+    spec = importlib.util.spec_from_file_location("make_bench_programs", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_bench_programs_are_reproduced_by_their_generator():
+    gen = _bench_generator()
+    for name, text in gen.build_programs().items():
+        assert (gen.HERE / name).read_text(encoding="ascii") == text, name
+
+
+def test_pentagram_edges_are_38_mm():
+    """Five edges of 38 mm each, closing on the first vertex, two of every three vertices on
+    a circle of radius 19 / sin 72° (the chord over 144°)."""
+    prog = interpret_text((_bench_generator().HERE / "pentagram_g61.nc").read_text())
+    edges = [s for s in prog.segments if s.kind == "line"]
+    assert [round(s.length_mm, 5) for s in edges] == [38.0] * 5
+    assert np.allclose(edges[-1].end_mm, edges[0].start_mm)
+    radius = 19.0 / math.sin(math.radians(72.0))
+    assert all(math.hypot(*s.end_mm[:2]) == pytest.approx(radius, abs=1e-6) for s in edges)
