@@ -133,8 +133,8 @@ def test_bench_programs_are_reproduced_by_their_generator():
 
 
 def test_pentagram_edges_are_38_mm():
-    """Five edges of 38 mm each, closing on the first vertex, two of every three vertices on
-    a circle of radius 19 / sin 72° (the chord over 144°)."""
+    """Five edges of 38 mm each, closing on the first vertex, every vertex on the circle of
+    radius 19 / sin 72° (an edge is the chord over 144°: 2 R sin 72° = 38)."""
     prog = interpret_text((_bench_generator().HERE / "pentagram_g61.nc").read_text())
     edges = [s for s in prog.segments if s.kind == "line"]
     assert [round(s.length_mm, 5) for s in edges] == [38.0] * 5
