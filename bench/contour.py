@@ -210,6 +210,15 @@ def motion_span(reference_mm: np.ndarray, period_s: float = SERVO_PERIOD_S) -> M
     return Motion(int(moving[0]), int(moving[-1]) + 1, period_s)
 
 
+def slow_drops(reference_mm: np.ndarray, period_s: float = SERVO_PERIOD_S,
+               below_mm_s: float = 0.5) -> int:
+    """How many times the reference's speed |Δp|/T falls below ``below_mm_s`` [mm/s] from
+    above during the motion (a stop or near-stop inside the program; issue 13 counts them)."""
+    speed = np.linalg.norm(np.diff(reference_mm, axis=0), axis=1) / period_s
+    fast = speed >= below_mm_s
+    return int(np.count_nonzero(fast[:-1] & ~fast[1:]))
+
+
 def block_start_index(lines: np.ndarray, block_line: int) -> int:
     """Index of the last sample of the motion before the block at ``block_line``: the last
     sample whose source line is positive and below it (the move that brings the tool to the

@@ -52,6 +52,7 @@ from contour import (  # noqa: E402
     contour_errors_um,
     motion_span,
     path_polyline_mm,
+    slow_drops,
 )
 from machine_info import corpus_program, run_info  # noqa: E402
 
@@ -146,7 +147,8 @@ def measure(points_mm: np.ndarray, lines: np.ndarray, path, block: int | None) -
     maximum is recorded beside it (``contour_max_all_um``)."""
     polyline, rapid_lines = path
     span = motion_span(points_mm)
-    out = {"motion_s": span.seconds, "samples": int(points_mm.shape[0])}
+    out = {"motion_s": span.seconds, "samples": int(points_mm.shape[0]),
+           "drops_below_0.5_mm_s": slow_drops(points_mm)}
     out["time_s"] = span.seconds
     if block is not None:
         # the end of the move before the block, then any wait at the block's start point (a

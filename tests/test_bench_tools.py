@@ -141,3 +141,10 @@ def test_pentagram_edges_are_38_mm():
     assert np.allclose(edges[-1].end_mm, edges[0].start_mm)
     radius = 19.0 / math.sin(math.radians(72.0))
     assert all(math.hypot(*s.end_mm[:2]) == pytest.approx(radius, abs=1e-6) for s in edges)
+
+
+def test_slow_drops_counts_the_stops():
+    """Speeds 1, 0, 1, 0.2, 0.2, 1, 1, 0 mm/s (T = 1 s): three drops below 0.5 mm/s."""
+    x = np.cumsum([0.0, 1.0, 0.0, 1.0, 0.2, 0.2, 1.0, 1.0, 0.0])
+    pts = np.column_stack([x, np.zeros_like(x), np.zeros_like(x)])
+    assert contour.slow_drops(pts, period_s=1.0) == 3
