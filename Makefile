@@ -33,11 +33,20 @@ unit: $(STAMP)
 
 test: lint unit
 
+# `make bench` runs every benchmark and rewrites bench/*.json (docs/benchmarks.md explains
+# each figure); `make bench BENCH_QUICK=1` runs the small subsets (a few minutes) and writes
+# out/bench-quick/*.json instead, leaving the committed results alone.
+BENCH_QUICK ?=
+BENCH_OUT   := $(if $(BENCH_QUICK),$(OUT)/bench-quick,bench)
+BENCH_FLAG  := $(if $(BENCH_QUICK),--quick,)
 bench: $(STAMP)
-	$(BIN)/python bench/run.py --out bench/results.json
-	$(BIN)/python bench/interp_bench.py --out bench/interp_results.json
-	$(BIN)/python bench/stream_bench.py --out bench/stream_results.json
-	@if [ -f bench/plan_bench.py ]; then $(BIN)/python bench/plan_bench.py --out bench/plan_results.json; fi
+	@mkdir -p $(BENCH_OUT)
+	$(BIN)/python bench/run.py $(BENCH_FLAG) --out $(BENCH_OUT)/results.json
+	$(BIN)/python bench/interp_bench.py $(BENCH_FLAG) --out $(BENCH_OUT)/interp_results.json
+	$(BIN)/python bench/stream_bench.py $(BENCH_FLAG) --out $(BENCH_OUT)/stream_results.json
+	$(BIN)/python bench/plan_bench.py $(BENCH_FLAG) --out $(BENCH_OUT)/plan_results.json
+	$(BIN)/python bench/planner_bench.py $(BENCH_FLAG) --out $(BENCH_OUT)/planner_results.json
+	$(BIN)/python bench/scale_bench.py $(BENCH_FLAG) --out $(BENCH_OUT)/scale_results.json
 
 # The fuzz tests with a large budget (make test runs them small): mutants of the corpus and
 # hypothesis programs through check/plan; counts in out/fuzz-report.json.
