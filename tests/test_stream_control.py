@@ -29,7 +29,7 @@ FINE = {"steps.per_mm.x": 1e5, "steps.per_mm.y": 1e5, "steps.per_mm.z": 1e5,
         "steps.max_pulses_per_period": 32767}  # fmt: skip
 T = 1e-3
 
-PAUSES = """G21 G90 G17
+PAUSES = """G21 G90 G17 G61
 G0 X0 Y0 Z5
 G1 Z0 F600
 G1 X10 F1200
@@ -42,8 +42,8 @@ G1 Y0
 M2
 """
 
-SQUARE = """G21 G90 G17 G64
-G1 X20 F3000
+SQUARE = """G21 G90 G17 G61
+G1 X20 F600
 G1 Y10
 G2 X30 Y20 I10 J0
 G1 X0
@@ -176,7 +176,8 @@ def hold_run(hold_at: float, resume_at: float, lead: int | None = None):
 
 
 def test_feed_hold_decelerates_within_a_and_j_and_resumes_on_the_programmed_path():
-    _, mach, run, job, r = hold_run(0.5, 3.0)
+    # Asked at 0.1 s, the hold (256 periods later) stops on the first, 20 mm line.
+    _, mach, run, job, r = hold_run(0.1, 3.0)
     assert r.completed, r.error
     lim = mach.limits
     (hold,) = job.holds
@@ -329,7 +330,7 @@ def test_card_position_can_be_set_when_idle_and_is_refused_while_streaming():
     assert card.position.tolist() == [9, 10, 11]
 
 
-FROM_LINE = """G21 G90 G17
+FROM_LINE = """G21 G90 G17 G61
 G0 X0 Y0 Z5
 G1 Z-1 F600
 G1 X20 F1500

@@ -26,6 +26,7 @@ from scipy.spatial import cKDTree
 
 from nurbscnc.machine.profile import load_machine
 from nurbscnc.pipeline import RunOptions, run_program
+from nurbscnc.plan.dynamics import dense_path_mm
 from nurbscnc.plan.options import LookaheadOptions
 from nurbscnc.program.interpret import interpret_text
 from tests.servo_reference import lsim_actual_mm
@@ -207,15 +208,18 @@ def test_corpus_program_runs_end_to_end(rel):
     d = distance_to_path(smp.points_mm, programmed_path(prog))
     assert d.max() <= max(1.5 * LIM.ph_tolerance_mm, LIM.path_tolerance_mm) + 1e-5
     # The dynamics check held: the reference through an independent servo simulation
-    # (scipy.signal.lsim of eq. 25) stays within ε_max of the programmed path while cutting
-    # (reference on a feed move; the settling tail counts as cutting), allowing the corners'
-    # PH fit tolerance.
+    # (scipy.signal.lsim of eq. 25) stays within ε_max of the planned path (the programmed
+    # one with its corners blended or PH-fitted, checked above) while cutting (reference on a
+    # feed move; the settling tail counts as cutting); the planned path as exact points of
+    # its pieces every 2 µm.
     actual = lsim_actual_mm(smp.points_mm, MACHINE)
     rapid = plan.pieces.rapid
     cut = np.append(~rapid[smp.piece], np.full(actual.shape[0] - smp.t_s.size, not rapid[-1]))
     if cut.any():  # (a program of rapids only cuts nothing)
-        d = distance_to_path(actual[cut], programmed_path(prog), reach=0.1)
-        assert d.max() <= LIM.contour_tolerance_mm + 1.5 * LIM.ph_tolerance_mm + 1e-5
+        planned = dense_path_mm(plan.pieces, plan.profile)
+        d = distance_to_path(actual[cut], (np.zeros((0, 3)), np.zeros((0, 3)), [planned]),
+                             reach=0.1)  # fmt: skip
+        assert d.max() <= LIM.contour_tolerance_mm + 1e-5
 
 
 # --- polygons with and without G64 P ---------------------------------------------------------
