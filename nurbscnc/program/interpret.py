@@ -341,7 +341,8 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
             numbers = [self.main_line()] * len(run.index)
         with pause_cyclic_gc():
             self.segments.extend(map(Line, run.starts_mm, run.ends_mm, run.feeds_mm_s, numbers,
-                                     run.rapid, itertools.repeat(blend_mm)))  # fmt: skip
+                                     run.rapid, itertools.repeat(blend_mm),
+                                     itertools.repeat(m.naive_mm)))  # fmt: skip
         new = run.state
         m.motion, m.feed, m.feed_mm = new.motion, new.feed, new.feed_mm
         self.prog = list(new.prog_mm)
