@@ -171,7 +171,7 @@ def test_errors_program_file_and_option(files):
 #: Keys of the stream controller's job report (feed hold, override, sections), documented
 #: with the stream's.
 JOB_KEYS = {"sections", "feed_override", "holds", "holds[].latency_s", "holds[].stop_s",
-            "holds[].stopped_at_mm", "notes"}  # fmt: skip
+            "holds[].stopped_at_mm", "notes", "notes[].line", "notes[].message"}  # fmt: skip
 
 
 def test_stream_report_keys_are_documented():

@@ -380,7 +380,9 @@ def stream(program, port, allow_url, baud, batch, timeout_s, lead, optional_stop
                 "bytes_sent": sum(r.bytes_sent for r in reports),
                 "retransmits": sum(r.retransmits for r in reports),
                 "duration_s": sum(r.duration_s for r in reports), **extra}  # fmt: skip
-        click.echo(json.dumps({"ok": True, "program": program, **body}))
+        # "program" as every command names it (standard input is "<stdin>").
+        name = "<stdin>" if program == "-" else program
+        click.echo(json.dumps({"ok": True, "program": name, **body}))
         return
     holds = extra.get("holds", [])
     hold_text = "".join(f"; feed hold: deceleration began {h['latency_s'] * 1e3:.0f} ms after "
@@ -394,7 +396,7 @@ def stream(program, port, allow_url, baud, batch, timeout_s, lead, optional_stop
         markup=False,
     )
     for note in extra.get("notes", []):
-        err.print(f"stream: note: {note}", markup=False, highlight=False)
+        err.print(f"stream: note: {note['message']}", markup=False, highlight=False)
 
 
 @click.command("card-position")

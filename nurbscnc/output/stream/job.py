@@ -385,7 +385,10 @@ class Job:
     def report(self) -> dict:
         """JSON-able summary: sections, holds (latency), notes, the final override."""
         return {"sections": self.sections, "feed_override": round(self.override, 6),
-                "holds": [h.to_json() for h in self.holds], "notes": list(self.notes)}
+                "holds": [h.to_json() for h in self.holds],
+                # The same shape as every command's notes ({line, message}); the job's notes
+                # are about the stream as a whole (no source line).
+                "notes": [{"line": None, "message": n} for n in self.notes]}
 
 
 def program_stops(program, plan) -> list[Stop]:
