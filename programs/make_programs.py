@@ -289,12 +289,13 @@ def build_programs() -> dict[str, str]:
     }
 
 
-def write_programs(out_dir) -> list[Path]:
-    """Write every program into ``out_dir`` (ASCII, '\\n' line ends); return the paths."""
+def write_programs(out_dir, programs: dict[str, str] | None = None) -> list[Path]:
+    """Write every program (``programs``: name → text; default :func:`build_programs`) into
+    ``out_dir`` (ASCII, '\\n' line ends); return the paths."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = []
-    for name, text in build_programs().items():
+    for name, text in (build_programs() if programs is None else programs).items():
         path = out / name
         path.write_text(text, encoding="ascii", newline="\n")
         paths.append(path)

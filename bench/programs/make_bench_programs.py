@@ -183,15 +183,9 @@ def build_programs() -> dict[str, str]:
 
 
 def write_programs(out_dir=HERE) -> list[Path]:
-    """Write every program into ``out_dir`` (ASCII, '\\n' line ends); return the paths."""
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    paths = []
-    for name, text in build_programs().items():
-        path = out / name
-        path.write_text(text, encoding="ascii", newline="\n")
-        paths.append(path)
-    return paths
+    """Write every benchmark program into ``out_dir`` (programs/make_programs.py's writer:
+    ASCII, '\\n' line ends); return the paths."""
+    return MP.write_programs(out_dir, build_programs())
 
 
 if __name__ == "__main__":
