@@ -634,9 +634,11 @@ def _small_break(pieces: PieceList, turning: np.ndarray, regular: np.ndarray,
     cap, length = pieces.v_cap_mm_s, pieces.length_mm
     v = np.minimum(cap[:-1], cap[1:])
     half = 0.5 * np.minimum(length[:-1], length[1:])
+    # A zero-length neighbour (half = 0) gives an infinite or NaN crowd and jump: such a
+    # junction is not ``regular`` and the NaN compares False, so it never passes.
     with np.errstate(divide="ignore", invalid="ignore"):
         crowd = np.maximum(1.0, v * machine.servo.period_s / half)
-    jump = 2.0 * v * np.sin(0.5 * turning) * crowd
+        jump = 2.0 * v * np.sin(0.5 * turning) * crowd
     return regular & (turning > SMOOTH_JUNCTION_RAD) & (jump <= pass_velocity_jump_mm_s(machine))
 
 
