@@ -90,6 +90,11 @@ class Limits:
     a_down_mm_s2: np.ndarray
     j_down_mm_s3: np.ndarray
 
+    def tail(self, first: int) -> Limits:
+        """The limits of pieces ``first`` … k − 1."""
+        return Limits(self.a_up_mm_s2[first:], self.j_up_mm_s3[first:],
+                      self.a_down_mm_s2[first:], self.j_down_mm_s3[first:])  # fmt: skip
+
 
 @dataclass(frozen=True, eq=False)
 class Plan:
@@ -137,15 +142,17 @@ class Check:
         return self.response.contour_mm[self.cutting] * 1000.0
 
 
-def _profile(pieces: PieceList, caps: np.ndarray, smooth: np.ndarray, limits: Limits,
-             window: int | None) -> Profile:  # fmt: skip
-    """The jerk-limited profile (SPEC §7) over the pieces with cruise caps ``caps`` [mm/s],
-    the junctions ``smooth`` (> 0: tangent-continuous, capped by the smaller neighbour) and
-    the per-piece acceleration and jerk ``limits``."""
-    k = len(pieces)
+def profile_over(length_mm: np.ndarray, caps: np.ndarray, smooth: np.ndarray,
+                 limits: Limits, window: int | None) -> Profile:  # fmt: skip
+    """The jerk-limited profile (SPEC §7) over pieces of ``length_mm`` with cruise caps
+    ``caps`` [mm/s], the junctions ``smooth`` (k+1; > 0: tangent-continuous, capped by the
+    smaller neighbour; the ends are rests) and the per-piece acceleration and jerk
+    ``limits``. The planner's profile, and the stream's re-plan of a plan's rest after a
+    feed hold (the same pieces from one on, same caps and limits)."""
+    k = caps.size
     jcaps = np.zeros(k + 1)
     jcaps[1:-1] = np.where(smooth[1:-1] > 0, np.minimum(caps[:-1], caps[1:]), 0.0)
-    return plan_profile(ProfileInput(pieces.length_mm, caps, jcaps, limits.a_up_mm_s2,
+    return plan_profile(ProfileInput(length_mm, caps, jcaps, limits.a_up_mm_s2,
                                      limits.j_up_mm_s3, lookahead_pieces=window,
                                      a_decel_mm_s2=limits.a_down_mm_s2,
                                      j_decel_mm_s3=limits.j_down_mm_s3))  # fmt: skip
@@ -451,7 +458,8 @@ def plan_checked(program, machine: Machine, options: LookaheadOptions | None = N
         """Plan with the levers ``lv`` and check: (planned pieces, profile, check, err)."""
         nonlocal index
         planned = _with_dwell(pieces, base_dwell + lv.settle_s) if settle_rows.size else pieces
-        profile = _profile(planned, lv.caps, smooth, lv.limits(), options.lookahead_pieces)
+        profile = profile_over(planned.length_mm, lv.caps, smooth, lv.limits(),
+                               options.lookahead_pieces)  # fmt: skip
         check_point_count(planned, profile, machine)  # before anything is sampled
         if options.dynamics == Dynamics.OFF:
             return planned, profile, None, None
@@ -563,7 +571,7 @@ def _cut_distance_after_rapids(response: Response, ref: Reference, profile: Prof
 
 def _cycle_time(result) -> float:
     planned, profile = result[0], result[1]
-    return total_time_s(profile, dwell_times(planned, profile)[1])
+    return total_time_s(profile, dwell_times(planned.dwell_after_s, profile)[1])
 
 
 def segment_times_s(plan: Plan) -> dict[int, float]:

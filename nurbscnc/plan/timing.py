@@ -20,14 +20,16 @@ from nurbscnc.plan.profile import Profile
 SLAB = 1 << 16
 
 
-def dwell_times(pieces, profile: Profile) -> tuple[np.ndarray, np.ndarray]:
+def dwell_times(dwell_after_s, profile: Profile) -> tuple[np.ndarray, np.ndarray]:
     """Profile times [s] at which dwells start and their durations [s] (sorted), from the
-    ``dwell_after_s`` column of the pieces (a dwell after the last piece starts at the end)."""
-    i = np.flatnonzero(pieces.dwell_after_s > 0.0)
-    k = len(pieces)
+    ``dwell_after_s`` column (k,) of the pieces the profile plans (a dwell after the last
+    piece starts at the end)."""
+    dwell_after_s = np.asarray(dwell_after_s, dtype=float)
+    i = np.flatnonzero(dwell_after_s > 0.0)
+    k = dwell_after_s.size
     nxt = np.minimum(i + 1, k - 1)
     at = np.where(i + 1 < k, profile.piece_start_time_s[nxt], profile.duration_s)
-    return at.astype(float), pieces.dwell_after_s[i].astype(float)
+    return at.astype(float), dwell_after_s[i]
 
 
 def total_time_s(profile: Profile, dwell_durations_s: np.ndarray) -> float:
@@ -56,7 +58,7 @@ def servo_clock(pieces, profile: Profile, period_s: float) -> tuple[np.ndarray, 
     """Wall times t_k = k·T_s [s] from 0 to the first one at or after the end of motion, and
     the profile times τ_k [s] they map to (dwells held). Every pair of consecutive samples is
     T_s apart; the last one is at rest at the programmed end point."""
-    dwell_at, dwell_s = dwell_times(pieces, profile)
+    dwell_at, dwell_s = dwell_times(pieces.dwell_after_s, profile)
     n = int(np.ceil(total_time_s(profile, dwell_s) / period_s - 1e-9)) + 1
     t = np.arange(n) * period_s
     return t, wall_to_profile_time(t, dwell_at, dwell_s)

@@ -254,8 +254,8 @@ class Job:
             self.last_line = int(sec.program.line[-1])
         self.section = None
         if sec.held:
-            self.motion = resume_motion(self.plan, self.machine, float(sec.track.s_mm[-1]),
-                                        sec.hold_wait_s, self.lookahead_pieces)  # fmt: skip
+            self.motion = resume_motion(self.plan, float(sec.track.s_mm[-1]), sec.hold_wait_s,
+                                        self.lookahead_pieces)  # fmt: skip
             self.tau = 0.0
             self.waiting = None if self.resume_early else "feed hold"
             self.hold_wanted = self.resume_early = False

@@ -2,7 +2,7 @@
 
 Pure numpy, no I/O and no clock. A :class:`Motion` is a jerk-limited profile over the pieces
 of a plan from some path length on: the whole plan, or the rest of it re-planned from rest
-after a feed hold (:func:`resume_motion`, the same planner: :func:`plan_profile` over the
+after a feed hold (:func:`resume_motion`, the same planner: :func:`profile_over` over the
 remaining pieces with the plan's final caps). :func:`play` turns a motion into servo periods
 at a feed override, :func:`stop_phases` gives the shortest jerk-limited stop from a moving
 state.
@@ -28,9 +28,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from nurbscnc.plan.lookahead import profile_over
 from nurbscnc.plan.pieces import junction_caps
-from nurbscnc.plan.profile import Profile, ProfileInput, plan_profile, time_at_length
-from nurbscnc.plan.timing import wall_to_profile_time
+from nurbscnc.plan.profile import Profile, time_at_length
+from nurbscnc.plan.timing import dwell_times, wall_to_profile_time
 
 #: Relative slack of the limit checks (rounding of the closed forms).
 LIMIT_SLACK = 1e-6
@@ -161,26 +162,17 @@ class Motion:
         return time_at_length(self.profile, s - self.s0_mm)
 
 
-def _dwells(dwell_after_s: np.ndarray, profile: Profile) -> tuple[np.ndarray, np.ndarray]:
-    """Profile times of the dwells after pieces (``dwell_after_s`` (k,)) and their lengths."""
-    i = np.flatnonzero(dwell_after_s > 0.0)
-    k = dwell_after_s.size
-    at = np.where(i + 1 < k, profile.piece_start_time_s[np.minimum(i + 1, k - 1)],
-                  profile.duration_s)  # fmt: skip
-    return at.astype(float), dwell_after_s[i].astype(float)
-
-
 def plan_motion(plan) -> Motion:
     """The whole :class:`~nurbscnc.plan.lookahead.Plan` as a motion."""
-    at, d = _dwells(np.asarray(plan.pieces.dwell_after_s, dtype=float), plan.profile)
+    at, d = dwell_times(plan.pieces.dwell_after_s, plan.profile)
     return Motion(plan.pieces, plan.profile.piece_start_mm, plan.profile, 0, 0.0, at, d)
 
 
-def resume_motion(plan, machine, s_mm: float, wait_s: float = 0.0,
+def resume_motion(plan, s_mm: float, wait_s: float = 0.0,
                   lookahead_pieces: int | None = None) -> Motion | None:  # fmt: skip
     """The rest of ``plan`` from global path length ``s_mm``, planned from rest (SPEC §7: the
-    same :func:`plan_profile` over the remaining pieces, with the plan's final caps, so the
-    dynamics check's lowered caps still hold); None when nothing is left to move."""
+    planner's own :func:`~nurbscnc.plan.lookahead.profile_over` over the remaining pieces,
+    with the plan's final caps and per-piece limits); None when nothing is left to move."""
     pieces = plan.pieces
     starts = np.asarray(plan.profile.piece_start_mm, dtype=float)
     length = np.asarray(pieces.length_mm, dtype=float)
@@ -192,16 +184,13 @@ def resume_motion(plan, machine, s_mm: float, wait_s: float = 0.0,
     left[0] = max(0.0, starts[i0] + length[i0] - s_mm)
     if left.sum() <= 1e-12 and not np.any(pieces.dwell_after_s[i0:] > 0.0) and wait_s <= 0.0:
         return None
-    caps = np.asarray(plan.caps_mm_s, dtype=float)
-    smooth = junction_caps(pieces)  # > 0 where the path is tangent-continuous
-    jcaps = np.zeros(k + 1)
-    jcaps[1:-1] = np.where(smooth[1:-1] > 0, np.minimum(caps[:-1], caps[1:]), 0.0)
-    sub_j = jcaps[i0:].copy()
-    sub_j[0] = sub_j[-1] = 0.0
-    lim = machine.limits
-    profile = plan_profile(ProfileInput(left, caps[i0:], sub_j, lim.a_max_mm_s2, lim.j_max_mm_s3,
-                                        lookahead_pieces=lookahead_pieces))  # fmt: skip
-    at, d = _dwells(np.asarray(pieces.dwell_after_s, dtype=float)[i0:], profile)
+    # The plan's own profile over the rest (its final caps and per-piece limits, so the
+    # dynamics check's shaping and the axes' limits still hold), from rest at s_mm.
+    smooth = junction_caps(pieces)[i0:].copy()  # > 0 where the path is tangent-continuous
+    smooth[0] = 0.0
+    profile = profile_over(left, np.asarray(plan.caps_mm_s, dtype=float)[i0:], smooth,
+                           plan.limits.tail(i0), lookahead_pieces)  # fmt: skip
+    at, d = dwell_times(pieces.dwell_after_s[i0:], profile)
     # The profile's s counts from s_mm; its piece i is the plan's piece i0 + i.
     return Motion(pieces, starts, profile, i0, float(s_mm), at, d, wait_s)
 
