@@ -258,16 +258,20 @@ def test_unwritable_card_log_and_directory_program_exit_3(tmp_path):
 PAUSED = "G21 G90 G17\nG0 X0 Y0\nG1 X5 F3000\nM0\nG1 X8\nM2\n"  # M0 at X5 (line 4)
 
 
+def _stream_process(nc, ep) -> subprocess.Popen:
+    """``nurbscnc stream NC --port EP --quiet`` as a child process (pipes for its output)."""
+    return subprocess.Popen([sys.executable, "-m", "nurbscnc", "stream", str(nc), "--port",
+                             ep.path, "--quiet"], stderr=subprocess.PIPE, stdout=subprocess.PIPE,
+                            env={**os.environ, "PYTHONPATH": str(ROOT)})  # fmt: skip
+
+
 def test_m0_waits_at_rest_until_sigusr2(tmp_path):
     """At M0 the card stops (DONE at X5: its buffer drained), the command says so and waits;
     SIGUSR2 continues to the end."""
     nc = tmp_path / "part.nc"
     nc.write_text(PAUSED)
     with card_on("pty", CardConfig(speed=None)) as (card, ep):
-        proc = subprocess.Popen([sys.executable, "-m", "nurbscnc", "stream", str(nc), "--port",
-                                 ep.path, "--quiet"], stderr=subprocess.PIPE,
-                                stdout=subprocess.PIPE, env={**os.environ,
-                                                             "PYTHONPATH": str(ROOT)})  # fmt: skip
+        proc = _stream_process(nc, ep)
         try:
             waiting = proc.stderr.readline()
             time.sleep(0.3)
@@ -334,10 +338,7 @@ def test_ctrl_c_while_waiting_at_m0_exits_130_with_the_cards_position(tmp_path):
     nc = tmp_path / "part.nc"
     nc.write_text(PAUSED)
     with card_on("pty", CardConfig(speed=None)) as (card, ep):
-        proc = subprocess.Popen([sys.executable, "-m", "nurbscnc", "stream", str(nc), "--port",
-                                 ep.path, "--quiet"], stderr=subprocess.PIPE,
-                                stdout=subprocess.PIPE, env={**os.environ,
-                                                             "PYTHONPATH": str(ROOT)})  # fmt: skip
+        proc = _stream_process(nc, ep)
         try:
             proc.stderr.readline()  # waiting at M0
             proc.send_signal(signal.SIGINT)
