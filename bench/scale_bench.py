@@ -159,9 +159,17 @@ def measure(cmd: list[str], mem_cap_gb: float, timeout_s: float) -> dict:
     return row
 
 
-def _motion_s(row: dict) -> float | None:
-    summary = row.get("json") or {}
-    return summary.get("cycle_time_s")
+def _add_realtime(row: dict) -> float | None:
+    """The motion time [s] of a measured command (its --json ``cycle_time_s``; None if it
+    printed none or failed), recorded in ``row`` with the real-time factors: motion time over
+    the wall and the CPU time (what a quiet machine would give)."""
+    motion = (row.get("json") or {}).get("cycle_time_s")
+    if motion is not None and row["exit"] == 0:
+        row["motion_s"] = motion
+        row["realtime_factor"] = motion / row["wall_s"]
+        row["realtime_factor_cpu"] = motion / row["cpu_s"]
+        return motion
+    return None
 
 
 def check_and_run(path: Path, lines: int, tmp: Path, caps) -> dict:
@@ -171,11 +179,7 @@ def check_and_run(path: Path, lines: int, tmp: Path, caps) -> dict:
     for row in (check, run):
         row["lines_per_s"] = lines / row["wall_s"]
         row["lines_per_s_cpu"] = lines / row["cpu_s"] if row["cpu_s"] > 0 else None
-    motion = _motion_s(run)
-    if motion is not None and run["exit"] == 0:
-        run["motion_s"] = motion
-        run["realtime_factor"] = motion / run["wall_s"]
-        run["realtime_factor_cpu"] = motion / run["cpu_s"]  # what a quiet machine would give
+    _add_realtime(run)
     summary = run.pop("json", None) or {}
     run["samples"] = summary.get("samples")
     check.pop("json", None)
@@ -231,12 +235,9 @@ def issue_rows(tmp: Path, caps, quick: bool) -> dict:
                          text=True, check=True, cwd=ROOT)  # fmt: skip
     foil.write_text(gen.stdout)
     r = measure([*NURBSCNC, "run", str(foil), "-o", str(tmp / "foil.npz"), "--json"], *caps)
-    motion = _motion_s(r)
+    motion = _add_realtime(r)
     r.pop("json", None)
     if motion:
-        r["motion_s"] = motion
-        r["realtime_factor"] = motion / r["wall_s"]
-        r["realtime_factor_cpu"] = motion / r["cpu_s"]
         after = r["wall_s"] - startup["wall_s"]
         r["realtime_factor_after_startup"] = motion / after if after > 0 else None
         # the same on CPU seconds: wall start-up times swing by seconds on a loaded machine
@@ -267,12 +268,9 @@ def issue_rows(tmp: Path, caps, quick: bool) -> dict:
               file=sys.stderr)  # fmt: skip
     else:
         r = measure([*NURBSCNC, "plan", str(tort), "--json"], *caps)
-        motion = _motion_s(r)
+        motion = _add_realtime(r)
         r.pop("json", None)
         if motion:
-            r["motion_s"] = motion
-            r["realtime_factor"] = motion / r["wall_s"]
-            r["realtime_factor_cpu"] = motion / r["cpu_s"]
             r["pass"] = r["realtime_factor"] >= 300
         rows["plan_tort"] = {"goal": "≥ 300× real time", "published_before": "41 s", **r}
     return rows
