@@ -277,3 +277,20 @@ def test_taylor_on_the_airfoil_keeps_ph_pieces_exact(airfoil_plan):
     fluct = np.abs(ds[cruise] / planned[cruise] - 1.0)
     assert 1e-6 < fluct.max() < 2e-3
     np.testing.assert_array_equal(smp.points_mm[-1], plan.samples.points_mm[-1])
+
+
+def test_reference_windows_are_the_rows_of_the_whole_reference(corners_plan):
+    """``exact_reference(..., k0, k1)`` gives exactly rows k0…k1−1 of the whole reference
+    (long programs are sampled window by window; the windows must join without a seam)."""
+    from nurbscnc.plan.timing import exact_reference, sample_count
+
+    plan = corners_plan
+    whole = exact_reference(plan.pieces, plan.profile, 1e-3)
+    n = sample_count(plan.pieces, plan.profile, 1e-3)
+    assert n == whole.t_s.size
+    cuts = [0, 1, 17, n // 3, n // 3 + 1, n - 2, n, n + 5]
+    parts = [exact_reference(plan.pieces, plan.profile, 1e-3, a, b)
+             for a, b in zip(cuts[:-1], cuts[1:])]  # fmt: skip
+    for field in ("t_s", "tau_s", "s_mm", "v_mm_s", "a_mm_s2", "piece", "points_mm", "param"):
+        joined = np.concatenate([getattr(p, field) for p in parts])
+        np.testing.assert_array_equal(joined, getattr(whole, field), err_msg=field)

@@ -49,15 +49,16 @@ class Samples:
 
 
 def reference_sampler(interpolator="exact"):
-    """The function (pieces, profile, period_s) → :class:`~nurbscnc.plan.timing.Reference`
-    of this interpolator: the plan's exact reference, with the NURBS points replaced by the
+    """The function (pieces, profile, period_s, k0=0, k1=None) →
+    :class:`~nurbscnc.plan.timing.Reference` of this interpolator (samples k0…k1−1; default
+    all): the plan's exact reference, with the NURBS points replaced by the
     Taylor recurrence's for ``"taylor"``. The look-ahead planner's dynamics check runs on it
     (:func:`nurbscnc.plan.lookahead.plan_checked`), so the check sees the points that will be
     output."""
     how = Interpolator.parse(interpolator)
 
-    def sample(pieces, profile, period_s: float):
-        ref = exact_reference(pieces, profile, period_s)
+    def sample(pieces, profile, period_s: float, k0: int = 0, k1: int | None = None):
+        ref = exact_reference(pieces, profile, period_s, k0, k1)
         if how == Interpolator.TAYLOR:
             taylor_nurbs(pieces.path, ref.piece, ref.tau_s, ref.v_mm_s, ref.a_mm_s2,
                          ref.points_mm, ref.param)  # fmt: skip

@@ -141,6 +141,20 @@ class Check:
         """The true contour error [µm] of the cutting samples."""
         return self.response.contour_mm[self.cutting] * 1000.0
 
+    def contour_stats(self) -> dict:
+        """The check's contour error of the cutting samples [µm]: ``contour_true_max_um``,
+        ``contour_true_rms_um`` (true distance to the path) and ``contour_eq29_max_um`` (|ε|
+        of SPEC eq. 29); 0 when nothing is cut. The summaries use only these (a check that
+        keeps no per-sample arrays gives the same numbers)."""
+        c = self.contour_um()
+        eq29 = np.abs(self.response.contour_eq29_mm[self.cutting]) * 1000.0
+        if not c.size:
+            return {"contour_true_max_um": 0.0, "contour_true_rms_um": 0.0,
+                    "contour_eq29_max_um": 0.0}  # fmt: skip
+        return {"contour_true_max_um": float(c.max()),
+                "contour_true_rms_um": float(np.sqrt(np.mean(c * c))),
+                "contour_eq29_max_um": float(eq29.max())}  # fmt: skip
+
 
 def profile_over(length_mm: np.ndarray, caps: np.ndarray, smooth: np.ndarray,
                  limits: Limits, window: int | None) -> Profile:  # fmt: skip

@@ -178,13 +178,7 @@ def plan_summary(prog, machine: Machine, samples, plan=None, check=None,
         summary["feed_fluctuation_max"] = fluct
     _bound(summary, lb, cycle_time_s)
     if check is not None:
-        c = check.contour_um()
-        eq29 = np.abs(check.response.contour_eq29_mm[check.cutting]) * 1000.0
-        summary.update(
-            contour_true_max_um=float(c.max()) if c.size else 0.0,
-            contour_true_rms_um=float(np.sqrt(np.mean(c * c))) if c.size else 0.0,
-            contour_eq29_max_um=float(eq29.max()) if c.size else 0.0,
-        )
+        summary.update(check.contour_stats())
     return summary
 
 

@@ -54,13 +54,23 @@ def wall_to_profile_time(t_wall: np.ndarray, dwell_at_s: np.ndarray, dwell_s: np
     return tau
 
 
-def servo_clock(pieces, profile: Profile, period_s: float) -> tuple[np.ndarray, np.ndarray]:
-    """Wall times t_k = k·T_s [s] from 0 to the first one at or after the end of motion, and
-    the profile times τ_k [s] they map to (dwells held). Every pair of consecutive samples is
-    T_s apart; the last one is at rest at the programmed end point."""
+def sample_count(pieces, profile: Profile, period_s: float) -> int:
+    """Number of servo periods of a plan: t_k = k·T_s for k = 0 … N−1, the last one the
+    first at or after the end of motion (dwells included)."""
+    _, dwell_s = dwell_times(pieces.dwell_after_s, profile)
+    return int(np.ceil(total_time_s(profile, dwell_s) / period_s - 1e-9)) + 1
+
+
+def servo_clock(pieces, profile: Profile, period_s: float, k0: int = 0,
+                k1: int | None = None) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """Wall times t_k = k·T_s [s] for k in [k0, k1) (default: from 0 to the first one at or
+    after the end of motion, :func:`sample_count`), and the profile times τ_k [s] they map
+    to (dwells held). Every pair of consecutive samples is T_s apart; the last one is at
+    rest at the programmed end point."""
     dwell_at, dwell_s = dwell_times(pieces.dwell_after_s, profile)
-    n = int(np.ceil(total_time_s(profile, dwell_s) / period_s - 1e-9)) + 1
-    t = np.arange(n) * period_s
+    n = sample_count(pieces, profile, period_s)
+    k1 = n if k1 is None else min(int(k1), n)
+    t = np.arange(int(k0), max(int(k0), k1)) * period_s
     return t, wall_to_profile_time(t, dwell_at, dwell_s)
 
 
@@ -81,11 +91,14 @@ class Reference:
     param: np.ndarray
 
 
-def exact_reference(pieces, profile: Profile, period_s: float) -> Reference:
-    """Reference points at t_k = k·T_s (:func:`servo_clock`), each exactly on the path at
-    the profile's s(τ_k) (SPEC §10). Profile and placement a slab of samples at a time: flat
-    memory, cache-friendly temporaries; the cost stays linear in the number of samples."""
-    t, tau = servo_clock(pieces, profile, period_s)
+def exact_reference(pieces, profile: Profile, period_s: float, k0: int = 0,
+                    k1: int | None = None) -> Reference:  # fmt: skip
+    """Reference points at t_k = k·T_s for k in [k0, k1) (:func:`servo_clock`; default all
+    of them), each exactly on the path at the profile's s(τ_k) (SPEC §10). Profile and
+    placement a slab of samples at a time: flat memory, cache-friendly temporaries; the cost
+    stays linear in the number of samples. A window [k0, k1) gives exactly the rows k0…k1−1
+    of the whole reference (long programs are sampled window by window)."""
+    t, tau = servo_clock(pieces, profile, period_s, k0, k1)
     n = t.size
     path = pieces.path
     s, v, a = np.empty(n), np.empty(n), np.empty(n)
