@@ -150,11 +150,12 @@ def _run_precompensated(program, machine: Machine, lookahead: LookaheadOptions,
     """Plan with the dynamics check on the pre-compensated reference, output that reference
     (the same transform on the interpolator's points) and report on it."""
     tol = options.reference_tolerance_mm
+    fit = lookahead.plan.tolerance_mm  # the PH fit tolerance e (None: the profile's)
     plan, check = plan_checked(program, machine, lookahead,
-                               precompensated_sampler(sampler, machine, tol))  # fmt: skip
+                               precompensated_sampler(sampler, machine, tol, fit))  # fmt: skip
     planned = sampler(plan.pieces, plan.profile, machine.servo.period_s)
     compensated, comp = precompensate_reference(planned, plan.pieces, plan.profile, machine,
-                                                tol)  # fmt: skip
+                                                tol, fit)  # fmt: skip
     samples = samples_of(compensated, plan.pieces, options.interpolator)
     report = precompensation_report(plan, planned, compensated, comp, machine, tol)
     return Run(options.algorithm, samples, plan, check, report)

@@ -13,6 +13,7 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
+from nurbscnc.geometry.path import Kind
 from nurbscnc.machine.profile import AxisServo, Machine
 from nurbscnc.plan.dynamics import PathIndex, path_response, windowed_contour_mm
 from nurbscnc.plan.lookahead import Plan
@@ -49,7 +50,8 @@ class Precompensation:
 
     ``lead_s`` how much later than planned the tool moves: the inverse's look-ahead, taken
     as a delay so nothing moves before t = 0 [s] (counted in the cycle time);
-    ``tail_s`` the periods after the planned stop while the compensation decays [s];
+    ``tail_s`` periods added after the planned stop [s] (none: the inverse's tail is
+    blended in, ``end_step_mm`` [mm] over the last ``end_blend_s`` [s]);
     ``reference_deviation_max_mm`` the compensated points' largest distance from the path
     [mm] (cutting samples), kept within ``reference_tolerance_mm``; ``sensitivity`` (label,
     worst contour error [mm]) of the same reference simulated through each model error of
@@ -60,6 +62,8 @@ class Precompensation:
     reference_deviation_max_mm: float
     sensitivity: tuple[tuple[str, float], ...]
     reference_tolerance_mm: float = float("inf")
+    end_step_mm: float = 0.0
+    end_blend_s: float = 0.0
 
     @property
     def sensitivity_max_mm(self) -> float:
@@ -73,6 +77,7 @@ class Precompensation:
         return {"method": "zpetc", "lead_s": self.lead_s, "tail_s": self.tail_s,
                 "reference_tolerance_um": tol * 1000.0 if np.isfinite(tol) else None,
                 "reference_deviation_max_um": self.reference_deviation_max_mm * 1000.0,
+                "end_step_um": self.end_step_mm * 1000.0, "end_blend_s": self.end_blend_s,
                 "sensitivity_contour_max_um": self.sensitivity_max_mm * 1000.0,
                 "sensitivity": [{"model_error": k, "contour_max_um": e * 1000.0}
                                 for k, e in self.sensitivity]}  # fmt: skip
@@ -83,23 +88,41 @@ def _models(machine: Machine) -> list:
     return [servo.x, servo.y, servo.z]
 
 
+def _tube_mm(pieces, piece: np.ndarray, tolerance_mm: float,
+             fit_tolerance_mm: float) -> np.ndarray:  # fmt: skip
+    """The reference tolerance about each foot [mm] (M,): ``tolerance_mm`` less the PH fit
+    tolerance e where the foot is on a PH corner piece of a NURBS (SPEC §6: that piece is
+    within e of the programmed curve, not on it), so the reference stays within
+    ``tolerance_mm`` of the *programmed* path (the triangle inequality). Line-line blends
+    (``pieces.ph_rows``) leave the programmed corner by design: there the planned path is
+    the path."""
+    fit = pieces.kind == Kind.PH
+    fit[pieces.ph_rows] = False
+    return np.where(fit[piece], max(tolerance_mm - fit_tolerance_mm, 0.0), tolerance_mm)
+
+
 def precompensate_reference(ref: Reference, pieces, profile, machine: Machine,
                             tolerance_mm: float = REFERENCE_TOLERANCE_MM,
+                            fit_tolerance_mm: float | None = None,
                             ) -> tuple[Reference, Compensated]:  # fmt: skip
     """The ZPETC pre-compensated version of a plan's reference (SPEC eq. 25 inverted,
-    :func:`~nurbscnc.servo.precompensate.precompensate_points`), kept within
-    ``tolerance_mm`` of the path (inf: no limit): each compensated point u_k is limited to
-    that distance from the path point its lead d_t
-    (:func:`~nurbscnc.servo.precompensate.along_path_offset_mm`) ahead of the planned point,
-    placed exactly at path length s_k + d_t (clamped to the program's ends, so the
-    reference is never led past the end point along the path;
+    :func:`~nurbscnc.servo.precompensate.precompensate_points`; F's tail blended in within
+    the machine's acceleration and jerk, so it ends with the plan), kept within
+    ``tolerance_mm`` of the path (inf: no limit): each compensated point u_k is projected
+    onto the ball of that radius (less the PH fit tolerance ``fit_tolerance_mm``, default
+    the profile's e, on PH corner pieces of a NURBS: :func:`_tube_mm`) about the path point
+    its lead d_t (:func:`~nurbscnc.servo.precompensate.along_path_offset_mm`) ahead of the
+    planned point, placed exactly at path length s_k + d_t (clamped to the program's ends,
+    so the reference is never led past the end point along the path;
     :func:`~nurbscnc.servo.precompensate.limit_to_path`). Every other per-sample column is
-    padded to the new length (the start repeated ``lead_samples`` times, the end through the
-    tail), so the dynamics check maps each sample to its piece and path length as before.
-    Wall times restart at 0 with the servo period."""
+    padded to the new length (the start repeated ``lead_samples`` times), so the dynamics
+    check maps each sample to its piece and path length as before. Wall times restart at
+    0 with the servo period."""
     period = machine.servo.period_s
-    comp = precompensate_points(_models(machine), ref.points_mm, period)
-    pad = (comp.lead_samples, comp.tail_samples)
+    lim = machine.limits
+    comp = precompensate_points(_models(machine), ref.points_mm, period,
+                                a_max_mm_s2=lim.a_max_mm_s2, j_max_mm_s3=lim.j_max_mm_s3)
+    pad = (comp.lead_samples, 0)
 
     def edge(x):
         return np.pad(x, pad, mode="edge") if x.ndim == 1 else np.pad(x, (pad, (0, 0)), "edge")
@@ -113,7 +136,8 @@ def precompensate_reference(ref: Reference, pieces, profile, machine: Machine,
         piece = np.clip(np.searchsorted(starts, s_foot, side="right") - 1, 0, starts.size - 1)
         foot = pieces.path.place(starts, np.minimum(s_foot, starts[piece]
                                                     + pieces.length_mm[piece]), piece)[0]
-        points = limit_to_path(points, foot, tolerance_mm)
+        fit = lim.ph_tolerance_mm if fit_tolerance_mm is None else fit_tolerance_mm
+        points = limit_to_path(points, foot, _tube_mm(pieces, piece, tolerance_mm, fit))
         comp = replace(comp, points_mm=points)
     n_in, n = ref.points_mm.shape[0], points.shape[0]
     # Every per-sample column padded alike (whatever columns the Reference has).
@@ -125,16 +149,21 @@ def precompensate_reference(ref: Reference, pieces, profile, machine: Machine,
 
 
 def precompensated_sampler(sampler, machine: Machine,
-                           tolerance_mm: float = REFERENCE_TOLERANCE_MM):  # fmt: skip
+                           tolerance_mm: float = REFERENCE_TOLERANCE_MM,
+                           fit_tolerance_mm: float | None = None):  # fmt: skip
     """The reference sampler (pieces, profile, period_s) → Reference of ``sampler`` followed
     by :func:`precompensate_reference`: what the dynamics check simulates with
     ``--precompensate`` (it needs no hook in the planner)."""
 
     def sample(pieces, profile, period_s: float):
         ref = sampler(pieces, profile, period_s)
-        return precompensate_reference(ref, pieces, profile, machine, tolerance_mm)[0]
+        return precompensate_reference(ref, pieces, profile, machine, tolerance_mm,
+                                       fit_tolerance_mm)[0]
 
     sample.interpolator = getattr(sampler, "interpolator", None)
+    # The inverse filters the whole reference (its state runs from the start): the planner
+    # evaluates this sampler whole, not in windows of samples k0…k1.
+    sample.windows = False
     return sample
 
 
@@ -164,7 +193,7 @@ def precompensation_report(plan: Plan, planned: Reference, compensated: Referenc
     to the path), the largest contour error on cutting samples, as the dynamics check counts
     it."""
     pieces, profile = plan.pieces, plan.profile
-    pad = (comp.lead_samples, comp.tail_samples)
+    pad = (comp.lead_samples, 0)
     r = np.pad(planned.points_mm, (pad, (0, 0)), mode="edge")
     u = compensated.points_mm
     lag = np.sqrt(np.sum((u - r) ** 2, axis=1))
@@ -191,5 +220,6 @@ def precompensation_report(plan: Plan, planned: Reference, compensated: Referenc
         err = resp.contour_mm[cutting]
         rows.append((label, float(err.max()) if err.size else 0.0))
     period = machine.servo.period_s
-    return Precompensation(comp.lead_samples * period, comp.tail_samples * period, deviation,
-                           tuple(rows), tolerance_mm)  # fmt: skip
+    return Precompensation(comp.lead_samples * period, 0.0, deviation, tuple(rows),
+                           tolerance_mm, comp.end_step_mm,
+                           comp.end_blend_samples * period)  # fmt: skip

@@ -35,11 +35,18 @@ Boundary conditions (the programmed start and end points are kept):
   exactly the programmed start, the machine at rest there, and the pre-actuation happens in
   the held periods: the tool follows the planned motion ``lead_samples`` periods later
   (1 ms on the paper's axes), which the cycle time counts.
-- End: after the planned motion stops the decaying modes of F (the stable zeros of H) still
-  move the compensated reference by a little; periods are *appended* until it stays within
-  ``tail_tolerance_mm`` of the end point, and the last point is exactly the programmed end point
-  (a step of at most that tolerance). Whether the reference overshoots the end point on the
-  way is a property of the plan (a jerk-limited stop gives none; the tests measure it).
+- End: after the planned motion stops, F's slowest modes (the stable zeros of H, the
+  controller's near pole-zero cancellations: 0.91 and 0.86 per sample on the paper's axes,
+  time constants 11 and 7 ms) would keep moving the compensated reference for tens of
+  milliseconds (40 ms until within 0.1 µm on the 9 mm airfoil: the reference stays up to
+  10 µm back along the path to hold the tool while the servo's integrator discharges), and
+  every sample of that tail is motion time. Instead the compensated reference ends with the
+  planned motion (no sample is added): the remaining offset d = r_end − u_end is blended in
+  over the last W samples by the quintic smooth step s(x) = x³(10 − 15x + 6x²), s = 1 at the
+  last sample (exactly the programmed end point), W the shortest blend whose own
+  acceleration and jerk are within the machine's (:func:`end_blend_samples`). The tool then
+  overshoots the end point by about the servo's response to d (6–9 µm after a 10 µm
+  offset), which the dynamics check simulates like any other error.
 - DC: F is scaled to unit DC gain, so a model whose G(0) ≠ 1 keeps its static error (the
   points at rest are the programmed ones, never scaled).
 
@@ -58,9 +65,10 @@ from scipy import signal
 from nurbscnc.errors import ConfigError
 from nurbscnc.servo.model import AxisModel, DiscreteAxis, _as_model, discretise
 
-#: The compensated reference's tail ends once it stays this close to the end point [mm]
-#: (0.1 µm: a tenth of a 1000 steps/mm step; the last point is then set exactly).
-TAIL_TOLERANCE_MM = 1e-4
+#: Largest acceleration and jerk of the quintic smooth step s(x) = x³(10 − 15x + 6x²) on
+#: x ∈ [0, 1] for a unit step: max |s″| = 10/√3, max |s‴| = 60 (the end blend).
+SMOOTH_STEP_ACCEL = 10.0 / np.sqrt(3.0)
+SMOOTH_STEP_JERK = 60.0
 #: Default largest distance of a pre-compensated reference from the path [mm] (issue 13's
 #: 3 µm, :func:`limit_to_path`): if the model is wrong, the reference itself is never far
 #: off the path.
@@ -132,21 +140,38 @@ def _compensate(inverse: InverseFilter, r_mm: np.ndarray, lead: int) -> np.ndarr
 
 @dataclass(frozen=True, eq=False)
 class Compensated:
-    """A pre-compensated reference: ``points_mm`` (M, k) [mm], M = N + ``lead_samples`` +
-    ``tail_samples``: the start held ``lead_samples`` periods (pre-actuation), then the
-    compensated motion, then ``tail_samples`` periods while the compensation decays after the
-    planned stop. Sample k + ``lead_samples`` belongs to planned sample k."""
+    """A pre-compensated reference: ``points_mm`` (N + ``lead_samples``, k) [mm]: the start
+    held ``lead_samples`` periods (pre-actuation), then the compensated motion, ending with
+    the planned motion at the programmed end point. Sample k + ``lead_samples`` belongs to
+    planned sample k. ``end_step_mm`` |d|, the offset of F's tail blended in at the end over
+    the last ``end_blend_samples`` periods (module docstring)."""
 
     points_mm: np.ndarray
     lead_samples: int
-    tail_samples: int
+    end_step_mm: float = 0.0
+    end_blend_samples: int = 0
+
+    @property
+    def tail_samples(self) -> int:
+        """Periods appended after the planned stop: none (F's tail is blended in)."""
+        return 0
 
 
-def _tail_guess(inverses) -> int:
-    # Samples for the slowest pole of F to decay by 1e-6 (at least 16).
-    slow = max((f.slowest_pole for f in inverses), default=0.0)
-    n = 16 if slow <= 0.0 else int(np.ceil(np.log(1e-6) / np.log(slow)))
-    return max(n, 16) + max(f.lead_samples for f in inverses)
+def smooth_step(x) -> np.ndarray:
+    """The quintic smooth step s(x) = x³(10 − 15x + 6x²): s(0) = 0, s(1) = 1, first and
+    second derivatives zero at both ends."""
+    x = np.asarray(x, dtype=float)
+    return x**3 * (10.0 - 15.0 * x + 6.0 * x * x)
+
+
+def end_blend_samples(step_mm: float, period_s: float, a_max_mm_s2: float = np.inf,
+                      j_max_mm_s3: float = np.inf) -> int:  # fmt: skip
+    """Samples W (≥ 1) of the end blend of a step ``step_mm`` [mm]: the fewest with the
+    smooth step's own acceleration 5.774·step/(W·T)² ≤ ``a_max_mm_s2`` and jerk
+    60·step/(W·T)³ ≤ ``j_max_mm_s3`` (T = ``period_s``; module docstring)."""
+    t_a = np.sqrt(SMOOTH_STEP_ACCEL * step_mm / a_max_mm_s2)
+    t_j = np.cbrt(SMOOTH_STEP_JERK * step_mm / j_max_mm_s3)
+    return max(1, int(np.ceil(max(t_a, t_j) / period_s - 1e-9)))
 
 
 def precompensate_points(
@@ -154,14 +179,17 @@ def precompensate_points(
     points_mm: np.ndarray,
     period_s: float,
     hold: str = "foh",
-    tail_tolerance_mm: float = TAIL_TOLERANCE_MM,
+    a_max_mm_s2: float = np.inf,
+    j_max_mm_s3: float = np.inf,
 ) -> Compensated:
     """Pre-compensate the reference ``points_mm`` (N, k) [mm] for the axis ``models`` (one per
     column; None an ideal axis, left as is) by ZPETC (module docstring, Tomizuka 1987).
 
     The planned points start and end at rest. The result starts at rest at the first point
     (held ``lead_samples`` periods, the largest look-ahead of any axis), follows u = F r, and
-    ends exactly at the last point once every axis stays within ``tail_tolerance_mm`` of it.
+    ends with the planned motion exactly at the last point, F's tail blended in over the
+    last samples within ``a_max_mm_s2`` [mm/s²] and ``j_max_mm_s3`` [mm/s³]
+    (:func:`end_blend_samples`; inf: a jump in the last period).
     """
     r = np.asarray(points_mm, dtype=float)
     if r.ndim != 2 or r.shape[1] != len(models) or r.shape[0] == 0:
@@ -173,26 +201,23 @@ def precompensate_points(
         raise ConfigError("pre-compensation needs a servo model for at least one axis")
     lead = max(f.lead_samples for f in present)
     n = r.shape[0]
-    tail = _tail_guess(present)
-    while True:
-        ext = np.concatenate([np.repeat(r[:1], lead, axis=0), r,
-                              np.repeat(r[-1:], tail + lead, axis=0)])  # fmt: skip
-        u = ext.copy()
-        for j, f in enumerate(inverses):
-            if f is not None:
-                u[:, j] = _compensate(f, ext[:, j], lead)
-        # Drop the look-ahead padding; keep samples up to the last one off the end point.
-        u = u[: lead + n + tail]
-        off = np.flatnonzero(np.any(np.abs(u - r[-1]) > tail_tolerance_mm, axis=1))
-        last = int(off[-1]) if off.size else 0
-        if last < u.shape[0] - 1 - 8 or tail > 1_000_000:
-            break
-        tail *= 2  # still moving near the end of the guess: a slower F than expected
-    keep = max(last + 2, lead + n)  # at least the planned motion, then the exact end point
-    out = u[:keep].copy()
-    out[-1] = r[-1]
-    out[0] = r[0]  # exact already (u_0 looks at most to the planned first point, at rest)
-    return Compensated(points_mm=out, lead_samples=lead, tail_samples=keep - lead - n)
+    # The planned points held `lead` periods at the start (the pre-actuation) and at the end
+    # (what F looks ahead of the last one).
+    ext = np.concatenate([np.repeat(r[:1], lead, axis=0), r, np.repeat(r[-1:], lead, axis=0)])
+    u = ext.copy()
+    for j, f in enumerate(inverses):
+        if f is not None:
+            u[:, j] = _compensate(f, ext[:, j], lead)
+    u = u[: lead + n]
+    u[0] = r[0]  # exact already (u_0 looks at most to the planned first point, at rest)
+    d = r[-1] - u[-1]
+    step = float(np.sqrt(d @ d))
+    w = min(end_blend_samples(step, period_s, a_max_mm_s2, j_max_mm_s3), u.shape[0] - 1)
+    if step > 0.0 and w >= 1:
+        u[-w:] += smooth_step(np.arange(1, w + 1) / w)[:, None] * d
+    u[-1] = r[-1]
+    return Compensated(points_mm=u, lead_samples=lead, end_step_mm=step,
+                       end_blend_samples=w if step > 0.0 else 0)  # fmt: skip
 
 
 def perturbed_model(model: AxisModel, loop_gain: float = 1.0,
@@ -243,22 +268,25 @@ def along_path_offset_mm(compensated_mm: np.ndarray, planned_mm: np.ndarray) -> 
 
 
 def limit_to_path(compensated_mm: np.ndarray, foot_mm: np.ndarray,
-                  tolerance_mm: float) -> np.ndarray:  # fmt: skip
+                  tolerance_mm) -> np.ndarray:  # fmt: skip
     """Keep a compensated reference within ``tolerance_mm`` of the path.
 
     ``foot_mm`` (M, k) a point *of the path* for each compensated point u_k (the caller's: the
     path point :func:`along_path_offset_mm` ahead of the planned point). The residual
-    e = u − foot is scaled down to length ``tolerance_mm`` where longer:
-    u' = foot + e·min(1, tol/|e|), so the distance from u' to the path is at most
-    ``tolerance_mm`` by construction. The tool then follows the path only as far as the
-    limited reference lets it: the dynamics check, which simulates the limited reference,
-    slows down where that is not within ε_max. ``tolerance_mm`` inf: u unchanged.
+    e = u − foot is scaled down to length ``tolerance_mm`` (a scalar or (M,) per point)
+    where longer: u' = foot + e·min(1, tol/|e|), the point of the ball of radius tol about
+    the foot nearest to u (the Euclidean projection onto it), so the distance from u' to
+    the path is at most ``tolerance_mm`` by construction. The tool then follows the path
+    only as far as the limited reference lets it: the dynamics check, which simulates the
+    limited reference, slows down where that is not within ε_max. ``tolerance_mm`` inf: u
+    unchanged.
     """
     u = np.asarray(compensated_mm, dtype=float)
-    if not np.isfinite(tolerance_mm):
+    tol = np.asarray(tolerance_mm, dtype=float)
+    if not np.any(np.isfinite(tol)):
         return u
     foot = np.asarray(foot_mm, dtype=float)
     e = u - foot
     size = np.sqrt(np.einsum("ij,ij->i", e, e))
-    scale = np.minimum(1.0, tolerance_mm / np.where(size > 0.0, size, 1.0))
+    scale = np.minimum(1.0, tol / np.where(size > 0.0, size, 1.0))
     return foot + e * scale[:, None]
