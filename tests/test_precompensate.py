@@ -362,3 +362,45 @@ def test_precompensate_with_a_baseline_is_refused():
     prog = interpret_text(AIRFOIL.read_text())
     with pytest.raises(ConfigError, match="look-ahead planner"):
         run_program(prog, MACHINE, RunOptions(algorithm="adaptive", precompensate=True))
+
+
+def _segment_distance_mm(points_mm, dense_mm):
+    """Exact distance from each point to the polyline: the two segments at its nearest
+    vertex (enough for a polyline much denser than the distances)."""
+    from scipy.spatial import cKDTree
+
+    i = cKDTree(dense_mm).query(points_mm)[1]
+    best = np.full(len(points_mm), np.inf)
+    for a, b in ((np.maximum(i - 1, 0), i), (i, np.minimum(i + 1, len(dense_mm) - 1))):
+        pa, d = dense_mm[a], dense_mm[b] - dense_mm[a]
+        t = np.clip(np.einsum("ij,ij->i", points_mm - pa, d)
+                    / np.maximum(np.einsum("ij,ij->i", d, d), 1e-300), 0.0, 1.0)
+        best = np.minimum(best, np.linalg.norm(points_mm - pa - t[:, None] * d, axis=1))
+    return best
+
+
+def test_the_reference_tolerance_is_measured_from_the_programmed_curve(airfoil):
+    """On the PH corner pieces of the airfoil (a fit within e of the NURBS, not on it) the
+    tube about each planned path point is the tolerance less that point's distance from the
+    programmed curve: against the distance to the test's own dense NURBS polyline."""
+    from nurbscnc.geometry.path import Kind
+    from nurbscnc.plan.precompensation import _tube_mm
+
+    prog, dense = airfoil
+    run = run_program(prog, MACHINE, RunOptions(precompensate=True))
+    pieces, profile = run.plan.pieces, run.plan.profile
+    rows = np.flatnonzero(pieces.kind == Kind.PH)
+    assert rows.size >= 2  # the nose is fitted by PH pieces
+    piece = np.repeat(rows, 41)
+    s = profile.piece_start_mm[piece] + np.tile(np.linspace(0.0, 1.0, 41), rows.size) \
+        * pieces.length_mm[piece]
+    foot = pieces.path.place(profile.piece_start_mm, s, piece)[0]
+    tube = _tube_mm(pieces, piece, foot, 0.003, MACHINE.limits.ph_tolerance_mm)
+    dist = _segment_distance_mm(foot, dense)
+    assert 1e-4 < dist.max() <= MACHINE.limits.ph_tolerance_mm  # the fit is off the curve
+    # Never more than the tolerance allows (up to our polyline's sagitta), and no less.
+    assert np.all(tube <= 0.003 - dist + 1e-9)
+    np.testing.assert_allclose(tube, 0.003 - dist, rtol=0, atol=2e-6)
+    # Elsewhere (NURBS stretches, lines) the full tolerance.
+    other = np.flatnonzero(pieces.kind != Kind.PH)
+    assert np.all(_tube_mm(pieces, other, np.zeros((other.size, 3)), 0.003, 1e-3) == 0.003)

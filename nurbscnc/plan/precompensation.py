@@ -13,12 +13,13 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
+from nurbscnc.geometry.nurbs import NurbsCurve
 from nurbscnc.geometry.path import Kind
 from nurbscnc.machine.profile import AxisServo, Machine
 from nurbscnc.plan.dynamics import PathIndex, path_response, windowed_contour_mm
 from nurbscnc.plan.lookahead import Plan
 from nurbscnc.plan.timing import Reference
-from nurbscnc.servo.model import AxisModel
+from nurbscnc.servo.model import AxisModel, contour_error_true
 from nurbscnc.servo.precompensate import (
     REFERENCE_TOLERANCE_MM,
     Compensated,
@@ -88,17 +89,61 @@ def _models(machine: Machine) -> list:
     return [servo.x, servo.y, servo.z]
 
 
-def _tube_mm(pieces, piece: np.ndarray, tolerance_mm: float,
-             fit_tolerance_mm: float) -> np.ndarray:  # fmt: skip
-    """The reference tolerance about each foot [mm] (M,): ``tolerance_mm`` less the PH fit
-    tolerance e where the foot is on a PH corner piece of a NURBS (SPEC §6: that piece is
-    within e of the programmed curve, not on it), so the reference stays within
-    ``tolerance_mm`` of the *programmed* path (the triangle inequality). Line-line blends
-    (``pieces.ph_rows``) leave the programmed corner by design: there the planned path is
-    the path."""
+#: Spacing of the programmed curve's points where the reference tolerance is measured
+#: against it (:func:`_fit_margin_mm`) [mm]; the sagitta of the chords is added.
+_CURVE_SPACING_MM = 1e-3
+
+
+def _fit_margin_mm(pieces, piece: np.ndarray, foot_mm: np.ndarray,
+                   fit_tolerance_mm: float) -> np.ndarray:  # fmt: skip
+    """How far each foot (M, 3) [mm] may be from the programmed path (M,) [mm]: 0 on every
+    piece of the programmed path itself; on a PH corner piece of a NURBS (SPEC §6: a fit
+    within e of the curve, not on it) its distance to the NURBS span the fit replaces
+    (a dense polyline of the curve, exact point-to-segment distance, plus the chords'
+    sagitta κ_max c²/8), or ``fit_tolerance_mm`` e where that span is not known.
+    Line-line blends (``pieces.ph_rows``) leave the programmed corner by design: there the
+    planned path is the path."""
     fit = pieces.kind == Kind.PH
     fit[pieces.ph_rows] = False
-    return np.where(fit[piece], max(tolerance_mm - fit_tolerance_mm, 0.0), tolerance_mm)
+    margin = np.zeros(piece.size)
+    rows = np.flatnonzero(fit)
+    if not rows.size:
+        return margin
+    # Runs of consecutive fit rows of one segment: one corner region each.
+    breaks = np.flatnonzero((np.diff(rows) != 1)
+                            | (pieces.segment[rows[1:]] != pieces.segment[rows[:-1]]))
+    for group in np.split(rows, breaks + 1):
+        sel = np.flatnonzero((piece >= group[0]) & (piece <= group[-1]))
+        if not sel.size:
+            continue
+        lo, hi = pieces.objects.get(group[0] - 1), pieces.objects.get(group[-1] + 1)
+        seg = pieces.segment[group[0]]
+        lo = lo if group[0] > 0 and pieces.segment[group[0] - 1] == seg else None
+        hi = hi if group[-1] + 1 < len(pieces) and pieces.segment[group[-1] + 1] == seg else None
+        curve = next((o[0] for o in (lo, hi) if o is not None and isinstance(o[0], NurbsCurve)),
+                     None)  # fmt: skip
+        if curve is None:
+            margin[sel] = fit_tolerance_mm
+            continue
+        u_lo = lo[2] if lo is not None and lo[0] is curve else curve.u_start
+        u_hi = hi[1] if hi is not None and hi[0] is curve else curve.u_end
+        length = float(pieces.length_mm[group].sum())
+        m = int(np.clip(np.ceil(length / _CURVE_SPACING_MM), 64, 100_000)) + 1
+        dense = curve.point(np.linspace(u_lo, u_hi, m))
+        chord = float(np.linalg.norm(np.diff(dense, axis=0), axis=1).max())
+        kappa = float(pieces.kappa_max_per_mm[group].max())
+        sagitta = kappa * chord * chord / 8.0 if np.isfinite(kappa) else chord
+        margin[sel] = contour_error_true(foot_mm[sel], dense) + sagitta
+    return margin
+
+
+def _tube_mm(pieces, piece: np.ndarray, foot_mm: np.ndarray, tolerance_mm: float,
+             fit_tolerance_mm: float) -> np.ndarray:  # fmt: skip
+    """The reference tolerance about each foot [mm] (M,): ``tolerance_mm`` less the foot's
+    own distance from the programmed path (:func:`_fit_margin_mm`), so that the reference
+    is within ``tolerance_mm`` of the *programmed* path (the triangle inequality)."""
+    margin = _fit_margin_mm(pieces, piece, foot_mm, fit_tolerance_mm)
+    return np.maximum(tolerance_mm - margin, 0.0)
 
 
 def precompensate_reference(ref: Reference, pieces, profile, machine: Machine,
@@ -109,8 +154,9 @@ def precompensate_reference(ref: Reference, pieces, profile, machine: Machine,
     :func:`~nurbscnc.servo.precompensate.precompensate_points`; F's tail blended in within
     the machine's acceleration and jerk, so it ends with the plan), kept within
     ``tolerance_mm`` of the path (inf: no limit): each compensated point u_k is projected
-    onto the ball of that radius (less the PH fit tolerance ``fit_tolerance_mm``, default
-    the profile's e, on PH corner pieces of a NURBS: :func:`_tube_mm`) about the path point
+    onto the ball of that radius (less the foot's own distance from the programmed curve on
+    PH corner pieces of a NURBS, :func:`_tube_mm`; the fit tolerance ``fit_tolerance_mm``,
+    default the profile's e, where that is not known) about the path point
     its lead d_t (:func:`~nurbscnc.servo.precompensate.along_path_offset_mm`) ahead of the
     planned point, placed exactly at path length s_k + d_t (clamped to the program's ends,
     so the reference is never led past the end point along the path;
@@ -137,7 +183,7 @@ def precompensate_reference(ref: Reference, pieces, profile, machine: Machine,
         foot = pieces.path.place(starts, np.minimum(s_foot, starts[piece]
                                                     + pieces.length_mm[piece]), piece)[0]
         fit = lim.ph_tolerance_mm if fit_tolerance_mm is None else fit_tolerance_mm
-        points = limit_to_path(points, foot, _tube_mm(pieces, piece, tolerance_mm, fit))
+        points = limit_to_path(points, foot, _tube_mm(pieces, piece, foot, tolerance_mm, fit))
         comp = replace(comp, points_mm=points)
     n_in, n = ref.points_mm.shape[0], points.shape[0]
     # Every per-sample column padded alike (whatever columns the Reference has).
