@@ -294,7 +294,7 @@ def test_run_precompensate_on_the_airfoil_cli(airfoil, tmp_path):
     piece = np.asarray(data["piece"])
     lim = MACHINE.limits
     err = _contour_um(pts, dense, int(np.argmax(piece >= 1)))
-    assert err.max() <= (lim.contour_tolerance_mm + lim.ph_tolerance_mm + 1e-5) * 1000.0
+    assert err.max() <= lim.contour_tolerance_mm * 1000.0  # measured from the NURBS itself
     # The written points themselves are within 3 µm of the programmed curve (+ CSV
     # rounding): the PH corner pieces' own fit error e is taken off the tolerance there.
     dev = distance_to_polyline_mm(pts[piece >= 1], dense) * 1000.0
