@@ -9,9 +9,11 @@ Each command runs as a new process through the console script (``.venv/bin/nurbs
 user types), so the figure is the whole process: interpreter start, imports, work, exit. The
 commands: ``nurbscnc --help``, ``nurbscnc check --help``, shell completion of a command name
 (click's ``_NURBSCNC_COMPLETE=bash_complete``), ``check`` and ``run -o /dev/null`` of a tiny
-program (a few lines and an arc, written to a temporary folder; ~6 s of motion). The wall time
-is the median of ``--repeat`` runs (min and max recorded too): the machine is shared, so the
-load average goes into the file with the numbers.
+program (a few lines and an arc, written to a temporary folder; ~6 s of motion), ``run`` once
+more with ``--dynamics off`` (no servo check). The wall time
+is the median of ``--repeat`` runs (min and max recorded too), with the median CPU time (user +
+system) beside it: the machine is shared, so the load average goes into the file with the
+numbers, and the CPU time is the figure the load disturbs least.
 
 Then every command runs once more under ``python -X importtime``: the file records the total
 import time and, for each heavy module (numpy, scipy, scipy.signal, rich, lark, matplotlib,
@@ -23,6 +25,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import statistics
 import subprocess
 import sys
@@ -62,6 +65,9 @@ def commands(tiny: str) -> dict[str, tuple[list[str], dict]]:
         "completion": ([], COMPLETE_ENV),
         "check tiny.nc": (["check", tiny], {}),
         "run tiny.nc -o /dev/null": (["run", tiny, "-o", os.devnull, "--quiet"], {}),
+        # without the servo check (no contour error prediction): no scipy.signal to import
+        "run tiny.nc -o /dev/null --dynamics off": (
+            ["run", tiny, "-o", os.devnull, "--quiet", "--dynamics", "off"], {}),
     }
 
 
@@ -73,16 +79,24 @@ def console_script() -> Path:
     return script
 
 
-def wall_times_s(argv: list[str], env: dict, repeat: int) -> list[float]:
-    """Wall time [s] of ``repeat`` runs of ``argv`` (each must exit 0)."""
-    times = []
+def _children_cpu_s() -> float:
+    use = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return use.ru_utime + use.ru_stime
+
+
+def timed_runs_s(argv: list[str], env: dict, repeat: int) -> tuple[list[float], list[float]]:
+    """Wall times and CPU times (user + system) [s] of ``repeat`` runs of ``argv`` (each
+    must exit 0). On a loaded machine the CPU time is the steadier figure: the wall time
+    adds the time the process waited for a core."""
+    walls, cpus = [], []
     for _ in range(repeat):
-        start = time.perf_counter()
+        cpu0, start = _children_cpu_s(), time.perf_counter()
         done = subprocess.run(argv, env=env, capture_output=True)
-        times.append(time.perf_counter() - start)
+        walls.append(time.perf_counter() - start)
+        cpus.append(_children_cpu_s() - cpu0)
         if done.returncode != 0:
             raise SystemExit(f"{argv} exited {done.returncode}: {done.stderr.decode()[-500:]}")
-    return times
+    return walls, cpus
 
 
 def _belongs(name: str, module: str) -> bool:
@@ -115,8 +129,8 @@ def parse_importtime(text: str) -> dict:
             if _belongs(name, module) and not inside:
                 cost_us[module] = (cost_us[module] or 0) + us
         stack.append((depth, name))
-    heavy = {m: None if us is None else round(us / 1000.0, 1) for m, us in cost_us.items()}
-    return {"imports_ms": round(total_us / 1000.0, 1), "heavy_imports_ms": heavy,
+    heavy = {m: None if us is None else round(us / 1000.0, 3) for m, us in cost_us.items()}
+    return {"imports_ms": round(total_us / 1000.0, 3), "heavy_imports_ms": heavy,
             "imported": [m for m, t in heavy.items() if t is not None]}  # fmt: skip
 
 
@@ -144,13 +158,15 @@ def main() -> None:
         for name, (rest, extra) in commands(tiny).items():
             env = {**os.environ, **extra, "NO_COLOR": "1"}
             argv = [str(script), *rest]
-            times = wall_times_s(argv, env, repeat)
+            times, cpus = timed_runs_s(argv, env, repeat)
             row = {"median_s": round(statistics.median(times), 4),
                    "min_s": round(min(times), 4), "max_s": round(max(times), 4),
+                   "cpu_median_s": round(statistics.median(cpus), 4),
                    "runs": repeat, **import_profile(argv, env)}  # fmt: skip
             results[name] = row
-            print(f"{name:28s} median {row['median_s']:.3f} s (min {row['min_s']:.3f}), "
-                  f"imports {row['imports_ms']:.0f} ms: {', '.join(row['imported']) or '-'}")
+            print(f"{name:40s} wall median {row['median_s']:.3f} s (min {row['min_s']:.3f}), "
+                  f"CPU {row['cpu_median_s']:.3f} s, imports {row['imports_ms']:.0f} ms: "
+                  f"{', '.join(row['imported']) or '-'}")
     info = run_info()
     info["machine"]["load_average_before_1_5_15"] = list(load_before)
     doc = {**info, "goal_s": {"--help": 0.3, "check --help": 0.3, "completion": 0.3},

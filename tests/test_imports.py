@@ -151,3 +151,32 @@ assert real.file.getvalue() == "hello [b]x[/b]\\n", repr(real.file.getvalue())
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                           cwd=tmp_path, timeout=120)  # fmt: skip
     assert done.returncode == 0, done.stderr
+
+
+def test_the_benchmark_reads_importtime_output_by_hand_computed_sums():
+    # bench/startup_bench.py's reader on a made-up -X importtime listing (post-order, two
+    # spaces per level). scipy.signal is imported inside scipy.optimize and on its own; numpy
+    # inside scipy.signal counts for numpy and, as part of it, for scipy.signal and scipy.
+    sys.path.insert(0, str(ROOT / "bench"))
+    from startup_bench import parse_importtime
+
+    text = "\n".join([
+        "import time: self [us] | cumulative | imported package",
+        "import time:       100 |        100 | click",
+        "import time:       300 |        300 |       numpy",
+        "import time:       200 |        500 |     scipy.signal._x",
+        "import time:        50 |        550 |   scipy.signal",
+        "import time:        40 |        590 | scipy.optimize",
+        "import time:        10 |         10 |   scipy.signal.windows",
+        "import time:         5 |         15 | nurbscnc.servo.model",
+        "some output of the command",
+    ])  # fmt: skip
+    r = parse_importtime(text)
+    assert r["imports_ms"] == pytest.approx((100 + 590 + 15) / 1000)
+    heavy = r["heavy_imports_ms"]
+    assert heavy["numpy"] == pytest.approx(0.3)
+    assert heavy["scipy.signal"] == pytest.approx((550 + 10) / 1000)  # two outermost entries
+    assert heavy["scipy"] == pytest.approx((590 + 10) / 1000)
+    assert heavy["nurbscnc.servo.model"] == pytest.approx(0.015)
+    assert heavy["rich"] is None and heavy["matplotlib"] is None
+    assert set(r["imported"]) == {"numpy", "scipy", "scipy.signal", "nurbscnc.servo.model"}
