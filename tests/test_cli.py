@@ -187,7 +187,7 @@ def test_internal_error_exits_1_without_traceback(monkeypatch):
         raise RuntimeError("simulated fault")
 
     monkeypatch.delenv("NURBSCNC_DEBUG", raising=False)
-    monkeypatch.setattr(cli, "interpret_text", boom)
+    monkeypatch.setattr("nurbscnc.program.interpret.interpret_text", boom)  # read at the call
     result = run(["check", NACA])
     assert result.exit_code == 1
     assert "internal error" in result.stderr

@@ -14,12 +14,9 @@ import io
 import json
 import os
 import sys
+from typing import TYPE_CHECKING
 
 import click
-import numpy as np
-from rich.console import Console
-from rich.table import Table
-from rich.text import Text
 
 from nurbscnc import __version__
 from nurbscnc.cli.options import (
@@ -38,35 +35,78 @@ from nurbscnc.errors import (
     NurbsCncError,
     OutputError,
 )
-from nurbscnc.geometry.segments import Program
-from nurbscnc.program.interpret import InterpretOptions, interpret_text
-from nurbscnc.program.tooltable import parse_tool_table
+
+# Start-up: this module is imported by every command, by --help and by shell completion, so
+# it imports only click and the standard library at the top; numpy, rich, the interpreter
+# (lark) and the planner (scipy) are imported by the functions that use them.
+if TYPE_CHECKING:
+    from rich.console import Console
+
+    from nurbscnc.geometry.segments import Program
 
 
-class _Console(Console):
-    """A rich Console that leaves a failed write to the caller: on stdout a closed pipe or a full
-    disk raises (handle_errors ends quietly with 141, or says so with 3; rich's default would
-    exit 1), on stderr it is ignored. The unwritten text is dropped either way."""
+def _rich_console_class():
+    """The rich Console that leaves a failed write to the caller: on stdout a closed pipe or a
+    full disk raises (handle_errors ends quietly with 141, or says so with 3; rich's default
+    would exit 1), on stderr it is ignored. The unwritten text is dropped either way. (Built on
+    first use: rich is imported when a command prints, not by ``--help``.)"""
+    from rich.console import Console
 
-    def on_broken_pipe(self) -> None:
-        raise BrokenPipeError(errno.EPIPE, "Broken pipe")
+    class _Console(Console):
+        def on_broken_pipe(self) -> None:
+            raise BrokenPipeError(errno.EPIPE, "Broken pipe")
 
-    def _check_buffer(self) -> None:
-        try:
-            super()._check_buffer()
-        except OSError:
-            del self._buffer[:]
-            if not self.stderr:
-                raise
+        def _check_buffer(self) -> None:
+            try:
+                super()._check_buffer()
+            except OSError:
+                del self._buffer[:]
+                if not self.stderr:
+                    raise
+
+    return _Console
+
+
+class _LazyConsole:
+    """Stands for the module's rich Console ``name`` (``out`` or ``err``) until its first use,
+    so that importing this module does not import rich: the first use (an attribute:
+    ``print``, ``is_terminal``, ...) makes the Console from ``settings`` and puts it in the
+    module in the stand-in's place. A stand-in a caller kept (``from ... import err`` before
+    any use) forwards every use to that Console: attributes read and set, ``with``."""
+
+    def __init__(self, name: str, **settings):
+        object.__setattr__(self, "_name", name)
+        object.__setattr__(self, "_settings", settings)
+        object.__setattr__(self, "_console", None)
+
+    def _real(self):
+        if self._console is None:
+            object.__setattr__(self, "_console", _rich_console_class()(**self._settings))
+            if globals().get(self._name) is self:
+                globals()[self._name] = self._console
+        return self._console
+
+    def __getattr__(self, attr: str):
+        return getattr(self._real(), attr)
+
+    def __setattr__(self, attr: str, value) -> None:
+        setattr(self._real(), attr, value)
+
+    def __enter__(self):
+        return self._real().__enter__()
+
+    def __exit__(self, *exc_info):
+        return self._real().__exit__(*exc_info)
 
 
 # Tables keep their width when piped (rich would assume 80 columns and truncate numbers).
 # Markup and emoji codes are off: file names, source lines, messages and JSON are user text and
 # must print literally (a file "[/].nc", "(:thumbs_up:)" in a comment, "part.nc:100:" would be
 # markup or emoji otherwise). Styling goes through rich.text.Text objects only.
-out = _Console(highlight=False, markup=False, emoji=False, soft_wrap=True,
-               width=None if sys.stdout.isatty() else 200)  # fmt: skip
-err = _Console(stderr=True, highlight=False, markup=False, emoji=False, soft_wrap=True)
+out = _LazyConsole("out", highlight=False, markup=False, emoji=False, soft_wrap=True,
+                   width=None if sys.stdout.isatty() else 200)  # fmt: skip
+err = _LazyConsole("err", stderr=True, highlight=False, markup=False, emoji=False,
+                   soft_wrap=True)  # fmt: skip
 
 
 # -- progress ----------------------------------------------------------------------------------
@@ -322,6 +362,8 @@ def load_program(
     SUBROUTINE_PATH); the interpreter gets the reading as a callback and does no I/O itself.
     ``text``, when given, is the program already read (stdin that ``simulate -`` looked at).
     """
+    from nurbscnc.program.interpret import InterpretOptions, interpret_text
+
     if text is None:
         text = read_program_text(path)
     tools = read_tool_table(tool_table) if tool_table else None
@@ -345,6 +387,8 @@ def load_program(
 
 def read_tool_table(path: str) -> dict:
     """A LinuxCNC tool table file → ``{tool number: Tool}`` (see program/tooltable.py)."""
+    from nurbscnc.program.tooltable import parse_tool_table
+
     try:
         with open(path, encoding="utf-8", errors="replace") as fh:
             text = fh.read()
@@ -431,6 +475,9 @@ def check(program, as_json, no_block_delete, tool_table, subroutine_path, machin
 
 
 def print_summary(prog: Program, s: dict) -> None:
+    from rich.table import Table
+    from rich.text import Text
+
     out.print(Text.assemble((prog.name, "bold"),
                             f": ok — {s['blocks']} blocks, {len(s['segments'])} segments"))
     counts = ", ".join(f"{v} {k}" for k, v in sorted(s["counts"].items())) or "none"
@@ -519,6 +566,8 @@ def corners(program, as_json, feed, amax, machine, overrides):
 
     Example: nurbscnc corners programs/naca2415.nc --json
     """
+    from rich.table import Table
+
     from nurbscnc.plan.corners import program_corners, tangent_junctions
 
     mach = load_machine_cli(machine, overrides, {"limits.a_max_mm_s2": amax})
@@ -557,6 +606,8 @@ def corners(program, as_json, feed, amax, machine, overrides):
 
 
 def corners_json(result, junctions) -> dict:
+    import numpy as np
+
     return {
         "ok": True,
         "blocks": [
@@ -603,6 +654,8 @@ def ph(program, as_json, tolerance_um, no_split, machine, overrides):
 
     Example: nurbscnc ph programs/naca2415.nc --tolerance-um 1
     """
+    from rich.table import Table
+
     from nurbscnc.plan.report import corner_fits
 
     mach = load_machine_cli(machine, overrides, {"limits.ph_tolerance_um": tolerance_um})
@@ -678,6 +731,8 @@ def write_plan_plots(run, plot_dir: str, prog, expl=None, mach=None) -> list[str
     the path (rapids dashed, cuts coloured by feed, PH pieces marked), the feed over time,
     the feed along the path with the programmed F, the path coloured by the limit that set
     the feed (with an explanation ``expl``), the predicted contour error with ε_max."""
+    import numpy as np
+
     from nurbscnc.output import plots
     from nurbscnc.plan.report import corner_polylines
 
@@ -849,12 +904,18 @@ EXPLAIN_CORNERS = 10
 
 def _feed_text(v_mm_s: float) -> str:
     """A feed [mm/s] as mm/min, the unit of F words ("-" for none)."""
+    import numpy as np
+
     return "-" if not np.isfinite(v_mm_s) else f"{v_mm_s * 60.0:.0f}"
 
 
 def print_explanation(expl, out: Console, count: int | None, source: list[str]) -> None:
     """The ``plan --explain`` text: time under each limit, the ``count`` costliest lines
     (every line in program order when None), the corners that stopped and why."""
+    import numpy as np
+    from rich.table import Table
+    from rich.text import Text
+
     from nurbscnc.plan.explain import LIMIT_OF_KEY, Limit
 
     total = expl.cycle_time_s if expl.cycle_time_s > 0 else 1.0
@@ -902,6 +963,8 @@ def print_explanation(expl, out: Console, count: int | None, source: list[str]) 
 
 def print_plan_summary(prog, mach, summary: dict, out: Console) -> None:
     """The human summary of ``plan`` on ``out`` (stderr when the profile goes to stdout)."""
+    from rich.text import Text
+
     if "pieces" in summary:
         out.print(Text.assemble((prog.name, "bold"), f": {summary['piece_count']} pieces "
                   f"({', '.join(f'{v} {k}' for k, v in sorted(summary['pieces'].items()))})"))
@@ -1073,6 +1136,8 @@ def _worker_init() -> None:
 def run_batch(programs, output_dir, jobs, fmt, quiet, as_json, settings) -> None:
     import multiprocessing
 
+    from rich.table import Table
+
     targets = batch_targets(programs, output_dir, fmt)
     try:
         os.makedirs(output_dir, exist_ok=True)
@@ -1121,6 +1186,8 @@ def simulate(source, as_json, plot_dir, hold, **settings):
 
     Example: nurbscnc simulate points.csv --json
     """
+    import numpy as np
+
     from nurbscnc.output.files import point_header, read_points, read_points_text
     from nurbscnc.servo.simulate import contour_errors, metrics, simulate_reference
 
@@ -1193,6 +1260,8 @@ def compare(program, as_json, plot_dir, angles, block, algorithms, machine, over
 
     Example: nurbscnc compare programs/naca2415.nc --rotate 0 --rotate 45 --rotate -45
     """
+    from rich.table import Table
+
     from nurbscnc.studies.compare import ALGORITHMS, compare_block, nurbs_block, row
 
     mach = load_machine_cli(machine, overrides)

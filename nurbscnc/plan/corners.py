@@ -16,7 +16,6 @@ from dataclasses import dataclass
 from enum import IntEnum
 
 import numpy as np
-from scipy.optimize import brentq
 
 from nurbscnc.geometry.nurbs import NurbsCurve
 from nurbscnc.geometry.path import STOP_KINDS
@@ -135,6 +134,8 @@ def find_corner_regions(
     (the bracket closes on it). Cusps (κ = inf) are peaks where they are sampled. Region ends:
     the crossings κ = κ_th on each side, refined by Brent's method.
     """
+    from scipy.optimize import brentq  # here, not at the top: only NURBS corners need it
+
     u = _sample_params(curve, per_span)
     kappa = curve.curvature(u)
     above = kappa > kappa_th_per_mm

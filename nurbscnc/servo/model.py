@@ -26,8 +26,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import linalg, signal
-from scipy.spatial import cKDTree
 
 from nurbscnc.errors import ConfigError
 from nurbscnc.machine.profile import AxisServo
@@ -108,6 +106,8 @@ def discretise(model: AxisModel | AxisServo, period_s: float, hold: str = "foh")
         raise ValueError(f"hold must be one of {_HOLDS}, got {hold!r}")
     if not (np.isfinite(period_s) and period_s > 0):
         raise ConfigError(f"servo period must be > 0, got {period_s!r}")
+    from scipy import linalg, signal  # here, not at the top: importing scipy.signal is slow
+
     A, B, C, D = signal.tf2ss(model.numerator, model.denominator)
     n = A.shape[0]
     if hold == "zoh":
@@ -147,6 +147,8 @@ def _run(disc: DiscreteAxis, reference_mm: np.ndarray, extra: int, auto_chunk: i
     samples such that the last kept sample and all after it are within SETTLE_TOLERANCE_MM of
     the final value (0 when auto_chunk == 0).
     """
+    from scipy import signal  # here, not at the top: importing scipy.signal is slow
+
     r = np.asarray(reference_mm, dtype=float)
     r0 = r[0]
     zi = np.zeros(max(disc.a.size, disc.b.size) - 1)
@@ -309,6 +311,8 @@ def contour_error_true(actual_xyz, path_points_xyz, k_initial: int = 8) -> np.nd
     found, no unexamined segment can be nearer. Points where the bound fails are re-queried
     with k doubled (only those points), up to all segments.
     """
+    from scipy.spatial import cKDTree
+
     p = np.asarray(actual_xyz, dtype=float)
     path = np.asarray(path_points_xyz, dtype=float)
     single = p.ndim == 1

@@ -60,7 +60,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import signal
 
 from nurbscnc.errors import ConfigError
 from nurbscnc.servo.model import AxisModel, DiscreteAxis, _as_model, discretise
@@ -129,6 +128,8 @@ def _compensate(inverse: InverseFilter, r_mm: np.ndarray, lead: int) -> np.ndarr
     """u = F r for the extended reference ``r_mm`` (already held ``lead`` samples at its start
     and long enough at its end): the IIR part from rest, then the look-ahead FIR. Returns
     u of the same length; its last ``inverse.lead_samples`` samples are held at the end."""
+    from scipy import signal  # here, not at the top: importing scipy.signal is slow
+
     r0 = r_mm[0]
     v = signal.lfilter(inverse.num, inverse.den, r_mm - r0)  # from rest: zero state
     # u_k = Σ_i c_i v_{k + d + i} with the delay d folded into lead_samples: c has n_u + 1
