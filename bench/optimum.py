@@ -73,6 +73,11 @@ SERVO_PERIOD_S = 1e-3
 CAUSE_WINDOW_S = 0.012
 #: Settle simulated after the end of the reference [s] (planner_bench's measure uses 0.3 s).
 SETTLE_S = 0.3
+#: Time step of the LP grid after the first solution [s] (:func:`time_grid_mm`), and the
+#: largest number of grid intervals (long blocks get a longer step).
+GRID_STEP_S = 5e-4
+MAX_GRID_INTERVALS = 2500
+MIN_GRID_STEP_MM = 5e-4
 
 
 # --------------------------------------------------------------------------- path
@@ -198,8 +203,8 @@ def interval_times_s(s_mm: np.ndarray, b_mm2_s2: np.ndarray) -> np.ndarray:
 
 
 def jerk_limited_profile(s_mm: np.ndarray, cap2_mm2_s2: np.ndarray, a_max_mm_s2: float,
-                         j_max_mm_s3: float | None, iterations: int = 12,
-                         rel_tol: float = 1e-4) -> Profile:  # fmt: skip
+                         j_max_mm_s3: float | None, iterations: int = 20,
+                         rel_tol: float = 1e-5) -> Profile:  # fmt: skip
     """Near time-optimal rest-to-rest profile under a squared-speed cap, |a| ≤ A, |j| ≤ J.
 
     The LP of the module docstring (step 2): maximise Σ b_i over b ≤ cap², |Δb| ≤ 2Ah,
@@ -247,12 +252,18 @@ def jerk_limited_profile(s_mm: np.ndarray, cap2_mm2_s2: np.ndarray, a_max_mm_s2:
     if j_max_mm_s3 is None:
         return Profile(s_mm, b)
     last_t = Profile(s_mm, b).time_s
+    dtau = None
     for _ in range(iterations):
-        dt = interval_times_s(s_mm, b)
-        dtau = 0.5 * np.concatenate([[dt[0]], dt[1:] + dt[:-1], [dt[-1]]])
+        # An interval at rest at both ends (a solver zero beside a rest point) would give
+        # Δτ = inf; 20 ms is longer than any transition step here, so it only unblocks.
+        dt = np.minimum(interval_times_s(s_mm, b), 0.02)
+        new = 0.5 * np.concatenate([[dt[0]], dt[1:] + dt[:-1], [dt[-1]]])
+        # Damped (geometric mean with the last Δτ): near a rest point Δτ ∝ 1/√b and the
+        # bound on b ∝ Δτ, so the plain iteration alternates around its fixed point.
+        dtau = new if dtau is None else np.sqrt(dtau * new)
         b = solve(2.0 * j_max_mm_s3 * dtau)
         t = Profile(s_mm, b).time_s
-        if abs(t - last_t) <= rel_tol * t:
+        if np.isfinite(t) and abs(t - last_t) <= rel_tol * t:
             break
         last_t = t
     return Profile(s_mm, b)
@@ -298,13 +309,28 @@ class Block:
     against (the whole program's dense polyline, as bench/planner_bench.py measures)."""
 
     curve: Curve
-    s_mm: np.ndarray  #: the LP grid
-    cap2_mm2_s2: np.ndarray  #: the kinematic cap² on the grid
+    s_mm: np.ndarray  #: the first LP grid (uniform in s)
     a_max_mm_s2: float
     j_max_mm_s3: float
+    v_top_mm_s: float  #: min(F, V_max)
+    period_s: float
+    chord_tolerance_mm: float
     polyline_mm: np.ndarray
     servo: Servo
     line: int  #: source line of the block
+
+    def cap2_at(self, s_mm) -> np.ndarray:
+        """The planner's point-wise cap² min(v_top², V_af(κ)², A/κ) [mm²/s²] at ``s_mm``
+        (:func:`nurbscnc.machine.caps.curvature_cap2_mm2_s2`, SPEC eq. 23)."""
+        from nurbscnc.machine.caps import curvature_cap2_mm2_s2
+
+        return np.asarray(curvature_cap2_mm2_s2(self.curve.kappa_at(s_mm), self.v_top_mm_s,
+                                                self.a_max_mm_s2, self.period_s,
+                                                self.chord_tolerance_mm), float)  # fmt: skip
+
+    @property
+    def cap2_mm2_s2(self) -> np.ndarray:
+        return self.cap2_at(self.s_mm)
 
     def reference_mm(self, profile: Profile) -> np.ndarray:
         """The 1 ms reference points (N + 1, 3) [mm] of a profile."""
@@ -319,14 +345,41 @@ class Block:
         return s_all, distance_to_polyline_mm(tool, self.polyline_mm) * 1e3
 
 
+def time_grid_mm(profile: Profile, max_intervals: int = MAX_GRID_INTERVALS) -> np.ndarray:
+    """A grid uniform in the time of ``profile``: s at t = k·Δt, Δt = max(GRID_STEP_S,
+    T/max_intervals), the end included. On it every interval takes about Δt, so the LP's
+    acceleration steps come every Δt ≤ 1 ms and the 1 ms reference's finite-difference jerk
+    stays near J (on a grid uniform in s the slow stretches hold one acceleration for
+    several milliseconds and then jump)."""
+    dt = max(GRID_STEP_S, profile.time_s / max_intervals)
+    s = profile.sample_s_mm(dt)
+    # Near the rest points s grows like J t³/6: intervals of a few nm would make the LP's
+    # v² there (~1e-4 mm²/s²) fall inside the solver's tolerance; keep ≥ MIN_GRID_STEP_MM.
+    keep = [0]
+    for i in range(1, s.size - 1):
+        if s[i] - s[keep[-1]] >= MIN_GRID_STEP_MM and s[-1] - s[i] >= MIN_GRID_STEP_MM:
+            keep.append(i)
+    return np.append(s[keep], profile.s_mm[-1])
+
+
+def kinematic_profile(block: Block, j_max_mm_s3: float | None, passes: int = 2) -> Profile:
+    """The LP under the kinematic cap alone: first on the uniform grid, then ``passes``
+    times on the time-uniform grid of the previous solution (:func:`time_grid_mm`)."""
+    s = block.s_mm
+    prof = jerk_limited_profile(s, block.cap2_at(s), block.a_max_mm_s2, j_max_mm_s3)
+    for _ in range(passes if j_max_mm_s3 is not None else 0):
+        s = time_grid_mm(prof)
+        prof = jerk_limited_profile(s, block.cap2_at(s), block.a_max_mm_s2, j_max_mm_s3)
+    return prof
+
+
 def load_block(program: Path, machine, max_spacing_mm: float = 0.02, min_knots: int = 800,
                max_knots: int = 2000) -> Block:  # fmt: skip
     """The first NURBS block of ``program`` with ``machine``'s limits (module doc, step 2):
-    grid spacing ``max_spacing_mm`` with at least ``min_knots`` and at most ``max_knots``
-    intervals."""
+    first grid spacing ``max_spacing_mm`` with at least ``min_knots`` and at most
+    ``max_knots`` intervals."""
     from planner_bench import programmed_path
 
-    from nurbscnc.machine.caps import curvature_cap2_mm2_s2
     from nurbscnc.program.interpret import interpret_text
 
     segments = interpret_text(program.read_text()).segments
@@ -335,11 +388,10 @@ def load_block(program: Path, machine, max_spacing_mm: float = 0.02, min_knots: 
     n = int(np.clip(np.ceil(curve.length_mm / max_spacing_mm), min_knots, max_knots))
     s = np.linspace(0.0, curve.length_mm, n + 1)
     lim = machine.limits
-    v_top = min(seg.feed_mm_s, lim.v_max_mm_s)
-    cap2 = curvature_cap2_mm2_s2(curve.kappa_at(s), v_top, lim.a_max_mm_s2,
-                                 machine.servo.period_s, lim.chord_tolerance_mm)  # fmt: skip
-    return Block(curve, s, np.asarray(cap2, float), lim.a_max_mm_s2, lim.j_max_mm_s3,
-                 programmed_path(program)[0], Servo(machine), seg.line)  # fmt: skip
+    return Block(curve, s, lim.a_max_mm_s2, lim.j_max_mm_s3,
+                 min(seg.feed_mm_s, lim.v_max_mm_s), machine.servo.period_s,
+                 lim.chord_tolerance_mm, programmed_path(program)[0], Servo(machine),
+                 seg.line)  # fmt: skip
 
 
 # --------------------------------------------------------------------------- servo loop
@@ -347,40 +399,47 @@ def load_block(program: Path, machine, max_spacing_mm: float = 0.02, min_knots: 
 
 @dataclass(frozen=True, eq=False)
 class Optimum:
-    """The best profile found (error within ε_max), and the history of the loop."""
+    """The best profile found (error within the target), the speed cap that gave it (on the
+    profile's grid), and the history of the loop: (time_s, contour_max_um) per iteration."""
 
     profile: Profile
+    cap_mm_s: np.ndarray
     contour_max_um: float
-    iterations: int
-    history: list  #: (time_s, contour_max_um) per iteration
+    history: list
+
+    @property
+    def iterations(self) -> int:
+        return len(self.history)
 
 
-def servo_optimum(block: Block, eps_target_um: float = EPS_TARGET_UM,
-                  eps_max_um: float = EPS_MAX_UM, max_iterations: int = 40,
-                  patience: int = 8, gain_down: float = 1.0,
-                  gain_up: float = 0.3) -> Optimum:  # fmt: skip
-    """The servo loop of the module docstring (step 3).
+def servo_loop(block: Block, grid_mm: np.ndarray, cap_mm_s: np.ndarray,
+               eps_target_um: float = EPS_TARGET_UM, max_iterations: int = 40,
+               patience: int = 8, gain_down: float = 1.0,
+               gain_up: float = 0.3) -> Optimum | None:  # fmt: skip
+    """The servo loop of the module docstring (step 3) on a fixed grid.
 
-    A speed cap c_i (start: the kinematic cap) enters the LP as cap² = c². After each LP the
-    reference is simulated; every tool sample k with error e_k is attributed to the grid
-    points the reference crossed in the ``CAUSE_WINDOW_S`` before it (the largest e_k over
-    the samples that cover a point is that point's error e_i). Points with e_i above the
-    target get c_i = min(c_i, v_i)·(0.995·target/e_i)^gain_down (relative to the speed they
-    actually run, so a cut always bites); the others are raised, c_i ← c_i·min(1.5,
-    0.995·target/e_i)^gain_up, never above the kinematic cap. The loop stops after
-    ``patience`` iterations without a better feasible time, or ``max_iterations``.
+    A speed cap c_i (start: ``cap_mm_s``, never above the kinematic cap) enters the LP as
+    cap² = c². After each LP the reference is simulated; every tool sample k with error e_k
+    is attributed to the grid points the reference crossed in the ``CAUSE_WINDOW_S`` before
+    it (the largest e_k over the samples that cover a point is that point's error e_i).
+    Points with e_i above the target get c_i = min(c_i, v_i)·(0.995·target/e_i)^gain_down
+    (relative to the speed they actually run, so a cut always bites); the others are raised,
+    c_i ← c_i·min(1.5, 0.995·target/e_i)^gain_up, never above the kinematic cap. Stops after
+    ``patience`` iterations without a better feasible time, or ``max_iterations``; None when
+    no profile met the target.
     """
-    kin = np.sqrt(block.cap2_mm2_s2)
-    cap = kin.copy()
+    kin = np.sqrt(block.cap2_at(grid_mm))
+    cap = np.minimum(cap_mm_s, kin)
     window = int(round(CAUSE_WINDOW_S / block.servo.period_s))
-    best, best_err, since, history = None, np.inf, 0, []
+    best, since, history = None, 0, []
     for _ in range(max_iterations):
-        profile = jerk_limited_profile(block.s_mm, cap * cap, block.a_max_mm_s2,
+        profile = jerk_limited_profile(grid_mm, cap * cap, block.a_max_mm_s2,
                                        block.j_max_mm_s3)  # fmt: skip
         s_all, err = block.tool_error_um(profile)
         history.append((profile.time_s, float(err.max())))
-        if err.max() <= eps_target_um and (best is None or profile.time_s < best.time_s - 1e-6):
-            best, best_err, since = profile, float(err.max()), 0
+        if err.max() <= eps_target_um and (best is None
+                                           or profile.time_s < best.profile.time_s - 1e-6):
+            best, since = Optimum(profile, cap.copy(), float(err.max()), []), 0
         else:
             since += 1
             if best is not None and since >= patience:
@@ -388,9 +447,9 @@ def servo_optimum(block: Block, eps_target_um: float = EPS_TARGET_UM,
         # Attribution: grid points in [s(t_k − window), s(t_k)], the largest e_k wins
         # (assigned in increasing order of e, so the larger overwrites).
         k = np.arange(err.size)
-        i0 = np.searchsorted(block.s_mm, s_all[np.maximum(k - window, 0)], "left")
-        i1 = np.searchsorted(block.s_mm, s_all, "right")
-        point_err = np.zeros(block.s_mm.size)
+        i0 = np.searchsorted(grid_mm, s_all[np.maximum(k - window, 0)], "left")
+        i1 = np.searchsorted(grid_mm, s_all, "right")
+        point_err = np.zeros(grid_mm.size)
         for j in np.argsort(err):
             point_err[max(i0[j] - 1, 0) : i1[j] + 1] = err[j]
         ratio = 0.995 * eps_target_um / np.maximum(point_err, 1e-3)
@@ -399,8 +458,19 @@ def servo_optimum(block: Block, eps_target_um: float = EPS_TARGET_UM,
                        np.minimum(kin, cap * np.minimum(ratio, 1.5) ** gain_up))  # fmt: skip
         cap = np.maximum(cap, 0.5)
     if best is None:
-        raise RuntimeError(f"no profile within {eps_max_um} µm after {max_iterations} iterations")
-    return Optimum(best, best_err, len(history), history)
+        return None
+    return Optimum(best.profile, best.cap_mm_s, best.contour_max_um, history)
+
+
+def servo_optimum(block: Block) -> Optimum:
+    """:func:`servo_loop` on the block's grid uniform in s, from the kinematic cap.
+
+    (A grid uniform in time, :func:`time_grid_mm`, makes the loop alternate between two
+    profiles as the caps move across its intervals; on the uniform grid it converges.)"""
+    found = servo_loop(block, block.s_mm, np.sqrt(block.cap2_at(block.s_mm)))
+    if found is None:
+        raise RuntimeError(f"no profile within {EPS_TARGET_UM} µm")
+    return found
 
 
 # --------------------------------------------------------------------------- programs
@@ -482,9 +552,23 @@ def measured(block: Block, profile: Profile, program: Path) -> dict:
         "max_tangential_accel_mm_s2": float(np.abs(profile.accel_mm_s2()).max()),
         "max_normal_accel_mm_s2": float(np.max(profile.b_mm2_s2 * kappa)),
         "max_jerk_grid_mm_s3": float(np.abs(profile.jerk_mm_s3()).max()),
+        **sample_derivatives(profile, block.servo.period_s),
         "grid_intervals": int(profile.s_mm.size - 1),
     })  # fmt: skip
     return row
+
+
+def sample_derivatives(profile: Profile, period_s: float) -> dict:
+    """Tangential speed, acceleration and jerk of the 1 ms reference by finite differences
+    of s(kT) (first, second, third; the jerk also as the 99th percentile of |·|)."""
+    s = profile.sample_s_mm(period_s)
+    v = np.diff(s) / period_s
+    a = np.diff(s, 2) / period_s**2
+    j = np.abs(np.diff(s, 3)) / period_s**3
+    return {"samples_max_speed_mm_s": float(v.max()),
+            "samples_max_tangential_accel_mm_s2": float(np.abs(a).max()),
+            "samples_max_jerk_mm_s3": float(j.max()),
+            "samples_p99_jerk_mm_s3": float(np.percentile(j, 99))}  # fmt: skip
 
 
 def run_case(case: Case, machine, tmp: Path, nurbscnc: bool = True) -> dict:
@@ -494,9 +578,9 @@ def run_case(case: Case, machine, tmp: Path, nurbscnc: bool = True) -> dict:
     program = ROOT / case.program
     t0 = time.process_time()
     block = load_block(program, machine)
-    no_jerk = jerk_limited_profile(block.s_mm, block.cap2_mm2_s2, block.a_max_mm_s2, None)
-    kinematic = jerk_limited_profile(block.s_mm, block.cap2_mm2_s2, block.a_max_mm_s2,
-                                     block.j_max_mm_s3)  # fmt: skip
+    no_jerk = kinematic_profile(block, None)
+    kinematic = kinematic_profile(block, block.j_max_mm_s3, passes=0)  # the optimum's grid
+    kinematic_tg = kinematic_profile(block, block.j_max_mm_s3, passes=2)
     best = servo_optimum(block)
     row = {
         "program": case.program,
@@ -504,6 +588,9 @@ def run_case(case: Case, machine, tmp: Path, nurbscnc: bool = True) -> dict:
         "optimum": {**measured(block, best.profile, program), "iterations": best.iterations,
                     "history": [[round(t, 6), round(e, 4)] for t, e in best.history]},
         "kinematic_jerk": measured(block, kinematic, program),
+        "kinematic_jerk_time_grid": {"profile_time_s": kinematic_tg.time_s,
+                                     "grid_intervals": int(kinematic_tg.s_mm.size - 1),
+                                     **sample_derivatives(kinematic_tg, block.period_s)},
         "kinematic_no_jerk_s": no_jerk.time_s,
         "optimum_cpu_s": time.process_time() - t0,
     }  # fmt: skip
