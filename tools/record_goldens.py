@@ -413,11 +413,14 @@ def merge_events(moves: list, calls: list | None, tools: dict) -> tuple[list, st
     if _moves_agree(moves, replay, RS274_TOL_MM):
         base, how, tol = moves, "gcode module, cross-checked with rs274", 1e-9
     else:
+        # rs274 prints no line numbers: take the gcode module's while the two make the same
+        # move; after their first difference the sequences are shifted (a corner arc one of
+        # them makes, the other not), so a line copied by position would be another move's:
+        # the rest keeps line 0 ("not known").
         for m, n in zip(replay, moves):
-            if m["kind"] == n["kind"]:
-                m["line"] = n["line"]
-            else:
+            if not _moves_agree([m], [n], RS274_TOL_MM):
                 break
+            m["line"] = n["line"]
         base, how, tol = (
             replay,
             (
