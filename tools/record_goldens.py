@@ -513,6 +513,12 @@ def record(path: str, tools: dict) -> dict:
             )
         else:
             last_line = _error_line(path, last_line, rs274_calls(path, tools, PARAMS, tmp)[1])
+            # A call of a subroutine that is nowhere makes LinuxCNC read to the end of the
+            # file looking for it; the line it stops at is not the error's, the message names
+            # it: "EOF in file:… seeking o-word: o<name> from line: N".
+            seeking = re.search(r"seeking o-word: \S+ from line: (\d+)", gcode.strerror(result))
+            if seeking:
+                last_line = int(seeking.group(1))
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     golden = {
