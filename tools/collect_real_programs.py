@@ -42,7 +42,6 @@ FILES = [
             "comp",
             "comp311",
             "comp311_2",
-            "cone",
             "daisy",
             "factorial",
             "flowsnake",
@@ -77,9 +76,12 @@ FILES = [
             ("b-index", "rotary B axis motion"),
             ("threading", "G33 spindle sync"),
             ("g76", "G76 lathe threading"),
-            ("probe-hole", "G38 probing"),
+            ("cone", "rotary B axis motion (LinuxCNC also refuses its line 34: W word)"),
         ]
     ],
+    # A file that only defines a probing subroutine (G38) and never calls it: no moves.
+    (LINUXCNC, "nc_files/probe-hole.ngc", "linuxcnc/nc_files/probe-hole.ngc", "program",
+     "G38 probing subroutine, defined and not called: no moves"),
     (LINUXCNC, "nc_files/lathecomp.ngc", "linuxcnc/nc_files/lathecomp.ngc", "program",
      "G18 (XZ) cutter compensation, lathe profile"),
     # tests/interp: each test.ngc under a name made from its directory.
