@@ -28,6 +28,8 @@ CAMOTICS = (
 )
 CNCJS = ("cncjs/cncjs", "48550474bd6b0bf375997f2d779f1f440b16aa4d", "MIT (LICENSE)")
 BCNC = ("vlachoudis/bCNC", "23103b08f6b233470d6aa91b9cd4615243e9f6a4", "GPL-2.0 (LICENSE.md)")
+PCB2GCODE = ("pcb2gcode/pcb2gcode", "765d670c8030b76ed7dc6e2b79aa3fbb791f1688", "GPL-3.0 (COPYING)")
+PCB = "testing/gerbv_example/"
 
 TP = "tests/trajectory-planner/circular-arcs/nc_files/"
 # (repository tuple, source path, destination under tests/programs/real, role, what it is)
@@ -335,6 +337,28 @@ FILES = [
         ]
     ],
     (BCNC, "tests/static/sample.gcode", "bcnc/sample.gcode", "program", "bCNC test sample"),
+    # pcb2gcode's expected outputs (its regression tests): PCB isolation milling, outlines
+    # with bridges, drilling (G81) and mill-drilling, for LinuxCNC, inch and mm.
+    *[
+        (PCB2GCODE, PCB + p, "pcb2gcode/" + p.replace("/expected/", "__"), "program", what)
+        for p, what in [
+            ("multivibrator/expected/back.ngc", "pcb2gcode isolation milling, inch"),
+            ("multivibrator/expected/milldrill.ngc", "pcb2gcode mill-drilling (helical holes)"),
+            ("multivibrator-clockwise/expected/outline.ngc", "pcb2gcode outline, clockwise"),
+            ("multivibrator-zchange-absolute/expected/back.ngc", "pcb2gcode, absolute Z"),
+            ("lift-mill/expected/outline.ngc", "pcb2gcode outline with bridges"),
+            ("slots-with-drill-metric/expected/drill.ngc", "pcb2gcode drilling (G81), mm"),
+            ("slots-milldrill-metric/expected/milldrill.ngc", "pcb2gcode milled slots, mm"),
+            ("milldrilldiatest/expected/drill.ngc", "pcb2gcode drilling, four tools, mm"),
+            ("mill_masking_voronoi/expected/front.ngc", "pcb2gcode Voronoi isolation"),
+            ("sharp_corner/expected/back.ngc", "pcb2gcode isolation, sharp corners"),
+            ("edge-cuts-inside-cuts/expected/outline.ngc", "pcb2gcode outline with inner cuts"),
+            ("example_board_new_default/expected/back.ngc", "pcb2gcode isolation, defaults"),
+        ]
+    ],
+    (PCB2GCODE, PCB + "example_board_al_linuxcnc/expected/front.ngc",
+     "pcb2gcode/example_board_al_linuxcnc__front.ngc", "refused",
+     "pcb2gcode auto-levelling: G38 probing subroutines"),
     (CNCJS, "examples/gcode/arc-xy-plane.gcode", "cncjs/arc-xy-plane.gcode", "program",
      "G17 arc"),
 ]
@@ -379,8 +403,8 @@ def main() -> None:
         "**subroutine**",
         '(called by a program beside it), **refused** (outside 3-axis milling; kept as "stays',
         'refused" examples). The programs are redistributed under their repositories\'',
-        "licences (GPL-2.0 / GPL-2.0-or-later; MIT for cncjs; GPL-2.0 for bCNC), unchanged,",
-        "with their origin.",
+        "licences (GPL-2.0 / GPL-2.0-or-later; MIT for cncjs; GPL-2.0 for bCNC; GPL-3.0 for",
+        "pcb2gcode), unchanged, with their origin.",
         "",
         "Initial state used for every program (`make goldens`): `tools.tbl` (LinuxCNC tool-table",
         "format, mm: T1–T4 from LinuxCNC's `tests/interp/cam-nisley/test.tbl` in mm, T5–T99",
