@@ -554,3 +554,14 @@ def test_comp_inside_square_is_the_offset_square():
     ends = [tuple(round(v, 12) for v in s.end_mm[:2]) for s in got[1:]]
     assert ends == [(12, 2), (18, 2), (18, 18), (2, 18), (2, 2), (10, 2), (10, 10)]
     assert got[-1].start_mm[:2] == (10, 2)  # the exit move leaves the compensated point
+
+
+@pytest.mark.parametrize(("change", "end"), [("", (10.0, 0.0, -1.0)), ("T1 M6", (10.0, 1.0, -1.0))])
+def test_tool_change_after_g40_takes_the_compensated_point(change, end):
+    """After G40 LinuxCNC's program position is the programmed point (10, 0) while the tool
+    stands at the compensated one (10, 1) (1 mm left of +X); a tool change re-reads the
+    position from the machine (refresh_actual_position), so Z-1 then stays at (10, 1)
+    (LinuxCNC's nc_files/useful-subroutines.ngc does this)."""
+    prog = segs(f"G0 X-10 Y0\nG41.1 D2\nG1 X0 Y0 F600\nG1 X10\nG40\n{change}\nG1 Z-1\nM2\n")
+    assert prog[-1].start_mm == (10.0, 1.0, 0.0)
+    assert prog[-1].end_mm == end

@@ -27,6 +27,9 @@ CAMOTICS = (
     "GPL-2.0-or-later (COPYING, LICENSE)",
 )
 CNCJS = ("cncjs/cncjs", "48550474bd6b0bf375997f2d779f1f440b16aa4d", "MIT (LICENSE)")
+BCNC = ("vlachoudis/bCNC", "23103b08f6b233470d6aa91b9cd4615243e9f6a4", "GPL-2.0 (LICENSE.md)")
+PCB2GCODE = ("pcb2gcode/pcb2gcode", "765d670c8030b76ed7dc6e2b79aa3fbb791f1688", "GPL-3.0 (COPYING)")
+PCB = "testing/gerbv_example/"
 
 TP = "tests/trajectory-planner/circular-arcs/nc_files/"
 # (repository tuple, source path, destination under tests/programs/real, role, what it is)
@@ -41,7 +44,6 @@ FILES = [
             "comp",
             "comp311",
             "comp311_2",
-            "cone",
             "daisy",
             "factorial",
             "flowsnake",
@@ -76,9 +78,12 @@ FILES = [
             ("b-index", "rotary B axis motion"),
             ("threading", "G33 spindle sync"),
             ("g76", "G76 lathe threading"),
-            ("probe-hole", "G38 probing"),
+            ("cone", "rotary B axis motion (LinuxCNC also refuses its line 34: W word)"),
         ]
     ],
+    # A file that only defines a probing subroutine (G38) and never calls it: no moves.
+    (LINUXCNC, "nc_files/probe-hole.ngc", "linuxcnc/nc_files/probe-hole.ngc", "program",
+     "G38 probing subroutine, defined and not called: no moves"),
     (LINUXCNC, "nc_files/lathecomp.ngc", "linuxcnc/nc_files/lathecomp.ngc", "program",
      "G18 (XZ) cutter compensation, lathe profile"),
     # tests/interp: each test.ngc under a name made from its directory.
@@ -297,6 +302,65 @@ FILES = [
             ("arc-yz-plane.gcode", "G19 arc"),
         ]
     ],
+    # Wave 2 (session 4): larger CAM outputs. CAMotics' examples (pycam, CAMotics TPL, a
+    # Vectric-style post, OpenVoronoi V-carving), LinuxCNC's trajectory-planner test programs
+    # that are CAM output (SheetCam, BobCAD, gcmc, a plasma post, a Mastercam-style post), a
+    # bCNC test file.
+    *[
+        (CAMOTICS, f"examples/{p}", "camotics/" + p.replace("/", "__"), "program", what)
+        for p, what in [
+            ("bear/bear.nc", "CAM output (3D relief, ball end)"),
+            ("botomata_bottom/botomata_bottom.nc", "CAM output, G10 L2 work offsets"),
+            ("compass/compass.ngc", "engraving"),
+            ("locket/locket_inside.ngc", "CAM output, 3D"),
+            ("locket/locket_outside.ngc", "CAM output, 3D"),
+            ("vcarve/vcarve.ngc", "OpenVoronoi V-carving output, inch"),
+            ("flower_mold/flower_mold.nc", "CAM output (3D mold), inch"),
+        ]
+    ],
+    *[
+        (LINUXCNC, TP + p, "linuxcnc/tp/" + p.replace("/", "__"), "program", what)
+        for p, what in [
+            ("performance/Cereal.ngc", "CAM output (2D profile)"),
+            ("performance/Pasta.ngc", "CAM output (2D profile)"),
+            ("performance/LHchips4.ngc", "CAM output (3D ball end)"),
+            ("performance/wheels.ngc", "gcmc output"),
+            ("performance/blur_torus.ngc", "CAM output (3D torus), inch"),
+            ("performance/spiral-circular-segments.ngc", "generated arcs, inch"),
+            ("performance/zigzag_0.002_0.001.ngc", "generated short lines, inch"),
+            ("performance/short_segments_0.001.ngc", "generated short lines, inch"),
+            ("performance/straight_short_lines_X.ngc", "generated short lines"),
+            ("XYtests/51MeanderAve.ngc", "SheetCam plasma post output"),
+            ("diagnostic/rgh.ngc", "CAM post output with % and N words"),
+            ("violation_checks/stellabee-kink-test.ngc", "CAM output, inch"),
+            ("violation_checks/stellabee-violation-spirals.ngc", "CAM output, inch"),
+        ]
+    ],
+    (BCNC, "tests/static/sample.gcode", "bcnc/sample.gcode", "program", "bCNC test sample"),
+    # pcb2gcode's expected outputs (its regression tests): PCB isolation milling, outlines
+    # with bridges, drilling (G81) and mill-drilling, for LinuxCNC, inch and mm.
+    *[
+        (PCB2GCODE, PCB + p, "pcb2gcode/" + p.replace("/expected/", "__"), "program", what)
+        for p, what in [
+            ("multivibrator/expected/back.ngc", "pcb2gcode isolation milling, inch"),
+            ("multivibrator/expected/milldrill.ngc", "pcb2gcode mill-drilling (helical holes)"),
+            ("multivibrator-clockwise/expected/outline.ngc", "pcb2gcode outline, clockwise"),
+            ("multivibrator-zchange-absolute/expected/back.ngc", "pcb2gcode, absolute Z"),
+            ("lift-mill/expected/outline.ngc", "pcb2gcode outline with bridges"),
+            ("slots-with-drill-metric/expected/drill.ngc", "pcb2gcode drilling (G81), mm"),
+            ("slots-milldrill-metric/expected/milldrill.ngc", "pcb2gcode milled slots, mm"),
+            ("milldrilldiatest/expected/drill.ngc", "pcb2gcode drilling, four tools, mm"),
+            ("mill_masking_voronoi/expected/front.ngc", "pcb2gcode Voronoi isolation"),
+            ("sharp_corner/expected/back.ngc", "pcb2gcode isolation, sharp corners"),
+            ("edge-cuts-inside-cuts/expected/outline.ngc", "pcb2gcode outline with inner cuts"),
+            ("example_board_new_default/expected/back.ngc", "pcb2gcode isolation, defaults"),
+        ]
+    ],
+    (PCB2GCODE, PCB + "example_board_al_linuxcnc/expected/front.ngc",
+     "pcb2gcode/example_board_al_linuxcnc__front.ngc", "refused",
+     "pcb2gcode auto-levelling: G38 probing subroutines"),
+    (CNCJS, "examples/gcode/arc-xy-plane.gcode", "cncjs/arc-xy-plane.gcode", "program",
+     "G17 arc"),
 ]
 
 
@@ -339,7 +403,8 @@ def main() -> None:
         "**subroutine**",
         '(called by a program beside it), **refused** (outside 3-axis milling; kept as "stays',
         'refused" examples). The programs are redistributed under their repositories\'',
-        "licences (GPL-2.0 / GPL-2.0-or-later; MIT for cncjs), unchanged, with their origin.",
+        "licences (GPL-2.0 / GPL-2.0-or-later; MIT for cncjs; GPL-2.0 for bCNC; GPL-3.0 for",
+        "pcb2gcode), unchanged, with their origin.",
         "",
         "Initial state used for every program (`make goldens`): `tools.tbl` (LinuxCNC tool-table",
         "format, mm: T1–T4 from LinuxCNC's `tests/interp/cam-nisley/test.tbl` in mm, T5–T99",

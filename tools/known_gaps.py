@@ -47,7 +47,20 @@ FEATURES = [
 ]
 
 
-def feature(message: str) -> str:
+#: Differences kept on purpose (the golden shows the oracle's canon, not a LinuxCNC machine).
+DECIDED = {
+    "linuxcnc__nc_files__skeleton": (
+        "oracle artifact, not fixed on purpose: after T1 M6 G43 H1 the oracle's canons (rs274, "
+        "gcode module) re-read the position without the new tool length offset, so LinuxCNC's "
+        "preview moves Z 12.7 mm down on the next XY rapid; a LinuxCNC machine (emccanon.cc, "
+        "unoffset_and_unrotate_pos) subtracts it and Z stays, as nurbscnc does"
+    ),
+}
+
+
+def feature(message: str, name: str = "") -> str:
+    if name in DECIDED:
+        return DECIDED[name]
     return next((f for frag, f in FEATURES if frag in message), "differs")
 
 
@@ -71,7 +84,7 @@ def main() -> int:
             compared[kind][0] += 1
         except AssertionError as exc:
             message = " ".join(str(exc).split())
-            gaps.append(f"{name}  {feature(message)}: {message[:160]}")
+            gaps.append(f"{name}  {feature(message, name)}: {message[:160]}")
     lines = [
         "# Real programs nurbscnc does not reproduce yet: golden name, missing feature: first",
         "# difference. Written by tools/known_gaps.py; tests/test_linuxcnc_goldens.py expects",

@@ -413,11 +413,14 @@ def merge_events(moves: list, calls: list | None, tools: dict) -> tuple[list, st
     if _moves_agree(moves, replay, RS274_TOL_MM):
         base, how, tol = moves, "gcode module, cross-checked with rs274", 1e-9
     else:
+        # rs274 prints no line numbers: take the gcode module's while the two make the same
+        # move; after their first difference the sequences are shifted (a corner arc one of
+        # them makes, the other not), so a line copied by position would be another move's:
+        # the rest keeps line 0 ("not known").
         for m, n in zip(replay, moves):
-            if m["kind"] == n["kind"]:
-                m["line"] = n["line"]
-            else:
+            if not _moves_agree([m], [n], RS274_TOL_MM):
                 break
+            m["line"] = n["line"]
         base, how, tol = (
             replay,
             (
@@ -449,6 +452,32 @@ class _ToolEntry(ctypes.Structure):
 
 
 _TOOLDATA = None  # libtooldata, once loaded
+
+
+def _rs274_error(path: str, tools: dict, tmp: str) -> str:
+    """rs274's error message (the line before the failed block it prints on stderr)."""
+    env = dict(os.environ, HOME=tmp)
+    tbl = os.path.join(tmp, "rs274.tbl")
+    var = os.path.join(tmp, "rs274.var")
+    res = subprocess.run(
+        [RS274, "-g", "-b", "-t", tbl, "-v", var, os.path.abspath(path)],
+        cwd=os.path.dirname(os.path.abspath(path)), capture_output=True, text=True,
+        errors="replace", timeout=120, stdin=subprocess.DEVNULL, env=env,
+    )  # fmt: skip
+    err_lines = [t for t in res.stderr.splitlines() if t.strip()]
+    return err_lines[-2].strip() if len(err_lines) >= 2 else ""
+
+
+def _block_line(path: str, failed_block: str, moves: list) -> int:
+    """The line of ``failed_block`` (rs274's text of the block it refused): the first line
+    with that text at or after the last line a recorded move came from."""
+    with open(path, errors="replace") as fh:
+        lines = fh.read().splitlines()
+    after = max([m.get("line") or 0 for m in moves] or [0])
+    for k in range(max(after, 1), len(lines) + 1):
+        if lines[k - 1].strip() == failed_block:
+            return k
+    return 0
 
 
 def _error_line(path: str, reported: int, failed_block: str) -> int:
@@ -504,12 +533,25 @@ def record(path: str, tools: dict) -> dict:
         accepted = result <= gcode.MIN_ERROR
         eof_only = not accepted and gcode.strerror(result).startswith(EOF_ERROR)
         moves, alignment, tol_mm = canon.moves, "program refused", 1e-9
+        message = gcode.strerror(result).strip()
         if accepted:
-            moves, alignment, tol_mm = merge_events(
-                canon.moves, rs274_calls(path, tools, PARAMS, tmp)[0], tools
-            )
+            calls, failed_block = rs274_calls(path, tools, PARAMS, tmp)
+            moves, alignment, tol_mm = merge_events(canon.moves, calls, tools)
+            if failed_block and alignment.startswith("rs274"):
+                # The preview accepts what rs274 refuses, where the two disagree (the gcode
+                # module keeps the old tool's radius after M6: nc_files/mmount): rs274's
+                # refusal, at the block it printed, is the record.
+                accepted, alignment = False, "rs274 refuses it (the gcode module accepts it)"
+                message = _rs274_error(path, tools, tmp)
+                last_line = _block_line(path, failed_block, moves)
         else:
             last_line = _error_line(path, last_line, rs274_calls(path, tools, PARAMS, tmp)[1])
+            # A call of a subroutine that is nowhere makes LinuxCNC read to the end of the
+            # file looking for it; the line it stops at is not the error's, the message names
+            # it: "EOF in file:… seeking o-word: o<name> from line: N".
+            seeking = re.search(r"seeking o-word: \S+ from line: (\d+)", gcode.strerror(result))
+            if seeking:
+                last_line = int(seeking.group(1))
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     golden = {
@@ -530,7 +572,7 @@ def record(path: str, tools: dict) -> dict:
         if accepted
         else {
             "line": last_line,
-            "message": gcode.strerror(result).strip().replace(ROOT + os.sep, ""),
+            "message": message.replace(ROOT + os.sep, ""),
         },
         "record": alignment,
         "tolerance_mm": tol_mm,

@@ -311,6 +311,14 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
                 if source is self.main:
                     if percent_seen:
                         break  # the second % ends the tape
+                    # LinuxCNC (rs274ngc_pre.cc, open): only a % as the first non-blank line
+                    # opens a tape; any other % line is a bad character (interp_read.cc).
+                    if any(line.strip() for line in self.lines[:pc]):
+                        raise self.error(
+                            "Bad character '%' used (a % line ends the program only when the "
+                            "program's first line is a %)",
+                            self.lines[pc].find("%") + 1,
+                        )
                     percent_seen = True
                 continue
             if block.delete and block_delete:
@@ -541,6 +549,8 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
         for letter, (_, col) in words.items():
             if letter not in used:
                 raise self.error(_unused_word_message(letter), col)
+        if 6 in mcodes and self.comp_exit is not None:
+            self.refresh_position()
         if 4 in mcodes:
             code, col = mcodes[4]
             if code == 98:
@@ -549,6 +559,17 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
                 self.m99(col)
             else:
                 self.stop(code, col)
+
+    def refresh_position(self) -> None:
+        """After a tool change (M6, M61) LinuxCNC re-reads the current position before the
+        next block (interp_internal.cc, refresh_actual_position): the machine's position
+        taken back to program coordinates with the offsets now in force, the new tool length
+        offset included (emccanon.cc, unoffset_and_unrotate_pos). nurbscnc's program position
+        already keeps the machine where it is through every offset change; the one place it
+        differs from the machine is just after G40, where LinuxCNC's interpreter holds the
+        programmed point while the tool stands at the compensated one: the tool change makes
+        the compensated point the program position (nc_files/useful-subroutines.ngc)."""
+        self.pos = self.comp_exit
 
     def m61_tool(self, words: dict, column: int, used: set) -> int:
         if "Q" not in words:
