@@ -104,13 +104,15 @@ class Run:
             return int(self.whole.t_s.size)
         return sample_count(self.plan.pieces, self.plan.profile, self.period_s)
 
-    def chunks(self, chunk: int = CHUNK) -> Iterator[Samples]:
-        """The reference points as :class:`Samples` of ``chunk`` consecutive rows (the last
-        shorter), in order: slices of the whole arrays when there are any (or once
-        :attr:`samples` has made them), else the plan re-sampled window by window
+    def chunks(self, chunk: int | None = None) -> Iterator[Samples]:
+        """The reference points as :class:`Samples` of ``chunk`` consecutive rows (None:
+        :data:`~nurbscnc.interpolate.sample.CHUNK`; the last window shorter), in order:
+        slices of the whole arrays when there are any (or once :attr:`samples` has made
+        them), else the plan re-sampled window by window
         (:func:`~nurbscnc.interpolate.sample.sample_chunks`, bit-identical to the whole).
         A window outside the soft limits raises PlanningError naming the first offending
         point's line, before the window is yielded."""
+        chunk = CHUNK if chunk is None else chunk
         made = self.whole if self.whole is not None else self.__dict__.get("samples")
         if made is not None:
             yield from chunks_of(made, chunk)

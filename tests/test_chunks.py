@@ -8,6 +8,7 @@ PH corners and dwells) and 4096 (a window holds several pieces).
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -255,3 +256,44 @@ def test_a_window_outside_the_soft_limits_names_the_first_line(plans):
     assert str(got.value) == str(expected.value)
     assert got.value.pos.line == expected.value.pos.line == int(whole.line[first_bad])
     assert handed == first_bad - first_bad % 7  # the offending window was not handed out
+
+
+# ----------------------------------------------------------------------------------- CLI
+
+
+@pytest.mark.parametrize("window", [7, 4096])
+@pytest.mark.parametrize("dynamics", ["off", "local"])
+@pytest.mark.parametrize("suffix", ["csv", "npz", "hs"])
+def test_run_writes_the_whole_runs_bytes_and_summary(tmp_path, monkeypatch, frozen_clock,
+                                                     suffix, dynamics, window):  # fmt: skip
+    """``run -o`` writes, window by window, the file the whole-array writers make of the
+    run's whole samples, and prints the summary of the whole samples — with the check off
+    (the points re-sampled as they are written) and on (its kept reference, sliced)."""
+    from click.testing import CliRunner
+
+    import nurbscnc.pipeline as pipeline
+    from nurbscnc.cli.main import main, make_plan, summary_of
+    from nurbscnc.output.files import write_points
+    from nurbscnc.output.halstreamer import write_halstreamer
+    from nurbscnc.plan.report import plan_summary
+
+    monkeypatch.setattr(pipeline, "CHUNK", window)
+    src = str(ROOT / "programs" / "naca2415.nc")
+    out = tmp_path / f"points.{suffix}"
+    res = CliRunner().invoke(main, ["run", src, "-o", str(out), "--json", "--dynamics",
+                                    dynamics, "--interpolator", "taylor"])  # fmt: skip
+    assert res.exit_code == 0, res.output
+    prog, mach, run = make_plan(src, dynamics=dynamics, interpolator="taylor")
+    whole = run.samples
+    expected = tmp_path / f"whole.{suffix}"
+    if suffix == "hs":
+        write_halstreamer(str(expected), whole.points_mm, mach.servo.period_s, prog.name)
+    else:
+        write_points(str(expected), whole)
+    assert out.read_bytes() == expected.read_bytes()
+    summary = json.loads(res.stdout)
+    reference = plan_summary(prog, mach, whole, run.plan, run.check, run.algorithm,
+                             run.cycle_time_s)  # fmt: skip
+    assert {k: summary[k] for k in reference} == json.loads(json.dumps(reference))
+    assert summary == json.loads(json.dumps(summary_of(prog, mach, run)))
+    assert "feed_fluctuation_max" in summary and summary["samples"] == whole.t_s.size
