@@ -27,7 +27,14 @@ Issue 14 rows: ``run`` of ten 60 mm NACA 2415 airfoils (whole process, and after
 minus the wall time of ``run`` on a one-line program), ``plan`` of corpus
 ``general/tort.ngc``, the one-line explosions ``G1 X1000000 F600``, ``G1 X1 F0.001`` and
 ``G4 P100000`` (time to the error, exit code, first message line, peak RSS), process start
-(``nurbscnc --help``). The 1,000,000-line spiral is bench/plan_bench.py's.
+(``nurbscnc --help``).
+
+Big ``run`` rows (issue 14: output in windows, memory bounded by the program): ``run -o
+points.npz`` of bench/plan_bench.py's 1,000,000-line CAM spiral (goal ≤ 15 s, ≤ 1 GB; its
+stage-by-stage timing stays in plan_bench.py) and, with ``--heavy``, of the 200,000-line
+zig-zag over 10 km of path (100 mm passes, 5 µm step-overs: about 48 h of motion, 1.7e8
+points, so ``limits.max_points`` is raised for it; it shows the memory bounded, not the time).
+``--quick`` runs both at 1/20 and 1/100 of their size, to see that they work.
 """
 
 from __future__ import annotations
@@ -47,6 +54,7 @@ ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
 
 from machine_info import corpus_program, run_info  # noqa: E402
+from plan_bench import cam_spiral  # noqa: E402  (stdlib-only generator of plan_bench.py)
 from run import g1_program  # noqa: E402  (stdlib-only generator of bench/run.py)
 
 NURBSCNC = [sys.executable, "-m", "nurbscnc"]
@@ -58,7 +66,15 @@ GOALS = {
     "run_realtime_factor": 300.0,
     "run_peak_rss_mb_200k": 500.0,
     "start_s": 0.3,
+    "spiral_1m_run_s": 15.0,
+    "spiral_1m_run_peak_rss_mb": 1024.0,
 }
+#: The issue's big programs: the CAM spiral's lines, the zig-zag's lines, passes and step.
+SPIRAL_1M_LINES = 1_000_000
+ZIGZAG_10KM = {"n_lines": 200_000, "pass_mm": 100.0, "step_mm": 0.005}
+#: Reference points allowed for the 10 km zig-zag (about 1.7e8 at 1 ms; the default cap,
+#: 5e7, refuses it in seconds — which is a row of its own, the explosion check).
+ZIGZAG_MAX_POINTS = 250_000_000
 
 
 # --------------------------------------------------------------------------- programs
@@ -213,6 +229,43 @@ def scaling(kind: str, base: int, scales, tmp: Path, caps) -> list[dict]:
     return rows
 
 
+def big_runs(tmp: Path, caps, quick: bool, heavy: bool) -> dict:
+    """``run -o points.npz`` of the 1,000,000-line CAM spiral and (``heavy``) the 10 km
+    zig-zag, in a fresh process each: wall and CPU time, peak RSS, points, real-time factor
+    (``quick``: at 1/20 and 1/100 of the size, no pass/fail)."""
+    rows = {}
+    n = SPIRAL_1M_LINES // 20 if quick else SPIRAL_1M_LINES
+    path = tmp / f"cam_spiral_{n}.nc"
+    lines = write_lines(path, cam_spiral(n))
+    r = _big_run(path, tmp, caps)
+    path.unlink()
+    if not quick:
+        r["pass"] = bool(r["exit"] == 0 and r["wall_s"] <= GOALS["spiral_1m_run_s"]
+                         and r["peak_rss_mb"] <= GOALS["spiral_1m_run_peak_rss_mb"])  # fmt: skip
+    rows["cam_spiral_1m_run"] = {"lines": lines, "goal": "≤ 15 s, ≤ 1 GB",
+                                 "published_before": "36–45 s, 1.86 GB", **r}  # fmt: skip
+    if quick or heavy:
+        zz = dict(ZIGZAG_10KM, n_lines=ZIGZAG_10KM["n_lines"] // (100 if quick else 1))
+        path = tmp / f"zigzag_{zz['n_lines']}.nc"
+        lines = write_lines(path, zigzag_program(**zz))
+        r = _big_run(path, tmp, caps, ["--set", f"limits.max_points={ZIGZAG_MAX_POINTS}"])
+        path.unlink()
+        rows["zigzag_10km_run"] = {
+            "lines": lines, "path_mm": zz["pass_mm"] * (lines // 2),
+            "goal": "runs in bounded memory",
+            "published_before": "plan: killed by the OOM killer at 23 GB after 232 s", **r}
+    return rows
+
+
+def _big_run(path: Path, tmp: Path, caps, extra=()) -> dict:
+    out = tmp / "big.npz"
+    r = measure([*NURBSCNC, "run", str(path), "-o", str(out), "--json", *extra], *caps)
+    out.unlink(missing_ok=True)
+    _add_realtime(r)
+    r["samples"] = (r.pop("json", None) or {}).get("samples")
+    return r
+
+
 def issue_rows(tmp: Path, caps, quick: bool) -> dict:
     rows = {}
     # process start
@@ -283,7 +336,7 @@ def main(argv=None) -> int:
     parser.add_argument("--mem-cap-gb", type=float, default=4.0, help="RLIMIT_AS per command")
     parser.add_argument("--timeout", type=float, default=600.0, help="seconds per command")
     parser.add_argument("--heavy", action="store_true",
-                        help="also the issue's 200,000-line 10 km zig-zag run")
+                        help="also the issue's 200,000-line 10 km zig-zag (plan and run)")
     args = parser.parse_args(argv)
     caps = (args.mem_cap_gb, args.timeout)
     scales = (1, 4) if args.quick else SCALES
@@ -318,6 +371,7 @@ def main(argv=None) -> int:
                                      and big["run"]["peak_rss_mb"] <= 500)},
             }  # fmt: skip
         report["issue_rows"] = issue_rows(tmp, caps, args.quick)
+        report["issue_rows"].update(big_runs(tmp, caps, args.quick, args.heavy))
         if args.heavy:
             path = tmp / "zigzag_10km.nc"
             n = write_lines(path, zigzag_program(200_000, pass_mm=100.0, step_mm=0.005))
@@ -326,6 +380,17 @@ def main(argv=None) -> int:
             report["issue_rows"]["zigzag_200k_10km_plan"] = {
                 "lines": n, "goal": "runs in bounded memory",
                 "published_before": "killed by the OOM killer at 23 GB after 232 s", **r}
+    # The scaling table: time should grow with the size, run's peak memory stay flat.
+    report["table"] = [
+        {"program": kind, "scale": row["scale"], "lines": row["lines"],
+         "check_s": row["check"]["wall_s"], "run_s": row["run"]["wall_s"],
+         "run_samples": row["run"].get("samples"), "run_peak_rss_mb": row["run"]["peak_rss_mb"],
+         "run_memory_ratio": row["memory_ratio"]["run"]}
+        for kind, rows in report["scaling"].items() for row in rows]  # fmt: skip
+    for t in report["table"]:
+        print(f"{t['program']} ×{t['scale']}: {t['lines']} lines, check {t['check_s']:.2f} s, "
+              f"run {t['run_s']:.2f} s ({t['run_samples']} points), run peak "
+              f"{t['run_peak_rss_mb']:.0f} MB (×{t['run_memory_ratio']:.2f} of ×1)")
     for name, r in report["issue_rows"].items():
         print(f"{name}: {r.get('wall_s', r.get('best_wall_s', 0)):.2f} s "
               f"(cpu {r.get('cpu_s', 0):.2f} s), "

@@ -8,18 +8,23 @@ are made from the :class:`Run` it returns. No I/O here.
 from __future__ import annotations
 
 import itertools
+from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 
 from nurbscnc.errors import ConfigError
 from nurbscnc.interpolate.baselines import baseline_program_samples
 from nurbscnc.interpolate.sample import (
+    CHUNK,
     Interpolator,
     Samples,
+    chunks_of,
     reference_sampler,
+    sample_chunks,
     sample_plan,
     samples_of,
 )
-from nurbscnc.machine.profile import Machine
+from nurbscnc.machine.profile import Machine, SoftLimits
 from nurbscnc.plan.limits import check_before_work
 from nurbscnc.plan.lookahead import Check, Plan, plan_checked
 from nurbscnc.plan.options import Algorithm, Dynamics, LookaheadOptions, parse_choice
@@ -30,6 +35,7 @@ from nurbscnc.plan.precompensation import (
     precompensation_report,
 )
 from nurbscnc.plan.report import check_soft_limits
+from nurbscnc.plan.timing import sample_count
 from nurbscnc.servo.precompensate import REFERENCE_TOLERANCE_MM
 
 
@@ -60,15 +66,26 @@ class RunOptions:
 
 @dataclass(frozen=True, eq=False)
 class Run:
-    """One program through the pipeline: its reference ``samples``; for the look-ahead
-    planner also the ``plan`` and its dynamics ``check`` (None when the check was off); a
-    baseline has neither (``plan`` is None)."""
+    """One program through the pipeline: its reference points (:meth:`chunks` window by
+    window, :attr:`samples` whole); for the look-ahead planner also the ``plan`` and its
+    dynamics ``check`` (None when the check was off); a baseline has neither (``plan`` is
+    None).
+
+    ``whole``: the reference points as whole arrays when the stage that made them had them
+    anyway (a baseline, the pre-compensated reference, the check's kept reference), checked
+    against the soft limits already. None: the plan's points are made on demand, window by
+    window, with the ``interpolator`` at ``period_s``, each window checked against
+    ``soft_limits`` as it is made — so writing an hours-long program needs one window of
+    memory (issue 14)."""
 
     algorithm: Algorithm
-    samples: Samples
+    whole: Samples | None = None
     plan: Plan | None = None
     check: Check | None = None
     precompensation: Precompensation | None = None
+    interpolator: Interpolator = Interpolator.EXACT
+    period_s: float | None = None
+    soft_limits: SoftLimits | None = None
 
     @property
     def cycle_time_s(self) -> float:
@@ -77,7 +94,44 @@ class Run:
         if self.plan is not None:
             lead = self.precompensation.lead_s if self.precompensation is not None else 0.0
             return self.plan.cycle_time_s + lead
-        return float(self.samples.t_s[-1])
+        return float(self.whole.t_s[-1])
+
+    @property
+    def sample_count(self) -> int:
+        """Number of reference points N (one per servo period, the end at rest included),
+        known without making them."""
+        if self.whole is not None:
+            return int(self.whole.t_s.size)
+        return sample_count(self.plan.pieces, self.plan.profile, self.period_s)
+
+    def chunks(self, chunk: int | None = None) -> Iterator[Samples]:
+        """The reference points as :class:`Samples` of ``chunk`` consecutive rows (None:
+        :data:`~nurbscnc.interpolate.sample.CHUNK`; the last window shorter), in order:
+        slices of the whole arrays when there are any (or once :attr:`samples` has made
+        them), else the plan re-sampled window by window
+        (:func:`~nurbscnc.interpolate.sample.sample_chunks`, bit-identical to the whole).
+        A window outside the soft limits raises PlanningError naming the first offending
+        point's line, before the window is yielded."""
+        chunk = CHUNK if chunk is None else chunk
+        made = self.whole if self.whole is not None else self.__dict__.get("samples")
+        if made is not None:
+            yield from chunks_of(made, chunk)
+            return
+        for window in sample_chunks(self.plan.pieces, self.plan.profile, self.period_s,
+                                    self.interpolator, chunk):  # fmt: skip
+            check_soft_limits(window.points_mm, window.line, self.soft_limits)
+            yield window
+
+    @cached_property
+    def samples(self) -> Samples:
+        """All reference points as whole arrays, made once (plots, simulate, compare,
+        explain, the stream's pulses need them whole); N rows of memory."""
+        if self.whole is not None:
+            return self.whole
+        whole = sample_plan(self.plan.pieces, self.plan.profile, self.period_s,
+                            self.interpolator)  # fmt: skip
+        check_soft_limits(whole.points_mm, whole.line, self.soft_limits)
+        return whole
 
 
 def _announcing(sampler, say):
@@ -96,7 +150,9 @@ def _announcing(sampler, say):
 def run_program(program, machine: Machine, options: RunOptions | None = None,
                 progress=None) -> Run:  # fmt: skip
     """Plan (or run a baseline on) an interpreted program, interpolate it at the servo period
-    and refuse reference points outside the soft limits (PlanningError at the first one).
+    and refuse reference points outside the soft limits (PlanningError at the first one:
+    here when the points are made here, else as :meth:`Run.chunks` or :attr:`Run.samples`
+    make them).
     Before any of that: the segments' boxes inside the soft limits, and the motion time's
     lower bound within ``limits.max_points`` (:mod:`nurbscnc.plan.limits`).
 
@@ -131,17 +187,19 @@ def run_program(program, machine: Machine, options: RunOptions | None = None,
         else:
             plan, check = plan_checked(program, machine, lookahead, sampler)
             say("interpolating")
-            if check is not None:
-                samples = samples_of(check.reference, plan.pieces, options.interpolator)
-            else:
-                samples = sample_plan(plan.pieces, plan.profile, machine.servo.period_s,
-                                      options.interpolator)  # fmt: skip
-            run = Run(options.algorithm, samples, plan, check)
+            kept = getattr(check, "reference", None)
+            # The check's reference, when it kept one, is the output (no second sampling);
+            # else the points are made window by window as the output is written.
+            whole = None if kept is None else samples_of(kept, plan.pieces,
+                                                         options.interpolator)  # fmt: skip
+            run = Run(options.algorithm, whole, plan, check, None, options.interpolator,
+                      machine.servo.period_s, machine.soft_limits)  # fmt: skip
     else:
         say(f"interpolating ({options.algorithm.value})")
         samples = baseline_program_samples(options.algorithm.value, program, machine)
         run = Run(options.algorithm, samples)
-    check_soft_limits(run.samples.points_mm, run.samples.line, machine.soft_limits)
+    if run.whole is not None:  # made already: checked now (a lazy run checks each window)
+        check_soft_limits(run.whole.points_mm, run.whole.line, machine.soft_limits)
     return run
 
 

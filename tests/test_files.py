@@ -270,13 +270,13 @@ def test_batch_output_dir_that_is_a_file_exits_3(tmp_path, program):
 _SLOW_WRITER = r"""
 import sys, time
 import nurbscnc.output.files as files
-real = files._columns_csv
+real = files._csv_rows
 def slow(fh, *args):
     real(fh, *args)
     fh.flush()
     print("WRITING", flush=True)
     time.sleep(60)
-files._columns_csv = slow
+files._csv_rows = slow
 from nurbscnc.cli.main import main
 main(["run", sys.argv[1], "-o", sys.argv[2]])
 """

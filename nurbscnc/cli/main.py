@@ -808,11 +808,19 @@ def clock_suffix(seconds: float) -> str:
     return f" ({hours}:{minutes:02d}:{secs:02d})"
 
 
-def summary_of(prog, mach, run) -> dict:
-    """The plan summary of a run (:func:`nurbscnc.plan.report.plan_summary`)."""
-    from nurbscnc.plan.report import plan_summary
+def summary_of(prog, mach, run, stats=None) -> dict:
+    """The plan summary of a run (:func:`nurbscnc.plan.report.plan_summary`). ``stats``: the
+    :class:`~nurbscnc.plan.report.SampleStats` gathered while the points were written (None:
+    gathered here, window by window, without whole arrays); a baseline is simulated on its
+    whole samples."""
+    from nurbscnc.plan.report import SampleStats, plan_summary
 
-    summary = plan_summary(prog, mach, run.samples, run.plan, run.check, run.algorithm,
+    samples = run.samples if run.plan is None else stats
+    if samples is None:
+        samples = SampleStats(run.plan)
+        for window in run.chunks():
+            samples.add(window)
+    summary = plan_summary(prog, mach, samples, run.plan, run.check, run.algorithm,
                            run.cycle_time_s)  # fmt: skip
     if getattr(run, "precompensation", None) is not None:  # --precompensate
         summary["precompensation"] = run.precompensation.as_json()
@@ -1029,15 +1037,19 @@ def run(programs, output, output_dir, jobs, fmt, quiet, as_json, plot_dir, **set
         fmt = output_format(output, fmt)
         with progress_display(show_progress(as_json, quiet), _display_name(program)) as say:
             prog, mach, run = make_plan(program, **settings, progress=say)
-            say(f"writing {run.samples.t_s.size} points")
-            write_output(output, fmt, run.samples, mach, prog.name)
+            if plot_dir:  # the figures need whole arrays: made once, written from them
+                _ = run.samples
+            say(f"writing {run.sample_count} points")
+            # Window by window: the points are made, checked, written and summarised as
+            # they come (memory of one window, whatever the motion time).
+            stats = write_output(output, fmt, run, mach, prog.name)
             if plot_dir:
                 from nurbscnc.plan.explain import explain_plan
 
                 say("plotting")
                 expl = explain_plan(prog, mach, run.plan) if run.plan is not None else None
                 write_plan_plots(run, plot_dir, prog, expl, mach)
-        summary = summary_of(prog, mach, run)
+        summary = summary_of(prog, mach, run, stats)
         if as_json:
             click.echo(json.dumps(summary), err=output == "-")
         elif not quiet:
@@ -1070,16 +1082,24 @@ def output_format(output: str, fmt: str | None) -> str:
     return fmt
 
 
-def write_output(path: str, fmt: str, samples, mach, name: str) -> None:
-    """Reference points to ``path``: a halstreamer file, or CSV/NPZ by suffix."""
+def write_output(path: str, fmt: str, run, mach, name: str):
+    """The reference points of ``run`` (:class:`~nurbscnc.pipeline.Run`) to ``path``: a
+    halstreamer file, or CSV/NPZ by suffix, window by window (:meth:`Run.chunks`). Returns
+    the :class:`~nurbscnc.plan.report.SampleStats` of the points written (the summary's)."""
+    from nurbscnc.plan.report import SampleStats
+
+    stats = SampleStats(run.plan)
+    windows = stats.tap(run.chunks())
     if fmt == "halstreamer":
-        from nurbscnc.output.halstreamer import write_halstreamer
+        from nurbscnc.output.halstreamer import write_halstreamer_windows
 
-        write_halstreamer(path, samples.points_mm, mach.servo.period_s, name)
+        write_halstreamer_windows(path, (w.points_mm for w in windows), run.sample_count,
+                                  mach.servo.period_s, name)  # fmt: skip
     else:
-        from nurbscnc.output.files import write_points
+        from nurbscnc.output.files import write_point_windows
 
-        write_points(path, samples, npz=fmt == "npz" if fmt else None)
+        write_point_windows(path, windows, run.sample_count, npz=fmt == "npz" if fmt else None)
+    return stats
 
 
 def _batch_one(args):
@@ -1088,10 +1108,10 @@ def _batch_one(args):
 
     try:
         prog, mach, run = make_plan(program, **settings)
-        write_output(target, "halstreamer" if target.endswith(".hs") else "", run.samples, mach,
-                     prog.name)  # fmt: skip
+        stats = write_output(target, "halstreamer" if target.endswith(".hs") else "", run, mach,
+                             prog.name)  # fmt: skip
         return {"program": program, "ok": True, "output": target,
-                "cycle_time_s": run.cycle_time_s, "samples": int(run.samples.t_s.size)}
+                "cycle_time_s": run.cycle_time_s, "samples": stats.count}
     except NurbsCncError as exc:
         return {"program": program, "ok": False,
                 "error": format_error(exc, _display_name(program)),

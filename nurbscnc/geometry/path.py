@@ -313,13 +313,19 @@ class PathTable:
         tol = np.maximum(1e-13, 8.0 * eps * length)
         with np.errstate(invalid="ignore", divide="ignore"):
             xi = np.where(length > 0.0, s / length, 0.0)
+        # Each sample stops at its own tolerance (not when all have converged), so its ξ does
+        # not depend on the others in the call: a window of samples gives the same bits as
+        # the whole reference (issue 14's chunked output).
+        active = np.arange(xi.size)
         for _ in range(PH_MAX_NEWTON):
-            x = xi - 0.5
-            f = horner_rows(self.ph_s, i, x) - s
-            if np.all(np.abs(f) <= tol):
+            ia = i[active]
+            x = xi[active] - 0.5
+            f = horner_rows(self.ph_s, ia, x) - s[active]
+            going = np.abs(f) > tol[active]
+            if not going.any():
                 return xi
-            xi -= f / horner_rows(self.ph_sigma, i, x)
-            np.clip(xi, 0.0, 1.0, out=xi)
+            active, ia, x, f = active[going], ia[going], x[going], f[going]
+            xi[active] = np.clip(xi[active] - f / horner_rows(self.ph_sigma, ia, x), 0.0, 1.0)
         bad = np.flatnonzero(np.abs(horner_rows(self.ph_s, i, xi - 0.5) - s) > tol)
         if bad.size:
             lo, hi = np.zeros(bad.size), np.ones(bad.size)

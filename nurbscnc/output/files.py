@@ -139,8 +139,9 @@ def atomic_output(path: str, binary: bool = False):
         raise
 
 
-def _columns_csv(fh, names, columns, formats) -> None:
-    fh.write(",".join(names) + "\n")
+def _csv_rows(fh, columns, formats) -> None:
+    """Rows of one window of columns as CSV text (no header): np.savetxt formats each row on
+    its own, so the windows' text joined is the whole table's, byte for byte."""
     n = len(columns[0])
     block = 65536
     for start in range(0, n, block):
@@ -151,18 +152,101 @@ def _columns_csv(fh, names, columns, formats) -> None:
         fh.write(buf.getvalue())
 
 
-def write_table(path: str, names, columns, formats, npz: bool | None = None) -> None:
-    """Write named columns to ``path`` (``-``: stdout): NPZ when ``npz`` (None: when the path
-    ends in .npz), else CSV."""
+#: Bytes per read when a spooled NPZ column is copied into its zip member.
+SPOOL_BLOCK = 1 << 24
+
+
+def _npy_header(fid, dtype: np.dtype, count: int) -> None:
+    """The .npy header of a 1-D C-order array of ``count`` items of ``dtype``: what
+    ``np.save`` writes before the data (format version 1.0: the header is short)."""
+    np.lib.format.write_array_header_1_0(fid, {"descr": np.lib.format.dtype_to_descr(dtype),
+                                               "fortran_order": False, "shape": (count,)})
+
+
+def _npz_windows(fh, spool_dir: str | None, names, windows, count: int) -> None:
+    """Named 1-D columns, given window by window, as the NPZ ``np.savez_compressed`` writes
+    (one deflated ``<name>.npy`` zip member per column, in order, zip64 forced), byte for byte.
+
+    A zip member must be complete before the next begins, and the windows come row-wise. So
+    the first column goes straight into its member (its header first: the row ``count`` is
+    known), and the others are spooled, raw, to an unnamed temporary file in ``spool_dir``
+    (the output's folder: the same disk the output needs anyway; the system's temporary
+    folder may be a tmpfs, i.e. memory) at fixed offsets — column j's region holds its
+    ``count`` items — then copied into their members. One sampling pass; re-sampling per
+    column instead would cost the interpolation once per column (seven times). Whole arrays
+    (one window of ``count`` rows) skip the spool."""
+    import tempfile
+    import zipfile
+
+    windows = iter(windows)
+    first = next(windows, None)
+    if first is None:
+        raise ValueError("no rows to write")
+    first = [np.asarray(c) for c in first]
+    dtypes = [c.dtype for c in first]
+    with zipfile.ZipFile(fh, mode="w", compression=zipfile.ZIP_DEFLATED,
+                         allowZip64=True) as zipf:  # fmt: skip
+        if len(first[0]) == count:  # whole arrays: nothing to spool
+            if next(windows, None) is not None:
+                raise ValueError(f"more rows than the {count} announced")
+            for name, col in zip(names, first):
+                with zipf.open(f"{name}.npy", "w", force_zip64=True) as fid:
+                    np.lib.format.write_array(fid, col, allow_pickle=False)
+            return
+        offsets = np.concatenate(([0], np.cumsum([count * d.itemsize for d in dtypes[1:]])))
+        with tempfile.TemporaryFile(dir=spool_dir) as spool:
+            rows = 0
+            with zipf.open(f"{names[0]}.npy", "w", force_zip64=True) as fid:
+                _npy_header(fid, dtypes[0], count)
+                window = first
+                while window is not None:
+                    cols = [np.asarray(c, dtype=d) for c, d in zip(window, dtypes)]
+                    m = len(cols[0])
+                    if rows + m > count:
+                        raise ValueError(f"more rows than the {count} announced")
+                    fid.write(np.ascontiguousarray(cols[0]).tobytes())
+                    for j, col in enumerate(cols[1:]):
+                        spool.seek(int(offsets[j]) + rows * dtypes[j + 1].itemsize)
+                        spool.write(np.ascontiguousarray(col).tobytes())
+                    rows += m
+                    window = next(windows, None)
+            if rows != count:
+                raise ValueError(f"{rows} rows written, {count} announced")
+            for j, name in enumerate(names[1:]):
+                spool.seek(int(offsets[j]))
+                left = count * dtypes[j + 1].itemsize
+                with zipf.open(f"{name}.npy", "w", force_zip64=True) as fid:
+                    _npy_header(fid, dtypes[j + 1], count)
+                    while left > 0:
+                        block = spool.read(min(SPOOL_BLOCK, left))
+                        if not block:
+                            raise OSError("the spooled columns came back short")
+                        fid.write(block)
+                        left -= len(block)
+
+
+def write_table_windows(path: str, names, windows, count: int, formats,
+                        npz: bool | None = None) -> None:  # fmt: skip
+    """Write named columns given window by window (an iterable of column tuples, rows in
+    order, ``count`` rows in all) to ``path`` (``-``: stdout), atomically: NPZ when ``npz``
+    (None: when the path ends in .npz), else CSV. Memory: one window (the NPZ's other
+    columns are spooled to disk, :func:`_npz_windows`). An exception from ``windows`` (a
+    point outside the soft limits, found as it is made) leaves no file."""
     if npz is None:
         npz = path.endswith(".npz")
     try:
         if npz:
+            spool_dir = None  # stdout, a device, a FIFO: the system's temporary folder
+            if path != "-":
+                target, st = output_target(path)
+                spool_dir = None if _in_place(path, st) else os.path.dirname(target)
             with atomic_output(path, binary=True) as fh:
-                np.savez_compressed(fh, **{n: np.asarray(c) for n, c in zip(names, columns)})
+                _npz_windows(fh, spool_dir, names, windows, count)
         else:
             with atomic_output(path) as fh:
-                _columns_csv(fh, names, columns, formats)
+                fh.write(",".join(names) + "\n")
+                for columns in windows:
+                    _csv_rows(fh, columns, formats)
     except BrokenPipeError:
         raise  # a reader that went away (``| head``): the CLI ends quietly
     except OSError as exc:
@@ -170,13 +254,35 @@ def write_table(path: str, names, columns, formats, npz: bool | None = None) -> 
         raise OutputError(f"cannot write {name}: {exc.strerror or exc}") from None
 
 
+def write_table(path: str, names, columns, formats, npz: bool | None = None) -> None:
+    """Write named columns to ``path`` (``-``: stdout): NPZ when ``npz`` (None: when the path
+    ends in .npz), else CSV."""
+    write_table_windows(path, names, [columns], len(columns[0]), formats, npz)
+
+
+#: printf formats of the reference-point columns (POINT_COLUMNS).
+POINT_FORMATS = ["%.6f", "%.9f", "%.9f", "%.9f", "%.6f", "%d", "%d"]
+
+
+def point_columns(samples) -> tuple:
+    """The POINT_COLUMNS of reference points (whole or one window): t, x, y, z, feed,
+    piece, line."""
+    p = samples.points_mm
+    return (samples.t_s, p[:, 0], p[:, 1], p[:, 2], samples.v_mm_s, samples.piece,
+            samples.line)  # fmt: skip
+
+
 def write_points(path: str, samples, npz: bool | None = None) -> None:
     """Reference points: ``t,x,y,z,feed,piece,line`` (s, mm, mm, mm, mm/s, index, line);
     NPZ when ``npz`` (None: by the path's suffix)."""
-    p = samples.points_mm
-    cols = (samples.t_s, p[:, 0], p[:, 1], p[:, 2], samples.v_mm_s, samples.piece, samples.line)
-    formats = ["%.6f", "%.9f", "%.9f", "%.9f", "%.6f", "%d", "%d"]
-    write_table(path, POINT_COLUMNS, cols, formats, npz)
+    write_point_windows(path, [samples], int(samples.t_s.size), npz)
+
+
+def write_point_windows(path: str, windows, count: int, npz: bool | None = None) -> None:
+    """:func:`write_points` of reference points given window by window (``count`` rows in
+    all, e.g. :meth:`nurbscnc.pipeline.Run.chunks`): the same bytes, one window of memory."""
+    write_table_windows(path, POINT_COLUMNS, (point_columns(w) for w in windows), count,
+                        POINT_FORMATS, npz)  # fmt: skip
 
 
 def write_profile(path: str, t_s, s_mm, v, a, j, piece) -> None:

@@ -28,15 +28,18 @@ STREAMER_CFG = "fff"
 DECIMALS = 6
 
 
-def halstreamer_header(points_mm: np.ndarray, period_s: float, program: str = "") -> str:
-    """The comment lines at the top of the file (each begins with ``#``)."""
+def halstreamer_header(points_mm: np.ndarray, period_s: float, program: str = "",
+                       count: int | None = None) -> str:  # fmt: skip
+    """The comment lines at the top of the file (each begins with ``#``): ``count`` lines
+    (None: as many as ``points_mm`` has), starting at ``points_mm[0]``."""
     start = " ".join(f"{v:.{DECIMALS}f}" for v in np.round(points_mm[0], DECIMALS) + 0.0)
+    count = points_mm.shape[0] if count is None else int(count)
     return (
         f"# nurbscnc reference points for LinuxCNC halstreamer{': ' + program if program else ''}\n"
         f"# one line per servo period T_s = {period_s * 1e3:g} ms: x y z [mm, machine coords]\n"
         f"# loadrt streamer depth=... cfg={STREAMER_CFG}; the servo thread period must be "
         f"{round(period_s * 1e9)} ns\n"
-        f"# {points_mm.shape[0]} lines; start point {start} (the machine must be there)\n"
+        f"# {count} lines; start point {start} (the machine must be there)\n"
     )
 
 
@@ -51,12 +54,34 @@ def halstreamer_lines(points_mm: np.ndarray) -> str:
     return (line * p.shape[0]) % tuple(p.ravel().tolist())
 
 
+#: Rows formatted per string (a window may be larger: the text of 64 Ki rows is ~2.5 MB).
+LINES_BLOCK = 1 << 16
+
+
 def write_halstreamer(path: str, points_mm, period_s: float, program: str = "") -> None:
     """Write points (N, 3) [mm], one per period ``period_s`` [s], as a halstreamer file
     (atomically; ``-`` is stdout)."""
     p = np.asarray(points_mm, dtype=float)
     if p.ndim != 2 or p.shape[1] != 3 or p.shape[0] == 0:
         raise ValueError(f"points must be (N, 3) with N >= 1, got {p.shape}")
+    write_halstreamer_windows(path, [p], p.shape[0], period_s, program)
+
+
+def write_halstreamer_windows(path: str, windows, count: int, period_s: float,
+                              program: str = "") -> None:  # fmt: skip
+    """:func:`write_halstreamer` of points given window by window (arrays (m, 3) [mm] in
+    order, ``count`` rows in all): the header (which names the count and the first point)
+    from the first window, then each window's lines as it comes — the same bytes as the
+    whole-array writer, one window of memory. Fewer or more rows than ``count`` is a
+    ValueError (and no file)."""
     with atomic_output(path) as fh:
-        fh.write(halstreamer_header(p, period_s, program))
-        fh.write(halstreamer_lines(p))
+        rows = 0
+        for w in windows:
+            p = np.asarray(w, dtype=float)
+            if rows == 0 and p.shape[0]:
+                fh.write(halstreamer_header(p, period_s, program, count))
+            for lo in range(0, p.shape[0], LINES_BLOCK):
+                fh.write(halstreamer_lines(p[lo : lo + LINES_BLOCK]))
+            rows += p.shape[0]
+        if rows != count:
+            raise ValueError(f"{rows} halstreamer lines written, {count} announced")

@@ -4,7 +4,10 @@
   bounding box, feeds, notes;
 - :func:`plan_summary`: a plan and its reference points (``plan``, ``run``): pieces, cycle
   time, lower bound (SPEC §10), feed fluctuation (SPEC §3), predicted contour error (SPEC §8);
-- :func:`check_soft_limits`: refuse reference points outside the travel envelope.
+- :func:`check_soft_limits`: refuse reference points outside the travel envelope (a window
+  of them at a time: the first offending point of the first window that has one is the
+  program's first);
+- :class:`SampleStats`: the summary's numbers of the reference points, window by window.
 
 No I/O: the CLI prints or serialises the dictionaries.
 """
@@ -117,14 +120,78 @@ def feed_fluctuation(plan, samples) -> float | None:
     """Largest |Δs_true/Δs_planned − 1| over servo steps on NURBS pieces moving at ≥ 10 % of
     the highest cap (SPEC §3; true arc length from the curves' exact tables), or None if
     there are none."""
-    k, ds_true = nurbs_step_lengths(plan.pieces, samples)
-    if k.size == 0:
-        return None
-    planned = samples.s_mm[k + 1] - samples.s_mm[k]
-    fast = samples.v_mm_s[k] >= 0.1 * float(np.max(plan.caps_mm_s))
-    if not fast.any():
-        return None
-    return float(np.max(np.abs(ds_true[fast] / planned[fast] - 1.0)))
+    return SampleStats.of(samples, plan).feed_fluctuation_max
+
+
+class SampleStats:
+    """What the summaries need of a plan's reference points, gathered window by window
+    (:meth:`add` each window in order; issue 14: no whole arrays): the number of samples,
+    the highest planned feed [mm/s] and — given the ``plan`` — the feed fluctuation on
+    NURBS (:func:`feed_fluctuation`, SPEC §3), whose steps include the one across each join
+    of two windows. Equal to the whole-array numbers bit for bit (each step's ratio is the
+    same float expression; a maximum does not depend on the grouping)."""
+
+    def __init__(self, plan=None):
+        self.pieces = None if plan is None else plan.pieces
+        self.fast_mm_s = None if plan is None else 0.1 * float(np.max(plan.caps_mm_s))
+        self.count = 0
+        self.feed_max_mm_s = -np.inf
+        self.feed_fluctuation_max: float | None = None
+        self.interpolator = "exact"
+        # The last sample of the previous window: its curve (-1: not on a NURBS), true and
+        # planned path length [mm], planned feed [mm/s].
+        self._last = (-1, 0.0, 0.0, 0.0)
+
+    @classmethod
+    def of(cls, samples, plan=None) -> SampleStats:
+        """The stats of whole samples (one window)."""
+        stats = cls(plan)
+        stats.add(samples)
+        return stats
+
+    def tap(self, windows):
+        """Yield ``windows`` unchanged, adding each as it passes (a writer's input)."""
+        for w in windows:
+            self.add(w)
+            yield w
+
+    def add(self, samples) -> None:
+        """Take the next window of samples (``t_s``, ``v_mm_s``, ``s_mm``, ``piece``,
+        ``param``, ``interpolator``)."""
+        n = int(samples.t_s.size)
+        if n == 0:
+            return
+        self.count += n
+        self.feed_max_mm_s = max(self.feed_max_mm_s, float(samples.v_mm_s.max()))
+        self.interpolator = str(samples.interpolator)
+        if self.pieces is None:
+            return
+        curve, s_true, s_mm, v = self._last
+        k, ds_true = nurbs_step_lengths(self.pieces, samples)
+        planned = samples.s_mm[k + 1] - samples.s_mm[k]
+        v_k = samples.v_mm_s[k]
+        cid, s_first = self._first_and_last(samples)
+        if curve >= 0 and cid == curve:  # the step across the join, k = −1 → 0
+            ds_true = np.r_[s_first - s_true, ds_true]
+            planned = np.r_[samples.s_mm[0] - s_mm, planned]
+            v_k = np.r_[v, v_k]
+        fast = v_k >= self.fast_mm_s
+        if fast.any():
+            worst = float(np.max(np.abs(ds_true[fast] / planned[fast] - 1.0)))
+            if self.feed_fluctuation_max is None or worst > self.feed_fluctuation_max:
+                self.feed_fluctuation_max = worst
+
+    def _first_and_last(self, samples) -> tuple[int, float]:
+        """The curve and true arc length of the window's first sample (for the step across
+        the join); the window's last sample becomes the carried one."""
+        path = self.pieces.path
+        ends = samples.piece[[0, -1]]
+        kind = np.take(path.kind, ends)
+        cid = np.where(kind == Kind.NURBS, np.take(path.obj_id, ends), -1).tolist()
+        s_ends = [float(path.objects[c].arc_length(samples.param[[i]])[0]) if c >= 0 else 0.0
+                  for c, i in zip(cid, (0, -1))]  # fmt: skip
+        self._last = (cid[1], s_ends[1], float(samples.s_mm[-1]), float(samples.v_mm_s[-1]))
+        return cid[0], s_ends[0]
 
 
 def _bound(summary: dict, lower_bound_s: float | None, cycle_time_s: float) -> None:
@@ -138,7 +205,9 @@ def plan_summary(prog, machine: Machine, samples, plan=None, check=None,
                  cycle_time_s: float | None = None) -> dict:  # fmt: skip
     """Numbers that describe a plan (``plan --json``): of the look-ahead ``plan`` with its
     dynamics ``check`` (None: off), or — ``plan`` None — of a baseline ``algorithm``'s
-    ``samples``, simulated on the servo model to see its errors."""
+    ``samples``, simulated on the servo model to see its errors. With a plan, ``samples``
+    may be whole :class:`Samples` or the :class:`SampleStats` gathered while the windows
+    were written (the contour error is the check's :meth:`Check.contour_stats`)."""
     from nurbscnc.plan.lookahead import segment_times_s
 
     lb = program_lower_bound_s(prog.segments, machine)
@@ -158,6 +227,7 @@ def plan_summary(prog, machine: Machine, samples, plan=None, check=None,
                        contour_true_rms_um=m["true_rms_um"],
                        contour_eq29_max_um=m["contour_max_um"])  # fmt: skip
         return summary
+    stats = samples if isinstance(samples, SampleStats) else SampleStats.of(samples, plan)
     kinds = plan.pieces.kind_counts()  # vectorised: no Piece object per row
     summary = {
         **head,
@@ -165,17 +235,16 @@ def plan_summary(prog, machine: Machine, samples, plan=None, check=None,
         "piece_count": len(plan.pieces),
         "corner_pieces": kinds.get("ph", 0),
         "cycle_time_s": cycle_time_s,
-        "samples": int(samples.t_s.size),
+        "samples": stats.count,
         "period_s": machine.servo.period_s,
         "dynamics": str(plan.dynamics),
         "dynamics_iterations": plan.iterations,
-        "feed_max_mm_s": float(samples.v_mm_s.max()),
+        "feed_max_mm_s": stats.feed_max_mm_s,
         "segment_times_s": {str(k): v for k, v in segment_times_s(plan).items()},
-        "interpolator": str(samples.interpolator),
+        "interpolator": stats.interpolator,
     }
-    fluct = feed_fluctuation(plan, samples)
-    if fluct is not None:
-        summary["feed_fluctuation_max"] = fluct
+    if stats.feed_fluctuation_max is not None:
+        summary["feed_fluctuation_max"] = stats.feed_fluctuation_max
     _bound(summary, lb, cycle_time_s)
     if check is not None:
         summary.update(check.contour_stats())
