@@ -364,73 +364,163 @@ def _repair_junctions(v: np.ndarray, length: np.ndarray, a, j, a_dn=None,
     return v
 
 
+#: A junction between two pieces whose acceleration or jerk limits differ by more than this
+#: ratio (smaller / larger) stays a planning junction; below it the pieces may share one
+#: planning unit, planned with the smaller limits (see :func:`plan_profile`).
+LIMIT_MERGE_RATIO = 0.5
+
+
+def _key_junctions(inp: ProfileInput) -> np.ndarray:
+    """(k+1,) bool: the junctions that stay planning junctions (zero acceleration there).
+
+    Both ends; every junction whose own cap is below both neighbouring cruise caps (an exact
+    stop, a corner); where the limits of the two pieces differ by more than
+    :data:`LIMIT_MERGE_RATIO`; and both ends of every *valley*: a run of equal-cap pieces
+    whose neighbouring runs (across junctions that are not already planning junctions) both
+    have higher caps. Between two planning junctions the caps then rise and fall once
+    (unimodal staircase), so a unit's single S-curve up and single S-curve down meet the
+    caps or are split by :func:`_cap_violations`.
+    """
+    k = inp.piece_count
+    c = np.asarray(inp.v_max_mm_s)
+    jcap = np.asarray(inp.v_junction_max_mm_s)
+    key = np.ones(k + 1, dtype=bool)
+    left, right = c[:-1], c[1:]
+    inner = jcap[1:-1] >= np.minimum(left, right)
+    for x in inp.piece_limits():
+        lo, hi = np.minimum(x[:-1], x[1:]), np.maximum(x[:-1], x[1:])
+        inner &= lo >= LIMIT_MERGE_RATIO * hi
+    key[1:-1] = ~inner
+    # Runs of equal caps between planning junctions; a run's neighbour across a planning
+    # junction counts as −inf (a run next to a stop is not a valley: the stop's own
+    # junction is already a planning junction, and a staircase rising from it is one unit).
+    step = key[1:-1] | (left != right)  # junction i+1 separates two runs
+    run = np.concatenate(([0], np.cumsum(step)))  # run label of each piece
+    bounds = np.flatnonzero(np.concatenate(([True], step, [True])))  # run boundaries
+    run_cap = c[bounds[:-1]]
+    n = run_cap.size
+    if n < 3:
+        return key
+    lower_left = np.full(n, -np.inf)
+    lower_right = np.full(n, -np.inf)
+    soft = ~key[bounds[1:-1]]  # between run r and r+1 with no planning junction
+    lower_left[1:] = np.where(soft, run_cap[:-1], -np.inf)
+    lower_right[:-1] = np.where(soft, run_cap[1:], -np.inf)
+    valley = (lower_left > run_cap) & (lower_right > run_cap)
+    key[bounds[:-1][valley]] = True
+    key[bounds[1:][valley]] = True
+    del run
+    return key
+
+
 def plan_profile(inp: ProfileInput) -> Profile:
     """Plan the jerk-limited feed profile of ``inp`` (SPEC §7; see the module docstring).
 
-    Consecutive pieces with the same cruise cap whose junction does not constrain the speed
-    (its cap ≥ that cruise cap) are planned as ONE piece: the S-curve puts zero acceleration
-    at every planned junction, and a chain of short cells of one curve would otherwise
-    accelerate in small steps. The result is reported per original piece (start times found
-    by inverting s(t) at the piece boundaries), so callers never see the merging.
+    Acceleration is carried across the junctions where the path is smooth: pieces are
+    grouped into *planning units* between planning junctions (:func:`_key_junctions`:
+    stops, corner caps, valleys of the cap staircase, large changes of the limits), each
+    unit planned as one piece (S-curve up, cruise, S-curve down; limits the smallest of its
+    pieces'; cruise cap the largest of its pieces' caps). A unit whose speed then exceeds
+    the cap of one of its pieces is split at that piece (:func:`_cap_violations`) and the
+    whole plan is made again, until every piece's cap holds; each round adds a planning
+    junction, so this ends (at worst with every junction one, :func:`plan_profile_pieces`).
+    A run of equal caps is one unit from the start, as is an airfoil's descent from its
+    cruise into the nose where the S-curve meets the staircase of the nose cells' caps.
+    The result is reported per original piece (start times found by inverting s(t) at the
+    piece boundaries), so callers never see the grouping.
     """
     k = inp.piece_count
     if k < 2 or inp.lookahead_pieces is not None:
         # A bounded look-ahead counts programmed pieces (a controller's block buffer): keep
         # every piece a planning unit then.
         return plan_profile_pieces(inp)
-    v_max = np.asarray(inp.v_max_mm_s)
+    key = _key_junctions(inp)
+    while not key.all():
+        profile, split = _plan_units(inp, key)
+        if not split.any():
+            return profile
+        key |= split
+    return plan_profile_pieces(inp)
+
+
+def _plan_units(inp: ProfileInput, key: np.ndarray) -> tuple[Profile, np.ndarray]:
+    """The profile with the planning units between the junctions ``key`` (k+1,), reported
+    per piece, and the junctions (k+1, bool) that must become planning junctions because a
+    unit's speed exceeds one of its pieces' caps (none: the profile is valid)."""
+    k = inp.piece_count
+    c = np.asarray(inp.v_max_mm_s)
     jcap = np.asarray(inp.v_junction_max_mm_s)
-    inner = np.arange(1, k)
-    transparent = (v_max[inner - 1] == v_max[inner]) & (jcap[inner] >= v_max[inner])
-    lims = inp.piece_limits()
-    for x in lims:  # merged pieces share one set of limits
-        transparent &= x[inner - 1] == x[inner]
-    if not transparent.any():
-        return plan_profile_pieces(inp)
-    # Group g holds pieces first[g] .. first[g+1]-1.
-    first = np.concatenate(([0], inner[~transparent], [k]))
-    lengths = np.asarray(inp.length_mm)
-    cum = np.concatenate(([0.0], np.cumsum(lengths)))
-    heads = first[:-1]
+    first = np.flatnonzero(key[:-1])  # the first piece of each unit
+    bounds = np.append(first, k)
+    cum = np.concatenate(([0.0], np.cumsum(inp.length_mm)))
+    unit_cap = np.maximum.reduceat(c, first)
+    jcap_unit = jcap[bounds].copy()
+    inner = bounds[1:-1]
+    jcap_unit[1:-1] = np.minimum(jcap_unit[1:-1], np.minimum(c[inner - 1], c[inner]))
+    lims = [np.minimum.reduceat(x, first) for x in inp.piece_limits()]
     uniform = inp.uniform_limits
-    merged = ProfileInput(
-        cum[first[1:]] - cum[first[:-1]],
-        v_max[heads],
-        jcap[first],
-        inp.a_max_mm_s2 if uniform else lims[0][heads],
-        inp.j_max_mm_s3 if uniform else lims[1][heads],
-        lookahead_pieces=inp.lookahead_pieces,
-        a_decel_mm_s2=None if uniform else lims[2][heads],
-        j_decel_mm_s3=None if uniform else lims[3][heads],
-    )
-    g = plan_profile_pieces(merged)
+    unit = plan_profile_pieces(ProfileInput(
+        cum[bounds[1:]] - cum[bounds[:-1]], unit_cap, jcap_unit,
+        inp.a_max_mm_s2 if uniform else lims[0], inp.j_max_mm_s3 if uniform else lims[1],
+        a_decel_mm_s2=None if uniform else lims[2], j_decel_mm_s3=None if uniform else lims[3]))
     piece_start = cum[:-1]
-    # Times at which the path reaches each piece start (exact within a merged piece).
-    t_start = time_at_length(g, piece_start)
-    group_of = np.repeat(np.arange(first.size - 1), np.diff(first))
-    is_first = np.zeros(k, dtype=bool)
-    is_first[first[:-1]] = True
-    t_start = np.where(is_first, g.piece_start_time_s[group_of], t_start)
+    # Times at which the path reaches each piece start (exact within a unit).
+    unit_of = np.repeat(np.arange(first.size), np.diff(bounds))
+    t_start = time_at_length(unit, piece_start)
+    t_start[first] = unit.piece_start_time_s
     t_start = np.maximum.accumulate(t_start)
     v_junction = np.empty(k + 1)
-    v_junction[:-1] = g.sample(t_start)[1]
-    v_junction[first] = g.junction_speeds_mm_s
-    v_junction[-1] = 0.0
-    return Profile(
-        total_length_mm=g.total_length_mm,
-        duration_s=g.duration_s,
+    v_junction[:-1] = unit.sample(t_start)[1]
+    v_junction[bounds] = unit.junction_speeds_mm_s
+    # Largest speed on each piece: within a unit the speed rises to the peak, cruises and
+    # falls, so it is the peak where the piece touches the cruise, else the larger end.
+    v_s, v_e = unit.junction_speeds_mm_s[:-1], unit.junction_speeds_mm_s[1:]
+    v_p = unit.piece_peak_speed_mm_s
+    a_up, j_up = (lims[0], lims[1]) if not uniform else (inp.a_max_mm_s2, inp.j_max_mm_s3)
+    a_dn, j_dn = (lims[2], lims[3]) if not uniform else (inp.a_max_mm_s2, inp.j_max_mm_s3)
+    cruise_from = cum[bounds[:-1]] + scurve_distance_mm(v_s, v_p, a_up, j_up)
+    cruise_to = cum[bounds[1:]] - scurve_distance_mm(v_p, v_e, a_dn, j_dn)
+    lo = np.minimum(cruise_from, cruise_to)[unit_of]
+    hi = np.maximum(cruise_from, cruise_to)[unit_of]
+    at_peak = (piece_start <= hi) & (cum[1:] >= lo)
+    v_piece = np.where(at_peak, v_p[unit_of], np.maximum(v_junction[:-1], v_junction[1:]))
+    split = np.zeros(k + 1, dtype=bool)
+    over = np.flatnonzero(v_piece > c * (1.0 + 1e-12))
+    if over.size:
+        # A piece below its unit's cap before the unit's first piece at that cap (the rise)
+        # ends its unit (v ≤ its cap there, a = 0); after the last one (the descent) it
+        # starts a unit. Either way it then lies in a unit whose caps are ≤ its own.
+        idx = np.arange(k)
+        is_top = c == unit_cap[unit_of]
+        top_first = np.minimum.reduceat(np.where(is_top, idx, k), first)[unit_of]
+        top_last = np.maximum.reduceat(np.where(is_top, idx, -1), first)[unit_of]
+        # One split per unit and side per round, the one nearest the unit's end it
+        # approaches (the rise's first offender, the descent's last): its planning junction
+        # (a = 0 at its cap) often clears the other offenders of that side.
+        rise = over[over < top_first[over]]
+        rise = rise[np.unique(unit_of[rise], return_index=True)[1]]
+        fall = over[over > top_last[over]][::-1]
+        fall = fall[np.unique(unit_of[fall], return_index=True)[1]]
+        split[rise + 1] = True
+        split[fall] = True
+        if not (rise.size or fall.size):
+            raise PlanningError("feed profile: a piece at its unit's cap exceeds it (rounding)")
+    profile = Profile(
+        total_length_mm=unit.total_length_mm,
+        duration_s=unit.duration_s,
         junction_speeds_mm_s=_frozen(v_junction),
-        piece_peak_speed_mm_s=_frozen(g.piece_peak_speed_mm_s[group_of]),
+        piece_peak_speed_mm_s=_frozen(np.minimum(v_piece, c)),
         piece_start_mm=_frozen(piece_start),
         piece_start_time_s=_frozen(t_start),
-        phase_start_time_s=g.phase_start_time_s,
-        phase_duration_s=g.phase_duration_s,
-        phase_s0_mm=g.phase_s0_mm,
-        phase_v0_mm_s=g.phase_v0_mm_s,
-        phase_a0_mm_s2=g.phase_a0_mm_s2,
-        phase_jerk_mm_s3=g.phase_jerk_mm_s3,
-        phase_piece_index=_frozen(first[:-1][g.phase_piece_index], dtype=np.int64),
+        phase_start_time_s=unit.phase_start_time_s,
+        phase_duration_s=unit.phase_duration_s,
+        phase_s0_mm=unit.phase_s0_mm,
+        phase_v0_mm_s=unit.phase_v0_mm_s,
+        phase_a0_mm_s2=unit.phase_a0_mm_s2,
+        phase_jerk_mm_s3=unit.phase_jerk_mm_s3,
+        phase_piece_index=_frozen(first[unit.phase_piece_index], dtype=np.int64),
     )
+    return profile, split
 
 
 def time_at_length(profile: Profile, s_mm: np.ndarray) -> np.ndarray:
