@@ -437,16 +437,16 @@ def plan_profile(inp: ProfileInput) -> Profile:
     key = _key_junctions(inp)
     while not key.all():
         profile, split = _plan_units(inp, key)
-        if not split.any():
+        if profile is not None:
             return profile
         key |= split
     return plan_profile_pieces(inp)
 
 
-def _plan_units(inp: ProfileInput, key: np.ndarray) -> tuple[Profile, np.ndarray]:
+def _plan_units(inp: ProfileInput, key: np.ndarray) -> tuple[Profile | None, np.ndarray]:
     """The profile with the planning units between the junctions ``key`` (k+1,), reported
     per piece, and the junctions (k+1, bool) that must become planning junctions because a
-    unit's speed exceeds one of its pieces' caps (none: the profile is valid)."""
+    unit's speed exceeds one of its pieces' caps (then the profile is None: not valid)."""
     k = inp.piece_count
     c = np.asarray(inp.v_max_mm_s)
     jcap = np.asarray(inp.v_junction_max_mm_s)
@@ -457,54 +457,47 @@ def _plan_units(inp: ProfileInput, key: np.ndarray) -> tuple[Profile, np.ndarray
     jcap_unit = jcap[bounds].copy()
     inner = bounds[1:-1]
     jcap_unit[1:-1] = np.minimum(jcap_unit[1:-1], np.minimum(c[inner - 1], c[inner]))
-    lims = [np.minimum.reduceat(x, first) for x in inp.piece_limits()]
-    uniform = inp.uniform_limits
-    unit = plan_profile_pieces(ProfileInput(
-        cum[bounds[1:]] - cum[bounds[:-1]], unit_cap, jcap_unit,
-        inp.a_max_mm_s2 if uniform else lims[0], inp.j_max_mm_s3 if uniform else lims[1],
-        a_decel_mm_s2=None if uniform else lims[2], j_decel_mm_s3=None if uniform else lims[3]))
+    if inp.uniform_limits:
+        a_up = a_dn = inp.a_max_mm_s2
+        j_up = j_dn = inp.j_max_mm_s3
+    else:
+        a_up, j_up, a_dn, j_dn = (np.minimum.reduceat(x, first) for x in inp.piece_limits())
+    unit = plan_profile_pieces(ProfileInput(cum[bounds[1:]] - cum[bounds[:-1]], unit_cap,
+                                            jcap_unit, a_up, j_up, a_decel_mm_s2=a_dn,
+                                            j_decel_mm_s3=j_dn))  # fmt: skip
+    unit_of = np.repeat(np.arange(first.size), np.diff(bounds))
+    # Within a unit the speed rises to its peak v_p, cruises over [cruise_from, cruise_to]
+    # and falls, so the largest speed on a piece is v_p where the piece touches the cruise,
+    # else the larger of its end speeds. Only pieces below their unit's cap can exceed it.
+    v_s, v_e = unit.junction_speeds_mm_s[:-1], unit.junction_speeds_mm_s[1:]
+    v_p = unit.piece_peak_speed_mm_s
+    cruise_from = cum[bounds[:-1]] + scurve_distance_mm(v_s, v_p, a_up, j_up)
+    cruise_to = cum[bounds[1:]] - scurve_distance_mm(v_p, v_e, a_dn, j_dn)
+    lo = np.minimum(cruise_from, cruise_to)
+    hi = np.maximum(cruise_from, cruise_to)
+
+    def piece_max(idx: np.ndarray, v_start: np.ndarray, v_end: np.ndarray) -> np.ndarray:
+        u = unit_of[idx]
+        at_peak = (cum[idx] <= hi[u]) & (cum[idx + 1] >= lo[u])
+        return np.where(at_peak, v_p[u], np.maximum(v_start, v_end))
+
+    low = np.flatnonzero(c < unit_cap[unit_of])
+    if low.size:
+        ends = np.concatenate((cum[low], cum[low + 1]))
+        v_ends = unit.sample(time_at_length(unit, ends))[1]
+        over = low[piece_max(low, v_ends[:low.size], v_ends[low.size:])
+                   > c[low] * (1.0 + 1e-12)]  # fmt: skip
+        if over.size:
+            return None, _splits(over, c, unit_cap, unit_of, first, k)
     piece_start = cum[:-1]
     # Times at which the path reaches each piece start (exact within a unit).
-    unit_of = np.repeat(np.arange(first.size), np.diff(bounds))
     t_start = time_at_length(unit, piece_start)
     t_start[first] = unit.piece_start_time_s
     t_start = np.maximum.accumulate(t_start)
     v_junction = np.empty(k + 1)
     v_junction[:-1] = unit.sample(t_start)[1]
     v_junction[bounds] = unit.junction_speeds_mm_s
-    # Largest speed on each piece: within a unit the speed rises to the peak, cruises and
-    # falls, so it is the peak where the piece touches the cruise, else the larger end.
-    v_s, v_e = unit.junction_speeds_mm_s[:-1], unit.junction_speeds_mm_s[1:]
-    v_p = unit.piece_peak_speed_mm_s
-    a_up, j_up = (lims[0], lims[1]) if not uniform else (inp.a_max_mm_s2, inp.j_max_mm_s3)
-    a_dn, j_dn = (lims[2], lims[3]) if not uniform else (inp.a_max_mm_s2, inp.j_max_mm_s3)
-    cruise_from = cum[bounds[:-1]] + scurve_distance_mm(v_s, v_p, a_up, j_up)
-    cruise_to = cum[bounds[1:]] - scurve_distance_mm(v_p, v_e, a_dn, j_dn)
-    lo = np.minimum(cruise_from, cruise_to)[unit_of]
-    hi = np.maximum(cruise_from, cruise_to)[unit_of]
-    at_peak = (piece_start <= hi) & (cum[1:] >= lo)
-    v_piece = np.where(at_peak, v_p[unit_of], np.maximum(v_junction[:-1], v_junction[1:]))
-    split = np.zeros(k + 1, dtype=bool)
-    over = np.flatnonzero(v_piece > c * (1.0 + 1e-12))
-    if over.size:
-        # A piece below its unit's cap before the unit's first piece at that cap (the rise)
-        # ends its unit (v ≤ its cap there, a = 0); after the last one (the descent) it
-        # starts a unit. Either way it then lies in a unit whose caps are ≤ its own.
-        idx = np.arange(k)
-        is_top = c == unit_cap[unit_of]
-        top_first = np.minimum.reduceat(np.where(is_top, idx, k), first)[unit_of]
-        top_last = np.maximum.reduceat(np.where(is_top, idx, -1), first)[unit_of]
-        # One split per unit and side per round, the one nearest the unit's end it
-        # approaches (the rise's first offender, the descent's last): its planning junction
-        # (a = 0 at its cap) often clears the other offenders of that side.
-        rise = over[over < top_first[over]]
-        rise = rise[np.unique(unit_of[rise], return_index=True)[1]]
-        fall = over[over > top_last[over]][::-1]
-        fall = fall[np.unique(unit_of[fall], return_index=True)[1]]
-        split[rise + 1] = True
-        split[fall] = True
-        if not (rise.size or fall.size):
-            raise PlanningError("feed profile: a piece at its unit's cap exceeds it (rounding)")
+    v_piece = piece_max(np.arange(k), v_junction[:-1], v_junction[1:])
     profile = Profile(
         total_length_mm=unit.total_length_mm,
         duration_s=unit.duration_s,
@@ -520,7 +513,35 @@ def _plan_units(inp: ProfileInput, key: np.ndarray) -> tuple[Profile, np.ndarray
         phase_jerk_mm_s3=unit.phase_jerk_mm_s3,
         phase_piece_index=_frozen(first[unit.phase_piece_index], dtype=np.int64),
     )
-    return profile, split
+    return profile, np.zeros(k + 1, dtype=bool)
+
+
+def _splits(over: np.ndarray, c: np.ndarray, unit_cap: np.ndarray, unit_of: np.ndarray,
+            first: np.ndarray, k: int) -> np.ndarray:  # fmt: skip
+    """The junctions (k+1, bool) that become planning junctions for the pieces ``over``
+    whose cap their unit's speed exceeds.
+
+    A piece before its unit's first piece at the unit's cap (on the rise) ends its unit
+    there (v ≤ its cap at that junction, a = 0); a piece after the last one (on the
+    descent) starts a unit. Either way it then lies in a unit whose caps are all ≤ its own
+    (the unit's caps rise, then fall). One split per unit and side per round, the one
+    nearest the end that side approaches (the rise's first offender, the descent's last):
+    its planning junction often clears the other offenders of that side.
+    """
+    idx = np.arange(k)
+    is_top = c == unit_cap[unit_of]
+    top_first = np.minimum.reduceat(np.where(is_top, idx, k), first)[unit_of]
+    top_last = np.maximum.reduceat(np.where(is_top, idx, -1), first)[unit_of]
+    rise = over[over < top_first[over]]
+    rise = rise[np.unique(unit_of[rise], return_index=True)[1]]
+    fall = over[over > top_last[over]][::-1]
+    fall = fall[np.unique(unit_of[fall], return_index=True)[1]]
+    if not (rise.size or fall.size):
+        raise PlanningError("feed profile: a piece at its unit's cap exceeds it (rounding)")
+    split = np.zeros(k + 1, dtype=bool)
+    split[rise + 1] = True
+    split[fall] = True
+    return split
 
 
 def time_at_length(profile: Profile, s_mm: np.ndarray) -> np.ndarray:
