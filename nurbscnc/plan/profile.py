@@ -34,20 +34,34 @@ one further on; the scans do not search for that: the result stays safe, not glo
 time-optimal.) A float guard in ``R`` and a final repair pass make ``D(v_i → v_{i+1}) ≤ L_i``
 hold in floating point too, so every piece has a cruise length ≥ 0.
 
-Decision: every S-curve starts and ends at zero acceleration, so the acceleration is zero at
-every junction and at both ends of every cruise. This is a little slower than carrying
-acceleration across junctions (a chain of short accelerating pieces pays ``A/J`` of jerk
-ramps per piece), but it keeps pieces independent, makes a junction a single speed number and
-makes every joint trivially continuous in ``v`` and ``a``.
+Planning units (issue 13, :func:`plan_profile`). The scans above run over *planning units*,
+not programmed pieces: every S-curve starts and ends at zero acceleration, so a junction of
+units is a single speed number and the joints are trivially continuous in ``v`` and ``a``;
+but a chain of short pieces planned one by one pays the ``A/J`` jerk ramps at every junction
+and never carries acceleration across one (on the 9 mm airfoil, 76 cells of 0.25 mm: 27 ms
+of its 0.489 s). So pieces are grouped into units between *planning junctions* — stops,
+junction caps below both neighbours' cruise caps (corners), the two ends of each valley of
+the cap staircase, and joints whose limits differ by more than :data:`LIMIT_MERGE_RATIO` —
+and each unit is planned as one piece with the largest of its pieces' caps and the smallest
+of their limits. Between planning junctions the caps rise and fall once, so a unit's speed
+(up, cruise, down) can only exceed the cap of a piece on its rising or falling flank; such a
+piece is made the end (rising flank) or the start (falling flank) of a unit and the plan is
+made again (a few rounds at most in practice; each round adds planning junctions, so it
+ends). A piece of a unit thus sees the unit's single S-curve, which passes it below its cap
+with non-zero acceleration: the descent into an airfoil's nose is one S-curve from the
+cruise down to the nose's cap, ending at the nose with ``a = 0`` (the time-optimal way to
+meet a constant cap), instead of a step per cell.
 
 Per-piece limits (planner v2). Each piece has its own acceleration and jerk limits, and may
 have separate ones for its descent (the S-curve from its peak down to its end speed: the
-contour check softens the deceleration into a stop without touching the rise). Because the
-acceleration is zero at every junction, every transition lies inside one piece and obeys
-that piece's limits: the backward scan uses each piece's descent limits, the forward scan
-its rise limits, the peak bisection both; at a junction only the jerk's sign changes, so
-both neighbours' limits hold there. The feasibility argument above is unchanged (it is per
-piece). Pieces are merged into one planning unit only when their limits are equal too.
+contour check softens the deceleration into a stop without touching the rise). A unit uses
+the smallest rise and descent limits of its pieces, so a transition obeys the limits of
+every piece it crosses; at a planning junction the acceleration is zero and only the jerk's
+sign may change, so both neighbours' limits hold there. The backward scan uses each unit's
+descent limits, the forward scan its rise limits, the peak bisection both. The feasibility
+argument above is unchanged (it is per unit). Decision: the smallest limit of a unit can be
+a little slower than a piece's own larger one where the transition does not cross the
+smaller-limit piece; limits that differ by more than a factor 2 keep their junction.
 
 The result, :class:`Profile`, holds the motion exactly: a list of phases of constant jerk,
 so ``s(t)`` is a cubic on each; :meth:`Profile.sample` evaluates it for any array of times.
@@ -100,10 +114,9 @@ class ProfileInput:
         separate limits (scalar or (k,)) for the *deceleration* within each piece (its
         S-curve down from the peak to the end speed); the others then limit its rise.
 
-    Where the limits apply: every speed transition lies inside one piece (the acceleration
-    is zero at every junction, see the module docstring), so a transition obeys the limits
-    of the piece it lies in, and a junction, where the acceleration is zero and only the
-    jerk's sign may change, respects both neighbours' limits.
+    Where the limits apply: every speed transition lies inside one planning unit and obeys
+    the smallest limits of the unit's pieces (see the module docstring); at a planning
+    junction the acceleration is zero and only the jerk's sign may change.
     """
 
     length_mm: np.ndarray
@@ -395,21 +408,19 @@ def _key_junctions(inp: ProfileInput) -> np.ndarray:
     # junction counts as −inf (a run next to a stop is not a valley: the stop's own
     # junction is already a planning junction, and a staircase rising from it is one unit).
     step = key[1:-1] | (left != right)  # junction i+1 separates two runs
-    run = np.concatenate(([0], np.cumsum(step)))  # run label of each piece
     bounds = np.flatnonzero(np.concatenate(([True], step, [True])))  # run boundaries
     run_cap = c[bounds[:-1]]
     n = run_cap.size
     if n < 3:
         return key
-    lower_left = np.full(n, -np.inf)
-    lower_right = np.full(n, -np.inf)
+    left_cap = np.full(n, -np.inf)
+    right_cap = np.full(n, -np.inf)
     soft = ~key[bounds[1:-1]]  # between run r and r+1 with no planning junction
-    lower_left[1:] = np.where(soft, run_cap[:-1], -np.inf)
-    lower_right[:-1] = np.where(soft, run_cap[1:], -np.inf)
-    valley = (lower_left > run_cap) & (lower_right > run_cap)
+    left_cap[1:] = np.where(soft, run_cap[:-1], -np.inf)
+    right_cap[:-1] = np.where(soft, run_cap[1:], -np.inf)
+    valley = (left_cap > run_cap) & (right_cap > run_cap)
     key[bounds[:-1][valley]] = True
     key[bounds[1:][valley]] = True
-    del run
     return key
 
 
