@@ -186,3 +186,30 @@ def test_random_staircases_keep_every_limit_and_cap(case):
     if np.all(a1 == A) and np.all(j2 == J):
         per_piece = plan_profile_pieces(inp)
         assert prof.duration_s <= per_piece.duration_s * (1 + 1e-9) + 1e-12
+
+
+def test_long_smooth_staircase_needs_few_rounds(monkeypatch):
+    """A cap staircase of 2 × 1000 pieces (58 → 2 → 58 mm/s, 0.05 mm each): a round per
+    step would re-plan a thousand times; after SPLIT_ONE_ROUNDS rounds every offender is
+    split at once, so it takes a handful of rounds, keeps every cap on the samples and is
+    faster than the per-piece plan (which stops accelerating at every junction)."""
+    from nurbscnc.plan import profile as prof_mod
+
+    calls = []
+    real = prof_mod._plan_units
+
+    def counted(*args, **kwargs):
+        calls.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(prof_mod, "_plan_units", counted)
+    down = np.linspace(58.0, 2.0, 1000)
+    caps = np.concatenate((down, down[::-1]))
+    lengths = np.full(caps.size, 0.05)
+    inp = _inp(lengths, caps)
+    prof = plan_profile(inp)
+    assert len(calls) <= prof_mod.SPLIT_ONE_ROUNDS + 3
+    t = np.linspace(0.0, prof.duration_s, 200001)
+    _, vel, _, _, piece = prof.sample(t)
+    assert np.all(vel <= caps[piece] * (1 + 1e-9))
+    assert prof.duration_s < 0.95 * plan_profile_pieces(inp).duration_s

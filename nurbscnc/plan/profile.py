@@ -381,6 +381,9 @@ def _repair_junctions(v: np.ndarray, length: np.ndarray, a, j, a_dn=None,
 #: ratio (smaller / larger) stays a planning junction; below it the pieces may share one
 #: planning unit, planned with the smaller limits (see :func:`plan_profile`).
 LIMIT_MERGE_RATIO = 0.5
+#: Rounds of :func:`plan_profile` that split one offending piece per unit and flank (the
+#: least restrictive choice) before every offender is split at once.
+SPLIT_ONE_ROUNDS = 3
 
 
 def _key_junctions(inp: ProfileInput) -> np.ndarray:
@@ -446,18 +449,23 @@ def plan_profile(inp: ProfileInput) -> Profile:
         # every piece a planning unit then.
         return plan_profile_pieces(inp)
     key = _key_junctions(inp)
+    rounds = 0
     while not key.all():
-        profile, split = _plan_units(inp, key)
+        profile, split = _plan_units(inp, key, every=rounds >= SPLIT_ONE_ROUNDS)
         if profile is not None:
             return profile
         key |= split
+        rounds += 1
     return plan_profile_pieces(inp)
 
 
-def _plan_units(inp: ProfileInput, key: np.ndarray) -> tuple[Profile | None, np.ndarray]:
+def _plan_units(inp: ProfileInput, key: np.ndarray,
+                every: bool = False) -> tuple[Profile | None, np.ndarray]:  # fmt: skip
     """The profile with the planning units between the junctions ``key`` (k+1,), reported
     per piece, and the junctions (k+1, bool) that must become planning junctions because a
-    unit's speed exceeds one of its pieces' caps (then the profile is None: not valid)."""
+    unit's speed exceeds one of its pieces' caps (then the profile is None: not valid);
+    ``every``: split at every offending piece, not one per unit and flank
+    (:func:`_splits`)."""
     k = inp.piece_count
     c = np.asarray(inp.v_max_mm_s)
     jcap = np.asarray(inp.v_junction_max_mm_s)
@@ -499,7 +507,7 @@ def _plan_units(inp: ProfileInput, key: np.ndarray) -> tuple[Profile | None, np.
         over = low[piece_max(low, v_ends[:low.size], v_ends[low.size:])
                    > c[low] * (1.0 + 1e-12)]  # fmt: skip
         if over.size:
-            return None, _splits(over, c, unit_cap, unit_of, first, k)
+            return None, _splits(over, c, unit_cap, unit_of, first, k, every)
     piece_start = cum[:-1]
     # Times at which the path reaches each piece start (exact within a unit).
     t_start = time_at_length(unit, piece_start)
@@ -528,7 +536,7 @@ def _plan_units(inp: ProfileInput, key: np.ndarray) -> tuple[Profile | None, np.
 
 
 def _splits(over: np.ndarray, c: np.ndarray, unit_cap: np.ndarray, unit_of: np.ndarray,
-            first: np.ndarray, k: int) -> np.ndarray:  # fmt: skip
+            first: np.ndarray, k: int, every: bool = False) -> np.ndarray:  # fmt: skip
     """The junctions (k+1, bool) that become planning junctions for the pieces ``over``
     whose cap their unit's speed exceeds.
 
@@ -537,16 +545,19 @@ def _splits(over: np.ndarray, c: np.ndarray, unit_cap: np.ndarray, unit_of: np.n
     descent) starts a unit. Either way it then lies in a unit whose caps are all ≤ its own
     (the unit's caps rise, then fall). One split per unit and side per round, the one
     nearest the end that side approaches (the rise's first offender, the descent's last):
-    its planning junction often clears the other offenders of that side.
+    its planning junction often clears the other offenders of that side. With ``every``
+    (after :data:`SPLIT_ONE_ROUNDS` rounds: a long smooth staircase would otherwise take a
+    round per step) every offender is split at once.
     """
     idx = np.arange(k)
     is_top = c == unit_cap[unit_of]
     top_first = np.minimum.reduceat(np.where(is_top, idx, k), first)[unit_of]
     top_last = np.maximum.reduceat(np.where(is_top, idx, -1), first)[unit_of]
     rise = over[over < top_first[over]]
-    rise = rise[np.unique(unit_of[rise], return_index=True)[1]]
     fall = over[over > top_last[over]][::-1]
-    fall = fall[np.unique(unit_of[fall], return_index=True)[1]]
+    if not every:
+        rise = rise[np.unique(unit_of[rise], return_index=True)[1]]
+        fall = fall[np.unique(unit_of[fall], return_index=True)[1]]
     if not (rise.size or fall.size):
         raise PlanningError("feed profile: a piece at its unit's cap exceeds it (rounding)")
     split = np.zeros(k + 1, dtype=bool)
