@@ -34,20 +34,34 @@ one further on; the scans do not search for that: the result stays safe, not glo
 time-optimal.) A float guard in ``R`` and a final repair pass make ``D(v_i → v_{i+1}) ≤ L_i``
 hold in floating point too, so every piece has a cruise length ≥ 0.
 
-Decision: every S-curve starts and ends at zero acceleration, so the acceleration is zero at
-every junction and at both ends of every cruise. This is a little slower than carrying
-acceleration across junctions (a chain of short accelerating pieces pays ``A/J`` of jerk
-ramps per piece), but it keeps pieces independent, makes a junction a single speed number and
-makes every joint trivially continuous in ``v`` and ``a``.
+Planning units (issue 13, :func:`plan_profile`). The scans above run over *planning units*,
+not programmed pieces: every S-curve starts and ends at zero acceleration, so a junction of
+units is a single speed number and the joints are trivially continuous in ``v`` and ``a``;
+but a chain of short pieces planned one by one pays the ``A/J`` jerk ramps at every junction
+and never carries acceleration across one (on the 9 mm airfoil, 76 cells of 0.25 mm: 27 ms
+of its 0.489 s). So pieces are grouped into units between *planning junctions* — stops,
+junction caps below both neighbours' cruise caps (corners), the two ends of each valley of
+the cap staircase, and joints whose limits differ by more than :data:`LIMIT_MERGE_RATIO` —
+and each unit is planned as one piece with the largest of its pieces' caps and the smallest
+of their limits. Between planning junctions the caps rise and fall once, so a unit's speed
+(up, cruise, down) can only exceed the cap of a piece on its rising or falling flank; such a
+piece is made the end (rising flank) or the start (falling flank) of a unit and the plan is
+made again (a few rounds at most in practice; each round adds planning junctions, so it
+ends). A piece of a unit thus sees the unit's single S-curve, which passes it below its cap
+with non-zero acceleration: the descent into an airfoil's nose is one S-curve from the
+cruise down to the nose's cap, ending at the nose with ``a = 0`` (the time-optimal way to
+meet a constant cap), instead of a step per cell.
 
 Per-piece limits (planner v2). Each piece has its own acceleration and jerk limits, and may
 have separate ones for its descent (the S-curve from its peak down to its end speed: the
-contour check softens the deceleration into a stop without touching the rise). Because the
-acceleration is zero at every junction, every transition lies inside one piece and obeys
-that piece's limits: the backward scan uses each piece's descent limits, the forward scan
-its rise limits, the peak bisection both; at a junction only the jerk's sign changes, so
-both neighbours' limits hold there. The feasibility argument above is unchanged (it is per
-piece). Pieces are merged into one planning unit only when their limits are equal too.
+contour check softens the deceleration into a stop without touching the rise). A unit uses
+the smallest rise and descent limits of its pieces, so a transition obeys the limits of
+every piece it crosses; at a planning junction the acceleration is zero and only the jerk's
+sign may change, so both neighbours' limits hold there. The backward scan uses each unit's
+descent limits, the forward scan its rise limits, the peak bisection both. The feasibility
+argument above is unchanged (it is per unit). Decision: the smallest limit of a unit can be
+a little slower than a piece's own larger one where the transition does not cross the
+smaller-limit piece; limits that differ by more than a factor 2 keep their junction.
 
 The result, :class:`Profile`, holds the motion exactly: a list of phases of constant jerk,
 so ``s(t)`` is a cubic on each; :meth:`Profile.sample` evaluates it for any array of times.
@@ -100,10 +114,9 @@ class ProfileInput:
         separate limits (scalar or (k,)) for the *deceleration* within each piece (its
         S-curve down from the peak to the end speed); the others then limit its rise.
 
-    Where the limits apply: every speed transition lies inside one piece (the acceleration
-    is zero at every junction, see the module docstring), so a transition obeys the limits
-    of the piece it lies in, and a junction, where the acceleration is zero and only the
-    jerk's sign may change, respects both neighbours' limits.
+    Where the limits apply: every speed transition lies inside one planning unit and obeys
+    the smallest limits of the unit's pieces (see the module docstring); at a planning
+    junction the acceleration is zero and only the jerk's sign may change.
     """
 
     length_mm: np.ndarray
@@ -364,73 +377,193 @@ def _repair_junctions(v: np.ndarray, length: np.ndarray, a, j, a_dn=None,
     return v
 
 
+#: A junction between two pieces whose acceleration or jerk limits differ by more than this
+#: ratio (smaller / larger) stays a planning junction; below it the pieces may share one
+#: planning unit, planned with the smaller limits (see :func:`plan_profile`).
+LIMIT_MERGE_RATIO = 0.5
+#: Rounds of :func:`plan_profile` that split one offending piece per unit and flank (the
+#: least restrictive choice) before every offender is split at once.
+SPLIT_ONE_ROUNDS = 3
+
+
+def _key_junctions(inp: ProfileInput) -> np.ndarray:
+    """(k+1,) bool: the junctions that stay planning junctions (zero acceleration there).
+
+    Both ends; every junction whose own cap is below both neighbouring cruise caps (an exact
+    stop, a corner); where the limits of the two pieces differ by more than
+    :data:`LIMIT_MERGE_RATIO`; and both ends of every *valley*: a run of equal-cap pieces
+    whose neighbouring runs (across junctions that are not already planning junctions) both
+    have higher caps. Between two planning junctions the caps then rise and fall once
+    (unimodal staircase), so a unit's single S-curve up and single S-curve down meet the
+    caps or are split by :func:`_cap_violations`.
+    """
+    k = inp.piece_count
+    c = np.asarray(inp.v_max_mm_s)
+    jcap = np.asarray(inp.v_junction_max_mm_s)
+    key = np.ones(k + 1, dtype=bool)
+    left, right = c[:-1], c[1:]
+    inner = jcap[1:-1] >= np.minimum(left, right)
+    for x in inp.piece_limits():
+        lo, hi = np.minimum(x[:-1], x[1:]), np.maximum(x[:-1], x[1:])
+        inner &= lo >= LIMIT_MERGE_RATIO * hi
+    key[1:-1] = ~inner
+    # Runs of equal caps between planning junctions; a run's neighbour across a planning
+    # junction counts as −inf (a run next to a stop is not a valley: the stop's own
+    # junction is already a planning junction, and a staircase rising from it is one unit).
+    step = key[1:-1] | (left != right)  # junction i+1 separates two runs
+    bounds = np.flatnonzero(np.concatenate(([True], step, [True])))  # run boundaries
+    run_cap = c[bounds[:-1]]
+    n = run_cap.size
+    if n < 3:
+        return key
+    left_cap = np.full(n, -np.inf)
+    right_cap = np.full(n, -np.inf)
+    soft = ~key[bounds[1:-1]]  # between run r and r+1 with no planning junction
+    left_cap[1:] = np.where(soft, run_cap[:-1], -np.inf)
+    right_cap[:-1] = np.where(soft, run_cap[1:], -np.inf)
+    valley = (left_cap > run_cap) & (right_cap > run_cap)
+    key[bounds[:-1][valley]] = True
+    key[bounds[1:][valley]] = True
+    return key
+
+
 def plan_profile(inp: ProfileInput) -> Profile:
     """Plan the jerk-limited feed profile of ``inp`` (SPEC §7; see the module docstring).
 
-    Consecutive pieces with the same cruise cap whose junction does not constrain the speed
-    (its cap ≥ that cruise cap) are planned as ONE piece: the S-curve puts zero acceleration
-    at every planned junction, and a chain of short cells of one curve would otherwise
-    accelerate in small steps. The result is reported per original piece (start times found
-    by inverting s(t) at the piece boundaries), so callers never see the merging.
+    Acceleration is carried across the junctions where the path is smooth: pieces are
+    grouped into *planning units* between planning junctions (:func:`_key_junctions`:
+    stops, corner caps, valleys of the cap staircase, large changes of the limits), each
+    unit planned as one piece (S-curve up, cruise, S-curve down; limits the smallest of its
+    pieces'; cruise cap the largest of its pieces' caps). A unit whose speed then exceeds
+    the cap of one of its pieces is split at that piece (:func:`_cap_violations`) and the
+    whole plan is made again, until every piece's cap holds; each round adds a planning
+    junction, so this ends (at worst with every junction one, :func:`plan_profile_pieces`).
+    A run of equal caps is one unit from the start, as is an airfoil's descent from its
+    cruise into the nose where the S-curve meets the staircase of the nose cells' caps.
+    The result is reported per original piece (start times found by inverting s(t) at the
+    piece boundaries), so callers never see the grouping.
     """
     k = inp.piece_count
     if k < 2 or inp.lookahead_pieces is not None:
         # A bounded look-ahead counts programmed pieces (a controller's block buffer): keep
         # every piece a planning unit then.
         return plan_profile_pieces(inp)
-    v_max = np.asarray(inp.v_max_mm_s)
+    key = _key_junctions(inp)
+    rounds = 0
+    while not key.all():
+        profile, split = _plan_units(inp, key, every=rounds >= SPLIT_ONE_ROUNDS)
+        if profile is not None:
+            return profile
+        key |= split
+        rounds += 1
+    return plan_profile_pieces(inp)
+
+
+def _plan_units(inp: ProfileInput, key: np.ndarray,
+                every: bool = False) -> tuple[Profile | None, np.ndarray]:  # fmt: skip
+    """The profile with the planning units between the junctions ``key`` (k+1,), reported
+    per piece, and the junctions (k+1, bool) that must become planning junctions because a
+    unit's speed exceeds one of its pieces' caps (then the profile is None: not valid);
+    ``every``: split at every offending piece, not one per unit and flank
+    (:func:`_splits`)."""
+    k = inp.piece_count
+    c = np.asarray(inp.v_max_mm_s)
     jcap = np.asarray(inp.v_junction_max_mm_s)
-    inner = np.arange(1, k)
-    transparent = (v_max[inner - 1] == v_max[inner]) & (jcap[inner] >= v_max[inner])
-    lims = inp.piece_limits()
-    for x in lims:  # merged pieces share one set of limits
-        transparent &= x[inner - 1] == x[inner]
-    if not transparent.any():
-        return plan_profile_pieces(inp)
-    # Group g holds pieces first[g] .. first[g+1]-1.
-    first = np.concatenate(([0], inner[~transparent], [k]))
-    lengths = np.asarray(inp.length_mm)
-    cum = np.concatenate(([0.0], np.cumsum(lengths)))
-    heads = first[:-1]
-    uniform = inp.uniform_limits
-    merged = ProfileInput(
-        cum[first[1:]] - cum[first[:-1]],
-        v_max[heads],
-        jcap[first],
-        inp.a_max_mm_s2 if uniform else lims[0][heads],
-        inp.j_max_mm_s3 if uniform else lims[1][heads],
-        lookahead_pieces=inp.lookahead_pieces,
-        a_decel_mm_s2=None if uniform else lims[2][heads],
-        j_decel_mm_s3=None if uniform else lims[3][heads],
-    )
-    g = plan_profile_pieces(merged)
+    first = np.flatnonzero(key[:-1])  # the first piece of each unit
+    bounds = np.append(first, k)
+    cum = np.concatenate(([0.0], np.cumsum(inp.length_mm)))
+    unit_cap = np.maximum.reduceat(c, first)
+    jcap_unit = jcap[bounds].copy()
+    inner = bounds[1:-1]
+    jcap_unit[1:-1] = np.minimum(jcap_unit[1:-1], np.minimum(c[inner - 1], c[inner]))
+    if inp.uniform_limits:
+        a_up = a_dn = inp.a_max_mm_s2
+        j_up = j_dn = inp.j_max_mm_s3
+    else:
+        a_up, j_up, a_dn, j_dn = (np.minimum.reduceat(x, first) for x in inp.piece_limits())
+    unit = plan_profile_pieces(ProfileInput(cum[bounds[1:]] - cum[bounds[:-1]], unit_cap,
+                                            jcap_unit, a_up, j_up, a_decel_mm_s2=a_dn,
+                                            j_decel_mm_s3=j_dn))  # fmt: skip
+    unit_of = np.repeat(np.arange(first.size), np.diff(bounds))
+    # Within a unit the speed rises to its peak v_p, cruises over [cruise_from, cruise_to]
+    # and falls, so the largest speed on a piece is v_p where the piece touches the cruise,
+    # else the larger of its end speeds. Only pieces below their unit's cap can exceed it.
+    v_s, v_e = unit.junction_speeds_mm_s[:-1], unit.junction_speeds_mm_s[1:]
+    v_p = unit.piece_peak_speed_mm_s
+    cruise_from = cum[bounds[:-1]] + scurve_distance_mm(v_s, v_p, a_up, j_up)
+    cruise_to = cum[bounds[1:]] - scurve_distance_mm(v_p, v_e, a_dn, j_dn)
+    lo = np.minimum(cruise_from, cruise_to)
+    hi = np.maximum(cruise_from, cruise_to)
+
+    def piece_max(idx: np.ndarray, v_start: np.ndarray, v_end: np.ndarray) -> np.ndarray:
+        u = unit_of[idx]
+        at_peak = (cum[idx] <= hi[u]) & (cum[idx + 1] >= lo[u])
+        return np.where(at_peak, v_p[u], np.maximum(v_start, v_end))
+
+    low = np.flatnonzero(c < unit_cap[unit_of])
+    if low.size:
+        ends = np.concatenate((cum[low], cum[low + 1]))
+        v_ends = unit.sample(time_at_length(unit, ends))[1]
+        over = low[piece_max(low, v_ends[:low.size], v_ends[low.size:])
+                   > c[low] * (1.0 + 1e-12)]  # fmt: skip
+        if over.size:
+            return None, _splits(over, c, unit_cap, unit_of, first, k, every)
     piece_start = cum[:-1]
-    # Times at which the path reaches each piece start (exact within a merged piece).
-    t_start = time_at_length(g, piece_start)
-    group_of = np.repeat(np.arange(first.size - 1), np.diff(first))
-    is_first = np.zeros(k, dtype=bool)
-    is_first[first[:-1]] = True
-    t_start = np.where(is_first, g.piece_start_time_s[group_of], t_start)
+    # Times at which the path reaches each piece start (exact within a unit).
+    t_start = time_at_length(unit, piece_start)
+    t_start[first] = unit.piece_start_time_s
     t_start = np.maximum.accumulate(t_start)
     v_junction = np.empty(k + 1)
-    v_junction[:-1] = g.sample(t_start)[1]
-    v_junction[first] = g.junction_speeds_mm_s
-    v_junction[-1] = 0.0
-    return Profile(
-        total_length_mm=g.total_length_mm,
-        duration_s=g.duration_s,
+    v_junction[:-1] = unit.sample(t_start)[1]
+    v_junction[bounds] = unit.junction_speeds_mm_s
+    v_piece = piece_max(np.arange(k), v_junction[:-1], v_junction[1:])
+    profile = Profile(
+        total_length_mm=unit.total_length_mm,
+        duration_s=unit.duration_s,
         junction_speeds_mm_s=_frozen(v_junction),
-        piece_peak_speed_mm_s=_frozen(g.piece_peak_speed_mm_s[group_of]),
+        piece_peak_speed_mm_s=_frozen(np.minimum(v_piece, c)),
         piece_start_mm=_frozen(piece_start),
         piece_start_time_s=_frozen(t_start),
-        phase_start_time_s=g.phase_start_time_s,
-        phase_duration_s=g.phase_duration_s,
-        phase_s0_mm=g.phase_s0_mm,
-        phase_v0_mm_s=g.phase_v0_mm_s,
-        phase_a0_mm_s2=g.phase_a0_mm_s2,
-        phase_jerk_mm_s3=g.phase_jerk_mm_s3,
-        phase_piece_index=_frozen(first[:-1][g.phase_piece_index], dtype=np.int64),
+        phase_start_time_s=unit.phase_start_time_s,
+        phase_duration_s=unit.phase_duration_s,
+        phase_s0_mm=unit.phase_s0_mm,
+        phase_v0_mm_s=unit.phase_v0_mm_s,
+        phase_a0_mm_s2=unit.phase_a0_mm_s2,
+        phase_jerk_mm_s3=unit.phase_jerk_mm_s3,
+        phase_piece_index=_frozen(first[unit.phase_piece_index], dtype=np.int64),
     )
+    return profile, np.zeros(k + 1, dtype=bool)
+
+
+def _splits(over: np.ndarray, c: np.ndarray, unit_cap: np.ndarray, unit_of: np.ndarray,
+            first: np.ndarray, k: int, every: bool = False) -> np.ndarray:  # fmt: skip
+    """The junctions (k+1, bool) that become planning junctions for the pieces ``over``
+    whose cap their unit's speed exceeds.
+
+    A piece before its unit's first piece at the unit's cap (on the rise) ends its unit
+    there (v ≤ its cap at that junction, a = 0); a piece after the last one (on the
+    descent) starts a unit. Either way it then lies in a unit whose caps are all ≤ its own
+    (the unit's caps rise, then fall). One split per unit and side per round, the one
+    nearest the end that side approaches (the rise's first offender, the descent's last):
+    its planning junction often clears the other offenders of that side. With ``every``
+    (after :data:`SPLIT_ONE_ROUNDS` rounds: a long smooth staircase would otherwise take a
+    round per step) every offender is split at once.
+    """
+    idx = np.arange(k)
+    is_top = c == unit_cap[unit_of]
+    top_first = np.minimum.reduceat(np.where(is_top, idx, k), first)[unit_of]
+    top_last = np.maximum.reduceat(np.where(is_top, idx, -1), first)[unit_of]
+    rise = over[over < top_first[over]]
+    fall = over[over > top_last[over]][::-1]
+    if not every:
+        rise = rise[np.unique(unit_of[rise], return_index=True)[1]]
+        fall = fall[np.unique(unit_of[fall], return_index=True)[1]]
+    if not (rise.size or fall.size):
+        raise PlanningError("feed profile: a piece at its unit's cap exceeds it (rounding)")
+    split = np.zeros(k + 1, dtype=bool)
+    split[rise + 1] = True
+    split[fall] = True
+    return split
 
 
 def time_at_length(profile: Profile, s_mm: np.ndarray) -> np.ndarray:
