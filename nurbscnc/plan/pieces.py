@@ -33,7 +33,12 @@ from nurbscnc.geometry.nurbs import NurbsCurve
 from nurbscnc.geometry.path import STOP_KINDS, Kind, PathTable, ph_power_rows, stop_seconds
 from nurbscnc.geometry.paths import ArcGeometry, LineGeometry, geometry_of
 from nurbscnc.geometry.ph import PHQuintic
-from nurbscnc.machine.caps import MIN_CAP_MM_S, corner_cap_mm_s, curvature_cap_mm_s
+from nurbscnc.machine.caps import (
+    MIN_CAP_MM_S,
+    corner_cap_mm_s,
+    curvature_cap_mm_s,
+    junction_jump_cap_mm_s,
+)
 from nurbscnc.machine.profile import Machine
 from nurbscnc.plan.corners import CornerAction, CornerLog, CornerWhy, find_corner_regions
 from nurbscnc.plan.naive import merge_collinear
@@ -230,6 +235,13 @@ class PieceList(Sequence):
     objects: dict = field(default_factory=dict)
     #: Every corner and what the planner did there (:class:`~nurbscnc.plan.corners.CornerLog`).
     corners: CornerLog = field(default_factory=CornerLog.empty)
+    #: Junctions where the curvature vector jumps (:func:`curvature_jumps`): ``jump_rows``
+    #: (m,) junction j between rows j and j + 1, ``jump_kn`` (m, 3) the jump Δ(κn) [1/mm],
+    #: ``jump_cap_mm_s`` (m,) the speed cap there
+    #: (:func:`~nurbscnc.machine.caps.junction_jump_cap_mm_s`), applied by :func:`junction_caps`.
+    jump_rows: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    jump_kn: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    jump_cap_mm_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @classmethod
     def of(cls, pieces: Sequence[Piece]) -> PieceList:
@@ -521,7 +533,55 @@ def segment_pieces(segments, machine: Machine, options: PlanOptions | None = Non
         turning, regular = _turning(pieces)
         pieces.pass_after[:-1] = _small_break(pieces, turning, regular, machine)
     pieces, tried = apply_blends(pieces, machine)
-    return dc_replace(pieces, corners=corner_log(pieces, tried, machine, options))
+    rows, dkn = curvature_jumps(pieces)
+    cap = junction_jump_cap_mm_s(dkn, machine.servo.period_s, lim.j_max_mm_s3,
+                                 machine.axis_limits.as_arrays()[2])  # fmt: skip
+    return dc_replace(pieces, corners=corner_log(pieces, tried, machine, options),
+                      jump_rows=rows, jump_kn=dkn, jump_cap_mm_s=cap)  # fmt: skip
+
+
+#: Curvature-vector jumps below this [1/mm] are rounding (the cells of one NURBS, an arc cut
+#: by a blend): no junction cap (at 58 mm/s it would be 2.6e5 mm/s).
+MIN_JUMP_PER_MM = 1e-9
+
+
+def curvature_jumps(pieces: PieceList) -> tuple[np.ndarray, np.ndarray]:
+    """Junctions passed at speed (not stops) where the curvature vector κn jumps: their
+    indices j (m,) (between rows j and j + 1) and the jumps Δ(κn) = (κn)_start(j+1) −
+    (κn)_end(j) (m, 3) [1/mm], those above :data:`MIN_JUMP_PER_MM`. κn = (C″ − (C″·t) t) /
+    |C′|² at the pieces' parameter ends (exact). Lines and the columnar line–line blends (G2
+    with their lines: κ = 0 at both ends) have κn = 0 there, so only junctions next to an
+    object row (arc, NURBS cell, PH piece) are evaluated, the pieces of one geometry in one
+    call. A cusp (C′ = 0) gives κn = 0: such a junction is a stop anyway."""
+    k = len(pieces)
+    obj = np.array(sorted(pieces.objects), dtype=np.int64)
+    if k < 2 or obj.size == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros((0, 3))
+    kn_start, kn_end = np.zeros((k, 3)), np.zeros((k, 3))
+    by_geometry: dict[int, list[int]] = {}
+    for r in obj.tolist():
+        by_geometry.setdefault(id(pieces.objects[r][0]), []).append(r)
+    for rows in by_geometry.values():
+        g = pieces.objects[rows[0]][0]
+        u = np.array([pieces.objects[r][1] for r in rows] + [pieces.objects[r][2] for r in rows])
+        d = g.derivatives(u, 2)
+        d1, d2 = d[1], d[2]
+        sp2 = np.einsum("ij,ij->i", d1, d1)
+        ok = sp2 > 0.0
+        safe = np.where(ok, sp2, 1.0)
+        t = d1 / np.sqrt(safe)[:, None]
+        kn = np.where(ok[:, None], (d2 - np.einsum("ij,ij->i", d2, t)[:, None] * t)
+                      / safe[:, None], 0.0)  # fmt: skip
+        n = len(rows)
+        kn_start[rows], kn_end[rows] = kn[:n], kn[n:]
+    near = np.zeros(k, dtype=bool)
+    near[obj] = True
+    turning, regular = _turning(pieces)
+    moving = _passable(pieces, turning, regular) & ~_stopped(pieces)  # passed at speed
+    j = np.flatnonzero((near[:-1] | near[1:]) & moving)
+    dkn = kn_start[j + 1] - kn_end[j]
+    big = np.sqrt(np.einsum("ij,ij->i", dkn, dkn)) > MIN_JUMP_PER_MM
+    return j[big], dkn[big]
 
 
 def blend_override(seg, options: PlanOptions) -> float:
@@ -1034,4 +1094,7 @@ def junction_caps(pieces: PieceList) -> np.ndarray:
     smooth = _passable(pieces, turning, regular) & ~_stopped(pieces)
     cap = pieces.v_cap_mm_s
     caps[1:-1] = np.where(smooth, np.minimum(cap[:-1], cap[1:]), 0.0)
+    # Curvature jumps passed at speed: the acceleration step's jerk (junction_jump_cap_mm_s).
+    j = pieces.jump_rows + 1
+    caps[j] = np.minimum(caps[j], pieces.jump_cap_mm_s)
     return caps
