@@ -118,7 +118,9 @@ class Piece:
 def nurbs_pieces(seg, index: int, machine: Machine, options: PlanOptions) -> list[Piece]:
     """A NURBS segment as pieces: PH corner pieces and capped NURBS stretches."""
     lim = machine.limits
-    curve = NurbsCurve.from_segment(seg)
+    # A hook of rounding at an end (a control leg of 1e-6 mm turning back) is removed within
+    # the chord tolerance δ: the small-break rule's bound on how far a passed break may cut.
+    curve = NurbsCurve.from_segment(seg).without_end_hooks(lim.chord_tolerance_mm)
     feed = min(seg.feed_mm_s, lim.v_max_mm_s)
     kth = lim.a_max_mm_s2 / (feed * feed)
     regions = find_corner_regions(curve, kth)
