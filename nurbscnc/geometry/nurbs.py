@@ -716,11 +716,12 @@ class NurbsCurve:
         leaves its end in one direction and turns round within |P1 − P0| — what rounding
         does to a least-squares fit whose P1 should sit on P0 (a sharp trailing edge as
         G5.2 with 6-decimal control points: a 1e-6 mm leg, curvature 4e8 /mm, crawled at
-        √(A/κ) = 2.6 µm/s). The hook is removed by moving P1 onto P0: the curve then leaves
-        P0 along P2 − P0 (a doubled control point: C′ = 0 at the end, where the tool is at
-        rest anyway or the planner stops). The curve moves by |P1 − P0| · R1(u) ≤ |P1 − P0|
-        (R1 the rational basis function of P1, ≤ 1); the change is made only when that bound,
-        taken over samples of R1's support, is within ``max_deviation_mm`` [mm].
+        √(A/κ) = 2.6 µm/s). The hook is removed by moving P1 onto the ray from P0 towards P2,
+        ℓ = min(0.9·tol / max R1 − |P1 − P0|, |P2 − P0|/3) from P0: the curve then leaves P0
+        along P2 − P0 with zero curvature (C′ ∥ C″ there), regular. It moves by
+        |ΔP1| · R1(u) ≤ (|P1 − P0| + ℓ) max R1 ≤ 0.9 ``max_deviation_mm`` [mm] (R1 the rational
+        basis function of P1, its maximum taken over 257 samples of its support); no change
+        where |P1 − P0| alone exceeds that.
         """
         p, ctrl = self.degree, np.array(self.control_points_mm)
         n = ctrl.shape[0]
@@ -742,8 +743,13 @@ class NurbsCurve:
             r = np.where((col >= 0) & (col <= p),
                          basis[np.arange(u.size), np.clip(col, 0, p)] * w[inner]
                          / np.sum(basis * w[idx], axis=1), 0.0)  # fmt: skip
-            if size * float(r.max()) <= max_deviation_mm:
-                ctrl[inner] = ctrl[end]
+            # P1 onto the ray P0 → P2, as far as the deviation allows (at most a third of
+            # |P2 − P0|): |ΔP1| ≤ |P1 − P0| + ℓ, times max R1 ≤ 0.9 of the tolerance.
+            room = 0.9 * max_deviation_mm / float(r.max()) - size
+            chord = ctrl[nxt] - ctrl[end]
+            far = float(np.linalg.norm(chord))
+            if room > 0.0 and far > 0.0:
+                ctrl[inner] = ctrl[end] + min(room, far / 3.0) * chord / far
                 changed = True
         if not changed:
             return self
