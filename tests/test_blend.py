@@ -598,7 +598,9 @@ def test_planner_blends_3d_turns_within_p():
     from nurbscnc.program.interpret import interpret_text
     from tests.test_wholeprograms import distance_to_path, programmed_path
 
-    text = ("G21 G90 G17 G64 P0.02\nG0 X2 Y-1 Z16\nF3000\nG2 I0 J7 X9 Y6 Z13\n"
+    # F300: slow enough that the helix blend, capped for the servo (servo_blend_cap_mm_s),
+    # beats a stop; at F3000 the corner stops (stop_faster).
+    text = ("G21 G90 G17 G64 P0.02\nG0 X2 Y-1 Z16\nF300\nG2 I0 J7 X9 Y6 Z13\n"
             "G1 X15 Y6 Z10\nG1 X20 Y10 Z10\nM2\n")  # fmt: skip
     prog = interpret_text(text)
     r = run_program(prog, load_machine(), RunOptions(lookahead=LookaheadOptions(dynamics="off")))
@@ -615,3 +617,15 @@ def test_planner_blends_3d_turns_within_p():
     normal /= np.linalg.norm(normal)
     assert np.abs((on_ph - [15.0, 6.0, 10.0]) @ normal).max() <= 1e-9
     assert distance_to_path(pts, programmed_path(prog), reach=1.0).max() <= 0.02 + 1e-6
+
+
+def test_servo_blend_cap_is_the_steady_circle_error_bound():
+    # SPEC §8: on a circle the paper's servo path grows by 2.85e-5 s² · v²κ; a space blend's
+    # cap keeps that within ε_max/2: v = √(7.5e-3 mm / (2.85e-5 s² · κ)).
+    from nurbscnc.machine.profile import load_machine
+    from nurbscnc.plan.pieces import servo_blend_cap_mm_s
+
+    m = load_machine()
+    for kappa in (0.5, 22.0, 300.0):
+        expect = np.sqrt(0.5 * m.limits.contour_tolerance_mm / (2.85e-5 * kappa))
+        assert servo_blend_cap_mm_s(m, kappa) == pytest.approx(expect, rel=5e-3)

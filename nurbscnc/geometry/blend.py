@@ -775,7 +775,7 @@ class SpaceBlend:
     turning_deg: float
 
 
-_N_SPACE = 257
+_N_SPACE = 129
 
 
 def _tangent_curvature(geom, s_mm: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -855,7 +855,7 @@ def blend_space_corner(geom_a, geom_b, tolerance_mm: float, max_trim_a_mm: float
 
     Equal trims d ≤ min(max trims, lengths); the curve is :func:`space_bezier` between the
     cut points (G2: tangents and curvature vectors of both sides). The deviation is the
-    Hausdorff distance between its 257 samples and the corner path (33 points a side and the
+    Hausdorff distance between its 129 samples and the corner path (33 points a side and the
     vertex, as polylines), each way; d is bisected (from the line corner's estimate, at most
     :data:`MAX_EVALS` blends) to the largest trim within the tolerance, in
     [(1 − :data:`SEARCH_WINDOW`) tol, tol] unless d reached its cap. None: smooth or reversed

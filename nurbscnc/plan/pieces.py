@@ -671,9 +671,12 @@ class _Corners:
     #: junction of the blended list each such stop is at.
     slower: np.ndarray = None
     slower_junction: np.ndarray = None
+    #: A further feed cap of each blend [mm/s] (inf: none): the servo's on space blends.
+    cap_mm_s: np.ndarray = None
 
     def __post_init__(self):
         m = self.row.size
+        self.cap_mm_s = np.full(m, np.inf)
         self.ok = np.zeros(m, dtype=bool)
         self.kappa_per_mm, self.length_mm = np.zeros(m), np.zeros(m)
         self.trim_a_mm, self.trim_b_mm = np.zeros(m), np.zeros(m)
@@ -818,7 +821,7 @@ def _blend_geometry(piece: Piece):
     return SubCurve(piece.geometry, piece.u_a, piece.u_b, piece.s_a_mm, piece.length_mm)
 
 
-def _blend_object_corners(pieces: PieceList, c: _Corners) -> None:
+def _blend_object_corners(pieces: PieceList, c: _Corners, machine: Machine) -> None:
     """Corners with an arc, NURBS or PH piece, one at a time
     (:func:`~nurbscnc.geometry.blend.blend_corner`, equal trims ≤ half the shorter piece)."""
     from nurbscnc.geometry.blend import blend_corner, blend_space_corner
@@ -831,11 +834,39 @@ def _blend_object_corners(pieces: PieceList, c: _Corners) -> None:
         bl = blend_corner(ga, gb, *args, measure=False)
         if bl is None and _out_of_plane(pieces, np.array([i - 1]))[0]:
             bl = blend_space_corner(ga, gb, *args)  # a 3-D turn: a G2 quintic Bézier
+            if bl is not None:
+                c.cap_mm_s[j] = servo_blend_cap_mm_s(machine, bl.kappa_max_per_mm)
         if bl is not None:
             c.obj_blends[j] = bl
             c.ok[j], c.kappa_per_mm[j] = True, bl.kappa_max_per_mm
             c.length_mm[j] = _blend_length_mm(bl)
             c.trim_a_mm[j], c.trim_b_mm[j] = bl.trim_a_mm, bl.trim_b_mm
+
+
+#: Share of ε_max the servo's steady curve error may take on a space blend
+#: (:func:`servo_blend_cap_mm_s`).
+SERVO_BLEND_SHARE = 0.5
+
+
+def servo_blend_cap_mm_s(machine: Machine, kappa_per_mm: float) -> float:
+    """Feed cap [mm/s] of a space blend of peak curvature κ under the contour check: on a
+    curve the servo's path grows by (c₂ + c₁²/2)·v²κ (steady circular motion;
+    :func:`~nurbscnc.servo.model.error_series`, SPEC §8: 2.85e-5 s² for the paper's axes),
+    kept within :data:`SERVO_BLEND_SHARE` · ε_max: v ≤ √(share·ε / (|c₂ + c₁²/2| κ)),
+    the largest coefficient over the modelled axes (inf without a servo model). Why:
+    the contour check's lever on a short tight blend is the feed of the pieces around it
+    (measured on tort.ngc: blends at √(A/κ), 2450 mm/s² of normal acceleration, made the
+    check slow 33 mm helices from 50 to 30 mm/s, +33 s over stopping)."""
+    from nurbscnc.servo.model import error_series
+
+    gains = [abs(float(c[2] + 0.5 * c[1] ** 2))
+             for ax in (machine.servo.x, machine.servo.y, machine.servo.z) if ax is not None
+             for c in (error_series(ax),)]  # fmt: skip
+    gain = max(gains, default=0.0)
+    if gain == 0.0 or not machine.contour_check or kappa_per_mm <= 0.0:
+        return np.inf
+    eps = SERVO_BLEND_SHARE * machine.limits.contour_tolerance_mm
+    return float(np.sqrt(eps / (gain * kappa_per_mm)))
 
 
 def _blend_length_mm(bl) -> float:
@@ -870,7 +901,7 @@ def apply_blends(pieces: PieceList, machine: Machine) -> tuple[PieceList, _Corne
     if c is None:
         return pieces, None
     _blend_line_corners(pieces, c)
-    _blend_object_corners(pieces, c)
+    _blend_object_corners(pieces, c, machine)
     faster = _blend_is_faster(pieces, c, machine)
     c.slower = c.ok & ~faster
     c.ok &= faster
@@ -924,7 +955,8 @@ def _blend_is_faster(pieces: PieceList, c: _Corners, machine: Machine) -> np.nda
     cap = np.minimum(pieces.v_cap_mm_s[a], pieces.v_cap_mm_s[b])
     half = 0.5 * np.minimum(pieces.length_mm[a], pieces.length_mm[b])
     v = np.minimum(cap, _reach_mm_s(half, lim.a_max_mm_s2, lim.j_max_mm_s3))
-    w = np.minimum(np.maximum(curvature_cap_mm_s(machine, c.kappa_per_mm, cap), MIN_CAP_MM_S), v)
+    w = np.minimum(np.maximum(np.minimum(curvature_cap_mm_s(machine, c.kappa_per_mm, cap),
+                                         c.cap_mm_s), MIN_CAP_MM_S), v)  # fmt: skip
     v = np.maximum(v, MIN_CAP_MM_S)
     t_dip = _speed_change_s(v - w, lim.a_max_mm_s2, lim.j_max_mm_s3) * (v - w) / v
     blend = t_dip + c.length_mm / w - (c.trim_a_mm + c.trim_b_mm) / v
@@ -1035,7 +1067,8 @@ def _blended_rows(pieces: PieceList, c: _Corners, machine: Machine) -> PieceList
             continue
         i = int(corner[j])
         feed_j = min(float(cap_a[j]), float(cap_b[j]))
-        cap = max(float(curvature_cap_mm_s(machine, bl.kappa_max_per_mm, feed_j)), MIN_CAP_MM_S)
+        cap = max(min(float(curvature_cap_mm_s(machine, bl.kappa_max_per_mm, feed_j)),
+                      float(c.cap_mm_s[j])), MIN_CAP_MM_S)  # fmt: skip
         obj_rows.append(int(first[i]))
         kind, geom = (Kind.PH, bl.ph) if hasattr(bl, "ph") else (Kind.NURBS, bl.curve)
         obj_pieces.append(Piece(kind, geom, float(c.length_mm[j]), cap,
