@@ -56,6 +56,14 @@ Line corners take one evaluation (the estimate is exact). The cap is min(max tri
 4 × the line estimate): an arc curving away from the corner can keep the deviation under the
 tolerance for any trim, and such blends would swallow the arc.
 
+Corners out of one plane
+------------------------
+A helix meeting a line (or an arc leaving the corner plane) cannot be met by a planar PH
+quintic at both cut points. :func:`blend_space_corner` joins them by a quintic Bézier that is
+G2 with both sides (:func:`space_bezier`: end tangents and curvature vectors), a NURBS piece
+for the planner (arc length by its table, not in closed form), with the same equal-trim
+search and a two-way sampled Hausdorff deviation (:data:`MAX_EVALS` blends at most).
+
 Caller's rule (the planner applies it)
 --------------------------------------
 Blends must not overlap each other or consume more than half of a short segment: pass
