@@ -520,3 +520,112 @@ def test_ph_tables_match_the_ph_quintic():
         np.testing.assert_allclose(sigma[i], ph.sigma_coeffs, rtol=1e-15, atol=1e-15)
         np.testing.assert_allclose(s[i], ph.s_coeffs, rtol=1e-15, atol=1e-15)
         assert length[i] == pytest.approx(ph.length_mm, rel=1e-15)
+
+
+# --- corners out of one plane (issue 13) ----------------------------------------------------
+
+
+def _helix_into_line():
+    """A G2 helix (R 7 mm, a quarter turn, Z −3 mm) into a line that leaves its corner
+    plane: from the interpreter, as the planner sees them."""
+    from nurbscnc.geometry.paths import geometry_of
+    from nurbscnc.program.interpret import interpret_text
+
+    prog = interpret_text("G21 G90 G17\nG0 X2 Y-1 Z16\nG2 I0 J7 X9 Y6 Z13 F3000\n"
+                          "G1 X15 Y6 Z10\nM2\n")  # fmt: skip
+    arc, line = (s for s in prog.segments if s.kind in ("arc", "line"))
+    return geometry_of(arc), LineGeometry(np.asarray(line.start_mm), np.asarray(line.end_mm))
+
+
+def _helix_points(c_xy, r, phi0, dphi, z0, dz, n):
+    """Closed-form helix points: centre c_xy, radius r, from angle phi0 through dphi."""
+    f = np.linspace(0.0, 1.0, n)
+    phi = phi0 + f * dphi
+    return np.column_stack([c_xy[0] + r * np.cos(phi), c_xy[1] + r * np.sin(phi), z0 + f * dz])
+
+
+@pytest.mark.parametrize("tol", [0.005, 0.02, 0.1])
+def test_space_blend_of_a_helix_into_a_line(tol):
+    from nurbscnc.geometry.blend import SEARCH_WINDOW, blend_space_corner
+
+    helix, line = _helix_into_line()
+    # The planar PH blend cannot meet a helix: no planar blend exists.
+    assert blend_corner(helix, line, tol, 1.0, 1.0) is None
+    bl = blend_space_corner(helix, line, tol, 1.0, 1.0)
+    assert bl is not None and bl.trim_a_mm == bl.trim_b_mm
+    d = bl.trim_a_mm
+    # Closed forms of both sides: the helix about (2, 6), R 7, clockwise from −90° through
+    # 270° to 0° (Z 16 → 13: pitch c = −3/(3π/2) per radian, arc length √(r² + c²)·3π/2),
+    # the line from (9, 6, 13) to (15, 6, 10).
+    r, sweep, dz = 7.0, 1.5 * np.pi, -3.0
+    c = dz / sweep
+    phi_cut = d / np.hypot(r, c)  # the angle of the helix's cut point above 0°
+    side_a = _helix_points((2.0, 6.0), r, phi_cut, -phi_cut, 13.0 - c * phi_cut, c * phi_cut,
+                           4001)  # fmt: skip
+    line_dir = np.array([6.0, 0.0, -3.0]) / np.sqrt(45.0)
+    np.testing.assert_allclose(side_a[-1], [9.0, 6.0, 13.0], atol=1e-12)
+    side_b = np.array([9.0, 6.0, 13.0]) + np.linspace(0.0, d, 4001)[:, None] * line_dir
+    corner = np.vstack([side_a, side_b[1:]])
+    xi = np.linspace(0.0, 1.0, 20001)
+    ctrl = np.asarray(bl.curve.control_points_mm)
+    blend = _bezier(ctrl, xi)
+    # Ends: the cut points of the closed forms; G1 and G2 there (tangent and curvature
+    # vector of the helix, R_xy = 7 with pitch: κ = r/(r² + c²), and the line's zero).
+    np.testing.assert_allclose(blend[0], side_a[0], atol=1e-9)
+    np.testing.assert_allclose(blend[-1], side_b[-1], atol=1e-9)
+    d1, d2 = _bezier(ctrl, np.array([0.0, 1.0]), 1), _bezier(ctrl, np.array([0.0, 1.0]), 2)
+    kappa_helix = r / (r * r + c * c)
+    k0 = np.linalg.norm(np.cross(d1[0], d2[0])) / np.linalg.norm(d1[0]) ** 3
+    k1 = np.linalg.norm(np.cross(d1[1], d2[1])) / np.linalg.norm(d1[1]) ** 3
+    assert k0 == pytest.approx(kappa_helix, rel=1e-9)
+    assert k1 == pytest.approx(0.0, abs=1e-9)
+    np.testing.assert_allclose(d1[1] / np.linalg.norm(d1[1]), line_dir, atol=1e-12)
+    # Within the tolerance, using most of it (Hausdorff both ways, dense closed forms).
+    dev = max(_to_polyline(blend, corner).max(), _to_polyline(corner, blend).max())
+    assert dev <= tol * (1 + 1e-6)
+    assert dev >= tol * (1.0 - SEARCH_WINDOW) * 0.99
+    assert bl.deviation_mm == pytest.approx(dev, rel=1e-3)
+
+
+def test_planner_blends_3d_turns_within_p():
+    """Under G64 P0.02 the helix → line turn (a space blend, a NURBS piece) and the 3-D
+    line → line turn (a PH blend in the plane of the two lines) are blended, not stopped: the
+    samples of the line–line blend lie in that plane, every sample within P of the path."""
+    from nurbscnc.machine.profile import load_machine
+    from nurbscnc.pipeline import RunOptions, run_program
+    from nurbscnc.plan.corners import CornerAction
+    from nurbscnc.plan.options import LookaheadOptions
+    from nurbscnc.program.interpret import interpret_text
+    from tests.test_wholeprograms import distance_to_path, programmed_path
+
+    # F300: slow enough that the helix blend, capped for the servo (servo_blend_cap_mm_s),
+    # beats a stop; at F3000 the corner stops (stop_faster).
+    text = ("G21 G90 G17 G64 P0.02\nG0 X2 Y-1 Z16\nF300\nG2 I0 J7 X9 Y6 Z13\n"
+            "G1 X15 Y6 Z10\nG1 X20 Y10 Z10\nM2\n")  # fmt: skip
+    prog = interpret_text(text)
+    r = run_program(prog, load_machine(), RunOptions(lookahead=LookaheadOptions(dynamics="off")))
+    log = r.plan.pieces.corners
+    feed = log.line > 2
+    assert np.all(log.action[feed] == CornerAction.BLEND) and feed.sum() == 2
+    pieces = r.plan.pieces
+    assert pieces.kind_counts() == {"line": 2, "rapid": 1, "arc": 1, "ph": 1, "nurbs": 1}
+    pts = r.samples.points_mm
+    ph = np.flatnonzero(np.asarray(pieces.kind) == 3)[0]
+    on_ph = pts[r.samples.piece == ph]
+    assert on_ph.shape[0] >= 3
+    normal = np.cross([6.0, 0.0, -3.0], [5.0, 4.0, 0.0])
+    normal /= np.linalg.norm(normal)
+    assert np.abs((on_ph - [15.0, 6.0, 10.0]) @ normal).max() <= 1e-9
+    assert distance_to_path(pts, programmed_path(prog), reach=1.0).max() <= 0.02 + 1e-6
+
+
+def test_servo_blend_cap_is_the_steady_circle_error_bound():
+    # SPEC §8: on a circle the paper's servo path grows by 2.85e-5 s² · v²κ; a space blend's
+    # cap keeps that within ε_max/2: v = √(7.5e-3 mm / (2.85e-5 s² · κ)).
+    from nurbscnc.machine.profile import load_machine
+    from nurbscnc.plan.pieces import servo_blend_cap_mm_s
+
+    m = load_machine()
+    for kappa in (0.5, 22.0, 300.0):
+        expect = np.sqrt(0.5 * m.limits.contour_tolerance_mm / (2.85e-5 * kappa))
+        assert servo_blend_cap_mm_s(m, kappa) == pytest.approx(expect, rel=5e-3)

@@ -56,6 +56,14 @@ Line corners take one evaluation (the estimate is exact). The cap is min(max tri
 4 × the line estimate): an arc curving away from the corner can keep the deviation under the
 tolerance for any trim, and such blends would swallow the arc.
 
+Corners out of one plane
+------------------------
+A helix meeting a line (or an arc leaving the corner plane) cannot be met by a planar PH
+quintic at both cut points. :func:`blend_space_corner` joins them by a quintic Bézier that is
+G2 with both sides (:func:`space_bezier`: end tangents and curvature vectors), a NURBS piece
+for the planner (arc length by its table, not in closed form), with the same equal-trim
+search and a two-way sampled Hausdorff deviation (:data:`MAX_EVALS` blends at most).
+
 Caller's rule (the planner applies it)
 --------------------------------------
 Blends must not overlap each other or consume more than half of a short segment: pass
@@ -752,3 +760,144 @@ def ph_tables(w: np.ndarray, p0: np.ndarray):
     ], axis=1)  # fmt: skip
     s = np.concatenate((np.zeros((w.shape[0], 1)), np.cumsum(sigma / 5.0, axis=1)), axis=1)
     return points, sigma, s, s[:, -1].copy()
+
+
+# ---------------------------------------------------------------------------------------------
+# Corners out of one plane (a helix meeting a line, an arc leaving the corner plane).
+
+
+@dataclass(frozen=True, eq=False)
+class SpaceBlend:
+    """A blend of a corner whose sides do not lie in one plane: ``curve`` a quintic Bézier
+    (a :class:`~nurbscnc.geometry.nurbs.NurbsCurve`, u ∈ [0, 1]) from the point at arc length
+    L_a − ``trim_a_mm`` of the first geometry to the point at ``trim_b_mm`` of the second;
+    ``deviation_mm`` its measured Hausdorff distance to the corner path [mm];
+    ``kappa_max_per_mm`` its largest curvature [1/mm]; ``turning_deg`` the tangent turning
+    at the vertex [deg]."""
+
+    curve: object
+    trim_a_mm: float
+    trim_b_mm: float
+    deviation_mm: float
+    kappa_max_per_mm: float
+    turning_deg: float
+
+
+_N_SPACE = 129
+
+
+def _tangent_curvature(geom, s_mm: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Point, unit tangent and curvature vector κn = (C″ − (C″·t)t)/|C′|² [1/mm] of
+    ``geom`` at arc length ``s_mm``."""
+    d = _eval(geom, s_mm, 2)
+    speed2 = float(d[1] @ d[1])
+    t = d[1] / np.sqrt(speed2)
+    return d[0], t, (d[2] - (d[2] @ t) * t) / speed2
+
+
+def space_bezier(p_a, t_a, k_a, p_b, t_b, k_b) -> np.ndarray:
+    """Control points (6, 3) [mm] of the quintic Bézier from ``p_a`` to ``p_b`` that is G2
+    with both ends: unit tangents ``t_a``, ``t_b`` and curvature vectors ``k_a``, ``k_b``
+    [1/mm]. With C′(0) = α t_a, C″(0) = α² k_a (no tangential component: the curvature
+    vector is C″⊥/|C′|²) and the Bézier end derivatives C′(0) = 5(P1 − P0), C″(0) =
+    20(P2 − 2P1 + P0): P1 = P0 + α t_a/5, P2 = P0 + 2α t_a/5 + α² k_a/20, and mirrored at
+    the end with β. α = β = |p_b − p_a| (the chord)."""
+    p_a, p_b = np.asarray(p_a, dtype=float), np.asarray(p_b, dtype=float)
+    a = b = float(np.linalg.norm(p_b - p_a))
+    return np.array([p_a, p_a + a / 5.0 * t_a, p_a + 2.0 * a / 5.0 * t_a + a * a / 20.0 * k_a,
+                     p_b - 2.0 * b / 5.0 * t_b + b * b / 20.0 * k_b, p_b - b / 5.0 * t_b, p_b])
+
+
+def _polyline_distance(q: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """Distance [mm] of each point of ``q`` (m, 3) to the polyline ``pts`` (n, 3)."""
+    a, ab = pts[:-1], np.diff(pts, axis=0)
+    ab2 = np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-300)
+    rel = q[:, None, :] - a[None, :, :]
+    f = np.clip(np.einsum("mnj,nj->mn", rel, ab) / ab2[None, :], 0.0, 1.0)
+    diff = rel - f[..., None] * ab[None, :, :]
+    return np.sqrt(np.einsum("mnj,mnj->mn", diff, diff)).min(axis=1)
+
+
+def _space_candidate(geom_a, geom_b, len_a: float, vertex: np.ndarray, d: float):
+    """(curve control points, deviation [mm], κ samples) of the trim ``d``, or None when
+    the Bézier is not regular (|C′| near 0: a cusp)."""
+    p_a, t_a, k_a = _tangent_curvature(geom_a, len_a - d)
+    p_b, t_b, k_b = _tangent_curvature(geom_b, d)
+    ctrl = space_bezier(p_a, t_a, k_a, p_b, t_b, k_b)
+    xi = np.linspace(0.0, 1.0, _N_SPACE)
+    pts, d1, d2 = _bezier_derivatives(ctrl, xi)
+    speed = np.sqrt(np.einsum("ij,ij->i", d1, d1))
+    if speed.min() <= 1e-3 * speed.max():
+        return None
+    s = np.linspace(0.0, d, _N_ARC)
+    side_a = geom_a.derivatives(geom_a.param_at_length(len_a - d + s), 0)[0]
+    side_b = geom_b.derivatives(geom_b.param_at_length(s), 0)[0]
+    path = np.vstack([side_a[:-1], vertex[None, :], side_b[1:]])
+    dev = max(float(_polyline_distance(pts, path).max()),
+              float(_polyline_distance(path, pts).max()))  # fmt: skip
+    kappa = np.linalg.norm(np.cross(d1, d2), axis=1) / speed**3
+    return ctrl, dev, kappa
+
+
+def _bezier_derivatives(ctrl: np.ndarray, xi: np.ndarray):
+    """Points, first and second derivatives (m, 3) of the Bézier ``ctrl`` at ``xi``."""
+    from math import comb
+
+    n = ctrl.shape[0] - 1
+
+    def bern(deg, pts):
+        t = xi[:, None]
+        return sum(comb(deg, i) * t**i * (1.0 - t) ** (deg - i) * pts[i]
+                   for i in range(deg + 1))  # fmt: skip
+
+    d1 = n * np.diff(ctrl, axis=0)
+    d2 = (n - 1) * np.diff(d1, axis=0)
+    return bern(n, ctrl), bern(n - 1, d1), bern(n - 2, d2)
+
+
+def blend_space_corner(geom_a, geom_b, tolerance_mm: float, max_trim_a_mm: float,
+                       max_trim_b_mm: float) -> SpaceBlend | None:  # fmt: skip
+    """The largest G2 quintic Bézier blend of a corner whose sides leave the plane of its
+    two tangents (a helix into a line: the planar PH blend of :func:`blend_corner` cannot
+    meet both sides), within ``tolerance_mm`` [mm].
+
+    Equal trims d ≤ min(max trims, lengths); the curve is :func:`space_bezier` between the
+    cut points (G2: tangents and curvature vectors of both sides). The deviation is the
+    Hausdorff distance between its 129 samples and the corner path (33 points a side and the
+    vertex, as polylines), each way; d is bisected (from the line corner's estimate, at most
+    :data:`MAX_EVALS` blends) to the largest trim within the tolerance, in
+    [(1 − :data:`SEARCH_WINDOW`) tol, tol] unless d reached its cap. None: smooth or reversed
+    junctions, no regular candidate within the tolerance, degenerate trims.
+    """
+    from nurbscnc.geometry.nurbs import NurbsCurve
+
+    tol = float(tolerance_mm)
+    len_a, len_b = float(geom_a.length_mm), float(geom_b.length_mm)
+    d_max = min(float(max_trim_a_mm), float(max_trim_b_mm), len_a, len_b)
+    if not (np.isfinite(tol) and tol > 0.0) or not d_max > MIN_TRIM_MM:
+        return None
+    vertex, t_a, _ = _tangent_curvature(geom_a, len_a)
+    _, t_b, _ = _tangent_curvature(geom_b, 0.0)
+    n_c = _cross(t_a, t_b)
+    turning = float(np.arctan2(np.sqrt(n_c @ n_c), t_a @ t_b))
+    if turning < MIN_TURNING_RAD or turning > np.pi - MIN_REVERSAL_RAD:
+        return None
+    d_cap = min(d_max, TRIM_CAP_FACTOR * tol / line_deviation_per_trim(turning))
+    lo, hi, best = 0.0, d_cap, None
+    d = min(d_cap, tol * (1.0 - 0.5 * SEARCH_WINDOW) / line_deviation_per_trim(turning))
+    for _ in range(MAX_EVALS):
+        cand = _space_candidate(geom_a, geom_b, len_a, vertex, d)
+        if cand is not None and cand[1] <= tol:
+            lo, best = d, (d, cand)
+            if cand[1] >= tol * (1.0 - SEARCH_WINDOW) or d >= d_cap:
+                break
+        else:
+            hi = d
+        d = 0.5 * (lo + hi) if hi < d_cap or lo > 0.0 else min(2.0 * d, d_cap)
+        if hi - lo <= BRACKET_REL * hi:
+            break
+    if best is None or best[0] <= MIN_TRIM_MM:
+        return None
+    trim, (ctrl, dev, kappa) = best
+    curve = NurbsCurve(5, np.array([0.0] * 6 + [1.0] * 6), ctrl, np.ones(6))
+    return SpaceBlend(curve, trim, trim, dev, float(kappa.max()), float(np.degrees(turning)))

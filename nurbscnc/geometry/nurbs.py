@@ -708,6 +708,53 @@ class NurbsCurve:
         """The curve of a ``segments.Nurbs`` (its weights checked: :func:`sane_weights`)."""
         return cls(seg.degree, seg.knots, seg.control_points_mm, sane_weights(seg))
 
+    def without_end_hooks(self, max_deviation_mm: float) -> NurbsCurve:
+        """The curve with tiny hooks at its ends removed, or itself if it has none.
+
+        A hook: the first control leg P1 − P0 (or the last, P_{n−2} − P_{n−1}) is shorter
+        than the next one and points back from it (a negative dot product), so the curve
+        leaves its end in one direction and turns round within |P1 − P0| — what rounding
+        does to a least-squares fit whose P1 should sit on P0 (a sharp trailing edge as
+        G5.2 with 6-decimal control points: a 1e-6 mm leg, curvature 4e8 /mm, crawled at
+        √(A/κ) = 2.6 µm/s). The hook is removed by moving P1 onto the ray from P0 towards P2,
+        ℓ = min(0.9·tol / max R1 − |P1 − P0|, |P2 − P0|/3) from P0: the curve then leaves P0
+        along P2 − P0 with zero curvature (C′ ∥ C″ there), regular. It moves by
+        |ΔP1| · R1(u) ≤ (|P1 − P0| + ℓ) max R1 ≤ 0.9 ``max_deviation_mm`` [mm] (R1 the rational
+        basis function of P1, its maximum taken over 257 samples of its support); no change
+        where |P1 − P0| alone exceeds that.
+        """
+        p, ctrl = self.degree, np.array(self.control_points_mm)
+        n = ctrl.shape[0]
+        if n < 3:
+            return self
+        changed = False
+        for end, inner, nxt in ((0, 1, 2), (n - 1, n - 2, n - 3)):
+            leg, after = ctrl[inner] - ctrl[end], ctrl[nxt] - ctrl[inner]
+            size = float(np.linalg.norm(leg))
+            if not 0.0 < size < float(np.linalg.norm(after)) or float(leg @ after) >= 0.0:
+                continue
+            lo, hi = self.knots[inner], self.knots[inner + p + 1]  # support of R_inner
+            u = np.linspace(lo, hi, 257)
+            spans = find_span(self.knots, p, u)
+            basis = basis_functions(self.knots, p, u, spans).T  # (m, p+1): spans−p..spans
+            col = inner - (spans - p)
+            w = self.weights
+            idx = (spans - p)[:, None] + np.arange(p + 1)[None, :]
+            r = np.where((col >= 0) & (col <= p),
+                         basis[np.arange(u.size), np.clip(col, 0, p)] * w[inner]
+                         / np.sum(basis * w[idx], axis=1), 0.0)  # fmt: skip
+            # P1 onto the ray P0 → P2, as far as the deviation allows (at most a third of
+            # |P2 − P0|): |ΔP1| ≤ |P1 − P0| + ℓ, times max R1 ≤ 0.9 of the tolerance.
+            room = 0.9 * max_deviation_mm / float(r.max()) - size
+            chord = ctrl[nxt] - ctrl[end]
+            far = float(np.linalg.norm(chord))
+            if room > 0.0 and far > 0.0:
+                ctrl[inner] = ctrl[end] + min(room, far / 3.0) * chord / far
+                changed = True
+        if not changed:
+            return self
+        return NurbsCurve(p, self.knots, ctrl, self.weights)
+
     @property
     def u_start(self) -> float:
         return float(self.knots[self.degree])

@@ -13,7 +13,9 @@ filled in). Built from them:
   (:func:`corner_cap_mm_s`);
 - the baselines' feeds (SPEC §9, :func:`baseline_feed_mm_s`);
 - the path limits that keep every axis within its own velocity, acceleration and jerk
-  limits on a piece (issue 13, :func:`axis_path_limits`).
+  limits on a piece (issue 13, :func:`axis_path_limits`);
+- the junction cap where the curvature vector jumps (a line into an arc, two arcs of other
+  radii): the acceleration steps there, a jerk impulse (issue 13, :func:`junction_jump_cap_mm_s`).
 
 All speeds in mm/s, curvatures in 1/mm, accelerations in mm/s².
 """
@@ -24,9 +26,10 @@ from typing import Protocol
 
 import numpy as np
 
-__all__ = ["MIN_CAP_MM_S", "axis_path_limits", "baseline_feed_mm_s", "chord_feed_mm_s",
-           "corner_cap_mm_s", "curvature_cap2_mm2_s2", "curvature_cap_mm_s", "curvature_feed_mm_s",
-           "kappa_threshold_per_mm", "normal_feed_mm_s"]  # fmt: skip
+__all__ = ["JUNCTION_SHARE", "MIN_CAP_MM_S", "axis_path_limits", "baseline_feed_mm_s",
+           "chord_feed_mm_s", "corner_cap_mm_s", "curvature_cap2_mm2_s2", "curvature_cap_mm_s",
+           "curvature_feed_mm_s", "junction_jump_cap_mm_s", "kappa_threshold_per_mm",
+           "normal_feed_mm_s"]  # fmt: skip
 
 
 class MachineLike(Protocol):
@@ -44,6 +47,11 @@ class MachineLike(Protocol):
 #: Share of each axis's acceleration and jerk limit the normal (centripetal) part may take on
 #: a curve (:func:`axis_path_limits`, the feed cap); the tangential part gets the rest.
 NORMAL_SHARE = 0.5
+
+#: Share of each axis's jerk limit the acceleration step at a curvature jump may take
+#: (:func:`junction_jump_cap_mm_s`); the pieces on both sides of such a junction keep to the
+#: rest on that axis (:func:`nurbscnc.plan.axes.piece_limits`).
+JUNCTION_SHARE = 0.5
 
 #: The lowest cruise cap a piece gets [mm/s]: never a zero cap, which would stall the tool.
 MIN_CAP_MM_S = 1e-3
@@ -173,7 +181,8 @@ def axis_path_limits(t_bound, k_bound, g_bound, kappa_per_mm, v_piece_mm_s, v_ax
     K_i ≥ |(κn)_i| [1/mm] (curvature vector) and ``g_bound`` G_i ≥ |d(κn)_i/ds| [1/mm²], each
     over the whole piece; ``kappa_per_mm`` (k,) κ̄ ≥ κ on the piece [1/mm];
     ``v_piece_mm_s`` (k,) the piece's own cruise cap [mm/s]; the axis
-    limits (3,) V_i [mm/s], A_i [mm/s²], J_i [mm/s³] (``inf``: none); the path limits A, J.
+    limits (3,) V_i [mm/s], A_i [mm/s²], J_i [mm/s³] (``inf``: none; J_i may also be given per
+    piece, (k, 3): the share left beside a curvature jump); the path limits A, J.
     Returns (k,) each: the feed cap v̄ [mm/s] (``inf`` when no axis caps the feed), the
     tangential acceleration ā [mm/s²] and jerk j̄ [mm/s³].
 
@@ -215,7 +224,8 @@ def axis_path_limits(t_bound, k_bound, g_bound, kappa_per_mm, v_piece_mm_s, v_ax
     g = np.asarray(g_bound, dtype=float)
     v_i = np.asarray(v_axis_mm_s, dtype=float)[None, :]
     a_i = np.asarray(a_axis_mm_s2, dtype=float)[None, :]
-    j_i = np.asarray(j_axis_mm_s3, dtype=float)[None, :]
+    j_i = np.asarray(j_axis_mm_s3, dtype=float)
+    j_i = j_i if j_i.ndim == 2 else j_i[None, :]
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         # Feed caps (k,): velocity, then half the acceleration and jerk for the normal part.
         v_cap = np.min(np.where(t > 0.0, v_i / t, np.inf), axis=1)
@@ -238,3 +248,35 @@ def axis_path_limits(t_bound, k_bound, g_bound, kappa_per_mm, v_piece_mm_s, v_ax
         j_t = np.where(t > 0.0, j_room / t, np.inf)
         j_bar = np.minimum(j_t.min(axis=1), j_path_mm_s3)
     return v_cap, a_bar, j_bar
+
+
+def junction_jump_cap_mm_s(dkn_per_mm, period_s: float, j_path_mm_s3: float,
+                           j_axis_mm_s3=None, share: float = JUNCTION_SHARE):  # fmt: skip
+    """Speed cap [mm/s] at junctions where the curvature vector κn jumps by ``dkn_per_mm``
+    (m, 3) [1/mm] (issue 13): v ≤ √(4 J T / (3 |Δ(κn)|)) for the path jerk J = J_max, and
+    v ≤ √(4 s J_i T / (3 |Δ(κn)_i|)) for each axis i with a jerk limit J_i (``j_axis_mm_s3``
+    (3,), ``inf``: none) and share s (:data:`JUNCTION_SHARE`); ``inf`` where nothing jumps.
+
+    Derivation. The planned profile has zero tangential acceleration at every junction
+    (:mod:`nurbscnc.plan.profile`), so there the acceleration p̈ = a t + v² κn steps by
+    Δp̈ = v² Δ(κn) — on axis i by v² Δ(κn)_i — in no time: a jerk impulse Δp̈ δ(t − t_j).
+    On the reference points (one per period T) the third divided difference is the jerk
+    averaged with the quadratic B-spline kernel M₂ of width 3T (positive, integral 1, peak
+    3/(4T) at its centre), so the impulse shows as Δp̈ · M₂(t_j − t_k) ≤ (3/4) |Δp̈| / T,
+    reached when a sample pair straddles t_j symmetrically. Keeping that within a jerk
+    budget B gives v² |Δ(κn)| · 3/(4T) ≤ B, i.e. v ≤ √(4 B T / (3 |Δ(κn)|)). Path: B = J_max,
+    applied to the normal step (J_max bounds the tangential jerk, which is continuous at the
+    junction). Axis i: B = s J_i, and the continuous jerk of the pieces on both sides
+    (j t_i + 3 v a (κn)_i + v³ d(κn)_i/ds) keeps to (1 − s) J_i there, so the samples stay
+    within J_i. With T = 1 ms, J = 5e4 mm/s³, a line into an R 5 mm arc: 18.3 mm/s; two
+    tangent arcs of R 50 and 51 mm (Δκ = 3.9e-4 /mm): 412 mm/s (no cap in practice).
+    """
+    dkn = np.abs(np.asarray(dkn_per_mm, dtype=float)).reshape(-1, 3)
+    with np.errstate(divide="ignore"):
+        size = np.sqrt(np.sum(dkn * dkn, axis=1))
+        cap = np.sqrt(4.0 * j_path_mm_s3 * period_s / (3.0 * size))
+        if j_axis_mm_s3 is not None:
+            j_i = np.asarray(j_axis_mm_s3, dtype=float)[None, :]
+            per_axis = np.sqrt(4.0 * share * j_i * period_s / (3.0 * dkn))
+            cap = np.minimum(cap, per_axis.min(axis=1))
+    return cap

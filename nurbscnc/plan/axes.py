@@ -29,10 +29,11 @@ tangential and the normal parts: :func:`nurbscnc.machine.caps.axis_path_limits`)
 With no per-axis limit in the profile the result is the path limits alone (the planner's
 behaviour before issue 13).
 
-Not covered (per-piece limits cannot): a junction passed at speed where the curvature vector
-jumps (a line tangent into an arc) steps each axis's acceleration by v²|Δ(κn)_i| — a jerk
-impulse. Bounding it needs a junction speed cap v ≤ √(ΔA_i / |Δ(κn)_i|) in the planner's
-junction caps (tests/test_limits_on_samples.py keeps the case as a strict xfail).
+A junction passed at speed where the curvature vector jumps (a line tangent into an arc)
+steps each axis's acceleration by v²|Δ(κn)_i| — a jerk impulse. The planner's junction caps
+bound it (:func:`nurbscnc.machine.caps.junction_jump_cap_mm_s`, a share of each axis's jerk
+limit), and the pieces on both sides keep their own jerk to the rest on those axes
+(:func:`_jump_reserved`).
 """
 
 from __future__ import annotations
@@ -42,7 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from nurbscnc.geometry.path import Kind
-from nurbscnc.machine.caps import axis_path_limits
+from nurbscnc.machine.caps import JUNCTION_SHARE, axis_path_limits
 from nurbscnc.plan.pieces import junction_caps
 
 #: Fewest samples per curved piece for its tangent and curvature-vector bounds (ends
@@ -84,10 +85,28 @@ def piece_limits(pieces, machine) -> PieceLimits:
         return PieceLimits(np.full(k, np.inf), np.full(k, a_path), np.full(k, j_path))
     t_bound, k_bound, g_bound, kappa = axis_geometry_bounds(pieces)
     v_i, a_i, j_i = axis.as_arrays()
+    j_i = _jump_reserved(pieces, j_i)
     v, a, j = axis_path_limits(t_bound, k_bound, g_bound, kappa, pieces.v_cap_mm_s, v_i, a_i,
                                j_i, a_path, j_path)  # fmt: skip
     a, j = _run_minimum(pieces, np.minimum(pieces.v_cap_mm_s, v), a, j)
     return PieceLimits(v, a, j)
+
+
+def _jump_reserved(pieces, j_axis_mm_s3: np.ndarray) -> np.ndarray:
+    """Per piece and axis (k, 3) the axis jerk limit [mm/s³] the piece's own motion may use:
+    J_i, or (1 − :data:`~nurbscnc.machine.caps.JUNCTION_SHARE`) J_i on the axes where the
+    curvature vector jumps at one of its ends (``pieces.jump_kn``): the acceleration step
+    there takes the share (:func:`~nurbscnc.machine.caps.junction_jump_cap_mm_s`), so the
+    two add up to at most J_i on the samples."""
+    k = len(pieces)
+    j = np.broadcast_to(np.asarray(j_axis_mm_s3, dtype=float), (k, 3)).copy()
+    rows = np.asarray(pieces.jump_rows, dtype=np.int64)
+    if rows.size:
+        hit = np.abs(np.asarray(pieces.jump_kn)) > 0.0
+        scale = np.where(hit, 1.0 - JUNCTION_SHARE, 1.0)
+        for side in (rows, rows + 1):  # the pieces before and after each jump
+            np.minimum.at(j, side, np.asarray(j_axis_mm_s3)[None, :] * scale)
+    return j
 
 
 def _run_minimum(pieces, caps_mm_s: np.ndarray, a_mm_s2: np.ndarray, j_mm_s3: np.ndarray):

@@ -90,6 +90,7 @@ class CornerWhy(IntEnum):
     DWELL_OR_PAUSE = 7  #: a dwell, pause or program stop at the junction
     RAPID_FEED = 8  #: a rapid meets a feed move (the tool stops between them)
     PROGRAM_END = 9  #: start or end of the program
+    STOP_FASTER = 10  #: a blend fits, but it is so tight that stopping is faster
 
 
 @dataclass(frozen=True, eq=False)

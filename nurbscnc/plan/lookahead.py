@@ -159,13 +159,14 @@ class Check:
 def profile_over(length_mm: np.ndarray, caps: np.ndarray, smooth: np.ndarray,
                  limits: Limits, window: int | None) -> Profile:  # fmt: skip
     """The jerk-limited profile (SPEC §7) over pieces of ``length_mm`` with cruise caps
-    ``caps`` [mm/s], the junctions ``smooth`` (k+1; > 0: tangent-continuous, capped by the
-    smaller neighbour; the ends are rests) and the per-piece acceleration and jerk
+    ``caps`` [mm/s], the junctions ``smooth`` (k+1; > 0: tangent-continuous, capped by it and
+    the smaller neighbour; the ends are rests) and the per-piece acceleration and jerk
     ``limits``. The planner's profile, and the stream's re-plan of a plan's rest after a
     feed hold (the same pieces from one on, same caps and limits)."""
     k = caps.size
     jcaps = np.zeros(k + 1)
-    jcaps[1:-1] = np.where(smooth[1:-1] > 0, np.minimum(caps[:-1], caps[1:]), 0.0)
+    jcaps[1:-1] = np.where(smooth[1:-1] > 0, np.minimum(np.minimum(caps[:-1], caps[1:]),
+                                                        smooth[1:-1]), 0.0)  # fmt: skip
     return plan_profile(ProfileInput(length_mm, caps, jcaps, limits.a_up_mm_s2,
                                      limits.j_up_mm_s3, lookahead_pieces=window,
                                      a_decel_mm_s2=limits.a_down_mm_s2,

@@ -33,7 +33,12 @@ from nurbscnc.geometry.nurbs import NurbsCurve
 from nurbscnc.geometry.path import STOP_KINDS, Kind, PathTable, ph_power_rows, stop_seconds
 from nurbscnc.geometry.paths import ArcGeometry, LineGeometry, geometry_of
 from nurbscnc.geometry.ph import PHQuintic
-from nurbscnc.machine.caps import MIN_CAP_MM_S, corner_cap_mm_s, curvature_cap_mm_s
+from nurbscnc.machine.caps import (
+    MIN_CAP_MM_S,
+    corner_cap_mm_s,
+    curvature_cap_mm_s,
+    junction_jump_cap_mm_s,
+)
 from nurbscnc.machine.profile import Machine
 from nurbscnc.plan.corners import CornerAction, CornerLog, CornerWhy, find_corner_regions
 from nurbscnc.plan.naive import merge_collinear
@@ -113,7 +118,9 @@ class Piece:
 def nurbs_pieces(seg, index: int, machine: Machine, options: PlanOptions) -> list[Piece]:
     """A NURBS segment as pieces: PH corner pieces and capped NURBS stretches."""
     lim = machine.limits
-    curve = NurbsCurve.from_segment(seg)
+    # A hook of rounding at an end (a control leg of 1e-6 mm turning back) is removed within
+    # the chord tolerance δ: the small-break rule's bound on how far a passed break may cut.
+    curve = NurbsCurve.from_segment(seg).without_end_hooks(lim.chord_tolerance_mm)
     feed = min(seg.feed_mm_s, lim.v_max_mm_s)
     kth = lim.a_max_mm_s2 / (feed * feed)
     regions = find_corner_regions(curve, kth)
@@ -180,6 +187,7 @@ def _nurbs_stretch(curve, u_a, u_b, seg, index, machine, feed) -> list[Piece]:
     # cell by its finite curvature samples (κ grows like s^(-1/2) towards a cusp, so the
     # nearest sample already asks for a low feed).
     kappa = np.where(np.isfinite(kappa), kappa, 0.0)
+    kappa = np.column_stack([kappa, _peak_kappa(curve, fine, kappa)])
     # Never a zero cap (κ ≥ 2/δ makes V_af zero): it would stall the tool; 1 µm/s is the floor.
     cell_cap = np.maximum(curvature_cap_mm_s(machine, kappa, feed).min(axis=1), MIN_CAP_MM_S)
     k_cell = kappa.max(axis=1)
@@ -187,6 +195,26 @@ def _nurbs_stretch(curve, u_a, u_b, seg, index, machine, feed) -> list[Piece]:
                   index, seg.line, float(u_edges[i]), float(u_edges[i + 1]),
                   float(s_edges[i]), float(k_cell[i]))
             for i in range(n_cells)]  # fmt: skip
+
+
+def _peak_kappa(curve, u: np.ndarray, kappa: np.ndarray, rounds: int = 3) -> np.ndarray:
+    """The curvature peak [1/mm] of each row of samples (cells × samples at parameters
+    ``u``, curvatures ``kappa``), refined: 16 new samples between the neighbours of the
+    largest one, ``rounds`` times (a sharp peak between two of the 9 cell samples — a
+    near-cusp of a rational NURBS, κ 350 /mm — was missed by 30 %, and the cell's cap
+    √(A/κ) with it). Cusps (κ = inf) count as 0 as in the samples."""
+    m, n = u.shape
+    rows = np.arange(m)
+    best = kappa.max(axis=1)
+    for _ in range(rounds):
+        k = np.argmax(kappa, axis=1)
+        lo, hi = u[rows, np.maximum(k - 1, 0)], u[rows, np.minimum(k + 1, n - 1)]
+        u = lo[:, None] + (hi - lo)[:, None] * np.linspace(0.0, 1.0, 17)[None, :]
+        kappa = curve.curvature(u.ravel()).reshape(u.shape)
+        kappa = np.where(np.isfinite(kappa), kappa, 0.0)
+        best = np.maximum(best, kappa.max(axis=1))
+        n = u.shape[1]
+    return best
 
 
 _VECTORS = ("start_mm", "end_mm", "tangent_start", "tangent_end")
@@ -230,6 +258,13 @@ class PieceList(Sequence):
     objects: dict = field(default_factory=dict)
     #: Every corner and what the planner did there (:class:`~nurbscnc.plan.corners.CornerLog`).
     corners: CornerLog = field(default_factory=CornerLog.empty)
+    #: Junctions where the curvature vector jumps (:func:`curvature_jumps`): ``jump_rows``
+    #: (m,) junction j between rows j and j + 1, ``jump_kn`` (m, 3) the jump Δ(κn) [1/mm],
+    #: ``jump_cap_mm_s`` (m,) the speed cap there
+    #: (:func:`~nurbscnc.machine.caps.junction_jump_cap_mm_s`), applied by :func:`junction_caps`.
+    jump_rows: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    jump_kn: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    jump_cap_mm_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @classmethod
     def of(cls, pieces: Sequence[Piece]) -> PieceList:
@@ -521,7 +556,55 @@ def segment_pieces(segments, machine: Machine, options: PlanOptions | None = Non
         turning, regular = _turning(pieces)
         pieces.pass_after[:-1] = _small_break(pieces, turning, regular, machine)
     pieces, tried = apply_blends(pieces, machine)
-    return dc_replace(pieces, corners=corner_log(pieces, tried, machine, options))
+    rows, dkn = curvature_jumps(pieces)
+    cap = junction_jump_cap_mm_s(dkn, machine.servo.period_s, lim.j_max_mm_s3,
+                                 machine.axis_limits.as_arrays()[2])  # fmt: skip
+    return dc_replace(pieces, corners=corner_log(pieces, tried, machine, options),
+                      jump_rows=rows, jump_kn=dkn, jump_cap_mm_s=cap)  # fmt: skip
+
+
+#: Curvature-vector jumps below this [1/mm] are rounding (the cells of one NURBS, an arc cut
+#: by a blend): no junction cap (at 58 mm/s it would be 2.6e5 mm/s).
+MIN_JUMP_PER_MM = 1e-9
+
+
+def curvature_jumps(pieces: PieceList) -> tuple[np.ndarray, np.ndarray]:
+    """Junctions passed at speed (not stops) where the curvature vector κn jumps: their
+    indices j (m,) (between rows j and j + 1) and the jumps Δ(κn) = (κn)_start(j+1) −
+    (κn)_end(j) (m, 3) [1/mm], those above :data:`MIN_JUMP_PER_MM`. κn = (C″ − (C″·t) t) /
+    |C′|² at the pieces' parameter ends (exact). Lines and the columnar line–line blends (G2
+    with their lines: κ = 0 at both ends) have κn = 0 there, so only junctions next to an
+    object row (arc, NURBS cell, PH piece) are evaluated, the pieces of one geometry in one
+    call. A cusp (C′ = 0) gives κn = 0: such a junction is a stop anyway."""
+    k = len(pieces)
+    obj = np.array(sorted(pieces.objects), dtype=np.int64)
+    if k < 2 or obj.size == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros((0, 3))
+    kn_start, kn_end = np.zeros((k, 3)), np.zeros((k, 3))
+    by_geometry: dict[int, list[int]] = {}
+    for r in obj.tolist():
+        by_geometry.setdefault(id(pieces.objects[r][0]), []).append(r)
+    for rows in by_geometry.values():
+        g = pieces.objects[rows[0]][0]
+        u = np.array([pieces.objects[r][1] for r in rows] + [pieces.objects[r][2] for r in rows])
+        d = g.derivatives(u, 2)
+        d1, d2 = d[1], d[2]
+        sp2 = np.einsum("ij,ij->i", d1, d1)
+        ok = sp2 > 0.0
+        safe = np.where(ok, sp2, 1.0)
+        t = d1 / np.sqrt(safe)[:, None]
+        kn = np.where(ok[:, None], (d2 - np.einsum("ij,ij->i", d2, t)[:, None] * t)
+                      / safe[:, None], 0.0)  # fmt: skip
+        n = len(rows)
+        kn_start[rows], kn_end[rows] = kn[:n], kn[n:]
+    near = np.zeros(k, dtype=bool)
+    near[obj] = True
+    turning, regular = _turning(pieces)
+    moving = _passable(pieces, turning, regular) & ~_stopped(pieces)  # passed at speed
+    j = np.flatnonzero((near[:-1] | near[1:]) & moving)
+    dkn = kn_start[j + 1] - kn_end[j]
+    big = np.sqrt(np.einsum("ij,ij->i", dkn, dkn)) > MIN_JUMP_PER_MM
+    return j[big], dkn[big]
 
 
 def blend_override(seg, options: PlanOptions) -> float:
@@ -584,9 +667,16 @@ class _Corners:
     p0: np.ndarray = None
     frame: np.ndarray = None
     obj_blends: dict = field(default_factory=dict)
+    #: Corners whose blend fitted but stopping is faster (:func:`_blend_is_faster`), and the
+    #: junction of the blended list each such stop is at.
+    slower: np.ndarray = None
+    slower_junction: np.ndarray = None
+    #: A further feed cap of each blend [mm/s] (inf: none): the servo's on space blends.
+    cap_mm_s: np.ndarray = None
 
     def __post_init__(self):
         m = self.row.size
+        self.cap_mm_s = np.full(m, np.inf)
         self.ok = np.zeros(m, dtype=bool)
         self.kappa_per_mm, self.length_mm = np.zeros(m), np.zeros(m)
         self.trim_a_mm, self.trim_b_mm = np.zeros(m), np.zeros(m)
@@ -731,20 +821,60 @@ def _blend_geometry(piece: Piece):
     return SubCurve(piece.geometry, piece.u_a, piece.u_b, piece.s_a_mm, piece.length_mm)
 
 
-def _blend_object_corners(pieces: PieceList, c: _Corners) -> None:
+def _blend_object_corners(pieces: PieceList, c: _Corners, machine: Machine) -> None:
     """Corners with an arc, NURBS or PH piece, one at a time
     (:func:`~nurbscnc.geometry.blend.blend_corner`, equal trims ≤ half the shorter piece)."""
-    from nurbscnc.geometry.blend import blend_corner
+    from nurbscnc.geometry.blend import blend_corner, blend_space_corner
 
     for j in np.flatnonzero(~c.lines).tolist():
         i = int(c.row[j])
         a, b = pieces[i - 1], pieces[i]
-        bl = blend_corner(_blend_geometry(a), _blend_geometry(b), float(c.tol_mm[j]),
-                          0.5 * a.length_mm, 0.5 * b.length_mm, measure=False)  # fmt: skip
+        ga, gb = _blend_geometry(a), _blend_geometry(b)
+        args = (float(c.tol_mm[j]), 0.5 * a.length_mm, 0.5 * b.length_mm)
+        bl = blend_corner(ga, gb, *args, measure=False)
+        if bl is None and _out_of_plane(pieces, np.array([i - 1]))[0]:
+            bl = blend_space_corner(ga, gb, *args)  # a 3-D turn: a G2 quintic Bézier
+            if bl is not None:
+                c.cap_mm_s[j] = servo_blend_cap_mm_s(machine, bl.kappa_max_per_mm)
         if bl is not None:
             c.obj_blends[j] = bl
-            c.ok[j], c.kappa_per_mm[j], c.length_mm[j] = True, bl.kappa_max_per_mm, bl.ph.length_mm
+            c.ok[j], c.kappa_per_mm[j] = True, bl.kappa_max_per_mm
+            c.length_mm[j] = _blend_length_mm(bl)
             c.trim_a_mm[j], c.trim_b_mm[j] = bl.trim_a_mm, bl.trim_b_mm
+
+
+#: Share of ε_max the servo's steady curve error may take on a space blend
+#: (:func:`servo_blend_cap_mm_s`).
+SERVO_BLEND_SHARE = 0.5
+
+
+def servo_blend_cap_mm_s(machine: Machine, kappa_per_mm: float) -> float:
+    """Feed cap [mm/s] of a space blend of peak curvature κ under the contour check: on a
+    curve the servo's path grows by (c₂ + c₁²/2)·v²κ (steady circular motion;
+    :func:`~nurbscnc.servo.model.error_series`, SPEC §8: 2.85e-5 s² for the paper's axes),
+    kept within :data:`SERVO_BLEND_SHARE` · ε_max: v ≤ √(share·ε / (|c₂ + c₁²/2| κ)),
+    the largest coefficient over the modelled axes (inf without a servo model). Why:
+    the contour check's lever on a short tight blend is the feed of the pieces around it
+    (measured on tort.ngc: blends at √(A/κ), 2450 mm/s² of normal acceleration, made the
+    check slow 33 mm helices from 50 to 30 mm/s, +33 s over stopping)."""
+    from nurbscnc.servo.model import error_series
+
+    gains = [abs(float(c[2] + 0.5 * c[1] ** 2))
+             for ax in (machine.servo.x, machine.servo.y, machine.servo.z) if ax is not None
+             for c in (error_series(ax),)]  # fmt: skip
+    gain = max(gains, default=0.0)
+    if gain == 0.0 or not machine.contour_check or kappa_per_mm <= 0.0:
+        return np.inf
+    eps = SERVO_BLEND_SHARE * machine.limits.contour_tolerance_mm
+    return float(np.sqrt(eps / (gain * kappa_per_mm)))
+
+
+def _blend_length_mm(bl) -> float:
+    """Length [mm] of a blend: its PH quintic's, or a space blend's curve's."""
+    if hasattr(bl, "ph"):
+        return float(bl.ph.length_mm)
+    s = bl.curve.arc_length(np.array([0.0, 1.0]))
+    return float(s[1] - s[0])
 
 
 def apply_blends(pieces: PieceList, machine: Machine) -> tuple[PieceList, _Corners | None]:
@@ -771,10 +901,68 @@ def apply_blends(pieces: PieceList, machine: Machine) -> tuple[PieceList, _Corne
     if c is None:
         return pieces, None
     _blend_line_corners(pieces, c)
-    _blend_object_corners(pieces, c)
+    _blend_object_corners(pieces, c, machine)
+    faster = _blend_is_faster(pieces, c, machine)
+    c.slower = c.ok & ~faster
+    c.ok &= faster
     if not c.ok.any():
+        c.slower_junction = c.row[c.slower] - 1
         return pieces, c
     return _blended_rows(pieces, c, machine), c
+
+
+def _speed_change_s(dv_mm_s, a_mm_s2: float, j_mm_s3: float) -> np.ndarray:
+    """Time [s] of a jerk-limited speed change by ``dv_mm_s`` ≥ 0 between two instants of
+    zero acceleration (the profile's transitions, SPEC §7): 2√(Δv/J) while Δv ≤ A²/J (the
+    acceleration never reaches A), else Δv/A + A/J."""
+    dv = np.maximum(np.asarray(dv_mm_s, dtype=float), 0.0)
+    return np.where(dv <= a_mm_s2 * a_mm_s2 / j_mm_s3, 2.0 * np.sqrt(dv / j_mm_s3),
+                    dv / a_mm_s2 + a_mm_s2 / j_mm_s3)  # fmt: skip
+
+
+def _reach_mm_s(d_mm, a_mm_s2: float, j_mm_s3: float) -> np.ndarray:
+    """The speed [mm/s] a jerk-limited start from rest reaches over ``d_mm`` (ending at zero
+    acceleration): the inverse of d = v t(v)/2 with t = :func:`_speed_change_s`, i.e.
+    v = (d² J)^(1/3) while v ≤ A²/J, else the root of v²/(2A) + v A/(2J) = d."""
+    d = np.maximum(np.asarray(d_mm, dtype=float), 0.0)
+    low = np.cbrt(d * d * j_mm_s3)
+    b = a_mm_s2 / j_mm_s3  # v² + b A v − 2 A d = 0 with b A = A²/J
+    high = 0.5 * (-b * a_mm_s2 + np.sqrt((b * a_mm_s2) ** 2 + 8.0 * a_mm_s2 * d))
+    return np.where(low <= a_mm_s2 * a_mm_s2 / j_mm_s3, low, high)
+
+
+def _blend_is_faster(pieces: PieceList, c: _Corners, machine: Machine) -> np.ndarray:
+    """Which corners (m,) pass faster through their blend than stopping at the vertex
+    (G64 P: LinuxCNC blends every corner; a blend so tight that crawling through it costs
+    more than a stop is not used, so G64 P is never slower than G61 there).
+
+    Estimate, per corner, the time the corner adds to cruising at v over the same span, with
+    the profile's transitions (zero acceleration at their ends, :func:`_speed_change_s`
+    t(Δv), covering (v + w)/2 · t(Δv)): stopping costs t(v); slowing to the blend's cap w,
+    crossing its length L_b at w and speeding up again costs t(v − w)(v − w)/v + L_b/w −
+    (d_a + d_b)/v (the blend replaces the trims d_a + d_b of the corner path). v: the smaller
+    neighbouring cap, and at most the speed reachable from rest over half the shorter
+    neighbour (:func:`_reach_mm_s`, the stop's own bound); w: the blend's curvature cap, as
+    :func:`_blended_rows` gives it. On the pentagram (144° tips, P0.02, F3500) this predicts
+    81.6 ms against 68.3 ms for the stop: the planner measured 13.3 ms per corner more for the
+    blend."""
+    m = c.row.size
+    faster = np.ones(m, dtype=bool)
+    if not c.ok.any():
+        return faster
+    lim = machine.limits
+    a, b = c.row - 1, c.row
+    cap = np.minimum(pieces.v_cap_mm_s[a], pieces.v_cap_mm_s[b])
+    half = 0.5 * np.minimum(pieces.length_mm[a], pieces.length_mm[b])
+    v = np.minimum(cap, _reach_mm_s(half, lim.a_max_mm_s2, lim.j_max_mm_s3))
+    w = np.minimum(np.maximum(np.minimum(curvature_cap_mm_s(machine, c.kappa_per_mm, cap),
+                                         c.cap_mm_s), MIN_CAP_MM_S), v)  # fmt: skip
+    v = np.maximum(v, MIN_CAP_MM_S)
+    t_dip = _speed_change_s(v - w, lim.a_max_mm_s2, lim.j_max_mm_s3) * (v - w) / v
+    blend = t_dip + c.length_mm / w - (c.trim_a_mm + c.trim_b_mm) / v
+    stop = _speed_change_s(v, lim.a_max_mm_s2, lim.j_max_mm_s3)
+    faster[c.ok] = (blend <= stop)[c.ok]
+    return faster
 
 
 def _trimmed(piece: Piece, s0_mm: float, s1_mm: float) -> Piece:
@@ -819,6 +1007,7 @@ def _blended_rows(pieces: PieceList, c: _Corners, machine: Machine) -> PieceList
     first = np.cumsum(count) - count
     new_row = first + has_blend  # new row of each kept piece
     c.blend_row = first[corner[ok]]
+    c.slower_junction = new_row[corner[c.slower]] - 1
     cols = _empty_columns(int(count.sum()))
     kept = np.flatnonzero(keep)
     dest = new_row[kept]
@@ -878,9 +1067,11 @@ def _blended_rows(pieces: PieceList, c: _Corners, machine: Machine) -> PieceList
             continue
         i = int(corner[j])
         feed_j = min(float(cap_a[j]), float(cap_b[j]))
-        cap = max(float(curvature_cap_mm_s(machine, bl.kappa_max_per_mm, feed_j)), MIN_CAP_MM_S)
+        cap = max(min(float(curvature_cap_mm_s(machine, bl.kappa_max_per_mm, feed_j)),
+                      float(c.cap_mm_s[j])), MIN_CAP_MM_S)  # fmt: skip
         obj_rows.append(int(first[i]))
-        obj_pieces.append(Piece(Kind.PH, bl.ph, float(bl.ph.length_mm), cap,
+        kind, geom = (Kind.PH, bl.ph) if hasattr(bl, "ph") else (Kind.NURBS, bl.curve)
+        obj_pieces.append(Piece(kind, geom, float(c.length_mm[j]), cap,
                                 int(pieces.segment[i]), int(pieces.line[i]), 0.0, 1.0, 0.0,
                                 bl.kappa_max_per_mm, blend_mm=float(pieces.blend_mm[i]),
                                 rapid=bool(pieces.rapid[i])))  # fmt: skip
@@ -919,7 +1110,8 @@ def corner_log(pieces: PieceList, tried: _Corners | None, machine: Machine,
     or curve out of the corner plane: not blendable); G61.1 / G61 (exact path) /
     ``--blend-tolerance 0`` (zero tolerance) where no tolerance allows a blend; a columnar
     blend meeting a break (not blendable); else no blend fitted within the tolerance (the
-    pieces are too short for one, or its PH quintic has a loop or cusp)."""
+    pieces are too short for one, or its PH quintic has a loop or cusp), or one fitted but
+    stopping is faster (:func:`_blend_is_faster`)."""
     k = len(pieces)
     keys, lines, points, turns, acts, whys = [], [], [], [], [], []
     if tried is not None and tried.ok.any():
@@ -941,8 +1133,9 @@ def corner_log(pieces: PieceList, tried: _Corners | None, machine: Machine,
             act = np.where(passed, CornerAction.PASS, CornerAction.STOP)
             why = np.full(j.size, CornerWhy.SMALL_BREAK, dtype=np.int8)
             st = ~passed
+            slower = tried.slower_junction if tried is not None else None
             why[st] = _stop_reasons(pieces, j[st], turning[j[st]], regular[j[st]], machine,
-                                    options)  # fmt: skip
+                                    options, slower)  # fmt: skip
             keys.append(j + 1)  # the row after the junction (a blend row's junctions are smooth)
             lines.append(pieces.line[j])
             points.append(pieces.end_mm[:, j].T)
@@ -968,7 +1161,8 @@ def settle_time_s(machine: Machine) -> float:
 
 
 def _stop_reasons(pieces: PieceList, j: np.ndarray, turning: np.ndarray, regular: np.ndarray,
-                  machine: Machine, options: PlanOptions) -> np.ndarray:  # fmt: skip
+                  machine: Machine, options: PlanOptions,
+                  slower: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
     """Why the tool stops at junctions ``j`` (:class:`~nurbscnc.plan.corners.CornerWhy`
     codes; :func:`corner_log` gives the order). Rules are applied last-first, so the first
     rule that applies is the one left."""
@@ -979,6 +1173,8 @@ def _stop_reasons(pieces: PieceList, j: np.ndarray, turning: np.ndarray, regular
     why = np.full(j.size, CornerWhy.NO_BLEND_FITS, dtype=np.int8)
     columnar = np.isin(j, pieces.ph_rows) | np.isin(j + 1, pieces.ph_rows)
     why[columnar] = CornerWhy.NOT_BLENDABLE
+    if slower is not None and slower.size:  # a blend fitted, the stop is faster
+        why[np.isin(j, slower)] = CornerWhy.STOP_FASTER
     zero = tol == 0.0
     why[zero] = CornerWhy.EXACT_PATH  # G61
     if options.blend_tolerance_mm == 0.0:
@@ -1034,4 +1230,7 @@ def junction_caps(pieces: PieceList) -> np.ndarray:
     smooth = _passable(pieces, turning, regular) & ~_stopped(pieces)
     cap = pieces.v_cap_mm_s
     caps[1:-1] = np.where(smooth, np.minimum(cap[:-1], cap[1:]), 0.0)
+    # Curvature jumps passed at speed: the acceleration step's jerk (junction_jump_cap_mm_s).
+    j = pieces.jump_rows + 1
+    caps[j] = np.minimum(caps[j], pieces.jump_cap_mm_s)
     return caps
