@@ -526,7 +526,9 @@ class _Checker:
         self.pieces, self.machine, self.sampler = pieces, machine, sampler
         self.eps_mm, self.settle_rows, self.keep = eps_mm, settle_rows, keep
         self.window = max(int(window), 1)
-        self.windowed = _windowed(sampler)
+        # Keeping the whole reference and response: one window (today's memory; windows
+        # would be concatenated at the end, twice the memory for a moment).
+        self.windowed = _windowed(sampler) and not keep
         self.rapid = pieces.rapid
         self.after_rapid = np.zeros(len(pieces), dtype=bool)  # first piece of a cut after a rapid
         self.after_rapid[settle_rows + 1] = True
