@@ -50,7 +50,7 @@ import numpy as np
 from nurbscnc.errors import PlanningError
 from nurbscnc.machine.profile import Machine
 from nurbscnc.plan.axes import piece_limits
-from nurbscnc.plan.dynamics import PathIndex, Response, window_response
+from nurbscnc.plan.dynamics import PathIndex, Response, path_response, window_response
 from nurbscnc.plan.limits import check_point_count
 from nurbscnc.plan.options import Dynamics, LookaheadOptions
 from nurbscnc.plan.pieces import PieceList, junction_caps, segment_pieces, settle_time_s
@@ -504,12 +504,6 @@ def _rows(ref: Reference, sl: slice) -> Reference:
     return replace(ref, **{f.name: getattr(ref, f.name)[sl] for f in fields(ref)})
 
 
-def _concat(parts: list, cls):
-    """The dataclass ``cls`` whose every column is the concatenation of the parts'."""
-    return cls(**{f.name: np.concatenate([getattr(x, f.name) for x in parts])
-                  for f in fields(cls)})  # fmt: skip
-
-
 class _Checker:
     """The dynamics check of one program's plans (SPEC §8), a window of servo samples at a
     time (issue 14): the reference of ``window`` samples (plus one on each side for the
@@ -550,6 +544,8 @@ class _Checker:
 
     def run(self, planned: PieceList, profile: Profile) -> Check:
         """Check the plan ``planned``/``profile``: the :class:`Check` of its reference."""
+        if not self.windowed:
+            return self._run_whole(planned, profile)
         servo = self.machine.servo
         stream = AxesStream([servo.x, servo.y, servo.z], servo.period_s)
         acc = _Accumulator(self, profile)
@@ -561,33 +557,52 @@ class _Checker:
             actual = stream.step(ref.points_mm)
             resp = window_response(ref.points_mm, ref.s_mm, actual, d[own], planned, profile,
                                    self.eps_mm, self.index)  # fmt: skip
-            # Contour error matters while cutting: samples on rapids (air moves) and during
-            # the settle after a rapid (the reference waits at the cut's start) are not
-            # checked.
-            waiting = self.after_rapid[ref.piece] & (
-                ref.tau_s <= profile.piece_start_time_s[ref.piece])
-            _cut_distance_after_rapids(resp, ref, profile, self.after_rapid, waiting,
-                                       self.rapid, self.index)  # fmt: skip
-            acc.add(ref, resp, ~self.rapid[ref.piece] & ~waiting)
+            acc.add(resp, self._cutting(ref, resp, profile), ref.tau_s, ref.piece)
             last = ref
         tail = stream.settle()  # the reference held at its end until the axes settle
         if tail.shape[0]:
             m = tail.shape[0]
-            held = replace(_rows(last, slice(-1, None)), tau_s=np.full(1, profile.duration_s),
-                           piece=np.full(1, len(planned) - 1))  # fmt: skip
-            held = _rows(held, np.zeros(m, dtype=np.intp))
-            resp = window_response(held.points_mm, held.s_mm, tail, np.zeros((m, 2)), planned,
-                                   profile, self.eps_mm, self.index)  # fmt: skip
-            acc.add(held, resp, np.full(m, not self.rapid[-1]), tail=True)
+            held = np.repeat(last.points_mm[-1:], m, axis=0)
+            resp = window_response(held, np.full(m, last.s_mm[-1]), tail, np.zeros((m, 2)),
+                                   planned, profile, self.eps_mm, self.index)  # fmt: skip
+            acc.add(resp, np.full(m, not self.rapid[-1]), np.full(m, profile.duration_s),
+                    np.full(m, len(planned) - 1))  # fmt: skip
         return acc.check()
+
+    def _run_whole(self, planned: PieceList, profile: Profile) -> Check:
+        """The check on the whole reference at once (a sampler without windows, or the
+        reference and response kept): :func:`~nurbscnc.plan.dynamics.path_response`."""
+        ref = self.sampler(planned, profile, self.machine.servo.period_s)
+        resp = path_response(ref, planned, profile, self.machine, refine_above_mm=self.eps_mm,
+                             index=self.index)  # fmt: skip
+        n, m = ref.t_s.size, resp.contour_mm.size
+        cutting = np.append(self._cutting(ref, resp, profile),
+                            np.full(m - n, not self.rapid[-1]))  # fmt: skip
+        acc = _Accumulator(self, profile)
+        acc.add(resp, cutting, np.append(ref.tau_s, np.full(m - n, profile.duration_s)),
+                np.append(ref.piece, np.full(m - n, len(planned) - 1)))  # fmt: skip
+        if not self.keep:
+            return acc.check()
+        return replace(acc.check(), reference=ref, response=resp, cutting=cutting)
+
+    def _cutting(self, ref: Reference, resp: Response, profile: Profile) -> np.ndarray:
+        """Which reference samples are checked (N,): contour error matters while cutting;
+        samples on rapids (air moves) and during the settle after a rapid (the reference
+        waits at the cut's start) are not. The first cutting samples after a rapid are
+        measured against the cut only (in ``resp``)."""
+        waiting = self.after_rapid[ref.piece] & (
+            ref.tau_s <= profile.piece_start_time_s[ref.piece])
+        _cut_distance_after_rapids(resp, ref, profile, self.after_rapid, waiting, self.rapid,
+                                   self.index)  # fmt: skip
+        return ~self.rapid[ref.piece] & ~waiting
 
 
 class _Accumulator:
     """The running results of one check (:class:`_Checker`): over-limit samples, piece
-    runs, settle counts and contour statistics, and with ``keep`` the windows themselves."""
+    runs, settle counts and contour statistics (:class:`Overs`)."""
 
     def __init__(self, checker: _Checker, profile: Profile):
-        self.c = checker
+        self.eps_mm = checker.eps_mm
         self.t_restart = profile.piece_start_time_s[checker.settle_rows + 1]
         self.count = 0
         self.over: list = []  # (index, err, tau) per window
@@ -597,19 +612,19 @@ class _Accumulator:
         self.worst = 0.0
         self.c_max = self.c_sq = self.eq29_max = 0.0
         self.c_n = 0
-        self.kept: list = []  # (reference, response, cutting) per window (keep only)
 
-    def add(self, ref: Reference, resp: Response, cutting: np.ndarray, tail: bool = False):
-        """One window's samples (``tail``: the held samples after the end, which are not
-        part of the reference)."""
+    def add(self, resp: Response, cutting: np.ndarray, tau_s: np.ndarray, piece: np.ndarray):
+        """The next samples: their response, which are checked (``cutting``), profile times
+        [s] and pieces."""
         err = np.where(cutting, resp.contour_mm, 0.0)
-        over = np.flatnonzero(err > self.c.eps_mm)
-        self.over.append((over + self.count, err[over], ref.tau_s[over]))
+        over = np.flatnonzero(err > self.eps_mm)
+        self.over.append((over + self.count, err[over], tau_s[over]))
         self.worst = max(self.worst, float(err.max()))
-        starts = np.flatnonzero(np.diff(ref.piece, prepend=self.last_piece) != 0)
-        self.runs.append((ref.piece[starts], starts + self.count))
-        self.last_piece = int(ref.piece[-1])
-        self.restart += np.searchsorted(ref.tau_s, self.t_restart, side="right")
+        del err
+        starts = np.flatnonzero(np.diff(piece, prepend=self.last_piece) != 0)
+        self.runs.append((piece[starts], starts + self.count))
+        self.last_piece = int(piece[-1])
+        self.restart += np.searchsorted(tau_s, self.t_restart, side="right")
         c = resp.contour_mm[cutting] * 1000.0
         if c.size:
             self.c_max = max(self.c_max, float(c.max()))
@@ -617,25 +632,17 @@ class _Accumulator:
             self.c_n += c.size
             self.eq29_max = max(self.eq29_max,
                                 float(np.abs(resp.contour_eq29_mm[cutting]).max()) * 1000.0)
-        self.count += err.size
-        if self.c.keep:
-            self.kept.append((None if tail else ref, resp, cutting))
+        self.count += cutting.size
 
     def check(self) -> Check:
-        """The :class:`Check` of everything added."""
+        """The :class:`Check` of everything added (no per-sample arrays)."""
         idx, err, tau = (np.concatenate(x) for x in zip(*self.over))
         piece, start = (np.concatenate(x) for x in zip(*self.runs))
         overs = Overs(self.count, idx, err, tau, piece, start, self.restart, self.worst)
         rms = float(np.sqrt(self.c_sq / self.c_n)) if self.c_n else 0.0
         stats = {"contour_true_max_um": self.c_max, "contour_true_rms_um": rms,
                  "contour_eq29_max_um": self.eq29_max}  # fmt: skip
-        if not self.c.keep:
-            return Check(None, None, None, overs, stats)
-        refs = [r for r, _, _ in self.kept if r is not None]
-        ref = refs[0] if len(refs) == 1 else _concat(refs, type(refs[0]))
-        resp = _concat([r for _, r, _ in self.kept], Response)
-        cutting = np.concatenate([c for _, _, c in self.kept])
-        return Check(ref, resp, cutting, overs, stats)
+        return Check(None, None, None, overs, stats)
 
 
 def plan_checked(program, machine: Machine, options: LookaheadOptions | None = None,
