@@ -17,6 +17,11 @@ against the whole path (pieces near them found by a k-d tree), so the decision
 to slow down uses the true distance as the SPEC defines it — an overshoot past the end of a
 closed contour onto its own start is no error. The polyline is exact on lines (their end
 points) and has a chord error below :data:`CHORD_MM` on curved pieces.
+
+Everything after the simulation is per sample, so the planner's check measures a window of
+samples at a time (:func:`window_response`, the servo simulated with its state carried by
+:class:`~nurbscnc.servo.model.AxesStream`) and gets, sample for sample, what
+:func:`path_response` gives on the whole reference.
 """
 
 from __future__ import annotations

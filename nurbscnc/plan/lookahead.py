@@ -37,8 +37,14 @@ Long programs. Everything per piece is whole-array work on the columns of the
 :class:`~nurbscnc.plan.pieces.PieceList` (junctions, dwells, blame), the contour error is
 measured near each reference point only (:func:`~nurbscnc.plan.dynamics.path_response`), and
 a local re-plan changes the levers of all offending pieces at once, so a program needs a
-few iterations, whatever its length. Runs of tiny tangent-continuous pieces at one cap and
-one set of limits are planned as one by :func:`~nurbscnc.plan.profile.plan_profile`.
+few iterations, whatever its length. The check runs :data:`CHECK_WINDOW` servo samples at a
+time with the servo state carried (:class:`_Checker`, issue 14) and keeps only the
+over-limit samples, the piece of every sample run-length coded and running statistics
+(:class:`Overs`): its memory grows with the pieces, not with the motion time, and the plan
+is the one the whole-array check gives (``plan_checked(..., keep_reference=True)`` keeps the
+whole reference and response for plots and reports). Runs of tiny tangent-continuous
+pieces at one cap and one set of limits are planned as one by
+:func:`~nurbscnc.plan.profile.plan_profile`.
 """
 from __future__ import annotations
 
