@@ -205,3 +205,28 @@ def test_an_hour_of_motion_plans_under_a_memory_cap():
     assert 0.0 < worst_um <= MACHINE.limits.contour_tolerance_mm * 1000.0
     whole = _child("keep")
     assert whole.returncode != 0 and "MemoryError" in whole.stderr
+
+
+def test_which_samplers_are_checked_in_windows():
+    """Windows only where a window gives the whole reference's rows exactly: the exact
+    sampler; not the Taylor recurrence (sequential: a window would restart it), not a
+    sampler without k0/k1 (the pre-compensated one, the CLI's announcing wrapper), not one
+    that says ``windows = False``; and a plan checked whole equals the windowed one."""
+    from nurbscnc.interpolate.sample import reference_sampler
+    from nurbscnc.plan.timing import exact_reference
+
+    exact = reference_sampler("exact")
+    assert lookahead._windowed(exact) and lookahead._windowed(exact_reference)
+    assert not lookahead._windowed(reference_sampler("taylor"))
+
+    def whole_only(pieces, profile, period_s):
+        return exact_reference(pieces, profile, period_s)
+
+    def refused(pieces, profile, period_s, k0=0, k1=None):
+        return exact_reference(pieces, profile, period_s, k0, k1)
+
+    refused.windows = False
+    assert not lookahead._windowed(whole_only) and not lookahead._windowed(refused)
+    text = (PLANNER / "square_g61_f3000.nc").read_text()
+    _assert_same_plan(_plan(text, SLOW, reference=whole_only, keep_reference=False),
+                      _plan(text, SLOW, keep_reference=False, window=TINY))  # fmt: skip
