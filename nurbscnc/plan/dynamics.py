@@ -17,6 +17,11 @@ against the whole path (pieces near them found by a k-d tree), so the decision
 to slow down uses the true distance as the SPEC defines it — an overshoot past the end of a
 closed contour onto its own start is no error. The polyline is exact on lines (their end
 points) and has a chord error below :data:`CHORD_MM` on curved pieces.
+
+Everything after the simulation is per sample, so the planner's check measures a window of
+samples at a time (:func:`window_response`, the servo simulated with its state carried by
+:class:`~nurbscnc.servo.model.AxesStream`) and gets, sample for sample, what
+:func:`path_response` gives on the whole reference.
 """
 
 from __future__ import annotations
@@ -259,3 +264,29 @@ def path_response(samples, pieces, profile, machine, hold: str = "foh",
     eq29 = contour_error_eq29(axis_err[:, 0], axis_err[:, 1], phi)
     eq29 = np.where(np.hypot(d[:, 0], d[:, 1]) > 0, eq29, 0.0)
     return Response(actual, axis_err, contour, eq29)
+
+
+def window_response(points_mm: np.ndarray, s_mm: np.ndarray, actual_mm: np.ndarray,
+                    direction_xy: np.ndarray, pieces, profile,
+                    refine_above_mm: float | None = None,
+                    index: PathIndex | None = None) -> Response:  # fmt: skip
+    """The response of one window of samples (the windowed dynamics check, issue 14): the
+    reference ``points_mm`` (w, 3) [mm] at path lengths ``s_mm`` (w,), the simulated
+    ``actual_mm`` (w, 3) (:class:`~nurbscnc.servo.model.AxesStream`) and the reference's
+    direction of travel ``direction_xy`` (w, 2) (its central difference over the whole
+    reference; 0 where it does not move). Per sample the same as :func:`path_response`:
+    the true distance near the reference point (:func:`windowed_contour_mm`), refined to the
+    whole path above ``refine_above_mm``, and eq. 29 (SPEC §8) in the XY plane."""
+    axis_err = points_mm - actual_mm
+    lag = np.sqrt(np.einsum("ij,ij->i", axis_err, axis_err))
+    contour = windowed_contour_mm(actual_mm, lag, s_mm, pieces, profile)
+    if refine_above_mm is not None:
+        sel = np.flatnonzero(contour > refine_above_mm)
+        if sel.size:
+            index = index or PathIndex(pieces)
+            contour[sel] = index.distance_mm(actual_mm[sel], contour[sel])
+    d = direction_xy
+    phi = np.arctan2(d[:, 1], d[:, 0])
+    eq29 = contour_error_eq29(axis_err[:, 0], axis_err[:, 1], phi)
+    eq29 = np.where(np.hypot(d[:, 0], d[:, 1]) > 0, eq29, 0.0)
+    return Response(actual_mm, axis_err, contour, eq29)

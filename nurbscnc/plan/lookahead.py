@@ -37,24 +37,38 @@ Long programs. Everything per piece is whole-array work on the columns of the
 :class:`~nurbscnc.plan.pieces.PieceList` (junctions, dwells, blame), the contour error is
 measured near each reference point only (:func:`~nurbscnc.plan.dynamics.path_response`), and
 a local re-plan changes the levers of all offending pieces at once, so a program needs a
-few iterations, whatever its length. Runs of tiny tangent-continuous pieces at one cap and
-one set of limits are planned as one by :func:`~nurbscnc.plan.profile.plan_profile`.
+few iterations, whatever its length. The check runs :data:`CHECK_WINDOW` servo samples at a
+time with the servo state carried (:class:`_Checker`, issue 14) and keeps only the
+over-limit samples, the piece of every sample run-length coded and running statistics
+(:class:`Overs`): its memory grows with the pieces, not with the motion time, and the plan
+is the one the whole-array check gives (``plan_checked(..., keep_reference=True)`` keeps the
+whole reference and response for plots and reports). Runs of tiny tangent-continuous
+pieces at one cap and one set of limits are planned as one by
+:func:`~nurbscnc.plan.profile.plan_profile`.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+import inspect
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
 from nurbscnc.errors import PlanningError
 from nurbscnc.machine.profile import Machine
 from nurbscnc.plan.axes import piece_limits
-from nurbscnc.plan.dynamics import PathIndex, Response, path_response
+from nurbscnc.plan.dynamics import PathIndex, Response, path_response, window_response
 from nurbscnc.plan.limits import check_point_count
 from nurbscnc.plan.options import Dynamics, LookaheadOptions
 from nurbscnc.plan.pieces import PieceList, junction_caps, segment_pieces, settle_time_s
 from nurbscnc.plan.profile import Profile, ProfileInput, plan_profile
-from nurbscnc.plan.timing import Reference, dwell_times, exact_reference, total_time_s
+from nurbscnc.plan.timing import (
+    Reference,
+    dwell_times,
+    exact_reference,
+    sample_count,
+    total_time_s,
+)
+from nurbscnc.servo.model import AxesStream
 
 #: Plan to this fraction of ε_max so the prediction has a little room (model, rounding).
 CONTOUR_MARGIN = 0.99
@@ -78,6 +92,11 @@ FALLBACK_FACTOR = 0.6
 IMPROVE_ITERATIONS = 6
 #: A lever within this ratio of its bracket's upper end is left alone.
 IMPROVE_RATIO = 1.005
+#: Servo samples per window of the dynamics check: its memory grows with this, not with
+#: the motion time (issue 14).
+CHECK_WINDOW = 1 << 16
+#: Over-limit samples per block of the blame computation.
+BLAME_BLOCK = 1 << 12
 
 
 @dataclass(frozen=True, eq=False)
@@ -127,25 +146,56 @@ class Plan:
 
 
 @dataclass(frozen=True, eq=False)
-class Check:
-    """The dynamics check of the final plan (SPEC §8): the ``reference`` points it checked
-    (:class:`~nurbscnc.plan.timing.Reference`), the predicted servo ``response`` to them and
-    ``cutting`` (M,), which response samples are cutting (not on a rapid; the held tail after
-    the end counts as the last piece): those are checked."""
+class Overs:
+    """What the shaping rules need of one check, in memory that grows with the pieces and
+    the over-limit samples, never with the motion time (issue 14): ``count`` M checked
+    samples (the settle tail included); the over-limit samples (cutting, contour error above
+    the check's limit): their ``index`` (q,) in 0…M−1, ``err_mm`` (q,) [mm] and profile time
+    ``tau_s`` (q,) [s] (the tail: the end); the piece of every sample, run-length coded
+    (pieces follow time): ``run_piece`` (r,) and ``run_start`` (r,) its first sample;
+    ``restart_count`` (len(settle rows),): samples whose profile time is at most the start
+    of the cut after each rapid; ``worst_mm`` the largest checked error [mm]."""
 
-    reference: Reference
-    response: Response
-    cutting: np.ndarray
+    count: int
+    index: np.ndarray
+    err_mm: np.ndarray
+    tau_s: np.ndarray
+    run_piece: np.ndarray
+    run_start: np.ndarray
+    restart_count: np.ndarray
+    worst_mm: float
+
+
+@dataclass(frozen=True, eq=False)
+class Check:
+    """The dynamics check of the final plan (SPEC §8). Always: ``overs``, the compact form
+    the shaping rules read (:class:`Overs`) and ``stats``, the contour error statistics of
+    the cutting samples (:meth:`contour_stats`). With ``plan_checked(...,
+    keep_reference=True)`` also the ``reference`` points it checked
+    (:class:`~nurbscnc.plan.timing.Reference`), the predicted servo ``response`` to them and
+    ``cutting`` (M,), which response samples are cutting (not on a rapid; the held tail
+    after the end counts as the last piece); else these three are None."""
+
+    reference: Reference | None
+    response: Response | None
+    cutting: np.ndarray | None
+    overs: Overs | None = None
+    stats: dict | None = None
 
     def contour_um(self) -> np.ndarray:
-        """The true contour error [µm] of the cutting samples."""
+        """The true contour error [µm] of the cutting samples (needs the kept response)."""
+        if self.response is None:
+            raise ValueError("the check kept no per-sample response (keep_reference=False)")
         return self.response.contour_mm[self.cutting] * 1000.0
 
     def contour_stats(self) -> dict:
         """The check's contour error of the cutting samples [µm]: ``contour_true_max_um``,
         ``contour_true_rms_um`` (true distance to the path) and ``contour_eq29_max_um`` (|ε|
-        of SPEC eq. 29); 0 when nothing is cut. The summaries use only these (a check that
-        keeps no per-sample arrays gives the same numbers)."""
+        of SPEC eq. 29); 0 when nothing is cut. The summaries use only these; a check that
+        keeps no per-sample arrays gives the same numbers from its running statistics (the
+        rms summed window by window: equal to rounding)."""
+        if self.response is None:
+            return dict(self.stats)
         c = self.contour_um()
         eq29 = np.abs(self.response.contour_eq29_mm[self.cutting]) * 1000.0
         if not c.size:
@@ -173,28 +223,31 @@ def profile_over(length_mm: np.ndarray, caps: np.ndarray, smooth: np.ndarray,
                                      j_decel_mm_s3=limits.j_down_mm_s3))  # fmt: skip
 
 
-def _blame(err: np.ndarray, eps_mm: float, piece: np.ndarray, joined: np.ndarray,
+def _blame(ov: Overs, sel: np.ndarray, eps_mm: float, joined: np.ndarray,
            window: int) -> np.ndarray:  # fmt: skip
     """Largest over-limit error [mm] each piece shares the blame for (0: none).
 
-    A sample over the limit blames the pieces of the ``window`` samples up to it (the servo
-    remembers): per sample the largest over-limit error in the next ``window`` samples (a
-    sliding maximum), then the largest per piece. Blamed pieces that the profile plans as
-    one (``joined`` (k−1,): tangent-continuous junction, equal caps) share their largest
-    blame, so their caps stay equal and they stay one profile unit (a run of tiny CAM
-    pieces lowered piece by piece to slightly different caps would crawl)."""
-    from scipy.ndimage import maximum_filter1d
-
-    n = piece.size
+    An over-limit sample (``ov``: those of ``sel`` (q,) bool with error above ``eps_mm``)
+    blames the pieces of the ``window`` samples up to it (the servo remembers): sample i
+    blames every piece with a sample in [i − window, i], i.e. the runs of
+    ``ov.run_start`` from the one holding max(i − window, 0) to the one holding i; each
+    piece keeps the largest. Blamed pieces that the profile plans as one (``joined``
+    (k−1,): tangent-continuous junction, equal caps) share their largest blame, so their
+    caps stay equal and they stay one profile unit (a run of tiny CAM pieces lowered piece
+    by piece to slightly different caps would crawl)."""
     k = joined.size + 1
-    over = np.flatnonzero(err > eps_mm)
-    e_over = np.zeros(n)
-    np.maximum.at(e_over, np.minimum(over, n - 1), err[over])
-    size = window + 1
-    reach = maximum_filter1d(e_over, size=size, mode="constant", cval=0.0,
-                             origin=-(size // 2))  # fmt: skip
+    keep = sel & (ov.err_mm > eps_mm)
+    idx, err = ov.index[keep], ov.err_mm[keep]
+    blame_run = np.zeros(ov.run_start.size)
+    for lo in range(0, idx.size, BLAME_BLOCK):  # (block × window) temporaries at most
+        i, e = idx[lo : lo + BLAME_BLOCK], err[lo : lo + BLAME_BLOCK]
+        r_lo = np.searchsorted(ov.run_start, np.maximum(i - window, 0), side="right") - 1
+        span = np.searchsorted(ov.run_start, i, side="right") - r_lo
+        rows = np.repeat(np.arange(i.size), span)
+        runs = r_lo[rows] + np.arange(rows.size) - np.repeat(np.cumsum(span) - span, span)
+        np.maximum.at(blame_run, runs, e[rows])
     blame = np.zeros(k)
-    np.maximum.at(blame, piece, reach)
+    np.maximum.at(blame, ov.run_piece, blame_run)
     hit = blame > 0.0
     link = hit[:-1] & hit[1:] & joined
     if link.any():
@@ -312,9 +365,9 @@ def _runs(caps: np.ndarray, smooth: np.ndarray, lev: _Levers) -> np.ndarray:
     return np.concatenate(([0], np.cumsum(~joined)))
 
 
-def _stop_events(tau_s: np.ndarray, over: np.ndarray, profile: Profile, period_s: float):
-    """For the over-limit samples ``over`` (indices; profile times ``tau_s``), the stop
-    junction each is near (−1: none): a junction planned at rest whose profile time τ_j has
+def _stop_events(tau_s: np.ndarray, profile: Profile, period_s: float):
+    """For over-limit samples at profile times ``tau_s`` [s], the stop junction each is near
+    (−1: none): a junction planned at rest whose profile time τ_j has
     τ_j − :data:`STOP_BEFORE_S` ≤ τ ≤ τ_j + :data:`STOP_WINDOW_S` (the overshoot of a stop
     and the corner cut while the servo still settles from it; during a dwell τ = τ_j)."""
     v = profile.junction_speeds_mm_s
@@ -322,9 +375,9 @@ def _stop_events(tau_s: np.ndarray, over: np.ndarray, profile: Profile, period_s
     stops = np.flatnonzero(v == 0.0)
     stops = stops[stops > 0]  # the start at rest is no stop to soften
     t_stop = np.append(profile.piece_start_time_s, profile.duration_s)[stops]
-    tau = tau_s[over]
+    tau = tau_s
     if stops.size == 0:
-        return np.full(over.size, -1)
+        return np.full(tau.size, -1)
     # The first stop at or after τ − window, if it is not later than τ + before.
     i = np.searchsorted(t_stop, tau - STOP_WINDOW_S - 0.5 * period_s, side="left")
     i = np.minimum(i, stops.size - 1)
@@ -333,32 +386,40 @@ def _stop_events(tau_s: np.ndarray, over: np.ndarray, profile: Profile, period_s
     return np.where(near, np.minimum(stops[i], k), -1)
 
 
-def _shape(lev: _Levers, err: np.ndarray, eps_mm: float, ref: Reference, profile: Profile,
-           pieces: PieceList, smooth: np.ndarray, settle_rows: np.ndarray, settle_max_s: float,
-           period_s: float) -> None:  # fmt: skip
-    """One local re-plan (in place): each over-limit sample is answered where its error is
-    caused (module docstring): the settle after a rapid, the descent into and the rise out
-    of a stop, else the feed over the blamed window."""
-    n = ref.t_s.size
-    k = len(pieces)
-    over = np.flatnonzero(err > eps_mm)
-    tau = np.append(ref.tau_s, np.full(err.size - n, profile.duration_s))
-    near = _stop_events(tau, over, profile, period_s)
+def _settle_extra(lev: _Levers, ov: Overs, near: np.ndarray, profile: Profile,
+                  settle_rows: np.ndarray, settle_max_s: float, period_s: float) -> np.ndarray:
+    """The settles after rapids (in place): each rapid whose stop transient the over-limit
+    samples are near waits longer, past the last of them (plus one period). Returns which
+    over-limit samples this answered."""
+    over, tau = ov.index, ov.tau_s
     handled = np.zeros(over.size, dtype=bool)
-    # 1. Settle after a rapid: the rapid's own stop transient, not the cut's motion.
-    for r in settle_rows.tolist():
+    for i_r, r in enumerate(settle_rows.tolist()):
         hit = near == r + 1
         if not hit.any() or lev.settle_s[r] >= settle_max_s:
             continue
         # Move the restart past the last over-limit sample (plus one period).
         t_restart = profile.piece_start_time_s[r + 1]
-        moving = over[hit & (tau[over] > t_restart)]
+        moving = over[hit & (tau > t_restart)]
         extra = period_s
         if moving.size:
-            first_moving = int(np.searchsorted(tau, t_restart, side="right"))
+            first_moving = int(ov.restart_count[i_r])  # the first sample with τ > restart
             extra = max((int(moving.max()) - first_moving + 2) * period_s, period_s)
         lev.settle_s[r] = min(settle_max_s, lev.settle_s[r] + extra)
         handled |= hit
+    return handled
+
+
+def _shape(lev: _Levers, ov: Overs, eps_mm: float, profile: Profile, pieces: PieceList,
+           smooth: np.ndarray, settle_rows: np.ndarray, settle_max_s: float,
+           period_s: float) -> None:  # fmt: skip
+    """One local re-plan (in place) from a check's over-limit samples ``ov``: each is
+    answered where its error is caused (module docstring): the settle after a rapid, the
+    descent into and the rise out of a stop, else the feed over the blamed window."""
+    k = len(pieces)
+    err, tau = ov.err_mm, ov.tau_s
+    near = _stop_events(tau, profile, period_s)
+    # 1. Settle after a rapid: the rapid's own stop transient, not the cut's motion.
+    handled = _settle_extra(lev, ov, near, profile, settle_rows, settle_max_s, period_s)
     # 2. Stops: soften the descent of the run that ends there and, for samples after the
     #    restart, the rise of the run that leaves it.
     runs = _runs(lev.caps, smooth, lev)
@@ -366,7 +427,7 @@ def _shape(lev: _Levers, err: np.ndarray, eps_mm: float, ref: Reference, profile
     new_hist = {}
     for j in np.unique(near[(near > 0) & ~handled]).tolist():
         hit = (near == j) & ~handled
-        e = float(err[over[hit]].max())
+        e = float(err[hit].max())
         prev = stop_hist.get(j)
         if prev == FEED_ONLY:  # found ineffective before: the feed lever answers it
             new_hist[j] = prev
@@ -388,41 +449,36 @@ def _shape(lev: _Levers, err: np.ndarray, eps_mm: float, ref: Reference, profile
             lev.j_dn[sel] *= f
             lev.shaped |= sel
         t_restart = profile.piece_start_time_s[j] if j < k else np.inf
-        if j < k and (tau[over[hit]] > t_restart).any() and not pieces.rapid[j]:
+        if j < k and (tau[hit] > t_restart).any() and not pieces.rapid[j]:
             sel = runs == runs[j]
             lev.j_up[sel] *= f
             lev.shaped |= sel
         handled |= hit
     lev.stop_history = new_hist
     # 3. Curves: the feed of the pieces in the blamed window only.
-    rest = over[~handled]
-    if rest.size:
-        e_rest = np.zeros(err.size)
-        e_rest[rest] = err[rest]
+    if not handled.all():
         window = max(int(round(BLAME_WINDOW_S / period_s)), 1)
         joined = (smooth[1:-1] > 0) & (lev.caps[:-1] == lev.caps[1:])
-        piece = np.append(ref.piece, np.full(err.size - n, k - 1))
-        blame = _blame(e_rest, eps_mm, piece, joined, window)
+        blame = _blame(ov, ~handled, eps_mm, joined, window)
         factor, lev.cap_history = local_factors(blame, eps_mm, lev.cap_history)
         lev.caps *= factor
         lev.shaped |= factor < 1.0
 
 
-def _fallback(lev: _Levers, err: np.ndarray, eps_mm: float, ref: Reference, pieces: PieceList,
+def _fallback(lev: _Levers, ov: Overs, eps_mm: float, pieces: PieceList,
               settle_rows: np.ndarray, settle_max_s: float, period_s: float,
               stage: int) -> None:  # fmt: skip
     """The guaranteed-feasible fallback (in place): every lever of the blamed pieces (stage
-    1: within the servo's memory of each over-limit sample; stage 2: all cutting pieces)
-    scaled by :data:`FALLBACK_FACTOR` and the settles at their full length. Speed,
+    1: within the servo's memory of each over-limit sample of ``ov``; stage 2: all cutting
+    pieces) scaled by :data:`FALLBACK_FACTOR` and the settles at their full length. Speed,
     acceleration and jerk → 0 take the servo error → 0, so this ends within ε_max."""
-    n = ref.t_s.size
     k = len(pieces)
     f = FALLBACK_FACTOR
     lev.settle_s[settle_rows] = np.maximum(lev.settle_s[settle_rows], settle_max_s)
     if stage == 1:
         window = max(int(round(max(settle_max_s, BLAME_WINDOW_S) / period_s)), 1)
-        piece = np.append(ref.piece, np.full(err.size - n, k - 1))
-        blame = _blame(err, eps_mm, piece, np.zeros(k - 1, dtype=bool), window)
+        everything = np.ones(ov.index.size, dtype=bool)
+        blame = _blame(ov, everything, eps_mm, np.zeros(k - 1, dtype=bool), window)
         sel = (blame > 0.0) & ~pieces.rapid
     else:
         sel = ~pieces.rapid
@@ -432,15 +488,187 @@ def _fallback(lev: _Levers, err: np.ndarray, eps_mm: float, ref: Reference, piec
     lev.shaped |= sel
 
 
+def _windowed(sampler) -> bool:
+    """Whether the reference sampler gives any window [k0, k1) of its samples exactly (the
+    rows of the whole reference): an explicit ``sampler.windows`` says so; else a sampler
+    taking ``k0`` and ``k1`` does, unless it runs the Taylor recurrence (sequential: a
+    window would restart it). Others (the pre-compensated, non-causal one) are evaluated
+    whole."""
+    flag = getattr(sampler, "windows", None)
+    if flag is not None:
+        return bool(flag)
+    if getattr(getattr(sampler, "interpolator", None), "value", None) == "taylor":
+        return False
+    try:
+        params = inspect.signature(sampler).parameters
+    except (TypeError, ValueError):
+        return False
+    return "k0" in params and "k1" in params
+
+
+def _rows(ref: Reference, sl: slice) -> Reference:
+    """Rows ``sl`` of every per-sample column of ``ref``."""
+    return replace(ref, **{f.name: getattr(ref, f.name)[sl] for f in fields(ref)})
+
+
+class _Checker:
+    """The dynamics check of one program's plans (SPEC §8), a window of servo samples at a
+    time (issue 14): the reference of ``window`` samples (plus one on each side for the
+    direction of travel), the servo simulated with its state carried
+    (:class:`~nurbscnc.servo.model.AxesStream`), the contour error measured per sample
+    (:func:`~nurbscnc.plan.dynamics.window_response`), and only the over-limit samples, the
+    piece runs and running statistics kept (:class:`Overs`), unless ``keep`` (the whole
+    reference and response, as plots and reports need). A sampler that cannot give windows
+    is evaluated whole (one window). Per sample everything is what the whole-array check
+    computes, so plans do not depend on the window."""
+
+    def __init__(self, pieces: PieceList, machine: Machine, sampler, eps_mm: float,
+                 settle_rows: np.ndarray, window: int, keep: bool):  # fmt: skip
+        self.pieces, self.machine, self.sampler = pieces, machine, sampler
+        self.eps_mm, self.settle_rows, self.keep = eps_mm, settle_rows, keep
+        self.window = max(int(window), 1)
+        # Keeping the whole reference and response: one window (today's memory; windows
+        # would be concatenated at the end, twice the memory for a moment).
+        self.windowed = _windowed(sampler) and not keep
+        self.rapid = pieces.rapid
+        self.after_rapid = np.zeros(len(pieces), dtype=bool)  # first piece of a cut after a rapid
+        self.after_rapid[settle_rows + 1] = True
+        self.index = PathIndex(pieces)  # where the pieces are (built on first use)
+
+    def _windows(self, planned: PieceList, profile: Profile):
+        """(reference rows, slice of the window's own rows in them): one row more on each
+        side where there is one (the direction of travel is a central difference)."""
+        period = self.machine.servo.period_s
+        if not self.windowed:
+            ref = self.sampler(planned, profile, period)
+            yield ref, slice(0, ref.t_s.size)
+            return
+        n = sample_count(planned, profile, period)
+        for k0 in range(0, n, self.window):
+            k1 = min(k0 + self.window, n)
+            a, b = max(k0 - 1, 0), min(k1 + 1, n)
+            yield self.sampler(planned, profile, period, a, b), slice(k0 - a, k1 - a)
+
+    def run(self, planned: PieceList, profile: Profile) -> Check:
+        """Check the plan ``planned``/``profile``: the :class:`Check` of its reference."""
+        if not self.windowed:
+            return self._run_whole(planned, profile)
+        servo = self.machine.servo
+        stream = AxesStream([servo.x, servo.y, servo.z], servo.period_s)
+        acc = _Accumulator(self, profile)
+        last = None
+        for ref, own in self._windows(planned, profile):
+            d = np.gradient(ref.points_mm[:, :2], axis=0) if ref.t_s.size > 1 else \
+                np.zeros((ref.t_s.size, 2))  # fmt: skip
+            ref = _rows(ref, own)
+            actual = stream.step(ref.points_mm)
+            resp = window_response(ref.points_mm, ref.s_mm, actual, d[own], planned, profile,
+                                   self.eps_mm, self.index)  # fmt: skip
+            acc.add(resp, self._cutting(ref, resp, profile), ref.tau_s, ref.piece)
+            last = ref
+        tail = stream.settle()  # the reference held at its end until the axes settle
+        if tail.shape[0]:
+            m = tail.shape[0]
+            held = np.repeat(last.points_mm[-1:], m, axis=0)
+            resp = window_response(held, np.full(m, last.s_mm[-1]), tail, np.zeros((m, 2)),
+                                   planned, profile, self.eps_mm, self.index)  # fmt: skip
+            acc.add(resp, np.full(m, not self.rapid[-1]), np.full(m, profile.duration_s),
+                    np.full(m, len(planned) - 1))  # fmt: skip
+        return acc.check()
+
+    def _run_whole(self, planned: PieceList, profile: Profile) -> Check:
+        """The check on the whole reference at once (a sampler without windows, or the
+        reference and response kept): :func:`~nurbscnc.plan.dynamics.path_response`."""
+        ref = self.sampler(planned, profile, self.machine.servo.period_s)
+        resp = path_response(ref, planned, profile, self.machine, refine_above_mm=self.eps_mm,
+                             index=self.index)  # fmt: skip
+        n, m = ref.t_s.size, resp.contour_mm.size
+        cutting = np.append(self._cutting(ref, resp, profile),
+                            np.full(m - n, not self.rapid[-1]))  # fmt: skip
+        acc = _Accumulator(self, profile)
+        acc.add(resp, cutting, np.append(ref.tau_s, np.full(m - n, profile.duration_s)),
+                np.append(ref.piece, np.full(m - n, len(planned) - 1)))  # fmt: skip
+        if not self.keep:
+            return acc.check()
+        return replace(acc.check(), reference=ref, response=resp, cutting=cutting)
+
+    def _cutting(self, ref: Reference, resp: Response, profile: Profile) -> np.ndarray:
+        """Which reference samples are checked (N,): contour error matters while cutting;
+        samples on rapids (air moves) and during the settle after a rapid (the reference
+        waits at the cut's start) are not. The first cutting samples after a rapid are
+        measured against the cut only (in ``resp``)."""
+        waiting = self.after_rapid[ref.piece] & (
+            ref.tau_s <= profile.piece_start_time_s[ref.piece])
+        _cut_distance_after_rapids(resp, ref, profile, self.after_rapid, waiting, self.rapid,
+                                   self.index)  # fmt: skip
+        return ~self.rapid[ref.piece] & ~waiting
+
+
+class _Accumulator:
+    """The running results of one check (:class:`_Checker`): over-limit samples, piece
+    runs, settle counts and contour statistics (:class:`Overs`)."""
+
+    def __init__(self, checker: _Checker, profile: Profile):
+        self.eps_mm = checker.eps_mm
+        self.t_restart = profile.piece_start_time_s[checker.settle_rows + 1]
+        self.count = 0
+        self.over: list = []  # (index, err, tau) per window
+        self.runs: list = []  # (run piece, run start) per window
+        self.last_piece = -1
+        self.restart = np.zeros(checker.settle_rows.size, dtype=np.int64)
+        self.worst = 0.0
+        self.c_max = self.c_sq = self.eq29_max = 0.0
+        self.c_n = 0
+
+    def add(self, resp: Response, cutting: np.ndarray, tau_s: np.ndarray, piece: np.ndarray):
+        """The next samples: their response, which are checked (``cutting``), profile times
+        [s] and pieces."""
+        err = np.where(cutting, resp.contour_mm, 0.0)
+        over = np.flatnonzero(err > self.eps_mm)
+        self.over.append((over + self.count, err[over], tau_s[over]))
+        self.worst = max(self.worst, float(err.max()))
+        del err
+        starts = np.flatnonzero(np.diff(piece, prepend=self.last_piece) != 0)
+        self.runs.append((piece[starts], starts + self.count))
+        self.last_piece = int(piece[-1])
+        self.restart += np.searchsorted(tau_s, self.t_restart, side="right")
+        c = resp.contour_mm[cutting] * 1000.0
+        if c.size:
+            self.c_max = max(self.c_max, float(c.max()))
+            self.c_sq += float(np.dot(c, c))
+            self.c_n += c.size
+            self.eq29_max = max(self.eq29_max,
+                                float(np.abs(resp.contour_eq29_mm[cutting]).max()) * 1000.0)
+        self.count += cutting.size
+
+    def check(self) -> Check:
+        """The :class:`Check` of everything added (no per-sample arrays)."""
+        idx, err, tau = (np.concatenate(x) for x in zip(*self.over))
+        piece, start = (np.concatenate(x) for x in zip(*self.runs))
+        overs = Overs(self.count, idx, err, tau, piece, start, self.restart, self.worst)
+        rms = float(np.sqrt(self.c_sq / self.c_n)) if self.c_n else 0.0
+        stats = {"contour_true_max_um": self.c_max, "contour_true_rms_um": rms,
+                 "contour_eq29_max_um": self.eq29_max}  # fmt: skip
+        return Check(None, None, None, overs, stats)
+
+
 def plan_checked(program, machine: Machine, options: LookaheadOptions | None = None,
-                 reference=exact_reference) -> tuple[Plan, Check | None]:  # fmt: skip
+                 reference=exact_reference, keep_reference: bool = True,
+                 window: int = CHECK_WINDOW) -> tuple[Plan, Check | None]:  # fmt: skip
     """Plan a whole interpreted program and check it (SPEC §1: modules 1–4, §8): pieces,
     profile, then the dynamics check on the plan's reference points, re-planning until the
-    predicted contour error is within ε_max. ``reference``: (pieces, profile, period_s) →
-    :class:`~nurbscnc.plan.timing.Reference`, the points the check simulates (default: the
-    exact ones; the interpolator passes its own,
-    :func:`nurbscnc.interpolate.sample.reference_sampler`). Returns the plan and the final
-    check (None with ``dynamics="off"``)."""
+    predicted contour error is within ε_max. ``reference``: (pieces, profile, period_s,
+    k0=0, k1=None) → :class:`~nurbscnc.plan.timing.Reference`, the points k0…k1−1 the check
+    simulates (default: the exact ones; the interpolator passes its own,
+    :func:`nurbscnc.interpolate.sample.reference_sampler`); a sampler without windows
+    (:func:`_windowed`) is called as (pieces, profile, period_s) for all of them.
+
+    The check runs ``window`` servo samples at a time (:class:`_Checker`), so its memory
+    grows with the pieces, not with the motion time; the plan does not depend on
+    ``window``. ``keep_reference``: the final :class:`Check` holds the whole reference and
+    response (plots, reports, the output); False: only the over-limit samples and the
+    statistics (long programs). Returns the plan and the final check (None with
+    ``dynamics="off"``)."""
     options = options or LookaheadOptions()
     pieces = segment_pieces(program.segments, machine, options.plan)
     if not len(pieces):
@@ -453,48 +681,33 @@ def plan_checked(program, machine: Machine, options: LookaheadOptions | None = N
     lev = _Levers(np.minimum(pieces.v_cap_mm_s, path_lim.v_mm_s), a_p, j_p, a_p.copy(),
                   j_p.copy(), np.zeros(k), np.zeros(k, dtype=bool))  # fmt: skip
     smooth = junction_caps(pieces)  # > 0 where the path is tangent-continuous
-    rapid = pieces.rapid
     period = machine.servo.period_s
     eps_mm = lim.contour_tolerance_mm * CONTOUR_MARGIN
     # Rapids followed by a cut: the settle (in-position wait) there is the check's to set
     # (zero while the error is within ε_max). Without the check (``off``: kinematics only)
     # there is nothing to wait for; the paper's global rule has no local lever, so it waits
     # the full settle (the rapid's overshoot then never counts).
-    settle_rows = np.flatnonzero(rapid[:-1] & ~rapid[1:])
+    settle_rows = np.flatnonzero(pieces.rapid[:-1] & ~pieces.rapid[1:])
     settle_max = settle_time_s(machine)
     if options.dynamics == Dynamics.GLOBAL:
         lev.settle_s[settle_rows] = settle_max
     base_dwell = pieces.dwell_after_s
-    after_rapid = np.zeros(k, dtype=bool)  # the first piece of a cut after a rapid
-    after_rapid[settle_rows + 1] = True
-    index = None  # where the pieces are, for global distances (built if needed)
+    checker = _Checker(pieces, machine, reference, eps_mm, settle_rows, window,
+                       keep_reference)  # fmt: skip
 
     def evaluate(lv: _Levers):
-        """Plan with the levers ``lv`` and check: (planned pieces, profile, check, err)."""
-        nonlocal index
+        """Plan with the levers ``lv`` and check: (planned pieces, profile, check)."""
         planned = _with_dwell(pieces, base_dwell + lv.settle_s) if settle_rows.size else pieces
         profile = profile_over(planned.length_mm, lv.caps, smooth, lv.limits(),
                                options.lookahead_pieces)  # fmt: skip
         check_point_count(planned, profile, machine)  # before anything is sampled
         if options.dynamics == Dynamics.OFF:
-            return planned, profile, None, None
-        ref = reference(planned, profile, period)
-        index = index or PathIndex(pieces)
-        response = path_response(ref, planned, profile, machine, refine_above_mm=eps_mm,
-                                 index=index)  # fmt: skip
-        n = ref.t_s.size
-        # Contour error matters while cutting: samples on rapids (air moves) and during the
-        # settle after a rapid (the reference waits at the cut's start) are not checked.
-        waiting = after_rapid[ref.piece] & (ref.tau_s <= profile.piece_start_time_s[ref.piece])
-        cutting = np.append(~rapid[ref.piece] & ~waiting,
-                            np.full(response.contour_mm.size - n, not rapid[-1]))
-        _cut_distance_after_rapids(response, ref, profile, after_rapid, waiting, rapid, index)
-        check = Check(ref, response, cutting)
-        return planned, profile, check, np.where(cutting, response.contour_mm, 0.0)
+            return planned, profile, None
+        return planned, profile, checker.run(planned, profile)
 
     def shape(lv: _Levers, result) -> None:
-        _shape(lv, result[3], eps_mm, result[2].reference, result[1], pieces, smooth,
-               settle_rows, settle_max, period)  # fmt: skip
+        _shape(lv, result[2].overs, eps_mm, result[1], pieces, smooth, settle_rows,
+               settle_max, period)  # fmt: skip
 
     initial = lev.copy()
     iterations = 0
@@ -502,7 +715,7 @@ def plan_checked(program, machine: Machine, options: LookaheadOptions | None = N
         result = evaluate(lev)
         if result[2] is None:
             break
-        worst = float(result[3].max())
+        worst = result[2].overs.worst_mm
         if worst <= eps_mm:
             break
         iterations += 1
@@ -520,10 +733,9 @@ def plan_checked(program, machine: Machine, options: LookaheadOptions | None = N
             shape(lev, result)
         else:
             stage = 1 if iterations <= LOCAL_ITERATIONS + FALLBACK_LOCAL_ITERATIONS else 2
-            _fallback(lev, result[3], eps_mm, result[2].reference, pieces, settle_rows,
-                      settle_max, period, stage)  # fmt: skip
-        result = None  # the last reference and response go first (long programs: each is
-        #                hundreds of MB)
+            _fallback(lev, result[2].overs, eps_mm, pieces, settle_rows, settle_max, period,
+                      stage)  # fmt: skip
+        result = None  # the last check goes first (with keep_reference, hundreds of MB)
     if options.dynamics == Dynamics.LOCAL and lev.shaped.any():
         # Improvement: bisect every shaped lever between its feasible value and its value
         # before shaping (geometric means; the settles arithmetically towards 0). A try
@@ -540,7 +752,7 @@ def plan_checked(program, machine: Machine, options: LookaheadOptions | None = N
             result = None
             result = evaluate(trial)
             iterations += 1
-            if float(result[3].max()) <= eps_mm:
+            if result[2].overs.worst_mm <= eps_mm:
                 t = _cycle_time(result)
                 if t > best_time:  # a feasible raise that is slower (rare): stop here
                     result = None
@@ -554,7 +766,7 @@ def plan_checked(program, machine: Machine, options: LookaheadOptions | None = N
         lev = best
         if result is None:
             result = evaluate(lev)
-    planned, profile, check, _ = result
+    planned, profile, check = result
     feed = lev.caps < initial.caps
     transition = np.zeros(k, dtype=bool)
     for f in ("a_up", "j_up", "a_dn", "j_dn"):

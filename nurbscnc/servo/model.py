@@ -351,3 +351,86 @@ def contour_error_true(actual_xyz, path_points_xyz, k_initial: int = 8) -> np.nd
         k = min(2 * k, n_seg)
         block = max(1, 4_000_000 // k)
     return out[0] if single else out
+
+
+class AxesStream:
+    """Several axes simulated window by window, the filter state carried from one window to
+    the next (SPEC §8, eq. 25; the long programs of issue 14): :meth:`step` on consecutive
+    windows of the reference (w, k) [mm] gives the rows of :func:`simulate_axes` for those
+    samples, and :meth:`settle` the tail that ``simulate_axes(..., settle=True)`` appends
+    (the reference held at its last point until every axis is within
+    :data:`SETTLE_TOLERANCE_MM` of its final value). Memory: the filter state, whatever the
+    number of samples. ``models[j]`` None is an ideal axis (output = reference)."""
+
+    def __init__(self, models: Sequence[AxisModel | AxisServo | None], period_s: float,
+                 hold: str = "foh"):  # fmt: skip
+        self._models = [None if m is None else _as_model(m) for m in models]
+        self._discs = [None if m is None else discretise(m, period_s, hold)
+                       for m in self._models]  # fmt: skip
+        self._period_s = float(period_s)
+        self._r0: np.ndarray | None = None  # the first reference point [mm]
+        self._last: np.ndarray | None = None  # the last reference point seen [mm]
+        self._y_last = np.zeros(len(models))  # last filter output (offset removed) [mm]
+        self._zi = [None if d is None else np.zeros(max(d.a.size, d.b.size) - 1)
+                    for d in self._discs]  # fmt: skip
+
+    def step(self, reference_mm: np.ndarray) -> np.ndarray:
+        """Actual positions (w, k) [mm] for the next ``reference_mm`` (w, k) rows; the first
+        call's first row is where the machine starts at rest."""
+        r = np.asarray(reference_mm, dtype=float)
+        if r.ndim != 2 or r.shape[1] != len(self._models):
+            raise ValueError("reference_mm must be (w, k) with k = len(models)")
+        if r.shape[0] == 0:
+            return np.empty_like(r)
+        if self._r0 is None:
+            self._r0 = r[0].copy()
+        out = np.empty_like(r)
+        for j, d in enumerate(self._discs):
+            if d is None:
+                out[:, j] = r[:, j]
+                continue
+            y, self._zi[j] = signal.lfilter(d.b, d.a, r[:, j] - self._r0[j], zi=self._zi[j])
+            self._y_last[j] = y[-1]
+            out[:, j] = y + d.dc_gain * self._r0[j]
+        self._last = r[-1].copy()
+        return out
+
+    def _settle_count(self, j: int) -> int:
+        """Held samples axis j needs (the rule of :func:`_run` with ``auto_chunk``)."""
+        d, model = self._discs[j], self._models[j]
+        held = self._last[j] - self._r0[j]
+        final = d.dc_gain * held
+        chunk = _settle_chunk(model, self._period_s)
+        zf = self._zi[j]
+        done = 0
+        for _ in range(_MAX_SETTLE_SAMPLES // chunk):
+            yh, zf = signal.lfilter(d.b, d.a, np.full(chunk, held), zi=zf)
+            bad = np.flatnonzero(np.abs(yh - final) > SETTLE_TOLERANCE_MM)
+            if bad.size:  # the last held sample out of tolerance so far
+                last_bad = done + int(bad[-1])
+            done += chunk
+            if not bad.size:
+                break
+        else:
+            raise ConfigError(f"servo model does not settle to {SETTLE_TOLERANCE_MM} mm "
+                              f"within {_MAX_SETTLE_SAMPLES} samples")  # fmt: skip
+        if done > chunk:  # some chunk before the last was out of tolerance
+            return last_bad + 2
+        return 1 if abs(self._y_last[j] - final) > SETTLE_TOLERANCE_MM else 0
+
+    def settle(self) -> np.ndarray:
+        """The held tail (T, k) [mm] after the last window: T the most samples any axis needs
+        to settle (as :func:`simulate_axes` with ``settle=True``)."""
+        if self._last is None:
+            raise ValueError("settle() before any step()")
+        counts = [0 if d is None else self._settle_count(j) for j, d in enumerate(self._discs)]
+        n = max(counts)
+        out = np.empty((n, len(self._models)))
+        for j, d in enumerate(self._discs):
+            if d is None:
+                out[:, j] = self._last[j]
+                continue
+            held = self._last[j] - self._r0[j]
+            y, _ = signal.lfilter(d.b, d.a, np.full(n, held), zi=self._zi[j])
+            out[:, j] = y + d.dc_gain * self._r0[j]
+        return out
