@@ -46,13 +46,18 @@ class RunOptions:
     used by a baseline), the ``interpolator`` of NURBS pieces, and ``precompensate``: feed
     the servo the ZPETC pre-compensated reference (:mod:`nurbscnc.servo.precompensate`;
     the dynamics check then simulates it, and it is the output), kept within
-    ``reference_tolerance_mm`` of the path (inf: no limit)."""
+    ``reference_tolerance_mm`` of the path (inf: no limit). ``keep_reference``: the
+    dynamics check keeps its whole reference and servo response (the predicted contour plot
+    needs them; memory then grows with the motion time); without it the check keeps only
+    the over-limit samples and its statistics (issue 14: memory of the program only), and
+    the points are made window by window as the output is written."""
 
     algorithm: Algorithm = Algorithm.PH_LOOKAHEAD
     lookahead: LookaheadOptions = field(default_factory=LookaheadOptions)
     interpolator: Interpolator = Interpolator.EXACT
     precompensate: bool = False
     reference_tolerance_mm: float = REFERENCE_TOLERANCE_MM
+    keep_reference: bool = False
 
     def __post_init__(self):
         set_ = object.__setattr__
@@ -136,14 +141,20 @@ class Run:
 
 def _announcing(sampler, say):
     """``sampler`` that first says which pass of the planner's dynamics check it serves (the
-    planner calls it once per plan: the first check, then once per re-plan)."""
+    planner samples each plan from its first window on, k0 = 0: the first check, then once
+    per re-plan). Windows (k0, k1) pass through; so does what the planner reads of the
+    sampler (``windows``, ``interpolator``), so the check runs in windows as without it."""
     passes = itertools.count()
 
-    def sample(pieces, profile, period_s):
-        n = next(passes)
-        say("dynamics check" if n == 0 else f"dynamics check, re-plan {n}")
-        return sampler(pieces, profile, period_s)
+    def sample(pieces, profile, period_s, k0=0, k1=None):
+        if k0 == 0:
+            n = next(passes)
+            say("dynamics check" if n == 0 else f"dynamics check, re-plan {n}")
+        return sampler(pieces, profile, period_s, k0, k1)
 
+    for name in ("windows", "interpolator"):
+        if hasattr(sampler, name):
+            setattr(sample, name, getattr(sampler, name))
     return sample
 
 
@@ -185,7 +196,8 @@ def run_program(program, machine: Machine, options: RunOptions | None = None,
         if options.precompensate:
             run = _run_precompensated(program, machine, lookahead, options, sampler)
         else:
-            plan, check = plan_checked(program, machine, lookahead, sampler)
+            plan, check = plan_checked(program, machine, lookahead, sampler,
+                                       keep_reference=options.keep_reference)  # fmt: skip
             say("interpolating")
             kept = getattr(check, "reference", None)
             # The check's reference, when it kept one, is the output (no second sampling);

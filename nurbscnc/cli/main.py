@@ -778,17 +778,22 @@ def make_plan(program: str, machine=None, overrides=(), dynamics="local", lookah
               corner_feed="piece", interpolator="exact", blend_tolerance=None,
               algorithm="ph-lookahead", no_block_delete=False, tool_table=None,
               subroutine_path=(), text=None, precompensate=False, reference_tolerance=3.0,
-              progress=None):  # fmt: skip
+              progress=None, keep_reference=False):  # fmt: skip
     """Load, interpret, plan and interpolate one program; validate soft limits. Returns
     (program, machine, :class:`~nurbscnc.pipeline.Run`).
 
     The keyword arguments are the options of :func:`planning_options`, ``text``: the
     program already read (see :func:`load_program`), and ``progress``: None or the stage
-    callback of :func:`progress_display`."""
+    callback of :func:`progress_display`; ``keep_reference``: the dynamics check keeps its
+    whole reference and response (the contour plot needs them; memory grows with the motion
+    time, so only when plots are asked for)."""
+    from dataclasses import replace
+
     from nurbscnc.pipeline import run_program
 
     options = run_options(algorithm, corner_feed, dynamics, blend_tolerance, interpolator,
                           lookahead, precompensate, reference_tolerance)  # fmt: skip
+    options = replace(options, keep_reference=keep_reference)
     if progress:
         progress("loading the machine profile")
     mach = load_machine_cli(machine, overrides)
@@ -874,7 +879,8 @@ def plan(program, as_json, dump_profile, explain, explain_all, plot_dir, **setti
     # --explain shows the source lines: the program is read once, here (stdin too).
     text = read_program_text(program) if explain else None
     with progress_display(show_progress(as_json), _display_name(program)) as say:
-        prog, mach, run = make_plan(program, **settings, text=text, progress=say)
+        prog, mach, run = make_plan(program, **settings, text=text, progress=say,
+                                    keep_reference=bool(plot_dir))  # fmt: skip
         say("summarising")
         summary = summary_of(prog, mach, run)
     expl = None
@@ -1036,7 +1042,8 @@ def run(programs, output, output_dir, jobs, fmt, quiet, as_json, plot_dir, **set
         program = programs[0]
         fmt = output_format(output, fmt)
         with progress_display(show_progress(as_json, quiet), _display_name(program)) as say:
-            prog, mach, run = make_plan(program, **settings, progress=say)
+            prog, mach, run = make_plan(program, **settings, progress=say,
+                                        keep_reference=bool(plot_dir))  # fmt: skip
             if plot_dir:  # the figures need whole arrays: made once, written from them
                 _ = run.samples
             say(f"writing {run.sample_count} points")

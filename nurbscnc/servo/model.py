@@ -377,6 +377,8 @@ class AxesStream:
     def step(self, reference_mm: np.ndarray) -> np.ndarray:
         """Actual positions (w, k) [mm] for the next ``reference_mm`` (w, k) rows; the first
         call's first row is where the machine starts at rest."""
+        from scipy import signal  # here, not at the top: importing scipy.signal is slow
+
         r = np.asarray(reference_mm, dtype=float)
         if r.ndim != 2 or r.shape[1] != len(self._models):
             raise ValueError("reference_mm must be (w, k) with k = len(models)")
@@ -397,6 +399,8 @@ class AxesStream:
 
     def _settle_count(self, j: int) -> int:
         """Held samples axis j needs (the rule of :func:`_run` with ``auto_chunk``)."""
+        from scipy import signal  # here, not at the top: importing scipy.signal is slow
+
         d, model = self._discs[j], self._models[j]
         held = self._last[j] - self._r0[j]
         final = d.dc_gain * held
@@ -421,6 +425,8 @@ class AxesStream:
     def settle(self) -> np.ndarray:
         """The held tail (T, k) [mm] after the last window: T the most samples any axis needs
         to settle (as :func:`simulate_axes` with ``settle=True``)."""
+        from scipy import signal  # here, not at the top: importing scipy.signal is slow
+
         if self._last is None:
             raise ValueError("settle() before any step()")
         counts = [0 if d is None else self._settle_count(j) for j, d in enumerate(self._discs)]
