@@ -15,7 +15,7 @@ window by window.)
 from __future__ import annotations
 
 import json
-import resource
+import os
 import subprocess
 import sys
 
@@ -27,7 +27,11 @@ pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"),
 
 #: The child reports its own peak virtual size [kB] on stderr as it exits.
 CHILD = r"""
-import atexit, sys
+import atexit, os, resource, sys
+cap = int(os.environ.get("NURBSCNC_TEST_AS_CAP", "0"))
+if cap:  # the cap is set by the child itself, before any import (no preexec_fn in a
+    #      threaded parent: a fork there can deadlock before exec)
+    resource.setrlimit(resource.RLIMIT_AS, (cap, cap))
 def peak():
     with open("/proc/self/status") as fh:
         for line in fh:
@@ -51,12 +55,9 @@ def long_program() -> str:
 
 
 def run_capped(args, cap_bytes=None):
-    def limit():
-        if cap_bytes is not None:
-            resource.setrlimit(resource.RLIMIT_AS, (cap_bytes, cap_bytes))
-
+    env = dict(os.environ, NURBSCNC_TEST_AS_CAP=str(cap_bytes or 0))
     proc = subprocess.run([sys.executable, "-c", CHILD, *args], capture_output=True,
-                          text=True, preexec_fn=limit, timeout=900)  # fmt: skip
+                          text=True, env=env, timeout=900)  # fmt: skip
     peaks = [int(x.split()[1]) for x in proc.stderr.splitlines() if x.startswith("VMPEAK ")]
     return proc, peaks[-1] * 1024 if peaks else None
 
