@@ -173,13 +173,15 @@ CORNER_CELL_MM = 0.0625
 
 
 def _region_fit(curve, u_a: float, u_b: float, e_um: float):
-    """PH pieces of the corner region [u_a, u_b]: the region cut into parameter-equal parts of
-    at most :data:`CORNER_CELL_MM` of arc length, each fitted (:func:`fit_region`, max ≤ e).
-    The parts share C and C′ at their ends (Hermite data), so the joins stay G1 as in one
-    fit; a part is halved further by the fit where the deviation asks."""
+    """PH pieces of the corner region [u_a, u_b]: the region cut into parts of equal arc
+    length, at most :data:`CORNER_CELL_MM` (at most 64 parts), each fitted
+    (:func:`fit_region`, max ≤ e). The parts share C and C′ at their ends (Hermite data), so
+    the joins stay G1 as in one fit; a part is halved further by the fit where the deviation
+    asks."""
     s = curve.arc_length(np.array([u_a, u_b]))
     n = int(np.clip(np.ceil((s[1] - s[0]) / CORNER_CELL_MM), 1, 64))
-    u = np.linspace(u_a, u_b, n + 1)
+    u = curve.param_at_length(np.linspace(s[0], s[1], n + 1))
+    u[0], u[-1] = u_a, u_b
     return [p for a, b in zip(u[:-1], u[1:], strict=True)
             for p in fit_region(curve, float(a), float(b), tolerance_um=e_um,
                                 max_factor=1.0).pieces]  # fmt: skip
