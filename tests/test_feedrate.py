@@ -237,3 +237,63 @@ def test_peak_speed_vectorised_and_errors():
         peak_speed(50.0, 0.0, 1e-3, 100.0, A, J)  # cannot even stop within 1 µm
     with pytest.raises(PlanningError):
         peak_speed(50.0, 0.0, 100.0, 40.0, A, J)  # cap below the start speed
+
+
+# --- caps along curves (issue 13): the servo's steady-error cap and the corner cells -----------
+
+
+@pytest.mark.parametrize("radius_mm", [0.2, 1.0, 5.0])
+def test_servo_curve_cap_keeps_the_lsim_circle_error_within_epsilon(radius_mm):
+    # Closed form: v = √(ε r / g) with g = 2.85e-5 s² (SPEC §8); independently, the servo
+    # model simulated by scipy.signal.lsim on a circle at that speed settles to a radius
+    # error ≤ ε and close to it (the series bound is tight: 94–100 % of ε).
+    import sys
+    from pathlib import Path
+
+    from nurbscnc.machine.caps import servo_curve_cap_mm_s
+    from nurbscnc.machine.profile import load_machine
+    from nurbscnc.plan.pieces import servo_gain_s2
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from servo_reference import lsim_actual_mm
+
+    m = load_machine()
+    eps_mm = m.limits.contour_tolerance_mm
+    gain = servo_gain_s2(m)
+    assert gain == pytest.approx(2.85e-5, rel=2e-3)
+    v = servo_curve_cap_mm_s(1.0 / radius_mm, eps_mm, gain)
+    assert v == pytest.approx(math.sqrt(eps_mm * radius_mm / gain), rel=1e-12)
+    w = v / radius_mm  # rad/s
+    t = np.arange(0.0, 6 * 2 * math.pi / w, 1e-3)
+    ref = np.column_stack([radius_mm * np.cos(w * t), radius_mm * np.sin(w * t), 0 * t])
+    tool = lsim_actual_mm(ref, m, settle_s=0.0)
+    last = t > t[-1] - 2 * math.pi / w  # the last turn: steady state
+    grow_mm = np.hypot(tool[last, 0], tool[last, 1]) - radius_mm
+    assert grow_mm.max() <= eps_mm
+    assert grow_mm.min() >= 0.93 * eps_mm
+    assert servo_curve_cap_mm_s(0.0, eps_mm, gain) == math.inf
+    assert servo_curve_cap_mm_s(2.0, eps_mm, 0.0) == math.inf
+
+
+def test_corner_region_pieces_follow_the_curvature_of_a_circle():
+    # A rational quarter circle of r = 0.5 mm at F3500 is a corner region (κ = 2 > A/F²):
+    # its PH pieces are cut to equal arc lengths ≤ CORNER_CELL_MM, and each is capped by
+    # SPEC §7's V_sp at its own curvature, V_cf = F·κ̄/(κ + κ̄) = 58.33/3 mm/s (below
+    # V_af(2) = 55.1 and √(A r) = 35 mm/s).
+    from nurbscnc.machine.profile import load_machine
+    from nurbscnc.plan.options import PlanOptions
+    from nurbscnc.plan.pieces import CORNER_CELL_MM, segment_pieces
+    from nurbscnc.program.interpret import interpret_text
+
+    r = 0.5
+    w = math.sqrt(0.5)
+    prog = (f"G21 G17 G90 G94\nG0 X{r} Y0\nF3500\nG6.2 P3 K0 X{r} Y0 R1\n"
+            f"K0 X{r} Y{r} R{w:.15f}\nK0 X0 Y{r} R1\nK1\nK1\nK1\nM2\n")  # fmt: skip
+    m = load_machine()
+    pl = segment_pieces(interpret_text(prog).segments, m, PlanOptions())
+    ph = np.flatnonzero(pl.kind == 3)
+    n = math.ceil(math.pi * r / 2 / CORNER_CELL_MM)
+    assert ph.size == n == len(pl) - 1
+    assert np.allclose(pl.length_mm[ph], math.pi * r / 2 / n, rtol=1e-4)
+    assert np.allclose(pl.kappa_max_per_mm[ph], 1.0 / r, rtol=3e-3)
+    assert np.allclose(pl.v_cap_mm_s[ph], (3500.0 / 60.0) / 3.0, rtol=1e-5)

@@ -29,7 +29,7 @@ import numpy as np
 __all__ = ["JUNCTION_SHARE", "MIN_CAP_MM_S", "axis_path_limits", "baseline_feed_mm_s",
            "chord_feed_mm_s", "corner_cap_mm_s", "curvature_cap2_mm2_s2", "curvature_cap_mm_s",
            "curvature_feed_mm_s", "junction_jump_cap_mm_s", "kappa_threshold_per_mm",
-           "normal_feed_mm_s"]  # fmt: skip
+           "normal_feed_mm_s", "servo_curve_cap_mm_s"]  # fmt: skip
 
 
 class MachineLike(Protocol):
@@ -157,6 +157,18 @@ def corner_cap_mm_s(machine: MachineLike, kappa_peak_per_mm: float, feed_mm_s: f
     v_an = (float(np.sqrt(lim.a_max_mm_s2 / kappa_peak_per_mm)) if kappa_peak_per_mm > 0
             else np.inf)  # fmt: skip
     return max(min(v_sp, v_an, feed_mm_s, lim.v_max_mm_s), 1e-6)
+
+
+def servo_curve_cap_mm_s(kappa_per_mm, error_mm: float, gain_s2: float):
+    """Feed cap [mm/s] at curvature κ [1/mm] that keeps the servo's steady contour error on
+    the curve within ``error_mm``: in steady circular motion at speed V the tool's path
+    radius grows by g·V²κ (g = |c₂ + c₁²/2| [s²], :func:`nurbscnc.servo.model.error_series`;
+    SPEC §8: 2.85e-5 s² for the paper's axes), so V ≤ √(e / (g κ)). ``inf`` where κ = 0 or
+    g = 0 (no servo model). Vectorised over ``kappa_per_mm``."""
+    k = np.abs(np.asarray(kappa_per_mm, dtype=float))
+    with np.errstate(divide="ignore"):
+        v = np.sqrt(error_mm / (gain_s2 * k)) if gain_s2 > 0.0 else np.full(k.shape, np.inf)
+    return _as_result(np.where(k > 0.0, v, np.inf))
 
 
 def baseline_feed_mm_s(algorithm: str, kappa_per_mm, feed_mm_s: float, machine: MachineLike):

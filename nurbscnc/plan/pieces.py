@@ -38,6 +38,7 @@ from nurbscnc.machine.caps import (
     corner_cap_mm_s,
     curvature_cap_mm_s,
     junction_jump_cap_mm_s,
+    servo_curve_cap_mm_s,
 )
 from nurbscnc.machine.profile import Machine
 from nurbscnc.plan.corners import CornerAction, CornerLog, CornerWhy, find_corner_regions
@@ -142,8 +143,7 @@ def nurbs_pieces(seg, index: int, machine: Machine, options: PlanOptions) -> lis
         region_cap = corner_cap_mm_s(machine, region.kappa_peak_per_mm, feed)
         if options.ph:
             # max ≤ e (not the paper's 3e): every reference point within e of the curve.
-            fit = fit_region(curve, region.u_a, region.u_b, tolerance_um=e_um, max_factor=1.0)
-            for p in fit.pieces:
+            for p in _region_fit(curve, region.u_a, region.u_b, e_um):
                 xi = np.linspace(0.0, 1.0, 65)
                 k_max = float(np.max(np.abs(p.ph.curvature(xi))))
                 k_mean = abs(p.ph.turning_angle_rad()) / max(float(p.ph.length_mm), 1e-300)
@@ -163,6 +163,28 @@ def nurbs_pieces(seg, index: int, machine: Machine, options: PlanOptions) -> lis
     # Pieces shorter than a nanometre (a region clipped by a cusp at a curve end) carry no
     # motion; dropping them changes the path length by less than 1e-9 mm.
     return [p for p in pieces if p.length_mm > 1e-9]
+
+
+#: Longest PH piece of a corner region [mm]: a region's pieces are cut at least this fine, so
+#: each piece's cap (its own peak curvature, :func:`corner_cap_mm_s`) follows the curvature
+#: along the corner; a 0.25 mm piece holding the nose of a 9 mm airfoil (κ from 1.6 to
+#: 5 /mm) would be capped at its sharpest point all along (issue 13).
+CORNER_CELL_MM = 0.0625
+
+
+def _region_fit(curve, u_a: float, u_b: float, e_um: float):
+    """PH pieces of the corner region [u_a, u_b]: the region cut into parts of equal arc
+    length, at most :data:`CORNER_CELL_MM` (at most 64 parts), each fitted
+    (:func:`fit_region`, max ≤ e). The parts share C and C′ at their ends (Hermite data), so
+    the joins stay G1 as in one fit; a part is halved further by the fit where the deviation
+    asks."""
+    s = curve.arc_length(np.array([u_a, u_b]))
+    n = int(np.clip(np.ceil((s[1] - s[0]) / CORNER_CELL_MM), 1, 64))
+    u = curve.param_at_length(np.linspace(s[0], s[1], n + 1))
+    u[0], u[-1] = u_a, u_b
+    return [p for a, b in zip(u[:-1], u[1:], strict=True)
+            for p in fit_region(curve, float(a), float(b), tolerance_um=e_um,
+                                max_factor=1.0).pieces]  # fmt: skip
 
 
 #: Longest NURBS cell [mm]: stretches between corners are cut into cells this long or shorter,
@@ -857,16 +879,24 @@ def servo_blend_cap_mm_s(machine: Machine, kappa_per_mm: float) -> float:
     the contour check's lever on a short tight blend is the feed of the pieces around it
     (measured on tort.ngc: blends at √(A/κ), 2450 mm/s² of normal acceleration, made the
     check slow 33 mm helices from 50 to 30 mm/s, +33 s over stopping)."""
+
+    gain = servo_gain_s2(machine)
+    if gain == 0.0 or not machine.contour_check or kappa_per_mm <= 0.0:
+        return np.inf
+    eps = SERVO_BLEND_SHARE * machine.limits.contour_tolerance_mm
+    return float(servo_curve_cap_mm_s(kappa_per_mm, eps, gain))
+
+
+def servo_gain_s2(machine: Machine) -> float:
+    """The steady curve-error coefficient g = |c₂ + c₁²/2| [s²] of the servo (largest over
+    the modelled axes; 0 without a model): the path radius grows by g·V²κ on a curve
+    (:func:`~nurbscnc.servo.model.error_series`, SPEC §8: 2.85e-5 s²)."""
     from nurbscnc.servo.model import error_series
 
     gains = [abs(float(c[2] + 0.5 * c[1] ** 2))
              for ax in (machine.servo.x, machine.servo.y, machine.servo.z) if ax is not None
              for c in (error_series(ax),)]  # fmt: skip
-    gain = max(gains, default=0.0)
-    if gain == 0.0 or not machine.contour_check or kappa_per_mm <= 0.0:
-        return np.inf
-    eps = SERVO_BLEND_SHARE * machine.limits.contour_tolerance_mm
-    return float(np.sqrt(eps / (gain * kappa_per_mm)))
+    return max(gains, default=0.0)
 
 
 def _blend_length_mm(bl) -> float:
