@@ -151,10 +151,42 @@ class PathIndex:
     use and kept across the re-plans of one program (the geometry does not change).
     """
 
+    #: Most dense-polyline points kept across queries (48 MB); the cache is emptied when full.
+    CACHE_POINTS = 2_000_000
+
     def __init__(self, pieces, short_mm: float = 1.0):
         self._pieces = pieces
         self._short_mm = short_mm
         self._built = None
+        self._counts = None
+        self._polyline: dict[int, np.ndarray] = {}  # piece → its dense polyline (c, 3) [mm]
+        self._cached_points = 0
+
+    def _piece_points(self, cand: np.ndarray) -> np.ndarray:
+        """The dense polylines of :func:`path_counts` of pieces ``cand``, end to end
+        ((Σ c, 3) [mm]). Each piece's points are computed once (every query and re-plan
+        of the program asks the same pieces again) and are the same numbers as a fresh
+        :meth:`PathTable.points_at_fraction` (its formulas are elementwise)."""
+        counts = self._counts
+        cache = self._polyline
+        missing = [j for j in cand.tolist() if j not in cache]
+        if missing:
+            miss = np.asarray(missing, dtype=np.int64)
+            c = counts[miss]
+            if self._cached_points + int(c.sum()) > self.CACHE_POINTS:
+                cache.clear()
+                self._cached_points = 0
+                miss = cand
+                c = counts[miss]
+            piece = np.repeat(miss, c)
+            first = np.repeat(np.cumsum(c) - c, c)
+            frac = (np.arange(piece.size) - first) / np.repeat(c - 1, c)
+            pts = self._pieces.path.points_at_fraction(piece, frac)
+            ends = np.cumsum(c).tolist()
+            for j, a, z in zip(miss.tolist(), [0, *ends[:-1]], ends):
+                cache[j] = pts[a:z]
+            self._cached_points += int(c.sum())
+        return np.concatenate([cache[j] for j in cand.tolist()])
 
     def _build(self):
         from scipy.spatial import cKDTree
@@ -191,8 +223,9 @@ class PathIndex:
         :func:`path_counts` on the candidate pieces, never above ``upper_mm``. ``exclude``
         (k,) bool: pieces that are not part of the path measured against (the rapids, for
         the distance to the cut)."""
-        pieces = self._pieces
-        counts = path_counts(pieces)
+        if self._counts is None:
+            self._counts = path_counts(self._pieces)
+        counts = self._counts
         out = np.array(upper_mm, dtype=float)
         # Blocks of consecutive points (in the caller's order: time) at most ``block`` long
         # and broken where the points jump by more than 1 mm, so each block is compact.
@@ -205,11 +238,8 @@ class PathIndex:
                 cand = cand[~exclude[cand]]
             if cand.size == 0:
                 continue
-            c = counts[cand]
-            piece = np.repeat(cand, c)
-            first = np.repeat(np.cumsum(c) - c, c)
-            frac = (np.arange(piece.size) - first) / np.repeat(c - 1, c)
-            pts = pieces.path.points_at_fraction(piece, frac)
+            piece = np.repeat(cand, counts[cand])
+            pts = self._piece_points(cand)
             # Segments within a piece whose bounding box meets the queries' (widened).
             qb = q[sl]
             reach = float(out[sl].max())
