@@ -153,40 +153,17 @@ class PathIndex:
 
     #: Most dense-polyline points kept across queries (48 MB); the cache is emptied when full.
     CACHE_POINTS = 2_000_000
+    #: Segments per bounding box of a piece's polyline (the coarse level of the search).
+    CHUNK = 64
 
     def __init__(self, pieces, short_mm: float = 1.0):
         self._pieces = pieces
         self._short_mm = short_mm
         self._built = None
         self._counts = None
-        self._polyline: dict[int, np.ndarray] = {}  # piece → its dense polyline (c, 3) [mm]
+        # piece → (dense polyline (c, 3) [mm], box lows, box highs (⌈(c−1)/CHUNK⌉, 3) [mm])
+        self._polyline: dict[int, tuple] = {}
         self._cached_points = 0
-
-    def _piece_points(self, cand: np.ndarray) -> np.ndarray:
-        """The dense polylines of :func:`path_counts` of pieces ``cand``, end to end
-        ((Σ c, 3) [mm]). Each piece's points are computed once (every query and re-plan
-        of the program asks the same pieces again) and are the same numbers as a fresh
-        :meth:`PathTable.points_at_fraction` (its formulas are elementwise)."""
-        counts = self._counts
-        cache = self._polyline
-        missing = [j for j in cand.tolist() if j not in cache]
-        if missing:
-            miss = np.asarray(missing, dtype=np.int64)
-            c = counts[miss]
-            if self._cached_points + int(c.sum()) > self.CACHE_POINTS:
-                cache.clear()
-                self._cached_points = 0
-                miss = cand
-                c = counts[miss]
-            piece = np.repeat(miss, c)
-            first = np.repeat(np.cumsum(c) - c, c)
-            frac = (np.arange(piece.size) - first) / np.repeat(c - 1, c)
-            pts = self._pieces.path.points_at_fraction(piece, frac)
-            ends = np.cumsum(c).tolist()
-            for j, a, z in zip(miss.tolist(), [0, *ends[:-1]], ends):
-                cache[j] = pts[a:z]
-            self._cached_points += int(c.sum())
-        return np.concatenate([cache[j] for j in cand.tolist()])
 
     def _build(self):
         from scipy.spatial import cKDTree
@@ -216,6 +193,57 @@ class PathIndex:
             found.append(long_[near])
         return np.unique(np.concatenate(found)) if found else np.zeros(0, dtype=np.int64)
 
+    def _piece_polylines(self, cand: np.ndarray) -> list[tuple]:
+        """(points, box lows, box highs) of the dense polylines (:func:`path_counts`) of
+        pieces ``cand``. Each piece's are computed once (every query and re-plan of the
+        program asks the same pieces again), the points the same numbers as a fresh
+        :meth:`PathTable.points_at_fraction` (its formulas are elementwise); the boxes bound
+        runs of :data:`CHUNK` segments."""
+        counts = self._counts
+        cache = self._polyline
+        missing = [j for j in cand.tolist() if j not in cache]
+        if missing:
+            miss = np.asarray(missing, dtype=np.int64)
+            c = counts[miss]
+            if self._cached_points + int(c.sum()) > self.CACHE_POINTS:
+                cache.clear()
+                self._cached_points = 0
+                miss = cand
+                c = counts[miss]
+            piece = np.repeat(miss, c)
+            first = np.repeat(np.cumsum(c) - c, c)
+            frac = (np.arange(piece.size) - first) / np.repeat(c - 1, c)
+            pts = self._pieces.path.points_at_fraction(piece, frac)
+            ends = np.cumsum(c).tolist()
+            for j, a, z in zip(miss.tolist(), [0, *ends[:-1]], ends):
+                p = pts[a:z]
+                lo_s, hi_s = np.minimum(p[:-1], p[1:]), np.maximum(p[:-1], p[1:])
+                heads = np.arange(0, lo_s.shape[0], self.CHUNK)
+                cache[j] = (p, np.minimum.reduceat(lo_s, heads, axis=0),
+                            np.maximum.reduceat(hi_s, heads, axis=0))  # fmt: skip
+            self._cached_points += int(c.sum())
+        return [cache[j] for j in cand.tolist()]
+
+    def _near_segments(self, cand: np.ndarray, lo_q: np.ndarray, hi_q: np.ndarray):
+        """Starts and directions (n, 3) [mm] of the polyline segments of pieces ``cand``
+        whose bounding boxes meet the box [lo_q, hi_q]: boxes of :data:`CHUNK` segments
+        first, then the segments of the boxes that meet it (the same segments as testing
+        every one)."""
+        starts, dirs = [], []
+        for p, lo_c, hi_c in self._piece_polylines(cand):
+            hit = np.flatnonzero(np.all((hi_c >= lo_q) & (lo_c <= hi_q), axis=1))
+            if hit.size == 0:
+                continue
+            seg = (hit[:, None] * self.CHUNK + np.arange(self.CHUNK)).ravel()
+            seg = seg[seg < p.shape[0] - 1]
+            a, b = p[seg], p[seg + 1]
+            keep = np.all((np.maximum(a, b) >= lo_q) & (np.minimum(a, b) <= hi_q), axis=1)
+            starts.append(a[keep])
+            dirs.append(b[keep] - a[keep])
+        if not starts:
+            return np.zeros((0, 3)), np.zeros((0, 3))
+        return np.concatenate(starts), np.concatenate(dirs)
+
     def distance_mm(self, q: np.ndarray, upper_mm: np.ndarray, block: int = 256,
                     exclude: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
         """Distance [mm] from each point of ``q`` (m, 3) to the whole path, for points whose
@@ -225,7 +253,6 @@ class PathIndex:
         the distance to the cut)."""
         if self._counts is None:
             self._counts = path_counts(self._pieces)
-        counts = self._counts
         out = np.array(upper_mm, dtype=float)
         # Blocks of consecutive points (in the caller's order: time) at most ``block`` long
         # and broken where the points jump by more than 1 mm, so each block is compact.
@@ -238,18 +265,13 @@ class PathIndex:
                 cand = cand[~exclude[cand]]
             if cand.size == 0:
                 continue
-            piece = np.repeat(cand, counts[cand])
-            pts = self._piece_points(cand)
             # Segments within a piece whose bounding box meets the queries' (widened).
             qb = q[sl]
             reach = float(out[sl].max())
             lo_q, hi_q = qb.min(axis=0) - reach, qb.max(axis=0) + reach
-            lo_s, hi_s = np.minimum(pts[:-1], pts[1:]), np.maximum(pts[:-1], pts[1:])
-            inside = np.flatnonzero((piece[1:] == piece[:-1])
-                                    & np.all((hi_s >= lo_q) & (lo_s <= hi_q), axis=1))
-            if inside.size == 0:
+            a, d = self._near_segments(cand, lo_q, hi_q)
+            if a.shape[0] == 0:
                 continue
-            a, d = pts[inside], pts[inside + 1] - pts[inside]
             len2 = np.einsum("ij,ij->i", d, d)
             rel = qb[:, None, :] - a[None, :, :]
             t = np.einsum("mij,ij->mi", rel, d) / np.where(len2 > 0.0, len2, 1.0)
