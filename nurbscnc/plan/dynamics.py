@@ -72,18 +72,21 @@ def dense_path_mm(pieces, profile, spacing_mm: float = 0.002) -> np.ndarray:
     return pieces.path.place(starts, s, idx)[0]
 
 
-def path_counts(pieces) -> np.ndarray:
-    """Points of the dense polyline on each piece (≥ 2): 2 on lines and rapids (exact),
-    else chords of at most min(:data:`MAX_SPACING_MM`, √(8 δ_p / κ)) with δ_p =
-    :data:`CHORD_MM` (a chord h on curvature κ is off by κh²/8); κ is the piece's
-    ``kappa_max_per_mm``, doubled on NURBS cells (their κ comes from 8 samples)."""
-    kind = pieces.kind
-    kappa = np.where(kind == Kind.NURBS, 2.0, 1.0) * np.abs(pieces.kappa_max_per_mm)
+def path_counts(pieces, lo: int = 0, hi: int | None = None) -> np.ndarray:
+    """Points of the dense polyline on each piece (≥ 2) of pieces ``lo:hi`` (default all):
+    2 on lines and rapids (exact), else chords of at most min(:data:`MAX_SPACING_MM`,
+    √(8 δ_p / κ)) with δ_p = :data:`CHORD_MM` (a chord h on curvature κ is off by κh²/8);
+    κ is the piece's ``kappa_max_per_mm``, doubled on NURBS cells (their κ comes from 8
+    samples)."""
+    sl = slice(lo, hi)
+    kind = pieces.kind[sl]
+    length = pieces.length_mm[sl]
+    kappa = np.where(kind == Kind.NURBS, 2.0, 1.0) * np.abs(pieces.kappa_max_per_mm[sl])
     with np.errstate(divide="ignore"):
         h = np.minimum(MAX_SPACING_MM, np.sqrt(8.0 * CHORD_MM / kappa))
-    counts = np.maximum(np.ceil(pieces.length_mm / h).astype(np.int64) + 1, 3)
+    counts = np.maximum(np.ceil(length / h).astype(np.int64) + 1, 3)
     straight = kind == Kind.LINE
-    return np.where(straight | (pieces.length_mm == 0.0), 2, counts)
+    return np.where(straight | (length == 0.0), 2, counts)
 
 
 def windowed_contour_mm(actual_mm: np.ndarray, lag_mm: np.ndarray, s_ref_mm: np.ndarray,
@@ -97,7 +100,6 @@ def windowed_contour_mm(actual_mm: np.ndarray, lag_mm: np.ndarray, s_ref_mm: np.
     """
     m = actual_mm.shape[0]
     out = np.empty(m)
-    counts = path_counts(pieces)
     starts = profile.piece_start_mm
     lengths = pieces.length_mm
     total = profile.total_length_mm
@@ -110,8 +112,8 @@ def windowed_contour_mm(actual_mm: np.ndarray, lag_mm: np.ndarray, s_ref_mm: np.
         # The pieces the windows touch, and one more on each side.
         p_lo = max(int(np.searchsorted(starts, float((s - w).min()), side="right")) - 2, 0)
         p_hi = min(int(np.searchsorted(starts, float((s + w).max()), side="right")) + 1, k)
-        piece = np.repeat(np.arange(p_lo, p_hi), counts[p_lo:p_hi])
-        c = counts[p_lo:p_hi]
+        c = path_counts(pieces, p_lo, p_hi)  # these pieces only: O(window), not O(program)
+        piece = np.repeat(np.arange(p_lo, p_hi), c)
         first = np.repeat(np.cumsum(c) - c, c)
         frac = (np.arange(piece.size) - first) / np.repeat(c - 1, c)
         ps = np.minimum(starts[piece] + frac * lengths[piece], total)
