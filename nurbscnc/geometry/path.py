@@ -86,16 +86,6 @@ def horner_rows(coeffs: np.ndarray, i: np.ndarray, x: np.ndarray) -> np.ndarray:
     return acc
 
 
-def _horner(coeffs: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """Σ_k coeffs[k] x^k (coeffs (K, n) already gathered; the arithmetic of
-    :func:`horner_rows`)."""
-    acc = coeffs[-1].copy()
-    for k in range(coeffs.shape[0] - 2, -1, -1):
-        acc *= x
-        acc += coeffs[k]
-    return acc
-
-
 def horner_rows_derivative(coeffs: np.ndarray, i: np.ndarray, x: np.ndarray) -> np.ndarray:
     """d/dx Σ_k coeffs[k, i] x^k (coeffs (K, rows), gathered per sample)."""
     acc = np.take(coeffs[-1], i) * (coeffs.shape[0] - 1)
@@ -327,18 +317,16 @@ class PathTable:
         # Each sample stops at its own tolerance (not when all have converged), so its ξ does
         # not depend on the others in the call: a window of samples gives the same bits as
         # the whole reference (issue 14's chunked output).
-        # The rows' coefficients gathered once (Newton reads them 3–4 times; a gather from
-        # the whole table per step and coefficient was most of the cost on CAM programs).
-        cs, csig = np.take(self.ph_s, i, axis=1), np.take(self.ph_sigma, i, axis=1)
         active = np.arange(xi.size)
         for _ in range(PH_MAX_NEWTON):
+            ia = i[active]
             x = xi[active] - 0.5
-            f = _horner(cs[:, active], x) - s[active]
+            f = horner_rows(self.ph_s, ia, x) - s[active]
             going = np.abs(f) > tol[active]
             if not going.any():
                 return xi
-            active, x, f = active[going], x[going], f[going]
-            xi[active] = np.clip(xi[active] - f / _horner(csig[:, active], x), 0.0, 1.0)
+            active, ia, x, f = active[going], ia[going], x[going], f[going]
+            xi[active] = np.clip(xi[active] - f / horner_rows(self.ph_sigma, ia, x), 0.0, 1.0)
         bad = np.flatnonzero(np.abs(horner_rows(self.ph_s, i, xi - 0.5) - s) > tol)
         if bad.size:
             lo, hi = np.zeros(bad.size), np.ones(bad.size)
