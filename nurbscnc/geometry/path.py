@@ -26,11 +26,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from enum import IntEnum
+from functools import cached_property
 from math import comb
 
 import numpy as np
 from numpy.polynomial import polynomial as npoly
 
+from nurbscnc.geometry import segments
 from nurbscnc.geometry.nurbs import BLOCK
 
 #: Program segment kinds that do not move: the tool stops at rest there (a dwell holds for
@@ -244,10 +246,9 @@ class PathTable:
                 s_curve = np.take(self.s_a_mm, i) + ls
                 for a, z in equal_runs(oid):
                     o[a:z], prm[a:z] = self.objects[int(oid[a])].points_at_length(s_curve[a:z])
-            else:  # spiral arcs: their own arc-length table, one call per piece
-                prm = self._object_params(code, i, ls)
-                for a, z in equal_runs(i):
-                    o[a:z] = self.objects[int(self.obj_id[i[a]])].point(prm[a:z])
+            else:  # spiral arcs: Newton on their closed-form arc length, all rows at once
+                prm = self._spiral_params(i, ls)
+                o = self._spiral_at(i, prm)
             if sel is None:
                 return o, prm
             out[sel], param[sel] = o, prm
@@ -353,16 +354,79 @@ class PathTable:
             s_curve = np.take(self.s_a_mm, i) + ls
             for a, z in equal_runs(oid):
                 u[a:z] = self.objects[int(oid[a])].param_at_length_fast(s_curve[a:z])
-        else:  # spirals: u = 0 and u = L at the ends exactly, the arc-length table inside
-            length = np.take(self.length_mm, i)
-            for a, z in equal_runs(i):
-                g = self.objects[int(self.obj_id[i[a]])]
-                s_run, u_run = ls[a:z], u[a:z]
-                inside = (s_run > 0.0) & (s_run < length[a])
-                u_run[:] = np.where(s_run > 0.0, g.u_end, g.u_start)
-                if inside.any():
-                    u_run[inside] = g.param_at_length(s_run[inside])
+        else:
+            u = self._spiral_params(i, ls)
         return u
+
+    @cached_property
+    def _spiral_columns(self) -> dict:
+        """Per geometry object (``objects``): the spiral-arc constants of
+        :class:`~nurbscnc.geometry.paths.ArcGeometry` as columns (zeros on NURBS objects):
+        r0, r1, Δθ, H, L [mm, rad] (n_obj,) and origin, e1, e2, n (n_obj, 3)."""
+        n = len(self.objects)
+        col = {name: np.zeros(n) for name in ("r0", "r1", "angle", "helix", "length")}
+        for name in ("origin", "e1", "e2", "normal"):
+            col[name] = np.zeros((n, 3))
+        for o, g in enumerate(self.objects):
+            if hasattr(g, "radius_end_mm"):
+                col["r0"][o], col["r1"][o] = g.radius_start_mm, g.radius_end_mm
+                col["angle"][o], col["helix"][o] = g.angle_rad, g.helix_mm
+                col["length"][o] = g.length_mm
+                col["origin"][o], col["e1"][o] = g.origin_mm, g.e1
+                col["e2"][o], col["normal"][o] = g.e2, g.normal
+        return col
+
+    def _spiral_params(self, i: np.ndarray, ls: np.ndarray, max_iter: int = 50) -> np.ndarray:
+        """u = t L at arc lengths ``ls`` on spiral rows ``i``: 0 and L at the ends exactly,
+        inside Newton on the closed-form arc length (segments.spiral_arc_length_mm) from
+        t = s/L, t ← t − (s(t) − s)/√(a² + w(t)²), each sample to |s(t) − s| ≤ max(1e-12 mm,
+        8 ulps of s) or an ulp of t — the arithmetic of ArcGeometry.param_at_length, over
+        all rows at once (the same numbers)."""
+        col = self._spiral_columns
+        o = np.take(self.obj_id, i)
+        length = col["length"][o]
+        u = np.where(ls > 0.0, length, 0.0)
+        inside = np.flatnonzero((ls > 0.0) & (ls < np.take(self.length_mm, i)))
+        if inside.size == 0:
+            return u
+        oi = o[inside]
+        r0, r1, ang, hel = col["r0"][oi], col["r1"][oi], col["angle"][oi], col["helix"][oi]
+        big = length[inside]
+        s = np.clip(ls[inside], 0.0, big)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            t = np.where(big > 0.0, s / big, 0.0)
+        dr = r1 - r0
+        a2 = dr * dr + hel * hel
+        eps = np.finfo(float).eps
+        tol = np.maximum(1e-12, 8.0 * eps * s)
+        active = np.flatnonzero((s > 0.0) & (s < big))
+        for _ in range(max_iter):
+            if not active.size:
+                break
+            ta = t[active]
+            f = segments.spiral_arc_length_mm(r0[active], r1[active], ang[active],
+                                              hel[active], ta) - s[active]  # fmt: skip
+            w = ang[active] * (r0[active] + ta * dr[active])
+            new_t = np.clip(ta - f / np.sqrt(a2[active] + w * w), 0.0, 1.0)
+            done = (np.abs(f) <= tol[active]) | (np.abs(new_t - ta) <= 2.0 * eps)
+            t[active] = np.where(np.abs(f) <= tol[active], ta, new_t)
+            active = active[~done]
+        u[inside] = np.where(big > 0.0, big, 1.0) * t
+        return u
+
+    def _spiral_at(self, i: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """Points (m, 3) [mm] of spiral rows ``i`` at their parameters ``u`` (ArcGeometry's
+        C = r(t) (cos θ e1 + sin θ e2) + (O + t H n), t = u/L, θ = t Δθ, r = r0 + t Δr)."""
+        col = self._spiral_columns
+        o = np.take(self.obj_id, i)
+        big = col["length"][o]
+        t = np.clip(u / np.where(big > 0.0, big, 1.0), 0.0, 1.0)
+        r0 = col["r0"][o]
+        radius = r0 + t * (col["r1"][o] - r0)
+        theta = t * col["angle"][o]
+        c, sn = np.cos(theta), np.sin(theta)
+        ring = radius[:, None] * (c[:, None] * col["e1"][o] + sn[:, None] * col["e2"][o])
+        return ring + (col["origin"][o] + (t * col["helix"][o])[:, None] * col["normal"][o])
 
     def params(self, idx, s_local_mm) -> np.ndarray:
         """Own parameters (N,) at arc lengths ``s_local_mm`` from the starts of pieces ``idx``."""
@@ -385,10 +449,16 @@ class PathTable:
                 o = self._arc_at(i, f).T
             elif code == Kind.PH:
                 o = self._ph_at(i, f).T
+            elif code == Kind.SPIRAL:  # u = 0 + f (L − 0), as ArcGeometry's point
+                o = self._spiral_at(i, f * np.take(self._spiral_columns["length"],
+                                                   np.take(self.obj_id, i)))  # fmt: skip
             else:
                 o = np.empty((i.size, 3))
-                for j in np.unique(i).tolist():
-                    rows = np.flatnonzero(i == j)
+                # Rows grouped by piece (a stable sort: O(m log m), not one scan per piece).
+                by_piece = np.argsort(i, kind="stable")
+                for a, z in equal_runs(i[by_piece]):
+                    rows = by_piece[a:z]
+                    j = int(i[rows[0]])
                     g = self.objects[int(self.obj_id[j])]
                     ua, ub = float(self.u_a[j]), float(self.u_b[j])
                     if code == Kind.SPIRAL:

@@ -72,18 +72,21 @@ def dense_path_mm(pieces, profile, spacing_mm: float = 0.002) -> np.ndarray:
     return pieces.path.place(starts, s, idx)[0]
 
 
-def path_counts(pieces) -> np.ndarray:
-    """Points of the dense polyline on each piece (≥ 2): 2 on lines and rapids (exact),
-    else chords of at most min(:data:`MAX_SPACING_MM`, √(8 δ_p / κ)) with δ_p =
-    :data:`CHORD_MM` (a chord h on curvature κ is off by κh²/8); κ is the piece's
-    ``kappa_max_per_mm``, doubled on NURBS cells (their κ comes from 8 samples)."""
-    kind = pieces.kind
-    kappa = np.where(kind == Kind.NURBS, 2.0, 1.0) * np.abs(pieces.kappa_max_per_mm)
+def path_counts(pieces, lo: int = 0, hi: int | None = None) -> np.ndarray:
+    """Points of the dense polyline on each piece (≥ 2) of pieces ``lo:hi`` (default all):
+    2 on lines and rapids (exact), else chords of at most min(:data:`MAX_SPACING_MM`,
+    √(8 δ_p / κ)) with δ_p = :data:`CHORD_MM` (a chord h on curvature κ is off by κh²/8);
+    κ is the piece's ``kappa_max_per_mm``, doubled on NURBS cells (their κ comes from 8
+    samples)."""
+    sl = slice(lo, hi)
+    kind = pieces.kind[sl]
+    length = pieces.length_mm[sl]
+    kappa = np.where(kind == Kind.NURBS, 2.0, 1.0) * np.abs(pieces.kappa_max_per_mm[sl])
     with np.errstate(divide="ignore"):
         h = np.minimum(MAX_SPACING_MM, np.sqrt(8.0 * CHORD_MM / kappa))
-    counts = np.maximum(np.ceil(pieces.length_mm / h).astype(np.int64) + 1, 3)
+    counts = np.maximum(np.ceil(length / h).astype(np.int64) + 1, 3)
     straight = kind == Kind.LINE
-    return np.where(straight | (pieces.length_mm == 0.0), 2, counts)
+    return np.where(straight | (length == 0.0), 2, counts)
 
 
 def windowed_contour_mm(actual_mm: np.ndarray, lag_mm: np.ndarray, s_ref_mm: np.ndarray,
@@ -97,7 +100,6 @@ def windowed_contour_mm(actual_mm: np.ndarray, lag_mm: np.ndarray, s_ref_mm: np.
     """
     m = actual_mm.shape[0]
     out = np.empty(m)
-    counts = path_counts(pieces)
     starts = profile.piece_start_mm
     lengths = pieces.length_mm
     total = profile.total_length_mm
@@ -110,8 +112,8 @@ def windowed_contour_mm(actual_mm: np.ndarray, lag_mm: np.ndarray, s_ref_mm: np.
         # The pieces the windows touch, and one more on each side.
         p_lo = max(int(np.searchsorted(starts, float((s - w).min()), side="right")) - 2, 0)
         p_hi = min(int(np.searchsorted(starts, float((s + w).max()), side="right")) + 1, k)
-        piece = np.repeat(np.arange(p_lo, p_hi), counts[p_lo:p_hi])
-        c = counts[p_lo:p_hi]
+        c = path_counts(pieces, p_lo, p_hi)  # these pieces only: O(window), not O(program)
+        piece = np.repeat(np.arange(p_lo, p_hi), c)
         first = np.repeat(np.cumsum(c) - c, c)
         frac = (np.arange(piece.size) - first) / np.repeat(c - 1, c)
         ps = np.minimum(starts[piece] + frac * lengths[piece], total)
@@ -151,10 +153,19 @@ class PathIndex:
     use and kept across the re-plans of one program (the geometry does not change).
     """
 
+    #: Most dense-polyline points kept across queries (48 MB); the cache is emptied when full.
+    CACHE_POINTS = 2_000_000
+    #: Segments per bounding box of a piece's polyline (the coarse level of the search).
+    CHUNK = 64
+
     def __init__(self, pieces, short_mm: float = 1.0):
         self._pieces = pieces
         self._short_mm = short_mm
         self._built = None
+        self._counts = None
+        # piece → (dense polyline (c, 3) [mm], box lows, box highs (⌈(c−1)/CHUNK⌉, 3) [mm])
+        self._polyline: dict[int, tuple] = {}
+        self._cached_points = 0
 
     def _build(self):
         from scipy.spatial import cKDTree
@@ -184,6 +195,57 @@ class PathIndex:
             found.append(long_[near])
         return np.unique(np.concatenate(found)) if found else np.zeros(0, dtype=np.int64)
 
+    def _piece_polylines(self, cand: np.ndarray) -> list[tuple]:
+        """(points, box lows, box highs) of the dense polylines (:func:`path_counts`) of
+        pieces ``cand``. Each piece's are computed once (every query and re-plan of the
+        program asks the same pieces again), the points the same numbers as a fresh
+        :meth:`PathTable.points_at_fraction` (its formulas are elementwise); the boxes bound
+        runs of :data:`CHUNK` segments."""
+        counts = self._counts
+        cache = self._polyline
+        missing = [j for j in cand.tolist() if j not in cache]
+        if missing:
+            miss = np.asarray(missing, dtype=np.int64)
+            c = counts[miss]
+            if self._cached_points + int(c.sum()) > self.CACHE_POINTS:
+                cache.clear()
+                self._cached_points = 0
+                miss = cand
+                c = counts[miss]
+            piece = np.repeat(miss, c)
+            first = np.repeat(np.cumsum(c) - c, c)
+            frac = (np.arange(piece.size) - first) / np.repeat(c - 1, c)
+            pts = self._pieces.path.points_at_fraction(piece, frac)
+            ends = np.cumsum(c).tolist()
+            for j, a, z in zip(miss.tolist(), [0, *ends[:-1]], ends):
+                p = pts[a:z]
+                lo_s, hi_s = np.minimum(p[:-1], p[1:]), np.maximum(p[:-1], p[1:])
+                heads = np.arange(0, lo_s.shape[0], self.CHUNK)
+                cache[j] = (p, np.minimum.reduceat(lo_s, heads, axis=0),
+                            np.maximum.reduceat(hi_s, heads, axis=0))  # fmt: skip
+            self._cached_points += int(c.sum())
+        return [cache[j] for j in cand.tolist()]
+
+    def _near_segments(self, cand: np.ndarray, lo_q: np.ndarray, hi_q: np.ndarray):
+        """Starts and directions (n, 3) [mm] of the polyline segments of pieces ``cand``
+        whose bounding boxes meet the box [lo_q, hi_q]: boxes of :data:`CHUNK` segments
+        first, then the segments of the boxes that meet it (the same segments as testing
+        every one)."""
+        starts, dirs = [], []
+        for p, lo_c, hi_c in self._piece_polylines(cand):
+            hit = np.flatnonzero(np.all((hi_c >= lo_q) & (lo_c <= hi_q), axis=1))
+            if hit.size == 0:
+                continue
+            seg = (hit[:, None] * self.CHUNK + np.arange(self.CHUNK)).ravel()
+            seg = seg[seg < p.shape[0] - 1]
+            a, b = p[seg], p[seg + 1]
+            keep = np.all((np.maximum(a, b) >= lo_q) & (np.minimum(a, b) <= hi_q), axis=1)
+            starts.append(a[keep])
+            dirs.append(b[keep] - a[keep])
+        if not starts:
+            return np.zeros((0, 3)), np.zeros((0, 3))
+        return np.concatenate(starts), np.concatenate(dirs)
+
     def distance_mm(self, q: np.ndarray, upper_mm: np.ndarray, block: int = 256,
                     exclude: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
         """Distance [mm] from each point of ``q`` (m, 3) to the whole path, for points whose
@@ -191,8 +253,8 @@ class PathIndex:
         :func:`path_counts` on the candidate pieces, never above ``upper_mm``. ``exclude``
         (k,) bool: pieces that are not part of the path measured against (the rapids, for
         the distance to the cut)."""
-        pieces = self._pieces
-        counts = path_counts(pieces)
+        if self._counts is None:
+            self._counts = path_counts(self._pieces)
         out = np.array(upper_mm, dtype=float)
         # Blocks of consecutive points (in the caller's order: time) at most ``block`` long
         # and broken where the points jump by more than 1 mm, so each block is compact.
@@ -205,21 +267,13 @@ class PathIndex:
                 cand = cand[~exclude[cand]]
             if cand.size == 0:
                 continue
-            c = counts[cand]
-            piece = np.repeat(cand, c)
-            first = np.repeat(np.cumsum(c) - c, c)
-            frac = (np.arange(piece.size) - first) / np.repeat(c - 1, c)
-            pts = pieces.path.points_at_fraction(piece, frac)
             # Segments within a piece whose bounding box meets the queries' (widened).
             qb = q[sl]
             reach = float(out[sl].max())
             lo_q, hi_q = qb.min(axis=0) - reach, qb.max(axis=0) + reach
-            lo_s, hi_s = np.minimum(pts[:-1], pts[1:]), np.maximum(pts[:-1], pts[1:])
-            inside = np.flatnonzero((piece[1:] == piece[:-1])
-                                    & np.all((hi_s >= lo_q) & (lo_s <= hi_q), axis=1))
-            if inside.size == 0:
+            a, d = self._near_segments(cand, lo_q, hi_q)
+            if a.shape[0] == 0:
                 continue
-            a, d = pts[inside], pts[inside + 1] - pts[inside]
             len2 = np.einsum("ij,ij->i", d, d)
             rel = qb[:, None, :] - a[None, :, :]
             t = np.einsum("mij,ij->mi", rel, d) / np.where(len2 > 0.0, len2, 1.0)

@@ -59,16 +59,18 @@ def arc_box_mm(seg) -> tuple[np.ndarray, np.ndarray]:
     return lo, hi
 
 
-def _ends_mm(segments) -> tuple[np.ndarray, np.ndarray]:
-    """Start and end points (n, 3) [mm] of the segments (a stop: its position, twice)."""
+def _ends_mm(segments) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Start and end points (n, 3) [mm] of the segments (a stop: its position, twice) and
+    their kinds (n,) (one pass each; :func:`_special` picks kinds from them)."""
     starts = np.array([seg.start_mm for seg in segments], dtype=float).reshape(-1, 3)
     ends = np.array([seg.end_mm for seg in segments], dtype=float).reshape(-1, 3)
-    return starts, ends
+    return starts, ends, np.array([seg.kind for seg in segments], dtype=str)
 
 
-def _special(segments, kind: str) -> list[int]:
-    """Indices of the segments of one ``kind`` (few: arcs, NURBS and stops are not CAM's bulk)."""
-    return [i for i, seg in enumerate(segments) if seg.kind == kind]
+def _special(kinds: np.ndarray, kind: str) -> list[int]:
+    """Indices of the segments of one ``kind`` (few: arcs, NURBS and stops are not CAM's
+    bulk), from the kinds of :func:`_ends_mm`."""
+    return np.flatnonzero(kinds == kind).tolist()
 
 
 def segment_boxes_mm(segments, ends=None) -> tuple[np.ndarray, np.ndarray]:
@@ -76,11 +78,11 @@ def segment_boxes_mm(segments, ends=None) -> tuple[np.ndarray, np.ndarray]:
     and helices exact (:func:`arc_box_mm`), NURBS their control points (convex hull; the
     weights are positive), stops their position. Lines, the bulk of CAM programs, in arrays;
     ``ends``: :func:`_ends_mm` if already known."""
-    starts, stops = ends if ends is not None else _ends_mm(segments)
+    starts, stops, kinds = ends if ends is not None else _ends_mm(segments)
     lo, hi = np.minimum(starts, stops), np.maximum(starts, stops)
-    for i in _special(segments, "arc"):
+    for i in _special(kinds, "arc"):
         lo[i], hi[i] = arc_box_mm(segments[i])
-    for i in _special(segments, "nurbs"):
+    for i in _special(kinds, "nurbs"):
         cp = np.asarray(segments[i].control_points_mm, dtype=float)
         lo[i], hi[i] = cp.min(axis=0), cp.max(axis=0)
     return lo, hi
@@ -112,19 +114,19 @@ def segment_time_bounds_s(segments, machine, ends=None) -> np.ndarray:
     between its end points) over the fastest it may move, min(F, V_max) (G0: the rapid rate);
     a stop its seconds. A feed too small for its length gives inf."""
     lim = machine.limits
-    starts, stops = ends if ends is not None else _ends_mm(segments)
+    starts, stops, kinds = ends if ends is not None else _ends_mm(segments)
     length = np.sqrt(np.einsum("ij,ij->i", stops - starts, stops - starts))
-    for i in _special(segments, "arc"):
+    for i in _special(kinds, "arc"):
         length[i] = segments[i].length_mm
     speed = np.minimum(np.array([getattr(seg, "feed_mm_s", 0.0) for seg in segments], float),
                        lim.v_max_mm_s)  # fmt: skip
-    rapid = _special(segments, "rapid")
+    rapid = _special(kinds, "rapid")
     speed[rapid] = lim.rapid_mm_s
     with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
         t = np.where(length > 0.0, length / speed, 0.0)
     t = np.where(np.isnan(t), np.inf, t)
     for kind in STOP_KINDS:
-        for i in _special(segments, kind):
+        for i in _special(kinds, kind):
             t[i] = stop_seconds(segments[i])
     return t
 
