@@ -390,27 +390,9 @@ class PathTable:
         if inside.size == 0:
             return u
         oi = o[inside]
-        r0, r1, ang, hel = col["r0"][oi], col["r1"][oi], col["angle"][oi], col["helix"][oi]
         big = length[inside]
-        s = np.clip(ls[inside], 0.0, big)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            t = np.where(big > 0.0, s / big, 0.0)
-        dr = r1 - r0
-        a2 = dr * dr + hel * hel
-        eps = np.finfo(float).eps
-        tol = np.maximum(1e-12, 8.0 * eps * s)
-        active = np.flatnonzero((s > 0.0) & (s < big))
-        for _ in range(max_iter):
-            if not active.size:
-                break
-            ta = t[active]
-            f = segments.spiral_arc_length_mm(r0[active], r1[active], ang[active],
-                                              hel[active], ta) - s[active]  # fmt: skip
-            w = ang[active] * (r0[active] + ta * dr[active])
-            new_t = np.clip(ta - f / np.sqrt(a2[active] + w * w), 0.0, 1.0)
-            done = (np.abs(f) <= tol[active]) | (np.abs(new_t - ta) <= 2.0 * eps)
-            t[active] = np.where(np.abs(f) <= tol[active], ta, new_t)
-            active = active[~done]
+        t = segments.spiral_t_at_length(col["r0"][oi], col["r1"][oi], col["angle"][oi],
+                                        col["helix"][oi], ls[inside], big, max_iter)  # fmt: skip
         u[inside] = np.where(big > 0.0, big, 1.0) * t
         return u
 

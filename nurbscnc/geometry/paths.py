@@ -224,29 +224,11 @@ class ArcGeometry:
         return float(self._length_t(1.0))
 
     def _param_t_at_length(self, s_mm: np.ndarray, max_iter: int = 50) -> np.ndarray:
-        """t ∈ [0, 1] with s(t) = s_mm (clamped): Newton on the closed form, t ← t − (s(t) −
-        s)/|C'(t)|, from t = s/L. s is increasing with a convex or concave speed profile
-        √(a² + w(t)²) (w linear in t), so after the first step Newton closes in from one
-        side; it stops at |s(t) − s| ≤ max(1e-12 mm, 8 ulps of s) or at an ulp of t."""
-        length = self.length_mm
-        s = np.clip(s_mm, 0.0, length)
-        t = s / length if length > 0.0 else np.zeros_like(s)
-        dr = self.radius_end_mm - self.radius_start_mm
-        a2 = dr * dr + self.helix_mm * self.helix_mm
-        eps = np.finfo(float).eps
-        tol = np.maximum(1e-12, 8.0 * eps * s)
-        active = np.flatnonzero((s > 0.0) & (s < length))
-        for _ in range(max_iter):
-            if not active.size:
-                break
-            ta = t[active]
-            f = self._length_t(ta) - s[active]
-            w = self.angle_rad * (self.radius_start_mm + ta * dr)
-            new_t = np.clip(ta - f / np.sqrt(a2 + w * w), 0.0, 1.0)
-            done = (np.abs(f) <= tol[active]) | (np.abs(new_t - ta) <= 2.0 * eps)
-            t[active] = np.where(np.abs(f) <= tol[active], ta, new_t)
-            active = active[~done]
-        return t
+        """t ∈ [0, 1] with s(t) = s_mm (clamped): Newton on the closed form
+        (:func:`segments.spiral_t_at_length`)."""
+        return segments.spiral_t_at_length(self.radius_start_mm, self.radius_end_mm,
+                                           self.angle_rad, self.helix_mm, s_mm,
+                                           self.length_mm, max_iter)  # fmt: skip
 
     @property
     def u_end(self) -> float:

@@ -95,6 +95,39 @@ def spiral_arc_length_mm(radius_start_mm, radius_end_mm, angle_rad, helix_mm, t=
     return t * np.where(dr == 0.0, circle, mean_speed)
 
 
+def spiral_t_at_length(radius_start_mm, radius_end_mm, angle_rad, helix_mm, s_mm, length_mm,
+                       max_iter: int = 50) -> np.ndarray:  # fmt: skip
+    """Fractions t ∈ [0, 1] with s(t) = s_mm [mm] (clamped to [0, length_mm]) on circular,
+    helical or spiral arcs (vectorised over every argument, broadcast together): Newton on
+    the closed form :func:`spiral_arc_length_mm`, t ← t − (s(t) − s)/|C'(t)|, from t = s/L.
+    s is increasing with a convex or concave speed profile √(a² + w(t)²) (w linear in t), so
+    after the first step Newton closes in from one side; each sample stops at
+    |s(t) − s| ≤ max(1e-12 mm, 8 ulps of s) or at an ulp of t. One arc (ArcGeometry) and
+    all the spiral rows of a path table at once (PathTable) use this same arithmetic."""
+    r0, r1, ang, hel, big, s_in = np.broadcast_arrays(
+        *(np.asarray(x, dtype=float) for x in (radius_start_mm, radius_end_mm, angle_rad,
+                                                helix_mm, length_mm, s_mm)))  # fmt: skip
+    s = np.clip(s_in, 0.0, big)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t = np.where(big > 0.0, s / big, 0.0)
+    dr = r1 - r0
+    a2 = dr * dr + hel * hel
+    eps = np.finfo(float).eps
+    tol = np.maximum(1e-12, 8.0 * eps * s)
+    active = np.flatnonzero((s > 0.0) & (s < big))
+    for _ in range(max_iter):
+        if not active.size:
+            break
+        ta = t[active]
+        f = spiral_arc_length_mm(r0[active], r1[active], ang[active], hel[active], ta) - s[active]
+        w = ang[active] * (r0[active] + ta * dr[active])
+        new_t = np.clip(ta - f / np.sqrt(a2[active] + w * w), 0.0, 1.0)
+        done = (np.abs(f) <= tol[active]) | (np.abs(new_t - ta) <= 2.0 * eps)
+        t[active] = np.where(np.abs(f) <= tol[active], ta, new_t)
+        active = active[~done]
+    return t
+
+
 @dataclass(frozen=True, eq=False, slots=True)
 class Line:
     """A straight move from ``start_mm`` to ``end_mm`` [mm] at ``feed_mm_s`` [mm/s].
