@@ -229,6 +229,10 @@ def test_formatter_round_trip_examples():
         "(a)(b) G1 ;c",
         "G1 X1 2 3.4 5",
         "\tG1\tX1",
+        "%",
+        " \t% ",
+        "% (end) (of tape) ; rest (x",
+        "%;",
     ],
 )
 def test_fast_path_equals_lark_path_examples(line):

@@ -238,3 +238,17 @@ def test_operator_keywords_do_not_swallow_the_next_word():
     assert [w.letter for w in words] == ["G", "G"]
     assert words[1].value == ("exists", "a")
     assert parse_text("X[1GE2]")[0].words[0].value == ("op", "GE", 1.0, 2.0)
+
+
+@pytest.mark.parametrize("line", ["%%", "% X1", "% (a", "%)", "(a) %", "%\x00"])
+def test_percent_lines_the_fast_path_leaves_to_lark(line):
+    """Only "%" and comments make a tape mark: anything else on the line is lark's to refuse
+    (or, for "(a) %", read as a comment and a stray %), the same with and without the fast
+    path."""
+    def outcome(fast):
+        try:
+            return parse_text(line, fast=fast)
+        except GCodeSyntaxError as exc:
+            return (exc.message, exc.pos)
+
+    assert outcome(True) == outcome(False)
