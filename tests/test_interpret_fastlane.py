@@ -130,3 +130,30 @@ def test_options_can_turn_the_lane_off():
     on = interpret_text(text)
     off = interpret_text(text, InterpretOptions(fast_lane=False))
     assert _key(on) == _key(off)
+
+
+def test_make_lines_equals_the_constructor():
+    """The bulk Line maker sets every field as Line(...) does (and refuses a missing one)."""
+    import dataclasses
+    import itertools
+
+    from nurbscnc.geometry.segments import Line
+    from nurbscnc.program.fastlane import make_lines
+
+    starts = [(0.0, -0.0, 1.5), (1.0, 2.0, 3.0), (4.0, 5.0, 6.0)]
+    ends = [(1.0, 2.0, 3.0), (4.0, 5.0, 6.0), (7.0, 8.0, 9.0)]
+    cols = {"start_mm": starts, "end_mm": ends, "feed_mm_s": [0.0, 10.0, 20.5],
+            "line": [3, 4, 9], "rapid": [True, False, False],
+            "blend_mm": itertools.repeat(0.25), "naive_mm": itertools.repeat(0.0)}  # fmt: skip
+    made = make_lines(cols)
+    want = [Line(a, b, f, n, r, 0.25, 0.0) for a, b, f, n, r in
+            zip(starts, ends, [0.0, 10.0, 20.5], [3, 4, 9], [True, False, False])]  # fmt: skip
+    assert [type(m) for m in made] == [Line] * 3
+    for got, ref in zip(made, want):
+        for f in dataclasses.fields(Line):
+            assert getattr(got, f.name) == getattr(ref, f.name)
+            assert type(getattr(got, f.name)) is type(getattr(ref, f.name))
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        made[0].line = 5
+    with pytest.raises(TypeError):
+        make_lines({k: v for k, v in cols.items() if k != "naive_mm"})

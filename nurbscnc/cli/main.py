@@ -460,14 +460,16 @@ def check(program, as_json, no_block_delete, tool_table, subroutine_path, machin
     """
     from nurbscnc.plan.limits import check_before_work
     from nurbscnc.plan.report import program_summary
+    from nurbscnc.program.columns import segment_columns
 
     mach = load_machine_cli(machine, overrides, announce=False)
     with progress_display(show_progress(as_json), _display_name(program)) as say:
         say("reading and interpreting")
         prog = load_program(program, not no_block_delete, tool_table, subroutine_path)
         say(f"checking {len(prog.segments)} segments")
-        check_before_work(prog.segments, mach)
-        summary = program_summary(prog)
+        columns = segment_columns(prog.segments)  # read once for the checks and the summary
+        check_before_work(prog.segments, mach, columns)
+        summary = program_summary(prog, columns)
     if as_json:
         click.echo(json.dumps({**summary, **machine_json(mach)}))
         return

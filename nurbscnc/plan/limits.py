@@ -24,7 +24,8 @@ import math
 import numpy as np
 
 from nurbscnc.errors import PlanningError, SourcePos
-from nurbscnc.geometry.path import STOP_KINDS, stop_seconds
+from nurbscnc.geometry.path import stop_seconds
+from nurbscnc.program.columns import ARC, DWELL, NURBS, PAUSE, RAPID, segment_columns
 
 AXES = "XYZ"
 
@@ -59,41 +60,34 @@ def arc_box_mm(seg) -> tuple[np.ndarray, np.ndarray]:
     return lo, hi
 
 
-def _ends_mm(segments) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Start and end points (n, 3) [mm] of the segments (a stop: its position, twice) and
-    their kinds (n,) (one pass each; :func:`_special` picks kinds from them)."""
-    starts = np.array([seg.start_mm for seg in segments], dtype=float).reshape(-1, 3)
-    ends = np.array([seg.end_mm for seg in segments], dtype=float).reshape(-1, 3)
-    return starts, ends, np.array([seg.kind for seg in segments], dtype=str)
+def _columns(segments, columns):
+    """The segments' columns (:func:`~nurbscnc.program.columns.segment_columns`), read now
+    unless the caller has them."""
+    return columns if columns is not None else segment_columns(segments)
 
 
-def _special(kinds: np.ndarray, kind: str) -> list[int]:
-    """Indices of the segments of one ``kind`` (few: arcs, NURBS and stops are not CAM's
-    bulk), from the kinds of :func:`_ends_mm`."""
-    return np.flatnonzero(kinds == kind).tolist()
-
-
-def segment_boxes_mm(segments, ends=None) -> tuple[np.ndarray, np.ndarray]:
+def segment_boxes_mm(segments, columns=None) -> tuple[np.ndarray, np.ndarray]:
     """Boxes (lo, hi) (n, 3) [mm] of the segments: lines (and rapids) their end points, arcs
     and helices exact (:func:`arc_box_mm`), NURBS their control points (convex hull; the
-    weights are positive), stops their position. Lines, the bulk of CAM programs, in arrays;
-    ``ends``: :func:`_ends_mm` if already known."""
-    starts, stops, kinds = ends if ends is not None else _ends_mm(segments)
+    weights are positive), stops their position. Lines, the bulk of CAM programs, in arrays
+    (arcs, NURBS and stops are few); ``columns``: the segments' columns if already read."""
+    cols = _columns(segments, columns)
+    starts, stops = cols.starts_mm, cols.ends_mm
     lo, hi = np.minimum(starts, stops), np.maximum(starts, stops)
-    for i in _special(kinds, "arc"):
+    for i in cols.rows(ARC).tolist():
         lo[i], hi[i] = arc_box_mm(segments[i])
-    for i in _special(kinds, "nurbs"):
+    for i in cols.rows(NURBS).tolist():
         cp = np.asarray(segments[i].control_points_mm, dtype=float)
         lo[i], hi[i] = cp.min(axis=0), cp.max(axis=0)
     return lo, hi
 
 
-def check_geometry_limits(segments, soft_limits, ends=None) -> None:
+def check_geometry_limits(segments, soft_limits, columns=None) -> None:
     """PlanningError at the source line of the first segment whose box
     (:func:`segment_boxes_mm`) leaves the soft limits, naming the axis and the value."""
     if not len(segments):
         return
-    lo, hi = segment_boxes_mm(segments, ends)
+    lo, hi = segment_boxes_mm(segments, columns)
     lim_lo, lim_hi = np.asarray(soft_limits.min_mm), np.asarray(soft_limits.max_mm)
     below, above = lo < lim_lo, hi > lim_hi
     bad = np.flatnonzero((below | above).any(axis=1))
@@ -109,25 +103,23 @@ def check_geometry_limits(segments, soft_limits, ends=None) -> None:
     )
 
 
-def segment_time_bounds_s(segments, machine, ends=None) -> np.ndarray:
+def segment_time_bounds_s(segments, machine, columns=None) -> np.ndarray:
     """A lower bound [s] (n,) of each segment's motion time: its length (NURBS: the chord
     between its end points) over the fastest it may move, min(F, V_max) (G0: the rapid rate);
     a stop its seconds. A feed too small for its length gives inf."""
     lim = machine.limits
-    starts, stops, kinds = ends if ends is not None else _ends_mm(segments)
+    cols = _columns(segments, columns)
+    starts, stops = cols.starts_mm, cols.ends_mm
     length = np.sqrt(np.einsum("ij,ij->i", stops - starts, stops - starts))
-    for i in _special(kinds, "arc"):
+    for i in cols.rows(ARC).tolist():
         length[i] = segments[i].length_mm
-    speed = np.minimum(np.array([getattr(seg, "feed_mm_s", 0.0) for seg in segments], float),
-                       lim.v_max_mm_s)  # fmt: skip
-    rapid = _special(kinds, "rapid")
-    speed[rapid] = lim.rapid_mm_s
+    speed = np.minimum(cols.feeds_mm_s, lim.v_max_mm_s)
+    speed[cols.rows(RAPID)] = lim.rapid_mm_s
     with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
         t = np.where(length > 0.0, length / speed, 0.0)
     t = np.where(np.isnan(t), np.inf, t)
-    for kind in STOP_KINDS:
-        for i in _special(kinds, kind):
-            t[i] = stop_seconds(segments[i])
+    for i in np.flatnonzero((cols.kind == DWELL) | (cols.kind == PAUSE)).tolist():
+        t[i] = stop_seconds(segments[i])
     return t
 
 
@@ -151,13 +143,14 @@ def _refuse_points(times_s: np.ndarray, lines, period_s: float, max_points: int,
     )
 
 
-def check_motion_time(segments, machine, ends=None) -> None:
+def check_motion_time(segments, machine, columns=None) -> None:
     """Refuse a program whose motion takes, at least (:func:`segment_time_bounds_s`), more
     than ``limits.max_points`` servo periods: PlanningError at the segment that takes the
     most time. Cheap: no planning, no sampling."""
     if not len(segments):
         return
-    times = segment_time_bounds_s(segments, machine, ends)
+    cols = _columns(segments, columns)
+    times = segment_time_bounds_s(segments, machine, cols)
     endless = np.flatnonzero(~np.isfinite(times))
     if endless.size:
         # A feed so small (subnormal: 1e-321) that length / feed overflows.
@@ -165,19 +158,19 @@ def check_motion_time(segments, machine, ends=None) -> None:
         raise PlanningError(
             f"feed {seg.feed_mm_s * 60.0:.6g} mm/min is too small for this move: it would "
             "never end", SourcePos(int(seg.line), 1, ""))  # fmt: skip
-    lines = [seg.line for seg in segments]
-    _refuse_points(times, lines, machine.servo.period_s, machine.limits.max_points,
+    _refuse_points(times, cols.lines, machine.servo.period_s, machine.limits.max_points,
                    "at least ")  # fmt: skip
 
 
-def check_before_work(segments, machine) -> None:
+def check_before_work(segments, machine, columns=None) -> None:
     """Both checks before planning: :func:`check_geometry_limits` (the soft limits) then
-    :func:`check_motion_time` (``limits.max_points``), one pass over the segments' ends."""
+    :func:`check_motion_time` (``limits.max_points``), on the segments' columns (read once;
+    ``columns`` if the caller has them)."""
     if not len(segments):
         return
-    ends = _ends_mm(segments)
-    check_geometry_limits(segments, machine.soft_limits, ends)
-    check_motion_time(segments, machine, ends)
+    cols = _columns(segments, columns)
+    check_geometry_limits(segments, machine.soft_limits, cols)
+    check_motion_time(segments, machine, cols)
 
 
 def check_point_count(pieces, profile, machine) -> None:

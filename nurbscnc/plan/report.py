@@ -14,16 +14,19 @@ No I/O: the CLI prints or serialises the dictionaries.
 
 from __future__ import annotations
 
-from collections import Counter
+import math
+from operator import attrgetter
 
 import numpy as np
 
 from nurbscnc.errors import PlanningError, SourcePos
 from nurbscnc.geometry.nurbs import NurbsCurve
-from nurbscnc.geometry.path import STOP_KINDS, Kind
+from nurbscnc.geometry.path import Kind
 from nurbscnc.geometry.paths import geometry_of
+from nurbscnc.geometry.segments import spiral_arc_length_mm
 from nurbscnc.machine.profile import Machine, SoftLimits
 from nurbscnc.plan.lowerbound import program_lower_bound_s
+from nurbscnc.program.columns import ARC, DWELL, KINDS, LINE, NURBS, PAUSE, RAPID, segment_columns
 
 
 def check_soft_limits(points_mm: np.ndarray, lines: np.ndarray, limits: SoftLimits) -> None:
@@ -49,47 +52,109 @@ def segment_length_mm(seg) -> float:
     return float(seg.length_mm)
 
 
-def program_summary(prog) -> dict:
+#: Samples of every arc in the summary's bounding box (its extreme points lie between them
+#: within the sagitta; the exact box is :func:`nurbscnc.plan.limits.arc_box_mm`).
+ARC_BOX_SAMPLES = 65
+
+
+def segment_lengths_mm(segments, cols) -> np.ndarray:
+    """Lengths (n,) [mm] of the segments (``cols``: their columns), the same floats as
+    :func:`segment_length_mm` of each: lines and rapids ``math.dist`` of their ends (a C
+    loop over the end tuples: numpy's √(Δx² + Δy² + Δz²) may differ from it in the last
+    bit), arcs and helices the closed form over all arcs at once (SPEC: the elementwise
+    arithmetic of :func:`~nurbscnc.geometry.segments.spiral_arc_length_mm`), NURBS their
+    Gauss–Legendre arc length (one curve at a time: few, each a whole block), stops 0."""
+    n = len(segments)
+    lengths = np.zeros(n)
+    straight = np.flatnonzero((cols.kind == LINE) | (cols.kind == RAPID))
+    if straight.size == n:
+        pick = segments
+    else:
+        pick = [segments[i] for i in straight.tolist()]
+    lengths[straight] = np.fromiter(
+        map(math.dist, map(attrgetter("end_mm"), pick), map(attrgetter("start_mm"), pick)),
+        dtype=float, count=straight.size)  # fmt: skip
+    arcs = cols.rows(ARC).tolist()
+    if arcs:
+        radii = np.array([(segments[i].radius_start_mm, segments[i].radius_end_mm,
+                           segments[i].angle_rad, segments[i].helix_mm) for i in arcs])  # fmt: skip
+        lengths[arcs] = spiral_arc_length_mm(*radii.T)
+    for i in cols.rows(NURBS).tolist():
+        lengths[i] = segment_length_mm(segments[i])
+    return lengths
+
+
+def _box_points_mm(prog, cols) -> np.ndarray:
+    """The points the summary's bounding box holds, in the order of the per-segment
+    definition (a start point, then per segment: a NURBS's control points; a line's, rapid's
+    or arc's start and end; an arc's :data:`ARC_BOX_SAMPLES` points): the same array, so
+    its minimum is the same float even for −0.0 against 0.0."""
+    segments = prog.segments
+    moving = (cols.kind != DWELL) & (cols.kind != PAUSE)
+    nurbs = cols.rows(NURBS).tolist()
+    arcs = cols.rows(ARC)
+    count = np.where(moving, 2, 0)
+    count[arcs] += ARC_BOX_SAMPLES
+    hulls = [np.reshape(np.asarray(segments[i].control_points_mm, dtype=float), (-1, 3))
+             for i in nurbs]  # fmt: skip
+    count[nurbs] = [len(h) for h in hulls]
+    first = 1 + np.concatenate(([0], np.cumsum(count)[:-1]))
+    points = np.empty((1 + int(count.sum()), 3))
+    points[0] = np.asarray(prog.start_mm, dtype=float)
+    ends = np.flatnonzero(moving & (cols.kind != NURBS))
+    points[first[ends]] = cols.starts_mm[ends]
+    points[first[ends] + 1] = cols.ends_mm[ends]
+    for i, hull in zip(nurbs, hulls):
+        points[first[i] : first[i] + len(hull)] = hull
+    for i in arcs.tolist():
+        geom = geometry_of(segments[i])
+        at = first[i] + 2
+        points[at : at + ARC_BOX_SAMPLES] = geom.point(
+            np.linspace(geom.u_start, geom.u_end, ARC_BOX_SAMPLES))
+    return points
+
+
+def _sequential_sum(values: np.ndarray) -> float:
+    """Σ values added left to right from 0.0 (``np.cumsum`` is sequential; ``np.sum`` is
+    pairwise and may differ in the last bits from a running total)."""
+    return float(np.cumsum(values)[-1]) if values.size else 0.0
+
+
+def program_summary(prog, columns=None) -> dict:
     """The JSON-able summary of an interpreted program (``check --json``). The bounding box
     holds every end point, the NURBS control points (the convex hull property) and 65
-    points of every arc (its extreme points)."""
-    segments = []
-    feed_len = 0.0
-    rapid_len = 0.0
-    points = [np.asarray(prog.start_mm, dtype=float)]
-    feeds = []
-    for seg in prog.segments:
-        moving = seg.kind not in STOP_KINDS
-        length = segment_length_mm(seg) if moving else 0.0
-        entry = {"kind": seg.kind, "line": seg.line, "length_mm": length}
-        if seg.kind == "nurbs":
-            entry.update(degree=seg.degree, control_points=len(seg.control_points_mm),
-                         knots=len(seg.knots), plane=seg.plane)  # fmt: skip
-            points.append(np.asarray(seg.control_points_mm))
-        elif moving:
-            points.append(np.asarray([seg.start_mm, seg.end_mm], dtype=float))
-        if seg.kind == "arc":
-            geom = geometry_of(seg)
-            points.append(geom.point(np.linspace(geom.u_start, geom.u_end, 65)))
-        if seg.kind == "rapid":
-            rapid_len += length
-        elif moving:
-            feed_len += length
-            feeds.append(seg.feed_mm_s)
-        segments.append(entry)
-    allpts = np.vstack([np.reshape(p, (-1, 3)) for p in points])
-    counts = Counter(s["kind"] for s in segments)
+    points of every arc (its extreme points). Whole-array over the segments' columns
+    (``columns``: :func:`~nurbscnc.program.columns.segment_columns`, if already read);
+    the numbers are those of adding up the segments one by one."""
+    segments = prog.segments
+    cols = columns if columns is not None else segment_columns(segments)
+    lengths = segment_lengths_mm(segments, cols)
+    rapid = cols.kind == RAPID
+    feeding = (cols.kind != RAPID) & (cols.kind != DWELL) & (cols.kind != PAUSE)
+    feeds = cols.feeds_mm_s[feeding]
+    names = cols.names
+    entries = [{"kind": k, "line": line, "length_mm": length}
+               for k, line, length in zip(names.tolist(), cols.lines.tolist(),
+                                          lengths.tolist())]  # fmt: skip
+    for i in cols.rows(NURBS).tolist():
+        seg = segments[i]
+        entries[i].update(degree=seg.degree, control_points=len(seg.control_points_mm),
+                          knots=len(seg.knots), plane=seg.plane)  # fmt: skip
+    # Kinds counted in the order they first appear (the order of the JSON object).
+    codes, first, counts = np.unique(cols.kind, return_index=True, return_counts=True)
+    order = np.argsort(first)
+    allpts = _box_points_mm(prog, cols)
     return {
         "ok": True,
         "program": prog.name,
         "blocks": prog.blocks,
-        "segments": segments,
-        "counts": dict(counts),
-        "length_mm": feed_len,
-        "rapid_length_mm": rapid_len,
+        "segments": entries,
+        "counts": {KINDS[int(codes[k])]: int(counts[k]) for k in order},
+        "length_mm": _sequential_sum(lengths[feeding]),
+        "rapid_length_mm": _sequential_sum(lengths[rapid]),
         "bounding_box_mm": {"min": allpts.min(axis=0).tolist(), "max": allpts.max(axis=0).tolist()},
-        "feed_range_mm_s": {"min": min(feeds) if feeds else None,
-                            "max": max(feeds) if feeds else None},  # fmt: skip
+        "feed_range_mm_s": {"min": float(feeds.min()) if feeds.size else None,
+                            "max": float(feeds.max()) if feeds.size else None},  # fmt: skip
         "notes": [{"line": n.line, "message": n.message} for n in prog.notes],
         "errors": [],
     }

@@ -23,12 +23,17 @@ coordinate out of range, an axis word under another motion mode).
 
 from __future__ import annotations
 
+import collections
 import contextlib
+import dataclasses
 import gc
+import itertools
 import re
 from typing import NamedTuple
 
 import numpy as np
+
+from nurbscnc.geometry.segments import Line
 
 # Groups: 1 the motion digit of G0/G1 (G00, G01), 2-5 the X Y Z F numbers. A number here is
 # any run of digits and points with a sign; the runs float() refuses ("1.2.3", ".") are not
@@ -209,9 +214,11 @@ def _run(rows, start: int, state: BulkState, to_machine, limits) -> BulkRun | No
     ends_t = _triples(ends[moves])
     follows = np.zeros(moves.size, dtype=bool)
     follows[1:] = moves[1:] - 1 == moves[:-1]
-    fresh = iter(_triples(starts[moves[~follows]]))
-    starts_t = [ends_t[k - 1] if shared else next(fresh)
-                for k, shared in enumerate(follows.tolist())]  # fmt: skip
+    fresh = _triples(starts[moves[~follows]])
+    pool = ends_t + fresh  # move k starts at pool[k − 1] if it follows, else at a fresh one
+    at = np.arange(-1, moves.size - 1)
+    at[~follows] = len(ends_t) + np.arange(len(fresh))
+    starts_t = list(map(pool.__getitem__, at.tolist()))
     last = n - 1
     new_motion = int(motion[last])
     return BulkRun(
@@ -230,6 +237,28 @@ def _run(rows, start: int, state: BulkState, to_machine, limits) -> BulkRun | No
             scale=scale,
         ),
     )
+
+
+def make_lines(columns: dict) -> list:
+    """Line segments from columns: ``columns`` maps every field of
+    :class:`~nurbscnc.geometry.segments.Line` to an iterable of its values, one per line.
+
+    The same objects as ``Line(**fields)`` one by one (a test compares them field by field),
+    made ~3x faster: a frozen dataclass's ``__init__`` sets each field through
+    ``object.__setattr__`` (seven Python-level calls per Line; 0.6 s for 200,000 lines),
+    while here each field's slot descriptor is mapped over all the new objects in C.
+    """
+    names = [f.name for f in dataclasses.fields(Line)]
+    if sorted(names) != sorted(columns):
+        raise TypeError(f"Line fields {names}, given {sorted(columns)}")
+    lines = None
+    for name in names:
+        values = columns[name]
+        if lines is None:
+            values = list(values)
+            lines = list(map(object.__new__, itertools.repeat(Line, len(values))))
+        collections.deque(map(getattr(Line, name).__set__, lines, values), maxlen=0)
+    return lines or []
 
 
 @contextlib.contextmanager

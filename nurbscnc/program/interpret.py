@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import operator
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -40,7 +41,7 @@ from nurbscnc.program.compensation import MSG_ARC_AFTER_EXIT, CompMove, CutterCo
 from nurbscnc.program.control import N_LOCAL, ControlFlow, Frame, Source
 from nurbscnc.program.cycles import CycleState, expand_cycle
 from nurbscnc.program.expressions import MAX_PARAMETER, ExpressionError, evaluate
-from nurbscnc.program.fastlane import BulkState, pause_cyclic_gc, plain_run
+from nurbscnc.program.fastlane import BulkState, make_lines, pause_cyclic_gc, plain_run
 from nurbscnc.program.modal import (
     CANNED_CYCLES,
     G_GROUP,
@@ -344,13 +345,14 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
         np.frombuffer(source.worded, dtype=np.uint8)[run.worded] = 1
         blend_mm = m.blend_mm
         if source is self.main:
-            numbers = [k + 1 for k in run.index]
+            numbers = list(map((1).__add__, run.index))  # 1-based
         else:  # in a called file the moves carry the main program's call line
             numbers = [self.main_line()] * len(run.index)
         with pause_cyclic_gc():
-            self.segments.extend(map(Line, run.starts_mm, run.ends_mm, run.feeds_mm_s, numbers,
-                                     run.rapid, itertools.repeat(blend_mm),
-                                     itertools.repeat(m.naive_mm)))  # fmt: skip
+            self.segments += make_lines({
+                "start_mm": run.starts_mm, "end_mm": run.ends_mm, "feed_mm_s": run.feeds_mm_s,
+                "line": numbers, "rapid": run.rapid, "blend_mm": itertools.repeat(blend_mm),
+                "naive_mm": itertools.repeat(m.naive_mm)})  # fmt: skip
         new = run.state
         m.motion, m.feed, m.feed_mm = new.motion, new.feed, new.feed_mm
         self.prog = list(new.prog_mm)
@@ -1216,10 +1218,12 @@ def interpret(blocks, lines, options: InterpretOptions) -> Program:
     state = _Interpreter(list(lines), options)
     state.run()
     parsed = state.main._blocks
-    blocks = sum(1 for b in parsed if b is not None and (b.words or b.assigns))
+    blocks = sum(1 for b in filter(None, parsed) if b.words or b.assigns)  # a Block is truthy
     if state.main.worded is not None:  # lines run by the fast lane (and never parsed)
-        worded = np.flatnonzero(np.frombuffer(state.main.worded, dtype=np.uint8)).tolist()
-        blocks += sum(1 for k in worded if parsed[k] is None)
+        worded = np.frombuffer(state.main.worded, dtype=np.uint8).astype(bool)
+        unparsed = np.fromiter(map(operator.is_, parsed, itertools.repeat(None)), dtype=bool,
+                               count=len(parsed))  # fmt: skip
+        blocks += int(np.count_nonzero(worded & unparsed))
     return Program(
         segments=tuple(state.segments),
         start_mm=vec3(options.start_mm),
