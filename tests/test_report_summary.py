@@ -120,6 +120,8 @@ def test_summary_equals_the_per_segment_definition(pool, picks, start):
     prog = Program(segments=segments, start_mm=np.array(start), blocks=len(segments))
     got, want = program_summary(prog), reference_summary(prog)
     assert json.dumps(got) == json.dumps(want)
+    short = program_summary(prog, per_segment=False)  # the text report's: NURBS entries only
+    assert short == {**want, "segments": [e for e in want["segments"] if e["kind"] == "nurbs"]}
     for box in ("min", "max"):  # −0.0 and 0.0 print differently, but check the sign bits too
         assert [math.copysign(1, v) for v in got["bounding_box_mm"][box]] == \
             [math.copysign(1, v) for v in want["bounding_box_mm"][box]]  # fmt: skip

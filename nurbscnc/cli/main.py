@@ -469,7 +469,7 @@ def check(program, as_json, no_block_delete, tool_table, subroutine_path, machin
         say(f"checking {len(prog.segments)} segments")
         columns = segment_columns(prog.segments)  # read once for the checks and the summary
         check_before_work(prog.segments, mach, columns)
-        summary = program_summary(prog, columns)
+        summary = program_summary(prog, columns, per_segment=as_json)
     if as_json:
         click.echo(json.dumps({**summary, **machine_json(mach)}))
         return
@@ -481,7 +481,7 @@ def print_summary(prog: Program, s: dict) -> None:
     from rich.text import Text
 
     out.print(Text.assemble((prog.name, "bold"),
-                            f": ok — {s['blocks']} blocks, {len(s['segments'])} segments"))
+                            f": ok — {s['blocks']} blocks, {len(prog.segments)} segments"))
     counts = ", ".join(f"{v} {k}" for k, v in sorted(s["counts"].items())) or "none"
     out.print(f"  segments: {counts}")
     out.print(

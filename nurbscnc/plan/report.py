@@ -120,12 +120,14 @@ def _sequential_sum(values: np.ndarray) -> float:
     return float(np.cumsum(values)[-1]) if values.size else 0.0
 
 
-def program_summary(prog, columns=None) -> dict:
+def program_summary(prog, columns=None, per_segment: bool = True) -> dict:
     """The JSON-able summary of an interpreted program (``check --json``). The bounding box
     holds every end point, the NURBS control points (the convex hull property) and 65
     points of every arc (its extreme points). Whole-array over the segments' columns
     (``columns``: :func:`~nurbscnc.program.columns.segment_columns`, if already read);
-    the numbers are those of adding up the segments one by one."""
+    the numbers are those of adding up the segments one by one. ``per_segment`` False:
+    ``segments`` lists only the NURBS blocks (what the text report shows), not one entry
+    per segment (200,000 dictionaries for a CAM program)."""
     segments = prog.segments
     cols = columns if columns is not None else segment_columns(segments)
     lengths = segment_lengths_mm(segments, cols)
@@ -133,11 +135,13 @@ def program_summary(prog, columns=None) -> dict:
     feeding = (cols.kind != RAPID) & (cols.kind != DWELL) & (cols.kind != PAUSE)
     feeds = cols.feeds_mm_s[feeding]
     names = cols.names
+    shown = np.arange(len(segments)) if per_segment else cols.rows(NURBS)
     entries = [{"kind": k, "line": line, "length_mm": length}
-               for k, line, length in zip(names.tolist(), cols.lines.tolist(),
-                                          lengths.tolist())]  # fmt: skip
-    for i in cols.rows(NURBS).tolist():
-        seg = segments[i]
+               for k, line, length in zip(names[shown].tolist(), cols.lines[shown].tolist(),
+                                          lengths[shown].tolist())]  # fmt: skip
+    for i, k in zip(np.flatnonzero(cols.kind[shown] == NURBS).tolist(),
+                    shown[cols.kind[shown] == NURBS].tolist()):  # fmt: skip
+        seg = segments[k]
         entries[i].update(degree=seg.degree, control_points=len(seg.control_points_mm),
                           knots=len(seg.knots), plane=seg.plane)  # fmt: skip
     # Kinds counted in the order they first appear (the order of the JSON object).
