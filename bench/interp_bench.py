@@ -16,15 +16,15 @@ reported too. Target: ≥ 1,000,000 points/s exact, ≥ 100,000 points/s Taylor,
 from __future__ import annotations
 
 import argparse
-import datetime as dt
 import json
-import platform
 import sys
 import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+
+from machine_info import run_info  # noqa: E402
 
 from nurbscnc.interpolate.sample import sample_plan  # noqa: E402
 from nurbscnc.machine.profile import load_machine  # noqa: E402
@@ -79,9 +79,7 @@ def main(argv=None) -> int:
     ratio = big["best_s"] / small["best_s"]
     print(f"butterfly exact: 4x the points costs {ratio:.2f}x the time")
     result = {
-        "date": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
-        "python": platform.python_version(),
-        "machine": platform.platform(),
+        **run_info(),
         "quick": args.quick,
         "cases": cases,
         "linearity_4x_time_ratio": ratio,

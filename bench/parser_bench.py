@@ -11,18 +11,20 @@ file. Measured, best of three (a busy machine shows its quiet speed):
 - ``interpret``: the call ``interpret_text(text)`` (text in memory, grammar built), with the
   fast lane (program/fastlane.py) and without it (``InterpretOptions(fast_lane=False)``);
 - ``check``: the whole command ``nurbscnc check FILE`` in a fresh process (start-up, reading,
-  interpretation, the geometry checks and the summary);
-- ``rs274``: LinuxCNC's ``rs274 -g FILE`` (the speed anchor), when it is installed.
+  interpretation, the geometry checks and the summary), with its peak memory, on this
+  spiral, on the issue's G1 spiral (bench/run.py ``g1_program``) and on the CAM spiral with
+  N numbers and G64 blends (bench/plan_bench.py ``cam_spiral``);
+- ``rs274``: LinuxCNC's ``rs274 -g FILE`` (the speed anchor) on each, when it is installed.
+
+The machine, load, versions and commit are those of ``bench/machine_info.run_info()``.
 """
 
 from __future__ import annotations
 
 import argparse
-import datetime as dt
 import json
 import math
 import os
-import platform
 import shutil
 import subprocess
 import sys
@@ -32,6 +34,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+
+from machine_info import run_info  # noqa: E402
 
 from nurbscnc.program.interpret import InterpretOptions, interpret_text  # noqa: E402
 
@@ -68,6 +72,40 @@ def best_of(fn, repeat: int = 3) -> float:
     return min(times)
 
 
+def run_measured(cmd, cwd=None) -> tuple[float, float, float]:
+    """Wall time [s], CPU time (user + system) [s] and peak resident memory [MB] of one run
+    of the command ``cmd`` (the child's own rusage from ``wait4``, as ``/usr/bin/time -v``
+    reports it). On a shared machine the wall time is the CPU time stretched by the load."""
+    t0 = time.perf_counter()
+    child = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=cwd)
+    _, status, usage = os.wait4(child.pid, 0)
+    wall = time.perf_counter() - t0
+    child.returncode = os.waitstatus_to_exitcode(status)
+    if child.returncode != 0:
+        raise RuntimeError(f"{cmd} exited with {child.returncode}")
+    return wall, usage.ru_utime + usage.ru_stime, usage.ru_maxrss / 1024.0
+
+
+def command_case(cmd, n_lines: int, repeat: int = 3, cwd=None) -> dict:
+    """Best of ``repeat`` runs of a whole command on an ``n_lines`` program: wall time,
+    lines/s, and the CPU time and peak memory of that run."""
+    wall, cpu, rss = min(run_measured(cmd, cwd) for _ in range(repeat))
+    return {"seconds": wall, "lines_per_s": n_lines / wall, "cpu_seconds": cpu,
+            "max_rss_mb": rss}  # fmt: skip
+
+
+def programs(n: int):
+    """The programs ``check`` is timed on (name, description, lines): this module's spiral,
+    the issue's G1 spiral (bench/run.py) and the CAM spiral with N numbers and G64 blends
+    (bench/plan_bench.py)."""
+    from plan_bench import cam_spiral
+    from run import g1_program
+
+    yield "spiral", f"CAM-style G1 spiral, {n} lines (this module)", spiral_lines(n)
+    yield "g1_spiral", f"G1 spiral of bench/run.py g1_program, {n} lines", g1_program(n)
+    yield "cam_spiral", f"CAM spiral of bench/plan_bench.py cam_spiral, {n} lines", cam_spiral(n)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--out", default=None, help="write the results as JSON here")
@@ -81,27 +119,25 @@ def main(argv=None) -> int:
                            ("interpret_line_by_line", InterpretOptions(fast_lane=False))):
         seconds = best_of(lambda o=options: interpret_text(text, o))
         cases[label] = {"seconds": seconds, "lines_per_s": n / seconds}
+    exe = Path(sys.executable).with_name("nurbscnc")
+    rs274 = shutil.which("rs274")
+    described = {}
     with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / "spiral.ngc"
-        path.write_text(text)
-        exe = Path(sys.executable).with_name("nurbscnc")
-        check = [str(exe), "check", str(path)]
-        seconds = best_of(lambda: subprocess.run(check, check=True, capture_output=True))
-        cases["check_command"] = {"seconds": seconds, "lines_per_s": n / seconds}
-        rs274 = shutil.which("rs274")
-        if rs274:
-            cmd = [rs274, "-g", str(path)]
-            seconds = best_of(lambda: subprocess.run(cmd, capture_output=True, cwd=tmp))
-            cases["linuxcnc_rs274_g"] = {"seconds": seconds, "lines_per_s": n / seconds}
+        for name, about, lines in programs(n):
+            path = Path(tmp) / f"{name}.ngc"
+            path.write_text("\n".join(lines) + "\n")
+            described[name] = about
+            cases[f"check_command_{name}"] = command_case([str(exe), "check", str(path)], n)
+            if rs274:
+                cases[f"linuxcnc_rs274_g_{name}"] = command_case([rs274, "-g", str(path)], n,
+                                                                 cwd=tmp)  # fmt: skip
     for label, case in cases.items():
-        print(f"{label:24s} {case['seconds']:7.3f} s  {case['lines_per_s']:>10,.0f} lines/s")
+        rss = (f"  cpu {case['cpu_seconds']:6.3f} s  {case['max_rss_mb']:5.0f} MB"
+               if "max_rss_mb" in case else "")  # fmt: skip
+        print(f"{label:34s} {case['seconds']:7.3f} s  {case['lines_per_s']:>10,.0f} lines/s{rss}")
     result = {
-        "date": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
-        "python": platform.python_version(),
-        "machine": platform.platform(),
-        "cpus": os.cpu_count(),
-        "load_average": os.getloadavg(),
-        "program": f"CAM-style G1 spiral, {n} lines",
+        **run_info(),
+        "programs": described,
         "cases": cases,
     }
     if args.out:
