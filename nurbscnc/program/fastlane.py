@@ -127,19 +127,24 @@ class BulkRun(NamedTuple):
     state: BulkState
 
 
-def _filled(given: list, initial: float, scale: float | None) -> tuple[np.ndarray, np.ndarray]:
+def _filled(given: list, initial: float, scale: float | None,
+            also: tuple | None = None) -> tuple:  # fmt: skip
     """Forward fill of one column: (values per line, mask of lines that give it).
 
     ``given`` holds the column's strings ('' where absent). The k-th given value goes to
     every line from its own to the next given one; lines before the first keep ``initial``.
     ``scale`` multiplies the given values (units), as the general path does value by value.
+    ``also`` (initial, scale): a second fill of the same column (F as written and in mm),
+    appended to the result; the strings are converted once.
     """
     mask = np.fromiter(map(bool, given), dtype=bool, count=len(given))
-    values = np.fromiter(map(float, filter(None, given)), dtype=float)
-    if scale is not None:
-        values = values * scale
-    table = np.concatenate(([initial], values))
-    return table[np.cumsum(mask)], mask
+    raw = np.fromiter(map(float, filter(None, given)), dtype=float)
+    at = np.cumsum(mask)
+    out = []
+    for start, factor in ((initial, scale), *([also] if also else [])):
+        values = raw * factor if factor is not None else raw
+        out.append(np.concatenate(([start], values))[at])
+    return (out[0], mask, *out[1:])
 
 
 def plain_run(lines, start: int, state: BulkState, to_machine, limits) -> BulkRun | None:
@@ -184,8 +189,7 @@ def _run(rows, start: int, state: BulkState, to_machine, limits) -> BulkRun | No
     # Motion: None is -1, G0 is 0, G1 is 10.
     motion0 = -1 if state.motion is None else state.motion
     motion, has_g = _filled(g, motion0, 10.0)
-    feed_mm, has_f = _filled(f, state.feed_mm, scale)
-    feed_raw, _ = _filled(f, state.feed, None)
+    feed_mm, has_f, feed_raw = _filled(f, state.feed_mm, scale, also=(state.feed, None))
     prog = [_filled(col, state.prog_mm[i], scale) for i, col in enumerate((x, y, z))]
     has_axes = prog[0][1] | prog[1][1] | prog[2][1]
     worded = has_axes | has_g | has_f
