@@ -24,7 +24,6 @@ import math
 import numpy as np
 
 from nurbscnc.errors import PlanningError, SourcePos
-from nurbscnc.geometry.path import stop_seconds
 from nurbscnc.program.columns import ARC, DWELL, NURBS, PAUSE, RAPID, segment_columns
 
 AXES = "XYZ"
@@ -118,8 +117,12 @@ def segment_time_bounds_s(segments, machine, columns=None) -> np.ndarray:
     with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
         t = np.where(length > 0.0, length / speed, 0.0)
     t = np.where(np.isnan(t), np.inf, t)
-    for i in np.flatnonzero((cols.kind == DWELL) | (cols.kind == PAUSE)).tolist():
-        t[i] = stop_seconds(segments[i])
+    stops = np.flatnonzero((cols.kind == DWELL) | (cols.kind == PAUSE)).tolist()
+    if stops:  # (the path model is imported only for programs that have stops)
+        from nurbscnc.geometry.path import stop_seconds
+
+        for i in stops:
+            t[i] = stop_seconds(segments[i])
     return t
 
 

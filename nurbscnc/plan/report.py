@@ -9,7 +9,9 @@
   program's first);
 - :class:`SampleStats`: the summary's numbers of the reference points, window by window.
 
-No I/O: the CLI prints or serialises the dictionaries.
+No I/O: the CLI prints or serialises the dictionaries. The path model (geometry/path.py,
+paths.py, nurbs.py) and the lower bound are imported where they are needed: ``check`` of a
+program of lines never loads them (start-up, issue 14).
 """
 
 from __future__ import annotations
@@ -20,12 +22,8 @@ from operator import attrgetter
 import numpy as np
 
 from nurbscnc.errors import PlanningError, SourcePos
-from nurbscnc.geometry.nurbs import NurbsCurve
-from nurbscnc.geometry.path import Kind
-from nurbscnc.geometry.paths import geometry_of
 from nurbscnc.geometry.segments import spiral_arc_length_mm
 from nurbscnc.machine.profile import Machine, SoftLimits
-from nurbscnc.plan.lowerbound import program_lower_bound_s
 from nurbscnc.program.columns import ARC, DWELL, KINDS, LINE, NURBS, PAUSE, RAPID, segment_columns
 
 
@@ -48,6 +46,8 @@ def check_soft_limits(points_mm: np.ndarray, lines: np.ndarray, limits: SoftLimi
 def segment_length_mm(seg) -> float:
     """Length of one segment [mm] (NURBS by Gauss–Legendre arc length)."""
     if seg.kind == "nurbs":
+        from nurbscnc.geometry.nurbs import NurbsCurve
+
         return float(NurbsCurve.from_segment(seg).length_mm)
     return float(seg.length_mm)
 
@@ -106,6 +106,8 @@ def _box_points_mm(prog, cols) -> np.ndarray:
     points[first[ends] + 1] = cols.ends_mm[ends]
     for i, hull in zip(nurbs, hulls):
         points[first[i] : first[i] + len(hull)] = hull
+    if arcs.size:
+        from nurbscnc.geometry.paths import geometry_of
     for i in arcs.tolist():
         geom = geometry_of(segments[i])
         at = first[i] + 2
@@ -171,6 +173,8 @@ def nurbs_step_lengths(pieces, samples) -> tuple[np.ndarray, np.ndarray]:
     NURBS curve, and Δs_true = s(u_{k+1}) − s(u_k) [mm] from the curves' exact arc-length
     tables (SPEC §3: fluctuation |Δs/(V T_s) − 1| "measured with true arc length").
     ``samples``: reference points with ``piece`` and ``param`` (N,)."""
+    from nurbscnc.geometry.path import Kind
+
     path = pieces.path
     kind = np.take(path.kind, samples.piece)
     cid = np.where(kind == Kind.NURBS, np.take(path.obj_id, samples.piece), -1)
@@ -253,6 +257,8 @@ class SampleStats:
     def _first_and_last(self, samples) -> tuple[int, float]:
         """The curve and true arc length of the window's first sample (for the step across
         the join); the window's last sample becomes the carried one."""
+        from nurbscnc.geometry.path import Kind
+
         path = self.pieces.path
         ends = samples.piece[[0, -1]]
         kind = np.take(path.kind, ends)
@@ -278,6 +284,7 @@ def plan_summary(prog, machine: Machine, samples, plan=None, check=None,
     may be whole :class:`Samples` or the :class:`SampleStats` gathered while the windows
     were written (the contour error is the check's :meth:`Check.contour_stats`)."""
     from nurbscnc.plan.lookahead import segment_times_s
+    from nurbscnc.plan.lowerbound import program_lower_bound_s
 
     lb = program_lower_bound_s(prog.segments, machine)
     if cycle_time_s is None:
@@ -343,6 +350,7 @@ def corner_fits(prog, machine: Machine, split: bool = True) -> list[tuple]:
     """PH quintic fits of every corner region of the program's NURBS blocks (SPEC §5–§6,
     Table 1): (block corners, region, unsplit fit, fit) per region, the fit split to the
     profile's tolerance e unless ``split`` is False (then it is the unsplit one)."""
+    from nurbscnc.geometry.nurbs import NurbsCurve
     from nurbscnc.plan.corners import program_corners
     from nurbscnc.plan.phfit import fit_region
 
@@ -361,6 +369,8 @@ def corner_fits(prog, machine: Machine, split: bool = True) -> list[tuple]:
 def corner_polylines(pieces, points_per_piece: int = 50) -> list[np.ndarray]:
     """The PH pieces of a plan as polylines (one (n, 3) array [mm] each, evenly spaced in arc
     length), for the path figures; all pieces in one call to the path model."""
+    from nurbscnc.geometry.path import Kind
+
     rows = np.flatnonzero(pieces.kind == Kind.PH)
     if rows.size == 0:
         return []
