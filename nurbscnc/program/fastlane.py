@@ -127,24 +127,28 @@ class BulkRun(NamedTuple):
     state: BulkState
 
 
-def _filled(given: list, initial: float, scale: float | None,
-            also: tuple | None = None) -> tuple:  # fmt: skip
-    """Forward fill of one column: (values per line, mask of lines that give it).
+def _given(rows) -> tuple[np.ndarray, np.ndarray]:
+    """The rows' words: a mask (n, 5) of the given ones (g, x, y, z, f) and their values
+    (n, 5) (0 where not given): every string of the rows read in one pass, row by row, the
+    numbers by ``float`` as the general path reads them."""
+    n = len(rows)
+    flat = list(itertools.chain.from_iterable(rows))
+    given = np.fromiter(map(bool, flat), dtype=bool, count=5 * n).reshape(n, 5)
+    values = np.zeros((n, 5))
+    values[given] = np.fromiter(map(float, filter(None, flat)), dtype=float)
+    return given, values
 
-    ``given`` holds the column's strings ('' where absent). The k-th given value goes to
-    every line from its own to the next given one; lines before the first keep ``initial``.
-    ``scale`` multiplies the given values (units), as the general path does value by value.
-    ``also`` (initial, scale): a second fill of the same column (F as written and in mm),
-    appended to the result; the strings are converted once.
-    """
-    mask = np.fromiter(map(bool, given), dtype=bool, count=len(given))
-    raw = np.fromiter(map(float, filter(None, given)), dtype=float)
-    at = np.cumsum(mask)
-    out = []
-    for start, factor in ((initial, scale), *([also] if also else [])):
-        values = raw * factor if factor is not None else raw
-        out.append(np.concatenate(([start], values))[at])
-    return (out[0], mask, *out[1:])
+
+def _filled(given: np.ndarray, values: np.ndarray, initial: float,
+            scale: float | None) -> np.ndarray:  # fmt: skip
+    """Forward fill of one column (``given`` mask, ``values`` (n,)): the k-th given value
+    goes to every line from its own to the next given one; lines before the first keep
+    ``initial``. ``scale`` multiplies the given values (units), as the general path does
+    value by value."""
+    picked = values[given]
+    if scale is not None:
+        picked = picked * scale
+    return np.concatenate(([initial], picked))[np.cumsum(given)]
 
 
 def plain_run(lines, start: int, state: BulkState, to_machine, limits) -> BulkRun | None:
@@ -184,14 +188,17 @@ def _triples(points: np.ndarray) -> list:
 def _run(rows, start: int, state: BulkState, to_machine, limits) -> BulkRun | None:
     max_coord, min_feed, max_feed = limits
     n = len(rows)
-    g, x, y, z, f = zip(*rows)
+    given, values = _given(rows)
     scale = state.scale
     # Motion: None is -1, G0 is 0, G1 is 10.
     motion0 = -1 if state.motion is None else state.motion
-    motion, has_g = _filled(g, motion0, 10.0)
-    feed_mm, has_f, feed_raw = _filled(f, state.feed_mm, scale, also=(state.feed, None))
-    prog = [_filled(col, state.prog_mm[i], scale) for i, col in enumerate((x, y, z))]
-    has_axes = prog[0][1] | prog[1][1] | prog[2][1]
+    has_g, has_f = given[:, 0], given[:, 4]
+    motion = _filled(has_g, values[:, 0], motion0, 10.0)
+    feed_mm = _filled(has_f, values[:, 4], state.feed_mm, scale)
+    feed_raw = _filled(has_f, values[:, 4], state.feed, None)
+    prog = [(_filled(given[:, i], values[:, i], state.prog_mm[i - 1], scale), given[:, i])
+            for i in (1, 2, 3)]  # fmt: skip
+    has_axes = given[:, 1] | given[:, 2] | given[:, 3]
     worded = has_axes | has_g | has_f
     # Lines the general path refuses or treats otherwise end the run before them.
     bad = worded & (motion != 0.0) & (motion != 10.0)
