@@ -189,3 +189,51 @@ def test_arc_lengths_are_clipped_to_the_piece(table):
     np.testing.assert_allclose(pts[1], LINE.end_mm, atol=1e-13)
     np.testing.assert_allclose(pts[2], _ph_point(np.array([0.0]))[0], atol=1e-13)
     np.testing.assert_allclose(pts[3], _ph_point(np.array([1.0]))[0], atol=1e-12)
+
+
+def _ph_params_reference(t: PathTable, i: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """The PH Newton as it was before the coefficients were gathered once (issue 14): the
+    active set shrinks every step, each Horner gathers its coefficients again."""
+    from nurbscnc.geometry.path import PH_MAX_NEWTON, horner_rows
+
+    length = t.length_mm[i]
+    tol = np.maximum(1e-13, 8.0 * np.finfo(float).eps * length)
+    xi = np.where(length > 0.0, s / np.where(length > 0.0, length, 1.0), 0.0)
+    active = np.arange(xi.size)
+    for _ in range(PH_MAX_NEWTON):
+        ia, x = i[active], xi[active] - 0.5
+        f = horner_rows(t.ph_s, ia, x) - s[active]
+        going = np.abs(f) > tol[active]
+        if not going.any():
+            return xi
+        active, ia, x, f = active[going], ia[going], x[going], f[going]
+        xi[active] = np.clip(xi[active] - f / horner_rows(t.ph_sigma, ia, x), 0.0, 1.0)
+    bad = np.flatnonzero(np.abs(horner_rows(t.ph_s, i, xi - 0.5) - s) > tol)
+    lo, hi = np.zeros(bad.size), np.ones(bad.size)
+    for _ in range(60):  # the bisection fallback
+        mid = 0.5 * (lo + hi)
+        below = horner_rows(t.ph_s, i[bad], mid - 0.5) < s[bad]
+        lo, hi = np.where(below, mid, lo), np.where(below, hi, mid)
+    xi[bad] = 0.5 * (lo + hi)
+    return xi
+
+
+def test_ph_newton_gives_the_bits_of_the_shrinking_active_set():
+    # Many PH quintics of very different shapes (slow and fast middles: 2 to 8 Newton steps),
+    # samples in mixed order, including both ends: the same ξ to the bit.
+    rng = np.random.default_rng(11)
+    rows = []
+    for k in range(40):
+        w = rng.normal(size=3) + 1j * rng.normal(size=3)
+        w[1] *= rng.uniform(0.0, 3.0)
+        rows.append((Kind.PH, PHQuintic(w, complex(*rng.normal(size=2))), 0.0, 0.0, 1.0, 0.0, k))
+    rows = [(c, g, g.length_mm, *rest) for c, g, _, *rest in rows]
+    t = PathTable.of(rows)
+    i = rng.integers(0, t.size, 5000)
+    s = rng.uniform(0.0, 1.0, i.size) * t.length_mm[i]
+    s[::13], s[::17] = 0.0, t.length_mm[i[::17]]
+    got = t.params(i, s)
+    np.testing.assert_array_equal(got, _ph_params_reference(t, i, s))
+    # And s(ξ) = s to the Newton tolerance, against the polynomial arc length.
+    from nurbscnc.geometry.path import horner_rows
+    np.testing.assert_allclose(horner_rows(t.ph_s, i, got - 0.5), s, rtol=0, atol=1e-12)

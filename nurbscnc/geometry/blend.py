@@ -623,15 +623,46 @@ def _kappa_peak(alpha, beta, c, s, iterations: int = 52) -> np.ndarray:
     a4, b4, ab4 = 4.0 * a2, 4.0 * b2, 4.0 * ab
     # Powers as products (numpy's x**3, x**4 call libm pow per element: 5× slower; the
     # products round differently in the last bit, which moves the root by an ulp at most).
+    # The loop below evaluates, operation for operation (the same bits), x = (lo + hi)/2,
+    # u = 1 − x, q = a²(u²u²) + b²(x²x²) + (2ab) x² u², dq = (−4a²)(u²u) + 4b²(x²x)
+    # + 4ab x u (u − x) and rising = 1/x − 1/u − 2 dq/q > 0, in preallocated buffers.
+    ab2, na4 = 2.0 * ab, -a4
+    x, u, x2, u2, q, dq, w = (np.empty_like(alpha) for _ in range(7))
+    rising = np.empty(alpha.shape, dtype=bool)
     for _ in range(iterations):
-        x = 0.5 * (lo + hi)
-        u = 1.0 - x
-        x2, u2 = x * x, u * u
-        q = a2 * (u2 * u2) + b2 * (x2 * x2) + 2.0 * ab * x2 * u2
-        dq = -a4 * (u2 * u) + b4 * (x2 * x) + ab4 * x * u * (u - x)
-        rising = 1.0 / x - 1.0 / u - 2.0 * dq / q > 0.0
+        np.add(lo, hi, out=x)
+        x *= 0.5
+        np.subtract(1.0, x, out=u)
+        np.multiply(x, x, out=x2)
+        np.multiply(u, u, out=u2)
+        np.multiply(u2, u2, out=q)
+        q *= a2
+        np.multiply(x2, x2, out=w)
+        w *= b2
+        q += w
+        np.multiply(ab2, x2, out=w)
+        w *= u2
+        q += w
+        np.multiply(u2, u, out=dq)
+        np.multiply(na4, dq, out=dq)
+        np.multiply(x2, x, out=w)
+        w *= b4
+        dq += w
+        np.multiply(ab4, x, out=w)
+        w *= u
+        np.subtract(u, x, out=x2)  # x² is not needed any more this step
+        w *= x2
+        dq += w
+        dq *= 2.0
+        dq /= q
+        np.divide(1.0, x, out=w)
+        np.divide(1.0, u, out=u2)
+        w -= u2
+        w -= dq
+        np.greater(w, 0.0, out=rising)
         np.copyto(lo, x, where=rising)
-        np.copyto(hi, x, where=~rising)
+        np.logical_not(rising, out=rising)
+        np.copyto(hi, x, where=rising)
     x = 0.5 * (lo + hi)
     u = 1.0 - x
     q = a2 * u**4 + b2 * x**4 + 2.0 * ab * x * x * u * u
@@ -819,7 +850,8 @@ def _polyline_distance(q: np.ndarray, pts: np.ndarray) -> np.ndarray:
     rel = q[:, None, :] - a[None, :, :]
     f = np.clip(np.einsum("mnj,nj->mn", rel, ab) / ab2[None, :], 0.0, 1.0)
     diff = rel - f[..., None] * ab[None, :, :]
-    return np.sqrt(np.einsum("mnj,mnj->mn", diff, diff)).min(axis=1)
+    # √ is monotone and correctly rounded: the root of the least square is the least root.
+    return np.sqrt(np.einsum("mnj,mnj->mn", diff, diff).min(axis=1))
 
 
 def _space_candidate(geom_a, geom_b, len_a: float, vertex: np.ndarray, d: float):

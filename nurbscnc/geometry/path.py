@@ -86,6 +86,17 @@ def horner_rows(coeffs: np.ndarray, i: np.ndarray, x: np.ndarray) -> np.ndarray:
     return acc
 
 
+def _horner(c: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Σ_k c[k] x^k (c (K, n) coefficients already gathered per sample): the arithmetic of
+    :func:`horner_rows`, operation for operation (the same bits)."""
+    acc = c[-1] * x
+    acc += c[-2]
+    for k in range(c.shape[0] - 3, -1, -1):
+        acc *= x
+        acc += c[k]
+    return acc
+
+
 def horner_rows_derivative(coeffs: np.ndarray, i: np.ndarray, x: np.ndarray) -> np.ndarray:
     """d/dx Σ_k coeffs[k, i] x^k (coeffs (K, rows), gathered per sample)."""
     acc = np.take(coeffs[-1], i) * (coeffs.shape[0] - 1)
@@ -316,17 +327,30 @@ class PathTable:
             xi = np.where(length > 0.0, s / length, 0.0)
         # Each sample stops at its own tolerance (not when all have converged), so its ξ does
         # not depend on the others in the call: a window of samples gives the same bits as
-        # the whole reference (issue 14's chunked output).
-        active = np.arange(xi.size)
+        # the whole reference (issue 14's chunked output). The coefficients are gathered
+        # once; the working set is compacted only when less than half of it still moves
+        # (the others keep their ξ: the same arithmetic per sample, the same bits).
+        cs, cg = np.take(self.ph_s, i, axis=1), np.take(self.ph_sigma, i, axis=1)
+        at, xa, sa, ta = np.arange(xi.size), xi.copy(), s, tol
         for _ in range(PH_MAX_NEWTON):
-            ia = i[active]
-            x = xi[active] - 0.5
-            f = horner_rows(self.ph_s, ia, x) - s[active]
-            going = np.abs(f) > tol[active]
-            if not going.any():
+            x = xa - 0.5
+            f = _horner(cs, x) - sa
+            going = np.abs(f) > ta
+            n_going = int(np.count_nonzero(going))
+            if n_going == 0:
+                xi[at] = xa
                 return xi
-            active, ia, x, f = active[going], ia[going], x[going], f[going]
-            xi[active] = np.clip(xi[active] - f / horner_rows(self.ph_sigma, ia, x), 0.0, 1.0)
+            if 2 * n_going < xa.size:  # compact (the settled samples keep their ξ)
+                xi[at[~going]] = xa[~going]
+                at, xa, sa, ta, x, f = at[going], xa[going], sa[going], ta[going], x[going], \
+                    f[going]
+                cs, cg = cs[:, going], cg[:, going]
+                xa = np.clip(xa - f / _horner(cg, x), 0.0, 1.0)
+            else:
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    step = np.clip(xa - f / _horner(cg, x), 0.0, 1.0)
+                xa = np.where(going, step, xa)
+        xi[at] = xa
         bad = np.flatnonzero(np.abs(horner_rows(self.ph_s, i, xi - 0.5) - s) > tol)
         if bad.size:
             lo, hi = np.zeros(bad.size), np.ones(bad.size)

@@ -70,15 +70,28 @@ def spiral_arc_length_mm(radius_start_mm, radius_end_mm, angle_rad, helix_mm, t=
     D = (w1 − w0)(w1 + w0) / (w1 S0 + w0 S1) (from asinh x − asinh y =
     asinh(x √(1+y²) − y √(1+x²))), and s = t Δθ Δr / (Δθ Δr) × that = t × that.
     """
+    c = _spiral_constants(radius_start_mm, radius_end_mm, angle_rad, helix_mm)
+    return _spiral_length_at(c, np.asarray(t, dtype=float))[0]
+
+
+def _spiral_constants(radius_start_mm, radius_end_mm, angle_rad, helix_mm) -> tuple:
+    """The t-independent terms of :func:`spiral_arc_length_mm` (r0, Δr, Δθ, a², w0, S0 and
+    the circle's length √(w0² + H²)), computed once per arc for a Newton's iterations."""
     r0 = np.asarray(radius_start_mm, dtype=float)
     dr = np.asarray(radius_end_mm, dtype=float) - r0
     dtheta = np.asarray(angle_rad, dtype=float)
     h = np.asarray(helix_mm, dtype=float)
-    t = np.asarray(t, dtype=float)
     a2 = dr * dr + h * h
     w0 = dtheta * r0
-    w1 = dtheta * (r0 + t * dr)
     s0 = np.sqrt(a2 + w0 * w0)
+    return r0, dr, dtheta, a2, w0, s0, np.hypot(w0, h)
+
+
+def _spiral_length_at(c: tuple, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(s(t) [mm], w(t) = Δθ r(t) [mm]) of the arcs of constants ``c`` (:func:`_spiral_constants`)
+    at fractions ``t``: the divided-difference formula of :func:`spiral_arc_length_mm`."""
+    r0, dr, dtheta, a2, w0, s0, circle = c
+    w1 = dtheta * (r0 + t * dr)
     s1 = np.sqrt(a2 + w1 * w1)
     ssum = s0 + s1
     wsum = w0 + w1
@@ -91,8 +104,8 @@ def spiral_arc_length_mm(radius_start_mm, radius_end_mm, angle_rad, helix_mm, t=
     # Δθ = 0: the speed is a everywhere (s0 = s1 = a, w = 0): the terms above give a/2 + 0
     # + 0, so the log term's share (a/2) is added back.
     mean_speed = mean_speed + np.where(cross != 0.0, log_term, 0.5 * np.sqrt(a2))
-    circle = np.hypot(w0, h)  # Δr = 0: exactly √((r Δθ)² + H²)
-    return t * np.where(dr == 0.0, circle, mean_speed)
+    # Δr = 0: exactly √((r Δθ)² + H²)
+    return t * np.where(dr == 0.0, circle, mean_speed), w1
 
 
 def spiral_t_at_length(radius_start_mm, radius_end_mm, angle_rad, helix_mm, s_mm, length_mm,
@@ -103,28 +116,43 @@ def spiral_t_at_length(radius_start_mm, radius_end_mm, angle_rad, helix_mm, s_mm
     s is increasing with a convex or concave speed profile √(a² + w(t)²) (w linear in t), so
     after the first step Newton closes in from one side; each sample stops at
     |s(t) − s| ≤ max(1e-12 mm, 8 ulps of s) or at an ulp of t. One arc (ArcGeometry) and
-    all the spiral rows of a path table at once (PathTable) use this same arithmetic."""
+    all the spiral rows of a path table at once (PathTable) use this same arithmetic.
+    The arcs' t-independent terms are computed once; the working set is compacted only when
+    less than half of it still moves (per sample the same operations: the same bits)."""
     r0, r1, ang, hel, big, s_in = np.broadcast_arrays(
         *(np.asarray(x, dtype=float) for x in (radius_start_mm, radius_end_mm, angle_rad,
                                                 helix_mm, length_mm, s_mm)))  # fmt: skip
     s = np.clip(s_in, 0.0, big)
     with np.errstate(invalid="ignore", divide="ignore"):
         t = np.where(big > 0.0, s / big, 0.0)
-    dr = r1 - r0
-    a2 = dr * dr + hel * hel
     eps = np.finfo(float).eps
     tol = np.maximum(1e-12, 8.0 * eps * s)
     active = np.flatnonzero((s > 0.0) & (s < big))
+    if not active.size:
+        return t
+    c = _spiral_constants(r0[active], r1[active], ang[active], hel[active])
+    a2 = c[3]
+    ta, sa, tola = t[active], s[active], tol[active]
     for _ in range(max_iter):
-        if not active.size:
+        length, w = _spiral_length_at(c, ta)
+        f = length - sa
+        settled = np.abs(f) <= tola
+        new_t = np.clip(ta - f / np.sqrt(a2 + w * w), 0.0, 1.0)
+        done = settled | (np.abs(new_t - ta) <= 2.0 * eps)
+        ta = np.where(settled, ta, new_t)
+        n_done = int(np.count_nonzero(done))
+        if n_done == done.size:
             break
-        ta = t[active]
-        f = spiral_arc_length_mm(r0[active], r1[active], ang[active], hel[active], ta) - s[active]
-        w = ang[active] * (r0[active] + ta * dr[active])
-        new_t = np.clip(ta - f / np.sqrt(a2[active] + w * w), 0.0, 1.0)
-        done = (np.abs(f) <= tol[active]) | (np.abs(new_t - ta) <= 2.0 * eps)
-        t[active] = np.where(np.abs(f) <= tol[active], ta, new_t)
-        active = active[~done]
+        if 2 * n_done > done.size:  # compact: the finished samples keep their t
+            t[active[done]] = ta[done]
+            going = ~done
+            active, ta, sa, tola = active[going], ta[going], sa[going], tola[going]
+            c = tuple(x[going] for x in c)
+            a2 = c[3]
+        else:
+            # Finished samples must not move again: freeze them by their own tolerance.
+            tola = np.where(done, np.inf, tola)
+    t[active] = ta
     return t
 
 

@@ -172,14 +172,19 @@ def max_reachable_speed_scalar(
     # must not exceed d. Near Δv = 0, D ~ 2v0·√(Δv/J) is so steep that one ulp of v can
     # change D by several per cent, so step down (by a doubling number of ulps; v0 itself
     # always fits) until it does.
+    # The distance is _distance_scalar(v0, v, a, j) written out (v > v0 inside the loop: the
+    # first check failing means D(v) > d ≥ D(v0) = 0).
+    a2 = a * a
     dv = v - v0
-    t = dv / a + a / j if dv * j >= a * a else 2.0 * _sqrt(dv / j)
-    if 0.5 * (v0 + v) * t <= d:
-        return v
+    t = dv / a + a / j if dv * j >= a2 else 2.0 * _sqrt(dv / j)
     step = 1
-    while v > v0 and _distance_scalar(v0, v, a, j) > d:
+    while 0.5 * (v0 + v) * t > d:
         v = max(v0, v - step * _ulp(v))
+        if v <= v0:
+            return v
         step *= 2
+        dv = v - v0
+        t = dv / a + a / j if dv * j >= a2 else 2.0 * _sqrt(dv / j)
     return v
 
 

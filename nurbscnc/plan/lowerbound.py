@@ -46,6 +46,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from itertools import chain
 
 import numpy as np
 
@@ -410,33 +411,46 @@ def program_lower_bound_s(segments, machine: Machine) -> float:
     """
     lim = machine.limits
     period, chord, a_max = machine.servo.period_s, lim.chord_tolerance_mm, lim.a_max_mm_s2
-    moving = [(i, s) for i, s in enumerate(segments) if s.kind not in STOP_KINDS]
-    dwell = float(sum(stop_seconds(s) for s in segments if s.kind in STOP_KINDS))
-    if not moving:
+    # Attribute passes over the segments (millions in CAM programs): one for the kinds, then
+    # one per column over the moving ones, no tuple per segment.
+    segments = list(segments)
+    all_kinds = [s.kind for s in segments]
+    is_stop = np.fromiter((k in STOP_KINDS for k in all_kinds), dtype=bool,
+                          count=len(all_kinds))  # fmt: skip
+    stops = np.flatnonzero(is_stop).tolist()
+    dwell = float(sum(stop_seconds(segments[i]) for i in stops))
+    index = np.flatnonzero(~is_stop)
+    m = int(index.size)
+    if not m:
         return dwell
-    m = len(moving)
-    index = np.fromiter((i for i, _ in moving), dtype=np.int64, count=m)
-    kinds = [s.kind for _, s in moving]
-    rapid = np.array([k == "rapid" for k in kinds], dtype=bool)
-    straight = np.array([k in ("line", "rapid") for k in kinds], dtype=bool)
-    feed = np.fromiter((1.0 if k == "rapid" else s.feed_mm_s for k, (_, s) in
-                        zip(kinds, moving)), dtype=float, count=m)  # fmt: skip
+    if stops:
+        moving = [segments[i] for i in index.tolist()]
+        kinds = [all_kinds[i] for i in index.tolist()]
+    else:
+        moving, kinds = segments, all_kinds
+    rapid = np.fromiter((k == "rapid" for k in kinds), dtype=bool, count=m)
+    straight = np.fromiter((k in ("line", "rapid") for k in kinds), dtype=bool, count=m)
+    feed = np.fromiter((1.0 if k == "rapid" else s.feed_mm_s for k, s in zip(kinds, moving)),
+                       dtype=float, count=m)  # fmt: skip
     top = np.where(rapid, lim.rapid_mm_s, np.minimum(feed, lim.v_max_mm_s))
     if not np.all(np.isfinite(top) & (top > 0.0)):
         raise PlanningError("every piece needs a finite speed ceiling > 0 [mm/s]")
-    blend = np.fromiter((getattr(s, "blend_mm", 0.0) for _, s in moving), dtype=float, count=m)
+    blend = np.fromiter((getattr(s, "blend_mm", 0.0) for s in moving), dtype=float, count=m)
     length = np.zeros(m)
     t_start = np.zeros((m, 3))
     t_end = np.zeros((m, 3))
     li = np.flatnonzero(straight)
-    p0 = np.array([moving[i][1].start_mm for i in li.tolist()], dtype=float).reshape(-1, 3)
-    p1 = np.array([moving[i][1].end_mm for i in li.tolist()], dtype=float).reshape(-1, 3)
+    lsegs = [moving[i] for i in li.tolist()]
+    p0 = np.fromiter(chain.from_iterable(s.start_mm for s in lsegs), dtype=float,
+                     count=3 * li.size).reshape(-1, 3)  # fmt: skip
+    p1 = np.fromiter(chain.from_iterable(s.end_mm for s in lsegs), dtype=float,
+                     count=3 * li.size).reshape(-1, 3)  # fmt: skip
     t_start[li] = t_end[li] = p1 - p0
     length[li] = np.sqrt(np.einsum("ij,ij->i", p1 - p0, p1 - p0))
     cap2 = np.where(straight, top * top, 0.0)  # constant-cap pieces: their cap²
     # Arcs and NURBS blocks: one path-model row each (the programmed geometry, whole).
     curved = np.flatnonzero(~straight)
-    path = PathTable.of([_path_row(geometry_of(moving[i][1]), moving[i][1].line)
+    path = PathTable.of([_path_row(geometry_of(moving[i]), moving[i].line)
                          for i in curved.tolist()])  # fmt: skip
     rows = np.arange(curved.size)
     length[curved] = path.length_mm

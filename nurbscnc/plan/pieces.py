@@ -24,6 +24,7 @@ import functools
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from dataclasses import replace as dc_replace
+from itertools import chain
 
 import numpy as np
 
@@ -486,24 +487,32 @@ def segment_pieces(segments, machine: Machine, options: PlanOptions | None = Non
     seg_line = np.flatnonzero(straight)
     lsegs = [segs[i] for i in seg_line.tolist()]
     m = len(lsegs)
-    p0 = np.array([s.start_mm for s in lsegs], dtype=float).reshape(m, 3)
-    p1 = np.array([s.end_mm for s in lsegs], dtype=float).reshape(m, 3)
+    # Column passes over the lines (millions in CAM programs), no tuple per line.
+    p0 = np.fromiter(chain.from_iterable(s.start_mm for s in lsegs), dtype=float,
+                     count=3 * m).reshape(m, 3)  # fmt: skip
+    p1 = np.fromiter(chain.from_iterable(s.end_mm for s in lsegs), dtype=float,
+                     count=3 * m).reshape(m, 3)  # fmt: skip
     diff = p1 - p0
     l_len = np.sqrt(np.einsum("ij,ij->i", diff, diff))
-    l_rapid = np.fromiter((s.kind == "rapid" for s in lsegs), dtype=bool, count=m)
-    l_feed = np.fromiter((s.feed_mm_s for s in lsegs), dtype=float, count=m)
+    l_rapid = np.fromiter((k == "rapid" for k in kinds), dtype=bool, count=n)[seg_line]
+    # Feed, source line (exact in a float) and blend tolerance in one pass.
+    l_cols = np.fromiter(chain.from_iterable((s.feed_mm_s, s.line, getattr(s, "blend_mm", 0.0))
+                                             for s in lsegs), dtype=float,
+                         count=3 * m).reshape(m, 3)  # fmt: skip
+    l_feed = l_cols[:, 0]
     l_cap = np.maximum(np.where(l_rapid, lim.rapid_mm_s, np.minimum(l_feed, lim.v_max_mm_s)),
                        1e-6)  # fmt: skip
     if options.blend_tolerance_mm is not None:
         l_blend = np.full(m, float(options.blend_tolerance_mm))
     else:
-        l_blend = np.fromiter((getattr(s, "blend_mm", 0.0) for s in lsegs), dtype=float, count=m)
+        l_blend = l_cols[:, 2].copy()
     l_keep = l_len > 0.0
 
     counts = np.zeros(n, dtype=np.int64)
     counts[seg_line] = l_keep
     obj_pieces: dict[int, list[Piece]] = {}
-    for i in (i for i, kd in enumerate(kinds) if kd in ("arc", "nurbs")):
+    curved = np.fromiter((k in ("arc", "nurbs") for k in kinds), dtype=bool, count=n)
+    for i in np.flatnonzero(curved).tolist():
         obj_pieces[i] = _object_pieces(segs[i], i, machine, options)
         counts[i] = len(obj_pieces[i])
     first_row = np.cumsum(counts) - counts
@@ -517,7 +526,7 @@ def segment_pieces(segments, machine: Machine, options: PlanOptions | None = Non
     cols["length_mm"][rows] = l_len[sel]
     cols["v_cap_mm_s"][rows] = l_cap[sel]
     cols["segment"][rows] = seg_line[sel]
-    cols["line"][rows] = np.fromiter((s.line for s in lsegs), dtype=np.int64, count=m)[sel]
+    cols["line"][rows] = l_cols[:, 1].astype(np.int64)[sel]
     cols["blend_mm"][rows] = l_blend[sel]
     cols["start_mm"][:, rows] = p0[sel].T
     cols["end_mm"][:, rows] = p1[sel].T
@@ -541,7 +550,9 @@ def segment_pieces(segments, machine: Machine, options: PlanOptions | None = Non
             cols[name][:, r0 : r0 + len(pieces)] = arr.T
 
     pending = 0.0
-    for i in (i for i, kd in enumerate(kinds) if kd in STOP_KINDS):
+    for i in np.flatnonzero(~(straight | curved)).tolist():
+        if kinds[i] not in STOP_KINDS:
+            continue
         r = int(first_row[i]) - 1  # the last piece before the dwell or pause
         seconds = stop_seconds(segs[i])
         if r >= 0:
