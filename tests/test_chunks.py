@@ -115,11 +115,23 @@ def _today_csv(samples) -> bytes:
 
 
 def _today_npz(path, samples) -> bytes:
-    """The NPZ as the whole-array writer made it: numpy's own np.savez_compressed."""
-    from nurbscnc.output.files import POINT_COLUMNS, point_columns
+    """The NPZ as numpy's np.savez_compressed makes it (a zip of deflated ``<name>.npy``
+    members, zip64 forced), at the writers' deflate level (NPZ_DEFLATE_LEVEL, 1) instead of
+    zlib's default; numpy.load reads it back to the same columns."""
+    import zipfile
 
-    with open(path, "wb") as fh:
-        np.savez_compressed(fh, **dict(zip(POINT_COLUMNS, point_columns(samples))))
+    from nurbscnc.output.files import NPZ_DEFLATE_LEVEL, POINT_COLUMNS, point_columns
+
+    columns = dict(zip(POINT_COLUMNS, point_columns(samples)))
+    with zipfile.ZipFile(path, mode="w", compression=zipfile.ZIP_DEFLATED,
+                         compresslevel=NPZ_DEFLATE_LEVEL) as zipf:  # fmt: skip
+        for name, col in columns.items():
+            with zipf.open(f"{name}.npy", "w", force_zip64=True) as fid:
+                np.lib.format.write_array(fid, np.asanyarray(col), allow_pickle=False)
+    with np.load(path) as back:
+        assert list(back.files) == list(columns)
+        for name, col in columns.items():
+            np.testing.assert_array_equal(back[name], col)
     return Path(path).read_bytes()
 
 

@@ -131,6 +131,21 @@ def test_run_without_the_servo_check_loads_no_scipy_signal(tmp_path):
     assert not {m for m in row["modules"] if m.startswith("scipy.signal")}
 
 
+@pytest.mark.parametrize("program", ["tiny", "naca"])
+def test_run_with_the_servo_check_loads_no_scipy_signal(tmp_path, program):
+    # The dynamics check simulates the servo (nurbscnc.servo.model) with scipy's compiled
+    # IIR loop alone (the extension module scipy.signal._sigtools, loaded by itself): not
+    # scipy.signal's package nor what it pulls in (scipy.stats).
+    path = NACA if program == "naca" else tmp_path / "tiny.nc"
+    if program == "tiny":
+        path.write_text(TINY)
+    (row,) = loaded(tmp_path, [["run", str(path), "-o", "points.csv", "--quiet"]])
+    assert row["code"] == 0 and (tmp_path / "points.csv").stat().st_size > 0
+    assert "nurbscnc.servo.model" in row["modules"]  # it did simulate the servo
+    mods = row["modules"] - {"scipy.signal._sigtools"}
+    assert not {m for m in mods if m.startswith(("scipy.signal", "scipy.stats"))}
+
+
 
 def test_a_console_kept_before_its_first_use_is_the_console(tmp_path):
     # `from nurbscnc.cli.main import err` before anything printed keeps the stand-in; every

@@ -293,3 +293,43 @@ def test_true_distance_small_cases():
     assert contour_error_true(np.array([0.5, 2.0, 0.0]), path) == 2.0
     assert contour_error_true(np.array([[3.0, 4.0, 0.0]]), path[:1]).tolist() == [5.0]
     assert contour_error_true(np.array([[-3.0, 4.0, 0.0]]), path).tolist() == [5.0]
+
+
+@pytest.mark.parametrize("hold", ["foh", "zoh"])
+@pytest.mark.parametrize("axis", ["x", "y"])
+def test_discretisation_and_filter_are_scipy_signal_bit_for_bit(axis, hold):
+    """The model's own tf2ss/ss2tf give scipy.signal's state space and H(z) to the bit, and
+    its filter (scipy's compiled loop, loaded without scipy.signal) is lfilter's: same
+    output and final state, carried across a split."""
+    from nurbscnc.servo import model as servo_model
+
+    ax = getattr(MACHINE.servo, axis)
+    ours = servo_model._tf2ss(ax.numerator, ax.denominator)
+    for got, want in zip(ours, signal.tf2ss(ax.numerator, ax.denominator)):
+        assert got.shape == want.shape
+        np.testing.assert_array_equal(got, want)
+    disc = discretise(ax, MACHINE.servo.period_s, hold)
+    # H(z) by scipy.signal from the same exact discrete state space (module doc of
+    # nurbscnc.servo.model): ours must be these numbers.
+    from scipy import linalg
+
+    A, B, C, D = signal.tf2ss(ax.numerator, ax.denominator)
+    n, t = A.shape[0], MACHINE.servo.period_s
+    M = np.zeros((n + 2, n + 2))
+    M[:n, :n], M[:n, n : n + 1], M[n, n + 1] = A * t, B * t, 1.0
+    E = linalg.expm(M if hold == "foh" else M[: n + 1, : n + 1])
+    phi, g1 = E[:n, :n], E[:n, n : n + 1]
+    if hold == "foh":
+        g2 = E[:n, n + 1 : n + 2]
+        num, den = signal.ss2tf(phi, g1 + phi @ g2 - g2, C, D + C @ g2)
+    else:
+        num, den = signal.ss2tf(phi, g1, C, D)
+    np.testing.assert_array_equal(disc.b, np.ravel(num) / den[0])
+    np.testing.assert_array_equal(disc.a, den / den[0])
+    x = np.random.default_rng(3).normal(size=5000).cumsum()
+    zi = np.zeros(disc.a.size - 1)
+    want_y, want_z = signal.lfilter(disc.b, disc.a, x, zi=zi)
+    y1, z1 = servo_model._lfilter(disc.b, disc.a, x[:1234], zi)
+    y2, z2 = servo_model._lfilter(disc.b, disc.a, x[1234:], z1)
+    np.testing.assert_array_equal(np.concatenate((y1, y2)), want_y)
+    np.testing.assert_array_equal(z2, want_z)

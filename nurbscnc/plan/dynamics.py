@@ -90,20 +90,20 @@ def path_counts(pieces, lo: int = 0, hi: int | None = None) -> np.ndarray:
 
 
 def windowed_contour_mm(actual_mm: np.ndarray, lag_mm: np.ndarray, s_ref_mm: np.ndarray,
-                        pieces, profile) -> np.ndarray:  # fmt: skip
+                        pieces, profile, index: PathIndex | None = None) -> np.ndarray:  # fmt: skip
     """True distance [mm] from each actual point to the path near its reference (module doc).
 
     ``actual_mm`` (M, 3); ``lag_mm`` (M,) |reference − actual| [mm]; ``s_ref_mm`` (M,) the
     path length of each reference point. Exact point-to-segment distances to the dense polyline of
     :func:`path_counts`, from its last point before s − W to its first point after s + W,
-    W = 2|r − a|.
+    W = 2|r − a|. ``index`` (kept across the re-plans of one program): its copy of the
+    polyline (:meth:`PathIndex.dense_polyline`) instead of placing the points again.
     """
     m = actual_mm.shape[0]
     out = np.empty(m)
     starts = profile.piece_start_mm
-    lengths = pieces.length_mm
     total = profile.total_length_mm
-    k = lengths.size
+    k = pieces.length_mm.size
     lag = lag_mm
     for lo in range(0, m, SLAB):
         sl = slice(lo, min(lo + SLAB, m))
@@ -112,36 +112,43 @@ def windowed_contour_mm(actual_mm: np.ndarray, lag_mm: np.ndarray, s_ref_mm: np.
         # The pieces the windows touch, and one more on each side.
         p_lo = max(int(np.searchsorted(starts, float((s - w).min()), side="right")) - 2, 0)
         p_hi = min(int(np.searchsorted(starts, float((s + w).max()), side="right")) + 1, k)
-        c = path_counts(pieces, p_lo, p_hi)  # these pieces only: O(window), not O(program)
-        piece = np.repeat(np.arange(p_lo, p_hi), c)
-        first = np.repeat(np.cumsum(c) - c, c)
-        frac = (np.arange(piece.size) - first) / np.repeat(c - 1, c)
-        ps = np.minimum(starts[piece] + frac * lengths[piece], total)
-        pts = pieces.path.place(starts, ps, piece)[0]
+        if index is not None:
+            ps, pts = index.dense_polyline(pieces, starts, total, p_lo, p_hi)
+        else:
+            ps, pts = _dense_polyline(pieces, starts, total, p_lo, p_hi)
         # Polyline segments [j, j + 1] covering [s − w, s + w]: from the last point before
         # the window to the first one after it.
         a_idx = np.maximum(np.searchsorted(ps, s - w, side="left") - 1, 0)
         b_idx = np.minimum(np.searchsorted(ps, s + w, side="right"), ps.size - 1)
         b_idx = np.maximum(b_idx, np.minimum(a_idx + 1, ps.size - 1))
-        q = actual_mm[sl]
-        best = np.full(s.size, np.inf)
-        # Offset by offset along the windows, only over the windows still that long.
-        count = b_idx - a_idx
-        order = np.argsort(-count, kind="stable")
-        ranked = count[order]
-        for off in range(int(ranked[0]) if ranked.size else 0):
-            rows = order[: int(np.count_nonzero(ranked > off))]
-            j = np.minimum(a_idx[rows] + off, ps.size - 2)
-            a = pts[j]
-            d = pts[j + 1] - a
-            qa = q[rows] - a
-            len2 = np.einsum("ij,ij->i", d, d)
-            t = np.einsum("ij,ij->i", qa, d) / np.where(len2 > 0.0, len2, 1.0)
-            t = np.clip(np.where(len2 > 0.0, t, 0.0), 0.0, 1.0)
-            e = qa - t[:, None] * d
-            best[rows] = np.minimum(best[rows], np.sqrt(np.einsum("ij,ij->i", e, e)))
-        out[sl] = best
+        # Every (sample, segment) pair at once, the samples' pairs consecutive; the nearest
+        # per sample by a segmented minimum (the same numbers as pair by pair).
+        count = np.maximum(b_idx - a_idx, 1)  # no segment (never seen): inf, below
+        first = np.cumsum(count) - count
+        row = np.repeat(np.arange(s.size), count)
+        j = np.minimum(np.repeat(a_idx - first, count) + np.arange(row.size), ps.size - 2)
+        a = pts[j]
+        d = pts[j + 1] - a
+        qa = actual_mm[sl][row] - a
+        len2 = np.einsum("ij,ij->i", d, d)
+        t = np.einsum("ij,ij->i", qa, d) / np.where(len2 > 0.0, len2, 1.0)
+        t = np.clip(np.where(len2 > 0.0, t, 0.0), 0.0, 1.0)
+        e = qa - t[:, None] * d
+        best = np.minimum.reduceat(np.sqrt(np.einsum("ij,ij->i", e, e)), first)
+        out[sl] = np.where(b_idx > a_idx, best, np.inf)
     return out
+
+
+def _dense_polyline(pieces, starts_mm: np.ndarray, total_mm: float, lo: int, hi: int):
+    """Path lengths (n,) [mm] and points (n, 3) [mm] of the dense polyline
+    (:func:`path_counts`) of pieces ``lo:hi``, the pieces starting at ``starts_mm``. Each
+    point's numbers depend on its piece only (not on ``lo``, ``hi``)."""
+    c = path_counts(pieces, lo, hi)  # these pieces only: O(window), not O(program)
+    piece = np.repeat(np.arange(lo, hi), c)
+    first = np.repeat(np.cumsum(c) - c, c)
+    frac = (np.arange(piece.size) - first) / np.repeat(c - 1, c)
+    ps = np.minimum(starts_mm[piece] + frac * pieces.length_mm[piece], total_mm)
+    return ps, pieces.path.place(starts_mm, ps, piece)[0]
 
 
 class PathIndex:
@@ -158,11 +165,19 @@ class PathIndex:
     #: Segments per bounding box of a piece's polyline (the coarse level of the search).
     CHUNK = 64
 
+    #: Most points of the windowed check's polyline kept across re-plans (32 MB): the
+    #: program's first pieces up to this many points (a sweep from the start reuses them;
+    #: an evicting cache would miss every time on a sweep longer than itself).
+    DENSE_POINTS = 1_000_000
+
     def __init__(self, pieces, short_mm: float = 1.0):
         self._pieces = pieces
         self._short_mm = short_mm
         self._built = None
         self._counts = None
+        # The windowed check's dense polyline of pieces [0, filled): its path lengths,
+        # points and per-piece offsets, valid for the piece starts it was made with.
+        self._dense = None
         # piece → (dense polyline (c, 3) [mm], box lows, box highs (⌈(c−1)/CHUNK⌉, 3) [mm])
         self._polyline: dict[int, tuple] = {}
         self._cached_points = 0
@@ -178,6 +193,40 @@ class PathIndex:
         tree = cKDTree(centre[short]) if short.size else None
         r_short = float(radius[short].max()) if short.size else 0.0
         self._built = (centre, radius, short, long_, tree, r_short)
+
+    def dense_polyline(self, pieces, starts_mm: np.ndarray, total_mm: float, lo: int,
+                       hi: int) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+        """:func:`_dense_polyline` of pieces ``lo:hi``: the same numbers, the program's first
+        :data:`DENSE_POINTS` points computed once for all the re-plans (the geometry and the
+        piece starts do not change between them; checked, else computed afresh)."""
+        dense = self._dense
+        if dense is None:
+            off = np.concatenate(([0], np.cumsum(path_counts(self._pieces))))
+            room = int(np.searchsorted(off, self.DENSE_POINTS, side="right")) - 1
+            size = int(off[room])
+            dense = self._dense = {"off": off, "room": room, "filled": 0,
+                                   "starts": starts_mm.copy(), "total": total_mm,
+                                   "ps": np.empty(size), "pts": np.empty((size, 3))}  # fmt: skip
+        same = (pieces.path is self._pieces.path and total_mm == dense["total"]
+                and np.array_equal(starts_mm, dense["starts"]))  # fmt: skip
+        filled, off = dense["filled"], dense["off"]
+        if not same or lo > filled or hi <= lo:
+            return _dense_polyline(pieces, starts_mm, total_mm, lo, hi)
+        if hi > filled:  # the pieces [filled, hi) are new: place them, keep what fits
+            ps, pts = _dense_polyline(pieces, starts_mm, total_mm, filled, hi)
+            keep = min(hi, dense["room"])
+            if keep > filled:
+                n = int(off[keep] - off[filled])
+                dense["ps"][off[filled] : off[keep]] = ps[:n]
+                dense["pts"][off[filled] : off[keep]] = pts[:n]
+                dense["filled"] = keep
+            if lo == filled:
+                return ps, pts
+            a = int(off[lo])
+            return (np.concatenate((dense["ps"][a : off[filled]], ps)),
+                    np.concatenate((dense["pts"][a : off[filled]], pts)))  # fmt: skip
+        a, z = int(off[lo]), int(off[hi])
+        return dense["ps"][a:z], dense["pts"][a:z]
 
     def candidates(self, q: np.ndarray, upper_mm: np.ndarray) -> np.ndarray:
         """Pieces that may hold a path point closer to some point of ``q`` (m, 3) than
@@ -303,7 +352,7 @@ def path_response(samples, pieces, profile, machine, hold: str = "foh",
     np.subtract(ref[-1], actual[n:], out=axis_err[n:])
     lag = np.sqrt(np.einsum("ij,ij->i", axis_err, axis_err))
     s_ref = np.concatenate((samples.s_mm, np.full(actual.shape[0] - n, samples.s_mm[-1])))
-    contour = windowed_contour_mm(actual, lag, s_ref, pieces, profile)
+    contour = windowed_contour_mm(actual, lag, s_ref, pieces, profile, index)
     del lag, s_ref
     if refine_above_mm is not None:
         sel = np.flatnonzero(contour > refine_above_mm)
@@ -333,7 +382,7 @@ def window_response(points_mm: np.ndarray, s_mm: np.ndarray, actual_mm: np.ndarr
     whole path above ``refine_above_mm``, and eq. 29 (SPEC §8) in the XY plane."""
     axis_err = points_mm - actual_mm
     lag = np.sqrt(np.einsum("ij,ij->i", axis_err, axis_err))
-    contour = windowed_contour_mm(actual_mm, lag, s_mm, pieces, profile)
+    contour = windowed_contour_mm(actual_mm, lag, s_mm, pieces, profile, index)
     if refine_above_mm is not None:
         sel = np.flatnonzero(contour > refine_above_mm)
         if sel.size:

@@ -12,8 +12,9 @@ computed exactly, not approximated: with (A, B, C, D) a state-space form of G an
 
 x_{k+1} = Φ x_k + Γ1 u_k + Γ2 (u_{k+1} − u_k) holds exactly for an input linear on the period.
 The substitution ξ_k = x_k − Γ2 u_k makes this causal, ξ_{k+1} = Φ ξ_k + (Γ1 + ΦΓ2 − Γ2) u_k,
-y_k = C ξ_k + (D + CΓ2) u_k, whose transfer function H(z) (built once per model) is applied with
-``scipy.signal.lfilter``: the per-sample work is one compiled IIR recurrence, no Python loop.
+y_k = C ξ_k + (D + CΓ2) u_k, whose transfer function H(z) (built once per model) is applied by
+scipy's compiled IIR recurrence (the one behind ``scipy.signal.lfilter``, :func:`_lfilter`):
+the per-sample work is one compiled loop, no Python loop.
 A zero-order hold (staircase input; Φ, Γ1 alone) is available for comparison; it lags T_s/2 more.
 
 The machine starts at rest at the first reference point: the filter runs on r − r_0 from a zero
@@ -22,6 +23,7 @@ state and the equilibrium G(0)·r_0 is added back.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -95,6 +97,73 @@ def _as_model(model) -> AxisModel:
     raise TypeError(f"expected AxisModel or AxisServo, got {type(model).__name__}")
 
 
+@functools.cache
+def _linear_filter():
+    """The compiled direct-form-II-transposed IIR loop of ``scipy.signal.lfilter``, called as
+    f(b, a, x, axis, zi) → (y, zf).
+
+    Importing ``scipy.signal`` costs 1–3 s of CPU (it pulls in scipy.stats, optimize,
+    spatial, …) for one loop that takes milliseconds, so its extension module
+    ``scipy/signal/_sigtools`` is loaded on its own (it needs numpy only): the same code,
+    the same bits as ``lfilter``. A numpy replacement was measured and rejected (issue 14): a
+    banded triangular solve (BLAS ``dtbsv``) of the same recurrence is 27× slower and, being
+    direct form I, differs by 4e-11 mm on a 100 mm signal — as much as lfilter's own rounding
+    (3e-11 mm against the recurrence in extended precision), so no other arithmetic agrees
+    with it to 1e-12 mm. Falls back to ``scipy.signal.lfilter`` where the module is not found.
+    """
+    import importlib.machinery
+    import importlib.util
+    from pathlib import Path
+
+    import scipy
+
+    folder = Path(scipy.__file__).parent / "signal"
+    for suffix in importlib.machinery.EXTENSION_SUFFIXES:
+        path = folder / f"_sigtools{suffix}"
+        if path.is_file():
+            spec = importlib.util.spec_from_file_location("scipy.signal._sigtools", path)
+            module = importlib.util.module_from_spec(spec)
+            spec.loader.exec_module(module)
+            return module._linear_filter
+    from scipy.signal import lfilter  # pragma: no cover (another scipy layout)
+
+    return lambda b, a, x, axis, zi: lfilter(b, a, x, axis=axis, zi=zi)  # pragma: no cover
+
+
+def _lfilter(b: np.ndarray, a: np.ndarray, x: np.ndarray, zi: np.ndarray):
+    """``scipy.signal.lfilter(b, a, x, zi=zi)`` for 1-D float arrays, a[0] = 1: (y, zf)."""
+    return _linear_filter()(b, a, np.ascontiguousarray(x, dtype=float), -1, zi)
+
+
+def _tf2ss(num, den):
+    """Controllable canonical state space (A (n, n), B (n, 1), C (1, n), D (1, 1)) of the
+    continuous num(s)/den(s), the arithmetic of ``scipy.signal.tf2ss`` (the tests compare the
+    discretisation with scipy.signal's)."""
+    den = np.trim_zeros(np.asarray(den, dtype=float), "f")
+    num = np.atleast_1d(np.asarray(num, dtype=float))
+    num, den = num / den[0], den / den[0]
+    lead = 0  # leading numerator coefficients that are zero (|c| ≤ 1e-14, as scipy)
+    while lead < num.size - 1 and abs(num[lead]) <= 1e-14:
+        lead += 1
+    num = num[lead:]
+    k = den.size
+    num = np.concatenate((np.zeros(k - num.size), num))[None, :]
+    A = np.r_[-np.array([den[1:]]), np.eye(k - 2, k - 1)]
+    B = np.eye(k - 1, 1)
+    C = num[:, 1:] - np.outer(num[:, 0], den[1:])
+    D = num[:, :1]
+    return A, B, C, D
+
+
+def _ss2tf(A, B, C, D):
+    """Numerator and denominator (powers of z⁻¹ for a discrete system) of the single-input,
+    single-output (A, B, C, D), the arithmetic of ``scipy.signal.ss2tf``:
+    den = det(zI − A), num = det(zI − A + BC) + (D − 1)·den."""
+    den = np.poly(A)
+    num = np.poly(A - np.dot(B, C)) + (D[0] - 1) * den
+    return num, den
+
+
 def discretise(model: AxisModel | AxisServo, period_s: float, hold: str = "foh") -> DiscreteAxis:
     """Exact discretisation of ``model`` at ``period_s`` [s] for a FOH or ZOH input.
 
@@ -106,9 +175,9 @@ def discretise(model: AxisModel | AxisServo, period_s: float, hold: str = "foh")
         raise ValueError(f"hold must be one of {_HOLDS}, got {hold!r}")
     if not (np.isfinite(period_s) and period_s > 0):
         raise ConfigError(f"servo period must be > 0, got {period_s!r}")
-    from scipy import linalg, signal  # here, not at the top: importing scipy.signal is slow
+    from scipy import linalg
 
-    A, B, C, D = signal.tf2ss(model.numerator, model.denominator)
+    A, B, C, D = _tf2ss(model.numerator, model.denominator)
     n = A.shape[0]
     if hold == "zoh":
         M = np.zeros((n + 1, n + 1))
@@ -125,7 +194,7 @@ def discretise(model: AxisModel | AxisServo, period_s: float, hold: str = "foh")
         phi, g1, g2 = E[:n, :n], E[:n, n : n + 1], E[:n, n + 1 : n + 2]
         Ad, Bd = phi, g1 + phi @ g2 - g2
         Cd, Dd = C, D + C @ g2
-    num, den = signal.ss2tf(Ad, Bd, Cd, Dd)
+    num, den = _ss2tf(Ad, Bd, Cd, Dd)
     b = np.asarray(num, dtype=float).ravel()
     a = np.asarray(den, dtype=float).ravel()
     b, a = b / a[0], a / a[0]
@@ -147,16 +216,14 @@ def _run(disc: DiscreteAxis, reference_mm: np.ndarray, extra: int, auto_chunk: i
     samples such that the last kept sample and all after it are within SETTLE_TOLERANCE_MM of
     the final value (0 when auto_chunk == 0).
     """
-    from scipy import signal  # here, not at the top: importing scipy.signal is slow
-
     r = np.asarray(reference_mm, dtype=float)
     r0 = r[0]
     zi = np.zeros(max(disc.a.size, disc.b.size) - 1)
-    y, zf = signal.lfilter(disc.b, disc.a, r - r0, zi=zi)
+    y, zf = _lfilter(disc.b, disc.a, r - r0, zi)
     parts = [y]
     held = r[-1] - r0
     if extra > 0:
-        yh, zf = signal.lfilter(disc.b, disc.a, np.full(extra, held), zi=zf)
+        yh, zf = _lfilter(disc.b, disc.a, np.full(extra, held), zf)
         parts.append(yh)
     n_settle = 0
     if auto_chunk > 0:
@@ -164,7 +231,7 @@ def _run(disc: DiscreteAxis, reference_mm: np.ndarray, extra: int, auto_chunk: i
         # Extend by chunks until one whole chunk (≥ 5 slowest time constants) is within the
         # tolerance: the free response of a stable model decays, so it stays there afterwards.
         for _ in range(_MAX_SETTLE_SAMPLES // auto_chunk):
-            yh, zf = signal.lfilter(disc.b, disc.a, np.full(auto_chunk, held), zi=zf)
+            yh, zf = _lfilter(disc.b, disc.a, np.full(auto_chunk, held), zf)
             parts.append(yh)
             if np.all(np.abs(yh - final) <= SETTLE_TOLERANCE_MM):
                 break
@@ -377,8 +444,6 @@ class AxesStream:
     def step(self, reference_mm: np.ndarray) -> np.ndarray:
         """Actual positions (w, k) [mm] for the next ``reference_mm`` (w, k) rows; the first
         call's first row is where the machine starts at rest."""
-        from scipy import signal  # here, not at the top: importing scipy.signal is slow
-
         r = np.asarray(reference_mm, dtype=float)
         if r.ndim != 2 or r.shape[1] != len(self._models):
             raise ValueError("reference_mm must be (w, k) with k = len(models)")
@@ -391,7 +456,7 @@ class AxesStream:
             if d is None:
                 out[:, j] = r[:, j]
                 continue
-            y, self._zi[j] = signal.lfilter(d.b, d.a, r[:, j] - self._r0[j], zi=self._zi[j])
+            y, self._zi[j] = _lfilter(d.b, d.a, r[:, j] - self._r0[j], self._zi[j])
             self._y_last[j] = y[-1]
             out[:, j] = y + d.dc_gain * self._r0[j]
         self._last = r[-1].copy()
@@ -399,8 +464,6 @@ class AxesStream:
 
     def _settle_count(self, j: int) -> int:
         """Held samples axis j needs (the rule of :func:`_run` with ``auto_chunk``)."""
-        from scipy import signal  # here, not at the top: importing scipy.signal is slow
-
         d, model = self._discs[j], self._models[j]
         held = self._last[j] - self._r0[j]
         final = d.dc_gain * held
@@ -408,7 +471,7 @@ class AxesStream:
         zf = self._zi[j]
         done = 0
         for _ in range(_MAX_SETTLE_SAMPLES // chunk):
-            yh, zf = signal.lfilter(d.b, d.a, np.full(chunk, held), zi=zf)
+            yh, zf = _lfilter(d.b, d.a, np.full(chunk, held), zf)
             bad = np.flatnonzero(np.abs(yh - final) > SETTLE_TOLERANCE_MM)
             if bad.size:  # the last held sample out of tolerance so far
                 last_bad = done + int(bad[-1])
@@ -425,8 +488,6 @@ class AxesStream:
     def settle(self) -> np.ndarray:
         """The held tail (T, k) [mm] after the last window: T the most samples any axis needs
         to settle (as :func:`simulate_axes` with ``settle=True``)."""
-        from scipy import signal  # here, not at the top: importing scipy.signal is slow
-
         if self._last is None:
             raise ValueError("settle() before any step()")
         counts = [0 if d is None else self._settle_count(j) for j, d in enumerate(self._discs)]
@@ -437,6 +498,6 @@ class AxesStream:
                 out[:, j] = self._last[j]
                 continue
             held = self._last[j] - self._r0[j]
-            y, _ = signal.lfilter(d.b, d.a, np.full(n, held), zi=self._zi[j])
+            y, _ = _lfilter(d.b, d.a, np.full(n, held), self._zi[j])
             out[:, j] = y + d.dc_gain * self._r0[j]
         return out

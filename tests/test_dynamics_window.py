@@ -1,0 +1,97 @@
+"""The dynamics check's true distance near each reference point (SPEC §8;
+nurbscnc.plan.dynamics.windowed_contour_mm, issue 14).
+
+- the polyline kept across re-plans (``PathIndex.dense_polyline``: filled once, partly when
+  it does not all fit, with slabs of any size) gives the same bits as placing it afresh;
+- against an independent reference, the exact distance (k-d tree, point to segment) to a
+  much denser polyline of the path (``contour_error_true``): never below it and, but where
+  the tool overshoots a corner, equal to it up to the check polyline's chord error, on a
+  program of blended lines, arcs and a rapid.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from nurbscnc.machine.profile import load_machine
+from nurbscnc.pipeline import run_program
+from nurbscnc.plan import dynamics
+from nurbscnc.plan.dynamics import CHORD_MM, PathIndex, dense_path_mm, windowed_contour_mm
+from nurbscnc.program.interpret import interpret_text
+from nurbscnc.servo.model import contour_error_true, simulate_axes
+
+MACHINE = load_machine()
+
+# Blended lines (PH corners), arcs and a rapid: ~3 s of motion.
+PROGRAM = """G21 G17 G90 G94
+G64 P0.01
+G0 X0 Y0
+G1 X10 Y0 F3000
+G1 X15 Y4
+G1 X15 Y10
+G3 X5 Y10 I-5 J0
+G1 X2 Y3
+G1 X0 Y0
+G0 X30 Y0
+G1 X40 Y0 F2400
+G3 X40 Y10 I0 J5
+G1 X30 Y10
+M2
+"""
+
+
+@pytest.fixture(scope="module")
+def case():
+    """Pieces, profile and the servo's response (settle tail included) of PROGRAM."""
+    run = run_program(interpret_text(PROGRAM), MACHINE)
+    pieces, profile, ref = run.plan.pieces, run.plan.profile, run.samples
+    servo = MACHINE.servo
+    actual = simulate_axes([servo.x, servo.y, servo.z], ref.points_mm, servo.period_s,
+                           settle=True)  # fmt: skip
+    n = ref.t_s.size
+    held = np.vstack((ref.points_mm, np.repeat(ref.points_mm[-1:], actual.shape[0] - n, 0)))
+    lag = np.sqrt(np.sum((held - actual) ** 2, axis=1))
+    s = np.concatenate((ref.s_mm, np.full(actual.shape[0] - n, ref.s_mm[-1])))
+    return pieces, profile, actual, lag, s
+
+
+@pytest.mark.parametrize("slab", [dynamics.SLAB, 997])
+@pytest.mark.parametrize("room", [PathIndex.DENSE_POINTS, 5000])
+def test_the_kept_polyline_gives_the_same_bits(case, monkeypatch, slab, room):
+    pieces, profile, actual, lag, s = case
+    monkeypatch.setattr(dynamics, "SLAB", slab)
+    fresh = windowed_contour_mm(actual, lag, s, pieces, profile)
+    index = PathIndex(pieces)
+    index.DENSE_POINTS = room  # all of the polyline fits, or only its first pieces
+    for _ in range(2):  # filled, then read back (a re-plan)
+        np.testing.assert_array_equal(windowed_contour_mm(actual, lag, s, pieces, profile,
+                                                          index), fresh)  # fmt: skip
+    total = int(dynamics.path_counts(pieces).sum())
+    assert (index._dense["filled"] == len(pieces)) == (total <= room)
+    # Other windows of samples (a re-plan's windows fall elsewhere): the same numbers.
+    for lo, hi in ((0, 500), (313, 2900), (1800, actual.shape[0])):
+        sl = slice(lo, hi)
+        np.testing.assert_array_equal(
+            windowed_contour_mm(actual[sl], lag[sl], s[sl], pieces, profile, index), fresh[sl])
+
+
+def test_windowed_distance_is_the_true_distance_to_the_path(case):
+    pieces, profile, actual, lag, s = case
+    got = windowed_contour_mm(actual, lag, s, pieces, profile)
+    h = 1e-4
+    fine = dense_path_mm(pieces, profile, spacing_mm=h)
+    true = contour_error_true(actual, fine)
+    # The fine polyline's chords are off the curve by κh²/8 at most (doubled: κ of a PH
+    # corner is its sampled peak).
+    off = 2.0 * float(np.max(pieces.kappa_max_per_mm)) * h * h / 8.0 + 1e-12
+    # The check's polyline is off the curve by its chord error CHORD_MM at most (either way:
+    # a point inside a curve may be nearer its chord). Near the reference only, it is never
+    # below the distance to the whole path, and equal to it wherever the nearest point is
+    # in the window: all but the few samples where the tool overshoots a sharp corner
+    # towards the next piece (the check measures those against the whole path,
+    # PathIndex.distance_mm).
+    assert np.all(got >= true - CHORD_MM - off)
+    same = np.abs(got - true) <= CHORD_MM + off
+    assert np.mean(same) > 0.99
+    assert got.max() > 1e-3  # the servo does lag: the check measures something
