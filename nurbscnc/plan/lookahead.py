@@ -48,7 +48,9 @@ pieces at one cap and one set of limits are planned as one by
 """
 from __future__ import annotations
 
+import copy
 import inspect
+from collections import deque
 from dataclasses import dataclass, fields, replace
 
 import numpy as np
@@ -181,6 +183,11 @@ class Check:
     cutting: np.ndarray | None
     overs: Overs | None = None
     stats: dict | None = None
+    #: The compact form of the program's own samples (``overs`` without the held tail a cut
+    #: window's check adds, :func:`plan_windows`; else ``overs``): what joins windows.
+    samples: Overs | None = None
+    #: Cutting samples the statistics are over (joining windows).
+    cut_samples: int = 0
 
     def contour_um(self) -> np.ndarray:
         """The true contour error [µm] of the cutting samples (needs the kept response)."""
@@ -535,29 +542,46 @@ class _Checker:
         self.after_rapid[settle_rows + 1] = True
         self.index = PathIndex(pieces)  # where the pieces are (built on first use)
 
-    def _windows(self, planned: PieceList, profile: Profile):
+    def _windows(self, planned: PieceList, profile: Profile, rows: tuple | None = None):
         """(reference rows, slice of the window's own rows in them): one row more on each
-        side where there is one (the direction of travel is a central difference)."""
+        side where there is one (the direction of travel is a central difference); with
+        ``rows`` (k0, k1, last, …) only those samples, and no row after k1 unless ``last``
+        (the next cut window's motion is not planned yet)."""
         period = self.machine.servo.period_s
+        n = sample_count(planned, profile, period)
+        r0, r1 = (0, n) if rows is None else (rows[0], min(rows[1], n))
+        hi = n if rows is None or rows[2] else r1
         if not self.windowed:
             ref = self.sampler(planned, profile, period)
-            yield ref, slice(0, ref.t_s.size)
+            if rows is None:
+                yield ref, slice(0, ref.t_s.size)
+                return
+            a, b = max(r0 - 1, 0), min(r1 + 1, hi)
+            yield _rows(ref, slice(a, b)), slice(r0 - a, r1 - a)
             return
-        n = sample_count(planned, profile, period)
-        for k0 in range(0, n, self.window):
-            k1 = min(k0 + self.window, n)
-            a, b = max(k0 - 1, 0), min(k1 + 1, n)
+        for k0 in range(r0, r1, self.window):
+            k1 = min(k0 + self.window, r1)
+            a, b = max(k0 - 1, 0), min(k1 + 1, hi)
             yield self.sampler(planned, profile, period, a, b), slice(k0 - a, k1 - a)
 
-    def run(self, planned: PieceList, profile: Profile) -> Check:
-        """Check the plan ``planned``/``profile``: the :class:`Check` of its reference."""
-        if not self.windowed:
+    def run(self, planned: PieceList, profile: Profile, rows: tuple | None = None,
+            stream: AxesStream | None = None) -> Check:  # fmt: skip
+        """Check the plan ``planned``/``profile``: the :class:`Check` of its reference.
+        ``rows`` (k0, k1, last, τ_end [s], last piece): only the samples k0 … k1 − 1 (one
+        cut window of :func:`plan_windows`), the servo starting from ``stream`` (copied;
+        None: at rest at the first sample), the tail held after them as if the program ended
+        there at profile time τ_end on the last piece (``last`` False: on a copy of the
+        servo state, which :attr:`stream_out` then holds without it, for the next window)."""
+        if rows is None and not self.windowed:
             return self._run_whole(planned, profile)
         servo = self.machine.servo
-        stream = AxesStream([servo.x, servo.y, servo.z], servo.period_s)
+        if stream is None:
+            stream = AxesStream([servo.x, servo.y, servo.z], servo.period_s)
+        else:
+            stream = copy.deepcopy(stream)
         acc = _Accumulator(self, profile)
         last = None
-        for ref, own in self._windows(planned, profile):
+        for ref, own in self._windows(planned, profile, rows):
             d = np.gradient(ref.points_mm[:, :2], axis=0) if ref.t_s.size > 1 else \
                 np.zeros((ref.t_s.size, 2))  # fmt: skip
             ref = _rows(ref, own)
@@ -566,14 +590,19 @@ class _Checker:
                                    self.eps_mm, self.index)  # fmt: skip
             acc.add(resp, self._cutting(ref, resp, profile), ref.tau_s, ref.piece)
             last = ref
+        self.stream_out = stream
+        if rows is not None and not rows[2]:
+            stream = copy.deepcopy(stream)  # the virtual end of a cut window
         tail = stream.settle()  # the reference held at its end until the axes settle
         if tail.shape[0]:
             m = tail.shape[0]
             held = np.repeat(last.points_mm[-1:], m, axis=0)
             resp = window_response(held, np.full(m, last.s_mm[-1]), tail, np.zeros((m, 2)),
                                    planned, profile, self.eps_mm, self.index)  # fmt: skip
-            acc.add(resp, np.full(m, not self.rapid[-1]), np.full(m, profile.duration_s),
-                    np.full(m, len(planned) - 1))  # fmt: skip
+            tau_end, piece_end = (profile.duration_s, len(planned) - 1) if rows is None \
+                else rows[3:5]  # fmt: skip
+            acc.add(resp, np.full(m, not self.rapid[piece_end]), np.full(m, tau_end),
+                    np.full(m, piece_end), virtual=rows is not None and not rows[2])
         return acc.check()
 
     def _run_whole(self, planned: PieceList, profile: Profile) -> Check:
@@ -619,10 +648,17 @@ class _Accumulator:
         self.worst = 0.0
         self.c_max = self.c_sq = self.eq29_max = 0.0
         self.c_n = 0
+        self.real = None  # (count, worst, restart, over count, run count) before a virtual tail
 
-    def add(self, resp: Response, cutting: np.ndarray, tau_s: np.ndarray, piece: np.ndarray):
+    def add(self, resp: Response, cutting: np.ndarray, tau_s: np.ndarray, piece: np.ndarray,
+            virtual: bool = False):  # fmt: skip
         """The next samples: their response, which are checked (``cutting``), profile times
-        [s] and pieces."""
+        [s] and pieces. ``virtual``: the held tail of a cut window that the program does not
+        end with: it counts for the window's decisions, not in its statistics nor in
+        :attr:`Check.samples`."""
+        if virtual:
+            self.real = (self.count, self.worst, self.restart.copy(), len(self.over),
+                         len(self.runs))  # fmt: skip
         err = np.where(cutting, resp.contour_mm, 0.0)
         over = np.flatnonzero(err > self.eps_mm)
         self.over.append((over + self.count, err[over], tau_s[over]))
@@ -632,7 +668,7 @@ class _Accumulator:
         self.runs.append((piece[starts], starts + self.count))
         self.last_piece = int(piece[-1])
         self.restart += np.searchsorted(tau_s, self.t_restart, side="right")
-        c = resp.contour_mm[cutting] * 1000.0
+        c = resp.contour_mm[cutting] * 1000.0 if not virtual else np.zeros(0)
         if c.size:
             self.c_max = max(self.c_max, float(c.max()))
             self.c_sq += float(np.dot(c, c))
@@ -649,67 +685,121 @@ class _Accumulator:
         rms = float(np.sqrt(self.c_sq / self.c_n)) if self.c_n else 0.0
         stats = {"contour_true_max_um": self.c_max, "contour_true_rms_um": rms,
                  "contour_eq29_max_um": self.eq29_max}  # fmt: skip
-        return Check(None, None, None, overs, stats)
+        samples = overs
+        if self.real is not None:
+            count, worst, restart, n_over, n_runs = self.real
+            i, e, t = (np.concatenate(x) for x in zip(*self.over[:n_over]))
+            rp, rs = (np.concatenate(x) for x in zip(*self.runs[:n_runs]))
+            samples = Overs(count, i, e, t, rp, rs, restart, worst)
+        return Check(None, None, None, overs, stats, samples, self.c_n)
 
 
-def plan_checked(program, machine: Machine, options: LookaheadOptions | None = None,
-                 reference=exact_reference, keep_reference: bool = True,
-                 window: int = CHECK_WINDOW) -> tuple[Plan, Check | None]:  # fmt: skip
-    """Plan a whole interpreted program and check it (SPEC §1: modules 1–4, §8): pieces,
-    profile, then the dynamics check on the plan's reference points, re-planning until the
-    predicted contour error is within ε_max. ``reference``: (pieces, profile, period_s,
-    k0=0, k1=None) → :class:`~nurbscnc.plan.timing.Reference`, the points k0…k1−1 the check
-    simulates (default: the exact ones; the interpolator passes its own,
-    :func:`nurbscnc.interpolate.sample.reference_sampler`); a sampler without windows
-    (:func:`_windowed`) is called as (pieces, profile, period_s) for all of them.
+@dataclass(frozen=True, eq=False)
+class Window:
+    """One cut window of :func:`plan_windows`: ``index``; its pieces ``first`` … ``end`` − 1
+    (the rapids before a cut and the cut, up to the next rapid: a rest junction); its servo
+    samples ``k0`` … ``k1`` − 1 (wall time k·T_s within it; the last window: to the end);
+    ``plan``: the whole program's plan with this window and all before it final (the
+    profile of a window depends only on its own levers and the windows before it: the
+    junctions between windows are at rest), the later ones not planned yet (their
+    kinematic levers); ``check``: this window's check (compact) and ``iterations``: its
+    re-plans."""
 
-    The check runs ``window`` servo samples at a time (:class:`_Checker`), so its memory
-    grows with the pieces, not with the motion time; the plan does not depend on
-    ``window``. ``keep_reference``: the final :class:`Check` holds the whole reference and
-    response (plots, reports, the output); False: only the over-limit samples and the
-    statistics (long programs). Returns the plan and the final check (None with
-    ``dynamics="off"``)."""
-    options = options or LookaheadOptions()
-    pieces = segment_pieces(program.segments, machine, options.plan)
-    if not len(pieces):
-        raise PlanningError("the program has no motion to plan")
-    lim = machine.limits
-    path_lim = piece_limits(pieces, machine)  # the axes' limits along each piece
-    a_p = np.array(path_lim.a_mm_s2, dtype=float)
-    j_p = np.array(path_lim.j_mm_s3, dtype=float)
-    k = len(pieces)
-    lev = _Levers(np.minimum(pieces.v_cap_mm_s, path_lim.v_mm_s), a_p, j_p, a_p.copy(),
-                  j_p.copy(), np.zeros(k), np.zeros(k, dtype=bool))  # fmt: skip
-    smooth = junction_caps(pieces)  # > 0 where the path is tangent-continuous
-    period = machine.servo.period_s
-    eps_mm = lim.contour_tolerance_mm * CONTOUR_MARGIN
-    # Rapids followed by a cut: the settle (in-position wait) there is the check's to set
-    # (zero while the error is within ε_max). Without the check (``off``: kinematics only)
-    # there is nothing to wait for; the paper's global rule has no local lever, so it waits
-    # the full settle (the rapid's overshoot then never counts).
-    settle_rows = np.flatnonzero(pieces.rapid[:-1] & ~pieces.rapid[1:])
-    settle_max = settle_time_s(machine)
-    if options.dynamics == Dynamics.GLOBAL:
-        lev.settle_s[settle_rows] = settle_max
-    base_dwell = pieces.dwell_after_s
-    checker = _Checker(pieces, machine, reference, eps_mm, settle_rows, window,
-                       keep_reference)  # fmt: skip
+    index: int
+    first: int
+    end: int
+    k0: int
+    k1: int
+    plan: Plan
+    check: Check | None
+    iterations: int
 
-    def evaluate(lv: _Levers):
-        """Plan with the levers ``lv`` and check: (planned pieces, profile, check)."""
-        planned = _with_dwell(pieces, base_dwell + lv.settle_s) if settle_rows.size else pieces
-        profile = profile_over(planned.length_mm, lv.caps, smooth, lv.limits(),
-                               options.lookahead_pieces)  # fmt: skip
-        check_point_count(planned, profile, machine)  # before anything is sampled
-        if options.dynamics == Dynamics.OFF:
+
+def cut_windows(pieces: PieceList) -> np.ndarray:
+    """Piece index of the start of each cut window (w,) (the first is 0): every rapid that a
+    cut precedes starts a window (a cut → rapid junction is a rest, :func:`junction_caps`),
+    so a window is the rapids before a cut and the cut; the settle after a rapid belongs to
+    the cut after it."""
+    rapid = np.asarray(pieces.rapid, dtype=bool)
+    return np.concatenate(([0], np.flatnonzero(rapid[1:] & ~rapid[:-1]) + 1))
+
+
+class _Setup:
+    """What every plan of one program shares: its pieces, the kinematic levers (the axes'
+    path limits), the settle rows, the checker; :meth:`evaluate` plans and checks levers."""
+
+    def __init__(self, program, machine: Machine, options: LookaheadOptions, reference,
+                 keep_reference: bool, window: int):  # fmt: skip
+        self.machine, self.options = machine, options
+        pieces = segment_pieces(program.segments, machine, options.plan)
+        if not len(pieces):
+            raise PlanningError("the program has no motion to plan")
+        self.pieces = pieces
+        path_lim = piece_limits(pieces, machine)  # the axes' limits along each piece
+        a_p = np.array(path_lim.a_mm_s2, dtype=float)
+        j_p = np.array(path_lim.j_mm_s3, dtype=float)
+        k = self.k = len(pieces)
+        self.initial = _Levers(np.minimum(pieces.v_cap_mm_s, path_lim.v_mm_s), a_p, j_p,
+                               a_p.copy(), j_p.copy(), np.zeros(k), np.zeros(k, dtype=bool))
+        self.smooth = junction_caps(pieces)  # > 0 where the path is tangent-continuous
+        self.period = machine.servo.period_s
+        self.eps_mm = machine.limits.contour_tolerance_mm * CONTOUR_MARGIN
+        # Rapids followed by a cut: the settle (in-position wait) there is the check's to
+        # set (zero while the error is within ε_max). Without the check (``off``: kinematics
+        # only) there is nothing to wait for; the paper's global rule has no local lever, so
+        # it waits the full settle (the rapid's overshoot then never counts).
+        self.settle_rows = np.flatnonzero(pieces.rapid[:-1] & ~pieces.rapid[1:])
+        self.settle_max = settle_time_s(machine)
+        if options.dynamics == Dynamics.GLOBAL:
+            self.initial.settle_s[self.settle_rows] = self.settle_max
+        self.base_dwell = pieces.dwell_after_s
+        self.checker = _Checker(pieces, machine, reference, self.eps_mm, self.settle_rows,
+                                window, keep_reference)  # fmt: skip
+
+    def plan_of(self, lv: _Levers):
+        """The planned pieces (settles in their dwells) and profile of the levers ``lv``."""
+        planned = _with_dwell(self.pieces, self.base_dwell + lv.settle_s) \
+            if self.settle_rows.size else self.pieces  # fmt: skip
+        profile = profile_over(planned.length_mm, lv.caps, self.smooth, lv.limits(),
+                               self.options.lookahead_pieces)  # fmt: skip
+        check_point_count(planned, profile, self.machine)  # before anything is sampled
+        return planned, profile
+
+    def evaluate(self, lv: _Levers, rows=None, stream=None):
+        """Plan with the levers ``lv`` and check (``rows``, ``stream``: one cut window,
+        :meth:`_Checker.run`): (planned pieces, profile, check)."""
+        planned, profile = self.plan_of(lv)
+        if self.options.dynamics == Dynamics.OFF:
             return planned, profile, None
-        return planned, profile, checker.run(planned, profile)
+        return planned, profile, self.checker.run(planned, profile, rows, stream)
 
-    def shape(lv: _Levers, result) -> None:
-        _shape(lv, result[2].overs, eps_mm, result[1], pieces, smooth, settle_rows,
-               settle_max, period)  # fmt: skip
+    def shape(self, lv: _Levers, result) -> None:
+        _shape(lv, result[2].overs, self.eps_mm, result[1], self.pieces, self.smooth,
+               self.settle_rows, self.settle_max, self.period)  # fmt: skip
 
-    initial = lev.copy()
+    def fallback(self, lv: _Levers, result, stage: int) -> None:
+        _fallback(lv, result[2].overs, self.eps_mm, self.pieces, self.settle_rows,
+                  self.settle_max, self.period, stage)  # fmt: skip
+
+    def plan(self, lev: _Levers, result, iterations: int) -> Plan:
+        """The :class:`Plan` of the levers ``lev`` and their ``result``."""
+        planned, profile = result[0], result[1]
+        initial = self.initial
+        feed = lev.caps < initial.caps
+        transition = np.zeros(self.k, dtype=bool)
+        for f in ("a_up", "j_up", "a_dn", "j_dn"):
+            transition |= getattr(lev, f) < getattr(initial, f)
+        return Plan(planned, lev.caps, profile, iterations, _cycle_time(result),
+                    self.options.dynamics, lev.limits(), feed | transition, feed, transition,
+                    lev.settle_s)  # fmt: skip
+
+
+def _converge(st: _Setup, lev: _Levers, evaluate, confine=lambda lv: None):
+    """The levers loop (module docstring) from ``lev`` (changed in place): re-plan until the
+    check is within ε_max (local shaping, then the fallback), then the improvement phase.
+    ``evaluate(levers)`` → (planned, profile, check); ``confine(levers)`` undoes changes
+    outside the levers' scope (a cut window). Returns (final levers, result, re-plans)."""
+    options, eps_mm, initial = st.options, st.eps_mm, lev.copy()
     iterations = 0
     while True:
         result = evaluate(lev)
@@ -730,11 +820,11 @@ def plan_checked(program, machine: Machine, options: LookaheadOptions | None = N
             lev.caps *= min(float(np.sqrt(eps_mm / worst)), 0.98)
             lev.shaped[:] = True
         elif iterations <= LOCAL_ITERATIONS:
-            shape(lev, result)
+            st.shape(lev, result)
         else:
             stage = 1 if iterations <= LOCAL_ITERATIONS + FALLBACK_LOCAL_ITERATIONS else 2
-            _fallback(lev, result[2].overs, eps_mm, pieces, settle_rows, settle_max, period,
-                      stage)  # fmt: skip
+            st.fallback(lev, result, stage)
+        confine(lev)
         result = None  # the last check goes first (with keep_reference, hundreds of MB)
     if options.dynamics == Dynamics.LOCAL and lev.shaped.any():
         # Improvement: bisect every shaped lever between its feasible value and its value
@@ -760,21 +850,142 @@ def plan_checked(program, machine: Machine, options: LookaheadOptions | None = N
                 best, best_time = trial, t
             else:
                 probe = trial.copy()
-                shape(probe, result)
+                st.shape(probe, result)
+                confine(probe)
                 hi = hi.narrowed(trial, probe)
                 result = None
         lev = best
         if result is None:
             result = evaluate(lev)
-    planned, profile, check = result
-    feed = lev.caps < initial.caps
-    transition = np.zeros(k, dtype=bool)
-    for f in ("a_up", "j_up", "a_dn", "j_dn"):
-        transition |= getattr(lev, f) < getattr(initial, f)
-    plan = Plan(planned, lev.caps, profile, iterations, _cycle_time(result),
-                options.dynamics, lev.limits(), feed | transition, feed, transition,
-                lev.settle_s)  # fmt: skip
-    return plan, check
+    return lev, result, iterations
+
+
+def plan_checked(program, machine: Machine, options: LookaheadOptions | None = None,
+                 reference=exact_reference, keep_reference: bool = True,
+                 window: int = CHECK_WINDOW) -> tuple[Plan, Check | None]:  # fmt: skip
+    """Plan a whole interpreted program and check it (SPEC §1: modules 1–4, §8): pieces,
+    profile, then the dynamics check on the plan's reference points, re-planning until the
+    predicted contour error is within ε_max. ``reference``: (pieces, profile, period_s,
+    k0=0, k1=None) → :class:`~nurbscnc.plan.timing.Reference`, the points k0…k1−1 the check
+    simulates (default: the exact ones; the interpolator passes its own,
+    :func:`nurbscnc.interpolate.sample.reference_sampler`); a sampler without windows
+    (:func:`_windowed`) is called as (pieces, profile, period_s) for all of them.
+
+    A program of several cuts (``dynamics="local"``) is planned cut window by cut window
+    (:func:`plan_windows`); the plan is the last window's (all windows final) and the check
+    the windows' checks joined (with ``keep_reference``: re-run once on it as one program).
+    The check runs ``window`` servo samples at a time
+    (:class:`_Checker`), so its memory grows with the pieces, not with the motion time; the
+    plan does not depend on ``window``. ``keep_reference``: the final :class:`Check` holds
+    the whole reference and response (plots, reports, the output); False: only the
+    over-limit samples and the statistics (long programs). Returns the plan and the final
+    check (None with ``dynamics="off"``)."""
+    options = options or LookaheadOptions()
+    st = _Setup(program, machine, options, reference, keep_reference, window)
+    if options.dynamics != Dynamics.LOCAL or cut_windows(st.pieces).size == 1:
+        lev, result, iterations = _converge(st, st.initial.copy(), st.evaluate)
+        return st.plan(lev, result, iterations), result[2]
+    whole = st.checker
+    st.checker = _Checker(st.pieces, machine, reference, st.eps_mm, st.settle_rows, window,
+                          False)  # fmt: skip
+    checks = []
+
+    def windows():
+        for w in _windows_of(st):
+            checks.append(w.check)
+            yield w
+
+    last = deque(windows(), maxlen=1)[0]  # one window's plan held at a time
+    if keep_reference:  # the whole reference and response: one more pass over the samples
+        return last.plan, whole.run(last.plan.pieces, last.plan.profile)
+    return last.plan, _joined_checks(checks)
+
+
+def plan_windows(program, machine: Machine, options: LookaheadOptions | None = None,
+                 reference=exact_reference, window: int = CHECK_WINDOW):
+    """Plan a program cut window by cut window (:func:`cut_windows`), yielding each
+    :class:`Window` as soon as it is final: its levers loop (shaping, fallback, improvement)
+    sees only its own pieces and samples, the servo starting from the state the previous
+    window's final plan left it in (:class:`~nurbscnc.servo.model.AxesStream`), its end
+    checked as if the program ended there (the held tail on a copy of that state); the
+    plan of a program cut short after window n is the first n windows'. One window (and
+    ``dynamics`` other than "local") is :func:`plan_checked`'s plan."""
+    options = options or LookaheadOptions()
+    st = _Setup(program, machine, options, reference, False, window)
+    if options.dynamics != Dynamics.LOCAL or cut_windows(st.pieces).size == 1:
+        lev, result, iterations = _converge(st, st.initial.copy(), st.evaluate)
+        n = sample_count(result[0], result[1], st.period)
+        yield Window(0, 0, st.k, 0, n, st.plan(lev, result, iterations), result[2],
+                     iterations)  # fmt: skip
+        return
+    yield from _windows_of(st)
+
+
+def _windows_of(st: _Setup):
+    """The windows of :func:`plan_windows` (several cuts, local dynamics)."""
+    starts = cut_windows(st.pieces)
+    ends = np.append(starts[1:], st.k)
+    final = st.initial.copy()  # windows before the current one final, later ones kinematic
+    stream = None
+    total_iterations = 0
+    for w, (a, b) in enumerate(zip(starts.tolist(), ends.tolist())):
+        is_last = b == st.k
+        scope = np.zeros(st.k, dtype=bool)
+        scope[a:b] = True
+
+        def confine(lv: _Levers, scope=scope, final=final) -> None:
+            for f in (*_Levers._SCALED, "settle_s", "shaped"):
+                getattr(lv, f)[~scope] = getattr(final, f)[~scope]
+
+        def rows_of(lv: _Levers, a=a, b=b, is_last=is_last):
+            planned, profile = st.plan_of(lv)
+            k0 = _first_sample_at(planned, profile, a, st.period)
+            if is_last:
+                k1 = sample_count(planned, profile, st.period)
+                return (k0, k1, True, profile.duration_s, st.k - 1)
+            k1 = _first_sample_at(planned, profile, b, st.period)
+            return (k0, k1, False, float(profile.piece_start_time_s[b]), b - 1)
+
+        def evaluate(lv: _Levers, rows_of=rows_of, stream=stream):
+            return st.evaluate(lv, rows_of(lv), stream)
+
+        lev, result, iterations = _converge(st, final.copy(), evaluate, confine)
+        final = lev
+        stream = st.checker.stream_out
+        total_iterations += iterations
+        rows = rows_of(lev)
+        yield Window(w, a, b, rows[0], rows[1], st.plan(lev, result, total_iterations),
+                     result[2], iterations)  # fmt: skip
+
+
+def _first_sample_at(planned: PieceList, profile: Profile, piece: int, period_s: float) -> int:
+    """The first servo sample k at or after the wall time [s] at which ``piece`` starts
+    (its profile time plus the dwells before it): t_k = k·T_s ≥ that time."""
+    t_wall = float(profile.piece_start_time_s[piece]) + float(
+        np.sum(planned.dwell_after_s[:piece]))
+    return int(np.ceil(t_wall / period_s - 1e-9))
+
+
+def _joined_checks(checks: list) -> Check:
+    """The compact :class:`Check` of a program's cut windows, their samples one after the
+    other (:attr:`Check.samples`: without the held tails of the windows' checks): over-limit
+    samples, piece runs, counts before each restart and statistics joined."""
+    ov = [c.samples for c in checks]
+    off = np.cumsum([0] + [o.count for o in ov])
+    cat = np.concatenate
+    overs = Overs(int(off[-1]), cat([o.index + d for o, d in zip(ov, off)]),
+                  cat([o.err_mm for o in ov]), cat([o.tau_s for o in ov]),
+                  cat([o.run_piece for o in ov]), cat([o.run_start + d for o, d in zip(ov, off)]),
+                  np.sum([o.restart_count for o in ov], axis=0), max(o.worst_mm for o in ov))
+    n = [c.cut_samples for c in checks]
+    total = sum(n)
+    stats = [c.stats for c in checks]
+    rms = float(np.sqrt(sum(s["contour_true_rms_um"] ** 2 * m for s, m in zip(stats, n))
+                        / total)) if total else 0.0  # fmt: skip
+    joined = {"contour_true_max_um": max(s["contour_true_max_um"] for s in stats),
+              "contour_true_rms_um": rms,
+              "contour_eq29_max_um": max(s["contour_eq29_max_um"] for s in stats)}
+    return Check(None, None, None, overs, joined, overs, total)
 
 
 def _cut_distance_after_rapids(response: Response, ref: Reference, profile: Profile,
