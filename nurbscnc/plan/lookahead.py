@@ -543,35 +543,69 @@ class _Checker:
         self.index = PathIndex(pieces)  # where the pieces are (built on first use)
 
     def _windows(self, planned: PieceList, profile: Profile, rows: tuple | None = None):
-        """(reference rows, slice of the window's own rows in them): one row more on each
-        side where there is one (the direction of travel is a central difference); with
-        ``rows`` (k0, k1, last, …) only those samples, and no row after k1 unless ``last``
-        (the next cut window's motion is not planned yet)."""
+        """(reference rows, slice of the window's own rows in them, row of the virtual end
+        or None): one row more on each side where there is one (the direction of travel is
+        a central difference); with ``rows`` (k0, k1, last, …) only those samples, and
+        unless ``last``, after k1 − 1 the row k1 of the program as if it ended with this
+        window (:meth:`_end_row`: the next cut window's motion is not planned yet)."""
         period = self.machine.servo.period_s
         n = sample_count(planned, profile, period)
         r0, r1 = (0, n) if rows is None else (rows[0], min(rows[1], n))
-        hi = n if rows is None or rows[2] else r1
+        last = rows is None or rows[2]
+        hi = n if last else r1 + 1
         if not self.windowed:
             ref = self.sampler(planned, profile, period)
             if rows is None:
-                yield ref, slice(0, ref.t_s.size)
+                yield ref, slice(0, ref.t_s.size), None
                 return
-            a, b = max(r0 - 1, 0), min(r1 + 1, hi)
-            yield _rows(ref, slice(a, b)), slice(r0 - a, r1 - a)
-            return
-        for k0 in range(r0, r1, self.window):
-            k1 = min(k0 + self.window, r1)
-            a, b = max(k0 - 1, 0), min(k1 + 1, hi)
-            yield self.sampler(planned, profile, period, a, b), slice(k0 - a, k1 - a)
+            chunks = [(ref, max(r0 - 1, 0), min(r1 + 1, hi), r0, r1)]
+        else:
+            chunks = ((None, max(k0 - 1, 0), min(k0 + self.window + 1, r1 + 1, hi), k0,
+                       min(k0 + self.window, r1)) for k0 in range(r0, r1, self.window))
+        for whole, a, b, k0, k1 in chunks:
+            ref = self.sampler(planned, profile, period, a, b) if whole is None else \
+                _rows(whole, slice(a, b))  # fmt: skip
+            virt = None
+            if not last and b == r1 + 1:
+                virt = r1 - a
+                end = self._end_row(planned, profile, r1, rows[4] + 1)
+                ref = replace(ref, **{f.name: np.concatenate((getattr(ref, f.name)[:virt],
+                                                              getattr(end, f.name)))
+                                      for f in fields(ref)})  # fmt: skip
+            yield ref, slice(k0 - a, k1 - a), virt
+
+    def _head(self, planned: PieceList, profile: Profile, end: int) -> tuple:
+        """Pieces 0 … ``end`` − 1 of ``planned`` and ``profile`` as a program of their own,
+        as far as the contour distance needs them (:class:`_Head`), their
+        :class:`~nurbscnc.plan.dynamics.PathIndex` (kept per ``end``) and rapid flags."""
+        if getattr(self, "_head_index", (None,))[0] != end:
+            self._head_index = (end, PathIndex(_Head(planned, end)))
+        return (_Head(planned, end), _HeadProfile(profile, end), self._head_index[1],
+                self.rapid[:end])  # fmt: skip
+
+    def _end_row(self, planned: PieceList, profile: Profile, k: int, end: int) -> Reference:
+        """Sample ``k`` of the program made of pieces 0 … ``end`` − 1 only (a cut window's
+        end; t_k at or after the end of their motion): at rest at the end of piece
+        ``end`` − 1, as :func:`~nurbscnc.plan.timing.exact_reference` gives it there (the
+        profile time t_k minus the dwells before ``end``)."""
+        t = np.array([k * self.machine.servo.period_s])
+        dwell = planned.dwell_after_s[:end]
+        before = np.cumsum(dwell[dwell > 0.0])
+        tau = t - (before[-1] if before.size else 0.0)
+        s = np.array([profile.piece_start_mm[end]])
+        piece = np.array([end - 1], dtype=np.intp)
+        points, param = planned.path.place(profile.piece_start_mm, s, piece)
+        return Reference(t, tau, s, np.zeros(1), np.zeros(1), piece, points, param)
 
     def run(self, planned: PieceList, profile: Profile, rows: tuple | None = None,
             stream: AxesStream | None = None) -> Check:  # fmt: skip
         """Check the plan ``planned``/``profile``: the :class:`Check` of its reference.
         ``rows`` (k0, k1, last, τ_end [s], last piece): only the samples k0 … k1 − 1 (one
         cut window of :func:`plan_windows`), the servo starting from ``stream`` (copied;
-        None: at rest at the first sample), the tail held after them as if the program ended
-        there at profile time τ_end on the last piece (``last`` False: on a copy of the
-        servo state, which :attr:`stream_out` then holds without it, for the next window)."""
+        None: at rest at the first sample), then as if the program ended there (``last``
+        False: its last sample :meth:`_end_row` and the held tail at profile time τ_end on
+        the last piece, on a copy of the servo state, which :attr:`stream_out` then holds
+        without them, for the next window)."""
         if rows is None and not self.windowed:
             return self._run_whole(planned, profile)
         servo = self.machine.servo
@@ -580,29 +614,44 @@ class _Checker:
         else:
             stream = copy.deepcopy(stream)
         acc = _Accumulator(self, profile)
-        last = None
-        for ref, own in self._windows(planned, profile, rows):
+        last = end = None
+        # The path the error is measured against: the pieces up to this window's end (the
+        # program as if it ended there; the whole program for the last window).
+        head = None if rows is None or rows[2] else self._head(planned, profile, rows[4] + 1)
+        on, prof, index = (planned, profile, self.index) if head is None else head[:3]
+        for ref, own, virt in self._windows(planned, profile, rows):
             d = np.gradient(ref.points_mm[:, :2], axis=0) if ref.t_s.size > 1 else \
                 np.zeros((ref.t_s.size, 2))  # fmt: skip
+            if virt is not None:
+                end = (_rows(ref, slice(virt, virt + 1)), d[virt : virt + 1])
             ref = _rows(ref, own)
             actual = stream.step(ref.points_mm)
-            resp = window_response(ref.points_mm, ref.s_mm, actual, d[own], planned, profile,
-                                   self.eps_mm, self.index)  # fmt: skip
-            acc.add(resp, self._cutting(ref, resp, profile), ref.tau_s, ref.piece)
+            resp = window_response(ref.points_mm, ref.s_mm, actual, d[own], on, prof,
+                                   self.eps_mm, index)  # fmt: skip
+            acc.add(resp, self._cutting(ref, resp, profile, head), ref.tau_s, ref.piece)
             last = ref
         self.stream_out = stream
-        if rows is not None and not rows[2]:
-            stream = copy.deepcopy(stream)  # the virtual end of a cut window
+        virtual = rows is not None and not rows[2]
+        if virtual:  # the end of a cut window, as if the program ended there
+            stream = copy.deepcopy(stream)
+            if end is not None:
+                ref, d_end = end
+                actual = stream.step(ref.points_mm)
+                resp = window_response(ref.points_mm, ref.s_mm, actual, d_end, on, prof,
+                                       self.eps_mm, index)  # fmt: skip
+                acc.add(resp, self._cutting(ref, resp, profile, head), ref.tau_s, ref.piece,
+                        virtual=True)  # fmt: skip
+                last = ref
         tail = stream.settle()  # the reference held at its end until the axes settle
         if tail.shape[0]:
             m = tail.shape[0]
             held = np.repeat(last.points_mm[-1:], m, axis=0)
             resp = window_response(held, np.full(m, last.s_mm[-1]), tail, np.zeros((m, 2)),
-                                   planned, profile, self.eps_mm, self.index)  # fmt: skip
+                                   on, prof, self.eps_mm, index)  # fmt: skip
             tau_end, piece_end = (profile.duration_s, len(planned) - 1) if rows is None \
                 else rows[3:5]  # fmt: skip
             acc.add(resp, np.full(m, not self.rapid[piece_end]), np.full(m, tau_end),
-                    np.full(m, piece_end), virtual=rows is not None and not rows[2])
+                    np.full(m, piece_end), virtual=virtual)  # fmt: skip
         return acc.check()
 
     def _run_whole(self, planned: PieceList, profile: Profile) -> Check:
@@ -621,16 +670,43 @@ class _Checker:
             return acc.check()
         return replace(acc.check(), reference=ref, response=resp, cutting=cutting)
 
-    def _cutting(self, ref: Reference, resp: Response, profile: Profile) -> np.ndarray:
+    def _cutting(self, ref: Reference, resp: Response, profile: Profile,
+                 head: tuple | None = None) -> np.ndarray:  # fmt: skip
         """Which reference samples are checked (N,): contour error matters while cutting;
         samples on rapids (air moves) and during the settle after a rapid (the reference
         waits at the cut's start) are not. The first cutting samples after a rapid are
         measured against the cut only (in ``resp``)."""
         waiting = self.after_rapid[ref.piece] & (
             ref.tau_s <= profile.piece_start_time_s[ref.piece])
-        _cut_distance_after_rapids(resp, ref, profile, self.after_rapid, waiting, self.rapid,
-                                   self.index)  # fmt: skip
+        index, rapid = (self.index, self.rapid) if head is None else (head[2], head[3])
+        _cut_distance_after_rapids(resp, ref, profile, self.after_rapid, waiting, rapid,
+                                   index)  # fmt: skip
         return ~self.rapid[ref.piece] & ~waiting
+
+
+class _Head:
+    """The first ``end`` pieces of a :class:`~nurbscnc.plan.pieces.PieceList`, read-only,
+    for the contour distance (the columns it reads, cut to ``end``; the path shared)."""
+
+    def __init__(self, pieces: PieceList, end: int):
+        self._pieces, self._end = pieces, end
+
+    def __len__(self) -> int:
+        return self._end
+
+    def __getattr__(self, name: str):
+        value = getattr(self._pieces, name)
+        if isinstance(value, np.ndarray) and value.ndim and value.shape[-1] == len(self._pieces):
+            return value[..., : self._end]
+        return value
+
+
+class _HeadProfile:
+    """The profile of the first ``end`` pieces (their start lengths and total length)."""
+
+    def __init__(self, profile: Profile, end: int):
+        self.piece_start_mm = profile.piece_start_mm[:end]
+        self.total_length_mm = float(profile.piece_start_mm[end])
 
 
 class _Accumulator:
@@ -656,7 +732,7 @@ class _Accumulator:
         [s] and pieces. ``virtual``: the held tail of a cut window that the program does not
         end with: it counts for the window's decisions, not in its statistics nor in
         :attr:`Check.samples`."""
-        if virtual:
+        if virtual and self.real is None:
             self.real = (self.count, self.worst, self.restart.copy(), len(self.over),
                          len(self.runs))  # fmt: skip
         err = np.where(cutting, resp.contour_mm, 0.0)
