@@ -998,23 +998,43 @@ def plan_windows(program, machine: Machine, options: LookaheadOptions | None = N
 
 
 def _windows_of(st: _Setup):
-    """The windows of :func:`plan_windows` (several cuts, local dynamics)."""
+    """The windows of :func:`plan_windows` (several cuts, local dynamics).
+
+    Each window's profile is planned from its own pieces only (:func:`profile_over` over
+    pieces a … b − 1: the junctions at a and b are rests, so nothing outside the window
+    changes it): the plan of window w is the final windows before it, then its own profile,
+    then a placeholder for the pieces not planned yet (:func:`_placeholder`: never sampled
+    before the window's end), spliced into one :class:`Profile` (:func:`_spliced`). A
+    re-plan thus costs the window's pieces, not the program's."""
     starts = cut_windows(st.pieces)
     ends = np.append(starts[1:], st.k)
     final = st.initial.copy()  # windows before the current one final, later ones kinematic
     stream = None
+    done = None  # the final profile of the windows before the current one (from time 0)
     total_iterations = 0
     for w, (a, b) in enumerate(zip(starts.tolist(), ends.tolist())):
         is_last = b == st.k
         scope = np.zeros(st.k, dtype=bool)
         scope[a:b] = True
+        later = None if is_last else _placeholder(st.pieces, st.initial.caps, b)
 
         def confine(lv: _Levers, scope=scope, final=final) -> None:
             for f in (*_Levers._SCALED, "settle_s", "shaped"):
                 getattr(lv, f)[~scope] = getattr(final, f)[~scope]
 
-        def rows_of(lv: _Levers, a=a, b=b, is_last=is_last):
-            planned, profile = st.plan_of(lv)
+        def plan_of(lv: _Levers, a=a, b=b, done=done, later=later):
+            planned = _with_dwell(st.pieces, st.base_dwell + lv.settle_s) \
+                if st.settle_rows.size else st.pieces  # fmt: skip
+            lim = lv.limits()
+            own = profile_over(st.pieces.length_mm[a:b], lv.caps[a:b], st.smooth[a : b + 1],
+                               Limits(lim.a_up_mm_s2[a:b], lim.j_up_mm_s3[a:b],
+                                      lim.a_down_mm_s2[a:b], lim.j_down_mm_s3[a:b]),
+                               st.options.lookahead_pieces)  # fmt: skip
+            profile = _spliced([x for x in (done, own, later) if x is not None])
+            check_point_count(planned, profile, st.machine)  # before anything is sampled
+            return planned, profile, own
+
+        def rows_of(planned, profile, a=a, b=b, is_last=is_last):
             k0 = _first_sample_at(planned, profile, a, st.period)
             if is_last:
                 k1 = sample_count(planned, profile, st.period)
@@ -1022,16 +1042,61 @@ def _windows_of(st: _Setup):
             k1 = _first_sample_at(planned, profile, b, st.period)
             return (k0, k1, False, float(profile.piece_start_time_s[b]), b - 1)
 
-        def evaluate(lv: _Levers, rows_of=rows_of, stream=stream):
-            return st.evaluate(lv, rows_of(lv), stream)
+        def evaluate(lv: _Levers, plan_of=plan_of, rows_of=rows_of, stream=stream):
+            planned, profile, own = plan_of(lv)
+            check = st.checker.run(planned, profile, rows_of(planned, profile), stream)
+            return planned, profile, check, own
 
         lev, result, iterations = _converge(st, final.copy(), evaluate, confine)
         final = lev
         stream = st.checker.stream_out
+        done = _spliced([x for x in (done, result[3]) if x is not None])
         total_iterations += iterations
-        rows = rows_of(lev)
+        rows = rows_of(result[0], result[1])
         yield Window(w, a, b, rows[0], rows[1], st.plan(lev, result, total_iterations),
                      result[2], iterations)  # fmt: skip
+
+
+def _placeholder(pieces: PieceList, caps_mm_s: np.ndarray, first: int) -> Profile:
+    """A stand-in profile of pieces ``first`` … k − 1 (not planned yet): each crossed at its
+    kinematic cap in one phase of constant speed, its start a rest (the window's end), the
+    junctions after it marked moving (not stops).
+    Only its shape matters (piece starts after the planned pieces' end, a clock that runs
+    on): a cut window's check and the stream never sample it before the window's end."""
+    length = np.asarray(pieces.length_mm[first:], dtype=float)
+    cap = np.asarray(caps_mm_s[first:], dtype=float)
+    dur = length / cap
+    start_t = np.concatenate(([0.0], np.cumsum(dur)[:-1]))
+    start_s = np.concatenate(([0.0], np.cumsum(length)[:-1]))
+    moving = np.flatnonzero(length > 0.0)
+    z = np.zeros(moving.size)
+    return Profile(float(length.sum()), float(dur.sum()), np.append(0.0, cap), cap.copy(),
+                   start_s, start_t, start_t[moving], dur[moving], start_s[moving],
+                   cap[moving], z, z.copy(), moving)  # fmt: skip
+
+
+def _spliced(parts: list) -> Profile:
+    """Profiles of consecutive runs of pieces, each from time 0 and arc length 0, as one
+    (times, lengths and piece indices shifted by those before; the junctions between them
+    are rests, so the speeds join)."""
+    if len(parts) == 1:
+        return parts[0]
+    t0 = np.cumsum([0.0] + [p.duration_s for p in parts[:-1]])
+    s0 = np.cumsum([0.0] + [p.total_length_mm for p in parts[:-1]])
+    n0 = np.cumsum([0] + [p.piece_count for p in parts[:-1]])
+    cat = np.concatenate
+    return Profile(
+        float(s0[-1] + parts[-1].total_length_mm), float(t0[-1] + parts[-1].duration_s),
+        cat([p.junction_speeds_mm_s[:-1] for p in parts] + [parts[-1].junction_speeds_mm_s[-1:]]),
+        cat([p.piece_peak_speed_mm_s for p in parts]),
+        cat([p.piece_start_mm + s for p, s in zip(parts, s0)]),
+        cat([p.piece_start_time_s + t for p, t in zip(parts, t0)]),
+        cat([p.phase_start_time_s + t for p, t in zip(parts, t0)]),
+        cat([p.phase_duration_s for p in parts]),
+        cat([p.phase_s0_mm + s for p, s in zip(parts, s0)]),
+        cat([p.phase_v0_mm_s for p in parts]), cat([p.phase_a0_mm_s2 for p in parts]),
+        cat([p.phase_jerk_mm_s3 for p in parts]),
+        cat([p.phase_piece_index + n for p, n in zip(parts, n0)]))
 
 
 def _first_sample_at(planned: PieceList, profile: Profile, piece: int, period_s: float) -> int:
