@@ -1016,7 +1016,7 @@ def _windows_of(st: _Setup):
         is_last = b == st.k
         scope = np.zeros(st.k, dtype=bool)
         scope[a:b] = True
-        later = None if is_last else _placeholder(st.pieces, st.initial.caps, b)
+        later = None if is_last else _placeholder(st.pieces, st.initial, b)
 
         def confine(lv: _Levers, scope=scope, final=final) -> None:
             for f in (*_Levers._SCALED, "settle_s", "shaped"):
@@ -1057,22 +1057,25 @@ def _windows_of(st: _Setup):
                      result[2], iterations)  # fmt: skip
 
 
-def _placeholder(pieces: PieceList, caps_mm_s: np.ndarray, first: int) -> Profile:
-    """A stand-in profile of pieces ``first`` … k − 1 (not planned yet): each crossed at its
-    kinematic cap in one phase of constant speed, its start a rest (the window's end), the
-    junctions after it marked moving (not stops).
-    Only its shape matters (piece starts after the planned pieces' end, a clock that runs
-    on): a cut window's check and the stream never sample it before the window's end."""
+def _placeholder(pieces: PieceList, lev: _Levers, first: int) -> Profile:
+    """A stand-in profile of pieces ``first`` … k − 1 (not planned yet): each piece one phase
+    of constant jerk from rest (s = j·t³/6 over its length, the jerk within the piece's
+    kinematic limit and the mean speed within its cap), the junctions marked moving (not
+    stops) except the first, a rest (the window's end). Only its shape matters (piece
+    starts after the planned pieces' end, a clock that runs on; speed and acceleration 0 at
+    the window's end, as the real plan has them there): a cut window's check and the stream
+    never sample it beyond the window's end."""
     length = np.asarray(pieces.length_mm[first:], dtype=float)
-    cap = np.asarray(caps_mm_s[first:], dtype=float)
-    dur = length / cap
+    cap = np.asarray(lev.caps[first:], dtype=float)
+    dur = np.maximum(length / cap, np.cbrt(6.0 * length / lev.j_up[first:]))
     start_t = np.concatenate(([0.0], np.cumsum(dur)[:-1]))
     start_s = np.concatenate(([0.0], np.cumsum(length)[:-1]))
     moving = np.flatnonzero(length > 0.0)
     z = np.zeros(moving.size)
+    jerk = 6.0 * length[moving] / dur[moving] ** 3
     return Profile(float(length.sum()), float(dur.sum()), np.append(0.0, cap), cap.copy(),
-                   start_s, start_t, start_t[moving], dur[moving], start_s[moving],
-                   cap[moving], z, z.copy(), moving)  # fmt: skip
+                   start_s, start_t, start_t[moving], dur[moving], start_s[moving], z,
+                   z.copy(), jerk, moving)  # fmt: skip
 
 
 def _spliced(parts: list) -> Profile:
