@@ -578,9 +578,7 @@ class _Checker:
         """Pieces 0 … ``end`` − 1 of ``planned`` and ``profile`` as a program of their own,
         as far as the contour distance needs them (:class:`_Head`), their
         :class:`~nurbscnc.plan.dynamics.PathIndex` (kept per ``end``) and rapid flags."""
-        if getattr(self, "_head_index", (None,))[0] != end:
-            self._head_index = (end, PathIndex(_Head(planned, end)))
-        return (_Head(planned, end), _HeadProfile(profile, end), self._head_index[1],
+        return (_Head(planned, end), _HeadProfile(profile, end), _HeadIndex(self.index, end),
                 self.rapid[:end])  # fmt: skip
 
     def _end_row(self, planned: PieceList, profile: Profile, k: int, end: int) -> Reference:
@@ -699,6 +697,24 @@ class _Head:
         if isinstance(value, np.ndarray) and value.ndim and value.shape[-1] == len(self._pieces):
             return value[..., : self._end]
         return value
+
+
+class _HeadIndex:
+    """The whole program's :class:`~nurbscnc.plan.dynamics.PathIndex` asked about its first
+    ``end`` pieces only (the others excluded): the same candidates and distances as an index
+    of those pieces, with the dense polylines kept across every cut window's re-plans."""
+
+    def __init__(self, index: PathIndex, end: int):
+        self._index, self._end = index, end
+
+    def distance_mm(self, q: np.ndarray, upper_mm: np.ndarray, block: int = 256,
+                    exclude: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
+        """:meth:`PathIndex.distance_mm` to pieces 0 … end − 1 (less ``exclude`` (end,))."""
+        beyond = np.zeros(len(self._index._pieces), dtype=bool)
+        beyond[self._end :] = True
+        if exclude is not None:
+            beyond[: self._end] |= exclude[: self._end]
+        return self._index.distance_mm(q, upper_mm, block, beyond)
 
 
 class _HeadProfile:
