@@ -226,10 +226,12 @@ def planning_ahead(path: str) -> dict:
     windows = window_plans(prog, mach)  # the checks before work run here
     t_valid = time.perf_counter() - t0
     ready: list = []
+    cycle = []
 
     def recorded():
         for w in windows:
             ready.append((w.k0, time.perf_counter() - t0))
+            cycle[:] = [w.plan.cycle_time_s]  # the last window's: the whole plan's
             yield w
 
     feed = WindowFeed(recorded(), clock=time.perf_counter)
@@ -258,7 +260,7 @@ def planning_ahead(path: str) -> dict:
     # A card at 1x from its first period reaches window i's first sample at k0·T later.
     margins = [first[0] + k0 * period - t for k0, t in ready[1:]]
     return {"program": Path(path).name, "windows": len(ready),
-            "motion_s": round(job.plan.cycle_time_s, 3),
+            "motion_s": round(cycle[0], 3),
             "validated_s": round(t_valid, 3), "first_window_s": round(t_first_window, 3),
             "first_period_s": round(first[0], 3), "whole_plan_s": round(t_planned, 3),
             "margin_min_s": round(min(margins), 3) if margins else None,

@@ -373,11 +373,12 @@ class Job:
         """How long [s] the card still had to run to the horizon when the next window came
         (a planning hold: not a margin; it is counted as held time instead)."""
         sec = self.section
-        if sec is None or sec.at_horizon or link is None or link.state.status is None:
+        if sec is None or sec.at_horizon or link is None:
             return
         tr = sec.track
         h = self._horizon_tau()
-        executed = link.state.status.executed_periods
+        status = link.state.status  # None: the section's handshake, nothing executed yet
+        executed = status.executed_periods if status is not None else 0
         reached = np.flatnonzero(tr.tau_s >= h)
         if reached.size:
             to_go = int(reached[0]) - executed
