@@ -12,6 +12,8 @@ What is checked, against independent references:
   points (the plain run of the same program, planned whole by ``plan_checked``) and the points
   the job quantised equal ``run``'s to 1e-9 mm; each window after the first is adopted while
   the card moves (a margin measured for each);
+- a planner that fails after the first window: the card stops at rest at that window's end
+  (the plan's rest point) and the planner's error is raised there;
 - a slowed planner (windows released late, in virtual time): the card waits at rest at the
   end of a cut window — every planning hold at a planned rest (speed 0 there in the plan and
   in the streamed periods), the card's position there the plan's rest point — the holds and
@@ -23,7 +25,9 @@ from __future__ import annotations
 import threading
 
 import numpy as np
+import pytest
 
+from nurbscnc.errors import PlanningError
 from nurbscnc.machine.profile import default_profile_text, parse_machine
 from nurbscnc.output.stream import job as job_module
 from nurbscnc.output.stream.card import CardConfig
@@ -160,3 +164,29 @@ def test_a_slow_planner_holds_at_rests_only(monkeypatch):
     assert waited > 0.0 and abs(planning["held_s"] - waited) <= 1e-6
     assert np.array_equal(r.card.position,
                           np.rint(run.samples.points_mm[-1] * mach.steps.per_mm).astype(int))
+
+
+def test_a_planner_error_stops_the_card_at_rest_at_the_planned_end():
+    prog, mach, _ = _setup()
+    windows = list(plan_windows(prog, mach))
+
+    def failing():
+        yield windows[0]
+        raise PlanningError("line 7: planned too late for this test")
+
+    job = Job(None, prog, mach, feed=WindowFeed(failing()))
+    card = []
+    original = job.section_done
+
+    def section_done(executed_periods):
+        card.append(job.section.track)
+        return original(executed_periods)
+
+    job.section_done = section_done
+    with pytest.raises(PlanningError, match="planned too late"):
+        simulate_job(job, CardConfig(speed=1.0))
+    track, = card
+    end = windows[0].end
+    assert track.v_mm_s[-1] == 0.0
+    np.testing.assert_allclose(track.points_mm[-1], windows[-1].plan.pieces.start_mm[:, end],
+                               rtol=0, atol=1e-6)  # fmt: skip

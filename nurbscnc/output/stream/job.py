@@ -368,6 +368,8 @@ class Job:
         if ready and self.waiting == "planning":
             self.planning["held_s"] += self.feed.clock() - self._hold_since
             self.waiting = None
+        if self.feed_error is not None and self.waiting == "planning":
+            raise self.feed_error  # the card stands at rest at the last planned window's end
 
     def _margin(self, link) -> None:
         """How long [s] the card still had to run to the horizon when the next window came
