@@ -5,6 +5,7 @@ Usage::
     .venv/bin/python bench/stream_bench.py --out bench/stream_results.json
     .venv/bin/python bench/stream_bench.py --quick          # a short program, a few seconds
     .venv/bin/python bench/stream_bench.py --matrix-only --seeds 20   # only the fault matrix
+    .venv/bin/python bench/stream_bench.py --planning PROGRAM.ngc     # streaming while planning
 
 Four parts:
 
@@ -25,6 +26,13 @@ Four parts:
    frames / runs of bytes in both directions): corrupt 0.1–5 %, drop 0.1–2 %, several seeds.
    Every stream must end with the card's executed pulses equal to the plan, or fail with the
    card stopped having run a prefix of it; at ≤ 2 % corruption every stream must complete.
+
+``--planning PROGRAM`` (issue 14, :func:`planning_ahead`): the wall time from the start to
+the program validated (parse, interpret, the checks before work), to the first cut window
+planned and to the first period the card executes (the job streaming to the card simulator),
+against the time the whole plan takes (the planner thread left to finish); and, for a card
+running in real time from that first period, the margin by which each later window is ready
+before the card reaches it (negative: the card would wait at rest that long).
 """
 
 from __future__ import annotations
@@ -199,6 +207,66 @@ def print_matrix(m: dict) -> bool:
     return ok
 
 
+class _FirstPeriod(Exception):
+    """Raised from the simulation's hook once the card has executed its first period."""
+
+
+def planning_ahead(path: str) -> dict:
+    """Time to the first period vs the whole plan while streaming ``path`` (module doc)."""
+    from nurbscnc.machine.profile import load_machine
+    from nurbscnc.output.stream.feed import WindowFeed
+    from nurbscnc.output.stream.job import Job
+    from nurbscnc.output.stream.simlink import simulate_job
+    from nurbscnc.pipeline import window_plans
+    from nurbscnc.program.interpret import interpret_text
+
+    t0 = time.perf_counter()
+    mach = load_machine()
+    prog = interpret_text(Path(path).read_text())
+    windows = window_plans(prog, mach)  # the checks before work run here
+    t_valid = time.perf_counter() - t0
+    ready: list = []
+    cycle = []
+
+    def recorded():
+        for w in windows:
+            ready.append((w.k0, time.perf_counter() - t0))
+            cycle[:] = [w.plan.cycle_time_s]  # the last window's: the whole plan's
+            yield w
+
+    feed = WindowFeed(recorded(), clock=time.perf_counter)
+    job = Job(None, prog, mach, feed=feed)
+    t_first_window = time.perf_counter() - t0
+    first = []
+    update = job.update
+
+    def hook(link):
+        status = link.state.status
+        if status is not None and status.executed_periods > 0:
+            first.append(time.perf_counter() - t0)
+            raise _FirstPeriod
+        update(link)
+
+    job.update = hook
+    try:
+        simulate_job(job, CardConfig(speed=1.0))
+    except _FirstPeriod:
+        pass
+    while not feed.done:  # let the planner finish
+        time.sleep(0.05)
+        feed.poll()
+    t_planned = feed.start_s - t0 + feed.planned_s
+    period = mach.servo.period_s
+    # A card at 1x from its first period reaches window i's first sample at k0·T later.
+    margins = [first[0] + k0 * period - t for k0, t in ready[1:]]
+    return {"program": Path(path).name, "windows": len(ready),
+            "motion_s": round(cycle[0], 3),
+            "validated_s": round(t_valid, 3), "first_window_s": round(t_first_window, 3),
+            "first_period_s": round(first[0], 3), "whole_plan_s": round(t_planned, 3),
+            "margin_min_s": round(min(margins), 3) if margins else None,
+            "windows_late": int(sum(m < 0 for m in margins))}  # fmt: skip
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--out", default=None, help="write the results as JSON here")
@@ -207,7 +275,16 @@ def main() -> int:
     ap.add_argument("--matrix-only", action="store_true", help="only the fault matrix")
     ap.add_argument("--stress", action="store_true",
                     help="only the stress cells far past the matrix (10-50 %% corruption)")
+    ap.add_argument("--planning", default=None, metavar="PROGRAM",
+                    help="only: time to the first period vs the whole plan (streaming while "
+                         "planning)")
     args = ap.parse_args()
+    if args.planning:
+        row = planning_ahead(args.planning)
+        print(json.dumps(row))
+        if args.out:
+            Path(args.out).write_text(json.dumps(row, indent=2) + "\n")
+        return 0
     if args.stress:
         rows = stress()
         for name, row in rows.items():

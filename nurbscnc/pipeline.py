@@ -12,6 +12,8 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 
+import numpy as np
+
 from nurbscnc.errors import ConfigError
 from nurbscnc.interpolate.baselines import baseline_program_samples
 from nurbscnc.interpolate.sample import (
@@ -26,7 +28,7 @@ from nurbscnc.interpolate.sample import (
 )
 from nurbscnc.machine.profile import Machine, SoftLimits
 from nurbscnc.plan.limits import check_before_work
-from nurbscnc.plan.lookahead import Check, Plan, plan_checked
+from nurbscnc.plan.lookahead import Check, Plan, plan_checked, plan_windows
 from nurbscnc.plan.options import Algorithm, Dynamics, LookaheadOptions, parse_choice
 from nurbscnc.plan.precompensation import (
     Precompensation,
@@ -229,3 +231,38 @@ def _run_precompensated(program, machine: Machine, lookahead: LookaheadOptions,
     samples = samples_of(compensated, plan.pieces, options.interpolator)
     report = precompensation_report(plan, planned, compensated, comp, machine, tol)
     return Run(options.algorithm, samples, plan, check, report)
+
+
+def window_plans(program, machine: Machine, options: RunOptions | None = None, each=None):
+    """The look-ahead plan of an interpreted program cut window by cut window, for streaming
+    while it is planned (issue 14): the checks before work (the geometry inside the soft
+    limits, the motion within ``limits.max_points``) run here, at once (PlanningError before
+    anything is planned); then a generator of the windows of
+    :func:`~nurbscnc.plan.lookahead.plan_windows`, each yielded once final and its reference
+    points inside the soft limits (PlanningError at the first one outside, naming its line)
+    and passed to ``each(points_mm, lines)`` when given (the stream's pulse limit). The last
+    window's plan is :func:`run_program`'s (the same windows, the same levers), so the points
+    streamed are ``run``'s. A baseline ``algorithm`` or pre-compensation (a reference that
+    is not causal) raise ConfigError: they have no windows."""
+    options = options or RunOptions()
+    if options.algorithm != Algorithm.PH_LOOKAHEAD or options.precompensate:
+        raise ConfigError("planning while streaming needs the look-ahead planner without "
+                          "pre-compensation")  # fmt: skip
+    check_before_work(program.segments, machine)
+    lookahead = options.lookahead
+    if not machine.contour_check:
+        lookahead = replace(lookahead, dynamics=Dynamics.OFF)
+    sampler = reference_sampler(options.interpolator)
+    period = machine.servo.period_s
+
+    def windows():
+        for w in plan_windows(program, machine, lookahead, sampler):
+            last = w.end >= len(w.plan.pieces)
+            ref = sampler(w.plan.pieces, w.plan.profile, period, w.k0, None if last else w.k1)
+            lines = np.take(w.plan.pieces.line, ref.piece)
+            check_soft_limits(ref.points_mm, lines, machine.soft_limits)
+            if each is not None:
+                each(ref.points_mm, lines)
+            yield w
+
+    return windows()

@@ -72,6 +72,27 @@ def test_stream_program_over_pty_exits_0_at_the_programs_end(tmp_path):
     assert set(report) >= {"frames_sent", "retransmits", "duration_s", "bytes_sent"}
 
 
+def test_stream_plans_while_streaming_and_reports_the_planning(tmp_path):
+    """A program of four cuts (five cut windows) over a pty to the real-time card simulator:
+    the card ends at the program's end; the report counts the windows, and the margin, the
+    holds and the time held are there (their values depend on the machine's load: holds
+    are allowed, at most one per window boundary; the card then waited at rest)."""
+    from tests.test_stream_windows import CUTS
+
+    nc = tmp_path / "cuts.nc"
+    nc.write_text(CUTS)
+    with card_on("pty") as (card, ep):
+        result = run_stream([nc, "--port", ep.path, "--json"])
+    assert result.exit_code == 0, result.output
+    report = json.loads(result.stdout)
+    assert report["ok"] and report["final_position_steps"] == [40000, 15000, 5000]
+    planning = report["planning"]
+    assert planning["windows"] == 5 and planning["planned_s"] >= planning["first_window_s"]
+    assert 0 <= planning["holds"] <= 4 and planning["held_s"] >= 0.0
+    assert planning["plan_margin_min_s"] is None or planning["plan_margin_min_s"] >= 0.0
+    assert card.position.tolist() == [40000, 15000, 5000] and card.state.name == "DONE"
+
+
 def test_stream_points_file_over_socket_url(tmp_path):
     pts = spiral(600)
     csv = tmp_path / "points.csv"

@@ -98,9 +98,11 @@ def plan_job(path: str, machine=None, overrides=(), from_line: int | None = None
     from nurbscnc.cli.main import load_machine_cli, load_program
     from nurbscnc.cli.options import run_options
     from nurbscnc.errors import ConfigError
+    from nurbscnc.output.stream.feed import WindowFeed
     from nurbscnc.output.stream.job import Job, start_at_line
     from nurbscnc.output.stream.quantise import check_pulse_limit, quantise
-    from nurbscnc.pipeline import run_program
+    from nurbscnc.pipeline import run_program, window_plans
+    from nurbscnc.plan.options import Algorithm
 
     keys = ("algorithm", "corner_feed", "dynamics", "blend_tolerance", "interpolator",
             "lookahead")  # fmt: skip
@@ -113,15 +115,23 @@ def plan_job(path: str, machine=None, overrides=(), from_line: int | None = None
             prog = start_at_line(prog, from_line)
         except ValueError as exc:
             raise ConfigError(str(exc)) from None
-    run = run_program(prog, mach, options)
-    samples = run.samples
-    # The plan at 100 %: a lower override and a hold only slow down.
-    check_pulse_limit(quantise(samples.points_mm, mach.steps.per_mm, mach.servo.period_s,
-                               samples.line), mach.steps.max_pulses_per_period)  # fmt: skip
-    if run.plan is None:
+    if options.algorithm != Algorithm.PH_LOOKAHEAD:
+        run = run_program(prog, mach, options)
+        samples = run.samples
+        check_pulse_limit(quantise(samples.points_mm, mach.steps.per_mm, mach.servo.period_s,
+                                   samples.line), mach.steps.max_pulses_per_period)  # fmt: skip
         return None, mach
-    job = Job(run.plan, prog, mach, optional_stop=optional_stop, override=override,
-              lookahead_pieces=options.lookahead.lookahead_pieces)  # fmt: skip
+
+    def pulse_limit(points_mm, lines) -> None:
+        # The plan at 100 %: a lower override and a hold only slow down.
+        check_pulse_limit(quantise(points_mm, mach.steps.per_mm, mach.servo.period_s, lines),
+                          mach.steps.max_pulses_per_period)  # fmt: skip
+
+    # Planned cut window by cut window on a thread while the card runs the first ones
+    # (issue 14); the first window is waited for here, so its errors come before the port.
+    feed = WindowFeed(window_plans(prog, mach, options, each=pulse_limit))
+    job = Job(None, prog, mach, optional_stop=optional_stop, override=override,
+              lookahead_pieces=options.lookahead.lookahead_pieces, feed=feed)  # fmt: skip
     return job, mach
 
 
@@ -319,13 +329,16 @@ def stream(program, port, allow_url, baud, batch, timeout_s, lead, optional_stop
            zero, from_line, quiet, as_json, **settings):  # fmt: skip
     """Stream PROGRAM (.nc/.ngc, or reference points .csv/.npz) to a pulse-train card.
 
-    The whole program is planned and checked (soft limits, the card's pulse limit) before the
-    port is opened. At M0 / M60 (and M1 with --optional-stop) the card stops at rest and the
-    stream waits: Enter (on a terminal) or SIGUSR2 continues. SIGUSR1 or the space key is a
-    feed hold: the tool decelerates along the path within the acceleration and jerk limits,
-    stops, and continues on Enter / SIGUSR2 (the rest re-planned from rest). + / - change the
-    feed override. Ctrl-C or SIGTERM aborts the card at once and exits 130. Exit 0 only when
-    the card reports DONE at the program's end position.
+    The program is parsed, interpreted and its geometry checked before the port is opened;
+    the motion is planned cut window by cut window while the card runs (each window checked
+    against the soft limits and the card's pulse limit before it is sent; the card waits at
+    rest at the end of a cut if planning falls behind). At M0 / M60 (and M1 with
+    --optional-stop) the card stops at rest and the stream waits: Enter (on a terminal) or
+    SIGUSR2 continues. SIGUSR1 or the space key is a feed hold: the tool decelerates along
+    the path within the acceleration and jerk limits, stops, and continues on Enter /
+    SIGUSR2 (the rest re-planned from rest). + / - change the feed override. Ctrl-C or
+    SIGTERM aborts the card at once and exits 130. Exit 0 only when the card reports DONE at
+    the program's end position.
 
     Example: nurbscnc stream part.nc --port /dev/ttyUSB0 --optional-stop
     """
@@ -395,6 +408,19 @@ def stream(program, port, allow_url, baud, batch, timeout_s, lead, optional_stop
         f"{list(last.final_position_steps)} steps{hold_text}",
         markup=False,
     )
+    planning = extra.get("planning")
+    if planning is not None:
+        margin = planning["plan_margin_min_s"]
+        out.print(
+            f"planning: {planning['windows']} cut window(s); the first planned after "
+            f"{planning['first_window_s']:.3f} s, all after "
+            + (f"{planning['planned_s']:.3f} s" if planning["planned_s"] is not None
+               else "(unfinished)")
+            + ("; least margin ahead of the card "
+               + (f"{margin:.3f} s" if margin is not None else "— (no window while moving)"))
+            + f"; {planning['holds']} planning hold(s), {planning['held_s']:.3f} s held",
+            markup=False,
+        )
     for note in extra.get("notes", []):
         err.print(f"stream: note: {note['message']}", markup=False, highlight=False)
 

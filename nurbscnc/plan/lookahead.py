@@ -48,7 +48,9 @@ pieces at one cap and one set of limits are planned as one by
 """
 from __future__ import annotations
 
+import copy
 import inspect
+from collections import deque
 from dataclasses import dataclass, fields, replace
 
 import numpy as np
@@ -181,6 +183,11 @@ class Check:
     cutting: np.ndarray | None
     overs: Overs | None = None
     stats: dict | None = None
+    #: The compact form of the program's own samples (``overs`` without the held tail a cut
+    #: window's check adds, :func:`plan_windows`; else ``overs``): what joins windows.
+    samples: Overs | None = None
+    #: Cutting samples the statistics are over (joining windows).
+    cut_samples: int = 0
 
     def contour_um(self) -> np.ndarray:
         """The true contour error [µm] of the cutting samples (needs the kept response)."""
@@ -535,45 +542,114 @@ class _Checker:
         self.after_rapid[settle_rows + 1] = True
         self.index = PathIndex(pieces)  # where the pieces are (built on first use)
 
-    def _windows(self, planned: PieceList, profile: Profile):
-        """(reference rows, slice of the window's own rows in them): one row more on each
-        side where there is one (the direction of travel is a central difference)."""
+    def _windows(self, planned: PieceList, profile: Profile, rows: tuple | None = None):
+        """(reference rows, slice of the window's own rows in them, row of the virtual end
+        or None): one row more on each side where there is one (the direction of travel is
+        a central difference); with ``rows`` (k0, k1, last, …) only those samples, and
+        unless ``last``, after k1 − 1 the row k1 of the program as if it ended with this
+        window (:meth:`_end_row`: the next cut window's motion is not planned yet)."""
         period = self.machine.servo.period_s
+        n = sample_count(planned, profile, period)
+        r0, r1 = (0, n) if rows is None else (rows[0], min(rows[1], n))
+        last = rows is None or rows[2]
+        hi = n if last else r1 + 1
         if not self.windowed:
             ref = self.sampler(planned, profile, period)
-            yield ref, slice(0, ref.t_s.size)
-            return
-        n = sample_count(planned, profile, period)
-        for k0 in range(0, n, self.window):
-            k1 = min(k0 + self.window, n)
-            a, b = max(k0 - 1, 0), min(k1 + 1, n)
-            yield self.sampler(planned, profile, period, a, b), slice(k0 - a, k1 - a)
+            if rows is None:
+                yield ref, slice(0, ref.t_s.size), None
+                return
+            chunks = [(ref, max(r0 - 1, 0), min(r1 + 1, hi), r0, r1)]
+        else:
+            chunks = ((None, max(k0 - 1, 0), min(k0 + self.window + 1, r1 + 1, hi), k0,
+                       min(k0 + self.window, r1)) for k0 in range(r0, r1, self.window))
+        for whole, a, b, k0, k1 in chunks:
+            ref = self.sampler(planned, profile, period, a, b) if whole is None else \
+                _rows(whole, slice(a, b))  # fmt: skip
+            virt = None
+            if not last and b == r1 + 1:
+                virt = r1 - a
+                end = self._end_row(planned, profile, r1, rows[4] + 1)
+                ref = replace(ref, **{f.name: np.concatenate((getattr(ref, f.name)[:virt],
+                                                              getattr(end, f.name)))
+                                      for f in fields(ref)})  # fmt: skip
+            yield ref, slice(k0 - a, k1 - a), virt
 
-    def run(self, planned: PieceList, profile: Profile) -> Check:
-        """Check the plan ``planned``/``profile``: the :class:`Check` of its reference."""
-        if not self.windowed:
+    def _head(self, planned: PieceList, profile: Profile, end: int) -> tuple:
+        """Pieces 0 … ``end`` − 1 of ``planned`` and ``profile`` as a program of their own,
+        as far as the contour distance needs them (:class:`_Head`), their
+        :class:`~nurbscnc.plan.dynamics.PathIndex` (kept per ``end``) and rapid flags."""
+        return (_Head(planned, end), _HeadProfile(profile, end), _HeadIndex(self.index, end),
+                self.rapid[:end])  # fmt: skip
+
+    def _end_row(self, planned: PieceList, profile: Profile, k: int, end: int) -> Reference:
+        """Sample ``k`` of the program made of pieces 0 … ``end`` − 1 only (a cut window's
+        end; t_k at or after the end of their motion): at rest at the end of piece
+        ``end`` − 1, as :func:`~nurbscnc.plan.timing.exact_reference` gives it there (the
+        profile time t_k minus the dwells before ``end``)."""
+        t = np.array([k * self.machine.servo.period_s])
+        dwell = planned.dwell_after_s[:end]
+        before = np.cumsum(dwell[dwell > 0.0])
+        tau = t - (before[-1] if before.size else 0.0)
+        s = np.array([profile.piece_start_mm[end]])
+        piece = np.array([end - 1], dtype=np.intp)
+        points, param = planned.path.place(profile.piece_start_mm, s, piece)
+        return Reference(t, tau, s, np.zeros(1), np.zeros(1), piece, points, param)
+
+    def run(self, planned: PieceList, profile: Profile, rows: tuple | None = None,
+            stream: AxesStream | None = None) -> Check:  # fmt: skip
+        """Check the plan ``planned``/``profile``: the :class:`Check` of its reference.
+        ``rows`` (k0, k1, last, τ_end [s], last piece): only the samples k0 … k1 − 1 (one
+        cut window of :func:`plan_windows`), the servo starting from ``stream`` (copied;
+        None: at rest at the first sample), then as if the program ended there (``last``
+        False: its last sample :meth:`_end_row` and the held tail at profile time τ_end on
+        the last piece, on a copy of the servo state, which :attr:`stream_out` then holds
+        without them, for the next window)."""
+        if rows is None and not self.windowed:
             return self._run_whole(planned, profile)
         servo = self.machine.servo
-        stream = AxesStream([servo.x, servo.y, servo.z], servo.period_s)
+        if stream is None:
+            stream = AxesStream([servo.x, servo.y, servo.z], servo.period_s)
+        else:
+            stream = copy.deepcopy(stream)
         acc = _Accumulator(self, profile)
-        last = None
-        for ref, own in self._windows(planned, profile):
+        last = end = None
+        # The path the error is measured against: the pieces up to this window's end (the
+        # program as if it ended there; the whole program for the last window).
+        head = None if rows is None or rows[2] else self._head(planned, profile, rows[4] + 1)
+        on, prof, index = (planned, profile, self.index) if head is None else head[:3]
+        for ref, own, virt in self._windows(planned, profile, rows):
             d = np.gradient(ref.points_mm[:, :2], axis=0) if ref.t_s.size > 1 else \
                 np.zeros((ref.t_s.size, 2))  # fmt: skip
+            if virt is not None:
+                end = (_rows(ref, slice(virt, virt + 1)), d[virt : virt + 1])
             ref = _rows(ref, own)
             actual = stream.step(ref.points_mm)
-            resp = window_response(ref.points_mm, ref.s_mm, actual, d[own], planned, profile,
-                                   self.eps_mm, self.index)  # fmt: skip
-            acc.add(resp, self._cutting(ref, resp, profile), ref.tau_s, ref.piece)
+            resp = window_response(ref.points_mm, ref.s_mm, actual, d[own], on, prof,
+                                   self.eps_mm, index)  # fmt: skip
+            acc.add(resp, self._cutting(ref, resp, profile, head), ref.tau_s, ref.piece)
             last = ref
+        self.stream_out = stream
+        virtual = rows is not None and not rows[2]
+        if virtual:  # the end of a cut window, as if the program ended there
+            stream = copy.deepcopy(stream)
+            if end is not None:
+                ref, d_end = end
+                actual = stream.step(ref.points_mm)
+                resp = window_response(ref.points_mm, ref.s_mm, actual, d_end, on, prof,
+                                       self.eps_mm, index)  # fmt: skip
+                acc.add(resp, self._cutting(ref, resp, profile, head), ref.tau_s, ref.piece,
+                        virtual=True)  # fmt: skip
+                last = ref
         tail = stream.settle()  # the reference held at its end until the axes settle
         if tail.shape[0]:
             m = tail.shape[0]
             held = np.repeat(last.points_mm[-1:], m, axis=0)
             resp = window_response(held, np.full(m, last.s_mm[-1]), tail, np.zeros((m, 2)),
-                                   planned, profile, self.eps_mm, self.index)  # fmt: skip
-            acc.add(resp, np.full(m, not self.rapid[-1]), np.full(m, profile.duration_s),
-                    np.full(m, len(planned) - 1))  # fmt: skip
+                                   on, prof, self.eps_mm, index)  # fmt: skip
+            tau_end, piece_end = (profile.duration_s, len(planned) - 1) if rows is None \
+                else rows[3:5]  # fmt: skip
+            acc.add(resp, np.full(m, not self.rapid[piece_end]), np.full(m, tau_end),
+                    np.full(m, piece_end), virtual=virtual)  # fmt: skip
         return acc.check()
 
     def _run_whole(self, planned: PieceList, profile: Profile) -> Check:
@@ -592,16 +668,61 @@ class _Checker:
             return acc.check()
         return replace(acc.check(), reference=ref, response=resp, cutting=cutting)
 
-    def _cutting(self, ref: Reference, resp: Response, profile: Profile) -> np.ndarray:
+    def _cutting(self, ref: Reference, resp: Response, profile: Profile,
+                 head: tuple | None = None) -> np.ndarray:  # fmt: skip
         """Which reference samples are checked (N,): contour error matters while cutting;
         samples on rapids (air moves) and during the settle after a rapid (the reference
         waits at the cut's start) are not. The first cutting samples after a rapid are
         measured against the cut only (in ``resp``)."""
         waiting = self.after_rapid[ref.piece] & (
             ref.tau_s <= profile.piece_start_time_s[ref.piece])
-        _cut_distance_after_rapids(resp, ref, profile, self.after_rapid, waiting, self.rapid,
-                                   self.index)  # fmt: skip
+        index, rapid = (self.index, self.rapid) if head is None else (head[2], head[3])
+        _cut_distance_after_rapids(resp, ref, profile, self.after_rapid, waiting, rapid,
+                                   index)  # fmt: skip
         return ~self.rapid[ref.piece] & ~waiting
+
+
+class _Head:
+    """The first ``end`` pieces of a :class:`~nurbscnc.plan.pieces.PieceList`, read-only,
+    for the contour distance (the columns it reads, cut to ``end``; the path shared)."""
+
+    def __init__(self, pieces: PieceList, end: int):
+        self._pieces, self._end = pieces, end
+
+    def __len__(self) -> int:
+        return self._end
+
+    def __getattr__(self, name: str):
+        value = getattr(self._pieces, name)
+        if isinstance(value, np.ndarray) and value.ndim and value.shape[-1] == len(self._pieces):
+            return value[..., : self._end]
+        return value
+
+
+class _HeadIndex:
+    """The whole program's :class:`~nurbscnc.plan.dynamics.PathIndex` asked about its first
+    ``end`` pieces only (the others excluded): the same candidates and distances as an index
+    of those pieces, with the dense polylines kept across every cut window's re-plans."""
+
+    def __init__(self, index: PathIndex, end: int):
+        self._index, self._end = index, end
+
+    def distance_mm(self, q: np.ndarray, upper_mm: np.ndarray, block: int = 256,
+                    exclude: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
+        """:meth:`PathIndex.distance_mm` to pieces 0 … end − 1 (less ``exclude`` (end,))."""
+        beyond = np.zeros(len(self._index._pieces), dtype=bool)
+        beyond[self._end :] = True
+        if exclude is not None:
+            beyond[: self._end] |= exclude[: self._end]
+        return self._index.distance_mm(q, upper_mm, block, beyond)
+
+
+class _HeadProfile:
+    """The profile of the first ``end`` pieces (their start lengths and total length)."""
+
+    def __init__(self, profile: Profile, end: int):
+        self.piece_start_mm = profile.piece_start_mm[:end]
+        self.total_length_mm = float(profile.piece_start_mm[end])
 
 
 class _Accumulator:
@@ -619,10 +740,17 @@ class _Accumulator:
         self.worst = 0.0
         self.c_max = self.c_sq = self.eq29_max = 0.0
         self.c_n = 0
+        self.real = None  # (count, worst, restart, over count, run count) before a virtual tail
 
-    def add(self, resp: Response, cutting: np.ndarray, tau_s: np.ndarray, piece: np.ndarray):
+    def add(self, resp: Response, cutting: np.ndarray, tau_s: np.ndarray, piece: np.ndarray,
+            virtual: bool = False):  # fmt: skip
         """The next samples: their response, which are checked (``cutting``), profile times
-        [s] and pieces."""
+        [s] and pieces. ``virtual``: the held tail of a cut window that the program does not
+        end with: it counts for the window's decisions, not in its statistics nor in
+        :attr:`Check.samples`."""
+        if virtual and self.real is None:
+            self.real = (self.count, self.worst, self.restart.copy(), len(self.over),
+                         len(self.runs))  # fmt: skip
         err = np.where(cutting, resp.contour_mm, 0.0)
         over = np.flatnonzero(err > self.eps_mm)
         self.over.append((over + self.count, err[over], tau_s[over]))
@@ -632,7 +760,7 @@ class _Accumulator:
         self.runs.append((piece[starts], starts + self.count))
         self.last_piece = int(piece[-1])
         self.restart += np.searchsorted(tau_s, self.t_restart, side="right")
-        c = resp.contour_mm[cutting] * 1000.0
+        c = resp.contour_mm[cutting] * 1000.0 if not virtual else np.zeros(0)
         if c.size:
             self.c_max = max(self.c_max, float(c.max()))
             self.c_sq += float(np.dot(c, c))
@@ -649,67 +777,121 @@ class _Accumulator:
         rms = float(np.sqrt(self.c_sq / self.c_n)) if self.c_n else 0.0
         stats = {"contour_true_max_um": self.c_max, "contour_true_rms_um": rms,
                  "contour_eq29_max_um": self.eq29_max}  # fmt: skip
-        return Check(None, None, None, overs, stats)
+        samples = overs
+        if self.real is not None:
+            count, worst, restart, n_over, n_runs = self.real
+            i, e, t = (np.concatenate(x) for x in zip(*self.over[:n_over]))
+            rp, rs = (np.concatenate(x) for x in zip(*self.runs[:n_runs]))
+            samples = Overs(count, i, e, t, rp, rs, restart, worst)
+        return Check(None, None, None, overs, stats, samples, self.c_n)
 
 
-def plan_checked(program, machine: Machine, options: LookaheadOptions | None = None,
-                 reference=exact_reference, keep_reference: bool = True,
-                 window: int = CHECK_WINDOW) -> tuple[Plan, Check | None]:  # fmt: skip
-    """Plan a whole interpreted program and check it (SPEC §1: modules 1–4, §8): pieces,
-    profile, then the dynamics check on the plan's reference points, re-planning until the
-    predicted contour error is within ε_max. ``reference``: (pieces, profile, period_s,
-    k0=0, k1=None) → :class:`~nurbscnc.plan.timing.Reference`, the points k0…k1−1 the check
-    simulates (default: the exact ones; the interpolator passes its own,
-    :func:`nurbscnc.interpolate.sample.reference_sampler`); a sampler without windows
-    (:func:`_windowed`) is called as (pieces, profile, period_s) for all of them.
+@dataclass(frozen=True, eq=False)
+class Window:
+    """One cut window of :func:`plan_windows`: ``index``; its pieces ``first`` … ``end`` − 1
+    (the rapids before a cut and the cut, up to the next rapid: a rest junction); its servo
+    samples ``k0`` … ``k1`` − 1 (wall time k·T_s within it; the last window: to the end);
+    ``plan``: the whole program's plan with this window and all before it final (the
+    profile of a window depends only on its own levers and the windows before it: the
+    junctions between windows are at rest), the later ones not planned yet (their
+    kinematic levers); ``check``: this window's check (compact) and ``iterations``: its
+    re-plans."""
 
-    The check runs ``window`` servo samples at a time (:class:`_Checker`), so its memory
-    grows with the pieces, not with the motion time; the plan does not depend on
-    ``window``. ``keep_reference``: the final :class:`Check` holds the whole reference and
-    response (plots, reports, the output); False: only the over-limit samples and the
-    statistics (long programs). Returns the plan and the final check (None with
-    ``dynamics="off"``)."""
-    options = options or LookaheadOptions()
-    pieces = segment_pieces(program.segments, machine, options.plan)
-    if not len(pieces):
-        raise PlanningError("the program has no motion to plan")
-    lim = machine.limits
-    path_lim = piece_limits(pieces, machine)  # the axes' limits along each piece
-    a_p = np.array(path_lim.a_mm_s2, dtype=float)
-    j_p = np.array(path_lim.j_mm_s3, dtype=float)
-    k = len(pieces)
-    lev = _Levers(np.minimum(pieces.v_cap_mm_s, path_lim.v_mm_s), a_p, j_p, a_p.copy(),
-                  j_p.copy(), np.zeros(k), np.zeros(k, dtype=bool))  # fmt: skip
-    smooth = junction_caps(pieces)  # > 0 where the path is tangent-continuous
-    period = machine.servo.period_s
-    eps_mm = lim.contour_tolerance_mm * CONTOUR_MARGIN
-    # Rapids followed by a cut: the settle (in-position wait) there is the check's to set
-    # (zero while the error is within ε_max). Without the check (``off``: kinematics only)
-    # there is nothing to wait for; the paper's global rule has no local lever, so it waits
-    # the full settle (the rapid's overshoot then never counts).
-    settle_rows = np.flatnonzero(pieces.rapid[:-1] & ~pieces.rapid[1:])
-    settle_max = settle_time_s(machine)
-    if options.dynamics == Dynamics.GLOBAL:
-        lev.settle_s[settle_rows] = settle_max
-    base_dwell = pieces.dwell_after_s
-    checker = _Checker(pieces, machine, reference, eps_mm, settle_rows, window,
-                       keep_reference)  # fmt: skip
+    index: int
+    first: int
+    end: int
+    k0: int
+    k1: int
+    plan: Plan
+    check: Check | None
+    iterations: int
 
-    def evaluate(lv: _Levers):
-        """Plan with the levers ``lv`` and check: (planned pieces, profile, check)."""
-        planned = _with_dwell(pieces, base_dwell + lv.settle_s) if settle_rows.size else pieces
-        profile = profile_over(planned.length_mm, lv.caps, smooth, lv.limits(),
-                               options.lookahead_pieces)  # fmt: skip
-        check_point_count(planned, profile, machine)  # before anything is sampled
-        if options.dynamics == Dynamics.OFF:
+
+def cut_windows(pieces: PieceList) -> np.ndarray:
+    """Piece index of the start of each cut window (w,) (the first is 0): every rapid that a
+    cut precedes starts a window (a cut → rapid junction is a rest, :func:`junction_caps`),
+    so a window is the rapids before a cut and the cut; the settle after a rapid belongs to
+    the cut after it."""
+    rapid = np.asarray(pieces.rapid, dtype=bool)
+    return np.concatenate(([0], np.flatnonzero(rapid[1:] & ~rapid[:-1]) + 1))
+
+
+class _Setup:
+    """What every plan of one program shares: its pieces, the kinematic levers (the axes'
+    path limits), the settle rows, the checker; :meth:`evaluate` plans and checks levers."""
+
+    def __init__(self, program, machine: Machine, options: LookaheadOptions, reference,
+                 keep_reference: bool, window: int):  # fmt: skip
+        self.machine, self.options = machine, options
+        pieces = segment_pieces(program.segments, machine, options.plan)
+        if not len(pieces):
+            raise PlanningError("the program has no motion to plan")
+        self.pieces = pieces
+        path_lim = piece_limits(pieces, machine)  # the axes' limits along each piece
+        a_p = np.array(path_lim.a_mm_s2, dtype=float)
+        j_p = np.array(path_lim.j_mm_s3, dtype=float)
+        k = self.k = len(pieces)
+        self.initial = _Levers(np.minimum(pieces.v_cap_mm_s, path_lim.v_mm_s), a_p, j_p,
+                               a_p.copy(), j_p.copy(), np.zeros(k), np.zeros(k, dtype=bool))
+        self.smooth = junction_caps(pieces)  # > 0 where the path is tangent-continuous
+        self.period = machine.servo.period_s
+        self.eps_mm = machine.limits.contour_tolerance_mm * CONTOUR_MARGIN
+        # Rapids followed by a cut: the settle (in-position wait) there is the check's to
+        # set (zero while the error is within ε_max). Without the check (``off``: kinematics
+        # only) there is nothing to wait for; the paper's global rule has no local lever, so
+        # it waits the full settle (the rapid's overshoot then never counts).
+        self.settle_rows = np.flatnonzero(pieces.rapid[:-1] & ~pieces.rapid[1:])
+        self.settle_max = settle_time_s(machine)
+        if options.dynamics == Dynamics.GLOBAL:
+            self.initial.settle_s[self.settle_rows] = self.settle_max
+        self.base_dwell = pieces.dwell_after_s
+        self.checker = _Checker(pieces, machine, reference, self.eps_mm, self.settle_rows,
+                                window, keep_reference)  # fmt: skip
+
+    def plan_of(self, lv: _Levers):
+        """The planned pieces (settles in their dwells) and profile of the levers ``lv``."""
+        planned = _with_dwell(self.pieces, self.base_dwell + lv.settle_s) \
+            if self.settle_rows.size else self.pieces  # fmt: skip
+        profile = profile_over(planned.length_mm, lv.caps, self.smooth, lv.limits(),
+                               self.options.lookahead_pieces)  # fmt: skip
+        check_point_count(planned, profile, self.machine)  # before anything is sampled
+        return planned, profile
+
+    def evaluate(self, lv: _Levers, rows=None, stream=None):
+        """Plan with the levers ``lv`` and check (``rows``, ``stream``: one cut window,
+        :meth:`_Checker.run`): (planned pieces, profile, check)."""
+        planned, profile = self.plan_of(lv)
+        if self.options.dynamics == Dynamics.OFF:
             return planned, profile, None
-        return planned, profile, checker.run(planned, profile)
+        return planned, profile, self.checker.run(planned, profile, rows, stream)
 
-    def shape(lv: _Levers, result) -> None:
-        _shape(lv, result[2].overs, eps_mm, result[1], pieces, smooth, settle_rows,
-               settle_max, period)  # fmt: skip
+    def shape(self, lv: _Levers, result) -> None:
+        _shape(lv, result[2].overs, self.eps_mm, result[1], self.pieces, self.smooth,
+               self.settle_rows, self.settle_max, self.period)  # fmt: skip
 
-    initial = lev.copy()
+    def fallback(self, lv: _Levers, result, stage: int) -> None:
+        _fallback(lv, result[2].overs, self.eps_mm, self.pieces, self.settle_rows,
+                  self.settle_max, self.period, stage)  # fmt: skip
+
+    def plan(self, lev: _Levers, result, iterations: int) -> Plan:
+        """The :class:`Plan` of the levers ``lev`` and their ``result``."""
+        planned, profile = result[0], result[1]
+        initial = self.initial
+        feed = lev.caps < initial.caps
+        transition = np.zeros(self.k, dtype=bool)
+        for f in ("a_up", "j_up", "a_dn", "j_dn"):
+            transition |= getattr(lev, f) < getattr(initial, f)
+        return Plan(planned, lev.caps, profile, iterations, _cycle_time(result),
+                    self.options.dynamics, lev.limits(), feed | transition, feed, transition,
+                    lev.settle_s)  # fmt: skip
+
+
+def _converge(st: _Setup, lev: _Levers, evaluate, confine=lambda lv: None):
+    """The levers loop (module docstring) from ``lev`` (changed in place): re-plan until the
+    check is within ε_max (local shaping, then the fallback), then the improvement phase.
+    ``evaluate(levers)`` → (planned, profile, check); ``confine(levers)`` undoes changes
+    outside the levers' scope (a cut window). Returns (final levers, result, re-plans)."""
+    options, eps_mm, initial = st.options, st.eps_mm, lev.copy()
     iterations = 0
     while True:
         result = evaluate(lev)
@@ -730,11 +912,11 @@ def plan_checked(program, machine: Machine, options: LookaheadOptions | None = N
             lev.caps *= min(float(np.sqrt(eps_mm / worst)), 0.98)
             lev.shaped[:] = True
         elif iterations <= LOCAL_ITERATIONS:
-            shape(lev, result)
+            st.shape(lev, result)
         else:
             stage = 1 if iterations <= LOCAL_ITERATIONS + FALLBACK_LOCAL_ITERATIONS else 2
-            _fallback(lev, result[2].overs, eps_mm, pieces, settle_rows, settle_max, period,
-                      stage)  # fmt: skip
+            st.fallback(lev, result, stage)
+        confine(lev)
         result = None  # the last check goes first (with keep_reference, hundreds of MB)
     if options.dynamics == Dynamics.LOCAL and lev.shaped.any():
         # Improvement: bisect every shaped lever between its feasible value and its value
@@ -760,21 +942,210 @@ def plan_checked(program, machine: Machine, options: LookaheadOptions | None = N
                 best, best_time = trial, t
             else:
                 probe = trial.copy()
-                shape(probe, result)
+                st.shape(probe, result)
+                confine(probe)
                 hi = hi.narrowed(trial, probe)
                 result = None
         lev = best
         if result is None:
             result = evaluate(lev)
-    planned, profile, check = result
-    feed = lev.caps < initial.caps
-    transition = np.zeros(k, dtype=bool)
-    for f in ("a_up", "j_up", "a_dn", "j_dn"):
-        transition |= getattr(lev, f) < getattr(initial, f)
-    plan = Plan(planned, lev.caps, profile, iterations, _cycle_time(result),
-                options.dynamics, lev.limits(), feed | transition, feed, transition,
-                lev.settle_s)  # fmt: skip
-    return plan, check
+    return lev, result, iterations
+
+
+def plan_checked(program, machine: Machine, options: LookaheadOptions | None = None,
+                 reference=exact_reference, keep_reference: bool = True,
+                 window: int = CHECK_WINDOW) -> tuple[Plan, Check | None]:  # fmt: skip
+    """Plan a whole interpreted program and check it (SPEC §1: modules 1–4, §8): pieces,
+    profile, then the dynamics check on the plan's reference points, re-planning until the
+    predicted contour error is within ε_max. ``reference``: (pieces, profile, period_s,
+    k0=0, k1=None) → :class:`~nurbscnc.plan.timing.Reference`, the points k0…k1−1 the check
+    simulates (default: the exact ones; the interpolator passes its own,
+    :func:`nurbscnc.interpolate.sample.reference_sampler`); a sampler without windows
+    (:func:`_windowed`) is called as (pieces, profile, period_s) for all of them.
+
+    A program of several cuts (``dynamics="local"``) is planned cut window by cut window
+    (:func:`plan_windows`); the plan is the last window's (all windows final) and the check
+    the windows' checks joined (with ``keep_reference``: re-run once on it as one program).
+    The check runs ``window`` servo samples at a time
+    (:class:`_Checker`), so its memory grows with the pieces, not with the motion time; the
+    plan does not depend on ``window``. ``keep_reference``: the final :class:`Check` holds
+    the whole reference and response (plots, reports, the output); False: only the
+    over-limit samples and the statistics (long programs). Returns the plan and the final
+    check (None with ``dynamics="off"``)."""
+    options = options or LookaheadOptions()
+    st = _Setup(program, machine, options, reference, keep_reference, window)
+    if options.dynamics != Dynamics.LOCAL or cut_windows(st.pieces).size == 1:
+        lev, result, iterations = _converge(st, st.initial.copy(), st.evaluate)
+        return st.plan(lev, result, iterations), result[2]
+    whole = st.checker
+    st.checker = _Checker(st.pieces, machine, reference, st.eps_mm, st.settle_rows, window,
+                          False)  # fmt: skip
+    checks = []
+
+    def windows():
+        for w in _windows_of(st):
+            checks.append(w.check)
+            yield w
+
+    last = deque(windows(), maxlen=1)[0]  # one window's plan held at a time
+    if keep_reference:  # the whole reference and response: one more pass over the samples
+        return last.plan, whole.run(last.plan.pieces, last.plan.profile)
+    return last.plan, _joined_checks(checks)
+
+
+def plan_windows(program, machine: Machine, options: LookaheadOptions | None = None,
+                 reference=exact_reference, window: int = CHECK_WINDOW):
+    """Plan a program cut window by cut window (:func:`cut_windows`), yielding each
+    :class:`Window` as soon as it is final: its levers loop (shaping, fallback, improvement)
+    sees only its own pieces and samples, the servo starting from the state the previous
+    window's final plan left it in (:class:`~nurbscnc.servo.model.AxesStream`), its end
+    checked as if the program ended there (the held tail on a copy of that state); the
+    plan of a program cut short after window n is the first n windows'. One window (and
+    ``dynamics`` other than "local") is :func:`plan_checked`'s plan."""
+    options = options or LookaheadOptions()
+    st = _Setup(program, machine, options, reference, False, window)
+    if options.dynamics != Dynamics.LOCAL or cut_windows(st.pieces).size == 1:
+        lev, result, iterations = _converge(st, st.initial.copy(), st.evaluate)
+        n = sample_count(result[0], result[1], st.period)
+        yield Window(0, 0, st.k, 0, n, st.plan(lev, result, iterations), result[2],
+                     iterations)  # fmt: skip
+        return
+    yield from _windows_of(st)
+
+
+def _windows_of(st: _Setup):
+    """The windows of :func:`plan_windows` (several cuts, local dynamics).
+
+    Each window's profile is planned from its own pieces only (:func:`profile_over` over
+    pieces a … b − 1: the junctions at a and b are rests, so nothing outside the window
+    changes it): the plan of window w is the final windows before it, then its own profile,
+    then a placeholder for the pieces not planned yet (:func:`_placeholder`: never sampled
+    before the window's end), spliced into one :class:`Profile` (:func:`_spliced`). A
+    re-plan thus costs the window's pieces, not the program's."""
+    starts = cut_windows(st.pieces)
+    ends = np.append(starts[1:], st.k)
+    final = st.initial.copy()  # windows before the current one final, later ones kinematic
+    stream = None
+    done = None  # the final profile of the windows before the current one (from time 0)
+    total_iterations = 0
+    for w, (a, b) in enumerate(zip(starts.tolist(), ends.tolist())):
+        is_last = b == st.k
+        scope = np.zeros(st.k, dtype=bool)
+        scope[a:b] = True
+        later = None if is_last else _placeholder(st.pieces, st.initial, b)
+
+        def confine(lv: _Levers, scope=scope, final=final) -> None:
+            for f in (*_Levers._SCALED, "settle_s", "shaped"):
+                getattr(lv, f)[~scope] = getattr(final, f)[~scope]
+
+        def plan_of(lv: _Levers, a=a, b=b, done=done, later=later):
+            planned = _with_dwell(st.pieces, st.base_dwell + lv.settle_s) \
+                if st.settle_rows.size else st.pieces  # fmt: skip
+            lim = lv.limits()
+            own = profile_over(st.pieces.length_mm[a:b], lv.caps[a:b], st.smooth[a : b + 1],
+                               Limits(lim.a_up_mm_s2[a:b], lim.j_up_mm_s3[a:b],
+                                      lim.a_down_mm_s2[a:b], lim.j_down_mm_s3[a:b]),
+                               st.options.lookahead_pieces)  # fmt: skip
+            profile = _spliced([x for x in (done, own, later) if x is not None])
+            check_point_count(planned, profile, st.machine)  # before anything is sampled
+            return planned, profile, own
+
+        def rows_of(planned, profile, a=a, b=b, is_last=is_last):
+            k0 = _first_sample_at(planned, profile, a, st.period)
+            if is_last:
+                k1 = sample_count(planned, profile, st.period)
+                return (k0, k1, True, profile.duration_s, st.k - 1)
+            k1 = _first_sample_at(planned, profile, b, st.period)
+            return (k0, k1, False, float(profile.piece_start_time_s[b]), b - 1)
+
+        def evaluate(lv: _Levers, plan_of=plan_of, rows_of=rows_of, stream=stream):
+            planned, profile, own = plan_of(lv)
+            check = st.checker.run(planned, profile, rows_of(planned, profile), stream)
+            return planned, profile, check, own
+
+        lev, result, iterations = _converge(st, final.copy(), evaluate, confine)
+        final = lev
+        stream = st.checker.stream_out
+        done = _spliced([x for x in (done, result[3]) if x is not None])
+        total_iterations += iterations
+        rows = rows_of(result[0], result[1])
+        yield Window(w, a, b, rows[0], rows[1], st.plan(lev, result, total_iterations),
+                     result[2], iterations)  # fmt: skip
+
+
+def _placeholder(pieces: PieceList, lev: _Levers, first: int) -> Profile:
+    """A stand-in profile of pieces ``first`` … k − 1 (not planned yet): each piece one phase
+    of constant jerk from rest (s = j·t³/6 over its length, the jerk within the piece's
+    kinematic limit and the mean speed within its cap), the junctions marked moving (not
+    stops) except the first, a rest (the window's end). Only its shape matters (piece
+    starts after the planned pieces' end, a clock that runs on; speed and acceleration 0 at
+    the window's end, as the real plan has them there): a cut window's check and the stream
+    never sample it beyond the window's end."""
+    length = np.asarray(pieces.length_mm[first:], dtype=float)
+    cap = np.asarray(lev.caps[first:], dtype=float)
+    dur = np.maximum(length / cap, np.cbrt(6.0 * length / lev.j_up[first:]))
+    start_t = np.concatenate(([0.0], np.cumsum(dur)[:-1]))
+    start_s = np.concatenate(([0.0], np.cumsum(length)[:-1]))
+    moving = np.flatnonzero(length > 0.0)
+    z = np.zeros(moving.size)
+    jerk = 6.0 * length[moving] / dur[moving] ** 3
+    return Profile(float(length.sum()), float(dur.sum()), np.append(0.0, cap), cap.copy(),
+                   start_s, start_t, start_t[moving], dur[moving], start_s[moving], z,
+                   z.copy(), jerk, moving)  # fmt: skip
+
+
+def _spliced(parts: list) -> Profile:
+    """Profiles of consecutive runs of pieces, each from time 0 and arc length 0, as one
+    (times, lengths and piece indices shifted by those before; the junctions between them
+    are rests, so the speeds join)."""
+    if len(parts) == 1:
+        return parts[0]
+    t0 = np.cumsum([0.0] + [p.duration_s for p in parts[:-1]])
+    s0 = np.cumsum([0.0] + [p.total_length_mm for p in parts[:-1]])
+    n0 = np.cumsum([0] + [p.piece_count for p in parts[:-1]])
+    cat = np.concatenate
+    return Profile(
+        float(s0[-1] + parts[-1].total_length_mm), float(t0[-1] + parts[-1].duration_s),
+        cat([p.junction_speeds_mm_s[:-1] for p in parts] + [parts[-1].junction_speeds_mm_s[-1:]]),
+        cat([p.piece_peak_speed_mm_s for p in parts]),
+        cat([p.piece_start_mm + s for p, s in zip(parts, s0)]),
+        cat([p.piece_start_time_s + t for p, t in zip(parts, t0)]),
+        cat([p.phase_start_time_s + t for p, t in zip(parts, t0)]),
+        cat([p.phase_duration_s for p in parts]),
+        cat([p.phase_s0_mm + s for p, s in zip(parts, s0)]),
+        cat([p.phase_v0_mm_s for p in parts]), cat([p.phase_a0_mm_s2 for p in parts]),
+        cat([p.phase_jerk_mm_s3 for p in parts]),
+        cat([p.phase_piece_index + n for p, n in zip(parts, n0)]))
+
+
+def _first_sample_at(planned: PieceList, profile: Profile, piece: int, period_s: float) -> int:
+    """The first servo sample k at or after the wall time [s] at which ``piece`` starts
+    (its profile time plus the dwells before it): t_k = k·T_s ≥ that time."""
+    t_wall = float(profile.piece_start_time_s[piece]) + float(
+        np.sum(planned.dwell_after_s[:piece]))
+    return int(np.ceil(t_wall / period_s - 1e-9))
+
+
+def _joined_checks(checks: list) -> Check:
+    """The compact :class:`Check` of a program's cut windows, their samples one after the
+    other (:attr:`Check.samples`: without the held tails of the windows' checks): over-limit
+    samples, piece runs, counts before each restart and statistics joined."""
+    ov = [c.samples for c in checks]
+    off = np.cumsum([0] + [o.count for o in ov])
+    cat = np.concatenate
+    overs = Overs(int(off[-1]), cat([o.index + d for o, d in zip(ov, off)]),
+                  cat([o.err_mm for o in ov]), cat([o.tau_s for o in ov]),
+                  cat([o.run_piece for o in ov]), cat([o.run_start + d for o, d in zip(ov, off)]),
+                  np.sum([o.restart_count for o in ov], axis=0), max(o.worst_mm for o in ov))
+    n = [c.cut_samples for c in checks]
+    total = sum(n)
+    stats = [c.stats for c in checks]
+    rms = float(np.sqrt(sum(s["contour_true_rms_um"] ** 2 * m for s, m in zip(stats, n))
+                        / total)) if total else 0.0  # fmt: skip
+    joined = {"contour_true_max_um": max(s["contour_true_max_um"] for s in stats),
+              "contour_true_rms_um": rms,
+              "contour_eq29_max_um": max(s["contour_eq29_max_um"] for s in stats)}
+    return Check(None, None, None, overs, joined, overs, total)
 
 
 def _cut_distance_after_rapids(response: Response, ref: Reference, profile: Profile,

@@ -24,6 +24,17 @@ change re-times a bounded number of periods however long the section. Every sect
 periods are quantised to pulses (:func:`~.quantise.quantise`) with the same
 rounding, and each section starts at the exact point where the previous one ended, so the
 card's position is continuous across sections.
+
+Streaming while planning (issue 14). With a ``feed`` (:class:`~.feed.WindowFeed`: the cut
+windows of :func:`~nurbscnc.plan.lookahead.plan_windows` as they become final) the job starts
+on the first window's plan and adopts each later one as it arrives (:meth:`Job.poll`): the
+periods framed never go beyond the *horizon*, the end of the last final window, a rest (the
+profile is 0 there and nothing after it can change what comes before). A chunk is cut at the
+horizon and the section kept open; when the link has framed every period up to it and the
+next window is still not planned, the section ends there at rest (the card DONE, standing):
+a *planning hold*, until the window arrives. For each window adopted while the card moves,
+the margin is how long the card still had to run to the old horizon; the least of them, the
+holds and the time held are reported (:meth:`Job.report`).
 """
 
 from __future__ import annotations
@@ -104,6 +115,9 @@ class Section:
     held: bool = False  #: a feed hold replaced its end
     hold_wait_s: float = 0.0  #: a dwell interrupted by the hold: what is left of it [s]
     override_deferred: bool = False  #: no ramp fitted: the override waits for the next one
+    blocked: bool = False  #: the track stops at the planning horizon (more when planned)
+    blocked_at: int | None = None  #: the horizon (first piece not planned) it stops at
+    at_horizon: bool = False  #: closed at the planning horizon (a planning hold follows)
 
 
 class Job:
@@ -111,11 +125,26 @@ class Job:
 
     ``plan`` a :class:`~nurbscnc.plan.lookahead.Plan` of ``program``; ``machine`` its
     machine; ``override`` the starting feed override (fraction, 0.1–1: above 1 time scaling
-    would exceed the limits the plan respected).
+    would exceed the limits the plan respected). ``feed``: the plan's cut windows as they are
+    planned (module docstring; ``plan`` is then ignored: the first window's plan is used).
     """
 
     def __init__(self, plan, program, machine, *, optional_stop: bool = False,
-                 override: float = 1.0, lookahead_pieces: int | None = None):  # fmt: skip
+                 override: float = 1.0, lookahead_pieces: int | None = None,
+                 feed=None):  # fmt: skip
+        self.feed = feed
+        self.program = program
+        self.horizon = None  #: first piece not planned yet (None: the whole plan is final)
+        self.motion_horizon = None  #: the horizon the current motion was made with
+        self.planning = {"windows": 0, "margins_s": [], "holds": 0, "held_s": 0.0}
+        self._hold_since = None
+        self.feed_error = None
+        if feed is not None:
+            first = feed.first()
+            plan = first.plan
+            self.horizon = None if first.end >= len(plan.pieces) else first.end
+            self.motion_horizon = self.horizon
+            self.planning["windows"] = 1
         self.plan, self.machine = plan, machine
         self.period_s = machine.servo.period_s
         self.steps_per_mm = machine.steps.per_mm
@@ -127,6 +156,7 @@ class Job:
         self.motion: Motion | None = plan_motion(plan)
         self.tau = 0.0  #: where the next section starts, in the motion's profile time
         self.first_section = True
+        self.motion_is_plan = True  #: the motion is the plan's own (no feed hold yet)
         self.stops = tuple(program_stops(program, plan))
         self.next_stop = 0  #: the first stop not waited at yet
         self.section: Section | None = None
@@ -174,6 +204,10 @@ class Job:
     # -- sections ----------------------------------------------------------------------------
     def next_section(self) -> PulseProgram | None:
         """The pulses of the next section, or None (finished, or waiting for the operator)."""
+        self.poll()
+        if self.feed_error is not None and not self.finished and \
+                self._horizon_tau() <= self.tau:  # fmt: skip
+            raise self.feed_error
         if self.finished or self.waiting is not None:
             return None
         if self.hold_wanted:  # a hold between sections: wait at rest
@@ -184,16 +218,18 @@ class Job:
             self.override, self.override_wanted = self.override_wanted, None
         motion = self.motion
         stop = self._next_waiting_stop()
-        tau_b = (float(motion.time_of(self.stops[stop].s_mm)[0]) if stop is not None
-                 else motion.duration_s)  # fmt: skip
+        tau_b = self._end_tau(stop)
         rate = Rate(self.override)
         track, complete = play(motion, self.tau, tau_b, rate, self.period_s,
                                wait_s=motion.wait_s if self.tau == 0.0 else 0.0,
                                dwell_at_start=self.first_section,
                                max_samples=CHUNK_PERIODS)  # fmt: skip
+        track, blocked = self._within_horizon(track, tau_b)
         if self.last_point is not None:
             track.points_mm[0] = self.last_point  # exactly where the card stands
-        self.section = Section(track, self._pulses(track), tau_b, rate, stop, complete)
+        self.section = Section(track, self._pulses(track), tau_b, rate, stop,
+                               complete and not blocked, blocked=blocked,
+                               blocked_at=self.motion_horizon)  # fmt: skip
         self.first_section = False
         self.sections += 1
         return self.section.program
@@ -229,21 +265,129 @@ class Job:
                             np.concatenate([program.line[:k], tail.line]))  # fmt: skip
 
     def _extend(self, link) -> None:
-        """The next chunk of the section, once the link has framed half of the last one."""
+        """The next chunk of the section, once the link has framed half of the last one; at
+        the planning horizon: the next chunk as soon as the horizon moved on, or the
+        section's end at rest there once the link has framed every period up to it."""
         sec = self.section
         tr = sec.track
         k = len(tr) - 1
-        if sec.complete or link.sent_periods < k - CHUNK_PERIODS // 2:
+        if sec.complete:
             return
-        tail, sec.complete = play(self.motion, float(tr.tau_s[k]), sec.tau_b, sec.rate,
-                                  self.period_s, wait_s=self._wait_at(tr, k),
-                                  u0=float(tr.u_s[k]) - sec.rate_u0_s,
-                                  max_samples=CHUNK_PERIODS)  # fmt: skip
+        if sec.blocked:
+            if self.motion_horizon == sec.blocked_at:  # not planned further yet
+                if sec.program.periods - link.sent_periods < link.per_frame:
+                    self._close_at_horizon(link)
+                return
+            sec.blocked = False
+        elif link.sent_periods < k - CHUNK_PERIODS // 2:
+            return
+        tail, complete = play(self.motion, float(tr.tau_s[k]), sec.tau_b, sec.rate,
+                              self.period_s, wait_s=self._wait_at(tr, k),
+                              u0=float(tr.u_s[k]) - sec.rate_u0_s,
+                              max_samples=CHUNK_PERIODS)  # fmt: skip
+        tail, sec.blocked = self._within_horizon(tail, sec.tau_b)
+        sec.complete = complete and not sec.blocked
         tail.points_mm[0] = tr.points_mm[k]
         sec.track = tr.then(tail)
         sec.program = self._pulses(sec.track, k, sec.program)
         link.program_open = not sec.complete
         link.replace_unsent(sec.program)
+
+    def _end_tau(self, stop: int | None) -> float:
+        """Profile time [s] of the motion at which a section ending at ``stop`` (None: the
+        program's end) ends."""
+        if stop is None:
+            return self.motion.duration_s
+        return float(self.motion.time_of(self.stops[stop].s_mm)[0])
+
+    # -- streaming while planning ----------------------------------------------------------
+    def _horizon_tau(self) -> float:
+        """Profile time [s] of the current motion up to which its periods may be framed:
+        the start of the first piece not planned (when the motion was made) — a rest — or
+        the motion's end."""
+        h = self.motion_horizon
+        if h is None:
+            return self.motion.duration_s
+        return float(self.motion.profile.piece_start_time_s[h - self.motion.first])
+
+    def _within_horizon(self, track: Track, tau_b: float) -> tuple[Track, bool]:
+        """``track`` up to its last sample not beyond the planning horizon (profile time at
+        most the horizon's: those samples are final), and whether it was cut there."""
+        h = self._horizon_tau()
+        if h >= tau_b:
+            return track, False
+        if self.section is not None:
+            self.section.blocked_at = self.motion_horizon
+        beyond = np.flatnonzero(track.tau_s > h)
+        if not beyond.size:
+            return track, True
+        return track.head(max(int(beyond[0]), 1)), True
+
+    def _close_at_horizon(self, link) -> None:
+        """End the section at rest at the planning horizon (the next window is not planned
+        and the link has framed every period before it): the periods to the rest itself
+        (what is left of a dwell there included), then END."""
+        sec = self.section
+        tr = sec.track
+        k = len(tr) - 1
+        h = self._horizon_tau()
+        tail, _ = play(self.motion, float(tr.tau_s[k]), h, sec.rate, self.period_s,
+                       wait_s=self._wait_at(tr, k), u0=float(tr.u_s[k]) - sec.rate_u0_s)
+        tail.points_mm[0] = tr.points_mm[k]
+        sec.track = tr.then(tail)
+        sec.program = self._pulses(sec.track, k, sec.program)
+        sec.tau_b, sec.complete, sec.blocked, sec.at_horizon = h, True, False, True
+        link.program_open = False
+        link.replace_unsent(sec.program)
+
+    def poll(self, link=None) -> None:
+        """Adopt the windows the feed has planned since the last call: the plan, the stops,
+        the motion (when it is the plan's own: its periods up to the old horizon are the
+        same) and the horizon; measure the margin of each (``link``: the running section's,
+        for the card's executed periods) and end a planning hold."""
+        if self.feed is None or self.horizon is None:
+            return
+        try:
+            ready = self.feed.poll()
+        except Exception as exc:  # noqa: BLE001 - the planner's error: raised at the horizon
+            self.feed_error = exc
+            ready = []
+        for window, _t_ready in ready:
+            self._margin(link)
+            self.plan = window.plan
+            self.horizon = None if window.end >= len(window.plan.pieces) else window.end
+            self.stops = tuple(program_stops(self.program, window.plan))
+            self.planning["windows"] += 1
+            if self.motion_is_plan and self.motion is not None:
+                self.motion = plan_motion(window.plan)
+                self.motion_horizon = self.horizon
+                sec = self.section
+                if sec is not None and not (sec.held or sec.at_horizon):
+                    # Its end in the new motion's time (the stop it ends at is the same).
+                    sec.tau_b = self._end_tau(sec.ends_at)
+        if ready and self.waiting == "planning":
+            self.planning["held_s"] += self.feed.clock() - self._hold_since
+            self.waiting = None
+        if self.feed_error is not None and self.waiting == "planning":
+            raise self.feed_error  # the card stands at rest at the last planned window's end
+
+    def _margin(self, link) -> None:
+        """How long [s] the card still had to run to the horizon when the next window came
+        (a planning hold: not a margin; it is counted as held time instead)."""
+        sec = self.section
+        if sec is None or sec.at_horizon or link is None:
+            return
+        tr = sec.track
+        h = self._horizon_tau()
+        status = link.state.status  # None: the section's handshake, nothing executed yet
+        executed = status.executed_periods if status is not None else 0
+        reached = np.flatnonzero(tr.tau_s >= h)
+        if reached.size:
+            to_go = int(reached[0]) - executed
+        else:  # beyond the chunks made so far: the rest at the override (dwells not counted)
+            to_go = len(tr) - 1 - executed + (h - float(tr.tau_s[-1])) / self.period_s / \
+                sec.rate.final  # fmt: skip
+        self.planning["margins_s"].append(max(to_go, 0) * self.period_s)
 
     def section_done(self, executed_periods: int) -> None:
         """The card reported DONE at the section's end: wait there, or go on."""
@@ -253,9 +397,26 @@ class Job:
         if sec.program.periods:
             self.last_line = int(sec.program.line[-1])
         self.section = None
+        if sec.at_horizon:  # at rest at the planning horizon
+            self.tau = sec.tau_b
+            self.poll()
+            if not self.motion_is_plan:  # the rest from here on the plan as planned now
+                self.motion = resume_motion(self.plan, float(sec.track.s_mm[-1]), 0.0,
+                                            self.lookahead_pieces)  # fmt: skip
+                self.motion_horizon = self.horizon
+                self.tau = 0.0
+            self.planning["holds"] += 1
+            if self.feed_error is not None and self._horizon_tau() <= self.tau:
+                raise self.feed_error
+            if self.motion_horizon is not None and self._horizon_tau() <= self.tau:
+                self.waiting = "planning"
+                self._hold_since = self.feed.clock()
+            return
         if sec.held:
             self.motion = resume_motion(self.plan, float(sec.track.s_mm[-1]), sec.hold_wait_s,
                                         self.lookahead_pieces)  # fmt: skip
+            self.motion_is_plan = False
+            self.motion_horizon = self.horizon
             self.tau = 0.0
             self.waiting = None if self.resume_early else "feed hold"
             self.hold_wanted = self.resume_early = False
@@ -280,6 +441,7 @@ class Job:
         sec = self.section
         if sec is None:
             return
+        self.poll(link)
         link.program_open = not sec.complete
         if link.state.caps is None or sec.held or link.end_framed:
             return  # END framed: a hold waits at the section's end, an override at the next
@@ -338,6 +500,8 @@ class Job:
                 tail, complete = play(self.motion, float(tr.tau_s[k]), sec.tau_b, rate,
                                       self.period_s, wait_s=wait,
                                       max_samples=CHUNK_PERIODS)  # fmt: skip
+                tail, sec.blocked = self._within_horizon(tail, sec.tau_b)
+                complete = complete and not sec.blocked
                 tail.points_mm[0] = tr.points_mm[k]
                 track = tr.head(k + 1).then(tail)
                 program = self._pulses(track, k, sec.program)
@@ -384,11 +548,20 @@ class Job:
 
     def report(self) -> dict:
         """JSON-able summary: sections, holds (latency), notes, the final override."""
-        return {"sections": self.sections, "feed_override": round(self.override, 6),
-                "holds": [h.to_json() for h in self.holds],
+        out = {"sections": self.sections, "feed_override": round(self.override, 6),
+               "holds": [h.to_json() for h in self.holds],
                 # The same shape as every command's notes ({line, message}); the job's notes
                 # are about the stream as a whole (no source line).
-                "notes": [{"line": None, "message": n} for n in self.notes]}
+               "notes": [{"line": None, "message": n} for n in self.notes]}
+        if self.feed is not None:
+            margins = self.planning["margins_s"]
+            out["planning"] = {
+                "windows": self.planning["windows"],
+                "first_window_s": round(self.feed.first_s, 6),
+                "planned_s": None if self.feed.planned_s is None else round(self.feed.planned_s, 6),
+                "plan_margin_min_s": round(min(margins), 6) if margins else None,
+                "holds": self.planning["holds"], "held_s": round(self.planning["held_s"], 6)}
+        return out
 
 
 def program_stops(program, plan) -> list[Stop]:

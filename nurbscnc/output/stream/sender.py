@@ -214,7 +214,12 @@ class Sender:
     def _wait(self, job, idle_s: float, reports: list) -> None:
         """The card is DONE at rest: wait for the operator (or an abort)."""
         last = -1.0
+        poll = getattr(job, "poll", None)
         while job.waiting is not None:
+            if poll is not None:
+                poll()  # a planning hold ends when the next window is planned
+                if job.waiting is None:
+                    break
             if self._abort:
                 where = (f"; the card stands at {list(reports[-1].final_position_steps)} steps"
                          if reports else "")  # fmt: skip

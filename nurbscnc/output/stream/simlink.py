@@ -70,6 +70,7 @@ class _Line:
     def __init__(self, card: CardSim, to_card, to_host, baud: int | None):
         self.card, self.to_card, self.to_host = card, to_card, to_host
         self.down, self.up = Wire(baud), Wire(baud)
+        self.now_s = 0.0  #: the virtual time of the turn being driven
 
     def drive(self, link: Link, t: float, limit: float, pending: list, run_event,
               hook=None) -> float:  # fmt: skip
@@ -92,6 +93,7 @@ class _Line:
             if data:
                 link.on_bytes(data, t)
             link.on_time(t)
+            self.now_s = t
             if hook is not None:
                 hook(link)
             if link.flush_port:
@@ -211,6 +213,13 @@ def simulate_job(job, config: CardConfig | None = None, *, options: SenderOption
     line = _Line(card, Relay(), Relay(), baud)
     pending = sorted(events, key=lambda e: e[0])
     run_event = lambda ev: ev[1](job, card)  # noqa: E731
+    feed = getattr(job, "feed", None)
+
+    def hook(link: Link) -> None:
+        if feed is not None:
+            feed.now_s = line.now_s  # a scheduled feed releases windows in virtual time
+        job.update(link)
+
     t, reports, waits, session = 0.0, [], [], None
     while not job.finished:
         program = job.next_section()
@@ -218,6 +227,11 @@ def simulate_job(job, config: CardConfig | None = None, *, options: SenderOption
             if job.finished:
                 break
             waits.append([t, None, job.waiting])
+            if job.waiting == "planning":  # until the planner has the next window
+                t = job.feed.next_ready_s(t)
+                card.advance(t)
+                job.feed.now_s = t
+                job.poll()
             while job.waiting is not None and pending:
                 t = max(t, pending[0][0])
                 card.advance(t)
@@ -229,7 +243,7 @@ def simulate_job(job, config: CardConfig | None = None, *, options: SenderOption
         link = Link(program, options, byte_s, session_id=session, zero=zero and not reports)
         link.peak_pulses = job.peak_pulses
         link.program_open = job.section_open
-        t = line.drive(link, t, t + max_time_s, pending, run_event, hook=job.update)
+        t = line.drive(link, t, t + max_time_s, pending, run_event, hook=hook)
         try:
             report = link.result()
         except StreamError as exc:
