@@ -359,7 +359,8 @@ def test_merged_profile_keeps_every_limit_and_is_never_slower(program):
                        np.asarray(vj, float), a, j)
     merged = plan_profile(inp)
     pieces = plan_profile_pieces(inp)
-    assert merged.duration_s <= pieces.duration_s * (1 + 1e-12) + 1e-12
+    # (a gated flank switches its jerk within GATE_MIN_STEP_S = 0.1 µs of each gate)
+    assert merged.duration_s <= pieces.duration_s * (1 + 1e-9) + 1e-6
     dt = merged.phase_duration_s
     a0, jk = merged.phase_a0_mm_s2, merged.phase_jerk_mm_s3
     a1 = a0 + dt * jk

@@ -108,7 +108,7 @@ def test_cap_step_that_the_s_curve_would_cross_splits_the_unit():
     expected = (_t(v1) + (l1 - _d(0, v1) - _d(v1, v2)) / v1 + _t(v1 - v2)
                 + (l2 - _d(v2, v3)) / v2 + _t(v2 - v3) + (l3 - _d(v3, 0)) / v3 + _t(v3))
     assert prof.duration_s == pytest.approx(expected, abs=1e-9)
-    np.testing.assert_allclose(prof.junction_speeds_mm_s[1:3], [v2, v3], rtol=1e-12)
+    np.testing.assert_allclose(prof.junction_speeds_mm_s[1:3], [v2, v3], rtol=1e-9)
     t = np.linspace(0.0, prof.duration_s, 20001)
     _, vel, _, _, piece = prof.sample(t)
     assert np.all(vel <= np.array([v1, v2, v3])[piece] * (1 + 1e-12))
@@ -185,7 +185,8 @@ def test_random_staircases_keep_every_limit_and_cap(case):
     assert np.all(vel <= prof.piece_peak_speed_mm_s[piece] * (1 + 1e-9) + 1e-9)
     if np.all(a1 == A) and np.all(j2 == J):
         per_piece = plan_profile_pieces(inp)
-        assert prof.duration_s <= per_piece.duration_s * (1 + 1e-9) + 1e-12
+        # A gated flank switches its jerk to within GATE_MIN_STEP_S (0.1 µs) of each gate.
+        assert prof.duration_s <= per_piece.duration_s * (1 + 1e-9) + 1e-6
 
 
 def test_long_smooth_staircase_needs_few_rounds(monkeypatch):
