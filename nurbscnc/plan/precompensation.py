@@ -16,7 +16,7 @@ import numpy as np
 from nurbscnc.geometry.nurbs import NurbsCurve
 from nurbscnc.geometry.path import Kind
 from nurbscnc.machine.profile import AxisServo, Machine
-from nurbscnc.plan.dynamics import PathIndex, path_response, windowed_contour_mm
+from nurbscnc.plan.dynamics import CHORD_MM, PathIndex, path_response, windowed_contour_mm
 from nurbscnc.plan.lookahead import Plan
 from nurbscnc.plan.timing import Reference
 from nurbscnc.servo.model import AxisModel, contour_error_true
@@ -84,6 +84,15 @@ class Precompensation:
                                 for k, e in self.sensitivity]}  # fmt: skip
 
 
+@dataclass(frozen=True, eq=False)
+class Refined(Compensated):
+    """A :class:`~nurbscnc.servo.precompensate.Compensated` reference whose offsets across
+    the path were then optimised in the tube (:func:`refine_in_tube`): ``history_mm`` the
+    largest predicted contour error [mm] before and after each round."""
+
+    history_mm: tuple[float, ...] = ()
+
+
 def _models(machine: Machine) -> list:
     servo = machine.servo
     return [servo.x, servo.y, servo.z]
@@ -148,7 +157,7 @@ def _tube_mm(pieces, piece: np.ndarray, foot_mm: np.ndarray, tolerance_mm: float
 
 def precompensate_reference(ref: Reference, pieces, profile, machine: Machine,
                             tolerance_mm: float = REFERENCE_TOLERANCE_MM,
-                            fit_tolerance_mm: float | None = None,
+                            fit_tolerance_mm: float | None = None, refine: bool = True,
                             ) -> tuple[Reference, Compensated]:  # fmt: skip
     """The ZPETC pre-compensated version of a plan's reference (SPEC eq. 25 inverted,
     :func:`~nurbscnc.servo.precompensate.precompensate_points`; F's tail blended in within
@@ -183,7 +192,8 @@ def precompensate_reference(ref: Reference, pieces, profile, machine: Machine,
         foot = pieces.path.place(starts, np.minimum(s_foot, starts[piece]
                                                     + pieces.length_mm[piece]), piece)[0]
         fit = lim.ph_tolerance_mm if fit_tolerance_mm is None else fit_tolerance_mm
-        points = limit_to_path(points, foot, _tube_mm(pieces, piece, foot, tolerance_mm, fit))
+        tube = _tube_mm(pieces, piece, foot, tolerance_mm, fit)
+        points = limit_to_path(points, foot, tube)
         comp = replace(comp, points_mm=points)
     n_in, n = ref.points_mm.shape[0], points.shape[0]
     # Every per-sample column padded alike (whatever columns the Reference has).
@@ -191,7 +201,20 @@ def precompensate_reference(ref: Reference, pieces, profile, machine: Machine,
                if isinstance(getattr(ref, f.name), np.ndarray)
                and getattr(ref, f.name).shape[:1] == (n_in,)}  # fmt: skip
     columns.update(t_s=np.arange(n) * period, points_mm=points)
-    return replace(ref, **columns), comp
+    out = replace(ref, **columns)
+    if refine and np.isfinite(tolerance_mm) and machine.contour_check:
+        # The tube's radius about each sample: the smallest of its neighbours' (the foot
+        # moves a little along the path as the offsets change).
+        # Less the chord error of the polylines the optimisation measures on (≤ 10 nm,
+        # dynamics.CHORD_MM) twice over, so the reference stays within the tube of the
+        # exact path.
+        near = np.lib.stride_tricks.sliding_window_view(np.pad(tube, 4, mode="edge"), 9)
+        tube_in = np.maximum(near.min(axis=1) - 2.0 * CHORD_MM, 0.0)
+        done = refine_in_tube(out, pieces, profile, machine, tube_in)
+        out = replace(out, points_mm=done.points_mm)
+        comp = Refined(done.points_mm, comp.lead_samples, comp.end_step_mm,
+                       comp.end_blend_samples, done.history_mm)  # fmt: skip
+    return out, comp
 
 
 def precompensated_sampler(sampler, machine: Machine,
@@ -269,3 +292,277 @@ def precompensation_report(plan: Plan, planned: Reference, compensated: Referenc
     return Precompensation(comp.lead_samples * period, 0.0, deviation, tuple(rows),
                            tolerance_mm, comp.end_step_mm,
                            comp.end_blend_samples * period)  # fmt: skip
+
+
+# --------------------------------------------------------------------------- tube optimisation
+#
+# The clip above keeps the ZPETC reference within the tube of radius τ about the path, but
+# where the inverse wants more than τ across the path (entering a tight curve, the stop at
+# the end) the clipped reference is not the best one in the tube. Here the offsets across the
+# path are re-chosen, region by region where the simulated tool is still far from the path,
+# to minimise the largest contour error there (a small linear programme on the known model):
+#
+#   tool   y = H u (per axis, linear: the sampled eq. 25, FOH),
+#   error  e_k ≈ σ_k + ν_k · (H Δ)_k   (σ_k = |y_k − q_k|, q_k the nearest path point, ν_k the
+#          unit vector from q_k to y_k: the distance to first order),
+#   step   Δ_j = a_j m_j   (m_j the in-plane normal of the path at the reference's own foot),
+#   tube   |μ_j + a_j| ≤ τ'_j   (μ_j the current offset across the path, τ'_j the tube less
+#          any offset out of the plane),
+#   min z  subject to  |σ_k + Σ_j G_kj a_j| ≤ z  over the region's tool samples,
+#
+# G_kj = Σ_axes ν_k,c h_c[k − j] m_j,c with h_c the axis' impulse response. Then the step is
+# applied, the reference projected exactly into the tube again (nearest point on the path),
+# simulated, and kept only where the true largest error of the region went down (else halved,
+# then dropped): the largest error never increases from round to round. Work per region:
+# one dense G of (inputs + reach) × inputs ≤ REFINE_MAX_INPUTS × (REFINE_MAX_INPUTS + reach).
+
+#: Rounds of linearise → LP → simulate (each only keeps what lowers the error).
+REFINE_ROUNDS = 4
+#: A region is the tool samples whose contour error exceeds this fraction of ε_max, with the
+#: reference samples REFINE_BEFORE_S before it (the response's rise: what can still act) and
+#: the tool samples the impulse response reaches after it.
+REFINE_THRESHOLD = 0.9
+REFINE_BEFORE_S = 0.025
+#: The impulse response is followed until it is below this fraction of its peak.
+REFINE_REACH = 1e-3
+#: Most reference samples one LP moves (a longer region is cut into windows this long).
+REFINE_MAX_INPUTS = 300
+
+
+@dataclass(frozen=True, eq=False)
+class Refinement:
+    """What the tube optimisation did: ``points_mm`` the reference, ``history_mm`` the
+    largest contour error [mm] on the cut before the first round and after each round
+    (non-increasing), ``regions`` the windows of the last round."""
+
+    points_mm: np.ndarray
+    history_mm: tuple[float, ...]
+    regions: int
+
+
+def _impulse_responses(machine: Machine, length: int) -> np.ndarray:
+    """h (length, 3): each axis' sampled eq.-25 impulse response (FOH, the simulation's
+    discretisation, :func:`~nurbscnc.servo.model.discretise`); an axis without a model
+    follows its reference (h = δ)."""
+    from scipy import signal
+
+    from nurbscnc.servo.model import discretise
+
+    h = np.zeros((length, 3))
+    impulse = np.zeros(length)
+    impulse[0] = 1.0
+    for c, m in enumerate(_models(machine)):
+        if m is None:
+            h[0, c] = 1.0
+            continue
+        d = discretise(m, machine.servo.period_s, "foh")
+        h[:, c] = signal.lfilter(d.b, d.a, impulse)
+    return h
+
+
+def _reach_samples(machine: Machine) -> int:
+    """Samples after which every axis' impulse response stays below REFINE_REACH × peak."""
+    h = np.abs(_impulse_responses(machine, 2000))
+    big = h >= REFINE_REACH * h.max(axis=0)
+    return int(max(np.flatnonzero(big.any(axis=1))[-1] + 1, 1))
+
+
+def _local_polyline(pieces, profile, s_lo_mm: float, s_hi_mm: float) -> np.ndarray:
+    """The path between path lengths s_lo and s_hi [mm] (whole pieces) as a dense polyline
+    (:func:`~nurbscnc.plan.dynamics.path_counts`: chord error ≤ 10 nm on curves)."""
+    from nurbscnc.plan.dynamics import path_counts
+
+    starts = profile.piece_start_mm
+    lo = max(int(np.searchsorted(starts, s_lo_mm, side="right")) - 1, 0)
+    hi = min(int(np.searchsorted(starts, s_hi_mm, side="right")), starts.size)
+    hi = max(hi, lo + 1)
+    c = path_counts(pieces, lo, hi)
+    piece = np.repeat(np.arange(lo, hi), c)
+    first = np.repeat(np.cumsum(c) - c, c)
+    frac = (np.arange(piece.size) - first) / np.repeat(c - 1, c)
+    return pieces.path.points_at_fraction(piece, frac)
+
+
+def nearest_on_polyline(q_mm: np.ndarray, poly_mm: np.ndarray, vertices: int = 8):
+    """Nearest points (m, 3), distances (m,) [mm] and unit tangents (m, 3) of the polyline
+    ``poly_mm`` (p ≥ 2, 3) for the points ``q_mm`` (m, 3): exact point-to-segment over the
+    segments next to the ``vertices`` nearest vertices (a k-d tree)."""
+    from scipy.spatial import cKDTree
+
+    p = poly_mm.shape[0]
+    k = min(vertices, p)
+    _, idx = cKDTree(poly_mm).query(q_mm, k=k)
+    idx = np.asarray(idx).reshape(q_mm.shape[0], k)
+    seg = np.clip(np.concatenate([idx - 1, idx], axis=1), 0, p - 2)  # (m, 2k)
+    a = poly_mm[seg]
+    d = poly_mm[seg + 1] - a
+    len2 = np.einsum("mij,mij->mi", d, d)
+    t = np.einsum("mij,mij->mi", q_mm[:, None, :] - a, d) / np.where(len2 > 0.0, len2, 1.0)
+    t = np.clip(t, 0.0, 1.0)
+    foot = a + t[..., None] * d
+    e = q_mm[:, None, :] - foot
+    dist = np.sqrt(np.einsum("mij,mij->mi", e, e))
+    best = np.argmin(dist, axis=1)
+    rows = np.arange(q_mm.shape[0])
+    dd = d[rows, best]
+    tangent = dd / np.maximum(np.sqrt(np.einsum("ij,ij->i", dd, dd)), 1e-300)[:, None]
+    return foot[rows, best], dist[rows, best], tangent
+
+
+def _plane_normal(tangent: np.ndarray) -> np.ndarray:
+    """The unit normal in the XY plane, left of each unit tangent (m, 3) (zero where the
+    tangent has no XY part)."""
+    m = np.zeros_like(tangent)
+    m[:, 0], m[:, 1] = -tangent[:, 1], tangent[:, 0]
+    size = np.sqrt(m[:, 0] ** 2 + m[:, 1] ** 2)
+    return np.where(size[:, None] > 1e-12, m / np.where(size > 1e-12, size, 1.0)[:, None], 0.0)
+
+
+def _into_tube(u_mm: np.ndarray, poly_mm: np.ndarray, tube_mm: np.ndarray) -> np.ndarray:
+    """``u_mm`` projected into the ball of radius ``tube_mm`` about its nearest path point
+    (the exact tube: its distance to ``poly_mm`` is then at most the tube)."""
+    foot, dist, _ = nearest_on_polyline(u_mm, poly_mm)
+    scale = np.minimum(1.0, tube_mm / np.where(dist > 0.0, dist, 1.0))
+    return foot + (u_mm - foot) * scale[:, None]
+
+
+def _regions(over: np.ndarray, before: int, reach: int, lo: int, hi: int,
+             longest: int) -> list[tuple[int, int, int]]:  # fmt: skip
+    """Windows (j0, j1, k1) over the tool samples ``over`` (sorted): reference samples
+    j0 … j1−1 move (from ``before`` ahead of a run of over-limit samples to its end, within
+    [lo, hi)), tool samples j0 … k1−1 are constrained (``reach`` past j1). Runs whose windows
+    would overlap are merged; a window moves at most ``longest`` samples."""
+    if over.size == 0:
+        return []
+    cuts = np.flatnonzero(np.diff(over) > before + reach) + 1
+    out = []
+    for run in np.split(over, cuts):
+        a, b = max(int(run[0]) - before, lo), min(int(run[-1]) + 1, hi)
+        for j0 in range(a, b, longest):
+            j1 = min(j0 + longest, b)
+            out.append((j0, j1, j1 + reach))
+    return out
+
+
+def _region_step(u: np.ndarray, y: np.ndarray, cut_out: np.ndarray, j0: int, j1: int,
+                 k1: int, h: np.ndarray, poly: np.ndarray,
+                 tube: np.ndarray) -> np.ndarray | None:  # fmt: skip
+    """The LP step (j1 − j0, 3) [mm] of one window (module comment above), or None."""
+    from scipy.optimize import linprog
+
+    k1 = min(k1, y.shape[0])
+    ks = np.arange(j0, k1)
+    ks = ks[cut_out[ks]]
+    if ks.size == 0:
+        return None
+    q, sigma, tan_out = nearest_on_polyline(y[ks], poly)
+    nu = (y[ks] - q) / np.where(sigma > 1e-9, sigma, 1.0)[:, None]
+    nu = np.where(sigma[:, None] > 1e-9, nu, _plane_normal(tan_out))
+    uj = u[j0:j1]
+    foot, _, tan_in = nearest_on_polyline(uj, poly)
+    m = _plane_normal(tan_in)
+    off = uj - foot
+    mu = np.einsum("ij,ij->i", off, m)
+    rest = off - mu[:, None] * m
+    room = np.sqrt(np.maximum(tube[j0:j1] ** 2 - np.einsum("ij,ij->i", rest, rest), 0.0))
+    room *= 1.0 - 1e-6
+    lag = ks[:, None] - np.arange(j0, j1)[None, :]  # k − j
+    valid = (lag >= 0) & (lag < h.shape[0])
+    hk = h[np.clip(lag, 0, h.shape[0] - 1)] * valid[..., None]  # (K, J, 3)
+    g = np.einsum("kc,kjc,jc->kj", nu, hk, m)
+    n_in = j1 - j0
+    cost = np.zeros(n_in + 1)
+    cost[-1] = 1.0
+    ones = -np.ones((ks.size, 1))
+    a_ub = np.vstack([np.hstack([g, ones]), np.hstack([-g, ones])])
+    b_ub = np.concatenate([-sigma, sigma])
+    bounds = [(-r - x, r - x) for r, x in zip(room.tolist(), mu.tolist())] + [(0.0, None)]
+    res = linprog(cost, A_ub=a_ub, b_ub=b_ub, bounds=bounds, method="highs")
+    if res.status != 0:
+        return None
+    return res.x[:n_in, None] * m
+
+
+def refine_in_tube(ref: Reference, pieces, profile, machine: Machine, tube_mm: np.ndarray,
+                   rounds: int = REFINE_ROUNDS) -> Refinement:  # fmt: skip
+    """The reference ``ref`` (its points within ``tube_mm`` (N,) of the path) with its
+    offsets across the path re-chosen where the simulated contour error exceeds
+    REFINE_THRESHOLD × ε_max, to minimise the largest error there (module comment above:
+    sequential LPs on the known model, each round kept only where it lowers the error).
+    Samples at rest, on rapids, and the first and last sample do not move."""
+    eps = machine.limits.contour_tolerance_mm
+    u = np.array(ref.points_mm, dtype=float)
+    n = u.shape[0]
+    cut = ~pieces.rapid[ref.piece]
+    speed = np.zeros(n)
+    if n > 2:
+        speed[1:-1] = np.sqrt(np.sum((u[2:] - u[:-2]) ** 2, axis=1))
+    movable = cut & (speed > 1e-9)
+    movable[[0, -1]] = False
+    index = PathIndex(pieces)
+    reach = _reach_samples(machine)
+    h = _impulse_responses(machine, reach)
+    before = max(int(round(REFINE_BEFORE_S / machine.servo.period_s)), 1)
+
+    def response(points):
+        resp = path_response(replace(ref, points_mm=points), pieces, profile, machine,
+                             refine_above_mm=REFINE_THRESHOLD * eps, index=index)  # fmt: skip
+        m = resp.contour_mm.size
+        cut_out = np.append(cut, np.full(m - n, cut[-1]))
+        return resp.actual_mm, np.where(cut_out, resp.contour_mm, 0.0), cut_out
+
+    y, err, cut_out = response(u)
+    history = [float(err.max())]
+    windows: list = []
+    for _ in range(rounds):
+        over = np.flatnonzero(err > REFINE_THRESHOLD * eps)
+        windows = _regions(over, before, reach, 1, n - 1, REFINE_MAX_INPUTS)
+        steps = []
+        for j0, j1, k1 in windows:
+            # The path under the window's reference and tool samples (the tool within 2|u − y|
+            # of its reference along the path, as windowed_contour_mm).
+            s_in = ref.s_mm[j0 : min(k1, n)]
+            margin = 2.0 * float(np.max(np.abs(u[j0:min(k1, n)] - y[j0:min(k1, n)]))) + 0.05
+            poly = _local_polyline(pieces, profile, float(s_in.min()) - margin,
+                                   float(s_in.max()) + margin)  # fmt: skip
+            step = _region_step(u, y, cut_out, j0, j1, k1, h, poly, tube_mm)
+            if step is not None:
+                step[~movable[j0:j1]] = 0.0
+            steps.append((j0, j1, k1, step, poly))
+        steps = [s for s in steps if s[3] is not None]
+        if not steps:
+            break
+        # Each window kept where its own largest error went down (full step, else half, else
+        # a quarter); the windows' tool samples are disjoint, their effects add.
+        alpha = np.ones(len(steps))
+        done = np.zeros(len(steps), dtype=bool)
+        base = u.copy()
+        for _attempt in range(3):
+            trial = base.copy()
+            for i, (j0, j1, _k1, step, poly) in enumerate(steps):
+                if done[i]:
+                    continue
+                moved = _into_tube(base[j0:j1] + alpha[i] * step, poly, tube_mm[j0:j1])
+                trial[j0:j1] = np.where(movable[j0:j1, None], moved, base[j0:j1])
+            y_t, err_t, _ = response(trial)
+            for i, (j0, _j1, k1, _step, _poly) in enumerate(steps):
+                if done[i]:
+                    continue
+                k1 = min(k1, err.size)
+                if float(err_t[j0:k1].max()) < float(err[j0:k1].max()) - 1e-9:
+                    done[i] = True
+                    base[j0:_j1] = trial[j0:_j1]
+                else:
+                    alpha[i] *= 0.5
+            if done.all():
+                break
+        if not done.any():
+            history.append(history[-1])
+            break
+        y_t, err_t, _ = response(base)
+        if float(err_t.max()) > history[-1]:  # a window's tail raised another's: keep none
+            history.append(history[-1])
+            break
+        u, y, err = base, y_t, err_t
+        history.append(float(err.max()))
+    return Refinement(u, tuple(history), len(windows))
