@@ -327,6 +327,8 @@ REFINE_BEFORE_S = 0.025
 REFINE_REACH = 1e-3
 #: Most reference samples one LP moves (a longer region is cut into windows this long).
 REFINE_MAX_INPUTS = 300
+#: Largest move of a reference sample along the path in one round [mm].
+REFINE_ALONG_MM = 0.005
 
 
 @dataclass(frozen=True, eq=False)
@@ -444,12 +446,34 @@ def _regions(over: np.ndarray, before: int, reach: int, lo: int, hi: int,
     return out
 
 
-def _region_step(u: np.ndarray, y: np.ndarray, cut_out: np.ndarray, j0: int, j1: int,
-                 k1: int, h: np.ndarray, poly: np.ndarray,
-                 tube: np.ndarray) -> np.ndarray | None:  # fmt: skip
-    """The LP step (j1 − j0, 3) [mm] of one window (module comment above), or None."""
+def _difference_rows(u: np.ndarray, j0: int, j1: int, order: int) -> tuple:
+    """The ``order``-th differences of a step Δ that is zero outside samples j0 … j1−1, on
+    every row they touch (r = j0 − 1 … j1 − 2 + order, Δ_r − … centred as np.diff): the
+    matrix D (rows, j1 − j0) with D·Δ[j0:j1] those differences, and the same differences
+    of ``u`` (rows, 3) on those rows (edge samples repeated past the ends)."""
+    n_in = j1 - j0
+    coef = np.diff(np.eye(order + 1), n=order, axis=0)[0]  # e.g. [1, −2, 1]
+    rows = n_in + order
+    d = np.zeros((rows, n_in))
+    for i, c in enumerate(coef):  # row r covers Δ_{j0 − order + r + i}
+        cols = np.arange(rows) - order + i
+        ok = (cols >= 0) & (cols < n_in)
+        d[np.flatnonzero(ok), cols[ok]] = c
+    idx = np.clip(np.arange(j0 - order, j1 + order), 0, u.shape[0] - 1)
+    du = np.diff(u[idx], n=order, axis=0)  # rows j0 − order … j1 + order − 1 − order
+    return d, du[:rows]
+
+
+def _region_step(u: np.ndarray, y: np.ndarray, cut_out: np.ndarray, movable: np.ndarray,
+                 window: tuple[int, int, int], h: np.ndarray, poly: np.ndarray,
+                 tube: np.ndarray, limits: tuple[float, float]) -> np.ndarray | None:  # fmt: skip
+    """The LP step (j1 − j0, 3) [mm] of one ``window`` (j0, j1, k1) (module comment above),
+    or None. ``limits`` (A T², J T³) [mm]: the reference's second and third differences stay
+    within them on every axis (or within its own, where it was above them already), so the
+    step never makes the reference rougher than the machine's acceleration and jerk."""
     from scipy.optimize import linprog
 
+    j0, j1, k1 = window
     k1 = min(k1, y.shape[0])
     ks = np.arange(j0, k1)
     ks = ks[cut_out[ks]]
@@ -466,21 +490,40 @@ def _region_step(u: np.ndarray, y: np.ndarray, cut_out: np.ndarray, j0: int, j1:
     rest = off - mu[:, None] * m
     room = np.sqrt(np.maximum(tube[j0:j1] ** 2 - np.einsum("ij,ij->i", rest, rest), 0.0))
     room *= 1.0 - 1e-6
+    fixed = ~movable[j0:j1]
+    lo_a, hi_a = np.where(fixed, 0.0, -room - mu), np.where(fixed, 0.0, room - mu)
+    along = np.where(fixed, 0.0, REFINE_ALONG_MM)
+    # Unknowns x = (a, b, z): Δ_j = a_j m_j + b_j t_j across and along the path.
+    basis = np.concatenate([m, tan_in])  # (2J, 3): the direction of each unknown
     lag = ks[:, None] - np.arange(j0, j1)[None, :]  # k − j
     valid = (lag >= 0) & (lag < h.shape[0])
     hk = h[np.clip(lag, 0, h.shape[0] - 1)] * valid[..., None]  # (K, J, 3)
-    g = np.einsum("kc,kjc,jc->kj", nu, hk, m)
-    n_in = j1 - j0
-    cost = np.zeros(n_in + 1)
-    cost[-1] = 1.0
+    g = np.hstack([np.einsum("kc,kjc,jc->kj", nu, hk, m),
+                   np.einsum("kc,kjc,jc->kj", nu, hk, tan_in)])  # fmt: skip
     ones = -np.ones((ks.size, 1))
-    a_ub = np.vstack([np.hstack([g, ones]), np.hstack([-g, ones])])
-    b_ub = np.concatenate([-sigma, sigma])
-    bounds = [(-r - x, r - x) for r, x in zip(room.tolist(), mu.tolist())] + [(0.0, None)]
-    res = linprog(cost, A_ub=a_ub, b_ub=b_ub, bounds=bounds, method="highs")
+    a_ub = [np.hstack([g, ones]), np.hstack([-g, ones])]
+    b_ub = [-sigma, sigma]
+    n_x = 2 * (j1 - j0)
+    for order, limit in zip((2, 3), limits):
+        d, du = _difference_rows(u, j0, j1, order)
+        for c in range(3):
+            if not np.any(basis[:, c]):
+                continue
+            rows = np.hstack([d * basis[: j1 - j0, c], d * basis[j1 - j0 :, c]])
+            cap = np.maximum(limit, np.abs(du[:, c]))
+            zero = np.zeros((rows.shape[0], 1))
+            a_ub += [np.hstack([rows, zero]), np.hstack([-rows, zero])]
+            b_ub += [cap - du[:, c], cap + du[:, c]]
+    bounds = np.column_stack([np.concatenate([lo_a, -along, [0.0]]),
+                              np.concatenate([hi_a, along, [np.inf]])])  # fmt: skip
+    cost = np.zeros(n_x + 1)
+    cost[-1] = 1.0
+    res = linprog(cost, A_ub=np.vstack(a_ub), b_ub=np.concatenate(b_ub), bounds=bounds,
+                  method="highs")  # fmt: skip
     if res.status != 0:
         return None
-    return res.x[:n_in, None] * m
+    x = res.x[:n_x]
+    return x[: j1 - j0, None] * m + x[j1 - j0 :, None] * tan_in
 
 
 def refine_in_tube(ref: Reference, pieces, profile, machine: Machine, tube_mm: np.ndarray,
@@ -502,7 +545,10 @@ def refine_in_tube(ref: Reference, pieces, profile, machine: Machine, tube_mm: n
     index = PathIndex(pieces)
     reach = _reach_samples(machine)
     h = _impulse_responses(machine, reach)
-    before = max(int(round(REFINE_BEFORE_S / machine.servo.period_s)), 1)
+    period = machine.servo.period_s
+    before = max(int(round(REFINE_BEFORE_S / period)), 1)
+    lim = machine.limits
+    limits = (lim.a_max_mm_s2 * period**2, lim.j_max_mm_s3 * period**3)
 
     def response(points):
         resp = path_response(replace(ref, points_mm=points), pieces, profile, machine,
@@ -525,9 +571,8 @@ def refine_in_tube(ref: Reference, pieces, profile, machine: Machine, tube_mm: n
             margin = 2.0 * float(np.max(np.abs(u[j0:min(k1, n)] - y[j0:min(k1, n)]))) + 0.05
             poly = _local_polyline(pieces, profile, float(s_in.min()) - margin,
                                    float(s_in.max()) + margin)  # fmt: skip
-            step = _region_step(u, y, cut_out, j0, j1, k1, h, poly, tube_mm)
-            if step is not None:
-                step[~movable[j0:j1]] = 0.0
+            step = _region_step(u, y, cut_out, movable, (j0, j1, k1), h, poly, tube_mm,
+                                limits)  # fmt: skip
             steps.append((j0, j1, k1, step, poly))
         steps = [s for s in steps if s[3] is not None]
         if not steps:
