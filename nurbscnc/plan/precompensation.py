@@ -88,9 +88,11 @@ class Precompensation:
 class Refined(Compensated):
     """A :class:`~nurbscnc.servo.precompensate.Compensated` reference whose offsets across
     the path were then optimised in the tube (:func:`refine_in_tube`): ``history_mm`` the
-    largest predicted contour error [mm] before and after each round."""
+    largest predicted contour error [mm] before and after each round, ``clipped_mm`` the
+    reference it started from (the ZPETC reference clipped into the tube)."""
 
     history_mm: tuple[float, ...] = ()
+    clipped_mm: np.ndarray | None = None
 
 
 def _models(machine: Machine) -> list:
@@ -185,14 +187,22 @@ def precompensate_reference(ref: Reference, pieces, profile, machine: Machine,
     points = comp.points_mm
     s_mm = edge(ref.s_mm)
     if np.isfinite(tolerance_mm):
-        lead_mm = along_path_offset_mm(points, edge(ref.points_mm))
-        s_foot = np.clip(s_mm + lead_mm, 0.0, profile.total_length_mm)
+        s_foot = _s_along(points, edge(ref.points_mm), s_mm, profile)
         starts = profile.piece_start_mm
         piece = np.clip(np.searchsorted(starts, s_foot, side="right") - 1, 0, starts.size - 1)
         foot = pieces.path.place(starts, np.minimum(s_foot, starts[piece]
                                                     + pieces.length_mm[piece]), piece)[0]
         fit = lim.ph_tolerance_mm if fit_tolerance_mm is None else fit_tolerance_mm
         tube = _tube_mm(pieces, piece, foot, tolerance_mm, fit)
+        optimise = refine and machine.contour_check
+        if optimise:
+            # The optimisation measures the tube on polylines of the path (chords ≤ 10 nm
+            # inside the curve, dynamics.CHORD_MM): its tube is the smallest of each
+            # sample's neighbours' (the foot moves along the path) less twice that, and
+            # the clip a chord error more, so the clipped points start inside it.
+            near = np.lib.stride_tricks.sliding_window_view(np.pad(tube, 4, mode="edge"), 9)
+            tube_in = np.maximum(near.min(axis=1) - 2.0 * CHORD_MM, 0.0)
+            tube = np.maximum(tube_in - CHORD_MM, 0.0)
         points = limit_to_path(points, foot, tube)
         comp = replace(comp, points_mm=points)
     n_in, n = ref.points_mm.shape[0], points.shape[0]
@@ -201,20 +211,28 @@ def precompensate_reference(ref: Reference, pieces, profile, machine: Machine,
                if isinstance(getattr(ref, f.name), np.ndarray)
                and getattr(ref, f.name).shape[:1] == (n_in,)}  # fmt: skip
     columns.update(t_s=np.arange(n) * period, points_mm=points)
+    if np.isfinite(tolerance_mm):
+        # Each sample's path length where its point is (the planned one's plus the lead
+        # along the path), so a distance measured near it (windowed_contour_mm) looks at the
+        # stretch of path the point is at.
+        columns["s_mm"] = s_foot
     out = replace(ref, **columns)
-    if refine and np.isfinite(tolerance_mm) and machine.contour_check:
-        # The tube's radius about each sample: the smallest of its neighbours' (the foot
-        # moves a little along the path as the offsets change).
-        # Less the chord error of the polylines the optimisation measures on (≤ 10 nm,
-        # dynamics.CHORD_MM) twice over, so the reference stays within the tube of the
-        # exact path.
-        near = np.lib.stride_tricks.sliding_window_view(np.pad(tube, 4, mode="edge"), 9)
-        tube_in = np.maximum(near.min(axis=1) - 2.0 * CHORD_MM, 0.0)
+    if np.isfinite(tolerance_mm) and optimise:
         done = refine_in_tube(out, pieces, profile, machine, tube_in)
         out = replace(out, points_mm=done.points_mm)
+        out = replace(out, s_mm=_s_along(done.points_mm, edge(ref.points_mm), s_mm, profile))
         comp = Refined(done.points_mm, comp.lead_samples, comp.end_step_mm,
-                       comp.end_blend_samples, done.history_mm)  # fmt: skip
+                       comp.end_blend_samples, done.history_mm, points)  # fmt: skip
     return out, comp
+
+
+def _s_along(points_mm: np.ndarray, planned_mm: np.ndarray, s_planned_mm: np.ndarray,
+             profile) -> np.ndarray:  # fmt: skip
+    """The path length [mm] at which each point of ``points_mm`` is: its planned point's
+    plus its lead along the path (:func:`~nurbscnc.servo.precompensate.along_path_offset_mm`),
+    within the program."""
+    lead = along_path_offset_mm(points_mm, planned_mm)
+    return np.clip(s_planned_mm + lead, 0.0, profile.total_length_mm)
 
 
 def precompensated_sampler(sampler, machine: Machine,
@@ -317,7 +335,9 @@ def precompensation_report(plan: Plan, planned: Reference, compensated: Referenc
 # one dense G of (inputs + reach) × inputs ≤ REFINE_MAX_INPUTS × (REFINE_MAX_INPUTS + reach).
 
 #: Rounds of linearise → LP → simulate (each only keeps what lowers the error).
-REFINE_ROUNDS = 4
+REFINE_ROUNDS = 8
+#: ... stopping early when a round lowers the largest error by less than this [mm].
+REFINE_GAIN_MM = 1e-5
 #: A region is the tool samples whose contour error exceeds this fraction of ε_max, with the
 #: reference samples REFINE_BEFORE_S before it (the response's rise: what can still act) and
 #: the tool samples the impulse response reaches after it.
@@ -328,7 +348,9 @@ REFINE_REACH = 1e-3
 #: Most reference samples one LP moves (a longer region is cut into windows this long).
 REFINE_MAX_INPUTS = 300
 #: Largest move of a reference sample along the path in one round [mm].
-REFINE_ALONG_MM = 0.005
+REFINE_ALONG_MM = 0.02
+#: ... and less where the path curves: its bend over such a move at most this part of the tube.
+REFINE_BEND = 0.02
 
 
 @dataclass(frozen=True, eq=False)
@@ -408,7 +430,25 @@ def nearest_on_polyline(q_mm: np.ndarray, poly_mm: np.ndarray, vertices: int = 8
     rows = np.arange(q_mm.shape[0])
     dd = d[rows, best]
     tangent = dd / np.maximum(np.sqrt(np.einsum("ij,ij->i", dd, dd)), 1e-300)[:, None]
+    nearest_on_polyline.segment = seg[rows, best]
     return foot[rows, best], dist[rows, best], tangent
+
+
+def _polyline_curvature(poly_mm: np.ndarray, segment: np.ndarray,
+                        reach_mm: float) -> np.ndarray:  # fmt: skip
+    """The largest curvature [1/mm] of the polyline within ``reach_mm`` along it of each
+    ``segment`` (m,): at each vertex the turning angle over the mean of its two segments."""
+    d = np.diff(poly_mm, axis=0)
+    length = np.sqrt(np.einsum("ij,ij->i", d, d))
+    unit = d / np.where(length > 0.0, length, 1.0)[:, None]
+    cos = np.clip(np.einsum("ij,ij->i", unit[:-1], unit[1:]), -1.0, 1.0)
+    mean = 0.5 * (length[:-1] + length[1:])
+    vertex = np.concatenate([[0.0], np.arccos(cos) / np.where(mean > 0.0, mean, np.inf),
+                             [0.0]])  # fmt: skip
+    s = np.concatenate([[0.0], np.cumsum(length)])
+    lo = np.searchsorted(s, s[segment] - reach_mm, side="left")
+    hi = np.searchsorted(s, s[segment + 1] + reach_mm, side="right")
+    return np.array([vertex[a:b].max() for a, b in zip(lo.tolist(), hi.tolist())])
 
 
 def _plane_normal(tangent: np.ndarray) -> np.ndarray:
@@ -470,7 +510,11 @@ def _region_step(u: np.ndarray, y: np.ndarray, cut_out: np.ndarray, movable: np.
     """The LP step (j1 − j0, 3) [mm] of one ``window`` (j0, j1, k1) (module comment above),
     or None. ``limits`` (A T², J T³) [mm]: the reference's second and third differences stay
     within them on every axis (or within its own, where it was above them already), so the
-    step never makes the reference rougher than the machine's acceleration and jerk."""
+    step never makes the reference rougher than the machine's acceleration and jerk.
+    A move b along the tangent leaves a path of curvature κ (the polyline's largest within
+    reach of the sample's foot) by κb²/2, so b is bounded to keep that below
+    REFINE_BEND of the tube, and the tube's room across the path is that much smaller (the
+    step then needs no clipping into the tube, which would roughen it)."""
     from scipy.optimize import linprog
 
     j0, j1, k1 = window
@@ -484,15 +528,23 @@ def _region_step(u: np.ndarray, y: np.ndarray, cut_out: np.ndarray, movable: np.
     nu = np.where(sigma[:, None] > 1e-9, nu, _plane_normal(tan_out))
     uj = u[j0:j1]
     foot, _, tan_in = nearest_on_polyline(uj, poly)
+    kappa = _polyline_curvature(poly, nearest_on_polyline.segment, REFINE_ALONG_MM + 0.01)
     m = _plane_normal(tan_in)
     off = uj - foot
     mu = np.einsum("ij,ij->i", off, m)
     rest = off - mu[:, None] * m
     room = np.sqrt(np.maximum(tube[j0:j1] ** 2 - np.einsum("ij,ij->i", rest, rest), 0.0))
-    room *= 1.0 - 1e-6
+    # b ≤ √(2 β τ / κ): the bend κb²/2 ≤ β τ, taken off the room across the path.
+    tau = tube[j0:j1]
+    with np.errstate(divide="ignore"):
+        along = np.minimum(REFINE_ALONG_MM, np.sqrt(2.0 * REFINE_BEND * tau / kappa))
+    room = (room - 0.5 * kappa * along**2) * (1.0 - 1e-6)
     fixed = ~movable[j0:j1]
-    lo_a, hi_a = np.where(fixed, 0.0, -room - mu), np.where(fixed, 0.0, room - mu)
-    along = np.where(fixed, 0.0, REFINE_ALONG_MM)
+    # (never forced to move: the current point is in the tube, so a = 0 stays allowed and
+    # the LP always has a solution)
+    lo_a = np.where(fixed, 0.0, np.minimum(-room - mu, 0.0))
+    hi_a = np.where(fixed, 0.0, np.maximum(room - mu, 0.0))
+    along = np.where(fixed, 0.0, along)
     # Unknowns x = (a, b, z): Δ_j = a_j m_j + b_j t_j across and along the path.
     basis = np.concatenate([m, tan_in])  # (2J, 3): the direction of each unknown
     lag = ks[:, None] - np.arange(j0, j1)[None, :]  # k − j
@@ -527,12 +579,16 @@ def _region_step(u: np.ndarray, y: np.ndarray, cut_out: np.ndarray, movable: np.
 
 
 def refine_in_tube(ref: Reference, pieces, profile, machine: Machine, tube_mm: np.ndarray,
-                   rounds: int = REFINE_ROUNDS) -> Refinement:  # fmt: skip
+                   rounds: int = REFINE_ROUNDS, gain_mm: float = REFINE_GAIN_MM) -> Refinement:
     """The reference ``ref`` (its points within ``tube_mm`` (N,) of the path) with its
     offsets across the path re-chosen where the simulated contour error exceeds
     REFINE_THRESHOLD × ε_max, to minimise the largest error there (module comment above:
     sequential LPs on the known model, each round kept only where it lowers the error).
     Samples at rest, on rapids, and the first and last sample do not move."""
+    from scipy import signal
+
+    from nurbscnc.servo.model import discretise
+
     eps = machine.limits.contour_tolerance_mm
     u = np.array(ref.points_mm, dtype=float)
     n = u.shape[0]
@@ -550,12 +606,29 @@ def refine_in_tube(ref: Reference, pieces, profile, machine: Machine, tube_mm: n
     lim = machine.limits
     limits = (lim.a_max_mm_s2 * period**2, lim.j_max_mm_s3 * period**3)
 
+    # The check's simulation (path_response: each axis from rest at its first point, the
+    # last point held until settled, the true distance near the reference and to the whole
+    # path above the threshold), its discretisation made once and the settle length of the
+    # first reference kept: the same numbers at a fraction of the cost per round.
+    first = path_response(ref, pieces, profile, machine, index=index)
+    extra = first.actual_mm.shape[0] - n
+    discs = [None if m is None else discretise(m, period, "foh") for m in _models(machine)]
+    s_out = np.concatenate((ref.s_mm, np.full(extra, ref.s_mm[-1])))
+    cut_out = np.append(cut, np.full(extra, cut[-1]))
+
     def response(points):
-        resp = path_response(replace(ref, points_mm=points), pieces, profile, machine,
-                             refine_above_mm=REFINE_THRESHOLD * eps, index=index)  # fmt: skip
-        m = resp.contour_mm.size
-        cut_out = np.append(cut, np.full(m - n, cut[-1]))
-        return resp.actual_mm, np.where(cut_out, resp.contour_mm, 0.0), cut_out
+        held = np.vstack([points, np.repeat(points[-1:], extra, axis=0)])
+        actual = held.copy()
+        for c, d in enumerate(discs):
+            if d is not None:
+                x = held[:, c] - points[0, c]
+                actual[:, c] = signal.lfilter(d.b, d.a, x) + d.dc_gain * points[0, c]
+        lag = np.sqrt(np.sum((held - actual) ** 2, axis=1))
+        contour = windowed_contour_mm(actual, lag, s_out, pieces, profile)
+        sel = np.flatnonzero(contour > REFINE_THRESHOLD * eps)
+        if sel.size:
+            contour[sel] = index.distance_mm(actual[sel], contour[sel])
+        return actual, np.where(cut_out, contour, 0.0), cut_out
 
     y, err, cut_out = response(u)
     history = [float(err.max())]
@@ -610,4 +683,6 @@ def refine_in_tube(ref: Reference, pieces, profile, machine: Machine, tube_mm: n
             break
         u, y, err = base, y_t, err_t
         history.append(float(err.max()))
+        if history[-2] - history[-1] < gain_mm:
+            break
     return Refinement(u, tuple(history), len(windows))
