@@ -145,7 +145,7 @@ def test_the_optimised_reference_is_no_rougher_than_the_clipped_one():
     """On the airfoil's kinematic plan the optimisation lowers the largest error (round by
     round), and every second and third difference of the reference stays within the
     machine's A T² and J T³ or the clipped ZPETC reference's own (where it starts) at that
-    sample."""
+    sample, + 2 % of the limit."""
     plan, ref = _kinematic((ROOT / "programs" / "naca2415.nc").read_text())
     out, comp = precompensate_reference(ref, plan.pieces, plan.profile, MACHINE, TUBE_MM)
     clip = comp.clipped_mm
@@ -155,5 +155,5 @@ def test_the_optimised_reference_is_no_rougher_than_the_clipped_one():
     for order, limit in ((2, lim.a_max_mm_s2 * PERIOD**2), (3, lim.j_max_mm_s3 * PERIOD**3)):
         d_out = np.abs(np.diff(out.points_mm, n=order, axis=0))
         d_clip = np.abs(np.diff(clip, n=order, axis=0))
-        # (to 0.1 % of the limit: the LP's feasibility tolerance)
-        assert np.all(d_out <= np.maximum(limit, d_clip) + 1e-3 * limit)
+        # (+ 2 % of the limit: REFINE_ROUGH, the bend of moves along the curve)
+        assert np.all(d_out <= np.maximum(limit, d_clip) + 0.02 * limit * (1.0 + 1e-9))

@@ -347,10 +347,15 @@ REFINE_BEFORE_S = 0.025
 REFINE_REACH = 1e-3
 #: Most reference samples one LP moves (a longer region is cut into windows this long).
 REFINE_MAX_INPUTS = 300
+#: The share of the machine's A T² and J T³ a step's own differences may use.
+REFINE_SMOOTH = 0.9
+#: ... and what the step may add to them beyond that (share of the limit): the bend of a
+#: move along a curve is second order in the step, not in the LP.
+REFINE_ROUGH = 0.02
+#: Chord sagitta of the optimiser's polylines of the path [mm].
+REFINE_CHORD_MM = 1e-7
 #: Largest move of a reference sample along the path in one round [mm].
 REFINE_ALONG_MM = 0.02
-#: ... and less where the path curves: its bend over such a move at most this part of the tube.
-REFINE_BEND = 0.02
 
 
 @dataclass(frozen=True, eq=False)
@@ -392,19 +397,30 @@ def _reach_samples(machine: Machine) -> int:
 
 
 def _local_polyline(pieces, profile, s_lo_mm: float, s_hi_mm: float) -> np.ndarray:
-    """The path between path lengths s_lo and s_hi [mm] (whole pieces) as a dense polyline
-    (:func:`~nurbscnc.plan.dynamics.path_counts`: chord error ≤ 10 nm on curves)."""
-    from nurbscnc.plan.dynamics import path_counts
-
+    """The path between path lengths s_lo and s_hi [mm] (whole pieces) as a dense polyline:
+    lines by their ends, curves by chords of sagitta κh²/8 ≤ REFINE_CHORD_MM (κ the
+    piece's largest curvature, doubled on NURBS cells as dynamics.path_counts does), so
+    a point moved along it (:func:`_move_in_path_coordinates`) follows the curve smoothly
+    to well below the reference's jerk per period J T³."""
     starts = profile.piece_start_mm
     lo = max(int(np.searchsorted(starts, s_lo_mm, side="right")) - 1, 0)
     hi = min(int(np.searchsorted(starts, s_hi_mm, side="right")), starts.size)
     hi = max(hi, lo + 1)
-    c = path_counts(pieces, lo, hi)
+    sl = slice(lo, hi)
+    length = pieces.length_mm[sl]
+    kappa = np.where(pieces.kind[sl] == Kind.NURBS, 2.0, 1.0) * np.abs(pieces.kappa_max_per_mm[sl])
+    with np.errstate(divide="ignore"):
+        h = np.minimum(0.01, np.sqrt(8.0 * REFINE_CHORD_MM / kappa))
+    c = np.maximum(np.ceil(length / h).astype(np.int64) + 1, 3)
+    c = np.where((pieces.kind[sl] == Kind.LINE) | (length == 0.0), 2, c)
     piece = np.repeat(np.arange(lo, hi), c)
     first = np.repeat(np.cumsum(c) - c, c)
     frac = (np.arange(piece.size) - first) / np.repeat(c - 1, c)
-    return pieces.path.points_at_fraction(piece, frac)
+    pts = pieces.path.points_at_fraction(piece, frac)
+    # Without the repeated point where one piece ends and the next starts (a segment of
+    # rounding length has no direction).
+    step = np.sqrt(np.sum(np.diff(pts, axis=0) ** 2, axis=1))
+    return pts[np.concatenate([[True], step > 1e-9])]
 
 
 def nearest_on_polyline(q_mm: np.ndarray, poly_mm: np.ndarray, vertices: int = 8):
@@ -434,23 +450,6 @@ def nearest_on_polyline(q_mm: np.ndarray, poly_mm: np.ndarray, vertices: int = 8
     return foot[rows, best], dist[rows, best], tangent
 
 
-def _polyline_curvature(poly_mm: np.ndarray, segment: np.ndarray,
-                        reach_mm: float) -> np.ndarray:  # fmt: skip
-    """The largest curvature [1/mm] of the polyline within ``reach_mm`` along it of each
-    ``segment`` (m,): at each vertex the turning angle over the mean of its two segments."""
-    d = np.diff(poly_mm, axis=0)
-    length = np.sqrt(np.einsum("ij,ij->i", d, d))
-    unit = d / np.where(length > 0.0, length, 1.0)[:, None]
-    cos = np.clip(np.einsum("ij,ij->i", unit[:-1], unit[1:]), -1.0, 1.0)
-    mean = 0.5 * (length[:-1] + length[1:])
-    vertex = np.concatenate([[0.0], np.arccos(cos) / np.where(mean > 0.0, mean, np.inf),
-                             [0.0]])  # fmt: skip
-    s = np.concatenate([[0.0], np.cumsum(length)])
-    lo = np.searchsorted(s, s[segment] - reach_mm, side="left")
-    hi = np.searchsorted(s, s[segment + 1] + reach_mm, side="right")
-    return np.array([vertex[a:b].max() for a, b in zip(lo.tolist(), hi.tolist())])
-
-
 def _plane_normal(tangent: np.ndarray) -> np.ndarray:
     """The unit normal in the XY plane, left of each unit tangent (m, 3) (zero where the
     tangent has no XY part)."""
@@ -458,6 +457,54 @@ def _plane_normal(tangent: np.ndarray) -> np.ndarray:
     m[:, 0], m[:, 1] = -tangent[:, 1], tangent[:, 0]
     size = np.sqrt(m[:, 0] ** 2 + m[:, 1] ** 2)
     return np.where(size[:, None] > 1e-12, m / np.where(size > 1e-12, size, 1.0)[:, None], 0.0)
+
+
+def _frame(poly_mm: np.ndarray):
+    """The polyline's arc length at its vertices (P,), and a function σ → (points, unit
+    tangents, unit XY normals) at arc lengths σ, the tangents and normals interpolated
+    linearly between the vertices' (the mean of their two segments'), so they turn smoothly
+    along the path rather than jump at each vertex."""
+    d = np.diff(poly_mm, axis=0)
+    length = np.sqrt(np.einsum("ij,ij->i", d, d))
+    unit = d / np.where(length > 0.0, length, 1.0)[:, None]
+    t_v = np.concatenate([unit[:1], unit[:-1] + unit[1:], unit[-1:]])
+    t_v /= np.maximum(np.sqrt(np.einsum("ij,ij->i", t_v, t_v)), 1e-300)[:, None]
+    s_v = np.concatenate([[0.0], np.cumsum(length)])
+
+    def at(sigma):
+        i = np.clip(np.searchsorted(s_v, sigma, side="right") - 1, 0, length.size - 1)
+        f = np.clip((sigma - s_v[i]) / np.where(length[i] > 0.0, length[i], 1.0), 0.0, 1.0)
+        point = poly_mm[i] + f[:, None] * d[i]
+        t = (1.0 - f)[:, None] * t_v[i] + f[:, None] * t_v[i + 1]
+        t /= np.maximum(np.sqrt(np.einsum("ij,ij->i", t, t)), 1e-300)[:, None]
+        return point, t, _plane_normal(t)
+
+    return s_v, at
+
+
+def _path_coordinates(u_mm: np.ndarray, poly_mm: np.ndarray):
+    """Each point's place against the path: arc length σ of its nearest point on the
+    polyline, the frame function of :func:`_frame`, the unit tangent and XY normal there,
+    its offset μ along that normal [mm] and the rest of its offset (out of the plane)."""
+    foot, _, _ = nearest_on_polyline(u_mm, poly_mm)
+    seg = nearest_on_polyline.segment
+    s_v, at = _frame(poly_mm)
+    sigma = s_v[seg] + np.sqrt(np.sum((foot - poly_mm[seg]) ** 2, axis=1))
+    point, t, m = at(sigma)
+    off = u_mm - point
+    mu = np.einsum("ij,ij->i", off, m)
+    return sigma, at, t, m, mu, off - mu[:, None] * m
+
+
+def _move_in_path_coordinates(u_mm: np.ndarray, across_mm: np.ndarray, along_mm: np.ndarray,
+                              poly_mm: np.ndarray) -> np.ndarray:  # fmt: skip
+    """The points ``u_mm`` moved ``along_mm`` along the path (arc length) and ``across_mm``
+    across it (along its XY normal), keeping the rest of their offset: exact path
+    coordinates, so the distance from the path is |μ + a| (and the rest) wherever the point
+    goes along a curve (no bend κb²/2 as with a straight move along the tangent)."""
+    sigma, at, _t, _m, mu, rest = _path_coordinates(u_mm, poly_mm)
+    point, _t1, m1 = at(sigma + along_mm)
+    return point + (mu + across_mm)[:, None] * m1 + rest
 
 
 def _into_tube(u_mm: np.ndarray, poly_mm: np.ndarray, tube_mm: np.ndarray) -> np.ndarray:
@@ -507,14 +554,13 @@ def _difference_rows(u: np.ndarray, j0: int, j1: int, order: int) -> tuple:
 def _region_step(u: np.ndarray, y: np.ndarray, cut_out: np.ndarray, movable: np.ndarray,
                  window: tuple[int, int, int], h: np.ndarray, poly: np.ndarray,
                  tube: np.ndarray, limits: tuple[float, float]) -> np.ndarray | None:  # fmt: skip
-    """The LP step (j1 − j0, 3) [mm] of one ``window`` (j0, j1, k1) (module comment above),
-    or None. ``limits`` (A T², J T³) [mm]: the reference's second and third differences stay
-    within them on every axis (or within its own, where it was above them already), so the
-    step never makes the reference rougher than the machine's acceleration and jerk.
-    A move b along the tangent leaves a path of curvature κ (the polyline's largest within
-    reach of the sample's foot) by κb²/2, so b is bounded to keep that below
-    REFINE_BEND of the tube, and the tube's room across the path is that much smaller (the
-    step then needs no clipping into the tube, which would roughen it)."""
+    """The LP step of one ``window`` (j0, j1, k1) (module comment above): (j1 − j0, 2) [mm],
+    the moves across and along the path of each sample (path coordinates,
+    :func:`_move_in_path_coordinates`), or None. ``limits`` (A T², J T³) [mm]: the
+    reference's second and third differences stay within them on every axis (or within its
+    own, where it was above them already), so the step never makes the reference rougher
+    than the machine's acceleration and jerk (to first order: the path coordinates add the
+    bend, smooth along the path)."""
     from scipy.optimize import linprog
 
     j0, j1, k1 = window
@@ -526,25 +572,15 @@ def _region_step(u: np.ndarray, y: np.ndarray, cut_out: np.ndarray, movable: np.
     q, sigma, tan_out = nearest_on_polyline(y[ks], poly)
     nu = (y[ks] - q) / np.where(sigma > 1e-9, sigma, 1.0)[:, None]
     nu = np.where(sigma[:, None] > 1e-9, nu, _plane_normal(tan_out))
-    uj = u[j0:j1]
-    foot, _, tan_in = nearest_on_polyline(uj, poly)
-    kappa = _polyline_curvature(poly, nearest_on_polyline.segment, REFINE_ALONG_MM + 0.01)
-    m = _plane_normal(tan_in)
-    off = uj - foot
-    mu = np.einsum("ij,ij->i", off, m)
-    rest = off - mu[:, None] * m
+    _sigma, _at, tan_in, m, mu, rest = _path_coordinates(u[j0:j1], poly)
     room = np.sqrt(np.maximum(tube[j0:j1] ** 2 - np.einsum("ij,ij->i", rest, rest), 0.0))
-    # b ≤ √(2 β τ / κ): the bend κb²/2 ≤ β τ, taken off the room across the path.
-    tau = tube[j0:j1]
-    with np.errstate(divide="ignore"):
-        along = np.minimum(REFINE_ALONG_MM, np.sqrt(2.0 * REFINE_BEND * tau / kappa))
-    room = (room - 0.5 * kappa * along**2) * (1.0 - 1e-6)
+    room *= 1.0 - 1e-6
     fixed = ~movable[j0:j1]
     # (never forced to move: the current point is in the tube, so a = 0 stays allowed and
     # the LP always has a solution)
     lo_a = np.where(fixed, 0.0, np.minimum(-room - mu, 0.0))
     hi_a = np.where(fixed, 0.0, np.maximum(room - mu, 0.0))
-    along = np.where(fixed, 0.0, along)
+    along = np.where(fixed, 0.0, REFINE_ALONG_MM)
     # Unknowns x = (a, b, z): Δ_j = a_j m_j + b_j t_j across and along the path.
     basis = np.concatenate([m, tan_in])  # (2J, 3): the direction of each unknown
     lag = ks[:, None] - np.arange(j0, j1)[None, :]  # k − j
@@ -562,7 +598,9 @@ def _region_step(u: np.ndarray, y: np.ndarray, cut_out: np.ndarray, movable: np.
             if not np.any(basis[:, c]):
                 continue
             rows = np.hstack([d * basis[: j1 - j0, c], d * basis[j1 - j0 :, c]])
-            cap = np.maximum(limit, np.abs(du[:, c]))
+            # (the linear step within REFINE_SMOOTH of the limit: moving in path
+            # coordinates adds the bend, second order in the step)
+            cap = np.maximum(REFINE_SMOOTH * limit, np.abs(du[:, c]))
             zero = np.zeros((rows.shape[0], 1))
             a_ub += [np.hstack([rows, zero]), np.hstack([-rows, zero])]
             b_ub += [cap - du[:, c], cap + du[:, c]]
@@ -574,8 +612,22 @@ def _region_step(u: np.ndarray, y: np.ndarray, cut_out: np.ndarray, movable: np.
                   method="highs")  # fmt: skip
     if res.status != 0:
         return None
-    x = res.x[:n_x]
-    return x[: j1 - j0, None] * m + x[j1 - j0 :, None] * tan_in
+    return res.x[:n_x].reshape(2, j1 - j0).T  # (J, 2): a across, b along
+
+
+def _no_rougher(new_mm: np.ndarray, old_mm: np.ndarray, j0: int, j1: int,
+                limits: tuple[float, float]) -> bool:
+    """Whether the second and third differences of ``new_mm`` about samples j0 … j1−1 are
+    within max(limit, those of ``old_mm``) + REFINE_ROUGH × limit on every axis (``limits``
+    (A T², J T³) [mm]; ``old_mm`` the reference the optimisation started from, so the
+    allowance does not add up over the rounds)."""
+    lo, hi = max(j0 - 3, 0), min(j1 + 3, new_mm.shape[0])
+    for order, limit in zip((2, 3), limits):
+        d_new = np.abs(np.diff(new_mm[lo:hi], n=order, axis=0))
+        d_old = np.abs(np.diff(old_mm[lo:hi], n=order, axis=0))
+        if np.any(d_new > np.maximum(limit, d_old) + REFINE_ROUGH * limit):
+            return False
+    return True
 
 
 def refine_in_tube(ref: Reference, pieces, profile, machine: Machine, tube_mm: np.ndarray,
@@ -630,6 +682,7 @@ def refine_in_tube(ref: Reference, pieces, profile, machine: Machine, tube_mm: n
             contour[sel] = index.distance_mm(actual[sel], contour[sel])
         return actual, np.where(cut_out, contour, 0.0), cut_out
 
+    start = u.copy()
     y, err, cut_out = response(u)
     history = [float(err.max())]
     windows: list = []
@@ -650,8 +703,9 @@ def refine_in_tube(ref: Reference, pieces, profile, machine: Machine, tube_mm: n
         steps = [s for s in steps if s[3] is not None]
         if not steps:
             break
-        # Each window kept where its own largest error went down (full step, else half, else
-        # a quarter); the windows' tool samples are disjoint, their effects add.
+        # Each window kept where its own largest error went down and the reference is no
+        # rougher there (full step, else half, else a quarter); the windows' tool samples
+        # are disjoint, their effects add.
         alpha = np.ones(len(steps))
         done = np.zeros(len(steps), dtype=bool)
         base = u.copy()
@@ -660,14 +714,17 @@ def refine_in_tube(ref: Reference, pieces, profile, machine: Machine, tube_mm: n
             for i, (j0, j1, _k1, step, poly) in enumerate(steps):
                 if done[i]:
                     continue
-                moved = _into_tube(base[j0:j1] + alpha[i] * step, poly, tube_mm[j0:j1])
+                moved = _move_in_path_coordinates(base[j0:j1], alpha[i] * step[:, 0],
+                                                  alpha[i] * step[:, 1], poly)  # fmt: skip
+                moved = _into_tube(moved, poly, tube_mm[j0:j1])  # (to rounding: a no-op)
                 trial[j0:j1] = np.where(movable[j0:j1, None], moved, base[j0:j1])
             y_t, err_t, _ = response(trial)
             for i, (j0, _j1, k1, _step, _poly) in enumerate(steps):
                 if done[i]:
                     continue
                 k1 = min(k1, err.size)
-                if float(err_t[j0:k1].max()) < float(err[j0:k1].max()) - 1e-9:
+                if (float(err_t[j0:k1].max()) < float(err[j0:k1].max()) - 1e-9
+                        and _no_rougher(trial, start, j0, _j1, limits)):
                     done[i] = True
                     base[j0:_j1] = trial[j0:_j1]
                 else:
