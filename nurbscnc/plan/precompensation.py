@@ -16,7 +16,7 @@ import numpy as np
 from nurbscnc.geometry.nurbs import NurbsCurve
 from nurbscnc.geometry.path import Kind
 from nurbscnc.machine.profile import AxisServo, Machine
-from nurbscnc.plan.dynamics import PathIndex, path_response, windowed_contour_mm
+from nurbscnc.plan.dynamics import CHORD_MM, PathIndex, path_response, windowed_contour_mm
 from nurbscnc.plan.lookahead import Plan
 from nurbscnc.plan.timing import Reference
 from nurbscnc.servo.model import AxisModel, contour_error_true
@@ -84,6 +84,17 @@ class Precompensation:
                                 for k, e in self.sensitivity]}  # fmt: skip
 
 
+@dataclass(frozen=True, eq=False)
+class Refined(Compensated):
+    """A :class:`~nurbscnc.servo.precompensate.Compensated` reference whose offsets across
+    the path were then optimised in the tube (:func:`refine_in_tube`): ``history_mm`` the
+    largest predicted contour error [mm] before and after each round, ``clipped_mm`` the
+    reference it started from (the ZPETC reference clipped into the tube)."""
+
+    history_mm: tuple[float, ...] = ()
+    clipped_mm: np.ndarray | None = None
+
+
 def _models(machine: Machine) -> list:
     servo = machine.servo
     return [servo.x, servo.y, servo.z]
@@ -148,7 +159,7 @@ def _tube_mm(pieces, piece: np.ndarray, foot_mm: np.ndarray, tolerance_mm: float
 
 def precompensate_reference(ref: Reference, pieces, profile, machine: Machine,
                             tolerance_mm: float = REFERENCE_TOLERANCE_MM,
-                            fit_tolerance_mm: float | None = None,
+                            fit_tolerance_mm: float | None = None, refine: bool = True,
                             ) -> tuple[Reference, Compensated]:  # fmt: skip
     """The ZPETC pre-compensated version of a plan's reference (SPEC eq. 25 inverted,
     :func:`~nurbscnc.servo.precompensate.precompensate_points`; F's tail blended in within
@@ -176,14 +187,23 @@ def precompensate_reference(ref: Reference, pieces, profile, machine: Machine,
     points = comp.points_mm
     s_mm = edge(ref.s_mm)
     if np.isfinite(tolerance_mm):
-        lead_mm = along_path_offset_mm(points, edge(ref.points_mm))
-        s_foot = np.clip(s_mm + lead_mm, 0.0, profile.total_length_mm)
+        s_foot = _s_along(points, edge(ref.points_mm), s_mm, profile)
         starts = profile.piece_start_mm
         piece = np.clip(np.searchsorted(starts, s_foot, side="right") - 1, 0, starts.size - 1)
         foot = pieces.path.place(starts, np.minimum(s_foot, starts[piece]
                                                     + pieces.length_mm[piece]), piece)[0]
         fit = lim.ph_tolerance_mm if fit_tolerance_mm is None else fit_tolerance_mm
-        points = limit_to_path(points, foot, _tube_mm(pieces, piece, foot, tolerance_mm, fit))
+        tube = _tube_mm(pieces, piece, foot, tolerance_mm, fit)
+        optimise = refine and machine.contour_check
+        if optimise:
+            # The optimisation measures the tube on polylines of the path (chords ≤ 10 nm
+            # inside the curve, dynamics.CHORD_MM): its tube is the smallest of each
+            # sample's neighbours' (the foot moves along the path) less twice that, and
+            # the clip a chord error more, so the clipped points start inside it.
+            near = np.lib.stride_tricks.sliding_window_view(np.pad(tube, 4, mode="edge"), 9)
+            tube_in = np.maximum(near.min(axis=1) - 2.0 * CHORD_MM, 0.0)
+            tube = np.maximum(tube_in - CHORD_MM, 0.0)
+        points = limit_to_path(points, foot, tube)
         comp = replace(comp, points_mm=points)
     n_in, n = ref.points_mm.shape[0], points.shape[0]
     # Every per-sample column padded alike (whatever columns the Reference has).
@@ -191,7 +211,28 @@ def precompensate_reference(ref: Reference, pieces, profile, machine: Machine,
                if isinstance(getattr(ref, f.name), np.ndarray)
                and getattr(ref, f.name).shape[:1] == (n_in,)}  # fmt: skip
     columns.update(t_s=np.arange(n) * period, points_mm=points)
-    return replace(ref, **columns), comp
+    if np.isfinite(tolerance_mm):
+        # Each sample's path length where its point is (the planned one's plus the lead
+        # along the path), so a distance measured near it (windowed_contour_mm) looks at the
+        # stretch of path the point is at.
+        columns["s_mm"] = s_foot
+    out = replace(ref, **columns)
+    if np.isfinite(tolerance_mm) and optimise:
+        done = refine_in_tube(out, pieces, profile, machine, tube_in)
+        out = replace(out, points_mm=done.points_mm)
+        out = replace(out, s_mm=_s_along(done.points_mm, edge(ref.points_mm), s_mm, profile))
+        comp = Refined(done.points_mm, comp.lead_samples, comp.end_step_mm,
+                       comp.end_blend_samples, done.history_mm, points)  # fmt: skip
+    return out, comp
+
+
+def _s_along(points_mm: np.ndarray, planned_mm: np.ndarray, s_planned_mm: np.ndarray,
+             profile) -> np.ndarray:  # fmt: skip
+    """The path length [mm] at which each point of ``points_mm`` is: its planned point's
+    plus its lead along the path (:func:`~nurbscnc.servo.precompensate.along_path_offset_mm`),
+    within the program."""
+    lead = along_path_offset_mm(points_mm, planned_mm)
+    return np.clip(s_planned_mm + lead, 0.0, profile.total_length_mm)
 
 
 def precompensated_sampler(sampler, machine: Machine,
@@ -269,3 +310,436 @@ def precompensation_report(plan: Plan, planned: Reference, compensated: Referenc
     return Precompensation(comp.lead_samples * period, 0.0, deviation, tuple(rows),
                            tolerance_mm, comp.end_step_mm,
                            comp.end_blend_samples * period)  # fmt: skip
+
+
+# --------------------------------------------------------------------------- tube optimisation
+#
+# The clip above keeps the ZPETC reference within the tube of radius τ about the path, but
+# where the inverse wants more than τ across the path (entering a tight curve, the stop at
+# the end) the clipped reference is not the best one in the tube. Here the offsets across the
+# path are re-chosen, region by region where the simulated tool is still far from the path,
+# to minimise the largest contour error there (a small linear programme on the known model):
+#
+#   tool   y = H u (per axis, linear: the sampled eq. 25, FOH),
+#   error  e_k ≈ σ_k + ν_k · (H Δ)_k   (σ_k = |y_k − q_k|, q_k the nearest path point, ν_k the
+#          unit vector from q_k to y_k: the distance to first order),
+#   step   Δ_j = a_j m_j   (m_j the in-plane normal of the path at the reference's own foot),
+#   tube   |μ_j + a_j| ≤ τ'_j   (μ_j the current offset across the path, τ'_j the tube less
+#          any offset out of the plane),
+#   min z  subject to  |σ_k + Σ_j G_kj a_j| ≤ z  over the region's tool samples,
+#
+# G_kj = Σ_axes ν_k,c h_c[k − j] m_j,c with h_c the axis' impulse response. Then the step is
+# applied, the reference projected exactly into the tube again (nearest point on the path),
+# simulated, and kept only where the true largest error of the region went down (else halved,
+# then dropped): the largest error never increases from round to round. Work per region:
+# one dense G of (inputs + reach) × inputs ≤ REFINE_MAX_INPUTS × (REFINE_MAX_INPUTS + reach).
+
+#: Rounds of linearise → LP → simulate (each only keeps what lowers the error).
+REFINE_ROUNDS = 8
+#: ... stopping early when a round lowers the largest error by less than this [mm].
+REFINE_GAIN_MM = 1e-5
+#: A region is the tool samples whose contour error exceeds this fraction of ε_max, with the
+#: reference samples REFINE_BEFORE_S before it (the response's rise: what can still act) and
+#: the tool samples the impulse response reaches after it.
+REFINE_THRESHOLD = 0.9
+REFINE_BEFORE_S = 0.025
+#: The impulse response is followed until it is below this fraction of its peak.
+REFINE_REACH = 1e-3
+#: Most reference samples one LP moves (a longer region is cut into windows this long).
+REFINE_MAX_INPUTS = 300
+#: The share of the machine's A T² and J T³ a step's own differences may use.
+REFINE_SMOOTH = 0.9
+#: ... and what the step may add to them beyond that (share of the limit): the bend of a
+#: move along a curve is second order in the step, not in the LP.
+REFINE_ROUGH = 0.02
+#: Chord sagitta of the optimiser's polylines of the path [mm].
+REFINE_CHORD_MM = 1e-7
+#: Largest move of a reference sample along the path in one round [mm].
+REFINE_ALONG_MM = 0.02
+
+
+@dataclass(frozen=True, eq=False)
+class Refinement:
+    """What the tube optimisation did: ``points_mm`` the reference, ``history_mm`` the
+    largest contour error [mm] on the cut before the first round and after each round
+    (non-increasing), ``regions`` the windows of the last round."""
+
+    points_mm: np.ndarray
+    history_mm: tuple[float, ...]
+    regions: int
+
+
+def _impulse_responses(machine: Machine, length: int) -> np.ndarray:
+    """h (length, 3): each axis' sampled eq.-25 impulse response (FOH, the simulation's
+    discretisation, :func:`~nurbscnc.servo.model.discretise`); an axis without a model
+    follows its reference (h = δ)."""
+    from scipy import signal
+
+    from nurbscnc.servo.model import discretise
+
+    h = np.zeros((length, 3))
+    impulse = np.zeros(length)
+    impulse[0] = 1.0
+    for c, m in enumerate(_models(machine)):
+        if m is None:
+            h[0, c] = 1.0
+            continue
+        d = discretise(m, machine.servo.period_s, "foh")
+        h[:, c] = signal.lfilter(d.b, d.a, impulse)
+    return h
+
+
+def _reach_samples(machine: Machine) -> int:
+    """Samples after which every axis' impulse response stays below REFINE_REACH × peak."""
+    h = np.abs(_impulse_responses(machine, 2000))
+    big = h >= REFINE_REACH * h.max(axis=0)
+    return int(max(np.flatnonzero(big.any(axis=1))[-1] + 1, 1))
+
+
+def _local_polyline(pieces, profile, s_lo_mm: float, s_hi_mm: float) -> np.ndarray:
+    """The path between path lengths s_lo and s_hi [mm] (whole pieces) as a dense polyline:
+    lines by their ends, curves by chords of sagitta κh²/8 ≤ REFINE_CHORD_MM (κ the
+    piece's largest curvature, doubled on NURBS cells as dynamics.path_counts does), so
+    a point moved along it (:func:`_move_in_path_coordinates`) follows the curve smoothly
+    to well below the reference's jerk per period J T³."""
+    starts = profile.piece_start_mm
+    lo = max(int(np.searchsorted(starts, s_lo_mm, side="right")) - 1, 0)
+    hi = min(int(np.searchsorted(starts, s_hi_mm, side="right")), starts.size)
+    hi = max(hi, lo + 1)
+    sl = slice(lo, hi)
+    length = pieces.length_mm[sl]
+    kappa = np.where(pieces.kind[sl] == Kind.NURBS, 2.0, 1.0) * np.abs(pieces.kappa_max_per_mm[sl])
+    with np.errstate(divide="ignore"):
+        h = np.minimum(0.01, np.sqrt(8.0 * REFINE_CHORD_MM / kappa))
+    c = np.maximum(np.ceil(length / h).astype(np.int64) + 1, 3)
+    c = np.where((pieces.kind[sl] == Kind.LINE) | (length == 0.0), 2, c)
+    piece = np.repeat(np.arange(lo, hi), c)
+    first = np.repeat(np.cumsum(c) - c, c)
+    frac = (np.arange(piece.size) - first) / np.repeat(c - 1, c)
+    pts = pieces.path.points_at_fraction(piece, frac)
+    # Without the repeated point where one piece ends and the next starts (a segment of
+    # rounding length has no direction).
+    step = np.sqrt(np.sum(np.diff(pts, axis=0) ** 2, axis=1))
+    return pts[np.concatenate([[True], step > 1e-9])]
+
+
+def nearest_on_polyline(q_mm: np.ndarray, poly_mm: np.ndarray, vertices: int = 8):
+    """Nearest points (m, 3), distances (m,) [mm] and unit tangents (m, 3) of the polyline
+    ``poly_mm`` (p ≥ 2, 3) for the points ``q_mm`` (m, 3): exact point-to-segment over the
+    segments next to the ``vertices`` nearest vertices (a k-d tree)."""
+    from scipy.spatial import cKDTree
+
+    p = poly_mm.shape[0]
+    k = min(vertices, p)
+    _, idx = cKDTree(poly_mm).query(q_mm, k=k)
+    idx = np.asarray(idx).reshape(q_mm.shape[0], k)
+    seg = np.clip(np.concatenate([idx - 1, idx], axis=1), 0, p - 2)  # (m, 2k)
+    a = poly_mm[seg]
+    d = poly_mm[seg + 1] - a
+    len2 = np.einsum("mij,mij->mi", d, d)
+    t = np.einsum("mij,mij->mi", q_mm[:, None, :] - a, d) / np.where(len2 > 0.0, len2, 1.0)
+    t = np.clip(t, 0.0, 1.0)
+    foot = a + t[..., None] * d
+    e = q_mm[:, None, :] - foot
+    dist = np.sqrt(np.einsum("mij,mij->mi", e, e))
+    best = np.argmin(dist, axis=1)
+    rows = np.arange(q_mm.shape[0])
+    dd = d[rows, best]
+    tangent = dd / np.maximum(np.sqrt(np.einsum("ij,ij->i", dd, dd)), 1e-300)[:, None]
+    nearest_on_polyline.segment = seg[rows, best]
+    return foot[rows, best], dist[rows, best], tangent
+
+
+def _plane_normal(tangent: np.ndarray) -> np.ndarray:
+    """The unit normal in the XY plane, left of each unit tangent (m, 3) (zero where the
+    tangent has no XY part)."""
+    m = np.zeros_like(tangent)
+    m[:, 0], m[:, 1] = -tangent[:, 1], tangent[:, 0]
+    size = np.sqrt(m[:, 0] ** 2 + m[:, 1] ** 2)
+    return np.where(size[:, None] > 1e-12, m / np.where(size > 1e-12, size, 1.0)[:, None], 0.0)
+
+
+def _frame(poly_mm: np.ndarray):
+    """The polyline's arc length at its vertices (P,), and a function σ → (points, unit
+    tangents, unit XY normals) at arc lengths σ, the tangents and normals interpolated
+    linearly between the vertices' (the mean of their two segments'), so they turn smoothly
+    along the path rather than jump at each vertex."""
+    d = np.diff(poly_mm, axis=0)
+    length = np.sqrt(np.einsum("ij,ij->i", d, d))
+    unit = d / np.where(length > 0.0, length, 1.0)[:, None]
+    t_v = np.concatenate([unit[:1], unit[:-1] + unit[1:], unit[-1:]])
+    t_v /= np.maximum(np.sqrt(np.einsum("ij,ij->i", t_v, t_v)), 1e-300)[:, None]
+    s_v = np.concatenate([[0.0], np.cumsum(length)])
+
+    def at(sigma):
+        i = np.clip(np.searchsorted(s_v, sigma, side="right") - 1, 0, length.size - 1)
+        f = np.clip((sigma - s_v[i]) / np.where(length[i] > 0.0, length[i], 1.0), 0.0, 1.0)
+        point = poly_mm[i] + f[:, None] * d[i]
+        t = (1.0 - f)[:, None] * t_v[i] + f[:, None] * t_v[i + 1]
+        t /= np.maximum(np.sqrt(np.einsum("ij,ij->i", t, t)), 1e-300)[:, None]
+        return point, t, _plane_normal(t)
+
+    return s_v, at
+
+
+def _path_coordinates(u_mm: np.ndarray, poly_mm: np.ndarray):
+    """Each point's place against the path: arc length σ of its nearest point on the
+    polyline, the frame function of :func:`_frame`, the unit tangent and XY normal there,
+    its offset μ along that normal [mm] and the rest of its offset (out of the plane)."""
+    foot, _, _ = nearest_on_polyline(u_mm, poly_mm)
+    seg = nearest_on_polyline.segment
+    s_v, at = _frame(poly_mm)
+    sigma = s_v[seg] + np.sqrt(np.sum((foot - poly_mm[seg]) ** 2, axis=1))
+    point, t, m = at(sigma)
+    off = u_mm - point
+    mu = np.einsum("ij,ij->i", off, m)
+    return sigma, at, t, m, mu, off - mu[:, None] * m
+
+
+def _move_in_path_coordinates(u_mm: np.ndarray, across_mm: np.ndarray, along_mm: np.ndarray,
+                              poly_mm: np.ndarray) -> np.ndarray:  # fmt: skip
+    """The points ``u_mm`` moved ``along_mm`` along the path (arc length) and ``across_mm``
+    across it (along its XY normal), keeping the rest of their offset: exact path
+    coordinates, so the distance from the path is |μ + a| (and the rest) wherever the point
+    goes along a curve (no bend κb²/2 as with a straight move along the tangent)."""
+    sigma, at, _t, _m, mu, rest = _path_coordinates(u_mm, poly_mm)
+    point, _t1, m1 = at(sigma + along_mm)
+    return point + (mu + across_mm)[:, None] * m1 + rest
+
+
+def _into_tube(u_mm: np.ndarray, poly_mm: np.ndarray, tube_mm: np.ndarray) -> np.ndarray:
+    """``u_mm`` projected into the ball of radius ``tube_mm`` about its nearest path point
+    (the exact tube: its distance to ``poly_mm`` is then at most the tube)."""
+    foot, dist, _ = nearest_on_polyline(u_mm, poly_mm)
+    scale = np.minimum(1.0, tube_mm / np.where(dist > 0.0, dist, 1.0))
+    return foot + (u_mm - foot) * scale[:, None]
+
+
+def _regions(over: np.ndarray, before: int, reach: int, lo: int, hi: int,
+             longest: int) -> list[tuple[int, int, int]]:  # fmt: skip
+    """Windows (j0, j1, k1) over the tool samples ``over`` (sorted): reference samples
+    j0 … j1−1 move (from ``before`` ahead of a run of over-limit samples to its end, within
+    [lo, hi)), tool samples j0 … k1−1 are constrained (``reach`` past j1). Runs whose windows
+    would overlap are merged; a window moves at most ``longest`` samples."""
+    if over.size == 0:
+        return []
+    cuts = np.flatnonzero(np.diff(over) > before + reach) + 1
+    out = []
+    for run in np.split(over, cuts):
+        a, b = max(int(run[0]) - before, lo), min(int(run[-1]) + 1, hi)
+        for j0 in range(a, b, longest):
+            j1 = min(j0 + longest, b)
+            out.append((j0, j1, j1 + reach))
+    return out
+
+
+def _difference_rows(u: np.ndarray, j0: int, j1: int, order: int) -> tuple:
+    """The ``order``-th differences of a step Δ that is zero outside samples j0 … j1−1, on
+    every row they touch (r = j0 − 1 … j1 − 2 + order, Δ_r − … centred as np.diff): the
+    matrix D (rows, j1 − j0) with D·Δ[j0:j1] those differences, and the same differences
+    of ``u`` (rows, 3) on those rows (edge samples repeated past the ends)."""
+    n_in = j1 - j0
+    coef = np.diff(np.eye(order + 1), n=order, axis=0)[0]  # e.g. [1, −2, 1]
+    rows = n_in + order
+    d = np.zeros((rows, n_in))
+    for i, c in enumerate(coef):  # row r covers Δ_{j0 − order + r + i}
+        cols = np.arange(rows) - order + i
+        ok = (cols >= 0) & (cols < n_in)
+        d[np.flatnonzero(ok), cols[ok]] = c
+    idx = np.clip(np.arange(j0 - order, j1 + order), 0, u.shape[0] - 1)
+    du = np.diff(u[idx], n=order, axis=0)  # rows j0 − order … j1 + order − 1 − order
+    return d, du[:rows]
+
+
+def _region_step(u: np.ndarray, y: np.ndarray, cut_out: np.ndarray, movable: np.ndarray,
+                 window: tuple[int, int, int], h: np.ndarray, poly: np.ndarray,
+                 tube: np.ndarray, limits: tuple[float, float]) -> np.ndarray | None:  # fmt: skip
+    """The LP step of one ``window`` (j0, j1, k1) (module comment above): (j1 − j0, 2) [mm],
+    the moves across and along the path of each sample (path coordinates,
+    :func:`_move_in_path_coordinates`), or None. ``limits`` (A T², J T³) [mm]: the
+    reference's second and third differences stay within them on every axis (or within its
+    own, where it was above them already), so the step never makes the reference rougher
+    than the machine's acceleration and jerk (to first order: the path coordinates add the
+    bend, smooth along the path)."""
+    from scipy.optimize import linprog
+
+    j0, j1, k1 = window
+    k1 = min(k1, y.shape[0])
+    ks = np.arange(j0, k1)
+    ks = ks[cut_out[ks]]
+    if ks.size == 0:
+        return None
+    q, sigma, tan_out = nearest_on_polyline(y[ks], poly)
+    nu = (y[ks] - q) / np.where(sigma > 1e-9, sigma, 1.0)[:, None]
+    nu = np.where(sigma[:, None] > 1e-9, nu, _plane_normal(tan_out))
+    _sigma, _at, tan_in, m, mu, rest = _path_coordinates(u[j0:j1], poly)
+    room = np.sqrt(np.maximum(tube[j0:j1] ** 2 - np.einsum("ij,ij->i", rest, rest), 0.0))
+    room *= 1.0 - 1e-6
+    fixed = ~movable[j0:j1]
+    # (never forced to move: the current point is in the tube, so a = 0 stays allowed and
+    # the LP always has a solution)
+    lo_a = np.where(fixed, 0.0, np.minimum(-room - mu, 0.0))
+    hi_a = np.where(fixed, 0.0, np.maximum(room - mu, 0.0))
+    along = np.where(fixed, 0.0, REFINE_ALONG_MM)
+    # Unknowns x = (a, b, z): Δ_j = a_j m_j + b_j t_j across and along the path.
+    basis = np.concatenate([m, tan_in])  # (2J, 3): the direction of each unknown
+    lag = ks[:, None] - np.arange(j0, j1)[None, :]  # k − j
+    valid = (lag >= 0) & (lag < h.shape[0])
+    hk = h[np.clip(lag, 0, h.shape[0] - 1)] * valid[..., None]  # (K, J, 3)
+    g = np.hstack([np.einsum("kc,kjc,jc->kj", nu, hk, m),
+                   np.einsum("kc,kjc,jc->kj", nu, hk, tan_in)])  # fmt: skip
+    ones = -np.ones((ks.size, 1))
+    a_ub = [np.hstack([g, ones]), np.hstack([-g, ones])]
+    b_ub = [-sigma, sigma]
+    n_x = 2 * (j1 - j0)
+    for order, limit in zip((2, 3), limits):
+        d, du = _difference_rows(u, j0, j1, order)
+        for c in range(3):
+            if not np.any(basis[:, c]):
+                continue
+            rows = np.hstack([d * basis[: j1 - j0, c], d * basis[j1 - j0 :, c]])
+            # (the linear step within REFINE_SMOOTH of the limit: moving in path
+            # coordinates adds the bend, second order in the step)
+            cap = np.maximum(REFINE_SMOOTH * limit, np.abs(du[:, c]))
+            zero = np.zeros((rows.shape[0], 1))
+            a_ub += [np.hstack([rows, zero]), np.hstack([-rows, zero])]
+            b_ub += [cap - du[:, c], cap + du[:, c]]
+    bounds = np.column_stack([np.concatenate([lo_a, -along, [0.0]]),
+                              np.concatenate([hi_a, along, [np.inf]])])  # fmt: skip
+    cost = np.zeros(n_x + 1)
+    cost[-1] = 1.0
+    res = linprog(cost, A_ub=np.vstack(a_ub), b_ub=np.concatenate(b_ub), bounds=bounds,
+                  method="highs")  # fmt: skip
+    if res.status != 0:
+        return None
+    return res.x[:n_x].reshape(2, j1 - j0).T  # (J, 2): a across, b along
+
+
+def _no_rougher(new_mm: np.ndarray, old_mm: np.ndarray, j0: int, j1: int,
+                limits: tuple[float, float]) -> bool:
+    """Whether the second and third differences of ``new_mm`` about samples j0 … j1−1 are
+    within max(limit, those of ``old_mm``) + REFINE_ROUGH × limit on every axis (``limits``
+    (A T², J T³) [mm]; ``old_mm`` the reference the optimisation started from, so the
+    allowance does not add up over the rounds)."""
+    lo, hi = max(j0 - 3, 0), min(j1 + 3, new_mm.shape[0])
+    for order, limit in zip((2, 3), limits):
+        d_new = np.abs(np.diff(new_mm[lo:hi], n=order, axis=0))
+        d_old = np.abs(np.diff(old_mm[lo:hi], n=order, axis=0))
+        if np.any(d_new > np.maximum(limit, d_old) + REFINE_ROUGH * limit):
+            return False
+    return True
+
+
+def refine_in_tube(ref: Reference, pieces, profile, machine: Machine, tube_mm: np.ndarray,
+                   rounds: int = REFINE_ROUNDS, gain_mm: float = REFINE_GAIN_MM) -> Refinement:
+    """The reference ``ref`` (its points within ``tube_mm`` (N,) of the path) with its
+    offsets across the path re-chosen where the simulated contour error exceeds
+    REFINE_THRESHOLD × ε_max, to minimise the largest error there (module comment above:
+    sequential LPs on the known model, each round kept only where it lowers the error).
+    Samples at rest, on rapids, and the first and last sample do not move."""
+    from scipy import signal
+
+    from nurbscnc.servo.model import discretise
+
+    eps = machine.limits.contour_tolerance_mm
+    u = np.array(ref.points_mm, dtype=float)
+    n = u.shape[0]
+    cut = ~pieces.rapid[ref.piece]
+    speed = np.zeros(n)
+    if n > 2:
+        speed[1:-1] = np.sqrt(np.sum((u[2:] - u[:-2]) ** 2, axis=1))
+    movable = cut & (speed > 1e-9)
+    movable[[0, -1]] = False
+    index = PathIndex(pieces)
+    reach = _reach_samples(machine)
+    h = _impulse_responses(machine, reach)
+    period = machine.servo.period_s
+    before = max(int(round(REFINE_BEFORE_S / period)), 1)
+    lim = machine.limits
+    limits = (lim.a_max_mm_s2 * period**2, lim.j_max_mm_s3 * period**3)
+
+    # The check's simulation (path_response: each axis from rest at its first point, the
+    # last point held until settled, the true distance near the reference and to the whole
+    # path above the threshold), its discretisation made once and the settle length of the
+    # first reference kept: the same numbers at a fraction of the cost per round.
+    first = path_response(ref, pieces, profile, machine, index=index)
+    extra = first.actual_mm.shape[0] - n
+    discs = [None if m is None else discretise(m, period, "foh") for m in _models(machine)]
+    s_out = np.concatenate((ref.s_mm, np.full(extra, ref.s_mm[-1])))
+    cut_out = np.append(cut, np.full(extra, cut[-1]))
+
+    def response(points):
+        held = np.vstack([points, np.repeat(points[-1:], extra, axis=0)])
+        actual = held.copy()
+        for c, d in enumerate(discs):
+            if d is not None:
+                x = held[:, c] - points[0, c]
+                actual[:, c] = signal.lfilter(d.b, d.a, x) + d.dc_gain * points[0, c]
+        lag = np.sqrt(np.sum((held - actual) ** 2, axis=1))
+        contour = windowed_contour_mm(actual, lag, s_out, pieces, profile)
+        sel = np.flatnonzero(contour > REFINE_THRESHOLD * eps)
+        if sel.size:
+            contour[sel] = index.distance_mm(actual[sel], contour[sel])
+        return actual, np.where(cut_out, contour, 0.0), cut_out
+
+    start = u.copy()
+    y, err, cut_out = response(u)
+    history = [float(err.max())]
+    windows: list = []
+    for _ in range(rounds):
+        over = np.flatnonzero(err > REFINE_THRESHOLD * eps)
+        windows = _regions(over, before, reach, 1, n - 1, REFINE_MAX_INPUTS)
+        steps = []
+        for j0, j1, k1 in windows:
+            # The path under the window's reference and tool samples (the tool within 2|u − y|
+            # of its reference along the path, as windowed_contour_mm).
+            s_in = ref.s_mm[j0 : min(k1, n)]
+            margin = 2.0 * float(np.max(np.abs(u[j0:min(k1, n)] - y[j0:min(k1, n)]))) + 0.05
+            poly = _local_polyline(pieces, profile, float(s_in.min()) - margin,
+                                   float(s_in.max()) + margin)  # fmt: skip
+            step = _region_step(u, y, cut_out, movable, (j0, j1, k1), h, poly, tube_mm,
+                                limits)  # fmt: skip
+            steps.append((j0, j1, k1, step, poly))
+        steps = [s for s in steps if s[3] is not None]
+        if not steps:
+            break
+        # Each window kept where its own largest error went down and the reference is no
+        # rougher there (full step, else half, else a quarter); the windows' tool samples
+        # are disjoint, their effects add.
+        alpha = np.ones(len(steps))
+        done = np.zeros(len(steps), dtype=bool)
+        base = u.copy()
+        for _attempt in range(3):
+            trial = base.copy()
+            for i, (j0, j1, _k1, step, poly) in enumerate(steps):
+                if done[i]:
+                    continue
+                moved = _move_in_path_coordinates(base[j0:j1], alpha[i] * step[:, 0],
+                                                  alpha[i] * step[:, 1], poly)  # fmt: skip
+                moved = _into_tube(moved, poly, tube_mm[j0:j1])  # (to rounding: a no-op)
+                trial[j0:j1] = np.where(movable[j0:j1, None], moved, base[j0:j1])
+            y_t, err_t, _ = response(trial)
+            for i, (j0, _j1, k1, _step, _poly) in enumerate(steps):
+                if done[i]:
+                    continue
+                k1 = min(k1, err.size)
+                if (float(err_t[j0:k1].max()) < float(err[j0:k1].max()) - 1e-9
+                        and _no_rougher(trial, start, j0, _j1, limits)):
+                    done[i] = True
+                    base[j0:_j1] = trial[j0:_j1]
+                else:
+                    alpha[i] *= 0.5
+            if done.all():
+                break
+        if not done.any():
+            history.append(history[-1])
+            break
+        y_t, err_t, _ = response(base)
+        if float(err_t.max()) > history[-1]:  # a window's tail raised another's: keep none
+            history.append(history[-1])
+            break
+        u, y, err = base, y_t, err_t
+        history.append(float(err.max()))
+        if history[-2] - history[-1] < gain_mm:
+            break
+    return Refinement(u, tuple(history), len(windows))
