@@ -40,6 +40,7 @@ from __future__ import annotations
 import argparse
 import datetime as dt
 import json
+import os
 import platform
 import sys
 import threading
@@ -281,6 +282,10 @@ def main() -> int:
     args = ap.parse_args()
     if args.planning:
         row = planning_ahead(args.planning)
+        row.update(date=dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
+                   machine={"platform": platform.platform(), "cpus": os.cpu_count(),
+                            "python": platform.python_version(),
+                            "load_1min": round(os.getloadavg()[0], 2)})  # fmt: skip
         print(json.dumps(row))
         if args.out:
             Path(args.out).write_text(json.dumps(row, indent=2) + "\n")
