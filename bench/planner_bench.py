@@ -191,6 +191,8 @@ def nurbscnc_case(case: Case, path: Path, programmed, block, variant: list[str],
     for key in ("cycle_time_s", "contour_max_um", "dynamics_iterations", "lower_bound_s"):
         if key in s:
             row[{"contour_max_um": "predicted_contour_max_um"}.get(key, key)] = s[key]
+    if "precompensation" in s:  # --precompensate: its own report (deviation, ±10 % models)
+        row["precompensation"] = s["precompensation"]
     row.update(measure(res["points"], res["lines"], programmed, block))
     return row
 
