@@ -151,6 +151,10 @@ def _dense_polyline(pieces, starts_mm: np.ndarray, total_mm: float, lo: int, hi:
     return ps, pieces.path.place(starts_mm, ps, piece)[0]
 
 
+#: The dense polyline without an index's cache (for indexes over part of a program).
+dense_polyline_of = _dense_polyline
+
+
 class PathIndex:
     """Where the pieces of a path are, for the few global distance queries of the check.
 

@@ -58,7 +58,13 @@ import numpy as np
 from nurbscnc.errors import PlanningError
 from nurbscnc.machine.profile import Machine
 from nurbscnc.plan.axes import piece_limits
-from nurbscnc.plan.dynamics import PathIndex, Response, path_response, window_response
+from nurbscnc.plan.dynamics import (
+    PathIndex,
+    Response,
+    dense_polyline_of,
+    path_response,
+    window_response,
+)
 from nurbscnc.plan.limits import check_point_count
 from nurbscnc.plan.options import Dynamics, LookaheadOptions
 from nurbscnc.plan.pieces import PieceList, junction_caps, segment_pieces, settle_time_s
@@ -724,6 +730,13 @@ class _HeadIndex:
         if exclude is not None:
             beyond[: self._end] |= exclude[: self._end]
         return self._index.distance_mm(q, upper_mm, block, beyond)
+
+    def dense_polyline(self, pieces, starts_mm: np.ndarray, total_mm: float, lo: int,
+                       hi: int) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+        """The dense polyline of pieces ``lo:hi`` of the head, made afresh (the whole
+        program's kept polyline is clipped at the program's end, the head's at its own):
+        the same numbers as without an index."""
+        return dense_polyline_of(pieces, starts_mm, total_mm, lo, hi)
 
 
 class _HeadProfile:

@@ -753,7 +753,12 @@ def _small_break(pieces: PieceList, turning: np.ndarray, regular: np.ndarray,
     neighbouring piece (which a blend may later trim to half). The factor counts the breaks
     one servo step vT can cross when the pieces are shorter than it (a dense polyline): their
     jumps add up within one period. It also bounds the polyline's implied normal
-    acceleration, v²θ/L ≤ A_max, since the jump allowed is ≤ A_max T."""
+    acceleration, v²θ/L ≤ A_max, since the jump allowed is ≤ A_max T.
+
+    With per-axis limits, each axis's share of the jump, v |t_b,i − t_a,i| · crowd, must also
+    stay within that axis's min(A_i T, J_i T²) (the same finite-difference argument per axis:
+    a break of 0.42° at 5 mm/s passed the path's 0.05 mm/s rule and put 0.034 mm/s on the Y
+    axis, allowed 0.02 mm/s: on the samples a jerk 7,600 mm/s³ over that axis's limit)."""
     cap, length = pieces.v_cap_mm_s, pieces.length_mm
     v = np.minimum(cap[:-1], cap[1:])
     half = 0.5 * np.minimum(length[:-1], length[1:])
@@ -762,7 +767,14 @@ def _small_break(pieces: PieceList, turning: np.ndarray, regular: np.ndarray,
     with np.errstate(divide="ignore", invalid="ignore"):
         crowd = np.maximum(1.0, v * machine.servo.period_s / half)
         jump = 2.0 * v * np.sin(0.5 * turning) * crowd
-    return regular & (turning > SMOOTH_JUNCTION_RAD) & (jump <= pass_velocity_jump_mm_s(machine))
+        small = jump <= pass_velocity_jump_mm_s(machine)
+        if machine.axis_limits.any:
+            _, a_axis, j_axis = machine.axis_limits.as_arrays()
+            period = machine.servo.period_s
+            allow = np.minimum(a_axis * period, j_axis * period**2)[:, None]  # (3, 1)
+            step = pieces.tangent_start[:, 1:] - pieces.tangent_end[:, :-1]  # (3, k − 1)
+            small &= np.all(np.abs(step) * (v * crowd) <= allow, axis=0)
+    return regular & (turning > SMOOTH_JUNCTION_RAD) & small
 
 
 def _passable(pieces: PieceList, turning: np.ndarray, regular: np.ndarray) -> np.ndarray:
