@@ -346,12 +346,14 @@ REFINE_BEFORE_S = 0.025
 #: The impulse response is followed until it is below this fraction of its peak.
 REFINE_REACH = 1e-3
 #: Most reference samples one LP moves (a longer region is cut into windows this long).
-REFINE_MAX_INPUTS = 300
+REFINE_MAX_INPUTS = 120
 #: The share of the machine's A T² and J T³ a step's own differences may use.
 REFINE_SMOOTH = 0.9
 #: ... and what the step may add to them beyond that (share of the limit): the bend of a
 #: move along a curve is second order in the step, not in the LP.
 REFINE_ROUGH = 0.02
+#: Time limit of one window's LP [s] (HiGHS; a window not solved in time is left as is).
+REFINE_LP_TIME_S = 1.0
 #: Chord sagitta of the optimiser's polylines of the path [mm].
 REFINE_CHORD_MM = 1e-7
 #: Largest move of a reference sample along the path in one round [mm].
@@ -609,7 +611,7 @@ def _region_step(u: np.ndarray, y: np.ndarray, cut_out: np.ndarray, movable: np.
     cost = np.zeros(n_x + 1)
     cost[-1] = 1.0
     res = linprog(cost, A_ub=np.vstack(a_ub), b_ub=np.concatenate(b_ub), bounds=bounds,
-                  method="highs")  # fmt: skip
+                  method="highs", options={"time_limit": REFINE_LP_TIME_S})  # fmt: skip
     if res.status != 0:
         return None
     return res.x[:n_x].reshape(2, j1 - j0).T  # (J, 2): a across, b along
