@@ -38,3 +38,16 @@ def lsim_actual_mm(points_mm: np.ndarray, machine, settle_s: float = 0.3) -> np.
 def distance_to_polyline_mm(points_mm: np.ndarray, dense_mm: np.ndarray) -> np.ndarray:
     """Distance [mm] from each point to the nearest vertex of the dense polyline."""
     return cKDTree(dense_mm).query(points_mm)[0]
+
+
+def segment_distance_mm(points_mm, dense_mm):
+    """Exact distance [mm] from each point (M, 3) to the polyline ``dense_mm`` (N, 3): the two
+    segments at its nearest vertex (enough for a polyline much denser than the distances)."""
+    i = cKDTree(dense_mm).query(points_mm)[1]
+    best = np.full(len(points_mm), np.inf)
+    for a, b in ((np.maximum(i - 1, 0), i), (i, np.minimum(i + 1, len(dense_mm) - 1))):
+        pa, d = dense_mm[a], dense_mm[b] - dense_mm[a]
+        t = np.clip(np.einsum("ij,ij->i", points_mm - pa, d)
+                    / np.maximum(np.einsum("ij,ij->i", d, d), 1e-300), 0.0, 1.0)
+        best = np.minimum(best, np.linalg.norm(points_mm - pa - t[:, None] * d, axis=1))
+    return best

@@ -27,27 +27,12 @@ from nurbscnc.plan.lookahead import plan_checked
 from nurbscnc.plan.options import LookaheadOptions
 from nurbscnc.plan.precompensation import precompensate_reference, refine_in_tube
 from nurbscnc.program.interpret import interpret_text
-from tests.servo_reference import lsim_actual_mm
+from tests.servo_reference import lsim_actual_mm, segment_distance_mm
 
 ROOT = Path(__file__).resolve().parents[1]
 MACHINE = load_machine()
 PERIOD = MACHINE.servo.period_s
 TUBE_MM = 0.003
-
-
-def _segment_distance_mm(points_mm, dense_mm):
-    """Exact distance from each point to the polyline ``dense_mm``: the two segments at its
-    nearest vertex (the polyline much denser than the distances)."""
-    from scipy.spatial import cKDTree
-
-    i = cKDTree(dense_mm).query(points_mm)[1]
-    best = np.full(len(points_mm), np.inf)
-    for a, b in ((np.maximum(i - 1, 0), i), (i, np.minimum(i + 1, len(dense_mm) - 1))):
-        pa, d = dense_mm[a], dense_mm[b] - dense_mm[a]
-        t = np.clip(np.einsum("ij,ij->i", points_mm - pa, d)
-                    / np.maximum(np.einsum("ij,ij->i", d, d), 1e-300), 0.0, 1.0)
-        best = np.minimum(best, np.linalg.norm(points_mm - pa - t[:, None] * d, axis=1))
-    return best
 
 
 def _kinematic(text: str):
@@ -134,11 +119,11 @@ def test_airfoil_reported_error_and_reference_deviation_are_independent_ones(air
     frac = np.concatenate([np.linspace(0.0, 1.0, c) for c in counts])
     s = profile.piece_start_mm[piece] + frac * pieces.length_mm[piece]
     planned = pieces.path.place(profile.piece_start_mm, s, piece)[0]
-    err_um = _segment_distance_mm(actual[cut_all], planned) * 1000.0
+    err_um = segment_distance_mm(actual[cut_all], planned) * 1000.0
     reported = run.check.contour_stats()["contour_true_max_um"]
     assert err_um.max() == pytest.approx(reported, abs=0.01)
     assert reported <= MACHINE.limits.contour_tolerance_mm * 1000.0
-    dev_um = _segment_distance_mm(pts[cutting], dense) * 1000.0
+    dev_um = segment_distance_mm(pts[cutting], dense) * 1000.0
     assert dev_um.max() <= 3.0 + 1e-6
     assert run.precompensation.reference_deviation_max_mm <= TUBE_MM + 1e-9
     assert len(run.precompensation.sensitivity) == 8

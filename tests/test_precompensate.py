@@ -40,7 +40,7 @@ from nurbscnc.servo.precompensate import (
     smooth_step,
     zpetc,
 )
-from tests.servo_reference import distance_to_polyline_mm, lsim_actual_mm
+from tests.servo_reference import distance_to_polyline_mm, lsim_actual_mm, segment_distance_mm
 
 ROOT = Path(__file__).resolve().parents[1]
 MACHINE = load_machine()
@@ -364,21 +364,6 @@ def test_precompensate_with_a_baseline_is_refused():
         run_program(prog, MACHINE, RunOptions(algorithm="adaptive", precompensate=True))
 
 
-def _segment_distance_mm(points_mm, dense_mm):
-    """Exact distance from each point to the polyline: the two segments at its nearest
-    vertex (enough for a polyline much denser than the distances)."""
-    from scipy.spatial import cKDTree
-
-    i = cKDTree(dense_mm).query(points_mm)[1]
-    best = np.full(len(points_mm), np.inf)
-    for a, b in ((np.maximum(i - 1, 0), i), (i, np.minimum(i + 1, len(dense_mm) - 1))):
-        pa, d = dense_mm[a], dense_mm[b] - dense_mm[a]
-        t = np.clip(np.einsum("ij,ij->i", points_mm - pa, d)
-                    / np.maximum(np.einsum("ij,ij->i", d, d), 1e-300), 0.0, 1.0)
-        best = np.minimum(best, np.linalg.norm(points_mm - pa - t[:, None] * d, axis=1))
-    return best
-
-
 def test_the_reference_tolerance_is_measured_from_the_programmed_curve(airfoil):
     """On the PH corner pieces of the airfoil (a fit within e of the NURBS, not on it) the
     tube about each planned path point is the tolerance less that point's distance from the
@@ -396,7 +381,7 @@ def test_the_reference_tolerance_is_measured_from_the_programmed_curve(airfoil):
         * pieces.length_mm[piece]
     foot = pieces.path.place(profile.piece_start_mm, s, piece)[0]
     tube = _tube_mm(pieces, piece, foot, 0.003, MACHINE.limits.ph_tolerance_mm)
-    dist = _segment_distance_mm(foot, dense)
+    dist = segment_distance_mm(foot, dense)
     # the fit is off the curve (18 nm at most with 0.0625 mm corner cells, CORNER_CELL_MM)
     assert 1e-5 < dist.max() <= MACHINE.limits.ph_tolerance_mm
     # Never more than the tolerance allows (up to our polyline's sagitta), and no less.
