@@ -237,11 +237,12 @@ def profile_over(length_mm: np.ndarray, caps: np.ndarray, smooth: np.ndarray,
 
 
 def _blame(ov: Overs, sel: np.ndarray, eps_mm: float, joined: np.ndarray,
-           window: int) -> np.ndarray:  # fmt: skip
+           window) -> np.ndarray:  # fmt: skip
     """Largest over-limit error [mm] each piece shares the blame for (0: none).
 
     An over-limit sample (``ov``: those of ``sel`` (q,) bool with error above ``eps_mm``)
-    blames the pieces of the ``window`` samples up to it (the servo remembers): sample i
+    blames the pieces of the ``window`` samples (an int, or one per sample of ``ov``) up to
+    it (the servo remembers): sample i
     blames every piece with a sample in [i − window, i], i.e. the runs of
     ``ov.run_start`` from the one holding max(i − window, 0) to the one holding i; each
     piece keeps the largest. Blamed pieces that the profile plans as one (``joined``
@@ -251,10 +252,12 @@ def _blame(ov: Overs, sel: np.ndarray, eps_mm: float, joined: np.ndarray,
     k = joined.size + 1
     keep = sel & (ov.err_mm > eps_mm)
     idx, err = ov.index[keep], ov.err_mm[keep]
+    win = np.broadcast_to(window, ov.index.shape)[keep]
     blame_run = np.zeros(ov.run_start.size)
     for lo in range(0, idx.size, BLAME_BLOCK):  # (block × window) temporaries at most
         i, e = idx[lo : lo + BLAME_BLOCK], err[lo : lo + BLAME_BLOCK]
-        r_lo = np.searchsorted(ov.run_start, np.maximum(i - window, 0), side="right") - 1
+        w = win[lo : lo + BLAME_BLOCK]
+        r_lo = np.searchsorted(ov.run_start, np.maximum(i - w, 0), side="right") - 1
         span = np.searchsorted(ov.run_start, i, side="right") - r_lo
         rows = np.repeat(np.arange(i.size), span)
         runs = r_lo[rows] + np.arange(rows.size) - np.repeat(np.cumsum(span) - span, span)
@@ -271,8 +274,29 @@ def _blame(ov: Overs, sel: np.ndarray, eps_mm: float, joined: np.ndarray,
     return blame
 
 
+#: Re-plans in a row in which lowering a piece's feed hardly moved its error before the
+#: curve lever leaves its feed alone (a single one is common: the over-limit samples move
+#: as the braking moves).
+CURVE_STRIKES = 2
+
+
+def _curve_windows(ov: Overs, ineffective: np.ndarray, narrow: int, wide: int) -> np.ndarray:
+    """Blame window [samples] (q,) of each over-limit sample of ``ov``: ``wide`` where the
+    ``narrow`` window up to it holds a piece flagged ``ineffective`` (k,) (its feed was
+    lowered without effect: the cause lies further back in the servo's memory), else
+    ``narrow``."""
+    i = ov.index
+    if not ineffective.any():
+        return np.full(i.size, narrow)
+    flagged = np.concatenate(([0], np.cumsum(ineffective[ov.run_piece])))
+    r_lo = np.searchsorted(ov.run_start, np.maximum(i - narrow, 0), side="right") - 1
+    r_hi = np.searchsorted(ov.run_start, i, side="right") - 1
+    return np.where(flagged[r_hi + 1] > flagged[r_lo], wide, narrow)
+
+
 def local_factors(blame: np.ndarray, eps_mm: float, history=None):
-    """Cap factors (k,) of a local re-plan and the history for the next one.
+    """Cap factors (k,) of a local re-plan, the history for the next one, and which pieces
+    were lowered without effect (k,) bool.
 
     Every offending piece (``blame`` > 0: the error [mm] it shares) is lowered at once, by
     f = 0.97 (ε/e)^(1/p), clipped to [0.5, 0.97]. The exponent p of error ∝ V^p is 2 for a
@@ -280,19 +304,27 @@ def local_factors(blame: np.ndarray, eps_mm: float, history=None):
     measured for a piece hit again, from its last factor and how much its error fell:
     p = ln(e/e_prev) / ln(f_prev), kept in [0.25, 2]. Errors that depend on the feed weakly
     (the overshoot of an exact stop grows with the deceleration, not with V²) thus get a
-    strong correction at the second try instead of 3 % per re-plan.
+    strong correction at the second try instead of 3 % per re-plan. A piece whose error
+    fell with p below :data:`STOP_INEFFECTIVE_P` in :data:`CURVE_STRIKES` re-plans in a row
+    is not the cause (a ringing servo's error from further back): it is reported, not
+    lowered (halving it at every re-plan took a 20 Hz servo's program from 46 s to 10 h).
     """
     hit = blame > 0.0
     p = np.full(blame.size, 2.0)
+    strikes = np.zeros(blame.size, dtype=np.int8)
     if history is not None:
-        prev_blame, prev_factor = history
+        prev_blame, prev_factor, prev_strikes = history
         again = hit & (prev_blame > 0.0) & (prev_factor < 1.0)
         with np.errstate(divide="ignore", invalid="ignore"):
             measured = np.log(blame / prev_blame) / np.log(prev_factor)
-        p = np.where(again & np.isfinite(measured), np.clip(measured, 0.25, 2.0), p)
+        known = again & np.isfinite(measured)
+        weak = known & (measured < STOP_INEFFECTIVE_P)
+        strikes = np.where(weak, np.minimum(prev_strikes, CURVE_STRIKES) + 1, 0).astype(np.int8)
+        p = np.where(known, np.clip(measured, 0.25, 2.0), p)
+    ineffective = strikes >= CURVE_STRIKES
     ratio = eps_mm / np.where(hit, blame, eps_mm)
-    factor = np.where(hit, np.clip(0.97 * ratio ** (1.0 / p), 0.5, 0.97), 1.0)
-    return factor, (blame, factor)
+    factor = np.where(hit & ~ineffective, np.clip(0.97 * ratio ** (1.0 / p), 0.5, 0.97), 1.0)
+    return factor, (blame, factor, strikes), ineffective
 
 
 def plan_program(program, machine: Machine, options: LookaheadOptions | None = None) -> Plan:
@@ -323,6 +355,10 @@ class _Levers:
     j_dn: np.ndarray
     settle_s: np.ndarray
     shaped: np.ndarray
+    #: Pieces whose feed the curve lever lowered without effect (:func:`local_factors`):
+    #: not lowered by it again, and the over-limit samples near them blame the servo's
+    #: whole memory (:data:`BLAME_WINDOW_S`) instead of :data:`CURVE_BLAME_WINDOW_S`.
+    ineffective: np.ndarray
     cap_history: tuple | None = None
     stop_history: dict | None = None
 
@@ -333,7 +369,7 @@ class _Levers:
 
     def copy(self) -> _Levers:
         return _Levers(*(getattr(self, f).copy() for f in (*self._SCALED, "settle_s",
-                                                           "shaped")),
+                                                           "shaped", "ineffective")),
                        self.cap_history, self.stop_history)  # fmt: skip
 
     def toward(self, hi: _Levers) -> _Levers | None:
@@ -479,12 +515,29 @@ def _shape(lev: _Levers, ov: Overs, eps_mm: float, profile: Profile, pieces: Pie
     lev.stop_history = new_hist
     # 3. Curves: the feed of the pieces in the blamed window only.
     if not handled.all():
-        window = max(int(round(CURVE_BLAME_WINDOW_S / period_s)), 1)
+        narrow = max(int(round(CURVE_BLAME_WINDOW_S / period_s)), 1)
+        wide = max(int(round(BLAME_WINDOW_S / period_s)), narrow)
         joined = (smooth[1:-1] > 0) & (lev.caps[:-1] == lev.caps[1:])
-        blame = _blame(ov, ~handled, eps_mm, joined, window)
-        factor, lev.cap_history = local_factors(blame, eps_mm, lev.cap_history)
+        history = lev.cap_history
+        for _ in range(2):  # once more if pieces were just found ineffective
+            window = _curve_windows(ov, lev.ineffective, narrow, wide)
+            blame = _blame(ov, ~handled, eps_mm, joined, window)
+            factor, lev.cap_history, found = local_factors(blame, eps_mm, history)
+            found &= ~lev.ineffective
+            lev.ineffective |= found
+            if not found.any():
+                break
+        factor[lev.ineffective] = 1.0
         lev.caps *= factor
         lev.shaped |= factor < 1.0
+        # Where the feed is no lever (a short piece crossed in transition, the ringing after
+        # a stop), the transition is: its acceleration and jerk, by 0.95 ε/e (error ∝ a).
+        trans = lev.ineffective & (blame > 0.0)
+        if trans.any():
+            f_t = np.clip(0.95 * eps_mm / blame[trans], 0.5, 0.9)
+            for x in (lev.a_up, lev.a_dn, lev.j_up, lev.j_dn):
+                x[trans] *= f_t
+            lev.shaped |= trans
 
 
 def _fallback(lev: _Levers, ov: Overs, eps_mm: float, pieces: PieceList,
@@ -854,7 +907,8 @@ class _Setup:
         j_p = np.array(path_lim.j_mm_s3, dtype=float)
         k = self.k = len(pieces)
         self.initial = _Levers(np.minimum(pieces.v_cap_mm_s, path_lim.v_mm_s), a_p, j_p,
-                               a_p.copy(), j_p.copy(), np.zeros(k), np.zeros(k, dtype=bool))
+                               a_p.copy(), j_p.copy(), np.zeros(k), np.zeros(k, dtype=bool),
+                               np.zeros(k, dtype=bool))  # fmt: skip
         self.smooth = junction_caps(pieces)  # > 0 where the path is tangent-continuous
         self.period = machine.servo.period_s
         self.eps_mm = machine.limits.contour_tolerance_mm * CONTOUR_MARGIN
@@ -1057,7 +1111,7 @@ def _windows_of(st: _Setup):
         later = None if is_last else _placeholder(st.pieces, st.initial, b)
 
         def confine(lv: _Levers, scope=scope, final=final) -> None:
-            for f in (*_Levers._SCALED, "settle_s", "shaped"):
+            for f in (*_Levers._SCALED, "settle_s", "shaped", "ineffective"):
                 getattr(lv, f)[~scope] = getattr(final, f)[~scope]
 
         def plan_of(lv: _Levers, a=a, b=b, done=done, later=later):
