@@ -18,7 +18,10 @@ answered where its error is caused, never by the cruise of a whole long piece:
   jerk at the end of a stop is what excites the servo: a softer stop costs milliseconds);
 - else (a curve): the feed of the pieces in the blamed window (:func:`_blame`,
   :func:`local_factors`): NURBS cells and PH corners are short, so this is the feed over
-  that window only.
+  that window only. A piece whose lowered feed twice in a row hardly moved the error is no
+  feed lever (a short piece crossed in transition, a ringing servo's error from further
+  back): its acceleration and jerk are lowered instead, and the samples near it blame the
+  servo's whole memory.
 
 The check converges on every program: after :data:`LOCAL_ITERATIONS` re-plans a fallback
 scales every lever (feed, acceleration, jerk) of the blamed pieces, then of all cutting
