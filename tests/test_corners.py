@@ -100,6 +100,28 @@ def test_nurbs_ellipse_is_the_ellipse():
     np.testing.assert_allclose(curve.curvature(u), ellipse_kappa(A_MM, B_MM, theta), rtol=1e-12)
 
 
+def test_brent_is_scipy_brentq_bit_for_bit():
+    """The corner search's root finder (scipy's compiled Brent loop loaded without
+    scipy.optimize) gives scipy.optimize.brentq's roots exactly, on a curvature crossing of
+    the ellipse and on cos x = x; a NaN value and an unbracketed root are errors, as there."""
+    from scipy.optimize import brentq
+
+    from nurbscnc.plan.corners import BRENT_RTOL, BRENT_XTOL, _brentq
+
+    curve = nurbs_ellipse(A_MM, B_MM)
+
+    def excess(u):
+        return float(curve.curvature(np.array([u]))[0]) - 1.0
+
+    for f, a, b in ((excess, 0.05, 0.25), (lambda x: np.cos(x) - x, 0.0, 1.0)):
+        want = brentq(f, a, b, xtol=BRENT_XTOL, rtol=BRENT_RTOL)
+        assert _brentq()(f, a, b) == want
+    with pytest.raises(ValueError, match="NaN"):
+        _brentq()(lambda x: float("nan"), 0.0, 1.0)
+    with pytest.raises(ValueError, match="different signs"):
+        _brentq()(lambda x: x + 1.0, 0.0, 1.0)
+
+
 @pytest.mark.parametrize("kappa_th", [1.0, 0.5, 2.9])
 def test_ellipse_corners_closed_form(kappa_th):
     curve = nurbs_ellipse(A_MM, B_MM)

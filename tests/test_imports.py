@@ -142,8 +142,13 @@ def test_run_with_the_servo_check_loads_no_scipy_signal(tmp_path, program):
     (row,) = loaded(tmp_path, [["run", str(path), "-o", "points.csv", "--quiet"]])
     assert row["code"] == 0 and (tmp_path / "points.csv").stat().st_size > 0
     assert "nurbscnc.servo.model" in row["modules"]  # it did simulate the servo
-    mods = row["modules"] - {"scipy.signal._sigtools"}
+    mods = row["modules"] - {"scipy.signal._sigtools", "scipy.optimize._zeros"}
     assert not {m for m in mods if m.startswith(("scipy.signal", "scipy.stats"))}
+    # NURBS corners are found with scipy's compiled Brent loop alone (scipy.optimize._zeros),
+    # not scipy.optimize's package (0.4–0.8 s of CPU).
+    assert not {m for m in mods if m.startswith("scipy.optimize")}
+    if program == "naca":
+        assert "scipy.optimize._zeros" in row["modules"]  # it did search for corners
 
 
 

@@ -12,6 +12,8 @@ reported with their turning angle for the planner.
 
 from __future__ import annotations
 
+import functools
+import math
 from dataclasses import dataclass
 from enum import IntEnum
 
@@ -125,6 +127,41 @@ def _sample_params(curve: NurbsCurve, per_span: int) -> np.ndarray:
     return np.append(u, bp[-1])
 
 
+#: Brent's method tolerances of the corner search (absolute and relative, in u).
+BRENT_XTOL = 1e-14
+BRENT_RTOL = 1e-14
+BRENT_MAXITER = 100  # scipy.optimize.brentq's default
+
+
+@functools.cache
+def _brentq():
+    """f(x), a, b → the root of f in [a, b] by Brent's method: ``scipy.optimize.brentq``'s
+    compiled loop (``scipy/optimize/_zeros``) loaded by itself
+    (:func:`nurbscnc.scipy_ext.extension`: importing scipy.optimize costs 0.4–0.8 s of CPU on
+    every NURBS program), with brentq's own guard against NaN values; scipy.optimize.brentq
+    where that module is not found. Tolerances :data:`BRENT_XTOL`, :data:`BRENT_RTOL`."""
+    from nurbscnc.scipy_ext import extension
+
+    module = extension("optimize", "_zeros")
+    if module is None:  # pragma: no cover (another scipy layout)
+        from scipy.optimize import brentq
+
+        return lambda f, a, b: brentq(f, a, b, xtol=BRENT_XTOL, rtol=BRENT_RTOL,
+                                      maxiter=BRENT_MAXITER)  # fmt: skip
+
+    def solve(f, a, b):
+        def checked(x):
+            fx = f(x)
+            if math.isnan(fx):
+                raise ValueError(f"the function value at x={x} is NaN; solver cannot continue")
+            return fx
+
+        return module._brentq(checked, a, b, BRENT_XTOL, BRENT_RTOL, BRENT_MAXITER, (), False,
+                              True)  # fmt: skip
+
+    return solve
+
+
 def find_corner_regions(
     curve: NurbsCurve, kappa_th_per_mm: float, per_span: int = SAMPLES_PER_SPAN
 ) -> tuple[CornerRegion, ...]:
@@ -135,7 +172,7 @@ def find_corner_regions(
     (the bracket closes on it). Cusps (κ = inf) are peaks where they are sampled. Region ends:
     the crossings κ = κ_th on each side, refined by Brent's method.
     """
-    from scipy.optimize import brentq  # here, not at the top: only NURBS corners need it
+    brentq = _brentq()
 
     u = _sample_params(curve, per_span)
     kappa = curve.curvature(u)
@@ -160,8 +197,8 @@ def find_corner_regions(
         while j + 1 < n and above[j + 1]:
             j += 1
         # Samples i..j are above the threshold: one region. Its ends are the crossings.
-        u_a = u[0] if i == 0 else brentq(excess, u[i - 1], u[i], xtol=1e-14, rtol=1e-14)
-        u_b = u[-1] if j == n - 1 else brentq(excess, u[j], u[j + 1], xtol=1e-14, rtol=1e-14)
+        u_a = u[0] if i == 0 else brentq(excess, u[i - 1], u[i])
+        u_b = u[-1] if j == n - 1 else brentq(excess, u[j], u[j + 1])
         # The highest peak within: the best sample, then the zero of dκ/du next to it.
         k = i + int(np.argmax(kappa[i : j + 1]))
         u_peak = float(u[k])
@@ -175,7 +212,7 @@ def find_corner_regions(
                 hi = k
                 d_hi = dk(u[k])
             if d_lo > 0 > d_hi:
-                u_peak = brentq(dk, u[lo], u[hi], xtol=1e-14, rtol=1e-14)
+                u_peak = brentq(dk, u[lo], u[hi])
             elif k == 0 or k == n - 1:
                 u_peak = float(u[k])  # the maximum is at an end of the curve
         u_peak = min(max(u_peak, u_a), u_b)

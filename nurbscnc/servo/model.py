@@ -104,27 +104,19 @@ def _linear_filter():
 
     Importing ``scipy.signal`` costs 1–3 s of CPU (it pulls in scipy.stats, optimize,
     spatial, …) for one loop that takes milliseconds, so its extension module
-    ``scipy/signal/_sigtools`` is loaded on its own (it needs numpy only): the same code,
-    the same bits as ``lfilter``. A numpy replacement was measured and rejected (issue 14): a
-    banded triangular solve (BLAS ``dtbsv``) of the same recurrence is 27× slower and, being
-    direct form I, differs by 4e-11 mm on a 100 mm signal — as much as lfilter's own rounding
-    (3e-11 mm against the recurrence in extended precision), so no other arithmetic agrees
-    with it to 1e-12 mm. Falls back to ``scipy.signal.lfilter`` where the module is not found.
+    ``scipy/signal/_sigtools`` is loaded on its own (:func:`nurbscnc.scipy_ext.extension`;
+    it needs numpy only): the same code, the same bits as ``lfilter``. A numpy replacement
+    was measured and rejected (issue 14): a banded triangular solve (BLAS ``dtbsv``) of the
+    same recurrence is 27× slower and, being direct form I, differs by 4e-11 mm on a 100 mm
+    signal — as much as lfilter's own rounding (3e-11 mm against the recurrence in extended
+    precision), so no other arithmetic agrees with it to 1e-12 mm. Falls back to
+    ``scipy.signal.lfilter`` where the module is not found.
     """
-    import importlib.machinery
-    import importlib.util
-    from pathlib import Path
+    from nurbscnc.scipy_ext import extension
 
-    import scipy
-
-    folder = Path(scipy.__file__).parent / "signal"
-    for suffix in importlib.machinery.EXTENSION_SUFFIXES:
-        path = folder / f"_sigtools{suffix}"
-        if path.is_file():
-            spec = importlib.util.spec_from_file_location("scipy.signal._sigtools", path)
-            module = importlib.util.module_from_spec(spec)
-            spec.loader.exec_module(module)
-            return module._linear_filter
+    module = extension("signal", "_sigtools")
+    if module is not None:
+        return module._linear_filter
     from scipy.signal import lfilter  # pragma: no cover (another scipy layout)
 
     return lambda b, a, x, axis, zi: lfilter(b, a, x, axis=axis, zi=zi)  # pragma: no cover
