@@ -3,7 +3,7 @@
 Every module's imports are read from its source (``ast``, module level and inside
 functions alike), so a late import inside a function counts too. Layers, lowest first:
 
-    errors → machine → geometry → program, servo → plan → interpolate → studies, output
+    errors, scipy_ext → machine → geometry → program, servo → plan → interpolate → studies, output
     → pipeline → cli
 
 A module may import its own layer or a lower one. Within a layer, modules of different
@@ -23,6 +23,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "nurbscnc"
 #: Rank of each top-level part of the package; lower ranks never import higher ones.
 RANK = {
     "errors": 0,
+    "scipy_ext": 0,  # scipy's compiled kernels loaded alone; imports nothing of nurbscnc
     "machine": 1,
     "geometry": 2,
     "program": 3,
