@@ -15,10 +15,12 @@ answered where its error is caused, never by the cruise of a whole long piece:
   it): the overshoot of the stop and the corner cut after it. The descent jerk of the run
   of pieces that ends there (and, for samples after the restart, the rise jerk of the run
   that leaves it) is lowered, by 0.95 (ε/e)^(1/p) with p measured from the last try (the
-  jerk at the end of a stop is what excites the servo: a softer stop costs milliseconds);
+  jerk at the end of a stop is what excites the servo: a softer stop costs milliseconds),
+  from at most A·|p| (:func:`_servo_jerk`: a larger jerk is a step to the servo);
 - else (a curve): the feed of the pieces in the blamed window (:func:`_blame`,
   :func:`local_factors`): NURBS cells and PH corners are short, so this is the feed over
-  that window only. A piece whose lowered feed twice in a row hardly moved the error is no
+  that window only. A blamed piece whose jerk is above A·|p| gets that jerk first. A piece
+  whose lowered feed twice in a row hardly moved the error is no
   feed lever (a short piece crossed in transition, a ringing servo's error from further
   back): its acceleration and jerk are lowered instead, and the samples near it blame the
   servo's whole memory.
