@@ -810,7 +810,10 @@ def _gated_rise_of(v0: float, v1: float, gates_mm: np.ndarray, caps_mm_s: np.nda
     """:func:`_gated_rise`, remembered: the check re-plans the profile 5–10 times and each
     plan splits its units several times, asking for the same flanks again (a 20k-line CAM
     spiral: 26 flanks asked 1052 times). A pure function of its numbers, so the memo changes
-    no result; bounded (:data:`GATED_MEMO`)."""
+    no result; bounded (:data:`GATED_MEMO`). Returns (phases as a rise, phases read
+    backwards for a descent, distance [mm]), each phase list merged (:func:`_merged`; a
+    gated flank has hundreds of 0.1 ms steps: merging them at every ask cost 2 s of a 20 s
+    `run`), or None."""
     return _gated_rise_memo(float(v0), float(v1), np.ascontiguousarray(gates_mm, float).tobytes(),
                             np.ascontiguousarray(caps_mm_s, float).tobytes(), float(a), float(j))
 
@@ -825,7 +828,11 @@ def _gated_rise_memo(v0, v1, gates_b: bytes, caps_b: bytes, a, j):
     if result is None:
         return None
     durs, jerks, distance = result
-    return tuple(durs), tuple(jerks), distance  # shared by every caller: immutable
+    # Shared by every caller: immutable. The descent merges the reversed steps (its own
+    # sums, in its own order: the same bits as merging at the caller).
+    rise = tuple(map(tuple, _merged(durs, jerks)))
+    fall = tuple(map(tuple, _merged(durs[::-1], jerks[::-1])))
+    return rise, fall, distance
 
 
 def _per_unit(unit: np.ndarray, values: np.ndarray, reduce) -> tuple[np.ndarray, np.ndarray]:
@@ -884,12 +891,12 @@ def _gate_units(inp: ProfileInput, unit: Profile, over: np.ndarray, c: np.ndarra
             g = _gated_rise_of(vs, vp, cum[pre + 1] - s_a, c[pre], a_up[u], j_up[u])
             ok = g is not None
             if ok:
-                rise, du = _merged(g[0], g[1]), g[2]
+                rise, du = g[0], g[2]
         if ok and gate_post:
             g = _gated_rise_of(ve, vp, s_b - cum[post], c[post], a_dn[u], j_dn[u])
             ok = g is not None
             if ok:
-                fall, dd = _merged(g[0][::-1], g[1][::-1]), g[2]
+                fall, dd = g[1], g[2]
         if not ok or du + dd > (s_b - s_a) * (1.0 + 1e-12):
             left.append(u)
             continue
