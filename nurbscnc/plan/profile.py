@@ -769,11 +769,11 @@ def _merged(durs: list, jerks: list) -> tuple[list, list]:
     return out_d, out_j
 
 
-def _scurve_phases(v_a: float, v_b: float, a: float, j: float) -> tuple[list, list]:
-    """The constant-jerk phases (durations [s], jerks [mm/s³]) of the S-curve v_a → v_b
-    (SPEC §7), read from rest of acceleration to rest of acceleration."""
-    tj, tc, _ = (float(x) for x in scurve_timing(v_a, v_b, a, j))
-    sign = 1.0 if v_b >= v_a else -1.0
+def _scurve_phases(tj: float, tc: float, rising: bool, j: float) -> tuple[list, list]:
+    """The constant-jerk phases (durations [s], jerks [mm/s³]) of an S-curve (SPEC §7) with
+    jerk phases ``tj`` [s] and constant acceleration ``tc`` [s] (:func:`scurve_timing`, for
+    all units at once), read from rest of acceleration to rest of acceleration."""
+    sign = 1.0 if rising else -1.0
     return _merged([tj, tc, tj], [sign * j, 0.0, -sign * j])
 
 
@@ -861,6 +861,10 @@ def _gate_units(inp: ProfileInput, unit: Profile, over: np.ndarray, c: np.ndarra
     v_p = unit.piece_peak_speed_mm_s
     d_up = scurve_distance_mm(v_s, v_p, a_up, j_up)
     d_dn = scurve_distance_mm(v_p, v_e, a_dn, j_dn)
+    # Every unit's S-curve phase times at once (elementwise IEEE operations: the same bits as
+    # one unit at a time, without a numpy call per unit and flank).
+    tj_up, tc_up, _ = scurve_timing(v_s, v_p, a_up, j_up)
+    tj_dn, tc_dn, _ = scurve_timing(v_p, v_e, a_dn, j_dn)
     idx = np.arange(c.size)
     is_top = c == unit_cap[unit_of]
     top_first = np.minimum.reduceat(np.where(is_top, idx, c.size), first)
@@ -881,8 +885,8 @@ def _gate_units(inp: ProfileInput, unit: Profile, over: np.ndarray, c: np.ndarra
             continue
         s_a, s_b = cum[lo], cum[hi]
         vs, vp, ve = float(v_s[u]), float(v_p[u]), float(v_e[u])
-        rise = _scurve_phases(vs, vp, a_up[u], j_up[u])
-        fall = _scurve_phases(vp, ve, a_dn[u], j_dn[u])
+        rise = _scurve_phases(float(tj_up[u]), float(tc_up[u]), vp >= vs, j_up[u])
+        fall = _scurve_phases(float(tj_dn[u]), float(tc_dn[u]), ve >= vp, j_dn[u])
         du, dd = float(d_up[u]), float(d_dn[u])
         pre = np.arange(lo, lo + n_pre)
         post = np.arange(hi - n_post, hi)[::-1]
