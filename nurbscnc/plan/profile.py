@@ -534,8 +534,8 @@ def _plan_units(inp: ProfileInput, key: np.ndarray, every: bool = False,
     over, piece_max = offenders(unit, d_up, d_dn)
     if over.size and gate:
         # Flanks over a staircase of caps follow it (gated flanks) where the unit has room.
-        unit, d_up, d_dn, _ = _gate_units(inp, unit, over, c, cum, first, bounds, unit_of,
-                                          unit_cap, lims)  # fmt: skip
+        unit, d_up, d_dn = _gate_units(unit, over, c, cum, first, bounds, unit_of, unit_cap,
+                                       lims, d_up.copy(), d_dn.copy())  # fmt: skip
         over, piece_max = offenders(unit, d_up, d_dn)
     if over.size:
         return None, _splits(over, c, unit_cap, unit_of, first, k, every)
@@ -844,23 +844,22 @@ def _per_unit(unit: np.ndarray, values: np.ndarray, reduce) -> tuple[np.ndarray,
     return u[starts], reduce.reduceat(values[order], starts)
 
 
-def _gate_units(inp: ProfileInput, unit: Profile, over: np.ndarray, c: np.ndarray,
-                cum: np.ndarray, first: np.ndarray, bounds: np.ndarray, unit_of: np.ndarray,
-                unit_cap: np.ndarray, lims) -> tuple[Profile, np.ndarray, np.ndarray,
-                                                     np.ndarray]:  # fmt: skip
+def _gate_units(unit: Profile, over: np.ndarray, c: np.ndarray, cum: np.ndarray,
+                first: np.ndarray, bounds: np.ndarray, unit_of: np.ndarray,
+                unit_cap: np.ndarray, lims, d_up: np.ndarray,
+                d_dn: np.ndarray) -> tuple[Profile, np.ndarray, np.ndarray]:  # fmt: skip
     """The unit profile with *gated flanks* (:func:`_gated_rise`) in the units whose speed
     exceeds the caps ``c`` of the pieces ``over``: a rising flank under the caps of the
     pieces before the unit's first piece at its cap (each a gate at the piece's end), a
     falling flank under those after its last one (gates at the piece starts, planned time
     reversed). The unit keeps its end speeds and peak; it is gated only if both flanks fit
-    in its length (else its offenders stay for :func:`_splits`). Returns the profile (per
-    unit), the (units,) rise and descent distances [mm] and the pieces still over."""
+    in its length (else its offenders stay for :func:`_splits`). ``d_up``, ``d_dn``
+    (units,): the units' rise and descent distances [mm], updated in place where gated.
+    Returns the profile (per unit) and those distances."""
     a_up, j_up, a_dn, j_dn = (np.broadcast_to(np.asarray(x, dtype=float), (first.size,))
                               for x in lims)  # fmt: skip
     v_s, v_e = unit.junction_speeds_mm_s[:-1], unit.junction_speeds_mm_s[1:]
     v_p = unit.piece_peak_speed_mm_s
-    d_up = scurve_distance_mm(v_s, v_p, a_up, j_up)
-    d_dn = scurve_distance_mm(v_p, v_e, a_dn, j_dn)
     # Every unit's S-curve phase times at once (elementwise IEEE operations: the same bits as
     # one unit at a time, without a numpy call per unit and flank).
     tj_up, tc_up, _ = scurve_timing(v_s, v_p, a_up, j_up)
@@ -870,7 +869,6 @@ def _gate_units(inp: ProfileInput, unit: Profile, over: np.ndarray, c: np.ndarra
     top_first = np.minimum.reduceat(np.where(is_top, idx, c.size), first)
     top_last = np.maximum.reduceat(np.where(is_top, idx, -1), first)
     phase_rows = {}
-    left = []
     # The offenders' first and last piece per unit (one pass; not a scan of ``over`` per unit).
     units, o_min = _per_unit(unit_of[over], over, np.minimum)
     _, o_max = _per_unit(unit_of[over], over, np.maximum)
@@ -881,7 +879,6 @@ def _gate_units(inp: ProfileInput, unit: Profile, over: np.ndarray, c: np.ndarra
         gate_pre = lo_over < top_first[u] and n_pre >= MIN_GATES
         gate_post = hi_over > top_last[u] and n_post >= MIN_GATES
         if not (gate_pre or gate_post):  # nothing to gate: the unit is split as before
-            left.append(u)
             continue
         s_a, s_b = cum[lo], cum[hi]
         vs, vp, ve = float(v_s[u]), float(v_p[u]), float(v_e[u])
@@ -902,13 +899,11 @@ def _gate_units(inp: ProfileInput, unit: Profile, over: np.ndarray, c: np.ndarra
             if ok:
                 fall, dd = g[1], g[2]
         if not ok or du + dd > (s_b - s_a) * (1.0 + 1e-12):
-            left.append(u)
             continue
         up_rows, up_end = _rows(*rise, s_a, vs)
         dn_rows, dd = _rows(*fall, 0.0, vp)
         du = up_end - s_a
         if du + dd > (s_b - s_a) * (1.0 + 1e-12):
-            left.append(u)
             continue
         cruise = max(s_b - s_a - du - dd, 0.0)
         dn_rows[:, 4] += s_b - dd
@@ -917,7 +912,7 @@ def _gate_units(inp: ProfileInput, unit: Profile, over: np.ndarray, c: np.ndarra
         phase_rows[u] = rows
         d_up[u], d_dn[u] = du, dd
     if not phase_rows:
-        return unit, d_up, d_dn, over
+        return unit, d_up, d_dn
     # Every unit's phases, the gated ones replaced; times re-accumulated.
     pu = unit.phase_piece_index
     old = np.column_stack((unit.phase_duration_s, unit.phase_jerk_mm_s3, unit.phase_a0_mm_s2,
@@ -942,8 +937,7 @@ def _gate_units(inp: ProfileInput, unit: Profile, over: np.ndarray, c: np.ndarra
         phase_s0_mm=_frozen(rows[:, 4]), phase_v0_mm_s=_frozen(rows[:, 3]),
         phase_a0_mm_s2=_frozen(rows[:, 2]), phase_jerk_mm_s3=_frozen(rows[:, 1]),
         phase_piece_index=_frozen(owner, dtype=np.int64))  # fmt: skip
-    keep = ~np.isin(unit_of[over], np.fromiter(phase_rows, dtype=np.int64))
-    return gated, d_up, d_dn, over[keep]
+    return gated, d_up, d_dn
 
 
 def time_at_length(profile: Profile, s_mm: np.ndarray) -> np.ndarray:
