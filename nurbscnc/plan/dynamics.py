@@ -139,20 +139,25 @@ def windowed_contour_mm(actual_mm: np.ndarray, lag_mm: np.ndarray, s_ref_mm: np.
     return out
 
 
-def _dense_polyline(pieces, starts_mm: np.ndarray, total_mm: float, lo: int, hi: int):
-    """Path lengths (n,) [mm] and points (n, 3) [mm] of the dense polyline
-    (:func:`path_counts`) of pieces ``lo:hi``, the pieces starting at ``starts_mm``. Each
-    point's numbers depend on its piece only (not on ``lo``, ``hi``)."""
+def _dense_local(pieces, lo: int, hi: int) -> tuple[np.ndarray, np.ndarray]:
+    """The pieces (n,) and arc lengths from their starts (n,) [mm] of the dense polyline
+    (:func:`path_counts`) of pieces ``lo:hi``: c points a piece at fractions 0, 1/(c − 1),
+    …, 1 of its length."""
     c = path_counts(pieces, lo, hi)  # these pieces only: O(window), not O(program)
     piece = np.repeat(np.arange(lo, hi), c)
     first = np.repeat(np.cumsum(c) - c, c)
     frac = (np.arange(piece.size) - first) / np.repeat(c - 1, c)
-    ps = np.minimum(starts_mm[piece] + frac * pieces.length_mm[piece], total_mm)
-    return ps, pieces.path.place(starts_mm, ps, piece)[0]
+    return piece, frac * pieces.length_mm[piece]
 
 
-#: The dense polyline without an index's cache (for indexes over part of a program).
-dense_polyline_of = _dense_polyline
+def _dense_polyline(pieces, starts_mm: np.ndarray, total_mm: float, lo: int, hi: int):
+    """Path lengths (n,) [mm] and points (n, 3) [mm] of the dense polyline
+    (:func:`path_counts`) of pieces ``lo:hi``, the pieces starting at ``starts_mm``. Each
+    point is placed at its arc length from its piece's start, so its numbers depend on its
+    piece only (not on ``lo``, ``hi`` or the starts)."""
+    piece, local = _dense_local(pieces, lo, hi)
+    ps = np.minimum(starts_mm[piece] + local, total_mm)
+    return ps, pieces.path.points(piece, local)[0]
 
 
 class PathIndex:
@@ -169,18 +174,19 @@ class PathIndex:
     #: Segments per bounding box of a piece's polyline (the coarse level of the search).
     CHUNK = 64
 
-    #: Most points of the windowed check's polyline kept across re-plans (32 MB): the
-    #: program's first pieces up to this many points (a sweep from the start reuses them;
-    #: an evicting cache would miss every time on a sweep longer than itself).
-    DENSE_POINTS = 1_000_000
+    #: Most points of the windowed check's polyline kept across re-plans (144 MB; a
+    #: 1,000,000-line CAM spiral has 4.8e6): the program's first pieces up to this many
+    #: points (a sweep from the start reuses them; an evicting cache would miss every time
+    #: on a sweep longer than itself).
+    DENSE_POINTS = 6_000_000
 
     def __init__(self, pieces, short_mm: float = 1.0):
         self._pieces = pieces
         self._short_mm = short_mm
         self._built = None
         self._counts = None
-        # The windowed check's dense polyline of pieces [0, filled): its path lengths,
-        # points and per-piece offsets, valid for the piece starts it was made with.
+        # The windowed check's dense polyline of pieces [0, filled): its points and
+        # per-piece offsets.
         self._dense = None
         # piece → (dense polyline (c, 3) [mm], box lows, box highs (⌈(c−1)/CHUNK⌉, 3) [mm])
         self._polyline: dict[int, tuple] = {}
@@ -200,37 +206,30 @@ class PathIndex:
 
     def dense_polyline(self, pieces, starts_mm: np.ndarray, total_mm: float, lo: int,
                        hi: int) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
-        """:func:`_dense_polyline` of pieces ``lo:hi``: the same numbers, the program's first
-        :data:`DENSE_POINTS` points computed once for all the re-plans (the geometry and the
-        piece starts do not change between them; checked, else computed afresh)."""
+        """:func:`_dense_polyline` of pieces ``lo:hi`` of the program or of a head of it
+        (its first pieces, as a cut window measures against them): the same numbers, the
+        points of the program's first :data:`DENSE_POINTS` placed once for every re-plan and
+        window (a point depends on its piece only; the path lengths, from the starts of this
+        query, are cheap). Pieces from the kept ones' end up to ``hi`` are placed and kept
+        on the way (the check sweeps forward)."""
         dense = self._dense
         if dense is None:
             off = np.concatenate(([0], np.cumsum(path_counts(self._pieces))))
             room = int(np.searchsorted(off, self.DENSE_POINTS, side="right")) - 1
-            size = int(off[room])
             dense = self._dense = {"off": off, "room": room, "filled": 0,
-                                   "starts": starts_mm.copy(), "total": total_mm,
-                                   "ps": np.empty(size), "pts": np.empty((size, 3))}  # fmt: skip
-        same = (pieces.path is self._pieces.path and total_mm == dense["total"]
-                and np.array_equal(starts_mm, dense["starts"]))  # fmt: skip
-        filled, off = dense["filled"], dense["off"]
-        if not same or lo > filled or hi <= lo:
+                                   "pts": np.empty((int(off[room]), 3))}  # fmt: skip
+        filled, off, room = dense["filled"], dense["off"], dense["room"]
+        same_path = pieces.path is self._pieces.path
+        if same_path and hi > filled and filled < room:  # place [filled, hi), keep what fits
+            keep = min(hi, room)
+            piece, local = _dense_local(pieces, filled, keep)
+            dense["pts"][off[filled] : off[keep]] = pieces.path.points(piece, local)[0]
+            dense["filled"] = filled = keep
+        if not same_path or hi > filled:
             return _dense_polyline(pieces, starts_mm, total_mm, lo, hi)
-        if hi > filled:  # the pieces [filled, hi) are new: place them, keep what fits
-            ps, pts = _dense_polyline(pieces, starts_mm, total_mm, filled, hi)
-            keep = min(hi, dense["room"])
-            if keep > filled:
-                n = int(off[keep] - off[filled])
-                dense["ps"][off[filled] : off[keep]] = ps[:n]
-                dense["pts"][off[filled] : off[keep]] = pts[:n]
-                dense["filled"] = keep
-            if lo == filled:
-                return ps, pts
-            a = int(off[lo])
-            return (np.concatenate((dense["ps"][a : off[filled]], ps)),
-                    np.concatenate((dense["pts"][a : off[filled]], pts)))  # fmt: skip
-        a, z = int(off[lo]), int(off[hi])
-        return dense["ps"][a:z], dense["pts"][a:z]
+        piece, local = _dense_local(pieces, lo, hi)
+        return (np.minimum(starts_mm[piece] + local, total_mm),
+                dense["pts"][int(off[lo]) : int(off[hi])])  # fmt: skip
 
     def candidates(self, q: np.ndarray, upper_mm: np.ndarray) -> np.ndarray:
         """Pieces that may hold a path point closer to some point of ``q`` (m, 3) than

@@ -66,7 +66,6 @@ from nurbscnc.plan.axes import piece_limits
 from nurbscnc.plan.dynamics import (
     PathIndex,
     Response,
-    dense_polyline_of,
     path_response,
     window_response,
 )
@@ -818,10 +817,10 @@ class _HeadIndex:
 
     def dense_polyline(self, pieces, starts_mm: np.ndarray, total_mm: float, lo: int,
                        hi: int) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
-        """The dense polyline of pieces ``lo:hi`` of the head, made afresh (the whole
-        program's kept polyline is clipped at the program's end, the head's at its own):
-        the same numbers as without an index."""
-        return dense_polyline_of(pieces, starts_mm, total_mm, lo, hi)
+        """The dense polyline of pieces ``lo:hi`` of the head: the whole program's kept
+        polyline (:meth:`PathIndex.dense_polyline`: a point depends on its piece only, and
+        the path lengths are made from the head's starts and clipped at its end)."""
+        return self._index.dense_polyline(pieces, starts_mm, total_mm, lo, hi)
 
 
 class _HeadProfile:
