@@ -210,8 +210,8 @@ class PathIndex:
         (its first pieces, as a cut window measures against them): the same numbers, the
         points of the program's first :data:`DENSE_POINTS` placed once for every re-plan and
         window (a point depends on its piece only; the path lengths, from the starts of this
-        query, are cheap). Pieces from the kept ones' end up to ``hi`` are placed and kept
-        on the way (the check sweeps forward)."""
+        query, are cheap). A query that reaches past the kept pieces' end places the pieces
+        from there to ``hi`` and keeps them (the check sweeps forward)."""
         dense = self._dense
         if dense is None:
             off = np.concatenate(([0], np.cumsum(path_counts(self._pieces))))
@@ -220,7 +220,7 @@ class PathIndex:
                                    "pts": np.empty((int(off[room]), 3))}  # fmt: skip
         filled, off, room = dense["filled"], dense["off"], dense["room"]
         same_path = pieces.path is self._pieces.path
-        if same_path and hi > filled and filled < room:  # place [filled, hi), keep what fits
+        if same_path and lo <= filled < min(hi, room):  # place [filled, hi), keep what fits
             keep = min(hi, room)
             piece, local = _dense_local(pieces, filled, keep)
             dense["pts"][off[filled] : off[keep]] = pieces.path.points(piece, local)[0]

@@ -30,9 +30,12 @@ scales every lever (feed, acceleration, jerk) of the blamed pieces, then of all 
 pieces, and waits the full settles; the servo error goes to 0 with v, a, j. Once a plan is
 within ε_max, an improvement phase bisects every shaped lever between its feasible value and
 its value before shaping (:data:`IMPROVE_ITERATIONS` re-plans) and keeps the fastest plan
-within ε_max. Shaping depends on the programmed feed only through the caps; the bisection
-leaves each lever within :data:`IMPROVE_RATIO` of its bound, so plans at two feeds agree to
-that resolution (a higher F is never slower by more than it).
+within ε_max — when it may gain more than :data:`IMPROVE_MIN_GAIN` of the motion's time (it
+cannot gain more than the shaping cost: a long program shaped at a few corners skips six
+checks for a few ms). Shaping depends on the programmed feed only through the caps; the
+bisection leaves each lever within :data:`IMPROVE_RATIO` of its bound, so plans at two feeds
+agree to that resolution (a higher F is never slower by more than it, or than the skipped
+improvement's 0.1 %).
 
 ``dynamics="global"`` is the paper's rule (V_max becomes the feed where the error occurred,
 the whole program re-planned; full settles); ``"off"`` plans the kinematics only (no
@@ -102,6 +105,11 @@ FALLBACK_LOCAL_ITERATIONS = 8
 FALLBACK_FACTOR = 0.6
 #: Re-plans of the improvement phase (bisection of the shaped levers).
 IMPROVE_ITERATIONS = 6
+#: The improvement phase runs only if it may gain more than this fraction of the planned
+#: motion's time (a cut window's own): what it can gain is at most the time the shaping
+#: cost (the plan before shaping is the fastest its levers allow). A long program whose
+#: shaping touched a few corners gains a few ms of minutes from it, for six more checks.
+IMPROVE_MIN_GAIN = 1e-3
 #: A lever within this ratio of its bracket's upper end is left alone.
 IMPROVE_RATIO = 1.005
 #: Servo samples per window of the dynamics check: its memory grows with this, not with
@@ -338,11 +346,11 @@ def plan_program(program, machine: Machine, options: LookaheadOptions | None = N
 
 
 def _with_dwell(pieces: PieceList, dwell_s: np.ndarray) -> PieceList:
-    """``pieces`` with the dwell column ``dwell_s`` (k,) [s]; the path model, already built
-    and independent of dwells, is shared rather than rebuilt."""
+    """``pieces`` with the dwell column ``dwell_s`` (k,) [s]; the path model, independent
+    of dwells, built once on ``pieces`` and shared (not rebuilt per re-plan: the check's
+    kept polyline knows it by identity)."""
     out = replace(pieces, dwell_after_s=dwell_s)
-    if "path" in pieces.__dict__:
-        out.__dict__["path"] = pieces.__dict__["path"]
+    out.__dict__["path"] = pieces.path
     return out
 
 
@@ -818,8 +826,8 @@ class _HeadIndex:
     def dense_polyline(self, pieces, starts_mm: np.ndarray, total_mm: float, lo: int,
                        hi: int) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
         """The dense polyline of pieces ``lo:hi`` of the head: the whole program's kept
-        polyline (:meth:`PathIndex.dense_polyline`: a point depends on its piece only, and
-        the path lengths are made from the head's starts and clipped at its end)."""
+        polyline (:meth:`PathIndex.dense_polyline`: the same numbers as made afresh for the
+        head, whose starts are the program's first and whose total clips its end)."""
         return self._index.dense_polyline(pieces, starts_mm, total_mm, lo, hi)
 
 
@@ -1000,8 +1008,11 @@ def _converge(st: _Setup, lev: _Levers, evaluate, confine=lambda lv: None):
     outside the levers' scope (a cut window). Returns (final levers, result, re-plans)."""
     options, eps_mm, initial = st.options, st.eps_mm, lev.copy()
     iterations = 0
+    fastest_s = None  # the cycle time before shaping
     while True:
         result = evaluate(lev)
+        if fastest_s is None:
+            fastest_s = _cycle_time(result)
         if result[2] is None:
             break
         worst = result[2].overs.worst_mm
@@ -1025,14 +1036,18 @@ def _converge(st: _Setup, lev: _Levers, evaluate, confine=lambda lv: None):
             st.fallback(lev, result, stage)
         confine(lev)
         result = None  # the last check goes first (with keep_reference, hundreds of MB)
-    if options.dynamics == Dynamics.LOCAL and lev.shaped.any():
+    if options.dynamics == Dynamics.LOCAL and lev.shaped.any() and _may_gain(result,
+                                                                           fastest_s):
         # Improvement: bisect every shaped lever between its feasible value and its value
         # before shaping (geometric means; the settles arithmetically towards 0). A try
         # within ε_max is kept; a failing one narrows the brackets of the levers that the
         # shaping rule blames for it (found by applying the rule to a copy).
-        # Only one plan's reference and response are held at a time (long programs): the
-        # best plan is re-made at the end if a later try replaced its result.
+        # A check that keeps its reference and response holds hundreds of MB: then only
+        # one plan's is held at a time, and the best plan is re-made at the end if a later
+        # try replaced its result; a check without them is small and the best is kept.
+        keep_best = not st.checker.keep
         best, best_time = lev.copy(), _cycle_time(result)
+        best_result = result if keep_best else None
         hi = initial
         for _ in range(IMPROVE_ITERATIONS):
             trial = best.toward(hi)
@@ -1047,6 +1062,7 @@ def _converge(st: _Setup, lev: _Levers, evaluate, confine=lambda lv: None):
                     result = None
                     break
                 best, best_time = trial, t
+                best_result = result if keep_best else None
             else:
                 probe = trial.copy()
                 st.shape(probe, result)
@@ -1055,8 +1071,18 @@ def _converge(st: _Setup, lev: _Levers, evaluate, confine=lambda lv: None):
                 result = None
         lev = best
         if result is None:
-            result = evaluate(lev)
+            result = best_result if best_result is not None else evaluate(lev)
     return lev, result, iterations
+
+
+def _may_gain(result, fastest_s: float) -> bool:
+    """Whether the improvement phase may gain more than :data:`IMPROVE_MIN_GAIN` of the
+    planned motion's time: the shaped plan ``result`` is slower than the plan before
+    shaping (cycle time ``fastest_s`` [s]) by more than that fraction of its own motion (a
+    cut window's profile, else the whole cycle time)."""
+    shaped_s = _cycle_time(result)
+    span_s = result[3].duration_s if len(result) > 3 else shaped_s
+    return shaped_s - fastest_s > IMPROVE_MIN_GAIN * span_s
 
 
 def plan_checked(program, machine: Machine, options: LookaheadOptions | None = None,
@@ -1168,11 +1194,11 @@ def _windows_of(st: _Setup):
         def evaluate(lv: _Levers, plan_of=plan_of, rows_of=rows_of, stream=stream):
             planned, profile, own = plan_of(lv)
             check = st.checker.run(planned, profile, rows_of(planned, profile), stream)
-            return planned, profile, check, own
+            return planned, profile, check, own, st.checker.stream_out
 
         lev, result, iterations = _converge(st, final.copy(), evaluate, confine)
         final = lev
-        stream = st.checker.stream_out
+        stream = result[4]  # the servo's state after this window's final plan
         done = _spliced([x for x in (done, result[3]) if x is not None])
         total_iterations += iterations
         rows = rows_of(result[0], result[1])
