@@ -156,8 +156,14 @@ def _dense_polyline(pieces, starts_mm: np.ndarray, total_mm: float, lo: int, hi:
     point is placed at its arc length from its piece's start, so its numbers depend on its
     piece only (not on ``lo``, ``hi`` or the starts)."""
     piece, local = _dense_local(pieces, lo, hi)
-    ps = np.minimum(starts_mm[piece] + local, total_mm)
-    return ps, pieces.path.points(piece, local)[0]
+    return _path_lengths(starts_mm, total_mm, piece, local), pieces.path.points(piece, local)[0]
+
+
+def _path_lengths(starts_mm: np.ndarray, total_mm: float, piece: np.ndarray,
+                  local_mm: np.ndarray) -> np.ndarray:  # fmt: skip
+    """Path lengths [mm] of the points at ``local_mm`` from the starts of pieces ``piece``,
+    the pieces starting at ``starts_mm``, clipped at the path's end ``total_mm``."""
+    return np.minimum(starts_mm[piece] + local_mm, total_mm)
 
 
 class PathIndex:
@@ -228,7 +234,7 @@ class PathIndex:
         if not same_path or hi > filled:
             return _dense_polyline(pieces, starts_mm, total_mm, lo, hi)
         piece, local = _dense_local(pieces, lo, hi)
-        return (np.minimum(starts_mm[piece] + local, total_mm),
+        return (_path_lengths(starts_mm, total_mm, piece, local),
                 dense["pts"][int(off[lo]) : int(off[hi])])  # fmt: skip
 
     def candidates(self, q: np.ndarray, upper_mm: np.ndarray) -> np.ndarray:

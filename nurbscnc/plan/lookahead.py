@@ -1036,7 +1036,8 @@ def _converge(st: _Setup, lev: _Levers, evaluate, confine=lambda lv: None):
             st.fallback(lev, result, stage)
         confine(lev)
         result = None  # the last check goes first (with keep_reference, hundreds of MB)
-    if options.dynamics == Dynamics.LOCAL and lev.shaped.any() and _may_gain(result,
+    shaped_s = _cycle_time(result)
+    if options.dynamics == Dynamics.LOCAL and lev.shaped.any() and _may_gain(result, shaped_s,
                                                                            fastest_s):
         # Improvement: bisect every shaped lever between its feasible value and its value
         # before shaping (geometric means; the settles arithmetically towards 0). A try
@@ -1046,7 +1047,7 @@ def _converge(st: _Setup, lev: _Levers, evaluate, confine=lambda lv: None):
         # one plan's is held at a time, and the best plan is re-made at the end if a later
         # try replaced its result; a check without them is small and the best is kept.
         keep_best = not st.checker.keep
-        best, best_time = lev.copy(), _cycle_time(result)
+        best, best_time = lev.copy(), shaped_s
         best_result = result if keep_best else None
         hi = initial
         for _ in range(IMPROVE_ITERATIONS):
@@ -1075,12 +1076,11 @@ def _converge(st: _Setup, lev: _Levers, evaluate, confine=lambda lv: None):
     return lev, result, iterations
 
 
-def _may_gain(result, fastest_s: float) -> bool:
+def _may_gain(result, shaped_s: float, fastest_s: float) -> bool:
     """Whether the improvement phase may gain more than :data:`IMPROVE_MIN_GAIN` of the
-    planned motion's time: the shaped plan ``result`` is slower than the plan before
-    shaping (cycle time ``fastest_s`` [s]) by more than that fraction of its own motion (a
-    cut window's profile, else the whole cycle time)."""
-    shaped_s = _cycle_time(result)
+    planned motion's time: the shaped plan ``result`` (cycle time ``shaped_s`` [s]) is slower
+    than the plan before shaping (``fastest_s`` [s]) by more than that fraction of its own
+    motion (a cut window's profile, else the whole cycle time)."""
     span_s = result[3].duration_s if len(result) > 3 else shaped_s
     return shaped_s - fastest_s > IMPROVE_MIN_GAIN * span_s
 
