@@ -604,6 +604,8 @@ GATE_STEP_S = 1e-4
 GATE_MIN_STEP_S = 1e-7
 #: Most steps of one gated flank (a rise of 10 s at 0.1 ms); beyond it the unit is split.
 GATE_MAX_STEPS = 100_000
+#: Most :data:`GATE_STEP_S` steps of +J taken as one (:func:`_gated_rise`'s galloping).
+GATE_GALLOP = 64
 
 
 def _brake_ok(x: float, v: float, a: float, j: float, gate_d: list, gate_c: list,
@@ -662,6 +664,14 @@ def _gated_rise(v0: float, v_top: float, gate_d, gate_c, a_max: float, j_max: fl
     without exceeding ``v_top`` (v + a²/(2J) ≤ v_top) or any gate ahead (:func:`_brake_ok`);
     the target is met exactly by solving for the switch time inside the last step.
 
+    Two shortcuts take the same steps (up to rounding), as feasibility falls with the step
+    (the premise of :func:`_longest`). Galloping: after a full +J step, n = 2, 4, … up to
+    :data:`GATE_GALLOP` steps of +J are tried as one while none of them could be the last
+    rise (a₁ = √(J(v_top − v) + a²/2) is constant under +J, so the step whose end would
+    start it is known) nor pass A; if the n-step passes, each of its steps would have.
+    While braking, the +J and hold tries test their shortest step first: it fails as long
+    as the brake goes on, and then so would the full step.
+
     Returns (durations, jerks, distance) — lists of the constant-jerk phases [s], [mm/s³]
     and the distance covered [mm] — or None when no such rise exists (a gate below ``v0``,
     or too many steps).
@@ -696,7 +706,17 @@ def _gated_rise(v0: float, v_top: float, gate_d, gate_c, a_max: float, j_max: fl
                            vs + tau * (as_ + 0.5 * tau * jk), as_ + tau * jk)  # fmt: skip
         return passes(xs, vs, as_)
 
-    for _ in range(GATE_MAX_STEPS):
+    def longest(jk, tau):
+        """:func:`_longest` of the step with jerk ``jk``; while braking, the shortest step
+        first (class doc)."""
+        ok = lambda t: passes(*advance(t, jk))  # noqa: E731
+        if braking and not ok(GATE_MIN_STEP_S):
+            return 0.0
+        return _longest(ok, tau)
+
+    steps, streak, braking = 0, 0, False  # streak: dt steps of the last +J step, if full
+    while steps < GATE_MAX_STEPS:
+        steps += 1
         while first < len(gate_d) and gate_d[first] <= x:
             first += 1
         if a <= 0.0 and v >= v_top - tol:
@@ -709,12 +729,22 @@ def _gated_rise(v0: float, v_top: float, gate_d, gate_c, a_max: float, j_max: fl
                 if finish(phases):
                     done = phases
             else:
-                tau = _longest(lambda t: passes(*advance(t, j)), min(dt, (big_a - a) / j))
+                # Galloping: n steps, none of whose ends starts the last rise (that of step
+                # k does once a + (k + 1) J dt ≥ a₁; one step of margin) or passes A.
+                n = min(2 * streak, GATE_GALLOP, int((big_a - a) / (j * dt)),
+                        math.ceil((a1 - a) / (j * dt)) - 2 if a1 <= big_a else GATE_GALLOP,
+                        GATE_MAX_STEPS - steps + 1)  # fmt: skip
+                if n >= 2 and passes(*advance(n * dt, j)):
+                    tau, steps = n * dt, steps + n - 1
+                else:
+                    n, tau = 1, longest(j, min(dt, (big_a - a) / j))
                 if tau > 0.0:
+                    streak, braking = (n if tau == n * dt else 0), False
                     durs.append(tau)
                     jerks.append(j)
                     x, v, a = advance(tau, j)
                     continue
+        streak = 0
         if done is None and a > 0.0:  # hold a, possibly until the brake into v_top
             t0 = (v_top - v - a * a / (2.0 * j)) / a
             if t0 <= dt:
@@ -722,8 +752,9 @@ def _gated_rise(v0: float, v_top: float, gate_d, gate_c, a_max: float, j_max: fl
                 if finish(phases):
                     done = phases
             else:
-                tau = _longest(lambda t: passes(*advance(t, 0.0)), dt)
+                tau = longest(0.0, dt)
                 if tau > 0.0:
+                    braking = False
                     durs.append(tau)
                     jerks.append(0.0)
                     x, v, a = advance(tau, 0.0)
@@ -736,6 +767,7 @@ def _gated_rise(v0: float, v_top: float, gate_d, gate_c, a_max: float, j_max: fl
                     x, v, a = advance(tau, jk)
             return durs, jerks, x
         if a > 0.0:  # brake: feasible since the last step's check
+            braking = True
             t_b = a / j
             tau = min(dt, t_b)
             x, v, a = advance(tau, -j)
