@@ -411,6 +411,12 @@ class _Group(click.Group):
     message still goes to stderr and the exit code stays 2."""
 
     def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
+        # One BLAS thread unless the user set it: the commands' vector operations are far
+        # too small for threads, and OpenBLAS's idle threads spin on the other core
+        # (measured: a 1,000,000-line `run` spent 15.5 s of CPU instead of 11.8, tort's
+        # `plan` 5.5 s instead of 3.6, and both took longer). Read when numpy is first
+        # imported, which the commands do lazily, after this.
+        os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
         args = list(sys.argv[1:] if args is None else args)
         if not standalone_mode or "--json" not in args:
             return super().main(args, prog_name, complete_var, standalone_mode, **extra)
