@@ -964,6 +964,18 @@ class _Setup:
         self.base_dwell = pieces.dwell_after_s
         self.checker = _Checker(pieces, machine, reference, self.eps_mm, self.settle_rows,
                                 window, keep_reference)  # fmt: skip
+        # The improvement phase's upper brackets: the kinematic levers, or with
+        # ``raise_corner_caps`` the caps without the corner heuristic V_cf.
+        self.upper = self.initial
+        if options.raise_corner_caps and options.dynamics == Dynamics.LOCAL:
+            free = _without_corner_feed(program, machine, options, pieces)
+            if free is not None:
+                self.upper = self.initial.copy()
+                self.upper.caps = np.maximum(np.minimum(free.v_cap_mm_s, path_lim.v_mm_s),
+                                             self.initial.caps)  # fmt: skip
+                # The junctions capped by their neighbours' machine caps (the same passable
+                # junctions): the profile takes the smaller of the levers' caps anyway.
+                self.smooth = np.maximum(self.smooth, junction_caps(free))
 
     def plan_of(self, lv: _Levers):
         """The planned pieces (settles in their dwells) and profile of the levers ``lv``."""
@@ -1003,6 +1015,22 @@ class _Setup:
                     lev.settle_s)  # fmt: skip
 
 
+def _without_corner_feed(program, machine: Machine, options: LookaheadOptions,
+                         pieces: PieceList) -> PieceList | None:  # fmt: skip
+    """``pieces`` without the corner heuristic V_cf (SPEC eq. 24) in their caps: made again
+    with κ̄ → ∞ (V_cf = F), so a corner piece keeps its physical caps only — the chord
+    feed V_af, the normal acceleration √(A/κ), F and V_max. The corner regions (κ_th =
+    A/F²) and the fits do not depend on κ̄; None if the pieces came out otherwise than
+    ``pieces`` (then nothing is raised)."""
+    limits = replace(machine.limits, kappa_ref_per_mm=1e15)
+    free = segment_pieces(program.segments, replace(machine, limits=limits), options.plan)
+    if len(free) != len(pieces) or not np.array_equal(free.length_mm, pieces.length_mm):
+        return None
+    if not np.array_equal(junction_caps(free) > 0.0, junction_caps(pieces) > 0.0):
+        return None
+    return free
+
+
 def _converge(st: _Setup, lev: _Levers, evaluate, confine=lambda lv: None):
     """The levers loop (module docstring) from ``lev`` (changed in place): re-plan until the
     check is within ε_max (local shaping, then the fallback), then the improvement phase.
@@ -1039,8 +1067,11 @@ def _converge(st: _Setup, lev: _Levers, evaluate, confine=lambda lv: None):
         confine(lev)
         result = None  # the last check goes first (with keep_reference, hundreds of MB)
     shaped_s = _cycle_time(result)
-    if options.dynamics == Dynamics.LOCAL and lev.shaped.any() and _may_gain(result, shaped_s,
-                                                                           fastest_s):
+    # Caps the corner heuristic holds below the machine's (``raise_corner_caps``): the
+    # improvement phase bisects them too, from the feasible plan up to those caps.
+    raisable = bool(np.any(st.upper.caps > lev.caps * IMPROVE_RATIO))
+    if options.dynamics == Dynamics.LOCAL and (raisable or lev.shaped.any() and _may_gain(
+            result, shaped_s, fastest_s)):
         # Improvement: bisect every shaped lever between its feasible value and its value
         # before shaping (geometric means; the settles arithmetically towards 0). A try
         # within ε_max is kept; a failing one narrows the brackets of the levers that the
@@ -1052,6 +1083,9 @@ def _converge(st: _Setup, lev: _Levers, evaluate, confine=lambda lv: None):
         best, best_time = lev.copy(), shaped_s
         best_result = result if keep_best else None
         hi = initial
+        if st.upper is not st.initial:
+            hi = initial.copy()
+            hi.caps = np.maximum(hi.caps, st.upper.caps)
         for _ in range(IMPROVE_ITERATIONS):
             trial = best.toward(hi)
             if trial is None:
