@@ -335,7 +335,7 @@ def precompensation_report(plan: Plan, planned: Reference, compensated: Referenc
 # one dense G of (inputs + reach) × inputs ≤ REFINE_MAX_INPUTS × (REFINE_MAX_INPUTS + reach).
 
 #: Rounds of linearise → LP → simulate (each only keeps what lowers the error).
-REFINE_ROUNDS = 8
+REFINE_ROUNDS = 16
 #: ... stopping early when a round lowers the largest error by less than this [mm].
 REFINE_GAIN_MM = 1e-5
 #: A region is the tool samples whose contour error exceeds this fraction of ε_max, with the
@@ -347,17 +347,24 @@ REFINE_BEFORE_S = 0.025
 REFINE_REACH = 1e-3
 #: Most reference samples one LP moves (a longer region is cut into windows this long).
 REFINE_MAX_INPUTS = 120
+#: The share of the machine's V T a step's length may use (the first-order length is
+#: exact but for the move across the path, orthogonal: its square, sub-nanometre here).
+REFINE_SPEED = 0.999
 #: The share of the machine's A T² and J T³ a step's own differences may use.
 REFINE_SMOOTH = 0.9
 #: ... and what the step may add to them beyond that (share of the limit): the bend of a
 #: move along a curve is second order in the step, not in the LP.
 REFINE_ROUGH = 0.02
+#: Weight of the tool samples' mean excess over the ceiling (0.9 ε) beside the largest error
+#: in a window's LP (the secondary objective of :func:`_region_step`).
+REFINE_SPREAD = 0.1
+REFINE_CEILING = 0.99
 #: Time limit of one window's LP [s] (HiGHS; a window not solved in time is left as is).
 REFINE_LP_TIME_S = 1.0
 #: Chord sagitta of the optimiser's polylines of the path [mm].
 REFINE_CHORD_MM = 1e-7
 #: Largest move of a reference sample along the path in one round [mm] ...
-REFINE_ALONG_MM = 0.02
+REFINE_ALONG_MM = 0.05
 #: ... and at most the move whose bend off a curve (κ b²/2) is this share of the tube.
 REFINE_BEND = 0.05
 
@@ -557,15 +564,18 @@ def _difference_rows(u: np.ndarray, j0: int, j1: int, order: int) -> tuple:
 
 def _region_step(u: np.ndarray, y: np.ndarray, cut_out: np.ndarray, movable: np.ndarray,
                  window: tuple[int, int, int], h: np.ndarray, poly: np.ndarray,
-                 tube: np.ndarray, limits: tuple[float, float], kappa: np.ndarray,
+                 tube: np.ndarray, limits: tuple[float, float, float], kappa: np.ndarray,
                  ceiling_mm: float = np.inf) -> np.ndarray | None:  # fmt: skip
-    """The LP step of one ``window`` (j0, j1, k1) (module comment above): (j1 − j0, 2) [mm],
-    the moves across and along the path of each sample (path coordinates,
-    :func:`_move_in_path_coordinates`), or None. ``limits`` (A T², J T³) [mm]: the
-    reference's second and third differences stay within them on every axis (or within its
-    own, where it was above them already), so the step never makes the reference rougher
-    than the machine's acceleration and jerk (to first order: the path coordinates add the
-    bend, smooth along the path)."""
+    """The LP step of one ``window`` (j0, j1, k1) (module comment above): (j1 − j0, 3) [mm],
+    the move Δ_j = a_j m_j + b_j t_j of each sample across (in-plane normal m) and along
+    (tangent t) the path, or None. ``limits`` (V T, A T², J T³) [mm]: the reference's
+    steps (their length, to first order) and its second and third differences on every
+    axis stay within them (or within its own, where it was above them already), so the
+    step never makes the reference faster or rougher than the machine's velocity,
+    acceleration and jerk (the differences exactly: Δ is applied as it is here, a straight
+    move). ``kappa`` (N,) [1/mm] the path's curvature at each
+    sample (the bend of a move along it); ``ceiling_mm``: a tool sample below it may not be
+    raised above it."""
     from scipy.optimize import linprog
 
     j0, j1, k1 = window
@@ -614,7 +624,16 @@ def _region_step(u: np.ndarray, y: np.ndarray, cut_out: np.ndarray, movable: np.
         a_ub += [np.hstack([g[low], zero]), np.hstack([-g[low], zero])]
         b_ub += [ceiling_mm - sigma[low], ceiling_mm + sigma[low]]
     n_x = 2 * (j1 - j0)
-    for order, limit in zip((2, 3), limits):
+    # The speed: a move b along the path lengthens the step between samples j and j + 1 by
+    # b_{j+1} − b_j (to first order; a move across it, orthogonal, by its square), so that
+    # difference stays within what the path speed V T leaves (or the step's own length,
+    # where the reference was faster than V already).
+    d, du = _difference_rows(u, j0, j1, 1)
+    step = np.sqrt(np.einsum("ij,ij->i", du, du))
+    cap = np.maximum(REFINE_SPEED * limits[0], step)
+    a_ub.append(np.hstack([np.zeros_like(d), d, np.zeros((d.shape[0], 1))]))
+    b_ub.append(cap - step)
+    for order, limit in zip((2, 3), limits[1:]):
         d, du = _difference_rows(u, j0, j1, order)
         for c in range(3):
             if not np.any(basis[:, c]):
@@ -626,10 +645,23 @@ def _region_step(u: np.ndarray, y: np.ndarray, cut_out: np.ndarray, movable: np.
             zero = np.zeros((rows.shape[0], 1))
             a_ub += [np.hstack([rows, zero]), np.hstack([-rows, zero])]
             b_ub += [cap - du[:, c], cap + du[:, c]]
-    bounds = np.column_stack([np.concatenate([lo_a, -along, [0.0]]),
-                              np.concatenate([hi_a, along, [np.inf]])])  # fmt: skip
-    cost = np.zeros(n_x + 1)
-    cost[-1] = 1.0
+    # Beside the largest error z, the excess s_k ≥ |e_k| − ceiling of every tool sample at
+    # a small weight (REFINE_SPREAD / K): of the steps that reach the same z, the one that
+    # leaves the other samples' errors lowest — where they are caused, so the check's blame
+    # finds the pieces that cause them (the minimax alone leaves a flat error at z over the
+    # window, and any tie is a vertex the solver may pick).
+    n_k = ks.size
+    a_ub = [np.hstack([row, np.zeros((row.shape[0], n_k))]) for row in a_ub]
+    eye = np.eye(n_k)
+    zero = np.zeros((n_k, 1))
+    ceiling = min(ceiling_mm, float(sigma.max()))
+    a_ub += [np.hstack([g, zero, -eye]), np.hstack([-g, zero, -eye])]
+    b_ub += [ceiling - sigma, ceiling + sigma]
+    bounds = np.column_stack([np.concatenate([lo_a, -along, [0.0], np.zeros(n_k)]),
+                              np.concatenate([hi_a, along, [np.inf], np.full(n_k, np.inf)])])
+    cost = np.zeros(n_x + 1 + n_k)
+    cost[n_x] = 1.0
+    cost[n_x + 1 :] = REFINE_SPREAD / n_k
     res = linprog(cost, A_ub=np.vstack(a_ub), b_ub=np.concatenate(b_ub), bounds=bounds,
                   method="highs", options={"time_limit": REFINE_LP_TIME_S})  # fmt: skip
     if res.status != 0:
@@ -639,13 +671,18 @@ def _region_step(u: np.ndarray, y: np.ndarray, cut_out: np.ndarray, movable: np.
 
 
 def _no_rougher(new_mm: np.ndarray, old_mm: np.ndarray, j0: int, j1: int,
-                limits: tuple[float, float]) -> bool:
-    """Whether the second and third differences of ``new_mm`` about samples j0 … j1−1 are
-    within max(limit, those of ``old_mm``) + REFINE_ROUGH × limit on every axis (``limits``
-    (A T², J T³) [mm]; ``old_mm`` the reference the optimisation started from, so the
-    allowance does not add up over the rounds)."""
+                limits: tuple[float, float, float]) -> bool:
+    """Whether the steps of ``new_mm`` about samples j0 … j1−1 (their length) are within
+    (2 − REFINE_SPEED) max(V T, those of ``old_mm``), and its second and third differences
+    (on every axis) within max(limit, those of ``old_mm``) + REFINE_ROUGH × limit
+    (``limits`` (V T, A T², J T³) [mm]; ``old_mm`` the reference the optimisation started
+    from, so the allowance does not add up over the rounds)."""
     lo, hi = max(j0 - 3, 0), min(j1 + 3, new_mm.shape[0])
-    for order, limit in zip((2, 3), limits):
+    step_new = np.sqrt(np.sum(np.diff(new_mm[lo:hi], axis=0) ** 2, axis=1))
+    step_old = np.sqrt(np.sum(np.diff(old_mm[lo:hi], axis=0) ** 2, axis=1))
+    if np.any(step_new > np.maximum(limits[0], step_old) * (1.0 + 1.0 - REFINE_SPEED)):
+        return False
+    for order, limit in zip((2, 3), limits[1:]):
         d_new = np.abs(np.diff(new_mm[lo:hi], n=order, axis=0))
         d_old = np.abs(np.diff(old_mm[lo:hi], n=order, axis=0))
         if np.any(d_new > np.maximum(limit, d_old) + REFINE_ROUGH * limit):
@@ -679,7 +716,8 @@ def refine_in_tube(ref: Reference, pieces, profile, machine: Machine, tube_mm: n
     period = machine.servo.period_s
     before = max(int(round(REFINE_BEFORE_S / period)), 1)
     lim = machine.limits
-    limits = (lim.a_max_mm_s2 * period**2, lim.j_max_mm_s3 * period**3)
+    limits = (lim.v_max_mm_s * period, lim.a_max_mm_s2 * period**2,
+              lim.j_max_mm_s3 * period**3)  # fmt: skip
     # The path's curvature at each sample (its piece's largest) [1/mm]: the bend bound.
     kappa = np.asarray(pieces.kappa_max_per_mm, dtype=float)[ref.piece]
 
@@ -723,7 +761,7 @@ def refine_in_tube(ref: Reference, pieces, profile, machine: Machine, tube_mm: n
             poly = _local_polyline(pieces, profile, float(s_in.min()) - margin,
                                    float(s_in.max()) + margin)  # fmt: skip
             step = _region_step(u, y, cut_out, movable, (j0, j1, k1), h, poly, tube_mm,
-                                limits, kappa, REFINE_THRESHOLD * eps)  # fmt: skip
+                                limits, kappa, REFINE_CEILING * eps)  # fmt: skip
             steps.append((j0, j1, k1, step, poly))
         steps = [s for s in steps if s[3] is not None]
         if not steps:
