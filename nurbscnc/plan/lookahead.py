@@ -1067,9 +1067,16 @@ def _converge(st: _Setup, lev: _Levers, evaluate, confine=lambda lv: None):
         confine(lev)
         result = None  # the last check goes first (with keep_reference, hundreds of MB)
     shaped_s = _cycle_time(result)
-    # Caps the corner heuristic holds below the machine's (``raise_corner_caps``): the
-    # improvement phase bisects them too, from the feasible plan up to those caps.
-    raisable = bool(np.any(st.upper.caps > lev.caps * IMPROVE_RATIO))
+    # The improvement phase's upper brackets: the levers before shaping, and with
+    # ``raise_corner_caps`` the caps the corner heuristic V_cf held below the machine's
+    # (those of this window only): then it bisects them too, from the feasible plan up.
+    hi = initial
+    raisable = False
+    if st.upper is not st.initial:
+        hi = initial.copy()
+        hi.caps = np.maximum(hi.caps, st.upper.caps)
+        confine(hi)
+        raisable = bool(np.any(hi.caps > lev.caps * IMPROVE_RATIO))
     if options.dynamics == Dynamics.LOCAL and (raisable or lev.shaped.any() and _may_gain(
             result, shaped_s, fastest_s)):
         # Improvement: bisect every shaped lever between its feasible value and its value
@@ -1082,10 +1089,6 @@ def _converge(st: _Setup, lev: _Levers, evaluate, confine=lambda lv: None):
         keep_best = not st.checker.keep
         best, best_time = lev.copy(), shaped_s
         best_result = result if keep_best else None
-        hi = initial
-        if st.upper is not st.initial:
-            hi = initial.copy()
-            hi.caps = np.maximum(hi.caps, st.upper.caps)
         for _ in range(IMPROVE_ITERATIONS):
             trial = best.toward(hi)
             if trial is None:

@@ -565,7 +565,8 @@ def _difference_rows(u: np.ndarray, j0: int, j1: int, order: int) -> tuple:
 def _region_step(u: np.ndarray, y: np.ndarray, cut_out: np.ndarray, movable: np.ndarray,
                  window: tuple[int, int, int], h: np.ndarray, poly: np.ndarray,
                  tube: np.ndarray, limits: tuple[float, float, float], kappa: np.ndarray,
-                 ceiling_mm: float = np.inf) -> np.ndarray | None:  # fmt: skip
+                 ceiling_mm: float = np.inf,
+                 start: np.ndarray | None = None) -> np.ndarray | None:  # fmt: skip
     """The LP step of one ``window`` (j0, j1, k1) (module comment above): (j1 − j0, 3) [mm],
     the move Δ_j = a_j m_j + b_j t_j of each sample across (in-plane normal m) and along
     (tangent t) the path, or None. ``limits`` (V T, A T², J T³) [mm]: the reference's
@@ -575,7 +576,10 @@ def _region_step(u: np.ndarray, y: np.ndarray, cut_out: np.ndarray, movable: np.
     acceleration and jerk (the differences exactly: Δ is applied as it is here, a straight
     move). ``kappa`` (N,) [1/mm] the path's curvature at each
     sample (the bend of a move along it); ``ceiling_mm``: a tool sample below it may not be
-    raised above it."""
+    raised above it; ``start`` (N, 3) [mm] the reference the optimisation started from
+    (default ``u``): where its own differences exceed the limits they are the caps, as
+    :func:`_no_rougher` measures them (caps from ``u`` would ratchet: a row smoothed in
+    one round could never take back what the start had)."""
     from scipy.optimize import linprog
 
     j0, j1, k1 = window
@@ -628,20 +632,23 @@ def _region_step(u: np.ndarray, y: np.ndarray, cut_out: np.ndarray, movable: np.
     # b_{j+1} − b_j (to first order; a move across it, orthogonal, by its square), so that
     # difference stays within what the path speed V T leaves (or the step's own length,
     # where the reference was faster than V already).
+    start = u if start is None else start
     d, du = _difference_rows(u, j0, j1, 1)
     step = np.sqrt(np.einsum("ij,ij->i", du, du))
-    cap = np.maximum(REFINE_SPEED * limits[0], step)
+    d0 = _difference_rows(start, j0, j1, 1)[1]
+    cap = np.maximum(REFINE_SPEED * limits[0], np.sqrt(np.einsum("ij,ij->i", d0, d0)))
     a_ub.append(np.hstack([np.zeros_like(d), d, np.zeros((d.shape[0], 1))]))
-    b_ub.append(cap - step)
+    b_ub.append(np.maximum(cap - step, 0.0))
     for order, limit in zip((2, 3), limits[1:]):
         d, du = _difference_rows(u, j0, j1, order)
+        d0 = _difference_rows(start, j0, j1, order)[1]
         for c in range(3):
             if not np.any(basis[:, c]):
                 continue
             rows = np.hstack([d * basis[: j1 - j0, c], d * basis[j1 - j0 :, c]])
-            # (the linear step within REFINE_SMOOTH of the limit: moving in path
-            # coordinates adds the bend, second order in the step)
-            cap = np.maximum(REFINE_SMOOTH * limit, np.abs(du[:, c]))
+            # (the step's differences within REFINE_SMOOTH of the limit, or the start's)
+            cap = np.maximum(np.maximum(REFINE_SMOOTH * limit, np.abs(d0[:, c])),
+                             np.abs(du[:, c]))  # fmt: skip
             zero = np.zeros((rows.shape[0], 1))
             a_ub += [np.hstack([rows, zero]), np.hstack([-rows, zero])]
             b_ub += [cap - du[:, c], cap + du[:, c]]
@@ -761,7 +768,7 @@ def refine_in_tube(ref: Reference, pieces, profile, machine: Machine, tube_mm: n
             poly = _local_polyline(pieces, profile, float(s_in.min()) - margin,
                                    float(s_in.max()) + margin)  # fmt: skip
             step = _region_step(u, y, cut_out, movable, (j0, j1, k1), h, poly, tube_mm,
-                                limits, kappa, REFINE_CEILING * eps)  # fmt: skip
+                                limits, kappa, REFINE_CEILING * eps, start)  # fmt: skip
             steps.append((j0, j1, k1, step, poly))
         steps = [s for s in steps if s[3] is not None]
         if not steps:
