@@ -323,19 +323,26 @@ def precompensation_report(plan: Plan, planned: Reference, compensated: Referenc
 #   tool   y = H u (per axis, linear: the sampled eq. 25, FOH),
 #   error  e_k ≈ σ_k + ν_k · (H Δ)_k   (σ_k = |y_k − q_k|, q_k the nearest path point, ν_k the
 #          unit vector from q_k to y_k: the distance to first order),
-#   step   Δ_j = a_j m_j   (m_j the in-plane normal of the path at the reference's own foot),
-#   tube   |μ_j + a_j| ≤ τ'_j   (μ_j the current offset across the path, τ'_j the tube less
-#          any offset out of the plane),
-#   min z  subject to  |σ_k + Σ_j G_kj a_j| ≤ z  over the region's tool samples,
+#   step   Δ_j = a_j m_j + b_j t_j   (m_j the in-plane normal, t_j the tangent of the path
+#          at the reference's own foot: across and along it),
+#   tube   −τ'_j ≤ μ_j + a_j ≤ τ'_j − κ_j b̄_j²/2   (μ_j the current offset across the path,
+#          τ'_j the tube less any offset out of the plane; |b_j| ≤ b̄_j, the bend of a
+#          straight move along a curve of curvature κ_j at most REFINE_BEND τ),
+#   limits the step lengths |u_{j+1} − u_j| + b_{j+1} − b_j ≤ V T (first order) and the
+#          second and third differences of u + Δ on every axis within A T², J T³ — or
+#          within the starting reference's own where it was above them already,
+#   min z  subject to  |σ_k + Σ_j G_kj (a_j, b_j)| ≤ z  over the region's tool samples,
 #
-# G_kj = Σ_axes ν_k,c h_c[k − j] m_j,c with h_c the axis' impulse response. Then the step is
-# applied, the reference projected exactly into the tube again (nearest point on the path),
-# simulated, and kept only where the true largest error of the region went down (else halved,
-# then dropped): the largest error never increases from round to round. Work per region:
+# G_kj = Σ_axes ν_k,c h_c[k − j] (m_j,c, t_j,c) with h_c the axis' impulse response. Then the
+# step is applied as the LP sees it (a straight move: its differences are the LP's exactly),
+# the reference projected exactly into the tube again (nearest point on the path; to
+# rounding a no-op), simulated, and kept only where the true largest error of the region
+# went down and it is no faster or rougher than allowed (else halved, then dropped): the
+# largest error never increases from round to round. Work per region:
 # one dense G of (inputs + reach) × inputs ≤ REFINE_MAX_INPUTS × (REFINE_MAX_INPUTS + reach).
 
 #: Rounds of linearise → LP → simulate (each only keeps what lowers the error).
-REFINE_ROUNDS = 16
+REFINE_ROUNDS = 8
 #: ... stopping early when a round lowers the largest error by less than this [mm].
 REFINE_GAIN_MM = 1e-5
 #: A region is the tool samples whose contour error exceeds this fraction of ε_max, with the
@@ -352,19 +359,15 @@ REFINE_MAX_INPUTS = 120
 REFINE_SPEED = 0.999
 #: The share of the machine's A T² and J T³ a step's own differences may use.
 REFINE_SMOOTH = 0.9
-#: ... and what the step may add to them beyond that (share of the limit): the bend of a
-#: move along a curve is second order in the step, not in the LP.
+#: ... and what the step may add to them beyond that (share of the limit): the projection
+#: into the tube after the step, not in the LP.
 REFINE_ROUGH = 0.02
-#: Weight of the tool samples' mean excess over the ceiling (0.9 ε) beside the largest error
-#: in a window's LP (the secondary objective of :func:`_region_step`).
-REFINE_SPREAD = 0.1
-REFINE_CEILING = 0.99
 #: Time limit of one window's LP [s] (HiGHS; a window not solved in time is left as is).
 REFINE_LP_TIME_S = 1.0
 #: Chord sagitta of the optimiser's polylines of the path [mm].
 REFINE_CHORD_MM = 1e-7
 #: Largest move of a reference sample along the path in one round [mm] ...
-REFINE_ALONG_MM = 0.05
+REFINE_ALONG_MM = 0.02
 #: ... and at most the move whose bend off a curve (κ b²/2) is this share of the tube.
 REFINE_BEND = 0.05
 
@@ -411,7 +414,7 @@ def _local_polyline(pieces, profile, s_lo_mm: float, s_hi_mm: float) -> np.ndarr
     """The path between path lengths s_lo and s_hi [mm] (whole pieces) as a dense polyline:
     lines by their ends, curves by chords of sagitta κh²/8 ≤ REFINE_CHORD_MM (κ the
     piece's largest curvature, doubled on NURBS cells as dynamics.path_counts does), so
-    a point moved along it (:func:`_move_in_path_coordinates`) follows the curve smoothly
+    a point's foot on it (:func:`nearest_on_polyline`) follows the curve smoothly
     to well below the reference's jerk per period J T³."""
     starts = profile.piece_start_mm
     lo = max(int(np.searchsorted(starts, s_lo_mm, side="right")) - 1, 0)
@@ -507,17 +510,6 @@ def _path_coordinates(u_mm: np.ndarray, poly_mm: np.ndarray):
     return sigma, at, t, m, mu, off - mu[:, None] * m
 
 
-def _move_in_path_coordinates(u_mm: np.ndarray, across_mm: np.ndarray, along_mm: np.ndarray,
-                              poly_mm: np.ndarray) -> np.ndarray:  # fmt: skip
-    """The points ``u_mm`` moved ``along_mm`` along the path (arc length) and ``across_mm``
-    across it (along its XY normal), keeping the rest of their offset: exact path
-    coordinates, so the distance from the path is |μ + a| (and the rest) wherever the point
-    goes along a curve (no bend κb²/2 as with a straight move along the tangent)."""
-    sigma, at, _t, _m, mu, rest = _path_coordinates(u_mm, poly_mm)
-    point, _t1, m1 = at(sigma + along_mm)
-    return point + (mu + across_mm)[:, None] * m1 + rest
-
-
 def _into_tube(u_mm: np.ndarray, poly_mm: np.ndarray, tube_mm: np.ndarray) -> np.ndarray:
     """``u_mm`` projected into the ball of radius ``tube_mm`` about its nearest path point
     (the exact tube: its distance to ``poly_mm`` is then at most the tube)."""
@@ -565,7 +557,6 @@ def _difference_rows(u: np.ndarray, j0: int, j1: int, order: int) -> tuple:
 def _region_step(u: np.ndarray, y: np.ndarray, cut_out: np.ndarray, movable: np.ndarray,
                  window: tuple[int, int, int], h: np.ndarray, poly: np.ndarray,
                  tube: np.ndarray, limits: tuple[float, float, float], kappa: np.ndarray,
-                 ceiling_mm: float = np.inf,
                  start: np.ndarray | None = None) -> np.ndarray | None:  # fmt: skip
     """The LP step of one ``window`` (j0, j1, k1) (module comment above): (j1 − j0, 3) [mm],
     the move Δ_j = a_j m_j + b_j t_j of each sample across (in-plane normal m) and along
@@ -574,10 +565,9 @@ def _region_step(u: np.ndarray, y: np.ndarray, cut_out: np.ndarray, movable: np.
     axis stay within them (or within its own, where it was above them already), so the
     step never makes the reference faster or rougher than the machine's velocity,
     acceleration and jerk (the differences exactly: Δ is applied as it is here, a straight
-    move). ``kappa`` (N,) [1/mm] the path's curvature at each
-    sample (the bend of a move along it); ``ceiling_mm``: a tool sample below it may not be
-    raised above it; ``start`` (N, 3) [mm] the reference the optimisation started from
-    (default ``u``): where its own differences exceed the limits they are the caps, as
+    move). ``kappa`` (N,) [1/mm] the path's curvature at each sample (the bend of a move
+    along it); ``start`` (N, 3) [mm] the reference the optimisation started from (default
+    ``u``): where its own differences exceed the limits they are the caps, as
     :func:`_no_rougher` measures them (caps from ``u`` would ratchet: a row smoothed in
     one round could never take back what the start had)."""
     from scipy.optimize import linprog
@@ -618,15 +608,6 @@ def _region_step(u: np.ndarray, y: np.ndarray, cut_out: np.ndarray, movable: np.
     ones = -np.ones((ks.size, 1))
     a_ub = [np.hstack([g, ones]), np.hstack([-g, ones])]
     b_ub = [-sigma, sigma]
-    # A tool sample whose error is below ``ceiling_mm`` may rise to it, no further: the
-    # minimax alone spreads the window's peak over every sample in it (the approach to a
-    # tight curve taken from 8 to 15.8 µm to lower the curve's 20.7 µm to 15.8 µm), and the
-    # check then blames pieces that are not the cause.
-    low = sigma < ceiling_mm
-    if low.any():
-        zero = np.zeros((int(low.sum()), 1))
-        a_ub += [np.hstack([g[low], zero]), np.hstack([-g[low], zero])]
-        b_ub += [ceiling_mm - sigma[low], ceiling_mm + sigma[low]]
     n_x = 2 * (j1 - j0)
     # The speed: a move b along the path lengthens the step between samples j and j + 1 by
     # b_{j+1} − b_j (to first order; a move across it, orthogonal, by its square), so that
@@ -652,23 +633,10 @@ def _region_step(u: np.ndarray, y: np.ndarray, cut_out: np.ndarray, movable: np.
             zero = np.zeros((rows.shape[0], 1))
             a_ub += [np.hstack([rows, zero]), np.hstack([-rows, zero])]
             b_ub += [cap - du[:, c], cap + du[:, c]]
-    # Beside the largest error z, the excess s_k ≥ |e_k| − ceiling of every tool sample at
-    # a small weight (REFINE_SPREAD / K): of the steps that reach the same z, the one that
-    # leaves the other samples' errors lowest — where they are caused, so the check's blame
-    # finds the pieces that cause them (the minimax alone leaves a flat error at z over the
-    # window, and any tie is a vertex the solver may pick).
-    n_k = ks.size
-    a_ub = [np.hstack([row, np.zeros((row.shape[0], n_k))]) for row in a_ub]
-    eye = np.eye(n_k)
-    zero = np.zeros((n_k, 1))
-    ceiling = min(ceiling_mm, float(sigma.max()))
-    a_ub += [np.hstack([g, zero, -eye]), np.hstack([-g, zero, -eye])]
-    b_ub += [ceiling - sigma, ceiling + sigma]
-    bounds = np.column_stack([np.concatenate([lo_a, -along, [0.0], np.zeros(n_k)]),
-                              np.concatenate([hi_a, along, [np.inf], np.full(n_k, np.inf)])])
-    cost = np.zeros(n_x + 1 + n_k)
-    cost[n_x] = 1.0
-    cost[n_x + 1 :] = REFINE_SPREAD / n_k
+    bounds = np.column_stack([np.concatenate([lo_a, -along, [0.0]]),
+                              np.concatenate([hi_a, along, [np.inf]])])  # fmt: skip
+    cost = np.zeros(n_x + 1)
+    cost[-1] = 1.0
     res = linprog(cost, A_ub=np.vstack(a_ub), b_ub=np.concatenate(b_ub), bounds=bounds,
                   method="highs", options={"time_limit": REFINE_LP_TIME_S})  # fmt: skip
     if res.status != 0:
@@ -768,7 +736,7 @@ def refine_in_tube(ref: Reference, pieces, profile, machine: Machine, tube_mm: n
             poly = _local_polyline(pieces, profile, float(s_in.min()) - margin,
                                    float(s_in.max()) + margin)  # fmt: skip
             step = _region_step(u, y, cut_out, movable, (j0, j1, k1), h, poly, tube_mm,
-                                limits, kappa, REFINE_CEILING * eps, start)  # fmt: skip
+                                limits, kappa, start)  # fmt: skip
             steps.append((j0, j1, k1, step, poly))
         steps = [s for s in steps if s[3] is not None]
         if not steps:
