@@ -1031,11 +1031,13 @@ def _without_corner_feed(program, machine: Machine, options: LookaheadOptions,
     return free
 
 
-def _converge(st: _Setup, lev: _Levers, evaluate, confine=lambda lv: None):
+def _converge(st: _Setup, lev: _Levers, evaluate, confine=lambda lv: None, plan_of=None):
     """The levers loop (module docstring) from ``lev`` (changed in place): re-plan until the
     check is within ε_max (local shaping, then the fallback), then the improvement phase.
     ``evaluate(levers)`` → (planned, profile, check); ``confine(levers)`` undoes changes
-    outside the levers' scope (a cut window). Returns (final levers, result, re-plans)."""
+    outside the levers' scope (a cut window); ``plan_of(levers)`` → (planned, profile, …)
+    without the check (default :meth:`_Setup.plan_of`). Returns (final levers, result,
+    re-plans)."""
     options, eps_mm, initial = st.options, st.eps_mm, lev.copy()
     iterations = 0
     fastest_s = None  # the cycle time before shaping
@@ -1077,6 +1079,8 @@ def _converge(st: _Setup, lev: _Levers, evaluate, confine=lambda lv: None):
         hi.caps = np.maximum(hi.caps, st.upper.caps)
         confine(hi)
         raisable = bool(np.any(hi.caps > lev.caps * IMPROVE_RATIO))
+        if raisable:  # only where the raised plan may gain (its profile alone, no check)
+            raisable = _may_gain(result, shaped_s, _cycle_time((plan_of or st.plan_of)(hi)))
     if options.dynamics == Dynamics.LOCAL and (raisable or lev.shaped.any() and _may_gain(
             result, shaped_s, fastest_s)):
         # Improvement: bisect every shaped lever between its feasible value and its value
@@ -1235,7 +1239,7 @@ def _windows_of(st: _Setup):
             check = st.checker.run(planned, profile, rows_of(planned, profile), stream)
             return planned, profile, check, own, st.checker.stream_out
 
-        lev, result, iterations = _converge(st, final.copy(), evaluate, confine)
+        lev, result, iterations = _converge(st, final.copy(), evaluate, confine, plan_of)
         final = lev
         stream = result[4]  # the servo's state after this window's final plan
         done = _spliced([x for x in (done, result[3]) if x is not None])

@@ -369,7 +369,7 @@ REFINE_CHORD_MM = 1e-7
 #: Largest move of a reference sample along the path in one round [mm] ...
 REFINE_ALONG_MM = 0.02
 #: ... and at most the move whose bend off a curve (κ b²/2) is this share of the tube.
-REFINE_BEND = 0.05
+REFINE_BEND = 0.2
 
 
 @dataclass(frozen=True, eq=False)
