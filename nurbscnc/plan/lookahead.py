@@ -1069,54 +1069,63 @@ def _converge(st: _Setup, lev: _Levers, evaluate, confine=lambda lv: None, plan_
         confine(lev)
         result = None  # the last check goes first (with keep_reference, hundreds of MB)
     shaped_s = _cycle_time(result)
-    # The improvement phase's upper brackets: the levers before shaping, and with
-    # ``raise_corner_caps`` the caps the corner heuristic V_cf held below the machine's
-    # (those of this window only): then it bisects them too, from the feasible plan up.
-    hi = initial
-    raisable = False
-    if st.upper is not st.initial:
-        hi = initial.copy()
+    if options.dynamics == Dynamics.LOCAL and lev.shaped.any() and _may_gain(result, shaped_s,
+                                                                           fastest_s):
+        # Improvement: bisect every shaped lever between its feasible value and its value
+        # before shaping (geometric means; the settles arithmetically towards 0).
+        lev, result, n = _improve(st, lev, result, initial, evaluate, confine)
+        iterations += n
+    if st.upper is not st.initial and options.dynamics == Dynamics.LOCAL:
+        # The corner caps the heuristic V_cf held below the machine's (``raise_corner_caps``;
+        # this window's only), bisected the same way from the plan so far up to those caps
+        # — after the improvement above, so the plan is never slower than without them.
+        hi = lev.copy()
         hi.caps = np.maximum(hi.caps, st.upper.caps)
         confine(hi)
-        raisable = bool(np.any(hi.caps > lev.caps * IMPROVE_RATIO))
-        if raisable:  # only where the raised plan may gain (its profile alone, no check)
-            raisable = _may_gain(result, shaped_s, _cycle_time((plan_of or st.plan_of)(hi)))
-    if options.dynamics == Dynamics.LOCAL and (raisable or lev.shaped.any() and _may_gain(
-            result, shaped_s, fastest_s)):
-        # Improvement: bisect every shaped lever between its feasible value and its value
-        # before shaping (geometric means; the settles arithmetically towards 0). A try
-        # within ε_max is kept; a failing one narrows the brackets of the levers that the
-        # shaping rule blames for it (found by applying the rule to a copy).
-        # A check that keeps its reference and response holds hundreds of MB: then only
-        # one plan's is held at a time, and the best plan is re-made at the end if a later
-        # try replaced its result; a check without them is small and the best is kept.
-        keep_best = not st.checker.keep
-        best, best_time = lev.copy(), shaped_s
-        best_result = result if keep_best else None
-        for _ in range(IMPROVE_ITERATIONS):
-            trial = best.toward(hi)
-            if trial is None:
-                break
-            result = None
-            result = evaluate(trial)
-            iterations += 1
-            if result[2].overs.worst_mm <= eps_mm:
-                t = _cycle_time(result)
-                if t > best_time:  # a feasible raise that is slower (rare): stop here
-                    result = None
-                    break
-                best, best_time = trial, t
-                best_result = result if keep_best else None
-            else:
-                probe = trial.copy()
-                st.shape(probe, result)
-                confine(probe)
-                hi = hi.narrowed(trial, probe)
-                result = None
-        lev = best
-        if result is None:
-            result = best_result if best_result is not None else evaluate(lev)
+        shaped_s = _cycle_time(result)
+        if np.any(hi.caps > lev.caps * IMPROVE_RATIO) and _may_gain(
+                result, shaped_s, _cycle_time((plan_of or st.plan_of)(hi))):
+            lev, result, n = _improve(st, lev, result, hi, evaluate, confine)
+            iterations += n
     return lev, result, iterations
+
+
+def _improve(st: _Setup, lev: _Levers, result, hi: _Levers, evaluate, confine):
+    """The improvement phase (:func:`_converge`) from the feasible levers ``lev`` (their check
+    ``result``) towards the upper brackets ``hi``: at most :data:`IMPROVE_ITERATIONS` tries,
+    each halfway (:meth:`_Levers.toward`). A try within ε_max is kept if it is faster; a
+    failing one narrows the brackets of the levers that the shaping rule blames for it (found
+    by applying the rule to a copy). Returns (best levers, their result, re-plans)."""
+    # A check that keeps its reference and response holds hundreds of MB: then only one
+    # plan's is held at a time, and the best plan is re-made at the end if a later try
+    # replaced its result; a check without them is small and the best is kept.
+    keep_best = not st.checker.keep
+    best, best_time = lev.copy(), _cycle_time(result)
+    best_result = result if keep_best else None
+    iterations = 0
+    for _ in range(IMPROVE_ITERATIONS):
+        trial = best.toward(hi)
+        if trial is None:
+            break
+        result = None
+        result = evaluate(trial)
+        iterations += 1
+        if result[2].overs.worst_mm <= st.eps_mm:
+            t = _cycle_time(result)
+            if t > best_time:  # a feasible raise that is slower (rare): stop here
+                result = None
+                break
+            best, best_time = trial, t
+            best_result = result if keep_best else None
+        else:
+            probe = trial.copy()
+            st.shape(probe, result)
+            confine(probe)
+            hi = hi.narrowed(trial, probe)
+            result = None
+    if result is None:
+        result = best_result if best_result is not None else evaluate(best)
+    return best, result, iterations
 
 
 def _may_gain(result, shaped_s: float, fastest_s: float) -> bool:
