@@ -481,6 +481,12 @@ def segment_pieces(segments, machine: Machine, options: PlanOptions | None = Non
     options = options or PlanOptions()
     lim = machine.limits
     segs, source = merge_collinear(segments)  # G64 Q
+    if options.smooth:  # dense CAM polylines as splines (issue 13)
+        from nurbscnc.plan.smoothing import smooth_runs
+
+        reserve = options.tolerance_mm or lim.ph_tolerance_mm  # a PH corner inside a spline
+        segs, source = smooth_runs(segs, source, lim.path_tolerance_mm,
+                                   options.blend_tolerance_mm, reserve)  # fmt: skip
     n = len(segs)
     kinds = [s.kind for s in segs]
     straight = np.fromiter((k in ("line", "rapid") for k in kinds), dtype=bool, count=n)
@@ -641,8 +647,9 @@ def curvature_jumps(pieces: PieceList) -> tuple[np.ndarray, np.ndarray]:
 
 
 def blend_override(seg, options: PlanOptions) -> float:
-    """The blend tolerance [mm] for a segment: the option if given, else its G64 P."""
-    if options.blend_tolerance_mm is not None:
+    """The blend tolerance [mm] for a segment: the option if given, else its G64 P (a
+    smoothed run's own: the part of the tolerance its spline left to its end blends)."""
+    if options.blend_tolerance_mm is not None and not getattr(seg, "smoothed", False):
         return float(options.blend_tolerance_mm)
     return float(getattr(seg, "blend_mm", 0.0))
 
