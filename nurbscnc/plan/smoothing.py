@@ -56,14 +56,15 @@ MIN_RUN = 8
 MAX_RUN = 20000
 MAX_PIECE = 1000
 #: Vertices per knot span tried, fewest knots first.
-KNOT_STEPS = (16, 8, 4, 2)
+KNOT_STEPS = (32, 16, 8, 4, 2)
 #: Share of the path tolerance the spline may take from the polyline (the rest: the blends
 #: at its ends).
 SHARE = 0.5
 #: Spline samples per polyline chord in the deviation check.
-SAMPLES_PER_CHORD = 6
-#: Chords either side of a sample's own chord it is measured against.
-WINDOW = 3
+SAMPLES_PER_CHORD = 4
+#: Chords either side of a sample's own chord it is measured against (fewer only make the
+#: bound larger: it stays an upper bound).
+WINDOW = 1
 #: Weight of the end vertices in the least squares (1 elsewhere).
 END_WEIGHT = 1e6
 
