@@ -10,6 +10,9 @@ from __future__ import annotations
 
 import json
 import math
+import os
+import shutil
+import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -28,6 +31,19 @@ from tests.test_limits_on_samples import AXIS, REL, TOL_A, TOL_J, TOL_V, finite_
 HERE = Path(__file__).parent
 SPIRAL = HERE / "programs" / "cam" / "spiral2k.ngc"
 LINUXCNC = json.loads((HERE / "golden" / "linuxcnc_sim" / "spiral2k.json").read_text())
+
+
+#: LinuxCNC's planner run headless (../shared/tools/linuxcnc-sim beside the checkout).
+SIM = Path(os.environ.get("LINUXCNC_SIM") or HERE.parent.parent / "shared" / "tools"
+           / "linuxcnc-sim" / "run_linuxcnc.sh")  # fmt: skip
+
+
+def _sim_missing() -> str | None:
+    if not SIM.is_file():
+        return f"the LinuxCNC simulation script is not here ({SIM}; set LINUXCNC_SIM)"
+    if shutil.which("linuxcnc") is None:
+        return "LinuxCNC is not installed (apt-get install linuxcnc-uspace)"
+    return None
 
 
 def _options(smooth: bool, blend_tolerance=None, dynamics="local") -> RunOptions:
@@ -68,6 +84,18 @@ def test_spiral_runs_faster_than_linuxcnc_and_than_blends(spiral):
     assert smooth.cycle_time_s < LINUXCNC["cycle_time_s"]
     assert smooth.cycle_time_s < 0.65 * plain.cycle_time_s
     assert smooth.plan.pieces.kind_counts().get("nurbs", 0) > 0
+
+
+@pytest.mark.skipif(_sim_missing() is not None, reason=_sim_missing() or "")
+def test_linuxcnc_still_takes_the_golden_time(tmp_path):
+    """Live: LinuxCNC's real planner on the same program (its real duration, about 8 s)
+    gives the committed golden, sample for sample."""
+    out = tmp_path / "linuxcnc.csv"
+    subprocess.run(["bash", str(SIM), str(SPIRAL), str(out)], check=True, timeout=300,
+                   capture_output=True)  # fmt: skip
+    rows = np.loadtxt(out, delimiter=",", skiprows=1)
+    assert rows.shape[0] == LINUXCNC["samples"]
+    assert rows[-1, 0] == pytest.approx(LINUXCNC["cycle_time_s"], abs=1e-9)
 
 
 def test_spiral_reference_stays_within_the_path_tolerance(spiral):
@@ -214,3 +242,46 @@ def test_cli_smooth_flag(tmp_path):
     assert smooth["pieces"].get("nurbs", 0) > 0
     assert smooth["cycle_time_s"] < LINUXCNC["cycle_time_s"]
     assert smooth["contour_true_max_um"] <= 15.0
+
+
+@st.composite
+def cam_programs(draw):
+    """CAM-style passes: one or two arcs of short chords (radius 1–30 mm, chords
+    0.02–0.5 mm, coordinates rounded to 0.1 µm, Z ramping), the second turning the other way
+    from a corner of up to 90°, under G64 or G64 P; returns (text, tolerance [mm])."""
+    p = draw(st.sampled_from([None, 0.005, 0.02, 0.05]))
+    feed = draw(st.integers(300, 3000))
+    # Q0: no collinear merging first (under G64 P- Q- a merged line may leave a vertex by Q,
+    # and its blends by P more: LinuxCNC's naive CAM detector; here only P is tested)
+    lines = ["G21 G17 G90 G94", "G64" if p is None else f"G64 P{p} Q0", "G0 X0 Y0 Z0",
+             f"G1 F{feed}"]  # fmt: skip
+    x, y, z, heading = 0.0, 0.0, 0.0, 0.0
+    for _ in range(draw(st.integers(1, 2))):
+        radius = draw(st.floats(1.0, 30.0))
+        chord = draw(st.floats(0.02, 0.5))
+        turn = draw(st.sampled_from([1.0, -1.0]))
+        heading += draw(st.floats(0.0, math.pi / 2))
+        for _ in range(draw(st.integers(10, 200))):
+            heading += turn * chord / radius
+            x, y, z = x + chord * math.cos(heading), y + chord * math.sin(heading), z - 1e-4
+            lines.append(f"X{x:.4f} Y{y:.4f} Z{z:.4f}")
+    return "\n".join(lines + ["M2"]) + "\n", (0.015 if p is None else p)
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(case=cam_programs())
+def test_smoothed_cam_passes_keep_axis_limits_and_tolerance(case):
+    """Random CAM passes with ``--smooth`` under per-axis limits: every axis's v, a, j on
+    the samples by finite differences, and every reference point within the path tolerance
+    of the programmed polyline (exact distances)."""
+    text, tol_mm = case
+    prog = interpret_text(text)
+    run = run_program(prog, AXIS, _options(True, dynamics="off"))
+    s = run.samples
+    v, a, j = finite_differences(s.points_mm)
+    v_i, a_i, j_i = AXIS.axis_limits.as_arrays()
+    assert np.all(np.abs(v) <= v_i * (1 + REL) + TOL_V)
+    assert np.all(np.abs(a) <= a_i * (1 + REL) + TOL_A)
+    assert np.all(np.abs(j) <= j_i * (1 + REL) + TOL_J)
+    dev_mm = segment_distance_mm(s.points_mm[_cut(s, prog)], _programmed_polyline(prog))
+    assert dev_mm.max() <= tol_mm * (1 + 1e-9)
