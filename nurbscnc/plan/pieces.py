@@ -462,9 +462,10 @@ def segment_pieces(segments, machine: Machine, options: PlanOptions | None = Non
     """All pieces of a program, in order, as a :class:`PieceList`, with its corners decided
     (path-control modes, LinuxCNC 2.9's meaning, issue 13) and logged in ``corners``.
 
-    Runs of nearly collinear feed lines under G64 Q are merged first
-    (:func:`~nurbscnc.plan.naive.merge_collinear`; the ``segment`` column keeps the
-    program's indices). Breaks small enough to pass at speed are marked ``pass_after``
+    With ``options.smooth`` dense CAM polylines become splines first, on the programmed
+    vertices (:func:`~nurbscnc.plan.smoothing.smooth_runs`); then runs of nearly collinear
+    feed lines under G64 Q are merged (:func:`~nurbscnc.plan.naive.merge_collinear`); the
+    ``segment`` column keeps the program's indices. Breaks small enough to pass at speed are marked ``pass_after``
     (:func:`_small_break`, every mode but at G61.1 block ends); G61.1 stops at the end of
     every block (``stop_after``); G64 corners are blended within their tolerance
     (:func:`apply_blends`: P, or the machine's path tolerance without P or with P0); G61
@@ -480,13 +481,15 @@ def segment_pieces(segments, machine: Machine, options: PlanOptions | None = Non
     """
     options = options or PlanOptions()
     lim = machine.limits
-    segs, source = merge_collinear(segments)  # G64 Q
-    if options.smooth:  # dense CAM polylines as splines (issue 13)
+    segs, source = list(segments), np.arange(len(segments))
+    if options.smooth:  # dense CAM polylines as splines (issue 13), on the programmed vertices
         from nurbscnc.plan.smoothing import smooth_runs
 
         reserve = options.tolerance_mm or lim.ph_tolerance_mm  # a PH corner inside a spline
         segs, source = smooth_runs(segs, source, lim.path_tolerance_mm,
                                    options.blend_tolerance_mm, reserve)  # fmt: skip
+    segs, merged = merge_collinear(segs)  # G64 Q, on the lines left
+    source = source[merged]
     n = len(segs)
     kinds = [s.kind for s in segs]
     straight = np.fromiter((k in ("line", "rapid") for k in kinds), dtype=bool, count=n)
