@@ -316,3 +316,20 @@ def test_axis_jerk_on_a_blend_flank(smooth):
                       _options(smooth, dynamics="off"))  # fmt: skip
     _, _, j = finite_differences(run.samples.points_mm)
     assert np.all(np.abs(j) <= AXIS.axis_limits.as_arrays()[2] * (1 + REL) + TOL_J)
+
+
+def test_stream_smoothed_program_to_the_card(spiral):
+    """``stream --smooth`` plans the smoothed program window by window and the card ends at
+    the program's end; the executed periods are the smoothed plan's (5.33 s, not 8.69 s)."""
+    from tests.stream_helpers import card_on
+    from tests.test_stream_cli import run_stream
+
+    _, _, smooth, plain = spiral
+    with card_on("pty") as (card, ep):
+        result = run_stream([SPIRAL, "--smooth", "--port", ep.path, "--json"])
+    assert result.exit_code == 0, result.output
+    report = json.loads(result.stdout)
+    assert report["ok"] and report["final_position_steps"] == report["expected_position_steps"]
+    assert card.position.tolist() == report["expected_position_steps"]
+    assert abs(report["periods"] - smooth.samples.points_mm.shape[0]) <= 2
+    assert report["periods"] < 0.7 * plain.samples.points_mm.shape[0]
