@@ -333,3 +333,35 @@ def test_stream_smoothed_program_to_the_card(spiral):
     assert card.position.tolist() == report["expected_position_steps"]
     assert abs(report["periods"] - smooth.samples.points_mm.shape[0]) <= 2
     assert report["periods"] < 0.7 * plain.samples.points_mm.shape[0]
+
+
+def test_smoothed_samples_report_their_programmed_moves(spiral):
+    """Each sample on a spline reports the source line of the programmed move where its
+    piece (a cell of ≤ 0.25 mm: five 0.05 mm chords) starts: never past the move the tool
+    is nearest to, at most the chords of one cell behind it, and never decreasing."""
+    _, prog, smooth, _ = spiral
+    s = smooth.samples
+    moves = [g for g in prog.segments if g.kind == "line"][1:]  # the spiral's chords
+    a = np.array([g.start_mm for g in moves], dtype=float)
+    b = np.array([g.end_mm for g in moves], dtype=float)
+    on = np.isin(s.line, [g.line for g in moves])
+    pts = s.points_mm[on]
+    # the nearest chord of each sample: exact point-to-segment distances to the 8 chords
+    # whose midpoints are nearest (chords of 0.05 mm, samples within µm of the path)
+    from scipy.spatial import cKDTree
+
+    near = cKDTree(0.5 * (a + b)).query(pts, k=8)[1]
+    best = np.full(len(pts), np.inf)
+    nearest = np.zeros(len(pts), dtype=np.int64)
+    for c in range(near.shape[1]):
+        i = near[:, c]
+        ab = b[i] - a[i]
+        f = np.clip(np.einsum("ij,ij->i", pts - a[i], ab) / np.einsum("ij,ij->i", ab, ab), 0, 1)
+        dist = np.linalg.norm(pts - a[i] - f[:, None] * ab, axis=1)
+        better = dist < best
+        best[better], nearest[better] = dist[better], i[better]
+    line_of = np.array([g.line for g in moves])
+    reported = s.line[on]
+    assert np.all(np.diff(reported) >= 0)
+    lag = line_of[nearest] - reported
+    assert lag.min() >= -1 and lag.max() <= 8

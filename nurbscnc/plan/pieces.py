@@ -446,7 +446,9 @@ def _object_pieces(seg, index: int, machine: Machine, options: PlanOptions) -> l
         except NurbsCncError as exc:
             raise exc.with_pos(SourcePos(seg.line)) from None
         blend = blend_override(seg, options)
-        return [dc_replace(p, blend_mm=blend) for p in pieces]
+        line_at = getattr(seg, "line_at", None)  # a smoothed run: each piece its move's line
+        return [dc_replace(p, blend_mm=blend, line=line_at(p.u_a) if line_at else p.line)
+                for p in pieces]  # fmt: skip
     geom = geometry_of(seg)
     length = float(geom.length_mm)
     if length <= 0.0:
@@ -465,8 +467,9 @@ def segment_pieces(segments, machine: Machine, options: PlanOptions | None = Non
     With ``options.smooth`` dense CAM polylines become splines first, on the programmed
     vertices (:func:`~nurbscnc.plan.smoothing.smooth_runs`); then runs of nearly collinear
     feed lines under G64 Q are merged (:func:`~nurbscnc.plan.naive.merge_collinear`); the
-    ``segment`` column keeps the program's indices. Breaks small enough to pass at speed are marked ``pass_after``
-    (:func:`_small_break`, every mode but at G61.1 block ends); G61.1 stops at the end of
+    ``segment`` column keeps the program's indices. Breaks small enough to pass at speed
+    are marked ``pass_after`` (:func:`_small_break`, every mode but at G61.1 block ends);
+    G61.1 stops at the end of
     every block (``stop_after``); G64 corners are blended within their tolerance
     (:func:`apply_blends`: P, or the machine's path tolerance without P or with P0); G61
     stops at every other break (:func:`junction_caps`); :func:`corner_log` records it all.

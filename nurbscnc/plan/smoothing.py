@@ -33,8 +33,9 @@ tolerance is left to the blends where a spline meets the lines or splines beside
 stays within the tolerance of the program, as G64 P promises.
 
 Off by default (a program is planned as written unless asked): commercial controls ask for
-this too (Fanuc's G5.1 Q3 "nano smoothing", Siemens' COMPCAD). A smoothed run reports the
-first line of its run as its source line.
+this too (Fanuc's G5.1 Q3 "nano smoothing", Siemens' COMPCAD). Each piece the planner cuts
+from a spline (cells of ≤ 0.25 mm) reports the source line of the programmed move where it
+starts (:meth:`SmoothedRun.line_at`).
 """
 
 from __future__ import annotations
@@ -73,9 +74,19 @@ END_WEIGHT = 1e6
 class SmoothedRun(Nurbs):
     """A run of lines as its spline: a :class:`Nurbs` whose ``blend_mm`` is the share of the
     tolerance left to its end blends (kept under ``--blend-tolerance``, which it already
-    counts) and whose ``line`` is its run's first."""
+    counts) and whose ``line`` is its run's first. ``line_u`` (n,): the spline parameter
+    where each of its n programmed moves starts (its start vertex's), ``line_numbers`` (n,)
+    their source lines."""
+
+    line_u: np.ndarray | None = None
+    line_numbers: np.ndarray | None = None
 
     smoothed = True
+
+    def line_at(self, u: float) -> int:
+        """The source line of the programmed move whose stretch holds parameter ``u``."""
+        i = int(np.searchsorted(self.line_u, u, side="right")) - 1
+        return int(self.line_numbers[max(i, 0)])
 
 
 def _resolved_tolerance_mm(blend_mm: np.ndarray, path_tolerance_mm: float) -> np.ndarray:
@@ -246,10 +257,14 @@ def smooth_runs(segments, source: np.ndarray, path_tolerance_mm: float,
         change = np.flatnonzero(feed[a + 1 : b] != feed[a : b - 1]) + 1
         starts = np.union1d(change, np.arange(MAX_PIECE, b - a, MAX_PIECE)).astype(np.int64)
         bounds = [0, *starts.tolist(), b - a]
+        numbers = np.fromiter((s.line for s in lines[a:b]), dtype=np.int64, count=b - a)
         for (la, lb), (tk, ck) in zip(zip(bounds[:-1], bounds[1:]),
                                       split_spline(knots, ctrl, u[starts])):
+            lo, hi = u[la], u[lb]
             spline = SmoothedRun(3, tk, ck, np.ones(ck.shape[0]), float(feed[a + la]),
-                                 lines[a + la].line, "XY", (1.0 - SHARE) * float(tol[a]))
+                                 int(numbers[la]), "XY", (1.0 - SHARE) * float(tol[a]),
+                                 line_u=(u[la:lb] - lo) / (hi - lo),
+                                 line_numbers=numbers[la:lb])  # fmt: skip
             replaced[int(rows[a + la])] = (int(rows[a + lb - 1]), spline)
     if not replaced:
         return segs, source
