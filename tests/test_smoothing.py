@@ -90,9 +90,17 @@ def test_spiral_runs_faster_than_linuxcnc_and_than_blends(spiral):
 def test_linuxcnc_still_takes_the_golden_time(tmp_path):
     """Live: LinuxCNC's real planner on the same program (its real duration, about 8 s)
     gives the committed golden, sample for sample."""
+    import re
+
     out = tmp_path / "linuxcnc.csv"
-    subprocess.run(["bash", str(SIM), str(SPIRAL), str(out)], check=True, timeout=300,
-                   capture_output=True)  # fmt: skip
+    done = subprocess.run(["bash", str(SIM), str(SPIRAL), str(out)], check=True, timeout=300,
+                          capture_output=True, text=True)  # fmt: skip
+    # The recorder's summary ("…: N samples, cycle T s, gaps G, overruns O, errors E"): a
+    # real-time run on a loaded machine may miss servo periods, and then it measured that.
+    faults = re.search(r"gaps (\d+), overruns (\d+)", done.stdout + done.stderr)
+    if faults and (int(faults[1]) or int(faults[2])):
+        pytest.skip(f"LinuxCNC's real-time simulation missed periods on this loaded machine "
+                    f"(gaps {faults[1]}, overruns {faults[2]}): no measurement")
     rows = np.loadtxt(out, delimiter=",", skiprows=1)
     assert rows.shape[0] == LINUXCNC["samples"]
     assert rows[-1, 0] == pytest.approx(LINUXCNC["cycle_time_s"], abs=1e-9)
@@ -269,35 +277,33 @@ def cam_programs(draw):
 
 
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(case=cam_programs())
-def test_smoothed_cam_passes_keep_the_limits_and_the_tolerance(case):
-    """Random CAM passes with ``--smooth``: the path limits on the samples (speed ≤ the
-    feed, the acceleration vector ≤ √2·A, as tests/test_limits_on_samples.py) and every
-    reference point within the path tolerance of the programmed polyline (exact
-    distances). Per-axis limits: the spiral above, and the known blend failure below."""
+@given(case=cam_programs(), smooth=st.booleans())
+def test_cam_passes_keep_axis_limits_and_the_tolerance(case, smooth):
+    """Random CAM passes, with and without ``--smooth``, under per-axis limits: every axis's
+    v, a, j on the samples by finite differences (tests/test_limits_on_samples.py's
+    tolerances), and every reference point within the path tolerance of the programmed
+    polyline (exact distances)."""
     text, tol_mm = case
     prog = interpret_text(text)
-    machine = load_machine()
-    run = run_program(prog, machine, _options(True, dynamics="off"))
+    run = run_program(prog, AXIS, _options(smooth, dynamics="off"))
     s = run.samples
-    v, a, _ = finite_differences(s.points_mm)
-    feed_mm_s = min(max(g.feed_mm_s for g in prog.segments if g.kind == "line"),
-                    machine.limits.v_max_mm_s)
-    cut = _cut(s, prog)
-    assert np.linalg.norm(v, axis=1)[cut[1:]].max() <= feed_mm_s * (1 + REL) + TOL_V
-    assert np.linalg.norm(a, axis=1).max() <= math.sqrt(2.0) * machine.limits.a_max_mm_s2
-    dev_mm = segment_distance_mm(s.points_mm[cut], _programmed_polyline(prog))
+    v, a, j = finite_differences(s.points_mm)
+    v_i, a_i, j_i = AXIS.axis_limits.as_arrays()
+    assert np.all(np.abs(v) <= v_i * (1 + REL) + TOL_V)
+    assert np.all(np.abs(a) <= a_i * (1 + REL) + TOL_A)
+    assert np.all(np.abs(j) <= j_i * (1 + REL) + TOL_J)
+    dev_mm = segment_distance_mm(s.points_mm[_cut(s, prog)], _programmed_polyline(prog))
     assert dev_mm.max() <= tol_mm * (1 + 1e-9)
 
 
 #: Found by the CAM generator above with per-axis limits (session 8), and not smoothing's:
 #: the same plan without ``--smooth``. Ten 0.5 mm chords on a 1 mm radius (chained PH
-#: blends), then 0.125 mm chords: on the PH blend into the first short chord the S-curve
-#: from 3.7 to 5 mm/s keeps its tangential jerk (≈ 1.9e4 mm/s³) while the curvature terms
-#: 3va(κn)_y + v³ d(κn)_y/ds add ≈ 6e3: Y's jerk reaches 25,221 mm/s³ against its 2e4.
-#: The per-piece jerk caps (plan/axes.py) hold on the piece, but the flank's jerk phase is
-#: not re-limited where it crosses into the blend. Left for the planner issue (13).
-AXIS_JERK_ON_A_BLEND_FLANK = (
+#: blends), then 0.125 mm chords whose small breaks are passed at speed: at such a break
+#: each axis took its whole J_i T² for the velocity step while the S-curve from 3.7 to
+#: 5 mm/s crossed it with its own tangential jerk (≈ 1.9e4 mm/s³): Y's jerk reached
+#: 25,221 mm/s³ against its 2e4. A passed break now takes JUNCTION_SHARE of J_i T² and the
+#: pieces beside it keep to the rest, as at a curvature jump (plan/axes.py _jump_reserved).
+AXIS_JERK_AT_A_PASSED_BREAK = (
     "G21 G17 G90 G94\nG64\nG0 X0 Y0 Z0\nG1 F300\nX0.4388 Y0.2397 Z-0.0001\n"
     "X0.7089 Y0.6604 Z-0.0002\nX0.7443 Y1.1592 Z-0.0003\nX0.5362 Y1.6138 Z-0.0004\n"
     "X0.1357 Y1.9131 Z-0.0005\nX-0.3593 Y1.9836 Z-0.0006\nX-0.8276 Y1.8082 Z-0.0007\n"
@@ -308,11 +314,9 @@ AXIS_JERK_ON_A_BLEND_FLANK = (
     "X-0.4351 Y-0.5851 Z-0.0020\nM2\n")  # fmt: skip
 
 
-@pytest.mark.xfail(strict=True, reason="pre-existing: a blend flank's tangential jerk plus "
-                   "its curvature terms exceed Y's jerk limit by 26 % (see the program's note)")
 @pytest.mark.parametrize("smooth", [False, True])
-def test_axis_jerk_on_a_blend_flank(smooth):
-    run = run_program(interpret_text(AXIS_JERK_ON_A_BLEND_FLANK), AXIS,
+def test_axis_jerk_where_a_flank_crosses_a_passed_break(smooth):
+    run = run_program(interpret_text(AXIS_JERK_AT_A_PASSED_BREAK), AXIS,
                       _options(smooth, dynamics="off"))  # fmt: skip
     _, _, j = finite_differences(run.samples.points_mm)
     assert np.all(np.abs(j) <= AXIS.axis_limits.as_arrays()[2] * (1 + REL) + TOL_J)

@@ -35,6 +35,7 @@ from nurbscnc.geometry.path import STOP_KINDS, Kind, PathTable, ph_power_rows, s
 from nurbscnc.geometry.paths import ArcGeometry, LineGeometry, geometry_of
 from nurbscnc.geometry.ph import PHQuintic
 from nurbscnc.machine.caps import (
+    JUNCTION_SHARE,
     MIN_CAP_MM_S,
     corner_cap_mm_s,
     curvature_cap_mm_s,
@@ -769,9 +770,13 @@ def _small_break(pieces: PieceList, turning: np.ndarray, regular: np.ndarray,
     acceleration, v²θ/L ≤ A_max, since the jump allowed is ≤ A_max T.
 
     With per-axis limits, each axis's share of the jump, v |t_b,i − t_a,i| · crowd, must also
-    stay within that axis's min(A_i T, J_i T²) (the same finite-difference argument per axis:
+    stay within that axis's min(A_i T, s J_i T²) (the same finite-difference argument per axis:
     a break of 0.42° at 5 mm/s passed the path's 0.05 mm/s rule and put 0.034 mm/s on the Y
-    axis, allowed 0.02 mm/s: on the samples a jerk 7,600 mm/s³ over that axis's limit)."""
+    axis, allowed 0.02 mm/s: on the samples a jerk 7,600 mm/s³ over that axis's limit), s =
+    :data:`~nurbscnc.machine.caps.JUNCTION_SHARE`: the pieces on both sides keep their own
+    jerk to the rest on that axis (:func:`nurbscnc.plan.axes.piece_limits`), as at a
+    curvature jump. With all of J_i T² for the jump, an S-curve crossing the break added its
+    own jerk: 25,221 mm/s³ on a Y axis of 2e4 (tests/test_smoothing.py)."""
     cap, length = pieces.v_cap_mm_s, pieces.length_mm
     v = np.minimum(cap[:-1], cap[1:])
     half = 0.5 * np.minimum(length[:-1], length[1:])
@@ -784,7 +789,7 @@ def _small_break(pieces: PieceList, turning: np.ndarray, regular: np.ndarray,
         if machine.axis_limits.any:
             _, a_axis, j_axis = machine.axis_limits.as_arrays()
             period = machine.servo.period_s
-            allow = np.minimum(a_axis * period, j_axis * period**2)[:, None]  # (3, 1)
+            allow = np.minimum(a_axis * period, JUNCTION_SHARE * j_axis * period**2)[:, None]
             step = pieces.tangent_start[:, 1:] - pieces.tangent_end[:, :-1]  # (3, k − 1)
             small &= np.all(np.abs(step) * (v * crowd) <= allow, axis=0)
     return regular & (turning > SMOOTH_JUNCTION_RAD) & small
