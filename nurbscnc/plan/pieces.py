@@ -885,25 +885,44 @@ def _blend_geometry(piece: Piece):
 
 
 def _blend_object_corners(pieces: PieceList, c: _Corners, machine: Machine) -> None:
-    """Corners with an arc, NURBS or PH piece, one at a time
-    (:func:`~nurbscnc.geometry.blend.blend_corner`, equal trims ≤ half the shorter piece)."""
-    from nurbscnc.geometry.blend import blend_corner, blend_space_corner
+    """Corners with an arc, NURBS or PH piece (equal trims ≤ half the shorter piece): a
+    planar PH blend one corner at a time (:func:`~nurbscnc.geometry.blend.blend_corner`),
+    then every corner that has none and turns out of its plane at once, a G2 quintic
+    Bézier each (:func:`~nurbscnc.geometry.blend.blend_space_corners`)."""
+    from nurbscnc.geometry.blend import blend_corner, blend_space_corners
 
+    space = []
     for j in np.flatnonzero(~c.lines).tolist():
         i = int(c.row[j])
         a, b = pieces[i - 1], pieces[i]
-        ga, gb = _blend_geometry(a), _blend_geometry(b)
         args = (float(c.tol_mm[j]), 0.5 * a.length_mm, 0.5 * b.length_mm)
-        bl = blend_corner(ga, gb, *args, measure=False)
-        if bl is None and _out_of_plane(pieces, np.array([i - 1]))[0]:
-            bl = blend_space_corner(ga, gb, *args)  # a 3-D turn: a G2 quintic Bézier
-            if bl is not None:
-                c.cap_mm_s[j] = servo_blend_cap_mm_s(machine, bl.kappa_max_per_mm)
+        bl = blend_corner(_blend_geometry(a), _blend_geometry(b), *args, measure=False)
+        if bl is None:
+            space.append(j)
+        else:
+            _take_blend(c, j, bl)
+    if not space:
+        return
+    js = np.asarray(space, dtype=np.int64)
+    js = js[_out_of_plane(pieces, c.row[js] - 1)]  # a 3-D turn no planar blend can round
+    if js.size == 0:
+        return
+    rows = c.row[js]
+    length = pieces.length_mm
+    blends = blend_space_corners(pieces.path, rows - 1, rows, c.tol_mm[js],
+                                 0.5 * length[rows - 1], 0.5 * length[rows])  # fmt: skip
+    for j, bl in zip(js.tolist(), blends):
         if bl is not None:
-            c.obj_blends[j] = bl
-            c.ok[j], c.kappa_per_mm[j] = True, bl.kappa_max_per_mm
-            c.length_mm[j] = _blend_length_mm(bl)
-            c.trim_a_mm[j], c.trim_b_mm[j] = bl.trim_a_mm, bl.trim_b_mm
+            c.cap_mm_s[j] = servo_blend_cap_mm_s(machine, bl.kappa_max_per_mm)
+            _take_blend(c, j, bl)
+
+
+def _take_blend(c: _Corners, j: int, bl) -> None:
+    """Record blend ``bl`` (PH or space) as corner ``j``'s."""
+    c.obj_blends[j] = bl
+    c.ok[j], c.kappa_per_mm[j] = True, bl.kappa_max_per_mm
+    c.length_mm[j] = _blend_length_mm(bl)
+    c.trim_a_mm[j], c.trim_b_mm[j] = bl.trim_a_mm, bl.trim_b_mm
 
 
 #: Share of ε_max the servo's steady curve error may take on a space blend
