@@ -1211,32 +1211,42 @@ def _windows_of(st: _Setup):
 
 
 class _SeenWindows:
-    """The final levers of the cut windows planned so far, to start a window that repeats
-    one of them (a part cut again at another place: the same pieces translated) from that
-    window's final levers instead of the kinematic ones.
+    """The final levers of the cuts planned so far, to start a cut that repeats one of them
+    (a part cut again at another place: the same pieces translated) from that cut's final
+    levers instead of the kinematic ones.
 
-    Same: as many pieces, of the same kinds, rapid, stop, pass and dwell flags, and within
-    1e-9 (relative; 1e-9 mm for positions relative to the window's first piece, 1e-12 for
-    unit tangents) in length, curvature, end points, tangents and kinematic levers. A warm
-    start is only where the levers loop begins: the window is checked as any other, and
-    re-planned from there if the check fails (its servo starts from the state the window
-    before left, its own). Where it passes at once the window's plan is the repeated one's
-    (the improvement phase has nothing to gain: the first check is the fastest plan). Ten
-    translated 60 mm airfoils: 90 checks → 26. Found by a key (piece count, kinds, lengths
-    to 1e-6 mm) and then compared in full."""
+    A window is the rapids before a cut and the cut; the cut (from its first feed piece) is
+    compared, and warmed with the settle after the rapid before it. Same: as many pieces,
+    of the same kinds, rapid, stop, pass and dwell flags, and within 1e-9 (relative; 1e-9 mm
+    for positions relative to the cut's first piece; for unit tangents, whose last bits
+    carry the coordinates' size: 1.2e-12 apart 560 mm away) in length, curvature, end
+    points, tangents and kinematic levers. A warm start is only where the
+    levers loop begins: the window is checked as any other, and re-planned from there if
+    the check fails (its servo starts from the state the window before left, its own).
+    Where it passes at once the cut's plan is the repeated one's (the improvement phase has
+    nothing to gain: the first check is the fastest plan). Ten translated 60 mm airfoils:
+    80 re-plans → 8 (the first cut's). Found by a key (piece count, kinds, lengths to
+    1e-6 mm), then compared in full."""
+
+    _FIELDS = (*_Levers._SCALED, "settle_s", "shaped", "ineffective")
 
     def __init__(self, st: _Setup):
         self.st = st
         self.by_key: dict = {}
 
-    def _key(self, a: int, b: int) -> tuple:
-        p = self.st.pieces
-        return (b - a, np.asarray(p.kind[a:b]).tobytes(), np.asarray(p.rapid[a:b]).tobytes(),
-                round(float(np.sum(p.length_mm[a:b])), 6))  # fmt: skip
+    def _cut(self, a: int, b: int) -> int:
+        """The first feed piece of window a … b − 1 (b: none)."""
+        feed = np.flatnonzero(~np.asarray(self.st.pieces.rapid[a:b], dtype=bool))
+        return a + int(feed[0]) if feed.size else b
 
-    def _same(self, a: int, b: int, a2: int, b2: int) -> bool:
+    def _key(self, c: int, b: int) -> tuple:
+        p = self.st.pieces
+        return (b - c, np.asarray(p.kind[c:b]).tobytes(),
+                round(float(np.sum(p.length_mm[c:b])), 6))  # fmt: skip
+
+    def _same(self, c: int, b: int, c2: int) -> bool:
         p, init = self.st.pieces, self.st.initial
-        sl, sl2 = slice(a, b), slice(a2, b2)
+        sl, sl2 = slice(c, b), slice(c2, c2 + (b - c))
         for f in ("kind", "rapid", "stop_after", "pass_after", "dwell_after_s"):
             if not np.array_equal(getattr(p, f)[sl], getattr(p, f)[sl2]):
                 return False
@@ -1246,26 +1256,33 @@ class _SeenWindows:
             return False
         for f in ("start_mm", "end_mm"):
             x = getattr(p, f)
-            if not np.allclose(x[:, sl] - x[:, a : a + 1], x[:, sl2] - x[:, a2 : a2 + 1],
+            if not np.allclose(x[:, sl] - x[:, c : c + 1], x[:, sl2] - x[:, c2 : c2 + 1],
                                rtol=0.0, atol=1e-9):  # fmt: skip
                 return False
         return all(np.allclose(getattr(p, f)[:, sl], getattr(p, f)[:, sl2], rtol=0.0,
-                               atol=1e-12) for f in ("tangent_start", "tangent_end"))
+                               atol=1e-9) for f in ("tangent_start", "tangent_end"))
 
     def warm(self, final: _Levers, a: int, b: int) -> _Levers:
-        """``final``'s copy, with pieces a … b − 1 from a repeated window's final levers."""
+        """``final``'s copy, the cut of window a … b − 1 from a repeated cut's final levers."""
         lev = final.copy()
-        for a2, saved in self.by_key.get(self._key(a, b), ()):
-            if self._same(a, b, a2, a2 + (b - a)):
+        c = self._cut(a, b)
+        if c == b:
+            return lev
+        for c2, saved, settle in self.by_key.get(self._key(c, b), ()):
+            if self._same(c, b, c2):
                 for f, x in saved.items():
-                    getattr(lev, f)[a:b] = x
+                    getattr(lev, f)[c:b] = x
+                if c > a:  # the settle after the rapid before the cut
+                    lev.settle_s[c - 1] = settle
                 break
         return lev
 
     def add(self, lev: _Levers, a: int, b: int) -> None:
-        saved = {f: getattr(lev, f)[a:b].copy()
-                 for f in (*_Levers._SCALED, "settle_s", "shaped", "ineffective")}
-        self.by_key.setdefault(self._key(a, b), []).append((a, saved))
+        c = self._cut(a, b)
+        if c < b:
+            saved = {f: getattr(lev, f)[c:b].copy() for f in self._FIELDS}
+            settle = float(lev.settle_s[c - 1]) if c > a else 0.0
+            self.by_key.setdefault(self._key(c, b), []).append((c, saved, settle))
 
 
 def _placeholder(pieces: PieceList, lev: _Levers, first: int) -> Profile:
