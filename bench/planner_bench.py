@@ -54,7 +54,7 @@ from contour import (  # noqa: E402
     path_polyline_mm,
     slow_drops,
 )
-from machine_info import corpus_program, run_info  # noqa: E402
+from machine_info import corpus_program, run_info, use_bytecode  # noqa: E402
 
 LINUXCNC_SIM = Path(os.environ.get("LINUXCNC_SIM",
                                    "/work/shared/tools/linuxcnc-sim/run_linuxcnc.sh"))  # fmt: skip
@@ -380,6 +380,7 @@ def main(argv=None) -> int:
     parser.add_argument("--linuxcnc-long", action="store_true",
                         help="also run the corpus programs on LinuxCNC (real time, ~15 min)")
     args = parser.parse_args(argv)
+    use_bytecode()  # the children start as a user's installed nurbscnc does
 
     live = linuxcnc_available() and not args.no_linuxcnc and not args.quick
     stored = {}
