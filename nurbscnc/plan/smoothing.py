@@ -74,7 +74,7 @@ END_WEIGHT = 1e6
 class SmoothedRun(Nurbs):
     """A run of lines as its spline: a :class:`Nurbs` whose ``blend_mm`` is the share of the
     tolerance left to its end blends (kept under ``--blend-tolerance``, which it already
-    counts) and whose ``line`` is its run's first. ``line_u`` (n,): the spline parameter
+    counts) and whose ``line`` is its first move's. ``line_u`` (n,): the spline parameter
     where each of its n programmed moves starts (its start vertex's), ``line_numbers`` (n,)
     their source lines."""
 
@@ -99,7 +99,8 @@ def _resolved_tolerance_mm(blend_mm: np.ndarray, path_tolerance_mm: float) -> np
 def _runs(p0: np.ndarray, p1: np.ndarray, ok: np.ndarray, key: np.ndarray,
           adjacent: np.ndarray) -> list[tuple[int, int]]:  # fmt: skip
     """Runs [a, b) of consecutive candidate lines (module doc), as positions in the columns:
-    ``ok`` (m,) candidates, ``key`` (m, 2) feed and mode (a change breaks a run),
+    ``ok`` (m,) candidates, ``key`` (m, c) values whose change breaks a run (the path mode;
+    a feed change does not: the spline is cut there, C2),
     ``adjacent`` (m − 1,) line j + 1 follows line j in the program."""
     d = p1 - p0
     length = np.sqrt(np.einsum("ij,ij->i", d, d))
