@@ -161,6 +161,9 @@ def main(argv=None) -> int:
     parser.add_argument("--out", default=None, help="write the results (JSON) here")
     parser.add_argument("--worker", default=None, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
+    from machine_info import use_bytecode
+
+    use_bytecode()  # the children start as a user's installed nurbscnc does
     if args.worker:
         print(json.dumps(worker(args.worker, args.dynamics)))
         return 0

@@ -313,6 +313,9 @@ def main(argv=None) -> int:
                         help=f"programs {QUICK_DIVISOR}x smaller (a smoke test)")  # fmt: skip
     parser.add_argument("--worker", nargs=2, metavar=("MODE", "PROGRAM"), help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
+    from machine_info import use_bytecode
+
+    use_bytecode()  # the children start as a user's installed nurbscnc does
     if args.worker:
         print(json.dumps(worker(*args.worker)))
         return 0

@@ -53,7 +53,7 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
 
-from machine_info import corpus_program, run_info  # noqa: E402
+from machine_info import corpus_program, run_info, use_bytecode  # noqa: E402
 from plan_bench import cam_spiral  # noqa: E402  (stdlib-only generator of plan_bench.py)
 from run import g1_program  # noqa: E402  (stdlib-only generator of bench/run.py)
 
@@ -338,6 +338,7 @@ def main(argv=None) -> int:
     parser.add_argument("--heavy", action="store_true",
                         help="also the issue's 200,000-line 10 km zig-zag (plan and run)")
     args = parser.parse_args(argv)
+    use_bytecode()  # the children start as a user's installed nurbscnc does
     caps = (args.mem_cap_gb, args.timeout)
     scales = (1, 4) if args.quick else SCALES
     spiral_base = SPIRAL_BASE_LINES // 5 if args.quick else SPIRAL_BASE_LINES

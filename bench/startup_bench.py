@@ -36,7 +36,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from machine_info import run_info  # noqa: E402
+from machine_info import run_info, use_bytecode  # noqa: E402
 
 #: The modules whose import a command should pay only when it needs them.
 HEAVY = ("numpy", "scipy", "scipy.signal", "rich", "lark", "matplotlib", "serial",
@@ -148,6 +148,7 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true", help="3 runs per command")
     ap.add_argument("--repeat", type=int, default=None, help="runs per command (default 7)")
     args = ap.parse_args()
+    use_bytecode()  # the children start as a user's installed nurbscnc does
     repeat = args.repeat or (3 if args.quick else 7)
     script = console_script()
     results = {}

@@ -115,17 +115,27 @@ def _today_csv(samples) -> bytes:
 
 
 def _today_npz(path, samples) -> bytes:
-    """The NPZ as numpy's np.savez_compressed makes it (a zip of deflated ``<name>.npy``
-    members, zip64 forced), at the writers' deflate level (NPZ_DEFLATE_LEVEL, 1) instead of
-    zlib's default; numpy.load reads it back to the same columns."""
+    """The NPZ as numpy's np.savez_compressed makes it (a zip of ``<name>.npy`` members,
+    zip64 forced), at the writers' deflate level (NPZ_DEFLATE_LEVEL, 1) instead of zlib's
+    default, a member stored where its first NPZ_PROBE_ROWS rows deflate to more than
+    NPZ_STORE_RATIO of their size; numpy.load reads it back to the same columns."""
     import zipfile
+    import zlib
 
-    from nurbscnc.output.files import NPZ_DEFLATE_LEVEL, POINT_COLUMNS, point_columns
+    from nurbscnc.output.files import (
+        NPZ_DEFLATE_LEVEL,
+        NPZ_PROBE_ROWS,
+        NPZ_STORE_RATIO,
+        POINT_COLUMNS,
+        point_columns,
+    )
 
     columns = dict(zip(POINT_COLUMNS, point_columns(samples)))
-    with zipfile.ZipFile(path, mode="w", compression=zipfile.ZIP_DEFLATED,
-                         compresslevel=NPZ_DEFLATE_LEVEL) as zipf:  # fmt: skip
+    with zipfile.ZipFile(path, mode="w", compresslevel=NPZ_DEFLATE_LEVEL) as zipf:
         for name, col in columns.items():
+            head = np.ascontiguousarray(np.asanyarray(col)[:NPZ_PROBE_ROWS]).tobytes()
+            packs = len(zlib.compress(head, NPZ_DEFLATE_LEVEL)) <= NPZ_STORE_RATIO * len(head)
+            zipf.compression = zipfile.ZIP_DEFLATED if packs else zipfile.ZIP_STORED
             with zipf.open(f"{name}.npy", "w", force_zip64=True) as fid:
                 np.lib.format.write_array(fid, np.asanyarray(col), allow_pickle=False)
     with np.load(path) as back:
@@ -133,6 +143,26 @@ def _today_npz(path, samples) -> bytes:
         for name, col in columns.items():
             np.testing.assert_array_equal(back[name], col)
     return Path(path).read_bytes()
+
+
+def test_npz_stores_what_does_not_deflate(tmp_path):
+    """Random doubles (no redundancy: deflate cannot shrink them) are stored, a piece index
+    column (runs of equal integers) is deflated, and the file reads back."""
+    import zipfile
+
+    from nurbscnc.output.files import _npz_windows
+
+    rng = np.random.default_rng(0)
+    cols = {"x": rng.normal(size=100_000), "piece": np.repeat(np.arange(1000), 100)}
+    out = tmp_path / "two.npz"
+    with open(out, "wb") as fh:
+        _npz_windows(fh, str(tmp_path), list(cols), [tuple(cols.values())], 100_000)
+    with zipfile.ZipFile(out) as z:
+        kind = {i.filename: i.compress_type for i in z.infolist()}
+    assert kind == {"x.npy": zipfile.ZIP_STORED, "piece.npy": zipfile.ZIP_DEFLATED}
+    with np.load(out) as back:
+        for name, col in cols.items():
+            np.testing.assert_array_equal(back[name], col)
 
 
 @pytest.mark.parametrize("window", WINDOWS)

@@ -393,6 +393,8 @@ def test_mutation_fuzzer_over_the_corpus():
             continue
         planned += 1
         plan_args = ["plan", "-", "--json", "--dynamics", rng.choice(["off", "local"])]
+        if rng.random() < 0.5:
+            plan_args.append("--smooth")  # dense runs of lines as splines (plan/smoothing.py)
         plan = invoke(plan_args, data, PLAN_TIMEOUT_S)
         if plan is not None and problems_of(plan):
             failures.append((names[k], i, plan_args, data, problems_of(plan)))

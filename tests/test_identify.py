@@ -127,8 +127,14 @@ def test_cli_prints_a_loadable_profile_section(tmp_path, paper_fit):
     m = parse_machine(profile)
     true = sorted_poles(np.roots(PAPER_X[1]))
     assert np.all(np.abs(sorted_poles(m.servo.y.poles()) - true) / np.abs(true) < 0.05)
-    # the file holds the samples to 1 nm and the section 7 digits: the same fit, nearly
-    assert np.allclose(sorted_poles(m.servo.y.poles()), sorted_poles(fit.poles), rtol=5e-4)
+    # The file holds the samples to 1 nm: rounding alone moves the slowest pole (beside a
+    # zero, poorly observed) by 4.7e-4..5.7e-4 of itself (measured with ±0.5 nm uniform
+    # perturbations; 5.6e-4 on an AMD EPYC under OpenBLAS's Haswell kernels, where the old
+    # 5e-4 against the unrounded fit failed). So the reference is the fit of the file's own
+    # numbers, and the only difference left is the section's 7 printed digits.
+    file_fit = fit_axis(Trace(np.round(u, 6), np.round(y, 6), T_S), order=4)
+    assert np.allclose(sorted_poles(m.servo.y.poles()), sorted_poles(file_fit.poles), rtol=2e-5)
+    assert np.allclose(sorted_poles(m.servo.y.poles()), sorted_poles(fit.poles), rtol=2e-3)
 
 
 def test_cli_csv_with_header_time_column_and_json(tmp_path):

@@ -786,7 +786,7 @@ def make_plan(program: str, machine=None, overrides=(), dynamics="local", lookah
               corner_feed="piece", interpolator="exact", blend_tolerance=None,
               algorithm="ph-lookahead", no_block_delete=False, tool_table=None,
               subroutine_path=(), text=None, precompensate=False, reference_tolerance=3.0,
-              progress=None, keep_reference=False):  # fmt: skip
+              progress=None, keep_reference=False, smooth=False):  # fmt: skip
     """Load, interpret, plan and interpolate one program; validate soft limits. Returns
     (program, machine, :class:`~nurbscnc.pipeline.Run`).
 
@@ -800,7 +800,7 @@ def make_plan(program: str, machine=None, overrides=(), dynamics="local", lookah
     from nurbscnc.pipeline import run_program
 
     options = run_options(algorithm, corner_feed, dynamics, blend_tolerance, interpolator,
-                          lookahead, precompensate, reference_tolerance)  # fmt: skip
+                          lookahead, precompensate, reference_tolerance, smooth)  # fmt: skip
     options = replace(options, keep_reference=keep_reference)
     if progress:
         progress("loading the machine profile")

@@ -23,7 +23,7 @@ from nurbscnc.plan.options import (
 #: The keyword names :func:`planning_options` adds to a command (besides machine, overrides,
 #: and the program-input options no_block_delete, tool_table, subroutine_path).
 PLANNING_KEYS = ("algorithm", "corner_feed", "dynamics", "blend_tolerance", "interpolator",
-                 "lookahead", "precompensate", "reference_tolerance")  # fmt: skip
+                 "lookahead", "precompensate", "reference_tolerance", "smooth")  # fmt: skip
 #: The keyword names of :func:`program_input_options`.
 PROGRAM_INPUT_KEYS = ("no_block_delete", "tool_table", "subroutine_path")
 
@@ -92,6 +92,12 @@ def planning_options(func):
              "program's G61/G61.1/G64 P; 0: stop exactly at every corner).",
     )(func)  # fmt: skip
     func = click.option(
+        "--smooth", is_flag=True, default=False,
+        help="Dense CAM polylines (runs of short G1 moves under G64) become curvature-"
+             "continuous cubic B-splines within half the path tolerance (G64 P, else the "
+             "machine's), so the jerk limit no longer holds the feed down at every vertex.",
+    )(func)  # fmt: skip
+    func = click.option(
         "--interpolator", type=_choices(Interpolator), default=Interpolator.EXACT.value,
         help="NURBS pieces by exact arc-length inversion (default) or the paper's 2nd-order "
              "Taylor formula.",
@@ -118,12 +124,14 @@ def planning_options(func):
 
 def run_options(algorithm="ph-lookahead", corner_feed="piece", dynamics="local",
                 blend_tolerance=None, interpolator="exact",
-                lookahead=None, precompensate=False, reference_tolerance=3.0):  # fmt: skip
+                lookahead=None, precompensate=False, reference_tolerance=3.0,
+                smooth=False):  # fmt: skip
     """The validated :class:`~nurbscnc.pipeline.RunOptions` of the values of
     :func:`planning_options` (ConfigError on a bad value)."""
     from nurbscnc.pipeline import RunOptions  # the planner's imports, only when planning
 
-    plan = PlanOptions(corner_feed=corner_feed, blend_tolerance_mm=blend_tolerance)
+    plan = PlanOptions(corner_feed=corner_feed, blend_tolerance_mm=blend_tolerance,
+                       smooth=bool(smooth))
     return RunOptions(algorithm=algorithm, interpolator=interpolator,
                       lookahead=LookaheadOptions(dynamics=dynamics, lookahead_pieces=lookahead,
                                                  plan=plan),

@@ -105,7 +105,7 @@ def plan_job(path: str, machine=None, overrides=(), from_line: int | None = None
     from nurbscnc.plan.options import Algorithm
 
     keys = ("algorithm", "corner_feed", "dynamics", "blend_tolerance", "interpolator",
-            "lookahead")  # fmt: skip
+            "lookahead", "smooth")  # fmt: skip
     options = run_options(**{k: settings[k] for k in keys if k in settings})
     mach = load_machine_cli(machine, overrides)
     prog = load_program(path, not settings.get("no_block_delete", False),

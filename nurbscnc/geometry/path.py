@@ -128,6 +128,21 @@ def equal_runs(keys: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(edges[:-1].tolist(), edges[1:].tolist()))
 
 
+def whole_row(geom, line: int = 0) -> tuple:
+    """The :meth:`PathTable.of` row of one whole geometry object (a LineGeometry,
+    ArcGeometry, NurbsCurve or PHQuintic, over its full parameter range)."""
+    from nurbscnc.geometry.nurbs import NurbsCurve
+    from nurbscnc.geometry.paths import ArcGeometry, LineGeometry
+    from nurbscnc.geometry.ph import PHQuintic
+
+    for cls, kind in ((LineGeometry, Kind.LINE), (ArcGeometry, Kind.ARC), (NurbsCurve, Kind.NURBS),
+                      (PHQuintic, Kind.PH)):  # fmt: skip
+        if isinstance(geom, cls):
+            u_a, u_b = (0.0, 1.0) if kind == Kind.PH else (geom.u_start, geom.u_end)
+            return (kind, geom, float(geom.length_mm), float(u_a), float(u_b), 0.0, line)
+    raise TypeError(f"no path-model row for a {type(geom).__name__}")
+
+
 #: Newton iterations on PH pieces before the bracketed fallback (3–4 are typical).
 PH_MAX_NEWTON = 12
 

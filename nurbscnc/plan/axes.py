@@ -95,17 +95,26 @@ def piece_limits(pieces, machine) -> PieceLimits:
 def _jump_reserved(pieces, j_axis_mm_s3: np.ndarray) -> np.ndarray:
     """Per piece and axis (k, 3) the axis jerk limit [mm/s³] the piece's own motion may use:
     J_i, or (1 − :data:`~nurbscnc.machine.caps.JUNCTION_SHARE`) J_i on the axes where the
-    curvature vector jumps at one of its ends (``pieces.jump_kn``): the acceleration step
-    there takes the share (:func:`~nurbscnc.machine.caps.junction_jump_cap_mm_s`), so the
-    two add up to at most J_i on the samples."""
+    curvature vector jumps at one of its ends (``pieces.jump_kn``) or where a small break
+    passed at speed (``pieces.pass_after``) steps the velocity: the acceleration step
+    (:func:`~nurbscnc.machine.caps.junction_jump_cap_mm_s`) or the velocity step
+    (:func:`nurbscnc.plan.pieces._small_break`) takes the share, so the two add up to at
+    most J_i on the samples."""
     k = len(pieces)
-    j = np.broadcast_to(np.asarray(j_axis_mm_s3, dtype=float), (k, 3)).copy()
+    j_axis = np.asarray(j_axis_mm_s3, dtype=float)
+    j = np.broadcast_to(j_axis, (k, 3)).copy()
     rows = np.asarray(pieces.jump_rows, dtype=np.int64)
+    hits = np.abs(np.asarray(pieces.jump_kn)) > 0.0 if rows.size else np.zeros((0, 3), bool)
+    if k >= 2:
+        passed = np.flatnonzero(np.asarray(pieces.pass_after)[:-1])
+        step = (np.asarray(pieces.tangent_start)[:, passed + 1]
+                - np.asarray(pieces.tangent_end)[:, passed]).T  # (m, 3)
+        rows = np.concatenate((rows, passed))
+        hits = np.concatenate((hits, np.abs(step) > 0.0))
     if rows.size:
-        hit = np.abs(np.asarray(pieces.jump_kn)) > 0.0
-        scale = np.where(hit, 1.0 - JUNCTION_SHARE, 1.0)
-        for side in (rows, rows + 1):  # the pieces before and after each jump
-            np.minimum.at(j, side, np.asarray(j_axis_mm_s3)[None, :] * scale)
+        scale = np.where(hits, 1.0 - JUNCTION_SHARE, 1.0)
+        for side in (rows, rows + 1):  # the pieces before and after each junction
+            np.minimum.at(j, side, j_axis[None, :] * scale)
     return j
 
 

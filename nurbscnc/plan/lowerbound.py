@@ -51,10 +51,8 @@ from itertools import chain
 import numpy as np
 
 from nurbscnc.errors import ConfigError, PlanningError
-from nurbscnc.geometry.nurbs import NurbsCurve
-from nurbscnc.geometry.path import STOP_KINDS, Kind, PathTable, stop_seconds
-from nurbscnc.geometry.paths import ArcGeometry, LineGeometry, geometry_of
-from nurbscnc.geometry.ph import PHQuintic
+from nurbscnc.geometry.path import STOP_KINDS, Kind, PathTable, stop_seconds, whole_row
+from nurbscnc.geometry.paths import geometry_of
 from nurbscnc.machine.caps import curvature_cap2_mm2_s2
 from nurbscnc.machine.profile import Machine
 
@@ -151,17 +149,6 @@ def interval_times_s(
 
 # ---------------------------------------------------------------------------------------------
 # Sampling the pieces: curvature from the path model (PathTable), whole arrays over all pieces.
-
-
-def _path_row(geom, line: int = 0) -> tuple:
-    """The :meth:`PathTable.of <nurbscnc.geometry.path.PathTable.of>` row of one whole
-    geometry object (its full parameter range)."""
-    for cls, kind in ((LineGeometry, Kind.LINE), (ArcGeometry, Kind.ARC), (NurbsCurve, Kind.NURBS),
-                      (PHQuintic, Kind.PH)):  # fmt: skip
-        if isinstance(geom, cls):
-            u_a, u_b = (0.0, 1.0) if kind == Kind.PH else (geom.u_start, geom.u_end)
-            return (kind, geom, float(geom.length_mm), float(u_a), float(u_b), 0.0, line)
-    raise TypeError(f"no path-model row for a {type(geom).__name__}")
 
 
 def _sample_rows(path: PathTable, rows: np.ndarray, cap2_of, ds_mm: float,
@@ -315,7 +302,7 @@ def lower_bound_time_s(
         else _per_piece(stop_after, k, "stop_after", bool)
     )
 
-    path = PathTable.of([_path_row(g) for g in pieces])
+    path = PathTable.of([whole_row(g) for g in pieces])
 
     def cap2_of(kappa, j):
         return curvature_cap2_mm2_s2(kappa, v_top[j], a_max_mm_s2, period_s, chord_tolerance_mm)
@@ -450,7 +437,7 @@ def program_lower_bound_s(segments, machine: Machine) -> float:
     cap2 = np.where(straight, top * top, 0.0)  # constant-cap pieces: their cap²
     # Arcs and NURBS blocks: one path-model row each (the programmed geometry, whole).
     curved = np.flatnonzero(~straight)
-    path = PathTable.of([_path_row(geometry_of(moving[i]), moving[i].line)
+    path = PathTable.of([whole_row(geometry_of(moving[i]), moving[i].line)
                          for i in curved.tolist()])  # fmt: skip
     rows = np.arange(curved.size)
     length[curved] = path.length_mm

@@ -65,18 +65,22 @@ class PlanOptions:
     (False: plan the NURBS as it is, capped by the same corner feed). ``tolerance_mm``: the
     PH fit tolerance e [mm] (None: the machine profile's). ``blend_tolerance_mm``: overrides
     every segment's G64 P [mm] (None: as programmed; 0: exact stop at every corner).
+    ``smooth``: dense CAM polylines under G64 become cubic B-splines within half their
+    tolerance (:mod:`nurbscnc.plan.smoothing`).
     """
 
     corner_feed: CornerFeed = CornerFeed.PIECE
     ph: bool = True
     tolerance_mm: float | None = None
     blend_tolerance_mm: float | None = None
+    smooth: bool = False
 
     def __post_init__(self):
         set_ = object.__setattr__
         set_(self, "corner_feed", parse_choice(CornerFeed, self.corner_feed, "corner_feed"))
-        if not isinstance(self.ph, bool):
-            raise ConfigError(f"ph must be True or False, not {self.ph!r}")
+        for name in ("ph", "smooth"):
+            if not isinstance(getattr(self, name), bool):
+                raise ConfigError(f"{name} must be True or False, not {getattr(self, name)!r}")
         set_(self, "tolerance_mm", _positive_or_none(self.tolerance_mm, "tolerance_mm"))
         set_(self, "blend_tolerance_mm", _positive_or_none(
             self.blend_tolerance_mm, "blend_tolerance_mm", allow_zero=True))

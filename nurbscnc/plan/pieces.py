@@ -35,6 +35,7 @@ from nurbscnc.geometry.path import STOP_KINDS, Kind, PathTable, ph_power_rows, s
 from nurbscnc.geometry.paths import ArcGeometry, LineGeometry, geometry_of
 from nurbscnc.geometry.ph import PHQuintic
 from nurbscnc.machine.caps import (
+    JUNCTION_SHARE,
     MIN_CAP_MM_S,
     corner_cap_mm_s,
     curvature_cap_mm_s,
@@ -446,7 +447,9 @@ def _object_pieces(seg, index: int, machine: Machine, options: PlanOptions) -> l
         except NurbsCncError as exc:
             raise exc.with_pos(SourcePos(seg.line)) from None
         blend = blend_override(seg, options)
-        return [dc_replace(p, blend_mm=blend) for p in pieces]
+        line_at = getattr(seg, "line_at", None)  # a smoothed run: each piece its move's line
+        return [dc_replace(p, blend_mm=blend, line=line_at(p.u_a) if line_at else p.line)
+                for p in pieces]  # fmt: skip
     geom = geometry_of(seg)
     length = float(geom.length_mm)
     if length <= 0.0:
@@ -462,10 +465,12 @@ def segment_pieces(segments, machine: Machine, options: PlanOptions | None = Non
     """All pieces of a program, in order, as a :class:`PieceList`, with its corners decided
     (path-control modes, LinuxCNC 2.9's meaning, issue 13) and logged in ``corners``.
 
-    Runs of nearly collinear feed lines under G64 Q are merged first
-    (:func:`~nurbscnc.plan.naive.merge_collinear`; the ``segment`` column keeps the
-    program's indices). Breaks small enough to pass at speed are marked ``pass_after``
-    (:func:`_small_break`, every mode but at G61.1 block ends); G61.1 stops at the end of
+    With ``options.smooth`` dense CAM polylines become splines first, on the programmed
+    vertices (:func:`~nurbscnc.plan.smoothing.smooth_runs`); then runs of nearly collinear
+    feed lines under G64 Q are merged (:func:`~nurbscnc.plan.naive.merge_collinear`); the
+    ``segment`` column keeps the program's indices. Breaks small enough to pass at speed
+    are marked ``pass_after`` (:func:`_small_break`, every mode but at G61.1 block ends);
+    G61.1 stops at the end of
     every block (``stop_after``); G64 corners are blended within their tolerance
     (:func:`apply_blends`: P, or the machine's path tolerance without P or with P0); G61
     stops at every other break (:func:`junction_caps`); :func:`corner_log` records it all.
@@ -480,7 +485,15 @@ def segment_pieces(segments, machine: Machine, options: PlanOptions | None = Non
     """
     options = options or PlanOptions()
     lim = machine.limits
-    segs, source = merge_collinear(segments)  # G64 Q
+    segs, source = list(segments), np.arange(len(segments))
+    if options.smooth:  # dense CAM polylines as splines (issue 13), on the programmed vertices
+        from nurbscnc.plan.smoothing import smooth_runs
+
+        reserve = options.tolerance_mm or lim.ph_tolerance_mm  # a PH corner inside a spline
+        segs, source = smooth_runs(segs, source, lim.path_tolerance_mm,
+                                   options.blend_tolerance_mm, reserve)  # fmt: skip
+    segs, merged = merge_collinear(segs)  # G64 Q, on the lines left
+    source = source[merged]
     n = len(segs)
     kinds = [s.kind for s in segs]
     straight = np.fromiter((k in ("line", "rapid") for k in kinds), dtype=bool, count=n)
@@ -641,8 +654,9 @@ def curvature_jumps(pieces: PieceList) -> tuple[np.ndarray, np.ndarray]:
 
 
 def blend_override(seg, options: PlanOptions) -> float:
-    """The blend tolerance [mm] for a segment: the option if given, else its G64 P."""
-    if options.blend_tolerance_mm is not None:
+    """The blend tolerance [mm] for a segment: the option if given, else its G64 P (a
+    smoothed run's own: the part of the tolerance its spline left to its end blends)."""
+    if options.blend_tolerance_mm is not None and not getattr(seg, "smoothed", False):
         return float(options.blend_tolerance_mm)
     return float(getattr(seg, "blend_mm", 0.0))
 
@@ -756,9 +770,13 @@ def _small_break(pieces: PieceList, turning: np.ndarray, regular: np.ndarray,
     acceleration, v²θ/L ≤ A_max, since the jump allowed is ≤ A_max T.
 
     With per-axis limits, each axis's share of the jump, v |t_b,i − t_a,i| · crowd, must also
-    stay within that axis's min(A_i T, J_i T²) (the same finite-difference argument per axis:
+    stay within that axis's min(A_i T, s J_i T²) (the same finite-difference argument per axis:
     a break of 0.42° at 5 mm/s passed the path's 0.05 mm/s rule and put 0.034 mm/s on the Y
-    axis, allowed 0.02 mm/s: on the samples a jerk 7,600 mm/s³ over that axis's limit)."""
+    axis, allowed 0.02 mm/s: on the samples a jerk 7,600 mm/s³ over that axis's limit), s =
+    :data:`~nurbscnc.machine.caps.JUNCTION_SHARE`: the pieces on both sides keep their own
+    jerk to the rest on that axis (:func:`nurbscnc.plan.axes.piece_limits`), as at a
+    curvature jump. With all of J_i T² for the jump, an S-curve crossing the break added its
+    own jerk: 25,221 mm/s³ on a Y axis of 2e4 (tests/test_smoothing.py)."""
     cap, length = pieces.v_cap_mm_s, pieces.length_mm
     v = np.minimum(cap[:-1], cap[1:])
     half = 0.5 * np.minimum(length[:-1], length[1:])
@@ -771,7 +789,7 @@ def _small_break(pieces: PieceList, turning: np.ndarray, regular: np.ndarray,
         if machine.axis_limits.any:
             _, a_axis, j_axis = machine.axis_limits.as_arrays()
             period = machine.servo.period_s
-            allow = np.minimum(a_axis * period, j_axis * period**2)[:, None]  # (3, 1)
+            allow = np.minimum(a_axis * period, JUNCTION_SHARE * j_axis * period**2)[:, None]
             step = pieces.tangent_start[:, 1:] - pieces.tangent_end[:, :-1]  # (3, k − 1)
             small &= np.all(np.abs(step) * (v * crowd) <= allow, axis=0)
     return regular & (turning > SMOOTH_JUNCTION_RAD) & small
@@ -867,25 +885,44 @@ def _blend_geometry(piece: Piece):
 
 
 def _blend_object_corners(pieces: PieceList, c: _Corners, machine: Machine) -> None:
-    """Corners with an arc, NURBS or PH piece, one at a time
-    (:func:`~nurbscnc.geometry.blend.blend_corner`, equal trims ≤ half the shorter piece)."""
-    from nurbscnc.geometry.blend import blend_corner, blend_space_corner
+    """Corners with an arc, NURBS or PH piece (equal trims ≤ half the shorter piece): a
+    planar PH blend one corner at a time (:func:`~nurbscnc.geometry.blend.blend_corner`),
+    then every corner that has none and turns out of its plane at once, a G2 quintic
+    Bézier each (:func:`~nurbscnc.geometry.blend.blend_space_corners`)."""
+    from nurbscnc.geometry.blend import blend_corner, blend_space_corners
 
+    space = []
     for j in np.flatnonzero(~c.lines).tolist():
         i = int(c.row[j])
         a, b = pieces[i - 1], pieces[i]
-        ga, gb = _blend_geometry(a), _blend_geometry(b)
         args = (float(c.tol_mm[j]), 0.5 * a.length_mm, 0.5 * b.length_mm)
-        bl = blend_corner(ga, gb, *args, measure=False)
-        if bl is None and _out_of_plane(pieces, np.array([i - 1]))[0]:
-            bl = blend_space_corner(ga, gb, *args)  # a 3-D turn: a G2 quintic Bézier
-            if bl is not None:
-                c.cap_mm_s[j] = servo_blend_cap_mm_s(machine, bl.kappa_max_per_mm)
+        bl = blend_corner(_blend_geometry(a), _blend_geometry(b), *args, measure=False)
+        if bl is None:
+            space.append(j)
+        else:
+            _take_blend(c, j, bl)
+    if not space:
+        return
+    js = np.asarray(space, dtype=np.int64)
+    js = js[_out_of_plane(pieces, c.row[js] - 1)]  # a 3-D turn no planar blend can round
+    if js.size == 0:
+        return
+    rows = c.row[js]
+    length = pieces.length_mm
+    blends = blend_space_corners(pieces.path, rows - 1, rows, c.tol_mm[js],
+                                 0.5 * length[rows - 1], 0.5 * length[rows])  # fmt: skip
+    for j, bl in zip(js.tolist(), blends):
         if bl is not None:
-            c.obj_blends[j] = bl
-            c.ok[j], c.kappa_per_mm[j] = True, bl.kappa_max_per_mm
-            c.length_mm[j] = _blend_length_mm(bl)
-            c.trim_a_mm[j], c.trim_b_mm[j] = bl.trim_a_mm, bl.trim_b_mm
+            c.cap_mm_s[j] = servo_blend_cap_mm_s(machine, bl.kappa_max_per_mm)
+            _take_blend(c, j, bl)
+
+
+def _take_blend(c: _Corners, j: int, bl) -> None:
+    """Record blend ``bl`` (PH or space) as corner ``j``'s."""
+    c.obj_blends[j] = bl
+    c.ok[j], c.kappa_per_mm[j] = True, bl.kappa_max_per_mm
+    c.length_mm[j] = _blend_length_mm(bl)
+    c.trim_a_mm[j], c.trim_b_mm[j] = bl.trim_a_mm, bl.trim_b_mm
 
 
 #: Share of ε_max the servo's steady curve error may take on a space blend
