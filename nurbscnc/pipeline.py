@@ -223,6 +223,9 @@ def _run_precompensated(program, machine: Machine, lookahead: LookaheadOptions,
     (the same transform on the interpolator's points) and report on it."""
     tol = options.reference_tolerance_mm
     fit = lookahead.plan.tolerance_mm  # the PH fit tolerance e (None: the profile's)
+    # V_cf (SPEC eq. 24) stands in for the servo error of the plain reference: the check
+    # of the compensated one may raise it where that error has room.
+    lookahead = replace(lookahead, raise_corner_caps=True)
     plan, check = plan_checked(program, machine, lookahead,
                                precompensated_sampler(sampler, machine, tol, fit))  # fmt: skip
     planned = sampler(plan.pieces, plan.profile, machine.servo.period_s)

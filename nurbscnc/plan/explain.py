@@ -382,7 +382,10 @@ def explain_plan(program, machine, plan) -> Explanation:
     cap_code, before = cap_limits(seg, pieces, machine)
     final = np.asarray(plan.caps_mm_s, dtype=float)
     lowered, shaped = contour_limited(plan, before)
-    code = np.where(lowered, Limit.CONTOUR, cap_code).astype(np.int8)
+    # Above the cap it had before the check: raised by it (``raise_corner_caps``, with
+    # pre-compensation), to where the contour error allowed — the check's limit too.
+    raised = final > before * (1.0 + REL_TOL)
+    code = np.where(lowered | raised, Limit.CONTOUR, cap_code).astype(np.int8)
     peak, a_peak = profile_extremes(profile)
     short = peak < final * (1.0 - REL_TOL)
     a_lim = acceleration_limits_mm_s2(plan, machine)

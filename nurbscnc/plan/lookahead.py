@@ -964,6 +964,18 @@ class _Setup:
         self.base_dwell = pieces.dwell_after_s
         self.checker = _Checker(pieces, machine, reference, self.eps_mm, self.settle_rows,
                                 window, keep_reference)  # fmt: skip
+        # The improvement phase's upper brackets: the kinematic levers, or with
+        # ``raise_corner_caps`` the caps without the corner heuristic V_cf.
+        self.upper = self.initial
+        if options.raise_corner_caps and options.dynamics == Dynamics.LOCAL:
+            free = _without_corner_feed(program, machine, options, pieces)
+            if free is not None:
+                self.upper = self.initial.copy()
+                self.upper.caps = np.maximum(np.minimum(free.v_cap_mm_s, path_lim.v_mm_s),
+                                             self.initial.caps)  # fmt: skip
+                # The junctions capped by their neighbours' machine caps (the same passable
+                # junctions): the profile takes the smaller of the levers' caps anyway.
+                self.smooth = np.maximum(self.smooth, junction_caps(free))
 
     def plan_of(self, lv: _Levers):
         """The planned pieces (settles in their dwells) and profile of the levers ``lv``."""
@@ -1003,11 +1015,29 @@ class _Setup:
                     lev.settle_s)  # fmt: skip
 
 
-def _converge(st: _Setup, lev: _Levers, evaluate, confine=lambda lv: None):
+def _without_corner_feed(program, machine: Machine, options: LookaheadOptions,
+                         pieces: PieceList) -> PieceList | None:  # fmt: skip
+    """``pieces`` without the corner heuristic V_cf (SPEC eq. 24) in their caps: made again
+    with κ̄ → ∞ (V_cf = F), so a corner piece keeps its physical caps only — the chord
+    feed V_af, the normal acceleration √(A/κ), F and V_max. The corner regions (κ_th =
+    A/F²) and the fits do not depend on κ̄; None if the pieces came out otherwise than
+    ``pieces`` (then nothing is raised)."""
+    limits = replace(machine.limits, kappa_ref_per_mm=1e15)
+    free = segment_pieces(program.segments, replace(machine, limits=limits), options.plan)
+    if len(free) != len(pieces) or not np.array_equal(free.length_mm, pieces.length_mm):
+        return None
+    if not np.array_equal(junction_caps(free) > 0.0, junction_caps(pieces) > 0.0):
+        return None
+    return free
+
+
+def _converge(st: _Setup, lev: _Levers, evaluate, confine=lambda lv: None, plan_of=None):
     """The levers loop (module docstring) from ``lev`` (changed in place): re-plan until the
     check is within ε_max (local shaping, then the fallback), then the improvement phase.
     ``evaluate(levers)`` → (planned, profile, check); ``confine(levers)`` undoes changes
-    outside the levers' scope (a cut window). Returns (final levers, result, re-plans)."""
+    outside the levers' scope (a cut window); ``plan_of(levers)`` → (planned, profile, …)
+    without the check (default :meth:`_Setup.plan_of`). Returns (final levers, result,
+    re-plans)."""
     options, eps_mm, initial = st.options, st.eps_mm, lev.copy()
     iterations = 0
     fastest_s = None  # the cycle time before shaping
@@ -1042,40 +1072,60 @@ def _converge(st: _Setup, lev: _Levers, evaluate, confine=lambda lv: None):
     if options.dynamics == Dynamics.LOCAL and lev.shaped.any() and _may_gain(result, shaped_s,
                                                                            fastest_s):
         # Improvement: bisect every shaped lever between its feasible value and its value
-        # before shaping (geometric means; the settles arithmetically towards 0). A try
-        # within ε_max is kept; a failing one narrows the brackets of the levers that the
-        # shaping rule blames for it (found by applying the rule to a copy).
-        # A check that keeps its reference and response holds hundreds of MB: then only
-        # one plan's is held at a time, and the best plan is re-made at the end if a later
-        # try replaced its result; a check without them is small and the best is kept.
-        keep_best = not st.checker.keep
-        best, best_time = lev.copy(), shaped_s
-        best_result = result if keep_best else None
-        hi = initial
-        for _ in range(IMPROVE_ITERATIONS):
-            trial = best.toward(hi)
-            if trial is None:
-                break
-            result = None
-            result = evaluate(trial)
-            iterations += 1
-            if result[2].overs.worst_mm <= eps_mm:
-                t = _cycle_time(result)
-                if t > best_time:  # a feasible raise that is slower (rare): stop here
-                    result = None
-                    break
-                best, best_time = trial, t
-                best_result = result if keep_best else None
-            else:
-                probe = trial.copy()
-                st.shape(probe, result)
-                confine(probe)
-                hi = hi.narrowed(trial, probe)
-                result = None
-        lev = best
-        if result is None:
-            result = best_result if best_result is not None else evaluate(lev)
+        # before shaping (geometric means; the settles arithmetically towards 0).
+        lev, result, n = _improve(st, lev, result, initial, evaluate, confine)
+        iterations += n
+    if st.upper is not st.initial and options.dynamics == Dynamics.LOCAL:
+        # The corner caps the heuristic V_cf held below the machine's (``raise_corner_caps``;
+        # this window's only), bisected the same way from the plan so far up to those caps
+        # — after the improvement above, so the plan is never slower than without them.
+        hi = lev.copy()
+        hi.caps = np.maximum(hi.caps, st.upper.caps)
+        confine(hi)
+        shaped_s = _cycle_time(result)
+        if np.any(hi.caps > lev.caps * IMPROVE_RATIO) and _may_gain(
+                result, shaped_s, _cycle_time((plan_of or st.plan_of)(hi))):
+            lev, result, n = _improve(st, lev, result, hi, evaluate, confine)
+            iterations += n
     return lev, result, iterations
+
+
+def _improve(st: _Setup, lev: _Levers, result, hi: _Levers, evaluate, confine):
+    """The improvement phase (:func:`_converge`) from the feasible levers ``lev`` (their check
+    ``result``) towards the upper brackets ``hi``: at most :data:`IMPROVE_ITERATIONS` tries,
+    each halfway (:meth:`_Levers.toward`). A try within ε_max is kept if it is faster; a
+    failing one narrows the brackets of the levers that the shaping rule blames for it (found
+    by applying the rule to a copy). Returns (best levers, their result, re-plans)."""
+    # A check that keeps its reference and response holds hundreds of MB: then only one
+    # plan's is held at a time, and the best plan is re-made at the end if a later try
+    # replaced its result; a check without them is small and the best is kept.
+    keep_best = not st.checker.keep
+    best, best_time = lev.copy(), _cycle_time(result)
+    best_result = result if keep_best else None
+    iterations = 0
+    for _ in range(IMPROVE_ITERATIONS):
+        trial = best.toward(hi)
+        if trial is None:
+            break
+        result = None
+        result = evaluate(trial)
+        iterations += 1
+        if result[2].overs.worst_mm <= st.eps_mm:
+            t = _cycle_time(result)
+            if t > best_time:  # a feasible raise that is slower (rare): stop here
+                result = None
+                break
+            best, best_time = trial, t
+            best_result = result if keep_best else None
+        else:
+            probe = trial.copy()
+            st.shape(probe, result)
+            confine(probe)
+            hi = hi.narrowed(trial, probe)
+            result = None
+    if result is None:
+        result = best_result if best_result is not None else evaluate(best)
+    return best, result, iterations
 
 
 def _may_gain(result, shaped_s: float, fastest_s: float) -> bool:
@@ -1199,7 +1249,8 @@ def _windows_of(st: _Setup):
             check = st.checker.run(planned, profile, rows_of(planned, profile), stream)
             return planned, profile, check, own, st.checker.stream_out
 
-        lev, result, iterations = _converge(st, seen.warm(final, a, b), evaluate, confine)
+        lev, result, iterations = _converge(st, seen.warm(final, a, b), evaluate, confine,
+                                            plan_of)  # fmt: skip
         seen.add(lev, a, b)
         final = lev
         stream = result[4]  # the servo's state after this window's final plan

@@ -92,12 +92,16 @@ class LookaheadOptions:
 
     ``dynamics``: :class:`Dynamics`; ``max_iterations`` (≥ 0) of the re-plan loop;
     ``lookahead_pieces``: None (whole program) or a window of ≥ 1 pieces; ``plan``: the
-    piece options (:class:`PlanOptions`)."""
+    piece options (:class:`PlanOptions`); ``raise_corner_caps``: the local check may raise
+    the caps that the corner heuristic V_cf (SPEC eq. 24) set, up to the machine's own
+    caps, where the checked contour error has room (pre-compensation: the check simulates
+    the compensated reference, whose error V_cf does not model)."""
 
     dynamics: Dynamics = Dynamics.LOCAL
     max_iterations: int = 40
     lookahead_pieces: int | None = None
     plan: PlanOptions = field(default_factory=PlanOptions)
+    raise_corner_caps: bool = False
 
     def __post_init__(self):
         object.__setattr__(self, "dynamics", parse_choice(Dynamics, self.dynamics, "dynamics"))

@@ -323,15 +323,22 @@ def precompensation_report(plan: Plan, planned: Reference, compensated: Referenc
 #   tool   y = H u (per axis, linear: the sampled eq. 25, FOH),
 #   error  e_k ≈ σ_k + ν_k · (H Δ)_k   (σ_k = |y_k − q_k|, q_k the nearest path point, ν_k the
 #          unit vector from q_k to y_k: the distance to first order),
-#   step   Δ_j = a_j m_j   (m_j the in-plane normal of the path at the reference's own foot),
-#   tube   |μ_j + a_j| ≤ τ'_j   (μ_j the current offset across the path, τ'_j the tube less
-#          any offset out of the plane),
-#   min z  subject to  |σ_k + Σ_j G_kj a_j| ≤ z  over the region's tool samples,
+#   step   Δ_j = a_j m_j + b_j t_j   (m_j the in-plane normal, t_j the tangent of the path
+#          at the reference's own foot: across and along it),
+#   tube   −τ'_j ≤ μ_j + a_j ≤ τ'_j − κ_j b̄_j²/2   (μ_j the current offset across the path,
+#          τ'_j the tube less any offset out of the plane; |b_j| ≤ b̄_j, the bend of a
+#          straight move along a curve of curvature κ_j at most REFINE_BEND τ),
+#   limits the step lengths |u_{j+1} − u_j| + b_{j+1} − b_j ≤ V T (first order) and the
+#          second and third differences of u + Δ on every axis within A T², J T³ — or
+#          within the starting reference's own where it was above them already,
+#   min z  subject to  |σ_k + Σ_j G_kj (a_j, b_j)| ≤ z  over the region's tool samples,
 #
-# G_kj = Σ_axes ν_k,c h_c[k − j] m_j,c with h_c the axis' impulse response. Then the step is
-# applied, the reference projected exactly into the tube again (nearest point on the path),
-# simulated, and kept only where the true largest error of the region went down (else halved,
-# then dropped): the largest error never increases from round to round. Work per region:
+# G_kj = Σ_axes ν_k,c h_c[k − j] (m_j,c, t_j,c) with h_c the axis' impulse response. Then the
+# step is applied as the LP sees it (a straight move: its differences are the LP's exactly),
+# the reference projected exactly into the tube again (nearest point on the path; to
+# rounding a no-op), simulated, and kept only where the true largest error of the region
+# went down and it is no faster or rougher than allowed (else halved, then dropped): the
+# largest error never increases from round to round. Work per region:
 # one dense G of (inputs + reach) × inputs ≤ REFINE_MAX_INPUTS × (REFINE_MAX_INPUTS + reach).
 
 #: Rounds of linearise → LP → simulate (each only keeps what lowers the error).
@@ -347,17 +354,22 @@ REFINE_BEFORE_S = 0.025
 REFINE_REACH = 1e-3
 #: Most reference samples one LP moves (a longer region is cut into windows this long).
 REFINE_MAX_INPUTS = 120
+#: The share of the machine's V T a step's length may use (the first-order length is
+#: exact but for the move across the path, orthogonal: its square, sub-nanometre here).
+REFINE_SPEED = 0.999
 #: The share of the machine's A T² and J T³ a step's own differences may use.
 REFINE_SMOOTH = 0.9
-#: ... and what the step may add to them beyond that (share of the limit): the bend of a
-#: move along a curve is second order in the step, not in the LP.
+#: ... and what the step may add to them beyond that (share of the limit): the projection
+#: into the tube after the step, not in the LP.
 REFINE_ROUGH = 0.02
 #: Time limit of one window's LP [s] (HiGHS; a window not solved in time is left as is).
 REFINE_LP_TIME_S = 1.0
 #: Chord sagitta of the optimiser's polylines of the path [mm].
 REFINE_CHORD_MM = 1e-7
-#: Largest move of a reference sample along the path in one round [mm].
+#: Largest move of a reference sample along the path in one round [mm] ...
 REFINE_ALONG_MM = 0.02
+#: ... and at most the move whose bend off a curve (κ b²/2) is this share of the tube.
+REFINE_BEND = 0.2
 
 
 @dataclass(frozen=True, eq=False)
@@ -402,7 +414,7 @@ def _local_polyline(pieces, profile, s_lo_mm: float, s_hi_mm: float) -> np.ndarr
     """The path between path lengths s_lo and s_hi [mm] (whole pieces) as a dense polyline:
     lines by their ends, curves by chords of sagitta κh²/8 ≤ REFINE_CHORD_MM (κ the
     piece's largest curvature, doubled on NURBS cells as dynamics.path_counts does), so
-    a point moved along it (:func:`_move_in_path_coordinates`) follows the curve smoothly
+    a point's foot on it (:func:`nearest_on_polyline`) follows the curve smoothly
     to well below the reference's jerk per period J T³."""
     starts = profile.piece_start_mm
     lo = max(int(np.searchsorted(starts, s_lo_mm, side="right")) - 1, 0)
@@ -498,17 +510,6 @@ def _path_coordinates(u_mm: np.ndarray, poly_mm: np.ndarray):
     return sigma, at, t, m, mu, off - mu[:, None] * m
 
 
-def _move_in_path_coordinates(u_mm: np.ndarray, across_mm: np.ndarray, along_mm: np.ndarray,
-                              poly_mm: np.ndarray) -> np.ndarray:  # fmt: skip
-    """The points ``u_mm`` moved ``along_mm`` along the path (arc length) and ``across_mm``
-    across it (along its XY normal), keeping the rest of their offset: exact path
-    coordinates, so the distance from the path is |μ + a| (and the rest) wherever the point
-    goes along a curve (no bend κb²/2 as with a straight move along the tangent)."""
-    sigma, at, _t, _m, mu, rest = _path_coordinates(u_mm, poly_mm)
-    point, _t1, m1 = at(sigma + along_mm)
-    return point + (mu + across_mm)[:, None] * m1 + rest
-
-
 def _into_tube(u_mm: np.ndarray, poly_mm: np.ndarray, tube_mm: np.ndarray) -> np.ndarray:
     """``u_mm`` projected into the ball of radius ``tube_mm`` about its nearest path point
     (the exact tube: its distance to ``poly_mm`` is then at most the tube)."""
@@ -555,14 +556,20 @@ def _difference_rows(u: np.ndarray, j0: int, j1: int, order: int) -> tuple:
 
 def _region_step(u: np.ndarray, y: np.ndarray, cut_out: np.ndarray, movable: np.ndarray,
                  window: tuple[int, int, int], h: np.ndarray, poly: np.ndarray,
-                 tube: np.ndarray, limits: tuple[float, float]) -> np.ndarray | None:  # fmt: skip
-    """The LP step of one ``window`` (j0, j1, k1) (module comment above): (j1 − j0, 2) [mm],
-    the moves across and along the path of each sample (path coordinates,
-    :func:`_move_in_path_coordinates`), or None. ``limits`` (A T², J T³) [mm]: the
-    reference's second and third differences stay within them on every axis (or within its
-    own, where it was above them already), so the step never makes the reference rougher
-    than the machine's acceleration and jerk (to first order: the path coordinates add the
-    bend, smooth along the path)."""
+                 tube: np.ndarray, limits: tuple[float, float, float], kappa: np.ndarray,
+                 start: np.ndarray | None = None) -> np.ndarray | None:  # fmt: skip
+    """The LP step of one ``window`` (j0, j1, k1) (module comment above): (j1 − j0, 3) [mm],
+    the move Δ_j = a_j m_j + b_j t_j of each sample across (in-plane normal m) and along
+    (tangent t) the path, or None. ``limits`` (V T, A T², J T³) [mm]: the reference's
+    steps (their length, to first order) and its second and third differences on every
+    axis stay within them (or within its own, where it was above them already), so the
+    step never makes the reference faster or rougher than the machine's velocity,
+    acceleration and jerk (the differences exactly: Δ is applied as it is here, a straight
+    move). ``kappa`` (N,) [1/mm] the path's curvature at each sample (the bend of a move
+    along it); ``start`` (N, 3) [mm] the reference the optimisation started from (default
+    ``u``): where its own differences exceed the limits they are the caps, as
+    :func:`_no_rougher` measures them (caps from ``u`` would ratchet: a row smoothed in
+    one round could never take back what the start had)."""
     from scipy.optimize import linprog
 
     j0, j1, k1 = window
@@ -578,11 +585,19 @@ def _region_step(u: np.ndarray, y: np.ndarray, cut_out: np.ndarray, movable: np.
     room = np.sqrt(np.maximum(tube[j0:j1] ** 2 - np.einsum("ij,ij->i", rest, rest), 0.0))
     room *= 1.0 - 1e-6
     fixed = ~movable[j0:j1]
+    # The step is applied as the LP sees it, a straight move Δ = a m + b t (so its second
+    # and third differences are exactly the LP's); a move b along the tangent of a curve of
+    # curvature κ leaves the curve outward by up to κ b²/2, so b is bounded to keep that
+    # bend within REFINE_BEND of the tube, and the room across is reduced by it outward.
+    k = np.abs(np.nan_to_num(kappa[j0:j1], nan=0.0, posinf=0.0))
+    with np.errstate(divide="ignore"):
+        b_max = np.minimum(REFINE_ALONG_MM, np.sqrt(2.0 * REFINE_BEND * tube[j0:j1] / k))
+    bend = 0.5 * k * b_max**2
     # (never forced to move: the current point is in the tube, so a = 0 stays allowed and
     # the LP always has a solution)
     lo_a = np.where(fixed, 0.0, np.minimum(-room - mu, 0.0))
-    hi_a = np.where(fixed, 0.0, np.maximum(room - mu, 0.0))
-    along = np.where(fixed, 0.0, REFINE_ALONG_MM)
+    hi_a = np.where(fixed, 0.0, np.maximum(room - bend - mu, 0.0))
+    along = np.where(fixed, 0.0, b_max)
     # Unknowns x = (a, b, z): Δ_j = a_j m_j + b_j t_j across and along the path.
     basis = np.concatenate([m, tan_in])  # (2J, 3): the direction of each unknown
     lag = ks[:, None] - np.arange(j0, j1)[None, :]  # k − j
@@ -594,15 +609,27 @@ def _region_step(u: np.ndarray, y: np.ndarray, cut_out: np.ndarray, movable: np.
     a_ub = [np.hstack([g, ones]), np.hstack([-g, ones])]
     b_ub = [-sigma, sigma]
     n_x = 2 * (j1 - j0)
-    for order, limit in zip((2, 3), limits):
+    # The speed: a move b along the path lengthens the step between samples j and j + 1 by
+    # b_{j+1} − b_j (to first order; a move across it, orthogonal, by its square), so that
+    # difference stays within what the path speed V T leaves (or the step's own length,
+    # where the reference was faster than V already).
+    start = u if start is None else start
+    d, du = _difference_rows(u, j0, j1, 1)
+    step = np.sqrt(np.einsum("ij,ij->i", du, du))
+    d0 = _difference_rows(start, j0, j1, 1)[1]
+    cap = np.maximum(REFINE_SPEED * limits[0], np.sqrt(np.einsum("ij,ij->i", d0, d0)))
+    a_ub.append(np.hstack([np.zeros_like(d), d, np.zeros((d.shape[0], 1))]))
+    b_ub.append(np.maximum(cap - step, 0.0))
+    for order, limit in zip((2, 3), limits[1:]):
         d, du = _difference_rows(u, j0, j1, order)
+        d0 = _difference_rows(start, j0, j1, order)[1]
         for c in range(3):
             if not np.any(basis[:, c]):
                 continue
             rows = np.hstack([d * basis[: j1 - j0, c], d * basis[j1 - j0 :, c]])
-            # (the linear step within REFINE_SMOOTH of the limit: moving in path
-            # coordinates adds the bend, second order in the step)
-            cap = np.maximum(REFINE_SMOOTH * limit, np.abs(du[:, c]))
+            # (the step's differences within REFINE_SMOOTH of the limit, or the start's)
+            cap = np.maximum(np.maximum(REFINE_SMOOTH * limit, np.abs(d0[:, c])),
+                             np.abs(du[:, c]))  # fmt: skip
             zero = np.zeros((rows.shape[0], 1))
             a_ub += [np.hstack([rows, zero]), np.hstack([-rows, zero])]
             b_ub += [cap - du[:, c], cap + du[:, c]]
@@ -614,17 +641,23 @@ def _region_step(u: np.ndarray, y: np.ndarray, cut_out: np.ndarray, movable: np.
                   method="highs", options={"time_limit": REFINE_LP_TIME_S})  # fmt: skip
     if res.status != 0:
         return None
-    return res.x[:n_x].reshape(2, j1 - j0).T  # (J, 2): a across, b along
+    ab = res.x[:n_x].reshape(2, j1 - j0)
+    return ab[0][:, None] * m + ab[1][:, None] * tan_in  # (J, 3): Δ = a m + b t
 
 
 def _no_rougher(new_mm: np.ndarray, old_mm: np.ndarray, j0: int, j1: int,
-                limits: tuple[float, float]) -> bool:
-    """Whether the second and third differences of ``new_mm`` about samples j0 … j1−1 are
-    within max(limit, those of ``old_mm``) + REFINE_ROUGH × limit on every axis (``limits``
-    (A T², J T³) [mm]; ``old_mm`` the reference the optimisation started from, so the
-    allowance does not add up over the rounds)."""
+                limits: tuple[float, float, float]) -> bool:
+    """Whether the steps of ``new_mm`` about samples j0 … j1−1 (their length) are within
+    (2 − REFINE_SPEED) max(V T, those of ``old_mm``), and its second and third differences
+    (on every axis) within max(limit, those of ``old_mm``) + REFINE_ROUGH × limit
+    (``limits`` (V T, A T², J T³) [mm]; ``old_mm`` the reference the optimisation started
+    from, so the allowance does not add up over the rounds)."""
     lo, hi = max(j0 - 3, 0), min(j1 + 3, new_mm.shape[0])
-    for order, limit in zip((2, 3), limits):
+    step_new = np.sqrt(np.sum(np.diff(new_mm[lo:hi], axis=0) ** 2, axis=1))
+    step_old = np.sqrt(np.sum(np.diff(old_mm[lo:hi], axis=0) ** 2, axis=1))
+    if np.any(step_new > np.maximum(limits[0], step_old) * (1.0 + 1.0 - REFINE_SPEED)):
+        return False
+    for order, limit in zip((2, 3), limits[1:]):
         d_new = np.abs(np.diff(new_mm[lo:hi], n=order, axis=0))
         d_old = np.abs(np.diff(old_mm[lo:hi], n=order, axis=0))
         if np.any(d_new > np.maximum(limit, d_old) + REFINE_ROUGH * limit):
@@ -658,7 +691,10 @@ def refine_in_tube(ref: Reference, pieces, profile, machine: Machine, tube_mm: n
     period = machine.servo.period_s
     before = max(int(round(REFINE_BEFORE_S / period)), 1)
     lim = machine.limits
-    limits = (lim.a_max_mm_s2 * period**2, lim.j_max_mm_s3 * period**3)
+    limits = (lim.v_max_mm_s * period, lim.a_max_mm_s2 * period**2,
+              lim.j_max_mm_s3 * period**3)  # fmt: skip
+    # The path's curvature at each sample (its piece's largest) [1/mm]: the bend bound.
+    kappa = np.asarray(pieces.kappa_max_per_mm, dtype=float)[ref.piece]
 
     # The check's simulation (path_response: each axis from rest at its first point, the
     # last point held until settled, the true distance near the reference and to the whole
@@ -700,7 +736,7 @@ def refine_in_tube(ref: Reference, pieces, profile, machine: Machine, tube_mm: n
             poly = _local_polyline(pieces, profile, float(s_in.min()) - margin,
                                    float(s_in.max()) + margin)  # fmt: skip
             step = _region_step(u, y, cut_out, movable, (j0, j1, k1), h, poly, tube_mm,
-                                limits)  # fmt: skip
+                                limits, kappa, start)  # fmt: skip
             steps.append((j0, j1, k1, step, poly))
         steps = [s for s in steps if s[3] is not None]
         if not steps:
@@ -716,8 +752,7 @@ def refine_in_tube(ref: Reference, pieces, profile, machine: Machine, tube_mm: n
             for i, (j0, j1, _k1, step, poly) in enumerate(steps):
                 if done[i]:
                     continue
-                moved = _move_in_path_coordinates(base[j0:j1], alpha[i] * step[:, 0],
-                                                  alpha[i] * step[:, 1], poly)  # fmt: skip
+                moved = base[j0:j1] + alpha[i] * step
                 moved = _into_tube(moved, poly, tube_mm[j0:j1])  # (to rounding: a no-op)
                 trial[j0:j1] = np.where(movable[j0:j1, None], moved, base[j0:j1])
             y_t, err_t, _ = response(trial)
