@@ -13,10 +13,11 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from nurbscnc.plan.profile import (
+    GATE_STEP_S,
     LIMIT_MERGE_RATIO,
     ProfileInput,
     plan_profile,
@@ -159,8 +160,14 @@ def _staircases(draw):
     return lengths, caps, jcap, lim
 
 
+#: Three 1 mm pieces capped 2.0078125, 2, 2 mm/s between rests (module test above).
+STAIRCASE_HOLD = (np.array([1.0, 1.0, 1.0]), np.array([2.0078125, 2.0, 2.0]),
+                  np.array([0.0, INF, INF, 0.0]), [np.full(3, x) for x in (A, J, A, J)])
+
+
 @settings(max_examples=150, deadline=None, derandomize=True)
 @given(_staircases())
+@example(STAIRCASE_HOLD)
 def test_random_staircases_keep_every_limit_and_cap(case):
     """On dense samples: v ≤ the cap of the piece under each sample, junction caps at the
     junctions, |a| and |j| within the limits of the pieces the finite-difference stencil
@@ -185,8 +192,13 @@ def test_random_staircases_keep_every_limit_and_cap(case):
     assert np.all(vel <= prof.piece_peak_speed_mm_s[piece] * (1 + 1e-9) + 1e-9)
     if np.all(a1 == A) and np.all(j2 == J):
         per_piece = plan_profile_pieces(inp)
-        # A gated flank switches its jerk to within GATE_MIN_STEP_S (0.1 µs) of each gate.
-        assert prof.duration_s <= per_piece.duration_s * (1 + 1e-9) + 1e-6
+        # A gated flank is greedy in GATE_STEP_S (0.1 ms) steps: its loss against the
+        # continuous optimum is of that order per gate (profile.GATE_STEP_S), mostly far
+        # less (it switches within GATE_MIN_STEP_S of a gate it touches). Session 8's full
+        # suite drew STAIRCASE_HOLD below: 6.7 µs slower than per piece (a hold of 67 µs
+        # in the final descent), where 1 µs had been asserted.
+        slack_s = GATE_STEP_S * (len(caps) - 1)
+        assert prof.duration_s <= per_piece.duration_s * (1 + 1e-9) + slack_s
 
 
 def test_long_smooth_staircase_needs_few_rounds(monkeypatch):
