@@ -821,11 +821,11 @@ def clock_suffix(seconds: float) -> str:
     return f" ({hours}:{minutes:02d}:{secs:02d})"
 
 
-def summary_of(prog, mach, run, stats=None) -> dict:
+def summary_of(prog, mach, run, stats=None, lower_bound: bool = True) -> dict:
     """The plan summary of a run (:func:`nurbscnc.plan.report.plan_summary`). ``stats``: the
     :class:`~nurbscnc.plan.report.SampleStats` gathered while the points were written (None:
     gathered here, window by window, without whole arrays); a baseline is simulated on its
-    whole samples."""
+    whole samples. ``lower_bound``: with the kinematic lower bound (the JSON has it)."""
     from nurbscnc.plan.report import SampleStats, plan_summary
 
     samples = run.samples if run.plan is None else stats
@@ -834,7 +834,7 @@ def summary_of(prog, mach, run, stats=None) -> dict:
         for window in run.chunks():
             samples.add(window)
     summary = plan_summary(prog, mach, samples, run.plan, run.check, run.algorithm,
-                           run.cycle_time_s)  # fmt: skip
+                           run.cycle_time_s, lower_bound)  # fmt: skip
     if getattr(run, "precompensation", None) is not None:  # --precompensate
         summary["precompensation"] = run.precompensation.as_json()
     return {**summary, **machine_json(mach)}
@@ -1064,7 +1064,8 @@ def run(programs, output, output_dir, jobs, fmt, quiet, as_json, plot_dir, **set
                 say("plotting")
                 expl = explain_plan(prog, mach, run.plan) if run.plan is not None else None
                 write_plan_plots(run, plot_dir, prog, expl, mach)
-        summary = summary_of(prog, mach, run, stats)
+        # The text line shows points and cycle time only: no kinematic bound to compute.
+        summary = summary_of(prog, mach, run, stats, lower_bound=as_json)
         if as_json:
             click.echo(json.dumps(summary), err=output == "-")
         elif not quiet:
