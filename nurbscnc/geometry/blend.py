@@ -933,7 +933,7 @@ def blend_space_corners(path, rows_a, rows_b, tolerance_mm, max_trim_a_mm,
     m = rows_a.size
     args = [np.broadcast_to(np.asarray(x, dtype=float), (m,))
             for x in (tolerance_mm, max_trim_a_mm, max_trim_b_mm)]  # fmt: skip
-    if m > SPACE_CHUNK:  # bounded temporaries: (corners, 129, 64, 3) floats per distance
+    if m > SPACE_CHUNK:  # bounded temporaries
         return [bl for lo in range(0, m, SPACE_CHUNK)
                 for bl in blend_space_corners(path, rows_a[lo : lo + SPACE_CHUNK],
                                               rows_b[lo : lo + SPACE_CHUNK],
