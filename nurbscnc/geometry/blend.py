@@ -881,7 +881,8 @@ def blend_space_corner(geom_a, geom_b, tolerance_mm: float, max_trim_a_mm: float
 # Corners out of one plane, all at once (issue 14: per-piece work whole-array).
 
 
-#: Corners evaluated together by :func:`blend_space_corners` (about 30 MB of temporaries).
+#: Corners evaluated together by :func:`blend_space_corners` (bounds the batched Béziers and
+#: sides to a few MB).
 SPACE_CHUNK = 128
 
 
