@@ -52,6 +52,14 @@ def path_control(path_mode: int, p_mm: float | None) -> float:
     return BLEND_MACHINE if not p_mm else float(p_mm)
 
 
+def blend_tolerance_mm(blend_mm, path_tolerance_mm: float) -> np.ndarray:
+    """The path tolerance [mm] of each ``blend_mm`` (:func:`path_control`): G64 P as given,
+    G64 without P (:data:`BLEND_MACHINE`) ``path_tolerance_mm`` (the machine's), G61 / G61.1
+    (≤ 0) none."""
+    b = np.asarray(blend_mm, dtype=float)
+    return np.where(np.isinf(b), path_tolerance_mm, np.maximum(b, 0.0))
+
+
 def spiral_arc_length_mm(radius_start_mm, radius_end_mm, angle_rad, helix_mm, t=1.0):
     """Arc length [mm] from the start to fraction ``t`` ∈ [0, 1] of a circular, helical or
     spiral arc, in closed form (vectorised over every argument).

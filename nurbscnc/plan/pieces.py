@@ -34,6 +34,7 @@ from nurbscnc.geometry.nurbs import NurbsCurve
 from nurbscnc.geometry.path import STOP_KINDS, Kind, PathTable, ph_power_rows, stop_seconds
 from nurbscnc.geometry.paths import ArcGeometry, LineGeometry, geometry_of
 from nurbscnc.geometry.ph import PHQuintic
+from nurbscnc.geometry.segments import blend_tolerance_mm
 from nurbscnc.machine.caps import (
     JUNCTION_SHARE,
     MIN_CAP_MM_S,
@@ -470,8 +471,8 @@ def segment_pieces(segments, machine: Machine, options: PlanOptions | None = Non
     feed lines under G64 Q are merged (:func:`~nurbscnc.plan.naive.merge_collinear`); the
     ``segment`` column keeps the program's indices. Breaks small enough to pass at speed
     are marked ``pass_after`` (:func:`_small_break`, every mode but at G61.1 block ends);
-    G61.1 stops at the end of
-    every block (``stop_after``); G64 corners are blended within their tolerance
+    G61.1 stops at the end of every block (``stop_after``); G64 corners are blended within
+    their tolerance
     (:func:`apply_blends`: P, or the machine's path tolerance without P or with P0); G61
     stops at every other break (:func:`junction_caps`); :func:`corner_log` records it all.
 
@@ -490,8 +491,7 @@ def segment_pieces(segments, machine: Machine, options: PlanOptions | None = Non
         from nurbscnc.plan.smoothing import smooth_runs
 
         reserve = options.tolerance_mm or lim.ph_tolerance_mm  # a PH corner inside a spline
-        segs, source = smooth_runs(segs, source, lim.path_tolerance_mm,
-                                   options.blend_tolerance_mm, reserve)  # fmt: skip
+        segs, source = smooth_runs(segs, source, machine, options.blend_tolerance_mm, reserve)
     segs, merged = merge_collinear(segs)  # G64 Q, on the lines left
     source = source[merged]
     n = len(segs)
@@ -813,8 +813,7 @@ def tolerance_mm(blend_mm: np.ndarray, machine: Machine) -> np.ndarray:
     """The blend tolerance [mm] of each row from its path-control value (``blend_mm``, see
     :class:`~nurbscnc.geometry.segments.Line`): G64 P as given, G64 without P (inf) the
     machine's ``limits.path_tolerance_mm``, G61 / G61.1 (≤ 0) none."""
-    b = np.asarray(blend_mm, dtype=float)
-    return np.where(np.isinf(b), machine.limits.path_tolerance_mm, np.maximum(b, 0.0))
+    return blend_tolerance_mm(blend_mm, machine.limits.path_tolerance_mm)
 
 
 def _find_corners(pieces: PieceList, machine: Machine) -> _Corners | None:

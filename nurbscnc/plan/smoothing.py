@@ -45,7 +45,7 @@ from itertools import chain
 
 import numpy as np
 
-from nurbscnc.geometry.segments import BLEND_MACHINE, Line, Nurbs
+from nurbscnc.geometry.segments import Line, Nurbs, blend_tolerance_mm
 
 #: Longest line [mm] a run may hold: a longer line is a straight the CAM system meant.
 DENSE_MAX_MM = 1.0
@@ -87,13 +87,6 @@ class SmoothedRun(Nurbs):
         """The source line of the programmed move whose stretch holds parameter ``u``."""
         i = int(np.searchsorted(self.line_u, u, side="right")) - 1
         return int(self.line_numbers[max(i, 0)])
-
-
-def _resolved_tolerance_mm(blend_mm: np.ndarray, path_tolerance_mm: float) -> np.ndarray:
-    """The path tolerance [mm] of each segment's mode: G64 P, the machine's without P
-    (:data:`BLEND_MACHINE`), 0 for G61 / G61.1."""
-    b = np.asarray(blend_mm, dtype=float)
-    return np.where(b == BLEND_MACHINE, path_tolerance_mm, np.maximum(b, 0.0))
 
 
 def _runs(p0: np.ndarray, p1: np.ndarray, ok: np.ndarray, key: np.ndarray,
@@ -219,15 +212,16 @@ def split_spline(knots: np.ndarray, ctrl: np.ndarray, cuts: np.ndarray) -> list[
     return out
 
 
-def smooth_runs(segments, source: np.ndarray, path_tolerance_mm: float,
+def smooth_runs(segments, source: np.ndarray, machine,
                 blend_override_mm: float | None = None,
                 reserve_mm: float = 0.0) -> tuple[list, np.ndarray]:  # fmt: skip
     """The segments with every run of dense feed lines (module doc) replaced by a
     :class:`SmoothedRun` within SHARE × its path tolerance less ``reserve_mm`` (the PH fit
     tolerance of a corner the planner may still find inside the spline), its end blends
     within the rest, and the program index of each result segment (``source`` carried: a
-    spline takes its run's last line's). ``path_tolerance_mm``: the machine's, for G64
-    without P; ``blend_override_mm``: ``--blend-tolerance`` (it overrides every mode)."""
+    spline takes its run's last line's). ``machine``: its path tolerance serves G64
+    without P (:func:`~nurbscnc.geometry.segments.blend_tolerance_mm`); ``blend_override_mm``:
+    ``--blend-tolerance`` (it overrides every mode)."""
     segs = list(segments)
     is_line = np.fromiter((type(s) is Line and not s.rapid for s in segs), dtype=bool,
                           count=len(segs))  # fmt: skip
@@ -241,7 +235,7 @@ def smooth_runs(segments, source: np.ndarray, path_tolerance_mm: float,
     feed = np.fromiter((s.feed_mm_s for s in lines), float, m)
     mode = np.fromiter((s.blend_mm for s in lines), float, m)
     tol = (np.full(m, float(blend_override_mm)) if blend_override_mm is not None
-           else _resolved_tolerance_mm(mode, path_tolerance_mm))  # fmt: skip
+           else blend_tolerance_mm(mode, machine.limits.path_tolerance_mm))  # fmt: skip
     length = np.sqrt(np.sum((p1 - p0) ** 2, axis=1))
     ok = (tol > 0.0) & (length > 0.0) & (length <= DENSE_MAX_MM)
     adjacent = (rows[1:] == rows[:-1] + 1) & np.all(p1[:-1] == p0[1:], axis=1)
