@@ -216,6 +216,13 @@ def max_reachable_speed(v_from_mm_s, distance_mm, a_max_mm_s2: float, j_max_mm_s
     )
     shape = v0.shape
     v0, d, a, j = v0.ravel(), d.ravel(), a.ravel(), j.ravel()
+    v = reach_unchecked(v0, d, a, j)
+    return _out(v.reshape(shape), scalar)
+
+
+def reach_unchecked(v0: np.ndarray, d: np.ndarray, a: np.ndarray, j: np.ndarray) -> np.ndarray:
+    """:func:`max_reachable_speed` on validated 1-D float arrays of one length (no checks,
+    no broadcasting): the closed form and the float guard, vectorised."""
     a2j = a * a / j
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         # A reached.
@@ -241,7 +248,7 @@ def max_reachable_speed(v_from_mm_s, distance_mm, a_max_mm_s2: float, j_max_mm_s
         v[bad] = v_bad
         bad = bad[(v_bad > v0[bad]) & (_distance_arr(v0[bad], v_bad, a[bad], j[bad]) > d[bad])]
         step *= 2.0
-    return _out(v.reshape(shape), scalar)
+    return v
 
 
 def max_entry_speed(v_to_mm_s, distance_mm, a_max_mm_s2: float, j_max_mm_s3: float):

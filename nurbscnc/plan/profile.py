@@ -96,6 +96,7 @@ from nurbscnc.plan.feedrate import (
     check_limits,
     max_reachable_speed,
     max_reachable_speed_scalar,
+    reach_unchecked,
     peak_speed_unchecked,
     scurve_distance_mm,
     scurve_timing,
@@ -340,19 +341,58 @@ def _window_caps(
     return out
 
 
-def _backward_scan(cap: list, length: list, a: list, j: list) -> list:
+#: Below this many live chains :func:`_chain_scan` finishes each one in plain floats (a numpy
+#: step costs tens of µs whatever its size; the scalar closed form about 1 µs a piece).
+CHAIN_SCALAR = 24
+
+
+def _chain_scan(bound: np.ndarray, length: np.ndarray, a: np.ndarray,
+                j: np.ndarray) -> np.ndarray:  # fmt: skip
+    """The speeds (k+1,) [mm/s] of the recurrence ``y_0 = 0``,
+    ``y_{n+1} = min(bound_{n+1}, R(y_n, L_n))`` (``R`` the reach of
+    :func:`~nurbscnc.plan.feedrate.max_reachable_speed` with piece n's limits ``a_n, j_n``;
+    ``bound_0`` unused): the look-ahead's forward scan, and, on reversed arrays, its
+    backward scan.
+
+    Solved by relaxation instead of a Python loop over the pieces: start from ``y = bound``
+    and recompute, all at once, every ``y_{n+1}`` whose predecessor changed, until nothing
+    changes. After round r the first r speeds are final (induction), so this ends; at the
+    end every equation holds, and the recurrence has one solution, so it is the scan's.
+    The rounds number the longest run of pieces on one S-curve (a few dozen on CAM
+    chords); the last few chains run in plain floats (:data:`CHAIN_SCALAR`).
+    """
+    k = length.size
+    y = np.array(bound, dtype=float)
+    y[0] = 0.0
+    live = np.arange(k)  # n: y_{n+1} to recompute from y_n
+    while live.size > CHAIN_SCALAR:
+        new = np.minimum(bound[live + 1], reach_unchecked(y[live], length[live], a[live],
+                                                          j[live]))  # fmt: skip
+        moved = live[new != y[live + 1]] + 1
+        y[moved] = new[new != y[live + 1]]
+        live = moved[moved < k]
+    if live.size:
+        reach = max_reachable_speed_scalar
+        yl, bl, ll, al, jl = (x.tolist() for x in (y, bound, length, a, j))
+        for n in live.tolist():
+            w = yl[n]
+            while n < k:
+                w = reach(w, ll[n], al[n], jl[n])
+                if bl[n + 1] < w:
+                    w = bl[n + 1]
+                if w == yl[n + 1]:
+                    break
+                yl[n + 1] = w
+                n += 1
+        y = np.array(yl)
+    return y
+
+
+def _backward_scan(cap: np.ndarray, length: np.ndarray, a: np.ndarray,
+                   j: np.ndarray) -> np.ndarray:  # fmt: skip
     """``w_i = min(cap_i, R(w_{i+1}, L_i))`` from ``w_k = 0``, ``R`` with piece i's descent
-    limits ``a[i], j[i]`` (plain floats: numpy per element would be slower)."""
-    reach = max_reachable_speed_scalar
-    k = len(length)
-    w_back = [0.0] * (k + 1)
-    w = 0.0
-    for i in range(k - 1, -1, -1):
-        w = reach(w, length[i], a[i], j[i])
-        if cap[i] < w:
-            w = cap[i]
-        w_back[i] = w
-    return w_back
+    limits ``a[i], j[i]`` (:func:`_chain_scan` on the reversed pieces)."""
+    return _chain_scan(cap[::-1], length[::-1], a[::-1], j[::-1])[::-1]
 
 
 def _transition_distance_mm(v_a, v_b, a, j, a_dn=None, j_dn=None):
@@ -1012,28 +1052,18 @@ def plan_profile_pieces(inp: ProfileInput) -> Profile:
     cap[1:] = np.minimum(cap[1:], v_max)
 
     # 2. Backward scan from the end at rest.
-    length_l = length.tolist()
-    a_l, j_l, a_dn_l, j_dn_l = a.tolist(), j.tolist(), a_dn.tolist(), j_dn.tolist()
-    w_back = _backward_scan(cap.tolist(), length_l, a_dn_l, j_dn_l)
+    w_back = _backward_scan(cap, length, a_dn, j_dn)
 
     # 3. Bounded look-ahead: cap by the stop-within-the-window speeds, then rescan so that
     #    the caps are backward-consistent again (w_i ≤ R(w_{i+1}, L_i)), which is what makes
     #    the forward scan's result feasible (R is not monotone in its start speed: module doc).
     n = inp.lookahead_pieces
     if n is not None and n < k:
-        cap = np.minimum(cap, _window_caps(cap, length, np.array(w_back), n, a_dn, j_dn))
-        w_back = _backward_scan(cap.tolist(), length_l, a_dn_l, j_dn_l)
+        cap = np.minimum(cap, _window_caps(cap, length, w_back, n, a_dn, j_dn))
+        w_back = _backward_scan(cap, length, a_dn, j_dn)
 
     # 4. Forward scan from the start at rest.
-    reach = max_reachable_speed_scalar
-    v_l = [0.0] * (k + 1)
-    w = 0.0
-    for i in range(k):
-        w = reach(w, length_l[i], a_l[i], j_l[i])
-        if w_back[i + 1] < w:
-            w = w_back[i + 1]
-        v_l[i + 1] = w
-    v = _repair_junctions(np.array(v_l), length, a, j, a_dn, j_dn)
+    v = _repair_junctions(_chain_scan(w_back, length, a, j), length, a, j, a_dn, j_dn)
 
     # 5. Per piece: peak speed, then the seven phases.
     v_s, v_e = v[:-1], v[1:]
