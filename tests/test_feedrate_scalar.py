@@ -10,6 +10,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from nurbscnc.plan.feedrate import _distance_scalar, max_reachable_speed_scalar, scurve_distance_mm
 
@@ -64,3 +66,46 @@ def test_same_floats_as_the_reference_on_every_regime():
     sample = np.array([max_reachable_speed_scalar(x, y, 2000.0, 3e5) for x, y in
                        zip(v0[:500].tolist(), d[:500].tolist())])  # fmt: skip
     assert np.all(scurve_distance_mm(v0[:500], sample, 2000.0, 3e5) <= d[:500])
+
+
+# -- the look-ahead's scans by relaxation (profile._chain_scan) ------------------------------
+
+
+def _sequential_scan(bound, length, a, j):
+    """The recurrence y_0 = 0, y_{n+1} = min(bound_{n+1}, R(y_n, L_n)) as a plain loop."""
+    y = [0.0]
+    for n in range(length.size):
+        y.append(min(bound[n + 1], max_reachable_speed_scalar(y[n], length[n], a[n], j[n])))
+    return np.array(y)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(1, 400), st.integers(0, 2**32 - 1))
+def test_the_relaxed_scan_is_the_sequential_one(k, seed):
+    """Chords from 0.1 µm to 30 mm, caps from stops to none, per-piece limits: the
+    relaxation's speeds are the plain loop's (to the last bits of the transcendental
+    functions, numpy's against math's)."""
+    from nurbscnc.plan.profile import _chain_scan
+
+    rng = np.random.default_rng(seed)
+    length = rng.choice([1e-4, 0.05, 1.0, 30.0], k) * rng.random(k)
+    bound = rng.choice([0.0, 0.5, 20.0, 58.3, 1e9], k + 1)
+    a = 2450.0 * rng.choice([1.0, 0.3], k)
+    j = 5e4 * rng.choice([1.0, 0.1], k)
+    want = _sequential_scan(bound, length, a, j)
+    got = _chain_scan(bound, length, a, j)
+    np.testing.assert_allclose(got, want, rtol=1e-13, atol=0.0)
+
+
+def test_the_relaxed_scan_on_a_long_ramp_of_tiny_chords():
+    """20,000 chords of 1 µm from rest to a 40 mm/s cap (one S-curve over 1,000s of
+    pieces: the chains run long, the scalar finish takes them)."""
+    from nurbscnc.plan.profile import _chain_scan
+
+    k = 20_000
+    length = np.full(k, 1e-3)
+    bound = np.full(k + 1, 40.0)
+    a, j = np.full(k, 2450.0), np.full(k, 5e4)
+    got = _chain_scan(bound, length, a, j)
+    np.testing.assert_allclose(got,
+                               _sequential_scan(bound, length, a, j), rtol=1e-13)  # fmt: skip

@@ -96,8 +96,8 @@ from nurbscnc.plan.feedrate import (
     check_limits,
     max_reachable_speed,
     max_reachable_speed_scalar,
-    reach_unchecked,
     peak_speed_unchecked,
+    reach_unchecked,
     scurve_distance_mm,
     scurve_timing,
 )
