@@ -95,3 +95,28 @@ def test_windowed_distance_is_the_true_distance_to_the_path(case):
     same = np.abs(got - true) <= CHORD_MM + off
     assert np.mean(same) > 0.99
     assert got.max() > 1e-3  # the servo does lag: the check measures something
+
+
+@pytest.mark.parametrize("direct_pairs", [0, PathIndex.DIRECT_PAIRS])
+def test_the_global_distance_is_the_true_distance(case, direct_pairs, monkeypatch):
+    """PathIndex.distance_mm, candidates by the k-d tree (0 pairs direct) or by testing
+    every piece's ball (a program's first DIRECT_PAIRS): against the exact distance to a
+    much denser polyline of the path, for tool samples and for points up to 2 mm off the
+    path (upper bounds from the windowed distance, or 3 mm)."""
+    pieces, profile, actual, lag, s = case
+    monkeypatch.setattr(PathIndex, "DIRECT_PAIRS", direct_pairs)
+    rng = np.random.default_rng(7)
+    pick = rng.choice(actual.shape[0], 300, replace=False)
+    q = np.vstack((actual[pick], actual[pick[:100]] + rng.uniform(-2.0, 2.0, (100, 3))))
+    upper = np.concatenate((windowed_contour_mm(actual, lag, s, pieces, profile)[pick],
+                            np.full(100, 3.0)))  # fmt: skip
+    index = PathIndex(pieces)
+    got = index.distance_mm(q, upper)
+    assert (index._built is None) == (direct_pairs > 0)  # the way asked for was taken
+    h = 1e-4
+    true = contour_error_true(q, dense_path_mm(pieces, profile, spacing_mm=h))
+    off = 2.0 * float(np.max(pieces.kappa_max_per_mm)) * h * h / 8.0 + 1e-12
+    # The polyline of the check is within CHORD_MM of the curve; never above the bound.
+    want = np.minimum(true, upper)
+    assert np.all(np.abs(got - want) <= CHORD_MM + off)
+    assert np.all(got <= upper)

@@ -186,8 +186,13 @@ class PathIndex:
     #: on a sweep longer than itself).
     DENSE_POINTS = 6_000_000
 
+    #: (point, piece) pairs of a program's queries answered without the k-d tree.
+    DIRECT_PAIRS = 20_000_000
+
     def __init__(self, pieces, short_mm: float = 1.0):
         self._pieces = pieces
+        self._direct = 0  # (point, piece) pairs tested directly so far
+        self._balls = None  # (centres (k, 3), radii (k,), |centre|² (k,)) [mm, mm²]
         self._short_mm = short_mm
         self._built = None
         self._counts = None
@@ -239,7 +244,17 @@ class PathIndex:
 
     def candidates(self, q: np.ndarray, upper_mm: np.ndarray) -> np.ndarray:
         """Pieces that may hold a path point closer to some point of ``q`` (m, 3) than
-        ``upper_mm`` (m,) (sorted piece indices)."""
+        ``upper_mm`` (m,) (sorted piece indices).
+
+        The first :data:`DIRECT_PAIRS` (point, piece) pairs of a program are tested
+        directly, every piece's ball at once; only a program that asks more builds the k-d
+        tree (importing scipy.spatial and building the tree cost 0.2–0.3 s, and the check
+        of a long CAM program asks about a dozen points). Both find every piece whose ball
+        comes within ``upper_mm`` (the tree some more), so the distances are the same."""
+        k = self._pieces.length_mm.size
+        if self._built is None and self._direct + q.shape[0] * k <= self.DIRECT_PAIRS:
+            self._direct += q.shape[0] * k
+            return self._candidates_direct(q, upper_mm)
         if self._built is None:
             self._build()
         centre, radius, short, long_, tree, r_short = self._built
@@ -252,6 +267,26 @@ class PathIndex:
             near = np.any(gap - radius[long_][None, :] <= upper_mm[:, None], axis=0)
             found.append(long_[near])
         return np.unique(np.concatenate(found)) if found else np.zeros(0, dtype=np.int64)
+
+    def _candidates_direct(self, q: np.ndarray, upper_mm: np.ndarray) -> np.ndarray:
+        """:meth:`candidates` by testing every piece's ball (centre c = (A + B)/2, radius
+        r = L/2) against every point, by |q − c|² = |q|² − 2 q·c + |c|² (one matrix product
+        a block of points, ≤ 2e6 pairs) ≤ (u + r)², widened by 1e-9 (|q|² + |c|²) for the
+        rounding of the expansion (a wider test only adds candidates)."""
+        if self._balls is None:
+            pieces = self._pieces
+            centre = 0.5 * (pieces.start_mm + pieces.end_mm).T
+            self._balls = (centre, 0.5 * pieces.length_mm, np.einsum("kc,kc->k", centre, centre))
+        centre, radius, c2 = self._balls
+        near = np.zeros(radius.size, dtype=bool)
+        step = max(1, 2_000_000 // max(radius.size, 1))
+        for lo in range(0, q.shape[0], step):
+            qb = q[lo : lo + step]
+            q2 = np.einsum("mc,mc->m", qb, qb)[:, None]
+            d2 = q2 - 2.0 * (qb @ centre.T) + c2[None, :]
+            reach = upper_mm[lo : lo + step, None] + radius[None, :]
+            near |= np.any(d2 <= reach * reach + 1e-9 * (q2 + c2[None, :]), axis=0)
+        return np.flatnonzero(near)
 
     def _piece_polylines(self, cand: np.ndarray) -> list[tuple]:
         """(points, box lows, box highs) of the dense polylines (:func:`path_counts`) of
