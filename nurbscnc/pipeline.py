@@ -38,6 +38,7 @@ from nurbscnc.plan.precompensation import (
 )
 from nurbscnc.plan.report import check_soft_limits
 from nurbscnc.plan.timing import sample_count
+from nurbscnc.program.columns import SegmentColumns, segment_columns
 from nurbscnc.servo.precompensate import REFERENCE_TOLERANCE_MM
 
 
@@ -93,6 +94,9 @@ class Run:
     interpolator: Interpolator = Interpolator.EXACT
     period_s: float | None = None
     soft_limits: SoftLimits | None = None
+    #: The program's segments as columns (read once for the checks before work; the
+    #: summary's lower bound reads them again).
+    columns: SegmentColumns | None = None
 
     @property
     def cycle_time_s(self) -> float:
@@ -184,7 +188,8 @@ def run_program(program, machine: Machine, options: RunOptions | None = None,
     # Checks before work (issue 14): the geometry inside the soft limits, the motion short
     # enough for limits.max_points, before anything is planned or sampled.
     say("checking limits")
-    check_before_work(program.segments, machine)
+    columns = segment_columns(program.segments)
+    check_before_work(program.segments, machine, columns)
     if options.algorithm == Algorithm.PH_LOOKAHEAD:
         lookahead = options.lookahead
         if not machine.contour_check:
@@ -214,7 +219,7 @@ def run_program(program, machine: Machine, options: RunOptions | None = None,
         run = Run(options.algorithm, samples)
     if run.whole is not None:  # made already: checked now (a lazy run checks each window)
         check_soft_limits(run.whole.points_mm, run.whole.line, machine.soft_limits)
-    return run
+    return replace(run, columns=columns)
 
 
 def _run_precompensated(program, machine: Machine, lookahead: LookaheadOptions,

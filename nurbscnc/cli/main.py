@@ -834,7 +834,7 @@ def summary_of(prog, mach, run, stats=None, lower_bound: bool = True) -> dict:
         for window in run.chunks():
             samples.add(window)
     summary = plan_summary(prog, mach, samples, run.plan, run.check, run.algorithm,
-                           run.cycle_time_s, lower_bound)  # fmt: skip
+                           run.cycle_time_s, lower_bound, run.columns)  # fmt: skip
     if getattr(run, "precompensation", None) is not None:  # --precompensate
         summary["precompensation"] = run.precompensation.as_json()
     return {**summary, **machine_json(mach)}

@@ -46,15 +46,15 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from itertools import chain
 
 import numpy as np
 
 from nurbscnc.errors import ConfigError, PlanningError
-from nurbscnc.geometry.path import STOP_KINDS, Kind, PathTable, stop_seconds, whole_row
+from nurbscnc.geometry.path import Kind, PathTable, stop_seconds, whole_row
 from nurbscnc.geometry.paths import geometry_of
 from nurbscnc.machine.caps import curvature_cap2_mm2_s2
 from nurbscnc.machine.profile import Machine
+from nurbscnc.program.columns import DWELL, LINE, PAUSE, RAPID, segment_columns
 
 #: Default largest grid spacing [mm] (SPEC §10).
 DEFAULT_DS_MM = 0.01
@@ -379,16 +379,17 @@ def machine_lower_bound(
     )
 
 
-def program_lower_bound_s(segments, machine: Machine) -> float:
+def program_lower_bound_s(segments, machine: Machine, columns=None) -> float:
     """The lower bound [s] for a whole program's segments (SPEC §10): its own geometry (not
     the PH replacements), rest to rest, with exact stops at tangent discontinuities (turning
     > 1e-6 rad; except corners under G64 P, which a blend may pass at speed), at dwells
     (whose durations are added) and where rapids meet feed moves. No jerk limit, no servo
     settling: nothing can be faster.
 
-    Linear in the program length with small constants: lines (and rapids) are gathered into
-    arrays (length and direction from their end points, κ = 0) without a geometry object
-    each; arcs and NURBS blocks become the rows of one path model
+    Linear in the program length with small constants: lines (and rapids) are read from the
+    segments' columns (:func:`~nurbscnc.program.columns.segment_columns`; ``columns`` if the
+    caller has them), length and direction from their end points, κ = 0, without a geometry
+    object each; arcs and NURBS blocks become the rows of one path model
     (:class:`~nurbscnc.geometry.path.PathTable`, the programmed geometry, one row a
     segment), which gives their lengths, end tangents and curvature. Pieces of constant
     curvature (lines, circular and helical arcs) need no grid inside them — their cap is
@@ -398,47 +399,35 @@ def program_lower_bound_s(segments, machine: Machine) -> float:
     """
     lim = machine.limits
     period, chord, a_max = machine.servo.period_s, lim.chord_tolerance_mm, lim.a_max_mm_s2
-    # Attribute passes over the segments (millions in CAM programs): one for the kinds, then
-    # one per column over the moving ones, no tuple per segment.
-    segments = list(segments)
-    all_kinds = [s.kind for s in segments]
-    is_stop = np.fromiter((k in STOP_KINDS for k in all_kinds), dtype=bool,
-                          count=len(all_kinds))  # fmt: skip
+    segments = segments if isinstance(segments, (list, tuple)) else list(segments)
+    cols = columns if columns is not None else segment_columns(segments)
+    is_stop = (cols.kind == DWELL) | (cols.kind == PAUSE)
     stops = np.flatnonzero(is_stop).tolist()
     dwell = float(sum(stop_seconds(segments[i]) for i in stops))
     index = np.flatnonzero(~is_stop)
     m = int(index.size)
     if not m:
         return dwell
-    if stops:
-        moving = [segments[i] for i in index.tolist()]
-        kinds = [all_kinds[i] for i in index.tolist()]
-    else:
-        moving, kinds = segments, all_kinds
-    rapid = np.fromiter((k == "rapid" for k in kinds), dtype=bool, count=m)
-    straight = np.fromiter((k in ("line", "rapid") for k in kinds), dtype=bool, count=m)
-    feed = np.fromiter((1.0 if k == "rapid" else s.feed_mm_s for k, s in zip(kinds, moving)),
-                       dtype=float, count=m)  # fmt: skip
+    kind = cols.kind[index]
+    rapid = kind == RAPID
+    straight = rapid | (kind == LINE)
+    feed = np.where(rapid, 1.0, cols.feeds_mm_s[index])
     top = np.where(rapid, lim.rapid_mm_s, np.minimum(feed, lim.v_max_mm_s))
     if not np.all(np.isfinite(top) & (top > 0.0)):
         raise PlanningError("every piece needs a finite speed ceiling > 0 [mm/s]")
-    blend = np.fromiter((getattr(s, "blend_mm", 0.0) for s in moving), dtype=float, count=m)
+    blend = cols.blends_mm[index]
     length = np.zeros(m)
     t_start = np.zeros((m, 3))
     t_end = np.zeros((m, 3))
     li = np.flatnonzero(straight)
-    lsegs = [moving[i] for i in li.tolist()]
-    p0 = np.fromiter(chain.from_iterable(s.start_mm for s in lsegs), dtype=float,
-                     count=3 * li.size).reshape(-1, 3)  # fmt: skip
-    p1 = np.fromiter(chain.from_iterable(s.end_mm for s in lsegs), dtype=float,
-                     count=3 * li.size).reshape(-1, 3)  # fmt: skip
+    p0, p1 = cols.starts_mm[index[li]], cols.ends_mm[index[li]]
     t_start[li] = t_end[li] = p1 - p0
     length[li] = np.sqrt(np.einsum("ij,ij->i", p1 - p0, p1 - p0))
     cap2 = np.where(straight, top * top, 0.0)  # constant-cap pieces: their cap²
     # Arcs and NURBS blocks: one path-model row each (the programmed geometry, whole).
     curved = np.flatnonzero(~straight)
-    path = PathTable.of([whole_row(geometry_of(moving[i]), moving[i].line)
-                         for i in curved.tolist()])  # fmt: skip
+    moving = [segments[i] for i in index[curved].tolist()]
+    path = PathTable.of([whole_row(geometry_of(s), s.line) for s in moving])
     rows = np.arange(curved.size)
     length[curved] = path.length_mm
     # Unit tangents at both ends, one evaluation (start, end interleaved: one run a piece).

@@ -277,18 +277,19 @@ def _bound(summary: dict, lower_bound_s: float | None, cycle_time_s: float) -> N
 
 def plan_summary(prog, machine: Machine, samples, plan=None, check=None,
                  algorithm: str = "ph-lookahead", cycle_time_s: float | None = None,
-                 lower_bound: bool = True) -> dict:  # fmt: skip
+                 lower_bound: bool = True, columns=None) -> dict:  # fmt: skip
     """Numbers that describe a plan (``plan --json``): of the look-ahead ``plan`` with its
     dynamics ``check`` (None: off), or — ``plan`` None — of a baseline ``algorithm``'s
     ``samples``, simulated on the servo model to see its errors. With a plan, ``samples``
     may be whole :class:`Samples` or the :class:`SampleStats` gathered while the windows
     were written (the contour error is the check's :meth:`Check.contour_stats`).
     ``lower_bound``: False leaves out ``lower_bound_s`` and its ratio (a summary nobody
-    reads them from: the kinematic bound costs 0.2 s on a 200,000-line program)."""
+    reads them from: the kinematic bound costs 0.2 s on a 200,000-line program);
+    ``columns``: the program's segment columns if already read."""
     from nurbscnc.plan.lookahead import segment_times_s
     from nurbscnc.plan.lowerbound import program_lower_bound_s
 
-    lb = program_lower_bound_s(prog.segments, machine) if lower_bound else None
+    lb = program_lower_bound_s(prog.segments, machine, columns) if lower_bound else None
     if cycle_time_s is None:
         cycle_time_s = plan.cycle_time_s if plan is not None else float(samples.t_s[-1])
     head = {"ok": True, "program": prog.name}

@@ -26,13 +26,15 @@ class SegmentColumns(NamedTuple):
     """Columns of n segments: ``kind`` (n,) int8 codes into :data:`KINDS`, ``starts_mm`` and
     ``ends_mm`` (n, 3) [mm] (a stop: its position, twice; a NURBS: its first and last
     control points), ``feeds_mm_s`` (n,) [mm/s] (0 for rapids and stops), ``lines`` (n,)
-    the 1-based source lines."""
+    the 1-based source lines, ``blends_mm`` (n,) the path-control code of each move
+    (:func:`~nurbscnc.geometry.segments.path_control`; 0 for stops)."""
 
     kind: np.ndarray
     starts_mm: np.ndarray
     ends_mm: np.ndarray
     feeds_mm_s: np.ndarray
     lines: np.ndarray
+    blends_mm: np.ndarray
 
     @property
     def names(self) -> np.ndarray:
@@ -80,4 +82,6 @@ def segment_columns(segments) -> SegmentColumns:
         ends_mm=_points(segments, "end_mm"),
         feeds_mm_s=np.fromiter(map(attrgetter("feed_mm_s"), segments), dtype=float, count=n),
         lines=np.fromiter(map(attrgetter("line"), segments), dtype=np.int64, count=n),
+        blends_mm=np.fromiter(map(getattr, segments, repeat("blend_mm"), repeat(0.0)),
+                              dtype=float, count=n),  # fmt: skip
     )
