@@ -20,6 +20,7 @@ import json
 import math
 import os
 import re
+import shutil
 import subprocess
 from pathlib import Path
 
@@ -110,12 +111,16 @@ def _linuxcnc_missing() -> str | None:
 
 
 @pytest.mark.parametrize("path", PROGRAMS, ids=[p.stem for p in PROGRAMS])
-def test_live(path):
+def test_live(path, tmp_path):
     why = _linuxcnc_missing()
     if why:
         pytest.skip(f"live LinuxCNC comparison skipped: {why}")
-    out = subprocess.run([SYSTEM_PYTHON, str(RECORDER), str(path)], capture_output=True,
-                         text=True, cwd=path.parent, check=True)  # fmt: skip
+    # LinuxCNC reads and rewrites rs274ngc.var in its working folder: a fresh copy of the
+    # committed one in a temporary folder, so every run starts alike and the repo is not
+    # touched.
+    shutil.copy(path.parent / "rs274ngc.var", tmp_path / "rs274ngc.var")
+    out = subprocess.run([SYSTEM_PYTHON, str(RECORDER), str(path.resolve())],
+                         capture_output=True, text=True, cwd=tmp_path, check=True)  # fmt: skip
     compare(path, json.loads(out.stdout))
 
 

@@ -90,8 +90,9 @@ def test_path_modes_as_linuxcnc_interprets_them(tmp_path):
     text = "G21\n" + "".join(f"{w}\nG1 X{i + 1} F600\n" for i, w in enumerate(words)) + "M2\n"
     program = tmp_path / "modes.ngc"
     program.write_text(text)
+    # (in tmp_path: rs274 writes rs274ngc.var into its working folder)
     out = subprocess.run([str(RS274), "-g", str(program)], capture_output=True, text=True,
-                         timeout=60).stdout  # fmt: skip
+                         timeout=60, cwd=tmp_path).stdout  # fmt: skip
     expected, mode, naive = [], None, 0.0
     for line in out.splitlines():
         if m := re.search(r"SET_MOTION_CONTROL_MODE\(CANON_(\w+)(?:, ([\d.]+))?\)", line):
