@@ -4,7 +4,9 @@ The ZPETC inverse itself (:mod:`nurbscnc.servo.precompensate`) works on points; 
 applied to a plan's :class:`~nurbscnc.plan.timing.Reference` (kept near the path, padded so
 the dynamics check maps every sample to its piece), wrapped as the reference sampler the
 planner's check simulates, and reported on: the compensated reference's own deviation from
-the path and the contour error under ±10 % model errors.
+the path and the contour error under ±10 % model errors. The compensated reference keeps
+the machine's velocity, acceleration and jerk on its samples (:func:`project_onto_limits`,
+then the tube optimisation within the same caps).
 """
 
 from __future__ import annotations
@@ -173,7 +175,11 @@ def precompensate_reference(ref: Reference, pieces, profile, machine: Machine,
     its lead d_t (:func:`~nurbscnc.servo.precompensate.along_path_offset_mm`) ahead of the
     planned point, placed exactly at path length s_k + d_t (clamped to the program's ends,
     so the reference is never led past the end point along the path;
-    :func:`~nurbscnc.servo.precompensate.limit_to_path`). Every other per-sample column is
+    :func:`~nurbscnc.servo.precompensate.limit_to_path`), then projected onto the machine's
+    limits on the samples (:func:`project_onto_limits`: V, A, J per axis and the path speed
+    by finite differences, or the plan's own where that is above them, in the tube about
+    the plan's points; with no tolerance, anywhere) and, with a contour check, optimised in
+    the tube within the same caps (:func:`refine_in_tube`). Every other per-sample column is
     padded to the new length (the start repeated ``lead_samples`` times), so the dynamics
     check maps each sample to its piece and path length as before. Wall times restart at
     0 with the servo period."""
@@ -552,8 +558,8 @@ def _project_window(u: np.ndarray, r: np.ndarray, target: np.ndarray, caps: Samp
     rhs += [want, -want]
 
     def diff_matrix(order: int, weights: np.ndarray):
-        """Rows i (touching the window) of Σ_l c_l (weights · x)_{i+l}: weights (N, D) per
-        sample and direction; the rows' indices."""
+        """Rows i (touching the window) of Σ_l c_l (weights · x)_{i+l}: weights (j1 − j0, D)
+        per window sample and direction; the rows' indices."""
         coef = np.diff(np.eye(order + 1), n=order, axis=0)[0]
         rows = np.arange(max(j0 - order, 0), min(j1 - 1, n - 1 - order) + 1)
         ri, ci, vals = [], [], []
@@ -563,7 +569,7 @@ def _project_window(u: np.ndarray, r: np.ndarray, target: np.ndarray, caps: Samp
             for d in range(dims):
                 ri.append(np.flatnonzero(ok))
                 ci.append((k[ok] - j0) * dims + d)
-                vals.append(c * weights[k[ok], d])
+                vals.append(c * weights[k[ok] - j0, d])
         mat = coo_matrix((np.concatenate(vals), (np.concatenate(ri), np.concatenate(ci))),
                          shape=(rows.size, nx)).tocsr()  # fmt: skip
         return mat, rows
@@ -574,9 +580,7 @@ def _project_window(u: np.ndarray, r: np.ndarray, target: np.ndarray, caps: Samp
         for c in range(3):
             if not np.any(basis[j0:j1, :, c]) or not np.any(np.isfinite(cap[:, c])):
                 continue
-            w = np.zeros((n, dims))
-            w[j0:j1] = basis[j0:j1, :, c]
-            mat, rows = diff_matrix(order, w)
+            mat, rows = diff_matrix(order, b[:, :, c])
             keep = np.isfinite(cap[rows, c])
             mat, rows = mat[keep], rows[keep]
             zeros = csr_matrix((rows.size, nx))
@@ -691,8 +695,10 @@ def project_onto_limits(target_mm: np.ndarray, planned_mm: np.ndarray, caps: Sam
 #          τ'_j the tube less any offset out of the plane; |b_j| ≤ b̄_j, the bend of a
 #          straight move along a curve of curvature κ_j at most REFINE_BEND τ),
 #   limits the step lengths |u_{j+1} − u_j| + b_{j+1} − b_j ≤ V T (first order) and the
-#          second and third differences of u + Δ on every axis within A T², J T³ — or
-#          within the starting reference's own where it was above them already,
+#          first, second and third differences of u + Δ on every axis within the caps of
+#          the limits on the samples (SampleLimits: the machine's, or the plan's own where
+#          that is above them; the projection above starts the rounds within them) — or
+#          within u's own where it is above them (a start not projected: no step rougher),
 #   min z  subject to  |σ_k + Σ_j G_kj (a_j, b_j)| ≤ z  over the region's tool samples,
 #
 # G_kj = Σ_axes ν_k,c h_c[k − j] (m_j,c, t_j,c) with h_c the axis' impulse response. Then the
