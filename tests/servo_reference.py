@@ -51,3 +51,29 @@ def segment_distance_mm(points_mm, dense_mm):
                     / np.maximum(np.einsum("ij,ij->i", d, d), 1e-300), 0.0, 1.0)
         best = np.minimum(best, np.linalg.norm(points_mm - pa - t[:, None] * d, axis=1))
     return best
+
+
+def limits_excess(points_mm: np.ndarray, machine, planned_mm: np.ndarray | None = None) -> dict:
+    """The largest excess of the samples' finite differences over the machine's limits, per
+    kind: "speed" |Δp|/T against V_max, "axis_v", "axis_a", "axis_j" each axis' |Δ^k p|/T^k
+    against its limit (the smaller of the path's A_max, J_max and the axis' own; velocity:
+    the axis' own, if any) [mm/s^k]; ≤ 0 where every sample keeps it. With ``planned_mm``
+    (same length, the plan's own reference), a row where the plan itself is above the limit
+    is held to the plan's own difference there instead. An allowance of 1e-9 of the limit and
+    2^k·1e-12 mm of rounding of the points. Plain numpy, nothing of the planner's."""
+    t = machine.servo.period_s
+    lim, ax = machine.limits, machine.axis_limits
+    bounds = {"speed": (1, lim.v_max_mm_s), "axis_v": (1, np.array(ax.v_max_mm_s)),
+              "axis_a": (2, np.minimum(lim.a_max_mm_s2, ax.a_max_mm_s2)),
+              "axis_j": (3, np.minimum(lim.j_max_mm_s3, ax.j_max_mm_s3))}  # fmt: skip
+    out = {}
+    for name, (k, limit) in bounds.items():
+        d = np.diff(points_mm, k, axis=0) / t**k
+        own = None if planned_mm is None else np.diff(planned_mm, k, axis=0) / t**k
+        if name == "speed":
+            d = np.linalg.norm(d, axis=1)
+            own = None if own is None else np.linalg.norm(own, axis=1)
+        cap = np.maximum(limit, np.abs(own)) if own is not None else limit + 0.0 * d
+        excess = np.abs(d) - cap * (1.0 + 1e-9) - 2.0**k * 1e-12 / t**k
+        out[name] = float(np.max(np.where(np.isfinite(cap), excess, -np.inf), initial=-np.inf))
+    return out

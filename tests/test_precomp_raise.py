@@ -9,12 +9,14 @@ Pinned on the 9 mm NACA 2415 block at 0°, +45° and −45° (the paper's benchm
 independent measures only: the written reference through ``scipy.signal.lsim`` of the
 continuous eq.-25 model (tests/servo_reference.py), its distance to the test's own dense
 polyline of the programmed NURBS (cutting samples and the settle after the end) within
-ε_max = 15 µm; the reference itself within 3 µm of that curve; its speed within V_max, its
-acceleration within A_max and its third differences no larger than the clipped ZPETC
-reference's it started from (finite differences of the 1 ms samples); and the block's time,
-from the reference points as bench/planner_bench.py takes it (from the last sample at rest at
-the block's start to the first sample of the final rest), at most the 0.445 s this reached
-(0.447 s before; 0.5 ms of tolerance).
+ε_max = 15 µm; the reference itself within 3 µm of that curve; its speed within V_max, and
+its acceleration and jerk within A_max and J_max on every axis, or the plan's own where the
+plan is above them (finite differences of the 1 ms samples, tests/servo_reference.py
+limits_excess); and the block's time, from the reference points as bench/planner_bench.py
+takes it (from the last sample at rest at the block's start to the first sample of the final
+rest), at most the 0.449 s this reaches (0.5 ms of tolerance) and at least 5 ms under the
+uncompensated plan's 0.456 s. (0.445 s before the reference was held to the limits: the ZPETC
+reference's own roughness, up to 434,795 mm/s³ per axis, was allowed; keeping J costs 3–4 ms.)
 """
 
 from __future__ import annotations
@@ -32,17 +34,17 @@ from nurbscnc.plan.lookahead import plan_checked
 from nurbscnc.plan.options import LookaheadOptions
 from nurbscnc.plan.precompensation import precompensate_reference, precompensated_sampler
 from nurbscnc.program.interpret import interpret_text
-from tests.servo_reference import lsim_actual_mm, segment_distance_mm
+from tests.servo_reference import limits_excess, lsim_actual_mm, segment_distance_mm
 
 ROOT = Path(__file__).resolve().parents[1]
 MACHINE = load_machine()
 PERIOD_S = MACHINE.servo.period_s
-#: The block's time reached [s] (bench/planner_bench.py: 0.445 s at 0°, ±45°) and the
-#: tolerance of this test [s].
-BLOCK_BOUND_S = 0.445
+#: The block's time reached [s] (0.449 s at 0°, 0.448 s at ±45°) and the tolerance of this
+#: test [s].
+BLOCK_BOUND_S = 0.449
 TOLERANCE_S = 5e-4
-#: Before the raise (commit 37fccea): 0.447 s at 0°, ±45°.
-BLOCK_BEFORE_S = 0.447
+#: Without --precompensate (bench/planner_bench.py default: 0.456–0.457 s at 0°, ±45°).
+BLOCK_PLAIN_S = 0.456
 
 
 def _block_time_s(points_mm: np.ndarray, piece: np.ndarray) -> float:
@@ -72,39 +74,37 @@ def test_compensated_airfoil_block_is_faster_within_every_limit(name):
     assert err_um.max() <= lim.contour_tolerance_mm * 1000.0
     # The reference within 3 µm of the programmed curve.
     assert segment_distance_mm(pts[cutting], dense).max() * 1000.0 <= 3.0 + 1e-6
-    # Speed within V_max (the step lengths; the tube LP's first-order bound leaves 0.1 %)
-    # and acceleration within A_max on every axis, finite differences of the samples.
-    speed = np.linalg.norm(np.diff(pts, axis=0), axis=1) / PERIOD_S
-    assert speed.max() <= lim.v_max_mm_s * (1.0 + 1e-3)
-    assert np.abs(np.diff(pts, 2, axis=0)).max() / PERIOD_S**2 <= lim.a_max_mm_s2
-    # Third differences: the ZPETC inverse clipped into the tube is above J T³ near the nose
-    # already (the plan's own reference is not); the written one is no rougher than it (+ 2 %
-    # of the limit), sample by sample and axis by axis.
+    # Speed within V_max, acceleration within A_max and jerk within J_max on every axis
+    # (finite differences of the samples), or where the plan's own reference is above them
+    # (its curvature terms, per axis, on a path-limited machine), within the plan's: the
+    # written reference is the one the plan's reference compensates, lead-padded.
     planned = reference_sampler("exact")(run.plan.pieces, run.plan.profile, PERIOD_S)
     out, comp = precompensate_reference(planned, run.plan.pieces, run.plan.profile, MACHINE)
     np.testing.assert_allclose(out.points_mm, pts, rtol=0, atol=1e-12)
-    limit = lim.j_max_mm_s3 * PERIOD_S**3
-    d_out = np.abs(np.diff(pts, 3, axis=0))
-    d_clip = np.abs(np.diff(comp.clipped_mm, 3, axis=0))
-    assert np.all(d_out <= np.maximum(limit, d_clip) + 0.02 * limit * (1.0 + 1e-9))
-    # Faster than before, at most the bound reached.
+    own = np.pad(planned.points_mm, ((comp.lead_samples, 0), (0, 0)), mode="edge")
+    excess = limits_excess(pts, MACHINE, own)
+    assert max(excess.values()) <= 0.0, excess
+    assert limits_excess(comp.clipped_mm, MACHINE, own)["axis_j"] > 0.0  # (what it fixes)
+    # Faster than the uncompensated plan, at most the bound reached.
     block = _block_time_s(pts, piece)
     assert block <= BLOCK_BOUND_S + TOLERANCE_S
-    assert block < BLOCK_BEFORE_S - 1e-3
+    assert block <= BLOCK_PLAIN_S - 5e-3
 
 
 def test_the_raise_keeps_only_faster_compensated_plans_within_the_machine_caps():
     """The same pre-compensated check with and without ``raise_corner_caps``: with it the plan
-    is faster and within ε_max (the raise keeps a plan only if it is both), some corner cap
-    is above its V_cf value and none above √(A/κ) of its piece (the machine's own cap)."""
+    is never slower and within ε_max (the raise keeps a plan only if it is both), and no
+    corner cap is above √(A/κ) of its piece (the machine's own cap). (With the compensated
+    reference held to the machine's limits on its samples the raise finds no faster plan on
+    this block at 0°: 0.6709 s either way; it was 1–2 ms while the reference could keep the
+    ZPETC inverse's own jerk.)"""
     prog = interpret_text((ROOT / "programs" / "naca2415.nc").read_text())
     sampler = precompensated_sampler(reference_sampler("exact"), MACHINE)
     fixed = plan_checked(prog, MACHINE, LookaheadOptions(), sampler, keep_reference=False)
     free = plan_checked(prog, MACHINE, LookaheadOptions(raise_corner_caps=True), sampler,
                         keep_reference=False)  # fmt: skip
-    assert free[0].cycle_time_s <= fixed[0].cycle_time_s - 1e-3
+    assert free[0].cycle_time_s <= fixed[0].cycle_time_s + 1e-12
     assert free[1].stats["contour_true_max_um"] <= MACHINE.limits.contour_tolerance_mm * 1e3
-    assert np.any(free[0].caps_mm_s > fixed[0].caps_mm_s * 1.01)
     kappa = free[0].pieces.kappa_max_per_mm
     with np.errstate(divide="ignore"):
         normal_cap = np.sqrt(MACHINE.limits.a_max_mm_s2 / kappa)

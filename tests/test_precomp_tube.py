@@ -27,7 +27,7 @@ from nurbscnc.plan.lookahead import plan_checked
 from nurbscnc.plan.options import LookaheadOptions
 from nurbscnc.plan.precompensation import precompensate_reference, refine_in_tube
 from nurbscnc.program.interpret import interpret_text
-from tests.servo_reference import lsim_actual_mm, segment_distance_mm
+from tests.servo_reference import limits_excess, lsim_actual_mm, segment_distance_mm
 
 ROOT = Path(__file__).resolve().parents[1]
 MACHINE = load_machine()
@@ -62,7 +62,12 @@ def test_the_optimisation_converges_on_a_circle_to_the_closed_form_steady_state(
     from round to round, never goes below the steady-state optimum of the tube (the
     reference pulled in by τ: the faster axis' closed form) and ends within 0.1 µm of the
     slower axis' (windows of 120 samples: a long region converges slowly), and an independent lsim
-    of the final reference, measured from the exact circle, gives the same number."""
+    of the final reference, measured from the exact circle, gives the same number.
+
+    Every window keeps the machine's limits on the samples (finite differences, or the
+    plan's own where that is above them: the start into the circle), so the windows' fixed
+    ends converge slower than without: 0.3 µm of the closed form after six rounds (0.1 µm
+    when the optimisation could keep the clipped ZPETC reference's own roughness)."""
     plan, ref = _kinematic("G21 G90 G0 X1 Y0\nG3 X1 Y0 I-1 J0 F1800\nG3 X1 Y0 I-1 J0\n"
                            "G3 X1 Y0 I-1 J0\n")  # fmt: skip
     # The tube less twice the chord error of the optimiser's polylines, the clip inside it
@@ -80,7 +85,10 @@ def test_the_optimisation_converges_on_a_circle_to_the_closed_form_steady_state(
     # Never below what any reference in the tube reaches in the steady state (the closed
     # form of the faster axis), and within 0.1 µm of the slower one's.
     lo, hi = sorted(_steady_circle_error_um(1.0, 30.0, tube))
-    assert lo - 0.01 <= history[-1] <= hi + 0.1
+    assert lo - 0.01 <= history[-1] <= hi + 0.3
+    planned = np.pad(ref.points_mm, ((clip.t_s.size - ref.t_s.size, 0), (0, 0)), mode="edge")
+    excess = limits_excess(out.points_mm, MACHINE, planned)
+    assert max(excess.values()) <= 0.0, excess
     # Independent: lsim of the written reference, distance to the exact circle |p| − R.
     actual = lsim_actual_mm(out.points_mm, MACHINE)
     cut = np.append(~plan.pieces.rapid[out.piece], np.ones(actual.shape[0] - out.piece.size,
@@ -129,19 +137,75 @@ def test_airfoil_reported_error_and_reference_deviation_are_independent_ones(air
     assert len(run.precompensation.sensitivity) == 8
 
 
-def test_the_optimised_reference_is_no_rougher_than_the_clipped_one():
-    """On the airfoil's kinematic plan the optimisation lowers the largest error (round by
-    round), and every second and third difference of the reference stays within the
-    machine's A T² and J T³ or the clipped ZPETC reference's own (where it starts) at that
-    sample, + 2 % of the limit."""
+def _planned_polyline(plan, spacing_mm: float = 5e-4) -> np.ndarray:
+    """The planned path's cut pieces as a polyline of its own (``spacing_mm`` apart)."""
+    pieces, profile = plan.pieces, plan.profile
+    rows = np.flatnonzero(~pieces.rapid)
+    counts = np.ceil(pieces.length_mm[rows] / spacing_mm).astype(int) + 1
+    piece = np.repeat(rows, counts)
+    frac = np.concatenate([np.linspace(0.0, 1.0, c) for c in counts])
+    s = profile.piece_start_mm[piece] + frac * pieces.length_mm[piece]
+    return pieces.path.place(profile.piece_start_mm, s, piece)[0]
+
+
+def test_the_written_reference_keeps_the_limits_on_the_samples(airfoil_run):
+    """On the airfoil's kinematic plan the ZPETC reference clipped into the tube is far above
+    the machine's jerk (the inverse's snap impulses at the plan's jerk switches, the clip's
+    kinks: over 5 J on an axis), and the written reference keeps V, A and J on every sample
+    and axis (finite differences of the 1 ms points) — or the plan's own difference there,
+    where the plan itself is above the limit (a path-limited machine keeps A and J along the
+    path; per axis the curvature terms of the plan can exceed J) — while the optimisation
+    still lowers the largest error round by round, and the reference stays within 3 µm of
+    the programmed curve."""
+    _prog, dense, _run = airfoil_run
     plan, ref = _kinematic((ROOT / "programs" / "naca2415.nc").read_text())
     out, comp = precompensate_reference(ref, plan.pieces, plan.profile, MACHINE, TUBE_MM)
-    clip = comp.clipped_mm
+    planned = np.pad(ref.points_mm, ((comp.lead_samples, 0), (0, 0)), mode="edge")
+    lim = MACHINE.limits
+    clip_jerk = np.abs(np.diff(comp.clipped_mm, 3, axis=0)).max() / PERIOD**3
+    assert clip_jerk > 5.0 * lim.j_max_mm_s3
+    assert limits_excess(comp.clipped_mm, MACHINE, planned)["axis_j"] > 0.0  # (caught)
+    excess = limits_excess(out.points_mm, MACHINE, planned)
+    assert max(excess.values()) <= 0.0, excess
+    # The plan's own allowance is small: its curvature terms, a few % above J per axis.
+    jerk = np.abs(np.diff(out.points_mm, 3, axis=0)).max() / PERIOD**3
+    assert jerk <= 1.5 * lim.j_max_mm_s3
     history = np.array(comp.history_mm)
     assert np.all(np.diff(history) <= 1e-12) and history[-1] < history[0] - 1e-3
-    lim = MACHINE.limits
-    for order, limit in ((2, lim.a_max_mm_s2 * PERIOD**2), (3, lim.j_max_mm_s3 * PERIOD**3)):
-        d_out = np.abs(np.diff(out.points_mm, n=order, axis=0))
-        d_clip = np.abs(np.diff(clip, n=order, axis=0))
-        # (+ 2 % of the limit: REFINE_ROUGH, the bend of moves along the curve)
-        assert np.all(d_out <= np.maximum(limit, d_clip) + 0.02 * limit * (1.0 + 1e-9))
+    cutting = ~plan.pieces.rapid[out.piece]
+    assert segment_distance_mm(out.points_mm[cutting], dense).max() * 1000.0 <= 3.0 + 1e-6
+
+
+#: Per-axis limits on x and y ([axis_limits], issue 13) at the path's V, A and J: the planner
+#: keeps them on each axis of its samples, so the compensated reference must, with no
+#: allowance for the plan's own differences.
+_AXIS = (("v_max_mm_min", 3500.0), ("a_max_mm_s2", 2450.0), ("j_max_mm_s3", 5e4))
+AXIS_MACHINE = load_machine(overrides={f"axis_limits.{a}.{k}": v for a in "xy" for k, v in _AXIS})
+AXIS_PROGRAMS = {
+    "naca2415": (ROOT / "programs" / "naca2415.nc").read_text(),
+    "circle": "G21 G90 G17 G94 G61\nG0 X2 Y0\nF1800\nG3 X2 Y0 I-2 J0\nM2\n",
+    "line_arc_line": "G21 G90 G17 G94 G64\nG0 X0 Y0\nF3000\nG1 X5\nG3 X7 Y2 I0 J2\n"
+                     "G1 Y6\nM2\n",
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("name", sorted(AXIS_PROGRAMS))
+def test_compensated_reference_keeps_the_axis_limits_strictly(name):
+    """With per-axis limits, ``--precompensate`` writes a reference whose finite differences
+    keep every axis' V, A, J and the path's V with no allowance beyond rounding, within 3 µm
+    of the planned path (a polyline of its own), and whose independently simulated tool
+    (lsim) stays within ε_max of it (to the 0.01 µm the check's FOH sampling and lsim
+    agree on, as the airfoil test above)."""
+    run = run_program(interpret_text(AXIS_PROGRAMS[name]), AXIS_MACHINE,
+                      RunOptions(precompensate=True))  # fmt: skip
+    pts = run.samples.points_mm
+    excess = limits_excess(pts, AXIS_MACHINE)
+    assert max(excess.values()) <= 0.0, excess
+    cutting = ~run.plan.pieces.rapid[run.samples.piece]
+    path = _planned_polyline(run.plan)
+    assert segment_distance_mm(pts[cutting], path).max() * 1000.0 <= 3.0 + 1e-6
+    actual = lsim_actual_mm(pts, AXIS_MACHINE)
+    on_cut = np.append(cutting, np.full(actual.shape[0] - pts.shape[0], cutting[-1]))
+    on_cut[: int(np.argmax(cutting)) + 1] = False  # (from the rapid's rest at the start)
+    err_um = segment_distance_mm(actual[on_cut], path) * 1000.0
+    assert err_um.max() <= AXIS_MACHINE.limits.contour_tolerance_mm * 1000.0 + 0.01

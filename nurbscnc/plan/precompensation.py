@@ -4,7 +4,9 @@ The ZPETC inverse itself (:mod:`nurbscnc.servo.precompensate`) works on points; 
 applied to a plan's :class:`~nurbscnc.plan.timing.Reference` (kept near the path, padded so
 the dynamics check maps every sample to its piece), wrapped as the reference sampler the
 planner's check simulates, and reported on: the compensated reference's own deviation from
-the path and the contour error under ±10 % model errors.
+the path and the contour error under ±10 % model errors. The compensated reference keeps
+the machine's velocity, acceleration and jerk on its samples (:func:`project_onto_limits`,
+then the tube optimisation within the same caps).
 """
 
 from __future__ import annotations
@@ -89,10 +91,12 @@ class Refined(Compensated):
     """A :class:`~nurbscnc.servo.precompensate.Compensated` reference whose offsets across
     the path were then optimised in the tube (:func:`refine_in_tube`): ``history_mm`` the
     largest predicted contour error [mm] before and after each round, ``clipped_mm`` the
-    reference it started from (the ZPETC reference clipped into the tube)."""
+    ZPETC reference clipped into the tube, ``projected_mm`` that projected onto the limits
+    on the samples (:func:`project_onto_limits`): where the optimisation started."""
 
     history_mm: tuple[float, ...] = ()
     clipped_mm: np.ndarray | None = None
+    projected_mm: np.ndarray | None = None
 
 
 def _models(machine: Machine) -> list:
@@ -171,7 +175,11 @@ def precompensate_reference(ref: Reference, pieces, profile, machine: Machine,
     its lead d_t (:func:`~nurbscnc.servo.precompensate.along_path_offset_mm`) ahead of the
     planned point, placed exactly at path length s_k + d_t (clamped to the program's ends,
     so the reference is never led past the end point along the path;
-    :func:`~nurbscnc.servo.precompensate.limit_to_path`). Every other per-sample column is
+    :func:`~nurbscnc.servo.precompensate.limit_to_path`), then projected onto the machine's
+    limits on the samples (:func:`project_onto_limits`: V, A, J per axis and the path speed
+    by finite differences, or the plan's own where that is above them, in the tube about
+    the plan's points; with no tolerance, anywhere) and, with a contour check, optimised in
+    the tube within the same caps (:func:`refine_in_tube`). Every other per-sample column is
     padded to the new length (the start repeated ``lead_samples`` times), so the dynamics
     check maps each sample to its piece and path length as before. Wall times restart at
     0 with the servo period."""
@@ -204,7 +212,21 @@ def precompensate_reference(ref: Reference, pieces, profile, machine: Machine,
             tube_in = np.maximum(near.min(axis=1) - 2.0 * CHORD_MM, 0.0)
             tube = np.maximum(tube_in - CHORD_MM, 0.0)
         points = limit_to_path(points, foot, tube)
-        comp = replace(comp, points_mm=points)
+    clipped = points
+    # The limits on the samples (module comment "limits on samples"): the clipped ZPETC
+    # reference projected onto them, in the tube about the plan's points (or, with no
+    # tube, anywhere: a frame of the axes).
+    planned = edge(ref.points_mm)
+    caps = sample_limits(planned, machine)
+    if np.isfinite(tolerance_mm):
+        basis, lower, upper = path_frame(planned, s_mm, edge(ref.piece), pieces, profile,
+                                         clipped - planned, tube)  # fmt: skip
+    else:
+        basis = np.broadcast_to(np.eye(3), (points.shape[0], 3, 3))
+        lower = np.full((points.shape[0], 3), -np.inf)
+        upper = -lower
+    points = project_onto_limits(clipped, planned, caps, basis, lower, upper)
+    comp = replace(comp, points_mm=points)
     n_in, n = ref.points_mm.shape[0], points.shape[0]
     # Every per-sample column padded alike (whatever columns the Reference has).
     columns = {f.name: edge(getattr(ref, f.name)) for f in fields(ref)
@@ -218,11 +240,11 @@ def precompensate_reference(ref: Reference, pieces, profile, machine: Machine,
         columns["s_mm"] = s_foot
     out = replace(ref, **columns)
     if np.isfinite(tolerance_mm) and optimise:
-        done = refine_in_tube(out, pieces, profile, machine, tube_in)
+        done = refine_in_tube(out, pieces, profile, machine, tube_in, caps=caps)
         out = replace(out, points_mm=done.points_mm)
         out = replace(out, s_mm=_s_along(done.points_mm, edge(ref.points_mm), s_mm, profile))
         comp = Refined(done.points_mm, comp.lead_samples, comp.end_step_mm,
-                       comp.end_blend_samples, done.history_mm, points)  # fmt: skip
+                       comp.end_blend_samples, done.history_mm, clipped, points)  # fmt: skip
     return out, comp
 
 
@@ -312,6 +334,350 @@ def precompensation_report(plan: Plan, planned: Reference, compensated: Referenc
                            comp.end_blend_samples * period)  # fmt: skip
 
 
+# --------------------------------------------------------------------------- limits on samples
+#
+# The ZPETC inverse of a jerk-limited profile is not jerk-limited: F ≈ 1 + c_1 s + c_2 s² + …
+# adds the planned velocity, acceleration and jerk (scaled) to the reference, so every jerk
+# switch of the plan becomes a snap impulse of the compensated one, and the clip into the tube
+# adds kinks where it bites (the 9 mm airfoil: 434,795 mm/s³ per axis on the samples against
+# J = 50,000). The written reference must keep the machine's limits on its samples (issue 13),
+# so the compensated points are projected onto them before anything else looks at them.
+#
+# The offset δ = u − r from the planned reference r (the planner's output: within the limits,
+# on the path) is micrometres, and every limit is linear in it per sample row:
+#
+#   |Δ²(r + δ)_c| ≤ Ā_i,  |Δ³(r + δ)_c| ≤ J̄_i  (per axis c),  |Δ(r + δ)_c| ≤ V̄_c,i,
+#   |Δ(r + δ)| ≤ V̄_i  (the step length: linearised along the step, then checked exactly),
+#
+# the caps the limit (A T², J T³, V T, per axis the smaller of the path's and the axis' own),
+# or where the planned reference is above it already (a path-limited machine keeps A and J
+# along the path; per axis its curvature terms can exceed them, e.g. 56,489 mm/s³ on the
+# airfoil), its own difference there: never rougher than the plan. δ is written in the frame
+# of the path at r_k, δ_k = α_k m_k + β_k t_k (m the in-plane normal, t the tangent), and kept
+# in the tube exactly: P(s_k + β) = r_k + β t_k + R with |R| ≤ κ β²/2 (κ the largest curvature
+# within |β| along the path, no break in between), so dist(r_k + δ_k, path) ≤ |α_k| + κβ̄²/2:
+#
+#   |β_k| ≤ β̄_k,   |α_k| ≤ τ_k − κ_k β̄_k²/2.
+#
+# δ = 0 satisfies everything, so the linear programme
+#
+#   min Σ |α_k − α*_k| + |β_k − β*_k|   (α*, β*: the clipped ZPETC offset in that frame)
+#
+# always has a solution; it is solved over windows around the rows the ZPETC reference breaks
+# (the rest kept as it is, rows reaching out of a window with their fixed samples), a window
+# that cannot be solved with its ends fixed grown until it can (at worst the whole reference,
+# whose first and last samples are the plan's).
+
+#: The LP's unit of length [mm] (1 nm): the caps are 0.05 µm (J T³) and HiGHS' feasibility
+#: tolerance is absolute.
+_LP_UNIT_MM = 1e-6
+#: Share of a limit the LPs keep free (the solver's tolerance, rounding): the samples stay
+#: within (1 − LIMIT_MARGIN) of the limit where the plan is within it.
+LIMIT_MARGIN = 1e-7
+#: Samples either side of a row over the caps that its window moves (first try; ×4 a try).
+PROJECT_PAD = 40
+#: Largest move along the path of the projection [mm] ...
+PROJECT_ALONG_MM = 0.1
+#: ... and at most the move whose bend off the path (κ β²/2) is this share of the tube.
+PROJECT_BEND = 0.5
+#: Time limit of one projection LP [s].
+PROJECT_LP_TIME_S = 20.0
+
+
+@dataclass(frozen=True, eq=False)
+class SampleLimits:
+    """The limits on a reference's samples [mm], each a row of differences (np.diff):
+    ``step`` (N−1,) the step length (path speed V T), ``axis_step`` (N−1, 3) each axis'
+    step (its V_i T; inf: none), ``second`` (N−2, 3) and ``third`` (N−3, 3) each axis'
+    second and third differences (A T², J T³, the smaller of the path's and the axis' own),
+    every one raised to the planned reference's own difference where that is above the
+    limit (:func:`sample_limits`); ``limits`` the machine's (V T, (V_i T), (A_i T²),
+    (J_i T³)) the rows were raised from, ``own`` the planned reference's |differences| (its
+    step lengths and the |Δ^k| of each axis, k = 1, 2, 3)."""
+
+    step: np.ndarray
+    axis_step: np.ndarray
+    second: np.ndarray
+    third: np.ndarray
+    limits: tuple
+    own: tuple
+
+    def rows(self, order: int) -> np.ndarray:
+        """The per-axis caps of the ``order``-th differences (1, 2, 3) [mm]."""
+        return (self.axis_step, self.second, self.third)[order - 1]
+
+    def lp_rows(self, order: int) -> np.ndarray:
+        """The caps an LP uses: LIMIT_MARGIN below the limit, never below the plan's own (so
+        the plan's points are a solution)."""
+        limit = np.asarray(self.limits[order], dtype=float)
+        return np.maximum(limit * (1.0 - LIMIT_MARGIN), self.own[order])
+
+    def lp_step(self) -> np.ndarray:
+        """The step-length caps an LP uses (as :meth:`lp_rows`)."""
+        return np.maximum(float(self.limits[0]) * (1.0 - LIMIT_MARGIN), self.own[0])
+
+
+def sample_limits(planned_mm: np.ndarray, machine: Machine) -> SampleLimits:
+    """The caps of :class:`SampleLimits` for references of the length of ``planned_mm``
+    (N, 3) [mm] (the plan's reference, lead-padded): the machine's path limits ``limits``
+    and per-axis limits ``axis_limits`` per period T, each row raised to the plan's own."""
+    t = machine.servo.period_s
+    lim = machine.limits
+    v_i, a_i, j_i = machine.axis_limits.as_arrays()
+    v = lim.v_max_mm_s * t
+    axis_v = v_i * t
+    axis_a = np.minimum(lim.a_max_mm_s2, a_i) * t**2
+    axis_j = np.minimum(lim.j_max_mm_s3, j_i) * t**3
+    r = np.asarray(planned_mm, dtype=float)
+    d1, d2, d3 = (np.diff(r, n, axis=0) for n in (1, 2, 3))
+    own = (np.sqrt(np.einsum("ij,ij->i", d1, d1)), np.abs(d1), np.abs(d2), np.abs(d3))
+    return SampleLimits(np.maximum(v, own[0]), np.maximum(axis_v, own[1]),
+                        np.maximum(axis_a, own[2]), np.maximum(axis_j, own[3]),
+                        (v, axis_v, axis_a, axis_j), own)  # fmt: skip
+
+
+def limit_excess(points_mm: np.ndarray, caps: SampleLimits) -> np.ndarray:
+    """Per sample (N,): the largest excess [mm] of a difference row it is in over its cap,
+    beyond rounding (1e-9 of the cap, and 2^k ulps of the largest coordinate for a k-th
+    difference); ≤ 0: every row within its cap."""
+    u = np.asarray(points_mm, dtype=float)
+    n = u.shape[0]
+    out = np.full(n, -np.inf)
+    if n < 2:
+        return np.zeros(n)
+    ulp = float(np.spacing(np.abs(u).max()))
+    d1 = np.diff(u, axis=0)
+    rows = [(np.sqrt(np.einsum("ij,ij->i", d1, d1)) - caps.step * (1.0 + 1e-9) - 2.0 * ulp, 1)]
+    rows += [((np.abs(np.diff(u, k, axis=0)) - caps.rows(k) * (1.0 + 1e-9)
+               - 2.0**k * ulp).max(axis=1), k) for k in (1, 2, 3) if n > k]  # fmt: skip
+    for over, k in rows:
+        for lag in range(k + 1):  # row i covers samples i … i + k
+            out[lag : lag + over.size] = np.maximum(out[lag : lag + over.size], over)
+    return out
+
+
+def _break_lengths_mm(pieces, profile) -> np.ndarray:
+    """Path lengths [mm] (sorted) where the path's tangent jumps (a break between two pieces),
+    and its two ends."""
+    starts = profile.piece_start_mm
+    k = starts.size
+    rows = np.arange(k)
+    t0 = pieces.path.tangents(rows, np.zeros(k))
+    t1 = pieces.path.tangents(rows, pieces.length_mm[:k])
+    jump = np.sqrt(np.sum((t1[:-1] - t0[1:]) ** 2, axis=1)) > 1e-9
+    ends = np.concatenate([[0.0], starts[1:][jump], [profile.total_length_mm]])
+    return np.unique(ends)
+
+
+def _range_max(values: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """max(values[lo_i … hi_i]) (inclusive) for each i: a sparse table, whole-array."""
+    table = [np.asarray(values, dtype=float)]
+    while 2 ** len(table) <= table[0].size:
+        prev, half = table[-1], 2 ** (len(table) - 1)
+        table.append(np.maximum(prev[:-half], prev[half:]))
+    level = np.floor(np.log2(np.maximum(hi - lo + 1, 1))).astype(int)
+    out = np.empty(lo.size)
+    for k in np.unique(level):
+        sel = level == k
+        out[sel] = np.maximum(table[k][lo[sel]], table[k][hi[sel] - 2**k + 1])
+    return out
+
+
+def path_frame(planned_mm: np.ndarray, s_mm: np.ndarray, piece: np.ndarray, pieces, profile,
+               offset_mm: np.ndarray, tube_mm: np.ndarray):  # fmt: skip
+    """The frame of the projection (module comment above) at each planned point (N, 3) [mm]
+    at path length ``s_mm`` on ``piece``: the basis (N, 2, 3) (in-plane normal m, tangent t
+    of the path there), the bounds (N, 2) low and high of (α, β) [mm] keeping r + α m + β t
+    within ``tube_mm`` (N,) [mm] of the path, exactly (no break and at most
+    κ β̄²/2 ≤ PROJECT_BEND τ of bend within β̄ along it; ``offset_mm`` (N, 3) the wanted
+    offset, whose along-path part β̄ need not exceed by more than τ)."""
+    starts = profile.piece_start_mm
+    loc = s_mm - starts[piece]
+    t = pieces.path.tangents(piece, loc)
+    m = _plane_normal(t)
+    # The largest curvature of the pieces within PROJECT_ALONG_MM along the path (NURBS
+    # cells' estimate doubled, as _local_polyline).
+    kappa = np.where(pieces.kind == Kind.NURBS, 2.0, 1.0) * np.abs(pieces.kappa_max_per_mm)
+    kappa = np.nan_to_num(kappa, nan=np.inf)
+    lo_p = np.clip(np.searchsorted(starts, s_mm - PROJECT_ALONG_MM, side="right") - 1, 0,
+                   starts.size - 1)  # fmt: skip
+    hi_p = np.clip(np.searchsorted(starts, s_mm + PROJECT_ALONG_MM, side="right") - 1, 0,
+                   starts.size - 1)  # fmt: skip
+    k_near = _range_max(kappa[: starts.size], lo_p, hi_p)
+    tube = np.maximum(np.asarray(tube_mm, dtype=float), 0.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        b_cap = np.minimum(PROJECT_ALONG_MM, np.sqrt(2.0 * PROJECT_BEND * tube / k_near))
+    b_cap = np.nan_to_num(b_cap, nan=0.0)
+    along = np.abs(np.einsum("ij,ij->i", offset_mm, t))
+    b_bar = np.minimum(b_cap, along + tube)
+    # No break between r_k and r_k + β t: β within the distance to the nearest break (or
+    # end of the path) on its side.
+    brk = _break_lengths_mm(pieces, profile)
+    i = np.clip(np.searchsorted(brk, s_mm, side="right"), 1, brk.size - 1)
+    ahead = np.maximum(brk[i] - s_mm, 0.0)
+    behind = np.maximum(s_mm - brk[i - 1], 0.0)
+    room = np.maximum(tube - 0.5 * np.where(b_bar > 0.0, k_near, 0.0) * b_bar**2, 0.0)
+    has_m = np.any(m != 0.0, axis=1)
+    lower = np.column_stack([np.where(has_m, -room, 0.0), -np.minimum(b_bar, behind)])
+    upper = np.column_stack([np.where(has_m, room, 0.0), np.minimum(b_bar, ahead)])
+    return np.stack([m, t], axis=1), lower, upper
+
+
+def _windows(bad: np.ndarray, pad: int, n: int) -> list[tuple[int, int]]:
+    """Windows [j0, j1) of movable samples (1 … n − 2) ``pad`` either side of the samples
+    ``bad`` (N,) bool; overlapping ones merged."""
+    idx = np.flatnonzero(bad)
+    if idx.size == 0:
+        return []
+    cuts = np.flatnonzero(np.diff(idx) > 2 * pad + 1) + 1
+    return [(max(int(g[0]) - pad, 1), min(int(g[-1]) + pad + 1, n - 1))
+            for g in np.split(idx, cuts)]  # fmt: skip
+
+
+def _project_window(u: np.ndarray, r: np.ndarray, target: np.ndarray, caps: SampleLimits,
+                    basis: np.ndarray, lower: np.ndarray, upper: np.ndarray, j0: int,
+                    j1: int) -> np.ndarray | None:  # fmt: skip
+    """The LP of one window (module comment above): samples j0 … j1−1 of ``u`` (N, 3) moved to
+    r + Σ_d x_d basis_d, nearest ``target`` in L1 of the frame's coordinates, every
+    difference row touching them within the caps, the others as they are; the new
+    samples (j1 − j0, 3) [mm], or None (no solution, or the solver gave up)."""
+    from scipy.optimize import linprog
+    from scipy.sparse import coo_matrix, csr_matrix, eye, hstack, vstack
+
+    n = u.shape[0]
+    size, dims = j1 - j0, basis.shape[1]
+    b = basis[j0:j1]
+    nx = size * dims
+    want = np.einsum("kdc,kc->kd", b, target[j0:j1] - r[j0:j1]).ravel() / _LP_UNIT_MM
+    base = u.copy()
+    base[j0:j1] = r[j0:j1]  # x = 0: the plan's points in the window
+    blocks, rhs = [], []
+    # |x − x*| ≤ e
+    ident = eye(nx, format="csr")
+    blocks += [hstack([ident, -ident]), hstack([-ident, -ident])]
+    rhs += [want, -want]
+
+    def diff_matrix(order: int, weights: np.ndarray):
+        """Rows i (touching the window) of Σ_l c_l (weights · x)_{i+l}: weights (j1 − j0, D)
+        per window sample and direction; the rows' indices."""
+        coef = np.diff(np.eye(order + 1), n=order, axis=0)[0]
+        rows = np.arange(max(j0 - order, 0), min(j1 - 1, n - 1 - order) + 1)
+        ri, ci, vals = [], [], []
+        for lag, c in enumerate(coef):
+            k = rows + lag
+            ok = (k >= j0) & (k < j1)
+            for d in range(dims):
+                ri.append(np.flatnonzero(ok))
+                ci.append((k[ok] - j0) * dims + d)
+                vals.append(c * weights[k[ok] - j0, d])
+        mat = coo_matrix((np.concatenate(vals), (np.concatenate(ri), np.concatenate(ci))),
+                         shape=(rows.size, nx)).tocsr()  # fmt: skip
+        return mat, rows
+
+    for order in (1, 2, 3):
+        cap = caps.lp_rows(order)
+        diffs = np.diff(base, order, axis=0)
+        for c in range(3):
+            if not np.any(basis[j0:j1, :, c]) or not np.any(np.isfinite(cap[:, c])):
+                continue
+            mat, rows = diff_matrix(order, b[:, :, c])
+            keep = np.isfinite(cap[rows, c])
+            mat, rows = mat[keep], rows[keep]
+            zeros = csr_matrix((rows.size, nx))
+            blocks += [hstack([mat, zeros]), hstack([-mat, zeros])]
+            rhs += [(cap[rows, c] - diffs[rows, c]) / _LP_UNIT_MM,
+                    (cap[rows, c] + diffs[rows, c]) / _LP_UNIT_MM]  # fmt: skip
+    # The step length, linearised along the ZPETC reference's step (else the plan's); the
+    # solution is checked exactly, and a row it breaks is cut again along its own step (the
+    # second-order remainder |w⊥|²/2|w| of a move across the step: sub-nanometre here).
+    step_cap = caps.lp_step()
+    d1 = np.diff(base, axis=0)
+
+    def step_rows(rows: np.ndarray, direction: np.ndarray):
+        """Rows unit_i · Δ(δ)_i of the steps ``rows`` along ``direction`` (rows, 3), and
+        their caps less the fixed part unit_i · Δ(base)_i [LP units]."""
+        unit = direction / np.maximum(np.sqrt(np.einsum("ij,ij->i", direction, direction)),
+                                      1e-300)[:, None]  # fmt: skip
+        ri, ci, vals = [], [], []
+        for lag, c in enumerate((-1.0, 1.0)):
+            k = rows + lag
+            ok = (k >= j0) & (k < j1)
+            proj = np.einsum("kdc,kc->kd", basis[k[ok]], unit[ok])
+            for d in range(dims):
+                ri.append(np.flatnonzero(ok))
+                ci.append((k[ok] - j0) * dims + d)
+                vals.append(c * proj[:, d])
+        mat = coo_matrix((np.concatenate(vals), (np.concatenate(ri), np.concatenate(ci))),
+                         shape=(rows.size, nx)).tocsr()  # fmt: skip
+        cap = (step_cap[rows] - np.einsum("ij,ij->i", unit, d1[rows])) / _LP_UNIT_MM
+        return hstack([mat, csr_matrix((rows.size, nx))]), cap
+
+    rows = np.arange(max(j0 - 1, 0), min(j1 - 1, n - 2) + 1)
+    d_target = np.diff(target, axis=0)[rows]
+    direction = np.where(np.any(d_target != 0.0, axis=1)[:, None], d_target, d1[rows])
+    moving = np.any(direction != 0.0, axis=1)  # (a row between two samples at rest: none)
+    rows, direction = rows[moving], direction[moving]
+    mat, cap = step_rows(rows, direction)
+    blocks.append(mat)
+    rhs.append(cap)
+    bounds = np.column_stack([np.concatenate([lower[j0:j1].ravel() / _LP_UNIT_MM,
+                                              np.zeros(nx)]),
+                              np.concatenate([upper[j0:j1].ravel() / _LP_UNIT_MM,
+                                              np.full(nx, np.inf)])])  # fmt: skip
+    cost = np.concatenate([np.zeros(nx), np.ones(nx)])
+    for _try in range(4):
+        res = linprog(cost, A_ub=vstack(blocks).tocsr(), b_ub=np.concatenate(rhs),
+                      bounds=bounds, method="highs",
+                      options={"time_limit": PROJECT_LP_TIME_S,
+                               "primal_feasibility_tolerance": 1e-9})  # fmt: skip
+        if res.status != 0:
+            return None
+        x = res.x[:nx].reshape(size, dims) * _LP_UNIT_MM
+        moved = r[j0:j1] + np.einsum("kd,kdc->kc", x, b)
+        trial = u.copy()
+        trial[j0:j1] = moved
+        lo, hi = max(j0 - 1, 0), min(j1, n - 1)
+        d = np.diff(trial[lo : hi + 1], axis=0)
+        over = np.sqrt(np.einsum("ij,ij->i", d, d)) > step_cap[lo:hi] * (1.0 + 1e-12)
+        if not over.any():
+            return moved
+        mat, cap = step_rows(np.arange(lo, hi)[over], d[over])
+        blocks.append(mat)
+        rhs.append(cap)
+    return None
+
+
+def project_onto_limits(target_mm: np.ndarray, planned_mm: np.ndarray, caps: SampleLimits,
+                        basis: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+                        ) -> np.ndarray:  # fmt: skip
+    """``target_mm`` (N, 3) [mm] moved, where its differences break ``caps``, to the nearest
+    reference (L1 in the frame ``basis`` (N, D, 3) about ``planned_mm``, offsets within
+    ``lower`` … ``upper`` (N, D) [mm]) whose differences keep them (module comment above);
+    the first and last samples, and samples no broken row reaches, as they are. The plan's
+    own reference (δ = 0) keeps them, so there is always a solution: if the solver fails
+    on the whole reference, the planned points are returned."""
+    r = np.asarray(planned_mm, dtype=float)
+    u = np.array(target_mm, dtype=float)
+    n = u.shape[0]
+    if n < 3:
+        return u
+    pad = PROJECT_PAD
+    while True:
+        bad = limit_excess(u, caps) > 0.0
+        bad[[0, -1]] = False
+        windows = _windows(bad, pad, n)
+        if not windows:
+            return u
+        for j0, j1 in windows:
+            moved = _project_window(u, r, target_mm, caps, basis, lower, upper, j0, j1)
+            if moved is not None:
+                u[j0:j1] = moved
+        if windows == [(1, n - 1)]:
+            bad = limit_excess(u, caps) > 0.0
+            return u if not bad.any() else r.copy()
+        pad *= 4
+
+
 # --------------------------------------------------------------------------- tube optimisation
 #
 # The clip above keeps the ZPETC reference within the tube of radius τ about the path, but
@@ -329,8 +695,10 @@ def precompensation_report(plan: Plan, planned: Reference, compensated: Referenc
 #          τ'_j the tube less any offset out of the plane; |b_j| ≤ b̄_j, the bend of a
 #          straight move along a curve of curvature κ_j at most REFINE_BEND τ),
 #   limits the step lengths |u_{j+1} − u_j| + b_{j+1} − b_j ≤ V T (first order) and the
-#          second and third differences of u + Δ on every axis within A T², J T³ — or
-#          within the starting reference's own where it was above them already,
+#          first, second and third differences of u + Δ on every axis within the caps of
+#          the limits on the samples (SampleLimits: the machine's, or the plan's own where
+#          that is above them; the projection above starts the rounds within them) — or
+#          within u's own where it is above them (a start not projected: no step rougher),
 #   min z  subject to  |σ_k + Σ_j G_kj (a_j, b_j)| ≤ z  over the region's tool samples,
 #
 # G_kj = Σ_axes ν_k,c h_c[k − j] (m_j,c, t_j,c) with h_c the axis' impulse response. Then the
@@ -357,11 +725,6 @@ REFINE_MAX_INPUTS = 120
 #: The share of the machine's V T a step's length may use (the first-order length is
 #: exact but for the move across the path, orthogonal: its square, sub-nanometre here).
 REFINE_SPEED = 0.999
-#: The share of the machine's A T² and J T³ a step's own differences may use.
-REFINE_SMOOTH = 0.9
-#: ... and what the step may add to them beyond that (share of the limit): the projection
-#: into the tube after the step, not in the LP.
-REFINE_ROUGH = 0.02
 #: A tool sample within this of the last try's [mm] keeps its distance to the path
 #: (:func:`refine_in_tube`).
 REUSE_MM = 1e-12
@@ -559,20 +922,18 @@ def _difference_rows(u: np.ndarray, j0: int, j1: int, order: int) -> tuple:
 
 def _region_step(u: np.ndarray, y: np.ndarray, cut_out: np.ndarray, movable: np.ndarray,
                  window: tuple[int, int, int], h: np.ndarray, poly: np.ndarray,
-                 tube: np.ndarray, limits: tuple[float, float, float], kappa: np.ndarray,
-                 start: np.ndarray | None = None) -> np.ndarray | None:  # fmt: skip
+                 tube: np.ndarray, caps: SampleLimits, kappa: np.ndarray,
+                 ) -> np.ndarray | None:  # fmt: skip
     """The LP step of one ``window`` (j0, j1, k1) (module comment above): (j1 − j0, 3) [mm],
     the move Δ_j = a_j m_j + b_j t_j of each sample across (in-plane normal m) and along
-    (tangent t) the path, or None. ``limits`` (V T, A T², J T³) [mm]: the reference's
-    steps (their length, to first order) and its second and third differences on every
-    axis stay within them (or within its own, where it was above them already), so the
-    step never makes the reference faster or rougher than the machine's velocity,
-    acceleration and jerk (the differences exactly: Δ is applied as it is here, a straight
-    move). ``kappa`` (N,) [1/mm] the path's curvature at each sample (the bend of a move
-    along it); ``start`` (N, 3) [mm] the reference the optimisation started from (default
-    ``u``): where its own differences exceed the limits they are the caps, as
-    :func:`_no_rougher` measures them (caps from ``u`` would ratchet: a row smoothed in
-    one round could never take back what the start had)."""
+    (tangent t) the path, or None. ``caps`` (:class:`SampleLimits`): the reference's
+    steps (their length, to first order, REFINE_SPEED of the cap) and its first, second
+    and third differences on every axis stay within the caps less LIMIT_MARGIN (or within
+    ``u``'s own, where it was above them already: Δ = 0 is always a solution), so the step
+    never makes the reference faster or rougher than the machine's velocity, acceleration
+    and jerk (the differences exactly: Δ is applied as it is here, a straight move).
+    ``kappa`` (N,) [1/mm] the path's curvature at each sample (the bend of a move along
+    it)."""
     from scipy.optimize import linprog
 
     j0, j1, k1 = window
@@ -614,28 +975,27 @@ def _region_step(u: np.ndarray, y: np.ndarray, cut_out: np.ndarray, movable: np.
     n_x = 2 * (j1 - j0)
     # The speed: a move b along the path lengthens the step between samples j and j + 1 by
     # b_{j+1} − b_j (to first order; a move across it, orthogonal, by its square), so that
-    # difference stays within what the path speed V T leaves (or the step's own length,
-    # where the reference was faster than V already).
-    start = u if start is None else start
+    # difference stays within what the step's cap leaves (REFINE_SPEED of it: the square).
     d, du = _difference_rows(u, j0, j1, 1)
     step = np.sqrt(np.einsum("ij,ij->i", du, du))
-    d0 = _difference_rows(start, j0, j1, 1)[1]
-    cap = np.maximum(REFINE_SPEED * limits[0], np.sqrt(np.einsum("ij,ij->i", d0, d0)))
+    at = np.clip(np.arange(j0 - 1, j1), 0, caps.step.size - 1)  # the rows' np.diff index
     a_ub.append(np.hstack([np.zeros_like(d), d, np.zeros((d.shape[0], 1))]))
-    b_ub.append(np.maximum(cap - step, 0.0))
-    for order, limit in zip((2, 3), limits[1:]):
+    b_ub.append(np.maximum(REFINE_SPEED * caps.lp_step()[at] - step, 0.0))
+    for order in (1, 2, 3):
         d, du = _difference_rows(u, j0, j1, order)
-        d0 = _difference_rows(start, j0, j1, order)[1]
+        limit = caps.lp_rows(order)
+        at = np.clip(np.arange(j0 - order, j1), 0, limit.shape[0] - 1)
         for c in range(3):
-            if not np.any(basis[:, c]):
+            finite = np.isfinite(limit[at, c])
+            if not np.any(basis[:, c]) or not finite.any():
                 continue
-            rows = np.hstack([d * basis[: j1 - j0, c], d * basis[j1 - j0 :, c]])
-            # (the step's differences within REFINE_SMOOTH of the limit, or the start's)
-            cap = np.maximum(np.maximum(REFINE_SMOOTH * limit, np.abs(d0[:, c])),
-                             np.abs(du[:, c]))  # fmt: skip
+            rows = np.hstack([d * basis[: j1 - j0, c], d * basis[j1 - j0 :, c]])[finite]
+            # (within the cap, or the current reference's own where it is above it)
+            cap = np.maximum(limit[at, c], np.abs(du[:, c]))[finite]
+            du_c = du[finite, c]
             zero = np.zeros((rows.shape[0], 1))
             a_ub += [np.hstack([rows, zero]), np.hstack([-rows, zero])]
-            b_ub += [cap - du[:, c], cap + du[:, c]]
+            b_ub += [cap - du_c, cap + du_c]
     bounds = np.column_stack([np.concatenate([lo_a, -along, [0.0]]),
                               np.concatenate([hi_a, along, [np.inf]])])  # fmt: skip
     cost = np.zeros(n_x + 1)
@@ -648,33 +1008,53 @@ def _region_step(u: np.ndarray, y: np.ndarray, cut_out: np.ndarray, movable: np.
     return ab[0][:, None] * m + ab[1][:, None] * tan_in  # (J, 3): Δ = a m + b t
 
 
-def _no_rougher(new_mm: np.ndarray, old_mm: np.ndarray, j0: int, j1: int,
-                limits: tuple[float, float, float]) -> bool:
-    """Whether the steps of ``new_mm`` about samples j0 … j1−1 (their length) are within
-    (2 − REFINE_SPEED) max(V T, those of ``old_mm``), and its second and third differences
-    (on every axis) within max(limit, those of ``old_mm``) + REFINE_ROUGH × limit
-    (``limits`` (V T, A T², J T³) [mm]; ``old_mm`` the reference the optimisation started
-    from, so the allowance does not add up over the rounds)."""
+def _rougher(new_mm: np.ndarray, start_mm: np.ndarray, caps: SampleLimits, lo: int = 0,
+             hi: int | None = None) -> np.ndarray:  # fmt: skip
+    """Per sample lo … hi−1: whether a difference row of ``new_mm`` within that range that it
+    is in (its step length, its first, second and third differences on every axis) exceeds
+    its cap of ``caps``, or ``start_mm``'s own where that was above the cap already (the
+    reference the optimisation started from, so no allowance adds up over the rounds),
+    beyond rounding (1e-9 of the cap, 2^k ulps of the coordinates)."""
+    hi = new_mm.shape[0] if hi is None else hi
+    new, old = new_mm[lo:hi], start_mm[lo:hi]
+    out = np.zeros(hi - lo, dtype=bool)
+    if hi - lo < 2:
+        return out
+    ulp = float(np.spacing(np.abs(new).max()))
+    dn, do = np.diff(new, axis=0), np.diff(old, axis=0)
+    step_n, step_o = (np.sqrt(np.einsum("ij,ij->i", d, d)) for d in (dn, do))
+    rows = [(step_n > np.maximum(caps.step[lo : hi - 1], step_o) * (1.0 + 1e-9) + 2.0 * ulp, 1)]
+    for k in (1, 2, 3):
+        if hi - lo <= k:
+            break
+        dn, do = np.abs(np.diff(new, k, axis=0)), np.abs(np.diff(old, k, axis=0))
+        cap = np.maximum(caps.rows(k)[lo : hi - k], do) * (1.0 + 1e-9) + 2.0**k * ulp
+        rows.append((np.any(dn > cap, axis=1), k))
+    for over, k in rows:
+        for lag in range(k + 1):  # row i covers samples i … i + k
+            out[lag : lag + over.size] |= over
+    return out
+
+
+def _no_rougher(new_mm: np.ndarray, start_mm: np.ndarray, j0: int, j1: int,
+                caps: SampleLimits) -> bool:  # fmt: skip
+    """Whether every difference row about samples j0 … j1−1 of ``new_mm`` keeps its cap
+    (:func:`_rougher`)."""
     lo, hi = max(j0 - 3, 0), min(j1 + 3, new_mm.shape[0])
-    step_new = np.sqrt(np.sum(np.diff(new_mm[lo:hi], axis=0) ** 2, axis=1))
-    step_old = np.sqrt(np.sum(np.diff(old_mm[lo:hi], axis=0) ** 2, axis=1))
-    if np.any(step_new > np.maximum(limits[0], step_old) * (1.0 + 1.0 - REFINE_SPEED)):
-        return False
-    for order, limit in zip((2, 3), limits[1:]):
-        d_new = np.abs(np.diff(new_mm[lo:hi], n=order, axis=0))
-        d_old = np.abs(np.diff(old_mm[lo:hi], n=order, axis=0))
-        if np.any(d_new > np.maximum(limit, d_old) + REFINE_ROUGH * limit):
-            return False
-    return True
+    return not _rougher(new_mm, start_mm, caps, lo, hi).any()
 
 
 def refine_in_tube(ref: Reference, pieces, profile, machine: Machine, tube_mm: np.ndarray,
-                   rounds: int = REFINE_ROUNDS, gain_mm: float = REFINE_GAIN_MM) -> Refinement:
+                   rounds: int = REFINE_ROUNDS, gain_mm: float = REFINE_GAIN_MM,
+                   caps: SampleLimits | None = None) -> Refinement:  # fmt: skip
     """The reference ``ref`` (its points within ``tube_mm`` (N,) of the path) with its
     offsets across the path re-chosen where the simulated contour error exceeds
     REFINE_THRESHOLD × ε_max, to minimise the largest error there (module comment above:
     sequential LPs on the known model, each round kept only where it lowers the error).
-    Samples at rest, on rapids, and the first and last sample do not move."""
+    Samples at rest, on rapids, and the first and last sample do not move. ``caps``
+    (:class:`SampleLimits`, default the machine's limits alone) bound the differences of
+    the reference (:func:`_region_step`): a reference within them stays within them, one
+    above them never gets rougher where it is (:func:`_rougher`)."""
     from scipy import signal
 
     from nurbscnc.servo.model import discretise
@@ -693,9 +1073,8 @@ def refine_in_tube(ref: Reference, pieces, profile, machine: Machine, tube_mm: n
     h = _impulse_responses(machine, reach)
     period = machine.servo.period_s
     before = max(int(round(REFINE_BEFORE_S / period)), 1)
-    lim = machine.limits
-    limits = (lim.v_max_mm_s * period, lim.a_max_mm_s2 * period**2,
-              lim.j_max_mm_s3 * period**3)  # fmt: skip
+    if caps is None:
+        caps = sample_limits(np.zeros_like(u), machine)
     # The path's curvature at each sample (its piece's largest) [1/mm]: the bend bound.
     kappa = np.asarray(pieces.kappa_max_per_mm, dtype=float)[ref.piece]
 
@@ -757,7 +1136,7 @@ def refine_in_tube(ref: Reference, pieces, profile, machine: Machine, tube_mm: n
             poly = _local_polyline(pieces, profile, float(s_in.min()) - margin,
                                    float(s_in.max()) + margin)  # fmt: skip
             step = _region_step(u, y, cut_out, movable, (j0, j1, k1), h, poly, tube_mm,
-                                limits, kappa, start)  # fmt: skip
+                                caps, kappa)  # fmt: skip
             steps.append((j0, j1, k1, step, poly))
         steps = [s for s in steps if s[3] is not None]
         if not steps:
@@ -782,13 +1161,25 @@ def refine_in_tube(ref: Reference, pieces, profile, machine: Machine, tube_mm: n
                     continue
                 k1 = min(k1, err.size)
                 if (float(err_t[j0:k1].max()) < float(err[j0:k1].max()) - 1e-9
-                        and _no_rougher(trial, start, j0, _j1, limits)):
+                        and _no_rougher(trial, start, j0, _j1, caps)):
                     done[i] = True
                     base[j0:_j1] = trial[j0:_j1]
                 else:
                     alpha[i] *= 0.5
             if done.all():
                 break
+        # Windows next to each other were each checked with the other's step in: one whose
+        # neighbour was then not kept is taken back where a row across them breaks a cap.
+        for _undo in range(len(steps)):
+            bad = _rougher(base, start, caps)
+            hit = [i for i, (j0, j1, *_rest) in enumerate(steps)
+                   if done[i] and bad[max(j0 - 3, 0) : j1 + 3].any()]  # fmt: skip
+            if not hit:
+                break
+            for i in hit:
+                j0, j1 = steps[i][:2]
+                base[j0:j1] = u[j0:j1]
+                done[i] = False
         if not done.any():
             history.append(history[-1])
             break
