@@ -11,6 +11,8 @@ then the tube optimisation within the same caps).
 
 from __future__ import annotations
 
+import hashlib
+from collections import OrderedDict
 from dataclasses import dataclass, fields, replace
 
 import numpy as np
@@ -21,7 +23,7 @@ from nurbscnc.machine.profile import AxisServo, Machine
 from nurbscnc.plan.dynamics import CHORD_MM, PathIndex, path_response, windowed_contour_mm
 from nurbscnc.plan.lookahead import Plan
 from nurbscnc.plan.timing import Reference
-from nurbscnc.servo.model import AxisModel, contour_error_true
+from nurbscnc.servo.model import AxisModel, _as_model, contour_error_true, discretise
 from nurbscnc.servo.precompensate import (
     REFERENCE_TOLERANCE_MM,
     Compensated,
@@ -29,6 +31,7 @@ from nurbscnc.servo.precompensate import (
     limit_to_path,
     perturbed_model,
     precompensate_points,
+    zpetc,
 )
 
 #: The ±10 % model errors of the sensitivity report: (label, loop gain per axis x, y, z,
@@ -161,11 +164,13 @@ def _tube_mm(pieces, piece: np.ndarray, foot_mm: np.ndarray, tolerance_mm: float
     return np.maximum(tolerance_mm - margin, 0.0)
 
 
-def precompensate_reference(ref: Reference, pieces, profile, machine: Machine,
-                            tolerance_mm: float = REFERENCE_TOLERANCE_MM,
-                            fit_tolerance_mm: float | None = None, refine: bool = True,
-                            ) -> tuple[Reference, Compensated]:  # fmt: skip
-    """The ZPETC pre-compensated version of a plan's reference (SPEC eq. 25 inverted,
+def _compensate_segment(ref: Reference, pieces, profile, machine: Machine,
+                        tolerance_mm: float, fit_tolerance_mm: float | None, refine: bool,
+                        first: bool) -> tuple[Reference, Compensated]:  # fmt: skip
+    """One segment of :func:`precompensate_reference` (a cut window's samples, or the whole
+    reference), compensated as a program of its own (``first``: the program's first, delayed
+    by the pre-actuation; else its first sample the planned one, no delay): the ZPETC
+    pre-compensated version of a plan's reference (SPEC eq. 25 inverted,
     :func:`~nurbscnc.servo.precompensate.precompensate_points`; F's tail blended in within
     the machine's acceleration and jerk, so it ends with the plan), kept within
     ``tolerance_mm`` of the path (inf: no limit): each compensated point u_k is projected
@@ -187,6 +192,13 @@ def precompensate_reference(ref: Reference, pieces, profile, machine: Machine,
     lim = machine.limits
     comp = precompensate_points(_models(machine), ref.points_mm, period,
                                 a_max_mm_s2=lim.a_max_mm_s2, j_max_mm_s3=lim.j_max_mm_s3)
+    if not first:
+        # A later segment starts at rest at the end of the cut before it, with a rapid: its
+        # samples keep their wall times (no delay), so the pre-actuation of the rapid's start
+        # (the held samples) is dropped and its first sample is the planned one.
+        u = comp.points_mm[comp.lead_samples :].copy()
+        u[0] = ref.points_mm[0]
+        comp = replace(comp, points_mm=u, lead_samples=0)
     pad = (comp.lead_samples, 0)
 
     def edge(x):
@@ -257,22 +269,258 @@ def _s_along(points_mm: np.ndarray, planned_mm: np.ndarray, s_planned_mm: np.nda
     return np.clip(s_planned_mm + lead, 0.0, profile.total_length_mm)
 
 
+# --------------------------------------------------------------------------- cut-window segments
+#
+# Long programs (issue 13, tort.ngc: 554 s, 74 cut windows, 82 re-plans). The planner checks a
+# program cut window by cut window (lookahead.plan_windows), every re-plan of window w with
+# the windows before it final and the ones after it placeholders. A whole-reference sampler
+# made each of those checks compensate, project and optimise the whole program: O(re-plans ×
+# program), more than 3 minutes of CPU on tort without finishing (45 minutes under LinuxCNC's
+# limits). Here the compensated reference is made of *segments*, one per cut window's samples
+# (from the first sample at the window's first piece to the next window's), each compensated
+# as a program of its own (:func:`_compensate_segment`): the ZPETC inverse from rest at its
+# first point, F's tail blended in at its end (a cut → rapid junction is a rest, as the end
+# of a program is), the clip, the projection onto the limits and the tube optimisation on its
+# samples alone. A segment's samples then depend only on its own planned samples, so
+#
+# - the sampler gives any window of samples exactly (the planner checks the rows it needs,
+#   not the program: ``sample.windows``) and a re-plan of window w costs window w;
+# - segments are kept by their planned samples (:data:`_SEGMENTS`, bounded), so the final
+#   windows' segments are made once for every later check and for the output
+#   (``precompensate_reference`` of the final plan finds them).
+#
+# What a segment does not see: the tail of the inverse of the cut before it (the IIR part
+# decays at |pole| per sample: 0.91 on the paper's axes, 1e-12 after 300 samples, and the
+# rapid in between is at least one), and the pre-actuation of its own first samples (the
+# look-ahead of F, n_u + d samples: ~nanometres at a rapid's start from rest, where the
+# contour is not checked). The planner's check simulates the joined reference with the
+# servo's state carried across windows (what the machine does), so neither is assumed away;
+# the rows that span two segments (the step between them and the second and third differences
+# across it) are checked against the limits and, where they break them, re-projected by
+# moving the later segment's first samples (:func:`_join_segments`), which only depend on
+# the earlier segment's last three samples.
+
+#: Most samples of compensated segments kept across checks (:data:`_SEGMENTS`): 1.5e6
+#: samples of 10 columns, 120 MB; the planner needs two at a time (the window checked and the
+#: one before it), the output all of the final plan's (made again where evicted).
+SEGMENT_CACHE_SAMPLES = 1_500_000
+#: Fewest samples of a segment (a shorter cut window's samples join the segment before).
+MIN_SEGMENT = 16
+#: Samples after a segment's start that the joint's re-projection may move (first try; the
+#: whole segment but its last three at worst).
+JOIN_PAD = 40
+
+_SEGMENTS: OrderedDict = OrderedDict()
+
+
+def _segment_starts(pieces, profile, period_s: float, n: int) -> np.ndarray:
+    """Sample indices (S + 1,) where the segments of a reference of ``n`` samples start
+    (the first sample at each cut window's first piece, :func:`~nurbscnc.plan.lookahead.
+    cut_windows`), and ``n``: strictly increasing, the first 0."""
+    from nurbscnc.plan.lookahead import _first_sample_at, cut_windows
+
+    starts = [_first_sample_at(pieces, profile, int(a), period_s)
+              for a in cut_windows(pieces)[1:].tolist()]  # fmt: skip
+    ks = [0]
+    for k in starts:  # a segment shorter than MIN_SEGMENT joins the one before it
+        if k - ks[-1] >= MIN_SEGMENT and n - k >= MIN_SEGMENT:
+            ks.append(int(k))
+    return np.asarray([*ks, n], dtype=np.int64)
+
+
+def _key(ref: Reference, machine: Machine, pieces, options: tuple, first: bool) -> tuple:
+    """The cache key of a segment: what its compensation depends on (its planned samples'
+    columns, bit for bit; the machine, path and options by identity, the entry holding
+    them so an identity is never reused while it is kept)."""
+    h = hashlib.blake2b(digest_size=20)
+    for f in fields(ref):
+        x = np.ascontiguousarray(getattr(ref, f.name))
+        h.update(str(x.dtype).encode() + str(x.shape).encode())
+        h.update(x.tobytes())
+    return (id(machine), id(pieces.path), options, first, h.hexdigest())
+
+
+def _segment(ref: Reference, pieces, profile, machine: Machine, options: tuple,
+             first: bool) -> tuple[Reference, Compensated]:  # fmt: skip
+    """:func:`_compensate_segment` of the planned samples ``ref``, from :data:`_SEGMENTS` when
+    made before (least recently used evicted beyond SEGMENT_CACHE_SAMPLES)."""
+    key = _key(ref, machine, pieces, options, first)
+    hit = _SEGMENTS.get(key)
+    if hit is not None:
+        _SEGMENTS.move_to_end(key)
+        return hit[0], hit[1]
+    out, comp = _compensate_segment(ref, pieces, profile, machine, *options, first)
+    _SEGMENTS[key] = (out, comp, machine, pieces.path)
+    total = sum(v[0].t_s.size for v in _SEGMENTS.values())
+    while total > SEGMENT_CACHE_SAMPLES and len(_SEGMENTS) > 1:
+        _, old = _SEGMENTS.popitem(last=False)
+        total -= old[0].t_s.size
+    return out, comp
+
+
+def _rows_of(ref: Reference, lo: int, hi: int) -> Reference:
+    """Rows lo … hi − 1 of every per-sample column of ``ref``."""
+    return replace(ref, **{f.name: getattr(ref, f.name)[lo:hi] for f in fields(ref)})
+
+
+def _join_segments(prev_tail_mm: np.ndarray, seg: Reference, planned: Reference,
+                   pieces, profile, machine: Machine, tolerance_mm: float,
+                   fit_tolerance_mm: float | None) -> Reference:  # fmt: skip
+    """Segment ``seg`` (compensated, its planned samples ``planned``) after a segment whose
+    last three samples are ``prev_tail_mm`` (3, 3) [mm]: where a difference row across the
+    joint (the step, the second and third differences) breaks the limits on the samples,
+    the segment's first samples are projected onto them again (:func:`project_onto_limits`'
+    windows, the earlier segment's samples fixed, at most all but the segment's last three);
+    if no window solves it, the segment is left as it is (the output's limits test names
+    it)."""
+    m = prev_tail_mm.shape[0]
+    u = np.vstack([prev_tail_mm, seg.points_mm])
+    r = np.vstack([prev_tail_mm, planned.points_mm])
+    caps = sample_limits(r, machine)
+    head = min(u.shape[0], m + 6)  # every row with a sample on each side of the joint
+    if not (limit_excess(u[:head], sample_limits(r[:head], machine)) > 0.0).any():
+        return seg
+    if np.isfinite(tolerance_mm):
+        fit = machine.limits.ph_tolerance_mm if fit_tolerance_mm is None else fit_tolerance_mm
+        starts = profile.piece_start_mm
+        piece = np.concatenate([np.full(m, planned.piece[0]), planned.piece])
+        s_plan = np.concatenate([np.full(m, planned.s_mm[0]), planned.s_mm])
+        foot = pieces.path.place(starts, s_plan, piece)[0]
+        tube = _tube_mm(pieces, piece, foot, tolerance_mm, fit)
+        basis, lower, upper = path_frame(r, s_plan, piece, pieces, profile, u - r, tube)
+    else:
+        basis = np.broadcast_to(np.eye(3), (u.shape[0], 3, 3))
+        lower = np.full((u.shape[0], 3), -np.inf)
+        upper = -lower
+    last = u.shape[0] - 3
+    pad = JOIN_PAD
+    while True:
+        j1 = min(m + pad, last)
+        if j1 <= m:
+            return seg
+        moved = _project_window(u, r, u, caps, basis, lower, upper, m, j1)
+        if moved is not None:
+            out = u.copy()
+            out[m:j1] = moved
+            if not (limit_excess(out, caps)[: j1 + 3] > 0.0).any():
+                return replace(seg, points_mm=out[m:])
+        if j1 == last:
+            return seg
+        pad *= 4
+
+
+def _lead_samples(machine: Machine) -> int:
+    """The pre-actuation of the ZPETC inverse (:func:`~nurbscnc.servo.precompensate.zpetc`):
+    the largest look-ahead of the machine's axes [samples]."""
+    period = machine.servo.period_s
+    return max(zpetc(discretise(_as_model(m), period, "foh")).lead_samples
+               for m in _models(machine) if m is not None)  # fmt: skip
+
+
+def _compensated_rows(ref_of, pieces, profile, machine: Machine, options: tuple, n: int,
+                      lo: int, hi: int) -> tuple[Reference, list]:  # fmt: skip
+    """Rows lo … hi − 1 of the compensated reference of a plan of ``n`` planned samples
+    (cut-window segments, module comment above; row k + lead ↔ planned sample k, lead the
+    pre-actuation at the program's start, :func:`_lead_samples`): the segments covering
+    them (:func:`_segment`), each after the first joined to the one before it
+    (:func:`_join_segments`: its last three samples, which no join moves).
+    ``ref_of(k0, k1)`` gives the planned samples k0 … k1 − 1. Returns the rows and the
+    segments' :class:`Compensated` records."""
+    period = machine.servo.period_s
+    ks = _segment_starts(pieces, profile, period, n)
+    lead = _lead_samples(machine)
+    begin = ks[:-1] + lead  # the rows of segment i: begin[i] … end[i] − 1
+    begin[0] = 0
+    end = ks[1:] + lead
+    first_i = int(np.searchsorted(end, lo, side="right"))
+    last_i = max(int(np.searchsorted(begin, hi, side="left")), first_i + 1)
+    parts, comps = [], []
+    for i in range(first_i, min(last_i, ks.size - 1)):
+        planned = ref_of(int(ks[i]), int(ks[i + 1]))
+        seg, comp = _segment(planned, pieces, profile, machine, options, i == 0)
+        if i > 0:
+            before = _segment(ref_of(int(ks[i - 1]), int(ks[i])), pieces, profile, machine,
+                              options, i == 1)[0]  # fmt: skip
+            seg = _join_segments(before.points_mm[-3:], seg, planned, pieces, profile,
+                                 machine, *options[:2])  # fmt: skip
+        a = int(begin[i])
+        parts.append(_rows_of(seg, max(lo - a, 0), min(hi, int(end[i])) - a))
+        comps.append(comp)
+    out = replace(parts[0], **{f.name: np.concatenate([getattr(p, f.name) for p in parts])
+                                for f in fields(parts[0])})  # fmt: skip
+    return replace(out, t_s=np.arange(lo, lo + out.t_s.size) * period), comps
+
+
+def _joined_records(comps: list, points_mm: np.ndarray) -> Compensated:
+    """One record of the segments' ``comps`` for the whole reference ``points_mm``: the
+    first segment's pre-actuation, the last one's end blend; with the tube optimisation
+    (:class:`Refined`), the largest error of any segment before and after each round (a
+    segment that stopped early counted at its last value), the clipped and projected
+    references joined."""
+    if len(comps) == 1:
+        return replace(comps[0], points_mm=points_mm)
+    first, last = comps[0], comps[-1]
+    if not all(isinstance(c, Refined) for c in comps):
+        return Compensated(points_mm, first.lead_samples, last.end_step_mm,
+                           last.end_blend_samples)  # fmt: skip
+    rounds = max(len(c.history_mm) for c in comps)
+    history = np.max([np.pad(np.asarray(c.history_mm), (0, rounds - len(c.history_mm)),
+                             mode="edge") for c in comps], axis=0)  # fmt: skip
+    return Refined(points_mm, first.lead_samples, last.end_step_mm, last.end_blend_samples,
+                   tuple(float(h) for h in history),
+                   np.concatenate([c.clipped_mm for c in comps]),
+                   np.concatenate([c.projected_mm for c in comps]))  # fmt: skip
+
+
+def precompensate_reference(ref: Reference, pieces, profile, machine: Machine,
+                            tolerance_mm: float = REFERENCE_TOLERANCE_MM,
+                            fit_tolerance_mm: float | None = None, refine: bool = True,
+                            ) -> tuple[Reference, Compensated]:  # fmt: skip
+    """The ZPETC pre-compensated version of a plan's reference ``ref`` (all its samples):
+    one segment per cut window (module comment "cut-window segments"), each
+    :func:`_compensate_segment` (the inverse, the tube of ``tolerance_mm`` [mm] about the
+    path, the limits on the samples, the tube optimisation), joined within the limits; the
+    first segment delayed by the inverse's pre-actuation (``lead_samples``), every
+    per-sample column padded alike; wall times from 0 at the servo period. A program of one
+    cut is one segment: what :func:`_compensate_segment` gives for it."""
+    n = ref.t_s.size
+    options = (tolerance_mm, fit_tolerance_mm, refine)
+    out, comps = _compensated_rows(lambda a, b: _rows_of(ref, a, b), pieces, profile,
+                                   machine, options, n, 0, n + _lead_samples(machine))  # fmt: skip
+    return out, _joined_records(comps, out.points_mm)
+
+
 def precompensated_sampler(sampler, machine: Machine,
                            tolerance_mm: float = REFERENCE_TOLERANCE_MM,
                            fit_tolerance_mm: float | None = None):  # fmt: skip
-    """The reference sampler (pieces, profile, period_s) → Reference of ``sampler`` followed
-    by :func:`precompensate_reference`: what the dynamics check simulates with
-    ``--precompensate`` (it needs no hook in the planner)."""
+    """The reference sampler (pieces, profile, period_s, k0=0, k1=None) → Reference of
+    ``sampler`` followed by :func:`precompensate_reference`: what the dynamics check
+    simulates with ``--precompensate`` (it needs no hook in the planner). Rows k0 … k1 − 1
+    are made from the segments that hold them (module comment "cut-window segments"), the
+    same rows as the whole reference's, so the planner checks a cut window's samples at
+    the cost of that window; a sampler without windows (the Taylor recurrence) is sampled
+    whole and then cut."""
+    from nurbscnc.plan.lookahead import _windowed
+    from nurbscnc.plan.timing import sample_count
 
-    def sample(pieces, profile, period_s: float):
-        ref = sampler(pieces, profile, period_s)
-        return precompensate_reference(ref, pieces, profile, machine, tolerance_mm,
-                                       fit_tolerance_mm)[0]
+    options = (tolerance_mm, fit_tolerance_mm, True)
+    windowed = _windowed(sampler)
+
+    def sample(pieces, profile, period_s: float, k0: int = 0, k1: int | None = None):
+        n = sample_count(pieces, profile, period_s)
+        hi = n + _lead_samples(machine) if k1 is None else k1
+        if windowed:
+            def ref_of(a, b):
+                return sampler(pieces, profile, period_s, a, b)
+        else:
+            whole = sampler(pieces, profile, period_s)
+
+            def ref_of(a, b):
+                return _rows_of(whole, a, b)
+        return _compensated_rows(ref_of, pieces, profile, machine, options, n, k0, hi)[0]
 
     sample.interpolator = getattr(sampler, "interpolator", None)
-    # The inverse filters the whole reference (its state runs from the start): the planner
-    # evaluates this sampler whole, not in windows of samples k0…k1.
-    sample.windows = False
+    sample.windows = windowed
     return sample
 
 
