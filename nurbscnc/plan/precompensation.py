@@ -311,6 +311,10 @@ MIN_SEGMENT = 16
 JOIN_PAD = 40
 
 _SEGMENTS: OrderedDict = OrderedDict()
+#: Joined segments kept (:func:`_join_segments` of a segment after a given tail: the check
+#: asks a window's rows in several pieces).
+JOINED_KEPT = 16
+_JOINED: OrderedDict = OrderedDict()
 
 
 def _segment_starts(pieces, profile, period_s: float, n: int) -> np.ndarray:
@@ -441,8 +445,16 @@ def _compensated_rows(ref_of, pieces, profile, machine: Machine, options: tuple,
         if i > 0:
             before = _segment(ref_of(int(ks[i - 1]), int(ks[i])), pieces, profile, machine,
                               options, i == 1)[0]  # fmt: skip
-            seg = _join_segments(before.points_mm[-3:], seg, planned, pieces, profile,
-                                 machine, *options[:2])  # fmt: skip
+            tail = before.points_mm[-3:]
+            key = (id(seg), tail.tobytes())  # (seg is held by _SEGMENTS while it is kept)
+            joined = _JOINED.get(key)
+            if joined is None or joined[0] is not seg:
+                joined = (seg, _join_segments(tail, seg, planned, pieces, profile, machine,
+                                              *options[:2]))  # fmt: skip
+                _JOINED[key] = joined
+                while len(_JOINED) > JOINED_KEPT:
+                    _JOINED.popitem(last=False)
+            seg = joined[1]
         a = int(begin[i])
         parts.append(_rows_of(seg, max(lo - a, 0), min(hi, int(end[i])) - a))
         comps.append(comp)

@@ -1,0 +1,99 @@
+"""``--precompensate`` on a program of many cuts (issue 13: long programs).
+
+The compensated reference is made one segment per cut window
+(:mod:`nurbscnc.plan.precompensation`, "cut-window segments"), so the planner's check of a
+cut window costs that window, not the program. Speed is the benchmark's business (no timing
+here); this pins what must hold whatever the segments: on a generated program of ten cuts
+(250 pieces: lines and half circles, rapids between the cuts) the written reference keeps the
+machine's limits on its samples (tests/servo_reference.limits_excess, within the plan's own
+where the plan is above them), stays within 3 µm of the programmed path while cutting, and
+the tool simulated by ``scipy.signal.lsim`` from it stays within ε_max of the cuts — all
+measured independently of the planner (the test's own polylines of the lines and arcs).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from nurbscnc.interpolate.sample import reference_sampler
+from nurbscnc.machine.profile import load_machine
+from nurbscnc.pipeline import RunOptions, run_program
+from nurbscnc.plan.precompensation import _segment_starts
+from nurbscnc.program.interpret import interpret_text
+from tests.servo_reference import limits_excess, lsim_actual_mm, segment_distance_mm
+
+MACHINE = load_machine()
+CUTS, PAIRS = 10, 6  # ten cuts of six (line, half circle, line, half circle) each
+WIDTH_MM, RADIUS_MM = 2.0, 0.5
+
+
+def _program() -> tuple[str, np.ndarray]:
+    """The G-code and a dense polyline of its cuts [mm] (NaN rows between cuts)."""
+    lines = ["G21 G90 G17 G64", "G0 X0 Y0 Z0"]
+    dense = []
+    for c in range(CUTS):
+        ox, oy = (c % 5) * 6.0, (c // 5) * 30.0
+        lines += [f"G0 X{ox:.3f} Y{oy:.3f}", "G1 F1500"]
+        y = oy
+        for _ in range(PAIRS):
+            lines += [f"G1 X{ox + WIDTH_MM:.3f} Y{y:.3f}",
+                      f"G3 X{ox + WIDTH_MM:.3f} Y{y + 2 * RADIUS_MM:.3f} I0 J{RADIUS_MM}",
+                      f"G1 X{ox:.3f} Y{y + 2 * RADIUS_MM:.3f}",
+                      f"G2 X{ox:.3f} Y{y + 4 * RADIUS_MM:.3f} I0 J{RADIUS_MM}"]  # fmt: skip
+            t = np.linspace(0.0, 1.0, 2001)
+            a = np.linspace(-np.pi / 2, np.pi / 2, 4001)
+            r = RADIUS_MM
+            dense += [np.column_stack([ox + WIDTH_MM * t, np.full_like(t, y)]),
+                      np.column_stack([ox + WIDTH_MM + r * np.cos(a), y + r + r * np.sin(a)]),
+                      np.column_stack([ox + WIDTH_MM * (1 - t), np.full_like(t, y + 2 * r)]),
+                      np.column_stack([ox - r * np.cos(a), y + 3 * r + r * np.sin(a)])]  # fmt: skip
+            y += 4 * RADIUS_MM
+        dense.append(np.full((1, 2), np.nan))
+    lines.append("M2")
+    pts = np.vstack(dense)
+    return "\n".join(lines) + "\n", np.column_stack([pts, np.zeros(len(pts))])
+
+
+@pytest.mark.xfail(run=False, strict=True, reason=(
+    "known defect (branch precomp-long): a joint between cut-window segments breaks the "
+    "jerk limit on the samples (axis_j +1.0e6 mm/s^3 over J); the test also takes 240 s"))
+def test_many_cuts_precompensated_keep_limits_tube_and_contour():
+    text, dense = _program()
+    prog = interpret_text(text)
+    run = run_program(prog, MACHINE, RunOptions(precompensate=True))
+    plan = run.plan
+    assert len(plan.pieces) >= 240
+    period = MACHINE.servo.period_s
+    ks = _segment_starts(plan.pieces, plan.profile, period, 10**9)
+    assert ks.size - 1 >= CUTS  # one segment per cut (the first rapid's window with the first)
+    pts, piece = run.samples.points_mm, run.samples.piece
+    planned = reference_sampler("exact")(plan.pieces, plan.profile, period).points_mm
+    lead = pts.shape[0] - planned.shape[0]
+    assert lead >= 0
+    planned = np.pad(planned, ((lead, 0), (0, 0)), mode="edge")
+    # The limits on the samples (the plan's own where it is above them).
+    excess = limits_excess(pts, MACHINE, planned)
+    assert all(v <= 0.0 for v in excess.values()), excess
+    # Cutting samples: not on a rapid, and not waiting at a cut's start after a rapid (the
+    # planned reference at rest at the first point of the cut, as the planner's check).
+    rapid = plan.pieces.rapid[piece]
+    start = np.zeros(pts.shape[0], dtype=bool)
+    for k in np.flatnonzero(rapid[:-1] & ~rapid[1:]) + 1:
+        at = np.all(planned[k:] == planned[k], axis=1)
+        stop = int(np.argmin(at)) if not at.all() else at.size
+        start[k : k + stop] = True
+    cutting = ~rapid & ~start
+    segs = [d for d in np.split(dense, np.flatnonzero(np.isnan(dense[:, 0]))) if len(d) > 1]
+    segs = [d[~np.isnan(d[:, 0])] for d in segs]
+
+    def distance_mm(q):
+        return np.min([segment_distance_mm(q, d) for d in segs], axis=0)
+
+    # The reference within 3 µm of the programmed cuts.
+    assert distance_mm(pts[cutting]).max() * 1000.0 <= 3.0 + 1e-6
+    # The tool (lsim of the written reference, 0.3 s of settle after the end) within ε_max.
+    actual = lsim_actual_mm(pts, MACHINE)
+    on_cut = np.append(cutting, np.ones(actual.shape[0] - pts.shape[0], dtype=bool))
+    err_um = distance_mm(actual[on_cut]) * 1000.0
+    assert err_um.max() <= MACHINE.limits.contour_tolerance_mm * 1000.0
