@@ -166,10 +166,13 @@ def _tube_mm(pieces, piece: np.ndarray, foot_mm: np.ndarray, tolerance_mm: float
 
 def _compensate_segment(ref: Reference, pieces, profile, machine: Machine,
                         tolerance_mm: float, fit_tolerance_mm: float | None, refine: bool,
-                        first: bool) -> tuple[Reference, Compensated]:  # fmt: skip
+                        first: bool, last: bool = True,
+                        ) -> tuple[Reference, Compensated]:  # fmt: skip
     """One segment of :func:`precompensate_reference` (a cut window's samples, or the whole
     reference), compensated as a program of its own (``first``: the program's first, delayed
-    by the pre-actuation; else its first sample the planned one, no delay): the ZPETC
+    by the pre-actuation; else its first sample the planned one, no delay; not ``last``: a
+    segment followed by another, its last JOIN_HELD samples the planned ones, so the joint
+    always has a solution, :func:`_join_segments`): the ZPETC
     pre-compensated version of a plan's reference (SPEC eq. 25 inverted,
     :func:`~nurbscnc.servo.precompensate.precompensate_points`; F's tail blended in within
     the machine's acceleration and jerk, so it ends with the plan), kept within
@@ -224,6 +227,13 @@ def _compensate_segment(ref: Reference, pieces, profile, machine: Machine,
             tube_in = np.maximum(near.min(axis=1) - 2.0 * CHORD_MM, 0.0)
             tube = np.maximum(tube_in - CHORD_MM, 0.0)
         points = limit_to_path(points, foot, tube)
+    held = 1 if last else JOIN_HELD
+    if not last:
+        # A segment followed by another ends on the plan's own last samples: the joint's
+        # rows (the next segment's first samples after these) are then solved by the plan's
+        # own next samples at worst (:func:`_join_segments`).
+        points = points.copy()
+        points[-held:] = ref.points_mm[-held:]
     clipped = points
     # The limits on the samples (module comment "limits on samples"): the clipped ZPETC
     # reference projected onto them, in the tube about the plan's points (or, with no
@@ -237,7 +247,7 @@ def _compensate_segment(ref: Reference, pieces, profile, machine: Machine,
         basis = np.broadcast_to(np.eye(3), (points.shape[0], 3, 3))
         lower = np.full((points.shape[0], 3), -np.inf)
         upper = -lower
-    points = project_onto_limits(clipped, planned, caps, basis, lower, upper)
+    points = project_onto_limits(clipped, planned, caps, basis, lower, upper, held=held)
     comp = replace(comp, points_mm=points)
     n_in, n = ref.points_mm.shape[0], points.shape[0]
     # Every per-sample column padded alike (whatever columns the Reference has).
@@ -252,7 +262,7 @@ def _compensate_segment(ref: Reference, pieces, profile, machine: Machine,
         columns["s_mm"] = s_foot
     out = replace(ref, **columns)
     if np.isfinite(tolerance_mm) and optimise:
-        done = refine_in_tube(out, pieces, profile, machine, tube_in, caps=caps)
+        done = refine_in_tube(out, pieces, profile, machine, tube_in, caps=caps, held=held)
         out = replace(out, points_mm=done.points_mm)
         out = replace(out, s_mm=_s_along(done.points_mm, edge(ref.points_mm), s_mm, profile))
         comp = Refined(done.points_mm, comp.lead_samples, comp.end_step_mm,
@@ -309,6 +319,9 @@ MIN_SEGMENT = 16
 #: Samples after a segment's start that the joint's re-projection may move (first try; the
 #: whole segment but its last three at worst).
 JOIN_PAD = 40
+#: Last samples of a segment followed by another that are the plan's own (the third
+#: differences across the joint reach three samples back).
+JOIN_HELD = 3
 
 _SEGMENTS: OrderedDict = OrderedDict()
 #: Joined segments kept (:func:`_join_segments` of a segment after a given tail: the check
@@ -332,7 +345,8 @@ def _segment_starts(pieces, profile, period_s: float, n: int) -> np.ndarray:
     return np.asarray([*ks, n], dtype=np.int64)
 
 
-def _key(ref: Reference, machine: Machine, pieces, options: tuple, first: bool) -> tuple:
+def _key(ref: Reference, machine: Machine, pieces, options: tuple, first: bool,
+         last: bool) -> tuple:  # fmt: skip
     """The cache key of a segment: what its compensation depends on (its planned samples'
     columns, bit for bit; the machine, path and options by identity, the entry holding
     them so an identity is never reused while it is kept)."""
@@ -341,19 +355,19 @@ def _key(ref: Reference, machine: Machine, pieces, options: tuple, first: bool) 
         x = np.ascontiguousarray(getattr(ref, f.name))
         h.update(str(x.dtype).encode() + str(x.shape).encode())
         h.update(x.tobytes())
-    return (id(machine), id(pieces.path), options, first, h.hexdigest())
+    return (id(machine), id(pieces.path), options, first, last, h.hexdigest())
 
 
 def _segment(ref: Reference, pieces, profile, machine: Machine, options: tuple,
-             first: bool) -> tuple[Reference, Compensated]:  # fmt: skip
+             first: bool, last: bool) -> tuple[Reference, Compensated]:  # fmt: skip
     """:func:`_compensate_segment` of the planned samples ``ref``, from :data:`_SEGMENTS` when
     made before (least recently used evicted beyond SEGMENT_CACHE_SAMPLES)."""
-    key = _key(ref, machine, pieces, options, first)
+    key = _key(ref, machine, pieces, options, first, last)
     hit = _SEGMENTS.get(key)
     if hit is not None:
         _SEGMENTS.move_to_end(key)
         return hit[0], hit[1]
-    out, comp = _compensate_segment(ref, pieces, profile, machine, *options, first)
+    out, comp = _compensate_segment(ref, pieces, profile, machine, *options, first, last)
     _SEGMENTS[key] = (out, comp, machine, pieces.path)
     total = sum(v[0].t_s.size for v in _SEGMENTS.values())
     while total > SEGMENT_CACHE_SAMPLES and len(_SEGMENTS) > 1:
@@ -367,23 +381,24 @@ def _rows_of(ref: Reference, lo: int, hi: int) -> Reference:
     return replace(ref, **{f.name: getattr(ref, f.name)[lo:hi] for f in fields(ref)})
 
 
-def _join_segments(prev_tail_mm: np.ndarray, seg: Reference, planned: Reference,
-                   pieces, profile, machine: Machine, tolerance_mm: float,
+def _join_segments(prev_tail_mm: np.ndarray, prev_planned_mm: np.ndarray, seg: Reference,
+                   planned: Reference, pieces, profile, machine: Machine, tolerance_mm: float,
                    fit_tolerance_mm: float | None) -> Reference:  # fmt: skip
     """Segment ``seg`` (compensated, its planned samples ``planned``) after a segment whose
-    last three samples are ``prev_tail_mm`` (3, 3) [mm]: where a difference row across the
-    joint (the step, the second and third differences) breaks the limits on the samples,
-    the segment's first samples are projected onto them again (:func:`project_onto_limits`'
-    windows, the earlier segment's samples fixed, at most all but the segment's last three);
-    if no window solves it, the segment is left as it is (the output's limits test names
-    it)."""
+    last three samples are ``prev_tail_mm`` (3, 3) [mm] (the plan's own ``prev_planned_mm``:
+    a segment followed by another ends on them, :data:`JOIN_HELD`): where a difference row
+    across the joint (the step, the second and third differences) breaks the limits on the
+    samples (the caps of the plan's own samples across it), the segment's first samples are
+    projected onto them again (:func:`project_onto_limits`' windows, the earlier segment's
+    samples fixed, at most all but the segment's last three); if no window solves it, the
+    segment is the plan's own samples (the plan keeps the caps: a joint never breaks them)."""
     m = prev_tail_mm.shape[0]
     u = np.vstack([prev_tail_mm, seg.points_mm])
-    r = np.vstack([prev_tail_mm, planned.points_mm])
-    caps = sample_limits(r, machine)
+    r = np.vstack([prev_planned_mm, planned.points_mm])
     head = min(u.shape[0], m + 6)  # every row with a sample on each side of the joint
     if not (limit_excess(u[:head], sample_limits(r[:head], machine)) > 0.0).any():
         return seg
+    caps = sample_limits(r, machine)
     if np.isfinite(tolerance_mm):
         fit = machine.limits.ph_tolerance_mm if fit_tolerance_mm is None else fit_tolerance_mm
         starts = profile.piece_start_mm
@@ -401,7 +416,7 @@ def _join_segments(prev_tail_mm: np.ndarray, seg: Reference, planned: Reference,
     while True:
         j1 = min(m + pad, last)
         if j1 <= m:
-            return seg
+            break
         moved = _project_window(u, r, u, caps, basis, lower, upper, m, j1)
         if moved is not None:
             out = u.copy()
@@ -409,8 +424,10 @@ def _join_segments(prev_tail_mm: np.ndarray, seg: Reference, planned: Reference,
             if not (limit_excess(out, caps)[: j1 + 3] > 0.0).any():
                 return replace(seg, points_mm=out[m:])
         if j1 == last:
-            return seg
+            break
         pad *= 4
+    plain = replace(seg, points_mm=planned.points_mm.copy())
+    return plain
 
 
 def _lead_samples(machine: Machine) -> int:
@@ -441,15 +458,18 @@ def _compensated_rows(ref_of, pieces, profile, machine: Machine, options: tuple,
     parts, comps = [], []
     for i in range(first_i, min(last_i, ks.size - 1)):
         planned = ref_of(int(ks[i]), int(ks[i + 1]))
-        seg, comp = _segment(planned, pieces, profile, machine, options, i == 0)
+        seg, comp = _segment(planned, pieces, profile, machine, options, i == 0,
+                             i == ks.size - 2)  # fmt: skip
         if i > 0:
-            before = _segment(ref_of(int(ks[i - 1]), int(ks[i])), pieces, profile, machine,
-                              options, i == 1)[0]  # fmt: skip
-            tail = before.points_mm[-3:]
+            planned_before = ref_of(int(ks[i - 1]), int(ks[i]))
+            before = _segment(planned_before, pieces, profile, machine, options, i == 1,
+                              False)[0]  # fmt: skip
+            tail = before.points_mm[-JOIN_HELD:]
             key = (id(seg), tail.tobytes())  # (seg is held by _SEGMENTS while it is kept)
             joined = _JOINED.get(key)
             if joined is None or joined[0] is not seg:
-                joined = (seg, _join_segments(tail, seg, planned, pieces, profile, machine,
+                joined = (seg, _join_segments(tail, planned_before.points_mm[-JOIN_HELD:],
+                                              seg, planned, pieces, profile, machine,
                                               *options[:2]))  # fmt: skip
                 _JOINED[key] = joined
                 while len(_JOINED) > JOINED_KEPT:
@@ -909,11 +929,11 @@ def _project_window(u: np.ndarray, r: np.ndarray, target: np.ndarray, caps: Samp
 
 def project_onto_limits(target_mm: np.ndarray, planned_mm: np.ndarray, caps: SampleLimits,
                         basis: np.ndarray, lower: np.ndarray, upper: np.ndarray,
-                        ) -> np.ndarray:  # fmt: skip
+                        held: int = 1) -> np.ndarray:  # fmt: skip
     """``target_mm`` (N, 3) [mm] moved, where its differences break ``caps``, to the nearest
     reference (L1 in the frame ``basis`` (N, D, 3) about ``planned_mm``, offsets within
     ``lower`` … ``upper`` (N, D) [mm]) whose differences keep them (module comment above);
-    the first and last samples, and samples no broken row reaches, as they are. The plan's
+    the first and last ``held`` samples, and samples no broken row reaches, as they are. The plan's
     own reference (δ = 0) keeps them, so there is always a solution: if the solver fails
     on the whole reference, the planned points are returned."""
     r = np.asarray(planned_mm, dtype=float)
@@ -922,17 +942,19 @@ def project_onto_limits(target_mm: np.ndarray, planned_mm: np.ndarray, caps: Sam
     if n < 3:
         return u
     pad = PROJECT_PAD
+    m = n - held + 1  # the movable samples: 1 … m − 2
     while True:
         bad = limit_excess(u, caps) > 0.0
-        bad[[0, -1]] = False
-        windows = _windows(bad, pad, n)
+        bad[0] = False
+        bad[m - 1 :] = False
+        windows = _windows(bad, pad, m)
         if not windows:
             return u
         for j0, j1 in windows:
             moved = _project_window(u, r, target_mm, caps, basis, lower, upper, j0, j1)
             if moved is not None:
                 u[j0:j1] = moved
-        if windows == [(1, n - 1)]:
+        if windows == [(1, m - 1)]:
             bad = limit_excess(u, caps) > 0.0
             return u if not bad.any() else r.copy()
         pad *= 4
@@ -1306,12 +1328,12 @@ def _no_rougher(new_mm: np.ndarray, start_mm: np.ndarray, j0: int, j1: int,
 
 def refine_in_tube(ref: Reference, pieces, profile, machine: Machine, tube_mm: np.ndarray,
                    rounds: int = REFINE_ROUNDS, gain_mm: float = REFINE_GAIN_MM,
-                   caps: SampleLimits | None = None) -> Refinement:  # fmt: skip
+                   caps: SampleLimits | None = None, held: int = 1) -> Refinement:  # fmt: skip
     """The reference ``ref`` (its points within ``tube_mm`` (N,) of the path) with its
     offsets across the path re-chosen where the simulated contour error exceeds
     REFINE_THRESHOLD × ε_max, to minimise the largest error there (module comment above:
     sequential LPs on the known model, each round kept only where it lowers the error).
-    Samples at rest, on rapids, and the first and last sample do not move. ``caps``
+    Samples at rest, on rapids, the first and the last ``held`` samples do not move. ``caps``
     (:class:`SampleLimits`, default the machine's limits alone) bound the differences of
     the reference (:func:`_region_step`): a reference within them stays within them, one
     above them never gets rougher where it is (:func:`_rougher`)."""
@@ -1327,7 +1349,8 @@ def refine_in_tube(ref: Reference, pieces, profile, machine: Machine, tube_mm: n
     if n > 2:
         speed[1:-1] = np.sqrt(np.sum((u[2:] - u[:-2]) ** 2, axis=1))
     movable = cut & (speed > 1e-9)
-    movable[[0, -1]] = False
+    movable[0] = False
+    movable[n - held :] = False
     index = PathIndex(pieces)
     reach = _reach_samples(machine)
     h = _impulse_responses(machine, reach)
