@@ -660,6 +660,8 @@ PROJECT_PAD = 40
 PROJECT_ALONG_MM = 0.1
 #: ... and at most the move whose bend off the path (κ β²/2) is this share of the tube.
 PROJECT_BEND = 0.5
+#: Sides of the polygon in the disc across a path out of the XY plane (path_frame).
+TUBE_SIDES = 8
 #: Time limit of one projection LP [s].
 PROJECT_LP_TIME_S = 20.0
 
@@ -770,7 +772,12 @@ def path_frame(planned_mm: np.ndarray, s_mm: np.ndarray, piece: np.ndarray, piec
     of the path there), the bounds (N, 2) low and high of (α, β) [mm] keeping r + α m + β t
     within ``tube_mm`` (N,) [mm] of the path, exactly (no break and at most
     κ β̄²/2 ≤ PROJECT_BEND τ of bend within β̄ along it; ``offset_mm`` (N, 3) the wanted
-    offset, whose along-path part β̄ need not exceed by more than τ)."""
+    offset, whose along-path part β̄ need not exceed by more than τ). Where the path or
+    the offsets leave the XY plane (a helix, a plunge, a G18/G19 arc: an offset the plane's
+    (m, t) cannot hold, so a window's samples could not join the fixed ones beside it),
+    a third direction w = t × m (m any normal of a vertical tangent): basis (N, 3, 3) of
+    (m, t, w), bounds (N, 3) of (α, β, γ), the LP holding |α| + |γ| within α's bound
+    (:func:`_project_window`: within the tube exactly)."""
     starts = profile.piece_start_mm
     loc = s_mm - starts[piece]
     t = pieces.path.tangents(piece, loc)
@@ -798,6 +805,17 @@ def path_frame(planned_mm: np.ndarray, s_mm: np.ndarray, piece: np.ndarray, piec
     behind = np.maximum(s_mm - brk[i - 1], 0.0)
     room = np.maximum(tube - 0.5 * np.where(b_bar > 0.0, k_near, 0.0) * b_bar**2, 0.0)
     has_m = np.any(m != 0.0, axis=1)
+    if np.any(t[:, 2] != 0.0) or np.any(np.asarray(offset_mm)[:, 2] != 0.0):
+        # A third direction (docstring): m any unit normal of a vertical tangent.
+        x = np.array([1.0, 0.0, 0.0])
+        m_v = x - np.outer(t @ x, np.ones(3)) * t
+        m_v /= np.maximum(np.linalg.norm(m_v, axis=1), 1e-300)[:, None]
+        m = np.where(has_m[:, None], m, m_v)
+        w = np.cross(t, m)
+        w /= np.maximum(np.linalg.norm(w, axis=1), 1e-300)[:, None]
+        lower = np.column_stack([-room, -np.minimum(b_bar, behind), -room])
+        upper = np.column_stack([room, np.minimum(b_bar, ahead), room])
+        return np.stack([m, t, w], axis=1), lower, upper
     lower = np.column_stack([np.where(has_m, -room, 0.0), -np.minimum(b_bar, behind)])
     upper = np.column_stack([np.where(has_m, room, 0.0), np.minimum(b_bar, ahead)])
     return np.stack([m, t], axis=1), lower, upper
@@ -867,6 +885,23 @@ def _project_window(u: np.ndarray, r: np.ndarray, target: np.ndarray, caps: Samp
             blocks += [hstack([mat, zeros]), hstack([-mat, zeros])]
             rhs += [(cap[rows, c] - diffs[rows, c]) / _LP_UNIT_MM,
                     (cap[rows, c] + diffs[rows, c]) / _LP_UNIT_MM]  # fmt: skip
+    if dims == 3:
+        # The tube across the path with a third direction (path_frame): (α, γ) within the
+        # regular TUBE_SIDES-gon inscribed in the disc of α's bound, turned so that a corner
+        # is the target's direction (the clip puts targets on the disc's edge: each stays a
+        # solution, and so do its neighbours' nearly).
+        room = upper[j0:j1, 0] / _LP_UNIT_MM
+        pair = want.reshape(size, 3)
+        phi = np.arctan2(pair[:, 2], pair[:, 0])
+        k = np.arange(size)
+        half = np.pi / TUBE_SIDES
+        for side in range(TUBE_SIDES):
+            ang = phi + (2 * side + 1) * half
+            mat = coo_matrix((np.concatenate([np.cos(ang), np.sin(ang)]),
+                              (np.concatenate([k, k]), np.concatenate([3 * k, 3 * k + 2]))),
+                             shape=(size, 2 * nx)).tocsr()  # fmt: skip
+            blocks.append(mat)
+            rhs.append(room * np.cos(half))
     # The step length, linearised along the ZPETC reference's step (else the plan's); the
     # solution is checked exactly, and a row it breaks is cut again along its own step (the
     # second-order remainder |w⊥|²/2|w| of a move across the step: sub-nanometre here).
