@@ -890,16 +890,19 @@ def _project_window(u: np.ndarray, r: np.ndarray, target: np.ndarray, caps: Samp
         # regular TUBE_SIDES-gon inscribed in the disc of α's bound, turned so that a corner
         # is the target's direction (the clip puts targets on the disc's edge: each stays a
         # solution, and so do its neighbours' nearly).
+        # (No tube: the axes' frame, nothing across.)
         room = upper[j0:j1, 0] / _LP_UNIT_MM
-        pair = want.reshape(size, 3)
+        k = np.flatnonzero(np.isfinite(room))
+        room = room[k]
+        pair = want.reshape(size, 3)[k]
         phi = np.arctan2(pair[:, 2], pair[:, 0])
-        k = np.arange(size)
         half = np.pi / TUBE_SIDES
         for side in range(TUBE_SIDES):
             ang = phi + (2 * side + 1) * half
             mat = coo_matrix((np.concatenate([np.cos(ang), np.sin(ang)]),
-                              (np.concatenate([k, k]), np.concatenate([3 * k, 3 * k + 2]))),
-                             shape=(size, 2 * nx)).tocsr()  # fmt: skip
+                              (np.tile(np.arange(k.size), 2),
+                               np.concatenate([3 * k, 3 * k + 2]))),
+                             shape=(k.size, 2 * nx)).tocsr()  # fmt: skip
             blocks.append(mat)
             rhs.append(room * np.cos(half))
     # The step length, linearised along the ZPETC reference's step (else the plan's); the
