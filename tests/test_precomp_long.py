@@ -93,3 +93,74 @@ def test_many_cuts_precompensated_keep_limits_tube_and_contour():
     on_cut = np.append(cutting, np.ones(actual.shape[0] - pts.shape[0], dtype=bool))
     err_um = distance_mm(actual[on_cut]) * 1000.0
     assert err_um.max() <= MACHINE.limits.contour_tolerance_mm * 1000.0
+
+
+def _synthetic(n: int = 300) -> np.ndarray:
+    """A planned reference (n, 3) [mm]: from rest along x and y with half the machine's
+    jerk, then that acceleration (within every limit on the samples)."""
+    period = MACHINE.servo.period_s
+    j = 0.5 * float(np.min(np.minimum(MACHINE.limits.j_max_mm_s3,
+                                      MACHINE.axis_limits.as_arrays()[2])))  # fmt: skip
+    t = np.arange(n) * period
+    t1 = 0.005  # jerk for 5 ms, then that acceleration
+    x = np.where(t < t1, j * t**3 / 6.0,
+                 j * t1**3 / 6.0 + 0.5 * j * t1**2 * (t - t1) + 0.5 * j * t1 * (t - t1) ** 2)
+    return np.column_stack([x, 0.5 * x, np.zeros(n)])
+
+
+def test_a_joint_no_window_solves_is_the_plans_own(monkeypatch):
+    """The joint of two segments (:func:`_join_segments`): the earlier segment ends on the
+    plan's own samples, a later one far off its plan across the joint is re-projected, and
+    where no window solves it (the LP made to fail) it is the plan's own samples: either way
+    every row across the joint keeps the caps."""
+    from dataclasses import replace
+
+    from nurbscnc.plan import precompensation as pc
+    from nurbscnc.plan.timing import Reference
+
+    r = _synthetic()
+    n = r.shape[0]
+    zeros = np.zeros(n - 3)
+    planned = Reference(zeros, zeros, zeros, zeros, zeros, np.zeros(n - 3, dtype=np.int64),
+                        r[3:], zeros)  # fmt: skip
+    off = r[3:].copy()
+    off[:5] += 2e-3  # a jump of 2 µm at the joint
+    seg = replace(planned, points_mm=off)
+    caps = pc.sample_limits(r, MACHINE)
+    assert not (pc.limit_excess(r, caps) > 0.0).any()
+    assert (pc.limit_excess(np.vstack([r[:3], off]), caps) > 0.0).any()
+    joined = pc._join_segments(r[:3], r[:3], seg, planned, None, None, MACHINE, np.inf, None)
+    u = np.vstack([r[:3], joined.points_mm])
+    assert not (pc.limit_excess(u, caps) > 0.0).any()
+    assert not np.array_equal(joined.points_mm, planned.points_mm)  # moved, not the plan
+    monkeypatch.setattr(pc, "_project_window", lambda *a: None)
+    joined = pc._join_segments(r[:3], r[:3], seg, planned, None, None, MACHINE, np.inf, None)
+    np.testing.assert_array_equal(joined.points_mm, planned.points_mm)
+
+
+def test_projection_windows_are_bounded(monkeypatch):
+    """A projection window moves at most PROJECT_MAX_WINDOW samples (longer ones in pieces);
+    where that cannot solve the rows, the plan's own points (within the caps)."""
+    from nurbscnc.plan import precompensation as pc
+
+    r = _synthetic(400)
+    n = r.shape[0]
+    target = r + 3e-4 * np.sin(np.arange(n) * 1.3)[:, None] * np.array([1.0, -1.0, 0.0])
+    caps = pc.sample_limits(r, MACHINE)
+    basis = np.broadcast_to(np.eye(3), (n, 3, 3))
+    lower, upper = np.full((n, 3), -np.inf), np.full((n, 3), np.inf)
+    sizes = []
+    real = pc._project_window
+
+    def spy(u, r_, t, c, b, lo, up, j0, j1):
+        sizes.append(j1 - j0)
+        return real(u, r_, t, c, b, lo, up, j0, j1)
+
+    monkeypatch.setattr(pc, "PROJECT_MAX_WINDOW", 64)
+    monkeypatch.setattr(pc, "_project_window", spy)
+    u = pc.project_onto_limits(target, r, caps, basis, lower, upper)
+    assert sizes and max(sizes) <= 64
+    assert not (pc.limit_excess(u, caps) > 0.0).any()
+    monkeypatch.setattr(pc, "_project_window", lambda *a: None)
+    u = pc.project_onto_limits(target, r, caps, basis, lower, upper)
+    np.testing.assert_array_equal(u, r)

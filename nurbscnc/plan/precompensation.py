@@ -415,7 +415,7 @@ def _join_segments(prev_tail_mm: np.ndarray, prev_planned_mm: np.ndarray, seg: R
     pad = JOIN_PAD
     while True:
         j1 = min(m + pad, last)
-        if j1 <= m:
+        if j1 <= m or j1 - m > PROJECT_MAX_WINDOW:
             break
         moved = _project_window(u, r, u, caps, basis, lower, upper, m, j1)
         if moved is not None:
@@ -663,7 +663,11 @@ PROJECT_BEND = 0.5
 #: Sides of the polygon in the disc across a path out of the XY plane (path_frame).
 TUBE_SIDES = 8
 #: Time limit of one projection LP [s].
-PROJECT_LP_TIME_S = 20.0
+PROJECT_LP_TIME_S = 5.0
+#: Most samples one projection LP moves (memory: HiGHS took 2 GB for a whole 23,000-sample
+#: segment of tort.ngc): longer windows are solved in pieces, and windows grow no further
+#: (where rows are still broken then, the reference is the plan's own, within the caps).
+PROJECT_MAX_WINDOW = 4096
 
 
 @dataclass(frozen=True, eq=False)
@@ -973,7 +977,8 @@ def project_onto_limits(target_mm: np.ndarray, planned_mm: np.ndarray, caps: Sam
     ``lower`` … ``upper`` (N, D) [mm]) whose differences keep them (module comment above);
     the first and last ``held`` samples, and samples no broken row reaches, as they are. The plan's
     own reference (δ = 0) keeps them, so there is always a solution: if the solver fails
-    on the whole reference, the planned points are returned."""
+    on the whole reference, or on windows grown to PROJECT_MAX_WINDOW samples (an LP that
+    runs out of PROJECT_LP_TIME_S counts as failed), the planned points are returned."""
     r = np.asarray(planned_mm, dtype=float)
     u = np.array(target_mm, dtype=float)
     n = u.shape[0]
@@ -989,10 +994,13 @@ def project_onto_limits(target_mm: np.ndarray, planned_mm: np.ndarray, caps: Sam
         if not windows:
             return u
         for j0, j1 in windows:
-            moved = _project_window(u, r, target_mm, caps, basis, lower, upper, j0, j1)
-            if moved is not None:
-                u[j0:j1] = moved
-        if windows == [(1, m - 1)]:
+            # (a longer window in pieces of PROJECT_MAX_WINDOW, one after the other)
+            for c0 in range(j0, j1, PROJECT_MAX_WINDOW):
+                c1 = min(c0 + PROJECT_MAX_WINDOW, j1)
+                moved = _project_window(u, r, target_mm, caps, basis, lower, upper, c0, c1)
+                if moved is not None:
+                    u[c0:c1] = moved
+        if windows == [(1, m - 1)] or 2 * pad > PROJECT_MAX_WINDOW:
             bad = limit_excess(u, caps) > 0.0
             return u if not bad.any() else r.copy()
         pad *= 4
