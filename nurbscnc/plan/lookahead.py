@@ -1211,6 +1211,7 @@ def _windows_of(st: _Setup):
     ends = np.append(starts[1:], st.k)
     final = st.initial.copy()  # windows before the current one final, later ones kinematic
     seen = _SeenWindows(st)
+    stand_in = _placeholder(st.pieces, st.initial, 0)  # every window's "later", rebased
     stream = None
     done = None  # the final profile of the windows before the current one (from time 0)
     total_iterations = 0
@@ -1218,7 +1219,7 @@ def _windows_of(st: _Setup):
         is_last = b == st.k
         scope = np.zeros(st.k, dtype=bool)
         scope[a:b] = True
-        later = None if is_last else _placeholder(st.pieces, st.initial, b)
+        later = None if is_last else _placeholder(st.pieces, st.initial, b, stand_in)
 
         def confine(lv: _Levers, scope=scope, final=final) -> None:
             for f in (*_Levers._SCALED, "settle_s", "shaped", "ineffective"):
@@ -1336,14 +1337,27 @@ class _SeenWindows:
             self.by_key.setdefault(self._key(c, b), []).append((c, saved, settle))
 
 
-def _placeholder(pieces: PieceList, lev: _Levers, first: int) -> Profile:
+def _placeholder(pieces: PieceList, lev: _Levers, first: int, whole=None) -> Profile:
     """A stand-in profile of pieces ``first`` … k − 1 (not planned yet): each piece one phase
     of constant jerk from rest (s = j·t³/6 over its length, the jerk within the piece's
     kinematic limit and the mean speed within its cap), the junctions marked moving (not
     stops) except the first, a rest (the window's end). Only its shape matters (piece
     starts after the planned pieces' end, a clock that runs on; speed and acceleration 0 at
     the window's end, as the real plan has them there): a cut window's check and the stream
-    never sample it beyond the window's end."""
+    never sample it beyond the window's end. ``whole``: the placeholder of all the pieces
+    (``first`` = 0) with the same levers, made once: its rows from ``first`` on, rebased
+    (subtractions only: a program of many cuts asks for one per cut)."""
+    if whole is not None:
+        cut = int(np.searchsorted(whole.phase_piece_index, first))
+        t0, s0 = float(whole.piece_start_time_s[first]), float(whole.piece_start_mm[first])
+        return Profile(whole.total_length_mm - s0, whole.duration_s - t0,
+                       np.append(0.0, whole.junction_speeds_mm_s[first + 1 :]),
+                       whole.piece_peak_speed_mm_s[first:],
+                       whole.piece_start_mm[first:] - s0, whole.piece_start_time_s[first:] - t0,
+                       whole.phase_start_time_s[cut:] - t0, whole.phase_duration_s[cut:],
+                       whole.phase_s0_mm[cut:] - s0, whole.phase_v0_mm_s[cut:],
+                       whole.phase_a0_mm_s2[cut:], whole.phase_jerk_mm_s3[cut:],
+                       whole.phase_piece_index[cut:] - first)  # fmt: skip
     length = np.asarray(pieces.length_mm[first:], dtype=float)
     cap = np.asarray(lev.caps[first:], dtype=float)
     dur = np.maximum(length / cap, np.cbrt(6.0 * length / lev.j_up[first:]))
