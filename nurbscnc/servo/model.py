@@ -245,8 +245,11 @@ def discretise(model: AxisModel | AxisServo, period_s: float, hold: str = "foh")
     return DiscreteAxis(b=b, a=a, period_s=float(period_s), hold=hold, dc_gain=model.dc_gain)
 
 
+@functools.lru_cache(maxsize=64)
 def _settle_chunk(model: AxisModel, period_s: float) -> int:
-    # About five time constants of the slowest pole per chunk (at least 16 samples).
+    # About five time constants of the slowest pole per chunk (at least 16 samples). Kept per
+    # model (frozen, hashed by its coefficients): np.roots per call was 0.1 ms of every
+    # cut window's check.
     slowest = float(np.min(np.abs(model.poles().real)))
     return int(np.clip(np.ceil(5.0 / (slowest * period_s)), 16, _MAX_SETTLE_SAMPLES // 10))
 
