@@ -1165,17 +1165,17 @@ def plan_checked(program, machine: Machine, options: LookaheadOptions | None = N
     whole = st.checker
     st.checker = _Checker(st.pieces, machine, reference, st.eps_mm, st.settle_rows, window,
                           False)  # fmt: skip
-    checks = []
+    joined = _JoinedChecks()
 
     def windows():
         for w in _windows_of(st):
-            checks.append(w.check)
+            joined.add(w.check)
             yield w
 
     last = deque(windows(), maxlen=1)[0]  # one window's plan held at a time
     if keep_reference:  # the whole reference and response: one more pass over the samples
         return last.plan, whole.run(last.plan.pieces, last.plan.profile)
-    return last.plan, _joined_checks(checks)
+    return last.plan, joined.check()
 
 
 def plan_windows(program, machine: Machine, options: LookaheadOptions | None = None,
@@ -1403,26 +1403,48 @@ def _first_sample_at(planned: PieceList, profile: Profile, piece: int, period_s:
     return int(np.ceil(t_wall / period_s - 1e-9))
 
 
-def _joined_checks(checks: list) -> Check:
-    """The compact :class:`Check` of a program's cut windows, their samples one after the
-    other (:attr:`Check.samples`: without the held tails of the windows' checks): over-limit
-    samples, piece runs, counts before each restart and statistics joined."""
-    ov = [c.samples for c in checks]
-    off = np.cumsum([0] + [o.count for o in ov])
-    cat = np.concatenate
-    overs = Overs(int(off[-1]), cat([o.index + d for o, d in zip(ov, off)]),
-                  cat([o.err_mm for o in ov]), cat([o.tau_s for o in ov]),
-                  cat([o.run_piece for o in ov]), cat([o.run_start + d for o, d in zip(ov, off)]),
-                  np.sum([o.restart_count for o in ov], axis=0), max(o.worst_mm for o in ov))
-    n = [c.cut_samples for c in checks]
-    total = sum(n)
-    stats = [c.stats for c in checks]
-    rms = float(np.sqrt(sum(s["contour_true_rms_um"] ** 2 * m for s, m in zip(stats, n))
-                        / total)) if total else 0.0  # fmt: skip
-    joined = {"contour_true_max_um": max(s["contour_true_max_um"] for s in stats),
-              "contour_true_rms_um": rms,
-              "contour_eq29_max_um": max(s["contour_eq29_max_um"] for s in stats)}
-    return Check(None, None, None, overs, joined, overs, total)
+class _JoinedChecks:
+    """The compact :class:`Check` of a program's cut windows, joined as they come, their
+    samples one after the other (:attr:`Check.samples`: without the held tails of the
+    windows' checks): over-limit samples, piece runs, counts before each restart and
+    statistics. No window's check is kept: each holds counts for every restart of the
+    program (one per rapid), so keeping them all grew as cuts × rapids (512 MB at 4,000
+    cuts); the counts are summed as they come."""
+
+    def __init__(self):
+        self.parts: list = []  # per window: (index, err, tau, run piece, run start, count)
+        self.restart = None
+        self.worst = 0.0
+        self.n: list = []
+        self.stats: list = []
+
+    def add(self, check: Check) -> None:
+        o = check.samples
+        self.parts.append((o.index, o.err_mm, o.tau_s, o.run_piece, o.run_start, o.count))
+        if self.restart is None:
+            self.restart = np.array(o.restart_count, dtype=np.int64)
+        else:
+            self.restart += o.restart_count
+        self.worst = max(self.worst, o.worst_mm)
+        self.n.append(check.cut_samples)
+        self.stats.append(check.stats)
+
+    def check(self) -> Check:
+        off = np.cumsum([0] + [p[5] for p in self.parts])
+        cat = np.concatenate
+        overs = Overs(int(off[-1]), cat([p[0] + d for p, d in zip(self.parts, off)]),
+                      cat([p[1] for p in self.parts]), cat([p[2] for p in self.parts]),
+                      cat([p[3] for p in self.parts]),
+                      cat([p[4] + d for p, d in zip(self.parts, off)]), self.restart,
+                      self.worst)  # fmt: skip
+        total = sum(self.n)
+        stats = self.stats
+        rms = float(np.sqrt(sum(s["contour_true_rms_um"] ** 2 * m for s, m in zip(stats, self.n))
+                            / total)) if total else 0.0  # fmt: skip
+        joined = {"contour_true_max_um": max(s["contour_true_max_um"] for s in stats),
+                  "contour_true_rms_um": rms,
+                  "contour_eq29_max_um": max(s["contour_eq29_max_um"] for s in stats)}
+        return Check(None, None, None, overs, joined, overs, total)
 
 
 def _cut_distance_after_rapids(response: Response, ref: Reference, profile: Profile,
