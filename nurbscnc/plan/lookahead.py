@@ -56,7 +56,6 @@ pieces at one cap and one set of limits are planned as one by
 """
 from __future__ import annotations
 
-import copy
 import inspect
 from collections import deque
 from dataclasses import dataclass, fields, replace
@@ -719,7 +718,7 @@ class _Checker:
         if stream is None:
             stream = AxesStream([servo.x, servo.y, servo.z], servo.period_s)
         else:
-            stream = copy.deepcopy(stream)
+            stream = stream.copy()
         acc = _Accumulator(self, profile)
         last = end = None
         # The path the error is measured against: the pieces up to this window's end (the
@@ -740,7 +739,7 @@ class _Checker:
         self.stream_out = stream
         virtual = rows is not None and not rows[2]
         if virtual:  # the end of a cut window, as if the program ended there
-            stream = copy.deepcopy(stream)
+            stream = stream.copy()
             if end is not None:
                 ref, d_end = end
                 actual = stream.step(ref.points_mm)

@@ -486,6 +486,18 @@ class AxesStream:
         self._zi = [None if d is None else np.zeros(max(d.a.size, d.b.size) - 1)
                     for d in self._discs]  # fmt: skip
 
+    def copy(self) -> AxesStream:
+        """An independent copy of the stream's state (the filter states and the points seen;
+        the models and their discretisations, immutable, shared): what ``copy.deepcopy``
+        gives, without copying the models (a tenth of a millisecond per cut window)."""
+        other = object.__new__(AxesStream)
+        other.__dict__.update(self.__dict__)
+        other._r0 = None if self._r0 is None else self._r0.copy()
+        other._last = None if self._last is None else self._last.copy()
+        other._y_last = self._y_last.copy()
+        other._zi = [None if z is None else z.copy() for z in self._zi]
+        return other
+
     def step(self, reference_mm: np.ndarray) -> np.ndarray:
         """Actual positions (w, k) [mm] for the next ``reference_mm`` (w, k) rows; the first
         call's first row is where the machine starts at rest."""
