@@ -271,3 +271,21 @@ def test_which_samplers_are_checked_in_windows():
     text = (PLANNER / "square_g61_f3000.nc").read_text()
     _assert_same_plan(_plan(text, SLOW, reference=whole_only, keep_reference=False),
                       _plan(text, SLOW, keep_reference=False, window=TINY))  # fmt: skip
+
+
+def test_the_repeated_cut_comparison_is_allclose():
+    """lookahead._close (a repeated cut's columns compared per window) is np.allclose on
+    finite values, equal and unequal infinities and NaN, both ways."""
+    from nurbscnc.plan.lookahead import _close
+
+    rng = np.random.default_rng(0)
+    values = [0.0, 1.0, np.inf, -np.inf, np.nan, 1e-10, 5.0]
+    steps = [0.0, 1e-13, 1e-9, 1e-6, np.inf, -np.inf]
+    for _ in range(3000):
+        a = rng.choice(values, 8)
+        with np.errstate(invalid="ignore"):
+            b = a + rng.choice(steps, 8)
+        if rng.random() < 0.5:
+            a, b = b, a
+        for rtol, atol in ((1e-9, 1e-12), (0.0, 1e-9), (1e-9, 0.0)):
+            assert _close(a, b, rtol, atol) == np.allclose(a, b, rtol=rtol, atol=atol)
