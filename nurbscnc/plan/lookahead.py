@@ -56,9 +56,11 @@ pieces at one cap and one set of limits are planned as one by
 """
 from __future__ import annotations
 
+import functools
 import inspect
 from collections import deque
-from dataclasses import dataclass, fields, replace
+from collections.abc import Callable
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
@@ -917,9 +919,16 @@ class Window:
     end: int
     k0: int
     k1: int
-    plan: Plan
+    #: Makes :attr:`plan` (on first use: a caller that keeps the last window only, as
+    #: :func:`plan_checked` does, makes one whole-program plan, not one per window).
+    make_plan: Callable[[], Plan] = field(repr=False)
     check: Check | None
     iterations: int
+
+    @functools.cached_property
+    def plan(self) -> Plan:
+        """The whole program's plan with this window and every window before it final."""
+        return self.make_plan()
 
 
 def cut_windows(pieces: PieceList) -> np.ndarray:
@@ -1191,7 +1200,8 @@ def plan_windows(program, machine: Machine, options: LookaheadOptions | None = N
     if options.dynamics != Dynamics.LOCAL or cut_windows(st.pieces).size == 1:
         lev, result, iterations = _converge(st, st.initial.copy(), st.evaluate)
         n = sample_count(result[0], result[1], st.period)
-        yield Window(0, 0, st.k, 0, n, st.plan(lev, result, iterations), result[2],
+        plan = st.plan(lev, result, iterations)
+        yield Window(0, 0, st.k, 0, n, lambda: plan, result[2],
                      iterations)  # fmt: skip
         return
     yield from _windows_of(st)
@@ -1212,19 +1222,24 @@ def _windows_of(st: _Setup):
     seen = _SeenWindows(st)
     stand_in = _placeholder(st.pieces, st.initial, 0)  # every window's "later", rebased
     stream = None
-    done = None  # the final profile of the windows before the current one (from time 0)
+    parts: list = []  # the final profiles of the windows so far, each from time 0
+    done = None  # their splice, compacted (_compacted): what the re-plans put before a window
+    keep_s = WINDOW_KEEP_PERIODS * st.period
     total_iterations = 0
     for w, (a, b) in enumerate(zip(starts.tolist(), ends.tolist())):
         is_last = b == st.k
         scope = np.zeros(st.k, dtype=bool)
         scope[a:b] = True
         later = None if is_last else _placeholder(st.pieces, st.initial, b, stand_in)
+        # What the re-plans splice around the window's own profile: the windows before and
+        # the stand-in after, their phases outside the periods the check reads merged.
+        around = (done, None if later is None else _compacted(later, 0.0))
 
         def confine(lv: _Levers, scope=scope, final=final) -> None:
             for f in (*_Levers._SCALED, "settle_s", "shaped", "ineffective"):
                 getattr(lv, f)[~scope] = getattr(final, f)[~scope]
 
-        def plan_of(lv: _Levers, a=a, b=b, done=done, later=later):
+        def plan_of(lv: _Levers, a=a, b=b, around=around):
             planned = _with_dwell(st.pieces, st.base_dwell + lv.settle_s) \
                 if st.settle_rows.size else st.pieces  # fmt: skip
             lim = lv.limits()
@@ -1232,7 +1247,7 @@ def _windows_of(st: _Setup):
                                Limits(lim.a_up_mm_s2[a:b], lim.j_up_mm_s3[a:b],
                                       lim.a_down_mm_s2[a:b], lim.j_down_mm_s3[a:b]),
                                st.options.lookahead_pieces)  # fmt: skip
-            profile = _spliced([x for x in (done, own, later) if x is not None])
+            profile = _spliced([x for x in (around[0], own, around[1]) if x is not None])
             check_point_count(planned, profile, st.machine)  # before anything is sampled
             return planned, profile, own
 
@@ -1254,11 +1269,15 @@ def _windows_of(st: _Setup):
         seen.add(lev, a, b)
         final = lev
         stream = result[4]  # the servo's state after this window's final plan
-        done = _spliced([x for x in (done, result[3]) if x is not None])
+        parts.append(result[3])
+        done = _compacted(_spliced([x for x in (done, result[3]) if x is not None]), keep_s)
         total_iterations += iterations
-        rows = rows_of(result[0], result[1])
-        yield Window(w, a, b, rows[0], rows[1], st.plan(lev, result, total_iterations),
-                     result[2], iterations)  # fmt: skip
+        rows = rows_of(result[0], result[1])  # (per-piece columns and duration: whole)
+        # The window's plan with every phase (the re-plans' profiles had merged some), made
+        # when asked for (O(program) each: a plan per window made many cuts quadratic).
+        make = functools.partial(_window_plan, st, lev, result, parts, len(parts), later,
+                                 total_iterations)  # fmt: skip
+        yield Window(w, a, b, rows[0], rows[1], make, result[2], iterations)
 
 
 class _SeenWindows:
@@ -1333,6 +1352,47 @@ class _SeenWindows:
             saved = {f: getattr(lev, f)[c:b].copy() for f in self._FIELDS}
             settle = float(lev.settle_s[c - 1]) if c > a else 0.0
             self.by_key.setdefault(self._key(c, b), []).append((c, saved, settle))
+
+
+def _window_plan(st: _Setup, lev: _Levers, result, parts: list, n: int, later,
+                 iterations: int) -> Plan:  # fmt: skip
+    """The plan of a cut window (:attr:`Window.plan`): the final profiles of windows
+    0 … n − 1 (``parts``, shared and only appended to), then the stand-in ``later`` for
+    the pieces after (None: the last window), spliced whole."""
+    profile = _spliced([*parts[:n], *([] if later is None else [later])])
+    return st.plan(lev, (result[0], profile, *result[2:]), iterations)
+
+
+#: Servo periods at the end of the windows before a cut window whose phases its re-plans
+#: keep (:func:`_compacted`): its check reads the profile from one period before its start.
+WINDOW_KEEP_PERIODS = 4
+
+
+def _compacted(profile: Profile, keep_s: float) -> Profile:
+    """``profile`` (the planned windows before a cut window, or the stand-in after it) with
+    every phase that ends before its last ``keep_s`` seconds merged into one stand-in phase
+    from rest (s = j·t³/6 up to where the kept phases start); its per-piece columns (start
+    times and lengths, speeds) whole. A cut window's check reads the profile from one
+    period before the window's start (profile time runs at most as fast as the wall clock),
+    so the merged phases are never read; splicing every phase of the windows before (about
+    7 a piece) at every re-plan had made a program of many cuts quadratic."""
+    times = profile.phase_start_time_s
+    i = int(np.searchsorted(times, profile.duration_s - keep_s, side="right")) - 1
+    if i <= 0:
+        return profile
+    t_i, s_i = float(times[i]), float(profile.phase_s0_mm[i])
+    jerk = 6.0 * s_i / t_i**3
+
+    def merged(column, first):
+        return np.concatenate(([first], column[i:]))
+
+    return Profile(profile.total_length_mm, profile.duration_s, profile.junction_speeds_mm_s,
+                   profile.piece_peak_speed_mm_s, profile.piece_start_mm,
+                   profile.piece_start_time_s, merged(times, 0.0),
+                   merged(profile.phase_duration_s, t_i), merged(profile.phase_s0_mm, 0.0),
+                   merged(profile.phase_v0_mm_s, 0.0), merged(profile.phase_a0_mm_s2, 0.0),
+                   merged(profile.phase_jerk_mm_s3, jerk),
+                   merged(profile.phase_piece_index, 0))  # fmt: skip
 
 
 def _close(a: np.ndarray, b: np.ndarray, rtol: float, atol: float) -> bool:
