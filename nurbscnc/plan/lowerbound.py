@@ -62,6 +62,8 @@ DEFAULT_DS_MM = 0.01
 DEFAULT_CAP_REL_TOL = 1e-5
 #: Bisection levels at most: the finest spacing is ds / 2^levels (0.01 mm → 2.4 nm).
 MAX_LEVELS = 12
+#: Largest starting grid spacing on spiral arcs [mm] (then bisected like every grid).
+SPIRAL_DS_MM = 0.5
 
 
 @dataclass(frozen=True, eq=False)
@@ -163,7 +165,12 @@ def _sample_rows(path: PathTable, rows: np.ndarray, cap2_of, ds_mm: float,
     its ends by more than ``rel_tol`` is bisected, level by level, over all pieces together.
     """
     length = np.take(path.length_mm, rows)
-    steps = np.where(length > 0.0, np.maximum(1, np.ceil(length / ds_mm)), 1).astype(np.int64)
+    # Spiral arcs start coarser (:data:`SPIRAL_DS_MM`): their curvature is analytic and
+    # monotone in the radius, nothing hides between grid points, and the bisection below
+    # refines where cap² bends (CAM arcs whose end radii differ by rounding, 1e-7 mm, are
+    # spirals: tort.ngc's 118 took 0.3 s on the 0.01 mm grid).
+    spacing = np.where(np.take(path.kind, rows) == Kind.SPIRAL, max(ds_mm, SPIRAL_DS_MM), ds_mm)
+    steps = np.where(length > 0.0, np.maximum(1, np.ceil(length / spacing)), 1).astype(np.int64)
     owner = np.repeat(np.arange(rows.size), steps + 1)
     first = np.concatenate(([0], np.cumsum(steps + 1)))
     s = (np.arange(owner.size) - first[owner]) * (length / steps)[owner]

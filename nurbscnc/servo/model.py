@@ -245,8 +245,11 @@ def discretise(model: AxisModel | AxisServo, period_s: float, hold: str = "foh")
     return DiscreteAxis(b=b, a=a, period_s=float(period_s), hold=hold, dc_gain=model.dc_gain)
 
 
+@functools.lru_cache(maxsize=64)
 def _settle_chunk(model: AxisModel, period_s: float) -> int:
-    # About five time constants of the slowest pole per chunk (at least 16 samples).
+    # About five time constants of the slowest pole per chunk (at least 16 samples). Kept per
+    # model (frozen, hashed by its coefficients): np.roots per call was 0.1 ms of every
+    # cut window's check.
     slowest = float(np.min(np.abs(model.poles().real)))
     return int(np.clip(np.ceil(5.0 / (slowest * period_s)), 16, _MAX_SETTLE_SAMPLES // 10))
 
@@ -482,6 +485,18 @@ class AxesStream:
         self._y_last = np.zeros(len(models))  # last filter output (offset removed) [mm]
         self._zi = [None if d is None else np.zeros(max(d.a.size, d.b.size) - 1)
                     for d in self._discs]  # fmt: skip
+
+    def copy(self) -> AxesStream:
+        """An independent copy of the stream's state (the filter states and the points seen;
+        the models and their discretisations, immutable, shared): what ``copy.deepcopy``
+        gives, without copying the models (a tenth of a millisecond per cut window)."""
+        other = object.__new__(AxesStream)
+        other.__dict__.update(self.__dict__)
+        other._r0 = None if self._r0 is None else self._r0.copy()
+        other._last = None if self._last is None else self._last.copy()
+        other._y_last = self._y_last.copy()
+        other._zi = [None if z is None else z.copy() for z in self._zi]
+        return other
 
     def step(self, reference_mm: np.ndarray) -> np.ndarray:
         """Actual positions (w, k) [mm] for the next ``reference_mm`` (w, k) rows; the first
