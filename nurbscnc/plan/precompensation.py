@@ -398,12 +398,17 @@ def _join_segments(prev_tail_mm: np.ndarray, prev_planned_mm: np.ndarray, seg: R
     head = min(u.shape[0], m + 6)  # every row with a sample on each side of the joint
     if not (limit_excess(u[:head], sample_limits(r[:head], machine)) > 0.0).any():
         return seg
+    # The samples a window may move (PROJECT_MAX_WINDOW after the joint) and the rows
+    # about them: the frame and caps of those alone (not the whole segment's).
+    size = min(u.shape[0], m + PROJECT_MAX_WINDOW + 3)
+    whole = u
+    u, r = u[:size], r[:size]
     caps = sample_limits(r, machine)
     if np.isfinite(tolerance_mm):
         fit = machine.limits.ph_tolerance_mm if fit_tolerance_mm is None else fit_tolerance_mm
         starts = profile.piece_start_mm
-        piece = np.concatenate([np.full(m, planned.piece[0]), planned.piece])
-        s_plan = np.concatenate([np.full(m, planned.s_mm[0]), planned.s_mm])
+        piece = np.concatenate([np.full(m, planned.piece[0]), planned.piece[: size - m]])
+        s_plan = np.concatenate([np.full(m, planned.s_mm[0]), planned.s_mm[: size - m]])
         foot = pieces.path.place(starts, s_plan, piece)[0]
         tube = _tube_mm(pieces, piece, foot, tolerance_mm, fit)
         basis, lower, upper = path_frame(r, s_plan, piece, pieces, profile, u - r, tube)
@@ -422,7 +427,9 @@ def _join_segments(prev_tail_mm: np.ndarray, prev_planned_mm: np.ndarray, seg: R
             out = u.copy()
             out[m:j1] = moved
             if not (limit_excess(out, caps)[: j1 + 3] > 0.0).any():
-                return replace(seg, points_mm=out[m:])
+                joined = whole[m:].copy()
+                joined[: j1 - m] = moved
+                return replace(seg, points_mm=joined)
         if j1 == last:
             break
         pad *= 4
