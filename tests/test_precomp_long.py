@@ -18,7 +18,12 @@ import numpy as np
 from nurbscnc.interpolate.sample import reference_sampler
 from nurbscnc.machine.profile import load_machine
 from nurbscnc.pipeline import RunOptions, run_program
-from nurbscnc.plan.precompensation import _segment_starts
+from nurbscnc.plan.precompensation import (
+    _segment_starts,
+    precompensate_reference,
+    precompensated_sampler,
+)
+from nurbscnc.plan.timing import sample_count
 from nurbscnc.program.interpret import interpret_text
 from tests.servo_reference import limits_excess, lsim_actual_mm, segment_distance_mm
 
@@ -63,6 +68,17 @@ def test_many_cuts_precompensated_keep_limits_tube_and_contour():
     period = MACHINE.servo.period_s
     ks = _segment_starts(plan.pieces, plan.profile, period, 10**9)
     assert ks.size - 1 >= CUTS  # one segment per cut (the first rapid's window with the first)
+    # The planner's windows of rows (each from just before a joint) are the written rows.
+    exact = reference_sampler("exact")
+    whole = precompensate_reference(exact(plan.pieces, plan.profile, period), plan.pieces,
+                                    plan.profile, MACHINE)[0]  # fmt: skip
+    lead = whole.t_s.size - sample_count(plan.pieces, plan.profile, period)
+    sample = precompensated_sampler(exact, MACHINE)
+    for k in _segment_starts(plan.pieces, plan.profile, period, 10**12)[1:-1]:
+        for a, b in ((k + lead - 2, k + lead + 50), (k + lead - 2, k + lead)):
+            rows = sample(plan.pieces, plan.profile, period, int(a), int(b))
+            for f in ("points_mm", "s_mm", "piece", "t_s"):
+                np.testing.assert_array_equal(getattr(rows, f), getattr(whole, f)[a:b])
     pts, piece = run.samples.points_mm, run.samples.piece
     planned = reference_sampler("exact")(plan.pieces, plan.profile, period).points_mm
     lead = pts.shape[0] - planned.shape[0]

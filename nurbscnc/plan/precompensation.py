@@ -464,25 +464,29 @@ def _compensated_rows(ref_of, pieces, profile, machine: Machine, options: tuple,
     last_i = max(int(np.searchsorted(begin, hi, side="left")), first_i + 1)
     parts, comps = [], []
     for i in range(first_i, min(last_i, ks.size - 1)):
+        a = int(begin[i])
+        if i < ks.size - 2 and lo >= int(end[i]) - JOIN_HELD:
+            # Only rows of a segment's held end (the plan's own samples): taken from the
+            # plan, the segment not made (a check of the next window reads them).
+            parts.append(ref_of(lo - lead, min(hi, int(end[i])) - lead))
+            continue
         planned = ref_of(int(ks[i]), int(ks[i + 1]))
         seg, comp = _segment(planned, pieces, profile, machine, options, i == 0,
                              i == ks.size - 2)  # fmt: skip
         if i > 0:
-            planned_before = ref_of(int(ks[i - 1]), int(ks[i]))
-            before = _segment(planned_before, pieces, profile, machine, options, i == 1,
-                              False)[0]  # fmt: skip
-            tail = before.points_mm[-JOIN_HELD:]
+            # The segment before ends on its plan's last JOIN_HELD samples: those are its
+            # tail (it need not be made; the planner's re-plans of a later window splice a
+            # compacted profile before it, whose samples are the final plan's only there).
+            tail = ref_of(int(ks[i]) - JOIN_HELD, int(ks[i])).points_mm
             key = (id(seg), tail.tobytes())  # (seg is held by _SEGMENTS while it is kept)
             joined = _JOINED.get(key)
             if joined is None or joined[0] is not seg:
-                joined = (seg, _join_segments(tail, planned_before.points_mm[-JOIN_HELD:],
-                                              seg, planned, pieces, profile, machine,
-                                              *options[:2]))  # fmt: skip
+                joined = (seg, _join_segments(tail, tail, seg, planned, pieces, profile,
+                                              machine, *options[:2]))  # fmt: skip
                 _JOINED[key] = joined
                 while len(_JOINED) > JOINED_KEPT:
                     _JOINED.popitem(last=False)
             seg = joined[1]
-        a = int(begin[i])
         parts.append(_rows_of(seg, max(lo - a, 0), min(hi, int(end[i])) - a))
         comps.append(comp)
     out = replace(parts[0], **{f.name: np.concatenate([getattr(p, f.name) for p in parts])
