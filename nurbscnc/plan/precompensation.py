@@ -308,7 +308,10 @@ def _s_along(points_mm: np.ndarray, planned_mm: np.ndarray, s_planned_mm: np.nda
 # the rows that span two segments (the step between them and the second and third differences
 # across it) are checked against the limits and, where they break them, re-projected by
 # moving the later segment's first samples (:func:`_join_segments`), which only depend on
-# the earlier segment's last three samples.
+# the earlier segment's last three samples. A segment followed by another ends on its plan's
+# own last three samples (JOIN_HELD), so those are known without making it (a check of the
+# next window reads them from the plan), the joint's caps are the plan's own across it, and
+# the plan's own samples of the later segment always solve it (the fallback).
 
 #: Most samples of compensated segments kept across checks (:data:`_SEGMENTS`): 1.5e6
 #: samples of 10 columns, 120 MB; the planner needs two at a time (the window checked and the
