@@ -204,7 +204,8 @@ def run_program(program, machine: Machine, options: RunOptions | None = None,
             run = _run_precompensated(program, machine, lookahead, options, sampler)
         else:
             plan, check = plan_checked(program, machine, lookahead, sampler,
-                                       keep_reference=options.keep_reference)  # fmt: skip
+                                       keep_reference=options.keep_reference,
+                                       columns=columns)  # fmt: skip
             say("interpolating")
             kept = getattr(check, "reference", None)
             # The check's reference, when it kept one, is the output (no second sampling);
@@ -256,7 +257,8 @@ def window_plans(program, machine: Machine, options: RunOptions | None = None, e
     if options.algorithm != Algorithm.PH_LOOKAHEAD or options.precompensate:
         raise ConfigError("planning while streaming needs the look-ahead planner without "
                           "pre-compensation")  # fmt: skip
-    check_before_work(program.segments, machine)
+    columns = segment_columns(program.segments)
+    check_before_work(program.segments, machine, columns)
     lookahead = options.lookahead
     if not machine.contour_check:
         lookahead = replace(lookahead, dynamics=Dynamics.OFF)
@@ -264,7 +266,7 @@ def window_plans(program, machine: Machine, options: RunOptions | None = None, e
     period = machine.servo.period_s
 
     def windows():
-        for w in plan_windows(program, machine, lookahead, sampler):
+        for w in plan_windows(program, machine, lookahead, sampler, columns=columns):
             last = w.end >= len(w.plan.pieces)
             ref = sampler(w.plan.pieces, w.plan.profile, period, w.k0, None if last else w.k1)
             lines = np.take(w.plan.pieces.line, ref.piece)

@@ -8,7 +8,7 @@ from math import comb
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from scipy.optimize import minimize_scalar
 from scipy.spatial import cKDTree
@@ -585,6 +585,40 @@ def test_space_blend_of_a_helix_into_a_line(tol):
     assert dev <= tol * (1 + 1e-6)
     assert dev >= tol * (1.0 - SEARCH_WINDOW) * 0.99
     assert bl.deviation_mm == pytest.approx(dev, rel=1e-3)
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.floats(2.0, 30.0), st.floats(-6.0, 6.0), st.floats(0.3, 2.5), st.floats(-3.0, 3.0),
+       st.floats(-3.0, 3.0), st.sampled_from([0.002, 0.01, 0.05]))
+def test_space_blends_use_the_tolerance_window(radius, rise, sweep, dx, dz, tol):
+    """Random G2 helices (radius, rise, sweep) into a line leaving their plane, whatever the
+    turn: the space blend's search (secant steps, then bisection) ends with its deviation in
+    [(1 − SEARCH_WINDOW) tol, tol] measured independently (the helix and the line at 4,001
+    points of their own, the Bézier at 20,001, Hausdorff both ways), unless the trim reached
+    its cap (the sides' lengths, the 1 mm given)."""
+    from nurbscnc.geometry.blend import SEARCH_WINDOW, blend_space_corner
+    from nurbscnc.geometry.paths import geometry_of
+    from nurbscnc.program.interpret import interpret_text
+
+    end = np.array([radius * np.sin(sweep), radius * np.cos(sweep), rise])
+    text = (f"G21 G90 G17\nG0 X0 Y{radius:.6f} Z0\nG2 I0 J{-radius:.6f} X{end[0]:.6f} "
+            f"Y{end[1]:.6f} Z{end[2]:.6f} F3000\nG1 X{end[0] + 5 + dx:.6f} "
+            f"Y{end[1] + dx:.6f} Z{end[2] + dz:.6f}\nM2\n")  # fmt: skip
+    arc, line = (s for s in interpret_text(text).segments if s.kind in ("arc", "line"))
+    helix = geometry_of(arc)
+    seg = LineGeometry(np.asarray(line.start_mm), np.asarray(line.end_mm))
+    bl = blend_space_corner(helix, seg, tol, 1.0, 1.0)
+    assume(bl is not None)
+    d = bl.trim_a_mm
+    u = np.linspace(helix.length_mm - d, helix.length_mm, 4001)
+    side_a = helix.point(helix.param_at_length(u))
+    side_b = seg.point(seg.param_at_length(np.linspace(0.0, d, 4001)))
+    corner = np.vstack([side_a, side_b[1:]])
+    blend = _bezier(np.asarray(bl.curve.control_points_mm), np.linspace(0.0, 1.0, 20001))
+    dev = max(_to_polyline(blend, corner).max(), _to_polyline(corner, blend).max())
+    assert dev <= tol * (1 + 1e-6)
+    capped = d >= min(1.0, helix.length_mm, seg.length_mm) * (1 - 1e-9)
+    assert capped or dev >= tol * (1.0 - SEARCH_WINDOW) * 0.999
 
 
 def test_planner_blends_3d_turns_within_p():

@@ -197,7 +197,7 @@ class PathIndex:
     def __init__(self, pieces, short_mm: float = 1.0):
         self._pieces = pieces
         self._direct = 0  # (point, piece) pairs tested directly so far
-        self._balls = None  # (centres (k, 3), radii (k,), |centre|² (k,)) [mm, mm²]
+        self._balls = None  # (centres (k, 3), radii (k,), centres' x (k,)) [mm]
         self._short_mm = short_mm
         self._built = None
         self._counts = None
@@ -283,23 +283,20 @@ class PathIndex:
 
     def _candidates_direct(self, q: np.ndarray, upper_mm: np.ndarray) -> np.ndarray:
         """:meth:`candidates` by testing every piece's ball (centre c = (A + B)/2, radius
-        r = L/2) against every point, by |q − c|² = |q|² − 2 q·c + |c|² (one matrix product
-        a block of points, ≤ 2e6 pairs) ≤ (u + r)², widened by 1e-9 (|q|² + |c|²) for the
-        rounding of the expansion (a wider test only adds candidates)."""
+        r = L/2) against each point: first |q_x − c_x| ≤ u + r over all pieces (one pass),
+        then |q − c| ≤ u + r on the pieces that pass."""
         if self._balls is None:
             pieces = self._pieces
-            centre = 0.5 * (pieces.start_mm + pieces.end_mm).T
-            self._balls = (centre, 0.5 * pieces.length_mm, np.einsum("kc,kc->k", centre, centre))
-        centre, radius, c2 = self._balls
-        near = np.zeros(radius.size, dtype=bool)
-        step = max(1, 2_000_000 // max(radius.size, 1))
-        for lo in range(0, q.shape[0], step):
-            qb = q[lo : lo + step]
-            q2 = np.einsum("mc,mc->m", qb, qb)[:, None]
-            d2 = q2 - 2.0 * (qb @ centre.T) + c2[None, :]
-            reach = upper_mm[lo : lo + step, None] + radius[None, :]
-            near |= np.any(d2 <= reach * reach + 1e-9 * (q2 + c2[None, :]), axis=0)
-        return np.flatnonzero(near)
+            centre = np.ascontiguousarray(0.5 * (pieces.start_mm + pieces.end_mm).T)
+            self._balls = (centre, 0.5 * pieces.length_mm, np.ascontiguousarray(centre[:, 0]))
+        centre, radius, cx = self._balls
+        found = []
+        for p, u in zip(q, upper_mm.tolist()):
+            near = np.flatnonzero(np.abs(cx - p[0]) <= u + radius)
+            rel = centre[near] - p
+            gap = np.sqrt(np.einsum("kc,kc->k", rel, rel)) - radius[near]
+            found.append(near[gap <= u])
+        return np.unique(np.concatenate(found)) if found else np.zeros(0, dtype=np.int64)
 
     def _piece_polylines(self, cand: np.ndarray) -> list[tuple]:
         """(points, box lows, box highs) of the dense polylines (:func:`path_counts`) of

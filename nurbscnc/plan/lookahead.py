@@ -945,9 +945,9 @@ class _Setup:
     path limits), the settle rows, the checker; :meth:`evaluate` plans and checks levers."""
 
     def __init__(self, program, machine: Machine, options: LookaheadOptions, reference,
-                 keep_reference: bool, window: int):  # fmt: skip
+                 keep_reference: bool, window: int, columns=None):  # fmt: skip
         self.machine, self.options = machine, options
-        pieces = segment_pieces(program.segments, machine, options.plan)
+        pieces = segment_pieces(program.segments, machine, options.plan, columns)
         if not len(pieces):
             raise PlanningError("the program has no motion to plan")
         self.pieces = pieces
@@ -1147,7 +1147,8 @@ def _may_gain(result, shaped_s: float, fastest_s: float) -> bool:
 
 def plan_checked(program, machine: Machine, options: LookaheadOptions | None = None,
                  reference=exact_reference, keep_reference: bool = True,
-                 window: int = CHECK_WINDOW) -> tuple[Plan, Check | None]:  # fmt: skip
+                 window: int = CHECK_WINDOW,
+                 columns=None) -> tuple[Plan, Check | None]:  # fmt: skip
     """Plan a whole interpreted program and check it (SPEC §1: modules 1–4, §8): pieces,
     profile, then the dynamics check on the plan's reference points, re-planning until the
     predicted contour error is within ε_max. ``reference``: (pieces, profile, period_s,
@@ -1163,10 +1164,11 @@ def plan_checked(program, machine: Machine, options: LookaheadOptions | None = N
     (:class:`_Checker`), so its memory grows with the pieces, not with the motion time; the
     plan does not depend on ``window``. ``keep_reference``: the final :class:`Check` holds
     the whole reference and response (plots, reports, the output); False: only the
-    over-limit samples and the statistics (long programs). Returns the plan and the final
-    check (None with ``dynamics="off"``)."""
+    over-limit samples and the statistics (long programs). ``columns``: the program's
+    :class:`~nurbscnc.program.columns.SegmentColumns` if read already. Returns the plan and
+    the final check (None with ``dynamics="off"``)."""
     options = options or LookaheadOptions()
-    st = _Setup(program, machine, options, reference, keep_reference, window)
+    st = _Setup(program, machine, options, reference, keep_reference, window, columns)
     if options.dynamics != Dynamics.LOCAL or cut_windows(st.pieces).size == 1:
         lev, result, iterations = _converge(st, st.initial.copy(), st.evaluate)
         return st.plan(lev, result, iterations), result[2]
@@ -1187,7 +1189,7 @@ def plan_checked(program, machine: Machine, options: LookaheadOptions | None = N
 
 
 def plan_windows(program, machine: Machine, options: LookaheadOptions | None = None,
-                 reference=exact_reference, window: int = CHECK_WINDOW):
+                 reference=exact_reference, window: int = CHECK_WINDOW, columns=None):
     """Plan a program cut window by cut window (:func:`cut_windows`), yielding each
     :class:`Window` as soon as it is final: its levers loop (shaping, fallback, improvement)
     sees only its own pieces and samples, the servo starting from the state the previous
@@ -1196,7 +1198,7 @@ def plan_windows(program, machine: Machine, options: LookaheadOptions | None = N
     plan of a program cut short after window n is the first n windows'. One window (and
     ``dynamics`` other than "local") is :func:`plan_checked`'s plan."""
     options = options or LookaheadOptions()
-    st = _Setup(program, machine, options, reference, False, window)
+    st = _Setup(program, machine, options, reference, False, window, columns)
     if options.dynamics != Dynamics.LOCAL or cut_windows(st.pieces).size == 1:
         lev, result, iterations = _converge(st, st.initial.copy(), st.evaluate)
         n = sample_count(result[0], result[1], st.period)
@@ -1543,6 +1545,7 @@ def segment_times_s(plan: Plan) -> dict[int, float]:
     ends = np.append(prof.piece_start_time_s[1:], prof.duration_s)
     span = ends - prof.piece_start_time_s
     seg = np.asarray(plan.pieces.segment)
-    present = np.unique(seg)
     sums = np.bincount(seg, weights=span)
-    return {int(s): float(sums[s]) for s in present}
+    present = np.flatnonzero(np.bincount(seg))  # the segments that have pieces, in order
+    # (lists, not numpy scalars one by one: 200,000 segments in CAM programs)
+    return dict(zip(present.tolist(), sums[present].tolist()))

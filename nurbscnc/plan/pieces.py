@@ -24,7 +24,6 @@ import functools
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from dataclasses import replace as dc_replace
-from itertools import chain
 
 import numpy as np
 
@@ -48,6 +47,9 @@ from nurbscnc.plan.corners import CornerAction, CornerLog, CornerWhy, find_corne
 from nurbscnc.plan.naive import merge_collinear
 from nurbscnc.plan.options import CornerFeed, PlanOptions
 from nurbscnc.plan.phfit import fit_region
+from nurbscnc.program.columns import LINE as LINE_CODE
+from nurbscnc.program.columns import RAPID as RAPID_CODE
+from nurbscnc.program.columns import segment_columns
 
 #: Junctions whose tangents turn by less than this [rad] are treated as smooth (no stop).
 SMOOTH_JUNCTION_RAD = 1e-6
@@ -462,7 +464,8 @@ def _object_pieces(seg, index: int, machine: Machine, options: PlanOptions) -> l
                   geom.u_end, 0.0, kappa, blend_mm=blend_override(seg, options))]  # fmt: skip
 
 
-def segment_pieces(segments, machine: Machine, options: PlanOptions | None = None) -> PieceList:
+def segment_pieces(segments, machine: Machine, options: PlanOptions | None = None,
+                   columns=None) -> PieceList:  # fmt: skip
     """All pieces of a program, in order, as a :class:`PieceList`, with its corners decided
     (path-control modes, LinuxCNC 2.9's meaning, issue 13) and logged in ``corners``.
 
@@ -483,6 +486,8 @@ def segment_pieces(segments, machine: Machine, options: PlanOptions | None = Non
     followed by a feed move stops exactly; the settle there (in-position wait) is set by
     the planner's contour check (:func:`~nurbscnc.plan.lookahead.plan_checked`), at most
     :func:`settle_time_s`, so a rapid's stop overshoot never shows up as contour error.
+    ``columns``: the segments' :class:`~nurbscnc.program.columns.SegmentColumns` if read
+    already (used where smoothing and G64 Q left the segments as they were).
     """
     options = options or PlanOptions()
     lim = machine.limits
@@ -495,23 +500,20 @@ def segment_pieces(segments, machine: Machine, options: PlanOptions | None = Non
     segs, merged = merge_collinear(segs)  # G64 Q, on the lines left
     source = source[merged]
     n = len(segs)
-    kinds = [s.kind for s in segs]
-    straight = np.fromiter((k in ("line", "rapid") for k in kinds), dtype=bool, count=n)
+    if columns is None or len(source) != len(columns.kind) or options.smooth:
+        columns = segment_columns(segs)  # the program's own are for its segments, unchanged
+    kinds = columns.names.tolist()
+    straight = (columns.kind == LINE_CODE) | (columns.kind == RAPID_CODE)
     seg_line = np.flatnonzero(straight)
-    lsegs = [segs[i] for i in seg_line.tolist()]
-    m = len(lsegs)
-    # Column passes over the lines (millions in CAM programs), no tuple per line.
-    p0 = np.fromiter(chain.from_iterable(s.start_mm for s in lsegs), dtype=float,
-                     count=3 * m).reshape(m, 3)  # fmt: skip
-    p1 = np.fromiter(chain.from_iterable(s.end_mm for s in lsegs), dtype=float,
-                     count=3 * m).reshape(m, 3)  # fmt: skip
+    m = seg_line.size
+    # The lines' columns (millions in CAM programs): no tuple per line.
+    p0, p1 = columns.starts_mm[seg_line], columns.ends_mm[seg_line]
     diff = p1 - p0
     l_len = np.sqrt(np.einsum("ij,ij->i", diff, diff))
-    l_rapid = np.fromiter((k == "rapid" for k in kinds), dtype=bool, count=n)[seg_line]
-    # Feed, source line (exact in a float) and blend tolerance in one pass.
-    l_cols = np.fromiter(chain.from_iterable((s.feed_mm_s, s.line, getattr(s, "blend_mm", 0.0))
-                                             for s in lsegs), dtype=float,
-                         count=3 * m).reshape(m, 3)  # fmt: skip
+    l_rapid = columns.kind[seg_line] == RAPID_CODE
+    # Feed, source line (exact in a float) and blend tolerance.
+    l_cols = np.column_stack((columns.feeds_mm_s[seg_line], columns.lines[seg_line],
+                              columns.blends_mm[seg_line]))  # fmt: skip
     l_feed = l_cols[:, 0]
     l_cap = np.maximum(np.where(l_rapid, lim.rapid_mm_s, np.minimum(l_feed, lim.v_max_mm_s)),
                        1e-6)  # fmt: skip
