@@ -97,14 +97,19 @@ def test_windowed_distance_is_the_true_distance_to_the_path(case):
     assert got.max() > 1e-3  # the servo does lag: the check measures something
 
 
-@pytest.mark.parametrize("direct_pairs", [0, PathIndex.DIRECT_PAIRS])
-def test_the_global_distance_is_the_true_distance(case, direct_pairs, monkeypatch):
-    """PathIndex.distance_mm, candidates by the k-d tree (0 pairs direct) or by testing
-    every piece's ball (a program's first DIRECT_PAIRS): against the exact distance to a
-    much denser polyline of the path, for tool samples and for points up to 2 mm off the
-    path (upper bounds from the windowed distance, or 3 mm)."""
+@pytest.mark.parametrize(("direct_pairs", "block_pieces"),
+                         [(0, 0), (PathIndex.DIRECT_PAIRS, PathIndex.DIRECT_BLOCK_PIECES),
+                          (PathIndex.DIRECT_PAIRS, 0)])  # fmt: skip
+def test_the_global_distance_is_the_true_distance(case, direct_pairs, block_pieces,
+                                                  monkeypatch):  # fmt: skip
+    """PathIndex.distance_mm, candidates by the k-d trees (0 pairs direct) or by testing
+    every piece's ball (a program's first DIRECT_PAIRS: all pairs of a block at once, or a
+    point at a time through its x band, as for programs of more than DIRECT_BLOCK_PIECES):
+    against the exact distance to a much denser polyline of the path, for tool samples and
+    for points up to 2 mm off the path (upper bounds from the windowed distance, or 3 mm)."""
     pieces, profile, actual, lag, s = case
     monkeypatch.setattr(PathIndex, "DIRECT_PAIRS", direct_pairs)
+    monkeypatch.setattr(PathIndex, "DIRECT_BLOCK_PIECES", block_pieces)
     rng = np.random.default_rng(7)
     pick = rng.choice(actual.shape[0], 300, replace=False)
     q = np.vstack((actual[pick], actual[pick[:100]] + rng.uniform(-2.0, 2.0, (100, 3))))

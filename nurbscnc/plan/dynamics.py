@@ -193,6 +193,9 @@ class PathIndex:
     DIRECT_PAIRS = 20_000_000
     #: Pieces of one radius group below which it is tested directly, without a tree.
     TREE_MIN = 32
+    #: Programs of at most this many pieces test all (point, piece) pairs of a query block
+    #: at once (:meth:`_candidates_direct`); longer ones a point at a time.
+    DIRECT_BLOCK_PIECES = 20_000
 
     def __init__(self, pieces, short_mm: float = 1.0):
         self._pieces = pieces
@@ -283,19 +286,30 @@ class PathIndex:
 
     def _candidates_direct(self, q: np.ndarray, upper_mm: np.ndarray) -> np.ndarray:
         """:meth:`candidates` by testing every piece's ball (centre c = (A + B)/2, radius
-        r = L/2) against each point: first |q_x − c_x| ≤ u + r over all pieces (one pass),
-        then |q − c| ≤ u + r on the pieces that pass."""
+        r = L/2) against the points, |q − c| ≤ u + r: all pairs at once, a block of points
+        at a time, for programs of up to :data:`DIRECT_BLOCK_PIECES` pieces; beyond, a point
+        at a time, first |q_x − c_x| ≤ u + r over all pieces, then the balls of those (a
+        long program's check asks a few points of many pieces)."""
         if self._balls is None:
             pieces = self._pieces
             centre = np.ascontiguousarray(0.5 * (pieces.start_mm + pieces.end_mm).T)
             self._balls = (centre, 0.5 * pieces.length_mm, np.ascontiguousarray(centre[:, 0]))
         centre, radius, cx = self._balls
+        k = radius.size
+        if k <= self.DIRECT_BLOCK_PIECES:
+            near = np.zeros(k, dtype=bool)
+            step = max(1, (1 << 20) // max(k, 1))
+            for lo in range(0, q.shape[0], step):
+                rel = q[lo : lo + step, None, :] - centre[None, :, :]
+                gap = np.sqrt(np.einsum("mkc,mkc->mk", rel, rel)) - radius[None, :]
+                near |= np.any(gap <= upper_mm[lo : lo + step, None], axis=0)
+            return np.flatnonzero(near)
         found = []
         for p, u in zip(q, upper_mm.tolist()):
-            near = np.flatnonzero(np.abs(cx - p[0]) <= u + radius)
-            rel = centre[near] - p
-            gap = np.sqrt(np.einsum("kc,kc->k", rel, rel)) - radius[near]
-            found.append(near[gap <= u])
+            band = np.flatnonzero(np.abs(cx - p[0]) <= u + radius)
+            rel = centre[band] - p
+            gap = np.sqrt(np.einsum("kc,kc->k", rel, rel)) - radius[band]
+            found.append(band[gap <= u])
         return np.unique(np.concatenate(found)) if found else np.zeros(0, dtype=np.int64)
 
     def _piece_polylines(self, cand: np.ndarray) -> list[tuple]:
