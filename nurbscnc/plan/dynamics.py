@@ -218,9 +218,7 @@ class PathIndex:
         :data:`TREE_MIN` pieces is tested directly)."""
         from scipy.spatial import cKDTree
 
-        pieces = self._pieces
-        centre = 0.5 * (pieces.start_mm + pieces.end_mm).T
-        radius = 0.5 * pieces.length_mm
+        centre, radius, _ = self._ball_columns()
         r0 = 0.5 * self._short_mm
         with np.errstate(divide="ignore"):
             cls = np.where(radius <= r0, 0, np.ceil(np.log2(radius / r0))).astype(np.int64)
@@ -229,7 +227,30 @@ class PathIndex:
             idx = np.flatnonzero(cls == c)
             tree = cKDTree(centre[idx]) if idx.size >= self.TREE_MIN else None
             groups.append((idx, tree, float(radius[idx].max())))
-        self._built = (centre, radius, groups)
+        self._built = groups
+
+    def _ball_columns(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Every piece's ball: centres (k, 3) [mm], radii (k,) [mm] and the centres' x (k,)
+        [mm], computed once."""
+        if self._balls is None:
+            pieces = self._pieces
+            centre = np.ascontiguousarray(0.5 * (pieces.start_mm + pieces.end_mm).T)
+            self._balls = (centre, 0.5 * pieces.length_mm, np.ascontiguousarray(centre[:, 0]))
+        return self._balls
+
+    def _near_balls(self, q: np.ndarray, upper_mm: np.ndarray, idx: np.ndarray) -> np.ndarray:
+        """The pieces of ``idx`` whose balls come within ``upper_mm`` of some point of
+        ``q`` (|q − c| − r ≤ u), all pairs at once, a block of points at a time (≤ 2^20
+        pairs)."""
+        centre, radius, _ = self._ball_columns()
+        c, r = centre[idx], radius[idx]
+        near = np.zeros(idx.size, dtype=bool)
+        step = max(1, (1 << 20) // max(idx.size, 1))
+        for lo in range(0, q.shape[0], step):
+            rel = q[lo : lo + step, None, :] - c[None, :, :]
+            gap = np.sqrt(np.einsum("mkc,mkc->mk", rel, rel)) - r[None, :]
+            near |= np.any(gap <= upper_mm[lo : lo + step, None], axis=0)
+        return idx[near]
 
     def dense_polyline(self, pieces, starts_mm: np.ndarray, total_mm: float, lo: int,
                        hi: int) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
@@ -273,15 +294,13 @@ class PathIndex:
             return self._candidates_direct(q, upper_mm)
         if self._built is None:
             self._build()
-        centre, radius, groups = self._built
         found = []
-        for idx, tree, r_max in groups:
+        for idx, tree, r_max in self._built:
             if tree is not None:
                 for lst in tree.query_ball_point(q, upper_mm + r_max):
                     found.append(idx[np.asarray(lst, dtype=np.int64)])
             else:
-                gap = np.sqrt(((q[:, None, :] - centre[idx][None, :, :]) ** 2).sum(axis=2))
-                found.append(idx[np.any(gap - radius[idx][None, :] <= upper_mm[:, None], axis=0)])
+                found.append(self._near_balls(q, upper_mm, idx))
         return np.unique(np.concatenate(found)) if found else np.zeros(0, dtype=np.int64)
 
     def _candidates_direct(self, q: np.ndarray, upper_mm: np.ndarray) -> np.ndarray:
@@ -290,20 +309,10 @@ class PathIndex:
         at a time, for programs of up to :data:`DIRECT_BLOCK_PIECES` pieces; beyond, a point
         at a time, first |q_x − c_x| ≤ u + r over all pieces, then the balls of those (a
         long program's check asks a few points of many pieces)."""
-        if self._balls is None:
-            pieces = self._pieces
-            centre = np.ascontiguousarray(0.5 * (pieces.start_mm + pieces.end_mm).T)
-            self._balls = (centre, 0.5 * pieces.length_mm, np.ascontiguousarray(centre[:, 0]))
-        centre, radius, cx = self._balls
+        centre, radius, cx = self._ball_columns()
         k = radius.size
         if k <= self.DIRECT_BLOCK_PIECES:
-            near = np.zeros(k, dtype=bool)
-            step = max(1, (1 << 20) // max(k, 1))
-            for lo in range(0, q.shape[0], step):
-                rel = q[lo : lo + step, None, :] - centre[None, :, :]
-                gap = np.sqrt(np.einsum("mkc,mkc->mk", rel, rel)) - radius[None, :]
-                near |= np.any(gap <= upper_mm[lo : lo + step, None], axis=0)
-            return np.flatnonzero(near)
+            return self._near_balls(q, upper_mm, np.arange(k))
         found = []
         for p, u in zip(q, upper_mm.tolist()):
             band = np.flatnonzero(np.abs(cx - p[0]) <= u + radius)

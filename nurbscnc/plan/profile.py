@@ -368,8 +368,9 @@ def _chain_scan(bound: np.ndarray, length: np.ndarray, a: np.ndarray,
     while live.size > CHAIN_SCALAR:
         new = np.minimum(bound[live + 1], reach_unchecked(y[live], length[live], a[live],
                                                           j[live]))  # fmt: skip
-        moved = live[new != y[live + 1]] + 1
-        y[moved] = new[new != y[live + 1]]
+        changed = new != y[live + 1]
+        moved = live[changed] + 1
+        y[moved] = new[changed]
         live = moved[moved < k]
     if live.size:
         reach = max_reachable_speed_scalar
