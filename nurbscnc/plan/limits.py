@@ -126,14 +126,19 @@ def segment_time_bounds_s(segments, machine, columns=None) -> np.ndarray:
     return t
 
 
+def _point_count(total_s: float, period_s: float) -> float:
+    """Reference points of a motion of ``total_s`` [s]: as many as the servo clock makes
+    (nurbscnc.plan.timing.servo_clock: t_k = k T_s from 0 to the first at or after the end);
+    inf for an endless one."""
+    return math.ceil(total_s / period_s - 1e-9) + 1 if math.isfinite(total_s) else math.inf
+
+
 def _refuse_points(times_s: np.ndarray, lines, period_s: float, max_points: int,
                    what: str) -> None:  # fmt: skip
     """PlanningError at the line whose time is the largest when the total time ``times_s``
     [s] needs more than ``max_points`` reference points at ``period_s``."""
     total_s = float(np.sum(times_s))
-    # As many as the servo clock makes (nurbscnc.plan.timing.servo_clock): t_k = k T_s from 0
-    # to the first at or after the end.
-    points = math.ceil(total_s / period_s - 1e-9) + 1 if math.isfinite(total_s) else math.inf
+    points = _point_count(total_s, period_s)
     if points <= max_points:
         return
     i = int(np.argmax(times_s))
@@ -183,8 +188,7 @@ def check_point_count(pieces, profile, machine) -> None:
     with the piece before it). The total first (one sum): the per-segment times only when
     it is over (a cut window's re-plan calls this for the whole program every time)."""
     total_s = float(profile.duration_s) + float(np.sum(pieces.dwell_after_s))
-    limit = machine.limits.max_points
-    if math.isfinite(total_s) and math.ceil(total_s / machine.servo.period_s - 1e-9) + 1 <= limit:
+    if _point_count(total_s, machine.servo.period_s) <= machine.limits.max_points:
         return
     ends = np.append(profile.piece_start_time_s[1:], profile.duration_s)
     span = ends - profile.piece_start_time_s + pieces.dwell_after_s
