@@ -1000,8 +1000,8 @@ def blend_space_corners(path, rows_a, rows_b, tolerance_mm, max_trim_a_mm,
                     continue
             else:
                 hi[c] = d[c]
-            # The next trim: a secant step on the deviation towards the middle of the window
-            # (through the last two regular blends, or through 0: the deviation vanishes
+            # The next trim: a secant step on the deviation towards tol(1 − 0.2 window), near
+            # its top (through the last two regular blends, or through 0: the deviation vanishes
             # with the trim), kept if strictly inside the bracket; else halve the bracket
             # (or double the trim while nothing failed).
             step = np.nan

@@ -33,7 +33,8 @@ at rest. So the bound is *exact* (to rounding) for any cap whose square is linea
 between grid points: constant caps (lines, circles) on any grid, whatever the grid spacing.
 
 The only approximation is the linear interpolation of cap² between samples. The grid starts
-at spacing ≤ ``ds_mm`` (default 0.01 mm, plus the knots of NURBS pieces) and every interval
+at spacing ≤ ``ds_mm`` (default 0.01 mm, plus the knots of NURBS pieces; spiral arcs, whose
+curvature is analytic, at ``SPIRAL_DS_MM``) and every interval
 is bisected, level by level, while cap² at its midpoint differs from the mean of its ends by
 more than ``cap_rel_tol`` (default 1e-5) of its value; a relative error ε in v² is ε/2 in v
 and at most about that in time, so the bound is accurate to well below 0.01 % on smooth
