@@ -404,6 +404,35 @@ def usage_error_json(message: str) -> dict:
     return {"ok": False, "errors": [{"line": None, "column": None, "message": message}]}
 
 
+#: glibc's ``mallopt`` parameters (malloc.h) and the values set by :func:`_reuse_freed_memory`.
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
+_MMAP_THRESHOLD_BYTES = 32 * 2**20  # glibc's own ceiling for its sliding threshold
+_TRIM_THRESHOLD_BYTES = 2**30
+
+
+def _reuse_freed_memory() -> None:
+    """Let glibc's malloc reuse freed blocks below 32 MB instead of giving them back to the
+    kernel and faulting fresh pages in for the next one.
+
+    The commands allocate and free the same large numpy temporaries window after window.
+    By default glibc trims the top of its heap when more than twice its sliding mmap
+    threshold is free, so the next allocation of that size faults every page in again
+    (measured: the 200,000-line spiral's ``run`` spent 0.4–0.5 s of 2.5 s in the kernel, on
+    215,000 page faults). With the threshold fixed at glibc's ceiling (32 MB) and trimming
+    above 1 GB: 113,000 faults, 0.25 s in the kernel, 1.3 % more peak memory. Blocks of 32 MB
+    and more are still mapped and unmapped on their own. Not glibc (macOS, musl): nothing."""
+    try:
+        if not os.confstr("CS_GNU_LIBC_VERSION"):
+            return
+        import ctypes
+
+        libc = ctypes.CDLL(None)
+        libc.mallopt(_M_MMAP_THRESHOLD, _MMAP_THRESHOLD_BYTES)
+        libc.mallopt(_M_TRIM_THRESHOLD, _TRIM_THRESHOLD_BYTES)
+    except (ValueError, OSError, AttributeError):  # no confstr name, no libc, no mallopt
+        return
+
+
 class _Group(click.Group):
     """The command group. With ``--json`` among the arguments, an option error (a click
     usage error: unknown option, bad value, missing argument, two options that exclude each
@@ -417,6 +446,7 @@ class _Group(click.Group):
         # `plan` 5.5 s instead of 3.6, and both took longer). Read when numpy is first
         # imported, which the commands do lazily, after this.
         os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+        _reuse_freed_memory()
         args = list(sys.argv[1:] if args is None else args)
         if not standalone_mode or "--json" not in args:
             return super().main(args, prog_name, complete_var, standalone_mode, **extra)
