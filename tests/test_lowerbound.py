@@ -444,3 +444,19 @@ def test_spiral_arcs_start_coarse_and_give_the_fine_grid_bound(monkeypatch):
     arcs = [geometry_of(s) for s in prog.segments if s.kind == "arc"]
     assert sum(g.radius_end_mm != g.radius_start_mm for g in arcs) >= 10  # spirals, all but
     # the arcs whose end happened to round onto the circle
+
+
+@pytest.mark.parametrize("name", ["naca2415.nc", "butterfly.nc"])
+def test_program_bound_nurbs_start_grid_converged(name, monkeypatch):
+    """A program's NURBS pieces start on PROGRAM_DS_MM (0.05 mm) in the summary's bound; the
+    knots and the bisection make it equal to a 0.0025 mm start to 1e-7 relative (measured
+    2.6e-8 on the NACA, 1.5e-9 on the butterfly)."""
+    from nurbscnc.plan import lowerbound
+
+    prog = interpret_text((PROGRAMS / name).read_text())
+    machine = load_machine()
+    coarse = program_lower_bound_s(prog.segments, machine)
+    monkeypatch.setattr(lowerbound, "PROGRAM_DS_MM", 0.0025)
+    fine = program_lower_bound_s(prog.segments, machine)
+    assert coarse == pytest.approx(fine, rel=1e-7)
+    assert coarse != fine  # the two grids differ: the comparison is not with itself
