@@ -567,3 +567,23 @@ def test_bash_completion_as_the_readme_says(words, expected):
     got = {line.split(",", 1)[1] for line in res.stdout.splitlines() if "," in line}
     assert expected <= got, res.stdout
     assert "_NURBSCNC_COMPLETE=bash_source nurbscnc" in (ROOT / "README.md").read_text()
+
+
+def test_reuse_freed_memory_is_harmless_without_glibc(monkeypatch):
+    """The allocator setting (mallopt, glibc only) never fails a command: without glibc
+    (confstr unknown, or no name) it does nothing; with it, calling it again is harmless."""
+    from nurbscnc.cli import main as cli_main
+
+    cli_main._reuse_freed_memory()  # this machine's libc (glibc on Linux CI): set twice
+    cli_main._reuse_freed_memory()
+
+    def no_confstr(name):
+        raise ValueError(f"unrecognized configuration name {name!r}")
+
+    calls = []
+    monkeypatch.setattr(cli_main.os, "confstr", no_confstr)
+    monkeypatch.setattr("ctypes.CDLL", lambda *a, **k: calls.append(a))
+    assert cli_main._reuse_freed_memory() is None
+    monkeypatch.setattr(cli_main.os, "confstr", lambda name: None)  # musl: no glibc version
+    assert cli_main._reuse_freed_memory() is None
+    assert calls == []  # libc never opened without glibc

@@ -18,6 +18,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from nurbscnc.geometry.blend import sub_ph
+from nurbscnc.geometry.path import Kind
 from nurbscnc.geometry.ph import PHQuintic
 from nurbscnc.geometry.segments import BLEND_EXACT_STOP, Line
 from nurbscnc.machine.profile import load_machine
@@ -203,6 +204,9 @@ def test_line_nurbs_line_corners_are_blended_within_the_tolerance():
     h = np.linalg.norm(np.diff(smp, axis=0), axis=1).max()
     assert np.all(dev <= 0.01 + kappa * h * h / 8) and np.all(dev > 0.005)  # + a sagitta
     assert r.plan.profile.junction_speeds_mm_s[2:-1].min() > 0.0  # no stop after the rapid
+    # The NURBS cells carry their block's G64 P (built with it, nurbs_pieces).
+    nurbs = pieces.kind == Kind.NURBS
+    assert nurbs.sum() > 10 and np.all(pieces.blend_mm[nurbs] == 0.01)
 
 
 def test_sub_ph_is_the_same_curve():
@@ -441,7 +445,6 @@ def test_trimmed_ph_and_nurbs_pieces_are_the_same_curve():
     """A blend trims PH and NURBS pieces too: the trimmed piece's points at arc length t are
     the original's at s0 + t (PH: its own arc-length inversion; NURBS: the same curve)."""
     from nurbscnc.geometry.nurbs import NurbsCurve
-    from nurbscnc.geometry.path import Kind
     from nurbscnc.plan.pieces import Piece, _trimmed
 
     ph = PHQuintic(np.array([1.0 + 0.2j, 0.7 - 0.4j, 0.3 + 1.1j]), 2.0 - 1.0j)
