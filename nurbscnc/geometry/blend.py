@@ -621,11 +621,14 @@ def _line_ab(x: np.ndarray, y: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, n
     return alpha, alpha * r
 
 
-def _kappa_peak(alpha, beta, c, s, iterations: int = 52) -> np.ndarray:
+def _kappa_peak(alpha, beta, c, s, iterations: int = 30) -> np.ndarray:
     """max over ξ of κ = 4αβ s ξ(1 − ξ) / Q², Q = α²(1 − ξ)⁴ + β²ξ⁴ + 2αβc ξ²(1 − ξ)²
     (the curvature of w = α e0 (1 − ξ)² + β e2 ξ²), by bisection on the derivative of
     ln ξ + ln(1 − ξ) − 2 ln Q, which falls from +∞ to −∞ once (one maximum: checked on
-    wide random samples; the tests compare with dense sampling)."""
+    wide random samples; the tests compare with dense sampling). κ is stationary at its
+    peak, so an error δ in ξ moves κ by O(δ²): 30 halvings (δ = 2^-30 ≈ 1e-9) give κ to
+    rounding (within 1.2e-15 of 52 halvings on 150,000 random blends, as 40 and 52 differ
+    among themselves), in 0.6 of the time."""
     lo = np.zeros_like(alpha)
     hi = np.ones_like(alpha)
     a2, b2, ab = alpha * alpha, beta * beta, alpha * beta * c
