@@ -232,8 +232,8 @@ def _peak_kappa(curve, u: np.ndarray, kappa: np.ndarray, rounds: int = 3) -> np.
     ``u``, curvatures ``kappa``), refined: 16 new samples between the neighbours of the
     largest one, ``rounds`` times (a sharp peak between two of the 9 cell samples — a
     near-cusp of a rational NURBS, κ 350 /mm — was missed by 30 %, and the cell's cap
-    √(A/κ) with it); after the first round only the cells whose peak it raised. Cusps
-    (κ = inf) count as 0 as in the samples."""
+    √(A/κ) with it); past the first round, not the cells whose curvature that round found
+    rising to the cell's end. Cusps (κ = inf) count as 0 as in the samples."""
     m, n = u.shape
     best = kappa.max(axis=1)
     rows = np.arange(m)  # the cells still refined: row i of u and kappa is cell rows[i]
@@ -248,11 +248,14 @@ def _peak_kappa(curve, u: np.ndarray, kappa: np.ndarray, rounds: int = 3) -> np.
         rose = peak > best[rows]
         best[rows] = np.maximum(best[rows], peak)
         if r == 0:
-            # A cell whose first refinement finds nothing above its samples is done: its
-            # peak is at a sample (the curvature is monotone in most cells: 4,930 of the
-            # 4,950 of ten airfoils). On the airfoils and the butterfly the later rounds
-            # never raised the peak of such a cell (the same caps as refining them all).
-            rows, u, kappa = rows[rose], u[rose], kappa[rose]
+            # Done after one round: a cell whose refinement found nothing above its samples
+            # and whose largest new sample is an end of the refined interval (the curvature
+            # rises to the cell's end there: most cells, 4,900 of the 4,950 of ten airfoils).
+            # On 65,610 cells of 60 random rational curves (weights 0.05–20) refining them
+            # all further changes one peak, by 2e-7.
+            j = np.argmax(kappa, axis=1)
+            on = np.flatnonzero(rose | ((j > 0) & (j < kappa.shape[1] - 1)))
+            rows, u, kappa = rows[on], u[on], kappa[on]
             if not rows.size:
                 break
         n = u.shape[1]
