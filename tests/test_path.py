@@ -197,6 +197,7 @@ def _ph_params_reference(t: PathTable, i: np.ndarray, s: np.ndarray) -> np.ndarr
     from nurbscnc.geometry.path import PH_MAX_NEWTON, horner_rows
 
     length = t.length_mm[i]
+    i = t.ph_slot[i]  # the rows' PH coefficient columns
     tol = np.maximum(1e-13, 8.0 * np.finfo(float).eps * length)
     xi = np.where(length > 0.0, s / np.where(length > 0.0, length, 1.0), 0.0)
     active = np.arange(xi.size)
@@ -236,4 +237,5 @@ def test_ph_newton_gives_the_bits_of_the_shrinking_active_set():
     np.testing.assert_array_equal(got, _ph_params_reference(t, i, s))
     # And s(ξ) = s to the Newton tolerance, against the polynomial arc length.
     from nurbscnc.geometry.path import horner_rows
-    np.testing.assert_allclose(horner_rows(t.ph_s, i, got - 0.5), s, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(horner_rows(t.ph_s, t.ph_slot[i], got - 0.5), s, rtol=0,
+                               atol=1e-12)  # fmt: skip

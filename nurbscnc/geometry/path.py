@@ -156,7 +156,9 @@ class PathTable:
     ``e2``, ``normal`` (3, k), ``radius_mm``, ``angle_rad``, ``helix_mm`` (k,):
     C = O + r (cos θ e1 + sin θ e2) + t H n, θ = t Δθ, t = s/L. PH pieces: ``ph_s``,
     ``ph_sigma``, ``ph_x``, ``ph_y`` power coefficients in ξ − ½ of s(ξ), σ(ξ) and the plane
-    point (x, y) [mm] ((6|5, k)), with the plane frame in ``origin_mm``, ``e1``, ``e2``.
+    point (x, y) [mm] ((6|5, m), one column per PH row: row r's is column ``ph_slot[r]``,
+    −1 on other rows; a CAM program's line rows need none), with the plane frame in
+    ``origin_mm``, ``e1``, ``e2``.
     NURBS and spiral rows: ``obj_id`` (k,) index into ``objects`` (their geometry, −1 on other
     rows), ``u_a``/``u_b`` (k,) their parameter range and ``s_a_mm`` (k,) the arc length of
     the object at ``u_a`` [mm]. Columns no row needs may be broadcast zeros (no memory).
@@ -178,6 +180,7 @@ class PathTable:
     ph_sigma: np.ndarray
     ph_x: np.ndarray
     ph_y: np.ndarray
+    ph_slot: np.ndarray
     obj_id: np.ndarray
     objects: tuple
     u_a: np.ndarray
@@ -228,15 +231,18 @@ class PathTable:
                     objects.append(g)
                 u_a[i], u_b[i], s_a[i] = ua, ub, sa
             kind[i] = code
-        ph = (np.zeros((6, k)), np.zeros((5, k)), np.zeros((6, k)), np.zeros((6, k)))
+        m = len(ph_rows)
+        ph = (np.zeros((6, m)), np.zeros((5, m)), np.zeros((6, m)), np.zeros((6, m)))
+        ph_slot = np.full(k, -1, dtype=np.intp)
         if ph_rows:
-            r = np.array(ph_rows)
-            for mine, theirs in zip(ph, ph_power_rows(np.array(ph_s), np.array(ph_sigma),
-                                                      np.array(ph_pts))):  # fmt: skip
-                mine[:, r] = theirs
+            ph_slot[np.array(ph_rows)] = np.arange(m)
+            ph = tuple(map(np.ascontiguousarray, ph_power_rows(np.array(ph_s),
+                                                               np.array(ph_sigma),
+                                                               np.array(ph_pts))))  # fmt: skip
         t = {name: np.ascontiguousarray(v.T) for name, v in vec.items()}
         table = cls(kind, length, line, t["start"], t["end"], t["origin"], t["e1"], t["e2"],
-                    t["n"], radius, angle, helix, *ph, obj_id, tuple(objects), u_a, u_b, s_a)
+                    t["n"], radius, angle, helix, *ph, ph_slot, obj_id, tuple(objects), u_a,
+                    u_b, s_a)  # fmt: skip
         return table.frozen()
 
     def frozen(self) -> PathTable:
@@ -327,7 +333,8 @@ class PathTable:
     def _ph_at(self, i, xi) -> np.ndarray:
         """PH points (3, m) at ξ on pieces ``i``: origin + x(ξ) e1 + y(ξ) e2."""
         x = xi - 0.5
-        px, py = horner_rows(self.ph_x, i, x), horner_rows(self.ph_y, i, x)
+        j = np.take(self.ph_slot, i)
+        px, py = horner_rows(self.ph_x, j, x), horner_rows(self.ph_y, j, x)
         return self._col3("origin_mm", i) + px * self._col3("e1", i) + py * self._col3("e2", i)
 
     def _ph_params(self, i, s) -> np.ndarray:
@@ -345,7 +352,8 @@ class PathTable:
         # the whole reference (issue 14's chunked output). The coefficients are gathered
         # once; the working set is compacted only when less than half of it still moves
         # (the others keep their ξ: the same arithmetic per sample, the same bits).
-        cs, cg = np.take(self.ph_s, i, axis=1), np.take(self.ph_sigma, i, axis=1)
+        slot = np.take(self.ph_slot, i)
+        cs, cg = np.take(self.ph_s, slot, axis=1), np.take(self.ph_sigma, slot, axis=1)
         at, xa, sa, ta = np.arange(xi.size), xi.copy(), s, tol
         for _ in range(PH_MAX_NEWTON):
             x = xa - 0.5
@@ -366,12 +374,12 @@ class PathTable:
                     step = np.clip(xa - f / _horner(cg, x), 0.0, 1.0)
                 xa = np.where(going, step, xa)
         xi[at] = xa
-        bad = np.flatnonzero(np.abs(horner_rows(self.ph_s, i, xi - 0.5) - s) > tol)
+        bad = np.flatnonzero(np.abs(horner_rows(self.ph_s, slot, xi - 0.5) - s) > tol)
         if bad.size:
             lo, hi = np.zeros(bad.size), np.ones(bad.size)
             for _ in range(60):  # 2^-60 of the parameter range
                 mid = 0.5 * (lo + hi)
-                below = horner_rows(self.ph_s, i[bad], mid - 0.5) < s[bad]
+                below = horner_rows(self.ph_s, slot[bad], mid - 0.5) < s[bad]
                 lo, hi = np.where(below, mid, lo), np.where(below, hi, mid)
             xi[bad] = 0.5 * (lo + hi)
         return xi
@@ -516,11 +524,12 @@ class PathTable:
                 xi = self._ph_params(i, ls)
                 x = xi - 0.5
                 e1, e2 = self._col3("e1", i), self._col3("e2", i)
-                dx, dy = horner_rows_derivative(self.ph_x, i, x), horner_rows_derivative(
-                    self.ph_y, i, x)
+                j = np.take(self.ph_slot, i)
+                dx, dy = horner_rows_derivative(self.ph_x, j, x), horner_rows_derivative(
+                    self.ph_y, j, x)
                 d1[sel] = (dx * e1 + dy * e2).T
-                ddx = _second_derivative_rows(self.ph_x, i, x)
-                ddy = _second_derivative_rows(self.ph_y, i, x)
+                ddx = _second_derivative_rows(self.ph_x, j, x)
+                ddy = _second_derivative_rows(self.ph_y, j, x)
                 d2[sel] = (ddx * e1 + ddy * e2).T
             else:
                 u = self._object_params(code, i, ls)

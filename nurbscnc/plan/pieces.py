@@ -371,7 +371,6 @@ class PieceList(Sequence):
         obj_kind = self.kind[rows_obj]
         need_frame = self.ph_rows.size > 0 or bool(np.any(obj_kind != Kind.NURBS))
         need_arc = bool(np.any(obj_kind == Kind.ARC))
-        need_ph = self.ph_rows.size > 0 or bool(np.any(obj_kind == Kind.PH))
         need_obj = bool(np.any((obj_kind == Kind.NURBS) | (obj_kind == Kind.ARC)))
 
         def zeros(shape, needed, dtype=float):
@@ -383,27 +382,33 @@ class PieceList(Sequence):
         origin, e1, e2 = (zeros((3, k), need_frame) for _ in range(3))
         normal = zeros((3, k), need_arc)
         radius, angle, helix = (zeros(k, need_arc) for _ in range(3))
-        ph_s, ph_x, ph_y = (zeros((6, k), need_ph) for _ in range(3))
-        ph_sigma = zeros((5, k), need_ph)
         u_a, u_b, s_a = (zeros(k, need_obj) for _ in range(3))
         obj_id = (np.full(k, -1, dtype=np.intp) if need_obj
                   else np.broadcast_to(np.intp(-1), (k,)))  # fmt: skip
         objects: tuple = ()
-        for lo in range(0, self.ph_rows.size, _CHUNK):
+        sub = PathTable.of([self[int(r)].path_row() for r in rows_obj]) if rows_obj.size \
+            else None  # fmt: skip
+        # PH coefficients in one column per PH row (lines need none: a CAM program's
+        # 41 % line rows would hold 184 zero bytes each): the columnar rows' first, in row
+        # order, then the object rows' PH pieces.
+        sub_ph = np.flatnonzero(sub.ph_slot >= 0) if sub is not None else np.zeros(0, np.intp)
+        m = self.ph_rows.size
+        ph_s, ph_x, ph_y = (np.zeros((6, m + sub_ph.size)) for _ in range(3))
+        ph_sigma = np.zeros((5, m + sub_ph.size))
+        ph_slot = np.full(k, -1, dtype=np.intp)
+        ph_slot[self.ph_rows] = np.arange(m)
+        for lo in range(0, m, _CHUNK):
             sl = slice(lo, lo + _CHUNK)
             rows = self.ph_rows[sl]
             pts, sigma, s, _ = ph_tables(self.ph_w[sl], self.ph_p0[sl])
-            ph_s[:, rows], ph_sigma[:, rows], ph_x[:, rows], ph_y[:, rows] = ph_power_rows(
-                s, sigma, pts)
+            ph_s[:, sl], ph_sigma[:, sl], ph_x[:, sl], ph_y[:, sl] = ph_power_rows(s, sigma, pts)
             frame = self.ph_frame[sl]
             origin[:, rows], e1[:, rows], e2[:, rows] = frame[:, 0].T, frame[:, 1].T, frame[:, 2].T
-        if rows_obj.size:
-            sub = PathTable.of([self[int(r)].path_row() for r in rows_obj])
+        if sub is not None:
             code[rows_obj] = sub.kind
             objects = sub.objects
             for mine, theirs in ((origin, sub.origin_mm), (e1, sub.e1), (e2, sub.e2),
-                                 (normal, sub.normal), (ph_s, sub.ph_s), (ph_x, sub.ph_x),
-                                 (ph_y, sub.ph_y), (ph_sigma, sub.ph_sigma)):  # fmt: skip
+                                 (normal, sub.normal)):  # fmt: skip
                 if mine.flags.writeable:
                     mine[:, rows_obj] = theirs
             for mine, theirs in ((radius, sub.radius_mm), (angle, sub.angle_rad),
@@ -411,9 +416,14 @@ class PieceList(Sequence):
                                  (s_a, sub.s_a_mm), (obj_id, sub.obj_id)):  # fmt: skip
                 if mine.flags.writeable:
                     mine[rows_obj] = theirs
+            if sub_ph.size:
+                ph_slot[rows_obj[sub_ph]] = m + np.arange(sub_ph.size)
+                for mine, theirs in ((ph_s, sub.ph_s), (ph_x, sub.ph_x), (ph_y, sub.ph_y),
+                                     (ph_sigma, sub.ph_sigma)):  # fmt: skip
+                    mine[:, m:] = theirs[:, sub.ph_slot[sub_ph]]
         return PathTable(code, self.length_mm, self.line, self.start_mm, self.end_mm, origin,
                          e1, e2, normal, radius, angle, helix, ph_s, ph_sigma, ph_x, ph_y,
-                         obj_id, objects, u_a, u_b, s_a).frozen()  # fmt: skip
+                         ph_slot, obj_id, objects, u_a, u_b, s_a).frozen()  # fmt: skip
 
 
 #: Rows per chunk of the vectorised PH work (bounds the temporaries).
