@@ -460,3 +460,41 @@ def test_program_bound_nurbs_start_grid_converged(name, monkeypatch):
     fine = program_lower_bound_s(prog.segments, machine)
     assert coarse == pytest.approx(fine, rel=1e-7)
     assert coarse != fine  # the two grids differ: the comparison is not with itself
+
+
+@pytest.mark.parametrize("mode", ["G64 P0.01", "G61"])
+def test_program_bound_of_a_polyline_run_closed_form(mode):
+    """A zig-zag polyline (corners of 0.1–6°) at one feed, then a feed change, a dwell and a
+    second run: under G64 P the corners are passed (each run of constant cap is one piece
+    of the bound, its inner junctions dropped), rest to rest per run: trapezoids of the
+    runs' lengths, the feed change exactly at its junction (closed form below); under G61
+    every corner stops: a trapezoid per line."""
+    rng = np.random.default_rng(4)
+    lines, pts, x, y, heading = [f"G21 G17 G90 G94 {mode}", "G0 X0 Y0", "F1800"], [], 0.0, 0.0, 0.0
+    runs = []
+    for feed, n in ((1800.0, 400), (3000.0, 300)):
+        length = 0.0
+        lines.append(f"F{feed:g}")
+        for _ in range(n):
+            heading += float(rng.choice([-1.0, 1.0]) * rng.uniform(0.1, 6.0)) * math.pi / 180
+            step = float(rng.uniform(0.2, 1.0))
+            x, y = x + step * math.cos(heading), y + step * math.sin(heading)
+            lines.append(f"G1 X{x:.9f} Y{y:.9f}")
+            pts.append((x, y))
+            length += step
+        runs.append((feed / 60.0, length))
+        if len(runs) == 1:
+            lines.append("G4 P0.5")
+    lines.append("M2")
+    prog = interpret_text("\n".join(lines) + "\n")
+    machine = load_machine()
+    got = program_lower_bound_s(prog.segments, machine)
+    if mode == "G61":
+        seg = np.diff(np.vstack(([0.0, 0.0], pts)), axis=0)
+        step = np.hypot(seg[:, 0], seg[:, 1])
+        feeds = np.r_[np.full(400, 30.0), np.full(300, min(50.0, V))]
+        expected = sum(trapezoid_s(float(s), float(f)) for s, f in zip(step, feeds)) + 0.5
+    else:
+        expected = sum(trapezoid_s(length, min(v, V)) for v, length in runs) + 0.5
+    # The rounded end points move the lengths by 1e-9 mm at most.
+    assert got == pytest.approx(expected, rel=1e-9)

@@ -319,7 +319,7 @@ def plan_summary(prog, machine: Machine, samples, plan=None, check=None,
         "dynamics": str(plan.dynamics),
         "dynamics_iterations": plan.iterations,
         "feed_max_mm_s": stats.feed_max_mm_s,
-        "segment_times_s": dict(zip(map(str, (times := segment_times_s(plan))), times.values())),
+        "segment_times_s": segment_times_s(plan, key=str),
         "interpolator": stats.interpolator,
     }
     if stats.feed_fluctuation_max is not None:
