@@ -239,3 +239,31 @@ def test_ph_newton_gives_the_bits_of_the_shrinking_active_set():
     from nurbscnc.geometry.path import horner_rows
     np.testing.assert_allclose(horner_rows(t.ph_s, t.ph_slot[i], got - 0.5), s, rtol=0,
                                atol=1e-12)  # fmt: skip
+
+
+def test_ph_rows_columnar_and_objects_share_the_compact_coefficients():
+    """A program with line–line blends (columnar PH rows) and line–arc blends (PH objects):
+    every PH row of the pieces' path table (its coefficients in column ``ph_slot[row]``)
+    gives the points of its own PHQuintic (found by hypothesis: the columnar rows' chunk
+    once ran into the objects' columns)."""
+    from nurbscnc.machine.profile import load_machine
+    from nurbscnc.pipeline import RunOptions, run_program
+    from nurbscnc.plan.options import Dynamics, LookaheadOptions
+    from nurbscnc.program.interpret import interpret_text
+
+    text = ("G21 G90 G17 G94 G64\nG0 X0 Y0 Z0\nG1 X1 Y0.5 F300\nG1 X1 Y1.5\n"
+            "G3 X0.540302 Y2.341471 I-1 J0\nG1 X1.540302 Y2.841471\nG1 X1.540302 Y3.841471\n"
+            "M2\n")  # fmt: skip
+    options = RunOptions(lookahead=LookaheadOptions(dynamics=Dynamics.OFF))
+    pieces = run_program(interpret_text(text), load_machine(), options).plan.pieces
+    table = pieces.path
+    ph = np.flatnonzero(table.kind == Kind.PH)
+    columnar = np.isin(ph, pieces.ph_rows)
+    assert columnar.any() and (~columnar).any()  # both kinds of PH row
+    assert np.array_equal(np.sort(table.ph_slot[ph]), np.arange(ph.size))
+    for r in ph.tolist():
+        geom = pieces[r].geometry
+        s = np.linspace(0.0, float(table.length_mm[r]), 9)
+        got, _ = table.points(np.full(s.size, r), s)
+        want = geom.point_mm(geom.param_at_length(s))
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-9)

@@ -398,7 +398,7 @@ class PieceList(Sequence):
         ph_slot = np.full(k, -1, dtype=np.intp)
         ph_slot[self.ph_rows] = np.arange(m)
         for lo in range(0, m, _CHUNK):
-            sl = slice(lo, lo + _CHUNK)
+            sl = slice(lo, min(lo + _CHUNK, m))  # the columnar rows' columns only
             rows = self.ph_rows[sl]
             pts, sigma, s, _ = ph_tables(self.ph_w[sl], self.ph_p0[sl])
             ph_s[:, sl], ph_sigma[:, sl], ph_x[:, sl], ph_y[:, sl] = ph_power_rows(s, sigma, pts)
