@@ -393,3 +393,56 @@ def test_merged_chain_of_short_cells_accelerates_like_one_move():
     # Each cell's start time is where s(t) reaches it.
     s_at = merged.sample(merged.piece_start_time_s)[0]
     np.testing.assert_allclose(s_at, np.arange(k) * ell, atol=1e-12)
+
+
+def _time_at_length_bisection(profile, s):
+    """The plain 64-halving bisection of the whole phase (time_at_length before the Newton
+    start): the reference."""
+    n = profile.phase_s0_mm.size
+    idx = np.clip(np.searchsorted(profile.phase_s0_mm, s, side="right") - 1, 0, n - 1)
+    s0, v0 = profile.phase_s0_mm[idx], profile.phase_v0_mm_s[idx]
+    a0, jk = profile.phase_a0_mm_s2[idx], profile.phase_jerk_mm_s3[idx]
+    lo, hi = np.zeros_like(s), profile.phase_duration_s[idx].copy()
+    for _ in range(64):
+        mid = 0.5 * (lo + hi)
+        below = s0 + mid * (v0 + mid * (0.5 * a0 + mid * (jk / 6.0))) < s
+        lo, hi = np.where(below, mid, lo), np.where(below, hi, mid)
+    return profile.phase_start_time_s[idx] + hi
+
+
+def test_time_at_length_against_bisection_and_closed_forms():
+    from nurbscnc.plan.profile import ProfileInput, plan_profile, time_at_length
+
+    rng = np.random.default_rng(2)
+    k = 5000
+    length = rng.choice([0.05, 1.0, 20.0], k) * rng.random(k) + 1e-4
+    caps = rng.choice([10.0, 40.0, 58.3], k)
+    junction = np.zeros(k + 1)  # stops (0) and moving junctions, at random
+    junction[1:-1] = np.minimum(caps[:-1], caps[1:]) * rng.choice([0.0, 1.0], k - 1)
+    prof = plan_profile(ProfileInput(length, caps, junction, 2450.0, 5e4))
+    total = prof.total_length_mm
+    s0 = prof.phase_s0_mm
+    s = np.concatenate((rng.random(40_000) * total, s0, s0[1:] - 1e-12, s0[1:] + 1e-12,
+                        [0.0, total, total * (1 + 1e-12)]))  # fmt: skip
+    s = np.clip(s, 0.0, None)
+    got, ref = time_at_length(prof, s), _time_at_length_bisection(prof, s)
+    assert np.all(np.abs(got - ref) <= np.spacing(np.maximum(ref, 1e-300)))
+    # Closed forms: a cruise phase t = Δs / v, a jerk phase from rest t = ∛(6 Δs / j).
+    cruise = np.flatnonzero((prof.phase_jerk_mm_s3 == 0) & (prof.phase_a0_mm_s2 == 0)
+                            & (prof.phase_v0_mm_s > 0) & (prof.phase_duration_s > 1e-3))[:200]
+    frac = rng.uniform(0.1, 0.9, cruise.size)
+    ds = frac * prof.phase_duration_s[cruise] * prof.phase_v0_mm_s[cruise]
+    t = time_at_length(prof, s0[cruise] + ds) - prof.phase_start_time_s[cruise]
+    # The query s = s0 + Δs is itself rounded to spacing(s) [mm]: at speed v that is
+    # spacing(s)/v [s] of time; the times' own rounding adds 1e-13 s.
+    v = prof.phase_v0_mm_s[cruise]
+    bound = 4.0 * np.spacing(s0[cruise] + ds) / v + 1e-13
+    assert np.all(np.abs(t - ds / v) <= bound)
+    rest = np.flatnonzero((prof.phase_v0_mm_s == 0) & (prof.phase_a0_mm_s2 == 0)
+                          & (prof.phase_jerk_mm_s3 > 0))[:200]
+    tau = rng.uniform(0.1, 0.9, rest.size) * prof.phase_duration_s[rest]
+    ds = prof.phase_jerk_mm_s3[rest] * tau**3 / 6.0
+    t = time_at_length(prof, s0[rest] + ds) - prof.phase_start_time_s[rest]
+    v = prof.phase_jerk_mm_s3[rest] * tau**2 / 2.0
+    assert np.all(np.abs(t - tau) <= 4.0 * np.spacing(s0[rest] + ds) / v + 1e-13)
+    assert cruise.size > 50 and rest.size > 50

@@ -1013,9 +1013,41 @@ def _gate_units(unit: Profile, over: np.ndarray, c: np.ndarray, cum: np.ndarray,
     return gated, d_up, d_dn
 
 
+def _below(t, s0, v0, c2, c3, s) -> np.ndarray:
+    """s(t) < s in a phase: s0 + t (v0 + t (c2 + t c3)) [mm], c2 = a0/2, c3 = j/6."""
+    return s0 + t * (v0 + t * (c2 + t * c3)) < s
+
+
+def _bisect(lo: np.ndarray, hi: np.ndarray, phase: tuple, count: int):
+    """``count`` halvings of [lo, hi] [s] towards the first time s(t) ≥ s (``phase``:
+    s0, v0, c2, c3, s as :func:`_below`); returns (lo, hi)."""
+    for _ in range(count):
+        mid = 0.5 * (lo + hi)
+        below = _below(mid, *phase)
+        lo, hi = np.where(below, mid, lo), np.where(below, hi, mid)
+    return lo, hi
+
+
+#: Newton steps of :func:`time_at_length`, the relative half-width of the bracket about their
+#: result, and the halvings of that bracket (2^-26 · 2^-30: below a float's resolution).
+TIME_NEWTON_STEPS = 5
+TIME_BRACKET_REL = 2.0**-26
+TIME_HALVINGS = 30
+
+
 def time_at_length(profile: Profile, s_mm: np.ndarray) -> np.ndarray:
-    """Times [s] at which the profile reaches arc lengths ``s_mm`` (first time; vectorised
-    bisection inside the phase, where s(t) is a monotone cubic)."""
+    """Times [s] at which the profile reaches arc lengths ``s_mm`` (first time, each sample
+    on its own).
+
+    Inside its phase s(t) = s0 + v0 t + a0 t²/2 + j t³/6 is a monotone cubic. Newton steps
+    from the phase's mean speed, kept inside a bracket that each step's sign narrows, come
+    within rounding in a few steps; the root is then bisected in [t(1 − 2^-26), t(1 + 2^-26)]
+    (30 halvings, as the plain bisection of the whole phase would from there) where s at the
+    ends of that interval brackets it, else — a flat start or end of a stop, s at a phase
+    start — in the whole phase, 64 halvings in all. Within rounding of a 64-halving
+    bisection of the whole phase (on 240,000 random queries the same floats; the tests allow
+    1 ulp), in half its time (the 200,000-line spiral's 240,000 piece starts: 0.19 →
+    0.10 s)."""
     s = np.asarray(s_mm, dtype=float)
     n = profile.phase_s0_mm.size
     if n == 0:
@@ -1023,16 +1055,32 @@ def time_at_length(profile: Profile, s_mm: np.ndarray) -> np.ndarray:
     idx = np.clip(np.searchsorted(profile.phase_s0_mm, s, side="right") - 1, 0, n - 1)
     s0 = profile.phase_s0_mm[idx]
     v0 = profile.phase_v0_mm_s[idx]
-    a0 = profile.phase_a0_mm_s2[idx]
-    jk = profile.phase_jerk_mm_s3[idx]
-    lo = np.zeros_like(s)
-    hi = profile.phase_duration_s[idx].copy()
-    for _ in range(64):  # 2^-64 of a phase duration: far below a servo period
-        mid = 0.5 * (lo + hi)
-        val = s0 + mid * (v0 + mid * (0.5 * a0 + mid * (jk / 6.0)))
-        below = val < s
-        lo = np.where(below, mid, lo)
-        hi = np.where(below, hi, mid)
+    c2 = 0.5 * profile.phase_a0_mm_s2[idx]
+    c3 = profile.phase_jerk_mm_s3[idx] / 6.0
+    dur = profile.phase_duration_s[idx]
+
+    end = dur * (v0 + dur * (c2 + dur * c3))  # the phase's length
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.clip(np.where(end > 0.0, dur * ((s - s0) / end), 0.0), 0.0, dur)
+    lo, hi = np.zeros_like(s), dur.copy()
+    for _ in range(TIME_NEWTON_STEPS):
+        f = s0 + t * (v0 + t * (c2 + t * c3)) - s
+        below = f < 0.0
+        lo, hi = np.where(below, t, lo), np.where(below, hi, t)
+        speed = v0 + t * (2.0 * c2 + 3.0 * c3 * t)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            step = t - f / speed
+        t = np.where((speed > 0.0) & (step >= lo) & (step <= hi), step, 0.5 * (lo + hi))
+    near_lo = np.maximum(t * (1.0 - TIME_BRACKET_REL), 0.0)
+    near_hi = np.minimum(t * (1.0 + TIME_BRACKET_REL), dur)
+    near = ((near_hi > near_lo) & _below(near_lo, s0, v0, c2, c3, s)
+            & ~_below(near_hi, s0, v0, c2, c3, s))  # fmt: skip
+    lo, hi = _bisect(np.where(near, near_lo, 0.0), np.where(near, near_hi, dur),
+                     (s0, v0, c2, c3, s), TIME_HALVINGS)  # fmt: skip
+    far = np.flatnonzero(~near)
+    if far.size:
+        hi[far] = _bisect(lo[far], hi[far], tuple(c[far] for c in (s0, v0, c2, c3, s)),
+                          64 - TIME_HALVINGS)[1]  # fmt: skip
     return profile.phase_start_time_s[idx] + hi
 
 
