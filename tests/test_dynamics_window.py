@@ -56,11 +56,13 @@ def case():
     return pieces, profile, actual, lag, s
 
 
+@pytest.mark.parametrize("fill_block", [PathIndex.FILL_BLOCK, 777])
 @pytest.mark.parametrize("slab", [dynamics.SLAB, 997])
 @pytest.mark.parametrize("room", [PathIndex.DENSE_POINTS, 5000])
-def test_the_kept_polyline_gives_the_same_bits(case, monkeypatch, slab, room):
+def test_the_kept_polyline_gives_the_same_bits(case, monkeypatch, slab, room, fill_block):
     pieces, profile, actual, lag, s = case
     monkeypatch.setattr(dynamics, "SLAB", slab)
+    monkeypatch.setattr(PathIndex, "FILL_BLOCK", fill_block)
     fresh = windowed_contour_mm(actual, lag, s, pieces, profile)
     index = PathIndex(pieces)
     index.DENSE_POINTS = room  # all of the polyline fits, or only its first pieces
