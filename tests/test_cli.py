@@ -587,3 +587,24 @@ def test_reuse_freed_memory_is_harmless_without_glibc(monkeypatch):
     monkeypatch.setattr(cli_main.os, "confstr", lambda name: None)  # musl: no glibc version
     assert cli_main._reuse_freed_memory() is None
     assert calls == []  # libc never opened without glibc
+
+
+def test_collector_paused_and_thawed_around_the_plan_and_its_json():
+    """make_plan freezes the program's objects for the planning only, and summary_json
+    pauses the cycle collector for the encoding only: afterwards nothing stays frozen and
+    the collector is as it was (on or off); the text is json.dumps's."""
+    import gc
+
+    from nurbscnc.cli import main as cli_main
+
+    prog, mach, run = cli_main.make_plan(str(ROOT / "programs" / "corners.nc"))
+    assert gc.get_freeze_count() == 0 and gc.isenabled()
+    summary = cli_main.summary_of(prog, mach, run)
+    assert cli_main.summary_json(summary) == json.dumps(summary)
+    assert gc.isenabled()
+    gc.disable()
+    try:
+        cli_main.summary_json({"a": 1.5})
+        assert not gc.isenabled()
+    finally:
+        gc.enable()

@@ -10,6 +10,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import functools
+import gc
 import io
 import json
 import os
@@ -838,7 +839,29 @@ def make_plan(program: str, machine=None, overrides=(), dynamics="local", lookah
     if progress:
         progress("reading and interpreting")
     prog = load_program(program, not no_block_delete, tool_table, subroutine_path, text)
-    return prog, mach, run_program(prog, mach, options, progress)
+    # The program's objects (a CAM program's 200,000 lines: 600,000 objects) and the modules'
+    # live until the plan is made: the cycle collector's full passes need not walk them
+    # (measured on the 200k spiral: 0.19 s of collections, 0.12 s of it four full passes).
+    # Thawed after, so nothing stays exempt.
+    gc.freeze()
+    try:
+        return prog, mach, run_program(prog, mach, options, progress)
+    finally:
+        gc.unfreeze()
+
+
+def summary_json(summary: dict) -> str:
+    """The JSON text of a summary, the cycle collector paused while it is made: a long
+    program's 200,000 per-line times make as many strings, which set off full collections
+    that walk every object of the run (two, 0.08 s, on the 200k spiral) and find nothing —
+    the encoder makes no cycles."""
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        return json.dumps(summary)
+    finally:
+        if enabled:
+            gc.enable()
 
 
 def clock_suffix(seconds: float) -> str:
@@ -940,7 +963,7 @@ def plan(program, as_json, dump_profile, explain, explain_all, plot_dir, **setti
         s, v, a, j, piece = pl.profile.sample(tau)
         write_profile(dump_profile, t, s, v, a, j, piece)
     if as_json:
-        click.echo(json.dumps(summary))
+        click.echo(summary_json(summary))
         return
     print_plan_summary(prog, mach, summary, err if dump_profile == "-" else out)
     if explain:
@@ -1097,7 +1120,7 @@ def run(programs, output, output_dir, jobs, fmt, quiet, as_json, plot_dir, **set
         # The text line shows points and cycle time only: no kinematic bound to compute.
         summary = summary_of(prog, mach, run, stats, lower_bound=as_json)
         if as_json:
-            click.echo(json.dumps(summary), err=output == "-")
+            click.echo(summary_json(summary), err=output == "-")
         elif not quiet:
             err.print(f"{prog.name}: {summary['samples']} points, cycle time "
                       f"{summary['cycle_time_s']:.4f} s{clock_suffix(summary['cycle_time_s'])}"
