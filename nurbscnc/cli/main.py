@@ -855,13 +855,10 @@ def summary_json(summary: dict) -> str:
     program's 200,000 per-line times make as many strings, which set off full collections
     that walk every object of the run (two, 0.08 s, on the 200k spiral) and find nothing —
     the encoder makes no cycles."""
-    enabled = gc.isenabled()
-    gc.disable()
-    try:
+    from nurbscnc.program.fastlane import pause_cyclic_gc
+
+    with pause_cyclic_gc():
         return json.dumps(summary)
-    finally:
-        if enabled:
-            gc.enable()
 
 
 def clock_suffix(seconds: float) -> str:

@@ -386,8 +386,9 @@ class PieceList(Sequence):
         obj_id = (np.full(k, -1, dtype=np.intp) if need_obj
                   else np.broadcast_to(np.intp(-1), (k,)))  # fmt: skip
         objects: tuple = ()
-        sub = PathTable.of([self[int(r)].path_row() for r in rows_obj]) if rows_obj.size \
-            else None  # fmt: skip
+        sub = None
+        if rows_obj.size:
+            sub = PathTable.of([self[int(r)].path_row() for r in rows_obj])
         # PH coefficients in one column per PH row (lines need none: a CAM program's
         # 41 % line rows would hold 184 zero bytes each): the columnar rows' first, in row
         # order, then the object rows' PH pieces.

@@ -1013,9 +1013,15 @@ def _gate_units(unit: Profile, over: np.ndarray, c: np.ndarray, cum: np.ndarray,
     return gated, d_up, d_dn
 
 
+def _phase_s(t, s0, v0, c2, c3) -> np.ndarray:
+    """s(t) [mm] in a phase, t [s] from its start: s0 + t (v0 + t (c2 + t c3)), c2 = a0/2,
+    c3 = j/6."""
+    return s0 + t * (v0 + t * (c2 + t * c3))
+
+
 def _below(t, s0, v0, c2, c3, s) -> np.ndarray:
-    """s(t) < s in a phase: s0 + t (v0 + t (c2 + t c3)) [mm], c2 = a0/2, c3 = j/6."""
-    return s0 + t * (v0 + t * (c2 + t * c3)) < s
+    """s(t) < s in a phase (:func:`_phase_s`)."""
+    return _phase_s(t, s0, v0, c2, c3) < s
 
 
 def _bisect(lo: np.ndarray, hi: np.ndarray, phase: tuple, count: int):
@@ -1059,12 +1065,12 @@ def time_at_length(profile: Profile, s_mm: np.ndarray) -> np.ndarray:
     c3 = profile.phase_jerk_mm_s3[idx] / 6.0
     dur = profile.phase_duration_s[idx]
 
-    end = dur * (v0 + dur * (c2 + dur * c3))  # the phase's length
+    end = _phase_s(dur, 0.0, v0, c2, c3)  # the phase's length
     with np.errstate(divide="ignore", invalid="ignore"):
         t = np.clip(np.where(end > 0.0, dur * ((s - s0) / end), 0.0), 0.0, dur)
     lo, hi = np.zeros_like(s), dur.copy()
     for _ in range(TIME_NEWTON_STEPS):
-        f = s0 + t * (v0 + t * (c2 + t * c3)) - s
+        f = _phase_s(t, s0, v0, c2, c3) - s
         below = f < 0.0
         lo, hi = np.where(below, t, lo), np.where(below, hi, t)
         speed = v0 + t * (2.0 * c2 + 3.0 * c3 * t)
