@@ -76,11 +76,12 @@ from nurbscnc.plan.dynamics import (
 from nurbscnc.plan.limits import check_point_count
 from nurbscnc.plan.options import Dynamics, LookaheadOptions
 from nurbscnc.plan.pieces import PieceList, junction_caps, segment_pieces, settle_time_s
-from nurbscnc.plan.profile import Profile, ProfileInput, plan_profile
+from nurbscnc.plan.profile import Profile, ProfileInput, plan_profile, same_until_s
 from nurbscnc.plan.timing import (
     Reference,
     dwell_times,
     exact_reference,
+    same_clock_until_s,
     sample_count,
     total_time_s,
 )
@@ -628,6 +629,36 @@ def _rows(ref: Reference, sl: slice) -> Reference:
     return replace(ref, **{f.name: getattr(ref, f.name)[sl] for f in fields(ref)})
 
 
+def _joined(first: Reference, then: Reference) -> Reference:
+    """The rows of ``first``, then those of ``then``."""
+    return replace(first, **{f.name: np.concatenate((getattr(first, f.name),
+                                                     getattr(then, f.name)))
+                             for f in fields(first)})  # fmt: skip
+
+
+@dataclass(frozen=True, eq=False)
+class _Memo:
+    """What :meth:`_Checker.run` keeps of its last check of a window made of one chunk, for
+    the next re-plan of that window (:meth:`_Checker._same_rows`): the window (``key``: its
+    first sample, whether it ends the program, its last piece; the servo state it started
+    from; the path), the profile and dwell schedule it sampled, the chunk's sampled rows
+    (``ref``, from row ``a``), and per own row (from chunk row ``own``) the response's
+    axis errors, contour and eq. 29 errors and the cutting flags."""
+
+    key: tuple
+    stream: AxesStream | None
+    path: object
+    profile: Profile
+    clock: tuple
+    a: int
+    ref: Reference
+    own: int
+    axis_error_mm: np.ndarray
+    contour_mm: np.ndarray
+    contour_eq29_mm: np.ndarray
+    cutting: np.ndarray
+
+
 class _Checker:
     """The dynamics check of one program's plans (SPEC §8), a window of servo samples at a
     time (issue 14): the reference of ``window`` samples (plus one on each side for the
@@ -651,13 +682,16 @@ class _Checker:
         self.after_rapid = np.zeros(len(pieces), dtype=bool)  # first piece of a cut after a rapid
         self.after_rapid[settle_rows + 1] = True
         self.index = PathIndex(pieces)  # where the pieces are (built on first use)
+        self._memo: _Memo | None = None  # the last one-chunk check (:meth:`_same_rows`)
 
-    def _windows(self, planned: PieceList, profile: Profile, rows: tuple | None = None):
+    def _windows(self, planned: PieceList, profile: Profile, rows: tuple | None = None,
+                 sample=None):  # fmt: skip
         """(reference rows, slice of the window's own rows in them, row of the virtual end
         or None): one row more on each side where there is one (the direction of travel is
         a central difference); with ``rows`` (k0, k1, last, …) only those samples, and
         unless ``last``, after k1 − 1 the row k1 of the program as if it ended with this
-        window (:meth:`_end_row`: the next cut window's motion is not planned yet)."""
+        window (:meth:`_end_row`: the next cut window's motion is not planned yet).
+        ``sample(a, b)``: rows a … b − 1 of the reference (default: the sampler's)."""
         period = self.machine.servo.period_s
         n = sample_count(planned, profile, period)
         r0, r1 = (0, n) if rows is None else (rows[0], min(rows[1], n))
@@ -672,9 +706,11 @@ class _Checker:
         else:
             chunks = ((None, max(k0 - 1, 0), min(k0 + self.window + 1, r1 + 1, hi), k0,
                        min(k0 + self.window, r1)) for k0 in range(r0, r1, self.window))
+        if sample is None:
+            def sample(a, b):
+                return self.sampler(planned, profile, period, a, b)
         for whole, a, b, k0, k1 in chunks:
-            ref = self.sampler(planned, profile, period, a, b) if whole is None else \
-                _rows(whole, slice(a, b))  # fmt: skip
+            ref = sample(a, b) if whole is None else _rows(whole, slice(a, b))
             virt = None
             if not last and b == r1 + 1:
                 virt = r1 - a
@@ -717,27 +753,54 @@ class _Checker:
         if rows is None and not self.windowed:
             return self._run_whole(planned, profile)
         servo = self.machine.servo
-        if stream is None:
-            stream = AxesStream([servo.x, servo.y, servo.z], servo.period_s)
-        else:
-            stream = stream.copy()
+        stream_in = stream
+        stream = AxesStream([servo.x, servo.y, servo.z], servo.period_s) if stream is None \
+            else stream.copy()  # fmt: skip
         acc = _Accumulator(self, profile)
         last = end = None
         # The path the error is measured against: the pieces up to this window's end (the
         # program as if it ended there; the whole program for the last window).
         head = None if rows is None or rows[2] else self._head(planned, profile, rows[4] + 1)
         on, prof, index = (planned, profile, self.index) if head is None else head[:3]
-        for ref, own, virt in self._windows(planned, profile, rows):
+        key = None if rows is None else (rows[0], rows[2], rows[4])
+        memo, same = self._memo, self._same_rows(planned, profile, key, stream_in)
+        self._memo = None
+        sampled = []  # (first row, rows) of each chunk: one chunk is kept for the re-plans
+
+        def sample(a: int, b: int) -> Reference:
+            period = servo.period_s
+            if same and a == memo.a:  # the leading rows the last check of it sampled
+                j = min(same, b - a)
+                ref = _joined(_rows(memo.ref, slice(0, j)),
+                              self.sampler(planned, profile, period, a + j, b))  # fmt: skip
+            else:
+                ref = self.sampler(planned, profile, period, a, b)
+            sampled.append((a, ref))
+            return ref
+
+        for ref, own, virt in self._windows(planned, profile, rows, sample):
             d = np.gradient(ref.points_mm[:, :2], axis=0) if ref.t_s.size > 1 else \
                 np.zeros((ref.t_s.size, 2))  # fmt: skip
             if virt is not None:
                 end = (_rows(ref, slice(virt, virt + 1)), d[virt : virt + 1])
+            # Own rows whose response the last check computed: their reference rows and
+            # the rows on each side (the direction of travel) are the same.
+            kept = 0
+            if same and sampled[-1][0] == memo.a and own.start == memo.own:
+                kept = max(0, min(same - 1, ref.t_s.size - 2, own.stop) - own.start)
+                kept = min(kept, memo.contour_mm.size)
             ref = _rows(ref, own)
             actual = stream.step(ref.points_mm)
-            resp = window_response(ref.points_mm, ref.s_mm, actual, d[own], on, prof,
-                                   self.eps_mm, index)  # fmt: skip
-            acc.add(resp, self._cutting(ref, resp, profile, head), ref.tau_s, ref.piece)
+            resp, cutting = self._respond(ref, actual, d[own], on, prof, index, profile, head,
+                                          memo, kept)  # fmt: skip
+            acc.add(resp, cutting, ref.tau_s, ref.piece)
             last = ref
+            self._memo = None
+            if len(sampled) == 1:  # one chunk: kept for the next re-plan of this window
+                self._memo = _Memo(key, stream_in, planned.path, profile,
+                                   dwell_times(planned.dwell_after_s, profile), sampled[0][0],
+                                   sampled[0][1], own.start, resp.axis_error_mm,
+                                   resp.contour_mm, resp.contour_eq29_mm, cutting)  # fmt: skip
         self.stream_out = stream
         virtual = rows is not None and not rows[2]
         if virtual:  # the end of a cut window, as if the program ended there
@@ -761,6 +824,47 @@ class _Checker:
             acc.add(resp, np.full(m, not self.rapid[piece_end]), np.full(m, tau_end),
                     np.full(m, piece_end), virtual=virtual)  # fmt: skip
         return acc.check()
+
+    def _same_rows(self, planned: PieceList, profile: Profile, key: tuple | None,
+                   stream: AxesStream | None) -> int:  # fmt: skip
+        """How many leading rows of the kept chunk (:class:`_Memo`) a check of this plan
+        samples alike, bit for bit: the same window started from the same servo state on
+        the same path, each row's wall time before the dwell schedules differ
+        (:func:`~nurbscnc.plan.timing.same_clock_until_s`) and its profile time before the
+        profiles do (:func:`~nurbscnc.plan.profile.same_until_s`). The sampler gives each
+        row from its own wall time alone (any window of rows is those rows of the whole
+        reference), and the response of a row depends on its reference, its neighbours'
+        and the servo state only: so a re-plan that changed the profile from some point on
+        costs the samples from there on. 0 without a kept chunk."""
+        memo = self._memo
+        if memo is None or memo.key != key or memo.stream is not stream or \
+                memo.path is not planned.path:  # fmt: skip
+            return 0
+        t_wall = same_clock_until_s(memo.clock, dwell_times(planned.dwell_after_s, profile))
+        t_tau = same_until_s(memo.profile, profile)
+        return int(min(np.searchsorted(memo.ref.t_s, t_wall, side="left"),
+                       np.searchsorted(memo.ref.tau_s, t_tau, side="left")))  # fmt: skip
+
+    def _respond(self, ref: Reference, actual: np.ndarray, direction: np.ndarray, on, prof,
+                 index, profile: Profile, head: tuple | None, memo: _Memo | None,
+                 kept: int) -> tuple[Response, np.ndarray]:  # fmt: skip
+        """The response to the own reference rows ``ref`` (the servo's ``actual``
+        positions, the directions of travel) and which rows are checked (:meth:`_cutting`):
+        the first ``kept`` rows from ``memo`` (the same numbers), the others computed."""
+        new = slice(kept, None)
+        resp = window_response(ref.points_mm[new], ref.s_mm[new], actual[new], direction[new],
+                               on, prof, self.eps_mm, index)  # fmt: skip
+        cutting = self._cutting(_rows(ref, new) if kept else ref, resp, profile, head)
+        if not kept:
+            return resp, cutting
+
+        def joined(old: np.ndarray, now: np.ndarray) -> np.ndarray:
+            return np.concatenate((old[:kept], now))
+
+        return (Response(actual, joined(memo.axis_error_mm, resp.axis_error_mm),
+                         joined(memo.contour_mm, resp.contour_mm),
+                         joined(memo.contour_eq29_mm, resp.contour_eq29_mm)),
+                joined(memo.cutting, cutting))  # fmt: skip
 
     def _run_whole(self, planned: PieceList, profile: Profile) -> Check:
         """The check on the whole reference at once (a sampler without windows, or the

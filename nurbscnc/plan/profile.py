@@ -309,6 +309,55 @@ class Profile:
         )
 
 
+#: The phase columns that :meth:`Profile.sample` reads (with ``phase_start_time_s``).
+_PHASE_COLUMNS = ("phase_duration_s", "phase_s0_mm", "phase_v0_mm_s", "phase_a0_mm_s2",
+                  "phase_jerk_mm_s3")  # fmt: skip
+
+
+def _only_duration_differs(old: Profile, new: Profile, p: int) -> bool:
+    """Whether phase ``p`` of the two profiles starts alike (time, s, v, a, jerk) and only
+    its duration differs."""
+    return old.phase_start_time_s[p] == new.phase_start_time_s[p] and all(
+        getattr(old, name)[p] == getattr(new, name)[p] for name in _PHASE_COLUMNS[1:])
+
+
+def same_until_s(old: Profile, new: Profile) -> float:
+    """The profile time [s] before which ``old`` and ``new`` sample alike, bit for bit
+    (:meth:`Profile.sample` at any τ < it gives the same five numbers), and their pieces
+    start at the same times (``piece_start_time_s``, which places dwells): a re-plan that
+    changed the profile from some phase on changes nothing before it.
+
+    :meth:`Profile.sample` at τ reads the phase found among the phase start times and that
+    phase's columns, the piece start lengths and the duration. So: the earlier start of the
+    first phase that differs in any column (or is missing from one profile) — where only
+    its duration differs, its shorter end or the earlier start of the phase after it — the
+    earlier start time of the first piece whose start time differs, and the shorter
+    duration; 0 when the pieces' start lengths differ (another path)."""
+    if not np.array_equal(old.piece_start_mm, new.piece_start_mm):
+        return 0.0
+    t = min(old.duration_s, new.duration_s)
+    m = min(old.phase_start_time_s.size, new.phase_start_time_s.size)
+    differ = old.phase_start_time_s[:m] != new.phase_start_time_s[:m]
+    for name in _PHASE_COLUMNS:
+        differ |= getattr(old, name)[:m] != getattr(new, name)[:m]
+    first = int(np.argmax(differ)) if differ.any() else m
+    cut = first  # the phase whose start bounds the common samples
+    if first < m and differ[first] and _only_duration_differs(old, new, first):
+        # The same motion cut short in one (a cruise that the braking now begins earlier
+        # in): alike up to the shorter end, and before either profile's next phase.
+        t = min(t, float(old.phase_start_time_s[first])
+                + float(min(old.phase_duration_s[first], new.phase_duration_s[first])))
+        cut = first + 1
+    for prof in (old, new):
+        if cut < prof.phase_start_time_s.size:
+            t = min(t, float(prof.phase_start_time_s[cut]))
+    moved = np.flatnonzero(old.piece_start_time_s != new.piece_start_time_s)
+    if moved.size:
+        p = int(moved[0])
+        t = min(t, float(old.piece_start_time_s[p]), float(new.piece_start_time_s[p]))
+    return t
+
+
 def _window_caps(
     cap: np.ndarray, length: np.ndarray, w_back: np.ndarray, n: int, a: np.ndarray,
     j: np.ndarray,

@@ -54,6 +54,23 @@ def wall_to_profile_time(t_wall: np.ndarray, dwell_at_s: np.ndarray, dwell_s: np
     return tau
 
 
+def same_clock_until_s(old: tuple, new: tuple) -> float:
+    """The wall time [s] before which two dwell schedules (``(dwell_at_s, dwell_s)`` of
+    :func:`dwell_times`) map wall time to the same profile time, bit for bit
+    (:func:`wall_to_profile_time` at any t below it): the earlier wall start of their first
+    dwell that differs in place or length, or that one of them lacks (``inf`` when they
+    are the same). Below it, both read the same dwells before t and none at or after it."""
+    (at_a, s_a), (at_b, s_b) = old, new
+    m = min(at_a.size, at_b.size)
+    differ = (at_a[:m] != at_b[:m]) | (s_a[:m] != s_b[:m])
+    first = int(np.argmax(differ)) if differ.any() else m
+    t = np.inf
+    for at, s in ((at_a, s_a), (at_b, s_b)):
+        if first < at.size:  # its wall start: the same cumulative sum as the mapping's
+            t = min(t, float((at + np.concatenate(([0.0], np.cumsum(s)))[:-1])[first]))
+    return t
+
+
 def sample_count(pieces, profile: Profile, period_s: float) -> int:
     """Number of servo periods of a plan: t_k = k·T_s for k = 0 … N−1, the last one the
     first at or after the end of motion (dwells included)."""

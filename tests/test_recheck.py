@@ -1,0 +1,107 @@
+"""A re-plan's check samples again only where the plan changed (plan/lookahead.py
+``_Checker._same_rows``, plan/profile.py ``same_until_s``, plan/timing.py
+``same_clock_until_s``): the rows before are taken from the last check, bit for bit what a
+fresh check computes."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from nurbscnc.machine.profile import load_machine
+from nurbscnc.plan import lookahead as la
+from nurbscnc.plan.profile import ProfileInput, plan_profile, same_until_s
+from nurbscnc.plan.timing import same_clock_until_s, wall_to_profile_time
+from nurbscnc.program.interpret import interpret_text
+
+A, J = 2450.0, 50_000.0
+
+
+def _profile(caps):
+    k = len(caps)
+    lengths = np.linspace(1.0, 3.0, k)
+    junction = np.full(k + 1, np.inf)
+    junction[[0, -1]] = 0.0
+    return plan_profile(ProfileInput(lengths, np.asarray(caps, float), junction, A, J))
+
+
+@pytest.mark.parametrize("changed", [3, 6, 9])
+def test_profiles_sample_alike_before_same_until(changed):
+    caps = np.full(12, 50.0)
+    old = _profile(caps)
+    caps[changed] = 12.0  # a lower cap on one piece: the braking before it changes too
+    new = _profile(caps)
+    t = same_until_s(old, new)
+    assert 0.0 < t < min(old.duration_s, new.duration_s)
+    tau = np.linspace(0.0, t, 20_001)[:-1]  # every τ < t
+    for x, y in zip(old.sample(tau), new.sample(tau)):
+        assert np.array_equal(x, y)
+    # Not a vacuous bound: a little after it the samples differ, and the change is no
+    # later than the braking into the lowered piece must start.
+    late = np.linspace(t, t + 0.02, 200)
+    assert not np.array_equal(old.sample(late)[0], new.sample(late)[0])
+    assert t <= old.piece_start_time_s[changed]
+
+
+def test_same_profiles_are_the_same_to_their_end_and_other_paths_not_at_all():
+    a = _profile(np.full(5, 40.0))
+    b = _profile(np.full(5, 40.0))
+    assert same_until_s(a, b) == a.duration_s
+    other = plan_profile(ProfileInput(np.linspace(1.0, 3.5, 5), np.full(5, 40.0),
+                                      np.array([0, np.inf, np.inf, np.inf, np.inf, 0]), A, J))
+    assert same_until_s(a, other) == 0.0
+
+
+def test_dwell_schedules_map_alike_before_the_first_difference():
+    at = np.array([0.5, 1.2, 2.0])
+    old = (at, np.array([0.25, 0.1, 0.3]))
+    assert same_clock_until_s(old, old) == np.inf
+    longer = (at, np.array([0.25, 0.4, 0.3]))  # the second dwell longer
+    t = same_clock_until_s(old, longer)
+    assert t == pytest.approx(1.2 + 0.25, abs=1e-15)  # its wall start
+    wall = np.linspace(0.0, t, 5001)[:-1]
+    assert np.array_equal(wall_to_profile_time(wall, *old), wall_to_profile_time(wall, *longer))
+    fewer = (at[:2], old[1][:2])  # the third dwell gone: the clocks part at its start
+    assert same_clock_until_s(old, fewer) == pytest.approx(2.0 + 0.35, abs=1e-15)
+    moved = (np.array([0.4, 1.2, 2.0]), old[1])
+    assert same_clock_until_s(old, moved) == 0.4
+
+
+PROGRAMS = {
+    # Cut windows after rapids (settles, re-plans of later windows from their start).
+    "cuts": "G21 G90 G17 F3000\n" + "".join(
+        f"G0 Z2\nG0 X{x} Y0\nG1 Z-1\nG1 X{x + 6}\nG2 X{x + 6} Y4 I0 J2\nG1 X{x}\nG1 Y0\n"
+        for x in (0, 20, 40)) + "G0 Z5\nM2\n",
+    # One window, the whole program one chunk: re-plans of a sharp-cornered contour.
+    "corners": "G21 G90 G17 G61 F3500\nG1 X10\nG1 Y8\nG1 X3 Y4\nG3 X-3 Y4 I-3 J-4\nG1 X0 Y0\nM2\n",
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("name", sorted(PROGRAMS))
+def test_a_recheck_reusing_rows_gives_the_fresh_checks_plan(name, monkeypatch):
+    """The plan, its check (every over-limit sample, piece runs, statistics) and the
+    reference are those of checks that sample every row afresh — and rows were reused."""
+    machine = load_machine()
+    program = interpret_text(PROGRAMS[name])
+    reused = []
+    real = la._Checker._same_rows
+
+    def counting(self, *args):
+        rows = real(self, *args)
+        reused.append(rows)
+        return rows
+
+    monkeypatch.setattr(la._Checker, "_same_rows", counting)
+    plan, check = la.plan_checked(program, machine, keep_reference=False)
+    assert sum(reused) > 0 and plan.iterations > 0
+    monkeypatch.setattr(la._Checker, "_same_rows", lambda self, *args: 0)
+    fresh, fresh_check = la.plan_checked(program, machine, keep_reference=False)
+    assert plan.cycle_time_s == fresh.cycle_time_s and plan.iterations == fresh.iterations
+    assert np.array_equal(plan.caps_mm_s, fresh.caps_mm_s)
+    for f in ("phase_start_time_s", "phase_jerk_mm_s3", "piece_start_time_s"):
+        assert np.array_equal(getattr(plan.profile, f), getattr(fresh.profile, f))
+    assert np.array_equal(plan.pieces.dwell_after_s, fresh.pieces.dwell_after_s)
+    assert check.stats == fresh_check.stats
+    for f in ("count", "index", "err_mm", "tau_s", "run_piece", "run_start", "restart_count",
+              "worst_mm"):  # fmt: skip
+        assert np.array_equal(getattr(check.overs, f), getattr(fresh_check.overs, f)), f
