@@ -105,3 +105,25 @@ def test_a_recheck_reusing_rows_gives_the_fresh_checks_plan(name, monkeypatch):
     for f in ("count", "index", "err_mm", "tau_s", "run_piece", "run_start", "restart_count",
               "worst_mm"):  # fmt: skip
         assert np.array_equal(getattr(check.overs, f), getattr(fresh_check.overs, f)), f
+
+
+def test_a_window_of_several_chunks_keeps_nothing(monkeypatch):
+    """Memory: only a window checked in one chunk is kept; checked 64 samples at a time,
+    no rows are reused, and the plan is the same."""
+    machine = load_machine()
+    program = interpret_text(PROGRAMS["corners"])
+    reused = []
+    real = la._Checker._same_rows
+
+    def counting(self, *args):
+        rows = real(self, *args)
+        reused.append(rows)
+        return rows
+
+    monkeypatch.setattr(la._Checker, "_same_rows", counting)
+    small, _ = la.plan_checked(program, machine, keep_reference=False, window=64)
+    assert len(reused) > 1 and sum(reused) == 0
+    whole, _ = la.plan_checked(program, machine, keep_reference=False)
+    assert sum(reused) > 0
+    assert small.cycle_time_s == whole.cycle_time_s
+    assert np.array_equal(small.profile.phase_start_time_s, whole.profile.phase_start_time_s)

@@ -765,7 +765,8 @@ class _Checker:
         key = None if rows is None else (rows[0], rows[2], rows[4])
         memo, same = self._memo, self._same_rows(planned, profile, key, stream_in)
         self._memo = None
-        sampled = []  # (first row, rows) of each chunk: one chunk is kept for the re-plans
+        sampled = []  # (first row, rows) of the first chunk, kept for the re-plans if the
+        chunks = 0  # window is one chunk; and the chunks sampled
 
         def sample(a: int, b: int) -> Reference:
             period = servo.period_s
@@ -775,7 +776,9 @@ class _Checker:
                               self.sampler(planned, profile, period, a + j, b))  # fmt: skip
             else:
                 ref = self.sampler(planned, profile, period, a, b)
-            sampled.append((a, ref))
+            nonlocal chunks
+            chunks += 1
+            sampled[:] = [(a, ref)] if chunks == 1 else []  # memory: one chunk at most
             return ref
 
         for ref, own, virt in self._windows(planned, profile, rows, sample):
@@ -786,7 +789,9 @@ class _Checker:
             # Own rows whose response the last check computed: their reference rows and
             # the rows on each side (the direction of travel) are the same.
             kept = 0
-            if same and sampled[-1][0] == memo.a and own.start == memo.own:
+            if chunks > 1:  # a window of several chunks keeps none
+                memo = self._memo = None
+            elif same and sampled[0][0] == memo.a and own.start == memo.own:
                 kept = max(0, min(same - 1, ref.t_s.size - 2, own.stop) - own.start)
                 kept = min(kept, memo.contour_mm.size)
             ref = _rows(ref, own)
@@ -795,8 +800,7 @@ class _Checker:
                                           memo, kept)  # fmt: skip
             acc.add(resp, cutting, ref.tau_s, ref.piece)
             last = ref
-            self._memo = None
-            if len(sampled) == 1:  # one chunk: kept for the next re-plan of this window
+            if sampled:  # the first chunk: kept for the next re-plan of a one-chunk window
                 self._memo = _Memo(key, stream_in, planned.path, profile,
                                    dwell_times(planned.dwell_after_s, profile), sampled[0][0],
                                    sampled[0][1], own.start, resp.axis_error_mm,
