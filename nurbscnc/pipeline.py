@@ -146,21 +146,25 @@ class Run:
 
 
 def _announcing(sampler, say):
-    """``sampler`` that first says which pass of the planner's dynamics check it serves (the
-    planner samples each plan from its first window on, k0 = 0: the first check, then once
-    per re-plan). Windows (k0, k1) pass through; so does what the planner reads of the
-    sampler (``windows``, ``interpolator``), so the check runs in windows as without it."""
+    """``sampler`` with a ``check_begins(k0)`` that says which pass of the planner's dynamics
+    check begins (the checker calls it as each check of a plan begins at sample k0: from
+    sample 0, the first check, then once per re-plan). Sampling passes through; so does
+    what the planner reads of the sampler (``windows``, ``interpolator``), so the check
+    runs in windows as without it."""
     passes = itertools.count()
 
     def sample(pieces, profile, period_s, k0=0, k1=None):
+        return sampler(pieces, profile, period_s, k0, k1)
+
+    def check_begins(k0: int) -> None:
         if k0 == 0:
             n = next(passes)
             say("dynamics check" if n == 0 else f"dynamics check, re-plan {n}")
-        return sampler(pieces, profile, period_s, k0, k1)
 
     for name in ("windows", "interpolator"):
         if hasattr(sampler, name):
             setattr(sample, name, getattr(sampler, name))
+    sample.check_begins = check_begins
     return sample
 
 

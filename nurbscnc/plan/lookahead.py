@@ -750,6 +750,9 @@ class _Checker:
         False: its last sample :meth:`_end_row` and the held tail at profile time τ_end on
         the last piece, on a copy of the servo state, which :attr:`stream_out` then holds
         without them, for the next window)."""
+        begins = getattr(self.sampler, "check_begins", None)  # a progress display's hook
+        if begins is not None:
+            begins(0 if rows is None else rows[0])
         if rows is None and not self.windowed:
             return self._run_whole(planned, profile)
         servo = self.machine.servo
@@ -1263,7 +1266,9 @@ def plan_checked(program, machine: Machine, options: LookaheadOptions | None = N
     k0=0, k1=None) → :class:`~nurbscnc.plan.timing.Reference`, the points k0…k1−1 the check
     simulates (default: the exact ones; the interpolator passes its own,
     :func:`nurbscnc.interpolate.sample.reference_sampler`); a sampler without windows
-    (:func:`_windowed`) is called as (pieces, profile, period_s) for all of them.
+    (:func:`_windowed`) is called as (pieces, profile, period_s) for all of them; a
+    sampler's ``check_begins(k0)``, if it has one, is called as each check begins at sample
+    k0 (a progress display: a re-plan may sample only from where its plan changed).
 
     A program of several cuts (``dynamics="local"``) is planned cut window by cut window
     (:func:`plan_windows`); the plan is the last window's (all windows final) and the check
