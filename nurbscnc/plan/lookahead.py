@@ -768,8 +768,10 @@ class _Checker:
         key = None if rows is None else (rows[0], rows[2], rows[4])
         memo, same = self._memo, self._same_rows(planned, profile, key, stream_in)
         self._memo = None
-        sampled = []  # (first row, rows) of the first chunk, kept for the re-plans if the
-        chunks = 0  # window is one chunk; and the chunks sampled
+        # The first chunk sampled, as (first row, rows): kept for the next re-plan if the
+        # window is that one chunk. Memory: one chunk at most.
+        sampled: list = []
+        chunks = 0
 
         def sample(a: int, b: int) -> Reference:
             period = servo.period_s
@@ -781,7 +783,7 @@ class _Checker:
                 ref = self.sampler(planned, profile, period, a, b)
             nonlocal chunks
             chunks += 1
-            sampled[:] = [(a, ref)] if chunks == 1 else []  # memory: one chunk at most
+            sampled[:] = [(a, ref)] if chunks == 1 else []
             return ref
 
         for ref, own, virt in self._windows(planned, profile, rows, sample):
