@@ -151,3 +151,18 @@ def test_columns_are_the_segments_attributes(pool):
 def test_columns_of_no_segments():
     cols = segment_columns(())
     assert cols.starts_mm.shape == (0, 3) and cols.kind.size == 0
+
+
+def test_summary_json_in_pieces_is_json_dumps_text():
+    """The summary's JSON, its large mappings encoded in pieces (cli ``_json_in_pieces``),
+    is json.dumps's text, byte for byte."""
+    from nurbscnc.cli.main import JSON_PIECE, summary_json
+
+    rng = np.random.default_rng(7)
+    times = {str(i): float(x) for i, x in enumerate(rng.exponential(0.01, 3 * JSON_PIECE + 5))}
+    summary = {"ok": True, "program": '@@segment_times_s@@ "quoted" \\ é',
+               "segment_times_s": times, "small": {"a": 1.5, "b": [1, None]},
+               "inf": float("inf"), "exact": {str(i): 0.1 for i in range(JSON_PIECE)},
+               "list": list(range(10)), "empty": {}}  # fmt: skip
+    assert summary_json(summary) == json.dumps(summary)
+    assert summary_json({}) == json.dumps({})

@@ -863,7 +863,28 @@ def summary_json(summary: dict) -> str:
     from nurbscnc.program.fastlane import pause_cyclic_gc
 
     with pause_cyclic_gc():
-        return json.dumps(summary)
+        return _json_in_pieces(summary)
+
+
+#: Entries of a large mapping encoded per ``json.dumps`` call by :func:`_json_in_pieces`.
+JSON_PIECE = 8192
+
+
+def _json_in_pieces(summary: dict) -> str:
+    """``json.dumps(summary)``, the same text, with the large mappings (a long program's
+    per-line times) encoded :data:`JSON_PIECE` entries per call: the C encoder holds the
+    interpreter lock for a whole call, and ``run`` encodes while its output is being
+    finished in the other thread (cli ``write_output``), which needs the lock now and then.
+    A mapping's text is its entries' joined by ", " inside braces, as json.dumps writes it."""
+
+    def encoded(value) -> str:
+        if not (isinstance(value, dict) and len(value) > JSON_PIECE):
+            return json.dumps(value)
+        items = list(value.items())
+        return "{" + ", ".join(json.dumps(dict(items[i : i + JSON_PIECE]))[1:-1]
+                               for i in range(0, len(items), JSON_PIECE)) + "}"  # fmt: skip
+
+    return "{" + ", ".join(f"{json.dumps(k)}: {encoded(v)}" for k, v in summary.items()) + "}"
 
 
 def clock_suffix(seconds: float) -> str:
@@ -1114,8 +1135,11 @@ def run(programs, output, output_dir, jobs, fmt, quiet, as_json, plot_dir, **set
             # they come (memory of one window, whatever the motion time); the summary is
             # made while the writer finishes the file. The text line shows points and
             # cycle time only: no kinematic bound to compute.
-            summary = write_output(output, fmt, run, mach, prog.name, lambda stats:
-                                   summary_of(prog, mach, run, stats, lower_bound=as_json))
+            def summarise(stats):
+                summary = summary_of(prog, mach, run, stats, lower_bound=as_json)
+                return summary, summary_json(summary) if as_json else None
+
+            summary, text = write_output(output, fmt, run, mach, prog.name, summarise)
             if plot_dir:
                 from nurbscnc.plan.explain import explain_plan
 
@@ -1123,7 +1147,7 @@ def run(programs, output, output_dir, jobs, fmt, quiet, as_json, plot_dir, **set
                 expl = explain_plan(prog, mach, run.plan) if run.plan is not None else None
                 write_plan_plots(run, plot_dir, prog, expl, mach)
         if as_json:
-            click.echo(summary_json(summary), err=output == "-")
+            click.echo(text, err=output == "-")
         elif not quiet:
             err.print(f"{prog.name}: {summary['samples']} points, cycle time "
                       f"{summary['cycle_time_s']:.4f} s{clock_suffix(summary['cycle_time_s'])}"
