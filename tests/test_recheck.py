@@ -77,13 +77,9 @@ PROGRAMS = {
 }  # fmt: skip
 
 
-@pytest.mark.parametrize("name", sorted(PROGRAMS))
-def test_a_recheck_reusing_rows_gives_the_fresh_checks_plan(name, monkeypatch):
-    """The plan, its check (every over-limit sample, piece runs, statistics) and the
-    reference are those of checks that sample every row afresh — and rows were reused."""
-    machine = load_machine()
-    program = interpret_text(PROGRAMS[name])
-    reused = []
+def _counting_reuse(monkeypatch) -> list:
+    """Record what every check's :meth:`_Checker._same_rows` returns (rows reused)."""
+    reused: list = []
     real = la._Checker._same_rows
 
     def counting(self, *args):
@@ -92,6 +88,16 @@ def test_a_recheck_reusing_rows_gives_the_fresh_checks_plan(name, monkeypatch):
         return rows
 
     monkeypatch.setattr(la._Checker, "_same_rows", counting)
+    return reused
+
+
+@pytest.mark.parametrize("name", sorted(PROGRAMS))
+def test_a_recheck_reusing_rows_gives_the_fresh_checks_plan(name, monkeypatch):
+    """The plan, its check (every over-limit sample, piece runs, statistics) and the
+    reference are those of checks that sample every row afresh — and rows were reused."""
+    machine = load_machine()
+    program = interpret_text(PROGRAMS[name])
+    reused = _counting_reuse(monkeypatch)
     plan, check = la.plan_checked(program, machine, keep_reference=False)
     assert sum(reused) > 0 and plan.iterations > 0
     monkeypatch.setattr(la._Checker, "_same_rows", lambda self, *args: 0)
@@ -112,15 +118,7 @@ def test_a_window_of_several_chunks_keeps_nothing(monkeypatch):
     no rows are reused, and the plan is the same."""
     machine = load_machine()
     program = interpret_text(PROGRAMS["corners"])
-    reused = []
-    real = la._Checker._same_rows
-
-    def counting(self, *args):
-        rows = real(self, *args)
-        reused.append(rows)
-        return rows
-
-    monkeypatch.setattr(la._Checker, "_same_rows", counting)
+    reused = _counting_reuse(monkeypatch)
     small, _ = la.plan_checked(program, machine, keep_reference=False, window=64)
     assert len(reused) > 1 and sum(reused) == 0
     whole, _ = la.plan_checked(program, machine, keep_reference=False)
