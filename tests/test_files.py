@@ -282,18 +282,41 @@ main(["run", sys.argv[1], "-o", sys.argv[2]])
 """
 
 
+# The points made slowly (in the worker thread, cli write_output) while the writer, in the
+# main thread, waits for the next window.
+_SLOW_MAKER = r"""
+import sys, time
+import nurbscnc.pipeline as pipeline
+real = pipeline.Run.chunks
+def slow(self, chunk=None):
+    for i, window in enumerate(real(self, 64)):
+        if i == 1:
+            print("WRITING", flush=True)
+            time.sleep(60)
+        yield window
+pipeline.Run.chunks = slow
+from nurbscnc.cli.main import main
+main(["run", sys.argv[1], "-o", sys.argv[2]])
+"""
+
+
+@pytest.mark.parametrize("slow", [_SLOW_WRITER, _SLOW_MAKER], ids=["writer", "maker"])
 @pytest.mark.parametrize("sig, code", [(signal.SIGTERM, 143), (signal.SIGHUP, 129),
                                        (signal.SIGINT, 130)])  # fmt: skip
-def test_signal_during_run_leaves_no_temp_file(tmp_path, program, sig, code):
+def test_signal_during_run_leaves_no_temp_file(tmp_path, program, sig, code, slow):
     out = tmp_path / "out"
     out.mkdir()
     target = out / "points.csv"
     target.write_text("old\n")
-    proc = subprocess.Popen([sys.executable, "-c", _SLOW_WRITER, str(program), str(target)],
+    proc = subprocess.Popen([sys.executable, "-c", slow, str(program), str(target)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE)  # fmt: skip
     try:
         assert proc.stdout.readline().strip() == b"WRITING"
-        temps = [n for n in os.listdir(out) if n.startswith(".nurbscnc-")]
+        for _ in range(200):  # the writer (the other thread) opens its temp file soon
+            temps = [n for n in os.listdir(out) if n.startswith(".nurbscnc-")]
+            if temps:
+                break
+            time.sleep(0.01)
         assert len(temps) == 1 and temps[0].endswith(".tmp")  # mid-write: the temp exists
         proc.send_signal(sig)
         assert proc.wait(30) == code
