@@ -166,3 +166,5 @@ def test_summary_json_in_pieces_is_json_dumps_text():
                "list": list(range(10)), "empty": {}}  # fmt: skip
     assert summary_json(summary) == json.dumps(summary)
     assert summary_json({}) == json.dumps({})
+    odd = {1: "int key", None: times, "x": {str(i): i for i in range(JSON_PIECE + 1)}}
+    assert summary_json(odd) == json.dumps(odd)

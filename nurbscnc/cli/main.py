@@ -884,6 +884,8 @@ def _json_in_pieces(summary: dict) -> str:
         return "{" + ", ".join(json.dumps(dict(items[i : i + JSON_PIECE]))[1:-1]
                                for i in range(0, len(items), JSON_PIECE)) + "}"  # fmt: skip
 
+    if not all(isinstance(k, str) for k in summary):  # json.dumps's own key conversions
+        return json.dumps(summary)
     return "{" + ", ".join(f"{json.dumps(k)}: {encoded(v)}" for k, v in summary.items()) + "}"
 
 
