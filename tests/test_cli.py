@@ -608,3 +608,40 @@ def test_collector_paused_and_thawed_around_the_plan_and_its_json():
         assert not gc.isenabled()
     finally:
         gc.enable()
+
+
+@pytest.mark.parametrize("signal_exc, code", [(KeyboardInterrupt(), 130),
+                                              (cli._Terminated(15), 143),
+                                              (cli._Terminated(1), 129)])  # fmt: skip
+@pytest.mark.parametrize("late", [OSError(28, "No space left on device"),
+                                  cli.OutputError("cannot write x.csv: closed"),
+                                  ValueError("a writer's own error")])  # fmt: skip
+def test_an_error_while_unwinding_from_a_signal_reports_the_signal(signal_exc, code, late,
+                                                                   capsys):  # fmt: skip
+    """A write cut short by Ctrl-C or SIGTERM can fail again as its file is closed on the
+    way out: the exit code is the signal's, not the later error's (3 or 1)."""
+
+    @cli.handle_errors
+    def command():
+        try:
+            raise signal_exc
+        except BaseException:
+            raise late from None  # ``from None`` keeps the context, as the writers do
+
+    with pytest.raises(SystemExit) as caught:
+        command()
+    assert caught.value.code == code
+    assert "No space" not in capsys.readouterr().err
+
+
+def test_an_error_without_a_signal_behind_it_keeps_its_code():
+    @cli.handle_errors
+    def command():
+        try:
+            raise ValueError("first")
+        except ValueError:
+            raise cli.OutputError("cannot write x.csv: disk full") from None
+
+    with pytest.raises(SystemExit) as caught:
+        command()
+    assert caught.value.code == 3

@@ -319,7 +319,8 @@ def test_signal_during_run_leaves_no_temp_file(tmp_path, program, sig, code, slo
             time.sleep(0.01)
         assert len(temps) == 1 and temps[0].endswith(".tmp")  # mid-write: the temp exists
         proc.send_signal(sig)
-        assert proc.wait(30) == code
+        rc = proc.wait(30)
+        assert rc == code, proc.stderr.read().decode(errors="replace")
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -465,3 +466,23 @@ def test_dev_stdout_to_a_pipe_and_to_a_file(tmp_path, program, name):
     assert os.stat(target).st_ino == inode  # written through the shell's file, not replaced
     assert target.read_bytes() == piped.stdout
     assert not [n for n in os.listdir(tmp_path) if n.startswith(".nurbscnc-")]
+
+
+def test_a_signal_just_after_the_temp_file_is_created_leaves_no_file(tmp_path, monkeypatch):
+    """A signal landing between the temporary file's creation and the code that owns it
+    (here: right as ``os.open`` returns) still leaves no temporary file behind."""
+    import nurbscnc.output.files as files
+
+    real_open = os.open
+
+    def open_then_interrupted(path, flags, mode=0o777):
+        real_open(path, flags, mode)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(files.os, "open", open_then_interrupted)
+    target = tmp_path / "points.csv"
+    target.write_text("old\n")
+    with pytest.raises(KeyboardInterrupt), files.atomic_output(str(target)) as fh:
+        fh.write("new\n")
+    assert os.listdir(tmp_path) == ["points.csv"]
+    assert target.read_text() == "old\n"

@@ -266,6 +266,7 @@ def handle_errors(func):
         except _Failed as exc:
             sys.exit(exc.code)
         except NurbsCncError as exc:
+            _exit_if_interrupted(exc)
             if kwargs.get("as_json"):
                 with contextlib.suppress(OSError):
                     click.echo(json.dumps(_error_json(exc)))
@@ -284,6 +285,7 @@ def handle_errors(func):
         except click.ClickException:
             raise
         except OSError as exc:
+            _exit_if_interrupted(exc)
             # Stages do no I/O and every file we open is wrapped in OutputError: an OSError
             # without a file name is a write to stdout failing (a full disk, a dead device).
             if os.environ.get("NURBSCNC_DEBUG"):
@@ -297,6 +299,7 @@ def handle_errors(func):
             err.print(f"{filename}: error: {message}", markup=False)
             sys.exit(EXIT_IO)
         except Exception as exc:  # a bug: say so, without a traceback unless asked
+            _exit_if_interrupted(exc)
             if os.environ.get("NURBSCNC_DEBUG"):
                 raise
             if kwargs.get("as_json"):
@@ -309,6 +312,22 @@ def handle_errors(func):
             sys.exit(EXIT_INTERNAL)
 
     return wrapper
+
+
+def _exit_if_interrupted(exc: BaseException) -> None:
+    """Exit as for the signal if ``exc`` was raised while unwinding from one (Ctrl-C,
+    SIGTERM, SIGHUP): a write cut short by the signal can fail again as its file is closed
+    on the way out, and that error would otherwise be reported instead of the signal."""
+    seen: set = set()
+    cause = exc.__context__
+    while cause is not None and id(cause) not in seen:
+        if isinstance(cause, KeyboardInterrupt):
+            err.print("interrupted", markup=False)
+            sys.exit(EXIT_INTERRUPTED)
+        if isinstance(cause, _Terminated):
+            sys.exit(128 + cause.signum)
+        seen.add(id(cause))
+        cause = cause.__context__
 
 
 def _echo_json_error(message: str) -> None:

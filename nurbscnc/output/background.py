@@ -13,7 +13,9 @@ calling thread. The writer stays in the calling thread because that is where sig
 SIGTERM, SIGHUP or Ctrl-C raise there and unwind the writer's own ``with`` blocks at once,
 so an atomic output leaves no file even when the writer is stuck on a slow disk or pipe.
 The worker only computes; when the writer stops early (a signal, a full disk, a closed
-pipe) it is told to stop and left to end on its own (a daemon thread: it writes nothing).
+pipe) it is told to stop, and the error waits for it to stop at its next window (at most
+:data:`STOP_WAIT_S`) before it goes on: a process that exits while the worker is inside
+numpy can abort.
 An exception of the making (a point outside the soft limits, found as it is made) is raised
 in the writer where the next window would have come, so it unwinds the writer too (no
 file), and then reaches the caller unchanged.
@@ -29,6 +31,11 @@ import threading
 DEPTH = 2
 #: Seconds between the worker's checks that the writer still wants windows while it waits.
 POLL_S = 0.05
+#: Seconds the writer's error waits for the worker to stop (at its next window: one
+#: window's sampling, or the summary). The process must not end while the worker is inside
+#: numpy: a daemon thread stopped there at exit can abort the interpreter ("terminate called
+#: without an active exception"). A worker stuck longer (a bug) is left behind.
+STOP_WAIT_S = 2.0
 
 
 class _Stopped(Exception):
@@ -102,9 +109,11 @@ def write_while_making(write, windows, after=None):
         write(received())
     except BaseException:
         stop.set()
+        worker.join(STOP_WAIT_S)
         raise
     if not ended:  # the writer returned before the last window: a bug, not a hang
         stop.set()
+        worker.join(STOP_WAIT_S)
         raise RuntimeError("the output writer returned before the last window")
     worker.join()
     if "error" in outcome:

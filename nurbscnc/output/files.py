@@ -93,14 +93,18 @@ def _through_proc(path: str) -> bool:
     return False
 
 
-def _create_temp(folder: str, mode: int) -> tuple[int, str]:
+def _create_temp(folder: str, mode: int, named: list) -> tuple[int, str]:
     """A new, exclusive temporary file in ``folder`` created with ``mode`` (the kernel applies
-    the umask); returns (fd, path)."""
+    the umask); returns (fd, path). Its name is in ``named`` from just before it is created
+    (a signal can land between the file's creation and this function's return: the caller
+    removes it by that name)."""
     for _ in range(100):
         tmp = os.path.join(folder, f"{TEMP_PREFIX}{secrets.token_hex(6)}{TEMP_SUFFIX}")
+        named[:] = [tmp]
         try:
             return os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC, mode), tmp
-        except FileExistsError:
+        except FileExistsError:  # not ours
+            named.clear()
             continue
     raise FileExistsError(f"no free temporary name in {folder}")
 
@@ -120,8 +124,9 @@ def atomic_output(path: str, binary: bool = False):
         with open(path, mode, newline=newline) as fh:
             yield fh
         return
-    fd, tmp = _create_temp(os.path.dirname(target), 0o666)
+    fd, named = -1, []
     try:
+        fd, tmp = _create_temp(os.path.dirname(target), 0o666, named)
         if st is not None:  # keep the existing file's permissions (and owner if we may)
             os.fchmod(fd, stat.S_IMODE(st.st_mode))
             if (st.st_uid, st.st_gid) != (os.geteuid(), os.getegid()):
@@ -134,8 +139,9 @@ def atomic_output(path: str, binary: bool = False):
     except BaseException:
         if fd >= 0:
             os.close(fd)
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
+        for tmp in named:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
         raise
 
 
