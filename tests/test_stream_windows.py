@@ -190,3 +190,27 @@ def test_a_planner_error_stops_the_card_at_rest_at_the_planned_end():
     assert track.v_mm_s[-1] == 0.0
     np.testing.assert_allclose(track.points_mm[-1], windows[-1].plan.pieces.start_mm[:, end],
                                rtol=0, atol=1e-6)  # fmt: skip
+
+
+def test_closing_the_feed_stops_the_planner_after_its_window():
+    """The stream over (an error, an abort): the planner thread plans no further window and
+    has ended when ``close`` returns, so the process never exits while it is inside numpy."""
+    import threading
+    import time
+
+    made = []
+
+    def slow():
+        for i in range(1000):
+            time.sleep(0.02)  # a window's planning
+            made.append(i)
+            yield i
+
+    feed = WindowFeed(slow())
+    assert feed.first() == 0
+    feed.close()
+    assert not any(t.name == "nurbscnc-planner" and t.is_alive()
+                   for t in threading.enumerate())  # fmt: skip
+    count = len(made)
+    time.sleep(0.1)
+    assert len(made) == count < 1000

@@ -358,32 +358,36 @@ def stream(program, port, allow_url, baud, batch, timeout_s, lead, optional_stop
         if not points_file:
             job, mach = plan_job(program, from_line=from_line, optional_stop=optional_stop,
                                  override=feed_override / 100.0, **settings)  # fmt: skip
-        if job is None:
-            if from_line is not None or feed_override != 100:
-                raise ConfigError("--from-line and --feed-override need the look-ahead "
-                                  "planner (--algorithm ph-lookahead)")  # fmt: skip
-            pulses, mach = load_pulse_program(program, **settings)
-            total = pulses.periods
-        else:
-            total = int(round(job.plan.cycle_time_s / job.period_s / job.override))
-        operator.attach_job(job)
-        options = SenderOptions(batch_periods=batch, timeout_s=timeout_s, lead_periods=lead)
-        ser = open_port(port, baud=baud, allow_url=allow_url, write_timeout_s=timeout_s,
-                        read_wait_s=options.read_wait_s)  # fmt: skip
-        show = not (quiet or as_json) and err.is_terminal
-        keys = not as_json and sys.stdin is not None and sys.stdin.isatty()
         try:
-            with _progress_bar(show, total, keys) as progress, _keys(operator, keys):
-                sender = Sender(ser, options, progress=progress)
-                operator.attach(sender)
-                with _signals(operator, ("SIGINT", "SIGTERM")):
-                    if job is None:
-                        reports = [sender.stream(pulses, zero=zero)]
-                    else:
-                        reports = sender.run_job(job, zero=zero)
-        finally:
-            with contextlib.suppress(Exception):
-                ser.close()
+            if job is None:
+                if from_line is not None or feed_override != 100:
+                    raise ConfigError("--from-line and --feed-override need the look-ahead "
+                                      "planner (--algorithm ph-lookahead)")  # fmt: skip
+                pulses, mach = load_pulse_program(program, **settings)
+                total = pulses.periods
+            else:
+                total = int(round(job.plan.cycle_time_s / job.period_s / job.override))
+            operator.attach_job(job)
+            options = SenderOptions(batch_periods=batch, timeout_s=timeout_s, lead_periods=lead)
+            ser = open_port(port, baud=baud, allow_url=allow_url, write_timeout_s=timeout_s,
+                            read_wait_s=options.read_wait_s)  # fmt: skip
+            show = not (quiet or as_json) and err.is_terminal
+            keys = not as_json and sys.stdin is not None and sys.stdin.isatty()
+            try:
+                with _progress_bar(show, total, keys) as progress, _keys(operator, keys):
+                    sender = Sender(ser, options, progress=progress)
+                    operator.attach(sender)
+                    with _signals(operator, ("SIGINT", "SIGTERM")):
+                        if job is None:
+                            reports = [sender.stream(pulses, zero=zero)]
+                        else:
+                            reports = sender.run_job(job, zero=zero)
+            finally:
+                with contextlib.suppress(Exception):
+                    ser.close()
+        finally:  # the planner thread stopped before the process may exit
+            if job is not None and job.feed is not None:
+                job.feed.close()
     last = reports[-1]
     executed = sum(r.executed_periods for r in reports)
     extra = job.report() if job is not None else {"sections": 1}

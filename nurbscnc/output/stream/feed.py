@@ -25,6 +25,8 @@ import time
 from collections.abc import Callable, Iterable
 
 _END = object()
+#: Seconds :meth:`WindowFeed.close` waits for the window being planned.
+STOP_WAIT_S = 2.0
 
 
 class WindowFeed:
@@ -39,6 +41,7 @@ class WindowFeed:
         self.done = False
         self._queue: queue.Queue = queue.Queue()
         self._waited = None  #: an item :meth:`next_ready_s` took off the queue
+        self._stop = threading.Event()
         self._thread = threading.Thread(target=self._plan, args=(iter(windows),),
                                         name="nurbscnc-planner", daemon=True)  # fmt: skip
         self._thread.start()
@@ -46,6 +49,8 @@ class WindowFeed:
     def _plan(self, windows) -> None:
         try:
             for w in windows:
+                if self._stop.is_set():
+                    return
                 self._queue.put((w, self.clock()))
             self._queue.put((_END, self.clock()))
         except BaseException as exc:  # noqa: BLE001 - handed to the stream, raised there
@@ -63,6 +68,14 @@ class WindowFeed:
         if self.first_s is None:
             self.first_s = t - self.start_s
         return [(w, t)]
+
+    def close(self, wait_s: float = STOP_WAIT_S) -> None:
+        """Stop planning after the window being planned, and wait for that (at most
+        ``wait_s`` [s]): the stream is over (done, failed or aborted). The process must not
+        exit while the planner is inside numpy: a daemon thread stopped there at exit can
+        abort the interpreter."""
+        self._stop.set()
+        self._thread.join(wait_s)
 
     def first(self):
         """The first window (blocks until it is planned; raises the planner's error)."""
@@ -108,6 +121,14 @@ class ScheduledFeed:
     @property
     def done(self) -> bool:
         return self.given >= len(self.windows)
+
+    def close(self, wait_s: float = STOP_WAIT_S) -> None:
+        """Stop planning after the window being planned, and wait for that (at most
+        ``wait_s`` [s]): the stream is over (done, failed or aborted). The process must not
+        exit while the planner is inside numpy: a daemon thread stopped there at exit can
+        abort the interpreter."""
+        self._stop.set()
+        self._thread.join(wait_s)
 
     def first(self):
         self.given = 1
