@@ -14,7 +14,7 @@ last call, with the time each became ready; never blocks; raises the planner's e
 every window before it was handed over), :meth:`next_ready_s` (blocks until the next window
 is ready: for the simulator's waits), ``clock`` (the time base of the reports [s]),
 ``first_s`` and ``planned_s`` (time from the start to the first and to the last window [s];
-None while planning).
+None while planning), :meth:`close` (the stream is over: stop planning).
 """
 
 from __future__ import annotations
@@ -123,12 +123,7 @@ class ScheduledFeed:
         return self.given >= len(self.windows)
 
     def close(self, wait_s: float = STOP_WAIT_S) -> None:
-        """Stop planning after the window being planned, and wait for that (at most
-        ``wait_s`` [s]): the stream is over (done, failed or aborted). The process must not
-        exit while the planner is inside numpy: a daemon thread stopped there at exit can
-        abort the interpreter."""
-        self._stop.set()
-        self._thread.join(wait_s)
+        """Nothing to stop: the windows were planned beforehand."""
 
     def first(self):
         self.given = 1
