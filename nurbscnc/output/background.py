@@ -32,9 +32,11 @@ DEPTH = 2
 #: Seconds between the worker's checks that the writer still wants windows while it waits.
 POLL_S = 0.05
 #: Seconds the writer's error waits for the worker to stop (at its next window: one
-#: window's sampling, or the summary). The process must not end while the worker is inside
-#: numpy: a daemon thread stopped there at exit can abort the interpreter ("terminate called
-#: without an active exception"). A worker stuck longer (a bug) is left behind.
+#: window's sampling, or the summary; the stream's planner thread likewise,
+#: :meth:`~nurbscnc.output.stream.feed.WindowFeed.close`). The process must not end while
+#: a worker is inside numpy: a daemon thread stopped there at exit can abort the
+#: interpreter ("terminate called without an active exception"). A worker stuck longer
+#: (a bug) is left behind.
 STOP_WAIT_S = 2.0
 
 
@@ -103,17 +105,19 @@ def write_while_making(write, windows, after=None):
                 raise item.error
             yield item
 
+    def halt() -> None:  # the worker stopped at its next window before we go on
+        stop.set()
+        worker.join(STOP_WAIT_S)
+
     worker = threading.Thread(target=work, name="nurbscnc-making", daemon=True)
     worker.start()
     try:
         write(received())
     except BaseException:
-        stop.set()
-        worker.join(STOP_WAIT_S)
+        halt()
         raise
     if not ended:  # the writer returned before the last window: a bug, not a hang
-        stop.set()
-        worker.join(STOP_WAIT_S)
+        halt()
         raise RuntimeError("the output writer returned before the last window")
     worker.join()
     if "error" in outcome:

@@ -863,7 +863,7 @@ class _Checker:
         new = slice(kept, None)
         resp = window_response(ref.points_mm[new], ref.s_mm[new], actual[new], direction[new],
                                on, prof, self.eps_mm, index)  # fmt: skip
-        cutting = self._cutting(_rows(ref, new) if kept else ref, resp, profile, head)
+        cutting = self._cutting(_rows(ref, new), resp, profile, head)
         if not kept:
             return resp, cutting
 

@@ -314,13 +314,6 @@ _PHASE_COLUMNS = ("phase_duration_s", "phase_s0_mm", "phase_v0_mm_s", "phase_a0_
                   "phase_jerk_mm_s3")  # fmt: skip
 
 
-def _only_duration_differs(old: Profile, new: Profile, p: int) -> bool:
-    """Whether phase ``p`` of the two profiles starts alike (time, s, v, a, jerk) and only
-    its duration differs."""
-    return old.phase_start_time_s[p] == new.phase_start_time_s[p] and all(
-        getattr(old, name)[p] == getattr(new, name)[p] for name in _PHASE_COLUMNS[1:])
-
-
 def same_until_s(old: Profile, new: Profile) -> float:
     """The profile time [s] before which ``old`` and ``new`` sample alike, bit for bit
     (:meth:`Profile.sample` at any τ < it gives the same five numbers), and their pieces
@@ -337,12 +330,13 @@ def same_until_s(old: Profile, new: Profile) -> float:
         return 0.0
     t = min(old.duration_s, new.duration_s)
     m = min(old.phase_start_time_s.size, new.phase_start_time_s.size)
-    differ = old.phase_start_time_s[:m] != new.phase_start_time_s[:m]
-    for name in _PHASE_COLUMNS:
-        differ |= getattr(old, name)[:m] != getattr(new, name)[:m]
+    starts_apart = old.phase_start_time_s[:m] != new.phase_start_time_s[:m]  # or s, v, a, j
+    for name in _PHASE_COLUMNS[1:]:
+        starts_apart |= getattr(old, name)[:m] != getattr(new, name)[:m]
+    differ = starts_apart | (old.phase_duration_s[:m] != new.phase_duration_s[:m])
     first = int(np.argmax(differ)) if differ.any() else m
     cut = first  # the phase whose start bounds the common samples
-    if first < m and differ[first] and _only_duration_differs(old, new, first):
+    if first < m and not starts_apart[first]:
         # The same motion cut short in one (a cruise that the braking now begins earlier
         # in): alike up to the shorter end, and before either profile's next phase.
         t = min(t, float(old.phase_start_time_s[first])

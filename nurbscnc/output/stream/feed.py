@@ -24,9 +24,9 @@ import threading
 import time
 from collections.abc import Callable, Iterable
 
+from nurbscnc.output.background import STOP_WAIT_S  # the wait for a thread inside numpy
+
 _END = object()
-#: Seconds :meth:`WindowFeed.close` waits for the window being planned.
-STOP_WAIT_S = 2.0
 
 
 class WindowFeed:
