@@ -99,18 +99,23 @@ def test_windowed_distance_is_the_true_distance_to_the_path(case):
     assert got.max() > 1e-3  # the servo does lag: the check measures something
 
 
-@pytest.mark.parametrize(("direct_pairs", "block_pieces"),
-                         [(0, 0), (PathIndex.DIRECT_PAIRS, PathIndex.DIRECT_BLOCK_PIECES),
-                          (PathIndex.DIRECT_PAIRS, 0)])  # fmt: skip
-def test_the_global_distance_is_the_true_distance(case, direct_pairs, block_pieces,
-                                                  monkeypatch):  # fmt: skip
-    """PathIndex.distance_mm, candidates by the k-d trees (0 pairs direct) or by testing
-    every piece's ball (a program's first DIRECT_PAIRS: all pairs of a block at once, or a
-    point at a time through its x band, as for programs of more than DIRECT_BLOCK_PIECES):
-    against the exact distance to a much denser polyline of the path, for tool samples and
-    for points up to 2 mm off the path (upper bounds from the windowed distance, or 3 mm)."""
+@pytest.mark.parametrize(("way", "direct_pairs", "band_after", "block_pieces"),
+                         [("trees", -1, PathIndex.BAND_AFTER, 0),
+                          ("bands", PathIndex.DIRECT_PAIRS, 0, 0),
+                          ("direct", PathIndex.DIRECT_PAIRS, 10**9,
+                           PathIndex.DIRECT_BLOCK_PIECES),
+                          ("direct", PathIndex.DIRECT_PAIRS, 10**9, 0)])  # fmt: skip
+def test_the_global_distance_is_the_true_distance(case, way, direct_pairs, band_after,
+                                                  block_pieces, monkeypatch):  # fmt: skip
+    """PathIndex.distance_mm, candidates by the k-d trees, through the bands of centres
+    sorted along an axis, or by testing every piece's ball (a program's first queries: all
+    pairs of a block at once, or a point at a time through its x band, as for programs of
+    more than DIRECT_BLOCK_PIECES): against the exact distance to a much denser polyline of
+    the path, for tool samples and for points up to 2 mm off the path (upper bounds from
+    the windowed distance, or 3 mm)."""
     pieces, profile, actual, lag, s = case
     monkeypatch.setattr(PathIndex, "DIRECT_PAIRS", direct_pairs)
+    monkeypatch.setattr(PathIndex, "BAND_AFTER", band_after)
     monkeypatch.setattr(PathIndex, "DIRECT_BLOCK_PIECES", block_pieces)
     rng = np.random.default_rng(7)
     pick = rng.choice(actual.shape[0], 300, replace=False)
@@ -119,7 +124,8 @@ def test_the_global_distance_is_the_true_distance(case, direct_pairs, block_piec
                             np.full(100, 3.0)))  # fmt: skip
     index = PathIndex(pieces)
     got = index.distance_mm(q, upper)
-    assert (index._built is None) == (direct_pairs > 0)  # the way asked for was taken
+    taken = "trees" if index._built else "bands" if index._bands else "direct"
+    assert taken == way  # the way asked for was taken
     h = 1e-4
     true = contour_error_true(q, dense_path_mm(pieces, profile, spacing_mm=h))
     off = 2.0 * float(np.max(pieces.kappa_max_per_mm)) * h * h / 8.0 + 1e-12
@@ -127,3 +133,39 @@ def test_the_global_distance_is_the_true_distance(case, direct_pairs, block_piec
     want = np.minimum(true, upper)
     assert np.all(np.abs(got - want) <= CHORD_MM + off)
     assert np.all(got <= upper)
+
+
+def _column_of_cuts(count: int) -> str:
+    """``count`` 2 mm squares and quarter arcs stacked along Y (one X for all: the bands
+    must be made along Y), rapids between them."""
+    lines = ["G21 G17 G90 G94", "G64 P0.01", "F1200"]
+    for k in range(count):
+        y = 3.0 * k
+        lines += [f"G0 X0 Y{y:.3f}", "G0 Z0", f"G1 X2 Y{y:.3f}", f"G1 X2 Y{y + 2:.3f}",
+                  f"G3 X0 Y{y + 2:.3f} I-1 J0", f"G1 X0 Y{y:.3f}", "G0 Z2"]
+    return "\n".join(lines + ["M2"])
+
+
+@pytest.mark.parametrize("band_after", [0, 10**9])
+def test_the_bands_find_every_piece_whose_ball_is_near(monkeypatch, band_after):
+    """PathIndex.candidates through the bands (or every ball, the reference way) includes
+    every piece whose ball (centre (A + B)/2, radius L/2) comes within u of a query point,
+    brute force over all pairs, for blocks of points about the path and off it."""
+    monkeypatch.setattr(PathIndex, "BAND_AFTER", band_after)
+    run = run_program(interpret_text(_column_of_cuts(40)), MACHINE)
+    pieces = run.plan.pieces
+    centre = 0.5 * (pieces.start_mm + pieces.end_mm).T
+    radius = 0.5 * pieces.length_mm
+    rng = np.random.default_rng(3)
+    index = PathIndex(pieces)
+    for _ in range(60):
+        base = np.array([rng.uniform(-1.0, 3.0), rng.uniform(-1.0, 120.0), rng.uniform(-1, 3)])
+        q = base + rng.uniform(-0.5, 0.5, (int(rng.integers(1, 9)), 3))
+        u = rng.uniform(0.0, 1.5, q.shape[0])
+        gap = np.linalg.norm(q[:, None, :] - centre[None, :, :], axis=2) - radius[None, :]
+        want = np.flatnonzero(np.any(gap <= u[:, None], axis=0))
+        got = index.candidates(q, u)
+        assert np.all(np.isin(want, got))
+        assert np.all(np.diff(got) > 0)  # sorted, once each
+    assert (index._bands is not None) == (band_after == 0)
+    assert index._built is None

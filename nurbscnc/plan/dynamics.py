@@ -170,12 +170,12 @@ class PathIndex:
     """Where the pieces of a path are, for the few global distance queries of the check.
 
     A piece of length L from A to B lies in the ball of radius L/2 about (A + B)/2 (every
-    point P of it has |P − A| + |P − B| ≤ L). The pieces are found by k-d trees over those
-    centres, one per group of like radii (short pieces, L ≤ ``short_mm``, one group; then
-    doublings), so a query costs O(log k) per group: testing every long piece's ball, as
-    before, made a program of many cuts quadratic (2,000 cuts of 2 mm lines: 6.7 of 19 s).
-    Built on first use and kept across the re-plans of one program (the geometry does not
-    change).
+    point P of it has |P − A| + |P − B| ≤ L). The pieces are grouped by like radii (short
+    pieces, L ≤ ``short_mm``, one group; then doublings) and found, per group, in a band of
+    centres sorted along one axis, or by k-d trees over the centres where the bands are too
+    full (:meth:`candidates`): testing every long piece's ball, as once, made a program of
+    many cuts quadratic (2,000 cuts of 2 mm lines: 6.7 of 19 s). Built on first use and kept
+    across the re-plans of one program (the geometry does not change).
     """
 
     #: Most dense-polyline points kept across queries (48 MB); the cache is emptied when full.
@@ -192,8 +192,12 @@ class PathIndex:
     #: Points placed at a time when the polyline is filled.
     FILL_BLOCK = 1 << 16
 
-    #: (point, piece) pairs of a program's queries answered without the k-d trees.
+    #: (point, piece) pairs of a program's queries answered without the k-d trees: by testing
+    #: every piece's ball, then through the bands (:meth:`_candidates_banded`).
     DIRECT_PAIRS = 20_000_000
+    #: Pairs tested against every piece's ball, per piece of the program, before the bands
+    #: are made (sorting the centres costs about as much as testing them all this often).
+    BAND_AFTER = 16
     #: Pieces of one radius group below which it is tested directly, without a tree.
     TREE_MIN = 32
     #: Programs of at most this many pieces test all (point, piece) pairs of a query block
@@ -205,6 +209,8 @@ class PathIndex:
         self._direct = 0  # (point, piece) pairs tested directly so far
         self._balls = None  # (centres (k, 3), radii (k,), centres' x (k,)) [mm]
         self._short_mm = short_mm
+        self._bands = None  # the radius groups sorted along an axis (_make_bands)
+        self._banded = 0  # (point, piece) pairs tested through the bands so far
         self._built = None
         self._counts = None
         # The windowed check's dense polyline of pieces [0, filled): its points and
@@ -214,23 +220,41 @@ class PathIndex:
         self._polyline: dict[int, tuple] = {}
         self._cached_points = 0
 
-    def _build(self):
-        """The k-d trees of :meth:`candidates`: the pieces grouped by the radius of their
-        balls, ≤ short_mm/2, then doublings of it (a group's radii within a factor 2 of its
-        largest, R); a tree over each group's centres (a group of fewer than
-        :data:`TREE_MIN` pieces is tested directly)."""
-        from scipy.spatial import cKDTree
-
-        centre, radius, _ = self._ball_columns()
+    def _radius_groups(self) -> list[np.ndarray]:
+        """The pieces grouped by the radius of their balls: ≤ short_mm/2, then doublings of
+        it (a group's radii within a factor 2 of its largest)."""
+        _, radius, _ = self._ball_columns()
         r0 = 0.5 * self._short_mm
         with np.errstate(divide="ignore"):
             cls = np.where(radius <= r0, 0, np.ceil(np.log2(radius / r0))).astype(np.int64)
+        return [np.flatnonzero(cls == c) for c in np.unique(cls).tolist()]
+
+    def _build(self):
+        """The k-d trees of :meth:`candidates`: a tree over the centres of each radius group
+        (:meth:`_radius_groups`; one of fewer than :data:`TREE_MIN` pieces is tested
+        directly), with the group's largest radius R."""
+        from scipy.spatial import cKDTree
+
+        centre, radius, _ = self._ball_columns()
         groups = []
-        for c in np.unique(cls).tolist():
-            idx = np.flatnonzero(cls == c)
+        for idx in self._radius_groups():
             tree = cKDTree(centre[idx]) if idx.size >= self.TREE_MIN else None
             groups.append((idx, tree, float(radius[idx].max())))
         self._built = groups
+
+    def _make_bands(self):
+        """The bands of :meth:`_candidates_banded`: each radius group's pieces sorted by
+        their centres' coordinate along the axis on which those spread most, with that
+        coordinate (sorted), the axis and the group's largest radius R."""
+        centre, radius, _ = self._ball_columns()
+        bands = []
+        for idx in self._radius_groups():
+            c = centre[idx]
+            axis = int(np.argmax(c.max(axis=0) - c.min(axis=0)))
+            order = np.argsort(c[:, axis], kind="stable")
+            bands.append((idx[order], np.ascontiguousarray(c[order, axis]), axis,
+                          float(radius[idx].max())))  # fmt: skip
+        self._bands = bands
 
     def _ball_columns(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Every piece's ball: centres (k, 3) [mm], radii (k,) [mm] and the centres' x (k,)
@@ -291,15 +315,21 @@ class PathIndex:
         """Pieces that may hold a path point closer to some point of ``q`` (m, 3) than
         ``upper_mm`` (m,) (sorted piece indices).
 
-        The first :data:`DIRECT_PAIRS` (point, piece) pairs of a program are tested
-        directly, every piece's ball at once; only a program that asks more builds the k-d
-        tree (importing scipy.spatial and building the tree cost 0.2–0.3 s, and the check
-        of a long CAM program asks about a dozen points). Both find every piece whose ball
-        comes within ``upper_mm`` (the tree some more), so the distances are the same."""
+        A program's first queries test every piece's ball, up to :data:`BAND_AFTER` pairs
+        per piece (and :data:`DIRECT_PAIRS`): the check of a long CAM program asks about a
+        dozen points. A program that asks more (one of many cuts asks a few points after
+        every rapid) makes the bands and tests the balls in the band about each block of
+        points; only one whose bands hold more than :data:`DIRECT_PAIRS` pairs in all (a
+        path dense along every axis) builds the k-d trees (importing scipy.spatial and
+        building them cost 0.2–0.3 s). Each finds every piece whose ball comes within
+        ``upper_mm`` (the tree some more), so the distances are the same."""
         k = self._pieces.length_mm.size
-        if self._built is None and self._direct + q.shape[0] * k <= self.DIRECT_PAIRS:
+        direct = min(self.DIRECT_PAIRS, self.BAND_AFTER * k)
+        if self._bands is None and self._built is None and self._direct + q.shape[0] * k <= direct:
             self._direct += q.shape[0] * k
             return self._candidates_direct(q, upper_mm)
+        if self._built is None and self._banded <= self.DIRECT_PAIRS:
+            return self._candidates_banded(q, upper_mm)
         if self._built is None:
             self._build()
         found = []
@@ -309,6 +339,25 @@ class PathIndex:
                     found.append(idx[np.asarray(lst, dtype=np.int64)])
             else:
                 found.append(self._near_balls(q, upper_mm, idx))
+        return np.unique(np.concatenate(found)) if found else np.zeros(0, dtype=np.int64)
+
+    def _candidates_banded(self, q: np.ndarray, upper_mm: np.ndarray) -> np.ndarray:
+        """:meth:`candidates` through the bands (:meth:`_make_bands`): in each radius group
+        (largest radius R), the pieces whose centres lie, along the group's axis, within
+        max(u) + R of the points' span on it (a ball within u of a point has its centre
+        within u + r of it on every axis), then their balls tested against every point
+        (:meth:`_near_balls`). The pairs tested are counted against :data:`DIRECT_PAIRS`."""
+        if self._bands is None:
+            self._make_bands()
+        reach_mm = float(upper_mm.max())
+        found = []
+        for idx, along, axis, r_max in self._bands:
+            x = q[:, axis]
+            lo = int(np.searchsorted(along, float(x.min()) - reach_mm - r_max, side="left"))
+            hi = int(np.searchsorted(along, float(x.max()) + reach_mm + r_max, side="right"))
+            if hi > lo:
+                self._banded += q.shape[0] * (hi - lo)
+                found.append(self._near_balls(q, upper_mm, idx[lo:hi]))
         return np.unique(np.concatenate(found)) if found else np.zeros(0, dtype=np.int64)
 
     def _candidates_direct(self, q: np.ndarray, upper_mm: np.ndarray) -> np.ndarray:
@@ -366,6 +415,19 @@ class PathIndex:
         first, then the segments of the boxes that meet it (the same segments as testing
         every one)."""
         starts, dirs = [], []
+        # Lines (a polyline of their two ends, as PathTable.points_at_fraction places them
+        # at fractions 0 and 1) all at once; the other pieces through their kept polylines.
+        path = self._pieces.path
+        line = (np.take(path.kind, cand) == Kind.LINE) & (np.take(self._counts, cand) == 2)
+        if line.any():
+            i = cand[line]
+            b = np.take(path.end_mm, i, axis=1).T
+            a = np.take(path.start_mm, i, axis=1).T
+            a = a + 0.0 * (b - a)
+            keep = np.all((np.maximum(a, b) >= lo_q) & (np.minimum(a, b) <= hi_q), axis=1)
+            starts.append(a[keep])
+            dirs.append(b[keep] - a[keep])
+            cand = cand[~line]
         for p, lo_c, hi_c in self._piece_polylines(cand):
             hit = np.flatnonzero(np.all((hi_c >= lo_q) & (lo_c <= hi_q), axis=1))
             if hit.size == 0:
