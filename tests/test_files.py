@@ -486,3 +486,36 @@ def test_a_signal_just_after_the_temp_file_is_created_leaves_no_file(tmp_path, m
         fh.write("new\n")
     assert os.listdir(tmp_path) == ["points.csv"]
     assert target.read_text() == "old\n"
+
+
+def test_a_signal_just_after_the_file_object_is_made_closes_the_descriptor_once(
+        tmp_path, monkeypatch):  # fmt: skip
+    """A signal landing as ``os.fdopen`` returns (before the ``with`` owns the object):
+    the temporary file is removed and its descriptor closed once. The object left behind
+    must not close it again when it is collected: by then the number may be another
+    file's (here: the next file opened gets it)."""
+    import gc
+
+    import nurbscnc.output.files as files
+
+    real_fdopen = os.fdopen
+    orphans = []
+
+    def fdopen_then_interrupted(fd, *args, **kwargs):
+        orphans.append(real_fdopen(fd, *args, **kwargs))
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(files.os, "fdopen", fdopen_then_interrupted)
+    target = tmp_path / "points.csv"
+    with pytest.raises(KeyboardInterrupt), files.atomic_output(str(target)) as fh:
+        fh.write("new\n")
+    assert os.listdir(tmp_path) == []
+    closed_fd = orphans[0].fileno()
+    other = os.open(tmp_path / "other", os.O_WRONLY | os.O_CREAT)
+    try:
+        assert other == closed_fd  # the lowest free number: the one the output had
+        orphans.clear()
+        gc.collect()
+        os.fstat(other)  # still open: the orphan did not close it
+    finally:
+        os.close(other)

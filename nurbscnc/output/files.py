@@ -132,13 +132,19 @@ def atomic_output(path: str, binary: bool = False):
             if (st.st_uid, st.st_gid) != (os.geteuid(), os.getegid()):
                 with contextlib.suppress(OSError):
                     os.fchown(fd, st.st_uid, st.st_gid)
-        with os.fdopen(fd, mode, newline=newline) as fh:
-            fd = -1  # owned (and closed) by fh now
+        # The descriptor stays ours (closefd=False), closed once below: were the file
+        # object its owner, a signal between its creation and the line marking that would
+        # have it closed twice (by the object, then here), the second time perhaps another
+        # file's by then.
+        with os.fdopen(fd, mode, newline=newline, closefd=False) as fh:
             yield fh
+        closing, fd = fd, -1  # marked first: a signal in between leaks it, never closes twice
+        os.close(closing)
         os.replace(tmp, target)
     except BaseException:
         if fd >= 0:
-            os.close(fd)
+            with contextlib.suppress(OSError):
+                os.close(fd)
         for tmp in named:
             with contextlib.suppress(OSError):
                 os.unlink(tmp)
