@@ -350,15 +350,18 @@ class PathIndex:
         if self._bands is None:
             self._make_bands()
         reach_mm = float(upper_mm.max())
-        found = []
+        lows, highs = q.min(axis=0), q.max(axis=0)
+        band = []
         for idx, along, axis, r_max in self._bands:
-            x = q[:, axis]
-            lo = int(np.searchsorted(along, float(x.min()) - reach_mm - r_max, side="left"))
-            hi = int(np.searchsorted(along, float(x.max()) + reach_mm + r_max, side="right"))
+            lo = int(np.searchsorted(along, float(lows[axis]) - reach_mm - r_max, side="left"))
+            hi = int(np.searchsorted(along, float(highs[axis]) + reach_mm + r_max, side="right"))
             if hi > lo:
-                self._banded += q.shape[0] * (hi - lo)
-                found.append(self._near_balls(q, upper_mm, idx[lo:hi]))
-        return np.unique(np.concatenate(found)) if found else np.zeros(0, dtype=np.int64)
+                band.append(idx[lo:hi])
+        if not band:
+            return np.zeros(0, dtype=np.int64)
+        band = np.concatenate(band)
+        self._banded += q.shape[0] * band.size
+        return np.unique(self._near_balls(q, upper_mm, band))
 
     def _candidates_direct(self, q: np.ndarray, upper_mm: np.ndarray) -> np.ndarray:
         """:meth:`candidates` by testing every piece's ball (centre c = (A + B)/2, radius
