@@ -418,15 +418,14 @@ class PathIndex:
         first, then the segments of the boxes that meet it (the same segments as testing
         every one)."""
         starts, dirs = [], []
-        # Lines (a polyline of their two ends, as PathTable.points_at_fraction places them
-        # at fractions 0 and 1) all at once; the other pieces through their kept polylines.
+        # Lines (a polyline of their points at fractions 0 and 1) all at once; the other
+        # pieces through their kept polylines.
         path = self._pieces.path
         line = (np.take(path.kind, cand) == Kind.LINE) & (np.take(self._counts, cand) == 2)
         if line.any():
             i = cand[line]
-            b = np.take(path.end_mm, i, axis=1).T
-            a = np.take(path.start_mm, i, axis=1).T
-            a = a + 0.0 * (b - a)
+            ends = path.points_at_fraction(np.repeat(i, 2), np.tile([0.0, 1.0], i.size))
+            a, b = ends[0::2], ends[1::2]
             keep = np.all((np.maximum(a, b) >= lo_q) & (np.minimum(a, b) <= hi_q), axis=1)
             starts.append(a[keep])
             dirs.append(b[keep] - a[keep])

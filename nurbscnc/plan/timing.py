@@ -37,13 +37,19 @@ def total_time_s(profile: Profile, dwell_durations_s: np.ndarray) -> float:
     return float(profile.duration_s + dwell_durations_s.sum())
 
 
+def _dwell_wall_starts(dwell_at_s: np.ndarray, dwell_s: np.ndarray):
+    """Wall times [s] at which the dwells begin, and the dwell time before each (offsets
+    (n + 1,): 0, then the running sums of ``dwell_s``)."""
+    offsets = np.concatenate(([0.0], np.cumsum(dwell_s)))
+    return dwell_at_s + offsets[:-1], offsets
+
+
 def wall_to_profile_time(t_wall: np.ndarray, dwell_at_s: np.ndarray, dwell_s: np.ndarray):
     """Map wall-clock times [s] to profile times [s]: during a dwell the profile time stands
     still (``dwell_at_s`` profile times at which dwells start, ``dwell_s`` their lengths)."""
     if dwell_at_s.size == 0:
         return t_wall
-    offsets = np.concatenate(([0.0], np.cumsum(dwell_s)))
-    wall_start = dwell_at_s + offsets[:-1]  # wall time at which dwell j begins
+    wall_start, offsets = _dwell_wall_starts(dwell_at_s, dwell_s)
     j = np.searchsorted(wall_start, t_wall, side="right") - 1  # last dwell begun, or -1
     tau = t_wall.copy()
     has = j >= 0
@@ -66,8 +72,8 @@ def same_clock_until_s(old: tuple, new: tuple) -> float:
     first = int(np.argmax(differ)) if differ.any() else m
     t = np.inf
     for at, s in ((at_a, s_a), (at_b, s_b)):
-        if first < at.size:  # its wall start: the same cumulative sum as the mapping's
-            t = min(t, float((at + np.concatenate(([0.0], np.cumsum(s)))[:-1])[first]))
+        if first < at.size:  # its wall start, as the mapping computes it
+            t = min(t, float(_dwell_wall_starts(at, s)[0][first]))
     return t
 
 
