@@ -498,3 +498,26 @@ def test_program_bound_of_a_polyline_run_closed_form(mode):
         expected = sum(trapezoid_s(length, min(v, V)) for v, length in runs) + 0.5
     # The rounded end points move the lengths by 1e-9 mm at most.
     assert got == pytest.approx(expected, rel=1e-9)
+
+
+def test_program_bound_reuses_the_plans_own_curves_only():
+    """The summary's bound takes a plan's NURBS curves (their arc-length tables built) where
+    they are the programmed ones: the same bound to the last bit, the plan's curve objects
+    in use; a curve the planner changed (an end hook removed) is not the program's and is
+    ignored: the bound is then the programmed geometry's, not the changed curve's."""
+    from nurbscnc.plan import lowerbound
+    from nurbscnc.plan.pieces import segment_pieces
+
+    machine = load_machine()
+    prog = interpret_text((PROGRAMS / "naca2415.nc").read_text())
+    curves = segment_pieces(prog.segments, machine).nurbs_curves()
+    (i,) = [i for i, s in enumerate(prog.segments) if s.kind == "nurbs"]
+    assert list(curves) == [i]
+    assert lowerbound._programmed_geometry(prog.segments[i], curves[i]) is curves[i]
+    plain = program_lower_bound_s(prog.segments, machine)
+    assert program_lower_bound_s(prog.segments, machine, curves=curves) == plain
+    # Another curve (the NACA's control points moved off by 0.1 mm) is refused.
+    other = NurbsCurve(curves[i].degree, curves[i].knots, curves[i].control_points_mm + 0.1,
+                       curves[i].weights)  # fmt: skip
+    assert lowerbound._programmed_geometry(prog.segments[i], other) is not other
+    assert program_lower_bound_s(prog.segments, machine, curves={i: other}) == plain

@@ -360,6 +360,15 @@ class PieceList(Sequence):
         named["rapid"] = rapid
         return {name: c for name, c in named.items() if c}
 
+    def nurbs_curves(self) -> dict[int, object]:
+        """The NURBS curve of each segment that has NURBS rows, by segment index: the objects
+        its rows are evaluated on, whose arc-length tables are built already once the pieces
+        were made (:func:`~nurbscnc.plan.lowerbound.program_lower_bound_s` reuses them)."""
+        rows = np.fromiter(self.objects, dtype=np.int64, count=len(self.objects))
+        rows = rows[self.kind[rows] == int(Kind.NURBS)]
+        seg, first = np.unique(self.segment[rows], return_index=True)  # a row per segment
+        return {s: self.objects[r][0] for s, r in zip(seg.tolist(), rows[first].tolist())}
+
     @functools.cached_property
     def path(self) -> PathTable:
         """The geometry of every row as a :class:`~nurbscnc.geometry.path.PathTable` (built

@@ -289,7 +289,8 @@ def plan_summary(prog, machine: Machine, samples, plan=None, check=None,
     from nurbscnc.plan.lookahead import segment_times_s
     from nurbscnc.plan.lowerbound import program_lower_bound_s
 
-    lb = program_lower_bound_s(prog.segments, machine, columns) if lower_bound else None
+    curves = plan.pieces.nurbs_curves() if plan is not None else None
+    lb = program_lower_bound_s(prog.segments, machine, columns, curves) if lower_bound else None
     if cycle_time_s is None:
         cycle_time_s = plan.cycle_time_s if plan is not None else float(samples.t_s[-1])
     head = {"ok": True, "program": prog.name}
