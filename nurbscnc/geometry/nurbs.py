@@ -24,6 +24,11 @@ if TYPE_CHECKING:  # pragma: no cover - typing only
 GL_NODES, GL_WEIGHTS = np.polynomial.legendre.leggauss(16)
 GL_NODES.setflags(write=False)
 GL_WEIGHTS.setflags(write=False)
+#: 8-point Gauss–Legendre (exact to degree 15), for the short steps of
+#: :meth:`ArcLengthTable.step_lengths`.
+GL8_NODES, GL8_WEIGHTS = np.polynomial.legendre.leggauss(8)
+GL8_NODES.setflags(write=False)
+GL8_WEIGHTS.setflags(write=False)
 
 #: A point whose speed |C'| is at most this fraction of the curve's characteristic speed
 #: (bounding-box diagonal / parameter range) is treated as a cusp: κ = +inf, dκ/du = 0.
@@ -203,6 +208,20 @@ def _gl_integral(speed: Callable[[np.ndarray], np.ndarray], a, b) -> np.ndarray:
     return half * (values @ GL_WEIGHTS)
 
 
+def _gl8_integral(speed: Callable[[np.ndarray], np.ndarray], a: np.ndarray,
+                  b: np.ndarray) -> np.ndarray:  # fmt: skip
+    """∫_a^b speed(u) du by 8-point Gauss–Legendre, elementwise over 1-D arrays a, b; the
+    weighted sum node by node in a fixed order, so each value depends on its own a, b only
+    (a matrix product's summation order may change with the number of rows)."""
+    half = 0.5 * (b - a)
+    nodes = (0.5 * (a + b))[:, None] + half[:, None] * GL8_NODES
+    values = speed(nodes.ravel()).reshape(nodes.shape)
+    acc = GL8_WEIGHTS[0] * values[:, 0]
+    for i in range(1, GL8_NODES.size):
+        acc += GL8_WEIGHTS[i] * values[:, i]
+    return half * acc
+
+
 @dataclass(frozen=True, eq=False)
 class ArcLengthTable:
     """Cumulative arc length s(u) [mm] at breakpoints, plus GL on the partial interval.
@@ -280,6 +299,35 @@ class ArcLengthTable:
         u = np.clip(_as_params(u), self.breaks[0], self.breaks[-1])
         j = self._interval(u)
         return self.cumulative_mm[j] + _gl_integral(self.speed, self.breaks[j], u)
+
+    def step_lengths(self, u) -> np.ndarray:
+        """s(u[i+1]) − s(u[i]) [mm] (len(u) − 1,) for parameters ``u`` (clamped), each step
+        integrated on its own: 8-point Gauss–Legendre over [u_i, u_{i+1}] within one table
+        interval; a step across interval ends is cut there (its parts within their
+        intervals, whole intervals between them from the table). Not the difference of two
+        s(u) from the curve's start, which loses ulp(s) to cancellation: on the servo steps
+        of ten 60 mm airfoils that difference is off 16-point Gauss–Legendre over each step
+        by up to 2e-9 relative, this rule by 4e-16 (on corpus and repository NURBS
+        programs at most 1.1e-15; a 4-point rule 5e-11). Half the speed evaluations of
+        :meth:`arc_length` per step."""
+        u = np.clip(_as_params(u), self.breaks[0], self.breaks[-1])
+        if u.size < 2:
+            return np.zeros(0)
+        j = self._interval(u)
+        a, b, ja, jb = u[:-1], u[1:], j[:-1], j[1:]
+        out = np.empty(a.size)
+        same = ja == jb
+        out[same] = _gl8_integral(self.speed, a[same], b[same])
+        cut = np.flatnonzero(~same)
+        if cut.size:
+            lo, hi = np.minimum(ja[cut], jb[cut]), np.maximum(ja[cut], jb[cut])
+            ua, ub = np.minimum(a[cut], b[cut]), np.maximum(a[cut], b[cut])
+            brk, cum = self.breaks, self.cumulative_mm
+            part = (_gl8_integral(self.speed, ua, brk[lo + 1])
+                    + (cum[hi] - cum[lo + 1])
+                    + _gl8_integral(self.speed, brk[hi], ub))  # fmt: skip
+            out[cut] = np.where(b[cut] >= a[cut], part, -part)
+        return out
 
     def param_at_length(self, s_mm, tol_mm: float = 1e-12, max_iter: int = 100) -> np.ndarray:
         """u with s(u) = s_mm (clamped to [0, length]), vectorised safeguarded Newton.
@@ -859,6 +907,11 @@ class NurbsCurve:
     def arc_length(self, u) -> np.ndarray:
         """s(u) [mm] from u_start."""
         return self.arc_table.arc_length(u)
+
+    def step_lengths(self, u) -> np.ndarray:
+        """Arc lengths [mm] of the steps between consecutive parameters ``u``
+        (:meth:`ArcLengthTable.step_lengths`)."""
+        return self.arc_table.step_lengths(u)
 
     def param_at_length(self, s_mm) -> np.ndarray:
         """u with s(u) = s_mm [mm] (to 1e-12 mm); s clamped to [0, length_mm]."""

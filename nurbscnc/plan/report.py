@@ -170,23 +170,25 @@ def nurbs_step_lengths(pieces, samples) -> tuple[np.ndarray, np.ndarray]:
     """True arc lengths of the servo steps on NURBS pieces, for the feed fluctuation.
 
     Returns ``(k, ds_mm)``: the indices k of the steps k → k+1 with both samples on the same
-    NURBS curve, and Δs_true = s(u_{k+1}) − s(u_k) [mm] from the curves' exact arc-length
-    tables (SPEC §3: fluctuation |Δs/(V T_s) − 1| "measured with true arc length").
+    NURBS curve, and Δs_true = s(u_{k+1}) − s(u_k) [mm], each step's integral on its own
+    from the curve's exact arc-length table (:meth:`NurbsCurve.step_lengths
+    <nurbscnc.geometry.nurbs.NurbsCurve.step_lengths>`; SPEC §3: fluctuation
+    |Δs/(V T_s) − 1| "measured with true arc length").
     ``samples``: reference points with ``piece`` and ``param`` (N,)."""
     from nurbscnc.geometry.path import Kind
 
     path = pieces.path
     kind = np.take(path.kind, samples.piece)
     cid = np.where(kind == Kind.NURBS, np.take(path.obj_id, samples.piece), -1)
-    s_true = np.full(samples.piece.size, np.nan)
+    ds = np.full(max(cid.size - 1, 0), np.nan)  # step k → k+1
     if cid.size:
         cuts = np.flatnonzero(cid[1:] != cid[:-1]) + 1
         edges = np.concatenate(([0], cuts, [cid.size])).tolist()
         for a, z in zip(edges[:-1], edges[1:]):
-            if cid[a] >= 0:
-                s_true[a:z] = path.objects[int(cid[a])].arc_length(samples.param[a:z])
+            if cid[a] >= 0 and z - a > 1:
+                ds[a : z - 1] = path.objects[int(cid[a])].step_lengths(samples.param[a:z])
     k = np.flatnonzero((cid[:-1] >= 0) & (cid[:-1] == cid[1:]))
-    return k, s_true[k + 1] - s_true[k]
+    return k, ds[k]
 
 
 def feed_fluctuation(plan, samples) -> float | None:
@@ -211,8 +213,8 @@ class SampleStats:
         self.feed_max_mm_s = -np.inf
         self.feed_fluctuation_max: float | None = None
         self.interpolator = "exact"
-        # The last sample of the previous window: its curve (-1: not on a NURBS), true and
-        # planned path length [mm], planned feed [mm/s].
+        # The last sample of the previous window: its curve (-1: not on a NURBS), parameter
+        # on it, planned path length [mm], planned feed [mm/s].
         self._last = (-1, 0.0, 0.0, 0.0)
 
     @classmethod
@@ -239,13 +241,14 @@ class SampleStats:
         self.interpolator = str(samples.interpolator)
         if self.pieces is None:
             return
-        curve, s_true, s_mm, v = self._last
+        curve, u_last, s_mm, v = self._last
         k, ds_true = nurbs_step_lengths(self.pieces, samples)
         planned = samples.s_mm[k + 1] - samples.s_mm[k]
         v_k = samples.v_mm_s[k]
-        cid, s_first = self._first_and_last(samples)
+        cid = self._first_and_last(samples)
         if curve >= 0 and cid == curve:  # the step across the join, k = −1 → 0
-            ds_true = np.r_[s_first - s_true, ds_true]
+            join = self.pieces.path.objects[cid].step_lengths([u_last, samples.param[0]])
+            ds_true = np.r_[join, ds_true]
             planned = np.r_[samples.s_mm[0] - s_mm, planned]
             v_k = np.r_[v, v_k]
         fast = v_k >= self.fast_mm_s
@@ -254,19 +257,18 @@ class SampleStats:
             if self.feed_fluctuation_max is None or worst > self.feed_fluctuation_max:
                 self.feed_fluctuation_max = worst
 
-    def _first_and_last(self, samples) -> tuple[int, float]:
-        """The curve and true arc length of the window's first sample (for the step across
-        the join); the window's last sample becomes the carried one."""
+    def _first_and_last(self, samples) -> int:
+        """The curve of the window's first sample (−1: none; for the step across the join);
+        the window's last sample becomes the carried one."""
         from nurbscnc.geometry.path import Kind
 
         path = self.pieces.path
         ends = samples.piece[[0, -1]]
         kind = np.take(path.kind, ends)
         cid = np.where(kind == Kind.NURBS, np.take(path.obj_id, ends), -1).tolist()
-        s_ends = [float(path.objects[c].arc_length(samples.param[[i]])[0]) if c >= 0 else 0.0
-                  for c, i in zip(cid, (0, -1))]  # fmt: skip
-        self._last = (cid[1], s_ends[1], float(samples.s_mm[-1]), float(samples.v_mm_s[-1]))
-        return cid[0], s_ends[0]
+        self._last = (cid[1], float(samples.param[-1]), float(samples.s_mm[-1]),
+                      float(samples.v_mm_s[-1]))  # fmt: skip
+        return cid[0]
 
 
 def _bound(summary: dict, lower_bound_s: float | None, cycle_time_s: float) -> None:
