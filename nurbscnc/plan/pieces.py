@@ -397,7 +397,13 @@ class PieceList(Sequence):
         objects: tuple = ()
         sub = None
         if rows_obj.size:
-            sub = PathTable.of([self[int(r)].path_row() for r in rows_obj])
+            # Their rows (:meth:`Piece.path_row`) straight from the columns and ``objects``,
+            # without a Piece each (4,950 NURBS cells: 26 of the 37 ms this took).
+            objs = [self.objects[r] for r in rows_obj.tolist()]
+            sub = PathTable.of([(kind, g, length, ua, ub, sa, line) for kind, (g, ua, ub, sa),
+                                length, line in zip(obj_kind.tolist(), objs,
+                                                    self.length_mm[rows_obj].tolist(),
+                                                    self.line[rows_obj].tolist())])  # fmt: skip
         # PH coefficients in one column per PH row (lines need none: a CAM program's
         # 41 % line rows would hold 184 zero bytes each): the columnar rows' first, in row
         # order, then the object rows' PH pieces.
