@@ -1255,14 +1255,17 @@ def _improve(st: _Setup, lev: _Levers, result, hi: _Levers, evaluate, confine):
             result = None
     # Restores: the joint tries raise every lever at once and fail on any one of them, so
     # a feed lowered where it did not help (the error was a junction's, answered later by
-    # another lever) stays low. The caps with the most time to gain are tried alone.
-    gain = _restore_gains(st, best, hi)
+    # another lever) stays low. The caps with the most time to gain are tried alone, among
+    # those this plan may change (``confine`` keeps a cut window's others at their final).
+    reach = best.copy()
+    reach.caps = np.maximum(best.caps, hi.caps)
+    confine(reach)
+    gain = _restore_gains(st, best, reach)
     for p in np.argsort(-gain, kind="stable")[:RESTORE_PIECES].tolist():
         if gain[p] < st.period:
             break
         trial = best.copy()
-        trial.caps[p] = hi.caps[p]
-        confine(trial)
+        trial.caps[p] = reach.caps[p]
         result = None
         result = evaluate(trial)
         iterations += 1
@@ -1277,9 +1280,9 @@ def _improve(st: _Setup, lev: _Levers, result, hi: _Levers, evaluate, confine):
 
 
 def _restore_gains(st: _Setup, best: _Levers, hi: _Levers) -> np.ndarray:
-    """Per piece, the time [s] its cruise at the upper bracket ``hi.caps`` would save over
-    ``best.caps`` (L/c − L/c_hi; 0 where the cap is within :data:`IMPROVE_RATIO` of it):
-    the order of :func:`_improve`'s restores."""
+    """Per piece, the time [s] its cruise at the cap ``hi.caps`` (the upper bracket where the
+    plan may change it) would save over ``best.caps`` (L/c − L/c_hi; 0 where the cap is
+    within :data:`IMPROVE_RATIO` of it): the order of :func:`_improve`'s restores."""
     low = hi.caps > best.caps * IMPROVE_RATIO
     length = st.pieces.length_mm
     with np.errstate(divide="ignore", invalid="ignore"):
