@@ -318,3 +318,70 @@ def test_restores_in_each_cut_window(monkeypatch):
         sel = on_cut & (np.arange(piece.size) >= first)
         d = distance_to_polyline_mm(actual[sel], _polyline(vertices.astype(float)))
         assert d.max() <= EPS_MM + 1e-6
+
+
+LINUXCNC_LIMITS = ROOT / "bench" / "programs" / "linuxcnc_limits.toml"
+
+
+def _arc_program_check(path: Path, machine):
+    """Run ``path`` (lines and arcs) and measure it independently: the largest lsim contour
+    error [mm] of the cutting samples against bench/contour.py's dense polyline of the
+    programmed path (its own closed-form arc sampling, tested in test_bench_tools.py)."""
+    import sys
+
+    sys.path.insert(0, str(ROOT / "bench"))
+    import contour
+
+    prog = interpret_text(path.read_text())
+    run = run_program(prog, machine)
+    actual, first = _lsim_error_while_cutting_mm(run, machine)
+    polyline = contour.path_polyline_mm(prog.segments)
+    return run, float(distance_to_polyline_mm(actual[first:], polyline).max())
+
+
+def _line_time_s(run, line: int) -> float:
+    return float(np.count_nonzero(run.plan.pieces.line[run.samples.piece] == line)
+                 * MACHINE.servo.period_s)  # fmt: skip
+
+
+def test_stop_after_a_long_helix_softens_its_deceleration_not_its_feed():
+    """A 56.6 mm helix at F500 stopping into an arc of another plane (tort.ngc, LinuxCNC's
+    limits). Softening the stop's jerk hardly moves its overshoot there (J = 1e9: the jerk
+    phase is a step to the servo), and the check used to answer with the helix's feed:
+    F348 over all of it, 9.76 s. The stop's deceleration is the next lever: the helix keeps
+    F500 (6.81 s), its descent is softer, the tool within ε_max (independent lsim)."""
+    machine = load_machine(LINUXCNC_LIMITS)
+    run, err_mm = _arc_program_check(PROGRAMS / "tort_helix_stop.nc", machine)
+    assert err_mm <= machine.limits.contour_tolerance_mm + 1e-6
+    plan = run.plan
+    helix = np.flatnonzero(plan.pieces.line == 5)
+    assert helix.size == 1
+    np.testing.assert_allclose(plan.caps_mm_s[helix], 500.0 / 60.0, rtol=1e-12)
+    assert not plan.contour_feed[helix].any() and plan.contour_transition[helix].all()
+    off = run_program(interpret_text((PROGRAMS / "tort_helix_stop.nc").read_text()), machine,
+                      RunOptions(lookahead=LookaheadOptions(dynamics="off")))  # fmt: skip
+    assert plan.limits.a_down_mm_s2[helix] < off.plan.limits.a_down_mm_s2[helix]
+    # The helix takes its kinematic time but for softer transitions (measured +23 ms; the
+    # lowered feed cost it 2.96 s).
+    assert _line_time_s(run, 5) <= _line_time_s(off, 5) + 0.030
+    assert run.cycle_time_s < 8.0  # 10.88 s when its feed was lowered
+
+
+def test_slowdown_after_a_long_arc_softens_the_transition_not_the_arc(monkeypatch):
+    """A 16.8 mm arc at F620 slowing, tangent, into a G1 at F160 (tort.ngc, LinuxCNC's
+    limits): the error where the tool turns from the arc into the line at the lower speed is
+    the transition's. Answered like a stop's (its jerk, then its deceleration), the arc keeps
+    F620 and the program is faster than when the arc's feed answered it (F387 on the whole
+    arc, SLOWDOWN_PIECE_S = inf); the tool within ε_max either way (independent lsim)."""
+    machine = load_machine(LINUXCNC_LIMITS)
+    path = PROGRAMS / "tort_arc_slowdown.nc"
+    run, err_mm = _arc_program_check(path, machine)
+    monkeypatch.setattr(lookahead, "SLOWDOWN_PIECE_S", np.inf)
+    before, err_before_mm = _arc_program_check(path, machine)
+    eps = machine.limits.contour_tolerance_mm + 1e-6
+    assert err_mm <= eps and err_before_mm <= eps
+    arc = np.flatnonzero(run.plan.pieces.line == 7)
+    np.testing.assert_allclose(run.plan.caps_mm_s[arc], 620.0 / 60.0, rtol=1e-12)
+    assert not run.plan.contour_feed[arc].any()
+    assert before.plan.caps_mm_s[arc].max() < 0.7 * 620.0 / 60.0
+    assert run.cycle_time_s < before.cycle_time_s - 0.5  # measured 5.82 s against 6.79 s

@@ -16,7 +16,14 @@ answered where its error is caused, never by the cruise of a whole long piece:
   of pieces that ends there (and, for samples after the restart, the rise jerk of the run
   that leaves it) is lowered, by 0.95 (ε/e)^(1/p) with p measured from the last try (the
   jerk at the end of a stop is what excites the servo: a softer stop costs milliseconds),
-  from at most A·|p| (:func:`_servo_jerk`: a larger jerk is a step to the servo);
+  from at most A·|p| (:func:`_servo_jerk`: a larger jerk is a step to the servo). Where
+  that hardly moves the error (:data:`STOP_INEFFECTIVE_P`), the descent's and rise's
+  acceleration is lowered with the jerk; only where that fails too does the feed lever
+  below take the stop's samples (a 56.6 mm helix of tort.ngc stopping into another plane,
+  LinuxCNC's limits: F348 over the whole helix before, 2.96 s; now F500 and a softer stop).
+  The same holds for a *slowdown* between two long pieces (:func:`_slowdowns`: a feed drop
+  at a junction passed without stopping, each side ≥ :data:`SLOWDOWN_PIECE_S` of motion):
+  its error is the transition's, not the cruise of the long piece before it;
 - else (a curve): the feed of the pieces in the blamed window (:func:`_blame`,
   :func:`local_factors`): NURBS cells and PH corners are short, so this is the feed over
   that window only. A blamed piece whose jerk is above A·|p| gets that jerk first. A piece
@@ -97,7 +104,9 @@ BLAME_WINDOW_S = 0.03
 STOP_BEFORE_S = 0.02
 #: ... or at most this long before it [s] (the overshoot and the corner cut after it).
 STOP_WINDOW_S = 0.03
-#: A stop whose error fell as (jerk factor)^p with p below this is not softened again.
+#: A stop whose error fell as (jerk factor)^p with p below this is no jerk lever: its
+#: acceleration is softened with its jerk from then on; if that too moves the error less,
+#: it is not softened again (the feed lever takes it).
 STOP_INEFFECTIVE_P = 0.2
 FEED_ONLY = ("feed",)
 #: Re-plans with the local levers before the fallback takes over.
@@ -438,13 +447,15 @@ def _runs(caps: np.ndarray, smooth: np.ndarray, lev: _Levers) -> np.ndarray:
 
 def _stop_events(tau_s: np.ndarray, profile: Profile, period_s: float):
     """For over-limit samples at profile times ``tau_s`` [s], the stop junction each is near
-    (−1: none): a junction planned at rest whose profile time τ_j has
+    (−1: none): a junction planned at rest, or a slowdown between long pieces
+    (:func:`_slowdowns`), whose profile time τ_j has
     τ_j − :data:`STOP_BEFORE_S` ≤ τ ≤ τ_j + :data:`STOP_WINDOW_S` (the overshoot of a stop
     and the corner cut while the servo still settles from it; during a dwell τ = τ_j)."""
     v = profile.junction_speeds_mm_s
     k = v.size - 1
     stops = np.flatnonzero(v == 0.0)
     stops = stops[stops > 0]  # the start at rest is no stop to soften
+    stops = np.union1d(stops, _slowdowns(profile))
     t_stop = np.append(profile.piece_start_time_s, profile.duration_s)[stops]
     tau = tau_s
     if stops.size == 0:
@@ -455,6 +466,32 @@ def _stop_events(tau_s: np.ndarray, profile: Profile, period_s: float):
     near = (stops.size > 0) & (t_stop[i] <= tau + STOP_BEFORE_S)
     near &= t_stop[i] >= tau - STOP_WINDOW_S - 0.5 * period_s
     return np.where(near, np.minimum(stops[i], k), -1)
+
+
+#: The pieces on both sides of a slowdown junction (:func:`_slowdowns`) take at least this
+#: many seconds of motion each: far longer than the servo's memory (:data:`BLAME_WINDOW_S`),
+#: so either feed is the cruise of a whole long piece, which the check must not lower for
+#: an error made at its end. (A short piece beside it, a corner's blend, keeps the feed
+#: lever: there the error is the blend's curvature, and softening the long piece's descent
+#: instead made the paper machine's plunged squares 0.5 % slower.)
+SLOWDOWN_PIECE_S = 0.1
+#: ... and the speed changes there by more than this factor.
+SLOWDOWN_RATIO = 1.05
+
+
+def _slowdowns(profile: Profile) -> np.ndarray:
+    """Junctions (1…k−1) passed without stopping between two long pieces
+    (:data:`SLOWDOWN_PIECE_S` each) where the speed changes (:data:`SLOWDOWN_RATIO`): a feed
+    drop from an arc into a slow line or plunge. An error made there is the transition's
+    (the deceleration on the curve, the step of the curvature at the junction), answered
+    like a stop's, by its jerk and then its acceleration, not by the long piece's cruise."""
+    v = profile.junction_speeds_mm_s
+    peak = profile.piece_peak_speed_mm_s
+    dur = np.diff(np.append(profile.piece_start_time_s, profile.duration_s))
+    j = np.arange(1, v.size - 1)
+    long = (dur[j - 1] >= SLOWDOWN_PIECE_S) & (dur[j] >= SLOWDOWN_PIECE_S)
+    change = (peak[j - 1] > v[j] * SLOWDOWN_RATIO) | (peak[j] > v[j] * SLOWDOWN_RATIO)
+    return j[(v[j] > 0.0) & long & change]
 
 
 def _settle_extra(lev: _Levers, ov: Overs, near: np.ndarray, profile: Profile,
@@ -507,7 +544,8 @@ def _shape(lev: _Levers, ov: Overs, eps_mm: float, profile: Profile, pieces: Pie
            period_s: float) -> None:  # fmt: skip
     """One local re-plan (in place) from a check's over-limit samples ``ov``: each is
     answered where its error is caused (module docstring): the settle after a rapid, the
-    descent into and the rise out of a stop, else the feed over the blamed window."""
+    descent into and the rise out of a stop or a slowdown between long pieces (their jerk,
+    then their acceleration), else the feed over the blamed window."""
     k = len(pieces)
     err, tau = ov.err_mm, ov.tau_s
     near = _stop_events(tau, profile, period_s)
@@ -526,25 +564,32 @@ def _shape(lev: _Levers, ov: Overs, eps_mm: float, profile: Profile, pieces: Pie
             new_hist[j] = prev
             continue
         p = 1.0
+        accel = prev is not None and prev[2]
         if prev is not None and prev[1] < 1.0 and e > 0.0:
             measured = np.log(e / prev[0]) / np.log(prev[1])
             if np.isfinite(measured):
-                if measured < STOP_INEFFECTIVE_P:
+                if measured < STOP_INEFFECTIVE_P and accel:
                     # Softening this stop hardly helped: the error is the feed's (a tight
                     # curve into the stop), so the feed lever below takes these samples.
                     new_hist[j] = FEED_ONLY
                     continue
+                if measured < STOP_INEFFECTIVE_P:
+                    accel, measured = True, 1.0  # the jerk was no lever: the acceleration
                 p = float(np.clip(measured, 0.25, 2.0))
         f = float(np.clip(0.95 * (eps_mm / e) ** (1.0 / p), 0.3, 0.9))
-        new_hist[j] = (e, f)
+        new_hist[j] = (e, f, accel)
         if j - 1 >= 0 and not pieces.rapid[j - 1]:
             sel = runs == runs[j - 1]
             lev.j_dn[sel] = _servo_jerk(lev.j_dn[sel], lev.a_dn[sel], settle_max_s) * f
+            if accel:
+                lev.a_dn[sel] *= f
             lev.shaped |= sel
         t_restart = profile.piece_start_time_s[j] if j < k else np.inf
         if j < k and (tau[hit] > t_restart).any() and not pieces.rapid[j]:
             sel = runs == runs[j]
             lev.j_up[sel] = _servo_jerk(lev.j_up[sel], lev.a_up[sel], settle_max_s) * f
+            if accel:
+                lev.a_up[sel] *= f
             lev.shaped |= sel
         handled |= hit
     lev.stop_history = new_hist
