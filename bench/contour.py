@@ -219,6 +219,26 @@ def slow_drops(reference_mm: np.ndarray, period_s: float = SERVO_PERIOD_S,
     return int(np.count_nonzero(fast[:-1] & ~fast[1:]))
 
 
+def settle_waits(points_mm: np.ndarray, cutting: np.ndarray) -> np.ndarray:
+    """(N,) bool: the samples where a controller waits, at rest, at the start of a cut that
+    follows a rapid: at the start of each run of ``cutting`` samples after a sample that is
+    not, the samples at the run's first point while the reference rests there (it stays, or
+    it arrived there a sample before). The tool is still settling from the rapid and nothing
+    is being cut (nurbscnc's settle after a rapid, whose samples carry the cut's line: its
+    dynamics check measures the cut from its first motion); the tool must be within the
+    limit once the reference moves. A cut the reference enters moving has no wait."""
+    pts = np.asarray(points_mm, dtype=float)
+    cut = np.asarray(cutting, dtype=bool)
+    wait = np.zeros(cut.size, dtype=bool)
+    for i in (np.flatnonzero(cut[1:] & ~cut[:-1]) + 1).tolist():
+        j = i
+        while j + 1 < cut.size and cut[j + 1] and np.array_equal(pts[j + 1], pts[i]):
+            j += 1
+        if j > i or np.array_equal(pts[i], pts[i - 1]):
+            wait[i : j + 1] = True
+    return wait
+
+
 def block_start_index(lines: np.ndarray, block_line: int) -> int:
     """Index of the last sample of the motion before the block at ``block_line``: the last
     sample whose source line is positive and below it (the move that brings the tool to the

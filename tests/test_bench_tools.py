@@ -148,3 +148,20 @@ def test_slow_drops_counts_the_stops():
     x = np.cumsum([0.0, 1.0, 0.0, 1.0, 0.2, 0.2, 1.0, 1.0, 0.0])
     pts = np.column_stack([x, np.zeros_like(x), np.zeros_like(x)])
     assert contour.slow_drops(pts, period_s=1.0) == 3
+
+
+def test_settle_waits_are_the_rest_at_a_cut_start_after_a_rapid():
+    """The rapid (line 3) arrives at x = 2; the reference rests there 4 samples labelled with
+    the cut's line 5, then moves: those 4 are the wait. A cut entered moving has none, nor
+    does a rest inside a cut (a dwell) or a cut at the stream's start."""
+    x = np.array([0.0, 1.0, 1.9, 2.0, 2.0, 2.0, 2.0, 2.5, 3.0, 3.0])
+    pts = np.column_stack([x, np.zeros_like(x), np.zeros_like(x)])
+    cut = np.array([3, 3, 3, 5, 5, 5, 5, 5, 5, 5]) != 3
+    np.testing.assert_array_equal(np.flatnonzero(contour.settle_waits(pts, cut)), [3, 4, 5, 6])
+    # the rapid's last sample at rest at the start point, the cut's first already there
+    cut_late = np.array([3, 3, 3, 3, 5, 5, 5, 5, 5, 5]) != 3
+    np.testing.assert_array_equal(np.flatnonzero(contour.settle_waits(pts, cut_late)),
+                                  [4, 5, 6])  # fmt: skip
+    entered_moving = np.array([3, 3, 3, 3, 3, 3, 3, 5, 5, 5]) != 3
+    assert not contour.settle_waits(pts, entered_moving).any()
+    assert not contour.settle_waits(pts, np.ones(10, dtype=bool)).any()

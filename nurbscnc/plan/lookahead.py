@@ -45,8 +45,9 @@ more than the shaping cost: a long program shaped at a few corners skips six che
 few ms). Shaping depends on the programmed feed only through the caps; the bisection leaves
 each lever within :data:`IMPROVE_RATIO` of its bound, so plans at two feeds agree to that
 resolution (a higher F is never slower by more than it, or than the skipped improvement's
-0.03 %: tested on the paper's machine; under LinuxCNC's limits, J = 1e9, the shaping is
-path-dependent enough that a 4-move program was found 7.8 % slower at F2960 than at F2822).
+0.03 %: tested on the paper's machine; with bench/programs/linuxcnc_limits.toml, J = 1e9
+and no Z servo model, a 4-move program was found 7.8 % slower at F2960 than at F2822: the
+shaping is path-dependent).
 
 ``dynamics="global"`` is the paper's rule (V_max becomes the feed where the error occurred,
 the whole program re-planned; full settles); ``"off"`` plans the kinematics only (no
@@ -1325,7 +1326,8 @@ def _improve(st: _Setup, lev: _Levers, result, hi: _Levers, evaluate, confine):
         trial = best.copy()
         trial.caps[p] = reach.caps[p]
         shapes = RESHAPE_ITERATIONS if gain[p] >= RESHAPE_MIN_GAIN_S else 0
-        trial.stop_history = None  # every stop starts again from its transition
+        if shapes:
+            trial.stop_history = None  # every stop starts again from its transition
         for i in range(shapes + 1):
             result = None
             result = evaluate(trial)
