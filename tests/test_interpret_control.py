@@ -437,3 +437,31 @@ def test_computed_o_label_call():
     assert ends(text)[:, 0].tolist() == [7.0, 8.0]
     with pytest.raises(ProgramError, match="not an O number"):
         segs("o5 sub\no5 endsub\no[2.5] call\nM2")
+
+
+def test_o_labels_of_any_length_are_numbers_without_leading_zeros():
+    """o0100 and o100 are one label (LinuxCNC reads the number); a label of 5,000 digits is
+    read as written (the fuzzer's ``int`` of 20,021 digits raised Python's ValueError: exit 1,
+    an internal error), and an unmatched one is the usual error."""
+    text = "o0100 sub\nG0 X[#1]\no100 endsub\no00100 call [4]\nM2"
+    assert ends(text)[:, 0].tolist() == [4.0]
+    label = "1" + "9" * 5000
+    assert ends(f"o{label} sub\nG0 X[#1]\no{label} endsub\no0{label} call [3]\nM2")[:, 0] \
+        .tolist() == [3.0]  # fmt: skip
+    with pytest.raises(ProgramError, match="endif without if"):
+        segs(f"o1 if [1]\no{label} endif\nM2")
+
+
+@pytest.mark.parametrize("text", ["o2 endif\nG0 X1\nM2", "o2 else\nG0 X1\no2 endif\nM2",
+                                  "o2 elseif [1]\nG0 X1\no2 endif\nM2",
+                                  "o1 if [1]\nG0 X1\no2 endif\nM2"])  # fmt: skip
+def test_else_and_endif_need_their_if(text):
+    """LinuxCNC 2.9 (rs274 -g) stops each of these at the unmatched label ("undefined O-word
+    label"); nurbscnc ran them, skipping the G0 after a stray else."""
+    with pytest.raises(ProgramError, match="without if"):
+        segs(text)
+
+
+def test_a_second_endif_of_a_closed_if_is_accepted():
+    """As LinuxCNC 2.9: the label is known, the extra endif does nothing."""
+    assert ends("o1 if [1]\nG0 X1\no1 endif\no1 endif\nM2")[:, 0].tolist() == [1.0]

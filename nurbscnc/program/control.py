@@ -345,15 +345,23 @@ class ControlFlow:
             frame.pc = nxt + 1
             return
 
+    def _after_if(self, label, here, column, keyword) -> None:
+        """An elseif, else or endif needs an ``if`` of its label before it (LinuxCNC:
+        "undefined O-word label"); a second endif of a closed if is accepted, as LinuxCNC."""
+        if self.source.find_before(label, here, ("if",)) is None:
+            raise self.error(f"o{label} {keyword} without if", column)
+
     def o_elseif(self, label, args, column, frame, here) -> None:
         # Reached by running off the end of a taken branch: skip to endif.
+        self._after_if(label, here, column, "elseif")
         frame.pc = self._jump_target(label, here, ("endif",), column, "elseif without endif") + 1
 
     def o_else(self, label, args, column, frame, here) -> None:
+        self._after_if(label, here, column, "else")
         frame.pc = self._jump_target(label, here, ("endif",), column, "else without endif") + 1
 
     def o_endif(self, label, args, column, frame, here) -> None:
-        pass
+        self._after_if(label, here, column, "endif")
 
     def _is_do_tail(self, label: str, here: int) -> bool:
         """A ``while`` that closes a ``do`` loop (no endwhile follows for it)."""

@@ -196,11 +196,12 @@ class _ToBlocks(Transformer):
 
 
 def _label_name(token) -> str:
-    """An O label: "<name>" (case folded, blanks dropped) or the number without zeros."""
+    """An O label: "<name>" (case folded, blanks dropped) or the number without leading zeros
+    (its digits as written: ``int`` would refuse a label of more than 4300 digits)."""
     text = str(token)[1:].replace(" ", "").replace("\t", "")
     if text.startswith("<"):
         return text.lower()
-    return str(int(text))
+    return text.lstrip("0") or "0"
 
 
 def _param_name(token) -> str:
