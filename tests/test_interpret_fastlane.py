@@ -44,10 +44,13 @@ def _key(program):
 
 
 def _both(run):
-    """``run()`` with the fast lane and without it: (result or error) twice."""
+    """``run()`` with the fast lane and without it: (result or error) twice. The fast lane
+    takes every run here, down to one line (``MIN_RUN_LINES`` 1: by default runs shorter
+    than 8 lines go line by line), so the short edge cases exercise it."""
     results = []
     for slow in (False, True):
         with pytest.MonkeyPatch.context() as mp:
+            mp.setattr(fastlane, "MIN_RUN_LINES", 1)
             if slow:
                 mp.setattr(interpret_module, "plain_run", lambda *a, **k: None)
             try:
@@ -157,3 +160,25 @@ def test_make_lines_equals_the_constructor():
         made[0].line = 5
     with pytest.raises(TypeError):
         make_lines({k: v for k, v in cols.items() if k != "naive_mm"})
+
+
+def test_a_short_run_goes_line_by_line_and_is_parsed_once(monkeypatch):
+    """Runs shorter than MIN_RUN_LINES go line by line, so a loop body's lines are parsed
+    once and then run from their blocks: the lane is asked once per short run, not once per
+    turn (an endless two-line loop took 36 s to its 250,000-turn limit, the fuzzer's
+    timeout; the program is the same either way)."""
+    calls = []
+    real = fastlane.plain_run
+
+    def counting(*a, **k):
+        calls.append(a[1])
+        return real(*a, **k)
+
+    monkeypatch.setattr(interpret_module, "plain_run", counting)
+    text = ("#1 = 0\no1 while [#1 LT 1000]\nG1 X1 F100\nG1 X0\n; back\n#1 = [#1 + 1]\n"
+            "o1 endwhile\nM2\n")  # fmt: skip
+    prog = interpret_text(text)
+    assert len(prog.segments) == 2000 and prog.segments[-1].end_mm[0] == 0.0
+    assert len(calls) <= len(text.splitlines())  # 1000 before: the plain run at every turn
+    fast, slow = _both(lambda: interpret_text(text))
+    assert fast == slow
