@@ -18,7 +18,9 @@ in this order, any case, blanks between words (not inside numbers), a comment th
 ``(MSG, …)``. Every other line (other words, expressions, block delete, ``%``, O-words, a
 malformed line) ends the run and goes to the general path, which also reports every error:
 the run stops BEFORE any line the general path would refuse (a G1 with no feed, a feed or a
-coordinate out of range, an axis word under another motion mode).
+coordinate out of range, an axis word under another motion mode). A run shorter than
+:data:`MIN_RUN_LINES` goes to the general path too: there a line is cheaper, and is parsed
+once (a loop's body runs from its blocks).
 """
 
 from __future__ import annotations
@@ -52,8 +54,8 @@ _PLAIN = re.compile(
     re.M,
 )
 
-#: A run is read in chunks that start small (a run may be one line between two others) and
-#: double while every line of the chunk is plain.
+#: A run is read in chunks that start small (a run may be a few lines between two others)
+#: and double while every line of the chunk is plain.
 FIRST_CHUNK = 32
 #: Shortest run the lane takes [lines]. Its whole-array work costs ~90 µs a call, the line by
 #: line interpreter ~10 µs a line; and a line the lane took is never parsed, so a loop whose
