@@ -395,3 +395,28 @@ def test_step_lengths_against_quadrature_and_the_circle():
     assert across.sum() >= brk.size - 2  # the steps across interval ends were taken
     assert ds[-2] == 0.0 and ds[-1] < 0.0
 
+
+
+def test_inverse_table_is_bounded_on_an_extreme_weight():
+    """A quadratic with one weight of 140,164 among weights of 1 (the fuzzer's G5.2 in G18):
+    u(s) escapes the quintics below 0.1 µm and the table's intervals doubled at every level,
+    to 3.8 million at depth 35 (24 GB, the OOM killer). Now the table stops at its budget
+    and leaves the rest to the exact Newton inversion, whose parameters still invert the
+    curve's arc length to 1e-9 mm. (That arc length is the curve's own table: on the heavy
+    span it is 1.8878 mm where a 2-million-chord polyline measures 2.0000 mm; the corner
+    finder replaces that stretch by PH pieces. Left as is.)"""
+    import nurbscnc.geometry.nurbs as nurbs_module
+
+    knots = np.array([0.0, 0, 0, 1, 2, 3, 3, 3])
+    ctrl = np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 2], [0, 0, 2], [0, 0, 0]])
+    w = np.array([1.0, 1, 1, 140164, 2])
+    curve = NurbsCurve(2, knots, ctrl, w)
+    table = curve.inverse_table
+    initial = int(np.sum(np.ceil(np.diff(curve.arc_length(knots[2:6]))
+                                 / nurbs_module.INVERSE_START_MM)))  # fmt: skip
+    assert table.inv_width.size <= max(nurbs_module.INVERSE_MAX_INTERVALS, 16 * initial)
+    assert table.exact.any()
+    s = np.linspace(0.0, curve.length_mm, 401)
+    points, u = curve.points_at_length(s)
+    np.testing.assert_allclose(curve.arc_length(u), s, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(points, curve.point(u), rtol=0, atol=1e-10)  # two evaluations
