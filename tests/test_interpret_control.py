@@ -462,6 +462,29 @@ def test_else_and_endif_need_their_if(text):
         segs(text)
 
 
+@pytest.mark.parametrize("text", [
+    "o1 while [1]\nG0 X1\no1 break\no1 endwhile\no1 break\nG0 X2\nM2",
+    "o1 while [1]\nG0 X1\no1 break\no1 endwhile\no1 continue\nG0 X2\nM2",
+    "o1 repeat [2]\nG0 X1\no1 endrepeat\no1 break\nM2",
+    "o1 do\nG0 X1\no1 break\no1 while [1]\no1 break\nM2"])  # fmt: skip
+def test_break_after_its_loop_is_an_error_not_a_hang(text):
+    """A break or continue after its loop's end found the loop before it and jumped to the
+    line after that end: itself, for ever (check never returned). It is outside the loop."""
+    import signal
+
+    def hung(*_):
+        raise AssertionError("the interpreter hung")
+
+    old = signal.signal(signal.SIGALRM, hung)
+    signal.alarm(20)
+    try:
+        with pytest.raises(ProgramError, match="outside a loop"):
+            segs(text)
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, old)
+
+
 def test_a_second_endif_of_a_closed_if_is_accepted():
     """As LinuxCNC 2.9: the label is known, the extra endif does nothing."""
     assert ends("o1 if [1]\nG0 X1\no1 endif\no1 endif\nM2")[:, 0].tolist() == [1.0]

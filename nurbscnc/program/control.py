@@ -430,6 +430,8 @@ class ControlFlow:
             end = self.source.find(label, head, ("endwhile" if kind == "while" else "endrepeat",))
         if end is None:
             raise self.error(f"o{label} {what}: the loop has no end", column)
+        if end < here:  # after the loop's end: a break there would jump back to itself
+            raise self.error(f"o{label} {what} outside a loop", column)
         return head, kind, end
 
     def o_break(self, label, args, column, frame, here) -> None:
