@@ -542,14 +542,14 @@ def _horner(coeffs: np.ndarray, t: np.ndarray) -> np.ndarray:
     return acc
 
 
-def _in_blocks(f, *columns: np.ndarray, size: int = 1 << 15) -> np.ndarray:
-    """``f(*columns)`` of an elementwise ``f``, evaluated :data:`size` elements at a time:
-    the same values, with the temporaries of one block (a Gauss–Legendre arc length holds
-    16 nodes × 4 homogeneous rows per point)."""
+def _blockwise(f, *columns: np.ndarray) -> np.ndarray:
+    """``f(*columns)`` of an elementwise ``f``, evaluated :func:`_blocks` at a time: the same
+    values, with the temporaries of one block (a Gauss–Legendre arc length holds 16 nodes ×
+    4 homogeneous rows per point)."""
     n = columns[0].size
-    if n <= size:
+    if n <= BLOCK:
         return f(*columns)
-    return np.concatenate([f(*(c[i : i + size] for c in columns)) for i in range(0, n, size)])
+    return np.concatenate([f(*(c[b] for c in columns)) for b in _blocks(n)])
 
 
 @dataclass(frozen=True, eq=False)
@@ -612,11 +612,11 @@ class InverseArcTable:
             coeffs, bad_data = _interval_hermite(lo, hi, width, d_lo, d_hi, floor)
             # Check points: exact s there, the quintic's u, error in mm along the curve.
             uc = lo[None, :] + checks[:, None] * (hi - lo)[None, :]
-            sc = _in_blocks(arc.arc_length, uc.ravel()).reshape(uc.shape)
+            sc = _blockwise(arc.arc_length, uc.ravel()).reshape(uc.shape)
             with np.errstate(divide="ignore", invalid="ignore"):
                 t = (sc - s_lo) / width
                 uh = np.array([_horner(coeffs, t[i]) for i in range(checks.size)])
-            speed_c = _in_blocks(pf.speed, uc.ravel(), np.tile(span, checks.size)).reshape(
+            speed_c = _blockwise(pf.speed, uc.ravel(), np.tile(span, checks.size)).reshape(
                 uc.shape)
             err = np.abs(uh - uc) * speed_c
             allow = np.maximum(tol_mm, 8.0 * eps * sc + 4.0 * np.spacing(np.abs(uc)) * speed_c)

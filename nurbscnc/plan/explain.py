@@ -396,7 +396,7 @@ def explain_plan(program, machine, plan) -> Explanation:
         stop, Limit.CORNER_STOP,
         np.where(a_peak >= a_lim * (1.0 - REL_TOL), Limit.DISTANCE, Limit.JERK)))
     code = np.where(short & (np.asarray(pieces.length_mm) > 0.0), reason, code).astype(np.int8)
-    t_piece = np.diff(np.append(profile.piece_start_time_s, profile.duration_s))
+    t_piece = profile.piece_duration_s
     feed = np.where(np.asarray(pieces.rapid), machine.limits.rapid_mm_s,
                     piece_feeds_mm_s(seg, pieces))  # fmt: skip
     dwell_lines, dwell_s, settle = waits_s(seg, pieces)

@@ -498,7 +498,7 @@ def _slowdowns(profile: Profile) -> np.ndarray:
     like a stop's, by its jerk and then its acceleration, not by the long piece's cruise."""
     v = profile.junction_speeds_mm_s
     peak = profile.piece_peak_speed_mm_s
-    dur = np.diff(np.append(profile.piece_start_time_s, profile.duration_s))
+    dur = profile.piece_duration_s
     j = np.arange(1, v.size - 1)
     long = (dur[j - 1] >= SLOWDOWN_PIECE_S) & (dur[j] >= SLOWDOWN_PIECE_S)
     change = (peak[j - 1] > v[j] * SLOWDOWN_RATIO) | (peak[j] > v[j] * SLOWDOWN_RATIO)
@@ -579,12 +579,12 @@ def _shape(lev: _Levers, ov: Overs, eps_mm: float, profile: Profile, pieces: Pie
         if prev is not None and prev[1] < 1.0 and e > 0.0:
             measured = np.log(e / prev[0]) / np.log(prev[1])
             if np.isfinite(measured):
-                if measured < STOP_INEFFECTIVE_P and accel:
-                    # Softening this stop hardly helped: the error is the feed's (a tight
-                    # curve into the stop), so the feed lever below takes these samples.
-                    new_hist[j] = FEED_ONLY
-                    continue
                 if measured < STOP_INEFFECTIVE_P:
+                    if accel:
+                        # Softening this stop hardly helped: the error is the feed's (a tight
+                        # curve into the stop), so the feed lever below takes these samples.
+                        new_hist[j] = FEED_ONLY
+                        continue
                     accel, measured = True, 1.0  # the jerk was no lever: the acceleration
                 p = float(np.clip(measured, 0.25, 2.0))
         f = float(np.clip(0.95 * (eps_mm / e) ** (1.0 / p), 0.3, 0.9))

@@ -262,6 +262,11 @@ class Profile:
         """Arc length ``s`` [mm] at each piece start; the same array as ``piece_start_mm``."""
         return self.piece_start_mm
 
+    @property
+    def piece_duration_s(self) -> np.ndarray:
+        """Time [s] the motion spends on each piece (k,), dwells not included."""
+        return np.diff(np.append(self.piece_start_time_s, self.duration_s))
+
     def sample(self, t_s) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Evaluate the profile at times ``t_s`` [s] (any shape, any order).
 
