@@ -173,6 +173,30 @@ def test_endless_recursion_and_loops_end_quickly():
     assert time.perf_counter() - start < 5.0
 
 
+
+def test_what_loops_and_repeats_add_is_bounded():
+    """The fuzzer's 1,000 blank lines in an endless loop ran 250,000 iterations (250 M
+    lines, 3 minutes) before the iteration limit; 100 moves per iteration, or one canned
+    cycle with L100000000, filled 4 GB first (MemoryError, exit 1). Executed lines and moves
+    beyond one per line of the program are budgets, checked at the line that passes them;
+    a cycle's repeats are counted before it expands."""
+    body = "\n" * 50
+    loop = f"#1 = 0\no1 while [#1 GE 0]\n{body}o1 endwhile\nM2\n"
+    with pytest.raises(ProgramError, match="executes more than 1,000 lines") as info:
+        segs(loop, extra_lines=1000)
+    assert 3 <= info.value.pos.line <= 53  # inside the loop, on its first passes
+    moves = "G1 X1 F100\nG1 X0\n" * 5
+    with pytest.raises(ProgramError, match="makes more than 100 moves") as info:
+        segs(f"o1 repeat [1000]\n{moves}o1 endrepeat\nM2\n", extra_moves=100)
+    assert 2 <= info.value.pos.line <= 11
+    # exactly at the budget is allowed: 14 lines, 10 × 11 moves = 14 + 96
+    assert len(segs(f"o1 repeat [11]\n{moves}o1 endrepeat\nM2\n", extra_moves=96)) == 110
+    with pytest.raises(ProgramError, match="makes more than 1,000,000 moves") as info:
+        segs("G21 G90 F100\nG91 G81 X0.001 Y0 Z-1 R1 L100000000\nM2\n")
+    assert (info.value.pos.line, info.value.pos.column) == (2, 5)
+    # a repeat within it: LinuxCNC's rs274 -g makes the same 152 straight moves
+    assert len(segs("G90 F100 G0 Z2\nG91 G81 X1 Y0 Z-1 R1 L50\nM2\n")) == 152
+
 def test_fanuc_program_number_at_the_top():
     assert ends("%\nO1234 (PART 7)\nG0 X1\n%\n").tolist() == [[1, 0, 0]]
 
