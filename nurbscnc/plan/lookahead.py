@@ -133,6 +133,9 @@ RESTORE_PIECES = 3
 #: paper's machine no plan changed.
 RESHAPE_ITERATIONS = 3
 RESHAPE_MIN_GAIN_S = 0.02
+#: Then, if the restore still fails, at most this many re-plans of that cap alone between
+#: the plan's and the restore's (false position on the error).
+RESTORE_SECANTS = 3
 #: The improvement phase runs only if it may gain more than this fraction of the planned
 #: motion's time (a cut window's own): what it can gain is at most the time the shaping
 #: cost (the plan before shaping is the fastest its levers allow). A long program whose
@@ -1290,6 +1293,7 @@ def _improve(st: _Setup, lev: _Levers, result, hi: _Levers, evaluate, confine):
     # replaced its result; a check without them is small and the best is kept.
     keep_best = not st.checker.keep
     best, best_time = lev.copy(), _cycle_time(result)
+    best_worst_mm = result[2].overs.worst_mm
     best_result = result if keep_best else None
     iterations = 0
     for _ in range(IMPROVE_ITERATIONS):
@@ -1304,7 +1308,7 @@ def _improve(st: _Setup, lev: _Levers, result, hi: _Levers, evaluate, confine):
             if t > best_time:  # a feasible raise that is slower (rare): stop here
                 result = None
                 break
-            best, best_time = trial, t
+            best, best_time, best_worst_mm = trial, t, result[2].overs.worst_mm
             best_result = result if keep_best else None
         else:
             probe = trial.copy()
@@ -1328,21 +1332,54 @@ def _improve(st: _Setup, lev: _Levers, result, hi: _Levers, evaluate, confine):
         shapes = RESHAPE_ITERATIONS if gain[p] >= RESHAPE_MIN_GAIN_S else 0
         if shapes:
             trial.stop_history = None  # every stop starts again from its transition
+        alone = None  # (cap, error [mm]) of the restore alone
         for i in range(shapes + 1):
             result = None
             result = evaluate(trial)
             iterations += 1
+            if alone is None:
+                alone = (reach.caps[p], result[2].overs.worst_mm)
             if result[2].overs.worst_mm <= st.eps_mm or i == shapes:
                 break
             st.shape(trial, result)
             confine(trial)
-            if trial.caps[p] < reach.caps[p]:  # the feed lever again: no transition helps
+            if trial.caps[p] <= best.caps[p] * IMPROVE_RATIO:  # nothing left to gain
                 break
         if result[2].overs.worst_mm <= st.eps_mm and _cycle_time(result) < best_time:
             best, best_time = trial, _cycle_time(result)
+            best_worst_mm = result[2].overs.worst_mm
             best_result = result if keep_best else None
         else:
             result = None
+        if not shapes or best.caps[p] >= alone[0]:
+            continue
+        # The cap alone, between best's (within ε_max; the shaping's if it found one, whose
+        # feed lever steps by up to 2×) and the restore's (above it): false
+        # position on the error, which grows about linearly with the cruise feed where the
+        # cap is what limits it (a line or helix in space whose z has no servo model lags
+        # ∝ v off the path).
+        lo, hi_cap = (best.caps[p], best_worst_mm), alone
+        for _ in range(RESTORE_SECANTS):
+            gap = hi_cap[0] - lo[0]
+            if gap <= lo[0] * (IMPROVE_RATIO - 1.0):
+                break
+            slope = (hi_cap[1] - lo[1]) / gap
+            cap = lo[0] + (st.eps_mm - lo[1]) / slope if slope > 0.0 else lo[0] + gap / 2
+            trial = best.copy()
+            trial.caps[p] = min(max(cap, lo[0] + 0.1 * gap), hi_cap[0] - 0.1 * gap)
+            result = None
+            result = evaluate(trial)
+            iterations += 1
+            worst = result[2].overs.worst_mm
+            if worst > st.eps_mm:
+                hi_cap, result = (trial.caps[p], worst), None
+                continue
+            if _cycle_time(result) >= best_time:  # within ε_max yet slower: stop here
+                result = None
+                break
+            best, best_time, best_worst_mm = trial, _cycle_time(result), worst
+            best_result = result if keep_best else None
+            lo = (trial.caps[p], worst)
     if result is None:
         result = best_result if best_result is not None else evaluate(best)
     return best, result, iterations
