@@ -15,6 +15,7 @@ from geomdl import NURBS
 from scipy.integrate import quad
 from scipy.interpolate import BSpline
 
+import nurbscnc.geometry.nurbs as nurbs_module
 from nurbscnc.geometry import segments
 from nurbscnc.geometry.nurbs import (
     NurbsCurve,
@@ -397,22 +398,39 @@ def test_step_lengths_against_quadrature_and_the_circle():
 
 
 
-def test_inverse_table_is_bounded_on_an_extreme_weight():
-    """A quadratic with one weight of 140,164 among weights of 1 (the fuzzer's G5.2 in G18):
-    u(s) escapes the quintics below 0.1 µm and the table's intervals doubled at every level,
-    to 3.8 million at depth 35 (24 GB, the OOM killer). Now the table stops at its budget
-    and leaves the rest to the exact Newton inversion, whose parameters still invert the
-    curve's arc length to 1e-9 mm. (That arc length is the curve's own table: on the heavy
-    span it is 1.8878 mm where a 2-million-chord polyline measures 2.0000 mm; the corner
-    finder replaces that stretch by PH pieces. Left as is.)"""
-    import nurbscnc.geometry.nurbs as nurbs_module
-
+def _extreme_weight_curve() -> NurbsCurve:
+    """A quadratic with one weight of 140,164 among weights of 1 (the fuzzer's G5.2 in G18)."""
     knots = np.array([0.0, 0, 0, 1, 2, 3, 3, 3])
     ctrl = np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 2], [0, 0, 2], [0, 0, 0]])
-    w = np.array([1.0, 1, 1, 140164, 2])
-    curve = NurbsCurve(2, knots, ctrl, w)
+    return NurbsCurve(2, knots, ctrl, np.array([1.0, 1, 1, 140164, 2]))
+
+
+def test_arc_length_of_an_extreme_weight():
+    """|C'(u)| of that curve peaks in a sliver of its spans that 1,024 equal pieces of
+    16-point Gauss–Legendre miss: its table said 1.8878 mm for the last span, where a
+    2-million-chord polyline measures 2.0000069 mm. The pieces that do not converge at the
+    finest equal split are halved where they do not (nurbs._halve_pieces); each span now
+    agrees with the polyline to its chord error (h²κ/24 per chord: below 3e-9 mm here)."""
+    curve = _extreme_weight_curve()
+    for lo in (0.0, 1.0, 2.0):
+        u = np.linspace(lo, lo + 1.0, 2_000_001)
+        chords_mm = np.linalg.norm(np.diff(curve.point(u), axis=0), axis=1).sum()
+        span_mm = float(np.diff(curve.arc_length(np.array([lo, lo + 1.0])))[0])
+        assert chords_mm <= span_mm + 1e-12  # a polyline is never longer than its curve
+        assert span_mm - chords_mm < 3e-9
+    assert curve.arc_table.breaks.size <= 2 * nurbs_module.HALVING_MAX_PIECES + 3 * 1024
+
+
+def test_inverse_table_is_bounded_on_an_extreme_weight(monkeypatch):
+    """On that curve u(s) once escaped the inversion's quintics below 0.1 µm and the table's
+    intervals doubled at every level, to 3.8 million at depth 35 (24 GB, the OOM killer).
+    The table stops at its budget and leaves the rest to the exact Newton inversion, whose
+    parameters still invert the curve's arc length to 1e-9 mm. With the arc length right
+    (above) this curve needs 638 intervals; a budget below that exercises the rule."""
+    monkeypatch.setattr(nurbs_module, "INVERSE_MAX_INTERVALS", 64)
+    curve = _extreme_weight_curve()
     table = curve.inverse_table
-    initial = int(np.sum(np.ceil(np.diff(curve.arc_length(knots[2:6]))
+    initial = int(np.sum(np.ceil(np.diff(curve.arc_length(curve.knots[2:6]))
                                  / nurbs_module.INVERSE_START_MM)))  # fmt: skip
     assert table.inv_width.size <= max(nurbs_module.INVERSE_MAX_INTERVALS, 16 * initial)
     assert table.exact.any()
