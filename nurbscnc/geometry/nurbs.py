@@ -30,8 +30,9 @@ GL8_NODES, GL8_WEIGHTS = np.polynomial.legendre.leggauss(8)
 GL8_NODES.setflags(write=False)
 GL8_WEIGHTS.setflags(write=False)
 #: Adaptive halving of a knot span's pieces that the equal split does not resolve
-#: (:func:`_halve_pieces`): at most this many levels, and pieces per table. A quadratic with
-#: one weight of 140,164 among 1s needs 27 levels and 2,200 pieces to 1e-13.
+#: (:func:`_halve_pieces`): at most this many levels, and pieces per table (each kept as its
+#: two halves). A quadratic with one weight of 140,164 among 1s: 12 levels, 47,699 pieces
+#: (its two heavy spans' table 0.15 s, against 0.01 s and 6 % short before).
 HALVING_DEPTH = 60
 HALVING_MAX_PIECES = 1 << 16
 
