@@ -191,7 +191,7 @@ def test_what_loops_and_repeats_add_is_bounded():
     assert 2 <= info.value.pos.line <= 11
     # exactly at the budget is allowed: 14 lines, 10 × 11 moves = 14 + 96
     assert len(segs(f"o1 repeat [11]\n{moves}o1 endrepeat\nM2\n", extra_moves=96)) == 110
-    with pytest.raises(ProgramError, match="makes more than 1,000,000 moves") as info:
+    with pytest.raises(ProgramError, match="makes more than 2,000,000 moves") as info:
         segs("G21 G90 F100\nG91 G81 X0.001 Y0 Z-1 R1 L100000000\nM2\n")
     assert (info.value.pos.line, info.value.pos.column) == (2, 5)
     # a repeat within it: LinuxCNC's rs274 -g makes the same 152 straight moves

@@ -99,9 +99,9 @@ class InterpretOptions:
     max_call_depth: int = 100
     max_loop_iterations: int = 250_000
     #: Measured here, 2026: a loop runs 0.7–1.4 M lines/s in `check`, and a move holds about
-    #: 500 bytes until it is planned: 5 M lines take seconds, 1 M moves 0.5 GB.
+    #: 300 bytes until it is planned: 5 M lines take 3–7 s, 2 M moves 7–11 s and 0.65 GB.
     extra_lines: int = 5_000_000
-    extra_moves: int = 1_000_000
+    extra_moves: int = 2_000_000
     #: Interpret runs of plain G0/G1 lines in bulk (fastlane.py; same segments, faster).
     fast_lane: bool = True
 
