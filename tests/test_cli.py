@@ -645,3 +645,59 @@ def test_an_error_without_a_signal_behind_it_keeps_its_code():
     with pytest.raises(SystemExit) as caught:
         command()
     assert caught.value.code == 3
+
+
+def test_run_never_writes_over_its_program(tmp_path):
+    """``run x.nc -o x.nc`` (or through a link, or a batch whose output folder holds a
+    program of the output's name) would replace the program by its points: refused before
+    anything is planned, exit 2, the program untouched."""
+    prog = tmp_path / "a.nc"
+    text = "G1 X1 F100\nM2\n"
+    prog.write_text(text)
+    (tmp_path / "link.nc").symlink_to(prog)
+    for out in (prog, tmp_path / "link.nc", tmp_path / "." / "a.nc"):
+        result = run(["run", prog, "-o", out, "--format", "csv"])
+        assert result.exit_code == 2, result.output
+        assert "is the program" in result.stderr and str(prog) in result.stderr
+        assert prog.read_text() == text
+    csv_prog = tmp_path / "b.csv"  # a program whose name ends in .csv
+    csv_prog.write_text(text)
+    result = run(["run", csv_prog, "--output-dir", tmp_path])
+    assert result.exit_code == 2 and "is the program" in result.stderr
+    assert csv_prog.read_text() == text
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.nc", "b.csv", "link.nc"]
+
+
+def test_inputs_are_bounded(monkeypatch, tmp_path):
+    """A stream that never ends (/dev/urandom, /dev/zero) or a file past MAX_INPUT_BYTES, as
+    the program, a tool table, a point file or a trace, or a machine profile past
+    MAX_PROFILE_CHARS, is refused after reading that much, exit 2: each filled the memory
+    until the OOM killer (exit 137) or a MemoryError (exit 1)."""
+    import nurbscnc.output.files as files
+
+    monkeypatch.setattr(files, "MAX_INPUT_BYTES", 1 << 16)
+    result = run(["check", "/dev/urandom"])
+    assert result.exit_code == 2
+    assert ("the program is larger than 65,536 bytes (0.0625 MiB), the most nurbscnc reads"
+            in result.stderr)  # fmt: skip
+    prog = tmp_path / "a.nc"
+    prog.write_text("G1 X1 F100\nM2\n")
+    for args, what in ((["plan", prog, "--tool-table", "/dev/zero"], "the tool table"),
+                       (["identify", "/dev/zero"], "the trace"),
+                       (["plan", prog, "--machine", "/dev/zero"], "machine profile")):
+        result = run(args)
+        assert result.exit_code == 2, (args, result.output)
+        assert what in result.stderr and ("larger than" in result.stderr
+                                          or "longer than" in result.stderr)  # fmt: skip
+    points = tmp_path / "p.csv"
+    points.write_text("t,x,y\n" + "0.0,0.0,0.0\n" * 6000)
+    result = run(["simulate", points])
+    assert result.exit_code == 2 and "the point file is larger than" in result.stderr
+    big = tmp_path / "big.nc"
+    big.write_text("G1 X1 F100\n" * 6000)  # 66,000 bytes
+    result = run(["check", big])
+    assert result.exit_code == 2 and "the most nurbscnc reads" in result.stderr
+    result = run(["check", "-"], input="G1 X1 F100\n" * 6000)
+    assert result.exit_code == 2 and "the most nurbscnc reads" in result.stderr
+    big.write_text("G1 X1 F100\n" * 5957)  # 65,527 bytes: read
+    assert run(["check", big]).exit_code == 0

@@ -56,15 +56,13 @@ def identify(source, axis, order, cmd_col, fb_col, time_col, period_ms, delay, a
     RMS) and poles. The trace should start at rest and move the axis through steps or fast
     moves. Example: nurbscnc identify trace.txt --period-ms 1 --axis y
     """
+    from nurbscnc.output.files import read_input_bytes
     from nurbscnc.servo.identify import fit_axis, parse_trace, profile_section
 
+    data = read_input_bytes(source, "the trace")
     try:
-        if source == "-":
-            text = click.get_text_stream("stdin").read()
-        else:
-            with open(source, encoding="utf-8") as fh:
-                text = fh.read()
-    except (OSError, UnicodeDecodeError) as exc:
+        text = data.decode("utf-8").replace("\r\n", "\n").replace("\r", "\n")
+    except UnicodeDecodeError as exc:
         raise OutputError(f"cannot read {source}: {exc}") from exc
     trace = parse_trace(text, cmd_col, fb_col, time_col,
                         None if period_ms is None else period_ms * 1e-3)  # fmt: skip

@@ -35,6 +35,7 @@ from nurbscnc.errors import (
     ConfigError,
     NurbsCncError,
     OutputError,
+    ProgramError,
 )
 
 # Start-up: this module is imported by every command, by --help and by shell completion, so
@@ -354,14 +355,9 @@ def read_program_text(path: str) -> str:
 
     Non-ASCII bytes are harmless in comments; elsewhere the parser reports them.
     """
-    try:
-        if path == "-":
-            data = sys.stdin.buffer.read()
-        else:
-            with open(path, "rb") as fh:
-                data = fh.read()
-    except OSError as exc:
-        raise OutputError(f"cannot read {path}: {exc.strerror or exc}") from None
+    from nurbscnc.output.files import read_input_bytes
+
+    data = read_input_bytes(path, "the program", ProgramError)
     try:
         return data.decode("utf-8-sig")
     except UnicodeDecodeError:
@@ -407,14 +403,11 @@ def load_program(
 
 def read_tool_table(path: str) -> dict:
     """A LinuxCNC tool table file → ``{tool number: Tool}`` (see program/tooltable.py)."""
+    from nurbscnc.output.files import read_input_bytes
     from nurbscnc.program.tooltable import parse_tool_table
 
-    try:
-        with open(path, encoding="utf-8", errors="replace") as fh:
-            text = fh.read()
-    except OSError as exc:
-        raise OutputError(f"cannot read tool table {path}: {exc.strerror or exc}") from None
-    return parse_tool_table(text, path)
+    data = read_input_bytes(path, f"the tool table {path}", ConfigError)
+    return parse_tool_table(data.decode("utf-8", errors="replace"), path)
 
 
 # -- the command group -------------------------------------------------------------------------
@@ -1146,6 +1139,7 @@ def run(programs, output, output_dir, jobs, fmt, quiet, as_json, plot_dir, **set
             raise click.UsageError("give -o FILE (.csv, .npz or -) or --output-dir DIR")
         program = programs[0]
         fmt = output_format(output, fmt)
+        refuse_overwriting(program, output)
         with progress_display(show_progress(as_json, quiet), _display_name(program)) as say:
             prog, mach, run = make_plan(program, **settings, progress=say,
                                         keep_reference=bool(plot_dir))  # fmt: skip
@@ -1264,7 +1258,24 @@ def batch_targets(programs, output_dir: str, fmt: str) -> list[str]:
                               "rename one or run them separately")  # fmt: skip
         seen[target] = program
         targets.append(target)
+    for program in programs:  # a program that is some program's output (run --output-dir .)
+        for target in targets:
+            refuse_overwriting(program, target)
     return targets
+
+
+def refuse_overwriting(program: str, output: str) -> None:
+    """ConfigError (exit 2) when ``output`` is the file ``program`` (``run x.nc -o x.nc``, or
+    through a link): the points would replace the program they came from."""
+    if "-" in (program, output):
+        return
+    try:
+        same = os.path.samefile(program, output)
+    except OSError:  # either does not exist (yet): reading the program says why
+        return
+    if same:
+        raise ConfigError(f"the output {output} is the program {program} itself: its points "
+                          "would replace it; give another output file")
 
 
 def _worker_exit(signum, _frame):

@@ -415,6 +415,10 @@ def find_machine(
     return None, FOUND_BY_DEFAULT
 
 
+#: The longest machine profile read [characters] (the bundled one has about 9,000).
+MAX_PROFILE_CHARS = 1 << 20
+
+
 def load_machine(
     path: str | None = None, overrides: dict | None = None, found_by: str | None = None
 ) -> Machine:
@@ -429,12 +433,15 @@ def load_machine(
     if path is None:
         m = parse_machine(default_profile_text(), "<default machine>", overrides)
         return _with_origin(m, found_by or FOUND_BY_DEFAULT)
+    how = f" (from {found_by})" if found_by not in (None, FOUND_BY_OPTION) else ""
     try:
         with open(path, encoding="utf-8") as f:
-            text = f.read()
+            text = f.read(MAX_PROFILE_CHARS + 1)
     except (OSError, UnicodeDecodeError) as exc:
-        how = f" (from {found_by})" if found_by not in (None, FOUND_BY_OPTION) else ""
         raise OutputError(f"cannot read machine profile {path}{how}: {exc}") from exc
+    if len(text) > MAX_PROFILE_CHARS:  # /dev/zero: a stream that never ends
+        raise ConfigError(f"machine profile {path}{how} is longer than "
+                          f"{MAX_PROFILE_CHARS:,} characters: not a profile")
     return _with_origin(parse_machine(text, str(path), overrides), found_by or FOUND_BY_OPTION)
 
 

@@ -41,6 +41,27 @@ PROFILE_COLUMNS = ("t", "s", "v", "a", "j", "piece")
 POINT_VALUE_LIMIT = 1e9
 #: Prefix and suffix of the temporary file beside a regular-file output.
 TEMP_PREFIX, TEMP_SUFFIX = ".nurbscnc-", ".tmp"
+#: The largest input read whole [bytes] (a program, a point CSV, a trace, a tool table):
+#: about 15 million lines of CAM output, whose moves would need some 5 GB to plan. A stream
+#: that never ends (/dev/urandom) is refused past it instead of filling the memory.
+MAX_INPUT_BYTES = 512 << 20
+
+
+def read_input_bytes(path: str, what: str, error=DataError) -> bytes:
+    """The bytes of ``path`` (``-``: stdin), at most :data:`MAX_INPUT_BYTES`. OSError →
+    OutputError (exit 3); a larger input → ``error`` (exit 2) naming it as ``what``."""
+    try:
+        if path == "-":
+            data = sys.stdin.buffer.read(MAX_INPUT_BYTES + 1)
+        else:
+            with open(path, "rb") as fh:
+                data = fh.read(MAX_INPUT_BYTES + 1)
+    except OSError as exc:
+        raise OutputError(f"cannot read {path}: {exc.strerror or exc}") from None
+    if len(data) > MAX_INPUT_BYTES:
+        raise error(f"{what} is larger than {MAX_INPUT_BYTES:,} bytes "
+                    f"({MAX_INPUT_BYTES / 2**20:g} MiB), the most nurbscnc reads")
+    return data
 
 
 def output_target(path: str) -> tuple[str, os.stat_result | None]:
@@ -365,17 +386,13 @@ def read_points(path: str) -> dict:
     where a CSV has them: the header, the column count, text that is not a number, a value
     that is not finite or beyond ``POINT_VALUE_LIMIT`` (named).
     """
-    try:
-        if path != "-" and path.endswith(".npz"):
+    if path != "-" and path.endswith(".npz"):
+        try:
             return _read_points_npz(path)
-        if path == "-":
-            text = sys.stdin.buffer.read().decode("utf-8", errors="replace")
-        else:
-            with open(path, encoding="utf-8", errors="replace") as fh:
-                text = fh.read()
-    except OSError as exc:
-        raise OutputError(f"cannot read {path}: {exc.strerror or exc}") from None
-    return read_points_text(text)
+        except OSError as exc:
+            raise OutputError(f"cannot read {path}: {exc.strerror or exc}") from None
+    text = read_input_bytes(path, "the point file").decode("utf-8", errors="replace")
+    return read_points_text(text.replace("\r\n", "\n").replace("\r", "\n"))
 
 
 def read_points_text(text: str) -> dict:
