@@ -533,7 +533,7 @@ def test_huge_arc_radius_stays_finite(radius):
 def test_cycle_follows_work_offsets():
     """A G81 under G55 (set by G10 L2) makes the G54 program's moves shifted by the offset:
     cycles.py works in program coordinates, the interpreter maps every move to the machine."""
-    body = "G0 X0 Y0 Z10\nG81 X5 Y7 Z-2 R2 F120\nX9\nG80\n"
+    body = "G0 X0 Y0 Z10\nG98 G81 X5 Y7 Z-2 R2 F120\nX9\nG80\n"
     plain = segs("G21 G90\n" + body)
     shifted = segs("G21 G90\nG10 L2 P2 X100 Y-50 Z3\nG55\n" + body)
     assert len(plain) == len(shifted) == 9  # rapid to 0,0 and two holes of 4 moves each

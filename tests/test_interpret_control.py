@@ -512,3 +512,19 @@ def test_break_after_its_loop_is_an_error_not_a_hang(text):
 def test_a_second_endif_of_a_closed_if_is_accepted():
     """As LinuxCNC 2.9: the label is known, the extra endif does nothing."""
     assert ends("o1 if [1]\nG0 X1\no1 endif\no1 endif\nM2")[:, 0].tolist() == [1.0]
+
+
+def test_linuxcnc_errors_a_differential_run_found():
+    """Two programs LinuxCNC 2.9 refuses (its rs274 -g, messages word for word) that
+    nurbscnc ran: a canned-cycle code with no axis word (only G0–G3 may stand without one:
+    enhance_block), and a G88 after M6, which stops the spindle (convert_tool_change); an M3
+    in the tool change's block starts it again after the change, as LinuxCNC orders them."""
+    with pytest.raises(ProgramError, match="^All axes missing with motion code$") as info:
+        segs("G21 G90 F100\nG81 X1 R1 Z-2\nG81\nM2\n")
+    assert (info.value.pos.line, info.value.pos.column) == (3, 1)
+    with pytest.raises(ProgramError, match="^Spindle not turning in g88$") as info:
+        segs("G21 G90 F100 M3 S1000\nT3 M6\nG88 X5 R-1 Z-2 P0.5\nM2\n")
+    assert info.value.pos.line == 3
+    moves = segs("G21 G90 F100 M3 S1000\nT3 M6 M3\nG88 X5 R-1 Z-2 P0.5\nM2\n")
+    # rs274 -g: two traverses, the feed down, DWELL(0.5), PROGRAM_STOP (the operator takes over)
+    assert [s.kind for s in moves] == ["rapid", "rapid", "line", "dwell", "pause"]

@@ -530,16 +530,19 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
         self.set_units(gcodes)
         self.set_spindle(words, used)
         self.select_tool(words, used)
-        if 7 in mcodes:
-            self.m.spindle = {3: "cw", 4: "ccw"}.get(mcodes[7][0], "off")  # M5, M19: stopped
         if 6 in mcodes:
             if self.m.comp_mode != 400:
                 raise self.error("Cannot change tools with cutter radius compensation on",
                                  mcodes[6][1])  # fmt: skip
             if mcodes[6][0] == 6:
                 self.m.tool_loaded = self.m.tool_selected  # M6
+                # LinuxCNC's convert_tool_change stops the spindle (unless the INI's
+                # TOOL_CHANGE_WITH_SPINDLE_ON): a G86 after it refuses a stopped spindle.
+                self.m.spindle = "off"
             else:  # M61 Q<tool>: the tool in the spindle is Q (no change is made)
                 self.m.tool_loaded = self.m61_tool(words, mcodes[6][1], used)
+        if 7 in mcodes:  # after the tool change, as LinuxCNC's order of execution
+            self.m.spindle = {3: "cw", 4: "ccw"}.get(mcodes[7][0], "off")  # M5, M19: stopped
         if 10 in mcodes:
             self.modal_save_restore(*mcodes[10])
         if mcodes.get(7, (0,))[0] == 19:
@@ -873,7 +876,10 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
             if has_axes:
                 self.straight(words, machine_coords)
         elif motion in (20, 30):
-            if has_axes or motion_code is not None or any(k in words for k in "IJKR"):
+            # A block whose axis words a group-0 code took (G10 L2 P1 R45 under modal G2)
+            # makes no arc: its R or P belong to that code (LinuxCNC's enhance_block).
+            if has_axes or motion_code is not None or (
+                    not axes_consumed and any(k in words for k in "IJKR")):
                 self.arc(words, used)
         elif motion in (50, 51, 52, 62) and self.comp is not None:
             raise self.error(f"G{_fmt_code(motion)} with cutter radius compensation is not "
@@ -883,6 +889,9 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
             if has_axes or motion_code is not None:
                 self.spline(words, used, motion, motion_code)
         elif motion in CANNED_CYCLES:
+            if motion_code is not None and not has_axes and not axes_consumed:
+                # LinuxCNC (enhance_block): only G0–G3 may stand without an axis word.
+                raise self.error("All axes missing with motion code", motion_code[1])
             if has_axes or motion_code is not None:
                 self.canned_cycle(motion, words, used, motion_code, fresh_cycle)
         elif motion == 52:

@@ -84,7 +84,9 @@ class ModalState:
 
     Canned cycles (for cycles.py): ``cycle`` the sticky words and initial level of the run of
     cycle blocks in force (a :class:`~nurbscnc.program.cycles.CycleState`, mm and s);
-    ``retract_mode`` is 980 (G98: back to the initial level) or 990 (G99: to R).
+    ``retract_mode`` is 980 (G98: back to the initial level) or 990 (G99: to R); 990 at the
+    start, as LinuxCNC 2.9 (its ``retract_mode`` starts at 0, R_PLANE: rs274ngc_pre.cc leaves
+    it uninitialised in a zeroed setup; rs274 -g retracts a first G81 to R).
     ``spindle`` is "cw" (M3), "ccw" (M4) or "off" (M5, M19, the start): cycles that stop and
     restart the spindle (G74, G84, G86, G87) need it.
     Cutter compensation (for compensation.py): ``comp_mode`` 400 (G40), 410/420 (G41/G42,
@@ -111,7 +113,7 @@ class ModalState:
     path_mode: int = 640
     naive_mm: float = 0.0  # G64 Q [mm]: the naive CAM detector's tolerance (0: off)
     # canned cycles
-    retract_mode: int = 980
+    retract_mode: int = 990
     cycle: CycleState = CycleState()
     spindle: str = "off"
     # cutter compensation
