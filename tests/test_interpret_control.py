@@ -383,6 +383,21 @@ def test_inverse_time_and_per_revolution_feeds():
     assert got[4].feed_mm_s == pytest.approx(0.01 * 25.4 * 1000 / 60, rel=1e-15)
 
 
+def test_inverse_time_feeds_as_linuxcnc():
+    """LinuxCNC's G93 rate (interp_inverse.cc) is max(0.1, L·F) program units per minute,
+    with an arc's L from its start radius (find_arc_length). The feeds its gcode module gave
+    for these moves [mm/s], recorded by a differential run: a 1 µm move at F1 (L·F is
+    0.001 mm/min: the 0.1 floor), the same in inches, and an arc whose end radius differs
+    from its start radius by 1.4e-6 mm (mean radius: 8e-9 relative off)."""
+    metric = segs("G21 G90\nG93 G1 X0.001 F1\n")[0].feed_mm_s
+    assert metric == pytest.approx(0.001666666666666667, rel=1e-15)  # (was 1.67e-5)
+    inch = segs("G20 G90\nG93 G1 X0.001 F1\n")[0].feed_mm_s
+    assert inch == pytest.approx(0.042333333333333334, rel=1e-15)
+    arc = segs("G21 G90\nG93\nG0 X17.00767 Y-25.82195\n"
+               "G3 X6.746468 Y-3.890651 I-19.259902 J4.354841 F124.294\n")[1]  # fmt: skip
+    assert arc.feed_mm_s == pytest.approx(53.99446243988222, rel=1e-14)
+
+
 @settings(max_examples=40, deadline=None, derandomize=True)
 @given(body=moves, turns=st.integers(0, 4))
 def test_fanuc_m98_equals_inlined(body, turns):

@@ -1105,7 +1105,8 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
         if m.feed_mode == 930:
             if "F" not in words:
                 raise self.error("G93 (inverse time) moves need an F word on every line")
-            return length_mm * m.feed / 60.0
+            # LinuxCNC's inverse_time_rate_*: at least 0.1 program units per minute.
+            return max(length_mm * m.feed, 0.1 * m.scale) / 60.0
         if m.feed_mode == 950 and m.spindle_rpm <= 0.0:
             raise self.error("G95 feed per revolution with spindle speed S0")
         return self.feed_mm_s
@@ -1189,7 +1190,8 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
         c3 = list(start)
         c3[a], c3[b] = center
         helix = end[n_axis] - start[n_axis]
-        length = math.hypot(0.5 * (r0 + r1) * sweep, helix)
+        # The length G93 divides (LinuxCNC's find_arc_length): the start radius's.
+        length = r0 * abs(sweep) if helix == 0.0 else math.hypot(r0 * sweep, helix)
         feed = self.move_feed_mm_s(length, words)
         if feed <= 0.0:
             raise self.error("arc move with zero feed (set F first)", col0)
