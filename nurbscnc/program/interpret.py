@@ -255,8 +255,11 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
         return name in self.frames[-1].named
 
     def _predefined(self, name: str) -> float | None:
-        """LinuxCNC's read-only named parameters (the ones a milling program reads)."""
+        """LinuxCNC's read-only named parameters, as its interp_namedparams.cc computes them
+        (``_retract_r_plane`` is 1 under G99, whatever its comment says; ``_task`` 1 as in
+        milltask, which makes the motion, not the preview)."""
         m = self.m
+        system = self.coords.system  # 1..9 for G54..G59.3
         values = {
             "_x": self.prog[0] / m.scale,
             "_y": self.prog[1] / m.scale,
@@ -272,12 +275,32 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
             "_line": float(self.line_no),
             "_motion_mode": float(m.motion if m.motion is not None else 800),
             "_plane": float(G_OF_PLANE[m.plane] * 10),
-            "_coord_system": float(self.coords.system),
+            "_coord_system": float(530 + 10 * system if system < 7 else 584 + system),
+            "_ccomp": float(m.comp_mode),
+            "_inverse_time": float(m.feed_mode == 930),
+            "_units_per_minute": float(m.feed_mode == 940),
+            "_units_per_rev": float(m.feed_mode == 950),
+            "_tool_offset": float(any(self.coords.tool_mm)),
+            "_retract_r_plane": float(m.retract_mode == 990),
+            "_retract_old_z": float(m.retract_mode == 980),
+            "_ijk_absolute_mode": float(m.arc_absolute),
+            "_lathe_diameter_mode": 0.0,
+            "_lathe_radius_mode": 1.0,
+            "_spindle_on": float(m.spindle != "off"),
+            "_spindle_cw": float(m.spindle == "cw"),
+            "_a": m.rotary[0],
+            "_b": m.rotary[1],
+            "_c": m.rotary[2],
+            "_u": 0.0,
+            "_v": 0.0,
+            "_w": 0.0,
+            "_call_level": float(len(self.frames) - 1),
+            "_remap_level": 0.0,
             "_value": 0.0,
             "_value_returned": 0.0,
             "_task": 1.0,
-            "_vmajor": 2.0,
-            "_vminor": 9.0,
+            "_vmajor": 2.9,  # LinuxCNC's sscanf("%lf%lf") of its version "2.9.x"
+            "_vminor": 0.0,
         }
         return values.get(name)
 
