@@ -14,10 +14,15 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 
+import numpy as np
+
 from nurbscnc.errors import ProgramError
 
 #: The highest parameter number (LinuxCNC: RS274NGC_MAX_PARAMETERS − 1).
 MAX_PARAMETER = 5602
+#: LinuxCNC's TOLERANCE_EQUAL: EQ and NE compare within it ([0.1 + 0.2] EQ 0.3 is 1, and
+#: a loop counting in steps of 0.1 meets its NE bound).
+TOLERANCE_EQUAL = 0.0001
 
 
 class ExpressionError(ProgramError):
@@ -46,10 +51,10 @@ def _binop(op: str, a: float, b: float) -> float:
         if a == 0.0 and b < 0.0:
             raise ExpressionError("zero raised to a negative power")
         return float(a**b)
-    if op == "EQ":
-        return float(a == b)
+    if op == "EQ":  # LinuxCNC 2.9 (execute_binary2): within TOLERANCE_EQUAL; LE, GE exact
+        return float(abs(a - b) < TOLERANCE_EQUAL)
     if op == "NE":
-        return float(a != b)
+        return float(abs(a - b) >= TOLERANCE_EQUAL)
     if op == "GT":
         return float(a > b)
     if op == "GE":
@@ -67,17 +72,26 @@ def _binop(op: str, a: float, b: float) -> float:
     raise AssertionError(op)  # pragma: no cover
 
 
+#: π in the C ``long double`` LinuxCNC's execute_unary and execute_binary use (M_PIl): its
+#: degree conversions run in that precision (80-bit on x86-64; where numpy's longdouble is
+#: a double, the results are a double's). SIN[30] is 0.5 there, 0.49999999999999994 in
+#: doubles, and FIX[2*SIN[30]] 1, not 0.
+_PI_L = np.longdouble("3.14159265358979323846264338327950288")
+_TRIG_L = {"SIN": np.sin, "COS": np.cos, "TAN": np.tan}
+
+
+def degrees_as_linuxcnc(radians: float) -> float:
+    """``(radians * 180.0) / M_PIl`` rounded to a double (ASIN, ACOS, ATAN)."""
+    return float(np.longdouble(radians * 180.0) / _PI_L)
+
+
 def _func(name: str, x: float) -> float:
-    if name == "SIN":
-        return math.sin(math.radians(x))
-    if name == "COS":
-        return math.cos(math.radians(x))
-    if name == "TAN":
-        return math.tan(math.radians(x))
+    if name in _TRIG_L:  # sin((x * M_PIl) / 180.0), in long double
+        return float(_TRIG_L[name](np.longdouble(x) * _PI_L / 180))
     if name in ("ASIN", "ACOS"):
         if not -1.0 <= x <= 1.0:
             raise ExpressionError(f"{name} argument {x:g} outside [-1, 1]")
-        return math.degrees(math.asin(x) if name == "ASIN" else math.acos(x))
+        return degrees_as_linuxcnc(math.asin(x) if name == "ASIN" else math.acos(x))
     if name == "SQRT":
         if x < 0.0:
             raise ExpressionError(f"SQRT of a negative number ({x:g})")
@@ -155,7 +169,7 @@ def _evaluate(expr, numbered, named, exists) -> float:
             else:  # atan
                 x = values.pop()
                 y = values.pop()
-                r = math.degrees(math.atan2(y, x))
+                r = degrees_as_linuxcnc(math.atan2(y, x))
             if not math.isfinite(r):
                 raise ExpressionError("expression value is not finite (overflow)")
             push_value(r)
