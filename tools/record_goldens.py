@@ -132,17 +132,35 @@ class Recorder:
     def set_feed_rate(self, rate):
         self.feed_in_min = rate
 
+    def _reframe(self, change) -> None:
+        """Apply ``change`` to the offsets, keeping the current point where it is on the
+        machine: its program coordinates ``self.prog`` are expressed again in the new frame
+        (machine = R(rotation)·(program + g92) + g5x + tool). Without it the next arc's
+        centre took its axial coordinate (the Z of a G17 arc) from the old frame: after a
+        G92 then a G18 arc its Y was off by the G92 offset (found by a differential run)."""
+        m = [self.prog[i] + self.g92[i] for i in range(9)]
+        if self.rotation_deg:
+            t = math.radians(self.rotation_deg)
+            m[0], m[1] = m[0] * math.cos(t) - m[1] * math.sin(t), m[0] * math.sin(t) + m[1] * math.cos(t)
+        m = [m[i] + self.g5x[i] + self.tool[i] for i in range(9)]
+        change()
+        q = [m[i] - self.g5x[i] - self.tool[i] for i in range(9)]
+        if self.rotation_deg:
+            t = math.radians(-self.rotation_deg)
+            q[0], q[1] = q[0] * math.cos(t) - q[1] * math.sin(t), q[0] * math.sin(t) + q[1] * math.cos(t)
+        self.prog = [q[i] - self.g92[i] for i in range(9)]
+
     def set_g5x_offset(self, index, *xyz):
-        self.g5x = list(xyz) + [0.0] * (9 - len(xyz))
+        self._reframe(lambda: setattr(self, "g5x", list(xyz) + [0.0] * (9 - len(xyz))))
 
     def set_g92_offset(self, *xyz):
-        self.g92 = list(xyz) + [0.0] * (9 - len(xyz))
+        self._reframe(lambda: setattr(self, "g92", list(xyz) + [0.0] * (9 - len(xyz))))
 
     def set_xy_rotation(self, theta_deg):
-        self.rotation_deg = theta_deg
+        self._reframe(lambda: setattr(self, "rotation_deg", theta_deg))
 
     def tool_offset(self, *xyz):
-        self.tool = list(xyz)
+        self._reframe(lambda: setattr(self, "tool", list(xyz) + [0.0] * (9 - len(xyz))))
 
     def change_tool(self, pocket):
         # What LinuxCNC's tool changer (and rs274's canon) does on M6: the pocket's data
