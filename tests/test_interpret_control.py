@@ -543,3 +543,19 @@ def test_linuxcnc_errors_a_differential_run_found():
     moves = segs("G21 G90 F100 M3 S1000\nT3 M6 M3\nG88 X5 R-1 Z-2 P0.5\nM2\n")
     # rs274 -g: two traverses, the feed down, DWELL(0.5), PROGRAM_STOP (the operator takes over)
     assert [s.kind for s in moves] == ["rapid", "rapid", "line", "dwell", "pause"]
+
+
+def test_elseif_after_a_taken_branch_is_still_evaluated():
+    """LinuxCNC evaluates the condition of every O-word line it reaches (when it reads the
+    line): an elseif met at the end of a taken branch is skipped, but a condition that
+    cannot be evaluated is an error there, at that line (rs274 -g: "Negative argument to
+    sqrt" at line 3, "Zero or negative argument to ln" at line 5)."""
+    with pytest.raises(ProgramError, match="SQRT") as info:
+        segs("o1 if [1]\nG4 P1\no1 elseif [SQRT[-1]]\nG4 P2\no1 endif\n")
+    assert info.value.pos.line == 3
+    with pytest.raises(ProgramError, match="LN") as info:
+        segs("o1 if [0]\nG4 P1\no1 elseif [1]\nG4 P2\no1 elseif [LN[-1]]\nG4 P3\no1 else\n"
+             "o1 endif\n")  # fmt: skip
+    assert info.value.pos.line == 5
+    dwells = segs("o1 if [0]\nG4 P1\no1 elseif [1]\nG4 P2\no1 elseif [1]\nG4 P3\no1 endif\n")
+    assert [d.seconds for d in dwells] == [2.0]

@@ -138,16 +138,14 @@ class Recorder:
         (machine = R(rotation)·(program + g92) + g5x + tool). Without it the next arc's
         centre took its axial coordinate (the Z of a G17 arc) from the old frame: after a
         G92 then a G18 arc its Y was off by the G92 offset (found by a differential run)."""
-        m = [self.prog[i] + self.g92[i] for i in range(9)]
-        if self.rotation_deg:
-            t = math.radians(self.rotation_deg)
-            m[0], m[1] = m[0] * math.cos(t) - m[1] * math.sin(t), m[0] * math.sin(t) + m[1] * math.cos(t)
+        def turn(p, deg):
+            c, s = math.cos(math.radians(deg)), math.sin(math.radians(deg))
+            return [p[0] * c - p[1] * s, p[0] * s + p[1] * c, *p[2:]]
+
+        m = turn([self.prog[i] + self.g92[i] for i in range(9)], self.rotation_deg)
         m = [m[i] + self.g5x[i] + self.tool[i] for i in range(9)]
         change()
-        q = [m[i] - self.g5x[i] - self.tool[i] for i in range(9)]
-        if self.rotation_deg:
-            t = math.radians(-self.rotation_deg)
-            q[0], q[1] = q[0] * math.cos(t) - q[1] * math.sin(t), q[0] * math.sin(t) + q[1] * math.cos(t)
+        q = turn([m[i] - self.g5x[i] - self.tool[i] for i in range(9)], -self.rotation_deg)
         self.prog = [q[i] - self.g92[i] for i in range(9)]
 
     def set_g5x_offset(self, index, *xyz):

@@ -352,8 +352,11 @@ class ControlFlow:
             raise self.error(f"o{label} {keyword} without if", column)
 
     def o_elseif(self, label, args, column, frame, here) -> None:
-        # Reached by running off the end of a taken branch: skip to endif.
+        # Reached by running off the end of a taken branch: skip to endif. LinuxCNC reads
+        # (evaluates) the condition of every O-word line it reaches, so an elseif [SQRT[-1]]
+        # after a taken branch is still an error there: evaluated here too, then unused.
         self._after_if(label, here, column, "elseif")
+        self._cond(args, column, "elseif")
         frame.pc = self._jump_target(label, here, ("endif",), column, "elseif without endif") + 1
 
     def o_else(self, label, args, column, frame, here) -> None:
