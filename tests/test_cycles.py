@@ -30,7 +30,7 @@ TOL_MM = 1e-9
 
 def drive(text: str) -> list[dict]:
     """Moves of a plain cycle program, as golden-like dicts; ProgramError gets ``.line``."""
-    pos, plane, incremental, retract = [0.0, 0.0, 0.0], "XY", False, "G98"
+    pos, plane, incremental, retract = [0.0, 0.0, 0.0], "XY", False, "G99"
     scale, feed_mm_s, spindle, motion = 1.0, 0.0, "off", None
     state = CycleState()
     out = []

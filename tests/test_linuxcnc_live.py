@@ -104,13 +104,16 @@ def random_program(seed: int) -> str:
         plane = rnd.choice(list(planes))
         incremental = rnd.random() < 0.3
         mode = "G91" if incremental else "G90"
-        kind = rnd.choice(["G0", "G1", "G1", "G2", "G3", "G2", "G3", "G4", "F"])
+        kind = rnd.choice(["G0", "G1", "G1", "G2", "G3", "G2", "G3", "G4", "F", "G93"])
         if kind == "G4":
             lines.append(f"G4 P{rnd.uniform(0, 2):.3f}")
             continue
         if kind == "F":
             lines.append(f"F{rnd.uniform(50, 3000) * scale:.3f}")
             continue
+        inverse_time = kind == "G93"  # a G1 in inverse time (F: 1/minutes), then back
+        if inverse_time:
+            kind = rnd.choice(["G1", "G2", "G3"])
         if kind in ("G0", "G1"):
             end = [p + rnd.uniform(-50, 50) * scale for p in pos]
             end = [round(e, 6) for e in end]
@@ -136,7 +139,12 @@ def random_program(seed: int) -> str:
                       f"{centre_letters[b]}{centre[b] - pos[b]:.6f}"]  # fmt: skip
             if rnd.random() < 0.15:
                 words.append("P2")
-        lines.append(f"{plane} {mode} {kind} " + " ".join(words))
+        if inverse_time:  # short moves at low F meet LinuxCNC's 0.1 units/min floor
+            words.append(f"F{rnd.choice([rnd.uniform(1, 200), rnd.uniform(1e-4, 1e-2)]):.6f}")
+            lines.append(f"G93 {plane} {mode} {kind} " + " ".join(words))
+            lines.append(f"G94 F{600 * scale:.3f}")
+        else:
+            lines.append(f"{plane} {mode} {kind} " + " ".join(words))
         # Incremental words are rounded relative to the rounded position: track what was
         # written, not what was meant.
         if incremental:
@@ -180,7 +188,8 @@ def random_cycle_program(seed: int) -> str:
         else:
             sticky = True  # same code again: words may be left out
         incremental = rnd.random() < 0.4
-        words = [rnd.choice(["G98", "G99"]), "G91" if incremental else "G90", code]
+        # no G98/G99 at all: LinuxCNC's start is G99 (retract to R)
+        words = [rnd.choice(["G98", "G99", ""]), "G91" if incremental else "G90", code]
         for letter in others:
             if rnd.random() < 0.8:
                 words.append(f"{letter}{rnd.uniform(-15, 15) * k:.4f}")
