@@ -559,3 +559,50 @@ def test_elseif_after_a_taken_branch_is_still_evaluated():
     assert info.value.pos.line == 5
     dwells = segs("o1 if [0]\nG4 P1\no1 elseif [1]\nG4 P2\no1 elseif [1]\nG4 P3\no1 endif\n")
     assert [d.seconds for d in dwells] == [2.0]
+
+
+@pytest.mark.parametrize(("line", "message"), [
+    ("G43", "Cannot change tool offset with cutter radius compensation on"),
+    ("G43.1 Z1", "Cannot change tool offset with cutter radius compensation on"),
+    ("G49", "Cannot change tool offset with cutter radius compensation on"),
+    ("G92 X1", "Cannot change axis offsets with cutter radius comp"),
+    ("G52 X1", "Cannot change axis offsets with cutter radius comp"),
+    ("G55", "Cannot change coordinate systems with cutter radius compensation on"),
+    ("G10 L2 P1 X1", "Cannot change the active coordinate system with cutter radius "
+                     "compensation on"),
+    ("G10 L20 P0 X1", "Cannot change the active coordinate system with cutter radius "
+                      "compensation on"),
+    ("G53 G1 X5", "Cannot use g53 with cutter radius comp"),
+    ("G61", "Cannot change control mode with cutter radius compensation on"),
+    ("G64 P0.1", "Cannot change control mode with cutter radius compensation on"),
+])  # fmt: skip
+def test_offset_and_mode_changes_while_compensating_are_refused(line, message):
+    """LinuxCNC 2.9 refuses each of these while G41/G42 is on (rs274 -g, its words): the
+    compensated path would change frame under the tool. nurbscnc kept compensating. A G10
+    of another system is allowed, as there."""
+    text = f"G21 G90 F600\nG41.1 D2 G1 X10 Y0\n{line}\nG1 X20 Y5\nG40 G1 X30 Y10\nM2\n"
+    with pytest.raises(ProgramError, match=f"^{message}$") as info:
+        segs(text)
+    assert info.value.pos.line == 3
+    assert len(segs(text.replace(line, "G10 L2 P2 X1"))) == 3
+
+
+def test_parameters_as_linuxcnc_reads_them():
+    """From a second differential run (rs274 -g for each): #<_value> and the other
+    read-only names refuse an assignment; a break in a repeat loop is refused (only while
+    and do loops have one); #5400 is the tool an M6 loaded (it read 0: the offsets' range
+    claimed it); G41/G42 D0 compensates with the loaded tool's radius (the spindle's
+    pocket), not 0."""
+    for name in ("_value", "_x", "_coord_system"):
+        with pytest.raises(ProgramError, match=f"Cannot assign to read-only parameter #<{name}>"):
+            segs(f"#<{name}>=5\nM2\n")
+    with pytest.raises(ProgramError, match="no matching while/do label: 'o1 break' "
+                                           r"\(found 'repeat' in line 2\)") as info:  # fmt: skip
+        segs("F500\no1 repeat [3]\nG91 G1 X1\no1 break\no1 endrepeat\nM2\n")
+    assert info.value.pos.line == 4
+    assert segs("T3 M6\nG4 P[#5400]\nM2\n")[0].seconds == 3.0
+    tools = parse_tool_table("T2 P2 D3.175\n")
+    moves = segs("F600\nT2 M6\nG42 D0 G1 X10 Y0\nG1 X20\nG40 G1 X30 Y10\nM2\n", tools=tools)
+    # rs274 -g: (10, -1.5875), (20, -1.5875), (30, 10)
+    np.testing.assert_allclose([m.end_mm for m in moves],
+                               [(10, -1.5875, 0), (20, -1.5875, 0), (30, 10, 0)], atol=1e-12)

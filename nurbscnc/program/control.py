@@ -204,8 +204,15 @@ class ControlFlow:
             )
 
     def o_sub(self, label, args, column, frame, here) -> None:
-        # A definition met in the flow: skip to after its endsub.
+        # A definition met in the flow: skip to after its endsub. LinuxCNC still reads that
+        # endsub (read_o evaluates it while skipping): its value, or none, becomes #<_value>
+        # and #<_value_returned>, as after a return.
         end = self._jump_target(label, here, ("endsub",), column, "sub without endsub")
+        tail = self.source.block(end).oword
+        self.line_no = end + 1
+        value = self.evaluate(tail.args[0], tail.column, lenient=True) if tail.args else None
+        self.globals["_value"] = value if value is not None else 0.0
+        self.globals["_value_returned"] = 1.0 if value is not None else 0.0
         frame.pc = end + 1
 
     def o_endsub(self, label, args, column, frame, here) -> None:
@@ -435,6 +442,9 @@ class ControlFlow:
             raise self.error(f"o{label} {what}: the loop has no end", column)
         if end < here:  # after the loop's end: a break there would jump back to itself
             raise self.error(f"o{label} {what} outside a loop", column)
+        if kind == "repeat":  # LinuxCNC (interp_o_word.cc): only while and do loops
+            raise self.error(f"no matching while/do label: 'o{label} {what}' (found 'repeat' "
+                             f"in line {head + 1})", column)  # fmt: skip
         return head, kind, end
 
     def o_break(self, label, args, column, frame, here) -> None:

@@ -239,7 +239,7 @@ class OffsetCommands:
             self.g92(words, used, col)
             return True
         if code == 520:
-            self.g52(words, used)
+            self.g52(words, used, col)
             return True
         if code in (921, 922, 923):
             machine = self.pos
@@ -271,6 +271,9 @@ class OffsetCommands:
             raise self.error(f"G10 L{level:g} P{p:g}: P must be an integer 0..9", pcol)
         used.update("LP" + ("R" if "R" in words else "") + "XYZ")
         system = int(p) or self.coords.system
+        if system == self.coords.system:
+            self.not_in_comp("Cannot change the active coordinate system with cutter radius "
+                             "compensation on", col)  # fmt: skip
         scale = self.m.scale
         given = {i: words[a][0] * scale for i, a in enumerate(_AXES) if a in words}
         rotation = words["R"][0] if "R" in words else None
@@ -350,10 +353,11 @@ class OffsetCommands:
             out[2] = origin[2] + have[2] - want[2]
         return out
 
-    def g52(self, words: dict, used: set) -> None:
+    def g52(self, words: dict, used: set, col: int) -> None:
         """G52 X Y Z: a local origin at the given program coordinates (LinuxCNC keeps it in
         the G92 offsets: it sets them directly, raises #5210, and G92.1/.2/.3 act on it);
         axes not given keep their offset; the machine does not move."""
+        self.not_in_comp("Cannot change axis offsets with cutter radius comp", col)
         machine = self.pos
         self.coords.set_g92({i: words[a][0] * self.m.scale
                              for i, a in enumerate(_AXES) if a in words})  # fmt: skip
@@ -363,6 +367,7 @@ class OffsetCommands:
     def g92(self, words: dict, used: set, col: int) -> None:
         if not any(a in words for a in _AXES):
             raise self.error("G92 needs at least one axis word", col)
+        self.not_in_comp("Cannot change axis offsets with cutter radius comp", col)
         machine = self.pos
         c = self.coords
         unshifted = [self.prog[k] + c.g92_mm[k] for k in range(3)]

@@ -218,10 +218,10 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
         index = self._param_index(index_f)
         if index <= N_LOCAL:
             return self.params.get(index, 0.0)
+        if index == 5400:  # the tool in the spindle (before the offsets' range claims it)
+            return float(self.m.tool_loaded)
         if coords.is_coordinate_parameter(index):
             return self.coords.read(index)
-        if index == 5400:
-            return float(self.m.tool_loaded)
         if 5420 <= index <= 5422:
             return self.prog[index - 5420] / self.m.scale
         return self.params.get(index, 0.0)
@@ -248,6 +248,17 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
         elif name in self.frames[-1].named:
             return self.frames[-1].named[name]
         raise ExpressionError(f"named parameter #<{name}> is not defined")
+
+    def declare_named(self, name: str, column: int) -> None:
+        """An assignment to ``#<name>`` being read, as LinuxCNC's
+        read_named_parameter_setting: a read-only name is an error; a new name exists from
+        here on with the value 0, so ``#<h>=[#<h>+5]`` gives 5."""
+        if name.startswith("_"):
+            if self._predefined(name) is not None:
+                raise self.error(f"Cannot assign to read-only parameter #<{name}>", column)
+            self.globals.setdefault(name, 0.0)
+        else:
+            self.frames[-1].named.setdefault(name, 0.0)
 
     def exists(self, name: str) -> bool:
         if name.startswith("_"):
@@ -304,11 +315,18 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
         }
         return values.get(name)
 
-    def evaluate(self, value, column: int) -> float:
+    def evaluate(self, value, column: int, lenient: bool = False) -> float:
+        """The value of an expression; ``lenient``: an undefined named parameter reads 0
+        (an endsub's value read while its definition is skipped: LinuxCNC reads it without
+        the sub's locals, and does not stop)."""
         if type(value) is float:
             return value
+        named = self.read_named
+        if lenient:
+            def named(name):
+                return self.read_named(name) if self.exists(name) else 0.0
         try:
-            return evaluate(value, self.read_numbered, self.read_named, self.exists)
+            return evaluate(value, self.read_numbered, named, self.exists)
         except ExpressionError as exc:
             raise self.error(exc.message, column) from None
 
@@ -368,6 +386,12 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
             elif block.words or block.assigns or block.comments:
                 self.block(block)
         self.finish()
+
+    def not_in_comp(self, message: str, column: int) -> None:
+        """LinuxCNC's refusals of offset and mode changes while cutter compensation is on
+        (interp_convert.cc), with its messages: the compensated path would change frame."""
+        if self.m.comp_mode != 400:
+            raise self.error(message, column)
 
     def over_budget(self, column: int = 1, moves: bool = False) -> None:
         """The error of a program past its budget of executed lines or of moves
@@ -432,7 +456,9 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
         # Parameter assignments take effect at the end of the line's reading (LinuxCNC):
         # every right-hand side sees the old values.
         pending = []
-        for target, raw, _ in block.assigns:
+        for target, raw, column in block.assigns:
+            if target[0] != "#":  # a named parameter exists (0) from its assignment's reading
+                self.declare_named(target[1], column)
             value = self.evaluate(raw, 1)
             if target[0] == "#":
                 index_f = self.evaluate(target[1], 1)
@@ -580,6 +606,8 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
         self.set_cutter_comp(gcodes, words, used)
         self.set_tool_offset(gcodes, words, used)
         if 12 in gcodes:
+            self.not_in_comp("Cannot change coordinate systems with cutter radius compensation "
+                             "on", gcodes[12][1])  # fmt: skip
             self.select_system(SYSTEM_OF_G[gcodes[12][0]])
         self.set_path_mode(gcodes, words, used)
         if 3 in gcodes:
@@ -757,7 +785,9 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
                     # signed: a negative D swaps the side (LinuxCNC; CutterComp does it)
                     m.comp_radius_mm = d[0] * m.scale / 2.0
                 else:
-                    number = int(d[0]) if d is not None else m.tool_loaded
+                    # no D, or D0 (LinuxCNC's find_tool_index(0): the spindle's pocket):
+                    # the loaded tool
+                    number = int(d[0]) if d is not None and d[0] != 0 else m.tool_loaded
                     if d is not None and (d[0] != int(d[0]) or d[0] < 0):
                         raise self.error(f"D{d[0]:g} must be a tool number", d[1])
                     tool = self.tools.get(number)
@@ -781,6 +811,7 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
                 raise self.error("H word with no G43 to use it", words["H"][1])
             return
         code, col = gcodes[8]
+        self.not_in_comp("Cannot change tool offset with cutter radius compensation on", col)
         machine = self.pos
         if code == 430:
             used.add("H")
@@ -823,6 +854,7 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
         if 13 not in gcodes:
             return
         code, col = gcodes[13]
+        self.not_in_comp("Cannot change control mode with cutter radius compensation on", col)
         p_mm = q_mm = None
         if code == 640:
             for letter in "PQ":
@@ -868,6 +900,8 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
                 raise self.error("G53 needs G0 or G1 in force", gcodes[0][1])
             if not self.m.absolute:
                 raise self.error("G53 cannot be used with G91 (incremental)", gcodes[0][1])
+            if self.m.comp_mode != 400 and self.m.comp_radius_mm > 0.0:
+                raise self.error("Cannot use g53 with cutter radius comp", gcodes[0][1])
         if motion_code is not None:
             code, col = motion_code
             if self.nurbs is not None and code != self.nurbs_code():
