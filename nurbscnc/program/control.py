@@ -253,8 +253,9 @@ class ControlFlow:
         for k in range(1, N_LOCAL + 1):
             self.params[k] = values[k - 1] if k <= len(values) else 0.0
         call_line = self.main_line() if self.source is self.main else self.main_line()
+        # #<_value_returned> keeps its value into the call (rs274 -g: 1 inside a sub called
+        # after a skipped definition's endsub [5]); the call's own return sets it.
         self.frames.append(Frame(source, start + 1, label, call_line, frame.pc, saved))
-        self.globals["_value_returned"] = 0.0
 
     def m98(self, words: dict, column: int) -> None:
         """``M98 P<n> [L<k>]``: run the Fanuc subroutine that starts at the line ``O<n>`` of
@@ -295,6 +296,9 @@ class ControlFlow:
                                  "endless loop nurbscnc cannot plan)", column)  # fmt: skip
             raise self.error(f"M99 in subroutine o{frame.label} (it ends with endsub or "
                              f"return; M99 ends an M98 subroutine)", column)  # fmt: skip
+        # Every M99 ends a run as an endsub without a value (rs274 -g: a second M98 L2 run
+        # reads #<_value_returned> 0).
+        self.globals["_value"] = self.globals["_value_returned"] = 0.0
         if frame.fanuc_left > 0:
             self._count_loop(column)
             frame.fanuc_left -= 1
