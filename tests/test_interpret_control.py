@@ -606,3 +606,15 @@ def test_parameters_as_linuxcnc_reads_them():
     # rs274 -g: (10, -1.5875), (20, -1.5875), (30, 10)
     np.testing.assert_allclose([m.end_mm for m in moves],
                                [(10, -1.5875, 0), (20, -1.5875, 0), (30, 10, 0)], atol=1e-12)
+
+
+def test_break_in_a_repeat_is_refused_even_where_it_is_skipped():
+    """LinuxCNC refuses a break or continue of a repeat loop as it reads the line, even in a
+    body repeat [0] skips or in a false if (rs274 -g: "no matching while/do label" at that
+    line, 3 here)."""
+    for text in ("o1 repeat [0]\nG4 P1\no1 continue\no1 endrepeat\nG4 P2\nM2\n",
+                 "o1 repeat [2]\no2 if [0]\no1 continue\no2 endif\nG4 P1\no1 endrepeat\nM2\n"):
+        with pytest.raises(ProgramError, match="no matching while/do label: 'o1 continue' "
+                                               r"\(found 'repeat' in line 1\)") as info:
+            segs(text)
+        assert info.value.pos.line == 3

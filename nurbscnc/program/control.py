@@ -412,6 +412,11 @@ class ControlFlow:
     def o_repeat(self, label, args, column, frame, here) -> None:
         count = self._cond(args, column, "repeat")
         end = self._jump_target(label, here, ("endrepeat",), column, "repeat without endrepeat")
+        exit_ = self.source.find(label, here, ("break", "continue"))
+        if exit_ is not None and exit_ < end:  # LinuxCNC refuses it as it reads it, even
+            self.line_no = exit_ + 1            # skipped (repeat [0], a false if)
+            stray = self.source.block(exit_).oword
+            self._repeat_has_no_exit(label, stray.keyword, stray.column, here)
         turns = int(count) if count > 0 else 0
         if turns <= 0:
             frame.pc = end + 1
@@ -446,10 +451,14 @@ class ControlFlow:
             raise self.error(f"o{label} {what}: the loop has no end", column)
         if end < here:  # after the loop's end: a break there would jump back to itself
             raise self.error(f"o{label} {what} outside a loop", column)
-        if kind == "repeat":  # LinuxCNC (interp_o_word.cc): only while and do loops
-            raise self.error(f"no matching while/do label: 'o{label} {what}' (found 'repeat' "
-                             f"in line {head + 1})", column)  # fmt: skip
+        if kind == "repeat":
+            self._repeat_has_no_exit(label, what, column, head)
         return head, kind, end
+
+    def _repeat_has_no_exit(self, label, keyword, column, head) -> None:
+        """LinuxCNC (interp_o_word.cc): break and continue belong to while and do loops."""
+        raise self.error(f"no matching while/do label: 'o{label} {keyword}' (found 'repeat' "
+                         f"in line {head + 1})", column)  # fmt: skip
 
     def o_break(self, label, args, column, frame, here) -> None:
         head, kind, end = self._loop_of(label, here, column, "break")
