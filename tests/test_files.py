@@ -519,3 +519,31 @@ def test_a_signal_just_after_the_file_object_is_made_closes_the_descriptor_once(
         os.fstat(other)  # still open: the orphan did not close it
     finally:
         os.close(other)
+
+
+def test_an_interrupted_batch_ends_whatever_its_pool_does(tmp_path):
+    """The safety net of a batch stopped by a signal (cli.main._stop_batch): the workers are
+    told at once, and the parent exits as for the signal within BATCH_STOP_S even if what
+    follows blocks for ever (here a sleep stands for the pool's shutdown waiting on a lock
+    a dying worker held; a CI run saw such a parent still alive 30 s after SIGTERM)."""
+    code = (
+        "import multiprocessing, time\n"
+        "from nurbscnc.cli.main import _Terminated, _stop_batch\n"
+        "worker = multiprocessing.Process(target=time.sleep, args=(120,))\n"
+        "worker.start()\n"
+        "print(worker.pid, flush=True)\n"
+        "_stop_batch(_Terminated(15))\n"
+        "time.sleep(120)\n"
+    )
+    start = time.monotonic()
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=60)  # fmt: skip
+    from nurbscnc.cli.main import BATCH_STOP_S
+
+    assert proc.returncode == 143, proc.stderr
+    assert time.monotonic() - start < BATCH_STOP_S + 20
+    worker = int(proc.stdout.split()[0])
+    with pytest.raises(ProcessLookupError):  # the worker was ended, not left behind
+        for _ in range(100):
+            os.kill(worker, 0)
+            time.sleep(0.05)

@@ -1278,6 +1278,25 @@ def refuse_overwriting(program: str, output: str) -> None:
                           "would replace it; give another output file")
 
 
+#: After SIGTERM, SIGHUP or Ctrl-C, a batch's parent is gone within this time [s].
+BATCH_STOP_S = 10
+
+
+def _stop_batch(exc: BaseException) -> None:
+    """A batch interrupted by a signal: each worker is told now (it removes its temporary
+    file and exits), and the parent ends within :data:`BATCH_STOP_S` whatever the pool's
+    own shutdown does next: it can wait for ever on a queue lock a dying worker held (a CI
+    run saw SIGTERM leave the parent alive after 30 s). Exit code as for the signal."""
+    import multiprocessing
+    import signal
+
+    for worker in multiprocessing.active_children():
+        worker.terminate()
+    code = 128 + exc.signum if isinstance(exc, _Terminated) else EXIT_INTERRUPTED
+    signal.signal(signal.SIGALRM, lambda *_: os._exit(code))
+    signal.alarm(BATCH_STOP_S)
+
+
 def _worker_exit(signum, _frame):
     sys.exit(128 + signum)  # SystemExit unwinds atomic_output: no temporary file stays
 
@@ -1309,7 +1328,11 @@ def run_batch(programs, output_dir, jobs, fmt, quiet, as_json, settings) -> None
         # Leaving the block for any reason (a signal, Ctrl-C) terminates the workers: each
         # removes its temporary file and exits; none goes on writing after we are gone.
         with multiprocessing.Pool(workers, initializer=_worker_init) as pool:
-            results = pool.map(_batch_one, tasks, chunksize=1)
+            try:
+                results = pool.map(_batch_one, tasks, chunksize=1)
+            except (_Terminated, KeyboardInterrupt) as exc:
+                _stop_batch(exc)
+                raise
     failed = [r for r in results if not r["ok"]]
     if as_json:
         click.echo(json.dumps({"ok": not failed, "results": results}))
