@@ -618,3 +618,40 @@ def test_break_in_a_repeat_is_refused_even_where_it_is_skipped():
                                                r"\(found 'repeat' in line 1\)") as info:
             segs(text)
         assert info.value.pos.line == 3
+
+
+def test_curves_and_feeds_as_linuxcnc():
+    """A third differential run (curves and arcs), each against LinuxCNC 2.9 (its gcode
+    module's samples, or rs274 -g):
+    - G91 G5.2: every control point is an increment from the block's start (find_ends; the
+      current point stays there until G5.3), not from the previous point. LinuxCNC's first
+      two samples of this block, at u = 1/30 and 2/30 of knots [0, 0, 0, 1, 2, 2, 2];
+    - the NURBS runs at the feed in force at G5.3 (rs274: SET_FEED_RATE(300), NURBS_FEED);
+    - G5 and G5.1 keep the motion mode (convert_spline sets none): the X Y line after is G1;
+    - G5 without I J: −(P, Q) of the last G5, moves between or not, (0, 0) before any;
+    - an arc's P within 0.001 of an integer is that integer (check_other_codes);
+    - every G93/G94/G95 word clears F (convert_feed_mode): a G1 after a second G94 has no
+      feed (rs274: "Cannot do g1 with zero feed rate")."""
+    from nurbscnc.geometry.nurbs import NurbsCurve
+
+    prog = segs("G21 G90 F600 G0 X1 Y1\nG91 G5.2 X10 Y0 P1 L3\nX10 Y10 P1\nX0 Y10 P1\nG5.3\n"
+                "G90\nM2\n")  # fmt: skip
+    curve = NurbsCurve.from_segment(prog[1])
+    np.testing.assert_allclose(curve.point([1 / 30, 2 / 30])[:, :2],
+                               [[1.655555555555556, 1.0055555555555558],
+                                [2.2888888888888883, 1.0222222222222224]], atol=1e-12)  # fmt: skip
+    np.testing.assert_allclose(prog[1].end_mm, (1, 11, 0), atol=1e-12)
+    (nurbs,) = segs("G21 G90 F600\nG5.2 X10 Y0 P1 L3\nX10 Y10 P1 F300\nX0 Y10 P1\nG5.3\nM2\n")
+    assert nurbs.feed_mm_s == 5.0
+    after = segs("G21 G90 F600\nG1 X1\nG5 X10 Y5 I2 J3 P1 Q1\nX20 Y0\nM2\n")
+    assert [s.kind for s in after] == ["line", "nurbs", "line"]
+    np.testing.assert_allclose(after[2].end_mm, (20, 0, 0), atol=1e-12)
+    first = segs("G21 F100\nG5 X1 Y1 P1 Q0\nM2\n")[0]
+    np.testing.assert_allclose(first.control_points_mm[1], (0, 0, 0), atol=1e-12)
+    later = segs("G21 G90 F600\nG5 X10 Y5 I1 J1 P1 Q2\nG1 X0 Y0\nG5 X10 Y5 P1 Q1\nM2\n")[2]
+    np.testing.assert_allclose(later.control_points_mm[1], (-1, -2, 0), atol=1e-12)
+    (arc,) = segs("G21 G90 F600\nG2 X10 Y0 I5 P2.9995\nM2\n")
+    assert arc.angle_rad == pytest.approx(-5 * np.pi, rel=1e-12)  # rs274: ARC_FEED(…, -3, …)
+    with pytest.raises(ProgramError, match="zero feed") as info:
+        segs("G21 G94 F600\nG94\nG1 X10\nM2\n")
+    assert info.value.pos.line == 3

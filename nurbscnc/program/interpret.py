@@ -128,7 +128,9 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
         self.segments: list = []
         self.notes: list[Note] = []
         self.nurbs = None
-        self.spline_ij = None  # G5: the previous spline's end tangent offset (P, Q) [mm]
+        # G5 without I J: minus the last G5's (P, Q) [mm], (0, 0) before any (LinuxCNC's
+        # cycle_i, cycle_j, kept across other moves)
+        self.spline_pq = (0.0, 0.0)
         self.noted: set = set()
         self.line_no = 0
         self.ended = False
@@ -690,10 +692,10 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
 
     def set_feed_mode(self, gcodes: dict, words: dict) -> None:
         if 5 in gcodes:
-            code = gcodes[5][0]
-            if code != self.m.feed_mode and code == 930:
-                self.m.feed = self.m.feed_mm = 0.0  # LinuxCNC: entering G93 clears F
-            self.m.feed_mode = code
+            # LinuxCNC (convert_feed_mode): every G93, G94, G95 word clears F, even for the
+            # mode in force; an F in the same block sets it again (it comes after).
+            self.m.feed = self.m.feed_mm = 0.0
+            self.m.feed_mode = gcodes[5][0]
 
     def set_units(self, gcodes: dict) -> None:
         # RS274/NGC sets F (step 3) before units (step 12) and LinuxCNC's canon keeps the
@@ -910,7 +912,7 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
                 self.m.motion = None
                 if any(a in words for a in _AXES) and not axes_consumed:
                     raise self.error("axis words with G80 (motion cancelled)", col)
-            else:
+            elif code not in (50, 51):  # LinuxCNC's convert_spline keeps the motion mode
                 self.m.motion = code
         if self.axes_consumed:
             self.axes_consumed = False
@@ -922,6 +924,8 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
             "X" in words or "Y" in words or "Z" in words or "@" in words or "^" in words
         )
         motion = self.m.motion
+        if motion_code is not None and motion_code[0] in (50, 51):
+            motion = motion_code[0]  # this block's spline; the next line moves as before it
         if motion is None:
             if has_axes:
                 letter = next(a for a in (*_AXES, "@", "^") if a in words)
@@ -1212,6 +1216,8 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
         if "P" in words:
             used.add("P")
             p, pcol = words["P"]
+            if abs(p - round(p)) <= 0.001:  # LinuxCNC (check_other_codes) rounds within it
+                p = float(round(p))
             if p != int(p) or p < 1:
                 raise self.error(f"arc turns P{p:g} must be a positive integer", pcol)
             if p > MAX_ARC_TURNS:

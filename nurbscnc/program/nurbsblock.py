@@ -126,7 +126,9 @@ class NurbsBlocks:
         if "L" in words:
             raise self.error("L word inside a G5.2 block (only on its first line)",
                              words["L"][1])  # fmt: skip
-        point = self.plane_point(words, build.points[-1], False)
+        # In G91 each point is an increment from the block's start, not from the previous
+        # point: LinuxCNC's current point stays there until G5.3 (find_ends).
+        point = self.plane_point(words, build.points[0], False)
         if point is None:
             if "P" in words:
                 raise self.error(
@@ -163,6 +165,8 @@ class NurbsBlocks:
                 column,
             )
         knots = g5_knot_vector(n, build.order)
+        if self.feed_mm_s > 0.0:  # LinuxCNC feeds the curve at the F in force at G5.3
+            build.feed_mm_s = self.feed_mm_s
         self.emit_nurbs(build, knots, column)
         self.motion = None  # LinuxCNC: motion mode is cleared by G5.3
 
@@ -336,10 +340,10 @@ class Splines:
 
     def spline(self, words: dict, used: set, motion: int, motion_code=None) -> None:
         """G5 X Y I J P Q: cubic Bezier from the current point to X Y; the first control point
-        is the start + (I, J), the second the end + (P, Q). I, J may be omitted after a G5:
-        they are then −(P, Q) of that spline (a smooth join). G5.1 X Y I J: quadratic, the
-        control point start + (I, J). I J P Q are incremental in any distance mode; only the
-        XY plane (LinuxCNC)."""
+        is the start + (I, J), the second the end + (P, Q). I, J may be omitted: they are then
+        −(P, Q) of the last G5, other moves between or not, or (0, 0) before any (LinuxCNC).
+        G5.1 X Y I J: quadratic, the control point start + (I, J). I J P Q are incremental in
+        any distance mode; only the XY plane (LinuxCNC). Neither changes the motion mode."""
         name = "G5" if motion == 50 else "G5.1"
         col0 = motion_code[1] if motion_code else min((c for _, c in words.values()), default=1)
         if self.m.plane != "XY":
@@ -364,10 +368,8 @@ class Splines:
                 if "I" not in words or "J" not in words:
                     raise self.error("G5 needs both I and J, or neither after a G5", col0)
                 ij = (words["I"][0] * scale, words["J"][0] * scale)
-            elif self.spline_ij is not None and self.spline_ij[0] == len(self.segments):
-                ij = (-self.spline_ij[1][0], -self.spline_ij[1][1])
             else:
-                raise self.error("G5 needs I and J unless it follows another G5", col0)
+                ij = (-self.spline_pq[0], -self.spline_pq[1])
             pq = (words["P"][0] * scale, words["Q"][0] * scale)
             points = [
                 start,
@@ -399,4 +401,4 @@ class Splines:
         )
         self.prog = end
         if motion == 50:
-            self.spline_ij = (len(self.segments), pq)
+            self.spline_pq = pq
