@@ -655,3 +655,14 @@ def test_curves_and_feeds_as_linuxcnc():
     with pytest.raises(ProgramError, match="zero feed") as info:
         segs("G21 G94 F600\nG94\nG1 X10\nM2\n")
     assert info.value.pos.line == 3
+
+
+def test_g52_order_words_as_linuxcnc():
+    """LinuxCNC's convert_nurbs takes an L on any line of a G5.2 block, as the order when
+    L > 3 and as order 3 otherwise (L0…L3); nurbscnc refused L1 and an L after the first
+    line. Both programs match LinuxCNC's samples (the third differential run's check)."""
+    (later,) = segs("G21 G90 F600\nG5.2 X10 Y0 P1 L3\nX10 Y10 P1 L4\nX0 Y10 P1\nX0 Y0 P1\n"
+                    "G5.3\nM2\n")  # fmt: skip
+    assert later.degree == 3  # order 4
+    (low,) = segs("G21 G90 F600\nG5.2 X10 Y0 P1 L1\nX0 Y10 P1\nG5.3\nM2\n")
+    assert low.degree == 2  # order 3

@@ -105,27 +105,12 @@ class NurbsBlocks:
             build.points.append(list(self.pos))
             build.weights.append(w0)
             build.point_lines.append(self.line_no)
-            if "L" in words:
-                order_f, lcol = words["L"]
-                if order_f != int(order_f) or not 2 <= order_f <= 8:
-                    raise self.error(f"NURBS order L{order_f:g} must be an integer in 2..8", lcol)
-                if order_f > 3:
-                    build.order = int(order_f)
-                elif order_f < 3:
-                    self.note_once(
-                        ("L", self.line_no),
-                        f"G5.2 L{int(order_f)}: LinuxCNC uses order 3 unless L > 3; order 3 used",
-                    )
+            self._g5_order(words)
             if point is not None:
                 self._g5_add(words, point)
             return
         build = self.nurbs
-        if motion_code is not None and "L" in words:
-            raise self.error("L word inside a G5.2 block (only on its first line)",
-                             words["L"][1])  # fmt: skip
-        if "L" in words:
-            raise self.error("L word inside a G5.2 block (only on its first line)",
-                             words["L"][1])  # fmt: skip
+        self._g5_order(words)
         # In G91 each point is an increment from the block's start, not from the previous
         # point: LinuxCNC's current point stays there until G5.3 (find_ends).
         point = self.plane_point(words, build.points[0], False)
@@ -137,6 +122,21 @@ class NurbsBlocks:
                 )
             return
         self._g5_add(words, point)
+
+    def _g5_order(self, words: dict) -> None:
+        """An L word on any line of a G5.2 block, as LinuxCNC's convert_nurbs: the order
+        becomes L when L > 3 (at most 8 here), and stays 3 otherwise (L0…L3, with a note)."""
+        if "L" not in words:
+            return
+        order_f, lcol = words["L"]
+        if order_f != int(order_f) or not 0 <= order_f <= 8:
+            raise self.error(f"NURBS order L{order_f:g} must be an integer up to 8", lcol)
+        if order_f > 3:
+            self.nurbs.order = int(order_f)
+        elif order_f < 3:
+            self.note_once(("L", self.line_no),
+                           f"G5.2 L{int(order_f)}: LinuxCNC uses order 3 unless L > 3; order 3 "
+                           "used")  # fmt: skip
 
     def _g5_add(self, words: dict, point: list) -> None:
         if "P" not in words:

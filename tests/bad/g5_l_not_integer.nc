@@ -1,3 +1,3 @@
-; order L3.5 must be an integer in 2..8 @ 3:15
+; order L3.5 must be an integer up to 8 @ 3:15
 F100
 G5.2 X0 Y1 P1 L3.5
