@@ -1286,15 +1286,22 @@ def _improve(st: _Setup, lev: _Levers, result, hi: _Levers, evaluate, confine):
     each tried alone at its upper bracket and kept if within ε_max and faster; a restore
     that gains at least :data:`RESHAPE_MIN_GAIN_S` and fails is shaped again (at most
     :data:`RESHAPE_ITERATIONS` re-plans, the stops' history cleared so each starts from its
-    transition) unless the shaping lowers that cap again. Returns (best levers, their
-    result, re-plans)."""
+    transition) while the shaping keeps that cap above the plan's, then that cap alone is
+    searched between the two by false position (:data:`RESTORE_SECANTS` re-plans). Returns
+    (best levers, their result, re-plans)."""
     # A check that keeps its reference and response holds hundreds of MB: then only one
     # plan's is held at a time, and the best plan is re-made at the end if a later try
     # replaced its result; a check without them is small and the best is kept.
     keep_best = not st.checker.keep
-    best, best_time = lev.copy(), _cycle_time(result)
-    best_worst_mm = result[2].overs.worst_mm
-    best_result = result if keep_best else None
+    best = best_time = best_worst_mm = best_result = None
+
+    def take(levers, res):  # the best plan so far: these levers, their check
+        nonlocal best, best_time, best_worst_mm, best_result
+        best, best_time = levers, _cycle_time(res)
+        best_worst_mm = res[2].overs.worst_mm
+        best_result = res if keep_best else None
+
+    take(lev.copy(), result)
     iterations = 0
     for _ in range(IMPROVE_ITERATIONS):
         trial = best.toward(hi)
@@ -1308,8 +1315,7 @@ def _improve(st: _Setup, lev: _Levers, result, hi: _Levers, evaluate, confine):
             if t > best_time:  # a feasible raise that is slower (rare): stop here
                 result = None
                 break
-            best, best_time, best_worst_mm = trial, t, result[2].overs.worst_mm
-            best_result = result if keep_best else None
+            take(trial, result)
         else:
             probe = trial.copy()
             st.shape(probe, result)
@@ -1346,18 +1352,16 @@ def _improve(st: _Setup, lev: _Levers, result, hi: _Levers, evaluate, confine):
             if trial.caps[p] <= best.caps[p] * IMPROVE_RATIO:  # nothing left to gain
                 break
         if result[2].overs.worst_mm <= st.eps_mm and _cycle_time(result) < best_time:
-            best, best_time = trial, _cycle_time(result)
-            best_worst_mm = result[2].overs.worst_mm
-            best_result = result if keep_best else None
+            take(trial, result)
         else:
             result = None
         if not shapes or best.caps[p] >= alone[0]:
             continue
-        # The cap alone, between best's (within ε_max; the shaping's if it found one, whose
-        # feed lever steps by up to 2×) and the restore's (above it): false
-        # position on the error, which grows about linearly with the cruise feed where the
-        # cap is what limits it (a line or helix in space whose z has no servo model lags
-        # ∝ v off the path).
+        # The cap alone, between the plan's (within ε_max; the shaping's if it found one,
+        # whose feed lever steps by up to 2×) and the restore's (above it): false position
+        # on the error, which grows about linearly with the cruise feed where the cap is
+        # what limits it (a line or helix in space whose z has no servo model lags ∝ v off
+        # the path).
         lo, hi_cap = (best.caps[p], best_worst_mm), alone
         for _ in range(RESTORE_SECANTS):
             gap = hi_cap[0] - lo[0]
@@ -1377,8 +1381,7 @@ def _improve(st: _Setup, lev: _Levers, result, hi: _Levers, evaluate, confine):
             if _cycle_time(result) >= best_time:  # within ε_max yet slower: stop here
                 result = None
                 break
-            best, best_time, best_worst_mm = trial, _cycle_time(result), worst
-            best_result = result if keep_best else None
+            take(trial, result)
             lo = (trial.caps[p], worst)
     if result is None:
         result = best_result if best_result is not None else evaluate(best)

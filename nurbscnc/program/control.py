@@ -210,9 +210,8 @@ class ControlFlow:
         end = self._jump_target(label, here, ("endsub",), column, "sub without endsub")
         tail = self.source.block(end).oword
         self.line_no = end + 1
-        value = self.evaluate(tail.args[0], tail.column, lenient=True) if tail.args else None
-        self.globals["_value"] = value if value is not None else 0.0
-        self.globals["_value_returned"] = 1.0 if value is not None else 0.0
+        self._set_value(self.evaluate(tail.args[0], tail.column, lenient=True)
+                        if tail.args else None)  # fmt: skip
         frame.pc = end + 1
 
     def o_endsub(self, label, args, column, frame, here) -> None:
@@ -235,6 +234,11 @@ class ControlFlow:
             else:
                 self.params[k] = v
         caller.pc = frame.return_to
+        self._set_value(value)
+
+    def _set_value(self, value: float | None) -> None:
+        """#<_value> and #<_value_returned> after an endsub or return (``value`` None: none
+        given), a skipped definition's endsub, or an M99."""
         self.globals["_value"] = value if value is not None else 0.0
         self.globals["_value_returned"] = 1.0 if value is not None else 0.0
 
@@ -298,7 +302,7 @@ class ControlFlow:
                              f"return; M99 ends an M98 subroutine)", column)  # fmt: skip
         # Every M99 ends a run as an endsub without a value (rs274 -g: a second M98 L2 run
         # reads #<_value_returned> 0).
-        self.globals["_value"] = self.globals["_value_returned"] = 0.0
+        self._set_value(None)
         if frame.fanuc_left > 0:
             self._count_loop(column)
             frame.fanuc_left -= 1
@@ -412,9 +416,11 @@ class ControlFlow:
     def o_repeat(self, label, args, column, frame, here) -> None:
         count = self._cond(args, column, "repeat")
         end = self._jump_target(label, here, ("endrepeat",), column, "repeat without endrepeat")
+        # A break or continue of this repeat: LinuxCNC refuses it as it reads it, even where
+        # it is skipped (repeat [0], a false if), so the whole body is looked at here.
         exit_ = self.source.find(label, here, ("break", "continue"))
-        if exit_ is not None and exit_ < end:  # LinuxCNC refuses it as it reads it, even
-            self.line_no = exit_ + 1            # skipped (repeat [0], a false if)
+        if exit_ is not None and exit_ < end:
+            self.line_no = exit_ + 1
             stray = self.source.block(exit_).oword
             self._repeat_has_no_exit(label, stray.keyword, stray.column, here)
         turns = int(count) if count > 0 else 0

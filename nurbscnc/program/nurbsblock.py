@@ -366,7 +366,7 @@ class Splines:
                 raise self.error("G5 needs both P and Q (end control point offset)", col0)
             if "I" in words or "J" in words:
                 if "I" not in words or "J" not in words:
-                    raise self.error("G5 needs both I and J, or neither after a G5", col0)
+                    raise self.error("G5 needs both I and J, or neither", col0)
                 ij = (words["I"][0] * scale, words["J"][0] * scale)
             else:
                 ij = (-self.spline_pq[0], -self.spline_pq[1])
