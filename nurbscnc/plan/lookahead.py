@@ -747,6 +747,9 @@ class _Checker:
         self.after_rapid = np.zeros(len(pieces), dtype=bool)  # first piece of a cut after a rapid
         self.after_rapid[settle_rows + 1] = True
         self.index = PathIndex(pieces)  # where the pieces are (built on first use)
+        # The servo at rest, discretised once (0.5 ms a check): every check starts from a copy.
+        servo = machine.servo
+        self._at_rest = AxesStream([servo.x, servo.y, servo.z], servo.period_s)
         self._memo: _Memo | None = None  # the last one-chunk check (:meth:`_same_rows`)
 
     def _windows(self, planned: PieceList, profile: Profile, rows: tuple | None = None,
@@ -822,8 +825,7 @@ class _Checker:
             return self._run_whole(planned, profile)
         servo = self.machine.servo
         stream_in = stream
-        stream = AxesStream([servo.x, servo.y, servo.z], servo.period_s) if stream is None \
-            else stream.copy()  # fmt: skip
+        stream = (self._at_rest if stream is None else stream).copy()
         acc = _Accumulator(self, profile)
         last = end = None
         # The path the error is measured against: the pieces up to this window's end (the

@@ -410,6 +410,33 @@ def _programmed_geometry(segment, known=None):
     return known if same else geom
 
 
+#: Curves remembered per shape key in :func:`_moved_copies` (a bound on the comparisons).
+MOVED_BUCKET = 4
+
+
+def _moved_copies(path: PathTable, rows: np.ndarray, top: np.ndarray):
+    """The rows of ``path`` to grid among ``rows`` (whole-curve rows, cap ceilings ``top``):
+    (own, copy_of) — ``own`` the positions in ``rows`` gridded, ``copy_of`` (len(rows),)
+    for each row the position in ``own`` whose grid it takes: itself, or a NURBS curve of
+    which it is a moved copy
+    (:meth:`~nurbscnc.geometry.nurbs.NurbsCurve.translation_from`) at the same ceiling."""
+    copy_of = np.arange(rows.size)
+    seen: dict[tuple, list[int]] = {}
+    is_nurbs = np.take(path.kind, rows) == Kind.NURBS
+    for j in np.flatnonzero(is_nurbs).tolist():
+        curve = path.objects[int(path.obj_id[rows[j]])]
+        bucket = seen.setdefault((curve.shape_key(), float(top[j])), [])
+        for i in bucket:
+            if curve.translation_from(path.objects[int(path.obj_id[rows[i]])]) is not None:
+                copy_of[j] = i
+                break
+        else:
+            if len(bucket) < MOVED_BUCKET:
+                bucket.append(j)
+    own = np.flatnonzero(copy_of == np.arange(rows.size))
+    return own, np.searchsorted(own, copy_of)
+
+
 def program_lower_bound_s(segments, machine: Machine, columns=None, curves=None) -> float:
     """The lower bound [s] for a whole program's segments (SPEC §10): its own geometry (not
     the PH replacements), rest to rest, with exact stops at tangent discontinuities (turning
@@ -483,11 +510,19 @@ def program_lower_bound_s(segments, machine: Machine, columns=None, curves=None)
     grid_rows = rows[~const]
     top_grid = top[curved[grid_rows]]
 
-    def cap2_of(kappa, j):
-        return curvature_cap2_mm2_s2(kappa, top_grid[j], a_max, period, chord)
+    # A curve that is another one moved (a part cut again elsewhere) at the same top speed
+    # has its grid and caps (κ does not depend on where the curve lies): sampled once.
+    own, copy_of = _moved_copies(path, grid_rows, top_grid)
 
-    s_grid, c2_grid, grid_sizes = _sample_rows(path, grid_rows, cap2_of, PROGRAM_DS_MM,
-                                               DEFAULT_CAP_REL_TOL)  # fmt: skip
+    def cap2_of(kappa, j):
+        return curvature_cap2_mm2_s2(kappa, top_grid[own[j]], a_max, period, chord)
+
+    s_own, c2_own, own_sizes = _sample_rows(path, grid_rows[own], cap2_of, PROGRAM_DS_MM,
+                                            DEFAULT_CAP_REL_TOL)  # fmt: skip
+    grid_sizes = own_sizes[copy_of]
+    at = np.repeat(np.cumsum(own_sizes)[copy_of] - np.cumsum(grid_sizes), grid_sizes)
+    take = at + np.arange(at.size)
+    s_grid, c2_grid = s_own[take], c2_own[take]
     grid_start = np.concatenate(([0], np.cumsum(grid_sizes)))
     sampled = curved[grid_rows]  # indices into ``moving`` of the gridded pieces
     length[sampled] = s_grid[grid_start[1:] - 1]

@@ -121,12 +121,19 @@ class Piece:
         return _object_ends([self])[3][0]
 
 
-def nurbs_pieces(seg, index: int, machine: Machine, options: PlanOptions) -> list[Piece]:
-    """A NURBS segment as pieces: PH corner pieces and capped NURBS stretches."""
+def nurbs_curve(seg, machine: Machine) -> NurbsCurve:
+    """The curve a NURBS segment is planned on: its own, with a hook of rounding at an end
+    (a control leg of 1e-6 mm turning back) removed within the chord tolerance δ, the
+    small-break rule's bound on how far a passed break may cut."""
+    return NurbsCurve.from_segment(seg).without_end_hooks(machine.limits.chord_tolerance_mm)
+
+
+def nurbs_pieces(seg, index: int, machine: Machine, options: PlanOptions,
+                 curve: NurbsCurve | None = None) -> list[Piece]:  # fmt: skip
+    """A NURBS segment as pieces: PH corner pieces and capped NURBS stretches, on ``curve``
+    (default :func:`nurbs_curve`)."""
     lim = machine.limits
-    # A hook of rounding at an end (a control leg of 1e-6 mm turning back) is removed within
-    # the chord tolerance δ: the small-break rule's bound on how far a passed break may cut.
-    curve = NurbsCurve.from_segment(seg).without_end_hooks(lim.chord_tolerance_mm)
+    curve = nurbs_curve(seg, machine) if curve is None else curve
     feed = min(seg.feed_mm_s, lim.v_max_mm_s)
     kth = lim.a_max_mm_s2 / (feed * feed)
     regions = find_corner_regions(curve, kth)
@@ -486,11 +493,13 @@ def _object_ends(pieces) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray
 
 
 
-def _object_pieces(seg, index: int, machine: Machine, options: PlanOptions) -> list[Piece]:
-    """The pieces of an arc or NURBS segment (Piece objects; none for a zero-length arc)."""
+def _object_pieces(seg, index: int, machine: Machine, options: PlanOptions,
+                   curve: NurbsCurve | None = None) -> list[Piece]:  # fmt: skip
+    """The pieces of an arc or NURBS segment (Piece objects; none for a zero-length arc);
+    a NURBS segment's on ``curve`` if given (:func:`nurbs_curve`)."""
     if seg.kind == "nurbs":
         try:
-            pieces = nurbs_pieces(seg, index, machine, options)
+            pieces = nurbs_pieces(seg, index, machine, options, curve)
         except NurbsCncError as exc:
             raise exc.with_pos(SourcePos(seg.line)) from None
         line_at = getattr(seg, "line_at", None)  # a smoothed run: each piece its move's line
@@ -504,6 +513,89 @@ def _object_pieces(seg, index: int, machine: Machine, options: PlanOptions) -> l
     cap = float(curvature_cap_mm_s(machine, kappa, seg.feed_mm_s))
     return [Piece(Kind.ARC, geom, length, max(cap, 1e-6), index, seg.line, geom.u_start,
                   geom.u_end, 0.0, kappa, blend_mm=blend_override(seg, options))]  # fmt: skip
+
+
+@dataclass(frozen=True, eq=False)
+class _Block:
+    """The pieces of one arc or NURBS segment as the columns of their :class:`PieceList`
+    rows: ``scalars`` (name → (n,)), ``ends`` (start, end, unit tangents at both, each
+    (n, 3)) and ``objects`` (geometry, u_a, u_b, s_a_mm) a row."""
+
+    scalars: dict
+    ends: tuple
+    objects: list
+
+    @classmethod
+    def of(cls, pieces: list[Piece]) -> _Block:
+        scalars = {name: np.array([getattr(p, name) for p in pieces],
+                                  dtype=_DTYPES.get(name, float)) for name in _SCALARS}  # fmt: skip
+        return cls(scalars, _object_ends(pieces),
+                   [(p.geometry, p.u_a, p.u_b, p.s_a_mm) for p in pieces])  # fmt: skip
+
+    def moved(self, curve: NurbsCurve, old: NurbsCurve, delta_mm: np.ndarray, index: int,
+              line: int) -> _Block:  # fmt: skip
+        """The block of a segment whose curve ``curve`` is the curve ``old`` of this block
+        moved by ``delta_mm`` (:meth:`~nurbscnc.geometry.nurbs.NurbsCurve.translation_from`),
+        as segment ``index`` at source line ``line``: the same cells, corners, caps and
+        lengths (none of them depends on where the curve lies), the end points moved, the
+        NURBS rows on ``curve`` (sharing ``old``'s arc-length tables), the PH corner pieces
+        moved with their plane's origin."""
+        curve.sharing_tables(old)
+        scalars = {name: col.copy() for name, col in self.scalars.items()}
+        scalars["segment"][:] = index
+        scalars["line"][:] = line
+        start, end, t_start, t_end = self.ends
+        moved_ph: dict[int, PHQuintic] = {}
+
+        def geometry(g):
+            if g is old:
+                return curve
+            if isinstance(g, PHQuintic):
+                if id(g) not in moved_ph:
+                    moved_ph[id(g)] = dc_replace(g, origin_mm=g.origin_mm + delta_mm)
+                return moved_ph[id(g)]
+            raise TypeError(f"a NURBS segment's piece on {type(g).__name__}")  # never: cells, PH
+
+        return _Block(scalars, (start + delta_mm, end + delta_mm, t_start, t_end),
+                      [(geometry(g), ua, ub, sa) for g, ua, ub, sa in self.objects])  # fmt: skip
+
+
+class _Repeats:
+    """The NURBS segments of one program planned so far (:func:`segment_pieces`), to plan a
+    segment that is one of them moved (a part cut again at another place: ten airfoils
+    along X) from that one's pieces instead of again (:meth:`_Block.moved`). A candidate
+    has the same shape key, feed and blend tolerance; the control points decide
+    (:meth:`~nurbscnc.geometry.nurbs.NurbsCurve.translation_from`). Smoothed runs (a line
+    per piece) are not remembered. Memory: the blocks, which the program's pieces hold
+    anyway."""
+
+    #: Curves remembered per key (:meth:`~nurbscnc.geometry.nurbs.NurbsCurve.shape_key`):
+    #: a segment is compared with at most these, whatever the program.
+    BUCKET = 4
+
+    def __init__(self, machine: Machine, options: PlanOptions):
+        self.machine, self.options = machine, options
+        self.seen: dict[tuple, list[tuple[NurbsCurve, _Block]]] = {}
+
+    def block(self, seg, index: int) -> _Block:
+        """The block of NURBS segment ``seg`` (number ``index``)."""
+        if getattr(seg, "line_at", None) is not None:
+            return _Block.of(_object_pieces(seg, index, self.machine, self.options))
+        try:
+            curve = nurbs_curve(seg, self.machine)
+        except NurbsCncError as exc:
+            raise exc.with_pos(SourcePos(seg.line)) from None
+        key = (curve.shape_key(), min(seg.feed_mm_s, self.machine.limits.v_max_mm_s),
+               blend_override(seg, self.options))  # fmt: skip
+        for old, block in self.seen.get(key, ()):
+            delta = curve.translation_from(old)
+            if delta is not None:
+                return block.moved(curve, old, delta, index, seg.line)
+        block = _Block.of(_object_pieces(seg, index, self.machine, self.options, curve))
+        bucket = self.seen.setdefault(key, [])
+        if len(bucket) < self.BUCKET:
+            bucket.append((curve, block))
+        return block
 
 
 def segment_pieces(segments, machine: Machine, options: PlanOptions | None = None,
@@ -567,11 +659,17 @@ def segment_pieces(segments, machine: Machine, options: PlanOptions | None = Non
 
     counts = np.zeros(n, dtype=np.int64)
     counts[seg_line] = l_keep
-    obj_pieces: dict[int, list[Piece]] = {}
+    blocks: dict[int, _Block] = {}
     curved = np.fromiter((k in ("arc", "nurbs") for k in kinds), dtype=bool, count=n)
+    repeats = _Repeats(machine, options)
     for i in np.flatnonzero(curved).tolist():
-        obj_pieces[i] = _object_pieces(segs[i], i, machine, options)
-        counts[i] = len(obj_pieces[i])
+        if kinds[i] == "nurbs":
+            blocks[i] = repeats.block(segs[i], i)
+        else:
+            pieces = _object_pieces(segs[i], i, machine, options)
+            if pieces:
+                blocks[i] = _Block.of(pieces)
+        counts[i] = len(blocks[i].objects) if i in blocks else 0
     first_row = np.cumsum(counts) - counts
     k = int(counts.sum())
     cols = _empty_columns(k)
@@ -593,18 +691,15 @@ def segment_pieces(segments, machine: Machine, options: PlanOptions | None = Non
     del p0, p1, diff, direction
 
     objects = {}
-    for i, pieces in obj_pieces.items():
-        if not pieces:
+    for i, block in blocks.items():
+        r0, m_i = int(first_row[i]), len(block.objects)
+        if not m_i:
             continue
-        r0 = int(first_row[i])
-        for j, p in enumerate(pieces):
-            r = r0 + j
-            for name in _SCALARS:
-                cols[name][r] = getattr(p, name)
-            objects[r] = (p.geometry, p.u_a, p.u_b, p.s_a_mm)
-        ends = _object_ends(pieces)
-        for name, arr in zip(_VECTORS, ends):
-            cols[name][:, r0 : r0 + len(pieces)] = arr.T
+        for name in _SCALARS:
+            cols[name][r0 : r0 + m_i] = block.scalars[name]
+        objects.update(zip(range(r0, r0 + m_i), block.objects))
+        for name, arr in zip(_VECTORS, block.ends):
+            cols[name][:, r0 : r0 + m_i] = arr.T
 
     pending = 0.0
     for i in np.flatnonzero(~(straight | curved)).tolist():

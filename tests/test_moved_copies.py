@@ -1,0 +1,144 @@
+"""A NURBS block that repeats an earlier one at another place (a part cut again elsewhere)
+is planned from that one's pieces moved (plan/pieces.py ``_Repeats``), and the kinematic
+lower bound grids it once (plan/lowerbound.py ``_moved_copies``): the same pieces and bound
+as planning the copy on its own, to rounding; a curve that differs is planned afresh."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from nurbscnc.geometry.nurbs import NurbsCurve
+from nurbscnc.machine.profile import load_machine
+from nurbscnc.plan import lowerbound
+from nurbscnc.plan.lowerbound import program_lower_bound_s
+from nurbscnc.plan.pieces import segment_pieces
+from nurbscnc.program.interpret import interpret_text
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
+from scale_bench import airfoils_program  # noqa: E402
+
+COLUMNS = ("length_mm", "v_cap_mm_s", "kappa_max_per_mm", "kind", "rapid", "stop_after",
+           "pass_after", "blend_mm")  # fmt: skip
+
+
+def _nurbs_rows(pieces, segment: int) -> np.ndarray:
+    return np.flatnonzero(np.asarray(pieces.segment) == segment)
+
+
+def _copy_alone(text: str, which: int) -> str:
+    """The program ``text`` (airfoils_program) with only its airfoil ``which`` (0-based)."""
+    lines = text.splitlines()
+    starts = [i for i, ln in enumerate(lines) if ln.startswith("G0")] + [len(lines) - 1]
+    return "\n".join(lines[:3] + lines[starts[which] : starts[which + 1]] + ["M2", ""])
+
+
+def _sample_points(pieces, rows: np.ndarray) -> np.ndarray:
+    frac = np.linspace(0.0, 1.0, 9)
+    idx = np.repeat(rows, frac.size)
+    return pieces.path.points(idx, np.tile(frac, rows.size) * pieces.length_mm[idx])[0]
+
+
+def test_a_moved_airfoil_gets_the_pieces_it_would_get_alone():
+    machine = load_machine()
+    text = airfoils_program(count=3, chord_mm=20.0, pitch_mm=35.0)
+    whole = segment_pieces(interpret_text(text).segments, machine)
+    nurbs_segments = sorted({int(s) for s, k in zip(whole.segment, whole.kind) if k == 4})
+    assert len(nurbs_segments) == 3
+    for which in (1, 2):
+        alone = segment_pieces(interpret_text(_copy_alone(text, which)).segments, machine)
+        mine = _nurbs_rows(whole, nurbs_segments[which])
+        theirs = _nurbs_rows(alone, int(alone.segment[np.asarray(alone.kind) == 4][0]))
+        assert mine.size == theirs.size > 100
+        # The same cells, corners, caps and lengths. The curvature of the copy planned alone
+        # differs from the original's by 1e-11 relative: derivatives of a curve 70 mm from
+        # the origin carry that much rounding (so do the caps it sets).
+        for name in COLUMNS:
+            np.testing.assert_allclose(np.asarray(getattr(whole, name))[mine].astype(float),
+                                       np.asarray(getattr(alone, name))[theirs].astype(float),
+                                       rtol=1e-10, atol=1e-12, err_msg=name)  # fmt: skip
+        for name in ("start_mm", "end_mm", "tangent_start", "tangent_end"):
+            np.testing.assert_allclose(getattr(whole, name)[:, mine],
+                                       getattr(alone, name)[:, theirs], rtol=0, atol=1e-11)
+        # Points along every piece (NURBS cells on the copy's own curve, PH corners moved).
+        np.testing.assert_allclose(_sample_points(whole, mine), _sample_points(alone, theirs),
+                                   rtol=0, atol=1e-11)  # fmt: skip
+        assert np.array_equal(whole.line[mine], alone.line[theirs] - alone.line[theirs][0]
+                              + whole.line[mine][0])  # fmt: skip
+
+
+def test_translation_is_found_to_rounding_only():
+    rng = np.random.default_rng(5)
+    ctrl = rng.uniform(-50.0, 50.0, (12, 3))
+    knots = np.r_[[0.0] * 4, np.linspace(0.1, 0.9, 8), [1.0] * 4]
+    weights = rng.uniform(0.5, 2.0, 12)
+    base = NurbsCurve(3, knots, ctrl, weights)
+    delta = np.array([70.0, -3.25, 0.5])
+    moved = NurbsCurve(3, knots, ctrl + delta, weights)
+    np.testing.assert_allclose(moved.translation_from(base), delta, rtol=0, atol=1e-12)
+    assert moved.shape_key() == base.shape_key()
+    # One control point 1e-9 mm off, a weight or a knot changed: not a copy.
+    bent = ctrl + delta
+    bent[5, 1] += 1e-9
+    assert NurbsCurve(3, knots, bent, weights).translation_from(base) is None
+    w2 = weights.copy()
+    w2[3] *= 1.0 + 1e-15
+    assert NurbsCurve(3, knots, ctrl + delta, w2).translation_from(base) is None
+    k2 = knots.copy()
+    k2[6] += 1e-12
+    assert NurbsCurve(3, k2, ctrl + delta, weights).translation_from(base) is None
+    # A copy shares its tables: the same arc lengths, its own points.
+    moved.sharing_tables(base)
+    u = np.linspace(0.0, 1.0, 41)
+    np.testing.assert_allclose(moved.arc_length(u), base.arc_length(u), rtol=0, atol=1e-12)
+    fresh = NurbsCurve(3, knots, ctrl + delta, weights)
+    s = np.linspace(0.0, base.length_mm, 101)
+    np.testing.assert_allclose(moved.points_at_length(s)[0], fresh.points_at_length(s)[0],
+                               rtol=0, atol=1e-9)  # fmt: skip
+
+
+def test_a_bent_copy_is_planned_afresh():
+    """The third airfoil with one control point 1 µm off: planned on its own (its cells
+    differ from the first's where the curvature does)."""
+    machine = load_machine()
+    text = airfoils_program(count=3, chord_mm=20.0, pitch_mm=35.0)
+    lines = text.splitlines()
+    third = [i for i, ln in enumerate(lines) if ln.startswith("G0")][2]
+    words = lines[third + 5].split()
+    words = [f"Y{float(w[1:]) + 1e-3:.6f}" if w.startswith("Y") else w for w in words]
+    lines[third + 5] = " ".join(words)
+    whole = segment_pieces(interpret_text("\n".join(lines) + "\n").segments, machine)
+    alone = segment_pieces(interpret_text(_copy_alone("\n".join(lines) + "\n", 2)).segments,
+                           machine)  # fmt: skip
+    segs = sorted({int(s) for s, k in zip(whole.segment, whole.kind) if k == 4})
+    mine = _nurbs_rows(whole, segs[2])
+    theirs = _nurbs_rows(alone, int(alone.segment[np.asarray(alone.kind) == 4][0]))
+    np.testing.assert_allclose(whole.v_cap_mm_s[mine], alone.v_cap_mm_s[theirs], rtol=1e-12)
+    first = _nurbs_rows(whole, segs[0])
+    assert not np.allclose(whole.kappa_max_per_mm[mine], whole.kappa_max_per_mm[first],
+                           rtol=1e-6, atol=0)  # fmt: skip
+
+
+def test_the_lower_bound_grids_a_copy_once_with_the_same_bound(monkeypatch):
+    machine = load_machine()
+    prog = interpret_text(airfoils_program(count=4, chord_mm=20.0, pitch_mm=35.0))
+    calls = []
+    real = lowerbound._sample_rows
+
+    def counting(path, rows, *args):
+        calls.append(int(np.count_nonzero(np.take(path.kind, rows) == 4)))
+        return real(path, rows, *args)
+
+    monkeypatch.setattr(lowerbound, "_sample_rows", counting)
+    bound = program_lower_bound_s(prog.segments, machine)
+    assert calls == [1]  # four airfoils, one grid
+    # Each curve gridded on its own (no copies found): the same bound to rounding.
+    monkeypatch.setattr(lowerbound, "_moved_copies",
+                        lambda path, rows, top: (np.arange(rows.size), np.arange(rows.size)))
+    calls.clear()
+    alone = program_lower_bound_s(prog.segments, machine)
+    assert calls == [4]
+    assert bound == pytest.approx(alone, rel=1e-12)
