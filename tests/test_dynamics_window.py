@@ -169,3 +169,40 @@ def test_the_bands_find_every_piece_whose_ball_is_near(monkeypatch, band_after):
         assert np.all(np.diff(got) > 0)  # sorted, once each
     assert (index._bands is not None) == (band_after == 0)
     assert index._built is None
+
+
+def _chord_errors_mm(pieces) -> np.ndarray:
+    """Distance [mm] from the true path to the check's dense polyline: at 1/4, 1/2 and 3/4
+    of every chord's arc length, the exact point of its piece to the chord (the polyline's
+    points are exact, so the error is inside the chords)."""
+    counts = dynamics.path_counts(pieces)
+    piece = np.repeat(np.arange(len(pieces)), counts)
+    first = np.repeat(np.cumsum(counts) - counts, counts)
+    local = (np.arange(piece.size) - first) / np.repeat(counts - 1, counts)
+    local = local * pieces.length_mm[piece]
+    ends = pieces.path.points(piece, local)[0]
+    same = np.flatnonzero(piece[1:] == piece[:-1])
+    a, b = ends[same], ends[same + 1]
+    worst = np.zeros(same.size)
+    for f in (0.25, 0.5, 0.75):
+        q = pieces.path.points(piece[same], (1 - f) * local[same] + f * local[same + 1])[0]
+        d = b - a
+        t = np.clip(np.einsum("ij,ij->i", q - a, d) / np.einsum("ij,ij->i", d, d), 0.0, 1.0)
+        worst = np.maximum(worst, np.linalg.norm(q - (a + t[:, None] * d), axis=1))
+    return worst
+
+
+@pytest.mark.parametrize("name", ["naca2415.nc", "butterfly.nc", "corners.nc",
+                                  "naca2415_c40.nc"])  # fmt: skip
+def test_the_dense_polyline_is_within_its_chord_error(name):
+    """CHORD_MM (0.01 µm) holds on NURBS cells, PH corners and arcs of the repository's
+    programs (the chords follow the curvature; MAX_SPACING_MM only caps them)."""
+    from pathlib import Path
+
+    from nurbscnc.plan.pieces import segment_pieces
+
+    text = (Path(__file__).resolve().parents[1] / "programs" / name).read_text()
+    pieces = segment_pieces(interpret_text(text).segments, MACHINE)
+    err = _chord_errors_mm(pieces)
+    assert err.size > 500
+    assert err.max() <= CHORD_MM * (1.0 + 1e-6)

@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from nurbscnc.machine.profile import load_machine
 from nurbscnc.pipeline import RunOptions, run_program
@@ -61,3 +62,59 @@ def test_a_different_cut_is_not_taken_for_a_repeat():
     text = text.replace("M2\n", "\n".join(moved) + "\nM2\n")
     windows = list(plan_windows(interpret_text(text), machine))
     assert len(windows) == 3 and windows[2].iterations > 0
+
+
+def test_a_window_profile_is_its_rapids_and_its_cut_planned_apart():
+    """_OwnProfiles: the rapids and the cut of a window planned apart and spliced give the
+    profile of the whole window (the junction between them is a rest) to the rounding of
+    the times after it; a repeated cut's profile is the remembered one, and the plans of
+    three airfoils are those made without remembering any."""
+    from nurbscnc.plan import lookahead
+    from nurbscnc.plan.lookahead import Limits, _OwnProfiles, _Setup, cut_windows, profile_over
+
+    machine = load_machine()
+    prog = interpret_text(airfoils_program(count=3, chord_mm=20.0, pitch_mm=30.0))
+    st = _Setup(prog, machine, lookahead.LookaheadOptions(), None, False, 1 << 16)
+    own = _OwnProfiles(st)
+    lv = st.initial
+    lim = lv.limits()
+    starts = cut_windows(st.pieces)
+    ends = np.append(starts[1:], st.k)
+    for a, b in zip(starts.tolist(), ends.tolist()):
+        whole = profile_over(st.pieces.length_mm[a:b], lv.caps[a:b], st.smooth[a : b + 1],
+                             Limits(*(x[a:b] for x in (lim.a_up_mm_s2, lim.j_up_mm_s3,
+                                                       lim.a_down_mm_s2, lim.j_down_mm_s3))),
+                             None)  # fmt: skip
+        split = own(lv, a, b)
+        # Speeds inside a unit are read at the pieces' start lengths, which the cut counts
+        # from its own start: the same to rounding.
+        np.testing.assert_allclose(split.junction_speeds_mm_s, whole.junction_speeds_mm_s,
+                                   rtol=1e-12, atol=1e-12)  # fmt: skip
+        np.testing.assert_allclose(split.piece_peak_speed_mm_s, whole.piece_peak_speed_mm_s,
+                                   rtol=1e-12, atol=1e-12)  # fmt: skip
+        np.testing.assert_allclose(split.piece_start_time_s, whole.piece_start_time_s,
+                                   rtol=0, atol=1e-12)  # fmt: skip
+        np.testing.assert_allclose(split.piece_start_mm, whole.piece_start_mm, rtol=0,
+                                   atol=1e-12)  # fmt: skip
+        assert split.duration_s == pytest.approx(whole.duration_s, abs=1e-12)
+    assert len(own.kept) == 1  # the three cuts are one cut moved: planned once
+
+    def plans(remember: bool):
+        if not remember:
+            original = _OwnProfiles.__call__
+
+            def afresh(self, lv, a, b):
+                self.kept.clear()
+                return original(self, lv, a, b)
+
+            with pytest.MonkeyPatch.context() as mp:
+                mp.setattr(_OwnProfiles, "__call__", afresh)
+                return list(plan_windows(prog, machine))
+        return list(plan_windows(prog, machine))
+
+    kept, fresh = plans(True), plans(False)
+    for w_kept, w_fresh in zip(kept, fresh, strict=True):
+        assert (w_kept.k0, w_kept.k1, w_kept.iterations) == (w_fresh.k0, w_fresh.k1,
+                                                             w_fresh.iterations)  # fmt: skip
+    np.testing.assert_array_equal(kept[-1].plan.profile.phase_start_time_s,
+                                  fresh[-1].plan.profile.phase_start_time_s)  # fmt: skip

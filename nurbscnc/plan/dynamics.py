@@ -36,7 +36,7 @@ from nurbscnc.servo.model import contour_error_eq29, simulate_axes
 #: Chord error of the dense polyline on curved pieces [mm] (0.01 µm).
 CHORD_MM = 1e-5
 #: Longest chord of the dense polyline on curved pieces [mm].
-MAX_SPACING_MM = 0.01
+MAX_SPACING_MM = 0.05
 #: Servo samples per slab of the windowed distance.
 SLAB = 1 << 16
 

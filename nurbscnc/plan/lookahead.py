@@ -1494,6 +1494,7 @@ def _windows_of(st: _Setup):
     done = None  # their splice, compacted (_compacted): what the re-plans put before a window
     keep_s = WINDOW_KEEP_PERIODS * st.period
     total_iterations = 0
+    own_profile = _OwnProfiles(st)
     for w, (a, b) in enumerate(zip(starts.tolist(), ends.tolist())):
         is_last = b == st.k
         scope = np.zeros(st.k, dtype=bool)
@@ -1510,11 +1511,7 @@ def _windows_of(st: _Setup):
         def plan_of(lv: _Levers, a=a, b=b, around=around):
             planned = _with_dwell(st.pieces, st.base_dwell + lv.settle_s) \
                 if st.settle_rows.size else st.pieces  # fmt: skip
-            lim = lv.limits()
-            own = profile_over(st.pieces.length_mm[a:b], lv.caps[a:b], st.smooth[a : b + 1],
-                               Limits(lim.a_up_mm_s2[a:b], lim.j_up_mm_s3[a:b],
-                                      lim.a_down_mm_s2[a:b], lim.j_down_mm_s3[a:b]),
-                               st.options.lookahead_pieces)  # fmt: skip
+            own = own_profile(lv, a, b)
             profile = _spliced([x for x in (around[0], own, around[1]) if x is not None])
             check_point_count(planned, profile, st.machine)  # before anything is sampled
             return planned, profile, own
@@ -1546,6 +1543,53 @@ def _windows_of(st: _Setup):
         make = functools.partial(_window_plan, st, lev, result, parts, len(parts), later,
                                  total_iterations)  # fmt: skip
         yield Window(w, a, b, rows[0], rows[1], make, result[2], iterations)
+
+
+class _OwnProfiles:
+    """A cut window's own profile (:func:`_windows_of`): its rapids' and its cut's, planned
+    apart (the junction between them is a rest: each is what :func:`profile_over` of the
+    whole window gives for its pieces, to the rounding of the times that follow) and
+    spliced. The cut's is remembered: a cut that repeats an earlier one (a part cut again
+    elsewhere, its levers started from that one's, :class:`_SeenWindows`) has the same
+    lengths, caps, junctions and limits bit for bit, and :func:`profile_over` is a pure
+    function of them, so its profile is taken, not planned again (2 of the 6 ms a repeated
+    60 mm airfoil cost). The last :data:`MEMO` cuts' profiles are kept."""
+
+    MEMO = 4
+
+    def __init__(self, st: _Setup):
+        self.st = st
+        self.rapid = np.asarray(st.pieces.rapid, dtype=bool)
+        self.kept: dict[bytes, Profile] = {}
+
+    def __call__(self, lv: _Levers, a: int, b: int) -> Profile:
+        st = self.st
+        lim = lv.limits()
+        c = a + int(np.argmin(self.rapid[a:b])) if not self.rapid[a:b].all() else b
+
+        def over(lo: int, hi: int) -> Profile:
+            return profile_over(st.pieces.length_mm[lo:hi], lv.caps[lo:hi],
+                                st.smooth[lo : hi + 1],
+                                Limits(lim.a_up_mm_s2[lo:hi], lim.j_up_mm_s3[lo:hi],
+                                       lim.a_down_mm_s2[lo:hi], lim.j_down_mm_s3[lo:hi]),
+                                st.options.lookahead_pieces)  # fmt: skip
+
+        if c in (a, b) or st.smooth[c] > 0.0 or st.options.lookahead_pieces is not None:
+            # A window of rapids only, a cut without any, a passed junction between them,
+            # or a bounded look-ahead (which counts the window's pieces): whole.
+            return over(a, b)
+        smooth = st.smooth[c : b + 1].copy()
+        smooth[[0, -1]] = 0.0  # the rests at its ends (what profile_over reads of them)
+        key = b"".join(np.ascontiguousarray(x).tobytes() for x in (
+            st.pieces.length_mm[c:b], lv.caps[c:b], smooth, lim.a_up_mm_s2[c:b],
+            lim.j_up_mm_s3[c:b], lim.a_down_mm_s2[c:b], lim.j_down_mm_s3[c:b]))  # fmt: skip
+        cut = self.kept.get(key)
+        if cut is None:
+            cut = over(c, b)
+            if len(self.kept) >= self.MEMO:
+                self.kept.pop(next(iter(self.kept)))
+            self.kept[key] = cut
+        return _spliced([over(a, c), cut])
 
 
 class _SeenWindows:
