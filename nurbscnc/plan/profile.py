@@ -599,6 +599,15 @@ def _plan_units(inp: ProfileInput, key: np.ndarray, every: bool = False,
     d_up = scurve_distance_mm(unit.junction_speeds_mm_s[:-1], v_p, a_up, j_up)
     d_dn = scurve_distance_mm(v_p, unit.junction_speeds_mm_s[1:], a_dn, j_dn)
     low = np.flatnonzero(c < unit_cap[unit_of])
+    # Times at which the units' profile reaches every piece boundary (k+1), once per
+    # version of it: the offenders read their pieces' ends, the result every piece start
+    # (elementwise: the same numbers as asking for each subset).
+    at_bounds: list = [None, None]  # (unit profile, its times)
+
+    def bound_times(unit: Profile) -> np.ndarray:
+        if at_bounds[0] is not unit:
+            at_bounds[:] = [unit, time_at_length(unit, cum)]
+        return at_bounds[1]
 
     def offenders(unit: Profile, d_up: np.ndarray, d_dn: np.ndarray):
         """The pieces whose cap the unit's speed exceeds, and piece_max of the module."""
@@ -614,8 +623,8 @@ def _plan_units(inp: ProfileInput, key: np.ndarray, every: bool = False,
 
         if not low.size:
             return low, piece_max
-        ends = np.concatenate((cum[low], cum[low + 1]))
-        v_ends = unit.sample(time_at_length(unit, ends))[1]
+        t = bound_times(unit)
+        v_ends = unit.sample(np.concatenate((t[low], t[low + 1])))[1]
         over = low[piece_max(low, v_ends[:low.size], v_ends[low.size:])
                    > c[low] * (1.0 + 1e-12)]  # fmt: skip
         return over, piece_max
@@ -630,7 +639,7 @@ def _plan_units(inp: ProfileInput, key: np.ndarray, every: bool = False,
         return None, _splits(over, c, unit_cap, unit_of, first, k, every)
     piece_start = cum[:-1]
     # Times at which the path reaches each piece start (exact within a unit).
-    t_start = time_at_length(unit, piece_start)
+    t_start = bound_times(unit)[:-1].copy()
     t_start[first] = unit.piece_start_time_s
     t_start = np.maximum.accumulate(t_start)
     v_junction = np.empty(k + 1)
