@@ -27,7 +27,8 @@ For each size: ``check`` (parse + interpret + geometry checks) and ``run -o poin
 real-time factor = motion time (the summary's cycle time) / wall time.
 
 Issue 14 rows: ``run`` of ten 60 mm NACA 2415 airfoils (whole process, and after start-up:
-minus the wall time of ``run`` on a one-line program), ``plan`` of corpus
+minus the wall time of ``run`` on a one-line program; each the best of
+:data:`AIRFOIL_REPEATS` runs taken in turn), ``plan`` of corpus
 ``general/tort.ngc``, the one-line explosions ``G1 X1000000 F600``, ``G1 X1 F0.001`` and
 ``G4 P100000`` (time to the error, exit code, first message line, peak RSS), process start
 (``nurbscnc --help``).
@@ -49,6 +50,7 @@ import resource
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -73,6 +75,8 @@ GOALS = {
     "spiral_1m_run_s": 15.0,
     "spiral_1m_run_peak_rss_mb": 1024.0,
 }
+#: Runs of the one-line program and of the ten airfoils, the best of each kept.
+AIRFOIL_REPEATS = 5
 #: The issue's big programs: the CAM spiral's lines, the zig-zag's lines, passes and step.
 SPIRAL_1M_LINES = 1_000_000
 ZIGZAG_10KM = {"n_lines": 200_000, "pass_mm": 100.0, "step_mm": 0.005}
@@ -160,19 +164,17 @@ def measure(cmd: list[str], mem_cap_gb: float, timeout_s: float) -> dict:
     with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
         t0 = time.perf_counter()
         proc = subprocess.Popen(cmd, stdout=out, stderr=err, cwd=ROOT, preexec_fn=limits)
-        deadline = t0 + timeout_s
-        timed_out = False
-        while True:
-            pid, status, usage = os.wait4(proc.pid, os.WNOHANG)
-            if pid:
-                break
-            if time.perf_counter() > deadline:
-                proc.kill()
-                pid, status, usage = os.wait4(proc.pid, 0)
-                timed_out = True
-                break
-            time.sleep(0.02)
+        # A blocking wait, timed as it returns (polling every 20 ms added 0–20 ms to every
+        # wall time: a sixth of the airfoils' budget after start-up); a timer kills the
+        # child at the time limit.
+        killer = threading.Timer(timeout_s, proc.kill)
+        killer.start()
+        try:
+            _, status, usage = os.wait4(proc.pid, 0)
+        finally:
+            killer.cancel()
         wall = time.perf_counter() - t0
+        timed_out = wall >= timeout_s and os.WIFSIGNALED(status)
         proc.returncode = os.waitstatus_to_exitcode(status)
         out.seek(0)
         err.seek(0)
@@ -291,27 +293,36 @@ def issue_rows(tmp: Path, caps, quick: bool) -> dict:
     rows["start_help"] = {"goal": "≤ 0.3 s", "best_wall_s": min(r["wall_s"] for r in starts),
                           "runs": starts}  # fmt: skip
     rows["start_help"]["pass"] = rows["start_help"]["best_wall_s"] <= GOALS["start_s"]
-    # one-line program: start-up of run
+    # one-line program (start-up of run) and ten airfoils, each the best of
+    # AIRFOIL_REPEATS runs taken in turn (the shared machine's load moves a single wall
+    # time by tens of ms; the budget after start-up is 117 ms)
     one = tmp / "one.nc"
     one.write_text("G21 G90\nG1 X1 F600\nM2\n")
-    startup = measure([*NURBSCNC, "run", str(one), "-o", str(tmp / "one.npz"), "--json"], *caps)
-    rows["run_startup"] = {"what": "run of a one-line program (G1 X1)", **startup}
-    rows["run_startup"].pop("json", None)
-    # ten airfoils
     foil = tmp / "airfoils.nc"
     code = ("import sys; sys.path.insert(0, sys.argv[1]); "
             "import scale_bench as s; print(s.airfoils_program(), end='')")
     gen = subprocess.run([sys.executable, "-c", code, str(HERE)], capture_output=True,
                          text=True, check=True, cwd=ROOT)  # fmt: skip
     foil.write_text(gen.stdout)
-    r = measure([*NURBSCNC, "run", str(foil), "-o", str(tmp / "foil.npz"), "--json"], *caps)
+    starts, foils = [], []
+    for _ in range(AIRFOIL_REPEATS):
+        starts.append(measure([*NURBSCNC, "run", str(one), "-o", str(tmp / "one.npz"),
+                               "--json"], *caps))  # fmt: skip
+        foils.append(measure([*NURBSCNC, "run", str(foil), "-o", str(tmp / "foil.npz"),
+                              "--json"], *caps))  # fmt: skip
+    startup = min(starts, key=lambda x: x["wall_s"])
+    rows["run_startup"] = {"what": "run of a one-line program (G1 X1)", **startup,
+                           "runs_wall_s": [x["wall_s"] for x in starts]}  # fmt: skip
+    rows["run_startup"].pop("json", None)
+    r = min(foils, key=lambda x: x["wall_s"])
+    r["runs_wall_s"] = [x["wall_s"] for x in foils]
     motion = _add_realtime(r)
     r.pop("json", None)
     if motion:
         after = r["wall_s"] - startup["wall_s"]
         r["realtime_factor_after_startup"] = motion / after if after > 0 else None
         # the same on CPU seconds: wall start-up times swing by seconds on a loaded machine
-        after_cpu = r["cpu_s"] - startup["cpu_s"]
+        after_cpu = min(x["cpu_s"] for x in foils) - min(x["cpu_s"] for x in starts)
         r["realtime_factor_cpu_after_startup"] = motion / after_cpu if after_cpu > 0 else None
         r["pass"] = bool(r["realtime_factor_after_startup"]
                          and r["realtime_factor_after_startup"] >= 300)  # fmt: skip
