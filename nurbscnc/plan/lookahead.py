@@ -1152,6 +1152,7 @@ class _Setup:
         self.base_dwell = pieces.dwell_after_s
         self.checker = _Checker(pieces, machine, reference, self.eps_mm, self.settle_rows,
                                 window, keep_reference)  # fmt: skip
+        self.own_profile = _OwnProfiles(self)  # a window's profile, a repeated cut's kept
         # The improvement phase's upper brackets: the kinematic levers, or with
         # ``raise_corner_caps`` the caps without the corner heuristic V_cf.
         self.upper = self.initial
@@ -1169,8 +1170,9 @@ class _Setup:
         """The planned pieces (settles in their dwells) and profile of the levers ``lv``."""
         planned = _with_dwell(self.pieces, self.base_dwell + lv.settle_s) \
             if self.settle_rows.size else self.pieces  # fmt: skip
-        profile = profile_over(planned.length_mm, lv.caps, self.smooth, lv.limits(),
-                               self.options.lookahead_pieces)  # fmt: skip
+        # As a cut window's own profile (its leading rapids apart: a program of one cut
+        # window is planned as that window would be in a longer one, bit for bit).
+        profile = self.own_profile(lv, 0, self.k)
         check_point_count(planned, profile, self.machine)  # before anything is sampled
         return planned, profile
 
@@ -1494,7 +1496,7 @@ def _windows_of(st: _Setup):
     done = None  # their splice, compacted (_compacted): what the re-plans put before a window
     keep_s = WINDOW_KEEP_PERIODS * st.period
     total_iterations = 0
-    own_profile = _OwnProfiles(st)
+    own_profile = st.own_profile
     for w, (a, b) in enumerate(zip(starts.tolist(), ends.tolist())):
         is_last = b == st.k
         scope = np.zeros(st.k, dtype=bool)
