@@ -19,7 +19,7 @@ import itertools
 import math
 import operator
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -702,7 +702,17 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
         # feed as a length per minute in the units of the moment it was set: "G20 F60" in a
         # block that starts in mm is 60 mm/min (its goldens: ccomp/mill-zchanges, comp311).
         if 6 in gcodes:
-            self.m.scale = INCH_MM if gcodes[6][0] == 200 else 1.0
+            scale = INCH_MM if gcodes[6][0] == 200 else 1.0
+            if scale != self.m.scale:
+                # LinuxCNC (convert_length_units) converts positions and offsets but not what
+                # a cycle remembers (cycle_r, cycle_cc, cycle_il, Q, I, J, K): their numbers are
+                # read in the new units (R2 in mm, then G20: R2 inches).
+                c, ratio = self.m.cycle, scale / self.m.scale
+                self.m.cycle = replace(c, **{f: None if getattr(c, f) is None
+                                             else getattr(c, f) * ratio
+                                             for f in ("initial_level_mm", "r_mm", "z_mm",
+                                                       "q_mm", "i_mm", "j_mm", "k_mm")})
+            self.m.scale = scale
 
     def set_feed(self, words: dict, used: set) -> None:
         if "F" in words:
@@ -974,8 +984,15 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
             raise self.error("Cannot use inverse time feed with canned cycles", col)
         if m.comp_mode != 400:
             raise self.error("Cannot use canned cycles with cutter compensation on", col)
+        # LinuxCNC's check_other_codes: besides X Y Z R L (and polar @ ^) a cycle reads only
+        # its own words; a P, Q, I, J or K that neither it nor another code of the block
+        # (G4, G10, G64, M19, M98: marked used before the motion) reads is an error.
+        reads = "XYZRL@^" + CYCLE_WORDS[code]
+        for letter in "PQIJK":
+            if letter in words and letter not in reads and letter not in used:
+                raise self.error(_unused_word_message(letter), words[letter][1])
         given = {}
-        for letter in "XYZRQIJK@PL^":
+        for letter in reads:
             if letter in words:
                 value = words[letter][0]
                 given[letter] = value * m.scale if letter in "XYZRQIJK@" else value
@@ -1292,18 +1309,25 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
         self.segments.append(Pause(position, self.main_line(), f"M{code}"))
 
 
+#: The words a canned cycle reads besides X, Y, Z, R, L and polar @ ^ (LinuxCNC's
+#: check_other_codes): P with G74, G82, G84, G86, G88, G89; Q with G73, G83; I, J, K with G87.
+CYCLE_WORDS = {730: "Q", 740: "P", 810: "", 820: "P", 830: "Q", 840: "P", 850: "", 860: "P",
+               870: "IJK", 880: "P", 890: "P"}  # fmt: skip
+
+
 def _fmt_code(code: int) -> str:
     return str(code // 10) if code % 10 == 0 else f"{code // 10}.{code % 10}"
 
 
 def _unused_word_message(letter: str) -> str:
     return {
-        "I": "I word with no arc (G2/G3) to use it",
-        "J": "J word with no arc (G2/G3) to use it",
-        "K": "K word with no arc (G2/G3) or G6.2 NURBS to use it",
-        "R": "R word with no arc (G2/G3) or G6.2 NURBS to use it",
-        "P": "P word with no G4, G64, arc, G5.2 or G6.2 to use it",
-        "Q": "Q word with no G64 or G6.2 to use it",
+        "I": "I word with no arc (G2/G3), G5, G5.1, G10 or G87 to use it",
+        "J": "J word with no arc (G2/G3), G5, G5.1, G10 or G87 to use it",
+        "K": "K word with no arc (G2/G3), G6.2 NURBS or G87 to use it",
+        "R": "R word with no arc (G2/G3), canned cycle or G6.2 NURBS to use it",
+        "P": "P word with no G4, G10, G64, arc, G5, G5.2, G6.2, G74, G82, G84, G86, G88, G89 "
+             "or M98 to use it",
+        "Q": "Q word with no G5, G10, G64, G73, G83 or G6.2 to use it",
         "L": "L word with no G5.2 or G10 to use it",
         "H": "H word with no G43 to use it",
         "F": "F word not used",

@@ -1,0 +1,4 @@
+; Q word with no G5, G10, G64, G73, G83 @ 3:18
+G0 Z5
+G81 X1 Y1 Z-1 R2 Q0.5 F100
+M2
