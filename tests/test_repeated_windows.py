@@ -76,6 +76,7 @@ def test_a_window_profile_is_its_rapids_and_its_cut_planned_apart():
     prog = interpret_text(airfoils_program(count=3, chord_mm=20.0, pitch_mm=30.0))
     st = _Setup(prog, machine, lookahead.LookaheadOptions(), None, False, 1 << 16)
     own = _OwnProfiles(st)
+    own.remember = True  # as in a program of several cut windows
     lv = st.initial
     lim = lv.limits()
     starts = cut_windows(st.pieces)

@@ -1497,6 +1497,7 @@ def _windows_of(st: _Setup):
     keep_s = WINDOW_KEEP_PERIODS * st.period
     total_iterations = 0
     own_profile = st.own_profile
+    own_profile.remember = True  # several cut windows: a cut may repeat an earlier one
     for w, (a, b) in enumerate(zip(starts.tolist(), ends.tolist())):
         is_last = b == st.k
         scope = np.zeros(st.k, dtype=bool)
@@ -1555,14 +1556,18 @@ class _OwnProfiles:
     elsewhere, its levers started from that one's, :class:`_SeenWindows`) has the same
     lengths, caps, junctions and limits bit for bit, and :func:`profile_over` is a pure
     function of them, so its profile is taken, not planned again (2 of the 6 ms a repeated
-    60 mm airfoil cost). The last :data:`MEMO` cuts' profiles are kept."""
+    60 mm airfoil cost). With ``remember`` (a program of several cut windows: only there
+    can a cut repeat), the last :data:`MEMO` cuts' profiles of at most :data:`MEMO_PIECES`
+    pieces are kept (the key holds the cut's columns: a long cut is not worth it)."""
 
     MEMO = 4
+    MEMO_PIECES = 1 << 16
 
     def __init__(self, st: _Setup):
         self.st = st
         self.rapid = np.asarray(st.pieces.rapid, dtype=bool)
         self.kept: dict[bytes, Profile] = {}
+        self.remember = False
 
     def __call__(self, lv: _Levers, a: int, b: int) -> Profile:
         st = self.st
@@ -1580,6 +1585,8 @@ class _OwnProfiles:
             # A window of rapids only, a cut without any, a passed junction between them,
             # or a bounded look-ahead (which counts the window's pieces): whole.
             return over(a, b)
+        if not self.remember or b - c > self.MEMO_PIECES:
+            return _spliced([over(a, c), over(c, b)])
         smooth = st.smooth[c : b + 1].copy()
         smooth[[0, -1]] = 0.0  # the rests at its ends (what profile_over reads of them)
         key = b"".join(np.ascontiguousarray(x).tobytes() for x in (
