@@ -65,10 +65,11 @@ def test_a_different_cut_is_not_taken_for_a_repeat():
 
 
 def test_a_window_profile_is_its_rapids_and_its_cut_planned_apart():
-    """_OwnProfiles: the rapids and the cut of a window planned apart and spliced give the
-    profile of the whole window (the junction between them is a rest) to the rounding of
-    the times after it; a repeated cut's profile is the remembered one, and the plans of
-    three airfoils are those made without remembering any."""
+    """_OwnProfiles: the rapids and the cut of a window planned apart and spliced (as for a
+    cut that repeats an earlier one) give the profile of the whole window (the junction
+    between them is a rest) to the rounding of the times after it; a repeated cut's profile
+    is the remembered one, and the plans of three airfoils are those made without
+    remembering any."""
     from nurbscnc.plan import lookahead
     from nurbscnc.plan.lookahead import Limits, _OwnProfiles, _Setup, cut_windows, profile_over
 
@@ -76,7 +77,6 @@ def test_a_window_profile_is_its_rapids_and_its_cut_planned_apart():
     prog = interpret_text(airfoils_program(count=3, chord_mm=20.0, pitch_mm=30.0))
     st = _Setup(prog, machine, lookahead.LookaheadOptions(), None, False, 1 << 16)
     own = _OwnProfiles(st)
-    own.remember = True  # as in a program of several cut windows
     lv = st.initial
     lim = lv.limits()
     starts = cut_windows(st.pieces)
@@ -86,7 +86,8 @@ def test_a_window_profile_is_its_rapids_and_its_cut_planned_apart():
                              Limits(*(x[a:b] for x in (lim.a_up_mm_s2, lim.j_up_mm_s3,
                                                        lim.a_down_mm_s2, lim.j_down_mm_s3))),
                              None)  # fmt: skip
-        split = own(lv, a, b)
+        split = own(lv, a, b, True)  # as for a repeated cut
+        assert own(lv, a, b, False).duration_s == whole.duration_s  # not split: the same
         # Speeds inside a unit are read at the pieces' start lengths, which the cut counts
         # from its own start: the same to rounding.
         np.testing.assert_allclose(split.junction_speeds_mm_s, whole.junction_speeds_mm_s,
@@ -104,9 +105,9 @@ def test_a_window_profile_is_its_rapids_and_its_cut_planned_apart():
         if not remember:
             original = _OwnProfiles.__call__
 
-            def afresh(self, lv, a, b):
+            def afresh(self, lv, a, b, split):
                 self.kept.clear()
-                return original(self, lv, a, b)
+                return original(self, lv, a, b, split)
 
             with pytest.MonkeyPatch.context() as mp:
                 mp.setattr(_OwnProfiles, "__call__", afresh)

@@ -1152,7 +1152,6 @@ class _Setup:
         self.base_dwell = pieces.dwell_after_s
         self.checker = _Checker(pieces, machine, reference, self.eps_mm, self.settle_rows,
                                 window, keep_reference)  # fmt: skip
-        self.own_profile = _OwnProfiles(self)  # a window's profile, a repeated cut's kept
         # The improvement phase's upper brackets: the kinematic levers, or with
         # ``raise_corner_caps`` the caps without the corner heuristic V_cf.
         self.upper = self.initial
@@ -1170,9 +1169,8 @@ class _Setup:
         """The planned pieces (settles in their dwells) and profile of the levers ``lv``."""
         planned = _with_dwell(self.pieces, self.base_dwell + lv.settle_s) \
             if self.settle_rows.size else self.pieces  # fmt: skip
-        # As a cut window's own profile (its leading rapids apart: a program of one cut
-        # window is planned as that window would be in a longer one, bit for bit).
-        profile = self.own_profile(lv, 0, self.k)
+        profile = profile_over(planned.length_mm, lv.caps, self.smooth, lv.limits(),
+                               self.options.lookahead_pieces)  # fmt: skip
         check_point_count(planned, profile, self.machine)  # before anything is sampled
         return planned, profile
 
@@ -1496,8 +1494,7 @@ def _windows_of(st: _Setup):
     done = None  # their splice, compacted (_compacted): what the re-plans put before a window
     keep_s = WINDOW_KEEP_PERIODS * st.period
     total_iterations = 0
-    own_profile = st.own_profile
-    own_profile.remember = True  # several cut windows: a cut may repeat an earlier one
+    own_profile = _OwnProfiles(st)
     for w, (a, b) in enumerate(zip(starts.tolist(), ends.tolist())):
         is_last = b == st.k
         scope = np.zeros(st.k, dtype=bool)
@@ -1511,10 +1508,12 @@ def _windows_of(st: _Setup):
             for f in (*_Levers._SCALED, "settle_s", "shaped", "ineffective"):
                 getattr(lv, f)[~scope] = getattr(final, f)[~scope]
 
-        def plan_of(lv: _Levers, a=a, b=b, around=around):
+        warm, repeat = seen.warm(final, a, b)
+
+        def plan_of(lv: _Levers, a=a, b=b, around=around, repeat=repeat):
             planned = _with_dwell(st.pieces, st.base_dwell + lv.settle_s) \
                 if st.settle_rows.size else st.pieces  # fmt: skip
-            own = own_profile(lv, a, b)
+            own = own_profile(lv, a, b, repeat)
             profile = _spliced([x for x in (around[0], own, around[1]) if x is not None])
             check_point_count(planned, profile, st.machine)  # before anything is sampled
             return planned, profile, own
@@ -1532,8 +1531,7 @@ def _windows_of(st: _Setup):
             check = st.checker.run(planned, profile, rows_of(planned, profile), stream)
             return planned, profile, check, own, st.checker.stream_out
 
-        lev, result, iterations = _converge(st, seen.warm(final, a, b), evaluate, confine,
-                                            plan_of)  # fmt: skip
+        lev, result, iterations = _converge(st, warm, evaluate, confine, plan_of)
         seen.add(lev, a, b)
         final = lev
         stream = result[4]  # the servo's state after this window's final plan
@@ -1549,16 +1547,18 @@ def _windows_of(st: _Setup):
 
 
 class _OwnProfiles:
-    """A cut window's own profile (:func:`_windows_of`): its rapids' and its cut's, planned
-    apart (the junction between them is a rest: each is what :func:`profile_over` of the
-    whole window gives for its pieces, to the rounding of the times that follow) and
-    spliced. The cut's is remembered: a cut that repeats an earlier one (a part cut again
-    elsewhere, its levers started from that one's, :class:`_SeenWindows`) has the same
-    lengths, caps, junctions and limits bit for bit, and :func:`profile_over` is a pure
-    function of them, so its profile is taken, not planned again (2 of the 6 ms a repeated
-    60 mm airfoil cost). With ``remember`` (a program of several cut windows: only there
-    can a cut repeat), the last :data:`MEMO` cuts' profiles of at most :data:`MEMO_PIECES`
-    pieces are kept (the key holds the cut's columns: a long cut is not worth it)."""
+    """A cut window's own profile (:func:`_windows_of`): :func:`profile_over` of its pieces;
+    for a window whose cut repeats an earlier one (a part cut again elsewhere, its levers
+    started from that one's: :meth:`_SeenWindows.warm`), its rapids' and its cut's planned
+    apart (the junction between them is a rest: each is what the whole window's profile
+    gives for its pieces, to the rounding of the times after it) and spliced, and the cut's
+    remembered: a cut that repeats it with those levers has the same lengths, caps,
+    junctions and limits bit for bit, and :func:`profile_over` is a pure function of them,
+    so its profile is taken, not planned again (2 of the 6 ms a repeated 60 mm airfoil
+    cost). Whether a window is split depends on the windows before it only (a program cut
+    short plans its first windows as the whole program does). The last :data:`MEMO` cuts'
+    profiles of at most :data:`MEMO_PIECES` pieces are kept (the key holds the cut's
+    columns)."""
 
     MEMO = 4
     MEMO_PIECES = 1 << 16
@@ -1567,12 +1567,10 @@ class _OwnProfiles:
         self.st = st
         self.rapid = np.asarray(st.pieces.rapid, dtype=bool)
         self.kept: dict[bytes, Profile] = {}
-        self.remember = False
 
-    def __call__(self, lv: _Levers, a: int, b: int) -> Profile:
+    def __call__(self, lv: _Levers, a: int, b: int, split: bool) -> Profile:
         st = self.st
         lim = lv.limits()
-        c = a + int(np.argmin(self.rapid[a:b])) if not self.rapid[a:b].all() else b
 
         def over(lo: int, hi: int) -> Profile:
             return profile_over(st.pieces.length_mm[lo:hi], lv.caps[lo:hi],
@@ -1581,12 +1579,12 @@ class _OwnProfiles:
                                        lim.a_down_mm_s2[lo:hi], lim.j_down_mm_s3[lo:hi]),
                                 st.options.lookahead_pieces)  # fmt: skip
 
-        if c in (a, b) or st.smooth[c] > 0.0 or st.options.lookahead_pieces is not None:
-            # A window of rapids only, a cut without any, a passed junction between them,
-            # or a bounded look-ahead (which counts the window's pieces): whole.
+        c = a + int(np.argmin(self.rapid[a:b])) if not self.rapid[a:b].all() else b
+        if (not split or c in (a, b) or st.smooth[c] > 0.0 or b - c > self.MEMO_PIECES
+                or st.options.lookahead_pieces is not None):  # fmt: skip
+            # Not a repeat; rapids only, a cut without any, a passed junction between them,
+            # a long cut, or a bounded look-ahead (which counts the window's pieces): whole.
             return over(a, b)
-        if not self.remember or b - c > self.MEMO_PIECES:
-            return _spliced([over(a, c), over(c, b)])
         smooth = st.smooth[c : b + 1].copy()
         smooth[[0, -1]] = 0.0  # the rests at its ends (what profile_over reads of them)
         key = b"".join(np.ascontiguousarray(x).tobytes() for x in (
@@ -1652,20 +1650,21 @@ class _SeenWindows:
         return all(_close(getattr(p, f)[:, sl], getattr(p, f)[:, sl2], 0.0, 1e-9)
                    for f in ("tangent_start", "tangent_end"))  # fmt: skip
 
-    def warm(self, final: _Levers, a: int, b: int) -> _Levers:
-        """``final``'s copy, the cut of window a … b − 1 from a repeated cut's final levers."""
+    def warm(self, final: _Levers, a: int, b: int) -> tuple[_Levers, bool]:
+        """``final``'s copy, the cut of window a … b − 1 from a repeated cut's final levers,
+        and whether there was one."""
         lev = final.copy()
         c = self._cut(a, b)
         if c == b:
-            return lev
+            return lev, False
         for c2, saved, settle in self.by_key.get(self._key(c, b), ()):
             if self._same(c, b, c2):
                 for f, x in saved.items():
                     getattr(lev, f)[c:b] = x
                 if c > a:  # the settle after the rapid before the cut
                     lev.settle_s[c - 1] = settle
-                break
-        return lev
+                return lev, True
+        return lev, False
 
     def add(self, lev: _Levers, a: int, b: int) -> None:
         c = self._cut(a, b)
