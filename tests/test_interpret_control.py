@@ -197,6 +197,25 @@ def test_what_loops_and_repeats_add_is_bounded():
     # a repeat within it: LinuxCNC's rs274 -g makes the same 152 straight moves
     assert len(segs("G90 F100 G0 Z2\nG91 G81 X1 Y0 Z-1 R1 L50\nM2\n")) == 152
 
+
+def test_pecks_are_counted_before_they_are_made():
+    """The fuzzer's G83 with Q 1e-9 mm filled 2.9 GB in 39 s (MemoryError, exit 1), and Q 1e-6
+    passed the budget a line late after 17 s: the pecks of a block are counted first."""
+    start = time.perf_counter()
+    for code in ("G83", "G73"):
+        with pytest.raises(ProgramError, match="makes more than 2,000,000 moves") as info:
+            segs(f"{code} X0 Y0 Z-1 R0 Q0.000000001 F600\nM2\n")
+        assert (info.value.pos.line, info.value.pos.column) == (1, 1)
+        with pytest.raises(ProgramError, match="makes more than 100 moves") as info:
+            segs(f"G0 Z1\n{code} X0 Y0 Z-1 R0 Q0.5 F600\nX1\nQ0.01 X2\nM2\n",
+                 extra_moves=100)  # fmt: skip
+        assert info.value.pos.line == 4
+    assert time.perf_counter() - start < 5.0
+    # within the budget, LinuxCNC's moves: rs274 -g prints 302 straight moves for this, the
+    # second of which (a rapid to the hole's X Y at the initial level) goes nowhere
+    ours = segs("G0 Z1\nG83 X0 Y0 Z-1 R0 Q0.01 F600\nM2\n", extra_moves=400)
+    assert len(ours) == 301
+
 def test_fanuc_program_number_at_the_top():
     assert ends("%\nO1234 (PART 7)\nG0 X1\n%\n").tolist() == [[1, 0, 0]]
 

@@ -867,6 +867,8 @@ class NurbsCurve:
                          / np.sum(basis * w[idx], axis=1), 0.0)  # fmt: skip
             # P1 onto the ray P0 → P2, as far as the deviation allows (at most a third of
             # |P2 − P0|): |ΔP1| ≤ |P1 − P0| + ℓ, times max R1 ≤ 0.9 of the tolerance.
+            if not r.max() > 0.0:  # R1 vanishes (an unclamped start): no hook to move
+                continue
             room = 0.9 * max_deviation_mm / float(r.max()) - size
             chord = ctrl[nxt] - ctrl[end]
             far = float(np.linalg.norm(chord))

@@ -53,6 +53,10 @@ _PLANE_NAME = {"XY": "xy", "ZX": "xz", "YZ": "yz"}
 CODES = ("G73", "G74", "G81", "G82", "G83", "G84", "G85", "G86", "G87", "G88", "G89")
 
 
+class TooManyMoves(ProgramError):
+    """A cycle block that would make more moves than :func:`expand_cycle` may."""
+
+
 @dataclass(frozen=True)
 class CycleState:
     """What LinuxCNC remembers between cycle blocks (all mm / s; None = not set).
@@ -138,6 +142,7 @@ def expand_cycle(
     feed_mm_s: float,
     state: CycleState,
     spindle: str = "cw",
+    max_moves: float = math.inf,
 ) -> CycleResult:
     """The moves of one canned-cycle block, in LinuxCNC's order (see the module docstring).
 
@@ -149,7 +154,9 @@ def expand_cycle(
     ``spindle``: "cw", "ccw" or "off" (G74/G84/G86/G87/G88 need it turning).
 
     The caller checks what is outside the cycle: inverse-time feed and cutter compensation
-    (LinuxCNC refuses both with canned cycles), and rotary words.
+    (LinuxCNC refuses both with canned cycles), and rotary words. ``max_moves``: the moves
+    the block may make; a block that would make more (a G83 with Q 1e-9, L 1e8) raises
+    :class:`TooManyMoves` before any is made.
     Raises ProgramError with LinuxCNC's message (the caller adds line and column).
     """
     if code not in CODES:
@@ -220,6 +227,15 @@ def expand_cycle(
 
     p_s, q_mm = state.p_s, state.q_mm
     i_mm, j_mm, k_mm = state.i_mm, state.j_mm, state.k_mm
+    if code in ("G73", "G83") and ("Q" in words or same):
+        q_next = words.get("Q", q_mm)
+        if q_next > 0.0 and repeats * (3.0 * (r - c) / q_next + 8.0) > max_moves:
+            # Each peck is a feed and one or two rapids (_peck): counted before they are made.
+            raise TooManyMoves(f"{code.lower()} with Q{q_next:g} mm pecks {r - c:g} mm deep "
+                               f"{repeats} time(s): more moves than the program may make")
+    if repeats * 6.0 > max_moves:  # a hole is at most six moves (G87, G88)
+        raise TooManyMoves(f"{code.lower()} with L{repeats}: more moves than the program may "
+                           "make")
     if code in ("G82", "G86", "G88", "G89"):
         if not same and "P" not in words:
             raise ProgramError(f"Dwell time p word missing with {code.lower()}")

@@ -39,7 +39,7 @@ from nurbscnc.geometry.segments import (
 from nurbscnc.program import arcs, coords
 from nurbscnc.program.compensation import MSG_ARC_AFTER_EXIT, CompMove, CutterComp
 from nurbscnc.program.control import N_LOCAL, ControlFlow, Frame, Source
-from nurbscnc.program.cycles import CycleState, expand_cycle
+from nurbscnc.program.cycles import CycleState, TooManyMoves, expand_cycle
 from nurbscnc.program.expressions import MAX_PARAMETER, ExpressionError, evaluate
 from nurbscnc.program.fastlane import BulkState, make_lines, pause_cyclic_gc, plain_run
 from nurbscnc.program.modal import (
@@ -402,8 +402,8 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
             what = f"makes more than {self.options.extra_moves:,} moves"
         else:
             what = f"executes more than {self.options.extra_lines:,} lines"
-        raise self.error(f"the program {what} beyond one per line of its own (a loop, call "
-                         f"or L repeat that runs away?)", column)
+        raise self.error(f"the program {what} beyond one per line of its own (a loop, call, "
+                         f"L repeat or peck (G73, G83 Q) that runs away?)", column)
 
     def bulk(self, source: Source, pc: int) -> int:
         """Interpret the run of plain straight-move lines at ``source.lines[pc]`` in bulk
@@ -1005,7 +1005,10 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
                 position_mm=tuple(self.prog), plane=m.plane,
                 retract="G98" if m.retract_mode == 980 else "G99", feed_mm_s=self.feed_mm_s,
                 state=CycleState() if fresh else m.cycle, spindle=m.spindle,
+                max_moves=self.max_moves - len(self.segments),
             )  # fmt: skip
+        except TooManyMoves:
+            self.over_budget(col, moves=True)
         except ProgramError as exc:
             raise self.error(exc.message, col) from None
         line = self.main_line()

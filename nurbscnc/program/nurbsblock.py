@@ -281,7 +281,26 @@ class NurbsBlocks:
                 )
             if k[0] == k[-1]:
                 raise self.error("all knots are equal")
+            span = float(k[-1] - k[0])
+            if not KNOT_SPAN_MIN <= span <= KNOT_SPAN_MAX or max(-k[0], k[-1]) > KNOT_SPAN_MAX:
+                # The curve's derivatives scale as 1/span^p: K0 … K3e-300 overflows them
+                # (the fuzzer). Knots set only the parametrization: any scale draws the same
+                # curve, and 1e-12 … 1e12 plans alike to the last digit.
+                raise self.error(
+                    f"knots from {k[0]:g} to {k[-1]:g}: their span must lie in "
+                    f"{KNOT_SPAN_MIN:g} … {KNOT_SPAN_MAX:g} and no knot beyond ±{KNOT_SPAN_MAX:g} "
+                    "(scaling all knots draws the same curve)"
+                )
             interior = k[order:-order]
+            if interior.size and (interior[0] == k[0] or interior[-1] == k[-1]):
+                # An end knot repeated more than the order: the first (last) control points
+                # get no weight and the curve does not start (end) at them.
+                end = "first" if interior[0] == k[0] else "last"
+                times = int(np.count_nonzero(k == (k[0] if end == "first" else k[-1])))
+                raise self.error(
+                    f"the {end} knot is repeated {times} times; a clamped knot vector repeats "
+                    f"it exactly the order ({order}) times"
+                )
             if interior.size:
                 _, counts = np.unique(interior, return_counts=True)
                 if counts.max() > p:
@@ -310,6 +329,11 @@ class NurbsBlocks:
         self.pos = list(build.points[-1])
         self.nurbs = None
 
+
+
+#: The knot span (last − first) a NURBS block may have, and the largest |knot| (G6.2 K).
+KNOT_SPAN_MIN = 1e-12
+KNOT_SPAN_MAX = 1e12
 
 
 def g5_knot_vector(n_points: int, order: int) -> list[float]:
