@@ -5,6 +5,7 @@ as planning the copy on its own, to rounding; a curve that differs is planned af
 
 from __future__ import annotations
 
+import dataclasses
 import sys
 from pathlib import Path
 
@@ -142,3 +143,57 @@ def test_the_lower_bound_grids_a_copy_once_with_the_same_bound(monkeypatch):
     alone = program_lower_bound_s(prog.segments, machine)
     assert calls == [4]
     assert bound == pytest.approx(alone, rel=1e-12)
+
+
+def _with_before_copy(text: str, which: int, inserted: str) -> str:
+    """``text`` (airfoils_program) with the line ``inserted`` before airfoil ``which``."""
+    lines = text.splitlines()
+    at = [i for i, ln in enumerate(lines) if ln.startswith("G0")][which]
+    return "\n".join(lines[:at] + [inserted] + lines[at:]) + "\n"
+
+
+@pytest.mark.parametrize("inserted", ["F1200", "G64 P0.05"])
+def test_a_copy_at_another_feed_or_blend_is_its_own(inserted):
+    """The second airfoil at another F (or G64 P) gets its own caps: those it gets alone."""
+    machine = load_machine()
+    text = _with_before_copy(airfoils_program(count=2, chord_mm=20.0, pitch_mm=35.0), 1,
+                             inserted)  # fmt: skip
+    whole = segment_pieces(interpret_text(text).segments, machine)
+    segs = sorted({int(s) for s, k in zip(whole.segment, whole.kind) if k == 4})
+    lines = text.splitlines()
+    at = [i for i, ln in enumerate(lines) if ln.startswith("G0")][1]
+    alone_text = "\n".join(lines[:3] + [inserted] + lines[at:]) + "\n"
+    alone = segment_pieces(interpret_text(alone_text).segments, machine)
+    mine = _nurbs_rows(whole, segs[1])
+    theirs = _nurbs_rows(alone, int(alone.segment[np.asarray(alone.kind) == 4][0]))
+    np.testing.assert_allclose(whole.v_cap_mm_s[mine], alone.v_cap_mm_s[theirs], rtol=1e-10)
+    np.testing.assert_allclose(whole.blend_mm[mine], alone.blend_mm[theirs], rtol=0, atol=0)
+    first = _nurbs_rows(whole, segs[0])
+    if inserted.startswith("F"):  # the feed changed the cells or caps a copy would have kept
+        assert mine.size != first.size or not np.allclose(whole.v_cap_mm_s[mine],
+                                                          whole.v_cap_mm_s[first])  # fmt: skip
+    else:  # the blend tolerance is the copy's own
+        assert whole.blend_mm[mine][0] == 0.05 != whole.blend_mm[first][0]
+
+
+def _curve_of(pieces, segment: int):
+    row = int(_nurbs_rows(pieces, segment)[0])
+    return pieces.objects[row][0]
+
+
+def test_a_copy_one_tenth_of_a_nanometre_off_is_planned_afresh():
+    """Control points 1e-10 mm off (the same shape key, beyond 8 ulps): not a copy. A
+    true copy shares its original's arc-length tables; this one builds its own."""
+    machine = load_machine()
+    text = airfoils_program(count=3, chord_mm=20.0, pitch_mm=35.0)
+    segments = list(interpret_text(text).segments)
+    nurbs = [i for i, s in enumerate(segments) if s.kind == "nurbs"]
+    bent = np.array(segments[nurbs[2]].control_points_mm)
+    bent[4, 1] += 1e-10
+    segments[nurbs[2]] = dataclasses.replace(segments[nurbs[2]], control_points_mm=bent)
+    pieces = segment_pieces(segments, machine)
+    first, copy, other = (_curve_of(pieces, i) for i in nurbs)
+    assert copy.translation_from(first) is not None and other.translation_from(first) is None
+    assert copy.shape_key() == other.shape_key() == first.shape_key()
+    assert copy.__dict__.get("arc_table") is first.arc_table  # taken
+    assert other.arc_table is not first.arc_table  # built for itself

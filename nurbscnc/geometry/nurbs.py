@@ -804,6 +804,33 @@ def sane_weights(seg) -> np.ndarray:
     return w
 
 
+class MovedCopies:
+    """The curves met so far, to find the one a curve is a moved copy of
+    (:meth:`NurbsCurve.translation_from`): candidates by :meth:`NurbsCurve.shape_key` and
+    the caller's ``extra`` key (what else must be the same: a feed, a speed ceiling), at most
+    :data:`BUCKET` a key (a bound on the comparisons, whatever the program)."""
+
+    BUCKET = 4
+
+    def __init__(self):
+        self._seen: dict[tuple, list] = {}
+
+    def find(self, curve: NurbsCurve, extra: tuple = ()):
+        """(value, Δ (3,) [mm]) of the curve met before that ``curve`` is moved by Δ, or
+        None."""
+        for other, value in self._seen.get((curve.shape_key(), extra), ()):
+            delta = curve.translation_from(other)
+            if delta is not None:
+                return value, delta
+        return None
+
+    def add(self, curve: NurbsCurve, value, extra: tuple = ()) -> None:
+        """Remember ``curve`` with ``value`` (unless its key holds :data:`BUCKET` already)."""
+        bucket = self._seen.setdefault((curve.shape_key(), extra), [])
+        if len(bucket) < self.BUCKET:
+            bucket.append((curve, value))
+
+
 @dataclass(frozen=True, eq=False)
 class NurbsCurve:
     """A rational B-spline curve C(u) = Σ N_{i,p} w_i P_i / Σ N_{i,p} w_i (SPEC §2, eq. 1).
@@ -867,7 +894,9 @@ class NurbsCurve:
                          / np.sum(basis * w[idx], axis=1), 0.0)  # fmt: skip
             # P1 onto the ray P0 → P2, as far as the deviation allows (at most a third of
             # |P2 − P0|): |ΔP1| ≤ |P1 − P0| + ℓ, times max R1 ≤ 0.9 of the tolerance.
-            if not r.max() > 0.0:  # R1 vanishes (an unclamped start): no hook to move
+            if not r.max() > 0.0:
+                # R1 vanishes (an end knot repeated beyond the order: its span holds no
+                # parameter of the curve; programs refuse such knots): no hook to move.
                 continue
             room = 0.9 * max_deviation_mm / float(r.max()) - size
             chord = ctrl[nxt] - ctrl[end]

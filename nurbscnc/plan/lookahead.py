@@ -1557,10 +1557,11 @@ class _OwnProfiles:
     so its profile is taken, not planned again (2 of the 6 ms a repeated 60 mm airfoil
     cost). Whether a window is split depends on the windows before it only (a program cut
     short plans its first windows as the whole program does). The last :data:`MEMO` cuts'
-    profiles of at most :data:`MEMO_PIECES` pieces are kept (the key holds the cut's
-    columns)."""
+    profiles of :data:`MEMO_MIN_PIECES` to :data:`MEMO_PIECES` pieces are kept (the key
+    holds the cut's columns)."""
 
     MEMO = 4
+    MEMO_MIN_PIECES = 64
     MEMO_PIECES = 1 << 16
 
     def __init__(self, st: _Setup):
@@ -1580,10 +1581,13 @@ class _OwnProfiles:
                                 st.options.lookahead_pieces)  # fmt: skip
 
         c = a + int(np.argmin(self.rapid[a:b])) if not self.rapid[a:b].all() else b
-        if (not split or c in (a, b) or st.smooth[c] > 0.0 or b - c > self.MEMO_PIECES
+        if (not split or c in (a, b) or st.smooth[c] > 0.0
+                or not self.MEMO_MIN_PIECES <= b - c <= self.MEMO_PIECES
                 or st.options.lookahead_pieces is not None):  # fmt: skip
             # Not a repeat; rapids only, a cut without any, a passed junction between them,
-            # a long cut, or a bounded look-ahead (which counts the window's pieces): whole.
+            # a cut too short to gain (two profiles and a splice cost more than one: 2,000
+            # plunged squares 3 % slower) or too long to key, or a bounded look-ahead
+            # (which counts the window's pieces): whole.
             return over(a, b)
         smooth = st.smooth[c : b + 1].copy()
         smooth[[0, -1]] = 0.0  # the rests at its ends (what profile_over reads of them)

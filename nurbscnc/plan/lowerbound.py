@@ -52,7 +52,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from nurbscnc.errors import ConfigError, PlanningError
-from nurbscnc.geometry.nurbs import NurbsCurve
+from nurbscnc.geometry.nurbs import MovedCopies, NurbsCurve
 from nurbscnc.geometry.path import Kind, PathTable, stop_seconds, whole_row
 from nurbscnc.geometry.paths import geometry_of
 from nurbscnc.machine.caps import curvature_cap2_mm2_s2
@@ -410,29 +410,22 @@ def _programmed_geometry(segment, known=None):
     return known if same else geom
 
 
-#: Curves remembered per shape key in :func:`_moved_copies` (a bound on the comparisons).
-MOVED_BUCKET = 4
-
-
 def _moved_copies(path: PathTable, rows: np.ndarray, top: np.ndarray):
     """The rows of ``path`` to grid among ``rows`` (whole-curve rows, cap ceilings ``top``):
     (own, copy_of) — ``own`` the positions in ``rows`` gridded, ``copy_of`` (len(rows),)
     for each row the position in ``own`` whose grid it takes: itself, or a NURBS curve of
-    which it is a moved copy
-    (:meth:`~nurbscnc.geometry.nurbs.NurbsCurve.translation_from`) at the same ceiling."""
+    which it is a moved copy (:class:`~nurbscnc.geometry.nurbs.MovedCopies`) at the same
+    ceiling."""
     copy_of = np.arange(rows.size)
-    seen: dict[tuple, list[int]] = {}
+    copies = MovedCopies()
     is_nurbs = np.take(path.kind, rows) == Kind.NURBS
     for j in np.flatnonzero(is_nurbs).tolist():
         curve = path.objects[int(path.obj_id[rows[j]])]
-        bucket = seen.setdefault((curve.shape_key(), float(top[j])), [])
-        for i in bucket:
-            if curve.translation_from(path.objects[int(path.obj_id[rows[i]])]) is not None:
-                copy_of[j] = i
-                break
+        hit = copies.find(curve, (float(top[j]),))
+        if hit is not None:
+            copy_of[j] = hit[0]
         else:
-            if len(bucket) < MOVED_BUCKET:
-                bucket.append(j)
+            copies.add(curve, j, (float(top[j]),))
     own = np.flatnonzero(copy_of == np.arange(rows.size))
     return own, np.searchsorted(own, copy_of)
 

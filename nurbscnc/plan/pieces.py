@@ -29,7 +29,7 @@ import numpy as np
 
 from nurbscnc.errors import GeometryError, NurbsCncError, SourcePos
 from nurbscnc.geometry.blend import MIN_REVERSAL_RAD, ph_tables
-from nurbscnc.geometry.nurbs import NurbsCurve
+from nurbscnc.geometry.nurbs import MovedCopies, NurbsCurve
 from nurbscnc.geometry.path import STOP_KINDS, Kind, PathTable, ph_power_rows, stop_seconds
 from nurbscnc.geometry.paths import ArcGeometry, LineGeometry, geometry_of
 from nurbscnc.geometry.ph import PHQuintic
@@ -563,19 +563,14 @@ class _Block:
 class _Repeats:
     """The NURBS segments of one program planned so far (:func:`segment_pieces`), to plan a
     segment that is one of them moved (a part cut again at another place: ten airfoils
-    along X) from that one's pieces instead of again (:meth:`_Block.moved`). A candidate
-    has the same shape key, feed and blend tolerance; the control points decide
-    (:meth:`~nurbscnc.geometry.nurbs.NurbsCurve.translation_from`). Smoothed runs (a line
-    per piece) are not remembered. Memory: the blocks, which the program's pieces hold
-    anyway."""
-
-    #: Curves remembered per key (:meth:`~nurbscnc.geometry.nurbs.NurbsCurve.shape_key`):
-    #: a segment is compared with at most these, whatever the program.
-    BUCKET = 4
+    along X) from that one's pieces instead of again (:meth:`_Block.moved`): a moved copy
+    (:class:`~nurbscnc.geometry.nurbs.MovedCopies`) at the same feed and blend tolerance.
+    Smoothed runs (a line per piece) are not remembered. Memory: the blocks, which the
+    program's pieces hold anyway."""
 
     def __init__(self, machine: Machine, options: PlanOptions):
         self.machine, self.options = machine, options
-        self.seen: dict[tuple, list[tuple[NurbsCurve, _Block]]] = {}
+        self.copies = MovedCopies()
 
     def block(self, seg, index: int) -> _Block:
         """The block of NURBS segment ``seg`` (number ``index``)."""
@@ -585,16 +580,14 @@ class _Repeats:
             curve = nurbs_curve(seg, self.machine)
         except NurbsCncError as exc:
             raise exc.with_pos(SourcePos(seg.line)) from None
-        key = (curve.shape_key(), min(seg.feed_mm_s, self.machine.limits.v_max_mm_s),
-               blend_override(seg, self.options))  # fmt: skip
-        for old, block in self.seen.get(key, ()):
-            delta = curve.translation_from(old)
-            if delta is not None:
-                return block.moved(curve, old, delta, index, seg.line)
+        same = (min(seg.feed_mm_s, self.machine.limits.v_max_mm_s),
+                blend_override(seg, self.options))  # fmt: skip
+        hit = self.copies.find(curve, same)
+        if hit is not None:
+            (old, block), delta = hit
+            return block.moved(curve, old, delta, index, seg.line)
         block = _Block.of(_object_pieces(seg, index, self.machine, self.options, curve))
-        bucket = self.seen.setdefault(key, [])
-        if len(bucket) < self.BUCKET:
-            bucket.append((curve, block))
+        self.copies.add(curve, (curve, block), same)
         return block
 
 

@@ -155,8 +155,8 @@ def expand_cycle(
 
     The caller checks what is outside the cycle: inverse-time feed and cutter compensation
     (LinuxCNC refuses both with canned cycles), and rotary words. ``max_moves``: the moves
-    the block may make; a block that would make more (a G83 with Q 1e-9, L 1e8) raises
-    :class:`TooManyMoves` before any is made.
+    the block may make; a G73/G83 block certain to make more (Q 1e-9 mm) raises
+    :class:`TooManyMoves` before any is made (the caller counts the rest as made).
     Raises ProgramError with LinuxCNC's message (the caller adds line and column).
     """
     if code not in CODES:
@@ -227,15 +227,6 @@ def expand_cycle(
 
     p_s, q_mm = state.p_s, state.q_mm
     i_mm, j_mm, k_mm = state.i_mm, state.j_mm, state.k_mm
-    if code in ("G73", "G83") and ("Q" in words or same):
-        q_next = words.get("Q", q_mm)
-        if q_next > 0.0 and repeats * (3.0 * (r - c) / q_next + 8.0) > max_moves:
-            # Each peck is a feed and one or two rapids (_peck): counted before they are made.
-            raise TooManyMoves(f"{code.lower()} with Q{q_next:g} mm pecks {r - c:g} mm deep "
-                               f"{repeats} time(s): more moves than the program may make")
-    if repeats * 6.0 > max_moves:  # a hole is at most six moves (G87, G88)
-        raise TooManyMoves(f"{code.lower()} with L{repeats}: more moves than the program may "
-                           "make")
     if code in ("G82", "G86", "G88", "G89"):
         if not same and "P" not in words:
             raise ProgramError(f"Dwell time p word missing with {code.lower()}")
@@ -246,6 +237,14 @@ def expand_cycle(
         if not same and "Q" not in words:
             raise ProgramError(f"Q word missing with {code.lower()}")
         q_mm = words.get("Q", q_mm)
+        # Pecks counted before they are made: a hole has more than (R − Z)/Q − 2 of them
+        # (_peck), each a feed and a rapid back that go somewhere, and under G83 the rapid
+        # down to the last depth too (all but the first's when Q is the 0.254 mm clearance),
+        # so more than this many moves is certain; fewer are made and counted as made.
+        per_peck = 3.0 if code == "G83" else 2.0
+        if q_mm > 0.0 and repeats * (per_peck * ((r - c) / q_mm - 2.0) - 1.0) > max_moves:
+            raise TooManyMoves(f"{code.lower()} with Q{q_mm:g} mm pecks {r - c:g} mm deep "
+                               f"{repeats} time(s): more moves than the program may make")
     elif code == "G87":
         if not same:
             for letter in "IJK":

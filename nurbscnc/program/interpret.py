@@ -1318,19 +1318,25 @@ CYCLE_WORDS = {730: "Q", 740: "P", 810: "", 820: "P", 830: "Q", 840: "P", 850: "
                870: "IJK", 880: "P", 890: "P"}  # fmt: skip
 
 
+def _cycles_reading(letter: str) -> str:
+    """The canned cycles that read ``letter`` (:data:`CYCLE_WORDS`), as "G74, G82, …"."""
+    return ", ".join(f"G{code // 10}" for code, reads in sorted(CYCLE_WORDS.items())
+                     if letter in reads)  # fmt: skip
+
+
 def _fmt_code(code: int) -> str:
     return str(code // 10) if code % 10 == 0 else f"{code // 10}.{code % 10}"
 
 
 def _unused_word_message(letter: str) -> str:
     return {
-        "I": "I word with no arc (G2/G3), G5, G5.1, G10 or G87 to use it",
-        "J": "J word with no arc (G2/G3), G5, G5.1, G10 or G87 to use it",
-        "K": "K word with no arc (G2/G3), G6.2 NURBS or G87 to use it",
+        "I": f"I word with no arc (G2/G3), G5, G5.1, G10 or {_cycles_reading('I')} to use it",
+        "J": f"J word with no arc (G2/G3), G5, G5.1, G10 or {_cycles_reading('J')} to use it",
+        "K": f"K word with no arc (G2/G3), G6.2 NURBS or {_cycles_reading('K')} to use it",
         "R": "R word with no arc (G2/G3), canned cycle or G6.2 NURBS to use it",
-        "P": "P word with no G4, G10, G64, arc, G5, G5.2, G6.2, G74, G82, G84, G86, G88, G89 "
-             "or M98 to use it",
-        "Q": "Q word with no G5, G10, G64, G73, G83 or G6.2 to use it",
+        "P": f"P word with no G4, G10, G64, arc, G5, G5.2, G6.2, {_cycles_reading('P')} or "
+             "M98 to use it",
+        "Q": f"Q word with no G5, G10, G64, {_cycles_reading('Q')} or G6.2 to use it",
         "L": "L word with no G5.2 or G10 to use it",
         "H": "H word with no G43 to use it",
         "F": "F word not used",
