@@ -206,3 +206,21 @@ def test_the_dense_polyline_is_within_its_chord_error(name):
     err = _chord_errors_mm(pieces)
     assert err.size > 500
     assert err.max() <= CHORD_MM * (1.0 + 1e-6)
+
+
+def test_a_near_cusp_piece_has_a_bounded_polyline():
+    """The fuzzer's control polygon folding back by 1e-10 mm: κ 3e10 /mm on a NURBS cell
+    asked the chord rule for 2e8 points (1.6 GB, exit 1); a piece gets at most
+    MAX_PIECE_POINTS, and the rest of the polyline is as the rule asks."""
+    from nurbscnc.plan.pieces import segment_pieces
+
+    text = ("G21 G17 F1000\nG6.2 P4 K0 X0 Y0 R1\nK0 X1 Y1 R1\nK0 X0 Y1 R1\n"
+            "K0 X1 Y0.0000000001 R1\nK1\nK1\nK1\nK1\nM2\n")  # fmt: skip
+    pieces = segment_pieces(interpret_text(text).segments, MACHINE)
+    counts = dynamics.path_counts(pieces)
+    assert pieces.kappa_max_per_mm.max() > 1e9
+    assert counts.max() == dynamics.MAX_PIECE_POINTS
+    kappa = 2.0 * pieces.kappa_max_per_mm  # NURBS cells
+    h = np.minimum(dynamics.MAX_SPACING_MM, np.sqrt(8.0 * CHORD_MM / kappa))
+    free = counts < dynamics.MAX_PIECE_POINTS
+    assert np.all(counts[free] == np.maximum(np.ceil(pieces.length_mm[free] / h[free]) + 1, 3))

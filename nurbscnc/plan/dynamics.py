@@ -41,6 +41,11 @@ CHORD_MM = 1e-5
 #: measured chord error stays ≤ CHORD_MM on every NURBS program of the corpus and
 #: repository (tests/test_dynamics_window.py).
 MAX_SPACING_MM = 0.05
+#: Most points of the dense polyline on one piece. The corpus's most is 24,901 (a long
+#: NURBS cell of G5_Curva_Delfino); a near-cusp (the fuzzer's control polygon folding back
+#: by 1e-10 mm: κ 3e10 /mm on a 0.25 mm cell) asked for 2e8 (1.6 GB, exit 1). Such a piece's
+#: chords then miss CHORD_MM near its peak only.
+MAX_PIECE_POINTS = 1 << 16
 #: Servo samples per slab of the windowed distance.
 SLAB = 1 << 16
 
@@ -81,14 +86,14 @@ def path_counts(pieces, lo: int = 0, hi: int | None = None) -> np.ndarray:
     2 on lines and rapids (exact), else chords of at most min(:data:`MAX_SPACING_MM`,
     √(8 δ_p / κ)) with δ_p = :data:`CHORD_MM` (a chord h on curvature κ is off by κh²/8);
     κ is the piece's ``kappa_max_per_mm``, doubled on NURBS cells (their κ comes from 8
-    samples)."""
+    samples); at most :data:`MAX_PIECE_POINTS` a piece."""
     sl = slice(lo, hi)
     kind = pieces.kind[sl]
     length = pieces.length_mm[sl]
     kappa = np.where(kind == Kind.NURBS, 2.0, 1.0) * np.abs(pieces.kappa_max_per_mm[sl])
     with np.errstate(divide="ignore"):
         h = np.minimum(MAX_SPACING_MM, np.sqrt(8.0 * CHORD_MM / kappa))
-    counts = np.maximum(np.ceil(length / h).astype(np.int64) + 1, 3)
+    counts = np.clip(np.ceil(length / h), 2.0, MAX_PIECE_POINTS - 1).astype(np.int64) + 1
     straight = kind == Kind.LINE
     return np.where(straight | (length == 0.0), 2, counts)
 

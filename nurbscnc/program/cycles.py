@@ -104,11 +104,17 @@ class CycleResult:
 class _Emitter:
     """Collects moves in plane coordinates (a, b, c) and maps them to (x, y, z)."""
 
-    def __init__(self, plane: str, feed_mm_s: float, position_mm):
+    def __init__(self, plane: str, feed_mm_s: float, position_mm, limit: float = math.inf):
         self.ia, self.ib, self.ic = _AXES[plane]
         self.feed_mm_s = feed_mm_s
         self.pos = list(position_mm)
         self.moves: list[CycleMove] = []
+        self.limit = limit  # most moves: past it, TooManyMoves
+
+    def _append(self, move: CycleMove) -> None:
+        self.moves.append(move)
+        if len(self.moves) > self.limit:
+            raise TooManyMoves("a canned cycle block with more moves than the program may make")
 
     def _point(self, a, b, c) -> tuple:
         p = [0.0, 0.0, 0.0]
@@ -117,14 +123,14 @@ class _Emitter:
 
     def rapid(self, a, b, c):
         self.pos = list(self._point(a, b, c))
-        self.moves.append(CycleMove("rapid", tuple(self.pos)))
+        self._append(CycleMove("rapid", tuple(self.pos)))
 
     def feed(self, a, b, c):
         self.pos = list(self._point(a, b, c))
-        self.moves.append(CycleMove("feed", tuple(self.pos), self.feed_mm_s))
+        self._append(CycleMove("feed", tuple(self.pos), self.feed_mm_s))
 
     def event(self, kind: str, dwell_s: float = 0.0):
-        self.moves.append(CycleMove(kind, tuple(self.pos), 0.0, dwell_s))
+        self._append(CycleMove(kind, tuple(self.pos), 0.0, dwell_s))
 
 
 def _spindle_start(direction: str) -> str:
@@ -218,7 +224,9 @@ def expand_cycle(
         raise ProgramError(f"R less than {depth_letter.lower()} in cycle in "
                            f"{_PLANE_NAME[plane]} plane")  # fmt: skip
 
-    out = _Emitter(plane, feed_mm_s, position_mm)
+    # A net under the count below: the moves the emitter makes (some go nowhere and make no
+    # segment, so twice the budget) never run away, whatever the count missed.
+    out = _Emitter(plane, feed_mm_s, position_mm, 2.0 * max_moves + 64)
     if old_c < r:
         out.rapid(current[ia], current[ib], r)
         old_c = r
@@ -308,6 +316,9 @@ def _peck(out, a, b, r, clear, c, q, back_to_r: bool):
         if back_to_r:
             out.rapid(a, b, r)
         out.rapid(a, b, depth + PECK_CLEARANCE_MM)
+        if not depth - q < depth:  # Q under half an ulp of the depth: it would never move on
+            raise ProgramError(f"Q{q:g} is below the resolution of the depth {depth:g}: the "
+                               "pecks would never reach the bottom")
         depth -= q
     out.feed(a, b, c)
     out.rapid(a, b, clear)
