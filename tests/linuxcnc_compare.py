@@ -114,8 +114,13 @@ def expected_moves(golden: dict) -> list[dict]:
 
 
 def actual_segments(program) -> list:
+    """nurbscnc's comparable segments: zero-length straight moves dropped, and the stops of
+    M64, M65, M66, M68 (a 0 s dwell: the machine waits for the motion to end; LinuxCNC's
+    canon has an I/O call there, not a move)."""
     out, prev = [], tuple(float(v) for v in program.start_mm)
     for seg in program.segments:
+        if seg.kind == "dwell" and getattr(seg, "code", "G4") != "G4":
+            continue
         kind = _segment_kind(seg)
         end = tuple(float(v) for v in seg.end_mm) if hasattr(seg, "end_mm") else None
         if end is not None and _is_zero_length(kind, end, prev):

@@ -689,3 +689,26 @@ def test_g52_order_words_as_linuxcnc():
     assert later.degree == 3  # order 4
     (low,) = segs("G21 G90 F600\nG5.2 X10 Y0 P1 L1\nX0 Y10 P1\nG5.3\nM2\n")
     assert low.degree == 2  # order 3
+
+
+def test_hal_io_and_override_codes_as_linuxcnc():
+    """M62–M68 and M50–M53 make no move (LinuxCNC's canon: SET_MOTION_OUTPUT_BIT,
+    SET_AUX_OUTPUT_BIT, …; golden divergences.ngc). M64, M65, M66, M68 run once the motion
+    before them has ended (emcTaskCheckPreconditions: WAITING_FOR_MOTION), so the tool stops
+    there: a 0 s dwell, with the code; M62, M63, M67 go with the motion."""
+    text = ("G21 F600\nG1 X1\nM62 P0\nG1 X2\nM64 P1\nG1 X3 M63 P0\nM65 P1\nM66 P0 L0\n"
+            "M67 E0 Q1.5\nM68 E1 Q2\nM50 P0\nM51\nM52 P1\nM53 P0\nG1 X4\nM2\n")  # fmt: skip
+    got = [(s.kind, getattr(s, "code", None), s.line) for s in segs(text)]
+    assert got == [("line", None, 2), ("line", None, 4), ("dwell", "M64", 5),
+                   ("line", None, 6), ("dwell", "M65", 7), ("dwell", "M66", 8),
+                   ("dwell", "M68", 10), ("line", None, 15)]  # fmt: skip
+    assert all(s.seconds == 0.0 for s in segs(text) if s.kind == "dwell")
+    # the words as LinuxCNC checks them (rs274 -g's messages)
+    for block, message in (("M64", "No valid P word with M64"),
+                           ("M66 L1", "Need to have either a valid P or a valid E word"),
+                           ("M67 Q1", "Invalid analog index with M67"),
+                           ("G1 X1 E2", "E word with no M66, M67 or M68"),
+                           ("M64 P0 M65 P1", "same modal group"),
+                           ("M48 M50 P0", "same modal group")):  # fmt: skip
+        with pytest.raises(ProgramError, match=message):
+            segs(f"G21 F600\n{block}\nM2\n")

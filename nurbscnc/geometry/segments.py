@@ -273,11 +273,13 @@ class _AtRest:
 
 @dataclass(frozen=True, eq=False)
 class Dwell(_AtRest):
-    """A timed stop (G4) of ``seconds`` [s] at ``position_mm`` (an ``(x, y, z)`` tuple)."""
+    """A timed stop of ``seconds`` [s] at ``position_mm`` (an ``(x, y, z)`` tuple): ``code``
+    "G4", or the M code that waits for the motion to end (M64, M65, M66, M68: 0 s)."""
 
     seconds: float
     position_mm: tuple
     line: int
+    code: str = "G4"
 
     kind = "dwell"
 

@@ -492,7 +492,7 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
                 self.read_m(value, column, mcodes)
             elif letter in words:
                 raise self.error(f"{letter} word repeated in the block", column)
-            elif letter in "UVWOEN":
+            elif letter in "UVWON":
                 self._bad_letter(letter, column)
             else:
                 words[letter] = (value, column)
@@ -504,8 +504,6 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
                              column, UnsupportedError)  # fmt: skip
         if letter == "O":
             raise self.error("O word must start the line (o<label> keyword)", column)
-        if letter == "E":
-            raise self.error(f"unknown word {letter}", column)
         raise self.error("N (line number) must start the line", column)
 
     def read_g(self, value: float, column: int, gcodes: dict) -> None:
@@ -581,6 +579,7 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
         self.set_units(gcodes)
         self.set_spindle(words, used)
         self.select_tool(words, used)
+        self.io_codes(mcodes, words, used)
         if 6 in mcodes:
             if self.m.comp_mode != 400:
                 raise self.error("Cannot change tools with cutter radius compensation on",
@@ -746,6 +745,39 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
                 raise self.error(f"tool number T{t:g} must be a non-negative integer", col)
             self.m.tool_selected = int(t)
 
+    def io_codes(self, mcodes: dict, words: dict, used: set) -> None:
+        """M62–M68 (LinuxCNC's HAL I/O: digital and analog outputs, a wait on an input) and
+        M50–M53 (override switches), step 6 and 11 of LinuxCNC's order: no motion of their
+        own. M64, M65 (a digital output now), M66 (wait on an input) and M68 (an analog
+        output now) run once the motion before them has ended (LinuxCNC's task waits for it,
+        emcTaskCheckPreconditions), so the tool stops there: a dwell of 0 s; M62, M63 and
+        M67 go with the motion. The words as LinuxCNC checks them (convert_m)."""
+        if 5 in mcodes:
+            code, col = mcodes[5]
+            if code in (62, 63, 64, 65) and "P" not in words:
+                raise self.error(f"No valid P word with M{code}", col)
+            if code == 66 and "P" not in words and "E" not in words:
+                raise self.error("Need to have either a valid P or a valid E word with M66",
+                                 col)  # fmt: skip
+            if code in (67, 68) and "E" not in words:
+                raise self.error(f"Invalid analog index with M{code}", col)
+            used.update({66: "PELQ", 67: "EQ", 68: "EQ"}.get(code, "P"))
+            if code in (64, 65, 66, 68):
+                self.dwell_here(0.0, f"M{code}")
+        if mcodes.get(9, (0,))[0] in (50, 51, 52, 53):
+            used.add("P")  # P0 switches the override off, P1 (or none) on
+
+    def dwell_here(self, seconds: float, code: str = "G4") -> None:
+        """A dwell of ``seconds`` at the current point (the tool at rest there), made by
+        ``code``."""
+        position = tuple(self.pos) if self.comp_exit is None else self.comp_exit
+        dwell = Dwell(float(seconds), position, self.main_line(), code)
+        if self.comp is None:
+            self.segments.append(dwell)
+        else:
+            self.comp_moves(CompMove("dwell", self.to_comp(position), line=dwell.line,
+                                     seconds=dwell.seconds))  # fmt: skip
+
     def dwell(self, gcodes: dict, words: dict, used: set) -> None:
         nonmodal = gcodes.get(0)
         if nonmodal is None or nonmodal[0] != 40:
@@ -760,13 +792,7 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
             raise self.error(
                 f"dwell P{seconds:.6g} is out of range (at most {MAX_DWELL_S:g} s)", col
             )
-        position = tuple(self.pos) if self.comp_exit is None else self.comp_exit
-        dwell = Dwell(float(seconds), position, self.main_line())
-        if self.comp is None:
-            self.segments.append(dwell)
-        else:
-            self.comp_moves(CompMove("dwell", self.to_comp(position), line=dwell.line,
-                                     seconds=dwell.seconds))  # fmt: skip
+        self.dwell_here(seconds)
 
     def set_cutter_comp(self, gcodes: dict, words: dict, used: set) -> None:
         """G40 / G41 / G42 / G41.1 / G42.1 with D: tracked in ``self.m.comp_*``."""
@@ -1339,6 +1365,7 @@ def _unused_word_message(letter: str) -> str:
         "Q": f"Q word with no G5, G10, G64, {_cycles_reading('Q')} or G6.2 to use it",
         "L": "L word with no G5.2 or G10 to use it",
         "H": "H word with no G43 to use it",
+        "E": "E word with no M66, M67 or M68 to use it",
         "F": "F word not used",
     }.get(letter, f"{letter} word not used")
 

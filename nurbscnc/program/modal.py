@@ -64,9 +64,11 @@ G_REFUSED = {
     722: "G72.2 (lathe facing cycle)",
 }
 
-#: M codes: group as LinuxCNC numbers them (4 stop, 6 tool change, 7 spindle, 8 coolant).
-M_GROUP = {0: 4, 1: 4, 2: 4, 30: 4, 60: 4, 98: 4, 99: 4, 6: 6, 61: 6, 3: 7, 4: 7, 5: 7, 7: 8, 8: 8,
-           9: 8, 19: 7, 48: 9, 49: 9, 70: 10, 71: 10, 72: 10, 73: 10}  # fmt: skip
+#: M codes: group as LinuxCNC numbers them (4 stop, 5 HAL I/O, 6 tool change, 7 spindle,
+#: 8 coolant, 9 override switches, 10 modal state).
+M_GROUP = {0: 4, 1: 4, 2: 4, 30: 4, 60: 4, 98: 4, 99: 4, 62: 5, 63: 5, 64: 5, 65: 5, 66: 5,
+           67: 5, 68: 5, 6: 6, 61: 6, 3: 7, 4: 7, 5: 7, 7: 8, 8: 8, 9: 8, 19: 7, 48: 9, 49: 9,
+           50: 9, 51: 9, 52: 9, 53: 9, 70: 10, 71: 10, 72: 10, 73: 10}  # fmt: skip
 
 #: What M70 / M73 save and M72 restores (LinuxCNC: units, plane, distance modes, feed mode,
 #: path control, F and S; the coordinate system is saved beside these, in the interpreter).

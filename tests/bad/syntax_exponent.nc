@@ -1,2 +1,2 @@
-; unknown word E @ 2:11
+; E word with no M66, M67 or M68 to use it @ 2:11
 G1 F100 X1e3

@@ -1,2 +1,2 @@
-; M62 is not supported @ 2:1
-M62 P1
+; M100 is not supported @ 2:1
+M100
