@@ -86,7 +86,8 @@ def test_a_window_profile_is_its_rapids_and_its_cut_planned_apart():
                              Limits(*(x[a:b] for x in (lim.a_up_mm_s2, lim.j_up_mm_s3,
                                                        lim.a_down_mm_s2, lim.j_down_mm_s3))),
                              None)  # fmt: skip
-        split = own(lv, a, b, True)  # as for a repeated cut
+        c = a + int(np.flatnonzero(~np.asarray(st.pieces.rapid[a:b], dtype=bool))[0])
+        split = own(lv, a, b, c)  # as for a repeated cut starting at c
         # Speeds inside a unit are read at the pieces' start lengths, which the cut counts
         # from its own start: the same to rounding.
         np.testing.assert_allclose(split.junction_speeds_mm_s, whole.junction_speeds_mm_s,
@@ -104,9 +105,9 @@ def test_a_window_profile_is_its_rapids_and_its_cut_planned_apart():
         if not remember:
             original = _OwnProfiles.__call__
 
-            def afresh(self, lv, a, b, split):
+            def afresh(self, lv, a, b, cut):
                 self.kept.clear()
-                return original(self, lv, a, b, split)
+                return original(self, lv, a, b, cut)
 
             with pytest.MonkeyPatch.context() as mp:
                 mp.setattr(_OwnProfiles, "__call__", afresh)

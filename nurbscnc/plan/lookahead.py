@@ -1508,12 +1508,12 @@ def _windows_of(st: _Setup):
             for f in (*_Levers._SCALED, "settle_s", "shaped", "ineffective"):
                 getattr(lv, f)[~scope] = getattr(final, f)[~scope]
 
-        warm, repeat = seen.warm(final, a, b)
+        warm, repeated_cut = seen.warm(final, a, b)
 
-        def plan_of(lv: _Levers, a=a, b=b, around=around, repeat=repeat):
+        def plan_of(lv: _Levers, a=a, b=b, around=around, cut=repeated_cut):
             planned = _with_dwell(st.pieces, st.base_dwell + lv.settle_s) \
                 if st.settle_rows.size else st.pieces  # fmt: skip
-            own = own_profile(lv, a, b, repeat)
+            own = own_profile(lv, a, b, cut)
             profile = _spliced([x for x in (around[0], own, around[1]) if x is not None])
             check_point_count(planned, profile, st.machine)  # before anything is sampled
             return planned, profile, own
@@ -1566,10 +1566,11 @@ class _OwnProfiles:
 
     def __init__(self, st: _Setup):
         self.st = st
-        self.rapid = np.asarray(st.pieces.rapid, dtype=bool)
         self.kept: dict[bytes, Profile] = {}
 
-    def __call__(self, lv: _Levers, a: int, b: int, split: bool) -> Profile:
+    def __call__(self, lv: _Levers, a: int, b: int, cut: int | None) -> Profile:
+        """The own profile of window a … b − 1; ``cut``: the first piece of its cut when the
+        cut repeats an earlier one (:meth:`_SeenWindows.warm`), else None."""
         st = self.st
         lim = lv.limits()
 
@@ -1580,12 +1581,12 @@ class _OwnProfiles:
                                        lim.a_down_mm_s2[lo:hi], lim.j_down_mm_s3[lo:hi]),
                                 st.options.lookahead_pieces)  # fmt: skip
 
-        c = a + int(np.argmin(self.rapid[a:b])) if not self.rapid[a:b].all() else b
-        if (not split or c in (a, b) or st.smooth[c] > 0.0
+        c = cut
+        if (c is None or c == a or st.smooth[c] > 0.0
                 or not self.MEMO_MIN_PIECES <= b - c <= self.MEMO_PIECES
                 or st.options.lookahead_pieces is not None):  # fmt: skip
-            # Not a repeat; rapids only, a cut without any, a passed junction between them,
-            # a cut too short to gain (two profiles and a splice cost more than one: 2,000
+            # Not a repeat; a cut without rapids, a passed junction between them, a cut too
+            # short to gain (two profiles and a splice cost more than one: 2,000
             # plunged squares 3 % slower) or too long to key, or a bounded look-ahead
             # (which counts the window's pieces): whole.
             return over(a, b)
@@ -1654,21 +1655,21 @@ class _SeenWindows:
         return all(_close(getattr(p, f)[:, sl], getattr(p, f)[:, sl2], 0.0, 1e-9)
                    for f in ("tangent_start", "tangent_end"))  # fmt: skip
 
-    def warm(self, final: _Levers, a: int, b: int) -> tuple[_Levers, bool]:
+    def warm(self, final: _Levers, a: int, b: int) -> tuple[_Levers, int | None]:
         """``final``'s copy, the cut of window a … b − 1 from a repeated cut's final levers,
-        and whether there was one."""
+        and the cut's first piece if there was one (else None)."""
         lev = final.copy()
         c = self._cut(a, b)
         if c == b:
-            return lev, False
+            return lev, None
         for c2, saved, settle in self.by_key.get(self._key(c, b), ()):
             if self._same(c, b, c2):
                 for f, x in saved.items():
                     getattr(lev, f)[c:b] = x
                 if c > a:  # the settle after the rapid before the cut
                     lev.settle_s[c - 1] = settle
-                return lev, True
-        return lev, False
+                return lev, c
+        return lev, None
 
     def add(self, lev: _Levers, a: int, b: int) -> None:
         c = self._cut(a, b)
