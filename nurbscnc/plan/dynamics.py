@@ -33,6 +33,11 @@ import numpy as np
 from nurbscnc.geometry.path import Kind
 from nurbscnc.servo.model import contour_error_eq29, simulate_axes
 
+try:  # the compiled loops (setup.py; optional: the numpy ones give the same numbers)
+    from nurbscnc.plan import _kernels
+except ImportError:  # pragma: no cover - a build without a C compiler
+    _kernels = None
+
 #: Chord error of the dense polyline on curved pieces [mm] (0.01 µm).
 CHORD_MM = 1e-5
 #: Longest chord of the dense polyline on curved pieces [mm]: a cap behind the chord error
@@ -130,21 +135,55 @@ def windowed_contour_mm(actual_mm: np.ndarray, lag_mm: np.ndarray, s_ref_mm: np.
         a_idx = np.maximum(np.searchsorted(ps, s - w, side="left") - 1, 0)
         b_idx = np.minimum(np.searchsorted(ps, s + w, side="right"), ps.size - 1)
         b_idx = np.maximum(b_idx, np.minimum(a_idx + 1, ps.size - 1))
-        # Every (sample, segment) pair at once, the samples' pairs consecutive; the nearest
-        # per sample by a segmented minimum (the same numbers as pair by pair).
-        count = np.maximum(b_idx - a_idx, 1)  # no segment (never seen): inf, below
-        first = np.cumsum(count) - count
-        row = np.repeat(np.arange(s.size), count)
-        j = np.minimum(np.repeat(a_idx - first, count) + np.arange(row.size), ps.size - 2)
-        a = np.take(pts, j, axis=0)  # take: a gather of rows several times faster than pts[j]
-        d = np.take(pts, j + 1, axis=0) - a
-        qa = np.take(actual_mm[sl], row, axis=0) - a
-        len2 = np.einsum("ij,ij->i", d, d)
-        t = np.einsum("ij,ij->i", qa, d) / np.where(len2 > 0.0, len2, 1.0)
-        t = np.clip(np.where(len2 > 0.0, t, 0.0), 0.0, 1.0)
-        e = qa - t[:, None] * d
-        best = np.minimum.reduceat(np.sqrt(np.einsum("ij,ij->i", e, e)), first)
-        out[sl] = np.where(b_idx > a_idx, best, np.inf)
+        # Polyline segment j runs from point j to point j + 1.
+        out[sl] = segment_distances(actual_mm[sl], pts[:-1], np.diff(pts, axis=0), a_idx,
+                                    b_idx)  # fmt: skip
+    return out
+
+
+def _dot3(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Row-wise dot products of (n, 3) arrays, as (x₀y₀ + x₁y₁) + x₂y₂: one order on every
+    machine (einsum's depends on its SIMD path) and the compiled kernel's."""
+    return (x[:, 0] * y[:, 0] + x[:, 1] * y[:, 1]) + x[:, 2] * y[:, 2]
+
+
+def segment_distances(q_mm: np.ndarray, a_mm: np.ndarray, d_mm: np.ndarray, lo: np.ndarray,
+                      hi: np.ndarray) -> np.ndarray:  # fmt: skip
+    """For each point ``q_mm[i]`` (m, 3) [mm], the distance [mm] to the nearest of the
+    segments a_k + t·d_k, t ∈ [0, 1], k ∈ [``lo[i]``, ``hi[i]``) (inf where that is empty):
+    :func:`_segment_distances_py`, compiled where :mod:`nurbscnc.plan._kernels` was built
+    (the same numbers bit for bit, without its (pairs, 3) temporaries)."""
+    q, a, d = (np.ascontiguousarray(x, dtype=np.float64) for x in (q_mm, a_mm, d_mm))
+    lo = np.ascontiguousarray(lo, dtype=np.int64)
+    hi = np.ascontiguousarray(hi, dtype=np.int64)
+    if _kernels is None:
+        return _segment_distances_py(q, a, d, lo, hi)
+    out = np.empty(q.shape[0])
+    _kernels.segment_distances(q, a, d, lo, hi, out)
+    return out
+
+
+def _segment_distances_py(q: np.ndarray, a: np.ndarray, d: np.ndarray, lo: np.ndarray,
+                          hi: np.ndarray) -> np.ndarray:  # fmt: skip
+    """:func:`segment_distances` in numpy: every (point, segment) pair at once, a point's
+    pairs consecutive, the nearest per point by a segmented minimum. Per pair: t =
+    (q − a)·d / |d|² clipped to [0, 1] (0 where |d|² = 0), the distance |q − a − t·d|."""
+    out = np.full(q.shape[0], np.inf)
+    count = np.maximum(hi - lo, 0)
+    has = np.flatnonzero(count)
+    if not has.size:
+        return out
+    count = count[has]
+    first = np.cumsum(count) - count
+    k = np.repeat(lo[has] - first, count) + np.arange(int(count.sum()))
+    ak = np.take(a, k, axis=0)  # take: a gather of rows several times faster than a[k]
+    dk = np.take(d, k, axis=0)
+    qa = np.take(q, np.repeat(has, count), axis=0) - ak
+    len2 = _dot3(dk, dk)
+    t = _dot3(qa, dk) / np.where(len2 > 0.0, len2, 1.0)
+    t = np.clip(np.where(len2 > 0.0, t, 0.0), 0.0, 1.0)
+    e = qa - t[:, None] * dk
+    out[has] = np.minimum.reduceat(np.sqrt(_dot3(e, e)), first)
     return out
 
 
@@ -481,12 +520,9 @@ class PathIndex:
             a, d = self._near_segments(cand, lo_q, hi_q)
             if a.shape[0] == 0:
                 continue
-            len2 = np.einsum("ij,ij->i", d, d)
-            rel = qb[:, None, :] - a[None, :, :]
-            t = np.einsum("mij,ij->mi", rel, d) / np.where(len2 > 0.0, len2, 1.0)
-            t = np.clip(t, 0.0, 1.0)
-            e = rel - t[:, :, None] * d[None, :, :]
-            dist = np.sqrt(np.einsum("mij,mij->mi", e, e)).min(axis=1)
+            m = hi - lo
+            dist = segment_distances(qb, a, d, np.zeros(m, dtype=np.int64),
+                                     np.full(m, a.shape[0], dtype=np.int64))  # fmt: skip
             out[sl] = np.minimum(out[sl], dist)
         return out
 

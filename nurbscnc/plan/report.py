@@ -225,10 +225,13 @@ class SampleStats:
         return stats
 
     def tap(self, windows):
-        """Yield ``windows`` unchanged, adding each as it passes (a writer's input)."""
+        """Yield ``windows`` unchanged, adding each as it passes (a writer's input): after
+        it is yielded, so the writer (another thread, deflating without the interpreter lock)
+        has it while its stats are worked out (a 60 mm airfoil's 3,500 samples: 0.7 ms of
+        NURBS step lengths). The stats are complete once the windows are exhausted."""
         for w in windows:
-            self.add(w)
             yield w
+            self.add(w)
 
     def add(self, samples) -> None:
         """Take the next window of samples (``t_s``, ``v_mm_s``, ``s_mm``, ``piece``,

@@ -1,0 +1,530 @@
+/* Compiled kernels of the plan stage: the loops numpy cannot vectorise (or only through
+ * large temporaries), ported operation for operation from their Python reference
+ * implementations — profile.py's _gated_rise_py and _time_at_length_py, dynamics.py's
+ * _segment_distances_py — which remain the specification and the fallback where this
+ * module was not built.
+ *
+ * Every result is bit for bit the Python one: IEEE double arithmetic in the same order,
+ * each expression as Python or numpy evaluates it (left to right, no reassociation), built
+ * with -ffp-contract=off (no fused multiply-add) and without -ffast-math; sqrt and ceil
+ * are correctly rounded / exact. tests/test_profile_kernels.py compares the two on random
+ * and captured inputs.
+ *
+ *   gated_rise(v0, v_top, gate_d, gate_c, a_max, j_max, dt, min_step, gallop, max_steps)
+ *       -> (durations list, jerks list, distance) or None       [profile._gated_rise_py]
+ *   time_at_length(s0, v0, a0, jerk, duration, start, s, out, rel, newton, halvings, whole)
+ *       -> None (out filled)                                     [profile._time_at_length_py]
+ *   segment_distances(q, a, d, lo, hi, out)
+ *       -> None (out filled)                                   [dynamics._segment_distances_py]
+ *
+ * The arrays are C-contiguous float64 (lo, hi: int64) buffers (the caller makes them so).
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <math.h>
+#include <stdlib.h>
+
+/* ------------------------------------------------------------------ gated rise */
+
+typedef struct {
+    const double *gd, *gc; /* gates: distances [mm] (increasing), caps [mm/s] */
+    Py_ssize_t n;
+    double j, big_a, min_step;
+    Py_ssize_t first; /* the first gate beyond x */
+    int braking;
+    double x, v, a; /* the state */
+} Rise;
+
+/* Python's min(p, q) and max(p, q) of two floats: the first unless the second is
+ * strictly smaller (larger). */
+static inline double py_min(double p, double q) { return (q < p) ? q : p; }
+static inline double py_max(double p, double q) { return (q > p) ? q : p; }
+
+/* _brake_ok */
+static int brake_ok(const Rise *r, double x, double v, double a, Py_ssize_t first)
+{
+    double j = r->j;
+    double v_end = v + a * a / (2.0 * j);
+    for (Py_ssize_t m = first; m < r->n; m++) {
+        double c = r->gc[m];
+        if (c >= v_end)
+            continue;
+        if (v > c)
+            return 0;
+        double t_c = (a - sqrt(py_max(a * a - 2.0 * j * (c - v), 0.0))) / j;
+        if (x + t_c * (v + t_c * (0.5 * a - t_c * j / 6.0)) < r->gd[m])
+            return 0;
+    }
+    return 1;
+}
+
+/* advance(tau, jk) from (x, v, a) */
+static inline void advance(double x, double v, double a, double tau, double jk,
+                           double *x1, double *v1, double *a1)
+{
+    *x1 = x + tau * (v + tau * (0.5 * a + tau * jk / 6.0));
+    *v1 = v + tau * (a + 0.5 * tau * jk);
+    *a1 = a + tau * jk;
+}
+
+/* passes(x1, v1, a1) */
+static int passes(const Rise *r, double x1, double v1, double a1)
+{
+    Py_ssize_t m = r->first;
+    while (m < r->n && r->gd[m] <= x1) {
+        if (v1 > r->gc[m] * (1.0 + 1e-12))
+            return 0;
+        m++;
+    }
+    return brake_ok(r, x1, v1, a1, m);
+}
+
+/* ok(t) of longest(jk, ·): passes(*advance(t, jk)) */
+static int step_ok(const Rise *r, double jk, double t)
+{
+    double x1, v1, a1;
+    advance(r->x, r->v, r->a, t, jk, &x1, &v1, &a1);
+    return passes(r, x1, v1, a1);
+}
+
+/* _longest(ok, tau) */
+static double longest_of(const Rise *r, double jk, double tau)
+{
+    if (step_ok(r, jk, tau))
+        return tau;
+    if (!step_ok(r, jk, r->min_step))
+        return 0.0;
+    double lo = r->min_step, hi = tau;
+    while (hi - lo > 1e-12) {
+        double mid = 0.5 * (lo + hi);
+        if (step_ok(r, jk, mid))
+            lo = mid;
+        else
+            hi = mid;
+    }
+    return lo;
+}
+
+/* longest(jk, tau): while braking, the shortest step first */
+static double longest(const Rise *r, double jk, double tau)
+{
+    if (r->braking && !step_ok(r, jk, r->min_step))
+        return 0.0;
+    return longest_of(r, jk, tau);
+}
+
+/* finish(phases): the state after every phase but the last, then passes */
+static int finish(const Rise *r, const double *taus, const double *jks, int count)
+{
+    double xs = r->x, vs = r->v, as_ = r->a;
+    for (int i = 0; i < count - 1; i++) {
+        double tau = taus[i], jk = jks[i];
+        double x1 = xs + tau * (vs + tau * (0.5 * as_ + tau * jk / 6.0));
+        double v1 = vs + tau * (as_ + 0.5 * tau * jk);
+        double a1 = as_ + tau * jk;
+        xs = x1;
+        vs = v1;
+        as_ = a1;
+    }
+    return passes(r, xs, vs, as_);
+}
+
+/* Growable list of phases. */
+typedef struct {
+    double *d, *j;
+    Py_ssize_t n, cap;
+} Phases;
+
+static int push(Phases *p, double d, double j)
+{
+    if (p->n == p->cap) {
+        Py_ssize_t cap = p->cap ? 2 * p->cap : 256;
+        double *nd = realloc(p->d, (size_t)cap * sizeof(double));
+        if (!nd)
+            return -1;
+        p->d = nd;
+        double *nj = realloc(p->j, (size_t)cap * sizeof(double));
+        if (!nj)
+            return -1;
+        p->j = nj;
+        p->cap = cap;
+    }
+    p->d[p->n] = d;
+    p->j[p->n] = j;
+    p->n++;
+    return 0;
+}
+
+/* Python's int(x) of a finite float as a long long, clamped far beyond any count used. */
+static long long trunc_ll(double x)
+{
+    if (!(x < 4e18))
+        return (long long)4e18;
+    if (!(x > -4e18))
+        return -(long long)4e18;
+    return (long long)x; /* truncation towards zero, as int() */
+}
+
+static long long min_ll(long long p, long long q) { return (q < p) ? q : p; }
+
+/* The loop of _gated_rise_py. Returns 1 (done: phases, r->x), 0 (None) or -1 (no memory). */
+static int rise_loop(Rise *r, double v_top, double dt, long long gallop, long long max_steps,
+                     Phases *out)
+{
+    const double j = r->j, big_a = r->big_a;
+    const double tol = v_top * 1e-12;
+    long long steps = 0, streak = 0;
+    r->braking = 0;
+    while (steps < max_steps) {
+        steps += 1;
+        while (r->first < r->n && r->gd[r->first] <= r->x)
+            r->first++;
+        if (r->a <= 0.0 && r->v >= v_top - tol)
+            return 1;
+        int done = 0;
+        double done_d[2], done_j[2];
+        if (r->a < big_a) {
+            double a = r->a;
+            double a1 = sqrt(j * py_max(v_top - r->v, 0.0) + 0.5 * a * a);
+            if (a1 <= py_min(a + j * dt, big_a)) {
+                double pd[2] = {(a1 - a) / j, a1 / j}, pj[2] = {j, -j};
+                if (finish(r, pd, pj, 2)) {
+                    done = 1;
+                    done_d[0] = pd[0], done_d[1] = pd[1], done_j[0] = pj[0], done_j[1] = pj[1];
+                }
+            }
+            else {
+                long long n = min_ll(2 * streak, gallop);
+                n = min_ll(n, trunc_ll((big_a - a) / (j * dt)));
+                n = min_ll(n, a1 <= big_a ? trunc_ll(ceil((a1 - a) / (j * dt))) - 2 : gallop);
+                n = min_ll(n, max_steps - steps + 1);
+                double tau;
+                double x1, v1, a1s;
+                advance(r->x, r->v, r->a, (double)n * dt, j, &x1, &v1, &a1s);
+                if (n >= 2 && passes(r, x1, v1, a1s)) {
+                    tau = (double)n * dt;
+                    steps = steps + n - 1;
+                }
+                else {
+                    n = 1;
+                    tau = longest(r, j, py_min(dt, (big_a - a) / j));
+                }
+                if (tau > 0.0) {
+                    streak = (tau == (double)n * dt) ? n : 0;
+                    r->braking = 0;
+                    if (push(out, tau, j) < 0)
+                        return -1;
+                    advance(r->x, r->v, r->a, tau, j, &r->x, &r->v, &r->a);
+                    continue;
+                }
+            }
+        }
+        streak = 0;
+        if (!done && r->a > 0.0) {
+            double a = r->a;
+            double t0 = (v_top - r->v - a * a / (2.0 * j)) / a;
+            if (t0 <= dt) {
+                double pd[2] = {py_max(t0, 0.0), a / j}, pj[2] = {0.0, -j};
+                if (finish(r, pd, pj, 2)) {
+                    done = 1;
+                    done_d[0] = pd[0], done_d[1] = pd[1], done_j[0] = pj[0], done_j[1] = pj[1];
+                }
+            }
+            else {
+                double tau = longest(r, 0.0, dt);
+                if (tau > 0.0) {
+                    r->braking = 0;
+                    if (push(out, tau, 0.0) < 0)
+                        return -1;
+                    advance(r->x, r->v, r->a, tau, 0.0, &r->x, &r->v, &r->a);
+                    continue;
+                }
+            }
+        }
+        if (done) {
+            for (int i = 0; i < 2; i++) {
+                if (done_d[i] > 0.0) {
+                    if (push(out, done_d[i], done_j[i]) < 0)
+                        return -1;
+                    advance(r->x, r->v, r->a, done_d[i], done_j[i], &r->x, &r->v, &r->a);
+                }
+            }
+            return 1;
+        }
+        if (r->a > 0.0) { /* brake */
+            r->braking = 1;
+            double t_b = r->a / j;
+            double tau = py_min(dt, t_b);
+            advance(r->x, r->v, r->a, tau, -j, &r->x, &r->v, &r->a);
+            if (tau >= t_b || r->a < 1e-12 * big_a)
+                r->a = 0.0;
+            if (push(out, tau, -j) < 0)
+                return -1;
+            continue;
+        }
+        /* a = 0 and a gate ahead at the speed v: cruise just past it */
+        if (r->first >= r->n || r->v <= 0.0 || r->v > r->gc[r->first] * (1.0 + 1e-12))
+            return 0;
+        double tau = (r->gd[r->first] - r->x) / r->v * (1.0 + 1e-12) + 1e-15;
+        if (push(out, tau, 0.0) < 0)
+            return -1;
+        advance(r->x, r->v, r->a, tau, 0.0, &r->x, &r->v, &r->a);
+    }
+    return 0;
+}
+
+static int float64_buffer(Py_buffer *b, const char *what)
+{
+    /* The bytes of C-contiguous float64 arrays: the Python side makes them so. */
+    if (b->len % (Py_ssize_t)sizeof(double)) {
+        PyErr_Format(PyExc_TypeError, "%s: a contiguous float64 buffer is needed", what);
+        return -1;
+    }
+    return 0;
+}
+
+static PyObject *list_of(const double *x, Py_ssize_t n)
+{
+    PyObject *list = PyList_New(n);
+    if (!list)
+        return NULL;
+    for (Py_ssize_t i = 0; i < n; i++) {
+        PyObject *f = PyFloat_FromDouble(x[i]);
+        if (!f) {
+            Py_DECREF(list);
+            return NULL;
+        }
+        PyList_SET_ITEM(list, i, f);
+    }
+    return list;
+}
+
+static PyObject *gated_rise(PyObject *self, PyObject *args)
+{
+    double v0, v_top, a_max, j_max, dt, min_step;
+    long long gallop, max_steps;
+    Py_buffer bd, bc;
+    if (!PyArg_ParseTuple(args, "ddy*y*ddddLL", &v0, &v_top, &bd, &bc, &a_max, &j_max, &dt,
+                          &min_step, &gallop, &max_steps))
+        return NULL;
+    PyObject *result = NULL;
+    Phases out = {NULL, NULL, 0, 0};
+    if (float64_buffer(&bd, "gate_d") < 0 || float64_buffer(&bc, "gate_c") < 0)
+        goto done;
+    if (bd.len != bc.len) {
+        PyErr_SetString(PyExc_ValueError, "gate_d and gate_c differ in length");
+        goto done;
+    }
+    Rise r = {(const double *)bd.buf, (const double *)bc.buf, bd.len / (Py_ssize_t)sizeof(double),
+              j_max, a_max, min_step, 0, 0, 0.0, v0, 0.0};
+    int status;
+    Py_BEGIN_ALLOW_THREADS
+    status = rise_loop(&r, v_top, dt, gallop, max_steps, &out);
+    Py_END_ALLOW_THREADS
+    if (status < 0) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    if (status == 0) {
+        result = Py_NewRef(Py_None);
+        goto done;
+    }
+    PyObject *durs = list_of(out.d, out.n);
+    PyObject *jerks = durs ? list_of(out.j, out.n) : NULL;
+    if (durs && jerks)
+        result = Py_BuildValue("(NNd)", durs, jerks, r.x);
+    else {
+        Py_XDECREF(durs);
+        Py_XDECREF(jerks);
+    }
+done:
+    free(out.d);
+    free(out.j);
+    PyBuffer_Release(&bd);
+    PyBuffer_Release(&bc);
+    return result;
+}
+
+/* ------------------------------------------------------------------ time at length */
+
+/* numpy's maximum/minimum of two floats (NaN propagating) and clip's (x, lo, hi) */
+static inline double np_maximum(double a, double b) { return (a >= b || isnan(a)) ? a : b; }
+static inline double np_minimum(double a, double b) { return (a <= b || isnan(a)) ? a : b; }
+static inline double np_clip(double x, double lo, double hi)
+{
+    double m = isnan(x) ? x : ((x > lo) ? x : lo);
+    return isnan(m) ? m : ((m < hi) ? m : hi);
+}
+
+static inline double phase_s(double t, double s0, double v0, double c2, double c3)
+{
+    return s0 + t * (v0 + t * (c2 + t * c3));
+}
+
+/* _time_at_length_py for one query s: index of its phase found by the caller. */
+static double time_at(double s, double s0, double v0, double a0, double jerk, double dur,
+                      double rel, int newton, int halvings, int whole)
+{
+    double c2 = 0.5 * a0;
+    double c3 = jerk / 6.0;
+    double end = phase_s(dur, 0.0, v0, c2, c3);
+    double t = np_clip((end > 0.0) ? dur * ((s - s0) / end) : 0.0, 0.0, dur);
+    double lo = 0.0, hi = dur;
+    for (int i = 0; i < newton; i++) {
+        double f = phase_s(t, s0, v0, c2, c3) - s;
+        int below = f < 0.0;
+        if (below)
+            lo = t;
+        else
+            hi = t;
+        double speed = v0 + t * (2.0 * c2 + 3.0 * c3 * t);
+        double step = t - f / speed;
+        t = (speed > 0.0 && step >= lo && step <= hi) ? step : 0.5 * (lo + hi);
+    }
+    double near_lo = np_maximum(t * (1.0 - rel), 0.0);
+    double near_hi = np_minimum(t * (1.0 + rel), dur);
+    int near = (near_hi > near_lo) && (phase_s(near_lo, s0, v0, c2, c3) < s) &&
+               !(phase_s(near_hi, s0, v0, c2, c3) < s);
+    lo = near ? near_lo : 0.0;
+    hi = near ? near_hi : dur;
+    int count = near ? halvings : whole;
+    for (int i = 0; i < count; i++) {
+        double mid = 0.5 * (lo + hi);
+        if (phase_s(mid, s0, v0, c2, c3) < s)
+            lo = mid;
+        else
+            hi = mid;
+    }
+    return hi;
+}
+
+static PyObject *time_at_length(PyObject *self, PyObject *args)
+{
+    Py_buffer b[8];
+    double rel;
+    int newton, halvings, whole;
+    if (!PyArg_ParseTuple(args, "y*y*y*y*y*y*y*w*diii", &b[0], &b[1], &b[2], &b[3], &b[4], &b[5],
+                          &b[6], &b[7], &rel, &newton, &halvings, &whole))
+        return NULL;
+    PyObject *result = NULL;
+    static const char *names[8] = {"s0", "v0", "a0", "jerk", "duration", "start", "s", "out"};
+    for (int i = 0; i < 8; i++)
+        if (float64_buffer(&b[i], names[i]) < 0)
+            goto done;
+    Py_ssize_t n = b[0].len / (Py_ssize_t)sizeof(double);
+    Py_ssize_t m = b[6].len / (Py_ssize_t)sizeof(double);
+    for (int i = 1; i < 6; i++)
+        if (b[i].len != b[0].len) {
+            PyErr_SetString(PyExc_ValueError, "the phase columns differ in length");
+            goto done;
+        }
+    if (b[7].len != b[6].len || n == 0) {
+        PyErr_SetString(PyExc_ValueError, "time_at_length: no phases, or out not as long as s");
+        goto done;
+    }
+    const double *s0 = b[0].buf, *v0 = b[1].buf, *a0 = b[2].buf, *jerk = b[3].buf,
+                 *dur = b[4].buf, *start = b[5].buf, *s = b[6].buf;
+    double *out = b[7].buf;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t q = 0; q < m; q++) {
+        /* searchsorted(s0, s, side="right") - 1, clipped to [0, n - 1] */
+        Py_ssize_t lo = 0, hi = n;
+        double x = s[q];
+        while (lo < hi) {
+            Py_ssize_t mid = lo + (hi - lo) / 2;
+            if (x < s0[mid]) /* numpy: first index whose value is > x (NaN sorts last) */
+                hi = mid;
+            else
+                lo = mid + 1;
+        }
+        Py_ssize_t k = lo - 1;
+        if (k < 0)
+            k = 0;
+        if (k > n - 1)
+            k = n - 1;
+        out[q] = start[k] + time_at(x, s0[k], v0[k], a0[k], jerk[k], dur[k], rel, newton,
+                                    halvings, whole);
+    }
+    Py_END_ALLOW_THREADS
+    result = Py_NewRef(Py_None);
+done:
+    for (int i = 0; i < 8; i++)
+        PyBuffer_Release(&b[i]);
+    return result;
+}
+
+/* ------------------------------------------------------------------ contour distance */
+
+/* dynamics._segment_distances_py: for each point q_i (m, 3), the smallest distance to the
+ * segments a_k + t d_k (t in [0, 1]) for k in [lo_i, hi_i) (inf when empty). Dot products
+ * as (x0 y0 + x1 y1) + x2 y2; t = (qa.d) / |d|^2 clipped to [0, 1] (0 where |d|^2 = 0); the
+ * minimum NaN-propagating as numpy's. */
+static PyObject *segment_distances(PyObject *self, PyObject *args)
+{
+    Py_buffer bq, ba, bd, blo, bhi, bout;
+    if (!PyArg_ParseTuple(args, "y*y*y*y*y*w*", &bq, &ba, &bd, &blo, &bhi, &bout))
+        return NULL;
+    PyObject *result = NULL;
+    Py_ssize_t m = bq.len / (Py_ssize_t)(3 * sizeof(double));
+    Py_ssize_t n = ba.len / (Py_ssize_t)(3 * sizeof(double));
+    if (bq.len != m * (Py_ssize_t)(3 * sizeof(double)) || ba.len != bd.len ||
+        ba.len != n * (Py_ssize_t)(3 * sizeof(double)) ||
+        blo.len != m * (Py_ssize_t)sizeof(long long) || bhi.len != blo.len ||
+        bout.len != m * (Py_ssize_t)sizeof(double)) {
+        PyErr_SetString(PyExc_ValueError, "segment_distances: inconsistent buffers");
+        goto done;
+    }
+    const double *q = bq.buf, *a = ba.buf, *d = bd.buf;
+    const long long *lo = blo.buf, *hi = bhi.buf;
+    double *out = bout.buf;
+    for (Py_ssize_t i = 0; i < m; i++)
+        if (lo[i] < 0 || hi[i] > n) {
+            PyErr_SetString(PyExc_IndexError, "segment_distances: a range outside the segments");
+            goto done;
+        }
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t i = 0; i < m; i++) {
+        const double q0 = q[3 * i], q1 = q[3 * i + 1], q2 = q[3 * i + 2];
+        double best = INFINITY;
+        int any = 0;
+        for (long long k = lo[i]; k < hi[i]; k++) {
+            const double *ak = a + 3 * k, *dk = d + 3 * k;
+            double e0 = q0 - ak[0], e1 = q1 - ak[1], e2 = q2 - ak[2];
+            double len2 = (dk[0] * dk[0] + dk[1] * dk[1]) + dk[2] * dk[2];
+            double t = ((e0 * dk[0] + e1 * dk[1]) + e2 * dk[2]) / (len2 > 0.0 ? len2 : 1.0);
+            t = np_clip(len2 > 0.0 ? t : 0.0, 0.0, 1.0);
+            e0 = e0 - t * dk[0];
+            e1 = e1 - t * dk[1];
+            e2 = e2 - t * dk[2];
+            double dist = sqrt((e0 * e0 + e1 * e1) + e2 * e2);
+            best = any ? np_minimum(best, dist) : dist;
+            any = 1;
+        }
+        out[i] = best;
+    }
+    Py_END_ALLOW_THREADS
+    result = Py_NewRef(Py_None);
+done:
+    PyBuffer_Release(&bq);
+    PyBuffer_Release(&ba);
+    PyBuffer_Release(&bd);
+    PyBuffer_Release(&blo);
+    PyBuffer_Release(&bhi);
+    PyBuffer_Release(&bout);
+    return result;
+}
+
+static PyMethodDef methods[] = {
+    {"segment_distances", segment_distances, METH_VARARGS,
+     "dynamics._segment_distances_py, compiled."},
+    {"gated_rise", gated_rise, METH_VARARGS, "profile._gated_rise_py, compiled."},
+    {"time_at_length", time_at_length, METH_VARARGS, "profile._time_at_length_py, compiled."},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef module = {
+    PyModuleDef_HEAD_INIT, "_kernels",
+    "Compiled kernels of the plan stage (profile.py, dynamics.py).", -1, methods,
+};
+
+PyMODINIT_FUNC PyInit__kernels(void) { return PyModule_Create(&module); }

@@ -1,0 +1,20 @@
+"""The build's one compiled piece: nurbscnc.plan._kernels (nurbscnc/plan/_kernels.c), the
+feed profile's two loops that numpy cannot vectorise. Optional: where no C compiler is found
+the package installs without it and profile.py runs the same loops in Python (the same
+numbers, bit for bit; docs/benchmarks.md gives the speeds). Everything else is in
+pyproject.toml."""
+
+from setuptools import Extension, setup
+
+setup(
+    ext_modules=[
+        Extension(
+            "nurbscnc.plan._kernels",
+            ["nurbscnc/plan/_kernels.c"],
+            # The same IEEE double operations as the Python reference: no fused
+            # multiply-add, no reassociation (-ffast-math is never on).
+            extra_compile_args=["-O2", "-ffp-contract=off", "-fno-fast-math"],
+            optional=True,
+        )
+    ]
+)

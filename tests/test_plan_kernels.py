@@ -1,0 +1,166 @@
+"""The compiled kernels of the plan stage (``nurbscnc/plan/_kernels.c``, built by setup.py)
+against their Python reference implementations, bit for bit:
+
+- the gated flank (:func:`nurbscnc.plan.profile._gated_rise_py`),
+- the time at which a profile reaches a length (:func:`~nurbscnc.plan.profile._time_at_length_py`),
+- the point-to-segments distance of the contour check
+  (:func:`~nurbscnc.plan.dynamics._segment_distances_py`).
+
+The reference implementations are the specification (and what runs where no C compiler
+built the kernels); the kernels must give the same floats, so a plan never depends on
+whether the package was compiled. The inputs are random (seeded) and the ones the planner
+asks for on a repeated airfoil and its nose, where the gated flanks and the bisections work
+hardest. Where the kernels were not built, the tests skip, saying so, and the fallback is
+what ran everywhere else.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import nurbscnc.plan.dynamics as dynamics
+import nurbscnc.plan.profile as profile
+
+pytestmark = pytest.mark.skipif(
+    profile._kernels is None,
+    reason="nurbscnc.plan._kernels was not built (no C compiler at install): the Python "
+    "implementations ran instead",
+)
+
+
+def _bits(x) -> np.ndarray:
+    return np.ascontiguousarray(x, dtype=np.float64).view(np.int64)
+
+
+def _random_flank(rng):
+    n = int(rng.integers(1, 14))
+    d = np.cumsum(rng.uniform(0.001, 2.0, n) * 10.0 ** rng.integers(-2, 2))
+    c = np.sort(rng.uniform(0.5, 80.0, n))
+    if rng.random() < 0.3:  # unsorted caps: a staircase that dips
+        c = rng.permutation(c)
+    v0 = float(rng.uniform(0.0, c[0] * 1.05))
+    v_top = float(rng.uniform(c[-1] * 0.9, 120.0))
+    a = float(rng.choice([2450.0, 800.0, 50.0, 1e4]))
+    j = float(rng.choice([5e4, 1e4, 1e6, 3000.0]))
+    dt = float(rng.choice([profile.GATE_STEP_S, 1e-3, 3e-5]))
+    return v0, v_top, d, c, a, j, dt
+
+
+def test_gated_rise_kernel_is_the_python_flank_bit_for_bit():
+    """1,000 random flanks (gates of 1–13 caps, rising or dipping, speeds that start below
+    or above the first cap, four accelerations and jerks, three time steps): the same
+    phase durations, jerks and distance (or None) from the kernel and from Python."""
+    rng = np.random.default_rng(20261128)
+    found = none = 0
+    for _ in range(1000):
+        v0, v_top, d, c, a, j, dt = _random_flank(rng)
+        ref = profile._gated_rise_py(v0, v_top, d, c, a, j, dt)
+        got = profile._gated_rise(v0, v_top, d, c, a, j, dt)
+        if ref is None:
+            assert got is None
+            none += 1
+            continue
+        found += 1
+        assert got[0] == ref[0] and got[1] == ref[1] and got[2] == ref[2]
+        assert all(type(x) is float for x in got[0] + got[1])
+    assert found > 500 and none > 10  # both outcomes exercised
+
+
+def _profiles(rng):
+    """Profiles of random piece staircases (gated flanks, splits, stops and cruises)."""
+    for _ in range(60):
+        k = int(rng.integers(2, 120))
+        length = rng.uniform(0.01, 5.0, k) * 10.0 ** rng.integers(-2, 2, k)
+        caps = rng.uniform(1.0, 80.0, k)
+        jcap = np.full(k + 1, np.inf)
+        jcap[[0, -1]] = 0.0
+        jcap[rng.random(k + 1) < 0.1] = 0.0
+        yield profile.plan_profile(profile.ProfileInput(length, caps, jcap, 2450.0, 5e4))
+
+
+def test_time_at_length_kernel_is_the_python_inversion_bit_for_bit():
+    """60 random profiles, each asked at its piece starts and ends, its phase starts, random
+    lengths, lengths before 0 and past the end, and a length a few ulps off each phase
+    start: the same times from the kernel and from Python."""
+    rng = np.random.default_rng(7)
+    for prof in _profiles(rng):
+        bounds = np.append(prof.piece_start_mm, prof.total_length_mm)
+        s0 = np.asarray(prof.phase_s0_mm)
+        s = np.concatenate((bounds, s0, np.nextafter(s0, np.inf), np.nextafter(s0, -np.inf),
+                            rng.uniform(-0.1, prof.total_length_mm * 1.01, 500)))  # fmt: skip
+        assert np.array_equal(_bits(profile.time_at_length(prof, s)),
+                              _bits(profile._time_at_length_py(prof, s)))  # fmt: skip
+
+
+def test_segment_distances_kernel_is_the_numpy_pairs_bit_for_bit():
+    """500 random sets of points and segments over twelve orders of magnitude, with
+    zero-length segments, empty and partial ranges: the same distances (inf where a point
+    has no segment) from the kernel and from numpy."""
+    rng = np.random.default_rng(3)
+    for _ in range(500):
+        n, m = int(rng.integers(1, 80)), int(rng.integers(1, 50))
+        scale = 10.0 ** rng.integers(-6, 6)
+        a = rng.standard_normal((n, 3)) * scale
+        d = rng.standard_normal((n, 3)) * scale * 10.0 ** rng.integers(-4, 2)
+        d[rng.random(n) < 0.1] = 0.0
+        q = a[rng.integers(0, n, m)] + rng.standard_normal((m, 3)) * scale * 1e-3
+        lo = rng.integers(0, n + 1, m)
+        hi = np.minimum(lo + rng.integers(-3, n, m), n)
+        got = dynamics.segment_distances(q, a, d, lo, hi)
+        ref = dynamics._segment_distances_py(q, a, d, lo, hi)
+        assert np.array_equal(_bits(got), _bits(ref))
+        assert np.all(np.isinf(got[hi <= lo])) and np.all(np.isfinite(got[hi > lo]))
+
+
+def test_segment_distance_is_the_closed_form():
+    """Against the geometry itself: a point above the middle of a segment, beyond its end
+    and on its line, and a zero-length segment (a point)."""
+    a = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [1.0, 1.0, 1.0]])
+    d = np.array([[2.0, 0.0, 0.0], [2.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    q = np.array([[1.0, 3.0, 4.0], [5.0, 0.0, 0.0], [1.0, 1.0, 4.0]])
+    lo = np.array([0, 1, 2])
+    hi = lo + 1
+    for f in (dynamics.segment_distances, dynamics._segment_distances_py):
+        assert f(q, a, d, lo, hi).tolist() == [5.0, 3.0, 3.0]
+
+
+def _airfoil_twice() -> str:
+    """programs/naca2415.nc's airfoil, then the same airfoil 20 mm further along X."""
+    from pathlib import Path
+
+    lines = (Path(__file__).resolve().parents[1] / "programs" / "naca2415.nc").read_text()
+    lines = [ln for ln in lines.splitlines() if ln.strip() and not ln.startswith("M2")]
+    moved = []
+    for ln in lines[1:]:
+        words = []
+        for w in ln.split():
+            if w[0] == "X":
+                w = f"X{float(w[1:]) + 20.0:.6f}"
+            words.append(w)
+        moved.append(" ".join(words))
+    return "\n".join([*lines, *moved, "M2"]) + "\n"
+
+
+def test_airfoil_plan_is_the_same_without_the_kernels(monkeypatch):
+    """programs/naca2415.nc's airfoil cut twice (gated flanks, re-plans of the contour check,
+    the second cut a moved copy) planned with the kernels and with the Python loops: the
+    same cycle time, junction speeds and worst contour error, bit for bit."""
+    from nurbscnc.machine.profile import load_machine
+    from nurbscnc.pipeline import run_program
+    from nurbscnc.program.interpret import interpret_text
+
+    prog = interpret_text(_airfoil_twice())
+    machine = load_machine()
+    profile._gated_rise_memo.cache_clear()
+    fast = run_program(prog, machine)
+    monkeypatch.setattr(profile, "_kernels", None)
+    monkeypatch.setattr(dynamics, "_kernels", None)
+    profile._gated_rise_memo.cache_clear()
+    slow = run_program(prog, machine)
+    profile._gated_rise_memo.cache_clear()
+    assert fast.plan.iterations > 0  # the check re-planned
+    assert fast.cycle_time_s == slow.cycle_time_s
+    assert np.array_equal(_bits(fast.plan.profile.junction_speeds_mm_s),
+                          _bits(slow.plan.profile.junction_speeds_mm_s))  # fmt: skip
+    assert fast.check.overs.worst_mm == slow.check.overs.worst_mm
