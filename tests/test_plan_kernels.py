@@ -4,7 +4,8 @@ against their Python reference implementations, bit for bit:
 - the gated flank (:func:`nurbscnc.plan.profile._gated_rise_py`),
 - the time at which a profile reaches a length (:func:`~nurbscnc.plan.profile._time_at_length_py`),
 - the point-to-segments distance of the contour check
-  (:func:`~nurbscnc.plan.dynamics._segment_distances_py`).
+  (:func:`~nurbscnc.plan.dynamics._segment_distances_py`),
+- a piece's peak speed (:func:`nurbscnc.plan.feedrate._peak_speed_py`).
 
 The reference implementations are the specification (and what runs where no C compiler
 built the kernels); the kernels must give the same floats, so a plan never depends on
@@ -113,6 +114,29 @@ def test_segment_distances_kernel_is_the_numpy_pairs_bit_for_bit():
         assert np.all(np.isinf(got[hi <= lo])) and np.all(np.isfinite(got[hi > lo]))
 
 
+def test_peak_speed_kernel_is_the_python_bisection_bit_for_bit():
+    """300 random sets of pieces (zero lengths, stops, short pieces that cannot reach their
+    cap, per-piece or scalar limits, descents with their own limits): the same peak speeds
+    from the kernel and from numpy."""
+    from nurbscnc.plan import feedrate
+
+    rng = np.random.default_rng(13)
+    for _ in range(300):
+        n = int(rng.integers(1, 300))
+        v_s = rng.uniform(0, 60, n) * (rng.random(n) < 0.8)
+        v_e = rng.uniform(0, 60, n) * (rng.random(n) < 0.8)
+        length = rng.uniform(0, 5, n) * 10.0 ** rng.integers(-4, 2, n)
+        length[rng.random(n) < 0.05] = 0.0
+        cap = np.maximum(np.maximum(v_s, v_e), rng.uniform(0, 120, n))
+        a = rng.choice([2450.0, 800.0, 1e4], n)
+        j = rng.choice([5e4, 1e4, 1e6], n)
+        a_dn, j_dn = rng.choice([2450.0, 800.0, 1e4], n), rng.choice([5e4, 1e4, 1e6], n)
+        for lims in ((a, j, a_dn, j_dn), (a, j), (2450.0, 5e4)):
+            assert np.array_equal(_bits(feedrate.peak_speed_unchecked(v_s, v_e, length, cap,
+                                                                        *lims)),
+                                  _bits(feedrate._peak_speed_py(v_s, v_e, length, cap, *lims)))
+
+
 def test_segment_distance_is_the_closed_form():
     """Against the geometry itself: a point above the middle of a segment, beyond its end
     and on its line, and a zero-length segment (a point)."""
@@ -154,8 +178,10 @@ def test_airfoil_plan_is_the_same_without_the_kernels(monkeypatch):
     machine = load_machine()
     profile._gated_rise_memo.cache_clear()
     fast = run_program(prog, machine)
-    monkeypatch.setattr(profile, "_kernels", None)
-    monkeypatch.setattr(dynamics, "_kernels", None)
+    from nurbscnc.plan import feedrate
+
+    for module in (profile, dynamics, feedrate):
+        monkeypatch.setattr(module, "_kernels", None)
     profile._gated_rise_memo.cache_clear()
     slow = run_program(prog, machine)
     profile._gated_rise_memo.cache_clear()

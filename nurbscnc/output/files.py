@@ -30,6 +30,12 @@ import warnings
 import numpy as np
 
 from nurbscnc.errors import DataError, OutputError, SourcePos
+from nurbscnc.output.npz import (  # noqa: F401 - the NPZ format's settings, named here too
+    NPZ_DEFLATE_LEVEL,
+    NPZ_PROBE_ROWS,
+    NPZ_STORE_RATIO,
+    write_npz,
+)
 
 #: Column order of a reference-point file (units: s, mm, mm, mm, mm/s, index, source line).
 POINT_COLUMNS = ("t", "x", "y", "z", "feed", "piece", "line")
@@ -185,181 +191,14 @@ def _csv_rows(fh, columns, formats) -> None:
         fh.write(buf.getvalue())
 
 
-#: Bytes per read when a spooled NPZ column is copied into its zip member.
-SPOOL_BLOCK = 1 << 24
-
-
-def _npy_header(fid, dtype: np.dtype, count: int) -> None:
-    """The .npy header of a 1-D C-order array of ``count`` items of ``dtype``: what
-    ``np.save`` writes before the data (format version 1.0: the header is short)."""
-    np.lib.format.write_array_header_1_0(fid, {"descr": np.lib.format.dtype_to_descr(dtype),
-                                               "fortran_order": False, "shape": (count,)})
-
-
-#: Deflate level of the NPZ members (zlib's 1–9). Level 1, not ``np.savez_compressed``'s
-#: default 6: on the 200,000-line spiral's reference points (40.6 MB raw) it writes 19.1 MB
-#: instead of 18.8 MB (+1.6 %) in 55 % of the time (3.5 s against 6.3 s on a loaded
-#: machine; deflate was the largest single cost of ``run -o x.npz``); any zip reader and
-#: ``numpy.load`` read every level.
-NPZ_DEFLATE_LEVEL = 1
-#: A column whose first :data:`NPZ_PROBE_ROWS` rows deflate to more than this share of
-#: their size is stored, not deflated: on the 200,000-line spiral x and y deflate to 92 %
-#: (0.26 s each) and feed to 78 %, t, z, piece and line to 10–24 %; storing x and y
-#: costs 0.9 MB (5 %) of 19.1 MB and saves half the deflate time. The probe is the
-#: column's own first rows, so the choice (and the file) does not depend on the windows.
-#: (8,192 rows would probe an eighth as long, but read the spiral's x and y as deflatable.)
-NPZ_STORE_RATIO = 0.85
-NPZ_PROBE_ROWS = 1 << 16
-
-
-def _deflates(probe: bytes) -> bool:
-    """Whether an NPZ column is deflated (:data:`NPZ_STORE_RATIO`), from the bytes of its
-    first :data:`NPZ_PROBE_ROWS` rows."""
-    import zlib
-
-    return not probe or len(zlib.compress(probe, NPZ_DEFLATE_LEVEL)) <= NPZ_STORE_RATIO * len(
-        probe)
-
-
-class _Choices:
-    """Which NPZ columns are deflated (:func:`_deflates`), worked out column after column
-    in a helper thread while the writer writes the members before (zlib works without the
-    interpreter lock, so the probes and the members' deflate overlap: on ten 60 mm airfoils,
-    one 35,000-row window, 10 ms of probes beside 10 ms of members, one after the other
-    before). The helper only deflates bytes the writer cut (no numpy in it); it ends by
-    itself within a few ms (seven probes of 512 kB at most), and :meth:`close` waits for
-    it, so the process never ends while it runs. ``choice(j)`` waits for column j's."""
-
-    def __init__(self, probes: list[bytes]):
-        import threading
-
-        self._found: list = [None] * len(probes)
-        self._ready = [threading.Event() for _ in probes]
-
-        def work() -> None:
-            for j, probe in enumerate(probes):
-                try:
-                    self._found[j] = _deflates(probe)
-                except BaseException as exc:  # MemoryError: raised in the writer
-                    self._found[j] = exc
-                self._ready[j].set()
-
-        self._thread = threading.Thread(target=work, name="nurbscnc-npz-probe", daemon=True)
-        self._thread.start()
-
-    def choice(self, j: int) -> bool:
-        self._ready[j].wait()
-        found = self._found[j]
-        if isinstance(found, BaseException):
-            raise found
-        return found
-
-    def close(self) -> None:
-        self._thread.join()
-
-
-def _member(zipf, name: str, deflate: bool):
-    """A zip member open for writing, deflated at :data:`NPZ_DEFLATE_LEVEL` or stored."""
-    import zipfile
-
-    zipf.compression = zipfile.ZIP_DEFLATED if deflate else zipfile.ZIP_STORED
-    return zipf.open(f"{name}.npy", "w", force_zip64=True)
-
-
-def _npz_windows(fh, spool_dir: str | None, names, windows, count: int) -> None:
-    """Named 1-D columns, given window by window, as the NPZ ``np.savez_compressed`` writes
-    (one ``<name>.npy`` zip member per column, in order, zip64 forced) but deflated at
-    :data:`NPZ_DEFLATE_LEVEL`, or stored where deflating hardly pays
-    (:data:`NPZ_STORE_RATIO`): the same bytes for any split into windows.
-
-    A zip member must be complete before the next begins, and the windows come row-wise. So
-    the first column goes straight into its member (its header first: the row ``count`` is
-    known), and the others are spooled, raw, to an unnamed temporary file in ``spool_dir``
-    (the output's folder: the same disk the output needs anyway; the system's temporary
-    folder may be a tmpfs, i.e. memory) at fixed offsets — column j's region holds its
-    ``count`` items — then copied into their members. One sampling pass; re-sampling per
-    column instead would cost the interpolation once per column (seven times). Whole arrays
-    (one window of ``count`` rows) skip the spool."""
-    import itertools
-
-    windows = iter(windows)
-    head, rows_seen = [], 0  # the windows that hold the first NPZ_PROBE_ROWS rows
-    for window in windows:
-        head.append([np.asarray(c) for c in window])
-        rows_seen += len(head[-1][0])
-        # All rows in hand: go on without waiting for the end of the windows (the maker
-        # may still be summarising this one; a window too many is found at the end).
-        if rows_seen >= min(NPZ_PROBE_ROWS, count):
-            break
-    if not head:
-        raise ValueError("no rows to write")
-    first = head[0]
-    dtypes = [c.dtype for c in first]
-    probes = [np.ascontiguousarray(np.concatenate([w[j] for w in head])[:NPZ_PROBE_ROWS])
-              .tobytes() for j in range(len(first))]  # fmt: skip
-    windows = itertools.chain(head[1:], windows)
-    deflate = _Choices(probes)
-    try:
-        _npz_members(fh, spool_dir, names, first, windows, count, dtypes, deflate.choice)
-    finally:
-        deflate.close()
-
-
-def _npz_members(fh, spool_dir: str | None, names, first, windows, count: int, dtypes,
-                 deflate) -> None:  # fmt: skip
-    """The members of :func:`_npz_windows`: the first window ``first`` (its columns), the
-    ``windows`` after it; ``deflate(j)``: whether column j is deflated."""
-    import tempfile
-    import zipfile
-
-    with zipfile.ZipFile(fh, mode="w", compression=zipfile.ZIP_DEFLATED, allowZip64=True,
-                         compresslevel=NPZ_DEFLATE_LEVEL) as zipf:  # fmt: skip
-        if len(first[0]) == count:  # whole arrays: nothing to spool
-            for j, (name, col) in enumerate(zip(names, first)):
-                with _member(zipf, name, deflate(j)) as fid:
-                    np.lib.format.write_array(fid, col, allow_pickle=False)
-            if next(windows, None) is not None:
-                raise ValueError(f"more rows than the {count} announced")
-            return
-        offsets = np.concatenate(([0], np.cumsum([count * d.itemsize for d in dtypes[1:]])))
-        with tempfile.TemporaryFile(dir=spool_dir) as spool:
-            rows = 0
-            with _member(zipf, names[0], deflate(0)) as fid:
-                _npy_header(fid, dtypes[0], count)
-                window = first
-                while window is not None:
-                    cols = [np.asarray(c, dtype=d) for c, d in zip(window, dtypes)]
-                    m = len(cols[0])
-                    if rows + m > count:
-                        raise ValueError(f"more rows than the {count} announced")
-                    fid.write(np.ascontiguousarray(cols[0]).tobytes())
-                    for j, col in enumerate(cols[1:]):
-                        spool.seek(int(offsets[j]) + rows * dtypes[j + 1].itemsize)
-                        spool.write(np.ascontiguousarray(col).tobytes())
-                    rows += m
-                    window = next(windows, None)
-            if rows != count:
-                raise ValueError(f"{rows} rows written, {count} announced")
-            for j, name in enumerate(names[1:]):
-                spool.seek(int(offsets[j]))
-                left = count * dtypes[j + 1].itemsize
-                with _member(zipf, name, deflate(j + 1)) as fid:
-                    _npy_header(fid, dtypes[j + 1], count)
-                    while left > 0:
-                        block = spool.read(min(SPOOL_BLOCK, left))
-                        if not block:
-                            raise OSError("the spooled columns came back short")
-                        fid.write(block)
-                        left -= len(block)
-
-
 def write_table_windows(path: str, names, windows, count: int, formats,
                         npz: bool | None = None) -> None:  # fmt: skip
     """Write named columns given window by window (an iterable of column tuples, rows in
     order, ``count`` rows in all) to ``path`` (``-``: stdout), atomically: NPZ when ``npz``
-    (None: when the path ends in .npz), else CSV. Memory: one window (the NPZ's other
-    columns are spooled to disk, :func:`_npz_windows`). An exception from ``windows`` (a
-    point outside the soft limits, found as it is made) leaves no file."""
+    (None: when the path ends in .npz), else CSV. Memory: one window (the NPZ's columns are
+    deflated as they come and spooled to disk, :func:`~nurbscnc.output.npz.write_npz`). An
+    exception from ``windows`` (a point outside the soft limits, found as it is made)
+    leaves no file."""
     if npz is None:
         npz = path.endswith(".npz")
     try:
@@ -369,7 +208,7 @@ def write_table_windows(path: str, names, windows, count: int, formats,
                 target, st = output_target(path)
                 spool_dir = None if _in_place(path, st) else os.path.dirname(target)
             with atomic_output(path, binary=True) as fh:
-                _npz_windows(fh, spool_dir, names, windows, count)
+                write_npz(fh, spool_dir, names, windows, count)
         else:
             with atomic_output(path) as fh:
                 fh.write(",".join(names) + "\n")

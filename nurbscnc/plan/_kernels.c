@@ -1,7 +1,7 @@
 /* Compiled kernels of the plan stage: the loops numpy cannot vectorise (or only through
  * large temporaries), ported operation for operation from their Python reference
  * implementations — profile.py's _gated_rise_py and _time_at_length_py, dynamics.py's
- * _segment_distances_py — which remain the specification and the fallback where this
+ * _segment_distances_py, feedrate.py's _peak_speed_py — which remain the specification and the fallback where this
  * module was not built.
  *
  * Every result is bit for bit the Python one: IEEE double arithmetic in the same order,
@@ -16,6 +16,8 @@
  *       -> None (out filled)                                     [profile._time_at_length_py]
  *   segment_distances(q, a, d, lo, hi, out)
  *       -> None (out filled)                                   [dynamics._segment_distances_py]
+ *   peak_speeds(v_s, v_e, length, v_cap, a, j, a_dn, j_dn, out, newton, rel)
+ *       -> None (out filled)                                        [feedrate._peak_speed_py]
  *
  * The arrays are C-contiguous float64 (lo, hi: int64) buffers (the caller makes them so).
  */
@@ -514,7 +516,104 @@ done:
     return result;
 }
 
+/* ------------------------------------------------------------------ peak speed */
+
+/* feedrate._distance_arr for one element: D(v_a -> v_b) of an S-curve with limits a, j */
+static inline double distance(double v_a, double v_b, double a, double j)
+{
+    double dv = fabs(v_b - v_a);
+    double t = (dv * j >= a * a) ? dv / a + a / j : 2.0 * sqrt(dv / j);
+    return 0.5 * (v_a + v_b) * t;
+}
+
+/* feedrate._pair_distance_mm */
+static inline double pair_distance(double v_s, double v_p, double v_e, double a, double j,
+                                   double a_dn, double j_dn)
+{
+    return distance(v_s, v_p, a, j) + distance(v_p, v_e, a_dn, j_dn);
+}
+
+/* feedrate._distance_slope */
+static inline double distance_slope(double v_a, double v_b, double a, double j)
+{
+    double dv = np_maximum(v_b - v_a, 0.0);
+    int reached = dv * j >= a * a;
+    double t = reached ? dv / a + a / j : 2.0 * sqrt(dv / j);
+    double t_prime = reached ? 1.0 / a : 1.0 / sqrt(dv * j);
+    return 0.5 * t + 0.5 * (v_a + v_b) * t_prime;
+}
+
+/* feedrate._peak_speed_py for one piece (its arrays broadcast by the caller). */
+static double peak_one(double v_s, double v_e, double length, double v_cap, double a, double j,
+                       double a_dn, double j_dn, int newton, double rel)
+{
+    double lo = np_maximum(v_s, v_e);
+    double hi = np_maximum(v_cap, lo);
+    if (length <= 0.0)
+        return lo;
+    if (!(pair_distance(v_s, hi, v_e, a, j, a_dn, j_dn) > length))
+        return hi;
+    double x = 0.5 * (lo + hi);
+    for (int i = 0; i < newton; i++) {
+        double f = pair_distance(v_s, x, v_e, a, j, a_dn, j_dn) - length;
+        if (f <= 0.0)
+            lo = x;
+        else
+            hi = x;
+        double slope = distance_slope(v_s, x, a, j) + distance_slope(v_e, x, a_dn, j_dn);
+        double step = x - f / slope;
+        x = (isfinite(step) && step >= lo && step <= hi) ? step : 0.5 * (lo + hi);
+    }
+    double near_lo = np_maximum(x * (1.0 - rel), lo);
+    double near_hi = np_minimum(x * (1.0 + rel), hi);
+    if (pair_distance(v_s, near_lo, v_e, a, j, a_dn, j_dn) <= length)
+        lo = near_lo;
+    if (pair_distance(v_s, near_hi, v_e, a, j, a_dn, j_dn) > length)
+        hi = near_hi;
+    for (int i = 0; i < 1100; i++) {
+        double mid = 0.5 * (lo + hi);
+        if (!(mid > lo && mid < hi))
+            break;
+        if (pair_distance(v_s, mid, v_e, a, j, a_dn, j_dn) <= length)
+            lo = mid;
+        else
+            hi = mid;
+    }
+    return lo;
+}
+
+static PyObject *peak_speeds(PyObject *self, PyObject *args)
+{
+    Py_buffer b[9];
+    int newton;
+    double rel;
+    if (!PyArg_ParseTuple(args, "y*y*y*y*y*y*y*y*w*id", &b[0], &b[1], &b[2], &b[3], &b[4], &b[5],
+                          &b[6], &b[7], &b[8], &newton, &rel))
+        return NULL;
+    PyObject *result = NULL;
+    for (int i = 1; i < 9; i++)
+        if (b[i].len != b[0].len || b[i].len % (Py_ssize_t)sizeof(double)) {
+            PyErr_SetString(PyExc_ValueError, "peak_speeds: the columns differ in length");
+            goto done;
+        }
+    Py_ssize_t n = b[0].len / (Py_ssize_t)sizeof(double);
+    const double *v_s = b[0].buf, *v_e = b[1].buf, *len = b[2].buf, *cap = b[3].buf,
+                 *a = b[4].buf, *j = b[5].buf, *a_dn = b[6].buf, *j_dn = b[7].buf;
+    double *out = b[8].buf;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t i = 0; i < n; i++)
+        out[i] = peak_one(v_s[i], v_e[i], len[i], cap[i], a[i], j[i], a_dn[i], j_dn[i], newton,
+                          rel);
+    Py_END_ALLOW_THREADS
+    result = Py_NewRef(Py_None);
+done:
+    for (int i = 0; i < 9; i++)
+        PyBuffer_Release(&b[i]);
+    return result;
+}
+
 static PyMethodDef methods[] = {
+    {"peak_speeds", peak_speeds, METH_VARARGS, "feedrate._peak_speed_py, compiled."},
     {"segment_distances", segment_distances, METH_VARARGS,
      "dynamics._segment_distances_py, compiled."},
     {"gated_rise", gated_rise, METH_VARARGS, "profile._gated_rise_py, compiled."},
@@ -524,7 +623,7 @@ static PyMethodDef methods[] = {
 
 static struct PyModuleDef module = {
     PyModuleDef_HEAD_INIT, "_kernels",
-    "Compiled kernels of the plan stage (profile.py, dynamics.py).", -1, methods,
+    "Compiled kernels of the plan stage (profile.py, dynamics.py, feedrate.py).", -1, methods,
 };
 
 PyMODINIT_FUNC PyInit__kernels(void) { return PyModule_Create(&module); }
