@@ -363,41 +363,57 @@ static inline double phase_s(double t, double s0, double v0, double c2, double c
     return s0 + t * (v0 + t * (c2 + t * c3));
 }
 
-/* _time_at_length_py for one query s: index of its phase found by the caller. */
-static double time_at(double s, double s0, double v0, double a0, double jerk, double dur,
-                      double rel, int newton, int halvings, int whole)
+/* _time_at_length_py for TAL_BATCH queries at a time, in lockstep: each query's Newton steps
+ * and halvings are a chain of dependent operations, so the queries of a batch are stepped
+ * together (their chains overlap in the processor; the selections are branch-free) — the
+ * same operations per query as one at a time. s0 … dur: each query's phase. */
+#define TAL_BATCH 8
+
+static void time_at_batch(int m, const double *s, const double *s0, const double *v0,
+                          const double *a0, const double *jerk, const double *dur, double rel,
+                          int newton, int halvings, int whole, double *out)
 {
-    double c2 = 0.5 * a0;
-    double c3 = jerk / 6.0;
-    double end = phase_s(dur, 0.0, v0, c2, c3);
-    double t = np_clip((end > 0.0) ? dur * ((s - s0) / end) : 0.0, 0.0, dur);
-    double lo = 0.0, hi = dur;
-    for (int i = 0; i < newton; i++) {
-        double f = phase_s(t, s0, v0, c2, c3) - s;
-        int below = f < 0.0;
-        if (below)
-            lo = t;
-        else
-            hi = t;
-        double speed = v0 + t * (2.0 * c2 + 3.0 * c3 * t);
-        double step = t - f / speed;
-        t = (speed > 0.0 && step >= lo && step <= hi) ? step : 0.5 * (lo + hi);
+    double c2[TAL_BATCH], c3[TAL_BATCH], t[TAL_BATCH], lo[TAL_BATCH], hi[TAL_BATCH];
+    int count[TAL_BATCH], most = 0;
+    for (int q = 0; q < m; q++) {
+        c2[q] = 0.5 * a0[q];
+        c3[q] = jerk[q] / 6.0;
+        double end = phase_s(dur[q], 0.0, v0[q], c2[q], c3[q]);
+        t[q] = np_clip((end > 0.0) ? dur[q] * ((s[q] - s0[q]) / end) : 0.0, 0.0, dur[q]);
+        lo[q] = 0.0;
+        hi[q] = dur[q];
     }
-    double near_lo = np_maximum(t * (1.0 - rel), 0.0);
-    double near_hi = np_minimum(t * (1.0 + rel), dur);
-    int near = (near_hi > near_lo) && (phase_s(near_lo, s0, v0, c2, c3) < s) &&
-               !(phase_s(near_hi, s0, v0, c2, c3) < s);
-    lo = near ? near_lo : 0.0;
-    hi = near ? near_hi : dur;
-    int count = near ? halvings : whole;
-    for (int i = 0; i < count; i++) {
-        double mid = 0.5 * (lo + hi);
-        if (phase_s(mid, s0, v0, c2, c3) < s)
-            lo = mid;
-        else
-            hi = mid;
+    for (int i = 0; i < newton; i++)
+        for (int q = 0; q < m; q++) {
+            double tq = t[q];
+            double f = phase_s(tq, s0[q], v0[q], c2[q], c3[q]) - s[q];
+            int below = f < 0.0;
+            lo[q] = below ? tq : lo[q];
+            hi[q] = below ? hi[q] : tq;
+            double speed = v0[q] + tq * (2.0 * c2[q] + 3.0 * c3[q] * tq);
+            double step = tq - f / speed;
+            t[q] = (speed > 0.0 && step >= lo[q] && step <= hi[q]) ? step : 0.5 * (lo[q] + hi[q]);
+        }
+    for (int q = 0; q < m; q++) {
+        double near_lo = np_maximum(t[q] * (1.0 - rel), 0.0);
+        double near_hi = np_minimum(t[q] * (1.0 + rel), dur[q]);
+        int near = (near_hi > near_lo) && (phase_s(near_lo, s0[q], v0[q], c2[q], c3[q]) < s[q]) &&
+                   !(phase_s(near_hi, s0[q], v0[q], c2[q], c3[q]) < s[q]);
+        lo[q] = near ? near_lo : 0.0;
+        hi[q] = near ? near_hi : dur[q];
+        count[q] = near ? halvings : whole;
+        most = count[q] > most ? count[q] : most;
     }
-    return hi;
+    for (int i = 0; i < most; i++)
+        for (int q = 0; q < m; q++) {
+            double mid = 0.5 * (lo[q] + hi[q]);
+            int live = i < count[q];
+            int below = phase_s(mid, s0[q], v0[q], c2[q], c3[q]) < s[q];
+            lo[q] = (live && below) ? mid : lo[q];
+            hi[q] = (live && !below) ? mid : hi[q];
+        }
+    for (int q = 0; q < m; q++)
+        out[q] = hi[q];
 }
 
 static PyObject *time_at_length(PyObject *self, PyObject *args)
@@ -428,24 +444,32 @@ static PyObject *time_at_length(PyObject *self, PyObject *args)
                  *dur = b[4].buf, *start = b[5].buf, *s = b[6].buf;
     double *out = b[7].buf;
     Py_BEGIN_ALLOW_THREADS
-    for (Py_ssize_t q = 0; q < m; q++) {
-        /* searchsorted(s0, s, side="right") - 1, clipped to [0, n - 1] */
-        Py_ssize_t lo = 0, hi = n;
-        double x = s[q];
-        while (lo < hi) {
-            Py_ssize_t mid = lo + (hi - lo) / 2;
-            if (x < s0[mid]) /* numpy: first index whose value is > x (NaN sorts last) */
-                hi = mid;
-            else
-                lo = mid + 1;
+    for (Py_ssize_t q0 = 0; q0 < m; q0 += TAL_BATCH) {
+        int count = (int)(m - q0 < TAL_BATCH ? m - q0 : TAL_BATCH);
+        double ph[6][TAL_BATCH], t[TAL_BATCH];
+        for (int q = 0; q < count; q++) {
+            /* searchsorted(s0, s, side="right") - 1, clipped to [0, n - 1] */
+            Py_ssize_t lo = 0, hi = n;
+            double x = s[q0 + q];
+            while (lo < hi) {
+                Py_ssize_t mid = lo + (hi - lo) / 2;
+                if (x < s0[mid]) /* numpy: first index whose value is > x (NaN sorts last) */
+                    hi = mid;
+                else
+                    lo = mid + 1;
+            }
+            Py_ssize_t k = lo - 1;
+            if (k < 0)
+                k = 0;
+            if (k > n - 1)
+                k = n - 1;
+            ph[0][q] = s0[k], ph[1][q] = v0[k], ph[2][q] = a0[k], ph[3][q] = jerk[k];
+            ph[4][q] = dur[k], ph[5][q] = start[k];
         }
-        Py_ssize_t k = lo - 1;
-        if (k < 0)
-            k = 0;
-        if (k > n - 1)
-            k = n - 1;
-        out[q] = start[k] + time_at(x, s0[k], v0[k], a0[k], jerk[k], dur[k], rel, newton,
-                                    halvings, whole);
+        time_at_batch(count, s + q0, ph[0], ph[1], ph[2], ph[3], ph[4], rel, newton, halvings,
+                      whole, t);
+        for (int q = 0; q < count; q++)
+            out[q0 + q] = ph[5][q] + t[q]; /* the phase's start time + the time in it */
     }
     Py_END_ALLOW_THREADS
     result = Py_NewRef(Py_None);

@@ -430,8 +430,9 @@ class PathIndex:
         return np.unique(np.concatenate(found)) if found else np.zeros(0, dtype=np.int64)
 
     def _piece_polylines(self, cand: np.ndarray) -> list[tuple]:
-        """(points, box lows, box highs) of the dense polylines (:func:`path_counts`) of
-        pieces ``cand``. Each piece's are computed once (every query and re-plan of the
+        """(points, box lows, box highs, None) of the dense polylines (:func:`path_counts`)
+        of pieces ``cand`` — (points, None, None, segment directions) for one of at most
+        :data:`CHUNK` segments. Each piece's are computed once (every query and re-plan of the
         program asks the same pieces again), the points the same numbers as a fresh
         :meth:`PathTable.points_at_fraction` (its formulas are elementwise); the boxes bound
         runs of :data:`CHUNK` segments."""
@@ -453,10 +454,13 @@ class PathIndex:
             ends = np.cumsum(c).tolist()
             for j, a, z in zip(miss.tolist(), [0, *ends[:-1]], ends):
                 p = pts[a:z]
+                if z - a - 1 <= self.CHUNK:  # one box: its segments' directions instead
+                    cache[j] = (p, None, None, p[1:] - p[:-1])
+                    continue
                 lo_s, hi_s = np.minimum(p[:-1], p[1:]), np.maximum(p[:-1], p[1:])
                 heads = np.arange(0, lo_s.shape[0], self.CHUNK)
                 cache[j] = (p, np.minimum.reduceat(lo_s, heads, axis=0),
-                            np.maximum.reduceat(hi_s, heads, axis=0))  # fmt: skip
+                            np.maximum.reduceat(hi_s, heads, axis=0), None)  # fmt: skip
             self._cached_points += int(c.sum())
         return [cache[j] for j in cand.tolist()]
 
@@ -478,7 +482,15 @@ class PathIndex:
             starts.append(a[keep])
             dirs.append(b[keep] - a[keep])
             cand = cand[~line]
-        for p, lo_c, hi_c in self._piece_polylines(cand):
+        for p, lo_c, hi_c, d in self._piece_polylines(cand):
+            if d is not None:
+                # A polyline of at most CHUNK segments: all of them. A segment whose box
+                # misses [lo_q, hi_q] is farther from every query than the block's upper
+                # bound, so measuring it changes no distance (the caller keeps the
+                # smaller), and it costs less than testing it (numpy calls per piece).
+                starts.append(p[:-1])
+                dirs.append(d)
+                continue
             hit = np.flatnonzero(np.all((hi_c >= lo_q) & (lo_c <= hi_q), axis=1))
             if hit.size == 0:
                 continue
