@@ -53,6 +53,7 @@ def _both(run):
             mp.setattr(fastlane, "MIN_RUN_LINES", 1)
             if slow:
                 mp.setattr(interpret_module, "plain_run", lambda *a, **k: None)
+                mp.setattr(interpret_module, "nurbs_words", lambda line: None)
             try:
                 results.append(("ok", _key(run())))
             except NurbsCncError as exc:
@@ -103,6 +104,35 @@ EDGE_CASES = [
 ]
 
 
+# G6.2 blocks: continuation lines the NURBS lane reads (points with knots, knot-only lines,
+# N numbers, lower case, blanks, weights, G91, G20, offsets) and the lines it leaves to the
+# general path (other orders, comments, F, bad numbers), with errors at the right line. A
+# clamped cubic (P4): four points at K0, six more, then four knots K7 end the block.
+_G6 = "G6.2 P4 K0 X0 Y0 R1\nK0 X0.5 Y0.2 R1\nK0 X1 Y-0.2 R1\nK0 X1.5 Y0 R1\n"
+_G6_BODY = "".join(f"K{k} X{k * 1.5 + 2:g} Y{(-1) ** k * 0.5:g} R1\n" for k in range(1, 7))
+_G6_END = "K7\nK7\nK7\nK7\n"
+EDGE_CASES += [
+    "G21 G90 F600\n" + _G6 + _G6_BODY + _G6_END + "G1 X0 Y0\nM2",
+    "G21 G90 F600\n" + _G6 + "n5 k1 x4 y.5 r2\nK2X5Y1\n K3 \t X6 Y1 Z0.5 R1.5\nK4 X7 Y0\n"
+    "K5 X8\nK6 Y2 R1\n" + _G6_END + "M2",
+    "G21 G91 F600\nG6.2 P3 K0 X0 Y0\nK0 X1 Y1\nK0 X1 Y0\n"
+    + "".join(f"K{k} X1 Y{k % 2}\n" for k in range(1, 9)) + "K9\nK9\nK9\nG90\nM2",
+    "G20 G10 L2 P1 X1 Y2\nG54 F20\n" + _G6 + _G6_BODY + _G6_END + "M2",
+    "G21 F600\n" + _G6 + _G6_BODY.replace("K3 ", "X4 K3 ") + _G6_END + "M2",  # order
+    "G21 F600\n" + _G6 + _G6_BODY.replace("K3 X6.5", "K3 X6.5 (c)") + _G6_END + "M2",
+    "G21 F600\n" + _G6 + _G6_BODY.replace("K4 ", "K2 ") + _G6_END + "M2",  # knots decrease
+    "G21 F600\n" + _G6 + _G6_BODY.replace("K4 X8 Y0.5 R1", "K4 X8 Y0.5 R0") + _G6_END + "M2",
+    "G21 F600\n" + _G6 + _G6_BODY.replace("K4 X8", "K4 X1.2.3") + _G6_END + "M2",
+    "G21 F600\n" + _G6 + _G6_BODY.replace("K4 X8", "K4 X9e9") + _G6_END + "M2",
+    "G21 F600\n" + _G6 + _G6_BODY.replace("K4 X8", "K4 X9999999999") + _G6_END + "M2",
+    "G21 F600\n" + _G6 + _G6_BODY + "K7\nK7 X1 Y1\nK7\nK7\nK7\nM2",  # a point after knots
+    "G21 F600\n" + _G6 + _G6_BODY.replace("K5 X9.5 Y-0.5 R1", "K5 X9.5 Y-0.5 F300")
+    + _G6_END + "M2",
+    "G21 F600\n" + _G6 + _G6_BODY + _G6_END + "K7\nM2",  # one knot too many: a new line
+    "G21 F600\n" + _G6 + _G6_BODY + "K7\nK7\nM2",  # the block never ends
+]
+
+
 @pytest.mark.parametrize("text", EDGE_CASES)
 def test_fast_lane_edge_cases(text):
     fast, slow = _both(lambda: interpret_text(text))
@@ -126,6 +156,26 @@ def test_fast_lane_runs_in_bulk():
     assert len(prog.segments) == 4999  # X0 Y0 from X0 Y0 goes nowhere
     assert len(calls) <= 3
     assert prog.blocks == 5002
+
+
+def test_g6_lane_reads_a_long_block_without_parsing(monkeypatch):
+    """A 2,000-point G6.2 block: its continuation lines go through the NURBS lane (none of
+    them parsed), and the program is the one line by line gives."""
+    from nurbscnc.program import control
+
+    n = 2000  # points; a clamped uniform cubic: knots 0 ×4, 1 … n − 4, n − 3 ×4
+    knots = [0] * 4 + list(range(1, n - 3)) + [n - 3] * 4
+    text = "G21 G90 F600\nG6.2 P4 K0 X0 Y0 R1\n" + "".join(
+        f"K{knots[k]} X{k * 0.1:.4f} Y{math.sin(k / 30):.5f} R1\n" for k in range(1, n)) \
+        + "".join(f"K{x}\n" for x in knots[n:]) + "M2\n"  # fmt: skip
+    parsed = []
+    real = control.parse_line
+    monkeypatch.setattr(control, "parse_line", lambda line, n: parsed.append(n) or real(line, n))
+    fast = interpret_text(text)
+    assert len(parsed) < 10  # the first lines and M2
+    assert fast.blocks == n + 6  # every line has words
+    with_lane, line_by_line = _both(lambda: interpret_text(text))
+    assert with_lane == line_by_line == ("ok", _key(fast))
 
 
 def test_options_can_turn_the_lane_off():

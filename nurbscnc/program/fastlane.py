@@ -1,4 +1,5 @@
-"""The fast lane: runs of plain straight-move lines interpreted in bulk (issue 14).
+"""The fast lane: runs of plain straight-move lines interpreted in bulk (issue 14), and the
+continuation lines of G6.2 blocks read without the general parser (:func:`nurbs_words`).
 
 CAM output is mostly lines such as ``N120 G1 X12.5 Y-3.25 Z-1 F600`` or ``X12.5 Y-3.25``:
 straight moves under G0/G1 with constant words and nothing else. Interpreting them one at a
@@ -104,6 +105,47 @@ def _strict_rows(lines, n: int) -> list:
             break
         rows.append(row)
     return rows
+
+
+# A G6.2 continuation line (a control point with its knot, or a knot alone): letters,
+# then numbers, in groups (letter, number) for K, X, Y, Z, R in this order.
+_G6_LINE = re.compile(
+    r"[ \t]*(?:[nN][0-9]+[ \t]*)?"
+    r"([kK])[ \t]*" + _NUM + r"[ \t]*"
+    r"(?:([xX])[ \t]*" + _NUM + r"[ \t]*)?"
+    r"(?:([yY])[ \t]*" + _NUM + r"[ \t]*)?"
+    r"(?:([zZ])[ \t]*" + _NUM + r"[ \t]*)?"
+    r"(?:([rR])[ \t]*" + _NUM + r"[ \t]*)?"
+)
+
+
+def nurbs_words(line: str) -> dict | None:
+    """The words of a G6.2 continuation line, ``[N<int>] K<num> [X<num>] [Y<num>] [Z<num>]
+    [R<num>]`` in this order (any case, blanks between words), as the general path reads
+    them: ``{letter: (value, column)}``, the column 1-based at the letter; None for any
+    other line (a comment, another word or order, a number ``float`` refuses or reads as
+    infinite): those go to the general path, which also reports every error. The
+    interpreter hands these words to the G6.2 block (nurbsblock.py ``g6``) as the general
+    path would after parsing and the execution order, which do nothing else for them."""
+    match = _G6_LINE.fullmatch(line)
+    if match is None:
+        return None
+    words = {}
+    for g in range(1, 11, 2):
+        letter = match.group(g)
+        if letter is None:
+            continue
+        try:
+            value = float(match.group(g + 1))
+        except ValueError:
+            return None
+        if value == _INF or value == -_INF:
+            return None
+        words[letter.upper()] = (value, match.start(g) + 1)
+    return words
+
+
+_INF = float("inf")
 
 
 class BulkState(NamedTuple):

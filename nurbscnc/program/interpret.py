@@ -36,12 +36,18 @@ from nurbscnc.geometry.segments import (
     path_control,
     vec3,
 )
-from nurbscnc.program import arcs, coords
+from nurbscnc.program import arcs, coords, fastlane
 from nurbscnc.program.compensation import MSG_ARC_AFTER_EXIT, CompMove, CutterComp
 from nurbscnc.program.control import N_LOCAL, ControlFlow, Frame, Source
 from nurbscnc.program.cycles import CycleState, TooManyMoves, expand_cycle
 from nurbscnc.program.expressions import MAX_PARAMETER, ExpressionError, evaluate
-from nurbscnc.program.fastlane import BulkState, make_lines, pause_cyclic_gc, plain_run
+from nurbscnc.program.fastlane import (
+    BulkState,
+    make_lines,
+    nurbs_words,
+    pause_cyclic_gc,
+    plain_run,
+)
 from nurbscnc.program.modal import (
     CANNED_CYCLES,
     G_GROUP,
@@ -347,9 +353,12 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
                     raise self.error(f"end of file inside subroutine o{frame.label}")
                 break
             self.source = source
-            if fast and source._blocks[pc] is None and self.comp is None and self.nurbs is None \
-                    and self.comp_exit is None and self.m.feed_mode == 940 and self.m.absolute:
-                count = self.bulk(source, pc)
+            if fast and source._blocks[pc] is None and self.comp is None \
+                    and self.comp_exit is None and self.m.feed_mode == 940:
+                if self.nurbs is None:
+                    count = self.bulk(source, pc) if self.m.absolute else 0
+                else:
+                    count = self.g6_lane(source, frame, pc)
                 if count:
                     frame.pc = pc + count
                     self.executed += count
@@ -433,6 +442,33 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines):
         self.prog = list(new.prog_mm)
         self.line_no = pc + run.count
         return run.count
+
+    def g6_lane(self, source: Source, frame, pc: int) -> int:
+        """Inside a G6.2 block, the run of continuation lines at ``source.lines[pc]``
+        (:func:`~nurbscnc.program.fastlane.nurbs_words`: a point and its knot, or a knot)
+        handed to the block (``g6``) without parsing them: the general path would parse
+        each, then run the execution order, which does nothing else for these words (the
+        same points, knots, lines and errors: tests/test_interpret_fastlane.py). A run of
+        fewer than ``MIN_RUN_LINES`` lines is left to it (see fastlane.py). Returns the lines
+        consumed (0: none), up to the one that ends the block."""
+        lines = source.lines
+        least = fastlane.MIN_RUN_LINES
+        end = min(len(lines), pc + least)
+        if end - pc < least or any(nurbs_words(lines[i]) is None for i in range(pc, end)):
+            return 0
+        if source.worded is None:
+            source.worded = bytearray(len(source.lines))
+        i = pc
+        while i < len(lines) and self.nurbs is not None and source._blocks[i] is None:
+            words = nurbs_words(lines[i])
+            if words is None:
+                break
+            self.line_no = i + 1
+            frame.pc = i + 1
+            self.g6(words, set(), None)
+            source.worded[i] = 1
+            i += 1
+        return i - pc
 
     def finish(self) -> None:
         self.comp_off()  # the end of the program ends compensation as G40 does
