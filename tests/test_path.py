@@ -267,3 +267,26 @@ def test_ph_rows_columnar_and_objects_share_the_compact_coefficients():
         got, _ = table.points(np.full(s.size, r), s)
         want = geom.point_mm(geom.param_at_length(s))
         np.testing.assert_allclose(got, want, rtol=0, atol=1e-9)
+
+
+def test_path_table_of_nurbs_rows_gathered_whole_is_the_row_by_row_table():
+    """PathTable.of on a program's NURBS cells (two curves, one a moved copy): the table
+    gathered whole equals the one built row by row, column by column, bit for bit (its
+    curves the same objects in the same order)."""
+    from nurbscnc.geometry.path import PathTable
+    from nurbscnc.machine.profile import load_machine
+    from nurbscnc.plan.pieces import segment_pieces
+    from nurbscnc.program.interpret import interpret_text
+    from tests.test_plan_kernels import _airfoil_twice
+
+    pieces = segment_pieces(interpret_text(_airfoil_twice()).segments, load_machine())
+    rows_obj = sorted(pieces.objects)
+    rows = [(pieces.kind[r], pieces.objects[r][0], pieces.length_mm[r], *pieces.objects[r][1:],
+             pieces.line[r]) for r in rows_obj]  # fmt: skip
+    whole, by_row = PathTable.of(rows), PathTable.of(rows, bulk=False)
+    assert len(whole.objects) == 2 and all(a is b for a, b in zip(whole.objects, by_row.objects))
+    for name in whole.__dataclass_fields__:
+        a, b = getattr(whole, name), getattr(by_row, name)
+        if isinstance(a, np.ndarray):
+            assert a.dtype == b.dtype and a.shape == b.shape, name
+            assert a.tobytes() == b.tobytes(), name

@@ -65,6 +65,13 @@ def test_gated_rise_kernel_is_the_python_flank_bit_for_bit():
         found += 1
         assert got[0] == ref[0] and got[1] == ref[1] and got[2] == ref[2]
         assert all(type(x) is float for x in got[0] + got[1])
+        # the memo's merging (profile._merged, rising and reversed) compiled too
+        merged = profile._kernels.gated_rise_merged(
+            v0, v_top, d.tobytes(), c.tobytes(), a, j, dt, profile.GATE_MIN_STEP_S,
+            profile.GATE_GALLOP, profile.GATE_MAX_STEPS)  # fmt: skip
+        assert (merged[0], merged[1]) == profile._merged(ref[0], ref[1])
+        assert (merged[2], merged[3]) == profile._merged(ref[0][::-1], ref[1][::-1])
+        assert merged[4] == ref[2]
     assert found > 500 and none > 10  # both outcomes exercised
 
 
@@ -190,3 +197,4 @@ def test_airfoil_plan_is_the_same_without_the_kernels(monkeypatch):
     assert np.array_equal(_bits(fast.plan.profile.junction_speeds_mm_s),
                           _bits(slow.plan.profile.junction_speeds_mm_s))  # fmt: skip
     assert fast.check.overs.worst_mm == slow.check.overs.worst_mm
+

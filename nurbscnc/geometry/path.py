@@ -193,10 +193,14 @@ class PathTable:
 
     # -- building ---------------------------------------------------------------------------
     @classmethod
-    def of(cls, rows) -> PathTable:
+    def of(cls, rows, bulk: bool = True) -> PathTable:
         """A table from ``rows``: (kind, geometry, length_mm, u_a, u_b, s_a_mm, line) per
-        piece, geometry a LineGeometry, ArcGeometry, PHQuintic or NurbsCurve (one pass)."""
+        piece, geometry a LineGeometry, ArcGeometry, PHQuintic or NurbsCurve (one pass).
+        ``bulk``: rows that are all NURBS cells gathered whole (:meth:`_of_curves`; False:
+        row by row, what the tests compare it with)."""
         k = len(rows)
+        if bulk and k and all(int(r[0]) == Kind.NURBS for r in rows):
+            return cls._of_curves(rows)
         kind = np.empty(k, dtype=np.int8)
         length = np.empty(k)
         line = np.zeros(k, dtype=np.int64)
@@ -246,6 +250,25 @@ class PathTable:
         table = cls(kind, length, line, t["start"], t["end"], t["origin"], t["e1"], t["e2"],
                     t["n"], radius, angle, helix, *ph, ph_slot, obj_id, tuple(objects), u_a,
                     u_b, s_a)  # fmt: skip
+        return table.frozen()
+
+    @classmethod
+    def _of_curves(cls, rows) -> PathTable:
+        """:meth:`of` for rows that are all NURBS cells (a G6.2 program's): the same table,
+        its columns gathered whole instead of row by row (0.9 µs a row: an airfoil's 495
+        cells cost 0.45 ms)."""
+        k = len(rows)
+        ids: dict[int, int] = {}  # curve → its index, in order of first use
+        obj_id = np.fromiter((ids.setdefault(id(r[1]), len(ids)) for r in rows),
+                             dtype=np.intp, count=k)  # fmt: skip
+        objects = tuple({id(r[1]): r[1] for r in rows}.values())
+        length, u_a, u_b, s_a = (np.array([r[c] for r in rows], dtype=float) for c in (2, 3, 4, 5))
+        line = np.array([r[6] for r in rows], dtype=np.int64)
+        zeros3 = [np.zeros((3, k)) for _ in range(6)]  # start, end, origin, e1, e2, n
+        ph = (np.zeros((6, 0)), np.zeros((5, 0)), np.zeros((6, 0)), np.zeros((6, 0)))
+        table = cls(np.full(k, int(Kind.NURBS), dtype=np.int8), length, line, *zeros3,
+                    np.zeros(k), np.zeros(k), np.zeros(k), *ph, np.full(k, -1, dtype=np.intp),
+                    obj_id, objects, u_a, u_b, s_a)  # fmt: skip
         return table.frozen()
 
     def frozen(self) -> PathTable:

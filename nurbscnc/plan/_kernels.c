@@ -12,6 +12,8 @@
  *
  *   gated_rise(v0, v_top, gate_d, gate_c, a_max, j_max, dt, min_step, gallop, max_steps)
  *       -> (durations list, jerks list, distance) or None       [profile._gated_rise_py]
+ *   gated_rise_merged(the same) -> (rise durations, rise jerks, descent durations,
+ *       descent jerks, distance) or None          [profile._gated_rise_memo's merging]
  *   time_at_length(s0, v0, a0, jerk, duration, start, s, out, rel, newton, halvings, whole)
  *       -> None (out filled)                                     [profile._time_at_length_py]
  *   segment_distances(q, a, d, lo, hi, out)
@@ -347,6 +349,58 @@ done:
     return result;
 }
 
+/* profile._merged: consecutive phases of equal jerk as one (in order, or reversed). */
+static int merge_phases(const Phases *in, int reverse, Phases *out)
+{
+    for (Py_ssize_t k = 0; k < in->n; k++) {
+        Py_ssize_t i = reverse ? in->n - 1 - k : k;
+        double d = in->d[i], jk = in->j[i];
+        if (d <= 0.0)
+            continue;
+        if (out->n && out->j[out->n - 1] == jk)
+            out->d[out->n - 1] += d;
+        else if (push(out, d, jk) < 0)
+            return -1;
+    }
+    return 0;
+}
+
+/* gated_rise_merged(...): gated_rise's flank merged as profile._gated_rise_memo merges it:
+ * (rise durations, rise jerks, descent durations, descent jerks, distance) or None — the
+ * descent the reversed steps merged in their own order. */
+static PyObject *gated_rise_merged(PyObject *self, PyObject *args)
+{
+    PyObject *flank = gated_rise(self, args);
+    if (flank == NULL || flank == Py_None)
+        return flank;
+    PyObject *durs = PyTuple_GET_ITEM(flank, 0), *jerks = PyTuple_GET_ITEM(flank, 1);
+    Py_ssize_t n = PyList_GET_SIZE(durs);
+    Phases in = {NULL, NULL, 0, 0}, up = {NULL, NULL, 0, 0}, down = {NULL, NULL, 0, 0};
+    PyObject *result = NULL;
+    for (Py_ssize_t i = 0; i < n; i++)
+        if (push(&in, PyFloat_AS_DOUBLE(PyList_GET_ITEM(durs, i)),
+                 PyFloat_AS_DOUBLE(PyList_GET_ITEM(jerks, i))) < 0) {
+            PyErr_NoMemory();
+            goto done;
+        }
+    if (merge_phases(&in, 0, &up) < 0 || merge_phases(&in, 1, &down) < 0) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    PyObject *parts[4] = {list_of(up.d, up.n), list_of(up.j, up.n), list_of(down.d, down.n),
+                          list_of(down.j, down.n)};
+    if (parts[0] && parts[1] && parts[2] && parts[3])
+        result = Py_BuildValue("(NNNNO)", parts[0], parts[1], parts[2], parts[3],
+                               PyTuple_GET_ITEM(flank, 2));
+    else
+        for (int i = 0; i < 4; i++)
+            Py_XDECREF(parts[i]);
+done:
+    Py_DECREF(flank);
+    free(in.d), free(in.j), free(up.d), free(up.j), free(down.d), free(down.j);
+    return result;
+}
+
 /* ------------------------------------------------------------------ time at length */
 
 /* numpy's maximum/minimum of two floats (NaN propagating) and clip's (x, lo, hi) */
@@ -641,6 +695,8 @@ static PyMethodDef methods[] = {
     {"segment_distances", segment_distances, METH_VARARGS,
      "dynamics._segment_distances_py, compiled."},
     {"gated_rise", gated_rise, METH_VARARGS, "profile._gated_rise_py, compiled."},
+    {"gated_rise_merged", gated_rise_merged, METH_VARARGS,
+     "profile._gated_rise_py, compiled, its phases merged (profile._merged)."},
     {"time_at_length", time_at_length, METH_VARARGS, "profile._time_at_length_py, compiled."},
     {NULL, NULL, 0, NULL},
 };

@@ -975,6 +975,13 @@ GATED_MEMO = 4096
 
 @functools.lru_cache(maxsize=GATED_MEMO)
 def _gated_rise_memo(v0, v1, gates_b: bytes, caps_b: bytes, a, j):
+    if _kernels is not None:  # the flank and its merging compiled (the same floats)
+        got = _kernels.gated_rise_merged(float(v0), float(v1), gates_b, caps_b, float(a),
+                                         float(j), GATE_STEP_S, GATE_MIN_STEP_S, GATE_GALLOP,
+                                         GATE_MAX_STEPS)  # fmt: skip
+        if got is None:
+            return None
+        return (tuple(got[0]), tuple(got[1])), (tuple(got[2]), tuple(got[3])), got[4]
     result = _gated_rise(v0, v1, np.frombuffer(gates_b), np.frombuffer(caps_b), a, j)
     if result is None:
         return None
