@@ -224,3 +224,39 @@ def test_a_near_cusp_piece_has_a_bounded_polyline():
     h = np.minimum(dynamics.MAX_SPACING_MM, np.sqrt(8.0 * CHORD_MM / kappa))
     free = counts < dynamics.MAX_PIECE_POINTS
     assert np.all(counts[free] == np.maximum(np.ceil(pieces.length_mm[free] / h[free]) + 1, 3))
+
+
+def test_passes_at_the_same_place_are_measured_once_with_the_same_result(monkeypatch):
+    """programs/naca2415.nc's airfoil cut five times at the same place (multi-pass
+    engraving, spring passes): the check measures a point's distance to the coincident
+    passes once (PathIndex._distinct: the polylines are the same numbers), and the plan,
+    its re-plans and its contour statistics are the very ones of measuring every pass."""
+    from pathlib import Path
+
+    from nurbscnc.machine.profile import load_machine
+    from nurbscnc.pipeline import run_program
+    from nurbscnc.plan import dynamics
+    from nurbscnc.program.interpret import interpret_text
+
+    lines = (Path(__file__).resolve().parents[1] / "programs" / "naca2415.nc").read_text()
+    body = [ln for ln in lines.splitlines()[2:] if ln.strip() and not ln.startswith("M2")]
+    prog = interpret_text("G21 G17 G90 G94\n" + "\n".join(body * 5) + "\nM2\n")
+    machine = load_machine()
+    calls = []
+    real = dynamics.PathIndex._distinct
+
+    def counting(self, cand):
+        out = real(self, cand)
+        calls.append((cand.size, out.size))
+        return out
+
+    monkeypatch.setattr(dynamics.PathIndex, "_distinct", counting)
+    monkeypatch.setattr(dynamics.PathIndex, "DISTINCT_MIN", 8)  # every block of 8 or more
+    once = run_program(prog, machine)
+    assert any(after * 4 < before for before, after in calls)  # passes were merged
+    monkeypatch.setattr(dynamics.PathIndex, "DISTINCT_MIN", 1 << 60)
+    every = run_program(prog, machine)
+    assert once.cycle_time_s == every.cycle_time_s
+    assert once.plan.iterations == every.plan.iterations
+    assert once.check.contour_stats() == every.check.contour_stats()
+    assert once.check.overs.worst_mm == every.check.overs.worst_mm

@@ -103,6 +103,16 @@ def path_counts(pieces, lo: int = 0, hi: int | None = None) -> np.ndarray:
     return np.where(straight | (length == 0.0), 2, counts)
 
 
+def _geometry_key(g) -> tuple:
+    """A key equal for two geometry objects that place the same points bit for bit: a NURBS
+    curve's degree, knots, control points and weights (their bytes); any other object is
+    only itself."""
+    if all(hasattr(g, a) for a in ("degree", "knots", "control_points_mm", "weights")):
+        return ("nurbs", int(g.degree), *(np.ascontiguousarray(getattr(g, a)).tobytes()
+                                          for a in ("knots", "control_points_mm", "weights")))
+    return ("object", id(g))
+
+
 def windowed_contour_mm(actual_mm: np.ndarray, lag_mm: np.ndarray, s_ref_mm: np.ndarray,
                         pieces, profile, index: PathIndex | None = None) -> np.ndarray:  # fmt: skip
     """True distance [mm] from each actual point to the path near its reference (module doc).
@@ -251,6 +261,9 @@ class PathIndex:
     #: Programs of at most this many pieces test all (point, piece) pairs of a query block
     #: at once (:meth:`_candidates_direct`); longer ones a point at a time.
     DIRECT_BLOCK_PIECES = 20_000
+    #: Candidates of one query block from which pieces repeating another's geometry are
+    #: measured once (:meth:`_distinct`).
+    DISTINCT_MIN = 64
 
     def __init__(self, pieces, short_mm: float = 1.0):
         self._pieces = pieces
@@ -267,6 +280,46 @@ class PathIndex:
         # piece → (dense polyline (c, 3) [mm], box lows, box highs (⌈(c−1)/CHUNK⌉, 3) [mm])
         self._polyline: dict[int, tuple] = {}
         self._cached_points = 0
+        self._object_keys = None  # per object: the first object of the same geometry
+
+    def _distinct(self, cand: np.ndarray) -> np.ndarray:
+        """``cand`` (sorted pieces) without those whose geometry repeats an earlier one of
+        ``cand`` bit for bit — a contour cut again at the same place (spring passes,
+        multi-pass engraving: 100 passes made the check quadratic, every query measuring
+        every pass): their polylines, hence their distances, are the same numbers, and a
+        point's distance is the minimum. Every column that places a piece's points is
+        compared (a PH row only with itself); blocks of fewer than :data:`DISTINCT_MIN`
+        candidates are left as they are."""
+        if cand.size < self.DISTINCT_MIN:
+            return cand
+        path = self._pieces.path
+        if self._object_keys is None:
+            first: dict = {}
+            self._object_keys = np.array([first.setdefault(_geometry_key(g), i)
+                                          for i, g in enumerate(path.objects)] + [-1],
+                                         dtype=np.int64)  # fmt: skip
+        obj = np.take(self._object_keys, np.take(path.obj_id, cand))  # −1 → the last: −1
+        ph = np.where(np.take(path.ph_slot, cand) >= 0, cand, -1)
+        columns = [np.take(c, cand) for c in (path.kind, self._counts, path.length_mm,
+                                               path.radius_mm, path.angle_rad, path.helix_mm,
+                                               path.u_a, path.u_b, path.s_a_mm)]  # fmt: skip
+        columns += [np.take(c, cand, axis=1) for c in (path.start_mm, path.end_mm,
+                                                      path.origin_mm, path.e1, path.e2,
+                                                      path.normal)]  # fmt: skip
+        rows = np.column_stack([c.astype(np.float64).view(np.int64) for c in columns[:1]]
+                               + [obj, ph]
+                               + [np.ascontiguousarray(c, dtype=np.float64).view(np.int64)
+                                  for c in columns[1:9]]
+                               + [np.ascontiguousarray(c.T).view(np.int64)
+                                  for c in columns[9:]])  # fmt: skip
+        # Rows grouped by a hash of their bits, then compared whole (a collision keeps both).
+        h = np.zeros(rows.shape[0], dtype=np.uint64)
+        for column in rows.T:
+            h = h * np.uint64(1_000_003) ^ column.view(np.uint64)
+        _, first, group = np.unique(h, return_index=True, return_inverse=True)
+        rep = first[group]
+        keep = (rep == np.arange(rows.shape[0])) | np.any(rows != rows[rep], axis=1)
+        return cand[keep]
 
     def _radius_groups(self) -> list[np.ndarray]:
         """The pieces grouped by the radius of their balls: ≤ short_mm/2, then doublings of
@@ -525,6 +578,7 @@ class PathIndex:
                 cand = cand[~exclude[cand]]
             if cand.size == 0:
                 continue
+            cand = self._distinct(cand)
             # Segments within a piece whose bounding box meets the queries' (widened).
             qb = q[sl]
             reach = float(out[sl].max())
