@@ -77,7 +77,6 @@ class _Column:
 
     def __init__(self, name: str, dtype: np.dtype, count: int, probe: bytes):
         self.name = f"{name}.npy"
-        self.dtype = dtype
         header = npy_header(dtype, count)
         self.crc = zlib.crc32(probe, zlib.crc32(header))
         self.size = len(header) + len(probe)
