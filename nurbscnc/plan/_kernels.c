@@ -1,13 +1,13 @@
 /* Compiled kernels of the plan stage: the loops numpy cannot vectorise (or only through
  * large temporaries), ported operation for operation from their Python reference
  * implementations — profile.py's _gated_rise_py and _time_at_length_py, dynamics.py's
- * _segment_distances_py, feedrate.py's _peak_speed_py — which remain the specification and the fallback where this
- * module was not built.
+ * _segment_distances_py, feedrate.py's _peak_speed_py — which remain the specification,
+ * and the fallback where this module was not built (setup.py: optional).
  *
  * Every result is bit for bit the Python one: IEEE double arithmetic in the same order,
  * each expression as Python or numpy evaluates it (left to right, no reassociation), built
  * with -ffp-contract=off (no fused multiply-add) and without -ffast-math; sqrt and ceil
- * are correctly rounded / exact. tests/test_profile_kernels.py compares the two on random
+ * are correctly rounded / exact. tests/test_plan_kernels.py compares the two on random
  * and captured inputs.
  *
  *   gated_rise(v0, v_top, gate_d, gate_c, a_max, j_max, dt, min_step, gallop, max_steps)
