@@ -421,7 +421,8 @@ def test_sigterm_during_batch_stops_the_workers_and_leaves_no_temp(tmp_path):
     programs = []
     for k in range(3):
         path = tmp_path / f"p{k}.nc"
-        path.write_text("G21 G90 G1 X300 F600\nM2\n")  # 30 s of motion: seconds to plan
+        # 300 s of motion: its 300,000 points keep a worker busy for a second or more
+        path.write_text("G21 G90 G1 X300 F60\nM2\n")
         programs.append(str(path))
     out = tmp_path / "out"
     proc = subprocess.Popen([sys.executable, "-m", "nurbscnc", "run", "--output-dir", str(out),

@@ -1297,8 +1297,20 @@ def _stop_batch(exc: BaseException) -> None:
     signal.alarm(BATCH_STOP_S)
 
 
+#: After SIGTERM, SIGHUP or Ctrl-C, a batch worker is gone within this time [s].
+WORKER_STOP_S = 3
+
+
 def _worker_exit(signum, _frame):
-    sys.exit(128 + signum)  # SystemExit unwinds atomic_output: no temporary file stays
+    """SystemExit unwinds the worker (atomic_output: no temporary file stays); should the
+    unwinding hang (a lock of the pool's queues that a worker killed beside it held, as the
+    parent's can: :func:`_stop_batch`), an alarm ends the worker within
+    :data:`WORKER_STOP_S` all the same (a full CI run once saw a worker outlive its batch)."""
+    import signal
+
+    signal.signal(signal.SIGALRM, lambda *_: os._exit(128 + signum))
+    signal.alarm(WORKER_STOP_S)
+    sys.exit(128 + signum)
 
 
 def _worker_init() -> None:
