@@ -1,8 +1,9 @@
 """The build's one compiled piece: nurbscnc.plan._kernels (nurbscnc/plan/_kernels.c), the
-feed profile's two loops that numpy cannot vectorise. Optional: where no C compiler is found
-the package installs without it and profile.py runs the same loops in Python (the same
-numbers, bit for bit; docs/benchmarks.md gives the speeds). Everything else is in
-pyproject.toml."""
+plan stage's loops that numpy cannot vectorise (the profile's gated flanks, times at a
+length and peak speeds, the check's point-to-segment distances). Optional: where no C
+compiler is found the package installs without it and their Python implementations run
+(the same numbers, bit for bit; nurbscnc/plan/compiled.py; docs/benchmarks.md gives the
+speeds). Everything else is in pyproject.toml."""
 
 from setuptools import Extension, setup
 

@@ -122,13 +122,8 @@ def _today_npz(path, samples) -> bytes:
     import zipfile
     import zlib
 
-    from nurbscnc.output.files import (
-        NPZ_DEFLATE_LEVEL,
-        NPZ_PROBE_ROWS,
-        NPZ_STORE_RATIO,
-        POINT_COLUMNS,
-        point_columns,
-    )
+    from nurbscnc.output.files import POINT_COLUMNS, point_columns
+    from nurbscnc.output.npz import NPZ_DEFLATE_LEVEL, NPZ_PROBE_ROWS, NPZ_STORE_RATIO
 
     columns = dict(zip(POINT_COLUMNS, point_columns(samples)))
     with zipfile.ZipFile(path, mode="w", compresslevel=NPZ_DEFLATE_LEVEL) as zipf:

@@ -30,12 +30,7 @@ import warnings
 import numpy as np
 
 from nurbscnc.errors import DataError, OutputError, SourcePos
-from nurbscnc.output.npz import (  # noqa: F401 - the NPZ format's settings, named here too
-    NPZ_DEFLATE_LEVEL,
-    NPZ_PROBE_ROWS,
-    NPZ_STORE_RATIO,
-    write_npz,
-)
+from nurbscnc.output.npz import write_npz
 
 #: Column order of a reference-point file (units: s, mm, mm, mm, mm/s, index, source line).
 POINT_COLUMNS = ("t", "x", "y", "z", "feed", "piece", "line")

@@ -30,13 +30,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from nurbscnc.geometry.nurbs import NurbsCurve
 from nurbscnc.geometry.path import Kind
+from nurbscnc.plan.compiled import kernels as _kernels  # None: the Python loops
 from nurbscnc.servo.model import contour_error_eq29, simulate_axes
-
-try:  # the compiled loops (setup.py; optional: the numpy ones give the same numbers)
-    from nurbscnc.plan import _kernels
-except ImportError:  # pragma: no cover - a build without a C compiler
-    _kernels = None
 
 #: Chord error of the dense polyline on curved pieces [mm] (0.01 µm).
 CHORD_MM = 1e-5
@@ -107,9 +104,9 @@ def _geometry_key(g) -> tuple:
     """A key equal for two geometry objects that place the same points bit for bit: a NURBS
     curve's degree, knots, control points and weights (their bytes); any other object is
     only itself."""
-    if all(hasattr(g, a) for a in ("degree", "knots", "control_points_mm", "weights")):
-        return ("nurbs", int(g.degree), *(np.ascontiguousarray(getattr(g, a)).tobytes()
-                                          for a in ("knots", "control_points_mm", "weights")))
+    if isinstance(g, NurbsCurve):
+        return ("nurbs", int(g.degree), *(np.ascontiguousarray(x).tobytes()
+                                          for x in (g.knots, g.control_points_mm, g.weights)))
     return ("object", id(g))
 
 
@@ -299,19 +296,15 @@ class PathIndex:
                                           for i, g in enumerate(path.objects)] + [-1],
                                          dtype=np.int64)  # fmt: skip
         obj = np.take(self._object_keys, np.take(path.obj_id, cand))  # −1 → the last: −1
-        ph = np.where(np.take(path.ph_slot, cand) >= 0, cand, -1)
-        columns = [np.take(c, cand) for c in (path.kind, self._counts, path.length_mm,
-                                               path.radius_mm, path.angle_rad, path.helix_mm,
-                                               path.u_a, path.u_b, path.s_a_mm)]  # fmt: skip
-        columns += [np.take(c, cand, axis=1) for c in (path.start_mm, path.end_mm,
-                                                      path.origin_mm, path.e1, path.e2,
-                                                      path.normal)]  # fmt: skip
-        rows = np.column_stack([c.astype(np.float64).view(np.int64) for c in columns[:1]]
-                               + [obj, ph]
-                               + [np.ascontiguousarray(c, dtype=np.float64).view(np.int64)
-                                  for c in columns[1:9]]
-                               + [np.ascontiguousarray(c.T).view(np.int64)
-                                  for c in columns[9:]])  # fmt: skip
+        ph = np.where(np.take(path.ph_slot, cand) >= 0, cand, -1)  # a PH row: only itself
+        # One row per candidate of every column that places its points, as the bits of
+        # float64s (−0.0 is not 0.0; the integers are exact in a float).
+        columns = [np.take(c, cand, axis=-1).reshape(-1, cand.size) for c in (
+            path.kind, self._counts, path.length_mm, path.radius_mm, path.angle_rad,
+            path.helix_mm, path.u_a, path.u_b, path.s_a_mm, path.start_mm, path.end_mm,
+            path.origin_mm, path.e1, path.e2, path.normal)]  # fmt: skip
+        rows = np.ascontiguousarray(np.vstack([*columns, obj, ph]).T, dtype=np.float64)
+        rows = rows.view(np.int64)
         # Rows grouped by a hash of their bits, then compared whole (a collision keeps both).
         h = np.zeros(rows.shape[0], dtype=np.uint64)
         for column in rows.T:

@@ -30,11 +30,7 @@ import math
 import numpy as np
 
 from nurbscnc.errors import ConfigError, PlanningError
-
-try:  # the compiled loops (setup.py; optional: the numpy ones give the same numbers)
-    from nurbscnc.plan import _kernels
-except ImportError:  # pragma: no cover - a build without a C compiler
-    _kernels = None
+from nurbscnc.plan.compiled import kernels as _kernels  # None: the Python loops
 
 __all__ = [
     "check_limits",

@@ -91,6 +91,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from nurbscnc.errors import ConfigError, PlanningError
+from nurbscnc.plan.compiled import kernels as _kernels  # None: the Python loops
 from nurbscnc.plan.feedrate import (
     check_limit_arrays,
     check_limits,
@@ -101,11 +102,6 @@ from nurbscnc.plan.feedrate import (
     scurve_distance_mm,
     scurve_timing,
 )
-
-try:  # the compiled loops (setup.py; optional: the Python ones give the same numbers)
-    from nurbscnc.plan import _kernels
-except ImportError:  # pragma: no cover - a build without a C compiler
-    _kernels = None
 
 __all__ = ["Profile", "ProfileInput", "plan_profile", "plan_profile_pieces"]
 

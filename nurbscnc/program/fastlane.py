@@ -107,6 +107,7 @@ def _strict_rows(lines, n: int) -> list:
     return rows
 
 
+_INF = float("inf")
 # A G6.2 continuation line (a control point with its knot, or a knot alone): letters,
 # then numbers, in groups (letter, number) for K, X, Y, Z, R in this order.
 _G6_LINE = re.compile(
@@ -143,9 +144,6 @@ def nurbs_words(line: str) -> dict | None:
             return None
         words[letter.upper()] = (value, match.start(g) + 1)
     return words
-
-
-_INF = float("inf")
 
 
 class BulkState(NamedTuple):
