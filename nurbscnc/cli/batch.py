@@ -43,8 +43,8 @@ BATCH_STOP_S = 10
 def _stop_batch(exc: BaseException) -> None:
     """A batch interrupted by a signal: each worker is told now (it removes its temporary
     file and exits), and the parent ends within :data:`BATCH_STOP_S` whatever the pool's
-    own shutdown does next: it can wait for ever on a queue lock a dying worker held (a CI
-    run saw SIGTERM leave the parent alive after 30 s). Exit code as for the signal."""
+    own shutdown does next: it can wait for ever on a queue lock a dying worker held. Exit
+    code as for the signal."""
     import multiprocessing
     import signal
 
@@ -63,7 +63,7 @@ def _worker_exit(signum, _frame):
     """SystemExit unwinds the worker (atomic_output: no temporary file stays); should the
     unwinding hang (a lock of the pool's queues that a worker killed beside it held, as the
     parent's can: :func:`_stop_batch`), an alarm ends the worker within
-    :data:`WORKER_STOP_S` all the same (a full CI run once saw a worker outlive its batch)."""
+    :data:`WORKER_STOP_S` all the same."""
     import signal
 
     signal.signal(signal.SIGALRM, lambda *_: os._exit(128 + signum))
@@ -80,10 +80,9 @@ def _worker_init() -> None:
 
 
 def run_batch(programs, output_dir, jobs, fmt, quiet, as_json, settings) -> None:
-    import multiprocessing
-
-    from rich.table import Table
-
+    """Plan every program of a batch and write its points into ``output_dir`` (``jobs``
+    worker processes at most); then the results (a table, or JSON), and Failed with the
+    worst exit code when any program failed."""
     targets = batch_targets(programs, output_dir, fmt)
     try:
         os.makedirs(output_dir, exist_ok=True)
@@ -91,32 +90,45 @@ def run_batch(programs, output_dir, jobs, fmt, quiet, as_json, settings) -> None
         raise OutputError(f"cannot create the output folder {output_dir}: "
                           f"{exc.strerror or exc}") from None  # fmt: skip
     tasks = [(program, target, settings) for program, target in zip(programs, targets)]
-    workers = min(jobs or os.cpu_count() or 1, len(tasks))
-    if workers == 1:
-        results = [_batch_one(t) for t in tasks]
-    else:
-        # Leaving the block for any reason (a signal, Ctrl-C) terminates the workers: each
-        # removes its temporary file and exits; none goes on writing after we are gone.
-        with multiprocessing.Pool(workers, initializer=_worker_init) as pool:
-            try:
-                results = pool.map(_batch_one, tasks, chunksize=1)
-            except (Terminated, KeyboardInterrupt) as exc:
-                _stop_batch(exc)
-                raise
+    results = _run_tasks(tasks, min(jobs or os.cpu_count() or 1, len(tasks)))
     failed = [r for r in results if not r["ok"]]
     if as_json:
         click.echo(json.dumps({"ok": not failed, "results": results}))
     else:
-        table = Table(title=f"batch: {len(results)} programs, {len(failed)} failed",
-                      show_edge=False)  # fmt: skip
-        for col in ("program", "result", "cycle time [s]", "points"):
-            table.add_column(col)
-        for r in results:
-            table.add_row(r["program"], "ok" if r["ok"] else "FAILED",
-                          f"{r['cycle_time_s']:.4f}" if r["ok"] else "",
-                          str(r["samples"]) if r["ok"] else "")  # fmt: skip
-        (err if quiet else out).print(table)
-        for r in failed:
-            err.print(r["error"], markup=False)
+        _print_results(results, failed, quiet)
     if failed:
         raise Failed(max(r["exit_code"] for r in failed))
+
+
+def _run_tasks(tasks: list, workers: int) -> list[dict]:
+    """The result rows of the batch's tasks, in order, made by ``workers`` processes (in
+    this one when 1)."""
+    import multiprocessing
+
+    if workers == 1:
+        return [_batch_one(t) for t in tasks]
+    # Leaving the block for any reason (a signal, Ctrl-C) terminates the workers: each
+    # removes its temporary file and exits; none goes on writing after we are gone.
+    with multiprocessing.Pool(workers, initializer=_worker_init) as pool:
+        try:
+            return pool.map(_batch_one, tasks, chunksize=1)
+        except (Terminated, KeyboardInterrupt) as exc:
+            _stop_batch(exc)
+            raise
+
+
+def _print_results(results: list[dict], failed: list[dict], quiet: bool) -> None:
+    """The batch's table (on stderr when ``quiet``), then the failures' messages."""
+    from rich.table import Table
+
+    table = Table(title=f"batch: {len(results)} programs, {len(failed)} failed",
+                  show_edge=False)  # fmt: skip
+    for col in ("program", "result", "cycle time [s]", "points"):
+        table.add_column(col)
+    for r in results:
+        table.add_row(r["program"], "ok" if r["ok"] else "FAILED",
+                      f"{r['cycle_time_s']:.4f}" if r["ok"] else "",
+                      str(r["samples"]) if r["ok"] else "")  # fmt: skip
+    (err if quiet else out).print(table)
+    for r in failed:
+        err.print(r["error"], markup=False)

@@ -8,7 +8,8 @@ from typing import TYPE_CHECKING
 
 import click
 
-from nurbscnc.app.load import display_name, load_program
+from nurbscnc.app.check import check_program
+from nurbscnc.app.load import display_name
 from nurbscnc.app.summary import machine_json
 from nurbscnc.cli.common import json_option, load_machine_cli, program_argument
 from nurbscnc.cli.console import out, progress_display, show_progress
@@ -40,18 +41,10 @@ def check(program, as_json, no_block_delete, tool_table, subroutine_path, machin
 
     Example: nurbscnc check programs/naca2415.nc
     """
-    from nurbscnc.plan.limits import check_before_work
-    from nurbscnc.plan.report import program_summary
-    from nurbscnc.program.columns import segment_columns
-
     mach = load_machine_cli(machine, overrides, announce=False)
     with progress_display(show_progress(as_json), display_name(program)) as say:
-        say("reading and interpreting")
-        prog = load_program(program, not no_block_delete, tool_table, subroutine_path)
-        say(f"checking {len(prog.segments)} segments")
-        columns = segment_columns(prog.segments)  # read once for the checks and the summary
-        check_before_work(prog.segments, mach, columns)
-        summary = program_summary(prog, columns, per_segment=as_json)
+        prog, summary = check_program(program, mach, not no_block_delete, tool_table,
+                                      subroutine_path, per_segment=as_json, progress=say)
     if as_json:
         click.echo(json.dumps({**summary, **machine_json(mach)}))
         return

@@ -9,6 +9,12 @@ import click
 
 from nurbscnc.app.load import display_name, read_program_text
 from nurbscnc.app.plots import write_simulate_plots
+from nurbscnc.app.simulation import (
+    is_points_source,
+    points_reference,
+    run_reference,
+    simulate_points,
+)
 from nurbscnc.app.summary import machine_json
 from nurbscnc.cli.common import json_option, load_machine_cli, make_plan, plot_option
 from nurbscnc.cli.console import out
@@ -30,30 +36,17 @@ def simulate(source, as_json, plot_dir, hold, **settings):
 
     Example: nurbscnc simulate points.csv --json
     """
-    import numpy as np
-
-    from nurbscnc.output.files import point_header, read_points, read_points_text
-    from nurbscnc.servo.simulate import contour_errors, metrics, simulate_reference
-
-    lower = source.lower()
     # stdin is recognised by its content: a points header (from `run -o -`) or a program
     text = read_program_text("-") if source == "-" else None
-    if lower.endswith((".csv", ".npz")) or (text is not None and point_header(text)):
+    if is_points_source(source, text):
         mach = load_machine_cli(settings["machine"], settings["overrides"])
-        data = read_points(source) if text is None else read_points_text(text)
-        points = np.column_stack([data["x"], data["y"], data["z"]])
-        path = points  # the commanded path: the reference polyline itself
+        points, path = points_reference(source, text)
         name = display_name(source)
     else:
         prog, mach, run = make_plan(source, **settings, text=text)
-        from nurbscnc.plan.dynamics import dense_path_mm
-
-        points = run.samples.points_mm
-        path = points if run.plan is None else dense_path_mm(run.plan.pieces, run.plan.profile)
+        points, path = run_reference(run)
         name = prog.name
-    sim = simulate_reference(points, mach, hold=hold)
-    contour = contour_errors(sim, path)
-    m = metrics(sim, path, contour).as_dict()
+    sim, contour, m = simulate_points(points, path, mach, hold)
     if plot_dir:
         write_simulate_plots(sim, contour, plot_dir, name,
                              mach.limits.contour_tolerance_mm * 1000.0)
