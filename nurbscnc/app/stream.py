@@ -105,3 +105,19 @@ def stream_job(prog, mach, options, from_line: int | None = None,
     job = Job(None, prog, mach, optional_stop=optional_stop, override=override,
               lookahead_pieces=options.lookahead.lookahead_pieces, feed=feed)  # fmt: skip
     return job, None
+
+
+def stream_report(program: str, job, reports: list) -> dict:
+    """The JSON report of a finished stream: the last part's card state
+    (:meth:`~nurbscnc.output.stream.sender.StreamReport.to_json`), the counters summed over
+    the ``reports`` of every part, and the ``job``'s own report (sections, holds, planning,
+    notes; one section without a job). ``program`` is named as every command names it
+    (standard input is ``<stdin>``)."""
+    extra = job.report() if job is not None else {"sections": 1}
+    body = {**reports[-1].to_json(),
+            "executed_periods": sum(r.executed_periods for r in reports),
+            "frames_sent": sum(r.frames_sent for r in reports),
+            "bytes_sent": sum(r.bytes_sent for r in reports),
+            "retransmits": sum(r.retransmits for r in reports),
+            "duration_s": sum(r.duration_s for r in reports), **extra}  # fmt: skip
+    return {"ok": True, "program": "<stdin>" if program == "-" else program, **body}

@@ -12,7 +12,13 @@ import click
 
 from nurbscnc.app.load import load_program
 from nurbscnc.app.settings import run_options_of
-from nurbscnc.app.stream import is_points_file, points_of_file, pulses_of_points, stream_job
+from nurbscnc.app.stream import (
+    is_points_file,
+    points_of_file,
+    pulses_of_points,
+    stream_job,
+    stream_report,
+)
 from nurbscnc.cli import console
 from nurbscnc.cli.common import load_machine_cli
 from nurbscnc.cli.controls import Operator, key_reader, routed_signals
@@ -204,34 +210,25 @@ def _send(link: dict, operator: Operator, job, pulses, total: int, zero: bool, q
 def _print_report(program: str, job, reports: list, as_json: bool) -> None:
     """The stream's final report: JSON on stdout, or a line on stdout (and one on the
     planning), notes on stderr."""
-    last = reports[-1]
-    executed = sum(r.executed_periods for r in reports)
-    extra = job.report() if job is not None else {"sections": 1}
+    report = stream_report(program, job, reports)
     if as_json:
-        body = {**last.to_json(), "executed_periods": executed,
-                "frames_sent": sum(r.frames_sent for r in reports),
-                "bytes_sent": sum(r.bytes_sent for r in reports),
-                "retransmits": sum(r.retransmits for r in reports),
-                "duration_s": sum(r.duration_s for r in reports), **extra}  # fmt: skip
-        # "program" as every command names it (standard input is "<stdin>").
-        name = "<stdin>" if program == "-" else program
-        click.echo(json.dumps({"ok": True, "program": name, **body}))
+        click.echo(json.dumps(report))
         return
-    holds = extra.get("holds", [])
+    holds = report.get("holds", [])
     hold_text = "".join(f"; feed hold: deceleration began {h['latency_s'] * 1e3:.0f} ms after "
                         f"the request, at rest after {h['stop_s'] * 1e3:.0f} ms"
                         for h in holds)  # fmt: skip
     console.out.print(
-        f"{program}: {executed} periods streamed in {extra['sections']} part(s), "
-        f"{sum(r.frames_sent for r in reports)} frames ({sum(r.bytes_sent for r in reports)} "
-        f"bytes), {sum(r.retransmits for r in reports)} retransmitted; the card ended at "
-        f"{list(last.final_position_steps)} steps{hold_text}",
+        f"{program}: {report['executed_periods']} periods streamed in {report['sections']} "
+        f"part(s), {report['frames_sent']} frames ({report['bytes_sent']} bytes), "
+        f"{report['retransmits']} retransmitted; the card ended at "
+        f"{list(reports[-1].final_position_steps)} steps{hold_text}",
         markup=False,
     )
-    planning = extra.get("planning")
+    planning = report.get("planning")
     if planning is not None:
         console.out.print(_planning_text(planning), markup=False)
-    for note in extra.get("notes", []):
+    for note in report.get("notes", []):
         console.err.print(f"stream: note: {note['message']}", markup=False, highlight=False)
 
 
