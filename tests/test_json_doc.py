@@ -107,7 +107,7 @@ def test_plan_and_run(files, tmp_path):
     explained = printed("plan", files / "corner.nc", "--json", "--explain")
     if not explained["explain"]["corners"]:
         # The planner does not log its corners yet: the keys of one logged corner, as printed.
-        from nurbscnc.cli.main import make_plan
+        from nurbscnc.app.planning import make_plan
         from nurbscnc.plan.explain import explain_plan
 
         prog, mach, run = make_plan(str(files / "corner.nc"))
