@@ -1394,7 +1394,7 @@ def simulate(source, as_json, plot_dir, hold, **settings):
         name = _display_name(source)
     else:
         prog, mach, run = make_plan(source, **settings, text=text)
-        from nurbscnc.plan.dynamics import dense_path_mm
+        from nurbscnc.geometry.polyline import dense_path_mm
 
         points = run.samples.points_mm
         path = points if run.plan is None else dense_path_mm(run.plan.pieces, run.plan.profile)
