@@ -260,3 +260,28 @@ def test_passes_at_the_same_place_are_measured_once_with_the_same_result(monkeyp
     assert once.plan.iterations == every.plan.iterations
     assert once.check.contour_stats() == every.check.contour_stats()
     assert once.check.overs.worst_mm == every.check.overs.worst_mm
+
+
+@pytest.mark.parametrize("name", ["naca2415.nc", "corners.nc"])
+def test_chord_counts_without_a_cap_are_the_refinement_rule(name):
+    """``chord_counts`` without ``max_points`` (the pre-compensation's polylines: chords of
+    sagitta ≤ 1e-7 mm, at most 0.01 mm) is the rule ⌈L/h⌉ + 1 ≥ 3 on every piece, 2 on lines,
+    the same integers; with the cap it is :func:`path_counts`."""
+    from pathlib import Path
+
+    from nurbscnc.geometry.path import Kind
+    from nurbscnc.plan.pieces import segment_pieces
+
+    text = (Path(__file__).resolve().parents[1] / "programs" / name).read_text()
+    pieces = segment_pieces(interpret_text(text).segments, MACHINE)
+    kind, length = pieces.kind, pieces.length_mm
+    kappa = np.where(kind == Kind.NURBS, 2.0, 1.0) * np.abs(pieces.kappa_max_per_mm)
+    with np.errstate(divide="ignore"):
+        h = np.minimum(0.01, np.sqrt(8.0 * 1e-7 / kappa))
+    want = np.maximum(np.ceil(length / h).astype(np.int64) + 1, 3)
+    want = np.where((kind == Kind.LINE) | (length == 0.0), 2, want)
+    got = polyline.chord_counts(kind, length, pieces.kappa_max_per_mm, 1e-7, 0.01)
+    assert got.dtype == want.dtype and np.array_equal(got, want)
+    capped = polyline.chord_counts(kind, length, pieces.kappa_max_per_mm, CHORD_MM,
+                                   polyline.MAX_SPACING_MM, polyline.MAX_PIECE_POINTS)
+    assert np.array_equal(capped, polyline.path_counts(pieces))
