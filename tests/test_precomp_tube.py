@@ -19,10 +19,10 @@ import pytest
 from scipy import signal
 
 from nurbscnc.geometry.nurbs import NurbsCurve
+from nurbscnc.geometry.polyline import CHORD_MM
 from nurbscnc.interpolate.sample import reference_sampler
 from nurbscnc.machine.profile import load_machine
 from nurbscnc.pipeline import RunOptions, run_program
-from nurbscnc.plan.dynamics import CHORD_MM
 from nurbscnc.plan.lookahead import plan_checked
 from nurbscnc.plan.options import LookaheadOptions
 from nurbscnc.plan.precompensation import precompensate_reference, refine_in_tube

@@ -30,7 +30,7 @@ def run_reference(run):
     """``(points, path)`` [mm] of a planned run: its reference points, and the planned path
     densely sampled (:func:`~nurbscnc.plan.dynamics.dense_path_mm`; a baseline's points are
     its own path)."""
-    from nurbscnc.plan.dynamics import dense_path_mm
+    from nurbscnc.geometry.polyline import dense_path_mm
 
     points = run.samples.points_mm
     path = points if run.plan is None else dense_path_mm(run.plan.pieces, run.plan.profile)

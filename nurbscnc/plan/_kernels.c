@@ -1,7 +1,7 @@
 /* Compiled kernels of the plan stage: the loops numpy cannot vectorise (or only through
  * large temporaries), ported operation for operation from their Python reference
- * implementations — profile.py's _gated_rise_py and _time_at_length_py, dynamics.py's
- * _segment_distances_py, feedrate.py's _peak_speed_py — which remain the specification,
+ * implementations — profile.py's _gated_rise_py and _time_at_length_py, feedrate.py's
+ * _peak_speed_py — which remain the specification,
  * and the fallback where this module was not built (setup.py: optional).
  *
  * Every result is bit for bit the Python one: IEEE double arithmetic in the same order,
@@ -16,8 +16,6 @@
  *       descent jerks, distance) or None          [profile._gated_rise_memo's merging]
  *   time_at_length(s0, v0, a0, jerk, duration, start, s, out, rel, newton, halvings, whole)
  *       -> None (out filled)                                     [profile._time_at_length_py]
- *   segment_distances(q, a, d, lo, hi, out)
- *       -> None (out filled)                                   [dynamics._segment_distances_py]
  *   peak_speeds(v_s, v_e, length, v_cap, a, j, a_dn, j_dn, out, newton, rel)
  *       -> None (out filled)                                        [feedrate._peak_speed_py]
  *
@@ -533,67 +531,6 @@ done:
     return result;
 }
 
-/* ------------------------------------------------------------------ contour distance */
-
-/* dynamics._segment_distances_py: for each point q_i (m, 3), the smallest distance to the
- * segments a_k + t d_k (t in [0, 1]) for k in [lo_i, hi_i) (inf when empty). Dot products
- * as (x0 y0 + x1 y1) + x2 y2; t = (qa.d) / |d|^2 clipped to [0, 1] (0 where |d|^2 = 0); the
- * minimum NaN-propagating as numpy's. */
-static PyObject *segment_distances(PyObject *self, PyObject *args)
-{
-    Py_buffer bq, ba, bd, blo, bhi, bout;
-    if (!PyArg_ParseTuple(args, "y*y*y*y*y*w*", &bq, &ba, &bd, &blo, &bhi, &bout))
-        return NULL;
-    PyObject *result = NULL;
-    Py_ssize_t m = bq.len / (Py_ssize_t)(3 * sizeof(double));
-    Py_ssize_t n = ba.len / (Py_ssize_t)(3 * sizeof(double));
-    if (bq.len != m * (Py_ssize_t)(3 * sizeof(double)) || ba.len != bd.len ||
-        ba.len != n * (Py_ssize_t)(3 * sizeof(double)) ||
-        blo.len != m * (Py_ssize_t)sizeof(long long) || bhi.len != blo.len ||
-        bout.len != m * (Py_ssize_t)sizeof(double)) {
-        PyErr_SetString(PyExc_ValueError, "segment_distances: inconsistent buffers");
-        goto done;
-    }
-    const double *q = bq.buf, *a = ba.buf, *d = bd.buf;
-    const long long *lo = blo.buf, *hi = bhi.buf;
-    double *out = bout.buf;
-    for (Py_ssize_t i = 0; i < m; i++)
-        if (lo[i] < 0 || hi[i] > n) {
-            PyErr_SetString(PyExc_IndexError, "segment_distances: a range outside the segments");
-            goto done;
-        }
-    Py_BEGIN_ALLOW_THREADS
-    for (Py_ssize_t i = 0; i < m; i++) {
-        const double q0 = q[3 * i], q1 = q[3 * i + 1], q2 = q[3 * i + 2];
-        double best = INFINITY;
-        int any = 0;
-        for (long long k = lo[i]; k < hi[i]; k++) {
-            const double *ak = a + 3 * k, *dk = d + 3 * k;
-            double e0 = q0 - ak[0], e1 = q1 - ak[1], e2 = q2 - ak[2];
-            double len2 = (dk[0] * dk[0] + dk[1] * dk[1]) + dk[2] * dk[2];
-            double t = ((e0 * dk[0] + e1 * dk[1]) + e2 * dk[2]) / (len2 > 0.0 ? len2 : 1.0);
-            t = np_clip(len2 > 0.0 ? t : 0.0, 0.0, 1.0);
-            e0 = e0 - t * dk[0];
-            e1 = e1 - t * dk[1];
-            e2 = e2 - t * dk[2];
-            double dist = sqrt((e0 * e0 + e1 * e1) + e2 * e2);
-            best = any ? np_minimum(best, dist) : dist;
-            any = 1;
-        }
-        out[i] = best;
-    }
-    Py_END_ALLOW_THREADS
-    result = Py_NewRef(Py_None);
-done:
-    PyBuffer_Release(&bq);
-    PyBuffer_Release(&ba);
-    PyBuffer_Release(&bd);
-    PyBuffer_Release(&blo);
-    PyBuffer_Release(&bhi);
-    PyBuffer_Release(&bout);
-    return result;
-}
-
 /* ------------------------------------------------------------------ peak speed */
 
 /* feedrate._distance_arr for one element: D(v_a -> v_b) of an S-curve with limits a, j */
@@ -692,8 +629,6 @@ done:
 
 static PyMethodDef methods[] = {
     {"peak_speeds", peak_speeds, METH_VARARGS, "feedrate._peak_speed_py, compiled."},
-    {"segment_distances", segment_distances, METH_VARARGS,
-     "dynamics._segment_distances_py, compiled."},
     {"gated_rise", gated_rise, METH_VARARGS, "profile._gated_rise_py, compiled."},
     {"gated_rise_merged", gated_rise_merged, METH_VARARGS,
      "profile._gated_rise_py, compiled, its phases merged (profile._merged)."},
@@ -703,7 +638,7 @@ static PyMethodDef methods[] = {
 
 static struct PyModuleDef module = {
     PyModuleDef_HEAD_INIT, "_kernels",
-    "Compiled kernels of the plan stage (profile.py, dynamics.py, feedrate.py).", -1, methods,
+    "Compiled kernels of the plan stage (profile.py, feedrate.py).", -1, methods,
 };
 
 PyMODINIT_FUNC PyInit__kernels(void) { return PyModule_Create(&module); }
