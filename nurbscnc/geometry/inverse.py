@@ -5,14 +5,10 @@ inversion."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from nurbscnc.geometry.powerform import BLOCK, blocks
-
-if TYPE_CHECKING:  # pragma: no cover - typing only
-    from nurbscnc.geometry.nurbs import NurbsCurve
 
 #: Target of the fast inversion [mm]: |s(u) − s| at the check points of every interval.
 INVERSE_TOL_MM = 1e-11
@@ -86,10 +82,12 @@ class InverseArcTable:
     max_check_error_mm: float
 
     @classmethod
-    def build(cls, curve: NurbsCurve, tol_mm: float = INVERSE_TOL_MM,
+    def build(cls, curve, tol_mm: float = INVERSE_TOL_MM,
               start_mm: float = INVERSE_START_MM,
               max_depth: int = INVERSE_MAX_DEPTH) -> InverseArcTable:  # fmt: skip
-        """Build the table of ``curve`` (see the class docstring); vectorised per level."""
+        """Build the table of ``curve`` (a :class:`~nurbscnc.geometry.nurbs.NurbsCurve`: its
+        power form, arc-length table and speed floor; see the class docstring); vectorised
+        per level."""
         pf = curve.power_form
         arc = curve.arc_table
         eps = np.finfo(float).eps

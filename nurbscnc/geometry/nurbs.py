@@ -252,7 +252,7 @@ class NurbsCurve:
         return np.hstack((self.control_points_mm * w, w))
 
     @cached_property
-    def _homogeneous_t(self) -> np.ndarray:
+    def homogeneous_t(self) -> np.ndarray:
         """The homogeneous control points components first, (4, n), for (4, m) gathers."""
         return np.ascontiguousarray(self._homogeneous.T)
 
@@ -274,7 +274,7 @@ class NurbsCurve:
         """
         u = np.clip(as_params(u), self.u_start, self.u_end)
         p = self.degree
-        pw = self._homogeneous_t
+        pw = self.homogeneous_t
         # Contract basis × control points one basis index j at a time, components first:
         # (4, m) gathers and multiply-adds over contiguous rows, several times faster than an
         # einsum over (m, k, p+1, 4).

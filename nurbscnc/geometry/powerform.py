@@ -5,14 +5,10 @@ temporaries in cache."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from nurbscnc.geometry.bspline import as_params, basis_derivatives, rational_derivatives
-
-if TYPE_CHECKING:  # pragma: no cover - typing only
-    from nurbscnc.geometry.nurbs import NurbsCurve
 
 #: Samples per block in the fast whole-array evaluations: temporaries of a few hundred kB stay
 #: in cache, which makes million-sample evaluations 1.5–3× faster than one pass. The loop runs
@@ -44,15 +40,16 @@ class PowerForm:
     coeffs: np.ndarray
 
     @classmethod
-    def of(cls, curve: NurbsCurve) -> PowerForm:
-        """The power form of ``curve`` (one basis-derivative evaluation per span)."""
+    def of(cls, curve) -> PowerForm:
+        """The power form of ``curve`` (a :class:`~nurbscnc.geometry.nurbs.NurbsCurve`; one
+        basis-derivative evaluation per span)."""
         p = curve.degree
         breaks = curve.breakpoints
         if breaks.size < 2:  # degenerate parameter range: one empty span
             breaks = np.array([breaks[0], breaks[0]])
         centers = 0.5 * (breaks[:-1] + breaks[1:])
         spans, ders = basis_derivatives(curve.knots, p, centers, p)
-        pw = curve._homogeneous_t
+        pw = curve.homogeneous_t
         coeffs = np.zeros((p + 1, 4, centers.size))
         for j in range(p + 1):
             rows = np.take(pw, spans - p + j, axis=1)
