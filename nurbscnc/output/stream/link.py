@@ -30,185 +30,34 @@ What it does:
   frames not yet written and send ABORT every ``abort_retry_s`` until a STATUS shows the card
   stopped, or ``abort_wait_s`` passed. The card's final state decides: a STATUS saying DONE
   with the program's period count and end position is success whatever failed before.
+
+The state and records are in :mod:`~.linkstate`, the retransmission timeout in
+:mod:`~.roundtrip`, the check of the card's CAPS in :mod:`~.cardcheck`.
 """
 
 from __future__ import annotations
 
-import enum
 import math
-from dataclasses import dataclass, field
 
 import numpy as np
 
-from nurbscnc.errors import EXIT_INTERRUPTED, ConfigError, StreamError
+from nurbscnc.errors import StreamError
 from nurbscnc.output.stream import protocol as p
+from nurbscnc.output.stream.cardcheck import alarm_name, check_caps
+from nurbscnc.output.stream.linkstate import (
+    STREAMING_STATES,
+    Counters,
+    InFlight,
+    LinkState,
+    Outgoing,
+    Phase,
+    Progress,
+    SenderOptions,
+    StreamInterrupted,
+    StreamReport,
+)
 from nurbscnc.output.stream.quantise import PulseProgram
-
-_STREAMING = (p.CardState.FILLING, p.CardState.RUNNING, p.CardState.HOLD)
-
-
-class StreamInterrupted(StreamError):
-    """The user interrupted the stream (SIGINT/SIGTERM); an abort was sent."""
-
-    exit_code = EXIT_INTERRUPTED
-
-
-@dataclass(frozen=True)
-class SenderOptions:
-    """Sender tuning. Times in seconds."""
-
-    batch_periods: int = 16  #: periods per BATCH frame (capped by the 255-byte payload)
-    timeout_s: float = 2.0  #: no valid frame from the card for this long: lost communication
-    rto_s: float = 0.2  #: retransmission timeout before the first round-trip measurement
-    rto_min_s: float = 0.02  #: floor of the measured retransmission timeout
-    rto_max_s: float = 1.0  #: back-off cap
-    poll_s: float = 0.1  #: ask for a STATUS when the card has been quiet this long
-    abort_wait_s: float = 0.5  #: how long ABORT is repeated waiting for the card to confirm
-    abort_retry_s: float = 0.1  #: ABORT is sent again this often until confirmed
-    read_wait_s: float = 0.001  #: port read timeout: the driver's idle tick
-    gap_s: float = 0.05  #: a reply whose bytes stop arriving this long is abandoned
-    link_baud: int | None = None  #: line rate for the queue model (None: the port's baudrate)
-    #: most periods queued ahead of the card's execution (buffered + in flight); None: its
-    #: whole buffer. Less makes a feed hold act sooner, at the cost of margin against an
-    #: underrun; at least half the card's buffer (where a card starts executing).
-    lead_periods: int | None = None
-
-    def __post_init__(self) -> None:
-        if self.batch_periods < 1:
-            raise ConfigError(f"--batch must be >= 1 period, got {self.batch_periods}")
-        if self.lead_periods is not None and self.lead_periods < 1:
-            raise ConfigError(f"--lead must be >= 1 period, got {self.lead_periods}")
-        if not self.timeout_s > 0.0:
-            raise ConfigError(f"--timeout must be > 0 s, got {self.timeout_s}")
-
-
-@dataclass(frozen=True)
-class Progress:
-    """A progress snapshot [periods]; ``line`` the source line of the period executing (0:
-    unknown), ``note`` what the controller is doing (waiting at a pause, holding…)."""
-
-    periods: int
-    sent: int
-    acked: int
-    executed: int
-    fill: int
-    buffer: int
-    line: int = 0
-    note: str = ""
-
-
-@dataclass(frozen=True)
-class StreamReport:
-    """What a finished stream did (``stream --json``)."""
-
-    periods: int
-    frames_sent: int
-    bytes_sent: int
-    bytes_received: int
-    retransmits: int
-    timeouts: int
-    naks_received: int
-    crc_errors: int
-    polls: int
-    executed_periods: int
-    final_position_steps: tuple[int, ...]
-    expected_position_steps: tuple[int, ...]
-    max_in_flight_periods: int
-    buffer_periods: int
-    session_id: int
-    duration_s: float
-
-    def to_json(self) -> dict:
-        out = {k: getattr(self, k) for k in self.__dataclass_fields__}
-        out["final_position_steps"] = list(self.final_position_steps)
-        out["expected_position_steps"] = list(self.expected_position_steps)
-        return out
-
-
-class Phase(enum.Enum):
-    HANDSHAKE = "handshake"
-    STREAMING = "streaming"
-    STOPPING = "stopping"  #: ABORT sent, waiting for the card to confirm
-    FINISHED = "finished"
-
-
-@dataclass
-class InFlight:
-    """One sequenced frame (BATCH or END) the card has not acknowledged yet.
-
-    Times [s] on the driver's clock; ``leaves_s`` is when the last byte of the newest copy
-    should have left the line (infinite until the copy is written), ``end_offset`` the count
-    of bytes written up to and including that copy.
-    """
-
-    seq: int  #: sequence number, unwrapped (the wire carries it modulo 2¹⁶)
-    data: bytes
-    periods: int
-    written_s: float = math.inf  #: when the first copy was written
-    leaves_s: float = math.inf
-    end_offset: int = 0
-    copies: int = 0  #: copies written
-    queued: bool = False  #: a copy waits in the outbox
-    position_naks: int = 0  #: NAKs saying it does not continue from where the card stands
-
-
-@dataclass
-class Counters:
-    """What happened on the link (for the report)."""
-
-    frames_sent: int = 0
-    bytes_sent: int = 0
-    bytes_received: int = 0
-    retransmits: int = 0
-    timeouts: int = 0
-    naks_received: int = 0
-    crc_errors: int = 0
-    protocol_errors: int = 0
-    polls: int = 0
-    max_in_flight: int = 0
-
-
-@dataclass
-class _Out:
-    data: bytes
-    record: InFlight | None = None
-
-
-@dataclass
-class LinkState:
-    """Everything the link knows, in one place."""
-
-    phase: Phase = Phase.HANDSHAKE
-    caps: p.Caps | None = None
-    status: p.Status | None = None
-    alarm: p.Alarm | None = None
-    # sequenced frames: [base, nxt) are unacknowledged, in_flight their periods
-    base: int = 0
-    nxt: int = 0
-    window: dict[int, InFlight] = field(default_factory=dict)
-    in_flight: int = 0
-    credit: int = 0
-    # timers [s]
-    started_s: float = 0.0
-    last_rx_s: float = 0.0
-    last_progress_s: float = 0.0  #: when the card last acknowledged a new frame
-    last_poll_s: float = -math.inf
-    last_hello_s: float = -math.inf
-    hellos: int = 0
-    hello_leaves_s: float = math.inf
-    last_ctl_s: float = -math.inf
-    last_resend_s: float = -math.inf
-    line_free_s: float = 0.0
-    stop_deadline_s: float = math.inf
-    last_abort_s: float = -math.inf
-    zero_sent_s: float = -math.inf  #: when SET_POSITION was last sent (``zero`` handshake)
-    # requests (set from signal handlers)
-    abort_requested: bool = False
-    want_hold: bool | None = None
-    # the end
-    error: StreamError | None = None  #: why the link is stopping or failed
-    abort_confirmed: bool = False
-    report: StreamReport | None = None
+from nurbscnc.output.stream.roundtrip import RoundTrip
 
 
 class Link:
@@ -240,7 +89,7 @@ class Link:
         self.rtt = RoundTrip(self.options)
         self.decoder = p.FrameDecoder(gap_s=self.options.gap_s)
         self.flush_port = False  #: the driver should drop what the port has queued (abort)
-        self._outbox: list[_Out] = []
+        self._outbox: list[Outgoing] = []
         self.per_frame = 1
         self.n_batches = 0
 
@@ -404,7 +253,7 @@ class Link:
     def _send(self, msg, record: InFlight | None = None) -> None:
         if record is not None:
             record.queued = True
-        self._outbox.append(_Out(p.encode_message(msg) if record is None else record.data,
+        self._outbox.append(Outgoing(p.encode_message(msg) if record is None else record.data,
                                  record))  # fmt: skip
 
     def _resend_oldest(self, now: float) -> None:
@@ -698,7 +547,7 @@ class Link:
         st.status = msg
         if msg.state == p.CardState.DONE:
             self._finish_done(now)
-        elif msg.state not in _STREAMING:
+        elif msg.state not in STREAMING_STATES:
             st.abort_confirmed = True
             where = f"the card stopped at {list(msg.position_steps)} steps"
             self._finish_error(_with_suffix(st.error, where))
@@ -748,75 +597,3 @@ def _with_suffix(error: StreamError | None, text: str) -> StreamError:
                       else f"{error.message}; {text}")  # fmt: skip
     return out
 
-
-def check_caps(caps: p.Caps, prog: PulseProgram, position: bool = True) -> None:
-    """StreamError unless the card can run ``prog`` (from where it stands: ``position``)."""
-    axes = prog.pulses.shape[1] if prog.pulses.ndim == 2 else len(prog.start_steps)
-    problems = []
-    if caps.version not in p.COMPATIBLE_VERSIONS:
-        problems.append(f"it speaks protocol version {caps.version}, nurbscnc speaks "
-                        f"{', '.join(map(str, p.COMPATIBLE_VERSIONS))}")  # fmt: skip
-    if caps.axes != axes:
-        problems.append(f"it has {caps.axes} axes, the program has {axes}")
-    period_us = round(prog.period_s * 1e6)
-    if caps.period_us != period_us:
-        problems.append(f"its period is {caps.period_us} µs, the machine's servo period "
-                        f"is {period_us} µs")  # fmt: skip
-    if prog.peak_pulses > caps.max_pulses_per_period:
-        problems.append(f"it takes at most {caps.max_pulses_per_period} pulses per period, "
-                        f"the program needs {prog.peak_pulses}")  # fmt: skip
-    if caps.state in (p.CardState.RUNNING, p.CardState.HOLD):
-        problems.append(f"it is busy ({p.CardState(caps.state).name}) with another stream")
-    if problems:
-        raise StreamError("the card cannot run this program: " + "; ".join(problems))
-    start = tuple(int(v) for v in prog.start_steps)
-    if position and tuple(caps.position_steps) != start:
-        raise StreamError(
-            f"the card is at {list(caps.position_steps)} steps, the program starts at "
-            f"{list(start)} steps: move the card there, or give --zero to declare that it "
-            "stands at the program's start"
-        )
-
-
-class RoundTrip:
-    """Retransmission timeout from round-trip samples (RFC 6298, α = 1/8, β = 1/4, K = 4)."""
-
-    def __init__(self, opt: SenderOptions):
-        self._opt = opt
-        self._srtt: float | None = None
-        self._rttvar = 0.0
-        self._backoff = 1.0
-
-    def sample(self, r_s: float) -> None:
-        """A round trip of a frame sent once: update the estimate."""
-        if self._srtt is None:
-            self._srtt, self._rttvar = r_s, r_s / 2.0
-        else:
-            self._rttvar = 0.75 * self._rttvar + 0.25 * abs(self._srtt - r_s)
-            self._srtt = 0.875 * self._srtt + 0.125 * r_s
-
-    def back_off(self) -> None:
-        self._backoff *= 2.0
-
-    def progress(self) -> None:
-        """The card acknowledged something new: the line works, end the back-off."""
-        self._backoff = 1.0
-
-    @property
-    def stale_s(self) -> float:
-        """Time after which a frame's missing acknowledgement means it was lost."""
-        srtt = self._opt.rto_s if self._srtt is None else self._srtt
-        return max(2.0 * srtt + 4.0 * self._rttvar, self._opt.rto_min_s / 2.0)
-
-    @property
-    def rto(self) -> float:
-        opt = self._opt
-        base = opt.rto_s if self._srtt is None else self._srtt + 4.0 * self._rttvar
-        return min(opt.rto_max_s, max(opt.rto_min_s, base) * self._backoff)
-
-
-def alarm_name(code: int) -> str:
-    try:
-        return p.AlarmCode(code).name
-    except ValueError:
-        return f"#{code}"
