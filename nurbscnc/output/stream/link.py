@@ -31,8 +31,11 @@ What it does:
   stopped, or ``abort_wait_s`` passed. The card's final state decides: a STATUS saying DONE
   with the program's period count and end position is success whatever failed before.
 
-The state and records are in :mod:`~.linkstate`, the retransmission timeout in
-:mod:`~.roundtrip`, the check of the card's CAPS in :mod:`~.cardcheck`.
+This module holds the driver interface, the output queue and the dispatch of the card's
+messages; the handlers of each phase are in :mod:`~.linkhandshake`, :mod:`~.linkstreaming` and
+:mod:`~.linkstop` (mixins of :class:`Link`), the state and records in :mod:`~.linkstate`, the
+retransmission timeout in :mod:`~.roundtrip`, the check of the card's CAPS in
+:mod:`~.cardcheck`.
 """
 
 from __future__ import annotations
@@ -43,9 +46,9 @@ import numpy as np
 
 from nurbscnc.errors import StreamError
 from nurbscnc.output.stream import protocol as p
-from nurbscnc.output.stream.cardcheck import alarm_name, check_caps
+from nurbscnc.output.stream.cardcheck import alarm_name
+from nurbscnc.output.stream.linkhandshake import HandshakeHandlers
 from nurbscnc.output.stream.linkstate import (
-    STREAMING_STATES,
     Counters,
     InFlight,
     LinkState,
@@ -56,11 +59,13 @@ from nurbscnc.output.stream.linkstate import (
     StreamInterrupted,
     StreamReport,
 )
+from nurbscnc.output.stream.linkstop import StoppingHandlers
+from nurbscnc.output.stream.linkstreaming import StreamingHandlers
 from nurbscnc.output.stream.quantise import PulseProgram
 from nurbscnc.output.stream.roundtrip import RoundTrip
 
 
-class Link:
+class Link(HandshakeHandlers, StreamingHandlers, StoppingHandlers):
     """The host side of the protocol for one ``program`` (see the module docstring).
 
     ``byte_s``: seconds per byte on the line (0: an instantaneous link). ``ignore_credit``
@@ -254,7 +259,7 @@ class Link:
         if record is not None:
             record.queued = True
         self._outbox.append(Outgoing(p.encode_message(msg) if record is None else record.data,
-                                 record))  # fmt: skip
+                                     record))  # fmt: skip
 
     def _resend_oldest(self, now: float) -> None:
         st = self.state
@@ -262,76 +267,7 @@ class Link:
         self._send(None, st.window[st.base])
         self.count.retransmits += 1
 
-    # -- handshake ---------------------------------------------------------------------------
-    def _handshake_timers(self, now: float) -> None:
-        st = self.state
-        if st.zero_sent_s > -math.inf:  # SET_POSITION until a STATUS confirms it
-            if now - st.zero_sent_s >= self.options.rto_s:
-                self._send(p.SetPosition(tuple(int(v) for v in self.program.start_steps)))
-                st.zero_sent_s = now
-        elif now - st.last_hello_s >= self.options.rto_s:
-            self._send(p.Hello())
-            st.last_hello_s = now
-            st.hellos += 1
-        if now - st.last_rx_s > self.options.timeout_s:
-            # The card may have opened a stream on a HELLO whose CAPS was lost: abort it.
-            self._stop(StreamError(
-                f"lost communication with card: no answer to HELLO for "
-                f"{self.options.timeout_s:g} s (is it a card speaking protocol version "
-                f"{p.PROTOCOL_VERSION}?)"), now)  # fmt: skip
-
-    def _on_caps_in_handshake(self, caps: p.Caps, now: float) -> None:
-        st = self.state
-        if st.hellos == 1:  # an unambiguous round trip seeds the timeout
-            self.rtt.sample(max(0.0, now - st.hello_leaves_s))
-        st.caps = caps
-        if self.session_id is not None and caps.session_id != self.session_id:
-            self._finish_error(StreamError(
-                f"the card reset between two parts of the program (session "
-                f"{self.session_id:08x} → {caps.session_id:08x}): its position is lost"))
-            return  # fmt: skip
-        start = tuple(int(v) for v in self.program.start_steps)
-        try:
-            check_caps(caps, self.program, position=not self.zero)
-            lead = self.options.lead_periods
-            if lead is not None and lead < caps.buffer_periods // 2:
-                raise StreamError(f"--lead {lead} is less than half the card's buffer of "
-                                  f"{caps.buffer_periods} periods: the card would wait for "
-                                  "periods the sender holds back")  # fmt: skip
-            if self.zero and tuple(caps.position_steps) != start and caps.version < 3:
-                raise StreamError(f"--zero needs a card speaking protocol version 3; it "
-                                  f"speaks {caps.version}")  # fmt: skip
-        except StreamError as exc:
-            self._finish_error(exc)
-            return
-        if self.zero and tuple(caps.position_steps) != start:
-            self._send(p.SetPosition(start))  # confirmed by a STATUS at the start
-            st.zero_sent_s = now
-            return
-        self._start_streaming(now)
-
-    def _start_streaming(self, now: float) -> None:
-        st = self.state
-        self.zero = False
-        width = p.pulse_width_bytes(max(self.program.peak_pulses, self.peak_pulses))
-        self.per_frame = max(1, min(self.options.batch_periods,
-                                    p.max_batch_periods(st.caps.axes, width)))  # fmt: skip
-        self._layout()
-        st.credit = self._credit(st.caps.buffer_periods)
-        st.phase = Phase.STREAMING
-        st.last_rx_s = st.last_progress_s = now
-
-    def _layout(self) -> None:
-        """Batches of the program: their count and where each starts [steps]."""
-        prog, k, axes = self.program, self.per_frame, len(self.program.start_steps)
-        self.n_batches = -(-prog.periods // k)
-        # Where each batch starts: the program's start plus every pulse before it [steps].
-        sums = (np.add.reduceat(prog.pulses, np.arange(0, prog.periods, k), axis=0)
-                if prog.periods else np.zeros((0, axes), dtype=np.int64))  # fmt: skip
-        self._batch_starts = prog.start_steps + np.vstack(
-            [np.zeros((1, axes), dtype=np.int64), np.cumsum(sums, axis=0)])
-
-    # -- streaming: input handlers -----------------------------------------------------------
+    # -- input ---------------------------------------------------------------------------------
     def _dispatch(self, msg, now: float) -> None:
         st = self.state
         if st.phase is Phase.HANDSHAKE:
@@ -361,239 +297,3 @@ class Link:
                 f"the card reset during the stream (session {st.caps.session_id:08x} → "
                 f"{msg.session_id:08x}): its buffer and position are lost; not resuming"),
                 now)  # fmt: skip
-
-    def _on_acknowledgement(self, msg, now: float) -> None:
-        """ACK, NAK and STATUS name the next frame the card expects and its free buffer."""
-        st = self.state
-        ahead = p.seq_ahead(st.base % p.SEQ_MODULO, msg.next_seq)
-        if ahead > st.nxt - st.base:  # stale or bogus: ignore it whole
-            return
-        if ahead == 0:
-            # No progress although the oldest frame should have arrived long ago: it was lost
-            # (and so was its NAK, or no later frame raised one). A NAK resends anyway.
-            oldest = st.window.get(st.base)
-            if (not isinstance(msg, p.Nak) and oldest is not None
-                    and now - oldest.leaves_s > self.rtt.stale_s):  # fmt: skip
-                self._fast_retransmit(now)
-        else:
-            newest = st.window[st.base + ahead - 1]
-            # Karn: no samples from retransmitted frames, nor from frames whose
-            # acknowledgement waited for a retransmission before them.
-            if newest.copies == 1 and newest.written_s > st.last_resend_s:
-                self.rtt.sample(max(0.0, now - newest.leaves_s))
-            self._correct_line_model(now, newest)
-            self.rtt.progress()
-            for seq in range(st.base, st.base + ahead):
-                st.in_flight -= st.window.pop(seq).periods
-            st.base += ahead
-            st.last_progress_s = now
-        st.credit = self._credit(msg.free_periods)
-
-    def _credit(self, free: int) -> int:
-        """Periods the sender may have in flight: the card's free buffer, less what the lead
-        limit keeps back (buffered = buffer − free; buffered + in flight ≤ lead)."""
-        lead = self.options.lead_periods
-        if lead is None or self.state.caps is None:
-            return free
-        return max(0, min(free, lead - (self.state.caps.buffer_periods - free)))
-
-    def _on_nak(self, msg: p.Nak, now: float) -> None:
-        st = self.state
-        self.count.naks_received += 1
-        if msg.reason == p.NakReason.STATE:
-            st.last_poll_s = -math.inf  # ask what state the card is in
-            return
-        oldest = st.window.get(st.base)
-        if msg.reason == p.NakReason.POSITION and oldest is not None:
-            oldest.position_naks += 1
-            if oldest.position_naks >= 2:  # two copies refused: not a damaged copy
-                what = "END" if oldest.seq >= self.n_batches else f"batch {oldest.seq + 1}"
-                self._stop(StreamError(
-                    f"the card refused {what} twice: it does not continue from where the "
-                    "card's accepted frames end (the card's position is not the program's)"),
-                    now)  # fmt: skip
-                return
-        self._fast_retransmit(now)
-
-    def _fast_retransmit(self, now: float) -> None:
-        """Resend the oldest frame; a frame already sent again only when its new copy should
-        have arrived (older NAKs may still be on their way)."""
-        st = self.state
-        oldest = st.window.get(st.base)
-        if oldest is None or oldest.queued or oldest.copies == 0:
-            return
-        if oldest.copies == 1 or now - oldest.leaves_s > self.rtt.stale_s:
-            self._resend_oldest(now)
-
-    def _on_status(self, msg: p.Status, now: float) -> None:
-        st = self.state
-        st.status = msg
-        if msg.state == p.CardState.DONE:
-            self._finish_done(now)
-        elif msg.state == p.CardState.ALARM:
-            text = st.alarm.text if st.alarm else "(no text received)"
-            self._stop(StreamError(f"card alarm {alarm_name(msg.alarm)}: {text}"), now)
-        elif msg.state == p.CardState.ABORTED:
-            self._stop(StreamError("the card aborted the stream"), now)
-        elif msg.state == p.CardState.IDLE:
-            self._stop(StreamError("the card reset during the stream (it reports no open "
-                                   "stream): its buffer and position are lost; not resuming"),
-                       now)  # fmt: skip
-
-    def _correct_line_model(self, now: float, newest: InFlight) -> None:
-        """Frame ``newest`` has arrived: at most the bytes written after it are still queued."""
-        st = self.state
-        done = newest.end_offset
-        st.line_free_s = min(st.line_free_s, now + (self.count.bytes_sent - done) * self.byte_s)
-        for seq in range(newest.seq + 1, st.nxt):
-            rec = st.window[seq]
-            if rec.copies:
-                rec.leaves_s = min(rec.leaves_s,
-                                   now + max(0, rec.end_offset - done) * self.byte_s)  # fmt: skip
-
-    # -- streaming: timers -------------------------------------------------------------------
-    def _fill_window(self, now: float) -> None:
-        """New frames, as far as the credit goes."""
-        st = self.state
-        total = self.n_batches + (0 if self.program_open else 1)  # the batches, then END
-        while st.nxt < total:
-            periods = min(self.per_frame, self.program.periods - st.nxt * self.per_frame)
-            if self.program_open and periods < self.per_frame:
-                break  # a partial batch waits for the periods that follow it
-            if not self.ignore_credit and st.in_flight + max(periods, 0) > st.credit:
-                break
-            rec = st.window[st.nxt] = self._record(st.nxt)
-            self._send(None, rec)
-            st.in_flight += rec.periods
-            self.count.max_in_flight = max(self.count.max_in_flight, st.in_flight)
-            st.nxt += 1
-
-    def _record(self, i: int) -> InFlight:
-        """Frame ``i``: a BATCH (with the position it starts from) or, after the last, END."""
-        prog, k = self.program, self.per_frame
-        if i < self.n_batches:
-            block = prog.pulses[i * k : i * k + k]
-            msg = p.Batch(block, tuple(int(v) for v in self._batch_starts[i]))
-            return InFlight(i, p.encode_message(msg, seq=i), len(block))
-        end = p.End(prog.periods, tuple(int(v) for v in prog.end_steps))
-        return InFlight(i, p.encode_message(end, seq=i), 0)
-
-    def _retransmit_timer(self, now: float) -> None:
-        """No progress for RTO: send the oldest frame again and double the timeout."""
-        st = self.state
-        oldest = st.window.get(st.base)
-        if oldest is not None and not oldest.queued and now - oldest.leaves_s > self.rtt.rto:
-            self.count.timeouts += 1
-            self._resend_oldest(now)
-            self.rtt.back_off()
-
-    def _hold_resume(self, now: float) -> None:
-        """Feed hold / resume, repeated until the card's state confirms it."""
-        st = self.state
-        if st.want_hold is None or now - st.last_ctl_s <= self.options.rto_s:
-            return
-        card = st.status.state if st.status else None
-        if card is not None and (card == p.CardState.HOLD) == st.want_hold:
-            st.want_hold = None
-        else:
-            self._send(p.Hold() if st.want_hold else p.Resume())
-            st.last_ctl_s = now
-
-    def _poll(self, now: float) -> None:
-        st = self.state
-        if now - max(st.last_rx_s, st.last_poll_s) > self.options.poll_s:
-            self._send(p.StatusRequest())
-            self.count.polls += 1
-            st.last_poll_s = now
-
-    def _check_contact(self, now: float, what: str) -> None:
-        """No valid frame for the timeout; or frames in flight and none acknowledged for it
-        although the card answers (a line too noisy to carry a frame)."""
-        st, timeout = self.state, self.options.timeout_s
-        if now - st.last_rx_s > timeout:
-            self._stop(StreamError(f"lost communication with card: no answer {what} for "
-                                   f"{timeout:g} s"), now)  # fmt: skip
-        elif st.base < st.nxt and now - max(st.last_progress_s,
-                                            st.window[st.base].written_s) > timeout:
-            self._stop(StreamError(f"the card acknowledged no frame for {timeout:g} s though it "
-                                   "answers: the line is too noisy"), now)  # fmt: skip
-
-    # -- the end -----------------------------------------------------------------------------
-    def _stop(self, error: StreamError, now: float) -> None:
-        """Something failed (or the user aborts): ABORT now, repeated until confirmed."""
-        st = self.state
-        st.error = error
-        st.phase = Phase.STOPPING
-        self._outbox.clear()  # frames not written yet must not reach the card first
-        self.flush_port = True
-        st.stop_deadline_s = now + self.options.abort_wait_s
-        st.last_abort_s = now
-        self._send(p.Abort())
-
-    def _abort_timers(self, now: float) -> None:
-        st = self.state
-        if now >= st.stop_deadline_s:
-            self._finish_unconfirmed()
-        elif now - st.last_abort_s >= self.options.abort_retry_s:
-            self._send(p.Abort())
-            st.last_abort_s = now
-
-    def _on_message_stopping(self, msg, now: float) -> None:
-        st = self.state
-        if isinstance(msg, p.Alarm):
-            st.alarm = msg
-        if not isinstance(msg, p.Status):
-            return
-        st.status = msg
-        if msg.state == p.CardState.DONE:
-            self._finish_done(now)
-        elif msg.state not in STREAMING_STATES:
-            st.abort_confirmed = True
-            where = f"the card stopped at {list(msg.position_steps)} steps"
-            self._finish_error(_with_suffix(st.error, where))
-
-    def _finish_unconfirmed(self) -> None:
-        wait = f"{self.options.abort_wait_s:g} s"
-        self._finish_error(_with_suffix(self.state.error,
-                                        f"no confirmation of the abort from the card within "
-                                        f"{wait}"))  # fmt: skip
-
-    def _finish_done(self, now: float) -> bool:
-        """The card says DONE: success if it ran the program's periods to its end position."""
-        st, prog = self.state, self.program
-        status = st.status
-        final = tuple(int(v) for v in status.position_steps)
-        expected = tuple(int(v) for v in prog.end_steps)
-        if final != expected or status.executed_periods != prog.periods:
-            self._finish_error(StreamError(
-                f"the card ended at {list(final)} steps after {status.executed_periods} "
-                f"periods; the program ends at {list(expected)} steps after {prog.periods}"))
-            return False  # fmt: skip
-        c = self.count
-        st.report = StreamReport(
-            periods=prog.periods, frames_sent=c.frames_sent, bytes_sent=c.bytes_sent,
-            bytes_received=c.bytes_received, retransmits=c.retransmits, timeouts=c.timeouts,
-            naks_received=c.naks_received, crc_errors=c.crc_errors, polls=c.polls,
-            executed_periods=status.executed_periods, final_position_steps=final,
-            expected_position_steps=expected, max_in_flight_periods=c.max_in_flight,
-            buffer_periods=st.caps.buffer_periods, session_id=st.caps.session_id,
-            duration_s=now - st.started_s,
-        )  # fmt: skip
-        st.error = None
-        st.phase = Phase.FINISHED
-        self._outbox.clear()
-        return True
-
-    def _finish_error(self, error: StreamError) -> None:
-        self.state.error = error
-        self.state.phase = Phase.FINISHED
-        self._outbox.clear()
-
-
-def _with_suffix(error: StreamError | None, text: str) -> StreamError:
-    """The same kind of error, its message extended by ``text``."""
-    error = error or StreamError("the stream failed")
-    out = type(error)(f"{error.message}, {text}" if isinstance(error, StreamInterrupted)
-                      else f"{error.message}; {text}")  # fmt: skip
-    return out
-
