@@ -13,7 +13,9 @@ number of frames.
 (:class:`~.endpoints.PtyEndpoint`) or a loopback TCP socket (:class:`~.endpoints.TcpEndpoint`)
 — until told to stop; :class:`~.wire.Wire` optionally limits the byte rate to a serial line's
 (10 bits per byte at the given baud rate). The card's configuration and faults are in
-:mod:`~.cardconfig`.
+:mod:`~.cardconfig`; its execution of the buffer in :mod:`~.cardmotion` and the fault
+injection in :mod:`~.cardfaults` (mixins of :class:`CardSim`, over its one state); this
+module holds the protocol handling and the replies.
 """
 
 from __future__ import annotations
@@ -26,6 +28,8 @@ import numpy as np
 from nurbscnc.output.stream import protocol as p
 from nurbscnc.output.stream.cardconfig import CardConfig as CardConfig
 from nurbscnc.output.stream.cardconfig import Faults as Faults
+from nurbscnc.output.stream.cardfaults import FaultInjection
+from nurbscnc.output.stream.cardmotion import Execution
 from nurbscnc.output.stream.endpoints import PtyEndpoint as PtyEndpoint
 from nurbscnc.output.stream.endpoints import TcpEndpoint as TcpEndpoint
 from nurbscnc.output.stream.endpoints import parse_listen as parse_listen
@@ -37,7 +41,7 @@ from nurbscnc.output.stream.endpoints import serve as serve
 _HALF_SEQ = p.SEQ_MODULO // 2
 
 
-class CardSim:
+class CardSim(FaultInjection, Execution):
     """One simulated card (single-threaded: call it from one thread at a time).
 
     Counters (attributes) for tests and the ``--report``: ``bytes_received``,
@@ -136,57 +140,6 @@ class CardSim:
         if self.stalled:
             return
         self._from_wire(self._wire.feed(data, now), now)
-
-    def _from_wire(self, items, now: float) -> None:
-        """Frames split from the wire: faults, resets and stalls, then the card's decoder."""
-        faults = self.config.faults
-        for item in items:
-            self.frames_received += 1
-            if faults.reset_after_frames is not None and self.resets == 0 \
-                    and self.frames_received >= faults.reset_after_frames:  # fmt: skip
-                self._reset(now)
-                continue
-            if faults.stall_after_frames is not None \
-                    and self.frames_received > faults.stall_after_frames:  # fmt: skip
-                self.stalled = True
-                return
-            if isinstance(item, p.BadFrame):  # damaged on the wire already
-                self._handle(item, now)
-                continue
-            raw = self._inject(p.encode_frame(item.type, item.payload, item.seq), "in")
-            if raw is None:
-                continue
-            for ev in self._decoder.feed(raw):
-                self._handle(ev, now)
-
-    def _inject(self, raw: bytes, direction: str) -> bytes | None:
-        """Apply drop/corrupt to one frame; None when it is dropped."""
-        faults = self.config.faults
-        if faults.drop_rate == 0.0 and faults.corrupt_rate == 0.0:
-            return raw
-        r = self._rng.random()
-        if r < faults.drop_rate:
-            setattr(self, f"dropped_{direction}", getattr(self, f"dropped_{direction}") + 1)
-            return None
-        if r < faults.drop_rate + faults.corrupt_rate:
-            setattr(self, f"corrupted_{direction}", getattr(self, f"corrupted_{direction}") + 1)
-            bit = self._rng.randrange(8 * len(raw))
-            b = bytearray(raw)
-            b[bit // 8] ^= 1 << (bit % 8)
-            return bytes(b)
-        return raw
-
-    def _reset(self, now: float) -> None:
-        """Power cycle: new session, position lost, buffer gone; announce with a CAPS."""
-        self.resets += 1
-        old = self.session_id
-        while self.session_id == old:
-            self.session_id = self._rng.getrandbits(32)
-        self.position[:] = 0
-        self._decoder = p.FrameDecoder()
-        self._open_stream(now)
-        self.state = p.CardState.IDLE
-        self._send(self.caps(), now)
 
     def _handle(self, ev, now: float) -> None:
         streaming = self.state in (p.CardState.FILLING, p.CardState.RUNNING, p.CardState.HOLD)
@@ -350,96 +303,9 @@ class CardSim:
             self._end = msg
         self.expected += 1
         return "ok"
-
-    def _run_fast(self, now: float) -> None:
-        """As fast as possible: every buffered period runs at once (unless held)."""
-        if self._period_wall_s is None and self.state is p.CardState.RUNNING:
-            self._execute(self.fill, now)
-
     def _ack(self, now: float) -> None:
         self.acks_sent += 1
         self._send(p.Ack(self.expected % p.SEQ_MODULO, self.free), now)
-
-    def _maybe_start(self, now: float) -> None:
-        fast = self._period_wall_s is None
-        if self.state is p.CardState.FILLING and (
-            self.fill >= self.config.start_fill or self._end is not None or (fast and self.fill)
-        ):
-            self.state = p.CardState.RUNNING
-            self._started = True
-            self._next_due = now
-            self._send(self.status(), now)
-
-    # -- time --------------------------------------------------------------------------------
-    def advance(self, now: float) -> None:
-        """Execute every period due by ``now`` [s] (real time / speed); abandon a stalled frame."""
-        if not self.stalled and self._wire.pending_bytes:
-            self._from_wire(self._wire.expire(now), now)
-        if self.stalled or self.state is not p.CardState.RUNNING or self._period_wall_s is None:
-            return
-        due = int((now - self._next_due) // self._period_wall_s) + 1
-        if due <= 0:
-            return
-        n = min(due, self.fill)
-        self._execute(n, now)
-        self._next_due += n * self._period_wall_s
-        if self.fill == 0 and self._end is not None:
-            self._maybe_finish(now)
-        elif due > n:
-            self._raise_alarm(
-                p.AlarmCode.UNDERRUN,
-                f"buffer underrun: period {self.stream_executed + 1} was due and the buffer "
-                "was empty",
-                now,
-            )
-
-    def _execute(self, n: int, now: float) -> None:
-        """Run the next ``n`` buffered periods: move, log, push a STATUS now and then."""
-        if n <= 0:
-            return
-        taken = []
-        left = n
-        while left:
-            head = self._buffer[0]
-            if len(head) <= left:
-                taken.append(self._buffer.popleft())
-                left -= len(head)
-            else:
-                taken.append(head[:left])
-                self._buffer[0] = head[left:]
-                left = 0
-        block = np.vstack(taken) if len(taken) > 1 else taken[0]
-        self.position += block.sum(axis=0)
-        self._log.append(block)
-        self.fill -= n
-        self.executed_periods += n
-        self.stream_executed += n
-        self._since_status += n
-        if self._since_status >= self.config.status_every_periods:
-            self._since_status = 0
-            self._send(self.status(), now)
-
-    def _maybe_finish(self, now: float) -> None:
-        if self._end is None or self.fill or self.state is not p.CardState.RUNNING:
-            return
-        pos = tuple(int(v) for v in self.position)
-        if self._end.periods != self.stream_executed or tuple(self._end.position_steps) != pos:
-            self._raise_alarm(p.AlarmCode.END_MISMATCH,
-                              f"END says {self._end.periods} periods to "
-                              f"{list(self._end.position_steps)}, executed "
-                              f"{self.stream_executed} to {list(pos)}", now)  # fmt: skip
-            return
-        self.state = p.CardState.DONE
-        self._send(self.status(), now)
-
-    def _raise_alarm(self, code: int, text: str, now: float) -> None:
-        self.state = p.CardState.ALARM
-        self.alarm, self.alarm_text = p.AlarmCode(code), text
-        self._buffer.clear()
-        self._early.clear()
-        self.fill = self._early_periods = 0
-        self._send(p.Alarm(int(code), text), now)
-        self._send(self.status(), now)
 
     # -- output ------------------------------------------------------------------------------
     def _send(self, msg, now: float) -> None:
