@@ -27,9 +27,9 @@ DEFAULT_PERIOD_MS = 1.0
 # Schema. A table is a dict of key -> sub-schema; a leaf is the name of a value check:
 #   "pos"    a finite number > 0        "finite"  any finite number
 #   "count"  an integer >= 1
-# Keys listed in OPTIONAL may be absent; every other key is required, and unknown keys are
+# Keys listed in _OPTIONAL may be absent; every other key is required, and unknown keys are
 # errors (a misspelt key must never silently fall back to a default).
-COEFF_SCHEMA = {
+_COEFF_SCHEMA = {
     "a0": "finite",
     "a1": "finite",
     "a2": "finite",
@@ -41,7 +41,7 @@ COEFF_SCHEMA = {
 }
 # An axis table holds one of two forms (checked by _check_axis): the coefficients, or the
 # simple form. The schema lists the union so that overrides can name either form's keys.
-AXIS_SCHEMA = {**COEFF_SCHEMA, "bandwidth_hz": "pos", "damping": "pos"}
+_AXIS_SCHEMA = {**_COEFF_SCHEMA, "bandwidth_hz": "pos", "damping": "pos"}
 SCHEMA: dict = {
     "limits": {
         "v_max_mm_min": "pos",
@@ -55,19 +55,19 @@ SCHEMA: dict = {
         "path_tolerance_um": "pos",
         "max_points": "count",
     },
-    "servo": {"period_ms": "pos", "x": AXIS_SCHEMA, "y": AXIS_SCHEMA, "z": AXIS_SCHEMA},
+    "servo": {"period_ms": "pos", "x": _AXIS_SCHEMA, "y": _AXIS_SCHEMA, "z": _AXIS_SCHEMA},
     "steps": {"max_pulses_per_period": "count", "per_mm": {a: "pos" for a in AXES}},
     "soft_limits": {a: {"min_mm": "finite", "max_mm": "finite"} for a in AXES},
     # Per-axis limits, beside the path limits of [limits]: a table per axis, every
     # key optional (an absent key leaves that axis to the path limits alone).
     "axis_limits": {a: dict.fromkeys(AXIS_LIMIT_KEYS, "pos") for a in AXES},
 }
-OPTIONAL = frozenset(
+_OPTIONAL = frozenset(
     {"limits.rapid_mm_min", "limits.max_points", "limits.path_tolerance_um", "servo",
      "servo.period_ms", "servo.x", "servo.y", "servo.z"}
 )
 # [axis_limits]: every table and every key optional.
-OPTIONAL |= {"axis_limits", *(f"axis_limits.{a}" for a in AXES),
+_OPTIONAL |= {"axis_limits", *(f"axis_limits.{a}" for a in AXES),
               *(f"axis_limits.{a}.{k}" for a in AXES for k in AXIS_LIMIT_KEYS)}  # fmt: skip
 
 MM_PER_UM = 1e-3
@@ -132,10 +132,10 @@ def check_table(data, schema: dict, prefix: str, rep: Reporter) -> None:
     for key, sub in schema.items():
         full = f"{prefix}.{key}" if prefix else key
         if key not in data:
-            if full in OPTIONAL:
+            if full in _OPTIONAL:
                 continue
             raise rep.error(full, "is missing")
-        if sub is AXIS_SCHEMA:
+        if sub is _AXIS_SCHEMA:
             _check_axis(data[key], full, rep)
         elif isinstance(sub, dict):
             check_table(data[key], sub, full, rep)
@@ -177,7 +177,7 @@ def _check_axis(data, key: str, rep: Reporter) -> None:
             key, f"mixes the two model forms ({coeffs[0]} and {simple[0]}): give either a0…b2 "
             "(SPEC eq. 25) or bandwidth_hz and damping"
         )  # fmt: skip
-    schema = {k: AXIS_SCHEMA[k] for k in (SERVO_SIMPLE if simple else SERVO_COEFFICIENTS)}
+    schema = {k: _AXIS_SCHEMA[k] for k in (SERVO_SIMPLE if simple else SERVO_COEFFICIENTS)}
     check_table(data, schema, key, rep)
     if simple and data["damping"] > MAX_DAMPING:
         raise rep.error(f"{key}.damping", f"must be <= {MAX_DAMPING:g}, got {data['damping']!r}")
