@@ -177,7 +177,7 @@ JOB_KEYS = {"sections", "feed_override", "holds", "holds[].latency_s", "holds[].
 
 
 def test_stream_report_keys_are_documented():
-    from nurbscnc.output.stream.link import StreamReport
+    from nurbscnc.output.stream.linkstate import StreamReport
 
     fields = {f.name for f in dataclasses.fields(StreamReport)} | {"ok", "program"}
     assert fields <= doc_keys("stream")
