@@ -153,31 +153,12 @@ def _difference_rows(u: np.ndarray, j0: int, j1: int, order: int) -> tuple:
     return d, du[:rows]
 
 
-def _region_step(u: np.ndarray, y: np.ndarray, cut_out: np.ndarray, movable: np.ndarray,
-                 window: tuple[int, int, int], h: np.ndarray, poly: np.ndarray,
-                 tube: np.ndarray, caps: SampleLimits, kappa: np.ndarray,
-                 ) -> np.ndarray | None:  # fmt: skip
-    """The LP step of one ``window`` (j0, j1, k1) (module comment above): (j1 − j0, 3) [mm],
-    the move Δ_j = a_j m_j + b_j t_j of each sample across (in-plane normal m) and along
-    (tangent t) the path, or None. ``caps`` (:class:`SampleLimits`): the reference's
-    steps (their length, to first order, REFINE_SPEED of the cap) and its first, second
-    and third differences on every axis stay within the caps less LIMIT_MARGIN (or within
-    ``u``'s own, where it was above them already: Δ = 0 is always a solution), so the step
-    never makes the reference faster or rougher than the machine's velocity, acceleration
-    and jerk (the differences exactly: Δ is applied as it is here, a straight move).
-    ``kappa`` (N,) [1/mm] the path's curvature at each sample (the bend of a move along
-    it)."""
-    from scipy.optimize import linprog
-
-    j0, j1, k1 = window
-    k1 = min(k1, y.shape[0])
-    ks = np.arange(j0, k1)
-    ks = ks[cut_out[ks]]
-    if ks.size == 0:
-        return None
-    q, sigma, tan_out = nearest_on_polyline(y[ks], poly)
-    nu = (y[ks] - q) / np.where(sigma > 1e-9, sigma, 1.0)[:, None]
-    nu = np.where(sigma[:, None] > 1e-9, nu, plane_normal(tan_out))
+def _region_bounds(u: np.ndarray, movable: np.ndarray, j0: int, j1: int, poly: np.ndarray,
+                   tube: np.ndarray, kappa: np.ndarray):  # fmt: skip
+    """The frame and bounds of a window's moves (samples j0 … j1−1): the unit tangents
+    t (J, 3) and in-plane normals m (J, 3) of the path at each sample's foot on ``poly``,
+    and the bounds [mm] of a (across) and |b| (along): within the tube, a = 0 for a sample
+    that may not move."""
     _sigma, _at, tan_in, m, mu, rest = path_coordinates(u[j0:j1], poly)
     room = np.sqrt(np.maximum(tube[j0:j1] ** 2 - np.einsum("ij,ij->i", rest, rest), 0.0))
     room *= 1.0 - 1e-6
@@ -195,17 +176,17 @@ def _region_step(u: np.ndarray, y: np.ndarray, cut_out: np.ndarray, movable: np.
     lo_a = np.where(fixed, 0.0, np.minimum(-room - mu, 0.0))
     hi_a = np.where(fixed, 0.0, np.maximum(room - bend - mu, 0.0))
     along = np.where(fixed, 0.0, b_max)
-    # Unknowns x = (a, b, z): Δ_j = a_j m_j + b_j t_j across and along the path.
-    basis = np.concatenate([m, tan_in])  # (2J, 3): the direction of each unknown
-    lag = ks[:, None] - np.arange(j0, j1)[None, :]  # k − j
-    valid = (lag >= 0) & (lag < h.shape[0])
-    hk = h[np.clip(lag, 0, h.shape[0] - 1)] * valid[..., None]  # (K, J, 3)
-    g = np.hstack([np.einsum("kc,kjc,jc->kj", nu, hk, m),
-                   np.einsum("kc,kjc,jc->kj", nu, hk, tan_in)])  # fmt: skip
-    ones = -np.ones((ks.size, 1))
-    a_ub = [np.hstack([g, ones]), np.hstack([-g, ones])]
-    b_ub = [-sigma, sigma]
-    n_x = 2 * (j1 - j0)
+    return tan_in, m, lo_a, hi_a, along
+
+
+def _region_limit_rows(u: np.ndarray, j0: int, j1: int, basis: np.ndarray,
+                       caps: SampleLimits) -> tuple[list, list]:  # fmt: skip
+    """The rows of a window's LP keeping the reference within ``caps`` (module comment
+    above): its step lengths (first order, REFINE_SPEED of the cap) and its first, second
+    and third differences on every axis (within the cap, or ``u``'s own where it is above
+    it), over the unknowns (a, b, z) with ``basis`` (2J, 3) the direction of each a and b.
+    Blocks and their right-hand sides [mm]."""
+    a_ub, b_ub = [], []
     # The speed: a move b along the path lengthens the step between samples j and j + 1 by
     # b_{j+1} − b_j (to first order; a move across it, orthogonal, by its square), so that
     # difference stays within what the step's cap leaves (REFINE_SPEED of it: the square).
@@ -229,6 +210,49 @@ def _region_step(u: np.ndarray, y: np.ndarray, cut_out: np.ndarray, movable: np.
             zero = np.zeros((rows.shape[0], 1))
             a_ub += [np.hstack([rows, zero]), np.hstack([-rows, zero])]
             b_ub += [cap - du_c, cap + du_c]
+    return a_ub, b_ub
+
+
+def _region_step(u: np.ndarray, y: np.ndarray, cut_out: np.ndarray, movable: np.ndarray,
+                 window: tuple[int, int, int], h: np.ndarray, poly: np.ndarray,
+                 tube: np.ndarray, caps: SampleLimits, kappa: np.ndarray,
+                 ) -> np.ndarray | None:  # fmt: skip
+    """The LP step of one ``window`` (j0, j1, k1) (module comment above): (j1 − j0, 3) [mm],
+    the move Δ_j = a_j m_j + b_j t_j of each sample across (in-plane normal m) and along
+    (tangent t) the path, or None. ``caps`` (:class:`SampleLimits`): the reference's
+    steps (their length, to first order, REFINE_SPEED of the cap) and its first, second
+    and third differences on every axis stay within the caps less LIMIT_MARGIN (or within
+    ``u``'s own, where it was above them already: Δ = 0 is always a solution), so the step
+    never makes the reference faster or rougher than the machine's velocity, acceleration
+    and jerk (the differences exactly: Δ is applied as it is here, a straight move;
+    :func:`_region_limit_rows`). ``kappa`` (N,) [1/mm] the path's curvature at each
+    sample (the bend of a move along it, :func:`_region_bounds`)."""
+    from scipy.optimize import linprog
+
+    j0, j1, k1 = window
+    k1 = min(k1, y.shape[0])
+    ks = np.arange(j0, k1)
+    ks = ks[cut_out[ks]]
+    if ks.size == 0:
+        return None
+    q, sigma, tan_out = nearest_on_polyline(y[ks], poly)
+    nu = (y[ks] - q) / np.where(sigma > 1e-9, sigma, 1.0)[:, None]
+    nu = np.where(sigma[:, None] > 1e-9, nu, plane_normal(tan_out))
+    tan_in, m, lo_a, hi_a, along = _region_bounds(u, movable, j0, j1, poly, tube, kappa)
+    # Unknowns x = (a, b, z): Δ_j = a_j m_j + b_j t_j across and along the path.
+    basis = np.concatenate([m, tan_in])  # (2J, 3): the direction of each unknown
+    lag = ks[:, None] - np.arange(j0, j1)[None, :]  # k − j
+    valid = (lag >= 0) & (lag < h.shape[0])
+    hk = h[np.clip(lag, 0, h.shape[0] - 1)] * valid[..., None]  # (K, J, 3)
+    g = np.hstack([np.einsum("kc,kjc,jc->kj", nu, hk, m),
+                   np.einsum("kc,kjc,jc->kj", nu, hk, tan_in)])  # fmt: skip
+    ones = -np.ones((ks.size, 1))
+    a_ub = [np.hstack([g, ones]), np.hstack([-g, ones])]
+    b_ub = [-sigma, sigma]
+    n_x = 2 * (j1 - j0)
+    limit_rows, limit_rhs = _region_limit_rows(u, j0, j1, basis, caps)
+    a_ub += limit_rows
+    b_ub += limit_rhs
     bounds = np.column_stack([np.concatenate([lo_a, -along, [0.0]]),
                               np.concatenate([hi_a, along, [np.inf]])])  # fmt: skip
     cost = np.zeros(n_x + 1)
