@@ -54,8 +54,6 @@ class Refined(Compensated):
     projected_mm: np.ndarray | None = None
 
 
-
-
 #: Spacing of the programmed curve's points where the reference tolerance is measured
 #: against it (:func:`_fit_margin_mm`) [mm]; the sagitta of the chords is added.
 _CURVE_SPACING_MM = 1e-3
@@ -169,9 +167,10 @@ def _clip_into_tube(points: np.ndarray, planned: np.ndarray, s_mm: np.ndarray, p
 
 def _projection_frame(planned: np.ndarray, clipped: np.ndarray, s_mm: np.ndarray,
                       piece: np.ndarray, pieces, profile, tube):  # fmt: skip
-    """The frame of the projection onto the limits (:func:`~nurbscnc.precompensation.
-    limits.path_frame`): in the tube about the plan's points, or (``tube`` None: no
-    tolerance) anywhere, a frame of the axes. Basis (N, D, 3), lower and upper (N, D) [mm]."""
+    """The frame of the projection onto the limits: in the tube about the plan's points
+    (:func:`~nurbscnc.precompensation.limits.path_frame`, the wanted offsets ``clipped`` −
+    ``planned``), or (``tube`` None: no tolerance) anywhere, a frame of the axes. Basis
+    (N, D, 3), lower and upper (N, D) [mm]."""
     if tube is not None:
         return path_frame(planned, s_mm, piece, pieces, profile, clipped - planned, tube)
     basis = np.broadcast_to(np.eye(3), (clipped.shape[0], 3, 3))
@@ -386,6 +385,7 @@ def _join_segments(prev_tail_mm: np.ndarray, prev_planned_mm: np.ndarray, seg: R
     whole = u
     u, r = u[:size], r[:size]
     caps = sample_limits(r, machine)
+    tube = s_plan = piece = None
     if np.isfinite(tolerance_mm):
         fit = machine.limits.ph_tolerance_mm if fit_tolerance_mm is None else fit_tolerance_mm
         starts = profile.piece_start_mm
@@ -393,11 +393,7 @@ def _join_segments(prev_tail_mm: np.ndarray, prev_planned_mm: np.ndarray, seg: R
         s_plan = np.concatenate([np.full(m, planned.s_mm[0]), planned.s_mm[: size - m]])
         foot = pieces.path.place(starts, s_plan, piece)[0]
         tube = reference_tube_mm(pieces, piece, foot, tolerance_mm, fit)
-        basis, lower, upper = path_frame(r, s_plan, piece, pieces, profile, u - r, tube)
-    else:
-        basis = np.broadcast_to(np.eye(3), (u.shape[0], 3, 3))
-        lower = np.full((u.shape[0], 3), -np.inf)
-        upper = -lower
+    basis, lower, upper = _projection_frame(r, u, s_plan, piece, pieces, profile, tube)
     last = u.shape[0] - 3
     pad = JOIN_PAD
     while True:
