@@ -30,14 +30,14 @@ from nurbscnc.machine.profile import Machine, SoftLimits
 from nurbscnc.plan.limits import check_before_work
 from nurbscnc.plan.lookahead import Check, Plan, plan_checked, plan_windows
 from nurbscnc.plan.options import Algorithm, Dynamics, LookaheadOptions, parse_choice
-from nurbscnc.plan.precompensation import (
+from nurbscnc.plan.report import check_soft_limits
+from nurbscnc.plan.timing import sample_count
+from nurbscnc.precompensation import (
     Precompensation,
     precompensate_reference,
     precompensated_sampler,
     precompensation_report,
 )
-from nurbscnc.plan.report import check_soft_limits
-from nurbscnc.plan.timing import sample_count
 from nurbscnc.program.columns import SegmentColumns, segment_columns
 from nurbscnc.servo.precompensate import REFERENCE_TOLERANCE_MM
 
