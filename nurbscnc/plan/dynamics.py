@@ -27,7 +27,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from nurbscnc.geometry.distance import PathIndex, windowed_contour_mm
-from nurbscnc.geometry.polyline import CHORD_MM  # noqa: F401  (re-exported)
 from nurbscnc.servo.model import contour_error_eq29, simulate_axes
 
 

@@ -17,8 +17,8 @@ import numpy as np
 
 from nurbscnc.geometry.nurbs import NurbsCurve
 from nurbscnc.geometry.path import Kind
+from nurbscnc.geometry.polyline import CHORD_MM
 from nurbscnc.machine.profile import Machine
-from nurbscnc.plan.dynamics import CHORD_MM
 from nurbscnc.plan.timing import Reference
 from nurbscnc.precompensation.limits import (
     PROJECT_MAX_WINDOW,

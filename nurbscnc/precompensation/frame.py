@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from nurbscnc.geometry.path import Kind
+from nurbscnc.geometry.polyline import chord_counts
 
 #: Chord sagitta of the optimiser's polylines of the path [mm].
 REFINE_CHORD_MM = 1e-7
@@ -15,20 +15,16 @@ REFINE_CHORD_MM = 1e-7
 def local_polyline(pieces, profile, s_lo_mm: float, s_hi_mm: float) -> np.ndarray:
     """The path between path lengths s_lo and s_hi [mm] (whole pieces) as a dense polyline:
     lines by their ends, curves by chords of sagitta κh²/8 ≤ REFINE_CHORD_MM (κ the
-    piece's largest curvature, doubled on NURBS cells as dynamics.path_counts does), so
-    a point's foot on it (:func:`nearest_on_polyline`) follows the curve smoothly
-    to well below the reference's jerk per period J T³."""
+    piece's largest curvature, doubled on NURBS cells:
+    :func:`~nurbscnc.geometry.polyline.chord_counts`), so a point's foot on it
+    (:func:`nearest_on_polyline`) follows the curve smoothly to well below the reference's jerk per period J T³."""
     starts = profile.piece_start_mm
     lo = max(int(np.searchsorted(starts, s_lo_mm, side="right")) - 1, 0)
     hi = min(int(np.searchsorted(starts, s_hi_mm, side="right")), starts.size)
     hi = max(hi, lo + 1)
     sl = slice(lo, hi)
-    length = pieces.length_mm[sl]
-    kappa = np.where(pieces.kind[sl] == Kind.NURBS, 2.0, 1.0) * np.abs(pieces.kappa_max_per_mm[sl])
-    with np.errstate(divide="ignore"):
-        h = np.minimum(0.01, np.sqrt(8.0 * REFINE_CHORD_MM / kappa))
-    c = np.maximum(np.ceil(length / h).astype(np.int64) + 1, 3)
-    c = np.where((pieces.kind[sl] == Kind.LINE) | (length == 0.0), 2, c)
+    c = chord_counts(pieces.kind[sl], pieces.length_mm[sl], pieces.kappa_max_per_mm[sl],
+                     REFINE_CHORD_MM, 0.01)  # fmt: skip
     piece = np.repeat(np.arange(lo, hi), c)
     first = np.repeat(np.cumsum(c) - c, c)
     frac = (np.arange(piece.size) - first) / np.repeat(c - 1, c)

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from nurbscnc.geometry.path import Kind
+from nurbscnc.geometry.polyline import chord_kappa_per_mm
 from nurbscnc.machine.profile import Machine
 from nurbscnc.precompensation.frame import plane_normal
 
@@ -202,7 +202,7 @@ def path_frame(planned_mm: np.ndarray, s_mm: np.ndarray, piece: np.ndarray, piec
     m = plane_normal(t)
     # The largest curvature of the pieces within PROJECT_ALONG_MM along the path (NURBS
     # cells' estimate doubled, as _local_polyline).
-    kappa = np.where(pieces.kind == Kind.NURBS, 2.0, 1.0) * np.abs(pieces.kappa_max_per_mm)
+    kappa = chord_kappa_per_mm(pieces.kind, pieces.kappa_max_per_mm)
     kappa = np.nan_to_num(kappa, nan=np.inf)
     lo_p = np.clip(np.searchsorted(starts, s_mm - PROJECT_ALONG_MM, side="right") - 1, 0,
                    starts.size - 1)  # fmt: skip

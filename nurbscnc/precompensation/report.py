@@ -8,8 +8,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from nurbscnc.geometry.distance import PathIndex, windowed_contour_mm
 from nurbscnc.machine.profile import AxisServo, Machine
-from nurbscnc.plan.dynamics import PathIndex, path_response, windowed_contour_mm
+from nurbscnc.plan.dynamics import path_response
 from nurbscnc.plan.lookahead import Plan
 from nurbscnc.plan.timing import Reference
 from nurbscnc.servo.model import AxisModel

@@ -8,8 +8,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from nurbscnc.geometry.distance import PathIndex, windowed_contour_mm
 from nurbscnc.machine.profile import Machine
-from nurbscnc.plan.dynamics import PathIndex, path_response, windowed_contour_mm
+from nurbscnc.plan.dynamics import path_response
 from nurbscnc.plan.timing import Reference
 from nurbscnc.precompensation.frame import (
     into_tube,
