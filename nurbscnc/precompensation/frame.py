@@ -17,7 +17,8 @@ def local_polyline(pieces, profile, s_lo_mm: float, s_hi_mm: float) -> np.ndarra
     lines by their ends, curves by chords of sagitta κh²/8 ≤ REFINE_CHORD_MM (κ the
     piece's largest curvature, doubled on NURBS cells:
     :func:`~nurbscnc.geometry.polyline.chord_counts`), so a point's foot on it
-    (:func:`nearest_on_polyline`) follows the curve smoothly to well below the reference's jerk per period J T³."""
+    (:func:`nearest_on_polyline`) follows the curve smoothly to well below the reference's
+    jerk per period J T³."""
     starts = profile.piece_start_mm
     lo = max(int(np.searchsorted(starts, s_lo_mm, side="right")) - 1, 0)
     hi = min(int(np.searchsorted(starts, s_hi_mm, side="right")), starts.size)
