@@ -37,6 +37,7 @@ from typing import NamedTuple
 import numpy as np
 
 from nurbscnc.geometry.segments import Line
+from nurbscnc.program.codes import G_0, G_1
 
 # Groups: 1 the motion digit of G0/G1 (G00, G01), 2-5 the X Y Z F numbers. A number here is
 # any run of digits and points with a sign; the runs float() refuses ("1.2.3", ".") are not
@@ -207,7 +208,7 @@ def plain_run(lines, start: int, state: BulkState, to_machine, limits) -> BulkRu
     """
     max_coord, min_feed, max_feed = limits
     first = _plain_row(lines[start])
-    if first is None or (state.motion not in (0, 10) and not first[0] and any(first[1:])):
+    if first is None or (state.motion not in (G_0, G_1) and not first[0] and any(first[1:])):
         return None  # not plain, or a plain line for another motion mode (G81 X Y): cheap no
     rows: list = []
     size = FIRST_CHUNK
@@ -250,10 +251,10 @@ def _run(rows, start: int, state: BulkState, to_machine, limits) -> BulkRun | No
     has_axes = given[:, 1] | given[:, 2] | given[:, 3]
     worded = has_axes | has_g | has_f
     # Lines the general path refuses or treats otherwise end the run before them.
-    bad = worded & (motion != 0.0) & (motion != 10.0)
+    bad = worded & (motion != G_0) & (motion != G_1)
     bad |= has_f & ((feed_raw < 0.0) | ((feed_mm != 0.0) & ((feed_mm < min_feed) |
                                                             (feed_mm > max_feed))))  # fmt: skip
-    bad |= has_axes & (motion == 10.0) & ~(feed_mm > 0.0)
+    bad |= has_axes & (motion == G_1) & ~(feed_mm > 0.0)
     for values, given in prog:
         bad |= given & ~(np.abs(values) <= max_coord)
     first_bad = np.flatnonzero(bad)
@@ -267,7 +268,7 @@ def _run(rows, start: int, state: BulkState, to_machine, limits) -> BulkRun | No
     starts[0] = to_machine(np.array([state.prog_mm], dtype=float))[0]
     starts[1:] = ends[:-1]
     moves = np.flatnonzero(has_axes[:n] & (ends != starts).any(axis=1))
-    rapid = motion[moves] == 0.0
+    rapid = motion[moves] == G_0
     feeds = np.where(rapid, 0.0, feed_mm[moves] / 60.0)
     # A move starts where the line before it ended: when that line is a move too (nearly
     # always) its end tuple is shared (equal values; one object instead of two).

@@ -40,6 +40,10 @@ from nurbscnc.program.codes import (
     M_3,
     M_4,
     M_6,
+    M_50,
+    M_51,
+    M_52,
+    M_53,
     M_62,
     M_63,
     M_64,
@@ -65,7 +69,7 @@ from nurbscnc.program.words import AXES, MAX_DWELL_S, MAX_FEED_MM_MIN, MIN_FEED_
 _IO_WORDS = {M_66: "PELQ", M_67: "EQ", M_68: "EQ"}
 #: The I/O codes that wait for the motion before them to end (a dwell of 0 s there).
 _IO_WAITS = (M_64, M_65, M_66, M_68)
-_OVERRIDES = (50, 51, 52, 53)  # M50–M53: their P switches the override
+_OVERRIDES = (M_50, M_51, M_52, M_53)  # their P switches the override
 
 
 class ModeSetters:
