@@ -1,4 +1,4 @@
-"""The fast lane: runs of plain straight-move lines interpreted in bulk (issue 14), and the
+"""The fast lane: runs of plain straight-move lines interpreted in bulk, and the
 continuation lines of G6.2 blocks read without the general parser (:func:`nurbs_words`).
 
 CAM output is mostly lines such as ``N120 G1 X12.5 Y-3.25 Z-1 F600`` or ``X12.5 Y-3.25``:
@@ -59,10 +59,10 @@ _PLAIN = re.compile(
 #: A run is read in chunks that start small (a run may be a few lines between two others)
 #: and double while every line of the chunk is plain.
 FIRST_CHUNK = 32
-#: Shortest run the lane takes [lines]. Its whole-array work costs ~90 µs a call, the line by
-#: line interpreter ~10 µs a line; and a line the lane took is never parsed, so a loop whose
-#: body holds a short plain run took the lane at every turn: an endless two-line loop ran
-#: 36 s to its 250,000-turn limit (the fuzzer), 1.5 s line by line.
+#: Shortest run the lane takes [lines]. Its whole-array work has a fixed cost per call of
+#: about as many lines as this interpreted one by one; and a line the lane took is never
+#: parsed, so a loop whose body holds a short plain run would pay that cost at every turn
+#: (an endless two-line loop runs to its turn limit many times slower than line by line).
 MIN_RUN_LINES = 8
 MAX_CHUNK = 8192
 
@@ -305,9 +305,9 @@ def make_lines(columns: dict) -> list:
     :class:`~nurbscnc.geometry.segments.Line` to an iterable of its values, one per line.
 
     The same objects as ``Line(**fields)`` one by one (a test compares them field by field),
-    made ~3x faster: a frozen dataclass's ``__init__`` sets each field through
-    ``object.__setattr__`` (seven Python-level calls per Line; 0.6 s for 200,000 lines),
-    while here each field's slot descriptor is mapped over all the new objects in C.
+    made faster: a frozen dataclass's ``__init__`` sets each field through
+    ``object.__setattr__`` (seven Python-level calls per Line), while here each field's
+    slot descriptor is mapped over all the new objects in C.
     """
     names = [f.name for f in dataclasses.fields(Line)]
     if sorted(names) != sorted(columns):
@@ -328,7 +328,7 @@ def pause_cyclic_gc():
 
     The segments hold no reference cycles, but the collector cannot know: building 200,000
     Line objects triggers a dozen full collections, each walking every object made so far
-    (measured: a third of the interpretation time of a 200,000-line program). Reference
+    (a cost that grows as the square of the run's length). Reference
     counting still frees everything; only the cycle search waits until the run is built.
     """
     enabled = gc.isenabled()
