@@ -1,8 +1,8 @@
 """The G and M codes and their modal groups by name (LinuxCNC's interp_internal.hh).
 
 G codes are integers, the value × 10, as LinuxCNC stores them: G59.3 is 593, G38.2 is 382
-(:meth:`~nurbscnc.program.interpret.Interpreter.read_g` rounds the word's value × 10). M codes
-are the plain value (M6 is 6): RS274/NGC has no M code with a decimal. The modal groups are
+(:meth:`~nurbscnc.program.executor.BlockExecutor.read_g` rounds the word's value × 10). M
+codes are the plain value (M6 is 6): RS274/NGC has no M code with a decimal. The modal groups are
 numbered as LinuxCNC numbers them (its ``GM_*`` and the M groups of ``convert_m``), so error
 messages that name a group say LinuxCNC's number.
 """

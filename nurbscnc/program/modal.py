@@ -1,4 +1,4 @@
-"""Modal groups and the modal state (LinuxCNC's interp_internal.hh, setup_struct).
+"""The modal state (LinuxCNC's interp_internal.hh, setup_struct) and the state each code selects.
 
 G codes are integers (value × 10: G59.3 is 593), named in :mod:`nurbscnc.program.codes`
 with their modal groups; the tables here map a code to the state it selects.
