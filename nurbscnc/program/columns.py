@@ -1,4 +1,4 @@
-"""The interpreted program's segments as columns (issue 14: per-segment work whole-array).
+"""The interpreted program's segments as columns (per-segment work done whole-array).
 
 A CAM program is hundreds of thousands of Line objects; the checks before work and the
 ``check`` summary want their kinds, end points, feeds and source lines as arrays. Each

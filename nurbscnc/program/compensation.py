@@ -232,7 +232,8 @@ class CutterComp:
         self.current, self.programmed = end, (px, py, pz)
 
     def _line2(self, m: CompMove, out: list) -> None:
-        """A straight move after the entry (convert_straight_comp2)."""
+        """A straight move after the entry (convert_straight_comp2): the corner it makes with
+        the move before is convex (go round it), concave (back off the move before) or none."""
         r, small = self.radius_mm, CORNER_TOL_RAD
         cx, cy, cz = self.current
         opx, opy, _ = self.programmed
@@ -241,6 +242,30 @@ class CutterComp:
             self._enqueue(replace(m, end_mm=(cx, cy, pz)))
             self.current, self.programmed = (cx, cy, pz), (px, py, pz)
             return
+        theta, alpha, beta, gamma = self._line_angles(px, py)
+        end = (px + r * math.cos(alpha + gamma), py + r * math.sin(alpha + gamma), pz)
+        mid = (opx + r * math.cos(alpha + gamma), opy + r * math.sin(alpha + gamma))
+        front = self._front_arc()
+        concave = self._line_corner_concave(beta, front)
+        if not concave and beta > small:
+            self._convex_to_line(m, mid, out)
+        elif concave:
+            if front is None:
+                self._concave_line_to_line(beta, theta, gamma, out)
+            else:
+                self._concave_arc_to_line(front, px, py, out)
+        else:  # no corner (collinear, or tangent arc -> line)
+            self._dequeue(out)
+            self.endpoint = (cx, cy)
+        self._enqueue(replace(m, end_mm=end), (px - opx, py - opy))
+        self.current, self.programmed = end, (px, py, pz)
+
+    def _line_angles(self, px: float, py: float) -> tuple:
+        """LinuxCNC's angles of a line to (px, py) after the programmed point [rad]: theta
+        the direction from it to the tool, alpha the line's direction, beta the turn of the
+        corner (0: straight on), gamma the side (+π/2 left, −π/2 right)."""
+        cx, cy, _ = self.current
+        opx, opy, _ = self.programmed
         theta = math.atan2(cy - opy, cx - opx)
         alpha = math.atan2(py - opy, px - opx)
         if self.left:
@@ -253,57 +278,64 @@ class CutterComp:
                 alpha += 2 * math.pi
             beta = alpha - theta - math.pi / 2
             gamma = -math.pi / 2
-        end = (px + r * math.cos(alpha + gamma), py + r * math.sin(alpha + gamma), pz)
-        mid = (opx + r * math.cos(alpha + gamma), opy + r * math.sin(alpha + gamma))
-        front = self._front_arc()
+        return theta, alpha, beta, gamma
+
+    def _line_corner_concave(self, beta: float, front: CompMove | None) -> bool:
+        """Whether the corner before a line of turn ``beta`` is concave."""
+        small = CORNER_TOL_RAD
         if beta < -small or beta > math.pi + small:
-            concave = True
-        elif beta > math.pi - small and front is not None and (
+            return True
+        # LinuxCNC's "h" shape: stay above and to the side
+        return beta > math.pi - small and front is not None and (
             (not self.left and front.turn > 0) or (self.left and front.turn < 0)
-        ):
-            concave = True  # LinuxCNC's "h" shape: stay above and to the side
-        else:
-            concave = False
-        if not concave and beta > small:  # convex corner: go round it
-            self._move_endpoint_and_flush(cx, cy, out)
-            if m.kind == "feed":
-                corner = CompMove("arc", (mid[0], mid[1], cz), m.feed_mm_s, m.line,
-                                  (opx, opy), -1 if self.left else 1)  # fmt: skip
-            else:  # no arc traverse: a rapid to the corner arc's end
-                corner = CompMove("rapid", (mid[0], mid[1], cz), 0.0, m.line)
-            self._enqueue(corner)
-            self._dequeue(out)
-            self.endpoint = mid
-        elif concave:
-            if front is None:  # line -> line: back off the previous line
-                halfcorner = (beta + math.pi) / 2.0
-                if halfcorner == 0.0:
-                    raise ProgramError(MSG_ZERO_CORNER)
-                retreat = r / math.tan(halfcorner)
-                back_x = cx + retreat * math.cos(theta + gamma)
-                back_y = cy + retreat * math.sin(theta + gamma)
-                self._move_endpoint_and_flush(back_x, back_y, out)
-            else:  # arc -> line: where the offset arc meets the offset line
-                pcx, pcy = front.centre_mm
-                oldrad = math.hypot(pcy - front.end_mm[1], pcx - front.end_mm[0])
-                base = math.atan2(py - opy, px - opx)
-                th = base + math.pi / 2 if front.turn > 0 else base - math.pi / 2
-                phi = math.atan2(pcy - opy, pcx - opx)
-                inside = self._inside(front.turn)
-                oldrad_uncomp = oldrad + r if inside else oldrad - r
-                d = oldrad_uncomp * math.cos(th - phi)
-                ratio = (d - r if inside else d + r) / oldrad
-                if ratio > 1.0 or ratio < -1.0:
-                    raise ProgramError(MSG_ARC_LINE_GOUGE)
-                sign = (-1 if front.turn > 0 else 1) * (1 if inside else -1)
-                ang = sign * math.acos(ratio) + th + math.pi
-                self._move_endpoint_and_flush(pcx + oldrad * math.cos(ang),
-                                              pcy + oldrad * math.sin(ang), out)  # fmt: skip
-        else:  # no corner (collinear, or tangent arc -> line)
-            self._dequeue(out)
-            self.endpoint = (cx, cy)
-        self._enqueue(replace(m, end_mm=end), (px - opx, py - opy))
-        self.current, self.programmed = end, (px, py, pz)
+        )
+
+    def _convex_to_line(self, m: CompMove, mid: tuple, out: list) -> None:
+        """A convex corner before a line: the move before ends at the tool, then a corner
+        arc about the programmed corner to ``mid`` (for a rapid: a rapid to it)."""
+        cx, cy, cz = self.current
+        opx, opy, _ = self.programmed
+        self._move_endpoint_and_flush(cx, cy, out)
+        if m.kind == "feed":
+            corner = CompMove("arc", (mid[0], mid[1], cz), m.feed_mm_s, m.line,
+                              (opx, opy), -1 if self.left else 1)  # fmt: skip
+        else:  # no arc traverse: a rapid to the corner arc's end
+            corner = CompMove("rapid", (mid[0], mid[1], cz), 0.0, m.line)
+        self._enqueue(corner)
+        self._dequeue(out)
+        self.endpoint = mid
+
+    def _concave_line_to_line(self, beta: float, theta: float, gamma: float, out: list) -> None:
+        """Line -> line, concave: the line before backs off by r / tan(half the corner)."""
+        cx, cy, _ = self.current
+        halfcorner = (beta + math.pi) / 2.0
+        if halfcorner == 0.0:
+            raise ProgramError(MSG_ZERO_CORNER)
+        retreat = self.radius_mm / math.tan(halfcorner)
+        back_x = cx + retreat * math.cos(theta + gamma)
+        back_y = cy + retreat * math.sin(theta + gamma)
+        self._move_endpoint_and_flush(back_x, back_y, out)
+
+    def _concave_arc_to_line(self, front: CompMove, px: float, py: float, out: list) -> None:
+        """Arc -> line, concave: the arc before ends where the offset arc meets the offset
+        line."""
+        r = self.radius_mm
+        opx, opy, _ = self.programmed
+        pcx, pcy = front.centre_mm
+        oldrad = math.hypot(pcy - front.end_mm[1], pcx - front.end_mm[0])
+        base = math.atan2(py - opy, px - opx)
+        th = base + math.pi / 2 if front.turn > 0 else base - math.pi / 2
+        phi = math.atan2(pcy - opy, pcx - opx)
+        inside = self._inside(front.turn)
+        oldrad_uncomp = oldrad + r if inside else oldrad - r
+        d = oldrad_uncomp * math.cos(th - phi)
+        ratio = (d - r if inside else d + r) / oldrad
+        if ratio > 1.0 or ratio < -1.0:
+            raise ProgramError(MSG_ARC_LINE_GOUGE)
+        sign = (-1 if front.turn > 0 else 1) * (1 if inside else -1)
+        ang = sign * math.acos(ratio) + th + math.pi
+        self._move_endpoint_and_flush(pcx + oldrad * math.cos(ang),
+                                      pcy + oldrad * math.sin(ang), out)  # fmt: skip
 
     # -- arcs ------------------------------------------------------------------------------
     def _arc1(self, m: CompMove, out: list) -> None:
@@ -335,7 +367,8 @@ class CutterComp:
         self.current = end
 
     def _arc2(self, m: CompMove, out: list) -> None:
-        """An arc after the entry (convert_arc_comp2)."""
+        """An arc after the entry (convert_arc_comp2): the corner it makes with the move
+        before is concave (back off the move before), convex (a corner arc) or tangent."""
         r, small = self.radius_mm, CORNER_TOL_RAD
         opx, opy, _ = self.programmed
         cx, cy, cz = self.current
@@ -343,15 +376,7 @@ class CutterComp:
         ccx, ccy = m.centre_mm
         turn = m.turn
         arc_radius = math.hypot(ccx - ex, ccy - ey)
-        theta = math.atan2(cy - opy, cx - opx)
-        theta = theta - math.pi / 2 if self.left else theta + math.pi / 2
-        delta = math.atan2(ccy - opy, ccx - opx)
-        alpha = delta - math.pi / 2 if turn > 0 else delta + math.pi / 2
-        beta = theta - alpha if self.left else alpha - theta
-        if beta > 1.5 * math.pi:
-            beta -= 2 * math.pi
-        elif beta < -math.pi / 2:
-            beta += 2 * math.pi
+        theta, delta, beta = self._arc_angles(ccx, ccy, turn)
         inside = self._inside(turn)
         if inside:
             gamma = math.atan2(ccy - ey, ccx - ex)
@@ -365,41 +390,10 @@ class CutterComp:
         main = replace(m, end_mm=new_end)
         if beta < -small or beta > math.pi + small or (abs(beta - math.pi) < small and not inside):
             front = self._front_arc()
-            if front is None:  # line -> arc
-                offset = arc_radius * math.sin(beta - math.pi / 2)
-                if inside:
-                    dist = arc_radius - r
-                    ratio = (offset + r) / dist
-                    if ratio > 1.0 or ratio < -1.0:
-                        raise ProgramError(MSG_ARC_GOUGE)
-                    ang = theta + math.asin(ratio) if turn > 0 else theta - math.asin(ratio)
-                else:
-                    dist = arc_radius + r
-                    ratio = (offset - r) / dist
-                    if ratio > 1.0 or ratio < -1.0:
-                        raise ProgramError(MSG_ARC_GOUGE)
-                    ang = (theta + math.pi - math.asin(ratio) if turn > 0
-                           else theta + math.pi + math.asin(ratio))  # fmt: skip
-                self._move_endpoint_and_flush(ccx + dist * math.cos(ang),
-                                              ccy + dist * math.sin(ang), out)  # fmt: skip
-            else:  # arc -> arc
-                pcx, pcy = front.centre_mm
-                oldrad = math.hypot(pcy - front.end_mm[1], pcx - front.end_mm[0])
-                newrad = arc_radius - r if inside else arc_radius + r
-                arc_cc = math.hypot(pcy - ccy, pcx - ccx)
-                if oldrad == 0 or arc_cc == 0:
-                    raise ProgramError(MSG_SAME_CENTRE)
-                a = (oldrad**2 + arc_cc**2 - newrad**2) / (2 * oldrad * arc_cc)
-                if a > 1.0 or a < -1.0:
-                    raise ProgramError(MSG_ARC_ARC_GOUGE)
-                pullback = math.acos(a)
-                cc_dir = math.atan2(ccy - pcy, ccx - pcx)
-                if self._inside(front.turn):
-                    direction = cc_dir + pullback if turn > 0 else cc_dir - pullback
-                else:
-                    direction = cc_dir - pullback if turn > 0 else cc_dir + pullback
-                self._move_endpoint_and_flush(pcx + oldrad * math.cos(direction),
-                                              pcy + oldrad * math.sin(direction), out)  # fmt: skip
+            if front is None:
+                self._concave_line_to_arc(m, theta, beta, arc_radius, inside, out)
+            else:
+                self._concave_arc_to_arc(m, front, arc_radius, inside, out)
             self._enqueue(main, (0.0, 0.0), main_turns)
         elif beta > small:  # convex: a corner arc, then the arc
             mid = (opx + r * math.cos(delta), opy + r * math.sin(delta))
@@ -415,3 +409,67 @@ class CutterComp:
             self._enqueue(main, (0.0, 0.0), main_turns)
         self.programmed = (ex, ey, ez)
         self.current = new_end
+
+    def _arc_angles(self, ccx: float, ccy: float, turn: int) -> tuple:
+        """LinuxCNC's angles of an arc about (ccx, ccy) after the programmed point [rad]:
+        theta the tool's normal direction there, delta the direction to the centre, beta
+        the turn of the corner, in (−π/2, 3π/2]."""
+        opx, opy, _ = self.programmed
+        cx, cy, _ = self.current
+        theta = math.atan2(cy - opy, cx - opx)
+        theta = theta - math.pi / 2 if self.left else theta + math.pi / 2
+        delta = math.atan2(ccy - opy, ccx - opx)
+        alpha = delta - math.pi / 2 if turn > 0 else delta + math.pi / 2
+        beta = theta - alpha if self.left else alpha - theta
+        if beta > 1.5 * math.pi:
+            beta -= 2 * math.pi
+        elif beta < -math.pi / 2:
+            beta += 2 * math.pi
+        return theta, delta, beta
+
+    def _concave_line_to_arc(self, m: CompMove, theta: float, beta: float, arc_radius: float,
+                             inside: bool, out: list) -> None:
+        """Line -> arc, concave: the line before ends where it meets the offset arc."""
+        r = self.radius_mm
+        ccx, ccy = m.centre_mm
+        turn = m.turn
+        offset = arc_radius * math.sin(beta - math.pi / 2)
+        if inside:
+            dist = arc_radius - r
+            ratio = (offset + r) / dist
+            if ratio > 1.0 or ratio < -1.0:
+                raise ProgramError(MSG_ARC_GOUGE)
+            ang = theta + math.asin(ratio) if turn > 0 else theta - math.asin(ratio)
+        else:
+            dist = arc_radius + r
+            ratio = (offset - r) / dist
+            if ratio > 1.0 or ratio < -1.0:
+                raise ProgramError(MSG_ARC_GOUGE)
+            ang = (theta + math.pi - math.asin(ratio) if turn > 0
+                   else theta + math.pi + math.asin(ratio))  # fmt: skip
+        self._move_endpoint_and_flush(ccx + dist * math.cos(ang),
+                                      ccy + dist * math.sin(ang), out)  # fmt: skip
+
+    def _concave_arc_to_arc(self, m: CompMove, front: CompMove, arc_radius: float,
+                            inside: bool, out: list) -> None:
+        """Arc -> arc, concave: the arc before ends where the two offset arcs meet."""
+        r = self.radius_mm
+        ccx, ccy = m.centre_mm
+        turn = m.turn
+        pcx, pcy = front.centre_mm
+        oldrad = math.hypot(pcy - front.end_mm[1], pcx - front.end_mm[0])
+        newrad = arc_radius - r if inside else arc_radius + r
+        arc_cc = math.hypot(pcy - ccy, pcx - ccx)
+        if oldrad == 0 or arc_cc == 0:
+            raise ProgramError(MSG_SAME_CENTRE)
+        a = (oldrad**2 + arc_cc**2 - newrad**2) / (2 * oldrad * arc_cc)
+        if a > 1.0 or a < -1.0:
+            raise ProgramError(MSG_ARC_ARC_GOUGE)
+        pullback = math.acos(a)
+        cc_dir = math.atan2(ccy - pcy, ccx - pcx)
+        if self._inside(front.turn):
+            direction = cc_dir + pullback if turn > 0 else cc_dir - pullback
+        else:
+            direction = cc_dir - pullback if turn > 0 else cc_dir + pullback
+        self._move_endpoint_and_flush(pcx + oldrad * math.cos(direction),
+                                      pcy + oldrad * math.sin(direction), out)  # fmt: skip

@@ -28,6 +28,20 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from nurbscnc.errors import UnsupportedError
+from nurbscnc.program.codes import (
+    G_10,
+    G_28,
+    G_28_1,
+    G_30,
+    G_30_1,
+    G_40,
+    G_52,
+    G_92,
+    G_92_1,
+    G_92_2,
+    G_92_3,
+    GM_NONMODAL,
+)
 from nurbscnc.program.tooltable import Tool
 
 _AXES = ("X", "Y", "Z")
@@ -223,30 +237,30 @@ class OffsetCommands:
 
     def nonmodal(self, gcodes: dict, words: dict, used: set) -> bool:
         """Group-0 codes other than G4; True when they consumed the axis words."""
-        if 0 not in gcodes:
+        if GM_NONMODAL not in gcodes:
             return False
-        code, col = gcodes[0]
-        if code == 100:
+        code, col = gcodes[GM_NONMODAL]
+        if code == G_10:
             self.g10(words, used, col)
             return True
-        if code in (280, 300):
-            self.go_home(28 if code == 280 else 30, words, used)
+        if code in (G_28, G_30):
+            self.go_home(28 if code == G_28 else 30, words, used)
             return True
-        if code in (281, 301):
-            self.coords.store_home(28 if code == 281 else 30, self.pos)
+        if code in (G_28_1, G_30_1):
+            self.coords.store_home(28 if code == G_28_1 else 30, self.pos)
             return False
-        if code == 920:
+        if code == G_92:
             self.g92(words, used, col)
             return True
-        if code == 520:
+        if code == G_52:
             self.g52(words, used, col)
             return True
-        if code in (921, 922, 923):
+        if code in (G_92_1, G_92_2, G_92_3):
             machine = self.pos
-            if code == 923:
+            if code == G_92_3:
                 self.coords.restore_g92()
             else:
-                self.coords.clear_g92(keep_parameters=code == 922)
+                self.coords.clear_g92(keep_parameters=code == G_92_2)
             self.pos = machine
         return False
 
@@ -382,7 +396,7 @@ class OffsetCommands:
 
         With axis words only those axes go home (LinuxCNC); without, all do.
         """
-        if self.m.comp_mode != 400:
+        if self.m.comp_mode != G_40:
             raise self.error(f"G{which} with cutter compensation on")
         home = self.coords.home_mm(which)
         axes = [i for i, a in enumerate(_AXES) if a in words]

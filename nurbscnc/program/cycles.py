@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
+from typing import NamedTuple
 
 from nurbscnc.errors import ProgramError
 
@@ -165,6 +166,54 @@ def expand_cycle(
     :class:`TooManyMoves` before any is made (the caller counts the rest as made).
     Raises ProgramError with LinuxCNC's message (the caller adds line and column).
     """
+    _refuse(code, words, plane, feed_mm_s)
+    same = state.motion == code
+    r_word, z_word, repeats = _levels_and_repeats(code, words, state, plane, same)
+    ia, ib, ic = _AXES[plane]
+    current = list(position_mm)
+    initial = state.initial_level_mm if state.initial_level_mm is not None else current[ic]
+    hole = _place(words, incremental, current, plane, r_word, z_word, initial)
+    r, c = hole.r, hole.c
+    if r < c:
+        raise ProgramError(f"R less than {_LETTER[ic].lower()} in cycle in "
+                           f"{_PLANE_NAME[plane]} plane")  # fmt: skip
+
+    # A net under the count below: the moves the emitter makes (some go nowhere and make no
+    # segment, so twice the budget) never run away, whatever the count missed.
+    out = _Emitter(plane, feed_mm_s, position_mm, 2.0 * max_moves + 64)
+    old_c = initial
+    current_c = current[ic]
+    if old_c < r:
+        out.rapid(current[ia], current[ib], r)
+        old_c = r
+        current_c = old_c
+    clear = r if retract == "G99" else old_c
+
+    sticky = _STICKY_WORDS.get(code, _no_words)(code, words, state, same)
+    if code in ("G73", "G83"):
+        _count_pecks(code, sticky.q_mm, r, c, repeats, max_moves)
+    a, b = hole.a, hole.b
+    for repeat in range(repeats):
+        a, b = _next_hole(a, b, hole)
+        _approach(out, a, b, r, clear, current_c if repeat == 0 else None)
+        _CYCLES[code](out, a, b, r, clear, c, sticky.p_s, sticky.q_mm,
+                      (sticky.i_mm, sticky.j_mm, sticky.k_mm, incremental), spindle,
+                      code)  # fmt: skip
+
+    new_state = replace(
+        state, motion=code, initial_level_mm=initial, r_mm=r_word, z_mm=z_word,
+        p_s=sticky.p_s, q_mm=sticky.q_mm, i_mm=sticky.i_mm, j_mm=sticky.j_mm, k_mm=sticky.k_mm,
+    )  # fmt: skip
+    final = [0.0, 0.0, 0.0]
+    final[ia], final[ib], final[ic] = a, b, clear
+    # G87 ends at (a, b, clear) too; G88 ends at the bottom (the operator retracts by hand), as
+    # LinuxCNC's canonical moves do; the interpreter's notion of position is (a, b, clear).
+    return CycleResult(tuple(out.moves), new_state, tuple(final))
+
+
+# -- the steps of a cycle block -------------------------------------------------------------
+def _refuse(code: str, words: dict, plane: str, feed_mm_s: float) -> None:
+    """What LinuxCNC refuses, or nurbscnc refuses rather than copy, before any level."""
     if code not in CODES:
         raise ProgramError(f"{code} is not a canned cycle")
     if code == "G74" and "L" in words:  # LinuxCNC's word check counts G74 out of L's codes
@@ -179,7 +228,10 @@ def expand_cycle(
         )
     if feed_mm_s == 0.0:
         raise ProgramError("Cannot feed with zero feed rate")
-    same = state.motion == code
+
+
+def _levels_and_repeats(code: str, words: dict, state: CycleState, plane: str, same: bool):
+    """The R and depth words (sticky while the same cycle goes on) and the repeats L."""
     if "R" not in words and not same:
         raise ProgramError("R clearance plane unspecified in cycle")
     r_word = words.get("R", state.r_mm)
@@ -187,23 +239,35 @@ def expand_cycle(
     if repeats == 0:
         raise ProgramError("Cannot do zero repeats of cycle")
     repeats = int(round(repeats))
-
-    ia, ib, ic = _AXES[plane]
-    depth_letter = _LETTER[ic]
+    depth_letter = _LETTER[_AXES[plane][2]]
     if state.motion != code and depth_letter not in words:
         raise ProgramError(
             f"{depth_letter} value unspecified in {_PLANE_NAME[plane]} plane canned cycle"
         )
-    z_word = words.get(depth_letter, state.z_mm)
+    return r_word, words.get(depth_letter, state.z_mm), repeats
 
-    current = list(position_mm)
-    current_c = current[ic]
-    initial = state.initial_level_mm if state.initial_level_mm is not None else current_c
-    old_c = initial
-    a_inc = b_inc = radius_inc = theta_inc = 0.0
+
+class _Hole(NamedTuple):
+    """The levels R and bottom ``c`` on the drilling axis, the first hole (a, b) in the plane
+    before its increment, and the increments of each repeat (G91: plane and polar) [mm,
+    rad]."""
+
+    r: float
+    c: float
+    a: float
+    b: float
+    a_inc: float = 0.0
+    b_inc: float = 0.0
+    radius_inc: float = 0.0
+    theta_inc: float = 0.0
+
+
+def _place(words: dict, incremental: bool, current: list, plane: str, r_word: float,
+           z_word: float, initial: float) -> _Hole:
+    """The levels and the hole: G90 absolute (X Y, or polar @ ^ in XY); G91 R from the
+    initial level, the depth from R, X Y (and polar) added once per repeat."""
+    ia, ib, _ = _AXES[plane]
     if not incremental:
-        r = r_word
-        c = z_word
         if plane == "XY" and ("@" in words or "^" in words):
             radius = words.get("@", math.hypot(current[1], current[0]))
             theta = math.radians(words["^"]) if "^" in words else math.atan2(current[1], current[0])
@@ -211,87 +275,105 @@ def expand_cycle(
         else:
             a = words.get(_LETTER[ia], current[ia])
             b = words.get(_LETTER[ib], current[ib])
+        return _Hole(r_word, z_word, a, b)
+    radius_inc = theta_inc = 0.0
+    if plane == "XY":
+        radius_inc = words.get("@", 0.0)
+        theta_inc = math.radians(words.get("^", 0.0))
+    r = r_word + initial
+    return _Hole(r, r + z_word, current[ia], current[ib], words.get(_LETTER[ia], 0.0),
+                 words.get(_LETTER[ib], 0.0), radius_inc, theta_inc)  # fmt: skip
+
+
+def _next_hole(a: float, b: float, hole: _Hole) -> tuple:
+    """The hole of the next repeat: the increments added (polar ones about the origin)."""
+    a, b = a + hole.a_inc, b + hole.b_inc
+    if hole.radius_inc or hole.theta_inc:
+        if a == 0.0 and b == 0.0:
+            raise ProgramError(
+                "Incremental motion with polar coordinates is indeterminate when at the origin"
+            )
+        if hole.radius_inc:
+            theta, radius = math.atan2(b, a), math.hypot(b, a) + hole.radius_inc
+            a, b = radius * math.cos(theta), radius * math.sin(theta)
+        if hole.theta_inc:
+            theta, radius = math.atan2(b, a) + hole.theta_inc, math.hypot(b, a)
+            a, b = radius * math.cos(theta), radius * math.sin(theta)
+    return a, b
+
+
+def _approach(out, a: float, b: float, r: float, clear: float, first_c: float | None) -> None:
+    """Rapid to the hole and down to R: on the first repeat at the current level when it is
+    above R (``first_c``), otherwise at the clear level."""
+    if first_c is not None and first_c > r:
+        out.rapid(a, b, first_c)
+        out.rapid(a, b, r)
     else:
-        a_inc = words.get(_LETTER[ia], 0.0)
-        b_inc = words.get(_LETTER[ib], 0.0)
-        if plane == "XY":
-            radius_inc = words.get("@", 0.0)
-            theta_inc = math.radians(words.get("^", 0.0))
-        r = r_word + old_c
-        c = r + z_word
-        a, b = current[ia], current[ib]
-    if r < c:
-        raise ProgramError(f"R less than {depth_letter.lower()} in cycle in "
-                           f"{_PLANE_NAME[plane]} plane")  # fmt: skip
-
-    # A net under the count below: the moves the emitter makes (some go nowhere and make no
-    # segment, so twice the budget) never run away, whatever the count missed.
-    out = _Emitter(plane, feed_mm_s, position_mm, 2.0 * max_moves + 64)
-    if old_c < r:
-        out.rapid(current[ia], current[ib], r)
-        old_c = r
-        current_c = old_c
-    clear = r if retract == "G99" else old_c
-
-    p_s, q_mm = state.p_s, state.q_mm
-    i_mm, j_mm, k_mm = state.i_mm, state.j_mm, state.k_mm
-    if code in ("G82", "G86", "G88", "G89"):
-        if not same and "P" not in words:
-            raise ProgramError(f"Dwell time p word missing with {code.lower()}")
-        p_s = words.get("P", p_s)
-    elif code in ("G74", "G84"):
-        p_s = words.get("P", p_s)
-    elif code in ("G73", "G83"):
-        if not same and "Q" not in words:
-            raise ProgramError(f"Q word missing with {code.lower()}")
-        q_mm = words.get("Q", q_mm)
-        # Pecks counted before they are made: a hole has more than (R − Z)/Q − 2 of them
-        # (_peck), each a feed and a rapid back that go somewhere, and under G83 the rapid
-        # down to the last depth too (all but the first's when Q is the 0.254 mm clearance),
-        # so more than this many moves is certain; fewer are made and counted as made.
-        per_peck = 3.0 if code == "G83" else 2.0
-        if q_mm > 0.0 and repeats * (per_peck * ((r - c) / q_mm - 2.0) - 1.0) > max_moves:
-            raise TooManyMoves(f"{code.lower()} with Q{q_mm:g} mm pecks {r - c:g} mm deep "
-                               f"{repeats} time(s): more moves than the program may make")
-    elif code == "G87":
-        if not same:
-            for letter in "IJK":
-                if letter not in words:
-                    raise ProgramError(f"{letter} word missing with g87")
-        i_mm, j_mm, k_mm = words.get("I", i_mm), words.get("J", j_mm), words.get("K", k_mm)
-
-    for repeat in range(repeats):
-        a, b = a + a_inc, b + b_inc
-        if radius_inc or theta_inc:
-            if a == 0.0 and b == 0.0:
-                raise ProgramError(
-                    "Incremental motion with polar coordinates is indeterminate when at the origin"
-                )
-            if radius_inc:
-                theta, radius = math.atan2(b, a), math.hypot(b, a) + radius_inc
-                a, b = radius * math.cos(theta), radius * math.sin(theta)
-            if theta_inc:
-                theta, radius = math.atan2(b, a) + theta_inc, math.hypot(b, a)
-                a, b = radius * math.cos(theta), radius * math.sin(theta)
-        if repeat == 0 and current_c > r:
-            out.rapid(a, b, current_c)
+        out.rapid(a, b, clear)
+        if clear > r:
             out.rapid(a, b, r)
-        else:
-            out.rapid(a, b, clear)
-            if clear > r:
-                out.rapid(a, b, r)
-        _CYCLES[code](out, a, b, r, clear, c, p_s, q_mm, (i_mm, j_mm, k_mm, incremental),
-                      spindle, code)  # fmt: skip
 
-    new_state = replace(
-        state, motion=code, initial_level_mm=initial, r_mm=r_word, z_mm=z_word,
-        p_s=p_s, q_mm=q_mm, i_mm=i_mm, j_mm=j_mm, k_mm=k_mm,
-    )  # fmt: skip
-    final = [0.0, 0.0, 0.0]
-    final[ia], final[ib], final[ic] = a, b, clear
-    # G87 ends at (a, b, clear) too; G88 ends at the bottom (the operator retracts by hand), as
-    # LinuxCNC's canonical moves do; the interpreter's notion of position is (a, b, clear).
-    return CycleResult(tuple(out.moves), new_state, tuple(final))
+
+class _Sticky(NamedTuple):
+    """The words a cycle family keeps between blocks: dwell P [s], peck Q [mm], back-bore
+    I J K [mm]."""
+
+    p_s: float
+    q_mm: float
+    i_mm: float
+    j_mm: float
+    k_mm: float
+
+
+def _no_words(code: str, words: dict, state: CycleState, same: bool) -> _Sticky:
+    """G81, G85: no words of their own (the state's are carried on)."""
+    return _Sticky(state.p_s, state.q_mm, state.i_mm, state.j_mm, state.k_mm)
+
+
+def _dwell_words(code: str, words: dict, state: CycleState, same: bool) -> _Sticky:
+    """G82, G86, G88, G89: P, required when the cycle changes."""
+    if not same and "P" not in words:
+        raise ProgramError(f"Dwell time p word missing with {code.lower()}")
+    return _no_words(code, words, state, same)._replace(p_s=words.get("P", state.p_s))
+
+
+def _tap_words(code: str, words: dict, state: CycleState, same: bool) -> _Sticky:
+    """G74, G84: an optional P."""
+    return _no_words(code, words, state, same)._replace(p_s=words.get("P", state.p_s))
+
+
+def _peck_words(code: str, words: dict, state: CycleState, same: bool) -> _Sticky:
+    """G73, G83: Q, required when the cycle changes."""
+    if not same and "Q" not in words:
+        raise ProgramError(f"Q word missing with {code.lower()}")
+    return _no_words(code, words, state, same)._replace(q_mm=words.get("Q", state.q_mm))
+
+
+def _back_bore_words(code: str, words: dict, state: CycleState, same: bool) -> _Sticky:
+    """G87: I, J and K, all required when the cycle changes."""
+    if not same:
+        for letter in "IJK":
+            if letter not in words:
+                raise ProgramError(f"{letter} word missing with g87")
+    return _Sticky(state.p_s, state.q_mm, words.get("I", state.i_mm),
+                   words.get("J", state.j_mm), words.get("K", state.k_mm))  # fmt: skip
+
+
+def _count_pecks(code: str, q_mm: float, r: float, c: float, repeats: int,
+                 max_moves: float) -> None:
+    """Pecks counted before they are made: a hole has more than (R − Z)/Q − 2 of them
+    (_peck), each a feed and a rapid back that go somewhere, and under G83 the rapid down to
+    the last depth too (all but the first's when Q is the 0.254 mm clearance), so more than
+    this many moves is certain; fewer are made and counted as made."""
+    per_peck = 3.0 if code == "G83" else 2.0
+    if q_mm > 0.0 and repeats * (per_peck * ((r - c) / q_mm - 2.0) - 1.0) > max_moves:
+        raise TooManyMoves(f"{code.lower()} with Q{q_mm:g} mm pecks {r - c:g} mm deep "
+                           f"{repeats} time(s): more moves than the program may make")
+
+
+_STICKY_WORDS = {"G82": _dwell_words, "G86": _dwell_words, "G88": _dwell_words,
+                 "G89": _dwell_words, "G74": _tap_words, "G84": _tap_words,
+                 "G73": _peck_words, "G83": _peck_words, "G87": _back_bore_words}  # fmt: skip
 
 
 # -- the cycles proper: LinuxCNC's convert_cycle_g8x, from the hole at level R ---------------

@@ -12,6 +12,7 @@ Angles are in degrees, as in RS274/NGC. Comparisons and logic give 1.0 or 0.0.
 from __future__ import annotations
 
 import math
+import operator
 from collections.abc import Callable
 
 import numpy as np
@@ -29,47 +30,54 @@ class ExpressionError(ProgramError):
     """An expression cannot be evaluated (division by zero, domain, overflow)."""
 
 
+def _divide(a: float, b: float) -> float:
+    if b == 0.0:
+        raise ExpressionError("division by zero")
+    return a / b
+
+
+def _mod(a: float, b: float) -> float:
+    if b == 0.0:
+        raise ExpressionError("MOD by zero")
+    r = math.fmod(a, b)
+    return r + abs(b) if r < 0.0 else r  # LinuxCNC: result in [0, |b|)
+
+
+def _power(a: float, b: float) -> float:
+    if a < 0.0 and b != int(b):
+        raise ExpressionError("negative number raised to a non-integer power")
+    if a == 0.0 and b < 0.0:
+        raise ExpressionError("zero raised to a negative power")
+    return float(a**b)
+
+
+#: The binary operators. Comparisons and logic give 1.0 or 0.0; EQ and NE compare within
+#: TOLERANCE_EQUAL (LinuxCNC 2.9, execute_binary2), LE and GE exactly.
+_BINARY = {
+    "+": operator.add,
+    "-": operator.sub,
+    "*": operator.mul,
+    "/": _divide,
+    "MOD": _mod,
+    "**": _power,
+    "EQ": lambda a, b: float(abs(a - b) < TOLERANCE_EQUAL),
+    "NE": lambda a, b: float(abs(a - b) >= TOLERANCE_EQUAL),
+    "GT": lambda a, b: float(a > b),
+    "GE": lambda a, b: float(a >= b),
+    "LT": lambda a, b: float(a < b),
+    "LE": lambda a, b: float(a <= b),
+    "AND": lambda a, b: float(a != 0.0 and b != 0.0),
+    "OR": lambda a, b: float(a != 0.0 or b != 0.0),
+    "XOR": lambda a, b: float((a != 0.0) != (b != 0.0)),
+}
+
+
 def _binop(op: str, a: float, b: float) -> float:
-    if op == "+":
-        return a + b
-    if op == "-":
-        return a - b
-    if op == "*":
-        return a * b
-    if op == "/":
-        if b == 0.0:
-            raise ExpressionError("division by zero")
-        return a / b
-    if op == "MOD":
-        if b == 0.0:
-            raise ExpressionError("MOD by zero")
-        r = math.fmod(a, b)
-        return r + abs(b) if r < 0.0 else r  # LinuxCNC: result in [0, |b|)
-    if op == "**":
-        if a < 0.0 and b != int(b):
-            raise ExpressionError("negative number raised to a non-integer power")
-        if a == 0.0 and b < 0.0:
-            raise ExpressionError("zero raised to a negative power")
-        return float(a**b)
-    if op == "EQ":  # LinuxCNC 2.9 (execute_binary2): within TOLERANCE_EQUAL; LE, GE exact
-        return float(abs(a - b) < TOLERANCE_EQUAL)
-    if op == "NE":
-        return float(abs(a - b) >= TOLERANCE_EQUAL)
-    if op == "GT":
-        return float(a > b)
-    if op == "GE":
-        return float(a >= b)
-    if op == "LT":
-        return float(a < b)
-    if op == "LE":
-        return float(a <= b)
-    if op == "AND":
-        return float(a != 0.0 and b != 0.0)
-    if op == "OR":
-        return float(a != 0.0 or b != 0.0)
-    if op == "XOR":
-        return float((a != 0.0) != (b != 0.0))
-    raise AssertionError(op)  # pragma: no cover
+    """``a op b`` (:data:`_BINARY`)."""
+    function = _BINARY.get(op)
+    if function is None:  # pragma: no cover
+        raise AssertionError(op)
+    return function(a, b)
 
 
 #: π in the C ``long double`` LinuxCNC's execute_unary and execute_binary use (M_PIl): its

@@ -1,4 +1,4 @@
-"""The fast lane: runs of plain straight-move lines interpreted in bulk (issue 14), and the
+"""The fast lane: runs of plain straight-move lines interpreted in bulk, and the
 continuation lines of G6.2 blocks read without the general parser (:func:`nurbs_words`).
 
 CAM output is mostly lines such as ``N120 G1 X12.5 Y-3.25 Z-1 F600`` or ``X12.5 Y-3.25``:
@@ -37,6 +37,7 @@ from typing import NamedTuple
 import numpy as np
 
 from nurbscnc.geometry.segments import Line
+from nurbscnc.program.codes import G_0, G_1
 
 # Groups: 1 the motion digit of G0/G1 (G00, G01), 2-5 the X Y Z F numbers. A number here is
 # any run of digits and points with a sign; the runs float() refuses ("1.2.3", ".") are not
@@ -58,10 +59,10 @@ _PLAIN = re.compile(
 #: A run is read in chunks that start small (a run may be a few lines between two others)
 #: and double while every line of the chunk is plain.
 FIRST_CHUNK = 32
-#: Shortest run the lane takes [lines]. Its whole-array work costs ~90 µs a call, the line by
-#: line interpreter ~10 µs a line; and a line the lane took is never parsed, so a loop whose
-#: body holds a short plain run took the lane at every turn: an endless two-line loop ran
-#: 36 s to its 250,000-turn limit (the fuzzer), 1.5 s line by line.
+#: Shortest run the lane takes [lines]. Its whole-array work has a fixed cost per call of
+#: about as many lines as this interpreted one by one; and a line the lane took is never
+#: parsed, so a loop whose body holds a short plain run would pay that cost at every turn
+#: (an endless two-line loop runs to its turn limit many times slower than line by line).
 MIN_RUN_LINES = 8
 MAX_CHUNK = 8192
 
@@ -207,7 +208,7 @@ def plain_run(lines, start: int, state: BulkState, to_machine, limits) -> BulkRu
     """
     max_coord, min_feed, max_feed = limits
     first = _plain_row(lines[start])
-    if first is None or (state.motion not in (0, 10) and not first[0] and any(first[1:])):
+    if first is None or (state.motion not in (G_0, G_1) and not first[0] and any(first[1:])):
         return None  # not plain, or a plain line for another motion mode (G81 X Y): cheap no
     rows: list = []
     size = FIRST_CHUNK
@@ -250,10 +251,10 @@ def _run(rows, start: int, state: BulkState, to_machine, limits) -> BulkRun | No
     has_axes = given[:, 1] | given[:, 2] | given[:, 3]
     worded = has_axes | has_g | has_f
     # Lines the general path refuses or treats otherwise end the run before them.
-    bad = worded & (motion != 0.0) & (motion != 10.0)
+    bad = worded & (motion != G_0) & (motion != G_1)
     bad |= has_f & ((feed_raw < 0.0) | ((feed_mm != 0.0) & ((feed_mm < min_feed) |
                                                             (feed_mm > max_feed))))  # fmt: skip
-    bad |= has_axes & (motion == 10.0) & ~(feed_mm > 0.0)
+    bad |= has_axes & (motion == G_1) & ~(feed_mm > 0.0)
     for values, given in prog:
         bad |= given & ~(np.abs(values) <= max_coord)
     first_bad = np.flatnonzero(bad)
@@ -267,7 +268,7 @@ def _run(rows, start: int, state: BulkState, to_machine, limits) -> BulkRun | No
     starts[0] = to_machine(np.array([state.prog_mm], dtype=float))[0]
     starts[1:] = ends[:-1]
     moves = np.flatnonzero(has_axes[:n] & (ends != starts).any(axis=1))
-    rapid = motion[moves] == 0.0
+    rapid = motion[moves] == G_0
     feeds = np.where(rapid, 0.0, feed_mm[moves] / 60.0)
     # A move starts where the line before it ended: when that line is a move too (nearly
     # always) its end tuple is shared (equal values; one object instead of two).
@@ -304,9 +305,9 @@ def make_lines(columns: dict) -> list:
     :class:`~nurbscnc.geometry.segments.Line` to an iterable of its values, one per line.
 
     The same objects as ``Line(**fields)`` one by one (a test compares them field by field),
-    made ~3x faster: a frozen dataclass's ``__init__`` sets each field through
-    ``object.__setattr__`` (seven Python-level calls per Line; 0.6 s for 200,000 lines),
-    while here each field's slot descriptor is mapped over all the new objects in C.
+    made faster: a frozen dataclass's ``__init__`` sets each field through
+    ``object.__setattr__`` (seven Python-level calls per Line), while here each field's
+    slot descriptor is mapped over all the new objects in C.
     """
     names = [f.name for f in dataclasses.fields(Line)]
     if sorted(names) != sorted(columns):
@@ -327,7 +328,7 @@ def pause_cyclic_gc():
 
     The segments hold no reference cycles, but the collector cannot know: building 200,000
     Line objects triggers a dozen full collections, each walking every object made so far
-    (measured: a third of the interpretation time of a 200,000-line program). Reference
+    (a cost that grows as the square of the run's length). Reference
     counting still frees everything; only the cycle search waits until the run is built.
     """
     enabled = gc.isenabled()

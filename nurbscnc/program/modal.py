@@ -1,9 +1,7 @@
-"""Modal groups and the modal state (LinuxCNC's interp_internal.hh, setup_struct).
+"""The modal state (LinuxCNC's interp_internal.hh, setup_struct) and the state each code selects.
 
-G codes are integers (value × 10: G59.3 is 593). :data:`G_GROUP` gives each executable or
-tracked code its modal group, as LinuxCNC numbers them; :data:`G_REFUSED` the codes that are
-valid RS274/NGC but that nurbscnc refuses with a clear error (spindle-synchronised motion,
-probing, lathe modes, axes it does not drive).
+G codes are integers (value × 10: G59.3 is 593), named in :mod:`nurbscnc.program.codes`
+with their modal groups; the tables here map a code to the state it selects.
 
 :class:`ModalState` is the state that persists from block to block. The canned-cycle state
 (``cycle_*``, ``retract_mode``) and cutter-compensation state (``comp_*``) are tracked here
@@ -14,70 +12,38 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from nurbscnc.program.codes import (
+    G_17,
+    G_18,
+    G_19,
+    G_40,
+    G_49,
+    G_54,
+    G_55,
+    G_56,
+    G_57,
+    G_58,
+    G_59,
+    G_59_1,
+    G_59_2,
+    G_59_3,
+    G_64,
+    G_94,
+    G_99,
+)
 from nurbscnc.program.cycles import CycleState
 
 INCH_MM = 25.4
-
-#: Canned cycle motion codes (group 1): G73, G74, G81–G89.
-CANNED_CYCLES = frozenset({730, 740, 810, 820, 830, 840, 850, 860, 870, 880, 890})
-
-G_GROUP = {
-    # group 0: non-modal
-    40: 0, 100: 0, 280: 0, 281: 0, 300: 0, 301: 0, 520: 0, 530: 0, 920: 0, 921: 0, 922: 0, 923: 0,
-    # group 1: motion
-    0: 1, 10: 1, 20: 1, 30: 1, 50: 1, 51: 1, 52: 1, 53: 1, 62: 1, 800: 1,
-    **{code: 1 for code in CANNED_CYCLES},
-    170: 2, 180: 2, 190: 2,
-    900: 3, 910: 3,
-    901: 4, 911: 4,
-    930: 5, 940: 5, 950: 5,
-    200: 6, 210: 6,
-    400: 7, 410: 7, 411: 7, 420: 7, 421: 7,
-    430: 8, 431: 8, 490: 8,
-    980: 10, 990: 10,
-    540: 12, 550: 12, 560: 12, 570: 12, 580: 12, 590: 12, 591: 12, 592: 12, 593: 12,
-    610: 13, 611: 13, 640: 13,
-    960: 14, 970: 14,
-}  # fmt: skip
-
-#: Valid RS274/NGC codes nurbscnc refuses (the error names them and why).
-G_REFUSED = {
-    70: "G7 (lathe diameter mode)",
-    80: "G8 (lathe radius mode)",
-    171: "G17.1 (UV plane: U, V, W axes)",
-    181: "G18.1 (WU plane: U, V, W axes)",
-    191: "G19.1 (VW plane: U, V, W axes)",
-    330: "G33 (spindle-synchronised motion)",
-    331: "G33.1 (rigid tapping)",
-    382: "G38.2 (probing needs a probe input)",
-    383: "G38.3 (probing needs a probe input)",
-    384: "G38.4 (probing needs a probe input)",
-    385: "G38.5 (probing needs a probe input)",
-    432: "G43.2 (additional tool length offset)",
-    760: "G76 (threading cycle, spindle-synchronised)",
-    700: "G70 (lathe finishing cycle)",
-    710: "G71 (lathe roughing cycle)",
-    711: "G71.1 (lathe roughing cycle)",
-    712: "G71.2 (lathe roughing cycle)",
-    720: "G72 (lathe facing cycle)",
-    721: "G72.1 (lathe facing cycle)",
-    722: "G72.2 (lathe facing cycle)",
-}
-
-#: M codes: group as LinuxCNC numbers them (4 stop, 5 HAL I/O, 6 tool change, 7 spindle,
-#: 8 coolant, 9 override switches, 10 modal state).
-M_GROUP = {0: 4, 1: 4, 2: 4, 30: 4, 60: 4, 98: 4, 99: 4, 62: 5, 63: 5, 64: 5, 65: 5, 66: 5,
-           67: 5, 68: 5, 6: 6, 61: 6, 3: 7, 4: 7, 5: 7, 7: 8, 8: 8, 9: 8, 19: 7, 48: 9, 49: 9,
-           50: 9, 51: 9, 52: 9, 53: 9, 70: 10, 71: 10, 72: 10, 73: 10}  # fmt: skip
 
 #: What M70 / M73 save and M72 restores (LinuxCNC: units, plane, distance modes, feed mode,
 #: path control, F and S; the coordinate system is saved beside these, in the interpreter).
 SAVED_BY_M70 = ("plane", "scale", "absolute", "arc_absolute", "feed_mode", "feed", "feed_mm",
                 "spindle_rpm", "path_mode", "blend_mm", "naive_mm")  # fmt: skip
 
-PLANE_OF_G = {170: "XY", 180: "ZX", 190: "YZ"}
-G_OF_PLANE = {"XY": 17, "ZX": 18, "YZ": 19}
-SYSTEM_OF_G = {540: 1, 550: 2, 560: 3, 570: 4, 580: 5, 590: 6, 591: 7, 592: 8, 593: 9}
+PLANE_OF_G = {G_17: "XY", G_18: "ZX", G_19: "YZ"}
+G_OF_PLANE = {"XY": G_17, "ZX": G_18, "YZ": G_19}
+SYSTEM_OF_G = {G_54: 1, G_55: 2, G_56: 3, G_57: 4, G_58: 5, G_59: 6, G_59_1: 7, G_59_2: 8,
+               G_59_3: 9}  # fmt: skip
 
 
 @dataclass
@@ -101,25 +67,25 @@ class ModalState:
     scale: float = 1.0  # mm per program unit (25.4 under G20)
     absolute: bool = True  # G90 / G91
     arc_absolute: bool = False  # G90.1 / G91.1
-    feed_mode: int = 940  # 930 inverse time, 940 units per minute, 950 units per revolution
+    feed_mode: int = G_94  # 930 inverse time, 940 units per minute, 950 units per revolution
     feed: float = 0.0  # the F word in force, as written
     feed_mm: float = 0.0  # F in mm (per minute or per revolution), in the units it was given
     spindle_rpm: float = 0.0
     tool_selected: int = 0  # T
     tool_loaded: int = 0  # M6
-    tool_offset_code: int = 490  # 430, 431, 490
+    tool_offset_code: int = G_49  # 430, 431, 490
     # Path control (group 13), as the segments carry it (geometry.segments.Line.blend_mm):
     # G64 P [mm] > 0; inf for G64 without P or with P0 (the machine's path tolerance,
     # LinuxCNC's default mode); 0 for G61 (exact path); BLEND_EXACT_STOP (< 0) for G61.1.
     blend_mm: float = float("inf")
-    path_mode: int = 640
+    path_mode: int = G_64
     naive_mm: float = 0.0  # G64 Q [mm]: the naive CAM detector's tolerance (0: off)
     # canned cycles
-    retract_mode: int = 990
+    retract_mode: int = G_99
     cycle: CycleState = CycleState()
     spindle: str = "off"
     # cutter compensation
-    comp_mode: int = 400
+    comp_mode: int = G_40
     comp_side: str | None = None
     comp_radius_mm: float = 0.0
     comp_d: float | None = None

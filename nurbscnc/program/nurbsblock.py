@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from nurbscnc.geometry.segments import PLANE_AXES, Nurbs, frozen_array
+from nurbscnc.program.codes import G_5, G_5_2, G_5_3, G_6_2, G_40, G_93
 
 _AXES = ("X", "Y", "Z")
 _NORMAL_AXIS = {"XY": 2, "ZX": 1, "YZ": 0}
@@ -53,12 +54,12 @@ class NurbsBlocks:
 
     # -- NURBS: LinuxCNC G5.2 ... G5.3 --------------------------------------------------------
     def nurbs_code(self) -> int:
-        return 52 if self.nurbs.kind == "G5.2" else 62
+        return G_5_2 if self.nurbs.kind == "G5.2" else G_6_2
 
     def finish_nurbs_by_other(self, code, column) -> None:
         build = self.nurbs
         if build.kind == "G5.2":
-            if code == 53:
+            if code == G_5_3:
                 return
             raise self.error(
                 f"G5.2 NURBS block (line {build.line}) not closed by G5.3 before this block",
@@ -368,15 +369,15 @@ class Splines:
         −(P, Q) of the last G5, other moves between or not, or (0, 0) before any (LinuxCNC).
         G5.1 X Y I J: quadratic, the control point start + (I, J). I J P Q are incremental in
         any distance mode; only the XY plane (LinuxCNC). Neither changes the motion mode."""
-        name = "G5" if motion == 50 else "G5.1"
+        name = "G5" if motion == G_5 else "G5.1"
         col0 = motion_code[1] if motion_code else min((c for _, c in words.values()), default=1)
         if self.m.plane != "XY":
             raise self.error(f"{name} splines are only allowed in the XY plane (G17)", col0)
         if "Z" in words:
             raise self.error(f"Z word with {name} (splines are planar)", words["Z"][1])
-        if self.m.comp_mode != 400:
+        if self.m.comp_mode != G_40:
             raise self.error(f"{name} with cutter radius compensation on", col0)
-        if self.m.feed_mode == 930:
+        if self.m.feed_mode == G_93:
             raise self.error(f"{name} in inverse time feed mode (G93) is not supported", col0)
         feed = self.feed_mm_s
         if feed <= 0.0:
@@ -385,7 +386,7 @@ class Splines:
         start = list(self.prog)
         end = self.target_program(words)
         used.update("IJPQ")
-        if motion == 50:
+        if motion == G_5:
             if "P" not in words or "Q" not in words:
                 raise self.error("G5 needs both P and Q (end control point offset)", col0)
             if "I" in words or "J" in words:
@@ -424,5 +425,5 @@ class Splines:
             )
         )
         self.prog = end
-        if motion == 50:
+        if motion == G_5:
             self.spline_pq = pq

@@ -402,41 +402,9 @@ def _parse_lark_raw(text: str) -> list[Block]:
     try:
         return _parser().parse(text)
     except UnexpectedCharacters as exc:
-        lines = _split_lines(text)
-        line_text = lines[exc.line - 1] if 0 < exc.line <= len(lines) else ""
-        ch = text[exc.pos_in_stream] if exc.pos_in_stream < len(text) else ""
-        if ch == "(":
-            msg = "nested comment: '(' inside a comment"
-            if ")" not in line_text[exc.column - 1 :]:
-                msg = "unclosed comment: '(' with no ')' on the line"
-        elif ch == ")":
-            msg = "')' with no comment open"
-        elif not ch.isascii():
-            msg = f"unexpected character {ch!r} (G-code is ASCII)"
-        else:
-            msg = f"unexpected character {ch!r}" + _expected(exc.allowed or ())
-        raise GCodeSyntaxError(msg, SourcePos(exc.line, exc.column, line_text)) from None
+        raise _character_error(text, exc) from None
     except UnexpectedToken as exc:
-        lines = _split_lines(text)
-        line_no = exc.line if exc.line and exc.line > 0 else len(lines)
-        line_text = lines[line_no - 1] if 0 < line_no <= len(lines) else ""
-        tok = exc.token
-        if tok.type == "$END":
-            what = "unexpected end of line" if "\n" not in text else "unexpected end of file"
-            column = len(line_text) + 1
-        elif tok.type == "_NL":
-            what = "unexpected end of line"
-            column = len(line_text) + 1
-        elif "NUMBER" in exc.expected and tok.type in ("LETTER", "FUNC", "LOGIC_OP"):
-            what = f"expected a value (a number, [expression] or #parameter), got {str(tok)!r}"
-            column = exc.column if exc.column and exc.column > 0 else 1
-            raise GCodeSyntaxError(what, SourcePos(line_no, column, line_text)) from None
-        else:
-            what = f"unexpected {str(tok).strip()!r}"
-            column = exc.column if exc.column and exc.column > 0 else 1
-        raise GCodeSyntaxError(
-            what + _expected(exc.expected), SourcePos(line_no, column, line_text)
-        ) from None
+        raise _token_error(text, exc) from None
     except UnexpectedInput as exc:  # pragma: no cover - other lark input errors
         raise GCodeSyntaxError(str(exc).splitlines()[0], SourcePos(1, 1, "")) from None
     except (VisitError, NurbsCncError) as exc:
@@ -448,3 +416,43 @@ def _parse_lark_raw(text: str) -> list[Block]:
         line_no = inner.pos.line
         inner.pos = SourcePos(line_no, inner.pos.column, lines[line_no - 1])
         raise inner from None
+
+
+def _character_error(text: str, exc: UnexpectedCharacters) -> GCodeSyntaxError:
+    """The error for a character the grammar cannot take (comments named)."""
+    lines = _split_lines(text)
+    line_text = lines[exc.line - 1] if 0 < exc.line <= len(lines) else ""
+    ch = text[exc.pos_in_stream] if exc.pos_in_stream < len(text) else ""
+    if ch == "(":
+        msg = "nested comment: '(' inside a comment"
+        if ")" not in line_text[exc.column - 1 :]:
+            msg = "unclosed comment: '(' with no ')' on the line"
+    elif ch == ")":
+        msg = "')' with no comment open"
+    elif not ch.isascii():
+        msg = f"unexpected character {ch!r} (G-code is ASCII)"
+    else:
+        msg = f"unexpected character {ch!r}" + _expected(exc.allowed or ())
+    return GCodeSyntaxError(msg, SourcePos(exc.line, exc.column, line_text))
+
+
+def _token_error(text: str, exc: UnexpectedToken) -> GCodeSyntaxError:
+    """The error for a token out of place (an end of line, a letter for a value …)."""
+    lines = _split_lines(text)
+    line_no = exc.line if exc.line and exc.line > 0 else len(lines)
+    line_text = lines[line_no - 1] if 0 < line_no <= len(lines) else ""
+    tok = exc.token
+    if tok.type == "$END":
+        what = "unexpected end of line" if "\n" not in text else "unexpected end of file"
+        column = len(line_text) + 1
+    elif tok.type == "_NL":
+        what = "unexpected end of line"
+        column = len(line_text) + 1
+    elif "NUMBER" in exc.expected and tok.type in ("LETTER", "FUNC", "LOGIC_OP"):
+        what = f"expected a value (a number, [expression] or #parameter), got {str(tok)!r}"
+        column = exc.column if exc.column and exc.column > 0 else 1
+        return GCodeSyntaxError(what, SourcePos(line_no, column, line_text))
+    else:
+        what = f"unexpected {str(tok).strip()!r}"
+        column = exc.column if exc.column and exc.column > 0 else 1
+    return GCodeSyntaxError(what + _expected(exc.expected), SourcePos(line_no, column, line_text))

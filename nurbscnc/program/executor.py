@@ -1,0 +1,248 @@
+"""The block executor: a parsed block's words read into G and M codes by modal group, then
+executed in LinuxCNC's order (interp_execute.cc, execute_block) as a sequence of steps (a
+mixin of the interpreter)."""
+
+from __future__ import annotations
+
+from nurbscnc.errors import UnsupportedError
+from nurbscnc.geometry.segments import Note, Pause
+from nurbscnc.program.codes import (
+    CANNED_CYCLES,
+    G_0,
+    G_1,
+    G_2_2,
+    G_5_2,
+    G_80,
+    G_GROUP,
+    G_REFUSED,
+    GM_MOTION,
+    M_2,
+    M_19,
+    M_30,
+    M_98,
+    M_99,
+    M_GROUP,
+    MM_SPINDLE,
+    MM_STOP,
+    MM_TOOL_CHANGE,
+    fmt_code,
+)
+from nurbscnc.program.modes import ModeSetters
+from nurbscnc.program.parse import Block
+from nurbscnc.program.words import unused_word_message
+
+_PLAIN_WORDS = frozenset("XYZF")
+_COMMON_CODES = {float(v): 10 * v for v in (0, 1, 2, 3, 17, 18, 19, 20, 21, 40, 49, 54, 80,
+                                             90, 91, 94)}  # fmt: skip
+
+
+class BlockExecutor:
+    """Reading a block's words and executing them (mixin of the interpreter)."""
+
+    def block(self, block: Block) -> None:
+        for _, text, _column in block.comments:
+            body = text[1:-1].strip() if text.startswith("(") else ""
+            if body[:4].upper() == "MSG,":
+                self.notes.append(Note(self.main_line(), f"message: {body[4:].strip()}"))
+        words, gcodes, mcodes = self.read_words(block)
+        self.assign(block)
+        if words or gcodes or mcodes:
+            self.execute(words, gcodes, mcodes)
+
+    # -- reading the words -------------------------------------------------------------------
+    def read_words(self, block: Block):
+        words: dict[str, tuple[float, int]] = {}
+        gcodes: dict[int, tuple[int, int]] = {}  # group -> (code, column)
+        mcodes: dict[int, tuple[int, int]] = {}
+        for letter, raw, column in block.words:
+            value = raw if type(raw) is float else self.evaluate(raw, column)
+            if letter == "G":
+                self.read_g(value, column, gcodes)
+            elif letter == "M":
+                self.read_m(value, column, mcodes)
+            elif letter in words:
+                raise self.error(f"{letter} word repeated in the block", column)
+            elif letter in "UVWON":
+                self.bad_letter(letter, column)
+            else:
+                words[letter] = (value, column)
+        return words, gcodes, mcodes
+
+    def bad_letter(self, letter: str, column: int):
+        if letter in "UVW":
+            raise self.error(f"axis {letter} is not supported (nurbscnc drives X, Y and Z)",
+                             column, UnsupportedError)  # fmt: skip
+        if letter == "O":
+            raise self.error("O word must start the line (o<label> keyword)", column)
+        raise self.error("N (line number) must start the line", column)
+
+    def read_g(self, value: float, column: int, gcodes: dict) -> None:
+        code = _COMMON_CODES.get(value)
+        if code is None:
+            code = self.code_value(value, "G", column)
+        if code == G_2_2:
+            # LinuxCNC's own sample G5_Curva_Stella_v1_G5.ngc opens its NURBS block with
+            # "G2.2" and closes it with G5.3; we read it as G5.2 and say so.
+            self.note_once("g2.2", "G2.2 is not an RS274/NGC code; read as G5.2 (closed by G5.3)")
+            code = G_5_2
+        group = G_GROUP.get(code)
+        if group is None:
+            if code in G_REFUSED:
+                raise self.error(f"{G_REFUSED[code]} is not supported", column, UnsupportedError)
+            raise self.error(f"unknown G code G{fmt_code(code)}", column)
+        if group in gcodes:
+            other = gcodes[group][0]
+            if group == GM_MOTION and G_80 in (code, other):
+                # LinuxCNC accepts G80 beside another motion code ("G80 G0" in CAM headers
+                # and its own tests): the other code is the block's motion.
+                if code != G_80:
+                    gcodes[group] = (code, column)
+                return
+            raise self.error(
+                f"G{fmt_code(other)} and G{fmt_code(code)} are in the same modal "
+                f"group ({group}) and cannot share a block",
+                column,
+            )
+        gcodes[group] = (code, column)
+
+    def read_m(self, value: float, column: int, mcodes: dict) -> None:
+        code = self.code_value(value, "M", column)
+        if code % 10:
+            raise self.error(f"unknown M code M{code / 10:g}", column)
+        code //= 10
+        group = M_GROUP.get(code)
+        if group is None:
+            raise self.error(f"M{code} is not supported", column, UnsupportedError)
+        if group in mcodes:
+            raise self.error(
+                f"M{mcodes[group][0]} and M{code} are in the same modal group "
+                f"({group}) and cannot share a block",
+                column,
+            )
+        mcodes[group] = (code, column)
+
+    def code_value(self, value: float, letter: str, column: int) -> int:
+        """A G or M word's value × 10 as an integer (G59.3: 593)."""
+        if not 0.0 <= value < 1e6:  # value * 10 must stay a modest integer
+            raise self.error(f"{letter}{value:g} is not a valid {letter} code", column)
+        code = round(value * 10.0)
+        if abs(value * 10.0 - code) > 1e-6:
+            raise self.error(f"{letter}{value:g} is not a valid {letter} code", column)
+        return int(code)
+
+    # -- execution in RS274/NGC order ---------------------------------------------------------
+    def execute(self, words: dict, gcodes: dict, mcodes: dict) -> None:
+        """One block, in LinuxCNC's order (interp_execute.cc, execute_block): the steps of
+        :data:`BEFORE_MOTION`, the group-0 codes, the motion, the check that every word was
+        used, then the program stops."""
+        used: set = set()
+        if self.plain_move(words, gcodes, mcodes, used):
+            return
+        for step in BEFORE_MOTION:
+            step(self, words, gcodes, mcodes, used)
+        moved_by_nonmodal = self.nonmodal(gcodes, words, used)
+        self.motion_block(gcodes, words, used, moved_by_nonmodal)
+        for letter, (_, col) in words.items():
+            if letter not in used:
+                raise self.error(unused_word_message(letter), col)
+        if MM_TOOL_CHANGE in mcodes and self.comp_exit is not None:
+            self.refresh_position()
+        if MM_STOP in mcodes:
+            self.program_stop(words, mcodes[MM_STOP])
+
+    def plain_move(self, words: dict, gcodes: dict, mcodes: dict, used: set) -> bool:
+        """The fast path: most CAM lines are "G1 X.. Y.. F.." (the same effect as the full
+        order). True when the block was such a line and is done."""
+        if not mcodes and len(gcodes) <= (GM_MOTION in gcodes) and _PLAIN_WORDS.issuperset(words):
+            motion_code = gcodes.get(GM_MOTION)
+            motion = self.m.motion if motion_code is None else motion_code[0]
+            if (motion == G_0 or motion == G_1) and self.nurbs is None:
+                if "F" in words:
+                    self.set_feed(words, gcodes, mcodes, used)
+                self.m.motion = motion
+                if "X" in words or "Y" in words or "Z" in words:
+                    self.straight(words, False)
+                return True
+        return False
+
+    def orient_words(self, words: dict, gcodes: dict, mcodes: dict, used: set) -> None:
+        if mcodes.get(MM_SPINDLE, (0,))[0] == M_19:
+            used.update("RQP")  # M19 R<angle> Q<timeout> P<direction>: spindle orientation
+
+    def check_cycle_axes(self, words: dict, gcodes: dict, mcodes: dict, used: set) -> None:
+        """A canned cycle moves no rotary axis (LinuxCNC: "Cannot put an a in canned
+        cycle")."""
+        motion = gcodes[GM_MOTION][0] if GM_MOTION in gcodes else self.m.motion
+        if motion in CANNED_CYCLES:
+            for letter in "ABC":
+                if letter in words:
+                    article = "an" if letter == "A" else "a"
+                    raise self.error(f"Cannot put {article} {letter.lower()} in canned cycle",
+                                     words[letter][1])  # fmt: skip
+
+    def call_words(self, words: dict, gcodes: dict, mcodes: dict, used: set) -> None:
+        if mcodes.get(MM_STOP, (0,))[0] == M_98:
+            used.update("PL")  # M98 P<O number> L<repeats>: the call, after the block's moves
+
+    def refresh_position(self) -> None:
+        """After a tool change (M6, M61) LinuxCNC re-reads the current position before the
+        next block (interp_internal.cc, refresh_actual_position): the machine's position
+        taken back to program coordinates with the offsets now in force, the new tool length
+        offset included (emccanon.cc, unoffset_and_unrotate_pos). nurbscnc's program position
+        already keeps the machine where it is through every offset change; the one place it
+        differs from the machine is just after G40, where LinuxCNC's interpreter holds the
+        programmed point while the tool stands at the compensated one: the tool change makes
+        the compensated point the program position (nc_files/useful-subroutines.ngc)."""
+        self.pos = self.comp_exit
+
+    # -- program stops ------------------------------------------------------------------------
+    def program_stop(self, words: dict, stop) -> None:
+        """The block's group-4 M code, the last step: M98 calls, M99 returns, the rest
+        stop (:meth:`stop`)."""
+        code, col = stop
+        if code == M_98:
+            self.m98(words, col)
+        elif code == M_99:
+            self.m99(col)
+        else:
+            self.stop(code, col)
+
+    def stop(self, code: int, column: int) -> None:
+        """M0 / M1 / M60: a Pause segment; M2 / M30: the end (nothing after is read)."""
+        if code in (M_2, M_30):
+            if self.nurbs is not None:
+                self.finish_nurbs_by_other(None, column)
+            self.ended = True
+            return
+        if self.nurbs is not None:
+            self.finish_nurbs_by_other(None, column)
+        # After G40 the tool stands at the compensated point until the exit move.
+        position = tuple(self.pos) if self.comp_exit is None else self.comp_exit
+        self.segments.append(Pause(position, self.main_line(), f"M{code}"))
+
+
+#: Steps 2–20 of LinuxCNC's order of execution, before the group-0 codes and the motion:
+#: each ``step(interpreter, words, gcodes, mcodes, used)``.
+BEFORE_MOTION = (
+    ModeSetters.set_feed_mode,  # G93, G94, G95
+    ModeSetters.set_feed,  # F
+    ModeSetters.set_units,  # G20, G21 (before S, T: neither depends on the units)
+    ModeSetters.set_spindle,  # S
+    ModeSetters.select_tool,  # T
+    ModeSetters.io_codes,  # M62–M68, M50–M53
+    ModeSetters.change_tool,  # M6, M61
+    ModeSetters.spindle_on_off,  # M3, M4, M5, M19
+    ModeSetters.save_restore_modes,  # M70–M73
+    BlockExecutor.orient_words,  # M19's words
+    ModeSetters.dwell,  # G4
+    ModeSetters.set_plane,  # G17, G18, G19
+    ModeSetters.set_cutter_comp,  # G40, G41, G42 (D)
+    ModeSetters.set_tool_offset,  # G43, G43.1, G49 (H)
+    ModeSetters.set_coord_system,  # G54–G59.3
+    ModeSetters.set_path_mode,  # G61, G61.1, G64
+    ModeSetters.set_distance_modes,  # G90, G91, G90.1, G91.1
+    ModeSetters.set_retract_mode,  # G98, G99
+    BlockExecutor.check_cycle_axes,  # A B C with a canned cycle
+    ModeSetters.check_rotary,  # A, B, C
+    BlockExecutor.call_words,  # M98's words
+)
