@@ -152,7 +152,7 @@ class Checker:
         self.after_rapid = np.zeros(len(pieces), dtype=bool)  # first piece of a cut after a rapid
         self.after_rapid[settle_rows + 1] = True
         self.index = PathIndex(pieces)  # where the pieces are (built on first use)
-        # The servo at rest, discretised once (0.5 ms a check): every check starts from a copy.
+        # The servo at rest, discretised once: every check starts from a copy.
         servo = machine.servo
         self._at_rest = AxesStream([servo.x, servo.y, servo.z], servo.period_s)
         self._memo: _Memo | None = None  # the last one-chunk check (:meth:`_same_rows`)
@@ -188,9 +188,7 @@ class Checker:
             if not last and b == r1 + 1:
                 virt = r1 - a
                 end = self._end_row(planned, profile, r1, rows[4] + 1)
-                ref = replace(ref, **{f.name: np.concatenate((getattr(ref, f.name)[:virt],
-                                                              getattr(end, f.name)))
-                                      for f in fields(ref)})  # fmt: skip
+                ref = _joined(_rows(ref, slice(0, virt)), end)
             yield ref, slice(k0 - a, k1 - a), virt
 
     def _head(self, planned: PieceList, profile: Profile, end: int) -> tuple:
@@ -502,8 +500,8 @@ class JoinedChecks:
     samples one after the other (:attr:`Check.samples`: without the held tails of the
     windows' checks): over-limit samples, piece runs, counts before each restart and
     statistics. No window's check is kept: each holds counts for every restart of the
-    program (one per rapid), so keeping them all grew as cuts × rapids (512 MB at 4,000
-    cuts); the counts are summed as they come."""
+    program (one per rapid), so keeping them all would grow as cuts × rapids; the counts
+    are summed as they come."""
 
     def __init__(self):
         self.parts: list = []  # per window: (index, err, tau, run piece, run start, count)

@@ -294,7 +294,7 @@ def _s_along(points_mm: np.ndarray, planned_mm: np.ndarray, s_planned_mm: np.nda
 # samples alone. A segment's samples then depend only on its own planned samples, so
 #
 # - the sampler gives any window of samples exactly (the planner checks the rows it needs,
-#   not the program: ``sample.windows``) and a re-plan of window w costs window w;
+#   not the program: ``windowed``) and a re-plan of window w costs window w;
 # - segments are kept by their planned samples (:data:`_SEGMENTS`, bounded), so the final
 #   windows' segments are made once for every later check and for the output
 #   (``precompensate_reference`` of the final plan finds them).
