@@ -190,7 +190,7 @@ class SeenWindows:
 
 
 def window_plan(st: Setup, lev: Levers, result, parts: list, n: int, later,
-                 iterations: int) -> Plan:  # fmt: skip
+                iterations: int) -> Plan:  # fmt: skip
     """The plan of a cut window (:attr:`Window.plan`): the final profiles of windows
     0 … n − 1 (``parts``, shared and only appended to), then the stand-in ``later`` for
     the pieces after (None: the last window), spliced whole."""
