@@ -31,6 +31,7 @@ from nurbscnc.plan.limits import check_before_work
 from nurbscnc.plan.lookahead import Check, Plan, plan_checked, plan_windows
 from nurbscnc.plan.options import Algorithm, Dynamics, LookaheadOptions, parse_choice
 from nurbscnc.plan.report import check_soft_limits
+from nurbscnc.plan.sampler import ForwardingSampler
 from nurbscnc.plan.timing import sample_count
 from nurbscnc.precompensation import (
     Precompensation,
@@ -149,23 +150,16 @@ def _announcing(sampler, say):
     """``sampler`` with a ``check_begins(k0)`` that says which pass of the planner's dynamics
     check begins (the checker calls it as each check of a plan begins at sample k0: from
     sample 0, the first check, then once per re-plan). Sampling passes through; so does
-    what the planner reads of the sampler (``windows``, ``interpolator``), so the check
+    what the planner reads of the sampler (``windowed``, ``interpolator``), so the check
     runs in windows as without it."""
     passes = itertools.count()
-
-    def sample(pieces, profile, period_s, k0=0, k1=None):
-        return sampler(pieces, profile, period_s, k0, k1)
 
     def check_begins(k0: int) -> None:
         if k0 == 0:
             n = next(passes)
             say("dynamics check" if n == 0 else f"dynamics check, re-plan {n}")
 
-    for name in ("windows", "interpolator"):
-        if hasattr(sampler, name):
-            setattr(sample, name, getattr(sampler, name))
-    sample.check_begins = check_begins
-    return sample
+    return ForwardingSampler(sampler, check_begins)
 
 
 def run_program(program, machine: Machine, options: RunOptions | None = None,

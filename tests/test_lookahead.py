@@ -21,8 +21,8 @@ from nurbscnc.geometry.nurbs import NurbsCurve
 from nurbscnc.machine.profile import load_machine
 from nurbscnc.output.files import read_points
 from nurbscnc.pipeline import RunOptions, run_program
-from nurbscnc.plan.lookahead import segment_times_s
 from nurbscnc.plan.options import LookaheadOptions
+from nurbscnc.plan.plans import segment_times_s
 from nurbscnc.program.interpret import interpret_text
 from nurbscnc.servo.model import contour_error_true
 from tests.servo_reference import distance_to_polyline_mm, lsim_actual_mm

@@ -1,5 +1,5 @@
-"""A re-plan's check samples again only where the plan changed (plan/lookahead.py
-``_Checker._same_rows``, plan/profile.py ``same_until_s``, plan/timing.py
+"""A re-plan's check samples again only where the plan changed (plan/check.py
+``Checker._same_rows``, plan/profile.py ``same_until_s``, plan/timing.py
 ``same_clock_until_s``): the rows before are taken from the last check, bit for bit what a
 fresh check computes."""
 
@@ -10,6 +10,7 @@ import pytest
 
 from nurbscnc.machine.profile import load_machine
 from nurbscnc.plan import lookahead as la
+from nurbscnc.plan.check import Checker
 from nurbscnc.plan.profile import ProfileInput, plan_profile, same_until_s
 from nurbscnc.plan.timing import same_clock_until_s, wall_to_profile_time
 from nurbscnc.program.interpret import interpret_text
@@ -78,16 +79,16 @@ PROGRAMS = {
 
 
 def _counting_reuse(monkeypatch) -> list:
-    """Record what every check's :meth:`_Checker._same_rows` returns (rows reused)."""
+    """Record what every check's :meth:`Checker._same_rows` returns (rows reused)."""
     reused: list = []
-    real = la._Checker._same_rows
+    real = Checker._same_rows
 
     def counting(self, *args):
         rows = real(self, *args)
         reused.append(rows)
         return rows
 
-    monkeypatch.setattr(la._Checker, "_same_rows", counting)
+    monkeypatch.setattr(Checker, "_same_rows", counting)
     return reused
 
 
@@ -100,7 +101,7 @@ def test_a_recheck_reusing_rows_gives_the_fresh_checks_plan(name, monkeypatch):
     reused = _counting_reuse(monkeypatch)
     plan, check = la.plan_checked(program, machine, keep_reference=False)
     assert sum(reused) > 0 and plan.iterations > 0
-    monkeypatch.setattr(la._Checker, "_same_rows", lambda self, *args: 0)
+    monkeypatch.setattr(Checker, "_same_rows", lambda self, *args: 0)
     fresh, fresh_check = la.plan_checked(program, machine, keep_reference=False)
     assert plan.cycle_time_s == fresh.cycle_time_s and plan.iterations == fresh.iterations
     assert np.array_equal(plan.caps_mm_s, fresh.caps_mm_s)

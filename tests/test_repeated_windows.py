@@ -1,5 +1,5 @@
 """A cut repeated at another place starts its levers loop from the repeated cut's final
-levers (plan/lookahead.py ``_SeenWindows``): checked as any other, so within ε_max by an
+levers (plan/windows.py ``SeenWindows``): checked as any other, so within ε_max by an
 independent simulation, and as fast as the repeated one."""
 
 from __future__ import annotations
@@ -65,18 +65,20 @@ def test_a_different_cut_is_not_taken_for_a_repeat():
 
 
 def test_a_window_profile_is_its_rapids_and_its_cut_planned_apart():
-    """_OwnProfiles: the rapids and the cut of a window planned apart and spliced (as for a
+    """OwnProfiles: the rapids and the cut of a window planned apart and spliced (as for a
     cut that repeats an earlier one) give the profile of the whole window (the junction
     between them is a rest) to the rounding of the times after it; a repeated cut's profile
     is the remembered one, and the plans of three airfoils are those made without
     remembering any."""
-    from nurbscnc.plan import lookahead
-    from nurbscnc.plan.lookahead import Limits, _OwnProfiles, _Setup, cut_windows, profile_over
+    from nurbscnc.plan.options import LookaheadOptions
+    from nurbscnc.plan.plans import Limits, profile_over
+    from nurbscnc.plan.setup import Setup
+    from nurbscnc.plan.windows import OwnProfiles, cut_windows
 
     machine = load_machine()
     prog = interpret_text(airfoils_program(count=3, chord_mm=20.0, pitch_mm=30.0))
-    st = _Setup(prog, machine, lookahead.LookaheadOptions(), None, False, 1 << 16)
-    own = _OwnProfiles(st)
+    st = Setup(prog, machine, LookaheadOptions(), None, False, 1 << 16)
+    own = OwnProfiles(st)
     lv = st.initial
     lim = lv.limits()
     starts = cut_windows(st.pieces)
@@ -103,14 +105,14 @@ def test_a_window_profile_is_its_rapids_and_its_cut_planned_apart():
 
     def plans(remember: bool):
         if not remember:
-            original = _OwnProfiles.__call__
+            original = OwnProfiles.__call__
 
             def afresh(self, lv, a, b, cut):
                 self.kept.clear()
                 return original(self, lv, a, b, cut)
 
             with pytest.MonkeyPatch.context() as mp:
-                mp.setattr(_OwnProfiles, "__call__", afresh)
+                mp.setattr(OwnProfiles, "__call__", afresh)
                 return list(plan_windows(prog, machine))
         return list(plan_windows(prog, machine))
 

@@ -18,7 +18,8 @@ from hypothesis import strategies as st
 
 from nurbscnc.machine.profile import default_profile_text, load_machine, parse_machine
 from nurbscnc.pipeline import RunOptions, run_program
-from nurbscnc.plan import lookahead
+from nurbscnc.plan import converge, lookahead, shaping, windows
+from nurbscnc.plan import setup as plan_setup
 from nurbscnc.plan.options import LookaheadOptions
 from nurbscnc.plan.pieces import settle_time_s
 from nurbscnc.program.interpret import interpret_text
@@ -142,7 +143,7 @@ def test_ringing_servo_never_crawls_on_a_nurbs_corpus_program():
     off, _ = lookahead.plan_checked(prog, slow, LookaheadOptions(dynamics="off"),
                                     keep_reference=False)  # fmt: skip
     assert check.overs.worst_mm <= slow.limits.contour_tolerance_mm
-    assert on.iterations <= lookahead.LOCAL_ITERATIONS
+    assert on.iterations <= converge.LOCAL_ITERATIONS
     assert on.cycle_time_s <= 1.02 * off.cycle_time_s
 
 
@@ -191,7 +192,7 @@ def test_settle_after_a_rapid_is_what_the_check_needs(tmp_path):
 def test_fallback_alone_converges(monkeypatch, tmp_path):
     """With no local re-plans the fallback (all levers of the blamed pieces, then of every
     cutting piece, scaled down) still ends within ε_max: error → 0 as v, a, j → 0."""
-    monkeypatch.setattr(lookahead, "LOCAL_ITERATIONS", 0)
+    monkeypatch.setattr(converge, "LOCAL_ITERATIONS", 0)
     run, err_mm = _check_program(PROGRAMS / "square_g61_f3000.nc")
     assert err_mm <= EPS_MM + 1e-6
     assert run.plan.iterations > 0 and run.plan.shaped_by_contour.any()
@@ -241,7 +242,7 @@ def test_plan_uses_the_axes_piece_limits(monkeypatch):
         v[-1], a[-1], j[-1] = 20.0, 400.0, 8e3  # the last edge only
         return axes.PieceLimits(v, a, j)
 
-    monkeypatch.setattr(lookahead, "piece_limits", lowered)
+    monkeypatch.setattr(plan_setup, "piece_limits", lowered)
     text = "G21 G90 G17\nG61\nG1 X20 F3000\nG1 X20 Y20\nM2\n"
     run = run_program(interpret_text(text), MACHINE,
                       RunOptions(lookahead=LookaheadOptions(dynamics="off")))
@@ -273,7 +274,7 @@ def test_restores_raise_a_feed_the_joint_tries_left_low(monkeypatch):
     plan within ε_max by the independent simulation."""
     path = PROGRAMS / "square_plunge_g64p.nc"
     run, err_mm = _check_program(path)
-    monkeypatch.setattr(lookahead, "RESTORE_PIECES", 0)
+    monkeypatch.setattr(converge, "RESTORE_PIECES", 0)
     before, err_before_mm = _check_program(path)
     assert err_mm <= EPS_MM + 1e-6 and err_before_mm <= EPS_MM + 1e-6
     assert run.cycle_time_s < before.cycle_time_s - 0.003
@@ -298,11 +299,11 @@ def test_restores_in_each_cut_window(monkeypatch):
             np.array([[6, 0, 2], [6, 0, -1], [9, 0, -1], [9, 3, -1], [6, 3, -1], [6, 0, -1]])]
     prog = interpret_text(text)
     run = run_program(prog, MACHINE)
-    monkeypatch.setattr(lookahead, "RESTORE_PIECES", 0)
+    monkeypatch.setattr(converge, "RESTORE_PIECES", 0)
     before = run_program(prog, MACHINE)
     assert run.cycle_time_s < before.cycle_time_s - 0.005
     pieces = run.plan.pieces
-    starts = lookahead.cut_windows(pieces)
+    starts = windows.cut_windows(pieces)
     assert starts.size == 2
     raised = np.flatnonzero(run.plan.caps_mm_s > before.plan.caps_mm_s * (1 + 1e-9))
     assert (raised < starts[1]).any() and (raised >= starts[1]).any()
@@ -378,7 +379,7 @@ def test_slowdown_after_a_long_arc_softens_the_transition_not_the_arc(monkeypatc
     machine = load_machine(LINUXCNC_LIMITS)
     path = PROGRAMS / "tort_arc_slowdown.nc"
     run, err_mm = _arc_program_check(path, machine)
-    monkeypatch.setattr(lookahead, "SLOWDOWN_PIECE_S", np.inf)
+    monkeypatch.setattr(shaping, "SLOWDOWN_PIECE_S", np.inf)
     before, err_before_mm = _arc_program_check(path, machine)
     eps = machine.limits.contour_tolerance_mm + 1e-6
     assert err_mm <= eps and err_before_mm <= eps
@@ -398,7 +399,7 @@ def test_a_failed_restore_is_shaped_again(monkeypatch):
     machine = load_machine(LINUXCNC_LIMITS)
     path = PROGRAMS / "cds_pocket_rows.nc"
     run, err_mm = _arc_program_check(path, machine)
-    monkeypatch.setattr(lookahead, "RESHAPE_ITERATIONS", 0)
+    monkeypatch.setattr(converge, "RESHAPE_ITERATIONS", 0)
     before, err_before_mm = _arc_program_check(path, machine)
     eps = machine.limits.contour_tolerance_mm + 1e-6
     assert err_mm <= eps and err_before_mm <= eps
@@ -434,7 +435,7 @@ def test_a_failed_restore_is_bisected_alone(monkeypatch, tmp_path):
                         "G3 X-6 Y0 Z-2 R9\nM2\n")  # fmt: skip
         run, err_mm = _arc_program_check(path, machine)
         with monkeypatch.context() as m:
-            m.setattr(lookahead, "RESTORE_SECANTS", 0)
+            m.setattr(converge, "RESTORE_SECANTS", 0)
             alone, err_alone_mm = _arc_program_check(path, machine)
         eps = machine.limits.contour_tolerance_mm + 1e-6
         assert err_mm <= eps and err_alone_mm <= eps

@@ -26,7 +26,7 @@ import numpy as np
 import pytest
 
 from nurbscnc.machine.profile import load_machine
-from nurbscnc.plan import lookahead
+from nurbscnc.plan import converge, windows
 from nurbscnc.plan.lookahead import plan_checked
 from nurbscnc.plan.options import LookaheadOptions
 from nurbscnc.plan.pieces import segment_pieces
@@ -138,9 +138,9 @@ def _assert_same_plan(a, b, stats: bool = True):
 
 
 def _cuts(text: str, machine) -> int:
-    """Cut windows of a program (:func:`~nurbscnc.plan.lookahead.cut_windows`)."""
+    """Cut windows of a program (:func:`~nurbscnc.plan.windows.cut_windows`)."""
     pieces = segment_pieces(interpret_text(text).segments, machine, LookaheadOptions().plan)
-    return lookahead.cut_windows(pieces).size
+    return windows.cut_windows(pieces).size
 
 
 def _windows_agree(text: str, machine, window: int = TINY) -> tuple:
@@ -184,8 +184,8 @@ def test_plan_does_not_depend_on_the_window_settle_after_rapids():
 
 def test_plan_does_not_depend_on_the_window_fallback(monkeypatch):
     """The fallback alone (both stages: blamed pieces, then every cutting piece)."""
-    monkeypatch.setattr(lookahead, "LOCAL_ITERATIONS", 0)
-    monkeypatch.setattr(lookahead, "FALLBACK_LOCAL_ITERATIONS", 1)
+    monkeypatch.setattr(converge, "LOCAL_ITERATIONS", 0)
+    monkeypatch.setattr(converge, "FALLBACK_LOCAL_ITERATIONS", 1)
     plan, _ = _windows_agree((PLANNER / "square_g61_f3000.nc").read_text(), SLOW)
     assert plan.iterations > 1
 
@@ -249,34 +249,45 @@ def test_an_hour_of_motion_plans_under_a_memory_cap():
 
 
 def test_which_samplers_are_checked_in_windows():
-    """Windows only where a window gives the whole reference's rows exactly: the exact
-    sampler; not the Taylor recurrence (sequential: a window would restart it), not a
-    sampler without k0/k1 (the pre-compensated one, the CLI's announcing wrapper), not one
-    that says ``windows = False``; and a plan checked whole equals the windowed one."""
+    """Windows only where the sampler says a window gives the whole reference's rows exactly
+    (``ReferenceSampler.windowed``): the exact sampler; not the Taylor recurrence
+    (sequential: a window would restart it), not a plain function (it promises nothing),
+    not one that says ``windowed=False``; a wrapper (the pre-compensated sampler, the CLI's
+    announcing one) as the sampler it wraps; and a plan checked whole equals the windowed
+    one."""
+    from nurbscnc.plan.precompensation import precompensated_sampler
+
     from nurbscnc.interpolate.sample import reference_sampler
+    from nurbscnc.plan.sampler import EXACT, ForwardingSampler, FunctionSampler, as_sampler
     from nurbscnc.plan.timing import exact_reference
 
-    exact = reference_sampler("exact")
-    assert lookahead._windowed(exact) and lookahead._windowed(exact_reference)
-    assert not lookahead._windowed(reference_sampler("taylor"))
+    exact, taylor = reference_sampler("exact"), reference_sampler("taylor")
+    assert exact.windowed and EXACT.windowed and not taylor.windowed
 
     def whole_only(pieces, profile, period_s):
         return exact_reference(pieces, profile, period_s)
 
-    def refused(pieces, profile, period_s, k0=0, k1=None):
+    def refusing(pieces, profile, period_s, k0=0, k1=None):
         return exact_reference(pieces, profile, period_s, k0, k1)
 
-    refused.windows = False
-    assert not lookahead._windowed(whole_only) and not lookahead._windowed(refused)
+    refused = FunctionSampler(refusing, windowed=False)
+    assert not as_sampler(whole_only).windowed and not refused.windowed
+    assert as_sampler(exact) is exact
+    for inner in (exact, taylor):
+        assert ForwardingSampler(inner).windowed == inner.windowed
+        assert precompensated_sampler(inner, SLOW).windowed == inner.windowed
+        assert precompensated_sampler(inner, SLOW).interpolator == inner.interpolator
     text = (PLANNER / "square_g61_f3000.nc").read_text()
     _assert_same_plan(_plan(text, SLOW, reference=whole_only, keep_reference=False),
+                      _plan(text, SLOW, keep_reference=False, window=TINY))  # fmt: skip
+    _assert_same_plan(_plan(text, SLOW, reference=refused, keep_reference=False),
                       _plan(text, SLOW, keep_reference=False, window=TINY))  # fmt: skip
 
 
 def test_the_repeated_cut_comparison_is_allclose():
-    """lookahead._close (a repeated cut's columns compared per window) is np.allclose on
+    """windows._close (a repeated cut's columns compared per window) is np.allclose on
     finite values, equal and unequal infinities and NaN, both ways."""
-    from nurbscnc.plan.lookahead import _close
+    from nurbscnc.plan.windows import _close
 
     rng = np.random.default_rng(0)
     values = [0.0, 1.0, np.inf, -np.inf, np.nan, 1e-10, 5.0]

@@ -26,7 +26,16 @@ import numpy as np
 from nurbscnc.geometry.path import Kind, equal_runs
 from nurbscnc.interpolate.taylor import taylor_nurbs, taylor_params
 from nurbscnc.plan.options import Interpolator  # noqa: F401  (re-exported)
-from nurbscnc.plan.timing import SLAB, Samples, exact_reference, rows_of, sample_count, servo_clock
+from nurbscnc.plan.sampler import ReferenceSampler
+from nurbscnc.plan.timing import (
+    SLAB,
+    Reference,
+    Samples,
+    exact_reference,
+    rows_of,
+    sample_count,
+    servo_clock,
+)
 
 #: Rows per window of :func:`sample_chunks` (64 Ki rows ≈ 6 MB of samples): large enough
 #: that the per-window work (servo clock, dwells, Python overhead) is negligible, small
@@ -36,24 +45,32 @@ CHUNK = 1 << 16
 INTERPOLATORS = tuple(m.value for m in Interpolator)
 
 
-def reference_sampler(interpolator="exact"):
-    """The function (pieces, profile, period_s, k0=0, k1=None) →
-    :class:`~nurbscnc.plan.timing.Reference` of this interpolator (samples k0…k1−1; default
-    all): the plan's exact reference, with the NURBS points replaced by the
-    Taylor recurrence's for ``"taylor"``. The look-ahead planner's dynamics check runs on it
-    (:func:`nurbscnc.plan.lookahead.plan_checked`), so the check sees the points that will be
-    output."""
-    how = Interpolator.parse(interpolator)
+class InterpolatorSampler(ReferenceSampler):
+    """The :class:`~nurbscnc.plan.sampler.ReferenceSampler` of an interpolator: the plan's
+    exact reference, with the NURBS points replaced by the Taylor recurrence's for
+    ``"taylor"``. Windowed unless it runs the Taylor recurrence (sequential: a window would
+    restart it)."""
 
-    def sample(pieces, profile, period_s: float, k0: int = 0, k1: int | None = None):
+    def __init__(self, interpolator="exact"):
+        self.interpolator = Interpolator.parse(interpolator)
+        self.windowed = self.interpolator != Interpolator.TAYLOR
+
+    def __call__(self, pieces, profile, period_s: float, k0: int = 0,
+                 k1: int | None = None) -> Reference:  # fmt: skip
         ref = exact_reference(pieces, profile, period_s, k0, k1)
-        if how == Interpolator.TAYLOR:
+        if self.interpolator == Interpolator.TAYLOR:
             taylor_nurbs(pieces.path, ref.piece, ref.tau_s, ref.v_mm_s, ref.a_mm_s2,
                          ref.points_mm, ref.param)  # fmt: skip
         return ref
 
-    sample.interpolator = how
-    return sample
+
+def reference_sampler(interpolator="exact") -> InterpolatorSampler:
+    """The sampler (pieces, profile, period_s, k0=0, k1=None) →
+    :class:`~nurbscnc.plan.timing.Reference` of this interpolator (samples k0…k1−1; default
+    all), :class:`InterpolatorSampler`. The look-ahead planner's dynamics check runs on it
+    (:func:`nurbscnc.plan.lookahead.plan_checked`), so the check sees the points that will be
+    output."""
+    return InterpolatorSampler(interpolator)
 
 
 def samples_of(reference, pieces, interpolator="exact") -> Samples:
@@ -78,7 +95,7 @@ def sample_plan(pieces, profile, period_s: float, interpolator="exact") -> Sampl
 
 
 def interpolate(plan, period_s: float, interpolator="exact") -> Samples:
-    """The reference points of a :class:`~nurbscnc.plan.lookahead.Plan` (:func:`sample_plan`)."""
+    """The reference points of a :class:`~nurbscnc.plan.plans.Plan` (:func:`sample_plan`)."""
     return sample_plan(plan.pieces, plan.profile, period_s, interpolator)
 
 

@@ -296,8 +296,8 @@ def plan_summary(prog, machine: Machine, samples, plan=None, check=None,
     ``lower_bound``: False leaves out ``lower_bound_s`` and its ratio (a summary nobody
     reads them from: the kinematic bound costs 0.2 s on a 200,000-line program);
     ``columns``: the program's segment columns if already read."""
-    from nurbscnc.plan.lookahead import segment_times_s
     from nurbscnc.plan.lowerbound import program_lower_bound_s
+    from nurbscnc.plan.plans import segment_times_s
 
     curves = plan.pieces.nurbs_curves() if plan is not None else None
     lb = program_lower_bound_s(prog.segments, machine, columns, curves) if lower_bound else None

@@ -272,7 +272,7 @@ def _s_along(points_mm: np.ndarray, planned_mm: np.ndarray, s_planned_mm: np.nda
 # samples alone. A segment's samples then depend only on its own planned samples, so
 #
 # - the sampler gives any window of samples exactly (the planner checks the rows it needs,
-#   not the program: ``sample.windows``) and a re-plan of window w costs window w;
+#   not the program: ``windowed``) and a re-plan of window w costs window w;
 # - segments are kept by their planned samples (:data:`_SEGMENTS`, bounded), so the final
 #   windows' segments are made once for every later check and for the output
 #   (``precompensate_reference`` of the final plan finds them).
@@ -315,9 +315,9 @@ def _segment_starts(pieces, profile, period_s: float, n: int) -> np.ndarray:
     """Sample indices (S + 1,) where the segments of a reference of ``n`` samples start
     (the first sample at each cut window's first piece, :func:`~nurbscnc.plan.lookahead.
     cut_windows`), and ``n``: strictly increasing, the first 0."""
-    from nurbscnc.plan.lookahead import _first_sample_at, cut_windows
+    from nurbscnc.plan.windows import cut_windows, first_sample_at
 
-    starts = [_first_sample_at(pieces, profile, int(a), period_s)
+    starts = [first_sample_at(pieces, profile, int(a), period_s)
               for a in cut_windows(pieces)[1:].tolist()]  # fmt: skip
     ks = [0]
     for k in starts:  # a segment shorter than MIN_SEGMENT joins the one before it
@@ -514,11 +514,11 @@ def precompensated_sampler(sampler, machine: Machine,
     same rows as the whole reference's, so the planner checks a cut window's samples at
     the cost of that window; a sampler without windows (the Taylor recurrence) is sampled
     whole and then cut."""
-    from nurbscnc.plan.lookahead import _windowed
+    from nurbscnc.plan.sampler import FunctionSampler
     from nurbscnc.plan.timing import sample_count
 
     options = (tolerance_mm, fit_tolerance_mm, True)
-    windowed = _windowed(sampler)
+    windowed = sampler.windowed
 
     def sample(pieces, profile, period_s: float, k0: int = 0, k1: int | None = None):
         n = sample_count(pieces, profile, period_s)
@@ -533,7 +533,5 @@ def precompensated_sampler(sampler, machine: Machine,
                 return _rows_of(whole, a, b)
         return _compensated_rows(ref_of, pieces, profile, machine, options, n, k0, hi)[0]
 
-    sample.interpolator = getattr(sampler, "interpolator", None)
-    sample.windows = windowed
-    return sample
+    return FunctionSampler(sample, windowed, sampler.interpolator)
 

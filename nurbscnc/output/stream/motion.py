@@ -28,8 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from nurbscnc.plan.lookahead import profile_over
 from nurbscnc.plan.pieces import junction_caps
+from nurbscnc.plan.plans import profile_over
 from nurbscnc.plan.profile import Profile, time_at_length
 from nurbscnc.plan.timing import dwell_times, wall_to_profile_time
 
@@ -171,7 +171,7 @@ def plan_motion(plan) -> Motion:
 def resume_motion(plan, s_mm: float, wait_s: float = 0.0,
                   lookahead_pieces: int | None = None) -> Motion | None:  # fmt: skip
     """The rest of ``plan`` from global path length ``s_mm``, planned from rest (SPEC §7: the
-    planner's own :func:`~nurbscnc.plan.lookahead.profile_over` over the remaining pieces,
+    planner's own :func:`~nurbscnc.plan.plans.profile_over` over the remaining pieces,
     with the plan's final caps and per-piece limits); None when nothing is left to move."""
     pieces = plan.pieces
     starts = np.asarray(plan.profile.piece_start_mm, dtype=float)

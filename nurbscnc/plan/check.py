@@ -1,0 +1,559 @@
+"""The windowed dynamics check of a plan (SPEC §8): the reference sampled a window of
+servo samples at a time, the servo simulated with its state carried, the contour error
+measured per sample, and only what the shaping rules need kept (:class:`Overs`); the result
+of a check (:class:`Check`) and of a program's cut windows joined (:class:`JoinedChecks`)."""
+from __future__ import annotations
+
+from dataclasses import dataclass, fields, replace
+
+import numpy as np
+
+from nurbscnc.machine.profile import Machine
+from nurbscnc.plan.dynamics import (
+    PathIndex,
+    Response,
+    path_response,
+    window_response,
+)
+from nurbscnc.plan.pieces import PieceList
+from nurbscnc.plan.profile import Profile, same_until_s
+from nurbscnc.plan.sampler import ReferenceSampler, as_sampler
+from nurbscnc.plan.timing import Reference, dwell_times, same_clock_until_s, sample_count
+from nurbscnc.servo.model import AxesStream
+
+#: Servo samples per window of the dynamics check: its memory grows with this, not with
+#: the motion time.
+CHECK_WINDOW = 1 << 16
+
+
+@dataclass(frozen=True, eq=False)
+class Overs:
+    """What the shaping rules need of one check, in memory that grows with the pieces and
+    the over-limit samples, never with the motion time: ``count`` M checked
+    samples (the settle tail included); the over-limit samples (cutting, contour error above
+    the check's limit): their ``index`` (q,) in 0…M−1, ``err_mm`` (q,) [mm] and profile time
+    ``tau_s`` (q,) [s] (the tail: the end); the piece of every sample, run-length coded
+    (pieces follow time): ``run_piece`` (r,) and ``run_start`` (r,) its first sample;
+    ``restart_count`` (len(settle rows),): samples whose profile time is at most the start
+    of the cut after each rapid; ``worst_mm`` the largest checked error [mm]."""
+
+    count: int
+    index: np.ndarray
+    err_mm: np.ndarray
+    tau_s: np.ndarray
+    run_piece: np.ndarray
+    run_start: np.ndarray
+    restart_count: np.ndarray
+    worst_mm: float
+
+
+@dataclass(frozen=True, eq=False)
+class Check:
+    """The dynamics check of the final plan (SPEC §8). Always: ``overs``, the compact form
+    the shaping rules read (:class:`Overs`) and ``stats``, the contour error statistics of
+    the cutting samples (:meth:`contour_stats`). With ``plan_checked(...,
+    keep_reference=True)`` also the ``reference`` points it checked
+    (:class:`~nurbscnc.plan.timing.Reference`), the predicted servo ``response`` to them and
+    ``cutting`` (M,), which response samples are cutting (not on a rapid; the held tail
+    after the end counts as the last piece); else these three are None."""
+
+    reference: Reference | None
+    response: Response | None
+    cutting: np.ndarray | None
+    overs: Overs | None = None
+    stats: dict | None = None
+    #: The compact form of the program's own samples (``overs`` without the held tail a cut
+    #: window's check adds, :func:`~nurbscnc.plan.lookahead.plan_windows`; else
+    #: ``overs``): what joins windows.
+    samples: Overs | None = None
+    #: Cutting samples the statistics are over (joining windows).
+    cut_samples: int = 0
+
+    def contour_um(self) -> np.ndarray:
+        """The true contour error [µm] of the cutting samples (needs the kept response)."""
+        if self.response is None:
+            raise ValueError("the check kept no per-sample response (keep_reference=False)")
+        return self.response.contour_mm[self.cutting] * 1000.0
+
+    def contour_stats(self) -> dict:
+        """The check's contour error of the cutting samples [µm]: ``contour_true_max_um``,
+        ``contour_true_rms_um`` (true distance to the path) and ``contour_eq29_max_um`` (|ε|
+        of SPEC eq. 29); 0 when nothing is cut. The summaries use only these; a check that
+        keeps no per-sample arrays gives the same numbers from its running statistics (the
+        rms summed window by window: equal to rounding)."""
+        if self.response is None:
+            return dict(self.stats)
+        c = self.contour_um()
+        eq29 = np.abs(self.response.contour_eq29_mm[self.cutting]) * 1000.0
+        if not c.size:
+            return {"contour_true_max_um": 0.0, "contour_true_rms_um": 0.0,
+                    "contour_eq29_max_um": 0.0}  # fmt: skip
+        return {"contour_true_max_um": float(c.max()),
+                "contour_true_rms_um": float(np.sqrt(np.mean(c * c))),
+                "contour_eq29_max_um": float(eq29.max())}  # fmt: skip
+
+
+def _rows(ref: Reference, sl: slice) -> Reference:
+    """Rows ``sl`` of every per-sample column of ``ref``."""
+    return replace(ref, **{f.name: getattr(ref, f.name)[sl] for f in fields(ref)})
+
+
+def _joined(first: Reference, then: Reference) -> Reference:
+    """The rows of ``first``, then those of ``then``."""
+    return replace(first, **{f.name: np.concatenate((getattr(first, f.name),
+                                                     getattr(then, f.name)))
+                             for f in fields(first)})  # fmt: skip
+
+
+@dataclass(frozen=True, eq=False)
+class _Memo:
+    """What :meth:`Checker.run` keeps of its last check of a window made of one chunk, for
+    the next re-plan of that window (:meth:`Checker._same_rows`): the window (``key``: its
+    first sample, whether it ends the program, its last piece; the servo state it started
+    from; the path), the profile and dwell schedule it sampled, the chunk's sampled rows
+    (``ref``, from row ``a``), and per own row (from chunk row ``own``) the response's
+    axis errors, contour and eq. 29 errors and the cutting flags."""
+
+    key: tuple
+    stream: AxesStream | None
+    path: object
+    profile: Profile
+    clock: tuple
+    a: int
+    ref: Reference
+    own: int
+    axis_error_mm: np.ndarray
+    contour_mm: np.ndarray
+    contour_eq29_mm: np.ndarray
+    cutting: np.ndarray
+
+
+class Checker:
+    """The dynamics check of one program's plans (SPEC §8), a window of servo samples at a
+    time: the reference of ``window`` samples (plus one on each side for the
+    direction of travel), the servo simulated with its state carried
+    (:class:`~nurbscnc.servo.model.AxesStream`), the contour error measured per sample
+    (:func:`~nurbscnc.plan.dynamics.window_response`), and only the over-limit samples, the
+    piece runs and running statistics kept (:class:`Overs`), unless ``keep`` (the whole
+    reference and response, as plots and reports need). A sampler that cannot give windows
+    is evaluated whole (one window). Per sample everything is what the whole-array check
+    computes, so plans do not depend on the window."""
+
+    def __init__(self, pieces: PieceList, machine: Machine, sampler: ReferenceSampler,
+                 eps_mm: float, settle_rows: np.ndarray, window: int, keep: bool):  # fmt: skip
+        self.pieces, self.machine = pieces, machine
+        self.sampler = as_sampler(sampler)
+        self.eps_mm, self.settle_rows, self.keep = eps_mm, settle_rows, keep
+        self.window = max(int(window), 1)
+        # Keeping the whole reference and response: one window (windows would be
+        # concatenated at the end, twice the memory for a moment).
+        self.windowed = self.sampler.windowed and not keep
+        self.rapid = pieces.rapid
+        self.after_rapid = np.zeros(len(pieces), dtype=bool)  # first piece of a cut after a rapid
+        self.after_rapid[settle_rows + 1] = True
+        self.index = PathIndex(pieces)  # where the pieces are (built on first use)
+        # The servo at rest, discretised once: every check starts from a copy.
+        servo = machine.servo
+        self._at_rest = AxesStream([servo.x, servo.y, servo.z], servo.period_s)
+        self._memo: _Memo | None = None  # the last one-chunk check (:meth:`_same_rows`)
+
+    def _windows(self, planned: PieceList, profile: Profile, rows: tuple | None = None,
+                 sample=None):  # fmt: skip
+        """(reference rows, slice of the window's own rows in them, row of the virtual end
+        or None): one row more on each side where there is one (the direction of travel is
+        a central difference); with ``rows`` (k0, k1, last, …) only those samples, and
+        unless ``last``, after k1 − 1 the row k1 of the program as if it ended with this
+        window (:meth:`_end_row`: the next cut window's motion is not planned yet).
+        ``sample(a, b)``: rows a … b − 1 of the reference (default: the sampler's)."""
+        period = self.machine.servo.period_s
+        n = sample_count(planned, profile, period)
+        r0, r1 = (0, n) if rows is None else (rows[0], min(rows[1], n))
+        last = rows is None or rows[2]
+        hi = n if last else r1 + 1
+        if not self.windowed:
+            ref = self.sampler(planned, profile, period)
+            if rows is None:
+                yield ref, slice(0, ref.t_s.size), None
+                return
+            chunks = [(ref, max(r0 - 1, 0), min(r1 + 1, hi), r0, r1)]
+        else:
+            chunks = ((None, max(k0 - 1, 0), min(k0 + self.window + 1, r1 + 1, hi), k0,
+                       min(k0 + self.window, r1)) for k0 in range(r0, r1, self.window))
+        if sample is None:
+            def sample(a, b):
+                return self.sampler(planned, profile, period, a, b)
+        for whole, a, b, k0, k1 in chunks:
+            ref = sample(a, b) if whole is None else _rows(whole, slice(a, b))
+            virt = None
+            if not last and b == r1 + 1:
+                virt = r1 - a
+                end = self._end_row(planned, profile, r1, rows[4] + 1)
+                ref = _joined(_rows(ref, slice(0, virt)), end)
+            yield ref, slice(k0 - a, k1 - a), virt
+
+    def _head(self, planned: PieceList, profile: Profile, end: int) -> tuple:
+        """Pieces 0 … ``end`` − 1 of ``planned`` and ``profile`` as a program of their own,
+        as far as the contour distance needs them (:class:`_Head`), their
+        :class:`~nurbscnc.plan.dynamics.PathIndex` (kept per ``end``) and rapid flags."""
+        return (_Head(planned, end), _HeadProfile(profile, end), _HeadIndex(self.index, end),
+                self.rapid[:end])  # fmt: skip
+
+    def _end_row(self, planned: PieceList, profile: Profile, k: int, end: int) -> Reference:
+        """Sample ``k`` of the program made of pieces 0 … ``end`` − 1 only (a cut window's
+        end; t_k at or after the end of their motion): at rest at the end of piece
+        ``end`` − 1, as :func:`~nurbscnc.plan.timing.exact_reference` gives it there (the
+        profile time t_k minus the dwells before ``end``)."""
+        t = np.array([k * self.machine.servo.period_s])
+        dwell = planned.dwell_after_s[:end]
+        before = np.cumsum(dwell[dwell > 0.0])
+        tau = t - (before[-1] if before.size else 0.0)
+        s = np.array([profile.piece_start_mm[end]])
+        piece = np.array([end - 1], dtype=np.intp)
+        points, param = planned.path.place(profile.piece_start_mm, s, piece)
+        return Reference(t, tau, s, np.zeros(1), np.zeros(1), piece, points, param)
+
+    def run(self, planned: PieceList, profile: Profile, rows: tuple | None = None,
+            stream: AxesStream | None = None) -> Check:  # fmt: skip
+        """Check the plan ``planned``/``profile``: the :class:`Check` of its reference.
+        ``rows`` (k0, k1, last, τ_end [s], last piece): only the samples k0 … k1 − 1 (one
+        cut window of :func:`~nurbscnc.plan.lookahead.plan_windows`), the servo starting
+        from ``stream`` (copied; None: at rest at the first sample), then as if the program
+        ended there (``last`` False: its last sample :meth:`_end_row` and the held tail at
+        profile time τ_end on the last piece, on a copy of the servo state, which
+        :attr:`stream_out` then holds without them, for the next window)."""
+        self.sampler.check_begins(0 if rows is None else rows[0])
+        if rows is None and not self.windowed:
+            return self._run_whole(planned, profile)
+        servo = self.machine.servo
+        stream_in = stream
+        stream = (self._at_rest if stream is None else stream).copy()
+        acc = _Accumulator(self, profile)
+        last = end = None
+        # The path the error is measured against: the pieces up to this window's end (the
+        # program as if it ended there; the whole program for the last window).
+        head = None if rows is None or rows[2] else self._head(planned, profile, rows[4] + 1)
+        on, prof, index = (planned, profile, self.index) if head is None else head[:3]
+        key = None if rows is None else (rows[0], rows[2], rows[4])
+        memo, same = self._memo, self._same_rows(planned, profile, key, stream_in)
+        self._memo = None
+        # The first chunk sampled, as (first row, rows): kept for the next re-plan if the
+        # window is that one chunk. Memory: one chunk at most.
+        sampled: list = []
+        chunks = 0
+
+        def sample(a: int, b: int) -> Reference:
+            period = servo.period_s
+            if same and a == memo.a:  # the leading rows the last check of it sampled
+                j = min(same, b - a)
+                ref = _joined(_rows(memo.ref, slice(0, j)),
+                              self.sampler(planned, profile, period, a + j, b))  # fmt: skip
+            else:
+                ref = self.sampler(planned, profile, period, a, b)
+            nonlocal chunks
+            chunks += 1
+            sampled[:] = [(a, ref)] if chunks == 1 else []
+            return ref
+
+        for ref, own, virt in self._windows(planned, profile, rows, sample):
+            d = np.gradient(ref.points_mm[:, :2], axis=0) if ref.t_s.size > 1 else \
+                np.zeros((ref.t_s.size, 2))  # fmt: skip
+            if virt is not None:
+                end = (_rows(ref, slice(virt, virt + 1)), d[virt : virt + 1])
+            # Own rows whose response the last check computed: their reference rows and
+            # the rows on each side (the direction of travel) are the same.
+            kept = 0
+            if chunks > 1:  # a window of several chunks keeps none
+                memo = self._memo = None
+            elif same and sampled[0][0] == memo.a and own.start == memo.own:
+                kept = max(0, min(same - 1, ref.t_s.size - 2, own.stop) - own.start)
+                kept = min(kept, memo.contour_mm.size)
+            ref = _rows(ref, own)
+            actual = stream.step(ref.points_mm)
+            resp, cutting = self._respond(ref, actual, d[own], on, prof, index, profile, head,
+                                          memo, kept)  # fmt: skip
+            acc.add(resp, cutting, ref.tau_s, ref.piece)
+            last = ref
+            if sampled:  # the first chunk: kept for the next re-plan of a one-chunk window
+                self._memo = _Memo(key, stream_in, planned.path, profile,
+                                   dwell_times(planned.dwell_after_s, profile), sampled[0][0],
+                                   sampled[0][1], own.start, resp.axis_error_mm,
+                                   resp.contour_mm, resp.contour_eq29_mm, cutting)  # fmt: skip
+        self.stream_out = stream
+        self._finish(acc, stream, end, last, planned, profile, rows, head, (on, prof, index))
+        return acc.check()
+
+    def _finish(self, acc: _Accumulator, stream: AxesStream, end: tuple | None,
+                last: Reference, planned: PieceList, profile: Profile, rows: tuple | None,
+                head: tuple | None, path: tuple) -> None:  # fmt: skip
+        """The end of a check of :meth:`run`, added to ``acc``: for a cut window that the
+        program does not end with, its virtual last sample ``end`` (reference row and
+        direction of travel, :meth:`_end_row`) on a copy of the servo state ``stream``;
+        then the reference held at its last point (``last``'s) until the axes settle.
+        ``path``: what the contour error is measured against (pieces, profile, index)."""
+        on, prof, index = path
+        virtual = rows is not None and not rows[2]
+        if virtual:  # the end of a cut window, as if the program ended there
+            stream = stream.copy()
+            if end is not None:
+                ref, d_end = end
+                actual = stream.step(ref.points_mm)
+                resp = window_response(ref.points_mm, ref.s_mm, actual, d_end, on, prof,
+                                       self.eps_mm, index)  # fmt: skip
+                acc.add(resp, self._cutting(ref, resp, profile, head), ref.tau_s, ref.piece,
+                        virtual=True)  # fmt: skip
+                last = ref
+        tail = stream.settle()  # the reference held at its end until the axes settle
+        if tail.shape[0]:
+            m = tail.shape[0]
+            held = np.repeat(last.points_mm[-1:], m, axis=0)
+            resp = window_response(held, np.full(m, last.s_mm[-1]), tail, np.zeros((m, 2)),
+                                   on, prof, self.eps_mm, index)  # fmt: skip
+            tau_end, piece_end = (profile.duration_s, len(planned) - 1) if rows is None \
+                else rows[3:5]  # fmt: skip
+            acc.add(resp, np.full(m, not self.rapid[piece_end]), np.full(m, tau_end),
+                    np.full(m, piece_end), virtual=virtual)  # fmt: skip
+
+    def _same_rows(self, planned: PieceList, profile: Profile, key: tuple | None,
+                   stream: AxesStream | None) -> int:  # fmt: skip
+        """How many leading rows of the kept chunk (:class:`_Memo`) a check of this plan
+        samples alike, bit for bit: the same window started from the same servo state on
+        the same path, each row's wall time before the dwell schedules differ
+        (:func:`~nurbscnc.plan.timing.same_clock_until_s`) and its profile time before the
+        profiles do (:func:`~nurbscnc.plan.profile.same_until_s`). The sampler gives each
+        row from its own wall time alone (any window of rows is those rows of the whole
+        reference), and the response of a row depends on its reference, its neighbours'
+        and the servo state only: so a re-plan that changed the profile from some point on
+        costs the samples from there on. 0 without a kept chunk."""
+        memo = self._memo
+        if memo is None or memo.key != key or memo.stream is not stream or \
+                memo.path is not planned.path:  # fmt: skip
+            return 0
+        t_wall = same_clock_until_s(memo.clock, dwell_times(planned.dwell_after_s, profile))
+        t_tau = same_until_s(memo.profile, profile)
+        return int(min(np.searchsorted(memo.ref.t_s, t_wall, side="left"),
+                       np.searchsorted(memo.ref.tau_s, t_tau, side="left")))  # fmt: skip
+
+    def _respond(self, ref: Reference, actual: np.ndarray, direction: np.ndarray, on, prof,
+                 index, profile: Profile, head: tuple | None, memo: _Memo | None,
+                 kept: int) -> tuple[Response, np.ndarray]:  # fmt: skip
+        """The response to the own reference rows ``ref`` (the servo's ``actual``
+        positions, the directions of travel) and which rows are checked (:meth:`_cutting`):
+        the first ``kept`` rows from ``memo`` (the same numbers), the others computed."""
+        new = slice(kept, None)
+        resp = window_response(ref.points_mm[new], ref.s_mm[new], actual[new], direction[new],
+                               on, prof, self.eps_mm, index)  # fmt: skip
+        cutting = self._cutting(_rows(ref, new), resp, profile, head)
+        if not kept:
+            return resp, cutting
+
+        def joined(old: np.ndarray, now: np.ndarray) -> np.ndarray:
+            return np.concatenate((old[:kept], now))
+
+        return (Response(actual, joined(memo.axis_error_mm, resp.axis_error_mm),
+                         joined(memo.contour_mm, resp.contour_mm),
+                         joined(memo.contour_eq29_mm, resp.contour_eq29_mm)),
+                joined(memo.cutting, cutting))  # fmt: skip
+
+    def _run_whole(self, planned: PieceList, profile: Profile) -> Check:
+        """The check on the whole reference at once (a sampler without windows, or the
+        reference and response kept): :func:`~nurbscnc.plan.dynamics.path_response`."""
+        ref = self.sampler(planned, profile, self.machine.servo.period_s)
+        resp = path_response(ref, planned, profile, self.machine, refine_above_mm=self.eps_mm,
+                             index=self.index)  # fmt: skip
+        n, m = ref.t_s.size, resp.contour_mm.size
+        cutting = np.append(self._cutting(ref, resp, profile),
+                            np.full(m - n, not self.rapid[-1]))  # fmt: skip
+        acc = _Accumulator(self, profile)
+        acc.add(resp, cutting, np.append(ref.tau_s, np.full(m - n, profile.duration_s)),
+                np.append(ref.piece, np.full(m - n, len(planned) - 1)))  # fmt: skip
+        if not self.keep:
+            return acc.check()
+        return replace(acc.check(), reference=ref, response=resp, cutting=cutting)
+
+    def _cutting(self, ref: Reference, resp: Response, profile: Profile,
+                 head: tuple | None = None) -> np.ndarray:  # fmt: skip
+        """Which reference samples are checked (N,): contour error matters while cutting;
+        samples on rapids (air moves) and during the settle after a rapid (the reference
+        waits at the cut's start) are not. The first cutting samples after a rapid are
+        measured against the cut only (in ``resp``)."""
+        waiting = self.after_rapid[ref.piece] & (
+            ref.tau_s <= profile.piece_start_time_s[ref.piece])
+        index, rapid = (self.index, self.rapid) if head is None else (head[2], head[3])
+        _cut_distance_after_rapids(resp, ref, profile, self.after_rapid, waiting, rapid,
+                                   index)  # fmt: skip
+        return ~self.rapid[ref.piece] & ~waiting
+
+
+class _Head:
+    """The first ``end`` pieces of a :class:`~nurbscnc.plan.pieces.PieceList`, read-only,
+    for the contour distance (the columns it reads, cut to ``end``; the path shared)."""
+
+    def __init__(self, pieces: PieceList, end: int):
+        self._pieces, self._end = pieces, end
+
+    def __len__(self) -> int:
+        return self._end
+
+    def __getattr__(self, name: str):
+        value = getattr(self._pieces, name)
+        if isinstance(value, np.ndarray) and value.ndim and value.shape[-1] == len(self._pieces):
+            return value[..., : self._end]
+        return value
+
+
+class _HeadIndex:
+    """The whole program's :class:`~nurbscnc.plan.dynamics.PathIndex` asked about its first
+    ``end`` pieces only (the others excluded): the same candidates and distances as an index
+    of those pieces, with the dense polylines kept across every cut window's re-plans."""
+
+    def __init__(self, index: PathIndex, end: int):
+        self._index, self._end = index, end
+
+    def distance_mm(self, q: np.ndarray, upper_mm: np.ndarray, block: int = 256,
+                    exclude: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
+        """:meth:`PathIndex.distance_mm` to pieces 0 … end − 1 (less ``exclude`` (end,))."""
+        beyond = np.zeros(len(self._index._pieces), dtype=bool)
+        beyond[self._end :] = True
+        if exclude is not None:
+            beyond[: self._end] |= exclude[: self._end]
+        return self._index.distance_mm(q, upper_mm, block, beyond)
+
+    def dense_polyline(self, pieces, starts_mm: np.ndarray, total_mm: float, lo: int,
+                       hi: int) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+        """The dense polyline of pieces ``lo:hi`` of the head: the whole program's kept
+        polyline (:meth:`PathIndex.dense_polyline`: the same numbers as made afresh for the
+        head, whose starts are the program's first and whose total clips its end)."""
+        return self._index.dense_polyline(pieces, starts_mm, total_mm, lo, hi)
+
+
+class _HeadProfile:
+    """The profile of the first ``end`` pieces (their start lengths and total length)."""
+
+    def __init__(self, profile: Profile, end: int):
+        self.piece_start_mm = profile.piece_start_mm[:end]
+        self.total_length_mm = float(profile.piece_start_mm[end])
+
+
+class _Accumulator:
+    """The running results of one check (:class:`Checker`): over-limit samples, piece
+    runs, settle counts and contour statistics (:class:`Overs`)."""
+
+    def __init__(self, checker: Checker, profile: Profile):
+        self.eps_mm = checker.eps_mm
+        self.t_restart = profile.piece_start_time_s[checker.settle_rows + 1]
+        self.count = 0
+        self.over: list = []  # (index, err, tau) per window
+        self.runs: list = []  # (run piece, run start) per window
+        self.last_piece = -1
+        self.restart = np.zeros(checker.settle_rows.size, dtype=np.int64)
+        self.worst = 0.0
+        self.c_max = self.c_sq = self.eq29_max = 0.0
+        self.c_n = 0
+        self.real = None  # (count, worst, restart, over count, run count) before a virtual tail
+
+    def add(self, resp: Response, cutting: np.ndarray, tau_s: np.ndarray, piece: np.ndarray,
+            virtual: bool = False):  # fmt: skip
+        """The next samples: their response, which are checked (``cutting``), profile times
+        [s] and pieces. ``virtual``: the held tail of a cut window that the program does not
+        end with: it counts for the window's decisions, not in its statistics nor in
+        :attr:`Check.samples`."""
+        if virtual and self.real is None:
+            self.real = (self.count, self.worst, self.restart.copy(), len(self.over),
+                         len(self.runs))  # fmt: skip
+        err = np.where(cutting, resp.contour_mm, 0.0)
+        over = np.flatnonzero(err > self.eps_mm)
+        self.over.append((over + self.count, err[over], tau_s[over]))
+        self.worst = max(self.worst, float(err.max()))
+        del err
+        starts = np.flatnonzero(np.diff(piece, prepend=self.last_piece) != 0)
+        self.runs.append((piece[starts], starts + self.count))
+        self.last_piece = int(piece[-1])
+        self.restart += np.searchsorted(tau_s, self.t_restart, side="right")
+        c = resp.contour_mm[cutting] * 1000.0 if not virtual else np.zeros(0)
+        if c.size:
+            self.c_max = max(self.c_max, float(c.max()))
+            self.c_sq += float(np.dot(c, c))
+            self.c_n += c.size
+            self.eq29_max = max(self.eq29_max,
+                                float(np.abs(resp.contour_eq29_mm[cutting]).max()) * 1000.0)
+        self.count += cutting.size
+
+    def check(self) -> Check:
+        """The :class:`Check` of everything added (no per-sample arrays)."""
+        idx, err, tau = (np.concatenate(x) for x in zip(*self.over))
+        piece, start = (np.concatenate(x) for x in zip(*self.runs))
+        overs = Overs(self.count, idx, err, tau, piece, start, self.restart, self.worst)
+        rms = float(np.sqrt(self.c_sq / self.c_n)) if self.c_n else 0.0
+        stats = {"contour_true_max_um": self.c_max, "contour_true_rms_um": rms,
+                 "contour_eq29_max_um": self.eq29_max}  # fmt: skip
+        samples = overs
+        if self.real is not None:
+            count, worst, restart, n_over, n_runs = self.real
+            i, e, t = (np.concatenate(x) for x in zip(*self.over[:n_over]))
+            rp, rs = (np.concatenate(x) for x in zip(*self.runs[:n_runs]))
+            samples = Overs(count, i, e, t, rp, rs, restart, worst)
+        return Check(None, None, None, overs, stats, samples, self.c_n)
+
+
+class JoinedChecks:
+    """The compact :class:`Check` of a program's cut windows, joined as they come, their
+    samples one after the other (:attr:`Check.samples`: without the held tails of the
+    windows' checks): over-limit samples, piece runs, counts before each restart and
+    statistics. No window's check is kept: each holds counts for every restart of the
+    program (one per rapid), so keeping them all would grow as cuts × rapids; the counts
+    are summed as they come."""
+
+    def __init__(self):
+        self.parts: list = []  # per window: (index, err, tau, run piece, run start, count)
+        self.restart = None
+        self.worst = 0.0
+        self.n: list = []
+        self.stats: list = []
+
+    def add(self, check: Check) -> None:
+        o = check.samples
+        self.parts.append((o.index, o.err_mm, o.tau_s, o.run_piece, o.run_start, o.count))
+        if self.restart is None:
+            self.restart = np.array(o.restart_count, dtype=np.int64)
+        else:
+            self.restart += o.restart_count
+        self.worst = max(self.worst, o.worst_mm)
+        self.n.append(check.cut_samples)
+        self.stats.append(check.stats)
+
+    def check(self) -> Check:
+        off = np.cumsum([0] + [p[5] for p in self.parts])
+        cat = np.concatenate
+        overs = Overs(int(off[-1]), cat([p[0] + d for p, d in zip(self.parts, off)]),
+                      cat([p[1] for p in self.parts]), cat([p[2] for p in self.parts]),
+                      cat([p[3] for p in self.parts]),
+                      cat([p[4] + d for p, d in zip(self.parts, off)]), self.restart,
+                      self.worst)  # fmt: skip
+        total = sum(self.n)
+        stats = self.stats
+        rms = float(np.sqrt(sum(s["contour_true_rms_um"] ** 2 * m for s, m in zip(stats, self.n))
+                            / total)) if total else 0.0  # fmt: skip
+        joined = {"contour_true_max_um": max(s["contour_true_max_um"] for s in stats),
+                  "contour_true_rms_um": rms,
+                  "contour_eq29_max_um": max(s["contour_eq29_max_um"] for s in stats)}
+        return Check(None, None, None, overs, joined, overs, total)
+
+
+def _cut_distance_after_rapids(response: Response, ref: Reference, profile: Profile,
+                               after_rapid: np.ndarray, waiting: np.ndarray, rapid: np.ndarray,
+                               index: PathIndex) -> None:  # fmt: skip
+    """Measure the first cutting samples after a rapid against the cut only (in place).
+
+    The path the contour error is measured against includes the rapids, so a tool still
+    arriving along a rapid looks on the path although the cut has moved off; it is 'on the
+    path' only if it is on the cut. Only samples whose distance window (module doc of
+    :mod:`~nurbscnc.plan.dynamics`: ±2|e| of arc length) reaches back across the rapid's
+    end are affected; their reference lies on the cut, so |e| bounds the distance."""
+    n = ref.t_s.size
+    lag = np.sqrt(np.einsum("ij,ij->i", response.axis_error_mm[:n], response.axis_error_mm[:n]))
+    start = profile.piece_start_mm[ref.piece]
+    fix = np.flatnonzero(after_rapid[ref.piece] & ~waiting & (ref.s_mm - 2.0 * lag <= start))
+    if fix.size:
+        response.contour_mm[fix] = index.distance_mm(response.actual_mm[fix], lag[fix] + 1e-12,
+                                                     exclude=rapid)  # fmt: skip
+

@@ -1,0 +1,388 @@
+"""The shaping rules of the contour check (SPEC §8, module docstring of
+:mod:`~nurbscnc.plan.lookahead`): from a check's over-limit samples, which levers of which
+pieces to lower — the settle after a rapid, the transitions of a stop or slowdown, the feed
+over a blamed window (:func:`shape`) — and the guaranteed-feasible :func:`fallback`."""
+from __future__ import annotations
+
+import numpy as np
+
+from nurbscnc.plan.check import Overs
+from nurbscnc.plan.levers import Levers
+from nurbscnc.plan.pieces import PieceList
+from nurbscnc.plan.profile import Profile
+
+#: Samples before an over-limit sample whose pieces share the blame (servo memory ≈ 30 ms).
+BLAME_WINDOW_S = 0.03
+#: An over-limit sample belongs to a stop planned at most this long after it [s] (profile
+#: time; the approach) ...
+STOP_BEFORE_S = 0.02
+#: ... or at most this long before it [s] (the overshoot and the corner cut after it).
+STOP_WINDOW_S = 0.03
+#: A stop whose error fell as (jerk factor)^p with p below this is no jerk lever: its
+#: acceleration is softened with its jerk from then on; if that too moves the error less,
+#: it is not softened again (the feed lever takes it).
+STOP_INEFFECTIVE_P = 0.2
+FEED_ONLY = ("feed",)
+#: Factor of every lever per fallback re-plan.
+FALLBACK_FACTOR = 0.6
+#: Over-limit samples per block of the blame computation.
+BLAME_BLOCK = 1 << 12
+
+
+def _blame(ov: Overs, sel: np.ndarray, eps_mm: float, joined: np.ndarray,
+           window) -> np.ndarray:  # fmt: skip
+    """Largest over-limit error [mm] each piece shares the blame for (0: none).
+
+    An over-limit sample (``ov``: those of ``sel`` (q,) bool with error above ``eps_mm``)
+    blames the pieces of the ``window`` samples (an int, or one per sample of ``ov``) up to
+    it (the servo remembers): sample i
+    blames every piece with a sample in [i − window, i], i.e. the runs of
+    ``ov.run_start`` from the one holding max(i − window, 0) to the one holding i; each
+    piece keeps the largest. Blamed pieces that the profile plans as one (``joined``
+    (k−1,): tangent-continuous junction, equal caps) share their largest blame, so their
+    caps stay equal and they stay one profile unit (a run of tiny CAM pieces lowered piece
+    by piece to slightly different caps would crawl)."""
+    k = joined.size + 1
+    keep = sel & (ov.err_mm > eps_mm)
+    idx, err = ov.index[keep], ov.err_mm[keep]
+    win = np.broadcast_to(window, ov.index.shape)[keep]
+    blame_run = np.zeros(ov.run_start.size)
+    for lo in range(0, idx.size, BLAME_BLOCK):  # (block × window) temporaries at most
+        i, e = idx[lo : lo + BLAME_BLOCK], err[lo : lo + BLAME_BLOCK]
+        w = win[lo : lo + BLAME_BLOCK]
+        r_lo = np.searchsorted(ov.run_start, np.maximum(i - w, 0), side="right") - 1
+        span = np.searchsorted(ov.run_start, i, side="right") - r_lo
+        rows = np.repeat(np.arange(i.size), span)
+        runs = r_lo[rows] + np.arange(rows.size) - np.repeat(np.cumsum(span) - span, span)
+        np.maximum.at(blame_run, runs, e[rows])
+    blame = np.zeros(k)
+    np.maximum.at(blame, ov.run_piece, blame_run)
+    hit = blame > 0.0
+    link = hit[:-1] & hit[1:] & joined
+    if link.any():
+        run = np.concatenate(([0], np.cumsum(~link)))  # run label of each piece
+        run_max = np.zeros(int(run[-1]) + 1)
+        np.maximum.at(run_max, run, blame)
+        blame = np.where(hit, run_max[run], 0.0)
+    return blame
+
+
+#: Re-plans in a row in which lowering a piece's feed hardly moved its error before the
+#: curve lever leaves its feed alone (a single one is common: the over-limit samples move
+#: as the braking moves).
+CURVE_STRIKES = 2
+
+
+def _curve_windows(ov: Overs, ineffective: np.ndarray, narrow: int, wide: int) -> np.ndarray:
+    """Blame window [samples] (q,) of each over-limit sample of ``ov``: ``wide`` where the
+    ``narrow`` window up to it holds a piece flagged ``ineffective`` (k,) (its feed was
+    lowered without effect: the cause lies further back in the servo's memory), else
+    ``narrow``."""
+    i = ov.index
+    if not ineffective.any():
+        return np.full(i.size, narrow)
+    flagged = np.concatenate(([0], np.cumsum(ineffective[ov.run_piece])))
+    r_lo = np.searchsorted(ov.run_start, np.maximum(i - narrow, 0), side="right") - 1
+    r_hi = np.searchsorted(ov.run_start, i, side="right") - 1
+    return np.where(flagged[r_hi + 1] > flagged[r_lo], wide, narrow)
+
+
+def local_factors(blame: np.ndarray, eps_mm: float, history=None):
+    """Cap factors (k,) of a local re-plan, the history for the next one, and which pieces
+    were lowered without effect (k,) bool.
+
+    Every offending piece (``blame`` > 0: the error [mm] it shares) is lowered at once, by
+    f = 0.97 (ε/e)^(1/p), clipped to [0.5, 0.97]. The exponent p of error ∝ V^p is 2 for a
+    piece hit for the first time (the normal acceleration V²κ drives the servo lag), and is
+    measured for a piece hit again, from its last factor and how much its error fell:
+    p = ln(e/e_prev) / ln(f_prev), kept in [0.25, 2]. Errors that depend on the feed weakly
+    (the overshoot of an exact stop grows with the deceleration, not with V²) thus get a
+    strong correction at the second try instead of 3 % per re-plan. A piece whose error
+    fell with p below :data:`STOP_INEFFECTIVE_P` in :data:`CURVE_STRIKES` re-plans in a row
+    is not the cause (a ringing servo's error from further back): it is reported, not
+    lowered (halving it at every re-plan would make a slow servo's program crawl).
+    """
+    hit = blame > 0.0
+    p = np.full(blame.size, 2.0)
+    strikes = np.zeros(blame.size, dtype=np.int8)
+    if history is not None:
+        prev_blame, prev_factor, prev_strikes = history
+        again = hit & (prev_blame > 0.0) & (prev_factor < 1.0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            measured = np.log(blame / prev_blame) / np.log(prev_factor)
+        known = again & np.isfinite(measured)
+        weak = known & (measured < STOP_INEFFECTIVE_P)
+        strikes = np.where(weak, np.minimum(prev_strikes, CURVE_STRIKES) + 1, 0).astype(np.int8)
+        p = np.where(known, np.clip(measured, 0.25, 2.0), p)
+    ineffective = strikes >= CURVE_STRIKES
+    ratio = eps_mm / np.where(hit, blame, eps_mm)
+    factor = np.where(hit & ~ineffective, np.clip(0.97 * ratio ** (1.0 / p), 0.5, 0.97), 1.0)
+    return factor, (blame, factor, strikes), ineffective
+
+
+def _runs(caps: np.ndarray, smooth: np.ndarray, lev: Levers) -> np.ndarray:
+    """Run label (k,) of each piece: the pieces the profile plans as one unit (tangent-
+    continuous junctions, equal caps and equal limits; see
+    :func:`~nurbscnc.plan.profile.plan_profile`)."""
+    joined = (smooth[1:-1] > 0) & (caps[:-1] == caps[1:])
+    for x in (lev.a_up, lev.j_up, lev.a_dn, lev.j_dn):
+        joined &= x[:-1] == x[1:]
+    return np.concatenate(([0], np.cumsum(~joined)))
+
+
+def _stop_events(tau_s: np.ndarray, profile: Profile, period_s: float):
+    """For over-limit samples at profile times ``tau_s`` [s], the stop junction each is near
+    (−1: none): a junction planned at rest, or a slowdown between long pieces
+    (:func:`_slowdowns`), whose profile time τ_j has
+    τ_j − :data:`STOP_BEFORE_S` ≤ τ ≤ τ_j + :data:`STOP_WINDOW_S` (the overshoot of a stop
+    and the corner cut while the servo still settles from it; during a dwell τ = τ_j)."""
+    v = profile.junction_speeds_mm_s
+    k = v.size - 1
+    stops = np.flatnonzero(v == 0.0)
+    stops = stops[stops > 0]  # the start at rest is no stop to soften
+    stops = np.union1d(stops, _slowdowns(profile))
+    t_stop = np.append(profile.piece_start_time_s, profile.duration_s)[stops]
+    tau = tau_s
+    if stops.size == 0:
+        return np.full(tau.size, -1)
+    # The first stop at or after τ − window, if it is not later than τ + before.
+    i = np.searchsorted(t_stop, tau - STOP_WINDOW_S - 0.5 * period_s, side="left")
+    i = np.minimum(i, stops.size - 1)
+    near = (stops.size > 0) & (t_stop[i] <= tau + STOP_BEFORE_S)
+    near &= t_stop[i] >= tau - STOP_WINDOW_S - 0.5 * period_s
+    return np.where(near, np.minimum(stops[i], k), -1)
+
+
+#: The pieces on both sides of a slowdown junction (:func:`_slowdowns`) take at least this
+#: many seconds of motion each: far longer than the servo's memory (:data:`BLAME_WINDOW_S`),
+#: so either feed is the cruise of a whole long piece, which the check must not lower for
+#: an error made at its end. (A short piece beside it, a corner's blend, keeps the feed
+#: lever: there the error is the blend's curvature, and softening the long piece's descent
+#: instead made plunged squares slower.)
+SLOWDOWN_PIECE_S = 0.1
+#: ... and the speed changes there by more than this factor.
+SLOWDOWN_RATIO = 1.05
+
+
+def _slowdowns(profile: Profile) -> np.ndarray:
+    """Junctions (1…k−1) passed without stopping between two long pieces
+    (:data:`SLOWDOWN_PIECE_S` each) where the speed changes (:data:`SLOWDOWN_RATIO`): a feed
+    drop from an arc into a slow line or plunge. An error made there is the transition's
+    (the deceleration on the curve, the step of the curvature at the junction), answered
+    like a stop's, by its jerk and then its acceleration, not by the long piece's cruise."""
+    v = profile.junction_speeds_mm_s
+    peak = profile.piece_peak_speed_mm_s
+    dur = profile.piece_duration_s
+    j = np.arange(1, v.size - 1)
+    long = (dur[j - 1] >= SLOWDOWN_PIECE_S) & (dur[j] >= SLOWDOWN_PIECE_S)
+    change = (peak[j - 1] > v[j] * SLOWDOWN_RATIO) | (peak[j] > v[j] * SLOWDOWN_RATIO)
+    return j[(v[j] > 0.0) & long & change]
+
+
+def _settle_extra(lev: Levers, ov: Overs, near: np.ndarray, profile: Profile,
+                  settle_rows: np.ndarray, settle_max_s: float, period_s: float) -> np.ndarray:
+    """The settles after rapids (in place): each rapid whose stop transient the over-limit
+    samples are near waits longer, past the last of them (plus one period). Returns which
+    over-limit samples this answered."""
+    over, tau = ov.index, ov.tau_s
+    handled = np.zeros(over.size, dtype=bool)
+    for i_r, r in enumerate(settle_rows.tolist()):
+        hit = near == r + 1
+        if not hit.any() or lev.settle_s[r] >= settle_max_s:
+            continue
+        # Move the restart past the last over-limit sample (plus one period).
+        t_restart = profile.piece_start_time_s[r + 1]
+        moving = over[hit & (tau > t_restart)]
+        extra = period_s
+        if moving.size:
+            first_moving = int(ov.restart_count[i_r])  # the first sample with τ > restart
+            extra = max((int(moving.max()) - first_moving + 2) * period_s, period_s)
+        lev.settle_s[r] = min(settle_max_s, lev.settle_s[r] + extra)
+        handled |= hit
+    return handled
+
+
+#: Samples before an over-limit sample on a curve whose pieces' feed is lowered [s]: the
+#: curve error is quasi-static (the speed and deceleration of the last few milliseconds on
+#: that curvature), so the feed is lowered where the error is, and the profile's gated
+#: flanks (:func:`~nurbscnc.plan.profile._gated_rise`) brake earlier into the lowered
+#: cells at the same A and J; the 30 ms window lowered the cruise of the whole approach.
+CURVE_BLAME_WINDOW_S = 0.008
+
+
+def _servo_jerk(j_mm_s3: np.ndarray, a_mm_s2: np.ndarray, settle_max_s: float) -> np.ndarray:
+    """The jerk [mm/s³] a softening starts from: at most A·|p|, |p| = 5 / ``settle_max_s``
+    the slowest servo pole's decay rate [1/s] (:func:`~nurbscnc.plan.pieces.settle_time_s`).
+    A jerk phase shorter than the servo's time constant 1/|p| is a step of acceleration to
+    the servo, so lowering a larger jerk by a factor changes almost nothing the check sees:
+    with a jerk limit far above A·|p| the stops of an arc program were found "ineffective"
+    and its feed crushed instead. The paper's machine: A·|p| = 2.3e5 > J = 5e4, nothing
+    changes."""
+    if not np.isfinite(settle_max_s) or settle_max_s <= 0.0:
+        return j_mm_s3
+    return np.minimum(j_mm_s3, a_mm_s2 * (5.0 / settle_max_s))
+
+
+def shape(lev: Levers, ov: Overs, eps_mm: float, profile: Profile, pieces: PieceList,
+          smooth: np.ndarray, settle_rows: np.ndarray, settle_max_s: float,
+          period_s: float) -> None:  # fmt: skip
+    """One local re-plan (in place) from a check's over-limit samples ``ov``: each is
+    answered where its error is caused (module docstring of
+    :mod:`~nurbscnc.plan.lookahead`): the settle after a rapid, the descent into and the
+    rise out of a stop or a slowdown between long pieces (their jerk, then their
+    acceleration), else the feed over the blamed window."""
+    near = _stop_events(ov.tau_s, profile, period_s)
+    # 1. Settle after a rapid: the rapid's own stop transient, not the cut's motion.
+    handled = _settle_extra(lev, ov, near, profile, settle_rows, settle_max_s, period_s)
+    # 2. Stops: soften the descent of the run that ends there and, for samples after the
+    #    restart, the rise of the run that leaves it.
+    _soften_stops(lev, ov, near, handled, eps_mm, profile, pieces, smooth, settle_max_s)
+    # 3. Curves: the feed of the pieces in the blamed window only.
+    if not handled.all():
+        _lower_curves(lev, ov, handled, eps_mm, smooth, settle_max_s, period_s)
+
+
+def _stop_entry(e_mm: float, prev, eps_mm: float):
+    """The history entry of a stop whose samples' largest error is ``e_mm`` [mm], from its
+    entry ``prev`` of the last re-plan (None: first hit): :data:`FEED_ONLY` (the feed lever
+    answers it), else (e, f, accel): the factor f = 0.95 (ε/e)^(1/p) of its transitions, in
+    [0.3, 0.9], p measured from the last try (error ∝ factor^p, 1 at first), and whether
+    the acceleration is lowered with the jerk."""
+    if prev == FEED_ONLY:  # found ineffective before: the feed lever answers it
+        return prev
+    e = e_mm
+    p = 1.0
+    accel = prev is not None and prev[2]
+    if prev is not None and prev[1] < 1.0 and e > 0.0:
+        measured = np.log(e / prev[0]) / np.log(prev[1])
+        if np.isfinite(measured):
+            if measured < STOP_INEFFECTIVE_P:
+                if accel:
+                    # Softening this stop hardly helped: the error is the feed's (a tight
+                    # curve into the stop), so the feed lever takes these samples.
+                    return FEED_ONLY
+                accel, measured = True, 1.0  # the jerk was no lever: the acceleration
+            p = float(np.clip(measured, 0.25, 2.0))
+    f = float(np.clip(0.95 * (eps_mm / e) ** (1.0 / p), 0.3, 0.9))
+    return (e, f, accel)
+
+
+def _soften(a_mm_s2: np.ndarray, j_mm_s3: np.ndarray, sel: np.ndarray, f: float, accel: bool,
+            settle_max_s: float) -> None:  # fmt: skip
+    """Soften the transition (rise or descent) limits ``a_mm_s2``, ``j_mm_s3`` of the pieces
+    ``sel`` (in place): the jerk from at most A·|p| (:func:`_servo_jerk`) by ``f``, and with
+    ``accel`` the acceleration too."""
+    j_mm_s3[sel] = _servo_jerk(j_mm_s3[sel], a_mm_s2[sel], settle_max_s) * f
+    if accel:
+        a_mm_s2[sel] *= f
+
+
+def _soften_stops(lev: Levers, ov: Overs, near: np.ndarray, handled: np.ndarray,
+                  eps_mm: float, profile: Profile, pieces: PieceList, smooth: np.ndarray,
+                  settle_max_s: float) -> None:  # fmt: skip
+    """The stop rule (in place; ``handled`` too): for each stop or slowdown junction j the
+    unhandled over-limit samples are ``near`` (:func:`_stop_events`), the descent of the run
+    of pieces that ends at j and, if a sample is after the restart, the rise of the run
+    that leaves it, softened by the factor of :func:`_stop_entry` (none where the feed
+    lever answers the stop: those samples stay unhandled)."""
+    k = len(pieces)
+    err, tau = ov.err_mm, ov.tau_s
+    runs = _runs(lev.caps, smooth, lev)
+    stop_hist = lev.stop_history or {}
+    new_hist = {}
+    for j in np.unique(near[(near > 0) & ~handled]).tolist():
+        hit = (near == j) & ~handled
+        entry = new_hist[j] = _stop_entry(float(err[hit].max()), stop_hist.get(j), eps_mm)
+        if entry == FEED_ONLY:
+            continue
+        f, accel = entry[1], entry[2]
+        if j - 1 >= 0 and not pieces.rapid[j - 1]:
+            sel = runs == runs[j - 1]
+            _soften(lev.a_dn, lev.j_dn, sel, f, accel, settle_max_s)
+            lev.shaped |= sel
+        t_restart = profile.piece_start_time_s[j] if j < k else np.inf
+        if j < k and (tau[hit] > t_restart).any() and not pieces.rapid[j]:
+            sel = runs == runs[j]
+            _soften(lev.a_up, lev.j_up, sel, f, accel, settle_max_s)
+            lev.shaped |= sel
+        handled |= hit
+    lev.stop_history = new_hist
+
+
+def _curve_factors(lev: Levers, ov: Overs, handled: np.ndarray, eps_mm: float,
+                   smooth: np.ndarray, period_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """The curve rule's cap factors (k,) and blame [mm] (k,) of the unhandled over-limit
+    samples (:func:`_blame` over :data:`CURVE_BLAME_WINDOW_S`, widened to
+    :data:`BLAME_WINDOW_S` near pieces found ineffective; :func:`local_factors`): once more
+    if pieces were just found ineffective (their factor 1). Updates ``lev``'s cap history
+    and ineffective flags."""
+    narrow = max(int(round(CURVE_BLAME_WINDOW_S / period_s)), 1)
+    wide = max(int(round(BLAME_WINDOW_S / period_s)), narrow)
+    joined = (smooth[1:-1] > 0) & (lev.caps[:-1] == lev.caps[1:])
+    history = lev.cap_history
+    for _ in range(2):  # once more if pieces were just found ineffective
+        window = _curve_windows(ov, lev.ineffective, narrow, wide)
+        blame = _blame(ov, ~handled, eps_mm, joined, window)
+        factor, lev.cap_history, found = local_factors(blame, eps_mm, history)
+        found &= ~lev.ineffective
+        lev.ineffective |= found
+        if not found.any():
+            break
+    factor[lev.ineffective] = 1.0
+    return factor, blame
+
+
+def _lower_curves(lev: Levers, ov: Overs, handled: np.ndarray, eps_mm: float,
+                  smooth: np.ndarray, settle_max_s: float, period_s: float) -> None:
+    """The curve rule (in place): the feed of the pieces blamed by the unhandled over-limit
+    samples (:func:`_curve_factors`); a blamed piece whose jerk the servo cannot follow
+    gets that jerk instead, and a piece whose feed is no lever its transitions."""
+    factor, blame = _curve_factors(lev, ov, handled, eps_mm, smooth, period_s)
+    # A blamed piece whose rise or descent jerk is above what the servo follows (A·|p|,
+    # :func:`_servo_jerk`: a step of acceleration to it) gets that jerk first, its feed
+    # kept this re-plan (with a jerk limit far above A·|p| the line before an arc lost a
+    # third of its cruise to the step at its end). Never the case on the paper's machine
+    # (J < A·|p|).
+    blamed = factor < 1.0
+    for acc, jerk in ((lev.a_up, lev.j_up), (lev.a_dn, lev.j_dn)):
+        servo = _servo_jerk(jerk, acc, settle_max_s)
+        soft = blamed & (servo < jerk)
+        jerk[soft] = servo[soft]
+        factor[soft] = 1.0
+        lev.shaped |= soft
+    lev.caps *= factor
+    lev.shaped |= factor < 1.0
+    # Where the feed is no lever (a short piece crossed in transition, the ringing after
+    # a stop), the transition is: its acceleration and jerk, by 0.95 ε/e (error ∝ a).
+    trans = lev.ineffective & (blame > 0.0)
+    if trans.any():
+        f_t = np.clip(0.95 * eps_mm / blame[trans], 0.5, 0.9)
+        lev.j_up[trans] = _servo_jerk(lev.j_up[trans], lev.a_up[trans], settle_max_s) * f_t
+        lev.j_dn[trans] = _servo_jerk(lev.j_dn[trans], lev.a_dn[trans], settle_max_s) * f_t
+        lev.a_up[trans] *= f_t
+        lev.a_dn[trans] *= f_t
+        lev.shaped |= trans
+
+
+def fallback(lev: Levers, ov: Overs, eps_mm: float, pieces: PieceList,
+             settle_rows: np.ndarray, settle_max_s: float, period_s: float,
+             stage: int) -> None:  # fmt: skip
+    """The guaranteed-feasible fallback (in place): every lever of the blamed pieces (stage
+    1: within the servo's memory of each over-limit sample of ``ov``; stage 2: all cutting
+    pieces) scaled by :data:`FALLBACK_FACTOR` and the settles at their full length. Speed,
+    acceleration and jerk → 0 take the servo error → 0, so this ends within ε_max."""
+    k = len(pieces)
+    f = FALLBACK_FACTOR
+    lev.settle_s[settle_rows] = np.maximum(lev.settle_s[settle_rows], settle_max_s)
+    if stage == 1:
+        window = max(int(round(max(settle_max_s, BLAME_WINDOW_S) / period_s)), 1)
+        everything = np.ones(ov.index.size, dtype=bool)
+        blame = _blame(ov, everything, eps_mm, np.zeros(k - 1, dtype=bool), window)
+        sel = (blame > 0.0) & ~pieces.rapid
+    else:
+        sel = ~pieces.rapid
+    lev.caps[sel] *= f
+    for x in (lev.a_up, lev.a_dn, lev.j_up, lev.j_dn):
+        x[sel] *= f
+    lev.shaped |= sel
+
