@@ -255,7 +255,7 @@ def test_which_samplers_are_checked_in_windows():
     not one that says ``windowed=False``; a wrapper (the pre-compensated sampler, the CLI's
     announcing one) as the sampler it wraps; and a plan checked whole equals the windowed
     one."""
-    from nurbscnc.plan.precompensation import precompensated_sampler
+    from nurbscnc.precompensation import precompensated_sampler
 
     from nurbscnc.interpolate.sample import reference_sampler
     from nurbscnc.plan.sampler import EXACT, ForwardingSampler, FunctionSampler, as_sampler
