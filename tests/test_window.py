@@ -29,7 +29,7 @@ from nurbscnc.machine.profile import load_machine
 from nurbscnc.plan import lookahead
 from nurbscnc.plan.lookahead import plan_checked
 from nurbscnc.plan.options import LookaheadOptions
-from nurbscnc.plan.pieces import segment_pieces
+from nurbscnc.plan.program_pieces import segment_pieces
 from nurbscnc.program.interpret import interpret_text
 from nurbscnc.servo.model import AxesStream, simulate_axes
 from tests.servo_reference import lsim_actual_mm

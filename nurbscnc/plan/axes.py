@@ -44,7 +44,7 @@ import numpy as np
 
 from nurbscnc.geometry.path import Kind
 from nurbscnc.machine.caps import JUNCTION_SHARE, axis_path_limits
-from nurbscnc.plan.pieces import junction_caps
+from nurbscnc.plan.junctions import junction_caps
 
 #: Fewest samples per curved piece for its tangent and curvature-vector bounds (ends
 #: included); more on pieces that turn a lot (:data:`SAMPLES_PER_RADIUS`).
@@ -98,7 +98,7 @@ def _jump_reserved(pieces, j_axis_mm_s3: np.ndarray) -> np.ndarray:
     curvature vector jumps at one of its ends (``pieces.jump_kn``) or where a small break
     passed at speed (``pieces.pass_after``) steps the velocity: the acceleration step
     (:func:`~nurbscnc.machine.caps.junction_jump_cap_mm_s`) or the velocity step
-    (:func:`nurbscnc.plan.pieces._small_break`) takes the share, so the two add up to at
+    (:func:`nurbscnc.plan.junctions.small_breaks`) takes the share, so the two add up to at
     most J_i on the samples."""
     k = len(pieces)
     j_axis = np.asarray(j_axis_mm_s3, dtype=float)

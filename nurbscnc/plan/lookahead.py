@@ -85,10 +85,12 @@ from nurbscnc.plan.dynamics import (
     path_response,
     window_response,
 )
+from nurbscnc.plan.junctions import junction_caps, settle_time_s
 from nurbscnc.plan.limits import check_point_count
 from nurbscnc.plan.options import Dynamics, LookaheadOptions
-from nurbscnc.plan.pieces import PieceList, junction_caps, segment_pieces, settle_time_s
+from nurbscnc.plan.pieces import PieceList
 from nurbscnc.plan.profile import Profile, ProfileInput, plan_profile, same_until_s
+from nurbscnc.plan.program_pieces import segment_pieces
 from nurbscnc.plan.timing import (
     Reference,
     dwell_times,

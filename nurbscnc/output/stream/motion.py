@@ -28,8 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from nurbscnc.plan.junctions import junction_caps
 from nurbscnc.plan.lookahead import profile_over
-from nurbscnc.plan.pieces import junction_caps
 from nurbscnc.plan.profile import Profile, time_at_length
 from nurbscnc.plan.timing import dwell_times, wall_to_profile_time
 
