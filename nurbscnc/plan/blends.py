@@ -233,7 +233,7 @@ def out_of_plane(pieces: PieceList, j: np.ndarray) -> np.ndarray:
     """Which junctions ``j`` join pieces that do not lie in the plane of their two tangents
     (a helix, an arc or a curve leaving the corner plane: a 3-D turn no planar blend can
     round). One geometry check per junction: call it on the few that failed to blend."""
-    from nurbscnc.geometry.blend import _planar_kind
+    from nurbscnc.geometry.blend import planar_kind
 
     out = np.zeros(j.size, dtype=bool)
     for n, r in enumerate(j.tolist()):
@@ -242,6 +242,6 @@ def out_of_plane(pieces: PieceList, j: np.ndarray) -> np.ndarray:
         if size == 0.0:
             continue
         vertex = pieces.end_mm[:, r]
-        out[n] = not all(_planar_kind(blend_geometry(pieces[i]), normal / size, vertex)
+        out[n] = not all(planar_kind(blend_geometry(pieces[i]), normal / size, vertex)
                          for i in (r, r + 1))  # fmt: skip
     return out
