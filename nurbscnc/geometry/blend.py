@@ -1029,3 +1029,6 @@ def blend_space_corners(path, rows_a, rows_b, tolerance_mm, max_trim_a_mm,
         out[c] = SpaceBlend(curve, float(best_d[c]), float(best_d[c]), dev_c, kmax,
                             float(np.degrees(turning[c])))
     return out
+
+
+planar_kind = _planar_kind  # TEMP alias: dropped at the merge (the geometry helper renames it)
