@@ -174,7 +174,7 @@ def _peak_kappa(curve, u: np.ndarray, kappa: np.ndarray, rounds: int = 3) -> np.
 
 
 def object_pieces(seg, index: int, machine: Machine, options: PlanOptions,
-                   curve: NurbsCurve | None = None) -> list[Piece]:  # fmt: skip
+                  curve: NurbsCurve | None = None) -> list[Piece]:  # fmt: skip
     """The pieces of an arc or NURBS segment (Piece objects; none for a zero-length arc);
     a NURBS segment's on ``curve`` if given (:func:`nurbs_curve`)."""
     if seg.kind == "nurbs":

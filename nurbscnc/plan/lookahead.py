@@ -89,7 +89,8 @@ from nurbscnc.plan.junctions import junction_caps, settle_time_s
 from nurbscnc.plan.limits import check_point_count
 from nurbscnc.plan.options import Dynamics, LookaheadOptions
 from nurbscnc.plan.pieces import PieceList
-from nurbscnc.plan.profile import Profile, ProfileInput, plan_profile, same_until_s
+from nurbscnc.plan.profile import Profile, ProfileInput, same_until_s
+from nurbscnc.plan.profile_plan import plan_profile
 from nurbscnc.plan.program_pieces import segment_pieces
 from nurbscnc.plan.timing import (
     Reference,
