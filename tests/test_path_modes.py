@@ -496,7 +496,7 @@ def test_stops_and_passes_where_linuxcnc_does():
 
 
 def test_stop_or_blend_estimate_agrees_with_the_planned_profiles(monkeypatch):
-    """The decision's estimate (pieces._blend_is_faster: jerk-limited transitions t(Δv),
+    """The decision's estimate (blend_choice._blend_is_faster: jerk-limited transitions t(Δv),
     crossing the blend at its cap) against the planner's own profiles: the pentagram's and a
     square's corners at F3500, P0.02, blended (forced) and stopped (G61); the difference per
     corner agrees within 1 ms and has the estimate's sign."""

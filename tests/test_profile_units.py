@@ -172,7 +172,7 @@ def test_random_staircases_keep_every_limit_and_cap(case):
     the total length; and with one set of limits the grouped plan is never slower than the
     per-piece one. (With per-piece limits a unit takes its pieces' smallest, so it can lose
     a little where a piece's own larger limit would have helped: a decision, see
-    :func:`~nurbscnc.plan.profile.plan_profile`.)"""
+    :func:`~nurbscnc.plan.profile_plan.plan_profile`.)"""
     lengths, caps, jcap, (a1, j1, a2, j2) = case
     inp = ProfileInput(lengths, caps, jcap, a1, j1, a_decel_mm_s2=a2, j_decel_mm_s3=j2)
     prof = plan_profile(inp)

@@ -123,7 +123,7 @@ def _run_minimum(pieces, caps_mm_s: np.ndarray, a_mm_s2: np.ndarray, j_mm_s3: np
     tangent-continuous junctions.
 
     Why: the feed profile plans such a run (the cells of a NURBS at the programmed feed) as
-    one unit only when the pieces' limits are equal too (:func:`~nurbscnc.plan.profile.
+    one unit only when the pieces' limits are equal too (:func:`~nurbscnc.plan.profile_plan.
     plan_profile`); with the slightly different limits each cell gets from its own geometry,
     it plans cell by cell, with zero acceleration at every cell junction — measured on the
     9 mm NACA 2415 with LinuxCNC's sim axes: 0.85 s instead of 0.79 s. The minimum over the
