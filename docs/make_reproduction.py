@@ -19,7 +19,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from nurbscnc.cli.main import write_compare_plots  # noqa: E402
+from nurbscnc.app.plots import write_compare_plots  # noqa: E402
 from nurbscnc.geometry.nurbs import NurbsCurve  # noqa: E402
 from nurbscnc.machine.profile import load_machine  # noqa: E402
 from nurbscnc.plan.corners import program_corners  # noqa: E402

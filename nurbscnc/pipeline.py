@@ -30,14 +30,14 @@ from nurbscnc.machine.profile import Machine, SoftLimits
 from nurbscnc.plan.limits import check_before_work
 from nurbscnc.plan.lookahead import Check, Plan, plan_checked, plan_windows
 from nurbscnc.plan.options import Algorithm, Dynamics, LookaheadOptions, parse_choice
-from nurbscnc.plan.precompensation import (
+from nurbscnc.plan.report import check_soft_limits
+from nurbscnc.plan.timing import sample_count
+from nurbscnc.precompensation import (
     Precompensation,
     precompensate_reference,
     precompensated_sampler,
     precompensation_report,
 )
-from nurbscnc.plan.report import check_soft_limits
-from nurbscnc.plan.timing import sample_count
 from nurbscnc.program.columns import SegmentColumns, segment_columns
 from nurbscnc.servo.precompensate import REFERENCE_TOLERANCE_MM
 
@@ -52,8 +52,8 @@ class RunOptions:
     ``reference_tolerance_mm`` of the path (inf: no limit). ``keep_reference``: the
     dynamics check keeps its whole reference and servo response (the predicted contour plot
     needs them; memory then grows with the motion time); without it the check keeps only
-    the over-limit samples and its statistics (issue 14: memory of the program only), and
-    the points are made window by window as the output is written."""
+    the over-limit samples and its statistics (memory of the program only), and the
+    points are made window by window as the output is written."""
 
     algorithm: Algorithm = Algorithm.PH_LOOKAHEAD
     lookahead: LookaheadOptions = field(default_factory=LookaheadOptions)
@@ -84,7 +84,7 @@ class Run:
     against the soft limits already. None: the plan's points are made on demand, window by
     window, with the ``interpolator`` at ``period_s``, each window checked against
     ``soft_limits`` as it is made — so writing an hours-long program needs one window of
-    memory (issue 14)."""
+    memory."""
 
     algorithm: Algorithm
     whole: Samples | None = None
@@ -189,8 +189,8 @@ def run_program(program, machine: Machine, options: RunOptions | None = None,
         if not machine.contour_check:
             raise ConfigError(f"pre-compensation needs a servo model: the machine profile "
                               f"{machine.source} has no [servo.x], [servo.y] or [servo.z]")
-    # Checks before work (issue 14): the geometry inside the soft limits, the motion short
-    # enough for limits.max_points, before anything is planned or sampled.
+    # Checks before work: the geometry inside the soft limits, the motion short enough for
+    # limits.max_points, before anything is planned or sampled.
     say("checking limits")
     columns = segment_columns(program.segments)
     check_before_work(program.segments, machine, columns)
@@ -248,15 +248,16 @@ def _run_precompensated(program, machine: Machine, lookahead: LookaheadOptions,
 
 def window_plans(program, machine: Machine, options: RunOptions | None = None, each=None):
     """The look-ahead plan of an interpreted program cut window by cut window, for streaming
-    while it is planned (issue 14): the checks before work (the geometry inside the soft
-    limits, the motion within ``limits.max_points``) run here, at once (PlanningError before
+    while it is planned: the checks before work (the geometry inside the soft limits, the
+    motion within ``limits.max_points``) run here, at once (PlanningError before
     anything is planned); then a generator of the windows of
     :func:`~nurbscnc.plan.lookahead.plan_windows`, each yielded once final and its reference
     points inside the soft limits (PlanningError at the first one outside, naming its line)
     and passed to ``each(points_mm, lines)`` when given (the stream's pulse limit). The last
     window's plan is :func:`run_program`'s (the same windows, the same levers), so the points
     streamed are ``run``'s. A baseline ``algorithm`` or pre-compensation (a reference that
-    is not causal) raise ConfigError: they have no windows."""
+    is not causal) raise ConfigError: they have no windows (the stream plans them whole,
+    :func:`nurbscnc.app.stream.stream_job`)."""
     options = options or RunOptions()
     if options.algorithm != Algorithm.PH_LOOKAHEAD or options.precompensate:
         raise ConfigError("planning while streaming needs the look-ahead planner without "

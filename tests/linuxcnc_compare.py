@@ -79,7 +79,7 @@ def read_known_gaps() -> dict[str, str]:
 
 def run_nurbscnc(program: Path):
     """nurbscnc's interpretation of ``program`` with the oracle's tool table."""
-    from nurbscnc.cli.main import load_program
+    from nurbscnc.app.load import load_program
 
     return load_program(str(program), tool_table=str(TOOLS))
 

@@ -1,11 +1,11 @@
-"""geometry/blend.py ``_kappa_peak``: the buffered bisection keeps the bits of the expression
-form it replaced (issue 14), and finds the peak of κ(ξ) of the w1 = 0 quintic."""
+"""geometry/lineblends.py ``_kappa_peak``: the buffered bisection keeps the bits of the
+expression form it replaced, and finds the peak of κ(ξ) of the w1 = 0 quintic."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from nurbscnc.geometry.blend import _kappa_peak
+from nurbscnc.geometry.lineblends import _kappa_peak
 
 
 def _reference(alpha, beta, c, s, iterations):

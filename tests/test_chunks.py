@@ -332,7 +332,9 @@ def test_run_writes_the_whole_runs_bytes_and_summary(tmp_path, monkeypatch, froz
     from click.testing import CliRunner
 
     import nurbscnc.pipeline as pipeline
-    from nurbscnc.cli.main import main, make_plan, summary_of
+    from nurbscnc.app.planning import make_plan
+    from nurbscnc.app.summary import summary_of
+    from nurbscnc.cli.main import main
     from nurbscnc.output.files import write_points
     from nurbscnc.output.halstreamer import write_halstreamer
     from nurbscnc.plan.report import plan_summary

@@ -23,9 +23,10 @@ from hypothesis import strategies as st
 from scipy.interpolate import BSpline
 
 import nurbscnc
-import nurbscnc.cli.main as cli
+import nurbscnc.cli.console as console
+import nurbscnc.cli.handle as handle
 from nurbscnc.cli.main import main
-from nurbscnc.errors import NurbsCncError, SourcePos
+from nurbscnc.errors import NurbsCncError, OutputError, SourcePos
 
 ROOT = Path(__file__).resolve().parents[1]
 NACA = ROOT / "programs" / "naca2415.nc"
@@ -293,10 +294,10 @@ def test_long_source_line_is_cut_around_the_column():
     text = "(" + "a" * 5_000_000 + ") G28 (" + "b" * 5_000_000 + ")"
     column = text.index("G28") + 1
     exc = NurbsCncError("G28 is not supported", SourcePos(7, column, text))
-    report = cli.format_error(exc, "big.nc")
+    report = console.format_error(exc, "big.nc")
     head, shown, caret = report.splitlines()
     assert head == f"big.nc:7:{column}: error: G28 is not supported"
-    assert len(shown) <= 4 + cli.SOURCE_ECHO_CHARS + 2
+    assert len(shown) <= 4 + console.SOURCE_ECHO_CHARS + 2
     assert shown.startswith("    …") and shown.endswith("…")
     assert shown[len(caret) - 1 : len(caret) + 2] == "G28"  # the caret is under the G
 
@@ -304,8 +305,8 @@ def test_long_source_line_is_cut_around_the_column():
 @pytest.mark.parametrize("column", [1, 2, 60, 119, 121, 500, 999, 1000, 1001])
 def test_cut_source_line_keeps_the_caret_on_its_character(column):
     text = "".join(chr(ord("A") + k % 26) for k in range(1000))
-    shown, caret = cli.echo_source_line(text, column)
-    assert len(shown) <= cli.SOURCE_ECHO_CHARS + 2
+    shown, caret = console.echo_source_line(text, column)
+    assert len(shown) <= console.SOURCE_ECHO_CHARS + 2
     if column <= len(text):
         assert shown[caret] == text[column - 1]
     else:
@@ -316,7 +317,7 @@ def test_cut_source_line_keeps_the_caret_on_its_character(column):
 @given(st.text(max_size=400), st.data())
 def test_cut_source_line_property(text, data):
     column = data.draw(st.integers(1, len(text) + 1))
-    shown, caret = cli.echo_source_line(text, column, width=40)
+    shown, caret = console.echo_source_line(text, column, width=40)
     visible = "".join(" " if c == "\t" else "\ufffd" if ord(c) < 0x20 or 0x7F <= ord(c) < 0xA0
                       else c for c in text)  # fmt: skip
     assert len(shown) <= 42
@@ -329,17 +330,17 @@ def test_cut_source_line_property(text, data):
 
 def test_control_characters_in_source_line_are_not_echoed():
     exc = NurbsCncError("bad", SourcePos(1, 9, "\x1b[2J\x07\tX\rG28\x9b1m"))
-    shown = cli.format_error(exc, "f.nc").splitlines()[1]
+    shown = console.format_error(exc, "f.nc").splitlines()[1]
     assert "\x1b" not in shown and "\x07" not in shown and "\r" not in shown
     assert shown == "    " + "\ufffd[2J\ufffd X\ufffdG28\ufffd1m"
 
 
 def test_control_characters_in_file_name_and_message_are_not_echoed():
     exc = NurbsCncError("bad word '\x1b]0;owned\x07'" + "x" * 5000, SourcePos(3, 1, "G1"))
-    head = cli.format_error(exc, "a\nb\x1b.nc").splitlines()[0]
+    head = console.format_error(exc, "a\nb\x1b.nc").splitlines()[0]
     assert head.startswith("a\ufffdb\ufffd.nc:3:1: error: bad word '\ufffd]0;owned\ufffd'")
     assert head.endswith(f"… ({len(exc.message)} characters)")
-    assert len(head) < cli.MESSAGE_CHARS + 100
+    assert len(head) < console.MESSAGE_CHARS + 100
 
 
 def test_cli_error_on_long_line_is_short(tmp_path):
@@ -572,20 +573,20 @@ def test_bash_completion_as_the_readme_says(words, expected):
 def test_reuse_freed_memory_is_harmless_without_glibc(monkeypatch):
     """The allocator setting (mallopt, glibc only) never fails a command: without glibc
     (confstr unknown, or no name) it does nothing; with it, calling it again is harmless."""
-    from nurbscnc.cli import main as cli_main
+    from nurbscnc.app import runtime
 
-    cli_main._reuse_freed_memory()  # this machine's libc (glibc on Linux CI): set twice
-    cli_main._reuse_freed_memory()
+    runtime.reuse_freed_memory()  # this machine's libc (glibc on Linux CI): set twice
+    runtime.reuse_freed_memory()
 
     def no_confstr(name):
         raise ValueError(f"unrecognized configuration name {name!r}")
 
     calls = []
-    monkeypatch.setattr(cli_main.os, "confstr", no_confstr)
+    monkeypatch.setattr(runtime.os, "confstr", no_confstr)
     monkeypatch.setattr("ctypes.CDLL", lambda *a, **k: calls.append(a))
-    assert cli_main._reuse_freed_memory() is None
-    monkeypatch.setattr(cli_main.os, "confstr", lambda name: None)  # musl: no glibc version
-    assert cli_main._reuse_freed_memory() is None
+    assert runtime.reuse_freed_memory() is None
+    monkeypatch.setattr(runtime.os, "confstr", lambda name: None)  # musl: no glibc version
+    assert runtime.reuse_freed_memory() is None
     assert calls == []  # libc never opened without glibc
 
 
@@ -595,33 +596,34 @@ def test_collector_paused_and_thawed_around_the_plan_and_its_json():
     the collector is as it was (on or off); the text is json.dumps's."""
     import gc
 
-    from nurbscnc.cli import main as cli_main
+    from nurbscnc.app.planning import make_plan
+    from nurbscnc.app.summary import summary_json, summary_of
 
-    prog, mach, run = cli_main.make_plan(str(ROOT / "programs" / "corners.nc"))
+    prog, mach, run = make_plan(str(ROOT / "programs" / "corners.nc"))
     assert gc.get_freeze_count() == 0 and gc.isenabled()
-    summary = cli_main.summary_of(prog, mach, run)
-    assert cli_main.summary_json(summary) == json.dumps(summary)
+    summary = summary_of(prog, mach, run)
+    assert summary_json(summary) == json.dumps(summary)
     assert gc.isenabled()
     gc.disable()
     try:
-        cli_main.summary_json({"a": 1.5})
+        summary_json({"a": 1.5})
         assert not gc.isenabled()
     finally:
         gc.enable()
 
 
 @pytest.mark.parametrize("signal_exc, code", [(KeyboardInterrupt(), 130),
-                                              (cli._Terminated(15), 143),
-                                              (cli._Terminated(1), 129)])  # fmt: skip
+                                              (handle.Terminated(15), 143),
+                                              (handle.Terminated(1), 129)])  # fmt: skip
 @pytest.mark.parametrize("late", [OSError(28, "No space left on device"),
-                                  cli.OutputError("cannot write x.csv: closed"),
+                                  OutputError("cannot write x.csv: closed"),
                                   ValueError("a writer's own error")])  # fmt: skip
 def test_an_error_while_unwinding_from_a_signal_reports_the_signal(signal_exc, code, late,
                                                                    capsys):  # fmt: skip
     """A write cut short by Ctrl-C or SIGTERM can fail again as its file is closed on the
     way out: the exit code is the signal's, not the later error's (3 or 1)."""
 
-    @cli.handle_errors
+    @handle.handle_errors
     def command():
         try:
             raise signal_exc
@@ -635,12 +637,12 @@ def test_an_error_while_unwinding_from_a_signal_reports_the_signal(signal_exc, c
 
 
 def test_an_error_without_a_signal_behind_it_keeps_its_code():
-    @cli.handle_errors
+    @handle.handle_errors
     def command():
         try:
             raise ValueError("first")
         except ValueError:
-            raise cli.OutputError("cannot write x.csv: disk full") from None
+            raise OutputError("cannot write x.csv: disk full") from None
 
     with pytest.raises(SystemExit) as caught:
         command()

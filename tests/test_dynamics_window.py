@@ -1,5 +1,5 @@
 """The dynamics check's true distance near each reference point (SPEC §8;
-nurbscnc.plan.dynamics.windowed_contour_mm, issue 14).
+nurbscnc.geometry.distance.windowed_contour_mm).
 
 - the polyline kept across re-plans (``PathIndex.dense_polyline``: filled once, partly when
   it does not all fit, with slabs of any size) gives the same bits as placing it afresh;
@@ -14,10 +14,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from nurbscnc.geometry import distance, polyline
+from nurbscnc.geometry.distance import PathIndex, windowed_contour_mm
+from nurbscnc.geometry.polyline import CHORD_MM, dense_path_mm
 from nurbscnc.machine.profile import load_machine
 from nurbscnc.pipeline import run_program
-from nurbscnc.plan import dynamics
-from nurbscnc.plan.dynamics import CHORD_MM, PathIndex, dense_path_mm, windowed_contour_mm
 from nurbscnc.program.interpret import interpret_text
 from nurbscnc.servo.model import contour_error_true, simulate_axes
 
@@ -57,11 +58,11 @@ def case():
 
 
 @pytest.mark.parametrize("fill_block", [PathIndex.FILL_BLOCK, 777])
-@pytest.mark.parametrize("slab", [dynamics.SLAB, 997])
+@pytest.mark.parametrize("slab", [distance.SLAB, 997])
 @pytest.mark.parametrize("room", [PathIndex.DENSE_POINTS, 5000])
 def test_the_kept_polyline_gives_the_same_bits(case, monkeypatch, slab, room, fill_block):
     pieces, profile, actual, lag, s = case
-    monkeypatch.setattr(dynamics, "SLAB", slab)
+    monkeypatch.setattr(distance, "SLAB", slab)
     monkeypatch.setattr(PathIndex, "FILL_BLOCK", fill_block)
     fresh = windowed_contour_mm(actual, lag, s, pieces, profile)
     index = PathIndex(pieces)
@@ -69,7 +70,7 @@ def test_the_kept_polyline_gives_the_same_bits(case, monkeypatch, slab, room, fi
     for _ in range(2):  # filled, then read back (a re-plan)
         np.testing.assert_array_equal(windowed_contour_mm(actual, lag, s, pieces, profile,
                                                           index), fresh)  # fmt: skip
-    total = int(dynamics.path_counts(pieces).sum())
+    total = int(polyline.path_counts(pieces).sum())
     assert (index._dense["filled"] == len(pieces)) == (total <= room)
     # Other windows of samples (a re-plan's windows fall elsewhere): the same numbers.
     for lo, hi in ((0, 500), (313, 2900), (1800, actual.shape[0])):
@@ -175,7 +176,7 @@ def _chord_errors_mm(pieces) -> np.ndarray:
     """Distance [mm] from the true path to the check's dense polyline: at 1/4, 1/2 and 3/4
     of every chord's arc length, the exact point of its piece to the chord (the polyline's
     points are exact, so the error is inside the chords)."""
-    counts = dynamics.path_counts(pieces)
+    counts = polyline.path_counts(pieces)
     piece = np.repeat(np.arange(len(pieces)), counts)
     first = np.repeat(np.cumsum(counts) - counts, counts)
     local = (np.arange(piece.size) - first) / np.repeat(counts - 1, counts)
@@ -217,12 +218,12 @@ def test_a_near_cusp_piece_has_a_bounded_polyline():
     text = ("G21 G17 F1000\nG6.2 P4 K0 X0 Y0 R1\nK0 X1 Y1 R1\nK0 X0 Y1 R1\n"
             "K0 X1 Y0.0000000001 R1\nK1\nK1\nK1\nK1\nM2\n")  # fmt: skip
     pieces = segment_pieces(interpret_text(text).segments, MACHINE)
-    counts = dynamics.path_counts(pieces)
+    counts = polyline.path_counts(pieces)
     assert pieces.kappa_max_per_mm.max() > 1e9
-    assert counts.max() == dynamics.MAX_PIECE_POINTS
+    assert counts.max() == polyline.MAX_PIECE_POINTS
     kappa = 2.0 * pieces.kappa_max_per_mm  # NURBS cells
-    h = np.minimum(dynamics.MAX_SPACING_MM, np.sqrt(8.0 * CHORD_MM / kappa))
-    free = counts < dynamics.MAX_PIECE_POINTS
+    h = np.minimum(polyline.MAX_SPACING_MM, np.sqrt(8.0 * CHORD_MM / kappa))
+    free = counts < polyline.MAX_PIECE_POINTS
     assert np.all(counts[free] == np.maximum(np.ceil(pieces.length_mm[free] / h[free]) + 1, 3))
 
 
@@ -235,7 +236,6 @@ def test_passes_at_the_same_place_are_measured_once_with_the_same_result(monkeyp
 
     from nurbscnc.machine.profile import load_machine
     from nurbscnc.pipeline import run_program
-    from nurbscnc.plan import dynamics
     from nurbscnc.program.interpret import interpret_text
 
     lines = (Path(__file__).resolve().parents[1] / "programs" / "naca2415.nc").read_text()
@@ -243,20 +243,45 @@ def test_passes_at_the_same_place_are_measured_once_with_the_same_result(monkeyp
     prog = interpret_text("G21 G17 G90 G94\n" + "\n".join(body * 5) + "\nM2\n")
     machine = load_machine()
     calls = []
-    real = dynamics.PathIndex._distinct
+    real = distance.PathIndex._distinct
 
     def counting(self, cand):
         out = real(self, cand)
         calls.append((cand.size, out.size))
         return out
 
-    monkeypatch.setattr(dynamics.PathIndex, "_distinct", counting)
-    monkeypatch.setattr(dynamics.PathIndex, "DISTINCT_MIN", 8)  # every block of 8 or more
+    monkeypatch.setattr(distance.PathIndex, "_distinct", counting)
+    monkeypatch.setattr(distance.PathIndex, "DISTINCT_MIN", 8)  # every block of 8 or more
     once = run_program(prog, machine)
     assert any(after * 4 < before for before, after in calls)  # passes were merged
-    monkeypatch.setattr(dynamics.PathIndex, "DISTINCT_MIN", 1 << 60)
+    monkeypatch.setattr(distance.PathIndex, "DISTINCT_MIN", 1 << 60)
     every = run_program(prog, machine)
     assert once.cycle_time_s == every.cycle_time_s
     assert once.plan.iterations == every.plan.iterations
     assert once.check.contour_stats() == every.check.contour_stats()
     assert once.check.overs.worst_mm == every.check.overs.worst_mm
+
+
+@pytest.mark.parametrize("name", ["naca2415.nc", "corners.nc"])
+def test_chord_counts_without_a_cap_are_the_refinement_rule(name):
+    """``chord_counts`` without ``max_points`` (the pre-compensation's polylines: chords of
+    sagitta ≤ 1e-7 mm, at most 0.01 mm) is the rule ⌈L/h⌉ + 1 ≥ 3 on every piece, 2 on lines,
+    the same integers; with the cap it is :func:`path_counts`."""
+    from pathlib import Path
+
+    from nurbscnc.geometry.path import Kind
+    from nurbscnc.plan.program_pieces import segment_pieces
+
+    text = (Path(__file__).resolve().parents[1] / "programs" / name).read_text()
+    pieces = segment_pieces(interpret_text(text).segments, MACHINE)
+    kind, length = pieces.kind, pieces.length_mm
+    kappa = np.where(kind == Kind.NURBS, 2.0, 1.0) * np.abs(pieces.kappa_max_per_mm)
+    with np.errstate(divide="ignore"):
+        h = np.minimum(0.01, np.sqrt(8.0 * 1e-7 / kappa))
+    want = np.maximum(np.ceil(length / h).astype(np.int64) + 1, 3)
+    want = np.where((kind == Kind.LINE) | (length == 0.0), 2, want)
+    got = polyline.chord_counts(kind, length, pieces.kappa_max_per_mm, 1e-7, 0.01)
+    assert got.dtype == want.dtype and np.array_equal(got, want)
+    capped = polyline.chord_counts(kind, length, pieces.kappa_max_per_mm, CHORD_MM,
+                                   polyline.MAX_SPACING_MM, polyline.MAX_PIECE_POINTS)
+    assert np.array_equal(capped, polyline.path_counts(pieces))

@@ -523,13 +523,14 @@ def test_a_signal_just_after_the_file_object_is_made_closes_the_descriptor_once(
 
 
 def test_an_interrupted_batch_ends_whatever_its_pool_does(tmp_path):
-    """The safety net of a batch stopped by a signal (cli.main._stop_batch): the workers are
+    """The safety net of a batch stopped by a signal (cli.batch._stop_batch): the workers are
     told at once, and the parent exits as for the signal within BATCH_STOP_S even if what
     follows blocks for ever (here a sleep stands for the pool's shutdown waiting on a lock
     a dying worker held; a CI run saw such a parent still alive 30 s after SIGTERM)."""
     code = (
         "import multiprocessing, time\n"
-        "from nurbscnc.cli.main import _Terminated, _stop_batch\n"
+        "from nurbscnc.cli.batch import _stop_batch\n"
+        "from nurbscnc.cli.handle import Terminated as _Terminated\n"
         "worker = multiprocessing.Process(target=time.sleep, args=(120,))\n"
         "worker.start()\n"
         "print(worker.pid, flush=True)\n"
@@ -539,7 +540,7 @@ def test_an_interrupted_batch_ends_whatever_its_pool_does(tmp_path):
     start = time.monotonic()
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                           timeout=60)  # fmt: skip
-    from nurbscnc.cli.main import BATCH_STOP_S
+    from nurbscnc.cli.batch import BATCH_STOP_S
 
     assert proc.returncode == 143, proc.stderr
     assert time.monotonic() - start < BATCH_STOP_S + 20

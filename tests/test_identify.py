@@ -18,11 +18,8 @@ from click.testing import CliRunner
 from scipy import signal
 
 from nurbscnc.cli.main import main
-from nurbscnc.machine.profile import (
-    default_profile_text,
-    natural_frequency_rad_s,
-    parse_machine,
-)
+from nurbscnc.machine.model import natural_frequency_rad_s
+from nurbscnc.machine.profile import default_profile_text, parse_machine
 from nurbscnc.servo.identify import Trace, TraceError, fit_axis, foh_discretise, parse_trace
 
 T_S = 1e-3

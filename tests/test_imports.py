@@ -153,11 +153,12 @@ def test_run_with_the_servo_check_loads_no_scipy_signal(tmp_path, program):
 
 
 def test_a_console_kept_before_its_first_use_is_the_console(tmp_path):
-    # `from nurbscnc.cli.main import err` before anything printed keeps the stand-in; every
+    # `from nurbscnc.cli.console import err` before anything printed keeps the stand-in; every
     # use of it must reach the one rich Console the module then holds.
     code = """
 import io, sys
-import nurbscnc.cli.main as m
+import nurbscnc.cli.main
+import nurbscnc.cli.console as m
 kept = m.err
 assert "rich" not in sys.modules
 kept.file = io.StringIO()  # set through the stand-in (rich's Live does this)

@@ -295,3 +295,30 @@ def test_reference_windows_are_the_rows_of_the_whole_reference(corners_plan):
     for field in ("t_s", "tau_s", "s_mm", "v_mm_s", "a_mm_s2", "piece", "points_mm", "param"):
         joined = np.concatenate([getattr(p, field) for p in parts])
         np.testing.assert_array_equal(joined, getattr(whole, field), err_msg=field)
+
+
+def test_samples_are_the_plans_reference_with_lines(corners_plan):
+    """The interpolator's samples are the plan's reference rows (the same arrays), with each
+    row's source line and the interpolator's name; a window of them (``slice_samples``)
+    slices every column and keeps the name, and a baseline's samples (no profile time, no
+    parameter) slice as well."""
+    from nurbscnc.interpolate.baselines import baseline_program_samples
+    from nurbscnc.interpolate.sample import samples_of, slice_samples
+    from nurbscnc.plan.timing import Reference, Samples, exact_reference
+
+    plan = corners_plan
+    ref = exact_reference(plan.pieces, plan.profile, 1e-3)
+    smp = samples_of(ref, plan.pieces, "taylor")
+    assert isinstance(smp, Samples) and isinstance(smp, Reference)
+    for field in ("t_s", "tau_s", "s_mm", "v_mm_s", "a_mm_s2", "piece", "points_mm", "param"):
+        assert getattr(smp, field) is getattr(ref, field), field
+    np.testing.assert_array_equal(smp.line, plan.pieces.line[ref.piece])
+    part = slice_samples(smp, 5, 40)
+    assert part.interpolator == "taylor" and part.t_s.size == 35
+    np.testing.assert_array_equal(part.line, smp.line[5:40])
+    np.testing.assert_array_equal(part.tau_s, smp.tau_s[5:40])
+    base = baseline_program_samples("adaptive", program("corners.nc"), MACHINE)
+    assert base.tau_s is None and base.param is None and base.interpolator == "exact"
+    cut = slice_samples(base, 1, 4)
+    assert cut.param is None and cut.tau_s is None
+    np.testing.assert_array_equal(cut.points_mm, base.points_mm[1:4])

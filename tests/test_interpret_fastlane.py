@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from nurbscnc.cli.main import load_program
+from nurbscnc.app.load import load_program
 from nurbscnc.errors import NurbsCncError
 from nurbscnc.program import fastlane
 from nurbscnc.program import interpret as interpret_module

@@ -107,7 +107,7 @@ def test_plan_and_run(files, tmp_path):
     explained = printed("plan", files / "corner.nc", "--json", "--explain")
     if not explained["explain"]["corners"]:
         # The planner does not log its corners yet: the keys of one logged corner, as printed.
-        from nurbscnc.cli.main import make_plan
+        from nurbscnc.app.planning import make_plan
         from nurbscnc.plan.explain import explain_plan
 
         prog, mach, run = make_plan(str(files / "corner.nc"))
@@ -177,7 +177,7 @@ JOB_KEYS = {"sections", "feed_override", "holds", "holds[].latency_s", "holds[].
 
 
 def test_stream_report_keys_are_documented():
-    from nurbscnc.output.stream.link import StreamReport
+    from nurbscnc.output.stream.linkstate import StreamReport
 
     fields = {f.name for f in dataclasses.fields(StreamReport)} | {"ok", "program"}
     assert fields <= doc_keys("stream")

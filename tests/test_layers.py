@@ -3,8 +3,8 @@
 Every module's imports are read from its source (``ast``, module level and inside
 functions alike), so a late import inside a function counts too. Layers, lowest first:
 
-    errors, scipy_ext → machine → geometry → program, servo → plan → interpolate → studies, output
-    → pipeline → cli
+    errors, scipy_ext → machine → geometry → program, servo → plan → precompensation
+    → interpolate → studies, output → pipeline → app → cli
 
 A module may import its own layer or a lower one. Within a layer, modules of different
 packages (program and servo; studies and output) do not import each other. Nothing imports
@@ -29,10 +29,12 @@ RANK = {
     "program": 3,
     "servo": 3,
     "plan": 4,
+    "precompensation": 4.5,  # the stage after planning: applies servo's inverse to a plan
     "interpolate": 5,
     "studies": 6,
     "output": 6,
     "pipeline": 7,
+    "app": 7.5,  # the application layer: loading, planning and reports for the commands
     "cli": 8,
     "__main__": 9,
     "__init__": 0,

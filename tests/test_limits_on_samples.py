@@ -164,7 +164,7 @@ def test_axis_limits_hold_on_the_samples(text, dynamics):
 #: between two arcs (R 1 and R 2) under G64 got a PH blend whose parametric speed at its start
 #: was 0.9 % of its mean, so its curvature spiked from 1 to 11.5 /mm within 0.3 µm and X
 #: reached a jerk of 34,854 mm/s³ (limit 30,000) on the samples; blends that slow now fail
-#: the blend's regularity test (geometry/blend.py MIN_SPEED_RATIO).
+#: the blend's regularity test (geometry/blendrules.py MIN_SPEED_RATIO).
 ARC_ARC_BLEND_OVER_AXIS_JERK = ("G21 G90 G17 G94 G64\nG0 X0 Y0 Z0\n"
                                 "G2 X1.464326 Y-1.006205 I0.472128 J-0.881530 F300\n"
                                 "G2 X0.544931 Y-2.689146 I-2.000000 J0.000000 F300\nM2\n")

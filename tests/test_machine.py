@@ -243,17 +243,16 @@ def test_corner_feed_is_the_minimum(machine):
 
 from scipy import signal  # noqa: E402
 
-from nurbscnc.machine.profile import (  # noqa: E402
+from nurbscnc.machine.discovery import (  # noqa: E402
     FOUND_BY_DEFAULT,
     FOUND_BY_ENV,
     FOUND_BY_LOCAL,
     FOUND_BY_OPTION,
     FOUND_BY_USER,
-    AxisServo,
     find_machine,
-    natural_frequency_rad_s,
-    profile_toml,
 )
+from nurbscnc.machine.model import AxisServo, natural_frequency_rad_s  # noqa: E402
+from nurbscnc.machine.show import profile_toml  # noqa: E402
 
 
 def _without_servo_axes(text: str) -> str:

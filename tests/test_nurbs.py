@@ -15,15 +15,14 @@ from geomdl import NURBS
 from scipy.integrate import quad
 from scipy.interpolate import BSpline
 
-import nurbscnc.geometry.nurbs as nurbs_module
-from nurbscnc.geometry import segments
-from nurbscnc.geometry.nurbs import (
-    NurbsCurve,
+from nurbscnc.geometry import arclength, inverse, segments
+from nurbscnc.geometry.bspline import (
     basis_derivatives,
     basis_functions,
     curvature_derivative_from_derivatives,
     find_span,
 )
+from nurbscnc.geometry.nurbs import NurbsCurve
 
 
 def random_curve(rng: np.random.Generator, degree: int) -> NurbsCurve:
@@ -409,7 +408,7 @@ def test_arc_length_of_an_extreme_weight():
     """|C'(u)| of that curve peaks in a sliver of its spans that 1,024 equal pieces of
     16-point Gauss–Legendre miss: its table said 1.8878 mm for the last span, where a
     2-million-chord polyline measures 2.0000069 mm. The pieces that do not converge at the
-    finest equal split are halved where they do not (nurbs._halve_pieces); each span now
+    finest equal split are halved where they do not (arclength._halve_pieces); each span now
     agrees with the polyline to its chord error (h²κ/24 per chord: below 3e-9 mm here)."""
     curve = _extreme_weight_curve()
     for lo in (0.0, 1.0, 2.0):
@@ -418,7 +417,7 @@ def test_arc_length_of_an_extreme_weight():
         span_mm = float(np.diff(curve.arc_length(np.array([lo, lo + 1.0])))[0])
         assert chords_mm <= span_mm + 1e-12  # a polyline is never longer than its curve
         assert span_mm - chords_mm < 3e-9
-    assert curve.arc_table.breaks.size <= 2 * nurbs_module.HALVING_MAX_PIECES + 3 * 1024
+    assert curve.arc_table.breaks.size <= 2 * arclength.HALVING_MAX_PIECES + 3 * 1024
 
 
 def test_inverse_table_is_bounded_on_an_extreme_weight(monkeypatch):
@@ -427,12 +426,12 @@ def test_inverse_table_is_bounded_on_an_extreme_weight(monkeypatch):
     The table stops at its budget and leaves the rest to the exact Newton inversion, whose
     parameters still invert the curve's arc length to 1e-9 mm. With the arc length right
     (above) this curve needs 638 intervals; a budget below that exercises the rule."""
-    monkeypatch.setattr(nurbs_module, "INVERSE_MAX_INTERVALS", 64)
+    monkeypatch.setattr(inverse, "INVERSE_MAX_INTERVALS", 64)
     curve = _extreme_weight_curve()
     table = curve.inverse_table
     initial = int(np.sum(np.ceil(np.diff(curve.arc_length(curve.knots[2:6]))
-                                 / nurbs_module.INVERSE_START_MM)))  # fmt: skip
-    assert table.inv_width.size <= max(nurbs_module.INVERSE_MAX_INTERVALS, 16 * initial)
+                                 / inverse.INVERSE_START_MM)))  # fmt: skip
+    assert table.inv_width.size <= max(inverse.INVERSE_MAX_INTERVALS, 16 * initial)
     assert table.exact.any()
     s = np.linspace(0.0, curve.length_mm, 401)
     points, u = curve.points_at_length(s)

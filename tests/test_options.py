@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from nurbscnc.app.settings import PLANNING_KEYS, PROGRAM_INPUT_KEYS, run_options
 from nurbscnc.cli.main import main
-from nurbscnc.cli.options import PLANNING_KEYS, PROGRAM_INPUT_KEYS, run_options
 from nurbscnc.errors import ConfigError
 from nurbscnc.interpolate.sample import Interpolator
 from nurbscnc.pipeline import Algorithm, RunOptions

@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from nurbscnc.cli.main import clock_suffix, main
+from nurbscnc.app.summary import clock_suffix
+from nurbscnc.cli.main import main
 from nurbscnc.output.files import PROFILE_COLUMNS, read_points
 
 #: A short planar program (two lines, F1200 mm/min); its cycle time is well under a minute.

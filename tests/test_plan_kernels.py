@@ -1,10 +1,11 @@
-"""The compiled kernels of the plan stage (``nurbscnc/plan/_kernels.c``, built by setup.py)
-against their Python reference implementations, bit for bit:
+"""The compiled kernels of the plan stage (``nurbscnc/plan/_kernels.c``) and of the geometry
+(``nurbscnc/geometry/_kernels.c``), built by setup.py, against their Python reference
+implementations, bit for bit:
 
 - the gated flank (:func:`nurbscnc.plan.gated.gated_rise_py`),
 - the time at which a profile reaches a length (:func:`~nurbscnc.plan.profile._time_at_length_py`),
 - the point-to-segments distance of the contour check
-  (:func:`~nurbscnc.plan.dynamics._segment_distances_py`),
+  (:func:`~nurbscnc.geometry.distance._segment_distances_py`),
 - a piece's peak speed (:func:`nurbscnc.plan.feedrate._peak_speed_py`).
 
 The reference implementations are the specification (and what runs where no C compiler
@@ -20,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import nurbscnc.plan.dynamics as dynamics
+import nurbscnc.geometry.distance as distance
 import nurbscnc.plan.gated as gated
 import nurbscnc.plan.profile as profile
 from nurbscnc.plan.profile_plan import plan_profile
@@ -103,6 +104,8 @@ def test_time_at_length_kernel_is_the_python_inversion_bit_for_bit():
                               _bits(profile._time_at_length_py(prof, s)))  # fmt: skip
 
 
+@pytest.mark.skipif(distance._kernels is None,
+                    reason="nurbscnc.geometry._kernels was not built")  # fmt: skip
 def test_segment_distances_kernel_is_the_numpy_pairs_bit_for_bit():
     """500 random sets of points and segments over twelve orders of magnitude, with
     zero-length segments, empty and partial ranges: the same distances (inf where a point
@@ -117,8 +120,8 @@ def test_segment_distances_kernel_is_the_numpy_pairs_bit_for_bit():
         q = a[rng.integers(0, n, m)] + rng.standard_normal((m, 3)) * scale * 1e-3
         lo = rng.integers(0, n + 1, m)
         hi = np.minimum(lo + rng.integers(-3, n, m), n)
-        got = dynamics.segment_distances(q, a, d, lo, hi)
-        ref = dynamics._segment_distances_py(q, a, d, lo, hi)
+        got = distance.segment_distances(q, a, d, lo, hi)
+        ref = distance._segment_distances_py(q, a, d, lo, hi)
         assert np.array_equal(_bits(got), _bits(ref))
         assert np.all(np.isinf(got[hi <= lo])) and np.all(np.isfinite(got[hi > lo]))
 
@@ -154,7 +157,7 @@ def test_segment_distance_is_the_closed_form():
     q = np.array([[1.0, 3.0, 4.0], [5.0, 0.0, 0.0], [1.0, 1.0, 4.0]])
     lo = np.array([0, 1, 2])
     hi = lo + 1
-    for f in (dynamics.segment_distances, dynamics._segment_distances_py):
+    for f in (distance.segment_distances, distance._segment_distances_py):
         assert f(q, a, d, lo, hi).tolist() == [5.0, 3.0, 3.0]
 
 
@@ -189,7 +192,7 @@ def test_airfoil_plan_is_the_same_without_the_kernels(monkeypatch):
     fast = run_program(prog, machine)
     from nurbscnc.plan import feedrate
 
-    for module in (profile, gated, dynamics, feedrate):
+    for module in (profile, gated, distance, feedrate):
         monkeypatch.setattr(module, "_kernels", None)
     gated._gated_rise_memo.cache_clear()
     slow = run_program(prog, machine)

@@ -1,7 +1,7 @@
 """``--precompensate`` on a program of many cuts (issue 13: long programs).
 
 The compensated reference is made one segment per cut window
-(:mod:`nurbscnc.plan.precompensation`, "cut-window segments"), so the planner's check of a
+(:mod:`nurbscnc.precompensation.apply`, "cut-window segments"), so the planner's check of a
 cut window costs that window, not the program. Speed is the benchmark's business (no timing
 here); this pins what must hold whatever the segments: on a generated program of four cuts
 (lines and half circles, rapids between the cuts: three joints) the written reference keeps the
@@ -18,12 +18,12 @@ import numpy as np
 from nurbscnc.interpolate.sample import reference_sampler
 from nurbscnc.machine.profile import load_machine
 from nurbscnc.pipeline import RunOptions, run_program
-from nurbscnc.plan.precompensation import (
+from nurbscnc.plan.timing import sample_count
+from nurbscnc.precompensation.apply import (
     _segment_starts,
     precompensate_reference,
     precompensated_sampler,
 )
-from nurbscnc.plan.timing import sample_count
 from nurbscnc.program.interpret import interpret_text
 from tests.servo_reference import limits_excess, lsim_actual_mm, segment_distance_mm
 
@@ -131,8 +131,8 @@ def test_a_joint_no_window_solves_is_the_plans_own(monkeypatch):
     every row across the joint keeps the caps."""
     from dataclasses import replace
 
-    from nurbscnc.plan import precompensation as pc
     from nurbscnc.plan.timing import Reference
+    from nurbscnc.precompensation import apply as pc
 
     r = _synthetic()
     n = r.shape[0]
@@ -149,7 +149,7 @@ def test_a_joint_no_window_solves_is_the_plans_own(monkeypatch):
     u = np.vstack([r[:3], joined.points_mm])
     assert not (pc.limit_excess(u, caps) > 0.0).any()
     assert not np.array_equal(joined.points_mm, planned.points_mm)  # moved, not the plan
-    monkeypatch.setattr(pc, "_project_window", lambda *a: None)
+    monkeypatch.setattr(pc, "project_window", lambda *a: None)
     joined = pc._join_segments(r[:3], r[:3], seg, planned, None, None, MACHINE, np.inf, None)
     np.testing.assert_array_equal(joined.points_mm, planned.points_mm)
 
@@ -157,7 +157,7 @@ def test_a_joint_no_window_solves_is_the_plans_own(monkeypatch):
 def test_projection_windows_are_bounded(monkeypatch):
     """A projection window moves at most PROJECT_MAX_WINDOW samples (longer ones in pieces);
     where that cannot solve the rows, the plan's own points (within the caps)."""
-    from nurbscnc.plan import precompensation as pc
+    from nurbscnc.precompensation import limits as pc
 
     r = _synthetic(400)
     n = r.shape[0]
@@ -166,17 +166,17 @@ def test_projection_windows_are_bounded(monkeypatch):
     basis = np.broadcast_to(np.eye(3), (n, 3, 3))
     lower, upper = np.full((n, 3), -np.inf), np.full((n, 3), np.inf)
     sizes = []
-    real = pc._project_window
+    real = pc.project_window
 
     def spy(u, r_, t, c, b, lo, up, j0, j1):
         sizes.append(j1 - j0)
         return real(u, r_, t, c, b, lo, up, j0, j1)
 
     monkeypatch.setattr(pc, "PROJECT_MAX_WINDOW", 64)
-    monkeypatch.setattr(pc, "_project_window", spy)
+    monkeypatch.setattr(pc, "project_window", spy)
     u = pc.project_onto_limits(target, r, caps, basis, lower, upper)
     assert sizes and max(sizes) <= 64
     assert not (pc.limit_excess(u, caps) > 0.0).any()
-    monkeypatch.setattr(pc, "_project_window", lambda *a: None)
+    monkeypatch.setattr(pc, "project_window", lambda *a: None)
     u = pc.project_onto_limits(target, r, caps, basis, lower, upper)
     np.testing.assert_array_equal(u, r)

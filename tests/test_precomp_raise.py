@@ -32,7 +32,7 @@ from nurbscnc.machine.profile import load_machine
 from nurbscnc.pipeline import RunOptions, run_program
 from nurbscnc.plan.lookahead import plan_checked
 from nurbscnc.plan.options import LookaheadOptions
-from nurbscnc.plan.precompensation import precompensate_reference, precompensated_sampler
+from nurbscnc.precompensation import precompensate_reference, precompensated_sampler
 from nurbscnc.program.interpret import interpret_text
 from tests.servo_reference import limits_excess, lsim_actual_mm, segment_distance_mm
 

@@ -1,6 +1,6 @@
 """The tube optimisation of ``--precompensate`` (issue 13): the offsets of the ZPETC reference
 within 3 µm of the path re-chosen by sequential LPs on the known servo model
-(:func:`nurbscnc.plan.precompensation.refine_in_tube`).
+(:func:`nurbscnc.precompensation.tube.refine_in_tube`).
 
 Checked against independent references: ``scipy.signal.lsim`` of the continuous eq.-25 model
 (tests/servo_reference.py), distances to the exact circle (|p| − R) or to the test's own dense
@@ -19,13 +19,13 @@ import pytest
 from scipy import signal
 
 from nurbscnc.geometry.nurbs import NurbsCurve
+from nurbscnc.geometry.polyline import CHORD_MM
 from nurbscnc.interpolate.sample import reference_sampler
 from nurbscnc.machine.profile import load_machine
 from nurbscnc.pipeline import RunOptions, run_program
-from nurbscnc.plan.dynamics import CHORD_MM
 from nurbscnc.plan.lookahead import plan_checked
 from nurbscnc.plan.options import LookaheadOptions
-from nurbscnc.plan.precompensation import precompensate_reference, refine_in_tube
+from nurbscnc.precompensation import precompensate_reference, refine_in_tube
 from nurbscnc.program.interpret import interpret_text
 from tests.servo_reference import limits_excess, lsim_actual_mm, segment_distance_mm
 

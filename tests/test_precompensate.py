@@ -369,7 +369,7 @@ def test_the_reference_tolerance_is_measured_from_the_programmed_curve(airfoil):
     tube about each planned path point is the tolerance less that point's distance from the
     programmed curve: against the distance to the test's own dense NURBS polyline."""
     from nurbscnc.geometry.path import Kind
-    from nurbscnc.plan.precompensation import _tube_mm
+    from nurbscnc.precompensation import reference_tube_mm
 
     prog, dense = airfoil
     run = run_program(prog, MACHINE, RunOptions(precompensate=True))
@@ -380,7 +380,7 @@ def test_the_reference_tolerance_is_measured_from_the_programmed_curve(airfoil):
     s = profile.piece_start_mm[piece] + np.tile(np.linspace(0.0, 1.0, 41), rows.size) \
         * pieces.length_mm[piece]
     foot = pieces.path.place(profile.piece_start_mm, s, piece)[0]
-    tube = _tube_mm(pieces, piece, foot, 0.003, MACHINE.limits.ph_tolerance_mm)
+    tube = reference_tube_mm(pieces, piece, foot, 0.003, MACHINE.limits.ph_tolerance_mm)
     dist = segment_distance_mm(foot, dense)
     # the fit is off the curve (18 nm at most with 0.0625 mm corner cells, CORNER_CELL_MM)
     assert 1e-5 < dist.max() <= MACHINE.limits.ph_tolerance_mm
@@ -389,4 +389,4 @@ def test_the_reference_tolerance_is_measured_from_the_programmed_curve(airfoil):
     np.testing.assert_allclose(tube, 0.003 - dist, rtol=0, atol=2e-6)
     # Elsewhere (NURBS stretches, lines) the full tolerance.
     other = np.flatnonzero(pieces.kind != Kind.PH)
-    assert np.all(_tube_mm(pieces, other, np.zeros((other.size, 3)), 0.003, 1e-3) == 0.003)
+    assert np.all(reference_tube_mm(pieces, other, np.zeros((other.size, 3)), 0.003, 1e-3) == 0.003)

@@ -13,7 +13,8 @@ import pytest
 from click.testing import CliRunner
 
 from nurbscnc.cli.main import main
-from nurbscnc.machine.profile import _SCHEMA, default_profile_text, load_machine, parse_machine
+from nurbscnc.machine.profile import default_profile_text, load_machine, parse_machine
+from nurbscnc.machine.schema import SCHEMA
 
 ROOT = Path(__file__).resolve().parents[1]
 CORNERS = ROOT / "programs" / "corners.nc"
@@ -68,7 +69,7 @@ def test_init_to_stdout_is_the_bundled_default(env):
 
 def test_template_documents_every_key_with_its_unit():
     text = default_profile_text()
-    for full in leaf_keys(_SCHEMA):
+    for full in leaf_keys(SCHEMA):
         key = full.rsplit(".", 1)[-1]
         # each key appears as a setting, or commented out (optional keys, alternative forms)
         assert re.search(rf"^#?\s*{re.escape(key)} = ", text, re.M), full

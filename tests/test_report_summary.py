@@ -156,7 +156,7 @@ def test_columns_of_no_segments():
 def test_summary_json_in_pieces_is_json_dumps_text():
     """The summary's JSON, its large mappings encoded in pieces (cli ``_json_in_pieces``),
     is json.dumps's text, byte for byte."""
-    from nurbscnc.cli.main import JSON_PIECE, summary_json
+    from nurbscnc.app.summary import JSON_PIECE, summary_json
 
     rng = np.random.default_rng(7)
     times = {str(i): float(x) for i, x in enumerate(rng.exponential(0.01, 3 * JSON_PIECE + 5))}

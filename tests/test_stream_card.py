@@ -11,7 +11,9 @@ import pytest
 
 from nurbscnc.errors import ConfigError
 from nurbscnc.output.stream import protocol as p
-from nurbscnc.output.stream.card import CardConfig, CardSim, Faults, Wire, parse_listen
+from nurbscnc.output.stream.card import CardConfig, CardSim, Faults
+from nurbscnc.output.stream.endpoints import parse_listen
+from nurbscnc.output.stream.wire import Wire
 
 
 def send(card, msg, seq=0, now=0.0):

@@ -21,7 +21,8 @@ import pytest
 import serial
 from click.testing import CliRunner
 
-from nurbscnc.cli.stream import card_sim, stream
+from nurbscnc.cli.card import card_sim
+from nurbscnc.cli.stream import stream
 from nurbscnc.output.stream.card import CardConfig, PtyEndpoint
 from tests.stream_helpers import card_on
 
@@ -195,7 +196,7 @@ def test_card_sim_command_logs_what_it_executed(tmp_path):
     csv = tmp_path / "points.csv"
     write_points(csv, pts)
     log, report = tmp_path / "executed.csv", tmp_path / "card.json"
-    code = "from nurbscnc.cli.stream import card_sim; card_sim(prog_name='card-sim')"
+    code = "from nurbscnc.cli.card import card_sim; card_sim(prog_name='card-sim')"
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     proc = subprocess.Popen(
         [sys.executable, "-c", code, "--listen", "127.0.0.1:0", "--fast", "--once",
@@ -309,7 +310,7 @@ def test_m0_waits_at_rest_until_sigusr2(tmp_path):
 
 
 def test_a_second_stream_needs_card_position_or_zero_not_a_restart(tmp_path):
-    from nurbscnc.cli.stream import card_position
+    from nurbscnc.cli.card import card_position
 
     nc = tmp_path / "part.nc"
     nc.write_text(GOOD)
@@ -370,3 +371,72 @@ def test_ctrl_c_while_waiting_at_m0_exits_130_with_the_cards_position(tmp_path):
     assert proc.returncode == 130
     assert b"interrupted while waiting (M0 at line 4); the card stands at [5000, 0, 0]" in stderr
     assert card.position.tolist() == [5000, 0, 0]
+
+
+#: A non-default command-line value of every planning option (cli.options.planning_options).
+NON_DEFAULT = {"algorithm": ["--algorithm", "adaptive"],
+               "corner_feed": ["--corner-feed", "peak"], "dynamics": ["--dynamics", "global"],
+               "blend_tolerance": ["--blend-tolerance", "0.05"],
+               "interpolator": ["--interpolator", "taylor"], "lookahead": ["--lookahead", "7"],
+               "precompensate": ["--precompensate"],
+               "reference_tolerance": ["--reference-tolerance", "5"],
+               "smooth": ["--smooth"]}  # fmt: skip
+
+
+def test_every_planning_option_has_a_non_default_value_here():
+    from nurbscnc.app.settings import PLANNING_KEYS
+
+    assert set(NON_DEFAULT) == set(PLANNING_KEYS)
+
+
+@pytest.mark.parametrize("key", sorted(NON_DEFAULT))
+def test_every_planning_option_reaches_the_streams_planner_as_runs(tmp_path, monkeypatch, key):
+    """`stream` and `run` given one planning option at a non-default value plan with equal
+    RunOptions (each captured where it reaches its planner; nothing is planned or sent), and
+    they differ from the defaults: no option is dropped on the way to the stream."""
+    import nurbscnc.cli.stream as cli_stream
+    import nurbscnc.pipeline as pipeline
+    from nurbscnc.cli.main import main
+    from nurbscnc.pipeline import RunOptions
+
+    nc = tmp_path / "part.nc"
+    nc.write_text(GOOD)
+    seen = {}
+
+    def planned(name):
+        def capture(_prog, _mach, options, *_args, **_kwargs):
+            seen[name] = options
+            raise KeyboardInterrupt  # stop before anything is planned, written or sent
+
+        return capture
+
+    monkeypatch.setattr(pipeline, "run_program", planned("run"))
+    monkeypatch.setattr(cli_stream, "stream_job", planned("stream"))
+    runner = CliRunner()
+    runner.invoke(main, ["run", str(nc), "-o", str(tmp_path / "p.csv"), *NON_DEFAULT[key]])
+    runner.invoke(main, ["stream", str(nc), "--port", "/dev/null", *NON_DEFAULT[key]])
+    assert seen["stream"] == seen["run"] != RunOptions()
+
+
+def test_stream_precompensate_executes_the_compensated_reference(tmp_path):
+    """`stream --precompensate` plans the whole program as `run --precompensate` does and
+    streams its points: the card executes the compensated reference, quantised to steps, and
+    that reference leaves the uncompensated one by more than a step somewhere."""
+    from nurbscnc.cli.main import main
+
+    nc = tmp_path / "part.nc"
+    nc.write_text(GOOD)
+    comp, plain = tmp_path / "comp.csv", tmp_path / "plain.csv"
+    runner = CliRunner()
+    for args in (["-o", comp, "--precompensate"], ["-o", plain]):
+        done = runner.invoke(main, ["run", str(nc), *map(str, args)])
+        assert done.exit_code == 0, done.output
+    with card_on("pty") as (card, ep):
+        result = run_stream([nc, "--port", ep.path, "--precompensate", "--json"])
+    assert result.exit_code == 0, result.output
+    assert np.array_equal(card.executed_pulses(), expected_pulses(comp))
+    executed = np.cumsum(card.executed_pulses(), axis=0)
+    uncompensated = np.cumsum(expected_pulses(plain), axis=0)
+    n = max(len(executed), len(uncompensated))
+    pad = lambda steps: np.vstack([steps, np.repeat(steps[-1:], n - len(steps), axis=0)])  # noqa: E731
+    assert np.abs(pad(executed) - pad(uncompensated)).max() > 1

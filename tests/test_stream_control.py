@@ -17,7 +17,7 @@ from nurbscnc.machine.profile import default_profile_text, parse_machine
 from nurbscnc.output.stream import protocol as p
 from nurbscnc.output.stream.card import CardConfig, CardSim
 from nurbscnc.output.stream.job import Job, program_stops, start_at_line
-from nurbscnc.output.stream.link import SenderOptions
+from nurbscnc.output.stream.linkstate import SenderOptions
 from nurbscnc.output.stream.motion import phase_states, stop_phases
 from nurbscnc.output.stream.simlink import simulate_job
 from nurbscnc.pipeline import RunOptions, run_program

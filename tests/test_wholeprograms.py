@@ -24,9 +24,9 @@ import pytest
 from scipy.interpolate import BSpline
 from scipy.spatial import cKDTree
 
+from nurbscnc.geometry.polyline import dense_path_mm
 from nurbscnc.machine.profile import load_machine
 from nurbscnc.pipeline import RunOptions, run_program
-from nurbscnc.plan.dynamics import dense_path_mm
 from nurbscnc.plan.options import LookaheadOptions
 from nurbscnc.program.interpret import interpret_text
 from tests.servo_reference import lsim_actual_mm

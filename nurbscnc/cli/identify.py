@@ -1,31 +1,17 @@
 """``nurbscnc identify TRACE``: fit an axis's closed-loop model from a recorded trace and print
 it as a machine-profile section (:mod:`nurbscnc.servo.identify`).
 
-Like :mod:`nurbscnc.cli.stream`, helpers of :mod:`nurbscnc.cli.main` are imported when the
-command runs (main imports this module at its end).
+Errors name the trace file (the argument is called ``source``).
 """
 
 from __future__ import annotations
 
-import functools
 import json
 
 import click
 
+from nurbscnc.cli.handle import handle_errors
 from nurbscnc.errors import OutputError
-
-
-def _handle_errors(func):
-    """``nurbscnc.cli.main.handle_errors``, looked up when the command runs (errors name the
-    trace file: its parameter is called ``source``)."""
-
-    @functools.wraps(func)
-    def wrapper(*args, **kwargs):
-        from nurbscnc.cli.main import handle_errors
-
-        return handle_errors(func)(*args, **kwargs)
-
-    return wrapper
 
 
 @click.command()
@@ -46,7 +32,7 @@ def _handle_errors(func):
               help="Periods by which the feedback is recorded late (1 for a LinuxCNC capture "
               "whose encoder is read before the period's command is written).")
 @click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
-@_handle_errors
+@handle_errors
 def identify(source, axis, order, cmd_col, fb_col, time_col, period_ms, delay, as_json):
     """Fit the closed-loop position model of one axis from TRACE ('-' for stdin): commanded
     and actual position, one sample per line (whitespace or commas; '#' comments; an optional

@@ -1,10 +1,10 @@
-"""Command-line options shared by every command that plans: one decorator, one builder.
+"""Command-line options shared by every command that plans: one decorator.
 
 :func:`planning_options` declares the planning options (algorithm, corner feed, dynamics,
-blend tolerance, interpolator, look-ahead) and the machine options (``--machine``,
-``--set``); :func:`run_options` turns their values into the validated
-:class:`~nurbscnc.pipeline.RunOptions`. ``plan``, ``run``, ``simulate`` and ``stream`` use
-the same set.
+blend tolerance, interpolator, look-ahead, pre-compensation) and the machine options
+(``--machine``, ``--set``); :func:`~nurbscnc.app.settings.run_options_of` turns their values
+into the validated :class:`~nurbscnc.pipeline.RunOptions`. ``plan``, ``run``, ``simulate``
+and ``stream`` use the same set.
 """
 
 from __future__ import annotations
@@ -16,16 +16,7 @@ from nurbscnc.plan.options import (
     CornerFeed,
     Dynamics,
     Interpolator,
-    LookaheadOptions,
-    PlanOptions,
 )
-
-#: The keyword names :func:`planning_options` adds to a command (besides machine, overrides,
-#: and the program-input options no_block_delete, tool_table, subroutine_path).
-PLANNING_KEYS = ("algorithm", "corner_feed", "dynamics", "blend_tolerance", "interpolator",
-                 "lookahead", "precompensate", "reference_tolerance", "smooth")  # fmt: skip
-#: The keyword names of :func:`program_input_options`.
-PROGRAM_INPUT_KEYS = ("no_block_delete", "tool_table", "subroutine_path")
 
 
 def _choices(enum_cls) -> click.Choice:
@@ -121,19 +112,3 @@ def planning_options(func):
     )(func)  # fmt: skip
     return program_input_options(machine_options(func))
 
-
-def run_options(algorithm="ph-lookahead", corner_feed="piece", dynamics="local",
-                blend_tolerance=None, interpolator="exact",
-                lookahead=None, precompensate=False, reference_tolerance=3.0,
-                smooth=False):  # fmt: skip
-    """The validated :class:`~nurbscnc.pipeline.RunOptions` of the values of
-    :func:`planning_options` (ConfigError on a bad value)."""
-    from nurbscnc.pipeline import RunOptions  # the planner's imports, only when planning
-
-    plan = PlanOptions(corner_feed=corner_feed, blend_tolerance_mm=blend_tolerance,
-                       smooth=bool(smooth))
-    return RunOptions(algorithm=algorithm, interpolator=interpolator,
-                      lookahead=LookaheadOptions(dynamics=dynamics, lookahead_pieces=lookahead,
-                                                 plan=plan),
-                      precompensate=bool(precompensate),
-                      reference_tolerance_mm=float(reference_tolerance) * 1e-3)  # fmt: skip

@@ -2,8 +2,7 @@
 
 ``init`` writes the commented template (the bundled default profile: every key, its unit and
 meaning); ``show`` prints the profile a command would use, after discovery, ``--machine`` and
-``--set`` (TOML, or JSON). Like :mod:`nurbscnc.cli.stream`, helpers of :mod:`nurbscnc.cli.main`
-are imported when a command runs (main imports this module at its end).
+``--set`` (TOML, or JSON).
 """
 
 from __future__ import annotations
@@ -15,32 +14,28 @@ import sys
 
 import click
 
+from nurbscnc.app.summary import error_json, machine_json
+from nurbscnc.cli.common import load_machine_cli
+from nurbscnc.cli.console import err
+from nurbscnc.cli.handle import handle_errors
 from nurbscnc.errors import NurbsCncError, OutputError
 
 
-def _handle_errors(func):
-    """``nurbscnc.cli.main.handle_errors`` (looked up when the command runs), but a user error
-    is reported as ``nurbscnc profile: error: …`` (these commands read no program)."""
+def _profile_errors(func):
+    """:func:`~nurbscnc.cli.handle.handle_errors`, but a user error is reported as
+    ``nurbscnc profile: error: …`` (these commands read no program)."""
 
     @functools.wraps(func)
     def reported(*args, **kwargs):
-        from nurbscnc.cli.main import _error_json, err
-
         try:
             return func(*args, **kwargs)
         except NurbsCncError as exc:
             if kwargs.get("as_json"):
-                click.echo(json.dumps(_error_json(exc)))
+                click.echo(json.dumps(error_json(exc)))
             err.print(f"nurbscnc profile: error: {exc.message}", markup=False)
             sys.exit(exc.exit_code)
 
-    @functools.wraps(func)
-    def wrapper(*args, **kwargs):
-        from nurbscnc.cli.main import handle_errors
-
-        return handle_errors(reported)(*args, **kwargs)
-
-    return wrapper
+    return handle_errors(reported)
 
 
 @click.group()
@@ -56,13 +51,12 @@ def profile():
 @profile.command("init")
 @click.argument("file", required=False, type=click.Path(dir_okay=False, allow_dash=True))
 @click.option("--force", is_flag=True, help="Overwrite FILE if it exists.")
-@_handle_errors
+@_profile_errors
 def init(file, force):
     """Write a commented profile template to FILE (default or '-': stdout).
 
     Example: nurbscnc profile init nurbscnc.toml
     """
-    from nurbscnc.cli.main import err
     from nurbscnc.machine.profile import default_profile_text
 
     text = default_profile_text()
@@ -87,13 +81,12 @@ def init(file, force):
               help="Machine profile (TOML); default: found as `nurbscnc profile` says.")
 @click.option("--set", "overrides", multiple=True, metavar="KEY=VALUE",
               help="Override one profile value, e.g. --set limits.a_max_mm_s2=1000.")
-@_handle_errors
+@_profile_errors
 def show(as_json, machine, overrides):
     """Print the effective machine profile (after discovery, --machine and --set).
 
     Example: nurbscnc profile show --set servo.x.bandwidth_hz=40 --set servo.x.damping=0.7
     """
-    from nurbscnc.cli.main import load_machine_cli, machine_json
     from nurbscnc.machine.profile import profile_toml
 
     click.get_current_context().meta["nurbscnc.machine_said"] = True  # the header says it

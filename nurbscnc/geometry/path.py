@@ -33,7 +33,7 @@ import numpy as np
 from numpy.polynomial import polynomial as npoly
 
 from nurbscnc.geometry import segments
-from nurbscnc.geometry.nurbs import BLOCK
+from nurbscnc.geometry.powerform import BLOCK
 
 #: Program segment kinds that do not move: the tool stops at rest there (a dwell holds for
 #: its ``seconds``; a pause, M0/M1/M60, is a stop of zero duration that the operator ends).

@@ -18,11 +18,11 @@ import numpy as np
 
 from nurbscnc.errors import GeometryError
 from nurbscnc.geometry import segments
-from nurbscnc.geometry.nurbs import (
-    NurbsCurve,
+from nurbscnc.geometry.bspline import (
     curvature_derivative_from_derivatives,
     curvature_from_derivatives,
 )
+from nurbscnc.geometry.nurbs import NurbsCurve
 
 
 @runtime_checkable

@@ -18,10 +18,10 @@ import numpy as np
 
 from nurbscnc.geometry.nurbs import NurbsCurve
 from nurbscnc.geometry.path import STOP_KINDS, stop_seconds
-from nurbscnc.interpolate.sample import Samples
 from nurbscnc.interpolate.taylor import taylor_increment
 from nurbscnc.machine.caps import baseline_feed_mm_s
 from nurbscnc.machine.profile import Machine
+from nurbscnc.plan.timing import Samples
 
 ALGORITHMS = ("adaptive", "curvature")
 
@@ -62,12 +62,14 @@ def baseline_samples(algorithm: str, seg, machine: Machine, max_steps: int = 10_
     v_arr = np.asarray(vs)
     return Samples(
         t_s=np.arange(n) * period,
+        tau_s=None,
         points_mm=points,
         s_mm=s,
         v_mm_s=v_arr,
         a_mm_s2=np.gradient(v_arr, period) if n > 1 else np.zeros(n),
         piece=np.zeros(n, dtype=np.int64),
         line=np.full(n, seg.line, dtype=np.int64),
+        param=None,
     )
 
 
@@ -114,10 +116,12 @@ def baseline_program_samples(algorithm: str, program, machine: Machine) -> Sampl
     seg_len = np.linalg.norm(np.diff(pts, axis=0), axis=1)
     return Samples(
         t_s=np.arange(n) * period,
+        tau_s=None,
         points_mm=pts,
         s_mm=np.concatenate(([0.0], np.cumsum(seg_len))),
         v_mm_s=v,
         a_mm_s2=np.gradient(v, period) if n > 1 else np.zeros(n),
         piece=np.zeros(n, dtype=np.int64),
         line=np.concatenate(lines).astype(np.int64),
+        param=None,
     )

@@ -14,20 +14,19 @@ exactly these points.
 
 Long programs are sampled in windows (:func:`sample_chunks`, :func:`reference_chunks`): the
 rows k0…k1−1 of the whole reference, window after window, bit-identical to the whole arrays,
-so the memory is that of one window whatever the motion time (issue 14).
+so the memory is that of one window whatever the motion time.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterator
-from dataclasses import dataclass
 
 import numpy as np
 
 from nurbscnc.geometry.path import Kind, equal_runs
 from nurbscnc.interpolate.taylor import taylor_nurbs, taylor_params
 from nurbscnc.plan.options import Interpolator  # noqa: F401  (re-exported)
-from nurbscnc.plan.timing import SLAB, exact_reference, sample_count, servo_clock
+from nurbscnc.plan.timing import SLAB, Samples, exact_reference, rows_of, sample_count, servo_clock
 
 #: Rows per window of :func:`sample_chunks` (64 Ki rows ≈ 6 MB of samples): large enough
 #: that the per-window work (servo clock, dwells, Python overhead) is negligible, small
@@ -35,28 +34,6 @@ from nurbscnc.plan.timing import SLAB, exact_reference, sample_count, servo_cloc
 CHUNK = 1 << 16
 
 INTERPOLATORS = tuple(m.value for m in Interpolator)
-
-
-@dataclass(frozen=True, eq=False)
-class Samples:
-    """Reference points at the servo period.
-
-    ``t_s`` (N,) [s] = k·T_s; ``points_mm`` (N, 3) [mm]; ``s_mm`` path length [mm];
-    ``v_mm_s`` planned feed [mm/s]; ``a_mm_s2`` tangential acceleration [mm/s²];
-    ``piece`` index of the piece; ``line`` source line of that piece; ``param`` (N,) the
-    parameter of each point on its piece's geometry (NURBS u, PH ξ, line/arc u [mm]);
-    ``interpolator`` "exact" or "taylor".
-    """
-
-    t_s: np.ndarray
-    points_mm: np.ndarray
-    s_mm: np.ndarray
-    v_mm_s: np.ndarray
-    a_mm_s2: np.ndarray
-    piece: np.ndarray
-    line: np.ndarray
-    param: np.ndarray | None = None
-    interpolator: str = "exact"
 
 
 def reference_sampler(interpolator="exact"):
@@ -82,8 +59,8 @@ def reference_sampler(interpolator="exact"):
 def samples_of(reference, pieces, interpolator="exact") -> Samples:
     """The :class:`Samples` of a reference made by :func:`reference_sampler`."""
     r = reference
-    return Samples(r.t_s, r.points_mm, r.s_mm, r.v_mm_s, r.a_mm_s2, r.piece,
-                   np.take(pieces.line, r.piece), r.param,
+    return Samples(r.t_s, r.tau_s, r.s_mm, r.v_mm_s, r.a_mm_s2, r.piece, r.points_mm, r.param,
+                   np.take(pieces.line, r.piece),
                    Interpolator.parse(interpolator).value)  # fmt: skip
 
 
@@ -136,11 +113,7 @@ def sample_chunks(pieces, profile, period_s: float, interpolator="exact",
 
 def slice_samples(samples: Samples, k0: int, k1: int) -> Samples:
     """Rows k0…k1−1 of whole samples (views, no copy)."""
-    b = slice(k0, k1)
-    return Samples(samples.t_s[b], samples.points_mm[b], samples.s_mm[b], samples.v_mm_s[b],
-                   samples.a_mm_s2[b], samples.piece[b], samples.line[b],
-                   None if samples.param is None else samples.param[b],
-                   samples.interpolator)  # fmt: skip
+    return rows_of(samples, slice(k0, k1))
 
 
 def chunks_of(samples: Samples, chunk: int = CHUNK) -> Iterator[Samples]:

@@ -13,8 +13,8 @@ from math import sqrt
 
 import numpy as np
 
-from nurbscnc.geometry.nurbs import PowerForm
 from nurbscnc.geometry.path import Kind, PathTable, equal_runs
+from nurbscnc.geometry.powerform import PowerForm
 
 
 def taylor_increment(v_mm_s: float, a_mm_s2: float, dt_s: float, speed: float,

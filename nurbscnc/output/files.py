@@ -26,11 +26,16 @@ import secrets
 import stat
 import sys
 import warnings
+from collections.abc import Iterable
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from nurbscnc.errors import DataError, OutputError, SourcePos
 from nurbscnc.output.npz import write_npz
+
+if TYPE_CHECKING:  # the annotations only: no import at start-up
+    from nurbscnc.plan.timing import Samples
 
 #: Column order of a reference-point file (units: s, mm, mm, mm, mm/s, index, source line).
 POINT_COLUMNS = ("t", "x", "y", "z", "feed", "piece", "line")
@@ -226,7 +231,7 @@ def write_table(path: str, names, columns, formats, npz: bool | None = None) -> 
 POINT_FORMATS = ["%.6f", "%.9f", "%.9f", "%.9f", "%.6f", "%d", "%d"]
 
 
-def point_columns(samples) -> tuple:
+def point_columns(samples: Samples) -> tuple:
     """The POINT_COLUMNS of reference points (whole or one window): t, x, y, z, feed,
     piece, line."""
     p = samples.points_mm
@@ -234,13 +239,14 @@ def point_columns(samples) -> tuple:
             samples.line)  # fmt: skip
 
 
-def write_points(path: str, samples, npz: bool | None = None) -> None:
+def write_points(path: str, samples: Samples, npz: bool | None = None) -> None:
     """Reference points: ``t,x,y,z,feed,piece,line`` (s, mm, mm, mm, mm/s, index, line);
     NPZ when ``npz`` (None: by the path's suffix)."""
     write_point_windows(path, [samples], int(samples.t_s.size), npz)
 
 
-def write_point_windows(path: str, windows, count: int, npz: bool | None = None) -> None:
+def write_point_windows(path: str, windows: Iterable[Samples], count: int,
+                        npz: bool | None = None) -> None:  # fmt: skip
     """:func:`write_points` of reference points given window by window (``count`` rows in
     all, e.g. :meth:`nurbscnc.pipeline.Run.chunks`): the same bytes, one window of memory."""
     write_table_windows(path, POINT_COLUMNS, (point_columns(w) for w in windows), count,

@@ -9,12 +9,10 @@
  *       descent jerks, distance) or None               [gated._gated_rise_memo's merging]
  *   time_at_length(s0, v0, a0, jerk, duration, start, s, out, rel, newton, halvings, whole)
  *       -> None (out filled)                                     [profile._time_at_length_py]
- *   segment_distances(q, a, d, lo, hi, out)
- *       -> None (out filled)                                   [dynamics._segment_distances_py]
  *   peak_speeds(v_s, v_e, length, v_cap, a, j, a_dn, j_dn, out, newton, rel)
  *       -> None (out filled)                                        [feedrate._peak_speed_py]
  *
- * The arrays are C-contiguous float64 (lo, hi: int64) buffers (the caller makes them so).
+ * The arrays are C-contiguous float64 buffers (the caller makes them so).
  * tests/test_plan_kernels.py compares every kernel with its Python reference.
  */
 #define PY_SSIZE_T_CLEAN
@@ -167,43 +165,6 @@ done:
     return result;
 }
 
-static PyObject *segment_distances(PyObject *self, PyObject *args)
-{
-    Py_buffer bq, ba, bd, blo, bhi, bout;
-    if (!PyArg_ParseTuple(args, "y*y*y*y*y*w*", &bq, &ba, &bd, &blo, &bhi, &bout))
-        return NULL;
-    PyObject *result = NULL;
-    Py_ssize_t m = bq.len / (Py_ssize_t)(3 * sizeof(double));
-    Py_ssize_t n = ba.len / (Py_ssize_t)(3 * sizeof(double));
-    if (bq.len != m * (Py_ssize_t)(3 * sizeof(double)) || ba.len != bd.len ||
-        ba.len != n * (Py_ssize_t)(3 * sizeof(double)) ||
-        blo.len != m * (Py_ssize_t)sizeof(long long) || bhi.len != blo.len ||
-        bout.len != m * (Py_ssize_t)sizeof(double)) {
-        PyErr_SetString(PyExc_ValueError, "segment_distances: inconsistent buffers");
-        goto done;
-    }
-    const double *q = bq.buf, *a = ba.buf, *d = bd.buf;
-    const long long *lo = blo.buf, *hi = bhi.buf;
-    double *out = bout.buf;
-    for (Py_ssize_t i = 0; i < m; i++)
-        if (lo[i] < 0 || hi[i] > n) {
-            PyErr_SetString(PyExc_IndexError, "segment_distances: a range outside the segments");
-            goto done;
-        }
-    Py_BEGIN_ALLOW_THREADS
-    segment_distances_all(m, q, a, d, lo, hi, out);
-    Py_END_ALLOW_THREADS
-    result = Py_NewRef(Py_None);
-done:
-    PyBuffer_Release(&bq);
-    PyBuffer_Release(&ba);
-    PyBuffer_Release(&bd);
-    PyBuffer_Release(&blo);
-    PyBuffer_Release(&bhi);
-    PyBuffer_Release(&bout);
-    return result;
-}
-
 static PyObject *peak_speeds(PyObject *self, PyObject *args)
 {
     Py_buffer b[9];
@@ -234,8 +195,6 @@ done:
 
 static PyMethodDef methods[] = {
     {"peak_speeds", peak_speeds, METH_VARARGS, "feedrate._peak_speed_py, compiled."},
-    {"segment_distances", segment_distances, METH_VARARGS,
-     "dynamics._segment_distances_py, compiled."},
     {"gated_rise", gated_rise, METH_VARARGS, "gated.gated_rise_py, compiled."},
     {"gated_rise_merged", gated_rise_merged, METH_VARARGS,
      "gated.gated_rise_py, compiled, its phases merged (gated.merged_phases)."},
@@ -245,7 +204,7 @@ static PyMethodDef methods[] = {
 
 static struct PyModuleDef module = {
     PyModuleDef_HEAD_INIT, "_kernels",
-    "Compiled kernels of the plan stage (gated.py, profile.py, dynamics.py, feedrate.py).", -1, methods,
+    "Compiled kernels of the plan stage (gated.py, profile.py, feedrate.py).", -1, methods,
 };
 
 PyMODINIT_FUNC PyInit__kernels(void) { return PyModule_Create(&module); }

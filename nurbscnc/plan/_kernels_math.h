@@ -1,8 +1,8 @@
 /* The numerics of the plan stage's compiled kernels (_kernels.c is their CPython glue: it
  * parses the arguments, checks the buffers and builds the results). Each function is ported
  * operation for operation from its Python reference implementation — gated.py's
- * gated_rise_py and merged_phases, profile.py's _time_at_length_py, dynamics.py's
- * _segment_distances_py, feedrate.py's _peak_speed_py — which remain the specification.
+ * gated_rise_py and merged_phases, profile.py's _time_at_length_py, feedrate.py's
+ * _peak_speed_py — which remain the specification.
  *
  * Every result is bit for bit the Python one: IEEE double arithmetic in the same order,
  * each expression as Python or numpy evaluates it (left to right, no reassociation), built
@@ -388,35 +388,6 @@ static void time_at_lengths(ptrdiff_t n, const double *s0, const double *v0, con
                       whole, t);
         for (int q = 0; q < count; q++)
             out[q0 + q] = ph[5][q] + t[q]; /* the phase's start time + the time in it */
-    }
-}
-
-/* dynamics._segment_distances_py: for each point q_i (m, 3), the smallest distance to the
- * segments a_k + t d_k (t in [0, 1]) for k in [lo_i, hi_i) (inf when empty). Dot products
- * as (x0 y0 + x1 y1) + x2 y2; t = (qa.d) / |d|^2 clipped to [0, 1] (0 where |d|^2 = 0); the
- * minimum NaN-propagating as numpy's. */
-static void segment_distances_all(ptrdiff_t m, const double *q, const double *a,
-                                  const double *d, const long long *lo, const long long *hi,
-                                  double *out)
-{
-    for (ptrdiff_t i = 0; i < m; i++) {
-        const double q0 = q[3 * i], q1 = q[3 * i + 1], q2 = q[3 * i + 2];
-        double best = INFINITY;
-        int any = 0;
-        for (long long k = lo[i]; k < hi[i]; k++) {
-            const double *ak = a + 3 * k, *dk = d + 3 * k;
-            double e0 = q0 - ak[0], e1 = q1 - ak[1], e2 = q2 - ak[2];
-            double len2 = (dk[0] * dk[0] + dk[1] * dk[1]) + dk[2] * dk[2];
-            double t = ((e0 * dk[0] + e1 * dk[1]) + e2 * dk[2]) / (len2 > 0.0 ? len2 : 1.0);
-            t = np_clip(len2 > 0.0 ? t : 0.0, 0.0, 1.0);
-            e0 = e0 - t * dk[0];
-            e1 = e1 - t * dk[1];
-            e2 = e2 - t * dk[2];
-            double dist = sqrt((e0 * e0 + e1 * e1) + e2 * e2);
-            best = any ? np_minimum(best, dist) : dist;
-            any = 1;
-        }
-        out[i] = best;
     }
 }
 

@@ -77,10 +77,10 @@ from dataclasses import dataclass, field, fields, replace
 import numpy as np
 
 from nurbscnc.errors import PlanningError
+from nurbscnc.geometry.distance import PathIndex
 from nurbscnc.machine.profile import Machine
 from nurbscnc.plan.axes import piece_limits
 from nurbscnc.plan.dynamics import (
-    PathIndex,
     Response,
     path_response,
     window_response,

@@ -11,13 +11,14 @@
 
 No I/O: the CLI prints or serialises the dictionaries. The path model (geometry/path.py,
 paths.py, nurbs.py) and the lower bound are imported where they are needed: ``check`` of a
-program of lines never loads them (start-up, issue 14).
+program of lines never loads them (start-up time).
 """
 
 from __future__ import annotations
 
 import math
 from operator import attrgetter
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -25,6 +26,9 @@ from nurbscnc.errors import PlanningError, SourcePos
 from nurbscnc.geometry.segments import spiral_arc_length_mm
 from nurbscnc.machine.profile import Machine, SoftLimits
 from nurbscnc.program.columns import ARC, DWELL, KINDS, LINE, NURBS, PAUSE, RAPID, segment_columns
+
+if TYPE_CHECKING:  # the annotations only: no import at start-up
+    from nurbscnc.plan.timing import Samples
 
 
 def check_soft_limits(points_mm: np.ndarray, lines: np.ndarray, limits: SoftLimits) -> None:
@@ -166,7 +170,7 @@ def program_summary(prog, columns=None, per_segment: bool = True) -> dict:
     }
 
 
-def nurbs_step_lengths(pieces, samples) -> tuple[np.ndarray, np.ndarray]:
+def nurbs_step_lengths(pieces, samples: Samples) -> tuple[np.ndarray, np.ndarray]:
     """True arc lengths of the servo steps on NURBS pieces, for the feed fluctuation.
 
     Returns ``(k, ds_mm)``: the indices k of the steps k → k+1 with both samples on the same
@@ -200,7 +204,7 @@ def feed_fluctuation(plan, samples) -> float | None:
 
 class SampleStats:
     """What the summaries need of a plan's reference points, gathered window by window
-    (:meth:`add` each window in order; issue 14: no whole arrays): the number of samples,
+    (:meth:`add` each window in order: no whole arrays): the number of samples,
     the highest planned feed [mm/s] and — given the ``plan`` — the feed fluctuation on
     NURBS (:func:`feed_fluctuation`, SPEC §3), whose steps include the one across each join
     of two windows. Equal to the whole-array numbers bit for bit (each step's ratio is the
@@ -218,7 +222,7 @@ class SampleStats:
         self._last = (-1, 0.0, 0.0, 0.0)
 
     @classmethod
-    def of(cls, samples, plan=None) -> SampleStats:
+    def of(cls, samples: Samples, plan=None) -> SampleStats:
         """The stats of whole samples (one window)."""
         stats = cls(plan)
         stats.add(samples)
@@ -233,7 +237,7 @@ class SampleStats:
             yield w
             self.add(w)
 
-    def add(self, samples) -> None:
+    def add(self, samples: Samples) -> None:
         """Take the next window of samples (``t_s``, ``v_mm_s``, ``s_mm``, ``piece``,
         ``param``, ``interpolator``)."""
         n = int(samples.t_s.size)
@@ -260,7 +264,7 @@ class SampleStats:
             if self.feed_fluctuation_max is None or worst > self.feed_fluctuation_max:
                 self.feed_fluctuation_max = worst
 
-    def _first_and_last(self, samples) -> int:
+    def _first_and_last(self, samples: Samples) -> int:
         """The curve of the window's first sample (−1: none; for the step across the join);
         the window's last sample becomes the carried one."""
         from nurbscnc.geometry.path import Kind
@@ -286,8 +290,9 @@ def plan_summary(prog, machine: Machine, samples, plan=None, check=None,
     """Numbers that describe a plan (``plan --json``): of the look-ahead ``plan`` with its
     dynamics ``check`` (None: off), or — ``plan`` None — of a baseline ``algorithm``'s
     ``samples``, simulated on the servo model to see its errors. With a plan, ``samples``
-    may be whole :class:`Samples` or the :class:`SampleStats` gathered while the windows
-    were written (the contour error is the check's :meth:`Check.contour_stats`).
+    may be whole :class:`~nurbscnc.plan.timing.Samples` or the :class:`SampleStats`
+    gathered while the windows were written (the contour error is the check's
+    :meth:`Check.contour_stats`).
     ``lower_bound``: False leaves out ``lower_bound_s`` and its ratio (a summary nobody
     reads them from: the kinematic bound costs 0.2 s on a 200,000-line program);
     ``columns``: the program's segment columns if already read."""

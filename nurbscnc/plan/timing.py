@@ -10,7 +10,7 @@ check sees exactly the points the interpolator will output (with ``interpolator=
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
@@ -99,19 +99,42 @@ def servo_clock(pieces, profile: Profile, period_s: float, k0: int = 0,
 
 @dataclass(frozen=True, eq=False)
 class Reference:
-    """The exact reference of a plan at the servo period: ``t_s`` (N,) wall time [s],
-    ``tau_s`` (N,) profile time [s], ``s_mm`` path length [mm], ``v_mm_s`` planned feed
-    [mm/s], ``a_mm_s2`` tangential acceleration [mm/s²], ``piece`` (N,) piece index,
-    ``points_mm`` (N, 3) [mm], ``param`` (N,) each point's parameter on its piece."""
+    """The reference points at the servo period, one row a sample: ``t_s`` (N,) wall time
+    [s] = k·T_s, ``tau_s`` (N,) profile time [s], ``s_mm`` path length [mm], ``v_mm_s``
+    planned feed [mm/s], ``a_mm_s2`` tangential acceleration [mm/s²], ``piece`` (N,) piece
+    index, ``points_mm`` (N, 3) [mm], ``param`` (N,) each point's parameter on its piece's
+    geometry (NURBS u, PH ξ, line/arc u [mm]). ``tau_s`` and ``param`` are None where no
+    plan made the points (a baseline interpolator's :class:`Samples`).
+
+    Every field is a per-sample column: the planner slices and joins references field by
+    field (:func:`rows_of`)."""
 
     t_s: np.ndarray
-    tau_s: np.ndarray
+    tau_s: np.ndarray | None
     s_mm: np.ndarray
     v_mm_s: np.ndarray
     a_mm_s2: np.ndarray
     piece: np.ndarray
     points_mm: np.ndarray
-    param: np.ndarray
+    param: np.ndarray | None
+
+
+@dataclass(frozen=True, eq=False)
+class Samples(Reference):
+    """The reference points as the interpolator outputs them: a :class:`Reference` with
+    ``line`` (N,) the source line of each sample's piece and ``interpolator`` the name of
+    the interpolator that placed the points ("exact" or "taylor"; a baseline's are
+    "exact"). The writers, the summary and the studies read these."""
+
+    line: np.ndarray
+    interpolator: str = "exact"
+
+
+def rows_of(ref: Reference, sl: slice) -> Reference:
+    """Rows ``sl`` of every per-sample column of ``ref`` (views); a column that is None and
+    the ``interpolator`` name stay as they are."""
+    return replace(ref, **{f.name: getattr(ref, f.name)[sl] for f in fields(ref)
+                           if isinstance(getattr(ref, f.name), np.ndarray)})  # fmt: skip
 
 
 def exact_reference(pieces, profile: Profile, period_s: float, k0: int = 0,

@@ -89,7 +89,9 @@ class DiscreteAxis:
     dc_gain: float
 
 
-def _as_model(model) -> AxisModel:
+def as_model(model) -> AxisModel:
+    """``model`` as an :class:`AxisModel` (SPEC eq. 25): itself, or the model of an
+    :class:`~nurbscnc.machine.profile.AxisServo`'s coefficients; TypeError for anything else."""
     if isinstance(model, AxisModel):
         return model
     if isinstance(model, AxisServo):
@@ -214,7 +216,7 @@ def discretise(model: AxisModel | AxisServo, period_s: float, hold: str = "foh")
     See the module docstring for the augmented-matrix construction (Franklin, Powell &
     Workman, "Digital Control of Dynamic Systems", §6.3.2 for the FOH equivalent).
     """
-    model = _as_model(model)
+    model = as_model(model)
     if hold not in _HOLDS:
         raise ValueError(f"hold must be one of {_HOLDS}, got {hold!r}")
     if not (np.isfinite(period_s) and period_s > 0):
@@ -322,7 +324,7 @@ def simulate_axis(
     extra, auto = _settle_arg(settle)
     if model is None:
         return np.concatenate([r, np.full(extra, r[-1])])
-    model = _as_model(model)
+    model = as_model(model)
     disc = discretise(model, period_s, hold)
     y, n_settle = _run(disc, r, extra, _settle_chunk(model, period_s) if auto else 0)
     return y[: r.size + (n_settle if auto else extra)]
@@ -346,7 +348,7 @@ def simulate_axes(
         raise ValueError("reference_mm must be (N, k) with k = len(models), N >= 1")
     extra, auto = _settle_arg(settle)
     discs = [
-        None if m is None else (discretise(_as_model(m), period_s, hold), _as_model(m))
+        None if m is None else (discretise(as_model(m), period_s, hold), as_model(m))
         for m in models
     ]
     runs: list[np.ndarray | None] = []
@@ -378,7 +380,7 @@ def error_series(model: AxisModel | AxisServo, order: int = 3) -> np.ndarray:
     steady circular motion at speed V and curvature κ the path radius grows by
     (c_2 + c_1²/2)·V²κ (|G(jω)| ≈ 1 + (c_2 + c_1²/2)ω²), SPEC §8's ≈ 2.85e−5 s² × V²κ.
     """
-    m = _as_model(model)
+    m = as_model(model)
     den = np.asarray(m.denominator, dtype=float)[::-1]  # ascending powers
     num = np.zeros_like(den)
     num[: len(m.numerator)] = np.asarray(m.numerator, dtype=float)[::-1]
@@ -476,7 +478,7 @@ class AxesStream:
 
     def __init__(self, models: Sequence[AxisModel | AxisServo | None], period_s: float,
                  hold: str = "foh"):  # fmt: skip
-        self._models = [None if m is None else _as_model(m) for m in models]
+        self._models = [None if m is None else as_model(m) for m in models]
         self._discs = [None if m is None else discretise(m, period_s, hold)
                        for m in self._models]  # fmt: skip
         self._period_s = float(period_s)

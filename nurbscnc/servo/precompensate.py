@@ -62,14 +62,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from nurbscnc.errors import ConfigError
-from nurbscnc.servo.model import AxisModel, DiscreteAxis, _as_model, discretise
+from nurbscnc.machine.profile import Machine
+from nurbscnc.servo.model import AxisModel, DiscreteAxis, as_model, discretise
 
 #: Largest acceleration and jerk of the quintic smooth step s(x) = x³(10 − 15x + 6x²) on
 #: x ∈ [0, 1] for a unit step: max |s″| = 10/√3, max |s‴| = 60 (the end blend).
 SMOOTH_STEP_ACCEL = 10.0 / np.sqrt(3.0)
 SMOOTH_STEP_JERK = 60.0
-#: Default largest distance of a pre-compensated reference from the path [mm] (issue 13's
-#: 3 µm, :func:`limit_to_path`): if the model is wrong, the reference itself is never far
+#: Default largest distance of a pre-compensated reference from the path [mm] (3 µm,
+#: :func:`limit_to_path`): if the model is wrong, the reference itself is never far
 #: off the path.
 REFERENCE_TOLERANCE_MM = 0.003
 #: Zeros with |z| ≥ 1 − this are treated as unstable (phase-cancelled, not inverted).
@@ -195,7 +196,7 @@ def precompensate_points(
     r = np.asarray(points_mm, dtype=float)
     if r.ndim != 2 or r.shape[1] != len(models) or r.shape[0] == 0:
         raise ValueError("points_mm must be (N, k) with k = len(models), N >= 1")
-    inverses = [None if m is None else zpetc(discretise(_as_model(m), period_s, hold))
+    inverses = [None if m is None else zpetc(discretise(as_model(m), period_s, hold))
                 for m in models]  # fmt: skip
     present = [f for f in inverses if f is not None]
     if not present:
@@ -230,7 +231,7 @@ def perturbed_model(model: AxisModel, loop_gain: float = 1.0,
     (the controller's) stay, G'(0) = G(0) when a0 = b0, and the velocity lag c_1 = (a1 − b1)/a0
     becomes c_1/k (a plant gain or inertia off by 1/k). ``bandwidth`` λ: G'(s) = G(s/λ), every
     pole and zero times λ (a loop λ times faster), c_1/λ, G'(0) = G(0)."""
-    model = _as_model(model)
+    model = as_model(model)
     den = np.trim_zeros(np.asarray(model.denominator, dtype=float), "f")
     num = np.trim_zeros(np.asarray(model.numerator, dtype=float), "f")
     num_p = np.zeros(den.size)
@@ -291,3 +292,18 @@ def limit_to_path(compensated_mm: np.ndarray, foot_mm: np.ndarray,
     size = np.sqrt(np.einsum("ij,ij->i", e, e))
     scale = np.minimum(1.0, tol / np.where(size > 0.0, size, 1.0))
     return foot + e * scale[:, None]
+
+
+def axis_models(machine: Machine) -> list:
+    """The servo models of ``machine``'s axes x, y, z (None: an axis without one), in the
+    column order of the reference's points."""
+    servo = machine.servo
+    return [servo.x, servo.y, servo.z]
+
+
+def lead_samples(machine: Machine) -> int:
+    """The pre-actuation of the ZPETC inverse (:func:`zpetc`) for ``machine``: the largest
+    look-ahead n_u + d of its axes [samples] (FOH models at the servo period)."""
+    period = machine.servo.period_s
+    return max(zpetc(discretise(as_model(m), period, "foh")).lead_samples
+               for m in axis_models(machine) if m is not None)  # fmt: skip

@@ -27,10 +27,11 @@ from nurbscnc.errors import PlanningError
 from nurbscnc.geometry.nurbs import NurbsCurve
 from nurbscnc.geometry.segments import Program, frozen_array
 from nurbscnc.interpolate.baselines import baseline_samples
-from nurbscnc.interpolate.sample import Interpolator, Samples, reference_sampler, samples_of
+from nurbscnc.interpolate.sample import Interpolator, reference_sampler, samples_of
 from nurbscnc.machine.profile import Machine
 from nurbscnc.plan.lookahead import plan_checked
 from nurbscnc.plan.options import CornerFeed, Dynamics, LookaheadOptions, PlanOptions
+from nurbscnc.plan.timing import Samples
 from nurbscnc.servo.simulate import contour_errors, metrics, simulate_reference
 
 ALGORITHMS = ("adaptive", "curvature", "ph-lookahead", "ours")

@@ -9,100 +9,39 @@ card's encoder and the wire: frames are dropped or get one bit flipped, replies 
 and the card can reset (new session id, position lost) or stall (stops answering) after a
 number of frames.
 
-:func:`serve` runs a card on an endpoint — a pseudo-terminal (:class:`PtyEndpoint`) or a
-loopback TCP socket (:class:`TcpEndpoint`) — until told to stop; :class:`Wire` optionally
-limits the byte rate to a serial line's (10 bits per byte at the given baud rate).
+:func:`~.endpoints.serve` runs a card on an endpoint — a pseudo-terminal
+(:class:`~.endpoints.PtyEndpoint`) or a loopback TCP socket (:class:`~.endpoints.TcpEndpoint`)
+— until told to stop; :class:`~.wire.Wire` optionally limits the byte rate to a serial line's
+(10 bits per byte at the given baud rate). The card's configuration and faults are in
+:mod:`~.cardconfig`; its execution of the buffer in :mod:`~.cardmotion` and the fault
+injection in :mod:`~.cardfaults` (mixins of :class:`CardSim`, over its one state); this
+module holds the protocol handling and the replies.
 """
 
 from __future__ import annotations
 
 import collections
-import ipaddress
-import os
 import random
-import select
-import socket
-import threading
-import time
-import tty
-from dataclasses import dataclass, field
 
 import numpy as np
 
-from nurbscnc.errors import ConfigError, StreamError
 from nurbscnc.output.stream import protocol as p
+from nurbscnc.output.stream.cardconfig import CardConfig as CardConfig
+from nurbscnc.output.stream.cardconfig import Faults as Faults
+from nurbscnc.output.stream.cardfaults import FaultInjection
+from nurbscnc.output.stream.cardmotion import Execution
+from nurbscnc.output.stream.endpoints import PtyEndpoint as PtyEndpoint
+from nurbscnc.output.stream.endpoints import TcpEndpoint as TcpEndpoint
+from nurbscnc.output.stream.endpoints import parse_listen as parse_listen
+from nurbscnc.output.stream.endpoints import serve as serve
+
+# The "X as X" imports re-export the card's configuration and endpoints: the CLI's
+# ``card-sim`` imports them from here with the card.
 
 _HALF_SEQ = p.SEQ_MODULO // 2
 
 
-@dataclass(frozen=True)
-class Faults:
-    """Injected faults. Rates are probabilities per frame, in each direction."""
-
-    drop_rate: float = 0.0  #: a frame vanishes
-    corrupt_rate: float = 0.0  #: one random bit of a frame is flipped
-    delay_s: float = 0.0  #: every reply leaves this much later [s]
-    reset_after_frames: int | None = None  #: the card resets once after this many frames in
-    stall_after_frames: int | None = None  #: the card goes silent after this many frames in
-
-    def __post_init__(self) -> None:
-        for name in ("drop_rate", "corrupt_rate"):
-            v = getattr(self, name)
-            if not 0.0 <= v < 1.0:
-                raise ConfigError(f"--{name.replace('_', '-')} must be in [0, 1), got {v}")
-        if self.drop_rate + self.corrupt_rate >= 1.0:
-            raise ConfigError("--drop-rate + --corrupt-rate must be < 1")
-        if self.delay_s < 0.0:
-            raise ConfigError(f"--delay-ms must be >= 0, got {self.delay_s * 1e3}")
-
-
-@dataclass(frozen=True)
-class CardConfig:
-    """What the simulated card is: axes, buffer, pulse limit, period, speed, start position.
-
-    ``speed`` None executes every period as soon as it is accepted (as fast as possible);
-    otherwise periods run every ``period_s / speed`` seconds of wall time. The card starts
-    executing when ``start_fill_periods`` are buffered (default: half the buffer) or END has
-    arrived, and pushes a STATUS every ``status_every_periods`` executed periods.
-    ``gap_s``: the receiver's limit on a stalled partial frame (see :class:`FrameDecoder`).
-    """
-
-    axes: int = 3
-    buffer_periods: int = 256
-    max_pulses_per_period: int = 127
-    period_s: float = 1e-3
-    speed: float | None = 1.0
-    start_fill_periods: int | None = None
-    status_every_periods: int = 16
-    position_steps: tuple[int, ...] = (0, 0, 0)
-    faults: Faults = field(default_factory=Faults)
-    #: an incomplete frame whose bytes stop arriving this long is abandoned [s]; 10 ms is
-    #: about 115 byte times at 115200 baud, far more than a UART leaves between bytes
-    gap_s: float = 0.01
-
-    def __post_init__(self) -> None:
-        if not 1 <= self.axes <= 15:
-            raise ConfigError(f"axes must be 1..15, got {self.axes}")
-        if not 1 <= self.buffer_periods <= 0xFFFF:
-            raise ConfigError(f"--buffer must be 1..65535 periods, got {self.buffer_periods}")
-        if not 1 <= self.max_pulses_per_period <= 32767:
-            raise ConfigError(f"--max-pulses must be 1..32767, got {self.max_pulses_per_period}")
-        if not self.period_s > 0.0:
-            raise ConfigError(f"--period-ms must be > 0, got {self.period_s * 1e3}")
-        if self.speed is not None and not self.speed > 0.0:
-            raise ConfigError(f"--speed must be > 0, got {self.speed}")
-        if len(self.position_steps) != self.axes:
-            raise ConfigError(f"the start position needs {self.axes} values")
-
-    @property
-    def start_fill(self) -> int:
-        """Buffered periods that start execution."""
-        if self.start_fill_periods is not None:
-            return max(1, min(self.start_fill_periods, self.buffer_periods))
-        return max(1, self.buffer_periods // 2)
-
-
-class CardSim:
+class CardSim(FaultInjection, Execution):
     """One simulated card (single-threaded: call it from one thread at a time).
 
     Counters (attributes) for tests and the ``--report``: ``bytes_received``,
@@ -201,57 +140,6 @@ class CardSim:
         if self.stalled:
             return
         self._from_wire(self._wire.feed(data, now), now)
-
-    def _from_wire(self, items, now: float) -> None:
-        """Frames split from the wire: faults, resets and stalls, then the card's decoder."""
-        faults = self.config.faults
-        for item in items:
-            self.frames_received += 1
-            if faults.reset_after_frames is not None and self.resets == 0 \
-                    and self.frames_received >= faults.reset_after_frames:  # fmt: skip
-                self._reset(now)
-                continue
-            if faults.stall_after_frames is not None \
-                    and self.frames_received > faults.stall_after_frames:  # fmt: skip
-                self.stalled = True
-                return
-            if isinstance(item, p.BadFrame):  # damaged on the wire already
-                self._handle(item, now)
-                continue
-            raw = self._inject(p.encode_frame(item.type, item.payload, item.seq), "in")
-            if raw is None:
-                continue
-            for ev in self._decoder.feed(raw):
-                self._handle(ev, now)
-
-    def _inject(self, raw: bytes, direction: str) -> bytes | None:
-        """Apply drop/corrupt to one frame; None when it is dropped."""
-        faults = self.config.faults
-        if faults.drop_rate == 0.0 and faults.corrupt_rate == 0.0:
-            return raw
-        r = self._rng.random()
-        if r < faults.drop_rate:
-            setattr(self, f"dropped_{direction}", getattr(self, f"dropped_{direction}") + 1)
-            return None
-        if r < faults.drop_rate + faults.corrupt_rate:
-            setattr(self, f"corrupted_{direction}", getattr(self, f"corrupted_{direction}") + 1)
-            bit = self._rng.randrange(8 * len(raw))
-            b = bytearray(raw)
-            b[bit // 8] ^= 1 << (bit % 8)
-            return bytes(b)
-        return raw
-
-    def _reset(self, now: float) -> None:
-        """Power cycle: new session, position lost, buffer gone; announce with a CAPS."""
-        self.resets += 1
-        old = self.session_id
-        while self.session_id == old:
-            self.session_id = self._rng.getrandbits(32)
-        self.position[:] = 0
-        self._decoder = p.FrameDecoder()
-        self._open_stream(now)
-        self.state = p.CardState.IDLE
-        self._send(self.caps(), now)
 
     def _handle(self, ev, now: float) -> None:
         streaming = self.state in (p.CardState.FILLING, p.CardState.RUNNING, p.CardState.HOLD)
@@ -415,96 +303,9 @@ class CardSim:
             self._end = msg
         self.expected += 1
         return "ok"
-
-    def _run_fast(self, now: float) -> None:
-        """As fast as possible: every buffered period runs at once (unless held)."""
-        if self._period_wall_s is None and self.state is p.CardState.RUNNING:
-            self._execute(self.fill, now)
-
     def _ack(self, now: float) -> None:
         self.acks_sent += 1
         self._send(p.Ack(self.expected % p.SEQ_MODULO, self.free), now)
-
-    def _maybe_start(self, now: float) -> None:
-        fast = self._period_wall_s is None
-        if self.state is p.CardState.FILLING and (
-            self.fill >= self.config.start_fill or self._end is not None or (fast and self.fill)
-        ):
-            self.state = p.CardState.RUNNING
-            self._started = True
-            self._next_due = now
-            self._send(self.status(), now)
-
-    # -- time --------------------------------------------------------------------------------
-    def advance(self, now: float) -> None:
-        """Execute every period due by ``now`` [s] (real time / speed); abandon a stalled frame."""
-        if not self.stalled and self._wire.pending_bytes:
-            self._from_wire(self._wire.expire(now), now)
-        if self.stalled or self.state is not p.CardState.RUNNING or self._period_wall_s is None:
-            return
-        due = int((now - self._next_due) // self._period_wall_s) + 1
-        if due <= 0:
-            return
-        n = min(due, self.fill)
-        self._execute(n, now)
-        self._next_due += n * self._period_wall_s
-        if self.fill == 0 and self._end is not None:
-            self._maybe_finish(now)
-        elif due > n:
-            self._raise_alarm(
-                p.AlarmCode.UNDERRUN,
-                f"buffer underrun: period {self.stream_executed + 1} was due and the buffer "
-                "was empty",
-                now,
-            )
-
-    def _execute(self, n: int, now: float) -> None:
-        """Run the next ``n`` buffered periods: move, log, push a STATUS now and then."""
-        if n <= 0:
-            return
-        taken = []
-        left = n
-        while left:
-            head = self._buffer[0]
-            if len(head) <= left:
-                taken.append(self._buffer.popleft())
-                left -= len(head)
-            else:
-                taken.append(head[:left])
-                self._buffer[0] = head[left:]
-                left = 0
-        block = np.vstack(taken) if len(taken) > 1 else taken[0]
-        self.position += block.sum(axis=0)
-        self._log.append(block)
-        self.fill -= n
-        self.executed_periods += n
-        self.stream_executed += n
-        self._since_status += n
-        if self._since_status >= self.config.status_every_periods:
-            self._since_status = 0
-            self._send(self.status(), now)
-
-    def _maybe_finish(self, now: float) -> None:
-        if self._end is None or self.fill or self.state is not p.CardState.RUNNING:
-            return
-        pos = tuple(int(v) for v in self.position)
-        if self._end.periods != self.stream_executed or tuple(self._end.position_steps) != pos:
-            self._raise_alarm(p.AlarmCode.END_MISMATCH,
-                              f"END says {self._end.periods} periods to "
-                              f"{list(self._end.position_steps)}, executed "
-                              f"{self.stream_executed} to {list(pos)}", now)  # fmt: skip
-            return
-        self.state = p.CardState.DONE
-        self._send(self.status(), now)
-
-    def _raise_alarm(self, code: int, text: str, now: float) -> None:
-        self.state = p.CardState.ALARM
-        self.alarm, self.alarm_text = p.AlarmCode(code), text
-        self._buffer.clear()
-        self._early.clear()
-        self.fill = self._early_periods = 0
-        self._send(p.Alarm(int(code), text), now)
-        self._send(self.status(), now)
 
     # -- output ------------------------------------------------------------------------------
     def _send(self, msg, now: float) -> None:
@@ -552,256 +353,3 @@ class CardSim:
                    buffer_periods=self.config.buffer_periods, session_id=self.session_id,
                    stalled=self.stalled)  # fmt: skip
         return out
-
-
-# -- the wire ------------------------------------------------------------------------------------
-class Wire:
-    """A serial line's byte rate: bytes pushed at t arrive one every 10/baud s after t."""
-
-    def __init__(self, baud: int | None):
-        self.byte_s = None if not baud else p.BITS_PER_BYTE_8N1 / baud
-        self._queue: collections.deque[list] = collections.deque()  # [start_s, data, taken]
-        self._free_at = 0.0
-
-    def push(self, data: bytes, now: float) -> None:
-        if data:
-            start = max(now, self._free_at)
-            self._free_at = start + (len(data) * self.byte_s if self.byte_s else 0.0)
-            self._queue.append([start, data, 0])
-
-    def pop(self, now: float) -> bytes:
-        """The bytes that have arrived by ``now``."""
-        if self.byte_s is None:
-            out = b"".join(item[1] for item in self._queue)
-            self._queue.clear()
-            return out
-        chunks = []
-        while self._queue:
-            start, data, taken = self._queue[0]
-            arrived = min(len(data), int((now - start) / self.byte_s))
-            if arrived > taken:
-                chunks.append(data[taken:arrived])
-                self._queue[0][2] = arrived
-            if arrived < len(data):
-                break
-            self._queue.popleft()
-        return b"".join(chunks)
-
-    def next_s(self) -> float | None:
-        if not self._queue:
-            return None
-        start, data, taken = self._queue[0]
-        return start + (taken + 1) * self.byte_s if self.byte_s else start
-
-    def done_s(self) -> float | None:
-        """When the oldest chunk on the line has arrived whole (None: nothing on the line)."""
-        if not self._queue:
-            return None
-        start, data, _ = self._queue[0]
-        return start + len(data) * self.byte_s if self.byte_s else start
-
-    def queued_bytes(self, now: float) -> int:
-        """Bytes pushed and not yet arrived by ``now``."""
-        if self.byte_s is None:
-            return sum(len(item[1]) for item in self._queue)
-        return max(0, round((self._free_at - now) / self.byte_s))
-
-    def drop_unsent(self, now: float) -> None:
-        """Forget the chunks not yet started by ``now`` (a port's output queue flushed)."""
-        while self._queue and self._queue[-1][0] > now:
-            self._queue.pop()
-        if self._queue:
-            start, data, _ = self._queue[-1]
-            self._free_at = start + len(data) * (self.byte_s or 0.0)
-        else:
-            self._free_at = min(self._free_at, now)
-
-
-# -- endpoints -----------------------------------------------------------------------------------
-class PtyEndpoint:
-    """A pseudo-terminal: the card holds the master, ``path`` is the slave the sender opens.
-
-    The card keeps its own descriptor of the slave open (so a sender closing the port is not an
-    error) and puts the line in raw mode (no echo, no line editing).
-    """
-
-    def __init__(self) -> None:
-        self.master, self._slave = os.openpty()
-        tty.setraw(self._slave)
-        self.path = os.ttyname(self._slave)
-        os.set_blocking(self.master, False)
-        self.closed = False
-
-    def fileno(self) -> int:
-        return self.master
-
-    def read(self) -> bytes | None:
-        """Available bytes; None when the endpoint is gone."""
-        try:
-            return os.read(self.master, 65536)
-        except BlockingIOError:
-            return b""
-        except OSError:
-            return None
-
-    def write(self, data: bytes) -> None:
-        view = memoryview(data)
-        deadline = time.monotonic() + 0.5
-        while view and time.monotonic() < deadline:
-            try:
-                n = os.write(self.master, view)
-                view = view[n:]
-            except BlockingIOError:
-                select.select([], [self.master], [], 0.01)
-            except OSError:
-                return
-
-    def close(self) -> None:
-        if not self.closed:
-            self.closed = True
-            for fd in (self.master, self._slave):
-                try:
-                    os.close(fd)
-                except OSError:
-                    pass
-
-
-def parse_listen(address: str) -> tuple[str, int]:
-    """``HOST:PORT`` → (host, port); only loopback hosts (the protocol is unauthenticated)."""
-    host, sep, port = address.rpartition(":")
-    host = host.strip("[]")
-    try:
-        if not sep or not host:
-            raise ValueError
-        number = int(port)
-        if not 0 <= number <= 65535 or not ipaddress.ip_address(host).is_loopback:
-            raise ValueError
-    except ValueError:
-        raise ConfigError(
-            f"--listen wants a loopback HOST:PORT such as 127.0.0.1:5555, got {address!r}"
-        ) from None
-    return host, number
-
-
-class TcpEndpoint:
-    """A loopback TCP listener (for ``socket://HOST:PORT``); one connection at a time."""
-
-    def __init__(self, host: str = "127.0.0.1", port: int = 0):
-        if not ipaddress.ip_address(host).is_loopback:
-            raise ConfigError(f"card-sim listens on loopback addresses only, not {host}")
-        family = socket.AF_INET6 if ":" in host else socket.AF_INET
-        self._server = socket.socket(family, socket.SOCK_STREAM)
-        self._server.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        try:
-            self._server.bind((host, port))
-        except OSError as exc:
-            self._server.close()
-            raise StreamError(f"cannot listen on {host}:{port}: {exc.strerror or exc}") from None
-        self._server.listen(1)
-        self._server.setblocking(False)
-        self.host, self.port = self._server.getsockname()[:2]
-        self.path = f"socket://{host}:{self.port}"
-        self._conn: socket.socket | None = None
-        self.connections = 0
-        self.closed = False
-
-    def fileno(self) -> int:
-        return self._conn.fileno() if self._conn is not None else self._server.fileno()
-
-    def read(self) -> bytes | None:
-        if self._conn is None:
-            try:
-                conn, _ = self._server.accept()
-            except BlockingIOError:
-                return b""
-            conn.setblocking(False)
-            conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-            self._conn = conn
-            self.connections += 1
-            return b""
-        try:
-            data = self._conn.recv(65536)
-        except BlockingIOError:
-            return b""
-        except OSError:
-            data = b""
-        if not data:  # the peer closed: wait for the next connection
-            self._conn.close()
-            self._conn = None
-            return None
-        return data
-
-    def write(self, data: bytes) -> None:
-        if self._conn is None:
-            return
-        view = memoryview(data)
-        deadline = time.monotonic() + 0.5
-        while view and time.monotonic() < deadline:
-            try:
-                view = view[self._conn.send(view) :]
-            except BlockingIOError:
-                select.select([], [self._conn], [], 0.01)
-            except OSError:
-                return
-
-    def close(self) -> None:
-        if not self.closed:
-            self.closed = True
-            if self._conn is not None:
-                self._conn.close()
-            self._server.close()
-
-
-def serve(card: CardSim, endpoint, stop: threading.Event | None = None, *, once: bool = False,
-          baud: int | None = None, log=None, linger_s: float = 0.3) -> None:  # fmt: skip
-    """Run ``card`` on ``endpoint`` until ``stop`` is set (or, with ``once``, a stream ended).
-
-    ``baud``: emulate a serial line's byte rate in both directions (None: unlimited).
-    ``log``: a text file; every executed period is appended as ``period,x,y,z`` (the header is
-    written first). With ``once`` the card keeps answering for ``linger_s`` after the stream
-    ended (so the sender reads the final status), then returns; a TCP peer that disconnects
-    after a stream started also ends a ``once`` run.
-    """
-    stop = stop or threading.Event()
-    wire_in, wire_out = Wire(baud), Wire(baud)
-    logged = 0
-    if log is not None:
-        log.write("period," + ",".join("xyzabcuvw"[: card.config.axes]) + "\n")
-    ended_at = None
-    while not stop.is_set():
-        now = time.monotonic()
-        wake = [t for t in (card.next_event_s(), wire_in.next_s(), wire_out.next_s())
-                if t is not None]  # fmt: skip
-        timeout = 0.02 if not wake else min(0.02, max(0.0, min(wake) - now))
-        try:
-            readable, _, _ = select.select([endpoint.fileno()], [], [], timeout)
-        except (OSError, ValueError):
-            return
-        if readable:
-            data = endpoint.read()
-            if data is None:
-                if isinstance(endpoint, PtyEndpoint) or (once and card.frames_received):
-                    return
-                continue
-            wire_in.push(data, time.monotonic())
-        now = time.monotonic()
-        incoming = wire_in.pop(now)
-        if incoming:
-            card.on_bytes(incoming, now)
-        card.advance(now)
-        wire_out.push(card.take_output(now), now)
-        outgoing = wire_out.pop(now)
-        if outgoing:
-            endpoint.write(outgoing)
-        if log is not None and card.executed_periods > logged:
-            rows = card.take_log(logged)
-            index = np.arange(logged + 1, logged + 1 + len(rows))
-            np.savetxt(log, np.column_stack([index, rows]), fmt="%d", delimiter=",")
-            logged += len(rows)
-        if once:
-            if card.finished and ended_at is None:
-                ended_at = now
-            elif not card.finished:
-                ended_at = None
-            if ended_at is not None and now - ended_at > linger_s:
-                return

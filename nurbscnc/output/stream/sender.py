@@ -19,8 +19,8 @@ import serial
 
 from nurbscnc.errors import ConfigError, StreamError
 from nurbscnc.output.stream import protocol as p
-from nurbscnc.output.stream.link import (
-    Link,
+from nurbscnc.output.stream.link import Link
+from nurbscnc.output.stream.linkstate import (
     Progress,
     SenderOptions,
     StreamInterrupted,

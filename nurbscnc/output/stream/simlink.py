@@ -18,9 +18,11 @@ import numpy as np
 
 from nurbscnc.errors import StreamError
 from nurbscnc.output.stream import protocol as p
-from nurbscnc.output.stream.card import CardConfig, CardSim, Wire
-from nurbscnc.output.stream.link import Link, SenderOptions, StreamReport
+from nurbscnc.output.stream.card import CardConfig, CardSim
+from nurbscnc.output.stream.link import Link
+from nurbscnc.output.stream.linkstate import SenderOptions, StreamReport
 from nurbscnc.output.stream.quantise import PulseProgram
+from nurbscnc.output.stream.wire import Wire
 
 
 @dataclass

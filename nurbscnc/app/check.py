@@ -1,0 +1,25 @@
+"""Checking a program without planning it: read, interpret, validate against the machine
+(soft limits, a lower bound of the motion time within ``limits.max_points``), summarise."""
+
+from __future__ import annotations
+
+from nurbscnc.app.load import load_program
+
+
+def check_program(program: str, mach, block_delete: bool = True, tool_table=None,
+                  subroutine_path=(), per_segment: bool = False, progress=None):  # fmt: skip
+    """``(program, summary)`` of the program file ``program`` checked for the machine
+    ``mach`` (:func:`~nurbscnc.plan.limits.check_before_work`; PlanningError when it fails);
+    the summary is :func:`~nurbscnc.plan.report.program_summary`'s, with every segment when
+    ``per_segment``. ``progress``: None or a callback named with each stage."""
+    from nurbscnc.plan.limits import check_before_work
+    from nurbscnc.plan.report import program_summary
+    from nurbscnc.program.columns import segment_columns
+
+    say = progress or (lambda _stage: None)
+    say("reading and interpreting")
+    prog = load_program(program, block_delete, tool_table, subroutine_path)
+    say(f"checking {len(prog.segments)} segments")
+    columns = segment_columns(prog.segments)  # read once for the checks and the summary
+    check_before_work(prog.segments, mach, columns)
+    return prog, program_summary(prog, columns, per_segment=per_segment)

@@ -1,0 +1,123 @@
+"""What a stream sends, prepared before any port is opened: the pulses of a reference-point
+file or of a whole planned run, or the job of a program planned cut window by cut window."""
+
+from __future__ import annotations
+
+from nurbscnc.errors import ConfigError, PlanningError
+
+#: The suffixes of reference-point files (``run -o``), streamed as they are.
+POINT_SUFFIXES = (".csv", ".npz")
+
+
+def is_points_file(path: str) -> bool:
+    """Whether ``path`` names a file of reference points rather than a program."""
+    return path.lower().endswith(POINT_SUFFIXES)
+
+
+def points_of_file(path: str, mach):
+    """The reference points [mm] (N × 3) of the file ``path`` (:data:`POINT_SUFFIXES`),
+    checked for the machine ``mach``: not empty, finite, one point per servo period (the
+    CSV's 1 µs rounding of t allowed), inside the soft limits (PlanningError or
+    ConfigError naming the first offending point)."""
+    import numpy as np
+
+    from nurbscnc.output.files import read_points
+
+    data = read_points(path)
+    points = np.column_stack([data["x"], data["y"], data["z"]]).astype(float)
+    if points.shape[0] == 0:
+        raise PlanningError(f"{path}: no reference points")
+    if not np.all(np.isfinite(points)):
+        raise PlanningError(f"{path}: a reference point is not a finite number")
+    period_s = mach.servo.period_s
+    dt = np.diff(np.asarray(data["t"], dtype=float))
+    # The CSV writes t with 6 decimals (1 µs): allow that rounding, nothing more.
+    bad = np.flatnonzero(np.abs(dt - period_s) > 1.01e-6)
+    if bad.size:
+        k = int(bad[0])
+        raise ConfigError(
+            f"{path}: points {k + 1} and {k + 2} are {dt[k] * 1e3:.6g} ms apart; the "
+            f"machine's servo period is {period_s * 1e3:g} ms (one point per period)"
+        )
+    inside = mach.soft_limits.inside(points)
+    if not np.all(inside):
+        k = int(np.flatnonzero(~inside)[0])
+        raise PlanningError(
+            f"{path}: point {k + 1} ({', '.join(f'{v:.4f}' for v in points[k])}) mm is "
+            "outside the soft limits"
+        )
+    return points
+
+
+def pulses_of_points(points_mm, mach, lines=None):
+    """The :class:`~nurbscnc.output.stream.quantise.PulseProgram` of reference points [mm]
+    at the machine's steps per mm and servo period (``lines``: their source lines), checked
+    against the card's pulse limit per period (before any port is touched)."""
+    from nurbscnc.output.stream.quantise import check_pulse_limit, quantise
+
+    if lines is None:
+        pulses = quantise(points_mm, mach.steps.per_mm, mach.servo.period_s)
+    else:
+        pulses = quantise(points_mm, mach.steps.per_mm, mach.servo.period_s, lines)
+    check_pulse_limit(pulses, mach.steps.max_pulses_per_period)
+    return pulses
+
+
+def needs_whole_plan(options) -> bool:
+    """Whether a program is planned whole before it is streamed rather than cut window by
+    cut window: a baseline ``algorithm`` has no look-ahead plan to cut, and the
+    pre-compensated reference (ZPETC) is not causal: each of its samples depends on the
+    planned reference ahead of it, to the program's end."""
+    from nurbscnc.plan.options import Algorithm
+
+    return options.algorithm != Algorithm.PH_LOOKAHEAD or options.precompensate
+
+
+def stream_job(prog, mach, options, from_line: int | None = None,
+               optional_stop: bool = False, override: float = 1.0):  # fmt: skip
+    """What streams the interpreted program ``prog`` (from ``from_line`` on:
+    :func:`~nurbscnc.output.stream.job.start_at_line`): ``(job, None)``, a
+    :class:`~nurbscnc.output.stream.job.Job` planned cut window by cut window while the
+    card runs; or, when :func:`needs_whole_plan`, ``(None, pulses)``: the pulses of the whole
+    run (the points ``run`` writes with the same options). Everything that can be wrong
+    with the input raises here, before any port is touched (the pulse limit too; for a job,
+    the first window's errors)."""
+    from nurbscnc.output.stream.feed import WindowFeed
+    from nurbscnc.output.stream.job import Job, start_at_line
+    from nurbscnc.pipeline import run_program, window_plans
+
+    if from_line is not None:
+        try:
+            prog = start_at_line(prog, from_line)
+        except ValueError as exc:
+            raise ConfigError(str(exc)) from None
+    if needs_whole_plan(options):
+        samples = run_program(prog, mach, options).samples
+        return None, pulses_of_points(samples.points_mm, mach, samples.line)
+
+    def pulse_limit(points_mm, lines) -> None:
+        # The plan at 100 %: a lower override and a hold only slow down.
+        pulses_of_points(points_mm, mach, lines)
+
+    # Planned cut window by cut window on a thread while the card runs the first ones; the
+    # first window is waited for here, so its errors come before the port.
+    feed = WindowFeed(window_plans(prog, mach, options, each=pulse_limit))
+    job = Job(None, prog, mach, optional_stop=optional_stop, override=override,
+              lookahead_pieces=options.lookahead.lookahead_pieces, feed=feed)  # fmt: skip
+    return job, None
+
+
+def stream_report(program: str, job, reports: list) -> dict:
+    """The JSON report of a finished stream: the last part's card state
+    (:meth:`~nurbscnc.output.stream.sender.StreamReport.to_json`), the counters summed over
+    the ``reports`` of every part, and the ``job``'s own report (sections, holds, planning,
+    notes; one section without a job). ``program`` is named as every command names it
+    (standard input is ``<stdin>``)."""
+    extra = job.report() if job is not None else {"sections": 1}
+    body = {**reports[-1].to_json(),
+            "executed_periods": sum(r.executed_periods for r in reports),
+            "frames_sent": sum(r.frames_sent for r in reports),
+            "bytes_sent": sum(r.bytes_sent for r in reports),
+            "retransmits": sum(r.retransmits for r in reports),
+            "duration_s": sum(r.duration_s for r in reports), **extra}  # fmt: skip
+    return {"ok": True, "program": "<stdin>" if program == "-" else program, **body}

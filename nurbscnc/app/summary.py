@@ -1,0 +1,104 @@
+"""The summaries of a command as data: the plan summary of a run, its JSON text, the
+machine-profile and error objects of the JSON output (docs/json.md), and the summary's
+figures as text."""
+
+from __future__ import annotations
+
+import json
+
+
+def machine_json(mach) -> dict:
+    """``{"machine_profile": {path, found_by, contour_check}}`` for a command's JSON."""
+    from nurbscnc.machine.profile import profile_info
+
+    return {"machine_profile": profile_info(mach)}
+
+
+def error_json(exc) -> dict:
+    """The JSON of a :class:`~nurbscnc.errors.NurbsCncError` (its position, if any)."""
+    pos = exc.pos
+    entry = {"line": pos.line if pos else None, "column": pos.column if pos else None,
+             "message": exc.message}  # fmt: skip
+    return {"ok": False, "errors": [entry]}
+
+
+def usage_error_json(message: str) -> dict:
+    """The JSON of an option error (docs/json.md): the shape of a program error, without a
+    position."""
+    return {"ok": False, "errors": [{"line": None, "column": None, "message": message}]}
+
+
+def summary_of(prog, mach, run, stats=None, lower_bound: bool = True) -> dict:
+    """The plan summary of a run (:func:`nurbscnc.plan.report.plan_summary`). ``stats``: the
+    :class:`~nurbscnc.plan.report.SampleStats` gathered while the points were written (None:
+    gathered here, window by window, without whole arrays); a baseline is simulated on its
+    whole samples. ``lower_bound``: with the kinematic lower bound (the JSON has it)."""
+    from nurbscnc.plan.report import SampleStats, plan_summary
+
+    samples = run.samples if run.plan is None else stats
+    if samples is None:
+        samples = SampleStats(run.plan)
+        for window in run.chunks():
+            samples.add(window)
+    summary = plan_summary(prog, mach, samples, run.plan, run.check, run.algorithm,
+                           run.cycle_time_s, lower_bound, run.columns)  # fmt: skip
+    if getattr(run, "precompensation", None) is not None:  # --precompensate
+        summary["precompensation"] = run.precompensation.as_json()
+    return {**summary, **machine_json(mach)}
+
+
+def summary_json(summary: dict) -> str:
+    """The JSON text of a summary, the cycle collector paused while it is made: a long
+    program's 200,000 per-line times make as many strings, which set off full collections
+    that walk every object of the run (two, 0.08 s, on the 200k spiral) and find nothing —
+    the encoder makes no cycles."""
+    from nurbscnc.program.fastlane import pause_cyclic_gc
+
+    with pause_cyclic_gc():
+        return json_in_pieces(summary)
+
+
+#: Entries of a large mapping encoded per ``json.dumps`` call by :func:`json_in_pieces`.
+JSON_PIECE = 8192
+
+
+def json_in_pieces(summary: dict) -> str:
+    """``json.dumps(summary)``, the same text, with the large mappings (a long program's
+    per-line times) encoded :data:`JSON_PIECE` entries per call: the C encoder holds the
+    interpreter lock for a whole call, and ``run`` encodes while its output is being
+    finished in the other thread (:func:`nurbscnc.app.output.write_output`), which needs the
+    lock now and then. A mapping's text is its entries' joined by ", " inside braces, as
+    json.dumps writes it."""
+
+    def encoded(value) -> str:
+        if not (isinstance(value, dict) and len(value) > JSON_PIECE):
+            return json.dumps(value)
+        items = list(value.items())
+        return "{" + ", ".join(json.dumps(dict(items[i : i + JSON_PIECE]))[1:-1]
+                               for i in range(0, len(items), JSON_PIECE)) + "}"  # fmt: skip
+
+    if not all(isinstance(k, str) for k in summary):  # json.dumps's own key conversions
+        return json.dumps(summary)
+    return "{" + ", ".join(f"{json.dumps(k)}: {encoded(v)}" for k, v in summary.items()) + "}"
+
+
+def clock_suffix(seconds: float) -> str:
+    """`` (h:mm:ss)`` for a time of a minute or more (human summaries only), else ``""``.
+    Rounded to whole seconds: 545.4 s → `` (0:09:05)``."""
+    if not seconds >= 60.0:
+        return ""
+    minutes, secs = divmod(int(round(seconds)), 60)
+    hours, minutes = divmod(minutes, 60)
+    return f" ({hours}:{minutes:02d}:{secs:02d})"
+
+
+def precompensation_text(summary: dict) -> str | None:
+    """The human line of ``--precompensate`` (None without it)."""
+    pre = summary.get("precompensation")
+    if pre is None:
+        return None
+    return (f"  pre-compensated reference (ZPETC): {pre['reference_deviation_max_um']:.2f} µm "
+            f"from the path at most; contour error with a ±10 % model error "
+            f"≤ {pre['sensitivity_contour_max_um']:.2f} µm; motion delayed "
+            f"{pre['lead_s'] * 1000:g} ms for the inverse's look-ahead, reference settles "
+            f"{pre['tail_s'] * 1000:g} ms after the stop")

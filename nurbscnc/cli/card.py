@@ -1,0 +1,175 @@
+"""``nurbscnc card-position`` and ``nurbscnc card-sim``: read or set a pulse-train card's
+position, and simulate such a card on a pty or loopback TCP."""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import json
+import signal
+import sys
+import threading
+
+import click
+
+from nurbscnc.cli.handle import handle_errors
+from nurbscnc.errors import NurbsCncError, OutputError
+
+
+@click.command("card-position")
+@click.option("--port", required=True, help="The card's serial device.")
+@click.option("--allow-url", is_flag=True, help="Accept a pyserial URL as --port.")
+@click.option("--baud", type=click.IntRange(min=1), default=115200, show_default=True)
+@click.option("--set", "set_to", default=None, metavar="X,Y,Z",
+              help="Set the card's position [steps] (protocol version 3; not while a stream "
+                   "runs), e.g. 0,0,0 after homing.")
+@click.option("--timeout", "timeout_s", type=click.FloatRange(min=0.0, min_open=True),
+              default=2.0, show_default=True)
+@click.option("--json", "as_json", is_flag=True, help="Print state and position as JSON.")
+@handle_errors
+def card_position(port, allow_url, baud, set_to, timeout_s, as_json):
+    """Read (or --set) the card's position [steps] and state, e.g. to zero a card between two
+    streams without restarting it.
+
+    Example: nurbscnc card-position --port /dev/ttyUSB0 --set 0,0,0
+    """
+    from nurbscnc.output.stream import protocol as p
+    from nurbscnc.output.stream.sender import card_position as exchange
+    from nurbscnc.output.stream.sender import open_port
+
+    ser = open_port(port, baud=baud, allow_url=allow_url, write_timeout_s=timeout_s)
+    try:
+        target = _parse_position(set_to, len(set_to.split(","))) if set_to else None
+        status = exchange(ser, target, timeout_s)
+    finally:
+        with contextlib.suppress(Exception):
+            ser.close()
+    state = p.CardState(status.state).name
+    if as_json:
+        click.echo(json.dumps({"ok": True, "state": state,
+                               "position_steps": list(status.position_steps)}))  # fmt: skip
+        return
+    click.echo(f"card: {state}, position {list(status.position_steps)} steps")
+
+
+# -- card-sim ------------------------------------------------------------------------------------
+def _card_errors(func):
+    """NurbsCncError → ``card-sim: error: message`` and its exit code."""
+
+    @functools.wraps(func)
+    def wrapper(*args, **kwargs):
+        try:
+            return func(*args, **kwargs)
+        except NurbsCncError as exc:
+            click.echo(f"card-sim: error: {exc.message}", err=True)
+            sys.exit(exc.exit_code)
+
+    return wrapper
+
+
+def _parse_position(text: str, axes: int) -> tuple[int, ...]:
+    from nurbscnc.errors import ConfigError
+
+    try:
+        values = tuple(int(v) for v in text.split(","))
+    except ValueError:
+        raise ConfigError(f"--position wants {axes} integers (steps) like 0,0,0") from None
+    if len(values) != axes:
+        raise ConfigError(f"--position wants {axes} integers, got {len(values)}")
+    return values
+
+
+@click.command("card-sim")
+@click.option("--listen", default=None, metavar="HOST:PORT",
+              help="Listen on loopback TCP (use with stream --port socket://HOST:PORT "
+                   "--allow-url) instead of opening a pty; PORT 0 picks a free one.")
+@click.option("--speed", type=click.FloatRange(min=0.0, min_open=True), default=1.0,
+              show_default=True, help="Run N times faster than real time.")
+@click.option("--fast", is_flag=True, help="Execute periods as fast as they arrive.")
+@click.option("--buffer", "buffer_periods", type=click.IntRange(1, 65535), default=256,
+              show_default=True, help="Buffer size [periods].")
+@click.option("--start-fill", type=click.IntRange(min=1), default=None,
+              help="Buffered periods that start execution (default: half the buffer).")
+@click.option("--max-pulses", type=click.IntRange(1, 32767), default=127, show_default=True,
+              help="Most pulses per period and axis.")
+@click.option("--period-ms", type=click.FloatRange(min=0.0, min_open=True), default=1.0,
+              show_default=True, help="The card's period.")
+@click.option("--axes", type=click.IntRange(1, 15), default=3, show_default=True)
+@click.option("--position", default=None, metavar="X,Y,Z",
+              help="Start position [steps] (default: all 0).")
+@click.option("--baud", type=click.IntRange(min=1), default=None,
+              help="Emulate a serial line's byte rate (10 bits per byte) both ways.")
+@click.option("--drop-rate", type=float, default=0.0, help="Probability a frame is lost.")
+@click.option("--corrupt-rate", type=float, default=0.0,
+              help="Probability a frame gets one bit flipped.")
+@click.option("--delay-ms", type=float, default=0.0, help="Delay of every reply [ms].")
+@click.option("--reset-after-frames", type=click.IntRange(min=1), default=None,
+              help="Reset (new session, position lost) after N received frames.")
+@click.option("--stall-after-frames", type=click.IntRange(min=0), default=None,
+              help="Stop answering after N received frames.")
+@click.option("--seed", type=int, default=None, help="Seed of the fault injection.")
+@click.option("--log", "log_path", type=click.Path(dir_okay=False), default=None,
+              help="CSV of executed periods: period,x,y,z (pulses).")
+@click.option("--report", "report_path", type=click.Path(dir_okay=False), default=None,
+              help="JSON counters and final state, written at exit.")
+@click.option("--once", is_flag=True, help="Exit after one stream has ended.")
+@_card_errors
+def card_sim(listen, speed, fast, buffer_periods, start_fill, max_pulses, period_ms, axes,
+             position, baud, drop_rate, corrupt_rate, delay_ms, reset_after_frames,
+             stall_after_frames, seed, log_path, report_path, once):  # fmt: skip
+    """Simulate a pulse-train motion card on a pty (its path is printed) or loopback TCP.
+
+    Prints the port to open (a /dev/pts path, or socket://HOST:PORT) on the first line of
+    stdout, then serves until SIGINT/SIGTERM (or, with --once, until a stream ended).
+
+    Example: nurbscnc card-sim --fast --log executed.csv
+    """
+    from nurbscnc.output.files import atomic_output
+    from nurbscnc.output.stream.card import (
+        CardConfig,
+        CardSim,
+        Faults,
+        PtyEndpoint,
+        TcpEndpoint,
+        parse_listen,
+        serve,
+    )
+
+    faults = Faults(drop_rate=drop_rate, corrupt_rate=corrupt_rate, delay_s=delay_ms * 1e-3,
+                    reset_after_frames=reset_after_frames,
+                    stall_after_frames=stall_after_frames)  # fmt: skip
+    config = CardConfig(
+        axes=axes, buffer_periods=buffer_periods, max_pulses_per_period=max_pulses,
+        period_s=period_ms * 1e-3, speed=None if fast else speed, start_fill_periods=start_fill,
+        position_steps=_parse_position(position, axes) if position else (0,) * axes,
+        faults=faults,
+    )  # fmt: skip
+    card = CardSim(config, seed=seed)
+    endpoint = TcpEndpoint(*parse_listen(listen)) if listen else PtyEndpoint()
+    stop = threading.Event()
+    previous = {}
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        previous[sig] = signal.signal(sig, lambda _s, _f: stop.set())
+    click.echo(endpoint.path)
+    sys.stdout.flush()
+    try:
+        log = open(log_path, "w", encoding="utf-8") if log_path else None  # noqa: SIM115
+    except OSError as exc:
+        endpoint.close()
+        for sig, old in previous.items():
+            signal.signal(sig, old)
+        raise OutputError(f"cannot write the log {log_path}: {exc.strerror or exc}") from None
+    try:
+        serve(card, endpoint, stop, once=once, baud=baud, log=log)
+    finally:
+        endpoint.close()
+        if log is not None:
+            log.close()
+        for sig, old in previous.items():
+            signal.signal(sig, old)
+        if report_path:
+            with atomic_output(report_path) as fh:
+                json.dump(card.report(), fh)
+    state = card.report()
+    click.echo(f"card-sim: {state['state']}, {state['executed_periods']} periods executed, "
+               f"position {state['position_steps']} steps", err=True)  # fmt: skip

@@ -1,0 +1,129 @@
+"""The operator of a stream: feed hold, continue, feed override and abort, asked by signal
+or by a key on the terminal, routed to the running job or to the card's sender."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import sys
+import threading
+
+
+class Operator:
+    """What the operator asks, by signal or key: SIGUSR1 / space feed hold, SIGUSR2 / Enter
+    continue (after a program stop or a hold), + / - feed override, SIGINT/SIGTERM abort (the
+    last two only once the port is open; before, they end the command as usual).
+
+    With a :class:`Job` (a planned program) hold and continue go to the job (a decelerating
+    hold along the path); for a point file to the card (HOLD/RESUME: the card stops at the
+    next period). A hold asked while the program is still being planned is kept, with a
+    message: the stream then waits at the start until continued.
+    """
+
+    def __init__(self) -> None:
+        self.sender = None
+        self.job = None
+        self.hold: bool | None = None  # asked before the sender existed
+
+    def attach_job(self, job) -> None:
+        self.job = job
+        if job is not None and self.hold:
+            job.request_hold()
+            self.hold = None
+
+    def attach(self, sender) -> None:
+        self.sender = sender
+        if self.hold is not None and self.job is None:
+            (sender.request_hold if self.hold else sender.request_resume)()
+
+    def on_hold(self, *_args) -> None:
+        self._feed(True)
+
+    def on_resume(self, *_args) -> None:
+        self._feed(False)
+
+    def on_abort(self, *_args) -> None:
+        self.sender.request_abort()
+
+    def on_key(self, key: bytes) -> None:
+        if key in (b" ", b"h"):
+            self._feed(True)
+        elif key in (b"\n", b"\r", b"c"):
+            self._feed(False)
+        elif key in (b"+", b"=", b"-", b"_") and self.job is not None:
+            self.job.step_override(1 if key in (b"+", b"=") else -1)
+
+    def _feed(self, hold: bool) -> None:
+        if self.job is not None:
+            self.job.request_hold() if hold else self.job.resume()
+            return
+        if self.sender is not None:
+            (self.sender.request_hold if hold else self.sender.request_resume)()
+            return
+        self.hold = hold
+        text = ("feed hold asked while planning: the stream will wait at the start "
+                "(SIGUSR2 continues)\n" if hold else
+                "resume asked while planning: no feed hold when the stream opens\n")  # fmt: skip
+        # os.write, not print: a signal handler may interrupt a print in progress.
+        with contextlib.suppress(OSError):
+            os.write(2, b"stream: " + text.encode())
+
+
+@contextlib.contextmanager
+def routed_signals(operator: Operator, names: tuple[str, ...]):
+    """Route the named signals to ``operator`` (main thread only); restore them after."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    actions = {"SIGUSR1": operator.on_hold, "SIGUSR2": operator.on_resume,
+               "SIGINT": operator.on_abort, "SIGTERM": operator.on_abort}  # fmt: skip
+    previous = {}
+    try:
+        for name in names:
+            if hasattr(signal, name):
+                sig = getattr(signal, name)
+                previous[sig] = signal.signal(sig, actions[name])
+        yield
+    finally:
+        for sig, old in previous.items():
+            signal.signal(sig, old)
+
+
+@contextlib.contextmanager
+def key_reader(operator: Operator, enabled: bool):
+    """Read single keys from a terminal on stdin (cbreak mode, restored after) in a thread."""
+    if not enabled:
+        yield
+        return
+    import select
+    import termios
+    import tty
+
+    fd = sys.stdin.fileno()
+    try:
+        saved = termios.tcgetattr(fd)
+        tty.setcbreak(fd)
+    except (termios.error, OSError):
+        yield
+        return
+    stop = threading.Event()
+
+    def read_keys() -> None:
+        while not stop.is_set():
+            ready, _, _ = select.select([fd], [], [], 0.1)
+            if ready:
+                key = os.read(fd, 1)
+                if not key:
+                    return
+                operator.on_key(key)
+
+    thread = threading.Thread(target=read_keys, daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        thread.join(1.0)
+        with contextlib.suppress(termios.error, OSError):
+            termios.tcsetattr(fd, termios.TCSADRAIN, saved)

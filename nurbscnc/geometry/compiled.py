@@ -1,0 +1,13 @@
+"""The geometry stage's compiled kernel, or None.
+
+``setup.py`` builds :mod:`nurbscnc.geometry._kernels` from ``_kernels.c`` where a C compiler
+is found (optional: without one the package installs anyway). Its one kernel, the
+point-to-segments distance (:func:`nurbscnc.geometry.distance.segment_distances`), keeps its
+Python reference implementation, which gives the same numbers bit for bit and runs where
+``kernels`` is None (tests/test_plan_kernels.py compares the two). A module of its own,
+apart from :mod:`nurbscnc.plan.compiled`, so that geometry imports nothing of the plan."""
+
+try:
+    from nurbscnc.geometry import _kernels as kernels
+except ImportError:  # pragma: no cover - a build without a C compiler
+    kernels = None

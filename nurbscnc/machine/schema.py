@@ -1,0 +1,190 @@
+"""The machine profile's schema: its tables and keys, the value checks of every leaf, the
+``--set`` overrides applied to a parsed file, and the units the file speaks (SPEC §7-§9)."""
+
+from __future__ import annotations
+
+import math
+import sys
+import tomllib
+
+from nurbscnc.errors import ConfigError
+
+#: The machine axes, in the order every per-axis tuple uses.
+AXES = ("x", "y", "z")
+#: Servo model coefficients of SPEC eq. 25, in the profile's key order.
+SERVO_COEFFICIENTS = ("a0", "a1", "a2", "a3", "a4", "b0", "b1", "b2")
+#: Keys of the simple (2nd-order) servo form.
+SERVO_SIMPLE = ("bandwidth_hz", "damping")
+#: Largest damping ratio of the simple form (see :meth:`AxisServo.second_order`).
+MAX_DAMPING = 2.0
+#: Keys of an ``[axis_limits.<axis>]`` table: velocity [mm/min] (like ``limits.v_max_mm_min``),
+#: acceleration [mm/s²] and jerk [mm/s³] of that axis alone.
+AXIS_LIMIT_KEYS = ("v_max_mm_min", "a_max_mm_s2", "j_max_mm_s3")
+#: Servo period when the profile gives none [ms] (SPEC §9).
+DEFAULT_PERIOD_MS = 1.0
+
+# ---------------------------------------------------------------------------------------------
+# Schema. A table is a dict of key -> sub-schema; a leaf is the name of a value check:
+#   "pos"    a finite number > 0        "finite"  any finite number
+#   "count"  an integer >= 1
+# Keys listed in _OPTIONAL may be absent; every other key is required, and unknown keys are
+# errors (a misspelt key must never silently fall back to a default).
+_COEFF_SCHEMA = {
+    "a0": "finite",
+    "a1": "finite",
+    "a2": "finite",
+    "a3": "finite",
+    "a4": "pos",  # leading coefficient: fixes the sign convention, keeps the model proper
+    "b0": "pos",  # b0 / a0 is the DC gain; a servo that does not track has no business here
+    "b1": "finite",
+    "b2": "finite",
+}
+# An axis table holds one of two forms (checked by _check_axis): the coefficients, or the
+# simple form. The schema lists the union so that overrides can name either form's keys.
+_AXIS_SCHEMA = {**_COEFF_SCHEMA, "bandwidth_hz": "pos", "damping": "pos"}
+SCHEMA: dict = {
+    "limits": {
+        "v_max_mm_min": "pos",
+        "rapid_mm_min": "pos",
+        "a_max_mm_s2": "pos",
+        "j_max_mm_s3": "pos",
+        "chord_tolerance_um": "pos",
+        "kappa_ref_per_mm": "pos",
+        "contour_tolerance_um": "pos",
+        "ph_tolerance_um": "pos",
+        "path_tolerance_um": "pos",
+        "max_points": "count",
+    },
+    "servo": {"period_ms": "pos", "x": _AXIS_SCHEMA, "y": _AXIS_SCHEMA, "z": _AXIS_SCHEMA},
+    "steps": {"max_pulses_per_period": "count", "per_mm": {a: "pos" for a in AXES}},
+    "soft_limits": {a: {"min_mm": "finite", "max_mm": "finite"} for a in AXES},
+    # Per-axis limits, beside the path limits of [limits]: a table per axis, every
+    # key optional (an absent key leaves that axis to the path limits alone).
+    "axis_limits": {a: dict.fromkeys(AXIS_LIMIT_KEYS, "pos") for a in AXES},
+}
+_OPTIONAL = frozenset(
+    {"limits.rapid_mm_min", "limits.max_points", "limits.path_tolerance_um", "servo",
+     "servo.period_ms", "servo.x", "servo.y", "servo.z"}
+)
+# [axis_limits]: every table and every key optional.
+_OPTIONAL |= {"axis_limits", *(f"axis_limits.{a}" for a in AXES),
+              *(f"axis_limits.{a}.{k}" for a in AXES for k in AXIS_LIMIT_KEYS)}  # fmt: skip
+
+MM_PER_UM = 1e-3
+#: Default of ``limits.max_points``: 50 million reference points, 13.9 h of motion at 1 ms
+#: (a few GB of samples in memory today).
+DEFAULT_MAX_POINTS = 50_000_000
+S_PER_MS = 1e-3
+S_PER_MIN = 60.0
+
+
+class Reporter:
+    """Builds ConfigError messages: "<source>: <key> <problem>", marking overridden keys."""
+
+    def __init__(self, source: str, overridden: set[str]):
+        self.source = source
+        self.overridden = overridden
+
+    def error(self, key: str, problem: str) -> ConfigError:
+        note = " (set by override)" if key in self.overridden else ""
+        return ConfigError(f"{self.source}: {key} {problem}{note}")
+
+
+def apply_override(data: dict, key: str, value, source: str) -> None:
+    parts = key.split(".")
+    schema = SCHEMA
+    table = data
+    for i, part in enumerate(parts):
+        if not isinstance(schema, dict) or part not in schema:
+            raise ConfigError(f"{source}: override {key!r}: unknown key")
+        schema = schema[part]
+        if i < len(parts) - 1:
+            sub = table.get(part)
+            if sub is None:
+                sub = table[part] = {}
+            elif not isinstance(sub, dict):
+                raise ConfigError(f"{source}: {'.'.join(parts[: i + 1])} must be a table")
+            table = sub
+    if isinstance(schema, dict):
+        raise ConfigError(f"{source}: override {key!r} names a table; give a key inside it")
+    if isinstance(value, str):
+        try:
+            value = tomllib.loads(f"v = {value}")["v"]
+        except (tomllib.TOMLDecodeError, ValueError):
+            raise ConfigError(f"{source}: override {key}: {value[:80]!r} is not a value") from None
+    if len(parts) == 3 and parts[0] == "servo":
+        # Setting a key of one servo form replaces the other form in that axis's table, so
+        # that --set servo.x.bandwidth_hz=… works on a profile with coefficients (and back).
+        other = SERVO_COEFFICIENTS if parts[2] in SERVO_SIMPLE else SERVO_SIMPLE
+        for k in other:
+            table.pop(k, None)
+    table[parts[-1]] = value
+
+
+def check_table(data, schema: dict, prefix: str, rep: Reporter) -> None:
+    """Structure and leaf checks against the schema (unknown, missing, type, range)."""
+    if not isinstance(data, dict):
+        raise rep.error(prefix or "profile", f"must be a table, got {data!r}")
+    for key in data:
+        if key not in schema:
+            full = f"{prefix}.{key}" if prefix else key
+            raise rep.error(full, "is not a known key")
+    for key, sub in schema.items():
+        full = f"{prefix}.{key}" if prefix else key
+        if key not in data:
+            if full in _OPTIONAL:
+                continue
+            raise rep.error(full, "is missing")
+        if sub is _AXIS_SCHEMA:
+            _check_axis(data[key], full, rep)
+        elif isinstance(sub, dict):
+            check_table(data[key], sub, full, rep)
+        else:
+            _check_leaf(data[key], sub, full, rep)
+
+
+#: Largest count a profile may give (a 32-bit signed integer: what a card register holds).
+_COUNT_MAX = 2**31 - 1
+
+
+def _check_leaf(value, kind: str, key: str, rep: Reporter) -> None:
+    if kind == "count":
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise rep.error(key, f"must be an integer, got {value!r}")
+        if value < 1:
+            raise rep.error(key, f"must be >= 1, got {_short(value)}")
+        if value > _COUNT_MAX:
+            raise rep.error(key, f"must be <= {_COUNT_MAX}, got {_short(value)}")
+        return
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise rep.error(key, f"must be a number, got {value!r}")
+    if isinstance(value, int) and abs(value) > sys.float_info.max:  # float() would overflow
+        raise rep.error(key, f"is too large, got {_short(value)}")
+    if not math.isfinite(value):
+        raise rep.error(key, f"must be finite, got {value!r}")
+    if kind == "pos" and not value > 0:
+        raise rep.error(key, f"must be > 0, got {value!r}")
+
+
+def _check_axis(data, key: str, rep: Reporter) -> None:
+    """An axis model table: either all of a0…b2 or both of bandwidth_hz and damping."""
+    if not isinstance(data, dict):
+        raise rep.error(key, f"must be a table, got {data!r}")
+    simple = [k for k in SERVO_SIMPLE if k in data]
+    coeffs = [k for k in SERVO_COEFFICIENTS if k in data]
+    if simple and coeffs:
+        raise rep.error(
+            key, f"mixes the two model forms ({coeffs[0]} and {simple[0]}): give either a0…b2 "
+            "(SPEC eq. 25) or bandwidth_hz and damping"
+        )  # fmt: skip
+    schema = {k: _AXIS_SCHEMA[k] for k in (SERVO_SIMPLE if simple else SERVO_COEFFICIENTS)}
+    check_table(data, schema, key, rep)
+    if simple and data["damping"] > MAX_DAMPING:
+        raise rep.error(f"{key}.damping", f"must be <= {MAX_DAMPING:g}, got {data['damping']!r}")
+
+
+def _short(value: int) -> str:
+    """An integer as text, its middle elided when it has more than 24 digits."""
+    text = str(value)
+    return text if len(text) <= 24 else f"{text[:10]}…{text[-6:]} ({len(text.lstrip('-'))} digits)"
+

@@ -1,0 +1,64 @@
+"""The effective machine profile as TOML text (``nurbscnc profile show``), and where it came
+from for every command's JSON."""
+
+from __future__ import annotations
+
+from nurbscnc.machine.discovery import FOUND_BY_DEFAULT
+from nurbscnc.machine.model import Machine
+from nurbscnc.machine.schema import SCHEMA
+
+
+def _toml_value(value) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int):
+        return str(value)
+    return repr(float(value))  # shortest round-trip form; valid TOML (validated finite)
+
+
+def _ordered(table: dict, schema) -> list[str]:
+    """Keys of ``table`` in schema order (the order of the template)."""
+    order = list(schema) if isinstance(schema, dict) else []
+    return sorted(table, key=lambda k: order.index(k) if k in order else len(order))
+
+
+def _pole_text(p: complex) -> str:
+    return f"{p.real:.6g}" if p.imag == 0.0 else f"{p.real:.6g}{p.imag:+.6g}j"
+
+
+def profile_toml(machine: Machine) -> str:
+    """``machine.settings`` as TOML, in the template's key order, with a header saying where
+    the profile came from and, per servo axis, its poles (and ω_n for the simple form)."""
+    lines = [f"# machine profile: {machine.describe()}"]
+    if not machine.contour_check:
+        lines.append("# no servo model: contour check off")
+
+    def emit(table: dict, schema, prefix: str) -> None:
+        keys = _ordered(table, schema)
+        leaves = [k for k in keys if not isinstance(table[k], dict)]
+        if prefix and leaves:
+            lines.extend(["", f"[{prefix}]"])
+            axis = machine.servo.axis(prefix[6:]) if prefix in ("servo.x", "servo.y",
+                                                                   "servo.z") else None
+            if axis is not None:
+                poles = ", ".join(_pole_text(p) for p in axis.poles())
+                wn = axis.natural_frequency_rad_s
+                extra = f"; wn = {wn:.6g} rad/s" if wn is not None else ""
+                lines.append(f"# poles [1/s]: {poles}{extra}")
+        lines.extend(f"{k} = {_toml_value(table[k])}" for k in leaves)
+        for k in keys:
+            if isinstance(table[k], dict):
+                sub = schema.get(k, {}) if isinstance(schema, dict) else {}
+                emit(table[k], sub, f"{prefix}.{k}" if prefix else k)
+
+    emit(machine.settings, SCHEMA, "")
+    return "\n".join(lines) + "\n"
+
+
+def profile_info(machine: Machine) -> dict:
+    """Where the profile came from, for every command's JSON (key ``machine_profile``)."""
+    return {
+        "path": None if machine.found_by == FOUND_BY_DEFAULT else machine.source,
+        "found_by": machine.found_by,
+        "contour_check": machine.contour_check,
+    }

@@ -1,0 +1,174 @@
+"""The link while streaming: what the card's ACK, NAK and STATUS say (selective repeat,
+credit, the line model), and the timers (new frames, retransmission, hold and resume, polls,
+lost contact)."""
+
+from __future__ import annotations
+
+import math
+
+from nurbscnc.errors import StreamError
+from nurbscnc.output.stream import protocol as p
+from nurbscnc.output.stream.cardcheck import alarm_name
+from nurbscnc.output.stream.linkstate import InFlight
+
+
+class StreamingHandlers:
+    """The streaming phase's handlers (a mixin of :class:`~.link.Link`: it provides
+    ``state``, ``options``, ``program``, ``count``, ``rtt``, ``_send``, ``_resend_oldest``,
+    ``_stop`` and ``_finish_done``)."""
+
+    def _on_acknowledgement(self, msg, now: float) -> None:
+        """ACK, NAK and STATUS name the next frame the card expects and its free buffer."""
+        st = self.state
+        ahead = p.seq_ahead(st.base % p.SEQ_MODULO, msg.next_seq)
+        if ahead > st.nxt - st.base:  # stale or bogus: ignore it whole
+            return
+        if ahead == 0:
+            # No progress although the oldest frame should have arrived long ago: it was lost
+            # (and so was its NAK, or no later frame raised one). A NAK resends anyway.
+            oldest = st.window.get(st.base)
+            if (not isinstance(msg, p.Nak) and oldest is not None
+                    and now - oldest.leaves_s > self.rtt.stale_s):  # fmt: skip
+                self._fast_retransmit(now)
+        else:
+            newest = st.window[st.base + ahead - 1]
+            # Karn: no samples from retransmitted frames, nor from frames whose
+            # acknowledgement waited for a retransmission before them.
+            if newest.copies == 1 and newest.written_s > st.last_resend_s:
+                self.rtt.sample(max(0.0, now - newest.leaves_s))
+            self._correct_line_model(now, newest)
+            self.rtt.progress()
+            for seq in range(st.base, st.base + ahead):
+                st.in_flight -= st.window.pop(seq).periods
+            st.base += ahead
+            st.last_progress_s = now
+        st.credit = self._credit(msg.free_periods)
+
+    def _credit(self, free: int) -> int:
+        """Periods the sender may have in flight: the card's free buffer, less what the lead
+        limit keeps back (buffered = buffer − free; buffered + in flight ≤ lead)."""
+        lead = self.options.lead_periods
+        if lead is None or self.state.caps is None:
+            return free
+        return max(0, min(free, lead - (self.state.caps.buffer_periods - free)))
+
+    def _on_nak(self, msg: p.Nak, now: float) -> None:
+        st = self.state
+        self.count.naks_received += 1
+        if msg.reason == p.NakReason.STATE:
+            st.last_poll_s = -math.inf  # ask what state the card is in
+            return
+        oldest = st.window.get(st.base)
+        if msg.reason == p.NakReason.POSITION and oldest is not None:
+            oldest.position_naks += 1
+            if oldest.position_naks >= 2:  # two copies refused: not a damaged copy
+                what = "END" if oldest.seq >= self.n_batches else f"batch {oldest.seq + 1}"
+                self._stop(StreamError(
+                    f"the card refused {what} twice: it does not continue from where the "
+                    "card's accepted frames end (the card's position is not the program's)"),
+                    now)  # fmt: skip
+                return
+        self._fast_retransmit(now)
+
+    def _fast_retransmit(self, now: float) -> None:
+        """Resend the oldest frame; a frame already sent again only when its new copy should
+        have arrived (older NAKs may still be on their way)."""
+        st = self.state
+        oldest = st.window.get(st.base)
+        if oldest is None or oldest.queued or oldest.copies == 0:
+            return
+        if oldest.copies == 1 or now - oldest.leaves_s > self.rtt.stale_s:
+            self._resend_oldest(now)
+
+    def _on_status(self, msg: p.Status, now: float) -> None:
+        st = self.state
+        st.status = msg
+        if msg.state == p.CardState.DONE:
+            self._finish_done(now)
+        elif msg.state == p.CardState.ALARM:
+            text = st.alarm.text if st.alarm else "(no text received)"
+            self._stop(StreamError(f"card alarm {alarm_name(msg.alarm)}: {text}"), now)
+        elif msg.state == p.CardState.ABORTED:
+            self._stop(StreamError("the card aborted the stream"), now)
+        elif msg.state == p.CardState.IDLE:
+            self._stop(StreamError("the card reset during the stream (it reports no open "
+                                   "stream): its buffer and position are lost; not resuming"),
+                       now)  # fmt: skip
+
+    def _correct_line_model(self, now: float, newest: InFlight) -> None:
+        """Frame ``newest`` has arrived: at most the bytes written after it are still queued."""
+        st = self.state
+        done = newest.end_offset
+        st.line_free_s = min(st.line_free_s, now + (self.count.bytes_sent - done) * self.byte_s)
+        for seq in range(newest.seq + 1, st.nxt):
+            rec = st.window[seq]
+            if rec.copies:
+                rec.leaves_s = min(rec.leaves_s,
+                                   now + max(0, rec.end_offset - done) * self.byte_s)  # fmt: skip
+
+    # -- streaming: timers -------------------------------------------------------------------
+    def _fill_window(self, now: float) -> None:
+        """New frames, as far as the credit goes."""
+        st = self.state
+        total = self.n_batches + (0 if self.program_open else 1)  # the batches, then END
+        while st.nxt < total:
+            periods = min(self.per_frame, self.program.periods - st.nxt * self.per_frame)
+            if self.program_open and periods < self.per_frame:
+                break  # a partial batch waits for the periods that follow it
+            if not self.ignore_credit and st.in_flight + max(periods, 0) > st.credit:
+                break
+            rec = st.window[st.nxt] = self._record(st.nxt)
+            self._send(None, rec)
+            st.in_flight += rec.periods
+            self.count.max_in_flight = max(self.count.max_in_flight, st.in_flight)
+            st.nxt += 1
+
+    def _record(self, i: int) -> InFlight:
+        """Frame ``i``: a BATCH (with the position it starts from) or, after the last, END."""
+        prog, k = self.program, self.per_frame
+        if i < self.n_batches:
+            block = prog.pulses[i * k : i * k + k]
+            msg = p.Batch(block, tuple(int(v) for v in self._batch_starts[i]))
+            return InFlight(i, p.encode_message(msg, seq=i), len(block))
+        end = p.End(prog.periods, tuple(int(v) for v in prog.end_steps))
+        return InFlight(i, p.encode_message(end, seq=i), 0)
+
+    def _retransmit_timer(self, now: float) -> None:
+        """No progress for RTO: send the oldest frame again and double the timeout."""
+        st = self.state
+        oldest = st.window.get(st.base)
+        if oldest is not None and not oldest.queued and now - oldest.leaves_s > self.rtt.rto:
+            self.count.timeouts += 1
+            self._resend_oldest(now)
+            self.rtt.back_off()
+
+    def _hold_resume(self, now: float) -> None:
+        """Feed hold / resume, repeated until the card's state confirms it."""
+        st = self.state
+        if st.want_hold is None or now - st.last_ctl_s <= self.options.rto_s:
+            return
+        card = st.status.state if st.status else None
+        if card is not None and (card == p.CardState.HOLD) == st.want_hold:
+            st.want_hold = None
+        else:
+            self._send(p.Hold() if st.want_hold else p.Resume())
+            st.last_ctl_s = now
+
+    def _poll(self, now: float) -> None:
+        st = self.state
+        if now - max(st.last_rx_s, st.last_poll_s) > self.options.poll_s:
+            self._send(p.StatusRequest())
+            self.count.polls += 1
+            st.last_poll_s = now
+
+    def _check_contact(self, now: float, what: str) -> None:
+        """No valid frame for the timeout; or frames in flight and none acknowledged for it
+        although the card answers (a line too noisy to carry a frame)."""
+        st, timeout = self.state, self.options.timeout_s
+        if now - st.last_rx_s > timeout:
+            self._stop(StreamError(f"lost communication with card: no answer {what} for "
+                                   f"{timeout:g} s"), now)  # fmt: skip
+        elif st.base < st.nxt and now - max(st.last_progress_s,
+                                            st.window[st.base].written_s) > timeout:
+            self._stop(StreamError(f"the card acknowledged no frame for {timeout:g} s though it "
+                                   "answers: the line is too noisy"), now)  # fmt: skip
