@@ -5,16 +5,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from nurbscnc.machine.caps import (
-    MIN_CAP_MM_S,
-    curvature_cap_mm_s,
-)
+from nurbscnc.machine.caps import MIN_CAP_MM_S, curvature_cap_mm_s
 from nurbscnc.machine.profile import Machine
 from nurbscnc.plan.blend_rows import blended_rows
 from nurbscnc.plan.blends import Corners, blend_line_corners, blend_object_corners, find_corners
-from nurbscnc.plan.pieces import (
-    PieceList,
-)
+from nurbscnc.plan.pieces import PieceList
 
 
 def apply_blends(pieces: PieceList, machine: Machine) -> tuple[PieceList, Corners | None]:

@@ -10,10 +10,7 @@ import numpy as np
 from nurbscnc.geometry.path import Kind
 from nurbscnc.geometry.paths import ArcGeometry, LineGeometry
 from nurbscnc.geometry.ph import PHQuintic
-from nurbscnc.machine.caps import (
-    MIN_CAP_MM_S,
-    curvature_cap_mm_s,
-)
+from nurbscnc.machine.caps import MIN_CAP_MM_S, curvature_cap_mm_s
 from nurbscnc.machine.profile import Machine
 from nurbscnc.plan.blends import Corners
 from nurbscnc.plan.pieces import (

@@ -12,20 +12,10 @@ from nurbscnc.geometry.blend import ph_tables
 from nurbscnc.geometry.path import Kind
 from nurbscnc.geometry.paths import ArcGeometry, LineGeometry
 from nurbscnc.geometry.segments import blend_tolerance_mm
-from nurbscnc.machine.caps import (
-    servo_curve_cap_mm_s,
-)
+from nurbscnc.machine.caps import servo_curve_cap_mm_s
 from nurbscnc.machine.profile import Machine
-from nurbscnc.plan.junctions import (
-    junction_turning,
-    passable_junctions,
-    stopped_junctions,
-)
-from nurbscnc.plan.pieces import (
-    CHUNK_ROWS,
-    Piece,
-    PieceList,
-)
+from nurbscnc.plan.junctions import junction_turning, passable_junctions, stopped_junctions
+from nurbscnc.plan.pieces import CHUNK_ROWS, Piece, PieceList
 
 
 @dataclass(eq=False)

@@ -16,9 +16,7 @@ from nurbscnc.plan.junctions import (
     stopped_junctions,
 )
 from nurbscnc.plan.options import PlanOptions
-from nurbscnc.plan.pieces import (
-    PieceList,
-)
+from nurbscnc.plan.pieces import PieceList
 
 
 def corner_log(pieces: PieceList, tried: Corners | None, machine: Machine,

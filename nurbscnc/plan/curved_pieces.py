@@ -12,18 +12,12 @@ from nurbscnc.errors import NurbsCncError, SourcePos
 from nurbscnc.geometry.nurbs import NurbsCurve
 from nurbscnc.geometry.path import Kind
 from nurbscnc.geometry.paths import geometry_of
-from nurbscnc.machine.caps import (
-    MIN_CAP_MM_S,
-    corner_cap_mm_s,
-    curvature_cap_mm_s,
-)
+from nurbscnc.machine.caps import MIN_CAP_MM_S, corner_cap_mm_s, curvature_cap_mm_s
 from nurbscnc.machine.profile import Machine
 from nurbscnc.plan.corners import find_corner_regions
 from nurbscnc.plan.options import CornerFeed, PlanOptions
 from nurbscnc.plan.phfit import fit_region
-from nurbscnc.plan.pieces import (
-    Piece,
-)
+from nurbscnc.plan.pieces import Piece
 
 
 def nurbs_curve(seg, machine: Machine) -> NurbsCurve:

@@ -5,9 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from nurbscnc.plan.feedrate import (
-    scurve_timing,
-)
+from nurbscnc.plan.feedrate import scurve_timing
 from nurbscnc.plan.gated import MIN_GATES, gated_rise_of, merged_phases
 from nurbscnc.plan.profile import Profile, frozen_array
 

@@ -5,13 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from nurbscnc.machine.caps import (
-    JUNCTION_SHARE,
-)
+from nurbscnc.machine.caps import JUNCTION_SHARE
 from nurbscnc.machine.profile import Machine
-from nurbscnc.plan.pieces import (
-    PieceList,
-)
+from nurbscnc.plan.pieces import PieceList
 
 #: Junctions whose tangents turn by less than this [rad] are treated as smooth (no stop).
 SMOOTH_JUNCTION_RAD = 1e-6

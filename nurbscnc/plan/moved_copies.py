@@ -14,12 +14,7 @@ from nurbscnc.geometry.ph import PHQuintic
 from nurbscnc.machine.profile import Machine
 from nurbscnc.plan.curved_pieces import blend_override, nurbs_curve, object_pieces
 from nurbscnc.plan.options import PlanOptions
-from nurbscnc.plan.pieces import (
-    COLUMN_DTYPES,
-    SCALAR_COLUMNS,
-    Piece,
-    object_ends,
-)
+from nurbscnc.plan.pieces import COLUMN_DTYPES, SCALAR_COLUMNS, Piece, object_ends
 
 
 @dataclass(frozen=True, eq=False)

@@ -14,10 +14,7 @@ import numpy as np
 from nurbscnc.errors import ConfigError, PlanningError
 from nurbscnc.plan.compiled import as_float64
 from nurbscnc.plan.compiled import kernels as _kernels  # None: the Python loops
-from nurbscnc.plan.feedrate import (
-    check_limit_arrays,
-    check_limits,
-)
+from nurbscnc.plan.feedrate import check_limit_arrays, check_limits
 
 
 def frozen_array(values, dtype=float) -> np.ndarray:

@@ -87,9 +87,7 @@ from __future__ import annotations
 import numpy as np
 
 from nurbscnc.errors import PlanningError
-from nurbscnc.plan.feedrate import (
-    scurve_distance_mm,
-)
+from nurbscnc.plan.feedrate import scurve_distance_mm
 from nurbscnc.plan.gated_units import gate_units
 from nurbscnc.plan.profile import Profile, ProfileInput, frozen_array, time_at_length
 from nurbscnc.plan.scans import plan_profile_pieces

@@ -9,27 +9,16 @@ from dataclasses import replace as dc_replace
 import numpy as np
 
 from nurbscnc.geometry.path import STOP_KINDS, Kind, stop_seconds
-from nurbscnc.machine.caps import (
-    junction_jump_cap_mm_s,
-)
+from nurbscnc.machine.caps import junction_jump_cap_mm_s
 from nurbscnc.machine.profile import Machine
 from nurbscnc.plan.blend_choice import apply_blends
 from nurbscnc.plan.corner_log import corner_log
 from nurbscnc.plan.curved_pieces import object_pieces
-from nurbscnc.plan.junctions import (
-    curvature_jumps,
-    junction_turning,
-    small_breaks,
-)
+from nurbscnc.plan.junctions import curvature_jumps, junction_turning, small_breaks
 from nurbscnc.plan.moved_copies import Block, Repeats
 from nurbscnc.plan.naive import merge_collinear
 from nurbscnc.plan.options import PlanOptions
-from nurbscnc.plan.pieces import (
-    SCALAR_COLUMNS,
-    VECTOR_COLUMNS,
-    PieceList,
-    empty_columns,
-)
+from nurbscnc.plan.pieces import SCALAR_COLUMNS, VECTOR_COLUMNS, PieceList, empty_columns
 from nurbscnc.program.columns import LINE as LINE_CODE
 from nurbscnc.program.columns import RAPID as RAPID_CODE
 from nurbscnc.program.columns import segment_columns
