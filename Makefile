@@ -12,7 +12,7 @@ install: $(STAMP)
 
 # setup.py builds the compiled kernels (nurbscnc/plan/_kernels.c, nurbscnc/geometry/_kernels.c;
 # optional: without a C compiler the package installs and runs the same loops in Python).
-$(STAMP): pyproject.toml setup.py nurbscnc/plan/_kernels.c nurbscnc/geometry/_kernels.c
+$(STAMP): pyproject.toml setup.py nurbscnc/plan/_kernels.c nurbscnc/plan/_kernels_math.h nurbscnc/geometry/_kernels.c
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -e '.[test,plot]'

@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 from nurbscnc.machine.caps import axis_path_limits
 from nurbscnc.machine.profile import load_machine
 from nurbscnc.plan.axes import axis_geometry_bounds, piece_limits
-from nurbscnc.plan.pieces import segment_pieces
+from nurbscnc.plan.program_pieces import segment_pieces
 from nurbscnc.program.interpret import interpret_text
 
 HEAD = "G21 G90 G17 G61\n"

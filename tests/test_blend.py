@@ -657,7 +657,7 @@ def test_servo_blend_cap_is_the_steady_circle_error_bound():
     # SPEC §8: on a circle the paper's servo path grows by 2.85e-5 s² · v²κ; a space blend's
     # cap keeps that within ε_max/2: v = √(7.5e-3 mm / (2.85e-5 s² · κ)).
     from nurbscnc.machine.profile import load_machine
-    from nurbscnc.plan.pieces import servo_blend_cap_mm_s
+    from nurbscnc.plan.blends import servo_blend_cap_mm_s
 
     m = load_machine()
     for kappa in (0.5, 22.0, 300.0):

@@ -27,7 +27,7 @@ import pytest
 from nurbscnc.machine.profile import load_machine
 from nurbscnc.plan import lookahead
 from nurbscnc.plan.lookahead import plan_checked, plan_windows
-from nurbscnc.plan.pieces import segment_pieces
+from nurbscnc.plan.program_pieces import segment_pieces
 from nurbscnc.plan.timing import exact_reference
 from nurbscnc.plan.windows import cut_windows
 from nurbscnc.program.interpret import interpret_text

@@ -200,7 +200,7 @@ def test_the_dense_polyline_is_within_its_chord_error(name):
     programs (the chords follow the curvature; MAX_SPACING_MM only caps them)."""
     from pathlib import Path
 
-    from nurbscnc.plan.pieces import segment_pieces
+    from nurbscnc.plan.program_pieces import segment_pieces
 
     text = (Path(__file__).resolve().parents[1] / "programs" / name).read_text()
     pieces = segment_pieces(interpret_text(text).segments, MACHINE)
@@ -213,7 +213,7 @@ def test_a_near_cusp_piece_has_a_bounded_polyline():
     """The fuzzer's control polygon folding back by 1e-10 mm: κ 3e10 /mm on a NURBS cell
     asked the chord rule for 2e8 points (1.6 GB, exit 1); a piece gets at most
     MAX_PIECE_POINTS, and the rest of the polyline is as the rule asks."""
-    from nurbscnc.plan.pieces import segment_pieces
+    from nurbscnc.plan.program_pieces import segment_pieces
 
     text = ("G21 G17 F1000\nG6.2 P4 K0 X0 Y0 R1\nK0 X1 Y1 R1\nK0 X0 Y1 R1\n"
             "K0 X1 Y0.0000000001 R1\nK1\nK1\nK1\nK1\nM2\n")  # fmt: skip
@@ -270,7 +270,7 @@ def test_chord_counts_without_a_cap_are_the_refinement_rule(name):
     from pathlib import Path
 
     from nurbscnc.geometry.path import Kind
-    from nurbscnc.plan.pieces import segment_pieces
+    from nurbscnc.plan.program_pieces import segment_pieces
 
     text = (Path(__file__).resolve().parents[1] / "programs" / name).read_text()
     pieces = segment_pieces(interpret_text(text).segments, MACHINE)

@@ -280,7 +280,7 @@ def test_servo_curve_cap_keeps_the_lsim_circle_error_within_epsilon(radius_mm):
 
     from nurbscnc.machine.caps import servo_curve_cap_mm_s
     from nurbscnc.machine.profile import load_machine
-    from nurbscnc.plan.pieces import servo_gain_s2
+    from nurbscnc.plan.blends import servo_gain_s2
 
     sys.path.insert(0, str(Path(__file__).parent))
     from servo_reference import lsim_actual_mm
@@ -309,8 +309,9 @@ def test_corner_region_pieces_follow_the_curvature_of_a_circle():
     # SPEC §7's V_sp at its own curvature, V_cf = F·κ̄/(κ + κ̄) = 58.33/3 mm/s (below
     # V_af(2) = 55.1 and √(A r) = 35 mm/s).
     from nurbscnc.machine.profile import load_machine
+    from nurbscnc.plan.curved_pieces import CORNER_CELL_MM
     from nurbscnc.plan.options import PlanOptions
-    from nurbscnc.plan.pieces import CORNER_CELL_MM, segment_pieces
+    from nurbscnc.plan.program_pieces import segment_pieces
     from nurbscnc.program.interpret import interpret_text
 
     r = 0.5

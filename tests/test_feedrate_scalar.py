@@ -68,7 +68,7 @@ def test_same_floats_as_the_reference_on_every_regime():
     assert np.all(scurve_distance_mm(v0[:500], sample, 2000.0, 3e5) <= d[:500])
 
 
-# -- the look-ahead's scans by relaxation (profile._chain_scan) ------------------------------
+# -- the look-ahead's scans by relaxation (scans.chain_scan) ------------------------------
 
 
 def _sequential_scan(bound, length, a, j):
@@ -85,7 +85,7 @@ def test_the_relaxed_scan_is_the_sequential_one(k, seed):
     """Chords from 0.1 µm to 30 mm, caps from stops to none, per-piece limits: the
     relaxation's speeds are the plain loop's (to the last bits of the transcendental
     functions, numpy's against math's)."""
-    from nurbscnc.plan.profile import _chain_scan
+    from nurbscnc.plan.scans import chain_scan
 
     rng = np.random.default_rng(seed)
     length = rng.choice([1e-4, 0.05, 1.0, 30.0], k) * rng.random(k)
@@ -93,19 +93,19 @@ def test_the_relaxed_scan_is_the_sequential_one(k, seed):
     a = 2450.0 * rng.choice([1.0, 0.3], k)
     j = 5e4 * rng.choice([1.0, 0.1], k)
     want = _sequential_scan(bound, length, a, j)
-    got = _chain_scan(bound, length, a, j)
+    got = chain_scan(bound, length, a, j)
     np.testing.assert_allclose(got, want, rtol=1e-13, atol=0.0)
 
 
 def test_the_relaxed_scan_on_a_long_ramp_of_tiny_chords():
     """20,000 chords of 1 µm from rest to a 40 mm/s cap (one S-curve over 1,000s of
     pieces: the chains run long, the scalar finish takes them)."""
-    from nurbscnc.plan.profile import _chain_scan
+    from nurbscnc.plan.scans import chain_scan
 
     k = 20_000
     length = np.full(k, 1e-3)
     bound = np.full(k + 1, 40.0)
     a, j = np.full(k, 2450.0), np.full(k, 5e4)
-    got = _chain_scan(bound, length, a, j)
+    got = chain_scan(bound, length, a, j)
     np.testing.assert_allclose(got,
                                _sequential_scan(bound, length, a, j), rtol=1e-13)  # fmt: skip

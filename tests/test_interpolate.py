@@ -24,7 +24,8 @@ from nurbscnc.machine.profile import load_machine
 from nurbscnc.plan.lookahead import plan_program
 from nurbscnc.plan.options import LookaheadOptions
 from nurbscnc.plan.pieces import Piece, PieceList
-from nurbscnc.plan.profile import ProfileInput, plan_profile
+from nurbscnc.plan.profile import ProfileInput
+from nurbscnc.plan.profile_plan import plan_profile
 from nurbscnc.plan.report import nurbs_step_lengths
 from nurbscnc.program.interpret import interpret_text
 

@@ -147,7 +147,7 @@ def check_samples(text: str, machine, dynamics: str):
 
 #: Found by this test (session 5): a 0.42° break at F300 passed at speed under the path's
 #: jump rule while the Y axis's share of the jump exceeded its J_i T² (on the samples a jerk
-#: 7,647 mm/s³ over its limit); pieces._small_break now checks every axis.
+#: 7,647 mm/s³ over its limit); junctions.small_breaks now checks every axis.
 SMALL_BREAK_OVER_AXIS_JERK = ("G21 G90 G17 G94 G61\nG0 X0 Y0 Z0\n"
                               "G1 X1.000000 Y0.500000 Z0.000000 F300\n"
                               "G1 X2.640625 Y1.335938 Z0.000000 F300\nM2\n")  # fmt: skip

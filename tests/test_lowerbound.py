@@ -506,7 +506,7 @@ def test_program_bound_reuses_the_plans_own_curves_only():
     in use; a curve the planner changed (an end hook removed) is not the program's and is
     ignored: the bound is then the programmed geometry's, not the changed curve's."""
     from nurbscnc.plan import lowerbound
-    from nurbscnc.plan.pieces import segment_pieces
+    from nurbscnc.plan.program_pieces import segment_pieces
 
     machine = load_machine()
     prog = interpret_text((PROGRAMS / "naca2415.nc").read_text())

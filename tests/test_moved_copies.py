@@ -1,5 +1,5 @@
 """A NURBS block that repeats an earlier one at another place (a part cut again elsewhere)
-is planned from that one's pieces moved (plan/pieces.py ``_Repeats``), and the kinematic
+is planned from that one's pieces moved (plan/moved_copies.py ``Repeats``), and the kinematic
 lower bound grids it once (plan/lowerbound.py ``_moved_copies``): the same pieces and bound
 as planning the copy on its own, to rounding; a curve that differs is planned afresh."""
 
@@ -16,7 +16,7 @@ from nurbscnc.geometry.nurbs import NurbsCurve
 from nurbscnc.machine.profile import load_machine
 from nurbscnc.plan import lowerbound
 from nurbscnc.plan.lowerbound import program_lower_bound_s
-from nurbscnc.plan.pieces import segment_pieces
+from nurbscnc.plan.program_pieces import segment_pieces
 from nurbscnc.program.interpret import interpret_text
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))

@@ -1,4 +1,4 @@
-"""NURBS cells' curvature peaks (plan/pieces.py ``_nurbs_stretch`` / ``_peak_kappa``): each
+"""NURBS cells' curvature peaks (plan/curved_pieces.py ``_nurbs_stretch`` / ``_peak_kappa``): each
 cell's κ_max, which sets its cap √(A/κ), against the full three-round refinement it
 shortcuts and against dense sampling with an independent evaluator (scipy's B-spline on
 homogeneous coordinates, tests/test_nurbs.py), on random rational curves with weights from
@@ -12,7 +12,7 @@ import numpy as np
 
 from nurbscnc.geometry.nurbs import NurbsCurve
 from nurbscnc.machine.profile import load_machine
-from nurbscnc.plan import pieces as pc
+from nurbscnc.plan import curved_pieces as pc
 from tests.test_nurbs import random_curve, scipy_derivatives
 
 

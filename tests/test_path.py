@@ -275,7 +275,7 @@ def test_path_table_of_nurbs_rows_gathered_whole_is_the_row_by_row_table():
     curves the same objects in the same order)."""
     from nurbscnc.geometry.path import PathTable
     from nurbscnc.machine.profile import load_machine
-    from nurbscnc.plan.pieces import segment_pieces
+    from nurbscnc.plan.program_pieces import segment_pieces
     from nurbscnc.program.interpret import interpret_text
     from tests.test_plan_kernels import _airfoil_twice
 

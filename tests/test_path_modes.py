@@ -24,9 +24,10 @@ from nurbscnc.geometry.segments import BLEND_EXACT_STOP, Line
 from nurbscnc.machine.profile import load_machine
 from nurbscnc.pipeline import RunOptions, run_program
 from nurbscnc.plan.corners import CornerAction, CornerWhy
+from nurbscnc.plan.junctions import junction_caps, pass_velocity_jump_mm_s
 from nurbscnc.plan.naive import merge_collinear
 from nurbscnc.plan.options import LookaheadOptions, PlanOptions
-from nurbscnc.plan.pieces import junction_caps, pass_velocity_jump_mm_s, segment_pieces
+from nurbscnc.plan.program_pieces import segment_pieces
 from nurbscnc.program.interpret import interpret_text
 from tests.test_wholeprograms import distance_to_path, programmed_path, vertex_deviation
 
@@ -445,12 +446,13 @@ def test_trimmed_ph_and_nurbs_pieces_are_the_same_curve():
     """A blend trims PH and NURBS pieces too: the trimmed piece's points at arc length t are
     the original's at s0 + t (PH: its own arc-length inversion; NURBS: the same curve)."""
     from nurbscnc.geometry.nurbs import NurbsCurve
-    from nurbscnc.plan.pieces import Piece, _trimmed
+    from nurbscnc.plan.blend_rows import trimmed_piece
+    from nurbscnc.plan.pieces import Piece
 
     ph = PHQuintic(np.array([1.0 + 0.2j, 0.7 - 0.4j, 0.3 + 1.1j]), 2.0 - 1.0j)
     piece = Piece(Kind.PH, ph, float(ph.length_mm), 10.0, 0, 1)
     s0, s1 = 0.1 * ph.length_mm, 0.7 * ph.length_mm
-    cut = _trimmed(piece, s0, s1)
+    cut = trimmed_piece(piece, s0, s1)
     assert cut.length_mm == pytest.approx(s1 - s0, rel=1e-9)
     t = np.linspace(0.0, s1 - s0, 9)
     np.testing.assert_allclose(cut.points_mm(t), piece.points_mm(s0 + t), atol=1e-9)
@@ -460,7 +462,7 @@ def test_trimmed_ph_and_nurbs_pieces_are_the_same_curve():
     s = curve.arc_length(np.array([curve.u_start, curve.u_end]))
     piece = Piece(Kind.NURBS, curve, float(s[1] - s[0]), 10.0, 1, 3, curve.u_start,
                   curve.u_end, 0.0)  # fmt: skip
-    cut = _trimmed(piece, 0.5, piece.length_mm - 0.25)
+    cut = trimmed_piece(piece, 0.5, piece.length_mm - 0.25)
     t = np.linspace(0.0, cut.length_mm, 9)
     np.testing.assert_allclose(cut.points_mm(t), piece.points_mm(0.5 + t), atol=1e-9)
 
@@ -494,11 +496,11 @@ def test_stops_and_passes_where_linuxcnc_does():
 
 
 def test_stop_or_blend_estimate_agrees_with_the_planned_profiles(monkeypatch):
-    """The decision's estimate (pieces._blend_is_faster: jerk-limited transitions t(Δv),
+    """The decision's estimate (blend_choice._blend_is_faster: jerk-limited transitions t(Δv),
     crossing the blend at its cap) against the planner's own profiles: the pentagram's and a
     square's corners at F3500, P0.02, blended (forced) and stopped (G61); the difference per
     corner agrees within 1 ms and has the estimate's sign."""
-    from nurbscnc.plan import pieces as pieces_mod
+    from nurbscnc.plan import blend_choice as pieces_mod
 
     a, j = LIM.a_max_mm_s2, LIM.j_max_mm_s3
     # t(Δv) and the reach from rest are inverse to each other: d = v·t(v)/2.

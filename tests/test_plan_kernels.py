@@ -2,7 +2,7 @@
 (``nurbscnc/geometry/_kernels.c``), built by setup.py, against their Python reference
 implementations, bit for bit:
 
-- the gated flank (:func:`nurbscnc.plan.profile._gated_rise_py`),
+- the gated flank (:func:`nurbscnc.plan.gated.gated_rise_py`),
 - the time at which a profile reaches a length (:func:`~nurbscnc.plan.profile._time_at_length_py`),
 - the point-to-segments distance of the contour check
   (:func:`~nurbscnc.geometry.distance._segment_distances_py`),
@@ -22,7 +22,9 @@ import numpy as np
 import pytest
 
 import nurbscnc.geometry.distance as distance
+import nurbscnc.plan.gated as gated
 import nurbscnc.plan.profile as profile
+from nurbscnc.plan.profile_plan import plan_profile
 
 pytestmark = pytest.mark.skipif(
     profile._kernels is None,
@@ -45,7 +47,7 @@ def _random_flank(rng):
     v_top = float(rng.uniform(c[-1] * 0.9, 120.0))
     a = float(rng.choice([2450.0, 800.0, 50.0, 1e4]))
     j = float(rng.choice([5e4, 1e4, 1e6, 3000.0]))
-    dt = float(rng.choice([profile.GATE_STEP_S, 1e-3, 3e-5]))
+    dt = float(rng.choice([gated.GATE_STEP_S, 1e-3, 3e-5]))
     return v0, v_top, d, c, a, j, dt
 
 
@@ -57,8 +59,8 @@ def test_gated_rise_kernel_is_the_python_flank_bit_for_bit():
     found = none = 0
     for _ in range(1000):
         v0, v_top, d, c, a, j, dt = _random_flank(rng)
-        ref = profile._gated_rise_py(v0, v_top, d, c, a, j, dt)
-        got = profile._gated_rise(v0, v_top, d, c, a, j, dt)
+        ref = gated.gated_rise_py(v0, v_top, d, c, a, j, dt)
+        got = gated.gated_rise(v0, v_top, d, c, a, j, dt)
         if ref is None:
             assert got is None
             none += 1
@@ -66,12 +68,12 @@ def test_gated_rise_kernel_is_the_python_flank_bit_for_bit():
         found += 1
         assert got[0] == ref[0] and got[1] == ref[1] and got[2] == ref[2]
         assert all(type(x) is float for x in got[0] + got[1])
-        # the memo's merging (profile._merged, rising and reversed) compiled too
-        merged = profile._kernels.gated_rise_merged(
-            v0, v_top, d.tobytes(), c.tobytes(), a, j, dt, profile.GATE_MIN_STEP_S,
-            profile.GATE_GALLOP, profile.GATE_MAX_STEPS)  # fmt: skip
-        assert (merged[0], merged[1]) == profile._merged(ref[0], ref[1])
-        assert (merged[2], merged[3]) == profile._merged(ref[0][::-1], ref[1][::-1])
+        # the memo's merging (gated.merged_phases, rising and reversed) compiled too
+        merged = gated._kernels.gated_rise_merged(
+            v0, v_top, d.tobytes(), c.tobytes(), a, j, dt, gated.GATE_MIN_STEP_S,
+            gated.GATE_GALLOP, gated.GATE_MAX_STEPS)  # fmt: skip
+        assert (merged[0], merged[1]) == gated.merged_phases(ref[0], ref[1])
+        assert (merged[2], merged[3]) == gated.merged_phases(ref[0][::-1], ref[1][::-1])
         assert merged[4] == ref[2]
     assert found > 500 and none > 10  # both outcomes exercised
 
@@ -85,7 +87,7 @@ def _profiles(rng):
         jcap = np.full(k + 1, np.inf)
         jcap[[0, -1]] = 0.0
         jcap[rng.random(k + 1) < 0.1] = 0.0
-        yield profile.plan_profile(profile.ProfileInput(length, caps, jcap, 2450.0, 5e4))
+        yield plan_profile(profile.ProfileInput(length, caps, jcap, 2450.0, 5e4))
 
 
 def test_time_at_length_kernel_is_the_python_inversion_bit_for_bit():
@@ -186,15 +188,15 @@ def test_airfoil_plan_is_the_same_without_the_kernels(monkeypatch):
 
     prog = interpret_text(_airfoil_twice())
     machine = load_machine()
-    profile._gated_rise_memo.cache_clear()
+    gated._gated_rise_memo.cache_clear()
     fast = run_program(prog, machine)
     from nurbscnc.plan import feedrate
 
-    for module in (profile, distance, feedrate):
+    for module in (profile, gated, distance, feedrate):
         monkeypatch.setattr(module, "_kernels", None)
-    profile._gated_rise_memo.cache_clear()
+    gated._gated_rise_memo.cache_clear()
     slow = run_program(prog, machine)
-    profile._gated_rise_memo.cache_clear()
+    gated._gated_rise_memo.cache_clear()
     assert fast.plan.iterations > 0  # the check re-planned
     assert fast.cycle_time_s == slow.cycle_time_s
     assert np.array_equal(_bits(fast.plan.profile.junction_speeds_mm_s),

@@ -15,12 +15,9 @@ from scipy.integrate import cumulative_trapezoid
 
 from nurbscnc.errors import ConfigError, PlanningError
 from nurbscnc.plan.feedrate import max_reachable_speed_scalar, scurve_distance_mm
-from nurbscnc.plan.profile import (
-    ProfileInput,
-    _repair_junctions,
-    plan_profile,
-    plan_profile_pieces,
-)
+from nurbscnc.plan.profile import ProfileInput
+from nurbscnc.plan.profile_plan import plan_profile
+from nurbscnc.plan.scans import plan_profile_pieces, repair_junctions
 
 A = 2450.0  # SPEC §9 Table 3
 J = 5.0e4
@@ -307,7 +304,7 @@ def test_zero_length_pieces():
 def test_repair_lowers_only_what_is_needed():
     lengths = np.array([1.0, 0.01, 1.0])
     v = np.array([0.0, 30.0, 80.0, 0.0])  # 30 → 80 within 0.01 mm is impossible
-    out = _repair_junctions(v.copy(), lengths, A, J)
+    out = repair_junctions(v.copy(), lengths, A, J)
     assert np.all(scurve_distance_mm(out[:-1], out[1:], A, J) <= lengths)
     assert np.all(out <= v) and out[0] == 0.0 and out[1] == 30.0
     assert 30.0 < out[2] < 80.0
@@ -411,7 +408,8 @@ def _time_at_length_bisection(profile, s):
 
 
 def test_time_at_length_against_bisection_and_closed_forms():
-    from nurbscnc.plan.profile import ProfileInput, plan_profile, time_at_length
+    from nurbscnc.plan.profile import ProfileInput, time_at_length
+    from nurbscnc.plan.profile_plan import plan_profile
 
     rng = np.random.default_rng(2)
     k = 5000

@@ -1,5 +1,5 @@
 """Gated flanks (issue 13): a planning unit's rise or descent follows a staircase of caps with
-non-zero acceleration at the cells (:func:`nurbscnc.plan.profile._gated_rise`), where the
+non-zero acceleration at the cells (:func:`nurbscnc.plan.gated.gated_rise`), where the
 unit split of earlier planners ended its acceleration (a = 0) at every cell it crossed.
 
 References, independent of the gated flank's own arithmetic:
@@ -20,8 +20,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import nurbscnc.plan.profile as profile_mod
-from nurbscnc.plan.profile import ProfileInput, _gated_rise, plan_profile, plan_profile_pieces
+import nurbscnc.plan.profile_plan as profile_mod
+from nurbscnc.plan.gated import gated_rise
+from nurbscnc.plan.profile import ProfileInput
+from nurbscnc.plan.profile_plan import plan_profile
+from nurbscnc.plan.scans import plan_profile_pieces
 from tests.test_profile_limits import _fd_check
 
 A = 2450.0
@@ -94,7 +97,7 @@ def test_gated_rise_meets_every_gate_and_ends_at_its_target(case):
     non-decreasing, 0 ≤ a ≤ A, |jerk| ≤ J, the speed at every gate's distance within its
     cap, and it ends at the target speed with a = 0 after the distance it reports."""
     v0, v_top, d, c, a_max = case
-    got = _gated_rise(v0, v_top, d, c, a_max, J)
+    got = gated_rise(v0, v_top, d, c, a_max, J)
     assert got is not None
     durs, jerks, dist = got
     assert all(abs(jk) <= J for jk in jerks) and all(t > 0 for t in durs)

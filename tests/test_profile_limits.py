@@ -17,7 +17,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from nurbscnc.errors import PlanningError
-from nurbscnc.plan.profile import ProfileInput, plan_profile, plan_profile_pieces
+from nurbscnc.plan.profile import ProfileInput
+from nurbscnc.plan.profile_plan import plan_profile
+from nurbscnc.plan.scans import plan_profile_pieces
 
 H = 5e-5  # finite-difference step [s]
 

@@ -16,13 +16,10 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from nurbscnc.plan.profile import (
-    GATE_STEP_S,
-    LIMIT_MERGE_RATIO,
-    ProfileInput,
-    plan_profile,
-    plan_profile_pieces,
-)
+from nurbscnc.plan.gated import GATE_STEP_S
+from nurbscnc.plan.profile import ProfileInput
+from nurbscnc.plan.profile_plan import LIMIT_MERGE_RATIO, plan_profile
+from nurbscnc.plan.scans import plan_profile_pieces
 from tests.test_profile_limits import _fd_check
 
 A = 2450.0
@@ -175,7 +172,7 @@ def test_random_staircases_keep_every_limit_and_cap(case):
     the total length; and with one set of limits the grouped plan is never slower than the
     per-piece one. (With per-piece limits a unit takes its pieces' smallest, so it can lose
     a little where a piece's own larger limit would have helped: a decision, see
-    :func:`~nurbscnc.plan.profile.plan_profile`.)"""
+    :func:`~nurbscnc.plan.profile_plan.plan_profile`.)"""
     lengths, caps, jcap, (a1, j1, a2, j2) = case
     inp = ProfileInput(lengths, caps, jcap, a1, j1, a_decel_mm_s2=a2, j_decel_mm_s3=j2)
     prof = plan_profile(inp)
@@ -193,7 +190,7 @@ def test_random_staircases_keep_every_limit_and_cap(case):
     if np.all(a1 == A) and np.all(j2 == J):
         per_piece = plan_profile_pieces(inp)
         # A gated flank is greedy in GATE_STEP_S (0.1 ms) steps: its loss against the
-        # continuous optimum is of that order per gate (profile.GATE_STEP_S), mostly far
+        # continuous optimum is of that order per gate (gated.GATE_STEP_S), mostly far
         # less (it switches within GATE_MIN_STEP_S of a gate it touches). Session 8's full
         # suite drew STAIRCASE_HOLD below: 6.7 µs slower than per piece (a hold of 67 µs
         # in the final descent), where 1 µs had been asserted.
@@ -206,7 +203,7 @@ def test_long_smooth_staircase_needs_few_rounds(monkeypatch):
     step would re-plan a thousand times; after SPLIT_ONE_ROUNDS rounds every offender is
     split at once, so it takes a handful of rounds, keeps every cap on the samples and is
     faster than the per-piece plan (which stops accelerating at every junction)."""
-    from nurbscnc.plan import profile as prof_mod
+    from nurbscnc.plan import profile_plan as prof_mod
 
     calls = []
     real = prof_mod._plan_units

@@ -11,7 +11,8 @@ import pytest
 from nurbscnc.machine.profile import load_machine
 from nurbscnc.plan import lookahead as la
 from nurbscnc.plan.check import Checker
-from nurbscnc.plan.profile import ProfileInput, plan_profile, same_until_s
+from nurbscnc.plan.profile import ProfileInput, same_until_s
+from nurbscnc.plan.profile_plan import plan_profile
 from nurbscnc.plan.timing import same_clock_until_s, wall_to_profile_time
 from nurbscnc.program.interpret import interpret_text
 

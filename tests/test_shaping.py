@@ -20,8 +20,8 @@ from nurbscnc.machine.profile import default_profile_text, load_machine, parse_m
 from nurbscnc.pipeline import RunOptions, run_program
 from nurbscnc.plan import converge, lookahead, shaping, windows
 from nurbscnc.plan import setup as plan_setup
+from nurbscnc.plan.junctions import settle_time_s
 from nurbscnc.plan.options import LookaheadOptions
-from nurbscnc.plan.pieces import settle_time_s
 from nurbscnc.program.interpret import interpret_text
 from tests.servo_reference import distance_to_polyline_mm, lsim_actual_mm
 

@@ -29,7 +29,7 @@ from nurbscnc.machine.profile import load_machine
 from nurbscnc.plan import converge, windows
 from nurbscnc.plan.lookahead import plan_checked
 from nurbscnc.plan.options import LookaheadOptions
-from nurbscnc.plan.pieces import segment_pieces
+from nurbscnc.plan.program_pieces import segment_pieces
 from nurbscnc.program.interpret import interpret_text
 from nurbscnc.servo.model import AxesStream, simulate_axes
 from tests.servo_reference import lsim_actual_mm
@@ -255,11 +255,10 @@ def test_which_samplers_are_checked_in_windows():
     not one that says ``windowed=False``; a wrapper (the pre-compensated sampler, the CLI's
     announcing one) as the sampler it wraps; and a plan checked whole equals the windowed
     one."""
-    from nurbscnc.precompensation import precompensated_sampler
-
     from nurbscnc.interpolate.sample import reference_sampler
     from nurbscnc.plan.sampler import EXACT, ForwardingSampler, FunctionSampler, as_sampler
     from nurbscnc.plan.timing import exact_reference
+    from nurbscnc.precompensation import precompensated_sampler
 
     exact, taylor = reference_sampler("exact"), reference_sampler("taylor")
     assert exact.windowed and EXACT.windowed and not taylor.windowed

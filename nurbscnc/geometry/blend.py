@@ -212,6 +212,3 @@ def _kappa_max(k: np.ndarray) -> float:
             return float(k0 - 0.125 * (kp - km) ** 2 / denom)
     return float(k[i])
 
-
-#: The private name plan/pieces.py imports until it takes :func:`planar_kind`.
-_planar_kind = planar_kind

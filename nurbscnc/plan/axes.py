@@ -44,7 +44,7 @@ import numpy as np
 
 from nurbscnc.geometry.path import Kind
 from nurbscnc.machine.caps import JUNCTION_SHARE, axis_path_limits
-from nurbscnc.plan.pieces import junction_caps
+from nurbscnc.plan.junctions import junction_caps
 
 #: Fewest samples per curved piece for its tangent and curvature-vector bounds (ends
 #: included); more on pieces that turn a lot (:data:`SAMPLES_PER_RADIUS`).
@@ -98,7 +98,7 @@ def _jump_reserved(pieces, j_axis_mm_s3: np.ndarray) -> np.ndarray:
     curvature vector jumps at one of its ends (``pieces.jump_kn``) or where a small break
     passed at speed (``pieces.pass_after``) steps the velocity: the acceleration step
     (:func:`~nurbscnc.machine.caps.junction_jump_cap_mm_s`) or the velocity step
-    (:func:`nurbscnc.plan.pieces._small_break`) takes the share, so the two add up to at
+    (:func:`nurbscnc.plan.junctions.small_breaks`) takes the share, so the two add up to at
     most J_i on the samples."""
     k = len(pieces)
     j_axis = np.asarray(j_axis_mm_s3, dtype=float)
@@ -123,7 +123,7 @@ def _run_minimum(pieces, caps_mm_s: np.ndarray, a_mm_s2: np.ndarray, j_mm_s3: np
     tangent-continuous junctions.
 
     Why: the feed profile plans such a run (the cells of a NURBS at the programmed feed) as
-    one unit only when the pieces' limits are equal too (:func:`~nurbscnc.plan.profile.
+    one unit only when the pieces' limits are equal too (:func:`~nurbscnc.plan.profile_plan.
     plan_profile`); with the slightly different limits each cell gets from its own geometry,
     it plans cell by cell, with zero acceleration at every cell junction — measured on the
     9 mm NACA 2415 with LinuxCNC's sim axes: 0.85 s instead of 0.79 s. The minimum over the

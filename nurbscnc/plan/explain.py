@@ -49,7 +49,7 @@ from nurbscnc.geometry.path import STOP_KINDS, Kind, stop_seconds
 from nurbscnc.machine.caps import chord_feed_mm_s, normal_feed_mm_s
 from nurbscnc.plan.axes import piece_limits
 from nurbscnc.plan.corners import CornerAction, CornerLog, CornerWhy
-from nurbscnc.plan.pieces import junction_caps
+from nurbscnc.plan.junctions import junction_caps
 
 #: Relative tolerance of "equal" caps and speeds (the profile's bisection and the caps'
 #: floating point are far tighter; a real difference between two limits is far larger).
@@ -344,7 +344,7 @@ def profile_extremes(profile) -> tuple[np.ndarray, np.ndarray]:
 
 def corner_stop_ends(pieces) -> np.ndarray:
     """Pieces (k,) with an exact stop at a corner at either end: an inner junction whose cap
-    is 0 (:func:`~nurbscnc.plan.pieces.junction_caps`) for its geometry — not a dwell or
+    is 0 (:func:`~nurbscnc.plan.junctions.junction_caps`) for its geometry — not a dwell or
     pause, not a rapid meeting a feed move, not a zero-length piece."""
     k = len(pieces)
     jc = junction_caps(pieces)

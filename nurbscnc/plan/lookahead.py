@@ -10,7 +10,7 @@ is answered where its error is caused, never by the cruise of a whole long piece
 
 - near the end of a rapid that a cut follows: the settle there (the reference waits at the
   cut's start; 0 until the check needs it, at most 5/|pole|
-  :func:`~nurbscnc.plan.pieces.settle_time_s`); while it waits nothing is checked, and the
+  :func:`~nurbscnc.plan.junctions.settle_time_s`); while it waits nothing is checked, and the
   first cut samples are measured against the cut only;
 - near a planned stop (from :data:`~nurbscnc.plan.shaping.STOP_BEFORE_S` before to
   :data:`~nurbscnc.plan.shaping.STOP_WINDOW_S` after it): the overshoot of the stop and the
@@ -66,7 +66,7 @@ piece of every sample run-length coded and running statistics
 time, and the plan is the one the whole-array check gives (``plan_checked(...,
 keep_reference=True)`` keeps the whole reference and response for plots and reports). Runs
 of tiny tangent-continuous pieces at one cap and one set of limits are planned as one by
-:func:`~nurbscnc.plan.profile.plan_profile`. A program of several cuts is planned cut window
+:func:`~nurbscnc.plan.profile_plan.plan_profile`. A program of several cuts is planned cut window
 by cut window (:mod:`~nurbscnc.plan.windows`).
 
 This module is the loop: the setup of a program (:class:`~nurbscnc.plan.setup.Setup`), the

@@ -451,12 +451,11 @@ def program_lower_bound_s(segments, machine: Machine, columns=None, curves=None)
     ``curves``: None, or NURBS curves by segment index (a plan's,
     :meth:`~nurbscnc.plan.pieces.PieceList.nurbs_curves`), used where a curve is the
     segment's own (the same degree, knots, control points and weights): their arc-length
-    tables are built already (10 NURBS airfoils: 28 of the bound's 45 ms were building them
-    again). A curve the planner changed (an end hook removed) is not the programmed one
+    tables are built already (building them again was most of the bound's time on NURBS
+    programs). A curve the planner changed (an end hook removed) is not the programmed one
     and is not used.
     """
     lim = machine.limits
-    period, chord, a_max = machine.servo.period_s, lim.chord_tolerance_mm, lim.a_max_mm_s2
     segments = segments if isinstance(segments, (list, tuple)) else list(segments)
     cols = columns if columns is not None else segment_columns(segments)
     is_stop = (cols.kind == DWELL) | (cols.kind == PAUSE)
@@ -473,7 +472,30 @@ def program_lower_bound_s(segments, machine: Machine, columns=None, curves=None)
     top = np.where(rapid, lim.rapid_mm_s, np.minimum(feed, lim.v_max_mm_s))
     if not np.all(np.isfinite(top) & (top > 0.0)):
         raise PlanningError("every piece needs a finite speed ceiling > 0 [mm/s]")
-    blend = cols.blends_mm[index]
+    length, t_start, t_end = _straight_ends(cols, index, straight)
+    cap2 = np.where(straight, top * top, 0.0)  # constant-cap pieces: their cap²
+    # Arcs and NURBS blocks: one path-model row each (the programmed geometry, whole).
+    curved = np.flatnonzero(~straight)
+    path = PathTable.of([whole_row(_programmed_geometry(segments[i], (curves or {}).get(i)),
+                                   segments[i].line) for i in index[curved].tolist()])  # fmt: skip
+    grid_rows = _curved_ends(path, curved, top, machine, length, t_start, t_end, cap2)
+    s_grid, c2_grid, grid_sizes = _grids(path, grid_rows, top[curved[grid_rows]], machine)
+    grid_start = np.concatenate(([0], np.cumsum(grid_sizes)))
+    sampled = curved[grid_rows]  # the gridded pieces
+    length[sampled] = s_grid[grid_start[1:] - 1]
+    stop = _exact_stops(t_start, t_end, cols.blends_mm[index], index, rapid)
+    s_mm, path_cap2, piece_start, last = _bound_points(length, cap2, stop, sampled, s_grid,
+                                                       c2_grid, grid_sizes, grid_start)  # fmt: skip
+    bound = _solve(s_mm, path_cap2, piece_start, stop[last], lim.a_max_mm_s2)
+    return float(bound.time_s) + dwell
+
+
+def _straight_ends(cols, index: np.ndarray,
+                   straight: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+    """Lengths [mm] (m,) and start and end tangents (m, 3) of the pieces ``index`` of the
+    columns ``cols``, filled for the ``straight`` ones (lines, rapids: the end-point
+    difference, not normalised) and zero elsewhere."""
+    m = int(index.size)
     length = np.zeros(m)
     t_start = np.zeros((m, 3))
     t_end = np.zeros((m, 3))
@@ -482,13 +504,16 @@ def program_lower_bound_s(segments, machine: Machine, columns=None, curves=None)
     d -= cols.starts_mm[index[li]]  # in place: one (m, 3) array, not four
     t_start[li] = t_end[li] = d
     length[li] = np.sqrt(np.einsum("ij,ij->i", d, d))
-    del d
-    cap2 = np.where(straight, top * top, 0.0)  # constant-cap pieces: their cap²
-    # Arcs and NURBS blocks: one path-model row each (the programmed geometry, whole).
-    curved = np.flatnonzero(~straight)
-    moving = index[curved].tolist()
-    path = PathTable.of([whole_row(_programmed_geometry(segments[i], (curves or {}).get(i)),
-                                   segments[i].line) for i in moving])  # fmt: skip
+    return length, t_start, t_end
+
+
+def _curved_ends(path: PathTable, curved: np.ndarray, top: np.ndarray, machine: Machine,
+                 length: np.ndarray, t_start: np.ndarray, t_end: np.ndarray,
+                 cap2: np.ndarray) -> np.ndarray:  # fmt: skip
+    """Fill the ``curved`` pieces' (rows of ``path``) lengths [mm], unit end tangents and,
+    for constant curvature (circles, helices), cap² [mm²/s²] (top speeds ``top``); returns
+    the rows of ``path`` that need a grid (spirals and NURBS)."""
+    lim = machine.limits
     rows = np.arange(curved.size)
     length[curved] = path.length_mm
     # Unit tangents at both ends, one evaluation (start, end interleaved: one run a piece).
@@ -498,13 +523,20 @@ def program_lower_bound_s(segments, machine: Machine, columns=None, curves=None)
     # Constant curvature (circles, helices): one cap² each; spirals and NURBS: a grid.
     const = path.kind == Kind.ARC
     cap2[curved[const]] = curvature_cap2_mm2_s2(
-        path.curvature(rows[const], np.zeros(int(const.sum()))), top[curved[const]], a_max,
-        period, chord)  # fmt: skip
-    grid_rows = rows[~const]
-    top_grid = top[curved[grid_rows]]
+        path.curvature(rows[const], np.zeros(int(const.sum()))), top[curved[const]],
+        lim.a_max_mm_s2, machine.servo.period_s, lim.chord_tolerance_mm)  # fmt: skip
+    return rows[~const]
 
-    # A curve that is another one moved (a part cut again elsewhere) at the same top speed
-    # has its grid and caps (κ does not depend on where the curve lies): sampled once.
+
+def _grids(path: PathTable, grid_rows: np.ndarray, top_grid: np.ndarray,
+           machine: Machine) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+    """The adaptive grids of the rows ``grid_rows`` of ``path`` (top speeds ``top_grid``
+    [mm/s]): the points [mm] from each row's start and their cap² [mm²/s²], all rows in
+    order, and each row's number of points. A curve that is another one moved (a part cut
+    again elsewhere) at the same top speed has its grid and caps (κ does not depend on
+    where the curve lies): sampled once."""
+    lim = machine.limits
+    period, chord, a_max = machine.servo.period_s, lim.chord_tolerance_mm, lim.a_max_mm_s2
     own, copy_of = _moved_copies(path, grid_rows, top_grid)
 
     def cap2_of(kappa, j):
@@ -515,27 +547,42 @@ def program_lower_bound_s(segments, machine: Machine, columns=None, curves=None)
     grid_sizes = own_sizes[copy_of]
     at = np.repeat(np.cumsum(own_sizes)[copy_of] - np.cumsum(grid_sizes), grid_sizes)
     take = at + np.arange(at.size)
-    s_grid, c2_grid = s_own[take], c2_own[take]
-    grid_start = np.concatenate(([0], np.cumsum(grid_sizes)))
-    sampled = curved[grid_rows]  # indices into ``moving`` of the gridded pieces
-    length[sampled] = s_grid[grid_start[1:] - 1]
-    # Exact stops: tangent discontinuities not under G64 P, dwells, rapid/feed changes.
+    return s_own[take], c2_own[take], grid_sizes
+
+
+def _exact_stops(t_start: np.ndarray, t_end: np.ndarray, blend: np.ndarray,
+                 index: np.ndarray, rapid: np.ndarray) -> np.ndarray:  # fmt: skip
+    """Whether the tool stops exactly after each piece (m,): tangent discontinuities
+    (turning > 1e-6 rad) not under G64 P (``blend`` > 0 on both sides), dwells (a gap in
+    the segment ``index``), rapid/feed changes; the last piece's entry False."""
     ta, tb = t_end[:-1], t_start[1:]
     cross = np.cross(ta, tb)
     turning = np.arctan2(np.sqrt(np.einsum("ij,ij->i", cross, cross)),
                          np.einsum("ij,ij->i", ta, tb))  # fmt: skip
     regular = (np.einsum("ij,ij->i", ta, ta) > 0.0) & (np.einsum("ij,ij->i", tb, tb) > 0.0)
     corner = regular & (turning > 1e-6) & ~(np.minimum(blend[:-1], blend[1:]) > 0.0)
-    stop = np.zeros(m, dtype=bool)
+    stop = np.zeros(index.size, dtype=bool)
     stop[:-1] = corner | (index[1:] != index[:-1] + 1) | (rapid[1:] != rapid[:-1])
+    return stop
+
+
+def _bound_points(length: np.ndarray, cap2: np.ndarray, stop: np.ndarray, sampled: np.ndarray,
+                  s_grid: np.ndarray, c2_grid: np.ndarray, grid_sizes: np.ndarray,
+                  grid_start: np.ndarray):  # fmt: skip
+    """The bound's grid along the whole path: points ``s_mm`` [mm], their cap²
+    [mm²/s²], each piece's first point and each piece's last programmed piece (the bound's
+    pieces are groups of programmed ones).
+
+    Runs of constant-cap pieces with neither a stop nor a change of cap between them are
+    one piece of the bound: their cap is constant along the run, and the bound is exact on
+    any grid for such a cap (module doc), so the run's inner junctions are dropped (a CAM
+    polyline under G64 P is one run, two points instead of two a line). Gridded pieces
+    (``sampled``: their points ``s_grid`` from their starts and caps ``c2_grid``) stay
+    pieces of their own."""
+    m = length.size
     offset = np.concatenate(([0.0], np.cumsum(length)))
     simple = np.ones(m, dtype=bool)
     simple[sampled] = False
-    # Runs of constant-cap pieces with neither a stop nor a change of cap between them are
-    # one piece of the bound: their cap is constant along the run, and the bound is exact on
-    # any grid for such a cap (module doc), so the run's inner junctions are dropped (a CAM
-    # polyline under G64 P is one run: 1,000,000 lines took 540 MB and 0.9 s as 2,000,000
-    # grid points). Gridded pieces stay pieces of their own.
     join = simple[:-1] & simple[1:] & ~stop[:-1] & (cap2[:-1] == cap2[1:])
     first = np.flatnonzero(np.r_[True, ~join])  # each group's first piece
     last = np.r_[first[1:], m] - 1  # and its last
@@ -555,5 +602,4 @@ def program_lower_bound_s(segments, machine: Machine, columns=None, curves=None)
         s_grid.size)
     s_mm[dest] = s_grid + np.repeat(offset[sampled], grid_sizes)
     path_cap2[dest] = c2_grid
-    bound = _solve(s_mm, path_cap2, piece_start, stop[last], a_max)
-    return float(bound.time_s) + dwell
+    return s_mm, path_cap2, piece_start, last

@@ -9,7 +9,8 @@ import numpy as np
 
 from nurbscnc.plan.options import Dynamics
 from nurbscnc.plan.pieces import PieceList
-from nurbscnc.plan.profile import Profile, ProfileInput, plan_profile
+from nurbscnc.plan.profile import Profile, ProfileInput
+from nurbscnc.plan.profile_plan import plan_profile
 from nurbscnc.plan.timing import dwell_times, total_time_s
 
 

@@ -10,11 +10,13 @@ from nurbscnc.errors import PlanningError
 from nurbscnc.machine.profile import Machine
 from nurbscnc.plan.axes import piece_limits
 from nurbscnc.plan.check import Checker
+from nurbscnc.plan.junctions import junction_caps, settle_time_s
 from nurbscnc.plan.levers import Levers
 from nurbscnc.plan.limits import check_point_count
 from nurbscnc.plan.options import Dynamics, LookaheadOptions
-from nurbscnc.plan.pieces import PieceList, junction_caps, segment_pieces, settle_time_s
+from nurbscnc.plan.pieces import PieceList
 from nurbscnc.plan.plans import Plan, cycle_time_s, profile_over
+from nurbscnc.plan.program_pieces import segment_pieces
 from nurbscnc.plan.shaping import fallback, shape
 
 #: Plan to this fraction of ε_max so the prediction has a little room (model, rounding).

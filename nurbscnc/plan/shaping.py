@@ -123,7 +123,7 @@ def local_factors(blame: np.ndarray, eps_mm: float, history=None):
 def _runs(caps: np.ndarray, smooth: np.ndarray, lev: Levers) -> np.ndarray:
     """Run label (k,) of each piece: the pieces the profile plans as one unit (tangent-
     continuous junctions, equal caps and equal limits; see
-    :func:`~nurbscnc.plan.profile.plan_profile`)."""
+    :func:`~nurbscnc.plan.profile_plan.plan_profile`)."""
     joined = (smooth[1:-1] > 0) & (caps[:-1] == caps[1:])
     for x in (lev.a_up, lev.j_up, lev.a_dn, lev.j_dn):
         joined &= x[:-1] == x[1:]
@@ -205,14 +205,14 @@ def _settle_extra(lev: Levers, ov: Overs, near: np.ndarray, profile: Profile,
 #: Samples before an over-limit sample on a curve whose pieces' feed is lowered [s]: the
 #: curve error is quasi-static (the speed and deceleration of the last few milliseconds on
 #: that curvature), so the feed is lowered where the error is, and the profile's gated
-#: flanks (:func:`~nurbscnc.plan.profile._gated_rise`) brake earlier into the lowered
+#: flanks (:func:`~nurbscnc.plan.gated.gated_rise`) brake earlier into the lowered
 #: cells at the same A and J; the 30 ms window lowered the cruise of the whole approach.
 CURVE_BLAME_WINDOW_S = 0.008
 
 
 def _servo_jerk(j_mm_s3: np.ndarray, a_mm_s2: np.ndarray, settle_max_s: float) -> np.ndarray:
     """The jerk [mm/s³] a softening starts from: at most A·|p|, |p| = 5 / ``settle_max_s``
-    the slowest servo pole's decay rate [1/s] (:func:`~nurbscnc.plan.pieces.settle_time_s`).
+    the slowest servo pole's decay rate [1/s] (:func:`~nurbscnc.plan.junctions.settle_time_s`).
     A jerk phase shorter than the servo's time constant 1/|p| is a step of acceleration to
     the servo, so lowering a larger jerk by a factor changes almost nothing the check sees:
     with a jerk limit far above A·|p| the stops of an arc program were found "ineffective"

@@ -50,7 +50,7 @@ class Window:
 def cut_windows(pieces: PieceList) -> np.ndarray:
     """Piece index of the start of each cut window (w,) (the first is 0): every rapid that a
     cut precedes starts a window (a cut → rapid junction is a rest,
-    :func:`~nurbscnc.plan.pieces.junction_caps`), so a window is the rapids before a cut and
+    :func:`~nurbscnc.plan.junctions.junction_caps`), so a window is the rapids before a cut and
     the cut; the settle after a rapid belongs to the cut after it."""
     rapid = np.asarray(pieces.rapid, dtype=bool)
     return np.concatenate(([0], np.flatnonzero(rapid[1:] & ~rapid[:-1]) + 1))

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from nurbscnc.plan.pieces import junction_caps
+from nurbscnc.plan.junctions import junction_caps
 from nurbscnc.plan.plans import profile_over
 from nurbscnc.plan.profile import Profile, time_at_length
 from nurbscnc.plan.timing import dwell_times, wall_to_profile_time

@@ -1,0 +1,98 @@
+"""Which corners are blended (G64): every blend that fits and is not slower than a stop,
+applied to the pieces (:func:`apply_blends`)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from nurbscnc.machine.caps import MIN_CAP_MM_S, curvature_cap_mm_s
+from nurbscnc.machine.profile import Machine
+from nurbscnc.plan.blend_rows import blended_rows
+from nurbscnc.plan.blends import Corners, blend_line_corners, blend_object_corners, find_corners
+from nurbscnc.plan.pieces import PieceList
+
+
+def apply_blends(pieces: PieceList, machine: Machine) -> tuple[PieceList, Corners | None]:
+    """Replace corners by PH quintic blends within their tolerance (G64).
+
+    Every corner :func:`find_corners` admits is blended when a blend fits: as LinuxCNC
+    under G64, blending is never weighed against stopping (a blend's feed is capped by its
+    peak curvature, and the look-ahead slows to that cap, which is never slower than slowing
+    to 0 over the same path). A blend trims at most half of each piece, so blends never
+    overlap. Line–line corners are built all at once in closed form
+    (:func:`blend_line_corners`): a polyline of short chords becomes a chain of blends with
+    no sliver of line left between them (equal trims where the tolerance binds). Corners
+    with an arc, NURBS or PH piece go one at a time (:func:`blend_object_corners`). The blend
+    piece is capped by its peak curvature like any curved piece (chord error, normal
+    acceleration). A piece trimmed at both ends to less than :data:`MIN_REMAINDER_MM` is
+    dropped. The blends' end tangents are the pieces' own unit tangents (not recomputed from
+    trimmed end points), so the junctions of a blended polyline are exactly smooth. The new
+    rows are written by :func:`blended_rows`. Returns the pieces and the corners tried
+    (None if none).
+    """
+    if len(pieces) < 2:
+        return pieces, None
+    c = find_corners(pieces, machine)
+    if c is None:
+        return pieces, None
+    blend_line_corners(pieces, c)
+    blend_object_corners(pieces, c, machine)
+    faster = _blend_is_faster(pieces, c, machine)
+    c.slower = c.ok & ~faster
+    c.ok &= faster
+    if not c.ok.any():
+        c.slower_junction = c.row[c.slower] - 1
+        return pieces, c
+    return blended_rows(pieces, c, machine), c
+
+
+def _speed_change_s(dv_mm_s, a_mm_s2: float, j_mm_s3: float) -> np.ndarray:
+    """Time [s] of a jerk-limited speed change by ``dv_mm_s`` ≥ 0 between two instants of
+    zero acceleration (the profile's transitions, SPEC §7): 2√(Δv/J) while Δv ≤ A²/J (the
+    acceleration never reaches A), else Δv/A + A/J."""
+    dv = np.maximum(np.asarray(dv_mm_s, dtype=float), 0.0)
+    return np.where(dv <= a_mm_s2 * a_mm_s2 / j_mm_s3, 2.0 * np.sqrt(dv / j_mm_s3),
+                    dv / a_mm_s2 + a_mm_s2 / j_mm_s3)  # fmt: skip
+
+
+def _reach_mm_s(d_mm, a_mm_s2: float, j_mm_s3: float) -> np.ndarray:
+    """The speed [mm/s] a jerk-limited start from rest reaches over ``d_mm`` (ending at zero
+    acceleration): the inverse of d = v t(v)/2 with t = :func:`_speed_change_s`, i.e.
+    v = (d² J)^(1/3) while v ≤ A²/J, else the root of v²/(2A) + v A/(2J) = d."""
+    d = np.maximum(np.asarray(d_mm, dtype=float), 0.0)
+    low = np.cbrt(d * d * j_mm_s3)
+    b = a_mm_s2 / j_mm_s3  # v² + b A v − 2 A d = 0 with b A = A²/J
+    high = 0.5 * (-b * a_mm_s2 + np.sqrt((b * a_mm_s2) ** 2 + 8.0 * a_mm_s2 * d))
+    return np.where(low <= a_mm_s2 * a_mm_s2 / j_mm_s3, low, high)
+
+
+def _blend_is_faster(pieces: PieceList, c: Corners, machine: Machine) -> np.ndarray:
+    """Which corners (m,) pass faster through their blend than stopping at the vertex
+    (G64 P: LinuxCNC blends every corner; a blend so tight that crawling through it costs
+    more than a stop is not used, so G64 P is never slower than G61 there).
+
+    Estimate, per corner, the time the corner adds to cruising at v over the same span, with
+    the profile's transitions (zero acceleration at their ends, :func:`_speed_change_s`
+    t(Δv), covering (v + w)/2 · t(Δv)): stopping costs t(v); slowing to the blend's cap w,
+    crossing its length L_b at w and speeding up again costs t(v − w)(v − w)/v + L_b/w −
+    (d_a + d_b)/v (the blend replaces the trims d_a + d_b of the corner path). v: the smaller
+    neighbouring cap, and at most the speed reachable from rest over half the shorter
+    neighbour (:func:`_reach_mm_s`, the stop's own bound); w: the blend's curvature cap, as
+    :func:`~nurbscnc.plan.blend_rows.blended_rows` gives it."""
+    m = c.row.size
+    faster = np.ones(m, dtype=bool)
+    if not c.ok.any():
+        return faster
+    lim = machine.limits
+    a, b = c.row - 1, c.row
+    cap = np.minimum(pieces.v_cap_mm_s[a], pieces.v_cap_mm_s[b])
+    half = 0.5 * np.minimum(pieces.length_mm[a], pieces.length_mm[b])
+    v = np.minimum(cap, _reach_mm_s(half, lim.a_max_mm_s2, lim.j_max_mm_s3))
+    w = np.minimum(np.maximum(np.minimum(curvature_cap_mm_s(machine, c.kappa_per_mm, cap),
+                                         c.cap_mm_s), MIN_CAP_MM_S), v)  # fmt: skip
+    v = np.maximum(v, MIN_CAP_MM_S)
+    t_dip = _speed_change_s(v - w, lim.a_max_mm_s2, lim.j_max_mm_s3) * (v - w) / v
+    blend = t_dip + c.length_mm / w - (c.trim_a_mm + c.trim_b_mm) / v
+    stop = _speed_change_s(v, lim.a_max_mm_s2, lim.j_max_mm_s3)
+    faster[c.ok] = (blend <= stop)[c.ok]
+    return faster
