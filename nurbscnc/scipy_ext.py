@@ -1,4 +1,4 @@
-"""scipy's compiled kernels without the packages around them (issue 14: import what a
+"""scipy's compiled kernels without the packages around them (import what a
 command needs).
 
 Importing ``scipy.signal`` costs 1–3 s of CPU (it pulls in scipy.stats, optimize, spatial,

@@ -1,4 +1,4 @@
-"""The path model: every piece of a toolpath in one column table (issue 12).
+"""The path model: every piece of a toolpath in one column table.
 
 One kind enum (:class:`Kind`) and one table (:class:`PathTable`, one row a piece, numpy
 columns) own the geometry of the planned path: lines, circular arcs and helices, spiral arcs
@@ -375,7 +375,7 @@ class PathTable:
             xi = np.where(length > 0.0, s / length, 0.0)
         # Each sample stops at its own tolerance (not when all have converged), so its ξ does
         # not depend on the others in the call: a window of samples gives the same bits as
-        # the whole reference (issue 14's chunked output). The coefficients are gathered
+        # the whole reference (the chunked output). The coefficients are gathered
         # once; the working set is compacted only when less than half of it still moves
         # (the others keep their ξ: the same arithmetic per sample, the same bits).
         slot = np.take(self.ph_slot, i)

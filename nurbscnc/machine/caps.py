@@ -13,9 +13,9 @@ filled in). Built from them:
   (:func:`corner_cap_mm_s`);
 - the baselines' feeds (SPEC §9, :func:`baseline_feed_mm_s`);
 - the path limits that keep every axis within its own velocity, acceleration and jerk
-  limits on a piece (issue 13, :func:`axis_path_limits`);
+  limits on a piece (:func:`axis_path_limits`);
 - the junction cap where the curvature vector jumps (a line into an arc, two arcs of other
-  radii): the acceleration steps there, a jerk impulse (issue 13, :func:`junction_jump_cap_mm_s`).
+  radii): the acceleration steps there, a jerk impulse (:func:`junction_jump_cap_mm_s`).
 
 All speeds in mm/s, curvatures in 1/mm, accelerations in mm/s².
 """
@@ -187,7 +187,7 @@ def baseline_feed_mm_s(algorithm: str, kappa_per_mm, feed_mm_s: float, machine: 
 def axis_path_limits(t_bound, k_bound, g_bound, kappa_per_mm, v_piece_mm_s, v_axis_mm_s,
                      a_axis_mm_s2, j_axis_mm_s3, a_path_mm_s2: float,
                      j_path_mm_s3: float):  # fmt: skip
-    """Path limits of k pieces that keep every axis within its own limits (issue 13).
+    """Path limits of k pieces that keep every axis within its own limits.
 
     Inputs per piece and axis (k, 3): ``t_bound`` T_i ≥ |t_i| (unit tangent), ``k_bound``
     K_i ≥ |(κn)_i| [1/mm] (curvature vector) and ``g_bound`` G_i ≥ |d(κn)_i/ds| [1/mm²], each
@@ -265,7 +265,7 @@ def axis_path_limits(t_bound, k_bound, g_bound, kappa_per_mm, v_piece_mm_s, v_ax
 def junction_jump_cap_mm_s(dkn_per_mm, period_s: float, j_path_mm_s3: float,
                            j_axis_mm_s3=None, share: float = JUNCTION_SHARE):  # fmt: skip
     """Speed cap [mm/s] at junctions where the curvature vector κn jumps by ``dkn_per_mm``
-    (m, 3) [1/mm] (issue 13): v ≤ √(4 J T / (3 |Δ(κn)|)) for the path jerk J = J_max, and
+    (m, 3) [1/mm]: v ≤ √(4 J T / (3 |Δ(κn)|)) for the path jerk J = J_max, and
     v ≤ √(4 s J_i T / (3 |Δ(κn)_i|)) for each axis i with a jerk limit J_i (``j_axis_mm_s3``
     (3,), ``inf``: none) and share s (:data:`JUNCTION_SHARE`); ``inf`` where nothing jumps.
 

@@ -1,4 +1,4 @@
-"""Writing an output while its windows are made (issue 14: long programs).
+"""Writing an output while its windows are made (long programs).
 
 ``run -o`` makes the reference points window by window and writes each as it comes. The
 writing is mostly work that does not hold Python's interpreter lock — deflating NPZ members

@@ -1,4 +1,4 @@
-"""The paper's figures as PNG files (SPEC §9, issue 5; the ``plot`` extra, matplotlib).
+"""The paper's figures as PNG files (SPEC §9; the ``plot`` extra, matplotlib).
 
 Pure functions: arrays in, one PNG out. Each builds its own ``matplotlib.figure.Figure`` on an
 Agg canvas (no pyplot, no global state, no display needed) and writes through

@@ -1,4 +1,4 @@
-"""Per-piece path limits from the machine's axis limits (planner v2, issue 13).
+"""Per-piece path limits from the machine's axis limits (planner v2).
 
 The planner plans along the path with one feed cap, tangential acceleration and jerk per
 piece; a real machine limits each axis (LinuxCNC's ``[AXIS_X] MAX_VELOCITY`` …). The profile's
@@ -27,7 +27,7 @@ tangential and the normal parts: :func:`nurbscnc.machine.caps.axis_path_limits`)
   their exact value (less on shorter arcs).
 
 With no per-axis limit in the profile the result is the path limits alone (the planner's
-behaviour before issue 13).
+behaviour without per-axis limits).
 
 A junction passed at speed where the curvature vector jumps (a line tangent into an arc)
 steps each axis's acceleration by v²|Δ(κn)_i| — a jerk impulse. The planner's junction caps

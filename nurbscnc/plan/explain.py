@@ -1,5 +1,5 @@
 """Why the feed is what it is: the limit that set each piece's and each source line's feed
-(``plan --explain``, issue 16).
+(``plan --explain``).
 
 For every piece of a plan the explanation recomputes the candidate caps from the formulas
 of :mod:`nurbscnc.machine.caps` (called, not copied), whole-array over the pieces:

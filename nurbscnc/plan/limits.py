@@ -1,4 +1,4 @@
-"""Checks before work (issue 14): soft limits on the geometry, and the number of reference
+"""Checks before work: soft limits on the geometry, and the number of reference
 points, refused before anything is planned or sampled.
 
 - :func:`segment_boxes_mm`: the axis-aligned box of every segment, exact for lines and arcs

@@ -1,4 +1,4 @@
-"""Dense CAM polylines as curvature-continuous splines (``--smooth``, issue 13).
+"""Dense CAM polylines as curvature-continuous splines (``--smooth``).
 
 CAM output writes a curved surface pass as thousands of short G1 chords (0.01–1 mm). Under
 G64 every vertex is blended, and a blend meets its lines with zero curvature: along a chain

@@ -108,7 +108,7 @@ def _linear_filter():
     spatial, …) for one loop that takes milliseconds, so its extension module
     ``scipy/signal/_sigtools`` is loaded on its own (:func:`nurbscnc.scipy_ext.extension`;
     it needs numpy only): the same code, the same bits as ``lfilter``. A numpy replacement
-    was measured and rejected (issue 14): a banded triangular solve (BLAS ``dtbsv``) of the
+    was measured and rejected: a banded triangular solve (BLAS ``dtbsv``) of the
     same recurrence is 27× slower and, being direct form I, differs by 4e-11 mm on a 100 mm
     signal — as much as lfilter's own rounding (3e-11 mm against the recurrence in extended
     precision), so no other arithmetic agrees with it to 1e-12 mm. Falls back to
@@ -195,7 +195,7 @@ def expm_small(m: np.ndarray) -> np.ndarray:
     (1/8)²¹/21! ≈ 1e-38), squared s times. On eq. 25's models at T = 1 ms it agrees with a
     40-digit evaluation (mpmath) to 1e-15 relative, where scipy.linalg.expm (Padé 13, no
     balancing) is 7e-12 off. Written here because importing scipy.linalg costs 0.1 s of
-    every ``run`` and ``plan`` (issue 14: import what a command needs) for one 6 × 6
+    every ``run`` and ``plan`` (import what a command needs) for one 6 × 6
     exponential; the tests compare it with scipy.linalg.expm."""
     b, d = _balance(m)
     norm = float(np.abs(b).sum(axis=1).max())
@@ -469,7 +469,7 @@ def contour_error_true(actual_xyz, path_points_xyz, k_initial: int = 8) -> np.nd
 
 class AxesStream:
     """Several axes simulated window by window, the filter state carried from one window to
-    the next (SPEC §8, eq. 25; the long programs of issue 14): :meth:`step` on consecutive
+    the next (SPEC §8, eq. 25; long programs): :meth:`step` on consecutive
     windows of the reference (w, k) [mm] gives the rows of :func:`simulate_axes` for those
     samples, and :meth:`settle` the tail that ``simulate_axes(..., settle=True)`` appends
     (the reference held at its last point until every axis is within

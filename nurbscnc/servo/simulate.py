@@ -1,4 +1,4 @@
-"""Independent servo simulation of a reference-point stream (SPEC §8, eq. 25-29; issue 5).
+"""Independent servo simulation of a reference-point stream (SPEC §8, eq. 25-29).
 
 This is the check the ``simulate`` and ``compare`` commands run on a plan's output. It uses the
 same model as the planner's own servo check (:mod:`nurbscnc.servo.model`: per axis G(s) of SPEC
@@ -306,7 +306,7 @@ def contour_errors(sim: Simulation, path_mm=None) -> ContourErrors:
 
 @dataclass(frozen=True)
 class Metrics:
-    """Summary of a simulation (issue 5, the paper's Table 4 columns) [µm, s].
+    """Summary of a simulation (the paper's Table 4 columns) [µm, s].
 
     ``contour_*`` are |ε| of SPEC eq. 29 (the paper's measure), ``true_*`` the distance to the
     commanded path; axis errors are |reference − actual| per axis. ``cycle_time_s`` is the time

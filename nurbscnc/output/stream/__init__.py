@@ -1,4 +1,4 @@
-"""Streaming reference points to a pulse-train motion card (issue 6; version 2 of the protocol).
+"""Streaming reference points to a pulse-train motion card (version 2 of the protocol).
 
 - :mod:`.quantise`: reference points [mm] → signed pulse counts per servo period and axis.
 - :mod:`.protocol`: the framed protocol (header CRC-8, CRC-32, batches that carry their start

@@ -1,4 +1,4 @@
-"""The cut windows of a plan handed to the stream as they are planned (issue 14).
+"""The cut windows of a plan handed to the stream as they are planned.
 
 :func:`~nurbscnc.plan.lookahead.plan_windows` yields a program's cut windows in order, each
 final when yielded (the junction after it is a rest: what comes after cannot change it). A

@@ -25,7 +25,7 @@ periods are quantised to pulses (:func:`~.quantise.quantise`) with the same
 rounding, and each section starts at the exact point where the previous one ended, so the
 card's position is continuous across sections.
 
-Streaming while planning (issue 14). With a ``feed`` (:class:`~.feed.WindowFeed`: the cut
+Streaming while planning. With a ``feed`` (:class:`~.feed.WindowFeed`: the cut
 windows of :func:`~nurbscnc.plan.lookahead.plan_windows` as they become final) the job starts
 on the first window's plan and adopts each later one as it arrives (:meth:`Job.poll`): the
 periods framed never go beyond the *horizon*, the end of the last final window, a rest (the
