@@ -59,8 +59,12 @@ PROJECT_ALONG_MM = 0.1
 PROJECT_BEND = 0.5
 #: Sides of the polygon in the disc across a path out of the XY plane (path_frame).
 TUBE_SIDES = 8
-#: Time limit of one projection LP [s].
-PROJECT_LP_TIME_S = 5.0
+#: Most simplex iterations of one projection LP, per unknown of the LP (at least
+#: PROJECT_LP_MIN_ITER): an iteration count, not a time limit, so that whether a window is
+#: solved does not depend on how busy the machine is (HiGHS needs at most ~2.5 per unknown
+#: on the test programs; a window that runs out counts as failed).
+PROJECT_LP_ITER_PER_UNKNOWN = 10
+PROJECT_LP_MIN_ITER = 10_000
 #: Most samples one projection LP moves (memory: HiGHS' grows fast with the window, to
 #: gigabytes for a long program's whole segment): longer windows are solved in pieces, and
 #: windows grow no further (where rows are still broken then, the reference is the plan's
@@ -419,10 +423,11 @@ def _solve_window(u: np.ndarray, r: np.ndarray, blocks: list, rhs: list,
     b = basis[j0:j1]
     nx = size * dims
     cost = np.concatenate([np.zeros(nx), np.ones(nx)])
+    maxiter = max(PROJECT_LP_MIN_ITER, PROJECT_LP_ITER_PER_UNKNOWN * cost.size)
     for _try in range(4):
         res = linprog(cost, A_ub=vstack(blocks).tocsr(), b_ub=np.concatenate(rhs),
                       bounds=bounds, method="highs",
-                      options={"time_limit": PROJECT_LP_TIME_S,
+                      options={"maxiter": maxiter,
                                "primal_feasibility_tolerance": 1e-9})  # fmt: skip
         if res.status != 0:
             return None
@@ -450,7 +455,8 @@ def project_onto_limits(target_mm: np.ndarray, planned_mm: np.ndarray, caps: Sam
     the first and last ``held`` samples, and samples no broken row reaches, as they are. The plan's
     own reference (δ = 0) keeps them, so there is always a solution: if the solver fails
     on the whole reference, or on windows grown to PROJECT_MAX_WINDOW samples (an LP that
-    runs out of PROJECT_LP_TIME_S counts as failed), the planned points are returned."""
+    runs out of its iterations, PROJECT_LP_ITER_PER_UNKNOWN, counts as failed), the planned
+    points are returned."""
     r = np.asarray(planned_mm, dtype=float)
     u = np.array(target_mm, dtype=float)
     n = u.shape[0]

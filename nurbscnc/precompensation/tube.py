@@ -72,8 +72,14 @@ REFINE_SPEED = 0.999
 #: A tool sample within this of the last try's [mm] keeps its distance to the path
 #: (:func:`refine_in_tube`).
 REUSE_MM = 1e-12
-#: Time limit of one window's LP [s] (HiGHS; a window not solved in time is left as is).
-REFINE_LP_TIME_S = 1.0
+#: Most simplex iterations of one window's LP (HiGHS; a window not solved within them is
+#: left as is). An iteration count, not a time limit: the result must not depend on how
+#: fast or how busy the machine is (a 1 s wall-clock limit cut the circle's hardest windows,
+#: ~8,200 iterations, ~0.8 s of CPU, whenever other processes shared the cores, and the
+#: reference then changed from run to run). A window moves at most REFINE_MAX_INPUTS
+#: samples, so an iteration costs at most ~0.1 ms: this bounds a window's LP to a few
+#: seconds (a 300-sample window once stalled for minutes) at 5x the hardest seen.
+REFINE_LP_MAX_ITER = 40_000
 #: Largest move of a reference sample along the path in one round [mm] ...
 REFINE_ALONG_MM = 0.02
 #: ... and at most the move whose bend off a curve (κ b²/2) is this share of the tube.
@@ -259,7 +265,7 @@ def _region_step(u: np.ndarray, y: np.ndarray, cut_out: np.ndarray, movable: np.
     cost = np.zeros(n_x + 1)
     cost[-1] = 1.0
     res = linprog(cost, A_ub=np.vstack(a_ub), b_ub=np.concatenate(b_ub), bounds=bounds,
-                  method="highs", options={"time_limit": REFINE_LP_TIME_S})  # fmt: skip
+                  method="highs", options={"maxiter": REFINE_LP_MAX_ITER})  # fmt: skip
     if res.status != 0:
         return None
     ab = res.x[:n_x].reshape(2, j1 - j0)
