@@ -140,9 +140,14 @@ def path_polyline_mm(segments) -> np.ndarray:
             parts.append(_arc_mm(seg))
         elif kind == "nurbs":
             parts.append(_nurbs_mm(seg))
-        elif hasattr(seg, "start_mm") and hasattr(seg, "end_mm") and kind not in (
-            "dwell",
-            "pause",
+        elif (
+            hasattr(seg, "start_mm")
+            and hasattr(seg, "end_mm")
+            and kind
+            not in (
+                "dwell",
+                "pause",
+            )
         ):
             raise ValueError(f"unknown segment kind {kind!r} (line {seg.line})")
     if not parts:
@@ -210,8 +215,9 @@ def motion_span(reference_mm: np.ndarray, period_s: float = SERVO_PERIOD_S) -> M
     return Motion(int(moving[0]), int(moving[-1]) + 1, period_s)
 
 
-def slow_drops(reference_mm: np.ndarray, period_s: float = SERVO_PERIOD_S,
-               below_mm_s: float = 0.5) -> int:
+def slow_drops(
+    reference_mm: np.ndarray, period_s: float = SERVO_PERIOD_S, below_mm_s: float = 0.5
+) -> int:
     """How many times the reference's speed |Δp|/T falls below ``below_mm_s`` [mm/s] from
     above during the motion (a stop or near-stop inside the program; issue 13 counts them)."""
     speed = np.linalg.norm(np.diff(reference_mm, axis=0), axis=1) / period_s
@@ -281,9 +287,9 @@ def contour_errors_um(
         "contour_max_um": float(cut.max() * 1e3),
         "contour_rms_um": float(np.sqrt(np.mean(cut**2)) * 1e3),
         "contour_argmax_s": float(np.flatnonzero(mask_all)[np.argmax(cut)] * period_s)
-        if mask_all.any() else float(np.argmax(err) * period_s),
+        if mask_all.any()
+        else float(np.argmax(err) * period_s),
         "contour_max_all_um": float(err.max() * 1e3),
         "contour_argmax_all_s": float(np.argmax(err) * period_s),
-        "reference_deviation_max_um": float(
-            (ref_dev[mask] if mask.any() else ref_dev).max() * 1e3),
+        "reference_deviation_max_um": float((ref_dev[mask] if mask.any() else ref_dev).max() * 1e3),
     }

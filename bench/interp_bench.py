@@ -71,8 +71,10 @@ def main(argv=None) -> int:
                 continue  # no NURBS: Taylor is the exact path there
             r = measure(name, target, interp)
             cases.append(r)
-            print(f"{name:18s} {interp:6s} {r['points']:>9d} points  "
-                  f"{r['points_per_s'] / 1e6:6.2f} M points/s (first run {r['first_run_s']:.2f} s)")
+            print(
+                f"{name:18s} {interp:6s} {r['points']:>9d} points  "
+                f"{r['points_per_s'] / 1e6:6.2f} M points/s (first run {r['first_run_s']:.2f} s)"
+            )
     # Linearity: the same program at a quarter of the points.
     small = measure("butterfly.nc", target // 4, "exact")
     big = next(c for c in cases if c["program"] == "butterfly.nc" and c["interpolator"] == "exact")

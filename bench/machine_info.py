@@ -53,17 +53,25 @@ def use_bytecode() -> None:
 
     os.environ.pop("PYTHONDONTWRITEBYTECODE", None)
     os.environ["PYTHONPYCACHEPREFIX"] = str(ROOT / "out" / "pycache")
-    subprocess.run([sys.executable, "-m", "compileall", "-q", str(ROOT / "nurbscnc")],
-                   check=False, capture_output=True)  # fmt: skip
+    subprocess.run(
+        [sys.executable, "-m", "compileall", "-q", str(ROOT / "nurbscnc")],
+        check=False,
+        capture_output=True,
+    )
 
 
 def git_commit() -> str | None:
     """The checked-out commit (with ``-dirty`` when the tree has changes), or None."""
     try:
-        sha = subprocess.run(["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True,
-                             text=True, check=True).stdout.strip()  # fmt: skip
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
-                               cwd=ROOT, capture_output=True, text=True).stdout.strip()  # fmt: skip
+        sha = subprocess.run(
+            ["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True, text=True, check=True
+        ).stdout.strip()
+        dirty = subprocess.run(
+            ["git", "status", "--porcelain", "--untracked-files=no"],
+            cwd=ROOT,
+            capture_output=True,
+            text=True,
+        ).stdout.strip()
         return sha + ("-dirty" if dirty else "")
     except (OSError, subprocess.CalledProcessError):
         return None
@@ -110,6 +118,7 @@ def corpus_program(relative: str) -> Path | None:
     direct = corpus / relative
     if direct.is_file():
         return direct
-    found = sorted(p for p in corpus.rglob(Path(relative).name)
-                   if p.as_posix().endswith("/" + relative))  # fmt: skip
+    found = sorted(
+        p for p in corpus.rglob(Path(relative).name) if p.as_posix().endswith("/" + relative)
+    )
     return found[0] if found else None

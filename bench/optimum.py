@@ -205,9 +205,14 @@ def interval_times_s(s_mm: np.ndarray, b_mm2_s2: np.ndarray) -> np.ndarray:
         return 2.0 * np.diff(s_mm) / (v[1:] + v[:-1])
 
 
-def jerk_limited_profile(s_mm: np.ndarray, cap2_mm2_s2: np.ndarray, a_max_mm_s2: float,
-                         j_max_mm_s3: float | None, iterations: int = 20,
-                         rel_tol: float = 1e-5) -> Profile:  # fmt: skip
+def jerk_limited_profile(
+    s_mm: np.ndarray,
+    cap2_mm2_s2: np.ndarray,
+    a_max_mm_s2: float,
+    j_max_mm_s3: float | None,
+    iterations: int = 20,
+    rel_tol: float = 1e-5,
+) -> Profile:
     """Near time-optimal rest-to-rest profile under a squared-speed cap, |a| ≤ A, |j| ≤ J.
 
     The LP of the module docstring (step 2): maximise Σ b_i over b ≤ cap², |Δb| ≤ 2Ah,
@@ -224,8 +229,10 @@ def jerk_limited_profile(s_mm: np.ndarray, cap2_mm2_s2: np.ndarray, a_max_mm_s2:
     upper[0] = upper[-1] = 0.0
     bounds = np.column_stack([np.zeros(n + 1), upper])
     rows = np.arange(n)
-    d1 = sparse.csr_matrix((np.r_[-np.ones(n), np.ones(n)], (np.r_[rows, rows],
-                            np.r_[rows, rows + 1])), shape=(n, n + 1))  # fmt: skip
+    d1 = sparse.csr_matrix(
+        (np.r_[-np.ones(n), np.ones(n)], (np.r_[rows, rows], np.r_[rows, rows + 1])),
+        shape=(n, n + 1),
+    )
     rhs1 = 2.0 * a_max_mm_s2 * h
     a_ub = [d1, -d1]
     b_ub = [rhs1, rhs1]
@@ -233,11 +240,21 @@ def jerk_limited_profile(s_mm: np.ndarray, cap2_mm2_s2: np.ndarray, a_max_mm_s2:
     # Rows 0 and n: the first and last interval's acceleration against the rest (a = 0)
     # before and after the motion, so the motion starts and ends with zero acceleration.
     r2 = np.arange(n - 1) + 1
-    d2 = sparse.csr_matrix((np.r_[1.0 / h[:-1], -1.0 / h[:-1] - 1.0 / h[1:], 1.0 / h[1:],
-                                  -1.0 / h[0], 1.0 / h[0], -1.0 / h[-1], 1.0 / h[-1]],
-                            (np.r_[r2, r2, r2, 0, 0, n, n],
-                             np.r_[r2 - 1, r2, r2 + 1, 0, 1, n - 1, n])),
-                           shape=(n + 1, n + 1))  # fmt: skip
+    d2 = sparse.csr_matrix(
+        (
+            np.r_[
+                1.0 / h[:-1],
+                -1.0 / h[:-1] - 1.0 / h[1:],
+                1.0 / h[1:],
+                -1.0 / h[0],
+                1.0 / h[0],
+                -1.0 / h[-1],
+                1.0 / h[-1],
+            ],
+            (np.r_[r2, r2, r2, 0, 0, n, n], np.r_[r2 - 1, r2, r2 + 1, 0, 1, n - 1, n]),
+        ),
+        shape=(n + 1, n + 1),
+    )
     c = -np.ones(n + 1)
 
     def solve(jerk_rhs):
@@ -245,8 +262,13 @@ def jerk_limited_profile(s_mm: np.ndarray, cap2_mm2_s2: np.ndarray, a_max_mm_s2:
         if jerk_rhs is not None:
             mats += [d2, -d2]
             rhs += [jerk_rhs, jerk_rhs]
-        res = linprog(c, A_ub=sparse.vstack(mats, format="csr"), b_ub=np.concatenate(rhs),
-                      bounds=bounds, method="highs")  # fmt: skip
+        res = linprog(
+            c,
+            A_ub=sparse.vstack(mats, format="csr"),
+            b_ub=np.concatenate(rhs),
+            bounds=bounds,
+            method="highs",
+        )
         if res.status != 0:
             raise RuntimeError(f"profile LP failed: {res.message}")
         return np.clip(res.x, 0.0, upper)
@@ -327,9 +349,16 @@ class Block:
         (:func:`nurbscnc.machine.caps.curvature_cap2_mm2_s2`, SPEC eq. 23)."""
         from nurbscnc.machine.caps import curvature_cap2_mm2_s2
 
-        return np.asarray(curvature_cap2_mm2_s2(self.curve.kappa_at(s_mm), self.v_top_mm_s,
-                                                self.a_max_mm_s2, self.period_s,
-                                                self.chord_tolerance_mm), float)  # fmt: skip
+        return np.asarray(
+            curvature_cap2_mm2_s2(
+                self.curve.kappa_at(s_mm),
+                self.v_top_mm_s,
+                self.a_max_mm_s2,
+                self.period_s,
+                self.chord_tolerance_mm,
+            ),
+            float,
+        )
 
     @property
     def cap2_mm2_s2(self) -> np.ndarray:
@@ -376,8 +405,13 @@ def kinematic_profile(block: Block, j_max_mm_s3: float | None, passes: int = 2) 
     return prof
 
 
-def load_block(program: Path, machine, max_spacing_mm: float = 0.02, min_knots: int = 800,
-               max_knots: int = 2000) -> Block:  # fmt: skip
+def load_block(
+    program: Path,
+    machine,
+    max_spacing_mm: float = 0.02,
+    min_knots: int = 800,
+    max_knots: int = 2000,
+) -> Block:
     """The first NURBS block of ``program`` with ``machine``'s limits (module doc, step 2):
     first grid spacing ``max_spacing_mm`` with at least ``min_knots`` and at most
     ``max_knots`` intervals."""
@@ -391,10 +425,18 @@ def load_block(program: Path, machine, max_spacing_mm: float = 0.02, min_knots: 
     n = int(np.clip(np.ceil(curve.length_mm / max_spacing_mm), min_knots, max_knots))
     s = np.linspace(0.0, curve.length_mm, n + 1)
     lim = machine.limits
-    return Block(curve, s, lim.a_max_mm_s2, lim.j_max_mm_s3,
-                 min(seg.feed_mm_s, lim.v_max_mm_s), machine.servo.period_s,
-                 lim.chord_tolerance_mm, programmed_path(program)[0], Servo(machine),
-                 seg.line)  # fmt: skip
+    return Block(
+        curve,
+        s,
+        lim.a_max_mm_s2,
+        lim.j_max_mm_s3,
+        min(seg.feed_mm_s, lim.v_max_mm_s),
+        machine.servo.period_s,
+        lim.chord_tolerance_mm,
+        programmed_path(program)[0],
+        Servo(machine),
+        seg.line,
+    )
 
 
 # --------------------------------------------------------------------------- servo loop
@@ -415,10 +457,16 @@ class Optimum:
         return len(self.history)
 
 
-def servo_loop(block: Block, grid_mm: np.ndarray, cap_mm_s: np.ndarray,
-               eps_target_um: float = EPS_TARGET_UM, max_iterations: int = 40,
-               patience: int = 8, gain_down: float = 1.0,
-               gain_up: float = 0.3) -> Optimum | None:  # fmt: skip
+def servo_loop(
+    block: Block,
+    grid_mm: np.ndarray,
+    cap_mm_s: np.ndarray,
+    eps_target_um: float = EPS_TARGET_UM,
+    max_iterations: int = 40,
+    patience: int = 8,
+    gain_down: float = 1.0,
+    gain_up: float = 0.3,
+) -> Optimum | None:
     """The servo loop of the module docstring (step 3) on a fixed grid.
 
     A speed cap c_i (start: ``cap_mm_s``, never above the kinematic cap) enters the LP as
@@ -436,12 +484,12 @@ def servo_loop(block: Block, grid_mm: np.ndarray, cap_mm_s: np.ndarray,
     window = int(round(CAUSE_WINDOW_S / block.servo.period_s))
     best, since, history = None, 0, []
     for _ in range(max_iterations):
-        profile = jerk_limited_profile(grid_mm, cap * cap, block.a_max_mm_s2,
-                                       block.j_max_mm_s3)  # fmt: skip
+        profile = jerk_limited_profile(grid_mm, cap * cap, block.a_max_mm_s2, block.j_max_mm_s3)
         s_all, err = block.tool_error_um(profile)
         history.append((profile.time_s, float(err.max())))
-        if err.max() <= eps_target_um and (best is None
-                                           or profile.time_s < best.profile.time_s - 1e-6):
+        if err.max() <= eps_target_um and (
+            best is None or profile.time_s < best.profile.time_s - 1e-6
+        ):
             best, since = Optimum(profile, cap.copy(), float(err.max()), []), 0
         else:
             since += 1
@@ -457,8 +505,11 @@ def servo_loop(block: Block, grid_mm: np.ndarray, cap_mm_s: np.ndarray,
             point_err[max(i0[j] - 1, 0) : i1[j] + 1] = err[j]
         ratio = 0.995 * eps_target_um / np.maximum(point_err, 1e-3)
         down = point_err > eps_target_um
-        cap = np.where(down, np.minimum(cap, np.maximum(profile.v_mm_s, 0.5)) * ratio**gain_down,
-                       np.minimum(kin, cap * np.minimum(ratio, 1.5) ** gain_up))  # fmt: skip
+        cap = np.where(
+            down,
+            np.minimum(cap, np.maximum(profile.v_mm_s, 0.5)) * ratio**gain_down,
+            np.minimum(kin, cap * np.minimum(ratio, 1.5) ** gain_up),
+        )
         cap = np.maximum(cap, 0.5)
     if best is None:
         return None
@@ -519,8 +570,9 @@ def airfoil_program(naca: str, chord_mm: float) -> str:
         knots, control = MP.interpolating_cubic(MP.airfoil_points_mm(chord_mm))
     finally:
         MP.NACA_M, MP.NACA_P, MP.NACA_T = saved
-    title = (f"NACA {naca}, chord {MP.fmt(chord_mm)} mm, cubic interpolating NURBS "
-             "(bench/optimum.py)")  # fmt: skip
+    title = (
+        f"NACA {naca}, chord {MP.fmt(chord_mm)} mm, cubic interpolating NURBS (bench/optimum.py)"
+    )
     text = MP.nurbs_program(title, knots, control, MP.AIRFOIL_FEED_MM_MIN)
     return text.replace(" (generated by programs/make_programs.py)", "")
 
@@ -549,15 +601,17 @@ def measured(block: Block, profile: Profile, program: Path) -> dict:
     lines = np.full(ref.shape[0], block.line)
     row = measure(ref, lines, programmed_path(program), block.line)
     kappa = block.curve.kappa_at(profile.s_mm)
-    row.update({
-        "profile_time_s": profile.time_s,
-        "max_speed_mm_s": float(profile.v_mm_s.max()),
-        "max_tangential_accel_mm_s2": float(np.abs(profile.accel_mm_s2()).max()),
-        "max_normal_accel_mm_s2": float(np.max(profile.b_mm2_s2 * kappa)),
-        "max_jerk_grid_mm_s3": float(np.abs(profile.jerk_mm_s3()).max()),
-        **sample_derivatives(profile, block.servo.period_s),
-        "grid_intervals": int(profile.s_mm.size - 1),
-    })  # fmt: skip
+    row.update(
+        {
+            "profile_time_s": profile.time_s,
+            "max_speed_mm_s": float(profile.v_mm_s.max()),
+            "max_tangential_accel_mm_s2": float(np.abs(profile.accel_mm_s2()).max()),
+            "max_normal_accel_mm_s2": float(np.max(profile.b_mm2_s2 * kappa)),
+            "max_jerk_grid_mm_s3": float(np.abs(profile.jerk_mm_s3()).max()),
+            **sample_derivatives(profile, block.servo.period_s),
+            "grid_intervals": int(profile.s_mm.size - 1),
+        }
+    )
     return row
 
 
@@ -568,10 +622,12 @@ def sample_derivatives(profile: Profile, period_s: float) -> dict:
     v = np.diff(s) / period_s
     a = np.diff(s, 2) / period_s**2
     j = np.abs(np.diff(s, 3)) / period_s**3
-    return {"samples_max_speed_mm_s": float(v.max()),
-            "samples_max_tangential_accel_mm_s2": float(np.abs(a).max()),
-            "samples_max_jerk_mm_s3": float(j.max()),
-            "samples_p99_jerk_mm_s3": float(np.percentile(j, 99))}  # fmt: skip
+    return {
+        "samples_max_speed_mm_s": float(v.max()),
+        "samples_max_tangential_accel_mm_s2": float(np.abs(a).max()),
+        "samples_max_jerk_mm_s3": float(j.max()),
+        "samples_p99_jerk_mm_s3": float(np.percentile(j, 99)),
+    }
 
 
 def run_case(case: Case, machine, tmp: Path, nurbscnc: bool = True) -> dict:
@@ -588,23 +644,29 @@ def run_case(case: Case, machine, tmp: Path, nurbscnc: bool = True) -> dict:
     row = {
         "program": case.program,
         "path_length_mm": block.curve.length_mm,
-        "optimum": {**measured(block, best.profile, program), "iterations": best.iterations,
-                    "history": [[round(t, 6), round(e, 4)] for t, e in best.history]},
+        "optimum": {
+            **measured(block, best.profile, program),
+            "iterations": best.iterations,
+            "history": [[round(t, 6), round(e, 4)] for t, e in best.history],
+        },
         "kinematic_jerk": measured(block, kinematic, program),
-        "kinematic_jerk_time_grid": {"profile_time_s": kinematic_tg.time_s,
-                                     "grid_intervals": int(kinematic_tg.s_mm.size - 1),
-                                     **sample_derivatives(kinematic_tg, block.period_s)},
+        "kinematic_jerk_time_grid": {
+            "profile_time_s": kinematic_tg.time_s,
+            "grid_intervals": int(kinematic_tg.s_mm.size - 1),
+            **sample_derivatives(kinematic_tg, block.period_s),
+        },
         "kinematic_no_jerk_s": no_jerk.time_s,
         "optimum_cpu_s": time.process_time() - t0,
-    }  # fmt: skip
+    }
     if nurbscnc:
         line = block_line(program)
         run = nurbscnc_case(None, program, programmed_path(program), line, [], tmp)
         row["nurbscnc"] = run
         if "time_s" in run:
             row["ratio"] = run["time_s"] / row["optimum"]["time_s"]
-            row["within_3_percent"] = bool(row["ratio"] <= 1.03
-                                           and run["contour_max_um"] <= EPS_MAX_UM)  # fmt: skip
+            row["within_3_percent"] = bool(
+                row["ratio"] <= 1.03 and run["contour_max_um"] <= EPS_MAX_UM
+            )
     return row
 
 
@@ -613,12 +675,18 @@ def print_table(cases: dict) -> None:
     rows = [head]
     for name, r in cases.items():
         o, k, n = r["optimum"], r["kinematic_jerk"], r.get("nurbscnc", {})
-        rows.append((name, f"{o['time_s']:.3f} s / {o['contour_max_um']:.2f} µm",
-                     f"{k['time_s']:.3f} s / {k['contour_max_um']:.1f} µm",
-                     f"{r['kinematic_no_jerk_s']:.3f} s",
-                     f"{n['time_s']:.3f} s / {n['contour_max_um']:.2f} µm" if "time_s" in n
-                     else n.get("error", "–")[:40],
-                     f"{r['ratio']:.3f}" if "ratio" in r else "–"))  # fmt: skip
+        rows.append(
+            (
+                name,
+                f"{o['time_s']:.3f} s / {o['contour_max_um']:.2f} µm",
+                f"{k['time_s']:.3f} s / {k['contour_max_um']:.1f} µm",
+                f"{r['kinematic_no_jerk_s']:.3f} s",
+                f"{n['time_s']:.3f} s / {n['contour_max_um']:.2f} µm"
+                if "time_s" in n
+                else n.get("error", "–")[:40],
+                f"{r['ratio']:.3f}" if "ratio" in r else "–",
+            )
+        )
     widths = [max(len(str(x[i])) for x in rows) for i in range(len(head))]
     for x in rows:
         print("  ".join(str(v).ljust(w) for v, w in zip(x, widths)).rstrip())
@@ -634,8 +702,11 @@ def main(argv=None) -> int:
     parser.add_argument("--out", default=None, help="write the results (JSON) here")
     parser.add_argument("--only", action="append", default=None, help="run only this case")
     parser.add_argument("--no-nurbscnc", action="store_true", help="the optimum only")
-    parser.add_argument("--write-programs", action="store_true",
-                        help="(re)write the generated airfoil programs and exit")  # fmt: skip
+    parser.add_argument(
+        "--write-programs",
+        action="store_true",
+        help="(re)write the generated airfoil programs and exit",
+    )
     args = parser.parse_args(argv)
     if args.write_programs:
         for path in write_programs():
@@ -652,18 +723,28 @@ def main(argv=None) -> int:
             cases[case.name] = run_case(case, machine, Path(tmp), not args.no_nurbscnc)
     print_table(cases)
     report = {
-        **run_info(), "issue": "issue 13: the jerk-limited optimum (docs/optimum.md)",
-        "limits": {"v_max_mm_s": lim.v_max_mm_s, "a_max_mm_s2": lim.a_max_mm_s2,
-                   "j_max_mm_s3": lim.j_max_mm_s3, "chord_tolerance_mm": lim.chord_tolerance_mm,
-                   "epsilon_max_um": EPS_MAX_UM, "epsilon_target_um": EPS_TARGET_UM,
-                   "period_s": machine.servo.period_s},
-        "issue_reference": {"optimum": "0.446 s / 14.97 µm (9 mm NACA 2415 block)",
-                            "topp_ra_no_jerk_s": 0.415, "kinematic_no_jerk_s": 0.355},
+        **run_info(),
+        "issue": "issue 13: the jerk-limited optimum (docs/optimum.md)",
+        "limits": {
+            "v_max_mm_s": lim.v_max_mm_s,
+            "a_max_mm_s2": lim.a_max_mm_s2,
+            "j_max_mm_s3": lim.j_max_mm_s3,
+            "chord_tolerance_mm": lim.chord_tolerance_mm,
+            "epsilon_max_um": EPS_MAX_UM,
+            "epsilon_target_um": EPS_TARGET_UM,
+            "period_s": machine.servo.period_s,
+        },
+        "issue_reference": {
+            "optimum": "0.446 s / 14.97 µm (9 mm NACA 2415 block)",
+            "topp_ra_no_jerk_s": 0.415,
+            "kinematic_no_jerk_s": 0.355,
+        },
         "measured": "time_s: the block's motion span from rest to rest on the 1 ms reference; "
-                    "contour_*: lsim of SPEC eq. 25 from the reference points, true distance "
-                    "to the programmed path (bench/planner_bench.py's measure)",
-        "quick": args.quick, "cases": cases,
-    }  # fmt: skip
+        "contour_*: lsim of SPEC eq. 25 from the reference points, true distance "
+        "to the programmed path (bench/planner_bench.py's measure)",
+        "quick": args.quick,
+        "cases": cases,
+    }
     if args.out:
         Path(args.out).write_text(json.dumps(report, indent=1, ensure_ascii=False) + "\n")
     return 0

@@ -42,8 +42,15 @@ from nurbscnc.program.interpret import InterpretOptions, interpret_text  # noqa:
 
 def spiral_lines(n_lines: int):
     """A CAM-style Archimedean spiral of exactly ``n_lines`` lines (module doc)."""
-    header = ["%", "(parser benchmark: CAM-style spiral, G1)", "G21 G17 G90 G94", "G64 P0.01",
-              "G0 Z5", "G0 X2 Y0", "G1 Z0 F300"]  # fmt: skip
+    header = [
+        "%",
+        "(parser benchmark: CAM-style spiral, G1)",
+        "G21 G17 G90 G94",
+        "G64 P0.01",
+        "G0 Z5",
+        "G0 X2 Y0",
+        "G1 Z0 F300",
+    ]
     footer = ["G0 Z5", "M2", "%"]
     yield from header
     theta = 0.0
@@ -82,8 +89,9 @@ def run_measured(cmd, cwd=None, env=None) -> tuple[float, float, float]:
     is the CPU time stretched by the load."""
     with tempfile.NamedTemporaryFile("r", suffix=".time") as report:
         timed = ["/usr/bin/time", "-o", report.name, "-f", "%e %U %S %M", *cmd]
-        done = subprocess.run(timed, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                              cwd=cwd, env=env)  # fmt: skip
+        done = subprocess.run(
+            timed, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=cwd, env=env
+        )
         if done.returncode != 0:
             raise RuntimeError(f"{cmd} exited with {done.returncode}")
         wall, user, system, rss_kb = report.read().split()[-4:]
@@ -94,8 +102,13 @@ def command_case(cmd, n_lines: int, repeat: int = 3, cwd=None, env=None) -> dict
     """Best of ``repeat`` runs of a whole command on an ``n_lines`` program: wall time,
     lines/s, and the CPU time and peak memory of that run."""
     wall, cpu, rss = min(run_measured(cmd, cwd, env) for _ in range(repeat))
-    return {"seconds": wall, "lines_per_s": n_lines / wall, "cpu_seconds": cpu,
-            "lines_per_cpu_s": n_lines / cpu, "max_rss_mb": rss}  # fmt: skip
+    return {
+        "seconds": wall,
+        "lines_per_s": n_lines / wall,
+        "cpu_seconds": cpu,
+        "lines_per_cpu_s": n_lines / cpu,
+        "max_rss_mb": rss,
+    }
 
 
 def programs(n: int):
@@ -119,11 +132,17 @@ def main(argv=None) -> int:
     text = "\n".join(spiral_lines(n)) + "\n"
     interpret_text("G1 X1 F100\n")  # build the grammar outside the timing
     cases = {}
-    for label, options in (("interpret_fast_lane", InterpretOptions()),
-                           ("interpret_line_by_line", InterpretOptions(fast_lane=False))):
+    for label, options in (
+        ("interpret_fast_lane", InterpretOptions()),
+        ("interpret_line_by_line", InterpretOptions(fast_lane=False)),
+    ):
         seconds, cpu = best_of(lambda o=options: interpret_text(text, o))
-        cases[label] = {"seconds": seconds, "lines_per_s": n / seconds, "cpu_seconds": cpu,
-                        "lines_per_cpu_s": n / cpu}  # fmt: skip
+        cases[label] = {
+            "seconds": seconds,
+            "lines_per_s": n / seconds,
+            "cpu_seconds": cpu,
+            "lines_per_cpu_s": n / cpu,
+        }
     exe = Path(sys.executable).with_name("nurbscnc")
     rs274 = shutil.which("rs274")
     described = {}
@@ -141,11 +160,13 @@ def main(argv=None) -> int:
             path = Path(tmp) / f"{name}.ngc"
             path.write_text("\n".join(lines) + "\n")
             described[name] = about
-            cases[f"check_command_{name}"] = command_case([str(exe), "check", str(path)], n,
-                                                          env=env)  # fmt: skip
+            cases[f"check_command_{name}"] = command_case(
+                [str(exe), "check", str(path)], n, env=env
+            )
             if rs274:
-                cases[f"linuxcnc_rs274_g_{name}"] = command_case([rs274, "-g", str(path)], n,
-                                                                 cwd=tmp)  # fmt: skip
+                cases[f"linuxcnc_rs274_g_{name}"] = command_case(
+                    [rs274, "-g", str(path)], n, cwd=tmp
+                )
     for label, case in cases.items():
         rss = f"  cpu {case['cpu_seconds']:6.3f} s  {case['lines_per_cpu_s']:>10,.0f} lines/cpu-s"
         rss += f"  {case['max_rss_mb']:5.0f} MB" if "max_rss_mb" in case else ""
@@ -154,7 +175,7 @@ def main(argv=None) -> int:
         **run_info(),
         "programs": described,
         "bytecode": "cached, as in an installed package (PYTHONPYCACHEPREFIX in a temporary "
-                    "folder, filled by one untimed run)",
+        "folder, filled by one untimed run)",
         "cases": cases,
     }
     if args.out:

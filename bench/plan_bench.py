@@ -42,8 +42,15 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def cam_spiral(n_lines: int, blend_mm: float = 0.01):
     """A CAM-style spiral finishing pass of exactly ``n_lines`` lines (module doc)."""
-    header = ["%", "(nurbscnc plan benchmark: CAM-style spiral, G1)", "G21 G17 G90 G94",
-              f"G64 P{blend_mm:g}", "G0 Z5", "G0 X2 Y0", "G1 Z0 F300"]  # fmt: skip
+    header = [
+        "%",
+        "(nurbscnc plan benchmark: CAM-style spiral, G1)",
+        "G21 G17 G90 G94",
+        f"G64 P{blend_mm:g}",
+        "G0 Z5",
+        "G0 X2 Y0",
+        "G1 Z0 F300",
+    ]
     footer = ["G0 Z5", "M2", "%"]
     yield from header
     theta = 0.0
@@ -132,8 +139,11 @@ def worker(program: str, dynamics: str) -> dict:
 def run_case(program: Path, dynamics: str) -> dict:
     proc = subprocess.run(
         [sys.executable, __file__, "--worker", str(program), "--dynamics", dynamics],
-        capture_output=True, text=True, check=False, cwd=ROOT,
-    )  # fmt: skip
+        capture_output=True,
+        text=True,
+        check=False,
+        cwd=ROOT,
+    )
     if proc.returncode != 0:
         raise RuntimeError(f"worker failed ({proc.returncode}):\n{proc.stderr}")
     return json.loads(proc.stdout)
@@ -148,8 +158,12 @@ def machine_info() -> dict:
                 break
     except OSError:
         pass
-    return {"platform": platform.platform(), "cpu": cpu, "cpu_count": os.cpu_count(),
-            "python": platform.python_version()}  # fmt: skip
+    return {
+        "platform": platform.platform(),
+        "cpu": cpu,
+        "cpu_count": os.cpu_count(),
+        "python": platform.python_version(),
+    }
 
 
 def main(argv=None) -> int:
@@ -181,17 +195,19 @@ def main(argv=None) -> int:
         "machine": machine_info(),
         "program": f"CAM-style G1 spiral, {n} lines, 0.05 mm chord, G64 P{args.blend:g}",
         "measured": "interpret_text + run_program (plan, check, interpolate) + "
-                    "write_points(.npz) + plan_summary, each timed; fresh subprocess per case",
+        "write_points(.npz) + plan_summary, each timed; fresh subprocess per case",
         "cases": cases,
     }
     for c in cases:
-        print(f"{c['lines']:>9} lines, dynamics {c['dynamics']}: interpret "
-              f"{c['interpret_s']:.2f} s, plan {c['plan_s']:.2f} s, write {c['write_s']:.2f} s, "
-              f"summary {c['summary_s']:.2f} s, "
-              f"run {c['run_s']:.2f} s | plan {c['plan_lines_per_s']:.0f} lines/s, run "
-              f"{c['run_lines_per_s']:.0f} lines/s, {c['run_samples_per_s']:.0f} samples/s | "
-              f"{c['pieces']} pieces, {c['samples']} samples, {c['dynamics_iterations']} it | "
-              f"peak RSS {c['rss_peak_mb']:.0f} MB")
+        print(
+            f"{c['lines']:>9} lines, dynamics {c['dynamics']}: interpret "
+            f"{c['interpret_s']:.2f} s, plan {c['plan_s']:.2f} s, write {c['write_s']:.2f} s, "
+            f"summary {c['summary_s']:.2f} s, "
+            f"run {c['run_s']:.2f} s | plan {c['plan_lines_per_s']:.0f} lines/s, run "
+            f"{c['run_lines_per_s']:.0f} lines/s, {c['run_samples_per_s']:.0f} samples/s | "
+            f"{c['pieces']} pieces, {c['samples']} samples, {c['dynamics_iterations']} it | "
+            f"peak RSS {c['rss_peak_mb']:.0f} MB"
+        )
     if args.out:
         Path(args.out).write_text(json.dumps(report, indent=1) + "\n")
     return 0

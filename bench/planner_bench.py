@@ -59,8 +59,9 @@ from contour import (  # noqa: E402
 )
 from machine_info import corpus_program, run_info, use_bytecode  # noqa: E402
 
-LINUXCNC_SIM = Path(os.environ.get("LINUXCNC_SIM",
-                                   "/work/shared/tools/linuxcnc-sim/run_linuxcnc.sh"))  # fmt: skip
+LINUXCNC_SIM = Path(
+    os.environ.get("LINUXCNC_SIM", "/work/shared/tools/linuxcnc-sim/run_linuxcnc.sh")
+)
 LINUXCNC_REFERENCE = HERE / "linuxcnc_reference.json"
 EPS_MAX_UM = 15.0
 ISSUE = "issue 13 ('Planner v2'), table measured with LinuxCNC 2.9 headless, same limits"
@@ -82,41 +83,93 @@ class Case:
     smooth: bool = False
 
 
-_AIRFOIL_PUB = {"linuxcnc": "0.367–0.392 s / 57–60 µm", "nurbscnc_before": "0.56–0.62 s / 14.3 µm",
-                "dynamics_off_before": "0.55 s / 20.6 µm"}  # fmt: skip
-_PENTA_PUB = {"linuxcnc": "3.75 s / 66–80 µm", "nurbscnc_before": "20.1 s / 14.8 µm",
-              "dynamics_off_before": "4.07 s / 15.9 µm"}  # fmt: skip
+_AIRFOIL_PUB = {
+    "linuxcnc": "0.367–0.392 s / 57–60 µm",
+    "nurbscnc_before": "0.56–0.62 s / 14.3 µm",
+    "dynamics_off_before": "0.55 s / 20.6 µm",
+}
+_PENTA_PUB = {
+    "linuxcnc": "3.75 s / 66–80 µm",
+    "nurbscnc_before": "20.1 s / 14.8 µm",
+    "dynamics_off_before": "4.07 s / 15.9 µm",
+}
 CASES = (
-    Case("naca2415", "programs/naca2415.nc", block=True, quick=True,
-         linuxcnc="bench/programs/naca2415_g52.nc", published=_AIRFOIL_PUB),
-    Case("naca2415_rot45", "programs/naca2415_rot45.nc", block=True,
-         linuxcnc="bench/programs/naca2415_g52_rot45.nc", published=_AIRFOIL_PUB),
-    Case("naca2415_rot-45", "programs/naca2415_rot-45.nc", block=True,
-         linuxcnc="bench/programs/naca2415_g52_rot-45.nc", published=_AIRFOIL_PUB),
-    Case("naca2415_g52", "bench/programs/naca2415_g52.nc", block=True, quick=True,
-         published={"linuxcnc": "0.367 s", "nurbscnc_before": "8.39 s",
-                    "dynamics_off_before": "8.39 s"}),
+    Case(
+        "naca2415",
+        "programs/naca2415.nc",
+        block=True,
+        quick=True,
+        linuxcnc="bench/programs/naca2415_g52.nc",
+        published=_AIRFOIL_PUB,
+    ),
+    Case(
+        "naca2415_rot45",
+        "programs/naca2415_rot45.nc",
+        block=True,
+        linuxcnc="bench/programs/naca2415_g52_rot45.nc",
+        published=_AIRFOIL_PUB,
+    ),
+    Case(
+        "naca2415_rot-45",
+        "programs/naca2415_rot-45.nc",
+        block=True,
+        linuxcnc="bench/programs/naca2415_g52_rot-45.nc",
+        published=_AIRFOIL_PUB,
+    ),
+    Case(
+        "naca2415_g52",
+        "bench/programs/naca2415_g52.nc",
+        block=True,
+        quick=True,
+        published={
+            "linuxcnc": "0.367 s",
+            "nurbscnc_before": "8.39 s",
+            "dynamics_off_before": "8.39 s",
+        },
+    ),
     Case("pentagram_g61", "bench/programs/pentagram_g61.nc", quick=True, published=_PENTA_PUB),
     Case("pentagram_g64p002", "bench/programs/pentagram_g64p002.nc", published=_PENTA_PUB),
-    Case("square_g61_f1000", "bench/programs/square_g61_f1000.nc", quick=True,
-         published={"nurbscnc_before": "8.62 s"}),
-    Case("square_g61_f3000", "bench/programs/square_g61_f3000.nc", quick=True,
-         published={"nurbscnc_before": "8.81 s", "dynamics_off_before": "1.85 s"}),
+    Case(
+        "square_g61_f1000",
+        "bench/programs/square_g61_f1000.nc",
+        quick=True,
+        published={"nurbscnc_before": "8.62 s"},
+    ),
+    Case(
+        "square_g61_f3000",
+        "bench/programs/square_g61_f3000.nc",
+        quick=True,
+        published={"nurbscnc_before": "8.81 s", "dynamics_off_before": "1.85 s"},
+    ),
     # A CAM finishing pass (2,000 G1 chords of 0.05 mm on a spiral, G64 without P): not in
     # the issue's table; measured because CAM output is what users run (docs/benchmarks.md).
     Case("cam_spiral2k", "tests/programs/cam/spiral2k.ngc", quick=True, smooth=True),
-    Case("arcspiral", "general/arcspiral.ngc", corpus=True,
-         published={"linuxcnc": "254.7 s / 78.7 µm", "nurbscnc_before": "283.5 s / 9.4 µm",
-                    "dynamics_off_before": "283.5 s"}),
-    Case("tort", "general/tort.ngc", corpus=True,
-         published={"linuxcnc": "545.4 s / 98.6 µm", "nurbscnc_before": "570.6 s / 14.8 µm",
-                    "dynamics_off_before": "557.3 s"}),
+    Case(
+        "arcspiral",
+        "general/arcspiral.ngc",
+        corpus=True,
+        published={
+            "linuxcnc": "254.7 s / 78.7 µm",
+            "nurbscnc_before": "283.5 s / 9.4 µm",
+            "dynamics_off_before": "283.5 s",
+        },
+    ),
+    Case(
+        "tort",
+        "general/tort.ngc",
+        corpus=True,
+        published={
+            "linuxcnc": "545.4 s / 98.6 µm",
+            "nurbscnc_before": "570.6 s / 14.8 µm",
+            "dynamics_off_before": "557.3 s",
+        },
+    ),
     # Two more corpus programs of LinuxCNC's nc_files, not in the issue's table: a pocket in
     # inches (cds) and arcs in the three planes with lettering (3dtest); measured to see
     # whether what holds for arcspiral and tort holds beyond them (session 14).
     Case("cds", "general/cds.ngc", corpus=True),
     Case("3dtest", "general/3dtest.ngc", corpus=True),
-)  # fmt: skip
+)
 #: The corpus programs also run under LinuxCNC's own limits (variant ``linuxcnc_limits``):
 #: LinuxCNC's accelerations per axis (√3 × 2450 mm/s² along a diagonal) and no jerk limit,
 #: the like-for-like comparison with its planner (docs/benchmarks.md).
@@ -165,8 +218,11 @@ def measure(points_mm: np.ndarray, lines: np.ndarray, path, block: int | None) -
     beside it (``contour_max_all_um``)."""
     polyline, rapid_lines = path
     span = motion_span(points_mm)
-    out = {"motion_s": span.seconds, "samples": int(points_mm.shape[0]),
-           "drops_below_0.5_mm_s": slow_drops(points_mm)}
+    out = {
+        "motion_s": span.seconds,
+        "samples": int(points_mm.shape[0]),
+        "drops_below_0.5_mm_s": slow_drops(points_mm),
+    }
     out["time_s"] = span.seconds
     if block is not None:
         # the end of the move before the block, then any wait at the block's start point (a
@@ -189,8 +245,11 @@ def run_nurbscnc(path: Path, extra: list[str], tmp: Path) -> dict:
     proc = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT, check=False)
     wall = time.perf_counter() - t0
     if proc.returncode != 0:
-        return {"error": (proc.stderr or proc.stdout).strip()[-2000:], "exit": proc.returncode,
-                "wall_s": wall}  # fmt: skip
+        return {
+            "error": (proc.stderr or proc.stdout).strip()[-2000:],
+            "exit": proc.returncode,
+            "wall_s": wall,
+        }
     try:
         summary = json.loads(proc.stdout)
     except json.JSONDecodeError:
@@ -225,9 +284,12 @@ def linuxcnc_available() -> bool:
 
 def linuxcnc_version() -> str | None:
     try:
-        return subprocess.run(["dpkg-query", "-W", "-f", "${Package} ${Version}",
-                               "linuxcnc-uspace"], capture_output=True, text=True,
-                              check=True).stdout.strip()  # fmt: skip
+        return subprocess.run(
+            ["dpkg-query", "-W", "-f", "${Package} ${Version}", "linuxcnc-uspace"],
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout.strip()
     except (OSError, subprocess.CalledProcessError):
         return None
 
@@ -245,28 +307,41 @@ def linuxcnc_config() -> dict:
             elif "=" in line and section in ("TRAJ", "AXIS_X", "EMCMOT"):
                 k, v = (x.strip() for x in line.split("=", 1))
                 keys[f"{section}.{k}"] = v
-    return {"script": str(LINUXCNC_SIM), "ini": str(ini),
-            "ini_sha256": sha256(ini) if ini.is_file() else None, "settings": keys}  # fmt: skip
+    return {
+        "script": str(LINUXCNC_SIM),
+        "ini": str(ini),
+        "ini_sha256": sha256(ini) if ini.is_file() else None,
+        "settings": keys,
+    }
 
 
 def run_linuxcnc_once(path: Path, programmed, block, tmp: Path) -> dict:
     out = tmp / "linuxcnc.csv"
     out.unlink(missing_ok=True)
     t0 = time.perf_counter()
-    proc = subprocess.run([str(LINUXCNC_SIM), str(path), str(out)], capture_output=True,
-                          text=True, check=False)  # fmt: skip
+    proc = subprocess.run(
+        [str(LINUXCNC_SIM), str(path), str(out)], capture_output=True, text=True, check=False
+    )
     wall = time.perf_counter() - t0
     status = {}
     if Path(str(out) + ".status.json").is_file():
         status = json.loads(Path(str(out) + ".status.json").read_text())
     if not out.is_file() or status.get("errors") or status.get("overruns"):
-        return {"error": (status.get("errors") or f"overruns {status.get('overruns')}"
-                          if status else proc.stderr.strip()[-1000:]),
-                "exit": proc.returncode}  # fmt: skip
+        return {
+            "error": (
+                status.get("errors") or f"overruns {status.get('overruns')}"
+                if status
+                else proc.stderr.strip()[-1000:]
+            ),
+            "exit": proc.returncode,
+        }
     data = np.loadtxt(out, delimiter=",", skiprows=1, ndmin=2)
-    row = {"program": str(path.relative_to(ROOT)) if path.is_relative_to(ROOT) else path.name,
-           "program_sha256": sha256(path), "wall_s": wall,
-           "recorder_cycle_time_s": status.get("cycle_time_s")}  # fmt: skip
+    row = {
+        "program": str(path.relative_to(ROOT)) if path.is_relative_to(ROOT) else path.name,
+        "program_sha256": sha256(path),
+        "wall_s": wall,
+        "recorder_cycle_time_s": status.get("cycle_time_s"),
+    }
     row.update(measure(data[:, 1:4], data[:, 4].astype(int), programmed, block))
     return row
 
@@ -310,7 +385,8 @@ def evaluate_goals(results: dict) -> None:
             if "time_s" in pre:
                 results[name]["goal_precompensate"] = "≤ 0.44 s at ≤ 15 µm, reference ≤ 3 µm"
                 results[name]["pass_precompensate"] = bool(
-                    ok(pre, 0.44) and pre["reference_deviation_max_um"] <= 3.0)
+                    ok(pre, 0.44) and pre["reference_deviation_max_um"] <= 3.0
+                )
     if "naca2415_g52" in results and "time_s" in row("naca2415"):
         t = 1.05 * row("naca2415")["time_s"]
         results["naca2415_g52"]["goal"] = f"≤ 1.05 × the G6.2 block = {t:.3f} s at ≤ 15 µm"
@@ -321,7 +397,8 @@ def evaluate_goals(results: dict) -> None:
     if "pentagram_g64p002" in results and "time_s" in row("pentagram_g61"):
         t = min(4.3, row("pentagram_g61")["time_s"])
         results["pentagram_g64p002"]["goal"] = (
-            f"no slower than G61 (≤ {t:.3f} s) at ≤ P + ε_max = 35 µm from the programmed path")
+            f"no slower than G61 (≤ {t:.3f} s) at ≤ P + ε_max = 35 µm from the programmed path"
+        )
         results["pentagram_g64p002"]["pass"] = ok(row("pentagram_g64p002"), t, 35.0)
     if "square_g61_f1000" in results:
         results["square_g61_f1000"]["goal"] = "≤ 15 µm"
@@ -334,8 +411,10 @@ def evaluate_goals(results: dict) -> None:
     lc = (cam or {}).get("linuxcnc") or {}
     if cam and "time_s" in lc and "time_s" in row("cam_spiral2k", "smooth"):
         t = lc["time_s"]
-        cam["goal_smooth"] = (f"--smooth: ≤ LinuxCNC's {t:.3f} s (measured) within the path "
-                              f"tolerance + ε_max = 30 µm of the programmed path")
+        cam["goal_smooth"] = (
+            f"--smooth: ≤ LinuxCNC's {t:.3f} s (measured) within the path "
+            f"tolerance + ε_max = 30 µm of the programmed path"
+        )
         cam["pass_smooth"] = ok(row("cam_spiral2k", "smooth"), t, 30.0)
     for name, t in LINUXCNC_PUBLISHED_S.items():
         if name in results:
@@ -344,8 +423,9 @@ def evaluate_goals(results: dict) -> None:
     for name, r in results.items():  # like for like: LinuxCNC's limits, its measured time
         lc = r.get("linuxcnc") or {}
         if "time_s" in row(name, "linuxcnc_limits") and "time_s" in lc:
-            r["goal_linuxcnc_limits"] = (f"under LinuxCNC's limits ≤ its {lc['time_s']:.3f} s "
-                                         f"(measured) at ≤ 15 µm")
+            r["goal_linuxcnc_limits"] = (
+                f"under LinuxCNC's limits ≤ its {lc['time_s']:.3f} s (measured) at ≤ 15 µm"
+            )
             r["pass_linuxcnc_limits"] = ok(row(name, "linuxcnc_limits"), lc["time_s"])
 
 
@@ -361,20 +441,47 @@ def _fmt(r: dict | None) -> str:
 
 
 def print_table(results: dict) -> None:
-    head = ("program", "LinuxCNC published", "LinuxCNC measured", "nurbscnc",
-            "--dynamics off", "goal", "pass")  # fmt: skip
+    head = (
+        "program",
+        "LinuxCNC published",
+        "LinuxCNC measured",
+        "nurbscnc",
+        "--dynamics off",
+        "goal",
+        "pass",
+    )
     rows = [head]
     for name, r in results.items():
         passed = {True: "PASS", False: "FAIL", None: "–"}[r.get("pass")]
-        rows.append((name, r.get("published", {}).get("linuxcnc", "–"), _fmt(r.get("linuxcnc")),
-                     _fmt(r["nurbscnc"].get("default")), _fmt(r["nurbscnc"].get("dynamics_off")),
-                     r.get("goal", "–"), passed))  # fmt: skip
-        for variant, label in (("precompensate", "--precompensate"), ("smooth", "--smooth"),
-                               ("linuxcnc_limits", "LinuxCNC's limits")):  # fmt: skip
+        rows.append(
+            (
+                name,
+                r.get("published", {}).get("linuxcnc", "–"),
+                _fmt(r.get("linuxcnc")),
+                _fmt(r["nurbscnc"].get("default")),
+                _fmt(r["nurbscnc"].get("dynamics_off")),
+                r.get("goal", "–"),
+                passed,
+            )
+        )
+        for variant, label in (
+            ("precompensate", "--precompensate"),
+            ("smooth", "--smooth"),
+            ("linuxcnc_limits", "LinuxCNC's limits"),
+        ):
             if variant in r["nurbscnc"]:
                 passed = {True: "PASS", False: "FAIL", None: "–"}[r.get(f"pass_{variant}")]
-                rows.append((f"  {label}", "", "", _fmt(r["nurbscnc"][variant]), "",
-                             r.get(f"goal_{variant}", "–"), passed))  # fmt: skip
+                rows.append(
+                    (
+                        f"  {label}",
+                        "",
+                        "",
+                        _fmt(r["nurbscnc"][variant]),
+                        "",
+                        r.get(f"goal_{variant}", "–"),
+                        passed,
+                    )
+                )
     widths = [max(len(str(x[i])) for x in rows) for i in range(len(head))]
     for x in rows:
         print("  ".join(str(v).ljust(w) for v, w in zip(x, widths)).rstrip())
@@ -384,23 +491,38 @@ def print_table(results: dict) -> None:
 
 
 def has_option(option: str) -> bool:
-    proc = subprocess.run([sys.executable, "-m", "nurbscnc", "run", "--help"],
-                          capture_output=True, text=True, cwd=ROOT, check=False)  # fmt: skip
+    proc = subprocess.run(
+        [sys.executable, "-m", "nurbscnc", "run", "--help"],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        check=False,
+    )
     return option in proc.stdout
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true",
-                        help="the short programs that carry goals, default dynamics only, "
-                             "LinuxCNC from the committed reference")  # fmt: skip
+    parser.add_argument(
+        "--quick",
+        action="store_true",
+        help="the short programs that carry goals, default dynamics only, "
+        "LinuxCNC from the committed reference",
+    )
     parser.add_argument("--out", default=None, help="write the results (JSON) here")
     parser.add_argument("--only", action="append", default=None, help="run only this case")
     parser.add_argument("--no-linuxcnc", action="store_true", help="never run LinuxCNC live")
-    parser.add_argument("--linuxcnc-repeat", type=int, default=3,
-                        help="LinuxCNC runs per program (the fastest counts; default 3)")
-    parser.add_argument("--linuxcnc-long", action="store_true",
-                        help="also run the corpus programs on LinuxCNC (real time, ~15 min)")
+    parser.add_argument(
+        "--linuxcnc-repeat",
+        type=int,
+        default=3,
+        help="LinuxCNC runs per program (the fastest counts; default 3)",
+    )
+    parser.add_argument(
+        "--linuxcnc-long",
+        action="store_true",
+        help="also run the corpus programs on LinuxCNC (real time, ~15 min)",
+    )
     args = parser.parse_args(argv)
     use_bytecode()  # the children start as a user's installed nurbscnc does
 
@@ -408,9 +530,13 @@ def main(argv=None) -> int:
     stored = {}
     if LINUXCNC_REFERENCE.is_file():
         stored = json.loads(LINUXCNC_REFERENCE.read_text())
-    reference = {"note": "LinuxCNC measured live by bench/planner_bench.py (see its doc)",
-                 **run_info(), "linuxcnc_version": linuxcnc_version(),
-                 "config": linuxcnc_config(), "cases": dict(stored.get("cases", {}))}  # fmt: skip
+    reference = {
+        "note": "LinuxCNC measured live by bench/planner_bench.py (see its doc)",
+        **run_info(),
+        "linuxcnc_version": linuxcnc_version(),
+        "config": linuxcnc_config(),
+        "cases": dict(stored.get("cases", {})),
+    }
     precompensate = has_option("--precompensate")
     results = {}
     live_runs = {}
@@ -421,15 +547,23 @@ def main(argv=None) -> int:
             continue
         path = program_path(case)
         if path is None:
-            print(f"{case.name}: corpus program {case.program} not found (set NURBSCNC_CORPUS); "
-                  "skipped", file=sys.stderr)  # fmt: skip
+            print(
+                f"{case.name}: corpus program {case.program} not found (set NURBSCNC_CORPUS); "
+                "skipped",
+                file=sys.stderr,
+            )
             continue
         print(f"{case.name}: {path}", file=sys.stderr)
         block = block_line(path) if case.block else None
         programmed = programmed_path(path)
-        entry = {"program": str(path.relative_to(ROOT)) if path.is_relative_to(ROOT)
-                 else f"$NURBSCNC_CORPUS/…/{case.program}",
-                 "block_line": block, "published": case.published, "nurbscnc": {}}  # fmt: skip
+        entry = {
+            "program": str(path.relative_to(ROOT))
+            if path.is_relative_to(ROOT)
+            else f"$NURBSCNC_CORPUS/…/{case.program}",
+            "block_line": block,
+            "published": case.published,
+            "nurbscnc": {},
+        }
         variants = {"default": []}
         if not (args.quick or case.corpus):
             variants["dynamics_off"] = ["--dynamics", "off"]
@@ -441,8 +575,9 @@ def main(argv=None) -> int:
             variants["smooth"] = ["--smooth"]
         with tempfile.TemporaryDirectory() as tmp:
             for key, extra in variants.items():
-                entry["nurbscnc"][key] = nurbscnc_case(case, path, programmed, block, extra,
-                                                       Path(tmp))  # fmt: skip
+                entry["nurbscnc"][key] = nurbscnc_case(
+                    case, path, programmed, block, extra, Path(tmp)
+                )
             lpath = ROOT / case.linuxcnc if case.linuxcnc else path
             lblock = block_line(lpath) if case.block else None
             if live and (not case.corpus or args.linuxcnc_long):
@@ -460,12 +595,18 @@ def main(argv=None) -> int:
         results[case.name] = entry
     evaluate_goals(results)
     print_table(results)
-    report = {**run_info(), "issue": ISSUE, "epsilon_max_um": EPS_MAX_UM,
-              "measured": "time_s: motion span (airfoils: from the end of the rapid to the "
-              "block); contour_*: lsim of SPEC eq. 25 from the reference points, true "
-              "distance to the programmed path (docs/benchmarks.md)",
-              "precompensate_option": precompensate, "quick": args.quick,
-              "linuxcnc_live": live, "cases": results}  # fmt: skip
+    report = {
+        **run_info(),
+        "issue": ISSUE,
+        "epsilon_max_um": EPS_MAX_UM,
+        "measured": "time_s: motion span (airfoils: from the end of the rapid to the "
+        "block); contour_*: lsim of SPEC eq. 25 from the reference points, true "
+        "distance to the programmed path (docs/benchmarks.md)",
+        "precompensate_option": precompensate,
+        "quick": args.quick,
+        "linuxcnc_live": live,
+        "cases": results,
+    }
     if args.out:
         Path(args.out).write_text(json.dumps(report, indent=1, ensure_ascii=False) + "\n")
     if live:

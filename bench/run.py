@@ -59,8 +59,14 @@ def g1_program(n_lines: int):
     every line numbered (N, wrapping at 99990), modal G1 with X Y (and Z every tenth line),
     a feed change every 250 moves and a comment every 1000 lines.
     """
-    header = ["%", "(nurbscnc benchmark: CAM-style spiral, G1)", "G21 G17 G90 G94",
-              "G0 Z5", "G0 X2 Y0", "G1 Z0 F300"]  # fmt: skip
+    header = [
+        "%",
+        "(nurbscnc benchmark: CAM-style spiral, G1)",
+        "G21 G17 G90 G94",
+        "G0 Z5",
+        "G0 X2 Y0",
+        "G1 Z0 F300",
+    ]
     footer = ["G0 Z5", "M2", "%"]
     yield from header
     theta, z = 0.0, 0.0
@@ -89,8 +95,13 @@ def g62_program(n_lines: int, blocks: int = 4):
     ``K X Y R`` lines and four knot-only ``K`` lines; clamped uniform knots 0,0,0,0,1,2,…
     Control points follow a wavy spiral; weights vary in [0.8, 1.2].
     """
-    header = ["%", "(nurbscnc benchmark: long G6.2 NURBS blocks)", "G21 G17 G90 G94",
-              "G0 X5 Y0", "F2000"]  # fmt: skip
+    header = [
+        "%",
+        "(nurbscnc benchmark: long G6.2 NURBS blocks)",
+        "G21 G17 G90 G94",
+        "G0 X5 Y0",
+        "F2000",
+    ]
     footer = ["M2", "%"]
     body = n_lines - len(header) - len(footer)
     yield from header
@@ -169,9 +180,14 @@ def worker(mode: str, program: str) -> dict:
         t0, c0 = time.perf_counter(), time.process_time()
         prog = interpret_text(text)
         seconds, cpu_seconds = time.perf_counter() - t0, time.process_time() - c0
-        return {"seconds": seconds, "cpu_seconds": cpu_seconds, "segments": len(prog.segments),
-                "rss_base_mb": rss_base, "rss_peak_mb": _rss_mb(),
-                "vm_hwm_mb": _vm_hwm_mb()}  # fmt: skip
+        return {
+            "seconds": seconds,
+            "cpu_seconds": cpu_seconds,
+            "segments": len(prog.segments),
+            "rss_base_mb": rss_base,
+            "rss_peak_mb": _rss_mb(),
+            "vm_hwm_mb": _vm_hwm_mb(),
+        }
     tracemalloc.start()
     prog = interpret_text(text)
     current, peak = tracemalloc.get_traced_memory()
@@ -247,23 +263,25 @@ def run_cases(quick: bool, workdir: Path) -> list[dict]:
         timed = timings[name]
         traced = finish_worker(tracing[name]) if name in tracing else no_trace
         assert traced["segments"] in (None, timed["segments"])
-        results.append({
-            "case": name if not quick else f"{name}/{QUICK_DIVISOR}",
-            "program": kind.upper().replace("G62", "G6.2"),
-            "lines": lines,
-            "bytes": program.stat().st_size,
-            "segments": timed["segments"],
-            "seconds": timed["seconds"],
-            "cpu_seconds": timed["cpu_seconds"],
-            "lines_per_s": lines / timed["seconds"],
-            "peak_mb": traced["peak_mb"],
-            "retained_mb": traced["retained_mb"],
-            "peak_bytes_per_line": _ratio(traced["peak_mb"], lines / MB),
-            "rss_base_mb": timed["rss_base_mb"],
-            "rss_peak_mb": timed["rss_peak_mb"],
-            "rss_growth_mb": timed["rss_peak_mb"] - timed["rss_base_mb"],
-            "vm_hwm_mb": timed["vm_hwm_mb"],
-        })  # fmt: skip
+        results.append(
+            {
+                "case": name if not quick else f"{name}/{QUICK_DIVISOR}",
+                "program": kind.upper().replace("G62", "G6.2"),
+                "lines": lines,
+                "bytes": program.stat().st_size,
+                "segments": timed["segments"],
+                "seconds": timed["seconds"],
+                "cpu_seconds": timed["cpu_seconds"],
+                "lines_per_s": lines / timed["seconds"],
+                "peak_mb": traced["peak_mb"],
+                "retained_mb": traced["retained_mb"],
+                "peak_bytes_per_line": _ratio(traced["peak_mb"], lines / MB),
+                "rss_base_mb": timed["rss_base_mb"],
+                "rss_peak_mb": timed["rss_peak_mb"],
+                "rss_growth_mb": timed["rss_peak_mb"] - timed["rss_base_mb"],
+                "vm_hwm_mb": timed["vm_hwm_mb"],
+            }
+        )
     return results
 
 
@@ -281,36 +299,49 @@ def linearity(results: list[dict]) -> list[dict]:
     rows = []
     for big, small in PAIRS:
         b, s = by_name[big], by_name[small]
-        rows.append({
-            "cases": [big, small],
-            "lines_ratio": b["lines"] / s["lines"],
-            "peak_mb_ratio": _ratio(b["peak_mb"], s["peak_mb"]),
-            "rss_growth_ratio": _ratio(b["rss_growth_mb"], s["rss_growth_mb"]),
-        })  # fmt: skip
+        rows.append(
+            {
+                "cases": [big, small],
+                "lines_ratio": b["lines"] / s["lines"],
+                "peak_mb_ratio": _ratio(b["peak_mb"], s["peak_mb"]),
+                "rss_growth_ratio": _ratio(b["rss_growth_mb"], s["rss_growth_mb"]),
+            }
+        )
     return rows
 
 
 def print_table(report: dict) -> None:
-    head = (f"{'case':<14}{'lines':>10}{'seconds':>9}{'lines/s':>10}{'peak MB':>9}"
-            f"{'B/line':>8}{'RSS MB':>9}{'RSS +MB':>9}")  # fmt: skip
+    head = (
+        f"{'case':<14}{'lines':>10}{'seconds':>9}{'lines/s':>10}{'peak MB':>9}"
+        f"{'B/line':>8}{'RSS MB':>9}{'RSS +MB':>9}"
+    )
     print(head)
     print("-" * len(head))
     for r in report["cases"]:
-        print(f"{r['case']:<14}{r['lines']:>10}{r['seconds']:>9.2f}{r['lines_per_s']:>10.0f}"
-              f"{_fmt(r['peak_mb'], 9, 1)}{_fmt(r['peak_bytes_per_line'], 8, 0)}"
-              f"{r['rss_peak_mb']:>9.1f}{r['rss_growth_mb']:>9.1f}")  # fmt: skip
+        print(
+            f"{r['case']:<14}{r['lines']:>10}{r['seconds']:>9.2f}{r['lines_per_s']:>10.0f}"
+            f"{_fmt(r['peak_mb'], 9, 1)}{_fmt(r['peak_bytes_per_line'], 8, 0)}"
+            f"{r['rss_peak_mb']:>9.1f}{r['rss_growth_mb']:>9.1f}"
+        )
     for row in report["linearity"]:
-        print(f"{' / '.join(row['cases'])}: lines x{row['lines_ratio']:.2f}, "
-              f"tracemalloc peak x{_fmt(row['peak_mb_ratio'], 0, 2).strip()}, "
-              f"RSS growth x{_fmt(row['rss_growth_ratio'], 0, 2).strip()}")  # fmt: skip
+        print(
+            f"{' / '.join(row['cases'])}: lines x{row['lines_ratio']:.2f}, "
+            f"tracemalloc peak x{_fmt(row['peak_mb_ratio'], 0, 2).strip()}, "
+            f"RSS growth x{_fmt(row['rss_growth_ratio'], 0, 2).strip()}"
+        )
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--out", type=Path, default=ROOT / "bench" / "results.json",
-                        help="JSON results file (default: bench/results.json)")  # fmt: skip
-    parser.add_argument("--quick", action="store_true",
-                        help=f"programs {QUICK_DIVISOR}x smaller (a smoke test)")  # fmt: skip
+    parser.add_argument(
+        "--out",
+        type=Path,
+        default=ROOT / "bench" / "results.json",
+        help="JSON results file (default: bench/results.json)",
+    )
+    parser.add_argument(
+        "--quick", action="store_true", help=f"programs {QUICK_DIVISOR}x smaller (a smoke test)"
+    )
     parser.add_argument("--worker", nargs=2, metavar=("MODE", "PROGRAM"), help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     from machine_info import use_bytecode
@@ -330,10 +361,10 @@ def main(argv=None) -> int:
         "versions": versions(),
         "quick": args.quick,
         "measured": "nurbscnc.program.interpret.interpret_text(text): lark LALR parse with an "
-                    "inline transformer + interpretation to segments; text already in memory",
+        "inline transformer + interpretation to segments; text already in memory",
         "cases": cases,
         "linearity": linearity(cases),
-    }  # fmt: skip
+    }
     args.out.parent.mkdir(parents=True, exist_ok=True)
     tmp_out = args.out.with_name(args.out.name + ".tmp")
     tmp_out.write_text(json.dumps(report, indent=1) + "\n", encoding="utf-8")

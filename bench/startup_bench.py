@@ -39,8 +39,17 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from machine_info import run_info, use_bytecode  # noqa: E402
 
 #: The modules whose import a command should pay only when it needs them.
-HEAVY = ("numpy", "scipy", "scipy.signal", "rich", "lark", "matplotlib", "serial",
-         "nurbscnc.servo.model", "nurbscnc.pipeline")  # fmt: skip
+HEAVY = (
+    "numpy",
+    "scipy",
+    "scipy.signal",
+    "rich",
+    "lark",
+    "matplotlib",
+    "serial",
+    "nurbscnc.servo.model",
+    "nurbscnc.pipeline",
+)
 
 #: A program with lines and an arc: ~6 s of motion, a few thousand reference points.
 TINY_PROGRAM = """G21 G90 G17
@@ -53,8 +62,11 @@ M2
 """
 
 #: The completion request a shell sends for ``nurbscnc ch<TAB>``.
-COMPLETE_ENV = {"_NURBSCNC_COMPLETE": "bash_complete", "COMP_WORDS": "nurbscnc ch",
-                "COMP_CWORD": "1"}  # fmt: skip
+COMPLETE_ENV = {
+    "_NURBSCNC_COMPLETE": "bash_complete",
+    "COMP_WORDS": "nurbscnc ch",
+    "COMP_CWORD": "1",
+}
 
 
 def commands(tiny: str) -> dict[str, tuple[list[str], dict]]:
@@ -67,7 +79,9 @@ def commands(tiny: str) -> dict[str, tuple[list[str], dict]]:
         "run tiny.nc -o /dev/null": (["run", tiny, "-o", os.devnull, "--quiet"], {}),
         # without the servo check (no contour error prediction): no scipy.signal to import
         "run tiny.nc -o /dev/null --dynamics off": (
-            ["run", tiny, "-o", os.devnull, "--quiet", "--dynamics", "off"], {}),
+            ["run", tiny, "-o", os.devnull, "--quiet", "--dynamics", "off"],
+            {},
+        ),
     }
 
 
@@ -115,7 +129,7 @@ def parse_importtime(text: str) -> dict:
     for line in text.splitlines():
         if not line.startswith("import time:") or "cumulative" in line:
             continue
-        _, cumulative, name = line[len("import time:"):].split("|")
+        _, cumulative, name = line[len("import time:") :].split("|")
         depth = (len(name) - len(name.lstrip(" ")) - 1) // 2  # one space follows the bar
         entries.append((depth, int(cumulative), name.strip()))
     total_us = sum(us for depth, us, _ in entries if depth == 0)
@@ -130,15 +144,19 @@ def parse_importtime(text: str) -> dict:
                 cost_us[module] = (cost_us[module] or 0) + us
         stack.append((depth, name))
     heavy = {m: None if us is None else round(us / 1000.0, 3) for m, us in cost_us.items()}
-    return {"imports_ms": round(total_us / 1000.0, 3), "heavy_imports_ms": heavy,
-            "imported": [m for m, t in heavy.items() if t is not None]}  # fmt: skip
+    return {
+        "imports_ms": round(total_us / 1000.0, 3),
+        "heavy_imports_ms": heavy,
+        "imported": [m for m, t in heavy.items() if t is not None],
+    }
 
 
 def import_profile(argv: list[str], env: dict) -> dict:
     """One run of ``argv`` (a Python script and its arguments) under ``-X importtime``:
     :func:`parse_importtime` of what it printed."""
-    done = subprocess.run([sys.executable, "-X", "importtime", *argv], env=env,
-                          capture_output=True, text=True)  # fmt: skip
+    done = subprocess.run(
+        [sys.executable, "-X", "importtime", *argv], env=env, capture_output=True, text=True
+    )
     return parse_importtime(done.stderr)
 
 
@@ -160,18 +178,27 @@ def main() -> None:
             env = {**os.environ, **extra, "NO_COLOR": "1"}
             argv = [str(script), *rest]
             times, cpus = timed_runs_s(argv, env, repeat)
-            row = {"median_s": round(statistics.median(times), 4),
-                   "min_s": round(min(times), 4), "max_s": round(max(times), 4),
-                   "cpu_median_s": round(statistics.median(cpus), 4),
-                   "runs": repeat, **import_profile(argv, env)}  # fmt: skip
+            row = {
+                "median_s": round(statistics.median(times), 4),
+                "min_s": round(min(times), 4),
+                "max_s": round(max(times), 4),
+                "cpu_median_s": round(statistics.median(cpus), 4),
+                "runs": repeat,
+                **import_profile(argv, env),
+            }
             results[name] = row
-            print(f"{name:40s} wall median {row['median_s']:.3f} s (min {row['min_s']:.3f}), "
-                  f"CPU {row['cpu_median_s']:.3f} s, imports {row['imports_ms']:.0f} ms: "
-                  f"{', '.join(row['imported']) or '-'}")
+            print(
+                f"{name:40s} wall median {row['median_s']:.3f} s (min {row['min_s']:.3f}), "
+                f"CPU {row['cpu_median_s']:.3f} s, imports {row['imports_ms']:.0f} ms: "
+                f"{', '.join(row['imported']) or '-'}"
+            )
     info = run_info()
     info["machine"]["load_average_before_1_5_15"] = list(load_before)
-    doc = {**info, "goal_s": {"--help": 0.3, "check --help": 0.3, "completion": 0.3},
-           "commands": results}  # fmt: skip
+    doc = {
+        **info,
+        "goal_s": {"--help": 0.3, "check --help": 0.3, "completion": 0.3},
+        "commands": results,
+    }
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(doc, indent=2) + "\n")
     print(f"load average {info['machine']['load_average_1_5_15']}; wrote {args.out}")

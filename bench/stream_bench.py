@@ -81,8 +81,16 @@ def computed(batch_sizes=(1, 2, 4, 8, 16, 32, 80)) -> list[dict]:
         per_period = frame / b
         use = per_period * RATE_HZ / LINE_BYTES_S
         back = (ack / b + status / 16.0) * RATE_HZ / LINE_BYTES_S
-        rows.append({"batch_periods": b, "frame_bytes": frame, "bytes_per_period": per_period,
-                     "line_use": use, "spare": 1.0 - use, "return_line_use": back})  # fmt: skip
+        rows.append(
+            {
+                "batch_periods": b,
+                "frame_bytes": frame,
+                "bytes_per_period": per_period,
+                "line_use": use,
+                "spare": 1.0 - use,
+                "return_line_use": back,
+            }
+        )
     return rows
 
 
@@ -91,8 +99,9 @@ def run_once(pulses, config: CardConfig, baud: int | None, seed: int = 1) -> dic
     card = CardSim(config, seed=seed)
     endpoint = PtyEndpoint()
     stop = threading.Event()
-    thread = threading.Thread(target=serve, args=(card, endpoint, stop),
-                              kwargs={"baud": baud}, daemon=True)  # fmt: skip
+    thread = threading.Thread(
+        target=serve, args=(card, endpoint, stop), kwargs={"baud": baud}, daemon=True
+    )
     thread.start()
     try:
         port = open_port(endpoint.path, baud=BAUD)
@@ -139,13 +148,24 @@ def matrix(pulses, seeds: int) -> dict:
     rows = {}
     t0 = time.perf_counter()
     for corrupt in CORRUPT_RATES:
-        row = {"streams": 0, "completed": 0, "failed_cleanly": 0, "unclean": 0,
-               "retransmits": 0, "virtual_s": 0.0, "errors": []}  # fmt: skip
+        row = {
+            "streams": 0,
+            "completed": 0,
+            "failed_cleanly": 0,
+            "unclean": 0,
+            "retransmits": 0,
+            "virtual_s": 0.0,
+            "errors": [],
+        }
         for drop in DROP_RATES:
             for seed in range(seeds):
-                r = simulate(pulses, CardConfig(speed=1.0),
-                             to_card=Relay(corrupt, drop, seed),
-                             to_host=Relay(corrupt, drop, 10_000 + seed), seed=seed)  # fmt: skip
+                r = simulate(
+                    pulses,
+                    CardConfig(speed=1.0),
+                    to_card=Relay(corrupt, drop, seed),
+                    to_host=Relay(corrupt, drop, 10_000 + seed),
+                    seed=seed,
+                )
                 row["streams"] += 1
                 row["virtual_s"] += r.elapsed_s
                 row["retransmits"] += r.link.count.retransmits
@@ -153,15 +173,22 @@ def matrix(pulses, seeds: int) -> dict:
                     row["completed"] += 1
                 elif not r.completed and r.stopped_cleanly(pulses):
                     row["failed_cleanly"] += 1
-                    row["errors"].append(f"drop {drop:g} seed {seed}: {r.error.message} (card "
-                                         f"{r.state_at_end.name} when the sender ended)")
+                    row["errors"].append(
+                        f"drop {drop:g} seed {seed}: {r.error.message} (card "
+                        f"{r.state_at_end.name} when the sender ended)"
+                    )
                 else:
                     row["unclean"] += 1
                     row["errors"].append(f"UNCLEAN drop {drop:g} seed {seed}: {r.error}")
         rows[f"corrupt_{corrupt:g}"] = row
-    return {"corrupt_rates": CORRUPT_RATES, "drop_rates": DROP_RATES, "seeds": seeds,
-            "periods": pulses.periods, "rows": rows,
-            "wall_s": time.perf_counter() - t0}  # fmt: skip
+    return {
+        "corrupt_rates": CORRUPT_RATES,
+        "drop_rates": DROP_RATES,
+        "seeds": seeds,
+        "periods": pulses.periods,
+        "rows": rows,
+        "wall_s": time.perf_counter() - t0,
+    }
 
 
 STRESS = ((0.1, 0.05, 48), (0.2, 0.1, 256), (0.3, 0.2, 64), (0.5, 0.3, 256))
@@ -177,30 +204,43 @@ def stress(seeds: int = 25) -> dict:
     for corrupt, drop, buffer in STRESS:
         row = {"streams": 0, "completed": 0, "failed_cleanly": 0, "unclean": 0}
         for seed in range(seeds):
-            r = simulate(pulses, CardConfig(speed=1.0, buffer_periods=buffer,
-                                            start_fill_periods=buffer // 2),
-                         to_card=Relay(corrupt, drop, seed),
-                         to_host=Relay(corrupt, drop, 1000 + seed), seed=seed)  # fmt: skip
+            r = simulate(
+                pulses,
+                CardConfig(speed=1.0, buffer_periods=buffer, start_fill_periods=buffer // 2),
+                to_card=Relay(corrupt, drop, seed),
+                to_host=Relay(corrupt, drop, 1000 + seed),
+                seed=seed,
+            )
             row["streams"] += 1
-            key = ("completed" if r.completed and r.exact(pulses) else
-                   "failed_cleanly" if not r.completed and r.stopped_cleanly(pulses)
-                   else "unclean")  # fmt: skip
+            key = (
+                "completed"
+                if r.completed and r.exact(pulses)
+                else "failed_cleanly"
+                if not r.completed and r.stopped_cleanly(pulses)
+                else "unclean"
+            )
             row[key] += 1
         out[f"corrupt_{corrupt:g}_drop_{drop:g}_buffer_{buffer}"] = row
     return out
 
 
 def print_matrix(m: dict) -> bool:
-    print(f"\nfault matrix ({m['periods']} periods, real-time card, 115200 baud, drop rates "
-          f"{', '.join(f'{d:.1%}' for d in m['drop_rates'])} × {m['seeds']} seeds each, "
-          f"{m['wall_s']:.1f} s):")
-    print(f"  {'corrupt':>7} {'streams':>7} {'done':>5} {'failed cleanly':>14} {'unclean':>7} "
-          f"{'retransmits/stream':>18}")
+    print(
+        f"\nfault matrix ({m['periods']} periods, real-time card, 115200 baud, drop rates "
+        f"{', '.join(f'{d:.1%}' for d in m['drop_rates'])} × {m['seeds']} seeds each, "
+        f"{m['wall_s']:.1f} s):"
+    )
+    print(
+        f"  {'corrupt':>7} {'streams':>7} {'done':>5} {'failed cleanly':>14} {'unclean':>7} "
+        f"{'retransmits/stream':>18}"
+    )
     ok = True
     for name, r in m["rows"].items():
         rate = float(name.split("_")[1])
-        print(f"  {rate:>7.1%} {r['streams']:>7} {r['completed']:>5} {r['failed_cleanly']:>14} "
-              f"{r['unclean']:>7} {r['retransmits'] / r['streams']:>18.1f}")
+        print(
+            f"  {rate:>7.1%} {r['streams']:>7} {r['completed']:>5} {r['failed_cleanly']:>14} "
+            f"{r['unclean']:>7} {r['retransmits'] / r['streams']:>18.1f}"
+        )
         for e in r["errors"][:3]:
             print(f"          {e}")
         ok = ok and r["unclean"] == 0 and (rate > 0.02 or r["completed"] == r["streams"])
@@ -260,12 +300,17 @@ def planning_ahead(path: str) -> dict:
     period = mach.servo.period_s
     # A card at 1x from its first period reaches window i's first sample at k0·T later.
     margins = [first[0] + k0 * period - t for k0, t in ready[1:]]
-    return {"program": Path(path).name, "windows": len(ready),
-            "motion_s": round(cycle[0], 3),
-            "validated_s": round(t_valid, 3), "first_window_s": round(t_first_window, 3),
-            "first_period_s": round(first[0], 3), "whole_plan_s": round(t_planned, 3),
-            "margin_min_s": round(min(margins), 3) if margins else None,
-            "windows_late": int(sum(m < 0 for m in margins))}  # fmt: skip
+    return {
+        "program": Path(path).name,
+        "windows": len(ready),
+        "motion_s": round(cycle[0], 3),
+        "validated_s": round(t_valid, 3),
+        "first_window_s": round(t_first_window, 3),
+        "first_period_s": round(first[0], 3),
+        "whole_plan_s": round(t_planned, 3),
+        "margin_min_s": round(min(margins), 3) if margins else None,
+        "windows_late": int(sum(m < 0 for m in margins)),
+    }
 
 
 def main() -> int:
@@ -274,18 +319,29 @@ def main() -> int:
     ap.add_argument("--quick", action="store_true", help="short program (naca2415, ~1.1 s)")
     ap.add_argument("--seeds", type=int, default=4, help="fault matrix: seeds per cell")
     ap.add_argument("--matrix-only", action="store_true", help="only the fault matrix")
-    ap.add_argument("--stress", action="store_true",
-                    help="only the stress cells far past the matrix (10-50 %% corruption)")
-    ap.add_argument("--planning", default=None, metavar="PROGRAM",
-                    help="only: time to the first period vs the whole plan (streaming while "
-                         "planning)")
+    ap.add_argument(
+        "--stress",
+        action="store_true",
+        help="only the stress cells far past the matrix (10-50 %% corruption)",
+    )
+    ap.add_argument(
+        "--planning",
+        default=None,
+        metavar="PROGRAM",
+        help="only: time to the first period vs the whole plan (streaming while planning)",
+    )
     args = ap.parse_args()
     if args.planning:
         row = planning_ahead(args.planning)
-        row.update(date=dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
-                   machine={"platform": platform.platform(), "cpus": os.cpu_count(),
-                            "python": platform.python_version(),
-                            "load_1min": round(os.getloadavg()[0], 2)})  # fmt: skip
+        row.update(
+            date=dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
+            machine={
+                "platform": platform.platform(),
+                "cpus": os.cpu_count(),
+                "python": platform.python_version(),
+                "load_1min": round(os.getloadavg()[0], 2),
+            },
+        )
         print(json.dumps(row))
         if args.out:
             Path(args.out).write_text(json.dumps(row, indent=2) + "\n")
@@ -332,20 +388,25 @@ def main() -> int:
     print("\ncomputed (3 axes, int8, 1 kHz, 115200 8N1 = 11520 bytes/s):")
     print(f"  {'batch':>5} {'frame B':>7} {'B/period':>8} {'use':>7} {'spare':>7} {'return':>7}")
     for r in results["computed"]:
-        print(f"  {r['batch_periods']:>5} {r['frame_bytes']:>7} {r['bytes_per_period']:>8.3f} "
-              f"{r['line_use']:>7.1%} {r['spare']:>7.1%} {r['return_line_use']:>7.1%}")
+        print(
+            f"  {r['batch_periods']:>5} {r['frame_bytes']:>7} {r['bytes_per_period']:>8.3f} "
+            f"{r['line_use']:>7.1%} {r['spare']:>7.1%} {r['return_line_use']:>7.1%}"
+        )
     for part in ("fast", "real_time_115200"):
         print(f"\n{part}:")
         for name, r in results[part].items():
-            wire = (f", line busy {r['measured_line_use']:.1%} of the run"
-                    if part != "fast" else "")  # fmt: skip
-            print(f"  {name:>12}: {r['bytes_per_period']:.3f} B/period → use "
-                  f"{r['line_use_at_1kHz']:.1%}, spare {r['spare_at_1kHz']:.1%}{wire}; "
-                  f"{r['periods_per_s']:,.0f} periods/s; retransmits {r['retransmits']}; "
-                  f"alarm {r['alarm']}; exact {r['executed_equals_sent']}")
-    ok = all(r["executed_equals_sent"] and r["final_position_ok"] and r["alarm"] == "NONE"
-             for part in ("fast", "real_time_115200")
-             for r in results[part].values())  # fmt: skip
+            wire = f", line busy {r['measured_line_use']:.1%} of the run" if part != "fast" else ""
+            print(
+                f"  {name:>12}: {r['bytes_per_period']:.3f} B/period → use "
+                f"{r['line_use_at_1kHz']:.1%}, spare {r['spare_at_1kHz']:.1%}{wire}; "
+                f"{r['periods_per_s']:,.0f} periods/s; retransmits {r['retransmits']}; "
+                f"alarm {r['alarm']}; exact {r['executed_equals_sent']}"
+            )
+    ok = all(
+        r["executed_equals_sent"] and r["final_position_ok"] and r["alarm"] == "NONE"
+        for part in ("fast", "real_time_115200")
+        for r in results[part].values()
+    )
     ok = ok and results["fast"]["corrupt_0"]["spare_at_1kHz"] >= 0.30
     results["fault_matrix"] = matrix(naca, args.seeds)
     ok = print_matrix(results["fault_matrix"]) and ok

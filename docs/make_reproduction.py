@@ -41,16 +41,22 @@ def _program(name: str):
 
 
 def table1(machine) -> list[str]:
-    lines = ["| curve | region | length [mm] | peak κ [1/mm] | unsplit RMS [µm] | unsplit max "
-             "[µm] | pieces | split RMS [µm] | split max [µm] |", "|" + "---|" * 9]
-    for (region, (ur, um, sr, sm)) in PAPER_TABLE1.items():
+    lines = [
+        "| curve | region | length [mm] | peak κ [1/mm] | unsplit RMS [µm] | unsplit max "
+        "[µm] | pieces | split RMS [µm] | split max [µm] |",
+        "|" + "---|" * 9,
+    ]
+    for region, (ur, um, sr, sm) in PAPER_TABLE1.items():
         lines.append(f"| paper | {region} | – | – | {ur} | {um} | 2 | {sr} | {sm} |")
     e_um = machine.limits.ph_tolerance_mm * 1000.0
-    for name, label in (("naca2415.nc", "ours, chord 9 mm"), ("naca2415_c40.nc",
-                                                              "ours, chord 40 mm")):
+    for name, label in (
+        ("naca2415.nc", "ours, chord 9 mm"),
+        ("naca2415_c40.nc", "ours, chord 40 mm"),
+    ):
         prog = _program(name)
-        for sc in program_corners(prog.segments, machine.limits.a_max_mm_s2,
-                                  machine.limits.v_max_mm_s):
+        for sc in program_corners(
+            prog.segments, machine.limits.a_max_mm_s2, machine.limits.v_max_mm_s
+        ):
             curve = NurbsCurve.from_segment(prog.segments[sc.segment_index])
             for k, r in enumerate(sc.regions):
                 un = fit_region(curve, r.u_a, r.u_b, tolerance_um=e_um, split=False)
@@ -58,7 +64,8 @@ def table1(machine) -> list[str]:
                 lines.append(
                     f"| {label} | {'AB CD EF'.split()[k] if k < 3 else k} | {r.length_mm:.4f} "
                     f"| {r.kappa_peak_per_mm:.3f} | {un.rms_um:.4f} | {un.max_um:.3f} "
-                    f"| {len(sp.pieces)} | {sp.rms_um:.4f} | {sp.max_um:.3f} |")
+                    f"| {len(sp.pieces)} | {sp.rms_um:.4f} | {sp.max_um:.3f} |"
+                )
     return lines
 
 
@@ -85,36 +92,55 @@ def _true_max_time(run) -> float:
 
 
 def table4(runs) -> list[str]:
-    cols = ("axis_x_max_um", "axis_x_rms_um", "axis_y_max_um", "axis_y_rms_um",
-            "contour_max_um", "contour_rms_um", "contour_mean_um")
-    lines = ["| algorithm | source | X max | X RMS | Y max | Y RMS | contour max | contour RMS "
-             "| contour mean | true-distance max | interior max | max at | time [s] |",
-             "|" + "---|" * 13]
+    cols = (
+        "axis_x_max_um",
+        "axis_x_rms_um",
+        "axis_y_max_um",
+        "axis_y_rms_um",
+        "contour_max_um",
+        "contour_rms_um",
+        "contour_mean_um",
+    )
+    lines = [
+        "| algorithm | source | X max | X RMS | Y max | Y RMS | contour max | contour RMS "
+        "| contour mean | true-distance max | interior max | max at | time [s] |",
+        "|" + "---|" * 13,
+    ]
     for run in runs:
         paper = PAPER_TABLE4.get(run.algorithm)
         if paper:
-            lines.append(f"| {run.algorithm} | paper | "
-                         + " | ".join(f"{paper[c]:.2f}" for c in cols)
-                         + f" | – | – | – | {paper['cycle_time_s']:.4f} |")
+            lines.append(
+                f"| {run.algorithm} | paper | "
+                + " | ".join(f"{paper[c]:.2f}" for c in cols)
+                + f" | – | – | – | {paper['cycle_time_s']:.4f} |"
+            )
         m = run.metrics
-        lines.append(f"| {run.algorithm} | ours | " + " | ".join(f"{m[c]:.2f}" for c in cols)
-                     + f" | {m['true_max_um']:.2f} | {_interior_max(run):.2f} | "
-                     f"{_where_max(run)} | {m['cycle_time_s']:.4f} |")
+        lines.append(
+            f"| {run.algorithm} | ours | "
+            + " | ".join(f"{m[c]:.2f}" for c in cols)
+            + f" | {m['true_max_um']:.2f} | {_interior_max(run):.2f} | "
+            f"{_where_max(run)} | {m['cycle_time_s']:.4f} |"
+        )
     return lines
 
 
 def table5(runs) -> list[str]:
-    lines = ["| angle | algorithm | contour max (eq. 29) [µm] | RMS [µm] | true-distance max "
-             "[µm] | X max [µm] | Y max [µm] | time [s] | paper max [µm] |", "|" + "---|" * 9]
+    lines = [
+        "| angle | algorithm | contour max (eq. 29) [µm] | RMS [µm] | true-distance max "
+        "[µm] | X max [µm] | Y max [µm] | time [s] | paper max [µm] |",
+        "|" + "---|" * 9,
+    ]
     for run in runs:
         if run.algorithm not in ("ph-lookahead", "ours"):
             continue
         m = run.metrics
         paper = PAPER_TABLE5.get(run.angle_deg, "–") if run.algorithm == "ph-lookahead" else "–"
-        lines.append(f"| {run.angle_deg:g}° | {run.algorithm} | {m['contour_max_um']:.2f} | "
-                     f"{m['contour_rms_um']:.2f} | {m['true_max_um']:.2f} | "
-                     f"{m['axis_x_max_um']:.2f} | {m['axis_y_max_um']:.2f} | "
-                     f"{m['cycle_time_s']:.4f} | {paper} |")
+        lines.append(
+            f"| {run.angle_deg:g}° | {run.algorithm} | {m['contour_max_um']:.2f} | "
+            f"{m['contour_rms_um']:.2f} | {m['true_max_um']:.2f} | "
+            f"{m['axis_x_max_um']:.2f} | {m['axis_y_max_um']:.2f} | "
+            f"{m['cycle_time_s']:.4f} | {paper} |"
+        )
     return lines
 
 

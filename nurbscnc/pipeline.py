@@ -129,8 +129,9 @@ class Run:
         if made is not None:
             yield from chunks_of(made, chunk)
             return
-        for window in sample_chunks(self.plan.pieces, self.plan.profile, self.period_s,
-                                    self.interpolator, chunk):  # fmt: skip
+        for window in sample_chunks(
+            self.plan.pieces, self.plan.profile, self.period_s, self.interpolator, chunk
+        ):
             check_soft_limits(window.points_mm, window.line, self.soft_limits)
             yield window
 
@@ -140,8 +141,7 @@ class Run:
         explain, the stream's pulses need them whole); N rows of memory."""
         if self.whole is not None:
             return self.whole
-        whole = sample_plan(self.plan.pieces, self.plan.profile, self.period_s,
-                            self.interpolator)  # fmt: skip
+        whole = sample_plan(self.plan.pieces, self.plan.profile, self.period_s, self.interpolator)
         check_soft_limits(whole.points_mm, whole.line, self.soft_limits)
         return whole
 
@@ -162,8 +162,7 @@ def _announcing(sampler, say):
     return ForwardingSampler(sampler, check_begins)
 
 
-def run_program(program, machine: Machine, options: RunOptions | None = None,
-                progress=None) -> Run:  # fmt: skip
+def run_program(program, machine: Machine, options: RunOptions | None = None, progress=None) -> Run:
     """Plan (or run a baseline on) an interpreted program, interpolate it at the servo period
     and refuse reference points outside the soft limits (PlanningError at the first one:
     here when the points are made here, else as :meth:`Run.chunks` or :attr:`Run.samples`
@@ -178,11 +177,15 @@ def run_program(program, machine: Machine, options: RunOptions | None = None,
     say = progress or (lambda _stage: None)
     if options.precompensate:
         if options.algorithm != Algorithm.PH_LOOKAHEAD:
-            raise ConfigError("pre-compensation needs the look-ahead planner (--algorithm "
-                              "ph-lookahead), not a baseline")  # fmt: skip
+            raise ConfigError(
+                "pre-compensation needs the look-ahead planner (--algorithm "
+                "ph-lookahead), not a baseline"
+            )
         if not machine.contour_check:
-            raise ConfigError(f"pre-compensation needs a servo model: the machine profile "
-                              f"{machine.source} has no [servo.x], [servo.y] or [servo.z]")
+            raise ConfigError(
+                f"pre-compensation needs a servo model: the machine profile "
+                f"{machine.source} has no [servo.x], [servo.y] or [servo.z]"
+            )
     # Checks before work: the geometry inside the soft limits, the motion short enough for
     # limits.max_points, before anything is planned or sampled.
     say("checking limits")
@@ -201,17 +204,29 @@ def run_program(program, machine: Machine, options: RunOptions | None = None,
         if options.precompensate:
             run = _run_precompensated(program, machine, lookahead, options, sampler)
         else:
-            plan, check = plan_checked(program, machine, lookahead, sampler,
-                                       keep_reference=options.keep_reference,
-                                       columns=columns)  # fmt: skip
+            plan, check = plan_checked(
+                program,
+                machine,
+                lookahead,
+                sampler,
+                keep_reference=options.keep_reference,
+                columns=columns,
+            )
             say("interpolating")
             kept = getattr(check, "reference", None)
             # The check's reference, when it kept one, is the output (no second sampling);
             # else the points are made window by window as the output is written.
-            whole = None if kept is None else samples_of(kept, plan.pieces,
-                                                         options.interpolator)  # fmt: skip
-            run = Run(options.algorithm, whole, plan, check, None, options.interpolator,
-                      machine.servo.period_s, machine.soft_limits)  # fmt: skip
+            whole = None if kept is None else samples_of(kept, plan.pieces, options.interpolator)
+            run = Run(
+                options.algorithm,
+                whole,
+                plan,
+                check,
+                None,
+                options.interpolator,
+                machine.servo.period_s,
+                machine.soft_limits,
+            )
     else:
         say(f"interpolating ({options.algorithm.value})")
         samples = baseline_program_samples(options.algorithm.value, program, machine)
@@ -221,8 +236,9 @@ def run_program(program, machine: Machine, options: RunOptions | None = None,
     return replace(run, columns=columns)
 
 
-def _run_precompensated(program, machine: Machine, lookahead: LookaheadOptions,
-                        options: RunOptions, sampler) -> Run:  # fmt: skip
+def _run_precompensated(
+    program, machine: Machine, lookahead: LookaheadOptions, options: RunOptions, sampler
+) -> Run:
     """Plan with the dynamics check on the pre-compensated reference, output that reference
     (the same transform on the interpolator's points) and report on it."""
     tol = options.reference_tolerance_mm
@@ -230,11 +246,13 @@ def _run_precompensated(program, machine: Machine, lookahead: LookaheadOptions,
     # V_cf (SPEC eq. 24) stands in for the servo error of the plain reference: the check
     # of the compensated one may raise it where that error has room.
     lookahead = replace(lookahead, raise_corner_caps=True)
-    plan, check = plan_checked(program, machine, lookahead,
-                               precompensated_sampler(sampler, machine, tol, fit))  # fmt: skip
+    plan, check = plan_checked(
+        program, machine, lookahead, precompensated_sampler(sampler, machine, tol, fit)
+    )
     planned = sampler(plan.pieces, plan.profile, machine.servo.period_s)
-    compensated, comp = precompensate_reference(planned, plan.pieces, plan.profile, machine,
-                                                tol, fit)  # fmt: skip
+    compensated, comp = precompensate_reference(
+        planned, plan.pieces, plan.profile, machine, tol, fit
+    )
     samples = samples_of(compensated, plan.pieces, options.interpolator)
     report = precompensation_report(plan, planned, compensated, comp, machine, tol)
     return Run(options.algorithm, samples, plan, check, report)
@@ -254,8 +272,9 @@ def window_plans(program, machine: Machine, options: RunOptions | None = None, e
     :func:`nurbscnc.app.stream.stream_job`)."""
     options = options or RunOptions()
     if options.algorithm != Algorithm.PH_LOOKAHEAD or options.precompensate:
-        raise ConfigError("planning while streaming needs the look-ahead planner without "
-                          "pre-compensation")  # fmt: skip
+        raise ConfigError(
+            "planning while streaming needs the look-ahead planner without pre-compensation"
+        )
     columns = segment_columns(program.segments)
     check_before_work(program.segments, machine, columns)
     lookahead = options.lookahead

@@ -96,15 +96,25 @@ class Canon:
         if self.rot:
             c, s = math.cos(math.radians(self.rot)), math.sin(math.radians(self.rot))
             x, y = c * x - s * y, s * x + c * y
-        return [x + self.g5x[0] + self.tlo[0], y + self.g5x[1] + self.tlo[1],
-                z + self.g5x[2] + self.tlo[2]]
+        return [
+            x + self.g5x[0] + self.tlo[0],
+            y + self.g5x[1] + self.tlo[1],
+            z + self.g5x[2] + self.tlo[2],
+        ]
 
     def straight_traverse(self, *a):
         self.out.append({"kind": "rapid", "line": self.line, "end": self.machine(a)})
 
     def straight_feed(self, *a):
-        self.out.append({"kind": "line", "line": self.line, "end": self.machine(a),
-                         "feed_mm_min": self.feed * IN, "feed_mode": self.feed_mode})
+        self.out.append(
+            {
+                "kind": "line",
+                "line": self.line,
+                "end": self.machine(a),
+                "feed_mm_min": self.feed * IN,
+                "feed_mode": self.feed_mode,
+            }
+        )
 
     def straight_probe(self, *a):
         self.out.append({"kind": "probe", "line": self.line})
@@ -123,9 +133,17 @@ class Canon:
             end, cen = [e3, e1, e2], [e3, c1, c2]
         else:
             end, cen = [e2, e3, e1], [c2, e3, c1]
-        self.out.append({"kind": "arc", "line": self.line, "end": self.machine(end),
-                         "center": self.machine(cen), "turn": turn,
-                         "feed_mm_min": self.feed * IN, "feed_mode": self.feed_mode})
+        self.out.append(
+            {
+                "kind": "arc",
+                "line": self.line,
+                "end": self.machine(end),
+                "center": self.machine(cen),
+                "turn": turn,
+                "feed_mm_min": self.feed * IN,
+                "feed_mode": self.feed_mode,
+            }
+        )
 
 
 def record(path):
@@ -157,8 +175,12 @@ def record_rs274(path, tool_table):
     import re
     import subprocess
 
-    out = subprocess.run(["rs274", "-t", str(tool_table), "-g", str(path)], capture_output=True,
-                         text=True, check=False).stdout  # fmt: skip
+    out = subprocess.run(
+        ["rs274", "-t", str(tool_table), "-g", str(path)],
+        capture_output=True,
+        text=True,
+        check=False,
+    ).stdout
     numbers = re.compile(r"-?\d+\.\d+")
     tlo = [0.0, 0.0, 0.0]
     moves = []

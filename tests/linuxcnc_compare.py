@@ -94,8 +94,11 @@ ZERO_MOVE_MM = 1e-9
 
 
 def _is_zero_length(kind: str, end, prev) -> bool:
-    return (kind in ("traverse", "feed") and prev is not None
-            and all(abs(a - b) <= ZERO_MOVE_MM for a, b in zip(end, prev)))  # fmt: skip
+    return (
+        kind in ("traverse", "feed")
+        and prev is not None
+        and all(abs(a - b) <= ZERO_MOVE_MM for a, b in zip(end, prev))
+    )
 
 
 def expected_moves(golden: dict) -> list[dict]:
@@ -195,8 +198,9 @@ def compare(golden: dict, program, held_back: int = 0) -> None:
             assert math.copysign(1, seg.angle_rad) == math.copysign(1, m["rotation"]), (
                 f"{where}: turns the other way (LinuxCNC rotation {m['rotation']})"
             )
-            want_rad = linuxcnc_angle_rad(m["start"][:3], centre, m["end"][:3], m["normal"],
-                                          m["rotation"])  # fmt: skip
+            want_rad = linuxcnc_angle_rad(
+                m["start"][:3], centre, m["end"][:3], m["normal"], m["rotation"]
+            )
             radius = float(np.linalg.norm(np.asarray(m["end"][:3]) - centre))
             assert abs(abs(seg.angle_rad) - want_rad) * max(radius, 1.0) <= max(tol, 1e-9), (
                 f"{where}: turns {abs(seg.angle_rad)} rad, LinuxCNC {want_rad} rad"
@@ -234,8 +238,11 @@ def check_golden(name: str, role: str, golden: dict, program_path: Path) -> None
             line = exc.pos.line if exc.pos else "?"
             raise AssertionError(f"nurbscnc refuses it (line {line}): {exc.message}") from None
         # LinuxCNC's compensation queue holds one move back; its EOF error loses it.
-        comp = lenient and any(m.get("kind") == "arc" or m.get("kind") == "feed"
-                               for m in golden["moves"]) and _has_comp(program_path)
+        comp = (
+            lenient
+            and any(m.get("kind") == "arc" or m.get("kind") == "feed" for m in golden["moves"])
+            and _has_comp(program_path)
+        )
         compare(golden, program, held_back=1 if comp else 0)
         return
     try:

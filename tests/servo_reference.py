@@ -47,8 +47,12 @@ def segment_distance_mm(points_mm, dense_mm):
     best = np.full(len(points_mm), np.inf)
     for a, b in ((np.maximum(i - 1, 0), i), (i, np.minimum(i + 1, len(dense_mm) - 1))):
         pa, d = dense_mm[a], dense_mm[b] - dense_mm[a]
-        t = np.clip(np.einsum("ij,ij->i", points_mm - pa, d)
-                    / np.maximum(np.einsum("ij,ij->i", d, d), 1e-300), 0.0, 1.0)
+        t = np.clip(
+            np.einsum("ij,ij->i", points_mm - pa, d)
+            / np.maximum(np.einsum("ij,ij->i", d, d), 1e-300),
+            0.0,
+            1.0,
+        )
         best = np.minimum(best, np.linalg.norm(points_mm - pa - t[:, None] * d, axis=1))
     return best
 
@@ -63,9 +67,12 @@ def limits_excess(points_mm: np.ndarray, machine, planned_mm: np.ndarray | None 
     2^k·1e-12 mm of rounding of the points. Plain numpy, nothing of the planner's."""
     t = machine.servo.period_s
     lim, ax = machine.limits, machine.axis_limits
-    bounds = {"speed": (1, lim.v_max_mm_s), "axis_v": (1, np.array(ax.v_max_mm_s)),
-              "axis_a": (2, np.minimum(lim.a_max_mm_s2, ax.a_max_mm_s2)),
-              "axis_j": (3, np.minimum(lim.j_max_mm_s3, ax.j_max_mm_s3))}  # fmt: skip
+    bounds = {
+        "speed": (1, lim.v_max_mm_s),
+        "axis_v": (1, np.array(ax.v_max_mm_s)),
+        "axis_a": (2, np.minimum(lim.a_max_mm_s2, ax.a_max_mm_s2)),
+        "axis_j": (3, np.minimum(lim.j_max_mm_s3, ax.j_max_mm_s3)),
+    }
     out = {}
     for name, (k, limit) in bounds.items():
         d = np.diff(points_mm, k, axis=0) / t**k

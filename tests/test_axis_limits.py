@@ -28,8 +28,14 @@ INF = math.inf
 def machine(**axes):
     """The default machine with the path limits raised out of the way (V 10 m/min, A 1e5,
     J 1e7) unless given, and per-axis limits ``x_v`` [mm/min], ``x_a``, ``x_j`` …"""
-    over = {"limits.v_max_mm_min": 10000.0, "limits.a_max_mm_s2": 1e5, "limits.j_max_mm_s3": 1e7,
-            "steps.per_mm.x": 100.0, "steps.per_mm.y": 100.0, "steps.per_mm.z": 100.0}
+    over = {
+        "limits.v_max_mm_min": 10000.0,
+        "limits.a_max_mm_s2": 1e5,
+        "limits.j_max_mm_s3": 1e7,
+        "steps.per_mm.x": 100.0,
+        "steps.per_mm.y": 100.0,
+        "steps.per_mm.z": 100.0,
+    }
     names = {"v": "v_max_mm_min", "a": "a_max_mm_s2", "j": "j_max_mm_s3"}
     for key, value in axes.items():
         if key.startswith("path_"):
@@ -55,8 +61,17 @@ def test_no_axis_limits_is_the_path_limits():
 
 @pytest.mark.parametrize(("move", "axis"), [("X10", 0), ("Y-7", 1), ("Z3", 2)])
 def test_line_along_an_axis_gets_that_axis_limits(move, axis):
-    m = machine(x_v=1200.0, x_a=500.0, x_j=1e4, y_v=2400.0, y_a=800.0, y_j=3e4,
-                z_v=600.0, z_a=200.0, z_j=5e3)
+    m = machine(
+        x_v=1200.0,
+        x_a=500.0,
+        x_j=1e4,
+        y_v=2400.0,
+        y_a=800.0,
+        y_j=3e4,
+        z_v=600.0,
+        z_a=200.0,
+        z_j=5e3,
+    )
     _, lim = limits_of(f"F9000\nG1 {move}\n", m)
     v = (20.0, 40.0, 10.0)[axis]
     a = (500.0, 800.0, 200.0)[axis]
@@ -68,8 +83,17 @@ def test_line_along_an_axis_gets_that_axis_limits(move, axis):
 
 def test_diagonal_line_direction_cosines():
     # Direction (3, 4, 12)/13: cosines 3/13, 4/13, 12/13.
-    m = machine(x_v=600.0, x_a=100.0, x_j=1e3, y_v=600.0, y_a=300.0, y_j=1e3, z_v=6000.0,
-                z_a=1000.0, z_j=1e5)
+    m = machine(
+        x_v=600.0,
+        x_a=100.0,
+        x_j=1e3,
+        y_v=600.0,
+        y_a=300.0,
+        y_j=1e3,
+        z_v=6000.0,
+        z_a=1000.0,
+        z_j=1e5,
+    )
     _, lim = limits_of("F9000\nG1 X3 Y4 Z12\n", m)
     c = np.array([3.0, 4.0, 12.0]) / 13.0
     assert lim.v_mm_s[0] == pytest.approx(min(10 / c[0], 10 / c[1], 100 / c[2]), rel=1e-13)
@@ -107,8 +131,9 @@ def _circle_bounds(th0, th1, r, n=200_001):
     return (np.abs(t).max(0), np.abs(kn).max(0), np.abs(dkn).max(0))
 
 
-@pytest.mark.parametrize(("th0_deg", "sweep_deg", "r"), [(45, 90, 5.0), (0, 360, 2.0),
-                                                         (10, 30, 20.0), (200, 170, 1.0)])
+@pytest.mark.parametrize(
+    ("th0_deg", "sweep_deg", "r"), [(45, 90, 5.0), (0, 360, 2.0), (10, 30, 20.0), (200, 170, 1.0)]
+)
 def test_arc_bounds_enclose_the_exact_ones_tightly(th0_deg, sweep_deg, r):
     th0, th1 = math.radians(th0_deg), math.radians(th0_deg + sweep_deg)
     x0, y0 = r * math.cos(th0), r * math.sin(th0)
@@ -133,8 +158,9 @@ def test_arc_bounds_enclose_the_exact_ones_tightly(th0_deg, sweep_deg, r):
 
 
 def test_helix_z_component_is_its_pitch():
-    pieces = segment_pieces(interpret_text(HEAD + "G0 X5 Y0\nF600\nG3 X5 Y0 Z4 I-5 J0\nM2\n")
-                            .segments, load_machine())  # fmt: skip
+    pieces = segment_pieces(
+        interpret_text(HEAD + "G0 X5 Y0\nF600\nG3 X5 Y0 Z4 I-5 J0\nM2\n").segments, load_machine()
+    )
     t_b, k_b, _, kappa = axis_geometry_bounds(pieces)
     circ = 2 * math.pi * 5.0
     tz = 4.0 / math.hypot(circ, 4.0)
@@ -152,8 +178,7 @@ def test_full_circle_linuxcnc_axes_closed_form():
     m = machine(x_v=3500.0, x_a=2450.0, y_v=3500.0, y_a=2450.0, path_v=3500.0)
     for r in (0.5, 2.0, 10.0):
         _, lim = limits_of(f"G0 X{r} Y0\nF3000\nG3 X{r} Y0 I{-r} J0\n", m)
-        assert lim.v_mm_s[1] == pytest.approx(min(3500 / 60, math.sqrt(2450 * r / 2)),
-                                              rel=1e-12)  # fmt: skip
+        assert lim.v_mm_s[1] == pytest.approx(min(3500 / 60, math.sqrt(2450 * r / 2)), rel=1e-12)
         v = min(50.0, math.sqrt(2450 * r / 2))
         assert lim.a_mm_s2[1] == pytest.approx(math.sqrt(2450**2 - (v * v / r) ** 2), rel=1e-12)
 
@@ -201,19 +226,23 @@ finite = st.floats(0.01, 1e4)
 
 
 @settings(max_examples=200, deadline=None)
-@given(t=st.lists(st.floats(0.0, 1.0), min_size=3, max_size=3),
-       kfrac=st.lists(st.floats(0.0, 1.0), min_size=3, max_size=3),
-       kappa=st.floats(0.0, 50.0), g=st.lists(st.floats(0.0, 1e3), min_size=3, max_size=3),
-       v_piece=finite, v_i=st.lists(finite, min_size=3, max_size=3),
-       a_i=st.lists(finite, min_size=3, max_size=3),
-       j_i=st.lists(st.floats(1.0, 1e7), min_size=3, max_size=3))  # fmt: skip
-def test_axis_path_limits_satisfy_every_axis_inequality(t, kfrac, kappa, g, v_piece, v_i, a_i,
-                                                         j_i):  # fmt: skip
+@given(
+    t=st.lists(st.floats(0.0, 1.0), min_size=3, max_size=3),
+    kfrac=st.lists(st.floats(0.0, 1.0), min_size=3, max_size=3),
+    kappa=st.floats(0.0, 50.0),
+    g=st.lists(st.floats(0.0, 1e3), min_size=3, max_size=3),
+    v_piece=finite,
+    v_i=st.lists(finite, min_size=3, max_size=3),
+    a_i=st.lists(finite, min_size=3, max_size=3),
+    j_i=st.lists(st.floats(1.0, 1e7), min_size=3, max_size=3),
+)
+def test_axis_path_limits_satisfy_every_axis_inequality(t, kfrac, kappa, g, v_piece, v_i, a_i, j_i):
     t = np.array([t])
     kb = np.array([kfrac]) * kappa
     gb = np.array([g])
-    v, a, j = axis_path_limits(t, kb, gb, np.array([kappa]), np.array([v_piece]), v_i, a_i, j_i,
-                               1e9, 1e12)  # fmt: skip
+    v, a, j = axis_path_limits(
+        t, kb, gb, np.array([kappa]), np.array([v_piece]), v_i, a_i, j_i, 1e9, 1e12
+    )
     vb = min(v[0], v_piece)
     assert a[0] > 0 and j[0] > 0
     for i in range(3):
@@ -233,16 +262,16 @@ def test_runs_at_one_cap_share_their_smallest_limits():
     from nurbscnc.machine.caps import axis_path_limits
 
     m = machine(x_v=3500.0, x_a=2450.0, x_j=5e4, y_v=3500.0, y_a=1000.0, y_j=2e4)
-    text = ("F600\nG5.2 X1 Y1.5 P1 L4\nX4 Y3 P1\nX8 Y-2 P1\nX12 Y4 P1\nX16 Y0 P1\nG5.3\n"
-            "G1 X16 Y10\n")
+    text = "F600\nG5.2 X1 Y1.5 P1 L4\nX4 Y3 P1\nX8 Y-2 P1\nX12 Y4 P1\nX16 Y0 P1\nG5.3\nG1 X16 Y10\n"
     pieces, lim = limits_of(text, m)
     nurbs = np.flatnonzero(np.asarray(pieces.kind) == 4)
     assert nurbs.size > 10
     v, a, j = lim.v_mm_s, lim.a_mm_s2, lim.j_mm_s3
     caps = np.minimum(pieces.v_cap_mm_s, v)
     assert np.all(caps[nurbs] == 10.0)  # F600 everywhere on the curve
-    own = axis_path_limits(*axis_geometry_bounds(pieces), pieces.v_cap_mm_s,
-                           *m.axis_limits.as_arrays(), 1e5, 1e7)  # fmt: skip
+    own = axis_path_limits(
+        *axis_geometry_bounds(pieces), pieces.v_cap_mm_s, *m.axis_limits.as_arrays(), 1e5, 1e7
+    )
     assert np.all(a[nurbs] == own[1][nurbs].min()) and np.all(j[nurbs] == own[2][nurbs].min())
     assert own[1][nurbs].max() > own[1][nurbs].min()  # the cells differ on their own
     last = len(pieces) - 1  # the Y line after the curve's end (a corner: a stop)

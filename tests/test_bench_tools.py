@@ -35,13 +35,14 @@ def test_circle_steady_state_radial_error_matches_gain(zeta):
     omega = speed_mm_s / radius_mm
     model = _second_order(wn, zeta)
     t = np.arange(0.0, 4.0, period_s)
-    ref = np.column_stack([radius_mm * np.cos(omega * t), radius_mm * np.sin(omega * t),
-                           np.zeros_like(t)])  # fmt: skip
-    tool = contour.simulate_tool_mm(ref, period_s, settle_s=0.0,
-                                    models={"x": model, "y": model})  # fmt: skip
+    ref = np.column_stack(
+        [radius_mm * np.cos(omega * t), radius_mm * np.sin(omega * t), np.zeros_like(t)]
+    )
+    tool = contour.simulate_tool_mm(ref, period_s, settle_s=0.0, models={"x": model, "y": model})
     theta = np.linspace(0.0, 2.0 * math.pi, 20001)
-    circle = np.column_stack([radius_mm * np.cos(theta), radius_mm * np.sin(theta),
-                              np.zeros_like(theta)])  # fmt: skip
+    circle = np.column_stack(
+        [radius_mm * np.cos(theta), radius_mm * np.sin(theta), np.zeros_like(theta)]
+    )
     steady = t >= 2.0  # the transient decays as e^(−ζ wn t) < 2e-14 by then
     dist = contour.distance_to_polyline_mm(tool[steady], circle)
     gain = wn**2 / math.hypot(wn**2 - omega**2, 2.0 * zeta * wn * omega)
@@ -61,17 +62,27 @@ def test_distance_is_to_segments_not_vertices():
     """A polyline with few vertices: the distance is to the segment (closed form), not to
     the nearest vertex."""
     poly = np.array([[0.0, 0.0, 0.0], [10.0, 0.0, 0.0], [10.0, 10.0, 0.0]])
-    pts = np.array([[5.0, 0.3, 0.0], [5.0, -2.0, 1.0], [12.0, 5.0, 0.0], [13.0, -4.0, 0.0],
-                    [9.0, 1.0, 0.0], [-3.0, 4.0, 0.0]])  # fmt: skip
+    pts = np.array(
+        [
+            [5.0, 0.3, 0.0],
+            [5.0, -2.0, 1.0],
+            [12.0, 5.0, 0.0],
+            [13.0, -4.0, 0.0],
+            [9.0, 1.0, 0.0],
+            [-3.0, 4.0, 0.0],
+        ]
+    )
     expected = [0.3, math.hypot(2.0, 1.0), 2.0, 5.0, 1.0, 5.0]
-    np.testing.assert_allclose(contour.distance_to_polyline_mm(pts, poly), expected,
-                               rtol=0, atol=1e-12)  # fmt: skip
+    np.testing.assert_allclose(
+        contour.distance_to_polyline_mm(pts, poly), expected, rtol=0, atol=1e-12
+    )
 
 
 def test_arc_path_lies_on_its_circle():
     """The dense path of G2/G3 arcs: every vertex at the arc's radius from its centre."""
-    prog = interpret_text("G21 G17 G90\nG0 X10 Y0\nG3 X-10 Y0 I-10 J0 F600\n"
-                          "G2 X-30 Y0 I-10 J0\nM2\n")  # fmt: skip
+    prog = interpret_text(
+        "G21 G17 G90\nG0 X10 Y0\nG3 X-10 Y0 I-10 J0 F600\nG2 X-30 Y0 I-10 J0\nM2\n"
+    )
     arcs = [s for s in prog.segments if s.kind == "arc"]
     first = contour.path_polyline_mm(arcs[:1])  # G3 about the origin: the upper half
     np.testing.assert_allclose(np.hypot(first[:, 0], first[:, 1]), 10.0, atol=1e-9)
@@ -86,9 +97,14 @@ def test_arc_path_lies_on_its_circle():
 
 def test_rational_quarter_circle():
     """The rational quadratic with weights 1, √2/2, 1 is exactly a quarter circle."""
-    seg = Nurbs(degree=2, knots=np.array([0.0, 0, 0, 1, 1, 1]),
-                control_points_mm=np.array([[5.0, 0, 0], [5.0, 5.0, 0], [0.0, 5.0, 0]]),
-                weights=np.array([1.0, math.sqrt(0.5), 1.0]), feed_mm_s=10.0, line=1)  # fmt: skip
+    seg = Nurbs(
+        degree=2,
+        knots=np.array([0.0, 0, 0, 1, 1, 1]),
+        control_points_mm=np.array([[5.0, 0, 0], [5.0, 5.0, 0], [0.0, 5.0, 0]]),
+        weights=np.array([1.0, math.sqrt(0.5), 1.0]),
+        feed_mm_s=10.0,
+        line=1,
+    )
     poly = contour.path_polyline_mm([seg])
     np.testing.assert_allclose(np.hypot(poly[:, 0], poly[:, 1]), 5.0, rtol=0, atol=1e-12)
     assert np.max(np.linalg.norm(np.diff(poly, axis=0), axis=1)) < 2.1e-3
@@ -160,8 +176,7 @@ def test_settle_waits_are_the_rest_at_a_cut_start_after_a_rapid():
     np.testing.assert_array_equal(np.flatnonzero(contour.settle_waits(pts, cut)), [3, 4, 5, 6])
     # the rapid's last sample at rest at the start point, the cut's first already there
     cut_late = np.array([3, 3, 3, 3, 5, 5, 5, 5, 5, 5]) != 3
-    np.testing.assert_array_equal(np.flatnonzero(contour.settle_waits(pts, cut_late)),
-                                  [4, 5, 6])  # fmt: skip
+    np.testing.assert_array_equal(np.flatnonzero(contour.settle_waits(pts, cut_late)), [4, 5, 6])
     entered_moving = np.array([3, 3, 3, 3, 3, 3, 3, 5, 5, 5]) != 3
     assert not contour.settle_waits(pts, entered_moving).any()
     assert not contour.settle_waits(pts, np.ones(10, dtype=bool)).any()

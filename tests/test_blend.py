@@ -60,9 +60,13 @@ def _to_polyline(p: np.ndarray, poly: np.ndarray) -> np.ndarray:
     vertex (exact for straight pieces; chord sagitta elsewhere, < 1e-11 mm in these tests)."""
     j = cKDTree(poly).query(p)[1]
     last = len(poly) - 1
-    return np.min([_segment_distance(p, poly[np.clip(j + s, 0, last)],
-                                     poly[np.clip(j + s + 1, 0, last)])
-                   for s in (-1, 0)], axis=0)  # fmt: skip
+    return np.min(
+        [
+            _segment_distance(p, poly[np.clip(j + s, 0, last)], poly[np.clip(j + s + 1, 0, last)])
+            for s in (-1, 0)
+        ],
+        axis=0,
+    )
 
 
 def _hausdorff(blend, geom_a, geom_b, n: int = 4001) -> float:
@@ -71,10 +75,12 @@ def _hausdorff(blend, geom_a, geom_b, n: int = 4001) -> float:
     xi = np.linspace(0.0, 1.0, n)
     blend_pts = _bezier(cp, xi)
     la = geom_a.length_mm
-    path = np.concatenate((
-        geom_a.point(np.linspace(la - blend.trim_a_mm, la, n)),
-        geom_b.point(np.linspace(0.0, blend.trim_b_mm, n)),
-    ))  # fmt: skip
+    path = np.concatenate(
+        (
+            geom_a.point(np.linspace(la - blend.trim_a_mm, la, n)),
+            geom_b.point(np.linspace(0.0, blend.trim_b_mm, n)),
+        )
+    )
     h_blend = _to_polyline(blend_pts, path).max()
     dist = _to_polyline(path, blend_pts)
     # Refine the farthest path point (the vertex, for a corner) by a bounded minimisation.
@@ -82,8 +88,12 @@ def _hausdorff(blend, geom_a, geom_b, n: int = 4001) -> float:
     q = path[i]
     k = int(np.argmin(np.linalg.norm(blend_pts - q, axis=1)))
     lo, hi = xi[max(k - 2, 0)], xi[min(k + 2, n - 1)]
-    res = minimize_scalar(lambda x: float(np.sum((_bezier(cp, [x])[0] - q) ** 2)),
-                          bounds=(lo, hi), method="bounded", options={"xatol": 1e-13})  # fmt: skip
+    res = minimize_scalar(
+        lambda x: float(np.sum((_bezier(cp, [x])[0] - q) ** 2)),
+        bounds=(lo, hi),
+        method="bounded",
+        options={"xatol": 1e-13},
+    )
     h_path = max(np.sqrt(res.fun), np.delete(dist, i).max())
     return float(max(h_blend, h_path))
 
@@ -95,8 +105,9 @@ def _arc(start, tangent, normal, radius, angle) -> ArcGeometry:
     t = np.asarray(tangent, float) / np.linalg.norm(tangent)
     e2 = t * np.sign(angle)
     e1 = np.cross(e2, n)
-    return ArcGeometry(np.asarray(start, float) - radius * e1, e1, e2, n, radius, radius,
-                       angle, 0.0)  # fmt: skip
+    return ArcGeometry(
+        np.asarray(start, float) - radius * e1, e1, e2, n, radius, radius, angle, 0.0
+    )
 
 
 def _circle_point(center, e1, e2, radius, phi):
@@ -178,7 +189,7 @@ def test_line_corners_10_to_170_degrees(turning_deg, tol, rot_deg, left):
     assert 0.995 * tol <= fast.deviation_mm <= tol
     assert abs(blend.turning_deg - turning_deg) < 1e-9
     # No inflection: the curvature keeps one sign.
-    k = _curvature(blend.ph.control_points_mm, np.linspace(0.01, 0.99, 99), np.array([0, 0, 1.]))
+    k = _curvature(blend.ph.control_points_mm, np.linspace(0.01, 0.99, 99), np.array([0, 0, 1.0]))
     assert np.all(k > 0) or np.all(k < 0)
 
 
@@ -359,9 +370,16 @@ def test_non_planar_corners_give_none():
     a = LineGeometry((0, 0, -1), (0, 0, 0))  # a Z plunge into an XY arc
     b = _arc((0, 0, 0), (1, 0, 0), (0, 0, 1), 2.0, 1.0)
     assert blend_corner(a, b, 0.01, 0.5, 0.5) is None
-    helix = ArcGeometry(np.array([0.0, 2.0, 0.0]), np.array([0.0, -1.0, 0.0]),
-                        np.array([1.0, 0.0, 0.0]), np.array([0.0, 0.0, 1.0]), 2.0, 2.0, 1.0,
-                        0.5)  # fmt: skip
+    helix = ArcGeometry(
+        np.array([0.0, 2.0, 0.0]),
+        np.array([0.0, -1.0, 0.0]),
+        np.array([1.0, 0.0, 0.0]),
+        np.array([0.0, 0.0, 1.0]),
+        2.0,
+        2.0,
+        1.0,
+        0.5,
+    )
     line = LineGeometry((-1, 0, 0), (0, 0, 0))
     assert blend_corner(line, helix, 0.01, 0.5, 0.5) is None
 
@@ -482,8 +500,14 @@ def test_batch_unequal_trims_fall_back_to_equal_ones_beyond_the_tolerance():
     would leave the tolerance (its bound), so both sides get the short side's trim."""
     th, tol = 0.3, 0.2
     d_line = tol * (1 - 0.0025) / line_deviation_per_trim(th)
-    b = line_corner_blends(np.zeros((1, 3)), [[1.0, 0.0, 0.0]], [[np.cos(th), np.sin(th), 0]],
-                           [tol], [0.1 * d_line], [10 * d_line])  # fmt: skip
+    b = line_corner_blends(
+        np.zeros((1, 3)),
+        [[1.0, 0.0, 0.0]],
+        [[np.cos(th), np.sin(th), 0]],
+        [tol],
+        [0.1 * d_line],
+        [10 * d_line],
+    )
     assert b.ok[0] and b.trim_a_mm[0] == b.trim_b_mm[0] == 0.1 * d_line
     assert b.deviation_mm[0] == pytest.approx(0.1 * tol * (1 - 0.0025), rel=1e-12)
 
@@ -491,10 +515,18 @@ def test_batch_unequal_trims_fall_back_to_equal_ones_beyond_the_tolerance():
 def test_batch_rejects_what_the_scalar_rejects():
     """Smooth (< 1e-6 rad) and reversed junctions, zero tolerance, degenerate trims."""
     ta = np.tile([1.0, 0.0, 0.0], (5, 1))
-    tb = np.array([[1.0, 0, 0], [np.cos(5e-7), np.sin(5e-7), 0], [-1.0, 1e-9, 0],
-                   [0.0, 1.0, 0], [0.0, 1.0, 0]])  # fmt: skip
-    b = line_corner_blends(np.zeros((5, 3)), ta, tb, [0.01, 0.01, 0.01, 0.0, 0.01],
-                           [0.5, 0.5, 0.5, 0.5, 1e-10])  # fmt: skip
+    tb = np.array(
+        [
+            [1.0, 0, 0],
+            [np.cos(5e-7), np.sin(5e-7), 0],
+            [-1.0, 1e-9, 0],
+            [0.0, 1.0, 0],
+            [0.0, 1.0, 0],
+        ]
+    )
+    b = line_corner_blends(
+        np.zeros((5, 3)), ta, tb, [0.01, 0.01, 0.01, 0.0, 0.01], [0.5, 0.5, 0.5, 0.5, 1e-10]
+    )
     assert not b.ok.any()
 
 
@@ -531,8 +563,9 @@ def _helix_into_line():
     from nurbscnc.geometry.paths import geometry_of
     from nurbscnc.program.interpret import interpret_text
 
-    prog = interpret_text("G21 G90 G17\nG0 X2 Y-1 Z16\nG2 I0 J7 X9 Y6 Z13 F3000\n"
-                          "G1 X15 Y6 Z10\nM2\n")  # fmt: skip
+    prog = interpret_text(
+        "G21 G90 G17\nG0 X2 Y-1 Z16\nG2 I0 J7 X9 Y6 Z13 F3000\nG1 X15 Y6 Z10\nM2\n"
+    )
     arc, line = (s for s in prog.segments if s.kind in ("arc", "line"))
     return geometry_of(arc), LineGeometry(np.asarray(line.start_mm), np.asarray(line.end_mm))
 
@@ -560,8 +593,7 @@ def test_space_blend_of_a_helix_into_a_line(tol):
     r, sweep, dz = 7.0, 1.5 * np.pi, -3.0
     c = dz / sweep
     phi_cut = d / np.hypot(r, c)  # the angle of the helix's cut point above 0°
-    side_a = _helix_points((2.0, 6.0), r, phi_cut, -phi_cut, 13.0 - c * phi_cut, c * phi_cut,
-                           4001)  # fmt: skip
+    side_a = _helix_points((2.0, 6.0), r, phi_cut, -phi_cut, 13.0 - c * phi_cut, c * phi_cut, 4001)
     line_dir = np.array([6.0, 0.0, -3.0]) / np.sqrt(45.0)
     np.testing.assert_allclose(side_a[-1], [9.0, 6.0, 13.0], atol=1e-12)
     side_b = np.array([9.0, 6.0, 13.0]) + np.linspace(0.0, d, 4001)[:, None] * line_dir
@@ -588,8 +620,14 @@ def test_space_blend_of_a_helix_into_a_line(tol):
 
 
 @settings(max_examples=25, deadline=None)
-@given(st.floats(2.0, 30.0), st.floats(-6.0, 6.0), st.floats(0.3, 2.5), st.floats(-3.0, 3.0),
-       st.floats(-3.0, 3.0), st.sampled_from([0.002, 0.01, 0.05]))
+@given(
+    st.floats(2.0, 30.0),
+    st.floats(-6.0, 6.0),
+    st.floats(0.3, 2.5),
+    st.floats(-3.0, 3.0),
+    st.floats(-3.0, 3.0),
+    st.sampled_from([0.002, 0.01, 0.05]),
+)
 def test_space_blends_use_the_tolerance_window(radius, rise, sweep, dx, dz, tol):
     """Random G2 helices (radius, rise, sweep) into a line leaving their plane, whatever the
     turn: the space blend's search (secant steps, then bisection) ends with its deviation in
@@ -601,9 +639,11 @@ def test_space_blends_use_the_tolerance_window(radius, rise, sweep, dx, dz, tol)
     from nurbscnc.program.interpret import interpret_text
 
     end = np.array([radius * np.sin(sweep), radius * np.cos(sweep), rise])
-    text = (f"G21 G90 G17\nG0 X0 Y{radius:.6f} Z0\nG2 I0 J{-radius:.6f} X{end[0]:.6f} "
-            f"Y{end[1]:.6f} Z{end[2]:.6f} F3000\nG1 X{end[0] + 5 + dx:.6f} "
-            f"Y{end[1] + dx:.6f} Z{end[2] + dz:.6f}\nM2\n")  # fmt: skip
+    text = (
+        f"G21 G90 G17\nG0 X0 Y{radius:.6f} Z0\nG2 I0 J{-radius:.6f} X{end[0]:.6f} "
+        f"Y{end[1]:.6f} Z{end[2]:.6f} F3000\nG1 X{end[0] + 5 + dx:.6f} "
+        f"Y{end[1] + dx:.6f} Z{end[2] + dz:.6f}\nM2\n"
+    )
     arc, line = (s for s in interpret_text(text).segments if s.kind in ("arc", "line"))
     helix = geometry_of(arc)
     seg = LineGeometry(np.asarray(line.start_mm), np.asarray(line.end_mm))
@@ -634,8 +674,10 @@ def test_planner_blends_3d_turns_within_p():
 
     # F300: slow enough that the helix blend, capped for the servo (servo_blend_cap_mm_s),
     # beats a stop; at F3000 the corner stops (stop_faster).
-    text = ("G21 G90 G17 G64 P0.02\nG0 X2 Y-1 Z16\nF300\nG2 I0 J7 X9 Y6 Z13\n"
-            "G1 X15 Y6 Z10\nG1 X20 Y10 Z10\nM2\n")  # fmt: skip
+    text = (
+        "G21 G90 G17 G64 P0.02\nG0 X2 Y-1 Z16\nF300\nG2 I0 J7 X9 Y6 Z13\n"
+        "G1 X15 Y6 Z10\nG1 X20 Y10 Z10\nM2\n"
+    )
     prog = interpret_text(text)
     r = run_program(prog, load_machine(), RunOptions(lookahead=LookaheadOptions(dynamics="off")))
     log = r.plan.pieces.corners

@@ -37,8 +37,9 @@ def test_kappa_peak_bits_and_the_dense_maximum():
     got = _kappa_peak(alpha, beta, c, s)
     np.testing.assert_array_equal(got, _reference(alpha, beta, c, s, iterations=30))
     # κ is stationary at its peak: 30 halvings give it to rounding (52 as the reference).
-    np.testing.assert_allclose(got, _reference(alpha, beta, c, s, iterations=52), rtol=2e-15,
-                               atol=0.0)  # fmt: skip
+    np.testing.assert_allclose(
+        got, _reference(alpha, beta, c, s, iterations=52), rtol=2e-15, atol=0.0
+    )
     # The maximum of κ(ξ) = 4αβ s ξ(1 − ξ)/Q² on a dense grid is never above it (to rounding)
     # and comes within the grid's resolution of it.
     xi = np.linspace(0.0, 1.0, 4001)[None, :]

@@ -67,8 +67,7 @@ def test_chunks_are_the_rows_of_the_whole_samples(plans, name, window, interpola
     assert [c.t_s.size for c in chunks] == [min(window, n - k) for k in range(0, n, window)]
     assert all(c.interpolator == interpolator for c in chunks)
     for field in FIELDS:
-        np.testing.assert_array_equal(_joined(chunks, field), getattr(whole, field),
-                                      err_msg=field)  # fmt: skip
+        np.testing.assert_array_equal(_joined(chunks, field), getattr(whole, field), err_msg=field)
 
 
 def test_taylor_windows_continue_the_recurrence(plans):
@@ -153,9 +152,21 @@ def _assert_same_npz(ours: Path, reference: Path) -> None:
         got, want = a.infolist(), b.infolist()
         assert [i.filename for i in got] == [i.filename for i in want]
         for x, y in zip(got, want):
-            assert (x.compress_type, x.CRC, x.file_size, x.date_time, x.external_attr,
-                    x.extract_version) == (y.compress_type, y.CRC, y.file_size, y.date_time,
-                                           y.external_attr, y.extract_version)  # fmt: skip
+            assert (
+                x.compress_type,
+                x.CRC,
+                x.file_size,
+                x.date_time,
+                x.external_attr,
+                x.extract_version,
+            ) == (
+                y.compress_type,
+                y.CRC,
+                y.file_size,
+                y.date_time,
+                y.external_attr,
+                y.extract_version,
+            )
     with np.load(ours) as p, np.load(reference) as q:
         assert list(p.files) == list(q.files)
         for name in q.files:
@@ -199,7 +210,7 @@ def test_windowed_writers_write_todays_bytes(plans, tmp_path, frozen_clock, fmt,
     whole = sample_plan(plan.pieces, plan.profile, PERIOD)
     n = whole.t_s.size
     windows = sample_chunks(plan.pieces, plan.profile, PERIOD, "exact", window)
-    out = tmp_path / "out" / f"points.{ {'halstreamer': 'hs'}.get(fmt, fmt)}"
+    out = tmp_path / "out" / f"points.{ {'halstreamer': 'hs'}.get(fmt, fmt) }"
     out.parent.mkdir()
     if fmt == "csv":
         write_point_windows(str(out), windows, n)
@@ -213,8 +224,9 @@ def test_windowed_writers_write_todays_bytes(plans, tmp_path, frozen_clock, fmt,
         _assert_same_npz(single, tmp_path / "today.npz")
     else:
         write_halstreamer_windows(str(out), (w.points_mm for w in windows), n, PERIOD, "naca")
-        expected = (halstreamer_header(whole.points_mm, PERIOD, "naca")
-                    + halstreamer_lines(whole.points_mm)).encode()  # fmt: skip
+        expected = (
+            halstreamer_header(whole.points_mm, PERIOD, "naca") + halstreamer_lines(whole.points_mm)
+        ).encode()
     assert out.read_bytes() == expected
     assert sorted(p.name for p in out.parent.iterdir()) == [out.name]
 
@@ -230,8 +242,9 @@ def test_npz_with_a_short_count_is_refused_and_leaves_no_file(plans, tmp_path):
     out.write_bytes(b"old")
     for count in (n - 1, n + 1):
         with pytest.raises(ValueError, match="announced"):
-            write_point_windows(str(out), sample_chunks(plan.pieces, plan.profile, PERIOD,
-                                                        "exact", 100), count)  # fmt: skip
+            write_point_windows(
+                str(out), sample_chunks(plan.pieces, plan.profile, PERIOD, "exact", 100), count
+            )
     assert out.read_bytes() == b"old" and list(tmp_path.iterdir()) == [out]
 
 
@@ -324,8 +337,9 @@ def test_a_window_outside_the_soft_limits_names_the_first_line(plans):
 @pytest.mark.parametrize("window", [7, 4096])
 @pytest.mark.parametrize("dynamics", ["off", "local"])
 @pytest.mark.parametrize("suffix", ["csv", "npz", "hs"])
-def test_run_writes_the_whole_runs_bytes_and_summary(tmp_path, monkeypatch, frozen_clock,
-                                                     suffix, dynamics, window):  # fmt: skip
+def test_run_writes_the_whole_runs_bytes_and_summary(
+    tmp_path, monkeypatch, frozen_clock, suffix, dynamics, window
+):
     """``run -o`` writes, window by window, the file the whole-array writers make of the
     run's whole samples, and prints the summary of the whole samples — with the check off
     (the points re-sampled as they are written) and on (its kept reference, sliced)."""
@@ -342,8 +356,10 @@ def test_run_writes_the_whole_runs_bytes_and_summary(tmp_path, monkeypatch, froz
     monkeypatch.setattr(pipeline, "CHUNK", window)
     src = str(ROOT / "programs" / "naca2415.nc")
     out = tmp_path / f"points.{suffix}"
-    res = CliRunner().invoke(main, ["run", src, "-o", str(out), "--json", "--dynamics",
-                                    dynamics, "--interpolator", "taylor"])  # fmt: skip
+    res = CliRunner().invoke(
+        main,
+        ["run", src, "-o", str(out), "--json", "--dynamics", dynamics, "--interpolator", "taylor"],
+    )
     assert res.exit_code == 0, res.output
     prog, mach, run = make_plan(src, dynamics=dynamics, interpolator="taylor")
     whole = run.samples
@@ -354,8 +370,9 @@ def test_run_writes_the_whole_runs_bytes_and_summary(tmp_path, monkeypatch, froz
         write_points(str(expected), whole)
     assert out.read_bytes() == expected.read_bytes()
     summary = json.loads(res.stdout)
-    reference = plan_summary(prog, mach, whole, run.plan, run.check, run.algorithm,
-                             run.cycle_time_s)  # fmt: skip
+    reference = plan_summary(
+        prog, mach, whole, run.plan, run.check, run.algorithm, run.cycle_time_s
+    )
     assert {k: summary[k] for k in reference} == json.loads(json.dumps(reference))
     assert summary == json.loads(json.dumps(summary_of(prog, mach, run)))
     assert "feed_fluctuation_max" in summary and summary["samples"] == whole.t_s.size

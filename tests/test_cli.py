@@ -33,10 +33,10 @@ NACA = ROOT / "programs" / "naca2415.nc"
 NUM = r"(-?\d+(?:\.\d+)?)"
 
 
-
 def error_report(stderr: str) -> str:
     """stderr without the leading line that says which machine profile a planning command used."""
     return stderr.split("\n", 1)[1] if stderr.startswith("machine: ") else stderr
+
 
 def run(args, **kwargs):
     return CliRunner().invoke(main, [str(a) for a in args], **kwargs)
@@ -260,8 +260,18 @@ def test_markup_file_name_prints_literally(bracket_program, command):
 
 
 def test_markup_file_name_in_batch(bracket_program, tmp_path):
-    result = run(["run", "--output-dir", tmp_path / "out", "--jobs", "1", "--dynamics", "off",
-                  bracket_program])  # fmt: skip
+    result = run(
+        [
+            "run",
+            "--output-dir",
+            tmp_path / "out",
+            "--jobs",
+            "1",
+            "--dynamics",
+            "off",
+            bracket_program,
+        ]
+    )
     assert result.exit_code == 0, result.output
     assert str(bracket_program) in result.stdout
     assert (tmp_path / "out" / "].csv").exists()
@@ -318,8 +328,10 @@ def test_cut_source_line_keeps_the_caret_on_its_character(column):
 def test_cut_source_line_property(text, data):
     column = data.draw(st.integers(1, len(text) + 1))
     shown, caret = console.echo_source_line(text, column, width=40)
-    visible = "".join(" " if c == "\t" else "\ufffd" if ord(c) < 0x20 or 0x7F <= ord(c) < 0xA0
-                      else c for c in text)  # fmt: skip
+    visible = "".join(
+        " " if c == "\t" else "\ufffd" if ord(c) < 0x20 or 0x7F <= ord(c) < 0xA0 else c
+        for c in text
+    )
     assert len(shown) <= 42
     assert shown.strip("…") in visible
     if column <= len(text):
@@ -434,8 +446,13 @@ def cli_default_profile() -> str:
 
 
 def _nurbscnc(args, stdout, **kwargs):
-    return subprocess.run([sys.executable, "-m", "nurbscnc", *map(str, args)], stdout=stdout,
-                          stderr=subprocess.PIPE, timeout=120, **kwargs)  # fmt: skip
+    return subprocess.run(
+        [sys.executable, "-m", "nurbscnc", *map(str, args)],
+        stdout=stdout,
+        stderr=subprocess.PIPE,
+        timeout=120,
+        **kwargs,
+    )
 
 
 def _closed_pipe():
@@ -445,8 +462,9 @@ def _closed_pipe():
     return write_end
 
 
-@pytest.mark.parametrize("args", [["check", NACA], ["run", NACA, "-o", "-"],
-                                  ["check", NACA, "--json"]])  # fmt: skip
+@pytest.mark.parametrize(
+    "args", [["check", NACA], ["run", NACA, "-o", "-"], ["check", NACA, "--json"]]
+)
 def test_closed_pipe_ends_quietly_with_141(args):
     fd = _closed_pipe()
     try:
@@ -461,9 +479,11 @@ def test_head_on_run_output_is_quiet(tmp_path):
     """A real reader that stops after one line, as ``| head -1``."""
     path = tmp_path / "long.nc"
     path.write_text("G21 G90 G1 X200 F600\nM2\n")  # 20 s: ~20000 rows, far beyond a pipe buffer
-    proc = subprocess.Popen([sys.executable, "-m", "nurbscnc", "run", str(path), "-o", "-",
-                             "--dynamics", "off"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)  # fmt: skip
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "nurbscnc", "run", str(path), "-o", "-", "--dynamics", "off"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
     first = proc.stdout.readline()
     proc.stdout.close()
     code = proc.wait(120)
@@ -473,10 +493,13 @@ def test_head_on_run_output_is_quiet(tmp_path):
 
 
 @pytest.mark.skipif(not os.path.exists("/dev/full"), reason="no /dev/full")
-@pytest.mark.parametrize("args, message", [
-    (["check", NACA], "cannot write to standard output: No space left on device"),
-    (["run", NACA, "-o", "-"], "cannot write standard output: No space left on device"),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["check", NACA], "cannot write to standard output: No space left on device"),
+        (["run", NACA, "-o", "-"], "cannot write standard output: No space left on device"),
+    ],
+)
 def test_stdout_to_dev_full_exits_3_with_a_message(args, message):
     with open("/dev/full", "wb") as full:
         proc = _nurbscnc(args, stdout=full)
@@ -518,9 +541,14 @@ def _stderr_on_a_pty(args, cwd) -> bytes:
     import select
 
     master, slave = pty.openpty()
-    proc = subprocess.Popen([sys.executable, "-m", "nurbscnc", *map(str, args)],
-                            stdout=subprocess.DEVNULL, stderr=slave, stdin=subprocess.DEVNULL,
-                            cwd=cwd, env={**os.environ, "PYTHONPATH": str(ROOT)})  # fmt: skip
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "nurbscnc", *map(str, args)],
+        stdout=subprocess.DEVNULL,
+        stderr=slave,
+        stdin=subprocess.DEVNULL,
+        cwd=cwd,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+    )
     os.close(slave)
     data = b""
     try:
@@ -555,14 +583,20 @@ def test_progress_on_a_terminal_names_the_stages(tmp_path):
 
 
 # ------------------------------------------------------------------------- shell completion
-@pytest.mark.parametrize("words, expected", [
-    ("nurbscnc pl", {"plan"}),
-    ("nurbscnc plan --expl", {"--explain", "--explain-all"}),
-    ("nurbscnc plan x.nc --dynamics ", {"local", "global", "off"}),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "words, expected",
+    [
+        ("nurbscnc pl", {"plan"}),
+        ("nurbscnc plan --expl", {"--explain", "--explain-all"}),
+        ("nurbscnc plan x.nc --dynamics ", {"local", "global", "off"}),
+    ],
+)
 def test_bash_completion_as_the_readme_says(words, expected):
-    env = {"_NURBSCNC_COMPLETE": "bash_complete", "COMP_WORDS": words,
-           "COMP_CWORD": str(len(words.split(" ")) - 1)}  # fmt: skip
+    env = {
+        "_NURBSCNC_COMPLETE": "bash_complete",
+        "COMP_WORDS": words,
+        "COMP_CWORD": str(len(words.split(" ")) - 1),
+    }
     res = CliRunner().invoke(main, [], env=env, prog_name="nurbscnc")
     assert res.exit_code == 0, res.output
     got = {line.split(",", 1)[1] for line in res.stdout.splitlines() if "," in line}
@@ -612,14 +646,19 @@ def test_collector_paused_and_thawed_around_the_plan_and_its_json():
         gc.enable()
 
 
-@pytest.mark.parametrize("signal_exc, code", [(KeyboardInterrupt(), 130),
-                                              (handle.Terminated(15), 143),
-                                              (handle.Terminated(1), 129)])  # fmt: skip
-@pytest.mark.parametrize("late", [OSError(28, "No space left on device"),
-                                  OutputError("cannot write x.csv: closed"),
-                                  ValueError("a writer's own error")])  # fmt: skip
-def test_an_error_while_unwinding_from_a_signal_reports_the_signal(signal_exc, code, late,
-                                                                   capsys):  # fmt: skip
+@pytest.mark.parametrize(
+    "signal_exc, code",
+    [(KeyboardInterrupt(), 130), (handle.Terminated(15), 143), (handle.Terminated(1), 129)],
+)
+@pytest.mark.parametrize(
+    "late",
+    [
+        OSError(28, "No space left on device"),
+        OutputError("cannot write x.csv: closed"),
+        ValueError("a writer's own error"),
+    ],
+)
+def test_an_error_while_unwinding_from_a_signal_reports_the_signal(signal_exc, code, late, capsys):
     """A write cut short by Ctrl-C or SIGTERM can fail again as its file is closed on the
     way out: the exit code is the signal's, not the later error's (3 or 1)."""
 
@@ -680,17 +719,22 @@ def test_inputs_are_bounded(monkeypatch, tmp_path):
     monkeypatch.setattr(files, "MAX_INPUT_BYTES", 1 << 16)
     result = run(["check", "/dev/urandom"])
     assert result.exit_code == 2
-    assert ("the program is larger than 65,536 bytes (0.0625 MiB), the most nurbscnc reads"
-            in result.stderr)  # fmt: skip
+    assert (
+        "the program is larger than 65,536 bytes (0.0625 MiB), the most nurbscnc reads"
+        in result.stderr
+    )
     prog = tmp_path / "a.nc"
     prog.write_text("G1 X1 F100\nM2\n")
-    for args, what in ((["plan", prog, "--tool-table", "/dev/zero"], "the tool table"),
-                       (["identify", "/dev/zero"], "the trace"),
-                       (["plan", prog, "--machine", "/dev/zero"], "machine profile")):
+    for args, what in (
+        (["plan", prog, "--tool-table", "/dev/zero"], "the tool table"),
+        (["identify", "/dev/zero"], "the trace"),
+        (["plan", prog, "--machine", "/dev/zero"], "machine profile"),
+    ):
         result = run(args)
         assert result.exit_code == 2, (args, result.output)
-        assert what in result.stderr and ("larger than" in result.stderr
-                                          or "longer than" in result.stderr)  # fmt: skip
+        assert what in result.stderr and (
+            "larger than" in result.stderr or "longer than" in result.stderr
+        )
     points = tmp_path / "p.csv"
     points.write_text("t,x,y\n" + "0.0,0.0,0.0\n" * 6000)
     result = run(["simulate", points])

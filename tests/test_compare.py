@@ -49,8 +49,9 @@ def test_baseline_feed_follows_its_formula(block, algorithm):
     f = min(block.feed_mm_s, lim.v_max_mm_s)
     kappa = _kappa_at(block, smp.s_mm[:-1])
     if algorithm == "adaptive":
-        expected = np.minimum(f, chord_feed_mm_s(kappa, MACHINE.servo.period_s,
-                                                 lim.chord_tolerance_mm))  # fmt: skip
+        expected = np.minimum(
+            f, chord_feed_mm_s(kappa, MACHINE.servo.period_s, lim.chord_tolerance_mm)
+        )
     else:
         expected = f * lim.kappa_ref_per_mm / (kappa + lim.kappa_ref_per_mm)
     np.testing.assert_allclose(smp.v_mm_s[:-1], expected, rtol=1e-9)
@@ -94,14 +95,33 @@ def test_rotation_is_a_rigid_motion(block):
 
 
 def test_compare_cli_json_and_plots(tmp_path):
-    res = CliRunner().invoke(main, ["compare", str(AIRFOIL), "--json", "--algorithm", "adaptive",
-                                    "--algorithm", "ours", "--plot", str(tmp_path)])
+    res = CliRunner().invoke(
+        main,
+        [
+            "compare",
+            str(AIRFOIL),
+            "--json",
+            "--algorithm",
+            "adaptive",
+            "--algorithm",
+            "ours",
+            "--plot",
+            str(tmp_path),
+        ],
+    )
     assert res.exit_code == 0, res.output
     data = json.loads(res.output)
     assert [r["algorithm"] for r in data["rows"]] == ["adaptive", "ours"]
-    for key in ("angle_deg", "contour_eq29_max_um", "contour_eq29_rms_um",
-                "contour_eq29_mean_um", "contour_true_max_um", "axis_x_max_um", "axis_y_max_um",
-                "cycle_time_s"):
+    for key in (
+        "angle_deg",
+        "contour_eq29_max_um",
+        "contour_eq29_rms_um",
+        "contour_eq29_mean_um",
+        "contour_true_max_um",
+        "axis_x_max_um",
+        "axis_y_max_um",
+        "cycle_time_s",
+    ):
         assert all(isinstance(r[key], float) for r in data["rows"])
     pngs = sorted(p.name for p in tmp_path.iterdir())
     assert pngs == ["axis_0deg.png", "contour_0deg.png", "feed_0deg.png", "path_0deg.png"]
@@ -131,9 +151,17 @@ def test_compare_rejects_programs_without_nurbs(tmp_path):
 
 def test_rows_have_the_documented_fields(table4):
     r = row(table4["ours"])
-    assert set(r) >= {"algorithm", "angle_deg", "contour_eq29_max_um", "contour_eq29_rms_um",
-                      "contour_eq29_mean_um", "contour_true_max_um", "axis_x_max_um",
-                      "axis_y_max_um", "cycle_time_s"}
+    assert set(r) >= {
+        "algorithm",
+        "angle_deg",
+        "contour_eq29_max_um",
+        "contour_eq29_rms_um",
+        "contour_eq29_mean_um",
+        "contour_true_max_um",
+        "axis_x_max_um",
+        "axis_y_max_um",
+        "cycle_time_s",
+    }
 
 
 @pytest.mark.parametrize("algorithm", ["adaptive", "curvature"])
@@ -144,15 +172,27 @@ def test_plan_and_run_accept_the_baselines(tmp_path, algorithm):
     summary = json.loads(res.output)
     assert summary["algorithm"] == algorithm and summary["contour_true_max_um"] > 15.0
     out = tmp_path / "b.csv"
-    res = runner.invoke(main, ["run", str(AIRFOIL), "--algorithm", algorithm, "-o", str(out),
-                               "--plot", str(tmp_path / "figs")])
+    res = runner.invoke(
+        main,
+        [
+            "run",
+            str(AIRFOIL),
+            "--algorithm",
+            algorithm,
+            "-o",
+            str(out),
+            "--plot",
+            str(tmp_path / "figs"),
+        ],
+    )
     assert res.exit_code == 0, res.output
     from nurbscnc.output.files import read_points
 
     data = read_points(str(out))
     prog = interpret_text(AIRFOIL.read_text())
-    np.testing.assert_allclose([data["x"][-1], data["y"][-1]], prog.segments[-1].end_mm[:2],
-                               atol=1e-9)
+    np.testing.assert_allclose(
+        [data["x"][-1], data["y"][-1]], prog.segments[-1].end_mm[:2], atol=1e-9
+    )
     np.testing.assert_allclose(np.diff(data["t"]), MACHINE.servo.period_s, atol=1e-9)
     assert (tmp_path / "figs" / "path.png").exists()
 
@@ -160,6 +200,10 @@ def test_plan_and_run_accept_the_baselines(tmp_path, algorithm):
 def test_plan_plot_writes_path_feed_and_contour(tmp_path):
     res = CliRunner().invoke(main, ["plan", str(AIRFOIL), "--plot", str(tmp_path)])
     assert res.exit_code == 0, res.output
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["contour_error.png", "feed.png",
-                                                          "feed_along.png", "limits.png",
-                                                          "path.png"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "contour_error.png",
+        "feed.png",
+        "feed_along.png",
+        "limits.png",
+        "path.png",
+    ]

@@ -53,12 +53,22 @@ def drive(text: str) -> list[dict]:
             if m.kind == "dwell":
                 out.append({"kind": "dwell", "line": m.line, "seconds": m.seconds})
             elif m.kind == "arc":
-                out.append({"kind": "arc", "line": m.line, "end": list(m.end_mm),
-                            "centre": [*m.centre_mm, m.start_mm[2]], "rotation": m.turn,
-                            "feed_mm_s": m.feed_mm_s})  # fmt: skip
+                out.append(
+                    {
+                        "kind": "arc",
+                        "line": m.line,
+                        "end": list(m.end_mm),
+                        "centre": [*m.centre_mm, m.start_mm[2]],
+                        "rotation": m.turn,
+                        "feed_mm_s": m.feed_mm_s,
+                    }
+                )
             else:
-                d = {"kind": "traverse" if m.kind == "rapid" else "feed", "line": m.line,
-                     "end": list(m.end_mm)}  # fmt: skip
+                d = {
+                    "kind": "traverse" if m.kind == "rapid" else "feed",
+                    "line": m.line,
+                    "end": list(m.end_mm),
+                }
                 if m.kind == "feed":
                     d["feed_mm_s"] = m.feed_mm_s
                 out.append(d)
@@ -99,8 +109,12 @@ def drive(text: str) -> list[dict]:
                 centre = (pos[0] + w.get("I", 0.0) * scale, pos[1] + w.get("J", 0.0) * scale)
                 m = CompMove("arc", tuple(end), feed, line_no, centre, 1 if motion == 3.0 else -1)
             else:
-                m = CompMove("rapid" if motion == 0.0 else "feed", tuple(end),
-                             0.0 if motion == 0.0 else feed, line_no)  # fmt: skip
+                m = CompMove(
+                    "rapid" if motion == 0.0 else "feed",
+                    tuple(end),
+                    0.0 if motion == 0.0 else feed,
+                    line_no,
+                )
             exit_move = False
             if comp is not None:
                 emit(comp.move(m))
@@ -172,8 +186,10 @@ def test_g18_compensation_is_g17_with_the_axes_turned():
     from nurbscnc.program.interpret import InterpretOptions, interpret_text
     from nurbscnc.program.tooltable import parse_tool_table
 
-    xy = ("G17 G21 F100\nG0 X0 Y-5 Z1\nG41 D1\nG1 X10 Y0\nG3 X20 Y10 I0 J10\nG1 Y20 Z2\n"
-          "G2 X10 Y30 I-10 J0\nG1 X0 Y20\nG40\nG0 X-5 Y-5\nM2")  # fmt: skip
+    xy = (
+        "G17 G21 F100\nG0 X0 Y-5 Z1\nG41 D1\nG1 X10 Y0\nG3 X20 Y10 I0 J10\nG1 Y20 Z2\n"
+        "G2 X10 Y30 I-10 J0\nG1 X0 Y20\nG40\nG0 X-5 Y-5\nM2"
+    )
     swap = {"X": "Z", "Y": "X", "Z": "Y", "I": "K", "J": "I"}
     zx = "".join(swap.get(ch, ch) for ch in xy).replace("G17", "G18")
     options = InterpretOptions(tools=parse_tool_table("T1 P1 D4\n"))

@@ -336,9 +336,7 @@ def test_ph_deviation_recomputed_independently(naca_ph, naca_oracle):
         assert np.sqrt(np.mean(dev**2)) == pytest.approx(region["rms_um"], abs=1e-4)
         # Between the samples too: the whole region stays within 3e.
         dense = naca_oracle["point"](np.linspace(region["u_a"], region["u_b"], 4001))
-        pts = np.vstack(
-            [bezier(xy(p), np.linspace(0, 1, 40_001)) for p in region["pieces"]]
-        )
+        pts = np.vstack([bezier(xy(p), np.linspace(0, 1, 40_001)) for p in region["pieces"]])
         assert 1e3 * cKDTree(pts).query(dense)[0].max() <= 3.0
 
 
@@ -411,8 +409,17 @@ def test_an_end_hook_of_rounding_is_removed_within_the_tolerance():
     # sat on P0): the curve turns round within 1e-6 mm (κ ~ 1e8 /mm). Removed: P1 moves onto
     # the ray P0 → P2; the curve moves by |ΔP1|·max N1 (scipy's B-splines of the two control
     # polygons) ≤ 0.9 δ; it leaves P0 along P2 − P0 with zero curvature, regular.
-    ctrl = [(9.0, 0.0), (9.000001, 0.0), (8.99, 0.0025), (8.95, 0.0135), (8.87, 0.0318),
-            (8.77, 0.0568), (8.78, 0.0570), (8.985, 0.0011), (9.0, 0.0)]  # fmt: skip
+    ctrl = [
+        (9.0, 0.0),
+        (9.000001, 0.0),
+        (8.99, 0.0025),
+        (8.95, 0.0135),
+        (8.87, 0.0318),
+        (8.77, 0.0568),
+        (8.78, 0.0570),
+        (8.985, 0.0011),
+        (9.0, 0.0),
+    ]
     curve = _uniform_cubic(ctrl)
     u = np.linspace(0.0, 1.0, 20001)
     assert curve.curvature(u[:3]).max() > 1e6

@@ -39,9 +39,11 @@ SLOW = _slow_servo_machine()
 POINTS_MM = 1e-9
 
 #: Four cuts on the ringing servo: stops, curves and settles after rapids get shaped.
-CUTS = ("G21 G90 G17\nG0 X30 Y0\nG1 X30 Y10 F300\nG1 X20 Y10 F3000\n"
-        "G0 X0 Y0\nG1 X5 Y5 F1200\nG2 X15 Y5 I5 J0 F3000\nG0 X40 Y40\n"
-        "G1 X40 Y0 F3000\nG1 X50 Y0\nG0 X60 Y0\nG3 X70 Y0 I5 J0 F2400\nM2\n")  # fmt: skip
+CUTS = (
+    "G21 G90 G17\nG0 X30 Y0\nG1 X30 Y10 F300\nG1 X20 Y10 F3000\n"
+    "G0 X0 Y0\nG1 X5 Y5 F1200\nG2 X15 Y5 I5 J0 F3000\nG0 X40 Y40\n"
+    "G1 X40 Y0 F3000\nG1 X50 Y0\nG0 X60 Y0\nG3 X70 Y0 I5 J0 F2400\nM2\n"
+)
 
 
 def _corpus() -> Path:
@@ -58,8 +60,9 @@ def _corpus_text(name: str) -> str:
 def _truncated(text: str, machine, n: int) -> str:
     """The program up to (not including) the line of the rapid that starts window ``n``,
     then M2."""
-    pieces = segment_pieces(interpret_text(text).segments, machine,
-                            lookahead.LookaheadOptions().plan)  # fmt: skip
+    pieces = segment_pieces(
+        interpret_text(text).segments, machine, lookahead.LookaheadOptions().plan
+    )
     first = int(cut_windows(pieces)[n])
     line = int(pieces.line[first])  # 1-based source line of that rapid
     lines = text.splitlines()
@@ -72,10 +75,12 @@ def _same_levers(a, b, k: int) -> None:
     for f in ("a_up_mm_s2", "j_up_mm_s3", "a_down_mm_s2", "j_down_mm_s3"):
         np.testing.assert_array_equal(getattr(a.limits, f)[:k], getattr(b.limits, f)[:k])
     np.testing.assert_array_equal(a.settle_s[:k], b.settle_s[:k])
-    np.testing.assert_array_equal(a.profile.junction_speeds_mm_s[: k + 1],
-                                  b.profile.junction_speeds_mm_s[: k + 1])  # fmt: skip
-    np.testing.assert_array_equal(a.profile.piece_start_time_s[:k],
-                                  b.profile.piece_start_time_s[:k])  # fmt: skip
+    np.testing.assert_array_equal(
+        a.profile.junction_speeds_mm_s[: k + 1], b.profile.junction_speeds_mm_s[: k + 1]
+    )
+    np.testing.assert_array_equal(
+        a.profile.piece_start_time_s[:k], b.profile.piece_start_time_s[:k]
+    )
 
 
 def _points(plan, k1: int, machine) -> np.ndarray:
@@ -91,13 +96,13 @@ def test_truncated_program_plans_the_first_windows(n):
     short = list(plan_windows(interpret_text(_truncated(CUTS, SLOW, n)), SLOW))
     assert len(short) == n
     for ws, wf in zip(short, full):
-        assert (ws.first, ws.end, ws.k0, ws.iterations) == (wf.first, wf.end, wf.k0,
-                                                             wf.iterations)  # fmt: skip
+        assert (ws.first, ws.end, ws.k0, ws.iterations) == (wf.first, wf.end, wf.k0, wf.iterations)
     end = full[n - 1].end
     _same_levers(short[-1].plan, full[-1].plan, end)
     k1 = full[n - 1].k1
-    np.testing.assert_allclose(_points(short[-1].plan, k1, SLOW),
-                               _points(full[-1].plan, k1, SLOW), rtol=0, atol=POINTS_MM)
+    np.testing.assert_allclose(
+        _points(short[-1].plan, k1, SLOW), _points(full[-1].plan, k1, SLOW), rtol=0, atol=POINTS_MM
+    )
 
 
 def test_windows_are_final_when_yielded():
@@ -106,8 +111,9 @@ def test_windows_are_final_when_yielded():
     final = windows[-1].plan
     for w in windows:
         _same_levers(w.plan, final, w.end)
-        np.testing.assert_allclose(_points(w.plan, w.k1, SLOW), _points(final, w.k1, SLOW),
-                                   rtol=0, atol=POINTS_MM)  # fmt: skip
+        np.testing.assert_allclose(
+            _points(w.plan, w.k1, SLOW), _points(final, w.k1, SLOW), rtol=0, atol=POINTS_MM
+        )
     assert [w.k0 for w in windows[1:]] == [w.k1 for w in windows[:-1]]
     plan, _ = plan_checked(interpret_text(CUTS), SLOW, keep_reference=False)
     _same_levers(plan, final, len(plan.pieces))
@@ -141,8 +147,9 @@ def test_one_cut_is_the_whole_program_loop(monkeypatch):
     assert windows[0].plan.cycle_time_s == plan.cycle_time_s
 
 
-@pytest.mark.parametrize("name", ["linuxcnc/general/3dtest.ngc",
-                                  "linuxcnc/nurbs/G5_butterfly-xy.ngc"])  # fmt: skip
+@pytest.mark.parametrize(
+    "name", ["linuxcnc/general/3dtest.ngc", "linuxcnc/nurbs/G5_butterfly-xy.ngc"]
+)
 def test_corpus_windows_within_eps_and_not_slower(name, monkeypatch):
     """Corpus programs of several cuts: the joined plan equals plan_checked's, is within
     ε_max by the whole-array check and within 1e-4 of one window for the whole program."""
@@ -152,8 +159,12 @@ def test_corpus_windows_within_eps_and_not_slower(name, monkeypatch):
     plan, whole = plan_checked(prog, MACHINE, keep_reference=True)
     _same_levers(windows[-1].plan, plan, len(plan.pieces))
     for w in windows:
-        np.testing.assert_allclose(_points(w.plan, w.k1, MACHINE)[w.k0:],
-                                   _points(plan, w.k1, MACHINE)[w.k0:], rtol=0, atol=POINTS_MM)
+        np.testing.assert_allclose(
+            _points(w.plan, w.k1, MACHINE)[w.k0 :],
+            _points(plan, w.k1, MACHINE)[w.k0 :],
+            rtol=0,
+            atol=POINTS_MM,
+        )
     assert whole.contour_um().max() <= MACHINE.limits.contour_tolerance_mm * 1000.0
     monkeypatch.setattr(lookahead, "cut_windows", lambda p: np.zeros(1, dtype=np.int64))
     one, _ = plan_checked(prog, MACHINE, keep_reference=False)

@@ -66,17 +66,28 @@ def drive(text: str) -> list[dict]:
         elif motion in CODES and axis:
             cycle_words = {k: (v if k in "PL^" else v * scale) for k, v in axis.items()}
             try:
-                res = expand_cycle(motion, cycle_words, incremental=incremental,
-                                   position_mm=tuple(pos), plane=plane, retract=retract,
-                                   feed_mm_s=feed_mm_s, state=state, spindle=spindle)  # fmt: skip
+                res = expand_cycle(
+                    motion,
+                    cycle_words,
+                    incremental=incremental,
+                    position_mm=tuple(pos),
+                    plane=plane,
+                    retract=retract,
+                    feed_mm_s=feed_mm_s,
+                    state=state,
+                    spindle=spindle,
+                )
             except ProgramError as exc:
                 exc.line = line_no
                 raise
             state, pos = res.state, list(res.position_mm)
             for m in res.moves:
                 if m.kind in ("rapid", "feed"):
-                    move = {"kind": {"rapid": "traverse"}.get(m.kind, m.kind),
-                            "line": line_no, "end": list(m.end_mm)}  # fmt: skip
+                    move = {
+                        "kind": {"rapid": "traverse"}.get(m.kind, m.kind),
+                        "line": line_no,
+                        "end": list(m.end_mm),
+                    }
                     if m.kind == "feed":
                         move["feed_mm_s"] = m.feed_mm_s
                 elif m.kind == "dwell":
@@ -155,17 +166,44 @@ def test_g91_form_equals_g90_form(incremental, absolute):
 
 def test_state_is_sticky_and_initial_level_kept():
     """A second G81 block keeps R, Z and the initial level; a fresh state forgets them."""
-    first = expand_cycle("G81", {"X": 1.0, "Y": 1.0, "Z": -1.0, "R": 2.0}, incremental=False,
-                         position_mm=(0.0, 0.0, 9.0), plane="XY", retract="G98",
-                         feed_mm_s=5.0, state=CycleState())  # fmt: skip
+    first = expand_cycle(
+        "G81",
+        {"X": 1.0, "Y": 1.0, "Z": -1.0, "R": 2.0},
+        incremental=False,
+        position_mm=(0.0, 0.0, 9.0),
+        plane="XY",
+        retract="G98",
+        feed_mm_s=5.0,
+        state=CycleState(),
+    )
     assert first.state.initial_level_mm == 9.0 and first.position_mm == (1.0, 1.0, 9.0)
-    second = expand_cycle("G81", {"X": 3.0}, incremental=False, position_mm=first.position_mm,
-                          plane="XY", retract="G98", feed_mm_s=5.0, state=first.state)  # fmt: skip
-    assert [m.end_mm for m in second.moves] == [(3.0, 1.0, 9.0), (3.0, 1.0, 2.0),
-                                                (3.0, 1.0, -1.0), (3.0, 1.0, 9.0)]  # fmt: skip
+    second = expand_cycle(
+        "G81",
+        {"X": 3.0},
+        incremental=False,
+        position_mm=first.position_mm,
+        plane="XY",
+        retract="G98",
+        feed_mm_s=5.0,
+        state=first.state,
+    )
+    assert [m.end_mm for m in second.moves] == [
+        (3.0, 1.0, 9.0),
+        (3.0, 1.0, 2.0),
+        (3.0, 1.0, -1.0),
+        (3.0, 1.0, 9.0),
+    ]
     with pytest.raises(ProgramError, match="R clearance plane unspecified"):
-        expand_cycle("G81", {"X": 3.0}, incremental=False, position_mm=first.position_mm,
-                     plane="XY", retract="G98", feed_mm_s=5.0, state=CycleState())  # fmt: skip
+        expand_cycle(
+            "G81",
+            {"X": 3.0},
+            incremental=False,
+            position_mm=first.position_mm,
+            plane="XY",
+            retract="G98",
+            feed_mm_s=5.0,
+            state=CycleState(),
+        )
 
 
 @pytest.mark.parametrize("plane", ["ZX", "YZ"])
@@ -173,6 +211,14 @@ def test_state_is_sticky_and_initial_level_kept():
 def test_tapping_outside_xy_is_refused(code, plane):
     """LinuxCNC 2.9 taps to interchanged coordinates in G18/G19: refused, not copied."""
     with pytest.raises(ProgramError, match="only supported in the XY plane"):
-        expand_cycle(code, {"X": 1.0, "Y": 1.0, "Z": -1.0, "R": 2.0}, incremental=False,
-                     position_mm=(0.0, 0.0, 5.0), plane=plane, retract="G98",
-                     feed_mm_s=5.0, state=CycleState(), spindle="cw")  # fmt: skip
+        expand_cycle(
+            code,
+            {"X": 1.0, "Y": 1.0, "Z": -1.0, "R": 2.0},
+            incremental=False,
+            position_mm=(0.0, 0.0, 5.0),
+            plane=plane,
+            retract="G98",
+            feed_mm_s=5.0,
+            state=CycleState(),
+            spindle="cw",
+        )

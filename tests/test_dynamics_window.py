@@ -48,8 +48,7 @@ def case():
     run = run_program(interpret_text(PROGRAM), MACHINE)
     pieces, profile, ref = run.plan.pieces, run.plan.profile, run.samples
     servo = MACHINE.servo
-    actual = simulate_axes([servo.x, servo.y, servo.z], ref.points_mm, servo.period_s,
-                           settle=True)  # fmt: skip
+    actual = simulate_axes([servo.x, servo.y, servo.z], ref.points_mm, servo.period_s, settle=True)
     n = ref.t_s.size
     held = np.vstack((ref.points_mm, np.repeat(ref.points_mm[-1:], actual.shape[0] - n, 0)))
     lag = np.sqrt(np.sum((held - actual) ** 2, axis=1))
@@ -68,15 +67,17 @@ def test_the_kept_polyline_gives_the_same_bits(case, monkeypatch, slab, room, fi
     index = PathIndex(pieces)
     index.DENSE_POINTS = room  # all of the polyline fits, or only its first pieces
     for _ in range(2):  # filled, then read back (a re-plan)
-        np.testing.assert_array_equal(windowed_contour_mm(actual, lag, s, pieces, profile,
-                                                          index), fresh)  # fmt: skip
+        np.testing.assert_array_equal(
+            windowed_contour_mm(actual, lag, s, pieces, profile, index), fresh
+        )
     total = int(polyline.path_counts(pieces).sum())
     assert (index._dense["filled"] == len(pieces)) == (total <= room)
     # Other windows of samples (a re-plan's windows fall elsewhere): the same numbers.
     for lo, hi in ((0, 500), (313, 2900), (1800, actual.shape[0])):
         sl = slice(lo, hi)
         np.testing.assert_array_equal(
-            windowed_contour_mm(actual[sl], lag[sl], s[sl], pieces, profile, index), fresh[sl])
+            windowed_contour_mm(actual[sl], lag[sl], s[sl], pieces, profile, index), fresh[sl]
+        )
 
 
 def test_windowed_distance_is_the_true_distance_to_the_path(case):
@@ -100,14 +101,18 @@ def test_windowed_distance_is_the_true_distance_to_the_path(case):
     assert got.max() > 1e-3  # the servo does lag: the check measures something
 
 
-@pytest.mark.parametrize(("way", "direct_pairs", "band_after", "block_pieces"),
-                         [("trees", -1, PathIndex.BAND_AFTER, 0),
-                          ("bands", PathIndex.DIRECT_PAIRS, 0, 0),
-                          ("direct", PathIndex.DIRECT_PAIRS, 10**9,
-                           PathIndex.DIRECT_BLOCK_PIECES),
-                          ("direct", PathIndex.DIRECT_PAIRS, 10**9, 0)])  # fmt: skip
-def test_the_global_distance_is_the_true_distance(case, way, direct_pairs, band_after,
-                                                  block_pieces, monkeypatch):  # fmt: skip
+@pytest.mark.parametrize(
+    ("way", "direct_pairs", "band_after", "block_pieces"),
+    [
+        ("trees", -1, PathIndex.BAND_AFTER, 0),
+        ("bands", PathIndex.DIRECT_PAIRS, 0, 0),
+        ("direct", PathIndex.DIRECT_PAIRS, 10**9, PathIndex.DIRECT_BLOCK_PIECES),
+        ("direct", PathIndex.DIRECT_PAIRS, 10**9, 0),
+    ],
+)
+def test_the_global_distance_is_the_true_distance(
+    case, way, direct_pairs, band_after, block_pieces, monkeypatch
+):
     """PathIndex.distance_mm, candidates by the k-d trees, through the bands of centres
     sorted along an axis, or by testing every piece's ball (a program's first queries: all
     pairs of a block at once, or a point at a time through its x band, as for programs of
@@ -121,8 +126,9 @@ def test_the_global_distance_is_the_true_distance(case, way, direct_pairs, band_
     rng = np.random.default_rng(7)
     pick = rng.choice(actual.shape[0], 300, replace=False)
     q = np.vstack((actual[pick], actual[pick[:100]] + rng.uniform(-2.0, 2.0, (100, 3))))
-    upper = np.concatenate((windowed_contour_mm(actual, lag, s, pieces, profile)[pick],
-                            np.full(100, 3.0)))  # fmt: skip
+    upper = np.concatenate(
+        (windowed_contour_mm(actual, lag, s, pieces, profile)[pick], np.full(100, 3.0))
+    )
     index = PathIndex(pieces)
     got = index.distance_mm(q, upper)
     taken = "trees" if index._built else "bands" if index._bands else "direct"
@@ -142,8 +148,15 @@ def _column_of_cuts(count: int) -> str:
     lines = ["G21 G17 G90 G94", "G64 P0.01", "F1200"]
     for k in range(count):
         y = 3.0 * k
-        lines += [f"G0 X0 Y{y:.3f}", "G0 Z0", f"G1 X2 Y{y:.3f}", f"G1 X2 Y{y + 2:.3f}",
-                  f"G3 X0 Y{y + 2:.3f} I-1 J0", f"G1 X0 Y{y:.3f}", "G0 Z2"]
+        lines += [
+            f"G0 X0 Y{y:.3f}",
+            "G0 Z0",
+            f"G1 X2 Y{y:.3f}",
+            f"G1 X2 Y{y + 2:.3f}",
+            f"G3 X0 Y{y + 2:.3f} I-1 J0",
+            f"G1 X0 Y{y:.3f}",
+            "G0 Z2",
+        ]
     return "\n".join(lines + ["M2"])
 
 
@@ -193,8 +206,7 @@ def _chord_errors_mm(pieces) -> np.ndarray:
     return worst
 
 
-@pytest.mark.parametrize("name", ["naca2415.nc", "butterfly.nc", "corners.nc",
-                                  "naca2415_c40.nc"])  # fmt: skip
+@pytest.mark.parametrize("name", ["naca2415.nc", "butterfly.nc", "corners.nc", "naca2415_c40.nc"])
 def test_the_dense_polyline_is_within_its_chord_error(name):
     """CHORD_MM (0.01 µm) holds on NURBS cells, PH corners and arcs of the repository's
     programs (the chords follow the curvature; MAX_SPACING_MM only caps them)."""
@@ -215,8 +227,10 @@ def test_a_near_cusp_piece_has_a_bounded_polyline():
     MAX_PIECE_POINTS, and the rest of the polyline is as the rule asks."""
     from nurbscnc.plan.program_pieces import segment_pieces
 
-    text = ("G21 G17 F1000\nG6.2 P4 K0 X0 Y0 R1\nK0 X1 Y1 R1\nK0 X0 Y1 R1\n"
-            "K0 X1 Y0.0000000001 R1\nK1\nK1\nK1\nK1\nM2\n")  # fmt: skip
+    text = (
+        "G21 G17 F1000\nG6.2 P4 K0 X0 Y0 R1\nK0 X1 Y1 R1\nK0 X0 Y1 R1\n"
+        "K0 X1 Y0.0000000001 R1\nK1\nK1\nK1\nK1\nM2\n"
+    )
     pieces = segment_pieces(interpret_text(text).segments, MACHINE)
     counts = polyline.path_counts(pieces)
     assert pieces.kappa_max_per_mm.max() > 1e9
@@ -282,6 +296,12 @@ def test_chord_counts_without_a_cap_are_the_refinement_rule(name):
     want = np.where((kind == Kind.LINE) | (length == 0.0), 2, want)
     got = polyline.chord_counts(kind, length, pieces.kappa_max_per_mm, 1e-7, 0.01)
     assert got.dtype == want.dtype and np.array_equal(got, want)
-    capped = polyline.chord_counts(kind, length, pieces.kappa_max_per_mm, CHORD_MM,
-                                   polyline.MAX_SPACING_MM, polyline.MAX_PIECE_POINTS)
+    capped = polyline.chord_counts(
+        kind,
+        length,
+        pieces.kappa_max_per_mm,
+        CHORD_MM,
+        polyline.MAX_SPACING_MM,
+        polyline.MAX_PIECE_POINTS,
+    )
     assert np.array_equal(capped, polyline.path_counts(pieces))

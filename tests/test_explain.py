@@ -86,8 +86,9 @@ def test_tight_arc_is_limited_by_normal_acceleration():
 def test_arc_with_a_tight_chord_tolerance_is_limited_by_chord_error():
     # δ = 0.1 µm: V_af = 2000 √(2δ r − δ²) ≈ √(800 r) < √(2450 r), r = 2 mm.
     r = 2.0
-    expl, _, _ = explain(f"G1 X{r} F3500\nG2 X{r} Y0 I-{r} J0\n",
-                         {"limits.chord_tolerance_um": 0.1})  # fmt: skip
+    expl, _, _ = explain(
+        f"G1 X{r} F3500\nG2 X{r} Y0 I-{r} J0\n", {"limits.chord_tolerance_um": 0.1}
+    )
     d = 1e-4
     v_chord = 2000.0 * math.sqrt(2.0 * d * r - d * d)
     assert v_chord < math.sqrt(A * r)
@@ -112,8 +113,10 @@ def test_short_fast_line_is_limited_by_acceleration_distance():
     # V_max 12000 mm/min, F12000 (200 mm/s), 16 mm: the peak is above A²/J = 120 mm/s, so A is
     # reached: D(0 → v) = v·(v/A + A/J)/2, 2·D = L → v²/A + v·A/J − L = 0.
     length = 16.0
-    expl, _, _ = explain(f"G1 X{length} F12000\n", {"limits.v_max_mm_min": 12000.0,
-                                                     "steps.max_pulses_per_period": 255})
+    expl, _, _ = explain(
+        f"G1 X{length} F12000\n",
+        {"limits.v_max_mm_min": 12000.0, "steps.max_pulses_per_period": 255},
+    )
     v_p = A / 2.0 * (-A / J + math.sqrt((A / J) ** 2 + 4.0 * length / A))
     assert A * A / J < v_p < 200.0
     i = row(expl, 1)
@@ -164,8 +167,11 @@ def test_contour_check_lowering_is_reported():
     pieces, caps = run.plan.pieces, run.plan.caps_mm_s
     lowered = caps < pieces.v_cap_mm_s * (1 - 1e-6)
     assert lowered.any()
-    assert np.all((expl.piece_limit == Limit.CONTOUR) | ~lowered
-                  | np.isin(expl.piece_limit, (Limit.DISTANCE, Limit.JERK, Limit.CORNER_STOP)))
+    assert np.all(
+        (expl.piece_limit == Limit.CONTOUR)
+        | ~lowered
+        | np.isin(expl.piece_limit, (Limit.DISTANCE, Limit.JERK, Limit.CORNER_STOP))
+    )
     i = row(expl, 2)
     assert Limit(int(expl.limit[i])) == Limit.CONTOUR
     assert expl.peak_mm_s[i] < math.sqrt(A * 2.0)
@@ -202,8 +208,9 @@ def corner_program(tmp_path):
 
 
 def test_plan_explain_json(corner_program):
-    res = CliRunner().invoke(main, ["plan", corner_program, "--json", "--explain",
-                                    "--dynamics", "off"])  # fmt: skip
+    res = CliRunner().invoke(
+        main, ["plan", corner_program, "--json", "--explain", "--dynamics", "off"]
+    )
     assert res.exit_code == 0, res.output
     out = json.loads(res.stdout)
     ex = out["explain"]
@@ -223,13 +230,12 @@ def test_plan_explain_text_lists_costliest_first(corner_program):
     text = res.stdout
     assert "time by limit:" in text and "corner stop" in text
     # Line 2 (10 mm) and line 4 (10 mm) cost the most; the G-code is shown.
-    body = text[text.index("costliest"):]
+    body = text[text.index("costliest") :]
     assert body.index("G1 X10 F3000") < body.index("G1 Y1")
 
 
 def test_plan_explain_all_is_in_program_order(corner_program):
-    res = CliRunner().invoke(main, ["plan", corner_program, "--explain-all", "--dynamics",
-                                    "off"])  # fmt: skip
+    res = CliRunner().invoke(main, ["plan", corner_program, "--explain-all", "--dynamics", "off"])
     assert res.exit_code == 0, res.output
     body = res.stdout
     positions = [body.index(code) for code in ("G1 X10 F3000", "G1 Y1", "G1 X0", "G4 P0.25")]
@@ -237,8 +243,7 @@ def test_plan_explain_all_is_in_program_order(corner_program):
 
 
 def test_plan_explain_refuses_a_baseline(corner_program):
-    res = CliRunner().invoke(main, ["plan", corner_program, "--explain", "--algorithm",
-                                    "adaptive"])  # fmt: skip
+    res = CliRunner().invoke(main, ["plan", corner_program, "--explain", "--algorithm", "adaptive"])
     assert res.exit_code == 2
 
 
@@ -251,9 +256,14 @@ def test_contour_shaping_reported_by_the_planner_is_used():
 
     expl, run, mach = explain("G1 X1 F3000\n")  # the jerk-limited short line
     plan = run.plan
-    shaped = type("ShapedPlan", (), {**{f.name: getattr(plan, f.name)
-                                        for f in dataclasses.fields(plan)},
-                                     "shaped_by_contour": np.array([True])})()  # fmt: skip
+    shaped = type(
+        "ShapedPlan",
+        (),
+        {
+            **{f.name: getattr(plan, f.name) for f in dataclasses.fields(plan)},
+            "shaped_by_contour": np.array([True]),
+        },
+    )()
     lowered, by_shape = contour_limited(shaped, plan.pieces.v_cap_mm_s)
     assert not lowered.any() and by_shape.all()
     prog = interpret_text("G1 X1 F3000\n")

@@ -46,8 +46,9 @@ def _t_min_oracle(dv, a, j):
     def t_of(ap):
         return dv / ap + ap / j
 
-    res = minimize_scalar(t_of, bounds=(1e-9 * a, a), method="bounded",
-                          options={"xatol": 1e-12 * a})
+    res = minimize_scalar(
+        t_of, bounds=(1e-9 * a, a), method="bounded", options={"xatol": 1e-12 * a}
+    )
     return min(res.fun, t_of(a))
 
 
@@ -181,8 +182,7 @@ def test_reach_is_not_monotone_in_the_start_speed():
         r0 = max_reachable_speed(v0, d, A, J)
         dv = r0 - v0
         assert dv < A * A / J
-        slope = (max_reachable_speed(v0 + h, d, A, J) - max_reachable_speed(max(v0 - h, 0), d,
-                                                                            A, J))
+        slope = max_reachable_speed(v0 + h, d, A, J) - max_reachable_speed(max(v0 - h, 0), d, A, J)
         slope /= (v0 + h) - max(v0 - h, 0)
         assert slope == pytest.approx((2 * v0 - dv) / (2 * v0 + 3 * dv), rel=1e-5, abs=1e-6)
     assert max_reachable_speed(1.0, d, A, J) < max_reachable_speed(0.0, d, A, J)
@@ -221,6 +221,7 @@ def test_peak_speed_against_brentq(v_s, v_e, extra, cap_over):
     if _d_ref(v_s, cap) + _d_ref(cap, v_e) <= L:
         assert v_p == cap
     else:
+
         def f(x):
             return _d_ref(v_s, x) + _d_ref(x, v_e) - L
 
@@ -244,8 +245,9 @@ def test_peak_speed_is_the_largest_float_that_fits(seed):
     a, j = rng.choice([2450.0, 500.0], n), rng.choice([5e4, 1e6, 1e9], n)
     a_dn, j_dn = rng.choice([2450.0, 300.0], n), rng.choice([5e4, 1e3], n)
     lo = np.maximum(v_s, v_e)
-    straight = scurve_distance_mm(np.minimum(v_s, v_e), lo, np.minimum(a, a_dn),
-                                  np.minimum(j, j_dn))  # fmt: skip
+    straight = scurve_distance_mm(
+        np.minimum(v_s, v_e), lo, np.minimum(a, a_dn), np.minimum(j, j_dn)
+    )
     length = straight + rng.choice([1e-6, 1e-3, 0.05, 1.0, 30.0], n) * rng.random(n)
     cap = np.maximum(np.full(n, 58.3), lo)
     v_p = peak_speed_unchecked(v_s, v_e, length, cap, a, j, a_dn, j_dn)
@@ -316,8 +318,10 @@ def test_corner_region_pieces_follow_the_curvature_of_a_circle():
 
     r = 0.5
     w = math.sqrt(0.5)
-    prog = (f"G21 G17 G90 G94\nG0 X{r} Y0\nF3500\nG6.2 P3 K0 X{r} Y0 R1\n"
-            f"K0 X{r} Y{r} R{w:.15f}\nK0 X0 Y{r} R1\nK1\nK1\nK1\nM2\n")  # fmt: skip
+    prog = (
+        f"G21 G17 G90 G94\nG0 X{r} Y0\nF3500\nG6.2 P3 K0 X{r} Y0 R1\n"
+        f"K0 X{r} Y{r} R{w:.15f}\nK0 X0 Y{r} R1\nK1\nK1\nK1\nM2\n"
+    )
     m = load_machine()
     pl = segment_pieces(interpret_text(prog).segments, m, PlanOptions())
     ph = np.flatnonzero(pl.kind == 3)

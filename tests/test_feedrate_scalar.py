@@ -48,8 +48,9 @@ def _reference(v0: float, d: float, a: float, j: float) -> float:
 def test_same_floats_as_the_reference_on_every_regime():
     rng = np.random.default_rng(3)
     n = 60000
-    v0 = np.concatenate([rng.uniform(0.0, 200.0, n // 3), np.zeros(n // 6),
-                         10.0 ** rng.uniform(-6, 3, n // 2)])  # fmt: skip
+    v0 = np.concatenate(
+        [rng.uniform(0.0, 200.0, n // 3), np.zeros(n // 6), 10.0 ** rng.uniform(-6, 3, n // 2)]
+    )
     d = 10.0 ** rng.uniform(-12, 2, v0.size)  # from far below an ulp of travel to 100 mm
     d[::11] = 0.0
     a = rng.choice([500.0, 2000.0, 12000.0], v0.size)
@@ -63,8 +64,12 @@ def test_same_floats_as_the_reference_on_every_regime():
         guarded += got != args[0] and _distance_scalar(args[0], got, args[2], args[3]) > 0.0
     assert guarded > n // 2  # the comparison is not only over trivial cases
     # And the float guard agrees with the array distance function.
-    sample = np.array([max_reachable_speed_scalar(x, y, 2000.0, 3e5) for x, y in
-                       zip(v0[:500].tolist(), d[:500].tolist())])  # fmt: skip
+    sample = np.array(
+        [
+            max_reachable_speed_scalar(x, y, 2000.0, 3e5)
+            for x, y in zip(v0[:500].tolist(), d[:500].tolist())
+        ]
+    )
     assert np.all(scurve_distance_mm(v0[:500], sample, 2000.0, 3e5) <= d[:500])
 
 
@@ -107,5 +112,4 @@ def test_the_relaxed_scan_on_a_long_ramp_of_tiny_chords():
     bound = np.full(k + 1, 40.0)
     a, j = np.full(k, 2450.0), np.full(k, 5e4)
     got = chain_scan(bound, length, a, j)
-    np.testing.assert_allclose(got,
-                               _sequential_scan(bound, length, a, j), rtol=1e-13)  # fmt: skip
+    np.testing.assert_allclose(got, _sequential_scan(bound, length, a, j), rtol=1e-13)

@@ -249,8 +249,17 @@ def test_batch_with_one_stem_twice_refuses_naming_both(tmp_path):
         (tmp_path / sub).mkdir()
         (tmp_path / sub / "x.nc").write_text(SHORT)
     out = tmp_path / "out"
-    result = run(["run", "--output-dir", out, "--jobs", "1",
-                  tmp_path / "a" / "x.nc", tmp_path / "b" / "x.nc"])  # fmt: skip
+    result = run(
+        [
+            "run",
+            "--output-dir",
+            out,
+            "--jobs",
+            "1",
+            tmp_path / "a" / "x.nc",
+            tmp_path / "b" / "x.nc",
+        ]
+    )
     assert result.exit_code == 2, result.output
     assert str(tmp_path / "a" / "x.nc") in result.stderr
     assert str(tmp_path / "b" / "x.nc") in result.stderr
@@ -301,15 +310,19 @@ main(["run", sys.argv[1], "-o", sys.argv[2]])
 
 
 @pytest.mark.parametrize("slow", [_SLOW_WRITER, _SLOW_MAKER], ids=["writer", "maker"])
-@pytest.mark.parametrize("sig, code", [(signal.SIGTERM, 143), (signal.SIGHUP, 129),
-                                       (signal.SIGINT, 130)])  # fmt: skip
+@pytest.mark.parametrize(
+    "sig, code", [(signal.SIGTERM, 143), (signal.SIGHUP, 129), (signal.SIGINT, 130)]
+)
 def test_signal_during_run_leaves_no_temp_file(tmp_path, program, sig, code, slow):
     out = tmp_path / "out"
     out.mkdir()
     target = out / "points.csv"
     target.write_text("old\n")
-    proc = subprocess.Popen([sys.executable, "-c", slow, str(program), str(target)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)  # fmt: skip
+    proc = subprocess.Popen(
+        [sys.executable, "-c", slow, str(program), str(target)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
     try:
         assert proc.stdout.readline().strip() == b"WRITING"
         for _ in range(200):  # the writer (the other thread) opens its temp file soon
@@ -339,8 +352,9 @@ def _csv(tmp_path, rows) -> Path:
     return path
 
 
-@pytest.mark.parametrize("bad, shown", [("1e308", "1e+308"), ("nan", "nan"), ("inf", "inf"),
-                                        ("-1e300", "-1e+300")])  # fmt: skip
+@pytest.mark.parametrize(
+    "bad, shown", [("1e308", "1e+308"), ("nan", "nan"), ("inf", "inf"), ("-1e300", "-1e+300")]
+)
 def test_points_csv_with_huge_or_nan_value_names_it_and_its_line(tmp_path, bad, shown):
     path = _csv(tmp_path, ["0,0,0,0,0,0,1", "", f"0.001,0,{bad},0,0,0,2"])
     with pytest.raises(DataError) as info:
@@ -380,12 +394,15 @@ def test_points_csv_round_trip_still_reads(tmp_path, program):
     assert json.loads(result.stdout)["samples"] == data["t"].size
 
 
-@pytest.mark.parametrize("body, message", [
-    ("t,x\n", "expected the header"),
-    ("t,x,y,z,feed,piece,line\n", "no reference points"),
-    ("t,x,y,z,feed,piece,line\n1,2,3\n", "expected 7 columns"),
-    ("t,x,y,z,feed,piece,line\n0,0,0,zz,0,0,1\n", "not a table of numbers"),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "body, message",
+    [
+        ("t,x\n", "expected the header"),
+        ("t,x,y,z,feed,piece,line\n", "no reference points"),
+        ("t,x,y,z,feed,piece,line\n1,2,3\n", "expected 7 columns"),
+        ("t,x,y,z,feed,piece,line\n0,0,0,zz,0,0,1\n", "not a table of numbers"),
+    ],
+)
 def test_bad_points_files_exit_2(tmp_path, body, message):
     path = tmp_path / "bad.csv"
     path.write_text(body)
@@ -399,7 +416,6 @@ def test_points_file_that_is_a_directory_exits_3(tmp_path):
     folder.mkdir()
     result = run(["simulate", folder])
     assert result.exit_code == 3, result.output
-
 
 
 def _children(pid: int) -> list[int]:
@@ -425,9 +441,23 @@ def test_sigterm_during_batch_stops_the_workers_and_leaves_no_temp(tmp_path):
         path.write_text("G21 G90 G1 X300 F60\nM2\n")
         programs.append(str(path))
     out = tmp_path / "out"
-    proc = subprocess.Popen([sys.executable, "-m", "nurbscnc", "run", "--output-dir", str(out),
-                             "--jobs", "2", "--dynamics", "off", *programs],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)  # fmt: skip
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "nurbscnc",
+            "run",
+            "--output-dir",
+            str(out),
+            "--jobs",
+            "2",
+            "--dynamics",
+            "off",
+            *programs,
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
     try:
         deadline = time.monotonic() + 60
         while len(_children(proc.pid)) < 2 and time.monotonic() < deadline:
@@ -490,7 +520,8 @@ def test_a_signal_just_after_the_temp_file_is_created_leaves_no_file(tmp_path, m
 
 
 def test_a_signal_just_after_the_file_object_is_made_closes_the_descriptor_once(
-        tmp_path, monkeypatch):  # fmt: skip
+    tmp_path, monkeypatch
+):
     """A signal landing as ``os.fdopen`` returns (before the ``with`` owns the object):
     the temporary file is removed and its descriptor closed once. The object left behind
     must not close it again when it is collected: by then the number may be another
@@ -538,8 +569,7 @@ def test_an_interrupted_batch_ends_whatever_its_pool_does(tmp_path):
         "time.sleep(120)\n"
     )
     start = time.monotonic()
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                          timeout=60)  # fmt: skip
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     from nurbscnc.cli.batch import BATCH_STOP_S
 
     assert proc.returncode == 143, proc.stderr

@@ -162,15 +162,22 @@ def report():
     """Print (and write to $NURBSCNC_FUZZ_REPORT) how many inputs ran and what they gave."""
     started = time.monotonic()
     yield
-    summary = {"examples_budget": EXAMPLES, "seed": SEED, "seconds": time.monotonic() - started,
-               "inputs": sum(v for k, v in STATS.items() if k.startswith("inputs_")),
-               "exited_1": STATS.get("exit_1", 0), **dict(sorted(STATS.items())),
-               "findings": sorted(FINDINGS, key=lambda f: _ORDER[f["kind"]])[:50]}  # fmt: skip
+    summary = {
+        "examples_budget": EXAMPLES,
+        "seed": SEED,
+        "seconds": time.monotonic() - started,
+        "inputs": sum(v for k, v in STATS.items() if k.startswith("inputs_")),
+        "exited_1": STATS.get("exit_1", 0),
+        **dict(sorted(STATS.items())),
+        "findings": sorted(FINDINGS, key=lambda f: _ORDER[f["kind"]])[:50],
+    }
     path = os.environ.get("NURBSCNC_FUZZ_REPORT")
     if path:
         Path(path).write_text(json.dumps(summary, indent=1) + "\n", encoding="utf-8")
-    print(f"\nfuzz: {summary['inputs']} inputs in {summary['seconds']:.1f} s, "
-          f"{summary['exited_1']} exited 1; {dict(sorted(STATS.items()))}")  # fmt: skip
+    print(
+        f"\nfuzz: {summary['inputs']} inputs in {summary['seconds']:.1f} s, "
+        f"{summary['exited_1']} exited 1; {dict(sorted(STATS.items()))}"
+    )
 
 
 # ------------------------------------------------------------------------------ hypothesis
@@ -192,24 +199,105 @@ def _number() -> st.SearchStrategy[str]:
         st.builds(lambda a, b: f"{a}.{b}", digits, digits),
         st.integers(300, 420).map(lambda n: "9" * n),  # beyond a double
         st.integers(300, 340).map(lambda n: "0." + "0" * n + "1"),  # below the smallest normal
-        st.sampled_from(["-0", ".5", "-.5", "1.", "0", "1e5", "nan", "inf", "1_0", "+-1",
-                         "[1+2]", "[-1]", "[1/0]", "[SQRT[-1]]", "[ACOS[2]]", "#1", "#<x>",
-                         "[#1*2]", "[2**1024]", "[1 MOD 0]", "[ATAN[1]/[0]]", "[EXP[1000]]",
-                         "[" * 30 + "1" + "]" * 30]),
-    )  # fmt: skip
+        st.sampled_from(
+            [
+                "-0",
+                ".5",
+                "-.5",
+                "1.",
+                "0",
+                "1e5",
+                "nan",
+                "inf",
+                "1_0",
+                "+-1",
+                "[1+2]",
+                "[-1]",
+                "[1/0]",
+                "[SQRT[-1]]",
+                "[ACOS[2]]",
+                "#1",
+                "#<x>",
+                "[#1*2]",
+                "[2**1024]",
+                "[1 MOD 0]",
+                "[ATAN[1]/[0]]",
+                "[EXP[1000]]",
+                "[" * 30 + "1" + "]" * 30,
+            ]
+        ),
+    )
 
 
 def _word() -> st.SearchStrategy[str]:
-    codes = st.sampled_from([
-        "G0", "G1", "G2", "G3", "G4", "G5.2", "G5.3", "G6.2", "G17", "G18", "G19", "G20", "G21",
-        "G90", "G91", "G90.1", "G91.1", "G93", "G94", "G95", "G61", "G61.1", "G64", "G40",
-        "G43", "G49", "G53", "G54", "G80", "G28", "G41", "G81", "G92", "M0", "M2", "M3", "M5",
-        "M6", "M30", "M99", "O100", "G2.2",
-    ])  # fmt: skip
-    axis = st.builds(lambda letter, n: letter + n,
-                     st.sampled_from(list("XYZIJKRPQLFEHTSDNABC")), _number())  # fmt: skip
-    other = st.sampled_from(["(comment)", "(MSG, hi)", "; tail", "/", "%", "#1=5", "#<x>=2",
-                             "#1=[#1+1]", "(", ")", "[", "]", "(:thumbs_up:)", "[/]", "\t"])
+    codes = st.sampled_from(
+        [
+            "G0",
+            "G1",
+            "G2",
+            "G3",
+            "G4",
+            "G5.2",
+            "G5.3",
+            "G6.2",
+            "G17",
+            "G18",
+            "G19",
+            "G20",
+            "G21",
+            "G90",
+            "G91",
+            "G90.1",
+            "G91.1",
+            "G93",
+            "G94",
+            "G95",
+            "G61",
+            "G61.1",
+            "G64",
+            "G40",
+            "G43",
+            "G49",
+            "G53",
+            "G54",
+            "G80",
+            "G28",
+            "G41",
+            "G81",
+            "G92",
+            "M0",
+            "M2",
+            "M3",
+            "M5",
+            "M6",
+            "M30",
+            "M99",
+            "O100",
+            "G2.2",
+        ]
+    )
+    axis = st.builds(
+        lambda letter, n: letter + n, st.sampled_from(list("XYZIJKRPQLFEHTSDNABC")), _number()
+    )
+    other = st.sampled_from(
+        [
+            "(comment)",
+            "(MSG, hi)",
+            "; tail",
+            "/",
+            "%",
+            "#1=5",
+            "#<x>=2",
+            "#1=[#1+1]",
+            "(",
+            ")",
+            "[",
+            "]",
+            "(:thumbs_up:)",
+            "[/]",
+            "\t",
+        ]
+    )
     return st.one_of(codes, axis, axis, other)
 
 
@@ -218,10 +306,14 @@ def programs(draw) -> str:
     lines = draw(st.lists(st.lists(_word(), max_size=8).map(" ".join), max_size=25))
     if draw(st.booleans()):  # a NURBS block shape, so the NURBS paths are reached often
         k = draw(st.integers(2, 8))
-        lines.insert(draw(st.integers(0, len(lines))), "\n".join(
-            ["G5.2 X0 Y0 P1 L4"]
-            + [f"X{draw(_number())} Y{draw(_number())} P{draw(_number())}" for _ in range(k)]
-            + ["G5.3"]))  # fmt: skip
+        lines.insert(
+            draw(st.integers(0, len(lines))),
+            "\n".join(
+                ["G5.2 X0 Y0 P1 L4"]
+                + [f"X{draw(_number())} Y{draw(_number())} P{draw(_number())}" for _ in range(k)]
+                + ["G5.3"]
+            ),
+        )
     return "\n".join(["G21 G90 F600", *lines, "M2"]) + "\n"
 
 
@@ -248,18 +340,54 @@ def seed_programs() -> dict[str, bytes]:
     """Name → bytes of every seed: the corpus, programs/*.nc and tests/bad/*.nc."""
     seeds = {}
     corpus = corpus_dir()
-    for folder, pattern in ((corpus, "*.ngc"), (ROOT / "programs", "*.nc"),
-                            (ROOT / "tests" / "bad", "*.nc")):  # fmt: skip
+    for folder, pattern in (
+        (corpus, "*.ngc"),
+        (ROOT / "programs", "*.nc"),
+        (ROOT / "tests" / "bad", "*.nc"),
+    ):
         if folder.is_dir():
             for path in sorted(folder.rglob(pattern)):
                 seeds[str(path.relative_to(folder.parent))] = path.read_bytes()
     return seeds
 
 
-HOSTILE = [b"[", b"]", b"#", b"##", b"#1=", b"ABS[", b"G5.2 ", b"G6.2 ", b"G5.3\n", b"M2\n",
-           b"G4 P", b"F0.001", b"F1e-321", b"P1000000000", b"1e400", b"(", b")", b"-", b"-.",
-           b"\n", b"\r", b"\x00", b"\xff", b"\xef\xbb\xbf", b"%\n", b"/", b"O1 sub\n", b"G28 ",
-           b"G91 ", b"G20 ", b"R-1 ", b"(:100:)", b"[/]", b"\t", b"G1 X1000000 "]  # fmt: skip
+HOSTILE = [
+    b"[",
+    b"]",
+    b"#",
+    b"##",
+    b"#1=",
+    b"ABS[",
+    b"G5.2 ",
+    b"G6.2 ",
+    b"G5.3\n",
+    b"M2\n",
+    b"G4 P",
+    b"F0.001",
+    b"F1e-321",
+    b"P1000000000",
+    b"1e400",
+    b"(",
+    b")",
+    b"-",
+    b"-.",
+    b"\n",
+    b"\r",
+    b"\x00",
+    b"\xff",
+    b"\xef\xbb\xbf",
+    b"%\n",
+    b"/",
+    b"O1 sub\n",
+    b"G28 ",
+    b"G91 ",
+    b"G20 ",
+    b"R-1 ",
+    b"(:100:)",
+    b"[/]",
+    b"\t",
+    b"G1 X1000000 ",
+]
 
 
 REPEATED = [b"[", b"]", b"#", b"ABS[", b"[1+", b"-", b"(", b"9", b"X1 ", b"G1 ", b"\n", b";"]
@@ -269,17 +397,24 @@ def hostile_value(rng: random.Random) -> bytes:
     """A value for a word: nested or chained expressions of depth 10 to 5000, numbers beyond a
     double or below its smallest subnormal, division by zero, domain errors."""
     n = rng.choice([10, 200, 1000, 5000])
-    return rng.choice([
-        lambda: b"#" * n + b"1",
-        lambda: b"[" + b"1+" * n + b"1]",
-        lambda: b"ABS[" * n + b"1" + b"]" * n,
-        lambda: b"[" * n + b"1" + b"]" * n,
-        lambda: b"[-" + b"-" * n + b"1]",
-        lambda: b"9" * rng.choice([20, 309, 400]),
-        lambda: b"0." + b"0" * rng.choice([30, 320, 400]) + b"1",
-        lambda: b"[1/0]", lambda: b"[SQRT[-1]]", lambda: b"[EXP[1000]]", lambda: b"[2**2000]",
-        lambda: b"1e400", lambda: b"-0", lambda: b"0",
-    ])()  # fmt: skip
+    return rng.choice(
+        [
+            lambda: b"#" * n + b"1",
+            lambda: b"[" + b"1+" * n + b"1]",
+            lambda: b"ABS[" * n + b"1" + b"]" * n,
+            lambda: b"[" * n + b"1" + b"]" * n,
+            lambda: b"[-" + b"-" * n + b"1]",
+            lambda: b"9" * rng.choice([20, 309, 400]),
+            lambda: b"0." + b"0" * rng.choice([30, 320, 400]) + b"1",
+            lambda: b"[1/0]",
+            lambda: b"[SQRT[-1]]",
+            lambda: b"[EXP[1000]]",
+            lambda: b"[2**2000]",
+            lambda: b"1e400",
+            lambda: b"-0",
+            lambda: b"0",
+        ]
+    )()
 
 
 def mutate(data: bytes, rng: random.Random, others: list[bytes]) -> bytes:
@@ -410,18 +545,29 @@ def test_mutation_fuzzer_over_the_corpus():
         STATS["known_elsewhere" if owner else "failures"] += 1
         if owner:
             STATS[f"known: {owner}"] += 1
-        FINDINGS.append({"kind": "known" if owner else "crash", "owner": owner,
-                         "seed_program": name, "mutant": i, "args": args, "problems": found,
-                         "input": _show(data)})  # fmt: skip
+        FINDINGS.append(
+            {
+                "kind": "known" if owner else "crash",
+                "owner": owner,
+                "seed_program": name,
+                "mutant": i,
+                "args": args,
+                "problems": found,
+                "input": _show(data),
+            }
+        )
         if not owner:
             unknown.append((name, i, args, data, found))
     assert not unknown, "\n".join(
         f"mutant {i} of {name}: nurbscnc {' '.join(args)}: {found}\n  input: {_show(data)!r}"
-        for name, i, args, data, found in unknown[:10])  # fmt: skip
+        for name, i, args, data, found in unknown[:10]
+    )
     if failures:
         owners = Counter(known_elsewhere(f[4]) for f in failures)
-        pytest.xfail(f"{len(failures)} crashes of known open bugs owned elsewhere: "
-                     + "; ".join(f"{n}x {o}" for o, n in owners.items()))  # fmt: skip
+        pytest.xfail(
+            f"{len(failures)} crashes of known open bugs owned elsewhere: "
+            + "; ".join(f"{n}x {o}" for o, n in owners.items())
+        )
 
 
 #: Crash signatures of bugs that are open in code this file's author does not own (issue 15,

@@ -74,7 +74,7 @@ EXPLICIT = {
     "NAMED_PARAM": NAME_CHARS.map(lambda s: f"<{s}>"),
     "FUNC": keyword(
         "sin", "cos", "tan", "asin", "acos", "sqrt", "abs", "exp", "ln", "round", "fix", "fup"
-    ),  # fmt: skip
+    ),
     "ATAN": keyword("atan"),
     "EXISTS": keyword("exists"),
     "LOGIC_OP": keyword("and", "or", "xor"),

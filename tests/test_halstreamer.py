@@ -76,12 +76,15 @@ def test_file_is_the_compiled_points(tmp_path):
 
 def test_lines_format():
     assert halstreamer_lines(np.array([[1.0, -2.5, 1e-9], [-1e-9, 0.0, 123.4567891]])) == (
-        "1.000000 -2.500000 0.000000\n0.000000 0.000000 123.456789\n")  # fmt: skip
+        "1.000000 -2.500000 0.000000\n0.000000 0.000000 123.456789\n"
+    )
 
 
 def test_batch_writes_hs_files(tmp_path):
-    r = CliRunner().invoke(main, ["run", str(NACA), "--format", "halstreamer",
-                                  "--output-dir", str(tmp_path), "--jobs", "1"])  # fmt: skip
+    r = CliRunner().invoke(
+        main,
+        ["run", str(NACA), "--format", "halstreamer", "--output-dir", str(tmp_path), "--jobs", "1"],
+    )
     assert r.exit_code == 0, r.output
     assert (tmp_path / "naca2415.hs").read_text().startswith("# nurbscnc")
 
@@ -151,17 +154,31 @@ def play(stream_text: str, n_points: int, scale) -> np.ndarray:
         Path(stream).write_text(stream_text)
         count = n_points + 50  # the end point held for 50 more periods
         hal = os.path.join(work, "play.hal")
-        Path(hal).write_text(HAL.format(period_ns=1_000_000, depth=count + 16, cfg=STREAMER_CFG,
-                                        scale=scale, stream=stream, record=record,
-                                        count=count))  # fmt: skip
+        Path(hal).write_text(
+            HAL.format(
+                period_ns=1_000_000,
+                depth=count + 16,
+                cfg=STREAMER_CFG,
+                scale=scale,
+                stream=stream,
+                record=record,
+                count=count,
+            )
+        )
         env = dict(os.environ, PATH="/usr/bin:/bin:/usr/sbin:/sbin")
         env.pop("DISPLAY", None)
         if os.geteuid() == 0:  # rtapi_app refuses root without a fallback uid
             env.update(RTAPI_UID="65534", RTAPI_FIFO_PATH=os.path.join(rt, ".rtapi_fifo"))
         with hal_lock():
             try:
-                r = subprocess.run(["halrun", "-f", hal], cwd=work, env=env, timeout=120,
-                                   capture_output=True, text=True)  # fmt: skip
+                r = subprocess.run(
+                    ["halrun", "-f", hal],
+                    cwd=work,
+                    env=env,
+                    timeout=120,
+                    capture_output=True,
+                    text=True,
+                )
             except subprocess.TimeoutExpired:
                 subprocess.run(["halrun", "-U"], env=env, timeout=60, capture_output=True)
                 raise

@@ -139,8 +139,22 @@ def test_cli_csv_with_header_time_column_and_json(tmp_path):
     u, y = simulated(([wn * wn], [1.0, 1.6 * wn, wn * wn]), 2000, 0.3e-3, seed=5)
     trace = tmp_path / "trace.csv"
     write_trace(trace, u, y, sep=",", header="t,pos-cmd,pos-fb", time=True)
-    r = CliRunner().invoke(main, ["identify", str(trace), "--order", "2", "--time", "t",
-                                  "--cmd", "pos-cmd", "--fb", "pos-fb", "--json"])  # fmt: skip
+    r = CliRunner().invoke(
+        main,
+        [
+            "identify",
+            str(trace),
+            "--order",
+            "2",
+            "--time",
+            "t",
+            "--cmd",
+            "pos-cmd",
+            "--fb",
+            "pos-fb",
+            "--json",
+        ],
+    )
     assert r.exit_code == 0, r.output
     j = json.loads(r.stdout)
     assert j["period_s"] == pytest.approx(1e-3, rel=1e-9)
@@ -155,8 +169,11 @@ BAD_TRACES = [
     ("1 2\n3 4 5\n" + GOOD, 2, "3 columns, expected 2"),
     ("# c\n1 2\n\noverrun\n" + GOOD, 4, "overrun"),
     # a lost sample: t jumps from 0.001 to 0.003 on line 4
-    ("t a b\n" + "".join(f"{k * 1e-3:.3f} {float(k > 5)} 0\n" for k in range(35) if k != 2), 4,
-     "time step"),
+    (
+        "t a b\n" + "".join(f"{k * 1e-3:.3f} {float(k > 5)} 0\n" for k in range(35) if k != 2),
+        4,
+        "time step",
+    ),
     ("1 nan\n" + GOOD, 1, "finite"),
 ]
 
@@ -174,12 +191,15 @@ def test_bad_trace_files_name_the_line(tmp_path, text, line, words):
     assert "Traceback" not in r.output
 
 
-@pytest.mark.parametrize(("text", "kwargs", "words"), [
-    ("1 2\n" * 5, {"period_s": 1e-3}, "at least 20"),
-    (GOOD, {}, "no sample period"),
-    (GOOD, {"period_s": 1e-3, "cmd": "3"}, "has 2 columns"),
-    (GOOD, {"period_s": 1e-3, "cmd": "pos"}, "no such column"),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    ("text", "kwargs", "words"),
+    [
+        ("1 2\n" * 5, {"period_s": 1e-3}, "at least 20"),
+        (GOOD, {}, "no sample period"),
+        (GOOD, {"period_s": 1e-3, "cmd": "3"}, "has 2 columns"),
+        (GOOD, {"period_s": 1e-3, "cmd": "pos"}, "no such column"),
+    ],
+)
 def test_bad_traces_without_a_line(text, kwargs, words):
     with pytest.raises(TraceError, match=words):
         parse_trace(text, **kwargs)
@@ -188,5 +208,8 @@ def test_bad_traces_without_a_line(text, kwargs, words):
 def test_still_command_is_an_error():
     with pytest.raises(TraceError, match="does not move"):
         fit_axis(Trace(np.zeros(50), np.zeros(50), T_S))
-    assert math.isfinite(fit_axis(Trace(np.r_[np.zeros(5), np.ones(45)],
-                                        np.r_[np.zeros(6), np.ones(44)], T_S), 2).damping)
+    assert math.isfinite(
+        fit_axis(
+            Trace(np.r_[np.zeros(5), np.ones(45)], np.r_[np.zeros(6), np.ones(44)], T_S), 2
+        ).damping
+    )

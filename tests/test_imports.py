@@ -57,9 +57,12 @@ def loaded(tmp_path, runs, env=None) -> list[dict]:
     report = tmp_path / "modules.json"
     done = subprocess.run(
         [sys.executable, "-c", _CHILD, str(report), json.dumps(runs)],
-        capture_output=True, text=True, cwd=tmp_path, env={**os.environ, **(env or {})},
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        env={**os.environ, **(env or {})},
         timeout=300,
-    )  # fmt: skip
+    )
     assert done.returncode == 0, done.stderr
     rows = json.loads(report.read_text())
     for row in rows:
@@ -94,8 +97,11 @@ def test_help_of_the_group_and_of_every_command_loads_no_heavy_module(tmp_path):
 @pytest.mark.parametrize("words", ["nurbscnc ch", "nurbscnc run --dyn", "nurbscnc run --dynamics "])
 def test_shell_completion_loads_no_heavy_module(tmp_path, words):
     # What bash sends on TAB: the words so far and the index of the one being completed.
-    env = {"_NURBSCNC_COMPLETE": "bash_complete", "COMP_WORDS": words,
-           "COMP_CWORD": str(len(words.split(" ")) - 1)}  # fmt: skip
+    env = {
+        "_NURBSCNC_COMPLETE": "bash_complete",
+        "COMP_WORDS": words,
+        "COMP_CWORD": str(len(words.split(" ")) - 1),
+    }
     (row,) = loaded(tmp_path, [[]], env)
     assert row["code"] == 0
     assert heavy_in(row["modules"]) == []
@@ -125,8 +131,9 @@ def test_run_without_plots_loads_no_matplotlib(tmp_path):
 def test_run_without_the_servo_check_loads_no_scipy_signal(tmp_path):
     # --dynamics off: no contour check, so no servo simulation and no filter design.
     (tmp_path / "tiny.nc").write_text(TINY)
-    (row,) = loaded(tmp_path, [["run", "tiny.nc", "-o", "points.csv", "--quiet",
-                                "--dynamics", "off"]])  # fmt: skip
+    (row,) = loaded(
+        tmp_path, [["run", "tiny.nc", "-o", "points.csv", "--quiet", "--dynamics", "off"]]
+    )
     assert row["code"] == 0 and (tmp_path / "points.csv").stat().st_size > 0
     assert not {m for m in row["modules"] if m.startswith("scipy.signal")}
 
@@ -151,7 +158,6 @@ def test_run_with_the_servo_check_loads_no_scipy_signal(tmp_path, program):
         assert "scipy.optimize._zeros" in row["modules"]  # it did search for corners
 
 
-
 def test_a_console_kept_before_its_first_use_is_the_console(tmp_path):
     # `from nurbscnc.cli.console import err` before anything printed keeps the stand-in; every
     # use of it must reach the one rich Console the module then holds.
@@ -169,8 +175,9 @@ assert type(real).__mro__[1].__module__ == "rich.console", type(real).__mro__
 assert real is not kept and real.file is kept.file
 assert real.file.getvalue() == "hello [b]x[/b]\\n", repr(real.file.getvalue())
 """
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                          cwd=tmp_path, timeout=120)  # fmt: skip
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path, timeout=120
+    )
     assert done.returncode == 0, done.stderr
 
 
@@ -181,17 +188,19 @@ def test_the_benchmark_reads_importtime_output_by_hand_computed_sums():
     sys.path.insert(0, str(ROOT / "bench"))
     from startup_bench import parse_importtime
 
-    text = "\n".join([
-        "import time: self [us] | cumulative | imported package",
-        "import time:       100 |        100 | click",
-        "import time:       300 |        300 |       numpy",
-        "import time:       200 |        500 |     scipy.signal._x",
-        "import time:        50 |        550 |   scipy.signal",
-        "import time:        40 |        590 | scipy.optimize",
-        "import time:        10 |         10 |   scipy.signal.windows",
-        "import time:         5 |         15 | nurbscnc.servo.model",
-        "some output of the command",
-    ])  # fmt: skip
+    text = "\n".join(
+        [
+            "import time: self [us] | cumulative | imported package",
+            "import time:       100 |        100 | click",
+            "import time:       300 |        300 |       numpy",
+            "import time:       200 |        500 |     scipy.signal._x",
+            "import time:        50 |        550 |   scipy.signal",
+            "import time:        40 |        590 | scipy.optimize",
+            "import time:        10 |         10 |   scipy.signal.windows",
+            "import time:         5 |         15 | nurbscnc.servo.model",
+            "some output of the command",
+        ]
+    )
     r = parse_importtime(text)
     assert r["imports_ms"] == pytest.approx((100 + 590 + 15) / 1000)
     heavy = r["heavy_imports_ms"]

@@ -54,8 +54,17 @@ def random_rational_curve(seed: int, degree: int) -> NurbsCurve:
 
 def circle(radius_mm: float) -> NurbsCurve:
     r, h = radius_mm, np.sqrt(0.5)
-    points = [[r, 0, 0], [r, r, 0], [0, r, 0], [-r, r, 0], [-r, 0, 0],
-              [-r, -r, 0], [0, -r, 0], [r, -r, 0], [r, 0, 0]]  # fmt: skip
+    points = [
+        [r, 0, 0],
+        [r, r, 0],
+        [0, r, 0],
+        [-r, r, 0],
+        [-r, 0, 0],
+        [-r, -r, 0],
+        [0, -r, 0],
+        [r, -r, 0],
+        [r, 0, 0],
+    ]
     knots = [0, 0, 0, 0.25, 0.25, 0.5, 0.5, 0.75, 0.75, 1, 1, 1]
     return NurbsCurve(2, knots, points, [1, h, 1, h, 1, h, 1, h, 1])
 
@@ -80,8 +89,9 @@ def test_fast_inversion_matches_exact_newton(name):
     nodes = curve.inverse_table.s_nodes_mm
     mids = 0.5 * (nodes[:-1] + nodes[1:])
     pick = rng.choice(mids.size, min(mids.size, 1500), replace=False)
-    s = np.r_[0.0, rng.uniform(0.0, curve.length_mm, 1500), mids[pick], nodes[pick],
-              curve.length_mm]  # fmt: skip
+    s = np.r_[
+        0.0, rng.uniform(0.0, curve.length_mm, 1500), mids[pick], nodes[pick], curve.length_mm
+    ]
     u_fast = curve.param_at_length_fast(s)
     u_exact = curve.param_at_length(s)
     assert np.all(np.abs(curve.arc_length(u_fast) - s) <= 1e-9)
@@ -193,8 +203,9 @@ def quarter_s(u):
 def taylor_step(curve, s0, v, a, dt):
     """One step of the recurrence from the exact u at s0; returns u_1."""
     u0 = quarter_u_derivatives(s0)[0]
-    u, _ = taylor_params(curve.power_form, u0, np.array([v, v]), np.array([a, a]),
-                         np.array([dt]), 0.0, 1.0)  # fmt: skip
+    u, _ = taylor_params(
+        curve.power_form, u0, np.array([v, v]), np.array([a, a]), np.array([dt]), 0.0, 1.0
+    )
     return u[1]
 
 
@@ -290,8 +301,9 @@ def test_reference_windows_are_the_rows_of_the_whole_reference(corners_plan):
     n = sample_count(plan.pieces, plan.profile, 1e-3)
     assert n == whole.t_s.size
     cuts = [0, 1, 17, n // 3, n // 3 + 1, n - 2, n, n + 5]
-    parts = [exact_reference(plan.pieces, plan.profile, 1e-3, a, b)
-             for a, b in zip(cuts[:-1], cuts[1:])]  # fmt: skip
+    parts = [
+        exact_reference(plan.pieces, plan.profile, 1e-3, a, b) for a, b in zip(cuts[:-1], cuts[1:])
+    ]
     for field in ("t_s", "tau_s", "s_mm", "v_mm_s", "a_mm_s2", "piece", "points_mm", "param"):
         joined = np.concatenate([getattr(p, field) for p in parts])
         np.testing.assert_array_equal(joined, getattr(whole, field), err_msg=field)

@@ -39,11 +39,20 @@ def fields(seg) -> dict:
     names = {
         "line": ("start_mm", "end_mm", "feed_mm_s"),
         "rapid": ("start_mm", "end_mm"),
-        "arc": ("start_mm", "end_mm", "center_mm", "normal", "angle_rad", "helix_mm",
-                "radius_start_mm", "radius_end_mm", "feed_mm_s"),
+        "arc": (
+            "start_mm",
+            "end_mm",
+            "center_mm",
+            "normal",
+            "angle_rad",
+            "helix_mm",
+            "radius_start_mm",
+            "radius_end_mm",
+            "feed_mm_s",
+        ),
         "nurbs": ("degree", "knots", "control_points_mm", "weights", "feed_mm_s"),
         "dwell": ("seconds", "position_mm"),
-    }[seg.kind]  # fmt: skip
+    }[seg.kind]
     return {n: np.asarray(getattr(seg, n), dtype=float) for n in names}
 
 
@@ -115,8 +124,19 @@ def test_inch_input_equals_mm_input_times_25_4(seed):
     mm = UNIT_PROGRAM.format(units=21, **{k: num(x * INCH) for k, x in v.items()})
     a, b = segs(inch), segs(mm)
     kinds = [s.kind for s in a]
-    assert kinds == ["rapid", "line", "arc", "arc", "arc", "line", "line", "dwell", "arc",
-                     "nurbs", "nurbs"]  # fmt: skip
+    assert kinds == [
+        "rapid",
+        "line",
+        "arc",
+        "arc",
+        "arc",
+        "line",
+        "line",
+        "dwell",
+        "arc",
+        "nurbs",
+        "nurbs",
+    ]
     assert_same_program(a, b)
     assert a[1].feed_mm_s == pytest.approx(v["f"] * INCH / 60.0, rel=1e-15)
     assert a[-1].feed_mm_s == pytest.approx(v["y"] * INCH / 60.0, rel=1e-15)
@@ -379,21 +399,47 @@ D = math.radians
 @pytest.mark.parametrize(
     ("expr", "expected"),
     [
-        ("SIN[30]", math.sin(D(30))), ("COS[60]", math.cos(D(60))), ("TAN[45]", math.tan(D(45))),
-        ("SIN[-123.4]", math.sin(D(-123.4))), ("COS[1000]", math.cos(D(1000))),
+        ("SIN[30]", math.sin(D(30))),
+        ("COS[60]", math.cos(D(60))),
+        ("TAN[45]", math.tan(D(45))),
+        ("SIN[-123.4]", math.sin(D(-123.4))),
+        ("COS[1000]", math.cos(D(1000))),
         ("ASIN[0.5]", math.degrees(math.asin(0.5))),
         ("ACOS[-0.3]", math.degrees(math.acos(-0.3))),
-        ("ATAN[1]/[-1]", 135.0), ("ATAN[-2]/[3]", math.degrees(math.atan2(-2, 3))),
-        ("SQRT[2]", math.sqrt(2)), ("ABS[-3.5]", 3.5), ("EXP[1.5]", math.exp(1.5)),
-        ("LN[10]", math.log(10)), ("2**0.5", 2**0.5), ("[-2]**3", -8.0),
-        ("ROUND[2.5]", 3.0), ("ROUND[-2.5]", -3.0), ("ROUND[2.4999]", 2.0),
-        ("FIX[2.7]", 2.0), ("FIX[-2.5]", -3.0), ("FUP[2.1]", 3.0), ("FUP[-2.7]", -2.0),
-        ("7/2", 3.5), ("2+3*4", 14.0), ("2**3**2", 64.0), ("8-2-1", 5.0), ("12/3/2", 2.0),
-        ("1 EQ 1", 1.0), ("1 NE 1", 0.0), ("1 GT 2", 0.0), ("2 GE 2", 1.0), ("1 LT 2", 1.0),
-        ("3 LE 2", 0.0), ("1 AND 0", 0.0), ("0 OR 3", 1.0), ("1 XOR 1", 0.0),
-        ("1 AND 0 OR 1", 1.0), ("0 OR 1 AND 0", 0.0), ("1+1 EQ 2", 1.0),
+        ("ATAN[1]/[-1]", 135.0),
+        ("ATAN[-2]/[3]", math.degrees(math.atan2(-2, 3))),
+        ("SQRT[2]", math.sqrt(2)),
+        ("ABS[-3.5]", 3.5),
+        ("EXP[1.5]", math.exp(1.5)),
+        ("LN[10]", math.log(10)),
+        ("2**0.5", 2**0.5),
+        ("[-2]**3", -8.0),
+        ("ROUND[2.5]", 3.0),
+        ("ROUND[-2.5]", -3.0),
+        ("ROUND[2.4999]", 2.0),
+        ("FIX[2.7]", 2.0),
+        ("FIX[-2.5]", -3.0),
+        ("FUP[2.1]", 3.0),
+        ("FUP[-2.7]", -2.0),
+        ("7/2", 3.5),
+        ("2+3*4", 14.0),
+        ("2**3**2", 64.0),
+        ("8-2-1", 5.0),
+        ("12/3/2", 2.0),
+        ("1 EQ 1", 1.0),
+        ("1 NE 1", 0.0),
+        ("1 GT 2", 0.0),
+        ("2 GE 2", 1.0),
+        ("1 LT 2", 1.0),
+        ("3 LE 2", 0.0),
+        ("1 AND 0", 0.0),
+        ("0 OR 3", 1.0),
+        ("1 XOR 1", 0.0),
+        ("1 AND 0 OR 1", 1.0),
+        ("0 OR 1 AND 0", 0.0),
+        ("1+1 EQ 2", 1.0),
     ],
-)  # fmt: skip
+)
 def test_expressions_against_math(expr, expected):
     assert value_of(expr) == pytest.approx(expected, rel=1e-15, abs=1e-15)
 
@@ -401,9 +447,17 @@ def test_expressions_against_math(expr, expected):
 @pytest.mark.parametrize(
     ("a", "b", "expected"),
     # LinuxCNC: fmod, then + |b| when negative, so the result lies in [0, |b|).
-    [(7, 3, 1.0), (-7, 3, 2.0), (7, -3, 1.0), (-7, -3, 2.0), (7.5, 2, 1.5), (-7.5, 2, 0.5),
-     (6, 3, 0.0), (-6, 3, 0.0)],
-)  # fmt: skip
+    [
+        (7, 3, 1.0),
+        (-7, 3, 2.0),
+        (7, -3, 1.0),
+        (-7, -3, 2.0),
+        (7.5, 2, 1.5),
+        (-7.5, 2, 0.5),
+        (6, 3, 0.0),
+        (-6, 3, 0.0),
+    ],
+)
 def test_mod_sign_rule(a, b, expected):
     assert value_of(f"[{a}] MOD [{b}]") == expected
 
@@ -445,9 +499,11 @@ def test_feed_and_dwell():
 def test_motion_mode_is_modal_and_g0_is_rapid():
     prog = segs("G0 X1\nY1\nG1 F60 X2\nY2")
     assert [(s.kind, s.end_mm) for s in prog] == [
-        ("rapid", (1.0, 0.0, 0.0)), ("rapid", (1.0, 1.0, 0.0)),
-        ("line", (2.0, 1.0, 0.0)), ("line", (2.0, 2.0, 0.0)),
-    ]  # fmt: skip
+        ("rapid", (1.0, 0.0, 0.0)),
+        ("rapid", (1.0, 1.0, 0.0)),
+        ("line", (2.0, 1.0, 0.0)),
+        ("line", (2.0, 2.0, 0.0)),
+    ]
     assert prog[0].feed_mm_s == 0.0
 
 
@@ -471,8 +527,10 @@ def test_m2_m30_end_the_program(end):
 
 def test_crlf_and_bom_same_program():
     lf = run("G21 F600\nG1 X1 (MSG, hi)\nG2 X2 Y0 I0.5\n")
-    for text in ("G21 F600\r\nG1 X1 (MSG, hi)\r\nG2 X2 Y0 I0.5\r\n",
-                 "\ufeffG21 F600\nG1 X1 (MSG, hi)\r\nG2 X2 Y0 I0.5\n"):  # fmt: skip
+    for text in (
+        "G21 F600\r\nG1 X1 (MSG, hi)\r\nG2 X2 Y0 I0.5\r\n",
+        "\ufeffG21 F600\nG1 X1 (MSG, hi)\r\nG2 X2 Y0 I0.5\n",
+    ):
         other = run(text)
         assert_same_program(lf.segments, other.segments, rtol=0, atol=0)
         assert other.notes == lf.notes

@@ -33,8 +33,9 @@ def ends(text: str, **options) -> np.ndarray:
 
 # -- subroutines equal their inlined form ---------------------------------------------------
 coord = st.integers(-50_000, 50_000).map(lambda k: k / 1000.0)
-moves = st.lists(st.tuples(st.sampled_from(["G0", "G1"]), coord, coord, coord), min_size=1,
-                 max_size=6)  # fmt: skip
+moves = st.lists(
+    st.tuples(st.sampled_from(["G0", "G1"]), coord, coord, coord), min_size=1, max_size=6
+)
 
 
 @settings(max_examples=60, deadline=None, derandomize=True)
@@ -44,11 +45,17 @@ def test_subroutine_equals_inlined(body, args, turns):
     moves written out with the argument values added (segment lines aside)."""
     sub_lines = [f"{g} X[#1 + {num(x)}] Y[#2 + {num(y)}] Z[#3 + {num(z)}]" for g, x, y, z in body]
     called = "\n".join(
-        ["F600", "o<part> sub", *sub_lines, "o<part> endsub",
-         f"o1 repeat [{turns}]",
-         f"o<part> call [{num(args[0])}] [{num(args[1])}] [{num(args[2])}]",
-         "o1 endrepeat", "M2"]
-    )  # fmt: skip
+        [
+            "F600",
+            "o<part> sub",
+            *sub_lines,
+            "o<part> endsub",
+            f"o1 repeat [{turns}]",
+            f"o<part> call [{num(args[0])}] [{num(args[1])}] [{num(args[2])}]",
+            "o1 endrepeat",
+            "M2",
+        ]
+    )
     a, b, c = args
     inline_lines = [f"{g} X{num(a + x)} Y{num(b + y)} Z{num(c + z)}" for g, x, y, z in body]
     inlined = "\n".join(["F600", *(inline_lines * turns), "M2"])
@@ -61,8 +68,10 @@ def test_subroutine_equals_inlined(body, args, turns):
 
 
 @settings(max_examples=60, deadline=None, derandomize=True)
-@given(points=st.lists(st.tuples(coord, coord, coord), min_size=1, max_size=8),
-       units=st.sampled_from(["G21", "G20"]))  # fmt: skip
+@given(
+    points=st.lists(st.tuples(coord, coord, coord), min_size=1, max_size=8),
+    units=st.sampled_from(["G21", "G20"]),
+)
 def test_g91_equals_g90(points, units):
     """The same path as G91 increments and G90 positions (also in inches, also arcs)."""
     absolute = [units, "G90 F100"]
@@ -138,13 +147,16 @@ o6 endrepeat
 
 
 def test_sub_defined_after_its_call_and_numbered():
-    np.testing.assert_array_equal(ends("o100 call [2]\nM2\no100 sub\nG0 X#1\no100 endsub\n"),
-                                  [[2, 0, 0]])  # fmt: skip
+    np.testing.assert_array_equal(
+        ends("o100 call [2]\nM2\no100 sub\nG0 X#1\no100 endsub\n"), [[2, 0, 0]]
+    )
 
 
 def test_subroutine_file_through_the_loader():
-    files = {"pocket": ("o<pocket> sub\nG1 X#1 F100\nG1 Y#2 Q5\no<pocket> endsub\n", "pocket.ngc"),
-             "ok": ("o<ok> sub\nG0 Z#1\no<ok> endsub\nM2\n", "/lib/ok.ngc")}  # fmt: skip
+    files = {
+        "pocket": ("o<pocket> sub\nG1 X#1 F100\nG1 Y#2 Q5\no<pocket> endsub\n", "pocket.ngc"),
+        "ok": ("o<ok> sub\nG0 Z#1\no<ok> endsub\nM2\n", "/lib/ok.ngc"),
+    }
     asked = []
 
     def load(name):
@@ -171,7 +183,6 @@ def test_endless_recursion_and_loops_end_quickly():
         segs("o1 do\no1 while [1]\n", max_loop_iterations=1000)
     assert info.value.pos.line == 2
     assert time.perf_counter() - start < 5.0
-
 
 
 def test_what_loops_and_repeats_add_is_bounded():
@@ -207,8 +218,7 @@ def test_pecks_are_counted_before_they_are_made():
             segs(f"{code} X0 Y0 Z-1 R0 Q0.000000001 F600\nM2\n")
         assert (info.value.pos.line, info.value.pos.column) == (1, 1)
         with pytest.raises(ProgramError, match="makes more than 100 moves") as info:
-            segs(f"G0 Z1\n{code} X0 Y0 Z-1 R0 Q0.5 F600\nX1\nQ0.01 X2\nM2\n",
-                 extra_moves=100)  # fmt: skip
+            segs(f"G0 Z1\n{code} X0 Y0 Z-1 R0 Q0.5 F600\nX1\nQ0.01 X2\nM2\n", extra_moves=100)
         assert info.value.pos.line == 4
     assert time.perf_counter() - start < 5.0
     # within the budget, LinuxCNC's moves: rs274 -g prints 302 straight moves for this, the
@@ -219,6 +229,7 @@ def test_pecks_are_counted_before_they_are_made():
     assert len(segs("G90 F100 G0 Z2\nG91 G81 X1 Y0 Z-1 R1 L50\nM2\n", extra_moves=200)) == 152
     with pytest.raises(ProgramError, match="makes more than 290 moves"):
         segs("G0 Z1\nG83 X0 Y0 Z-1 R0 Q0.01 F600\nM2\n", extra_moves=290)
+
 
 def test_fanuc_program_number_at_the_top():
     assert ends("%\nO1234 (PART 7)\nG0 X1\n%\n").tolist() == [[1, 0, 0]]
@@ -249,8 +260,12 @@ def test_pauses():
     """M0 / M1 / M60 are Pause segments: zero-second stops (kind "pause") with their code."""
     got = segs("G0 X1\nM0\nM1\nG0 Y2\nM60\n")
     assert [(type(s).__name__, s.line, getattr(s, "code", "")) for s in got] == [
-        ("Line", 1, ""), ("Pause", 2, "M0"), ("Pause", 3, "M1"), ("Line", 4, ""),
-        ("Pause", 5, "M60")]  # fmt: skip
+        ("Line", 1, ""),
+        ("Pause", 2, "M0"),
+        ("Pause", 3, "M1"),
+        ("Line", 4, ""),
+        ("Pause", 5, "M60"),
+    ]
     assert got[1].position_mm == (1.0, 0.0, 0.0)
     assert got[1].kind == "pause" and got[1].seconds == 0.0
 
@@ -284,12 +299,14 @@ def test_huge_line_is_refused_quickly():
     [
         ("G4 P" + "9" * 300, "dwell P1e+300 is out of range"),
         ("G1 F100 X99999999999999999999", "X1e+20 is out of range"),
-        ("F100 G5.2 X0 Y0 P1 L3\nX1 Y1 P1" + "0" * 300 + "\nX2 Y0 P1\nG5.3",
-         "NURBS weight P1e+300 is out of range"),
+        (
+            "F100 G5.2 X0 Y0 P1 L3\nX1 Y1 P1" + "0" * 300 + "\nX2 Y0 P1\nG5.3",
+            "NURBS weight P1e+300 is out of range",
+        ),
         ("G1 X1 F0." + "0" * 320 + "1", "is out of range"),
         ("F1 G2 X0 Y0 I1 J0 P1000000000", "arc turns P1e+09 is out of range"),
     ],
-)  # fmt: skip
+)
 def test_values_no_machine_can_use_are_named(text, message):
     with pytest.raises(ProgramError, match=message.replace("+", r"\+")):
         segs(text)
@@ -306,9 +323,14 @@ def test_tool_table_format_and_g43():
 
 @pytest.mark.parametrize(
     ("text", "message"),
-    [("T1e400 Z1", "out of range"), ("T1 Zx", "not a number"), ("P1 Z1", "without a T"),
-     ("T1.5 Z1", "non-negative integer"), ("T1 K4", "unknown tool table field")],
-)  # fmt: skip
+    [
+        ("T1e400 Z1", "out of range"),
+        ("T1 Zx", "not a number"),
+        ("P1 Z1", "without a T"),
+        ("T1.5 Z1", "non-negative integer"),
+        ("T1 K4", "unknown tool table field"),
+    ],
+)
 def test_bad_tool_tables(text, message):
     with pytest.raises(ConfigError, match=message) as info:
         parse_tool_table(text, "tools.tbl")
@@ -332,8 +354,9 @@ G28
     np.testing.assert_allclose(
         ends(prog),
         [[11, 21, -4], [20, 40, -4], [21, 40, -4], [0, 0, -4], [3, 0, -4], [4, 0, -4], [3, 0, -4]],
-        rtol=0, atol=1e-12,
-    )  # fmt: skip
+        rtol=0,
+        atol=1e-12,
+    )
 
 
 def test_errors_are_project_errors():
@@ -365,8 +388,10 @@ G1 X2
 def test_exists_of_numbered_parameters():
     """LinuxCNC's tests/interp/exists (its expected output: X1 Z1, then X1 Z0): EXISTS[#n]
     says whether n is a parameter number."""
-    prog = ("#<a>=999\nG0 X EXISTS[#1] Y EXISTS[#99999] Z EXISTS[#<a>]\n#1=2\n#2=99999\n"
-            "G0 X EXISTS[##1] Y EXISTS[##2] Z EXISTS[###1]\n")  # fmt: skip
+    prog = (
+        "#<a>=999\nG0 X EXISTS[#1] Y EXISTS[#99999] Z EXISTS[#<a>]\n#1=2\n#2=99999\n"
+        "G0 X EXISTS[##1] Y EXISTS[##2] Z EXISTS[###1]\n"
+    )
     np.testing.assert_array_equal(ends(prog), [[1, 0, 1], [1, 0, 0]])
 
 
@@ -386,8 +411,10 @@ def test_check_finds_subroutine_files(tmp_path):
     missing = runner.invoke(main, ["check", "--json", str(tmp_path / "main.ngc")])
     assert missing.exit_code == 2
     assert "no file far.ngc was found" in json.loads(missing.stdout)["errors"][0]["message"]
-    found = runner.invoke(main, ["check", "--json", "--subroutine-path", str(tmp_path / "lib"),
-                                 str(tmp_path / "main.ngc")])  # fmt: skip
+    found = runner.invoke(
+        main,
+        ["check", "--json", "--subroutine-path", str(tmp_path / "lib"), str(tmp_path / "main.ngc")],
+    )
     assert found.exit_code == 0, found.stderr
     data = json.loads(found.stdout)
     assert [(s["kind"], s["line"]) for s in data["segments"]] == [("line", 1), ("line", 2)]
@@ -397,8 +424,10 @@ def test_check_finds_subroutine_files(tmp_path):
 def test_inverse_time_and_per_revolution_feeds():
     """G93: F is 1/minutes, so a move of length L takes 1/F min: feed = L·F/60 mm/s (arcs by
     their length). G95: F mm per revolution at S rpm: F·S mm/min."""
-    got = segs("G93 G1 X30 Y40 F2\nG2 X50 Y40 I10 J0 F3\nG94 F600 G1 X0\n"
-               "S1000 G95 G1 X10 F0.2\nG20\nG1 X1 F0.01\n")  # fmt: skip
+    got = segs(
+        "G93 G1 X30 Y40 F2\nG2 X50 Y40 I10 J0 F3\nG94 F600 G1 X0\n"
+        "S1000 G95 G1 X10 F0.2\nG20\nG1 X1 F0.01\n"
+    )
     assert got[0].feed_mm_s == pytest.approx(50.0 * 2 / 60, rel=1e-15)
     assert got[1].feed_mm_s == pytest.approx(np.pi * 10 * 3 / 60, rel=1e-14)
     assert got[2].feed_mm_s == pytest.approx(10.0, rel=1e-15)
@@ -416,8 +445,10 @@ def test_inverse_time_feeds_as_linuxcnc():
     assert metric == pytest.approx(0.001666666666666667, rel=1e-15)  # (was 1.67e-5)
     inch = segs("G20 G90\nG93 G1 X0.001 F1\n")[0].feed_mm_s
     assert inch == pytest.approx(0.042333333333333334, rel=1e-15)
-    arc = segs("G21 G90\nG93\nG0 X17.00767 Y-25.82195\n"
-               "G3 X6.746468 Y-3.890651 I-19.259902 J4.354841 F124.294\n")[1]  # fmt: skip
+    arc = segs(
+        "G21 G90\nG93\nG0 X17.00767 Y-25.82195\n"
+        "G3 X6.746468 Y-3.890651 I-19.259902 J4.354841 F124.294\n"
+    )[1]
     assert arc.feed_mm_s == pytest.approx(53.99446243988222, rel=1e-14)
 
 
@@ -427,8 +458,20 @@ def test_fanuc_m98_equals_inlined(body, turns):
     """M98 P<n> L<k> runs the O<n> … M99 block k times (L0: not at all) and returns after
     the M98, as the body written out k times; #1..#30 are global (a counter survives)."""
     sub = [f"{g} X[#1 * 0.5 + {num(x)}] Y{num(y)} Z{num(z)}" for g, x, y, z in body]
-    called = "\n".join(["F600", "#1 = 0", f"M98 P17 L{turns}", "G0 X[#1]", "M30", "",
-                        "O17", *sub, "#1 = [#1 + 1]", "M99"])  # fmt: skip
+    called = "\n".join(
+        [
+            "F600",
+            "#1 = 0",
+            f"M98 P17 L{turns}",
+            "G0 X[#1]",
+            "M30",
+            "",
+            "O17",
+            *sub,
+            "#1 = [#1 + 1]",
+            "M99",
+        ]
+    )
     inline = []
     for k in range(turns):
         inline += [f"{g} X{num(k * 0.5 + x)} Y{num(y)} Z{num(z)}" for g, x, y, z in body]
@@ -461,8 +504,9 @@ def test_g80_beside_a_motion_code():
 
 def test_m61_sets_the_loaded_tool_for_g43():
     tools = parse_tool_table("T3 P3 Z2.5 D6\nT4 P4 Z-1 D4\n")
-    prog = interpret_text("M61 Q3\nG43\nG0 X0 Y0 Z0\nM61 Q4 G43\nG0 Z0\nM2",
-                          InterpretOptions(tools=tools))  # fmt: skip
+    prog = interpret_text(
+        "M61 Q3\nG43\nG0 X0 Y0 Z0\nM61 Q4 G43\nG0 Z0\nM2", InterpretOptions(tools=tools)
+    )
     assert [tuple(s.end_mm) for s in prog.segments] == [(0.0, 0.0, 2.5), (0.0, 0.0, -1.0)]
 
 
@@ -486,8 +530,10 @@ def test_g10_l1_l10_l11_write_the_tool_table():
 
 def test_g52_local_offset_shares_the_g92_registers():
     """End points recorded from LinuxCNC 2.9 (tools/record_goldens.py on this program)."""
-    text = ("G21\nG0 X1\nG52 X2 Y3\nG0 X0 Y0\nG52 Z1\nG0 X1 Z0\nG92.2\nG0 X0\nG92.3\nG0 X0.5\n"
-            "G52 X0\nG0 X0\nG92.1\nG0 X0 Y0\nM2\n")  # fmt: skip
+    text = (
+        "G21\nG0 X1\nG52 X2 Y3\nG0 X0 Y0\nG52 Z1\nG0 X1 Z0\nG92.2\nG0 X0\nG92.3\nG0 X0.5\n"
+        "G52 X0\nG0 X0\nG92.1\nG0 X0 Y0\nM2\n"
+    )
     linuxcnc = [[1, 0, 0], [2, 3, 0], [3, 3, 1], [0, 3, 1], [2.5, 3, 1], [0, 3, 1], [0, 0, 1]]
     np.testing.assert_allclose(ends(text), linuxcnc, rtol=0, atol=1e-9)
 
@@ -508,15 +554,22 @@ def test_o_labels_of_any_length_are_numbers_without_leading_zeros():
     text = "o0100 sub\nG0 X[#1]\no100 endsub\no00100 call [4]\nM2"
     assert ends(text)[:, 0].tolist() == [4.0]
     label = "1" + "9" * 5000
-    assert ends(f"o{label} sub\nG0 X[#1]\no{label} endsub\no0{label} call [3]\nM2")[:, 0] \
-        .tolist() == [3.0]  # fmt: skip
+    assert ends(f"o{label} sub\nG0 X[#1]\no{label} endsub\no0{label} call [3]\nM2")[
+        :, 0
+    ].tolist() == [3.0]
     with pytest.raises(ProgramError, match="endif without if"):
         segs(f"o1 if [1]\no{label} endif\nM2")
 
 
-@pytest.mark.parametrize("text", ["o2 endif\nG0 X1\nM2", "o2 else\nG0 X1\no2 endif\nM2",
-                                  "o2 elseif [1]\nG0 X1\no2 endif\nM2",
-                                  "o1 if [1]\nG0 X1\no2 endif\nM2"])  # fmt: skip
+@pytest.mark.parametrize(
+    "text",
+    [
+        "o2 endif\nG0 X1\nM2",
+        "o2 else\nG0 X1\no2 endif\nM2",
+        "o2 elseif [1]\nG0 X1\no2 endif\nM2",
+        "o1 if [1]\nG0 X1\no2 endif\nM2",
+    ],
+)
 def test_else_and_endif_need_their_if(text):
     """LinuxCNC 2.9 (rs274 -g) stops each of these at the unmatched label ("undefined O-word
     label"); nurbscnc ran them, skipping the G0 after a stray else."""
@@ -524,11 +577,15 @@ def test_else_and_endif_need_their_if(text):
         segs(text)
 
 
-@pytest.mark.parametrize("text", [
-    "o1 while [1]\nG0 X1\no1 break\no1 endwhile\no1 break\nG0 X2\nM2",
-    "o1 while [1]\nG0 X1\no1 break\no1 endwhile\no1 continue\nG0 X2\nM2",
-    "o1 repeat [2]\nG0 X1\no1 endrepeat\no1 break\nM2",
-    "o1 do\nG0 X1\no1 break\no1 while [1]\no1 break\nM2"])  # fmt: skip
+@pytest.mark.parametrize(
+    "text",
+    [
+        "o1 while [1]\nG0 X1\no1 break\no1 endwhile\no1 break\nG0 X2\nM2",
+        "o1 while [1]\nG0 X1\no1 break\no1 endwhile\no1 continue\nG0 X2\nM2",
+        "o1 repeat [2]\nG0 X1\no1 endrepeat\no1 break\nM2",
+        "o1 do\nG0 X1\no1 break\no1 while [1]\no1 break\nM2",
+    ],
+)
 def test_break_after_its_loop_is_an_error_not_a_hang(text):
     """A break or continue after its loop's end found the loop before it and jumped to the
     line after that end: itself, for ever (check never returned). It is outside the loop."""
@@ -577,28 +634,36 @@ def test_elseif_after_a_taken_branch_is_still_evaluated():
         segs("o1 if [1]\nG4 P1\no1 elseif [SQRT[-1]]\nG4 P2\no1 endif\n")
     assert info.value.pos.line == 3
     with pytest.raises(ProgramError, match="LN") as info:
-        segs("o1 if [0]\nG4 P1\no1 elseif [1]\nG4 P2\no1 elseif [LN[-1]]\nG4 P3\no1 else\n"
-             "o1 endif\n")  # fmt: skip
+        segs(
+            "o1 if [0]\nG4 P1\no1 elseif [1]\nG4 P2\no1 elseif [LN[-1]]\nG4 P3\no1 else\no1 endif\n"
+        )
     assert info.value.pos.line == 5
     dwells = segs("o1 if [0]\nG4 P1\no1 elseif [1]\nG4 P2\no1 elseif [1]\nG4 P3\no1 endif\n")
     assert [d.seconds for d in dwells] == [2.0]
 
 
-@pytest.mark.parametrize(("line", "message"), [
-    ("G43", "Cannot change tool offset with cutter radius compensation on"),
-    ("G43.1 Z1", "Cannot change tool offset with cutter radius compensation on"),
-    ("G49", "Cannot change tool offset with cutter radius compensation on"),
-    ("G92 X1", "Cannot change axis offsets with cutter radius comp"),
-    ("G52 X1", "Cannot change axis offsets with cutter radius comp"),
-    ("G55", "Cannot change coordinate systems with cutter radius compensation on"),
-    ("G10 L2 P1 X1", "Cannot change the active coordinate system with cutter radius "
-                     "compensation on"),
-    ("G10 L20 P0 X1", "Cannot change the active coordinate system with cutter radius "
-                      "compensation on"),
-    ("G53 G1 X5", "Cannot use g53 with cutter radius comp"),
-    ("G61", "Cannot change control mode with cutter radius compensation on"),
-    ("G64 P0.1", "Cannot change control mode with cutter radius compensation on"),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    ("line", "message"),
+    [
+        ("G43", "Cannot change tool offset with cutter radius compensation on"),
+        ("G43.1 Z1", "Cannot change tool offset with cutter radius compensation on"),
+        ("G49", "Cannot change tool offset with cutter radius compensation on"),
+        ("G92 X1", "Cannot change axis offsets with cutter radius comp"),
+        ("G52 X1", "Cannot change axis offsets with cutter radius comp"),
+        ("G55", "Cannot change coordinate systems with cutter radius compensation on"),
+        (
+            "G10 L2 P1 X1",
+            "Cannot change the active coordinate system with cutter radius compensation on",
+        ),
+        (
+            "G10 L20 P0 X1",
+            "Cannot change the active coordinate system with cutter radius compensation on",
+        ),
+        ("G53 G1 X5", "Cannot use g53 with cutter radius comp"),
+        ("G61", "Cannot change control mode with cutter radius compensation on"),
+        ("G64 P0.1", "Cannot change control mode with cutter radius compensation on"),
+    ],
+)
 def test_offset_and_mode_changes_while_compensating_are_refused(line, message):
     """LinuxCNC 2.9 refuses each of these while G41/G42 is on (rs274 -g, its words): the
     compensated path would change frame under the tool. nurbscnc kept compensating. A G10
@@ -619,26 +684,35 @@ def test_parameters_as_linuxcnc_reads_them():
     for name in ("_value", "_x", "_coord_system"):
         with pytest.raises(ProgramError, match=f"Cannot assign to read-only parameter #<{name}>"):
             segs(f"#<{name}>=5\nM2\n")
-    with pytest.raises(ProgramError, match="no matching while/do label: 'o1 break' "
-                                           r"\(found 'repeat' in line 2\)") as info:  # fmt: skip
+    with pytest.raises(
+        ProgramError,
+        match="no matching while/do label: 'o1 break' "
+        r"\(found 'repeat' in line 2\)",
+    ) as info:
         segs("F500\no1 repeat [3]\nG91 G1 X1\no1 break\no1 endrepeat\nM2\n")
     assert info.value.pos.line == 4
     assert segs("T3 M6\nG4 P[#5400]\nM2\n")[0].seconds == 3.0
     tools = parse_tool_table("T2 P2 D3.175\n")
     moves = segs("F600\nT2 M6\nG42 D0 G1 X10 Y0\nG1 X20\nG40 G1 X30 Y10\nM2\n", tools=tools)
     # rs274 -g: (10, -1.5875), (20, -1.5875), (30, 10)
-    np.testing.assert_allclose([m.end_mm for m in moves],
-                               [(10, -1.5875, 0), (20, -1.5875, 0), (30, 10, 0)], atol=1e-12)
+    np.testing.assert_allclose(
+        [m.end_mm for m in moves], [(10, -1.5875, 0), (20, -1.5875, 0), (30, 10, 0)], atol=1e-12
+    )
 
 
 def test_break_in_a_repeat_is_refused_even_where_it_is_skipped():
     """LinuxCNC refuses a break or continue of a repeat loop as it reads the line, even in a
     body repeat [0] skips or in a false if (rs274 -g: "no matching while/do label" at that
     line, 3 here)."""
-    for text in ("o1 repeat [0]\nG4 P1\no1 continue\no1 endrepeat\nG4 P2\nM2\n",
-                 "o1 repeat [2]\no2 if [0]\no1 continue\no2 endif\nG4 P1\no1 endrepeat\nM2\n"):
-        with pytest.raises(ProgramError, match="no matching while/do label: 'o1 continue' "
-                                               r"\(found 'repeat' in line 1\)") as info:
+    for text in (
+        "o1 repeat [0]\nG4 P1\no1 continue\no1 endrepeat\nG4 P2\nM2\n",
+        "o1 repeat [2]\no2 if [0]\no1 continue\no2 endif\nG4 P1\no1 endrepeat\nM2\n",
+    ):
+        with pytest.raises(
+            ProgramError,
+            match="no matching while/do label: 'o1 continue' "
+            r"\(found 'repeat' in line 1\)",
+        ) as info:
             segs(text)
         assert info.value.pos.line == 3
 
@@ -657,12 +731,15 @@ def test_curves_and_feeds_as_linuxcnc():
       feed (rs274: "Cannot do g1 with zero feed rate")."""
     from nurbscnc.geometry.nurbs import NurbsCurve
 
-    prog = segs("G21 G90 F600 G0 X1 Y1\nG91 G5.2 X10 Y0 P1 L3\nX10 Y10 P1\nX0 Y10 P1\nG5.3\n"
-                "G90\nM2\n")  # fmt: skip
+    prog = segs(
+        "G21 G90 F600 G0 X1 Y1\nG91 G5.2 X10 Y0 P1 L3\nX10 Y10 P1\nX0 Y10 P1\nG5.3\nG90\nM2\n"
+    )
     curve = NurbsCurve.from_segment(prog[1])
-    np.testing.assert_allclose(curve.point([1 / 30, 2 / 30])[:, :2],
-                               [[1.655555555555556, 1.0055555555555558],
-                                [2.2888888888888883, 1.0222222222222224]], atol=1e-12)  # fmt: skip
+    np.testing.assert_allclose(
+        curve.point([1 / 30, 2 / 30])[:, :2],
+        [[1.655555555555556, 1.0055555555555558], [2.2888888888888883, 1.0222222222222224]],
+        atol=1e-12,
+    )
     np.testing.assert_allclose(prog[1].end_mm, (1, 11, 0), atol=1e-12)
     (nurbs,) = segs("G21 G90 F600\nG5.2 X10 Y0 P1 L3\nX10 Y10 P1 F300\nX0 Y10 P1\nG5.3\nM2\n")
     assert nurbs.feed_mm_s == 5.0
@@ -684,8 +761,9 @@ def test_g52_order_words_as_linuxcnc():
     """LinuxCNC's convert_nurbs takes an L on any line of a G5.2 block, as the order when
     L > 3 and as order 3 otherwise (L0…L3); nurbscnc refused L1 and an L after the first
     line. Both programs match LinuxCNC's samples (the third differential run's check)."""
-    (later,) = segs("G21 G90 F600\nG5.2 X10 Y0 P1 L3\nX10 Y10 P1 L4\nX0 Y10 P1\nX0 Y0 P1\n"
-                    "G5.3\nM2\n")  # fmt: skip
+    (later,) = segs(
+        "G21 G90 F600\nG5.2 X10 Y0 P1 L3\nX10 Y10 P1 L4\nX0 Y10 P1\nX0 Y0 P1\nG5.3\nM2\n"
+    )
     assert later.degree == 3  # order 4
     (low,) = segs("G21 G90 F600\nG5.2 X10 Y0 P1 L1\nX0 Y10 P1\nG5.3\nM2\n")
     assert low.degree == 2  # order 3
@@ -696,19 +774,30 @@ def test_hal_io_and_override_codes_as_linuxcnc():
     SET_AUX_OUTPUT_BIT, …; golden divergences.ngc). M64, M65, M66, M68 run once the motion
     before them has ended (emcTaskCheckPreconditions: WAITING_FOR_MOTION), so the tool stops
     there: a 0 s dwell, with the code; M62, M63, M67 go with the motion."""
-    text = ("G21 F600\nG1 X1\nM62 P0\nG1 X2\nM64 P1\nG1 X3 M63 P0\nM65 P1\nM66 P0 L0\n"
-            "M67 E0 Q1.5\nM68 E1 Q2\nM50 P0\nM51\nM52 P1\nM53 P0\nG1 X4\nM2\n")  # fmt: skip
+    text = (
+        "G21 F600\nG1 X1\nM62 P0\nG1 X2\nM64 P1\nG1 X3 M63 P0\nM65 P1\nM66 P0 L0\n"
+        "M67 E0 Q1.5\nM68 E1 Q2\nM50 P0\nM51\nM52 P1\nM53 P0\nG1 X4\nM2\n"
+    )
     got = [(s.kind, getattr(s, "code", None), s.line) for s in segs(text)]
-    assert got == [("line", None, 2), ("line", None, 4), ("dwell", "M64", 5),
-                   ("line", None, 6), ("dwell", "M65", 7), ("dwell", "M66", 8),
-                   ("dwell", "M68", 10), ("line", None, 15)]  # fmt: skip
+    assert got == [
+        ("line", None, 2),
+        ("line", None, 4),
+        ("dwell", "M64", 5),
+        ("line", None, 6),
+        ("dwell", "M65", 7),
+        ("dwell", "M66", 8),
+        ("dwell", "M68", 10),
+        ("line", None, 15),
+    ]
     assert all(s.seconds == 0.0 for s in segs(text) if s.kind == "dwell")
     # the words as LinuxCNC checks them (rs274 -g's messages)
-    for block, message in (("M64", "No valid P word with M64"),
-                           ("M66 L1", "Need to have either a valid P or a valid E word"),
-                           ("M67 Q1", "Invalid analog index with M67"),
-                           ("G1 X1 E2", "E word with no M66, M67 or M68"),
-                           ("M64 P0 M65 P1", "same modal group"),
-                           ("M48 M50 P0", "same modal group")):  # fmt: skip
+    for block, message in (
+        ("M64", "No valid P word with M64"),
+        ("M66 L1", "Need to have either a valid P or a valid E word"),
+        ("M67 Q1", "Invalid analog index with M67"),
+        ("G1 X1 E2", "E word with no M66, M67 or M68"),
+        ("M64 P0 M65 P1", "same modal group"),
+        ("M48 M50 P0", "same modal group"),
+    ):
         with pytest.raises(ProgramError, match=message):
             segs(f"G21 F600\n{block}\nM2\n")

@@ -38,8 +38,9 @@ def _key(program):
     out = []
     for seg in program.segments:
         fields = getattr(seg, "__slots__", None) or tuple(vars(seg))
-        out.append((type(seg).__name__,
-                    tuple((name, _bits(getattr(seg, name))) for name in fields)))  # fmt: skip
+        out.append(
+            (type(seg).__name__, tuple((name, _bits(getattr(seg, name))) for name in fields))
+        )
     return out, program.blocks, [(n.line, n.message) for n in program.notes]
 
 
@@ -116,7 +117,8 @@ EDGE_CASES += [
     "G21 G90 F600\n" + _G6 + "n5 k1 x4 y.5 r2\nK2X5Y1\n K3 \t X6 Y1 Z0.5 R1.5\nK4 X7 Y0\n"
     "K5 X8\nK6 Y2 R1\n" + _G6_END + "M2",
     "G21 G91 F600\nG6.2 P3 K0 X0 Y0\nK0 X1 Y1\nK0 X1 Y0\n"
-    + "".join(f"K{k} X1 Y{k % 2}\n" for k in range(1, 9)) + "K9\nK9\nK9\nG90\nM2",
+    + "".join(f"K{k} X1 Y{k % 2}\n" for k in range(1, 9))
+    + "K9\nK9\nK9\nG90\nM2",
     "G20 G10 L2 P1 X1 Y2\nG54 F20\n" + _G6 + _G6_BODY + _G6_END + "M2",
     "G21 F600\n" + _G6 + _G6_BODY.replace("K3 ", "X4 K3 ") + _G6_END + "M2",  # order
     "G21 F600\n" + _G6 + _G6_BODY.replace("K3 X6.5", "K3 X6.5 (c)") + _G6_END + "M2",
@@ -126,8 +128,11 @@ EDGE_CASES += [
     "G21 F600\n" + _G6 + _G6_BODY.replace("K4 X8", "K4 X9e9") + _G6_END + "M2",
     "G21 F600\n" + _G6 + _G6_BODY.replace("K4 X8", "K4 X9999999999") + _G6_END + "M2",
     "G21 F600\n" + _G6 + _G6_BODY + "K7\nK7 X1 Y1\nK7\nK7\nK7\nM2",  # a point after knots
-    "G21 F600\n" + _G6 + _G6_BODY.replace("K5 X9.5 Y-0.5 R1", "K5 X9.5 Y-0.5 F300")
-    + _G6_END + "M2",
+    "G21 F600\n"
+    + _G6
+    + _G6_BODY.replace("K5 X9.5 Y-0.5 R1", "K5 X9.5 Y-0.5 F300")
+    + _G6_END
+    + "M2",
     "G21 F600\n" + _G6 + _G6_BODY + _G6_END + "K7\nM2",  # one knot too many: a new line
     "G21 F600\n" + _G6 + _G6_BODY + "K7\nK7\nM2",  # the block never ends
 ]
@@ -165,9 +170,12 @@ def test_g6_lane_reads_a_long_block_without_parsing(monkeypatch):
 
     n = 2000  # points; a clamped uniform cubic: knots 0 ×4, 1 … n − 4, n − 3 ×4
     knots = [0] * 4 + list(range(1, n - 3)) + [n - 3] * 4
-    text = "G21 G90 F600\nG6.2 P4 K0 X0 Y0 R1\n" + "".join(
-        f"K{knots[k]} X{k * 0.1:.4f} Y{math.sin(k / 30):.5f} R1\n" for k in range(1, n)) \
-        + "".join(f"K{x}\n" for x in knots[n:]) + "M2\n"  # fmt: skip
+    text = (
+        "G21 G90 F600\nG6.2 P4 K0 X0 Y0 R1\n"
+        + "".join(f"K{knots[k]} X{k * 0.1:.4f} Y{math.sin(k / 30):.5f} R1\n" for k in range(1, n))
+        + "".join(f"K{x}\n" for x in knots[n:])
+        + "M2\n"
+    )
     parsed = []
     real = control.parse_line
     monkeypatch.setattr(control, "parse_line", lambda line, n: parsed.append(n) or real(line, n))
@@ -195,12 +203,20 @@ def test_make_lines_equals_the_constructor():
 
     starts = [(0.0, -0.0, 1.5), (1.0, 2.0, 3.0), (4.0, 5.0, 6.0)]
     ends = [(1.0, 2.0, 3.0), (4.0, 5.0, 6.0), (7.0, 8.0, 9.0)]
-    cols = {"start_mm": starts, "end_mm": ends, "feed_mm_s": [0.0, 10.0, 20.5],
-            "line": [3, 4, 9], "rapid": [True, False, False],
-            "blend_mm": itertools.repeat(0.25), "naive_mm": itertools.repeat(0.0)}  # fmt: skip
+    cols = {
+        "start_mm": starts,
+        "end_mm": ends,
+        "feed_mm_s": [0.0, 10.0, 20.5],
+        "line": [3, 4, 9],
+        "rapid": [True, False, False],
+        "blend_mm": itertools.repeat(0.25),
+        "naive_mm": itertools.repeat(0.0),
+    }
     made = make_lines(cols)
-    want = [Line(a, b, f, n, r, 0.25, 0.0) for a, b, f, n, r in
-            zip(starts, ends, [0.0, 10.0, 20.5], [3, 4, 9], [True, False, False])]  # fmt: skip
+    want = [
+        Line(a, b, f, n, r, 0.25, 0.0)
+        for a, b, f, n, r in zip(starts, ends, [0.0, 10.0, 20.5], [3, 4, 9], [True, False, False])
+    ]
     assert [type(m) for m in made] == [Line] * 3
     for got, ref in zip(made, want):
         for f in dataclasses.fields(Line):
@@ -225,8 +241,9 @@ def test_a_short_run_goes_line_by_line_and_is_parsed_once(monkeypatch):
         return real(*a, **k)
 
     monkeypatch.setattr(interpret_module, "plain_run", counting)
-    text = ("#1 = 0\no1 while [#1 LT 1000]\nG1 X1 F100\nG1 X0\n; back\n#1 = [#1 + 1]\n"
-            "o1 endwhile\nM2\n")  # fmt: skip
+    text = (
+        "#1 = 0\no1 while [#1 LT 1000]\nG1 X1 F100\nG1 X0\n; back\n#1 = [#1 + 1]\no1 endwhile\nM2\n"
+    )
     prog = interpret_text(text)
     assert len(prog.segments) == 2000 and prog.segments[-1].end_mm[0] == 0.0
     assert len(calls) <= len(text.splitlines())  # 1000 before: the plain run at every turn

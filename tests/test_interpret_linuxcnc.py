@@ -76,8 +76,9 @@ def compare(path: Path, data: dict) -> None:
     prog = ours(path)
     # Pauses and the stops of M64, M65, M66, M68 (0 s dwells: the machine waits for the
     # motion to end there) have no canonical move.
-    segments = [s for s in prog.segments if not isinstance(s, Pause)
-                and getattr(s, "code", "G4") == "G4"]
+    segments = [
+        s for s in prog.segments if not isinstance(s, Pause) and getattr(s, "code", "G4") == "G4"
+    ]
     theirs = linuxcnc_moves(data)
     assert [(s.kind, s.line) for s in segments] == [(m["kind"], m["line"]) for m in theirs]
     per_minute = units_per_minute_lines(path.read_text())
@@ -122,8 +123,13 @@ def test_live(path, tmp_path):
     # committed one in a temporary folder, so every run starts alike and the repo is not
     # touched.
     shutil.copy(path.parent / "rs274ngc.var", tmp_path / "rs274ngc.var")
-    out = subprocess.run([SYSTEM_PYTHON, str(RECORDER), str(path.resolve())],
-                         capture_output=True, text=True, cwd=tmp_path, check=True)  # fmt: skip
+    out = subprocess.run(
+        [SYSTEM_PYTHON, str(RECORDER), str(path.resolve())],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        check=True,
+    )
     compare(path, json.loads(out.stdout))
 
 
@@ -154,8 +160,10 @@ def _rs274_tools() -> dict:
     from nurbscnc.program.tooltable import parse_tool_table
 
     table = parse_tool_table((RS274 / "tools.tbl").read_text())
-    return {n: Tool(n, tuple(v * 25.4 for v in t.offset_mm), t.diameter_mm * 25.4)
-            for n, t in table.items()}  # fmt: skip
+    return {
+        n: Tool(n, tuple(v * 25.4 for v in t.offset_mm), t.diameter_mm * 25.4)
+        for n, t in table.items()
+    }
 
 
 def compare_rs274(data: dict) -> None:

@@ -90,8 +90,9 @@ def check(command: str, outputs, skip: str | None = None) -> None:
 
 
 def test_check(files):
-    check("check", [printed("check", NACA, "--json"), printed("check", files / "mixed.nc",
-                                                             "--json")])  # fmt: skip
+    check(
+        "check", [printed("check", NACA, "--json"), printed("check", files / "mixed.nc", "--json")]
+    )
 
 
 def test_corners_and_ph():
@@ -102,8 +103,10 @@ def test_corners_and_ph():
 def test_plan_and_run(files, tmp_path):
     from nurbscnc.plan.corners import CornerLog
 
-    outputs = [printed("plan", NACA, "--json", "--explain"),
-               printed("plan", NACA, "--json", "--algorithm", "adaptive")]
+    outputs = [
+        printed("plan", NACA, "--json", "--explain"),
+        printed("plan", NACA, "--json", "--algorithm", "adaptive"),
+    ]
     explained = printed("plan", files / "corner.nc", "--json", "--explain")
     if not explained["explain"]["corners"]:
         # The planner does not log its corners yet: the keys of one logged corner, as printed.
@@ -111,32 +114,50 @@ def test_plan_and_run(files, tmp_path):
         from nurbscnc.plan.explain import explain_plan
 
         prog, mach, run = make_plan(str(files / "corner.nc"))
-        log = CornerLog(np.array([2]), np.zeros((1, 3)), np.array([np.pi / 2]),
-                        np.array([2], dtype=np.int8), np.array([2], dtype=np.int8))
+        log = CornerLog(
+            np.array([2]),
+            np.zeros((1, 3)),
+            np.array([np.pi / 2]),
+            np.array([2], dtype=np.int8),
+            np.array([2], dtype=np.int8),
+        )
         expl = dataclasses.replace(explain_plan(prog, mach, run.plan), corners=log)
-        explained["explain"].update(corners=expl.corner_dicts(),
-                                    corner_counts=expl.corner_counts())
+        explained["explain"].update(corners=expl.corner_dicts(), corner_counts=expl.corner_counts())
     check("plan", [*outputs, explained])
-    runs = [printed("run", NACA, "-o", tmp_path / "p.csv", "--json"),
-            printed("run", NACA, "-o", tmp_path / "b.csv", "--json", "--algorithm", "adaptive"),
-            printed("run", files / "mixed.nc", "-o", tmp_path / "m.csv", "--json")]
+    runs = [
+        printed("run", NACA, "-o", tmp_path / "p.csv", "--json"),
+        printed("run", NACA, "-o", tmp_path / "b.csv", "--json", "--algorithm", "adaptive"),
+        printed("run", files / "mixed.nc", "-o", tmp_path / "m.csv", "--json"),
+    ]
     check("run", runs, skip="explain")  # --explain is plan's
 
 
 def test_run_batch(files, tmp_path):
     # --jobs 1: the batch in this process (no fork of the test process, whose threads
     # from earlier tests can hold locks a forked worker would wait on)
-    out = printed("run", files / "mixed.nc", files / "bad.nc", "--output-dir", tmp_path,
-                  "--json", "--jobs", "1", code=2)  # fmt: skip
+    out = printed(
+        "run",
+        files / "mixed.nc",
+        files / "bad.nc",
+        "--output-dir",
+        tmp_path,
+        "--json",
+        "--jobs",
+        "1",
+        code=2,
+    )
     check("run --output-dir", [out])
 
 
 def test_simulate_and_compare(files, tmp_path):
     points = tmp_path / "p.csv"
-    assert CliRunner().invoke(main, ["run", str(files / "mixed.nc"), "-o",
-                                     str(points)]).exit_code == 0  # fmt: skip
-    check("simulate", [printed("simulate", points, "--json"),
-                       printed("simulate", files / "mixed.nc", "--json")])  # fmt: skip
+    assert (
+        CliRunner().invoke(main, ["run", str(files / "mixed.nc"), "-o", str(points)]).exit_code == 0
+    )
+    check(
+        "simulate",
+        [printed("simulate", points, "--json"), printed("simulate", files / "mixed.nc", "--json")],
+    )
     check("compare", [printed("compare", NACA, "--json", "--algorithm", "ours")])
 
 
@@ -155,16 +176,17 @@ def test_identify(tmp_path):
     _, y, _ = signal.lsim(([wn * wn], [1.0, 1.4 * wn, wn * wn]), u, np.arange(n) * 1e-3)
     trace = tmp_path / "trace.txt"
     trace.write_text("\n".join(f"{a:.9f} {b:.9f}" for a, b in zip(u, y)) + "\n")
-    check("identify", [printed("identify", trace, "--period-ms", "1", "--order", "2",
-                               "--json")])  # fmt: skip
+    check("identify", [printed("identify", trace, "--period-ms", "1", "--order", "2", "--json")])
 
 
 def test_errors_program_file_and_option(files):
-    outputs = [printed("check", files / "bad.nc", "--json", code=2),
-               printed("plan", files / "missing.nc", "--json", code=3),
-               printed("plan", files / "corner.nc", "--json", "--bogus", code=2),
-               printed("plan", files / "corner.nc", "--json", "--dynamics", "x", code=2),
-               printed("plan", "--json", code=2)]
+    outputs = [
+        printed("check", files / "bad.nc", "--json", code=2),
+        printed("plan", files / "missing.nc", "--json", code=3),
+        printed("plan", files / "corner.nc", "--json", "--bogus", code=2),
+        printed("plan", files / "corner.nc", "--json", "--dynamics", "x", code=2),
+        printed("plan", "--json", code=2),
+    ]
     check("error", outputs)
     assert outputs[0]["errors"][0]["line"] == 2 and outputs[0]["errors"][0]["column"] >= 1
     assert "--bogus" in outputs[2]["errors"][0]["message"]
@@ -172,8 +194,17 @@ def test_errors_program_file_and_option(files):
 
 #: Keys of the stream controller's job report (feed hold, override, sections), documented
 #: with the stream's.
-JOB_KEYS = {"sections", "feed_override", "holds", "holds[].latency_s", "holds[].stop_s",
-            "holds[].stopped_at_mm", "notes", "notes[].line", "notes[].message"}  # fmt: skip
+JOB_KEYS = {
+    "sections",
+    "feed_override",
+    "holds",
+    "holds[].latency_s",
+    "holds[].stop_s",
+    "holds[].stopped_at_mm",
+    "notes",
+    "notes[].line",
+    "notes[].message",
+}
 
 
 def test_stream_report_keys_are_documented():
@@ -188,5 +219,5 @@ def test_limits_table_lists_every_limit():
     from nurbscnc.plan.explain import LIMIT_OF_KEY
 
     text = DOC.read_text(encoding="utf-8")
-    table = text[text.index("### Limits"):].split("\n## ")[0]
+    table = text[text.index("### Limits") :].split("\n## ")[0]
     assert set(re.findall(r"^\| `([^`]+)` \|", table, flags=re.M)) == set(LIMIT_OF_KEY)

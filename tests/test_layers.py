@@ -81,8 +81,9 @@ def part(module: str) -> str:
     return parts[1] if len(parts) > 1 else "__init__"
 
 
-GRAPH = {m: {t for t in map(existing, imports_of(p, m)) if t and t != m}
-         for m, p in MODULES.items()}  # fmt: skip
+GRAPH = {
+    m: {t for t in map(existing, imports_of(p, m)) if t and t != m} for m, p in MODULES.items()
+}
 
 
 def test_every_part_has_a_rank():
@@ -109,7 +110,7 @@ def test_no_import_cycles():
         stack.append(m)
         for t in sorted(GRAPH[m]):
             if state.get(t) == 1:
-                cycle = stack[stack.index(t):] + [t]
+                cycle = stack[stack.index(t) :] + [t]
                 pytest.fail("import cycle: " + " → ".join(cycle))
             if t not in state:
                 visit(t)
@@ -124,9 +125,14 @@ def test_no_import_cycles():
 def test_the_rule_catches_an_upward_import(tmp_path):
     """The reader sees imports inside functions and relative imports (a test of the test)."""
     src = tmp_path / "x.py"
-    src.write_text("def f():\n    from nurbscnc.interpolate.sample import Samples\n"
-                   "from ..interpolate import taylor\n")
+    src.write_text(
+        "def f():\n    from nurbscnc.interpolate.sample import Samples\n"
+        "from ..interpolate import taylor\n"
+    )
     found = {existing(m) for m in imports_of(src, "nurbscnc.plan.x")}
-    assert found == {"nurbscnc.interpolate.sample", "nurbscnc.interpolate.taylor",
-                     "nurbscnc.interpolate"}
+    assert found == {
+        "nurbscnc.interpolate.sample",
+        "nurbscnc.interpolate.taylor",
+        "nurbscnc.interpolate",
+    }
     assert RANK[part("nurbscnc.interpolate.sample")] > RANK[part("nurbscnc.plan.x")]

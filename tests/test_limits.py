@@ -28,23 +28,48 @@ NURBS = "G1 X0 Y0 F600\nG5.2 X0 Y0 P1 L3\nX10 Y10 P{w}\nX20 Y0 P1\nG5.3\nM2\n"
 #: machine can use (a billion turns, a subnormal feed, weights beyond 1e±9) are refused by
 #: the interpreter at the word; the rest by the checks before work at the line.
 UNBOUNDED = [
-    ("beyond_soft_limits", HEAD + "G1 X1000000 F600\nM2\n", "2:1",
-     ["soft limits", "X reaches 1e+06 mm", "[-1000, 1000]"]),
-    ("tiny_feed", HEAD + "G1 X1 F0.001\nM2\n", "2:1",
-     ["60000 s", "60000001 reference points", "limits.max_points = 50000000"]),
-    ("long_dwell", HEAD + "G1 X1 F600\nG4 P100000\nG1 X2\nM2\n", "3:1",
-     ["100000 s", "limits.max_points"]),
-    ("billion_turns", HEAD + "G1 X0 Y0 F600\nG2 X0 Y0 I1 J0 P1000000000\nM2\n", "3:16",
-     ["arc turns P1e+09", "at most 100000"]),
-    ("subnormal_feed", HEAD + "G1 X1 F0." + "0" * 320 + "1\nM2\n", "2:7",
-     ["feed F9.98013e-322 is out of range"]),
+    (
+        "beyond_soft_limits",
+        HEAD + "G1 X1000000 F600\nM2\n",
+        "2:1",
+        ["soft limits", "X reaches 1e+06 mm", "[-1000, 1000]"],
+    ),
+    (
+        "tiny_feed",
+        HEAD + "G1 X1 F0.001\nM2\n",
+        "2:1",
+        ["60000 s", "60000001 reference points", "limits.max_points = 50000000"],
+    ),
+    (
+        "long_dwell",
+        HEAD + "G1 X1 F600\nG4 P100000\nG1 X2\nM2\n",
+        "3:1",
+        ["100000 s", "limits.max_points"],
+    ),
+    (
+        "billion_turns",
+        HEAD + "G1 X0 Y0 F600\nG2 X0 Y0 I1 J0 P1000000000\nM2\n",
+        "3:16",
+        ["arc turns P1e+09", "at most 100000"],
+    ),
+    (
+        "subnormal_feed",
+        HEAD + "G1 X1 F0." + "0" * 320 + "1\nM2\n",
+        "2:7",
+        ["feed F9.98013e-322 is out of range"],
+    ),
     ("weight_1e9", HEAD + NURBS.format(w="1000000000"), "3:1", ["factor of 1e+09"]),
     ("weight_1e20", HEAD + NURBS.format(w="1" + "0" * 20), "4:9", ["weight P1e+20"]),
     ("weight_1e308", HEAD + NURBS.format(w="1" + "0" * 308), "4:9", ["weight P1e+308"]),
     # The fuzzer's find: a weight ~1.26e20 on the G5.2 line made `plan` exit 1 (int(NaN)).
-    ("weight_fuzz", HEAD + "G1 X0 Y0 F600\nG5.2 X0 Y0 P126107250882699979611 L3\nX10 Y10 P1\n"
-     "X20 Y0 P1\nG5.3\nM2\n", "3:12", ["weight P1.26107e+20"]),
-]  # fmt: skip
+    (
+        "weight_fuzz",
+        HEAD + "G1 X0 Y0 F600\nG5.2 X0 Y0 P126107250882699979611 L3\nX10 Y10 P1\n"
+        "X20 Y0 P1\nG5.3\nM2\n",
+        "3:12",
+        ["weight P1.26107e+20"],
+    ),
+]
 
 
 def invoke(args):
@@ -90,12 +115,14 @@ def test_point_cap_is_the_servo_clock_count(tmp_path):
     assert n > 1001  # acceleration and jerk make the plan longer than its lower bound
     cap = f"limits.max_points={n}"
     assert invoke(["run", src, "-o", out, "--dynamics", "off", "--set", cap]).exit_code == 0
-    low = invoke(["run", src, "-o", out, "--dynamics", "off", "--set",
-                  f"limits.max_points={n - 1}"])  # fmt: skip
+    low = invoke(
+        ["run", src, "-o", out, "--dynamics", "off", "--set", f"limits.max_points={n - 1}"]
+    )
     assert low.exit_code == 2
     assert f"{src}:2:1: error: the program's motion takes " in low.stderr
     assert f": {n} reference points at T_s = 1 ms, more than limits.max_points = {n - 1};" in (
-        low.stderr)
+        low.stderr
+    )
     assert "at least" not in low.stderr  # the planned time, not the bound
     before = invoke(["check", src, "--set", "limits.max_points=1000"])
     assert before.exit_code == 2 and "at least 1 s: 1001 reference points" in before.stderr
@@ -114,16 +141,19 @@ def arc_of(text):
     return next(s for s in prog.segments if s.kind == "arc")
 
 
-@pytest.mark.parametrize("text, lo, hi", [
-    # G2 (clockwise) quarter from (1, 0) to (0, −1) about the origin.
-    ("G0 X1 Y0\nG2 X0 Y-1 I-1 J0 F600\n", (0, -1, 0), (1, 0, 0)),
-    # G3 half circle from (1, 0) to (−1, 0): it passes y = 1.
-    ("G0 X1 Y0\nG3 X-1 Y0 I-1 J0 F600\n", (-1, 0, 0), (1, 1, 0)),
-    # A full G3 circle of radius 2 about (3, 4), rising 5 mm in Z (a helix).
-    ("G0 X5 Y4 Z0\nG3 X5 Y4 Z5 I-2 J0 F600\n", (1, 2, 0), (5, 6, 5)),
-    # ZX plane: G18 G2 from (X0, Z1) about the origin to (X1, Z0), three quarters of a turn.
-    ("G18\nG0 X0 Y0 Z1\nG2 X1 Z0 I0 K-1 F600\n", (-1, 0, -1), (1, 0, 1)),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "text, lo, hi",
+    [
+        # G2 (clockwise) quarter from (1, 0) to (0, −1) about the origin.
+        ("G0 X1 Y0\nG2 X0 Y-1 I-1 J0 F600\n", (0, -1, 0), (1, 0, 0)),
+        # G3 half circle from (1, 0) to (−1, 0): it passes y = 1.
+        ("G0 X1 Y0\nG3 X-1 Y0 I-1 J0 F600\n", (-1, 0, 0), (1, 1, 0)),
+        # A full G3 circle of radius 2 about (3, 4), rising 5 mm in Z (a helix).
+        ("G0 X5 Y4 Z0\nG3 X5 Y4 Z5 I-2 J0 F600\n", (1, 2, 0), (5, 6, 5)),
+        # ZX plane: G18 G2 from (X0, Z1) about the origin to (X1, Z0), three quarters of a turn.
+        ("G18\nG0 X0 Y0 Z1\nG2 X1 Z0 I0 K-1 F600\n", (-1, 0, -1), (1, 0, 1)),
+    ],
+)
 def test_arc_box_is_the_circle_extremes(text, lo, hi):
     box_lo, box_hi = arc_box_mm(arc_of(text))
     np.testing.assert_allclose(box_lo, lo, atol=1e-12)
@@ -138,7 +168,8 @@ def test_arc_bulging_past_the_limit_is_refused_at_its_line(tmp_path):
     result = invoke(["check", src])
     assert result.exit_code == 2
     assert f"{src}:3:1: error: the arc leaves the soft limits: Y reaches 1000.5 mm" in (
-        result.stderr)
+        result.stderr
+    )
     src.write_text(HEAD + "G0 X0 Y998\nG3 X0 Y998 I0 J0.75 F600\nM2\n")
     assert invoke(["check", src]).exit_code == 0
 
@@ -153,9 +184,14 @@ def test_nurbs_control_hull_outside_is_refused(tmp_path):
 
 # -- NURBS weights -----------------------------------------------------------------------------
 def nurbs(weights):
-    return Nurbs(2, frozen_array([0, 0, 0, 1, 1, 1]),
-                 frozen_array([[0, 0, 0], [10, 10, 0], [20, 0, 0]]), frozen_array(weights),
-                 10.0, 7)  # fmt: skip
+    return Nurbs(
+        2,
+        frozen_array([0, 0, 0, 1, 1, 1]),
+        frozen_array([[0, 0, 0], [10, 10, 0], [20, 0, 0]]),
+        frozen_array(weights),
+        10.0,
+        7,
+    )
 
 
 def test_weight_ratio_limit():

@@ -49,16 +49,22 @@ TOL_J = 8 * POINT_ERROR_MM / PERIOD_S**3
 #: Per-axis limits unlike each other and below the path limits (V 58.3 mm/s, A 2450 mm/s²,
 #: J 5e4 mm/s³) on x and y, a slow Z: [mm/min], [mm/s²], [mm/s³].
 AXES = {"x": (3000.0, 1500.0, 3e4), "y": (2400.0, 1000.0, 2e4), "z": (900.0, 600.0, 2e4)}
-AXIS_OVERRIDES = {f"axis_limits.{a}.{k}": val for a, vals in AXES.items()
-                  for k, val in zip(("v_max_mm_min", "a_max_mm_s2", "j_max_mm_s3"), vals)}
+AXIS_OVERRIDES = {
+    f"axis_limits.{a}.{k}": val
+    for a, vals in AXES.items()
+    for k, val in zip(("v_max_mm_min", "a_max_mm_s2", "j_max_mm_s3"), vals)
+}
 PATH = load_machine()
 AXIS = load_machine(overrides=AXIS_OVERRIDES)
 
 
 def finite_differences(points_mm: np.ndarray):
     """Velocity (N−1, 3), acceleration (N−2, 3), jerk (N−3, 3) of the samples."""
-    return (np.diff(points_mm, 1, axis=0) / PERIOD_S, np.diff(points_mm, 2, axis=0) / PERIOD_S**2,
-            np.diff(points_mm, 3, axis=0) / PERIOD_S**3)  # fmt: skip
+    return (
+        np.diff(points_mm, 1, axis=0) / PERIOD_S,
+        np.diff(points_mm, 2, axis=0) / PERIOD_S**2,
+        np.diff(points_mm, 3, axis=0) / PERIOD_S**3,
+    )
 
 
 def _arc(draw, p, cw):
@@ -84,8 +90,13 @@ def programs(draw):
         feed = draw(st.sampled_from([300.0, 900.0, 2000.0, 3500.0, 6000.0]))
         kind = draw(st.sampled_from(["line", "line3", "arc", "arc", "nurbs"]))
         if kind.startswith("line"):
-            d = np.array([draw(st.floats(-15, 15)), draw(st.floats(-15, 15)),
-                          draw(st.floats(-3, 3)) if kind == "line3" else 0.0])  # fmt: skip
+            d = np.array(
+                [
+                    draw(st.floats(-15, 15)),
+                    draw(st.floats(-15, 15)),
+                    draw(st.floats(-3, 3)) if kind == "line3" else 0.0,
+                ]
+            )
             if np.linalg.norm(d) < 0.05:
                 d = np.array([1.0, 0.5, 0.0])
             p = p + d
@@ -95,8 +106,10 @@ def programs(draw):
             p = np.array([end[0], end[1], p[2]])
             lines.append(f"{text} F{feed:g}")
         else:
-            ctrl = [p[:2] + np.array([draw(st.floats(-8, 8)), draw(st.floats(-8, 8))])
-                    for _ in range(draw(st.integers(2, 4)))]  # fmt: skip
+            ctrl = [
+                p[:2] + np.array([draw(st.floats(-8, 8)), draw(st.floats(-8, 8))])
+                for _ in range(draw(st.integers(2, 4)))
+            ]
             ctrl = [c + (k + 1) * np.array([1.5, 0.4]) for k, c in enumerate(ctrl)]  # no cusps
             lines.append(f"F{feed:g}")
             lines.append(f"G5.2 X{p[0]:.6f} Y{p[1]:.6f} P1 L{min(len(ctrl) + 1, 4)}")
@@ -123,8 +136,9 @@ def check_samples(text: str, machine, dynamics: str):
     the axis limits (with ``machine.axis_limits``) or the path acceleration vector ≤ √2·A_max
     (path limits alone: A_max holds tangentially and normally, each). Returns the run."""
     program = interpret_text(text)
-    result = run_program(program, machine, RunOptions(lookahead=LookaheadOptions(
-        dynamics=dynamics)))  # fmt: skip
+    result = run_program(
+        program, machine, RunOptions(lookahead=LookaheadOptions(dynamics=dynamics))
+    )
     v, a, j = finite_differences(result.samples.points_mm)
     speed = np.linalg.norm(v, axis=1)
     feed = _feed_of_samples(result, program.segments, machine)
@@ -148,9 +162,11 @@ def check_samples(text: str, machine, dynamics: str):
 #: Found by this test (session 5): a 0.42° break at F300 passed at speed under the path's
 #: jump rule while the Y axis's share of the jump exceeded its J_i T² (on the samples a jerk
 #: 7,647 mm/s³ over its limit); junctions.small_breaks now checks every axis.
-SMALL_BREAK_OVER_AXIS_JERK = ("G21 G90 G17 G94 G61\nG0 X0 Y0 Z0\n"
-                              "G1 X1.000000 Y0.500000 Z0.000000 F300\n"
-                              "G1 X2.640625 Y1.335938 Z0.000000 F300\nM2\n")  # fmt: skip
+SMALL_BREAK_OVER_AXIS_JERK = (
+    "G21 G90 G17 G94 G61\nG0 X0 Y0 Z0\n"
+    "G1 X1.000000 Y0.500000 Z0.000000 F300\n"
+    "G1 X2.640625 Y1.335938 Z0.000000 F300\nM2\n"
+)
 
 
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -165,9 +181,11 @@ def test_axis_limits_hold_on_the_samples(text, dynamics):
 #: was 0.9 % of its mean, so its curvature spiked from 1 to 11.5 /mm within 0.3 µm and X
 #: reached a jerk of 34,854 mm/s³ (limit 30,000) on the samples; blends that slow now fail
 #: the blend's regularity test (geometry/blendrules.py MIN_SPEED_RATIO).
-ARC_ARC_BLEND_OVER_AXIS_JERK = ("G21 G90 G17 G94 G64\nG0 X0 Y0 Z0\n"
-                                "G2 X1.464326 Y-1.006205 I0.472128 J-0.881530 F300\n"
-                                "G2 X0.544931 Y-2.689146 I-2.000000 J0.000000 F300\nM2\n")
+ARC_ARC_BLEND_OVER_AXIS_JERK = (
+    "G21 G90 G17 G94 G64\nG0 X0 Y0 Z0\n"
+    "G2 X1.464326 Y-1.006205 I0.472128 J-0.881530 F300\n"
+    "G2 X0.544931 Y-2.689146 I-2.000000 J0.000000 F300\nM2\n"
+)
 
 
 @pytest.mark.parametrize("dynamics", ["off", "local"])
@@ -182,8 +200,9 @@ def test_path_limits_hold_on_the_samples(text, dynamics):
     check_samples(text, PATH, dynamics)
 
 
-SQUARE_45 = ("G21 G90 G17 G94 G61\nG0 X0 Y0\nF6000\nG1 X10 Y10\nG1 X0 Y20\nG1 X-10 Y10\n"
-             "G1 X0 Y0\nM2\n")
+SQUARE_45 = (
+    "G21 G90 G17 G94 G61\nG0 X0 Y0\nF6000\nG1 X10 Y10\nG1 X0 Y20\nG1 X-10 Y10\nG1 X0 Y0\nM2\n"
+)
 
 
 def test_diagonal_square_reaches_the_axis_caps_and_holds_them():
@@ -191,9 +210,15 @@ def test_diagonal_square_reaches_the_axis_caps_and_holds_them():
     # raised (J too: 5e4 would keep the S-curve below A on 14 mm edges): a 45° edge may run at
     # √2·58.33 = 82.5 mm/s and accelerate at √2·2450; the samples show both axes at (almost)
     # their limits and never above.
-    over = {"limits.v_max_mm_min": 6000.0, "limits.a_max_mm_s2": 1e4, "limits.j_max_mm_s3": 1e7,
-            "axis_limits.x.v_max_mm_min": 3500.0, "axis_limits.x.a_max_mm_s2": 2450.0,
-            "axis_limits.y.v_max_mm_min": 3500.0, "axis_limits.y.a_max_mm_s2": 2450.0}
+    over = {
+        "limits.v_max_mm_min": 6000.0,
+        "limits.a_max_mm_s2": 1e4,
+        "limits.j_max_mm_s3": 1e7,
+        "axis_limits.x.v_max_mm_min": 3500.0,
+        "axis_limits.x.a_max_mm_s2": 2450.0,
+        "axis_limits.y.v_max_mm_min": 3500.0,
+        "axis_limits.y.a_max_mm_s2": 2450.0,
+    }
     m = load_machine(overrides=over)
     result = check_samples(SQUARE_45, m, "off")
     v, a, _ = finite_differences(result.samples.points_mm)
@@ -204,8 +229,9 @@ def test_diagonal_square_reaches_the_axis_caps_and_holds_them():
 
 # A line into an arc and an S of two arcs, all tangent (G1-continuous), passed at speed: the
 # curvature vector jumps at the joints, so the axis acceleration steps by v²|Δ(κn)_i|.
-TANGENT = ("G21 G90 G17 G94 G61\nG0 X0 Y0\nF3000\nG1 X10\nG3 X15 Y5 I0 J5\nG2 X20 Y10 I5 J0\n"
-           "G1 X30\nM2\n")
+TANGENT = (
+    "G21 G90 G17 G94 G61\nG0 X0 Y0\nF3000\nG1 X10\nG3 X15 Y5 I0 J5\nG2 X20 Y10 I5 J0\nG1 X30\nM2\n"
+)
 
 
 def test_axis_jerk_holds_at_curvature_jumps():
@@ -242,15 +268,17 @@ def test_curvature_jump_speed_is_the_closed_form(machine, j_mm_s3, share):
     _, _, jerk = finite_differences(result.samples.points_mm)
     t_j = float(result.plan.profile.piece_start_time_s[1])
     k = int(round(t_j / PERIOD_S))
-    window = np.abs(jerk[k - 4:k + 2, 1]).max()
+    window = np.abs(jerk[k - 4 : k + 2, 1]).max()
     assert 2.0 / 3.0 * budget * 0.97 <= window <= budget * 1.03
 
 
 def test_no_cap_where_nothing_jumps():
     # Two lines and an arc ended by a stop: no curvature jump passed at speed, no junction
     # cap; the cells of one NURBS (continuous curvature) neither.
-    text = ("G21 G90 G17 G94 G61\nG0 X0 Y0\nF3000\nG1 X10\nG1 X20\nG4 P0\nG3 X30 Y0 I5 J0\n"
-            "G5.2 X30 Y0 P1 L4\nX35 Y5 P1\nX40 Y-5 P1\nX45 Y0 P1\nG5.3\nM2\n")
+    text = (
+        "G21 G90 G17 G94 G61\nG0 X0 Y0\nF3000\nG1 X10\nG1 X20\nG4 P0\nG3 X30 Y0 I5 J0\n"
+        "G5.2 X30 Y0 P1 L4\nX35 Y5 P1\nX40 Y-5 P1\nX45 Y0 P1\nG5.3\nM2\n"
+    )
     program = interpret_text(text)
     result = run_program(program, PATH, RunOptions(lookahead=LookaheadOptions(dynamics="off")))
     pieces = result.plan.pieces
@@ -261,14 +289,18 @@ def test_no_cap_where_nothing_jumps():
     assert np.all(_junction_speeds(result) <= 50.0 + 1e-9)
 
 
-LINUXCNC_AXES = {"limits.v_max_mm_min": 6000.0, "limits.a_max_mm_s2": 1e4,
-                 "limits.j_max_mm_s3": 1e7, "axis_limits.x.v_max_mm_min": 3500.0,
-                 "axis_limits.x.a_max_mm_s2": 2450.0, "axis_limits.y.v_max_mm_min": 3500.0,
-                 "axis_limits.y.a_max_mm_s2": 2450.0}  # fmt: skip
+LINUXCNC_AXES = {
+    "limits.v_max_mm_min": 6000.0,
+    "limits.a_max_mm_s2": 1e4,
+    "limits.j_max_mm_s3": 1e7,
+    "axis_limits.x.v_max_mm_min": 3500.0,
+    "axis_limits.x.a_max_mm_s2": 2450.0,
+    "axis_limits.y.v_max_mm_min": 3500.0,
+    "axis_limits.y.a_max_mm_s2": 2450.0,
+}
 
 
-@pytest.mark.parametrize(("r", "start_deg"), [(2.0, 0.0), (2.0, 40.0), (5.0, 20.0),
-                                              (20.0, 70.0)])
+@pytest.mark.parametrize(("r", "start_deg"), [(2.0, 0.0), (2.0, 40.0), (5.0, 20.0), (20.0, 70.0)])
 def test_circle_from_rest_uses_the_axis_acceleration_and_holds_it(r, start_deg):
     # A full circle started and ended at rest, F6000, LinuxCNC's sim axes, path limits out of
     # the way: speeding up along the circle the tangential and centripetal parts add up on
@@ -277,8 +309,10 @@ def test_circle_from_rest_uses_the_axis_acceleration_and_holds_it(r, start_deg):
     # 2681 mm/s² if the tangential part were not reduced by the centripetal one).
     th = math.radians(start_deg)
     x, y = r * math.cos(th), r * math.sin(th)
-    text = (f"G21 G90 G17 G94 G61\nG0 X{x:.9f} Y{y:.9f}\nF6000\n"
-            f"G3 X{x:.9f} Y{y:.9f} I{-x:.9f} J{-y:.9f}\nM2\n")
+    text = (
+        f"G21 G90 G17 G94 G61\nG0 X{x:.9f} Y{y:.9f}\nF6000\n"
+        f"G3 X{x:.9f} Y{y:.9f} I{-x:.9f} J{-y:.9f}\nM2\n"
+    )
     result = check_samples(text, load_machine(overrides=LINUXCNC_AXES), "off")
     v, a, _ = finite_differences(result.samples.points_mm)
     assert np.abs(a).max() == pytest.approx(2450.0, rel=1e-3)
@@ -295,8 +329,10 @@ def test_circle_with_axis_jerk_limits_reaches_and_holds_them(r):
     # where the peak lands on an axis).
     over = {**LINUXCNC_AXES, "axis_limits.x.j_max_mm_s3": 5e4, "axis_limits.y.j_max_mm_s3": 5e4}
     x = y = r / math.sqrt(2.0)
-    text = (f"G21 G90 G17 G94 G61\nG0 X{x:.9f} Y{y:.9f}\nF6000\n"
-            f"G3 X{x:.9f} Y{y:.9f} I{-x:.9f} J{-y:.9f}\nM2\n")
+    text = (
+        f"G21 G90 G17 G94 G61\nG0 X{x:.9f} Y{y:.9f}\nF6000\n"
+        f"G3 X{x:.9f} Y{y:.9f} I{-x:.9f} J{-y:.9f}\nM2\n"
+    )
     result = check_samples(text, load_machine(overrides=over), "off")
     _, _, j = finite_differences(result.samples.points_mm)
     on_arc = result.samples.piece[3:] == 1

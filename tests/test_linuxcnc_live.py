@@ -135,8 +135,10 @@ def random_program(seed: int) -> str:
             words.append(f"{letter}{value:.6f}")
         if kind in ("G2", "G3"):
             a, b, _ = planes[plane]
-            words += [f"{centre_letters[a]}{centre[a] - pos[a]:.6f}",
-                      f"{centre_letters[b]}{centre[b] - pos[b]:.6f}"]  # fmt: skip
+            words += [
+                f"{centre_letters[a]}{centre[a] - pos[a]:.6f}",
+                f"{centre_letters[b]}{centre[b] - pos[b]:.6f}",
+            ]
             if rnd.random() < 0.15:
                 words.append("P2")
         if inverse_time:  # short moves at low F meet LinuxCNC's 0.1 units/min floor
@@ -173,10 +175,12 @@ def random_cycle_program(seed: int) -> str:
     plane = rnd.choice(["G17", "G18", "G19"])
     depth = {"G17": "Z", "G18": "Y", "G19": "X"}[plane]
     others = {"G17": "XY", "G18": "ZX", "G19": "YZ"}[plane]
-    lines = [f"{'G20' if inch else 'G21'} {plane} G90 F{rnd.uniform(50, 500) * k:.4f}",
-             rnd.choice(["M3 S1000", "M4 S1000", "M5"]),
-             f"G0 X{rnd.uniform(-20, 20) * k:.4f} Y{rnd.uniform(-20, 20) * k:.4f} "
-             f"Z{rnd.uniform(-20, 20) * k:.4f}"]  # fmt: skip
+    lines = [
+        f"{'G20' if inch else 'G21'} {plane} G90 F{rnd.uniform(50, 500) * k:.4f}",
+        rnd.choice(["M3 S1000", "M4 S1000", "M5"]),
+        f"G0 X{rnd.uniform(-20, 20) * k:.4f} Y{rnd.uniform(-20, 20) * k:.4f} "
+        f"Z{rnd.uniform(-20, 20) * k:.4f}",
+    ]
     code = None
     for _ in range(rnd.randint(2, 6)):
         if code is None or rnd.random() < 0.5:
@@ -195,8 +199,10 @@ def random_cycle_program(seed: int) -> str:
                 words.append(f"{letter}{rnd.uniform(-15, 15) * k:.4f}")
         if not sticky or rnd.random() < 0.5:
             if incremental:
-                words += [f"R{rnd.uniform(-8, 1) * k:.4f}",
-                          f"{depth}{rnd.uniform(-9, 0.5) * k:.4f}"]  # fmt: skip
+                words += [
+                    f"R{rnd.uniform(-8, 1) * k:.4f}",
+                    f"{depth}{rnd.uniform(-9, 0.5) * k:.4f}",
+                ]
             else:
                 r = rnd.uniform(-5, 10)
                 words += [f"R{r * k:.4f}", f"{depth}{(r - rnd.uniform(-0.5, 12)) * k:.4f}"]
@@ -206,8 +212,11 @@ def random_cycle_program(seed: int) -> str:
         if code in dwells and (not sticky or rnd.random() < 0.3):
             words.append(f"P{rnd.uniform(0, 1):.3f}")
         if code == "G87" and (not sticky or rnd.random() < 0.3):
-            words += [f"I{rnd.uniform(-2, 2) * k:.4f}", f"J{rnd.uniform(-2, 2) * k:.4f}",
-                      f"K{rnd.uniform(-6, 6) * k:.4f}"]  # fmt: skip
+            words += [
+                f"I{rnd.uniform(-2, 2) * k:.4f}",
+                f"J{rnd.uniform(-2, 2) * k:.4f}",
+                f"K{rnd.uniform(-6, 6) * k:.4f}",
+            ]
         if rnd.random() < 0.3:
             words.append(f"L{rnd.randint(1, 4)}")
         lines.append(" ".join(words))
@@ -247,8 +256,10 @@ def random_comp_program(seed: int) -> str:
     rnd = random.Random(5000 + seed)
     inch = rnd.random() < 0.2
     k = 1 / 25.4 if inch else 1.0
-    lines = [f"{'G20' if inch else 'G21'} G17 G90 G40 F{rnd.uniform(100, 900) * k:.4f}",
-             f"G0 X{-30 * k:.4f} Y{-30 * k:.4f} Z0"]  # fmt: skip
+    lines = [
+        f"{'G20' if inch else 'G21'} G17 G90 G40 F{rnd.uniform(100, 900) * k:.4f}",
+        f"G0 X{-30 * k:.4f} Y{-30 * k:.4f} Z0",
+    ]
     side = rnd.choice(["G41.1", "G42.1"])
     lines.append(f"{side} D{rnd.uniform(0.5, 6) * k:.4f}")
     pos = [rnd.uniform(-10, 10), rnd.uniform(-10, 10)]

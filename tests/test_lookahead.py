@@ -89,8 +89,11 @@ def test_samples_lie_on_the_programmed_curve(airfoil_plan):
 
 def _menger_curvature(a, b, c):
     """Curvature [1/mm] of the circle through three points (4·area / product of sides)."""
-    ab, bc, ca = (np.linalg.norm(b - a, axis=1), np.linalg.norm(c - b, axis=1),
-                  np.linalg.norm(a - c, axis=1))  # fmt: skip
+    ab, bc, ca = (
+        np.linalg.norm(b - a, axis=1),
+        np.linalg.norm(c - b, axis=1),
+        np.linalg.norm(a - c, axis=1),
+    )
     area2 = np.linalg.norm(np.cross(b - a, c - a), axis=1)
     return 2.0 * area2 / np.maximum(ab * bc * ca, 1e-300)
 
@@ -112,8 +115,11 @@ def test_feed_fluctuation_on_exact_pieces_is_below_1e_6(airfoil_plan):
     # where the curvature jumps.
     kinds = np.array([p.name for p in plan.plan.pieces])
     curve_key = np.where(kinds == "nurbs", -1, np.arange(kinds.size))[plan.samples.piece]
-    same = (curve_key[1:-2] == curve_key[2:-1]) & (curve_key[2:-1] == curve_key[3:]) & (
-        curve_key[:-3] == curve_key[1:-2])
+    same = (
+        (curve_key[1:-2] == curve_key[2:-1])
+        & (curve_key[2:-1] == curve_key[3:])
+        & (curve_key[:-3] == curve_key[1:-2])
+    )
     on_curve = plan.samples.piece[1:-2] >= 1
     sel = same & on_curve & (ds_k > 1e-3)
     arc = c_k * (1.0 + (kappa_k * c_k) ** 2 / 24.0)
@@ -133,14 +139,14 @@ def test_contour_error_within_limit_and_faster_than_paper(airfoil_plan):
     first_cut = int(np.argmax(smp.piece >= 1))  # piece 0 is the rapid to the trailing edge
     curve = NurbsCurve.from_segment(prog.segments[1])
     dense = curve.point(np.linspace(curve.u_start, curve.u_end, 400_001))
-    d_mm = distance_to_polyline_mm(actual[first_cut + 1:], dense)
+    d_mm = distance_to_polyline_mm(actual[first_cut + 1 :], dense)
     lim = MACHINE.limits
     assert d_mm.max() <= lim.contour_tolerance_mm + lim.ph_tolerance_mm + 1e-5
     # The check is not idle: the kinematic plan alone misses ε_max on the same curve.
     off = _run(prog, dynamics="off")
     a_off = lsim_actual_mm(off.samples.points_mm, MACHINE)
     first_off = int(np.argmax(off.samples.piece >= 1))
-    assert distance_to_polyline_mm(a_off[first_off + 1:], dense).max() > lim.contour_tolerance_mm
+    assert distance_to_polyline_mm(a_off[first_off + 1 :], dense).max() > lim.contour_tolerance_mm
     nurbs_time = segment_times_s(run.plan)[1]
     assert nurbs_time < 0.9455  # the paper's PH look-ahead on its airfoil (Table 4)
 
@@ -204,9 +210,23 @@ def test_batch_run_reports_failures_and_writes_the_others(tmp_path):
     outdir = tmp_path / "out"
     # A process of its own, as a user runs it: the workers are forked, and a fork of this
     # test process (threads left by earlier tests, holding locks) can hang in the worker.
-    res = subprocess.run([sys.executable, "-m", "nurbscnc", "run", str(good), str(bad),
-                          "--output-dir", str(outdir), "--jobs", "2"],
-                         capture_output=True, text=True, timeout=300)  # fmt: skip
+    res = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "nurbscnc",
+            "run",
+            str(good),
+            str(bad),
+            "--output-dir",
+            str(outdir),
+            "--jobs",
+            "2",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert res.returncode == 2
     assert (outdir / "good.csv").exists() and not (outdir / "bad.csv").exists()
     assert "bad.nc:3" in res.stderr

@@ -517,7 +517,8 @@ def test_program_bound_reuses_the_plans_own_curves_only():
     plain = program_lower_bound_s(prog.segments, machine)
     assert program_lower_bound_s(prog.segments, machine, curves=curves) == plain
     # Another curve (the NACA's control points moved off by 0.1 mm) is refused.
-    other = NurbsCurve(curves[i].degree, curves[i].knots, curves[i].control_points_mm + 0.1,
-                       curves[i].weights)  # fmt: skip
+    other = NurbsCurve(
+        curves[i].degree, curves[i].knots, curves[i].control_points_mm + 0.1, curves[i].weights
+    )
     assert lowerbound._programmed_geometry(prog.segments[i], other) is not other
     assert program_lower_bound_s(prog.segments, machine, curves={i: other}) == plain

@@ -20,11 +20,13 @@ from nurbscnc.machine.profile import (
 
 # SPEC §8 Table 2 (paper Table 2), transcribed independently of the TOML file.
 TABLE2 = {
-    "x": dict(a0=1.938e9, a1=3.538e7, a2=2.135e5, a3=6.984e2, a4=1.0,
-              b0=1.938e9, b1=3.476e7, b2=1.471e5),
-    "y": dict(a0=1.904e9, a1=3.496e7, a2=2.120e5, a3=6.948e2, a4=1.0,
-              b0=1.904e9, b1=3.435e7, b2=1.466e5),
-}  # fmt: skip
+    "x": dict(
+        a0=1.938e9, a1=3.538e7, a2=2.135e5, a3=6.984e2, a4=1.0, b0=1.938e9, b1=3.476e7, b2=1.471e5
+    ),
+    "y": dict(
+        a0=1.904e9, a1=3.496e7, a2=2.120e5, a3=6.948e2, a4=1.0, b0=1.904e9, b1=3.435e7, b2=1.466e5
+    ),
+}
 
 
 @pytest.fixture(scope="module")
@@ -70,7 +72,11 @@ def test_parse_text_and_file_agree(machine, tmp_path):
     from_text = parse_machine(default_profile_text(), "x")
     for m in (from_file, from_text):
         assert (m.limits, m.servo, m.steps, m.soft_limits) == (
-            machine.limits, machine.servo, machine.steps, machine.soft_limits)  # fmt: skip
+            machine.limits,
+            machine.servo,
+            machine.steps,
+            machine.soft_limits,
+        )
     assert from_file.source == str(path)
 
 
@@ -80,8 +86,14 @@ def test_missing_file_is_output_error(tmp_path):
 
 
 def test_overrides():
-    m = load_machine(overrides={"limits.a_max_mm_s2": 1000, "limits.j_max_mm_s3": "2e4",
-                                "limits.rapid_mm_min": 6000.0, "servo.period_ms": 0.5})  # fmt: skip
+    m = load_machine(
+        overrides={
+            "limits.a_max_mm_s2": 1000,
+            "limits.j_max_mm_s3": "2e4",
+            "limits.rapid_mm_min": 6000.0,
+            "servo.period_ms": 0.5,
+        }
+    )
     assert m.limits.a_max_mm_s2 == 1000.0
     assert m.limits.j_max_mm_s3 == 2e4
     assert m.limits.rapid_mm_s == 100.0
@@ -274,14 +286,18 @@ def test_simple_form_bandwidth_is_minus_3_db(zeta, f_bw):
     _, h = signal.freqs([wn * wn], [1.0, 2.0 * zeta * wn, wn * wn], worN=[2 * math.pi * f_bw])
     assert abs(h[0]) == pytest.approx(1 / math.sqrt(2), rel=1e-12)
     # ... and it is the only crossing: above f_bw the gain stays below 1/√2.
-    _, h = signal.freqs([wn * wn], [1.0, 2.0 * zeta * wn, wn * wn],
-                        worN=2 * math.pi * f_bw * np.linspace(1.001, 50, 400))  # fmt: skip
+    _, h = signal.freqs(
+        [wn * wn],
+        [1.0, 2.0 * zeta * wn, wn * wn],
+        worN=2 * math.pi * f_bw * np.linspace(1.001, 50, 400),
+    )
     assert np.all(np.abs(h) < 1 / math.sqrt(2))
 
 
 def test_simple_form_at_butterworth_damping_has_wn_equal_bandwidth():
     assert natural_frequency_rad_s(25.0, 1 / math.sqrt(2)) == pytest.approx(
-        2 * math.pi * 25.0, rel=1e-14)  # fmt: skip
+        2 * math.pi * 25.0, rel=1e-14
+    )
 
 
 @pytest.mark.parametrize("zeta", [0.2, 0.7, 1.0, 2.0])
@@ -310,8 +326,10 @@ def test_simple_form_simulates_as_scipy_lsim():
     r = np.where(t < 0.1, 0.0, 5.0 * (t - 0.1)) + 0.3 * np.sin(2 * np.pi * 8 * t)
     _, y_ref, _ = signal.lsim(([wn * wn], [1.0, 2 * zeta * wn, wn * wn]), r, t)
     # An override of the simple form's keys replaces the file's coefficients of that axis.
-    m = parse_machine(default_profile_text(), overrides={
-        "servo.x.bandwidth_hz": f_bw, "servo.x.damping": str(zeta)})  # fmt: skip
+    m = parse_machine(
+        default_profile_text(),
+        overrides={"servo.x.bandwidth_hz": f_bw, "servo.x.damping": str(zeta)},
+    )
     assert m.servo.x == AxisServo.second_order(f_bw, zeta)
     assert m.servo.y == load_machine().servo.y
     y = simulate_axis(m.servo.x, r, T, settle=False)
@@ -365,8 +383,10 @@ def test_discovery_order(tmp_path):
     env["XDG_CONFIG_HOME"] = str(xdg)
     assert find_machine(None, env, str(cwd)) == (None, FOUND_BY_DEFAULT)
     (xdg / "nurbscnc" / "machine.toml").write_text("")
-    assert find_machine(None, env, str(cwd)) == (str(xdg / "nurbscnc" / "machine.toml"),
-                                                 FOUND_BY_USER)  # fmt: skip
+    assert find_machine(None, env, str(cwd)) == (
+        str(xdg / "nurbscnc" / "machine.toml"),
+        FOUND_BY_USER,
+    )
     (cwd / "nurbscnc.toml").write_text("")
     assert find_machine(None, env, str(cwd)) == (str(cwd / "nurbscnc.toml"), FOUND_BY_LOCAL)
     env["NURBSCNC_MACHINE"] = ""  # empty: not set
@@ -390,10 +410,14 @@ def test_axis_limits_absent_by_default(machine):
 
 
 def test_axis_limits_in_internal_units():
-    m = load_machine(overrides={"axis_limits.x.v_max_mm_min": 3500.0,
-                                "axis_limits.y.a_max_mm_s2": 1200,
-                                "axis_limits.z.j_max_mm_s3": "2e4",
-                                "axis_limits.z.v_max_mm_min": 600})  # fmt: skip
+    m = load_machine(
+        overrides={
+            "axis_limits.x.v_max_mm_min": 3500.0,
+            "axis_limits.y.a_max_mm_s2": 1200,
+            "axis_limits.z.j_max_mm_s3": "2e4",
+            "axis_limits.z.v_max_mm_min": 600,
+        }
+    )
     ax = m.axis_limits
     assert ax.any
     assert ax.v_max_mm_s == (3500.0 / 60.0, math.inf, 10.0)  # mm/min → mm/s
@@ -406,13 +430,16 @@ def test_axis_limits_in_internal_units():
 def test_axis_limits_from_a_file_and_shown_round_trip():
     text = default_profile_text() + (
         "\n[axis_limits.x]\nv_max_mm_min = 3000.0\na_max_mm_s2 = 800.0\nj_max_mm_s3 = 2.0e4\n"
-        "\n[axis_limits.z]\nv_max_mm_min = 1200.0\n")
+        "\n[axis_limits.z]\nv_max_mm_min = 1200.0\n"
+    )
     m = parse_machine(text, "axes.toml")
     assert m.axis_limits.v_max_mm_s == (50.0, math.inf, 20.0)
     assert m.axis_limits.a_max_mm_s2 == (800.0, math.inf, math.inf)
     shown = profile_toml(m)
-    assert "[axis_limits.x]\nv_max_mm_min = 3000.0\na_max_mm_s2 = 800.0\nj_max_mm_s3 = 20000.0" \
+    assert (
+        "[axis_limits.x]\nv_max_mm_min = 3000.0\na_max_mm_s2 = 800.0\nj_max_mm_s3 = 20000.0"
         in shown
+    )
     again = parse_machine(shown, "shown.toml")
     assert again.axis_limits == m.axis_limits
 
@@ -449,7 +476,7 @@ def test_invalid_axis_limits_name_the_key(overrides, key, words):
 
 BAD_AXIS_TEXTS = [
     ("[axis_limits.x]\nv_max_mm_min = -1.0\n", "axis_limits.x.v_max_mm_min", "> 0"),
-    ("[axis_limits.y]\na_max_mm_s2 = \"2450\"\n", "axis_limits.y.a_max_mm_s2", "number"),
+    ('[axis_limits.y]\na_max_mm_s2 = "2450"\n', "axis_limits.y.a_max_mm_s2", "number"),
     ("[axis_limits.x]\nmax_velocity = 1.0\n", "axis_limits.x.max_velocity", "not a known key"),
     ("[axis_limits.a]\nv_max_mm_min = 1.0\n", "axis_limits.a", "not a known key"),
     ("[axis_limits]\nx = 3.0\n", "axis_limits.x", "must be a table"),
@@ -459,8 +486,11 @@ BAD_AXIS_TEXTS = [
 
 @pytest.mark.parametrize(("extra", "key", "words"), BAD_AXIS_TEXTS)
 def test_invalid_axis_limit_files_name_the_key(extra, key, words):
-    text = (extra + default_profile_text()) if extra.startswith("axis_limits =") else (
-        default_profile_text() + "\n" + extra)
+    text = (
+        (extra + default_profile_text())
+        if extra.startswith("axis_limits =")
+        else (default_profile_text() + "\n" + extra)
+    )
     with pytest.raises(ConfigError) as info:
         parse_machine(text, "bad.toml")
     assert info.value.message.startswith("bad.toml: ")

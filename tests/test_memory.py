@@ -22,8 +22,9 @@ import sys
 import numpy as np
 import pytest
 
-pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"),
-                                reason="reads VmPeak from /proc (Linux)")  # fmt: skip
+pytestmark = pytest.mark.skipif(
+    not sys.platform.startswith("linux"), reason="reads VmPeak from /proc (Linux)"
+)
 
 #: The child reports its own peak virtual size [kB] on stderr as it exits.
 CHILD = r"""
@@ -50,14 +51,14 @@ FEED_MM_MIN = 40.0  # 0.667 mm/s: 24 moves of 150 mm take 1.5 h
 def long_program() -> str:
     corners = [(150, 0), (150, 150), (0, 150), (0, 0)]
     moves = [f"G1 X{x} Y{y}" for x, y in (corners[k % 4] for k in range(24))]
-    return "\n".join(["G21 G17 G90 G94", "G0 X0 Y0 Z0", f"F{FEED_MM_MIN:g}", *moves,
-                      "M2"]) + "\n"  # fmt: skip
+    return "\n".join(["G21 G17 G90 G94", "G0 X0 Y0 Z0", f"F{FEED_MM_MIN:g}", *moves, "M2"]) + "\n"
 
 
 def run_capped(args, cap_bytes=None):
     env = dict(os.environ, NURBSCNC_TEST_AS_CAP=str(cap_bytes or 0))
-    proc = subprocess.run([sys.executable, "-c", CHILD, *args], capture_output=True,
-                          text=True, env=env, timeout=900)  # fmt: skip
+    proc = subprocess.run(
+        [sys.executable, "-c", CHILD, *args], capture_output=True, text=True, env=env, timeout=900
+    )
     peaks = [int(x.split()[1]) for x in proc.stderr.splitlines() if x.startswith("VMPEAK ")]
     return proc, peaks[-1] * 1024 if peaks else None
 
@@ -71,8 +72,9 @@ def test_run_of_hours_of_motion_fits_under_a_cap_whole_arrays_exceed(tmp_path):
 
     small = tmp_path / "one.nc"
     small.write_text("G21 G90\nG1 X1 F600\nM2\n")
-    proc, startup = run_capped(["run", str(small), "-o", str(tmp_path / "one.npz"),
-                                "--dynamics", "off", "--quiet"])  # fmt: skip
+    proc, startup = run_capped(
+        ["run", str(small), "-o", str(tmp_path / "one.npz"), "--dynamics", "off", "--quiet"]
+    )
     assert proc.returncode == 0, proc.stderr
     assert startup is not None
 
@@ -86,8 +88,9 @@ def test_run_of_hours_of_motion_fits_under_a_cap_whole_arrays_exceed(tmp_path):
     assert 88 * n > 2 * HEADROOM  # whole arrays would not fit: the cap means something
 
     out = tmp_path / "points.npz"
-    proc, peak = run_capped(["run", str(prog), "-o", str(out), "--dynamics", "off", "--json"],
-                            startup + HEADROOM)  # fmt: skip
+    proc, peak = run_capped(
+        ["run", str(prog), "-o", str(out), "--dynamics", "off", "--json"], startup + HEADROOM
+    )
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert peak is not None and peak <= startup + HEADROOM
     summary = json.loads(proc.stdout)

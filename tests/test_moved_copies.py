@@ -22,8 +22,16 @@ from nurbscnc.program.interpret import interpret_text
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
 from scale_bench import airfoils_program  # noqa: E402
 
-COLUMNS = ("length_mm", "v_cap_mm_s", "kappa_max_per_mm", "kind", "rapid", "stop_after",
-           "pass_after", "blend_mm")  # fmt: skip
+COLUMNS = (
+    "length_mm",
+    "v_cap_mm_s",
+    "kappa_max_per_mm",
+    "kind",
+    "rapid",
+    "stop_after",
+    "pass_after",
+    "blend_mm",
+)
 
 
 def _nurbs_rows(pieces, segment: int) -> np.ndarray:
@@ -58,17 +66,24 @@ def test_a_moved_airfoil_gets_the_pieces_it_would_get_alone():
         # differs from the original's by 1e-11 relative: derivatives of a curve 70 mm from
         # the origin carry that much rounding (so do the caps it sets).
         for name in COLUMNS:
-            np.testing.assert_allclose(np.asarray(getattr(whole, name))[mine].astype(float),
-                                       np.asarray(getattr(alone, name))[theirs].astype(float),
-                                       rtol=1e-10, atol=1e-12, err_msg=name)  # fmt: skip
+            np.testing.assert_allclose(
+                np.asarray(getattr(whole, name))[mine].astype(float),
+                np.asarray(getattr(alone, name))[theirs].astype(float),
+                rtol=1e-10,
+                atol=1e-12,
+                err_msg=name,
+            )
         for name in ("start_mm", "end_mm", "tangent_start", "tangent_end"):
-            np.testing.assert_allclose(getattr(whole, name)[:, mine],
-                                       getattr(alone, name)[:, theirs], rtol=0, atol=1e-11)
+            np.testing.assert_allclose(
+                getattr(whole, name)[:, mine], getattr(alone, name)[:, theirs], rtol=0, atol=1e-11
+            )
         # Points along every piece (NURBS cells on the copy's own curve, PH corners moved).
-        np.testing.assert_allclose(_sample_points(whole, mine), _sample_points(alone, theirs),
-                                   rtol=0, atol=1e-11)  # fmt: skip
-        assert np.array_equal(whole.line[mine], alone.line[theirs] - alone.line[theirs][0]
-                              + whole.line[mine][0])  # fmt: skip
+        np.testing.assert_allclose(
+            _sample_points(whole, mine), _sample_points(alone, theirs), rtol=0, atol=1e-11
+        )
+        assert np.array_equal(
+            whole.line[mine], alone.line[theirs] - alone.line[theirs][0] + whole.line[mine][0]
+        )
 
 
 def test_translation_is_found_to_rounding_only():
@@ -97,8 +112,9 @@ def test_translation_is_found_to_rounding_only():
     np.testing.assert_allclose(moved.arc_length(u), base.arc_length(u), rtol=0, atol=1e-12)
     fresh = NurbsCurve(3, knots, ctrl + delta, weights)
     s = np.linspace(0.0, base.length_mm, 101)
-    np.testing.assert_allclose(moved.points_at_length(s)[0], fresh.points_at_length(s)[0],
-                               rtol=0, atol=1e-9)  # fmt: skip
+    np.testing.assert_allclose(
+        moved.points_at_length(s)[0], fresh.points_at_length(s)[0], rtol=0, atol=1e-9
+    )
 
 
 def test_a_bent_copy_is_planned_afresh():
@@ -112,15 +128,17 @@ def test_a_bent_copy_is_planned_afresh():
     words = [f"Y{float(w[1:]) + 1e-3:.6f}" if w.startswith("Y") else w for w in words]
     lines[third + 5] = " ".join(words)
     whole = segment_pieces(interpret_text("\n".join(lines) + "\n").segments, machine)
-    alone = segment_pieces(interpret_text(_copy_alone("\n".join(lines) + "\n", 2)).segments,
-                           machine)  # fmt: skip
+    alone = segment_pieces(
+        interpret_text(_copy_alone("\n".join(lines) + "\n", 2)).segments, machine
+    )
     segs = sorted({int(s) for s, k in zip(whole.segment, whole.kind) if k == 4})
     mine = _nurbs_rows(whole, segs[2])
     theirs = _nurbs_rows(alone, int(alone.segment[np.asarray(alone.kind) == 4][0]))
     np.testing.assert_allclose(whole.v_cap_mm_s[mine], alone.v_cap_mm_s[theirs], rtol=1e-12)
     first = _nurbs_rows(whole, segs[0])
-    assert not np.allclose(whole.kappa_max_per_mm[mine], whole.kappa_max_per_mm[first],
-                           rtol=1e-6, atol=0)  # fmt: skip
+    assert not np.allclose(
+        whole.kappa_max_per_mm[mine], whole.kappa_max_per_mm[first], rtol=1e-6, atol=0
+    )
 
 
 def test_the_lower_bound_grids_a_copy_once_with_the_same_bound(monkeypatch):
@@ -137,8 +155,11 @@ def test_the_lower_bound_grids_a_copy_once_with_the_same_bound(monkeypatch):
     bound = program_lower_bound_s(prog.segments, machine)
     assert calls == [1]  # four airfoils, one grid
     # Each curve gridded on its own (no copies found): the same bound to rounding.
-    monkeypatch.setattr(lowerbound, "_moved_copies",
-                        lambda path, rows, top: (np.arange(rows.size), np.arange(rows.size)))
+    monkeypatch.setattr(
+        lowerbound,
+        "_moved_copies",
+        lambda path, rows, top: (np.arange(rows.size), np.arange(rows.size)),
+    )
     calls.clear()
     alone = program_lower_bound_s(prog.segments, machine)
     assert calls == [4]
@@ -156,8 +177,7 @@ def _with_before_copy(text: str, which: int, inserted: str) -> str:
 def test_a_copy_at_another_feed_or_blend_is_its_own(inserted):
     """The second airfoil at another F (or G64 P) gets its own caps: those it gets alone."""
     machine = load_machine()
-    text = _with_before_copy(airfoils_program(count=2, chord_mm=20.0, pitch_mm=35.0), 1,
-                             inserted)  # fmt: skip
+    text = _with_before_copy(airfoils_program(count=2, chord_mm=20.0, pitch_mm=35.0), 1, inserted)
     whole = segment_pieces(interpret_text(text).segments, machine)
     segs = sorted({int(s) for s, k in zip(whole.segment, whole.kind) if k == 4})
     lines = text.splitlines()
@@ -170,8 +190,9 @@ def test_a_copy_at_another_feed_or_blend_is_its_own(inserted):
     np.testing.assert_allclose(whole.blend_mm[mine], alone.blend_mm[theirs], rtol=0, atol=0)
     first = _nurbs_rows(whole, segs[0])
     if inserted.startswith("F"):  # the feed changed the cells or caps a copy would have kept
-        assert mine.size != first.size or not np.allclose(whole.v_cap_mm_s[mine],
-                                                          whole.v_cap_mm_s[first])  # fmt: skip
+        assert mine.size != first.size or not np.allclose(
+            whole.v_cap_mm_s[mine], whole.v_cap_mm_s[first]
+        )
     else:  # the blend tolerance is the copy's own
         assert whole.blend_mm[mine][0] == 0.05 != whole.blend_mm[first][0]
 

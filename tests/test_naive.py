@@ -51,6 +51,7 @@ def _reference_chains(pts: list, tol_mm: float) -> list[tuple[int, int]]:
 
 def _reference_merge(segs: list) -> tuple[list[tuple], list[int]]:
     """(start, end) of every merged segment and its origin, by the scalar algorithm."""
+
     def mergeable(s):
         return s.kind == "line" and getattr(s, "naive_mm", 0.0) > 0.0
 
@@ -62,9 +63,12 @@ def _reference_merge(segs: list) -> tuple[list[tuple], list[int]]:
             i += 1
             continue
         j = i + 1
-        while (j < n and mergeable(segs[j])
-               and (segs[j].feed_mm_s, segs[j].blend_mm, segs[j].naive_mm)
-               == (segs[j - 1].feed_mm_s, segs[j - 1].blend_mm, segs[j - 1].naive_mm)):
+        while (
+            j < n
+            and mergeable(segs[j])
+            and (segs[j].feed_mm_s, segs[j].blend_mm, segs[j].naive_mm)
+            == (segs[j - 1].feed_mm_s, segs[j - 1].blend_mm, segs[j - 1].naive_mm)
+        ):
             j += 1
         run = segs[i:j]
         pts = [tuple(run[0].start_mm)] + [tuple(s.end_mm) for s in run]
@@ -78,9 +82,17 @@ def _reference_merge(segs: list) -> tuple[list[tuple], list[int]]:
 def _lines(pts: np.ndarray, feed: np.ndarray, q: np.ndarray, rapid_at=()) -> list:
     segs = []
     for k in range(len(pts) - 1):
-        segs.append(Line(tuple(map(float, pts[k])), tuple(map(float, pts[k + 1])),
-                         float(feed[k]), k + 1, rapid=k in rapid_at, blend_mm=0.01,
-                         naive_mm=float(q[k])))  # fmt: skip
+        segs.append(
+            Line(
+                tuple(map(float, pts[k])),
+                tuple(map(float, pts[k + 1])),
+                float(feed[k]),
+                k + 1,
+                rapid=k in rapid_at,
+                blend_mm=0.01,
+                naive_mm=float(q[k]),
+            )
+        )
     return segs
 
 
@@ -90,8 +102,11 @@ def _assert_same(segs: list) -> None:
     assert origin.tolist() == ref_origin
     assert [(tuple(s.start_mm), tuple(s.end_mm)) for s in got] == ref
     for s, o in zip(got, origin.tolist()):  # the merged line keeps its last move's data
-        assert (s.line, s.feed_mm_s, s.naive_mm) == (segs[o].line, segs[o].feed_mm_s,
-                                                     segs[o].naive_mm)  # fmt: skip
+        assert (s.line, s.feed_mm_s, s.naive_mm) == (
+            segs[o].line,
+            segs[o].feed_mm_s,
+            segs[o].naive_mm,
+        )
 
 
 def _spiral(n: int, chord_mm: float, r0_mm: float, noise_mm: float, seed: int) -> np.ndarray:
@@ -103,9 +118,15 @@ def _spiral(n: int, chord_mm: float, r0_mm: float, noise_mm: float, seed: int) -
 
 
 @settings(max_examples=40, deadline=None)
-@given(n=st.integers(2, 400), chord=st.floats(0.005, 0.5), r0=st.floats(1.0, 200.0),
-       noise=st.floats(0.0, 0.02), q=st.sampled_from([0.001, 0.005, 0.01, 0.05]),
-       seed=st.integers(0, 2**31), cuts=st.integers(0, 6))  # fmt: skip
+@given(
+    n=st.integers(2, 400),
+    chord=st.floats(0.005, 0.5),
+    r0=st.floats(1.0, 200.0),
+    noise=st.floats(0.0, 0.02),
+    q=st.sampled_from([0.001, 0.005, 0.01, 0.05]),
+    seed=st.integers(0, 2**31),
+    cuts=st.integers(0, 6),
+)
 def test_chains_equal_the_scalar_algorithm(n, chord, r0, noise, q, seed, cuts):
     pts = _spiral(n + 1, chord, r0, noise, seed)
     rng = np.random.default_rng(seed + 1)

@@ -59,20 +59,31 @@ def test_deflated_members_read_back_and_match_zipfile(tmp_path, n):
     same members, choices, CRC-32s and sizes as zipfile's file, testzip clean, numpy.load
     equal, and the same bytes for windows of 7, 4,096 and all rows."""
     rng = np.random.default_rng(n)
-    cols = {"t": np.arange(n) * 1e-3, "piece": np.repeat(np.arange(n // 50 + 1), 50)[:n],
-            "z": np.zeros(n), "x": rng.normal(size=n)}  # fmt: skip
+    cols = {
+        "t": np.arange(n) * 1e-3,
+        "piece": np.repeat(np.arange(n // 50 + 1), 50)[:n],
+        "z": np.zeros(n),
+        "x": rng.normal(size=n),
+    }
     got = _write(cols, max(n, 1), tmp_path)
     for w in (7, 4096):
         assert _write(cols, w, tmp_path) == got
     probe = {k: v[: npz.NPZ_PROBE_ROWS].tobytes() for k, v in cols.items()}
-    deflate = {k: not p or len(zlib.compress(p, npz.NPZ_DEFLATE_LEVEL))
-               <= npz.NPZ_STORE_RATIO * len(p) for k, p in probe.items()}  # fmt: skip
+    deflate = {
+        k: not p or len(zlib.compress(p, npz.NPZ_DEFLATE_LEVEL)) <= npz.NPZ_STORE_RATIO * len(p)
+        for k, p in probe.items()
+    }
     want = _zipfile_npz(cols, deflate)
     with zipfile.ZipFile(io.BytesIO(got)) as a, zipfile.ZipFile(io.BytesIO(want)) as b:
         assert a.testzip() is None
         for x, y in zip(a.infolist(), b.infolist(), strict=True):
-            assert (x.filename, x.compress_type, x.CRC, x.file_size, x.header_offset == 0) \
-                == (y.filename, y.compress_type, y.CRC, y.file_size, y.header_offset == 0)
+            assert (x.filename, x.compress_type, x.CRC, x.file_size, x.header_offset == 0) == (
+                y.filename,
+                y.compress_type,
+                y.CRC,
+                y.file_size,
+                y.header_offset == 0,
+            )
     with np.load(io.BytesIO(got)) as back:
         for name, col in cols.items():
             assert back[name].dtype == col.dtype and np.array_equal(back[name], col)
@@ -126,10 +137,13 @@ class _Pipe(io.RawIOBase):
 def test_a_pipe_gets_the_same_bytes(tmp_path):
     cols = {"t": np.arange(100_000) * 1e-3, "k": np.arange(100_000) // 7}
     pipe = _Pipe()
-    npz.write_npz(pipe, str(tmp_path), list(cols),
-                  [tuple(c[i : i + 30_000] for c in cols.values()) for i in range(0, 100_000,
-                                                                                  30_000)],
-                  100_000)  # fmt: skip
+    npz.write_npz(
+        pipe,
+        str(tmp_path),
+        list(cols),
+        [tuple(c[i : i + 30_000] for c in cols.values()) for i in range(0, 100_000, 30_000)],
+        100_000,
+    )
     assert bytes(pipe.data) == _write(cols, 100_000, tmp_path)
 
 

@@ -71,8 +71,17 @@ def assert_rel_close(actual: np.ndarray, expected: np.ndarray, rel: float):
 
 def circle(radius_mm: float) -> NurbsCurve:
     r, h = radius_mm, np.sqrt(0.5)
-    points = [[r, 0, 0], [r, r, 0], [0, r, 0], [-r, r, 0], [-r, 0, 0],
-              [-r, -r, 0], [0, -r, 0], [r, -r, 0], [r, 0, 0]]  # fmt: skip
+    points = [
+        [r, 0, 0],
+        [r, r, 0],
+        [0, r, 0],
+        [-r, r, 0],
+        [-r, 0, 0],
+        [-r, -r, 0],
+        [0, -r, 0],
+        [r, -r, 0],
+        [r, 0, 0],
+    ]
     weights = [1, h, 1, h, 1, h, 1, h, 1]
     knots = [0, 0, 0, 0.25, 0.25, 0.5, 0.5, 0.75, 0.75, 1, 1, 1]
     return NurbsCurve(2, knots, points, weights)
@@ -105,9 +114,9 @@ def test_basis_derivatives_match_scipy(degree):
     for j in range(degree + 1):
         index = spans - degree + j
         for k in range(degree + 1):
-            ref = np.array([
-                BSpline(curve.knots, np.eye(n)[i], degree)(x, nu=k) for i, x in zip(index, u)
-            ])  # fmt: skip
+            ref = np.array(
+                [BSpline(curve.knots, np.eye(n)[i], degree)(x, nu=k) for i, x in zip(index, u)]
+            )
             scale = np.max(np.abs(ders[:, k, :]), axis=1)
             assert np.all(np.abs(ders[:, k, j] - ref) <= 1e-12 * scale)
     np.testing.assert_allclose(ders[:, 0].sum(axis=1), 1.0, rtol=0, atol=1e-14)
@@ -282,8 +291,18 @@ def test_length_matches_adaptive_quadrature(seed):
     )
     assert curve.length_mm == pytest.approx(ref, rel=1e-12, abs=0)
     u = rng.uniform(0.0, 1.0, 5)
-    partial = [quad(lambda x: curve.speed(x)[0], 0.0, v, points=breaks[1:-1],
-                    epsabs=0, epsrel=1e-13, limit=500)[0] for v in u]  # fmt: skip
+    partial = [
+        quad(
+            lambda x: curve.speed(x)[0],
+            0.0,
+            v,
+            points=breaks[1:-1],
+            epsabs=0,
+            epsrel=1e-13,
+            limit=500,
+        )[0]
+        for v in u
+    ]
     np.testing.assert_allclose(curve.arc_length(u), partial, rtol=1e-11)
 
 
@@ -388,13 +407,13 @@ def test_step_lengths_against_quadrature_and_the_circle():
     for a, b, got in zip(u[:-1], u[1:], ds):
         lo, hi = min(a, b), max(a, b)
         inner = knots[(knots > lo) & (knots < hi)]
-        ref = quad(speed, lo, hi, points=inner if inner.size else None, epsabs=0.0,
-                   epsrel=2e-14, limit=200)[0] * (1.0 if b >= a else -1.0)  # fmt: skip
+        ref = quad(
+            speed, lo, hi, points=inner if inner.size else None, epsabs=0.0, epsrel=2e-14, limit=200
+        )[0] * (1.0 if b >= a else -1.0)
         assert got == pytest.approx(ref, rel=1e-13, abs=1e-15)
     across = np.searchsorted(brk, u[:-1], "right") != np.searchsorted(brk, u[1:], "right")
     assert across.sum() >= brk.size - 2  # the steps across interval ends were taken
     assert ds[-2] == 0.0 and ds[-1] < 0.0
-
 
 
 def _extreme_weight_curve() -> NurbsCurve:
@@ -429,8 +448,9 @@ def test_inverse_table_is_bounded_on_an_extreme_weight(monkeypatch):
     monkeypatch.setattr(inverse, "INVERSE_MAX_INTERVALS", 64)
     curve = _extreme_weight_curve()
     table = curve.inverse_table
-    initial = int(np.sum(np.ceil(np.diff(curve.arc_length(curve.knots[2:6]))
-                                 / inverse.INVERSE_START_MM)))  # fmt: skip
+    initial = int(
+        np.sum(np.ceil(np.diff(curve.arc_length(curve.knots[2:6])) / inverse.INVERSE_START_MM))
+    )
     assert table.inv_width.size <= max(inverse.INVERSE_MAX_INTERVALS, 16 * initial)
     assert table.exact.any()
     s = np.linspace(0.0, curve.length_mm, 401)

@@ -35,8 +35,9 @@ def _curves(count: int, seed: int = 5):
     rng = np.random.default_rng(seed)
     for _ in range(count):
         c = random_curve(rng, int(rng.integers(2, 4)))
-        yield NurbsCurve(c.degree, c.knots, c.control_points_mm,
-                         rng.uniform(0.05, 20.0, c.weights.size))  # fmt: skip
+        yield NurbsCurve(
+            c.degree, c.knots, c.control_points_mm, rng.uniform(0.05, 20.0, c.weights.size)
+        )
 
 
 def test_cell_peaks_as_refining_every_cell(monkeypatch):
@@ -57,8 +58,7 @@ def test_cell_peaks_as_refining_every_cell(monkeypatch):
 def test_cell_peaks_against_dense_independent_curvature():
     machine, seg = load_machine(), SimpleNamespace(line=1)
     for curve in _curves(6, seed=9):
-        cells = pc._nurbs_stretch(curve, curve.u_start, curve.u_end, seg, 0, machine, 58.3,
-                                  0.0)  # fmt: skip
+        cells = pc._nurbs_stretch(curve, curve.u_start, curve.u_end, seg, 0, machine, 58.3, 0.0)
         for p in cells[:: max(1, len(cells) // 60)]:
             u = np.linspace(p.u_a, p.u_b, 401)
             d = scipy_derivatives(curve, u, 2)

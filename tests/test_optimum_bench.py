@@ -78,7 +78,7 @@ def _circle_program(radius_mm: float) -> str:
     for i, (x, y) in enumerate(pts):
         head = "G6.2 P3 " if i == 0 else ""
         lines.append(f"{head}K{knots[i]} X{x} Y{y} R{1.0 if i % 2 == 0 else w}")
-    lines += [f"K{k}" for k in knots[len(pts):]]
+    lines += [f"K{k}" for k in knots[len(pts) :]]
     return "\n".join(lines + ["M2"]) + "\n"
 
 
@@ -114,8 +114,9 @@ def test_servo_steady_circle_radial_error():
     radius_mm, speed_mm_s = 10.0, V_MM_S
     omega = speed_mm_s / radius_mm
     t = np.arange(0.0, 3.0, 1e-3)
-    ref = np.column_stack([radius_mm * np.cos(omega * t), radius_mm * np.sin(omega * t),
-                           np.zeros_like(t)])  # fmt: skip
+    ref = np.column_stack(
+        [radius_mm * np.cos(omega * t), radius_mm * np.sin(omega * t), np.zeros_like(t)]
+    )
     tool = servo.tool_mm(ref, settle_s=0.0)
 
     def response(name):
@@ -126,10 +127,12 @@ def test_servo_steady_circle_radial_error():
 
     hold = (math.sin(omega * 5e-4) / (omega * 5e-4)) ** 2
     phasor = hold * np.exp(1j * omega * t[-1000:])
-    np.testing.assert_allclose(tool[-1000:, 0], radius_mm * np.real(response("x") * phasor),
-                               rtol=0, atol=1e-7)  # fmt: skip
-    np.testing.assert_allclose(tool[-1000:, 1], radius_mm * np.real(-1j * response("y") * phasor),
-                               rtol=0, atol=1e-7)  # fmt: skip
+    np.testing.assert_allclose(
+        tool[-1000:, 0], radius_mm * np.real(response("x") * phasor), rtol=0, atol=1e-7
+    )
+    np.testing.assert_allclose(
+        tool[-1000:, 1], radius_mm * np.real(-1j * response("y") * phasor), rtol=0, atol=1e-7
+    )
     radial_um = (np.hypot(tool[-1000:, 0], tool[-1000:, 1]) - radius_mm) * 1e3
     assert radial_um.mean() == pytest.approx(9.7, abs=0.1)
     import contour

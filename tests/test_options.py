@@ -22,46 +22,69 @@ from nurbscnc.pipeline import Algorithm, RunOptions
 from nurbscnc.plan.options import CornerFeed, Dynamics, LookaheadOptions, PlanOptions
 
 
-@pytest.mark.parametrize("kwargs", [
-    {"dynamics": "Global"}, {"dynamics": "none"}, {"dynamics": 1},
-    {"max_iterations": -1}, {"max_iterations": 2.5}, {"max_iterations": True},
-    {"lookahead_pieces": 0}, {"lookahead_pieces": 3.0}, {"plan": "piece"},
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {"dynamics": "Global"},
+        {"dynamics": "none"},
+        {"dynamics": 1},
+        {"max_iterations": -1},
+        {"max_iterations": 2.5},
+        {"max_iterations": True},
+        {"lookahead_pieces": 0},
+        {"lookahead_pieces": 3.0},
+        {"plan": "piece"},
+    ],
+)
 def test_bad_lookahead_options_raise(kwargs):
     with pytest.raises(ConfigError):
         LookaheadOptions(**kwargs)
 
 
-@pytest.mark.parametrize("kwargs", [
-    {"corner_feed": "paek"}, {"corner_feed": "PEAK"}, {"ph": "yes"},
-    {"tolerance_mm": 0.0}, {"tolerance_mm": -1e-3}, {"tolerance_mm": math.nan},
-    {"blend_tolerance_mm": -0.1}, {"blend_tolerance_mm": math.inf}, {"blend_tolerance_mm": "1"},
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {"corner_feed": "paek"},
+        {"corner_feed": "PEAK"},
+        {"ph": "yes"},
+        {"tolerance_mm": 0.0},
+        {"tolerance_mm": -1e-3},
+        {"tolerance_mm": math.nan},
+        {"blend_tolerance_mm": -0.1},
+        {"blend_tolerance_mm": math.inf},
+        {"blend_tolerance_mm": "1"},
+    ],
+)
 def test_bad_plan_options_raise(kwargs):
     with pytest.raises(ConfigError):
         PlanOptions(**kwargs)
 
 
-@pytest.mark.parametrize("kwargs", [{"algorithm": "fast"}, {"interpolator": "euler"},
-                                    {"interpolator": "Taylor"}])
+@pytest.mark.parametrize(
+    "kwargs", [{"algorithm": "fast"}, {"interpolator": "euler"}, {"interpolator": "Taylor"}]
+)
 def test_bad_run_options_raise(kwargs):
     with pytest.raises(ConfigError):
         RunOptions(**kwargs)
 
 
 def test_valid_strings_become_members_and_lengths_are_mm():
-    opt = LookaheadOptions(dynamics="global", lookahead_pieces=5,
-                           plan=PlanOptions(corner_feed="peak", tolerance_mm=1e-3,
-                                            blend_tolerance_mm=0))  # fmt: skip
+    opt = LookaheadOptions(
+        dynamics="global",
+        lookahead_pieces=5,
+        plan=PlanOptions(corner_feed="peak", tolerance_mm=1e-3, blend_tolerance_mm=0),
+    )
     assert opt.dynamics is Dynamics.GLOBAL and opt.plan.corner_feed is CornerFeed.PEAK
     assert opt.plan.tolerance_mm == 1e-3 and opt.plan.blend_tolerance_mm == 0.0
     assert not hasattr(opt.plan, "tolerance_um")
     run = RunOptions(algorithm="adaptive", interpolator="taylor")
     assert run.algorithm is Algorithm.ADAPTIVE and run.interpolator is Interpolator.TAYLOR
     built = run_options("ph-lookahead", "peak", "off", 0.05, "exact", 7)
-    assert built.lookahead == LookaheadOptions(dynamics="off", lookahead_pieces=7,
-                                               plan=PlanOptions(corner_feed="peak",
-                                                                blend_tolerance_mm=0.05))
+    assert built.lookahead == LookaheadOptions(
+        dynamics="off",
+        lookahead_pieces=7,
+        plan=PlanOptions(corner_feed="peak", blend_tolerance_mm=0.05),
+    )
 
 
 def _params(command: str) -> set[str]:
@@ -86,9 +109,21 @@ def test_run_reads_the_tool_table_and_subroutine_path(tmp_path):
     prog = tmp_path / "part.nc"
     prog.write_text("G21 G90 T1 M6 G43 H1\nG0 X0 Y0 Z0\nG1 X5 F600\no<lift> call [2]\nM2\n")
     out = tmp_path / "p.csv"
-    result = CliRunner().invoke(main, ["run", str(prog), "-o", str(out), "--dynamics", "off",
-                                       "--tool-table", str(tools),
-                                       "--subroutine-path", str(subs)])  # fmt: skip
+    result = CliRunner().invoke(
+        main,
+        [
+            "run",
+            str(prog),
+            "-o",
+            str(out),
+            "--dynamics",
+            "off",
+            "--tool-table",
+            str(tools),
+            "--subroutine-path",
+            str(subs),
+        ],
+    )
     assert result.exit_code == 0, result.output
     rows = np.loadtxt(out, delimiter=",", skiprows=1)
     assert rows[-1, 1:4] == pytest.approx([5.0, 0.0, 12.0], abs=1e-12)  # Z2 + 10 mm tool

@@ -62,9 +62,18 @@ def test_case_insensitive(fast):
 @PATHS
 @pytest.mark.parametrize(
     ("text", "value"),
-    [("X1.", 1.0), ("X.5", 0.5), ("X-.5", -0.5), ("X+1", 1.0), ("X0.125", 0.125),
-     ("X-0", 0.0), ("X007", 7.0), ("X--1", 1.0), ("X-+2", -2.0)],
-)  # fmt: skip
+    [
+        ("X1.", 1.0),
+        ("X.5", 0.5),
+        ("X-.5", -0.5),
+        ("X+1", 1.0),
+        ("X0.125", 0.125),
+        ("X-0", 0.0),
+        ("X007", 7.0),
+        ("X--1", 1.0),
+        ("X-+2", -2.0),
+    ],
+)
 def test_number_forms(fast, text, value):
     (word,) = one(text, fast).words
     assert word.value == value and is_constant(word.value)
@@ -168,9 +177,23 @@ def test_syntax_error_position_on_a_later_line(fast):
 @PATHS
 @pytest.mark.parametrize(
     "text",
-    ["G1 Xnan", "G1 Xinf", "G1 X1_0", "G1 X\u0661", "G1 X[1]]", "G1 X[1e5]",
-     "G1 (a (b) c)", "G1 (open", "G1 X1)", "G1 X" + "9" * 400, "N1.5.5", "G1 X", "#1 =", "G1 X*2"],
-)  # fmt: skip
+    [
+        "G1 Xnan",
+        "G1 Xinf",
+        "G1 X1_0",
+        "G1 X\u0661",
+        "G1 X[1]]",
+        "G1 X[1e5]",
+        "G1 (a (b) c)",
+        "G1 (open",
+        "G1 X1)",
+        "G1 X" + "9" * 400,
+        "N1.5.5",
+        "G1 X",
+        "#1 =",
+        "G1 X*2",
+    ],
+)
 def test_not_gcode(fast, text):
     """What Python's float() takes but G-code does not, and other malformed lines."""
     with pytest.raises(GCodeSyntaxError):
@@ -245,6 +268,7 @@ def test_percent_lines_the_fast_path_leaves_to_lark(line):
     """Only "%" and comments make a tape mark: anything else on the line is lark's to refuse
     (or, for "(a) %", read as a comment and a stray %), the same with and without the fast
     path."""
+
     def outcome(fast):
         try:
             return parse_text(line, fast=fast)

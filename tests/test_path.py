@@ -25,14 +25,34 @@ from nurbscnc.geometry.ph import PHQuintic
 
 LINE = LineGeometry(np.array([1.0, 2.0, 3.0]), np.array([4.0, -2.0, 15.0]))
 R, THETA, H = 7.5, 2.4, 0.0
-CIRCLE = ArcGeometry(np.array([1.0, 1.0, 0.0]), np.array([1.0, 0.0, 0.0]),
-                     np.array([0.0, 1.0, 0.0]), np.array([0.0, 0.0, 1.0]), R, R, THETA, 0.0)
+CIRCLE = ArcGeometry(
+    np.array([1.0, 1.0, 0.0]),
+    np.array([1.0, 0.0, 0.0]),
+    np.array([0.0, 1.0, 0.0]),
+    np.array([0.0, 0.0, 1.0]),
+    R,
+    R,
+    THETA,
+    0.0,
+)
 HELIX_H = 3.0
-HELIX = ArcGeometry(np.array([0.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]),
-                    np.array([-1.0, 0.0, 0.0]), np.array([0.0, 0.0, 1.0]), R, R, -THETA, HELIX_H)
-PH = PHQuintic(np.array([1.0 + 0.5j, 1.4 - 0.3j, 0.6 + 1.2j]), 2.0 - 1.0j,
-               origin_mm=np.array([0.0, 0.0, 5.0]), e1=np.array([1.0, 0.0, 0.0]),
-               e2=np.array([0.0, 0.6, 0.8]))  # fmt: skip
+HELIX = ArcGeometry(
+    np.array([0.0, 0.0, 0.0]),
+    np.array([0.0, 1.0, 0.0]),
+    np.array([-1.0, 0.0, 0.0]),
+    np.array([0.0, 0.0, 1.0]),
+    R,
+    R,
+    -THETA,
+    HELIX_H,
+)
+PH = PHQuintic(
+    np.array([1.0 + 0.5j, 1.4 - 0.3j, 0.6 + 1.2j]),
+    2.0 - 1.0j,
+    origin_mm=np.array([0.0, 0.0, 5.0]),
+    e1=np.array([1.0, 0.0, 0.0]),
+    e2=np.array([0.0, 0.6, 0.8]),
+)
 rng = np.random.default_rng(7)
 NPTS = 9
 KNOTS = np.r_[[0.0] * 4, np.sort(rng.uniform(0.1, 0.9, NPTS - 4)), [1.0] * 4]
@@ -64,8 +84,7 @@ def table() -> PathTable:
 
 
 def test_one_kind_numbering(table):
-    assert table.kind.tolist() == [Kind.LINE, Kind.ARC, Kind.ARC, Kind.PH, Kind.NURBS,
-                                   Kind.NURBS]  # fmt: skip
+    assert table.kind.tolist() == [Kind.LINE, Kind.ARC, Kind.ARC, Kind.PH, Kind.NURBS, Kind.NURBS]
     assert len(table.objects) == 1  # the two NURBS spans share their curve
 
 
@@ -106,13 +125,17 @@ def test_points_at_arc_length_match_the_closed_forms(table):
     # Circle and helix: centre + r (cos θ e1 + sin θ e2) + t H n, θ = t Δθ.
     for row, g in ((1, CIRCLE), (2, HELIX)):
         th = frac * g.angle_rad
-        ref = (g.origin_mm + R * (np.cos(th)[:, None] * g.e1 + np.sin(th)[:, None] * g.e2)
-               + (frac * g.helix_mm)[:, None] * g.normal)  # fmt: skip
+        ref = (
+            g.origin_mm
+            + R * (np.cos(th)[:, None] * g.e1 + np.sin(th)[:, None] * g.e2)
+            + (frac * g.helix_mm)[:, None] * g.normal
+        )
         np.testing.assert_allclose(pts[row], ref, rtol=0, atol=1e-12)
     # PH: ξ solves ∫₀^ξ |w²| = s (quad), the point is p0 + ∫ w² in the plane frame.
     for xi, target in zip(param[3], frac * table.length_mm[3]):
-        np.testing.assert_allclose(quad(_ph_speed, 0.0, xi, epsabs=1e-14)[0], target,
-                                   rtol=0, atol=1e-12)  # fmt: skip
+        np.testing.assert_allclose(
+            quad(_ph_speed, 0.0, xi, epsabs=1e-14)[0], target, rtol=0, atol=1e-12
+        )
     np.testing.assert_allclose(pts[3], _ph_point(param[3]), rtol=0, atol=1e-12)
     # NURBS: the point is geomdl's C(u) at the table's u, and u has the arc length asked
     # (within the 1e-9 mm of the inversion table, SPEC §10).
@@ -124,8 +147,9 @@ def test_points_at_arc_length_match_the_closed_forms(table):
         for u, target in zip(param[row][::8], (frac * table.length_mm[row])[::8]):
             lo = float(table.u_a[row])
             breaks = [k for k in np.unique(KNOTS) if lo < k < u]  # |C′| has kinks there
-            got = quad(speed, lo, float(u), epsabs=1e-12, epsrel=1e-13, limit=400,
-                       points=breaks or None)[0]  # fmt: skip
+            got = quad(
+                speed, lo, float(u), epsabs=1e-12, epsrel=1e-13, limit=400, points=breaks or None
+            )[0]
             assert abs(got - target) <= 1e-9
 
 
@@ -144,16 +168,18 @@ def test_tangents_and_curvature_match_the_closed_forms(table):
     c = HELIX_H / THETA
     np.testing.assert_allclose(kappa[2], R / (R * R + c * c), rtol=1e-13)
     th = frac * THETA
-    np.testing.assert_allclose(tan[1], -np.sin(th)[:, None] * CIRCLE.e1
-                               + np.cos(th)[:, None] * CIRCLE.e2, atol=1e-14)  # fmt: skip
+    np.testing.assert_allclose(
+        tan[1], -np.sin(th)[:, None] * CIRCLE.e1 + np.cos(th)[:, None] * CIRCLE.e2, atol=1e-14
+    )
     # PH: r′ = w², r″ = (w²)′ in the plane; κ = |x′y″ − y′x″| / |r′|³.
     _, w2 = _ph_preimage()
     d1, d2 = w2(param[3]), w2.deriv()(param[3])
     ref_k = np.abs((d1.conjugate() * d2).imag) / np.abs(d1) ** 3
     np.testing.assert_allclose(kappa[3], ref_k, rtol=1e-11)
     ref_t = d1 / np.abs(d1)
-    np.testing.assert_allclose(tan[3], ref_t.real[:, None] * PH.e1 + ref_t.imag[:, None] * PH.e2,
-                               atol=1e-13)  # fmt: skip
+    np.testing.assert_allclose(
+        tan[3], ref_t.real[:, None] * PH.e1 + ref_t.imag[:, None] * PH.e2, atol=1e-13
+    )
     # NURBS: geomdl's derivatives at the table's u.
     g = geomdl_curve()
     for row in (4, 5):
@@ -161,8 +187,7 @@ def test_tangents_and_curvature_match_the_closed_forms(table):
         c1, c2 = d[:, 1], d[:, 2]
         ref_k = np.linalg.norm(np.cross(c1, c2), axis=1) / np.linalg.norm(c1, axis=1) ** 3
         np.testing.assert_allclose(kappa[row], ref_k, rtol=1e-9)
-        np.testing.assert_allclose(tan[row], c1 / np.linalg.norm(c1, axis=1)[:, None],
-                                   atol=1e-12)  # fmt: skip
+        np.testing.assert_allclose(tan[row], c1 / np.linalg.norm(c1, axis=1)[:, None], atol=1e-12)
 
 
 def test_points_at_fraction_of_the_parameter_range(table):
@@ -170,9 +195,9 @@ def test_points_at_fraction_of_the_parameter_range(table):
     idx = np.repeat(np.arange(table.size), frac.size)
     f = np.tile(frac, table.size)
     pts = table.points_at_fraction(idx, f).reshape(table.size, frac.size, 3)
-    np.testing.assert_allclose(pts[0], LINE.start_mm + frac[:, None] * (LINE.end_mm
-                                                                          - LINE.start_mm),
-                               atol=1e-13)  # fmt: skip
+    np.testing.assert_allclose(
+        pts[0], LINE.start_mm + frac[:, None] * (LINE.end_mm - LINE.start_mm), atol=1e-13
+    )
     np.testing.assert_allclose(pts[3], _ph_point(frac), atol=1e-12)
     g = geomdl_curve()
     u = U_SPLIT + frac * (1.0 - U_SPLIT)
@@ -237,8 +262,8 @@ def test_ph_newton_gives_the_bits_of_the_shrinking_active_set():
     np.testing.assert_array_equal(got, _ph_params_reference(t, i, s))
     # And s(ξ) = s to the Newton tolerance, against the polynomial arc length.
     from nurbscnc.geometry.path import horner_rows
-    np.testing.assert_allclose(horner_rows(t.ph_s, t.ph_slot[i], got - 0.5), s, rtol=0,
-                               atol=1e-12)  # fmt: skip
+
+    np.testing.assert_allclose(horner_rows(t.ph_s, t.ph_slot[i], got - 0.5), s, rtol=0, atol=1e-12)
 
 
 def test_ph_rows_columnar_and_objects_share_the_compact_coefficients():
@@ -251,9 +276,11 @@ def test_ph_rows_columnar_and_objects_share_the_compact_coefficients():
     from nurbscnc.plan.options import Dynamics, LookaheadOptions
     from nurbscnc.program.interpret import interpret_text
 
-    text = ("G21 G90 G17 G94 G64\nG0 X0 Y0 Z0\nG1 X1 Y0.5 F300\nG1 X1 Y1.5\n"
-            "G3 X0.540302 Y2.341471 I-1 J0\nG1 X1.540302 Y2.841471\nG1 X1.540302 Y3.841471\n"
-            "M2\n")  # fmt: skip
+    text = (
+        "G21 G90 G17 G94 G64\nG0 X0 Y0 Z0\nG1 X1 Y0.5 F300\nG1 X1 Y1.5\n"
+        "G3 X0.540302 Y2.341471 I-1 J0\nG1 X1.540302 Y2.841471\nG1 X1.540302 Y3.841471\n"
+        "M2\n"
+    )
     options = RunOptions(lookahead=LookaheadOptions(dynamics=Dynamics.OFF))
     pieces = run_program(interpret_text(text), load_machine(), options).plan.pieces
     table = pieces.path
@@ -281,8 +308,16 @@ def test_path_table_of_nurbs_rows_gathered_whole_is_the_row_by_row_table():
 
     pieces = segment_pieces(interpret_text(_airfoil_twice()).segments, load_machine())
     rows_obj = sorted(pieces.objects)
-    rows = [(pieces.kind[r], pieces.objects[r][0], pieces.length_mm[r], *pieces.objects[r][1:],
-             pieces.line[r]) for r in rows_obj]  # fmt: skip
+    rows = [
+        (
+            pieces.kind[r],
+            pieces.objects[r][0],
+            pieces.length_mm[r],
+            *pieces.objects[r][1:],
+            pieces.line[r],
+        )
+        for r in rows_obj
+    ]
     whole, by_row = PathTable.of(rows), PathTable.of(rows, bulk=False)
     assert len(whole.objects) == 2 and all(a is b for a, b in zip(whole.objects, by_row.objects))
     for name in whole.__dataclass_fields__:

@@ -56,17 +56,20 @@ JUMP_CAP_R10_MM_S = math.sqrt(4.0 * 5e4 * 1e-3 / (3.0 * 0.1))  # 25.82 mm/s
 # --- the interpreter: what each mode puts on the segments -------------------------------------
 
 
-@pytest.mark.parametrize(("words", "blend", "naive"), [
-    ("", np.inf, 0.0),  # LinuxCNC's default mode: G64 without P
-    ("G61", 0.0, 0.0),
-    ("G61.1", BLEND_EXACT_STOP, 0.0),
-    ("G64", np.inf, 0.0),
-    ("G64 P0", np.inf, 0.0),
-    ("G64 P0.02", 0.02, 0.02),  # Q defaults to P
-    ("G64 P0.02 Q0", 0.02, 0.0),  # Q0 turns the naive CAM detector off
-    ("G64 P0.02 Q0.1", 0.02, 0.1),
-    ("G20 G64 P0.001 Q0.002", 0.0254, 0.0508),  # inch words in mm
-])  # fmt: skip
+@pytest.mark.parametrize(
+    ("words", "blend", "naive"),
+    [
+        ("", np.inf, 0.0),  # LinuxCNC's default mode: G64 without P
+        ("G61", 0.0, 0.0),
+        ("G61.1", BLEND_EXACT_STOP, 0.0),
+        ("G64", np.inf, 0.0),
+        ("G64 P0", np.inf, 0.0),
+        ("G64 P0.02", 0.02, 0.02),  # Q defaults to P
+        ("G64 P0.02 Q0", 0.02, 0.0),  # Q0 turns the naive CAM detector off
+        ("G64 P0.02 Q0.1", 0.02, 0.1),
+        ("G20 G64 P0.001 Q0.002", 0.0254, 0.0508),  # inch words in mm
+    ],
+)
 def test_path_mode_words_on_the_segments(words, blend, naive):
     prog = interpret_text(f"{words or 'G21'}\nG1 X1 F600\nX2 Y1\nM2\n")
     lines = [s for s in prog.segments if s.kind == "line"]
@@ -87,20 +90,30 @@ def test_path_modes_as_linuxcnc_interprets_them(tmp_path):
     import re
     import subprocess
 
-    words = ["G64", "G64 P0.02", "G64 P0.02 Q0.1", "G61", "G61.1", "G64 P0", "G64 Q0.05",
-             "G64 P0.3 Q0"]  # fmt: skip
+    words = [
+        "G64",
+        "G64 P0.02",
+        "G64 P0.02 Q0.1",
+        "G61",
+        "G61.1",
+        "G64 P0",
+        "G64 Q0.05",
+        "G64 P0.3 Q0",
+    ]
     text = "G21\n" + "".join(f"{w}\nG1 X{i + 1} F600\n" for i, w in enumerate(words)) + "M2\n"
     program = tmp_path / "modes.ngc"
     program.write_text(text)
     # (in tmp_path: rs274 writes rs274ngc.var into its working folder)
-    out = subprocess.run([str(RS274), "-g", str(program)], capture_output=True, text=True,
-                         timeout=60, cwd=tmp_path).stdout  # fmt: skip
+    out = subprocess.run(
+        [str(RS274), "-g", str(program)], capture_output=True, text=True, timeout=60, cwd=tmp_path
+    ).stdout
     expected, mode, naive = [], None, 0.0
     for line in out.splitlines():
         if m := re.search(r"SET_MOTION_CONTROL_MODE\(CANON_(\w+)(?:, ([\d.]+))?\)", line):
             kind, tol = m.group(1), float(m.group(2) or 0.0)
             mode = {"EXACT_PATH": 0.0, "EXACT_STOP": BLEND_EXACT_STOP}.get(
-                kind, tol if tol > 0.0 else np.inf)
+                kind, tol if tol > 0.0 else np.inf
+            )
         elif m := re.search(r"SET_NAIVECAM_TOLERANCE\(([\d.]+)\)", line):
             naive = float(m.group(1))
         elif "STRAIGHT_FEED" in line:
@@ -135,8 +148,11 @@ def test_corner_log_of_the_pentagram_in_each_mode(feed):
     F3500 the blends within 15 or 20 µm of the 144° tips are so tight (3.5 mm/s) that
     stopping is faster; at F600 blending is."""
     rapid_end = (CornerAction.STOP, CornerWhy.RAPID_FEED)
-    blend = ((CornerAction.BLEND, CornerWhy.BLENDED) if feed == 600
-             else (CornerAction.STOP, CornerWhy.STOP_FASTER))  # fmt: skip
+    blend = (
+        (CornerAction.BLEND, CornerWhy.BLENDED)
+        if feed == 600
+        else (CornerAction.STOP, CornerWhy.STOP_FASTER)
+    )
     expect = {
         "G61": (CornerAction.STOP, CornerWhy.EXACT_PATH),
         "G61.1": (CornerAction.STOP, CornerWhy.EXACT_STOP),
@@ -158,12 +174,16 @@ def test_corner_log_of_the_pentagram_in_each_mode(feed):
 
 
 def test_corner_log_names_dwells_and_exact_stops_at_tangent_joints():
-    text = ("G21 G61.1 G0 X-5 Y0\nG1 X10 F600\nX20\nG64\nG4 P0.5\nG1 X20 Y10\nX30 Y10\nM2\n")
+    text = "G21 G61.1 G0 X-5 Y0\nG1 X10 F600\nX20\nG64\nG4 P0.5\nG1 X20 Y10\nX30 Y10\nM2\n"
     log = _log(text)
     whys = [CornerWhy(w) for w in log.why]
     # rapid end; the co-linear G61.1 joint at X10 stops; the dwell; the G64 90° corner blends
-    assert whys == [CornerWhy.RAPID_FEED, CornerWhy.EXACT_STOP, CornerWhy.DWELL_OR_PAUSE,
-                    CornerWhy.BLENDED]  # fmt: skip
+    assert whys == [
+        CornerWhy.RAPID_FEED,
+        CornerWhy.EXACT_STOP,
+        CornerWhy.DWELL_OR_PAUSE,
+        CornerWhy.BLENDED,
+    ]
     np.testing.assert_allclose(log.turning_rad[1], 0.0, atol=1e-15)
 
 
@@ -189,8 +209,10 @@ def test_blended_pentagram_within_the_tolerance(mode):
 
 def test_line_nurbs_line_corners_are_blended_within_the_tolerance():
     """A 90° line→NURBS and a 90° NURBS→line joint (never blended before issue 13)."""
-    text = ("G21 G90 G17 G64 P0.01\nG0 X10 Y-10\nG1 X10 Y0 F1200\n"
-            "G5.2 X15 Y0 P1 L3\nX15 Y5 P1\nX15 Y10 P1\nG5.3\nG1 X5 Y10\nM2\n")  # fmt: skip
+    text = (
+        "G21 G90 G17 G64 P0.01\nG0 X10 Y-10\nG1 X10 Y0 F1200\n"
+        "G5.2 X15 Y0 P1 L3\nX15 Y5 P1\nX15 Y10 P1\nG5.3\nG1 X5 Y10\nM2\n"
+    )
     prog, r = run(text)
     log = r.plan.pieces.corners
     blends = log.action == CornerAction.BLEND
@@ -281,8 +303,9 @@ def test_cam_breaks_of_1e_5_rad_pass_at_full_speed(mode):
 def test_small_break_rule_at_its_threshold():
     """2v sin(θ/2) ≤ min(A T, J T², 4δ/T): the break just under θ* passes, just over stops
     (G61, long lines: no crowding factor)."""
-    dv = min(LIM.a_max_mm_s2 * PERIOD, LIM.j_max_mm_s3 * PERIOD**2,
-             4 * LIM.chord_tolerance_mm / PERIOD)  # fmt: skip
+    dv = min(
+        LIM.a_max_mm_s2 * PERIOD, LIM.j_max_mm_s3 * PERIOD**2, 4 * LIM.chord_tolerance_mm / PERIOD
+    )
     assert pass_velocity_jump_mm_s(MACHINE) == pytest.approx(dv, rel=1e-15)
     v = LIM.v_max_mm_s
     theta = 2 * np.arcsin(dv / (2 * v))
@@ -313,8 +336,11 @@ def test_g64_q_merges_within_q_of_every_original_vertex():
     q = 0.01
     x = np.linspace(0.0, 50.0, 501)[1:]
     y = np.where(x < 25.0, 0.0, x - 25.0) + rng.uniform(-0.4 * q, 0.4 * q, x.size)
-    text = (f"G21 G90 G64 P0.005 Q{q}\nG0 X0 Y0\nF1200\n"
-            + "".join(f"G1 X{a:.6f} Y{b:.6f}\n" for a, b in zip(x, y)) + "M2\n")  # fmt: skip
+    text = (
+        f"G21 G90 G64 P0.005 Q{q}\nG0 X0 Y0\nF1200\n"
+        + "".join(f"G1 X{a:.6f} Y{b:.6f}\n" for a, b in zip(x, y))
+        + "M2\n"
+    )
     prog = interpret_text(text)
     merged, source = merge_collinear(prog.segments)
     lines = [s for s in merged if s.kind == "line"]
@@ -456,12 +482,14 @@ def test_trimmed_ph_and_nurbs_pieces_are_the_same_curve():
     assert cut.length_mm == pytest.approx(s1 - s0, rel=1e-9)
     t = np.linspace(0.0, s1 - s0, 9)
     np.testing.assert_allclose(cut.points_mm(t), piece.points_mm(s0 + t), atol=1e-9)
-    prog = interpret_text("G21 G17\nG1 X10 Y0 F600\nG5.2 X15 Y0 P1 L3\nX15 Y5 P1\n"
-                          "X15 Y10 P1\nG5.3\nM2\n")  # fmt: skip
+    prog = interpret_text(
+        "G21 G17\nG1 X10 Y0 F600\nG5.2 X15 Y0 P1 L3\nX15 Y5 P1\nX15 Y10 P1\nG5.3\nM2\n"
+    )
     curve = NurbsCurve.from_segment(prog.segments[1])
     s = curve.arc_length(np.array([curve.u_start, curve.u_end]))
-    piece = Piece(Kind.NURBS, curve, float(s[1] - s[0]), 10.0, 1, 3, curve.u_start,
-                  curve.u_end, 0.0)  # fmt: skip
+    piece = Piece(
+        Kind.NURBS, curve, float(s[1] - s[0]), 10.0, 1, 3, curve.u_start, curve.u_end, 0.0
+    )
     cut = trimmed_piece(piece, 0.5, piece.length_mm - 0.25)
     t = np.linspace(0.0, cut.length_mm, 9)
     np.testing.assert_allclose(cut.points_mm(t), piece.points_mm(0.5 + t), atol=1e-9)
@@ -514,8 +542,11 @@ def test_stop_or_blend_estimate_agrees_with_the_planned_profiles(monkeypatch):
         lim = machine.limits
         v = np.minimum(pieces.v_cap_mm_s[c.row - 1], pieces.v_cap_mm_s[c.row])
         w = np.minimum(pieces_mod.curvature_cap_mm_s(machine, c.kappa_per_mm, v), v)
-        blend = (pieces_mod._speed_change_s(v - w, lim.a_max_mm_s2, lim.j_max_mm_s3) * (v - w)
-                 / v + c.length_mm / w - (c.trim_a_mm + c.trim_b_mm) / v)  # fmt: skip
+        blend = (
+            pieces_mod._speed_change_s(v - w, lim.a_max_mm_s2, lim.j_max_mm_s3) * (v - w) / v
+            + c.length_mm / w
+            - (c.trim_a_mm + c.trim_b_mm) / v
+        )
         estimate["d"] = float(np.mean(blend - pieces_mod._speed_change_s(v, a, j)))
         real(pieces, c, machine)
         return np.ones(c.row.size, dtype=bool)  # force the blends

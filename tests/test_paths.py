@@ -226,8 +226,14 @@ def test_geometry_of_each_segment_kind():
 def _quad_length(r0, r1, angle, rise, t):
     """Reference: scipy's adaptive quadrature of the speed √((r(t) Δθ)² + Δr² + H²)."""
     dr = r1 - r0
-    return quad(lambda x: np.sqrt(((r0 + x * dr) * angle) ** 2 + dr * dr + rise * rise),
-                0.0, t, epsabs=0, epsrel=5e-14, limit=200)[0]  # fmt: skip
+    return quad(
+        lambda x: np.sqrt(((r0 + x * dr) * angle) ** 2 + dr * dr + rise * rise),
+        0.0,
+        t,
+        epsabs=0,
+        epsrel=5e-14,
+        limit=200,
+    )[0]
 
 
 @pytest.mark.parametrize("seed", range(4))
@@ -250,8 +256,9 @@ def test_spiral_closed_form_against_quadrature(seed):
 def test_helix_and_degenerate_closed_forms():
     # helix: √((r θ)² + h²) exactly; no turn: the straight rise √(Δr² + H²)
     assert segments.spiral_arc_length_mm(3.0, 3.0, 2.5, 4.0) == np.hypot(7.5, 4.0)
-    assert segments.spiral_arc_length_mm(1.0, 2.0, 0.0, 3.0) == pytest.approx(np.sqrt(10.0),
-                                                                              rel=1e-15)
+    assert segments.spiral_arc_length_mm(1.0, 2.0, 0.0, 3.0) == pytest.approx(
+        np.sqrt(10.0), rel=1e-15
+    )
     assert segments.spiral_arc_length_mm(1.0, 1.5, 2.0, 0.0, 0.0) == 0.0
 
 
@@ -284,8 +291,10 @@ def _spiral_t_reference(r0, r1, ang, hel, s_in, big, max_iter=50):
         if not active.size:
             break
         ta = t[active]
-        f = segments.spiral_arc_length_mm(r0[active], r1[active], ang[active], hel[active],
-                                          ta) - s[active]  # fmt: skip
+        f = (
+            segments.spiral_arc_length_mm(r0[active], r1[active], ang[active], hel[active], ta)
+            - s[active]
+        )
         w = ang[active] * (r0[active] + ta * dr[active])
         new_t = np.clip(ta - f / np.sqrt(a2[active] + w * w), 0.0, 1.0)
         done = (np.abs(f) <= tol[active]) | (np.abs(new_t - ta) <= 2.0 * eps)
@@ -312,11 +321,16 @@ def test_spiral_newton_gives_the_bits_of_the_reference_and_inverts_the_length():
         sk = s[k] * np.linspace(0.0, 1.0, 9)
         np.testing.assert_array_equal(
             segments.spiral_t_at_length(r0[k], r1[k], ang[k], hel[k], sk, big[k]),
-            _spiral_t_reference(*np.broadcast_arrays(r0[k], r1[k], ang[k], hel[k], sk, big[k])))
+            _spiral_t_reference(*np.broadcast_arrays(r0[k], r1[k], ang[k], hel[k], sk, big[k])),
+        )
     # And s(t) = s: against the integral of the speed √(Δr² + H² + (Δθ r(t))²).
     for k in range(0, n, 2003):
+
         def speed(u, k=k):
-            return np.sqrt((r1[k] - r0[k]) ** 2 + hel[k] ** 2
-                           + (ang[k] * (r0[k] + u * (r1[k] - r0[k]))) ** 2)
+            return np.sqrt(
+                (r1[k] - r0[k]) ** 2 + hel[k] ** 2 + (ang[k] * (r0[k] + u * (r1[k] - r0[k]))) ** 2
+            )
+
         assert quad(speed, 0.0, t[k], epsabs=1e-13, epsrel=1e-13)[0] == pytest.approx(
-            s[k], rel=1e-10, abs=1e-9)
+            s[k], rel=1e-10, abs=1e-9
+        )

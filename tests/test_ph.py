@@ -66,13 +66,26 @@ def test_sigma_equals_speed_and_length_equals_quadrature():
     xi = np.linspace(0.0, 1.0, 101)
     speed = np.abs(_bezier_hodograph(ph.control_points, xi))
     np.testing.assert_allclose(ph.sigma(xi), speed, rtol=1e-12, atol=0)
-    np.testing.assert_allclose(ph.hodograph(xi), _bezier_hodograph(ph.control_points, xi),
-                               rtol=1e-12, atol=1e-13)
-    length, _ = quad(lambda t: abs(_bezier_hodograph(ph.control_points, np.array(t))),
-                     0.0, 1.0, epsabs=0.0, epsrel=1e-13, limit=200)
+    np.testing.assert_allclose(
+        ph.hodograph(xi), _bezier_hodograph(ph.control_points, xi), rtol=1e-12, atol=1e-13
+    )
+    length, _ = quad(
+        lambda t: abs(_bezier_hodograph(ph.control_points, np.array(t))),
+        0.0,
+        1.0,
+        epsabs=0.0,
+        epsrel=1e-13,
+        limit=200,
+    )
     assert ph.length_mm == pytest.approx(length, rel=1e-12)
-    part, _ = quad(lambda t: abs(_bezier_hodograph(ph.control_points, np.array(t))),
-                   0.0, 0.37, epsabs=0.0, epsrel=1e-13, limit=200)
+    part, _ = quad(
+        lambda t: abs(_bezier_hodograph(ph.control_points, np.array(t))),
+        0.0,
+        0.37,
+        epsabs=0.0,
+        epsrel=1e-13,
+        limit=200,
+    )
     assert float(ph.arc_length(0.37)) == pytest.approx(part, rel=1e-12)
     for x in (0.0, 0.25, 0.6, 1.0):
         assert abs(ph.point(x) - _bezier_point(ph.control_points, x)) < 1e-13
@@ -96,10 +109,12 @@ def test_curvature_and_derivatives_vs_finite_differences():
     # The 3-D layout: (order + 1, m, 3) in the XY plane at z = 0.
     der = ph.derivatives_mm(xi, 3)
     assert der.shape == (4, xi.size, 3)
-    np.testing.assert_allclose(der[1, :, 0] + 1j * der[1, :, 1], ph.hodograph(xi), rtol=0,
-                               atol=1e-15)
-    np.testing.assert_allclose(der[3, :, 0] + 1j * der[3, :, 1], ph.third_derivative(xi),
-                               rtol=0, atol=1e-12)
+    np.testing.assert_allclose(
+        der[1, :, 0] + 1j * der[1, :, 1], ph.hodograph(xi), rtol=0, atol=1e-15
+    )
+    np.testing.assert_allclose(
+        der[3, :, 0] + 1j * der[3, :, 1], ph.third_derivative(xi), rtol=0, atol=1e-12
+    )
     assert np.all(der[:, :, 2] == 0.0)
     # Degree 5: the sixth derivative vanishes, the fifth is constant 5! × (Δ⁵ of control points).
     der6 = ph.derivatives_mm(xi, 6)
@@ -116,8 +131,9 @@ def test_rotation_index_matches_unwrapped_tangent_angle():
         dense = (angle[-1] - angle[0]) / (2 * np.pi)
         assert s.rotation_index() == pytest.approx(dense, abs=1e-9)
         # ∫κ ds by quadrature agrees too.
-        turn, _ = quad(lambda t, s=s: float(s.curvature(t) * s.sigma(t)), 0, 1, limit=200,
-                       epsabs=1e-12)
+        turn, _ = quad(
+            lambda t, s=s: float(s.curvature(t) * s.sigma(t)), 0, 1, limit=200, epsabs=1e-12
+        )
         assert s.turning_angle_rad() == pytest.approx(turn, abs=1e-9)
 
 
@@ -165,8 +181,9 @@ def test_chosen_solution_never_loops(chord, chord_angle, a0, a1, m0, m1, x0, y0)
     guess=st.floats(0.0, 1.0),
 )
 def test_param_at_length_inverts_arc_length(a0, a1, m0, m1, guess):
-    ph = hermite_ph(0, 10, 10 * m0 * np.exp(1j * np.radians(a0)),
-                    10 * m1 * np.exp(1j * np.radians(a1)))
+    ph = hermite_ph(
+        0, 10, 10 * m0 * np.exp(1j * np.radians(a0)), 10 * m1 * np.exp(1j * np.radians(a1))
+    )
     rng = np.random.default_rng(7)
     s = np.concatenate(([0.0, ph.length_mm], rng.uniform(0, ph.length_mm, 200)))
     xi = ph.param_at_length(s)

@@ -20,11 +20,17 @@ class CircleArc:
         self.r, self.c = r, np.asarray(c, float)
         half = 0.5 * (a1 - a0)
         mid = 0.5 * (a0 + a1)
-        self.p = np.array([
-            [np.cos(a0), np.sin(a0), 0.0],
-            [np.cos(mid) / np.cos(half), np.sin(mid) / np.cos(half), 0.0],
-            [np.cos(a1), np.sin(a1), 0.0],
-        ]) * r + self.c
+        self.p = (
+            np.array(
+                [
+                    [np.cos(a0), np.sin(a0), 0.0],
+                    [np.cos(mid) / np.cos(half), np.sin(mid) / np.cos(half), 0.0],
+                    [np.cos(a1), np.sin(a1), 0.0],
+                ]
+            )
+            * r
+            + self.c
+        )
         self.w = np.array([1.0, np.cos(half), 1.0])
 
     def _nd(self, u):
@@ -87,8 +93,9 @@ def test_circle_unsplit_error_is_small_and_order_four():
         assert 0.0 < fit.rms_um < fit.max_um
         # Cross-check with the exact circle: radial error of dense PH samples.
         ph = fit.pieces[0].ph
-        radial_um = 1e3 * np.abs(np.linalg.norm(ph.point_mm(np.linspace(0, 1, 2001)), axis=1)
-                                 - 10.0)
+        radial_um = 1e3 * np.abs(
+            np.linalg.norm(ph.point_mm(np.linspace(0, 1, 2001)), axis=1) - 10.0
+        )
         assert fit.max_um == pytest.approx(radial_um.max(), rel=1e-3)
         maxima.append(fit.max_um)
     orders = np.log2(np.array(maxima[:-1]) / np.array(maxima[1:]))
@@ -108,9 +115,12 @@ def test_deviation_is_true_point_to_curve_distance():
     dense = ph.point_mm(xs)
     for k, q in enumerate(pts):
         g = xs[np.argmin(np.linalg.norm(dense - q, axis=1))]
-        res = minimize_scalar(lambda x, q=q: np.sum((ph.point_mm([x])[0] - q) ** 2),
-                              bounds=(max(0.0, g - 1e-3), min(1.0, g + 1e-3)),
-                              method="bounded", options={"xatol": 1e-13})
+        res = minimize_scalar(
+            lambda x, q=q: np.sum((ph.point_mm([x])[0] - q) ** 2),
+            bounds=(max(0.0, g - 1e-3), min(1.0, g + 1e-3)),
+            method="bounded",
+            options={"xatol": 1e-13},
+        )
         oracle_um = 1e3 * np.sqrt(min(res.fun, np.sum((ph.point_mm([g])[0] - q) ** 2)))
         assert dev[k] == pytest.approx(oracle_um, abs=1e-5)
     assert fit.max_um > 10.0  # a real deviation, not a trivial zero
@@ -132,14 +142,14 @@ def test_split_fit_meets_tolerance_with_g1_joins():
         a = left.ph.derivatives_mm([1.0], 1)[:, 0]
         b = right.ph.derivatives_mm([0.0], 1)[:, 0]
         np.testing.assert_allclose(a[0], b[0], rtol=0, atol=1e-12)
-        np.testing.assert_allclose(a[1] / np.linalg.norm(a[1]), b[1] / np.linalg.norm(b[1]),
-                                   rtol=0, atol=1e-12)
+        np.testing.assert_allclose(
+            a[1] / np.linalg.norm(a[1]), b[1] / np.linalg.norm(b[1]), rtol=0, atol=1e-12
+        )
     ends = U_TURN.point(np.array([0.0, 1.0]))
     np.testing.assert_allclose(pieces[0].ph.point_mm([0.0])[0], ends[0], rtol=0, atol=1e-12)
     np.testing.assert_allclose(pieces[-1].ph.point_mm([1.0])[0], ends[1], rtol=0, atol=1e-12)
     # Overall RMS is the RMS over all samples (equal counts per piece).
-    assert fit.rms_um == pytest.approx(np.sqrt(np.mean([p.rms_um**2 for p in pieces])),
-                                       rel=1e-12)
+    assert fit.rms_um == pytest.approx(np.sqrt(np.mean([p.rms_um**2 for p in pieces])), rel=1e-12)
     # The unsplit fit of the same region is far off tolerance.
     assert fit_region(U_TURN, 0.0, 1.0, split=False).rms_um > 100 * tol
 
@@ -155,8 +165,7 @@ def test_fit_is_invariant_under_rigid_motion_into_a_tilted_plane():
     assert moved.max_um == pytest.approx(flat.max_um, rel=1e-6)
     for a, b in zip(flat.pieces, moved.pieces):
         xs = np.linspace(0, 1, 11)
-        np.testing.assert_allclose(b.ph.point_mm(xs), a.ph.point_mm(xs) @ rot.T + shift,
-                                   atol=1e-12)
+        np.testing.assert_allclose(b.ph.point_mm(xs), a.ph.point_mm(xs) @ rot.T + shift, atol=1e-12)
 
 
 def test_depth_cap_raises_and_bad_arguments():
@@ -187,18 +196,21 @@ def test_real_nurbs_circle_matches_closed_form_arc():
 
     # The standard 9-point rational quadratic circle, R = 10 mm about (1, 2, 0.5) in z = 0.5.
     s = np.sqrt(0.5)
-    unit = np.array([[1, 0], [1, 1], [0, 1], [-1, 1], [-1, 0], [-1, -1], [0, -1], [1, -1],
-                     [1, 0]], float)
+    unit = np.array(
+        [[1, 0], [1, 1], [0, 1], [-1, 1], [-1, 0], [-1, -1], [0, -1], [1, -1], [1, 0]], float
+    )
     centre = np.array([1.0, 2.0, 0.5])
     pts = np.column_stack([10.0 * unit, np.zeros(9)]) + centre
-    curve = NurbsCurve(2, [0, 0, 0, 0.25, 0.25, 0.5, 0.5, 0.75, 0.75, 1, 1, 1], pts,
-                       [1, s, 1, s, 1, s, 1, s, 1])
+    curve = NurbsCurve(
+        2, [0, 0, 0, 0.25, 0.25, 0.5, 0.5, 0.75, 0.75, 1, 1, 1], pts, [1, s, 1, s, 1, s, 1, s, 1]
+    )
     # Its first span is the quarter arc CircleArc(10, 0, π/2) with u = 4 u_nurbs; the Hermite
     # data (u_b − u_a) C′ do not depend on an affine reparametrisation, so the fits coincide.
     fit = fit_region(curve, 0.05, 0.2, split=False)
     ref = fit_region(CircleArc(10.0, 0.0, np.pi / 2, c=centre), 0.2, 0.8, split=False)
-    np.testing.assert_allclose(fit.pieces[0].ph.control_points_mm,
-                               ref.pieces[0].ph.control_points_mm, atol=1e-12)
+    np.testing.assert_allclose(
+        fit.pieces[0].ph.control_points_mm, ref.pieces[0].ph.control_points_mm, atol=1e-12
+    )
     assert fit.max_um == pytest.approx(ref.max_um, rel=1e-9)
     # A region across a knot, split to 0.1 µm; radial error of the pieces stays within 3e.
     split = fit_region(curve, 0.2, 0.45, tolerance_um=0.1)

@@ -67,8 +67,13 @@ def test_simulate_stdin_points_equals_simulate_file(short_nc, tmp_path):
     assert from_stdin.exit_code == 0, from_stdin.output
     a, b = json.loads(from_file.stdout), json.loads(from_stdin.stdout)
     assert b["program"] == "<stdin>"
-    for key in ("samples", "cycle_time_s", "contour_eq29_max_um", "contour_true_max_um",
-                "axis_x_max_um"):
+    for key in (
+        "samples",
+        "cycle_time_s",
+        "contour_eq29_max_um",
+        "contour_true_max_um",
+        "axis_x_max_um",
+    ):
         assert b[key] == a[key]
 
 
@@ -84,10 +89,16 @@ def test_pipeline_run_to_simulate_subprocess(short_nc, tmp_path):
     assert invoke(["run", short_nc, "-o", points, "--quiet"]).exit_code == 0
     expected = json.loads(invoke(["simulate", points, "--json"]).stdout)
     cli = [sys.executable, "-m", "nurbscnc"]
-    producer = subprocess.Popen([*cli, "run", str(short_nc), "-o", "-"],
-                                stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-    consumer = subprocess.run([*cli, "simulate", "-", "--json"], stdin=producer.stdout,
-                              capture_output=True, text=True, timeout=120)
+    producer = subprocess.Popen(
+        [*cli, "run", str(short_nc), "-o", "-"], stdout=subprocess.PIPE, stderr=subprocess.PIPE
+    )
+    consumer = subprocess.run(
+        [*cli, "simulate", "-", "--json"],
+        stdin=producer.stdout,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     producer.stdout.close()
     assert producer.wait(timeout=120) == 0
     assert consumer.returncode == 0, consumer.stderr
@@ -121,8 +132,9 @@ def test_run_npz_suffix_without_format_writes_npz(short_nc, tmp_path):
     assert zipfile.is_zipfile(out)
     ref = tmp_path / "points.csv"
     assert invoke(["run", short_nc, "-o", ref, "--quiet"]).exit_code == 0
-    np.testing.assert_allclose(read_points(str(out))["x"], read_points(str(ref))["x"],
-                               rtol=0, atol=1e-9)  # the CSV keeps 9 decimals
+    np.testing.assert_allclose(
+        read_points(str(out))["x"], read_points(str(ref))["x"], rtol=0, atol=1e-9
+    )  # the CSV keeps 9 decimals
 
 
 def test_run_format_contradicting_suffix_is_refused(short_nc, tmp_path):
@@ -146,8 +158,10 @@ def test_run_npz_to_stdout_is_refused(short_nc):
 
 
 # -- 4. h:mm:ss -------------------------------------------------------------------------------
-@pytest.mark.parametrize("seconds, text", [(545.4, " (0:09:05)"), (60.0, " (0:01:00)"),
-                                           (3725.6, " (1:02:06)"), (59.9, ""), (0.5, "")])
+@pytest.mark.parametrize(
+    "seconds, text",
+    [(545.4, " (0:09:05)"), (60.0, " (0:01:00)"), (3725.6, " (1:02:06)"), (59.9, ""), (0.5, "")],
+)
 def test_clock_suffix(seconds, text):
     assert clock_suffix(seconds) == text
 

@@ -70,8 +70,17 @@ def test_gated_rise_kernel_is_the_python_flank_bit_for_bit():
         assert all(type(x) is float for x in got[0] + got[1])
         # the memo's merging (gated.merged_phases, rising and reversed) compiled too
         merged = gated._kernels.gated_rise_merged(
-            v0, v_top, d.tobytes(), c.tobytes(), a, j, dt, gated.GATE_MIN_STEP_S,
-            gated.GATE_GALLOP, gated.GATE_MAX_STEPS)  # fmt: skip
+            v0,
+            v_top,
+            d.tobytes(),
+            c.tobytes(),
+            a,
+            j,
+            dt,
+            gated.GATE_MIN_STEP_S,
+            gated.GATE_GALLOP,
+            gated.GATE_MAX_STEPS,
+        )
         assert (merged[0], merged[1]) == gated.merged_phases(ref[0], ref[1])
         assert (merged[2], merged[3]) == gated.merged_phases(ref[0][::-1], ref[1][::-1])
         assert merged[4] == ref[2]
@@ -98,14 +107,21 @@ def test_time_at_length_kernel_is_the_python_inversion_bit_for_bit():
     for prof in _profiles(rng):
         bounds = np.append(prof.piece_start_mm, prof.total_length_mm)
         s0 = np.asarray(prof.phase_s0_mm)
-        s = np.concatenate((bounds, s0, np.nextafter(s0, np.inf), np.nextafter(s0, -np.inf),
-                            rng.uniform(-0.1, prof.total_length_mm * 1.01, 500)))  # fmt: skip
-        assert np.array_equal(_bits(profile.time_at_length(prof, s)),
-                              _bits(profile._time_at_length_py(prof, s)))  # fmt: skip
+        s = np.concatenate(
+            (
+                bounds,
+                s0,
+                np.nextafter(s0, np.inf),
+                np.nextafter(s0, -np.inf),
+                rng.uniform(-0.1, prof.total_length_mm * 1.01, 500),
+            )
+        )
+        assert np.array_equal(
+            _bits(profile.time_at_length(prof, s)), _bits(profile._time_at_length_py(prof, s))
+        )
 
 
-@pytest.mark.skipif(distance._kernels is None,
-                    reason="nurbscnc.geometry._kernels was not built")  # fmt: skip
+@pytest.mark.skipif(distance._kernels is None, reason="nurbscnc.geometry._kernels was not built")
 def test_segment_distances_kernel_is_the_numpy_pairs_bit_for_bit():
     """500 random sets of points and segments over twelve orders of magnitude, with
     zero-length segments, empty and partial ranges: the same distances (inf where a point
@@ -144,9 +160,10 @@ def test_peak_speed_kernel_is_the_python_bisection_bit_for_bit():
         j = rng.choice([5e4, 1e4, 1e6], n)
         a_dn, j_dn = rng.choice([2450.0, 800.0, 1e4], n), rng.choice([5e4, 1e4, 1e6], n)
         for lims in ((a, j, a_dn, j_dn), (a, j), (2450.0, 5e4)):
-            assert np.array_equal(_bits(feedrate.peak_speed_unchecked(v_s, v_e, length, cap,
-                                                                        *lims)),
-                                  _bits(feedrate._peak_speed_py(v_s, v_e, length, cap, *lims)))
+            assert np.array_equal(
+                _bits(feedrate.peak_speed_unchecked(v_s, v_e, length, cap, *lims)),
+                _bits(feedrate._peak_speed_py(v_s, v_e, length, cap, *lims)),
+            )
 
 
 def test_segment_distance_is_the_closed_form():
@@ -199,7 +216,7 @@ def test_airfoil_plan_is_the_same_without_the_kernels(monkeypatch):
     gated._gated_rise_memo.cache_clear()
     assert fast.plan.iterations > 0  # the check re-planned
     assert fast.cycle_time_s == slow.cycle_time_s
-    assert np.array_equal(_bits(fast.plan.profile.junction_speeds_mm_s),
-                          _bits(slow.plan.profile.junction_speeds_mm_s))  # fmt: skip
+    assert np.array_equal(
+        _bits(fast.plan.profile.junction_speeds_mm_s), _bits(slow.plan.profile.junction_speeds_mm_s)
+    )
     assert fast.check.overs.worst_mm == slow.check.overs.worst_mm
-

@@ -30,8 +30,11 @@ MACHINE = load_machine()
 def nurbs_programs(draw):
     order = draw(st.sampled_from([4, 5]))
     n = draw(st.integers(order + 1, order + 6))
-    pts = draw(st.lists(st.tuples(st.floats(-20, 20), st.floats(-20, 20)), min_size=n,
-                        max_size=n, unique=True))  # fmt: skip
+    pts = draw(
+        st.lists(
+            st.tuples(st.floats(-20, 20), st.floats(-20, 20)), min_size=n, max_size=n, unique=True
+        )
+    )
     pts = np.array(pts)
     # Keep consecutive control points apart so the curve has no cusp (cusps are exact stops,
     # tested elsewhere) and the program stays a smooth NURBS.
@@ -67,8 +70,9 @@ def _fd(s, period, order):
     return d / period**order
 
 
-@settings(max_examples=12, deadline=None, derandomize=True,
-          suppress_health_check=[HealthCheck.too_slow])
+@settings(
+    max_examples=12, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow]
+)
 @given(nurbs_programs())
 def test_random_nurbs_programs_keep_every_limit(text):
     prog = interpret_text(text)
@@ -96,8 +100,9 @@ def test_random_nurbs_programs_keep_every_limit(text):
         assert np.max(np.abs(ds_true[moving] / planned[moving] - 1.0)) < 1e-6
 
 
-@settings(max_examples=4, deadline=None, derandomize=True,
-          suppress_health_check=[HealthCheck.too_slow])
+@settings(
+    max_examples=4, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow]
+)
 @given(nurbs_programs())
 def test_random_nurbs_programs_meet_the_contour_tolerance(text):
     """With the (default) local dynamics check, the planner's reference points through an
@@ -107,6 +112,6 @@ def test_random_nurbs_programs_meet_the_contour_tolerance(text):
     smp = run_program(prog, MACHINE).samples
     actual = lsim_actual_mm(smp.points_mm, MACHINE)
     first_cut = int(np.argmax(smp.piece >= 1))  # piece 0 is the rapid to the curve's start
-    d = distance_to_polyline_mm(actual[first_cut + 1:], _dense_curve(prog.segments[-1], 400_001))
+    d = distance_to_polyline_mm(actual[first_cut + 1 :], _dense_curve(prog.segments[-1], 400_001))
     lim = MACHINE.limits
     assert d.max() <= lim.contour_tolerance_mm + lim.ph_tolerance_mm + 1e-5

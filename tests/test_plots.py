@@ -42,11 +42,13 @@ def _has_colour(img: np.ndarray, rgb, tol: float = 0.02) -> bool:
 
 def _square_with_corners():
     side = np.linspace(0.0, 10.0, 50)
-    path = np.concatenate([
-        np.column_stack([side, 0 * side]),
-        np.column_stack([10 + 0 * side, side]),
-        np.column_stack([side[::-1], 10 + 0 * side]),
-    ])  # fmt: skip
+    path = np.concatenate(
+        [
+            np.column_stack([side, 0 * side]),
+            np.column_stack([10 + 0 * side, side]),
+            np.column_stack([side[::-1], 10 + 0 * side]),
+        ]
+    )
     s = np.linspace(0.0, np.pi / 2, 30)
     corner = np.column_stack([9 + np.sin(s), 1 - np.cos(s), 0 * s])  # rounds (10, 0)
     return np.column_stack([path, np.zeros(len(path))]), [corner]

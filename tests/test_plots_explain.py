@@ -50,9 +50,17 @@ def test_path_rapids_dashed_and_cuts_coloured_by_feed():
 
 def test_contour_plot_draws_eps_max():
     t = np.linspace(0.0, 1.0, 101)
-    fig = plots._time_series_figure({"true": (t, 10 * t)}, "part.nc: contour error",
-                                    "contour error [µm]", "contour", 0.8, plots.FIGSIZE_IN,
-                                    True, False, (15.0, "ε_max = 15 µm"))  # fmt: skip
+    fig = plots._time_series_figure(
+        {"true": (t, 10 * t)},
+        "part.nc: contour error",
+        "contour error [µm]",
+        "contour",
+        0.8,
+        plots.FIGSIZE_IN,
+        True,
+        False,
+        (15.0, "ε_max = 15 µm"),
+    )
     ax = fig.axes[0]
     (line,) = [ln for ln in ax.get_lines() if ln.get_label() == "ε_max = 15 µm"]
     assert np.all(np.asarray(line.get_ydata()) == 15.0)
@@ -63,8 +71,15 @@ def test_contour_plot_draws_eps_max():
 def test_feed_along_draws_the_programmed_feed_per_piece():
     s = np.linspace(0.0, 30.0, 301)
     v = np.minimum(20.0, s)
-    fig = plots.feed_along_figure(s, v, [0.0, 10.0], [10.0, 30.0], [20.0, 25.0],
-                                  cap_mm_s=[20.0, 22.0], title="p.nc: feed along")
+    fig = plots.feed_along_figure(
+        s,
+        v,
+        [0.0, 10.0],
+        [10.0, 30.0],
+        [20.0, 25.0],
+        cap_mm_s=[20.0, 22.0],
+        title="p.nc: feed along",
+    )
     ax = fig.axes[0]
     (prog,) = [ln for ln in ax.get_lines() if ln.get_label() == "programmed F"]
     x, y = np.asarray(prog.get_xdata()), np.asarray(prog.get_ydata())
@@ -101,12 +116,15 @@ def captured(monkeypatch):
     return saved
 
 
-@pytest.mark.parametrize("command", [
-    ["plan", "{prog}", "--plot", "{dir}"],
-    ["run", "{prog}", "-o", "{prog}.csv", "--plot", "{dir}"],
-    ["simulate", "{prog}", "--plot", "{dir}"],
-    ["compare", "{prog}", "--algorithm", "ours", "--plot", "{dir}"],
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["plan", "{prog}", "--plot", "{dir}"],
+        ["run", "{prog}", "-o", "{prog}.csv", "--plot", "{dir}"],
+        ["simulate", "{prog}", "--plot", "{dir}"],
+        ["compare", "{prog}", "--algorithm", "ours", "--plot", "{dir}"],
+    ],
+)
 def test_every_figure_is_titled_with_the_program(tmp_path, captured, command):
     prog = tmp_path / "wing.nc"
     prog.write_text("G0 X-5 Y0\n" + NACA.read_text())
@@ -125,12 +143,20 @@ def test_plan_plots_show_rapids_limits_and_eps(tmp_path, captured):
     res = CliRunner().invoke(main, ["plan", str(prog), "--plot", str(tmp_path / "figs")])
     assert res.exit_code == 0, res.output
     figs = {Path(p).name: f for f, p in captured}
-    assert set(figs) == {"feed.png", "path.png", "feed_along.png", "limits.png",
-                         "contour_error.png"}  # fmt: skip
+    assert set(figs) == {
+        "feed.png",
+        "path.png",
+        "feed_along.png",
+        "limits.png",
+        "contour_error.png",
+    }
     path_ax = figs["path.png"].axes[0]
     assert any(c.get_label() == "rapid (G0)" for c in path_ax.collections)
-    eps = [ln for ln in figs["contour_error.png"].axes[0].get_lines()
-           if ln.get_label().startswith("ε_max")]  # fmt: skip
+    eps = [
+        ln
+        for ln in figs["contour_error.png"].axes[0].get_lines()
+        if ln.get_label().startswith("ε_max")
+    ]
     assert len(eps) == 1 and np.all(np.asarray(eps[0].get_ydata()) == 15.0)
     labels = {c.get_label() for c in figs["limits.png"].axes[0].collections}
     assert "rapid rate" in labels and len(labels) >= 2

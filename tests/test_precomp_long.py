@@ -41,17 +41,21 @@ def _program() -> tuple[str, np.ndarray]:
         lines += [f"G0 X{ox:.3f} Y{oy:.3f}", "G1 F1500"]
         y = oy
         for _ in range(PAIRS):
-            lines += [f"G1 X{ox + WIDTH_MM:.3f} Y{y:.3f}",
-                      f"G3 X{ox + WIDTH_MM:.3f} Y{y + 2 * RADIUS_MM:.3f} I0 J{RADIUS_MM}",
-                      f"G1 X{ox:.3f} Y{y + 2 * RADIUS_MM:.3f}",
-                      f"G2 X{ox:.3f} Y{y + 4 * RADIUS_MM:.3f} I0 J{RADIUS_MM}"]  # fmt: skip
+            lines += [
+                f"G1 X{ox + WIDTH_MM:.3f} Y{y:.3f}",
+                f"G3 X{ox + WIDTH_MM:.3f} Y{y + 2 * RADIUS_MM:.3f} I0 J{RADIUS_MM}",
+                f"G1 X{ox:.3f} Y{y + 2 * RADIUS_MM:.3f}",
+                f"G2 X{ox:.3f} Y{y + 4 * RADIUS_MM:.3f} I0 J{RADIUS_MM}",
+            ]
             t = np.linspace(0.0, 1.0, 2001)
             a = np.linspace(-np.pi / 2, np.pi / 2, 4001)
             r = RADIUS_MM
-            dense += [np.column_stack([ox + WIDTH_MM * t, np.full_like(t, y)]),
-                      np.column_stack([ox + WIDTH_MM + r * np.cos(a), y + r + r * np.sin(a)]),
-                      np.column_stack([ox + WIDTH_MM * (1 - t), np.full_like(t, y + 2 * r)]),
-                      np.column_stack([ox - r * np.cos(a), y + 3 * r + r * np.sin(a)])]  # fmt: skip
+            dense += [
+                np.column_stack([ox + WIDTH_MM * t, np.full_like(t, y)]),
+                np.column_stack([ox + WIDTH_MM + r * np.cos(a), y + r + r * np.sin(a)]),
+                np.column_stack([ox + WIDTH_MM * (1 - t), np.full_like(t, y + 2 * r)]),
+                np.column_stack([ox - r * np.cos(a), y + 3 * r + r * np.sin(a)]),
+            ]
             y += 4 * RADIUS_MM
         dense.append(np.full((1, 2), np.nan))
     lines.append("M2")
@@ -70,8 +74,9 @@ def test_many_cuts_precompensated_keep_limits_tube_and_contour():
     assert ks.size - 1 >= CUTS  # one segment per cut (the first rapid's window with the first)
     # The planner's windows of rows (each from just before a joint) are the written rows.
     exact = reference_sampler("exact")
-    whole = precompensate_reference(exact(plan.pieces, plan.profile, period), plan.pieces,
-                                    plan.profile, MACHINE)[0]  # fmt: skip
+    whole = precompensate_reference(
+        exact(plan.pieces, plan.profile, period), plan.pieces, plan.profile, MACHINE
+    )[0]
     lead = whole.t_s.size - sample_count(plan.pieces, plan.profile, period)
     sample = precompensated_sampler(exact, MACHINE)
     for k in _segment_starts(plan.pieces, plan.profile, period, 10**12)[1:-1]:
@@ -115,12 +120,16 @@ def _synthetic(n: int = 300) -> np.ndarray:
     """A planned reference (n, 3) [mm]: from rest along x and y with half the machine's
     jerk, then that acceleration (within every limit on the samples)."""
     period = MACHINE.servo.period_s
-    j = 0.5 * float(np.min(np.minimum(MACHINE.limits.j_max_mm_s3,
-                                      MACHINE.axis_limits.as_arrays()[2])))  # fmt: skip
+    j = 0.5 * float(
+        np.min(np.minimum(MACHINE.limits.j_max_mm_s3, MACHINE.axis_limits.as_arrays()[2]))
+    )
     t = np.arange(n) * period
     t1 = 0.005  # jerk for 5 ms, then that acceleration
-    x = np.where(t < t1, j * t**3 / 6.0,
-                 j * t1**3 / 6.0 + 0.5 * j * t1**2 * (t - t1) + 0.5 * j * t1 * (t - t1) ** 2)
+    x = np.where(
+        t < t1,
+        j * t**3 / 6.0,
+        j * t1**3 / 6.0 + 0.5 * j * t1**2 * (t - t1) + 0.5 * j * t1 * (t - t1) ** 2,
+    )
     return np.column_stack([x, 0.5 * x, np.zeros(n)])
 
 
@@ -137,8 +146,9 @@ def test_a_joint_no_window_solves_is_the_plans_own(monkeypatch):
     r = _synthetic()
     n = r.shape[0]
     zeros = np.zeros(n - 3)
-    planned = Reference(zeros, zeros, zeros, zeros, zeros, np.zeros(n - 3, dtype=np.int64),
-                        r[3:], zeros)  # fmt: skip
+    planned = Reference(
+        zeros, zeros, zeros, zeros, zeros, np.zeros(n - 3, dtype=np.int64), r[3:], zeros
+    )
     off = r[3:].copy()
     off[:5] += 2e-3  # a jump of 2 µm at the joint
     seg = replace(planned, points_mm=off)

@@ -101,8 +101,9 @@ def test_the_raise_keeps_only_faster_compensated_plans_within_the_machine_caps()
     prog = interpret_text((ROOT / "programs" / "naca2415.nc").read_text())
     sampler = precompensated_sampler(reference_sampler("exact"), MACHINE)
     fixed = plan_checked(prog, MACHINE, LookaheadOptions(), sampler, keep_reference=False)
-    free = plan_checked(prog, MACHINE, LookaheadOptions(raise_corner_caps=True), sampler,
-                        keep_reference=False)  # fmt: skip
+    free = plan_checked(
+        prog, MACHINE, LookaheadOptions(raise_corner_caps=True), sampler, keep_reference=False
+    )
     assert free[0].cycle_time_s <= fixed[0].cycle_time_s + 1e-12
     assert free[1].stats["contour_true_max_um"] <= MACHINE.limits.contour_tolerance_mm * 1e3
     kappa = free[0].pieces.kappa_max_per_mm

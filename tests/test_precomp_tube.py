@@ -38,13 +38,11 @@ TUBE_MM = 0.003
 def _kinematic(text: str):
     """The kinematic plan (no dynamics check) of a program and its exact reference."""
     sampler = reference_sampler("exact")
-    plan, _ = plan_checked(interpret_text(text), MACHINE, LookaheadOptions(dynamics="off"),
-                           sampler)  # fmt: skip
+    plan, _ = plan_checked(interpret_text(text), MACHINE, LookaheadOptions(dynamics="off"), sampler)
     return plan, sampler(plan.pieces, plan.profile, PERIOD)
 
 
-def _steady_circle_error_um(radius_mm: float, speed_mm_s: float,
-                            tube_mm: float) -> list[float]:  # fmt: skip
+def _steady_circle_error_um(radius_mm: float, speed_mm_s: float, tube_mm: float) -> list[float]:
     """Per axis: the contour error [µm] of the steady state on a circle when the reference
     runs at radius R − τ: |H(e^{jωT})|(R − τ) − R (H the FOH-sampled eq. 25, by scipy)."""
     w = speed_mm_s / radius_mm
@@ -83,16 +81,25 @@ def test_the_optimisation_converges_on_a_circle_to_the_closed_form_steady_state(
         return res
 
     monkeypatch.setattr(scipy.optimize, "linprog", recording_linprog)
-    plan, ref = _kinematic("G21 G90 G0 X1 Y0\nG3 X1 Y0 I-1 J0 F1800\nG3 X1 Y0 I-1 J0\n"
-                           "G3 X1 Y0 I-1 J0\n")  # fmt: skip
+    plan, ref = _kinematic(
+        "G21 G90 G0 X1 Y0\nG3 X1 Y0 I-1 J0 F1800\nG3 X1 Y0 I-1 J0\nG3 X1 Y0 I-1 J0\n"
+    )
     # The tube less twice the chord error of the optimiser's polylines, the clip inside it
     # by one more (as precompensate_reference does).
     tube = TUBE_MM - 2.0 * CHORD_MM
-    clip, _ = precompensate_reference(ref, plan.pieces, plan.profile, MACHINE,
-                                      tube - CHORD_MM, refine=False)  # fmt: skip
+    clip, _ = precompensate_reference(
+        ref, plan.pieces, plan.profile, MACHINE, tube - CHORD_MM, refine=False
+    )
     solved.clear()  # (the projection's LPs: infeasible ones are part of its method)
-    done = refine_in_tube(clip, plan.pieces, plan.profile, MACHINE,
-                          np.full(clip.t_s.size, tube), rounds=6, gain_mm=0.0)  # fmt: skip
+    done = refine_in_tube(
+        clip,
+        plan.pieces,
+        plan.profile,
+        MACHINE,
+        np.full(clip.t_s.size, tube),
+        rounds=6,
+        gain_mm=0.0,
+    )
     out = replace(clip, points_mm=done.points_mm)
     history = np.array(done.history_mm) * 1000.0
     assert solved and all(status == 0 and "time_limit" not in opts for status, opts in solved)
@@ -108,8 +115,9 @@ def test_the_optimisation_converges_on_a_circle_to_the_closed_form_steady_state(
     assert max(excess.values()) <= 0.0, excess
     # Independent: lsim of the written reference, distance to the exact circle |p| − R.
     actual = lsim_actual_mm(out.points_mm, MACHINE)
-    cut = np.append(~plan.pieces.rapid[out.piece], np.ones(actual.shape[0] - out.piece.size,
-                                                            dtype=bool))  # fmt: skip
+    cut = np.append(
+        ~plan.pieces.rapid[out.piece], np.ones(actual.shape[0] - out.piece.size, dtype=bool)
+    )
     err = np.abs(np.hypot(actual[:, 0], actual[:, 1]) - 1.0)[cut] * 1000.0
     assert err.max() == pytest.approx(history[-1], abs=0.01)
     # The reference itself within τ of the circle, on every cutting sample.
@@ -201,9 +209,8 @@ AXIS_MACHINE = load_machine(overrides={f"axis_limits.{a}.{k}": v for a in "xy" f
 AXIS_PROGRAMS = {
     "naca2415": (ROOT / "programs" / "naca2415.nc").read_text(),
     "circle": "G21 G90 G17 G94 G61\nG0 X2 Y0\nF1800\nG3 X2 Y0 I-2 J0\nM2\n",
-    "line_arc_line": "G21 G90 G17 G94 G64\nG0 X0 Y0\nF3000\nG1 X5\nG3 X7 Y2 I0 J2\n"
-                     "G1 Y6\nM2\n",
-}  # fmt: skip
+    "line_arc_line": "G21 G90 G17 G94 G64\nG0 X0 Y0\nF3000\nG1 X5\nG3 X7 Y2 I0 J2\nG1 Y6\nM2\n",
+}
 
 
 @pytest.mark.parametrize("name", sorted(AXIS_PROGRAMS))
@@ -213,8 +220,9 @@ def test_compensated_reference_keeps_the_axis_limits_strictly(name):
     of the planned path (a polyline of its own), and whose independently simulated tool
     (lsim) stays within ε_max of it (to the 0.01 µm the check's FOH sampling and lsim
     agree on, as the airfoil test above)."""
-    run = run_program(interpret_text(AXIS_PROGRAMS[name]), AXIS_MACHINE,
-                      RunOptions(precompensate=True))  # fmt: skip
+    run = run_program(
+        interpret_text(AXIS_PROGRAMS[name]), AXIS_MACHINE, RunOptions(precompensate=True)
+    )
     pts = run.samples.points_mm
     excess = limits_excess(pts, AXIS_MACHINE)
     assert max(excess.values()) <= 0.0, excess

@@ -95,8 +95,9 @@ def test_zpetc_on_a_non_minimum_phase_axis_is_the_zero_phase_filter(seed, axis):
     assert comp.lead_samples == 1  # the look-ahead of one unstable zero
     assert u.size == r.size + 1 and u[-1] == r[-1]  # ends with the plan, at its end point
     y = lsim_axis(num, den, np.concatenate([u, np.full(50, u[-1])]), PERIOD)
-    planned = np.concatenate([np.full(comp.lead_samples, r[0]), r,
-                              np.full(y.size - r.size - comp.lead_samples, r[-1])])
+    planned = np.concatenate(
+        [np.full(comp.lead_samples, r[0]), r, np.full(y.size - r.size - comp.lead_samples, r[-1])]
+    )
     d2 = np.zeros_like(planned)
     d2[1:-1] = planned[2:] - 2.0 * planned[1:-1] + planned[:-2]
     # Exactly the zero-phase filter at every sample (lsim's own accuracy ~1e-12 mm) but
@@ -145,8 +146,9 @@ def test_inverse_frequency_response_against_scipy(axis):
     assert np.abs(hf[band] - 1.0).max() <= 0.01
 
 
-@pytest.mark.parametrize("num, den", [((100.0,), (1.0, 100.0)),
-                                      ((1.0, 300.0, 2e4), (1.0, 200.0, 2e4))])
+@pytest.mark.parametrize(
+    "num, den", [((100.0,), (1.0, 100.0)), ((1.0, 300.0, 2e4), (1.0, 200.0, 2e4))]
+)
 def test_zpetc_on_a_minimum_phase_axis_is_the_exact_inverse(num, den):
     assert np.all(np.abs(foh_zeros(num, den, PERIOD)) < 1.0)
     r = smooth_reference(7)
@@ -168,8 +170,9 @@ def test_the_inverse_tail_is_blended_in_within_the_limits():
     r = np.concatenate([np.zeros(10), 2.0 * smooth_step(np.linspace(0.0, 1.0, 100))]) + 1.25
     long = np.concatenate([r, np.full(400, r[-1])])
     a_max, j_max = 2450.0, 5e4
-    comp = precompensate_points([MACHINE.servo.x], r[:, None], PERIOD, a_max_mm_s2=a_max,
-                                j_max_mm_s3=j_max)  # fmt: skip
+    comp = precompensate_points(
+        [MACHINE.servo.x], r[:, None], PERIOD, a_max_mm_s2=a_max, j_max_mm_s3=j_max
+    )
     free = precompensate_points([MACHINE.servo.x], long[:, None], PERIOD).points_mm[:, 0]
     u = comp.points_mm[:, 0]
     n = r.size + comp.lead_samples
@@ -181,14 +184,16 @@ def test_the_inverse_tail_is_blended_in_within_the_limits():
     assert comp.end_blend_samples == w > 1
     blend = u - free[:n]
     np.testing.assert_allclose(blend[: n - w], 0.0, atol=1e-12)
-    np.testing.assert_allclose(blend[n - w :], d * smooth_step(np.arange(1, w + 1) / w),
-                               rtol=0, atol=1e-12)  # fmt: skip
+    np.testing.assert_allclose(
+        blend[n - w :], d * smooth_step(np.arange(1, w + 1) / w), rtol=0, atol=1e-12
+    )
     full = np.concatenate([np.zeros(3), blend, np.full(3, d)])
     assert np.abs(np.diff(full, 2)).max() / PERIOD**2 <= a_max
     assert np.abs(np.diff(full, 3)).max() / PERIOD**3 <= j_max * (1 + 1e-9)
     assert SMOOTH_STEP_ACCEL == pytest.approx(
         np.abs(np.gradient(np.gradient(smooth_step(x := np.linspace(0, 1, 20001)), x), x)).max(),
-        rel=1e-3)
+        rel=1e-3,
+    )
     assert SMOOTH_STEP_JERK == pytest.approx(60.0)
 
 
@@ -202,12 +207,14 @@ def test_perturbed_models_against_closed_forms():
         assert num[-1] / den[-1] == pytest.approx(servo.dc_gain, rel=1e-12)
         assert (den[-2] - num[-2]) / den[-1] == pytest.approx(c1 / k, rel=1e-9)
         # The zeros stay, the poles are those of D + (k − 1)N.
-        np.testing.assert_allclose(np.sort_complex(np.roots(num)),
-                                   np.sort_complex(np.roots(servo.numerator)), rtol=1e-9)
+        np.testing.assert_allclose(
+            np.sort_complex(np.roots(num)), np.sort_complex(np.roots(servo.numerator)), rtol=1e-9
+        )
     for lam in (0.9, 1.1):
         m = perturbed_model(servo, bandwidth=lam)
-        np.testing.assert_allclose(np.sort_complex(m.poles()),
-                                   np.sort_complex(lam * servo.poles()), rtol=1e-9)
+        np.testing.assert_allclose(
+            np.sort_complex(m.poles()), np.sort_complex(lam * servo.poles()), rtol=1e-9
+        )
         assert m.dc_gain == pytest.approx(servo.dc_gain, rel=1e-12)
 
 
@@ -228,8 +235,9 @@ def test_the_lead_along_the_path_and_the_limit_to_the_path_on_a_circle():
     foot = circle(theta + lead / rho)  # the path point that far along
     out = limit_to_path(u, foot, 0.003)
     # Within the tolerance of the circle (by construction), and along the residual's line.
-    np.testing.assert_allclose(np.abs(np.linalg.norm(out, axis=1) - rho)[1:-1], 0.003,
-                               rtol=0, atol=1e-8)  # fmt: skip
+    np.testing.assert_allclose(
+        np.abs(np.linalg.norm(out, axis=1) - rho)[1:-1], 0.003, rtol=0, atol=1e-8
+    )
     assert np.all(np.linalg.norm(out - foot, axis=1) <= 0.003 + 1e-15)
     assert np.array_equal(limit_to_path(u, foot, np.inf), u)
 
@@ -245,7 +253,7 @@ def airfoil():
 
 def _contour_um(points_mm, dense, first_cut):
     actual = lsim_actual_mm(points_mm, MACHINE)
-    return distance_to_polyline_mm(actual[first_cut + 1:], dense) * 1000.0
+    return distance_to_polyline_mm(actual[first_cut + 1 :], dense) * 1000.0
 
 
 def test_airfoil_fully_compensated_tool_follows_the_plan(airfoil):
@@ -253,8 +261,7 @@ def test_airfoil_fully_compensated_tool_follows_the_plan(airfoil):
     tolerance e (the planned corner pieces may leave the NURBS by that) plus 1 µm of the
     curve, while the same plan's uncompensated reference misses ε_max."""
     prog, dense = airfoil
-    run = run_program(prog, MACHINE, RunOptions(precompensate=True,
-                                                reference_tolerance_mm=np.inf))  # fmt: skip
+    run = run_program(prog, MACHINE, RunOptions(precompensate=True, reference_tolerance_mm=np.inf))
     smp = run.samples
     lim = MACHINE.limits
     first_cut = int(np.argmax(smp.piece >= 1))
@@ -279,16 +286,16 @@ def test_run_precompensate_on_the_airfoil_cli(airfoil, tmp_path):
     same plan; the summary reports the deviation (≤ 3 µm) and 8 model errors."""
     prog, dense = airfoil
     out = tmp_path / "p.csv"
-    res = CliRunner().invoke(main, ["run", str(AIRFOIL), "-o", str(out), "--precompensate",
-                                    "--json"])  # fmt: skip
+    res = CliRunner().invoke(
+        main, ["run", str(AIRFOIL), "-o", str(out), "--precompensate", "--json"]
+    )
     assert res.exit_code == 0, res.output
     summary = json.loads(res.output.strip().splitlines()[-1])
     pre = summary["precompensation"]
     assert pre["reference_tolerance_um"] == pytest.approx(3.0)
     assert pre["reference_deviation_max_um"] <= 3.0 + 1e-6
     assert len(pre["sensitivity"]) == 8
-    assert pre["sensitivity_contour_max_um"] == max(s["contour_max_um"]
-                                                    for s in pre["sensitivity"])
+    assert pre["sensitivity_contour_max_um"] == max(s["contour_max_um"] for s in pre["sensitivity"])
     data = read_points(str(out))
     pts = np.column_stack([data["x"], data["y"], data["z"]])
     piece = np.asarray(data["piece"])
@@ -307,11 +314,14 @@ def test_run_precompensate_on_the_airfoil_cli(airfoil, tmp_path):
     assert err_plain.max() > lim.contour_tolerance_mm * 1000.0 > err.max()
 
 
-@pytest.mark.parametrize("text", [
-    "G21 G90 G0 X0 Y0\nG1 X10 Y3 F3000\n",
-    "G21 G90 G0 X0 Y0\nG1 X10 Y3 F3000\nG1 X12 Y-4\nG1 X1 Y0.5\n",
-    "G21 G90 G0 X1 Y1\nG1 X5 F2000\nG3 X5 Y5 R2\nG1 X1\n",
-])
+@pytest.mark.parametrize(
+    "text",
+    [
+        "G21 G90 G0 X0 Y0\nG1 X10 Y3 F3000\n",
+        "G21 G90 G0 X0 Y0\nG1 X10 Y3 F3000\nG1 X12 Y-4\nG1 X1 Y0.5\n",
+        "G21 G90 G0 X1 Y1\nG1 X5 F2000\nG3 X5 Y5 R2\nG1 X1\n",
+    ],
+)
 def test_the_compensated_reference_starts_and_ends_at_rest_at_the_programmed_points(text):
     prog = interpret_text(text)
     run = run_program(prog, MACHINE, RunOptions(precompensate=True))
@@ -332,7 +342,7 @@ def test_the_compensated_reference_starts_and_ends_at_rest_at_the_programmed_poi
     moving = np.flatnonzero(np.any(np.abs(plain - plain[-1]) > 1e-9, axis=1))
     direction = plain[-1] - plain[moving[-1] - 3]
     direction /= np.linalg.norm(direction)
-    last = u[lead + moving[-1] - 20:]
+    last = u[lead + moving[-1] - 20 :]
     assert ((last - end) @ direction).max() <= 1e-9
     # And the tool (independent lsim) stays within ε_max of the path at every sample.
     assert run.check.contour_um().max() <= MACHINE.limits.contour_tolerance_mm * 1000.0
@@ -348,14 +358,16 @@ def test_precompensate_without_a_servo_model_is_a_clear_error(tmp_path):
             lines.append(line)
     profile = tmp_path / "noservo.toml"
     profile.write_text("\n".join(lines) + "\n")
-    res = CliRunner().invoke(main, ["plan", str(AIRFOIL), "--machine", str(profile),
-                                    "--precompensate"])  # fmt: skip
+    res = CliRunner().invoke(
+        main, ["plan", str(AIRFOIL), "--machine", str(profile), "--precompensate"]
+    )
     assert res.exit_code == 2
     assert "pre-compensation needs a servo model" in res.output
     assert "Traceback" not in res.output
     # Without --precompensate the same profile plans (contour check off).
-    assert CliRunner().invoke(main, ["plan", str(AIRFOIL), "--machine", str(profile)]
-                              ).exit_code == 0  # fmt: skip
+    assert (
+        CliRunner().invoke(main, ["plan", str(AIRFOIL), "--machine", str(profile)]).exit_code == 0
+    )
 
 
 def test_precompensate_with_a_baseline_is_refused():
@@ -377,8 +389,10 @@ def test_the_reference_tolerance_is_measured_from_the_programmed_curve(airfoil):
     rows = np.flatnonzero(pieces.kind == Kind.PH)
     assert rows.size >= 2  # the nose is fitted by PH pieces
     piece = np.repeat(rows, 41)
-    s = profile.piece_start_mm[piece] + np.tile(np.linspace(0.0, 1.0, 41), rows.size) \
-        * pieces.length_mm[piece]
+    s = (
+        profile.piece_start_mm[piece]
+        + np.tile(np.linspace(0.0, 1.0, 41), rows.size) * pieces.length_mm[piece]
+    )
     foot = pieces.path.place(profile.piece_start_mm, s, piece)[0]
     tube = reference_tube_mm(pieces, piece, foot, 0.003, MACHINE.limits.ph_tolerance_mm)
     dist = segment_distance_mm(foot, dense)

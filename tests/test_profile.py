@@ -29,8 +29,14 @@ def _plan(lengths, v_max, v_junction, a=A, j=J, lookahead=None):
     junction-level properties below are stated for it; plan_profile's merging of
     unconstrained junctions is tested separately (test_merged_*)."""
     return plan_profile_pieces(
-        ProfileInput(np.asarray(lengths, float), np.asarray(v_max, float),
-                     np.asarray(v_junction, float), a, j, lookahead)
+        ProfileInput(
+            np.asarray(lengths, float),
+            np.asarray(v_max, float),
+            np.asarray(v_junction, float),
+            a,
+            j,
+            lookahead,
+        )
     )
 
 
@@ -86,8 +92,7 @@ def test_exact_stop_splits_into_independent_pieces():
     single = [_plan([L], [c], [0.0, 0.0]).duration_s for L, c in zip(lengths, caps)]
     assert prof.duration_s == pytest.approx(sum(single), rel=1e-13)
     np.testing.assert_array_equal(prof.junction_speeds_mm_s, 0.0)
-    np.testing.assert_allclose(prof.piece_start_time_s, np.cumsum([0.0] + single[:-1]),
-                               rtol=1e-13)
+    np.testing.assert_allclose(prof.piece_start_time_s, np.cumsum([0.0] + single[:-1]), rtol=1e-13)
 
 
 def test_junction_bound_by_the_short_last_piece():
@@ -164,9 +169,11 @@ def _check_profile(prof, lengths, v_max, v_junction, a, j, lookahead=None):
     assert np.all(v[np.asarray(v_junction) == 0.0] == 0.0)
     assert np.all(scurve_distance_mm(v[:-1], v[1:], a, j) <= lengths)
     for i in range(1, k):
-        bound = min(cap[i],
-                    max_reachable_speed_scalar(v[i - 1], lengths[i - 1], a, j),
-                    max_reachable_speed_scalar(v[i + 1], lengths[i], a, j))
+        bound = min(
+            cap[i],
+            max_reachable_speed_scalar(v[i - 1], lengths[i - 1], a, j),
+            max_reachable_speed_scalar(v[i + 1], lengths[i], a, j),
+        )
         if lookahead is not None:
             w_i = _window_bound(lengths, cap, lookahead, i, a, j)
             bound = min(bound, w_i)
@@ -177,8 +184,12 @@ def _check_profile(prof, lengths, v_max, v_junction, a, j, lookahead=None):
 
     # Phases: exact evaluation at both ends of every phase.
     t0, dt = prof.phase_start_time_s, prof.phase_duration_s
-    s0, v0, a0, jk = prof.phase_s0_mm, prof.phase_v0_mm_s, prof.phase_a0_mm_s2, \
-        prof.phase_jerk_mm_s3
+    s0, v0, a0, jk = (
+        prof.phase_s0_mm,
+        prof.phase_v0_mm_s,
+        prof.phase_a0_mm_s2,
+        prof.phase_jerk_mm_s3,
+    )
     pi = prof.phase_piece_index
     assert np.all(dt > 0.0) and np.all(np.diff(t0) >= 0.0) and np.all(np.diff(pi) >= 0)
     s1 = s0 + dt * v0 + dt**2 * a0 / 2 + dt**3 * jk / 6
@@ -188,7 +199,7 @@ def _check_profile(prof, lengths, v_max, v_junction, a, j, lookahead=None):
     assert np.all(np.abs(a0) <= a * (1 + 1e-6)) and np.all(np.abs(a1) <= a * (1 + 1e-6))
     # a is linear within a phase and never changes sign there, so v is monotone: its extremes
     # are the phase ends.
-    assert np.all(a0 * a1 >= -(a * 1e-9) ** 2)
+    assert np.all(a0 * a1 >= -((a * 1e-9) ** 2))
     piece_cap = np.asarray(v_max, float)[pi] * (1 + 1e-9)
     assert np.all(v0 <= piece_cap) and np.all(v1 <= piece_cap)
     assert np.all(v0 >= -1e-9 * vscale) and np.all(v1 >= -1e-9 * vscale)
@@ -217,8 +228,9 @@ def _check_profile(prof, lengths, v_max, v_junction, a, j, lookahead=None):
     assert np.all(s >= starts[piece] - 1e-9) and np.all(s <= starts[piece + 1] + 1e-9)
     end = prof.sample(np.array([prof.duration_s]))
     assert end[0][0] == prof.total_length_mm and end[1][0] == 0.0 and end[4][0] == k - 1
-    np.testing.assert_allclose(prof.piece_start_mm, np.r_[0.0, np.cumsum(lengths)[:-1]],
-                               rtol=0, atol=1e-9)
+    np.testing.assert_allclose(
+        prof.piece_start_mm, np.r_[0.0, np.cumsum(lengths)[:-1]], rtol=0, atol=1e-9
+    )
 
 
 _length = st.one_of(
@@ -253,8 +265,9 @@ def test_profile_properties_on_a_benchmark_like_sequence():
     # Many tiny pieces (PH/NURBS spans) between longer lines, corner caps, exact stops.
     rng = np.random.default_rng(11)
     k = 400
-    lengths = np.where(rng.random(k) < 0.5, 10 ** rng.uniform(-4, -1, k),
-                       10 ** rng.uniform(-1, 2, k))
+    lengths = np.where(
+        rng.random(k) < 0.5, 10 ** rng.uniform(-4, -1, k), 10 ** rng.uniform(-1, 2, k)
+    )
     v_max = rng.choice([3500 / 60, 20.0, 200.0], k)
     vj = np.r_[0.0, rng.choice([INF, 0.0, 5.0, 40.0], k - 1, p=[0.6, 0.02, 0.2, 0.18]), 0.0]
     for lookahead in (None, 3):
@@ -264,8 +277,11 @@ def test_profile_properties_on_a_benchmark_like_sequence():
 
 def test_sampled_motion_is_self_consistent():
     # v integrates to s and a is dv/dt, on dense samples (independent of the phase algebra).
-    prof = _plan([3.0, 0.2, 40.0, 1e-3, 5.0], [80.0, 30.0, 200.0, 200.0, 50.0],
-                 [0.0, INF, 10.0, INF, INF, 0.0])
+    prof = _plan(
+        [3.0, 0.2, 40.0, 1e-3, 5.0],
+        [80.0, 30.0, 200.0, 200.0, 50.0],
+        [0.0, INF, 10.0, INF, INF, 0.0],
+    )
     t = np.linspace(0.0, prof.duration_s, 200_001)
     s, v, a, _, _ = prof.sample(t)
     s_int = cumulative_trapezoid(v, t, initial=0.0)
@@ -337,8 +353,13 @@ def test_immutability():
     ],
 )
 def test_input_validation(kwargs, err):
-    base = dict(length_mm=[1.0], v_max_mm_s=[10.0], v_junction_max_mm_s=[0.0, 0.0],
-                a_max_mm_s2=A, j_max_mm_s3=J)
+    base = dict(
+        length_mm=[1.0],
+        v_max_mm_s=[10.0],
+        v_junction_max_mm_s=[0.0, 0.0],
+        a_max_mm_s2=A,
+        j_max_mm_s3=J,
+    )
     base.update(kwargs)
     with pytest.raises(err):
         ProfileInput(**base)
@@ -352,8 +373,9 @@ def test_merged_profile_keeps_every_limit_and_is_never_slower(program):
     |a| ≤ A, |j| ≤ J, continuity, rest at both ends, the exact total length — and it never
     takes longer than planning every piece on its own."""
     lengths, v_max, vj, a, j, _ = program
-    inp = ProfileInput(np.asarray(lengths, float), np.asarray(v_max, float),
-                       np.asarray(vj, float), a, j)
+    inp = ProfileInput(
+        np.asarray(lengths, float), np.asarray(v_max, float), np.asarray(vj, float), a, j
+    )
     merged = plan_profile(inp)
     pieces = plan_profile_pieces(inp)
     # (a gated flank switches its jerk within GATE_MIN_STEP_S = 0.1 µs of each gate)
@@ -382,8 +404,9 @@ def test_merged_chain_of_short_cells_accelerates_like_one_move():
     ell, k = 0.02, 30
     jcap = np.array([0.0] + [INF] * (k - 1) + [0.0])
     inp = ProfileInput(np.full(k, ell), np.full(k, 1e3), jcap, A, J)
-    one = plan_profile(ProfileInput(np.array([ell * k]), np.array([1e3]), np.array([0.0, 0.0]),
-                                    A, J))
+    one = plan_profile(
+        ProfileInput(np.array([ell * k]), np.array([1e3]), np.array([0.0, 0.0]), A, J)
+    )
     merged = plan_profile(inp)
     assert merged.duration_s == pytest.approx(one.duration_s, rel=1e-12)
     assert merged.piece_start_mm.size == k
@@ -420,14 +443,25 @@ def test_time_at_length_against_bisection_and_closed_forms():
     prof = plan_profile(ProfileInput(length, caps, junction, 2450.0, 5e4))
     total = prof.total_length_mm
     s0 = prof.phase_s0_mm
-    s = np.concatenate((rng.random(40_000) * total, s0, s0[1:] - 1e-12, s0[1:] + 1e-12,
-                        [0.0, total, total * (1 + 1e-12)]))  # fmt: skip
+    s = np.concatenate(
+        (
+            rng.random(40_000) * total,
+            s0,
+            s0[1:] - 1e-12,
+            s0[1:] + 1e-12,
+            [0.0, total, total * (1 + 1e-12)],
+        )
+    )
     s = np.clip(s, 0.0, None)
     got, ref = time_at_length(prof, s), _time_at_length_bisection(prof, s)
     assert np.all(np.abs(got - ref) <= np.spacing(np.maximum(ref, 1e-300)))
     # Closed forms: a cruise phase t = Δs / v, a jerk phase from rest t = ∛(6 Δs / j).
-    cruise = np.flatnonzero((prof.phase_jerk_mm_s3 == 0) & (prof.phase_a0_mm_s2 == 0)
-                            & (prof.phase_v0_mm_s > 0) & (prof.phase_duration_s > 1e-3))[:200]
+    cruise = np.flatnonzero(
+        (prof.phase_jerk_mm_s3 == 0)
+        & (prof.phase_a0_mm_s2 == 0)
+        & (prof.phase_v0_mm_s > 0)
+        & (prof.phase_duration_s > 1e-3)
+    )[:200]
     frac = rng.uniform(0.1, 0.9, cruise.size)
     ds = frac * prof.phase_duration_s[cruise] * prof.phase_v0_mm_s[cruise]
     t = time_at_length(prof, s0[cruise] + ds) - prof.phase_start_time_s[cruise]
@@ -436,8 +470,9 @@ def test_time_at_length_against_bisection_and_closed_forms():
     v = prof.phase_v0_mm_s[cruise]
     bound = 4.0 * np.spacing(s0[cruise] + ds) / v + 1e-13
     assert np.all(np.abs(t - ds / v) <= bound)
-    rest = np.flatnonzero((prof.phase_v0_mm_s == 0) & (prof.phase_a0_mm_s2 == 0)
-                          & (prof.phase_jerk_mm_s3 > 0))[:200]
+    rest = np.flatnonzero(
+        (prof.phase_v0_mm_s == 0) & (prof.phase_a0_mm_s2 == 0) & (prof.phase_jerk_mm_s3 > 0)
+    )[:200]
     tau = rng.uniform(0.1, 0.9, rest.size) * prof.phase_duration_s[rest]
     ds = prof.phase_jerk_mm_s3[rest] * tau**3 / 6.0
     t = time_at_length(prof, s0[rest] + ds) - prof.phase_start_time_s[rest]

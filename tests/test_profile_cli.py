@@ -46,8 +46,12 @@ def profile_with(a_max: float) -> str:
 
 def same(a, b) -> bool:
     """Two machines with the same values (wherever they were loaded from)."""
-    return (a.limits, a.servo, a.steps, a.soft_limits) == (b.limits, b.servo, b.steps,
-                                                           b.soft_limits)
+    return (a.limits, a.servo, a.steps, a.soft_limits) == (
+        b.limits,
+        b.servo,
+        b.steps,
+        b.soft_limits,
+    )
 
 
 def leaf_keys(schema, prefix=""):
@@ -91,21 +95,35 @@ def test_init_file_refuses_to_overwrite(env):
 
 
 def test_show_round_trips_with_overrides(env):
-    r = run(["profile", "show", "--set", "limits.a_max_mm_s2=1234",
-             "--set", "servo.z.bandwidth_hz=40", "--set", "servo.z.damping=0.7"])  # fmt: skip
+    r = run(
+        [
+            "profile",
+            "show",
+            "--set",
+            "limits.a_max_mm_s2=1234",
+            "--set",
+            "servo.z.bandwidth_hz=40",
+            "--set",
+            "servo.z.damping=0.7",
+        ]
+    )
     assert r.exit_code == 0, r.output
     assert r.stdout.startswith("# machine profile: bundled default")
     shown = parse_machine(r.stdout)
-    expected = load_machine(overrides={"limits.a_max_mm_s2": 1234, "servo.z.bandwidth_hz": 40,
-                                       "servo.z.damping": 0.7})  # fmt: skip
+    expected = load_machine(
+        overrides={"limits.a_max_mm_s2": 1234, "servo.z.bandwidth_hz": 40, "servo.z.damping": 0.7}
+    )
     assert same(shown, expected)
     data = tomllib.loads(r.stdout)
     assert data["limits"]["rapid_mm_min"] == 3500.0  # optional key shown with its default
     assert data["servo"]["z"] == {"bandwidth_hz": 40, "damping": 0.7}
     j = json.loads(run(["profile", "show", "--json", "--set", "limits.a_max_mm_s2=1234"]).stdout)
     assert j["profile"]["limits"]["a_max_mm_s2"] == 1234
-    assert j["machine_profile"] == {"path": None, "found_by": "bundled default",
-                                    "contour_check": True}  # fmt: skip
+    assert j["machine_profile"] == {
+        "path": None,
+        "found_by": "bundled default",
+        "contour_check": True,
+    }
 
 
 def test_show_bad_override_is_exit_2(env):
@@ -127,9 +145,15 @@ def test_discovery_order_through_the_cli(env, monkeypatch, where):
     order = list(files) + ["default"]
     a_max = {name: 1000.0 + 10 * i for i, name in enumerate(order)}
     a_max["default"] = 2450.0
-    found_by = {"option": "--machine", "env": "$NURBSCNC_MACHINE", "local": "./nurbscnc.toml",
-                "xdg": "user config", "home": "user config", "default": "bundled default"}
-    for name in order[order.index(where):-1]:  # this one and every lower-ranked one
+    found_by = {
+        "option": "--machine",
+        "env": "$NURBSCNC_MACHINE",
+        "local": "./nurbscnc.toml",
+        "xdg": "user config",
+        "home": "user config",
+        "default": "bundled default",
+    }
+    for name in order[order.index(where) : -1]:  # this one and every lower-ranked one
         files[name].parent.mkdir(parents=True, exist_ok=True)
         files[name].write_text(profile_with(a_max[name]))
     if files.get("env", Path()).exists():
@@ -164,8 +188,11 @@ def test_commands_say_which_profile(env):
     assert "machine: ./nurbscnc.toml (./nurbscnc.toml)" in r.stderr
     r = run(["plan", CORNERS, "--dynamics", "off", "--json"])
     j = json.loads(r.stdout)
-    assert j["machine_profile"] == {"path": "./nurbscnc.toml", "found_by": "./nurbscnc.toml",
-                                    "contour_check": True}  # fmt: skip
+    assert j["machine_profile"] == {
+        "path": "./nurbscnc.toml",
+        "found_by": "./nurbscnc.toml",
+        "contour_check": True,
+    }
     assert "machine:" not in r.stderr  # JSON mode: the key says it
     r = run(["corners", CORNERS, "--json"])
     assert json.loads(r.stdout)["machine_profile"]["found_by"] == "./nurbscnc.toml"
@@ -173,7 +200,7 @@ def test_commands_say_which_profile(env):
 
 def test_no_servo_model_turns_the_contour_check_off(env):
     lines = default_profile_text().splitlines()
-    text = "\n".join(lines[: lines.index("[servo]")] + lines[lines.index("[steps]"):])
+    text = "\n".join(lines[: lines.index("[servo]")] + lines[lines.index("[steps]") :])
     (env / "work" / "nurbscnc.toml").write_text(text)
     r = run(["plan", CORNERS])
     assert r.exit_code == 0, r.output

@@ -46,15 +46,18 @@ def _descent(cells: int, cell_mm: float):
 def _split_plan(inp, monkeypatch):
     real = profile_mod._plan_units
     with monkeypatch.context() as m:
-        m.setattr(profile_mod, "_plan_units",
-                  lambda i, key, every=False: real(i, key, every, gate=False))
+        m.setattr(
+            profile_mod, "_plan_units", lambda i, key, every=False: real(i, key, every, gate=False)
+        )
         return plan_profile(inp)
 
 
-@pytest.mark.parametrize(("cells", "cell_mm", "gain_s", "to_bound"),
-                         [(16, 0.1, 0.010, 1.005), (12, 0.2, 0.010, 1.03)])
+@pytest.mark.parametrize(
+    ("cells", "cell_mm", "gain_s", "to_bound"), [(16, 0.1, 0.010, 1.005), (12, 0.2, 0.010, 1.03)]
+)
 def test_falling_staircase_is_followed_without_stopping_the_acceleration(
-        cells, cell_mm, gain_s, to_bound, monkeypatch):  # fmt: skip
+    cells, cell_mm, gain_s, to_bound, monkeypatch
+):
     """The descent 58 → 10 mm/s over a falling staircase: every cap and limit holds on the
     samples; the gated plan is ≥ 10 ms faster than the unit split (measured 12.1 and
     11.4 ms) and than the per-piece plan, and no faster than the relaxation (the
@@ -64,8 +67,11 @@ def test_falling_staircase_is_followed_without_stopping_the_acceleration(
     prof = plan_profile(inp)
     split = _split_plan(inp, monkeypatch)
     per_piece = plan_profile_pieces(inp)
-    relaxed = plan_profile(ProfileInput(lengths, np.where(np.arange(caps.size) == caps.size - 1,
-                                                          caps, 58.0), jcap, A, J))
+    relaxed = plan_profile(
+        ProfileInput(
+            lengths, np.where(np.arange(caps.size) == caps.size - 1, caps, 58.0), jcap, A, J
+        )
+    )
     assert prof.duration_s <= split.duration_s - gain_s
     assert prof.duration_s <= per_piece.duration_s - gain_s
     assert prof.duration_s >= relaxed.duration_s - 1e-9
@@ -107,8 +113,11 @@ def test_gated_rise_meets_every_gate_and_ends_at_its_target(case):
         tau = np.linspace(0.0, t, 9)[1:]
         xs.extend(x + tau * (v + tau * (0.5 * a + tau * jk / 6.0)))
         vs.extend(v + tau * (a + 0.5 * tau * jk))
-        x, v, a = (x + t * (v + t * (0.5 * a + t * jk / 6.0)), v + t * (a + 0.5 * t * jk),
-                   a + t * jk)  # fmt: skip
+        x, v, a = (
+            x + t * (v + t * (0.5 * a + t * jk / 6.0)),
+            v + t * (a + 0.5 * t * jk),
+            a + t * jk,
+        )
         assert -1e-9 * a_max <= a <= a_max * (1 + 1e-9)
     xs, vs = np.array(xs), np.array(vs)
     assert np.all(np.diff(vs) >= -1e-9)

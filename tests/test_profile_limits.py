@@ -55,8 +55,9 @@ def test_single_piece_closed_form_with_its_own_limits():
     T_down with T = v/A + A/J (A reached) of each side (SPEC §7)."""
     v, length = 50.0, 20.0
     a1, j1, a2, j2 = 1000.0, 4e4, 500.0, 1e4  # A²/J = 25, 25 < v: A reached
-    prof = plan_profile(ProfileInput([length], [v], [0.0, 0.0], [a1], [j1],
-                                     a_decel_mm_s2=[a2], j_decel_mm_s3=[j2]))
+    prof = plan_profile(
+        ProfileInput([length], [v], [0.0, 0.0], [a1], [j1], a_decel_mm_s2=[a2], j_decel_mm_s3=[j2])
+    )
     t1, t2 = v / a1 + a1 / j1, v / a2 + a2 / j2
     d = v * (t1 + t2) / 2
     assert prof.duration_s == pytest.approx(t1 + t2 + (length - d) / v, rel=1e-12)
@@ -67,11 +68,22 @@ def test_single_piece_closed_form_with_its_own_limits():
 
 
 @settings(max_examples=40, deadline=None, derandomize=True)
-@given(st.lists(st.tuples(st.floats(0.05, 6.0), st.floats(5.0, 60.0), st.floats(200.0, 3000.0),
-                          st.floats(5e3, 8e4), st.floats(200.0, 3000.0), st.floats(5e3, 8e4),
-                          st.sampled_from([0.0, math.inf])),
-                min_size=1, max_size=8),
-       st.booleans())
+@given(
+    st.lists(
+        st.tuples(
+            st.floats(0.05, 6.0),
+            st.floats(5.0, 60.0),
+            st.floats(200.0, 3000.0),
+            st.floats(5e3, 8e4),
+            st.floats(200.0, 3000.0),
+            st.floats(5e3, 8e4),
+            st.sampled_from([0.0, math.inf]),
+        ),
+        min_size=1,
+        max_size=8,
+    ),
+    st.booleans(),
+)
 def test_random_pieces_honour_their_limits(rows, merged):
     """Random pieces, each with its own rise/descent limits, junctions stop or pass."""
     length, v, a1, j1, a2, j2, jc = (np.array(c, dtype=float) for c in zip(*rows))
@@ -93,9 +105,11 @@ def test_lower_limits_on_one_piece_change_only_that_piece():
     v = np.array([50.0, 50.0])
     jcap = np.array([0.0, 0.0, 0.0])
     base = plan_profile(ProfileInput(length, v, jcap, 2450.0, 5e4))
-    soft = plan_profile(ProfileInput(length, v, jcap, 2450.0, 5e4,
-                                     a_decel_mm_s2=[2450.0, 300.0],
-                                     j_decel_mm_s3=[5e4, 3e3]))  # fmt: skip
+    soft = plan_profile(
+        ProfileInput(
+            length, v, jcap, 2450.0, 5e4, a_decel_mm_s2=[2450.0, 300.0], j_decel_mm_s3=[5e4, 3e3]
+        )
+    )
     assert soft.piece_start_time_s[1] == pytest.approx(base.piece_start_time_s[1], rel=1e-14)
     t2 = v[1] / 300.0 + 300.0 / 3e3  # A²/J = 30 < 50: A reached (SPEC §7)
     t2_base = 2.0 * math.sqrt(v[1] / 5e4)  # A²/J = 120 > 50: triangular acceleration

@@ -52,8 +52,9 @@ def _inp(lengths, caps, jcaps=None, a=A, j=J, **kw):
     k = len(lengths)
     if jcaps is None:
         jcaps = [0.0] + [INF] * (k - 1) + [0.0]
-    return ProfileInput(np.asarray(lengths, float), np.asarray(caps, float),
-                        np.asarray(jcaps, float), a, j, **kw)
+    return ProfileInput(
+        np.asarray(lengths, float), np.asarray(caps, float), np.asarray(jcaps, float), a, j, **kw
+    )
 
 
 def test_constant_cap_run_is_one_s_curve_of_the_total_length():
@@ -84,8 +85,7 @@ def test_cap_staircase_down_is_one_s_curve_through_the_middle_cap():
     assert _speed_before_end(v3, l2) < v2
     prof = plan_profile(_inp([l1, l2, l3], [v1, v2, v3]))
     d_up, d_dn, d_stop = _d(0.0, v1), _d(v1, v3), _d(v3, 0.0)
-    expected = (_t(v1) + (l1 + l2 - d_up - d_dn) / v1 + _t(v1 - v3) + (l3 - d_stop) / v3
-                + _t(v3))  # fmt: skip
+    expected = _t(v1) + (l1 + l2 - d_up - d_dn) / v1 + _t(v1 - v3) + (l3 - d_stop) / v3 + _t(v3)
     assert prof.duration_s == pytest.approx(expected, abs=1e-9)
     np.testing.assert_allclose(prof.junction_speeds_mm_s[2], v3, rtol=1e-12)
     # The speed where the middle piece starts is the S-curve's, 0.25 mm before its end.
@@ -103,8 +103,15 @@ def test_cap_step_that_the_s_curve_would_cross_splits_the_unit():
     l1, l2, l3 = 8.0, 1.0, 3.0
     assert _speed_before_end(v3, l2) > v2
     prof = plan_profile(_inp([l1, l2, l3], [v1, v2, v3]))
-    expected = (_t(v1) + (l1 - _d(0, v1) - _d(v1, v2)) / v1 + _t(v1 - v2)
-                + (l2 - _d(v2, v3)) / v2 + _t(v2 - v3) + (l3 - _d(v3, 0)) / v3 + _t(v3))
+    expected = (
+        _t(v1)
+        + (l1 - _d(0, v1) - _d(v1, v2)) / v1
+        + _t(v1 - v2)
+        + (l2 - _d(v2, v3)) / v2
+        + _t(v2 - v3)
+        + (l3 - _d(v3, 0)) / v3
+        + _t(v3)
+    )
     assert prof.duration_s == pytest.approx(expected, abs=1e-9)
     np.testing.assert_allclose(prof.junction_speeds_mm_s[1:3], [v2, v3], rtol=1e-9)
     t = np.linspace(0.0, prof.duration_s, 20001)
@@ -122,9 +129,15 @@ def test_valley_then_rise_carries_acceleration_out_of_the_valley():
     # Rise after the valley: its speed 0.2 mm after the valley's end, by symmetry of the
     # S-curve, equals a descent's 0.2 mm before its end.
     assert _speed_before_end(v_lo, 0.2) < v_mid
-    expected = (_t(v_hi) + (lengths[0] - _d(0, v_hi) - _d(v_hi, v_lo)) / v_hi + _t(v_hi - v_lo)
-                + lengths[1] / v_lo + _t(v_hi - v_lo)
-                + (lengths[2] + lengths[3] - _d(v_lo, v_hi) - _d(v_hi, 0)) / v_hi + _t(v_hi))
+    expected = (
+        _t(v_hi)
+        + (lengths[0] - _d(0, v_hi) - _d(v_hi, v_lo)) / v_hi
+        + _t(v_hi - v_lo)
+        + lengths[1] / v_lo
+        + _t(v_hi - v_lo)
+        + (lengths[2] + lengths[3] - _d(v_lo, v_hi) - _d(v_hi, 0)) / v_hi
+        + _t(v_hi)
+    )
     assert prof.duration_s == pytest.approx(expected, abs=1e-9)
     np.testing.assert_allclose(prof.junction_speeds_mm_s[1:3], [v_lo, v_lo], rtol=1e-12)
 
@@ -134,8 +147,9 @@ def test_limits_that_differ_a_lot_keep_their_junction():
     the same as the per-piece planner."""
     j = np.array([J, 0.2 * J])
     inp = _inp([3.0, 3.0], [40.0, 40.0], a=np.array([A, A]), j=j)
-    assert plan_profile(inp).duration_s == pytest.approx(plan_profile_pieces(inp).duration_s,
-                                                         abs=1e-12)
+    assert plan_profile(inp).duration_s == pytest.approx(
+        plan_profile_pieces(inp).duration_s, abs=1e-12
+    )
 
 
 @st.composite
@@ -146,20 +160,28 @@ def _staircases(draw):
     levels = draw(st.lists(st.floats(2.0, 80.0), min_size=2, max_size=5))
     caps = np.array([draw(st.sampled_from(levels)) for _ in range(k)])
     lengths = np.array([draw(st.floats(0.01, 4.0)) for _ in range(k)])
-    inner = [draw(st.sampled_from([INF, INF, INF, 0.0, draw(st.floats(1.0, 80.0))]))
-             for _ in range(k - 1)]
+    inner = [
+        draw(st.sampled_from([INF, INF, INF, 0.0, draw(st.floats(1.0, 80.0))]))
+        for _ in range(k - 1)
+    ]
     jcap = np.array([0.0, *inner, 0.0])
     if draw(st.booleans()):  # one set of limits for every piece
         lim = [np.full(k, x) for x in (A, J, A, J)]
     else:
-        lim = [np.array([draw(st.floats(lo, hi)) for _ in range(k)])
-               for lo, hi in ((1200.0, 2450.0), (2.5e4, 5e4), (1200.0, 2450.0), (2.5e4, 5e4))]
+        lim = [
+            np.array([draw(st.floats(lo, hi)) for _ in range(k)])
+            for lo, hi in ((1200.0, 2450.0), (2.5e4, 5e4), (1200.0, 2450.0), (2.5e4, 5e4))
+        ]
     return lengths, caps, jcap, lim
 
 
 #: Three 1 mm pieces capped 2.0078125, 2, 2 mm/s between rests (module test above).
-STAIRCASE_HOLD = (np.array([1.0, 1.0, 1.0]), np.array([2.0078125, 2.0, 2.0]),
-                  np.array([0.0, INF, INF, 0.0]), [np.full(3, x) for x in (A, J, A, J)])
+STAIRCASE_HOLD = (
+    np.array([1.0, 1.0, 1.0]),
+    np.array([2.0078125, 2.0, 2.0]),
+    np.array([0.0, INF, INF, 0.0]),
+    [np.full(3, x) for x in (A, J, A, J)],
+)
 
 
 @settings(max_examples=150, deadline=None, derandomize=True)

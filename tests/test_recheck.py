@@ -49,8 +49,15 @@ def test_same_profiles_are_the_same_to_their_end_and_other_paths_not_at_all():
     a = _profile(np.full(5, 40.0))
     b = _profile(np.full(5, 40.0))
     assert same_until_s(a, b) == a.duration_s
-    other = plan_profile(ProfileInput(np.linspace(1.0, 3.5, 5), np.full(5, 40.0),
-                                      np.array([0, np.inf, np.inf, np.inf, np.inf, 0]), A, J))
+    other = plan_profile(
+        ProfileInput(
+            np.linspace(1.0, 3.5, 5),
+            np.full(5, 40.0),
+            np.array([0, np.inf, np.inf, np.inf, np.inf, 0]),
+            A,
+            J,
+        )
+    )
     assert same_until_s(a, other) == 0.0
 
 
@@ -71,12 +78,15 @@ def test_dwell_schedules_map_alike_before_the_first_difference():
 
 PROGRAMS = {
     # Cut windows after rapids (settles, re-plans of later windows from their start).
-    "cuts": "G21 G90 G17 F3000\n" + "".join(
+    "cuts": "G21 G90 G17 F3000\n"
+    + "".join(
         f"G0 Z2\nG0 X{x} Y0\nG1 Z-1\nG1 X{x + 6}\nG2 X{x + 6} Y4 I0 J2\nG1 X{x}\nG1 Y0\n"
-        for x in (0, 20, 40)) + "G0 Z5\nM2\n",
+        for x in (0, 20, 40)
+    )
+    + "G0 Z5\nM2\n",
     # One window, the whole program one chunk: re-plans of a sharp-cornered contour.
     "corners": "G21 G90 G17 G61 F3500\nG1 X10\nG1 Y8\nG1 X3 Y4\nG3 X-3 Y4 I-3 J-4\nG1 X0 Y0\nM2\n",
-}  # fmt: skip
+}
 
 
 def _counting_reuse(monkeypatch) -> list:
@@ -110,8 +120,16 @@ def test_a_recheck_reusing_rows_gives_the_fresh_checks_plan(name, monkeypatch):
         assert np.array_equal(getattr(plan.profile, f), getattr(fresh.profile, f))
     assert np.array_equal(plan.pieces.dwell_after_s, fresh.pieces.dwell_after_s)
     assert check.stats == fresh_check.stats
-    for f in ("count", "index", "err_mm", "tau_s", "run_piece", "run_start", "restart_count",
-              "worst_mm"):  # fmt: skip
+    for f in (
+        "count",
+        "index",
+        "err_mm",
+        "tau_s",
+        "run_piece",
+        "run_start",
+        "restart_count",
+        "worst_mm",
+    ):
         assert np.array_equal(getattr(check.overs, f), getattr(fresh_check.overs, f)), f
 
 

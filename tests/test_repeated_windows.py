@@ -84,22 +84,32 @@ def test_a_window_profile_is_its_rapids_and_its_cut_planned_apart():
     starts = cut_windows(st.pieces)
     ends = np.append(starts[1:], st.k)
     for a, b in zip(starts.tolist(), ends.tolist()):
-        whole = profile_over(st.pieces.length_mm[a:b], lv.caps[a:b], st.smooth[a : b + 1],
-                             Limits(*(x[a:b] for x in (lim.a_up_mm_s2, lim.j_up_mm_s3,
-                                                       lim.a_down_mm_s2, lim.j_down_mm_s3))),
-                             None)  # fmt: skip
+        whole = profile_over(
+            st.pieces.length_mm[a:b],
+            lv.caps[a:b],
+            st.smooth[a : b + 1],
+            Limits(
+                *(
+                    x[a:b]
+                    for x in (lim.a_up_mm_s2, lim.j_up_mm_s3, lim.a_down_mm_s2, lim.j_down_mm_s3)
+                )
+            ),
+            None,
+        )
         c = a + int(np.flatnonzero(~np.asarray(st.pieces.rapid[a:b], dtype=bool))[0])
         split = own(lv, a, b, c)  # as for a repeated cut starting at c
         # Speeds inside a unit are read at the pieces' start lengths, which the cut counts
         # from its own start: the same to rounding.
-        np.testing.assert_allclose(split.junction_speeds_mm_s, whole.junction_speeds_mm_s,
-                                   rtol=1e-12, atol=1e-12)  # fmt: skip
-        np.testing.assert_allclose(split.piece_peak_speed_mm_s, whole.piece_peak_speed_mm_s,
-                                   rtol=1e-12, atol=1e-12)  # fmt: skip
-        np.testing.assert_allclose(split.piece_start_time_s, whole.piece_start_time_s,
-                                   rtol=0, atol=1e-12)  # fmt: skip
-        np.testing.assert_allclose(split.piece_start_mm, whole.piece_start_mm, rtol=0,
-                                   atol=1e-12)  # fmt: skip
+        np.testing.assert_allclose(
+            split.junction_speeds_mm_s, whole.junction_speeds_mm_s, rtol=1e-12, atol=1e-12
+        )
+        np.testing.assert_allclose(
+            split.piece_peak_speed_mm_s, whole.piece_peak_speed_mm_s, rtol=1e-12, atol=1e-12
+        )
+        np.testing.assert_allclose(
+            split.piece_start_time_s, whole.piece_start_time_s, rtol=0, atol=1e-12
+        )
+        np.testing.assert_allclose(split.piece_start_mm, whole.piece_start_mm, rtol=0, atol=1e-12)
         assert split.duration_s == pytest.approx(whole.duration_s, abs=1e-12)
     assert len(own.kept) == 1  # the three cuts are one cut moved: planned once
 
@@ -118,7 +128,11 @@ def test_a_window_profile_is_its_rapids_and_its_cut_planned_apart():
 
     kept, fresh = plans(True), plans(False)
     for w_kept, w_fresh in zip(kept, fresh, strict=True):
-        assert (w_kept.k0, w_kept.k1, w_kept.iterations) == (w_fresh.k0, w_fresh.k1,
-                                                             w_fresh.iterations)  # fmt: skip
-    np.testing.assert_array_equal(kept[-1].plan.profile.phase_start_time_s,
-                                  fresh[-1].plan.profile.phase_start_time_s)  # fmt: skip
+        assert (w_kept.k0, w_kept.k1, w_kept.iterations) == (
+            w_fresh.k0,
+            w_fresh.k1,
+            w_fresh.iterations,
+        )
+    np.testing.assert_array_equal(
+        kept[-1].plan.profile.phase_start_time_s, fresh[-1].plan.profile.phase_start_time_s
+    )

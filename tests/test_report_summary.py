@@ -37,8 +37,12 @@ def reference_summary(prog) -> dict:
             length = float(NurbsCurve.from_segment(seg).length_mm if nurbs else seg.length_mm)
         entry = {"kind": seg.kind, "line": seg.line, "length_mm": length}
         if seg.kind == "nurbs":
-            entry.update(degree=seg.degree, control_points=len(seg.control_points_mm),
-                         knots=len(seg.knots), plane=seg.plane)  # fmt: skip
+            entry.update(
+                degree=seg.degree,
+                control_points=len(seg.control_points_mm),
+                knots=len(seg.knots),
+                plane=seg.plane,
+            )
             points.append(np.asarray(seg.control_points_mm))
         elif moving:
             points.append(np.asarray([seg.start_mm, seg.end_mm], dtype=float))
@@ -61,8 +65,10 @@ def reference_summary(prog) -> dict:
         "length_mm": feed_len,
         "rapid_length_mm": rapid_len,
         "bounding_box_mm": {"min": allpts.min(axis=0).tolist(), "max": allpts.max(axis=0).tolist()},
-        "feed_range_mm_s": {"min": min(feeds) if feeds else None,
-                            "max": max(feeds) if feeds else None},  # fmt: skip
+        "feed_range_mm_s": {
+            "min": min(feeds) if feeds else None,
+            "max": max(feeds) if feeds else None,
+        },
         "notes": [{"line": n.line, "message": n.message} for n in prog.notes],
         "errors": [],
     }
@@ -102,19 +108,25 @@ def pool():
     return segments
 
 
-COORD = st.one_of(st.sampled_from([0.0, -0.0, 1.5, -2.25, 1e-9, -1e-9]),
-                  st.floats(-1000.0, 1000.0))  # fmt: skip
+COORD = st.one_of(st.sampled_from([0.0, -0.0, 1.5, -2.25, 1e-9, -1e-9]), st.floats(-1000.0, 1000.0))
 
 
 def _lines():
     point = st.tuples(COORD, COORD, COORD)
-    return st.builds(Line, point, point, st.sampled_from([0.0, 5.0, 20.0, 0.123]),
-                     st.integers(1, 1000), st.booleans())  # fmt: skip
+    return st.builds(
+        Line,
+        point,
+        point,
+        st.sampled_from([0.0, 5.0, 20.0, 0.123]),
+        st.integers(1, 1000),
+        st.booleans(),
+    )
 
 
 @settings(max_examples=60, deadline=None)
-@given(st.lists(st.one_of(st.integers(0, 40), _lines()), max_size=120),
-       st.tuples(COORD, COORD, COORD))  # fmt: skip
+@given(
+    st.lists(st.one_of(st.integers(0, 40), _lines()), max_size=120), st.tuples(COORD, COORD, COORD)
+)
 def test_summary_equals_the_per_segment_definition(pool, picks, start):
     segments = tuple(pool[p % len(pool)] if isinstance(p, int) else p for p in picks)
     prog = Program(segments=segments, start_mm=np.array(start), blocks=len(segments))
@@ -123,16 +135,19 @@ def test_summary_equals_the_per_segment_definition(pool, picks, start):
     short = program_summary(prog, per_segment=False)  # the text report's: NURBS entries only
     assert short == {**want, "segments": [e for e in want["segments"] if e["kind"] == "nurbs"]}
     for box in ("min", "max"):  # −0.0 and 0.0 print differently, but check the sign bits too
-        assert [math.copysign(1, v) for v in got["bounding_box_mm"][box]] == \
-            [math.copysign(1, v) for v in want["bounding_box_mm"][box]]  # fmt: skip
+        assert [math.copysign(1, v) for v in got["bounding_box_mm"][box]] == [
+            math.copysign(1, v) for v in want["bounding_box_mm"][box]
+        ]
 
 
 def test_summary_of_a_long_program_equals_the_definition(pool):
     """Thousands of segments: running totals that a pairwise sum would round otherwise."""
     rng = np.random.default_rng(14)
     ends = [tuple(p) for p in rng.uniform(-500.0, 500.0, (3000, 3)).tolist()]
-    lines = [Line(a, b, 10.0 + k % 7, k + 1, k % 5 == 0) for k, (a, b) in
-             enumerate(zip(ends[:-1], ends[1:]))]  # fmt: skip
+    lines = [
+        Line(a, b, 10.0 + k % 7, k + 1, k % 5 == 0)
+        for k, (a, b) in enumerate(zip(ends[:-1], ends[1:]))
+    ]
     segments = tuple(lines[:1000]) + tuple(pool) + tuple(lines[1000:])
     prog = Program(segments=segments, start_mm=np.zeros(3), blocks=len(segments))
     assert json.dumps(program_summary(prog)) == json.dumps(reference_summary(prog))
@@ -160,10 +175,16 @@ def test_summary_json_in_pieces_is_json_dumps_text():
 
     rng = np.random.default_rng(7)
     times = {str(i): float(x) for i, x in enumerate(rng.exponential(0.01, 3 * JSON_PIECE + 5))}
-    summary = {"ok": True, "program": '@@segment_times_s@@ "quoted" \\ é',
-               "segment_times_s": times, "small": {"a": 1.5, "b": [1, None]},
-               "inf": float("inf"), "exact": {str(i): 0.1 for i in range(JSON_PIECE)},
-               "list": list(range(10)), "empty": {}}  # fmt: skip
+    summary = {
+        "ok": True,
+        "program": '@@segment_times_s@@ "quoted" \\ é',
+        "segment_times_s": times,
+        "small": {"a": 1.5, "b": [1, None]},
+        "inf": float("inf"),
+        "exact": {str(i): 0.1 for i in range(JSON_PIECE)},
+        "list": list(range(10)),
+        "empty": {},
+    }
     assert summary_json(summary) == json.dumps(summary)
     assert summary_json({}) == json.dumps({})
     odd = {1: "int key", None: times, "x": {str(i): i for i in range(JSON_PIECE + 1)}}

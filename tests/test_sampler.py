@@ -15,9 +15,14 @@ MACHINE = load_machine()
 #: One cut: a sharp-cornered contour, re-planned by the check.
 CORNERS = "G21 G90 G17 G61 F3500\nG1 X10\nG1 Y8\nG1 X3 Y4\nG3 X-3 Y4 I-3 J-4\nG1 X0 Y0\nM2\n"
 #: Three cuts after rapids, then a rapid: four cut windows.
-CUTS = "G21 G90 G17 F3000\n" + "".join(
-    f"G0 Z2\nG0 X{x} Y0\nG1 Z-1\nG1 X{x + 6}\nG2 X{x + 6} Y4 I0 J2\nG1 X{x}\nG1 Y0\n"
-    for x in (0, 20, 40)) + "G0 Z5\nM2\n"  # fmt: skip
+CUTS = (
+    "G21 G90 G17 F3000\n"
+    + "".join(
+        f"G0 Z2\nG0 X{x} Y0\nG1 Z-1\nG1 X{x + 6}\nG2 X{x + 6} Y4 I0 J2\nG1 X{x}\nG1 Y0\n"
+        for x in (0, 20, 40)
+    )
+    + "G0 Z5\nM2\n"
+)
 WINDOW = 64  # servo samples per window of the check: many windows
 
 
@@ -50,8 +55,9 @@ class Recording(ReferenceSampler):
 
 def test_a_sampler_without_windows_is_evaluated_whole_once_per_check():
     rec = Recording(windowed=False)
-    plan, _ = plan_checked(interpret_text(CORNERS), MACHINE, reference=rec,
-                           keep_reference=False, window=WINDOW)  # fmt: skip
+    plan, _ = plan_checked(
+        interpret_text(CORNERS), MACHINE, reference=rec, keep_reference=False, window=WINDOW
+    )
     checks = rec.checks()
     assert plan.iterations > 0 and len(checks) >= plan.iterations + 1
     assert all(first == 0 and calls == [(0, None)] for first, calls in checks)
@@ -59,8 +65,9 @@ def test_a_sampler_without_windows_is_evaluated_whole_once_per_check():
 
 def test_a_windowed_sampler_is_evaluated_window_by_window():
     rec = Recording(windowed=True)
-    plan, _ = plan_checked(interpret_text(CORNERS), MACHINE, reference=rec,
-                           keep_reference=False, window=WINDOW)  # fmt: skip
+    plan, _ = plan_checked(
+        interpret_text(CORNERS), MACHINE, reference=rec, keep_reference=False, window=WINDOW
+    )
     checks = rec.checks()
     assert len(checks) >= plan.iterations + 1
     for first, calls in checks:
@@ -70,8 +77,9 @@ def test_a_windowed_sampler_is_evaluated_window_by_window():
             # A window of WINDOW own rows and one row more on each side.
             assert b0 - a0 <= WINDOW + 2 and a1 == b0 - 2
     # The same plan as checked whole.
-    whole, _ = plan_checked(interpret_text(CORNERS), MACHINE, reference=Recording(False),
-                            keep_reference=False)  # fmt: skip
+    whole, _ = plan_checked(
+        interpret_text(CORNERS), MACHINE, reference=Recording(False), keep_reference=False
+    )
     assert plan.cycle_time_s == whole.cycle_time_s
     assert np.array_equal(plan.caps_mm_s, whole.caps_mm_s)
 
@@ -82,8 +90,7 @@ def test_check_begins_is_called_with_each_checks_first_sample():
     window's first sample, its sampler called whole."""
     for windowed in (True, False):
         rec = Recording(windowed)
-        windows = list(plan_windows(interpret_text(CUTS), MACHINE, reference=rec,
-                                    window=WINDOW))  # fmt: skip
+        windows = list(plan_windows(interpret_text(CUTS), MACHINE, reference=rec, window=WINDOW))
         assert len(windows) == 4  # the three cuts, then the last rapid
         checks = rec.checks()
         firsts = [first for first, _ in checks]
@@ -100,7 +107,6 @@ def test_check_begins_is_called_with_each_checks_first_sample():
 
 def test_keeping_the_reference_checks_the_final_plan_whole_from_sample_0():
     rec = Recording(windowed=True)
-    plan_checked(interpret_text(CUTS), MACHINE, reference=rec, keep_reference=True,
-                 window=WINDOW)  # fmt: skip
+    plan_checked(interpret_text(CUTS), MACHINE, reference=rec, keep_reference=True, window=WINDOW)
     first, calls = rec.checks()[-1]
     assert first == 0 and calls == [(0, None)]

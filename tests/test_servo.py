@@ -182,8 +182,9 @@ def test_simulate_axes_common_length():
     extra = out.shape[0] - n
     assert extra > 0
     for j, a in enumerate([AXES["x"], AXES["y"]]):
-        np.testing.assert_allclose(out[:, j], simulate_axis(a, ref[:, j], T_S, settle=extra),
-                                   rtol=0, atol=1e-12)  # fmt: skip
+        np.testing.assert_allclose(
+            out[:, j], simulate_axis(a, ref[:, j], T_S, settle=extra), rtol=0, atol=1e-12
+        )
         assert np.all(np.abs(out[-1, j] - ref[-1, j]) <= SETTLE_TOLERANCE_MM)
     np.testing.assert_array_equal(out[:n, 2], ref[:, 2])
     assert np.all(out[n:, 2] == ref[-1, 2])
@@ -263,8 +264,9 @@ def test_eq29_values():
     assert contour_error_eq29(0.0, 2.0, 0.0) == 2.0
     assert contour_error_eq29(2.0, 0.0, np.pi / 2) == pytest.approx(-2.0, rel=1e-15)
     ex, ey, phi = np.array([1.0, 3.0]), np.array([0.5, -1.0]), np.array([0.3, -2.0])
-    np.testing.assert_allclose(contour_error_eq29(ex, ey, phi),
-                               ey * np.cos(phi) - ex * np.sin(phi), rtol=1e-15)  # fmt: skip
+    np.testing.assert_allclose(
+        contour_error_eq29(ex, ey, phi), ey * np.cos(phi) - ex * np.sin(phi), rtol=1e-15
+    )
 
 
 def _brute_force_distance(points, path):
@@ -352,14 +354,16 @@ def test_the_small_exponential_against_closed_forms_and_scipy():
 
     w, lam = 0.7, -0.3
     rot = np.array([[0.0, -w], [w, 0.0]])
-    np.testing.assert_allclose(expm_small(rot), [[np.cos(w), -np.sin(w)],
-                                                 [np.sin(w), np.cos(w)]], rtol=0, atol=1e-15)
+    np.testing.assert_allclose(
+        expm_small(rot), [[np.cos(w), -np.sin(w)], [np.sin(w), np.cos(w)]], rtol=0, atol=1e-15
+    )
     jordan = np.array([[lam, 1.0, 0.0], [0.0, lam, 1.0], [0.0, 0.0, lam]])
     want_j = np.exp(lam) * np.array([[1.0, 1.0, 0.5], [0.0, 1.0, 1.0], [0.0, 0.0, 1.0]])
     np.testing.assert_allclose(expm_small(jordan), want_j, rtol=0, atol=1e-15)
     diag = np.diag([-3.0, 0.5, 0.0])
-    np.testing.assert_allclose(expm_small(diag), np.diag(np.exp([-3.0, 0.5, 0.0])),
-                               rtol=1e-14, atol=0)  # fmt: skip
+    np.testing.assert_allclose(
+        expm_small(diag), np.diag(np.exp([-3.0, 0.5, 0.0])), rtol=1e-14, atol=0
+    )
     d = np.array([1e-4, 3e2, 1e6])
     scaled = d[:, None] * jordan / d[None, :]
     want_s = d[:, None] * want_j / d[None, :]

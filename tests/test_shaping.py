@@ -84,8 +84,7 @@ def _check_program(path: Path, machine=MACHINE):
     return run, float(d.max())
 
 
-@pytest.mark.parametrize("name", ["square_g61_f1000.nc", "square_g61_f3000.nc",
-                                  "pentagram_g61.nc"])  # fmt: skip
+@pytest.mark.parametrize("name", ["square_g61_f1000.nc", "square_g61_f3000.nc", "pentagram_g61.nc"])
 def test_independent_contour_error_within_eps(name):
     run, err_mm = _check_program(PROGRAMS / name)
     assert err_mm <= EPS_MM + 1e-6
@@ -105,8 +104,11 @@ def test_g61_square_faster_at_higher_feed_and_stops_are_shaped_not_slowed():
     j = MACHINE.limits.j_max_mm_s3
     assert np.all(plan.limits.j_down_mm_s3 <= j) and plan.limits.j_down_mm_s3[cut].min() < j
     # Every edge reaches its cruise: the time is the kinematic one plus a few ms per stop.
-    off = run_program(interpret_text((PROGRAMS / "square_g61_f3000.nc").read_text()),
-                      MACHINE, RunOptions(lookahead=LookaheadOptions(dynamics="off")))
+    off = run_program(
+        interpret_text((PROGRAMS / "square_g61_f3000.nc").read_text()),
+        MACHINE,
+        RunOptions(lookahead=LookaheadOptions(dynamics="off")),
+    )
     assert fast.cycle_time_s < off.cycle_time_s + 4 * 0.02
 
 
@@ -140,8 +142,9 @@ def test_ringing_servo_never_crawls_on_a_nurbs_corpus_program():
     prog = interpret_text(path.read_text())
     slow = _slow_servo_machine()
     on, check = lookahead.plan_checked(prog, slow, keep_reference=False)
-    off, _ = lookahead.plan_checked(prog, slow, LookaheadOptions(dynamics="off"),
-                                    keep_reference=False)  # fmt: skip
+    off, _ = lookahead.plan_checked(
+        prog, slow, LookaheadOptions(dynamics="off"), keep_reference=False
+    )
     assert check.overs.worst_mm <= slow.limits.contour_tolerance_mm
     assert on.iterations <= converge.LOCAL_ITERATIONS
     assert on.cycle_time_s <= 1.02 * off.cycle_time_s
@@ -154,8 +157,7 @@ def _machine_with_jerk(j_mm_s3: float):
     return machine
 
 
-@pytest.mark.parametrize("name", ["square_g61_f1000.nc", "square_g61_f3000.nc",
-                                  "pentagram_g61.nc"])  # fmt: skip
+@pytest.mark.parametrize("name", ["square_g61_f1000.nc", "square_g61_f3000.nc", "pentagram_g61.nc"])
 def test_a_higher_jerk_limit_is_never_slower(name):
     """J = 1e9 (LinuxCNC's planner has no jerk limit) against the paper's 5e4: within ε_max
     (independent lsim) and no slower. A jerk phase far shorter than the servo's time
@@ -205,27 +207,34 @@ def test_airfoils_check_reaches_the_kinematic_plan_closely():
     for name in ("naca2415.nc", "naca2415_rot45.nc", "naca2415_rot-45.nc"):
         prog = interpret_text((ROOT / "programs" / name).read_text())
         on = run_program(prog, MACHINE).plan
-        off = run_program(prog, MACHINE,
-                          RunOptions(lookahead=LookaheadOptions(dynamics="off"))).plan
+        off = run_program(
+            prog, MACHINE, RunOptions(lookahead=LookaheadOptions(dynamics="off"))
+        ).plan
         assert on.cycle_time_s <= 1.05 * off.cycle_time_s
 
 
 _vertex = st.tuples(st.integers(-8, 8), st.integers(-8, 8))
 
 
-@settings(max_examples=12, deadline=None, derandomize=True,
-          suppress_health_check=[HealthCheck.too_slow])
-@given(st.lists(_vertex, min_size=2, max_size=4, unique=True), st.sampled_from(["G61", "G64"]),
-       st.integers(300, 3000), st.integers(100, 500))
+@settings(
+    max_examples=12, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow]
+)
+@given(
+    st.lists(_vertex, min_size=2, max_size=4, unique=True),
+    st.sampled_from(["G61", "G64"]),
+    st.integers(300, 3000),
+    st.integers(100, 500),
+)
 def test_cycle_time_non_increasing_in_feed(vertices, mode, feed, step):
     """Raising the programmed feed never lengthens the cycle (issue 13). The shaped levers
     are bisected to within IMPROVE_RATIO of their bounds, so two plans may differ by that
     resolution: 0.5 % of the cycle."""
+
     def cycle(f):
         lines = ["G21 G90 G17", mode, f"G0 X{vertices[0][0]} Y{vertices[0][1]}", f"F{f}"]
         lines += [f"G1 X{x} Y{y}" for x, y in vertices[1:]]
-        return run_program(interpret_text("\n".join(lines + ["M2"]) + "\n"),
-                           MACHINE).cycle_time_s
+        return run_program(interpret_text("\n".join(lines + ["M2"]) + "\n"), MACHINE).cycle_time_s
+
     assert cycle(feed + step) <= cycle(feed) * 1.005
 
 
@@ -244,8 +253,9 @@ def test_plan_uses_the_axes_piece_limits(monkeypatch):
 
     monkeypatch.setattr(plan_setup, "piece_limits", lowered)
     text = "G21 G90 G17\nG61\nG1 X20 F3000\nG1 X20 Y20\nM2\n"
-    run = run_program(interpret_text(text), MACHINE,
-                      RunOptions(lookahead=LookaheadOptions(dynamics="off")))
+    run = run_program(
+        interpret_text(text), MACHINE, RunOptions(lookahead=LookaheadOptions(dynamics="off"))
+    )
     smp = run.samples
     period = MACHINE.servo.period_s
     v = np.diff(smp.s_mm) / period
@@ -284,8 +294,9 @@ def test_restores_raise_a_feed_the_joint_tries_left_low(monkeypatch):
     assert np.all(run.plan.caps_mm_s >= before.plan.caps_mm_s)
     assert np.any(run.plan.caps_mm_s > before.plan.caps_mm_s * (1 + 1e-9))
     for name in ("a_up_mm_s2", "j_up_mm_s3", "a_down_mm_s2", "j_down_mm_s3"):
-        np.testing.assert_array_equal(getattr(run.plan.limits, name),
-                                      getattr(before.plan.limits, name))
+        np.testing.assert_array_equal(
+            getattr(run.plan.limits, name), getattr(before.plan.limits, name)
+        )
     np.testing.assert_array_equal(run.plan.settle_s, before.plan.settle_s)
 
 
@@ -293,10 +304,14 @@ def test_restores_in_each_cut_window(monkeypatch):
     """Two plunged squares, each a cut window of its own: the restores run in each window
     (feed caps raised in both, against RESTORE_PIECES = 0), the program is faster, and the
     independently simulated tool stays within ε_max of each square while it is cut."""
-    text = ("G21 G17 G90 G94\nG64 P0.01\nF1200\nG0 Z2\nG0 X0 Y0\nG1 Z-1\nG1 X2\nG1 Y2\n"
-            "G1 X0\nG1 Y0\nG0 Z2\nG0 X6 Y0\nG1 Z-1\nG1 X9\nG1 Y3\nG1 X6\nG1 Y0\nM2\n")
-    cuts = [np.array([[0, 0, 2], [0, 0, -1], [2, 0, -1], [2, 2, -1], [0, 2, -1], [0, 0, -1]]),
-            np.array([[6, 0, 2], [6, 0, -1], [9, 0, -1], [9, 3, -1], [6, 3, -1], [6, 0, -1]])]
+    text = (
+        "G21 G17 G90 G94\nG64 P0.01\nF1200\nG0 Z2\nG0 X0 Y0\nG1 Z-1\nG1 X2\nG1 Y2\n"
+        "G1 X0\nG1 Y0\nG0 Z2\nG0 X6 Y0\nG1 Z-1\nG1 X9\nG1 Y3\nG1 X6\nG1 Y0\nM2\n"
+    )
+    cuts = [
+        np.array([[0, 0, 2], [0, 0, -1], [2, 0, -1], [2, 2, -1], [0, 2, -1], [0, 0, -1]]),
+        np.array([[6, 0, 2], [6, 0, -1], [9, 0, -1], [9, 3, -1], [6, 3, -1], [6, 0, -1]]),
+    ]
     prog = interpret_text(text)
     run = run_program(prog, MACHINE)
     monkeypatch.setattr(converge, "RESTORE_PIECES", 0)
@@ -343,8 +358,9 @@ def _arc_program_check(path: Path, machine):
 
 
 def _line_time_s(run, line: int) -> float:
-    return float(np.count_nonzero(run.plan.pieces.line[run.samples.piece] == line)
-                 * MACHINE.servo.period_s)  # fmt: skip
+    return float(
+        np.count_nonzero(run.plan.pieces.line[run.samples.piece] == line) * MACHINE.servo.period_s
+    )
 
 
 def test_stop_after_a_long_helix_softens_its_deceleration_not_its_feed():
@@ -361,8 +377,11 @@ def test_stop_after_a_long_helix_softens_its_deceleration_not_its_feed():
     assert helix.size == 1
     np.testing.assert_allclose(plan.caps_mm_s[helix], 500.0 / 60.0, rtol=1e-12)
     assert not plan.contour_feed[helix].any() and plan.contour_transition[helix].all()
-    off = run_program(interpret_text((PROGRAMS / "tort_helix_stop.nc").read_text()), machine,
-                      RunOptions(lookahead=LookaheadOptions(dynamics="off")))  # fmt: skip
+    off = run_program(
+        interpret_text((PROGRAMS / "tort_helix_stop.nc").read_text()),
+        machine,
+        RunOptions(lookahead=LookaheadOptions(dynamics="off")),
+    )
     assert plan.limits.a_down_mm_s2[helix] < off.plan.limits.a_down_mm_s2[helix]
     # The helix takes its kinematic time but for softer transitions (measured +23 ms; the
     # lowered feed cost it 2.96 s).
@@ -413,10 +432,17 @@ def test_a_failed_restore_is_shaped_again(monkeypatch):
     # Where a row got its feed back its transitions are softer instead.
     back = at_feed & ~at_feed_before
     lim = run.plan.limits
-    off = run_program(interpret_text(path.read_text()), machine,
-                      RunOptions(lookahead=LookaheadOptions(dynamics="off"))).plan.limits
-    softer = (lim.a_down_mm_s2 < off.a_down_mm_s2) | (lim.j_down_mm_s3 < off.j_down_mm_s3) \
-        | (lim.a_up_mm_s2 < off.a_up_mm_s2) | (lim.j_up_mm_s3 < off.j_up_mm_s3)  # fmt: skip
+    off = run_program(
+        interpret_text(path.read_text()),
+        machine,
+        RunOptions(lookahead=LookaheadOptions(dynamics="off")),
+    ).plan.limits
+    softer = (
+        (lim.a_down_mm_s2 < off.a_down_mm_s2)
+        | (lim.j_down_mm_s3 < off.j_down_mm_s3)
+        | (lim.a_up_mm_s2 < off.a_up_mm_s2)
+        | (lim.j_up_mm_s3 < off.j_up_mm_s3)
+    )
     assert back.any() and softer[back].all()
 
 
@@ -431,8 +457,7 @@ def test_a_failed_restore_is_bisected_alone(monkeypatch, tmp_path):
     machine = load_machine(LINUXCNC_LIMITS)
     for feed, before_s in ((2903, 0.3575), (3169, 0.3759)):
         path = tmp_path / f"helix{feed}.nc"
-        path.write_text(f"G21 G90 G17\nG64 P0.01\nG0 X-1 Y-1 Z1\nF{feed}\n"
-                        "G3 X-6 Y0 Z-2 R9\nM2\n")  # fmt: skip
+        path.write_text(f"G21 G90 G17\nG64 P0.01\nG0 X-1 Y-1 Z1\nF{feed}\nG3 X-6 Y0 Z-2 R9\nM2\n")
         run, err_mm = _arc_program_check(path, machine)
         with monkeypatch.context() as m:
             m.setattr(converge, "RESTORE_SECANTS", 0)
@@ -460,14 +485,17 @@ def _linuxcnc_limits_with_z_servo():
 _vertex3 = st.tuples(st.integers(-8, 8), st.integers(-8, 8), st.integers(-2, 2))
 
 
-@settings(max_examples=20, deadline=None, derandomize=True,
-          suppress_health_check=[HealthCheck.too_slow])
-@given(st.lists(_vertex3, min_size=2, max_size=4, unique=True),
-       st.lists(st.sampled_from([None, 6, 9, 12]), min_size=3, max_size=3),
-       st.sampled_from(["G61", "G64", "G64 P0.01"]), st.integers(300, 3000),
-       st.integers(100, 500))  # fmt: skip
-def test_cycle_time_non_increasing_in_feed_under_linuxcnc_limits(vertices, radii, mode, feed,
-                                                                step):  # fmt: skip
+@settings(
+    max_examples=20, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow]
+)
+@given(
+    st.lists(_vertex3, min_size=2, max_size=4, unique=True),
+    st.lists(st.sampled_from([None, 6, 9, 12]), min_size=3, max_size=3),
+    st.sampled_from(["G61", "G64", "G64 P0.01"]),
+    st.integers(300, 3000),
+    st.integers(100, 500),
+)
+def test_cycle_time_non_increasing_in_feed_under_linuxcnc_limits(vertices, radii, mode, feed, step):
     """The same property under LinuxCNC's limits (J = 1e9: stops whose jerk is no lever,
     softened by their acceleration, restores shaped again), on lines and helical arcs in
     space. (Without a Z servo model the X/Y lag alone takes the tool off an inclined line,

@@ -34,8 +34,10 @@ LINUXCNC = json.loads((HERE / "golden" / "linuxcnc_sim" / "spiral2k.json").read_
 
 
 #: LinuxCNC's planner run headless (../shared/tools/linuxcnc-sim beside the checkout).
-SIM = Path(os.environ.get("LINUXCNC_SIM") or HERE.parent.parent / "shared" / "tools"
-           / "linuxcnc-sim" / "run_linuxcnc.sh")  # fmt: skip
+SIM = Path(
+    os.environ.get("LINUXCNC_SIM")
+    or HERE.parent.parent / "shared" / "tools" / "linuxcnc-sim" / "run_linuxcnc.sh"
+)
 
 
 def _sim_missing() -> str | None:
@@ -93,17 +95,22 @@ def test_linuxcnc_still_takes_the_golden_time(tmp_path):
     import re
 
     out = tmp_path / "linuxcnc.csv"
-    done = subprocess.run(["bash", str(SIM), str(SPIRAL), str(out)], timeout=300,
-                          capture_output=True, text=True)  # fmt: skip
+    done = subprocess.run(
+        ["bash", str(SIM), str(SPIRAL), str(out)], timeout=300, capture_output=True, text=True
+    )
     if done.returncode != 0:  # the script says why (another LinuxCNC, rtapi, …)
-        pytest.skip(f"LinuxCNC's simulation did not run here (exit {done.returncode}): "
-                    f"{(done.stderr or done.stdout).strip()[-300:]}")
+        pytest.skip(
+            f"LinuxCNC's simulation did not run here (exit {done.returncode}): "
+            f"{(done.stderr or done.stdout).strip()[-300:]}"
+        )
     # The recorder's summary ("…: N samples, cycle T s, gaps G, overruns O, errors E"): a
     # real-time run on a loaded machine may miss servo periods, and then it measured that.
     faults = re.search(r"gaps (\d+), overruns (\d+)", done.stdout + done.stderr)
     if faults and (int(faults[1]) or int(faults[2])):
-        pytest.skip(f"LinuxCNC's real-time simulation missed periods on this loaded machine "
-                    f"(gaps {faults[1]}, overruns {faults[2]}): no measurement")
+        pytest.skip(
+            f"LinuxCNC's real-time simulation missed periods on this loaded machine "
+            f"(gaps {faults[1]}, overruns {faults[2]}): no measurement"
+        )
     rows = np.loadtxt(out, delimiter=",", skiprows=1)
     assert rows.shape[0] == LINUXCNC["samples"]
     assert rows[-1, 0] == pytest.approx(LINUXCNC["cycle_time_s"], abs=1e-9)
@@ -133,8 +140,9 @@ def test_spiral_tool_error_independent_simulation(spiral):
     # To the programmed polyline: within ε_max plus the path tolerance (G64's promise plus
     # the servo's), and not far from LinuxCNC's own 9.5 µm on this program.
     to_program = segment_distance_mm(actual[cut], _programmed_polyline(prog))
-    assert to_program.max() <= (machine.limits.contour_tolerance_mm
-                                + machine.limits.path_tolerance_mm)  # fmt: skip
+    assert to_program.max() <= (
+        machine.limits.contour_tolerance_mm + machine.limits.path_tolerance_mm
+    )
 
 
 def test_spiral_limits_hold_on_the_samples(spiral):
@@ -180,8 +188,9 @@ def _square_program(side_mm: float, chord_mm: float, mode: str) -> str:
     return "\n".join(lines + ["M2"]) + "\n"
 
 
-@pytest.mark.parametrize("mode, override, tol_mm", [("G64 P0.01 Q0", None, 0.01),
-                                                    ("G64", 0.02, 0.02)])  # fmt: skip
+@pytest.mark.parametrize(
+    "mode, override, tol_mm", [("G64 P0.01 Q0", None, 0.01), ("G64", 0.02, 0.02)]
+)
 def test_sharp_corners_stay_corners_within_the_tolerance(mode, override, tol_mm):
     """A square of 0.1 mm chords: every vertex turns 0° but the four corners turn 90°, so
     the runs end there (Q0: no collinear merging first); the corners are blended within
@@ -212,10 +221,17 @@ def _dense_spline_distance(knots, ctrl, vertices, n_per_chord=200):
 
 
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(radius=st.floats(1.0, 50.0), chord=st.floats(0.01, 0.5), turns=st.floats(0.05, 1.0),
-       noise_um=st.floats(0.0, 2.0), tol_um=st.floats(2.0, 20.0), seed=st.integers(0, 99))
-def test_fit_run_is_within_its_bound_and_the_bound_is_conservative(radius, chord, turns,
-                                                                   noise_um, tol_um, seed):
+@given(
+    radius=st.floats(1.0, 50.0),
+    chord=st.floats(0.01, 0.5),
+    turns=st.floats(0.05, 1.0),
+    noise_um=st.floats(0.0, 2.0),
+    tol_um=st.floats(2.0, 20.0),
+    seed=st.integers(0, 99),
+)
+def test_fit_run_is_within_its_bound_and_the_bound_is_conservative(
+    radius, chord, turns, noise_um, tol_um, seed
+):
     """Noisy arcs (CAM output rounded to 0.1 µm and worse): a fit, when there is one, is
     within the tolerance by a brute-force measure, and :func:`spline_deviation_mm` never
     reports less than that measure; the ends are the run's end points exactly."""
@@ -264,8 +280,12 @@ def cam_programs(draw):
     feed = draw(st.integers(300, 3000))
     # Q0: no collinear merging first (under G64 P- Q- a merged line may leave a vertex by Q,
     # and its blends by P more: LinuxCNC's naive CAM detector; here only P is tested)
-    lines = ["G21 G17 G90 G94", "G64" if p is None else f"G64 P{p} Q0", "G0 X0 Y0 Z0",
-             f"G1 F{feed}"]  # fmt: skip
+    lines = [
+        "G21 G17 G90 G94",
+        "G64" if p is None else f"G64 P{p} Q0",
+        "G0 X0 Y0 Z0",
+        f"G1 F{feed}",
+    ]
     x, y, z, heading = 0.0, 0.0, 0.0, 0.0
     for _ in range(draw(st.integers(1, 2))):
         radius = draw(st.floats(1.0, 30.0))
@@ -314,13 +334,15 @@ AXIS_JERK_AT_A_PASSED_BREAK = (
     "X-1.0531 Y0.3547 Z-0.0011\nX-0.9876 Y0.2483 Z-0.0012\nX-0.9212 Y0.1424 Z-0.0013\n"
     "X-0.8541 Y0.0369 Z-0.0014\nX-0.7861 Y-0.0680 Z-0.0015\nX-0.7175 Y-0.1724 Z-0.0016\n"
     "X-0.6480 Y-0.2764 Z-0.0017\nX-0.5778 Y-0.3798 Z-0.0018\nX-0.5068 Y-0.4827 Z-0.0019\n"
-    "X-0.4351 Y-0.5851 Z-0.0020\nM2\n")  # fmt: skip
+    "X-0.4351 Y-0.5851 Z-0.0020\nM2\n"
+)
 
 
 @pytest.mark.parametrize("smooth", [False, True])
 def test_axis_jerk_where_a_flank_crosses_a_passed_break(smooth):
-    run = run_program(interpret_text(AXIS_JERK_AT_A_PASSED_BREAK), AXIS,
-                      _options(smooth, dynamics="off"))  # fmt: skip
+    run = run_program(
+        interpret_text(AXIS_JERK_AT_A_PASSED_BREAK), AXIS, _options(smooth, dynamics="off")
+    )
     _, _, j = finite_differences(run.samples.points_mm)
     assert np.all(np.abs(j) <= AXIS.axis_limits.as_arrays()[2] * (1 + REL) + TOL_J)
 

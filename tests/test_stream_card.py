@@ -38,11 +38,21 @@ def opened(**kwargs):
 
 
 def test_hello_reports_capabilities():
-    card = CardSim(CardConfig(buffer_periods=100, max_pulses_per_period=50, period_s=2e-3,
-                              position_steps=(1, -2, 3)), seed=5)  # fmt: skip
+    card = CardSim(
+        CardConfig(
+            buffer_periods=100, max_pulses_per_period=50, period_s=2e-3, position_steps=(1, -2, 3)
+        ),
+        seed=5,
+    )
     (caps,) = send(card, p.Hello())
-    assert (caps.version, caps.axes, caps.max_pulses_per_period, caps.buffer_periods,
-            caps.period_us, caps.position_steps) == (3, 3, 50, 100, 2000, (1, -2, 3))  # fmt: skip
+    assert (
+        caps.version,
+        caps.axes,
+        caps.max_pulses_per_period,
+        caps.buffer_periods,
+        caps.period_us,
+        caps.position_steps,
+    ) == (3, 3, 50, 100, 2000, (1, -2, 3))
     assert caps.session_id == card.session_id
 
 
@@ -51,8 +61,10 @@ def test_in_order_exactly_once_with_duplicates_and_gaps():
     a, b, c, d = [[1, 0, 0]] * 2, [[0, 2, 0]], [[0, 0, -3]] * 3, [[4, 4, 4]]
     b, c, d = batch(b, (2, 0, 0)), batch(c, (2, 2, 0)), batch(d, (2, 2, -9))
     # Starting is a state change (a STATUS); as fast as possible, the ACK finds it all run.
-    assert send(card, batch(a), seq=0) == [p.Status(p.CardState.RUNNING, 0, 1, 254, 2, 0,
-                                                    (0, 0, 0)), p.Ack(1, 256)]  # fmt: skip
+    assert send(card, batch(a), seq=0) == [
+        p.Status(p.CardState.RUNNING, 0, 1, 254, 2, 0, (0, 0, 0)),
+        p.Ack(1, 256),
+    ]
     gap = p.Nak(1, 256, p.NakReason.SEQUENCE)
     assert send(card, c, seq=2) == [gap]  # frame 1 is missing: 2 is kept, not run
     assert send(card, d, seq=3) == [gap]
@@ -202,8 +214,7 @@ def test_sequence_numbers_wrap():
 
 
 def test_fault_rates_are_applied_per_frame():
-    card = CardSim(CardConfig(speed=None, faults=Faults(drop_rate=0.1, corrupt_rate=0.1)),
-                   seed=7)  # fmt: skip
+    card = CardSim(CardConfig(speed=None, faults=Faults(drop_rate=0.1, corrupt_rate=0.1)), seed=7)
     for _ in range(2000):
         card.on_bytes(p.encode_message(p.StatusRequest()), 0.0)
     assert 140 < card.dropped_in < 260 and 140 < card.corrupted_in < 260  # 200 ± 4σ

@@ -38,12 +38,14 @@ def run_stream(args):
 def write_points(path: Path, points: np.ndarray, period_s: float = 1e-3) -> None:
     """A reference-point CSV as `run -o` writes it (t,x,y,z,feed,piece,line)."""
     n = len(points)
-    table = np.column_stack([np.arange(n) * period_s, points, np.zeros(n), np.zeros(n),
-                             np.full(n, 3)])  # fmt: skip
+    table = np.column_stack(
+        [np.arange(n) * period_s, points, np.zeros(n), np.zeros(n), np.full(n, 3)]
+    )
     with open(path, "w") as fh:
         fh.write("t,x,y,z,feed,piece,line\n")
-        np.savetxt(fh, table, fmt=["%.6f", "%.9f", "%.9f", "%.9f", "%.6f", "%d", "%d"],
-                   delimiter=",")  # fmt: skip
+        np.savetxt(
+            fh, table, fmt=["%.6f", "%.9f", "%.9f", "%.9f", "%.6f", "%d", "%d"], delimiter=","
+        )
 
 
 def expected_pulses(csv: Path) -> np.ndarray:
@@ -113,8 +115,11 @@ def test_stream_points_file_over_socket_url(tmp_path):
     [
         ("late", [], "5:4: error: arc with neither R nor I/J/K"),
         ("good", ["--set", "soft_limits.x.max_mm=5"], "soft limits"),
-        ("jump", [], "period 250 (t = 0.2500 s) needs 200 pulses on Z, more than the card's "
-                     "limit of 127"),
+        (
+            "jump",
+            [],
+            "period 250 (t = 0.2500 s) needs 200 pulses on Z, more than the card's limit of 127",
+        ),
         ("slow", [], "2 ms apart; the machine's servo period is 1 ms"),
     ],
 )
@@ -199,10 +204,23 @@ def test_card_sim_command_logs_what_it_executed(tmp_path):
     code = "from nurbscnc.cli.card import card_sim; card_sim(prog_name='card-sim')"
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     proc = subprocess.Popen(
-        [sys.executable, "-c", code, "--listen", "127.0.0.1:0", "--fast", "--once",
-         "--log", str(log), "--report", str(report)],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-c",
+            code,
+            "--listen",
+            "127.0.0.1:0",
+            "--fast",
+            "--once",
+            "--log",
+            str(log),
+            "--report",
+            str(report),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        env=env,
+    )
     try:
         url = proc.stdout.readline().decode().strip()
         assert url.startswith("socket://127.0.0.1:")
@@ -245,9 +263,12 @@ def test_sigusr1_while_planning_is_kept_and_the_stream_waits_at_the_start(tmp_pa
     )
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     with card_on("pty", CardConfig(speed=1.0)) as (card, ep):
-        proc = subprocess.Popen([sys.executable, "-c", code, "stream", str(nc), "--port", ep.path,
-                                 "--quiet"], stderr=subprocess.PIPE, stdout=subprocess.PIPE,
-                                env=env)  # fmt: skip
+        proc = subprocess.Popen(
+            [sys.executable, "-c", code, "stream", str(nc), "--port", ep.path, "--quiet"],
+            stderr=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            env=env,
+        )
         try:
             first = proc.stderr.readline()
             waiting = proc.stderr.readline()  # printed once the stream waits
@@ -267,8 +288,9 @@ def test_sigusr1_while_planning_is_kept_and_the_stream_waits_at_the_start(tmp_pa
 
 def test_unwritable_card_log_and_directory_program_exit_3(tmp_path):
     """Files that cannot be read or written are exit 3 with a message, never a traceback."""
-    result = CliRunner().invoke(card_sim, ["--fast", "--once", "--log",
-                                           str(tmp_path / "missing" / "log.csv")])  # fmt: skip
+    result = CliRunner().invoke(
+        card_sim, ["--fast", "--once", "--log", str(tmp_path / "missing" / "log.csv")]
+    )
     assert result.exit_code == 3, result.output
     assert "cannot write the log" in result.stderr
     assert "Traceback" not in result.output
@@ -282,9 +304,12 @@ PAUSED = "G21 G90 G17\nG0 X0 Y0\nG1 X5 F3000\nM0\nG1 X8\nM2\n"  # M0 at X5 (line
 
 def _stream_process(nc, ep) -> subprocess.Popen:
     """``nurbscnc stream NC --port EP --quiet`` as a child process (pipes for its output)."""
-    return subprocess.Popen([sys.executable, "-m", "nurbscnc", "stream", str(nc), "--port",
-                             ep.path, "--quiet"], stderr=subprocess.PIPE, stdout=subprocess.PIPE,
-                            env={**os.environ, "PYTHONPATH": str(ROOT)})  # fmt: skip
+    return subprocess.Popen(
+        [sys.executable, "-m", "nurbscnc", "stream", str(nc), "--port", ep.path, "--quiet"],
+        stderr=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+    )
 
 
 def test_m0_waits_at_rest_until_sigusr2(tmp_path):
@@ -327,8 +352,11 @@ def test_a_second_stream_needs_card_position_or_zero_not_a_restart(tmp_path):
         assert json.loads(zeroed.stdout)["final_position_steps"] == [8000, 0, 0]
         assert card.positions_set == 1
         moved = CliRunner().invoke(card_position, ["--port", ep.path, "--set", "0,0,0", "--json"])
-        assert json.loads(moved.stdout) == {"ok": True, "state": "DONE",
-                                            "position_steps": [0, 0, 0]}  # fmt: skip
+        assert json.loads(moved.stdout) == {
+            "ok": True,
+            "state": "DONE",
+            "position_steps": [0, 0, 0],
+        }
         assert run_stream([nc, "--port", ep.path, "--quiet"]).exit_code == 0
         assert card.position.tolist() == [8000, 0, 0] and card.positions_set == 2
 
@@ -374,13 +402,17 @@ def test_ctrl_c_while_waiting_at_m0_exits_130_with_the_cards_position(tmp_path):
 
 
 #: A non-default command-line value of every planning option (cli.options.planning_options).
-NON_DEFAULT = {"algorithm": ["--algorithm", "adaptive"],
-               "corner_feed": ["--corner-feed", "peak"], "dynamics": ["--dynamics", "global"],
-               "blend_tolerance": ["--blend-tolerance", "0.05"],
-               "interpolator": ["--interpolator", "taylor"], "lookahead": ["--lookahead", "7"],
-               "precompensate": ["--precompensate"],
-               "reference_tolerance": ["--reference-tolerance", "5"],
-               "smooth": ["--smooth"]}  # fmt: skip
+NON_DEFAULT = {
+    "algorithm": ["--algorithm", "adaptive"],
+    "corner_feed": ["--corner-feed", "peak"],
+    "dynamics": ["--dynamics", "global"],
+    "blend_tolerance": ["--blend-tolerance", "0.05"],
+    "interpolator": ["--interpolator", "taylor"],
+    "lookahead": ["--lookahead", "7"],
+    "precompensate": ["--precompensate"],
+    "reference_tolerance": ["--reference-tolerance", "5"],
+    "smooth": ["--smooth"],
+}
 
 
 def test_every_planning_option_has_a_non_default_value_here():

@@ -25,8 +25,12 @@ from nurbscnc.plan.feedrate import scurve_distance_mm, scurve_duration_s
 from nurbscnc.plan.options import LookaheadOptions
 from nurbscnc.program.interpret import interpret_text
 
-FINE = {"steps.per_mm.x": 1e5, "steps.per_mm.y": 1e5, "steps.per_mm.z": 1e5,
-        "steps.max_pulses_per_period": 32767}  # fmt: skip
+FINE = {
+    "steps.per_mm.x": 1e5,
+    "steps.per_mm.y": 1e5,
+    "steps.per_mm.z": 1e5,
+    "steps.max_pulses_per_period": 32767,
+}
 T = 1e-3
 
 PAUSES = """G21 G90 G17 G61
@@ -96,11 +100,16 @@ def test_m0_stops_the_card_at_rest_and_waits_until_the_operator_continues():
     seen = {}
 
     def look(job, card):  # just before the operator continues
-        seen.update(state=card.state, position=card.position.copy(), waiting=job.waiting,
-                    executed=card.executed_periods)  # fmt: skip
+        seen.update(
+            state=card.state,
+            position=card.position.copy(),
+            waiting=job.waiting,
+            executed=card.executed_periods,
+        )
 
-    r = simulate_job(job, CardConfig(speed=1.0),
-                     events=[(9.99, look), (10.0, lambda j, c: j.resume())])  # fmt: skip
+    r = simulate_job(
+        job, CardConfig(speed=1.0), events=[(9.99, look), (10.0, lambda j, c: j.resume())]
+    )
     assert r.error is None
     # M1 is passed (no --optional-stop); M60 waits like M0: the first wait ended by the
     # event at t = 10 s, the second still waiting (no one continued it).
@@ -119,8 +128,10 @@ def card_done_at(card, steps) -> bool:
 
 def test_every_wait_lasts_until_its_resume_event_and_m1_waits_only_with_optional_stop():
     prog, mach, run = planned(PAUSES)
-    for optional, expected in ((False, ["M0 at line 5", "M60 at line 9"]),
-                               (True, ["M0 at line 5", "M1 at line 7", "M60 at line 9"])):
+    for optional, expected in (
+        (False, ["M0 at line 5", "M60 at line 9"]),
+        (True, ["M0 at line 5", "M1 at line 7", "M60 at line 9"]),
+    ):
         job = Job(run.plan, prog, mach, optional_stop=optional)
         resumes = [(20.0 * (i + 1), lambda j, c: j.resume()) for i in range(len(expected))]
         r = simulate_job(job, CardConfig(speed=None), events=resumes)
@@ -169,9 +180,12 @@ def hold_run(hold_at: float, resume_at: float, lead: int | None = None):
     prog, mach, run = planned(SQUARE, FINE)
     job = Job(run.plan, prog, mach)
     cfg = CardConfig(speed=1.0, max_pulses_per_period=32767)
-    r = simulate_job(job, cfg, options=SenderOptions(lead_periods=lead),
-                     events=[(hold_at, lambda j, c: j.request_hold()),
-                             (resume_at, lambda j, c: j.resume())])  # fmt: skip
+    r = simulate_job(
+        job,
+        cfg,
+        options=SenderOptions(lead_periods=lead),
+        events=[(hold_at, lambda j, c: j.request_hold()), (resume_at, lambda j, c: j.resume())],
+    )
     return prog, mach, run, job, r
 
 
@@ -218,8 +232,9 @@ def test_the_hold_never_runs_faster_than_the_plan_at_the_same_place():
     pos = card_positions_mm(r.card, np.zeros(3, dtype=np.int64), 1e5)
     k0, n = hold.decel_start_period, hold.decel_periods
     seg = pos[k0 : k0 + n + 1]
-    s_hold = np.concatenate([[plain.s_mm[k0]], plain.s_mm[k0] + np.cumsum(
-        np.linalg.norm(np.diff(seg, axis=0), axis=1))])  # fmt: skip
+    s_hold = np.concatenate(
+        [[plain.s_mm[k0]], plain.s_mm[k0] + np.cumsum(np.linalg.norm(np.diff(seg, axis=0), axis=1))]
+    )
     v_hold = np.diff(s_hold) / T
     v_plan_there = np.interp(s_hold[1:], s_plain, v_plain)
     # (0.02 mm/s: the card's 10 nm steps over 1 ms are 0.01 mm/s)
@@ -241,8 +256,12 @@ def test_a_hold_after_the_last_frame_waits_at_the_end_of_the_section():
     job = Job(run.plan, prog, mach)
     # Asked when the M0 section (2.75 s) has all its frames sent (the last 256 periods):
     # nothing left to cut, the card stops at M0 as programmed, one wait serves both.
-    r = simulate_job(job, CardConfig(speed=1.0), events=[(2.6, lambda j, c: j.request_hold())]
-                     + [(t, lambda j, c: j.resume()) for t in (30.0, 60.0)])  # fmt: skip
+    r = simulate_job(
+        job,
+        CardConfig(speed=1.0),
+        events=[(2.6, lambda j, c: j.request_hold())]
+        + [(t, lambda j, c: j.resume()) for t in (30.0, 60.0)],
+    )
     assert r.completed and [w[2] for w in r.waits] == ["M0 at line 5", "M60 at line 9"]
     assert job.holds == [] and card_done_at(r.card, [0, 0, 0])
 
@@ -254,8 +273,9 @@ def test_override_50_percent_doubles_the_motion_time():
     for ov in (1.0, 0.5):
         job = Job(run.plan, prog, mach, override=ov)
         r = simulate_job(job, CardConfig(speed=None))
-        assert r.completed and card_done_at(r.card, np.rint(run.samples.points_mm[-1] * 1e3)
-                                            .astype(int).tolist())  # fmt: skip
+        assert r.completed and card_done_at(
+            r.card, np.rint(run.samples.points_mm[-1] * 1e3).astype(int).tolist()
+        )
         periods[ov] = sum(rep.executed_periods for rep in r.reports)
     motion = run.plan.cycle_time_s / T
     assert periods[1.0] == pytest.approx(motion, abs=1.0)
@@ -383,8 +403,9 @@ def test_from_line_moves_up_and_across_then_runs_the_plain_tail():
 def test_from_line_plunges_at_the_programmed_feed_and_never_below_the_program():
     prog = interpret_text(FROM_LINE)
     lead = start_at_line(prog, 8).segments  # G1 Y30 from X30 Y10 Z-1: down at F1500
-    np.testing.assert_allclose([s.end_mm for s in lead[:3]],
-                               [(0, 0, 8), (30, 10, 8), (30, 10, -1)], atol=1e-12)
+    np.testing.assert_allclose(
+        [s.end_mm for s in lead[:3]], [(0, 0, 8), (30, 10, 8), (30, 10, -1)], atol=1e-12
+    )
     assert [s.rapid for s in lead[:3]] == [True, True, False] and lead[2].feed_mm_s == 25.0
 
 

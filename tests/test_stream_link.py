@@ -41,8 +41,11 @@ def test_clean_stream_runs_every_period_once_in_real_time():
     r = simulate(prog, CardConfig(speed=1.0))
     assert r.completed and r.exact(prog)
     assert r.report.final_position_steps == tuple(prog.end_steps)
-    assert tuple(prog.end_steps) == (round(10 * np.sin(0.7 * np.pi) * 1000),
-                                     round((10 * np.cos(0.7 * np.pi) - 10) * 1000), 7)
+    assert tuple(prog.end_steps) == (
+        round(10 * np.sin(0.7 * np.pi) * 1000),
+        round((10 * np.cos(0.7 * np.pi) - 10) * 1000),
+        7,
+    )
     assert r.report.retransmits == 0 and r.card.crc_errors == 0 and r.card.duplicates == 0
     # 700 periods in 16-period frames: 44 batches + END, plus the HELLO (and any polls).
     assert r.report.frames_sent - r.report.polls == 1 + 44 + 1
@@ -74,10 +77,16 @@ def test_fault_matrix_every_stream_exact_or_stopped_cleanly(corrupt, drop):
     stopped having run only a prefix of it; at ≤ 2 % corruption every stream completes."""
     prog = circle_program(400)
     for seed in (1, 2):
-        r = simulate(prog, CardConfig(speed=1.0), to_card=Relay(corrupt, drop, seed),
-                     to_host=Relay(corrupt, drop, seed + 1000), seed=seed)  # fmt: skip
-        assert (r.completed and r.exact(prog)) or (not r.completed and
-                                                   r.stopped_cleanly(prog)), r.error
+        r = simulate(
+            prog,
+            CardConfig(speed=1.0),
+            to_card=Relay(corrupt, drop, seed),
+            to_host=Relay(corrupt, drop, seed + 1000),
+            seed=seed,
+        )
+        assert (r.completed and r.exact(prog)) or (not r.completed and r.stopped_cleanly(prog)), (
+            r.error
+        )
         if corrupt <= 0.02:
             assert r.completed, r.error
 
@@ -89,9 +98,11 @@ def test_relays_damage_what_they_claim():
     changed = sum(o != frame for o in out)
     assert relay.frames == 5000 and changed == relay.corrupted + relay.dropped + relay.cut
     assert abs(relay.corrupted - 1000) < 4 * 28 and abs(relay.dropped + relay.cut - 500) < 4 * 21
-    assert all(len(o) < len(frame) for o in out if o != frame and len(o) != len(frame)) and \
-        all(0 < sum(bin(a ^ b).count("1") for a, b in zip(o, frame, strict=True)) <= 4
-            for o in out if len(o) == len(frame) and o != frame)  # fmt: skip
+    assert all(len(o) < len(frame) for o in out if o != frame and len(o) != len(frame)) and all(
+        0 < sum(bin(a ^ b).count("1") for a, b in zip(o, frame, strict=True)) <= 4
+        for o in out
+        if len(o) == len(frame) and o != frame
+    )
 
 
 def test_slow_card_never_gets_more_than_its_buffer():
@@ -105,16 +116,21 @@ def test_slow_card_never_gets_more_than_its_buffer():
 def test_a_sender_ignoring_credit_is_caught_by_the_card():
     """The flow-control check above can fail: without credit the card must refuse batches."""
     prog = circle_program(300)
-    r = simulate(prog, CardConfig(speed=1.0, buffer_periods=32, start_fill_periods=16),
-                 options=SenderOptions(timeout_s=1.0), ignore_credit=True)  # fmt: skip
+    r = simulate(
+        prog,
+        CardConfig(speed=1.0, buffer_periods=32, start_fill_periods=16),
+        options=SenderOptions(timeout_s=1.0),
+        ignore_credit=True,
+    )
     assert r.card.overflows > 0
 
 
 def test_buffer_underrun_is_reported_and_the_card_stops():
     # Replies 60 ms late: the sender's credit (32 periods) runs out long before the card's
     # first ACK arrives, and the card runs dry at period 33.
-    config = CardConfig(speed=1.0, buffer_periods=32, start_fill_periods=16,
-                        faults=Faults(delay_s=0.06))  # fmt: skip
+    config = CardConfig(
+        speed=1.0, buffer_periods=32, start_fill_periods=16, faults=Faults(delay_s=0.06)
+    )
     r = simulate(circle_program(300), config)
     assert not r.completed
     assert r.error.message.startswith("card alarm UNDERRUN: buffer underrun: period 33 ")
@@ -122,8 +138,11 @@ def test_buffer_underrun_is_reported_and_the_card_stops():
 
 
 def test_silent_card_is_lost_communication_within_the_timeout():
-    r = simulate(circle_program(100), CardConfig(speed=None, faults=Faults(stall_after_frames=0)),
-                 options=SenderOptions(timeout_s=0.3))  # fmt: skip
+    r = simulate(
+        circle_program(100),
+        CardConfig(speed=None, faults=Faults(stall_after_frames=0)),
+        options=SenderOptions(timeout_s=0.3),
+    )
     assert "lost communication with card: no answer to HELLO for 0.3 s" in r.error.message
     # The HELLO may have opened a stream whose CAPS was lost: ABORT is tried for 0.5 s.
     assert "no confirmation of the abort" in r.error.message
@@ -133,10 +152,15 @@ def test_silent_card_is_lost_communication_within_the_timeout():
 
 def test_card_stalling_mid_stream_is_lost_communication_after_trying_to_abort():
     opts = SenderOptions(timeout_s=0.3)
-    r = simulate(circle_program(1000), CardConfig(speed=1.0, faults=Faults(stall_after_frames=8)),
-                 options=opts)  # fmt: skip
-    assert r.error.message.startswith("lost communication with card: no answer from the card "
-                                      "for 0.3 s; no confirmation of the abort")  # fmt: skip
+    r = simulate(
+        circle_program(1000),
+        CardConfig(speed=1.0, faults=Faults(stall_after_frames=8)),
+        options=opts,
+    )
+    assert r.error.message.startswith(
+        "lost communication with card: no answer from the card "
+        "for 0.3 s; no confirmation of the abort"
+    )
     assert r.card.stalled and r.elapsed_s < 0.3 + opts.abort_wait_s + 0.05
     # ABORT was repeated every 100 ms for the 0.5 s (the card no longer listens).
     assert r.link.count.frames_sent - r.link.count.polls - 8 >= 5
@@ -161,8 +185,10 @@ def test_the_cards_done_decides_even_after_a_failed_exchange():
     than the timeout: the sender's lost-communication abort is answered with DONE, and DONE
     with every period executed is success."""
     to_host = Relay()
-    events = [(0.01, lambda link, card: setattr(to_host, "drop_rate", 1.0)),
-              (2.2, lambda link, card: setattr(to_host, "drop_rate", 0.0))]  # fmt: skip
+    events = [
+        (0.01, lambda link, card: setattr(to_host, "drop_rate", 1.0)),
+        (2.2, lambda link, card: setattr(to_host, "drop_rate", 0.0)),
+    ]
     prog = circle_program(300)
     r = simulate(prog, CardConfig(speed=None, buffer_periods=512), to_host=to_host, events=events)
     assert r.completed and r.exact(prog), r.error
@@ -173,20 +199,23 @@ def test_the_cards_done_decides_even_after_a_failed_exchange():
 def test_a_line_too_noisy_to_carry_a_batch_fails_cleanly():
     """Every BATCH is damaged but the short replies get through: the card answers, yet
     acknowledges nothing; after the timeout the stream fails and the card is aborted."""
+
     def ruin_batches(frame: bytes) -> bytes:
         return frame[:-1] + bytes([frame[-1] ^ 1]) if frame[4] == p.MsgType.BATCH else frame
 
     prog = circle_program(300)
-    r = simulate(prog, CardConfig(speed=1.0), to_card=ruin_batches,
-                 options=SenderOptions(timeout_s=0.5))  # fmt: skip
-    assert r.error.message.startswith("the card acknowledged no frame for 0.5 s though it "
-                                      "answers: the line is too noisy; the card stopped")
+    r = simulate(
+        prog, CardConfig(speed=1.0), to_card=ruin_batches, options=SenderOptions(timeout_s=0.5)
+    )
+    assert r.error.message.startswith(
+        "the card acknowledged no frame for 0.5 s though it "
+        "answers: the line is too noisy; the card stopped"
+    )
     assert r.state_at_end.name == "ABORTED" and r.card.executed_periods == 0
 
 
 def test_card_reset_mid_stream_is_fatal():
-    r = simulate(circle_program(500), CardConfig(speed=None,
-                                                 faults=Faults(reset_after_frames=5)))
+    r = simulate(circle_program(500), CardConfig(speed=None, faults=Faults(reset_after_frames=5)))
     assert "reset during the stream" in r.error.message and "not resuming" in r.error.message
     assert r.card.resets == 1 and r.card.state.name == "IDLE"
     assert r.card.executed_periods == 3 * 16  # frames 2-4 ran before the reset, nothing after
@@ -214,10 +243,12 @@ def test_feed_hold_freezes_then_resume_finishes():
     def look(link, card, key):
         seen[key] = (card.state.name, card.executed_periods)
 
-    events = [(0.2, lambda link, card: link.request_hold()),
-              (0.3, lambda link, card: look(link, card, "a")),
-              (0.9, lambda link, card: look(link, card, "b")),
-              (0.9, lambda link, card: link.request_resume())]  # fmt: skip
+    events = [
+        (0.2, lambda link, card: link.request_hold()),
+        (0.3, lambda link, card: look(link, card, "a")),
+        (0.9, lambda link, card: look(link, card, "b")),
+        (0.9, lambda link, card: link.request_resume()),
+    ]
     r = simulate(prog, CardConfig(speed=1.0, start_fill_periods=32), events=events)
     assert r.completed and r.exact(prog)
     assert seen["a"][0] == "HOLD" and seen["a"] == seen["b"] and 0 < seen["a"][1] < 400
@@ -227,10 +258,16 @@ def test_feed_hold_freezes_then_resume_finishes():
 def test_a_hold_asked_before_the_stream_opens_holds_the_filled_card():
     prog = circle_program(300)
     state = {}
-    events = [(0.0, lambda link, card: link.request_hold()),
-              (0.5, lambda link, card: state.update(s=card.state.name, n=card.fill,
-                                                    x=card.executed_periods)),
-              (0.5, lambda link, card: link.request_resume())]  # fmt: skip
+    events = [
+        (0.0, lambda link, card: link.request_hold()),
+        (
+            0.5,
+            lambda link, card: state.update(
+                s=card.state.name, n=card.fill, x=card.executed_periods
+            ),
+        ),
+        (0.5, lambda link, card: link.request_resume()),
+    ]
     r = simulate(prog, CardConfig(speed=1.0), events=events)
     assert state == {"s": "HOLD", "n": 256, "x": 0}  # filled, not moved
     assert r.completed and r.exact(prog)

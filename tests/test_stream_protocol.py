@@ -76,8 +76,9 @@ def test_batch_layout_and_sizes():
     frame = p.encode_message(p.Batch(pulses, (-1, 70000, 5)), seq=7)
     # format byte: 3 axes, int8 (width code 0); the start position as 3 int32; then the
     # counts period by period as signed bytes.
-    assert frame[6:-4] == (bytes([0x03]) + struct.pack("<3i", -1, 70000, 5)
-                           + bytes([1, 0xFE, 3, 127, 0x81, 0]))  # fmt: skip
+    assert frame[6:-4] == (
+        bytes([0x03]) + struct.pack("<3i", -1, 70000, 5) + bytes([1, 0xFE, 3, 127, 0x81, 0])
+    )
     assert len(frame) == p.batch_frame_bytes(2, 3) == 10 + 1 + 12 + 6
     wide = p.encode_message(p.Batch(np.array([[128, 0, -300]]), (0, 0, 0)))
     assert wide[6] == 0x13  # 3 axes, 2 bytes per count
@@ -97,8 +98,17 @@ u16 = st.integers(0, 0xFFFF)
 u8 = st.integers(0, 255)
 messages = st.one_of(
     st.builds(p.Hello, u8),
-    st.builds(p.Caps, u8, st.integers(1, 15), u16, u16, st.integers(0, 2**32 - 1),
-              st.integers(0, 2**32 - 1), u8, positions),
+    st.builds(
+        p.Caps,
+        u8,
+        st.integers(1, 15),
+        u16,
+        u16,
+        st.integers(0, 2**32 - 1),
+        st.integers(0, 2**32 - 1),
+        u8,
+        positions,
+    ),
     st.builds(p.End, st.integers(0, 2**32 - 1), positions),
     st.builds(p.SetPosition, positions),
     st.sampled_from([p.StatusRequest(), p.Hold(), p.Resume(), p.Abort()]),
@@ -106,10 +116,14 @@ messages = st.one_of(
     st.builds(p.Nak, u16, u16, u8),
     st.builds(p.Status, u8, u8, u16, u16, u16, st.integers(0, 2**32 - 1), positions),
     st.builds(p.Alarm, u8, st.text(max_size=60)),
-    st.builds(lambda a, s: p.Batch(np.array(a, dtype=np.int64), s),
-              st.lists(st.lists(st.integers(-32767, 32767), min_size=3, max_size=3),
-                       min_size=1, max_size=40), positions),
-)  # fmt: skip
+    st.builds(
+        lambda a, s: p.Batch(np.array(a, dtype=np.int64), s),
+        st.lists(
+            st.lists(st.integers(-32767, 32767), min_size=3, max_size=3), min_size=1, max_size=40
+        ),
+        positions,
+    ),
+)
 
 
 @settings(max_examples=300, deadline=None)

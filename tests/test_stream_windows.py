@@ -113,8 +113,9 @@ def test_first_period_leaves_before_the_last_window_is_planned():
     assert n == 5  # four cuts after rapids, then the closing rapid
     assert events.index(("card ran", None)) < events.index(("planned", n - 1))
     assert job.report()["planning"]["windows"] == n
-    assert np.array_equal(r.card.position,
-                          np.rint(run.samples.points_mm[-1] * mach.steps.per_mm).astype(int))
+    assert np.array_equal(
+        r.card.position, np.rint(run.samples.points_mm[-1] * mach.steps.per_mm).astype(int)
+    )
 
 
 def test_a_planner_ahead_streams_exactly_runs_points(monkeypatch):
@@ -129,7 +130,7 @@ def test_a_planner_ahead_streams_exactly_runs_points(monkeypatch):
     assert r.completed and len(r.reports) == 1 and r.waits == []
     plain = quantise(run.samples.points_mm, mach.steps.per_mm, mach.servo.period_s)
     assert np.array_equal(r.card.executed_pulses(), plain.pulses)
-    (track, at_horizon), = done
+    ((track, at_horizon),) = done
     assert not at_horizon
     np.testing.assert_allclose(track.points_mm, run.samples.points_mm, rtol=0, atol=POINTS_MM)
     planning = job.report()["planning"]
@@ -157,13 +158,15 @@ def test_a_slow_planner_holds_at_rests_only(monkeypatch):
         assert abs(s_end - final.profile.piece_start_mm[w.end]) <= POINTS_MM
         assert final.profile.junction_speeds_mm_s[w.end] == 0.0  # a rest of the plan
         assert track.v_mm_s[-1] == 0.0  # and at rest in the streamed periods
-        np.testing.assert_allclose(track.points_mm[-1], final.pieces.start_mm[:, w.end],
-                                   rtol=0, atol=1e-6)  # fmt: skip
+        np.testing.assert_allclose(
+            track.points_mm[-1], final.pieces.start_mm[:, w.end], rtol=0, atol=1e-6
+        )
     waited = sum(b - a for a, b, why in r.waits if why == "planning")
     planning = job.report()["planning"]
     assert waited > 0.0 and abs(planning["held_s"] - waited) <= 1e-6
-    assert np.array_equal(r.card.position,
-                          np.rint(run.samples.points_mm[-1] * mach.steps.per_mm).astype(int))
+    assert np.array_equal(
+        r.card.position, np.rint(run.samples.points_mm[-1] * mach.steps.per_mm).astype(int)
+    )
 
 
 def test_a_planner_error_stops_the_card_at_rest_at_the_planned_end():
@@ -185,11 +188,12 @@ def test_a_planner_error_stops_the_card_at_rest_at_the_planned_end():
     job.section_done = section_done
     with pytest.raises(PlanningError, match="planned too late"):
         simulate_job(job, CardConfig(speed=1.0))
-    track, = card
+    (track,) = card
     end = windows[0].end
     assert track.v_mm_s[-1] == 0.0
-    np.testing.assert_allclose(track.points_mm[-1], windows[-1].plan.pieces.start_mm[:, end],
-                               rtol=0, atol=1e-6)  # fmt: skip
+    np.testing.assert_allclose(
+        track.points_mm[-1], windows[-1].plan.pieces.start_mm[:, end], rtol=0, atol=1e-6
+    )
 
 
 def test_closing_the_feed_stops_the_planner_after_its_window():
@@ -209,8 +213,7 @@ def test_closing_the_feed_stops_the_planner_after_its_window():
     feed = WindowFeed(slow())
     assert feed.first() == 0
     feed.close()
-    assert not any(t.name == "nurbscnc-planner" and t.is_alive()
-                   for t in threading.enumerate())  # fmt: skip
+    assert not any(t.name == "nurbscnc-planner" and t.is_alive() for t in threading.enumerate())
     count = len(made)
     time.sleep(0.1)
     assert len(made) == count < 1000

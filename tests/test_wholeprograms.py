@@ -42,8 +42,13 @@ def plan_program(prog, machine=MACHINE, lookahead: LookaheadOptions | None = Non
     """The program through the pipeline, its plan's fields and its reference samples."""
     run = run_program(prog, machine, RunOptions(lookahead=lookahead or LookaheadOptions()))
     p = run.plan
-    return SimpleNamespace(samples=run.samples, pieces=p.pieces, profile=p.profile,
-                           caps_mm_s=p.caps_mm_s, cycle_time_s=run.cycle_time_s)
+    return SimpleNamespace(
+        samples=run.samples,
+        pieces=p.pieces,
+        profile=p.profile,
+        caps_mm_s=p.caps_mm_s,
+        cycle_time_s=run.cycle_time_s,
+    )
 
 
 def corpus_dir() -> Path:
@@ -124,8 +129,9 @@ def distance_to_path(points: np.ndarray, path, reach: float = 0.01) -> np.ndarra
         p = points[lo : lo + 4096]
         # Only lines whose box comes within `reach` of the block's box; farther ones are
         # farther than `reach` from every point (the distances checked are far below it).
-        near = np.flatnonzero(np.all((hi_l >= p.min(axis=0) - reach)
-                                     & (lo_l <= p.max(axis=0) + reach), axis=1))  # fmt: skip
+        near = np.flatnonzero(
+            np.all((hi_l >= p.min(axis=0) - reach) & (lo_l <= p.max(axis=0) + reach), axis=1)
+        )
         if near.size:
             best[lo : lo + 4096] = _segment_distance(p, starts[near], ends[near]).min(axis=1)
     if curves:
@@ -135,8 +141,9 @@ def distance_to_path(points: np.ndarray, path, reach: float = 0.01) -> np.ndarra
         inside[np.cumsum([len(c) for c in curves]) - 1] = False
         # Vertices beyond `reach` + the longest chord cannot bound a segment within reach.
         chord = max(float(np.linalg.norm(np.diff(c, axis=0), axis=1).max()) for c in curves)
-        _, near = cKDTree(verts).query(points, k=min(8, len(verts)),
-                                       distance_upper_bound=reach + chord)  # fmt: skip
+        _, near = cKDTree(verts).query(
+            points, k=min(8, len(verts)), distance_upper_bound=reach + chord
+        )
         near = near.reshape(points.shape[0], -1)
         for col in range(near.shape[1]):
             found = near[:, col] < len(verts)
@@ -144,8 +151,9 @@ def distance_to_path(points: np.ndarray, path, reach: float = 0.01) -> np.ndarra
                 j = np.clip(np.where(found, near[:, col], 0) + off, 0, len(verts) - 2)
                 a, ab = verts[j], verts[j + 1] - verts[j]
                 ab2 = np.einsum("ij,ij->i", ab, ab)
-                t = np.clip(np.einsum("ij,ij->i", points - a, ab) / np.where(ab2 > 0, ab2, 1),
-                            0.0, 1.0)  # fmt: skip
+                t = np.clip(
+                    np.einsum("ij,ij->i", points - a, ab) / np.where(ab2 > 0, ab2, 1), 0.0, 1.0
+                )
                 dist = np.linalg.norm(points - a - t[:, None] * ab, axis=1)
                 best = np.where(found & inside[j], np.minimum(best, dist), best)
     return best
@@ -217,8 +225,9 @@ def test_corpus_program_runs_end_to_end(rel):
     cut = np.append(~rapid[smp.piece], np.full(actual.shape[0] - smp.t_s.size, not rapid[-1]))
     if cut.any():  # (a program of rapids only cuts nothing)
         planned = dense_path_mm(plan.pieces, plan.profile)
-        d = distance_to_path(actual[cut], (np.zeros((0, 3)), np.zeros((0, 3)), [planned]),
-                             reach=0.1)  # fmt: skip
+        d = distance_to_path(
+            actual[cut], (np.zeros((0, 3)), np.zeros((0, 3)), [planned]), reach=0.1
+        )
         assert d.max() <= LIM.contour_tolerance_mm + 1e-5
 
 
@@ -263,8 +272,10 @@ def test_g64_p_blends_corners_faster_within_p(shape):
     # a P0.2 blend must slow to its servo limit: whether a blend beats a stop there is the
     # blend decision's to make (corners/blend_pays), not this test's.
     off = LookaheadOptions(dynamics="off")
-    assert (plan_program(prog_b, lookahead=off).cycle_time_s
-            < plan_program(prog_e, lookahead=off).cycle_time_s)
+    assert (
+        plan_program(prog_b, lookahead=off).cycle_time_s
+        < plan_program(prog_e, lookahead=off).cycle_time_s
+    )
     for prog, plan in ((prog_e, exact), (prog_b, blended)):
         assert_limits(plan)
         np.testing.assert_allclose(plan.samples.points_mm[-1], end_point(prog), atol=1e-12)
@@ -291,8 +302,7 @@ def test_g64_p_corner_deviation_matches_the_blend_closed_form():
     from nurbscnc.geometry.blend import SEARCH_WINDOW, line_deviation_per_trim
 
     tol = 0.2
-    prog = interpret_text(_polygon_program(np.array([[0, 0], [30, 0], [30, 30.0]]),
-                                           f"G64 P{tol}"))  # fmt: skip
+    prog = interpret_text(_polygon_program(np.array([[0, 0], [30, 0], [30, 30.0]]), f"G64 P{tol}"))
     plan = plan_program(prog, MACHINE, LookaheadOptions(dynamics="off"))
     smp = plan.samples.points_mm
     d = distance_to_path(smp, programmed_path(prog), reach=1.0)

@@ -76,8 +76,7 @@ def test_servo_stream_equals_the_whole_simulation_and_lsim(machine, sizes):
     np.testing.assert_allclose(windowed, whole, rtol=0.0, atol=1e-12)
     settle_s = tail.shape[0] * servo.period_s
     indep = lsim_actual_mm(ref, replace_z(machine), settle_s=settle_s)
-    np.testing.assert_allclose(windowed[:, :2], indep[: windowed.shape[0], :2], rtol=0.0,
-                               atol=1e-9)  # fmt: skip
+    np.testing.assert_allclose(windowed[:, :2], indep[: windowed.shape[0], :2], rtol=0.0, atol=1e-9)
 
 
 def test_a_copied_stream_goes_on_alone():
@@ -126,8 +125,9 @@ def _assert_same_plan(a, b, stats: bool = True):
     for f in ("a_up_mm_s2", "j_up_mm_s3", "a_down_mm_s2", "j_down_mm_s3"):
         np.testing.assert_array_equal(getattr(plan_a.limits, f), getattr(plan_b.limits, f))
     np.testing.assert_array_equal(plan_a.settle_s, plan_b.settle_s)
-    np.testing.assert_array_equal(plan_a.profile.junction_speeds_mm_s,
-                                  plan_b.profile.junction_speeds_mm_s)  # fmt: skip
+    np.testing.assert_array_equal(
+        plan_a.profile.junction_speeds_mm_s, plan_b.profile.junction_speeds_mm_s
+    )
     sa, sb = check_a.contour_stats(), check_b.contour_stats()
     assert sa.keys() == sb.keys()
     for key in sa:
@@ -163,21 +163,25 @@ def _windows_agree(text: str, machine, window: int = TINY) -> tuple:
     return tiny
 
 
-@pytest.mark.parametrize("name", ["square_g61_f3000.nc", "pentagram_g61.nc",
-                                  "modes_cam_breaks_g64p.ngc"])  # fmt: skip
+@pytest.mark.parametrize(
+    "name", ["square_g61_f3000.nc", "pentagram_g61.nc", "modes_cam_breaks_g64p.ngc"]
+)
 def test_plan_does_not_depend_on_the_window_ringing_servo(name):
     """The ringing servo makes every rule of the shaping work (stops, feed, re-plans and
     the improvement bisection)."""
-    plan, _ = _windows_agree((PLANNER / name).read_text(), SLOW,
-                             window=TINY if "cam" not in name else 1009)  # fmt: skip
+    plan, _ = _windows_agree(
+        (PLANNER / name).read_text(), SLOW, window=TINY if "cam" not in name else 1009
+    )
     assert plan.iterations > 0 and plan.shaped_by_contour.any()
 
 
 def test_plan_does_not_depend_on_the_window_settle_after_rapids():
     """Rapids followed by cuts on the ringing servo: the settles the check sets (they need
     the count of samples before each restart, summed over windows)."""
-    text = ("G21 G90 G17\nG0 X30 Y0\nG1 X30 Y10 F300\nG0 X0 Y0\nG1 X5 Y5 F1200\nG0 X40 Y40\n"
-            "G1 X40 Y0 F3000\nM2\n")  # fmt: skip
+    text = (
+        "G21 G90 G17\nG0 X30 Y0\nG1 X30 Y10 F300\nG0 X0 Y0\nG1 X5 Y5 F1200\nG0 X40 Y40\n"
+        "G1 X40 Y0 F3000\nM2\n"
+    )
     plan, _ = _windows_agree(text, SLOW)
     assert (plan.settle_s > 0.0).sum() >= 2
 
@@ -200,9 +204,14 @@ def _corpus() -> Path:
     return Path(os.environ.get("NURBSCNC_CORPUS") or ROOT / ".." / "shared" / "corpus").resolve()
 
 
-@pytest.mark.parametrize("name", ["linuxcnc/nurbs/G6_Curva_Delfino_v1.ngc",
-                                  "linuxcnc/nurbs/G5_butterfly-xy.ngc",
-                                  "linuxcnc/general/skeleton.ngc"])  # fmt: skip
+@pytest.mark.parametrize(
+    "name",
+    [
+        "linuxcnc/nurbs/G6_Curva_Delfino_v1.ngc",
+        "linuxcnc/nurbs/G5_butterfly-xy.ngc",
+        "linuxcnc/general/skeleton.ngc",
+    ],
+)
 def test_plan_does_not_depend_on_the_window_corpus(name):
     """Corpus programs (NURBS, arcs, rapids) on the ringing servo."""
     path = _corpus() / name
@@ -277,10 +286,14 @@ def test_which_samplers_are_checked_in_windows():
         assert precompensated_sampler(inner, SLOW).windowed == inner.windowed
         assert precompensated_sampler(inner, SLOW).interpolator == inner.interpolator
     text = (PLANNER / "square_g61_f3000.nc").read_text()
-    _assert_same_plan(_plan(text, SLOW, reference=whole_only, keep_reference=False),
-                      _plan(text, SLOW, keep_reference=False, window=TINY))  # fmt: skip
-    _assert_same_plan(_plan(text, SLOW, reference=refused, keep_reference=False),
-                      _plan(text, SLOW, keep_reference=False, window=TINY))  # fmt: skip
+    _assert_same_plan(
+        _plan(text, SLOW, reference=whole_only, keep_reference=False),
+        _plan(text, SLOW, keep_reference=False, window=TINY),
+    )
+    _assert_same_plan(
+        _plan(text, SLOW, reference=refused, keep_reference=False),
+        _plan(text, SLOW, keep_reference=False, window=TINY),
+    )
 
 
 def test_the_repeated_cut_comparison_is_allclose():

@@ -82,10 +82,20 @@ FILES = [
         ]
     ],
     # A file that only defines a probing subroutine (G38) and never calls it: no moves.
-    (LINUXCNC, "nc_files/probe-hole.ngc", "linuxcnc/nc_files/probe-hole.ngc", "program",
-     "G38 probing subroutine, defined and not called: no moves"),
-    (LINUXCNC, "nc_files/lathecomp.ngc", "linuxcnc/nc_files/lathecomp.ngc", "program",
-     "G18 (XZ) cutter compensation, lathe profile"),
+    (
+        LINUXCNC,
+        "nc_files/probe-hole.ngc",
+        "linuxcnc/nc_files/probe-hole.ngc",
+        "program",
+        "G38 probing subroutine, defined and not called: no moves",
+    ),
+    (
+        LINUXCNC,
+        "nc_files/lathecomp.ngc",
+        "linuxcnc/nc_files/lathecomp.ngc",
+        "program",
+        "G18 (XZ) cutter compensation, lathe profile",
+    ),
     # tests/interp: each test.ngc under a name made from its directory.
     *[
         (LINUXCNC, f"tests/interp/{src}", f"linuxcnc/interp/{dst}.ngc", "program", "interp test")
@@ -356,11 +366,14 @@ FILES = [
             ("example_board_new_default/expected/back.ngc", "pcb2gcode isolation, defaults"),
         ]
     ],
-    (PCB2GCODE, PCB + "example_board_al_linuxcnc/expected/front.ngc",
-     "pcb2gcode/example_board_al_linuxcnc__front.ngc", "refused",
-     "pcb2gcode auto-levelling: G38 probing subroutines"),
-    (CNCJS, "examples/gcode/arc-xy-plane.gcode", "cncjs/arc-xy-plane.gcode", "program",
-     "G17 arc"),
+    (
+        PCB2GCODE,
+        PCB + "example_board_al_linuxcnc/expected/front.ngc",
+        "pcb2gcode/example_board_al_linuxcnc__front.ngc",
+        "refused",
+        "pcb2gcode auto-levelling: G38 probing subroutines",
+    ),
+    (CNCJS, "examples/gcode/arc-xy-plane.gcode", "cncjs/arc-xy-plane.gcode", "program", "G17 arc"),
 ]
 
 
@@ -402,7 +415,7 @@ def main() -> None:
         "(LinuxCNC's moves are recorded in `tests/golden/linuxcnc/` and compared with nurbscnc's),",
         "**subroutine**",
         '(called by a program beside it), **refused** (outside 3-axis milling; kept as "stays',
-        'refused" examples). The programs are redistributed under their repositories\'',
+        "refused\" examples). The programs are redistributed under their repositories'",
         "licences (GPL-2.0 / GPL-2.0-or-later; MIT for cncjs; GPL-2.0 for bCNC; GPL-3.0 for",
         "pcb2gcode), unchanged, with their origin.",
         "",

@@ -27,8 +27,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 #: The LinuxCNC-limits profile; NURBSCNC_LIMITS_TOML names another copy of it (the summary
 #: prints the profile's path: two checkouts compared must read the same path).
-LINUXCNC_LIMITS = os.environ.get("NURBSCNC_LIMITS_TOML",
-                                 str(ROOT / "bench" / "programs" / "linuxcnc_limits.toml"))
+LINUXCNC_LIMITS = os.environ.get(
+    "NURBSCNC_LIMITS_TOML", str(ROOT / "bench" / "programs" / "linuxcnc_limits.toml")
+)
 
 #: (name, options, which programs): each program runs in every mode whose filter accepts it.
 MODES = [
@@ -60,10 +61,20 @@ def fingerprint(program: Path, options: list[str], timeout_s: float) -> dict:
         points = Path(tmp) / "points.csv"
         t0 = time.perf_counter()
         try:
-            plan = subprocess.run([*base, "plan", str(program), "--json", *options],
-                                  capture_output=True, timeout=timeout_s, env=env, cwd=tmp)
-            run = subprocess.run([*base, "run", str(program), "-o", str(points), *options],
-                                 capture_output=True, timeout=timeout_s, env=env, cwd=tmp)
+            plan = subprocess.run(
+                [*base, "plan", str(program), "--json", *options],
+                capture_output=True,
+                timeout=timeout_s,
+                env=env,
+                cwd=tmp,
+            )
+            run = subprocess.run(
+                [*base, "run", str(program), "-o", str(points), *options],
+                capture_output=True,
+                timeout=timeout_s,
+                env=env,
+                cwd=tmp,
+            )
         except subprocess.TimeoutExpired:
             return {"timeout": True}
         summary = plan.stdout
@@ -76,9 +87,11 @@ def fingerprint(program: Path, options: list[str], timeout_s: float) -> dict:
         return {
             "plan_exit": plan.returncode,
             "plan": digest(summary),
-            "plan_stderr": digest(plan.stderr.replace(str(ROOT).encode(), b"ROOT")
-                                  .replace(str(Path(LINUXCNC_LIMITS).parents[2]).encode(),
-                                           b"ROOT")),
+            "plan_stderr": digest(
+                plan.stderr.replace(str(ROOT).encode(), b"ROOT").replace(
+                    str(Path(LINUXCNC_LIMITS).parents[2]).encode(), b"ROOT"
+                )
+            ),
             "run_exit": run.returncode,
             "points": digest(points.read_bytes()) if points.exists() else None,
             "seconds": round(time.perf_counter() - t0, 2),
@@ -106,8 +119,11 @@ def main() -> int:
         return 0
     before = json.loads(Path(args.against).read_text())
     keys = ("plan_exit", "plan", "plan_stderr", "run_exit", "points")
-    differ = [k for k in sorted(before) if k in results
-              and any(before[k].get(f) != results[k].get(f) for f in keys)]
+    differ = [
+        k
+        for k in sorted(before)
+        if k in results and any(before[k].get(f) != results[k].get(f) for f in keys)
+    ]
     missing = sorted(set(before) ^ set(results))
     for k in differ:
         print(f"differs: {k}")

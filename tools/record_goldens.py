@@ -138,6 +138,7 @@ class Recorder:
         (machine = R(rotation)·(program + g92) + g5x + tool). Without it the next arc's
         centre took its axial coordinate (the Z of a G17 arc) from the old frame: after a
         G92 then a G18 arc its Y was off by the G92 offset (found by a differential run)."""
+
         def turn(p, deg):
             c, s = math.cos(math.radians(deg)), math.sin(math.radians(deg))
             return [p[0] * c - p[1] * s, p[0] * s + p[1] * c, *p[2:]]
@@ -477,9 +478,14 @@ def _rs274_error(path: str, tools: dict, tmp: str) -> str:
     var = os.path.join(tmp, "rs274.var")
     res = subprocess.run(
         [RS274, "-g", "-b", "-t", tbl, "-v", var, os.path.abspath(path)],
-        cwd=os.path.dirname(os.path.abspath(path)), capture_output=True, text=True,
-        errors="replace", timeout=120, stdin=subprocess.DEVNULL, env=env,
-    )  # fmt: skip
+        cwd=os.path.dirname(os.path.abspath(path)),
+        capture_output=True,
+        text=True,
+        errors="replace",
+        timeout=120,
+        stdin=subprocess.DEVNULL,
+        env=env,
+    )
     err_lines = [t for t in res.stderr.splitlines() if t.strip()]
     return err_lines[-2].strip() if len(err_lines) >= 2 else ""
 

@@ -6,8 +6,15 @@ from __future__ import annotations
 from nurbscnc.app.load import load_program
 
 
-def check_program(program: str, mach, block_delete: bool = True, tool_table=None,
-                  subroutine_path=(), per_segment: bool = False, progress=None):  # fmt: skip
+def check_program(
+    program: str,
+    mach,
+    block_delete: bool = True,
+    tool_table=None,
+    subroutine_path=(),
+    per_segment: bool = False,
+    progress=None,
+):
     """``(program, summary)`` of the program file ``program`` checked for the machine
     ``mach`` (:func:`~nurbscnc.plan.limits.check_before_work`; PlanningError when it fails);
     the summary is :func:`~nurbscnc.plan.report.program_summary`'s, with every segment when

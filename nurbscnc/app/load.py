@@ -63,9 +63,11 @@ def load_program(
         return None
 
     options = InterpretOptions(
-        block_delete=block_delete, tools=tools, name=display_name(path),
+        block_delete=block_delete,
+        tools=tools,
+        name=display_name(path),
         load_subroutine=load_subroutine,
-    )  # fmt: skip
+    )
     return interpret_text(text, options)
 
 

@@ -27,8 +27,9 @@ def write_output(path: str, fmt: str, run, mach, name: str, then=None):
         from nurbscnc.output.halstreamer import write_halstreamer_windows
 
         def write(windows):
-            write_halstreamer_windows(path, (w.points_mm for w in windows), count,
-                                      mach.servo.period_s, name)  # fmt: skip
+            write_halstreamer_windows(
+                path, (w.points_mm for w in windows), count, mach.servo.period_s, name
+            )
     else:
         from nurbscnc.output.files import write_point_windows
 
@@ -36,8 +37,9 @@ def write_output(path: str, fmt: str, run, mach, name: str, then=None):
             write_point_windows(path, windows, count, npz=fmt == "npz" if fmt else None)
 
     stats = SampleStats(run.plan)
-    return write_while_making(write, stats.tap(run.chunks()),
-                              None if then is None else lambda: then(stats))  # fmt: skip
+    return write_while_making(
+        write, stats.tap(run.chunks()), None if then is None else lambda: then(stats)
+    )
 
 
 def write_profile_dump(path: str, run, mach) -> None:
@@ -65,8 +67,10 @@ def batch_targets(programs, output_dir: str, fmt: str) -> list[str]:
         ext = "hs" if fmt == "halstreamer" else fmt
         target = os.path.join(output_dir, f"{stem}.{ext}")
         if target in seen:
-            raise ConfigError(f"{seen[target]} and {program} would both write {target}; "
-                              "rename one or run them separately")  # fmt: skip
+            raise ConfigError(
+                f"{seen[target]} and {program} would both write {target}; "
+                "rename one or run them separately"
+            )
         seen[target] = program
         targets.append(target)
     for program in programs:  # a program that is some program's output (run --output-dir .)
@@ -85,5 +89,7 @@ def refuse_overwriting(program: str, output: str) -> None:
     except OSError:  # either does not exist (yet): reading the program says why
         return
     if same:
-        raise ConfigError(f"the output {output} is the program {program} itself: its points "
-                          "would replace it; give another output file")
+        raise ConfigError(
+            f"the output {output} is the program {program} itself: its points "
+            "would replace it; give another output file"
+        )

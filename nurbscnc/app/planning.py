@@ -8,11 +8,27 @@ from nurbscnc.app.runtime import frozen_objects
 from nurbscnc.app.settings import run_options
 
 
-def make_plan(program: str, machine=None, overrides=(), dynamics="local", lookahead=None,
-              corner_feed="piece", interpolator="exact", blend_tolerance=None,
-              algorithm="ph-lookahead", no_block_delete=False, tool_table=None,
-              subroutine_path=(), text=None, precompensate=False, reference_tolerance=3.0,
-              progress=None, keep_reference=False, smooth=False, announce=None):  # fmt: skip
+def make_plan(
+    program: str,
+    machine=None,
+    overrides=(),
+    dynamics="local",
+    lookahead=None,
+    corner_feed="piece",
+    interpolator="exact",
+    blend_tolerance=None,
+    algorithm="ph-lookahead",
+    no_block_delete=False,
+    tool_table=None,
+    subroutine_path=(),
+    text=None,
+    precompensate=False,
+    reference_tolerance=3.0,
+    progress=None,
+    keep_reference=False,
+    smooth=False,
+    announce=None,
+):
     """Load, interpret, plan and interpolate one program; validate soft limits. Returns
     (program, machine, :class:`~nurbscnc.pipeline.Run`).
 
@@ -27,8 +43,17 @@ def make_plan(program: str, machine=None, overrides=(), dynamics="local", lookah
 
     from nurbscnc.pipeline import run_program
 
-    options = run_options(algorithm, corner_feed, dynamics, blend_tolerance, interpolator,
-                          lookahead, precompensate, reference_tolerance, smooth)  # fmt: skip
+    options = run_options(
+        algorithm,
+        corner_feed,
+        dynamics,
+        blend_tolerance,
+        interpolator,
+        lookahead,
+        precompensate,
+        reference_tolerance,
+        smooth,
+    )
     options = replace(options, keep_reference=keep_reference)
     if progress:
         progress("loading the machine profile")

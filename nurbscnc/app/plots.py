@@ -23,23 +23,38 @@ def write_plan_plots(run, plot_dir: str, prog, expl=None, mach=None) -> list[str
     rapid = None
     if pl is not None:
         rapid = np.asarray(pl.pieces.rapid)[smp.piece]
-    written = [plots.plot_feed_profiles({"feed": (smp.t_s, smp.v_mm_s)},
-                                        os.path.join(plot_dir, "feed.png"),
-                                        title=f"{name}: feed over time")]  # fmt: skip
+    written = [
+        plots.plot_feed_profiles(
+            {"feed": (smp.t_s, smp.v_mm_s)},
+            os.path.join(plot_dir, "feed.png"),
+            title=f"{name}: feed over time",
+        )
+    ]
     corners = corner_polylines(pl.pieces) if pl is not None else []
-    written.append(plots.plot_path(smp.points_mm, corners, os.path.join(plot_dir, "path.png"),
-                                   title=f"{name}: tool path", rapid=rapid,
-                                   feed_mm_s=smp.v_mm_s))  # fmt: skip
+    written.append(
+        plots.plot_path(
+            smp.points_mm,
+            corners,
+            os.path.join(plot_dir, "path.png"),
+            title=f"{name}: tool path",
+            rapid=rapid,
+            feed_mm_s=smp.v_mm_s,
+        )
+    )
     if pl is not None and expl is not None:
         written += _explained_plots(smp, pl, expl, plot_dir, name)
     if run.check is not None:
         contour = run.check.response.contour_mm
         t = np.arange(contour.size) * (smp.t_s[1] - smp.t_s[0])
         eps = None if mach is None else mach.limits.contour_tolerance_mm * 1000.0
-        written.append(plots.plot_contour_error(
-            {"predicted (true distance)": (t, contour * 1000.0)},
-            os.path.join(plot_dir, "contour_error.png"),
-            title=f"{name}: predicted contour error", eps_max_um=eps))  # fmt: skip
+        written.append(
+            plots.plot_contour_error(
+                {"predicted (true distance)": (t, contour * 1000.0)},
+                os.path.join(plot_dir, "contour_error.png"),
+                title=f"{name}: predicted contour error",
+                eps_max_um=eps,
+            )
+        )
     return written
 
 
@@ -54,14 +69,23 @@ def _explained_plots(smp, pl, expl, plot_dir: str, name: str) -> list[str]:
     starts = np.asarray(pl.profile.piece_start_mm)
     return [
         plots.plot_feed_along(
-            smp.s_mm, smp.v_mm_s, starts, starts + np.asarray(pl.pieces.length_mm),
-            expl.piece_feed_mm_s, os.path.join(plot_dir, "feed_along.png"),
-            cap_mm_s=expl.piece_cap_mm_s, title=f"{name}: feed along the program"),
+            smp.s_mm,
+            smp.v_mm_s,
+            starts,
+            starts + np.asarray(pl.pieces.length_mm),
+            expl.piece_feed_mm_s,
+            os.path.join(plot_dir, "feed_along.png"),
+            cap_mm_s=expl.piece_cap_mm_s,
+            title=f"{name}: feed along the program",
+        ),
         plots.plot_path_limits(
-            smp.points_mm, expl.piece_limit[smp.piece], [m.text for m in Limit],
+            smp.points_mm,
+            expl.piece_limit[smp.piece],
+            [m.text for m in Limit],
             os.path.join(plot_dir, "limits.png"),
-            title=f"{name}: what limits the feed"),
-    ]  # fmt: skip
+            title=f"{name}: what limits the feed",
+        ),
+    ]
 
 
 def write_simulate_plots(sim, contour, plot_dir: str, name: str, eps_max_um: float) -> None:
@@ -72,19 +96,25 @@ def write_simulate_plots(sim, contour, plot_dir: str, name: str, eps_max_um: flo
     from nurbscnc.output import plots
 
     os.makedirs(plot_dir, exist_ok=True)
-    plots.plot_contour_error({"contour (true)": (sim.t_s, contour.true_mm * 1000.0),
-                              "contour (eq. 29)": (sim.t_s, np.abs(contour.eq29_mm) * 1000)},
-                             os.path.join(plot_dir, "contour_error.png"),
-                             title=f"{name}: simulated contour error",
-                             eps_max_um=eps_max_um)
-    plots.plot_axis_errors({"servo": (sim.t_s, sim.axis_error_mm[:, 0] * 1000.0,
-                                      sim.axis_error_mm[:, 1] * 1000.0)},
-                           os.path.join(plot_dir, "axis_errors.png"),
-                           title=f"{name}: simulated axis errors")  # fmt: skip
+    plots.plot_contour_error(
+        {
+            "contour (true)": (sim.t_s, contour.true_mm * 1000.0),
+            "contour (eq. 29)": (sim.t_s, np.abs(contour.eq29_mm) * 1000),
+        },
+        os.path.join(plot_dir, "contour_error.png"),
+        title=f"{name}: simulated contour error",
+        eps_max_um=eps_max_um,
+    )
+    plots.plot_axis_errors(
+        {"servo": (sim.t_s, sim.axis_error_mm[:, 0] * 1000.0, sim.axis_error_mm[:, 1] * 1000.0)},
+        os.path.join(plot_dir, "axis_errors.png"),
+        title=f"{name}: simulated axis errors",
+    )
 
 
-def write_compare_plots(runs, plot_dir: str, name: str | None = None,
-                        eps_max_um: float | None = None) -> list[str]:  # fmt: skip
+def write_compare_plots(
+    runs, plot_dir: str, name: str | None = None, eps_max_um: float | None = None
+) -> list[str]:
     """Figures 1, 2/4/6 and 7 of the paper for a comparison (PNG files in ``plot_dir``),
     titled with the program's ``name`` when given; ``eps_max_um`` [µm] drawn on the contour
     error figure."""
@@ -100,21 +130,37 @@ def write_compare_plots(runs, plot_dir: str, name: str | None = None,
         ours = next((r for r in group if r.plan is not None), None)
         if ours is not None:
             corners = corner_polylines(ours.plan.pieces)
-            written.append(plots.plot_path(ours.path_mm, corners,
-                                           os.path.join(plot_dir, f"path_{tag}.png"),
-                                           title=f"{head}tool path and corner regions, "
-                                                 f"{angle:g}°"))  # fmt: skip
-        written.append(plots.plot_feed_profiles(
-            {r.algorithm: (r.samples.t_s, r.samples.v_mm_s) for r in group},
-            os.path.join(plot_dir, f"feed_{tag}.png"),
-            title=f"{head}feed profiles, {angle:g}°"))  # fmt: skip
-        written.append(plots.plot_contour_error(
-            {r.algorithm: (r.sim_t_s, r.contour_true_um) for r in group},
-            os.path.join(plot_dir, f"contour_{tag}.png"),
-            title=f"{head}contour error (true distance), {angle:g}°",
-            eps_max_um=eps_max_um))  # fmt: skip
-        written.append(plots.plot_axis_errors(
-            {r.algorithm: (r.sim_t_s, r.axis_error_um[:, 0], r.axis_error_um[:, 1])
-             for r in group}, os.path.join(plot_dir, f"axis_{tag}.png"),
-            title=f"{head}axis tracking errors, {angle:g}°"))  # fmt: skip
+            written.append(
+                plots.plot_path(
+                    ours.path_mm,
+                    corners,
+                    os.path.join(plot_dir, f"path_{tag}.png"),
+                    title=f"{head}tool path and corner regions, {angle:g}°",
+                )
+            )
+        written.append(
+            plots.plot_feed_profiles(
+                {r.algorithm: (r.samples.t_s, r.samples.v_mm_s) for r in group},
+                os.path.join(plot_dir, f"feed_{tag}.png"),
+                title=f"{head}feed profiles, {angle:g}°",
+            )
+        )
+        written.append(
+            plots.plot_contour_error(
+                {r.algorithm: (r.sim_t_s, r.contour_true_um) for r in group},
+                os.path.join(plot_dir, f"contour_{tag}.png"),
+                title=f"{head}contour error (true distance), {angle:g}°",
+                eps_max_um=eps_max_um,
+            )
+        )
+        written.append(
+            plots.plot_axis_errors(
+                {
+                    r.algorithm: (r.sim_t_s, r.axis_error_um[:, 0], r.axis_error_um[:, 1])
+                    for r in group
+                },
+                os.path.join(plot_dir, f"axis_{tag}.png"),
+                title=f"{head}axis tracking errors, {angle:g}°",
+            )
+        )
     return written

@@ -10,8 +10,9 @@ def is_points_source(source: str, text: str | None) -> bool:
     program."""
     from nurbscnc.output.files import point_header
 
-    return source.lower().endswith((".csv", ".npz")) or (text is not None
-                                                         and bool(point_header(text)))
+    return source.lower().endswith((".csv", ".npz")) or (
+        text is not None and bool(point_header(text))
+    )
 
 
 def points_reference(source: str, text: str | None):

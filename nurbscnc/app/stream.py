@@ -73,8 +73,14 @@ def needs_whole_plan(options) -> bool:
     return options.algorithm != Algorithm.PH_LOOKAHEAD or options.precompensate
 
 
-def stream_job(prog, mach, options, from_line: int | None = None,
-               optional_stop: bool = False, override: float = 1.0):  # fmt: skip
+def stream_job(
+    prog,
+    mach,
+    options,
+    from_line: int | None = None,
+    optional_stop: bool = False,
+    override: float = 1.0,
+):
     """What streams the interpreted program ``prog`` (from ``from_line`` on:
     :func:`~nurbscnc.output.stream.job.start_at_line`): ``(job, None)``, a
     :class:`~nurbscnc.output.stream.job.Job` planned cut window by cut window while the
@@ -102,8 +108,15 @@ def stream_job(prog, mach, options, from_line: int | None = None,
     # Planned cut window by cut window on a thread while the card runs the first ones; the
     # first window is waited for here, so its errors come before the port.
     feed = WindowFeed(window_plans(prog, mach, options, each=pulse_limit))
-    job = Job(None, prog, mach, optional_stop=optional_stop, override=override,
-              lookahead_pieces=options.lookahead.lookahead_pieces, feed=feed)  # fmt: skip
+    job = Job(
+        None,
+        prog,
+        mach,
+        optional_stop=optional_stop,
+        override=override,
+        lookahead_pieces=options.lookahead.lookahead_pieces,
+        feed=feed,
+    )
     return job, None
 
 
@@ -114,10 +127,13 @@ def stream_report(program: str, job, reports: list) -> dict:
     notes; one section without a job). ``program`` is named as every command names it
     (standard input is ``<stdin>``)."""
     extra = job.report() if job is not None else {"sections": 1}
-    body = {**reports[-1].to_json(),
-            "executed_periods": sum(r.executed_periods for r in reports),
-            "frames_sent": sum(r.frames_sent for r in reports),
-            "bytes_sent": sum(r.bytes_sent for r in reports),
-            "retransmits": sum(r.retransmits for r in reports),
-            "duration_s": sum(r.duration_s for r in reports), **extra}  # fmt: skip
+    body = {
+        **reports[-1].to_json(),
+        "executed_periods": sum(r.executed_periods for r in reports),
+        "frames_sent": sum(r.frames_sent for r in reports),
+        "bytes_sent": sum(r.bytes_sent for r in reports),
+        "retransmits": sum(r.retransmits for r in reports),
+        "duration_s": sum(r.duration_s for r in reports),
+        **extra,
+    }
     return {"ok": True, "program": "<stdin>" if program == "-" else program, **body}

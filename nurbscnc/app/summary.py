@@ -17,8 +17,11 @@ def machine_json(mach) -> dict:
 def error_json(exc) -> dict:
     """The JSON of a :class:`~nurbscnc.errors.NurbsCncError` (its position, if any)."""
     pos = exc.pos
-    entry = {"line": pos.line if pos else None, "column": pos.column if pos else None,
-             "message": exc.message}  # fmt: skip
+    entry = {
+        "line": pos.line if pos else None,
+        "column": pos.column if pos else None,
+        "message": exc.message,
+    }
     return {"ok": False, "errors": [entry]}
 
 
@@ -40,8 +43,17 @@ def summary_of(prog, mach, run, stats=None, lower_bound: bool = True) -> dict:
         samples = SampleStats(run.plan)
         for window in run.chunks():
             samples.add(window)
-    summary = plan_summary(prog, mach, samples, run.plan, run.check, run.algorithm,
-                           run.cycle_time_s, lower_bound, run.columns)  # fmt: skip
+    summary = plan_summary(
+        prog,
+        mach,
+        samples,
+        run.plan,
+        run.check,
+        run.algorithm,
+        run.cycle_time_s,
+        lower_bound,
+        run.columns,
+    )
     if getattr(run, "precompensation", None) is not None:  # --precompensate
         summary["precompensation"] = run.precompensation.as_json()
     return {**summary, **machine_json(mach)}
@@ -74,8 +86,14 @@ def json_in_pieces(summary: dict) -> str:
         if not (isinstance(value, dict) and len(value) > JSON_PIECE):
             return json.dumps(value)
         items = list(value.items())
-        return "{" + ", ".join(json.dumps(dict(items[i : i + JSON_PIECE]))[1:-1]
-                               for i in range(0, len(items), JSON_PIECE)) + "}"  # fmt: skip
+        return (
+            "{"
+            + ", ".join(
+                json.dumps(dict(items[i : i + JSON_PIECE]))[1:-1]
+                for i in range(0, len(items), JSON_PIECE)
+            )
+            + "}"
+        )
 
     if not all(isinstance(k, str) for k in summary):  # json.dumps's own key conversions
         return json.dumps(summary)
@@ -97,8 +115,10 @@ def precompensation_text(summary: dict) -> str | None:
     pre = summary.get("precompensation")
     if pre is None:
         return None
-    return (f"  pre-compensated reference (ZPETC): {pre['reference_deviation_max_um']:.2f} µm "
-            f"from the path at most; contour error with a ±10 % model error "
-            f"≤ {pre['sensitivity_contour_max_um']:.2f} µm; motion delayed "
-            f"{pre['lead_s'] * 1000:g} ms for the inverse's look-ahead, reference settles "
-            f"{pre['tail_s'] * 1000:g} ms after the stop")
+    return (
+        f"  pre-compensated reference (ZPETC): {pre['reference_deviation_max_um']:.2f} µm "
+        f"from the path at most; contour error with a ±10 % model error "
+        f"≤ {pre['sensitivity_contour_max_um']:.2f} µm; motion delayed "
+        f"{pre['lead_s'] * 1000:g} ms for the inverse's look-ahead, reference settles "
+        f"{pre['tail_s'] * 1000:g} ms after the stop"
+    )

@@ -23,17 +23,35 @@ def _batch_one(args):
 
     try:
         prog, mach, run = make_plan(program, **settings)
-        samples = write_output(target, "halstreamer" if target.endswith(".hs") else "", run,
-                               mach, prog.name, lambda stats: stats.count)  # fmt: skip
-        return {"program": program, "ok": True, "output": target,
-                "cycle_time_s": run.cycle_time_s, "samples": samples}
+        samples = write_output(
+            target,
+            "halstreamer" if target.endswith(".hs") else "",
+            run,
+            mach,
+            prog.name,
+            lambda stats: stats.count,
+        )
+        return {
+            "program": program,
+            "ok": True,
+            "output": target,
+            "cycle_time_s": run.cycle_time_s,
+            "samples": samples,
+        }
     except NurbsCncError as exc:
-        return {"program": program, "ok": False,
-                "error": format_error(exc, display_name(program)),
-                "exit_code": exc.exit_code}  # fmt: skip
+        return {
+            "program": program,
+            "ok": False,
+            "error": format_error(exc, display_name(program)),
+            "exit_code": exc.exit_code,
+        }
     except Exception as exc:  # a bug: report it as such, keep the batch going
-        return {"program": program, "ok": False, "exit_code": EXIT_INTERNAL,
-                "error": f"{program}: internal error: {type(exc).__name__}: {exc}"}
+        return {
+            "program": program,
+            "ok": False,
+            "exit_code": EXIT_INTERNAL,
+            "error": f"{program}: internal error: {type(exc).__name__}: {exc}",
+        }
 
 
 #: After SIGTERM, SIGHUP or Ctrl-C, a batch's parent is gone within this time [s].
@@ -87,8 +105,9 @@ def run_batch(programs, output_dir, jobs, fmt, quiet, as_json, settings) -> None
     try:
         os.makedirs(output_dir, exist_ok=True)
     except OSError as exc:
-        raise OutputError(f"cannot create the output folder {output_dir}: "
-                          f"{exc.strerror or exc}") from None  # fmt: skip
+        raise OutputError(
+            f"cannot create the output folder {output_dir}: {exc.strerror or exc}"
+        ) from None
     tasks = [(program, target, settings) for program, target in zip(programs, targets)]
     results = _run_tasks(tasks, min(jobs or os.cpu_count() or 1, len(tasks)))
     failed = [r for r in results if not r["ok"]]
@@ -121,14 +140,16 @@ def _print_results(results: list[dict], failed: list[dict], quiet: bool) -> None
     """The batch's table (on stderr when ``quiet``), then the failures' messages."""
     from rich.table import Table
 
-    table = Table(title=f"batch: {len(results)} programs, {len(failed)} failed",
-                  show_edge=False)  # fmt: skip
+    table = Table(title=f"batch: {len(results)} programs, {len(failed)} failed", show_edge=False)
     for col in ("program", "result", "cycle time [s]", "points"):
         table.add_column(col)
     for r in results:
-        table.add_row(r["program"], "ok" if r["ok"] else "FAILED",
-                      f"{r['cycle_time_s']:.4f}" if r["ok"] else "",
-                      str(r["samples"]) if r["ok"] else "")  # fmt: skip
+        table.add_row(
+            r["program"],
+            "ok" if r["ok"] else "FAILED",
+            f"{r['cycle_time_s']:.4f}" if r["ok"] else "",
+            str(r["samples"]) if r["ok"] else "",
+        )
     (err if quiet else out).print(table)
     for r in failed:
         err.print(r["error"], markup=False)

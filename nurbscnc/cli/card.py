@@ -20,11 +20,21 @@ from nurbscnc.errors import NurbsCncError, OutputError
 @click.option("--port", required=True, help="The card's serial device.")
 @click.option("--allow-url", is_flag=True, help="Accept a pyserial URL as --port.")
 @click.option("--baud", type=click.IntRange(min=1), default=115200, show_default=True)
-@click.option("--set", "set_to", default=None, metavar="X,Y,Z",
-              help="Set the card's position [steps] (protocol version 3; not while a stream "
-                   "runs), e.g. 0,0,0 after homing.")
-@click.option("--timeout", "timeout_s", type=click.FloatRange(min=0.0, min_open=True),
-              default=2.0, show_default=True)
+@click.option(
+    "--set",
+    "set_to",
+    default=None,
+    metavar="X,Y,Z",
+    help="Set the card's position [steps] (protocol version 3; not while a stream "
+    "runs), e.g. 0,0,0 after homing.",
+)
+@click.option(
+    "--timeout",
+    "timeout_s",
+    type=click.FloatRange(min=0.0, min_open=True),
+    default=2.0,
+    show_default=True,
+)
 @click.option("--json", "as_json", is_flag=True, help="Print state and position as JSON.")
 @handle_errors
 def card_position(port, allow_url, baud, set_to, timeout_s, as_json):
@@ -46,8 +56,9 @@ def card_position(port, allow_url, baud, set_to, timeout_s, as_json):
             ser.close()
     state = p.CardState(status.state).name
     if as_json:
-        click.echo(json.dumps({"ok": True, "state": state,
-                               "position_steps": list(status.position_steps)}))  # fmt: skip
+        click.echo(
+            json.dumps({"ok": True, "state": state, "position_steps": list(status.position_steps)})
+        )
         return
     click.echo(f"card: {state}, position {list(status.position_steps)} steps")
 
@@ -80,43 +91,114 @@ def _parse_position(text: str, axes: int) -> tuple[int, ...]:
 
 
 @click.command("card-sim")
-@click.option("--listen", default=None, metavar="HOST:PORT",
-              help="Listen on loopback TCP (use with stream --port socket://HOST:PORT "
-                   "--allow-url) instead of opening a pty; PORT 0 picks a free one.")
-@click.option("--speed", type=click.FloatRange(min=0.0, min_open=True), default=1.0,
-              show_default=True, help="Run N times faster than real time.")
+@click.option(
+    "--listen",
+    default=None,
+    metavar="HOST:PORT",
+    help="Listen on loopback TCP (use with stream --port socket://HOST:PORT "
+    "--allow-url) instead of opening a pty; PORT 0 picks a free one.",
+)
+@click.option(
+    "--speed",
+    type=click.FloatRange(min=0.0, min_open=True),
+    default=1.0,
+    show_default=True,
+    help="Run N times faster than real time.",
+)
 @click.option("--fast", is_flag=True, help="Execute periods as fast as they arrive.")
-@click.option("--buffer", "buffer_periods", type=click.IntRange(1, 65535), default=256,
-              show_default=True, help="Buffer size [periods].")
-@click.option("--start-fill", type=click.IntRange(min=1), default=None,
-              help="Buffered periods that start execution (default: half the buffer).")
-@click.option("--max-pulses", type=click.IntRange(1, 32767), default=127, show_default=True,
-              help="Most pulses per period and axis.")
-@click.option("--period-ms", type=click.FloatRange(min=0.0, min_open=True), default=1.0,
-              show_default=True, help="The card's period.")
+@click.option(
+    "--buffer",
+    "buffer_periods",
+    type=click.IntRange(1, 65535),
+    default=256,
+    show_default=True,
+    help="Buffer size [periods].",
+)
+@click.option(
+    "--start-fill",
+    type=click.IntRange(min=1),
+    default=None,
+    help="Buffered periods that start execution (default: half the buffer).",
+)
+@click.option(
+    "--max-pulses",
+    type=click.IntRange(1, 32767),
+    default=127,
+    show_default=True,
+    help="Most pulses per period and axis.",
+)
+@click.option(
+    "--period-ms",
+    type=click.FloatRange(min=0.0, min_open=True),
+    default=1.0,
+    show_default=True,
+    help="The card's period.",
+)
 @click.option("--axes", type=click.IntRange(1, 15), default=3, show_default=True)
-@click.option("--position", default=None, metavar="X,Y,Z",
-              help="Start position [steps] (default: all 0).")
-@click.option("--baud", type=click.IntRange(min=1), default=None,
-              help="Emulate a serial line's byte rate (10 bits per byte) both ways.")
+@click.option(
+    "--position", default=None, metavar="X,Y,Z", help="Start position [steps] (default: all 0)."
+)
+@click.option(
+    "--baud",
+    type=click.IntRange(min=1),
+    default=None,
+    help="Emulate a serial line's byte rate (10 bits per byte) both ways.",
+)
 @click.option("--drop-rate", type=float, default=0.0, help="Probability a frame is lost.")
-@click.option("--corrupt-rate", type=float, default=0.0,
-              help="Probability a frame gets one bit flipped.")
+@click.option(
+    "--corrupt-rate", type=float, default=0.0, help="Probability a frame gets one bit flipped."
+)
 @click.option("--delay-ms", type=float, default=0.0, help="Delay of every reply [ms].")
-@click.option("--reset-after-frames", type=click.IntRange(min=1), default=None,
-              help="Reset (new session, position lost) after N received frames.")
-@click.option("--stall-after-frames", type=click.IntRange(min=0), default=None,
-              help="Stop answering after N received frames.")
+@click.option(
+    "--reset-after-frames",
+    type=click.IntRange(min=1),
+    default=None,
+    help="Reset (new session, position lost) after N received frames.",
+)
+@click.option(
+    "--stall-after-frames",
+    type=click.IntRange(min=0),
+    default=None,
+    help="Stop answering after N received frames.",
+)
 @click.option("--seed", type=int, default=None, help="Seed of the fault injection.")
-@click.option("--log", "log_path", type=click.Path(dir_okay=False), default=None,
-              help="CSV of executed periods: period,x,y,z (pulses).")
-@click.option("--report", "report_path", type=click.Path(dir_okay=False), default=None,
-              help="JSON counters and final state, written at exit.")
+@click.option(
+    "--log",
+    "log_path",
+    type=click.Path(dir_okay=False),
+    default=None,
+    help="CSV of executed periods: period,x,y,z (pulses).",
+)
+@click.option(
+    "--report",
+    "report_path",
+    type=click.Path(dir_okay=False),
+    default=None,
+    help="JSON counters and final state, written at exit.",
+)
 @click.option("--once", is_flag=True, help="Exit after one stream has ended.")
 @_card_errors
-def card_sim(listen, speed, fast, buffer_periods, start_fill, max_pulses, period_ms, axes,
-             position, baud, drop_rate, corrupt_rate, delay_ms, reset_after_frames,
-             stall_after_frames, seed, log_path, report_path, once):  # fmt: skip
+def card_sim(
+    listen,
+    speed,
+    fast,
+    buffer_periods,
+    start_fill,
+    max_pulses,
+    period_ms,
+    axes,
+    position,
+    baud,
+    drop_rate,
+    corrupt_rate,
+    delay_ms,
+    reset_after_frames,
+    stall_after_frames,
+    seed,
+    log_path,
+    report_path,
+    once,
+):
     """Simulate a pulse-train motion card on a pty (its path is printed) or loopback TCP.
 
     Prints the port to open (a /dev/pts path, or socket://HOST:PORT) on the first line of
@@ -135,15 +217,23 @@ def card_sim(listen, speed, fast, buffer_periods, start_fill, max_pulses, period
         serve,
     )
 
-    faults = Faults(drop_rate=drop_rate, corrupt_rate=corrupt_rate, delay_s=delay_ms * 1e-3,
-                    reset_after_frames=reset_after_frames,
-                    stall_after_frames=stall_after_frames)  # fmt: skip
+    faults = Faults(
+        drop_rate=drop_rate,
+        corrupt_rate=corrupt_rate,
+        delay_s=delay_ms * 1e-3,
+        reset_after_frames=reset_after_frames,
+        stall_after_frames=stall_after_frames,
+    )
     config = CardConfig(
-        axes=axes, buffer_periods=buffer_periods, max_pulses_per_period=max_pulses,
-        period_s=period_ms * 1e-3, speed=None if fast else speed, start_fill_periods=start_fill,
+        axes=axes,
+        buffer_periods=buffer_periods,
+        max_pulses_per_period=max_pulses,
+        period_s=period_ms * 1e-3,
+        speed=None if fast else speed,
+        start_fill_periods=start_fill,
         position_steps=_parse_position(position, axes) if position else (0,) * axes,
         faults=faults,
-    )  # fmt: skip
+    )
     card = CardSim(config, seed=seed)
     endpoint = TcpEndpoint(*parse_listen(listen)) if listen else PtyEndpoint()
     stop = threading.Event()
@@ -171,5 +261,8 @@ def card_sim(listen, speed, fast, buffer_periods, start_fill, max_pulses, period
             with atomic_output(report_path) as fh:
                 json.dump(card.report(), fh)
     state = card.report()
-    click.echo(f"card-sim: {state['state']}, {state['executed_periods']} periods executed, "
-               f"position {state['position_steps']} steps", err=True)  # fmt: skip
+    click.echo(
+        f"card-sim: {state['state']}, {state['executed_periods']} periods executed, "
+        f"position {state['position_steps']} steps",
+        err=True,
+    )

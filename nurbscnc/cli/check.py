@@ -43,8 +43,15 @@ def check(program, as_json, no_block_delete, tool_table, subroutine_path, machin
     """
     mach = load_machine_cli(machine, overrides, announce=False)
     with progress_display(show_progress(as_json), display_name(program)) as say:
-        prog, summary = check_program(program, mach, not no_block_delete, tool_table,
-                                      subroutine_path, per_segment=as_json, progress=say)
+        prog, summary = check_program(
+            program,
+            mach,
+            not no_block_delete,
+            tool_table,
+            subroutine_path,
+            per_segment=as_json,
+            progress=say,
+        )
     if as_json:
         click.echo(json.dumps({**summary, **machine_json(mach)}))
         return
@@ -55,8 +62,11 @@ def print_summary(prog: Program, s: dict) -> None:
     from rich.table import Table
     from rich.text import Text
 
-    out.print(Text.assemble((prog.name, "bold"),
-                            f": ok — {s['blocks']} blocks, {len(prog.segments)} segments"))
+    out.print(
+        Text.assemble(
+            (prog.name, "bold"), f": ok — {s['blocks']} blocks, {len(prog.segments)} segments"
+        )
+    )
     counts = ", ".join(f"{v} {k}" for k, v in sorted(s["counts"].items())) or "none"
     out.print(f"  segments: {counts}")
     out.print(
@@ -77,9 +87,13 @@ def print_summary(prog: Program, s: dict) -> None:
             table.add_column(col, justify="right")
         for e in nurbs:
             table.add_row(
-                str(e["line"]), e["plane"], str(e["degree"]), str(e["control_points"]),
-                str(e["knots"]), f"{e['length_mm']:.4f}",
-            )  # fmt: skip
+                str(e["line"]),
+                e["plane"],
+                str(e["degree"]),
+                str(e["control_points"]),
+                str(e["knots"]),
+                f"{e['length_mm']:.4f}",
+            )
         out.print(table)
     for n in s["notes"]:
         out.print(f"  note (line {n['line']}): {n['message']}", markup=False)

@@ -15,9 +15,12 @@ json_option = click.option("--json", "as_json", is_flag=True, help="Machine-read
 
 def plot_option(func):
     return click.option(
-        "--plot", "plot_dir", type=click.Path(), default=None,
+        "--plot",
+        "plot_dir",
+        type=click.Path(),
+        default=None,
         help="Write PNG figures into this folder (needs the 'plot' extra: matplotlib).",
-    )(func)  # fmt: skip
+    )(func)
 
 
 def announce_machine(mach, table: dict) -> None:

@@ -20,13 +20,26 @@ from nurbscnc.cli.options import machine_options
 @program_argument
 @json_option
 @plot_option
-@click.option("--rotate", "angles", type=float, multiple=True,
-              help="Rotate the block about Z by this angle [deg]; repeat for Table 5.")
-@click.option("--block", type=click.IntRange(min=1), default=1,
-              help="Which NURBS block of the program (1-based).")
-@click.option("--algorithm", "algorithms", multiple=True,
-              type=click.Choice(["adaptive", "curvature", "ph-lookahead", "ours"]),
-              help="Only these algorithms (default: all four).")
+@click.option(
+    "--rotate",
+    "angles",
+    type=float,
+    multiple=True,
+    help="Rotate the block about Z by this angle [deg]; repeat for Table 5.",
+)
+@click.option(
+    "--block",
+    type=click.IntRange(min=1),
+    default=1,
+    help="Which NURBS block of the program (1-based).",
+)
+@click.option(
+    "--algorithm",
+    "algorithms",
+    multiple=True,
+    type=click.Choice(["adaptive", "curvature", "ph-lookahead", "ours"]),
+    help="Only these algorithms (default: all four).",
+)
 @machine_options
 @handle_errors
 def compare(program, as_json, plot_dir, angles, block, algorithms, machine, overrides):
@@ -47,17 +60,42 @@ def compare(program, as_json, plot_dir, angles, block, algorithms, machine, over
     if plot_dir:
         write_compare_plots(runs, plot_dir, prog.name, mach.limits.contour_tolerance_mm * 1e3)
     if as_json:
-        click.echo(json.dumps({"ok": True, "program": prog.name, "rows": rows,
-                               **machine_json(mach)}))
+        click.echo(
+            json.dumps({"ok": True, "program": prog.name, "rows": rows, **machine_json(mach)})
+        )
         return
     table = Table(title=f"{prog.name}: NURBS block on line {seg.line} (µm, s)", show_edge=False)
-    for col in ("algorithm", "angle", "X max", "X RMS", "Y max", "Y RMS", "eq. 29 max",
-                "RMS", "mean", "true max", "time [s]"):  # fmt: skip
+    for col in (
+        "algorithm",
+        "angle",
+        "X max",
+        "X RMS",
+        "Y max",
+        "Y RMS",
+        "eq. 29 max",
+        "RMS",
+        "mean",
+        "true max",
+        "time [s]",
+    ):
         table.add_column(col, justify="right")
     for r in rows:
-        table.add_row(r["algorithm"], f"{r['angle_deg']:g}°", *(f"{r[k]:.2f}" for k in (
-            "axis_x_max_um", "axis_x_rms_um", "axis_y_max_um", "axis_y_rms_um",
-            "contour_eq29_max_um", "contour_eq29_rms_um", "contour_eq29_mean_um",
-            "contour_true_max_um")),
-            f"{r['cycle_time_s']:.4f}")  # fmt: skip
+        table.add_row(
+            r["algorithm"],
+            f"{r['angle_deg']:g}°",
+            *(
+                f"{r[k]:.2f}"
+                for k in (
+                    "axis_x_max_um",
+                    "axis_x_rms_um",
+                    "axis_y_max_um",
+                    "axis_y_rms_um",
+                    "contour_eq29_max_um",
+                    "contour_eq29_rms_um",
+                    "contour_eq29_mean_um",
+                    "contour_true_max_um",
+                )
+            ),
+            f"{r['cycle_time_s']:.4f}",
+        )
     out.print(table)

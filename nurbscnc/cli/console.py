@@ -72,10 +72,15 @@ class _LazyConsole:
 # Markup and emoji codes are off: file names, source lines, messages and JSON are user text and
 # must print literally (a file "[/].nc", "(:thumbs_up:)" in a comment, "part.nc:100:" would be
 # markup or emoji otherwise). Styling goes through rich.text.Text objects only.
-out = _LazyConsole("out", highlight=False, markup=False, emoji=False, soft_wrap=True,
-                   width=None if sys.stdout.isatty() else 200)  # fmt: skip
-err = _LazyConsole("err", stderr=True, highlight=False, markup=False, emoji=False,
-                   soft_wrap=True)  # fmt: skip
+out = _LazyConsole(
+    "out",
+    highlight=False,
+    markup=False,
+    emoji=False,
+    soft_wrap=True,
+    width=None if sys.stdout.isatty() else 200,
+)
+err = _LazyConsole("err", stderr=True, highlight=False, markup=False, emoji=False, soft_wrap=True)
 
 
 # -- progress ----------------------------------------------------------------------------------
@@ -96,8 +101,13 @@ def progress_display(show: bool, title: str):
         return
     from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 
-    with Progress(SpinnerColumn(), TextColumn("{task.description}", markup=False),
-                  TimeElapsedColumn(), console=err, transient=True) as bar:  # fmt: skip
+    with Progress(
+        SpinnerColumn(),
+        TextColumn("{task.description}", markup=False),
+        TimeElapsedColumn(),
+        console=err,
+        transient=True,
+    ) as bar:
         # The stage first: a narrow terminal cuts the end of the line (a long file name).
         task = bar.add_task(f"starting · {title}", total=None)
 

@@ -62,9 +62,12 @@ class Operator:
             (self.sender.request_hold if hold else self.sender.request_resume)()
             return
         self.hold = hold
-        text = ("feed hold asked while planning: the stream will wait at the start "
-                "(SIGUSR2 continues)\n" if hold else
-                "resume asked while planning: no feed hold when the stream opens\n")  # fmt: skip
+        text = (
+            "feed hold asked while planning: the stream will wait at the start "
+            "(SIGUSR2 continues)\n"
+            if hold
+            else "resume asked while planning: no feed hold when the stream opens\n"
+        )
         # os.write, not print: a signal handler may interrupt a print in progress.
         with contextlib.suppress(OSError):
             os.write(2, b"stream: " + text.encode())
@@ -76,8 +79,12 @@ def routed_signals(operator: Operator, names: tuple[str, ...]):
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    actions = {"SIGUSR1": operator.on_hold, "SIGUSR2": operator.on_resume,
-               "SIGINT": operator.on_abort, "SIGTERM": operator.on_abort}  # fmt: skip
+    actions = {
+        "SIGUSR1": operator.on_hold,
+        "SIGUSR2": operator.on_resume,
+        "SIGINT": operator.on_abort,
+        "SIGTERM": operator.on_abort,
+    }
     previous = {}
     try:
         for name in names:

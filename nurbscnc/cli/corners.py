@@ -19,8 +19,12 @@ from nurbscnc.cli.options import machine_options
 @click.command()
 @program_argument
 @json_option
-@click.option("--feed", type=float, default=None,
-              help="Feed F [mm/min] for the threshold (default: each block's F, capped by V_max).")
+@click.option(
+    "--feed",
+    type=float,
+    default=None,
+    help="Feed F [mm/min] for the threshold (default: each block's F, capped by V_max).",
+)
 @click.option("--amax", type=float, default=None, help="A_max [mm/s²] (default: the profile's).")
 @machine_options
 @handle_errors
@@ -38,41 +42,62 @@ def corners(program, as_json, feed, amax, machine, overrides):
         raise click.BadParameter("must be > 0", param_hint="--feed")
     prog = load_program(program)
     result = program_corners(
-        prog.segments, mach.limits.a_max_mm_s2, mach.limits.v_max_mm_s,
+        prog.segments,
+        mach.limits.a_max_mm_s2,
+        mach.limits.v_max_mm_s,
         feed / 60.0 if feed else None,
-    )  # fmt: skip
+    )
     junctions = tangent_junctions(prog.segments)
     if as_json:
         click.echo(json.dumps({**corners_json(result, junctions), **machine_json(mach)}))
         return
     table = Table(title=f"{prog.name}: sharp corners (κ > κ_th = A_max/F²)", show_edge=False)
-    for col in ("line", "κ_th [1/mm]", "peak κ [1/mm]", "x [mm]", "y [mm]", "z [mm]",
-                "u_a", "u_b", "length [mm]"):  # fmt: skip
+    for col in (
+        "line",
+        "κ_th [1/mm]",
+        "peak κ [1/mm]",
+        "x [mm]",
+        "y [mm]",
+        "z [mm]",
+        "u_a",
+        "u_b",
+        "length [mm]",
+    ):
         table.add_column(col, justify="right")
     count = 0
     for sc in result:
         for r in sc.regions:
             count += 1
             table.add_row(
-                str(sc.line), f"{sc.kappa_threshold_per_mm:.4g}", f"{r.kappa_peak_per_mm:.5g}",
-                *(f"{c:.4f}" for c in r.point_mm), f"{r.u_a:.6g}", f"{r.u_b:.6g}",
+                str(sc.line),
+                f"{sc.kappa_threshold_per_mm:.4g}",
+                f"{r.kappa_peak_per_mm:.5g}",
+                *(f"{c:.4f}" for c in r.point_mm),
+                f"{r.u_a:.6g}",
+                f"{r.u_b:.6g}",
                 f"{r.length_mm:.4f}",
-            )  # fmt: skip
+            )
     if count:
         out.print(table)
     else:
         out.print(f"{prog.name}: no sharp corners in {len(result)} NURBS block(s)")
     sharp = [j for j in junctions if j.angle_deg > 1e-3]
     if sharp:
-        out.print(f"{len(sharp)} tangent discontinuities between segments "
-                  f"(largest {max(j.angle_deg for j in sharp):.2f}°)")  # fmt: skip
+        out.print(
+            f"{len(sharp)} tangent discontinuities between segments "
+            f"(largest {max(j.angle_deg for j in sharp):.2f}°)"
+        )
 
 
 @click.command()
 @program_argument
 @json_option
-@click.option("--tolerance-um", type=float, default=None,
-              help="PH fit tolerance e [µm] (default: the profile's, 1 µm).")
+@click.option(
+    "--tolerance-um",
+    type=float,
+    default=None,
+    help="PH fit tolerance e [µm] (default: the profile's, 1 µm).",
+)
 @click.option("--no-split", is_flag=True, help="Fit one PH quintic per region (no splitting).")
 @machine_options
 @handle_errors
@@ -93,15 +118,28 @@ def ph(program, as_json, tolerance_um, no_split, machine, overrides):
         click.echo(json.dumps({**ph_json(rows, e_um, no_split), **machine_json(mach)}))
         return
     table = Table(title=f"{prog.name}: PH quintic fits (e = {e_um:g} µm)", show_edge=False)
-    for col in ("line", "region", "length [mm]", "unsplit RMS [µm]", "unsplit max [µm]",
-                "pieces", "RMS [µm]", "max [µm]"):  # fmt: skip
+    for col in (
+        "line",
+        "region",
+        "length [mm]",
+        "unsplit RMS [µm]",
+        "unsplit max [µm]",
+        "pieces",
+        "RMS [µm]",
+        "max [µm]",
+    ):
         table.add_column(col, justify="right")
     for k, (sc, r, unsplit, fit) in enumerate(rows):
         table.add_row(
-            str(sc.line), region_name(k), f"{r.length_mm:.4f}", f"{unsplit.rms_um:.4f}",
-            f"{unsplit.max_um:.4f}", str(len(fit.pieces)), f"{fit.rms_um:.4f}",
+            str(sc.line),
+            region_name(k),
+            f"{r.length_mm:.4f}",
+            f"{unsplit.rms_um:.4f}",
+            f"{unsplit.max_um:.4f}",
+            str(len(fit.pieces)),
+            f"{fit.rms_um:.4f}",
             f"{fit.max_um:.4f}",
-        )  # fmt: skip
+        )
     if rows:
         out.print(table)
     else:

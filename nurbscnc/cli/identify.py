@@ -16,21 +16,51 @@ from nurbscnc.errors import OutputError
 
 @click.command()
 @click.argument("source", metavar="TRACE", type=click.Path(dir_okay=False, allow_dash=True))
-@click.option("--axis", type=click.Choice(["x", "y", "z"]), default="x", show_default=True,
-              help="Which [servo.<axis>] section to print.")
-@click.option("--order", type=click.Choice(["2", "4"]), default="4", show_default=True,
-              help="4: the paper's model (SPEC eq. 25); 2: bandwidth and damping.")
-@click.option("--cmd", "cmd_col", default="1", show_default=True,
-              help="Column of the commanded position (1-based number, or header name).")
-@click.option("--fb", "fb_col", default="2", show_default=True,
-              help="Column of the actual (feedback) position.")
-@click.option("--time", "time_col", default=None,
-              help="Column of the time [s]; gives the sample period.")
-@click.option("--period-ms", type=click.FloatRange(min=0, min_open=True), default=None,
-              help="Sample period [ms] (e.g. the servo period of a halsampler capture).")
-@click.option("--delay", type=click.IntRange(min=0), default=0, show_default=True,
-              help="Periods by which the feedback is recorded late (1 for a LinuxCNC capture "
-              "whose encoder is read before the period's command is written).")
+@click.option(
+    "--axis",
+    type=click.Choice(["x", "y", "z"]),
+    default="x",
+    show_default=True,
+    help="Which [servo.<axis>] section to print.",
+)
+@click.option(
+    "--order",
+    type=click.Choice(["2", "4"]),
+    default="4",
+    show_default=True,
+    help="4: the paper's model (SPEC eq. 25); 2: bandwidth and damping.",
+)
+@click.option(
+    "--cmd",
+    "cmd_col",
+    default="1",
+    show_default=True,
+    help="Column of the commanded position (1-based number, or header name).",
+)
+@click.option(
+    "--fb",
+    "fb_col",
+    default="2",
+    show_default=True,
+    help="Column of the actual (feedback) position.",
+)
+@click.option(
+    "--time", "time_col", default=None, help="Column of the time [s]; gives the sample period."
+)
+@click.option(
+    "--period-ms",
+    type=click.FloatRange(min=0, min_open=True),
+    default=None,
+    help="Sample period [ms] (e.g. the servo period of a halsampler capture).",
+)
+@click.option(
+    "--delay",
+    type=click.IntRange(min=0),
+    default=0,
+    show_default=True,
+    help="Periods by which the feedback is recorded late (1 for a LinuxCNC capture "
+    "whose encoder is read before the period's command is written).",
+)
 @click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
 @handle_errors
 def identify(source, axis, order, cmd_col, fb_col, time_col, period_ms, delay, as_json):
@@ -50,22 +80,32 @@ def identify(source, axis, order, cmd_col, fb_col, time_col, period_ms, delay, a
         text = data.decode("utf-8").replace("\r\n", "\n").replace("\r", "\n")
     except UnicodeDecodeError as exc:
         raise OutputError(f"cannot read {source}: {exc}") from exc
-    trace = parse_trace(text, cmd_col, fb_col, time_col,
-                        None if period_ms is None else period_ms * 1e-3)  # fmt: skip
+    trace = parse_trace(
+        text, cmd_col, fb_col, time_col, None if period_ms is None else period_ms * 1e-3
+    )
     fit = fit_axis(trace, int(order), delay)
     name = "<stdin>" if source == "-" else source
     section = profile_section(fit, axis, name)
     if as_json:
         out = {
-            "ok": True, "source": name, "axis": axis, "order": fit.order,
-            "samples": fit.samples, "period_s": fit.period_s, "delay_samples": fit.delay,
-            "numerator": fit.numerator.tolist(), "denominator": fit.denominator.tolist(),
-            "poles": [[p.real, p.imag] for p in fit.poles], "dc_gain": fit.dc_gain,
-            "offset_um": fit.offset_mm * 1e3, "fit": fit.fit, "r2": fit.r2,
+            "ok": True,
+            "source": name,
+            "axis": axis,
+            "order": fit.order,
+            "samples": fit.samples,
+            "period_s": fit.period_s,
+            "delay_samples": fit.delay,
+            "numerator": fit.numerator.tolist(),
+            "denominator": fit.denominator.tolist(),
+            "poles": [[p.real, p.imag] for p in fit.poles],
+            "dc_gain": fit.dc_gain,
+            "offset_um": fit.offset_mm * 1e3,
+            "fit": fit.fit,
+            "r2": fit.r2,
             "residual_rms_um": fit.residual_rms_mm * 1e3,
             "following_error_rms_um": fit.following_error_rms_mm * 1e3,
             "profile_section": section,
-        }  # fmt: skip
+        }
         if fit.order == 2:
             out.update(bandwidth_hz=fit.bandwidth_hz, damping=fit.damping)
         click.echo(json.dumps(out))

@@ -67,6 +67,18 @@ def main():
     """
 
 
-for _command in (check, corners, ph, plan, run, simulate, compare, stream, card_sim,
-                 card_position, profile, identify):  # fmt: skip
+for _command in (
+    check,
+    corners,
+    ph,
+    plan,
+    run,
+    simulate,
+    compare,
+    stream,
+    card_sim,
+    card_position,
+    profile,
+    identify,
+):
     main.add_command(_command)

@@ -26,30 +26,40 @@ def _choices(enum_cls) -> click.Choice:
 def machine_options(func):
     """``--machine FILE`` and repeatable ``--set KEY=VALUE`` (dotted profile keys)."""
     func = click.option(
-        "--set", "overrides", multiple=True, metavar="KEY=VALUE",
+        "--set",
+        "overrides",
+        multiple=True,
+        metavar="KEY=VALUE",
         help="Override one profile value, e.g. --set limits.a_max_mm_s2=1000.",
-    )(func)  # fmt: skip
+    )(func)
     func = click.option(
-        "--machine", type=click.Path(), default=None,
+        "--machine",
+        type=click.Path(),
+        default=None,
         help="Machine profile (TOML). Default: $NURBSCNC_MACHINE, ./nurbscnc.toml, "
         "~/.config/nurbscnc/machine.toml, else the bundled paper machine (Tables 2, 3).",
-    )(func)  # fmt: skip
+    )(func)
     return func
 
 
 block_delete_option = click.option(
-    "--no-block-delete", "no_block_delete", is_flag=True,
+    "--no-block-delete",
+    "no_block_delete",
+    is_flag=True,
     help="Execute lines starting with '/' (default: skip them, the switch is on).",
-)  # fmt: skip
+)
 tool_table_option = click.option(
-    "--tool-table", type=click.Path(), default=None,
+    "--tool-table",
+    type=click.Path(),
+    default=None,
     help="LinuxCNC tool table: lengths for G43 H, diameters for G41/G42 D (default: none).",
-)  # fmt: skip
+)
 subroutine_path_option = click.option(
-    "--subroutine-path", multiple=True, type=click.Path(file_okay=False),
-    help="Directory searched for o<name> call files name.ngc after the program's own "
-         "(repeatable).",
-)  # fmt: skip
+    "--subroutine-path",
+    multiple=True,
+    type=click.Path(file_okay=False),
+    help="Directory searched for o<name> call files name.ngc after the program's own (repeatable).",
+)
 
 
 def program_input_options(func):
@@ -62,53 +72,72 @@ def program_input_options(func):
 def planning_options(func):
     """The planning options of every command that plans, and the machine options."""
     func = click.option(
-        "--algorithm", type=_choices(Algorithm), default=Algorithm.PH_LOOKAHEAD.value,
+        "--algorithm",
+        type=_choices(Algorithm),
+        default=Algorithm.PH_LOOKAHEAD.value,
         help="The look-ahead planner (default), or one of the paper's baselines: adaptive "
-             "(chord-error) feed or curvature feed, Taylor interpolation, no acceleration "
-             "limit (SPEC §9).",
-    )(func)  # fmt: skip
+        "(chord-error) feed or curvature feed, Taylor interpolation, no acceleration "
+        "limit (SPEC §9).",
+    )(func)
     func = click.option(
-        "--corner-feed", type=_choices(CornerFeed), default=CornerFeed.PIECE.value,
+        "--corner-feed",
+        type=_choices(CornerFeed),
+        default=CornerFeed.PIECE.value,
         help="PH pieces capped by their own peak curvature (piece, default) or the whole "
-             "region by the corner's peak (peak, as the paper).",
-    )(func)  # fmt: skip
+        "region by the corner's peak (peak, as the paper).",
+    )(func)
     func = click.option(
-        "--dynamics", type=_choices(Dynamics), default=Dynamics.LOCAL.value,
+        "--dynamics",
+        type=_choices(Dynamics),
+        default=Dynamics.LOCAL.value,
         help="Contour-error check: lower the feed on offending pieces (local, default), for "
-             "the whole program (global, the paper's rule), or not at all (off).",
-    )(func)  # fmt: skip
+        "the whole program (global, the paper's rule), or not at all (off).",
+    )(func)
     func = click.option(
-        "--blend-tolerance", type=click.FloatRange(min=0.0), default=None, metavar="MM",
+        "--blend-tolerance",
+        type=click.FloatRange(min=0.0),
+        default=None,
+        metavar="MM",
         help="Blend every corner by PH quintics within this distance [mm] (overrides the "
-             "program's G61/G61.1/G64 P; 0: stop exactly at every corner).",
-    )(func)  # fmt: skip
+        "program's G61/G61.1/G64 P; 0: stop exactly at every corner).",
+    )(func)
     func = click.option(
-        "--smooth", is_flag=True, default=False,
+        "--smooth",
+        is_flag=True,
+        default=False,
         help="Dense CAM polylines (runs of short G1 moves under G64) become curvature-"
-             "continuous cubic B-splines within half the path tolerance (G64 P, else the "
-             "machine's), so the jerk limit no longer holds the feed down at every vertex.",
-    )(func)  # fmt: skip
+        "continuous cubic B-splines within half the path tolerance (G64 P, else the "
+        "machine's), so the jerk limit no longer holds the feed down at every vertex.",
+    )(func)
     func = click.option(
-        "--interpolator", type=_choices(Interpolator), default=Interpolator.EXACT.value,
+        "--interpolator",
+        type=_choices(Interpolator),
+        default=Interpolator.EXACT.value,
         help="NURBS pieces by exact arc-length inversion (default) or the paper's 2nd-order "
-             "Taylor formula.",
-    )(func)  # fmt: skip
+        "Taylor formula.",
+    )(func)
     func = click.option(
-        "--lookahead", type=click.IntRange(min=1), default=None,
+        "--lookahead",
+        type=click.IntRange(min=1),
+        default=None,
         help="Look-ahead depth in pieces (default: the whole program).",
-    )(func)  # fmt: skip
+    )(func)
     func = click.option(
-        "--precompensate", is_flag=True, default=False,
+        "--precompensate",
+        is_flag=True,
+        default=False,
         help="Feed the servo a pre-compensated reference (zero-phase-error tracking inverse "
-             "of the profile's servo model) so the modelled tool follows the planned path; "
-             "the summary gives the reference's own deviation from the path and the contour "
-             "error under a ±10 % model error. Needs a servo model.",
-    )(func)  # fmt: skip
+        "of the profile's servo model) so the modelled tool follows the planned path; "
+        "the summary gives the reference's own deviation from the path and the contour "
+        "error under a ±10 % model error. Needs a servo model.",
+    )(func)
     func = click.option(
-        "--reference-tolerance", type=click.FloatRange(min=0.0), default=3.0, metavar="UM",
+        "--reference-tolerance",
+        type=click.FloatRange(min=0.0),
+        default=3.0,
+        metavar="UM",
         help="With --precompensate: keep the reference within this distance of the path [µm] "
-             "(default 3; inf: no limit); the dynamics check slows down where the tool then "
-             "misses ε_max.",
-    )(func)  # fmt: skip
+        "(default 3; inf: no limit); the dynamics check slows down where the tool then "
+        "misses ε_max.",
+    )(func)
     return program_input_options(machine_options(func))
-

@@ -23,14 +23,20 @@ if TYPE_CHECKING:
 @click.command()
 @program_argument
 @json_option
-@click.option("--dump-profile", type=click.Path(allow_dash=True), default=None,
-              help="Write t, s, v, a, j, piece at every servo period (CSV, or NPZ by extension).")
-@click.option("--explain", is_flag=True,
-              help="Why the feed is what it is: per source line the time, the programmed and "
-                   "achieved feed and the limit that set it (the costliest lines), the time "
-                   "under each limit, the corners that stopped and why.")
-@click.option("--explain-all", is_flag=True,
-              help="As --explain, with every line in program order.")
+@click.option(
+    "--dump-profile",
+    type=click.Path(allow_dash=True),
+    default=None,
+    help="Write t, s, v, a, j, piece at every servo period (CSV, or NPZ by extension).",
+)
+@click.option(
+    "--explain",
+    is_flag=True,
+    help="Why the feed is what it is: per source line the time, the programmed and "
+    "achieved feed and the limit that set it (the costliest lines), the time "
+    "under each limit, the corners that stopped and why.",
+)
+@click.option("--explain-all", is_flag=True, help="As --explain, with every line in program order.")
 @plot_option
 @planning_options
 @handle_errors
@@ -44,8 +50,9 @@ def plan(program, as_json, dump_profile, explain, explain_all, plot_dir, **setti
     # --explain shows the source lines: the program is read once, here (stdin too).
     text = read_program_text(program) if explain else None
     with progress_display(show_progress(as_json), display_name(program)) as say:
-        prog, mach, run = make_plan(program, **settings, text=text, progress=say,
-                                    keep_reference=bool(plot_dir))  # fmt: skip
+        prog, mach, run = make_plan(
+            program, **settings, text=text, progress=say, keep_reference=bool(plot_dir)
+        )
         say("summarising")
         summary = summary_of(prog, mach, run)
     expl = None
@@ -66,22 +73,25 @@ def plan(program, as_json, dump_profile, explain, explain_all, plot_dir, **setti
         return
     print_plan_summary(prog, mach, summary, err if dump_profile == "-" else out)
     if explain:
-        print_explanation(expl, out, None if explain_all else EXPLAIN_LINES,
-                          text.splitlines())
+        print_explanation(expl, out, None if explain_all else EXPLAIN_LINES, text.splitlines())
 
 
 def _refuse_conflicts(dump_profile, as_json: bool, explain: bool, algorithm: str) -> None:
     """The usage errors of ``plan``'s output options, before anything is read."""
     if dump_profile == "-" and (as_json or explain):
-        raise click.UsageError("--dump-profile - and --json/--explain both want stdout; "
-                               "write the profile to a file or drop --json/--explain")
+        raise click.UsageError(
+            "--dump-profile - and --json/--explain both want stdout; "
+            "write the profile to a file or drop --json/--explain"
+        )
     baseline = algorithm != "ph-lookahead"
     if dump_profile and baseline:
-        raise click.UsageError("--dump-profile needs the look-ahead planner (a baseline has "
-                               "no jerk-limited profile)")
+        raise click.UsageError(
+            "--dump-profile needs the look-ahead planner (a baseline has no jerk-limited profile)"
+        )
     if explain and baseline:
-        raise click.UsageError("--explain needs the look-ahead planner (a baseline has no "
-                               "caps or profile to explain)")
+        raise click.UsageError(
+            "--explain needs the look-ahead planner (a baseline has no caps or profile to explain)"
+        )
 
 
 #: Lines ``plan --explain`` shows (the costliest); ``--explain-all`` shows every line.
@@ -107,16 +117,25 @@ def print_explanation(expl, out: Console, count: int | None, source: list[str]) 
     from nurbscnc.plan.explain import LIMIT_OF_KEY, Limit
 
     total = expl.cycle_time_s if expl.cycle_time_s > 0 else 1.0
-    shares = ", ".join(f"{LIMIT_OF_KEY[k].text} {t / total:.1%} ({t:.3f} s)"
-                       for k, t in expl.total_by_limit_s().items())  # fmt: skip
+    shares = ", ".join(
+        f"{LIMIT_OF_KEY[k].text} {t / total:.1%} ({t:.3f} s)"
+        for k, t in expl.total_by_limit_s().items()
+    )
     out.print(f"  time by limit: {shares or 'none'}", markup=False)
     n = expl.line.size
     rows = np.arange(n) if count is None else expl.costliest(count)
     which = f"all {n} lines" if count is None else f"the {min(count, n)} costliest of {n} lines"
     table = Table(title=f"{which} (feeds in mm/min)", show_edge=False)
-    for col, justify in (("line", "right"), ("source", "left"), ("time [s]", "right"),
-                         ("share", "right"), ("F", "right"), ("peak", "right"),
-                         ("mean", "right"), ("limit", "left")):  # fmt: skip
+    for col, justify in (
+        ("line", "right"),
+        ("source", "left"),
+        ("time [s]", "right"),
+        ("share", "right"),
+        ("F", "right"),
+        ("peak", "right"),
+        ("mean", "right"),
+        ("limit", "left"),
+    ):
         table.add_column(col, justify=justify)
     for i in rows.tolist():
         line = int(expl.line[i])
@@ -127,26 +146,37 @@ def print_explanation(expl, out: Console, count: int | None, source: list[str]) 
         limit = Limit(int(expl.limit[i])).text
         if t > 0 and row.max() < t * 0.999:
             limit += f" ({row.max() / t:.0%})"
-        table.add_row(str(line), Text(shown), f"{t:.4f}", f"{t / total:.1%}",
-                      _feed_text(float(expl.feed_mm_s[i])),
-                      _feed_text(float(expl.peak_mm_s[i])),
-                      _feed_text(float(expl.mean_mm_s[i])), limit)  # fmt: skip
+        table.add_row(
+            str(line),
+            Text(shown),
+            f"{t:.4f}",
+            f"{t / total:.1%}",
+            _feed_text(float(expl.feed_mm_s[i])),
+            _feed_text(float(expl.peak_mm_s[i])),
+            _feed_text(float(expl.mean_mm_s[i])),
+            limit,
+        )
     out.print(table)
     if count is not None and n > count:
-        out.print(f"  … {n - count} more lines (plan --explain-all shows every line)",
-                  markup=False)  # fmt: skip
+        out.print(f"  … {n - count} more lines (plan --explain-all shows every line)", markup=False)
     counts = expl.corner_counts()
     if counts:
-        out.print("  corners: " + ", ".join(f"{v} {k}" for k, v in sorted(counts.items())),
-                  markup=False)  # fmt: skip
+        out.print(
+            "  corners: " + ", ".join(f"{v} {k}" for k, v in sorted(counts.items())), markup=False
+        )
     stops = expl.corner_dicts(stops_only=True)
     for c in stops[:EXPLAIN_CORNERS]:
         x, y, z = c["point_mm"]
-        out.print(f"  stop at line {c['line']} ({x:.3f}, {y:.3f}, {z:.3f}), turning "
-                  f"{c['turning_deg']:.1f}°: {c['why'].replace('_', ' ')}", markup=False)
+        out.print(
+            f"  stop at line {c['line']} ({x:.3f}, {y:.3f}, {z:.3f}), turning "
+            f"{c['turning_deg']:.1f}°: {c['why'].replace('_', ' ')}",
+            markup=False,
+        )
     if len(stops) > EXPLAIN_CORNERS:
-        out.print(f"  … {len(stops) - EXPLAIN_CORNERS} more stopped corners (--json lists "
-                  "every corner)", markup=False)  # fmt: skip
+        out.print(
+            f"  … {len(stops) - EXPLAIN_CORNERS} more stopped corners (--json lists every corner)",
+            markup=False,
+        )
 
 
 def print_plan_summary(prog, mach, summary: dict, out: Console) -> None:
@@ -154,27 +184,46 @@ def print_plan_summary(prog, mach, summary: dict, out: Console) -> None:
     from rich.text import Text
 
     if "pieces" in summary:
-        out.print(Text.assemble((prog.name, "bold"), f": {summary['piece_count']} pieces "
-                  f"({', '.join(f'{v} {k}' for k, v in sorted(summary['pieces'].items()))})"))
+        out.print(
+            Text.assemble(
+                (prog.name, "bold"),
+                f": {summary['piece_count']} pieces "
+                f"({', '.join(f'{v} {k}' for k, v in sorted(summary['pieces'].items()))})",
+            )
+        )
     else:
-        out.print(Text.assemble((prog.name, "bold"), f": baseline {summary['algorithm']} "
-                                "(no acceleration limit)"))  # fmt: skip
-    out.print(f"  cycle time: {summary['cycle_time_s']:.4f} s"
-              f"{clock_suffix(summary['cycle_time_s'])} ({summary['samples']} reference points "
-              f"at T_s = {summary['period_s'] * 1000:g} ms)")  # fmt: skip
+        out.print(
+            Text.assemble(
+                (prog.name, "bold"), f": baseline {summary['algorithm']} (no acceleration limit)"
+            )
+        )
+    out.print(
+        f"  cycle time: {summary['cycle_time_s']:.4f} s"
+        f"{clock_suffix(summary['cycle_time_s'])} ({summary['samples']} reference points "
+        f"at T_s = {summary['period_s'] * 1000:g} ms)"
+    )
     if "lower_bound_s" in summary:
         note = "" if "pieces" in summary else "; a baseline ignores A_max and may beat it"
-        out.print(f"  kinematic lower bound: {summary['lower_bound_s']:.4f} s "
-                  f"(plan / bound = {summary['lower_bound_ratio']:.3f}{note})")  # fmt: skip
+        out.print(
+            f"  kinematic lower bound: {summary['lower_bound_s']:.4f} s "
+            f"(plan / bound = {summary['lower_bound_ratio']:.3f}{note})"
+        )
     if "feed_fluctuation_max" in summary:
-        out.print(f"  feed fluctuation on NURBS ({summary['interpolator']} interpolation): "
-                  f"max {summary['feed_fluctuation_max'] * 100:.2g} %")  # fmt: skip
+        out.print(
+            f"  feed fluctuation on NURBS ({summary['interpolator']} interpolation): "
+            f"max {summary['feed_fluctuation_max'] * 100:.2g} %"
+        )
     if "contour_true_max_um" in summary:
-        how = (f"dynamics {summary['dynamics']}, {summary['dynamics_iterations']} re-plans"
-               if "pieces" in summary else "no dynamics check: a baseline")
-        out.print(f"  {'predicted' if 'pieces' in summary else 'simulated'} contour error: "
-                  f"max {summary['contour_true_max_um']:.2f} µm, RMS "
-                  f"{summary['contour_true_rms_um']:.2f} "
-                  f"µm (ε_max {mach.limits.contour_tolerance_mm * 1000:g} µm; {how})")
+        how = (
+            f"dynamics {summary['dynamics']}, {summary['dynamics_iterations']} re-plans"
+            if "pieces" in summary
+            else "no dynamics check: a baseline"
+        )
+        out.print(
+            f"  {'predicted' if 'pieces' in summary else 'simulated'} contour error: "
+            f"max {summary['contour_true_max_um']:.2f} µm, RMS "
+            f"{summary['contour_true_rms_um']:.2f} "
+            f"µm (ε_max {mach.limits.contour_tolerance_mm * 1000:g} µm; {how})"
+        )
     if precompensation_text(summary):
         out.print(precompensation_text(summary), markup=False)

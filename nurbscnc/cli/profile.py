@@ -70,17 +70,28 @@ def init(file, force):
             f.write(text)
     except OSError as exc:
         raise OutputError(f"cannot write {file}: {exc}") from exc
-    err.print(f"wrote {file}: edit it for your machine, then `nurbscnc profile show` "
-              f"(found without flags as ./nurbscnc.toml, or with --machine {file})",
-              markup=False)  # fmt: skip
+    err.print(
+        f"wrote {file}: edit it for your machine, then `nurbscnc profile show` "
+        f"(found without flags as ./nurbscnc.toml, or with --machine {file})",
+        markup=False,
+    )
 
 
 @profile.command("show")
 @click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
-@click.option("--machine", type=click.Path(dir_okay=False), default=None,
-              help="Machine profile (TOML); default: found as `nurbscnc profile` says.")
-@click.option("--set", "overrides", multiple=True, metavar="KEY=VALUE",
-              help="Override one profile value, e.g. --set limits.a_max_mm_s2=1000.")
+@click.option(
+    "--machine",
+    type=click.Path(dir_okay=False),
+    default=None,
+    help="Machine profile (TOML); default: found as `nurbscnc profile` says.",
+)
+@click.option(
+    "--set",
+    "overrides",
+    multiple=True,
+    metavar="KEY=VALUE",
+    help="Override one profile value, e.g. --set limits.a_max_mm_s2=1000.",
+)
 @_profile_errors
 def show(as_json, machine, overrides):
     """Print the effective machine profile (after discovery, --machine and --set).

@@ -19,19 +19,36 @@ from nurbscnc.cli.options import planning_options
 
 
 @click.command()
-@click.argument("programs", nargs=-1, required=True,
-                type=click.Path(allow_dash=True))
-@click.option("-o", "--output", type=click.Path(allow_dash=True), default=None,
-              help="Reference points: .csv, .npz or - (stdout). One program only.")
-@click.option("--output-dir", type=click.Path(), default=None,
-              help="Batch: write <name>.csv for every program into this folder.")
-@click.option("--jobs", type=click.IntRange(min=1), default=None,
-              help="Batch worker processes (default: the number of cores).")
-@click.option("--format", "fmt", type=click.Choice(["csv", "npz", "halstreamer"]),
-              default=None, help="Output format (default: -o's suffix .npz/.hs, else csv; a "
-              "format that contradicts the suffix is an error; npz never goes to stdout): "
-              "csv, npz, or halstreamer (LinuxCNC streamer text, x y z per servo period; "
-              "docs/linuxcnc.md).")
+@click.argument("programs", nargs=-1, required=True, type=click.Path(allow_dash=True))
+@click.option(
+    "-o",
+    "--output",
+    type=click.Path(allow_dash=True),
+    default=None,
+    help="Reference points: .csv, .npz or - (stdout). One program only.",
+)
+@click.option(
+    "--output-dir",
+    type=click.Path(),
+    default=None,
+    help="Batch: write <name>.csv for every program into this folder.",
+)
+@click.option(
+    "--jobs",
+    type=click.IntRange(min=1),
+    default=None,
+    help="Batch worker processes (default: the number of cores).",
+)
+@click.option(
+    "--format",
+    "fmt",
+    type=click.Choice(["csv", "npz", "halstreamer"]),
+    default=None,
+    help="Output format (default: -o's suffix .npz/.hs, else csv; a "
+    "format that contradicts the suffix is an error; npz never goes to stdout): "
+    "csv, npz, or halstreamer (LinuxCNC streamer text, x y z per servo period; "
+    "docs/linuxcnc.md).",
+)
 @click.option("--quiet", is_flag=True, help="No summary on stderr.")
 @json_option
 @plot_option
@@ -62,14 +79,16 @@ def _run_one(programs, output, fmt, quiet: bool, as_json: bool, plot_dir, settin
     fmt = output_format(output, fmt)
     refuse_overwriting(program, output)
     with progress_display(show_progress(as_json, quiet), display_name(program)) as say:
-        prog, summary, text = _write_points(program, output, fmt, as_json, plot_dir, settings,
-                                            say)  # fmt: skip
+        prog, summary, text = _write_points(program, output, fmt, as_json, plot_dir, settings, say)
     if as_json:
         click.echo(text, err=output == "-")
     elif not quiet:
-        err.print(f"{prog.name}: {summary['samples']} points, cycle time "
-                  f"{summary['cycle_time_s']:.4f} s{clock_suffix(summary['cycle_time_s'])}"
-                  f" → {output}", markup=False)  # fmt: skip
+        err.print(
+            f"{prog.name}: {summary['samples']} points, cycle time "
+            f"{summary['cycle_time_s']:.4f} s{clock_suffix(summary['cycle_time_s'])}"
+            f" → {output}",
+            markup=False,
+        )
         if precompensation_text(summary):
             err.print(precompensation_text(summary), markup=False)
 
@@ -77,11 +96,11 @@ def _run_one(programs, output, fmt, quiet: bool, as_json: bool, plot_dir, settin
 def _write_points(program, output, fmt, as_json: bool, plot_dir, settings, say):
     """Plan ``program``, write its points to ``output`` and its figures into ``plot_dir``;
     returns (program, summary, the summary's JSON text or None)."""
-    prog, mach, run = make_plan(program, **settings, progress=say,
-                                keep_reference=bool(plot_dir))  # fmt: skip
+    prog, mach, run = make_plan(program, **settings, progress=say, keep_reference=bool(plot_dir))
     if plot_dir:  # the figures need whole arrays: made once, written from them
         _ = run.samples
     say(f"writing {run.sample_count} points")
+
     # Window by window: the points are made, checked, written and summarised as they come
     # (memory of one window, whatever the motion time); the summary is made while the
     # writer finishes the file. The text line shows points and cycle time only: no
@@ -107,10 +126,13 @@ def output_format(output: str, fmt: str | None) -> str:
     suffix = os.path.splitext(output)[1].lower() if output != "-" else ""
     implied = SUFFIX_FORMATS.get(suffix)
     if fmt is not None and implied is not None and fmt != implied:
-        raise click.UsageError(f"--format {fmt} contradicts the suffix of -o {output} "
-                               f"({implied}); drop --format or rename the output")
+        raise click.UsageError(
+            f"--format {fmt} contradicts the suffix of -o {output} "
+            f"({implied}); drop --format or rename the output"
+        )
     fmt = fmt or implied or "csv"
     if output == "-" and fmt == "npz":
-        raise click.UsageError("--format npz writes binary and is refused on stdout (-o -); "
-                               "give -o FILE.npz")
+        raise click.UsageError(
+            "--format npz writes binary and is refused on stdout (-o -); give -o FILE.npz"
+        )
     return fmt

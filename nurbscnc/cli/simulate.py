@@ -26,8 +26,12 @@ from nurbscnc.cli.options import planning_options
 @click.argument("source", type=click.Path(allow_dash=True))
 @json_option
 @plot_option
-@click.option("--hold", type=click.Choice(["foh", "zoh"]), default="foh",
-              help="Reference between samples: linear (foh, as a pulse-train card) or steps.")
+@click.option(
+    "--hold",
+    type=click.Choice(["foh", "zoh"]),
+    default="foh",
+    help="Reference between samples: linear (foh, as a pulse-train card) or steps.",
+)
 @planning_options
 @handle_errors
 def simulate(source, as_json, plot_dir, hold, **settings):
@@ -48,20 +52,40 @@ def simulate(source, as_json, plot_dir, hold, **settings):
         name = prog.name
     sim, contour, m = simulate_points(points, path, mach, hold)
     if plot_dir:
-        write_simulate_plots(sim, contour, plot_dir, name,
-                             mach.limits.contour_tolerance_mm * 1000.0)
+        write_simulate_plots(
+            sim, contour, plot_dir, name, mach.limits.contour_tolerance_mm * 1000.0
+        )
     if as_json:
         from nurbscnc.plan.report import metrics_json
 
-        click.echo(json.dumps({"ok": True, "program": name, "samples": int(points.shape[0]),
-                               **metrics_json(m), **machine_json(mach)}))
+        click.echo(
+            json.dumps(
+                {
+                    "ok": True,
+                    "program": name,
+                    "samples": int(points.shape[0]),
+                    **metrics_json(m),
+                    **machine_json(mach),
+                }
+            )
+        )
         return
-    out.print(f"{name}: {points.shape[0]} reference points, cycle time {m['cycle_time_s']:.4f} s",
-              markup=False)  # fmt: skip
-    out.print(f"  axis error X: max {m['axis_x_max_um']:.2f} µm, RMS {m['axis_x_rms_um']:.2f} µm;"
-              f" Y: max {m['axis_y_max_um']:.2f} µm, RMS {m['axis_y_rms_um']:.2f} µm",
-              markup=False)  # fmt: skip
-    out.print(f"  contour error (eq. 29): max {m['contour_max_um']:.2f} µm, RMS "
-              f"{m['contour_rms_um']:.2f} µm, mean {m['contour_mean_um']:.2f} µm", markup=False)
-    out.print(f"  contour error (true distance): max {m['true_max_um']:.2f} µm, RMS "
-              f"{m['true_rms_um']:.2f} µm, mean {m['true_mean_um']:.2f} µm", markup=False)
+    out.print(
+        f"{name}: {points.shape[0]} reference points, cycle time {m['cycle_time_s']:.4f} s",
+        markup=False,
+    )
+    out.print(
+        f"  axis error X: max {m['axis_x_max_um']:.2f} µm, RMS {m['axis_x_rms_um']:.2f} µm;"
+        f" Y: max {m['axis_y_max_um']:.2f} µm, RMS {m['axis_y_rms_um']:.2f} µm",
+        markup=False,
+    )
+    out.print(
+        f"  contour error (eq. 29): max {m['contour_max_um']:.2f} µm, RMS "
+        f"{m['contour_rms_um']:.2f} µm, mean {m['contour_mean_um']:.2f} µm",
+        markup=False,
+    )
+    out.print(
+        f"  contour error (true distance): max {m['true_max_um']:.2f} µm, RMS "
+        f"{m['true_rms_um']:.2f} µm, mean {m['true_mean_um']:.2f} µm",
+        markup=False,
+    )

@@ -37,8 +37,15 @@ def load_pulse_program(path: str, machine=None, overrides=(), **_settings):
     return pulses_of_points(points_of_file(path, mach), mach), mach
 
 
-def plan_job(path: str, machine=None, overrides=(), from_line: int | None = None,
-             optional_stop: bool = False, override: float = 1.0, **settings):
+def plan_job(
+    path: str,
+    machine=None,
+    overrides=(),
+    from_line: int | None = None,
+    optional_stop: bool = False,
+    override: float = 1.0,
+    **settings,
+):
     """Plan program ``path`` (from ``from_line`` on) for the stream with the options ``run``
     builds from the same ``settings`` (:func:`~nurbscnc.app.settings.run_options_of`).
     Returns ``(job, pulses, machine)`` (:func:`~nurbscnc.app.stream.stream_job`): a job
@@ -47,8 +54,12 @@ def plan_job(path: str, machine=None, overrides=(), from_line: int | None = None
     raises here, before any port is touched (the pulse limit too)."""
     options = run_options_of(settings)
     mach = load_machine_cli(machine, overrides)
-    prog = load_program(path, not settings.get("no_block_delete", False),
-                        settings.get("tool_table"), settings.get("subroutine_path", ()))
+    prog = load_program(
+        path,
+        not settings.get("no_block_delete", False),
+        settings.get("tool_table"),
+        settings.get("subroutine_path", ()),
+    )
     job, pulses = stream_job(prog, mach, options, from_line, optional_stop, override)
     return job, pulses, mach
 
@@ -66,8 +77,9 @@ def _progress_bar(enabled: bool, total: int, keys: bool = False):
         if waiting and pr.note != last["note"]:
             why = pr.note.split("waiting: ")[1]
             where = f" at line {pr.line}" if why == "feed hold" and pr.line else ""
-            err.print(f"stream: {why}{where}: the card is at rest; {how}", markup=False,
-                      highlight=False)  # fmt: skip
+            err.print(
+                f"stream: {why}{where}: the card is at rest; {how}", markup=False, highlight=False
+            )
         last["note"] = pr.note if waiting else ""
 
     if not enabled:
@@ -75,56 +87,117 @@ def _progress_bar(enabled: bool, total: int, keys: bool = False):
         return
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
-    with Progress(TextColumn("streaming"), BarColumn(), TextColumn("{task.fields[info]}"),
-                  TimeElapsedColumn(), console=err, transient=False) as bar:  # fmt: skip
+    with Progress(
+        TextColumn("streaming"),
+        BarColumn(),
+        TextColumn("{task.fields[info]}"),
+        TimeElapsedColumn(),
+        console=err,
+        transient=False,
+    ) as bar:
         task = bar.add_task("stream", total=max(total, 1), info="")
 
         def update(pr) -> None:
             tell(pr)
-            info = (f"line {pr.line} · executed {pr.executed} · buffer {pr.fill}/{pr.buffer}"
-                    + (f" · {pr.note}" if pr.note else ""))  # fmt: skip
-            bar.update(task, completed=pr.executed, total=max(pr.periods, total, 1),
-                       info=info.replace("[", "\\["))  # fmt: skip
+            info = f"line {pr.line} · executed {pr.executed} · buffer {pr.fill}/{pr.buffer}" + (
+                f" · {pr.note}" if pr.note else ""
+            )
+            bar.update(
+                task,
+                completed=pr.executed,
+                total=max(pr.periods, total, 1),
+                info=info.replace("[", "\\["),
+            )
 
         yield update
 
 
 @click.command()
 @click.argument("program", type=click.Path())
-@click.option("--port", required=True,
-              help="The card's serial device, e.g. /dev/ttyUSB0 (opened exclusively).")
-@click.option("--allow-url", is_flag=True,
-              help="Accept a pyserial URL (socket://HOST:PORT, rfc2217://...) as --port. "
-                   "These are unauthenticated network connections.")
-@click.option("--baud", type=click.IntRange(min=1), default=115200, show_default=True,
-              help="Line rate.")
-@click.option("--batch", type=click.IntRange(1, 80), default=16, show_default=True,
-              help="Periods per frame (at most 80 with 3 axes).")
-@click.option("--timeout", "timeout_s", type=click.FloatRange(min=0.0, min_open=True),
-              default=2.0, show_default=True,
-              help="Seconds without an answer from the card before giving up.")
-@click.option("--lead", "lead", type=click.IntRange(min=1), default=None, metavar="PERIODS",
-              help="Keep at most this many periods queued ahead of the card's execution "
-                   "(default: its whole buffer): a feed hold acts that much sooner; at least "
-                   "half the card's buffer.")
-@click.option("--optional-stop", is_flag=True,
-              help="Wait at M1 (optional stop) too; without it M1 is passed.")
-@click.option("--feed-override", type=click.IntRange(10, 100), default=100, show_default=True,
-              metavar="PERCENT",
-              help="Feed override at the start [%]; + / - keys change it by 10 % while "
-                   "streaming (10-100 %).")
-@click.option("--zero", is_flag=True,
-              help="Declare that the card stands at the program's start (sets the card's "
-                   "position; protocol version 3) instead of refusing a card elsewhere.")
-@click.option("--from-line", type=click.IntRange(min=1), default=None, metavar="N",
-              help="Start at source line N (run from line): the program is interpreted "
-                   "whole, the tool goes up to a safe Z, across, and down to line N's start.")
+@click.option(
+    "--port",
+    required=True,
+    help="The card's serial device, e.g. /dev/ttyUSB0 (opened exclusively).",
+)
+@click.option(
+    "--allow-url",
+    is_flag=True,
+    help="Accept a pyserial URL (socket://HOST:PORT, rfc2217://...) as --port. "
+    "These are unauthenticated network connections.",
+)
+@click.option(
+    "--baud", type=click.IntRange(min=1), default=115200, show_default=True, help="Line rate."
+)
+@click.option(
+    "--batch",
+    type=click.IntRange(1, 80),
+    default=16,
+    show_default=True,
+    help="Periods per frame (at most 80 with 3 axes).",
+)
+@click.option(
+    "--timeout",
+    "timeout_s",
+    type=click.FloatRange(min=0.0, min_open=True),
+    default=2.0,
+    show_default=True,
+    help="Seconds without an answer from the card before giving up.",
+)
+@click.option(
+    "--lead",
+    "lead",
+    type=click.IntRange(min=1),
+    default=None,
+    metavar="PERIODS",
+    help="Keep at most this many periods queued ahead of the card's execution "
+    "(default: its whole buffer): a feed hold acts that much sooner; at least "
+    "half the card's buffer.",
+)
+@click.option(
+    "--optional-stop", is_flag=True, help="Wait at M1 (optional stop) too; without it M1 is passed."
+)
+@click.option(
+    "--feed-override",
+    type=click.IntRange(10, 100),
+    default=100,
+    show_default=True,
+    metavar="PERCENT",
+    help="Feed override at the start [%]; + / - keys change it by 10 % while streaming (10-100 %).",
+)
+@click.option(
+    "--zero",
+    is_flag=True,
+    help="Declare that the card stands at the program's start (sets the card's "
+    "position; protocol version 3) instead of refusing a card elsewhere.",
+)
+@click.option(
+    "--from-line",
+    type=click.IntRange(min=1),
+    default=None,
+    metavar="N",
+    help="Start at source line N (run from line): the program is interpreted "
+    "whole, the tool goes up to a safe Z, across, and down to line N's start.",
+)
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @click.option("--json", "as_json", is_flag=True, help="Print the final report as JSON.")
 @planning_options
 @handle_errors
-def stream(program, port, allow_url, baud, batch, timeout_s, lead, optional_stop, feed_override,
-           zero, from_line, quiet, as_json, **settings):  # fmt: skip
+def stream(
+    program,
+    port,
+    allow_url,
+    baud,
+    batch,
+    timeout_s,
+    lead,
+    optional_stop,
+    feed_override,
+    zero,
+    from_line,
+    quiet,
+    as_json,
+    **settings,
+):
     """Stream PROGRAM (.nc/.ngc, or reference points .csv/.npz) to a pulse-train card.
 
     The program is parsed, interpreted and its geometry checked before the port is opened;
@@ -147,12 +220,18 @@ def stream(program, port, allow_url, baud, batch, timeout_s, lead, optional_stop
     with routed_signals(operator, ("SIGUSR1", "SIGUSR2")):
         job = pulses = None
         if points_file and (from_line is not None or feed_override != 100):
-            raise ConfigError("--from-line and --feed-override need a program (.nc/.ngc), "
-                              "not a file of reference points")  # fmt: skip
+            raise ConfigError(
+                "--from-line and --feed-override need a program (.nc/.ngc), "
+                "not a file of reference points"
+            )
         if not points_file:
-            job, pulses, mach = plan_job(program, from_line=from_line,
-                                         optional_stop=optional_stop,
-                                         override=feed_override / 100.0, **settings)  # fmt: skip
+            job, pulses, mach = plan_job(
+                program,
+                from_line=from_line,
+                optional_stop=optional_stop,
+                override=feed_override / 100.0,
+                **settings,
+            )
         try:
             if job is None:
                 if from_line is not None or feed_override != 100:
@@ -163,8 +242,14 @@ def stream(program, port, allow_url, baud, batch, timeout_s, lead, optional_stop
             else:
                 total = int(round(job.plan.cycle_time_s / job.period_s / job.override))
             operator.attach_job(job)
-            link = {"port": port, "baud": baud, "allow_url": allow_url, "batch": batch,
-                    "timeout_s": timeout_s, "lead": lead}  # fmt: skip
+            link = {
+                "port": port,
+                "baud": baud,
+                "allow_url": allow_url,
+                "batch": batch,
+                "timeout_s": timeout_s,
+                "lead": lead,
+            }
             reports = _send(link, operator, job, pulses, total, zero, quiet, as_json)
         finally:  # the planner thread stopped before the process may exit
             if job is not None and job.feed is not None:
@@ -175,23 +260,33 @@ def stream(program, port, allow_url, baud, batch, timeout_s, lead, optional_stop
 def _needs_the_job(settings) -> str:
     """Why ``--from-line`` and ``--feed-override`` are refused for a program planned whole."""
     if settings.get("algorithm", "ph-lookahead") != "ph-lookahead":
-        return ("--from-line and --feed-override need the look-ahead planner (--algorithm "
-                "ph-lookahead)")
-    return ("--from-line and --feed-override need the look-ahead planner without "
-            "--precompensate (a pre-compensated program is streamed as planned whole)")
+        return (
+            "--from-line and --feed-override need the look-ahead planner (--algorithm ph-lookahead)"
+        )
+    return (
+        "--from-line and --feed-override need the look-ahead planner without "
+        "--precompensate (a pre-compensated program is streamed as planned whole)"
+    )
 
 
-def _send(link: dict, operator: Operator, job, pulses, total: int, zero: bool, quiet: bool,
-          as_json: bool) -> list:
+def _send(
+    link: dict, operator: Operator, job, pulses, total: int, zero: bool, quiet: bool, as_json: bool
+) -> list:
     """Open the card's port (``link``: the port options), stream the ``job`` (or the
     ``pulses`` without one) with the operator's keys and signals routed, and close the port;
     returns the sender's reports (one per part of the stream)."""
     from nurbscnc.output.stream.sender import Sender, SenderOptions, open_port
 
-    options = SenderOptions(batch_periods=link["batch"], timeout_s=link["timeout_s"],
-                            lead_periods=link["lead"])  # fmt: skip
-    ser = open_port(link["port"], baud=link["baud"], allow_url=link["allow_url"],
-                    write_timeout_s=link["timeout_s"], read_wait_s=options.read_wait_s)
+    options = SenderOptions(
+        batch_periods=link["batch"], timeout_s=link["timeout_s"], lead_periods=link["lead"]
+    )
+    ser = open_port(
+        link["port"],
+        baud=link["baud"],
+        allow_url=link["allow_url"],
+        write_timeout_s=link["timeout_s"],
+        read_wait_s=options.read_wait_s,
+    )
     show = not (quiet or as_json) and console.err.is_terminal
     keys = not as_json and sys.stdin is not None and sys.stdin.isatty()
     try:
@@ -215,9 +310,11 @@ def _print_report(program: str, job, reports: list, as_json: bool) -> None:
         click.echo(json.dumps(report))
         return
     holds = report.get("holds", [])
-    hold_text = "".join(f"; feed hold: deceleration began {h['latency_s'] * 1e3:.0f} ms after "
-                        f"the request, at rest after {h['stop_s'] * 1e3:.0f} ms"
-                        for h in holds)  # fmt: skip
+    hold_text = "".join(
+        f"; feed hold: deceleration began {h['latency_s'] * 1e3:.0f} ms after "
+        f"the request, at rest after {h['stop_s'] * 1e3:.0f} ms"
+        for h in holds
+    )
     console.out.print(
         f"{program}: {report['executed_periods']} periods streamed in {report['sections']} "
         f"part(s), {report['frames_sent']} frames ({report['bytes_sent']} bytes), "
@@ -238,9 +335,14 @@ def _planning_text(planning: dict) -> str:
     return (
         f"planning: {planning['windows']} cut window(s); the first planned after "
         f"{planning['first_window_s']:.3f} s, all after "
-        + (f"{planning['planned_s']:.3f} s" if planning["planned_s"] is not None
-           else "(unfinished)")
-        + ("; least margin ahead of the card "
-           + (f"{margin:.3f} s" if margin is not None else "— (no window while moving)"))
+        + (
+            f"{planning['planned_s']:.3f} s"
+            if planning["planned_s"] is not None
+            else "(unfinished)"
+        )
+        + (
+            "; least margin ahead of the card "
+            + (f"{margin:.3f} s" if margin is not None else "— (no window while moving)")
+        )
         + f"; {planning['holds']} planning hold(s), {planning['held_s']:.3f} s held"
     )

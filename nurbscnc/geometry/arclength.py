@@ -42,8 +42,9 @@ def _gl_integral(speed: Callable[[np.ndarray], np.ndarray], a, b) -> np.ndarray:
     return half * (values @ GL_WEIGHTS)
 
 
-def _gl8_integral(speed: Callable[[np.ndarray], np.ndarray], a: np.ndarray,
-                  b: np.ndarray) -> np.ndarray:  # fmt: skip
+def _gl8_integral(
+    speed: Callable[[np.ndarray], np.ndarray], a: np.ndarray, b: np.ndarray
+) -> np.ndarray:
     """∫_a^b speed(u) du by 8-point Gauss–Legendre, elementwise over 1-D arrays a, b; the
     weighted sum node by node in a fixed order, so each value depends on its own a, b only
     (a matrix product's summation order may change with the number of rows)."""
@@ -56,8 +57,13 @@ def _gl8_integral(speed: Callable[[np.ndarray], np.ndarray], a: np.ndarray,
     return half * acc
 
 
-def _halve_pieces(speed: Callable[[np.ndarray], np.ndarray], a: np.ndarray, w: np.ndarray,
-                  value: np.ndarray, tol: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _halve_pieces(
+    speed: Callable[[np.ndarray], np.ndarray],
+    a: np.ndarray,
+    w: np.ndarray,
+    value: np.ndarray,
+    tol: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
     """Adaptive Gauss–Legendre over the pieces [a, a + w] whose 16-point values are ``value``
     [mm]: each is halved until its halves' sum agrees with it within its ``tol`` [mm] (each
     half gets half), at most :data:`HALVING_DEPTH` times and :data:`HALVING_MAX_PIECES`
@@ -141,9 +147,13 @@ class ArcLengthTable:
                 # weight) that equal pieces miss. Its pieces are halved where it is.
                 hard = ~done
                 if hard.any():
-                    a_h, l_h = _halve_pieces(speed, a[hard].ravel(),
-                                             np.repeat(width[hard, 0] / k, k),
-                                             pieces[hard].ravel(), np.repeat(tol[hard] / k, k))
+                    a_h, l_h = _halve_pieces(
+                        speed,
+                        a[hard].ravel(),
+                        np.repeat(width[hard, 0] / k, k),
+                        pieces[hard].ravel(),
+                        np.repeat(tol[hard] / k, k),
+                    )
                     starts.append(a_h)
                     lengths.append(l_h)
                 done[:] = True
@@ -196,9 +206,11 @@ class ArcLengthTable:
             lo, hi = np.minimum(ja[cut], jb[cut]), np.maximum(ja[cut], jb[cut])
             ua, ub = np.minimum(a[cut], b[cut]), np.maximum(a[cut], b[cut])
             brk, cum = self.breaks, self.cumulative_mm
-            part = (_gl8_integral(self.speed, ua, brk[lo + 1])
-                    + (cum[hi] - cum[lo + 1])
-                    + _gl8_integral(self.speed, brk[hi], ub))  # fmt: skip
+            part = (
+                _gl8_integral(self.speed, ua, brk[lo + 1])
+                + (cum[hi] - cum[lo + 1])
+                + _gl8_integral(self.speed, brk[hi], ub)
+            )
             out[cut] = np.where(b[cut] >= a[cut], part, -part)
         return out
 

@@ -137,8 +137,14 @@ def planar_kind(geom, normal: np.ndarray, vertex_mm: np.ndarray | None = None) -
     return False
 
 
-def blend_corner(geom_a, geom_b, tolerance_mm: float, max_trim_a_mm: float,
-                 max_trim_b_mm: float, measure: bool = True) -> Blend | None:
+def blend_corner(
+    geom_a,
+    geom_b,
+    tolerance_mm: float,
+    max_trim_a_mm: float,
+    max_trim_b_mm: float,
+    measure: bool = True,
+) -> Blend | None:
     """The largest PH quintic blend of the corner within ``tolerance_mm`` [mm]
     (:mod:`nurbscnc.geometry.phcorner`).
 
@@ -178,19 +184,20 @@ def blend_corner(geom_a, geom_b, tolerance_mm: float, max_trim_a_mm: float,
     n_c = unit_vector(n_c)
     if not (planar_kind(geom_a, n_c, vertex) and planar_kind(geom_b, n_c, vertex)):
         return None
-    origin, e1, e2 = plane_frame(np.array([vertex - t_a, vertex, vertex + t_b]),
-                                 tol_mm=1e-12 * scale)  # fmt: skip
+    origin, e1, e2 = plane_frame(
+        np.array([vertex - t_a, vertex, vertex + t_b]), tol_mm=1e-12 * scale
+    )
     rel = vertex - origin
-    corner = Corner(geom_a, geom_b, len_a, origin, e1, e2, cross3(e1, e2),
-                     complex(rel @ e1, rel @ e2))
+    corner = Corner(
+        geom_a, geom_b, len_a, origin, e1, e2, cross3(e1, e2), complex(rel @ e1, rel @ e2)
+    )
 
     d_line = tol * (1.0 - 0.5 * SEARCH_WINDOW) / line_deviation_per_trim(turning)
     d_cap = min(d_max, TRIM_CAP_FACTOR * d_line)
     d_enough = 0.5 * min(d_line, d_cap)  # a G2 blend this long is preferred to any G1 one
     both_lines = isinstance(geom_a, LineGeometry) and isinstance(geom_b, LineGeometry)
     per_trim = line_deviation_per_trim(turning) if both_lines and not measure else None
-    best = search_trim(corner, tol, d_line, d_cap, g2=True, d_floor=d_enough,
-                   dev_per_trim=per_trim)  # fmt: skip
+    best = search_trim(corner, tol, d_line, d_cap, g2=True, d_floor=d_enough, dev_per_trim=per_trim)
     if not both_lines and (best is None or best.trim_mm < d_enough):
         g1 = search_trim(corner, tol, d_line, d_cap, g2=False)
         if g1 is not None and (best is None or g1.trim_mm > best.trim_mm):
@@ -198,8 +205,15 @@ def blend_corner(geom_a, geom_b, tolerance_mm: float, max_trim_a_mm: float,
     if best is None or best.trim_mm <= MIN_TRIM_MM:
         return None
     k = np.abs(best.ph.curvature(XI))
-    return Blend(best.ph, best.trim_mm, best.trim_mm, best.deviation_mm, _kappa_max(k),
-                 float(np.degrees(turning)), best.kappa_jump_per_mm)
+    return Blend(
+        best.ph,
+        best.trim_mm,
+        best.trim_mm,
+        best.deviation_mm,
+        _kappa_max(k),
+        float(np.degrees(turning)),
+        best.kappa_jump_per_mm,
+    )
 
 
 def _kappa_max(k: np.ndarray) -> float:
@@ -211,4 +225,3 @@ def _kappa_max(k: np.ndarray) -> float:
         if denom < 0.0:
             return float(k0 - 0.125 * (kp - km) ** 2 / denom)
     return float(k[i])
-

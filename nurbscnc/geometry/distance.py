@@ -39,13 +39,22 @@ def _geometry_key(g) -> tuple:
     curve's degree, knots, control points and weights (their bytes); any other object is
     only itself."""
     if isinstance(g, NurbsCurve):
-        return ("nurbs", int(g.degree), *(np.ascontiguousarray(x).tobytes()
-                                          for x in (g.knots, g.control_points_mm, g.weights)))
+        return (
+            "nurbs",
+            int(g.degree),
+            *(np.ascontiguousarray(x).tobytes() for x in (g.knots, g.control_points_mm, g.weights)),
+        )
     return ("object", id(g))
 
 
-def windowed_contour_mm(actual_mm: np.ndarray, lag_mm: np.ndarray, s_ref_mm: np.ndarray,
-                        pieces, profile, index: PathIndex | None = None) -> np.ndarray:  # fmt: skip
+def windowed_contour_mm(
+    actual_mm: np.ndarray,
+    lag_mm: np.ndarray,
+    s_ref_mm: np.ndarray,
+    pieces,
+    profile,
+    index: PathIndex | None = None,
+) -> np.ndarray:
     """True distance [mm] from each actual point to the path near its reference (module doc).
 
     ``actual_mm`` (M, 3); ``lag_mm`` (M,) |reference − actual| [mm]; ``s_ref_mm`` (M,) the
@@ -77,8 +86,7 @@ def windowed_contour_mm(actual_mm: np.ndarray, lag_mm: np.ndarray, s_ref_mm: np.
         b_idx = np.minimum(np.searchsorted(ps, s + w, side="right"), ps.size - 1)
         b_idx = np.maximum(b_idx, np.minimum(a_idx + 1, ps.size - 1))
         # Polyline segment j runs from point j to point j + 1.
-        out[sl] = segment_distances(actual_mm[sl], pts[:-1], np.diff(pts, axis=0), a_idx,
-                                    b_idx)  # fmt: skip
+        out[sl] = segment_distances(actual_mm[sl], pts[:-1], np.diff(pts, axis=0), a_idx, b_idx)
     return out
 
 
@@ -88,8 +96,9 @@ def _dot3(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     return (x[:, 0] * y[:, 0] + x[:, 1] * y[:, 1]) + x[:, 2] * y[:, 2]
 
 
-def segment_distances(q_mm: np.ndarray, a_mm: np.ndarray, d_mm: np.ndarray, lo: np.ndarray,
-                      hi: np.ndarray) -> np.ndarray:  # fmt: skip
+def segment_distances(
+    q_mm: np.ndarray, a_mm: np.ndarray, d_mm: np.ndarray, lo: np.ndarray, hi: np.ndarray
+) -> np.ndarray:
     """For each point ``q_mm[i]`` (m, 3) [mm], the distance [mm] to the nearest of the
     segments a_k + t·d_k, t ∈ [0, 1], k ∈ [``lo[i]``, ``hi[i]``) (inf where that is empty):
     :func:`_segment_distances_py`, compiled where :mod:`nurbscnc.geometry._kernels` was built
@@ -104,8 +113,9 @@ def segment_distances(q_mm: np.ndarray, a_mm: np.ndarray, d_mm: np.ndarray, lo: 
     return out
 
 
-def _segment_distances_py(q: np.ndarray, a: np.ndarray, d: np.ndarray, lo: np.ndarray,
-                          hi: np.ndarray) -> np.ndarray:  # fmt: skip
+def _segment_distances_py(
+    q: np.ndarray, a: np.ndarray, d: np.ndarray, lo: np.ndarray, hi: np.ndarray
+) -> np.ndarray:
     """:func:`segment_distances` in numpy: every (point, segment) pair at once, a point's
     pairs consecutive, the nearest per point by a segmented minimum. Per pair: t =
     (q − a)·d / |d|² clipped to [0, 1] (0 where |d|² = 0), the distance |q − a − t·d|."""
@@ -199,17 +209,34 @@ class PathIndex:
         path = self._pieces.path
         if self._object_keys is None:
             first: dict = {}
-            self._object_keys = np.array([first.setdefault(_geometry_key(g), i)
-                                          for i, g in enumerate(path.objects)] + [-1],
-                                         dtype=np.int64)  # fmt: skip
+            self._object_keys = np.array(
+                [first.setdefault(_geometry_key(g), i) for i, g in enumerate(path.objects)] + [-1],
+                dtype=np.int64,
+            )
         obj = np.take(self._object_keys, np.take(path.obj_id, cand))  # −1 → the last: −1
         ph = np.where(np.take(path.ph_slot, cand) >= 0, cand, -1)  # a PH row: only itself
         # One row per candidate of every column that places its points, as the bits of
         # float64s (−0.0 is not 0.0; the integers are exact in a float).
-        columns = [np.take(c, cand, axis=-1).reshape(-1, cand.size) for c in (
-            path.kind, self._counts, path.length_mm, path.radius_mm, path.angle_rad,
-            path.helix_mm, path.u_a, path.u_b, path.s_a_mm, path.start_mm, path.end_mm,
-            path.origin_mm, path.e1, path.e2, path.normal)]  # fmt: skip
+        columns = [
+            np.take(c, cand, axis=-1).reshape(-1, cand.size)
+            for c in (
+                path.kind,
+                self._counts,
+                path.length_mm,
+                path.radius_mm,
+                path.angle_rad,
+                path.helix_mm,
+                path.u_a,
+                path.u_b,
+                path.s_a_mm,
+                path.start_mm,
+                path.end_mm,
+                path.origin_mm,
+                path.e1,
+                path.e2,
+                path.normal,
+            )
+        ]
         rows = np.ascontiguousarray(np.vstack([*columns, obj, ph]).T, dtype=np.float64)
         rows = rows.view(np.int64)
         # Rows grouped by a hash of their bits, then compared whole (a collision keeps both).
@@ -253,8 +280,9 @@ class PathIndex:
             c = centre[idx]
             axis = int(np.argmax(c.max(axis=0) - c.min(axis=0)))
             order = np.argsort(c[:, axis], kind="stable")
-            bands.append((idx[order], np.ascontiguousarray(c[order, axis]), axis,
-                          float(radius[idx].max())))  # fmt: skip
+            bands.append(
+                (idx[order], np.ascontiguousarray(c[order, axis]), axis, float(radius[idx].max()))
+            )
         self._bands = bands
 
     def _ball_columns(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -280,8 +308,9 @@ class PathIndex:
             near |= np.any(gap <= upper_mm[lo : lo + step, None], axis=0)
         return idx[near]
 
-    def dense_polyline(self, pieces, starts_mm: np.ndarray, total_mm: float, lo: int,
-                       hi: int) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    def dense_polyline(
+        self, pieces, starts_mm: np.ndarray, total_mm: float, lo: int, hi: int
+    ) -> tuple[np.ndarray, np.ndarray]:
         """:func:`~nurbscnc.geometry.polyline.dense_polyline` of pieces ``lo:hi`` of the
         program or of a head of it (its first pieces, as a cut window measures against
         them): the same numbers, the points of the program's first :data:`DENSE_POINTS`
@@ -293,8 +322,12 @@ class PathIndex:
         if dense is None:
             off = np.concatenate(([0], np.cumsum(path_counts(self._pieces))))
             room = int(np.searchsorted(off, self.DENSE_POINTS, side="right")) - 1
-            dense = self._dense = {"off": off, "room": room, "filled": 0,
-                                   "pts": np.empty((int(off[room]), 3))}  # fmt: skip
+            dense = self._dense = {
+                "off": off,
+                "room": room,
+                "filled": 0,
+                "pts": np.empty((int(off[room]), 3)),
+            }
         filled, off, room = dense["filled"], dense["off"], dense["room"]
         same_path = pieces.path is self._pieces.path
         if same_path and lo <= filled < min(hi, room):  # place [filled, hi), keep what fits
@@ -310,8 +343,10 @@ class PathIndex:
         if not same_path or hi > filled:
             return dense_polyline(pieces, starts_mm, total_mm, lo, hi)
         piece, local = dense_local(pieces, lo, hi)
-        return (path_lengths(starts_mm, total_mm, piece, local),
-                dense["pts"][int(off[lo]) : int(off[hi])])  # fmt: skip
+        return (
+            path_lengths(starts_mm, total_mm, piece, local),
+            dense["pts"][int(off[lo]) : int(off[hi])],
+        )
 
     def candidates(self, q: np.ndarray, upper_mm: np.ndarray) -> np.ndarray:
         """Pieces that may hold a path point closer to some point of ``q`` (m, 3) than
@@ -413,8 +448,12 @@ class PathIndex:
                     continue
                 lo_s, hi_s = np.minimum(p[:-1], p[1:]), np.maximum(p[:-1], p[1:])
                 heads = np.arange(0, lo_s.shape[0], self.CHUNK)
-                cache[j] = (p, np.minimum.reduceat(lo_s, heads, axis=0),
-                            np.maximum.reduceat(hi_s, heads, axis=0), None)  # fmt: skip
+                cache[j] = (
+                    p,
+                    np.minimum.reduceat(lo_s, heads, axis=0),
+                    np.maximum.reduceat(hi_s, heads, axis=0),
+                    None,
+                )
             self._cached_points += int(c.sum())
         return [cache[j] for j in cand.tolist()]
 
@@ -458,8 +497,13 @@ class PathIndex:
             return np.zeros((0, 3)), np.zeros((0, 3))
         return np.concatenate(starts), np.concatenate(dirs)
 
-    def distance_mm(self, q: np.ndarray, upper_mm: np.ndarray, block: int = 256,
-                    exclude: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
+    def distance_mm(
+        self,
+        q: np.ndarray,
+        upper_mm: np.ndarray,
+        block: int = 256,
+        exclude: np.ndarray | None = None,
+    ) -> np.ndarray:
         """Distance [mm] from each point of ``q`` (m, 3) to the whole path, for points whose
         distance is known to be at most ``upper_mm`` (m,): exact to the polyline of
         :func:`path_counts` on the candidate pieces, never above ``upper_mm``. ``exclude``
@@ -488,7 +532,8 @@ class PathIndex:
             if a.shape[0] == 0:
                 continue
             m = hi - lo
-            dist = segment_distances(qb, a, d, np.zeros(m, dtype=np.int64),
-                                     np.full(m, a.shape[0], dtype=np.int64))  # fmt: skip
+            dist = segment_distances(
+                qb, a, d, np.zeros(m, dtype=np.int64), np.full(m, a.shape[0], dtype=np.int64)
+            )
             out[sl] = np.minimum(out[sl], dist)
         return out

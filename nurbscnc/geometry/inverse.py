@@ -28,14 +28,16 @@ def _hermite_quintic(y0, d0, a0, y1, d1, a1) -> np.ndarray:
     """Monomial coefficients (6, m) of the quintic on t ∈ [0, 1] with value, first and second
     derivative y, d, a given at t = 0 and t = 1 (already scaled to t)."""
     dy = y1 - y0
-    return np.array([
-        y0,
-        d0,
-        0.5 * a0,
-        10.0 * dy - 6.0 * d0 - 4.0 * d1 - 1.5 * a0 + 0.5 * a1,
-        -15.0 * dy + 8.0 * d0 + 7.0 * d1 + 1.5 * a0 - a1,
-        6.0 * dy - 3.0 * (d0 + d1) - 0.5 * (a0 - a1),
-    ])  # fmt: skip
+    return np.array(
+        [
+            y0,
+            d0,
+            0.5 * a0,
+            10.0 * dy - 6.0 * d0 - 4.0 * d1 - 1.5 * a0 + 0.5 * a1,
+            -15.0 * dy + 8.0 * d0 + 7.0 * d1 + 1.5 * a0 - a1,
+            6.0 * dy - 3.0 * (d0 + d1) - 0.5 * (a0 - a1),
+        ]
+    )
 
 
 def _horner(coeffs: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -82,9 +84,13 @@ class InverseArcTable:
     max_check_error_mm: float
 
     @classmethod
-    def build(cls, curve, tol_mm: float = INVERSE_TOL_MM,
-              start_mm: float = INVERSE_START_MM,
-              max_depth: int = INVERSE_MAX_DEPTH) -> InverseArcTable:  # fmt: skip
+    def build(
+        cls,
+        curve,
+        tol_mm: float = INVERSE_TOL_MM,
+        start_mm: float = INVERSE_START_MM,
+        max_depth: int = INVERSE_MAX_DEPTH,
+    ) -> InverseArcTable:
         """Build the table of ``curve`` (a :class:`~nurbscnc.geometry.nurbs.NurbsCurve`: its
         power form, arc-length table and speed floor; see the class docstring); vectorised
         per level."""
@@ -123,8 +129,7 @@ class InverseArcTable:
             with np.errstate(divide="ignore", invalid="ignore"):
                 t = (sc - s_lo) / width
                 uh = np.array([_horner(coeffs, t[i]) for i in range(checks.size)])
-            speed_c = _blockwise(pf.speed, uc.ravel(), np.tile(span, checks.size)).reshape(
-                uc.shape)
+            speed_c = _blockwise(pf.speed, uc.ravel(), np.tile(span, checks.size)).reshape(uc.shape)
             err = np.abs(uh - uc) * speed_c
             allow = np.maximum(tol_mm, 8.0 * eps * sc + 4.0 * np.spacing(np.abs(uc)) * speed_c)
             ok = np.all(err <= allow, axis=0) & ~bad_data
@@ -135,8 +140,17 @@ class InverseArcTable:
             kept += int(np.count_nonzero(keep))
             if np.any(ok):
                 worst = max(worst, float(np.max(err[:, ok])))
-            done.append((s_lo[keep], s_hi[keep], lo[keep], hi[keep], span[keep],
-                         coeffs[:, keep], give_up[keep]))  # fmt: skip
+            done.append(
+                (
+                    s_lo[keep],
+                    s_hi[keep],
+                    lo[keep],
+                    hi[keep],
+                    span[keep],
+                    coeffs[:, keep],
+                    give_up[keep],
+                )
+            )
             split = ~keep
             mid_u, mid_s = uc[1, split], sc[1, split]
             lo = np.concatenate((lo[split], mid_u))
@@ -155,10 +169,25 @@ class InverseArcTable:
         with np.errstate(divide="ignore"):
             inv_width = np.where(width > 0.0, 1.0 / width, 0.0)
         exact = exact[order] | (width <= 0.0)
-        table = cls(s_nodes, inv_width, np.ascontiguousarray(coeffs[:, order]), lo[order],
-                    hi[order], span[order], exact, worst)  # fmt: skip
-        for a in (table.s_nodes_mm, table.inv_width, table.coeffs, table.u_lo, table.u_hi,
-                  table.spans, table.exact):  # fmt: skip
+        table = cls(
+            s_nodes,
+            inv_width,
+            np.ascontiguousarray(coeffs[:, order]),
+            lo[order],
+            hi[order],
+            span[order],
+            exact,
+            worst,
+        )
+        for a in (
+            table.s_nodes_mm,
+            table.inv_width,
+            table.coeffs,
+            table.u_lo,
+            table.u_hi,
+            table.spans,
+            table.exact,
+        ):
             a.setflags(write=False)
         return table
 
@@ -205,8 +234,9 @@ def _interval_hermite(lo, hi, width, d_lo, d_hi, speed_floor):
     du0, ddu0, cusp0 = end_data(d_lo)
     du1, ddu1, cusp1 = end_data(d_hi)
     with np.errstate(invalid="ignore", over="ignore"):
-        coeffs = _hermite_quintic(lo, du0 * width, ddu0 * width * width,
-                                  hi, du1 * width, ddu1 * width * width)  # fmt: skip
+        coeffs = _hermite_quintic(
+            lo, du0 * width, ddu0 * width * width, hi, du1 * width, ddu1 * width * width
+        )
     bad = cusp0 | cusp1 | ~np.all(np.isfinite(coeffs), axis=0)
     coeffs[:, bad] = 0.0
     return coeffs, bad

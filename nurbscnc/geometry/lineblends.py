@@ -119,8 +119,9 @@ def _kappa_peak(alpha, beta, c, s, iterations: int = 30) -> np.ndarray:
     return 4.0 * alpha * beta * s * x * u / (q * q)
 
 
-def line_corner_blends(vertex_mm, t_a, t_b, tolerance_mm, max_trim_a_mm,
-                       max_trim_b_mm=None) -> LineBlends:  # fmt: skip
+def line_corner_blends(
+    vertex_mm, t_a, t_b, tolerance_mm, max_trim_a_mm, max_trim_b_mm=None
+) -> LineBlends:
     """The blends of m line–line corners at once (the line path of CAM polylines).
 
     ``vertex_mm`` (m, 3) the corner points [mm]; ``t_a``, ``t_b`` (m, 3) the unit directions
@@ -159,8 +160,11 @@ def line_corner_blends(vertex_mm, t_a, t_b, tolerance_mm, max_trim_a_mm,
     m = v.shape[0]
     tol = np.broadcast_to(np.asarray(tolerance_mm, dtype=float), (m,))
     max_a = np.broadcast_to(np.asarray(max_trim_a_mm, dtype=float), (m,))
-    max_b = max_a if max_trim_b_mm is None else np.broadcast_to(
-        np.asarray(max_trim_b_mm, dtype=float), (m,))
+    max_b = (
+        max_a
+        if max_trim_b_mm is None
+        else np.broadcast_to(np.asarray(max_trim_b_mm, dtype=float), (m,))
+    )
     cross = np.cross(ta, tb)
     sin_t = np.sqrt(_rows_dot(cross, cross))
     turning = np.arctan2(sin_t, _rows_dot(ta, tb))
@@ -201,8 +205,12 @@ def line_corner_blends(vertex_mm, t_a, t_b, tolerance_mm, max_trim_a_mm,
         da, db = np.where(ok, da, 1.0), np.where(ok, db, 1.0)
         alpha, beta = _line_ab(da, db, c)
         p0 = -da * tau_a
-        mid = (p0 + (31.0 / 160.0) * alpha * alpha * tau_a + (alpha * beta / 30.0) * e0 * e2c
-               + (1.0 / 160.0) * beta * beta * tau_b)  # fmt: skip
+        mid = (
+            p0
+            + (31.0 / 160.0) * alpha * alpha * tau_a
+            + (alpha * beta / 30.0) * e0 * e2c
+            + (1.0 / 160.0) * beta * beta * tau_b
+        )
         dev = np.where(da == db, da * dpt, np.abs(mid))
         # Unequal trims beyond the tolerance: back to equal trims (exact closed form).
         back = (da != db) & (dev > tol * (1.0 - 1e-6))
@@ -232,16 +240,19 @@ def ph_tables(w: np.ndarray, p0: np.ndarray):
     scalar path does not, so the last bit can differ).
     """
     w0, w1, w2 = w[:, 0], w[:, 1], w[:, 2]
-    steps = np.stack([w0 * w0, w0 * w1, (2.0 * w1 * w1 + w0 * w2) / 3.0, w1 * w2, w2 * w2],
-                     axis=1)  # fmt: skip
-    points = p0[:, None] + np.concatenate((np.zeros((w.shape[0], 1)),
-                                           np.cumsum(steps / 5.0, axis=1)), axis=1)  # fmt: skip
-    sigma = np.stack([
-        np.abs(w0) ** 2,
-        (w0 * w1.conjugate()).real,
-        (2.0 * np.abs(w1) ** 2 + (w0 * w2.conjugate()).real) / 3.0,
-        (w1 * w2.conjugate()).real,
-        np.abs(w2) ** 2,
-    ], axis=1)  # fmt: skip
+    steps = np.stack([w0 * w0, w0 * w1, (2.0 * w1 * w1 + w0 * w2) / 3.0, w1 * w2, w2 * w2], axis=1)
+    points = p0[:, None] + np.concatenate(
+        (np.zeros((w.shape[0], 1)), np.cumsum(steps / 5.0, axis=1)), axis=1
+    )
+    sigma = np.stack(
+        [
+            np.abs(w0) ** 2,
+            (w0 * w1.conjugate()).real,
+            (2.0 * np.abs(w1) ** 2 + (w0 * w2.conjugate()).real) / 3.0,
+            (w1 * w2.conjugate()).real,
+            np.abs(w2) ** 2,
+        ],
+        axis=1,
+    )
     s = np.concatenate((np.zeros((w.shape[0], 1)), np.cumsum(sigma / 5.0, axis=1)), axis=1)
     return points, sigma, s, s[:, -1].copy()

@@ -174,9 +174,13 @@ class NurbsCurve:
             col = inner - (spans - p)
             w = self.weights
             idx = (spans - p)[:, None] + np.arange(p + 1)[None, :]
-            r = np.where((col >= 0) & (col <= p),
-                         basis[np.arange(u.size), np.clip(col, 0, p)] * w[inner]
-                         / np.sum(basis * w[idx], axis=1), 0.0)  # fmt: skip
+            r = np.where(
+                (col >= 0) & (col <= p),
+                basis[np.arange(u.size), np.clip(col, 0, p)]
+                * w[inner]
+                / np.sum(basis * w[idx], axis=1),
+                0.0,
+            )
             # P1 onto the ray P0 → P2, as far as the deviation allows (at most a third of
             # |P2 − P0|): |ΔP1| ≤ |P1 − P0| + ℓ, times max R1 ≤ 0.9 of the tolerance.
             if not r.max() > 0.0:
@@ -200,8 +204,12 @@ class NurbsCurve:
         side of a rounding boundary about once in 2,000 curves of 80 control points: that
         copy is then planned afresh, with the same result."""
         rel = self.control_points_mm - self.control_points_mm[0]
-        return (self.degree, self.knots.tobytes(), self.weights.tobytes(),
-                (np.round(rel / MOVED_KEY_MM) + 0.0).tobytes())  # fmt: skip (+0.0: no −0.0)
+        return (
+            self.degree,
+            self.knots.tobytes(),
+            self.weights.tobytes(),
+            (np.round(rel / MOVED_KEY_MM) + 0.0).tobytes(),
+        )  # (+0.0: no −0.0)
 
     def translation_from(self, other: NurbsCurve) -> np.ndarray | None:
         """The translation Δ (3,) [mm] that moves ``other`` onto this curve, or None if it is
@@ -210,9 +218,12 @@ class NurbsCurve:
         again at another place: its decimal coordinates round differently, 1.4e-14 mm on a
         60 mm airfoil moved by 70 mm). The difference of the two curves is then a NURBS of
         control points that small (convex hull), far below any tolerance of the planner."""
-        if (self.degree != other.degree or self.control_points_mm.shape
-                != other.control_points_mm.shape or not np.array_equal(self.knots, other.knots)
-                or not np.array_equal(self.weights, other.weights)):  # fmt: skip
+        if (
+            self.degree != other.degree
+            or self.control_points_mm.shape != other.control_points_mm.shape
+            or not np.array_equal(self.knots, other.knots)
+            or not np.array_equal(self.weights, other.weights)
+        ):
             return None
         mine, theirs = self.control_points_mm, other.control_points_mm
         size = max(float(np.abs(mine).max()), float(np.abs(theirs).max()))

@@ -110,8 +110,12 @@ def ph_power_rows(s_bern: np.ndarray, sigma_bern: np.ndarray, points: np.ndarray
     """Centred power coefficients (columns: one a piece) of PH quintics given in Bernstein form:
     ``s_bern`` (m, 6) arc length [mm], ``sigma_bern`` (m, 5) parametric speed [mm], ``points``
     (m, 6) complex control points [mm]. Returns (s (6, m), σ (5, m), x (6, m), y (6, m))."""
-    return ((s_bern @ BERNSTEIN5).T, (sigma_bern @ BERNSTEIN4).T,
-            (points.real @ BERNSTEIN5).T, (points.imag @ BERNSTEIN5).T)  # fmt: skip
+    return (
+        (s_bern @ BERNSTEIN5).T,
+        (sigma_bern @ BERNSTEIN4).T,
+        (points.real @ BERNSTEIN5).T,
+        (points.imag @ BERNSTEIN5).T,
+    )
 
 
 def _blocks(n: int, size: int = BLOCK):
@@ -135,8 +139,12 @@ def whole_row(geom, line: int = 0) -> tuple:
     from nurbscnc.geometry.paths import ArcGeometry, LineGeometry
     from nurbscnc.geometry.ph import PHQuintic
 
-    for cls, kind in ((LineGeometry, Kind.LINE), (ArcGeometry, Kind.ARC), (NurbsCurve, Kind.NURBS),
-                      (PHQuintic, Kind.PH)):  # fmt: skip
+    for cls, kind in (
+        (LineGeometry, Kind.LINE),
+        (ArcGeometry, Kind.ARC),
+        (NurbsCurve, Kind.NURBS),
+        (PHQuintic, Kind.PH),
+    ):
         if isinstance(geom, cls):
             u_a, u_b = (0.0, 1.0) if kind == Kind.PH else (geom.u_start, geom.u_end)
             return (kind, geom, float(geom.length_mm), float(u_a), float(u_b), 0.0, line)
@@ -213,8 +221,12 @@ class PathTable:
         ids: dict[int, int] = {}
         objects: list = []
         # Plain int codes in the loop (an enum per row was half of it on 4,950 NURBS rows).
-        c_line, c_arc, c_ph, c_spiral = int(Kind.LINE), int(Kind.ARC), int(Kind.PH), \
-            int(Kind.SPIRAL)  # fmt: skip
+        c_line, c_arc, c_ph, c_spiral = (
+            int(Kind.LINE),
+            int(Kind.ARC),
+            int(Kind.PH),
+            int(Kind.SPIRAL),
+        )
         for i, (code, g, length_i, ua, ub, sa, ln) in enumerate(rows):
             code = int(code)
             if code == c_arc and g.is_spiral:
@@ -243,13 +255,34 @@ class PathTable:
         ph_slot = np.full(k, -1, dtype=np.intp)
         if ph_rows:
             ph_slot[np.array(ph_rows)] = np.arange(m)
-            ph = tuple(map(np.ascontiguousarray, ph_power_rows(np.array(ph_s),
-                                                               np.array(ph_sigma),
-                                                               np.array(ph_pts))))  # fmt: skip
+            ph = tuple(
+                map(
+                    np.ascontiguousarray,
+                    ph_power_rows(np.array(ph_s), np.array(ph_sigma), np.array(ph_pts)),
+                )
+            )
         t = {name: np.ascontiguousarray(v.T) for name, v in vec.items()}
-        table = cls(kind, length, line, t["start"], t["end"], t["origin"], t["e1"], t["e2"],
-                    t["n"], radius, angle, helix, *ph, ph_slot, obj_id, tuple(objects), u_a,
-                    u_b, s_a)  # fmt: skip
+        table = cls(
+            kind,
+            length,
+            line,
+            t["start"],
+            t["end"],
+            t["origin"],
+            t["e1"],
+            t["e2"],
+            t["n"],
+            radius,
+            angle,
+            helix,
+            *ph,
+            ph_slot,
+            obj_id,
+            tuple(objects),
+            u_a,
+            u_b,
+            s_a,
+        )
         return table.frozen()
 
     @classmethod
@@ -259,16 +292,30 @@ class PathTable:
         cells cost 0.45 ms)."""
         k = len(rows)
         ids: dict[int, int] = {}  # curve → its index, in order of first use
-        obj_id = np.fromiter((ids.setdefault(id(r[1]), len(ids)) for r in rows),
-                             dtype=np.intp, count=k)  # fmt: skip
+        obj_id = np.fromiter(
+            (ids.setdefault(id(r[1]), len(ids)) for r in rows), dtype=np.intp, count=k
+        )
         objects = tuple({id(r[1]): r[1] for r in rows}.values())
         length, u_a, u_b, s_a = (np.array([r[c] for r in rows], dtype=float) for c in (2, 3, 4, 5))
         line = np.array([r[6] for r in rows], dtype=np.int64)
         zeros3 = [np.zeros((3, k)) for _ in range(6)]  # start, end, origin, e1, e2, n
         ph = (np.zeros((6, 0)), np.zeros((5, 0)), np.zeros((6, 0)), np.zeros((6, 0)))
-        table = cls(np.full(k, int(Kind.NURBS), dtype=np.int8), length, line, *zeros3,
-                    np.zeros(k), np.zeros(k), np.zeros(k), *ph, np.full(k, -1, dtype=np.intp),
-                    obj_id, objects, u_a, u_b, s_a)  # fmt: skip
+        table = cls(
+            np.full(k, int(Kind.NURBS), dtype=np.int8),
+            length,
+            line,
+            *zeros3,
+            np.zeros(k),
+            np.zeros(k),
+            np.zeros(k),
+            *ph,
+            np.full(k, -1, dtype=np.intp),
+            obj_id,
+            objects,
+            u_a,
+            u_b,
+            s_a,
+        )
         return table.frozen()
 
     def frozen(self) -> PathTable:
@@ -352,9 +399,12 @@ class PathTable:
         """Arc points (3, m) at fractions ``t`` of the arcs ``i``."""
         theta = t * np.take(self.angle_rad, i)
         r = np.take(self.radius_mm, i)
-        return (self._col3("origin_mm", i) + (r * np.cos(theta)) * self._col3("e1", i)
-                + (r * np.sin(theta)) * self._col3("e2", i)
-                + (t * np.take(self.helix_mm, i)) * self._col3("normal", i))  # fmt: skip
+        return (
+            self._col3("origin_mm", i)
+            + (r * np.cos(theta)) * self._col3("e1", i)
+            + (r * np.sin(theta)) * self._col3("e2", i)
+            + (t * np.take(self.helix_mm, i)) * self._col3("normal", i)
+        )
 
     def _ph_at(self, i, xi) -> np.ndarray:
         """PH points (3, m) at ξ on pieces ``i``: origin + x(ξ) e1 + y(ξ) e2."""
@@ -391,8 +441,14 @@ class PathTable:
                 return xi
             if 2 * n_going < xa.size:  # compact (the settled samples keep their ξ)
                 xi[at[~going]] = xa[~going]
-                at, xa, sa, ta, x, f = at[going], xa[going], sa[going], ta[going], x[going], \
-                    f[going]
+                at, xa, sa, ta, x, f = (
+                    at[going],
+                    xa[going],
+                    sa[going],
+                    ta[going],
+                    x[going],
+                    f[going],
+                )
                 cs, cg = cs[:, going], cg[:, going]
                 xa = np.clip(xa - f / _horner(cg, x), 0.0, 1.0)
             else:
@@ -464,8 +520,15 @@ class PathTable:
             return u
         oi = o[inside]
         big = length[inside]
-        t = segments.spiral_t_at_length(col["r0"][oi], col["r1"][oi], col["angle"][oi],
-                                        col["helix"][oi], ls[inside], big, max_iter)  # fmt: skip
+        t = segments.spiral_t_at_length(
+            col["r0"][oi],
+            col["r1"][oi],
+            col["angle"][oi],
+            col["helix"][oi],
+            ls[inside],
+            big,
+            max_iter,
+        )
         u[inside] = np.where(big > 0.0, big, 1.0) * t
         return u
 
@@ -505,8 +568,9 @@ class PathTable:
             elif code == Kind.PH:
                 o = self._ph_at(i, f).T
             elif code == Kind.SPIRAL:  # u = 0 + f (L − 0), as ArcGeometry's point
-                o = self._spiral_at(i, f * np.take(self._spiral_columns["length"],
-                                                   np.take(self.obj_id, i)))  # fmt: skip
+                o = self._spiral_at(
+                    i, f * np.take(self._spiral_columns["length"], np.take(self.obj_id, i))
+                )
             else:
                 o = np.empty((i.size, 3))
                 # Rows grouped by piece (a stable sort: O(m log m), not one scan per piece).
@@ -543,16 +607,20 @@ class PathTable:
                 r = np.take(self.radius_mm, i)
                 c, s = np.cos(t * dth), np.sin(t * dth)
                 e1, e2 = self._col3("e1", i), self._col3("e2", i)
-                d1[sel] = (r * dth * (c * e2 - s * e1)
-                           + np.take(self.helix_mm, i) * self._col3("normal", i)).T
+                d1[sel] = (
+                    r * dth * (c * e2 - s * e1)
+                    + np.take(self.helix_mm, i) * self._col3("normal", i)
+                ).T
                 d2[sel] = (-r * dth * dth * (c * e1 + s * e2)).T
             elif code == Kind.PH:
                 xi = self._ph_params(i, ls)
                 x = xi - 0.5
                 e1, e2 = self._col3("e1", i), self._col3("e2", i)
                 j = np.take(self.ph_slot, i)
-                dx, dy = horner_rows_derivative(self.ph_x, j, x), horner_rows_derivative(
-                    self.ph_y, j, x)
+                dx, dy = (
+                    horner_rows_derivative(self.ph_x, j, x),
+                    horner_rows_derivative(self.ph_y, j, x),
+                )
                 d1[sel] = (dx * e1 + dy * e2).T
                 ddx = _second_derivative_rows(self.ph_x, j, x)
                 ddy = _second_derivative_rows(self.ph_y, j, x)

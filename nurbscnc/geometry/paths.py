@@ -212,8 +212,9 @@ class ArcGeometry:
 
     def _length_t(self, t) -> np.ndarray:
         """s(t) [mm] from the start, closed form (segments.spiral_arc_length_mm)."""
-        return segments.spiral_arc_length_mm(self.radius_start_mm, self.radius_end_mm,
-                                             self.angle_rad, self.helix_mm, t)  # fmt: skip
+        return segments.spiral_arc_length_mm(
+            self.radius_start_mm, self.radius_end_mm, self.angle_rad, self.helix_mm, t
+        )
 
     @cached_property
     def length_mm(self) -> float:
@@ -226,9 +227,15 @@ class ArcGeometry:
     def _param_t_at_length(self, s_mm: np.ndarray, max_iter: int = 50) -> np.ndarray:
         """t ∈ [0, 1] with s(t) = s_mm (clamped): Newton on the closed form
         (:func:`segments.spiral_t_at_length`)."""
-        return segments.spiral_t_at_length(self.radius_start_mm, self.radius_end_mm,
-                                           self.angle_rad, self.helix_mm, s_mm,
-                                           self.length_mm, max_iter)  # fmt: skip
+        return segments.spiral_t_at_length(
+            self.radius_start_mm,
+            self.radius_end_mm,
+            self.angle_rad,
+            self.helix_mm,
+            s_mm,
+            self.length_mm,
+            max_iter,
+        )
 
     @property
     def u_end(self) -> float:

@@ -124,13 +124,15 @@ class PHQuintic:
         points = p0 + np.concatenate(([0.0], np.cumsum(steps / 5.0)))
         set_(self, "control_points", frozen_array(points, dtype=complex))
         # σ = |w|² in Bernstein form, degree 4.
-        sigma = np.array([
-            abs(w0) ** 2,
-            (w0 * w1.conjugate()).real,
-            (2.0 * abs(w1) ** 2 + (w0 * w2.conjugate()).real) / 3.0,
-            (w1 * w2.conjugate()).real,
-            abs(w2) ** 2,
-        ])
+        sigma = np.array(
+            [
+                abs(w0) ** 2,
+                (w0 * w1.conjugate()).real,
+                (2.0 * abs(w1) ** 2 + (w0 * w2.conjugate()).real) / 3.0,
+                (w1 * w2.conjugate()).real,
+                abs(w2) ** 2,
+            ]
+        )
         set_(self, "sigma_coeffs", frozen_array(sigma))
         # s = ∫σ: s_0 = 0, s_k = s_{k−1} + σ_{k−1}/5; L = Σσ_k/5.
         set_(self, "s_coeffs", frozen_array(np.concatenate(([0.0], np.cumsum(sigma / 5.0)))))
@@ -267,8 +269,8 @@ class PHQuintic:
         nearest = np.empty(q.size, dtype=int)
         chunk = max(1, 2_000_000 // n_dense)
         for start in range(0, q.size, chunk):  # bounded memory; not a per-sample loop
-            block = q[start:start + chunk]
-            nearest[start:start + chunk] = np.argmin(np.abs(rs[None, :] - block[:, None]), axis=1)
+            block = q[start : start + chunk]
+            nearest[start : start + chunk] = np.argmin(np.abs(rs[None, :] - block[:, None]), axis=1)
 
         def g(x, idx):
             d = self.point(x) - q[idx]
@@ -290,6 +292,7 @@ class PHQuintic:
         xi = x_mid.copy()
         sel = np.flatnonzero((left | right) & (b > a))
         if sel.size:
+
             def g_sel(x, idx):
                 return g(x, sel[idx])
 
@@ -346,8 +349,9 @@ class PHQuintic:
         return self.derivatives_mm(xi, order)
 
 
-def hermite_solutions(p0, p5, d0, d1, origin_mm=(0.0, 0.0, 0.0), e1=(1.0, 0.0, 0.0),
-                      e2=(0.0, 1.0, 0.0)) -> list[PHQuintic]:
+def hermite_solutions(
+    p0, p5, d0, d1, origin_mm=(0.0, 0.0, 0.0), e1=(1.0, 0.0, 0.0), e2=(0.0, 1.0, 0.0)
+) -> list[PHQuintic]:
     """The four PH quintics with r(0) = p0, r(1) = p5, r′(0) = d0, r′(1) = d1 (SPEC §4, eq. 21).
 
     All arguments complex plane coordinates [mm]; the frame is passed to each curve.
@@ -372,8 +376,9 @@ def hermite_solutions(p0, p5, d0, d1, origin_mm=(0.0, 0.0, 0.0), e1=(1.0, 0.0, 0
     return out
 
 
-def hermite_ph(p0, p5, d0, d1, origin_mm=(0.0, 0.0, 0.0), e1=(1.0, 0.0, 0.0),
-               e2=(0.0, 1.0, 0.0)) -> PHQuintic:
+def hermite_ph(
+    p0, p5, d0, d1, origin_mm=(0.0, 0.0, 0.0), e1=(1.0, 0.0, 0.0), e2=(0.0, 1.0, 0.0)
+) -> PHQuintic:
     """The "good" PH quintic Hermite interpolant (SPEC §4): of the four solutions the one with
     the least absolute rotation index; ties (within 1e-9) go to the least bending energy."""
     sols = hermite_solutions(p0, p5, d0, d1, origin_mm, e1, e2)

@@ -100,8 +100,9 @@ class Candidate:
 
 def cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """a × b for 3-vectors (np.cross costs ~30 µs per call on tiny arrays)."""
-    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2],
-                     a[0] * b[1] - a[1] * b[0]])  # fmt: skip
+    return np.array(
+        [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    )
 
 
 def unit_vector(v: np.ndarray) -> np.ndarray:
@@ -111,7 +112,6 @@ def unit_vector(v: np.ndarray) -> np.ndarray:
 def derivatives_at_length(geom, s_mm: float, order: int) -> np.ndarray:
     """Derivatives (order + 1, 3) of ``geom`` at arc length ``s_mm`` from its start."""
     return geom.derivatives(geom.param_at_length(np.array([s_mm])), order)[:, 0, :]
-
 
 
 def _w_line(dp: complex, e0: complex, e2: complex) -> tuple[float, float] | None:
@@ -202,21 +202,19 @@ def _segment_distance(q: np.ndarray, a: complex, b: complex) -> np.ndarray:
     return np.abs(q - a - t * ab)
 
 
-def _side(corner: Corner, geom, s_from: float, s_to: float, z_from: complex,
-          z_to: complex):
+def _side(corner: Corner, geom, s_from: float, s_to: float, z_from: complex, z_to: complex):
     """One side of the corner path from arc length ``s_from`` to ``s_to`` of ``geom``
     (end points ``z_from``, ``z_to``): its sample points (complex) and a function giving
     the distance from points to it (a line: exact; a circular arc: exact, ||q − c| − r|
     inside its angular span, else the nearer end; a spiral arc: a 33-point polyline)."""
     if isinstance(geom, LineGeometry):
         return np.array([z_from, z_to]), lambda q: _segment_distance(q, z_from, z_to)
-    pts = _to_plane(corner, geom.point(geom.param_at_length(np.linspace(s_from, s_to,
-                                                                        N_ARC))))  # fmt: skip
+    pts = _to_plane(corner, geom.point(geom.param_at_length(np.linspace(s_from, s_to, N_ARC))))
     pts[0], pts[-1] = z_from, z_to
     if geom.is_spiral:
+
         def polyline(q):
-            return np.min([_segment_distance(q, a, b) for a, b in zip(pts[:-1], pts[1:])],
-                          axis=0)  # fmt: skip
+            return np.min([_segment_distance(q, a, b) for a, b in zip(pts[:-1], pts[1:])], axis=0)
 
         return pts, polyline
     center = _to_plane(corner, geom.origin_mm[None, :])[0]
@@ -268,8 +266,9 @@ def _regular(ph: PHQuintic, turn_rad: float) -> bool:
     return bool(np.min(np.abs(ph.preimage(XI)) ** 2) > MIN_SPEED_RATIO * ph.length_mm)
 
 
-def _candidate(corner: Corner, trim_mm: float, g2: bool,
-               dev_per_trim: float | None = None) -> Candidate | None:
+def _candidate(
+    corner: Corner, trim_mm: float, g2: bool, dev_per_trim: float | None = None
+) -> Candidate | None:
     """The blend with trim ``trim_mm`` on both sides (G2 family or G1 family) and its
     measured deviation (or ``trim_mm · dev_per_trim`` if given: the line-corner closed
     form); None where the family has no regular member."""
@@ -321,14 +320,22 @@ def _candidate(corner: Corner, trim_mm: float, g2: bool,
     if dev_per_trim is not None:
         return Candidate(trim_mm, ph, trim_mm * dev_per_trim, jump)
     z_v = corner.vertex_z
-    sides = [_side(corner, corner.geom_a, corner.length_a_mm - trim_mm, corner.length_a_mm,
-                   z_a, z_v),
-             _side(corner, corner.geom_b, 0.0, trim_mm, z_v, z_b)]  # fmt: skip
+    sides = [
+        _side(corner, corner.geom_a, corner.length_a_mm - trim_mm, corner.length_a_mm, z_a, z_v),
+        _side(corner, corner.geom_b, 0.0, trim_mm, z_v, z_b),
+    ]
     return Candidate(trim_mm, ph, _deviation(ph, sides, z_v), jump)
 
 
-def search_trim(corner: Corner, tol: float, d_start: float, d_cap: float, g2: bool,
-            d_floor: float = 0.0, dev_per_trim: float | None = None) -> Candidate | None:
+def search_trim(
+    corner: Corner,
+    tol: float,
+    d_start: float,
+    d_cap: float,
+    g2: bool,
+    d_floor: float = 0.0,
+    dev_per_trim: float | None = None,
+) -> Candidate | None:
     """Largest trim ≤ ``d_cap`` with deviation ≤ ``tol`` (secant + bisection, module doc);
     gives up once the family has no member at a trim ≤ ``d_floor``."""
     target = tol * (1.0 - 0.5 * SEARCH_WINDOW)

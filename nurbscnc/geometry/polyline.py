@@ -41,9 +41,14 @@ def chord_kappa_per_mm(kind: np.ndarray, kappa_max_per_mm: np.ndarray) -> np.nda
     return np.where(kind == Kind.NURBS, 2.0, 1.0) * np.abs(kappa_max_per_mm)
 
 
-def chord_counts(kind: np.ndarray, length_mm: np.ndarray, kappa_max_per_mm: np.ndarray,
-                 chord_mm: float, max_chord_mm: float,
-                 max_points: int | None = None) -> np.ndarray:  # fmt: skip
+def chord_counts(
+    kind: np.ndarray,
+    length_mm: np.ndarray,
+    kappa_max_per_mm: np.ndarray,
+    chord_mm: float,
+    max_chord_mm: float,
+    max_points: int | None = None,
+) -> np.ndarray:
     """Points of a polyline on each piece (k,) [1]: 2 on lines and zero-length pieces (exact),
     else chords of h = min(``max_chord_mm``, √(8 ``chord_mm`` / κ)) (sagitta κh²/8 ≤
     ``chord_mm`` [mm]; κ of :func:`chord_kappa_per_mm`), ⌈L/h⌉ + 1 points, at least 3 and,
@@ -66,8 +71,14 @@ def path_counts(pieces, lo: int = 0, hi: int | None = None) -> np.ndarray:
     κ is the piece's ``kappa_max_per_mm``, doubled on NURBS cells (their κ comes from 8
     samples); at most :data:`MAX_PIECE_POINTS` a piece (:func:`chord_counts`)."""
     sl = slice(lo, hi)
-    return chord_counts(pieces.kind[sl], pieces.length_mm[sl], pieces.kappa_max_per_mm[sl],
-                        CHORD_MM, MAX_SPACING_MM, MAX_PIECE_POINTS)  # fmt: skip
+    return chord_counts(
+        pieces.kind[sl],
+        pieces.length_mm[sl],
+        pieces.kappa_max_per_mm[sl],
+        CHORD_MM,
+        MAX_SPACING_MM,
+        MAX_PIECE_POINTS,
+    )
 
 
 def dense_path_mm(pieces, profile, spacing_mm: float = 0.002) -> np.ndarray:
@@ -106,8 +117,9 @@ def dense_polyline(pieces, starts_mm: np.ndarray, total_mm: float, lo: int, hi: 
     return path_lengths(starts_mm, total_mm, piece, local), pieces.path.points(piece, local)[0]
 
 
-def path_lengths(starts_mm: np.ndarray, total_mm: float, piece: np.ndarray,
-                 local_mm: np.ndarray) -> np.ndarray:  # fmt: skip
+def path_lengths(
+    starts_mm: np.ndarray, total_mm: float, piece: np.ndarray, local_mm: np.ndarray
+) -> np.ndarray:
     """Path lengths [mm] of the points at ``local_mm`` from the starts of pieces ``piece``,
     the pieces starting at ``starts_mm``, clipped at the path's end ``total_mm``."""
     return np.minimum(starts_mm[piece] + local_mm, total_mm)

@@ -116,8 +116,9 @@ def _spiral_length_at(c: tuple, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return t * np.where(dr == 0.0, circle, mean_speed), w1
 
 
-def spiral_t_at_length(radius_start_mm, radius_end_mm, angle_rad, helix_mm, s_mm, length_mm,
-                       max_iter: int = 50) -> np.ndarray:  # fmt: skip
+def spiral_t_at_length(
+    radius_start_mm, radius_end_mm, angle_rad, helix_mm, s_mm, length_mm, max_iter: int = 50
+) -> np.ndarray:
     """Fractions t ∈ [0, 1] with s(t) = s_mm [mm] (clamped to [0, length_mm]) on circular,
     helical or spiral arcs (vectorised over every argument, broadcast together): Newton on
     the closed form :func:`spiral_arc_length_mm`, t ← t − (s(t) − s)/|C'(t)|, from t = s/L.
@@ -128,8 +129,11 @@ def spiral_t_at_length(radius_start_mm, radius_end_mm, angle_rad, helix_mm, s_mm
     The arcs' t-independent terms are computed once; the working set is compacted only when
     less than half of it still moves (per sample the same operations: the same bits)."""
     r0, r1, ang, hel, big, s_in = np.broadcast_arrays(
-        *(np.asarray(x, dtype=float) for x in (radius_start_mm, radius_end_mm, angle_rad,
-                                                helix_mm, length_mm, s_mm)))  # fmt: skip
+        *(
+            np.asarray(x, dtype=float)
+            for x in (radius_start_mm, radius_end_mm, angle_rad, helix_mm, length_mm, s_mm)
+        )
+    )
     s = np.clip(s_in, 0.0, big)
     with np.errstate(invalid="ignore", divide="ignore"):
         t = np.where(big > 0.0, s / big, 0.0)
@@ -224,8 +228,11 @@ class Arc:
     @property
     def length_mm(self) -> float:
         # Closed form for circles, helices and spirals (:func:`spiral_arc_length_mm`).
-        return float(spiral_arc_length_mm(self.radius_start_mm, self.radius_end_mm,
-                                          self.angle_rad, self.helix_mm))  # fmt: skip
+        return float(
+            spiral_arc_length_mm(
+                self.radius_start_mm, self.radius_end_mm, self.angle_rad, self.helix_mm
+            )
+        )
 
 
 @dataclass(frozen=True, eq=False)

@@ -55,10 +55,17 @@ def space_bezier(p_a, t_a, k_a, p_b, t_b, k_b) -> np.ndarray:
     20(P2 − 2P1 + P0): P1 = P0 + α t_a/5, P2 = P0 + 2α t_a/5 + α² k_a/20, and mirrored at
     the end with β. α = β = |p_b − p_a| (the chord)."""
     chord = np.linalg.norm(p_b - p_a, axis=1)[:, None]
-    return np.stack([p_a, p_a + chord / 5.0 * t_a,
-                     p_a + 2.0 * chord / 5.0 * t_a + chord * chord / 20.0 * k_a,
-                     p_b - 2.0 * chord / 5.0 * t_b + chord * chord / 20.0 * k_b,
-                     p_b - chord / 5.0 * t_b, p_b], axis=1)  # fmt: skip
+    return np.stack(
+        [
+            p_a,
+            p_a + chord / 5.0 * t_a,
+            p_a + 2.0 * chord / 5.0 * t_a + chord * chord / 20.0 * k_a,
+            p_b - 2.0 * chord / 5.0 * t_b + chord * chord / 20.0 * k_b,
+            p_b - chord / 5.0 * t_b,
+            p_b,
+        ],
+        axis=1,
+    )
 
 
 def _polyline_distance(q: np.ndarray, pts: np.ndarray) -> np.ndarray:
@@ -72,8 +79,9 @@ def _polyline_distance(q: np.ndarray, pts: np.ndarray) -> np.ndarray:
     return np.sqrt(np.einsum("mnj,mnj->mn", diff, diff).min(axis=1))
 
 
-def blend_space_corner(geom_a, geom_b, tolerance_mm: float, max_trim_a_mm: float,
-                       max_trim_b_mm: float) -> SpaceBlend | None:  # fmt: skip
+def blend_space_corner(
+    geom_a, geom_b, tolerance_mm: float, max_trim_a_mm: float, max_trim_b_mm: float
+) -> SpaceBlend | None:
     """The largest G2 quintic Bézier blend of a corner whose sides leave the plane of its
     two tangents (a helix into a line: the planar PH blend of :func:`blend_corner` cannot
     meet both sides), within ``tolerance_mm`` [mm]: :func:`blend_space_corners` of the one
@@ -95,6 +103,7 @@ def blend_space_corner(geom_a, geom_b, tolerance_mm: float, max_trim_a_mm: float
 
     path = PathTable.of([whole_row(geom_a), whole_row(geom_b)])
     return blend_space_corners(path, [0], [1], tolerance_mm, max_trim_a_mm, max_trim_b_mm)[0]
+
 
 #: Corners evaluated together by :func:`blend_space_corners` (bounds the batched Béziers and
 #: sides to a few MB).
@@ -120,8 +129,10 @@ def _bezier_batch(ctrl: np.ndarray, xi: np.ndarray):
 
     def bern(deg, pts):
         t = xi[None, :, None]
-        return sum(comb(deg, i) * t**i * (1.0 - t) ** (deg - i) * pts[:, i : i + 1, :]
-                   for i in range(deg + 1))  # fmt: skip
+        return sum(
+            comb(deg, i) * t**i * (1.0 - t) ** (deg - i) * pts[:, i : i + 1, :]
+            for i in range(deg + 1)
+        )
 
     d1 = 5 * np.diff(ctrl, axis=1)
     d2 = 4 * np.diff(d1, axis=1)
@@ -135,8 +146,9 @@ def _polyline_distance_batch(q: np.ndarray, pts: np.ndarray) -> np.ndarray:
     return np.stack([_polyline_distance(qi, pi) for qi, pi in zip(q, pts)])
 
 
-def blend_space_corners(path, rows_a, rows_b, tolerance_mm, max_trim_a_mm,
-                        max_trim_b_mm) -> list[SpaceBlend | None]:  # fmt: skip
+def blend_space_corners(
+    path, rows_a, rows_b, tolerance_mm, max_trim_a_mm, max_trim_b_mm
+) -> list[SpaceBlend | None]:
     """:func:`blend_space_corner`'s search for m corners at once: the corner between
     path-table pieces ``rows_a`` (m,) and ``rows_b`` (m,) (each a's end meets b's start),
     with tolerances and trim caps (m,) [mm]. Every corner's search takes its next trim in
@@ -147,29 +159,46 @@ def blend_space_corners(path, rows_a, rows_b, tolerance_mm, max_trim_a_mm,
 
     rows_a, rows_b = np.asarray(rows_a, dtype=np.intp), np.asarray(rows_b, dtype=np.intp)
     m = rows_a.size
-    args = [np.broadcast_to(np.asarray(x, dtype=float), (m,))
-            for x in (tolerance_mm, max_trim_a_mm, max_trim_b_mm)]  # fmt: skip
+    args = [
+        np.broadcast_to(np.asarray(x, dtype=float), (m,))
+        for x in (tolerance_mm, max_trim_a_mm, max_trim_b_mm)
+    ]
     if m > SPACE_CHUNK:  # bounded temporaries
-        return [bl for lo in range(0, m, SPACE_CHUNK)
-                for bl in blend_space_corners(path, rows_a[lo : lo + SPACE_CHUNK],
-                                              rows_b[lo : lo + SPACE_CHUNK],
-                                              *(x[lo : lo + SPACE_CHUNK] for x in args))]
+        return [
+            bl
+            for lo in range(0, m, SPACE_CHUNK)
+            for bl in blend_space_corners(
+                path,
+                rows_a[lo : lo + SPACE_CHUNK],
+                rows_b[lo : lo + SPACE_CHUNK],
+                *(x[lo : lo + SPACE_CHUNK] for x in args),
+            )
+        ]
     tolerance_mm, max_trim_a_mm, max_trim_b_mm = args
     out: list[SpaceBlend | None] = [None] * m
     if m == 0:
         return out
     tol = np.asarray(tolerance_mm, dtype=float).copy()
     len_a, len_b = path.length_mm[rows_a].astype(float), path.length_mm[rows_b].astype(float)
-    d_max = np.minimum.reduce([np.broadcast_to(np.asarray(max_trim_a_mm, float), (m,)),
-                               np.broadcast_to(np.asarray(max_trim_b_mm, float), (m,)),
-                               len_a, len_b])  # fmt: skip
+    d_max = np.minimum.reduce(
+        [
+            np.broadcast_to(np.asarray(max_trim_a_mm, float), (m,)),
+            np.broadcast_to(np.asarray(max_trim_b_mm, float), (m,)),
+            len_a,
+            len_b,
+        ]
+    )
     vertex, t_a, _ = _frames(path, rows_a, len_a)
     _, t_b, _ = _frames(path, rows_b, np.zeros(m))
     n_c = np.cross(t_a, t_b)
-    turning = np.arctan2(np.sqrt(np.einsum("ij,ij->i", n_c, n_c)),
-                         np.einsum("ij,ij->i", t_a, t_b))  # fmt: skip
-    live = (np.isfinite(tol) & (tol > 0.0) & (d_max > MIN_TRIM_MM) & (turning >= MIN_TURNING_RAD)
-            & (turning <= np.pi - MIN_REVERSAL_RAD))  # fmt: skip
+    turning = np.arctan2(np.sqrt(np.einsum("ij,ij->i", n_c, n_c)), np.einsum("ij,ij->i", t_a, t_b))
+    live = (
+        np.isfinite(tol)
+        & (tol > 0.0)
+        & (d_max > MIN_TRIM_MM)
+        & (turning >= MIN_TURNING_RAD)
+        & (turning <= np.pi - MIN_REVERSAL_RAD)
+    )
     per_trim = np.where(live, line_deviation_per_trim(np.where(live, turning, 1.0)), 1.0)
     d_cap = np.minimum(d_max, TRIM_CAP_FACTOR * tol / per_trim)
     d = np.minimum(d_cap, tol * (1.0 - 0.5 * SEARCH_WINDOW) / per_trim)
@@ -192,14 +221,18 @@ def blend_space_corners(path, rows_a, rows_b, tolerance_mm, max_trim_a_mm,
         regular = speed.min(axis=1) > 1e-3 * speed.max(axis=1)
         s = da[:, None] * frac[None, :]
         k_side = frac.size
-        side_a = path.points(np.repeat(rows_a[act], k_side),
-                             (len_a[act] - da)[:, None].repeat(k_side, axis=1).ravel()
-                             + s.ravel())[0].reshape(act.size, k_side, 3)  # fmt: skip
+        side_a = path.points(
+            np.repeat(rows_a[act], k_side),
+            (len_a[act] - da)[:, None].repeat(k_side, axis=1).ravel() + s.ravel(),
+        )[0].reshape(act.size, k_side, 3)
         side_b = path.points(np.repeat(rows_b[act], k_side), s.ravel())[0].reshape(
-            act.size, k_side, 3)
+            act.size, k_side, 3
+        )
         corner = np.concatenate([side_a[:, :-1], vertex[act][:, None, :], side_b[:, 1:]], axis=1)
-        dev = np.maximum(_polyline_distance_batch(pts, corner).max(axis=1),
-                         _polyline_distance_batch(corner, pts).max(axis=1))
+        dev = np.maximum(
+            _polyline_distance_batch(pts, corner).max(axis=1),
+            _polyline_distance_batch(corner, pts).max(axis=1),
+        )
         kappa = np.linalg.norm(np.cross(d1, d2), axis=2) / np.maximum(speed, 1e-300) ** 3
         ok = regular & (dev <= tol[act])
         stop = np.zeros(act.size, dtype=bool)
@@ -225,8 +258,11 @@ def blend_space_corners(path, rows_a, rows_b, tolerance_mm, max_trim_a_mm,
             if lo[c] < step < hi[c]:
                 d[c] = step
             else:
-                d[c] = 0.5 * (lo[c] + hi[c]) if hi[c] < d_cap[c] or lo[c] > 0.0 else min(
-                    2.0 * d[c], d_cap[c])
+                d[c] = (
+                    0.5 * (lo[c] + hi[c])
+                    if hi[c] < d_cap[c] or lo[c] > 0.0
+                    else min(2.0 * d[c], d_cap[c])
+                )
             if hi[c] - lo[c] <= BRACKET_REL * hi[c]:
                 stop[n] = True
         live[act[stop]] = False
@@ -235,6 +271,7 @@ def blend_space_corners(path, rows_a, rows_b, tolerance_mm, max_trim_a_mm,
             continue
         ctrl_c, dev_c, kmax = best[c]
         curve = NurbsCurve(5, np.array([0.0] * 6 + [1.0] * 6), ctrl_c, np.ones(6))
-        out[c] = SpaceBlend(curve, float(best_d[c]), float(best_d[c]), dev_c, kmax,
-                            float(np.degrees(turning[c])))
+        out[c] = SpaceBlend(
+            curve, float(best_d[c]), float(best_d[c]), dev_c, kmax, float(np.degrees(turning[c]))
+        )
     return out

@@ -55,12 +55,14 @@ class InterpolatorSampler(ReferenceSampler):
         self.interpolator = Interpolator.parse(interpolator)
         self.windowed = self.interpolator != Interpolator.TAYLOR
 
-    def __call__(self, pieces, profile, period_s: float, k0: int = 0,
-                 k1: int | None = None) -> Reference:  # fmt: skip
+    def __call__(
+        self, pieces, profile, period_s: float, k0: int = 0, k1: int | None = None
+    ) -> Reference:
         ref = exact_reference(pieces, profile, period_s, k0, k1)
         if self.interpolator == Interpolator.TAYLOR:
-            taylor_nurbs(pieces.path, ref.piece, ref.tau_s, ref.v_mm_s, ref.a_mm_s2,
-                         ref.points_mm, ref.param)  # fmt: skip
+            taylor_nurbs(
+                pieces.path, ref.piece, ref.tau_s, ref.v_mm_s, ref.a_mm_s2, ref.points_mm, ref.param
+            )
         return ref
 
 
@@ -76,9 +78,18 @@ def reference_sampler(interpolator="exact") -> InterpolatorSampler:
 def samples_of(reference, pieces, interpolator="exact") -> Samples:
     """The :class:`Samples` of a reference made by :func:`reference_sampler`."""
     r = reference
-    return Samples(r.t_s, r.tau_s, r.s_mm, r.v_mm_s, r.a_mm_s2, r.piece, r.points_mm, r.param,
-                   np.take(pieces.line, r.piece),
-                   Interpolator.parse(interpolator).value)  # fmt: skip
+    return Samples(
+        r.t_s,
+        r.tau_s,
+        r.s_mm,
+        r.v_mm_s,
+        r.a_mm_s2,
+        r.piece,
+        r.points_mm,
+        r.param,
+        np.take(pieces.line, r.piece),
+        Interpolator.parse(interpolator).value,
+    )
 
 
 def sample_plan(pieces, profile, period_s: float, interpolator="exact") -> Samples:
@@ -99,8 +110,9 @@ def interpolate(plan, period_s: float, interpolator="exact") -> Samples:
     return sample_plan(plan.pieces, plan.profile, period_s, interpolator)
 
 
-def reference_chunks(pieces, profile, period_s: float, interpolator="exact",
-                     chunk: int = CHUNK) -> Iterator:  # fmt: skip
+def reference_chunks(
+    pieces, profile, period_s: float, interpolator="exact", chunk: int = CHUNK
+) -> Iterator:
     """The plan's reference (:func:`reference_sampler`'s) window by window: one
     :class:`~nurbscnc.plan.timing.Reference` per ``chunk`` consecutive rows, k = 0 … N−1
     (N = :func:`~nurbscnc.plan.timing.sample_count`), bit-identical to the rows of the whole
@@ -119,8 +131,9 @@ def reference_chunks(pieces, profile, period_s: float, interpolator="exact",
         yield ref
 
 
-def sample_chunks(pieces, profile, period_s: float, interpolator="exact",
-                  chunk: int = CHUNK) -> Iterator[Samples]:  # fmt: skip
+def sample_chunks(
+    pieces, profile, period_s: float, interpolator="exact", chunk: int = CHUNK
+) -> Iterator[Samples]:
     """:func:`sample_plan` window by window: :class:`Samples` of ``chunk`` consecutive rows
     (the last window shorter), bit-identical to the rows of the whole samples; memory is one
     window's, whatever the motion time."""
@@ -211,8 +224,7 @@ class _TaylorCarry:
                 u0 = self.u
             else:
                 u0 = param[a_]
-            u, spans = taylor_params(pf, u0, v, acc, np.diff(tau), self.u_min, u_max,
-                                     u_rest=rest)  # fmt: skip
+            u, spans = taylor_params(pf, u0, v, acc, np.diff(tau), self.u_min, u_max, u_rest=rest)
             if carried:
                 u, spans = u[1:], spans[1:]
             ref.points_mm[a_:z] = pf.point(u, spans)

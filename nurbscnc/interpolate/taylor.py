@@ -17,13 +17,15 @@ from nurbscnc.geometry.path import Kind, PathTable, equal_runs
 from nurbscnc.geometry.powerform import PowerForm
 
 
-def taylor_increment(v_mm_s: float, a_mm_s2: float, dt_s: float, speed: float,
-                     speed2: float, dot: float) -> float:
+def taylor_increment(
+    v_mm_s: float, a_mm_s2: float, dt_s: float, speed: float, speed2: float, dot: float
+) -> float:
     """Δu of one step of the 2nd-order Taylor interpolator (SPEC §3, eq. 4–5):
     Δu = V Δt/|C′| + (Δt²/2)(A/|C′| − V² (C′·C″)/|C′|⁴), with ``speed`` = |C′|, ``speed2`` =
     |C′|² and ``dot`` = C′·C″ at the current u (plain floats: it runs once per servo step)."""
-    return v_mm_s * dt_s / speed + 0.5 * dt_s * dt_s * (a_mm_s2 / speed - v_mm_s * v_mm_s * dot
-                                                        / (speed2 * speed2))
+    return v_mm_s * dt_s / speed + 0.5 * dt_s * dt_s * (
+        a_mm_s2 / speed - v_mm_s * v_mm_s * dot / (speed2 * speed2)
+    )
 
 
 def taylor_params(
@@ -131,7 +133,8 @@ def taylor_nurbs(path: PathTable, samples_piece, tau, v, a, out, param) -> None:
         pf = curve.power_form
         u_min = float(path.u_a[samples_piece[a_]])
         u_max = float(path.u_b[samples_piece[z - 1]])
-        u, spans = taylor_params(pf, param[a_], v[a_:z], a[a_:z], dt[a_ : z - 1], u_min,
-                                 u_max, u_rest=param[a_:z])  # fmt: skip
+        u, spans = taylor_params(
+            pf, param[a_], v[a_:z], a[a_:z], dt[a_ : z - 1], u_min, u_max, u_rest=param[a_:z]
+        )
         out[a_:z] = pf.point(u, spans)
         param[a_:z] = u

@@ -26,10 +26,21 @@ from typing import Protocol
 
 import numpy as np
 
-__all__ = ["JUNCTION_SHARE", "MIN_CAP_MM_S", "axis_path_limits", "baseline_feed_mm_s",
-           "chord_feed_mm_s", "corner_cap_mm_s", "curvature_cap2_mm2_s2", "curvature_cap_mm_s",
-           "curvature_feed_mm_s", "junction_jump_cap_mm_s", "kappa_threshold_per_mm",
-           "normal_feed_mm_s", "servo_curve_cap_mm_s"]  # fmt: skip
+__all__ = [
+    "JUNCTION_SHARE",
+    "MIN_CAP_MM_S",
+    "axis_path_limits",
+    "baseline_feed_mm_s",
+    "chord_feed_mm_s",
+    "corner_cap_mm_s",
+    "curvature_cap2_mm2_s2",
+    "curvature_cap_mm_s",
+    "curvature_feed_mm_s",
+    "junction_jump_cap_mm_s",
+    "kappa_threshold_per_mm",
+    "normal_feed_mm_s",
+    "servo_curve_cap_mm_s",
+]
 
 
 class MachineLike(Protocol):
@@ -128,8 +139,9 @@ def curvature_cap_mm_s(machine: MachineLike, kappa_per_mm, feed_mm_s) -> np.ndar
     return np.minimum(np.minimum(v_af, v_an), np.minimum(feed_mm_s, lim.v_max_mm_s))
 
 
-def curvature_cap2_mm2_s2(kappa_per_mm, v_top_mm_s: float, a_max_mm_s2: float, period_s: float,
-                          chord_mm: float) -> np.ndarray:  # fmt: skip
+def curvature_cap2_mm2_s2(
+    kappa_per_mm, v_top_mm_s: float, a_max_mm_s2: float, period_s: float, chord_mm: float
+) -> np.ndarray:
     """The square of the curvature cap, min(v_top², V_af(κ)², A/κ) [mm²/s²], computed in
     squares (the lower bound works with v²); κ = 0 leaves v_top², κ = inf gives 0."""
     k = np.abs(np.asarray(kappa_per_mm, dtype=float))
@@ -139,8 +151,12 @@ def curvature_cap2_mm2_s2(kappa_per_mm, v_top_mm_s: float, a_max_mm_s2: float, p
     return np.minimum(np.minimum(v_top_mm_s * v_top_mm_s, v_af * v_af), normal)
 
 
-def corner_cap_mm_s(machine: MachineLike, kappa_peak_per_mm: float, feed_mm_s: float,
-                    kappa_cf_per_mm: float | None = None) -> float:  # fmt: skip
+def corner_cap_mm_s(
+    machine: MachineLike,
+    kappa_peak_per_mm: float,
+    feed_mm_s: float,
+    kappa_cf_per_mm: float | None = None,
+) -> float:
     """V_sp = min(V_af, V_cf) at a corner of peak curvature κ (SPEC §7), capped by F, V_max
     and the normal-acceleration limit √(A/κ); at least 1e-6 mm/s. ``kappa_cf_per_mm``
     (default: the peak) is the curvature given to V_cf: the physical limits (chord error,
@@ -150,12 +166,10 @@ def corner_cap_mm_s(machine: MachineLike, kappa_peak_per_mm: float, feed_mm_s: f
     lim = machine.limits
     f = min(feed_mm_s, lim.v_max_mm_s)
     kappa_cf = kappa_peak_per_mm if kappa_cf_per_mm is None else kappa_cf_per_mm
-    v_af = float(chord_feed_mm_s(kappa_peak_per_mm, machine.servo.period_s,
-                                 lim.chord_tolerance_mm))  # fmt: skip
+    v_af = float(chord_feed_mm_s(kappa_peak_per_mm, machine.servo.period_s, lim.chord_tolerance_mm))
     v_cf = float(curvature_feed_mm_s(kappa_cf, f, lim.kappa_ref_per_mm))
     v_sp = min(v_af, v_cf)
-    v_an = (float(np.sqrt(lim.a_max_mm_s2 / kappa_peak_per_mm)) if kappa_peak_per_mm > 0
-            else np.inf)  # fmt: skip
+    v_an = float(np.sqrt(lim.a_max_mm_s2 / kappa_peak_per_mm)) if kappa_peak_per_mm > 0 else np.inf
     return max(min(v_sp, v_an, feed_mm_s, lim.v_max_mm_s), 1e-6)
 
 
@@ -184,9 +198,18 @@ def baseline_feed_mm_s(algorithm: str, kappa_per_mm, feed_mm_s: float, machine: 
     raise ValueError(f"unknown baseline {algorithm!r}")
 
 
-def axis_path_limits(t_bound, k_bound, g_bound, kappa_per_mm, v_piece_mm_s, v_axis_mm_s,
-                     a_axis_mm_s2, j_axis_mm_s3, a_path_mm_s2: float,
-                     j_path_mm_s3: float):  # fmt: skip
+def axis_path_limits(
+    t_bound,
+    k_bound,
+    g_bound,
+    kappa_per_mm,
+    v_piece_mm_s,
+    v_axis_mm_s,
+    a_axis_mm_s2,
+    j_axis_mm_s3,
+    a_path_mm_s2: float,
+    j_path_mm_s3: float,
+):
     """Path limits of k pieces that keep every axis within its own limits.
 
     Inputs per piece and axis (k, 3): ``t_bound`` T_i ≥ |t_i| (unit tangent), ``k_bound``
@@ -242,10 +265,12 @@ def axis_path_limits(t_bound, k_bound, g_bound, kappa_per_mm, v_piece_mm_s, v_ax
         # Feed caps (k,): velocity, then half the acceleration and jerk for the normal part.
         v_cap = np.min(np.where(t > 0.0, v_i / t, np.inf), axis=1)
         share = NORMAL_SHARE
-        v_cap = np.minimum(v_cap, np.min(np.where(kb > 0.0, np.sqrt(share * a_i / kb), np.inf),
-                                         axis=1))  # fmt: skip
-        v_cap = np.minimum(v_cap, np.min(np.where(g > 0.0, np.cbrt(share * j_i / g), np.inf),
-                                         axis=1))  # fmt: skip
+        v_cap = np.minimum(
+            v_cap, np.min(np.where(kb > 0.0, np.sqrt(share * a_i / kb), np.inf), axis=1)
+        )
+        v_cap = np.minimum(
+            v_cap, np.min(np.where(g > 0.0, np.cbrt(share * j_i / g), np.inf), axis=1)
+        )
         v_bar = np.minimum(v_cap, np.asarray(v_piece_mm_s, dtype=float))[:, None]
         normal_a = np.where(kb > 0.0, v_bar * v_bar * kb, 0.0)
         a_room = np.where(np.isfinite(a_i), a_i - normal_a, np.inf)
@@ -262,8 +287,13 @@ def axis_path_limits(t_bound, k_bound, g_bound, kappa_per_mm, v_piece_mm_s, v_ax
     return v_cap, a_bar, j_bar
 
 
-def junction_jump_cap_mm_s(dkn_per_mm, period_s: float, j_path_mm_s3: float,
-                           j_axis_mm_s3=None, share: float = JUNCTION_SHARE):  # fmt: skip
+def junction_jump_cap_mm_s(
+    dkn_per_mm,
+    period_s: float,
+    j_path_mm_s3: float,
+    j_axis_mm_s3=None,
+    share: float = JUNCTION_SHARE,
+):
     """Speed cap [mm/s] at junctions where the curvature vector κn jumps by ``dkn_per_mm``
     (m, 3) [1/mm]: v ≤ √(4 J T / (3 |Δ(κn)|)) for the path jerk J = J_max, and
     v ≤ √(4 s J_i T / (3 |Δ(κn)_i|)) for each axis i with a jerk limit J_i (``j_axis_mm_s3``

@@ -60,4 +60,3 @@ def find_machine(
     if os.path.isfile(user):
         return user, FOUND_BY_USER
     return None, FOUND_BY_DEFAULT
-

@@ -182,13 +182,17 @@ class AxisLimits:
     @property
     def any(self) -> bool:
         """True when some axis has some limit (False: the path limits alone apply)."""
-        return any(math.isfinite(x) for x in (*self.v_max_mm_s, *self.a_max_mm_s2,
-                                              *self.j_max_mm_s3))  # fmt: skip
+        return any(
+            math.isfinite(x) for x in (*self.v_max_mm_s, *self.a_max_mm_s2, *self.j_max_mm_s3)
+        )
 
     def as_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(3,) arrays of the velocity [mm/s], acceleration [mm/s²], jerk [mm/s³] limits."""
-        return (np.array(self.v_max_mm_s, dtype=float), np.array(self.a_max_mm_s2, dtype=float),
-                np.array(self.j_max_mm_s3, dtype=float))
+        return (
+            np.array(self.v_max_mm_s, dtype=float),
+            np.array(self.a_max_mm_s2, dtype=float),
+            np.array(self.j_max_mm_s3, dtype=float),
+        )
 
 
 @dataclass(frozen=True)
@@ -238,7 +242,7 @@ class Machine:
         return self.servo.modelled
 
     def describe(self) -> str:
-        """"<file> (<how it was found>)", for command summaries."""
+        """ "<file> (<how it was found>)", for command summaries."""
         if self.found_by == FOUND_BY_DEFAULT:
             return "bundled default (the paper's machine, nurbscnc/data/default_machine.toml)"
         return f"{self.source} ({self.found_by})"
@@ -249,8 +253,9 @@ class Machine:
 
     def chord_feed_mm_s(self, kappa_per_mm):
         """V_af at curvature ``kappa_per_mm`` with this machine's T_s and δ (SPEC eq. 23)."""
-        return caps.chord_feed_mm_s(kappa_per_mm, self.servo.period_s,
-                                    self.limits.chord_tolerance_mm)  # fmt: skip
+        return caps.chord_feed_mm_s(
+            kappa_per_mm, self.servo.period_s, self.limits.chord_tolerance_mm
+        )
 
     def curvature_feed_mm_s(self, kappa_per_mm, feed_mm_s: float | None = None):
         """V_cf with κ̄ of this machine (SPEC eq. 24); ``feed_mm_s`` defaults to V_max."""
@@ -265,4 +270,3 @@ class Machine:
                 np.asarray(self.curvature_feed_mm_s(kappa_per_mm, feed_mm_s)),
             )
         )
-

@@ -94,14 +94,24 @@ def load_machine(
     except (OSError, UnicodeDecodeError) as exc:
         raise OutputError(f"cannot read machine profile {path}{how}: {exc}") from exc
     if len(text) > MAX_PROFILE_CHARS:  # /dev/zero: a stream that never ends
-        raise ConfigError(f"machine profile {path}{how} is longer than "
-                          f"{MAX_PROFILE_CHARS:,} characters: not a profile")
+        raise ConfigError(
+            f"machine profile {path}{how} is longer than "
+            f"{MAX_PROFILE_CHARS:,} characters: not a profile"
+        )
     return _with_origin(parse_machine(text, str(path), overrides), found_by or FOUND_BY_OPTION)
 
 
 def _with_origin(machine: Machine, found_by: str) -> Machine:
-    return Machine(machine.limits, machine.servo, machine.steps, machine.soft_limits,
-                   machine.source, found_by, machine.settings, machine.axis_limits)  # fmt: skip
+    return Machine(
+        machine.limits,
+        machine.servo,
+        machine.steps,
+        machine.soft_limits,
+        machine.source,
+        found_by,
+        machine.settings,
+        machine.axis_limits,
+    )
 
 
 def parse_machine(text: str, source: str = "<string>", overrides: dict | None = None) -> Machine:
@@ -115,8 +125,10 @@ def parse_machine(text: str, source: str = "<string>", overrides: dict | None = 
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{source}: invalid TOML: {exc}") from exc
     except ValueError:  # an integer beyond Python's 4300-digit conversion limit
-        raise ConfigError(f"{source}: invalid TOML: an integer has more than "
-                          f"{sys.get_int_max_str_digits()} digits") from None
+        raise ConfigError(
+            f"{source}: invalid TOML: an integer has more than "
+            f"{sys.get_int_max_str_digits()} digits"
+        ) from None
     overridden: set[str] = set()
     if overrides:
         data = copy.deepcopy(data)
@@ -124,8 +136,6 @@ def parse_machine(text: str, source: str = "<string>", overrides: dict | None = 
             apply_override(data, str(key), value, source)
             overridden.add(str(key))
     return _build(data, Reporter(source, overridden))
-
-
 
 
 def _axis_servo(table: dict, key: str, rep: Reporter) -> AxisServo:
@@ -208,8 +218,15 @@ def _build(data: dict, rep: Reporter) -> Machine:
     settings["limits"].setdefault("path_tolerance_um", lim["contour_tolerance_um"])
     settings.setdefault("servo", {}).setdefault("period_ms", DEFAULT_PERIOD_MS)
     settings["servo"] = {"period_ms": settings["servo"].pop("period_ms"), **settings["servo"]}
-    return Machine(limits=limits, servo=servo, steps=steps, soft_limits=soft, source=rep.source,
-                   settings=settings, axis_limits=axis_limits)  # fmt: skip
+    return Machine(
+        limits=limits,
+        servo=servo,
+        steps=steps,
+        soft_limits=soft,
+        source=rep.source,
+        settings=settings,
+        axis_limits=axis_limits,
+    )
 
 
 def _axis_limits(tables: dict) -> AxisLimits:
@@ -218,6 +235,8 @@ def _axis_limits(tables: dict) -> AxisLimits:
     def per_axis(key: str, scale: float) -> tuple[float, float, float]:
         return tuple(float(tables.get(a, {}).get(key, math.inf)) * scale for a in AXES)
 
-    return AxisLimits(v_max_mm_s=per_axis("v_max_mm_min", 1.0 / S_PER_MIN),
-                      a_max_mm_s2=per_axis("a_max_mm_s2", 1.0),
-                      j_max_mm_s3=per_axis("j_max_mm_s3", 1.0))  # fmt: skip
+    return AxisLimits(
+        v_max_mm_s=per_axis("v_max_mm_min", 1.0 / S_PER_MIN),
+        a_max_mm_s2=per_axis("a_max_mm_s2", 1.0),
+        j_max_mm_s3=per_axis("j_max_mm_s3", 1.0),
+    )

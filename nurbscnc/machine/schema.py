@@ -63,12 +63,23 @@ SCHEMA: dict = {
     "axis_limits": {a: dict.fromkeys(AXIS_LIMIT_KEYS, "pos") for a in AXES},
 }
 _OPTIONAL = frozenset(
-    {"limits.rapid_mm_min", "limits.max_points", "limits.path_tolerance_um", "servo",
-     "servo.period_ms", "servo.x", "servo.y", "servo.z"}
+    {
+        "limits.rapid_mm_min",
+        "limits.max_points",
+        "limits.path_tolerance_um",
+        "servo",
+        "servo.period_ms",
+        "servo.x",
+        "servo.y",
+        "servo.z",
+    }
 )
 # [axis_limits]: every table and every key optional.
-_OPTIONAL |= {"axis_limits", *(f"axis_limits.{a}" for a in AXES),
-              *(f"axis_limits.{a}.{k}" for a in AXES for k in AXIS_LIMIT_KEYS)}  # fmt: skip
+_OPTIONAL |= {
+    "axis_limits",
+    *(f"axis_limits.{a}" for a in AXES),
+    *(f"axis_limits.{a}.{k}" for a in AXES for k in AXIS_LIMIT_KEYS),
+}
 
 MM_PER_UM = 1e-3
 #: Default of ``limits.max_points``: 50 million reference points, 13.9 h of motion at 1 ms
@@ -174,9 +185,10 @@ def _check_axis(data, key: str, rep: Reporter) -> None:
     coeffs = [k for k in SERVO_COEFFICIENTS if k in data]
     if simple and coeffs:
         raise rep.error(
-            key, f"mixes the two model forms ({coeffs[0]} and {simple[0]}): give either a0…b2 "
-            "(SPEC eq. 25) or bandwidth_hz and damping"
-        )  # fmt: skip
+            key,
+            f"mixes the two model forms ({coeffs[0]} and {simple[0]}): give either a0…b2 "
+            "(SPEC eq. 25) or bandwidth_hz and damping",
+        )
     schema = {k: _AXIS_SCHEMA[k] for k in (SERVO_SIMPLE if simple else SERVO_COEFFICIENTS)}
     check_table(data, schema, key, rep)
     if simple and data["damping"] > MAX_DAMPING:
@@ -187,4 +199,3 @@ def _short(value: int) -> str:
     """An integer as text, its middle elided when it has more than 24 digits."""
     text = str(value)
     return text if len(text) <= 24 else f"{text[:10]}…{text[-6:]} ({len(text.lstrip('-'))} digits)"
-

@@ -38,8 +38,11 @@ def profile_toml(machine: Machine) -> str:
         leaves = [k for k in keys if not isinstance(table[k], dict)]
         if prefix and leaves:
             lines.extend(["", f"[{prefix}]"])
-            axis = machine.servo.axis(prefix[6:]) if prefix in ("servo.x", "servo.y",
-                                                                   "servo.z") else None
+            axis = (
+                machine.servo.axis(prefix[6:])
+                if prefix in ("servo.x", "servo.y", "servo.z")
+                else None
+            )
             if axis is not None:
                 poles = ", ".join(_pole_text(p) for p in axis.poles())
                 wn = axis.natural_frequency_rad_s

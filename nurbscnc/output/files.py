@@ -65,8 +65,10 @@ def read_input_bytes(path: str, what: str, error=DataError) -> bytes:
     except OSError as exc:
         raise OutputError(f"cannot read {path}: {exc.strerror or exc}") from None
     if len(data) > MAX_INPUT_BYTES:
-        raise error(f"{what} is larger than {MAX_INPUT_BYTES:,} bytes "
-                    f"({MAX_INPUT_BYTES / 2**20:g} MiB), the most nurbscnc reads")
+        raise error(
+            f"{what} is larger than {MAX_INPUT_BYTES:,} bytes "
+            f"({MAX_INPUT_BYTES / 2**20:g} MiB), the most nurbscnc reads"
+        )
     return data
 
 
@@ -184,15 +186,17 @@ def _csv_rows(fh, columns, formats) -> None:
     n = len(columns[0])
     block = 65536
     for start in range(0, n, block):
-        chunk = np.column_stack([np.asarray(c[start : start + block], dtype=float)
-                                 for c in columns])  # fmt: skip
+        chunk = np.column_stack(
+            [np.asarray(c[start : start + block], dtype=float) for c in columns]
+        )
         buf = io.StringIO()
         np.savetxt(buf, chunk, fmt=formats, delimiter=",")
         fh.write(buf.getvalue())
 
 
-def write_table_windows(path: str, names, windows, count: int, formats,
-                        npz: bool | None = None) -> None:  # fmt: skip
+def write_table_windows(
+    path: str, names, windows, count: int, formats, npz: bool | None = None
+) -> None:
     """Write named columns given window by window (an iterable of column tuples, rows in
     order, ``count`` rows in all) to ``path`` (``-``: stdout), atomically: NPZ when ``npz``
     (None: when the path ends in .npz), else CSV. Memory: one window (the NPZ's columns are
@@ -235,8 +239,7 @@ def point_columns(samples: Samples) -> tuple:
     """The POINT_COLUMNS of reference points (whole or one window): t, x, y, z, feed,
     piece, line."""
     p = samples.points_mm
-    return (samples.t_s, p[:, 0], p[:, 1], p[:, 2], samples.v_mm_s, samples.piece,
-            samples.line)  # fmt: skip
+    return (samples.t_s, p[:, 0], p[:, 1], p[:, 2], samples.v_mm_s, samples.piece, samples.line)
 
 
 def write_points(path: str, samples: Samples, npz: bool | None = None) -> None:
@@ -245,18 +248,24 @@ def write_points(path: str, samples: Samples, npz: bool | None = None) -> None:
     write_point_windows(path, [samples], int(samples.t_s.size), npz)
 
 
-def write_point_windows(path: str, windows: Iterable[Samples], count: int,
-                        npz: bool | None = None) -> None:  # fmt: skip
+def write_point_windows(
+    path: str, windows: Iterable[Samples], count: int, npz: bool | None = None
+) -> None:
     """:func:`write_points` of reference points given window by window (``count`` rows in
     all, e.g. :meth:`nurbscnc.pipeline.Run.chunks`): the same bytes, one window of memory."""
-    write_table_windows(path, POINT_COLUMNS, (point_columns(w) for w in windows), count,
-                        POINT_FORMATS, npz)  # fmt: skip
+    write_table_windows(
+        path, POINT_COLUMNS, (point_columns(w) for w in windows), count, POINT_FORMATS, npz
+    )
 
 
 def write_profile(path: str, t_s, s_mm, v, a, j, piece) -> None:
     """A feed-profile dump: ``t,s,v,a,j,piece`` (s, mm, mm/s, mm/s², mm/s³, index)."""
-    write_table(path, PROFILE_COLUMNS, (t_s, s_mm, v, a, j, piece),
-                ["%.6f", "%.9f", "%.6f", "%.4f", "%.2f", "%d"])  # fmt: skip
+    write_table(
+        path,
+        PROFILE_COLUMNS,
+        (t_s, s_mm, v, a, j, piece),
+        ["%.6f", "%.9f", "%.6f", "%.4f", "%.2f", "%d"],
+    )
 
 
 def point_header(text: str) -> tuple[str, ...] | None:
@@ -294,8 +303,10 @@ def read_points_text(text: str) -> dict:
     lines = text.lstrip("\ufeff").splitlines()
     if names is None:
         header = lines[0] if lines else ""
-        raise DataError(f"expected the header {','.join(POINT_COLUMNS)} (or t,x,y / t,x,y,z)",
-                        SourcePos(1, 1, header))  # fmt: skip
+        raise DataError(
+            f"expected the header {','.join(POINT_COLUMNS)} (or t,x,y / t,x,y,z)",
+            SourcePos(1, 1, header),
+        )
     try:
         with warnings.catch_warnings():  # "input contained no data": reported below
             warnings.simplefilter("ignore", UserWarning)
@@ -321,10 +332,14 @@ def _read_points_npz(path: str) -> dict:
             arrays = [np.asarray(npz[c]) for c in POINT_COLUMNS]
     except ValueError as exc:  # not an NPZ, or pickled objects (refused)
         raise DataError(f"not a reference-point NPZ file: {str(exc)[:200]}") from None
-    if any(a.ndim != 1 or a.shape != arrays[0].shape or a.dtype.kind not in "iuf"
-           for a in arrays) or arrays[0].size == 0:  # fmt: skip
-        raise DataError(f"the arrays {', '.join(POINT_COLUMNS)} must be numeric, 1-D, "
-                        "non-empty and of one length")  # fmt: skip
+    if (
+        any(a.ndim != 1 or a.shape != arrays[0].shape or a.dtype.kind not in "iuf" for a in arrays)
+        or arrays[0].size == 0
+    ):
+        raise DataError(
+            f"the arrays {', '.join(POINT_COLUMNS)} must be numeric, 1-D, "
+            "non-empty and of one length"
+        )
     data = np.column_stack([a.astype(float) for a in arrays])
     _check_values(data, lambda row, col: None, lambda row: f" (row {row + 1})")
     return {c: data[:, i] for i, c in enumerate(POINT_COLUMNS)}
@@ -338,10 +353,10 @@ def _check_values(data: np.ndarray, position, where=lambda row: "") -> None:
     if bad.any():
         row, col = (int(k) for k in np.argwhere(bad)[0])
         value = float(data[row, col])
-        what = "is not finite" if not math.isfinite(value) else (
-            f"is beyond ±{POINT_VALUE_LIMIT:g}")  # fmt: skip
-        raise DataError(f"{POINT_COLUMNS[col]} = {value!r} {what}{where(row)}",
-                        position(row, col))  # fmt: skip
+        what = (
+            "is not finite" if not math.isfinite(value) else (f"is beyond ±{POINT_VALUE_LIMIT:g}")
+        )
+        raise DataError(f"{POINT_COLUMNS[col]} = {value!r} {what}{where(row)}", position(row, col))
 
 
 def _csv_position(lines: list[str], row: int, col: int) -> SourcePos | None:

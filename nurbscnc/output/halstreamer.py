@@ -28,8 +28,9 @@ STREAMER_CFG = "fff"
 DECIMALS = 6
 
 
-def halstreamer_header(points_mm: np.ndarray, period_s: float, program: str = "",
-                       count: int | None = None) -> str:  # fmt: skip
+def halstreamer_header(
+    points_mm: np.ndarray, period_s: float, program: str = "", count: int | None = None
+) -> str:
     """The comment lines at the top of the file (each begins with ``#``): ``count`` lines
     (None: as many as ``points_mm`` has), starting at ``points_mm[0]``."""
     start = " ".join(f"{v:.{DECIMALS}f}" for v in np.round(points_mm[0], DECIMALS) + 0.0)
@@ -67,8 +68,9 @@ def write_halstreamer(path: str, points_mm, period_s: float, program: str = "") 
     write_halstreamer_windows(path, [p], p.shape[0], period_s, program)
 
 
-def write_halstreamer_windows(path: str, windows, count: int, period_s: float,
-                              program: str = "") -> None:  # fmt: skip
+def write_halstreamer_windows(
+    path: str, windows, count: int, period_s: float, program: str = ""
+) -> None:
     """:func:`write_halstreamer` of points given window by window (arrays (m, 3) [mm] in
     order, ``count`` rows in all): the header (which names the count and the first point)
     from the first window, then each window's lines as it comes — the same bytes as the

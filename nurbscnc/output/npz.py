@@ -62,8 +62,10 @@ def npy_header(dtype: np.dtype, count: int) -> bytes:
     """The .npy header of a 1-D C-order array of ``count`` items of ``dtype``: what
     ``np.save`` writes before the data (format version 1.0: the header is short)."""
     buf = io.BytesIO()
-    np.lib.format.write_array_header_1_0(buf, {"descr": np.lib.format.dtype_to_descr(dtype),
-                                               "fortran_order": False, "shape": (count,)})
+    np.lib.format.write_array_header_1_0(
+        buf,
+        {"descr": np.lib.format.dtype_to_descr(dtype), "fortran_order": False, "shape": (count,)},
+    )
     return buf.getvalue()
 
 
@@ -180,10 +182,14 @@ def write_npz(fh, spool_dir: str | None, names, windows, count: int) -> None:
     if rows > count:
         raise ValueError(f"more rows than the {count} announced")
     dtypes = [c.dtype for c in head[0]]
-    joined = [np.ascontiguousarray(np.concatenate([w[j] for w in head]), dtype=d)
-              for j, d in enumerate(dtypes)]  # fmt: skip
-    columns = [_Column(name, d, count, col[:NPZ_PROBE_ROWS].tobytes())
-               for name, d, col in zip(names, dtypes, joined)]  # fmt: skip
+    joined = [
+        np.ascontiguousarray(np.concatenate([w[j] for w in head]), dtype=d)
+        for j, d in enumerate(dtypes)
+    ]
+    columns = [
+        _Column(name, d, count, col[:NPZ_PROBE_ROWS].tobytes())
+        for name, d, col in zip(names, dtypes, joined)
+    ]
     parts = _Parts(len(columns), spool_dir)
     try:
         for j, (column, col) in enumerate(zip(columns, joined)):
@@ -245,13 +251,29 @@ def _lay_out(fh, columns: list[_Column], parts: _Parts) -> None:
         least = 45 if extra else 0  # zip64 needs version 4.5
         y, mo, d, h, mi, sec = info.date_time
         name = info.filename.encode("ascii")
-        fh.write(_CENTRAL.pack(
-            b"PK\x01\x02", max(least, info.create_version), info.create_system,
-            max(least, info.extract_version), info.reserved, info.flag_bits,
-            info.compress_type, h << 11 | mi << 5 | sec // 2, (y - 1980) << 9 | mo << 5 | d,
-            info.CRC, 0xFFFFFFFF if big else info.compress_size,
-            0xFFFFFFFF if big else info.file_size, len(name), len(data), 0, 0,
-            info.internal_attr, info.external_attr, offset))  # fmt: skip
+        fh.write(
+            _CENTRAL.pack(
+                b"PK\x01\x02",
+                max(least, info.create_version),
+                info.create_system,
+                max(least, info.extract_version),
+                info.reserved,
+                info.flag_bits,
+                info.compress_type,
+                h << 11 | mi << 5 | sec // 2,
+                (y - 1980) << 9 | mo << 5 | d,
+                info.CRC,
+                0xFFFFFFFF if big else info.compress_size,
+                0xFFFFFFFF if big else info.file_size,
+                len(name),
+                len(data),
+                0,
+                0,
+                info.internal_attr,
+                info.external_attr,
+                offset,
+            )
+        )
         fh.write(name)
         fh.write(data)
     end = fh.tell()

@@ -82,8 +82,14 @@ def _segments_xy(xy: np.ndarray, mask: np.ndarray) -> np.ndarray:
     return np.stack([xy[:-1][keep], xy[1:][keep]], axis=1)
 
 
-def path_figure(path_mm, corner_pieces: Sequence, title: str = "Tool path and corner regions",
-                figsize_in=FIGSIZE_IN, rapid=None, feed_mm_s=None):  # fmt: skip
+def path_figure(
+    path_mm,
+    corner_pieces: Sequence,
+    title: str = "Tool path and corner regions",
+    figsize_in=FIGSIZE_IN,
+    rapid=None,
+    feed_mm_s=None,
+):
     """The Figure of :func:`plot_path` (not saved)."""
     from matplotlib.collections import LineCollection
 
@@ -98,8 +104,9 @@ def path_figure(path_mm, corner_pieces: Sequence, title: str = "Tool path and co
         # A point is on a rapid when the move that reaches it is one: the segment between two
         # points is drawn as the later point's move.
         segs = np.stack([path[:-1], path[1:]], axis=1)[rapid[1:]]
-        ax.add_collection(LineCollection(segs, colors="0.55", linestyles="dashed", lw=0.9,
-                                         label="rapid (G0)"))  # fmt: skip
+        ax.add_collection(
+            LineCollection(segs, colors="0.55", linestyles="dashed", lw=0.9, label="rapid (G0)")
+        )
     cut = np.concatenate(([True], ~rapid[1:]))
     if feed_mm_s is not None:
         feed = np.asarray(feed_mm_s, dtype=float)
@@ -113,12 +120,18 @@ def path_figure(path_mm, corner_pieces: Sequence, title: str = "Tool path and co
         fig.colorbar(lc, ax=ax, label="feed [mm/min]")
         ax.autoscale_view()
     else:
-        ax.add_collection(LineCollection(_segments_xy(path, cut), colors="0.45", lw=1.0,
-                                         label="path"))  # fmt: skip
+        ax.add_collection(
+            LineCollection(_segments_xy(path, cut), colors="0.45", lw=1.0, label="path")
+        )
         ax.autoscale_view()
     for i, piece in enumerate(pieces):
-        ax.plot(piece[:, 0], piece[:, 1], color="tab:red", lw=2.2,
-                label="corner region (PH piece)" if i == 0 else None)  # fmt: skip
+        ax.plot(
+            piece[:, 0],
+            piece[:, 1],
+            color="tab:red",
+            lw=2.2,
+            label="corner region (PH piece)" if i == 0 else None,
+        )
         ends = piece[[0, -1]]
         ax.plot(ends[:, 0], ends[:, 1], "o", color="tab:red", ms=3.5, mfc="white")
     ax.set_aspect("equal", adjustable="datalim")
@@ -149,18 +162,29 @@ def plot_path(
     given, colours the cutting moves by their feed (a colour bar in mm/min). Returns
     ``out_png``.
     """
-    return _save(path_figure(path_mm, corner_pieces, title, figsize_in, rapid, feed_mm_s),
-                 out_png)  # fmt: skip
+    return _save(path_figure(path_mm, corner_pieces, title, figsize_in, rapid, feed_mm_s), out_png)
 
 
 #: Colours of the limiting factors (tab10 and tab20 entries; index = Limit code).
-LIMIT_COLOURS = ("tab:green", "tab:olive", "0.6", "tab:purple", "tab:blue", "tab:brown",
-                 "tab:pink", "tab:cyan", "tab:red", "black", "tab:orange", "gold",
-                 "0.3", "0.3")  # fmt: skip
+LIMIT_COLOURS = (
+    "tab:green",
+    "tab:olive",
+    "0.6",
+    "tab:purple",
+    "tab:blue",
+    "tab:brown",
+    "tab:pink",
+    "tab:cyan",
+    "tab:red",
+    "black",
+    "tab:orange",
+    "gold",
+    "0.3",
+    "0.3",
+)
 
 
-def limits_figure(path_mm, limit_code, names: Sequence[str], title: str,
-                  figsize_in=FIGSIZE_IN):  # fmt: skip
+def limits_figure(path_mm, limit_code, names: Sequence[str], title: str, figsize_in=FIGSIZE_IN):
     """The Figure of :func:`plot_path_limits` (not saved)."""
     from matplotlib.collections import LineCollection
 
@@ -172,8 +196,14 @@ def limits_figure(path_mm, limit_code, names: Sequence[str], title: str,
     segs = np.stack([path[:-1], path[1:]], axis=1)
     seg_code = code[1:]
     for c in np.unique(seg_code).tolist():
-        ax.add_collection(LineCollection(segs[seg_code == c], lw=1.6, label=names[c],
-                                         colors=LIMIT_COLOURS[c % len(LIMIT_COLOURS)]))
+        ax.add_collection(
+            LineCollection(
+                segs[seg_code == c],
+                lw=1.6,
+                label=names[c],
+                colors=LIMIT_COLOURS[c % len(LIMIT_COLOURS)],
+            )
+        )
     ax.autoscale_view()
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("x [mm]")
@@ -185,24 +215,35 @@ def limits_figure(path_mm, limit_code, names: Sequence[str], title: str,
     return fig
 
 
-def plot_path_limits(path_mm, limit_code, names: Sequence[str], out_png: str,
-                     title: str = "Tool path by limiting factor",
-                     figsize_in=FIGSIZE_IN) -> str:  # fmt: skip
+def plot_path_limits(
+    path_mm,
+    limit_code,
+    names: Sequence[str],
+    out_png: str,
+    title: str = "Tool path by limiting factor",
+    figsize_in=FIGSIZE_IN,
+) -> str:
     """The path (N, 2|3) [mm] in XY, each move coloured by the limit that set its feed:
     ``limit_code`` (N,) the code of the move reaching each point, ``names`` the legend
     names by code (:class:`nurbscnc.plan.explain.Limit`)."""
     return _save(limits_figure(path_mm, limit_code, names, title, figsize_in), out_png)
 
 
-def feed_along_figure(s_mm, v_mm_s, piece_start_mm, piece_end_mm, programmed_mm_s,
-                      cap_mm_s=None, title: str = "Feed along the program",
-                      figsize_in=FIGSIZE_IN):  # fmt: skip
+def feed_along_figure(
+    s_mm,
+    v_mm_s,
+    piece_start_mm,
+    piece_end_mm,
+    programmed_mm_s,
+    cap_mm_s=None,
+    title: str = "Feed along the program",
+    figsize_in=FIGSIZE_IN,
+):
     """The Figure of :func:`plot_feed_along` (not saved)."""
     s, v = (np.asarray(a, dtype=float) for a in (s_mm, v_mm_s))
     if s.ndim != 1 or s.shape != v.shape:
         raise ConfigError("feed along: s_mm and v_mm_s must be equally long 1-D arrays")
-    a, b, f = (np.asarray(x, dtype=float) for x in (piece_start_mm, piece_end_mm,
-                                                    programmed_mm_s))
+    a, b, f = (np.asarray(x, dtype=float) for x in (piece_start_mm, piece_end_mm, programmed_mm_s))
     fig, (ax,) = _figure(figsize_in)
 
     def steps(y):
@@ -213,8 +254,13 @@ def feed_along_figure(s_mm, v_mm_s, piece_start_mm, piece_end_mm, programmed_mm_
 
     ax.plot(*steps(f), color="tab:gray", lw=1.2, ls="--", label="programmed F")
     if cap_mm_s is not None:
-        ax.plot(*steps(np.asarray(cap_mm_s, dtype=float)), color="tab:orange", lw=0.8,
-                ls=":", label="cap")  # fmt: skip
+        ax.plot(
+            *steps(np.asarray(cap_mm_s, dtype=float)),
+            color="tab:orange",
+            lw=0.8,
+            ls=":",
+            label="cap",
+        )
     ax.plot(s, v * 60.0, color="tab:blue", lw=1.0, label="planned feed")
     ax.set_ylim(bottom=0.0)
     ax.set_xlabel("path length [mm]")
@@ -225,27 +271,60 @@ def feed_along_figure(s_mm, v_mm_s, piece_start_mm, piece_end_mm, programmed_mm_
     return fig
 
 
-def plot_feed_along(s_mm, v_mm_s, piece_start_mm, piece_end_mm, programmed_mm_s, out_png: str,
-                    cap_mm_s=None, title: str = "Feed along the program",
-                    figsize_in=FIGSIZE_IN) -> str:  # fmt: skip
+def plot_feed_along(
+    s_mm,
+    v_mm_s,
+    piece_start_mm,
+    piece_end_mm,
+    programmed_mm_s,
+    out_png: str,
+    cap_mm_s=None,
+    title: str = "Feed along the program",
+    figsize_in=FIGSIZE_IN,
+) -> str:
     """The planned feed v [mm/s] over the path length s [mm] (drawn in mm/min), with each
     piece's programmed F (``piece_start_mm``..``piece_end_mm``, ``programmed_mm_s``) as a
     dashed step and, optionally, its final cap ``cap_mm_s`` dotted."""
-    return _save(feed_along_figure(s_mm, v_mm_s, piece_start_mm, piece_end_mm, programmed_mm_s,
-                                   cap_mm_s, title, figsize_in), out_png)  # fmt: skip
+    return _save(
+        feed_along_figure(
+            s_mm, v_mm_s, piece_start_mm, piece_end_mm, programmed_mm_s, cap_mm_s, title, figsize_in
+        ),
+        out_png,
+    )
 
 
-def _time_series_plot(series: Mapping, out_png: str, title: str, ylabel: str, what: str,
-                      lw: float, figsize_in, zero_line: bool, y_from_zero: bool,
-                      limit: tuple | None = None) -> str:  # fmt: skip
+def _time_series_plot(
+    series: Mapping,
+    out_png: str,
+    title: str,
+    ylabel: str,
+    what: str,
+    lw: float,
+    figsize_in,
+    zero_line: bool,
+    y_from_zero: bool,
+    limit: tuple | None = None,
+) -> str:
     """One axes of ``{name: (t_s, y)}`` lines against time [s], saved to ``out_png``."""
-    return _save(_time_series_figure(series, title, ylabel, what, lw, figsize_in, zero_line,
-                                     y_from_zero, limit), out_png)  # fmt: skip
+    return _save(
+        _time_series_figure(
+            series, title, ylabel, what, lw, figsize_in, zero_line, y_from_zero, limit
+        ),
+        out_png,
+    )
 
 
-def _time_series_figure(series: Mapping, title: str, ylabel: str, what: str, lw: float,
-                        figsize_in, zero_line: bool, y_from_zero: bool,
-                        limit: tuple | None = None):  # fmt: skip
+def _time_series_figure(
+    series: Mapping,
+    title: str,
+    ylabel: str,
+    what: str,
+    lw: float,
+    figsize_in,
+    zero_line: bool,
+    y_from_zero: bool,
+    limit: tuple | None = None,
+):
     """The Figure of :func:`_time_series_plot`; ``limit`` (value, label): a red dashed
     horizontal line (ε_max on the contour plot)."""
     fig, (ax,) = _figure(figsize_in)
@@ -272,8 +351,17 @@ def plot_feed_profiles(
     figsize_in=FIGSIZE_IN,
 ) -> str:
     """Fig. 2/4/6: feed v [mm/s] over time t [s], one line per ``{name: (t_s, v_mm_s)}``."""
-    return _time_series_plot(profiles, out_png, title, "feed [mm/s]", "feed profiles", 1.0,
-                             figsize_in, zero_line=False, y_from_zero=True)
+    return _time_series_plot(
+        profiles,
+        out_png,
+        title,
+        "feed [mm/s]",
+        "feed profiles",
+        1.0,
+        figsize_in,
+        zero_line=False,
+        y_from_zero=True,
+    )
 
 
 def plot_contour_error(
@@ -286,8 +374,18 @@ def plot_contour_error(
     """Fig. 7: contour error [µm] over time [s], one line per ``{name: (t_s, err_um)}``;
     ``eps_max_um``, when given, the limit ε_max [µm] as a red dashed line."""
     limit = None if eps_max_um is None else (float(eps_max_um), f"ε_max = {eps_max_um:g} µm")
-    return _time_series_plot(errors, out_png, title, "contour error [µm]", "contour errors",
-                             0.8, figsize_in, zero_line=True, y_from_zero=False, limit=limit)
+    return _time_series_plot(
+        errors,
+        out_png,
+        title,
+        "contour error [µm]",
+        "contour errors",
+        0.8,
+        figsize_in,
+        zero_line=True,
+        y_from_zero=False,
+        limit=limit,
+    )
 
 
 def plot_axis_errors(

@@ -86,8 +86,9 @@ def piece_limits(pieces, machine) -> PieceLimits:
     t_bound, k_bound, g_bound, kappa = axis_geometry_bounds(pieces)
     v_i, a_i, j_i = axis.as_arrays()
     j_i = _jump_reserved(pieces, j_i)
-    v, a, j = axis_path_limits(t_bound, k_bound, g_bound, kappa, pieces.v_cap_mm_s, v_i, a_i,
-                               j_i, a_path, j_path)  # fmt: skip
+    v, a, j = axis_path_limits(
+        t_bound, k_bound, g_bound, kappa, pieces.v_cap_mm_s, v_i, a_i, j_i, a_path, j_path
+    )
     a, j = _run_minimum(pieces, np.minimum(pieces.v_cap_mm_s, v), a, j)
     return PieceLimits(v, a, j)
 
@@ -107,8 +108,10 @@ def _jump_reserved(pieces, j_axis_mm_s3: np.ndarray) -> np.ndarray:
     hits = np.abs(np.asarray(pieces.jump_kn)) > 0.0 if rows.size else np.zeros((0, 3), bool)
     if k >= 2:
         passed = np.flatnonzero(np.asarray(pieces.pass_after)[:-1])
-        step = (np.asarray(pieces.tangent_start)[:, passed + 1]
-                - np.asarray(pieces.tangent_end)[:, passed]).T  # (m, 3)
+        step = (
+            np.asarray(pieces.tangent_start)[:, passed + 1]
+            - np.asarray(pieces.tangent_end)[:, passed]
+        ).T  # (m, 3)
         rows = np.concatenate((rows, passed))
         hits = np.concatenate((hits, np.abs(step) > 0.0))
     if rows.size:
@@ -158,17 +161,21 @@ def axis_geometry_bounds(pieces) -> tuple[np.ndarray, np.ndarray, np.ndarray, np
     # Samples per piece: at least SAMPLES, and SAMPLES_PER_RADIUS per radius of curvature
     # 1/κ_max along it (a PH corner blend whose curvature peaks at 110 /mm over a few µm
     # needs µm spacing); in power-of-two buckets so each bucket is one whole-array pass.
-    want = np.ceil(length[curved] * np.where(np.isfinite(k_rec[curved]), k_rec[curved], 0.0)
-                   * SAMPLES_PER_RADIUS)  # fmt: skip
+    want = np.ceil(
+        length[curved]
+        * np.where(np.isfinite(k_rec[curved]), k_rec[curved], 0.0)
+        * SAMPLES_PER_RADIUS
+    )
     level = np.ceil(np.log2(np.clip(want, SAMPLES - 1, MAX_SAMPLES - 1))).astype(int)
     for lv in np.unique(level).tolist():
         n = (1 << lv) + 1
         group = curved[level == lv]
         step = max(_CHUNK * SAMPLES // n, 1)
         for lo in range(0, group.size, step):
-            rows = group[lo:lo + step]
+            rows = group[lo : lo + step]
             t_bound[rows], k_bound[rows], g_bound[rows], kappa[rows] = _sampled_bounds(
-                path, rows, length[rows], k_rec[rows], kind[rows] == Kind.ARC, n)
+                path, rows, length[rows], k_rec[rows], kind[rows] == Kind.ARC, n
+            )
     return t_bound, k_bound, g_bound, kappa
 
 
@@ -184,8 +191,14 @@ def _nearest_regular(ok: np.ndarray) -> np.ndarray:
     return np.where(out >= n, 0, out)
 
 
-def _sampled_bounds(path, rows: np.ndarray, length_mm: np.ndarray, kappa_max_per_mm,
-                    exact_kappa: np.ndarray, samples: int):  # fmt: skip
+def _sampled_bounds(
+    path,
+    rows: np.ndarray,
+    length_mm: np.ndarray,
+    kappa_max_per_mm,
+    exact_kappa: np.ndarray,
+    samples: int,
+):
     """T, K, G (m, 3) and κ (m,) of curved pieces ``rows`` from ``samples`` samples each;
     ``exact_kappa`` (m,): the recorded κ_max is exact (circular arcs and helices)."""
     m = rows.size
@@ -219,8 +232,9 @@ def _sampled_bounds(path, rows: np.ndarray, length_mm: np.ndarray, kappa_max_per
     # κ_max and the sampled one plus its change within h/2.
     k_rec = np.asarray(kappa_max_per_mm, dtype=float)
     sampled = np.sqrt((curv * curv).sum(axis=2)).max(axis=1)
-    kappa = np.where(exact_kappa, k_rec, np.maximum(k_rec, sampled + np.sqrt((g * g).sum(axis=1))
-                                                    * h / 2.0))  # fmt: skip
+    kappa = np.where(
+        exact_kappa, k_rec, np.maximum(k_rec, sampled + np.sqrt((g * g).sum(axis=1)) * h / 2.0)
+    )
     k_b = np.minimum(np.abs(curv).max(axis=1) + g * (h / 2.0)[:, None], kappa[:, None])
     # |dt_i/ds| = |(κn)_i| ≤ K_i: within h/2 of a sample t_i changes by at most K_i h/2 (an
     # XY arc keeps T_z = 0, so a slow Z axis never caps it).

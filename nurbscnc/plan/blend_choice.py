@@ -51,8 +51,11 @@ def _speed_change_s(dv_mm_s, a_mm_s2: float, j_mm_s3: float) -> np.ndarray:
     zero acceleration (the profile's transitions, SPEC §7): 2√(Δv/J) while Δv ≤ A²/J (the
     acceleration never reaches A), else Δv/A + A/J."""
     dv = np.maximum(np.asarray(dv_mm_s, dtype=float), 0.0)
-    return np.where(dv <= a_mm_s2 * a_mm_s2 / j_mm_s3, 2.0 * np.sqrt(dv / j_mm_s3),
-                    dv / a_mm_s2 + a_mm_s2 / j_mm_s3)  # fmt: skip
+    return np.where(
+        dv <= a_mm_s2 * a_mm_s2 / j_mm_s3,
+        2.0 * np.sqrt(dv / j_mm_s3),
+        dv / a_mm_s2 + a_mm_s2 / j_mm_s3,
+    )
 
 
 def _reach_mm_s(d_mm, a_mm_s2: float, j_mm_s3: float) -> np.ndarray:
@@ -88,8 +91,12 @@ def _blend_is_faster(pieces: PieceList, c: Corners, machine: Machine) -> np.ndar
     cap = np.minimum(pieces.v_cap_mm_s[a], pieces.v_cap_mm_s[b])
     half = 0.5 * np.minimum(pieces.length_mm[a], pieces.length_mm[b])
     v = np.minimum(cap, _reach_mm_s(half, lim.a_max_mm_s2, lim.j_max_mm_s3))
-    w = np.minimum(np.maximum(np.minimum(curvature_cap_mm_s(machine, c.kappa_per_mm, cap),
-                                         c.cap_mm_s), MIN_CAP_MM_S), v)  # fmt: skip
+    w = np.minimum(
+        np.maximum(
+            np.minimum(curvature_cap_mm_s(machine, c.kappa_per_mm, cap), c.cap_mm_s), MIN_CAP_MM_S
+        ),
+        v,
+    )
     v = np.maximum(v, MIN_CAP_MM_S)
     t_dip = _speed_change_s(v - w, lim.a_max_mm_s2, lim.j_max_mm_s3) * (v - w) / v
     blend = t_dip + c.length_mm / w - (c.trim_a_mm + c.trim_b_mm) / v

@@ -63,17 +63,22 @@ def trimmed_piece(piece: Piece, s0_mm: float, s1_mm: float) -> Piece:
     g = piece.geometry
     if isinstance(g, LineGeometry | ArcGeometry):
         geom = sub_geometry(piece, s0_mm, s1_mm)
-        return dc_replace(piece, geometry=geom, length_mm=float(geom.length_mm), u_a=0.0,
-                          u_b=float(geom.u_end))  # fmt: skip
+        return dc_replace(
+            piece, geometry=geom, length_mm=float(geom.length_mm), u_a=0.0, u_b=float(geom.u_end)
+        )
     full = s1_mm >= piece.length_mm
     if isinstance(g, PHQuintic):
         xi = g.param_at_length(np.array([s0_mm, s1_mm]))
         sub = sub_ph(g, float(xi[0]) if s0_mm > 0.0 else 0.0, 1.0 if full else float(xi[1]))
         return dc_replace(piece, geometry=sub, length_mm=float(sub.length_mm))
     u = g.param_at_length(piece.s_a_mm + np.array([s0_mm, s1_mm]))
-    return dc_replace(piece, u_a=float(u[0]) if s0_mm > 0.0 else piece.u_a,
-                      u_b=piece.u_b if full else float(u[1]), s_a_mm=piece.s_a_mm + s0_mm,
-                      length_mm=float(s1_mm - s0_mm))  # fmt: skip
+    return dc_replace(
+        piece,
+        u_a=float(u[0]) if s0_mm > 0.0 else piece.u_a,
+        u_b=piece.u_b if full else float(u[1]),
+        s_a_mm=piece.s_a_mm + s0_mm,
+        length_mm=float(s1_mm - s0_mm),
+    )
 
 
 def blended_rows(pieces: PieceList, c: Corners, machine: Machine) -> PieceList:
@@ -105,8 +110,7 @@ def blended_rows(pieces: PieceList, c: Corners, machine: Machine) -> PieceList:
         cols[name][:, dest] = getattr(pieces, name)[:, kept]
     in_objects = np.zeros(k, dtype=bool)
     in_objects[list(pieces.objects)] = True
-    objects = {int(new_row[r]): v for r, v in pieces.objects.items()
-               if keep[r] and not trimmed[r]}  # fmt: skip
+    objects = {int(new_row[r]): v for r, v in pieces.objects.items() if keep[r] and not trimmed[r]}
 
     # Trimmed columnar lines: the sub-segment, end points as LineGeometry.point gives them.
     tl = np.flatnonzero(trimmed & keep & (kind == Kind.LINE) & ~in_objects)
@@ -122,8 +126,9 @@ def blended_rows(pieces: PieceList, c: Corners, machine: Machine) -> PieceList:
         cols["length_mm"][dest] = np.sqrt(np.sum((b_pt - a_pt) ** 2, axis=0))
     # Trimmed object rows (arcs, NURBS cells, PH pieces): exact sub-pieces.
     to = np.flatnonzero(trimmed & keep & in_objects).tolist()
-    sub_pieces = [trimmed_piece(pieces[r], float(trim_start[r]),
-                           float(length[r] - trim_end[r])) for r in to]  # fmt: skip
+    sub_pieces = [
+        trimmed_piece(pieces[r], float(trim_start[r]), float(length[r] - trim_end[r])) for r in to
+    ]
     put_objects(cols, objects, [int(new_row[r]) for r in to], sub_pieces)
 
     # The line–line blends (columnar PH rows) and the other blends (PH objects).
@@ -147,29 +152,50 @@ def blended_rows(pieces: PieceList, c: Corners, machine: Machine) -> PieceList:
     w, p0, frame = c.w[ll_ok], c.p0[ll_ok], c.frame[ll_ok]
     p5 = p0 + (w[:, 0] * w[:, 0] + w[:, 0] * w[:, 2] / 3.0 + w[:, 2] * w[:, 2]) / 5.0
     for name, z in (("start_mm", p0), ("end_mm", p5)):
-        cols[name][:, dest] = (frame[:, 0] + z.real[:, None] * frame[:, 1]
-                               + z.imag[:, None] * frame[:, 2]).T  # fmt: skip
+        cols[name][:, dest] = (
+            frame[:, 0] + z.real[:, None] * frame[:, 1] + z.imag[:, None] * frame[:, 2]
+        ).T
     obj_rows, obj_pieces = [], []
     for j, bl in c.obj_blends.items():
         if not ok[j]:
             continue
         i = int(corner[j])
         feed_j = min(float(cap_a[j]), float(cap_b[j]))
-        cap = max(min(float(curvature_cap_mm_s(machine, bl.kappa_max_per_mm, feed_j)),
-                      float(c.cap_mm_s[j])), MIN_CAP_MM_S)  # fmt: skip
+        cap = max(
+            min(
+                float(curvature_cap_mm_s(machine, bl.kappa_max_per_mm, feed_j)),
+                float(c.cap_mm_s[j]),
+            ),
+            MIN_CAP_MM_S,
+        )
         obj_rows.append(int(first[i]))
         kind, geom = (Kind.PH, bl.ph) if hasattr(bl, "ph") else (Kind.NURBS, bl.curve)
-        obj_pieces.append(Piece(kind, geom, float(c.length_mm[j]), cap,
-                                int(pieces.segment[i]), int(pieces.line[i]), 0.0, 1.0, 0.0,
-                                bl.kappa_max_per_mm, blend_mm=float(pieces.blend_mm[i]),
-                                rapid=bool(pieces.rapid[i])))  # fmt: skip
+        obj_pieces.append(
+            Piece(
+                kind,
+                geom,
+                float(c.length_mm[j]),
+                cap,
+                int(pieces.segment[i]),
+                int(pieces.line[i]),
+                0.0,
+                1.0,
+                0.0,
+                bl.kappa_max_per_mm,
+                blend_mm=float(pieces.blend_mm[i]),
+                rapid=bool(pieces.rapid[i]),
+            )
+        )
     put_objects(cols, objects, obj_rows, obj_pieces)
 
     # Columnar PH rows: the old ones (moved) and the new line–line blends, in row order.
     ph_rows = np.concatenate((new_row[pieces.ph_rows], dest))
     order = np.argsort(ph_rows, kind="stable")
-    return PieceList(**cols, ph_rows=ph_rows[order],
-                     ph_w=np.concatenate((pieces.ph_w, w))[order],
-                     ph_p0=np.concatenate((pieces.ph_p0, p0))[order],
-                     ph_frame=np.concatenate((pieces.ph_frame, frame))[order],
-                     objects=objects)  # fmt: skip
+    return PieceList(
+        **cols,
+        ph_rows=ph_rows[order],
+        ph_w=np.concatenate((pieces.ph_w, w))[order],
+        ph_p0=np.concatenate((pieces.ph_p0, p0))[order],
+        ph_frame=np.concatenate((pieces.ph_frame, frame))[order],
+        objects=objects,
+    )

@@ -82,8 +82,14 @@ def find_corners(pieces: PieceList, machine: Machine) -> Corners | None:
     turning, regular = junction_turning(pieces)
     columnar = np.zeros(k, dtype=bool)
     columnar[pieces.ph_rows] = True
-    cand = (~columnar[:-1] & ~columnar[1:] & ~stopped_junctions(pieces) & (tol > 0.0) & regular
-            & ~passable_junctions(pieces, turning, regular))  # fmt: skip
+    cand = (
+        ~columnar[:-1]
+        & ~columnar[1:]
+        & ~stopped_junctions(pieces)
+        & (tol > 0.0)
+        & regular
+        & ~passable_junctions(pieces, turning, regular)
+    )
     corner = np.flatnonzero(cand) + 1
     if corner.size == 0:
         return None
@@ -92,12 +98,15 @@ def find_corners(pieces: PieceList, machine: Machine) -> Corners | None:
     scale = np.maximum(1.0, np.abs(vertex).max(axis=0))
     if np.any(gap > 1e-6 * scale):
         i = int(corner[np.argmax(gap > 1e-6 * scale)])
-        raise GeometryError(f"blend_corner: the geometries do not meet (gap "
-                            f"{gap.max():.3g} mm)", SourcePos(int(pieces.line[i])))  # fmt: skip
+        raise GeometryError(
+            f"blend_corner: the geometries do not meet (gap {gap.max():.3g} mm)",
+            SourcePos(int(pieces.line[i])),
+        )
     is_line = (kind == Kind.LINE) & ~np.isin(np.arange(k), list(pieces.objects))
     lines = is_line[corner - 1] & is_line[corner]
-    return Corners(corner, tol[corner - 1], vertex, turning[corner - 1], lines,
-                    pieces.line[corner - 1])
+    return Corners(
+        corner, tol[corner - 1], vertex, turning[corner - 1], lines, pieces.line[corner - 1]
+    )
 
 
 def blend_line_corners(pieces: PieceList, c: Corners) -> None:
@@ -114,9 +123,14 @@ def blend_line_corners(pieces: PieceList, c: Corners) -> None:
         sl = slice(lo, lo + CHUNK_ROWS)
         j = ll[sl]
         r = c.row[j]
-        lb = line_corner_blends(c.vertex_mm[:, j].T, pieces.tangent_end[:, r - 1].T,
-                                pieces.tangent_start[:, r].T, c.tol_mm[j], 0.5 * length[r - 1],
-                                0.5 * length[r])  # fmt: skip
+        lb = line_corner_blends(
+            c.vertex_mm[:, j].T,
+            pieces.tangent_end[:, r - 1].T,
+            pieces.tangent_start[:, r].T,
+            c.tol_mm[j],
+            0.5 * length[r - 1],
+            0.5 * length[r],
+        )
         c.ok[j], c.kappa_per_mm[j] = lb.ok, lb.kappa_max_per_mm
         c.trim_a_mm[j], c.trim_b_mm[j] = lb.trim_a_mm, lb.trim_b_mm
         c.length_mm[j] = ph_tables(lb.w, lb.p0)[3]
@@ -161,8 +175,9 @@ def blend_object_corners(pieces: PieceList, c: Corners, machine: Machine) -> Non
         return
     rows = c.row[js]
     length = pieces.length_mm
-    blends = blend_space_corners(pieces.path, rows - 1, rows, c.tol_mm[js],
-                                 0.5 * length[rows - 1], 0.5 * length[rows])  # fmt: skip
+    blends = blend_space_corners(
+        pieces.path, rows - 1, rows, c.tol_mm[js], 0.5 * length[rows - 1], 0.5 * length[rows]
+    )
     for j, bl in zip(js.tolist(), blends):
         if bl is not None:
             c.cap_mm_s[j] = servo_blend_cap_mm_s(machine, bl.kappa_max_per_mm)
@@ -205,9 +220,12 @@ def servo_gain_s2(machine: Machine) -> float:
     (:func:`~nurbscnc.servo.model.error_series`, SPEC §8: 2.85e-5 s²)."""
     from nurbscnc.servo.model import error_series
 
-    gains = [abs(float(c[2] + 0.5 * c[1] ** 2))
-             for ax in (machine.servo.x, machine.servo.y, machine.servo.z) if ax is not None
-             for c in (error_series(ax),)]  # fmt: skip
+    gains = [
+        abs(float(c[2] + 0.5 * c[1] ** 2))
+        for ax in (machine.servo.x, machine.servo.y, machine.servo.z)
+        if ax is not None
+        for c in (error_series(ax),)
+    ]
     return max(gains, default=0.0)
 
 
@@ -232,6 +250,7 @@ def out_of_plane(pieces: PieceList, j: np.ndarray) -> np.ndarray:
         if size == 0.0:
             continue
         vertex = pieces.end_mm[:, r]
-        out[n] = not all(planar_kind(blend_geometry(pieces[i]), normal / size, vertex)
-                         for i in (r, r + 1))  # fmt: skip
+        out[n] = not all(
+            planar_kind(blend_geometry(pieces[i]), normal / size, vertex) for i in (r, r + 1)
+        )
     return out

@@ -2,6 +2,7 @@
 servo samples at a time, the servo simulated with its state carried, the contour error
 measured per sample, and only what the shaping rules need kept (:class:`Overs`); the result
 of a check (:class:`Check`) and of a program's cut windows joined (:class:`JoinedChecks`)."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass, fields, replace
@@ -86,11 +87,16 @@ class Check:
         c = self.contour_um()
         eq29 = np.abs(self.response.contour_eq29_mm[self.cutting]) * 1000.0
         if not c.size:
-            return {"contour_true_max_um": 0.0, "contour_true_rms_um": 0.0,
-                    "contour_eq29_max_um": 0.0}  # fmt: skip
-        return {"contour_true_max_um": float(c.max()),
-                "contour_true_rms_um": float(np.sqrt(np.mean(c * c))),
-                "contour_eq29_max_um": float(eq29.max())}  # fmt: skip
+            return {
+                "contour_true_max_um": 0.0,
+                "contour_true_rms_um": 0.0,
+                "contour_eq29_max_um": 0.0,
+            }
+        return {
+            "contour_true_max_um": float(c.max()),
+            "contour_true_rms_um": float(np.sqrt(np.mean(c * c))),
+            "contour_eq29_max_um": float(eq29.max()),
+        }
 
 
 def _rows(ref: Reference, sl: slice) -> Reference:
@@ -100,9 +106,13 @@ def _rows(ref: Reference, sl: slice) -> Reference:
 
 def _joined(first: Reference, then: Reference) -> Reference:
     """The rows of ``first``, then those of ``then``."""
-    return replace(first, **{f.name: np.concatenate((getattr(first, f.name),
-                                                     getattr(then, f.name)))
-                             for f in fields(first)})  # fmt: skip
+    return replace(
+        first,
+        **{
+            f.name: np.concatenate((getattr(first, f.name), getattr(then, f.name)))
+            for f in fields(first)
+        },
+    )
 
 
 @dataclass(frozen=True, eq=False)
@@ -139,8 +149,16 @@ class Checker:
     is evaluated whole (one window). Per sample everything is what the whole-array check
     computes, so plans do not depend on the window."""
 
-    def __init__(self, pieces: PieceList, machine: Machine, sampler: ReferenceSampler,
-                 eps_mm: float, settle_rows: np.ndarray, window: int, keep: bool):  # fmt: skip
+    def __init__(
+        self,
+        pieces: PieceList,
+        machine: Machine,
+        sampler: ReferenceSampler,
+        eps_mm: float,
+        settle_rows: np.ndarray,
+        window: int,
+        keep: bool,
+    ):
         self.pieces, self.machine = pieces, machine
         self.sampler = as_sampler(sampler)
         self.eps_mm, self.settle_rows, self.keep = eps_mm, settle_rows, keep
@@ -157,8 +175,9 @@ class Checker:
         self._at_rest = AxesStream([servo.x, servo.y, servo.z], servo.period_s)
         self._memo: _Memo | None = None  # the last one-chunk check (:meth:`_same_rows`)
 
-    def _windows(self, planned: PieceList, profile: Profile, rows: tuple | None = None,
-                 sample=None):  # fmt: skip
+    def _windows(
+        self, planned: PieceList, profile: Profile, rows: tuple | None = None, sample=None
+    ):
         """(reference rows, slice of the window's own rows in them, row of the virtual end
         or None): one row more on each side where there is one (the direction of travel is
         a central difference); with ``rows`` (k0, k1, last, …) only those samples, and
@@ -177,11 +196,21 @@ class Checker:
                 return
             chunks = [(ref, max(r0 - 1, 0), min(r1 + 1, hi), r0, r1)]
         else:
-            chunks = ((None, max(k0 - 1, 0), min(k0 + self.window + 1, r1 + 1, hi), k0,
-                       min(k0 + self.window, r1)) for k0 in range(r0, r1, self.window))
+            chunks = (
+                (
+                    None,
+                    max(k0 - 1, 0),
+                    min(k0 + self.window + 1, r1 + 1, hi),
+                    k0,
+                    min(k0 + self.window, r1),
+                )
+                for k0 in range(r0, r1, self.window)
+            )
         if sample is None:
+
             def sample(a, b):
                 return self.sampler(planned, profile, period, a, b)
+
         for whole, a, b, k0, k1 in chunks:
             ref = sample(a, b) if whole is None else _rows(whole, slice(a, b))
             virt = None
@@ -195,8 +224,12 @@ class Checker:
         """Pieces 0 … ``end`` − 1 of ``planned`` and ``profile`` as a program of their own,
         as far as the contour distance needs them (:class:`_Head`), their
         :class:`~nurbscnc.plan.dynamics.PathIndex` (kept per ``end``) and rapid flags."""
-        return (_Head(planned, end), _HeadProfile(profile, end), _HeadIndex(self.index, end),
-                self.rapid[:end])  # fmt: skip
+        return (
+            _Head(planned, end),
+            _HeadProfile(profile, end),
+            _HeadIndex(self.index, end),
+            self.rapid[:end],
+        )
 
     def _end_row(self, planned: PieceList, profile: Profile, k: int, end: int) -> Reference:
         """Sample ``k`` of the program made of pieces 0 … ``end`` − 1 only (a cut window's
@@ -212,8 +245,13 @@ class Checker:
         points, param = planned.path.place(profile.piece_start_mm, s, piece)
         return Reference(t, tau, s, np.zeros(1), np.zeros(1), piece, points, param)
 
-    def run(self, planned: PieceList, profile: Profile, rows: tuple | None = None,
-            stream: AxesStream | None = None) -> Check:  # fmt: skip
+    def run(
+        self,
+        planned: PieceList,
+        profile: Profile,
+        rows: tuple | None = None,
+        stream: AxesStream | None = None,
+    ) -> Check:
         """Check the plan ``planned``/``profile``: the :class:`Check` of its reference.
         ``rows`` (k0, k1, last, τ_end [s], last piece): only the samples k0 … k1 − 1 (one
         cut window of :func:`~nurbscnc.plan.lookahead.plan_windows`), the servo starting
@@ -245,8 +283,9 @@ class Checker:
             period = servo.period_s
             if same and a == memo.a:  # the leading rows the last check of it sampled
                 j = min(same, b - a)
-                ref = _joined(_rows(memo.ref, slice(0, j)),
-                              self.sampler(planned, profile, period, a + j, b))  # fmt: skip
+                ref = _joined(
+                    _rows(memo.ref, slice(0, j)), self.sampler(planned, profile, period, a + j, b)
+                )
             else:
                 ref = self.sampler(planned, profile, period, a, b)
             nonlocal chunks
@@ -255,8 +294,11 @@ class Checker:
             return ref
 
         for ref, own, virt in self._windows(planned, profile, rows, sample):
-            d = np.gradient(ref.points_mm[:, :2], axis=0) if ref.t_s.size > 1 else \
-                np.zeros((ref.t_s.size, 2))  # fmt: skip
+            d = (
+                np.gradient(ref.points_mm[:, :2], axis=0)
+                if ref.t_s.size > 1
+                else np.zeros((ref.t_s.size, 2))
+            )
             if virt is not None:
                 end = (_rows(ref, slice(virt, virt + 1)), d[virt : virt + 1])
             # Own rows whose response the last check computed: their reference rows and
@@ -269,22 +311,42 @@ class Checker:
                 kept = min(kept, memo.contour_mm.size)
             ref = _rows(ref, own)
             actual = stream.step(ref.points_mm)
-            resp, cutting = self._respond(ref, actual, d[own], on, prof, index, profile, head,
-                                          memo, kept)  # fmt: skip
+            resp, cutting = self._respond(
+                ref, actual, d[own], on, prof, index, profile, head, memo, kept
+            )
             acc.add(resp, cutting, ref.tau_s, ref.piece)
             last = ref
             if sampled:  # the first chunk: kept for the next re-plan of a one-chunk window
-                self._memo = _Memo(key, stream_in, planned.path, profile,
-                                   dwell_times(planned.dwell_after_s, profile), sampled[0][0],
-                                   sampled[0][1], own.start, resp.axis_error_mm,
-                                   resp.contour_mm, resp.contour_eq29_mm, cutting)  # fmt: skip
+                self._memo = _Memo(
+                    key,
+                    stream_in,
+                    planned.path,
+                    profile,
+                    dwell_times(planned.dwell_after_s, profile),
+                    sampled[0][0],
+                    sampled[0][1],
+                    own.start,
+                    resp.axis_error_mm,
+                    resp.contour_mm,
+                    resp.contour_eq29_mm,
+                    cutting,
+                )
         self.stream_out = stream
         self._finish(acc, stream, end, last, planned, profile, rows, head, (on, prof, index))
         return acc.check()
 
-    def _finish(self, acc: _Accumulator, stream: AxesStream, end: tuple | None,
-                last: Reference, planned: PieceList, profile: Profile, rows: tuple | None,
-                head: tuple | None, path: tuple) -> None:  # fmt: skip
+    def _finish(
+        self,
+        acc: _Accumulator,
+        stream: AxesStream,
+        end: tuple | None,
+        last: Reference,
+        planned: PieceList,
+        profile: Profile,
+        rows: tuple | None,
+        head: tuple | None,
+        path: tuple,
+    ) -> None:
         """The end of a check of :meth:`run`, added to ``acc``: for a cut window that the
         program does not end with, its virtual last sample ``end`` (reference row and
         direction of travel, :meth:`_end_row`) on a copy of the servo state ``stream``;
@@ -297,24 +359,45 @@ class Checker:
             if end is not None:
                 ref, d_end = end
                 actual = stream.step(ref.points_mm)
-                resp = window_response(ref.points_mm, ref.s_mm, actual, d_end, on, prof,
-                                       self.eps_mm, index)  # fmt: skip
-                acc.add(resp, self._cutting(ref, resp, profile, head), ref.tau_s, ref.piece,
-                        virtual=True)  # fmt: skip
+                resp = window_response(
+                    ref.points_mm, ref.s_mm, actual, d_end, on, prof, self.eps_mm, index
+                )
+                acc.add(
+                    resp,
+                    self._cutting(ref, resp, profile, head),
+                    ref.tau_s,
+                    ref.piece,
+                    virtual=True,
+                )
                 last = ref
         tail = stream.settle()  # the reference held at its end until the axes settle
         if tail.shape[0]:
             m = tail.shape[0]
             held = np.repeat(last.points_mm[-1:], m, axis=0)
-            resp = window_response(held, np.full(m, last.s_mm[-1]), tail, np.zeros((m, 2)),
-                                   on, prof, self.eps_mm, index)  # fmt: skip
-            tau_end, piece_end = (profile.duration_s, len(planned) - 1) if rows is None \
-                else rows[3:5]  # fmt: skip
-            acc.add(resp, np.full(m, not self.rapid[piece_end]), np.full(m, tau_end),
-                    np.full(m, piece_end), virtual=virtual)  # fmt: skip
+            resp = window_response(
+                held,
+                np.full(m, last.s_mm[-1]),
+                tail,
+                np.zeros((m, 2)),
+                on,
+                prof,
+                self.eps_mm,
+                index,
+            )
+            tau_end, piece_end = (
+                (profile.duration_s, len(planned) - 1) if rows is None else rows[3:5]
+            )
+            acc.add(
+                resp,
+                np.full(m, not self.rapid[piece_end]),
+                np.full(m, tau_end),
+                np.full(m, piece_end),
+                virtual=virtual,
+            )
 
-    def _same_rows(self, planned: PieceList, profile: Profile, key: tuple | None,
-                   stream: AxesStream | None) -> int:  # fmt: skip
+    def _same_rows(
+        self, planned: PieceList, profile: Profile, key: tuple | None, stream: AxesStream | None
+    ) -> int:
         """How many leading rows of the kept chunk (:class:`_Memo`) a check of this plan
         samples alike, bit for bit: the same window started from the same servo state on
         the same path, each row's wall time before the dwell schedules differ
@@ -325,23 +408,49 @@ class Checker:
         and the servo state only: so a re-plan that changed the profile from some point on
         costs the samples from there on. 0 without a kept chunk."""
         memo = self._memo
-        if memo is None or memo.key != key or memo.stream is not stream or \
-                memo.path is not planned.path:  # fmt: skip
+        if (
+            memo is None
+            or memo.key != key
+            or memo.stream is not stream
+            or memo.path is not planned.path
+        ):
             return 0
         t_wall = same_clock_until_s(memo.clock, dwell_times(planned.dwell_after_s, profile))
         t_tau = same_until_s(memo.profile, profile)
-        return int(min(np.searchsorted(memo.ref.t_s, t_wall, side="left"),
-                       np.searchsorted(memo.ref.tau_s, t_tau, side="left")))  # fmt: skip
+        return int(
+            min(
+                np.searchsorted(memo.ref.t_s, t_wall, side="left"),
+                np.searchsorted(memo.ref.tau_s, t_tau, side="left"),
+            )
+        )
 
-    def _respond(self, ref: Reference, actual: np.ndarray, direction: np.ndarray, on, prof,
-                 index, profile: Profile, head: tuple | None, memo: _Memo | None,
-                 kept: int) -> tuple[Response, np.ndarray]:  # fmt: skip
+    def _respond(
+        self,
+        ref: Reference,
+        actual: np.ndarray,
+        direction: np.ndarray,
+        on,
+        prof,
+        index,
+        profile: Profile,
+        head: tuple | None,
+        memo: _Memo | None,
+        kept: int,
+    ) -> tuple[Response, np.ndarray]:
         """The response to the own reference rows ``ref`` (the servo's ``actual``
         positions, the directions of travel) and which rows are checked (:meth:`_cutting`):
         the first ``kept`` rows from ``memo`` (the same numbers), the others computed."""
         new = slice(kept, None)
-        resp = window_response(ref.points_mm[new], ref.s_mm[new], actual[new], direction[new],
-                               on, prof, self.eps_mm, index)  # fmt: skip
+        resp = window_response(
+            ref.points_mm[new],
+            ref.s_mm[new],
+            actual[new],
+            direction[new],
+            on,
+            prof,
+            self.eps_mm,
+            index,
+        )
         cutting = self._cutting(_rows(ref, new), resp, profile, head)
         if not kept:
             return resp, cutting
@@ -349,38 +458,46 @@ class Checker:
         def joined(old: np.ndarray, now: np.ndarray) -> np.ndarray:
             return np.concatenate((old[:kept], now))
 
-        return (Response(actual, joined(memo.axis_error_mm, resp.axis_error_mm),
-                         joined(memo.contour_mm, resp.contour_mm),
-                         joined(memo.contour_eq29_mm, resp.contour_eq29_mm)),
-                joined(memo.cutting, cutting))  # fmt: skip
+        return (
+            Response(
+                actual,
+                joined(memo.axis_error_mm, resp.axis_error_mm),
+                joined(memo.contour_mm, resp.contour_mm),
+                joined(memo.contour_eq29_mm, resp.contour_eq29_mm),
+            ),
+            joined(memo.cutting, cutting),
+        )
 
     def _run_whole(self, planned: PieceList, profile: Profile) -> Check:
         """The check on the whole reference at once (a sampler without windows, or the
         reference and response kept): :func:`~nurbscnc.plan.dynamics.path_response`."""
         ref = self.sampler(planned, profile, self.machine.servo.period_s)
-        resp = path_response(ref, planned, profile, self.machine, refine_above_mm=self.eps_mm,
-                             index=self.index)  # fmt: skip
+        resp = path_response(
+            ref, planned, profile, self.machine, refine_above_mm=self.eps_mm, index=self.index
+        )
         n, m = ref.t_s.size, resp.contour_mm.size
-        cutting = np.append(self._cutting(ref, resp, profile),
-                            np.full(m - n, not self.rapid[-1]))  # fmt: skip
+        cutting = np.append(self._cutting(ref, resp, profile), np.full(m - n, not self.rapid[-1]))
         acc = _Accumulator(self, profile)
-        acc.add(resp, cutting, np.append(ref.tau_s, np.full(m - n, profile.duration_s)),
-                np.append(ref.piece, np.full(m - n, len(planned) - 1)))  # fmt: skip
+        acc.add(
+            resp,
+            cutting,
+            np.append(ref.tau_s, np.full(m - n, profile.duration_s)),
+            np.append(ref.piece, np.full(m - n, len(planned) - 1)),
+        )
         if not self.keep:
             return acc.check()
         return replace(acc.check(), reference=ref, response=resp, cutting=cutting)
 
-    def _cutting(self, ref: Reference, resp: Response, profile: Profile,
-                 head: tuple | None = None) -> np.ndarray:  # fmt: skip
+    def _cutting(
+        self, ref: Reference, resp: Response, profile: Profile, head: tuple | None = None
+    ) -> np.ndarray:
         """Which reference samples are checked (N,): contour error matters while cutting;
         samples on rapids (air moves) and during the settle after a rapid (the reference
         waits at the cut's start) are not. The first cutting samples after a rapid are
         measured against the cut only (in ``resp``)."""
-        waiting = self.after_rapid[ref.piece] & (
-            ref.tau_s <= profile.piece_start_time_s[ref.piece])
+        waiting = self.after_rapid[ref.piece] & (ref.tau_s <= profile.piece_start_time_s[ref.piece])
         index, rapid = (self.index, self.rapid) if head is None else (head[2], head[3])
-        _cut_distance_after_rapids(resp, ref, profile, self.after_rapid, waiting, rapid,
-                                   index)  # fmt: skip
+        _cut_distance_after_rapids(resp, ref, profile, self.after_rapid, waiting, rapid, index)
         return ~self.rapid[ref.piece] & ~waiting
 
 
@@ -409,8 +526,13 @@ class _HeadIndex:
     def __init__(self, index: PathIndex, end: int):
         self._index, self._end = index, end
 
-    def distance_mm(self, q: np.ndarray, upper_mm: np.ndarray, block: int = 256,
-                    exclude: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
+    def distance_mm(
+        self,
+        q: np.ndarray,
+        upper_mm: np.ndarray,
+        block: int = 256,
+        exclude: np.ndarray | None = None,
+    ) -> np.ndarray:
         """:meth:`PathIndex.distance_mm` to pieces 0 … end − 1 (less ``exclude`` (end,))."""
         beyond = np.zeros(len(self._index._pieces), dtype=bool)
         beyond[self._end :] = True
@@ -418,8 +540,9 @@ class _HeadIndex:
             beyond[: self._end] |= exclude[: self._end]
         return self._index.distance_mm(q, upper_mm, block, beyond)
 
-    def dense_polyline(self, pieces, starts_mm: np.ndarray, total_mm: float, lo: int,
-                       hi: int) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    def dense_polyline(
+        self, pieces, starts_mm: np.ndarray, total_mm: float, lo: int, hi: int
+    ) -> tuple[np.ndarray, np.ndarray]:
         """The dense polyline of pieces ``lo:hi`` of the head: the whole program's kept
         polyline (:meth:`PathIndex.dense_polyline`: the same numbers as made afresh for the
         head, whose starts are the program's first and whose total clips its end)."""
@@ -451,15 +574,26 @@ class _Accumulator:
         self.c_n = 0
         self.real = None  # (count, worst, restart, over count, run count) before a virtual tail
 
-    def add(self, resp: Response, cutting: np.ndarray, tau_s: np.ndarray, piece: np.ndarray,
-            virtual: bool = False):  # fmt: skip
+    def add(
+        self,
+        resp: Response,
+        cutting: np.ndarray,
+        tau_s: np.ndarray,
+        piece: np.ndarray,
+        virtual: bool = False,
+    ):
         """The next samples: their response, which are checked (``cutting``), profile times
         [s] and pieces. ``virtual``: the held tail of a cut window that the program does not
         end with: it counts for the window's decisions, not in its statistics nor in
         :attr:`Check.samples`."""
         if virtual and self.real is None:
-            self.real = (self.count, self.worst, self.restart.copy(), len(self.over),
-                         len(self.runs))  # fmt: skip
+            self.real = (
+                self.count,
+                self.worst,
+                self.restart.copy(),
+                len(self.over),
+                len(self.runs),
+            )
         err = np.where(cutting, resp.contour_mm, 0.0)
         over = np.flatnonzero(err > self.eps_mm)
         self.over.append((over + self.count, err[over], tau_s[over]))
@@ -474,8 +608,9 @@ class _Accumulator:
             self.c_max = max(self.c_max, float(c.max()))
             self.c_sq += float(np.dot(c, c))
             self.c_n += c.size
-            self.eq29_max = max(self.eq29_max,
-                                float(np.abs(resp.contour_eq29_mm[cutting]).max()) * 1000.0)
+            self.eq29_max = max(
+                self.eq29_max, float(np.abs(resp.contour_eq29_mm[cutting]).max()) * 1000.0
+            )
         self.count += cutting.size
 
     def check(self) -> Check:
@@ -484,8 +619,11 @@ class _Accumulator:
         piece, start = (np.concatenate(x) for x in zip(*self.runs))
         overs = Overs(self.count, idx, err, tau, piece, start, self.restart, self.worst)
         rms = float(np.sqrt(self.c_sq / self.c_n)) if self.c_n else 0.0
-        stats = {"contour_true_max_um": self.c_max, "contour_true_rms_um": rms,
-                 "contour_eq29_max_um": self.eq29_max}  # fmt: skip
+        stats = {
+            "contour_true_max_um": self.c_max,
+            "contour_true_rms_um": rms,
+            "contour_eq29_max_um": self.eq29_max,
+        }
         samples = overs
         if self.real is not None:
             count, worst, restart, n_over, n_runs = self.real
@@ -524,24 +662,44 @@ class JoinedChecks:
     def check(self) -> Check:
         off = np.cumsum([0] + [p[5] for p in self.parts])
         cat = np.concatenate
-        overs = Overs(int(off[-1]), cat([p[0] + d for p, d in zip(self.parts, off)]),
-                      cat([p[1] for p in self.parts]), cat([p[2] for p in self.parts]),
-                      cat([p[3] for p in self.parts]),
-                      cat([p[4] + d for p, d in zip(self.parts, off)]), self.restart,
-                      self.worst)  # fmt: skip
+        overs = Overs(
+            int(off[-1]),
+            cat([p[0] + d for p, d in zip(self.parts, off)]),
+            cat([p[1] for p in self.parts]),
+            cat([p[2] for p in self.parts]),
+            cat([p[3] for p in self.parts]),
+            cat([p[4] + d for p, d in zip(self.parts, off)]),
+            self.restart,
+            self.worst,
+        )
         total = sum(self.n)
         stats = self.stats
-        rms = float(np.sqrt(sum(s["contour_true_rms_um"] ** 2 * m for s, m in zip(stats, self.n))
-                            / total)) if total else 0.0  # fmt: skip
-        joined = {"contour_true_max_um": max(s["contour_true_max_um"] for s in stats),
-                  "contour_true_rms_um": rms,
-                  "contour_eq29_max_um": max(s["contour_eq29_max_um"] for s in stats)}
+        rms = (
+            float(
+                np.sqrt(
+                    sum(s["contour_true_rms_um"] ** 2 * m for s, m in zip(stats, self.n)) / total
+                )
+            )
+            if total
+            else 0.0
+        )
+        joined = {
+            "contour_true_max_um": max(s["contour_true_max_um"] for s in stats),
+            "contour_true_rms_um": rms,
+            "contour_eq29_max_um": max(s["contour_eq29_max_um"] for s in stats),
+        }
         return Check(None, None, None, overs, joined, overs, total)
 
 
-def _cut_distance_after_rapids(response: Response, ref: Reference, profile: Profile,
-                               after_rapid: np.ndarray, waiting: np.ndarray, rapid: np.ndarray,
-                               index: PathIndex) -> None:  # fmt: skip
+def _cut_distance_after_rapids(
+    response: Response,
+    ref: Reference,
+    profile: Profile,
+    after_rapid: np.ndarray,
+    waiting: np.ndarray,
+    rapid: np.ndarray,
+    index: PathIndex,
+) -> None:
     """Measure the first cutting samples after a rapid against the cut only (in place).
 
     The path the contour error is measured against includes the rapids, so a tool still
@@ -554,6 +712,6 @@ def _cut_distance_after_rapids(response: Response, ref: Reference, profile: Prof
     start = profile.piece_start_mm[ref.piece]
     fix = np.flatnonzero(after_rapid[ref.piece] & ~waiting & (ref.s_mm - 2.0 * lag <= start))
     if fix.size:
-        response.contour_mm[fix] = index.distance_mm(response.actual_mm[fix], lag[fix] + 1e-12,
-                                                     exclude=rapid)  # fmt: skip
-
+        response.contour_mm[fix] = index.distance_mm(
+            response.actual_mm[fix], lag[fix] + 1e-12, exclude=rapid
+        )

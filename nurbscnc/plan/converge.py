@@ -1,6 +1,7 @@
 """The levers loop of one plan (module docstring of :mod:`~nurbscnc.plan.lookahead`):
 re-plan until the check is within ε_max (local shaping, then the fallback), then the
 improvement phase that bisects the shaped levers back towards their brackets."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -76,8 +77,11 @@ def converge(st: Setup, lev: Levers, evaluate, confine=lambda lv: None, plan_of=
         confine(lev)
         result = None  # the last check goes first (with keep_reference, hundreds of MB)
     shaped_s = cycle_time_s(result)
-    if options.dynamics == Dynamics.LOCAL and lev.shaped.any() and _may_gain(result, shaped_s,
-                                                                           fastest_s):
+    if (
+        options.dynamics == Dynamics.LOCAL
+        and lev.shaped.any()
+        and _may_gain(result, shaped_s, fastest_s)
+    ):
         # Improvement: bisect every shaped lever between its feasible value and its value
         # before shaping (geometric means; the settles arithmetically towards 0).
         lev, result, n = _improve(st, lev, result, initial, evaluate, confine)
@@ -91,7 +95,8 @@ def converge(st: Setup, lev: Levers, evaluate, confine=lambda lv: None, plan_of=
         confine(hi)
         shaped_s = cycle_time_s(result)
         if np.any(hi.caps > lev.caps * IMPROVE_RATIO) and _may_gain(
-                result, shaped_s, cycle_time_s((plan_of or st.plan_of)(hi))):
+            result, shaped_s, cycle_time_s((plan_of or st.plan_of)(hi))
+        ):
             lev, result, n = _improve(st, lev, result, hi, evaluate, confine)
             iterations += n
     return lev, result, iterations
@@ -202,8 +207,10 @@ class _Improvement:
             self.confine(trial)
             if trial.caps[p] <= self.best.caps[p] * IMPROVE_RATIO:  # nothing left to gain
                 break
-        if self.result[2].overs.worst_mm <= st.eps_mm and \
-                cycle_time_s(self.result) < self.best_time:  # fmt: skip
+        if (
+            self.result[2].overs.worst_mm <= st.eps_mm
+            and cycle_time_s(self.result) < self.best_time
+        ):
             self.take(trial, self.result)
         else:
             self.result = None
@@ -242,8 +249,7 @@ class _Improvement:
         replaced it (not counted as a re-plan)."""
         result = self.result
         if result is None:
-            result = self.best_result if self.best_result is not None else \
-                self.evaluate(self.best)  # fmt: skip
+            result = self.best_result if self.best_result is not None else self.evaluate(self.best)
         return self.best, result, self.iterations
 
 
@@ -264,4 +270,3 @@ def _may_gain(result, shaped_s: float, fastest_s: float) -> bool:
     motion (a cut window's profile, else the whole cycle time)."""
     span_s = result[3].duration_s if len(result) > 3 else shaped_s
     return shaped_s - fastest_s > IMPROVE_MIN_GAIN * span_s
-

@@ -19,8 +19,9 @@ from nurbscnc.plan.options import PlanOptions
 from nurbscnc.plan.pieces import PieceList
 
 
-def corner_log(pieces: PieceList, tried: Corners | None, machine: Machine,
-               options: PlanOptions) -> CornerLog:  # fmt: skip
+def corner_log(
+    pieces: PieceList, tried: Corners | None, machine: Machine, options: PlanOptions
+) -> CornerLog:
     """Every corner and what was done there (:class:`~nurbscnc.plan.corners.CornerLog`), in
     path order: the blended corners (``tried``, with the rows of ``pieces`` their blends
     took), and every junction of the final ``pieces`` that is not tangent or where the tool
@@ -53,8 +54,9 @@ def corner_log(pieces: PieceList, tried: Corners | None, machine: Machine,
             why = np.full(j.size, CornerWhy.SMALL_BREAK, dtype=np.int8)
             st = ~passed
             slower = tried.slower_junction if tried is not None else None
-            why[st] = _stop_reasons(pieces, j[st], turning[j[st]], regular[j[st]], machine,
-                                    options, slower)  # fmt: skip
+            why[st] = _stop_reasons(
+                pieces, j[st], turning[j[st]], regular[j[st]], machine, options, slower
+            )
             keys.append(j + 1)  # the row after the junction (a blend row's junctions are smooth)
             lines.append(pieces.line[j])
             points.append(pieces.end_mm[:, j].T)
@@ -64,14 +66,24 @@ def corner_log(pieces: PieceList, tried: Corners | None, machine: Machine,
     if not keys:
         return CornerLog.empty()
     order = np.argsort(np.concatenate(keys), kind="stable")
-    return CornerLog(np.concatenate(lines).astype(np.int64)[order],
-                     np.concatenate(points)[order], np.concatenate(turns)[order],
-                     np.concatenate(acts)[order], np.concatenate(whys)[order])  # fmt: skip
+    return CornerLog(
+        np.concatenate(lines).astype(np.int64)[order],
+        np.concatenate(points)[order],
+        np.concatenate(turns)[order],
+        np.concatenate(acts)[order],
+        np.concatenate(whys)[order],
+    )
 
 
-def _stop_reasons(pieces: PieceList, j: np.ndarray, turning: np.ndarray, regular: np.ndarray,
-                  machine: Machine, options: PlanOptions,
-                  slower: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
+def _stop_reasons(
+    pieces: PieceList,
+    j: np.ndarray,
+    turning: np.ndarray,
+    regular: np.ndarray,
+    machine: Machine,
+    options: PlanOptions,
+    slower: np.ndarray | None = None,
+) -> np.ndarray:
     """Why the tool stops at junctions ``j`` (:class:`~nurbscnc.plan.corners.CornerWhy`
     codes; :func:`corner_log` gives the order). Rules are applied last-first, so the first
     rule that applies is the one left."""
@@ -90,8 +102,12 @@ def _stop_reasons(pieces: PieceList, j: np.ndarray, turning: np.ndarray, regular
         why[zero] = CornerWhy.ZERO_TOLERANCE
     exact_stop = (blend[j] < 0.0) | (blend[j + 1] < 0.0)
     why[zero & exact_stop] = CornerWhy.EXACT_STOP
-    degenerate = (~regular | (turning > np.pi - MIN_REVERSAL_RAD) | (length[j] == 0.0)
-                  | (length[j + 1] == 0.0))  # fmt: skip
+    degenerate = (
+        ~regular
+        | (turning > np.pi - MIN_REVERSAL_RAD)
+        | (length[j] == 0.0)
+        | (length[j + 1] == 0.0)
+    )
     why[degenerate] = CornerWhy.NOT_BLENDABLE
     # Two lines always lie in one plane: only corners with a curved piece can be 3-D turns.
     objects = np.zeros(len(pieces), dtype=bool)
@@ -99,8 +115,9 @@ def _stop_reasons(pieces: PieceList, j: np.ndarray, turning: np.ndarray, regular
     failed = np.flatnonzero((why == CornerWhy.NO_BLEND_FITS) & (objects[j] | objects[j + 1]))
     why[failed[out_of_plane(pieces, j[failed])]] = CornerWhy.NOT_BLENDABLE
     why[stop_after[j]] = CornerWhy.DWELL_OR_PAUSE
-    block_end = (stop_after[j] & (blend[j] < 0.0) & (seg[j] != seg[j + 1])
-                 & (pieces.dwell_after_s[j] == 0.0))  # fmt: skip
+    block_end = (
+        stop_after[j] & (blend[j] < 0.0) & (seg[j] != seg[j + 1]) & (pieces.dwell_after_s[j] == 0.0)
+    )
     why[block_end] = CornerWhy.EXACT_STOP
     why[rapid[j] != rapid[j + 1]] = CornerWhy.RAPID_FEED
     return why

@@ -146,8 +146,9 @@ def _brentq():
     if module is None:  # pragma: no cover (another scipy layout)
         from scipy.optimize import brentq
 
-        return lambda f, a, b: brentq(f, a, b, xtol=BRENT_XTOL, rtol=BRENT_RTOL,
-                                      maxiter=BRENT_MAXITER)  # fmt: skip
+        return lambda f, a, b: brentq(
+            f, a, b, xtol=BRENT_XTOL, rtol=BRENT_RTOL, maxiter=BRENT_MAXITER
+        )
 
     def solve(f, a, b):
         def checked(x):
@@ -156,8 +157,7 @@ def _brentq():
                 raise ValueError(f"the function value at x={x} is NaN; solver cannot continue")
             return fx
 
-        return module._brentq(checked, a, b, BRENT_XTOL, BRENT_RTOL, BRENT_MAXITER, (), False,
-                              True)  # fmt: skip
+        return module._brentq(checked, a, b, BRENT_XTOL, BRENT_RTOL, BRENT_MAXITER, (), False, True)
 
     return solve
 
@@ -251,9 +251,7 @@ def program_corners(
         feed = min(feed, v_max_mm_s)
         kth = float(kappa_threshold_per_mm(feed, a_max_mm_s2))
         curve = NurbsCurve.from_segment(seg)
-        result.append(
-            SegmentCorners(index, seg.line, feed, kth, find_corner_regions(curve, kth))
-        )
+        result.append(SegmentCorners(index, seg.line, feed, kth, find_corner_regions(curve, kth)))
     return result
 
 

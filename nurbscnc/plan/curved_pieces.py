@@ -27,8 +27,9 @@ def nurbs_curve(seg, machine: Machine) -> NurbsCurve:
     return NurbsCurve.from_segment(seg).without_end_hooks(machine.limits.chord_tolerance_mm)
 
 
-def nurbs_pieces(seg, index: int, machine: Machine, options: PlanOptions,
-                 curve: NurbsCurve | None = None) -> list[Piece]:  # fmt: skip
+def nurbs_pieces(
+    seg, index: int, machine: Machine, options: PlanOptions, curve: NurbsCurve | None = None
+) -> list[Piece]:
     """A NURBS segment as pieces: PH corner pieces and capped NURBS stretches, on ``curve``
     (default :func:`nurbs_curve`)."""
     lim = machine.limits
@@ -42,8 +43,9 @@ def nurbs_pieces(seg, index: int, machine: Machine, options: PlanOptions,
     u_prev = curve.u_start
     for region in regions:
         if region.u_a > u_prev:
-            pieces.extend(_nurbs_stretch(curve, u_prev, region.u_a, seg, index, machine, feed,
-                                         blend))  # fmt: skip
+            pieces.extend(
+                _nurbs_stretch(curve, u_prev, region.u_a, seg, index, machine, feed, blend)
+            )
         if not np.isfinite(region.kappa_peak_per_mm):
             # A cusp (C′ = 0): a true sharp corner of the programmed curve. No smooth curve
             # can pass it at speed: stop exactly at the cusp (the junction between the two
@@ -60,16 +62,43 @@ def nurbs_pieces(seg, index: int, machine: Machine, options: PlanOptions,
                 xi = np.linspace(0.0, 1.0, 65)
                 k_max = float(np.max(np.abs(p.ph.curvature(xi))))
                 k_mean = abs(p.ph.turning_angle_rad()) / max(float(p.ph.length_mm), 1e-300)
-                cap = (region_cap if options.corner_feed == CornerFeed.PEAK
-                       else corner_cap_mm_s(machine, max(k_max, kth), feed,
-                                        max(k_mean, kth)))  # fmt: skip
-                pieces.append(Piece(Kind.PH, p.ph, float(p.ph.length_mm), cap, index, seg.line,
-                                    0.0, 1.0, 0.0, k_max, blend_mm=blend))  # fmt: skip
+                cap = (
+                    region_cap
+                    if options.corner_feed == CornerFeed.PEAK
+                    else corner_cap_mm_s(machine, max(k_max, kth), feed, max(k_mean, kth))
+                )
+                pieces.append(
+                    Piece(
+                        Kind.PH,
+                        p.ph,
+                        float(p.ph.length_mm),
+                        cap,
+                        index,
+                        seg.line,
+                        0.0,
+                        1.0,
+                        0.0,
+                        k_max,
+                        blend_mm=blend,
+                    )
+                )
         else:
             s = curve.arc_length(np.array([region.u_a, region.u_b]))
-            pieces.append(Piece(Kind.NURBS, curve, float(s[1] - s[0]), region_cap, index,
-                                seg.line, region.u_a, region.u_b, float(s[0]),
-                                region.kappa_peak_per_mm, blend_mm=blend))  # fmt: skip
+            pieces.append(
+                Piece(
+                    Kind.NURBS,
+                    curve,
+                    float(s[1] - s[0]),
+                    region_cap,
+                    index,
+                    seg.line,
+                    region.u_a,
+                    region.u_b,
+                    float(s[0]),
+                    region.kappa_peak_per_mm,
+                    blend_mm=blend,
+                )
+            )
         u_prev = region.u_b
     if u_prev < curve.u_end:
         pieces.extend(_nurbs_stretch(curve, u_prev, curve.u_end, seg, index, machine, feed, blend))
@@ -95,9 +124,11 @@ def _region_fit(curve, u_a: float, u_b: float, e_um: float):
     n = int(np.clip(np.ceil((s[1] - s[0]) / CORNER_CELL_MM), 1, 64))
     u = curve.param_at_length(np.linspace(s[0], s[1], n + 1))
     u[0], u[-1] = u_a, u_b
-    return [p for a, b in zip(u[:-1], u[1:], strict=True)
-            for p in fit_region(curve, float(a), float(b), tolerance_um=e_um,
-                                max_factor=1.0).pieces]  # fmt: skip
+    return [
+        p
+        for a, b in zip(u[:-1], u[1:], strict=True)
+        for p in fit_region(curve, float(a), float(b), tolerance_um=e_um, max_factor=1.0).pieces
+    ]
 
 
 #: Longest NURBS cell [mm]: stretches between corners are cut into cells this long or shorter,
@@ -116,8 +147,10 @@ def _nurbs_stretch(curve, u_a, u_b, seg, index, machine, feed, blend_mm) -> list
     u_edges = curve.param_at_length(s_edges)
     u_edges[0], u_edges[-1] = u_a, u_b
     sub = 8
-    fine = (u_edges[:-1, None] + (u_edges[1:] - u_edges[:-1])[:, None]
-            * np.linspace(0.0, 1.0, sub + 1)[None, :])  # fmt: skip
+    fine = (
+        u_edges[:-1, None]
+        + (u_edges[1:] - u_edges[:-1])[:, None] * np.linspace(0.0, 1.0, sub + 1)[None, :]
+    )
     kappa = curve.curvature(fine.ravel()).reshape(fine.shape)
     # A cusp (κ = inf) sits at a cell end, where the junction is an exact stop anyway: cap the
     # cell by its finite curvature samples (κ grows like s^(-1/2) towards a cusp, so the
@@ -127,10 +160,22 @@ def _nurbs_stretch(curve, u_a, u_b, seg, index, machine, feed, blend_mm) -> list
     # Never a zero cap (κ ≥ 2/δ makes V_af zero): it would stall the tool; 1 µm/s is the floor.
     cell_cap = np.maximum(curvature_cap_mm_s(machine, kappa, feed).min(axis=1), MIN_CAP_MM_S)
     k_cell = kappa.max(axis=1)
-    return [Piece(Kind.NURBS, curve, float(s_edges[i + 1] - s_edges[i]), float(cell_cap[i]),
-                  index, seg.line, float(u_edges[i]), float(u_edges[i + 1]),
-                  float(s_edges[i]), float(k_cell[i]), blend_mm=blend_mm)
-            for i in range(n_cells)]  # fmt: skip
+    return [
+        Piece(
+            Kind.NURBS,
+            curve,
+            float(s_edges[i + 1] - s_edges[i]),
+            float(cell_cap[i]),
+            index,
+            seg.line,
+            float(u_edges[i]),
+            float(u_edges[i + 1]),
+            float(s_edges[i]),
+            float(k_cell[i]),
+            blend_mm=blend_mm,
+        )
+        for i in range(n_cells)
+    ]
 
 
 def _peak_kappa(curve, u: np.ndarray, kappa: np.ndarray, rounds: int = 3) -> np.ndarray:
@@ -167,8 +212,9 @@ def _peak_kappa(curve, u: np.ndarray, kappa: np.ndarray, rounds: int = 3) -> np.
     return best
 
 
-def object_pieces(seg, index: int, machine: Machine, options: PlanOptions,
-                  curve: NurbsCurve | None = None) -> list[Piece]:  # fmt: skip
+def object_pieces(
+    seg, index: int, machine: Machine, options: PlanOptions, curve: NurbsCurve | None = None
+) -> list[Piece]:
     """The pieces of an arc or NURBS segment (Piece objects; none for a zero-length arc);
     a NURBS segment's on ``curve`` if given (:func:`nurbs_curve`)."""
     if seg.kind == "nurbs":
@@ -185,8 +231,21 @@ def object_pieces(seg, index: int, machine: Machine, options: PlanOptions,
     # Constant curvature (helix: r / (r² + c²)).
     kappa = float(np.max(geom.curvature(np.array([geom.u_start, geom.u_end]))))
     cap = float(curvature_cap_mm_s(machine, kappa, seg.feed_mm_s))
-    return [Piece(Kind.ARC, geom, length, max(cap, 1e-6), index, seg.line, geom.u_start,
-                  geom.u_end, 0.0, kappa, blend_mm=blend_override(seg, options))]  # fmt: skip
+    return [
+        Piece(
+            Kind.ARC,
+            geom,
+            length,
+            max(cap, 1e-6),
+            index,
+            seg.line,
+            geom.u_start,
+            geom.u_end,
+            0.0,
+            kappa,
+            blend_mm=blend_override(seg, options),
+        )
+    ]
 
 
 def blend_override(seg, options: PlanOptions) -> float:

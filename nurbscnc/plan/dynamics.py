@@ -45,9 +45,15 @@ class Response:
     contour_eq29_mm: np.ndarray
 
 
-def path_response(samples, pieces, profile, machine, hold: str = "foh",
-                  refine_above_mm: float | None = None,
-                  index: PathIndex | None = None) -> Response:  # fmt: skip
+def path_response(
+    samples,
+    pieces,
+    profile,
+    machine,
+    hold: str = "foh",
+    refine_above_mm: float | None = None,
+    index: PathIndex | None = None,
+) -> Response:
     """Simulate every axis on the planned samples and measure the contour error: the
     windowed true distance (module doc), linear in the program length; where it exceeds
     ``refine_above_mm`` (default: never), the distance to the whole path instead
@@ -57,8 +63,7 @@ def path_response(samples, pieces, profile, machine, hold: str = "foh",
     ref = samples.points_mm
     n = ref.shape[0]
     servo = machine.servo
-    actual = simulate_axes([servo.x, servo.y, servo.z], ref, servo.period_s, hold=hold,
-                           settle=True)  # fmt: skip
+    actual = simulate_axes([servo.x, servo.y, servo.z], ref, servo.period_s, hold=hold, settle=True)
     axis_err = np.empty_like(actual)
     np.subtract(ref, actual[:n], out=axis_err[:n])
     np.subtract(ref[-1], actual[n:], out=axis_err[n:])
@@ -81,10 +86,16 @@ def path_response(samples, pieces, profile, machine, hold: str = "foh",
     return Response(actual, axis_err, contour, eq29)
 
 
-def window_response(points_mm: np.ndarray, s_mm: np.ndarray, actual_mm: np.ndarray,
-                    direction_xy: np.ndarray, pieces, profile,
-                    refine_above_mm: float | None = None,
-                    index: PathIndex | None = None) -> Response:  # fmt: skip
+def window_response(
+    points_mm: np.ndarray,
+    s_mm: np.ndarray,
+    actual_mm: np.ndarray,
+    direction_xy: np.ndarray,
+    pieces,
+    profile,
+    refine_above_mm: float | None = None,
+    index: PathIndex | None = None,
+) -> Response:
     """The response of one window of samples (the windowed dynamics check): the
     reference ``points_mm`` (w, 3) [mm] at path lengths ``s_mm`` (w,), the simulated
     ``actual_mm`` (w, 3) (:class:`~nurbscnc.servo.model.AxesStream`) and the reference's

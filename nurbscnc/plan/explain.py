@@ -85,17 +85,38 @@ class Limit(IntEnum):
         return _TEXTS[self]
 
 
-_KEYS = {Limit.FEED: "feed", Limit.V_MAX: "v_max", Limit.RAPID: "rapid",
-         Limit.CHORD: "chord_error", Limit.NORMAL: "normal_acceleration", Limit.AXIS: "axis",
-         Limit.CURVATURE: "curvature", Limit.BLEND: "blend", Limit.CONTOUR: "contour_error",
-         Limit.CORNER_STOP: "corner_stop", Limit.DISTANCE: "distance", Limit.JERK: "jerk",
-         Limit.SETTLE: "settle", Limit.DWELL: "dwell"}  # fmt: skip
-_TEXTS = {Limit.FEED: "programmed F", Limit.V_MAX: "V_max", Limit.RAPID: "rapid rate",
-          Limit.CHORD: "chord error (eq. 23)", Limit.NORMAL: "normal acceleration",
-          Limit.AXIS: "axis limit", Limit.CURVATURE: "curvature (eq. 24)",
-          Limit.BLEND: "corner blend", Limit.CONTOUR: "contour error",
-          Limit.CORNER_STOP: "corner stop", Limit.DISTANCE: "acceleration distance",
-          Limit.JERK: "jerk (too short)", Limit.SETTLE: "settle", Limit.DWELL: "dwell"}  # fmt: skip
+_KEYS = {
+    Limit.FEED: "feed",
+    Limit.V_MAX: "v_max",
+    Limit.RAPID: "rapid",
+    Limit.CHORD: "chord_error",
+    Limit.NORMAL: "normal_acceleration",
+    Limit.AXIS: "axis",
+    Limit.CURVATURE: "curvature",
+    Limit.BLEND: "blend",
+    Limit.CONTOUR: "contour_error",
+    Limit.CORNER_STOP: "corner_stop",
+    Limit.DISTANCE: "distance",
+    Limit.JERK: "jerk",
+    Limit.SETTLE: "settle",
+    Limit.DWELL: "dwell",
+}
+_TEXTS = {
+    Limit.FEED: "programmed F",
+    Limit.V_MAX: "V_max",
+    Limit.RAPID: "rapid rate",
+    Limit.CHORD: "chord error (eq. 23)",
+    Limit.NORMAL: "normal acceleration",
+    Limit.AXIS: "axis limit",
+    Limit.CURVATURE: "curvature (eq. 24)",
+    Limit.BLEND: "corner blend",
+    Limit.CONTOUR: "contour error",
+    Limit.CORNER_STOP: "corner stop",
+    Limit.DISTANCE: "acceleration distance",
+    Limit.JERK: "jerk (too short)",
+    Limit.SETTLE: "settle",
+    Limit.DWELL: "dwell",
+}
 N_LIMITS = len(Limit)
 #: The :class:`Limit` of each JSON name.
 LIMIT_OF_KEY = {key: limit for limit, key in _KEYS.items()}
@@ -176,20 +197,27 @@ class Explanation:
         rows = np.flatnonzero(c.action == CornerAction.STOP) if stops_only else slice(None)
         actions = {int(a): a.name.lower() for a in CornerAction}
         whys = {int(w): w.name.lower() for w in CornerWhy}
-        return [{"line": ln, "point_mm": pt, "turning_deg": deg, "action": actions[a],
-                 "why": whys[w]}
-                for ln, pt, deg, a, w in zip(
-                    c.line[rows].tolist(), c.point_mm[rows].tolist(),
-                    np.degrees(c.turning_rad[rows]).tolist(), c.action[rows].tolist(),
-                    c.why[rows].tolist())]  # fmt: skip
+        return [
+            {"line": ln, "point_mm": pt, "turning_deg": deg, "action": actions[a], "why": whys[w]}
+            for ln, pt, deg, a, w in zip(
+                c.line[rows].tolist(),
+                c.point_mm[rows].tolist(),
+                np.degrees(c.turning_rad[rows]).tolist(),
+                c.action[rows].tolist(),
+                c.why[rows].tolist(),
+            )
+        ]
 
     def corner_counts(self) -> dict[str, int]:
         """How many corners got each (action, why): ``{"stop/exact_path": 3, ...}``."""
         c = self.corners
-        keys, counts = np.unique(np.stack([c.action, c.why]).astype(np.int64), axis=1,
-                                 return_counts=True)  # fmt: skip
-        return {f"{CornerAction(int(a)).name.lower()}/{CornerWhy(int(w)).name.lower()}": int(n)
-                for (a, w), n in zip(keys.T.tolist(), counts.tolist())}  # fmt: skip
+        keys, counts = np.unique(
+            np.stack([c.action, c.why]).astype(np.int64), axis=1, return_counts=True
+        )
+        return {
+            f"{CornerAction(int(a)).name.lower()}/{CornerWhy(int(w)).name.lower()}": int(n)
+            for (a, w), n in zip(keys.T.tolist(), counts.tolist())
+        }
 
     def line_dicts(self) -> list[dict]:
         """Every line's JSON entry (as :meth:`line_dict`, built from whole columns)."""
@@ -201,13 +229,32 @@ class Explanation:
             times[i][keys[j]] = x
         feed = [None if not np.isfinite(f) else f for f in self.feed_mm_s.tolist()]
         limit = [keys[c] for c in self.limit.tolist()]
-        return [{"line": ln, "kind": kd, "length_mm": le, "time_s": t, "wait_s": w,
-                 "feed_programmed_mm_s": f, "feed_peak_mm_s": pk, "feed_mean_mm_s": mn,
-                 "limit": lim, "limit_time_s": row}
-                for ln, kd, le, t, w, f, pk, mn, lim, row in zip(
-                    self.line.tolist(), self.kind, self.length_mm.tolist(), self.time_s.tolist(),
-                    self.wait_s.tolist(), feed, self.peak_mm_s.tolist(),
-                    self.mean_mm_s.tolist(), limit, times)]  # fmt: skip
+        return [
+            {
+                "line": ln,
+                "kind": kd,
+                "length_mm": le,
+                "time_s": t,
+                "wait_s": w,
+                "feed_programmed_mm_s": f,
+                "feed_peak_mm_s": pk,
+                "feed_mean_mm_s": mn,
+                "limit": lim,
+                "limit_time_s": row,
+            }
+            for ln, kd, le, t, w, f, pk, mn, lim, row in zip(
+                self.line.tolist(),
+                self.kind,
+                self.length_mm.tolist(),
+                self.time_s.tolist(),
+                self.wait_s.tolist(),
+                feed,
+                self.peak_mm_s.tolist(),
+                self.mean_mm_s.tolist(),
+                limit,
+                times,
+            )
+        ]
 
     def as_dict(self) -> dict:
         """The ``explain`` object of ``plan --json --explain`` (every line, every corner)."""
@@ -239,8 +286,9 @@ def acceleration_limits_mm_s2(plan, machine) -> np.ndarray:
     else the per-axis path limit of :func:`~nurbscnc.plan.axes.piece_limits`."""
     lim = getattr(plan, "limits", None)
     if lim is not None:
-        return np.minimum(np.asarray(lim.a_up_mm_s2, dtype=float),
-                          np.asarray(lim.a_down_mm_s2, dtype=float))  # fmt: skip
+        return np.minimum(
+            np.asarray(lim.a_up_mm_s2, dtype=float), np.asarray(lim.a_down_mm_s2, dtype=float)
+        )
     return np.asarray(piece_limits(plan.pieces, machine).a_mm_s2, dtype=float)
 
 
@@ -262,8 +310,12 @@ class SegmentColumns:
         stop = np.flatnonzero(np.isin(kind, STOP_KINDS))
         seconds = np.zeros(len(rows))
         seconds[stop] = [stop_seconds(segments[i]) for i in stop.tolist()]
-        return cls(kind, np.array([r[1] for r in rows], dtype=float),
-                   np.array([r[2] for r in rows], dtype=np.int64), seconds)  # fmt: skip
+        return cls(
+            kind,
+            np.array([r[1] for r in rows], dtype=float),
+            np.array([r[2] for r in rows], dtype=np.int64),
+            seconds,
+        )
 
 
 def piece_feeds_mm_s(seg: SegmentColumns, pieces) -> np.ndarray:
@@ -287,8 +339,9 @@ def cap_limits(seg: SegmentColumns, pieces, machine) -> tuple[np.ndarray, np.nda
     cand[Limit.FEED] = np.where(rapid, np.inf, feed)
     cand[Limit.V_MAX] = np.where(rapid, np.inf, lim.v_max_mm_s)
     cand[Limit.RAPID] = np.where(rapid, lim.rapid_mm_s, np.inf)
-    cand[Limit.CHORD] = np.where(curved, chord_feed_mm_s(kappa, machine.servo.period_s,
-                                                         lim.chord_tolerance_mm), inf)
+    cand[Limit.CHORD] = np.where(
+        curved, chord_feed_mm_s(kappa, machine.servo.period_s, lim.chord_tolerance_mm), inf
+    )
     cand[Limit.NORMAL] = np.where(curved, normal_feed_mm_s(kappa, lim.a_max_mm_s2), inf)
     cand[Limit.AXIS] = axis_v
     cap = np.asarray(pieces.v_cap_mm_s, dtype=float)
@@ -352,9 +405,13 @@ def corner_stop_ends(pieces) -> np.ndarray:
     rapid = np.asarray(pieces.rapid)
     corner = np.zeros(k + 1, dtype=bool)
     if k > 1:
-        corner[1:-1] = ((jc[1:-1] == 0.0) & ~np.asarray(pieces.stop_after[:-1])
-                        & (rapid[:-1] == rapid[1:]) & (length[:-1] > 0.0)
-                        & (length[1:] > 0.0))  # fmt: skip
+        corner[1:-1] = (
+            (jc[1:-1] == 0.0)
+            & ~np.asarray(pieces.stop_after[:-1])
+            & (rapid[:-1] == rapid[1:])
+            & (length[:-1] > 0.0)
+            & (length[1:] > 0.0)
+        )
     return corner[:-1] | corner[1:]
 
 
@@ -392,13 +449,20 @@ def explain_plan(program, machine, plan) -> Explanation:
     stop = corner_stop_ends(pieces)
     # Below its cap: the check's shaping, else a corner stop, else its length (A reached or
     # not on the way).
-    reason = np.where(shaped, Limit.CONTOUR, np.where(
-        stop, Limit.CORNER_STOP,
-        np.where(a_peak >= a_lim * (1.0 - REL_TOL), Limit.DISTANCE, Limit.JERK)))
+    reason = np.where(
+        shaped,
+        Limit.CONTOUR,
+        np.where(
+            stop,
+            Limit.CORNER_STOP,
+            np.where(a_peak >= a_lim * (1.0 - REL_TOL), Limit.DISTANCE, Limit.JERK),
+        ),
+    )
     code = np.where(short & (np.asarray(pieces.length_mm) > 0.0), reason, code).astype(np.int8)
     t_piece = profile.piece_duration_s
-    feed = np.where(np.asarray(pieces.rapid), machine.limits.rapid_mm_s,
-                    piece_feeds_mm_s(seg, pieces))  # fmt: skip
+    feed = np.where(
+        np.asarray(pieces.rapid), machine.limits.rapid_mm_s, piece_feeds_mm_s(seg, pieces)
+    )
     dwell_lines, dwell_s, settle = waits_s(seg, pieces)
 
     # Per source line: every piece and every dwell of that line number.
@@ -422,15 +486,35 @@ def explain_plan(program, machine, plan) -> Explanation:
         mean = np.where(time > 0.0, length / time, 0.0)
     # A dwell line's limit is "dwell" even when it lasts 0 s (a pause).
     best = np.argmax(limit_time, axis=1)
-    best = np.where(limit_time.max(axis=1) > 0.0, best,
-                    np.where(np.isin(lines, dwell_lines), Limit.DWELL, code_of_line(pi, code, n)))
+    best = np.where(
+        limit_time.max(axis=1) > 0.0,
+        best,
+        np.where(np.isin(lines, dwell_lines), Limit.DWELL, code_of_line(pi, code, n)),
+    )
     # The kind of each line's first segment.
     order = np.argsort(seg.line, kind="stable")
     first = order[np.searchsorted(seg.line[order], lines, side="left")]
     kinds = tuple(seg.kind[first].tolist())
-    return Explanation(code, cap_code, final, t_piece, peak, feed, lines, kinds, length, time,
-                       wait, line_feed, line_peak, mean, limit_time, best.astype(np.int8),
-                       pieces.corners, float(plan.cycle_time_s))  # fmt: skip
+    return Explanation(
+        code,
+        cap_code,
+        final,
+        t_piece,
+        peak,
+        feed,
+        lines,
+        kinds,
+        length,
+        time,
+        wait,
+        line_feed,
+        line_peak,
+        mean,
+        limit_time,
+        best.astype(np.int8),
+        pieces.corners,
+        float(plan.cycle_time_s),
+    )
 
 
 def code_of_line(piece_line_index: np.ndarray, code: np.ndarray, n: int) -> np.ndarray:

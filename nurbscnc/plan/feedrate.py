@@ -305,8 +305,12 @@ def peak_speed_unchecked(v_s, v_e, length, v_cap, a, j, a_dn=None, j_dn=None) ->
     cols = np.broadcast_arrays(v_s, v_e, length, v_cap, a, j, a_dn, j_dn)
     shape = cols[0].shape
     out = np.empty(shape)
-    _kernels.peak_speeds(*(np.ascontiguousarray(x, dtype=np.float64) for x in cols), out,
-                         PEAK_NEWTON_STEPS, PEAK_BRACKET_REL)  # fmt: skip
+    _kernels.peak_speeds(
+        *(np.ascontiguousarray(x, dtype=np.float64) for x in cols),
+        out,
+        PEAK_NEWTON_STEPS,
+        PEAK_BRACKET_REL,
+    )
     return out
 
 
@@ -328,17 +332,20 @@ def _peak_speed_py(v_s, v_e, length, v_cap, a, j, a_dn=None, j_dn=None) -> np.nd
     a_dn = a if a_dn is None else a_dn
     j_dn = j if j_dn is None else j_dn
     v_s, v_e, length, v_cap, a, j, a_dn, j_dn = np.broadcast_arrays(
-        v_s, v_e, length, v_cap, a, j, a_dn, j_dn)
+        v_s, v_e, length, v_cap, a, j, a_dn, j_dn
+    )
     shape = v_s.shape
     v_s, v_e, length, v_cap, a, j, a_dn, j_dn = (
-        np.ravel(x) for x in (v_s, v_e, length, v_cap, a, j, a_dn, j_dn))
+        np.ravel(x) for x in (v_s, v_e, length, v_cap, a, j, a_dn, j_dn)
+    )
     lo = np.maximum(v_s, v_e)
     hi = np.maximum(v_cap, lo)
     out = hi.astype(float, copy=True)
     # A piece of zero length keeps its (equal) end speeds: no bisection down to denormals.
     out[length <= 0.0] = lo[length <= 0.0]
-    todo = np.flatnonzero((_pair_distance_mm(v_s, hi, v_e, a, j, a_dn, j_dn) > length)
-                          & (length > 0.0))  # fmt: skip
+    todo = np.flatnonzero(
+        (_pair_distance_mm(v_s, hi, v_e, a, j, a_dn, j_dn) > length) & (length > 0.0)
+    )
     out[todo] = lo[todo]
     lo_t, hi_t = lo[todo], hi[todo]
     vs_t, ve_t, len_t = v_s[todo], v_e[todo], length[todo]

@@ -23,8 +23,9 @@ GATE_MAX_STEPS = 100_000
 GATE_GALLOP = 64
 
 
-def _brake_ok(x: float, v: float, a: float, j: float, gate_d: list, gate_c: list,
-              first: int) -> bool:  # fmt: skip
+def _brake_ok(
+    x: float, v: float, a: float, j: float, gate_d: list, gate_c: list, first: int
+) -> bool:
     """Whether braking the acceleration ``a`` ≥ 0 at once (jerk −j until a = 0, then
     cruising) from position ``x`` [mm] at speed ``v`` passes every gate from ``first`` on:
     v(gate_d[m]) ≤ gate_c[m]. During the brake v = v + a t − j t²/2 rises to
@@ -61,19 +62,30 @@ def _longest(ok, tau: float) -> float:
     return lo
 
 
-def gated_rise(v0: float, v_top: float, gate_d, gate_c, a_max: float, j_max: float,
-               dt: float = GATE_STEP_S):  # fmt: skip
+def gated_rise(
+    v0: float, v_top: float, gate_d, gate_c, a_max: float, j_max: float, dt: float = GATE_STEP_S
+):
     """:func:`gated_rise_py`, compiled where :mod:`nurbscnc.plan._kernels` was built (the
     same numbers bit for bit)."""
     if _kernels is None:
         return gated_rise_py(v0, v_top, gate_d, gate_c, a_max, j_max, dt)
-    return _kernels.gated_rise(float(v0), float(v_top), as_float64(gate_d), as_float64(gate_c),
-                               float(a_max), float(j_max), float(dt), GATE_MIN_STEP_S,
-                               GATE_GALLOP, GATE_MAX_STEPS)  # fmt: skip
+    return _kernels.gated_rise(
+        float(v0),
+        float(v_top),
+        as_float64(gate_d),
+        as_float64(gate_c),
+        float(a_max),
+        float(j_max),
+        float(dt),
+        GATE_MIN_STEP_S,
+        GATE_GALLOP,
+        GATE_MAX_STEPS,
+    )
 
 
-def gated_rise_py(v0: float, v_top: float, gate_d, gate_c, a_max: float, j_max: float,
-                  dt: float = GATE_STEP_S):  # fmt: skip
+def gated_rise_py(
+    v0: float, v_top: float, gate_d, gate_c, a_max: float, j_max: float, dt: float = GATE_STEP_S
+):
     """A rise from (``v0``, a = 0) to (``v_top``, a = 0) under *gates*: at distance
     ``gate_d[m]`` [mm] from the start (increasing) the speed must be ≤ ``gate_c[m]`` [mm/s],
     with |a| ≤ ``a_max``, |j| ≤ ``j_max``, the speed never falling (a ≥ 0).
@@ -159,8 +171,11 @@ class _Flank:
     def advance(self, tau: float, jk: float) -> tuple[float, float, float]:
         """The state (x, v, a) after ``tau`` [s] of jerk ``jk`` from the current one."""
         x, v, a = self.x, self.v, self.a
-        return (x + tau * (v + tau * (0.5 * a + tau * jk / 6.0)),
-                v + tau * (a + 0.5 * tau * jk), a + tau * jk)  # fmt: skip
+        return (
+            x + tau * (v + tau * (0.5 * a + tau * jk / 6.0)),
+            v + tau * (a + 0.5 * tau * jk),
+            a + tau * jk,
+        )
 
     def take(self, tau: float, jk: float) -> None:
         """Append the phase (``tau``, ``jk``) and move the state over it."""
@@ -188,8 +203,11 @@ class _Flank:
         """Try ending with ``phases`` [(τ, jerk), …] (the last brakes a to 0 at v_top)."""
         xs, vs, as_ = self.x, self.v, self.a
         for tau, jk in phases[:-1]:
-            xs, vs, as_ = (xs + tau * (vs + tau * (0.5 * as_ + tau * jk / 6.0)),
-                           vs + tau * (as_ + 0.5 * tau * jk), as_ + tau * jk)  # fmt: skip
+            xs, vs, as_ = (
+                xs + tau * (vs + tau * (0.5 * as_ + tau * jk / 6.0)),
+                vs + tau * (as_ + 0.5 * tau * jk),
+                as_ + tau * jk,
+            )
         return self.passes(xs, vs, as_)
 
     def longest(self, jk: float, tau: float) -> float:
@@ -222,8 +240,9 @@ class _Flank:
         return True
 
 
-def _rise_step(f: _Flank, v_top: float, dt: float, streak: int,
-               steps: int) -> tuple[list | None, tuple[int, int] | None]:  # fmt: skip
+def _rise_step(
+    f: _Flank, v_top: float, dt: float, streak: int, steps: int
+) -> tuple[list | None, tuple[int, int] | None]:
     """The +J step of :func:`gated_rise_py` (a < A): the last rise and brake into ``v_top``
     if it starts within this step and passes (returned as ``done``), else a step of +J —
     ``n`` steps at once while galloping (the step whose end would start the last rise is
@@ -235,9 +254,13 @@ def _rise_step(f: _Flank, v_top: float, dt: float, streak: int,
     if a1 <= min(a + j * dt, big_a):
         phases = [((a1 - a) / j, j), (a1 / j, -j)]
         return (phases if f.finish(phases) else None), None
-    n = min(2 * streak, GATE_GALLOP, int((big_a - a) / (j * dt)),
-            math.ceil((a1 - a) / (j * dt)) - 2 if a1 <= big_a else GATE_GALLOP,
-            GATE_MAX_STEPS - steps + 1)  # fmt: skip
+    n = min(
+        2 * streak,
+        GATE_GALLOP,
+        int((big_a - a) / (j * dt)),
+        math.ceil((a1 - a) / (j * dt)) - 2 if a1 <= big_a else GATE_GALLOP,
+        GATE_MAX_STEPS - steps + 1,
+    )
     if n >= 2 and f.passes(*f.advance(n * dt, j)):
         tau, steps = n * dt, steps + n - 1
     else:
@@ -288,16 +311,23 @@ def merged_phases(durs: list, jerks: list) -> tuple[list, list]:
 MIN_GATES = 2
 
 
-def gated_rise_of(v0: float, v1: float, gates_mm: np.ndarray, caps_mm_s: np.ndarray,
-                  a: float, j: float):
+def gated_rise_of(
+    v0: float, v1: float, gates_mm: np.ndarray, caps_mm_s: np.ndarray, a: float, j: float
+):
     """:func:`gated_rise`, remembered: the check re-plans the profile 5–10 times and each
     plan splits its units several times, asking for the same flanks again. A pure function
     of its numbers, so the memo changes no result; bounded (:data:`GATED_MEMO`). Returns (phases as
     a rise, phases read backwards for a descent, distance [mm]), each phase list merged
     (:func:`merged_phases`; a gated flank has hundreds of 0.1 ms steps: merging them at every ask
     was a large share of a run), or None."""
-    return _gated_rise_memo(float(v0), float(v1), np.ascontiguousarray(gates_mm, float).tobytes(),
-                            np.ascontiguousarray(caps_mm_s, float).tobytes(), float(a), float(j))
+    return _gated_rise_memo(
+        float(v0),
+        float(v1),
+        np.ascontiguousarray(gates_mm, float).tobytes(),
+        np.ascontiguousarray(caps_mm_s, float).tobytes(),
+        float(a),
+        float(j),
+    )
 
 
 #: Flanks remembered by :func:`gated_rise_of` (each a few kB).
@@ -307,9 +337,18 @@ GATED_MEMO = 4096
 @functools.lru_cache(maxsize=GATED_MEMO)
 def _gated_rise_memo(v0, v1, gates_b: bytes, caps_b: bytes, a, j):
     if _kernels is not None:  # the flank and its merging compiled (the same floats)
-        got = _kernels.gated_rise_merged(float(v0), float(v1), gates_b, caps_b, float(a),
-                                         float(j), GATE_STEP_S, GATE_MIN_STEP_S, GATE_GALLOP,
-                                         GATE_MAX_STEPS)  # fmt: skip
+        got = _kernels.gated_rise_merged(
+            float(v0),
+            float(v1),
+            gates_b,
+            caps_b,
+            float(a),
+            float(j),
+            GATE_STEP_S,
+            GATE_MIN_STEP_S,
+            GATE_GALLOP,
+            GATE_MAX_STEPS,
+        )
         if got is None:
             return None
         return (tuple(got[0]), tuple(got[1])), (tuple(got[2]), tuple(got[3])), got[4]

@@ -28,8 +28,11 @@ def _rows(durs: list, jerks: list, s0: float, v0: float) -> tuple[np.ndarray, fl
     a_scale = 0.0
     for i, (d, jk) in enumerate(zip(durs, jerks, strict=True)):
         rows[i] = (d, jk, a, v, s)
-        s, v, a = (s + d * (v + d * (0.5 * a + d * jk / 6.0)), v + d * (a + 0.5 * d * jk),
-                   a + d * jk)  # fmt: skip
+        s, v, a = (
+            s + d * (v + d * (0.5 * a + d * jk / 6.0)),
+            v + d * (a + 0.5 * d * jk),
+            a + d * jk,
+        )
         # A braked acceleration is 0, not the rounding of Σ jerk·duration (2e-12 mm/s²
         # held over a 500 s cruise would raise the speed by 1e-9 mm/s).
         a_scale = max(a_scale, abs(a))
@@ -47,10 +50,19 @@ def _per_unit(unit: np.ndarray, values: np.ndarray, reduce) -> tuple[np.ndarray,
     return u[starts], reduce.reduceat(values[order], starts)
 
 
-def gate_units(unit: Profile, over: np.ndarray, c: np.ndarray, cum: np.ndarray,
-               first: np.ndarray, bounds: np.ndarray, unit_of: np.ndarray,
-               unit_cap: np.ndarray, lims, d_up: np.ndarray,
-               d_dn: np.ndarray) -> tuple[Profile, np.ndarray, np.ndarray]:  # fmt: skip
+def gate_units(
+    unit: Profile,
+    over: np.ndarray,
+    c: np.ndarray,
+    cum: np.ndarray,
+    first: np.ndarray,
+    bounds: np.ndarray,
+    unit_of: np.ndarray,
+    unit_cap: np.ndarray,
+    lims,
+    d_up: np.ndarray,
+    d_dn: np.ndarray,
+) -> tuple[Profile, np.ndarray, np.ndarray]:
     """The unit profile with *gated flanks* (:func:`gated_rise`) in the units whose speed
     exceeds the caps ``c`` of the pieces ``over``: a rising flank under the caps of the
     pieces before the unit's first piece at its cap (each a gate at the piece's end), a
@@ -59,8 +71,9 @@ def gate_units(unit: Profile, over: np.ndarray, c: np.ndarray, cum: np.ndarray,
     in its length (else its offenders stay for :func:`_splits`). ``d_up``, ``d_dn``
     (units,): the units' rise and descent distances [mm], updated in place where gated.
     Returns the profile (per unit) and those distances."""
-    a_up, j_up, a_dn, j_dn = (np.broadcast_to(np.asarray(x, dtype=float), (first.size,))
-                              for x in lims)  # fmt: skip
+    a_up, j_up, a_dn, j_dn = (
+        np.broadcast_to(np.asarray(x, dtype=float), (first.size,)) for x in lims
+    )
     v_s, v_e = unit.junction_speeds_mm_s[:-1], unit.junction_speeds_mm_s[1:]
     v_p = unit.piece_peak_speed_mm_s
     # Every unit's S-curve phase times at once (elementwise IEEE operations: the same bits as
@@ -118,8 +131,15 @@ def gate_units(unit: Profile, over: np.ndarray, c: np.ndarray, cum: np.ndarray,
         return unit, d_up, d_dn
     # Every unit's phases, the gated ones replaced; times re-accumulated.
     pu = unit.phase_piece_index
-    old = np.column_stack((unit.phase_duration_s, unit.phase_jerk_mm_s3, unit.phase_a0_mm_s2,
-                           unit.phase_v0_mm_s, unit.phase_s0_mm))  # fmt: skip
+    old = np.column_stack(
+        (
+            unit.phase_duration_s,
+            unit.phase_jerk_mm_s3,
+            unit.phase_a0_mm_s2,
+            unit.phase_v0_mm_s,
+            unit.phase_s0_mm,
+        )
+    )
     parts, owner = [], []
     for u in range(first.size):
         rows = phase_rows.get(u)
@@ -132,12 +152,18 @@ def gate_units(unit: Profile, over: np.ndarray, c: np.ndarray, cum: np.ndarray,
     t0 = np.concatenate(([0.0], np.cumsum(rows[:, 0])))
     unit_t = t0[np.searchsorted(owner, np.arange(first.size), side="left")]
     gated = Profile(
-        total_length_mm=unit.total_length_mm, duration_s=float(t0[-1]),
+        total_length_mm=unit.total_length_mm,
+        duration_s=float(t0[-1]),
         junction_speeds_mm_s=unit.junction_speeds_mm_s,
         piece_peak_speed_mm_s=unit.piece_peak_speed_mm_s,
-        piece_start_mm=unit.piece_start_mm, piece_start_time_s=frozen_array(unit_t),
-        phase_start_time_s=frozen_array(t0[:-1]), phase_duration_s=frozen_array(rows[:, 0]),
-        phase_s0_mm=frozen_array(rows[:, 4]), phase_v0_mm_s=frozen_array(rows[:, 3]),
-        phase_a0_mm_s2=frozen_array(rows[:, 2]), phase_jerk_mm_s3=frozen_array(rows[:, 1]),
-        phase_piece_index=frozen_array(owner, dtype=np.int64))  # fmt: skip
+        piece_start_mm=unit.piece_start_mm,
+        piece_start_time_s=frozen_array(unit_t),
+        phase_start_time_s=frozen_array(t0[:-1]),
+        phase_duration_s=frozen_array(rows[:, 0]),
+        phase_s0_mm=frozen_array(rows[:, 4]),
+        phase_v0_mm_s=frozen_array(rows[:, 3]),
+        phase_a0_mm_s2=frozen_array(rows[:, 2]),
+        phase_jerk_mm_s3=frozen_array(rows[:, 1]),
+        phase_piece_index=frozen_array(owner, dtype=np.int64),
+    )
     return gated, d_up, d_dn

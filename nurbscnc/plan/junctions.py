@@ -28,8 +28,13 @@ def pass_velocity_jump_mm_s(machine: Machine) -> float:
     output (1e-5 rad) passes; anything larger is blended (G64) or stopped at (G61)."""
     lim = machine.limits
     period = machine.servo.period_s
-    return float(min(lim.a_max_mm_s2 * period, lim.j_max_mm_s3 * period**2,
-                     4.0 * lim.chord_tolerance_mm / period))  # fmt: skip
+    return float(
+        min(
+            lim.a_max_mm_s2 * period,
+            lim.j_max_mm_s3 * period**2,
+            4.0 * lim.chord_tolerance_mm / period,
+        )
+    )
 
 
 def junction_turning(pieces: PieceList) -> tuple[np.ndarray, np.ndarray]:
@@ -43,8 +48,9 @@ def junction_turning(pieces: PieceList) -> tuple[np.ndarray, np.ndarray]:
     return turning, regular
 
 
-def small_breaks(pieces: PieceList, turning: np.ndarray, regular: np.ndarray,
-                 machine: Machine) -> np.ndarray:  # fmt: skip
+def small_breaks(
+    pieces: PieceList, turning: np.ndarray, regular: np.ndarray, machine: Machine
+) -> np.ndarray:
     """Junctions (k − 1) with a break small enough to pass at the smaller neighbouring cruise
     cap v (no blend, no slow-down): 2v sin(θ/2) · max(1, vT / (L/2)) ≤
     :func:`pass_velocity_jump_mm_s`, θ > :data:`SMOOTH_JUNCTION_RAD`, L the shorter
@@ -89,8 +95,12 @@ def stopped_junctions(pieces: PieceList) -> np.ndarray:
     """Junctions where the tool must stop whatever the geometry (k − 1): a dwell, pause or
     exact stop (``stop_after``), a rapid meeting a feed move, a zero-length piece."""
     rapid, length = pieces.rapid, pieces.length_mm
-    return (pieces.stop_after[:-1] | (rapid[:-1] != rapid[1:]) | (length[:-1] == 0.0)
-            | (length[1:] == 0.0))  # fmt: skip
+    return (
+        pieces.stop_after[:-1]
+        | (rapid[:-1] != rapid[1:])
+        | (length[:-1] == 0.0)
+        | (length[1:] == 0.0)
+    )
 
 
 #: Curvature-vector jumps below this [1/mm] are rounding (the cells of one NURBS, an arc cut
@@ -123,8 +133,9 @@ def curvature_jumps(pieces: PieceList) -> tuple[np.ndarray, np.ndarray]:
         ok = sp2 > 0.0
         safe = np.where(ok, sp2, 1.0)
         t = d1 / np.sqrt(safe)[:, None]
-        kn = np.where(ok[:, None], (d2 - np.einsum("ij,ij->i", d2, t)[:, None] * t)
-                      / safe[:, None], 0.0)  # fmt: skip
+        kn = np.where(
+            ok[:, None], (d2 - np.einsum("ij,ij->i", d2, t)[:, None] * t) / safe[:, None], 0.0
+        )
         n = len(rows)
         kn_start[rows], kn_end[rows] = kn[:n], kn[n:]
     near = np.zeros(k, dtype=bool)
@@ -161,9 +172,12 @@ def junction_caps(pieces: PieceList) -> np.ndarray:
 
 def settle_time_s(machine: Machine) -> float:
     """Time [s] for the slowest servo mode to decay to e⁻⁵ (< 1 %) of its amplitude."""
-    slowest = min((
-        float(np.min(np.abs(np.real(ax.poles()))))
-        for ax in (machine.servo.x, machine.servo.y, machine.servo.z)
-        if ax is not None
-    ), default=np.inf)  # no servo model: ideal axes, nothing to settle (0 s)
+    slowest = min(
+        (
+            float(np.min(np.abs(np.real(ax.poles()))))
+            for ax in (machine.servo.x, machine.servo.y, machine.servo.z)
+            if ax is not None
+        ),
+        default=np.inf,
+    )  # no servo model: ideal axes, nothing to settle (0 s)
     return 5.0 / slowest

@@ -1,6 +1,7 @@
 """What the contour check may change of a plan, per piece (:class:`Levers`): the cruise
 caps, the rise and descent limits, the settles after rapids; and how the improvement phase
 moves them between brackets (:meth:`Levers.toward`, :meth:`Levers.narrowed`)."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -47,8 +48,9 @@ class Levers:
     def copy(self) -> Levers:
         """A copy with its own per-piece columns (the histories shared: never changed in
         place)."""
-        return Levers(*(getattr(self, f).copy() for f in self.PER_PIECE),
-                      self.cap_history, self.stop_history)  # fmt: skip
+        return Levers(
+            *(getattr(self, f).copy() for f in self.PER_PIECE), self.cap_history, self.stop_history
+        )
 
     def toward(self, hi: Levers) -> Levers | None:
         """Halfway to ``hi`` (geometric means of the scaled levers, arithmetic of the
@@ -81,4 +83,3 @@ class Levers:
             getattr(out, f)[b] = getattr(trial, f)[b]
         out.settle_s[blamed_settle] = trial.settle_s[blamed_settle]
         return out
-

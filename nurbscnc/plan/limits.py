@@ -133,8 +133,7 @@ def _point_count(total_s: float, period_s: float) -> float:
     return math.ceil(total_s / period_s - 1e-9) + 1 if math.isfinite(total_s) else math.inf
 
 
-def _refuse_points(times_s: np.ndarray, lines, period_s: float, max_points: int,
-                   what: str) -> None:  # fmt: skip
+def _refuse_points(times_s: np.ndarray, lines, period_s: float, max_points: int, what: str) -> None:
     """PlanningError at the line whose time is the largest when the total time ``times_s``
     [s] needs more than ``max_points`` reference points at ``period_s``."""
     total_s = float(np.sum(times_s))
@@ -165,9 +164,12 @@ def check_motion_time(segments, machine, columns=None) -> None:
         seg = segments[int(endless[0])]
         raise PlanningError(
             f"feed {seg.feed_mm_s * 60.0:.6g} mm/min is too small for this move: it would "
-            "never end", SourcePos(int(seg.line), 1, ""))  # fmt: skip
-    _refuse_points(times, cols.lines, machine.servo.period_s, machine.limits.max_points,
-                   "at least ")  # fmt: skip
+            "never end",
+            SourcePos(int(seg.line), 1, ""),
+        )
+    _refuse_points(
+        times, cols.lines, machine.servo.period_s, machine.limits.max_points, "at least "
+    )
 
 
 def check_before_work(segments, machine, columns=None) -> None:

@@ -72,6 +72,7 @@ by cut window (:mod:`~nurbscnc.plan.windows`).
 This module is the loop: the setup of a program (:class:`~nurbscnc.plan.setup.Setup`), the
 levers loop run on it whole or window by window, and the check's result.
 """
+
 from __future__ import annotations
 
 import functools
@@ -109,10 +110,15 @@ def plan_program(program, machine: Machine, options: LookaheadOptions | None = N
     return plan_checked(program, machine, options)[0]
 
 
-def plan_checked(program, machine: Machine, options: LookaheadOptions | None = None,
-                 reference: ReferenceSampler = EXACT, keep_reference: bool = True,
-                 window: int = CHECK_WINDOW,
-                 columns=None) -> tuple[Plan, Check | None]:  # fmt: skip
+def plan_checked(
+    program,
+    machine: Machine,
+    options: LookaheadOptions | None = None,
+    reference: ReferenceSampler = EXACT,
+    keep_reference: bool = True,
+    window: int = CHECK_WINDOW,
+    columns=None,
+) -> tuple[Plan, Check | None]:
     """Plan a whole interpreted program and check it (SPEC §1: modules 1–4, §8): pieces,
     profile, then the dynamics check on the plan's reference points, re-planning until the
     predicted contour error is within ε_max. ``reference``: the
@@ -141,8 +147,7 @@ def plan_checked(program, machine: Machine, options: LookaheadOptions | None = N
         lev, result, iterations = converge(st, st.initial.copy(), st.evaluate)
         return st.plan(lev, result, iterations), result[2]
     whole = st.checker
-    st.checker = Checker(st.pieces, machine, reference, st.eps_mm, st.settle_rows, window,
-                         False)  # fmt: skip
+    st.checker = Checker(st.pieces, machine, reference, st.eps_mm, st.settle_rows, window, False)
     joined = JoinedChecks()
 
     def windows():
@@ -156,9 +161,14 @@ def plan_checked(program, machine: Machine, options: LookaheadOptions | None = N
     return last.plan, joined.check()
 
 
-def plan_windows(program, machine: Machine, options: LookaheadOptions | None = None,
-                 reference: ReferenceSampler = EXACT, window: int = CHECK_WINDOW,
-                 columns=None):
+def plan_windows(
+    program,
+    machine: Machine,
+    options: LookaheadOptions | None = None,
+    reference: ReferenceSampler = EXACT,
+    window: int = CHECK_WINDOW,
+    columns=None,
+):
     """Plan a program cut window by cut window (:func:`~nurbscnc.plan.windows.cut_windows`),
     yielding each :class:`~nurbscnc.plan.windows.Window` as soon as it is final: its levers
     loop (shaping, fallback, improvement) sees only its own pieces and samples, the servo
@@ -173,8 +183,7 @@ def plan_windows(program, machine: Machine, options: LookaheadOptions | None = N
         lev, result, iterations = converge(st, st.initial.copy(), st.evaluate)
         n = sample_count(result[0], result[1], st.period)
         plan = st.plan(lev, result, iterations)
-        yield Window(0, 0, st.k, 0, n, lambda: plan, result[2],
-                     iterations)  # fmt: skip
+        yield Window(0, 0, st.k, 0, n, lambda: plan, result[2], iterations)
         return
     yield from _windows_of(st)
 
@@ -245,6 +254,7 @@ def _windows_of(st: Setup):
         rows = rows_of(result[0], result[1])  # (per-piece columns and duration: whole)
         # The window's plan with every phase (the re-plans' profiles had merged some), made
         # when asked for (O(program) each: a plan per window made many cuts quadratic).
-        make = functools.partial(window_plan, st, lev, result, parts, len(parts), later,
-                                 total_iterations)  # fmt: skip
+        make = functools.partial(
+            window_plan, st, lev, result, parts, len(parts), later, total_iterations
+        )
         yield Window(w, a, b, rows[0], rows[1], make, result[2], iterations)

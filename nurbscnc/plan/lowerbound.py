@@ -164,8 +164,9 @@ def interval_times_s(
 # Sampling the pieces: curvature from the path model (PathTable), whole arrays over all pieces.
 
 
-def _sample_rows(path: PathTable, rows: np.ndarray, cap2_of, ds_mm: float,
-                 rel_tol: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+def _sample_rows(
+    path: PathTable, rows: np.ndarray, cap2_of, ds_mm: float, rel_tol: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Arc-length grids (from each piece's start) and cap² on them for the pieces ``rows`` of
     ``path``, all pieces at once (see the module docstring): ``(s, cap², sizes)`` with the
     pieces' grids one after the other, ``sizes`` (len(rows),) their point counts.
@@ -334,8 +335,13 @@ def lower_bound_time_s(
     return _solve(s_mm, c2, piece_start, stops, a_max_mm_s2)
 
 
-def _solve(s_mm: np.ndarray, path_cap2: np.ndarray, piece_start: np.ndarray, stops: np.ndarray,
-           a_max_mm_s2: float) -> LowerBound:  # fmt: skip
+def _solve(
+    s_mm: np.ndarray,
+    path_cap2: np.ndarray,
+    piece_start: np.ndarray,
+    stops: np.ndarray,
+    a_max_mm_s2: float,
+) -> LowerBound:
     """The bound on the grid ``s_mm`` (absolute s [mm], piece i on
     ``piece_start[i]:piece_start[i+1]``) with the path's cap² ``path_cap2``, at rest at both
     ends and after the pieces flagged in ``stops``."""
@@ -406,7 +412,8 @@ def _programmed_geometry(segment, known=None):
         return geom
     same = geom.degree == known.degree and all(
         np.array_equal(getattr(geom, f), getattr(known, f))
-        for f in ("knots", "control_points_mm", "weights"))  # fmt: skip
+        for f in ("knots", "control_points_mm", "weights")
+    )
     return known if same else geom
 
 
@@ -476,22 +483,28 @@ def program_lower_bound_s(segments, machine: Machine, columns=None, curves=None)
     cap2 = np.where(straight, top * top, 0.0)  # constant-cap pieces: their cap²
     # Arcs and NURBS blocks: one path-model row each (the programmed geometry, whole).
     curved = np.flatnonzero(~straight)
-    path = PathTable.of([whole_row(_programmed_geometry(segments[i], (curves or {}).get(i)),
-                                   segments[i].line) for i in index[curved].tolist()])  # fmt: skip
+    path = PathTable.of(
+        [
+            whole_row(_programmed_geometry(segments[i], (curves or {}).get(i)), segments[i].line)
+            for i in index[curved].tolist()
+        ]
+    )
     grid_rows = _curved_ends(path, curved, top, machine, length, t_start, t_end, cap2)
     s_grid, c2_grid, grid_sizes = _grids(path, grid_rows, top[curved[grid_rows]], machine)
     grid_start = np.concatenate(([0], np.cumsum(grid_sizes)))
     sampled = curved[grid_rows]  # the gridded pieces
     length[sampled] = s_grid[grid_start[1:] - 1]
     stop = _exact_stops(t_start, t_end, cols.blends_mm[index], index, rapid)
-    s_mm, path_cap2, piece_start, last = _bound_points(length, cap2, stop, sampled, s_grid,
-                                                       c2_grid, grid_sizes, grid_start)  # fmt: skip
+    s_mm, path_cap2, piece_start, last = _bound_points(
+        length, cap2, stop, sampled, s_grid, c2_grid, grid_sizes, grid_start
+    )
     bound = _solve(s_mm, path_cap2, piece_start, stop[last], lim.a_max_mm_s2)
     return float(bound.time_s) + dwell
 
 
-def _straight_ends(cols, index: np.ndarray,
-                   straight: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+def _straight_ends(
+    cols, index: np.ndarray, straight: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Lengths [mm] (m,) and start and end tangents (m, 3) of the pieces ``index`` of the
     columns ``cols``, filled for the ``straight`` ones (lines, rapids: the end-point
     difference, not normalised) and zero elsewhere."""
@@ -507,9 +520,16 @@ def _straight_ends(cols, index: np.ndarray,
     return length, t_start, t_end
 
 
-def _curved_ends(path: PathTable, curved: np.ndarray, top: np.ndarray, machine: Machine,
-                 length: np.ndarray, t_start: np.ndarray, t_end: np.ndarray,
-                 cap2: np.ndarray) -> np.ndarray:  # fmt: skip
+def _curved_ends(
+    path: PathTable,
+    curved: np.ndarray,
+    top: np.ndarray,
+    machine: Machine,
+    length: np.ndarray,
+    t_start: np.ndarray,
+    t_end: np.ndarray,
+    cap2: np.ndarray,
+) -> np.ndarray:
     """Fill the ``curved`` pieces' (rows of ``path``) lengths [mm], unit end tangents and,
     for constant curvature (circles, helices), cap² [mm²/s²] (top speeds ``top``); returns
     the rows of ``path`` that need a grid (spirals and NURBS)."""
@@ -517,19 +537,25 @@ def _curved_ends(path: PathTable, curved: np.ndarray, top: np.ndarray, machine: 
     rows = np.arange(curved.size)
     length[curved] = path.length_mm
     # Unit tangents at both ends, one evaluation (start, end interleaved: one run a piece).
-    ends = path.tangents(np.repeat(rows, 2), np.column_stack((np.zeros(rows.size),
-                                                              path.length_mm)).ravel())
+    ends = path.tangents(
+        np.repeat(rows, 2), np.column_stack((np.zeros(rows.size), path.length_mm)).ravel()
+    )
     t_start[curved], t_end[curved] = ends[0::2], ends[1::2]
     # Constant curvature (circles, helices): one cap² each; spirals and NURBS: a grid.
     const = path.kind == Kind.ARC
     cap2[curved[const]] = curvature_cap2_mm2_s2(
-        path.curvature(rows[const], np.zeros(int(const.sum()))), top[curved[const]],
-        lim.a_max_mm_s2, machine.servo.period_s, lim.chord_tolerance_mm)  # fmt: skip
+        path.curvature(rows[const], np.zeros(int(const.sum()))),
+        top[curved[const]],
+        lim.a_max_mm_s2,
+        machine.servo.period_s,
+        lim.chord_tolerance_mm,
+    )
     return rows[~const]
 
 
-def _grids(path: PathTable, grid_rows: np.ndarray, top_grid: np.ndarray,
-           machine: Machine) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+def _grids(
+    path: PathTable, grid_rows: np.ndarray, top_grid: np.ndarray, machine: Machine
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The adaptive grids of the rows ``grid_rows`` of ``path`` (top speeds ``top_grid``
     [mm/s]): the points [mm] from each row's start and their cap² [mm²/s²], all rows in
     order, and each row's number of points. A curve that is another one moved (a part cut
@@ -542,23 +568,26 @@ def _grids(path: PathTable, grid_rows: np.ndarray, top_grid: np.ndarray,
     def cap2_of(kappa, j):
         return curvature_cap2_mm2_s2(kappa, top_grid[own[j]], a_max, period, chord)
 
-    s_own, c2_own, own_sizes = _sample_rows(path, grid_rows[own], cap2_of, PROGRAM_DS_MM,
-                                            DEFAULT_CAP_REL_TOL)  # fmt: skip
+    s_own, c2_own, own_sizes = _sample_rows(
+        path, grid_rows[own], cap2_of, PROGRAM_DS_MM, DEFAULT_CAP_REL_TOL
+    )
     grid_sizes = own_sizes[copy_of]
     at = np.repeat(np.cumsum(own_sizes)[copy_of] - np.cumsum(grid_sizes), grid_sizes)
     take = at + np.arange(at.size)
     return s_own[take], c2_own[take], grid_sizes
 
 
-def _exact_stops(t_start: np.ndarray, t_end: np.ndarray, blend: np.ndarray,
-                 index: np.ndarray, rapid: np.ndarray) -> np.ndarray:  # fmt: skip
+def _exact_stops(
+    t_start: np.ndarray, t_end: np.ndarray, blend: np.ndarray, index: np.ndarray, rapid: np.ndarray
+) -> np.ndarray:
     """Whether the tool stops exactly after each piece (m,): tangent discontinuities
     (turning > 1e-6 rad) not under G64 P (``blend`` > 0 on both sides), dwells (a gap in
     the segment ``index``), rapid/feed changes; the last piece's entry False."""
     ta, tb = t_end[:-1], t_start[1:]
     cross = np.cross(ta, tb)
-    turning = np.arctan2(np.sqrt(np.einsum("ij,ij->i", cross, cross)),
-                         np.einsum("ij,ij->i", ta, tb))  # fmt: skip
+    turning = np.arctan2(
+        np.sqrt(np.einsum("ij,ij->i", cross, cross)), np.einsum("ij,ij->i", ta, tb)
+    )
     regular = (np.einsum("ij,ij->i", ta, ta) > 0.0) & (np.einsum("ij,ij->i", tb, tb) > 0.0)
     corner = regular & (turning > 1e-6) & ~(np.minimum(blend[:-1], blend[1:]) > 0.0)
     stop = np.zeros(index.size, dtype=bool)
@@ -566,9 +595,16 @@ def _exact_stops(t_start: np.ndarray, t_end: np.ndarray, blend: np.ndarray,
     return stop
 
 
-def _bound_points(length: np.ndarray, cap2: np.ndarray, stop: np.ndarray, sampled: np.ndarray,
-                  s_grid: np.ndarray, c2_grid: np.ndarray, grid_sizes: np.ndarray,
-                  grid_start: np.ndarray):  # fmt: skip
+def _bound_points(
+    length: np.ndarray,
+    cap2: np.ndarray,
+    stop: np.ndarray,
+    sampled: np.ndarray,
+    s_grid: np.ndarray,
+    c2_grid: np.ndarray,
+    grid_sizes: np.ndarray,
+    grid_start: np.ndarray,
+):
     """The bound's grid along the whole path: points ``s_mm`` [mm], their cap²
     [mm²/s²], each piece's first point and each piece's last programmed piece (the bound's
     pieces are groups of programmed ones).
@@ -599,7 +635,8 @@ def _bound_points(length: np.ndarray, cap2: np.ndarray, stop: np.ndarray, sample
     path_cap2[at] = path_cap2[at + 1] = cap2[first[g_simple]]
     # The gridded pieces' points, scattered to their places in one step.
     dest = np.repeat(piece_start[group_of_sampled] - grid_start[:-1], grid_sizes) + np.arange(
-        s_grid.size)
+        s_grid.size
+    )
     s_mm[dest] = s_grid + np.repeat(offset[sampled], grid_sizes)
     path_cap2[dest] = c2_grid
     return s_mm, path_cap2, piece_start, last

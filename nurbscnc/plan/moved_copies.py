@@ -29,14 +29,17 @@ class Block:
 
     @classmethod
     def of(cls, pieces: list[Piece]) -> Block:
-        scalars = {name: np.array([getattr(p, name) for p in pieces],
-                                  dtype=COLUMN_DTYPES.get(name, float))
-                   for name in SCALAR_COLUMNS}  # fmt: skip
-        return cls(scalars, object_ends(pieces),
-                   [(p.geometry, p.u_a, p.u_b, p.s_a_mm) for p in pieces])  # fmt: skip
+        scalars = {
+            name: np.array([getattr(p, name) for p in pieces], dtype=COLUMN_DTYPES.get(name, float))
+            for name in SCALAR_COLUMNS
+        }
+        return cls(
+            scalars, object_ends(pieces), [(p.geometry, p.u_a, p.u_b, p.s_a_mm) for p in pieces]
+        )
 
-    def moved(self, curve: NurbsCurve, old: NurbsCurve, delta_mm: np.ndarray, index: int,
-              line: int) -> Block:  # fmt: skip
+    def moved(
+        self, curve: NurbsCurve, old: NurbsCurve, delta_mm: np.ndarray, index: int, line: int
+    ) -> Block:
         """The block of a segment whose curve ``curve`` is the curve ``old`` of this block
         moved by ``delta_mm`` (:meth:`~nurbscnc.geometry.nurbs.NurbsCurve.translation_from`),
         as segment ``index`` at source line ``line``: the same cells, corners, caps and
@@ -59,8 +62,11 @@ class Block:
                 return moved_ph[id(g)]
             raise TypeError(f"a NURBS segment's piece on {type(g).__name__}")  # never: cells, PH
 
-        return Block(scalars, (start + delta_mm, end + delta_mm, t_start, t_end),
-                      [(geometry(g), ua, ub, sa) for g, ua, ub, sa in self.objects])  # fmt: skip
+        return Block(
+            scalars,
+            (start + delta_mm, end + delta_mm, t_start, t_end),
+            [(geometry(g), ua, ub, sa) for g, ua, ub, sa in self.objects],
+        )
 
 
 class Repeats:
@@ -84,8 +90,10 @@ class Repeats:
             curve = nurbs_curve(seg, self.machine)
         except NurbsCncError as exc:
             raise exc.with_pos(SourcePos(seg.line)) from None
-        same = (min(seg.feed_mm_s, self.machine.limits.v_max_mm_s),
-                blend_override(seg, self.options))  # fmt: skip
+        same = (
+            min(seg.feed_mm_s, self.machine.limits.v_max_mm_s),
+            blend_override(seg, self.options),
+        )
         hit = self.copies.find(curve, same)
         if hit is not None:
             (old, block), delta = hit

@@ -152,8 +152,9 @@ def _stepwise_block(v, a, last, tol2) -> np.ndarray:
     ends = p[:, 2:]  # (R, K, 3)
     rows, kk = a.size, k.size
     # Every (row, end) pair as one row of _offsets2: vertices j = 1 … STEPWISE − 1.
-    off2, rr2 = _offsets2(np.repeat(start, kk, axis=0), ends.reshape(-1, 3),
-                          np.repeat(p[:, 1:STEPWISE], kk, axis=0))  # fmt: skip
+    off2, rr2 = _offsets2(
+        np.repeat(start, kk, axis=0), ends.reshape(-1, 3), np.repeat(p[:, 1:STEPWISE], kk, axis=0)
+    )
     inside = np.broadcast_to(j[None, :] < np.tile(k, rows)[:, None], off2.shape)
     tol_rows = np.repeat(tol2, kk)
     verdict = _verdicts(off2, rr2, inside, tol_rows).reshape(rows, kk)
@@ -221,25 +222,37 @@ def merge_collinear(segments) -> tuple[list, np.ndarray]:
     segs = list(segments)
     # One attribute pass (CAM programs hold millions of moves): Q first, as most segments
     # of most programs have none.
-    mine = np.flatnonzero(np.fromiter(
-        (getattr(s, "naive_mm", 0.0) > 0.0 and s.kind == "line" for s in segs),
-        dtype=bool, count=len(segs)))  # fmt: skip
+    mine = np.flatnonzero(
+        np.fromiter(
+            (getattr(s, "naive_mm", 0.0) > 0.0 and s.kind == "line" for s in segs),
+            dtype=bool,
+            count=len(segs),
+        )
+    )
     if not mine.size:
         return segs, np.arange(len(segs))
     sub = [segs[i] for i in mine.tolist()]
-    keys = np.fromiter(chain.from_iterable((s.feed_mm_s, s.blend_mm, s.naive_mm) for s in sub),
-                       dtype=float, count=3 * len(sub)).reshape(-1, 3)  # fmt: skip
+    keys = np.fromiter(
+        chain.from_iterable((s.feed_mm_s, s.blend_mm, s.naive_mm) for s in sub),
+        dtype=float,
+        count=3 * len(sub),
+    ).reshape(-1, 3)
     feed, blend, q = keys.T
     # A run breaks at a gap (a non-mergeable segment between) or where feed, mode or Q change.
-    same = ((mine[1:] == mine[:-1] + 1) & (feed[1:] == feed[:-1]) & (blend[1:] == blend[:-1])
-            & (q[1:] == q[:-1]))  # fmt: skip
+    same = (
+        (mine[1:] == mine[:-1] + 1)
+        & (feed[1:] == feed[:-1])
+        & (blend[1:] == blend[:-1])
+        & (q[1:] == q[:-1])
+    )
     rs = np.concatenate(([0], np.flatnonzero(~same) + 1))  # run starts (positions in sub)
     re = np.concatenate((rs[1:], [mine.size]))
     runs = np.arange(rs.size)
     # Vertices of run r: start of its first move, then every move's end; laid out run after
     # run, so run r's vertices are v[rs[r] + r : re[r] + r + 1].
-    end_mm = np.fromiter(chain.from_iterable(s.end_mm for s in sub), dtype=float,
-                         count=3 * len(sub)).reshape(-1, 3)
+    end_mm = np.fromiter(
+        chain.from_iterable(s.end_mm for s in sub), dtype=float, count=3 * len(sub)
+    ).reshape(-1, 3)
     start_mm = np.array([sub[i].start_mm for i in rs.tolist()], dtype=float).reshape(-1, 3)
     v = np.insert(end_mm, rs, start_mm, axis=0)
     first = rs + runs

@@ -52,8 +52,9 @@ def _positive_or_none(value, what: str, allow_zero: bool = False):
         raise ConfigError(f"{what} must be a number, not {value!r}")
     ok = value >= 0.0 if allow_zero else value > 0.0
     if not (math.isfinite(value) and ok):
-        raise ConfigError(f"{what} must be {'≥ 0' if allow_zero else '> 0'} and finite, "
-                          f"not {value!r}")  # fmt: skip
+        raise ConfigError(
+            f"{what} must be {'≥ 0' if allow_zero else '> 0'} and finite, not {value!r}"
+        )
     return float(value)
 
 
@@ -82,8 +83,11 @@ class PlanOptions:
             if not isinstance(getattr(self, name), bool):
                 raise ConfigError(f"{name} must be True or False, not {getattr(self, name)!r}")
         set_(self, "tolerance_mm", _positive_or_none(self.tolerance_mm, "tolerance_mm"))
-        set_(self, "blend_tolerance_mm", _positive_or_none(
-            self.blend_tolerance_mm, "blend_tolerance_mm", allow_zero=True))
+        set_(
+            self,
+            "blend_tolerance_mm",
+            _positive_or_none(self.blend_tolerance_mm, "blend_tolerance_mm", allow_zero=True),
+        )
 
 
 @dataclass(frozen=True)
@@ -105,10 +109,12 @@ class LookaheadOptions:
 
     def __post_init__(self):
         object.__setattr__(self, "dynamics", parse_choice(Dynamics, self.dynamics, "dynamics"))
-        if isinstance(self.max_iterations, bool) or not isinstance(self.max_iterations, int) \
-                or self.max_iterations < 0:
-            raise ConfigError(f"max_iterations must be an integer ≥ 0, not "
-                              f"{self.max_iterations!r}")  # fmt: skip
+        if (
+            isinstance(self.max_iterations, bool)
+            or not isinstance(self.max_iterations, int)
+            or self.max_iterations < 0
+        ):
+            raise ConfigError(f"max_iterations must be an integer ≥ 0, not {self.max_iterations!r}")
         n = self.lookahead_pieces
         if n is not None and (isinstance(n, bool) or not isinstance(n, int) or n < 1):
             raise ConfigError(f"lookahead_pieces must be None or an integer ≥ 1, not {n!r}")

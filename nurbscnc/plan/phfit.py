@@ -79,14 +79,22 @@ def _fit_piece(curve, u_a: float, u_b: float, frame, n_samples: int):
     ph = hermite_ph(p0, p5, d0, d1, *frame)
     u = np.linspace(u_a, u_b, n_samples)
     dev_um = ph_deviation_um(ph, curve.point(u))
-    piece = PHPiece(ph, float(u_a), float(u_b), float(np.sqrt(np.mean(dev_um**2))),
-                    float(dev_um.max()))
+    piece = PHPiece(
+        ph, float(u_a), float(u_b), float(np.sqrt(np.mean(dev_um**2))), float(dev_um.max())
+    )
     return piece, float(np.sum(dev_um**2)), dev_um.size
 
 
-def fit_region(curve, u_a: float, u_b: float, tolerance_um: float = 1.0, max_depth: int = 12,
-               split: bool = True, samples_per_piece: int = 200,
-               max_factor: float = 3.0) -> PHFit:
+def fit_region(
+    curve,
+    u_a: float,
+    u_b: float,
+    tolerance_um: float = 1.0,
+    max_depth: int = 12,
+    split: bool = True,
+    samples_per_piece: int = 200,
+    max_factor: float = 3.0,
+) -> PHFit:
     """Fit PH quintics to ``curve`` on [``u_a``, ``u_b``] (SPEC §6).
 
     ``curve`` has ``point(u) -> (m, 3)`` and ``derivatives(u, order) -> (order + 1, m, 3)``
@@ -133,5 +141,4 @@ def fit_region(curve, u_a: float, u_b: float, tolerance_um: float = 1.0, max_dep
         mid = 0.5 * (a + b)
         stack.append((mid, b, depth + 1))
         stack.append((a, mid, depth + 1))
-    return PHFit(tuple(pieces), float(np.sqrt(sum_sq / count)),
-                 max(p.max_um for p in pieces))
+    return PHFit(tuple(pieces), float(np.sqrt(sum_sq / count)), max(p.max_um for p in pieces))

@@ -35,8 +35,13 @@ from nurbscnc.plan.corners import CornerLog
 KIND_NAMES = ("line", "rapid", "arc", "ph", "nurbs")
 
 
-_NAME_OF = {Kind.LINE: "line", Kind.ARC: "arc", Kind.SPIRAL: "arc", Kind.PH: "ph",
-            Kind.NURBS: "nurbs"}  # fmt: skip
+_NAME_OF = {
+    Kind.LINE: "line",
+    Kind.ARC: "arc",
+    Kind.SPIRAL: "arc",
+    Kind.PH: "ph",
+    Kind.NURBS: "nurbs",
+}
 
 
 @dataclass(frozen=True, eq=False)
@@ -74,13 +79,20 @@ class Piece:
 
     @property
     def name(self) -> str:
-        """"line", "rapid", "arc", "ph" or "nurbs" (summaries)."""
+        """ "line", "rapid", "arc", "ph" or "nurbs" (summaries)."""
         return "rapid" if self.rapid else _NAME_OF[Kind(self.kind)]
 
     def path_row(self) -> tuple:
         """The row of :meth:`PathTable.of <nurbscnc.geometry.path.PathTable.of>` for it."""
-        return (self.kind, self.geometry, self.length_mm, self.u_a, self.u_b, self.s_a_mm,
-                self.line)  # fmt: skip
+        return (
+            self.kind,
+            self.geometry,
+            self.length_mm,
+            self.u_a,
+            self.u_b,
+            self.s_a_mm,
+            self.line,
+        )
 
     def points_mm(self, s_local_mm: np.ndarray) -> np.ndarray:
         """Exact points [mm] (m, 3) at arc lengths ``s_local_mm`` from the piece start."""
@@ -179,11 +191,23 @@ class PieceList(Sequence):
             origin, e1, e2 = self.ph_frame[j]
             geom = PHQuintic(self.ph_w[j], self.ph_p0[j], origin, e1, e2)
             u_a, u_b, s_a = 0.0, 1.0, 0.0
-        return Piece(kind, geom, float(self.length_mm[i]), float(self.v_cap_mm_s[i]),
-                     int(self.segment[i]), int(self.line[i]), u_a, u_b, s_a,
-                     float(self.kappa_max_per_mm[i]), float(self.dwell_after_s[i]),
-                     float(self.blend_mm[i]), bool(self.rapid[i]),
-                     bool(self.stop_after[i]), bool(self.pass_after[i]))  # fmt: skip
+        return Piece(
+            kind,
+            geom,
+            float(self.length_mm[i]),
+            float(self.v_cap_mm_s[i]),
+            int(self.segment[i]),
+            int(self.line[i]),
+            u_a,
+            u_b,
+            s_a,
+            float(self.kappa_max_per_mm[i]),
+            float(self.dwell_after_s[i]),
+            float(self.blend_mm[i]),
+            bool(self.rapid[i]),
+            bool(self.stop_after[i]),
+            bool(self.pass_after[i]),
+        )
 
     def kind_counts(self) -> dict[str, int]:
         """How many pieces of each kind (names of :data:`KIND_NAMES`, kinds present only)."""
@@ -228,18 +252,24 @@ class PieceList(Sequence):
         normal = zeros((3, k), need_arc)
         radius, angle, helix = (zeros(k, need_arc) for _ in range(3))
         u_a, u_b, s_a = (zeros(k, need_obj) for _ in range(3))
-        obj_id = (np.full(k, -1, dtype=np.intp) if need_obj
-                  else np.broadcast_to(np.intp(-1), (k,)))  # fmt: skip
+        obj_id = np.full(k, -1, dtype=np.intp) if need_obj else np.broadcast_to(np.intp(-1), (k,))
         objects: tuple = ()
         sub = None
         if rows_obj.size:
             # Their rows (:meth:`Piece.path_row`) straight from the columns and ``objects``,
             # without a Piece each (building those Pieces dominated the path's cost).
             objs = [self.objects[r] for r in rows_obj.tolist()]
-            sub = PathTable.of([(kind, g, length, ua, ub, sa, line) for kind, (g, ua, ub, sa),
-                                length, line in zip(obj_kind.tolist(), objs,
-                                                    self.length_mm[rows_obj].tolist(),
-                                                    self.line[rows_obj].tolist())])  # fmt: skip
+            sub = PathTable.of(
+                [
+                    (kind, g, length, ua, ub, sa, line)
+                    for kind, (g, ua, ub, sa), length, line in zip(
+                        obj_kind.tolist(),
+                        objs,
+                        self.length_mm[rows_obj].tolist(),
+                        self.line[rows_obj].tolist(),
+                    )
+                ]
+            )
         # PH coefficients in one column per PH row (lines need none: a CAM program's
         # 41 % line rows would hold 184 zero bytes each): the columnar rows' first, in row
         # order, then the object rows' PH pieces.
@@ -259,35 +289,87 @@ class PieceList(Sequence):
         if sub is not None:
             code[rows_obj] = sub.kind
             objects = sub.objects
-            for mine, theirs in ((origin, sub.origin_mm), (e1, sub.e1), (e2, sub.e2),
-                                 (normal, sub.normal)):  # fmt: skip
+            for mine, theirs in (
+                (origin, sub.origin_mm),
+                (e1, sub.e1),
+                (e2, sub.e2),
+                (normal, sub.normal),
+            ):
                 if mine.flags.writeable:
                     mine[:, rows_obj] = theirs
-            for mine, theirs in ((radius, sub.radius_mm), (angle, sub.angle_rad),
-                                 (helix, sub.helix_mm), (u_a, sub.u_a), (u_b, sub.u_b),
-                                 (s_a, sub.s_a_mm), (obj_id, sub.obj_id)):  # fmt: skip
+            for mine, theirs in (
+                (radius, sub.radius_mm),
+                (angle, sub.angle_rad),
+                (helix, sub.helix_mm),
+                (u_a, sub.u_a),
+                (u_b, sub.u_b),
+                (s_a, sub.s_a_mm),
+                (obj_id, sub.obj_id),
+            ):
                 if mine.flags.writeable:
                     mine[rows_obj] = theirs
             if sub_ph.size:
                 ph_slot[rows_obj[sub_ph]] = m + np.arange(sub_ph.size)
-                for mine, theirs in ((ph_s, sub.ph_s), (ph_x, sub.ph_x), (ph_y, sub.ph_y),
-                                     (ph_sigma, sub.ph_sigma)):  # fmt: skip
+                for mine, theirs in (
+                    (ph_s, sub.ph_s),
+                    (ph_x, sub.ph_x),
+                    (ph_y, sub.ph_y),
+                    (ph_sigma, sub.ph_sigma),
+                ):
                     mine[:, m:] = theirs[:, sub.ph_slot[sub_ph]]
-        return PathTable(code, self.length_mm, self.line, self.start_mm, self.end_mm, origin,
-                         e1, e2, normal, radius, angle, helix, ph_s, ph_sigma, ph_x, ph_y,
-                         ph_slot, obj_id, objects, u_a, u_b, s_a).frozen()  # fmt: skip
+        return PathTable(
+            code,
+            self.length_mm,
+            self.line,
+            self.start_mm,
+            self.end_mm,
+            origin,
+            e1,
+            e2,
+            normal,
+            radius,
+            angle,
+            helix,
+            ph_s,
+            ph_sigma,
+            ph_x,
+            ph_y,
+            ph_slot,
+            obj_id,
+            objects,
+            u_a,
+            u_b,
+            s_a,
+        ).frozen()
 
 
 #: Rows per chunk of the vectorised PH work (bounds the temporaries).
 CHUNK_ROWS = 1 << 16
 
 
-SCALAR_COLUMNS = ("kind", "length_mm", "v_cap_mm_s", "segment", "line", "kappa_max_per_mm",
-            "dwell_after_s", "blend_mm", "rapid", "stop_after", "pass_after")  # fmt: skip
+SCALAR_COLUMNS = (
+    "kind",
+    "length_mm",
+    "v_cap_mm_s",
+    "segment",
+    "line",
+    "kappa_max_per_mm",
+    "dwell_after_s",
+    "blend_mm",
+    "rapid",
+    "stop_after",
+    "pass_after",
+)
 
 
-COLUMN_DTYPES = {"kind": np.int8, "segment": np.int64, "line": np.int64, "rapid": bool,
-           "stop_after": bool, "pass_after": bool}  # fmt: skip
+COLUMN_DTYPES = {
+    "kind": np.int8,
+    "segment": np.int64,
+    "line": np.int64,
+    "rapid": bool,
+    "stop_after": bool,
+    "pass_after": bool,
+}
 
 
 def empty_columns(k: int) -> dict:

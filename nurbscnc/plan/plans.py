@@ -1,6 +1,7 @@
 """The planner's result: the :class:`Plan` of a program, the per-piece :class:`Limits` it was
 planned with, the jerk-limited profile over given levers (:func:`profile_over`), and the
 times read from a plan (:func:`cycle_time_s`, :func:`segment_times_s`)."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -26,8 +27,12 @@ class Limits:
 
     def tail(self, first: int) -> Limits:
         """The limits of pieces ``first`` … k − 1."""
-        return Limits(self.a_up_mm_s2[first:], self.j_up_mm_s3[first:],
-                      self.a_down_mm_s2[first:], self.j_down_mm_s3[first:])  # fmt: skip
+        return Limits(
+            self.a_up_mm_s2[first:],
+            self.j_up_mm_s3[first:],
+            self.a_down_mm_s2[first:],
+            self.j_down_mm_s3[first:],
+        )
 
 
 @dataclass(frozen=True, eq=False)
@@ -60,8 +65,9 @@ class Plan:
     settle_s: np.ndarray | None = None
 
 
-def profile_over(length_mm: np.ndarray, caps: np.ndarray, smooth: np.ndarray,
-                 limits: Limits, window: int | None) -> Profile:  # fmt: skip
+def profile_over(
+    length_mm: np.ndarray, caps: np.ndarray, smooth: np.ndarray, limits: Limits, window: int | None
+) -> Profile:
     """The jerk-limited profile (SPEC §7) over pieces of ``length_mm`` with cruise caps
     ``caps`` [mm/s], the junctions ``smooth`` (k+1; > 0: tangent-continuous, capped by it and
     the smaller neighbour; the ends are rests) and the per-piece acceleration and jerk
@@ -69,12 +75,21 @@ def profile_over(length_mm: np.ndarray, caps: np.ndarray, smooth: np.ndarray,
     feed hold (the same pieces from one on, same caps and limits)."""
     k = caps.size
     jcaps = np.zeros(k + 1)
-    jcaps[1:-1] = np.where(smooth[1:-1] > 0, np.minimum(np.minimum(caps[:-1], caps[1:]),
-                                                        smooth[1:-1]), 0.0)  # fmt: skip
-    return plan_profile(ProfileInput(length_mm, caps, jcaps, limits.a_up_mm_s2,
-                                     limits.j_up_mm_s3, lookahead_pieces=window,
-                                     a_decel_mm_s2=limits.a_down_mm_s2,
-                                     j_decel_mm_s3=limits.j_down_mm_s3))  # fmt: skip
+    jcaps[1:-1] = np.where(
+        smooth[1:-1] > 0, np.minimum(np.minimum(caps[:-1], caps[1:]), smooth[1:-1]), 0.0
+    )
+    return plan_profile(
+        ProfileInput(
+            length_mm,
+            caps,
+            jcaps,
+            limits.a_up_mm_s2,
+            limits.j_up_mm_s3,
+            lookahead_pieces=window,
+            a_decel_mm_s2=limits.a_down_mm_s2,
+            j_decel_mm_s3=limits.j_down_mm_s3,
+        )
+    )
 
 
 def cycle_time_s(result) -> float:

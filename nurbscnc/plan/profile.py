@@ -64,10 +64,11 @@ class ProfileInput:
         a_dn = a if self.a_decel_mm_s2 is None else None
         j_dn = j if self.j_decel_mm_s3 is None else None
         if a_dn is None or j_dn is None:
-            a_dn, j_dn = _piece_limits(self.a_max_mm_s2 if self.a_decel_mm_s2 is None
-                                       else self.a_decel_mm_s2,
-                                       self.j_max_mm_s3 if self.j_decel_mm_s3 is None
-                                       else self.j_decel_mm_s3, k)  # fmt: skip
+            a_dn, j_dn = _piece_limits(
+                self.a_max_mm_s2 if self.a_decel_mm_s2 is None else self.a_decel_mm_s2,
+                self.j_max_mm_s3 if self.j_decel_mm_s3 is None else self.j_decel_mm_s3,
+                k,
+            )
         v_max = frozen_array(self.v_max_mm_s)
         v_junction = frozen_array(self.v_junction_max_mm_s)
         if length.ndim != 1 or length.size < 1:
@@ -110,9 +111,10 @@ class ProfileInput:
         """(k,) arrays ``(a_up, j_up, a_down, j_down)``: each piece's limits for its rise
         and its descent [mm/s², mm/s³]."""
         k = self.piece_count
-        return tuple(np.broadcast_to(np.asarray(x, dtype=float), (k,))
-                     for x in (self.a_max_mm_s2, self.j_max_mm_s3, self.a_decel_mm_s2,
-                               self.j_decel_mm_s3))  # fmt: skip
+        return tuple(
+            np.broadcast_to(np.asarray(x, dtype=float), (k,))
+            for x in (self.a_max_mm_s2, self.j_max_mm_s3, self.a_decel_mm_s2, self.j_decel_mm_s3)
+        )
 
     @property
     def uniform_limits(self) -> bool:
@@ -128,8 +130,9 @@ def _piece_limits(a_max, j_max, k: int):
     a, j = check_limit_arrays(a_max, j_max)
     for name, x in (("a_max_mm_s2", a), ("j_max_mm_s3", j)):
         if x.ndim not in (0, 1) or (x.ndim == 1 and x.shape != (k,)):
-            raise PlanningError(f"{name} must be a number or one per piece ({k},), got "
-                                f"shape {x.shape}")  # fmt: skip
+            raise PlanningError(
+                f"{name} must be a number or one per piece ({k},), got shape {x.shape}"
+            )
     return (frozen_array(np.broadcast_to(a, (k,))), frozen_array(np.broadcast_to(j, (k,))))
 
 
@@ -227,8 +230,13 @@ class Profile:
 
 
 #: The phase columns that :meth:`Profile.sample` reads (with ``phase_start_time_s``).
-_PHASE_COLUMNS = ("phase_duration_s", "phase_s0_mm", "phase_v0_mm_s", "phase_a0_mm_s2",
-                  "phase_jerk_mm_s3")  # fmt: skip
+_PHASE_COLUMNS = (
+    "phase_duration_s",
+    "phase_s0_mm",
+    "phase_v0_mm_s",
+    "phase_a0_mm_s2",
+    "phase_jerk_mm_s3",
+)
 
 
 def same_until_s(old: Profile, new: Profile) -> float:
@@ -256,8 +264,11 @@ def same_until_s(old: Profile, new: Profile) -> float:
     if first < m and not starts_apart[first]:
         # The same motion cut short in one (a cruise that the braking now begins earlier
         # in): alike up to the shorter end, and before either profile's next phase.
-        t = min(t, float(old.phase_start_time_s[first])
-                + float(min(old.phase_duration_s[first], new.phase_duration_s[first])))
+        t = min(
+            t,
+            float(old.phase_start_time_s[first])
+            + float(min(old.phase_duration_s[first], new.phase_duration_s[first])),
+        )
         cut = first + 1
     for prof in (old, new):
         if cut < prof.phase_start_time_s.size:
@@ -311,11 +322,25 @@ def time_at_length(profile: Profile, s_mm: np.ndarray) -> np.ndarray:
     shape = np.shape(s_mm)
     s = as_float64(s_mm).reshape(-1)
     out = np.empty(s.size)
-    _kernels.time_at_length(*(as_float64(c) for c in (
-        profile.phase_s0_mm, profile.phase_v0_mm_s, profile.phase_a0_mm_s2,
-        profile.phase_jerk_mm_s3, profile.phase_duration_s, profile.phase_start_time_s)),
-        s, out, TIME_BRACKET_REL, TIME_NEWTON_STEPS, TIME_HALVINGS,
-        TIME_WHOLE_HALVINGS)  # fmt: skip
+    _kernels.time_at_length(
+        *(
+            as_float64(c)
+            for c in (
+                profile.phase_s0_mm,
+                profile.phase_v0_mm_s,
+                profile.phase_a0_mm_s2,
+                profile.phase_jerk_mm_s3,
+                profile.phase_duration_s,
+                profile.phase_start_time_s,
+            )
+        ),
+        s,
+        out,
+        TIME_BRACKET_REL,
+        TIME_NEWTON_STEPS,
+        TIME_HALVINGS,
+        TIME_WHOLE_HALVINGS,
+    )
     return out.reshape(shape)
 
 
@@ -355,12 +380,23 @@ def _time_at_length_py(profile: Profile, s_mm: np.ndarray) -> np.ndarray:
         t = np.where((speed > 0.0) & (step >= lo) & (step <= hi), step, 0.5 * (lo + hi))
     near_lo = np.maximum(t * (1.0 - TIME_BRACKET_REL), 0.0)
     near_hi = np.minimum(t * (1.0 + TIME_BRACKET_REL), dur)
-    near = ((near_hi > near_lo) & _below(near_lo, s0, v0, c2, c3, s)
-            & ~_below(near_hi, s0, v0, c2, c3, s))  # fmt: skip
-    lo, hi = _bisect(np.where(near, near_lo, 0.0), np.where(near, near_hi, dur),
-                     (s0, v0, c2, c3, s), TIME_HALVINGS)  # fmt: skip
+    near = (
+        (near_hi > near_lo)
+        & _below(near_lo, s0, v0, c2, c3, s)
+        & ~_below(near_hi, s0, v0, c2, c3, s)
+    )
+    lo, hi = _bisect(
+        np.where(near, near_lo, 0.0),
+        np.where(near, near_hi, dur),
+        (s0, v0, c2, c3, s),
+        TIME_HALVINGS,
+    )
     far = np.flatnonzero(~near)
     if far.size:
-        hi[far] = _bisect(lo[far], hi[far], tuple(c[far] for c in (s0, v0, c2, c3, s)),
-                          TIME_WHOLE_HALVINGS - TIME_HALVINGS)[1]  # fmt: skip
+        hi[far] = _bisect(
+            lo[far],
+            hi[far],
+            tuple(c[far] for c in (s0, v0, c2, c3, s)),
+            TIME_WHOLE_HALVINGS - TIME_HALVINGS,
+        )[1]
     return profile.phase_start_time_s[idx] + hi

@@ -177,8 +177,9 @@ def plan_profile(inp: ProfileInput) -> Profile:
     return plan_profile_pieces(inp)
 
 
-def _plan_units(inp: ProfileInput, key: np.ndarray, every: bool = False,
-                gate: bool = True) -> tuple[Profile | None, np.ndarray]:  # fmt: skip
+def _plan_units(
+    inp: ProfileInput, key: np.ndarray, every: bool = False, gate: bool = True
+) -> tuple[Profile | None, np.ndarray]:
     """The profile with the planning units between the junctions ``key`` (k+1,), reported
     per piece, and the junctions (k+1, bool) that must become planning junctions because a
     unit's speed exceeds one of its pieces' caps (then the profile is None: not valid);
@@ -199,9 +200,17 @@ def _plan_units(inp: ProfileInput, key: np.ndarray, every: bool = False,
         j_up = j_dn = inp.j_max_mm_s3
     else:
         a_up, j_up, a_dn, j_dn = (np.minimum.reduceat(x, first) for x in inp.piece_limits())
-    unit = plan_profile_pieces(ProfileInput(cum[bounds[1:]] - cum[bounds[:-1]], unit_cap,
-                                            jcap_unit, a_up, j_up, a_decel_mm_s2=a_dn,
-                                            j_decel_mm_s3=j_dn))  # fmt: skip
+    unit = plan_profile_pieces(
+        ProfileInput(
+            cum[bounds[1:]] - cum[bounds[:-1]],
+            unit_cap,
+            jcap_unit,
+            a_up,
+            j_up,
+            a_decel_mm_s2=a_dn,
+            j_decel_mm_s3=j_dn,
+        )
+    )
     lims = (a_up, j_up, a_dn, j_dn)
     unit_of = np.repeat(np.arange(first.size), np.diff(bounds))
     # Within a unit the speed rises to its peak v_p, cruises over [cruise_from, cruise_to]
@@ -237,15 +246,15 @@ def _plan_units(inp: ProfileInput, key: np.ndarray, every: bool = False,
             return low, piece_max
         t = bound_times(unit)
         v_ends = unit.sample(np.concatenate((t[low], t[low + 1])))[1]
-        over = low[piece_max(low, v_ends[:low.size], v_ends[low.size:])
-                   > c[low] * (1.0 + 1e-12)]  # fmt: skip
+        over = low[piece_max(low, v_ends[: low.size], v_ends[low.size :]) > c[low] * (1.0 + 1e-12)]
         return over, piece_max
 
     over, piece_max = offenders(unit, d_up, d_dn)
     if over.size and gate:
         # Flanks over a staircase of caps follow it (gated flanks) where the unit has room.
-        unit, d_up, d_dn = gate_units(unit, over, c, cum, first, bounds, unit_of, unit_cap,
-                                       lims, d_up.copy(), d_dn.copy())  # fmt: skip
+        unit, d_up, d_dn = gate_units(
+            unit, over, c, cum, first, bounds, unit_of, unit_cap, lims, d_up.copy(), d_dn.copy()
+        )
         over, piece_max = offenders(unit, d_up, d_dn)
     if over.size:
         return None, _splits(over, c, unit_cap, unit_of, first, k, every)
@@ -276,8 +285,15 @@ def _plan_units(inp: ProfileInput, key: np.ndarray, every: bool = False,
     return profile, np.zeros(k + 1, dtype=bool)
 
 
-def _splits(over: np.ndarray, c: np.ndarray, unit_cap: np.ndarray, unit_of: np.ndarray,
-            first: np.ndarray, k: int, every: bool = False) -> np.ndarray:  # fmt: skip
+def _splits(
+    over: np.ndarray,
+    c: np.ndarray,
+    unit_cap: np.ndarray,
+    unit_of: np.ndarray,
+    first: np.ndarray,
+    k: int,
+    every: bool = False,
+) -> np.ndarray:
     """The junctions (k+1, bool) that become planning junctions for the pieces ``over``
     whose cap their unit's speed exceeds.
 

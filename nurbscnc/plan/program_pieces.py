@@ -24,8 +24,9 @@ from nurbscnc.program.columns import RAPID as RAPID_CODE
 from nurbscnc.program.columns import segment_columns
 
 
-def segment_pieces(segments, machine: Machine, options: PlanOptions | None = None,
-                   columns=None) -> PieceList:  # fmt: skip
+def segment_pieces(
+    segments, machine: Machine, options: PlanOptions | None = None, columns=None
+) -> PieceList:
     """All pieces of a program, in order, as a :class:`PieceList`, with its corners decided
     (path-control modes, LinuxCNC 2.9's meaning) and logged in ``corners``.
 
@@ -113,8 +114,7 @@ class _Lines:
     keep: np.ndarray
 
 
-def _line_columns(columns, straight: np.ndarray, machine: Machine,
-                  options: PlanOptions) -> _Lines:  # fmt: skip
+def _line_columns(columns, straight: np.ndarray, machine: Machine, options: PlanOptions) -> _Lines:
     """The lines' columns (millions in CAM programs): no tuple per line."""
     lim = machine.limits
     seg_line = np.flatnonzero(straight)
@@ -124,11 +124,11 @@ def _line_columns(columns, straight: np.ndarray, machine: Machine,
     l_len = np.sqrt(np.einsum("ij,ij->i", diff, diff))
     l_rapid = columns.kind[seg_line] == RAPID_CODE
     # Feed, source line (exact in a float) and blend tolerance.
-    l_cols = np.column_stack((columns.feeds_mm_s[seg_line], columns.lines[seg_line],
-                              columns.blends_mm[seg_line]))  # fmt: skip
+    l_cols = np.column_stack(
+        (columns.feeds_mm_s[seg_line], columns.lines[seg_line], columns.blends_mm[seg_line])
+    )
     l_feed = l_cols[:, 0]
-    l_cap = np.maximum(np.where(l_rapid, lim.rapid_mm_s, np.minimum(l_feed, lim.v_max_mm_s)),
-                       1e-6)  # fmt: skip
+    l_cap = np.maximum(np.where(l_rapid, lim.rapid_mm_s, np.minimum(l_feed, lim.v_max_mm_s)), 1e-6)
     if options.blend_tolerance_mm is not None:
         l_blend = np.full(m, float(options.blend_tolerance_mm))
     else:
@@ -136,8 +136,9 @@ def _line_columns(columns, straight: np.ndarray, machine: Machine,
     return _Lines(seg_line, p0, p1, diff, l_len, l_rapid, l_cols, l_cap, l_blend, l_len > 0.0)
 
 
-def _curved_blocks(segs: list, kinds: list, curved: np.ndarray, machine: Machine,
-                   options: PlanOptions) -> dict[int, Block]:  # fmt: skip
+def _curved_blocks(
+    segs: list, kinds: list, curved: np.ndarray, machine: Machine, options: PlanOptions
+) -> dict[int, Block]:
     """The pieces of every arc and NURBS segment, by segment index (none for a zero-length
     arc); a NURBS segment that is an earlier one moved from that one's
     (:class:`~nurbscnc.plan.moved_copies.Repeats`)."""
@@ -186,8 +187,9 @@ def _put_blocks(cols: dict, first_row: np.ndarray, blocks: dict[int, Block]) -> 
     return objects
 
 
-def _put_stops(cols: dict, first_row: np.ndarray, segs: list, kinds: list,
-               other: np.ndarray) -> float:  # fmt: skip
+def _put_stops(
+    cols: dict, first_row: np.ndarray, segs: list, kinds: list, other: np.ndarray
+) -> float:
     """Dwells and pauses among the ``other`` segments (neither lines nor curves) as
     ``stop_after`` and ``dwell_after_s`` of the piece before; returns the seconds [s] of
     those before the first piece (for :func:`_with_dwell_marker`)."""
@@ -245,7 +247,13 @@ def _corners_decided(pieces: PieceList, machine: Machine, options: PlanOptions) 
         pieces.pass_after[:-1] = small_breaks(pieces, turning, regular, machine)
     pieces, tried = apply_blends(pieces, machine)
     rows, dkn = curvature_jumps(pieces)
-    cap = junction_jump_cap_mm_s(dkn, machine.servo.period_s, machine.limits.j_max_mm_s3,
-                                 machine.axis_limits.as_arrays()[2])  # fmt: skip
-    return dc_replace(pieces, corners=corner_log(pieces, tried, machine, options),
-                      jump_rows=rows, jump_kn=dkn, jump_cap_mm_s=cap)  # fmt: skip
+    cap = junction_jump_cap_mm_s(
+        dkn, machine.servo.period_s, machine.limits.j_max_mm_s3, machine.axis_limits.as_arrays()[2]
+    )
+    return dc_replace(
+        pieces,
+        corners=corner_log(pieces, tried, machine, options),
+        jump_rows=rows,
+        jump_kn=dkn,
+        jump_cap_mm_s=cap,
+    )

@@ -77,11 +77,22 @@ def segment_lengths_mm(segments, cols) -> np.ndarray:
         pick = [segments[i] for i in straight.tolist()]
     lengths[straight] = np.fromiter(
         map(math.dist, map(attrgetter("end_mm"), pick), map(attrgetter("start_mm"), pick)),
-        dtype=float, count=straight.size)  # fmt: skip
+        dtype=float,
+        count=straight.size,
+    )
     arcs = cols.rows(ARC).tolist()
     if arcs:
-        radii = np.array([(segments[i].radius_start_mm, segments[i].radius_end_mm,
-                           segments[i].angle_rad, segments[i].helix_mm) for i in arcs])  # fmt: skip
+        radii = np.array(
+            [
+                (
+                    segments[i].radius_start_mm,
+                    segments[i].radius_end_mm,
+                    segments[i].angle_rad,
+                    segments[i].helix_mm,
+                )
+                for i in arcs
+            ]
+        )
         lengths[arcs] = spiral_arc_length_mm(*radii.T)
     for i in cols.rows(NURBS).tolist():
         lengths[i] = segment_length_mm(segments[i])
@@ -99,8 +110,9 @@ def _box_points_mm(prog, cols) -> np.ndarray:
     arcs = cols.rows(ARC)
     count = np.where(moving, 2, 0)
     count[arcs] += ARC_BOX_SAMPLES
-    hulls = [np.reshape(np.asarray(segments[i].control_points_mm, dtype=float), (-1, 3))
-             for i in nurbs]  # fmt: skip
+    hulls = [
+        np.reshape(np.asarray(segments[i].control_points_mm, dtype=float), (-1, 3)) for i in nurbs
+    ]
     count[nurbs] = [len(h) for h in hulls]
     first = 1 + np.concatenate(([0], np.cumsum(count)[:-1]))
     points = np.empty((1 + int(count.sum()), 3))
@@ -116,7 +128,8 @@ def _box_points_mm(prog, cols) -> np.ndarray:
         geom = geometry_of(segments[i])
         at = first[i] + 2
         points[at : at + ARC_BOX_SAMPLES] = geom.point(
-            np.linspace(geom.u_start, geom.u_end, ARC_BOX_SAMPLES))
+            np.linspace(geom.u_start, geom.u_end, ARC_BOX_SAMPLES)
+        )
     return points
 
 
@@ -142,14 +155,23 @@ def program_summary(prog, columns=None, per_segment: bool = True) -> dict:
     feeds = cols.feeds_mm_s[feeding]
     names = cols.names
     shown = np.arange(len(segments)) if per_segment else cols.rows(NURBS)
-    entries = [{"kind": k, "line": line, "length_mm": length}
-               for k, line, length in zip(names[shown].tolist(), cols.lines[shown].tolist(),
-                                          lengths[shown].tolist())]  # fmt: skip
-    for i, k in zip(np.flatnonzero(cols.kind[shown] == NURBS).tolist(),
-                    shown[cols.kind[shown] == NURBS].tolist()):  # fmt: skip
+    entries = [
+        {"kind": k, "line": line, "length_mm": length}
+        for k, line, length in zip(
+            names[shown].tolist(), cols.lines[shown].tolist(), lengths[shown].tolist()
+        )
+    ]
+    for i, k in zip(
+        np.flatnonzero(cols.kind[shown] == NURBS).tolist(),
+        shown[cols.kind[shown] == NURBS].tolist(),
+    ):
         seg = segments[k]
-        entries[i].update(degree=seg.degree, control_points=len(seg.control_points_mm),
-                          knots=len(seg.knots), plane=seg.plane)  # fmt: skip
+        entries[i].update(
+            degree=seg.degree,
+            control_points=len(seg.control_points_mm),
+            knots=len(seg.knots),
+            plane=seg.plane,
+        )
     # Kinds counted in the order they first appear (the order of the JSON object).
     codes, first, counts = np.unique(cols.kind, return_index=True, return_counts=True)
     order = np.argsort(first)
@@ -163,8 +185,10 @@ def program_summary(prog, columns=None, per_segment: bool = True) -> dict:
         "length_mm": _sequential_sum(lengths[feeding]),
         "rapid_length_mm": _sequential_sum(lengths[rapid]),
         "bounding_box_mm": {"min": allpts.min(axis=0).tolist(), "max": allpts.max(axis=0).tolist()},
-        "feed_range_mm_s": {"min": float(feeds.min()) if feeds.size else None,
-                            "max": float(feeds.max()) if feeds.size else None},  # fmt: skip
+        "feed_range_mm_s": {
+            "min": float(feeds.min()) if feeds.size else None,
+            "max": float(feeds.max()) if feeds.size else None,
+        },
         "notes": [{"line": n.line, "message": n.message} for n in prog.notes],
         "errors": [],
     }
@@ -273,8 +297,12 @@ class SampleStats:
         ends = samples.piece[[0, -1]]
         kind = np.take(path.kind, ends)
         cid = np.where(kind == Kind.NURBS, np.take(path.obj_id, ends), -1).tolist()
-        self._last = (cid[1], float(samples.param[-1]), float(samples.s_mm[-1]),
-                      float(samples.v_mm_s[-1]))  # fmt: skip
+        self._last = (
+            cid[1],
+            float(samples.param[-1]),
+            float(samples.s_mm[-1]),
+            float(samples.v_mm_s[-1]),
+        )
         return cid[0]
 
 
@@ -284,9 +312,17 @@ def _bound(summary: dict, lower_bound_s: float | None, cycle_time_s: float) -> N
         summary["lower_bound_ratio"] = cycle_time_s / lower_bound_s if lower_bound_s > 0 else None
 
 
-def plan_summary(prog, machine: Machine, samples, plan=None, check=None,
-                 algorithm: str = "ph-lookahead", cycle_time_s: float | None = None,
-                 lower_bound: bool = True, columns=None) -> dict:  # fmt: skip
+def plan_summary(
+    prog,
+    machine: Machine,
+    samples,
+    plan=None,
+    check=None,
+    algorithm: str = "ph-lookahead",
+    cycle_time_s: float | None = None,
+    lower_bound: bool = True,
+    columns=None,
+) -> dict:
     """Numbers that describe a plan (``plan --json``): of the look-ahead ``plan`` with its
     dynamics ``check`` (None: off), or — ``plan`` None — of a baseline ``algorithm``'s
     ``samples``, simulated on the servo model to see its errors. With a plan, ``samples``
@@ -309,13 +345,20 @@ def plan_summary(prog, machine: Machine, samples, plan=None, check=None,
 
         sim = simulate_reference(samples.points_mm, machine)
         m = metrics(sim, None, contour_errors(sim, None)).as_dict()
-        summary = {**head, "algorithm": str(algorithm), "cycle_time_s": cycle_time_s,
-                   "samples": int(samples.t_s.size), "period_s": machine.servo.period_s,
-                   "feed_max_mm_s": float(samples.v_mm_s.max())}  # fmt: skip
+        summary = {
+            **head,
+            "algorithm": str(algorithm),
+            "cycle_time_s": cycle_time_s,
+            "samples": int(samples.t_s.size),
+            "period_s": machine.servo.period_s,
+            "feed_max_mm_s": float(samples.v_mm_s.max()),
+        }
         _bound(summary, lb, cycle_time_s)
-        summary.update(contour_true_max_um=m["true_max_um"],
-                       contour_true_rms_um=m["true_rms_um"],
-                       contour_eq29_max_um=m["contour_max_um"])  # fmt: skip
+        summary.update(
+            contour_true_max_um=m["true_max_um"],
+            contour_true_rms_um=m["true_rms_um"],
+            contour_eq29_max_um=m["contour_max_um"],
+        )
         return summary
     stats = samples if isinstance(samples, SampleStats) else SampleStats.of(samples, plan)
     kinds = plan.pieces.kind_counts()  # vectorised: no Piece object per row
@@ -346,13 +389,19 @@ def plan_summary(prog, machine: Machine, samples, plan=None, check=None,
 #: ``contour_true_*`` (the distance from the actual point to the path) or ``contour_eq29_*``
 #: (|ε| of SPEC eq. 29) in every command.
 METRIC_KEYS = {
-    "axis_x_max_um": "axis_x_max_um", "axis_x_rms_um": "axis_x_rms_um",
-    "axis_y_max_um": "axis_y_max_um", "axis_y_rms_um": "axis_y_rms_um",
-    "contour_max_um": "contour_eq29_max_um", "contour_rms_um": "contour_eq29_rms_um",
-    "contour_mean_um": "contour_eq29_mean_um", "true_max_um": "contour_true_max_um",
-    "true_rms_um": "contour_true_rms_um", "true_mean_um": "contour_true_mean_um",
-    "cycle_time_s": "cycle_time_s", "settle_time_s": "settle_time_s",
-}  # fmt: skip
+    "axis_x_max_um": "axis_x_max_um",
+    "axis_x_rms_um": "axis_x_rms_um",
+    "axis_y_max_um": "axis_y_max_um",
+    "axis_y_rms_um": "axis_y_rms_um",
+    "contour_max_um": "contour_eq29_max_um",
+    "contour_rms_um": "contour_eq29_rms_um",
+    "contour_mean_um": "contour_eq29_mean_um",
+    "true_max_um": "contour_true_max_um",
+    "true_rms_um": "contour_true_rms_um",
+    "true_mean_um": "contour_true_mean_um",
+    "cycle_time_s": "cycle_time_s",
+    "settle_time_s": "settle_time_s",
+}
 
 
 def metrics_json(metrics: dict) -> dict:

@@ -8,6 +8,7 @@ default is the plan's exact reference (:data:`EXACT`); the interpolator's sample
 (:func:`nurbscnc.interpolate.sample.reference_sampler`), the pre-compensated one and a
 progress display's wrapper are instances too.
 """
+
 from __future__ import annotations
 
 from collections.abc import Callable
@@ -32,8 +33,9 @@ class ReferenceSampler:
     windowed: bool = True
     interpolator: Interpolator | None = Interpolator.EXACT
 
-    def __call__(self, pieces, profile, period_s: float, k0: int = 0,
-                 k1: int | None = None) -> Reference:  # fmt: skip
+    def __call__(
+        self, pieces, profile, period_s: float, k0: int = 0, k1: int | None = None
+    ) -> Reference:
         return exact_reference(pieces, profile, period_s, k0, k1)
 
     def check_begins(self, k0: int) -> None:
@@ -51,14 +53,19 @@ class FunctionSampler(ReferenceSampler):
     :class:`ReferenceSampler` that says explicitly whether it is ``windowed`` and which
     ``interpolator`` it samples with."""
 
-    def __init__(self, sample: Callable[..., Reference], windowed: bool,
-                 interpolator: Interpolator | None = None):  # fmt: skip
+    def __init__(
+        self,
+        sample: Callable[..., Reference],
+        windowed: bool,
+        interpolator: Interpolator | None = None,
+    ):
         self.sample = sample
         self.windowed = bool(windowed)
         self.interpolator = interpolator
 
-    def __call__(self, pieces, profile, period_s: float, k0: int = 0,
-                 k1: int | None = None) -> Reference:  # fmt: skip
+    def __call__(
+        self, pieces, profile, period_s: float, k0: int = 0, k1: int | None = None
+    ) -> Reference:
         return self.sample(pieces, profile, period_s, k0, k1)
 
 
@@ -72,8 +79,9 @@ class ForwardingSampler(ReferenceSampler):
         self.interpolator = inner.interpolator
         self.hook = hook
 
-    def __call__(self, pieces, profile, period_s: float, k0: int = 0,
-                 k1: int | None = None) -> Reference:  # fmt: skip
+    def __call__(
+        self, pieces, profile, period_s: float, k0: int = 0, k1: int | None = None
+    ) -> Reference:
         return self.inner(pieces, profile, period_s, k0, k1)
 
     def check_begins(self, k0: int) -> None:
@@ -89,5 +97,7 @@ def as_sampler(reference) -> ReferenceSampler:
     evaluated whole (called as (pieces, profile, period_s))."""
     if isinstance(reference, ReferenceSampler):
         return reference
-    return FunctionSampler(lambda pieces, profile, period_s, k0=0, k1=None:
-                           reference(pieces, profile, period_s), windowed=False)  # fmt: skip
+    return FunctionSampler(
+        lambda pieces, profile, period_s, k0=0, k1=None: reference(pieces, profile, period_s),
+        windowed=False,
+    )

@@ -22,7 +22,11 @@ from nurbscnc.plan.profile import Profile, ProfileInput, frozen_array
 
 
 def window_caps(
-    cap: np.ndarray, length: np.ndarray, w_back: np.ndarray, n: int, a: np.ndarray,
+    cap: np.ndarray,
+    length: np.ndarray,
+    w_back: np.ndarray,
+    n: int,
+    a: np.ndarray,
     j: np.ndarray,
 ) -> np.ndarray:
     """Stop-within-the-window caps of an ``n``-piece look-ahead, (k+1,) [mm/s].
@@ -58,8 +62,7 @@ def window_caps(
 CHAIN_SCALAR = 24
 
 
-def chain_scan(bound: np.ndarray, length: np.ndarray, a: np.ndarray,
-               j: np.ndarray) -> np.ndarray:  # fmt: skip
+def chain_scan(bound: np.ndarray, length: np.ndarray, a: np.ndarray, j: np.ndarray) -> np.ndarray:
     """The speeds (k+1,) [mm/s] of the recurrence ``y_0 = 0``,
     ``y_{n+1} = min(bound_{n+1}, R(y_n, L_n))`` (``R`` the reach of
     :func:`~nurbscnc.plan.feedrate.max_reachable_speed` with piece n's limits ``a_n, j_n``;
@@ -78,8 +81,7 @@ def chain_scan(bound: np.ndarray, length: np.ndarray, a: np.ndarray,
     y[0] = 0.0
     live = np.arange(k)  # n: y_{n+1} to recompute from y_n
     while live.size > CHAIN_SCALAR:
-        new = np.minimum(bound[live + 1], reach_unchecked(y[live], length[live], a[live],
-                                                          j[live]))  # fmt: skip
+        new = np.minimum(bound[live + 1], reach_unchecked(y[live], length[live], a[live], j[live]))
         changed = new != y[live + 1]
         moved = live[changed] + 1
         y[moved] = new[changed]
@@ -101,8 +103,7 @@ def chain_scan(bound: np.ndarray, length: np.ndarray, a: np.ndarray,
     return y
 
 
-def backward_scan(cap: np.ndarray, length: np.ndarray, a: np.ndarray,
-                  j: np.ndarray) -> np.ndarray:  # fmt: skip
+def backward_scan(cap: np.ndarray, length: np.ndarray, a: np.ndarray, j: np.ndarray) -> np.ndarray:
     """``w_i = min(cap_i, R(w_{i+1}, L_i))`` from ``w_k = 0``, ``R`` with piece i's descent
     limits ``a[i], j[i]`` (:func:`chain_scan` on the reversed pieces)."""
     return chain_scan(cap[::-1], length[::-1], a[::-1], j[::-1])[::-1]
@@ -117,8 +118,7 @@ def transition_distance_mm(v_a, v_b, a, j, a_dn=None, j_dn=None):
     return scurve_distance_mm(v_a, v_b, np.where(up, a, a_dn), np.where(up, j, j_dn))
 
 
-def repair_junctions(v: np.ndarray, length: np.ndarray, a, j, a_dn=None,
-                     j_dn=None) -> np.ndarray:  # fmt: skip
+def repair_junctions(v: np.ndarray, length: np.ndarray, a, j, a_dn=None, j_dn=None) -> np.ndarray:
     """Make ``D(v_i → v_{i+1}) ≤ L_i`` hold in floats for every piece (in place; returned).
 
     The scans satisfy it mathematically and, with the float guard of the reach function,
@@ -128,8 +128,10 @@ def repair_junctions(v: np.ndarray, length: np.ndarray, a, j, a_dn=None,
     ``a_dn, j_dn`` for descents, default the same): scalars or (k,) per piece.
     """
     k = length.size
-    lims = [np.broadcast_to(np.asarray(x, dtype=float), (k,))
-            for x in (a, j, a if a_dn is None else a_dn, j if j_dn is None else j_dn)]
+    lims = [
+        np.broadcast_to(np.asarray(x, dtype=float), (k,))
+        for x in (a, j, a if a_dn is None else a_dn, j if j_dn is None else j_dn)
+    ]
     bad = np.flatnonzero(transition_distance_mm(v[:-1], v[1:], *lims) > length)
     work = [int(x) for x in bad]
     while work:

@@ -1,5 +1,6 @@
 """What every plan of one program shares (:class:`Setup`): its pieces, the kinematic levers
 (the axes' path limits), the settle rows, the checker; planning and checking given levers."""
+
 from __future__ import annotations
 
 from dataclasses import replace
@@ -36,8 +37,16 @@ class Setup:
     """What every plan of one program shares: its pieces, the kinematic levers (the axes'
     path limits), the settle rows, the checker; :meth:`evaluate` plans and checks levers."""
 
-    def __init__(self, program, machine: Machine, options: LookaheadOptions, reference,
-                 keep_reference: bool, window: int, columns=None):  # fmt: skip
+    def __init__(
+        self,
+        program,
+        machine: Machine,
+        options: LookaheadOptions,
+        reference,
+        keep_reference: bool,
+        window: int,
+        columns=None,
+    ):
         self.machine, self.options = machine, options
         pieces = segment_pieces(program.segments, machine, options.plan, columns)
         if not len(pieces):
@@ -47,9 +56,16 @@ class Setup:
         a_p = np.array(path_lim.a_mm_s2, dtype=float)
         j_p = np.array(path_lim.j_mm_s3, dtype=float)
         k = self.k = len(pieces)
-        self.initial = Levers(np.minimum(pieces.v_cap_mm_s, path_lim.v_mm_s), a_p, j_p,
-                              a_p.copy(), j_p.copy(), np.zeros(k), np.zeros(k, dtype=bool),
-                              np.zeros(k, dtype=bool))  # fmt: skip
+        self.initial = Levers(
+            np.minimum(pieces.v_cap_mm_s, path_lim.v_mm_s),
+            a_p,
+            j_p,
+            a_p.copy(),
+            j_p.copy(),
+            np.zeros(k),
+            np.zeros(k, dtype=bool),
+            np.zeros(k, dtype=bool),
+        )
         self.smooth = junction_caps(pieces)  # > 0 where the path is tangent-continuous
         self.period = machine.servo.period_s
         self.eps_mm = machine.limits.contour_tolerance_mm * CONTOUR_MARGIN
@@ -62,8 +78,9 @@ class Setup:
         if options.dynamics == Dynamics.GLOBAL:
             self.initial.settle_s[self.settle_rows] = self.settle_max
         self.base_dwell = pieces.dwell_after_s
-        self.checker = Checker(pieces, machine, reference, self.eps_mm, self.settle_rows,
-                               window, keep_reference)  # fmt: skip
+        self.checker = Checker(
+            pieces, machine, reference, self.eps_mm, self.settle_rows, window, keep_reference
+        )
         # The improvement phase's upper brackets: the kinematic levers, or with
         # ``raise_corner_caps`` the caps without the corner heuristic V_cf.
         self.upper = self.initial
@@ -71,22 +88,27 @@ class Setup:
             free = _without_corner_feed(program, machine, options, pieces)
             if free is not None:
                 self.upper = self.initial.copy()
-                self.upper.caps = np.maximum(np.minimum(free.v_cap_mm_s, path_lim.v_mm_s),
-                                             self.initial.caps)  # fmt: skip
+                self.upper.caps = np.maximum(
+                    np.minimum(free.v_cap_mm_s, path_lim.v_mm_s), self.initial.caps
+                )
                 # The junctions capped by their neighbours' machine caps (the same passable
                 # junctions): the profile takes the smaller of the levers' caps anyway.
                 self.smooth = np.maximum(self.smooth, junction_caps(free))
 
     def planned(self, lv: Levers) -> PieceList:
         """The pieces with the settles of the levers ``lv`` in their dwells."""
-        return _with_dwell(self.pieces, self.base_dwell + lv.settle_s) \
-            if self.settle_rows.size else self.pieces  # fmt: skip
+        return (
+            _with_dwell(self.pieces, self.base_dwell + lv.settle_s)
+            if self.settle_rows.size
+            else self.pieces
+        )
 
     def plan_of(self, lv: Levers):
         """The planned pieces (settles in their dwells) and profile of the levers ``lv``."""
         planned = self.planned(lv)
-        profile = profile_over(planned.length_mm, lv.caps, self.smooth, lv.limits(),
-                               self.options.lookahead_pieces)  # fmt: skip
+        profile = profile_over(
+            planned.length_mm, lv.caps, self.smooth, lv.limits(), self.options.lookahead_pieces
+        )
         check_point_count(planned, profile, self.machine)  # before anything is sampled
         return planned, profile
 
@@ -101,14 +123,31 @@ class Setup:
     def shape(self, lv: Levers, result) -> None:
         """One local re-plan of ``lv`` (in place) from the check of ``result``
         (:func:`~nurbscnc.plan.shaping.shape`)."""
-        shape(lv, result[2].overs, self.eps_mm, result[1], self.pieces, self.smooth,
-              self.settle_rows, self.settle_max, self.period)  # fmt: skip
+        shape(
+            lv,
+            result[2].overs,
+            self.eps_mm,
+            result[1],
+            self.pieces,
+            self.smooth,
+            self.settle_rows,
+            self.settle_max,
+            self.period,
+        )
 
     def fallback(self, lv: Levers, result, stage: int) -> None:
         """The fallback of ``stage`` on ``lv`` (in place) from the check of ``result``
         (:func:`~nurbscnc.plan.shaping.fallback`)."""
-        fallback(lv, result[2].overs, self.eps_mm, self.pieces, self.settle_rows,
-                 self.settle_max, self.period, stage)  # fmt: skip
+        fallback(
+            lv,
+            result[2].overs,
+            self.eps_mm,
+            self.pieces,
+            self.settle_rows,
+            self.settle_max,
+            self.period,
+            stage,
+        )
 
     def plan(self, lev: Levers, result, iterations: int) -> Plan:
         """The :class:`Plan` of the levers ``lev`` and their ``result``."""
@@ -118,13 +157,24 @@ class Setup:
         transition = np.zeros(self.k, dtype=bool)
         for f in ("a_up", "j_up", "a_dn", "j_dn"):
             transition |= getattr(lev, f) < getattr(initial, f)
-        return Plan(planned, lev.caps, profile, iterations, cycle_time_s(result),
-                    self.options.dynamics, lev.limits(), feed | transition, feed, transition,
-                    lev.settle_s)  # fmt: skip
+        return Plan(
+            planned,
+            lev.caps,
+            profile,
+            iterations,
+            cycle_time_s(result),
+            self.options.dynamics,
+            lev.limits(),
+            feed | transition,
+            feed,
+            transition,
+            lev.settle_s,
+        )
 
 
-def _without_corner_feed(program, machine: Machine, options: LookaheadOptions,
-                         pieces: PieceList) -> PieceList | None:  # fmt: skip
+def _without_corner_feed(
+    program, machine: Machine, options: LookaheadOptions, pieces: PieceList
+) -> PieceList | None:
     """``pieces`` without the corner heuristic V_cf (SPEC eq. 24) in their caps: made again
     with κ̄ → ∞ (V_cf = F), so a corner piece keeps its physical caps only — the chord
     feed V_af, the normal acceleration √(A/κ), F and V_max. The corner regions (κ_th =
@@ -137,4 +187,3 @@ def _without_corner_feed(program, machine: Machine, options: LookaheadOptions,
     if not np.array_equal(junction_caps(free) > 0.0, junction_caps(pieces) > 0.0):
         return None
     return free
-

@@ -2,6 +2,7 @@
 :mod:`~nurbscnc.plan.lookahead`): from a check's over-limit samples, which levers of which
 pieces to lower — the settle after a rapid, the transitions of a stop or slowdown, the feed
 over a blamed window (:func:`shape`) — and the guaranteed-feasible :func:`fallback`."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -29,8 +30,7 @@ FALLBACK_FACTOR = 0.6
 BLAME_BLOCK = 1 << 12
 
 
-def _blame(ov: Overs, sel: np.ndarray, eps_mm: float, joined: np.ndarray,
-           window) -> np.ndarray:  # fmt: skip
+def _blame(ov: Overs, sel: np.ndarray, eps_mm: float, joined: np.ndarray, window) -> np.ndarray:
     """Largest over-limit error [mm] each piece shares the blame for (0: none).
 
     An over-limit sample (``ov``: those of ``sel`` (q,) bool with error above ``eps_mm``)
@@ -179,8 +179,15 @@ def _slowdowns(profile: Profile) -> np.ndarray:
     return j[(v[j] > 0.0) & long & change]
 
 
-def _settle_extra(lev: Levers, ov: Overs, near: np.ndarray, profile: Profile,
-                  settle_rows: np.ndarray, settle_max_s: float, period_s: float) -> np.ndarray:
+def _settle_extra(
+    lev: Levers,
+    ov: Overs,
+    near: np.ndarray,
+    profile: Profile,
+    settle_rows: np.ndarray,
+    settle_max_s: float,
+    period_s: float,
+) -> np.ndarray:
     """The settles after rapids (in place): each rapid whose stop transient the over-limit
     samples are near waits longer, past the last of them (plus one period). Returns which
     over-limit samples this answered."""
@@ -223,9 +230,17 @@ def _servo_jerk(j_mm_s3: np.ndarray, a_mm_s2: np.ndarray, settle_max_s: float) -
     return np.minimum(j_mm_s3, a_mm_s2 * (5.0 / settle_max_s))
 
 
-def shape(lev: Levers, ov: Overs, eps_mm: float, profile: Profile, pieces: PieceList,
-          smooth: np.ndarray, settle_rows: np.ndarray, settle_max_s: float,
-          period_s: float) -> None:  # fmt: skip
+def shape(
+    lev: Levers,
+    ov: Overs,
+    eps_mm: float,
+    profile: Profile,
+    pieces: PieceList,
+    smooth: np.ndarray,
+    settle_rows: np.ndarray,
+    settle_max_s: float,
+    period_s: float,
+) -> None:
     """One local re-plan (in place) from a check's over-limit samples ``ov``: each is
     answered where its error is caused (module docstring of
     :mod:`~nurbscnc.plan.lookahead`): the settle after a rapid, the descent into and the
@@ -267,8 +282,14 @@ def _stop_entry(e_mm: float, prev, eps_mm: float):
     return (e, f, accel)
 
 
-def _soften(a_mm_s2: np.ndarray, j_mm_s3: np.ndarray, sel: np.ndarray, f: float, accel: bool,
-            settle_max_s: float) -> None:  # fmt: skip
+def _soften(
+    a_mm_s2: np.ndarray,
+    j_mm_s3: np.ndarray,
+    sel: np.ndarray,
+    f: float,
+    accel: bool,
+    settle_max_s: float,
+) -> None:
     """Soften the transition (rise or descent) limits ``a_mm_s2``, ``j_mm_s3`` of the pieces
     ``sel`` (in place): the jerk from at most A·|p| (:func:`_servo_jerk`) by ``f``, and with
     ``accel`` the acceleration too."""
@@ -277,9 +298,17 @@ def _soften(a_mm_s2: np.ndarray, j_mm_s3: np.ndarray, sel: np.ndarray, f: float,
         a_mm_s2[sel] *= f
 
 
-def _soften_stops(lev: Levers, ov: Overs, near: np.ndarray, handled: np.ndarray,
-                  eps_mm: float, profile: Profile, pieces: PieceList, smooth: np.ndarray,
-                  settle_max_s: float) -> None:  # fmt: skip
+def _soften_stops(
+    lev: Levers,
+    ov: Overs,
+    near: np.ndarray,
+    handled: np.ndarray,
+    eps_mm: float,
+    profile: Profile,
+    pieces: PieceList,
+    smooth: np.ndarray,
+    settle_max_s: float,
+) -> None:
     """The stop rule (in place; ``handled`` too): for each stop or slowdown junction j the
     unhandled over-limit samples are ``near`` (:func:`_stop_events`), the descent of the run
     of pieces that ends at j and, if a sample is after the restart, the rise of the run
@@ -309,8 +338,9 @@ def _soften_stops(lev: Levers, ov: Overs, near: np.ndarray, handled: np.ndarray,
     lev.stop_history = new_hist
 
 
-def _curve_factors(lev: Levers, ov: Overs, handled: np.ndarray, eps_mm: float,
-                   smooth: np.ndarray, period_s: float) -> tuple[np.ndarray, np.ndarray]:
+def _curve_factors(
+    lev: Levers, ov: Overs, handled: np.ndarray, eps_mm: float, smooth: np.ndarray, period_s: float
+) -> tuple[np.ndarray, np.ndarray]:
     """The curve rule's cap factors (k,) and blame [mm] (k,) of the unhandled over-limit
     samples (:func:`_blame` over :data:`CURVE_BLAME_WINDOW_S`, widened to
     :data:`BLAME_WINDOW_S` near pieces found ineffective; :func:`local_factors`): once more
@@ -332,8 +362,15 @@ def _curve_factors(lev: Levers, ov: Overs, handled: np.ndarray, eps_mm: float,
     return factor, blame
 
 
-def _lower_curves(lev: Levers, ov: Overs, handled: np.ndarray, eps_mm: float,
-                  smooth: np.ndarray, settle_max_s: float, period_s: float) -> None:
+def _lower_curves(
+    lev: Levers,
+    ov: Overs,
+    handled: np.ndarray,
+    eps_mm: float,
+    smooth: np.ndarray,
+    settle_max_s: float,
+    period_s: float,
+) -> None:
     """The curve rule (in place): the feed of the pieces blamed by the unhandled over-limit
     samples (:func:`_curve_factors`); a blamed piece whose jerk the servo cannot follow
     gets that jerk instead, and a piece whose feed is no lever its transitions."""
@@ -364,9 +401,16 @@ def _lower_curves(lev: Levers, ov: Overs, handled: np.ndarray, eps_mm: float,
         lev.shaped |= trans
 
 
-def fallback(lev: Levers, ov: Overs, eps_mm: float, pieces: PieceList,
-             settle_rows: np.ndarray, settle_max_s: float, period_s: float,
-             stage: int) -> None:  # fmt: skip
+def fallback(
+    lev: Levers,
+    ov: Overs,
+    eps_mm: float,
+    pieces: PieceList,
+    settle_rows: np.ndarray,
+    settle_max_s: float,
+    period_s: float,
+    stage: int,
+) -> None:
     """The guaranteed-feasible fallback (in place): every lever of the blamed pieces (stage
     1: within the servo's memory of each over-limit sample of ``ov``; stage 2: all cutting
     pieces) scaled by :data:`FALLBACK_FACTOR` and the settles at their full length. Speed,
@@ -385,4 +429,3 @@ def fallback(lev: Levers, ov: Overs, eps_mm: float, pieces: PieceList,
     for x in (lev.a_up, lev.a_dn, lev.j_up, lev.j_dn):
         x[sel] *= f
     lev.shaped |= sel
-

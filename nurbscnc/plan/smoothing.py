@@ -89,8 +89,9 @@ class SmoothedRun(Nurbs):
         return int(self.line_numbers[max(i, 0)])
 
 
-def _runs(p0: np.ndarray, p1: np.ndarray, ok: np.ndarray, key: np.ndarray,
-          adjacent: np.ndarray) -> list[tuple[int, int]]:  # fmt: skip
+def _runs(
+    p0: np.ndarray, p1: np.ndarray, ok: np.ndarray, key: np.ndarray, adjacent: np.ndarray
+) -> list[tuple[int, int]]:
     """Runs [a, b) of consecutive candidate lines (module doc), as positions in the columns:
     ``ok`` (m,) candidates, ``key`` (m, c) values whose change breaks a run (the path mode;
     a feed change does not: the spline is cut there, C2),
@@ -99,8 +100,13 @@ def _runs(p0: np.ndarray, p1: np.ndarray, ok: np.ndarray, key: np.ndarray,
     length = np.sqrt(np.einsum("ij,ij->i", d, d))
     unit = d / np.where(length > 0.0, length, 1.0)[:, None]
     cos_turn = np.einsum("ij,ij->i", unit[:-1], unit[1:])
-    joined = (adjacent & ok[:-1] & ok[1:] & np.all(key[1:] == key[:-1], axis=1)
-              & (cos_turn >= np.cos(np.radians(MAX_TURN_DEG))))  # fmt: skip
+    joined = (
+        adjacent
+        & ok[:-1]
+        & ok[1:]
+        & np.all(key[1:] == key[:-1], axis=1)
+        & (cos_turn >= np.cos(np.radians(MAX_TURN_DEG)))
+    )
     # Runs are maximal stretches of `joined` junctions (plus lone candidates, dropped below).
     edges = np.flatnonzero(np.diff(np.concatenate(([False], joined, [False])).astype(np.int8)))
     out = []
@@ -144,8 +150,7 @@ def spline_deviation_mm(spline, u: np.ndarray, vertices: np.ndarray) -> float:
     pts = spline(us)
     to_poly = _windowed_distance_mm(pts, own, vertices)
     # Vertices to the chords between spline samples near them (sample i·per is at u_i).
-    to_curve = _windowed_distance_mm(vertices, np.minimum(np.arange(n + 1) * per,
-                                                          us.size - 2), pts)  # fmt: skip
+    to_curve = _windowed_distance_mm(vertices, np.minimum(np.arange(n + 1) * per, us.size - 2), pts)
     # Between samples Δu apart: a chord of the curve is within M Δu²/8 of it (|C″| ≤ M per
     # unit parameter), and the curve's distance to a chord line, whose second derivative is
     # at most M too, exceeds the interpolation of its sampled values by at most as much.
@@ -212,9 +217,13 @@ def split_spline(knots: np.ndarray, ctrl: np.ndarray, cuts: np.ndarray) -> list[
     return out
 
 
-def smooth_runs(segments, source: np.ndarray, machine,
-                blend_override_mm: float | None = None,
-                reserve_mm: float = 0.0) -> tuple[list, np.ndarray]:  # fmt: skip
+def smooth_runs(
+    segments,
+    source: np.ndarray,
+    machine,
+    blend_override_mm: float | None = None,
+    reserve_mm: float = 0.0,
+) -> tuple[list, np.ndarray]:
     """The segments with every run of dense feed lines (module doc) replaced by a
     :class:`SmoothedRun` within SHARE × its path tolerance less ``reserve_mm`` (the PH fit
     tolerance of a corner the planner may still find inside the spline), its end blends
@@ -223,8 +232,9 @@ def smooth_runs(segments, source: np.ndarray, machine,
     without P (:func:`~nurbscnc.geometry.segments.blend_tolerance_mm`); ``blend_override_mm``:
     ``--blend-tolerance`` (it overrides every mode)."""
     segs = list(segments)
-    is_line = np.fromiter((type(s) is Line and not s.rapid for s in segs), dtype=bool,
-                          count=len(segs))  # fmt: skip
+    is_line = np.fromiter(
+        (type(s) is Line and not s.rapid for s in segs), dtype=bool, count=len(segs)
+    )
     rows = np.flatnonzero(is_line)
     if rows.size < MIN_RUN:
         return segs, source
@@ -234,8 +244,11 @@ def smooth_runs(segments, source: np.ndarray, machine,
     p1 = np.fromiter(chain.from_iterable(s.end_mm for s in lines), float, 3 * m).reshape(m, 3)
     feed = np.fromiter((s.feed_mm_s for s in lines), float, m)
     mode = np.fromiter((s.blend_mm for s in lines), float, m)
-    tol = (np.full(m, float(blend_override_mm)) if blend_override_mm is not None
-           else blend_tolerance_mm(mode, machine.limits.path_tolerance_mm))  # fmt: skip
+    tol = (
+        np.full(m, float(blend_override_mm))
+        if blend_override_mm is not None
+        else blend_tolerance_mm(mode, machine.limits.path_tolerance_mm)
+    )
     length = np.sqrt(np.sum((p1 - p0) ** 2, axis=1))
     ok = (tol > 0.0) & (length > 0.0) & (length <= DENSE_MAX_MM)
     adjacent = (rows[1:] == rows[:-1] + 1) & np.all(p1[:-1] == p0[1:], axis=1)
@@ -253,13 +266,22 @@ def smooth_runs(segments, source: np.ndarray, machine,
         starts = np.union1d(change, np.arange(MAX_PIECE, b - a, MAX_PIECE)).astype(np.int64)
         bounds = [0, *starts.tolist(), b - a]
         numbers = np.fromiter((s.line for s in lines[a:b]), dtype=np.int64, count=b - a)
-        for (la, lb), (tk, ck) in zip(zip(bounds[:-1], bounds[1:]),
-                                      split_spline(knots, ctrl, u[starts])):
+        for (la, lb), (tk, ck) in zip(
+            zip(bounds[:-1], bounds[1:]), split_spline(knots, ctrl, u[starts])
+        ):
             lo, hi = u[la], u[lb]
-            spline = SmoothedRun(3, tk, ck, np.ones(ck.shape[0]), float(feed[a + la]),
-                                 int(numbers[la]), "XY", (1.0 - SHARE) * float(tol[a]),
-                                 line_u=(u[la:lb] - lo) / (hi - lo),
-                                 line_numbers=numbers[la:lb])  # fmt: skip
+            spline = SmoothedRun(
+                3,
+                tk,
+                ck,
+                np.ones(ck.shape[0]),
+                float(feed[a + la]),
+                int(numbers[la]),
+                "XY",
+                (1.0 - SHARE) * float(tol[a]),
+                line_u=(u[la:lb] - lo) / (hi - lo),
+                line_numbers=numbers[la:lb],
+            )
             replaced[int(rows[a + la])] = (int(rows[a + lb - 1]), spline)
     if not replaced:
         return segs, source

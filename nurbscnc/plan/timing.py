@@ -84,8 +84,9 @@ def sample_count(pieces, profile: Profile, period_s: float) -> int:
     return int(np.ceil(total_time_s(profile, dwell_s) / period_s - 1e-9)) + 1
 
 
-def servo_clock(pieces, profile: Profile, period_s: float, k0: int = 0,
-                k1: int | None = None) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+def servo_clock(
+    pieces, profile: Profile, period_s: float, k0: int = 0, k1: int | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Wall times t_k = k·T_s [s] for k in [k0, k1) (default: from 0 to the first one at or
     after the end of motion, :func:`sample_count`), and the profile times τ_k [s] they map
     to (dwells held). Every pair of consecutive samples is T_s apart; the last one is at
@@ -133,12 +134,19 @@ class Samples(Reference):
 def rows_of(ref: Reference, sl: slice) -> Reference:
     """Rows ``sl`` of every per-sample column of ``ref`` (views); a column that is None and
     the ``interpolator`` name stay as they are."""
-    return replace(ref, **{f.name: getattr(ref, f.name)[sl] for f in fields(ref)
-                           if isinstance(getattr(ref, f.name), np.ndarray)})  # fmt: skip
+    return replace(
+        ref,
+        **{
+            f.name: getattr(ref, f.name)[sl]
+            for f in fields(ref)
+            if isinstance(getattr(ref, f.name), np.ndarray)
+        },
+    )
 
 
-def exact_reference(pieces, profile: Profile, period_s: float, k0: int = 0,
-                    k1: int | None = None) -> Reference:  # fmt: skip
+def exact_reference(
+    pieces, profile: Profile, period_s: float, k0: int = 0, k1: int | None = None
+) -> Reference:
     """Reference points at t_k = k·T_s for k in [k0, k1) (:func:`servo_clock`; default all
     of them), each exactly on the path at the profile's s(τ_k) (SPEC §10). Profile and
     placement a slab of samples at a time: flat memory, cache-friendly temporaries; the cost

@@ -2,6 +2,7 @@
 re-plans share: a window's own profile (:class:`OwnProfiles`), the levers of cuts seen before
 (:class:`SeenWindows`), and the profiles of the windows before and after it, compacted,
 stood in for and spliced into one (:func:`compacted`, :func:`placeholder`, :func:`spliced`)."""
+
 from __future__ import annotations
 
 import functools
@@ -85,16 +86,27 @@ class OwnProfiles:
         lim = lv.limits()
 
         def over(lo: int, hi: int) -> Profile:
-            return profile_over(st.pieces.length_mm[lo:hi], lv.caps[lo:hi],
-                                st.smooth[lo : hi + 1],
-                                Limits(lim.a_up_mm_s2[lo:hi], lim.j_up_mm_s3[lo:hi],
-                                       lim.a_down_mm_s2[lo:hi], lim.j_down_mm_s3[lo:hi]),
-                                st.options.lookahead_pieces)  # fmt: skip
+            return profile_over(
+                st.pieces.length_mm[lo:hi],
+                lv.caps[lo:hi],
+                st.smooth[lo : hi + 1],
+                Limits(
+                    lim.a_up_mm_s2[lo:hi],
+                    lim.j_up_mm_s3[lo:hi],
+                    lim.a_down_mm_s2[lo:hi],
+                    lim.j_down_mm_s3[lo:hi],
+                ),
+                st.options.lookahead_pieces,
+            )
 
         c = cut
-        if (c is None or c == a or st.smooth[c] > 0.0
-                or not self.MEMO_MIN_PIECES <= b - c <= self.MEMO_PIECES
-                or st.options.lookahead_pieces is not None):  # fmt: skip
+        if (
+            c is None
+            or c == a
+            or st.smooth[c] > 0.0
+            or not self.MEMO_MIN_PIECES <= b - c <= self.MEMO_PIECES
+            or st.options.lookahead_pieces is not None
+        ):
             # Not a repeat; a cut without rapids, a passed junction between them, a cut too
             # short to gain (two profiles and a splice cost more than one) or too long to
             # key, or a bounded look-ahead
@@ -102,9 +114,18 @@ class OwnProfiles:
             return over(a, b)
         smooth = st.smooth[c : b + 1].copy()
         smooth[[0, -1]] = 0.0  # the rests at its ends (what profile_over reads of them)
-        key = b"".join(np.ascontiguousarray(x).tobytes() for x in (
-            st.pieces.length_mm[c:b], lv.caps[c:b], smooth, lim.a_up_mm_s2[c:b],
-            lim.j_up_mm_s3[c:b], lim.a_down_mm_s2[c:b], lim.j_down_mm_s3[c:b]))  # fmt: skip
+        key = b"".join(
+            np.ascontiguousarray(x).tobytes()
+            for x in (
+                st.pieces.length_mm[c:b],
+                lv.caps[c:b],
+                smooth,
+                lim.a_up_mm_s2[c:b],
+                lim.j_up_mm_s3[c:b],
+                lim.a_down_mm_s2[c:b],
+                lim.j_down_mm_s3[c:b],
+            )
+        )
         cut = self.kept.get(key)
         if cut is None:
             cut = over(c, b)
@@ -145,8 +166,7 @@ class SeenWindows:
 
     def _key(self, c: int, b: int) -> tuple:
         p = self.st.pieces
-        return (b - c, np.asarray(p.kind[c:b]).tobytes(),
-                round(float(np.sum(p.length_mm[c:b])), 6))  # fmt: skip
+        return (b - c, np.asarray(p.kind[c:b]).tobytes(), round(float(np.sum(p.length_mm[c:b])), 6))
 
     def _same(self, c: int, b: int, c2: int) -> bool:
         p, init = self.st.pieces, self.st.initial
@@ -154,16 +174,21 @@ class SeenWindows:
         for f in ("kind", "rapid", "stop_after", "pass_after", "dwell_after_s"):
             if not np.array_equal(getattr(p, f)[sl], getattr(p, f)[sl2]):
                 return False
-        close = [(p.length_mm, 1e-9, 1e-12), (p.kappa_max_per_mm, 1e-9, 1e-12),
-                 *((getattr(init, f), 1e-9, 0.0) for f in Levers.SCALED)]  # fmt: skip
+        close = [
+            (p.length_mm, 1e-9, 1e-12),
+            (p.kappa_max_per_mm, 1e-9, 1e-12),
+            *((getattr(init, f), 1e-9, 0.0) for f in Levers.SCALED),
+        ]
         if not all(_close(x[sl], x[sl2], r, t) for x, r, t in close):
             return False
         for f in ("start_mm", "end_mm"):
             x = getattr(p, f)
             if not _close(x[:, sl] - x[:, c : c + 1], x[:, sl2] - x[:, c2 : c2 + 1], 0.0, 1e-9):
                 return False
-        return all(_close(getattr(p, f)[:, sl], getattr(p, f)[:, sl2], 0.0, 1e-9)
-                   for f in ("tangent_start", "tangent_end"))  # fmt: skip
+        return all(
+            _close(getattr(p, f)[:, sl], getattr(p, f)[:, sl2], 0.0, 1e-9)
+            for f in ("tangent_start", "tangent_end")
+        )
 
     def warm(self, final: Levers, a: int, b: int) -> tuple[Levers, int | None]:
         """``final``'s copy, the cut of window a … b − 1 from a repeated cut's final levers,
@@ -189,8 +214,9 @@ class SeenWindows:
             self.by_key.setdefault(self._key(c, b), []).append((c, saved, settle))
 
 
-def window_plan(st: Setup, lev: Levers, result, parts: list, n: int, later,
-                iterations: int) -> Plan:  # fmt: skip
+def window_plan(
+    st: Setup, lev: Levers, result, parts: list, n: int, later, iterations: int
+) -> Plan:
     """The plan of a cut window (:attr:`Window.plan`): the final profiles of windows
     0 … n − 1 (``parts``, shared and only appended to), then the stand-in ``later`` for
     the pieces after (None: the last window), spliced whole."""
@@ -221,13 +247,21 @@ def compacted(profile: Profile, keep_s: float) -> Profile:
     def merged(column, first):
         return np.concatenate(([first], column[i:]))
 
-    return Profile(profile.total_length_mm, profile.duration_s, profile.junction_speeds_mm_s,
-                   profile.piece_peak_speed_mm_s, profile.piece_start_mm,
-                   profile.piece_start_time_s, merged(times, 0.0),
-                   merged(profile.phase_duration_s, t_i), merged(profile.phase_s0_mm, 0.0),
-                   merged(profile.phase_v0_mm_s, 0.0), merged(profile.phase_a0_mm_s2, 0.0),
-                   merged(profile.phase_jerk_mm_s3, jerk),
-                   merged(profile.phase_piece_index, 0))  # fmt: skip
+    return Profile(
+        profile.total_length_mm,
+        profile.duration_s,
+        profile.junction_speeds_mm_s,
+        profile.piece_peak_speed_mm_s,
+        profile.piece_start_mm,
+        profile.piece_start_time_s,
+        merged(times, 0.0),
+        merged(profile.phase_duration_s, t_i),
+        merged(profile.phase_s0_mm, 0.0),
+        merged(profile.phase_v0_mm_s, 0.0),
+        merged(profile.phase_a0_mm_s2, 0.0),
+        merged(profile.phase_jerk_mm_s3, jerk),
+        merged(profile.phase_piece_index, 0),
+    )
 
 
 def _close(a: np.ndarray, b: np.ndarray, rtol: float, atol: float) -> bool:
@@ -251,14 +285,21 @@ def placeholder(pieces: PieceList, lev: Levers, first: int, whole=None) -> Profi
     if whole is not None:
         cut = int(np.searchsorted(whole.phase_piece_index, first))
         t0, s0 = float(whole.piece_start_time_s[first]), float(whole.piece_start_mm[first])
-        return Profile(whole.total_length_mm - s0, whole.duration_s - t0,
-                       np.append(0.0, whole.junction_speeds_mm_s[first + 1 :]),
-                       whole.piece_peak_speed_mm_s[first:],
-                       whole.piece_start_mm[first:] - s0, whole.piece_start_time_s[first:] - t0,
-                       whole.phase_start_time_s[cut:] - t0, whole.phase_duration_s[cut:],
-                       whole.phase_s0_mm[cut:] - s0, whole.phase_v0_mm_s[cut:],
-                       whole.phase_a0_mm_s2[cut:], whole.phase_jerk_mm_s3[cut:],
-                       whole.phase_piece_index[cut:] - first)  # fmt: skip
+        return Profile(
+            whole.total_length_mm - s0,
+            whole.duration_s - t0,
+            np.append(0.0, whole.junction_speeds_mm_s[first + 1 :]),
+            whole.piece_peak_speed_mm_s[first:],
+            whole.piece_start_mm[first:] - s0,
+            whole.piece_start_time_s[first:] - t0,
+            whole.phase_start_time_s[cut:] - t0,
+            whole.phase_duration_s[cut:],
+            whole.phase_s0_mm[cut:] - s0,
+            whole.phase_v0_mm_s[cut:],
+            whole.phase_a0_mm_s2[cut:],
+            whole.phase_jerk_mm_s3[cut:],
+            whole.phase_piece_index[cut:] - first,
+        )
     length = np.asarray(pieces.length_mm[first:], dtype=float)
     cap = np.asarray(lev.caps[first:], dtype=float)
     dur = np.maximum(length / cap, np.cbrt(6.0 * length / lev.j_up[first:]))
@@ -267,9 +308,21 @@ def placeholder(pieces: PieceList, lev: Levers, first: int, whole=None) -> Profi
     moving = np.flatnonzero(length > 0.0)
     z = np.zeros(moving.size)
     jerk = 6.0 * length[moving] / dur[moving] ** 3
-    return Profile(float(length.sum()), float(dur.sum()), np.append(0.0, cap), cap.copy(),
-                   start_s, start_t, start_t[moving], dur[moving], start_s[moving], z,
-                   z.copy(), jerk, moving)  # fmt: skip
+    return Profile(
+        float(length.sum()),
+        float(dur.sum()),
+        np.append(0.0, cap),
+        cap.copy(),
+        start_s,
+        start_t,
+        start_t[moving],
+        dur[moving],
+        start_s[moving],
+        z,
+        z.copy(),
+        jerk,
+        moving,
+    )
 
 
 def spliced(parts: list) -> Profile:
@@ -283,7 +336,8 @@ def spliced(parts: list) -> Profile:
     n0 = np.cumsum([0] + [p.piece_count for p in parts[:-1]])
     cat = np.concatenate
     return Profile(
-        float(s0[-1] + parts[-1].total_length_mm), float(t0[-1] + parts[-1].duration_s),
+        float(s0[-1] + parts[-1].total_length_mm),
+        float(t0[-1] + parts[-1].duration_s),
         cat([p.junction_speeds_mm_s[:-1] for p in parts] + [parts[-1].junction_speeds_mm_s[-1:]]),
         cat([p.piece_peak_speed_mm_s for p in parts]),
         cat([p.piece_start_mm + s for p, s in zip(parts, s0)]),
@@ -291,15 +345,15 @@ def spliced(parts: list) -> Profile:
         cat([p.phase_start_time_s + t for p, t in zip(parts, t0)]),
         cat([p.phase_duration_s for p in parts]),
         cat([p.phase_s0_mm + s for p, s in zip(parts, s0)]),
-        cat([p.phase_v0_mm_s for p in parts]), cat([p.phase_a0_mm_s2 for p in parts]),
+        cat([p.phase_v0_mm_s for p in parts]),
+        cat([p.phase_a0_mm_s2 for p in parts]),
         cat([p.phase_jerk_mm_s3 for p in parts]),
-        cat([p.phase_piece_index + n for p, n in zip(parts, n0)]))
+        cat([p.phase_piece_index + n for p, n in zip(parts, n0)]),
+    )
 
 
 def first_sample_at(planned: PieceList, profile: Profile, piece: int, period_s: float) -> int:
     """The first servo sample k at or after the wall time [s] at which ``piece`` starts
     (its profile time plus the dwells before it): t_k = k·T_s ≥ that time."""
-    t_wall = float(profile.piece_start_time_s[piece]) + float(
-        np.sum(planned.dwell_after_s[:piece]))
+    t_wall = float(profile.piece_start_time_s[piece]) + float(np.sum(planned.dwell_after_s[:piece]))
     return int(np.ceil(t_wall / period_s - 1e-9))
-

@@ -59,8 +59,9 @@ class Refined(Compensated):
 _CURVE_SPACING_MM = 1e-3
 
 
-def _fit_margin_mm(pieces, piece: np.ndarray, foot_mm: np.ndarray,
-                   fit_tolerance_mm: float) -> np.ndarray:  # fmt: skip
+def _fit_margin_mm(
+    pieces, piece: np.ndarray, foot_mm: np.ndarray, fit_tolerance_mm: float
+) -> np.ndarray:
     """How far each foot (M, 3) [mm] may be from the programmed path (M,) [mm]: 0 on every
     piece of the programmed path itself; on a PH corner piece of a NURBS (SPEC §6: a fit
     within e of the curve, not on it) its distance to the NURBS span the fit replaces
@@ -75,8 +76,9 @@ def _fit_margin_mm(pieces, piece: np.ndarray, foot_mm: np.ndarray,
     if not rows.size:
         return margin
     # Runs of consecutive fit rows of one segment: one corner region each.
-    breaks = np.flatnonzero((np.diff(rows) != 1)
-                            | (pieces.segment[rows[1:]] != pieces.segment[rows[:-1]]))
+    breaks = np.flatnonzero(
+        (np.diff(rows) != 1) | (pieces.segment[rows[1:]] != pieces.segment[rows[:-1]])
+    )
     for group in np.split(rows, breaks + 1):
         sel = np.flatnonzero((piece >= group[0]) & (piece <= group[-1]))
         if not sel.size:
@@ -85,8 +87,9 @@ def _fit_margin_mm(pieces, piece: np.ndarray, foot_mm: np.ndarray,
         seg = pieces.segment[group[0]]
         lo = lo if group[0] > 0 and pieces.segment[group[0] - 1] == seg else None
         hi = hi if group[-1] + 1 < len(pieces) and pieces.segment[group[-1] + 1] == seg else None
-        curve = next((o[0] for o in (lo, hi) if o is not None and isinstance(o[0], NurbsCurve)),
-                     None)  # fmt: skip
+        curve = next(
+            (o[0] for o in (lo, hi) if o is not None and isinstance(o[0], NurbsCurve)), None
+        )
         if curve is None:
             margin[sel] = fit_tolerance_mm
             continue
@@ -102,8 +105,9 @@ def _fit_margin_mm(pieces, piece: np.ndarray, foot_mm: np.ndarray,
     return margin
 
 
-def reference_tube_mm(pieces, piece: np.ndarray, foot_mm: np.ndarray, tolerance_mm: float,
-                      fit_tolerance_mm: float) -> np.ndarray:  # fmt: skip
+def reference_tube_mm(
+    pieces, piece: np.ndarray, foot_mm: np.ndarray, tolerance_mm: float, fit_tolerance_mm: float
+) -> np.ndarray:
     """The reference tolerance about each foot [mm] (M,): ``tolerance_mm`` less the foot's
     own distance from the programmed path (:func:`_fit_margin_mm`), so that the reference
     is within ``tolerance_mm`` of the *programmed* path (the triangle inequality)."""
@@ -124,8 +128,13 @@ def _segment_inverse(ref: Reference, machine: Machine, first: bool) -> Compensat
     ``first`` without its pre-actuation."""
     period = machine.servo.period_s
     lim = machine.limits
-    comp = precompensate_points(axis_models(machine), ref.points_mm, period,
-                                a_max_mm_s2=lim.a_max_mm_s2, j_max_mm_s3=lim.j_max_mm_s3)
+    comp = precompensate_points(
+        axis_models(machine),
+        ref.points_mm,
+        period,
+        a_max_mm_s2=lim.a_max_mm_s2,
+        j_max_mm_s3=lim.j_max_mm_s3,
+    )
     if not first:
         # A later segment starts at rest at the end of the cut before it, with a rapid: its
         # samples keep their wall times (no delay), so the pre-actuation of the rapid's start
@@ -136,9 +145,17 @@ def _segment_inverse(ref: Reference, machine: Machine, first: bool) -> Compensat
     return comp
 
 
-def _clip_into_tube(points: np.ndarray, planned: np.ndarray, s_mm: np.ndarray, pieces,
-                    profile, machine: Machine, tolerance_mm: float,
-                    fit_tolerance_mm: float | None, optimise: bool):  # fmt: skip
+def _clip_into_tube(
+    points: np.ndarray,
+    planned: np.ndarray,
+    s_mm: np.ndarray,
+    pieces,
+    profile,
+    machine: Machine,
+    tolerance_mm: float,
+    fit_tolerance_mm: float | None,
+    optimise: bool,
+):
     """The compensated ``points`` (N, 3) [mm] (their planned points ``planned`` at path
     lengths ``s_mm``) each projected onto the ball of radius ``tolerance_mm`` (less the
     foot's own distance from the programmed curve, :func:`reference_tube_mm`) about the path
@@ -149,8 +166,9 @@ def _clip_into_tube(points: np.ndarray, planned: np.ndarray, s_mm: np.ndarray, p
     s_foot = _s_along(points, planned, s_mm, profile)
     starts = profile.piece_start_mm
     piece = np.clip(np.searchsorted(starts, s_foot, side="right") - 1, 0, starts.size - 1)
-    foot = pieces.path.place(starts, np.minimum(s_foot, starts[piece]
-                                                + pieces.length_mm[piece]), piece)[0]
+    foot = pieces.path.place(
+        starts, np.minimum(s_foot, starts[piece] + pieces.length_mm[piece]), piece
+    )[0]
     fit = machine.limits.ph_tolerance_mm if fit_tolerance_mm is None else fit_tolerance_mm
     tube = reference_tube_mm(pieces, piece, foot, tolerance_mm, fit)
     tube_in = None
@@ -165,8 +183,15 @@ def _clip_into_tube(points: np.ndarray, planned: np.ndarray, s_mm: np.ndarray, p
     return limit_to_path(points, foot, tube), s_foot, tube, tube_in
 
 
-def _projection_frame(planned: np.ndarray, clipped: np.ndarray, s_mm: np.ndarray,
-                      piece: np.ndarray, pieces, profile, tube):  # fmt: skip
+def _projection_frame(
+    planned: np.ndarray,
+    clipped: np.ndarray,
+    s_mm: np.ndarray,
+    piece: np.ndarray,
+    pieces,
+    profile,
+    tube,
+):
     """The frame of the projection onto the limits: in the tube about the plan's points
     (:func:`~nurbscnc.precompensation.limits.path_frame`, the wanted offsets ``clipped`` −
     ``planned``), or (``tube`` None: no tolerance) anywhere, a frame of the axes. Basis
@@ -179,10 +204,17 @@ def _projection_frame(planned: np.ndarray, clipped: np.ndarray, s_mm: np.ndarray
     return basis, lower, upper
 
 
-def _compensate_segment(ref: Reference, pieces, profile, machine: Machine,
-                        tolerance_mm: float, fit_tolerance_mm: float | None, refine: bool,
-                        first: bool, last: bool = True,
-                        ) -> tuple[Reference, Compensated]:  # fmt: skip
+def _compensate_segment(
+    ref: Reference,
+    pieces,
+    profile,
+    machine: Machine,
+    tolerance_mm: float,
+    fit_tolerance_mm: float | None,
+    refine: bool,
+    first: bool,
+    last: bool = True,
+) -> tuple[Reference, Compensated]:
     """One segment of :func:`precompensate_reference` (a cut window's samples, or the whole
     reference), compensated as a program of its own (``first``: the program's first, delayed
     by the pre-actuation; else its first sample the planned one, no delay; not ``last``: a
@@ -211,8 +243,16 @@ def _compensate_segment(ref: Reference, pieces, profile, machine: Machine,
     tube = tube_in = s_foot = None
     if finite:
         points, s_foot, tube, tube_in = _clip_into_tube(
-            points, planned, s_mm, pieces, profile, machine, tolerance_mm, fit_tolerance_mm,
-            optimise)  # fmt: skip
+            points,
+            planned,
+            s_mm,
+            pieces,
+            profile,
+            machine,
+            tolerance_mm,
+            fit_tolerance_mm,
+            optimise,
+        )
     held = 1 if last else JOIN_HELD
     if not last:
         # A segment followed by another ends on the plan's own last samples: the joint's
@@ -224,15 +264,19 @@ def _compensate_segment(ref: Reference, pieces, profile, machine: Machine,
     # The limits on the samples (module comment of limits.py): the clipped ZPETC
     # reference projected onto them.
     caps = sample_limits(planned, machine)
-    basis, lower, upper = _projection_frame(planned, clipped, s_mm, _edge(ref.piece, pad),
-                                            pieces, profile, tube)  # fmt: skip
+    basis, lower, upper = _projection_frame(
+        planned, clipped, s_mm, _edge(ref.piece, pad), pieces, profile, tube
+    )
     points = project_onto_limits(clipped, planned, caps, basis, lower, upper, held=held)
     comp = replace(comp, points_mm=points)
     n_in, n = ref.points_mm.shape[0], points.shape[0]
     # Every per-sample column padded alike (whatever columns the Reference has).
-    columns = {f.name: _edge(getattr(ref, f.name), pad) for f in fields(ref)
-               if isinstance(getattr(ref, f.name), np.ndarray)
-               and getattr(ref, f.name).shape[:1] == (n_in,)}  # fmt: skip
+    columns = {
+        f.name: _edge(getattr(ref, f.name), pad)
+        for f in fields(ref)
+        if isinstance(getattr(ref, f.name), np.ndarray)
+        and getattr(ref, f.name).shape[:1] == (n_in,)
+    }
     columns.update(t_s=np.arange(n) * period, points_mm=points)
     if finite:
         # Each sample's path length where its point is (the planned one's plus the lead
@@ -244,13 +288,21 @@ def _compensate_segment(ref: Reference, pieces, profile, machine: Machine,
         done = refine_in_tube(out, pieces, profile, machine, tube_in, caps=caps, held=held)
         out = replace(out, points_mm=done.points_mm)
         out = replace(out, s_mm=_s_along(done.points_mm, planned, s_mm, profile))
-        comp = Refined(done.points_mm, comp.lead_samples, comp.end_step_mm,
-                       comp.end_blend_samples, done.history_mm, clipped, points)  # fmt: skip
+        comp = Refined(
+            done.points_mm,
+            comp.lead_samples,
+            comp.end_step_mm,
+            comp.end_blend_samples,
+            done.history_mm,
+            clipped,
+            points,
+        )
     return out, comp
 
 
-def _s_along(points_mm: np.ndarray, planned_mm: np.ndarray, s_planned_mm: np.ndarray,
-             profile) -> np.ndarray:  # fmt: skip
+def _s_along(
+    points_mm: np.ndarray, planned_mm: np.ndarray, s_planned_mm: np.ndarray, profile
+) -> np.ndarray:
     """The path length [mm] at which each point of ``points_mm`` is: its planned point's
     plus its lead along the path (:func:`~nurbscnc.servo.precompensate.along_path_offset_mm`),
     within the program."""
@@ -317,8 +369,9 @@ def _segment_starts(pieces, profile, period_s: float, n: int) -> np.ndarray:
     cut_windows`), and ``n``: strictly increasing, the first 0."""
     from nurbscnc.plan.windows import cut_windows, first_sample_at
 
-    starts = [first_sample_at(pieces, profile, int(a), period_s)
-              for a in cut_windows(pieces)[1:].tolist()]  # fmt: skip
+    starts = [
+        first_sample_at(pieces, profile, int(a), period_s) for a in cut_windows(pieces)[1:].tolist()
+    ]
     ks = [0]
     for k in starts:  # a segment shorter than MIN_SEGMENT joins the one before it
         if k - ks[-1] >= MIN_SEGMENT and n - k >= MIN_SEGMENT:
@@ -326,8 +379,9 @@ def _segment_starts(pieces, profile, period_s: float, n: int) -> np.ndarray:
     return np.asarray([*ks, n], dtype=np.int64)
 
 
-def _key(ref: Reference, machine: Machine, pieces, options: tuple, first: bool,
-         last: bool) -> tuple:  # fmt: skip
+def _key(
+    ref: Reference, machine: Machine, pieces, options: tuple, first: bool, last: bool
+) -> tuple:
     """The cache key of a segment: what its compensation depends on (its planned samples'
     columns, bit for bit; the machine, path and options by identity, the entry holding
     them so an identity is never reused while it is kept)."""
@@ -339,8 +393,9 @@ def _key(ref: Reference, machine: Machine, pieces, options: tuple, first: bool,
     return (id(machine), id(pieces.path), options, first, last, h.hexdigest())
 
 
-def _segment(ref: Reference, pieces, profile, machine: Machine, options: tuple,
-             first: bool, last: bool) -> tuple[Reference, Compensated]:  # fmt: skip
+def _segment(
+    ref: Reference, pieces, profile, machine: Machine, options: tuple, first: bool, last: bool
+) -> tuple[Reference, Compensated]:
     """:func:`_compensate_segment` of the planned samples ``ref``, from :data:`_SEGMENTS` when
     made before (least recently used evicted beyond SEGMENT_CACHE_SAMPLES)."""
     key = _key(ref, machine, pieces, options, first, last)
@@ -362,9 +417,17 @@ def _rows_of(ref: Reference, lo: int, hi: int) -> Reference:
     return replace(ref, **{f.name: getattr(ref, f.name)[lo:hi] for f in fields(ref)})
 
 
-def _join_segments(prev_tail_mm: np.ndarray, prev_planned_mm: np.ndarray, seg: Reference,
-                   planned: Reference, pieces, profile, machine: Machine, tolerance_mm: float,
-                   fit_tolerance_mm: float | None) -> Reference:  # fmt: skip
+def _join_segments(
+    prev_tail_mm: np.ndarray,
+    prev_planned_mm: np.ndarray,
+    seg: Reference,
+    planned: Reference,
+    pieces,
+    profile,
+    machine: Machine,
+    tolerance_mm: float,
+    fit_tolerance_mm: float | None,
+) -> Reference:
     """Segment ``seg`` (compensated, its planned samples ``planned``) after a segment whose
     last three samples are ``prev_tail_mm`` (3, 3) [mm] (the plan's own ``prev_planned_mm``:
     a segment followed by another ends on them, :data:`JOIN_HELD`): where a difference row
@@ -415,8 +478,9 @@ def _join_segments(prev_tail_mm: np.ndarray, prev_planned_mm: np.ndarray, seg: R
     return plain
 
 
-def _compensated_rows(ref_of, pieces, profile, machine: Machine, options: tuple, n: int,
-                      lo: int, hi: int) -> tuple[Reference, list]:  # fmt: skip
+def _compensated_rows(
+    ref_of, pieces, profile, machine: Machine, options: tuple, n: int, lo: int, hi: int
+) -> tuple[Reference, list]:
     """Rows lo … hi − 1 of the compensated reference of a plan of ``n`` planned samples
     (cut-window segments, module comment above; row k + lead ↔ planned sample k, lead the
     pre-actuation at the program's start,
@@ -442,8 +506,7 @@ def _compensated_rows(ref_of, pieces, profile, machine: Machine, options: tuple,
             parts.append(ref_of(lo - lead, min(hi, int(end[i])) - lead))
             continue
         planned = ref_of(int(ks[i]), int(ks[i + 1]))
-        seg, comp = _segment(planned, pieces, profile, machine, options, i == 0,
-                             i == ks.size - 2)  # fmt: skip
+        seg, comp = _segment(planned, pieces, profile, machine, options, i == 0, i == ks.size - 2)
         if i > 0:
             # The segment before ends on its plan's last JOIN_HELD samples: those are its
             # tail (it need not be made; the planner's re-plans of a later window splice a
@@ -452,16 +515,22 @@ def _compensated_rows(ref_of, pieces, profile, machine: Machine, options: tuple,
             key = (id(seg), tail.tobytes())  # (seg is held by _SEGMENTS while it is kept)
             joined = _JOINED.get(key)
             if joined is None or joined[0] is not seg:
-                joined = (seg, _join_segments(tail, tail, seg, planned, pieces, profile,
-                                              machine, *options[:2]))  # fmt: skip
+                joined = (
+                    seg,
+                    _join_segments(
+                        tail, tail, seg, planned, pieces, profile, machine, *options[:2]
+                    ),
+                )
                 _JOINED[key] = joined
                 while len(_JOINED) > JOINED_KEPT:
                     _JOINED.popitem(last=False)
             seg = joined[1]
         parts.append(_rows_of(seg, max(lo - a, 0), min(hi, int(end[i])) - a))
         comps.append(comp)
-    out = replace(parts[0], **{f.name: np.concatenate([getattr(p, f.name) for p in parts])
-                                for f in fields(parts[0])})  # fmt: skip
+    out = replace(
+        parts[0],
+        **{f.name: np.concatenate([getattr(p, f.name) for p in parts]) for f in fields(parts[0])},
+    )
     return replace(out, t_s=np.arange(lo, lo + out.t_s.size) * period), comps
 
 
@@ -475,21 +544,35 @@ def _joined_records(comps: list, points_mm: np.ndarray) -> Compensated:
         return replace(comps[0], points_mm=points_mm)
     first, last = comps[0], comps[-1]
     if not all(isinstance(c, Refined) for c in comps):
-        return Compensated(points_mm, first.lead_samples, last.end_step_mm,
-                           last.end_blend_samples)  # fmt: skip
+        return Compensated(points_mm, first.lead_samples, last.end_step_mm, last.end_blend_samples)
     rounds = max(len(c.history_mm) for c in comps)
-    history = np.max([np.pad(np.asarray(c.history_mm), (0, rounds - len(c.history_mm)),
-                             mode="edge") for c in comps], axis=0)  # fmt: skip
-    return Refined(points_mm, first.lead_samples, last.end_step_mm, last.end_blend_samples,
-                   tuple(float(h) for h in history),
-                   np.concatenate([c.clipped_mm for c in comps]),
-                   np.concatenate([c.projected_mm for c in comps]))  # fmt: skip
+    history = np.max(
+        [
+            np.pad(np.asarray(c.history_mm), (0, rounds - len(c.history_mm)), mode="edge")
+            for c in comps
+        ],
+        axis=0,
+    )
+    return Refined(
+        points_mm,
+        first.lead_samples,
+        last.end_step_mm,
+        last.end_blend_samples,
+        tuple(float(h) for h in history),
+        np.concatenate([c.clipped_mm for c in comps]),
+        np.concatenate([c.projected_mm for c in comps]),
+    )
 
 
-def precompensate_reference(ref: Reference, pieces, profile, machine: Machine,
-                            tolerance_mm: float = REFERENCE_TOLERANCE_MM,
-                            fit_tolerance_mm: float | None = None, refine: bool = True,
-                            ) -> tuple[Reference, Compensated]:  # fmt: skip
+def precompensate_reference(
+    ref: Reference,
+    pieces,
+    profile,
+    machine: Machine,
+    tolerance_mm: float = REFERENCE_TOLERANCE_MM,
+    fit_tolerance_mm: float | None = None,
+    refine: bool = True,
+) -> tuple[Reference, Compensated]:
     """The ZPETC pre-compensated version of a plan's reference ``ref`` (all its samples):
     one segment per cut window (module comment "cut-window segments"), each
     :func:`_compensate_segment` (the inverse, the tube of ``tolerance_mm`` [mm] about the
@@ -499,14 +582,25 @@ def precompensate_reference(ref: Reference, pieces, profile, machine: Machine,
     cut is one segment: what :func:`_compensate_segment` gives for it."""
     n = ref.t_s.size
     options = (tolerance_mm, fit_tolerance_mm, refine)
-    out, comps = _compensated_rows(lambda a, b: _rows_of(ref, a, b), pieces, profile,
-                                   machine, options, n, 0, n + lead_samples(machine))  # fmt: skip
+    out, comps = _compensated_rows(
+        lambda a, b: _rows_of(ref, a, b),
+        pieces,
+        profile,
+        machine,
+        options,
+        n,
+        0,
+        n + lead_samples(machine),
+    )
     return out, _joined_records(comps, out.points_mm)
 
 
-def precompensated_sampler(sampler, machine: Machine,
-                           tolerance_mm: float = REFERENCE_TOLERANCE_MM,
-                           fit_tolerance_mm: float | None = None):  # fmt: skip
+def precompensated_sampler(
+    sampler,
+    machine: Machine,
+    tolerance_mm: float = REFERENCE_TOLERANCE_MM,
+    fit_tolerance_mm: float | None = None,
+):
     """The reference sampler (pieces, profile, period_s, k0=0, k1=None) → Reference of
     ``sampler`` followed by :func:`precompensate_reference`: what the dynamics check
     simulates with ``--precompensate`` (it needs no hook in the planner). Rows k0 … k1 − 1
@@ -524,6 +618,7 @@ def precompensated_sampler(sampler, machine: Machine,
         n = sample_count(pieces, profile, period_s)
         hi = n + lead_samples(machine) if k1 is None else k1
         if windowed:
+
             def ref_of(a, b):
                 return sampler(pieces, profile, period_s, a, b)
         else:
@@ -531,7 +626,7 @@ def precompensated_sampler(sampler, machine: Machine,
 
             def ref_of(a, b):
                 return _rows_of(whole, a, b)
+
         return _compensated_rows(ref_of, pieces, profile, machine, options, n, k0, hi)[0]
 
     return FunctionSampler(sample, windowed, sampler.interpolator)
-

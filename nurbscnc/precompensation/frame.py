@@ -24,8 +24,9 @@ def local_polyline(pieces, profile, s_lo_mm: float, s_hi_mm: float) -> np.ndarra
     hi = min(int(np.searchsorted(starts, s_hi_mm, side="right")), starts.size)
     hi = max(hi, lo + 1)
     sl = slice(lo, hi)
-    c = chord_counts(pieces.kind[sl], pieces.length_mm[sl], pieces.kappa_max_per_mm[sl],
-                     REFINE_CHORD_MM, 0.01)  # fmt: skip
+    c = chord_counts(
+        pieces.kind[sl], pieces.length_mm[sl], pieces.kappa_max_per_mm[sl], REFINE_CHORD_MM, 0.01
+    )
     piece = np.repeat(np.arange(lo, hi), c)
     first = np.repeat(np.cumsum(c) - c, c)
     frac = (np.arange(piece.size) - first) / np.repeat(c - 1, c)
@@ -116,4 +117,3 @@ def into_tube(u_mm: np.ndarray, poly_mm: np.ndarray, tube_mm: np.ndarray) -> np.
     foot, dist, _ = nearest_on_polyline(u_mm, poly_mm)
     scale = np.minimum(1.0, tube_mm / np.where(dist > 0.0, dist, 1.0))
     return foot + (u_mm - foot) * scale[:, None]
-

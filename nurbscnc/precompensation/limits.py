@@ -119,9 +119,14 @@ def sample_limits(planned_mm: np.ndarray, machine: Machine) -> SampleLimits:
     r = np.asarray(planned_mm, dtype=float)
     d1, d2, d3 = (np.diff(r, n, axis=0) for n in (1, 2, 3))
     own = (np.sqrt(np.einsum("ij,ij->i", d1, d1)), np.abs(d1), np.abs(d2), np.abs(d3))
-    return SampleLimits(np.maximum(v, own[0]), np.maximum(axis_v, own[1]),
-                        np.maximum(axis_a, own[2]), np.maximum(axis_j, own[3]),
-                        (v, axis_v, axis_a, axis_j), own)  # fmt: skip
+    return SampleLimits(
+        np.maximum(v, own[0]),
+        np.maximum(axis_v, own[1]),
+        np.maximum(axis_a, own[2]),
+        np.maximum(axis_j, own[3]),
+        (v, axis_v, axis_a, axis_j),
+        own,
+    )
 
 
 def limit_excess(points_mm: np.ndarray, caps: SampleLimits) -> np.ndarray:
@@ -136,8 +141,16 @@ def limit_excess(points_mm: np.ndarray, caps: SampleLimits) -> np.ndarray:
     ulp = float(np.spacing(np.abs(u).max()))
     d1 = np.diff(u, axis=0)
     rows = [(np.sqrt(np.einsum("ij,ij->i", d1, d1)) - caps.step * (1.0 + 1e-9) - 2.0 * ulp, 1)]
-    rows += [((np.abs(np.diff(u, k, axis=0)) - caps.rows(k) * (1.0 + 1e-9)
-               - 2.0**k * ulp).max(axis=1), k) for k in (1, 2, 3) if n > k]  # fmt: skip
+    rows += [
+        (
+            (np.abs(np.diff(u, k, axis=0)) - caps.rows(k) * (1.0 + 1e-9) - 2.0**k * ulp).max(
+                axis=1
+            ),
+            k,
+        )
+        for k in (1, 2, 3)
+        if n > k
+    ]
     for over, k in rows:
         for lag in range(k + 1):  # row i covers samples i … i + k
             out[lag : lag + over.size] = np.maximum(out[lag : lag + over.size], over)
@@ -187,8 +200,15 @@ def _range_max(values: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray
     return out
 
 
-def path_frame(planned_mm: np.ndarray, s_mm: np.ndarray, piece: np.ndarray, pieces, profile,
-               offset_mm: np.ndarray, tube_mm: np.ndarray):  # fmt: skip
+def path_frame(
+    planned_mm: np.ndarray,
+    s_mm: np.ndarray,
+    piece: np.ndarray,
+    pieces,
+    profile,
+    offset_mm: np.ndarray,
+    tube_mm: np.ndarray,
+):
     """The frame of the projection (module comment above) at each planned point (N, 3) [mm]
     at path length ``s_mm`` on ``piece``: the basis (N, 2, 3) (in-plane normal m, tangent t
     of the path there), the bounds (N, 2) low and high of (α, β) [mm] keeping r + α m + β t
@@ -208,10 +228,12 @@ def path_frame(planned_mm: np.ndarray, s_mm: np.ndarray, piece: np.ndarray, piec
     # cells' estimate doubled, as _local_polyline).
     kappa = chord_kappa_per_mm(pieces.kind, pieces.kappa_max_per_mm)
     kappa = np.nan_to_num(kappa, nan=np.inf)
-    lo_p = np.clip(np.searchsorted(starts, s_mm - PROJECT_ALONG_MM, side="right") - 1, 0,
-                   starts.size - 1)  # fmt: skip
-    hi_p = np.clip(np.searchsorted(starts, s_mm + PROJECT_ALONG_MM, side="right") - 1, 0,
-                   starts.size - 1)  # fmt: skip
+    lo_p = np.clip(
+        np.searchsorted(starts, s_mm - PROJECT_ALONG_MM, side="right") - 1, 0, starts.size - 1
+    )
+    hi_p = np.clip(
+        np.searchsorted(starts, s_mm + PROJECT_ALONG_MM, side="right") - 1, 0, starts.size - 1
+    )
     k_near = _range_max(kappa[: starts.size], lo_p, hi_p)
     tube = np.maximum(np.asarray(tube_mm, dtype=float), 0.0)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -250,12 +272,12 @@ def _windows(bad: np.ndarray, pad: int, n: int) -> list[tuple[int, int]]:
     if idx.size == 0:
         return []
     cuts = np.flatnonzero(np.diff(idx) > 2 * pad + 1) + 1
-    return [(max(int(g[0]) - pad, 1), min(int(g[-1]) + pad + 1, n - 1))
-            for g in np.split(idx, cuts)]  # fmt: skip
+    return [
+        (max(int(g[0]) - pad, 1), min(int(g[-1]) + pad + 1, n - 1)) for g in np.split(idx, cuts)
+    ]
 
 
-def _difference_matrix(order: int, weights: np.ndarray, j0: int, j1: int, n: int,
-                       nx: int):  # fmt: skip
+def _difference_matrix(order: int, weights: np.ndarray, j0: int, j1: int, n: int, nx: int):
     """Rows i (touching the window j0 … j1−1 of a reference of ``n`` samples) of the
     ``order``-th difference Σ_l c_l (weights · x)_{i+l} of the window's unknowns x (``nx``
     of them, D per sample): ``weights`` (j1 − j0, D) per window sample and direction; the
@@ -273,13 +295,15 @@ def _difference_matrix(order: int, weights: np.ndarray, j0: int, j1: int, n: int
             ri.append(np.flatnonzero(ok))
             ci.append((k[ok] - j0) * dims + d)
             vals.append(c * weights[k[ok] - j0, d])
-    mat = coo_matrix((np.concatenate(vals), (np.concatenate(ri), np.concatenate(ci))),
-                     shape=(rows.size, nx)).tocsr()  # fmt: skip
+    mat = coo_matrix(
+        (np.concatenate(vals), (np.concatenate(ri), np.concatenate(ci))), shape=(rows.size, nx)
+    ).tocsr()
     return mat, rows
 
 
-def _difference_constraints(base: np.ndarray, caps: SampleLimits, basis: np.ndarray,
-                            j0: int, j1: int) -> tuple[list, list]:  # fmt: skip
+def _difference_constraints(
+    base: np.ndarray, caps: SampleLimits, basis: np.ndarray, j0: int, j1: int
+) -> tuple[list, list]:
     """The rows of the window's LP keeping every first, second and third difference on each
     axis within the caps (:meth:`SampleLimits.lp_rows`, the window's samples at ``base``
     plus the move): blocks (rows, 2 nx) [LP units] and their right-hand sides."""
@@ -300,13 +324,16 @@ def _difference_constraints(base: np.ndarray, caps: SampleLimits, basis: np.ndar
             mat, rows = mat[keep], rows[keep]
             zeros = csr_matrix((rows.size, nx))
             blocks += [hstack([mat, zeros]), hstack([-mat, zeros])]
-            rhs += [(cap[rows, c] - diffs[rows, c]) / _LP_UNIT_MM,
-                    (cap[rows, c] + diffs[rows, c]) / _LP_UNIT_MM]  # fmt: skip
+            rhs += [
+                (cap[rows, c] - diffs[rows, c]) / _LP_UNIT_MM,
+                (cap[rows, c] + diffs[rows, c]) / _LP_UNIT_MM,
+            ]
     return blocks, rhs
 
 
-def _polygon_constraints(want: np.ndarray, upper: np.ndarray, j0: int, j1: int,
-                         nx: int) -> tuple[list, list]:  # fmt: skip
+def _polygon_constraints(
+    want: np.ndarray, upper: np.ndarray, j0: int, j1: int, nx: int
+) -> tuple[list, list]:
     """The tube across the path with a third direction (:func:`path_frame`): (α, γ) within
     the regular TUBE_SIDES-gon inscribed in the disc of α's bound, turned so that a corner
     is the target's direction ``want`` (the clip puts targets on the disc's edge: each stays
@@ -324,17 +351,27 @@ def _polygon_constraints(want: np.ndarray, upper: np.ndarray, j0: int, j1: int,
     blocks, rhs = [], []
     for side in range(TUBE_SIDES):
         ang = phi + (2 * side + 1) * half
-        mat = coo_matrix((np.concatenate([np.cos(ang), np.sin(ang)]),
-                          (np.tile(np.arange(k.size), 2),
-                           np.concatenate([3 * k, 3 * k + 2]))),
-                         shape=(k.size, 2 * nx)).tocsr()  # fmt: skip
+        mat = coo_matrix(
+            (
+                np.concatenate([np.cos(ang), np.sin(ang)]),
+                (np.tile(np.arange(k.size), 2), np.concatenate([3 * k, 3 * k + 2])),
+            ),
+            shape=(k.size, 2 * nx),
+        ).tocsr()
         blocks.append(mat)
         rhs.append(room * np.cos(half))
     return blocks, rhs
 
 
-def _step_rows(rows: np.ndarray, direction: np.ndarray, basis: np.ndarray,
-               step_cap: np.ndarray, d1: np.ndarray, j0: int, j1: int):  # fmt: skip
+def _step_rows(
+    rows: np.ndarray,
+    direction: np.ndarray,
+    basis: np.ndarray,
+    step_cap: np.ndarray,
+    d1: np.ndarray,
+    j0: int,
+    j1: int,
+):
     """Rows unit_i · Δ(δ)_i of the steps ``rows`` along ``direction`` (rows, 3) of the
     window j0 … j1−1 (the step length linearised along it), and their caps ``step_cap``
     less the fixed part unit_i · Δ(base)_i (``d1`` the steps of the base reference)
@@ -343,8 +380,10 @@ def _step_rows(rows: np.ndarray, direction: np.ndarray, basis: np.ndarray,
 
     dims = basis.shape[1]
     nx = (j1 - j0) * dims
-    unit = direction / np.maximum(np.sqrt(np.einsum("ij,ij->i", direction, direction)),
-                                  1e-300)[:, None]  # fmt: skip
+    unit = (
+        direction
+        / np.maximum(np.sqrt(np.einsum("ij,ij->i", direction, direction)), 1e-300)[:, None]
+    )
     ri, ci, vals = [], [], []
     for lag, c in enumerate((-1.0, 1.0)):
         k = rows + lag
@@ -354,15 +393,24 @@ def _step_rows(rows: np.ndarray, direction: np.ndarray, basis: np.ndarray,
             ri.append(np.flatnonzero(ok))
             ci.append((k[ok] - j0) * dims + d)
             vals.append(c * proj[:, d])
-    mat = coo_matrix((np.concatenate(vals), (np.concatenate(ri), np.concatenate(ci))),
-                     shape=(rows.size, nx)).tocsr()  # fmt: skip
+    mat = coo_matrix(
+        (np.concatenate(vals), (np.concatenate(ri), np.concatenate(ci))), shape=(rows.size, nx)
+    ).tocsr()
     cap = (step_cap[rows] - np.einsum("ij,ij->i", unit, d1[rows])) / _LP_UNIT_MM
     return hstack([mat, csr_matrix((rows.size, nx))]), cap
 
 
-def project_window(u: np.ndarray, r: np.ndarray, target: np.ndarray, caps: SampleLimits,
-                   basis: np.ndarray, lower: np.ndarray, upper: np.ndarray, j0: int,
-                   j1: int) -> np.ndarray | None:  # fmt: skip
+def project_window(
+    u: np.ndarray,
+    r: np.ndarray,
+    target: np.ndarray,
+    caps: SampleLimits,
+    basis: np.ndarray,
+    lower: np.ndarray,
+    upper: np.ndarray,
+    j0: int,
+    j1: int,
+) -> np.ndarray | None:
     """The LP of one window (module comment above): samples j0 … j1−1 of ``u`` (N, 3) moved to
     r + Σ_d x_d basis_d, nearest ``target`` in L1 of the frame's coordinates, every
     difference row touching them within the caps, the others as they are; the new
@@ -401,16 +449,27 @@ def project_window(u: np.ndarray, r: np.ndarray, target: np.ndarray, caps: Sampl
     mat, cap = _step_rows(rows, direction, basis, step_cap, d1, j0, j1)
     blocks.append(mat)
     rhs.append(cap)
-    bounds = np.column_stack([np.concatenate([lower[j0:j1].ravel() / _LP_UNIT_MM,
-                                              np.zeros(nx)]),
-                              np.concatenate([upper[j0:j1].ravel() / _LP_UNIT_MM,
-                                              np.full(nx, np.inf)])])  # fmt: skip
+    bounds = np.column_stack(
+        [
+            np.concatenate([lower[j0:j1].ravel() / _LP_UNIT_MM, np.zeros(nx)]),
+            np.concatenate([upper[j0:j1].ravel() / _LP_UNIT_MM, np.full(nx, np.inf)]),
+        ]
+    )
     return _solve_window(u, r, blocks, rhs, bounds, basis, step_cap, d1, j0, j1)
 
 
-def _solve_window(u: np.ndarray, r: np.ndarray, blocks: list, rhs: list,
-                  bounds: np.ndarray, basis: np.ndarray, step_cap: np.ndarray,
-                  d1: np.ndarray, j0: int, j1: int) -> np.ndarray | None:  # fmt: skip
+def _solve_window(
+    u: np.ndarray,
+    r: np.ndarray,
+    blocks: list,
+    rhs: list,
+    bounds: np.ndarray,
+    basis: np.ndarray,
+    step_cap: np.ndarray,
+    d1: np.ndarray,
+    j0: int,
+    j1: int,
+) -> np.ndarray | None:
     """The window's LP (min Σ e over the unknowns (x, e), ``blocks`` · (x, e) ≤ ``rhs``
     within ``bounds``) solved by HiGHS, its step lengths then checked exactly: a step over
     its cap is cut again along its own direction (:func:`_step_rows`) and the LP solved
@@ -425,10 +484,14 @@ def _solve_window(u: np.ndarray, r: np.ndarray, blocks: list, rhs: list,
     cost = np.concatenate([np.zeros(nx), np.ones(nx)])
     maxiter = max(PROJECT_LP_MIN_ITER, PROJECT_LP_ITER_PER_UNKNOWN * cost.size)
     for _try in range(4):
-        res = linprog(cost, A_ub=vstack(blocks).tocsr(), b_ub=np.concatenate(rhs),
-                      bounds=bounds, method="highs",
-                      options={"maxiter": maxiter,
-                               "primal_feasibility_tolerance": 1e-9})  # fmt: skip
+        res = linprog(
+            cost,
+            A_ub=vstack(blocks).tocsr(),
+            b_ub=np.concatenate(rhs),
+            bounds=bounds,
+            method="highs",
+            options={"maxiter": maxiter, "primal_feasibility_tolerance": 1e-9},
+        )
         if res.status != 0:
             return None
         x = res.x[:nx].reshape(size, dims) * _LP_UNIT_MM
@@ -446,9 +509,15 @@ def _solve_window(u: np.ndarray, r: np.ndarray, blocks: list, rhs: list,
     return None
 
 
-def project_onto_limits(target_mm: np.ndarray, planned_mm: np.ndarray, caps: SampleLimits,
-                        basis: np.ndarray, lower: np.ndarray, upper: np.ndarray,
-                        held: int = 1) -> np.ndarray:  # fmt: skip
+def project_onto_limits(
+    target_mm: np.ndarray,
+    planned_mm: np.ndarray,
+    caps: SampleLimits,
+    basis: np.ndarray,
+    lower: np.ndarray,
+    upper: np.ndarray,
+    held: int = 1,
+) -> np.ndarray:
     """``target_mm`` (N, 3) [mm] moved, where its differences break ``caps``, to the nearest
     reference (L1 in the frame ``basis`` (N, D, 3) about ``planned_mm``, offsets within
     ``lower`` … ``upper`` (N, D) [mm]) whose differences keep them (module comment above);
@@ -482,4 +551,3 @@ def project_onto_limits(target_mm: np.ndarray, planned_mm: np.ndarray, caps: Sam
             bad = limit_excess(u, caps) > 0.0
             return u if not bad.any() else r.copy()
         pad *= 4
-

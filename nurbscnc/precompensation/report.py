@@ -67,14 +67,19 @@ class Precompensation:
         """The ``precompensation`` object of ``plan``/``run --json`` (µm, s; a tolerance of
         None is no limit)."""
         tol = self.reference_tolerance_mm
-        return {"method": "zpetc", "lead_s": self.lead_s, "tail_s": self.tail_s,
-                "reference_tolerance_um": tol * 1000.0 if np.isfinite(tol) else None,
-                "reference_deviation_max_um": self.reference_deviation_max_mm * 1000.0,
-                "end_step_um": self.end_step_mm * 1000.0, "end_blend_s": self.end_blend_s,
-                "sensitivity_contour_max_um": self.sensitivity_max_mm * 1000.0,
-                "sensitivity": [{"model_error": k, "contour_max_um": e * 1000.0}
-                                for k, e in self.sensitivity]}  # fmt: skip
-
+        return {
+            "method": "zpetc",
+            "lead_s": self.lead_s,
+            "tail_s": self.tail_s,
+            "reference_tolerance_um": tol * 1000.0 if np.isfinite(tol) else None,
+            "reference_deviation_max_um": self.reference_deviation_max_mm * 1000.0,
+            "end_step_um": self.end_step_mm * 1000.0,
+            "end_blend_s": self.end_blend_s,
+            "sensitivity_contour_max_um": self.sensitivity_max_mm * 1000.0,
+            "sensitivity": [
+                {"model_error": k, "contour_max_um": e * 1000.0} for k, e in self.sensitivity
+            ],
+        }
 
 
 def _servo_of(model: AxisModel) -> AxisServo:
@@ -85,13 +90,19 @@ def _servo_of(model: AxisModel) -> AxisServo:
     d = np.trim_zeros(np.asarray(model.denominator, dtype=float), "f")
     num[3 - n.size :] = n
     den[5 - d.size :] = d
-    return AxisServo(a0=den[4], a1=den[3], a2=den[2], a3=den[1], a4=den[0], b0=num[2],
-                     b1=num[1], b2=num[0])  # fmt: skip
+    return AxisServo(
+        a0=den[4], a1=den[3], a2=den[2], a3=den[1], a4=den[0], b0=num[2], b1=num[1], b2=num[0]
+    )
 
 
-def precompensation_report(plan: Plan, planned: Reference, compensated: Reference,
-                           comp: Compensated, machine: Machine,
-                           tolerance_mm: float = REFERENCE_TOLERANCE_MM) -> Precompensation:
+def precompensation_report(
+    plan: Plan,
+    planned: Reference,
+    compensated: Reference,
+    comp: Compensated,
+    machine: Machine,
+    tolerance_mm: float = REFERENCE_TOLERANCE_MM,
+) -> Precompensation:
     """The reference's own deviation from the path and the ±10 % model-error sensitivity.
 
     Deviation: the distance of each compensated point u_k from the path, measured near the
@@ -120,17 +131,25 @@ def precompensation_report(plan: Plan, planned: Reference, compensated: Referenc
     rows = []
     for label, gains, bandwidths in SENSITIVITY_CASES:
         servo = machine.servo
-        models = {a: None if m is None else _servo_of(perturbed_model(m, k, lam))
-                  for a, m, k, lam in zip("xyz", axis_models(machine), gains, bandwidths)}
+        models = {
+            a: None if m is None else _servo_of(perturbed_model(m, k, lam))
+            for a, m, k, lam in zip("xyz", axis_models(machine), gains, bandwidths)
+        }
         perturbed = replace(machine, servo=replace(servo, **models))
-        resp = path_response(compensated, pieces, profile, perturbed, refine_above_mm=eps,
-                             index=index)  # fmt: skip
+        resp = path_response(
+            compensated, pieces, profile, perturbed, refine_above_mm=eps, index=index
+        )
         tail = np.full(resp.contour_mm.size - u.shape[0], not pieces.rapid[-1])
         cutting = np.append(cut, tail)
         err = resp.contour_mm[cutting]
         rows.append((label, float(err.max()) if err.size else 0.0))
     period = machine.servo.period_s
-    return Precompensation(comp.lead_samples * period, 0.0, deviation, tuple(rows),
-                           tolerance_mm, comp.end_step_mm,
-                           comp.end_blend_samples * period)  # fmt: skip
-
+    return Precompensation(
+        comp.lead_samples * period,
+        0.0,
+        deviation,
+        tuple(rows),
+        tolerance_mm,
+        comp.end_step_mm,
+        comp.end_blend_samples * period,
+    )

@@ -124,8 +124,9 @@ def _reach_samples(machine: Machine) -> int:
     return int(max(np.flatnonzero(big.any(axis=1))[-1] + 1, 1))
 
 
-def _regions(over: np.ndarray, before: int, reach: int, lo: int, hi: int,
-             longest: int) -> list[tuple[int, int, int]]:  # fmt: skip
+def _regions(
+    over: np.ndarray, before: int, reach: int, lo: int, hi: int, longest: int
+) -> list[tuple[int, int, int]]:
     """Windows (j0, j1, k1) over the tool samples ``over`` (sorted): reference samples
     j0 … j1−1 move (from ``before`` ahead of a run of over-limit samples to its end, within
     [lo, hi)), tool samples j0 … k1−1 are constrained (``reach`` past j1). Runs whose windows
@@ -160,8 +161,15 @@ def _difference_rows(u: np.ndarray, j0: int, j1: int, order: int) -> tuple:
     return d, du[:rows]
 
 
-def _region_bounds(u: np.ndarray, movable: np.ndarray, j0: int, j1: int, poly: np.ndarray,
-                   tube: np.ndarray, kappa: np.ndarray):  # fmt: skip
+def _region_bounds(
+    u: np.ndarray,
+    movable: np.ndarray,
+    j0: int,
+    j1: int,
+    poly: np.ndarray,
+    tube: np.ndarray,
+    kappa: np.ndarray,
+):
     """The frame and bounds of a window's moves (samples j0 … j1−1): the unit tangents
     t (J, 3) and in-plane normals m (J, 3) of the path at each sample's foot on ``poly``,
     and the bounds [mm] of a (across) and |b| (along): within the tube, a = 0 for a sample
@@ -186,8 +194,9 @@ def _region_bounds(u: np.ndarray, movable: np.ndarray, j0: int, j1: int, poly: n
     return tan_in, m, lo_a, hi_a, along
 
 
-def _region_limit_rows(u: np.ndarray, j0: int, j1: int, basis: np.ndarray,
-                       caps: SampleLimits) -> tuple[list, list]:  # fmt: skip
+def _region_limit_rows(
+    u: np.ndarray, j0: int, j1: int, basis: np.ndarray, caps: SampleLimits
+) -> tuple[list, list]:
     """The rows of a window's LP keeping the reference within ``caps`` (module comment
     above): its step lengths (first order, REFINE_SPEED of the cap) and its first, second
     and third differences on every axis (within the cap, or ``u``'s own where it is above
@@ -220,10 +229,18 @@ def _region_limit_rows(u: np.ndarray, j0: int, j1: int, basis: np.ndarray,
     return a_ub, b_ub
 
 
-def _region_step(u: np.ndarray, y: np.ndarray, cut_out: np.ndarray, movable: np.ndarray,
-                 window: tuple[int, int, int], h: np.ndarray, poly: np.ndarray,
-                 tube: np.ndarray, caps: SampleLimits, kappa: np.ndarray,
-                 ) -> np.ndarray | None:  # fmt: skip
+def _region_step(
+    u: np.ndarray,
+    y: np.ndarray,
+    cut_out: np.ndarray,
+    movable: np.ndarray,
+    window: tuple[int, int, int],
+    h: np.ndarray,
+    poly: np.ndarray,
+    tube: np.ndarray,
+    caps: SampleLimits,
+    kappa: np.ndarray,
+) -> np.ndarray | None:
     """The LP step of one ``window`` (j0, j1, k1) (module comment above): (j1 − j0, 3) [mm],
     the move Δ_j = a_j m_j + b_j t_j of each sample across (in-plane normal m) and along
     (tangent t) the path, or None. ``caps`` (:class:`SampleLimits`): the reference's
@@ -251,8 +268,9 @@ def _region_step(u: np.ndarray, y: np.ndarray, cut_out: np.ndarray, movable: np.
     lag = ks[:, None] - np.arange(j0, j1)[None, :]  # k − j
     valid = (lag >= 0) & (lag < h.shape[0])
     hk = h[np.clip(lag, 0, h.shape[0] - 1)] * valid[..., None]  # (K, J, 3)
-    g = np.hstack([np.einsum("kc,kjc,jc->kj", nu, hk, m),
-                   np.einsum("kc,kjc,jc->kj", nu, hk, tan_in)])  # fmt: skip
+    g = np.hstack(
+        [np.einsum("kc,kjc,jc->kj", nu, hk, m), np.einsum("kc,kjc,jc->kj", nu, hk, tan_in)]
+    )
     ones = -np.ones((ks.size, 1))
     a_ub = [np.hstack([g, ones]), np.hstack([-g, ones])]
     b_ub = [-sigma, sigma]
@@ -260,20 +278,28 @@ def _region_step(u: np.ndarray, y: np.ndarray, cut_out: np.ndarray, movable: np.
     limit_rows, limit_rhs = _region_limit_rows(u, j0, j1, basis, caps)
     a_ub += limit_rows
     b_ub += limit_rhs
-    bounds = np.column_stack([np.concatenate([lo_a, -along, [0.0]]),
-                              np.concatenate([hi_a, along, [np.inf]])])  # fmt: skip
+    bounds = np.column_stack(
+        [np.concatenate([lo_a, -along, [0.0]]), np.concatenate([hi_a, along, [np.inf]])]
+    )
     cost = np.zeros(n_x + 1)
     cost[-1] = 1.0
-    res = linprog(cost, A_ub=np.vstack(a_ub), b_ub=np.concatenate(b_ub), bounds=bounds,
-                  method="highs", options={"maxiter": REFINE_LP_MAX_ITER})  # fmt: skip
+    res = linprog(
+        cost,
+        A_ub=np.vstack(a_ub),
+        b_ub=np.concatenate(b_ub),
+        bounds=bounds,
+        method="highs",
+        options={"maxiter": REFINE_LP_MAX_ITER},
+    )
     if res.status != 0:
         return None
     ab = res.x[:n_x].reshape(2, j1 - j0)
     return ab[0][:, None] * m + ab[1][:, None] * tan_in  # (J, 3): Δ = a m + b t
 
 
-def _rougher(new_mm: np.ndarray, start_mm: np.ndarray, caps: SampleLimits, lo: int = 0,
-             hi: int | None = None) -> np.ndarray:  # fmt: skip
+def _rougher(
+    new_mm: np.ndarray, start_mm: np.ndarray, caps: SampleLimits, lo: int = 0, hi: int | None = None
+) -> np.ndarray:
     """Per sample lo … hi−1: whether a difference row of ``new_mm`` within that range that it
     is in (its step length, its first, second and third differences on every axis) exceeds
     its cap of ``caps``, or ``start_mm``'s own where that was above the cap already (the
@@ -300,8 +326,9 @@ def _rougher(new_mm: np.ndarray, start_mm: np.ndarray, caps: SampleLimits, lo: i
     return out
 
 
-def _no_rougher(new_mm: np.ndarray, start_mm: np.ndarray, j0: int, j1: int,
-                caps: SampleLimits) -> bool:  # fmt: skip
+def _no_rougher(
+    new_mm: np.ndarray, start_mm: np.ndarray, j0: int, j1: int, caps: SampleLimits
+) -> bool:
     """Whether every difference row about samples j0 … j1−1 of ``new_mm`` keeps its cap
     (:func:`_rougher`)."""
     lo, hi = max(j0 - 3, 0), min(j1 + 3, new_mm.shape[0])
@@ -334,16 +361,18 @@ class _ToolResponse:
     their distance (the distance to a set is 1-Lipschitz: off by at most that much), which
     spares most of the global distance queries, the costly part of a round."""
 
-    def __init__(self, ref: Reference, pieces, profile, machine: Machine, index: PathIndex,
-                 cut: np.ndarray):  # fmt: skip
+    def __init__(
+        self, ref: Reference, pieces, profile, machine: Machine, index: PathIndex, cut: np.ndarray
+    ):
         from nurbscnc.servo.model import discretise
 
         n = ref.points_mm.shape[0]
         period = machine.servo.period_s
         first = path_response(ref, pieces, profile, machine, index=index)
         self.extra = extra = first.actual_mm.shape[0] - n
-        self.discs = [None if m is None else discretise(m, period, "foh")
-                      for m in axis_models(machine)]  # fmt: skip
+        self.discs = [
+            None if m is None else discretise(m, period, "foh") for m in axis_models(machine)
+        ]
         self.s_out = np.concatenate((ref.s_mm, np.full(extra, ref.s_mm[-1])))
         self.cut_out = np.append(cut, np.full(extra, cut[-1]))
         self.pieces, self.profile, self.index = pieces, profile, index
@@ -369,7 +398,8 @@ class _ToolResponse:
             kept = np.zeros(sel.size, dtype=bool)
             if last:  # measured last time (over the threshold then) at the same place
                 kept = last["over"][sel] & np.all(
-                    np.abs(actual[sel] - last["actual"][sel]) <= REUSE_MM, axis=1)
+                    np.abs(actual[sel] - last["actual"][sel]) <= REUSE_MM, axis=1
+                )
                 same = sel[kept]
                 contour[same] = np.minimum(contour[same], last["contour"][same])
             fresh = sel[~kept]
@@ -381,10 +411,20 @@ class _ToolResponse:
         return actual, np.where(self.cut_out, contour, 0.0), self.cut_out
 
 
-def _window_steps(ref: Reference, pieces, profile, u: np.ndarray, y: np.ndarray,
-                  cut_out: np.ndarray, movable: np.ndarray, windows: list, h: np.ndarray,
-                  tube_mm: np.ndarray, caps: SampleLimits, kappa: np.ndarray,
-                  ) -> list:  # fmt: skip
+def _window_steps(
+    ref: Reference,
+    pieces,
+    profile,
+    u: np.ndarray,
+    y: np.ndarray,
+    cut_out: np.ndarray,
+    movable: np.ndarray,
+    windows: list,
+    h: np.ndarray,
+    tube_mm: np.ndarray,
+    caps: SampleLimits,
+    kappa: np.ndarray,
+) -> list:
     """The LP step of each of the round's ``windows`` (:func:`_region_step`) that has one:
     (j0, j1, k1, step (j1 − j0, 3) [mm], the window's polyline of the path)."""
     n = u.shape[0]
@@ -393,18 +433,25 @@ def _window_steps(ref: Reference, pieces, profile, u: np.ndarray, y: np.ndarray,
         # The path under the window's reference and tool samples (the tool within 2|u − y|
         # of its reference along the path, as windowed_contour_mm).
         s_in = ref.s_mm[j0 : min(k1, n)]
-        margin = 2.0 * float(np.max(np.abs(u[j0:min(k1, n)] - y[j0:min(k1, n)]))) + 0.05
-        poly = local_polyline(pieces, profile, float(s_in.min()) - margin,
-                              float(s_in.max()) + margin)  # fmt: skip
-        step = _region_step(u, y, cut_out, movable, (j0, j1, k1), h, poly, tube_mm,
-                            caps, kappa)  # fmt: skip
+        margin = 2.0 * float(np.max(np.abs(u[j0 : min(k1, n)] - y[j0 : min(k1, n)]))) + 0.05
+        poly = local_polyline(
+            pieces, profile, float(s_in.min()) - margin, float(s_in.max()) + margin
+        )
+        step = _region_step(u, y, cut_out, movable, (j0, j1, k1), h, poly, tube_mm, caps, kappa)
         steps.append((j0, j1, k1, step, poly))
     return [s for s in steps if s[3] is not None]
 
 
-def _try_steps(u: np.ndarray, err: np.ndarray, steps: list, movable: np.ndarray,
-               tube_mm: np.ndarray, start: np.ndarray, caps: SampleLimits,
-               response: _ToolResponse) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+def _try_steps(
+    u: np.ndarray,
+    err: np.ndarray,
+    steps: list,
+    movable: np.ndarray,
+    tube_mm: np.ndarray,
+    start: np.ndarray,
+    caps: SampleLimits,
+    response: _ToolResponse,
+) -> tuple[np.ndarray, np.ndarray]:
     """The reference ``u`` with each window's step of ``steps`` kept where the window's own
     largest error went down and the reference is no rougher there than ``start``'s
     (:func:`_no_rougher`): the full step, else half, else a quarter; the windows' tool
@@ -426,8 +473,9 @@ def _try_steps(u: np.ndarray, err: np.ndarray, steps: list, movable: np.ndarray,
             if done[i]:
                 continue
             k1 = min(k1, err.size)
-            if (float(err_t[j0:k1].max()) < float(err[j0:k1].max()) - 1e-9
-                    and _no_rougher(trial, start, j0, j1, caps)):
+            if float(err_t[j0:k1].max()) < float(err[j0:k1].max()) - 1e-9 and _no_rougher(
+                trial, start, j0, j1, caps
+            ):
                 done[i] = True
                 base[j0:j1] = trial[j0:j1]
             else:
@@ -437,15 +485,24 @@ def _try_steps(u: np.ndarray, err: np.ndarray, steps: list, movable: np.ndarray,
     return base, done
 
 
-def _take_back_rough(base: np.ndarray, u: np.ndarray, start: np.ndarray, steps: list,
-                     done: np.ndarray, caps: SampleLimits) -> None:  # fmt: skip
+def _take_back_rough(
+    base: np.ndarray,
+    u: np.ndarray,
+    start: np.ndarray,
+    steps: list,
+    done: np.ndarray,
+    caps: SampleLimits,
+) -> None:
     """Windows next to each other were each checked with the other's step in: one whose
     neighbour was then not kept is taken back (``base`` set to ``u`` there, ``done``
     cleared; both in place) where a row across them breaks a cap (:func:`_rougher`)."""
     for _undo in range(len(steps)):
         bad = _rougher(base, start, caps)
-        hit = [i for i, (j0, j1, *_rest) in enumerate(steps)
-               if done[i] and bad[max(j0 - 3, 0) : j1 + 3].any()]  # fmt: skip
+        hit = [
+            i
+            for i, (j0, j1, *_rest) in enumerate(steps)
+            if done[i] and bad[max(j0 - 3, 0) : j1 + 3].any()
+        ]
         if not hit:
             break
         for i in hit:
@@ -454,9 +511,17 @@ def _take_back_rough(base: np.ndarray, u: np.ndarray, start: np.ndarray, steps: 
             done[i] = False
 
 
-def refine_in_tube(ref: Reference, pieces, profile, machine: Machine, tube_mm: np.ndarray,
-                   rounds: int = REFINE_ROUNDS, gain_mm: float = REFINE_GAIN_MM,
-                   caps: SampleLimits | None = None, held: int = 1) -> Refinement:  # fmt: skip
+def refine_in_tube(
+    ref: Reference,
+    pieces,
+    profile,
+    machine: Machine,
+    tube_mm: np.ndarray,
+    rounds: int = REFINE_ROUNDS,
+    gain_mm: float = REFINE_GAIN_MM,
+    caps: SampleLimits | None = None,
+    held: int = 1,
+) -> Refinement:
     """The reference ``ref`` (its points within ``tube_mm`` (N,) of the path) with its
     offsets across the path re-chosen where the simulated contour error exceeds
     REFINE_THRESHOLD × ε_max, to minimise the largest error there (module comment above:
@@ -488,8 +553,9 @@ def refine_in_tube(ref: Reference, pieces, profile, machine: Machine, tube_mm: n
     for _ in range(rounds):
         over = np.flatnonzero(err > REFINE_THRESHOLD * eps)
         windows = _regions(over, before, reach, 1, n - 1, REFINE_MAX_INPUTS)
-        steps = _window_steps(ref, pieces, profile, u, y, cut_out, movable, windows, h,
-                              tube_mm, caps, kappa)  # fmt: skip
+        steps = _window_steps(
+            ref, pieces, profile, u, y, cut_out, movable, windows, h, tube_mm, caps, kappa
+        )
         if not steps:
             break
         base, done = _try_steps(u, err, steps, movable, tube_mm, start, caps, response)

@@ -69,8 +69,9 @@ def _column(spec: str, header: list[str] | None, width: int, what: str) -> int:
     return header.index(spec)
 
 
-def parse_trace(text: str, cmd: str = "1", fb: str = "2", time: str | None = None,
-                period_s: float | None = None) -> Trace:  # fmt: skip
+def parse_trace(
+    text: str, cmd: str = "1", fb: str = "2", time: str | None = None, period_s: float | None = None
+) -> Trace:
     """Read a trace: whitespace- or comma-separated numbers, one sample per line.
 
     Blank lines and lines starting with ``#`` are skipped; a first line of names is a header
@@ -87,8 +88,11 @@ def parse_trace(text: str, cmd: str = "1", fb: str = "2", time: str | None = Non
             continue
         fields = line.replace(",", " ").split()
         if line == "overrun":
-            raise TraceError("halsampler overrun: samples were lost here (use a deeper sampler "
-                             "FIFO or record fewer channels)", SourcePos(number, 1, raw))
+            raise TraceError(
+                "halsampler overrun: samples were lost here (use a deeper sampler "
+                "FIFO or record fewer channels)",
+                SourcePos(number, 1, raw),
+            )
         try:
             values = [float(f) for f in fields]
         except ValueError:
@@ -96,8 +100,9 @@ def parse_trace(text: str, cmd: str = "1", fb: str = "2", time: str | None = Non
                 header = fields  # a first line of names only
                 continue
             bad = next(f for f in fields if not _is_float(f))
-            raise TraceError(f"not a number: {bad!r}",
-                             SourcePos(number, raw.find(bad) + 1, raw)) from None  # fmt: skip
+            raise TraceError(
+                f"not a number: {bad!r}", SourcePos(number, raw.find(bad) + 1, raw)
+            ) from None
         width = len(header) if header is not None else (len(rows[0]) if rows else len(values))
         if len(values) != width:
             raise TraceError(f"{len(values)} columns, expected {width}", SourcePos(number, 1, raw))
@@ -124,8 +129,10 @@ def parse_trace(text: str, cmd: str = "1", fb: str = "2", time: str | None = Non
                 SourcePos(numbers[k], 1, ""),
             )
         if period_s is not None and abs(period - period_s) > 0.01 * period_s:
-            raise TraceError(f"the time column's period {period:.6g} s disagrees with "
-                             f"--period-ms {period_s * 1e3:g}")  # fmt: skip
+            raise TraceError(
+                f"the time column's period {period:.6g} s disagrees with "
+                f"--period-ms {period_s * 1e3:g}"
+            )
     elif period_s is None:
         raise TraceError("no sample period: give --period-ms or --time COLUMN")
     else:
@@ -320,8 +327,9 @@ def fit_axis(trace: Trace, order: int = 4, delay: int = 0) -> Fit:
     if order not in ORDERS:
         raise ValueError(f"order must be one of {ORDERS}, got {order}")
     if not 0 <= delay < trace.command_mm.size - 20:
-        raise TraceError(f"delay {delay} samples does not fit a trace of "
-                         f"{trace.command_mm.size} samples")  # fmt: skip
+        raise TraceError(
+            f"delay {delay} samples does not fit a trace of {trace.command_mm.size} samples"
+        )
     u = np.asarray(trace.command_mm, dtype=float)[: trace.command_mm.size - delay]
     y = np.asarray(trace.actual_mm, dtype=float)[delay:]
     if not np.ptp(u) > 0:
@@ -340,8 +348,9 @@ def fit_axis(trace: Trace, order: int = 4, delay: int = 0) -> Fit:
         if best is not None and 1.0 - math.sqrt(2.0 * best.cost / ss_tot) >= 0.98:
             break
         try:
-            res = optimize.least_squares(_residual, starts[i], args=args, x_scale="jac",
-                                         method="trf", max_nfev=300)  # fmt: skip
+            res = optimize.least_squares(
+                _residual, starts[i], args=args, x_scale="jac", method="trf", max_nfev=300
+            )
         except (ValueError, np.linalg.LinAlgError, FloatingPointError):
             continue
         if np.all(np.isfinite(res.fun)) and (best is None or res.cost < best.cost):

@@ -476,17 +476,18 @@ class AxesStream:
     :data:`SETTLE_TOLERANCE_MM` of its final value). Memory: the filter state, whatever the
     number of samples. ``models[j]`` None is an ideal axis (output = reference)."""
 
-    def __init__(self, models: Sequence[AxisModel | AxisServo | None], period_s: float,
-                 hold: str = "foh"):  # fmt: skip
+    def __init__(
+        self, models: Sequence[AxisModel | AxisServo | None], period_s: float, hold: str = "foh"
+    ):
         self._models = [None if m is None else as_model(m) for m in models]
-        self._discs = [None if m is None else discretise(m, period_s, hold)
-                       for m in self._models]  # fmt: skip
+        self._discs = [None if m is None else discretise(m, period_s, hold) for m in self._models]
         self._period_s = float(period_s)
         self._r0: np.ndarray | None = None  # the first reference point [mm]
         self._last: np.ndarray | None = None  # the last reference point seen [mm]
         self._y_last = np.zeros(len(models))  # last filter output (offset removed) [mm]
-        self._zi = [None if d is None else np.zeros(max(d.a.size, d.b.size) - 1)
-                    for d in self._discs]  # fmt: skip
+        self._zi = [
+            None if d is None else np.zeros(max(d.a.size, d.b.size) - 1) for d in self._discs
+        ]
 
     def copy(self) -> AxesStream:
         """An independent copy of the stream's state (the filter states and the points seen;
@@ -538,8 +539,10 @@ class AxesStream:
             if not bad.size:
                 break
         else:
-            raise ConfigError(f"servo model does not settle to {SETTLE_TOLERANCE_MM} mm "
-                              f"within {_MAX_SETTLE_SAMPLES} samples")  # fmt: skip
+            raise ConfigError(
+                f"servo model does not settle to {SETTLE_TOLERANCE_MM} mm "
+                f"within {_MAX_SETTLE_SAMPLES} samples"
+            )
         if done > chunk:  # some chunk before the last was out of tolerance
             return last_bad + 2
         return 1 if abs(self._y_last[j] - final) > SETTLE_TOLERANCE_MM else 0

@@ -121,8 +121,14 @@ def zpetc(disc: DiscreteAxis) -> InverseFilter:
     dc = a.sum() / (b_s.sum() * b_u.sum())  # F(1) = A(1) B_u(1) / (B_s(1) B_u(1)²)
     ahead = b_u / (b_u.sum() ** 2 * dc)
     slowest = float(np.abs(stable).max()) if stable.size else 0.0
-    return InverseFilter(num=a, den=b_s, ahead=ahead, lead_samples=delay + unstable.size,
-                         unstable_zeros=unstable, slowest_pole=slowest)  # fmt: skip
+    return InverseFilter(
+        num=a,
+        den=b_s,
+        ahead=ahead,
+        lead_samples=delay + unstable.size,
+        unstable_zeros=unstable,
+        slowest_pole=slowest,
+    )
 
 
 def _compensate(inverse: InverseFilter, r_mm: np.ndarray, lead: int) -> np.ndarray:
@@ -166,8 +172,9 @@ def smooth_step(x) -> np.ndarray:
     return x**3 * (10.0 - 15.0 * x + 6.0 * x * x)
 
 
-def end_blend_samples(step_mm: float, period_s: float, a_max_mm_s2: float = np.inf,
-                      j_max_mm_s3: float = np.inf) -> int:  # fmt: skip
+def end_blend_samples(
+    step_mm: float, period_s: float, a_max_mm_s2: float = np.inf, j_max_mm_s3: float = np.inf
+) -> int:
     """Samples W (≥ 1) of the end blend of a step ``step_mm`` [mm]: the fewest with the
     smooth step's own acceleration 5.774·step/(W·T)² ≤ ``a_max_mm_s2`` and jerk
     60·step/(W·T)³ ≤ ``j_max_mm_s3`` (T = ``period_s``; module docstring)."""
@@ -196,8 +203,9 @@ def precompensate_points(
     r = np.asarray(points_mm, dtype=float)
     if r.ndim != 2 or r.shape[1] != len(models) or r.shape[0] == 0:
         raise ValueError("points_mm must be (N, k) with k = len(models), N >= 1")
-    inverses = [None if m is None else zpetc(discretise(as_model(m), period_s, hold))
-                for m in models]  # fmt: skip
+    inverses = [
+        None if m is None else zpetc(discretise(as_model(m), period_s, hold)) for m in models
+    ]
     present = [f for f in inverses if f is not None]
     if not present:
         raise ConfigError("pre-compensation needs a servo model for at least one axis")
@@ -218,12 +226,12 @@ def precompensate_points(
     if step > 0.0 and w >= 1:
         u[-w:] += smooth_step(np.arange(1, w + 1) / w)[:, None] * d
     u[-1] = r[-1]
-    return Compensated(points_mm=u, lead_samples=lead, end_step_mm=step,
-                       end_blend_samples=w if step > 0.0 else 0)  # fmt: skip
+    return Compensated(
+        points_mm=u, lead_samples=lead, end_step_mm=step, end_blend_samples=w if step > 0.0 else 0
+    )
 
 
-def perturbed_model(model: AxisModel, loop_gain: float = 1.0,
-                    bandwidth: float = 1.0) -> AxisModel:  # fmt: skip
+def perturbed_model(model: AxisModel, loop_gain: float = 1.0, bandwidth: float = 1.0) -> AxisModel:
     """A model error of G = N/D for the sensitivity of a pre-compensated reference.
 
     ``loop_gain`` k: the open loop L = G/(1 − G) = N/(D − N) (a unity-feedback reading of the
@@ -269,8 +277,7 @@ def along_path_offset_mm(compensated_mm: np.ndarray, planned_mm: np.ndarray) -> 
     return np.einsum("ij,ij->i", u - r, t_hat)
 
 
-def limit_to_path(compensated_mm: np.ndarray, foot_mm: np.ndarray,
-                  tolerance_mm) -> np.ndarray:  # fmt: skip
+def limit_to_path(compensated_mm: np.ndarray, foot_mm: np.ndarray, tolerance_mm) -> np.ndarray:
     """Keep a compensated reference within ``tolerance_mm`` of the path.
 
     ``foot_mm`` (M, k) a point *of the path* for each compensated point u_k (the caller's: the
@@ -305,5 +312,8 @@ def lead_samples(machine: Machine) -> int:
     """The pre-actuation of the ZPETC inverse (:func:`zpetc`) for ``machine``: the largest
     look-ahead n_u + d of its axes [samples] (FOH models at the servo period)."""
     period = machine.servo.period_s
-    return max(zpetc(discretise(as_model(m), period, "foh")).lead_samples
-               for m in axis_models(machine) if m is not None)  # fmt: skip
+    return max(
+        zpetc(discretise(as_model(m), period, "foh")).lead_samples
+        for m in axis_models(machine)
+        if m is not None
+    )

@@ -242,8 +242,15 @@ def simulate_reference(points_mm, machine: Machine, hold: str = "foh") -> Simula
     act.setflags(write=False)
     t = np.arange(m) * period_s
     t.setflags(write=False)
-    return Simulation(t_s=t, reference_mm=ref, actual_mm=act, axis_error_mm=err,
-                      n_reference=n, period_s=period_s, hold=hold)  # fmt: skip
+    return Simulation(
+        t_s=t,
+        reference_mm=ref,
+        actual_mm=act,
+        axis_error_mm=err,
+        n_reference=n,
+        period_s=period_s,
+        hold=hold,
+    )
 
 
 # ---------------------------------------------------------------------------------------------

@@ -38,16 +38,37 @@ ALGORITHMS = ("adaptive", "curvature", "ph-lookahead", "ours")
 
 #: The paper's Table 4 (airfoil at 0°, µm and s), for side-by-side reports.
 PAPER_TABLE4 = {
-    "adaptive": {"axis_x_max_um": 358.69, "axis_x_rms_um": 75.65, "axis_y_max_um": 132.56,
-                 "axis_y_rms_um": 27.31, "contour_max_um": 142.79, "contour_rms_um": 35.14,
-                 "contour_mean_um": 16.78, "cycle_time_s": 0.3440},
-    "curvature": {"axis_x_max_um": 195.78, "axis_x_rms_um": 41.53, "axis_y_max_um": 22.65,
-                  "axis_y_rms_um": 8.39, "contour_max_um": 47.02, "contour_rms_um": 12.98,
-                  "contour_mean_um": 8.50, "cycle_time_s": 0.4535},
-    "ph-lookahead": {"axis_x_max_um": 57.97, "axis_x_rms_um": 20.30, "axis_y_max_um": 13.98,
-                     "axis_y_rms_um": 3.56, "contour_max_um": 14.11, "contour_rms_um": 3.84,
-                     "contour_mean_um": 2.31, "cycle_time_s": 0.9455},
-}  # fmt: skip
+    "adaptive": {
+        "axis_x_max_um": 358.69,
+        "axis_x_rms_um": 75.65,
+        "axis_y_max_um": 132.56,
+        "axis_y_rms_um": 27.31,
+        "contour_max_um": 142.79,
+        "contour_rms_um": 35.14,
+        "contour_mean_um": 16.78,
+        "cycle_time_s": 0.3440,
+    },
+    "curvature": {
+        "axis_x_max_um": 195.78,
+        "axis_x_rms_um": 41.53,
+        "axis_y_max_um": 22.65,
+        "axis_y_rms_um": 8.39,
+        "contour_max_um": 47.02,
+        "contour_rms_um": 12.98,
+        "contour_mean_um": 8.50,
+        "cycle_time_s": 0.4535,
+    },
+    "ph-lookahead": {
+        "axis_x_max_um": 57.97,
+        "axis_x_rms_um": 20.30,
+        "axis_y_max_um": 13.98,
+        "axis_y_rms_um": 3.56,
+        "contour_max_um": 14.11,
+        "contour_rms_um": 3.84,
+        "contour_mean_um": 2.31,
+        "cycle_time_s": 0.9455,
+    },
+}
 #: The paper's Table 5: PH look-ahead contour error max [µm] by orientation.
 PAPER_TABLE5 = {0.0: 14.11, 45.0: 14.12, -45.0: 14.12}
 
@@ -84,8 +105,9 @@ def rotate_segment(seg, angle_deg: float):
     if angle_deg == 0.0:
         return seg
     a = math.radians(angle_deg)
-    rot = np.array([[math.cos(a), -math.sin(a), 0.0], [math.sin(a), math.cos(a), 0.0],
-                    [0.0, 0.0, 1.0]])  # fmt: skip
+    rot = np.array(
+        [[math.cos(a), -math.sin(a), 0.0], [math.sin(a), math.cos(a), 0.0], [0.0, 0.0, 1.0]]
+    )
     return replace(seg, control_points_mm=frozen_array(seg.control_points_mm @ rot.T))
 
 
@@ -106,13 +128,19 @@ def _planned(seg, machine: Machine, options: tuple[LookaheadOptions, Interpolato
 def algorithm_options(algorithm: str) -> tuple[LookaheadOptions, Interpolator]:
     """The planner and interpolator settings of the two look-ahead algorithms."""
     if algorithm == "ph-lookahead":
-        return (LookaheadOptions(dynamics=Dynamics.GLOBAL,
-                                 plan=PlanOptions(corner_feed=CornerFeed.PEAK)),
-                Interpolator.TAYLOR)  # fmt: skip
+        return (
+            LookaheadOptions(
+                dynamics=Dynamics.GLOBAL, plan=PlanOptions(corner_feed=CornerFeed.PEAK)
+            ),
+            Interpolator.TAYLOR,
+        )
     if algorithm == "ours":
-        return (LookaheadOptions(dynamics=Dynamics.LOCAL,
-                                 plan=PlanOptions(corner_feed=CornerFeed.PIECE)),
-                Interpolator.EXACT)  # fmt: skip
+        return (
+            LookaheadOptions(
+                dynamics=Dynamics.LOCAL, plan=PlanOptions(corner_feed=CornerFeed.PIECE)
+            ),
+            Interpolator.EXACT,
+        )
     raise ValueError(algorithm)
 
 
@@ -128,8 +156,18 @@ def run_algorithm(algorithm: str, seg, machine: Machine, angle_deg: float = 0.0)
     contour = contour_errors(sim, path)
     m = metrics(sim, path, contour).as_dict()
     m["cycle_time_s"] = float(samples.t_s[-1])  # rest to rest, one block
-    return Run(algorithm, angle_deg, samples, path, m, contour.true_mm * 1000.0,
-               contour.eq29_mm * 1000.0, sim.t_s, sim.axis_error_mm * 1000.0, plan)
+    return Run(
+        algorithm,
+        angle_deg,
+        samples,
+        path,
+        m,
+        contour.true_mm * 1000.0,
+        contour.eq29_mm * 1000.0,
+        sim.t_s,
+        sim.axis_error_mm * 1000.0,
+        plan,
+    )
 
 
 def compare_block(seg, machine: Machine, angles_deg=(0.0,), algorithms=ALGORITHMS) -> list[Run]:
@@ -147,7 +185,16 @@ def row(run: Run) -> dict:
     from nurbscnc.plan.report import metrics_json
 
     m = metrics_json(run.metrics)
-    keys = ("contour_eq29_max_um", "contour_eq29_rms_um", "contour_eq29_mean_um",
-            "contour_true_max_um", "contour_true_rms_um", "axis_x_max_um", "axis_x_rms_um",
-            "axis_y_max_um", "axis_y_rms_um", "cycle_time_s")  # fmt: skip
+    keys = (
+        "contour_eq29_max_um",
+        "contour_eq29_rms_um",
+        "contour_eq29_mean_um",
+        "contour_true_max_um",
+        "contour_true_rms_um",
+        "axis_x_max_um",
+        "axis_x_rms_um",
+        "axis_y_max_um",
+        "axis_y_rms_um",
+        "cycle_time_s",
+    )
     return {"algorithm": run.algorithm, "angle_deg": run.angle_deg, **{k: m[k] for k in keys}}

@@ -70,11 +70,28 @@ class CardSim(FaultInjection, Execution):
         self._out: collections.deque[tuple[float, bytes]] = collections.deque()
         self._log: list[np.ndarray] = []
         self.stalled = False
-        for name in ("bytes_received", "frames_received", "crc_errors", "protocol_errors",
-                     "dropped_in", "corrupted_in", "dropped_out", "corrupted_out", "duplicates",
-                     "overflows", "naks_sent", "acks_sent", "aborts_received", "holds_received",
-                     "resets", "max_fill", "executed_periods", "frames_sent",
-                     "position_naks", "positions_set"):  # fmt: skip
+        for name in (
+            "bytes_received",
+            "frames_received",
+            "crc_errors",
+            "protocol_errors",
+            "dropped_in",
+            "corrupted_in",
+            "dropped_out",
+            "corrupted_out",
+            "duplicates",
+            "overflows",
+            "naks_sent",
+            "acks_sent",
+            "aborts_received",
+            "holds_received",
+            "resets",
+            "max_fill",
+            "executed_periods",
+            "frames_sent",
+            "position_naks",
+            "positions_set",
+        ):
             setattr(self, name, 0)
         self._open_stream(0.0)
         self.state = p.CardState.IDLE
@@ -124,14 +141,27 @@ class CardSim(FaultInjection, Execution):
 
     def caps(self) -> p.Caps:
         cfg = self.config
-        return p.Caps(p.PROTOCOL_VERSION, cfg.axes, cfg.max_pulses_per_period,
-                      cfg.buffer_periods, round(cfg.period_s * 1e6), self.session_id,
-                      int(self.state), tuple(int(v) for v in self.position))  # fmt: skip
+        return p.Caps(
+            p.PROTOCOL_VERSION,
+            cfg.axes,
+            cfg.max_pulses_per_period,
+            cfg.buffer_periods,
+            round(cfg.period_s * 1e6),
+            self.session_id,
+            int(self.state),
+            tuple(int(v) for v in self.position),
+        )
 
     def status(self) -> p.Status:
-        return p.Status(int(self.state), int(self.alarm), self.expected % p.SEQ_MODULO,
-                        self.free, self.fill, self.stream_executed,
-                        tuple(int(v) for v in self.position))  # fmt: skip
+        return p.Status(
+            int(self.state),
+            int(self.alarm),
+            self.expected % p.SEQ_MODULO,
+            self.free,
+            self.fill,
+            self.stream_executed,
+            tuple(int(v) for v in self.position),
+        )
 
     # -- input -------------------------------------------------------------------------------
     def on_bytes(self, data: bytes, now: float) -> None:
@@ -278,18 +308,22 @@ class CardSim(FaultInjection, Execution):
         if isinstance(msg, p.Batch):
             pulses = msg.pulses
             if pulses.shape[1] != self.config.axes:
-                self._raise_alarm(p.AlarmCode.PROTOCOL,
-                                  f"batch of {pulses.shape[1]} axes, card has "
-                                  f"{self.config.axes}", now)  # fmt: skip
+                self._raise_alarm(
+                    p.AlarmCode.PROTOCOL,
+                    f"batch of {pulses.shape[1]} axes, card has {self.config.axes}",
+                    now,
+                )
                 return "alarm"
             if tuple(msg.start_steps) != tail:
                 self.position_naks += 1
                 return "refused"
             peak = int(np.abs(pulses).max())
             if peak > self.config.max_pulses_per_period:
-                self._raise_alarm(p.AlarmCode.PULSE_LIMIT,
-                                  f"{peak} pulses in one period, limit "
-                                  f"{self.config.max_pulses_per_period}", now)  # fmt: skip
+                self._raise_alarm(
+                    p.AlarmCode.PULSE_LIMIT,
+                    f"{peak} pulses in one period, limit {self.config.max_pulses_per_period}",
+                    now,
+                )
                 return "alarm"
             self._buffer.append(pulses)
             self.fill += len(pulses)
@@ -303,6 +337,7 @@ class CardSim(FaultInjection, Execution):
             self._end = msg
         self.expected += 1
         return "ok"
+
     def _ack(self, now: float) -> None:
         self.acks_sent += 1
         self._send(p.Ack(self.expected % p.SEQ_MODULO, self.free), now)
@@ -335,21 +370,46 @@ class CardSim(FaultInjection, Execution):
             times.append(self._out[0][0])
         if self._wire.expires_s is not None and not self.stalled:
             times.append(self._wire.expires_s)
-        if self.state is p.CardState.RUNNING and self._period_wall_s is not None \
-                and not self.stalled:  # fmt: skip
+        if (
+            self.state is p.CardState.RUNNING
+            and self._period_wall_s is not None
+            and not self.stalled
+        ):
             times.append(self._next_due)
         return min(times) if times else None
 
     def report(self) -> dict:
         """Counters and final state, JSON-able."""
-        keys = ("bytes_received", "frames_received", "crc_errors", "protocol_errors",
-                "dropped_in", "corrupted_in", "dropped_out", "corrupted_out", "duplicates",
-                "overflows", "naks_sent", "acks_sent", "aborts_received", "holds_received",
-                "resets", "max_fill", "executed_periods", "frames_sent",
-                "position_naks", "positions_set")  # fmt: skip
+        keys = (
+            "bytes_received",
+            "frames_received",
+            "crc_errors",
+            "protocol_errors",
+            "dropped_in",
+            "corrupted_in",
+            "dropped_out",
+            "corrupted_out",
+            "duplicates",
+            "overflows",
+            "naks_sent",
+            "acks_sent",
+            "aborts_received",
+            "holds_received",
+            "resets",
+            "max_fill",
+            "executed_periods",
+            "frames_sent",
+            "position_naks",
+            "positions_set",
+        )
         out = {k: int(getattr(self, k)) for k in keys}
-        out.update(state=self.state.name, alarm=self.alarm.name, alarm_text=self.alarm_text,
-                   position_steps=[int(v) for v in self.position],
-                   buffer_periods=self.config.buffer_periods, session_id=self.session_id,
-                   stalled=self.stalled)  # fmt: skip
+        out.update(
+            state=self.state.name,
+            alarm=self.alarm.name,
+            alarm_text=self.alarm_text,
+            position_steps=[int(v) for v in self.position],
+            buffer_periods=self.config.buffer_periods,
+            session_id=self.session_id,
+            stalled=self.stalled,
+        )
         return out

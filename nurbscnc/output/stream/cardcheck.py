@@ -13,17 +13,22 @@ def check_caps(caps: p.Caps, prog: PulseProgram, position: bool = True) -> None:
     axes = prog.pulses.shape[1] if prog.pulses.ndim == 2 else len(prog.start_steps)
     problems = []
     if caps.version not in p.COMPATIBLE_VERSIONS:
-        problems.append(f"it speaks protocol version {caps.version}, nurbscnc speaks "
-                        f"{', '.join(map(str, p.COMPATIBLE_VERSIONS))}")  # fmt: skip
+        problems.append(
+            f"it speaks protocol version {caps.version}, nurbscnc speaks "
+            f"{', '.join(map(str, p.COMPATIBLE_VERSIONS))}"
+        )
     if caps.axes != axes:
         problems.append(f"it has {caps.axes} axes, the program has {axes}")
     period_us = round(prog.period_s * 1e6)
     if caps.period_us != period_us:
-        problems.append(f"its period is {caps.period_us} µs, the machine's servo period "
-                        f"is {period_us} µs")  # fmt: skip
+        problems.append(
+            f"its period is {caps.period_us} µs, the machine's servo period is {period_us} µs"
+        )
     if prog.peak_pulses > caps.max_pulses_per_period:
-        problems.append(f"it takes at most {caps.max_pulses_per_period} pulses per period, "
-                        f"the program needs {prog.peak_pulses}")  # fmt: skip
+        problems.append(
+            f"it takes at most {caps.max_pulses_per_period} pulses per period, "
+            f"the program needs {prog.peak_pulses}"
+        )
     if caps.state in (p.CardState.RUNNING, p.CardState.HOLD):
         problems.append(f"it is busy ({p.CardState(caps.state).name}) with another stream")
     if problems:

@@ -17,12 +17,17 @@ class FaultInjection:
         faults = self.config.faults
         for item in items:
             self.frames_received += 1
-            if faults.reset_after_frames is not None and self.resets == 0 \
-                    and self.frames_received >= faults.reset_after_frames:  # fmt: skip
+            if (
+                faults.reset_after_frames is not None
+                and self.resets == 0
+                and self.frames_received >= faults.reset_after_frames
+            ):
                 self._reset(now)
                 continue
-            if faults.stall_after_frames is not None \
-                    and self.frames_received > faults.stall_after_frames:  # fmt: skip
+            if (
+                faults.stall_after_frames is not None
+                and self.frames_received > faults.stall_after_frames
+            ):
                 self.stalled = True
                 return
             if isinstance(item, p.BadFrame):  # damaged on the wire already

@@ -81,10 +81,13 @@ class Execution:
             return
         pos = tuple(int(v) for v in self.position)
         if self._end.periods != self.stream_executed or tuple(self._end.position_steps) != pos:
-            self._raise_alarm(p.AlarmCode.END_MISMATCH,
-                              f"END says {self._end.periods} periods to "
-                              f"{list(self._end.position_steps)}, executed "
-                              f"{self.stream_executed} to {list(pos)}", now)  # fmt: skip
+            self._raise_alarm(
+                p.AlarmCode.END_MISMATCH,
+                f"END says {self._end.periods} periods to "
+                f"{list(self._end.position_steps)}, executed "
+                f"{self.stream_executed} to {list(pos)}",
+                now,
+            )
             return
         self.state = p.CardState.DONE
         self._send(self.status(), now)

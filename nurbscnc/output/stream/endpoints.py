@@ -152,8 +152,16 @@ class TcpEndpoint:
             self._server.close()
 
 
-def serve(card, endpoint, stop: threading.Event | None = None, *, once: bool = False,
-          baud: int | None = None, log=None, linger_s: float = 0.3) -> None:  # fmt: skip
+def serve(
+    card,
+    endpoint,
+    stop: threading.Event | None = None,
+    *,
+    once: bool = False,
+    baud: int | None = None,
+    log=None,
+    linger_s: float = 0.3,
+) -> None:
     """Run ``card`` (a :class:`~.card.CardSim`) on ``endpoint`` until ``stop`` is set (or,
     with ``once``, a stream ended).
 
@@ -171,8 +179,9 @@ def serve(card, endpoint, stop: threading.Event | None = None, *, once: bool = F
     ended_at = None
     while not stop.is_set():
         now = time.monotonic()
-        wake = [t for t in (card.next_event_s(), wire_in.next_s(), wire_out.next_s())
-                if t is not None]  # fmt: skip
+        wake = [
+            t for t in (card.next_event_s(), wire_in.next_s(), wire_out.next_s()) if t is not None
+        ]
         timeout = 0.02 if not wake else min(0.02, max(0.0, min(wake) - now))
         try:
             readable, _, _ = select.select([endpoint.fileno()], [], [], timeout)

@@ -42,8 +42,9 @@ class WindowFeed:
         self._queue: queue.Queue = queue.Queue()
         self._waited = None  #: an item :meth:`next_ready_s` took off the queue
         self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._plan, args=(iter(windows),),
-                                        name="nurbscnc-planner", daemon=True)  # fmt: skip
+        self._thread = threading.Thread(
+            target=self._plan, args=(iter(windows),), name="nurbscnc-planner", daemon=True
+        )
         self._thread.start()
 
     def _plan(self, windows) -> None:

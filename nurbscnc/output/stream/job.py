@@ -97,8 +97,11 @@ class HoldRecord:
         return self.latency_s + self.decel_periods * self.period_s
 
     def to_json(self) -> dict:
-        return {"latency_s": round(self.latency_s, 6), "stop_s": round(self.stop_s, 6),
-                "stopped_at_mm": round(self.s_mm, 6)}  # fmt: skip
+        return {
+            "latency_s": round(self.latency_s, 6),
+            "stop_s": round(self.stop_s, 6),
+            "stopped_at_mm": round(self.s_mm, 6),
+        }
 
 
 @dataclass
@@ -129,9 +132,17 @@ class Job:
     planned (module docstring; ``plan`` is then ignored: the first window's plan is used).
     """
 
-    def __init__(self, plan, program, machine, *, optional_stop: bool = False,
-                 override: float = 1.0, lookahead_pieces: int | None = None,
-                 feed=None):  # fmt: skip
+    def __init__(
+        self,
+        plan,
+        program,
+        machine,
+        *,
+        optional_stop: bool = False,
+        override: float = 1.0,
+        lookahead_pieces: int | None = None,
+        feed=None,
+    ):
         self.feed = feed
         self.program = program
         self.horizon = None  #: first piece not planned yet (None: the whole plan is final)
@@ -174,8 +185,9 @@ class Job:
         # The frames' count width must fit the fastest section: the plan's peak speed (a hold
         # or an override ≤ 100 % only slows down; +2: rounding, a re-planned rest).
         v_peak = float(np.max(plan.profile.piece_peak_speed_mm_s))
-        self.peak_pulses = int(math.ceil(v_peak * self.period_s
-                                         * float(np.max(self.steps_per_mm)))) + 2  # fmt: skip
+        self.peak_pulses = (
+            int(math.ceil(v_peak * self.period_s * float(np.max(self.steps_per_mm)))) + 2
+        )
 
     # -- requests (plain attribute writes: safe from a signal handler) -----------------------
     def request_hold(self) -> None:
@@ -205,8 +217,7 @@ class Job:
     def next_section(self) -> PulseProgram | None:
         """The pulses of the next section, or None (finished, or waiting for the operator)."""
         self.poll()
-        if self.feed_error is not None and not self.finished and \
-                self._horizon_tau() <= self.tau:  # fmt: skip
+        if self.feed_error is not None and not self.finished and self._horizon_tau() <= self.tau:
             raise self.feed_error
         if self.finished or self.waiting is not None:
             return None
@@ -220,16 +231,29 @@ class Job:
         stop = self._next_waiting_stop()
         tau_b = self._end_tau(stop)
         rate = Rate(self.override)
-        track, complete = play(motion, self.tau, tau_b, rate, self.period_s,
-                               wait_s=motion.wait_s if self.tau == 0.0 else 0.0,
-                               dwell_at_start=self.first_section,
-                               max_samples=CHUNK_PERIODS)  # fmt: skip
+        track, complete = play(
+            motion,
+            self.tau,
+            tau_b,
+            rate,
+            self.period_s,
+            wait_s=motion.wait_s if self.tau == 0.0 else 0.0,
+            dwell_at_start=self.first_section,
+            max_samples=CHUNK_PERIODS,
+        )
         track, blocked = self._within_horizon(track, tau_b)
         if self.last_point is not None:
             track.points_mm[0] = self.last_point  # exactly where the card stands
-        self.section = Section(track, self._pulses(track), tau_b, rate, stop,
-                               complete and not blocked, blocked=blocked,
-                               blocked_at=self.motion_horizon)  # fmt: skip
+        self.section = Section(
+            track,
+            self._pulses(track),
+            tau_b,
+            rate,
+            stop,
+            complete and not blocked,
+            blocked=blocked,
+            blocked_at=self.motion_horizon,
+        )
         self.first_section = False
         self.sections += 1
         return self.section.program
@@ -260,9 +284,13 @@ class Job:
         tail = quantise(track.points_mm[k:], self.steps_per_mm, self.period_s, line)
         if program is None or k == 0:
             return tail
-        return PulseProgram(program.start_steps, tail.end_steps,
-                            np.concatenate([program.pulses[:k], tail.pulses]), self.period_s,
-                            np.concatenate([program.line[:k], tail.line]))  # fmt: skip
+        return PulseProgram(
+            program.start_steps,
+            tail.end_steps,
+            np.concatenate([program.pulses[:k], tail.pulses]),
+            self.period_s,
+            np.concatenate([program.line[:k], tail.line]),
+        )
 
     def _extend(self, link) -> None:
         """The next chunk of the section, once the link has framed half of the last one; at
@@ -281,10 +309,16 @@ class Job:
             sec.blocked = False
         elif link.sent_periods < k - CHUNK_PERIODS // 2:
             return
-        tail, complete = play(self.motion, float(tr.tau_s[k]), sec.tau_b, sec.rate,
-                              self.period_s, wait_s=self._wait_at(tr, k),
-                              u0=float(tr.u_s[k]) - sec.rate_u0_s,
-                              max_samples=CHUNK_PERIODS)  # fmt: skip
+        tail, complete = play(
+            self.motion,
+            float(tr.tau_s[k]),
+            sec.tau_b,
+            sec.rate,
+            self.period_s,
+            wait_s=self._wait_at(tr, k),
+            u0=float(tr.u_s[k]) - sec.rate_u0_s,
+            max_samples=CHUNK_PERIODS,
+        )
         tail, sec.blocked = self._within_horizon(tail, sec.tau_b)
         sec.complete = complete and not sec.blocked
         tail.points_mm[0] = tr.points_mm[k]
@@ -331,8 +365,15 @@ class Job:
         tr = sec.track
         k = len(tr) - 1
         h = self._horizon_tau()
-        tail, _ = play(self.motion, float(tr.tau_s[k]), h, sec.rate, self.period_s,
-                       wait_s=self._wait_at(tr, k), u0=float(tr.u_s[k]) - sec.rate_u0_s)
+        tail, _ = play(
+            self.motion,
+            float(tr.tau_s[k]),
+            h,
+            sec.rate,
+            self.period_s,
+            wait_s=self._wait_at(tr, k),
+            u0=float(tr.u_s[k]) - sec.rate_u0_s,
+        )
         tail.points_mm[0] = tr.points_mm[k]
         sec.track = tr.then(tail)
         sec.program = self._pulses(sec.track, k, sec.program)
@@ -385,8 +426,9 @@ class Job:
         if reached.size:
             to_go = int(reached[0]) - executed
         else:  # beyond the chunks made so far: the rest at the override (dwells not counted)
-            to_go = len(tr) - 1 - executed + (h - float(tr.tau_s[-1])) / self.period_s / \
-                sec.rate.final  # fmt: skip
+            to_go = (
+                len(tr) - 1 - executed + (h - float(tr.tau_s[-1])) / self.period_s / sec.rate.final
+            )
         self.planning["margins_s"].append(max(to_go, 0) * self.period_s)
 
     def section_done(self, executed_periods: int) -> None:
@@ -401,8 +443,9 @@ class Job:
             self.tau = sec.tau_b
             self.poll()
             if not self.motion_is_plan:  # the rest from here on the plan as planned now
-                self.motion = resume_motion(self.plan, float(sec.track.s_mm[-1]), 0.0,
-                                            self.lookahead_pieces)  # fmt: skip
+                self.motion = resume_motion(
+                    self.plan, float(sec.track.s_mm[-1]), 0.0, self.lookahead_pieces
+                )
                 self.motion_horizon = self.horizon
                 self.tau = 0.0
             self.planning["holds"] += 1
@@ -413,8 +456,9 @@ class Job:
                 self._hold_since = self.feed.clock()
             return
         if sec.held:
-            self.motion = resume_motion(self.plan, float(sec.track.s_mm[-1]), sec.hold_wait_s,
-                                        self.lookahead_pieces)  # fmt: skip
+            self.motion = resume_motion(
+                self.plan, float(sec.track.s_mm[-1]), sec.hold_wait_s, self.lookahead_pieces
+            )
             self.motion_is_plan = False
             self.motion_horizon = self.horizon
             self.tau = 0.0
@@ -458,8 +502,9 @@ class Job:
         k = link.sent_periods
         executed = link.state.status.executed_periods if link.state.status else 0
         tr = sec.track
-        stop = stop_track(self.motion, tr, k, self.a_max, self.j_max, self.period_s,
-                          float(tr.s_mm[-1]))  # fmt: skip
+        stop = stop_track(
+            self.motion, tr, k, self.a_max, self.j_max, self.period_s, float(tr.s_mm[-1])
+        )
         track = tr.head(k + 1).then(stop)
         program = self._pulses(track, k, sec.program)
         sec.complete = True
@@ -467,8 +512,9 @@ class Job:
         link.replace_unsent(program)
         sec.hold_wait_s = self._wait_at(tr, k)
         sec.track, sec.program, sec.held = track, program, True
-        self.holds.append(HoldRecord(executed, k, len(stop) - 1, self.period_s,
-                                     float(track.s_mm[-1])))  # fmt: skip
+        self.holds.append(
+            HoldRecord(executed, k, len(stop) - 1, self.period_s, float(track.s_mm[-1]))
+        )
         self.hold_wanted = False
 
     def _apply_override(self, link) -> None:
@@ -493,13 +539,20 @@ class Job:
                 rate = Rate(r_k, r1, float(offset), d)
                 # Check the ramp's periods only (cheap), then time the whole rest once.
                 tau_w = min(sec.tau_b, float(tr.tau_s[k] + rate.integral(offset + d)))
-                window, _ = play(self.motion, float(tr.tau_s[k]), tau_w, rate, self.period_s,
-                                 wait_s=wait)  # fmt: skip
+                window, _ = play(
+                    self.motion, float(tr.tau_s[k]), tau_w, rate, self.period_s, wait_s=wait
+                )
                 if not ramp_fits(window, self.a_max, self.j_max):
                     continue
-                tail, complete = play(self.motion, float(tr.tau_s[k]), sec.tau_b, rate,
-                                      self.period_s, wait_s=wait,
-                                      max_samples=CHUNK_PERIODS)  # fmt: skip
+                tail, complete = play(
+                    self.motion,
+                    float(tr.tau_s[k]),
+                    sec.tau_b,
+                    rate,
+                    self.period_s,
+                    wait_s=wait,
+                    max_samples=CHUNK_PERIODS,
+                )
                 tail, sec.blocked = self._within_horizon(tail, sec.tau_b)
                 complete = complete and not sec.blocked
                 tail.points_mm[0] = tr.points_mm[k]
@@ -512,8 +565,10 @@ class Job:
                 sec.rate, sec.rate_u0_s = rate, u_k
                 self.override, self.override_wanted = r1, None
                 return
-        self.notes.append(f"no smooth change of the feed override to {r1:.0%} fits the "
-                          "limits in this section: it applies from the next one")  # fmt: skip
+        self.notes.append(
+            f"no smooth change of the feed override to {r1:.0%} fits the "
+            "limits in this section: it applies from the next one"
+        )
         sec.override_deferred = True  # pending until the next section starts
 
     def _wait_at(self, tr: Track, k: int) -> float:
@@ -548,11 +603,14 @@ class Job:
 
     def report(self) -> dict:
         """JSON-able summary: sections, holds (latency), notes, the final override."""
-        out = {"sections": self.sections, "feed_override": round(self.override, 6),
-               "holds": [h.to_json() for h in self.holds],
-                # The same shape as every command's notes ({line, message}); the job's notes
-                # are about the stream as a whole (no source line).
-               "notes": [{"line": None, "message": n} for n in self.notes]}
+        out = {
+            "sections": self.sections,
+            "feed_override": round(self.override, 6),
+            "holds": [h.to_json() for h in self.holds],
+            # The same shape as every command's notes ({line, message}); the job's notes
+            # are about the stream as a whole (no source line).
+            "notes": [{"line": None, "message": n} for n in self.notes],
+        }
         if self.feed is not None:
             margins = self.planning["margins_s"]
             out["planning"] = {
@@ -560,7 +618,9 @@ class Job:
                 "first_window_s": round(self.feed.first_s, 6),
                 "planned_s": None if self.feed.planned_s is None else round(self.feed.planned_s, 6),
                 "plan_margin_min_s": round(min(margins), 6) if margins else None,
-                "holds": self.planning["holds"], "held_s": round(self.planning["held_s"], 6)}
+                "holds": self.planning["holds"],
+                "held_s": round(self.planning["held_s"], 6),
+            }
         return out
 
 
@@ -597,8 +657,11 @@ def start_at_line(program, line: int):
 
     segs = list(program.segments)
     first = next((i for i, s in enumerate(segs) if s.line >= line), None)
-    moving = next((i for i in range(first, len(segs)) if segs[i].kind not in ("dwell", "pause")),
-                  None) if first is not None else None  # fmt: skip
+    moving = (
+        next((i for i in range(first, len(segs)) if segs[i].kind not in ("dwell", "pause")), None)
+        if first is not None
+        else None
+    )
     if moving is None:
         raise ValueError(f"--from-line {line}: no motion at or after line {line}")
     target = np.asarray(segs[moving].start_mm, dtype=float)
@@ -607,13 +670,24 @@ def start_at_line(program, line: int):
     z_safe = float(max([here[2], target[2], *before]))
     feed = segs[moving].feed_mm_s
     plunge_rapid = segs[moving].kind == "rapid" or not feed > 0.0
-    path = [here, np.array([here[0], here[1], z_safe]), np.array([target[0], target[1], z_safe]),
-            target]  # fmt: skip
+    path = [
+        here,
+        np.array([here[0], here[1], z_safe]),
+        np.array([target[0], target[1], z_safe]),
+        target,
+    ]
     lead = []
     for i, (a, b) in enumerate(zip(path[:-1], path[1:])):
         if np.allclose(a, b, rtol=0.0, atol=1e-12):
             continue
         rapid = i < 2 or plunge_rapid
-        lead.append(Line(tuple(a.tolist()), tuple(b.tolist()), 0.0 if rapid else float(feed),
-                         int(segs[moving].line), rapid=rapid))  # fmt: skip
+        lead.append(
+            Line(
+                tuple(a.tolist()),
+                tuple(b.tolist()),
+                0.0 if rapid else float(feed),
+                int(segs[moving].line),
+                rapid=rapid,
+            )
+        )
     return replace(program, segments=tuple(lead + segs[first:]))

@@ -76,9 +76,15 @@ class Link(HandshakeHandlers, StreamingHandlers, StoppingHandlers):
     version 3) before streaming, instead of refusing a card that stands elsewhere.
     """
 
-    def __init__(self, program: PulseProgram, options: SenderOptions | None = None,
-                 byte_s: float = 0.0, ignore_credit: bool = False,
-                 session_id: int | None = None, zero: bool = False):  # fmt: skip
+    def __init__(
+        self,
+        program: PulseProgram,
+        options: SenderOptions | None = None,
+        byte_s: float = 0.0,
+        ignore_credit: bool = False,
+        session_id: int | None = None,
+        zero: bool = False,
+    ):
         self.program = program
         self.session_id = session_id
         self.zero = zero
@@ -210,9 +216,15 @@ class Link(HandshakeHandlers, StreamingHandlers, StoppingHandlers):
         status = st.status
         executed = status.executed_periods if status else 0
         line = int(self.program.line[min(executed, n - 1)]) if n else 0
-        return Progress(n, self.sent_periods, min(st.base * self.per_frame, n), executed,
-                        status.fill_periods if status else 0,
-                        st.caps.buffer_periods if st.caps else 0, line)  # fmt: skip
+        return Progress(
+            n,
+            self.sent_periods,
+            min(st.base * self.per_frame, n),
+            executed,
+            status.fill_periods if status else 0,
+            st.caps.buffer_periods if st.caps else 0,
+            line,
+        )
 
     @property
     def sent_periods(self) -> int:
@@ -234,12 +246,16 @@ class Link(HandshakeHandlers, StreamingHandlers, StoppingHandlers):
         old = self.program
         if self.end_framed:
             raise StreamError("the stream's end has been sent already: nothing to replace")
-        if (program.periods < k or not np.array_equal(program.start_steps, old.start_steps)
-                or not np.array_equal(program.pulses[:k], old.pulses[:k])):  # fmt: skip
+        if (
+            program.periods < k
+            or not np.array_equal(program.start_steps, old.start_steps)
+            or not np.array_equal(program.pulses[:k], old.pulses[:k])
+        ):
             raise StreamError("the replacement does not continue the periods already sent")
         axes = len(program.start_steps)
         if program.periods and self.per_frame > p.max_batch_periods(
-                axes, p.pulse_width_bytes(program.peak_pulses)):  # fmt: skip
+            axes, p.pulse_width_bytes(program.peak_pulses)
+        ):
             raise StreamError("the replacement needs wider pulse counts than the frames have")
         self.program = program
         if self.state.phase is not Phase.HANDSHAKE:
@@ -258,8 +274,9 @@ class Link(HandshakeHandlers, StreamingHandlers, StoppingHandlers):
     def _send(self, msg, record: InFlight | None = None) -> None:
         if record is not None:
             record.queued = True
-        self._outbox.append(Outgoing(p.encode_message(msg) if record is None else record.data,
-                                     record))  # fmt: skip
+        self._outbox.append(
+            Outgoing(p.encode_message(msg) if record is None else record.data, record)
+        )
 
     def _resend_oldest(self, now: float) -> None:
         st = self.state
@@ -293,7 +310,10 @@ class Link(HandshakeHandlers, StreamingHandlers, StoppingHandlers):
             st.alarm = msg
             self._stop(StreamError(f"card alarm {alarm_name(msg.code)}: {msg.text}"), now)
         elif isinstance(msg, p.Caps) and msg.session_id != st.caps.session_id:
-            self._stop(StreamError(
-                f"the card reset during the stream (session {st.caps.session_id:08x} → "
-                f"{msg.session_id:08x}): its buffer and position are lost; not resuming"),
-                now)  # fmt: skip
+            self._stop(
+                StreamError(
+                    f"the card reset during the stream (session {st.caps.session_id:08x} → "
+                    f"{msg.session_id:08x}): its buffer and position are lost; not resuming"
+                ),
+                now,
+            )

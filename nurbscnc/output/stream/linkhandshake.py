@@ -29,10 +29,14 @@ class HandshakeHandlers:
             st.hellos += 1
         if now - st.last_rx_s > self.options.timeout_s:
             # The card may have opened a stream on a HELLO whose CAPS was lost: abort it.
-            self._stop(StreamError(
-                f"lost communication with card: no answer to HELLO for "
-                f"{self.options.timeout_s:g} s (is it a card speaking protocol version "
-                f"{p.PROTOCOL_VERSION}?)"), now)  # fmt: skip
+            self._stop(
+                StreamError(
+                    f"lost communication with card: no answer to HELLO for "
+                    f"{self.options.timeout_s:g} s (is it a card speaking protocol version "
+                    f"{p.PROTOCOL_VERSION}?)"
+                ),
+                now,
+            )
 
     def _on_caps_in_handshake(self, caps: p.Caps, now: float) -> None:
         st = self.state
@@ -40,21 +44,27 @@ class HandshakeHandlers:
             self.rtt.sample(max(0.0, now - st.hello_leaves_s))
         st.caps = caps
         if self.session_id is not None and caps.session_id != self.session_id:
-            self._finish_error(StreamError(
-                f"the card reset between two parts of the program (session "
-                f"{self.session_id:08x} → {caps.session_id:08x}): its position is lost"))
-            return  # fmt: skip
+            self._finish_error(
+                StreamError(
+                    f"the card reset between two parts of the program (session "
+                    f"{self.session_id:08x} → {caps.session_id:08x}): its position is lost"
+                )
+            )
+            return
         start = tuple(int(v) for v in self.program.start_steps)
         try:
             check_caps(caps, self.program, position=not self.zero)
             lead = self.options.lead_periods
             if lead is not None and lead < caps.buffer_periods // 2:
-                raise StreamError(f"--lead {lead} is less than half the card's buffer of "
-                                  f"{caps.buffer_periods} periods: the card would wait for "
-                                  "periods the sender holds back")  # fmt: skip
+                raise StreamError(
+                    f"--lead {lead} is less than half the card's buffer of "
+                    f"{caps.buffer_periods} periods: the card would wait for "
+                    "periods the sender holds back"
+                )
             if self.zero and tuple(caps.position_steps) != start and caps.version < 3:
-                raise StreamError(f"--zero needs a card speaking protocol version 3; it "
-                                  f"speaks {caps.version}")  # fmt: skip
+                raise StreamError(
+                    f"--zero needs a card speaking protocol version 3; it speaks {caps.version}"
+                )
         except StreamError as exc:
             self._finish_error(exc)
             return
@@ -68,8 +78,9 @@ class HandshakeHandlers:
         st = self.state
         self.zero = False
         width = p.pulse_width_bytes(max(self.program.peak_pulses, self.peak_pulses))
-        self.per_frame = max(1, min(self.options.batch_periods,
-                                    p.max_batch_periods(st.caps.axes, width)))  # fmt: skip
+        self.per_frame = max(
+            1, min(self.options.batch_periods, p.max_batch_periods(st.caps.axes, width))
+        )
         self._layout()
         st.credit = self._credit(st.caps.buffer_periods)
         st.phase = Phase.STREAMING
@@ -80,7 +91,11 @@ class HandshakeHandlers:
         prog, k, axes = self.program, self.per_frame, len(self.program.start_steps)
         self.n_batches = -(-prog.periods // k)
         # Where each batch starts: the program's start plus every pulse before it [steps].
-        sums = (np.add.reduceat(prog.pulses, np.arange(0, prog.periods, k), axis=0)
-                if prog.periods else np.zeros((0, axes), dtype=np.int64))  # fmt: skip
+        sums = (
+            np.add.reduceat(prog.pulses, np.arange(0, prog.periods, k), axis=0)
+            if prog.periods
+            else np.zeros((0, axes), dtype=np.int64)
+        )
         self._batch_starts = prog.start_steps + np.vstack(
-            [np.zeros((1, axes), dtype=np.int64), np.cumsum(sums, axis=0)])
+            [np.zeros((1, axes), dtype=np.int64), np.cumsum(sums, axis=0)]
+        )

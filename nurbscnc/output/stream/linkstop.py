@@ -52,9 +52,11 @@ class StoppingHandlers:
 
     def _finish_unconfirmed(self) -> None:
         wait = f"{self.options.abort_wait_s:g} s"
-        self._finish_error(_with_suffix(self.state.error,
-                                        f"no confirmation of the abort from the card within "
-                                        f"{wait}"))  # fmt: skip
+        self._finish_error(
+            _with_suffix(
+                self.state.error, f"no confirmation of the abort from the card within {wait}"
+            )
+        )
 
     def _finish_done(self, now: float) -> bool:
         """The card says DONE: success if it ran the program's periods to its end position."""
@@ -63,20 +65,32 @@ class StoppingHandlers:
         final = tuple(int(v) for v in status.position_steps)
         expected = tuple(int(v) for v in prog.end_steps)
         if final != expected or status.executed_periods != prog.periods:
-            self._finish_error(StreamError(
-                f"the card ended at {list(final)} steps after {status.executed_periods} "
-                f"periods; the program ends at {list(expected)} steps after {prog.periods}"))
-            return False  # fmt: skip
+            self._finish_error(
+                StreamError(
+                    f"the card ended at {list(final)} steps after {status.executed_periods} "
+                    f"periods; the program ends at {list(expected)} steps after {prog.periods}"
+                )
+            )
+            return False
         c = self.count
         st.report = StreamReport(
-            periods=prog.periods, frames_sent=c.frames_sent, bytes_sent=c.bytes_sent,
-            bytes_received=c.bytes_received, retransmits=c.retransmits, timeouts=c.timeouts,
-            naks_received=c.naks_received, crc_errors=c.crc_errors, polls=c.polls,
-            executed_periods=status.executed_periods, final_position_steps=final,
-            expected_position_steps=expected, max_in_flight_periods=c.max_in_flight,
-            buffer_periods=st.caps.buffer_periods, session_id=st.caps.session_id,
+            periods=prog.periods,
+            frames_sent=c.frames_sent,
+            bytes_sent=c.bytes_sent,
+            bytes_received=c.bytes_received,
+            retransmits=c.retransmits,
+            timeouts=c.timeouts,
+            naks_received=c.naks_received,
+            crc_errors=c.crc_errors,
+            polls=c.polls,
+            executed_periods=status.executed_periods,
+            final_position_steps=final,
+            expected_position_steps=expected,
+            max_in_flight_periods=c.max_in_flight,
+            buffer_periods=st.caps.buffer_periods,
+            session_id=st.caps.session_id,
             duration_s=now - st.started_s,
-        )  # fmt: skip
+        )
         st.error = None
         st.phase = Phase.FINISHED
         self._outbox.clear()
@@ -91,6 +105,9 @@ class StoppingHandlers:
 def _with_suffix(error: StreamError | None, text: str) -> StreamError:
     """The same kind of error, its message extended by ``text``."""
     error = error or StreamError("the stream failed")
-    out = type(error)(f"{error.message}, {text}" if isinstance(error, StreamInterrupted)
-                      else f"{error.message}; {text}")  # fmt: skip
+    out = type(error)(
+        f"{error.message}, {text}"
+        if isinstance(error, StreamInterrupted)
+        else f"{error.message}; {text}"
+    )
     return out

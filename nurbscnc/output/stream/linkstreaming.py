@@ -27,8 +27,11 @@ class StreamingHandlers:
             # No progress although the oldest frame should have arrived long ago: it was lost
             # (and so was its NAK, or no later frame raised one). A NAK resends anyway.
             oldest = st.window.get(st.base)
-            if (not isinstance(msg, p.Nak) and oldest is not None
-                    and now - oldest.leaves_s > self.rtt.stale_s):  # fmt: skip
+            if (
+                not isinstance(msg, p.Nak)
+                and oldest is not None
+                and now - oldest.leaves_s > self.rtt.stale_s
+            ):
                 self._fast_retransmit(now)
         else:
             newest = st.window[st.base + ahead - 1]
@@ -63,10 +66,13 @@ class StreamingHandlers:
             oldest.position_naks += 1
             if oldest.position_naks >= 2:  # two copies refused: not a damaged copy
                 what = "END" if oldest.seq >= self.n_batches else f"batch {oldest.seq + 1}"
-                self._stop(StreamError(
-                    f"the card refused {what} twice: it does not continue from where the "
-                    "card's accepted frames end (the card's position is not the program's)"),
-                    now)  # fmt: skip
+                self._stop(
+                    StreamError(
+                        f"the card refused {what} twice: it does not continue from where the "
+                        "card's accepted frames end (the card's position is not the program's)"
+                    ),
+                    now,
+                )
                 return
         self._fast_retransmit(now)
 
@@ -91,9 +97,13 @@ class StreamingHandlers:
         elif msg.state == p.CardState.ABORTED:
             self._stop(StreamError("the card aborted the stream"), now)
         elif msg.state == p.CardState.IDLE:
-            self._stop(StreamError("the card reset during the stream (it reports no open "
-                                   "stream): its buffer and position are lost; not resuming"),
-                       now)  # fmt: skip
+            self._stop(
+                StreamError(
+                    "the card reset during the stream (it reports no open "
+                    "stream): its buffer and position are lost; not resuming"
+                ),
+                now,
+            )
 
     def _correct_line_model(self, now: float, newest: InFlight) -> None:
         """Frame ``newest`` has arrived: at most the bytes written after it are still queued."""
@@ -103,8 +113,7 @@ class StreamingHandlers:
         for seq in range(newest.seq + 1, st.nxt):
             rec = st.window[seq]
             if rec.copies:
-                rec.leaves_s = min(rec.leaves_s,
-                                   now + max(0, rec.end_offset - done) * self.byte_s)  # fmt: skip
+                rec.leaves_s = min(rec.leaves_s, now + max(0, rec.end_offset - done) * self.byte_s)
 
     # -- streaming: timers -------------------------------------------------------------------
     def _fill_window(self, now: float) -> None:
@@ -166,9 +175,18 @@ class StreamingHandlers:
         although the card answers (a line too noisy to carry a frame)."""
         st, timeout = self.state, self.options.timeout_s
         if now - st.last_rx_s > timeout:
-            self._stop(StreamError(f"lost communication with card: no answer {what} for "
-                                   f"{timeout:g} s"), now)  # fmt: skip
-        elif st.base < st.nxt and now - max(st.last_progress_s,
-                                            st.window[st.base].written_s) > timeout:
-            self._stop(StreamError(f"the card acknowledged no frame for {timeout:g} s though it "
-                                   "answers: the line is too noisy"), now)  # fmt: skip
+            self._stop(
+                StreamError(f"lost communication with card: no answer {what} for {timeout:g} s"),
+                now,
+            )
+        elif (
+            st.base < st.nxt
+            and now - max(st.last_progress_s, st.window[st.base].written_s) > timeout
+        ):
+            self._stop(
+                StreamError(
+                    f"the card acknowledged no frame for {timeout:g} s though it "
+                    "answers: the line is too noisy"
+                ),
+                now,
+            )

@@ -86,8 +86,9 @@ class Rate:
             return np.zeros(u.shape)
         x = self._x(u)
         inside = (x > 0.0) & (x < 1.0)
-        return np.where(inside, (self.r1 - self.r0) / self.d_s**2 * 60.0 * x * (1.0 - x)
-                        * (1.0 - 2.0 * x), 0.0)  # fmt: skip
+        return np.where(
+            inside, (self.r1 - self.r0) / self.d_s**2 * 60.0 * x * (1.0 - x) * (1.0 - 2.0 * x), 0.0
+        )
 
     def integral(self, u) -> np.ndarray:
         """F(u) = ∫₀ᵘ r du [s of profile time]."""
@@ -168,8 +169,9 @@ def plan_motion(plan) -> Motion:
     return Motion(plan.pieces, plan.profile.piece_start_mm, plan.profile, 0, 0.0, at, d)
 
 
-def resume_motion(plan, s_mm: float, wait_s: float = 0.0,
-                  lookahead_pieces: int | None = None) -> Motion | None:  # fmt: skip
+def resume_motion(
+    plan, s_mm: float, wait_s: float = 0.0, lookahead_pieces: int | None = None
+) -> Motion | None:
     """The rest of ``plan`` from global path length ``s_mm``, planned from rest (SPEC §7: the
     planner's own :func:`~nurbscnc.plan.plans.profile_over` over the remaining pieces,
     with the plan's final caps and per-piece limits); None when nothing is left to move."""
@@ -188,8 +190,13 @@ def resume_motion(plan, s_mm: float, wait_s: float = 0.0,
     # dynamics check's shaping and the axes' limits still hold), from rest at s_mm.
     smooth = junction_caps(pieces)[i0:].copy()  # > 0 where the path is tangent-continuous
     smooth[0] = 0.0
-    profile = profile_over(left, np.asarray(plan.caps_mm_s, dtype=float)[i0:], smooth,
-                           plan.limits.tail(i0), lookahead_pieces)  # fmt: skip
+    profile = profile_over(
+        left,
+        np.asarray(plan.caps_mm_s, dtype=float)[i0:],
+        smooth,
+        plan.limits.tail(i0),
+        lookahead_pieces,
+    )
     at, d = dwell_times(pieces.dwell_after_s[i0:], profile)
     # The profile's s counts from s_mm; its piece i is the plan's piece i0 + i.
     return Motion(pieces, starts, profile, i0, float(s_mm), at, d, wait_s)
@@ -221,14 +228,27 @@ class Track:
         """This track's samples, then ``other``'s from its second (its first is this one's
         last: the same point); ``other``'s motion time counts on from this one's."""
         u0 = self.u_s[-1] if len(self) else 0.0
-        return Track(*(np.concatenate([getattr(self, f), getattr(other, f)[1:]
-                                       + (u0 if f == "u_s" else 0)])
-                       for f in self.__dataclass_fields__))  # fmt: skip
+        return Track(
+            *(
+                np.concatenate(
+                    [getattr(self, f), getattr(other, f)[1:] + (u0 if f == "u_s" else 0)]
+                )
+                for f in self.__dataclass_fields__
+            )
+        )
 
 
-def play(motion: Motion, tau_a: float, tau_b: float, rate: Rate, period_s: float,
-         wait_s: float = 0.0, dwell_at_start: bool = False, u0: float = 0.0,
-         max_samples: int | None = None) -> tuple[Track, bool]:  # fmt: skip
+def play(
+    motion: Motion,
+    tau_a: float,
+    tau_b: float,
+    rate: Rate,
+    period_s: float,
+    wait_s: float = 0.0,
+    dwell_at_start: bool = False,
+    u0: float = 0.0,
+    max_samples: int | None = None,
+) -> tuple[Track, bool]:
     """Servo periods from profile time ``tau_a`` (sample 0) until the motion reaches
     ``tau_b`` at rest (the last sample, clamped there) at the override ``rate``, whose motion
     time is ``u0`` at sample 0. ``wait_s``: a dwell at the start; dwells inside
@@ -260,23 +280,34 @@ def play(motion: Motion, tau_a: float, tau_b: float, rate: Rate, period_s: float
     s, v, a, j, piece = motion.state(tau)
     r, dr, ddr = rate.r(u0 + u), rate.dr(u0 + u), rate.ddr(u0 + u)
     # Inside a dwell the motion stands: s', s'', s''' are 0 there anyway.
-    track = Track(tau, u, s, v * r, a * r * r + v * dr, j * r**3 + 3.0 * a * r * dr + v * ddr,
-                  piece, motion.points(s, piece))  # fmt: skip
+    track = Track(
+        tau,
+        u,
+        s,
+        v * r,
+        a * r * r + v * dr,
+        j * r**3 + 3.0 * a * r * dr + v * ddr,
+        piece,
+        motion.points(s, piece),
+    )
     return track, complete
 
 
 def ramp_fits(track: Track, a_max: float, j_max: float) -> bool:
     """Every sample within |a| ≤ A and |j| ≤ J (the closed forms of the module docstring)."""
-    return bool(np.all(np.abs(track.a_mm_s2) <= a_max * (1 + LIMIT_SLACK) + 1e-9)
-                and np.all(np.abs(track.j_mm_s3) <= j_max * (1 + LIMIT_SLACK) + 1e-9))  # fmt: skip
+    return bool(
+        np.all(np.abs(track.a_mm_s2) <= a_max * (1 + LIMIT_SLACK) + 1e-9)
+        and np.all(np.abs(track.j_mm_s3) <= j_max * (1 + LIMIT_SLACK) + 1e-9)
+    )
 
 
 def ramp_duration_s(delta_r: float, v_max: float, a_max: float, j_max: float) -> float:
     """The shortest quintic ramp of ``delta_r`` whose own terms fit the limits at cruise:
     v·|ṙ| ≤ A with max |ṙ| = 1.875·|Δr|/D, and v·|r̈| ≤ J with max |r̈| = (10/√3)·|Δr|/D²."""
     dr = abs(delta_r)
-    return max(1.875 * dr * v_max / a_max, math.sqrt(10.0 / math.sqrt(3.0) * dr * v_max / j_max),
-               1e-3)  # fmt: skip
+    return max(
+        1.875 * dr * v_max / a_max, math.sqrt(10.0 / math.sqrt(3.0) * dr * v_max / j_max), 1e-3
+    )
 
 
 # -- stopping ------------------------------------------------------------------------------------
@@ -333,8 +364,15 @@ def phase_states(s0: float, v0: float, a0: float, phases, t_s: np.ndarray):
     return s, np.maximum(v, 0.0), a, ja
 
 
-def stop_track(motion: Motion, track: Track, k: int, a_max: float, j_max: float,
-               period_s: float, s_limit_mm: float) -> Track:  # fmt: skip
+def stop_track(
+    motion: Motion,
+    track: Track,
+    k: int,
+    a_max: float,
+    j_max: float,
+    period_s: float,
+    s_limit_mm: float,
+) -> Track:
     """The shortest jerk-limited stop along the path from sample ``k`` of ``track`` (its
     first sample is sample ``k``), held at most at ``s_limit_mm`` (the next stop)."""
     phases = stop_phases(float(track.v_mm_s[k]), float(track.a_mm_s2[k]), a_max, j_max)
@@ -342,8 +380,9 @@ def stop_track(motion: Motion, track: Track, k: int, a_max: float, j_max: float,
     n = int(math.ceil(total / period_s - 1e-9)) + 1
     t = np.arange(n) * period_s
     t[-1] = max(total, 0.0) if n > 1 else 0.0
-    s, v, a, j = phase_states(float(track.s_mm[k]), float(track.v_mm_s[k]),
-                              float(track.a_mm_s2[k]), phases, t)  # fmt: skip
+    s, v, a, j = phase_states(
+        float(track.s_mm[k]), float(track.v_mm_s[k]), float(track.a_mm_s2[k]), phases, t
+    )
     s = np.minimum(s, s_limit_mm)
     s[-1] = min(s[-1], s_limit_mm)
     v[-1] = a[-1] = 0.0

@@ -205,8 +205,12 @@ class FrameDecoder:
     def expire(self, now: float) -> list[Frame | BadFrame]:
         """Abandon an incomplete frame whose bytes stopped arriving ``gap_s`` before ``now``."""
         out: list[Frame | BadFrame] = []
-        if (self.gap_s is not None and self._buf and self._last_s is not None
-                and now - self._last_s >= self.gap_s):  # fmt: skip
+        if (
+            self.gap_s is not None
+            and self._buf
+            and self._last_s is not None
+            and now - self._last_s >= self.gap_s
+        ):
             self._scan(out, final=True)
         return out
 
@@ -307,8 +311,11 @@ class Batch:
     start_steps: tuple[int, ...]
 
     def __eq__(self, other) -> bool:
-        return (isinstance(other, Batch) and np.array_equal(self.pulses, other.pulses)
-                and tuple(self.start_steps) == tuple(other.start_steps))  # fmt: skip
+        return (
+            isinstance(other, Batch)
+            and np.array_equal(self.pulses, other.pulses)
+            and tuple(self.start_steps) == tuple(other.start_steps)
+        )
 
     __hash__ = None  # type: ignore[assignment]
 
@@ -388,12 +395,27 @@ class Alarm:
 
 
 Message = (
-    Hello | Caps | Batch | End | StatusRequest | Hold | Resume | Abort | SetPosition | Ack | Nak
-    | Status | Alarm
+    Hello
+    | Caps
+    | Batch
+    | End
+    | StatusRequest
+    | Hold
+    | Resume
+    | Abort
+    | SetPosition
+    | Ack
+    | Nak
+    | Status
+    | Alarm
 )
 
-_EMPTY = {MsgType.STATUS_REQUEST: StatusRequest, MsgType.HOLD: Hold, MsgType.RESUME: Resume,
-          MsgType.ABORT: Abort}  # fmt: skip
+_EMPTY = {
+    MsgType.STATUS_REQUEST: StatusRequest,
+    MsgType.HOLD: Hold,
+    MsgType.RESUME: Resume,
+    MsgType.ABORT: Abort,
+}
 _EMPTY_TYPES = {cls: t for t, cls in _EMPTY.items()}
 _CAPS = struct.Struct("<BBHHIIB")
 _ACK = struct.Struct("<HH")
@@ -442,8 +464,9 @@ def encode_message(msg: Message, seq: int = 0) -> bytes:
     if isinstance(msg, Batch):
         return encode_frame(MsgType.BATCH, _batch_payload(msg.pulses, msg.start_steps), seq)
     if isinstance(msg, End):
-        return encode_frame(MsgType.END, _END.pack(msg.periods) +
-                            _pack_position(msg.position_steps), seq)  # fmt: skip
+        return encode_frame(
+            MsgType.END, _END.pack(msg.periods) + _pack_position(msg.position_steps), seq
+        )
     if isinstance(msg, Hello):
         return encode_frame(MsgType.HELLO, bytes((msg.version,)))
     if isinstance(msg, SetPosition):
@@ -451,8 +474,15 @@ def encode_message(msg: Message, seq: int = 0) -> bytes:
     if type(msg) in _EMPTY_TYPES:
         return encode_frame(_EMPTY_TYPES[type(msg)])
     if isinstance(msg, Caps):
-        head = _CAPS.pack(msg.version, msg.axes, msg.max_pulses_per_period, msg.buffer_periods,
-                          msg.period_us, msg.session_id, msg.state)  # fmt: skip
+        head = _CAPS.pack(
+            msg.version,
+            msg.axes,
+            msg.max_pulses_per_period,
+            msg.buffer_periods,
+            msg.period_us,
+            msg.session_id,
+            msg.state,
+        )
         return encode_frame(MsgType.CAPS, head + _pack_position(msg.position_steps))
     if isinstance(msg, Ack):
         return encode_frame(MsgType.ACK, _ACK.pack(msg.next_seq % SEQ_MODULO, msg.free_periods))
@@ -461,8 +491,14 @@ def encode_message(msg: Message, seq: int = 0) -> bytes:
             MsgType.NAK, _NAK.pack(msg.next_seq % SEQ_MODULO, msg.free_periods, msg.reason)
         )
     if isinstance(msg, Status):
-        head = _STATUS.pack(msg.state, msg.alarm, msg.next_seq % SEQ_MODULO, msg.free_periods,
-                            msg.fill_periods, msg.executed_periods)  # fmt: skip
+        head = _STATUS.pack(
+            msg.state,
+            msg.alarm,
+            msg.next_seq % SEQ_MODULO,
+            msg.free_periods,
+            msg.fill_periods,
+            msg.executed_periods,
+        )
         return encode_frame(MsgType.STATUS, head + _pack_position(msg.position_steps))
     if isinstance(msg, Alarm):
         text = msg.text.encode("utf-8")[: MAX_PAYLOAD_BYTES - 1]
@@ -479,8 +515,11 @@ def _batch_payload(pulses, start_steps) -> bytes:
     if len(start_steps) != p.shape[1]:
         raise ValueError(f"a batch of {p.shape[1]} axes needs {p.shape[1]} start positions")
     width = pulse_width_bytes(int(np.abs(p).max()))
-    return (bytes((p.shape[1] | ((width - 1) << 4),)) + _pack_position(start_steps)
-            + p.astype(_WIDTH_DTYPES[width]).tobytes())  # fmt: skip
+    return (
+        bytes((p.shape[1] | ((width - 1) << 4),))
+        + _pack_position(start_steps)
+        + p.astype(_WIDTH_DTYPES[width]).tobytes()
+    )
 
 
 def decode_message(frame: Frame) -> Message:
@@ -534,7 +573,8 @@ def _batch(data: bytes) -> Batch:
     start = _unpack_position(data[1 : 1 + 4 * axes], "BATCH")
     body = data[1 + 4 * axes :]
     if len(start) != axes or not body or len(body) % (axes * width):
-        raise ProtocolError(f"BATCH of {len(data)} bytes is not a start position and whole "
-                            f"periods of {axes} axes")  # fmt: skip
+        raise ProtocolError(
+            f"BATCH of {len(data)} bytes is not a start position and whole periods of {axes} axes"
+        )
     pulses = np.frombuffer(body, dtype=_WIDTH_DTYPES[width]).astype(np.int64).reshape(-1, axes)
     return Batch(pulses, start)

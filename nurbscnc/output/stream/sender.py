@@ -28,15 +28,27 @@ from nurbscnc.output.stream.linkstate import (
 )
 from nurbscnc.output.stream.quantise import PulseProgram
 
-__all__ = ["Sender", "SenderOptions", "StreamInterrupted", "StreamReport", "Progress",
-           "open_port", "URL_SCHEMES"]  # fmt: skip
+__all__ = [
+    "Sender",
+    "SenderOptions",
+    "StreamInterrupted",
+    "StreamReport",
+    "Progress",
+    "open_port",
+    "URL_SCHEMES",
+]
 
 #: URL schemes accepted with ``--allow-url`` (pyserial URL handlers; both unauthenticated).
 URL_SCHEMES = ("socket", "rfc2217")
 
 
-def open_port(port: str, baud: int = 115200, allow_url: bool = False,
-              write_timeout_s: float = 2.0, read_wait_s: float = 0.001):  # fmt: skip
+def open_port(
+    port: str,
+    baud: int = 115200,
+    allow_url: bool = False,
+    write_timeout_s: float = 2.0,
+    read_wait_s: float = 0.001,
+):
     """Open ``port`` exclusively: a device path, or a pyserial URL only with ``allow_url``.
 
     URLs (``socket://``, ``rfc2217://``) reach a card over the network without any
@@ -52,12 +64,20 @@ def open_port(port: str, baud: int = 115200, allow_url: bool = False,
                     "give --allow-url to use one (or a device path such as /dev/ttyUSB0)"
                 )
             if scheme not in URL_SCHEMES:
-                raise ConfigError(f"--port: URL scheme {scheme!r} is not one of "
-                                  f"{', '.join(s + '://' for s in URL_SCHEMES)}")  # fmt: skip
-            return serial.serial_for_url(port, baudrate=baud, timeout=read_wait_s,
-                                         write_timeout=write_timeout_s)  # fmt: skip
-        return serial.Serial(port=port, baudrate=baud, timeout=read_wait_s,
-                             write_timeout=write_timeout_s, exclusive=True)  # fmt: skip
+                raise ConfigError(
+                    f"--port: URL scheme {scheme!r} is not one of "
+                    f"{', '.join(s + '://' for s in URL_SCHEMES)}"
+                )
+            return serial.serial_for_url(
+                port, baudrate=baud, timeout=read_wait_s, write_timeout=write_timeout_s
+            )
+        return serial.Serial(
+            port=port,
+            baudrate=baud,
+            timeout=read_wait_s,
+            write_timeout=write_timeout_s,
+            exclusive=True,
+        )
     except serial.SerialException as exc:
         text = str(exc)
         if "exclusively lock" in text:
@@ -75,9 +95,14 @@ class Sender:
     ``clock`` is the time source [s] (monotonic).
     """
 
-    def __init__(self, port, options: SenderOptions | None = None,
-                 progress: Callable[[Progress], None] | None = None,
-                 _ignore_credit: bool = False, clock: Callable[[], float] = time.monotonic):
+    def __init__(
+        self,
+        port,
+        options: SenderOptions | None = None,
+        progress: Callable[[Progress], None] | None = None,
+        _ignore_credit: bool = False,
+        clock: Callable[[], float] = time.monotonic,
+    ):
         self.port = port
         self.options = options or SenderOptions()
         self.progress = progress
@@ -89,8 +114,9 @@ class Sender:
         self.job = None
         # The line model needs a real line: a device's baud rate (or link_baud). A URL port
         # (a TCP socket) has no baud rate, so it is modelled as instantaneous.
-        baud = self.options.link_baud or (port.baudrate if isinstance(port, serial.Serial)
-                                          else None)  # fmt: skip
+        baud = self.options.link_baud or (
+            port.baudrate if isinstance(port, serial.Serial) else None
+        )
         self.byte_s = p.BITS_PER_BYTE_8N1 / float(baud) if baud else 0.0
 
     # -- requests (safe to call from a signal handler or another thread) ----------------------
@@ -126,8 +152,9 @@ class Sender:
         Raises StreamInterrupted (exit 130) after :meth:`request_abort`, StreamError when the
         stream failed (the card was sent ABORT until it confirmed, or for a bounded time).
         """
-        link = Link(program, self.options, self.byte_s, ignore_credit=self._ignore_credit,
-                    zero=zero)  # fmt: skip
+        link = Link(
+            program, self.options, self.byte_s, ignore_credit=self._ignore_credit, zero=zero
+        )
         for what in self._requests:
             getattr(link, f"request_{what}")()
         self._requests.clear()
@@ -156,8 +183,11 @@ class Sender:
             link.on_time(now)
             if hook is not None:
                 hook(link)
-            if self.progress is not None and now - last_progress > 0.1 and \
-                    link.state.caps is not None:  # fmt: skip
+            if (
+                self.progress is not None
+                and now - last_progress > 0.1
+                and link.state.caps is not None
+            ):
                 last_progress = now
                 self._report_progress(link.progress())
         return link.result()
@@ -165,9 +195,12 @@ class Sender:
     def _report_progress(self, pr: Progress) -> None:
         job = self.job
         if job is not None:
-            pr = dataclasses.replace(pr, executed=job.executed_before + pr.executed,
-                                     periods=job.executed_before + pr.periods,
-                                     note=job.note())  # fmt: skip
+            pr = dataclasses.replace(
+                pr,
+                executed=job.executed_before + pr.executed,
+                periods=job.executed_before + pr.periods,
+                note=job.note(),
+            )
         self.progress(pr)
 
     # -- a job: sections, program stops, feed hold and override ------------------------------
@@ -189,8 +222,14 @@ class Sender:
                     break
                 self._wait(job, idle_s, reports)
                 continue
-            link = Link(program, self.options, self.byte_s, ignore_credit=self._ignore_credit,
-                        session_id=session, zero=zero and not reports)  # fmt: skip
+            link = Link(
+                program,
+                self.options,
+                self.byte_s,
+                ignore_credit=self._ignore_credit,
+                session_id=session,
+                zero=zero and not reports,
+            )
             link.peak_pulses = job.peak_pulses
             link.program_open = job.section_open
             if self._abort:
@@ -221,8 +260,11 @@ class Sender:
                 if job.waiting is None:
                     break
             if self._abort:
-                where = (f"; the card stands at {list(reports[-1].final_position_steps)} steps"
-                         if reports else "")  # fmt: skip
+                where = (
+                    f"; the card stands at {list(reports[-1].final_position_steps)} steps"
+                    if reports
+                    else ""
+                )
                 raise StreamInterrupted(f"interrupted while waiting ({job.waiting}){where}")
             now = self._clock()
             if self.progress is not None and now - last > 0.1:
@@ -282,11 +324,17 @@ def card_position(port, set_to=None, timeout_s: float = 2.0, retry_s: float = 0.
             except p.ProtocolError:
                 continue
             if isinstance(reply, p.Nak) and set_to is not None:
-                raise StreamError("the card refused the new position: a stream is open on it "
-                                  "(FILLING, RUNNING or HOLD), or it has another axis count")
-            if isinstance(reply, p.Status) and (set_to is None or tuple(reply.position_steps)
-                                                == tuple(msg.position_steps)):  # fmt: skip
+                raise StreamError(
+                    "the card refused the new position: a stream is open on it "
+                    "(FILLING, RUNNING or HOLD), or it has another axis count"
+                )
+            if isinstance(reply, p.Status) and (
+                set_to is None or tuple(reply.position_steps) == tuple(msg.position_steps)
+            ):
                 return reply
-    what = "SET_POSITION (does the card speak protocol version 3?)" if set_to is not None \
-        else "STATUS_REQUEST"  # fmt: skip
+    what = (
+        "SET_POSITION (does the card speak protocol version 3?)"
+        if set_to is not None
+        else "STATUS_REQUEST"
+    )
     raise StreamError(f"lost communication with card: no answer to {what} for {timeout_s:g} s")

@@ -74,8 +74,9 @@ class _Line:
         self.down, self.up = Wire(baud), Wire(baud)
         self.now_s = 0.0  #: the virtual time of the turn being driven
 
-    def drive(self, link: Link, t: float, limit: float, pending: list, run_event,
-              hook=None) -> float:  # fmt: skip
+    def drive(
+        self, link: Link, t: float, limit: float, pending: list, run_event, hook=None
+    ) -> float:
         """Run ``link`` from virtual time ``t`` until it finishes (or ``limit``): events
         from ``pending`` when their time comes (``run_event(event)``), ``hook(link)`` after
         every turn. Returns the time it ended."""
@@ -105,8 +106,13 @@ class _Line:
                 down.push(self.to_card(frame), t)
             if link.finished:
                 break
-            wake = [link.next_wakeup_s(t), card.next_event_s(), down.done_s(), up.done_s(),
-                    pending[0][0] if pending else None]  # fmt: skip
+            wake = [
+                link.next_wakeup_s(t),
+                card.next_event_s(),
+                down.done_s(),
+                up.done_s(),
+                pending[0][0] if pending else None,
+            ]
             t_next = min(w for w in wake if w is not None)
             # Instantaneous lines deliver at the same time: a few turns at one time, then on.
             same_time = same_time + 1 if t_next <= t else 0
@@ -132,8 +138,9 @@ class SimResult:
 
     def exact(self, program: PulseProgram) -> bool:
         """The card executed exactly the program's pulses and is DONE."""
-        return (self.card.state is p.CardState.DONE
-                and np.array_equal(self.card.executed_pulses(), program.pulses))  # fmt: skip
+        return self.card.state is p.CardState.DONE and np.array_equal(
+            self.card.executed_pulses(), program.pulses
+        )
 
     def stopped_cleanly(self, program: PulseProgram) -> bool:
         """The card does not move (any more), and what it executed is a prefix of the program.
@@ -143,18 +150,24 @@ class SimResult:
         or HOLD card executes nothing.
         """
         ran = self.card.executed_pulses()
-        return (self.card.state is not p.CardState.RUNNING
-                and np.array_equal(ran, program.pulses[: len(ran)]))  # fmt: skip
+        return self.card.state is not p.CardState.RUNNING and np.array_equal(
+            ran, program.pulses[: len(ran)]
+        )
 
 
 def simulate(  # noqa: PLR0913 - a test harness with everything optional
-             program: PulseProgram, config: CardConfig | None = None, *,
-             options: SenderOptions | None = None,
-             to_card: Callable[[bytes], bytes] | None = None,
-             to_host: Callable[[bytes], bytes] | None = None,
-             baud: int | None = 115200, seed: int = 1,
-             events: Sequence[tuple[float, Callable[[Link, CardSim], None]]] = (),
-             max_time_s: float | None = None, ignore_credit: bool = False) -> SimResult:
+    program: PulseProgram,
+    config: CardConfig | None = None,
+    *,
+    options: SenderOptions | None = None,
+    to_card: Callable[[bytes], bytes] | None = None,
+    to_host: Callable[[bytes], bytes] | None = None,
+    baud: int | None = 115200,
+    seed: int = 1,
+    events: Sequence[tuple[float, Callable[[Link, CardSim], None]]] = (),
+    max_time_s: float | None = None,
+    ignore_credit: bool = False,
+) -> SimResult:
     """Stream ``program`` to a simulated card over a simulated line; see the module docstring.
 
     ``events``: (time [s], action(link, card)) pairs run when virtual time reaches them (an
@@ -175,8 +188,9 @@ def simulate(  # noqa: PLR0913 - a test harness with everything optional
     cfg = card.config
     card.advance(t + cfg.buffer_periods * cfg.period_s / (cfg.speed or 1.0) + 0.05)
     if not link.finished:
-        return SimResult(None, StreamError(f"simulation did not finish in {limit:g} s"), card,
-                         link, t, at_end)  # fmt: skip
+        return SimResult(
+            None, StreamError(f"simulation did not finish in {limit:g} s"), card, link, t, at_end
+        )
     try:
         return SimResult(link.result(), None, card, link, t, at_end)
     except StreamError as exc:
@@ -196,13 +210,24 @@ class JobSimResult:
 
     @property
     def completed(self) -> bool:
-        return self.error is None and bool(self.reports) and not (
-            self.waits and self.waits[-1][1] is None)  # fmt: skip
+        return (
+            self.error is None
+            and bool(self.reports)
+            and not (self.waits and self.waits[-1][1] is None)
+        )
 
 
-def simulate_job(job, config: CardConfig | None = None, *, options: SenderOptions | None = None,
-                 baud: int | None = 115200, seed: int = 1, events=(),
-                 max_time_s: float = 600.0, zero: bool = False) -> JobSimResult:  # fmt: skip
+def simulate_job(
+    job,
+    config: CardConfig | None = None,
+    *,
+    options: SenderOptions | None = None,
+    baud: int | None = 115200,
+    seed: int = 1,
+    events=(),
+    max_time_s: float = 600.0,
+    zero: bool = False,
+) -> JobSimResult:
     """Stream a :class:`~.job.Job` to a simulated card in virtual time, section by section.
 
     ``events``: (time [s], action(job, card)) pairs — the operator's hold, resume, override.
