@@ -62,7 +62,8 @@ class BlockExecutor:
             if body[:4].upper() == "MSG,":
                 self.notes.append(Note(self.main_line(), f"message: {body[4:].strip()}"))
         words, gcodes, mcodes = self.read_words(block)
-        self.assign(block)
+        if block.assigns:
+            self.assign(block)
         if words or gcodes or mcodes:
             self.execute(words, gcodes, mcodes)
 
