@@ -4,6 +4,9 @@ mixin of the interpreter)."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import NamedTuple
+
 from nurbscnc.errors import UnsupportedError
 from nurbscnc.geometry.segments import Note, Pause
 from nurbscnc.program.codes import (
@@ -15,13 +18,27 @@ from nurbscnc.program.codes import (
     G_80,
     G_GROUP,
     G_REFUSED,
+    GM_CONTROL_MODE,
+    GM_COORD_SYSTEM,
+    GM_CUTTER_COMP,
+    GM_DISTANCE,
+    GM_FEED_MODE,
+    GM_IJK_DISTANCE,
     GM_MOTION,
+    GM_NONMODAL,
+    GM_PLANE,
+    GM_RETURN_MODE,
+    GM_TOOL_LENGTH,
+    GM_UNITS,
     M_2,
     M_19,
     M_30,
     M_98,
     M_99,
     M_GROUP,
+    MM_IO,
+    MM_MODAL_STATE,
+    MM_OVERRIDE,
     MM_SPINDLE,
     MM_STOP,
     MM_TOOL_CHANGE,
@@ -45,7 +62,8 @@ class BlockExecutor:
             if body[:4].upper() == "MSG,":
                 self.notes.append(Note(self.main_line(), f"message: {body[4:].strip()}"))
         words, gcodes, mcodes = self.read_words(block)
-        self.assign(block)
+        if block.assigns:
+            self.assign(block)
         if words or gcodes or mcodes:
             self.execute(words, gcodes, mcodes)
 
@@ -133,36 +151,40 @@ class BlockExecutor:
     # -- execution in RS274/NGC order ---------------------------------------------------------
     def execute(self, words: dict, gcodes: dict, mcodes: dict) -> None:
         """One block, in LinuxCNC's order (interp_execute.cc, execute_block): the steps of
-        :data:`BEFORE_MOTION`, the group-0 codes, the motion, the check that every word was
-        used, then the program stops."""
+        :data:`BEFORE_MOTION` the block calls for, the group-0 codes, the motion, the check
+        that every word was used, then the program stops."""
         used: set = set()
-        if self.plain_move(words, gcodes, mcodes, used):
+        if (not mcodes and len(gcodes) <= (GM_MOTION in gcodes)
+                and _PLAIN_WORDS.issuperset(words)
+                and self.plain_move(words, gcodes, mcodes, used)):  # fmt: skip
             return
-        for step in BEFORE_MOTION:
+        for step in STEPS.select(words, gcodes, mcodes):
             step(self, words, gcodes, mcodes, used)
-        moved_by_nonmodal = self.nonmodal(gcodes, words, used)
+        moved_by_nonmodal = GM_NONMODAL in gcodes and self.nonmodal(gcodes, words, used)
         self.motion_block(gcodes, words, used, moved_by_nonmodal)
         for letter, (_, col) in words.items():
             if letter not in used:
                 raise self.error(unused_word_message(letter), col)
-        if MM_TOOL_CHANGE in mcodes and self.comp_exit is not None:
-            self.refresh_position()
-        if MM_STOP in mcodes:
-            self.program_stop(words, mcodes[MM_STOP])
+        if mcodes:
+            if MM_TOOL_CHANGE in mcodes and self.comp_exit is not None:
+                self.refresh_position()
+            if MM_STOP in mcodes:
+                self.program_stop(words, mcodes[MM_STOP])
 
     def plain_move(self, words: dict, gcodes: dict, mcodes: dict, used: set) -> bool:
         """The fast path: most CAM lines are "G1 X.. Y.. F.." (the same effect as the full
-        order). True when the block was such a line and is done."""
-        if not mcodes and len(gcodes) <= (GM_MOTION in gcodes) and _PLAIN_WORDS.issuperset(words):
-            motion_code = gcodes.get(GM_MOTION)
-            motion = self.m.motion if motion_code is None else motion_code[0]
-            if (motion == G_0 or motion == G_1) and self.nurbs is None:
-                if "F" in words:
-                    self.set_feed(words, gcodes, mcodes, used)
-                self.m.motion = motion
-                if "X" in words or "Y" in words or "Z" in words:
-                    self.straight(words, False)
-                return True
+        order). ``execute`` asks only for blocks of X, Y, Z and F words with no code but a
+        motion code; True when the block was such a line (G0 or G1 outside a NURBS block) and
+        is done."""
+        motion_code = gcodes.get(GM_MOTION)
+        motion = self.m.motion if motion_code is None else motion_code[0]
+        if (motion == G_0 or motion == G_1) and self.nurbs is None:
+            if "F" in words:
+                self.set_feed(words, gcodes, mcodes, used)
+            self.m.motion = motion
+            if "X" in words or "Y" in words or "Z" in words:
+                self.straight(words, False)
+            return True
         return False
 
     def orient_words(self, words: dict, gcodes: dict, mcodes: dict, used: set) -> None:
@@ -221,28 +243,86 @@ class BlockExecutor:
         self.segments.append(Pause(position, self.main_line(), f"M{code}"))
 
 
-#: Steps 2–20 of LinuxCNC's order of execution, before the group-0 codes and the motion:
-#: each ``step(interpreter, words, gcodes, mcodes, used)``.
+class Step(NamedTuple):
+    """One step of the order of execution, ``run(interpreter, words, gcodes, mcodes,
+    used)``, and what in a block calls for it: the modal groups of its G codes
+    (``g_groups``), of its M codes (``m_groups``) and its word letters (``letters``). A block
+    with none of them leaves the step nothing to do: it is not run."""
+
+    run: Callable
+    g_groups: tuple = ()
+    m_groups: tuple = ()
+    letters: str = ""
+
+
+class StepTable:
+    """The steps a block calls for, in their order: each G group, M group and word letter
+    maps to a bit mask of the steps it triggers (bit i: step i); the union of a block's
+    masks selects its steps, the tuple of each union made once."""
+
+    #: Unions remembered at most (a program has a handful; the bound keeps a generated one's
+    #: combinations from growing the memo without end).
+    MAX_MEMO = 4096
+
+    def __init__(self, steps: tuple):
+        self.steps = steps
+        self.g_mask: dict = {}
+        self.m_mask: dict = {}
+        self.letter_mask: dict = {}
+        for i, step in enumerate(steps):
+            for table, keys in ((self.g_mask, step.g_groups), (self.m_mask, step.m_groups),
+                                (self.letter_mask, step.letters)):  # fmt: skip
+                for key in keys:
+                    table[key] = table.get(key, 0) | 1 << i
+        self.memo: dict = {0: ()}
+
+    def select(self, words: dict, gcodes: dict, mcodes: dict) -> tuple:
+        """The ``run`` of each step the block calls for, in the order of :attr:`steps`."""
+        mask = 0
+        g_mask, letter_mask = self.g_mask, self.letter_mask
+        for group in gcodes:
+            mask |= g_mask.get(group, 0)
+        if mcodes:
+            m_mask = self.m_mask
+            for group in mcodes:
+                mask |= m_mask.get(group, 0)
+        for letter in words:
+            mask |= letter_mask.get(letter, 0)
+        runs = self.memo.get(mask)
+        if runs is None:
+            runs = tuple(step.run for i, step in enumerate(self.steps) if mask >> i & 1)
+            if len(self.memo) < self.MAX_MEMO:
+                self.memo[mask] = runs
+        return runs
+
+
+#: Steps 2–20 of LinuxCNC's order of execution, before the group-0 codes and the motion,
+#: each with the codes and words that call for it.
 BEFORE_MOTION = (
-    ModeSetters.set_feed_mode,  # G93, G94, G95
-    ModeSetters.set_feed,  # F
-    ModeSetters.set_units,  # G20, G21 (before S, T: neither depends on the units)
-    ModeSetters.set_spindle,  # S
-    ModeSetters.select_tool,  # T
-    ModeSetters.io_codes,  # M62–M68, M50–M53
-    ModeSetters.change_tool,  # M6, M61
-    ModeSetters.spindle_on_off,  # M3, M4, M5, M19
-    ModeSetters.save_restore_modes,  # M70–M73
-    BlockExecutor.orient_words,  # M19's words
-    ModeSetters.dwell,  # G4
-    ModeSetters.set_plane,  # G17, G18, G19
-    ModeSetters.set_cutter_comp,  # G40, G41, G42 (D)
-    ModeSetters.set_tool_offset,  # G43, G43.1, G49 (H)
-    ModeSetters.set_coord_system,  # G54–G59.3
-    ModeSetters.set_path_mode,  # G61, G61.1, G64
-    ModeSetters.set_distance_modes,  # G90, G91, G90.1, G91.1
-    ModeSetters.set_retract_mode,  # G98, G99
-    BlockExecutor.check_cycle_axes,  # A B C with a canned cycle
-    ModeSetters.check_rotary,  # A, B, C
-    BlockExecutor.call_words,  # M98's words
+    Step(ModeSetters.set_feed_mode, g_groups=(GM_FEED_MODE,)),  # G93, G94, G95
+    Step(ModeSetters.set_feed, letters="F"),
+    # G20, G21 (before S, T: neither depends on the units)
+    Step(ModeSetters.set_units, g_groups=(GM_UNITS,)),
+    Step(ModeSetters.set_spindle, letters="S"),
+    Step(ModeSetters.select_tool, letters="T"),
+    Step(ModeSetters.io_codes, m_groups=(MM_IO, MM_OVERRIDE)),  # M62–M68, M50–M53
+    Step(ModeSetters.change_tool, m_groups=(MM_TOOL_CHANGE,)),  # M6, M61
+    Step(ModeSetters.spindle_on_off, m_groups=(MM_SPINDLE,)),  # M3, M4, M5, M19
+    Step(ModeSetters.save_restore_modes, m_groups=(MM_MODAL_STATE,)),  # M70–M73
+    Step(BlockExecutor.orient_words, m_groups=(MM_SPINDLE,)),  # M19's words
+    Step(ModeSetters.dwell, g_groups=(GM_NONMODAL,)),  # G4
+    Step(ModeSetters.set_plane, g_groups=(GM_PLANE,)),  # G17, G18, G19
+    Step(ModeSetters.set_cutter_comp, g_groups=(GM_CUTTER_COMP,), letters="D"),  # G40–G42
+    Step(ModeSetters.set_tool_offset, g_groups=(GM_TOOL_LENGTH,), letters="H"),  # G43, G49
+    Step(ModeSetters.set_coord_system, g_groups=(GM_COORD_SYSTEM,)),  # G54–G59.3
+    Step(ModeSetters.set_path_mode, g_groups=(GM_CONTROL_MODE,)),  # G61, G61.1, G64
+    # G90, G91, G90.1, G91.1
+    Step(ModeSetters.set_distance_modes, g_groups=(GM_DISTANCE, GM_IJK_DISTANCE)),
+    Step(ModeSetters.set_retract_mode, g_groups=(GM_RETURN_MODE,)),  # G98, G99
+    Step(BlockExecutor.check_cycle_axes, letters="ABC"),  # A B C with a canned cycle
+    Step(ModeSetters.check_rotary, letters="ABC"),  # A, B, C
+    Step(BlockExecutor.call_words, m_groups=(MM_STOP,)),  # M98's words
 )
+
+#: :data:`BEFORE_MOTION` indexed by what calls for each step.
+STEPS = StepTable(BEFORE_MOTION)

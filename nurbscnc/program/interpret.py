@@ -95,6 +95,10 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines, Par
     One instance per call of :func:`interpret` (local state)."""
 
     def __init__(self, lines, options: InterpretOptions):
+        # At most 29 attributes: CPython 3.11 keeps an instance's attributes inline, with
+        # specialised fast attribute access, only while its class's shared keys hold fewer
+        # than 30 names; past them every ``self.x`` of the interpreter goes through a dict
+        # (several per cent slower on whole programs). State needed by one method stays local.
         self.options = options
         self.main = Source(lines, options.name)
         self.lines = lines
@@ -125,7 +129,6 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines, Par
         self.comp: CutterComp | None = None  # G41/G42 in force: the compensation stream
         self.comp_exit = None  # after G40: the compensated tool position [mm, machine]
         self.comp_plane = "XY"  # the plane of the compensation in force (XY or ZX)
-        self.percent_seen = False  # the main program opened with a % line
         tools = dict(options.tools or {})
         for number, length in (options.tool_lengths_mm or {}).items():
             tools.setdefault(int(number), Tool(int(number), (0.0, 0.0, float(length))))
@@ -200,6 +203,7 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines, Par
     def run(self) -> None:
         block_delete = self.options.block_delete
         fast = self.options.fast_lane
+        percent_seen = False  # the main program opened with a % line
         while not self.ended:
             frame = self.frames[-1]
             source = frame.source
@@ -212,8 +216,11 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines, Par
                 continue
             block = self.next_block(source, frame, pc)
             if block.percent:
-                if source is self.main and self.percent_line(pc):
-                    break
+                if source is self.main:
+                    if percent_seen:
+                        break  # the second % ends the tape
+                    self.opening_percent(pc)
+                    percent_seen = True
                 continue
             if block.delete and block_delete:
                 continue
@@ -261,20 +268,16 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines, Par
                 raise self.error(exc.message, exc.pos.column, type(exc)) from None
             raise
 
-    def percent_line(self, pc: int) -> bool:
-        """A % line of the main program: True when it ends the tape (the second %)."""
-        if self.percent_seen:
-            return True
-        # LinuxCNC (rs274ngc_pre.cc, open): only a % as the first non-blank line
-        # opens a tape; any other % line is a bad character (interp_read.cc).
+    def opening_percent(self, pc: int) -> None:
+        """The first % line of the main program: it opens a tape only as the program's first
+        non-blank line (LinuxCNC's rs274ngc_pre.cc, open); any other % line is a bad
+        character (interp_read.cc)."""
         if any(line.strip() for line in self.lines[:pc]):
             raise self.error(
                 "Bad character '%' used (a % line ends the program only when the "
                 "program's first line is a %)",
                 self.lines[pc].find("%") + 1,
             )
-        self.percent_seen = True
-        return False
 
     def over_budget(self, column: int = 1, moves: bool = False) -> None:
         """The error of a program past its budget of executed lines or of moves
