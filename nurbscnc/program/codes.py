@@ -165,8 +165,10 @@ CANNED_CYCLES = frozenset({G_73, G_74, G_81, G_82, G_83, G_84, G_85, G_86, G_87,
 
 #: Each executable or tracked G code's modal group.
 G_GROUP = {
-    **dict.fromkeys((G_4, G_10, G_28, G_28_1, G_30, G_30_1, G_52, G_53, G_92, G_92_1, G_92_2,
-                     G_92_3), GM_NONMODAL),
+    **dict.fromkeys(
+        (G_4, G_10, G_28, G_28_1, G_30, G_30_1, G_52, G_53, G_92, G_92_1, G_92_2, G_92_3),
+        GM_NONMODAL,
+    ),
     **dict.fromkeys((G_0, G_1, G_2, G_3, G_5, G_5_1, G_5_2, G_5_3, G_6_2, G_80), GM_MOTION),
     **dict.fromkeys(CANNED_CYCLES, GM_MOTION),
     **dict.fromkeys((G_17, G_18, G_19), GM_PLANE),
@@ -177,11 +179,10 @@ G_GROUP = {
     **dict.fromkeys((G_40, G_41, G_41_1, G_42, G_42_1), GM_CUTTER_COMP),
     **dict.fromkeys((G_43, G_43_1, G_49), GM_TOOL_LENGTH),
     **dict.fromkeys((G_98, G_99), GM_RETURN_MODE),
-    **dict.fromkeys((G_54, G_55, G_56, G_57, G_58, G_59, G_59_1, G_59_2, G_59_3),
-                    GM_COORD_SYSTEM),
+    **dict.fromkeys((G_54, G_55, G_56, G_57, G_58, G_59, G_59_1, G_59_2, G_59_3), GM_COORD_SYSTEM),
     **dict.fromkeys((G_61, G_61_1, G_64), GM_CONTROL_MODE),
     **dict.fromkeys((G_96, G_97), GM_SPINDLE_MODE),
-}  # fmt: skip
+}
 
 #: Each supported M code's modal group.
 M_GROUP = {
@@ -192,7 +193,7 @@ M_GROUP = {
     **dict.fromkeys((M_7, M_8, M_9), MM_COOLANT),
     **dict.fromkeys((M_48, M_49, M_50, M_51, M_52, M_53), MM_OVERRIDE),
     **dict.fromkeys((M_70, M_71, M_72, M_73), MM_MODAL_STATE),
-}  # fmt: skip
+}
 
 #: Valid RS274/NGC codes nurbscnc refuses (the error names them and why).
 G_REFUSED = {

@@ -66,8 +66,7 @@ def _kind_codes(segments) -> np.ndarray:
             raise TypeError(f"a {cls.__name__} segment has no kind")
         by_type[cls] = KINDS.index(kind) if isinstance(kind, str) else LINE
     code = np.fromiter(map(by_type.__getitem__, types), dtype=np.int8, count=n)
-    rapid = np.fromiter(map(getattr, segments, repeat("rapid"), repeat(False)), dtype=bool,
-                        count=n)  # fmt: skip
+    rapid = np.fromiter(map(getattr, segments, repeat("rapid"), repeat(False)), dtype=bool, count=n)
     code[rapid & (code == LINE)] = RAPID
     return code
 
@@ -82,6 +81,7 @@ def segment_columns(segments) -> SegmentColumns:
         ends_mm=_points(segments, "end_mm"),
         feeds_mm_s=np.fromiter(map(attrgetter("feed_mm_s"), segments), dtype=float, count=n),
         lines=np.fromiter(map(attrgetter("line"), segments), dtype=np.int64, count=n),
-        blends_mm=np.fromiter(map(getattr, segments, repeat("blend_mm"), repeat(0.0)),
-                              dtype=float, count=n),  # fmt: skip
+        blends_mm=np.fromiter(
+            map(getattr, segments, repeat("blend_mm"), repeat(0.0)), dtype=float, count=n
+        ),
     )

@@ -198,11 +198,11 @@ class CutterComp:
                         raise ProgramError(MSG_ARC_GOUGE)
             elif m.kind in ("rapid", "feed"):
                 if self.endpoint is not None:
-                    dot = (q.direction[0] * (x - self.endpoint[0])
-                           + q.direction[1] * (y - self.endpoint[1]))  # fmt: skip
+                    dot = q.direction[0] * (x - self.endpoint[0]) + q.direction[1] * (
+                        y - self.endpoint[1]
+                    )
                     if dot < 0.0:
-                        raise ProgramError(MSG_RAPID_GOUGE if m.kind == "rapid"
-                                           else MSG_FEED_GOUGE)  # fmt: skip
+                        raise ProgramError(MSG_RAPID_GOUGE if m.kind == "rapid" else MSG_FEED_GOUGE)
             else:
                 continue
             q.move = replace(m, end_mm=(x, y, m.end_mm[2]))
@@ -286,8 +286,10 @@ class CutterComp:
         if beta < -small or beta > math.pi + small:
             return True
         # LinuxCNC's "h" shape: stay above and to the side
-        return beta > math.pi - small and front is not None and (
-            (not self.left and front.turn > 0) or (self.left and front.turn < 0)
+        return (
+            beta > math.pi - small
+            and front is not None
+            and ((not self.left and front.turn > 0) or (self.left and front.turn < 0))
         )
 
     def _convex_to_line(self, m: CompMove, mid: tuple, out: list) -> None:
@@ -297,8 +299,9 @@ class CutterComp:
         opx, opy, _ = self.programmed
         self._move_endpoint_and_flush(cx, cy, out)
         if m.kind == "feed":
-            corner = CompMove("arc", (mid[0], mid[1], cz), m.feed_mm_s, m.line,
-                              (opx, opy), -1 if self.left else 1)  # fmt: skip
+            corner = CompMove(
+                "arc", (mid[0], mid[1], cz), m.feed_mm_s, m.line, (opx, opy), -1 if self.left else 1
+            )
         else:  # no arc traverse: a rapid to the corner arc's end
             corner = CompMove("rapid", (mid[0], mid[1], cz), 0.0, m.line)
         self._enqueue(corner)
@@ -334,8 +337,9 @@ class CutterComp:
             raise ProgramError(MSG_ARC_LINE_GOUGE)
         sign = (-1 if front.turn > 0 else 1) * (1 if inside else -1)
         ang = sign * math.acos(ratio) + th + math.pi
-        self._move_endpoint_and_flush(pcx + oldrad * math.cos(ang),
-                                      pcy + oldrad * math.sin(ang), out)  # fmt: skip
+        self._move_endpoint_and_flush(
+            pcx + oldrad * math.cos(ang), pcy + oldrad * math.sin(ang), out
+        )
 
     # -- arcs ------------------------------------------------------------------------------
     def _arc1(self, m: CompMove, out: list) -> None:
@@ -362,8 +366,11 @@ class CutterComp:
         c_len = b_len / math.cos(a_ang)
         centre = (ex + c_len * math.cos(ab_ang), ey + c_len * math.sin(ab_ang))
         end = (ex, ey, ez)
-        self._enqueue(replace(m, end_mm=end, centre_mm=centre), (0.0, 0.0),
-                      _find_turn(cx, cy, centre[0], centre[1], m.turn, ex, ey))  # fmt: skip
+        self._enqueue(
+            replace(m, end_mm=end, centre_mm=centre),
+            (0.0, 0.0),
+            _find_turn(cx, cy, centre[0], centre[1], m.turn, ex, ey),
+        )
         self.current = end
 
     def _arc2(self, m: CompMove, out: list) -> None:
@@ -398,8 +405,16 @@ class CutterComp:
         elif beta > small:  # convex: a corner arc, then the arc
             mid = (opx + r * math.cos(delta), opy + r * math.sin(delta))
             self._dequeue(out)
-            self._enqueue(CompMove("arc", (mid[0], mid[1], cz), m.feed_mm_s, m.line,
-                                   (opx, opy), -1 if self.left else 1))  # fmt: skip
+            self._enqueue(
+                CompMove(
+                    "arc",
+                    (mid[0], mid[1], cz),
+                    m.feed_mm_s,
+                    m.line,
+                    (opx, opy),
+                    -1 if self.left else 1,
+                )
+            )
             self._dequeue(out)
             self.endpoint = mid
             self._enqueue(main, (0.0, 0.0), main_turns)
@@ -427,8 +442,9 @@ class CutterComp:
             beta += 2 * math.pi
         return theta, delta, beta
 
-    def _concave_line_to_arc(self, m: CompMove, theta: float, beta: float, arc_radius: float,
-                             inside: bool, out: list) -> None:
+    def _concave_line_to_arc(
+        self, m: CompMove, theta: float, beta: float, arc_radius: float, inside: bool, out: list
+    ) -> None:
         """Line -> arc, concave: the line before ends where it meets the offset arc."""
         r = self.radius_mm
         ccx, ccy = m.centre_mm
@@ -445,13 +461,16 @@ class CutterComp:
             ratio = (offset - r) / dist
             if ratio > 1.0 or ratio < -1.0:
                 raise ProgramError(MSG_ARC_GOUGE)
-            ang = (theta + math.pi - math.asin(ratio) if turn > 0
-                   else theta + math.pi + math.asin(ratio))  # fmt: skip
-        self._move_endpoint_and_flush(ccx + dist * math.cos(ang),
-                                      ccy + dist * math.sin(ang), out)  # fmt: skip
+            ang = (
+                theta + math.pi - math.asin(ratio)
+                if turn > 0
+                else theta + math.pi + math.asin(ratio)
+            )
+        self._move_endpoint_and_flush(ccx + dist * math.cos(ang), ccy + dist * math.sin(ang), out)
 
-    def _concave_arc_to_arc(self, m: CompMove, front: CompMove, arc_radius: float,
-                            inside: bool, out: list) -> None:
+    def _concave_arc_to_arc(
+        self, m: CompMove, front: CompMove, arc_radius: float, inside: bool, out: list
+    ) -> None:
         """Arc -> arc, concave: the arc before ends where the two offset arcs meet."""
         r = self.radius_mm
         ccx, ccy = m.centre_mm
@@ -471,5 +490,6 @@ class CutterComp:
             direction = cc_dir + pullback if turn > 0 else cc_dir - pullback
         else:
             direction = cc_dir - pullback if turn > 0 else cc_dir + pullback
-        self._move_endpoint_and_flush(pcx + oldrad * math.cos(direction),
-                                      pcy + oldrad * math.sin(direction), out)  # fmt: skip
+        self._move_endpoint_and_flush(
+            pcx + oldrad * math.cos(direction), pcy + oldrad * math.sin(direction), out
+        )

@@ -39,12 +39,21 @@ class CompStream:
         if isinstance(segment, Arc):
             turns = max(1, math.ceil(abs(segment.angle_rad) / (2.0 * math.pi) - 1e-9))
             centre = self.to_comp(segment.center_mm)
-            move = CompMove("arc", self.to_comp(segment.end_mm), segment.feed_mm_s,
-                            segment.line, (centre[0], centre[1]),
-                            turns if segment.angle_rad > 0 else -turns)  # fmt: skip
+            move = CompMove(
+                "arc",
+                self.to_comp(segment.end_mm),
+                segment.feed_mm_s,
+                segment.line,
+                (centre[0], centre[1]),
+                turns if segment.angle_rad > 0 else -turns,
+            )
         else:
-            move = CompMove("rapid" if segment.rapid else "feed", self.to_comp(segment.end_mm),
-                            segment.feed_mm_s, segment.line)  # fmt: skip
+            move = CompMove(
+                "rapid" if segment.rapid else "feed",
+                self.to_comp(segment.end_mm),
+                segment.feed_mm_s,
+                segment.line,
+            )
         self.comp_moves(move)
 
     def comp_moves(self, move: CompMove) -> None:
@@ -79,18 +88,33 @@ class CompStream:
                 start, end = tuple(mv.start_mm), tuple(mv.end_mm)
                 s2, e2 = start[:2], end[:2]
                 sweep = arcs.sweep_rad(s2, e2, mv.centre_mm, mv.turn > 0, abs(mv.turn))
-                self.segments.append(Arc(
-                    start_mm=vec3(back(start)), end_mm=vec3(back(end)),
-                    center_mm=vec3(back((*mv.centre_mm, start[2]))),
-                    normal=vec3(PLANE_NORMALS[plane]),
-                    angle_rad=float(sweep), helix_mm=end[2] - start[2],
-                    radius_start_mm=math.dist(s2, mv.centre_mm),
-                    radius_end_mm=math.dist(e2, mv.centre_mm),
-                    feed_mm_s=mv.feed_mm_s, line=mv.line, plane=plane, blend_mm=blend_mm,
-                ))  # fmt: skip
+                self.segments.append(
+                    Arc(
+                        start_mm=vec3(back(start)),
+                        end_mm=vec3(back(end)),
+                        center_mm=vec3(back((*mv.centre_mm, start[2]))),
+                        normal=vec3(PLANE_NORMALS[plane]),
+                        angle_rad=float(sweep),
+                        helix_mm=end[2] - start[2],
+                        radius_start_mm=math.dist(s2, mv.centre_mm),
+                        radius_end_mm=math.dist(e2, mv.centre_mm),
+                        feed_mm_s=mv.feed_mm_s,
+                        line=mv.line,
+                        plane=plane,
+                        blend_mm=blend_mm,
+                    )
+                )
             elif tuple(mv.start_mm) != tuple(mv.end_mm):
-                self.segments.append(Line(back(mv.start_mm), back(mv.end_mm), mv.feed_mm_s,
-                                          mv.line, mv.kind == "rapid", blend_mm))  # fmt: skip
+                self.segments.append(
+                    Line(
+                        back(mv.start_mm),
+                        back(mv.end_mm),
+                        mv.feed_mm_s,
+                        mv.line,
+                        mv.kind == "rapid",
+                        blend_mm,
+                    )
+                )
 
     def emit(self, segment) -> None:
         """Append a Line or Arc (through compensation when it is on; the move just after G40
@@ -101,10 +125,15 @@ class CompStream:
         if self.comp_exit is not None:
             if isinstance(segment, Arc):
                 raise self.error(MSG_ARC_AFTER_EXIT)
-            segment = Line(self.comp_exit, segment.end_mm, segment.feed_mm_s, segment.line,
-                           segment.rapid, segment.blend_mm)  # fmt: skip
+            segment = Line(
+                self.comp_exit,
+                segment.end_mm,
+                segment.feed_mm_s,
+                segment.line,
+                segment.rapid,
+                segment.blend_mm,
+            )
             self.comp_exit = None
             if segment.start_mm == segment.end_mm:
                 return
         self.segments.append(segment)
-

@@ -143,8 +143,9 @@ class ControlFlow:
         here = frame.pc - 1
         if type(label) is tuple:  # "o#<sub> call": the number is computed (LinuxCNC)
             if keyword != "call":
-                raise self.error(f"a computed O label (o#… or o[…]) only works with call, "
-                                 f"not {keyword}", column)  # fmt: skip
+                raise self.error(
+                    f"a computed O label (o#… or o[…]) only works with call, not {keyword}", column
+                )
             value = self.evaluate(label[1], column)
             if value != int(value) or value < 0:
                 raise self.error(f"computed O label {value:g} is not an O number", column)
@@ -170,8 +171,11 @@ class ControlFlow:
         indexes, kinds = self.source.labels()[label]
         # Subroutine names and control labels are separate name spaces (LinuxCNC accepts
         # "O101 repeat" and "O101 sub" in one file).
-        heads = ("sub",) if self.source.block(here).oword.keyword == "sub" else (
-            "if", "while", "do", "repeat")  # fmt: skip
+        heads = (
+            ("sub",)
+            if self.source.block(here).oword.keyword == "sub"
+            else ("if", "while", "do", "repeat")
+        )
         for index, kind in zip(indexes, kinds):
             if index >= here or kind not in heads:
                 continue
@@ -179,8 +183,9 @@ class ControlFlow:
                 continue
             if kind == "while" and index > here and self.source.block(here).oword.keyword == "do":
                 continue
-            raise self.error(f"duplicate O-word label o{label} (also defined on line {index + 1})",
-                             column)  # fmt: skip
+            raise self.error(
+                f"duplicate O-word label o{label} (also defined on line {index + 1})", column
+            )
         checked.add(here)
 
     def _cond(self, args, column: int, keyword: str) -> float:
@@ -198,8 +203,7 @@ class ControlFlow:
         self.loop_count += 1
         if self.loop_count > self.options.max_loop_iterations:
             raise self.error(
-                f"more than {self.options.max_loop_iterations} loop iterations "
-                f"(an endless loop?)",
+                f"more than {self.options.max_loop_iterations} loop iterations (an endless loop?)",
                 column,
             )
 
@@ -210,8 +214,9 @@ class ControlFlow:
         end = self._jump_target(label, here, ("endsub",), column, "sub without endsub")
         tail = self.source.block(end).oword
         self.line_no = end + 1
-        self._set_value(self.evaluate(tail.args[0], tail.column, lenient=True)
-                        if tail.args else None)  # fmt: skip
+        self._set_value(
+            self.evaluate(tail.args[0], tail.column, lenient=True) if tail.args else None
+        )
         frame.pc = end + 1
 
     def o_endsub(self, label, args, column, frame, here) -> None:
@@ -278,8 +283,11 @@ class ControlFlow:
             return
         label = str(int(p))
         if len(self.frames) > self.options.max_call_depth:
-            raise self.error(f"M98 P{label}: more than {self.options.max_call_depth} nested "
-                             f"calls (endless recursion?)", column)  # fmt: skip
+            raise self.error(
+                f"M98 P{label}: more than {self.options.max_call_depth} nested "
+                f"calls (endless recursion?)",
+                column,
+            )
         for source in (self.source, self.main):
             start = source.fanuc_start(label)
             if start is not None:
@@ -287,8 +295,17 @@ class ControlFlow:
         else:
             raise self.error(f"M98 P{label}: no subroutine O{label} in the program", pcol)
         caller = self.frames[-1]
-        self.frames.append(Frame(source, start + 1, label, self.main_line(), caller.pc,
-                                 fanuc=True, fanuc_left=int(repeats) - 1))  # fmt: skip
+        self.frames.append(
+            Frame(
+                source,
+                start + 1,
+                label,
+                self.main_line(),
+                caller.pc,
+                fanuc=True,
+                fanuc_left=int(repeats) - 1,
+            )
+        )
 
     def m99(self, column: int) -> None:
         """M99: the end of a Fanuc subroutine run: again from its O line while M98's L count
@@ -296,10 +313,16 @@ class ControlFlow:
         frame = self.frames[-1]
         if not frame.fanuc:
             if len(self.frames) == 1:
-                raise self.error("M99 in the main program (LinuxCNC restarts the program: an "
-                                 "endless loop nurbscnc cannot plan)", column)  # fmt: skip
-            raise self.error(f"M99 in subroutine o{frame.label} (it ends with endsub or "
-                             f"return; M99 ends an M98 subroutine)", column)  # fmt: skip
+                raise self.error(
+                    "M99 in the main program (LinuxCNC restarts the program: an "
+                    "endless loop nurbscnc cannot plan)",
+                    column,
+                )
+            raise self.error(
+                f"M99 in subroutine o{frame.label} (it ends with endsub or "
+                f"return; M99 ends an M98 subroutine)",
+                column,
+            )
         # Every M99 ends a run as an endsub without a value (rs274 -g: a second M98 L2 run
         # reads #<_value_returned> 0).
         self._set_value(None)
@@ -344,8 +367,9 @@ class ControlFlow:
         # Try the elseif conditions in turn, then else, then endif.
         at = here
         while True:
-            nxt = self._jump_target(label, at, ("elseif", "else", "endif"), column,
-                                    "if without endif")  # fmt: skip
+            nxt = self._jump_target(
+                label, at, ("elseif", "else", "endif"), column, "if without endif"
+            )
             blk = self.source.block(nxt)
             if blk.oword.keyword == "elseif":
                 saved = self.line_no
@@ -463,8 +487,10 @@ class ControlFlow:
 
     def _repeat_has_no_exit(self, label, keyword, column, head) -> None:
         """LinuxCNC (interp_o_word.cc): break and continue belong to while and do loops."""
-        raise self.error(f"no matching while/do label: 'o{label} {keyword}' (found 'repeat' "
-                         f"in line {head + 1})", column)  # fmt: skip
+        raise self.error(
+            f"no matching while/do label: 'o{label} {keyword}' (found 'repeat' in line {head + 1})",
+            column,
+        )
 
     def o_break(self, label, args, column, frame, here) -> None:
         head, kind, end = self._loop_of(label, here, column, "break")
@@ -476,4 +502,3 @@ class ControlFlow:
         self._count_loop(column)
         # while: re-test at the head; do: test at the tail; repeat: count at endrepeat.
         frame.pc = head if kind == "while" else end
-

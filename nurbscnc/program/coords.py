@@ -60,8 +60,11 @@ SYSTEM_NAMES = ("", "G54", "G55", "G56", "G57", "G58", "G59", "G59.1", "G59.2", 
 
 def is_coordinate_parameter(index: int) -> bool:
     """True for the parameters this module owns (they carry lengths that follow the units)."""
-    return (G28_BASE <= index <= G28_BASE + 5 or G30_BASE <= index <= G30_BASE + 5
-            or G92_FLAG <= index <= SYSTEM_BASE + SYSTEM_STRIDE * N_SYSTEMS - 1)  # fmt: skip
+    return (
+        G28_BASE <= index <= G28_BASE + 5
+        or G30_BASE <= index <= G30_BASE + 5
+        or G92_FLAG <= index <= SYSTEM_BASE + SYSTEM_STRIDE * N_SYSTEMS - 1
+    )
 
 
 @dataclass
@@ -86,8 +89,9 @@ class Coordinates:
         self.plain = True  # no offset, rotation or tool offset: machine = program
 
     def _update_plain(self) -> None:
-        self.plain = not (any(self.origin_mm) or any(self.g92_mm) or any(self.tool_mm)
-                          or self.rotation_deg)  # fmt: skip
+        self.plain = not (
+            any(self.origin_mm) or any(self.g92_mm) or any(self.tool_mm) or self.rotation_deg
+        )
 
     def set_tool(self, offset_mm) -> None:
         """G43 / G43.1 / G49: the tool offset [mm] along X, Y, Z."""
@@ -119,9 +123,11 @@ class Coordinates:
         if self.rotation_deg:
             c, s = _cos_sin(self.rotation_deg)
             x, y = c * x - s * y, s * x + c * y
-        return [x + self.origin_mm[0] + self.tool_mm[0],
-                y + self.origin_mm[1] + self.tool_mm[1],
-                z + self.origin_mm[2] + self.tool_mm[2]]  # fmt: skip
+        return [
+            x + self.origin_mm[0] + self.tool_mm[0],
+            y + self.origin_mm[1] + self.tool_mm[1],
+            z + self.origin_mm[2] + self.tool_mm[2],
+        ]
 
     def to_machine_array(self, prog_mm: np.ndarray) -> np.ndarray:
         """:meth:`to_machine` of each row of ``prog_mm`` (n, 3) [mm]: the same operations in
@@ -134,9 +140,13 @@ class Coordinates:
         if self.rotation_deg:
             c, s = _cos_sin(self.rotation_deg)
             x, y = c * x - s * y, s * x + c * y
-        return np.column_stack([x + self.origin_mm[0] + self.tool_mm[0],
-                                y + self.origin_mm[1] + self.tool_mm[1],
-                                z + self.origin_mm[2] + self.tool_mm[2]])  # fmt: skip
+        return np.column_stack(
+            [
+                x + self.origin_mm[0] + self.tool_mm[0],
+                y + self.origin_mm[1] + self.tool_mm[1],
+                z + self.origin_mm[2] + self.tool_mm[2],
+            ]
+        )
 
     def to_program(self, machine) -> list:
         """Inverse of :meth:`to_machine`."""
@@ -286,8 +296,9 @@ class OffsetCommands:
         used.update("LP" + ("R" if "R" in words else "") + "XYZ")
         system = int(p) or self.coords.system
         if system == self.coords.system:
-            self.not_in_comp("Cannot change the active coordinate system with cutter radius "
-                             "compensation on", col)  # fmt: skip
+            self.not_in_comp(
+                "Cannot change the active coordinate system with cutter radius compensation on", col
+            )
         scale = self.m.scale
         given = {i: words[a][0] * scale for i, a in enumerate(_AXES) if a in words}
         rotation = words["R"][0] if "R" in words else None
@@ -332,8 +343,11 @@ class OffsetCommands:
                 origin, rot, g92 = c.origin_mm, c.rotation_deg, c.g92_mm
             cos, sin = _cos_sin(rot)
             free = [machine[k] - offset[k] - origin[k] for k in range(3)]
-            now = [cos * free[0] + sin * free[1] - g92[0],
-                   -sin * free[0] + cos * free[1] - g92[1], free[2] - g92[2]]  # fmt: skip
+            now = [
+                cos * free[0] + sin * free[1] - g92[0],
+                -sin * free[0] + cos * free[1] - g92[1],
+                free[2] - g92[2],
+            ]
             want = [given.get(k, now[k]) + g92[k] for k in range(3)]
             turned = [cos * want[0] - sin * want[1], sin * want[0] + cos * want[1], want[2]]
             new = [machine[k] - origin[k] - turned[k] for k in range(3)]
@@ -354,9 +368,11 @@ class OffsetCommands:
         cos, sin = math.cos(rad), math.sin(rad)
         free = [machine[k] - c.tool_mm[k] - origin[k] for k in range(3)]
         # the current position in the system's own (rotated) coordinates, G92 removed
-        now = [cos * free[0] + sin * free[1] - c.g92_mm[0],
-               -sin * free[0] + cos * free[1] - c.g92_mm[1],
-               free[2] - c.g92_mm[2]]  # fmt: skip
+        now = [
+            cos * free[0] + sin * free[1] - c.g92_mm[0],
+            -sin * free[0] + cos * free[1] - c.g92_mm[1],
+            free[2] - c.g92_mm[2],
+        ]
         want = [given.get(k, now[k]) + c.g92_mm[k] for k in range(3)]
         have = [now[k] + c.g92_mm[k] for k in range(3)]
         out = {}
@@ -373,8 +389,9 @@ class OffsetCommands:
         axes not given keep their offset; the machine does not move."""
         self.not_in_comp("Cannot change axis offsets with cutter radius comp", col)
         machine = self.pos
-        self.coords.set_g92({i: words[a][0] * self.m.scale
-                             for i, a in enumerate(_AXES) if a in words})  # fmt: skip
+        self.coords.set_g92(
+            {i: words[a][0] * self.m.scale for i, a in enumerate(_AXES) if a in words}
+        )
         used.update(_AXES)
         self.pos = machine
 
@@ -385,8 +402,9 @@ class OffsetCommands:
         machine = self.pos
         c = self.coords
         unshifted = [self.prog[k] + c.g92_mm[k] for k in range(3)]
-        offsets = {i: unshifted[i] - words[a][0] * self.m.scale
-                   for i, a in enumerate(_AXES) if a in words}  # fmt: skip
+        offsets = {
+            i: unshifted[i] - words[a][0] * self.m.scale for i, a in enumerate(_AXES) if a in words
+        }
         c.set_g92(offsets)
         self.pos = machine
         used.update(_AXES)
@@ -410,4 +428,3 @@ class OffsetCommands:
             machine = list(home)
         self.rapid_to_program(self.coords.to_program(machine))
         used.update(_AXES)
-

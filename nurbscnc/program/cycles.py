@@ -175,8 +175,9 @@ def expand_cycle(
     hole = _place(words, incremental, current, plane, r_word, z_word, initial)
     r, c = hole.r, hole.c
     if r < c:
-        raise ProgramError(f"R less than {_LETTER[ic].lower()} in cycle in "
-                           f"{_PLANE_NAME[plane]} plane")  # fmt: skip
+        raise ProgramError(
+            f"R less than {_LETTER[ic].lower()} in cycle in {_PLANE_NAME[plane]} plane"
+        )
 
     # A net under the count below: the moves the emitter makes (some go nowhere and make no
     # segment, so twice the budget) never run away, whatever the count missed.
@@ -196,14 +197,32 @@ def expand_cycle(
     for repeat in range(repeats):
         a, b = _next_hole(a, b, hole)
         _approach(out, a, b, r, clear, current_c if repeat == 0 else None)
-        _CYCLES[code](out, a, b, r, clear, c, sticky.p_s, sticky.q_mm,
-                      (sticky.i_mm, sticky.j_mm, sticky.k_mm, incremental), spindle,
-                      code)  # fmt: skip
+        _CYCLES[code](
+            out,
+            a,
+            b,
+            r,
+            clear,
+            c,
+            sticky.p_s,
+            sticky.q_mm,
+            (sticky.i_mm, sticky.j_mm, sticky.k_mm, incremental),
+            spindle,
+            code,
+        )
 
     new_state = replace(
-        state, motion=code, initial_level_mm=initial, r_mm=r_word, z_mm=z_word,
-        p_s=sticky.p_s, q_mm=sticky.q_mm, i_mm=sticky.i_mm, j_mm=sticky.j_mm, k_mm=sticky.k_mm,
-    )  # fmt: skip
+        state,
+        motion=code,
+        initial_level_mm=initial,
+        r_mm=r_word,
+        z_mm=z_word,
+        p_s=sticky.p_s,
+        q_mm=sticky.q_mm,
+        i_mm=sticky.i_mm,
+        j_mm=sticky.j_mm,
+        k_mm=sticky.k_mm,
+    )
     final = [0.0, 0.0, 0.0]
     final[ia], final[ib], final[ic] = a, b, clear
     # G87 ends at (a, b, clear) too; G88 ends at the bottom (the operator retracts by hand), as
@@ -262,8 +281,15 @@ class _Hole(NamedTuple):
     theta_inc: float = 0.0
 
 
-def _place(words: dict, incremental: bool, current: list, plane: str, r_word: float,
-           z_word: float, initial: float) -> _Hole:
+def _place(
+    words: dict,
+    incremental: bool,
+    current: list,
+    plane: str,
+    r_word: float,
+    z_word: float,
+    initial: float,
+) -> _Hole:
     """The levels and the hole: G90 absolute (X Y, or polar @ ^ in XY); G91 R from the
     initial level, the depth from R, X Y (and polar) added once per repeat."""
     ia, ib, _ = _AXES[plane]
@@ -281,8 +307,16 @@ def _place(words: dict, incremental: bool, current: list, plane: str, r_word: fl
         radius_inc = words.get("@", 0.0)
         theta_inc = math.radians(words.get("^", 0.0))
     r = r_word + initial
-    return _Hole(r, r + z_word, current[ia], current[ib], words.get(_LETTER[ia], 0.0),
-                 words.get(_LETTER[ib], 0.0), radius_inc, theta_inc)  # fmt: skip
+    return _Hole(
+        r,
+        r + z_word,
+        current[ia],
+        current[ib],
+        words.get(_LETTER[ia], 0.0),
+        words.get(_LETTER[ib], 0.0),
+        radius_inc,
+        theta_inc,
+    )
 
 
 def _next_hole(a: float, b: float, hole: _Hole) -> tuple:
@@ -355,25 +389,41 @@ def _back_bore_words(code: str, words: dict, state: CycleState, same: bool) -> _
         for letter in "IJK":
             if letter not in words:
                 raise ProgramError(f"{letter} word missing with g87")
-    return _Sticky(state.p_s, state.q_mm, words.get("I", state.i_mm),
-                   words.get("J", state.j_mm), words.get("K", state.k_mm))  # fmt: skip
+    return _Sticky(
+        state.p_s,
+        state.q_mm,
+        words.get("I", state.i_mm),
+        words.get("J", state.j_mm),
+        words.get("K", state.k_mm),
+    )
 
 
-def _count_pecks(code: str, q_mm: float, r: float, c: float, repeats: int,
-                 max_moves: float) -> None:
+def _count_pecks(
+    code: str, q_mm: float, r: float, c: float, repeats: int, max_moves: float
+) -> None:
     """Pecks counted before they are made: a hole has more than (R − Z)/Q − 2 of them
     (_peck), each a feed and a rapid back that go somewhere, and under G83 the rapid down to
     the last depth too (all but the first's when Q is the 0.254 mm clearance), so more than
     this many moves is certain; fewer are made and counted as made."""
     per_peck = 3.0 if code == "G83" else 2.0
     if q_mm > 0.0 and repeats * (per_peck * ((r - c) / q_mm - 2.0) - 1.0) > max_moves:
-        raise TooManyMoves(f"{code.lower()} with Q{q_mm:g} mm pecks {r - c:g} mm deep "
-                           f"{repeats} time(s): more moves than the program may make")
+        raise TooManyMoves(
+            f"{code.lower()} with Q{q_mm:g} mm pecks {r - c:g} mm deep "
+            f"{repeats} time(s): more moves than the program may make"
+        )
 
 
-_STICKY_WORDS = {"G82": _dwell_words, "G86": _dwell_words, "G88": _dwell_words,
-                 "G89": _dwell_words, "G74": _tap_words, "G84": _tap_words,
-                 "G73": _peck_words, "G83": _peck_words, "G87": _back_bore_words}  # fmt: skip
+_STICKY_WORDS = {
+    "G82": _dwell_words,
+    "G86": _dwell_words,
+    "G88": _dwell_words,
+    "G89": _dwell_words,
+    "G74": _tap_words,
+    "G84": _tap_words,
+    "G73": _peck_words,
+    "G83": _peck_words,
+    "G87": _back_bore_words,
+}
 
 
 # -- the cycles proper: LinuxCNC's convert_cycle_g8x, from the hole at level R ---------------
@@ -399,8 +449,10 @@ def _peck(out, a, b, r, clear, c, q, back_to_r: bool):
             out.rapid(a, b, r)
         out.rapid(a, b, depth + PECK_CLEARANCE_MM)
         if not depth - q < depth:  # Q under half an ulp of the depth: it would never move on
-            raise ProgramError(f"Q{q:g} is below the resolution of the depth {depth:g}: the "
-                               "pecks would never reach the bottom")
+            raise ProgramError(
+                f"Q{q:g} is below the resolution of the depth {depth:g}: the "
+                "pecks would never reach the bottom"
+            )
         depth -= q
     out.feed(a, b, c)
     out.rapid(a, b, clear)
@@ -489,5 +541,16 @@ def _g89(out, a, b, r, clear, c, p, q, ijk, spindle, code):
     out.feed(a, b, clear)
 
 
-_CYCLES = {"G73": _g73, "G74": _tap, "G81": _g81, "G82": _g82, "G83": _g83, "G84": _tap,
-           "G85": _g85, "G86": _g86, "G87": _g87, "G88": _g88, "G89": _g89}  # fmt: skip
+_CYCLES = {
+    "G73": _g73,
+    "G74": _tap,
+    "G81": _g81,
+    "G82": _g82,
+    "G83": _g83,
+    "G84": _tap,
+    "G85": _g85,
+    "G86": _g86,
+    "G87": _g87,
+    "G88": _g88,
+    "G89": _g89,
+}

@@ -49,8 +49,9 @@ from nurbscnc.program.parse import Block
 from nurbscnc.program.words import unused_word_message
 
 _PLAIN_WORDS = frozenset("XYZF")
-_COMMON_CODES = {float(v): 10 * v for v in (0, 1, 2, 3, 17, 18, 19, 20, 21, 40, 49, 54, 80,
-                                             90, 91, 94)}  # fmt: skip
+_COMMON_CODES = {
+    float(v): 10 * v for v in (0, 1, 2, 3, 17, 18, 19, 20, 21, 40, 49, 54, 80, 90, 91, 94)
+}
 
 
 class BlockExecutor:
@@ -88,8 +89,11 @@ class BlockExecutor:
 
     def bad_letter(self, letter: str, column: int):
         if letter in "UVW":
-            raise self.error(f"axis {letter} is not supported (nurbscnc drives X, Y and Z)",
-                             column, UnsupportedError)  # fmt: skip
+            raise self.error(
+                f"axis {letter} is not supported (nurbscnc drives X, Y and Z)",
+                column,
+                UnsupportedError,
+            )
         if letter == "O":
             raise self.error("O word must start the line (o<label> keyword)", column)
         raise self.error("N (line number) must start the line", column)
@@ -154,9 +158,12 @@ class BlockExecutor:
         :data:`BEFORE_MOTION` the block calls for, the group-0 codes, the motion, the check
         that every word was used, then the program stops."""
         used: set = set()
-        if (not mcodes and len(gcodes) <= (GM_MOTION in gcodes)
-                and _PLAIN_WORDS.issuperset(words)
-                and self.plain_move(words, gcodes, mcodes, used)):  # fmt: skip
+        if (
+            not mcodes
+            and len(gcodes) <= (GM_MOTION in gcodes)
+            and _PLAIN_WORDS.issuperset(words)
+            and self.plain_move(words, gcodes, mcodes, used)
+        ):
             return
         for step in STEPS.select(words, gcodes, mcodes):
             step(self, words, gcodes, mcodes, used)
@@ -199,8 +206,9 @@ class BlockExecutor:
             for letter in "ABC":
                 if letter in words:
                     article = "an" if letter == "A" else "a"
-                    raise self.error(f"Cannot put {article} {letter.lower()} in canned cycle",
-                                     words[letter][1])  # fmt: skip
+                    raise self.error(
+                        f"Cannot put {article} {letter.lower()} in canned cycle", words[letter][1]
+                    )
 
     def call_words(self, words: dict, gcodes: dict, mcodes: dict, used: set) -> None:
         if mcodes.get(MM_STOP, (0,))[0] == M_98:
@@ -270,8 +278,11 @@ class StepTable:
         self.m_mask: dict = {}
         self.letter_mask: dict = {}
         for i, step in enumerate(steps):
-            for table, keys in ((self.g_mask, step.g_groups), (self.m_mask, step.m_groups),
-                                (self.letter_mask, step.letters)):  # fmt: skip
+            for table, keys in (
+                (self.g_mask, step.g_groups),
+                (self.m_mask, step.m_groups),
+                (self.letter_mask, step.letters),
+            ):
                 for key in keys:
                     table[key] = table.get(key, 0) | 1 << i
         self.memo: dict = {0: ()}

@@ -187,8 +187,9 @@ def _given(rows) -> tuple[np.ndarray, np.ndarray]:
     return given, values
 
 
-def _filled(given: np.ndarray, values: np.ndarray, initial: float,
-            scale: float | None) -> np.ndarray:  # fmt: skip
+def _filled(
+    given: np.ndarray, values: np.ndarray, initial: float, scale: float | None
+) -> np.ndarray:
     """Forward fill of one column (``given`` mask, ``values`` (n,)): the k-th given value
     goes to every line from its own to the next given one; lines before the first keep
     ``initial``. ``scale`` multiplies the given values (units), as the general path does
@@ -246,14 +247,17 @@ def _run(rows, start: int, state: BulkState, to_machine, limits) -> BulkRun | No
     motion = _filled(has_g, values[:, 0], motion0, 10.0)
     feed_mm = _filled(has_f, values[:, 4], state.feed_mm, scale)
     feed_raw = _filled(has_f, values[:, 4], state.feed, None)
-    prog = [(_filled(given[:, i], values[:, i], state.prog_mm[i - 1], scale), given[:, i])
-            for i in (1, 2, 3)]  # fmt: skip
+    prog = [
+        (_filled(given[:, i], values[:, i], state.prog_mm[i - 1], scale), given[:, i])
+        for i in (1, 2, 3)
+    ]
     has_axes = given[:, 1] | given[:, 2] | given[:, 3]
     worded = has_axes | has_g | has_f
     # Lines the general path refuses or treats otherwise end the run before them.
     bad = worded & (motion != G_0) & (motion != G_1)
-    bad |= has_f & ((feed_raw < 0.0) | ((feed_mm != 0.0) & ((feed_mm < min_feed) |
-                                                            (feed_mm > max_feed))))  # fmt: skip
+    bad |= has_f & (
+        (feed_raw < 0.0) | ((feed_mm != 0.0) & ((feed_mm < min_feed) | (feed_mm > max_feed)))
+    )
     bad |= has_axes & (motion == G_1) & ~(feed_mm > 0.0)
     for values, given in prog:
         bad |= given & ~(np.abs(values) <= max_coord)

@@ -52,7 +52,6 @@ from nurbscnc.program.words import MAX_COORD_MM, MAX_FEED_MM_MIN, MIN_FEED_MM_MI
 __all__ = ["InterpretOptions", "interpret", "interpret_text", "g5_knot_vector", "INCH_MM"]
 
 
-
 @dataclass(frozen=True)
 class InterpretOptions:
     """Settings outside the program.
@@ -89,8 +88,17 @@ def interpret_text(text: str, options: InterpretOptions | None = None) -> Progra
     return interpret(None, split_lines(text), options or InterpretOptions())
 
 
-class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines, ParameterStore,
-                   BlockExecutor, ModeSetters, Motion, CompStream):  # fmt: skip
+class _Interpreter(
+    ControlFlow,
+    coords.OffsetCommands,
+    NurbsBlocks,
+    Splines,
+    ParameterStore,
+    BlockExecutor,
+    ModeSetters,
+    Motion,
+    CompStream,
+):
     """The interpreter's state; its jobs come from the mixins (see the module docstring).
     One instance per call of :func:`interpret` (local state)."""
 
@@ -286,8 +294,11 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines, Par
             what = f"makes more than {self.options.extra_moves:,} moves"
         else:
             what = f"executes more than {self.options.extra_lines:,} lines"
-        raise self.error(f"the program {what} beyond one per line of its own (a loop, call, "
-                         f"L repeat or peck (G73, G83 Q) that runs away?)", column)
+        raise self.error(
+            f"the program {what} beyond one per line of its own (a loop, call, "
+            f"L repeat or peck (G73, G83 Q) that runs away?)",
+            column,
+        )
 
     def bulk(self, source: Source, pc: int) -> int:
         """Interpret the run of plain straight-move lines at ``source.lines[pc]`` in bulk
@@ -295,8 +306,13 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines, Par
         the line is not one the fast lane takes)."""
         m = self.m
         state = BulkState(m.motion, m.feed, m.feed_mm, tuple(self.prog), m.scale)
-        run = plain_run(source.lines, pc, state, self.coords.to_machine_array,
-                        (MAX_COORD_MM, MIN_FEED_MM_MIN, MAX_FEED_MM_MIN))  # fmt: skip
+        run = plain_run(
+            source.lines,
+            pc,
+            state,
+            self.coords.to_machine_array,
+            (MAX_COORD_MM, MIN_FEED_MM_MIN, MAX_FEED_MM_MIN),
+        )
         if run is None:
             return 0
         if source.worded is None:
@@ -308,10 +324,17 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines, Par
         else:  # in a called file the moves carry the main program's call line
             numbers = [self.main_line()] * len(run.index)
         with pause_cyclic_gc():
-            self.segments += make_lines({
-                "start_mm": run.starts_mm, "end_mm": run.ends_mm, "feed_mm_s": run.feeds_mm_s,
-                "line": numbers, "rapid": run.rapid, "blend_mm": itertools.repeat(blend_mm),
-                "naive_mm": itertools.repeat(m.naive_mm)})  # fmt: skip
+            self.segments += make_lines(
+                {
+                    "start_mm": run.starts_mm,
+                    "end_mm": run.ends_mm,
+                    "feed_mm_s": run.feeds_mm_s,
+                    "line": numbers,
+                    "rapid": run.rapid,
+                    "blend_mm": itertools.repeat(blend_mm),
+                    "naive_mm": itertools.repeat(m.naive_mm),
+                }
+            )
         new = run.state
         m.motion, m.feed, m.feed_mm = new.motion, new.feed, new.feed_mm
         self.prog = list(new.prog_mm)
@@ -360,7 +383,6 @@ class _Interpreter(ControlFlow, coords.OffsetCommands, NurbsBlocks, Splines, Par
             )
 
 
-
 def interpret(blocks, lines, options: InterpretOptions) -> Program:
     """Interpret a program (pure: no I/O, no global state) into a :class:`Program`.
 
@@ -374,8 +396,9 @@ def interpret(blocks, lines, options: InterpretOptions) -> Program:
     blocks = sum(1 for b in filter(None, parsed) if b.words or b.assigns)  # a Block is truthy
     if state.main.worded is not None:  # lines run by the fast lane (and never parsed)
         worded = np.frombuffer(state.main.worded, dtype=np.uint8).astype(bool)
-        unparsed = np.fromiter(map(operator.is_, parsed, itertools.repeat(None)), dtype=bool,
-                               count=len(parsed))  # fmt: skip
+        unparsed = np.fromiter(
+            map(operator.is_, parsed, itertools.repeat(None)), dtype=bool, count=len(parsed)
+        )
         blocks += int(np.count_nonzero(worded & unparsed))
     return Program(
         segments=tuple(state.segments),

@@ -37,13 +37,33 @@ INCH_MM = 25.4
 
 #: What M70 / M73 save and M72 restores (LinuxCNC: units, plane, distance modes, feed mode,
 #: path control, F and S; the coordinate system is saved beside these, in the interpreter).
-SAVED_BY_M70 = ("plane", "scale", "absolute", "arc_absolute", "feed_mode", "feed", "feed_mm",
-                "spindle_rpm", "path_mode", "blend_mm", "naive_mm")  # fmt: skip
+SAVED_BY_M70 = (
+    "plane",
+    "scale",
+    "absolute",
+    "arc_absolute",
+    "feed_mode",
+    "feed",
+    "feed_mm",
+    "spindle_rpm",
+    "path_mode",
+    "blend_mm",
+    "naive_mm",
+)
 
 PLANE_OF_G = {G_17: "XY", G_18: "ZX", G_19: "YZ"}
 G_OF_PLANE = {"XY": G_17, "ZX": G_18, "YZ": G_19}
-SYSTEM_OF_G = {G_54: 1, G_55: 2, G_56: 3, G_57: 4, G_58: 5, G_59: 6, G_59_1: 7, G_59_2: 8,
-               G_59_3: 9}  # fmt: skip
+SYSTEM_OF_G = {
+    G_54: 1,
+    G_55: 2,
+    G_56: 3,
+    G_57: 4,
+    G_58: 5,
+    G_59: 6,
+    G_59_1: 7,
+    G_59_2: 8,
+    G_59_3: 9,
+}
 
 
 @dataclass

@@ -101,10 +101,21 @@ class ModeSetters:
                 # a cycle remembers (cycle_r, cycle_cc, cycle_il, Q, I, J, K): their numbers are
                 # read in the new units (R2 in mm, then G20: R2 inches).
                 c, ratio = self.m.cycle, scale / self.m.scale
-                self.m.cycle = replace(c, **{f: None if getattr(c, f) is None
-                                             else getattr(c, f) * ratio
-                                             for f in ("initial_level_mm", "r_mm", "z_mm",
-                                                       "q_mm", "i_mm", "j_mm", "k_mm")})
+                self.m.cycle = replace(
+                    c,
+                    **{
+                        f: None if getattr(c, f) is None else getattr(c, f) * ratio
+                        for f in (
+                            "initial_level_mm",
+                            "r_mm",
+                            "z_mm",
+                            "q_mm",
+                            "i_mm",
+                            "j_mm",
+                            "k_mm",
+                        )
+                    },
+                )
             self.m.scale = scale
 
     def set_feed(self, words: dict, gcodes: dict, mcodes: dict, used: set) -> None:
@@ -152,8 +163,7 @@ class ModeSetters:
             if code in (M_62, M_63, M_64, M_65) and "P" not in words:
                 raise self.error(f"No valid P word with M{code}", col)
             if code == M_66 and "P" not in words and "E" not in words:
-                raise self.error("Need to have either a valid P or a valid E word with M66",
-                                 col)  # fmt: skip
+                raise self.error("Need to have either a valid P or a valid E word with M66", col)
             if code in (M_67, M_68) and "E" not in words:
                 raise self.error(f"Invalid analog index with M{code}", col)
             used.update(_IO_WORDS.get(code, "P"))
@@ -229,8 +239,9 @@ class ModeSetters:
         if self.comp is None:
             self.segments.append(dwell)
         else:
-            self.comp_moves(CompMove("dwell", self.to_comp(position), line=dwell.line,
-                                     seconds=dwell.seconds))  # fmt: skip
+            self.comp_moves(
+                CompMove("dwell", self.to_comp(position), line=dwell.line, seconds=dwell.seconds)
+            )
 
     def dwell(self, words: dict, gcodes: dict, mcodes: dict, used: set) -> None:
         nonmodal = gcodes.get(GM_NONMODAL)
@@ -263,8 +274,7 @@ class ModeSetters:
         if GM_CUTTER_COMP in gcodes:
             code, col = gcodes[GM_CUTTER_COMP]
             if code != G_40 and m.comp_mode != G_40:
-                raise self.error("cannot turn cutter compensation on when it is already on",
-                                 col)  # fmt: skip
+                raise self.error("cannot turn cutter compensation on when it is already on", col)
             if code == G_40:
                 m.comp_mode, m.comp_side, m.comp_radius_mm, m.comp_d = G_40, None, 0.0, None
                 self.comp_off()
@@ -284,9 +294,12 @@ class ModeSetters:
         if m.plane == "YZ":
             raise self.error("Cutter radius compensation allowed only in XY, XZ planes", col)
         if m.plane == "ZX" and self.coords.rotation_deg:
-            raise self.error("cutter radius compensation in the XZ plane (G18) with a "
-                             "rotated coordinate system (G10 L2 R) is not supported",
-                             col, UnsupportedError)  # fmt: skip
+            raise self.error(
+                "cutter radius compensation in the XZ plane (G18) with a "
+                "rotated coordinate system (G10 L2 R) is not supported",
+                col,
+                UnsupportedError,
+            )
         self.comp_plane = m.plane
         m.comp_mode = code
         m.comp_side = "left" if code in (G_41, G_41_1) else "right"
@@ -357,8 +370,9 @@ class ModeSetters:
     def set_coord_system(self, words: dict, gcodes: dict, mcodes: dict, used: set) -> None:
         if GM_COORD_SYSTEM in gcodes:
             code, col = gcodes[GM_COORD_SYSTEM]
-            self.not_in_comp("Cannot change coordinate systems with cutter radius compensation "
-                             "on", col)  # fmt: skip
+            self.not_in_comp(
+                "Cannot change coordinate systems with cutter radius compensation on", col
+            )
             self.select_system(SYSTEM_OF_G[code])
 
     def select_system(self, system: int) -> None:

@@ -88,8 +88,13 @@ class Motion:
             motion = motion_code[0]  # this block's spline; the next line moves as before it
         handler = MOTION_HANDLERS.get(motion)
         if handler is not None:
-            handler(self, motion, MotionWords(words, used, motion_code, has_axes, axes_consumed,
-                                              machine_coords, fresh_cycle))  # fmt: skip
+            handler(
+                self,
+                motion,
+                MotionWords(
+                    words, used, motion_code, has_axes, axes_consumed, machine_coords, fresh_cycle
+                ),
+            )
         used.update(AXES)
 
     def check_g53(self, motion_code, column: int) -> None:
@@ -132,16 +137,21 @@ class Motion:
     def arc_motion(self, motion, b: MotionWords) -> None:
         # A block whose axis words a group-0 code took (G10 L2 P1 R45 under modal G2)
         # makes no arc: its R or P belong to that code (LinuxCNC's enhance_block).
-        if b.has_axes or b.motion_code is not None or (
-                not b.axes_consumed and any(k in b.words for k in "IJKR")):
+        if (
+            b.has_axes
+            or b.motion_code is not None
+            or (not b.axes_consumed and any(k in b.words for k in "IJKR"))
+        ):
             self.arc(b.words, b.used)
 
     def refuse_in_comp(self, motion, b: MotionWords) -> None:
         """Splines and NURBS are not compensated."""
         if self.comp is not None:
-            raise self.error(f"G{fmt_code(motion)} with cutter radius compensation is not "
-                             "supported", b.motion_code[1] if b.motion_code else 1,
-                             UnsupportedError)  # fmt: skip
+            raise self.error(
+                f"G{fmt_code(motion)} with cutter radius compensation is not supported",
+                b.motion_code[1] if b.motion_code else 1,
+                UnsupportedError,
+            )
 
     def spline_motion(self, motion, b: MotionWords) -> None:
         self.refuse_in_comp(motion, b)
@@ -183,12 +193,17 @@ class Motion:
             self.over_budget(col, moves=True)
         try:
             result = expand_cycle(
-                f"G{code // 10}", given, incremental=not m.absolute,
-                position_mm=tuple(self.prog), plane=m.plane,
-                retract="G98" if m.retract_mode == G_98 else "G99", feed_mm_s=self.feed_mm_s,
-                state=CycleState() if fresh else m.cycle, spindle=m.spindle,
+                f"G{code // 10}",
+                given,
+                incremental=not m.absolute,
+                position_mm=tuple(self.prog),
+                plane=m.plane,
+                retract="G98" if m.retract_mode == G_98 else "G99",
+                feed_mm_s=self.feed_mm_s,
+                state=CycleState() if fresh else m.cycle,
+                spindle=m.spindle,
                 max_moves=self.max_moves - len(self.segments),
-            )  # fmt: skip
+            )
         except TooManyMoves:
             self.over_budget(col, moves=True)
         except ProgramError as exc:
@@ -225,8 +240,9 @@ class Motion:
             if move.kind in ("rapid", "feed"):
                 end = tuple(to_machine(list(move.end_mm)))
                 if end != start:
-                    self.segments.append(Line(start, end, move.feed_mm_s, line,
-                                              move.kind == "rapid", blend_mm))  # fmt: skip
+                    self.segments.append(
+                        Line(start, end, move.feed_mm_s, line, move.kind == "rapid", blend_mm)
+                    )
                 start = end
             elif move.kind == "dwell":
                 self.segments.append(Dwell(float(move.dwell_s), start, line))
@@ -342,8 +358,7 @@ class Motion:
         if p != int(p) or p < 1:
             raise self.error(f"arc turns P{p:g} must be a positive integer", pcol)
         if p > MAX_ARC_TURNS:
-            raise self.error(f"arc turns P{p:.6g} is out of range (at most "
-                             f"{MAX_ARC_TURNS})", pcol)  # fmt: skip
+            raise self.error(f"arc turns P{p:.6g} is out of range (at most {MAX_ARC_TURNS})", pcol)
         return int(p)
 
     def arc_centre(self, words: dict, s2, e2, ijk, ccw: bool, radius_tol: float, col0: int):
@@ -351,8 +366,7 @@ class Motion:
         plane = self.m.plane
         a, b = PLANE_AXES[plane]
         if "R" in words:
-            return arcs.center_from_radius(s2, e2, words["R"][0] * self.m.scale, ccw,
-                                           radius_tol)  # fmt: skip
+            return arcs.center_from_radius(s2, e2, words["R"][0] * self.m.scale, ccw, radius_tol)
         if not ijk:
             raise self.error("arc with neither R nor I/J/K words", col0)
         offs = []
@@ -364,8 +378,7 @@ class Motion:
                 raise self.error(f"{letter} word missing in absolute center arc", col0)
             else:
                 offs.append(0.0)
-        return (offs[0], offs[1]) if self.m.arc_absolute else (
-            s2[0] + offs[0], s2[1] + offs[1])  # fmt: skip
+        return (offs[0], offs[1]) if self.m.arc_absolute else (s2[0] + offs[0], s2[1] + offs[1])
 
     def arc(self, words: dict, used: set) -> None:
         plane = self.m.plane
@@ -380,8 +393,7 @@ class Motion:
             raise self.error("arc with both R and I/J/K words", words["R"][1])
         wrong = _CENTER_LETTER[n_axis]
         if wrong in words:
-            raise self.error(f"{wrong} word given for an arc in the {plane} plane",
-                             words[wrong][1])  # fmt: skip
+            raise self.error(f"{wrong} word given for an arc in the {plane} plane", words[wrong][1])
         turns = self.arc_turns(words, used)
         ccw = self.m.motion == G_3
         spiral_tol, radius_tol = arcs.tolerances(self.m.inch)

@@ -26,8 +26,7 @@ MAX_WEIGHT = 1e9
 def _check_weight(interp, letter: str, w: float, col: int) -> None:
     if not 1.0 / MAX_WEIGHT <= w <= MAX_WEIGHT:
         raise interp.error(
-            f"NURBS weight {letter}{w:.6g} is out of range ({1 / MAX_WEIGHT:g} to "
-            f"{MAX_WEIGHT:g})",
+            f"NURBS weight {letter}{w:.6g} is out of range ({1 / MAX_WEIGHT:g} to {MAX_WEIGHT:g})",
             col,
         )
 
@@ -135,9 +134,10 @@ class NurbsBlocks:
         if order_f > 3:
             self.nurbs.order = int(order_f)
         elif order_f < 3:
-            self.note_once(("L", self.line_no),
-                           f"G5.2 L{int(order_f)}: LinuxCNC uses order 3 unless L > 3; order 3 "
-                           "used")  # fmt: skip
+            self.note_once(
+                ("L", self.line_no),
+                f"G5.2 L{int(order_f)}: LinuxCNC uses order 3 unless L > 3; order 3 used",
+            )
 
     def _g5_add(self, words: dict, point: list) -> None:
         if "P" not in words:
@@ -264,9 +264,7 @@ class NurbsBlocks:
             if not 2 <= order <= 8:
                 raise self.error(f"NURBS order {order} must be in 2..8")
             if order > n:
-                raise self.error(
-                    f"NURBS order {order} exceeds the number of control points ({n})"
-                )
+                raise self.error(f"NURBS order {order} exceeds the number of control points ({n})")
             k = np.asarray(knots, dtype=float)
             if k.size != n + order:
                 raise self.error(
@@ -331,7 +329,6 @@ class NurbsBlocks:
         self.nurbs = None
 
 
-
 #: The knot span (last − first) a NURBS block may have, and the largest |knot| (G6.2 K).
 KNOT_SPAN_MIN = 1e-12
 KNOT_SPAN_MAX = 1e12
@@ -344,10 +341,9 @@ def g5_knot_vector(n_points: int, order: int) -> list[float]:
     k ≤ i ≤ n and n − k + 2 beyond: clamped, uniform, integer-valued.
     """
     n, k = n_points - 1, order
-    return [0.0 if i < k else float(i - k + 1) if i <= n else float(n - k + 2)
-            for i in range(n + k + 1)]  # fmt: skip
-
-
+    return [
+        0.0 if i < k else float(i - k + 1) if i <= n else float(n - k + 2) for i in range(n + k + 1)
+    ]
 
 
 def _fmt_point(p) -> str:

@@ -130,8 +130,10 @@ class ParameterStore:
             return value
         named = self.read_named
         if lenient:
+
             def named(name):
                 return self.read_named(name) if self.exists(name) else 0.0
+
         try:
             return evaluate(value, self.read_numbered, named, self.exists)
         except ExpressionError as exc:

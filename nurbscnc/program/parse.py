@@ -133,15 +133,19 @@ class _ToBlocks(Transformer):
                 keyword = str(child).lower()
             elif child.type == "COMMENT":
                 comments.append(("comment", str(child), child.column))
-        return Block(delete, (), (), tuple(comments), False,
-                     OWord(label[0], keyword, tuple(args), label[1]))  # fmt: skip
+        return Block(
+            delete, (), (), tuple(comments), False, OWord(label[0], keyword, tuple(args), label[1])
+        )
 
     def oword_computed(self, children):
         # The child after O_COMPUTED is the label's value; the rest as in ``oword``.
-        at = next(k for k, c in enumerate(children)
-                  if type(c) is not float and type(c) is not tuple and c.type == "O_COMPUTED")
+        at = next(
+            k
+            for k, c in enumerate(children)
+            if type(c) is not float and type(c) is not tuple and c.type == "O_COMPUTED"
+        )
         marker, value = children[at], children[at + 1]
-        block = self.oword([*children[:at], *children[at + 2:]], (("#", value), marker.column))
+        block = self.oword([*children[:at], *children[at + 2 :]], (("#", value), marker.column))
         return block
 
     def comment(self, children):
@@ -320,8 +324,13 @@ def _fast_block(line: str, match) -> Block:
             if value == _INF or value == -_INF:  # e.g. 400 digits (no nan: digits only)
                 raise GCodeSyntaxError(
                     f"number {text.strip()[:12]}... is out of range",
-                    SourcePos(0, body_start + pos + 1 + (len(body[pos + 1:]) -
-                                                         len(body[pos + 1:].lstrip(" \t")))),
+                    SourcePos(
+                        0,
+                        body_start
+                        + pos
+                        + 1
+                        + (len(body[pos + 1 :]) - len(body[pos + 1 :].lstrip(" \t"))),
+                    ),
                 )
             words.append(Word(letter.upper(), value, body_start + pos))
             pos += 1

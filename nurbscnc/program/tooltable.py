@@ -63,9 +63,7 @@ def parse_tool_table(text: str, name: str = "<tool table>") -> dict[int, Tool]:
             raise ConfigError(f"{name}:{number}: tool table line without a T word")
         t = fields["T"]
         if t != int(t) or not 0 <= t < 2**31:
-            raise ConfigError(
-                f"{name}:{number}: tool number T{t:g} must be a non-negative integer"
-            )
+            raise ConfigError(f"{name}:{number}: tool number T{t:g} must be a non-negative integer")
         diameter = fields.get("D", 0.0)
         if diameter < 0.0:
             raise ConfigError(f"{name}:{number}: negative tool diameter D{diameter:g}")

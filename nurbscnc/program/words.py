@@ -17,14 +17,26 @@ MAX_ARC_TURNS = 100_000
 
 #: The words a canned cycle reads besides X, Y, Z, R, L and polar @ ^ (LinuxCNC's
 #: check_other_codes): P with G74, G82, G84, G86, G88, G89; Q with G73, G83; I, J, K with G87.
-CYCLE_WORDS = {G_73: "Q", G_74: "P", G_81: "", G_82: "P", G_83: "Q", G_84: "P", G_85: "",
-               G_86: "P", G_87: "IJK", G_88: "P", G_89: "P"}  # fmt: skip
+CYCLE_WORDS = {
+    G_73: "Q",
+    G_74: "P",
+    G_81: "",
+    G_82: "P",
+    G_83: "Q",
+    G_84: "P",
+    G_85: "",
+    G_86: "P",
+    G_87: "IJK",
+    G_88: "P",
+    G_89: "P",
+}
 
 
 def cycles_reading(letter: str) -> str:
     """The canned cycles that read ``letter`` (:data:`CYCLE_WORDS`), as "G74, G82, …"."""
-    return ", ".join(f"G{code // 10}" for code, reads in sorted(CYCLE_WORDS.items())
-                     if letter in reads)  # fmt: skip
+    return ", ".join(
+        f"G{code // 10}" for code, reads in sorted(CYCLE_WORDS.items()) if letter in reads
+    )
 
 
 def unused_word_message(letter: str) -> str:
@@ -35,7 +47,7 @@ def unused_word_message(letter: str) -> str:
         "K": f"K word with no arc (G2/G3), G6.2 NURBS or {cycles_reading('K')} to use it",
         "R": "R word with no arc (G2/G3), canned cycle or G6.2 NURBS to use it",
         "P": f"P word with no G4, G10, G64, arc, G5, G5.2, G6.2, {cycles_reading('P')} or "
-             "M98 to use it",
+        "M98 to use it",
         "Q": f"Q word with no G5, G10, G64, {cycles_reading('Q')} or G6.2 to use it",
         "L": "L word with no G5.2 or G10 to use it",
         "H": "H word with no G43 to use it",
