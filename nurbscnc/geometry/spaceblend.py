@@ -212,28 +212,9 @@ def blend_space_corners(
         act = np.flatnonzero(live)
         if act.size == 0:
             break
-        da = d[act]
-        p_a, ta, ka = _frames(path, rows_a[act], len_a[act] - da)
-        p_b, tb, kb = _frames(path, rows_b[act], da)
-        ctrl = space_bezier(p_a, ta, ka, p_b, tb, kb)
-        pts, d1, d2 = _bezier_batch(ctrl, xi)
-        speed = np.sqrt(np.einsum("mij,mij->mi", d1, d1))
-        regular = speed.min(axis=1) > 1e-3 * speed.max(axis=1)
-        s = da[:, None] * frac[None, :]
-        k_side = frac.size
-        side_a = path.points(
-            np.repeat(rows_a[act], k_side),
-            (len_a[act] - da)[:, None].repeat(k_side, axis=1).ravel() + s.ravel(),
-        )[0].reshape(act.size, k_side, 3)
-        side_b = path.points(np.repeat(rows_b[act], k_side), s.ravel())[0].reshape(
-            act.size, k_side, 3
+        ctrl, dev, kappa, regular = _candidates(
+            path, rows_a[act], rows_b[act], len_a[act], vertex[act], d[act], xi, frac
         )
-        corner = np.concatenate([side_a[:, :-1], vertex[act][:, None, :], side_b[:, 1:]], axis=1)
-        dev = np.maximum(
-            _polyline_distance_batch(pts, corner).max(axis=1),
-            _polyline_distance_batch(corner, pts).max(axis=1),
-        )
-        kappa = np.linalg.norm(np.cross(d1, d2), axis=2) / np.maximum(speed, 1e-300) ** 3
         ok = regular & (dev <= tol[act])
         stop = np.zeros(act.size, dtype=bool)
         for n, c in enumerate(act.tolist()):  # the scalar bookkeeping of the search
@@ -275,3 +256,32 @@ def blend_space_corners(
             curve, float(best_d[c]), float(best_d[c]), dev_c, kmax, float(np.degrees(turning[c]))
         )
     return out
+
+
+def _candidates(path, rows_a, rows_b, len_a, vertex, da, xi, frac):
+    """One round of :func:`blend_space_corners`' search, whole-array over the k corners still
+    searching: the blend of trims ``da`` (k,) [mm] between pieces ``rows_a`` (of lengths
+    ``len_a``) and ``rows_b`` meeting at ``vertex`` (k, 3), sampled at ``xi``, the corner's
+    sides at fractions ``frac`` of the trims. Returns the Béziers' control points (k, 6, 3),
+    the two-way deviation from the corner (k,) [mm], the curvature samples (k, len(xi))
+    [1/mm] and whether each blend is regular (no vanishing speed)."""
+    p_a, ta, ka = _frames(path, rows_a, len_a - da)
+    p_b, tb, kb = _frames(path, rows_b, da)
+    ctrl = space_bezier(p_a, ta, ka, p_b, tb, kb)
+    pts, d1, d2 = _bezier_batch(ctrl, xi)
+    speed = np.sqrt(np.einsum("mij,mij->mi", d1, d1))
+    regular = speed.min(axis=1) > 1e-3 * speed.max(axis=1)
+    s = da[:, None] * frac[None, :]
+    k_side = frac.size
+    side_a = path.points(
+        np.repeat(rows_a, k_side),
+        (len_a - da)[:, None].repeat(k_side, axis=1).ravel() + s.ravel(),
+    )[0].reshape(rows_a.size, k_side, 3)
+    side_b = path.points(np.repeat(rows_b, k_side), s.ravel())[0].reshape(rows_a.size, k_side, 3)
+    corner = np.concatenate([side_a[:, :-1], vertex[:, None, :], side_b[:, 1:]], axis=1)
+    dev = np.maximum(
+        _polyline_distance_batch(pts, corner).max(axis=1),
+        _polyline_distance_batch(corner, pts).max(axis=1),
+    )
+    kappa = np.linalg.norm(np.cross(d1, d2), axis=2) / np.maximum(speed, 1e-300) ** 3
+    return ctrl, dev, kappa, regular

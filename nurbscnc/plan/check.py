@@ -10,6 +10,7 @@ from dataclasses import dataclass, fields, replace
 import numpy as np
 
 from nurbscnc.machine.profile import Machine
+from nurbscnc.plan.checkresult import Accumulator, Check
 from nurbscnc.plan.dynamics import (
     PathIndex,
     Response,
@@ -25,78 +26,6 @@ from nurbscnc.servo.model import AxesStream
 #: Servo samples per window of the dynamics check: its memory grows with this, not with
 #: the motion time.
 CHECK_WINDOW = 1 << 16
-
-
-@dataclass(frozen=True, eq=False)
-class Overs:
-    """What the shaping rules need of one check, in memory that grows with the pieces and
-    the over-limit samples, never with the motion time: ``count`` M checked
-    samples (the settle tail included); the over-limit samples (cutting, contour error above
-    the check's limit): their ``index`` (q,) in 0…M−1, ``err_mm`` (q,) [mm] and profile time
-    ``tau_s`` (q,) [s] (the tail: the end); the piece of every sample, run-length coded
-    (pieces follow time): ``run_piece`` (r,) and ``run_start`` (r,) its first sample;
-    ``restart_count`` (len(settle rows),): samples whose profile time is at most the start
-    of the cut after each rapid; ``worst_mm`` the largest checked error [mm]."""
-
-    count: int
-    index: np.ndarray
-    err_mm: np.ndarray
-    tau_s: np.ndarray
-    run_piece: np.ndarray
-    run_start: np.ndarray
-    restart_count: np.ndarray
-    worst_mm: float
-
-
-@dataclass(frozen=True, eq=False)
-class Check:
-    """The dynamics check of the final plan (SPEC §8). Always: ``overs``, the compact form
-    the shaping rules read (:class:`Overs`) and ``stats``, the contour error statistics of
-    the cutting samples (:meth:`contour_stats`). With ``plan_checked(...,
-    keep_reference=True)`` also the ``reference`` points it checked
-    (:class:`~nurbscnc.plan.timing.Reference`), the predicted servo ``response`` to them and
-    ``cutting`` (M,), which response samples are cutting (not on a rapid; the held tail
-    after the end counts as the last piece); else these three are None."""
-
-    reference: Reference | None
-    response: Response | None
-    cutting: np.ndarray | None
-    overs: Overs | None = None
-    stats: dict | None = None
-    #: The compact form of the program's own samples (``overs`` without the held tail a cut
-    #: window's check adds, :func:`~nurbscnc.plan.lookahead.plan_windows`; else
-    #: ``overs``): what joins windows.
-    samples: Overs | None = None
-    #: Cutting samples the statistics are over (joining windows).
-    cut_samples: int = 0
-
-    def contour_um(self) -> np.ndarray:
-        """The true contour error [µm] of the cutting samples (needs the kept response)."""
-        if self.response is None:
-            raise ValueError("the check kept no per-sample response (keep_reference=False)")
-        return self.response.contour_mm[self.cutting] * 1000.0
-
-    def contour_stats(self) -> dict:
-        """The check's contour error of the cutting samples [µm]: ``contour_true_max_um``,
-        ``contour_true_rms_um`` (true distance to the path) and ``contour_eq29_max_um`` (|ε|
-        of SPEC eq. 29); 0 when nothing is cut. The summaries use only these; a check that
-        keeps no per-sample arrays gives the same numbers from its running statistics (the
-        rms summed window by window: equal to rounding)."""
-        if self.response is None:
-            return dict(self.stats)
-        c = self.contour_um()
-        eq29 = np.abs(self.response.contour_eq29_mm[self.cutting]) * 1000.0
-        if not c.size:
-            return {
-                "contour_true_max_um": 0.0,
-                "contour_true_rms_um": 0.0,
-                "contour_eq29_max_um": 0.0,
-            }
-        return {
-            "contour_true_max_um": float(c.max()),
-            "contour_true_rms_um": float(np.sqrt(np.mean(c * c))),
-            "contour_eq29_max_um": float(eq29.max()),
-        }
 
 
 def _rows(ref: Reference, sl: slice) -> Reference:
@@ -265,7 +194,7 @@ class Checker:
         servo = self.machine.servo
         stream_in = stream
         stream = (self._at_rest if stream is None else stream).copy()
-        acc = _Accumulator(self, profile)
+        acc = Accumulator(self, profile)
         last = end = None
         # The path the error is measured against: the pieces up to this window's end (the
         # program as if it ended there; the whole program for the last window).
@@ -337,7 +266,7 @@ class Checker:
 
     def _finish(
         self,
-        acc: _Accumulator,
+        acc: Accumulator,
         stream: AxesStream,
         end: tuple | None,
         last: Reference,
@@ -477,7 +406,7 @@ class Checker:
         )
         n, m = ref.t_s.size, resp.contour_mm.size
         cutting = np.append(self._cutting(ref, resp, profile), np.full(m - n, not self.rapid[-1]))
-        acc = _Accumulator(self, profile)
+        acc = Accumulator(self, profile)
         acc.add(
             resp,
             cutting,
@@ -555,140 +484,6 @@ class _HeadProfile:
     def __init__(self, profile: Profile, end: int):
         self.piece_start_mm = profile.piece_start_mm[:end]
         self.total_length_mm = float(profile.piece_start_mm[end])
-
-
-class _Accumulator:
-    """The running results of one check (:class:`Checker`): over-limit samples, piece
-    runs, settle counts and contour statistics (:class:`Overs`)."""
-
-    def __init__(self, checker: Checker, profile: Profile):
-        self.eps_mm = checker.eps_mm
-        self.t_restart = profile.piece_start_time_s[checker.settle_rows + 1]
-        self.count = 0
-        self.over: list = []  # (index, err, tau) per window
-        self.runs: list = []  # (run piece, run start) per window
-        self.last_piece = -1
-        self.restart = np.zeros(checker.settle_rows.size, dtype=np.int64)
-        self.worst = 0.0
-        self.c_max = self.c_sq = self.eq29_max = 0.0
-        self.c_n = 0
-        self.real = None  # (count, worst, restart, over count, run count) before a virtual tail
-
-    def add(
-        self,
-        resp: Response,
-        cutting: np.ndarray,
-        tau_s: np.ndarray,
-        piece: np.ndarray,
-        virtual: bool = False,
-    ):
-        """The next samples: their response, which are checked (``cutting``), profile times
-        [s] and pieces. ``virtual``: the held tail of a cut window that the program does not
-        end with: it counts for the window's decisions, not in its statistics nor in
-        :attr:`Check.samples`."""
-        if virtual and self.real is None:
-            self.real = (
-                self.count,
-                self.worst,
-                self.restart.copy(),
-                len(self.over),
-                len(self.runs),
-            )
-        err = np.where(cutting, resp.contour_mm, 0.0)
-        over = np.flatnonzero(err > self.eps_mm)
-        self.over.append((over + self.count, err[over], tau_s[over]))
-        self.worst = max(self.worst, float(err.max()))
-        del err
-        starts = np.flatnonzero(np.diff(piece, prepend=self.last_piece) != 0)
-        self.runs.append((piece[starts], starts + self.count))
-        self.last_piece = int(piece[-1])
-        self.restart += np.searchsorted(tau_s, self.t_restart, side="right")
-        c = resp.contour_mm[cutting] * 1000.0 if not virtual else np.zeros(0)
-        if c.size:
-            self.c_max = max(self.c_max, float(c.max()))
-            self.c_sq += float(np.dot(c, c))
-            self.c_n += c.size
-            self.eq29_max = max(
-                self.eq29_max, float(np.abs(resp.contour_eq29_mm[cutting]).max()) * 1000.0
-            )
-        self.count += cutting.size
-
-    def check(self) -> Check:
-        """The :class:`Check` of everything added (no per-sample arrays)."""
-        idx, err, tau = (np.concatenate(x) for x in zip(*self.over))
-        piece, start = (np.concatenate(x) for x in zip(*self.runs))
-        overs = Overs(self.count, idx, err, tau, piece, start, self.restart, self.worst)
-        rms = float(np.sqrt(self.c_sq / self.c_n)) if self.c_n else 0.0
-        stats = {
-            "contour_true_max_um": self.c_max,
-            "contour_true_rms_um": rms,
-            "contour_eq29_max_um": self.eq29_max,
-        }
-        samples = overs
-        if self.real is not None:
-            count, worst, restart, n_over, n_runs = self.real
-            i, e, t = (np.concatenate(x) for x in zip(*self.over[:n_over]))
-            rp, rs = (np.concatenate(x) for x in zip(*self.runs[:n_runs]))
-            samples = Overs(count, i, e, t, rp, rs, restart, worst)
-        return Check(None, None, None, overs, stats, samples, self.c_n)
-
-
-class JoinedChecks:
-    """The compact :class:`Check` of a program's cut windows, joined as they come, their
-    samples one after the other (:attr:`Check.samples`: without the held tails of the
-    windows' checks): over-limit samples, piece runs, counts before each restart and
-    statistics. No window's check is kept: each holds counts for every restart of the
-    program (one per rapid), so keeping them all would grow as cuts × rapids; the counts
-    are summed as they come."""
-
-    def __init__(self):
-        self.parts: list = []  # per window: (index, err, tau, run piece, run start, count)
-        self.restart = None
-        self.worst = 0.0
-        self.n: list = []
-        self.stats: list = []
-
-    def add(self, check: Check) -> None:
-        o = check.samples
-        self.parts.append((o.index, o.err_mm, o.tau_s, o.run_piece, o.run_start, o.count))
-        if self.restart is None:
-            self.restart = np.array(o.restart_count, dtype=np.int64)
-        else:
-            self.restart += o.restart_count
-        self.worst = max(self.worst, o.worst_mm)
-        self.n.append(check.cut_samples)
-        self.stats.append(check.stats)
-
-    def check(self) -> Check:
-        off = np.cumsum([0] + [p[5] for p in self.parts])
-        cat = np.concatenate
-        overs = Overs(
-            int(off[-1]),
-            cat([p[0] + d for p, d in zip(self.parts, off)]),
-            cat([p[1] for p in self.parts]),
-            cat([p[2] for p in self.parts]),
-            cat([p[3] for p in self.parts]),
-            cat([p[4] + d for p, d in zip(self.parts, off)]),
-            self.restart,
-            self.worst,
-        )
-        total = sum(self.n)
-        stats = self.stats
-        rms = (
-            float(
-                np.sqrt(
-                    sum(s["contour_true_rms_um"] ** 2 * m for s, m in zip(stats, self.n)) / total
-                )
-            )
-            if total
-            else 0.0
-        )
-        joined = {
-            "contour_true_max_um": max(s["contour_true_max_um"] for s in stats),
-            "contour_true_rms_um": rms,
-            "contour_eq29_max_um": max(s["contour_eq29_max_um"] for s in stats),
-        }
-        return Check(None, None, None, overs, joined, overs, total)
 
 
 def _cut_distance_after_rapids(

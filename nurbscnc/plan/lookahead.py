@@ -62,7 +62,7 @@ iterations, whatever its length. The check (:mod:`~nurbscnc.plan.check`) runs
 :data:`~nurbscnc.plan.check.CHECK_WINDOW` servo samples at a time with the servo state
 carried (:class:`~nurbscnc.plan.check.Checker`) and keeps only the over-limit samples, the
 piece of every sample run-length coded and running statistics
-(:class:`~nurbscnc.plan.check.Overs`): its memory grows with the pieces, not with the motion
+(:class:`~nurbscnc.plan.checkresult.Overs`): its memory grows with the pieces, not with the motion
 time, and the plan is the one the whole-array check gives (``plan_checked(...,
 keep_reference=True)`` keeps the whole reference and response for plots and reports). Runs
 of tiny tangent-continuous pieces at one cap and one set of limits are planned as one by
@@ -81,7 +81,8 @@ from collections import deque
 import numpy as np
 
 from nurbscnc.machine.profile import Machine
-from nurbscnc.plan.check import CHECK_WINDOW, Check, Checker, JoinedChecks
+from nurbscnc.plan.check import CHECK_WINDOW, Checker
+from nurbscnc.plan.checkresult import Check, JoinedChecks
 from nurbscnc.plan.converge import converge
 from nurbscnc.plan.levers import Levers
 from nurbscnc.plan.limits import check_point_count
@@ -137,7 +138,7 @@ def plan_checked(
     The check runs ``window`` servo samples at a time
     (:class:`~nurbscnc.plan.check.Checker`), so its memory grows with the pieces, not with
     the motion time; the plan does not depend on ``window``. ``keep_reference``: the final
-    :class:`~nurbscnc.plan.check.Check` holds the whole reference and response (plots,
+    :class:`~nurbscnc.plan.checkresult.Check` holds the whole reference and response (plots,
     reports, the output); False: only the over-limit samples and the statistics (long
     programs). ``columns``: the program's :class:`~nurbscnc.program.columns.SegmentColumns`
     if read already. Returns the plan and the final check (None with ``dynamics="off"``)."""

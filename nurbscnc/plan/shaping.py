@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from nurbscnc.plan.check import Overs
+from nurbscnc.plan.checkresult import Overs
 from nurbscnc.plan.levers import Levers
 from nurbscnc.plan.pieces import PieceList
 from nurbscnc.plan.profile import Profile

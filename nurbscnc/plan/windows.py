@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from nurbscnc.plan.check import Check
+from nurbscnc.plan.checkresult import Check
 from nurbscnc.plan.levers import Levers
 from nurbscnc.plan.pieces import PieceList
 from nurbscnc.plan.plans import Limits, Plan, profile_over
