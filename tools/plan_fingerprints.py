@@ -106,10 +106,20 @@ def main() -> int:
     ap.add_argument("--jobs", type=int, default=2)
     args = ap.parse_args()
     tasks = [(p, name, opts) for p in programs() for name, opts, keep in MODES if keep(p)]
+    if args.against:  # the quick ones first: a run stopped early has compared the most
+        seconds = {
+            k: v.get("seconds", 0.0) for k, v in json.loads(Path(args.against).read_text()).items()
+        }
+        tasks.sort(key=lambda t: seconds.get(f"{t[0].name}::{t[1]}", 0.0))
+    progress = Path(args.out).with_suffix(".partial.jsonl")
+    progress.write_text("")
 
     def one(task):
         p, name, opts = task
-        return f"{p.name}::{name}", fingerprint(p, opts, args.timeout)
+        key, result = f"{p.name}::{name}", fingerprint(p, opts, args.timeout)
+        with progress.open("a") as f:  # one line per run as it ends
+            f.write(json.dumps({key: result}) + "\n")
+        return key, result
 
     with ThreadPoolExecutor(args.jobs) as pool:
         results = dict(pool.map(one, tasks))
