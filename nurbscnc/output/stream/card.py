@@ -41,6 +41,31 @@ from nurbscnc.output.stream.endpoints import serve as serve
 _HALF_SEQ = p.SEQ_MODULO // 2
 
 
+#: The simulated card's counters, all 0 at the start and in its report.
+COUNTERS = (
+    "bytes_received",
+    "frames_received",
+    "crc_errors",
+    "protocol_errors",
+    "dropped_in",
+    "corrupted_in",
+    "dropped_out",
+    "corrupted_out",
+    "duplicates",
+    "overflows",
+    "naks_sent",
+    "acks_sent",
+    "aborts_received",
+    "holds_received",
+    "resets",
+    "max_fill",
+    "executed_periods",
+    "frames_sent",
+    "position_naks",
+    "positions_set",
+)
+
+
 class CardSim(FaultInjection, Execution):
     """One simulated card (single-threaded: call it from one thread at a time).
 
@@ -70,28 +95,7 @@ class CardSim(FaultInjection, Execution):
         self._out: collections.deque[tuple[float, bytes]] = collections.deque()
         self._log: list[np.ndarray] = []
         self.stalled = False
-        for name in (
-            "bytes_received",
-            "frames_received",
-            "crc_errors",
-            "protocol_errors",
-            "dropped_in",
-            "corrupted_in",
-            "dropped_out",
-            "corrupted_out",
-            "duplicates",
-            "overflows",
-            "naks_sent",
-            "acks_sent",
-            "aborts_received",
-            "holds_received",
-            "resets",
-            "max_fill",
-            "executed_periods",
-            "frames_sent",
-            "position_naks",
-            "positions_set",
-        ):
+        for name in COUNTERS:
             setattr(self, name, 0)
         self._open_stream(0.0)
         self.state = p.CardState.IDLE
@@ -380,29 +384,7 @@ class CardSim(FaultInjection, Execution):
 
     def report(self) -> dict:
         """Counters and final state, JSON-able."""
-        keys = (
-            "bytes_received",
-            "frames_received",
-            "crc_errors",
-            "protocol_errors",
-            "dropped_in",
-            "corrupted_in",
-            "dropped_out",
-            "corrupted_out",
-            "duplicates",
-            "overflows",
-            "naks_sent",
-            "acks_sent",
-            "aborts_received",
-            "holds_received",
-            "resets",
-            "max_fill",
-            "executed_periods",
-            "frames_sent",
-            "position_naks",
-            "positions_set",
-        )
-        out = {k: int(getattr(self, k)) for k in keys}
+        out = {k: int(getattr(self, k)) for k in COUNTERS}
         out.update(
             state=self.state.name,
             alarm=self.alarm.name,
