@@ -20,17 +20,18 @@ from nurbscnc.plan.dynamics import (
 from nurbscnc.plan.pieces import PieceList
 from nurbscnc.plan.profile import Profile, same_until_s
 from nurbscnc.plan.sampler import ReferenceSampler, as_sampler
-from nurbscnc.plan.timing import Reference, dwell_times, same_clock_until_s, sample_count
+from nurbscnc.plan.timing import (
+    Reference,
+    dwell_times,
+    rows_of,
+    same_clock_until_s,
+    sample_count,
+)
 from nurbscnc.servo.model import AxesStream
 
 #: Servo samples per window of the dynamics check: its memory grows with this, not with
 #: the motion time.
 CHECK_WINDOW = 1 << 16
-
-
-def _rows(ref: Reference, sl: slice) -> Reference:
-    """Rows ``sl`` of every per-sample column of ``ref``."""
-    return replace(ref, **{f.name: getattr(ref, f.name)[sl] for f in fields(ref)})
 
 
 def _joined(first: Reference, then: Reference) -> Reference:
@@ -141,12 +142,12 @@ class Checker:
                 return self.sampler(planned, profile, period, a, b)
 
         for whole, a, b, k0, k1 in chunks:
-            ref = sample(a, b) if whole is None else _rows(whole, slice(a, b))
+            ref = sample(a, b) if whole is None else rows_of(whole, slice(a, b))
             virt = None
             if not last and b == r1 + 1:
                 virt = r1 - a
                 end = self._end_row(planned, profile, r1, rows[4] + 1)
-                ref = _joined(_rows(ref, slice(0, virt)), end)
+                ref = _joined(rows_of(ref, slice(0, virt)), end)
             yield ref, slice(k0 - a, k1 - a), virt
 
     def _head(self, planned: PieceList, profile: Profile, end: int) -> tuple:
@@ -213,7 +214,7 @@ class Checker:
             if same and a == memo.a:  # the leading rows the last check of it sampled
                 j = min(same, b - a)
                 ref = _joined(
-                    _rows(memo.ref, slice(0, j)), self.sampler(planned, profile, period, a + j, b)
+                    rows_of(memo.ref, slice(0, j)), self.sampler(planned, profile, period, a + j, b)
                 )
             else:
                 ref = self.sampler(planned, profile, period, a, b)
@@ -229,7 +230,7 @@ class Checker:
                 else np.zeros((ref.t_s.size, 2))
             )
             if virt is not None:
-                end = (_rows(ref, slice(virt, virt + 1)), d[virt : virt + 1])
+                end = (rows_of(ref, slice(virt, virt + 1)), d[virt : virt + 1])
             # Own rows whose response the last check computed: their reference rows and
             # the rows on each side (the direction of travel) are the same.
             kept = 0
@@ -238,7 +239,7 @@ class Checker:
             elif same and sampled[0][0] == memo.a and own.start == memo.own:
                 kept = max(0, min(same - 1, ref.t_s.size - 2, own.stop) - own.start)
                 kept = min(kept, memo.contour_mm.size)
-            ref = _rows(ref, own)
+            ref = rows_of(ref, own)
             actual = stream.step(ref.points_mm)
             resp, cutting = self._respond(
                 ref, actual, d[own], on, prof, index, profile, head, memo, kept
@@ -380,7 +381,7 @@ class Checker:
             self.eps_mm,
             index,
         )
-        cutting = self._cutting(_rows(ref, new), resp, profile, head)
+        cutting = self._cutting(rows_of(ref, new), resp, profile, head)
         if not kept:
             return resp, cutting
 

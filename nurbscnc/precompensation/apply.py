@@ -19,7 +19,7 @@ from nurbscnc.geometry.nurbs import NurbsCurve
 from nurbscnc.geometry.path import Kind
 from nurbscnc.geometry.polyline import CHORD_MM
 from nurbscnc.machine.profile import Machine
-from nurbscnc.plan.timing import Reference
+from nurbscnc.plan.timing import Reference, rows_of
 from nurbscnc.precompensation.limits import (
     PROJECT_MAX_WINDOW,
     limit_excess,
@@ -412,11 +412,6 @@ def _segment(
     return out, comp
 
 
-def _rows_of(ref: Reference, lo: int, hi: int) -> Reference:
-    """Rows lo … hi − 1 of every per-sample column of ``ref``."""
-    return replace(ref, **{f.name: getattr(ref, f.name)[lo:hi] for f in fields(ref)})
-
-
 def _join_segments(
     prev_tail_mm: np.ndarray,
     prev_planned_mm: np.ndarray,
@@ -525,7 +520,7 @@ def _compensated_rows(
                 while len(_JOINED) > JOINED_KEPT:
                     _JOINED.popitem(last=False)
             seg = joined[1]
-        parts.append(_rows_of(seg, max(lo - a, 0), min(hi, int(end[i])) - a))
+        parts.append(rows_of(seg, slice(max(lo - a, 0), min(hi, int(end[i])) - a)))
         comps.append(comp)
     out = replace(
         parts[0],
@@ -583,7 +578,7 @@ def precompensate_reference(
     n = ref.t_s.size
     options = (tolerance_mm, fit_tolerance_mm, refine)
     out, comps = _compensated_rows(
-        lambda a, b: _rows_of(ref, a, b),
+        lambda a, b: rows_of(ref, slice(a, b)),
         pieces,
         profile,
         machine,
@@ -625,7 +620,7 @@ def precompensated_sampler(
             whole = sampler(pieces, profile, period_s)
 
             def ref_of(a, b):
-                return _rows_of(whole, a, b)
+                return rows_of(whole, slice(a, b))
 
         return _compensated_rows(ref_of, pieces, profile, machine, options, n, k0, hi)[0]
 
