@@ -295,7 +295,10 @@ class Dwell(_AtRest):
 class Pause(_AtRest):
     """A program stop (M0, M1 optional stop, M60 pallet change) at ``position_mm`` (an
     ``(x, y, z)`` tuple): the machine stops there and waits for the operator to resume.
-    ``code`` is "M0", "M1" or "M60".
+    ``code`` is "M0", "M1" or "M60"; "M6" for a tool change (``tool``: the tool number
+    to load); "M100"–"M199" for a user M-code (``argv``: the executable's path, then its
+    P and Q as text, as LinuxCNC passes them). ``message``: the operator's text of that
+    line (its comment or MSG), "" when it has none.
 
     Its ``kind`` is "pause"; every stage treats the stop kinds
     (:data:`nurbscnc.geometry.path.STOP_KINDS`) alike: come to rest, hold ``seconds`` (0 here).
@@ -305,6 +308,9 @@ class Pause(_AtRest):
     position_mm: tuple
     line: int
     code: str = "M0"
+    tool: int | None = None
+    message: str = ""
+    argv: tuple = ()
 
     kind = "pause"
     seconds = 0.0
