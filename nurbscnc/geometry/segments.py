@@ -337,3 +337,6 @@ class Program:
     blocks: int = 0
     name: str = "<program>"
     source_lines: tuple = field(default=(), repr=False)
+    #: The numbered parameters at the program's end (``{number: value}``, lengths in mm):
+    #: what a LinuxCNC parameter file keeps (program/varfile.py).
+    parameters: dict = field(default_factory=dict, repr=False)

@@ -112,6 +112,20 @@ class Coordinates:
     def system_rotation_deg(self, system: int) -> float:
         return self.params.get(SYSTEM_BASE + SYSTEM_STRIDE * (system - 1) + 9, 0.0)
 
+    def restore(self, values: dict) -> None:
+        """The persistent parameters of a parameter file (``{number: value}``, lengths in
+        mm) in force before the program, as LinuxCNC's ``Interp::init`` applies them: the
+        system #5220 (1..9) active with its offsets and rotation, the G92 offsets
+        #5211–#5213 in force when #5210 is not 0."""
+        for index, value in values.items():
+            if is_coordinate_parameter(index):
+                self.params[index] = float(value)
+        system = int(self.params.get(SYSTEM_INDEX, 1.0) + 0.0001)
+        self._load(system if 1 <= system <= N_SYSTEMS else 1)
+        if self.params.get(G92_FLAG, 0.0):
+            self.g92_mm = [self.params.get(G92_BASE + k, 0.0) for k in range(3)]
+        self._update_plain()
+
     # -- transforms --------------------------------------------------------------------------
     def to_machine(self, prog) -> list:
         """Machine position [mm] of a program position [mm] (see the module docstring)."""
