@@ -28,5 +28,5 @@ def check_program(
     prog = load_program(program, block_delete, tool_table, subroutine_path)
     say(f"checking {len(prog.segments)} segments")
     columns = segment_columns(prog.segments)  # read once for the checks and the summary
-    check_before_work(prog.segments, mach, columns)
+    check_before_work(prog.segments, mach, columns, prog.frames)
     return prog, program_summary(prog, columns, per_segment=per_segment)

@@ -84,14 +84,34 @@ class Coordinates:
     g92_mm: list = field(default_factory=lambda: [0.0, 0.0, 0.0])
     tool_mm: list = field(default_factory=lambda: [0.0, 0.0, 0.0])
 
+    #: The interpreter's segment list: :attr:`frames` says from which segment on each
+    #: set of offsets was in force.
+    segments: list = field(default_factory=list)
+
     def __post_init__(self):
         self.params.setdefault(SYSTEM_INDEX, 1.0)
         self.plain = True  # no offset, rotation or tool offset: machine = program
+        self.frames: list = []
+        self._update_plain()
 
     def _update_plain(self) -> None:
         self.plain = not (
             any(self.origin_mm) or any(self.g92_mm) or any(self.tool_mm) or self.rotation_deg
         )
+        # (first segment, system name, origin, G92, tool [mm], rotation [deg]) for the
+        # errors that name the offsets (soft limits): one row per change
+        frame = (
+            len(self.segments),
+            SYSTEM_NAMES[self.system],
+            tuple(self.origin_mm),
+            tuple(self.g92_mm),
+            tuple(self.tool_mm),
+            self.rotation_deg,
+        )
+        if self.frames and self.frames[-1][0] == frame[0]:
+            self.frames[-1] = frame
+        elif not self.frames or self.frames[-1][1:] != frame[1:]:
+            self.frames.append(frame)
 
     def set_tool(self, offset_mm) -> None:
         """G43 / G43.1 / G49: the tool offset [mm] along X, Y, Z."""

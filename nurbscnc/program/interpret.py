@@ -118,7 +118,8 @@ class _Interpreter(
         self.main = Source(lines, options.name)
         self.lines = lines
         self.m = ModalState()
-        self.coords = coords.Coordinates()
+        self.segments: list = []
+        self.coords = coords.Coordinates(segments=self.segments)
         self.params: dict[int, float] = {}
         if options.parameters:
             self.coords.restore(options.parameters)
@@ -130,7 +131,6 @@ class _Interpreter(
         self.globals: dict[str, float] = {}
         self.frames = [Frame(self.main, 0)]
         self.source = self.main
-        self.segments: list = []
         self.notes: list[Note] = []
         self.nurbs = None
         # G5 without I J: minus the last G5's (P, Q) [mm], (0, 0) before any (LinuxCNC's
@@ -429,4 +429,5 @@ def interpret(blocks, lines, options: InterpretOptions) -> Program:
         blocks=blocks,
         name=options.name,
         parameters=state.final_parameters(),
+        frames=tuple(state.coords.frames),
     )
