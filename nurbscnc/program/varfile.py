@@ -56,7 +56,8 @@ def _length_numbers() -> frozenset:
     return frozenset(numbers)
 
 
-_LENGTHS = _length_numbers()
+#: The parameters that hold lengths [mm] (the others are flags, angles, plain numbers).
+LENGTH_PARAMETERS = _length_numbers()
 
 
 def parse_var_text(text: str, name: str = "<var file>") -> dict[int, float]:
@@ -99,7 +100,7 @@ def parse_var_text(text: str, name: str = "<var file>") -> dict[int, float]:
 def _check_value(where: str, index: int, value: float) -> None:
     if not math.isfinite(value):
         raise ConfigError(f"{where}: parameter #{index} value {value} is not a finite number")
-    if index in _LENGTHS and abs(value) > MAX_COORD_MM:
+    if index in LENGTH_PARAMETERS and abs(value) > MAX_COORD_MM:
         raise ConfigError(
             f"{where}: parameter #{index} = {value:g} mm is out of range "
             f"(at most ±{MAX_COORD_MM:g})"
