@@ -235,3 +235,21 @@ def test_user_m_codes_from_the_user_m_path(job):
     assert r.exit_code == 0, r.output
     r = run_cli(["check", "mc.nc", "--set", f"program.user_m_path={folder}"])
     assert r.exit_code == 0, r.output
+
+
+def test_stream_reads_the_offsets_and_writes_them_back_at_the_end(tmp_path):
+    """Against the card simulator: G54 X 0.5 from the file puts X1 at machine 1.5; G10 L20
+    there makes it G54's origin; X2 then ends at machine 3.5 (3500 steps at 1000 steps/mm);
+    once the card is done the file holds the new origin (1.5, 1)."""
+    from tests.stream_helpers import card_on
+
+    nc = tmp_path / "part.nc"
+    nc.write_text("G21 G90\nG0 X1 Y1\nG10 L20 P1 X0 Y0\nG1 X2 F3000\nM2\n")
+    var = tmp_path / "m.var"
+    var.write_text("5221\t0.500000\n")
+    with card_on("pty") as (card, ep):
+        r = run_cli(["stream", nc, "--port", ep.path, "--json", "--var", var])
+    assert r.exit_code == 0, r.output
+    assert card.position.tolist() == [3500, 1000, 0]
+    values = parse_var_text(var.read_text(), "m.var")
+    assert (values[5221], values[5222], values[5220]) == (1.5, 1.0, 1.0)
