@@ -168,6 +168,12 @@ def test_run_write_var_writes_the_offsets_back(job):
     assert (job / "m.var").read_text() == "5223 -50\n"
 
 
+def test_a_file_that_cannot_be_written_back_is_refused_before_the_work(job):
+    r = run_cli(["run", "part.nc", "-o", "p.csv", "--var", "no/such/m.var", "--write-var"])
+    assert r.exit_code == 2 and "its folder" in r.stderr and "does not exist" in r.stderr
+    assert not (job / "p.csv").exists()
+
+
 def test_a_write_that_fails_leaves_the_old_file_whole(job, monkeypatch):
     before = (job / "m.var").read_bytes()
 
@@ -253,3 +259,15 @@ def test_stream_reads_the_offsets_and_writes_them_back_at_the_end(tmp_path):
     assert card.position.tolist() == [3500, 1000, 0]
     values = parse_var_text(var.read_text(), "m.var")
     assert (values[5221], values[5222], values[5220]) == (1.5, 1.0, 1.0)
+
+
+def test_work_position_of_a_machine_position():
+    """G55 at (10, 20, -30) turned 90°, G92 (1, 0, 0) on: machine (10, 21, -25) is
+    R(-90°)·(0, 1) − G92 = (1, 0) − (1, 0) in X Y, 5 in Z."""
+    from nurbscnc.program.varfile import work_position_mm
+
+    values = {5220: 2, 5241: 10, 5242: 20, 5243: -30, 5250: 90, 5210: 1, 5211: 1}
+    name, work = work_position_mm(values, (10, 21, -25))
+    assert name == "G55"
+    assert work == pytest.approx([0.0, 0.0, 5.0], abs=1e-12)
+    assert work_position_mm({}, (1, 2, 3)) == ("G54", [1.0, 2.0, 3.0])

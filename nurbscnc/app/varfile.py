@@ -22,7 +22,7 @@ import os
 import stat
 from dataclasses import dataclass, field
 
-from nurbscnc.errors import ConfigError
+from nurbscnc.errors import ConfigError, OutputError
 
 #: The environment variable naming the parameter file.
 ENV_VAR = "NURBSCNC_VAR"
@@ -115,6 +115,16 @@ def program_inputs(machine=None, var=None, user_m_path=(), writes: bool = False)
     parameter file back, so a missing one is all zeros)."""
     path, how = find_var_file(machine, var)
     values = read_var_file(path, must_exist=not writes) if path else {}
+    if writes and path:
+        # checked before the work: a file that cannot be written back loses the offsets
+        # the program set (after a whole stream)
+        folder = os.path.dirname(os.path.abspath(path))
+        if not os.path.isdir(folder):
+            raise ConfigError(f"the parameter file {path}: its folder {folder} does not exist")
+        if not os.access(folder, os.W_OK) or (
+            os.path.exists(path) and not os.access(path, os.W_OK)
+        ):
+            raise OutputError(f"cannot write the parameter file {path}: Permission denied")
     return ProgramInputs(path, how, values, user_m_dirs(machine, user_m_path))
 
 

@@ -124,3 +124,12 @@ def format_var_text(values: dict, old: dict | None = None) -> str:
     """The parameter file's text LinuxCNC writes: one ``"%d\\t%f"`` line for each number of
     :func:`var_numbers` ``(old)``, with its value in ``values`` (0 when absent)."""
     return "".join(f"{k}\t{float(values.get(k, 0.0)):f}\n" for k in var_numbers(old))
+
+
+def work_position_mm(values: dict, machine_mm) -> tuple[str, list]:
+    """The active system's name ("G54"…) and the work (program) coordinates [mm] of the
+    machine position ``machine_mm`` under the offsets of a parameter file's ``values``
+    (lengths in mm; no tool offset): what a controller shows beside the machine position."""
+    frame = coords.Coordinates()
+    frame.restore(values)
+    return coords.SYSTEM_NAMES[frame.system], frame.to_program(list(map(float, machine_mm)))
