@@ -21,9 +21,10 @@ def check_program(
     """``(program, summary)`` of the program file ``program`` checked for the machine
     ``mach`` (:func:`~nurbscnc.plan.limits.check_before_work`; PlanningError when it fails);
     the summary is :func:`~nurbscnc.plan.report.program_summary`'s, with every segment when
-    ``per_segment``. ``progress``: None or a callback named with each stage; ``var``,
-    ``user_m_path``: the parameter file and user M-code folders
-    (:func:`~nurbscnc.app.varfile.program_inputs`; the file is read, never written)."""
+    ``per_segment``, and ``var_file``: the parameter file read (None: none).
+    ``progress``: None or a callback named with each stage; ``var``, ``user_m_path``: the
+    parameter file and user M-code folders (:func:`~nurbscnc.app.varfile.program_inputs`;
+    the file is read, never written)."""
     from nurbscnc.plan.limits import check_before_work
     from nurbscnc.plan.report import program_summary
     from nurbscnc.program.columns import segment_columns
@@ -35,4 +36,5 @@ def check_program(
     say(f"checking {len(prog.segments)} segments")
     columns = segment_columns(prog.segments)  # read once for the checks and the summary
     check_before_work(prog.segments, mach, columns, prog.frames)
-    return prog, program_summary(prog, columns, per_segment=per_segment)
+    summary = program_summary(prog, columns, per_segment=per_segment)
+    return prog, {**summary, "var_file": inputs.var_path}

@@ -94,6 +94,9 @@ def print_summary(prog: Program, s: dict) -> None:
         "  bounding box [mm]: "
         + "  ".join(f"{a} {lo[i]:.3f}..{hi[i]:.3f}" for i, a in enumerate("XYZ"))
     )
+    if s.get("var_file"):
+        start = prog.frames[0][1] if prog.frames else "G54"
+        out.print(f"  parameter file: {s['var_file']} ({start} at the start)", markup=False)
     f = s["feed_range_mm_s"]
     if f["min"] is not None:
         out.print(f"  feed [mm/min]: {f['min'] * 60.0:.6g}..{f['max'] * 60.0:.6g}")
