@@ -19,6 +19,7 @@ from nurbscnc.app.stream import (
     stream_job,
     stream_report,
 )
+from nurbscnc.app.varfile import program_inputs, write_back
 from nurbscnc.cli import console
 from nurbscnc.cli.common import load_machine_cli
 from nurbscnc.cli.controls import Operator, key_reader, routed_signals
@@ -51,17 +52,23 @@ def plan_job(
     Returns ``(job, pulses, machine)`` (:func:`~nurbscnc.app.stream.stream_job`): a job
     planned cut window by cut window, or the pulses of the whole run (a baseline
     ``--algorithm``, ``--precompensate``). Everything that can be wrong with the input
-    raises here, before any port is touched (the pulse limit too)."""
+    raises here, before any port is touched (the pulse limit too). Returns ``(job, pulses,
+    machine, inputs, program)``: ``inputs`` the parameter file and user M-code folders
+    (:func:`~nurbscnc.app.varfile.program_inputs`; the stream writes the file back, so a
+    missing one is all zeros), ``program`` the interpreted program (its ``parameters``
+    are what is written back)."""
     options = run_options_of(settings)
     mach = load_machine_cli(machine, overrides)
+    inputs = program_inputs(mach, settings.get("var"), settings.get("user_m_path", ()), writes=True)
     prog = load_program(
         path,
         not settings.get("no_block_delete", False),
         settings.get("tool_table"),
         settings.get("subroutine_path", ()),
+        inputs=inputs,
     )
     job, pulses = stream_job(prog, mach, options, from_line, optional_stop, override)
-    return job, pulses, mach
+    return job, pulses, mach, inputs, prog
 
 
 @contextlib.contextmanager
@@ -209,7 +216,8 @@ def stream(
     the path within the acceleration and jerk limits, stops, and continues on Enter /
     SIGUSR2 (the rest re-planned from rest). + / - change the feed override. Ctrl-C or
     SIGTERM aborts the card at once and exits 130. Exit 0 only when the card reports DONE at
-    the program's end position.
+    the program's end position. The parameter file (--var) is read before and written back
+    (atomically) once the card is DONE: G10 L2/L20, G92, G28.1/G30.1 persist.
 
     Example: nurbscnc stream part.nc --port /dev/ttyUSB0 --optional-stop
     """
@@ -218,14 +226,14 @@ def stream(
     # Hold/resume are caught from the start: planning a long program takes time, and
     # SIGUSR1's default action would end the command silently.
     with routed_signals(operator, ("SIGUSR1", "SIGUSR2")):
-        job = pulses = None
+        job = pulses = inputs = prog = None
         if points_file and (from_line is not None or feed_override != 100):
             raise ConfigError(
                 "--from-line and --feed-override need a program (.nc/.ngc), "
                 "not a file of reference points"
             )
         if not points_file:
-            job, pulses, mach = plan_job(
+            job, pulses, mach, inputs, prog = plan_job(
                 program,
                 from_line=from_line,
                 optional_stop=optional_stop,
@@ -251,6 +259,8 @@ def stream(
                 "lead": lead,
             }
             reports = _send(link, operator, job, pulses, total, zero, quiet, as_json)
+            if inputs is not None:  # the program ran to its end: its offsets persist
+                write_back(inputs, prog)
         finally:  # the planner thread stopped before the process may exit
             if job is not None and job.feed is not None:
                 job.feed.close()
