@@ -80,16 +80,19 @@ def stream_job(
     from_line: int | None = None,
     optional_stop: bool = False,
     override: float = 1.0,
+    tools: dict | None = None,
 ):
     """What streams the interpreted program ``prog`` (from ``from_line`` on:
-    :func:`~nurbscnc.output.stream.job.start_at_line`): ``(job, None)``, a
-    :class:`~nurbscnc.output.stream.job.Job` planned cut window by cut window while the
+    :func:`~nurbscnc.controller.stops.start_at_line`): ``(job, None)``, a
+    :class:`~nurbscnc.controller.job.Job` planned cut window by cut window while the
     card runs; or, when :func:`needs_whole_plan`, ``(None, pulses)``: the pulses of the whole
     run (the points ``run`` writes with the same options). Everything that can be wrong
     with the input raises here, before any port is touched (the pulse limit too; for a job,
-    the first window's errors)."""
-    from nurbscnc.output.stream.feed import WindowFeed
-    from nurbscnc.output.stream.job import Job, start_at_line
+    the first window's errors). ``tools``: the tool table ``{number: Tool}``, named to the
+    operator at a tool change."""
+    from nurbscnc.controller.feed import WindowFeed
+    from nurbscnc.controller.job import Job
+    from nurbscnc.controller.stops import start_at_line
     from nurbscnc.pipeline import run_program, window_plans
 
     if from_line is not None:
@@ -116,6 +119,7 @@ def stream_job(
         override=override,
         lookahead_pieces=options.lookahead.lookahead_pieces,
         feed=feed,
+        tools=tools,
     )
     return job, None
 

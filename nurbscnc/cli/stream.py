@@ -10,7 +10,7 @@ import sys
 
 import click
 
-from nurbscnc.app.load import load_program
+from nurbscnc.app.load import load_program, read_tool_table
 from nurbscnc.app.settings import run_options_of
 from nurbscnc.app.stream import (
     is_points_file,
@@ -21,7 +21,7 @@ from nurbscnc.app.stream import (
 )
 from nurbscnc.cli import console
 from nurbscnc.cli.common import load_machine_cli
-from nurbscnc.cli.controls import Operator, key_reader, routed_signals
+from nurbscnc.cli.controls import Operator, key_reader, routed_signals, user_m_runner
 from nurbscnc.cli.handle import handle_errors
 from nurbscnc.cli.options import planning_options
 from nurbscnc.errors import ConfigError
@@ -60,7 +60,9 @@ def plan_job(
         settings.get("tool_table"),
         settings.get("subroutine_path", ()),
     )
-    job, pulses = stream_job(prog, mach, options, from_line, optional_stop, override)
+    table = settings.get("tool_table")
+    tools = read_tool_table(table) if table else None
+    job, pulses = stream_job(prog, mach, options, from_line, optional_stop, override, tools)
     return job, pulses, mach
 
 
@@ -178,6 +180,16 @@ def _progress_bar(enabled: bool, total: int, keys: bool = False):
     help="Start at source line N (run from line): the program is interpreted "
     "whole, the tool goes up to a safe Z, across, and down to line N's start.",
 )
+@click.option(
+    "--user-m-timeout",
+    "user_m_timeout_s",
+    type=click.FloatRange(min=0.0, min_open=True),
+    default=60.0,
+    show_default=True,
+    metavar="SECONDS",
+    help="Longest a user M-code's executable (M100-M199) may run; then it is killed and "
+    "the stream stops (exit 3).",
+)
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @click.option("--json", "as_json", is_flag=True, help="Print the final report as JSON.")
 @planning_options
@@ -194,6 +206,7 @@ def stream(
     feed_override,
     zero,
     from_line,
+    user_m_timeout_s,
     quiet,
     as_json,
     **settings,
@@ -249,6 +262,7 @@ def stream(
                 "batch": batch,
                 "timeout_s": timeout_s,
                 "lead": lead,
+                "user_m_timeout_s": user_m_timeout_s,
             }
             reports = _send(link, operator, job, pulses, total, zero, quiet, as_json)
         finally:  # the planner thread stopped before the process may exit
@@ -275,6 +289,7 @@ def _send(
     """Open the card's port (``link``: the port options), stream the ``job`` (or the
     ``pulses`` without one) with the operator's keys and signals routed, and close the port;
     returns the sender's reports (one per part of the stream)."""
+    from nurbscnc.controller.run import run_job
     from nurbscnc.output.stream.sender import Sender, SenderOptions, open_port
 
     options = SenderOptions(
@@ -296,7 +311,14 @@ def _send(
             with routed_signals(operator, ("SIGINT", "SIGTERM")):
                 if job is None:
                     return [sender.stream(pulses, zero=zero)]
-                return sender.run_job(job, zero=zero)
+                sender.job = job
+                return run_job(
+                    job,
+                    sender,
+                    sender.wait_idle,
+                    zero=zero,
+                    run_user_m=user_m_runner(link["user_m_timeout_s"], console.err),
+                )
     finally:
         with contextlib.suppress(Exception):
             ser.close()

@@ -44,7 +44,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from nurbscnc.output.stream.motion import (
+from nurbscnc.controller.motion import (
     Motion,
     Rate,
     Track,
@@ -55,6 +55,7 @@ from nurbscnc.output.stream.motion import (
     resume_motion,
     stop_track,
 )
+from nurbscnc.controller.stops import Stop, describe_stop, program_stops
 from nurbscnc.output.stream.quantise import PulseProgram, quantise
 
 #: Override limits [fraction] and the step of the + / - keys.
@@ -64,15 +65,6 @@ OVERRIDE_MIN, OVERRIDE_STEP = 0.10, 0.10
 CHUNK_PERIODS = 4096
 #: Where a ramp may start, after the first period not yet framed [s] (searched in order).
 RAMP_OFFSETS_S = tuple(np.round(np.arange(0.0, 2.0, 0.025), 3))
-
-
-@dataclass(frozen=True)
-class Stop:
-    """A program stop (M0/M1/M60) at global path length ``s_mm``, source ``line``."""
-
-    s_mm: float
-    line: int
-    code: str
 
 
 @dataclass
@@ -142,6 +134,7 @@ class Job:
         override: float = 1.0,
         lookahead_pieces: int | None = None,
         feed=None,
+        tools: dict | None = None,
     ):
         self.feed = feed
         self.program = program
@@ -172,6 +165,8 @@ class Job:
         self.next_stop = 0  #: the first stop not waited at yet
         self.section: Section | None = None
         self.waiting: str | None = None  #: why the job waits for the operator
+        self.at_stop: Stop | None = None  #: the program stop the card stands at
+        self.tools = tools  #: the tool table {number: Tool}, named at a tool change
         self.finished = False
         self.last_point: np.ndarray | None = None
         self.hold_wanted = False
@@ -200,6 +195,7 @@ class Job:
         self.hold_wanted = False
         self.resume_early = self.section is not None and self.section.held
         self.waiting = None
+        self.at_stop = None
 
     def set_override(self, fraction: float) -> None:
         self.override_wanted = self._clamp(fraction)
@@ -467,8 +463,8 @@ class Job:
         elif sec.ends_at is not None:
             self.tau = sec.tau_b
             self.next_stop = sec.ends_at + 1
-            stop = self.stops[sec.ends_at]
-            self.waiting = f"{stop.code} at line {stop.line}"
+            self.at_stop = self.stops[sec.ends_at]
+            self.waiting = describe_stop(self.at_stop, self.tools)
         else:
             self.motion = None
         if self.motion is None:
@@ -622,72 +618,3 @@ class Job:
                 "held_s": round(self.planning["held_s"], 6),
             }
         return out
-
-
-def program_stops(program, plan) -> list[Stop]:
-    """The program stops (kind "pause": M0, M1, M60) at their path lengths in ``plan``: the
-    end of the last piece made from a segment before the stop."""
-    seg = np.asarray(plan.pieces.segment)
-    ends = np.asarray(plan.profile.piece_start_mm) + np.asarray(plan.pieces.length_mm)
-    out = []
-    for i, s in enumerate(program.segments):
-        if s.kind != "pause":
-            continue
-        r = int(np.searchsorted(seg, i, side="left")) - 1
-        out.append(Stop(float(ends[r]) if r >= 0 else 0.0, int(s.line), str(s.code)))
-    return out
-
-
-def start_at_line(program, line: int):
-    """The program run from source line ``line`` on, as LinuxCNC's run-from-line: the whole
-    program was interpreted (so the segments from ``line`` on carry every modal state set
-    before it: units, offsets, plane, feed, tool), the segments before it are dropped, and a
-    lead-in brings the tool from the program's start to the start of line ``line`` safely.
-
-    Lead-in (decision; docs/protocol.md): up to Z_safe = the highest Z of the program's start,
-    of every point the program reaches before ``line`` and of the target (the clearance the
-    program itself used, so it is known to be free and inside the soft limits; +Z is up), a
-    rapid across at Z_safe, then down to the target: a rapid when the first move of ``line``
-    is a rapid, else at that move's programmed feed (never a rapid plunge into material).
-    Raises ValueError when no motion starts at or after ``line``.
-    """
-    from dataclasses import replace
-
-    from nurbscnc.geometry.segments import Line
-
-    segs = list(program.segments)
-    first = next((i for i, s in enumerate(segs) if s.line >= line), None)
-    moving = (
-        next((i for i in range(first, len(segs)) if segs[i].kind not in ("dwell", "pause")), None)
-        if first is not None
-        else None
-    )
-    if moving is None:
-        raise ValueError(f"--from-line {line}: no motion at or after line {line}")
-    target = np.asarray(segs[moving].start_mm, dtype=float)
-    here = np.asarray(program.start_mm, dtype=float)
-    before = [np.asarray(s.end_mm, dtype=float)[2] for s in segs[:first]]
-    z_safe = float(max([here[2], target[2], *before]))
-    feed = segs[moving].feed_mm_s
-    plunge_rapid = segs[moving].kind == "rapid" or not feed > 0.0
-    path = [
-        here,
-        np.array([here[0], here[1], z_safe]),
-        np.array([target[0], target[1], z_safe]),
-        target,
-    ]
-    lead = []
-    for i, (a, b) in enumerate(zip(path[:-1], path[1:])):
-        if np.allclose(a, b, rtol=0.0, atol=1e-12):
-            continue
-        rapid = i < 2 or plunge_rapid
-        lead.append(
-            Line(
-                tuple(a.tolist()),
-                tuple(b.tolist()),
-                0.0 if rapid else float(feed),
-                int(segs[moving].line),
-                rapid=rapid,
-            )
-        )
-    return replace(program, segments=tuple(lead + segs[first:]))
