@@ -124,12 +124,21 @@ def stream_job(
     return job, None
 
 
-def stream_report(program: str, job, reports: list) -> dict:
+def position_mm(steps, mach) -> list[float]:
+    """The card's position ``steps`` (per axis) in mm, machine coordinates: steps over the
+    profile's steps per mm (exact: the steps are what the card counts; rounded to 1 nm)."""
+    import numpy as np
+
+    return [round(v, 6) for v in (np.asarray(steps, dtype=float) / mach.steps.per_mm).tolist()]
+
+
+def stream_report(program: str, job, reports: list, mach=None) -> dict:
     """The JSON report of a finished stream: the last part's card state
     (:meth:`~nurbscnc.output.stream.sender.StreamReport.to_json`), the counters summed over
     the ``reports`` of every part, and the ``job``'s own report (sections, holds, planning,
-    notes; one section without a job). ``program`` is named as every command names it
-    (standard input is ``<stdin>``)."""
+    notes; one section without a job), the final position in mm (``mach``: the machine's
+    steps per mm). ``program`` is named as every command names it (standard input is
+    ``<stdin>``)."""
     extra = job.report() if job is not None else {"sections": 1}
     body = {
         **reports[-1].to_json(),
@@ -140,4 +149,6 @@ def stream_report(program: str, job, reports: list) -> dict:
         "duration_s": sum(r.duration_s for r in reports),
         **extra,
     }
+    if mach is not None:
+        body["final_position_mm"] = position_mm(reports[-1].final_position_steps, mach)
     return {"ok": True, "program": "<stdin>" if program == "-" else program, **body}

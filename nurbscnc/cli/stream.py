@@ -15,6 +15,7 @@ from nurbscnc.app.settings import run_options_of
 from nurbscnc.app.stream import (
     is_points_file,
     points_of_file,
+    position_mm,
     pulses_of_points,
     stream_job,
     stream_report,
@@ -160,11 +161,13 @@ def _progress_bar(enabled: bool, total: int, keys: bool = False):
 )
 @click.option(
     "--feed-override",
-    type=click.IntRange(10, 100),
+    type=click.IntRange(10, 200),
     default=100,
     show_default=True,
     metavar="PERCENT",
-    help="Feed override at the start [%]; + / - keys change it by 10 % while streaming (10-100 %).",
+    help="Feed override at the start [%]; + / - keys change it by 10 % while streaming "
+    "(10-200 %; above 100 % the rest is re-planned from the next rest with the programmed "
+    "feeds raised, within the machine's V, A and J).",
 )
 @click.option(
     "--zero",
@@ -264,11 +267,12 @@ def stream(
                 "lead": lead,
                 "user_m_timeout_s": user_m_timeout_s,
             }
+            link["mach"] = mach
             reports = _send(link, operator, job, pulses, total, zero, quiet, as_json)
         finally:  # the planner thread stopped before the process may exit
             if job is not None and job.feed is not None:
                 job.feed.close()
-    _print_report(program, job, reports, as_json)
+    _print_report(program, job, reports, as_json, mach)
 
 
 def _needs_the_job(settings) -> str:
@@ -318,16 +322,17 @@ def _send(
                     sender.wait_idle,
                     zero=zero,
                     run_user_m=user_m_runner(link["user_m_timeout_s"], console.err),
+                    positions_mm=lambda steps: position_mm(steps, link["mach"]),
                 )
     finally:
         with contextlib.suppress(Exception):
             ser.close()
 
 
-def _print_report(program: str, job, reports: list, as_json: bool) -> None:
+def _print_report(program: str, job, reports: list, as_json: bool, mach) -> None:
     """The stream's final report: JSON on stdout, or a line on stdout (and one on the
     planning), notes on stderr."""
-    report = stream_report(program, job, reports)
+    report = stream_report(program, job, reports, mach)
     if as_json:
         click.echo(json.dumps(report))
         return
@@ -341,7 +346,8 @@ def _print_report(program: str, job, reports: list, as_json: bool) -> None:
         f"{program}: {report['executed_periods']} periods streamed in {report['sections']} "
         f"part(s), {report['frames_sent']} frames ({report['bytes_sent']} bytes), "
         f"{report['retransmits']} retransmitted; the card ended at "
-        f"{list(reports[-1].final_position_steps)} steps{hold_text}",
+        f"{list(reports[-1].final_position_steps)} steps "
+        f"({', '.join(f'{v:.4f}' for v in report['final_position_mm'])} mm){hold_text}",
         markup=False,
     )
     planning = report.get("planning")

@@ -50,21 +50,24 @@ from nurbscnc.controller.motion import (
     Track,
     plan_motion,
     play,
-    ramp_duration_s,
-    ramp_fits,
     resume_motion,
     stop_track,
 )
+from nurbscnc.controller.override import (
+    OVERRIDE_MAX,
+    OVERRIDE_MIN,
+    OVERRIDE_STEP,
+    apply_override,
+    cut_at_rest,
+    raised_caps,
+)
 from nurbscnc.controller.stops import Stop, describe_stop, program_stops
 from nurbscnc.output.stream.quantise import PulseProgram, quantise
+from nurbscnc.plan.profile import time_at_length
 
-#: Override limits [fraction] and the step of the + / - keys.
-OVERRIDE_MIN, OVERRIDE_STEP = 0.10, 0.10
 #: A section's periods are computed in chunks of this many, ahead of what the link frames, so
 #: a hold or an override change re-times a bounded number of periods however long it is.
 CHUNK_PERIODS = 4096
-#: Where a ramp may start, after the first period not yet framed [s] (searched in order).
-RAMP_OFFSETS_S = tuple(np.round(np.arange(0.0, 2.0, 0.025), 3))
 
 
 @dataclass
@@ -113,6 +116,7 @@ class Section:
     blocked: bool = False  #: the track stops at the planning horizon (more when planned)
     blocked_at: int | None = None  #: the horizon (first piece not planned) it stops at
     at_horizon: bool = False  #: closed at the planning horizon (a planning hold follows)
+    rescale: bool = False  #: cut at a rest: the next section re-plans at a new override
 
 
 class Job:
@@ -157,6 +161,8 @@ class Job:
         self.lookahead_pieces = lookahead_pieces
         self.optional_stop = optional_stop
         self.override = self._clamp(override)
+        self.scale = 1.0  #: the motion's feed scale: max(override, 1) when it was planned
+        self.pending_override: float | None = None  #: applies at the next rest (above 100 %)
         self.motion: Motion | None = plan_motion(plan)
         self.tau = 0.0  #: where the next section starts, in the motion's profile time
         self.first_section = True
@@ -177,12 +183,11 @@ class Job:
         self.sections = 0
         self.executed_before = 0  #: periods of the finished sections
         self.last_line = 0  #: source line of the last period of the finished sections
+        self.last_steps: np.ndarray | None = None  #: where the last section ended [steps]
+        self.last_s_mm = 0.0  #: and its path length [mm]
         # The frames' count width must fit the fastest section: the plan's peak speed (a hold
-        # or an override ≤ 100 % only slows down; +2: rounding, a re-planned rest).
-        v_peak = float(np.max(plan.profile.piece_peak_speed_mm_s))
-        self.peak_pulses = (
-            int(math.ceil(v_peak * self.period_s * float(np.max(self.steps_per_mm)))) + 2
-        )
+        # or an override ≤ 100 % only slows down; a re-plan above 100 % widens it).
+        self.peak_pulses = self._peak_pulses(plan.profile)
 
     # -- requests (plain attribute writes: safe from a signal handler) -----------------------
     def request_hold(self) -> None:
@@ -207,7 +212,7 @@ class Job:
         return self.override_wanted
 
     def _clamp(self, fraction: float) -> float:
-        return float(min(max(fraction, OVERRIDE_MIN), 1.0))
+        return float(min(max(fraction, OVERRIDE_MIN), OVERRIDE_MAX))
 
     # -- sections ----------------------------------------------------------------------------
     def next_section(self) -> PulseProgram | None:
@@ -221,12 +226,21 @@ class Job:
             self.hold_wanted = False
             self.waiting = "feed hold"
             return None
+        if self.pending_override is not None:  # at rest: the part above 100 % too
+            self.override, self.pending_override = self.pending_override, None
         if self.override_wanted is not None:  # at rest: a new override applies at once
             self.override, self.override_wanted = self.override_wanted, None
+        if max(self.override, 1.0) != self.scale:
+            self.scale = max(self.override, 1.0)
+            s_now = float(self.motion.state(np.array([self.tau]))[0][0])
+            self._replan(s_now, self.motion.wait_s if self.tau == 0.0 else 0.0)
+            if self.motion is None:
+                self.finished = True
+                return None
         motion = self.motion
         stop = self._next_waiting_stop()
         tau_b = self._end_tau(stop)
-        rate = Rate(self.override)
+        rate = Rate(min(self.override, 1.0))
         track, complete = play(
             motion,
             self.tau,
@@ -432,6 +446,7 @@ class Job:
         sec = self.section
         self.executed_before += executed_periods
         self.last_point = sec.track.points_mm[-1].copy()
+        self.last_steps, self.last_s_mm = sec.program.end_steps, float(sec.track.s_mm[-1])
         if sec.program.periods:
             self.last_line = int(sec.program.line[-1])
         self.section = None
@@ -439,11 +454,7 @@ class Job:
             self.tau = sec.tau_b
             self.poll()
             if not self.motion_is_plan:  # the rest from here on the plan as planned now
-                self.motion = resume_motion(
-                    self.plan, float(sec.track.s_mm[-1]), 0.0, self.lookahead_pieces
-                )
-                self.motion_horizon = self.horizon
-                self.tau = 0.0
+                self._replan(float(sec.track.s_mm[-1]), 0.0)
             self.planning["holds"] += 1
             if self.feed_error is not None and self._horizon_tau() <= self.tau:
                 raise self.feed_error
@@ -451,13 +462,11 @@ class Job:
                 self.waiting = "planning"
                 self._hold_since = self.feed.clock()
             return
+        if sec.rescale:  # at a rest: the next section re-plans at the new override
+            self.tau = sec.tau_b
+            return
         if sec.held:
-            self.motion = resume_motion(
-                self.plan, float(sec.track.s_mm[-1]), sec.hold_wait_s, self.lookahead_pieces
-            )
-            self.motion_is_plan = False
-            self.motion_horizon = self.horizon
-            self.tau = 0.0
+            self._replan(float(sec.track.s_mm[-1]), sec.hold_wait_s)
             self.waiting = None if self.resume_early else "feed hold"
             self.hold_wanted = self.resume_early = False
         elif sec.ends_at is not None:
@@ -473,6 +482,24 @@ class Job:
         elif self.hold_wanted and self.waiting is None:
             self.hold_wanted = False
             self.waiting = "feed hold"
+
+    def _replan(self, s_mm: float, wait_s: float) -> None:
+        """The rest of the plan from rest at global path length ``s_mm`` (``wait_s``: a
+        dwell still to finish there) at the current feed scale (caps raised above 100 %:
+        :func:`~.override.raised_caps`); None when nothing is left."""
+        caps = raised_caps(self.plan, self.program, self.machine, self.scale)
+        self.motion = resume_motion(self.plan, s_mm, wait_s, self.lookahead_pieces, caps)
+        self.motion_is_plan = False
+        self.motion_horizon = self.horizon
+        self.tau = 0.0
+        if self.motion is not None:
+            self.peak_pulses = max(self.peak_pulses, self._peak_pulses(self.motion.profile))
+
+    def _peak_pulses(self, profile) -> int:
+        """The frames' count width for a profile: its peak speed's pulses per period (+2:
+        rounding, a re-planned rest)."""
+        v_peak = float(np.max(profile.piece_peak_speed_mm_s))
+        return int(math.ceil(v_peak * self.period_s * float(np.max(self.steps_per_mm)))) + 2
 
     # -- changes while a section streams -------------------------------------------------------
     def update(self, link) -> None:
@@ -492,6 +519,8 @@ class Job:
             self._apply_hold(link)
         elif self.override_wanted is not None and not sec.override_deferred:
             self._apply_override(link)
+        elif self.pending_override is not None and not sec.rescale:
+            cut_at_rest(self, link)
 
     def _apply_hold(self, link) -> None:
         sec = self.section
@@ -514,58 +543,20 @@ class Job:
         self.hold_wanted = False
 
     def _apply_override(self, link) -> None:
-        sec = self.section
-        r1 = self.override_wanted
-        k = link.sent_periods
-        tr = sec.track
-        u_k = float(tr.u_s[k])
-        r_k = float(sec.rate.r(np.array([u_k - sec.rate_u0_s]))[0])
-        if abs(r1 - r_k) < 1e-12:
-            self.override, self.override_wanted = r1, None
-            return
-        # A ramp in progress finishes first.
-        busy_until = sec.rate.end_u + sec.rate_u0_s - u_k if sec.rate.ramping else 0.0
-        v_max = float(np.max(self.plan.profile.piece_peak_speed_mm_s))
-        d0 = ramp_duration_s(r1 - r_k, v_max, self.a_max, self.j_max)
-        wait = self._wait_at(tr, k)
-        for offset in RAMP_OFFSETS_S:
-            if offset < busy_until:
-                continue
-            for d in (d0, 2 * d0, 4 * d0):
-                rate = Rate(r_k, r1, float(offset), d)
-                # Check the ramp's periods only (cheap), then time the whole rest once.
-                tau_w = min(sec.tau_b, float(tr.tau_s[k] + rate.integral(offset + d)))
-                window, _ = play(
-                    self.motion, float(tr.tau_s[k]), tau_w, rate, self.period_s, wait_s=wait
-                )
-                if not ramp_fits(window, self.a_max, self.j_max):
-                    continue
-                tail, complete = play(
-                    self.motion,
-                    float(tr.tau_s[k]),
-                    sec.tau_b,
-                    rate,
-                    self.period_s,
-                    wait_s=wait,
-                    max_samples=CHUNK_PERIODS,
-                )
-                tail, sec.blocked = self._within_horizon(tail, sec.tau_b)
-                complete = complete and not sec.blocked
-                tail.points_mm[0] = tr.points_mm[k]
-                track = tr.head(k + 1).then(tail)
-                program = self._pulses(track, k, sec.program)
-                sec.complete = complete
-                link.program_open = not complete
-                link.replace_unsent(program)
-                sec.track, sec.program = track, program
-                sec.rate, sec.rate_u0_s = rate, u_k
-                self.override, self.override_wanted = r1, None
-                return
-        self.notes.append(
-            f"no smooth change of the feed override to {r1:.0%} fits the "
-            "limits in this section: it applies from the next one"
-        )
-        sec.override_deferred = True  # pending until the next section starts
+        apply_override(self, link, CHUNK_PERIODS)
+
+    # The helpers the override's module uses on the running section.
+    def horizon_tau(self) -> float:
+        return self._horizon_tau()
+
+    def within_horizon(self, track: Track, tau_b: float) -> tuple[Track, bool]:
+        return self._within_horizon(track, tau_b)
+
+    def wait_at(self, tr: Track, k: int) -> float:
+        return self._wait_at(tr, k)
+
+    def pulses_of(self, track: Track, k: int, program: PulseProgram) -> PulseProgram:
+        return self._pulses(track, k, program)
 
     def _wait_at(self, tr: Track, k: int) -> float:
         """A dwell in progress at sample ``k``: the part still to wait [s] (0: none)."""
@@ -586,11 +577,46 @@ class Job:
             return 0
         return int(sec.program.line[min(executed_in_section, sec.program.periods - 1)])
 
-    def note(self) -> str:
-        """What the progress line says besides the counts."""
+    def progress_of(self, executed_in_section: int):
+        """``(position_mm, done, left_s)`` after ``executed_in_section`` periods of the
+        running section (or at rest after the last one): the card's position [mm] in machine
+        coordinates (its steps over the profile's steps per mm: exact, the steps are what the
+        card counts), the part of the program's path done [0–1], and the time left [s]
+        (estimate: the plan's profile time from there over the override, plus the dwells
+        after it). None before the first section."""
+        sec = self.section
+        if sec is not None and sec.program.periods:
+            k = min(max(int(executed_in_section), 0), sec.program.periods)
+            steps = sec.program.start_steps + sec.program.pulses[:k].sum(axis=0)
+            s_mm = float(sec.track.s_mm[min(k, len(sec.track) - 1)])
+        elif self.last_steps is not None:
+            steps, s_mm = self.last_steps, self.last_s_mm
+        else:
+            return None
+        position_mm = np.asarray(steps, dtype=float) / self.steps_per_mm
+        pieces, profile = self.plan.pieces, self.plan.profile
+        total_mm = float(np.sum(pieces.length_mm))
+        done = min(max(s_mm / total_mm, 0.0), 1.0) if total_mm > 0.0 else 1.0
+        t_at_s = float(time_at_length(profile, np.array([min(s_mm, total_mm)]))[0])
+        ends = np.asarray(profile.piece_start_mm) + np.asarray(pieces.length_mm)
+        dwells_s = float(np.sum(np.asarray(pieces.dwell_after_s)[ends > s_mm + 1e-9]))
+        left_s = max(profile.duration_s - t_at_s, 0.0) / self.override + dwells_s
+        return position_mm, done, left_s
+
+    def note(self, executed_in_section: int | None = None) -> str:
+        """What the progress line says besides the counts: the override, the card's
+        position [mm], the part done and the time left, and why the job waits (last)."""
         parts = [f"feed {self.override:.0%}"]
-        if self.override_wanted is not None:
-            parts.append(f"→ {self.override_wanted:.0%}")
+        wanted = self.override_wanted if self.override_wanted is not None else None
+        wanted = self.pending_override if wanted is None else wanted
+        if wanted is not None:
+            parts.append(f"→ {wanted:.0%}")
+        where = None if executed_in_section is None else self.progress_of(executed_in_section)
+        if where is not None:
+            position_mm, done, left_s = where
+            parts.append(" ".join(f"{a} {v:.3f}" for a, v in zip("XYZ", position_mm)) + " mm")
+            left = int(round(left_s))
+            parts.append(f"{done:.0%} done, {left // 60}:{left % 60:02d} left")
         if self.waiting:
             parts.append(f"waiting: {self.waiting}")
         elif self.section is not None and self.section.held:

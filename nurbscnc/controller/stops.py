@@ -50,8 +50,7 @@ def describe_stop(stop: Stop, tools: dict | None = None) -> str:
                 f": load tool {stop.tool} (length {entry.length_mm:g} mm, "
                 f"diameter {entry.diameter_mm:g} mm"
             )
-            comment = getattr(entry, "comment", "")
-            text += f", {comment})" if comment else ")"
+            text += f", {entry.comment})" if entry.comment else ")"
     if stop.message:
         text += f": {stop.message}"
     return text

@@ -199,7 +199,7 @@ class Sender:
                 pr,
                 executed=job.executed_before + pr.executed,
                 periods=job.executed_before + pr.periods,
-                note=job.note(),
+                note=job.note(pr.executed),
             )
         self.progress(pr)
 
