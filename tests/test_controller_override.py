@@ -161,3 +161,32 @@ def test_progress_gives_the_position_in_mm_the_part_done_and_the_time_left():
     note = job.note(2500)
     x, y, z = job.progress_of(2500)[0]
     assert f"X {x:.3f} Y {y:.3f} Z {z:.3f} mm" in note and "% done" in note
+
+
+def test_stream_command_accepts_up_to_200_percent_and_reports_mm(tmp_path):
+    """`stream --feed-override 150` (planned window by window while streaming): the card
+    ends at the program's end, in about 2/3 of the periods (the moves cruise at F, no V_max
+    in the way); 201 % is refused before the port."""
+    import json
+
+    from click.testing import CliRunner
+
+    from nurbscnc.cli.stream import stream
+    from tests.stream_helpers import card_on
+
+    nc = tmp_path / "part.nc"
+    nc.write_text("G21 G90 G17\nG0 X0 Y0\nG1 X5 Y2 F900\nG1 X8 Y0\nM2\n")
+    periods = {}
+    with card_on("pty", CardConfig(speed=None)) as (card, ep):
+        for pct in (100, 150):
+            args = [str(nc), "--port", ep.path, "--json", "--zero", "--feed-override", str(pct)]
+            res = CliRunner().invoke(stream, args)
+            assert res.exit_code == 0, res.output
+            body = json.loads(res.stdout)
+            assert body["final_position_steps"] == [8000, 0, 0]
+            assert body["final_position_mm"] == [8.0, 0.0, 0.0]
+            assert body["feed_override"] == pct / 100
+            periods[pct] = body["executed_periods"]
+        bad = CliRunner().invoke(stream, [str(nc), "--port", ep.path, "--feed-override", "201"])
+        assert bad.exit_code == 2
+    assert 0.6 * periods[100] < periods[150] < 0.75 * periods[100]

@@ -185,3 +185,22 @@ def test_user_m_code_that_cannot_run_is_a_clear_error(tmp_path, monkeypatch, mis
     assert res.exit_code == 3, res.output
     assert f"line 4: M101: cannot run {tmp_path / missing}: No such file" in res.stderr
     assert final == [5000, 0, 0]
+
+
+def test_ctrl_c_while_a_user_m_code_runs_kills_it_and_exits_130(tmp_path, monkeypatch):
+    script, record = user_script(tmp_path, sleep=30.0)
+    prog = program_with_stop(code="M101", argv=(str(script), "0", "0"))
+
+    def interrupt(card):
+        deadline = time.monotonic() + 10.0
+        while not record.exists() and time.monotonic() < deadline:
+            time.sleep(0.01)
+        os.kill(os.getpid(), signal.SIGINT)
+        return {}
+
+    t0 = time.monotonic()
+    res, _, final = stream_with(monkeypatch, prog, ["--user-m-timeout", "60"], interrupt)
+    assert time.monotonic() - t0 < 20.0  # killed, not waited for
+    assert res.exit_code == 130, res.output
+    assert "interrupted while M101 at line 4 ran: it was killed" in res.stderr
+    assert final == [5000, 0, 0]

@@ -321,7 +321,9 @@ def _send(
                     sender,
                     sender.wait_idle,
                     zero=zero,
-                    run_user_m=user_m_runner(link["user_m_timeout_s"], console.err),
+                    run_user_m=user_m_runner(
+                        link["user_m_timeout_s"], console.err, lambda: sender.abort_requested
+                    ),
                     positions_mm=lambda steps: position_mm(steps, link["mach"]),
                 )
     finally:

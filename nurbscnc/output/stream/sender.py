@@ -141,6 +141,11 @@ class Sender:
             getattr(self.link, f"request_{what}")()
 
     @property
+    def abort_requested(self) -> bool:
+        """Ctrl-C / SIGTERM was asked (a job's work between sections stops for it)."""
+        return self._abort
+
+    @property
     def abort_confirmed(self) -> bool:
         return self.link is not None and self.link.state.abort_confirmed
 
