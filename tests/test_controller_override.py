@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from nurbscnc.controller.job import Job
+from nurbscnc.controller.simulate import simulate_job
 from nurbscnc.machine.profile import default_profile_text, parse_machine
 from nurbscnc.output.stream.card import CardConfig
-from nurbscnc.output.stream.simlink import simulate_job
 from nurbscnc.pipeline import run_program
 from nurbscnc.program.interpret import interpret_text
 

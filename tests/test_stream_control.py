@@ -15,12 +15,12 @@ import pytest
 
 from nurbscnc.controller.job import Job
 from nurbscnc.controller.motion import phase_states, stop_phases
+from nurbscnc.controller.simulate import simulate_job
 from nurbscnc.controller.stops import program_stops, start_at_line
 from nurbscnc.machine.profile import default_profile_text, parse_machine
 from nurbscnc.output.stream import protocol as p
 from nurbscnc.output.stream.card import CardConfig, CardSim
 from nurbscnc.output.stream.linkstate import SenderOptions
-from nurbscnc.output.stream.simlink import simulate_job
 from nurbscnc.pipeline import RunOptions, run_program
 from nurbscnc.plan.feedrate import scurve_distance_mm, scurve_duration_s
 from nurbscnc.plan.options import LookaheadOptions
