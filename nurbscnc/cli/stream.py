@@ -290,9 +290,11 @@ def _needs_the_job(settings) -> str:
 def _send(
     link: dict, operator: Operator, job, pulses, total: int, zero: bool, quiet: bool, as_json: bool
 ) -> list:
-    """Open the card's port (``link``: the port options), stream the ``job`` (or the
-    ``pulses`` without one) with the operator's keys and signals routed, and close the port;
-    returns the sender's reports (one per part of the stream)."""
+    """Open the card's port (``link``: the port options, the user M-codes' timeout
+    ``user_m_timeout_s`` and the machine ``mach``, for positions in mm), stream the ``job``
+    (through the controller's section loop) or the ``pulses`` without one, with the
+    operator's keys and signals routed, and close the port; returns the sender's reports (one
+    per part of the stream)."""
     from nurbscnc.controller.run import run_job
     from nurbscnc.output.stream.sender import Sender, SenderOptions, open_port
 

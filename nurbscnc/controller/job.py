@@ -4,8 +4,9 @@
 clocks like the link. It cuts the program into *sections*, each streamed to the card as one
 stream (HELLO … END, the card DONE at rest at its end):
 
-- a section ends at a program stop that waits — M0, M60, M1 with ``optional_stop`` — or at
-  the end of the program. The planner already brings the tool to rest there (SPEC §7: a stop
+- a section ends at a program stop that waits — M0, M60, M1 with ``optional_stop``, a tool
+  change M6, a user M-code M100–M199 (:mod:`.stops`; the section loop :mod:`.run` runs its
+  executable) — or at the end of the program. The planner already brings the tool to rest there (SPEC §7: a stop
   is a junction of speed 0), and the card is DONE only once its buffer has drained to that
   point: the job then *waits* until :meth:`Job.resume` (Enter or SIGUSR2 in the CLI).
 - a **feed hold** (:meth:`Job.request_hold`) is applied by :meth:`Job.update` to the running
@@ -17,6 +18,7 @@ stream (HELLO … END, the card DONE at rest at its end):
 - a **feed override** change (:meth:`Job.set_override`) re-times the periods not yet framed:
   the earliest quintic ramp of the override that keeps |a| ≤ A and |j| ≤ J on every period
   (:func:`~.motion.ramp_fits`); none within the section: it applies from the next section.
+  Above 100 %: the rest is re-planned from the next rest ahead (:mod:`.override`).
 
 A section's periods are computed in chunks (:data:`CHUNK_PERIODS`) ahead of what the link
 frames (the link holds END back meanwhile: ``Link.program_open``), so a hold or an override
@@ -123,9 +125,10 @@ class Job:
     """A planned program streamed as a controller; see the module docstring.
 
     ``plan`` a :class:`~nurbscnc.plan.lookahead.Plan` of ``program``; ``machine`` its
-    machine; ``override`` the starting feed override (fraction, 0.1–1: above 1 time scaling
-    would exceed the limits the plan respected). ``feed``: the plan's cut windows as they are
-    planned (module docstring; ``plan`` is then ignored: the first window's plan is used).
+    machine; ``override`` the starting feed override (fraction, 0.1–2: above 1 the rest is
+    re-planned with raised caps, :mod:`.override`). ``feed``: the plan's cut windows as they
+    are planned (module docstring; ``plan`` is then ignored: the first window's plan is
+    used). ``tools``: the tool table ``{number: Tool}``, named at a tool change.
     """
 
     def __init__(
