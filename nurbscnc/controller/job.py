@@ -6,9 +6,10 @@ stream (HELLO … END, the card DONE at rest at its end):
 
 - a section ends at a program stop that waits — M0, M60, M1 with ``optional_stop``, a tool
   change M6, a user M-code M100–M199 (:mod:`.stops`; the section loop :mod:`.run` runs its
-  executable) — or at the end of the program. The planner already brings the tool to rest there (SPEC §7: a stop
-  is a junction of speed 0), and the card is DONE only once its buffer has drained to that
-  point: the job then *waits* until :meth:`Job.resume` (Enter or SIGUSR2 in the CLI).
+  executable) — or at the end of the program. The planner already brings the tool to rest
+  there (SPEC §7: a stop is a junction of speed 0), and the card is DONE only once its
+  buffer has drained to that point: the job then *waits* until :meth:`Job.resume` (Enter or
+  SIGUSR2 in the CLI).
 - a **feed hold** (:meth:`Job.request_hold`) is applied by :meth:`Job.update` to the running
   link: the periods not yet framed are replaced by the shortest jerk-limited stop along the
   path from the state of the first of them (:func:`~.motion.stop_phases`), then END. What the
