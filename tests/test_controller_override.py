@@ -190,3 +190,27 @@ def test_stream_command_accepts_up_to_200_percent_and_reports_mm(tmp_path):
         bad = CliRunner().invoke(stream, [str(nc), "--port", ep.path, "--feed-override", "201"])
         assert bad.exit_code == 2
     assert 0.6 * periods[100] < periods[150] < 0.75 * periods[100]
+
+
+def test_plus_keys_while_moving_add_up_above_100_percent():
+    """Seven + presses 0.2 s apart on the first line (before its rest at X20): 170 % from
+    there on (each press counts from the override still pending)."""
+    events = [(0.2 * i, lambda j, c: j.step_override(1)) for i in range(1, 8)]
+    job, r, mach, _ = run_at(1.0, events)
+    assert job.override == pytest.approx(1.7)
+    pos = executed_mm(r.card)
+    check_limits(pos, mach)
+    assert speeds(pos, 1)[0].max() == pytest.approx(1.7 * F_MM_S, abs=0.02)
+
+
+def test_a_raise_taken_back_before_the_rest_never_applies():
+    """130 % asked, then 80 % before the rest where 130 % would apply: the card never goes
+    faster than F, and the rest runs at 80 %."""
+    events = [(0.2, lambda j, c: j.set_override(1.3)), (0.4, lambda j, c: j.set_override(0.8))]
+    job, r, mach, _ = run_at(1.0, events)
+    assert job.override == 0.8 and job.pending_override is None
+    pos = executed_mm(r.card)
+    check_limits(pos, mach)
+    v = speeds(pos, 1)[0]
+    assert v.max() == pytest.approx(F_MM_S, abs=0.02)
+    assert v[-3000:].max() == pytest.approx(0.8 * F_MM_S, abs=0.02)  # the last lines

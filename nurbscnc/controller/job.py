@@ -211,7 +211,9 @@ class Job:
 
     def step_override(self, steps: int) -> float:
         """+/- keys: change the wanted override by ``steps`` × 10 %; returns it."""
-        base = self.override_wanted if self.override_wanted is not None else self.override
+        base = next(
+            r for r in (self.override_wanted, self.pending_override, self.override) if r is not None
+        )
         self.set_override(round(base + steps * OVERRIDE_STEP, 6))
         return self.override_wanted
 

@@ -176,5 +176,4 @@ def apply_override(job, link, chunk_periods: int) -> None:
 def _done(job, wanted: float, r1: float, rescale: bool) -> None:
     """The time scale is ``r1`` now; the part above 100 % (if it changes) at the next rest."""
     job.override, job.override_wanted = (r1, None) if rescale else (wanted, None)
-    if rescale:
-        job.pending_override = wanted
+    job.pending_override = wanted if rescale else None
