@@ -189,6 +189,7 @@ class Job:
         self.last_line = 0  #: source line of the last period of the finished sections
         self.last_steps: np.ndarray | None = None  #: where the last section ended [steps]
         self.last_s_mm = 0.0  #: and its path length [mm]
+        self._steps_at = (0, 0, None)  #: (section, periods, steps) of the last progress
         # The frames' count width must fit the fastest section: the plan's peak speed (a hold
         # or an override ≤ 100 % only slows down; a re-plan above 100 % widens it).
         self.peak_pulses = self._peak_pulses(plan.profile)
@@ -593,7 +594,13 @@ class Job:
         sec = self.section
         if sec is not None and sec.program.periods:
             k = min(max(int(executed_in_section), 0), sec.program.periods)
-            steps = sec.program.start_steps + sec.program.pulses[:k].sum(axis=0)
+            # Summed on from the last call's count (the periods executed are framed, never
+            # changed again): a progress line costs the periods since the last one.
+            n0, k0, base = self._steps_at
+            if n0 != self.sections or k0 > k:
+                k0, base = 0, sec.program.start_steps
+            steps = base + sec.program.pulses[k0:k].sum(axis=0)
+            self._steps_at = (self.sections, k, steps)
             s_mm = float(sec.track.s_mm[min(k, len(sec.track) - 1)])
         elif self.last_steps is not None:
             steps, s_mm = self.last_steps, self.last_s_mm
