@@ -204,3 +204,47 @@ def test_ctrl_c_while_a_user_m_code_runs_kills_it_and_exits_130(tmp_path, monkey
     assert res.exit_code == 130, res.output
     assert "interrupted while M101 at line 4 ran: it was killed" in res.stderr
     assert final == [5000, 0, 0]
+
+
+def test_stops_in_a_row_wait_and_run_in_order_in_virtual_time():
+    """M6, then M101 on the next line (the same point), then M101 at the program's end: the
+    tool change waits for the operator, each user M-code runs once with its arguments, in
+    program order, and the card ends at the program's end."""
+    from nurbscnc.controller.job import Job
+    from nurbscnc.controller.run import UserMResult
+    from nurbscnc.controller.simulate import simulate_job
+    from nurbscnc.machine.profile import default_profile_text, parse_machine
+    from nurbscnc.pipeline import run_program
+
+    prog = interpret_text("G21 G90 G17\nG0 X0 Y0\nG1 X5 F3000\nM0\nM0\nG1 X8\nM0\nM2\n")
+    stops = iter(
+        [
+            {"code": "M6", "tool": 2},
+            {"code": "M101", "argv": ("/m/M101", "1", "2")},
+            {"code": "M102", "argv": ("/m/M102", "3", "4")},
+        ]
+    )
+    prog = dataclasses.replace(
+        prog,
+        segments=tuple(
+            dataclasses.replace(s, **next(stops)) if s.kind == "pause" else s for s in prog.segments
+        ),
+    )
+    mach = parse_machine(default_profile_text())
+    job = Job(run_program(prog, mach).plan, prog, mach)
+    ran = []
+
+    def run_user_m(stop):
+        ran.append((stop.code, stop.line, stop.argv, job.waiting))
+        return UserMResult(0)
+
+    r = simulate_job(
+        job, CardConfig(speed=None), events=[(5.0, lambda j, c: j.resume())], run_user_m=run_user_m
+    )
+    assert r.completed and r.card.position.tolist() == [8000, 0, 0]
+    assert [w[2] for w in r.waits] == ["M6 at line 4: load tool 2 (not in the tool table)"]
+    assert r.waits[0][1] == 5.0  # until the operator's continue
+    assert ran == [
+        ("M101", 5, ("/m/M101", "1", "2"), "M101 at line 5"),
+        ("M102", 7, ("/m/M102", "3", "4"), "M102 at line 7"),
+    ]
