@@ -214,3 +214,23 @@ def test_a_raise_taken_back_before_the_rest_never_applies():
     v = speeds(pos, 1)[0]
     assert v.max() == pytest.approx(F_MM_S, abs=0.02)
     assert v[-3000:].max() == pytest.approx(0.8 * F_MM_S, abs=0.02)  # the last lines
+
+
+def test_an_override_above_100_never_slows_the_job_down():
+    """programs/butterfly.nc: its rest re-planned at 150 % of F comes out slower than at
+    100 % (the jerk-limited profile is not monotonic in its caps), so the job keeps the
+    plan's speeds and says so; the card runs no more periods than at 100 %."""
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[1] / "programs" / "butterfly.nc").read_text()
+    prog = interpret_text(text)
+    mach = parse_machine(default_profile_text())
+    run = run_program(prog, mach)
+    periods = {}
+    for ov in (1.0, 1.5):
+        job = Job(run.plan, prog, mach, override=ov)
+        r = simulate_job(job, CardConfig(speed=None))
+        assert r.completed
+        periods[ov] = sum(x.executed_periods for x in r.reports)
+    assert periods[1.5] <= periods[1.0]
+    assert any("is not faster than at 100 %" in n for n in job.notes)

@@ -53,7 +53,6 @@ from nurbscnc.controller.motion import (
     Track,
     plan_motion,
     play,
-    resume_motion,
     stop_track,
 )
 from nurbscnc.controller.override import (
@@ -62,7 +61,7 @@ from nurbscnc.controller.override import (
     OVERRIDE_STEP,
     apply_override,
     cut_at_rest,
-    raised_caps,
+    replan_raised,
 )
 from nurbscnc.controller.stops import Stop, describe_stop, program_stops
 from nurbscnc.output.stream.quantise import PulseProgram, quantise
@@ -492,10 +491,9 @@ class Job:
 
     def _replan(self, s_mm: float, wait_s: float) -> None:
         """The rest of the plan from rest at global path length ``s_mm`` (``wait_s``: a
-        dwell still to finish there) at the current feed scale (caps raised above 100 %:
-        :func:`~.override.raised_caps`); None when nothing is left."""
-        caps = raised_caps(self.plan, self.program, self.machine, self.scale)
-        self.motion = resume_motion(self.plan, s_mm, wait_s, self.lookahead_pieces, caps)
+        dwell still to finish there) at the current feed scale (above 100 %:
+        :func:`~.override.replan_raised`); None when nothing is left."""
+        self.motion = replan_raised(self, s_mm, wait_s)
         self.motion_is_plan = False
         self.motion_horizon = self.horizon
         self.tau = 0.0
