@@ -78,8 +78,8 @@ def raised_caps(plan, program, machine, scale: float) -> np.ndarray:
 def replan_raised(job, s_mm: float, wait_s: float):
     """The rest of ``job.plan`` from rest at ``s_mm`` (:func:`~.motion.resume_motion`) at the
     feed scale ``job.scale``: with the raised caps when that is faster than with the plan's
-    own. (The jerk-limited profile is not monotonic in its caps: a higher cruise target can
-    leave a short piece slower, and on ``programs/butterfly.nc`` the whole rest at 150 % came
+    own. (The jerk-limited profile is not monotonic in its caps: with higher caps some short
+    pieces come out slower, and on ``programs/butterfly.nc`` the whole rest at 150 % came
     out 1.7 % slower. The override never slows the job down: a note says so instead.)"""
     plain = resume_motion(job.plan, s_mm, wait_s, job.lookahead_pieces)
     if job.scale <= 1.0 or plain is None:
