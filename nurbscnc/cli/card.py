@@ -13,7 +13,7 @@ import threading
 import click
 
 from nurbscnc.cli.handle import handle_errors
-from nurbscnc.errors import NurbsCncError, OutputError
+from nurbscnc.errors import NurbsCncError, OutputError, printable
 
 
 @click.command("card-position")
@@ -72,7 +72,7 @@ def _card_errors(func):
         try:
             return func(*args, **kwargs)
         except NurbsCncError as exc:
-            click.echo(f"card-sim: error: {exc.message}", err=True)
+            click.echo(f"card-sim: error: {printable(exc.message)}", err=True)
             sys.exit(exc.exit_code)
 
     return wrapper
