@@ -133,7 +133,17 @@ def stream_report(program: str, job, reports: list) -> dict:
         "frames_sent": sum(r.frames_sent for r in reports),
         "bytes_sent": sum(r.bytes_sent for r in reports),
         "retransmits": sum(r.retransmits for r in reports),
+        # over every part: lost copies of acknowledged frames / all their copies
+        "frame_error_rate": _frame_error_rate(reports),
         "duration_s": sum(r.duration_s for r in reports),
         **extra,
     }
     return {"ok": True, "program": "<stdin>" if program == "-" else program, **body}
+
+
+def _frame_error_rate(reports: list) -> float:
+    """The measured frame error rate of all the parts, weighted by their frames sent."""
+    frames = sum(r.frames_sent for r in reports)
+    if not frames:
+        return 0.0
+    return sum(r.frame_error_rate * r.frames_sent for r in reports) / frames

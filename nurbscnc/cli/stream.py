@@ -144,6 +144,15 @@ def _progress_bar(enabled: bool, total: int, keys: bool = False):
     help="Seconds without an answer from the card before giving up.",
 )
 @click.option(
+    "--stall-limit",
+    "stall_limit_s",
+    type=click.FloatRange(min=0.0, min_open=True),
+    default=None,
+    metavar="SECONDS",
+    help="Give up when the card answers but acknowledges no frame for this long (default: "
+    "a time that grows with the line's measured error rate, from --timeout up to 30 times it).",
+)
+@click.option(
     "--lead",
     "lead",
     type=click.IntRange(min=1),
@@ -189,6 +198,7 @@ def stream(
     baud,
     batch,
     timeout_s,
+    stall_limit_s,
     lead,
     optional_stop,
     feed_override,
@@ -248,6 +258,7 @@ def stream(
                 "allow_url": allow_url,
                 "batch": batch,
                 "timeout_s": timeout_s,
+                "stall_limit_s": stall_limit_s,
                 "lead": lead,
             }
             reports = _send(link, operator, job, pulses, total, zero, quiet, as_json)
@@ -278,7 +289,10 @@ def _send(
     from nurbscnc.output.stream.sender import Sender, SenderOptions, open_port
 
     options = SenderOptions(
-        batch_periods=link["batch"], timeout_s=link["timeout_s"], lead_periods=link["lead"]
+        batch_periods=link["batch"],
+        timeout_s=link["timeout_s"],
+        lead_periods=link["lead"],
+        stall_limit_s=link["stall_limit_s"],
     )
     ser = open_port(
         link["port"],
@@ -318,7 +332,8 @@ def _print_report(program: str, job, reports: list, as_json: bool) -> None:
     console.out.print(
         f"{program}: {report['executed_periods']} periods streamed in {report['sections']} "
         f"part(s), {report['frames_sent']} frames ({report['bytes_sent']} bytes), "
-        f"{report['retransmits']} retransmitted; the card ended at "
+        f"{report['retransmits']} retransmitted (frame error rate "
+        f"{report['frame_error_rate']:.1%}); the card ended at "
         f"{list(reports[-1].final_position_steps)} steps{hold_text}",
         markup=False,
     )

@@ -134,6 +134,7 @@ class Link(HandshakeHandlers, StreamingHandlers, StoppingHandlers):
                 self.count.crc_errors += 1
                 continue
             self.state.last_rx_s = now
+            self.count.frames_received += 1
             try:
                 msg = p.decode_message(ev)
             except p.ProtocolError:
@@ -203,7 +204,7 @@ class Link(HandshakeHandlers, StreamingHandlers, StoppingHandlers):
             if st.base < st.nxt:
                 oldest = st.window[st.base]
                 times.append(oldest.leaves_s + self.rtt.rto + eps)
-                times.append(max(st.last_progress_s, oldest.written_s) + opt.timeout_s + eps)
+                times.append(self._stall_deadline_s(now) + eps)
             if st.want_hold is not None:
                 times.append(st.last_ctl_s + opt.rto_s + eps)
         elif st.phase is Phase.STOPPING:

@@ -39,6 +39,10 @@ class SenderOptions:
     #: whole buffer. Less makes a feed hold act sooner, at the cost of margin against an
     #: underrun; at least half the card's buffer (where a card starts executing).
     lead_periods: int | None = None
+    #: frames in flight and none acknowledged for this long though the card answers: give up
+    #: [s]. None: the limit follows the measured frame error rate (see
+    #: :func:`~.linkstreaming.attempts_needed`)
+    stall_limit_s: float | None = None
 
     def __post_init__(self) -> None:
         if self.batch_periods < 1:
@@ -47,6 +51,8 @@ class SenderOptions:
             raise ConfigError(f"--lead must be >= 1 period, got {self.lead_periods}")
         if not self.timeout_s > 0.0:
             raise ConfigError(f"--timeout must be > 0 s, got {self.timeout_s}")
+        if self.stall_limit_s is not None and not self.stall_limit_s > 0.0:
+            raise ConfigError(f"--stall-limit must be > 0 s, got {self.stall_limit_s}")
 
 
 @dataclass(frozen=True)
@@ -84,6 +90,11 @@ class StreamReport:
     buffer_periods: int
     session_id: int
     duration_s: float
+    #: copies of the acknowledged frames that were lost or damaged (either way), over all
+    #: their copies: the line's measured frame error rate
+    frame_error_rate: float = 0.0
+    #: periods per BATCH frame at the end (fewer than asked on a noisy line)
+    batch_periods: int = 0
 
     def to_json(self) -> dict:
         out = {k: getattr(self, k) for k in self.__dataclass_fields__}
@@ -133,6 +144,30 @@ class Counters:
     protocol_errors: int = 0
     polls: int = 0
     max_in_flight: int = 0
+    frames_acked: int = 0  #: sequenced frames the card acknowledged
+    copies_acked: int = 0  #: copies written of those frames
+    frames_received: int = 0  #: valid frames from the card
+
+    @property
+    def frame_error_rate(self) -> float:
+        """Lost or damaged copies of the acknowledged frames over all their copies."""
+        if not self.copies_acked:
+            return 0.0
+        return (self.copies_acked - self.frames_acked) / self.copies_acked
+
+    def round_trip_error(self, frame_bytes: int) -> float:
+        """The chance that a copy of a ``frame_bytes`` frame or its answer is lost: the
+        measured :attr:`frame_error_rate`, or, when larger, what the damaged frames from the
+        card imply for a line that damages each byte alike (a frame of L bytes arrives
+        whole with probability (1 − e)^L): e from the card's frames, then the chance for
+        the frame and an answer of the card's mean frame length. Before any frame is
+        acknowledged only the second is known."""
+        seen = self.frames_received + self.crc_errors
+        if not self.crc_errors or not self.frames_received:
+            return self.frame_error_rate
+        reply_bytes = max(1.0, self.bytes_received / seen)
+        whole = (self.frames_received / seen) ** (1.0 / reply_bytes)  # 1 − e per byte
+        return max(self.frame_error_rate, 1.0 - whole ** (frame_bytes + reply_bytes))
 
 
 @dataclass

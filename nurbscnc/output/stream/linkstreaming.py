@@ -36,13 +36,23 @@ class StreamingHandlers:
         else:
             newest = st.window[st.base + ahead - 1]
             # Karn: no samples from retransmitted frames, nor from frames whose
-            # acknowledgement waited for a retransmission before them.
-            if newest.copies == 1 and newest.written_s > st.last_resend_s:
+            # acknowledgement waited for a retransmission before them; nor from a STATUS or a
+            # NAK: one acknowledging a frame means its ACK was lost (or the frame came in
+            # between two polls), and the time since is no round trip (on a noisy line such
+            # samples raised the timeout tenfold).
+            if (
+                isinstance(msg, p.Ack)
+                and newest.copies == 1
+                and newest.written_s > st.last_resend_s
+            ):
                 self.rtt.sample(max(0.0, now - newest.leaves_s))
             self._correct_line_model(now, newest)
             self.rtt.progress()
             for seq in range(st.base, st.base + ahead):
-                st.in_flight -= st.window.pop(seq).periods
+                rec = st.window.pop(seq)
+                st.in_flight -= rec.periods
+                self.count.frames_acked += 1
+                self.count.copies_acked += rec.copies
             st.base += ahead
             st.last_progress_s = now
         st.credit = self._credit(msg.free_periods)
@@ -171,22 +181,80 @@ class StreamingHandlers:
             st.last_poll_s = now
 
     def _check_contact(self, now: float, what: str) -> None:
-        """No valid frame for the timeout; or frames in flight and none acknowledged for it
-        although the card answers (a line too noisy to carry a frame)."""
+        """No valid frame for the timeout: contact lost. Frames in flight and none
+        acknowledged although the card answers: a noisy line, retried while progress is
+        possible (:meth:`_too_noisy`)."""
         st, timeout = self.state, self.options.timeout_s
         if now - st.last_rx_s > timeout:
             self._stop(
                 StreamError(f"lost communication with card: no answer {what} for {timeout:g} s"),
                 now,
             )
-        elif (
-            st.base < st.nxt
-            and now - max(st.last_progress_s, st.window[st.base].written_s) > timeout
+            return
+        verdict = self._too_noisy(now)
+        if verdict is not None:
+            self._stop(StreamError(verdict), now)
+
+    def _stall_deadline_s(self, now: float) -> float:
+        """When :meth:`_too_noisy` must look again with frames in flight (it also looks at
+        every other event: a copy written changes its verdict)."""
+        st, opt = self.state, self.options
+        since = max(st.last_progress_s, st.window[st.base].written_s)
+        if opt.stall_limit_s is not None:
+            return since + opt.stall_limit_s
+        if now <= since + opt.timeout_s:
+            return since + opt.timeout_s
+        return since + MAX_STALL_TIMEOUTS * opt.timeout_s
+
+    def _too_noisy(self, now: float) -> str | None:
+        """Why the stream gives up on a live line that acknowledges nothing, or None.
+
+        The oldest frame in flight has been sent ``copies`` times since the card last
+        acknowledged one. On a line that loses a fraction q of the copies (measured:
+        :attr:`Counters.frame_error_rate`), all of n copies are lost with probability q^n;
+        the stream gives up when that is below :data:`GIVE_UP_PROBABILITY` (n =
+        :func:`attempts_needed`), and not before the timeout: no progress for a time that
+        grows with the error rate (at most :data:`MAX_STALL_TIMEOUTS` timeouts). A line that
+        never carried a frame gives up after the timeout; ``stall_limit_s``, when set, is the
+        user's own limit instead.
+        """
+        st, opt = self.state, self.options
+        if st.base >= st.nxt:
+            return None
+        oldest = st.window[st.base]
+        stalled_s = now - max(st.last_progress_s, oldest.written_s)
+        rate = self.count.round_trip_error(len(oldest.data))
+        if opt.stall_limit_s is not None:
+            if stalled_s <= opt.stall_limit_s:
+                return None
+        elif stalled_s <= opt.timeout_s or (
+            oldest.copies < attempts_needed(rate)
+            and stalled_s <= MAX_STALL_TIMEOUTS * opt.timeout_s
         ):
-            self._stop(
-                StreamError(
-                    f"the card acknowledged no frame for {timeout:g} s though it "
-                    "answers: the line is too noisy"
-                ),
-                now,
-            )
+            return None
+        measured = (
+            f" ({oldest.copies} copies of one frame lost; measured round-trip error rate "
+            f"{rate:.1%})"
+            if rate > 0.0
+            else ""
+        )
+        return (
+            f"the card acknowledged no frame for {stalled_s:.3g} s though it answers: "
+            f"the line is too noisy{measured}"
+        )
+
+
+#: The stream gives up on a live line when every copy sent since the last acknowledgement
+#: being lost is less likely than this, at the line's measured error rate.
+GIVE_UP_PROBABILITY = 1e-6
+#: Longest wait for an acknowledgement on a live line, in timeouts (``--timeout``).
+MAX_STALL_TIMEOUTS = 30.0
+
+
+def attempts_needed(error_rate: float) -> int:
+    """Copies of one frame that a line losing ``error_rate`` of them all loses with
+    probability below GIVE_UP_PROBABILITY: ceil(ln P / ln q) (1 for a clean line)."""
+    if error_rate <= 0.0:
+        return 1
+    q = min(error_rate, 0.999)
+    return math.ceil(math.log(GIVE_UP_PROBABILITY) / math.log(q))
