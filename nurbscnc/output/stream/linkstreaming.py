@@ -75,7 +75,7 @@ class StreamingHandlers:
         if msg.reason == p.NakReason.POSITION and oldest is not None:
             oldest.position_naks += 1
             if oldest.position_naks >= 2:  # two copies refused: not a damaged copy
-                what = "END" if oldest.seq >= self.n_batches else f"batch {oldest.seq + 1}"
+                what = "END" if oldest.seq == self._end_seq else f"batch {oldest.seq + 1}"
                 self._stop(
                     StreamError(
                         f"the card refused {what} twice: it does not continue from where the "
@@ -127,28 +127,33 @@ class StreamingHandlers:
 
     # -- streaming: timers -------------------------------------------------------------------
     def _fill_window(self, now: float) -> None:
-        """New frames, as far as the credit goes."""
-        st = self.state
-        total = self.n_batches + (0 if self.program_open else 1)  # the batches, then END
-        while st.nxt < total:
-            periods = min(self.per_frame, self.program.periods - st.nxt * self.per_frame)
+        """New frames, as far as the credit goes: batches of :attr:`per_frame` periods
+        (a partial one waits while the program is open), then END."""
+        st, prog = self.state, self.program
+        while self._end_seq is None:
+            periods = min(self.per_frame, prog.periods - self._framed_periods)
             if self.program_open and periods < self.per_frame:
-                break  # a partial batch waits for the periods that follow it
-            if not self.ignore_credit and st.in_flight + max(periods, 0) > st.credit:
+                break  # a partial batch (or END) waits for the periods that follow
+            if not self.ignore_credit and st.in_flight + periods > st.credit:
                 break
-            rec = st.window[st.nxt] = self._record(st.nxt)
+            rec = st.window[st.nxt] = self._record(st.nxt, periods)
             self._send(None, rec)
             st.in_flight += rec.periods
             self.count.max_in_flight = max(self.count.max_in_flight, st.in_flight)
             st.nxt += 1
 
-    def _record(self, i: int) -> InFlight:
-        """Frame ``i``: a BATCH (with the position it starts from) or, after the last, END."""
-        prog, k = self.program, self.per_frame
-        if i < self.n_batches:
-            block = prog.pulses[i * k : i * k + k]
-            msg = p.Batch(block, tuple(int(v) for v in self._batch_starts[i]))
-            return InFlight(i, p.encode_message(msg, seq=i), len(block))
+    def _record(self, i: int, periods: int) -> InFlight:
+        """Frame ``i``: a BATCH of the next ``periods`` periods (with the position it starts
+        from), or END when none are left."""
+        prog, first = self.program, self._framed_periods
+        self._frame_starts.append(first)
+        if periods > 0:
+            block = prog.pulses[first : first + periods]
+            msg = p.Batch(block, tuple(int(v) for v in self._framed_position))
+            self._framed_position = self._framed_position + block.sum(axis=0)
+            self._framed_periods += periods
+            return InFlight(i, p.encode_message(msg, seq=i), periods)
+        self._end_seq = i
         end = p.End(prog.periods, tuple(int(v) for v in prog.end_steps))
         return InFlight(i, p.encode_message(end, seq=i), 0)
 
