@@ -406,9 +406,9 @@ AIRFOIL = airfoil_program()
 #: A card that executes each period as it is accepted (no underrun: a 115200-baud line
 #: losing 2 % of its bytes carries less than one period per ms), standing at the start.
 NOISY_CARD = CardConfig(speed=None, position_steps=tuple(int(v) for v in AIRFOIL.start_steps))
-#: Virtual time a 2 % noisy stream of the airfoil may take [s] (measured: 7.8-84 s over 20
-#: seeds, against 0.1 s clean).
-NOISY_BOUND_S = 150.0
+#: Virtual time a 2 % noisy stream of the airfoil may take [s] (measured: 4.5-18.7 s over
+#: 20 seeds, against 0.1 s clean).
+NOISY_BOUND_S = 60.0
 
 
 def _noisy(kind: str, rate: float, seed: int, **kwargs):
@@ -432,7 +432,8 @@ def test_a_2_percent_noisy_line_still_completes_the_airfoil(kind, seed):
     """Each byte lost (or one bit of it flipped) with probability 2 %, both ways: about 80 %
     of the default 16-period batches or their answers are damaged. The live line is retried
     until the card ends where the clean stream ends, within NOISY_BOUND_S; the report says
-    the error rate it measured. (Seeds 0, 3 and 7 gave up after 2 s before.)"""
+    the error rate it measured, and the batches shrank to carry more periods per byte.
+    (Seeds 0, 3 and 7 gave up after 2 s before.)"""
     clean = simulate(AIRFOIL, NOISY_CARD)
     assert clean.completed and clean.exact(AIRFOIL)
     r = _noisy(kind, 0.02, seed)
@@ -442,18 +443,23 @@ def test_a_2_percent_noisy_line_still_completes_the_airfoil(kind, seed):
     assert r.report.retransmits > 50 and clean.report.frame_error_rate == 0.0
     # Measured against what the relays did: a 71-byte batch and a ~15-byte answer both
     # arrive whole with probability 0.98^86 = 18 %.
-    assert 0.6 < r.report.frame_error_rate < 0.9
+    assert 0.5 < r.report.frame_error_rate < 0.9
     assert r.report.to_json()["frame_error_rate"] == r.report.frame_error_rate
+    # B periods per frame maximise B (1 - e)^(23 + 3B + 15) / (23 + 3B) at e = 2 %: B = 8
+    assert 6 <= r.report.batch_periods <= 11 and clean.report.batch_periods == 16
 
 
-@pytest.mark.parametrize("kind", ["drop", "corrupt"])
-def test_a_5_percent_noisy_line_completes_or_fails_cleanly(kind):
-    for seed in (0, 1):
-        r = _noisy(kind, 0.05, seed)
-        assert (r.completed and r.exact(AIRFOIL)) or (
-            not r.completed and r.stopped_cleanly(AIRFOIL)
-        ), r.error
-        assert r.elapsed_s < 400.0
+@pytest.mark.parametrize(("kind", "seed"), [("drop", 4), ("corrupt", 0)])
+def test_a_5_percent_noisy_line_completes_or_fails_cleanly(kind, seed):
+    """At 5 % per byte (measured over 12 seeds: 6 completed in 159-274 s, 6 failed with the
+    card stopped after a prefix); seed 4 of the drops fails, seed 0 of the bit flips completes."""
+    r = _noisy(kind, 0.05, seed)
+    assert (r.completed and r.exact(AIRFOIL)) or (not r.completed and r.stopped_cleanly(AIRFOIL)), (
+        r.error
+    )
+    assert r.completed == (kind == "corrupt") and r.elapsed_s < 400.0
+    if r.completed:
+        assert r.report.batch_periods <= 8  # shrunk from 16 (5 at the end of this one)
 
 
 def test_the_users_stall_limit_is_the_limit():

@@ -184,6 +184,7 @@ class Link(HandshakeHandlers, StreamingHandlers, StoppingHandlers):
                 rec.queued = False
                 rec.copies += 1
                 rec.written_s = min(rec.written_s, now)
+                rec.prev_leaves_s = rec.leaves_s
                 rec.leaves_s = st.line_free_s
                 rec.end_offset = self.count.bytes_sent
             elif item.data[4] == p.MsgType.HELLO:

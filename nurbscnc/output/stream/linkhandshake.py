@@ -87,6 +87,7 @@ class HandshakeHandlers:
         one = p.batch_frame_bytes(1, axes, width)
         self._frame_bytes = (one - axes * width, axes * width)
         self._framed_position = np.asarray(self.program.start_steps, dtype=np.int64).copy()
+        self._choose_batch()  # damaged replies in the handshake already tell of a noisy line
         st.credit = self._credit(st.caps.buffer_periods)
         st.phase = Phase.STREAMING
         st.last_rx_s = st.last_progress_s = now

@@ -124,6 +124,7 @@ class InFlight:
     periods: int
     written_s: float = math.inf  #: when the first copy was written
     leaves_s: float = math.inf
+    prev_leaves_s: float = math.inf  #: ``leaves_s`` of the copy before the newest
     end_offset: int = 0
     copies: int = 0  #: copies written
     queued: bool = False  #: a copy waits in the outbox
@@ -147,6 +148,7 @@ class Counters:
     frames_acked: int = 0  #: sequenced frames the card acknowledged
     copies_acked: int = 0  #: copies written of those frames
     frames_received: int = 0  #: valid frames from the card
+    bytes_acked: int = 0  #: bytes of one copy of each acknowledged frame
 
     @property
     def frame_error_rate(self) -> float:
@@ -155,19 +157,33 @@ class Counters:
             return 0.0
         return (self.copies_acked - self.frames_acked) / self.copies_acked
 
+    def byte_error_rate(self) -> float:
+        """The line's chance of damaging or losing one byte, for a line that damages bytes
+        alike (a frame of L bytes arrives whole with probability (1 − e)^L): the larger of
+        what the card's damaged frames imply (their mean length) and what the lost copies
+        of the acknowledged frames imply (their mean length, plus an answer's)."""
+        seen = self.frames_received + self.crc_errors
+        reply_bytes = self.bytes_received / seen if seen else 0.0
+        e = 0.0
+        if self.crc_errors and self.frames_received:
+            e = 1.0 - (self.frames_received / seen) ** (1.0 / max(1.0, reply_bytes))
+        if self.frames_acked and self.copies_acked > self.frames_acked:
+            trip_bytes = self.bytes_acked / self.frames_acked + reply_bytes
+            e = max(e, 1.0 - (1.0 - self.frame_error_rate) ** (1.0 / trip_bytes))
+        return e
+
+    def reply_bytes(self) -> float:
+        """The mean length of the card's frames [bytes] (15: an ACK, before any)."""
+        seen = self.frames_received + self.crc_errors
+        return self.bytes_received / seen if seen else 15.0
+
     def round_trip_error(self, frame_bytes: int) -> float:
         """The chance that a copy of a ``frame_bytes`` frame or its answer is lost: the
-        measured :attr:`frame_error_rate`, or, when larger, what the damaged frames from the
-        card imply for a line that damages each byte alike (a frame of L bytes arrives
-        whole with probability (1 − e)^L): e from the card's frames, then the chance for
-        the frame and an answer of the card's mean frame length. Before any frame is
-        acknowledged only the second is known."""
-        seen = self.frames_received + self.crc_errors
-        if not self.crc_errors or not self.frames_received:
-            return self.frame_error_rate
-        reply_bytes = max(1.0, self.bytes_received / seen)
-        whole = (self.frames_received / seen) ** (1.0 / reply_bytes)  # 1 − e per byte
-        return max(self.frame_error_rate, 1.0 - whole ** (frame_bytes + reply_bytes))
+        measured :attr:`frame_error_rate`, or, when larger, 1 − (1 − e)^(L + answer) from
+        :meth:`byte_error_rate` (before any frame is acknowledged, the only one known)."""
+        e = self.byte_error_rate()
+        whole = (1.0 - e) ** (frame_bytes + self.reply_bytes())
+        return max(self.frame_error_rate, 1.0 - whole)
 
 
 @dataclass
