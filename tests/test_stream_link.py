@@ -22,9 +22,10 @@ from nurbscnc.errors import EXIT_INTERRUPTED, StreamError
 from nurbscnc.output.stream import protocol as p
 from nurbscnc.output.stream.card import CardConfig, CardSim, Faults, PtyEndpoint, serve
 from nurbscnc.output.stream.linkstreaming import GIVE_UP_PROBABILITY, attempts_needed
+from nurbscnc.output.stream.noise import ByteRelay
 from nurbscnc.output.stream.quantise import quantise
 from nurbscnc.output.stream.sender import Sender, SenderOptions, StreamInterrupted, open_port
-from nurbscnc.output.stream.simlink import ByteRelay, Relay, simulate
+from nurbscnc.output.stream.simlink import Relay, simulate
 from tests.stream_helpers import card_on
 
 STEPS = (1000.0, 1000.0, 1000.0)

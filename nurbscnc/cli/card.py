@@ -13,7 +13,7 @@ import threading
 import click
 
 from nurbscnc.cli.handle import handle_errors
-from nurbscnc.errors import NurbsCncError, OutputError, printable
+from nurbscnc.errors import NurbsCncError, OutputError
 
 
 @click.command("card-position")
@@ -72,6 +72,8 @@ def _card_errors(func):
         try:
             return func(*args, **kwargs)
         except NurbsCncError as exc:
+            from nurbscnc.errors import printable  # (a message may quote a file name)
+
             click.echo(f"card-sim: error: {printable(exc.message)}", err=True)
             sys.exit(exc.exit_code)
 

@@ -332,14 +332,19 @@ def _print_report(program: str, job, reports: list, as_json: bool) -> None:
     console.out.print(
         f"{program}: {report['executed_periods']} periods streamed in {report['sections']} "
         f"part(s), {report['frames_sent']} frames ({report['bytes_sent']} bytes), "
-        f"{report['retransmits']} retransmitted (frame error rate "
-        f"{report['frame_error_rate']:.1%}); the card ended at "
+        f"{report['retransmits']} retransmitted; the card ended at "
         f"{list(reports[-1].final_position_steps)} steps{hold_text}",
         markup=False,
     )
     planning = report.get("planning")
     if planning is not None:
         console.out.print(_planning_text(planning), markup=False)
+    if report["frame_error_rate"] > 0.0:
+        console.out.print(
+            f"{program}: noisy line: {report['frame_error_rate']:.1%} of the frames' copies "
+            f"lost or damaged; {report['batch_periods']} periods per frame at the end",
+            markup=False,
+        )
     for note in report.get("notes", []):
         console.err.print(f"stream: note: {note['message']}", markup=False, highlight=False)
 
