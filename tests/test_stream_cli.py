@@ -92,7 +92,7 @@ def test_stream_stall_limit_option_reaches_the_sender(tmp_path, monkeypatch):
     with card_on("pty") as (_card, ep):
         result = run_stream([nc, "--port", ep.path, "--stall-limit", "7.5"])
     assert result.exit_code == 0, result.output
-    assert seen and seen[0].stall_limit_s == 7.5 and "noisy line" not in result.stdout
+    assert seen and seen[0].stall_limit_s == 7.5 and "noisy line" not in result.stderr
     bad = run_stream([nc, "--port", "/dev/null", "--stall-limit", "0"])
     assert bad.exit_code == 2 and "--stall-limit" in bad.stderr
 

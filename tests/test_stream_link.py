@@ -485,3 +485,18 @@ def test_byte_relay_damages_bytes_at_its_rates():
     assert relay.bytes == 100_000
     assert abs(relay.dropped - 2000) < 4 * 44 and abs(relay.corrupted - 3000) < 4 * 54
     assert sum(len(frame) - len(o) for o in out) == relay.dropped
+
+
+def test_the_stream_report_notes_a_noisy_line():
+    from nurbscnc.app.stream import stream_report
+
+    r = _noisy("drop", 0.02, 0)
+    report = stream_report("part.nc", None, [r.report])
+    assert report["frame_error_rate"] == r.report.frame_error_rate > 0.5
+    (note,) = report["notes"]
+    assert note["message"] == (
+        f"noisy line: {r.report.frame_error_rate:.1%} of the frames' copies lost or damaged; "
+        f"{r.report.batch_periods} periods per frame at the end"
+    )
+    clean = stream_report("part.nc", None, [simulate(AIRFOIL, NOISY_CARD).report])
+    assert "notes" not in clean and clean["frame_error_rate"] == 0.0

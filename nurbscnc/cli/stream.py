@@ -23,7 +23,7 @@ from nurbscnc.cli import console
 from nurbscnc.cli.common import load_machine_cli
 from nurbscnc.cli.controls import Operator, key_reader, routed_signals
 from nurbscnc.cli.handle import handle_errors
-from nurbscnc.cli.options import planning_options
+from nurbscnc.cli.options import planning_options, stall_limit_option
 from nurbscnc.errors import ConfigError
 
 
@@ -143,15 +143,7 @@ def _progress_bar(enabled: bool, total: int, keys: bool = False):
     show_default=True,
     help="Seconds without an answer from the card before giving up.",
 )
-@click.option(
-    "--stall-limit",
-    "stall_limit_s",
-    type=click.FloatRange(min=0.0, min_open=True),
-    default=None,
-    metavar="SECONDS",
-    help="Give up when the card answers but acknowledges no frame for this long (default: "
-    "a time that grows with the line's measured error rate, from --timeout up to 30 times it).",
-)
+@stall_limit_option
 @click.option(
     "--lead",
     "lead",
@@ -339,12 +331,6 @@ def _print_report(program: str, job, reports: list, as_json: bool) -> None:
     planning = report.get("planning")
     if planning is not None:
         console.out.print(_planning_text(planning), markup=False)
-    if report["frame_error_rate"] > 0.0:
-        console.out.print(
-            f"{program}: noisy line: {report['frame_error_rate']:.1%} of the frames' copies "
-            f"lost or damaged; {report['batch_periods']} periods per frame at the end",
-            markup=False,
-        )
     for note in report.get("notes", []):
         console.err.print(f"stream: note: {note['message']}", markup=False, highlight=False)
 
