@@ -110,6 +110,15 @@ def test_deeply_nested_profile_is_a_config_error(text):
     assert info.value.message.startswith("deep.toml: invalid profile:")
 
 
+@pytest.mark.parametrize(
+    ("depth", "words"), [(1000, "is not a value"), (100, f"nested more than {MAX_NESTING} deep")]
+)
+def test_deeply_nested_override_is_a_config_error(depth, words):
+    value = "[" * depth + "]" * depth
+    with pytest.raises(ConfigError, match=words):
+        parse_machine(default_profile_text(), "m.toml", {"limits.v_max_mm_min": value})
+
+
 def test_nesting_within_the_limit_reaches_the_schema_check():
     text = "a = " + "[" * MAX_NESTING + "]" * MAX_NESTING + "\n"
     with pytest.raises(ConfigError, match="a is not a known key"):

@@ -139,6 +139,8 @@ def parse_machine(text: str, source: str = "<string>", overrides: dict | None = 
         for key, value in overrides.items():
             apply_override(data, str(key), value, source)
             overridden.add(str(key))
+        if _depth_exceeds(data, MAX_NESTING):  # a value set by an override
+            raise _too_deep(source)
     return _build(data, Reporter(source, overridden))
 
 

@@ -175,7 +175,8 @@ def apply_override(data: dict, key: str, value, source: str) -> None:
     if isinstance(value, str):
         try:
             value = tomllib.loads(f"v = {value}")["v"]
-        except (tomllib.TOMLDecodeError, ValueError):
+        except (tomllib.TOMLDecodeError, ValueError, RecursionError):
+            # (RecursionError: arrays nested too deep for tomllib's recursive parser)
             raise ConfigError(f"{source}: override {key}: {value[:80]!r} is not a value") from None
     if len(parts) == 3 and parts[0] == "servo":
         # Setting a key of one servo form replaces the other form in that axis's table, so
