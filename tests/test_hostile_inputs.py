@@ -374,3 +374,21 @@ def test_contour_tolerance_out_of_range_exits_2_before_work(tmp_path):
     result = run(["plan", program, "--machine", machine])
     assert result.exit_code == 2
     assert "limits.contour_tolerance_um must be >= 0.1 and <= 10000" in result.stderr
+
+
+def test_console_escapes_text_objects_and_keeps_its_own_styles():
+    """Whatever prints (a str, a rich Text of a progress line or a table cell) goes through
+    the console's escape; rich's own style codes still reach a terminal."""
+    from rich.text import Text
+
+    from nurbscnc.cli import console
+
+    buf = io.StringIO()
+    term = console._rich_console_class()(
+        file=buf, force_terminal=True, color_system="standard", markup=False, width=200
+    )
+    term.print(Text("line 3: \x1b]0;pwned\x1b[2J", style="bold"), "\x9b31m\ttab")
+    out = buf.getvalue()
+    assert r"line 3: \x1b]0;pwned\x1b[2J" in out and r"\x9b31m" in out  # (tabs: spaces)
+    assert "\x1b[1m" in out  # bold, rich's own escape
+    assert "\x1b]" not in out and "\x1b[2J" not in out and "\x9b" not in out
