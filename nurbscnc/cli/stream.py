@@ -25,7 +25,7 @@ from nurbscnc.cli import console
 from nurbscnc.cli.common import load_machine_cli
 from nurbscnc.cli.controls import Operator, key_reader, routed_signals, user_m_runner
 from nurbscnc.cli.handle import handle_errors
-from nurbscnc.cli.options import planning_options
+from nurbscnc.cli.options import planning_options, stall_limit_option
 from nurbscnc.errors import ConfigError
 
 
@@ -153,6 +153,7 @@ def _progress_bar(enabled: bool, total: int, keys: bool = False):
     show_default=True,
     help="Seconds without an answer from the card before giving up.",
 )
+@stall_limit_option
 @click.option(
     "--lead",
     "lead",
@@ -211,6 +212,7 @@ def stream(
     baud,
     batch,
     timeout_s,
+    stall_limit_s,
     lead,
     optional_stop,
     feed_override,
@@ -272,6 +274,7 @@ def stream(
                 "allow_url": allow_url,
                 "batch": batch,
                 "timeout_s": timeout_s,
+                "stall_limit_s": stall_limit_s,
                 "lead": lead,
                 "user_m_timeout_s": user_m_timeout_s,
             }
@@ -309,7 +312,10 @@ def _send(
     from nurbscnc.output.stream.sender import Sender, SenderOptions, open_port
 
     options = SenderOptions(
-        batch_periods=link["batch"], timeout_s=link["timeout_s"], lead_periods=link["lead"]
+        batch_periods=link["batch"],
+        timeout_s=link["timeout_s"],
+        lead_periods=link["lead"],
+        stall_limit_s=link["stall_limit_s"],
     )
     ser = open_port(
         link["port"],
