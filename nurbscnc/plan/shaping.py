@@ -189,21 +189,21 @@ def _settle_extra(
     period_s: float,
 ) -> np.ndarray:
     """The settles after rapids (in place): each rapid whose stop transient the over-limit
-    samples are near waits longer, past the last of them (plus one period). Returns which
-    over-limit samples this answered."""
+    samples after the restart are near waits longer, past the last of them (plus one
+    period). Returns which over-limit samples this answered. Those during the settle (the
+    reference waiting at the cut's start, τ at the restart) are not: the rapid's overshoot
+    is largest as the settle begins, whatever its length, so the stop rule answers them
+    with the rapid's descent (:func:`_soften_stops`)."""
     over, tau = ov.index, ov.tau_s
     handled = np.zeros(over.size, dtype=bool)
     for i_r, r in enumerate(settle_rows.tolist()):
-        hit = near == r + 1
+        t_restart = profile.piece_start_time_s[r + 1]
+        hit = (near == r + 1) & (tau > t_restart)
         if not hit.any() or lev.settle_s[r] >= settle_max_s:
             continue
         # Move the restart past the last over-limit sample (plus one period).
-        t_restart = profile.piece_start_time_s[r + 1]
-        moving = over[hit & (tau > t_restart)]
-        extra = period_s
-        if moving.size:
-            first_moving = int(ov.restart_count[i_r])  # the first sample with τ > restart
-            extra = max((int(moving.max()) - first_moving + 2) * period_s, period_s)
+        first_moving = int(ov.restart_count[i_r])  # the first sample with τ > restart
+        extra = max((int(over[hit].max()) - first_moving + 2) * period_s, period_s)
         lev.settle_s[r] = min(settle_max_s, lev.settle_s[r] + extra)
         handled |= hit
     return handled
@@ -325,7 +325,8 @@ def _soften_stops(
         if entry == FEED_ONLY:
             continue
         f, accel = entry[1], entry[2]
-        if j - 1 >= 0 and not pieces.rapid[j - 1]:
+        # A rapid's descent too where it ends at a cut: its overshoot is the settle's error.
+        if j - 1 >= 0 and (not pieces.rapid[j - 1] or j < k and not pieces.rapid[j]):
             sel = runs == runs[j - 1]
             _soften(lev.a_dn, lev.j_dn, sel, f, accel, settle_max_s)
             lev.shaped |= sel
@@ -418,14 +419,20 @@ def fallback(
     k = len(pieces)
     f = FALLBACK_FACTOR
     lev.settle_s[settle_rows] = np.maximum(lev.settle_s[settle_rows], settle_max_s)
+    # The descent of each rapid that ends at a cut: its overshoot is the settle's error.
+    descent = np.zeros(k, dtype=bool)
+    descent[settle_rows] = True
     if stage == 1:
         window = max(int(round(max(settle_max_s, BLAME_WINDOW_S) / period_s)), 1)
         everything = np.ones(ov.index.size, dtype=bool)
         blame = _blame(ov, everything, eps_mm, np.zeros(k - 1, dtype=bool), window)
         sel = (blame > 0.0) & ~pieces.rapid
+        descent &= blame > 0.0
     else:
         sel = ~pieces.rapid
     lev.caps[sel] *= f
     for x in (lev.a_up, lev.a_dn, lev.j_up, lev.j_dn):
         x[sel] *= f
-    lev.shaped |= sel
+    lev.a_dn[descent] *= f
+    lev.j_dn[descent] *= f
+    lev.shaped |= sel | descent
