@@ -213,6 +213,12 @@ def _settle_extra(
         hit = (near == r + 1) & (tau > t_restart)
         if not hit.any() or lev.settle_s[r] >= settle_max_s:
             continue
+        if np.any((near == r + 1) & (tau <= t_restart)):
+            # The rapid still overshoots during the settle: its descent is softened this
+            # re-plan (the stop rule), which lowers the ringing after the restart too; the
+            # settle waits for what is left of it, measured next time.
+            handled |= hit
+            continue
         key, e = ("settle", r), float(ov.err_mm[hit].max())
         prev = history.get(key)
         if prev == FEED_ONLY or (
