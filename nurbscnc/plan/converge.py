@@ -27,6 +27,9 @@ RESTORE_PIECES = 3
 #: then acceleration) was never tried with this cap.
 RESHAPE_ITERATIONS = 3
 RESHAPE_MIN_GAIN_S = 0.02
+#: Then, at most this many halvings of the settles after rapids
+#: (:meth:`_Improvement.shorten_settles`).
+SETTLE_HALVINGS = 4
 #: Then, if the restore still fails, at most this many re-plans of that cap alone between
 #: the plan's and the restore's (false position on the error).
 RESTORE_SECANTS = 3
@@ -123,6 +126,7 @@ def _improve(st: Setup, lev: Levers, result, hi: Levers, evaluate, confine):
         if gain[p] < st.period:
             break
         run.restore(p, reach.caps[p], gain[p])
+    run.shorten_settles()
     return run.finish()
 
 
@@ -256,6 +260,26 @@ class _Improvement:
                 continue
             self.take(trial, self.result)
             levers = trial
+
+    def shorten_settles(self) -> None:
+        """The settles after rapids alone, halved while that is within ε_max and faster (at
+        most :data:`SETTLE_HALVINGS` re-plans). A settle is extended past the last over-limit
+        sample after its restart, as far as the cut's feed carries them, before the rapid's
+        descent is softened; the joint tries raise every lever at once and fail on any one:
+        so a higher F kept a longer settle than its softened descent needs (31 ms against
+        12 ms, 7 % slower)."""
+        st = self.st
+        for _ in range(SETTLE_HALVINGS):
+            trial = self.best.copy()
+            long = trial.settle_s >= st.period
+            if not long.any():
+                break
+            trial.settle_s[long] *= 0.5
+            self.confine(trial)
+            if self.attempt(trial) > st.eps_mm or cycle_time_s(self.result) >= self.best_time:
+                self.result = None
+                break
+            self.take(trial, self.result)
 
     def finish(self) -> tuple:
         """(best levers, their result, re-plans): the best's result re-made if a later try
