@@ -2,8 +2,8 @@
 LinuxCNC's limits): the kinematic lower bound it reports is never above its plan, and a
 higher programmed feed is never slower.
 
-``make test`` runs a few seeded programs; ``make fuzz`` (``NURBSCNC_FUZZ_EXAMPLES``) a
-twentieth of its budget here as more seeds.
+``make test`` runs a few seeded programs; ``make fuzz`` (``NURBSCNC_FUZZ_EXAMPLES``) one
+seed per 200 of its budget (100 by default), each a pair of plans on both profiles.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ MACHINES = {
     "linuxcnc": load_machine(str(ROOT / "bench" / "programs" / "linuxcnc_limits.toml")),
 }
 #: Seeds per property: a few in ``make test``, more under ``make fuzz``.
-SEEDS = max(3, int(os.environ.get("NURBSCNC_FUZZ_EXAMPLES") or 0) // 20)
+SEEDS = max(3, int(os.environ.get("NURBSCNC_FUZZ_EXAMPLES") or 0) // 200)
 
 
 def _cut_program(seed: int, feed_mm_min: float) -> str:
