@@ -21,6 +21,7 @@ from nurbscnc.app.stream import (
     stream_report,
 )
 from nurbscnc.app.varfile import program_inputs, write_back
+from nurbscnc.app.varfile import user_m_timeout_s as user_m_timeout
 from nurbscnc.cli import console
 from nurbscnc.cli.common import load_machine_cli
 from nurbscnc.cli.controls import Operator, key_reader, routed_signals, user_m_runner
@@ -194,11 +195,10 @@ def _progress_bar(enabled: bool, total: int, keys: bool = False):
     "--user-m-timeout",
     "user_m_timeout_s",
     type=click.FloatRange(min=0.0, min_open=True),
-    default=60.0,
-    show_default=True,
+    default=None,
     metavar="SECONDS",
     help="Longest a user M-code's executable (M100-M199) may run; then it is killed and "
-    "the stream stops (exit 3).",
+    "the stream stops (exit 3). Default: the profile's program.user_m_timeout_s, else 60.",
 )
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @click.option("--json", "as_json", is_flag=True, help="Print the final report as JSON.")
@@ -273,7 +273,7 @@ def stream(
                 "batch": batch,
                 "timeout_s": timeout_s,
                 "lead": lead,
-                "user_m_timeout_s": user_m_timeout_s,
+                "user_m_timeout_s": user_m_timeout(mach, user_m_timeout_s),
             }
             link["mach"] = mach
             reports = _send(link, operator, job, pulses, total, zero, quiet, as_json)
