@@ -155,3 +155,14 @@ def write_back(inputs: ProgramInputs, program) -> str | None:
     old = read_var_file(inputs.var_path, must_exist=False)
     write_var_file(inputs.var_path, format_var_text(program.parameters, old))
     return inputs.var_path
+
+
+def work_report(values: dict, machine_mm) -> dict:
+    """The active system and the work position [mm] of the machine position ``machine_mm``
+    under the parameters ``values`` (:func:`~nurbscnc.program.varfile.work_position_mm`;
+    rounded to 1 nm as the machine position): ``{"coordinate_system": "G54",
+    "work_position_mm": [x, y, z]}``."""
+    from nurbscnc.program.varfile import work_position_mm
+
+    system, work = work_position_mm(values, machine_mm)
+    return {"coordinate_system": system, "work_position_mm": [round(v, 6) for v in work]}

@@ -211,10 +211,9 @@ def _run_stops(stops, link: dict) -> None:
 def _report(program: str, job, start_steps, final_steps, written, mach, as_json: bool) -> None:
     """What the call did: JSON on stdout, or a line."""
     from nurbscnc.app.stream import position_mm
-    from nurbscnc.program.varfile import work_position_mm
+    from nurbscnc.app.varfile import work_report
 
     final_mm = position_mm(final_steps, mach)
-    system, work = work_position_mm(job.program.parameters, final_mm)
     body = {
         "ok": True,
         "command": program,
@@ -223,8 +222,7 @@ def _report(program: str, job, start_steps, final_steps, written, mach, as_json:
         "start_position_mm": list(job.start_mm),
         "final_position_steps": list(map(int, final_steps)),
         "final_position_mm": final_mm,
-        "coordinate_system": system,
-        "work_position_mm": [round(v, 6) for v in work],
+        **work_report(job.program.parameters, final_mm),
         "var_file": written,
     }
     if as_json:
@@ -236,6 +234,6 @@ def _report(program: str, job, start_steps, final_steps, written, mach, as_json:
     kept = f"; parameter file {written} written" if written else "; no parameter file"
     console.out.print(
         f"{program}: the card {what} {list(final_steps)} steps ({mm} mm machine; "
-        f"{system} {wk} mm){kept}",
+        f"{body['coordinate_system']} {wk} mm){kept}",
         markup=False,
     )
