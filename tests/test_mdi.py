@@ -17,6 +17,7 @@ import sys
 import threading
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
 from click.testing import CliRunner
@@ -221,3 +222,67 @@ def test_interpreted_tool_change_pauses_at_rest_and_resumes_on_sigusr2(here):
     assert seen["still"] == ("DONE", [4000, 0, 0])
     assert "stream: M6 at line 4: load tool 2 (length 12.5 mm, diameter 6 mm" in r.stderr
     assert final == [6400, 0, 0] and "in 2 part(s)" in r.stdout
+
+
+# -- work coordinates in the stream's progress and end report ---------------------------------
+def test_stream_end_report_gives_the_work_position(here):
+    """G54 (10, -5, 0) from the file: G0 X3 Y4 ends at machine (13, -1, 0) mm =
+    (10400, -1000, 0) steps, work (3, 4, 0) in G54."""
+    (here / "part.nc").write_text("G21 G90\nG0 X3 Y4\nM2\n")
+    (here / "m.var").write_text("5221\t10.000000\n5222\t-5.000000\n")
+    with card_on("pty", CardConfig(speed=None)) as (sim, ep):
+        r = run_cli(["stream", "part.nc", "--port", ep.path, "--var", "m.var", *MACHINE, "--json"])
+        assert r.exit_code == 0, r.output
+        assert sim.position.tolist() == [10400, -1000, 0]
+    body = json.loads(r.stdout.strip().splitlines()[-1])
+    assert body["final_position_mm"] == pytest.approx([13.0, -1.0, 0.0], abs=1e-9)
+    assert body["coordinate_system"] == "G54"
+    assert body["final_work_position_mm"] == pytest.approx([3.0, 4.0, 0.0], abs=1e-9)
+    with card_on("pty", CardConfig(speed=None)) as (sim, ep):
+        r = run_cli(["stream", "part.nc", "--port", ep.path, *MACHINE])
+    assert r.exit_code == 0, r.output
+    assert "ended at [2400, 4000, 0] steps (3.0000, 4.0000, 0.0000 mm)" in r.stdout  # no file
+    with card_on("pty", CardConfig(speed=None)) as (sim, ep):
+        r = run_cli(["stream", "part.nc", "--port", ep.path, "--var", "m.var", *MACHINE])
+    assert r.exit_code == 0, r.output
+    assert "(13.0000, -1.0000, 0.0000 mm; 3.0000, 4.0000, 0.0000 mm in G54)" in r.stdout
+
+
+def test_progress_carries_the_cards_position():
+    """Every progress snapshot's position is the card's at its executed count: the start
+    plus the program's pulses summed over the executed periods."""
+    import numpy as np
+
+    from nurbscnc.output.stream.quantise import quantise
+    from nurbscnc.output.stream.sender import Sender, SenderOptions, open_port
+
+    s = np.linspace(0.0, 1.0, 1500)[:, None]
+    prog = quantise(s * [30.0, -20.0, 5.0], (1000.0, 1000.0, 1000.0), 1e-3)
+    seen = []
+    with card_on("pty", CardConfig(speed=5.0)) as (_sim, ep):
+        port = open_port(ep.path)
+        try:
+            Sender(port, SenderOptions(timeout_s=2.0), progress=seen.append).stream(prog)
+        finally:
+            port.close()
+    cum = np.vstack([np.zeros((1, 3), int), np.cumsum(prog.pulses, axis=0)])
+    moving = [pr for pr in seen if pr.position_steps and 0 < pr.executed < prog.periods]
+    assert len(moving) >= 1
+    for pr in moving:
+        assert list(pr.position_steps) == cum[pr.executed].tolist()
+
+
+def test_progress_text_shows_work_coordinates_only_when_they_hold():
+    from nurbscnc.app.load import load_machine
+    from nurbscnc.app.stream import progress_position
+    from nurbscnc.app.varfile import ProgramInputs
+
+    mach = load_machine(None, {})
+    start = {5220: 1.0, 5221: 10.0, 5222: -5.0}
+    inputs = ProgramInputs("m.var", "--var", start)
+    where = progress_position(mach, inputs, SimpleNamespace(parameters=dict(start)))
+    assert where((13000, -1000, 0)) == "13.000, -1.000, 0.000 mm (G54 3.000, 4.000, 0.000)"
+    g10 = SimpleNamespace(parameters={**start, 5221: 12.0})  # G10 midway
+    moved = progress_position(mach, inputs, g10)
+    assert moved((13000, -1000, 0)) == "13.000, -1.000, 0.000 mm"
+    assert progress_position(mach)((1, 2, 3)) == "0.001, 0.002, 0.003 mm"

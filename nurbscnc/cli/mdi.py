@@ -110,6 +110,7 @@ def _run(program, blocks, jog, port, allow_url, baud, batch, timeout_s, **kwargs
     from nurbscnc.app.load import read_tool_table
     from nurbscnc.app.mdi import jog_block, mdi_job
     from nurbscnc.app.settings import run_options_of
+    from nurbscnc.app.stream import progress_position
     from nurbscnc.app.varfile import program_inputs, user_m_timeout_s, write_back
     from nurbscnc.cli.common import load_machine_cli
 
@@ -136,6 +137,7 @@ def _run(program, blocks, jog, port, allow_url, baud, batch, timeout_s, **kwargs
     if jog is not None:
         blocks = [jog_block(jog[0], steps, mach, jog[1])]
     job = mdi_job(blocks, mach, inputs, steps, options, tools, optional_stop)
+    link["where"] = progress_position(mach, inputs, job.program)
     final = _execute(job, link, quiet, as_json) if job.moves else list(steps)
     if not job.moves:
         _run_stops(job.stops, link)
