@@ -286,3 +286,17 @@ def test_progress_text_shows_work_coordinates_only_when_they_hold():
     moved = progress_position(mach, inputs, g10)
     assert moved((13000, -1000, 0)) == "13.000, -1.000, 0.000 mm"
     assert progress_position(mach)((1, 2, 3)) == "0.001, 0.002, 0.003 mm"
+
+
+def test_user_m_timeout_option_then_profile_then_default(here):
+    """--user-m-timeout beats program.user_m_timeout_s beats 60 s; the key must be > 0."""
+    from nurbscnc.app.load import load_machine
+    from nurbscnc.app.varfile import user_m_timeout_s
+
+    plain = load_machine("m.toml", {})
+    keyed = load_machine("m.toml", {"program.user_m_timeout_s": "2.5"})
+    assert user_m_timeout_s(plain) == 60.0
+    assert user_m_timeout_s(keyed) == 2.5
+    assert user_m_timeout_s(keyed, 7.0) == 7.0
+    r = run_cli(["profile", "show", *MACHINE, "--set", "program.user_m_timeout_s=0"])
+    assert r.exit_code == 2 and "program.user_m_timeout_s" in r.stderr, r.output
