@@ -93,6 +93,8 @@ def test_zero_here_then_a_move_in_work_coordinates(here, card):
     assert body["work_position_mm"] == pytest.approx([3.0, 4.0, 0.0], abs=1e-9)
     values2 = parse_var_text((here / "m.var").read_text(), "m.var")
     assert [values2[k] for k in (5221, 5222, 5223)] == [15.43125, -3.0, -12.5]
+    r = run_cli(["mdi", "G10 L20 P1 X0", "--port", port, *MACHINE])  # no parameter file
+    assert r.exit_code == 0 and "the offsets and positions set here are not kept" in r.stderr
 
 
 def test_card_position_text_names_the_work_system(here, card):

@@ -142,7 +142,25 @@ def _run(program, blocks, jog, port, allow_url, baud, batch, timeout_s, **kwargs
     if not job.moves:
         _run_stops(job.stops, link)
     written = write_back(inputs, job.program)
+    if written is None and _sets_offsets(job.program):
+        console.err.print(
+            f"{program}: note: no parameter file (--var, $NURBSCNC_VAR, program.var_file): "
+            "the offsets and positions set here are not kept",
+            markup=False,
+            highlight=False,
+        )
     _report(program, job, steps, final, written, mach, as_json)
+
+
+def _sets_offsets(prog) -> bool:
+    """Whether the blocks changed a coordinate parameter (G10, G92, G28.1, a G54-G59.3
+    choice) — what only the parameter file keeps."""
+    from nurbscnc.program.coords import SYSTEM_INDEX, is_coordinate_parameter
+
+    default = {SYSTEM_INDEX: 1.0}  # G54, all offsets zero
+    return any(
+        is_coordinate_parameter(k) and v != default.get(k, 0.0) for k, v in prog.parameters.items()
+    )
 
 
 def _card_at_rest(link: dict) -> list[int]:
