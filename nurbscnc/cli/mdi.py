@@ -12,7 +12,7 @@ import click
 
 from nurbscnc.cli import console
 from nurbscnc.cli.handle import handle_errors
-from nurbscnc.cli.options import planning_options
+from nurbscnc.cli.options import planning_options, stall_limit_option, user_m_timeout_option
 from nurbscnc.errors import StreamError
 
 
@@ -38,15 +38,8 @@ def _link_options(func):
                 show_default=True,
                 help="Seconds without an answer from the card before giving up.",
             ),
-            click.option(
-                "--user-m-timeout",
-                "user_m_timeout_s",
-                type=click.FloatRange(min=0.0, min_open=True),
-                default=None,
-                metavar="SECONDS",
-                help="Longest a user M-code's executable may run (default: the profile's "
-                "program.user_m_timeout_s, else 60).",
-            ),
+            stall_limit_option,
+            user_m_timeout_option,
             click.option("--quiet", is_flag=True, help="No progress bar."),
             click.option("--json", "as_json", is_flag=True, help="Print the report as JSON."),
         )
@@ -118,6 +111,7 @@ def _run(program, blocks, jog, port, allow_url, baud, batch, timeout_s, **kwargs
     as_json, quiet = settings.pop("as_json"), settings.pop("quiet")
     optional_stop = settings.pop("optional_stop")
     timeout_m_s = settings.pop("user_m_timeout_s")
+    stall_limit_s = settings.pop("stall_limit_s")
     options = run_options_of(settings)
     mach = load_machine_cli(settings.get("machine"), settings.get("overrides", ()))
     inputs = program_inputs(mach, settings.get("var"), settings.get("user_m_path", ()), writes=True)
@@ -130,6 +124,7 @@ def _run(program, blocks, jog, port, allow_url, baud, batch, timeout_s, **kwargs
         "batch": batch,
         "timeout_s": timeout_s,
         "lead": None,
+        "stall_limit_s": stall_limit_s,
         "user_m_timeout_s": user_m_timeout_s(mach, timeout_m_s),
         "mach": mach,
     }

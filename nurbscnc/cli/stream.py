@@ -28,7 +28,7 @@ from nurbscnc.cli import console
 from nurbscnc.cli.common import load_machine_cli
 from nurbscnc.cli.controls import Operator, key_reader, routed_signals, user_m_runner
 from nurbscnc.cli.handle import handle_errors
-from nurbscnc.cli.options import planning_options
+from nurbscnc.cli.options import planning_options, stall_limit_option, user_m_timeout_option
 from nurbscnc.errors import ConfigError
 
 
@@ -157,6 +157,7 @@ def _progress_bar(enabled: bool, total: int, keys: bool = False, where=None):
     show_default=True,
     help="Seconds without an answer from the card before giving up.",
 )
+@stall_limit_option
 @click.option(
     "--lead",
     "lead",
@@ -194,15 +195,7 @@ def _progress_bar(enabled: bool, total: int, keys: bool = False, where=None):
     help="Start at source line N (run from line): the program is interpreted "
     "whole, the tool goes up to a safe Z, across, and down to line N's start.",
 )
-@click.option(
-    "--user-m-timeout",
-    "user_m_timeout_s",
-    type=click.FloatRange(min=0.0, min_open=True),
-    default=None,
-    metavar="SECONDS",
-    help="Longest a user M-code's executable (M100-M199) may run; then it is killed and "
-    "the stream stops (exit 3). Default: the profile's program.user_m_timeout_s, else 60.",
-)
+@user_m_timeout_option
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @click.option("--json", "as_json", is_flag=True, help="Print the final report as JSON.")
 @planning_options
@@ -214,6 +207,7 @@ def stream(
     baud,
     batch,
     timeout_s,
+    stall_limit_s,
     lead,
     optional_stop,
     feed_override,
@@ -275,6 +269,7 @@ def stream(
                 "allow_url": allow_url,
                 "batch": batch,
                 "timeout_s": timeout_s,
+                "stall_limit_s": stall_limit_s,
                 "lead": lead,
                 "user_m_timeout_s": user_m_timeout(mach, user_m_timeout_s),
             }
@@ -314,7 +309,10 @@ def _send(
     from nurbscnc.output.stream.sender import Sender, SenderOptions, open_port
 
     options = SenderOptions(
-        batch_periods=link["batch"], timeout_s=link["timeout_s"], lead_periods=link["lead"]
+        batch_periods=link["batch"],
+        timeout_s=link["timeout_s"],
+        lead_periods=link["lead"],
+        stall_limit_s=link["stall_limit_s"],
     )
     ser = open_port(
         link["port"],
