@@ -132,13 +132,15 @@ def position_mm(steps, mach) -> list[float]:
     return [round(v, 6) for v in (np.asarray(steps, dtype=float) / mach.steps.per_mm).tolist()]
 
 
-def stream_report(program: str, job, reports: list, mach=None) -> dict:
+def stream_report(program: str, job, reports: list, mach=None, parameters=None) -> dict:
     """The JSON report of a finished stream: the last part's card state
     (:meth:`~nurbscnc.output.stream.sender.StreamReport.to_json`), the counters summed over
     the ``reports`` of every part, and the ``job``'s own report (sections, holds, planning,
     notes; one section without a job), the final position in mm (``mach``: the machine's
-    steps per mm). ``program`` is named as every command names it (standard input is
-    ``<stdin>``)."""
+    steps per mm), and with the ``parameters`` at the program's end (a parameter file is
+    known) the active system and the final work position
+    (:func:`~nurbscnc.app.varfile.work_report`). ``program`` is named as every command
+    names it (standard input is ``<stdin>``)."""
     extra = job.report() if job is not None else {"sections": 1}
     body = {
         **reports[-1].to_json(),
@@ -153,7 +155,56 @@ def stream_report(program: str, job, reports: list, mach=None) -> dict:
     }
     if mach is not None:
         body["final_position_mm"] = position_mm(reports[-1].final_position_steps, mach)
+        if parameters is not None:
+            from nurbscnc.app.varfile import work_report
+
+            work = work_report(parameters, body["final_position_mm"])
+            body["coordinate_system"] = work["coordinate_system"]
+            body["final_work_position_mm"] = work["work_position_mm"]
     return {"ok": True, "program": "<stdin>" if program == "-" else program, **body}
+
+
+def work_text(report: dict) -> str:
+    """``"; x, y, z mm in G54"``: the final work position of a :func:`stream_report` (empty
+    without one)."""
+    work = report.get("final_work_position_mm")
+    if not work:
+        return ""
+    return "; " + ", ".join(f"{v:.4f}" for v in work) + f" mm in {report['coordinate_system']}"
+
+
+def progress_position(mach, inputs=None, program=None):
+    """``where(steps) -> text`` for the progress line: the card's position in mm (machine)
+    and, when a parameter file is known (``inputs``:
+    :class:`~nurbscnc.app.varfile.ProgramInputs`) and the interpreted ``program`` leaves its
+    offsets as they were (its ``parameters`` at the end agree with the file's on every
+    coordinate parameter; a program that sets G10/G92 midway would show the wrong system
+    for part of the run), the work position in the active system."""
+    from nurbscnc.app.varfile import work_report
+    from nurbscnc.program.coords import is_coordinate_parameter
+
+    known = inputs is not None and inputs.var_path and program is not None
+    start_parameters = inputs.parameters if known else None
+    end_parameters = program.parameters if known else None
+    same = start_parameters is not None and end_parameters is not None
+    if same:
+        keys = {k for k in (*start_parameters, *end_parameters) if is_coordinate_parameter(k)}
+        same = all(
+            float(start_parameters.get(k, 0.0)) == float(end_parameters.get(k, 0.0)) for k in keys
+        )
+
+    def where(steps) -> str:
+        if len(steps) != len(mach.steps.per_mm):
+            return ""
+        mm = position_mm(steps, mach)
+        text = ", ".join(f"{v:.3f}" for v in mm) + " mm"
+        if same:
+            work = work_report(start_parameters, mm)
+            shown = ", ".join(f"{v:.3f}" for v in work["work_position_mm"])
+            text += f" ({work['coordinate_system']} {shown})"
+        return text
+
+    return where
 
 
 def _frame_error_rate(reports: list) -> float:

@@ -92,6 +92,20 @@ def user_m_dirs(machine=None, user_m_path=()) -> tuple:
     return tuple(os.path.expanduser(d) for d in dirs)
 
 
+#: The longest a user M-code's executable may run [s] when neither ``--user-m-timeout`` nor
+#: the profile's ``program.user_m_timeout_s`` says.
+DEFAULT_USER_M_TIMEOUT_S = 60.0
+
+
+def user_m_timeout_s(machine=None, option_s: float | None = None) -> float:
+    """The user M-codes' timeout [s]: ``option_s`` (``--user-m-timeout``), else the
+    profile's ``program.user_m_timeout_s``, else :data:`DEFAULT_USER_M_TIMEOUT_S`."""
+    if option_s is not None:
+        return float(option_s)
+    named = _program_settings(machine).get("user_m_timeout_s")
+    return float(named) if named is not None else DEFAULT_USER_M_TIMEOUT_S
+
+
 def read_var_file(path: str, must_exist: bool = True) -> dict:
     """The parameters of the parameter file ``path`` (:func:`~nurbscnc.program.varfile.
     parse_var_text`: ConfigError naming the file and line); ``{}`` for a file that does not
@@ -141,3 +155,14 @@ def write_back(inputs: ProgramInputs, program) -> str | None:
     old = read_var_file(inputs.var_path, must_exist=False)
     write_var_file(inputs.var_path, format_var_text(program.parameters, old))
     return inputs.var_path
+
+
+def work_report(values: dict, machine_mm) -> dict:
+    """The active system and the work position [mm] of the machine position ``machine_mm``
+    under the parameters ``values`` (:func:`~nurbscnc.program.varfile.work_position_mm`;
+    rounded to 1 nm as the machine position): ``{"coordinate_system": "G54",
+    "work_position_mm": [x, y, z]}``."""
+    from nurbscnc.program.varfile import work_position_mm
+
+    system, work = work_position_mm(values, machine_mm)
+    return {"coordinate_system": system, "work_position_mm": [round(v, 6) for v in work]}

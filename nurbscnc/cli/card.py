@@ -42,22 +42,34 @@ from nurbscnc.errors import ConfigError, NurbsCncError, OutputError
     help="Machine profile (TOML) whose steps per mm give the position in mm. Default: as "
     "every command ($NURBSCNC_MACHINE, ./nurbscnc.toml, ...).",
 )
+@click.option(
+    "--var",
+    type=click.Path(dir_okay=False),
+    default=None,
+    metavar="FILE",
+    help="LinuxCNC parameter file whose offsets give the work position (default: "
+    "$NURBSCNC_VAR, else the profile's program.var_file; none: machine coordinates only).",
+)
 @click.option("--json", "as_json", is_flag=True, help="Print state and position as JSON.")
 @handle_errors
-def card_position(port, allow_url, baud, set_to, timeout_s, machine, as_json):
+def card_position(port, allow_url, baud, set_to, timeout_s, machine, var, as_json):
     """Read (or --set) the card's position [steps] and state, e.g. to zero a card between two
     streams without restarting it. The position is also given in mm (machine coordinates)
-    from the machine profile's steps per mm.
+    from the machine profile's steps per mm, and in the active work system's coordinates
+    when a parameter file is known (one that does not exist yet: all offsets zero).
 
     Example: nurbscnc card-position --port /dev/ttyUSB0 --set 0,0,0
     """
     from nurbscnc.app.stream import position_mm
+    from nurbscnc.app.varfile import find_var_file, read_var_file, work_report
     from nurbscnc.cli.common import load_machine_cli
     from nurbscnc.output.stream import protocol as p
     from nurbscnc.output.stream.sender import card_position as exchange
     from nurbscnc.output.stream.sender import open_port
 
     mach = load_machine_cli(machine)  # before the port: a bad profile touches no card
+    var_path, _how = find_var_file(mach, var)
+    values = read_var_file(var_path, must_exist=False) if var_path else None
     ser = open_port(port, baud=baud, allow_url=allow_url, write_timeout_s=timeout_s)
     try:
         target = _parse_position(set_to, len(set_to.split(","))) if set_to else None
@@ -73,12 +85,18 @@ def card_position(port, allow_url, baud, set_to, timeout_s, machine, as_json):
             "no position in mm"
         )
     mm = position_mm(steps, mach)
+    work = work_report(values, mm) if values is not None else {}
     if as_json:
         body = {"ok": True, "state": state, "position_steps": steps, "position_mm": mm}
+        if values is not None:
+            body.update(work, var_file=var_path)
         click.echo(json.dumps(body))
         return
-    text = ", ".join(f"{v:.4f}" for v in mm)
-    click.echo(f"card: {state}, position {steps} steps ({text} mm, machine coordinates)")
+    text = ", ".join(f"{v:.4f}" for v in mm) + " mm, machine coordinates"
+    if work:
+        shown = ", ".join(f"{v:.4f}" for v in work["work_position_mm"])
+        text += f"; {shown} mm in {work['coordinate_system']}"
+    click.echo(f"card: {state}, position {steps} steps ({text})")
 
 
 # -- card-sim ------------------------------------------------------------------------------------

@@ -21,6 +21,7 @@ from nurbscnc.cli.console import err
 from nurbscnc.cli.corners import corners, ph
 from nurbscnc.cli.handle import echo_json_error
 from nurbscnc.cli.identify import identify
+from nurbscnc.cli.mdi import jog, mdi
 from nurbscnc.cli.plan import plan
 from nurbscnc.cli.profile import profile
 from nurbscnc.cli.run import run
@@ -76,6 +77,8 @@ for _command in (
     simulate,
     compare,
     stream,
+    mdi,
+    jog,
     card_sim,
     card_position,
     profile,

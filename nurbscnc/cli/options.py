@@ -70,6 +70,15 @@ var_option = click.option(
     "positions, read before the program (default: $NURBSCNC_VAR, else the profile's "
     "program.var_file; none: no offsets). stream and run --write-var write it back.",
 )
+user_m_timeout_option = click.option(
+    "--user-m-timeout",
+    "user_m_timeout_s",
+    type=click.FloatRange(min=0.0, min_open=True),
+    default=None,
+    metavar="SECONDS",
+    help="Longest a user M-code's executable (M100-M199) may run; then it is killed and "
+    "the stream stops (exit 3). Default: the profile's program.user_m_timeout_s, else 60.",
+)
 user_m_path_option = click.option(
     "--user-m-path",
     multiple=True,

@@ -16,16 +16,19 @@ from nurbscnc.app.stream import (
     is_points_file,
     points_of_file,
     position_mm,
+    progress_position,
     pulses_of_points,
     stream_job,
     stream_report,
+    work_text,
 )
 from nurbscnc.app.varfile import program_inputs, write_back
+from nurbscnc.app.varfile import user_m_timeout_s as user_m_timeout
 from nurbscnc.cli import console
 from nurbscnc.cli.common import load_machine_cli
 from nurbscnc.cli.controls import Operator, key_reader, routed_signals, user_m_runner
 from nurbscnc.cli.handle import handle_errors
-from nurbscnc.cli.options import planning_options, stall_limit_option
+from nurbscnc.cli.options import planning_options, stall_limit_option, user_m_timeout_option
 from nurbscnc.errors import ConfigError
 
 
@@ -75,9 +78,10 @@ def plan_job(
 
 
 @contextlib.contextmanager
-def _progress_bar(enabled: bool, total: int, keys: bool = False):
+def _progress_bar(enabled: bool, total: int, keys: bool = False, where=None):
     """A rich progress line on stderr; yields a callback for :class:`Sender`. Without it, a
-    message still tells when the stream waits for the operator (and why)."""
+    message still tells when the stream waits for the operator (and why). ``where(steps)``:
+    the card's position as text."""
     err = console.err
     how = "Enter or SIGUSR2 continues" if keys else "SIGUSR2 continues"
     last = {"note": ""}
@@ -109,9 +113,9 @@ def _progress_bar(enabled: bool, total: int, keys: bool = False):
 
         def update(pr) -> None:
             tell(pr)
-            info = f"line {pr.line} · executed {pr.executed} · buffer {pr.fill}/{pr.buffer}" + (
-                f" · {pr.note}" if pr.note else ""
-            )
+            info = f"line {pr.line} · executed {pr.executed} · buffer {pr.fill}/{pr.buffer}"
+            at = where(pr.position_steps) if where is not None and pr.position_steps else ""
+            info += (f" · {at}" if at else "") + (f" · {pr.note}" if pr.note else "")
             bar.update(
                 task,
                 completed=pr.executed,
@@ -191,16 +195,7 @@ def _progress_bar(enabled: bool, total: int, keys: bool = False):
     help="Start at source line N (run from line): the program is interpreted "
     "whole, the tool goes up to a safe Z, across, and down to line N's start.",
 )
-@click.option(
-    "--user-m-timeout",
-    "user_m_timeout_s",
-    type=click.FloatRange(min=0.0, min_open=True),
-    default=60.0,
-    show_default=True,
-    metavar="SECONDS",
-    help="Longest a user M-code's executable (M100-M199) may run; then it is killed and "
-    "the stream stops (exit 3).",
-)
+@user_m_timeout_option
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @click.option("--json", "as_json", is_flag=True, help="Print the final report as JSON.")
 @planning_options
@@ -276,16 +271,18 @@ def stream(
                 "timeout_s": timeout_s,
                 "stall_limit_s": stall_limit_s,
                 "lead": lead,
-                "user_m_timeout_s": user_m_timeout_s,
+                "user_m_timeout_s": user_m_timeout(mach, user_m_timeout_s),
             }
             link["mach"] = mach
+            link["where"] = progress_position(mach, inputs, prog)
             reports = _send(link, operator, job, pulses, total, zero, quiet, as_json)
             if inputs is not None:  # the program ran to its end: its offsets persist
                 write_back(inputs, prog)
         finally:  # the planner thread stopped before the process may exit
             if job is not None and job.feed is not None:
                 job.feed.close()
-    _print_report(program, job, reports, as_json, mach)
+    parameters = prog.parameters if inputs is not None and inputs.var_path else None
+    _print_report(program, job, reports, as_json, mach, parameters)
 
 
 def _needs_the_job(settings) -> str:
@@ -327,7 +324,10 @@ def _send(
     show = not (quiet or as_json) and console.err.is_terminal
     keys = not as_json and sys.stdin is not None and sys.stdin.isatty()
     try:
-        with _progress_bar(show, total, keys) as progress, key_reader(operator, keys):
+        with (
+            _progress_bar(show, total, keys, link.get("where")) as progress,
+            key_reader(operator, keys),
+        ):
             sender = Sender(ser, options, progress=progress)
             operator.attach(sender)
             with routed_signals(operator, ("SIGINT", "SIGTERM")):
@@ -349,10 +349,11 @@ def _send(
             ser.close()
 
 
-def _print_report(program: str, job, reports: list, as_json: bool, mach) -> None:
+def _print_report(program: str, job, reports: list, as_json: bool, mach, parameters=None) -> None:
     """The stream's final report: JSON on stdout, or a line on stdout (and one on the
-    planning), notes on stderr."""
-    report = stream_report(program, job, reports, mach)
+    planning), notes on stderr; ``parameters``: the program's at its end, when a parameter
+    file is known (the final work position)."""
+    report = stream_report(program, job, reports, mach, parameters)
     if as_json:
         click.echo(json.dumps(report))
         return
@@ -367,7 +368,8 @@ def _print_report(program: str, job, reports: list, as_json: bool, mach) -> None
         f"part(s), {report['frames_sent']} frames ({report['bytes_sent']} bytes), "
         f"{report['retransmits']} retransmitted; the card ended at "
         f"{list(reports[-1].final_position_steps)} steps "
-        f"({', '.join(f'{v:.4f}' for v in report['final_position_mm'])} mm){hold_text}",
+        f"({', '.join(f'{v:.4f}' for v in report['final_position_mm'])} mm"
+        f"{work_text(report)}){hold_text}",
         markup=False,
     )
     planning = report.get("planning")

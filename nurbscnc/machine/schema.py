@@ -63,8 +63,9 @@ SCHEMA: dict = {
     "axis_limits": {a: dict.fromkeys(AXIS_LIMIT_KEYS, "pos") for a in AXES},
     # How programs run on this machine: LinuxCNC's parameter file (work offsets, G92, G28/G30
     # positions) and its user M-code path ([RS274NGC]USER_M_PATH: colon-separated folders).
-    # Relative paths are relative to the profile's folder.
-    "program": {"var_file": "text", "user_m_path": "text"},
+    # Relative paths are relative to the profile's folder. user_m_timeout_s: the longest a
+    # user M-code's executable may run (stream --user-m-timeout overrides it).
+    "program": {"var_file": "text", "user_m_path": "text", "user_m_timeout_s": "pos"},
 }
 _OPTIONAL = frozenset(
     {
@@ -78,7 +79,7 @@ _OPTIONAL = frozenset(
         "servo.z",
     }
 )
-_OPTIONAL |= {"program", "program.var_file", "program.user_m_path"}
+_OPTIONAL |= {"program", "program.var_file", "program.user_m_path", "program.user_m_timeout_s"}
 # [axis_limits]: every table and every key optional.
 _OPTIONAL |= {
     "axis_limits",

@@ -232,6 +232,7 @@ class Link(HandshakeHandlers, StreamingHandlers, StoppingHandlers):
             status.fill_periods if status else 0,
             st.caps.buffer_periods if st.caps else 0,
             line,
+            position_steps=tuple(status.position_steps) if status else (),
         )
 
     @property

@@ -58,7 +58,8 @@ class SenderOptions:
 @dataclass(frozen=True)
 class Progress:
     """A progress snapshot [periods]; ``line`` the source line of the period executing (0:
-    unknown), ``note`` what the controller is doing (waiting at a pause, holding…)."""
+    unknown), ``note`` what the controller is doing (waiting at a pause, holding…),
+    ``position_steps`` the card's last reported position (empty before its first STATUS)."""
 
     periods: int
     sent: int
@@ -68,6 +69,7 @@ class Progress:
     buffer: int
     line: int = 0
     note: str = ""
+    position_steps: tuple = ()
 
 
 @dataclass(frozen=True)
