@@ -26,7 +26,7 @@ def make_plan(
     reference_tolerance=3.0,
     progress=None,
     keep_reference=False,
-    smooth=False,
+    smooth=True,
     announce=None,
 ):
     """Load, interpret, plan and interpolate one program; validate soft limits. Returns

@@ -26,6 +26,13 @@ from nurbscnc.plan.pieces import (
 #: such a sliver (two blends that almost meet, e.g. 4e-9 mm) carries no motion worth a piece.
 #: The path then jumps by less than this from one blend's end to the next one's start.
 MIN_REMAINDER_MM = 1e-6
+#: A blend belongs to both moves: its feed is the faster of theirs, as LinuxCNC 2.9's blend
+#: arcs take (tp.c blendInitCommonParams: v_req = max of both moves' requested speeds); its
+#: own curvature caps it (SPEC eq. 24) and the per-axis limits cap it as every piece
+#: (plan/axes.py). The slower move keeps its feed up to where the blend starts: a plunge at
+#: F10 into a cut at F30 no longer drags the blend, which may span several of the cut's
+#: short moves, down to F10.
+BLEND_FEED = np.maximum
 
 
 def sub_geometry(piece: Piece, s0_mm: float, s1_mm: float):
@@ -131,12 +138,13 @@ def blended_rows(pieces: PieceList, c: Corners, machine: Machine) -> PieceList:
     ]
     put_objects(cols, objects, [int(new_row[r]) for r in to], sub_pieces)
 
-    # The line–line blends (columnar PH rows) and the other blends (PH objects).
+    # The line–line blends (columnar PH rows) and the other blends (PH objects), at the
+    # faster of both moves' feeds (:data:`BLEND_FEED`), capped by their own curvature.
     cap_a, cap_b = pieces.v_cap_mm_s[corner - 1], pieces.v_cap_mm_s[corner]
     sel = ok & c.lines
     dest = first[corner[sel]]
     src = corner[sel]
-    feed = np.minimum(cap_a[sel], cap_b[sel])
+    feed = BLEND_FEED(cap_a[sel], cap_b[sel])
     kappa = c.kappa_per_mm[sel]
     cols["kind"][dest] = Kind.PH
     cols["length_mm"][dest] = c.length_mm[sel]
@@ -160,7 +168,7 @@ def blended_rows(pieces: PieceList, c: Corners, machine: Machine) -> PieceList:
         if not ok[j]:
             continue
         i = int(corner[j])
-        feed_j = min(float(cap_a[j]), float(cap_b[j]))
+        feed_j = float(BLEND_FEED(cap_a[j], cap_b[j]))
         cap = max(
             min(
                 float(curvature_cap_mm_s(machine, bl.kappa_max_per_mm, feed_j)),
