@@ -232,6 +232,9 @@ def main(argv=None) -> int:
     parser.add_argument("--linuxcnc-csv", default=None, help="read LinuxCNC's runs from DIR")
     parser.add_argument("--linuxcnc-only", action="store_true", help="do not run nurbscnc")
     parser.add_argument("--no-smooth-variant", action="store_true", help="skip --no-smooth")
+    parser.add_argument(
+        "--merge", action="store_true", help="keep the other cases of the --out file"
+    )
     args = parser.parse_args(argv)
     use_bytecode()
     stored = json.loads(LINUXCNC_REFERENCE.read_text()) if LINUXCNC_REFERENCE.is_file() else {}
@@ -273,6 +276,9 @@ def main(argv=None) -> int:
             if not args.no_smooth_variant:
                 entry["nurbscnc"]["no_smooth"] = nurbscnc_row(path, programmed, ["--no-smooth"])
         results[name] = entry
+    if args.merge and args.out and Path(args.out).is_file():
+        kept = json.loads(Path(args.out).read_text()).get("cases", {})
+        results = {n: results.get(n, kept.get(n)) for n, _, _ in CASES if n in results or n in kept}
     total = goals(results)
     print_table(results, total)
     if args.out:

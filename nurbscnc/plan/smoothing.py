@@ -1,4 +1,4 @@
-"""Dense CAM polylines as curvature-continuous splines (``--smooth``).
+"""Dense CAM polylines as curvature-continuous splines (by default; ``--no-smooth``).
 
 CAM output writes a curved surface pass as thousands of short G1 chords (0.01–1 mm). Under
 G64 every vertex is blended, and a blend meets its lines with zero curvature: along a chain
@@ -32,8 +32,11 @@ most that far above the interpolation of its sampled values). The other ``1 − 
 tolerance is left to the blends where a spline meets the lines or splines beside it: the path
 stays within the tolerance of the program, as G64 P promises.
 
-Off by default (a program is planned as written unless asked): commercial controls ask for
-this too (Fanuc's G5.1 Q3 "nano smoothing", Siemens' COMPCAD). Each piece the planner cuts
+On by default wherever a tolerance is granted (G64, G64 P): G64 promises a path within the
+tolerance, not the chords, and industrial controls' compressors do the same (Fanuc's G5.1 Q3
+"nano smoothing", Siemens' COMPCAD; LinuxCNC's answer is G64 P Q). G61 and G61.1 grant none
+and stay exact; ``--no-smooth`` plans every move as written. The plan's summary says what
+was fitted (:func:`smoothing_summary`). Each piece the planner cuts
 from a spline (cells of ≤ 0.25 mm) reports the source line of the programmed move where it
 starts (:meth:`SmoothedRun.line_at`).
 """
