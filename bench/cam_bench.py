@@ -1,6 +1,7 @@
 """Real CAM output vs LinuxCNC 2.9 under LinuxCNC's limits (issue 35, "Expected results").
 
     .venv/bin/python bench/cam_bench.py --out bench/cam_results.json        # make bench
+    .venv/bin/python bench/cam_bench.py --quick        # the two generated programs only
     .venv/bin/python bench/cam_bench.py --only raster_ballnose --no-smooth-variant
     .venv/bin/python bench/cam_bench.py --record-linuxcnc                   # hours: real time
     .venv/bin/python bench/cam_bench.py --linuxcnc-csv DIR                  # runs made apart
@@ -227,6 +228,9 @@ def _linuxcnc_row(name, path, programmed, args, reference) -> dict | None:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", default=None, help="write the results (JSON) here")
+    parser.add_argument(
+        "--quick", action="store_true", help="the generated programs only, no --no-smooth"
+    )
     parser.add_argument("--only", action="append", default=None, help="run only this case")
     parser.add_argument("--record-linuxcnc", action="store_true", help="run LinuxCNC live")
     parser.add_argument("--linuxcnc-csv", default=None, help="read LinuxCNC's runs from DIR")
@@ -253,7 +257,7 @@ def main(argv=None) -> int:
     reference["cases"] = dict(stored.get("cases", {}))
     results = {}
     for name, relative, corpus in CASES:
-        if args.only and name not in args.only:
+        if (args.only and name not in args.only) or (args.quick and corpus):
             continue
         path = program_path(relative, corpus)
         if path is None:
@@ -273,7 +277,7 @@ def main(argv=None) -> int:
             write_golden(name, relative, lrow)
         if not args.linuxcnc_only:
             entry["nurbscnc"]["default"] = nurbscnc_row(path, programmed, [])
-            if not args.no_smooth_variant:
+            if not (args.no_smooth_variant or args.quick):
                 entry["nurbscnc"]["no_smooth"] = nurbscnc_row(path, programmed, ["--no-smooth"])
         results[name] = entry
     if args.merge and args.out and Path(args.out).is_file():
