@@ -49,6 +49,7 @@ bench: $(STAMP)
 	$(BIN)/python bench/stream_bench.py $(BENCH_FLAG) --out $(BENCH_OUT)/stream_results.json
 	$(BIN)/python bench/plan_bench.py $(BENCH_FLAG) --out $(BENCH_OUT)/plan_results.json
 	$(BIN)/python bench/planner_bench.py $(BENCH_FLAG) --out $(BENCH_OUT)/planner_results.json
+	$(BIN)/python bench/cam_bench.py $(BENCH_FLAG) --out $(BENCH_OUT)/cam_results.json
 	$(BIN)/python bench/scale_bench.py $(BENCH_FLAG) --out $(BENCH_OUT)/scale_results.json
 	$(BIN)/python bench/startup_bench.py $(BENCH_FLAG) --out $(BENCH_OUT)/startup_results.json
 	$(BIN)/python bench/optimum.py $(BENCH_FLAG) --out $(BENCH_OUT)/optimum_results.json

@@ -23,6 +23,7 @@ from nurbscnc.cli.main import main
 ROOT = Path(__file__).resolve().parents[1]
 DOC = ROOT / "docs" / "json.md"
 NACA = str(ROOT / "programs" / "naca2415.nc")
+SPIRAL = str(ROOT / "tests" / "programs" / "cam" / "spiral2k.ngc")  # dense G1 chords
 MIXED = "G0 X1\n(MSG, hello)\nG1 X2 F600\nG2 X4 I1\nG4 P0.1\nG1 Y1\n"
 CORNER = "G61\nG1 X10 F3000\nG1 Y10\n"
 
@@ -106,6 +107,7 @@ def test_plan_and_run(files, tmp_path):
     outputs = [
         printed("plan", NACA, "--json", "--explain"),
         printed("plan", NACA, "--json", "--algorithm", "adaptive"),
+        printed("plan", SPIRAL, "--json", "--dynamics", "off"),  # smoothed (the default)
     ]
     explained = printed("plan", files / "corner.nc", "--json", "--explain")
     if not explained["explain"]["corners"]:
@@ -128,6 +130,7 @@ def test_plan_and_run(files, tmp_path):
         printed("run", NACA, "-o", tmp_path / "p.csv", "--json"),
         printed("run", NACA, "-o", tmp_path / "b.csv", "--json", "--algorithm", "adaptive"),
         printed("run", files / "mixed.nc", "-o", tmp_path / "m.csv", "--json"),
+        printed("run", SPIRAL, "-o", tmp_path / "s.csv", "--json", "--dynamics", "off"),
     ]
     check("run", runs, skip="explain")  # --explain is plan's
 

@@ -169,10 +169,15 @@ def test_spiral_axis_limits_hold_and_smoothing_pays_most_there():
     assert smooth.cycle_time_s < 0.25 * plain_s
 
 
-def test_smoothing_is_off_by_default():
-    assert PlanOptions().smooth is False
+def test_smoothing_is_on_by_default_and_off_when_asked():
+    """Under G64 a tolerance is granted: dense polylines are fitted by default (the
+    programmed spiral becomes splines); ``smooth=False`` (``--no-smooth``) plans the moves
+    as written."""
+    assert PlanOptions().smooth is True
     machine = load_machine()
     prog = interpret_text(SPIRAL.read_text())
+    default = run_program(prog, machine, RunOptions(lookahead=LookaheadOptions(dynamics="off")))
+    assert default.plan.pieces.kind_counts().get("nurbs", 0) > 0
     run = run_program(prog, machine, _options(False, dynamics="off"))
     assert run.plan.pieces.kind_counts().get("nurbs", 0) == 0
 
@@ -247,11 +252,12 @@ def test_fit_run_is_within_its_bound_and_the_bound_is_conservative(
         assert fit is not None  # smooth data with room: a fit exists
     if fit is None:
         return
-    knots, ctrl, _ = fit
+    knots, ctrl, _, bound_mm = fit
     measured, sp = _dense_spline_distance(knots, ctrl, v)
     assert measured <= tol * (1 + 1e-9)
     s = np.concatenate(([0.0], np.cumsum(np.linalg.norm(np.diff(v, axis=0), axis=1))))
     assert spline_deviation_mm(sp, s / s[-1], v) >= measured * (1 - 1e-6)
+    assert bound_mm == spline_deviation_mm(sp, s / s[-1], v)  # what the summary reports
     # the segment's end points are its end control points: exactly the run's (the curve
     # evaluated there by de Boor's recursion agrees to rounding)
     np.testing.assert_array_equal(ctrl[[0, -1]], v[[0, -1]])

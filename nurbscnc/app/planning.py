@@ -27,7 +27,7 @@ def make_plan(
     reference_tolerance=3.0,
     progress=None,
     keep_reference=False,
-    smooth=False,
+    smooth=True,
     announce=None,
     var=None,
     user_m_path=(),

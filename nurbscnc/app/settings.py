@@ -33,7 +33,7 @@ def run_options(
     lookahead=None,
     precompensate=False,
     reference_tolerance=3.0,
-    smooth=False,
+    smooth=True,
 ):
     """The validated :class:`~nurbscnc.pipeline.RunOptions` of the values of the planning
     options (ConfigError on a bad value); ``blend_tolerance`` [mm], ``reference_tolerance``

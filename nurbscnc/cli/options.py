@@ -136,12 +136,12 @@ def planning_options(func):
         "program's G61/G61.1/G64 P; 0: stop exactly at every corner).",
     )(func)
     func = click.option(
-        "--smooth",
-        is_flag=True,
-        default=False,
+        "--smooth/--no-smooth",
+        default=True,
         help="Dense CAM polylines (runs of short G1 moves under G64) become curvature-"
         "continuous cubic B-splines within half the path tolerance (G64 P, else the "
-        "machine's), so the jerk limit no longer holds the feed down at every vertex.",
+        "machine's), so the jerk limit no longer holds the feed down at every vertex "
+        "(default; G61/G61.1 stay exact). --no-smooth: plan every move as written.",
     )(func)
     func = click.option(
         "--interpolator",

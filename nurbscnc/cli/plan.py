@@ -208,6 +208,13 @@ def print_plan_summary(prog, mach, summary: dict, out: Console) -> None:
             f"  kinematic lower bound: {summary['lower_bound_s']:.4f} s "
             f"(plan / bound = {summary['lower_bound_ratio']:.3f}{note})"
         )
+    if "smoothed" in summary:
+        sm = summary["smoothed"]
+        out.print(
+            f"  smoothed: {sm['lines']} short G1 moves in {sm['runs']} runs as splines, "
+            f"within {sm['deviation_max_um']:.2f} µm of the programmed polyline "
+            "(--no-smooth: as written)"
+        )
     if "feed_fluctuation_max" in summary:
         out.print(
             f"  feed fluctuation on NURBS ({summary['interpolator']} interpolation): "

@@ -7,7 +7,7 @@ import numpy as np
 
 from nurbscnc.machine.caps import MIN_CAP_MM_S, curvature_cap_mm_s
 from nurbscnc.machine.profile import Machine
-from nurbscnc.plan.blend_rows import blended_rows
+from nurbscnc.plan.blend_rows import BLEND_FEED, blended_rows
 from nurbscnc.plan.blends import Corners, blend_line_corners, blend_object_corners, find_corners
 from nurbscnc.plan.pieces import PieceList
 
@@ -80,8 +80,9 @@ def _blend_is_faster(pieces: PieceList, c: Corners, machine: Machine) -> np.ndar
     crossing its length L_b at w and speeding up again costs t(v − w)(v − w)/v + L_b/w −
     (d_a + d_b)/v (the blend replaces the trims d_a + d_b of the corner path). v: the smaller
     neighbouring cap, and at most the speed reachable from rest over half the shorter
-    neighbour (:func:`_reach_mm_s`, the stop's own bound); w: the blend's curvature cap, as
-    :func:`~nurbscnc.plan.blend_rows.blended_rows` gives it."""
+    neighbour (:func:`_reach_mm_s`, the stop's own bound); w: the blend's curvature cap at
+    the faster move's feed, as :func:`~nurbscnc.plan.blend_rows.blended_rows` gives it
+    (at most v)."""
     m = c.row.size
     faster = np.ones(m, dtype=bool)
     if not c.ok.any():
@@ -89,11 +90,13 @@ def _blend_is_faster(pieces: PieceList, c: Corners, machine: Machine) -> np.ndar
     lim = machine.limits
     a, b = c.row - 1, c.row
     cap = np.minimum(pieces.v_cap_mm_s[a], pieces.v_cap_mm_s[b])
+    feed = BLEND_FEED(pieces.v_cap_mm_s[a], pieces.v_cap_mm_s[b])  # the blend's own
     half = 0.5 * np.minimum(pieces.length_mm[a], pieces.length_mm[b])
     v = np.minimum(cap, _reach_mm_s(half, lim.a_max_mm_s2, lim.j_max_mm_s3))
     w = np.minimum(
         np.maximum(
-            np.minimum(curvature_cap_mm_s(machine, c.kappa_per_mm, cap), c.cap_mm_s), MIN_CAP_MM_S
+            np.minimum(curvature_cap_mm_s(machine, c.kappa_per_mm, feed), c.cap_mm_s),
+            MIN_CAP_MM_S,
         ),
         v,
     )

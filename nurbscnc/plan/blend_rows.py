@@ -26,6 +26,13 @@ from nurbscnc.plan.pieces import (
 #: such a sliver (two blends that almost meet, e.g. 4e-9 mm) carries no motion worth a piece.
 #: The path then jumps by less than this from one blend's end to the next one's start.
 MIN_REMAINDER_MM = 1e-6
+#: A blend belongs to both moves: its feed is the faster of theirs, as LinuxCNC 2.9's blend
+#: arcs take (tp.c blendInitCommonParams: v_req = max of both moves' requested speeds); its
+#: own curvature caps it (SPEC eq. 24) and the per-axis limits cap it as every piece
+#: (plan/axes.py). The slower move keeps its feed up to where the blend starts: a plunge at
+#: F10 into a cut at F30 no longer drags the blend, which may span several of the cut's
+#: short moves, down to F10. The blend belongs to that faster move (its segment and source line).
+BLEND_FEED = np.maximum
 
 
 def sub_geometry(piece: Piece, s0_mm: float, s1_mm: float):
@@ -131,18 +138,21 @@ def blended_rows(pieces: PieceList, c: Corners, machine: Machine) -> PieceList:
     ]
     put_objects(cols, objects, [int(new_row[r]) for r in to], sub_pieces)
 
-    # The line–line blends (columnar PH rows) and the other blends (PH objects).
+    # The line–line blends (columnar PH rows) and the other blends (PH objects), at the
+    # faster of both moves' feeds (:data:`BLEND_FEED`), capped by their own curvature.
     cap_a, cap_b = pieces.v_cap_mm_s[corner - 1], pieces.v_cap_mm_s[corner]
     sel = ok & c.lines
     dest = first[corner[sel]]
     src = corner[sel]
-    feed = np.minimum(cap_a[sel], cap_b[sel])
+    feed = BLEND_FEED(cap_a[sel], cap_b[sel])
     kappa = c.kappa_per_mm[sel]
     cols["kind"][dest] = Kind.PH
     cols["length_mm"][dest] = c.length_mm[sel]
     cols["v_cap_mm_s"][dest] = np.maximum(curvature_cap_mm_s(machine, kappa, feed), MIN_CAP_MM_S)
-    cols["segment"][dest] = pieces.segment[src]
-    cols["line"][dest] = pieces.line[src]
+    # the blend belongs to the move whose feed it runs at (never faster than that move's F)
+    of = np.where(cap_a[sel] > cap_b[sel], src - 1, src)
+    cols["segment"][dest] = pieces.segment[of]
+    cols["line"][dest] = pieces.line[of]
     cols["kappa_max_per_mm"][dest] = kappa
     cols["rapid"][dest] = pieces.rapid[src]
     cols["blend_mm"][dest] = pieces.blend_mm[src]
@@ -155,37 +165,7 @@ def blended_rows(pieces: PieceList, c: Corners, machine: Machine) -> PieceList:
         cols[name][:, dest] = (
             frame[:, 0] + z.real[:, None] * frame[:, 1] + z.imag[:, None] * frame[:, 2]
         ).T
-    obj_rows, obj_pieces = [], []
-    for j, bl in c.obj_blends.items():
-        if not ok[j]:
-            continue
-        i = int(corner[j])
-        feed_j = min(float(cap_a[j]), float(cap_b[j]))
-        cap = max(
-            min(
-                float(curvature_cap_mm_s(machine, bl.kappa_max_per_mm, feed_j)),
-                float(c.cap_mm_s[j]),
-            ),
-            MIN_CAP_MM_S,
-        )
-        obj_rows.append(int(first[i]))
-        kind, geom = (Kind.PH, bl.ph) if hasattr(bl, "ph") else (Kind.NURBS, bl.curve)
-        obj_pieces.append(
-            Piece(
-                kind,
-                geom,
-                float(c.length_mm[j]),
-                cap,
-                int(pieces.segment[i]),
-                int(pieces.line[i]),
-                0.0,
-                1.0,
-                0.0,
-                bl.kappa_max_per_mm,
-                blend_mm=float(pieces.blend_mm[i]),
-                rapid=bool(pieces.rapid[i]),
-            )
-        )
+    obj_rows, obj_pieces = _object_blends(pieces, c, machine, ok, first)
     put_objects(cols, objects, obj_rows, obj_pieces)
 
     # Columnar PH rows: the old ones (moved) and the new line–line blends, in row order.
@@ -199,3 +179,45 @@ def blended_rows(pieces: PieceList, c: Corners, machine: Machine) -> PieceList:
         ph_frame=np.concatenate((pieces.ph_frame, frame))[order],
         objects=objects,
     )
+
+
+def _object_blends(pieces: PieceList, c: Corners, machine: Machine, ok, first) -> tuple:
+    """The rows (in the new columns) and the :class:`Piece` objects of the accepted blends
+    at corners with an arc, NURBS or PH piece (``c.obj_blends``): each capped by its own
+    curvature at the faster move's feed (:data:`BLEND_FEED`) and by its fit's cap, and
+    belonging to that faster move."""
+    corner = c.row
+    cap_a, cap_b = pieces.v_cap_mm_s[corner - 1], pieces.v_cap_mm_s[corner]
+    obj_rows, obj_pieces = [], []
+    for j, bl in c.obj_blends.items():
+        if not ok[j]:
+            continue
+        i = int(corner[j])
+        feed_j = float(BLEND_FEED(cap_a[j], cap_b[j]))
+        cap = max(
+            min(
+                float(curvature_cap_mm_s(machine, bl.kappa_max_per_mm, feed_j)),
+                float(c.cap_mm_s[j]),
+            ),
+            MIN_CAP_MM_S,
+        )
+        of_j = i - 1 if cap_a[j] > cap_b[j] else i  # the faster move's
+        obj_rows.append(int(first[i]))
+        kind, geom = (Kind.PH, bl.ph) if hasattr(bl, "ph") else (Kind.NURBS, bl.curve)
+        obj_pieces.append(
+            Piece(
+                kind,
+                geom,
+                float(c.length_mm[j]),
+                cap,
+                int(pieces.segment[of_j]),
+                int(pieces.line[of_j]),
+                0.0,
+                1.0,
+                0.0,
+                bl.kappa_max_per_mm,
+                blend_mm=float(pieces.blend_mm[i]),
+                rapid=bool(pieces.rapid[i]),
+            )
+        )
+    return obj_rows, obj_pieces

@@ -74,7 +74,7 @@ class PlanOptions:
     ph: bool = True
     tolerance_mm: float | None = None
     blend_tolerance_mm: float | None = None
-    smooth: bool = False
+    smooth: bool = True
 
     def __post_init__(self):
         set_ = object.__setattr__

@@ -158,6 +158,9 @@ class PieceList(Sequence):
     jump_rows: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     jump_kn: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     jump_cap_mm_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    #: What smoothing fitted (:func:`~nurbscnc.plan.smoothing.smoothing_summary`: runs,
+    #: lines, deviation bound [µm]), None when nothing was.
+    smoothed: dict | None = None
 
     @classmethod
     def of(cls, pieces: Sequence[Piece]) -> PieceList:

@@ -74,7 +74,14 @@ def segment_pieces(
     if k and pending:
         cols, objects = _with_dwell_marker(cols, objects, pending)
     _mark_exact_stops(cols, source)
-    return _corners_decided(PieceList(**cols, objects=objects), machine, options)
+    pieces = _corners_decided(PieceList(**cols, objects=objects), machine, options)
+    if options.smooth:
+        from nurbscnc.plan.smoothing import smoothing_summary
+
+        smoothed = smoothing_summary(segs)
+        if smoothed is not None:
+            pieces = dc_replace(pieces, smoothed=smoothed)
+    return pieces
 
 
 def _prepared_segments(segments, machine: Machine, options: PlanOptions, columns):

@@ -379,6 +379,8 @@ def plan_summary(
     if stats.feed_fluctuation_max is not None:
         summary["feed_fluctuation_max"] = stats.feed_fluctuation_max
     _bound(summary, lb, cycle_time_s)
+    if plan.pieces.smoothed is not None:
+        summary["smoothed"] = dict(plan.pieces.smoothed)
     if check is not None:
         summary.update(check.contour_stats())
     return summary

@@ -1,4 +1,4 @@
-"""Dense CAM polylines as curvature-continuous splines (``--smooth``).
+"""Dense CAM polylines as curvature-continuous splines (by default; ``--no-smooth``).
 
 CAM output writes a curved surface pass as thousands of short G1 chords (0.01–1 mm). Under
 G64 every vertex is blended, and a blend meets its lines with zero curvature: along a chain
@@ -32,8 +32,11 @@ most that far above the interpolation of its sampled values). The other ``1 − 
 tolerance is left to the blends where a spline meets the lines or splines beside it: the path
 stays within the tolerance of the program, as G64 P promises.
 
-Off by default (a program is planned as written unless asked): commercial controls ask for
-this too (Fanuc's G5.1 Q3 "nano smoothing", Siemens' COMPCAD). Each piece the planner cuts
+On by default wherever a tolerance is granted (G64, G64 P): G64 promises a path within the
+tolerance, not the chords, and industrial controls' compressors do the same (Fanuc's G5.1 Q3
+"nano smoothing", Siemens' COMPCAD; LinuxCNC's answer is G64 P Q). G61 and G61.1 grant none
+and stay exact; ``--no-smooth`` plans every move as written. The plan's summary says what
+was fitted (:func:`smoothing_summary`). Each piece the planner cuts
 from a spline (cells of ≤ 0.25 mm) reports the source line of the programmed move where it
 starts (:meth:`SmoothedRun.line_at`).
 """
@@ -80,6 +83,11 @@ class SmoothedRun(Nurbs):
 
     line_u: np.ndarray | None = None
     line_numbers: np.ndarray | None = None
+    #: The fit's bound on its two-way distance to its run's polyline [mm]
+    #: (:func:`spline_deviation_mm`), and the run's index in the program (the pieces of one
+    #: run share it).
+    deviation_mm: float = 0.0
+    run: int = 0
 
     smoothed = True
 
@@ -161,9 +169,10 @@ def spline_deviation_mm(spline, u: np.ndarray, vertices: np.ndarray) -> float:
 
 
 def fit_run(vertices: np.ndarray, tolerance_mm: float):
-    """The cubic B-spline (knots (n + 4,), control points (n, 3) [mm], and the vertices'
-    parameters (k + 1,)) of a run's ``vertices`` (k + 1, 3) [mm] within ``tolerance_mm`` both
-    ways, ends exact; None when no knot spacing of :data:`KNOT_STEPS` fits (module doc)."""
+    """The cubic B-spline (knots (n + 4,), control points (n, 3) [mm], the vertices'
+    parameters (k + 1,) and its deviation bound [mm]) of a run's ``vertices`` (k + 1, 3) [mm]
+    within ``tolerance_mm`` both ways, ends exact; None when no knot spacing of
+    :data:`KNOT_STEPS` fits (module doc)."""
     from scipy.interpolate import BSpline, make_lsq_spline
 
     chord = np.sqrt(np.sum(np.diff(vertices, axis=0) ** 2, axis=1))
@@ -187,8 +196,9 @@ def fit_run(vertices: np.ndarray, tolerance_mm: float):
         c = np.array(sp.c, dtype=float)
         c[0], c[-1] = vertices[0], vertices[-1]  # clamped: the curve's ends
         sp = BSpline(t, c, 3)
-        if spline_deviation_mm(sp, u, vertices) <= tolerance_mm:
-            return t, c, u
+        deviation_mm = spline_deviation_mm(sp, u, vertices)
+        if deviation_mm <= tolerance_mm:
+            return t, c, u, deviation_mm
     return None
 
 
@@ -259,7 +269,7 @@ def smooth_runs(
         fit = fit_run(vertices, room) if room > 0.0 else None
         if fit is None:
             continue
-        knots, ctrl, u = fit
+        knots, ctrl, u, deviation_mm = fit
         # One spline over the run, cut where the feed changes and every MAX_PIECE lines: the
         # cuts keep the spline's C2 (no blend, no break), each piece has its own feed.
         change = np.flatnonzero(feed[a + 1 : b] != feed[a : b - 1]) + 1
@@ -281,6 +291,8 @@ def smooth_runs(
                 (1.0 - SHARE) * float(tol[a]),
                 line_u=(u[la:lb] - lo) / (hi - lo),
                 line_numbers=numbers[la:lb],
+                deviation_mm=deviation_mm,
+                run=a,
             )
             replaced[int(rows[a + la])] = (int(rows[a + lb - 1]), spline)
     if not replaced:
@@ -298,3 +310,18 @@ def smooth_runs(
             origin.append(int(source[last]))
             i = last + 1
     return out, np.asarray(origin, dtype=np.int64)
+
+
+def smoothing_summary(segments) -> dict | None:
+    """What smoothing did, of the planned ``segments`` (the :class:`SmoothedRun` among
+    them counted): ``runs`` fitted, programmed ``lines`` they replace,
+    ``deviation_max_um`` the largest fit's bound on its distance to its polyline [µm] (the
+    end blends add at most the rest of the tolerance). None: nothing was smoothed."""
+    pieces = [s for s in segments if getattr(s, "smoothed", False)]
+    if not pieces:
+        return None
+    return {
+        "runs": len({s.run for s in pieces}),
+        "lines": int(sum(s.line_numbers.size for s in pieces)),
+        "deviation_max_um": 1000.0 * max(s.deviation_mm for s in pieces),
+    }
