@@ -21,7 +21,9 @@ from nurbscnc.interpolate.sample import (
     Interpolator,
     Samples,
     chunks_of,
+    has_motion,
     reference_sampler,
+    rest_samples,
     sample_chunks,
     sample_plan,
     samples_of,
@@ -191,7 +193,11 @@ def run_program(program, machine: Machine, options: RunOptions | None = None, pr
     say("checking limits")
     columns = segment_columns(program.segments)
     check_before_work(program.segments, machine, columns)
-    if options.algorithm == Algorithm.PH_LOOKAHEAD:
+    if not has_motion(columns):
+        # Offsets, tool changes, dwells only (LinuxCNC runs such programs): nothing to plan;
+        # the output holds the tool at its start point through the dwells, as any algorithm.
+        run = Run(options.algorithm, rest_samples(program, columns, machine.servo.period_s))
+    elif options.algorithm == Algorithm.PH_LOOKAHEAD:
         lookahead = options.lookahead
         if not machine.contour_check:
             # No servo model in the profile: there is no contour error to check.

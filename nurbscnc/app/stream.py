@@ -87,7 +87,9 @@ def stream_job(
     card runs; or, when :func:`needs_whole_plan`, ``(None, pulses)``: the pulses of the whole
     run (the points ``run`` writes with the same options). Everything that can be wrong
     with the input raises here, before any port is touched (the pulse limit too; for a job,
-    the first window's errors)."""
+    the first window's errors). ``(None, None)``: the program has no motion (offsets, tool
+    changes, dwells only): nothing to send."""
+    from nurbscnc.geometry.path import STOP_KINDS
     from nurbscnc.output.stream.feed import WindowFeed
     from nurbscnc.output.stream.job import Job, start_at_line
     from nurbscnc.pipeline import run_program, window_plans
@@ -97,6 +99,8 @@ def stream_job(
             prog = start_at_line(prog, from_line)
         except ValueError as exc:
             raise ConfigError(str(exc)) from None
+    if all(s.kind in STOP_KINDS for s in prog.segments):  # stops at the first move
+        return None, None
     if needs_whole_plan(options):
         samples = run_program(prog, mach, options).samples
         return None, pulses_of_points(samples.points_mm, mach, samples.line)

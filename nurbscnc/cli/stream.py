@@ -232,6 +232,9 @@ def stream(
                 override=feed_override / 100.0,
                 **settings,
             )
+            if job is None and pulses is None:
+                _nothing_to_send(program, as_json)
+                return
         try:
             if job is None:
                 if from_line is not None or feed_override != 100:
@@ -255,6 +258,16 @@ def stream(
             if job is not None and job.feed is not None:
                 job.feed.close()
     _print_report(program, job, reports, as_json)
+
+
+def _nothing_to_send(program: str, as_json: bool) -> None:
+    """A program with no motion (offsets, tool changes, dwells only): the port is not
+    opened, exit 0."""
+    message = "no motion (offsets, tool changes or dwells only): nothing to send"
+    if as_json:
+        click.echo(json.dumps({"ok": True, "program": program, "motion": False}))
+        return
+    console.out.print(f"{program}: {message}; the port was not opened", markup=False)
 
 
 def _needs_the_job(settings) -> str:
