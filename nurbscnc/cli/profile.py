@@ -51,15 +51,23 @@ def profile():
 @profile.command("init")
 @click.argument("file", required=False, type=click.Path(dir_okay=False, allow_dash=True))
 @click.option("--force", is_flag=True, help="Overwrite FILE if it exists.")
+@click.option(
+    "--template",
+    type=click.Choice(["paper", "router"]),
+    default="paper",
+    show_default=True,
+    help="paper: the paper's X-Y table with 4th-order servo models (the bundled default); "
+    "router: a stepper-motor router without a servo model (contour check off).",
+)
 @_profile_errors
-def init(file, force):
+def init(file, force, template):
     """Write a commented profile template to FILE (default or '-': stdout).
 
-    Example: nurbscnc profile init nurbscnc.toml
+    Example: nurbscnc profile init nurbscnc.toml --template router
     """
-    from nurbscnc.machine.profile import default_profile_text
+    from nurbscnc.machine.discovery import template_text
 
-    text = default_profile_text()
+    text = template_text(template)
     if file in (None, "-"):
         click.echo(text, nl=False)
         return
@@ -103,6 +111,11 @@ def show(as_json, machine, overrides):
     click.get_current_context().meta["nurbscnc.machine_said"] = True  # the header says it
     mach = load_machine_cli(machine, overrides)
     if as_json:
-        click.echo(json.dumps({"ok": True, **machine_json(mach), "profile": mach.settings}))
+        defaults = sorted(mach.defaults)
+        click.echo(
+            json.dumps(
+                {"ok": True, **machine_json(mach), "profile": mach.settings, "defaults": defaults}
+            )
+        )
         return
     click.echo(profile_toml(mach), nl=False)
