@@ -144,3 +144,26 @@ def test_tool_change_program_linuxcnc_live(tmp_path):
     assert "CHANGE_TOOL(1)" in out and "PROGRAM_END" in out
     for call in ("STRAIGHT_TRAVERSE", "STRAIGHT_FEED", "ARC_FEED", "STRAIGHT_PROBE"):
         assert call not in out
+
+
+def test_plan_explain_and_profile_dump(tmp_path):
+    result = cli("plan", NOMOTION, "--explain")
+    assert result.exit_code == 0, result.output
+    assert "no motion" in result.stdout
+    data = json.loads(cli("plan", NOMOTION, "--explain", "--json").stdout)
+    assert data["motion"] is False and "explain" not in data
+    dump = tmp_path / "profile.csv"
+    result = cli("plan", NOMOTION, "--dump-profile", dump)
+    assert result.exit_code == 0, result.output
+    rows = np.loadtxt(dump, delimiter=",", skiprows=1)
+    n = math.ceil(0.2605 / period_s() - 1e-9) + 1
+    assert rows.shape == (n, 6)
+    np.testing.assert_allclose(rows[:, 0], np.arange(n) * period_s(), rtol=0, atol=5e-7)
+    assert np.all(rows[:, 1:] == 0.0)
+
+
+def test_batch_reports_the_exact_cycle_time(tmp_path):
+    result = cli("run", NOMOTION, "--output-dir", tmp_path, "--jobs", "1", "--json")
+    assert result.exit_code == 0, result.output
+    (row,) = json.loads(result.stdout)["results"]
+    assert row["cycle_time_s"] == pytest.approx(0.2605, rel=1e-12)

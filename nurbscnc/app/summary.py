@@ -36,10 +36,9 @@ def summary_of(prog, mach, run, stats=None, lower_bound: bool = True) -> dict:
     :class:`~nurbscnc.plan.report.SampleStats` gathered while the points were written (None:
     gathered here, window by window, without whole arrays); a baseline is simulated on its
     whole samples. ``lower_bound``: with the kinematic lower bound (the JSON has it)."""
-    from nurbscnc.interpolate.sample import has_motion
     from nurbscnc.plan.report import SampleStats, plan_summary
 
-    if run.plan is None and run.columns is not None and not has_motion(run.columns):
+    if run.rest_s is not None:  # no motion
         return {**rest_summary(prog, mach, run), **machine_json(mach)}
     samples = run.samples if run.plan is None else stats
     if samples is None:
@@ -68,9 +67,7 @@ def rest_summary(prog, mach, run) -> dict:
     servo, at rest there from the start, follows without error: the contour errors are 0
     exactly (no simulation needed); the cycle time and its kinematic lower bound are the
     dwells' time (the points last till the first servo period at or after it)."""
-    from nurbscnc.geometry.path import stop_seconds
-
-    t_s = float(sum(stop_seconds(s) for s in prog.segments))  # only stops: no move
+    t_s = run.rest_s
     return {
         "ok": True,
         "program": prog.name,

@@ -78,7 +78,7 @@ def plan(program, as_json, dump_profile, explain, explain_all, plot_dir, **setti
         click.echo(summary_json(summary))
         return
     print_plan_summary(prog, mach, summary, err if dump_profile == "-" else out)
-    if explain:
+    if explain and expl is not None:  # None: no motion, nothing planned to explain
         print_explanation(expl, out, None if explain_all else EXPLAIN_LINES, text.splitlines())
 
 

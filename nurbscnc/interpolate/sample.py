@@ -253,8 +253,7 @@ def rest_samples(program, columns, period_s: float) -> Samples:
     dwell's after the last one ends; the first segment's, or 0 for a program without
     segments, at t = 0 before any dwell)."""
     dwells = columns.rows(DWELL)
-    seconds = np.array([program.segments[k].seconds for k in dwells], dtype=float)
-    ends_s = np.cumsum(seconds)
+    ends_s = np.cumsum(_dwell_seconds(program, dwells))
     total_s = float(ends_s[-1]) if ends_s.size else 0.0
     n = int(np.ceil(total_s / period_s - 1e-9)) + 1
     t = np.arange(n) * period_s
@@ -276,3 +275,14 @@ def rest_samples(program, columns, period_s: float) -> Samples:
         param=None,
         line=lines.astype(np.int64),
     )
+
+
+def _dwell_seconds(program, dwells: np.ndarray) -> np.ndarray:
+    """The durations [s] of the dwell segments at indexes ``dwells``."""
+    return np.array([program.segments[k].seconds for k in dwells], dtype=float)
+
+
+def rest_seconds(program, columns) -> float:
+    """How long a program with no motion holds the tool at rest [s]: the sum of its dwells
+    (exact; :func:`rest_samples` ends at the first servo period at or after it)."""
+    return float(np.sum(_dwell_seconds(program, columns.rows(DWELL))))
