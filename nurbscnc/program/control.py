@@ -28,6 +28,16 @@ _O_LINE = re.compile(
 )
 
 
+#: An M99 word (the end of a Fanuc subroutine), and comments to strip before looking for it.
+_M99 = re.compile(r"(?<![a-z])m\s*0*99(?![0-9.])", re.I)
+_COMMENT = re.compile(r"\([^)]*\)|;.*")
+
+
+def _code(line: str) -> str:
+    """A line without its comments."""
+    return _COMMENT.sub("", line) if ("(" in line or ";" in line) else line
+
+
 class Source:
     """One program file: its lines, blocks parsed on demand, and its label index."""
 
@@ -70,30 +80,47 @@ class Source:
         return self._labels
 
     def scope(self, index: int) -> int:
-        """The line index of the ``sub`` whose definition holds line ``index`` (-1: the main
-        program's body).
+        """The first line index of the subroutine whose definition holds line ``index``
+        (-1: the main program's body).
 
         LinuxCNC names a control label (if, while, do, repeat and their tails) after the
         subroutine being run, "<sub>#<label>" (interp_read.cc, read_o), so one label may head
-        a construct in each subroutine and once more in the main program.
+        a construct in each subroutine and once more in the main program. A subroutine is an
+        ``o<n> sub`` … ``o<n> endsub`` definition, or a Fanuc one: an ``O<n>`` line up to the
+        next M99 before any other ``O<n>`` line (an ``O<n>`` with no M99 after it is a
+        program number, a title).
         """
         if self._scopes is None:
-            starts: list[int] = []
-            ends: list[int] = []
-            for indexes, kinds in self.labels().values():
-                for k, kind in enumerate(kinds):
-                    if kind == "sub":
-                        end = next(
-                            (i for i, w in zip(indexes[k + 1 :], kinds[k + 1 :]) if w == "endsub"),
-                            len(self.lines),
-                        )
-                        starts.append(indexes[k])
-                        ends.append(end)
-            order = sorted(range(len(starts)), key=starts.__getitem__)
-            self._scopes = ([starts[i] for i in order], [ends[i] for i in order])
+            self._scopes = self._scope_spans()
         starts, ends = self._scopes
         k = bisect.bisect_right(starts, index) - 1
         return starts[k] if k >= 0 and index <= ends[k] else -1
+
+    def _scope_spans(self) -> tuple[list[int], list[int]]:
+        """(first, last) line indexes of every subroutine definition, sorted."""
+        spans = []
+        bare = sorted(
+            i
+            for indexes, kinds in self.labels().values()
+            for i, w in zip(indexes, kinds)
+            if w == ""
+        )
+        for indexes, kinds in self.labels().values():
+            for k, kind in enumerate(kinds):
+                if kind == "sub":
+                    tail = zip(indexes[k + 1 :], kinds[k + 1 :])
+                    spans.append(
+                        (indexes[k], next((i for i, w in tail if w == "endsub"), len(self.lines)))
+                    )
+        for k, head in enumerate(bare):
+            stop = bare[k + 1] if k + 1 < len(bare) else len(self.lines)
+            m99 = next(
+                (i for i in range(head + 1, stop) if _M99.search(_code(self.lines[i]))), None
+            )
+            if m99 is not None:
+                spans.append((head, m99))
+        spans.sort()
+        return [a for a, _ in spans], [b for _, b in spans]
 
     def find(self, label: str, after: int, keywords, stop=("sub", "endsub")) -> int | None:
         """The first line index > ``after`` carrying ``label`` with a keyword in ``keywords``.
