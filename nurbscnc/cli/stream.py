@@ -209,7 +209,8 @@ def stream(
     the path within the acceleration and jerk limits, stops, and continues on Enter /
     SIGUSR2 (the rest re-planned from rest). + / - change the feed override. Ctrl-C or
     SIGTERM aborts the card at once and exits 130. Exit 0 only when the card reports DONE at
-    the program's end position.
+    the program's end position, or for a program with no motion (offsets, tool changes,
+    dwells only): nothing to send, the port is not opened.
 
     Example: nurbscnc stream part.nc --port /dev/ttyUSB0 --optional-stop
     """
