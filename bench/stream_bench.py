@@ -254,10 +254,10 @@ class _FirstPeriod(Exception):
 
 def planning_ahead(path: str) -> dict:
     """Time to the first period vs the whole plan while streaming ``path`` (module doc)."""
+    from nurbscnc.controller.feed import WindowFeed
+    from nurbscnc.controller.job import Job
+    from nurbscnc.controller.simulate import simulate_job
     from nurbscnc.machine.profile import load_machine
-    from nurbscnc.output.stream.feed import WindowFeed
-    from nurbscnc.output.stream.job import Job
-    from nurbscnc.output.stream.simlink import simulate_job
     from nurbscnc.pipeline import window_plans
     from nurbscnc.program.interpret import interpret_text
 

@@ -199,7 +199,7 @@ def run_program(program, machine: Machine, options: RunOptions | None = None, pr
     # limits.max_points, before anything is planned or sampled.
     say("checking limits")
     columns = segment_columns(program.segments)
-    check_before_work(program.segments, machine, columns)
+    check_before_work(program.segments, machine, columns, program.frames)
     if not has_motion(columns):
         # Offsets, tool changes, dwells only (LinuxCNC runs such programs): nothing to plan;
         # the output holds the tool at its start point through the dwells, as any algorithm.
@@ -290,7 +290,7 @@ def window_plans(program, machine: Machine, options: RunOptions | None = None, e
             "planning while streaming needs the look-ahead planner without pre-compensation"
         )
     columns = segment_columns(program.segments)
-    check_before_work(program.segments, machine, columns)
+    check_before_work(program.segments, machine, columns, program.frames)
     lookahead = options.lookahead
     if not machine.contour_check:
         lookahead = replace(lookahead, dynamics=Dynamics.OFF)

@@ -171,6 +171,7 @@ def record_rs274(path, tool_table):
     database, absent outside a running LinuxCNC (a T word crashes it), while rs274 reads a
     tool table file. rs274's machine unit is the inch (tool table values are inches) and it
     prints program coordinates (mm here) without the tool length offset, which is added.
+    Its CHANGE_TOOL (M6) is a pause.
     """
     import re
     import subprocess
@@ -187,6 +188,8 @@ def record_rs274(path, tool_table):
     for text in out.splitlines():
         if "USE_TOOL_LENGTH_OFFSET(" in text:
             tlo = [float(v) for v in numbers.findall(text)[:3]]
+        if "CHANGE_TOOL(" in text:  # M6: the machine stops for the tool change
+            moves.append({"kind": "pause", "code": "M6"})
         for call, kind in (("STRAIGHT_TRAVERSE(", "rapid"), ("STRAIGHT_FEED(", "line")):
             if call in text:
                 p = [float(v) for v in numbers.findall(text.split(call, 1)[1])[:3]]

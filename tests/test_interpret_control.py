@@ -318,7 +318,8 @@ def test_tool_table_format_and_g43():
     assert table[1].offset_mm == (0.0, 0.0, 12.5) and table[1].diameter_mm == 6.0
     assert table[2].offset_mm == (0.5, 0.0, -3.0) and table[2].pocket == 2
     got = ends("T1 M6 G43\nG0 Z0\nG43 H2\nG0 X0 Z0\nG49\nG0 X0 Z0\n", tools=table)
-    np.testing.assert_array_equal(got, [[0, 0, 12.5], [0.5, 0, -3], [0, 0, 0]])
+    # the M6 stops at the start, then the moves
+    np.testing.assert_array_equal(got, [[0, 0, 0], [0, 0, 12.5], [0.5, 0, -3], [0, 0, 0]])
 
 
 @pytest.mark.parametrize(
@@ -517,7 +518,8 @@ def test_g10_l1_l10_l11_write_the_tool_table():
     tools = parse_tool_table("T1 P1 Z0 D2\n")
     run = lambda text: interpret_text(text, InterpretOptions(tools=tools)).segments  # noqa: E731
     segments = run("T1 M6 G43\nG0 X.1 Y.2 Z.3\nG10 L10 P1 X1\nG0 X2\nG43\nG0 X3\nM2")
-    assert [s.end_mm[0] for s in segments] == [0.1, 2.0, pytest.approx(2.1, abs=1e-15)]
+    assert [s.kind for s in segments][0] == "pause"  # the M6
+    assert [s.end_mm[0] for s in segments[1:]] == [0.1, 2.0, pytest.approx(2.1, abs=1e-15)]
     segments = run("G10 L2 P1 R45\nT1 M6 G43\nG10 L10 P1 X1\nG43\nG0 X2 Y0\nM2")
     # entry (-1/√2, -1/√2): program (2, 0) → machine R45·(2, 0) + entry = (1/√2, 1/√2)
     np.testing.assert_allclose(segments[-1].end_mm, [0.5**0.5, 0.5**0.5, 0.0], atol=1e-15)
@@ -621,8 +623,9 @@ def test_linuxcnc_errors_a_differential_run_found():
         segs("G21 G90 F100 M3 S1000\nT3 M6\nG88 X5 R-1 Z-2 P0.5\nM2\n")
     assert info.value.pos.line == 3
     moves = segs("G21 G90 F100 M3 S1000\nT3 M6 M3\nG88 X5 R-1 Z-2 P0.5\nM2\n")
-    # rs274 -g: two traverses, the feed down, DWELL(0.5), PROGRAM_STOP (the operator takes over)
-    assert [s.kind for s in moves] == ["rapid", "rapid", "line", "dwell", "pause"]
+    # rs274 -g: CHANGE_TOOL, two traverses, the feed down, DWELL(0.5), PROGRAM_STOP (the
+    # operator takes over)
+    assert [s.kind for s in moves] == ["pause", "rapid", "rapid", "line", "dwell", "pause"]
 
 
 def test_elseif_after_a_taken_branch_is_still_evaluated():
@@ -691,12 +694,13 @@ def test_parameters_as_linuxcnc_reads_them():
     ) as info:
         segs("F500\no1 repeat [3]\nG91 G1 X1\no1 break\no1 endrepeat\nM2\n")
     assert info.value.pos.line == 4
-    assert segs("T3 M6\nG4 P[#5400]\nM2\n")[0].seconds == 3.0
+    assert segs("T3 M6\nG4 P[#5400]\nM2\n")[1].seconds == 3.0
     tools = parse_tool_table("T2 P2 D3.175\n")
     moves = segs("F600\nT2 M6\nG42 D0 G1 X10 Y0\nG1 X20\nG40 G1 X30 Y10\nM2\n", tools=tools)
-    # rs274 -g: (10, -1.5875), (20, -1.5875), (30, 10)
+    # rs274 -g: CHANGE_TOOL, then (10, -1.5875), (20, -1.5875), (30, 10)
+    assert moves[0].code == "M6" and moves[0].tool == 2
     np.testing.assert_allclose(
-        [m.end_mm for m in moves], [(10, -1.5875, 0), (20, -1.5875, 0), (30, 10, 0)], atol=1e-12
+        [m.end_mm for m in moves[1:]], [(10, -1.5875, 0), (20, -1.5875, 0), (30, 10, 0)], atol=1e-12
     )
 
 

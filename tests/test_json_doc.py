@@ -198,6 +198,7 @@ def test_errors_program_file_and_option(files):
 #: Keys of the stream controller's job report (feed hold, override, sections), documented
 #: with the stream's.
 JOB_KEYS = {
+    "final_position_mm",
     "sections",
     "feed_override",
     "holds",

@@ -33,6 +33,7 @@ RANK = {
     "interpolate": 5,
     "studies": 6,
     "output": 6,
+    "controller": 6.5,  # runs a job: drives output's link and card, quantises with output
     "pipeline": 7,
     "app": 7.5,  # the application layer: loading, planning and reports for the commands
     "cli": 8,

@@ -346,7 +346,10 @@ def test_a_second_stream_needs_card_position_or_zero_not_a_restart(tmp_path):
         read = CliRunner().invoke(card_position, ["--port", ep.path])
         # (the refused stream's HELLO opened a stream that accepted nothing: FILLING)
         assert read.exit_code == 0
-        assert read.stdout == "card: FILLING, position [8000, 0, 0] steps\n"
+        assert read.stdout == (
+            "card: FILLING, position [8000, 0, 0] steps "
+            "(8.0000, 0.0000, 0.0000 mm, machine coordinates)\n"
+        )
         zeroed = run_stream([nc, "--port", ep.path, "--quiet", "--zero", "--json"])
         assert zeroed.exit_code == 0, zeroed.output
         assert json.loads(zeroed.stdout)["final_position_steps"] == [8000, 0, 0]
@@ -356,6 +359,7 @@ def test_a_second_stream_needs_card_position_or_zero_not_a_restart(tmp_path):
             "ok": True,
             "state": "DONE",
             "position_steps": [0, 0, 0],
+            "position_mm": [0.0, 0.0, 0.0],
         }
         assert run_stream([nc, "--port", ep.path, "--quiet"]).exit_code == 0
         assert card.position.tolist() == [8000, 0, 0] and card.positions_set == 2

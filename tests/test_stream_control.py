@@ -13,13 +13,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from nurbscnc.controller.job import Job
+from nurbscnc.controller.motion import phase_states, stop_phases
+from nurbscnc.controller.simulate import simulate_job
+from nurbscnc.controller.stops import program_stops, start_at_line
 from nurbscnc.machine.profile import default_profile_text, parse_machine
 from nurbscnc.output.stream import protocol as p
 from nurbscnc.output.stream.card import CardConfig, CardSim
-from nurbscnc.output.stream.job import Job, program_stops, start_at_line
 from nurbscnc.output.stream.linkstate import SenderOptions
-from nurbscnc.output.stream.motion import phase_states, stop_phases
-from nurbscnc.output.stream.simlink import simulate_job
 from nurbscnc.pipeline import RunOptions, run_program
 from nurbscnc.plan.feedrate import scurve_distance_mm, scurve_duration_s
 from nurbscnc.plan.options import LookaheadOptions
@@ -419,7 +420,7 @@ def test_from_line_without_motion_after_it_is_an_error():
 def test_untouched_job_executes_exactly_the_plain_runs_pulses(monkeypatch, chunk):
     """At 100 % with no operator, section by section and chunk by chunk (the periods are
     computed ahead of the link in chunks), the card runs the plain run's pulses."""
-    import nurbscnc.output.stream.job as job_module
+    import nurbscnc.controller.job as job_module
     from nurbscnc.output.stream.quantise import quantise
 
     monkeypatch.setattr(job_module, "CHUNK_PERIODS", chunk)

@@ -27,14 +27,14 @@ import threading
 import numpy as np
 import pytest
 
+from nurbscnc.controller import job as job_module
+from nurbscnc.controller.feed import ScheduledFeed, WindowFeed
+from nurbscnc.controller.job import Job
+from nurbscnc.controller.simulate import simulate_job
 from nurbscnc.errors import PlanningError
 from nurbscnc.machine.profile import default_profile_text, parse_machine
-from nurbscnc.output.stream import job as job_module
 from nurbscnc.output.stream.card import CardConfig
-from nurbscnc.output.stream.feed import ScheduledFeed, WindowFeed
-from nurbscnc.output.stream.job import Job
 from nurbscnc.output.stream.quantise import quantise
-from nurbscnc.output.stream.simlink import simulate_job
 from nurbscnc.pipeline import run_program, window_plans
 from nurbscnc.plan.lookahead import plan_windows
 from nurbscnc.program.interpret import interpret_text

@@ -283,6 +283,7 @@ _EVENTS = {
     "START_SPINDLE_CLOCKWISE": "spindle-cw",
     "START_SPINDLE_COUNTERCLOCKWISE": "spindle-ccw",
     "ORIENT_SPINDLE": "spindle-orient",
+    "CHANGE_TOOL": "M6",  # M6: the machine stops for the tool change
 }
 
 

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 from nurbscnc.app.load import load_program
+from nurbscnc.app.varfile import program_inputs
 
 
 def check_program(
@@ -14,19 +15,26 @@ def check_program(
     subroutine_path=(),
     per_segment: bool = False,
     progress=None,
+    var=None,
+    user_m_path=(),
 ):
     """``(program, summary)`` of the program file ``program`` checked for the machine
     ``mach`` (:func:`~nurbscnc.plan.limits.check_before_work`; PlanningError when it fails);
     the summary is :func:`~nurbscnc.plan.report.program_summary`'s, with every segment when
-    ``per_segment``. ``progress``: None or a callback named with each stage."""
+    ``per_segment``, and ``var_file``: the parameter file read (None: none).
+    ``progress``: None or a callback named with each stage; ``var``, ``user_m_path``: the
+    parameter file and user M-code folders (:func:`~nurbscnc.app.varfile.program_inputs`;
+    the file is read, never written)."""
     from nurbscnc.plan.limits import check_before_work
     from nurbscnc.plan.report import program_summary
     from nurbscnc.program.columns import segment_columns
 
     say = progress or (lambda _stage: None)
     say("reading and interpreting")
-    prog = load_program(program, block_delete, tool_table, subroutine_path)
+    inputs = program_inputs(mach, var, user_m_path)
+    prog = load_program(program, block_delete, tool_table, subroutine_path, inputs=inputs)
     say(f"checking {len(prog.segments)} segments")
     columns = segment_columns(prog.segments)  # read once for the checks and the summary
-    check_before_work(prog.segments, mach, columns)
-    return prog, program_summary(prog, columns, per_segment=per_segment)
+    check_before_work(prog.segments, mach, columns, prog.frames)
+    summary = program_summary(prog, columns, per_segment=per_segment)
+    return prog, {**summary, "var_file": inputs.var_path}

@@ -38,6 +38,7 @@ def load_program(
     tool_table: str | None = None,
     subroutine_path: tuple = (),
     text: str | None = None,
+    inputs=None,
 ) -> Program:
     """Read, parse and interpret a program file.
 
@@ -45,6 +46,8 @@ def load_program(
     program's directory, then each directory of ``subroutine_path`` (LinuxCNC's
     SUBROUTINE_PATH); the interpreter gets the reading as a callback and does no I/O itself.
     ``text``, when given, is the program already read (stdin that ``simulate -`` looked at).
+    ``inputs``: the parameter file's values and the user M-code folders
+    (:class:`~nurbscnc.app.varfile.ProgramInputs`; None: neither).
     """
     from nurbscnc.program.interpret import InterpretOptions, interpret_text
 
@@ -67,6 +70,7 @@ def load_program(
         tools=tools,
         name=display_name(path),
         load_subroutine=load_subroutine,
+        **(inputs.interpret_options() if inputs is not None else {}),
     )
     return interpret_text(text, options)
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 from nurbscnc.app.load import load_machine, load_program, override_table
 from nurbscnc.app.runtime import frozen_objects
 from nurbscnc.app.settings import run_options
+from nurbscnc.app.varfile import program_inputs
 
 
 def make_plan(
@@ -28,6 +29,9 @@ def make_plan(
     keep_reference=False,
     smooth=False,
     announce=None,
+    var=None,
+    user_m_path=(),
+    write_var=False,
 ):
     """Load, interpret, plan and interpolate one program; validate soft limits. Returns
     (program, machine, :class:`~nurbscnc.pipeline.Run`).
@@ -38,7 +42,9 @@ def make_plan(
     its whole reference and response (the contour plot needs them; memory grows with the
     motion time, so only when plots are asked for); ``announce``: None or a callback given
     the machine and its overrides once the profile is loaded (the CLI says which profile it
-    used)."""
+    used); ``var``, ``user_m_path``: the parameter file and the user M-code folders
+    (:func:`~nurbscnc.app.varfile.program_inputs`; ``write_var``: the caller writes the file
+    back, so a missing one is all zeros). The program's ``parameters`` are what it writes."""
     from dataclasses import replace
 
     from nurbscnc.pipeline import run_program
@@ -63,6 +69,9 @@ def make_plan(
         announce(mach, table)
     if progress:
         progress("reading and interpreting")
-    prog = load_program(program, not no_block_delete, tool_table, subroutine_path, text)
+    inputs = program_inputs(mach, var, user_m_path, writes=write_var)
+    prog = load_program(
+        program, not no_block_delete, tool_table, subroutine_path, text, inputs=inputs
+    )
     with frozen_objects():
         return prog, mach, run_program(prog, mach, options, progress)

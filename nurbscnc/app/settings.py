@@ -21,7 +21,7 @@ PLANNING_KEYS = (
     "smooth",
 )
 #: The keyword names of the program-input options.
-PROGRAM_INPUT_KEYS = ("no_block_delete", "tool_table", "subroutine_path")
+PROGRAM_INPUT_KEYS = ("no_block_delete", "tool_table", "subroutine_path", "var", "user_m_path")
 
 
 def run_options(

@@ -80,18 +80,21 @@ def stream_job(
     from_line: int | None = None,
     optional_stop: bool = False,
     override: float = 1.0,
+    tools: dict | None = None,
 ):
     """What streams the interpreted program ``prog`` (from ``from_line`` on:
-    :func:`~nurbscnc.output.stream.job.start_at_line`): ``(job, None)``, a
-    :class:`~nurbscnc.output.stream.job.Job` planned cut window by cut window while the
+    :func:`~nurbscnc.controller.stops.start_at_line`): ``(job, None)``, a
+    :class:`~nurbscnc.controller.job.Job` planned cut window by cut window while the
     card runs; or, when :func:`needs_whole_plan`, ``(None, pulses)``: the pulses of the whole
     run (the points ``run`` writes with the same options). Everything that can be wrong
     with the input raises here, before any port is touched (the pulse limit too; for a job,
-    the first window's errors). ``(None, None)``: the program has no motion (offsets, tool
+    the first window's errors). ``tools``: the tool table ``{number: Tool}``, named to the
+    operator at a tool change. ``(None, None)``: the program has no motion (offsets, tool
     changes, dwells only): nothing to send."""
+    from nurbscnc.controller.feed import WindowFeed
+    from nurbscnc.controller.job import Job
+    from nurbscnc.controller.stops import start_at_line
     from nurbscnc.geometry.path import STOP_KINDS
-    from nurbscnc.output.stream.feed import WindowFeed
-    from nurbscnc.output.stream.job import Job, start_at_line
     from nurbscnc.pipeline import run_program, window_plans
 
     if from_line is not None:
@@ -120,16 +123,26 @@ def stream_job(
         override=override,
         lookahead_pieces=options.lookahead.lookahead_pieces,
         feed=feed,
+        tools=tools,
     )
     return job, None
 
 
-def stream_report(program: str, job, reports: list) -> dict:
+def position_mm(steps, mach) -> list[float]:
+    """The card's position ``steps`` (per axis) in mm, machine coordinates: steps over the
+    profile's steps per mm (exact: the steps are what the card counts; rounded to 1 nm)."""
+    import numpy as np
+
+    return [round(v, 6) for v in (np.asarray(steps, dtype=float) / mach.steps.per_mm).tolist()]
+
+
+def stream_report(program: str, job, reports: list, mach=None) -> dict:
     """The JSON report of a finished stream: the last part's card state
     (:meth:`~nurbscnc.output.stream.sender.StreamReport.to_json`), the counters summed over
     the ``reports`` of every part, and the ``job``'s own report (sections, holds, planning,
-    notes; one section without a job). ``program`` is named as every command names it
-    (standard input is ``<stdin>``)."""
+    notes; one section without a job), the final position in mm (``mach``: the machine's
+    steps per mm). ``program`` is named as every command names it (standard input is
+    ``<stdin>``)."""
     extra = job.report() if job is not None else {"sections": 1}
     body = {
         **reports[-1].to_json(),
@@ -140,4 +153,6 @@ def stream_report(program: str, job, reports: list) -> dict:
         "duration_s": sum(r.duration_s for r in reports),
         **extra,
     }
+    if mach is not None:
+        body["final_position_mm"] = position_mm(reports[-1].final_position_steps, mach)
     return {"ok": True, "program": "<stdin>" if program == "-" else program, **body}

@@ -13,7 +13,7 @@ import threading
 import click
 
 from nurbscnc.cli.handle import handle_errors
-from nurbscnc.errors import NurbsCncError, OutputError
+from nurbscnc.errors import ConfigError, NurbsCncError, OutputError
 
 
 @click.command("card-position")
@@ -35,18 +35,29 @@ from nurbscnc.errors import NurbsCncError, OutputError
     default=2.0,
     show_default=True,
 )
+@click.option(
+    "--machine",
+    type=click.Path(),
+    default=None,
+    help="Machine profile (TOML) whose steps per mm give the position in mm. Default: as "
+    "every command ($NURBSCNC_MACHINE, ./nurbscnc.toml, ...).",
+)
 @click.option("--json", "as_json", is_flag=True, help="Print state and position as JSON.")
 @handle_errors
-def card_position(port, allow_url, baud, set_to, timeout_s, as_json):
+def card_position(port, allow_url, baud, set_to, timeout_s, machine, as_json):
     """Read (or --set) the card's position [steps] and state, e.g. to zero a card between two
-    streams without restarting it.
+    streams without restarting it. The position is also given in mm (machine coordinates)
+    from the machine profile's steps per mm.
 
     Example: nurbscnc card-position --port /dev/ttyUSB0 --set 0,0,0
     """
+    from nurbscnc.app.stream import position_mm
+    from nurbscnc.cli.common import load_machine_cli
     from nurbscnc.output.stream import protocol as p
     from nurbscnc.output.stream.sender import card_position as exchange
     from nurbscnc.output.stream.sender import open_port
 
+    mach = load_machine_cli(machine)  # before the port: a bad profile touches no card
     ser = open_port(port, baud=baud, allow_url=allow_url, write_timeout_s=timeout_s)
     try:
         target = _parse_position(set_to, len(set_to.split(","))) if set_to else None
@@ -55,12 +66,19 @@ def card_position(port, allow_url, baud, set_to, timeout_s, as_json):
         with contextlib.suppress(Exception):
             ser.close()
     state = p.CardState(status.state).name
-    if as_json:
-        click.echo(
-            json.dumps({"ok": True, "state": state, "position_steps": list(status.position_steps)})
+    steps = list(status.position_steps)
+    if len(steps) != len(mach.steps.per_mm):
+        raise ConfigError(
+            f"the card has {len(steps)} axes, the machine profile {len(mach.steps.per_mm)}: "
+            "no position in mm"
         )
+    mm = position_mm(steps, mach)
+    if as_json:
+        body = {"ok": True, "state": state, "position_steps": steps, "position_mm": mm}
+        click.echo(json.dumps(body))
         return
-    click.echo(f"card: {state}, position {list(status.position_steps)} steps")
+    text = ", ".join(f"{v:.4f}" for v in mm)
+    click.echo(f"card: {state}, position {steps} steps ({text} mm, machine coordinates)")
 
 
 # -- card-sim ------------------------------------------------------------------------------------

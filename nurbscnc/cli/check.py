@@ -19,6 +19,8 @@ from nurbscnc.cli.options import (
     machine_options,
     subroutine_path_option,
     tool_table_option,
+    user_m_path_option,
+    var_option,
 )
 
 if TYPE_CHECKING:
@@ -31,13 +33,26 @@ if TYPE_CHECKING:
 @block_delete_option
 @tool_table_option
 @subroutine_path_option
+@var_option
+@user_m_path_option
 @machine_options
 @handle_errors
-def check(program, as_json, no_block_delete, tool_table, subroutine_path, machine, overrides):
+def check(
+    program,
+    as_json,
+    no_block_delete,
+    tool_table,
+    subroutine_path,
+    var,
+    user_m_path,
+    machine,
+    overrides,
+):
     """Parse and validate PROGRAM ('-' for stdin) and summarise it.
 
     Validation includes the machine profile's soft limits on the geometry and its
-    limits.max_points on a lower bound of the motion time (no planning).
+    limits.max_points on a lower bound of the motion time (no planning), in machine
+    coordinates: after the offsets of the parameter file (--var; read, never written).
 
     Example: nurbscnc check programs/naca2415.nc
     """
@@ -52,6 +67,8 @@ def check(program, as_json, no_block_delete, tool_table, subroutine_path, machin
             subroutine_path,
             per_segment=as_json,
             progress=say,
+            var=var,
+            user_m_path=user_m_path,
         )
     if as_json:
         click.echo(json.dumps({**summary, **machine_json(mach)}))
@@ -78,6 +95,9 @@ def print_summary(prog: Program, s: dict) -> None:
         "  bounding box [mm]: "
         + "  ".join(f"{a} {lo[i]:.3f}..{hi[i]:.3f}" for i, a in enumerate("XYZ"))
     )
+    if s.get("var_file"):
+        start = prog.frames[0][1] if prog.frames else "G54"
+        out.print(f"  parameter file: {s['var_file']} ({start} at the start)", markup=False)
     f = s["feed_range_mm_s"]
     if f["min"] is not None:
         out.print(f"  feed [mm/min]: {f['min'] * 60.0:.6g}..{f['max'] * 60.0:.6g}")

@@ -134,3 +134,69 @@ def key_reader(operator: Operator, enabled: bool):
         thread.join(1.0)
         with contextlib.suppress(termios.error, OSError):
             termios.tcsetattr(fd, termios.TCSADRAIN, saved)
+
+
+#: The most of a user M-code's output shown [bytes] (its last part: where errors are).
+USER_M_OUTPUT_BYTES = 16384
+
+
+def user_m_runner(timeout_s: float, err, aborted=lambda: False, poll_s: float = 0.05):
+    """A callable running a user M-code's stop (``stop.argv``: the executable, then P and Q
+    as text) as LinuxCNC does: no shell, the stream waiting for it to end, killed after
+    ``timeout_s`` [s], or at once when ``aborted()`` (Ctrl-C / SIGTERM: StreamInterrupted,
+    exit 130). Its output (stdout and stderr, to a temporary file so a chatty script
+    cannot fill memory; the last :data:`USER_M_OUTPUT_BYTES` kept) is shown on ``err`` (a
+    rich console, as plain text). Returns a :class:`~nurbscnc.controller.run.UserMResult`."""
+    import subprocess
+    import tempfile
+
+    from nurbscnc.controller.run import UserMResult
+    from nurbscnc.errors import StreamError
+    from nurbscnc.output.stream.linkstate import StreamInterrupted
+
+    def run(stop) -> UserMResult:
+        err.print(
+            f"stream: {stop.code} at line {stop.line}: running {' '.join(stop.argv)}",
+            markup=False,
+            highlight=False,
+        )
+        with tempfile.TemporaryFile() as out:
+            try:
+                proc = subprocess.Popen(
+                    list(stop.argv), stdin=subprocess.DEVNULL, stdout=out, stderr=out
+                )
+            except OSError as exc:
+                raise StreamError(
+                    f"line {stop.line}: {stop.code}: cannot run {stop.argv[0]}: "
+                    f"{exc.strerror or exc}"
+                ) from None
+            code = _wait_bounded(proc, timeout_s, aborted, poll_s)
+            if aborted():
+                raise StreamInterrupted(
+                    f"interrupted while {stop.code} at line {stop.line} ran: it was killed"
+                )
+            size = out.seek(0, os.SEEK_END)
+            out.seek(max(0, size - USER_M_OUTPUT_BYTES))
+            text = out.read().decode("utf-8", errors="replace")
+        if text.strip():
+            err.print(text.rstrip("\n"), markup=False, highlight=False)
+        return UserMResult(code, text, timeout_s)
+
+    return run
+
+
+def _wait_bounded(proc, timeout_s: float, aborted, poll_s: float) -> int | None:
+    """Wait for ``proc`` at most ``timeout_s`` [s], checking ``aborted()`` every ``poll_s``;
+    kill it at the timeout or the abort (then None)."""
+    import subprocess
+    import time
+
+    deadline = time.monotonic() + timeout_s
+    while True:
+        try:
+            return proc.wait(timeout=max(min(poll_s, deadline - time.monotonic()), 0.0))
+        except subprocess.TimeoutExpired:
+            if aborted() or time.monotonic() >= deadline:
+                proc.kill()
+                proc.wait()
+                return None

@@ -61,10 +61,35 @@ subroutine_path_option = click.option(
     help="Directory searched for o<name> call files name.ngc after the program's own (repeatable).",
 )
 
+var_option = click.option(
+    "--var",
+    type=click.Path(dir_okay=False),
+    default=None,
+    metavar="FILE",
+    help="LinuxCNC parameter file (rs274ngc.var): work offsets G54-G59.3, G92, G28/G30 "
+    "positions, read before the program (default: $NURBSCNC_VAR, else the profile's "
+    "program.var_file; none: no offsets). stream and run --write-var write it back.",
+)
+user_m_path_option = click.option(
+    "--user-m-path",
+    multiple=True,
+    type=click.Path(file_okay=False),
+    metavar="DIR[:DIR...]",
+    help="Folders searched for user M-code executables M100-M199 (LinuxCNC's USER_M_PATH; "
+    "repeatable), before the profile's program.user_m_path.",
+)
+
 
 def program_input_options(func):
-    """How a program file is read: block delete, the tool table, the subroutine path."""
-    for option in (subroutine_path_option, tool_table_option, block_delete_option):
+    """How a program file is read: block delete, the tool table, the subroutine path, the
+    parameter file and the user M-code path."""
+    for option in (
+        user_m_path_option,
+        var_option,
+        subroutine_path_option,
+        tool_table_option,
+        block_delete_option,
+    ):
         func = option(func)
     return func
 

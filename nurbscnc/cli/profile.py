@@ -102,20 +102,32 @@ def init(file, force, template):
 )
 @_profile_errors
 def show(as_json, machine, overrides):
-    """Print the effective machine profile (after discovery, --machine and --set).
+    """Print the effective machine profile (after discovery, --machine and --set), and the
+    parameter file programs read their work offsets from ($NURBSCNC_VAR or program.var_file).
 
     Example: nurbscnc profile show --set servo.x.bandwidth_hz=40 --set servo.x.damping=0.7
     """
     from nurbscnc.machine.profile import profile_toml
 
     click.get_current_context().meta["nurbscnc.machine_said"] = True  # the header says it
+    from nurbscnc.app.varfile import find_var_file
+
     mach = load_machine_cli(machine, overrides)
+    var_path, found_by = find_var_file(mach)
     if as_json:
-        defaults = sorted(mach.defaults)
+        var = {"path": var_path, "found_by": found_by or None}
         click.echo(
             json.dumps(
-                {"ok": True, **machine_json(mach), "profile": mach.settings, "defaults": defaults}
+                {
+                    "ok": True,
+                    **machine_json(mach),
+                    "profile": mach.settings,
+                    "var_file": var,
+                    "defaults": sorted(mach.defaults),
+                }
             )
         )
         return
     click.echo(profile_toml(mach), nl=False)
+    said = f"{var_path} ({found_by})" if var_path else "none (no work offsets)"
+    click.echo(f"\n# parameter file (--var, $NURBSCNC_VAR, program.var_file): {said}")

@@ -11,11 +11,13 @@ from nurbscnc.app.load import display_name
 from nurbscnc.app.output import SUFFIX_FORMATS, refuse_overwriting, write_output
 from nurbscnc.app.plots import write_plan_plots
 from nurbscnc.app.summary import clock_suffix, precompensation_text, summary_json, summary_of
+from nurbscnc.app.varfile import program_inputs, write_back
 from nurbscnc.cli.batch import run_batch
 from nurbscnc.cli.common import json_option, make_plan, plot_option
 from nurbscnc.cli.console import err, progress_display, show_progress
 from nurbscnc.cli.handle import handle_errors
 from nurbscnc.cli.options import planning_options
+from nurbscnc.errors import ConfigError
 
 
 @click.command()
@@ -50,6 +52,12 @@ from nurbscnc.cli.options import planning_options
     "docs/linuxcnc.md).",
 )
 @click.option("--quiet", is_flag=True, help="No summary on stderr.")
+@click.option(
+    "--write-var",
+    is_flag=True,
+    help="Write the parameter file (--var, $NURBSCNC_VAR or the profile's program.var_file) "
+    "back once the points are written, as LinuxCNC at the program's end. One program only.",
+)
 @json_option
 @plot_option
 @planning_options
@@ -62,6 +70,8 @@ def run(programs, output, output_dir, jobs, fmt, quiet, as_json, plot_dir, **set
     The CSV header is t,x,y,z,feed,piece,line (s, mm, mm, mm, mm/s, piece index, source
     line); the first row is the start point at t = 0, the last the end point at rest.
     """
+    if settings.get("write_var") and output_dir is not None:
+        raise click.UsageError("--write-var writes one parameter file: give one program and -o")
     if output_dir is None:
         _run_one(programs, output, fmt, quiet, as_json, plot_dir, settings)
         return
@@ -110,6 +120,15 @@ def _write_points(program, output, fmt, as_json: bool, plot_dir, settings, say):
         return summary, summary_json(summary) if as_json else None
 
     summary, text = write_output(output, fmt, run, mach, prog.name, summarise)
+    if settings.get("write_var"):
+        say("writing the parameter file")
+        inputs = program_inputs(mach, settings.get("var"), writes=True)
+        if inputs.var_path is None:
+            raise ConfigError(
+                "--write-var: no parameter file (give --var FILE, $NURBSCNC_VAR or the "
+                "profile's program.var_file)"
+            )
+        write_back(inputs, prog)
     if plot_dir:
         from nurbscnc.plan.explain import explain_plan
 

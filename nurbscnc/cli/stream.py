@@ -10,21 +10,26 @@ import sys
 
 import click
 
-from nurbscnc.app.load import load_program
+from nurbscnc.app.load import load_program, read_tool_table
 from nurbscnc.app.settings import run_options_of
 from nurbscnc.app.stream import (
     is_points_file,
     points_of_file,
+    position_mm,
     pulses_of_points,
     stream_job,
     stream_report,
 )
+from nurbscnc.app.varfile import program_inputs, write_back
 from nurbscnc.cli import console
 from nurbscnc.cli.common import load_machine_cli
-from nurbscnc.cli.controls import Operator, key_reader, routed_signals
+from nurbscnc.cli.controls import Operator, key_reader, routed_signals, user_m_runner
 from nurbscnc.cli.handle import handle_errors
 from nurbscnc.cli.options import planning_options
 from nurbscnc.errors import ConfigError
+
+#: What ``stream`` says of a program with no motion (the port is not opened).
+NO_MOTION = "no motion (offsets, tool changes or dwells only): nothing to send"
 
 
 # -- what is sent (everything before the port is opened) -----------------------------------------
@@ -51,17 +56,25 @@ def plan_job(
     Returns ``(job, pulses, machine)`` (:func:`~nurbscnc.app.stream.stream_job`): a job
     planned cut window by cut window, or the pulses of the whole run (a baseline
     ``--algorithm``, ``--precompensate``). Everything that can be wrong with the input
-    raises here, before any port is touched (the pulse limit too)."""
+    raises here, before any port is touched (the pulse limit too). Returns ``(job, pulses,
+    machine, inputs, program)``: ``inputs`` the parameter file and user M-code folders
+    (:func:`~nurbscnc.app.varfile.program_inputs`; the stream writes the file back, so a
+    missing one is all zeros), ``program`` the interpreted program (its ``parameters``
+    are what is written back)."""
     options = run_options_of(settings)
     mach = load_machine_cli(machine, overrides)
+    inputs = program_inputs(mach, settings.get("var"), settings.get("user_m_path", ()), writes=True)
     prog = load_program(
         path,
         not settings.get("no_block_delete", False),
         settings.get("tool_table"),
         settings.get("subroutine_path", ()),
+        inputs=inputs,
     )
-    job, pulses = stream_job(prog, mach, options, from_line, optional_stop, override)
-    return job, pulses, mach
+    table = settings.get("tool_table")
+    tools = read_tool_table(table) if table else None
+    job, pulses = stream_job(prog, mach, options, from_line, optional_stop, override, tools)
+    return job, pulses, mach, inputs, prog
 
 
 @contextlib.contextmanager
@@ -158,11 +171,13 @@ def _progress_bar(enabled: bool, total: int, keys: bool = False):
 )
 @click.option(
     "--feed-override",
-    type=click.IntRange(10, 100),
+    type=click.IntRange(10, 200),
     default=100,
     show_default=True,
     metavar="PERCENT",
-    help="Feed override at the start [%]; + / - keys change it by 10 % while streaming (10-100 %).",
+    help="Feed override at the start [%]; + / - keys change it by 10 % while streaming "
+    "(10-200 %; above 100 % the rest is re-planned from the next rest with the programmed "
+    "feeds raised, within the machine's V, A and J).",
 )
 @click.option(
     "--zero",
@@ -177,6 +192,16 @@ def _progress_bar(enabled: bool, total: int, keys: bool = False):
     metavar="N",
     help="Start at source line N (run from line): the program is interpreted "
     "whole, the tool goes up to a safe Z, across, and down to line N's start.",
+)
+@click.option(
+    "--user-m-timeout",
+    "user_m_timeout_s",
+    type=click.FloatRange(min=0.0, min_open=True),
+    default=60.0,
+    show_default=True,
+    metavar="SECONDS",
+    help="Longest a user M-code's executable (M100-M199) may run; then it is killed and "
+    "the stream stops (exit 3).",
 )
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @click.option("--json", "as_json", is_flag=True, help="Print the final report as JSON.")
@@ -194,6 +219,7 @@ def stream(
     feed_override,
     zero,
     from_line,
+    user_m_timeout_s,
     quiet,
     as_json,
     **settings,
@@ -209,8 +235,9 @@ def stream(
     the path within the acceleration and jerk limits, stops, and continues on Enter /
     SIGUSR2 (the rest re-planned from rest). + / - change the feed override. Ctrl-C or
     SIGTERM aborts the card at once and exits 130. Exit 0 only when the card reports DONE at
-    the program's end position, or for a program with no motion (offsets, tool changes,
-    dwells only): nothing to send, the port is not opened.
+    the program's end position, or at once for a program with no motion (nothing to send).
+    The parameter file (--var) is read before and written back (atomically) once the card
+    is DONE: G10 L2/L20, G92, G28.1/G30.1 persist.
 
     Example: nurbscnc stream part.nc --port /dev/ttyUSB0 --optional-stop
     """
@@ -219,23 +246,25 @@ def stream(
     # Hold/resume are caught from the start: planning a long program takes time, and
     # SIGUSR1's default action would end the command silently.
     with routed_signals(operator, ("SIGUSR1", "SIGUSR2")):
-        job = pulses = None
+        job = pulses = inputs = prog = None
         if points_file and (from_line is not None or feed_override != 100):
             raise ConfigError(
                 "--from-line and --feed-override need a program (.nc/.ngc), "
                 "not a file of reference points"
             )
         if not points_file:
-            job, pulses, mach = plan_job(
+            job, pulses, mach, inputs, prog = plan_job(
                 program,
                 from_line=from_line,
                 optional_stop=optional_stop,
                 override=feed_override / 100.0,
                 **settings,
             )
-            if job is None and pulses is None:
-                _nothing_to_send(program, as_json)
-                return
+            if job is None and pulses is None:  # no motion (offsets, tool changes, dwells)
+                if inputs is not None:  # it ran: its parameters persist
+                    write_back(inputs, prog)
+                said = {"ok": True, "program": program, "motion": False}
+                return click.echo(json.dumps(said) if as_json else f"{program}: {NO_MOTION}")
         try:
             if job is None:
                 if from_line is not None or feed_override != 100:
@@ -253,22 +282,16 @@ def stream(
                 "batch": batch,
                 "timeout_s": timeout_s,
                 "lead": lead,
+                "user_m_timeout_s": user_m_timeout_s,
             }
+            link["mach"] = mach
             reports = _send(link, operator, job, pulses, total, zero, quiet, as_json)
+            if inputs is not None:  # the program ran to its end: its offsets persist
+                write_back(inputs, prog)
         finally:  # the planner thread stopped before the process may exit
             if job is not None and job.feed is not None:
                 job.feed.close()
-    _print_report(program, job, reports, as_json)
-
-
-def _nothing_to_send(program: str, as_json: bool) -> None:
-    """A program with no motion (offsets, tool changes, dwells only): the port is not
-    opened, exit 0."""
-    message = "no motion (offsets, tool changes or dwells only): nothing to send"
-    if as_json:
-        click.echo(json.dumps({"ok": True, "program": program, "motion": False}))
-        return
-    console.out.print(f"{program}: {message}; the port was not opened", markup=False)
+    _print_report(program, job, reports, as_json, mach)
 
 
 def _needs_the_job(settings) -> str:
@@ -286,9 +309,12 @@ def _needs_the_job(settings) -> str:
 def _send(
     link: dict, operator: Operator, job, pulses, total: int, zero: bool, quiet: bool, as_json: bool
 ) -> list:
-    """Open the card's port (``link``: the port options), stream the ``job`` (or the
-    ``pulses`` without one) with the operator's keys and signals routed, and close the port;
-    returns the sender's reports (one per part of the stream)."""
+    """Open the card's port (``link``: the port options, the user M-codes' timeout
+    ``user_m_timeout_s`` and the machine ``mach``, for positions in mm), stream the ``job``
+    (through the controller's section loop) or the ``pulses`` without one, with the
+    operator's keys and signals routed, and close the port; returns the sender's reports (one
+    per part of the stream)."""
+    from nurbscnc.controller.run import run_job
     from nurbscnc.output.stream.sender import Sender, SenderOptions, open_port
 
     options = SenderOptions(
@@ -310,16 +336,26 @@ def _send(
             with routed_signals(operator, ("SIGINT", "SIGTERM")):
                 if job is None:
                     return [sender.stream(pulses, zero=zero)]
-                return sender.run_job(job, zero=zero)
+                sender.job = job
+                return run_job(
+                    job,
+                    sender,
+                    sender.wait_idle,
+                    zero=zero,
+                    run_user_m=user_m_runner(
+                        link["user_m_timeout_s"], console.err, lambda: sender.abort_requested
+                    ),
+                    positions_mm=lambda steps: position_mm(steps, link["mach"]),
+                )
     finally:
         with contextlib.suppress(Exception):
             ser.close()
 
 
-def _print_report(program: str, job, reports: list, as_json: bool) -> None:
+def _print_report(program: str, job, reports: list, as_json: bool, mach) -> None:
     """The stream's final report: JSON on stdout, or a line on stdout (and one on the
     planning), notes on stderr."""
-    report = stream_report(program, job, reports)
+    report = stream_report(program, job, reports, mach)
     if as_json:
         click.echo(json.dumps(report))
         return
@@ -333,7 +369,8 @@ def _print_report(program: str, job, reports: list, as_json: bool) -> None:
         f"{program}: {report['executed_periods']} periods streamed in {report['sections']} "
         f"part(s), {report['frames_sent']} frames ({report['bytes_sent']} bytes), "
         f"{report['retransmits']} retransmitted; the card ended at "
-        f"{list(reports[-1].final_position_steps)} steps{hold_text}",
+        f"{list(reports[-1].final_position_steps)} steps "
+        f"({', '.join(f'{v:.4f}' for v in report['final_position_mm'])} mm){hold_text}",
         markup=False,
     )
     planning = report.get("planning")

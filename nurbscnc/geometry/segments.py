@@ -337,3 +337,10 @@ class Program:
     blocks: int = 0
     name: str = "<program>"
     source_lines: tuple = field(default=(), repr=False)
+    #: The numbered parameters at the program's end (``{number: value}``, lengths in mm):
+    #: what a LinuxCNC parameter file keeps (program/varfile.py).
+    parameters: dict = field(default_factory=dict, repr=False)
+    #: The offsets in force, one row per change: (first segment, coordinate system name
+    #: ("G54"…), its origin, the G92 offset, the tool offset [mm, (x, y, z) each], the XY
+    #: rotation [deg]) (program/coords.py); errors name them.
+    frames: tuple = field(default=(), repr=False)

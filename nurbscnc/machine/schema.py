@@ -26,7 +26,7 @@ DEFAULT_PERIOD_MS = 1.0
 # ---------------------------------------------------------------------------------------------
 # Schema. A table is a dict of key -> sub-schema; a leaf is the name of a value check:
 #   "pos"    a finite number > 0        "finite"  any finite number
-#   "count"  an integer >= 1
+#   "count"  an integer >= 1          "text"    a string (a path)
 # Keys listed in _OPTIONAL may be absent; every other key is required, and unknown keys are
 # errors (a misspelt key must never silently fall back to a default).
 _COEFF_SCHEMA = {
@@ -61,6 +61,10 @@ SCHEMA: dict = {
     # Per-axis limits, beside the path limits of [limits]: a table per axis, every
     # key optional (an absent key leaves that axis to the path limits alone).
     "axis_limits": {a: dict.fromkeys(AXIS_LIMIT_KEYS, "pos") for a in AXES},
+    # How programs run on this machine: LinuxCNC's parameter file (work offsets, G92, G28/G30
+    # positions) and its user M-code path ([RS274NGC]USER_M_PATH: colon-separated folders).
+    # Relative paths are relative to the profile's folder.
+    "program": {"var_file": "text", "user_m_path": "text"},
 }
 _OPTIONAL = frozenset(
     {
@@ -74,6 +78,7 @@ _OPTIONAL = frozenset(
         "servo.z",
     }
 )
+_OPTIONAL |= {"program", "program.var_file", "program.user_m_path"}
 # [axis_limits]: every table and every key optional.
 _OPTIONAL |= {
     "axis_limits",
@@ -118,7 +123,11 @@ def apply_override(data: dict, key: str, value, source: str) -> None:
             table = sub
     if isinstance(schema, dict):
         raise ConfigError(f"{source}: override {key!r} names a table; give a key inside it")
-    if isinstance(value, str):
+    if isinstance(value, str) and schema == "text":
+        # a path: the text as given (quotes optional)
+        if len(value) >= 2 and value[0] == value[-1] and value[0] in "\"'":
+            value = value[1:-1]
+    elif isinstance(value, str):
         try:
             value = tomllib.loads(f"v = {value}")["v"]
         except (tomllib.TOMLDecodeError, ValueError):
@@ -159,6 +168,10 @@ _COUNT_MAX = 2**31 - 1
 
 
 def _check_leaf(value, kind: str, key: str, rep: Reporter) -> None:
+    if kind == "text":
+        if not isinstance(value, str) or "\0" in value:
+            raise rep.error(key, f"must be a text (a path), got {value!r}")
+        return
     if kind == "count":
         if isinstance(value, bool) or not isinstance(value, int):
             raise rep.error(key, f"must be an integer, got {value!r}")

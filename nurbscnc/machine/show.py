@@ -3,6 +3,8 @@ from for every command's JSON."""
 
 from __future__ import annotations
 
+import json
+
 from nurbscnc.machine.discovery import FOUND_BY_DEFAULT
 from nurbscnc.machine.model import Machine
 from nurbscnc.machine.schema import SCHEMA
@@ -13,6 +15,8 @@ def _toml_value(value) -> str:
         return "true" if value else "false"
     if isinstance(value, int):
         return str(value)
+    if isinstance(value, str):
+        return json.dumps(value)  # a TOML basic string (JSON's escapes are TOML's)
     return repr(float(value))  # shortest round-trip form; valid TOML (validated finite)
 
 

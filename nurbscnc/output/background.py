@@ -33,7 +33,7 @@ DEPTH = 2
 POLL_S = 0.05
 #: Seconds the writer's error waits for the worker to stop (at its next window: one
 #: window's sampling, or the summary; the stream's planner thread likewise,
-#: :meth:`~nurbscnc.output.stream.feed.WindowFeed.close`). The process must not end while
+#: :meth:`~nurbscnc.controller.feed.WindowFeed.close`). The process must not end while
 #: a worker is inside numpy: a daemon thread stopped there at exit can abort the
 #: interpreter ("terminate called without an active exception"). A worker stuck longer
 #: (a bug) is left behind.

@@ -81,9 +81,30 @@ def segment_boxes_mm(segments, columns=None) -> tuple[np.ndarray, np.ndarray]:
     return lo, hi
 
 
-def check_geometry_limits(segments, soft_limits, columns=None) -> None:
+def offsets_text(frames, index: int, axis: int) -> str:
+    """What puts segment ``index``'s ``axis`` where it is: the coordinate system in force
+    and its offset on that axis, with the G92, tool and rotation terms that are not zero
+    (``frames``: :attr:`~nurbscnc.geometry.segments.Program.frames`; none: no offsets)."""
+    rows = [f for f in frames if f[0] <= index]
+    if not rows:
+        return "G54, no offset"
+    _, system, origin, g92, tool, rotation = rows[-1]
+    name = AXES[axis]
+    parts = [f"{system} offset {name} {origin[axis]:g}"]
+    if g92[axis]:
+        parts.append(f"G92 {name} {g92[axis]:g}")
+    if tool[axis]:
+        parts.append(f"tool offset {name} {tool[axis]:g}")
+    if rotation and axis < 2:
+        parts.append(f"rotation {rotation:g}°")
+    return ", ".join(parts)
+
+
+def check_geometry_limits(segments, soft_limits, columns=None, frames=()) -> None:
     """PlanningError at the source line of the first segment whose box
-    (:func:`segment_boxes_mm`) leaves the soft limits, naming the axis and the value."""
+    (:func:`segment_boxes_mm`) leaves the soft limits, naming the axis, the value in machine
+    coordinates and the offsets that put it there (``frames``: the program's
+    :attr:`~nurbscnc.geometry.segments.Program.frames`)."""
     if not len(segments):
         return
     lo, hi = segment_boxes_mm(segments, columns)
@@ -96,7 +117,8 @@ def check_geometry_limits(segments, soft_limits, columns=None) -> None:
     a = int(np.flatnonzero(below[i] | above[i])[0])
     value = lo[i, a] if below[i, a] else hi[i, a]
     raise PlanningError(
-        f"the {segments[i].kind} leaves the soft limits: {AXES[a]} reaches {value:.6g} mm, "
+        f"the {segments[i].kind} leaves the soft limits: {AXES[a]} reaches {value:.6g} mm "
+        f"in machine coordinates ({offsets_text(frames, i, a)}), "
         f"outside [{lim_lo[a]:g}, {lim_hi[a]:g}] mm",
         SourcePos(int(segments[i].line), 1, ""),
     )
@@ -172,14 +194,15 @@ def check_motion_time(segments, machine, columns=None) -> None:
     )
 
 
-def check_before_work(segments, machine, columns=None) -> None:
-    """Both checks before planning: :func:`check_geometry_limits` (the soft limits) then
-    :func:`check_motion_time` (``limits.max_points``), on the segments' columns (read once;
-    ``columns`` if the caller has them)."""
+def check_before_work(segments, machine, columns=None, frames=()) -> None:
+    """Both checks before planning: :func:`check_geometry_limits` (the soft limits; its
+    error names the offsets of ``frames``) then :func:`check_motion_time`
+    (``limits.max_points``), on the segments' columns (read once; ``columns`` if the caller
+    has them)."""
     if not len(segments):
         return
     cols = _columns(segments, columns)
-    check_geometry_limits(segments, machine.soft_limits, cols)
+    check_geometry_limits(segments, machine.soft_limits, cols, frames)
     check_motion_time(segments, machine, cols)
 
 

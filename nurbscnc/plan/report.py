@@ -41,8 +41,8 @@ def check_soft_limits(points_mm: np.ndarray, lines: np.ndarray, limits: SoftLimi
     lo, hi = np.asarray(limits.min_mm), np.asarray(limits.max_mm)
     axis = int(np.flatnonzero((points_mm[k] < lo) | (points_mm[k] > hi))[0])
     raise PlanningError(
-        f"the path leaves the soft limits: {'XYZ'[axis]} = {points_mm[k, axis]:.4f} mm outside "
-        f"[{lo[axis]:g}, {hi[axis]:g}] mm",
+        f"the path leaves the soft limits: {'XYZ'[axis]} = {points_mm[k, axis]:.4f} mm in "
+        f"machine coordinates, outside [{lo[axis]:g}, {hi[axis]:g}] mm",
         SourcePos(int(lines[k]), 1, ""),
     )
 

@@ -135,6 +135,10 @@ M_72 = 72
 M_73 = 73
 M_98 = 98
 M_99 = 99
+#: User M-codes M100–M199: an executable of that name run at rest (LinuxCNC's
+#: USER_DEFINED_FUNCTION, found in PROGRAM_PREFIX and [RS274NGC]USER_M_PATH).
+M_USER_FIRST = 100
+M_USER_LAST = 199
 
 # -- modal groups of G codes (LinuxCNC's numbers) ------------------------------------------
 GM_NONMODAL = 0  # G4, G10, G28, G30, G52, G53, G92 family
@@ -159,6 +163,9 @@ MM_SPINDLE = 7  # M3, M4, M5, M19
 MM_COOLANT = 8
 MM_OVERRIDE = 9  # M48–M53
 MM_MODAL_STATE = 10  # M70–M73
+#: M100–M199 (LinuxCNC's group 10, the last of convert_m: after the tool change, the
+#: spindle, coolant and the override switches; nurbscnc numbers it 11, its 10 is M70–M73).
+MM_USER = 11
 
 #: Canned cycle motion codes (group 1): G73, G74, G81–G89.
 CANNED_CYCLES = frozenset({G_73, G_74, G_81, G_82, G_83, G_84, G_85, G_86, G_87, G_88, G_89})
@@ -193,6 +200,7 @@ M_GROUP = {
     **dict.fromkeys((M_7, M_8, M_9), MM_COOLANT),
     **dict.fromkeys((M_48, M_49, M_50, M_51, M_52, M_53), MM_OVERRIDE),
     **dict.fromkeys((M_70, M_71, M_72, M_73), MM_MODAL_STATE),
+    **dict.fromkeys(range(M_USER_FIRST, M_USER_LAST + 1), MM_USER),
 }
 
 #: Valid RS274/NGC codes nurbscnc refuses (the error names them and why).

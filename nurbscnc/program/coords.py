@@ -84,14 +84,34 @@ class Coordinates:
     g92_mm: list = field(default_factory=lambda: [0.0, 0.0, 0.0])
     tool_mm: list = field(default_factory=lambda: [0.0, 0.0, 0.0])
 
+    #: The interpreter's segment list: :attr:`frames` says from which segment on each
+    #: set of offsets was in force.
+    segments: list = field(default_factory=list)
+
     def __post_init__(self):
         self.params.setdefault(SYSTEM_INDEX, 1.0)
         self.plain = True  # no offset, rotation or tool offset: machine = program
+        self.frames: list = []
+        self._update_plain()
 
     def _update_plain(self) -> None:
         self.plain = not (
             any(self.origin_mm) or any(self.g92_mm) or any(self.tool_mm) or self.rotation_deg
         )
+        # (first segment, system name, origin, G92, tool [mm], rotation [deg]) for the
+        # errors that name the offsets (soft limits): one row per change
+        frame = (
+            len(self.segments),
+            SYSTEM_NAMES[self.system],
+            tuple(self.origin_mm),
+            tuple(self.g92_mm),
+            tuple(self.tool_mm),
+            self.rotation_deg,
+        )
+        if self.frames and self.frames[-1][0] == frame[0]:
+            self.frames[-1] = frame
+        elif not self.frames or self.frames[-1][1:] != frame[1:]:
+            self.frames.append(frame)
 
     def set_tool(self, offset_mm) -> None:
         """G43 / G43.1 / G49: the tool offset [mm] along X, Y, Z."""
@@ -111,6 +131,20 @@ class Coordinates:
 
     def system_rotation_deg(self, system: int) -> float:
         return self.params.get(SYSTEM_BASE + SYSTEM_STRIDE * (system - 1) + 9, 0.0)
+
+    def restore(self, values: dict) -> None:
+        """The persistent parameters of a parameter file (``{number: value}``, lengths in
+        mm) in force before the program, as LinuxCNC's ``Interp::init`` applies them: the
+        system #5220 (1..9) active with its offsets and rotation, the G92 offsets
+        #5211–#5213 in force when #5210 is not 0."""
+        for index, value in values.items():
+            if is_coordinate_parameter(index):
+                self.params[index] = float(value)
+        system = int(self.params.get(SYSTEM_INDEX, 1.0) + 0.0001)
+        self._load(system if 1 <= system <= N_SYSTEMS else 1)
+        if self.params.get(G92_FLAG, 0.0):
+            self.g92_mm = [self.params.get(G92_BASE + k, 0.0) for k in range(3)]
+        self._update_plain()
 
     # -- transforms --------------------------------------------------------------------------
     def to_machine(self, prog) -> list:

@@ -5,6 +5,7 @@ mixin of the interpreter)."""
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import replace
 from typing import NamedTuple
 
 from nurbscnc.errors import UnsupportedError
@@ -42,6 +43,7 @@ from nurbscnc.program.codes import (
     MM_SPINDLE,
     MM_STOP,
     MM_TOOL_CHANGE,
+    MM_USER,
     fmt_code,
 )
 from nurbscnc.program.modes import ModeSetters
@@ -66,7 +68,28 @@ class BlockExecutor:
         if block.assigns:
             self.assign(block)
         if words or gcodes or mcodes:
+            before = len(self.segments)
             self.execute(words, gcodes, mcodes)
+            if mcodes and block.comments and len(self.segments) > before:
+                self.label_pauses(block, before)
+
+    def label_pauses(self, block: Block, first: int) -> None:
+        """The block's stops (M0, M1, M60, M6, a user M-code: the segments from ``first``
+        on) carry the line's text for the operator: its MSG, else its last comment (the
+        one LinuxCNC keeps when a line has several)."""
+        message = ""
+        for _, text, _column in block.comments:
+            body = (text[1:-1] if text.startswith("(") else text[1:]).strip()
+            if body[:4].upper() == "MSG,":
+                message = body[4:].strip()
+                break
+            message = body
+        if not message:
+            return
+        for i in range(first, len(self.segments)):
+            seg = self.segments[i]
+            if type(seg) is Pause and not seg.message:
+                self.segments[i] = replace(seg, message=message)
 
     # -- reading the words -------------------------------------------------------------------
     def read_words(self, block: Block):
@@ -244,11 +267,35 @@ class BlockExecutor:
                 self.finish_nurbs_by_other(None, column)
             self.ended = True
             return
+        self.pause_at_rest(f"M{code}", column)
+
+    def pause_at_rest(self, code: str, column: int, tool: int | None = None, argv=()) -> None:
+        """A :class:`Pause` named ``code`` where the tool stands now (an open NURBS block
+        ends first)."""
         if self.nurbs is not None:
             self.finish_nurbs_by_other(None, column)
         # After G40 the tool stands at the compensated point until the exit move.
         position = tuple(self.pos) if self.comp_exit is None else self.comp_exit
-        self.segments.append(Pause(position, self.main_line(), f"M{code}"))
+        self.segments.append(Pause(position, self.main_line(), code, tool=tool, argv=argv))
+
+    def user_m_code(self, words: dict, gcodes: dict, mcodes: dict, used: set) -> None:
+        """M100–M199 P Q: LinuxCNC runs the executable ``M1nn`` found in its user-M path at
+        rest, with P and Q as ``"%f"`` arguments (-1 when absent: its block's unset
+        p_number, q_number; emctask.cc, user_defined_add_m_code). A code with no executable
+        is LinuxCNC's "Unknown M code used"."""
+        code, col = mcodes[MM_USER]
+        find = self.options.find_user_m
+        path = find(code) if find is not None else None
+        if path is None:
+            raise self.error(
+                f"M{code}: no executable named M{code} in the user M-code path "
+                "(--user-m-path, the profile's program.user_m_path)",
+                col,
+            )
+        used.update("PQ")
+        p = words["P"][0] if "P" in words else -1.0
+        q = words["Q"][0] if "Q" in words else -1.0
+        self.pause_at_rest(f"M{code}", col, argv=(path, f"{p:f}", f"{q:f}"))
 
 
 class Step(NamedTuple):
@@ -320,6 +367,7 @@ BEFORE_MOTION = (
     Step(ModeSetters.change_tool, m_groups=(MM_TOOL_CHANGE,)),  # M6, M61
     Step(ModeSetters.spindle_on_off, m_groups=(MM_SPINDLE,)),  # M3, M4, M5, M19
     Step(ModeSetters.save_restore_modes, m_groups=(MM_MODAL_STATE,)),  # M70–M73
+    Step(BlockExecutor.user_m_code, m_groups=(MM_USER,)),  # M100–M199
     Step(BlockExecutor.orient_words, m_groups=(MM_SPINDLE,)),  # M19's words
     Step(ModeSetters.dwell, g_groups=(GM_NONMODAL,)),  # G4
     Step(ModeSetters.set_plane, g_groups=(GM_PLANE,)),  # G17, G18, G19

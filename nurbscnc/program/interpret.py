@@ -65,6 +65,11 @@ class InterpretOptions:
     ``extra_lines`` and ``extra_moves`` bound what loops, calls and repeats (``L``) add to
     the program: at most that many executed lines, and moves, beyond one per line of the
     main program (memory grows with the program, not with what it repeats).
+    ``parameters``: the numbered parameters in force before the program (a LinuxCNC
+    parameter file's, see varfile.py; lengths in mm): the active system, its offsets, G92,
+    the G28/G30 positions; the program's :attr:`~nurbscnc.geometry.segments.Program.parameters`
+    are their values at its end. ``find_user_m(code)``: the executable's path of the user
+    M-code ``code`` (100..199) or None (the CLI searches the user-M path; no I/O here).
     """
 
     start_mm: tuple = (0.0, 0.0, 0.0)
@@ -81,6 +86,8 @@ class InterpretOptions:
     extra_moves: int = 2_000_000
     #: Interpret runs of plain G0/G1 lines in bulk (fastlane.py; same segments, faster).
     fast_lane: bool = True
+    parameters: dict | None = None
+    find_user_m: Callable[[int], str | None] | None = None
 
 
 def interpret_text(text: str, options: InterpretOptions | None = None) -> Program:
@@ -111,13 +118,19 @@ class _Interpreter(
         self.main = Source(lines, options.name)
         self.lines = lines
         self.m = ModalState()
-        self.coords = coords.Coordinates()
-        self.prog = list(map(float, options.start_mm))  # program position [mm]
+        self.segments: list = []
+        self.coords = coords.Coordinates(segments=self.segments)
         self.params: dict[int, float] = {}
+        if options.parameters:
+            self.coords.restore(options.parameters)
+            for index, value in options.parameters.items():
+                if not coords.is_coordinate_parameter(index):
+                    self.params[index] = float(value)
+        # program position [mm] of the machine start point
+        self.prog = self.coords.to_program(list(map(float, options.start_mm)))
         self.globals: dict[str, float] = {}
         self.frames = [Frame(self.main, 0)]
         self.source = self.main
-        self.segments: list = []
         self.notes: list[Note] = []
         self.nurbs = None
         # G5 without I J: minus the last G5's (P, Q) [mm], (0, 0) before any (LinuxCNC's
@@ -368,6 +381,15 @@ class _Interpreter(
             i += 1
         return i - pc
 
+    def final_parameters(self) -> dict:
+        """The numbered parameters at the program's end (``{number: value}``, lengths in
+        mm): what LinuxCNC writes to its parameter file. M2 / M30 make G54 active again
+        (#5220 = 1, LinuxCNC's convert_stop); the offsets and G92 stay."""
+        values = {**self.params, **self.coords.params}
+        if self.ended:
+            values[coords.SYSTEM_INDEX] = 1.0
+        return values
+
     def finish(self) -> None:
         self.comp_off()  # the end of the program ends compensation as G40 does
         if self.nurbs is not None:
@@ -406,4 +428,6 @@ def interpret(blocks, lines, options: InterpretOptions) -> Program:
         notes=tuple(state.notes),
         blocks=blocks,
         name=options.name,
+        parameters=state.final_parameters(),
+        frames=tuple(state.coords.frames),
     )

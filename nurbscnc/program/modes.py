@@ -183,6 +183,9 @@ class ModeSetters:
                 # LinuxCNC's convert_tool_change stops the spindle (unless the INI's
                 # TOOL_CHANGE_WITH_SPINDLE_ON): a G86 after it refuses a stopped spindle.
                 self.m.spindle = "off"
+                # It issues CHANGE_TOOL after the motion before it: the machine stops
+                # there for the operator (or the changer), whatever the tool.
+                self.pause_at_rest("M6", col, tool=self.m.tool_selected)
             else:  # M61 Q<tool>: the tool in the spindle is Q (no change is made)
                 self.m.tool_loaded = self.m61_tool(words, col, used)
 

@@ -20,12 +20,14 @@ _KNOWN = set(_OFFSET_LETTERS) | set("TPDIJQ")
 
 @dataclass(frozen=True)
 class Tool:
-    """One tool: offsets [mm] along X, Y, Z (G43 uses them) and diameter [mm] (G41/G42)."""
+    """One tool: offsets [mm] along X, Y, Z (G43 uses them) and diameter [mm] (G41/G42);
+    ``comment``: the line's text after ``;`` (named to the operator at a tool change)."""
 
     number: int
     offset_mm: tuple = (0.0, 0.0, 0.0)
     diameter_mm: float = 0.0
     pocket: int = 0
+    comment: str = ""
 
     @property
     def length_mm(self) -> float:
@@ -72,5 +74,6 @@ def parse_tool_table(text: str, name: str = "<tool table>") -> dict[int, Tool]:
             offset_mm=(fields.get("X", 0.0), fields.get("Y", 0.0), fields.get("Z", 0.0)),
             diameter_mm=diameter,
             pocket=int(fields.get("P", 0.0)) if abs(fields.get("P", 0.0)) < 2**31 else 0,
+            comment=raw.split(";", 1)[1].strip() if ";" in raw else "",
         )
     return table

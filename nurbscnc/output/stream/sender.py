@@ -141,6 +141,11 @@ class Sender:
             getattr(self.link, f"request_{what}")()
 
     @property
+    def abort_requested(self) -> bool:
+        """Ctrl-C / SIGTERM was asked (a job's work between sections stops for it)."""
+        return self._abort
+
+    @property
     def abort_confirmed(self) -> bool:
         return self.link is not None and self.link.state.abort_confirmed
 
@@ -199,66 +204,60 @@ class Sender:
                 pr,
                 executed=job.executed_before + pr.executed,
                 periods=job.executed_before + pr.periods,
-                note=job.note(),
+                note=job.note(pr.executed),
             )
         self.progress(pr)
 
-    # -- a job: sections, program stops, feed hold and override ------------------------------
-    def run_job(self, job, zero: bool = False, idle_s: float = 0.02) -> list[StreamReport]:
-        """Stream a :class:`~nurbscnc.output.stream.job.Job` section by section; between
-        sections, while the job waits for the operator (a program stop, a feed hold), sleep
-        until :meth:`Job.resume <nurbscnc.output.stream.job.Job.resume>` or an abort.
+    # -- a job's sections (the controller decides them: nurbscnc.controller.run) -------------
+    def stream_section(
+        self,
+        program: PulseProgram,
+        *,
+        session_id=None,
+        zero: bool = False,
+        peak_pulses: int | None = None,
+        program_open: bool = False,
+        hook=None,
+    ) -> StreamReport:
+        """Stream one section of a job (HELLO … END, the card DONE at rest at its end) in the
+        session ``session_id`` (None: a new one); ``hook(link)`` is called on every turn of
+        the loop (the controller's changes while the section streams). Raises like
+        :meth:`stream`."""
+        link = Link(
+            program,
+            self.options,
+            self.byte_s,
+            ignore_credit=self._ignore_credit,
+            session_id=session_id,
+            zero=zero,
+        )
+        if peak_pulses is not None:
+            link.peak_pulses = peak_pulses
+        link.program_open = program_open
+        if self._abort:
+            link.request_abort()
+        self.link = link
+        with contextlib.suppress(Exception):
+            self.port.reset_input_buffer()
+        link.start(self._clock())
+        try:
+            return self._loop(link, hook=hook)
+        except BaseException:
+            if not link.finished:
+                with contextlib.suppress(Exception):
+                    self.port.write(p.encode_message(p.Abort()))
+            raise
 
-        ``zero``: the first section declares the card's position to be the program's start.
-        Returns every section's report; raises like :meth:`stream`.
-        """
+    def wait_idle(self, job, reports: list, idle_s: float = 0.02) -> None:
+        """The card is DONE at rest between sections: wait until the job no longer waits
+        (the operator's continue, the next planned window) or an abort (StreamInterrupted,
+        naming the card's position), reporting progress meanwhile."""
         self.job = job
-        reports: list[StreamReport] = []
-        session = None
-        while not job.finished:
-            program = job.next_section()
-            if program is None:
-                if job.finished:
-                    break
-                self._wait(job, idle_s, reports)
-                continue
-            link = Link(
-                program,
-                self.options,
-                self.byte_s,
-                ignore_credit=self._ignore_credit,
-                session_id=session,
-                zero=zero and not reports,
-            )
-            link.peak_pulses = job.peak_pulses
-            link.program_open = job.section_open
-            if self._abort:
-                link.request_abort()
-            self.link = link
-            with contextlib.suppress(Exception):
-                self.port.reset_input_buffer()
-            link.start(self._clock())
-            try:
-                report = self._loop(link, hook=job.update)
-            except BaseException:
-                if not link.finished:
-                    with contextlib.suppress(Exception):
-                        self.port.write(p.encode_message(p.Abort()))
-                raise
-            reports.append(report)
-            session = report.session_id
-            job.section_done(report.executed_periods)
-        return reports
-
-    def _wait(self, job, idle_s: float, reports: list) -> None:
-        """The card is DONE at rest: wait for the operator (or an abort)."""
         last = -1.0
-        poll = getattr(job, "poll", None)
         while job.waiting is not None:
-            if poll is not None:
-                poll()  # a planning hold ends when the next window is planned
-                if job.waiting is None:
-                    break
+            job.poll()  # a planning hold ends when the next window is planned
+            if job.waiting is None:
+                break
             if self._abort:
                 where = (
                     f"; the card stands at {list(reports[-1].final_position_steps)} steps"

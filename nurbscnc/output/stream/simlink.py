@@ -6,6 +6,8 @@
 lost). Nothing waits: time jumps from one event to the next (a byte arriving, a card period, a
 sender timer), so a stream of seconds runs in milliseconds, the same way every time for a
 seed. The link tests and the stream fault matrix (``bench/stream_bench.py``) use it.
+:class:`SimCard` streams a job's sections the same way, for the controller's simulation
+(:func:`nurbscnc.controller.simulate.simulate_job`).
 """
 
 from __future__ import annotations
@@ -66,7 +68,7 @@ class Relay:
         return frame
 
 
-class _Line:
+class SimLine:
     """A card and the two directions of its line, driven in virtual time."""
 
     def __init__(self, card: CardSim, to_card, to_host, baud: int | None):
@@ -179,7 +181,7 @@ def simulate(  # noqa: PLR0913 - a test harness with everything optional
     card = CardSim(config or CardConfig(speed=1.0), seed=seed)
     byte_s = p.BITS_PER_BYTE_8N1 / baud if baud else 0.0
     link = Link(program, options, byte_s, ignore_credit=ignore_credit)
-    line = _Line(card, to_card or Relay(), to_host or Relay(), baud)
+    line = SimLine(card, to_card or Relay(), to_host or Relay(), baud)
     pending = sorted(events, key=lambda e: e[0])
     limit = max_time_s if max_time_s is not None else 3.0 * program.periods * program.period_s + 10
     t = line.drive(link, 0.0, limit, pending, lambda ev: ev[1](link, card))
@@ -197,85 +199,63 @@ def simulate(  # noqa: PLR0913 - a test harness with everything optional
         return SimResult(None, exc, card, link, t, at_end)
 
 
-@dataclass
-class JobSimResult:
-    """How a simulated job ended: the card, every section's report, the waits
-    (start [s], end [s] or None when still waiting, reason), the error if any."""
+class SimCard:
+    """A card simulator on a simulated line (no faults), streamed section by section in
+    virtual time: the ``card`` of :func:`nurbscnc.controller.run.run_job` in simulations
+    (:func:`nurbscnc.controller.simulate.simulate_job`). ``events``: (time [s], event)
+    pairs, each run by ``run_event(event)`` when virtual time reaches it; ``on_turn(now_s)``
+    is called on every turn before the section's hook. ``t`` is the virtual time [s]."""
 
-    card: CardSim
-    reports: list
-    waits: list
-    error: StreamError | None
-    elapsed_s: float
+    def __init__(
+        self,
+        card: CardSim,
+        *,
+        options: SenderOptions | None = None,
+        baud: int | None = 115200,
+        events=(),
+        run_event=None,
+        max_time_s: float = 600.0,
+    ):
+        self.card, self.options, self.max_time_s = card, options, max_time_s
+        self.byte_s = p.BITS_PER_BYTE_8N1 / baud if baud else 0.0
+        self.line = SimLine(card, Relay(), Relay(), baud)
+        self.pending = sorted(events, key=lambda e: e[0])
+        self.run_event = run_event
+        self.on_turn = None
+        self.t = 0.0
+        self.reports: list[StreamReport] = []
 
-    @property
-    def completed(self) -> bool:
-        return (
-            self.error is None
-            and bool(self.reports)
-            and not (self.waits and self.waits[-1][1] is None)
+    def stream_section(
+        self,
+        program: PulseProgram,
+        *,
+        session_id=None,
+        zero: bool = False,
+        peak_pulses: int | None = None,
+        program_open: bool = False,
+        hook=None,
+    ) -> StreamReport:
+        """Stream one section (as :meth:`~.sender.Sender.stream_section`); raises
+        StreamError when it failed."""
+        link = Link(program, self.options, self.byte_s, session_id=session_id, zero=zero)
+        if peak_pulses is not None:
+            link.peak_pulses = peak_pulses
+        link.program_open = program_open
+
+        def turn(lk: Link) -> None:
+            if self.on_turn is not None:
+                self.on_turn(self.line.now_s)
+            if hook is not None:
+                hook(lk)
+
+        self.t = self.line.drive(
+            link, self.t, self.t + self.max_time_s, self.pending, self.run_event, hook=turn
         )
+        report = link.result()
+        self.reports.append(report)
+        return report
 
-
-def simulate_job(
-    job,
-    config: CardConfig | None = None,
-    *,
-    options: SenderOptions | None = None,
-    baud: int | None = 115200,
-    seed: int = 1,
-    events=(),
-    max_time_s: float = 600.0,
-    zero: bool = False,
-) -> JobSimResult:
-    """Stream a :class:`~.job.Job` to a simulated card in virtual time, section by section.
-
-    ``events``: (time [s], action(job, card)) pairs — the operator's hold, resume, override.
-    While the job waits (a program stop, a feed hold) virtual time jumps to the next event;
-    with none left the run ends, still waiting. ``zero``: the first section declares the
-    card's position to be its start (``stream --zero``).
-    """
-    card = CardSim(config or CardConfig(speed=1.0), seed=seed)
-    byte_s = p.BITS_PER_BYTE_8N1 / baud if baud else 0.0
-    line = _Line(card, Relay(), Relay(), baud)
-    pending = sorted(events, key=lambda e: e[0])
-    run_event = lambda ev: ev[1](job, card)  # noqa: E731
-    feed = getattr(job, "feed", None)
-
-    def hook(link: Link) -> None:
-        if feed is not None:
-            feed.now_s = line.now_s  # a scheduled feed releases windows in virtual time
-        job.update(link)
-
-    t, reports, waits, session = 0.0, [], [], None
-    while not job.finished:
-        program = job.next_section()
-        if program is None:
-            if job.finished:
-                break
-            waits.append([t, None, job.waiting])
-            if job.waiting == "planning":  # until the planner has the next window
-                t = job.feed.next_ready_s(t)
-                card.advance(t)
-                job.feed.now_s = t
-                job.poll()
-            while job.waiting is not None and pending:
-                t = max(t, pending[0][0])
-                card.advance(t)
-                run_event(pending.pop(0))
-            if job.waiting is not None:
-                return JobSimResult(card, reports, waits, None, t)
-            waits[-1][1] = t
-            continue
-        link = Link(program, options, byte_s, session_id=session, zero=zero and not reports)
-        link.peak_pulses = job.peak_pulses
-        link.program_open = job.section_open
-        t = line.drive(link, t, t + max_time_s, pending, run_event, hook=hook)
-        try:
-            report = link.result()
-        except StreamError as exc:
-            return JobSimResult(card, reports, waits, exc, t)
-        reports.append(report)
-        session = report.session_id
-        job.section_done(report.executed_periods)
-    return JobSimResult(card, reports, waits, None, t)
+    def advance(self, t_s: float) -> None:
+        """Let virtual time reach ``t_s`` (the card runs meanwhile)."""
+        self.t = max(self.t, t_s)
+        self.card.advance(self.t)

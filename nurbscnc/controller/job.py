@@ -4,10 +4,12 @@
 clocks like the link. It cuts the program into *sections*, each streamed to the card as one
 stream (HELLO … END, the card DONE at rest at its end):
 
-- a section ends at a program stop that waits — M0, M60, M1 with ``optional_stop`` — or at
-  the end of the program. The planner already brings the tool to rest there (SPEC §7: a stop
-  is a junction of speed 0), and the card is DONE only once its buffer has drained to that
-  point: the job then *waits* until :meth:`Job.resume` (Enter or SIGUSR2 in the CLI).
+- a section ends at a program stop that waits — M0, M60, M1 with ``optional_stop``, a tool
+  change M6, a user M-code M100–M199 (:mod:`.stops`; the section loop :mod:`.run` runs its
+  executable) — or at the end of the program. The planner already brings the tool to rest
+  there (SPEC §7: a stop is a junction of speed 0), and the card is DONE only once its
+  buffer has drained to that point: the job then *waits* until :meth:`Job.resume` (Enter or
+  SIGUSR2 in the CLI).
 - a **feed hold** (:meth:`Job.request_hold`) is applied by :meth:`Job.update` to the running
   link: the periods not yet framed are replaced by the shortest jerk-limited stop along the
   path from the state of the first of them (:func:`~.motion.stop_phases`), then END. What the
@@ -17,6 +19,7 @@ stream (HELLO … END, the card DONE at rest at its end):
 - a **feed override** change (:meth:`Job.set_override`) re-times the periods not yet framed:
   the earliest quintic ramp of the override that keeps |a| ≤ A and |j| ≤ J on every period
   (:func:`~.motion.ramp_fits`); none within the section: it applies from the next section.
+  Above 100 %: the rest is re-planned from the next rest ahead (:mod:`.override`).
 
 A section's periods are computed in chunks (:data:`CHUNK_PERIODS`) ahead of what the link
 frames (the link holds END back meanwhile: ``Link.program_open``), so a hold or an override
@@ -44,35 +47,29 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from nurbscnc.output.stream.motion import (
+from nurbscnc.controller.motion import (
     Motion,
     Rate,
     Track,
     plan_motion,
     play,
-    ramp_duration_s,
-    ramp_fits,
-    resume_motion,
     stop_track,
 )
+from nurbscnc.controller.override import (
+    OVERRIDE_MAX,
+    OVERRIDE_MIN,
+    OVERRIDE_STEP,
+    apply_override,
+    cut_at_rest,
+    replan_raised,
+)
+from nurbscnc.controller.stops import Stop, describe_stop, program_stops
 from nurbscnc.output.stream.quantise import PulseProgram, quantise
+from nurbscnc.plan.profile import time_at_length
 
-#: Override limits [fraction] and the step of the + / - keys.
-OVERRIDE_MIN, OVERRIDE_STEP = 0.10, 0.10
 #: A section's periods are computed in chunks of this many, ahead of what the link frames, so
 #: a hold or an override change re-times a bounded number of periods however long it is.
 CHUNK_PERIODS = 4096
-#: Where a ramp may start, after the first period not yet framed [s] (searched in order).
-RAMP_OFFSETS_S = tuple(np.round(np.arange(0.0, 2.0, 0.025), 3))
-
-
-@dataclass(frozen=True)
-class Stop:
-    """A program stop (M0/M1/M60) at global path length ``s_mm``, source ``line``."""
-
-    s_mm: float
-    line: int
-    code: str
 
 
 @dataclass
@@ -121,15 +118,17 @@ class Section:
     blocked: bool = False  #: the track stops at the planning horizon (more when planned)
     blocked_at: int | None = None  #: the horizon (first piece not planned) it stops at
     at_horizon: bool = False  #: closed at the planning horizon (a planning hold follows)
+    rescale: bool = False  #: cut at a rest: the next section re-plans at a new override
 
 
 class Job:
     """A planned program streamed as a controller; see the module docstring.
 
     ``plan`` a :class:`~nurbscnc.plan.lookahead.Plan` of ``program``; ``machine`` its
-    machine; ``override`` the starting feed override (fraction, 0.1–1: above 1 time scaling
-    would exceed the limits the plan respected). ``feed``: the plan's cut windows as they are
-    planned (module docstring; ``plan`` is then ignored: the first window's plan is used).
+    machine; ``override`` the starting feed override (fraction, 0.1–2: above 1 the rest is
+    re-planned with raised caps, :mod:`.override`). ``feed``: the plan's cut windows as they
+    are planned (module docstring; ``plan`` is then ignored: the first window's plan is
+    used). ``tools``: the tool table ``{number: Tool}``, named at a tool change.
     """
 
     def __init__(
@@ -142,6 +141,7 @@ class Job:
         override: float = 1.0,
         lookahead_pieces: int | None = None,
         feed=None,
+        tools: dict | None = None,
     ):
         self.feed = feed
         self.program = program
@@ -164,6 +164,8 @@ class Job:
         self.lookahead_pieces = lookahead_pieces
         self.optional_stop = optional_stop
         self.override = self._clamp(override)
+        self.scale = 1.0  #: the motion's feed scale: max(override, 1) when it was planned
+        self.pending_override: float | None = None  #: applies at the next rest (above 100 %)
         self.motion: Motion | None = plan_motion(plan)
         self.tau = 0.0  #: where the next section starts, in the motion's profile time
         self.first_section = True
@@ -172,6 +174,8 @@ class Job:
         self.next_stop = 0  #: the first stop not waited at yet
         self.section: Section | None = None
         self.waiting: str | None = None  #: why the job waits for the operator
+        self.at_stop: Stop | None = None  #: the program stop the card stands at
+        self.tools = tools  #: the tool table {number: Tool}, named at a tool change
         self.finished = False
         self.last_point: np.ndarray | None = None
         self.hold_wanted = False
@@ -182,12 +186,12 @@ class Job:
         self.sections = 0
         self.executed_before = 0  #: periods of the finished sections
         self.last_line = 0  #: source line of the last period of the finished sections
+        self.last_steps: np.ndarray | None = None  #: where the last section ended [steps]
+        self.last_s_mm = 0.0  #: and its path length [mm]
+        self._steps_at = (0, 0, None)  #: (section, periods, steps) of the last progress
         # The frames' count width must fit the fastest section: the plan's peak speed (a hold
-        # or an override ≤ 100 % only slows down; +2: rounding, a re-planned rest).
-        v_peak = float(np.max(plan.profile.piece_peak_speed_mm_s))
-        self.peak_pulses = (
-            int(math.ceil(v_peak * self.period_s * float(np.max(self.steps_per_mm)))) + 2
-        )
+        # or an override ≤ 100 % only slows down; a re-plan above 100 % widens it).
+        self.peak_pulses = self._peak_pulses(plan.profile)
 
     # -- requests (plain attribute writes: safe from a signal handler) -----------------------
     def request_hold(self) -> None:
@@ -200,18 +204,21 @@ class Job:
         self.hold_wanted = False
         self.resume_early = self.section is not None and self.section.held
         self.waiting = None
+        self.at_stop = None
 
     def set_override(self, fraction: float) -> None:
         self.override_wanted = self._clamp(fraction)
 
     def step_override(self, steps: int) -> float:
         """+/- keys: change the wanted override by ``steps`` × 10 %; returns it."""
-        base = self.override_wanted if self.override_wanted is not None else self.override
+        base = next(
+            r for r in (self.override_wanted, self.pending_override, self.override) if r is not None
+        )
         self.set_override(round(base + steps * OVERRIDE_STEP, 6))
         return self.override_wanted
 
     def _clamp(self, fraction: float) -> float:
-        return float(min(max(fraction, OVERRIDE_MIN), 1.0))
+        return float(min(max(fraction, OVERRIDE_MIN), OVERRIDE_MAX))
 
     # -- sections ----------------------------------------------------------------------------
     def next_section(self) -> PulseProgram | None:
@@ -225,12 +232,21 @@ class Job:
             self.hold_wanted = False
             self.waiting = "feed hold"
             return None
+        if self.pending_override is not None:  # at rest: the part above 100 % too
+            self.override, self.pending_override = self.pending_override, None
         if self.override_wanted is not None:  # at rest: a new override applies at once
             self.override, self.override_wanted = self.override_wanted, None
+        if max(self.override, 1.0) != self.scale:
+            self.scale = max(self.override, 1.0)
+            s_now = float(self.motion.state(np.array([self.tau]))[0][0])
+            self._replan(s_now, self.motion.wait_s if self.tau == 0.0 else 0.0)
+            if self.motion is None:
+                self.finished = True
+                return None
         motion = self.motion
         stop = self._next_waiting_stop()
         tau_b = self._end_tau(stop)
-        rate = Rate(self.override)
+        rate = Rate(min(self.override, 1.0))
         track, complete = play(
             motion,
             self.tau,
@@ -436,6 +452,7 @@ class Job:
         sec = self.section
         self.executed_before += executed_periods
         self.last_point = sec.track.points_mm[-1].copy()
+        self.last_steps, self.last_s_mm = sec.program.end_steps, float(sec.track.s_mm[-1])
         if sec.program.periods:
             self.last_line = int(sec.program.line[-1])
         self.section = None
@@ -443,11 +460,7 @@ class Job:
             self.tau = sec.tau_b
             self.poll()
             if not self.motion_is_plan:  # the rest from here on the plan as planned now
-                self.motion = resume_motion(
-                    self.plan, float(sec.track.s_mm[-1]), 0.0, self.lookahead_pieces
-                )
-                self.motion_horizon = self.horizon
-                self.tau = 0.0
+                self._replan(float(sec.track.s_mm[-1]), 0.0)
             self.planning["holds"] += 1
             if self.feed_error is not None and self._horizon_tau() <= self.tau:
                 raise self.feed_error
@@ -455,20 +468,18 @@ class Job:
                 self.waiting = "planning"
                 self._hold_since = self.feed.clock()
             return
+        if sec.rescale:  # at a rest: the next section re-plans at the new override
+            self.tau = sec.tau_b
+            return
         if sec.held:
-            self.motion = resume_motion(
-                self.plan, float(sec.track.s_mm[-1]), sec.hold_wait_s, self.lookahead_pieces
-            )
-            self.motion_is_plan = False
-            self.motion_horizon = self.horizon
-            self.tau = 0.0
+            self._replan(float(sec.track.s_mm[-1]), sec.hold_wait_s)
             self.waiting = None if self.resume_early else "feed hold"
             self.hold_wanted = self.resume_early = False
         elif sec.ends_at is not None:
             self.tau = sec.tau_b
             self.next_stop = sec.ends_at + 1
-            stop = self.stops[sec.ends_at]
-            self.waiting = f"{stop.code} at line {stop.line}"
+            self.at_stop = self.stops[sec.ends_at]
+            self.waiting = describe_stop(self.at_stop, self.tools)
         else:
             self.motion = None
         if self.motion is None:
@@ -477,6 +488,23 @@ class Job:
         elif self.hold_wanted and self.waiting is None:
             self.hold_wanted = False
             self.waiting = "feed hold"
+
+    def _replan(self, s_mm: float, wait_s: float) -> None:
+        """The rest of the plan from rest at global path length ``s_mm`` (``wait_s``: a
+        dwell still to finish there) at the current feed scale (above 100 %:
+        :func:`~.override.replan_raised`); None when nothing is left."""
+        self.motion = replan_raised(self, s_mm, wait_s)
+        self.motion_is_plan = False
+        self.motion_horizon = self.horizon
+        self.tau = 0.0
+        if self.motion is not None:
+            self.peak_pulses = max(self.peak_pulses, self._peak_pulses(self.motion.profile))
+
+    def _peak_pulses(self, profile) -> int:
+        """The frames' count width for a profile: its peak speed's pulses per period (+2:
+        rounding, a re-planned rest)."""
+        v_peak = float(np.max(profile.piece_peak_speed_mm_s))
+        return int(math.ceil(v_peak * self.period_s * float(np.max(self.steps_per_mm)))) + 2
 
     # -- changes while a section streams -------------------------------------------------------
     def update(self, link) -> None:
@@ -496,6 +524,8 @@ class Job:
             self._apply_hold(link)
         elif self.override_wanted is not None and not sec.override_deferred:
             self._apply_override(link)
+        elif self.pending_override is not None and not sec.rescale:
+            cut_at_rest(self, link)
 
     def _apply_hold(self, link) -> None:
         sec = self.section
@@ -518,58 +548,20 @@ class Job:
         self.hold_wanted = False
 
     def _apply_override(self, link) -> None:
-        sec = self.section
-        r1 = self.override_wanted
-        k = link.sent_periods
-        tr = sec.track
-        u_k = float(tr.u_s[k])
-        r_k = float(sec.rate.r(np.array([u_k - sec.rate_u0_s]))[0])
-        if abs(r1 - r_k) < 1e-12:
-            self.override, self.override_wanted = r1, None
-            return
-        # A ramp in progress finishes first.
-        busy_until = sec.rate.end_u + sec.rate_u0_s - u_k if sec.rate.ramping else 0.0
-        v_max = float(np.max(self.plan.profile.piece_peak_speed_mm_s))
-        d0 = ramp_duration_s(r1 - r_k, v_max, self.a_max, self.j_max)
-        wait = self._wait_at(tr, k)
-        for offset in RAMP_OFFSETS_S:
-            if offset < busy_until:
-                continue
-            for d in (d0, 2 * d0, 4 * d0):
-                rate = Rate(r_k, r1, float(offset), d)
-                # Check the ramp's periods only (cheap), then time the whole rest once.
-                tau_w = min(sec.tau_b, float(tr.tau_s[k] + rate.integral(offset + d)))
-                window, _ = play(
-                    self.motion, float(tr.tau_s[k]), tau_w, rate, self.period_s, wait_s=wait
-                )
-                if not ramp_fits(window, self.a_max, self.j_max):
-                    continue
-                tail, complete = play(
-                    self.motion,
-                    float(tr.tau_s[k]),
-                    sec.tau_b,
-                    rate,
-                    self.period_s,
-                    wait_s=wait,
-                    max_samples=CHUNK_PERIODS,
-                )
-                tail, sec.blocked = self._within_horizon(tail, sec.tau_b)
-                complete = complete and not sec.blocked
-                tail.points_mm[0] = tr.points_mm[k]
-                track = tr.head(k + 1).then(tail)
-                program = self._pulses(track, k, sec.program)
-                sec.complete = complete
-                link.program_open = not complete
-                link.replace_unsent(program)
-                sec.track, sec.program = track, program
-                sec.rate, sec.rate_u0_s = rate, u_k
-                self.override, self.override_wanted = r1, None
-                return
-        self.notes.append(
-            f"no smooth change of the feed override to {r1:.0%} fits the "
-            "limits in this section: it applies from the next one"
-        )
-        sec.override_deferred = True  # pending until the next section starts
+        apply_override(self, link, CHUNK_PERIODS)
+
+    # The helpers the override's module uses on the running section.
+    def horizon_tau(self) -> float:
+        return self._horizon_tau()
+
+    def within_horizon(self, track: Track, tau_b: float) -> tuple[Track, bool]:
+        return self._within_horizon(track, tau_b)
+
+    def wait_at(self, tr: Track, k: int) -> float:
+        return self._wait_at(tr, k)
+
+    def pulses_of(self, track: Track, k: int, program: PulseProgram) -> PulseProgram:
+        return self._pulses(track, k, program)
 
     def _wait_at(self, tr: Track, k: int) -> float:
         """A dwell in progress at sample ``k``: the part still to wait [s] (0: none)."""
@@ -590,11 +582,52 @@ class Job:
             return 0
         return int(sec.program.line[min(executed_in_section, sec.program.periods - 1)])
 
-    def note(self) -> str:
-        """What the progress line says besides the counts."""
+    def progress_of(self, executed_in_section: int):
+        """``(position_mm, done, left_s)`` after ``executed_in_section`` periods of the
+        running section (or at rest after the last one): the card's position [mm] in machine
+        coordinates (its steps over the profile's steps per mm: exact, the steps are what the
+        card counts), the part of the program's path done [0–1], and the time left [s]
+        (estimate: the plan's profile time from there over the override, plus the dwells
+        after it). None before the first section."""
+        sec = self.section
+        if sec is not None and sec.program.periods:
+            k = min(max(int(executed_in_section), 0), sec.program.periods)
+            # Summed on from the last call's count (the periods executed are framed, never
+            # changed again): a progress line costs the periods since the last one.
+            n0, k0, base = self._steps_at
+            if n0 != self.sections or k0 > k:
+                k0, base = 0, sec.program.start_steps
+            steps = base + sec.program.pulses[k0:k].sum(axis=0)
+            self._steps_at = (self.sections, k, steps)
+            s_mm = float(sec.track.s_mm[min(k, len(sec.track) - 1)])
+        elif self.last_steps is not None:
+            steps, s_mm = self.last_steps, self.last_s_mm
+        else:
+            return None
+        position_mm = np.asarray(steps, dtype=float) / self.steps_per_mm
+        pieces, profile = self.plan.pieces, self.plan.profile
+        total_mm = float(np.sum(pieces.length_mm))
+        done = min(max(s_mm / total_mm, 0.0), 1.0) if total_mm > 0.0 else 1.0
+        t_at_s = float(time_at_length(profile, np.array([min(s_mm, total_mm)]))[0])
+        ends = np.asarray(profile.piece_start_mm) + np.asarray(pieces.length_mm)
+        dwells_s = float(np.sum(np.asarray(pieces.dwell_after_s)[ends > s_mm + 1e-9]))
+        left_s = max(profile.duration_s - t_at_s, 0.0) / self.override + dwells_s
+        return position_mm, done, left_s
+
+    def note(self, executed_in_section: int | None = None) -> str:
+        """What the progress line says besides the counts: the override, the card's
+        position [mm], the part done and the time left, and why the job waits (last)."""
         parts = [f"feed {self.override:.0%}"]
-        if self.override_wanted is not None:
-            parts.append(f"→ {self.override_wanted:.0%}")
+        wanted = self.override_wanted if self.override_wanted is not None else None
+        wanted = self.pending_override if wanted is None else wanted
+        if wanted is not None:
+            parts.append(f"→ {wanted:.0%}")
+        where = None if executed_in_section is None else self.progress_of(executed_in_section)
+        if where is not None:
+            position_mm, done, left_s = where
+            parts.append(" ".join(f"{a} {v:.3f}" for a, v in zip("XYZ", position_mm)) + " mm")
+            left = int(round(left_s))
+            parts.append(f"{done:.0%} done, {left // 60}:{left % 60:02d} left")
         if self.waiting:
             parts.append(f"waiting: {self.waiting}")
         elif self.section is not None and self.section.held:
@@ -622,72 +655,3 @@ class Job:
                 "held_s": round(self.planning["held_s"], 6),
             }
         return out
-
-
-def program_stops(program, plan) -> list[Stop]:
-    """The program stops (kind "pause": M0, M1, M60) at their path lengths in ``plan``: the
-    end of the last piece made from a segment before the stop."""
-    seg = np.asarray(plan.pieces.segment)
-    ends = np.asarray(plan.profile.piece_start_mm) + np.asarray(plan.pieces.length_mm)
-    out = []
-    for i, s in enumerate(program.segments):
-        if s.kind != "pause":
-            continue
-        r = int(np.searchsorted(seg, i, side="left")) - 1
-        out.append(Stop(float(ends[r]) if r >= 0 else 0.0, int(s.line), str(s.code)))
-    return out
-
-
-def start_at_line(program, line: int):
-    """The program run from source line ``line`` on, as LinuxCNC's run-from-line: the whole
-    program was interpreted (so the segments from ``line`` on carry every modal state set
-    before it: units, offsets, plane, feed, tool), the segments before it are dropped, and a
-    lead-in brings the tool from the program's start to the start of line ``line`` safely.
-
-    Lead-in (decision; docs/protocol.md): up to Z_safe = the highest Z of the program's start,
-    of every point the program reaches before ``line`` and of the target (the clearance the
-    program itself used, so it is known to be free and inside the soft limits; +Z is up), a
-    rapid across at Z_safe, then down to the target: a rapid when the first move of ``line``
-    is a rapid, else at that move's programmed feed (never a rapid plunge into material).
-    Raises ValueError when no motion starts at or after ``line``.
-    """
-    from dataclasses import replace
-
-    from nurbscnc.geometry.segments import Line
-
-    segs = list(program.segments)
-    first = next((i for i, s in enumerate(segs) if s.line >= line), None)
-    moving = (
-        next((i for i in range(first, len(segs)) if segs[i].kind not in ("dwell", "pause")), None)
-        if first is not None
-        else None
-    )
-    if moving is None:
-        raise ValueError(f"--from-line {line}: no motion at or after line {line}")
-    target = np.asarray(segs[moving].start_mm, dtype=float)
-    here = np.asarray(program.start_mm, dtype=float)
-    before = [np.asarray(s.end_mm, dtype=float)[2] for s in segs[:first]]
-    z_safe = float(max([here[2], target[2], *before]))
-    feed = segs[moving].feed_mm_s
-    plunge_rapid = segs[moving].kind == "rapid" or not feed > 0.0
-    path = [
-        here,
-        np.array([here[0], here[1], z_safe]),
-        np.array([target[0], target[1], z_safe]),
-        target,
-    ]
-    lead = []
-    for i, (a, b) in enumerate(zip(path[:-1], path[1:])):
-        if np.allclose(a, b, rtol=0.0, atol=1e-12):
-            continue
-        rapid = i < 2 or plunge_rapid
-        lead.append(
-            Line(
-                tuple(a.tolist()),
-                tuple(b.tolist()),
-                0.0 if rapid else float(feed),
-                int(segs[moving].line),
-                rapid=rapid,
-            )
-        )
-    return replace(program, segments=tuple(lead + segs[first:]))

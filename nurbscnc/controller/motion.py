@@ -170,11 +170,16 @@ def plan_motion(plan) -> Motion:
 
 
 def resume_motion(
-    plan, s_mm: float, wait_s: float = 0.0, lookahead_pieces: int | None = None
+    plan,
+    s_mm: float,
+    wait_s: float = 0.0,
+    lookahead_pieces: int | None = None,
+    caps_mm_s: np.ndarray | None = None,
 ) -> Motion | None:
     """The rest of ``plan`` from global path length ``s_mm``, planned from rest (SPEC §7: the
     planner's own :func:`~nurbscnc.plan.plans.profile_over` over the remaining pieces,
-    with the plan's final caps and per-piece limits); None when nothing is left to move."""
+    with the plan's final caps — or ``caps_mm_s`` (k,), a feed override's raised caps — and
+    per-piece limits); None when nothing is left to move."""
     pieces = plan.pieces
     starts = np.asarray(plan.profile.piece_start_mm, dtype=float)
     length = np.asarray(pieces.length_mm, dtype=float)
@@ -190,9 +195,10 @@ def resume_motion(
     # dynamics check's shaping and the axes' limits still hold), from rest at s_mm.
     smooth = junction_caps(pieces)[i0:].copy()  # > 0 where the path is tangent-continuous
     smooth[0] = 0.0
+    caps = plan.caps_mm_s if caps_mm_s is None else caps_mm_s
     profile = profile_over(
         left,
-        np.asarray(plan.caps_mm_s, dtype=float)[i0:],
+        np.asarray(caps, dtype=float)[i0:],
         smooth,
         plan.limits.tail(i0),
         lookahead_pieces,
