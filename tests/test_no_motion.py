@@ -167,3 +167,18 @@ def test_batch_reports_the_exact_cycle_time(tmp_path):
     assert result.exit_code == 0, result.output
     (row,) = json.loads(result.stdout)["results"]
     assert row["cycle_time_s"] == pytest.approx(0.2605, rel=1e-12)
+
+
+def test_stream_writes_the_parameters_back(tmp_path):
+    """An offset set-up program has run when there is nothing to send: its parameters
+    persist as run --write-var writes them (G92 on: #5210 = 1)."""
+    var = HERE / "golden" / "interp_linuxcnc" / "rs274ngc.var"
+    streamed, ran = tmp_path / "s.var", tmp_path / "r.var"
+    for path in (streamed, ran):
+        path.write_text(var.read_text())
+    result = cli("stream", NOMOTION, "--port", tmp_path / "no-such-port", "--var", streamed)
+    assert result.exit_code == 0, result.output
+    result = cli("run", NOMOTION, "-o", tmp_path / "p.csv", "--var", ran, "--write-var")
+    assert result.exit_code == 0, result.output
+    assert streamed.read_text() == ran.read_text() != var.read_text()
+    assert "5210\t1.000000" in streamed.read_text()
