@@ -16,6 +16,27 @@ EXIT_IO = 3  # cannot read or write a file, port trouble
 EXIT_INTERRUPTED = 130
 
 
+#: Characters a terminal acts on rather than shows, as printable escapes: the C0 controls,
+#: DEL, the C1 controls (0x9B is a one-byte CSI) as ``\xNN``; the bidirectional embeddings,
+#: overrides and isolates (U+202A-U+202E, U+2066-U+2069: text that displays in another
+#: order than it reads) as ``\uNNNN``. Python's own escape notation, so an escape reads the
+#: same as in a ``repr`` of the text.
+_ESCAPES = {c: f"\\x{c:02x}" for c in (*range(0x20), *range(0x7F, 0xA0))} | {
+    c: f"\\u{c:04x}" for c in (*range(0x202A, 0x202F), *range(0x2066, 0x206A))
+}
+#: The same without line feed and tab: for whole screens of output (their lines and columns).
+_ESCAPES_KEEP_LAYOUT = {c: v for c, v in _ESCAPES.items() if c not in (0x0A, 0x09)}
+
+
+def printable(text: str, keep_layout: bool = False) -> str:
+    """``text`` safe to show on a terminal: every control character is written as its escape
+    (ESC as ``\x1b``, BEL as ``\x07``, CSI as ``\x9b``, U+202E as ``\u202e``), so text from a
+    program or a file (a ``(MSG, …)``, a source line, a file name) can neither move the
+    cursor, retitle or clear the terminal, nor reorder what is shown. ``keep_layout`` keeps
+    line feeds and tabs (a whole screen of output, not one line of user text)."""
+    return str(text).translate(_ESCAPES_KEEP_LAYOUT if keep_layout else _ESCAPES)
+
+
 @dataclass(frozen=True)
 class SourcePos:
     """A position in a source text: 1-based line and column, and the line's text."""

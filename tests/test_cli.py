@@ -26,7 +26,7 @@ import nurbscnc
 import nurbscnc.cli.console as console
 import nurbscnc.cli.handle as handle
 from nurbscnc.cli.main import main
-from nurbscnc.errors import NurbsCncError, OutputError, SourcePos
+from nurbscnc.errors import NurbsCncError, OutputError, SourcePos, printable
 
 ROOT = Path(__file__).resolve().parents[1]
 NACA = ROOT / "programs" / "naca2415.nc"
@@ -328,29 +328,29 @@ def test_cut_source_line_keeps_the_caret_on_its_character(column):
 def test_cut_source_line_property(text, data):
     column = data.draw(st.integers(1, len(text) + 1))
     shown, caret = console.echo_source_line(text, column, width=40)
-    visible = "".join(
-        " " if c == "\t" else "\ufffd" if ord(c) < 0x20 or 0x7F <= ord(c) < 0xA0 else c
-        for c in text
-    )
-    assert len(shown) <= 42
+    spaced = text.replace("\t", " ")
+    visible = printable(spaced)
+    assert len(shown) <= 6 * 40 + 2  # an escape is at most 6 characters (\u202e)
     assert shown.strip("…") in visible
+    assert not any(ord(c) < 0x20 or 0x7F <= ord(c) < 0xA0 for c in shown)
     if column <= len(text):
-        assert shown[caret] == visible[column - 1]
+        assert shown[caret:].startswith(printable(spaced[column - 1]))
     if len(text) <= 40:
         assert shown == visible
 
 
-def test_control_characters_in_source_line_are_not_echoed():
-    exc = NurbsCncError("bad", SourcePos(1, 9, "\x1b[2J\x07\tX\rG28\x9b1m"))
-    shown = console.format_error(exc, "f.nc").splitlines()[1]
+def test_control_characters_in_source_line_are_escaped():
+    exc = NurbsCncError("bad", SourcePos(1, 7, "\x1b[2J\x07\tX\rG28\x9b1m"))
+    shown, caret_line = console.format_error(exc, "f.nc").splitlines()[1:]
     assert "\x1b" not in shown and "\x07" not in shown and "\r" not in shown
-    assert shown == "    " + "\ufffd[2J\ufffd X\ufffdG28\ufffd1m"
+    assert shown == "    " + r"\x1b[2J\x07 X\x0dG28\x9b1m"
+    assert shown[caret_line.index("^")] == "X"  # column 7 is the X, after two escapes
 
 
-def test_control_characters_in_file_name_and_message_are_not_echoed():
+def test_control_characters_in_file_name_and_message_are_escaped():
     exc = NurbsCncError("bad word '\x1b]0;owned\x07'" + "x" * 5000, SourcePos(3, 1, "G1"))
     head = console.format_error(exc, "a\nb\x1b.nc").splitlines()[0]
-    assert head.startswith("a\ufffdb\ufffd.nc:3:1: error: bad word '\ufffd]0;owned\ufffd'")
+    assert head.startswith(r"a\x0ab\x1b.nc:3:1: error: bad word '\x1b]0;owned\x07'")
     assert head.endswith(f"… ({len(exc.message)} characters)")
     assert len(head) < console.MESSAGE_CHARS + 100
 
@@ -361,7 +361,11 @@ def test_cli_error_on_long_line_is_short(tmp_path):
     result = run(["check", path])
     assert result.exit_code == 2
     assert len(error_report(result.stderr)) < 600
-    assert error_report(result.stderr).startswith(f"{path}:2:200004: error: ")
+    # Over the line limit (parse.MAX_LINE_CHARS) on the plain-word path too: the caret
+    # marks the first character past it.
+    assert error_report(result.stderr).startswith(
+        f"{path}:2:65537: error: line is too long (200006 characters; at most 65536)"
+    )
 
 
 def test_run_names_errors_with_the_file(tmp_path):

@@ -8,10 +8,14 @@ CliRunner:
 - hypothesis with grammar-shaped programs (G/M codes, axis words, numbers from tiny to
   hundreds of digits, expressions, parameters, comments, NURBS blocks);
 - a mutation fuzzer over real programs (the corpus, ``$NURBSCNC_CORPUS`` or
-  ``../shared/corpus``; ``programs/*.nc``; ``tests/bad/*.nc``): byte flips and overwrites, line
-  duplication, deletion and swaps, digit runs inserted into numbers, hostile tokens, splices
-  of lines from another program, truncation. Deterministic: mutant ``i`` comes from
-  ``random.Random(seed + i)``.
+  ``../shared/corpus``; ``programs/*.nc``; ``tests/bad/*.nc``; ``tests/fuzz/*.nc``): byte
+  flips and overwrites, line duplication, deletion and swaps, digit runs inserted into
+  numbers, hostile tokens, splices of lines from another program, truncation.
+  Deterministic: mutant ``i`` comes from ``random.Random(seed + i)``.
+
+A regression corpus (:data:`REGRESSIONS`) replays, at every budget, the hostile inputs earlier
+campaigns found beyond programs: over-long lines, deep or out-of-range machine profiles,
+malformed NPZ point files, terminal controls in messages, a stream over a noisy line.
 
 Every outcome must be exit 0, 2 or 3, with a message on stderr for 2 and 3 (bounded in size:
 source lines are cut), and never a traceback. Work is bounded: every run has a wall-clock
@@ -344,6 +348,7 @@ def seed_programs() -> dict[str, bytes]:
         (corpus, "*.ngc"),
         (ROOT / "programs", "*.nc"),
         (ROOT / "tests" / "bad", "*.nc"),
+        (ROOT / "tests" / "fuzz", "*.nc"),
     ):
         if folder.is_dir():
             for path in sorted(folder.rglob(pattern)):
@@ -581,3 +586,119 @@ KNOWN_ELSEWHERE = {
 def known_elsewhere(problems: list[str]) -> str | None:
     text = " ".join(problems)
     return next((owner for sig, owner in KNOWN_ELSEWHERE.items() if sig in text), None)
+
+
+# ------------------------------------------------------------------------------ regressions
+
+
+def _profile(tmp: Path, key: str, value: str) -> Path:
+    """The default profile with ``[limits] key = value``."""
+    from nurbscnc.machine.discovery import default_profile_text
+
+    text = re.sub(rf"(?m)^{key} = .*$", f"{key} = {value}", default_profile_text())
+    path = tmp / f"{key}.toml"
+    path.write_text(text)
+    return path
+
+
+def _npz_bad_directory(tmp: Path) -> Path:
+    import numpy as np
+
+    path = tmp / "points.npz"
+    t = np.arange(20) * 1e-3
+    np.savez(path, t=t, x=t, y=t, z=t, feed=t + 1, piece=0 * t, line=1 + 0 * t)
+    data = bytearray(path.read_bytes())
+    k = data.rfind(b"PK\x01\x02")
+    data[k : k + 4] = b"XXXX"
+    path.write_bytes(bytes(data))
+    return path
+
+
+def _npy_renamed(tmp: Path) -> Path:
+    import numpy as np
+
+    path = tmp / "array.npz"
+    with open(path, "wb") as fh:
+        np.save(fh, np.zeros((20, 7)))
+    return path
+
+
+PROGRAM = b"G21 G90\nG1 X1 Y1 F600\nM2\n"
+
+#: name -> (setup(tmp) -> (args, stdin bytes), exit code, words the message must hold, words
+#: stdout and stderr must not hold).
+REGRESSIONS = {
+    "plain_word_line_10_mb": (
+        lambda tmp: (["check", "-"], b"G21\nG1 X1 F600 " + b"G1 " * 3_400_000 + b"\nM2\n"),
+        2,
+        "<stdin>:2:65537: error: line is too long",
+        (),
+    ),
+    "profile_nested_1000_deep": (
+        lambda tmp: (
+            ["check", "-", "--machine", str(_write(tmp / "deep.toml", _DEEP))],
+            PROGRAM,
+        ),
+        2,
+        "nested more than",
+        ("RecursionError",),
+    ),
+    "npz_bad_central_directory": (
+        lambda tmp: (["simulate", str(_npz_bad_directory(tmp))], b""),
+        2,
+        "not a reference-point NPZ file",
+        ("BadZipFile",),
+    ),
+    "npy_renamed_npz": (
+        lambda tmp: (["simulate", str(_npy_renamed(tmp))], b""),
+        2,
+        "a single .npy array",
+        ("TypeError",),
+    ),
+    "msg_with_terminal_controls": (
+        lambda tmp: (["check", "-"], (ROOT / "tests" / "fuzz" / "msg_controls.nc").read_bytes()),
+        0,
+        r"\x1b]0;pwned\x07\x1b[2J",
+        ("\x1b", "\x07", "\x9b"),
+    ),
+    "contour_tolerance_1e-300": (
+        lambda tmp: (
+            ["plan", "-", "--machine", str(_profile(tmp, "contour_tolerance_um", "1e-300"))],
+            PROGRAM,
+        ),
+        2,
+        "limits.contour_tolerance_um must be >= 0.1 and <= 10000",
+        (),
+    ),
+}
+_DEEP = "a = " + "[" * 1000 + "]" * 1000 + "\n"
+
+
+def _write(path: Path, text: str) -> Path:
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.parametrize("name", sorted(REGRESSIONS))
+def test_regression_corpus(name, tmp_path):
+    setup, code, words, absent = REGRESSIONS[name]
+    args, data = setup(tmp_path)
+    result = invoke(args, data, CHECK_TIMEOUT_S)
+    assert result is not None, f"{name}: timed out"
+    assert_ok(args, data[:300], result)
+    text = result.stdout + result.stderr
+    assert result.exit_code == code and words in text, (name, result.exit_code, text[-600:])
+    assert not any(a in text for a in absent), (name, text[-600:])
+
+
+@pytest.mark.parametrize("kind", ["drop", "corrupt"])
+def test_regression_noisy_line_stream(kind):
+    """A stream through lines losing (or damaging) 2 % of their bytes both ways completes
+    exactly (tests/test_stream_link.py measures it on more seeds)."""
+    from tests.test_stream_link import AIRFOIL, NOISY_CARD, _noisy
+
+    STATS["inputs_stream"] += 1
+    r = _noisy(kind, 0.02, SEED)
+    assert r.completed and r.exact(AIRFOIL), r.error
+    assert r.report.final_position_steps == tuple(int(v) for v in AIRFOIL.end_steps)
+    assert NOISY_CARD.speed is None  # a card executing periods as they arrive (no underrun)

@@ -467,22 +467,31 @@ def test_program_bound_of_a_polyline_run_closed_form(mode):
     """A zig-zag polyline (corners of 0.1–6°) at one feed, then a feed change, a dwell and a
     second run: under G64 P the corners are passed (each run of constant cap is one piece
     of the bound, its inner junctions dropped), rest to rest per run: trapezoids of the
-    runs' lengths, the feed change exactly at its junction (closed form below); under G61
-    every corner stops: a trapezoid per line."""
+    runs' lengths, the feed change exactly at its junction (closed form below), each
+    run shorter by what its corners' blends may cut (a corner of turning θ at most
+    s = min(2P tan(θ/2), a + b − |AB|) for legs a, b; a line at most min(L, s_before +
+    s_after)); under G61 every corner stops: a trapezoid per line."""
     rng = np.random.default_rng(4)
     lines, pts, x, y, heading = [f"G21 G17 G90 G94 {mode}", "G0 X0 Y0", "F1800"], [], 0.0, 0.0, 0.0
     runs = []
     for feed, n in ((1800.0, 400), (3000.0, 300)):
-        length = 0.0
+        steps, turns = [], []
         lines.append(f"F{feed:g}")
-        for _ in range(n):
-            heading += float(rng.choice([-1.0, 1.0]) * rng.uniform(0.1, 6.0)) * math.pi / 180
+        for i in range(n):
+            turn = float(rng.choice([-1.0, 1.0]) * rng.uniform(0.1, 6.0)) * math.pi / 180
+            heading += turn
+            if i:
+                turns.append(abs(turn))
             step = float(rng.uniform(0.2, 1.0))
             x, y = x + step * math.cos(heading), y + step * math.sin(heading)
             lines.append(f"G1 X{x:.9f} Y{y:.9f}")
             pts.append((x, y))
-            length += step
-        runs.append((feed / 60.0, length))
+            steps.append(step)
+        a, b, theta = np.array(steps[:-1]), np.array(steps[1:]), np.array(turns)
+        chord = np.sqrt(a * a + b * b + 2.0 * a * b * np.cos(theta))
+        save = np.minimum(2.0 * 0.01 * np.tan(theta / 2.0), a + b - chord)
+        around = np.r_[save, 0.0] + np.r_[0.0, save]
+        runs.append((feed / 60.0, float(np.sum(np.array(steps) - np.minimum(steps, around)))))
         if len(runs) == 1:
             lines.append("G4 P0.5")
     lines.append("M2")

@@ -73,6 +73,28 @@ def test_stream_program_over_pty_exits_0_at_the_programs_end(tmp_path):
     assert report["executed_periods"] == card.executed_periods == report["periods"]
     assert card.position.tolist() == [8000, 0, 0] and card.state.name == "DONE"
     assert set(report) >= {"frames_sent", "retransmits", "duration_s", "bytes_sent"}
+    assert report["frame_error_rate"] == 0.0 and report["batch_periods"] == 16
+
+
+def test_stream_stall_limit_option_reaches_the_sender(tmp_path, monkeypatch):
+    import nurbscnc.output.stream.sender as sender_module
+
+    seen = []
+    real = sender_module.Sender.__init__
+
+    def capture(self, ser, options, **kwargs):
+        seen.append(options)
+        real(self, ser, options, **kwargs)
+
+    monkeypatch.setattr(sender_module.Sender, "__init__", capture)
+    nc = tmp_path / "part.nc"
+    nc.write_text(GOOD)
+    with card_on("pty") as (_card, ep):
+        result = run_stream([nc, "--port", ep.path, "--stall-limit", "7.5"])
+    assert result.exit_code == 0, result.output
+    assert seen and seen[0].stall_limit_s == 7.5 and "noisy line" not in result.stderr
+    bad = run_stream([nc, "--port", "/dev/null", "--stall-limit", "0"])
+    assert bad.exit_code == 2 and "--stall-limit" in bad.stderr
 
 
 def test_stream_plans_while_streaming_and_reports_the_planning(tmp_path):

@@ -150,9 +150,31 @@ def stream_report(program: str, job, reports: list, mach=None) -> dict:
         "frames_sent": sum(r.frames_sent for r in reports),
         "bytes_sent": sum(r.bytes_sent for r in reports),
         "retransmits": sum(r.retransmits for r in reports),
+        # over every part: lost copies of acknowledged frames / all their copies
+        "frame_error_rate": _frame_error_rate(reports),
         "duration_s": sum(r.duration_s for r in reports),
-        **extra,
+        **_noted(extra, reports),
     }
     if mach is not None:
         body["final_position_mm"] = position_mm(reports[-1].final_position_steps, mach)
     return {"ok": True, "program": "<stdin>" if program == "-" else program, **body}
+
+
+def _frame_error_rate(reports: list) -> float:
+    """The measured frame error rate of all the parts, weighted by their frames sent."""
+    frames = sum(r.frames_sent for r in reports)
+    if not frames:
+        return 0.0
+    return sum(r.frame_error_rate * r.frames_sent for r in reports) / frames
+
+
+def _noted(extra: dict, reports: list) -> dict:
+    """``extra`` (the job's report) with a note on a noisy line, when frames were lost."""
+    rate = _frame_error_rate(reports)
+    if not rate:
+        return extra
+    note = (
+        f"noisy line: {rate:.1%} of the frames' copies lost or damaged; "
+        f"{reports[-1].batch_periods} periods per frame at the end"
+    )
+    return {**extra, "notes": [*extra.get("notes", []), {"line": None, "message": note}]}

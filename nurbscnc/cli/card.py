@@ -90,7 +90,9 @@ def _card_errors(func):
         try:
             return func(*args, **kwargs)
         except NurbsCncError as exc:
-            click.echo(f"card-sim: error: {exc.message}", err=True)
+            from nurbscnc.errors import printable  # (a message may quote a file name)
+
+            click.echo(f"card-sim: error: {printable(exc.message)}", err=True)
             sys.exit(exc.exit_code)
 
     return wrapper

@@ -59,3 +59,18 @@ def make_plan(program: str, **settings):
     from nurbscnc.app.planning import make_plan as plan_program
 
     return plan_program(program, **settings, announce=announce_machine)
+
+
+def nothing_to_send(program: str, as_json: bool, var_path: str | None) -> None:
+    """``stream`` of a program with no motion (offsets, tool changes, dwells only): the port
+    is not opened, exit 0; the program has run, so its parameters were written back to
+    ``var_path`` (None: no parameter file)."""
+    import json
+
+    if as_json:
+        click.echo(json.dumps({"ok": True, "program": program, "motion": False}))
+        return
+    kept = f"; parameters written to {var_path}" if var_path else ""
+    click.echo(
+        f"{program}: no motion (offsets, tool changes or dwells only): nothing to send{kept}"
+    )

@@ -11,7 +11,7 @@ import contextlib
 import errno
 import sys
 
-from nurbscnc.errors import NurbsCncError
+from nurbscnc.errors import NurbsCncError, printable
 
 
 def _rich_console_class():
@@ -20,8 +20,23 @@ def _rich_console_class():
     would exit 1), on stderr it is ignored. The unwritten text is dropped either way. (Built on
     first use: rich is imported when a command prints, not by ``--help``.)"""
     from rich.console import Console
+    from rich.segment import Segment
 
     class _Console(Console):
+        def _render_buffer(self, buffer) -> str:
+            # Every text printed is escaped (errors.printable): a control character from a
+            # program or a file never reaches the terminal raw, whichever path printed it
+            # (notes, messages, tables, the progress line). rich's own control segments
+            # (cursor moves of the progress display) and its styles pass untouched.
+            return super()._render_buffer(
+                seg if seg.control else Segment(printable(seg.text, True), seg.style)
+                for seg in buffer
+            )
+
+        def render_str(self, text: str, **kwargs):
+            # Before rich makes a Text of it (which would drop BEL, BS, CR silently).
+            return super().render_str(printable(text, True), **kwargs)
+
         def on_broken_pipe(self) -> None:
             raise BrokenPipeError(errno.EPIPE, "Broken pipe")
 
@@ -122,8 +137,6 @@ def progress_display(show: bool, title: str):
 SOURCE_ECHO_CHARS = 120
 #: A message longer than this is cut (a message quoting a 10 MB word stays readable).
 MESSAGE_CHARS = 1000
-#: C0, DEL and C1 controls (0x9B is a CSI): no terminal escapes from a file reach the screen.
-_CONTROL = {c: "\ufffd" for c in (*range(0x20), *range(0x7F, 0xA0))}
 
 
 def echo_source_line(text: str, column: int, width: int = SOURCE_ECHO_CHARS) -> tuple[str, int]:
@@ -131,17 +144,19 @@ def echo_source_line(text: str, column: int, width: int = SOURCE_ECHO_CHARS) -> 
 
     Lines up to ``width`` characters are shown whole; longer ones as a ``width``-character
     window around the column with ``…`` where text was cut. Tabs become spaces and control
-    characters U+FFFD, one for one, so the caret stays under the column.
+    characters their escapes (:func:`~nurbscnc.errors.printable`: ESC shows as ``\x1b``); the
+    caret stays under the column's character.
     """
-    text = text.replace("\t", " ").translate(_CONTROL)
+    text = text.replace("\t", " ")
     col = min(max(column, 1) - 1, len(text))
-    if len(text) <= width:
-        return text, col
-    start = max(0, min(col - width // 2, len(text) - width))
+    start = 0
+    if len(text) > width:
+        start = max(0, min(col - width // 2, len(text) - width))
     end = start + width
     prefix = "…" if start > 0 else ""
     suffix = "…" if end < len(text) else ""
-    return prefix + text[start:end] + suffix, col - start + len(prefix)
+    shown = prefix + printable(text[start:end]) + suffix
+    return shown, len(prefix) + len(printable(text[start:col]))
 
 
 def format_error(exc: NurbsCncError, filename: str) -> str:
@@ -150,7 +165,7 @@ def format_error(exc: NurbsCncError, filename: str) -> str:
     message = exc.message
     if len(message) > MESSAGE_CHARS:
         message = message[:MESSAGE_CHARS] + f"… ({len(exc.message)} characters)"
-    message, filename = message.translate(_CONTROL), str(filename).translate(_CONTROL)
+    message, filename = printable(message), printable(filename)
     pos = exc.pos
     if pos is None:
         return f"{filename}: error: {message}"

@@ -166,3 +166,15 @@ def planning_options(func):
         "misses ε_max.",
     )(func)
     return program_input_options(machine_options(func))
+
+
+#: ``stream --stall-limit``: the user's own limit on a live line that acknowledges nothing.
+stall_limit_option = click.option(
+    "--stall-limit",
+    "stall_limit_s",
+    type=click.FloatRange(min=0.0, min_open=True),
+    default=None,
+    metavar="SECONDS",
+    help="Give up when the card answers but acknowledges no frame for this long (default: "
+    "a time that grows with the line's measured error rate, from --timeout up to 30 times it).",
+)

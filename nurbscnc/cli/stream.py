@@ -22,14 +22,11 @@ from nurbscnc.app.stream import (
 )
 from nurbscnc.app.varfile import program_inputs, write_back
 from nurbscnc.cli import console
-from nurbscnc.cli.common import load_machine_cli
+from nurbscnc.cli.common import load_machine_cli, nothing_to_send
 from nurbscnc.cli.controls import Operator, key_reader, routed_signals, user_m_runner
 from nurbscnc.cli.handle import handle_errors
-from nurbscnc.cli.options import planning_options
+from nurbscnc.cli.options import planning_options, stall_limit_option
 from nurbscnc.errors import ConfigError
-
-#: What ``stream`` says of a program with no motion (the port is not opened).
-NO_MOTION = "no motion (offsets, tool changes or dwells only): nothing to send"
 
 
 # -- what is sent (everything before the port is opened) -----------------------------------------
@@ -156,6 +153,7 @@ def _progress_bar(enabled: bool, total: int, keys: bool = False):
     show_default=True,
     help="Seconds without an answer from the card before giving up.",
 )
+@stall_limit_option
 @click.option(
     "--lead",
     "lead",
@@ -214,6 +212,7 @@ def stream(
     baud,
     batch,
     timeout_s,
+    stall_limit_s,
     lead,
     optional_stop,
     feed_override,
@@ -235,9 +234,8 @@ def stream(
     the path within the acceleration and jerk limits, stops, and continues on Enter /
     SIGUSR2 (the rest re-planned from rest). + / - change the feed override. Ctrl-C or
     SIGTERM aborts the card at once and exits 130. Exit 0 only when the card reports DONE at
-    the program's end position, or at once for a program with no motion (nothing to send).
-    The parameter file (--var) is read before and written back (atomically) once the card
-    is DONE: G10 L2/L20, G92, G28.1/G30.1 persist.
+    the program's end position. The parameter file (--var) is read before and written back
+    (atomically) once the card is DONE: G10 L2/L20, G92, G28.1/G30.1 persist.
 
     Example: nurbscnc stream part.nc --port /dev/ttyUSB0 --optional-stop
     """
@@ -260,11 +258,8 @@ def stream(
                 override=feed_override / 100.0,
                 **settings,
             )
-            if job is None and pulses is None:  # no motion (offsets, tool changes, dwells)
-                if inputs is not None:  # it ran: its parameters persist
-                    write_back(inputs, prog)
-                said = {"ok": True, "program": program, "motion": False}
-                return click.echo(json.dumps(said) if as_json else f"{program}: {NO_MOTION}")
+            if job is None and pulses is None:  # no motion: it ran, its parameters persist
+                return nothing_to_send(program, as_json, write_back(inputs, prog))
         try:
             if job is None:
                 if from_line is not None or feed_override != 100:
@@ -281,6 +276,7 @@ def stream(
                 "allow_url": allow_url,
                 "batch": batch,
                 "timeout_s": timeout_s,
+                "stall_limit_s": stall_limit_s,
                 "lead": lead,
                 "user_m_timeout_s": user_m_timeout_s,
             }
@@ -318,7 +314,10 @@ def _send(
     from nurbscnc.output.stream.sender import Sender, SenderOptions, open_port
 
     options = SenderOptions(
-        batch_periods=link["batch"], timeout_s=link["timeout_s"], lead_periods=link["lead"]
+        batch_periods=link["batch"],
+        timeout_s=link["timeout_s"],
+        lead_periods=link["lead"],
+        stall_limit_s=link["stall_limit_s"],
     )
     ser = open_port(
         link["port"],

@@ -127,18 +127,50 @@ def parse_machine(text: str, source: str = "<string>", overrides: dict | None = 
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{source}: invalid TOML: {exc}") from exc
+    except RecursionError:  # tomllib parses nested arrays and inline tables recursively
+        raise _too_deep(source) from None
     except ValueError:  # an integer beyond Python's 4300-digit conversion limit
         raise ConfigError(
             f"{source}: invalid TOML: an integer has more than "
             f"{sys.get_int_max_str_digits()} digits"
         ) from None
+    if _depth_exceeds(data, MAX_NESTING):
+        raise _too_deep(source)
     overridden: set[str] = set()
     if overrides:
         data = copy.deepcopy(data)
         for key, value in overrides.items():
             apply_override(data, str(key), value, source)
             overridden.add(str(key))
+        if _depth_exceeds(data, MAX_NESTING):  # a value set by an override
+            raise _too_deep(source)
     return _build(data, Reporter(source, overridden))
+
+
+#: Deepest nesting of tables and arrays a profile may have: the schema goes three tables
+#: deep (``axis_limits.x.a_max_mm_s2``); anything far deeper is not a profile, and is refused
+#: before a recursive walk (a deep copy, a repr) could exhaust the stack.
+MAX_NESTING = 32
+
+
+def _too_deep(source: str) -> ConfigError:
+    return ConfigError(
+        f"{source}: invalid profile: arrays or tables nested more than {MAX_NESTING} deep"
+    )
+
+
+def _depth_exceeds(data, limit: int) -> bool:
+    """Whether tables and arrays in ``data`` nest deeper than ``limit`` (an iterative walk)."""
+    stack = [(data, 0)]  # the document itself is not nested
+    while stack:
+        value, depth = stack.pop()
+        if depth > limit:
+            return True
+        if isinstance(value, dict):
+            stack.extend((v, depth + 1) for v in value.values())
+        elif isinstance(value, list):
+            stack.extend((v, depth + 1) for v in value)
+    return False
 
 
 def _axis_servo(table: dict, key: str, rep: Reporter) -> AxisServo:

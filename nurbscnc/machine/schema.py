@@ -86,6 +86,60 @@ _OPTIONAL |= {
     *(f"axis_limits.{a}.{k}" for a in AXES for k in AXIS_LIMIT_KEYS),
 }
 
+# ---------------------------------------------------------------------------------------------
+# Physically meaningful ranges [low, high] of the numeric leaves, in the file's units, checked
+# before any work (a contour tolerance of 1e-300 um would make the planner lower the feed
+# for minutes; a period of 1e-300 ms would ask for 1e303 reference points). ``*`` stands for
+# any axis. The bounds are generous: a few decades beyond any machine tool on either side.
+RANGES: dict[str, tuple[float, float]] = {
+    # mm/min: 1 um/min (a creep feed) to 1000 m/min (ten times the fastest linear motors)
+    "limits.v_max_mm_min": (1e-3, 1e6),
+    "limits.rapid_mm_min": (1e-3, 1e6),
+    "axis_limits.*.v_max_mm_min": (1e-3, 1e6),
+    # mm/s^2: 1 um/s^2 to 100 g
+    "limits.a_max_mm_s2": (1e-3, 1e6),
+    "axis_limits.*.a_max_mm_s2": (1e-3, 1e6),
+    # mm/s^3: 1 um/s^3 to 1e9 (a linear motor reaches 1e7)
+    "limits.j_max_mm_s3": (1e-3, 1e9),
+    "axis_limits.*.j_max_mm_s3": (1e-3, 1e9),
+    # um: 10 nm (ultra-precision) to 10 mm. The contour tolerance stops at 0.1 um, a tenth
+    # of the default 1 um step: below it the check's re-plans grow without end (0.1 um takes
+    # 4.5 s on programs/naca2415.nc, 0.01 um more than 120 s) for an error no pulse shows.
+    "limits.chord_tolerance_um": (1e-2, 1e4),
+    "limits.contour_tolerance_um": (1e-1, 1e4),
+    "limits.ph_tolerance_um": (1e-2, 1e4),
+    "limits.path_tolerance_um": (1e-2, 1e4),
+    # 1/mm: a 1 km radius to a 1 um radius
+    "limits.kappa_ref_per_mm": (1e-6, 1e3),
+    # ms: 10 us to 100 ms per reference point
+    "servo.period_ms": (1e-2, 1e2),
+    # Hz, and the damping ratio (MAX_DAMPING is its upper end)
+    "servo.*.bandwidth_hz": (1e-2, 1e5),
+    "servo.*.damping": (1e-2, MAX_DAMPING),
+    # SPEC eq. 25's coefficients [1/s^k]: any scale, short of the double's own range (their
+    # products in the poles' polynomial must not overflow or vanish)
+    **{f"servo.*.{c}": (-1e60, 1e60) for c in ("a0", "a1", "a2", "a3", "b1", "b2")},
+    "servo.*.a4": (1e-60, 1e60),
+    "servo.*.b0": (1e-60, 1e60),
+    # steps/mm: 1 step per m to 10 steps per nm
+    "steps.per_mm.*": (1e-3, 1e7),
+    # mm: the interpreter's coordinate limit (program/words.py MAX_COORD_MM)
+    "soft_limits.*.min_mm": (-1e9, 1e9),
+    "soft_limits.*.max_mm": (-1e9, 1e9),
+}
+
+
+def range_of(key: str) -> tuple[float, float] | None:
+    """The :data:`RANGES` entry of a dotted key (an axis name matches ``*``), or None."""
+    parts = key.split(".")
+    for i, part in enumerate(parts):
+        if part in AXES:
+            wild = ".".join([*parts[:i], "*", *parts[i + 1 :]])
+            if wild in RANGES:
+                return RANGES[wild]
+    return RANGES.get(key)
+
+
 MM_PER_UM = 1e-3
 #: Default of ``limits.max_points``: 50 million reference points, 13.9 h of motion at 1 ms
 #: (a few GB of samples in memory today).
@@ -130,7 +184,8 @@ def apply_override(data: dict, key: str, value, source: str) -> None:
     elif isinstance(value, str):
         try:
             value = tomllib.loads(f"v = {value}")["v"]
-        except (tomllib.TOMLDecodeError, ValueError):
+        except (tomllib.TOMLDecodeError, ValueError, RecursionError):
+            # (RecursionError: arrays nested too deep for tomllib's recursive parser)
             raise ConfigError(f"{source}: override {key}: {value[:80]!r} is not a value") from None
     if len(parts) == 3 and parts[0] == "servo":
         # Setting a key of one servo form replaces the other form in that axis's table, so
@@ -188,6 +243,13 @@ def _check_leaf(value, kind: str, key: str, rep: Reporter) -> None:
         raise rep.error(key, f"must be finite, got {value!r}")
     if kind == "pos" and not value > 0:
         raise rep.error(key, f"must be > 0, got {value!r}")
+    bounds = range_of(key)
+    if bounds is not None and not bounds[0] <= value <= bounds[1]:
+        raise rep.error(
+            key,
+            f"must be >= {bounds[0]:g} and <= {bounds[1]:g} (a physically meaningful range), "
+            f"got {value!r}",
+        )
 
 
 def _check_axis(data, key: str, rep: Reporter) -> None:
@@ -204,8 +266,6 @@ def _check_axis(data, key: str, rep: Reporter) -> None:
         )
     schema = {k: _AXIS_SCHEMA[k] for k in (SERVO_SIMPLE if simple else SERVO_COEFFICIENTS)}
     check_table(data, schema, key, rep)
-    if simple and data["damping"] > MAX_DAMPING:
-        raise rep.error(f"{key}.damping", f"must be <= {MAX_DAMPING:g}, got {data['damping']!r}")
 
 
 def _short(value: int) -> str:

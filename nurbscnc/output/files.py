@@ -26,6 +26,8 @@ import secrets
 import stat
 import sys
 import warnings
+import zipfile
+import zlib
 from collections.abc import Iterable
 from typing import TYPE_CHECKING
 
@@ -323,14 +325,34 @@ def read_points_text(text: str) -> dict:
     return result
 
 
+#: An NPZ is a zip archive: its first bytes are a local file header (or, empty, the end of
+#: its central directory); a .npy array starts with b"\x93NUMPY".
+_ZIP_MAGIC = (b"PK\x03\x04", b"PK\x05\x06")
+_NPY_MAGIC = b"\x93NUMPY"
+
+
 def _read_points_npz(path: str) -> dict:
+    """The arrays of a reference-point NPZ (``write_npz``'s layout), every malformed file a
+    DataError: not a zip (a .npy renamed), a damaged archive or member, a missing array, a
+    header declaring more data than the member holds (checked before numpy allocates it),
+    pickled objects, wrong shapes or types, values that are not finite."""
+    with open(path, "rb") as fh:
+        head = fh.read(len(_NPY_MAGIC))
+    if head[:4] not in _ZIP_MAGIC:
+        what = "a single .npy array" if head == _NPY_MAGIC else "not a zip archive"
+        raise DataError(f"not a reference-point NPZ file: {what} (expected a zip of .npy arrays)")
     try:
-        with np.load(path) as npz:
-            missing = [c for c in POINT_COLUMNS if c not in npz]
+        with zipfile.ZipFile(path) as archive:
+            names = set(archive.namelist())
+            missing = [c for c in POINT_COLUMNS if f"{c}.npy" not in names]
             if missing:
                 raise DataError(f"missing arrays {', '.join(missing)}")
+            for c in POINT_COLUMNS:
+                _check_npy_member(archive, f"{c}.npy")
+        with np.load(path, allow_pickle=False) as npz:
             arrays = [np.asarray(npz[c]) for c in POINT_COLUMNS]
-    except ValueError as exc:  # not an NPZ, or pickled objects (refused)
+    except (ValueError, EOFError, zipfile.BadZipFile, zlib.error) as exc:
+        # ValueError: a bad .npy header, pickled objects (refused); the others: a damaged zip
         raise DataError(f"not a reference-point NPZ file: {str(exc)[:200]}") from None
     if (
         any(a.ndim != 1 or a.shape != arrays[0].shape or a.dtype.kind not in "iuf" for a in arrays)
@@ -343,6 +365,28 @@ def _read_points_npz(path: str) -> dict:
     data = np.column_stack([a.astype(float) for a in arrays])
     _check_values(data, lambda row, col: None, lambda row: f" (row {row + 1})")
     return {c: data[:, i] for i, c in enumerate(POINT_COLUMNS)}
+
+
+def _check_npy_member(archive: zipfile.ZipFile, name: str) -> None:
+    """Refuse a member whose .npy header declares more bytes than the member holds (numpy
+    would allocate the declared array before reading: a 200-byte file could ask for
+    terabytes), or more than :data:`MAX_INPUT_BYTES`."""
+    size = archive.getinfo(name).file_size
+    with archive.open(name) as member:
+        version = np.lib.format.read_magic(member)
+        read_header = (
+            np.lib.format.read_array_header_1_0
+            if version == (1, 0)
+            else np.lib.format.read_array_header_2_0
+        )
+        shape, _fortran, dtype = read_header(member)
+    if dtype.hasobject:
+        raise DataError(f"array {name} holds Python objects (pickled data is refused)")
+    declared = math.prod(shape) * dtype.itemsize
+    if declared > min(size, MAX_INPUT_BYTES):
+        raise DataError(
+            f"array {name} declares {declared:,} bytes of data; the member holds {size:,}"
+        )
 
 
 def _check_values(data: np.ndarray, position, where=lambda row: "") -> None:

@@ -421,14 +421,15 @@ class Checker:
     def _cutting(
         self, ref: Reference, resp: Response, profile: Profile, head: tuple | None = None
     ) -> np.ndarray:
-        """Which reference samples are checked (N,): contour error matters while cutting;
-        samples on rapids (air moves) and during the settle after a rapid (the reference
-        waits at the cut's start) are not. The first cutting samples after a rapid are
-        measured against the cut only (in ``resp``)."""
-        waiting = self.after_rapid[ref.piece] & (ref.tau_s <= profile.piece_start_time_s[ref.piece])
+        """Which reference samples are checked (N,): contour error matters while cutting
+        and before it; samples on rapids (air moves) are not, those of the settle after a
+        rapid are (the reference waits at the cut's start while the tool still rings from
+        the rapid's stop: the cut's first sample, written with the cut's line). The
+        settle's samples and the first cutting samples after a rapid are measured against
+        the cut only (in ``resp``)."""
         index, rapid = (self.index, self.rapid) if head is None else (head[2], head[3])
-        _cut_distance_after_rapids(resp, ref, profile, self.after_rapid, waiting, rapid, index)
-        return ~self.rapid[ref.piece] & ~waiting
+        _cut_distance_after_rapids(resp, ref, profile, self.after_rapid, rapid, index)
+        return ~self.rapid[ref.piece]
 
 
 class _Head:
@@ -492,21 +493,23 @@ def _cut_distance_after_rapids(
     ref: Reference,
     profile: Profile,
     after_rapid: np.ndarray,
-    waiting: np.ndarray,
     rapid: np.ndarray,
     index: PathIndex,
 ) -> None:
-    """Measure the first cutting samples after a rapid against the cut only (in place).
+    """Measure the settle after a rapid and the first cutting samples after it against the
+    cut only (in place).
 
     The path the contour error is measured against includes the rapids, so a tool still
-    arriving along a rapid looks on the path although the cut has moved off; it is 'on the
-    path' only if it is on the cut. Only samples whose distance window (module doc of
-    :mod:`~nurbscnc.plan.dynamics`: ±2|e| of arc length) reaches back across the rapid's
-    end are affected; their reference lies on the cut, so |e| bounds the distance."""
+    arriving along a rapid (or overshooting its end along it) looks on the path although
+    the cut leaves in another direction; it is 'on the path' only if it is on the cut.
+    Only samples whose distance window (module doc of :mod:`~nurbscnc.plan.dynamics`: ±2|e|
+    of arc length) reaches back across the rapid's end are affected (all of the settle's:
+    its reference waits at the cut's start); their reference lies on the cut, so |e|
+    bounds the distance."""
     n = ref.t_s.size
     lag = np.sqrt(np.einsum("ij,ij->i", response.axis_error_mm[:n], response.axis_error_mm[:n]))
     start = profile.piece_start_mm[ref.piece]
-    fix = np.flatnonzero(after_rapid[ref.piece] & ~waiting & (ref.s_mm - 2.0 * lag <= start))
+    fix = np.flatnonzero(after_rapid[ref.piece] & (ref.s_mm - 2.0 * lag <= start))
     if fix.size:
         response.contour_mm[fix] = index.distance_mm(
             response.actual_mm[fix], lag[fix] + 1e-12, exclude=rapid

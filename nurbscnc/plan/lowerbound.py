@@ -55,6 +55,7 @@ from nurbscnc.errors import ConfigError, PlanningError
 from nurbscnc.geometry.nurbs import MovedCopies, NurbsCurve
 from nurbscnc.geometry.path import Kind, PathTable, stop_seconds, whole_row
 from nurbscnc.geometry.paths import geometry_of
+from nurbscnc.geometry.segments import blend_tolerance_mm
 from nurbscnc.machine.caps import curvature_cap2_mm2_s2
 from nurbscnc.machine.profile import Machine
 from nurbscnc.program.columns import DWELL, LINE, PAUSE, RAPID, segment_columns
@@ -495,6 +496,9 @@ def program_lower_bound_s(segments, machine: Machine, columns=None, curves=None)
     sampled = curved[grid_rows]  # the gridded pieces
     length[sampled] = s_grid[grid_start[1:] - 1]
     stop = _exact_stops(t_start, t_end, cols.blends_mm[index], index, rapid)
+    tolerance_mm = blend_tolerance_mm(cols.blends_mm[index], lim.path_tolerance_mm)
+    constant = ~np.isin(np.arange(m), sampled)  # not gridded: lines, rapids, arcs
+    length -= _blend_savings_mm(t_start, t_end, tolerance_mm, stop, length, constant, straight)
     s_mm, path_cap2, piece_start, last = _bound_points(
         length, cap2, stop, sampled, s_grid, c2_grid, grid_sizes, grid_start
     )
@@ -593,6 +597,54 @@ def _exact_stops(
     stop = np.zeros(index.size, dtype=bool)
     stop[:-1] = corner | (index[1:] != index[:-1] + 1) | (rapid[1:] != rapid[:-1])
     return stop
+
+
+def _blend_savings_mm(
+    t_start: np.ndarray,
+    t_end: np.ndarray,
+    tolerance_mm: np.ndarray,
+    stop: np.ndarray,
+    length: np.ndarray,
+    constant: np.ndarray,
+    straight: np.ndarray,
+) -> np.ndarray:
+    """How much shorter [mm] (m,) each constant-cap piece (``constant``) may be in any plan:
+    a corner between pieces that both grant a path tolerance P (G64, G64 P; not at a stop)
+    may be cut by a blend, which the plan then runs instead of the corner.
+
+    A blend is a convex curve tangent to both legs at its ends A and B, within P of them
+    (its Hausdorff distance to the corner path, :mod:`~nurbscnc.geometry.lineblends`), so
+    it crosses the bisector at a point M with |VM| cos(θ/2) ≤ P (V the vertex, θ the
+    turning); its length is at least |AM| + |MB| ≥ |AV| + |VB| − 2|VM| sin(θ/2) (the
+    projections onto the legs), so a corner saves at most s = 2P tan(θ/2), whatever the
+    legs; between two lines (``straight``) of lengths a and b also at most a + b − |AB|
+    with A, B their far ends (a + b − |chord| grows with both trims). Blends do not
+    overlap, so a piece loses at most min(L, s_before + s_after): the savings each blend
+    makes on its two legs are then covered, leg by leg, and the bound stays below every
+    plan (on a V-carve's dense 25 µm corners the blended path is 2.4 % shorter than the
+    programmed one). Pieces on a grid (NURBS, spirals) keep their length; a blend next to
+    one is covered by the constant piece on its other side (or not at all, the rare
+    corner between two such pieces)."""
+    ta, tb = t_end[:-1], t_start[1:]
+    cross = np.cross(ta, tb)
+    turning = np.arctan2(
+        np.sqrt(np.einsum("ij,ij->i", cross, cross)), np.einsum("ij,ij->i", ta, tb)
+    )
+    regular = (np.einsum("ij,ij->i", ta, ta) > 0.0) & (np.einsum("ij,ij->i", tb, tb) > 0.0)
+    tol = np.minimum(tolerance_mm[:-1], tolerance_mm[1:])
+    cut = regular & (turning > 1e-6) & (tol > 0.0) & ~stop[:-1]
+    half = 0.5 * turning
+    with np.errstate(divide="ignore", over="ignore"):
+        save = np.where(cut, 2.0 * tol * np.tan(np.minimum(half, 0.5 * np.pi)), 0.0)
+    save = np.where(cut & (half >= 0.5 * np.pi - 1e-12), np.inf, save)  # a reversal
+    a, b = length[:-1], length[1:]
+    chord = np.sqrt(np.maximum(a * a + b * b + 2.0 * a * b * np.cos(turning), 0.0))
+    lines = straight[:-1] & straight[1:]
+    save = np.where(lines, np.minimum(save, a + b - chord), save)
+    around = np.zeros(length.size)
+    around[:-1] += save
+    around[1:] += save
+    return np.where(constant, np.minimum(length, around), 0.0)
 
 
 def _bound_points(

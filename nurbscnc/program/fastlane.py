@@ -38,6 +38,7 @@ import numpy as np
 
 from nurbscnc.geometry.segments import Line
 from nurbscnc.program.codes import G_0, G_1
+from nurbscnc.program.parse import MAX_LINE_CHARS
 
 # Groups: 1 the motion digit of G0/G1 (G00, G01), 2-5 the X Y Z F numbers. A number here is
 # any run of digits and points with a sign; the runs float() refuses ("1.2.3", ".") are not
@@ -76,7 +77,9 @@ def _is_number(text: str) -> bool:
 
 
 def _plain_row(line: str):
-    """The row (g, x, y, z, f) of one line, or None when it is not plain."""
+    """The row (g, x, y, z, f) of one line, or None when it is not plain (or too long)."""
+    if len(line) > MAX_LINE_CHARS:
+        return None
     match = _PLAIN.match(line)
     if match is None:
         return None
@@ -90,7 +93,9 @@ def _rows(lines, start: int, n: int) -> list:
     """Rows (g, x, y, z, f) of the plain lines from ``lines[start]`` on, at most ``n``,
     up to the first line that is not plain."""
     chunk = lines[start : start + n]
-    rows = _PLAIN.findall("\n".join(chunk))
+    text = "\n".join(chunk)
+    # A line over the limit is not plain: the general path refuses it (parse.MAX_LINE_CHARS).
+    rows = _PLAIN.findall(text) if len(text) <= MAX_LINE_CHARS else ()
     if len(rows) == len(chunk):
         return rows  # (numbers float() refuses: plain_run checks them, see _strict_rows)
     return _strict_rows(chunk, len(chunk))
@@ -129,7 +134,7 @@ def nurbs_words(line: str) -> dict | None:
     infinite): those go to the general path, which also reports every error. The
     interpreter hands these words to the G6.2 block (nurbsblock.py ``g6``) as the general
     path would after parsing and the execution order, which do nothing else for them."""
-    match = _G6_LINE.fullmatch(line)
+    match = _G6_LINE.fullmatch(line) if len(line) <= MAX_LINE_CHARS else None
     if match is None:
         return None
     words = {}

@@ -346,9 +346,10 @@ def _fast_block(line: str, match) -> Block:
     return Block(delete is not None, tuple(words), (), tuple(comments))
 
 
-#: Lines longer than this (outside the plain-word fast path) are refused: LinuxCNC refuses
-#: anything past 256 characters; this bound keeps the work on a hostile 10 MB line of
-#: nested brackets to a fraction of a second.
+#: Lines longer than this are refused, on every path (the plain-word fast path, lark, the
+#: whole-file parse; the fast lane leaves them to the general path): LinuxCNC refuses
+#: anything past 256 characters; this bound keeps the work on a hostile 10 MB line (of
+#: nested brackets, or of plain words) to a fraction of a second.
 MAX_LINE_CHARS = 65536
 
 _LINE_BREAKS = re.compile(r"\r+\n|\r")
@@ -366,6 +367,8 @@ def split_lines(text: str) -> list[str]:
 
 def parse_line(line: str, line_no: int) -> Block:
     """Parse one physical line (``line_no`` 1-based, for error positions) into a Block."""
+    if len(line) > MAX_LINE_CHARS:
+        raise _too_long(line, line_no)
     match = _SIMPLE_LINE.fullmatch(line)
     if match is not None and not (("o" in line or "O" in line) and _O_WORD.match(line)):
         try:
@@ -375,12 +378,14 @@ def parse_line(line: str, line_no: int) -> Block:
             raise
     if "%" in line and _PERCENT_LINE.fullmatch(line) is not None:
         return PERCENT_BLOCK
-    if len(line) > MAX_LINE_CHARS:
-        raise GCodeSyntaxError(
-            f"line is too long ({len(line)} characters; at most {MAX_LINE_CHARS})",
-            SourcePos(line_no, 1, line),
-        )
     return _parse_lark(line, line_no - 1)[0]
+
+
+def _too_long(line: str, line_no: int) -> GCodeSyntaxError:
+    return GCodeSyntaxError(
+        f"line is too long ({len(line)} characters; at most {MAX_LINE_CHARS})",
+        SourcePos(line_no, MAX_LINE_CHARS + 1, line),
+    )
 
 
 def parse_text(text: str, fast: bool = True) -> list[Block]:
@@ -393,6 +398,9 @@ def parse_text(text: str, fast: bool = True) -> list[Block]:
     """
     lines = split_lines(text)
     if not fast:
+        for index, line in enumerate(lines):
+            if len(line) > MAX_LINE_CHARS:
+                raise _too_long(line, index + 1)
         return _parse_lark("\n".join(lines), 0)
     return [parse_line(line, index + 1) for index, line in enumerate(lines)]
 

@@ -101,8 +101,14 @@ class Link(HandshakeHandlers, StreamingHandlers, StoppingHandlers):
         self.decoder = p.FrameDecoder(gap_s=self.options.gap_s)
         self.flush_port = False  #: the driver should drop what the port has queued (abort)
         self._outbox: list[Outgoing] = []
+        #: periods per BATCH frame from now on: ``batch_limit``, fewer on a noisy line
         self.per_frame = 1
-        self.n_batches = 0
+        #: most periods per BATCH frame (``batch_periods``, capped by the 255-byte payload)
+        self.batch_limit = 1
+        self._frame_starts: list[int] = []  #: first period of every sequenced frame framed
+        self._framed_periods = 0  #: periods framed so far
+        self._framed_position: np.ndarray | None = None  #: where the next batch starts [steps]
+        self._end_seq: int | None = None  #: END's sequence number once framed
 
     # -- driver interface --------------------------------------------------------------------
     def start(self, now: float) -> None:
@@ -134,6 +140,7 @@ class Link(HandshakeHandlers, StreamingHandlers, StoppingHandlers):
                 self.count.crc_errors += 1
                 continue
             self.state.last_rx_s = now
+            self.count.frames_received += 1
             try:
                 msg = p.decode_message(ev)
             except p.ProtocolError:
@@ -177,6 +184,7 @@ class Link(HandshakeHandlers, StreamingHandlers, StoppingHandlers):
                 rec.queued = False
                 rec.copies += 1
                 rec.written_s = min(rec.written_s, now)
+                rec.prev_leaves_s = rec.leaves_s
                 rec.leaves_s = st.line_free_s
                 rec.end_offset = self.count.bytes_sent
             elif item.data[4] == p.MsgType.HELLO:
@@ -203,7 +211,7 @@ class Link(HandshakeHandlers, StreamingHandlers, StoppingHandlers):
             if st.base < st.nxt:
                 oldest = st.window[st.base]
                 times.append(oldest.leaves_s + self.rtt.rto + eps)
-                times.append(max(st.last_progress_s, oldest.written_s) + opt.timeout_s + eps)
+                times.append(self._stall_deadline_s(now) + eps)
             if st.want_hold is not None:
                 times.append(st.last_ctl_s + opt.rto_s + eps)
         elif st.phase is Phase.STOPPING:
@@ -219,7 +227,7 @@ class Link(HandshakeHandlers, StreamingHandlers, StoppingHandlers):
         return Progress(
             n,
             self.sent_periods,
-            min(st.base * self.per_frame, n),
+            min(self._acked_periods(), n),
             executed,
             status.fill_periods if status else 0,
             st.caps.buffer_periods if st.caps else 0,
@@ -231,12 +239,17 @@ class Link(HandshakeHandlers, StreamingHandlers, StoppingHandlers):
         """Periods framed so far (sent or queued to be sent): they can no longer be changed."""
         if self.state.phase is Phase.HANDSHAKE:
             return 0
-        return min(self.state.nxt * self.per_frame, self.program.periods)
+        return min(self._framed_periods, self.program.periods)
+
+    def _acked_periods(self) -> int:
+        """Periods in the frames the card has acknowledged."""
+        base = self.state.base
+        return self._frame_starts[base] if base < len(self._frame_starts) else self._framed_periods
 
     @property
     def end_framed(self) -> bool:
         """END has been framed: the stream's motion is fixed."""
-        return self.state.phase is not Phase.HANDSHAKE and self.state.nxt > self.n_batches
+        return self.state.phase is not Phase.HANDSHAKE and self._end_seq is not None
 
     def replace_unsent(self, program: PulseProgram) -> None:
         """Stream ``program`` instead: its first :attr:`sent_periods` periods must be the ones
@@ -253,13 +266,11 @@ class Link(HandshakeHandlers, StreamingHandlers, StoppingHandlers):
         ):
             raise StreamError("the replacement does not continue the periods already sent")
         axes = len(program.start_steps)
-        if program.periods and self.per_frame > p.max_batch_periods(
+        if program.periods and self.batch_limit > p.max_batch_periods(
             axes, p.pulse_width_bytes(program.peak_pulses)
         ):
             raise StreamError("the replacement needs wider pulse counts than the frames have")
-        self.program = program
-        if self.state.phase is not Phase.HANDSHAKE:
-            self._layout()
+        self.program = program  # the frames to come start where the framed ones end
 
     def result(self) -> StreamReport:
         """The report of a successful stream; raises the stream's error otherwise."""

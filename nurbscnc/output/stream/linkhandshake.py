@@ -78,24 +78,16 @@ class HandshakeHandlers:
         st = self.state
         self.zero = False
         width = p.pulse_width_bytes(max(self.program.peak_pulses, self.peak_pulses))
-        self.per_frame = max(
+        axes = len(self.program.start_steps)
+        self.batch_limit = max(
             1, min(self.options.batch_periods, p.max_batch_periods(st.caps.axes, width))
         )
-        self._layout()
+        self.per_frame = self.batch_limit
+        #: bytes of a BATCH frame: fixed + per period (the frame-size choice on noisy lines)
+        one = p.batch_frame_bytes(1, axes, width)
+        self._frame_bytes = (one - axes * width, axes * width)
+        self._framed_position = np.asarray(self.program.start_steps, dtype=np.int64).copy()
+        self._choose_batch()  # damaged replies in the handshake already tell of a noisy line
         st.credit = self._credit(st.caps.buffer_periods)
         st.phase = Phase.STREAMING
         st.last_rx_s = st.last_progress_s = now
-
-    def _layout(self) -> None:
-        """Batches of the program: their count and where each starts [steps]."""
-        prog, k, axes = self.program, self.per_frame, len(self.program.start_steps)
-        self.n_batches = -(-prog.periods // k)
-        # Where each batch starts: the program's start plus every pulse before it [steps].
-        sums = (
-            np.add.reduceat(prog.pulses, np.arange(0, prog.periods, k), axis=0)
-            if prog.periods
-            else np.zeros((0, axes), dtype=np.int64)
-        )
-        self._batch_starts = prog.start_steps + np.vstack(
-            [np.zeros((1, axes), dtype=np.int64), np.cumsum(sums, axis=0)]
-        )

@@ -39,6 +39,10 @@ class SenderOptions:
     #: whole buffer. Less makes a feed hold act sooner, at the cost of margin against an
     #: underrun; at least half the card's buffer (where a card starts executing).
     lead_periods: int | None = None
+    #: frames in flight and none acknowledged for this long though the card answers: give up
+    #: [s]. None: the limit follows the measured frame error rate (see
+    #: :func:`~.linkstreaming.attempts_needed`)
+    stall_limit_s: float | None = None
 
     def __post_init__(self) -> None:
         if self.batch_periods < 1:
@@ -47,6 +51,8 @@ class SenderOptions:
             raise ConfigError(f"--lead must be >= 1 period, got {self.lead_periods}")
         if not self.timeout_s > 0.0:
             raise ConfigError(f"--timeout must be > 0 s, got {self.timeout_s}")
+        if self.stall_limit_s is not None and not self.stall_limit_s > 0.0:
+            raise ConfigError(f"--stall-limit must be > 0 s, got {self.stall_limit_s}")
 
 
 @dataclass(frozen=True)
@@ -84,6 +90,11 @@ class StreamReport:
     buffer_periods: int
     session_id: int
     duration_s: float
+    #: copies of the acknowledged frames that were lost or damaged (either way), over all
+    #: their copies: the line's measured frame error rate
+    frame_error_rate: float = 0.0
+    #: periods per BATCH frame at the end (fewer than asked on a noisy line)
+    batch_periods: int = 0
 
     def to_json(self) -> dict:
         out = {k: getattr(self, k) for k in self.__dataclass_fields__}
@@ -113,6 +124,7 @@ class InFlight:
     periods: int
     written_s: float = math.inf  #: when the first copy was written
     leaves_s: float = math.inf
+    prev_leaves_s: float = math.inf  #: ``leaves_s`` of the copy before the newest
     end_offset: int = 0
     copies: int = 0  #: copies written
     queued: bool = False  #: a copy waits in the outbox
@@ -133,6 +145,45 @@ class Counters:
     protocol_errors: int = 0
     polls: int = 0
     max_in_flight: int = 0
+    frames_acked: int = 0  #: sequenced frames the card acknowledged
+    copies_acked: int = 0  #: copies written of those frames
+    frames_received: int = 0  #: valid frames from the card
+    bytes_acked: int = 0  #: bytes of one copy of each acknowledged frame
+
+    @property
+    def frame_error_rate(self) -> float:
+        """Lost or damaged copies of the acknowledged frames over all their copies."""
+        if not self.copies_acked:
+            return 0.0
+        return (self.copies_acked - self.frames_acked) / self.copies_acked
+
+    def byte_error_rate(self) -> float:
+        """The line's chance of damaging or losing one byte, for a line that damages bytes
+        alike (a frame of L bytes arrives whole with probability (1 − e)^L): the larger of
+        what the card's damaged frames imply (their mean length) and what the lost copies
+        of the acknowledged frames imply (their mean length, plus an answer's)."""
+        seen = self.frames_received + self.crc_errors
+        reply_bytes = self.bytes_received / seen if seen else 0.0
+        e = 0.0
+        if self.crc_errors and self.frames_received:
+            e = 1.0 - (self.frames_received / seen) ** (1.0 / max(1.0, reply_bytes))
+        if self.frames_acked and self.copies_acked > self.frames_acked:
+            trip_bytes = self.bytes_acked / self.frames_acked + reply_bytes
+            e = max(e, 1.0 - (1.0 - self.frame_error_rate) ** (1.0 / trip_bytes))
+        return e
+
+    def reply_bytes(self) -> float:
+        """The mean length of the card's frames [bytes] (15: an ACK, before any)."""
+        seen = self.frames_received + self.crc_errors
+        return self.bytes_received / seen if seen else 15.0
+
+    def round_trip_error(self, frame_bytes: int) -> float:
+        """The chance that a copy of a ``frame_bytes`` frame or its answer is lost: the
+        measured :attr:`frame_error_rate`, or, when larger, 1 − (1 − e)^(L + answer) from
+        :meth:`byte_error_rate` (before any frame is acknowledged, the only one known)."""
+        e = self.byte_error_rate()
+        whole = (1.0 - e) ** (frame_bytes + self.reply_bytes())
+        return max(self.frame_error_rate, 1.0 - whole)
 
 
 @dataclass

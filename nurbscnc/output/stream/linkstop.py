@@ -90,6 +90,8 @@ class StoppingHandlers:
             buffer_periods=st.caps.buffer_periods,
             session_id=st.caps.session_id,
             duration_s=now - st.started_s,
+            frame_error_rate=c.frame_error_rate,
+            batch_periods=self.per_frame,
         )
         st.error = None
         st.phase = Phase.FINISHED
