@@ -21,7 +21,10 @@ from nurbscnc.interpolate.sample import (
     Interpolator,
     Samples,
     chunks_of,
+    has_motion,
     reference_sampler,
+    rest_samples,
+    rest_seconds,
     sample_chunks,
     sample_plan,
     samples_of,
@@ -98,11 +101,17 @@ class Run:
     #: The program's segments as columns (read once for the checks before work; the
     #: summary's lower bound reads them again).
     columns: SegmentColumns | None = None
+    #: A program with no motion: how long it holds the tool at rest [s] (its dwells; the
+    #: points of ``whole`` last till the first servo period at or after it). None: it moves.
+    rest_s: float | None = None
 
     @property
     def cycle_time_s(self) -> float:
         """Cycle time [s] including dwells: the plan's (plus the pre-compensation's held
-        start, when on), or a baseline's last sample time."""
+        start, when on), a program without motion's dwells, or a baseline's last sample
+        time."""
+        if self.rest_s is not None:
+            return self.rest_s
         if self.plan is not None:
             lead = self.precompensation.lead_s if self.precompensation is not None else 0.0
             return self.plan.cycle_time_s + lead
@@ -191,7 +200,12 @@ def run_program(program, machine: Machine, options: RunOptions | None = None, pr
     say("checking limits")
     columns = segment_columns(program.segments)
     check_before_work(program.segments, machine, columns, program.frames)
-    if options.algorithm == Algorithm.PH_LOOKAHEAD:
+    if not has_motion(columns):
+        # Offsets, tool changes, dwells only (LinuxCNC runs such programs): nothing to plan;
+        # the output holds the tool at its start point through the dwells, as any algorithm.
+        rest = rest_samples(program, columns, machine.servo.period_s)
+        run = Run(options.algorithm, rest, rest_s=rest_seconds(program, columns))
+    elif options.algorithm == Algorithm.PH_LOOKAHEAD:
         lookahead = options.lookahead
         if not machine.contour_check:
             # No servo model in the profile: there is no contour error to check.

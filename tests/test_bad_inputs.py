@@ -56,6 +56,8 @@ def check_report(stderr: str, path: str, case: Path) -> None:
     assert "Traceback" not in stderr
     assert "internal error" not in stderr
     out = stderr.splitlines()
+    if out and out[0].startswith("machine: "):  # which profile the command used, said first
+        out = out[1:]
     head = f"{path}:{line}:{column}: error: "
     assert out[0].startswith(head), out[0]
     assert message in out[0][len(head) :]

@@ -213,3 +213,106 @@ def test_still_command_is_an_error():
             Trace(np.r_[np.zeros(5), np.ones(45)], np.r_[np.zeros(6), np.ones(44)], T_S), 2
         ).damping
     )
+
+
+# -- column names, the period from the time column, the quality bar ---------------------------
+#: the profile's simple form at 30 Hz, ζ = 0.8 (the truth the fits are checked against)
+WN_30 = natural_frequency_rad_s(30.0, 0.8)
+SIMPLE_30 = ([WN_30 * WN_30], [1.0, 1.6 * WN_30, WN_30 * WN_30])
+
+
+def write_columns(path, header, columns, sep=","):
+    rows = [sep.join(f"{v:.9g}" for v in row) for row in zip(*columns, strict=True)]
+    path.write_text("\n".join(([header] if header else []) + rows) + "\n")
+
+
+def identify_json(*args):
+    r = CliRunner().invoke(main, ["identify", *map(str, args), "--json"])
+    return r, (json.loads(r.stdout) if r.stdout.strip() else None)
+
+
+@pytest.mark.parametrize(
+    ("header", "time_scale", "order"),
+    [
+        ("t,cmd,fb", 1.0, ("t", "cmd", "fb")),
+        ("time,command,position", 1.0, ("time", "command", "position")),
+        ("Time (ms),Reference [mm],Actual [mm]", 1e3, ("time", "cmd", "fb")),
+        ("FB,t_s,SETPOINT", 1.0, ("fb", "t", "cmd")),
+        ("fb,t_us,cmd", 1e6, ("fb", "t", "cmd")),
+    ],
+)
+def test_columns_found_by_header_names(tmp_path, header, time_scale, order):
+    n = 2000
+    u, y = simulated(SIMPLE_30, n, 0.3e-3, seed=5)
+    t = np.arange(n) * T_S * time_scale
+    by_role = {"t": t, "time": t, "cmd": u, "command": u, "fb": y, "position": y}
+    trace = tmp_path / "trace.csv"
+    write_columns(trace, header, [by_role[r] for r in order])
+    r, j = identify_json(trace, "--order", "2")
+    assert r.exit_code == 0, r.output
+    assert j["samples"] == n  # the header is not a sample
+    assert j["period_s"] == pytest.approx(1e-3, rel=1e-9)  # from the time column, its unit
+    assert j["bandwidth_hz"] == pytest.approx(30.0, rel=0.01)
+    assert j["damping"] == pytest.approx(0.8, rel=0.01)
+    assert "# columns: command " in j["profile_section"]
+
+
+def test_hal_pin_names_and_no_time_column(tmp_path):
+    n = 2000
+    u, y = simulated(SIMPLE_30, n, 0.3e-3, seed=6)
+    trace = tmp_path / "trace.txt"
+    write_columns(trace, "joint.0.motor-pos-fb joint.0.motor-pos-cmd", [y, u], sep=" ")
+    r, j = identify_json(trace, "--order", "2")
+    assert r.exit_code == 2 and "no sample period" in r.stderr  # no time column: say so
+    r, j = identify_json(trace, "--order", "2", "--period-ms", "1")
+    assert r.exit_code == 0, r.output
+    assert j["bandwidth_hz"] == pytest.approx(30.0, rel=0.01)
+    assert "'joint.0.motor-pos-cmd' (column 2)" in j["profile_section"]
+
+
+@pytest.mark.parametrize(
+    ("header", "words"),
+    [("t,cmd,ref,fb", "all look like --cmd"), ("a,b,c", "which column is --cmd")],
+)
+def test_unclear_headers_are_refused(tmp_path, header, words):
+    u, y = simulated(SIMPLE_30, 200, 0.0, seed=7)
+    trace = tmp_path / "trace.csv"
+    width = header.count(",") + 1
+    write_columns(trace, header, [np.arange(200) * T_S, u, y, y][:width])
+    r, j = identify_json(trace, "--period-ms", "1")
+    assert r.exit_code == 2 and words in r.stderr and j["ok"] is False
+
+
+def test_a_fit_below_the_bar_is_refused(tmp_path):
+    """The issue's trace: t,cmd,fb with --cmd 1 --fb 2 fits the time against the command."""
+    n = 2000
+    u, y = simulated(SIMPLE_30, n, 0.3e-3, seed=5)
+    trace = tmp_path / "trace.csv"
+    write_columns(trace, "t,cmd,fb", [np.arange(n) * T_S, u, y])
+    for order in ("2", "4"):
+        r, j = identify_json(trace, "--period-ms", "1", "--cmd", "1", "--fb", "2", "--order", order)
+        assert r.exit_code == 2, r.output
+        assert j["ok"] is False
+        message = j["errors"][0]["message"]
+        assert "below the 90 % a servo model needs" in message
+        assert "command 't' (column 1), actual 'cmd' (column 2)" in message
+        assert "Traceback" not in r.output and "[servo" not in r.stdout
+    # no header: the time in column 1 (halsampler's order is cmd, fb) is refused as well
+    write_columns(trace, None, [np.arange(n) * T_S, u, y], sep=" ")
+    r, _ = identify_json(trace, "--period-ms", "1")
+    assert r.exit_code == 2 and "below the 90 %" in r.stderr
+
+
+def test_min_fit_is_the_bar(tmp_path):
+    """Noise σ = 0.1 mm on a ±1 mm step trace: NRMSE fit ≈ 1 − σ/std(y) ≈ 0.8."""
+    n = 3000
+    u, y = simulated(SIMPLE_30, n, 0.1, seed=8)
+    expected_fit = 1.0 - 0.1 / np.std(y)
+    trace = tmp_path / "trace.csv"
+    write_columns(trace, "t,cmd,fb", [np.arange(n) * T_S, u, y])
+    r, j = identify_json(trace, "--order", "2")
+    assert r.exit_code == 2 and "below the 90 %" in j["errors"][0]["message"]
+    r, j = identify_json(trace, "--order", "2", "--min-fit", "70")
+    assert r.exit_code == 0, r.output
+    assert j["fit"] == pytest.approx(expected_fit, abs=0.02)
+    assert j["bandwidth_hz"] == pytest.approx(30.0, rel=0.1)

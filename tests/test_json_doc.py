@@ -72,6 +72,7 @@ def files(tmp_path_factory):
     (d / "mixed.nc").write_text(MIXED)
     (d / "corner.nc").write_text(CORNER)
     (d / "bad.nc").write_text("G1 X1 F600\nG1 Q\n")
+    (d / "rest.nc").write_text("G10 L2 P1 X5\nG4 P0.5\n")  # no motion
     return d
 
 
@@ -108,6 +109,7 @@ def test_plan_and_run(files, tmp_path):
         printed("plan", NACA, "--json", "--explain"),
         printed("plan", NACA, "--json", "--algorithm", "adaptive"),
         printed("plan", SPIRAL, "--json", "--dynamics", "off"),  # smoothed (the default)
+        printed("plan", files / "rest.nc", "--json"),
     ]
     explained = printed("plan", files / "corner.nc", "--json", "--explain")
     if not explained["explain"]["corners"]:
@@ -131,6 +133,7 @@ def test_plan_and_run(files, tmp_path):
         printed("run", NACA, "-o", tmp_path / "b.csv", "--json", "--algorithm", "adaptive"),
         printed("run", files / "mixed.nc", "-o", tmp_path / "m.csv", "--json"),
         printed("run", SPIRAL, "-o", tmp_path / "s.csv", "--json", "--dynamics", "off"),
+        printed("run", files / "rest.nc", "-o", tmp_path / "r.csv", "--json"),
     ]
     check("run", runs, skip="explain")  # --explain is plan's
 
@@ -199,6 +202,8 @@ def test_errors_program_file_and_option(files):
 #: with the stream's.
 JOB_KEYS = {
     "final_position_mm",
+    "coordinate_system",
+    "final_work_position_mm",
     "sections",
     "feed_override",
     "holds",

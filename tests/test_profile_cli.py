@@ -196,6 +196,13 @@ def test_commands_say_which_profile(env):
     assert "machine:" not in r.stderr  # JSON mode: the key says it
     r = run(["corners", CORNERS, "--json"])
     assert json.loads(r.stdout)["machine_profile"]["found_by"] == "./nurbscnc.toml"
+    # check too: its soft limits and max_points are the profile's
+    r = run(["check", CORNERS])
+    assert r.exit_code == 0, r.output
+    assert r.stderr.splitlines()[0] == "machine: ./nurbscnc.toml (./nurbscnc.toml)"
+    r = run(["check", CORNERS, "--json"])
+    assert "machine:" not in r.stderr
+    assert json.loads(r.stdout)["machine_profile"]["found_by"] == "./nurbscnc.toml"
 
 
 def test_no_servo_model_turns_the_contour_check_off(env):
@@ -206,6 +213,9 @@ def test_no_servo_model_turns_the_contour_check_off(env):
     assert r.exit_code == 0, r.output
     assert "contour check: off (no servo model in the profile)" in r.stderr
     assert "contour error" not in r.stdout
+    r = run(["check", CORNERS])  # check plans nothing: no word on a contour check
+    assert r.exit_code == 0 and r.stderr.startswith("machine: ./nurbscnc.toml")
+    assert "contour check" not in r.stderr
     j = json.loads(run(["plan", CORNERS, "--json"]).stdout)
     assert j["dynamics"] == "off" and j["dynamics_iterations"] == 0
     assert j["machine_profile"]["contour_check"] is False

@@ -44,11 +44,19 @@ def write_output(path: str, fmt: str, run, mach, name: str, then=None):
 
 def write_profile_dump(path: str, run, mach) -> None:
     """``plan --dump-profile``: t, s, v, a, j and the piece at every servo period (CSV, or
-    NPZ by extension) of the look-ahead plan of ``run``."""
+    NPZ by extension) of the look-ahead plan of ``run``; of a program with no motion, the
+    tool at rest (all 0) at the times of its points."""
+    import numpy as np
+
     from nurbscnc.output.files import write_profile
     from nurbscnc.plan.timing import servo_clock
 
     pl = run.plan
+    if run.rest_s is not None:
+        t = run.samples.t_s
+        zero = np.zeros(t.size)
+        write_profile(path, t, zero, zero, zero, zero, np.zeros(t.size, dtype=np.int64))
+        return
     t, tau = servo_clock(pl.pieces, pl.profile, mach.servo.period_s)
     s, v, a, j, piece = pl.profile.sample(tau)
     write_profile(path, t, s, v, a, j, piece)

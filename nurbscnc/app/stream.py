@@ -89,10 +89,12 @@ def stream_job(
     run (the points ``run`` writes with the same options). Everything that can be wrong
     with the input raises here, before any port is touched (the pulse limit too; for a job,
     the first window's errors). ``tools``: the tool table ``{number: Tool}``, named to the
-    operator at a tool change."""
+    operator at a tool change. ``(None, None)``: the program has no motion (offsets, tool
+    changes, dwells only): nothing to send."""
     from nurbscnc.controller.feed import WindowFeed
     from nurbscnc.controller.job import Job
     from nurbscnc.controller.stops import start_at_line
+    from nurbscnc.geometry.path import STOP_KINDS
     from nurbscnc.pipeline import run_program, window_plans
 
     if from_line is not None:
@@ -100,6 +102,8 @@ def stream_job(
             prog = start_at_line(prog, from_line)
         except ValueError as exc:
             raise ConfigError(str(exc)) from None
+    if all(s.kind in STOP_KINDS for s in prog.segments):  # stops at the first move
+        return None, None
     if needs_whole_plan(options):
         samples = run_program(prog, mach, options).samples
         return None, pulses_of_points(samples.points_mm, mach, samples.line)

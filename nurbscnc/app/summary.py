@@ -38,6 +38,8 @@ def summary_of(prog, mach, run, stats=None, lower_bound: bool = True) -> dict:
     whole samples. ``lower_bound``: with the kinematic lower bound (the JSON has it)."""
     from nurbscnc.plan.report import SampleStats, plan_summary
 
+    if run.rest_s is not None:  # no motion
+        return {**rest_summary(prog, mach, run), **machine_json(mach)}
     samples = run.samples if run.plan is None else stats
     if samples is None:
         samples = SampleStats(run.plan)
@@ -57,6 +59,41 @@ def summary_of(prog, mach, run, stats=None, lower_bound: bool = True) -> dict:
     if getattr(run, "precompensation", None) is not None:  # --precompensate
         summary["precompensation"] = run.precompensation.as_json()
     return {**summary, **machine_json(mach)}
+
+
+def rest_summary(prog, mach, run) -> dict:
+    """The summary of a program with no motion (offsets, tool changes, dwells): ``motion``
+    false, the tool at rest at its start point for the dwells' time. Nothing moves, so the
+    servo, at rest there from the start, follows without error: the contour errors are 0
+    exactly (no simulation needed); the cycle time and its kinematic lower bound are the
+    dwells' time (the points last till the first servo period at or after it)."""
+    t_s = run.rest_s
+    return {
+        "ok": True,
+        "program": prog.name,
+        "algorithm": str(run.algorithm),
+        "motion": False,
+        "rest_position_mm": [float(v) for v in prog.start_mm],
+        "cycle_time_s": t_s,
+        "samples": run.sample_count,
+        "period_s": mach.servo.period_s,
+        "feed_max_mm_s": 0.0,
+        "lower_bound_s": t_s,
+        "lower_bound_ratio": 1.0 if t_s > 0 else None,
+        "contour_true_max_um": 0.0,
+        "contour_true_rms_um": 0.0,
+        "contour_eq29_max_um": 0.0,
+    }
+
+
+def rest_text(summary: dict) -> str:
+    """The human line of a program with no motion (:func:`rest_summary`)."""
+    x, y, z = summary["rest_position_mm"]
+    return (
+        f"no motion (offsets, tool changes or dwells only): the tool rests at "
+        f"X{x:g} Y{y:g} Z{z:g} mm for {summary['cycle_time_s']:.4f} s "
+        f"({summary['samples']} reference points at T_s = {summary['period_s'] * 1000:g} ms)"
+    )
 
 
 def summary_json(summary: dict) -> str:

@@ -56,7 +56,8 @@ def check(
 
     Example: nurbscnc check programs/naca2415.nc
     """
-    mach = load_machine_cli(machine, overrides, announce=False)
+    # Said on stderr as every command does: the soft limits and max_points checked are its.
+    mach = load_machine_cli(machine, overrides, plans=False)
     with progress_display(show_progress(as_json), display_name(program)) as say:
         prog, summary = check_program(
             program,

@@ -33,19 +33,23 @@ from nurbscnc.errors import OutputError
 @click.option(
     "--cmd",
     "cmd_col",
-    default="1",
-    show_default=True,
-    help="Column of the commanded position (1-based number, or header name).",
+    default=None,
+    help="Column of the commanded position (1-based number, or header name). Default: the "
+    "header's cmd/command/ref/reference/setpoint column, else column 1.",
 )
 @click.option(
     "--fb",
     "fb_col",
-    default="2",
-    show_default=True,
-    help="Column of the actual (feedback) position.",
+    default=None,
+    help="Column of the actual (feedback) position. Default: the header's "
+    "fb/feedback/pos/position/actual column, else column 2.",
 )
 @click.option(
-    "--time", "time_col", default=None, help="Column of the time [s]; gives the sample period."
+    "--time",
+    "time_col",
+    default=None,
+    help="Column of the time [s, or the unit its name gives: time_ms]; gives the sample "
+    "period. Default: the header's t/time column, if any.",
 )
 @click.option(
     "--period-ms",
@@ -61,19 +65,34 @@ from nurbscnc.errors import OutputError
     help="Periods by which the feedback is recorded late (1 for a LinuxCNC capture "
     "whose encoder is read before the period's command is written).",
 )
+@click.option(
+    "--min-fit",
+    type=click.FloatRange(0, 100),
+    default=None,
+    help="Least fit [%, NRMSE] a model is printed with (default 90, servo.identify.MIN_FIT); "
+    "below it: exit 2, saying why.",
+)
 @click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
 @handle_errors
-def identify(source, axis, order, cmd_col, fb_col, time_col, period_ms, delay, as_json):
+def identify(source, axis, order, cmd_col, fb_col, time_col, period_ms, delay, min_fit, as_json):
     """Fit the closed-loop position model of one axis from TRACE ('-' for stdin): commanded
     and actual position, one sample per line (whitespace or commas; '#' comments; an optional
     header line of column names), e.g. a LinuxCNC halsampler capture of pos-cmd and pos-fb.
 
-    Prints a [servo.AXIS] profile section with the fit's quality (NRMSE fit, R², residual
-    RMS) and poles. The trace should start at rest and move the axis through steps or fast
+    Columns are found by the header's names (t, cmd, fb and the like), else 1 and 2; the
+    period from a time column or --period-ms. Prints a [servo.AXIS] profile section with the
+    fit's quality (NRMSE fit, R², residual RMS) and poles; a fit below --min-fit (90 %) is
+    refused (exit 2). The trace should start at rest and move the axis through steps or fast
     moves. Example: nurbscnc identify trace.txt --period-ms 1 --axis y
     """
     from nurbscnc.output.files import read_input_bytes
-    from nurbscnc.servo.identify import fit_axis, parse_trace, profile_section
+    from nurbscnc.servo.identify import (
+        MIN_FIT,
+        fit_axis,
+        parse_trace,
+        profile_section,
+        require_quality,
+    )
 
     data = read_input_bytes(source, "the trace")
     try:
@@ -84,8 +103,9 @@ def identify(source, axis, order, cmd_col, fb_col, time_col, period_ms, delay, a
         text, cmd_col, fb_col, time_col, None if period_ms is None else period_ms * 1e-3
     )
     fit = fit_axis(trace, int(order), delay)
+    require_quality(fit, MIN_FIT if min_fit is None else min_fit / 100.0, trace.columns)
     name = "<stdin>" if source == "-" else source
-    section = profile_section(fit, axis, name)
+    section = profile_section(fit, axis, name, trace.columns)
     if as_json:
         out = {
             "ok": True,

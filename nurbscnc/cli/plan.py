@@ -10,7 +10,13 @@ import click
 from nurbscnc.app.load import display_name, read_program_text
 from nurbscnc.app.output import write_profile_dump
 from nurbscnc.app.plots import write_plan_plots
-from nurbscnc.app.summary import clock_suffix, precompensation_text, summary_json, summary_of
+from nurbscnc.app.summary import (
+    clock_suffix,
+    precompensation_text,
+    rest_text,
+    summary_json,
+    summary_of,
+)
 from nurbscnc.cli.common import json_option, make_plan, plot_option, program_argument
 from nurbscnc.cli.console import echo_source_line, err, out, progress_display, show_progress
 from nurbscnc.cli.handle import handle_errors
@@ -72,7 +78,7 @@ def plan(program, as_json, dump_profile, explain, explain_all, plot_dir, **setti
         click.echo(summary_json(summary))
         return
     print_plan_summary(prog, mach, summary, err if dump_profile == "-" else out)
-    if explain:
+    if explain and expl is not None:  # None: no motion, nothing planned to explain
         print_explanation(expl, out, None if explain_all else EXPLAIN_LINES, text.splitlines())
 
 
@@ -183,6 +189,9 @@ def print_plan_summary(prog, mach, summary: dict, out: Console) -> None:
     """The human summary of ``plan`` on ``out`` (stderr when the profile goes to stdout)."""
     from rich.text import Text
 
+    if summary.get("motion") is False:
+        out.print(Text.assemble((prog.name, "bold"), ": ", rest_text(summary)))
+        return
     if "pieces" in summary:
         out.print(
             Text.assemble(

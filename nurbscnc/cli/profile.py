@@ -51,15 +51,23 @@ def profile():
 @profile.command("init")
 @click.argument("file", required=False, type=click.Path(dir_okay=False, allow_dash=True))
 @click.option("--force", is_flag=True, help="Overwrite FILE if it exists.")
+@click.option(
+    "--template",
+    type=click.Choice(["paper", "router"]),
+    default="paper",
+    show_default=True,
+    help="paper: the paper's X-Y table with 4th-order servo models (the bundled default); "
+    "router: a stepper-motor router without a servo model (contour check off).",
+)
 @_profile_errors
-def init(file, force):
+def init(file, force, template):
     """Write a commented profile template to FILE (default or '-': stdout).
 
-    Example: nurbscnc profile init nurbscnc.toml
+    Example: nurbscnc profile init nurbscnc.toml --template router
     """
-    from nurbscnc.machine.profile import default_profile_text
+    from nurbscnc.machine.discovery import template_text
 
-    text = default_profile_text()
+    text = template_text(template)
     if file in (None, "-"):
         click.echo(text, nl=False)
         return
@@ -110,7 +118,13 @@ def show(as_json, machine, overrides):
         var = {"path": var_path, "found_by": found_by or None}
         click.echo(
             json.dumps(
-                {"ok": True, **machine_json(mach), "profile": mach.settings, "var_file": var}
+                {
+                    "ok": True,
+                    **machine_json(mach),
+                    "profile": mach.settings,
+                    "var_file": var,
+                    "defaults": sorted(mach.defaults),
+                }
             )
         )
         return

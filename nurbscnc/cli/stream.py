@@ -25,7 +25,7 @@ from nurbscnc.app.stream import (
 from nurbscnc.app.varfile import program_inputs, write_back
 from nurbscnc.app.varfile import user_m_timeout_s as user_m_timeout
 from nurbscnc.cli import console
-from nurbscnc.cli.common import load_machine_cli
+from nurbscnc.cli.common import load_machine_cli, nothing_to_send
 from nurbscnc.cli.controls import Operator, key_reader, routed_signals, user_m_runner
 from nurbscnc.cli.handle import handle_errors
 from nurbscnc.cli.options import planning_options, stall_limit_option, user_m_timeout_option
@@ -253,6 +253,8 @@ def stream(
                 override=feed_override / 100.0,
                 **settings,
             )
+            if job is None and pulses is None:  # no motion: it ran, its parameters persist
+                return nothing_to_send(program, as_json, write_back(inputs, prog))
         try:
             if job is None:
                 if from_line is not None or feed_override != 100:

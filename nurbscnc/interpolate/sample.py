@@ -36,6 +36,7 @@ from nurbscnc.plan.timing import (
     sample_count,
     servo_clock,
 )
+from nurbscnc.program.columns import DWELL, PAUSE
 
 #: Rows per window of :func:`sample_chunks` (64 Ki rows ≈ 6 MB of samples): large enough
 #: that the per-window work (servo clock, dwells, Python overhead) is negligible, small
@@ -233,3 +234,55 @@ class _TaylorCarry:
         if self.curve >= 0:
             self.u, self.v = float(param[-1]), float(ref.v_mm_s[-1])
             self.a, self.tau = float(ref.a_mm_s2[-1]), float(ref.tau_s[-1])
+
+
+def has_motion(columns) -> bool:
+    """Does a program move at all? Any line, rapid, arc or NURBS among its segment columns
+    (:func:`~nurbscnc.program.columns.segment_columns`; the interpreter drops moves that go
+    nowhere, so a program of offsets, tool changes, dwells and stops has none)."""
+    return bool(np.any((columns.kind != DWELL) & (columns.kind != PAUSE)))
+
+
+def rest_samples(program, columns, period_s: float) -> Samples:
+    """The reference points of a program with no motion (:func:`has_motion` False): the
+    tool at rest at the program's start point ``program.start_mm`` from t = 0 through its
+    dwells, t_k = k·T_s for k = 0 … N−1 with N = ⌈ΣT_dwell / T_s⌉ + 1, the rule of a plan
+    (:func:`~nurbscnc.plan.timing.sample_count`): one row at t = 0 when nothing dwells.
+    Feed, acceleration and path length are 0; ``piece`` is 0 (there is none, as for a
+    baseline); ``line`` is the source line of the dwell in progress at t_k (the last
+    dwell's after the last one ends; the first segment's, or 0 for a program without
+    segments, at t = 0 before any dwell)."""
+    dwells = columns.rows(DWELL)
+    ends_s = np.cumsum(_dwell_seconds(program, dwells))
+    total_s = float(ends_s[-1]) if ends_s.size else 0.0
+    n = int(np.ceil(total_s / period_s - 1e-9)) + 1
+    t = np.arange(n) * period_s
+    if dwells.size:
+        lines = columns.lines[dwells][
+            np.minimum(np.searchsorted(ends_s, t, "right"), dwells.size - 1)
+        ]
+    else:
+        lines = np.full(n, columns.lines[0] if columns.lines.size else 0)
+    zeros = np.zeros(n)
+    return Samples(
+        t_s=t,
+        tau_s=t.copy(),
+        s_mm=zeros,
+        v_mm_s=zeros.copy(),
+        a_mm_s2=zeros.copy(),
+        piece=np.zeros(n, dtype=np.int64),
+        points_mm=np.repeat(np.asarray(program.start_mm, dtype=float)[None, :], n, axis=0),
+        param=None,
+        line=lines.astype(np.int64),
+    )
+
+
+def _dwell_seconds(program, dwells: np.ndarray) -> np.ndarray:
+    """The durations [s] of the dwell segments at indexes ``dwells``."""
+    return np.array([program.segments[k].seconds for k in dwells], dtype=float)
+
+
+def rest_seconds(program, columns) -> float:
+    """How long a program with no motion holds the tool at rest [s]: the sum of its dwells
+    (exact; :func:`rest_samples` ends at the first servo period at or after it)."""
+    return float(np.sum(_dwell_seconds(program, columns.rows(DWELL))))

@@ -20,9 +20,20 @@ FOUND_BY_USER = "user config"
 FOUND_BY_DEFAULT = "bundled default"
 
 
+#: The templates of ``profile init --template``: name → packaged file.
+TEMPLATES = {"paper": "default_machine.toml", "router": "router_machine.toml"}
+
+
 def default_profile_text() -> str:
     """The text of the packaged default profile (the paper's benchmark machine)."""
-    ref = resources.files("nurbscnc").joinpath("data", "default_machine.toml")
+    return template_text("paper")
+
+
+def template_text(name: str) -> str:
+    """The text of the packaged profile template ``name`` (:data:`TEMPLATES`): ``paper``, the
+    default profile (the paper's X-Y table with its 4th-order servo models), or ``router``, a
+    stepper-motor router without a servo model."""
+    ref = resources.files("nurbscnc").joinpath("data", TEMPLATES[name])
     return ref.read_text(encoding="utf-8")
 
 

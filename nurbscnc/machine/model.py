@@ -223,8 +223,8 @@ class Machine:
     ``source`` is the file it came from (``"<default machine>"`` for the bundled one),
     ``found_by`` how it was chosen (one of the ``FOUND_BY_*`` constants), ``settings`` the
     effective profile in the file's units (the TOML tables after overrides, optional keys
-    filled in with their defaults), for ``profile show``. ``axis_limits`` the optional
-    per-axis limits (none: the path limits of ``limits`` alone).
+    filled in with their defaults, ``defaults`` the keys so filled), for ``profile show``.
+    ``axis_limits`` the optional per-axis limits (none: the path limits of ``limits`` alone).
     """
 
     limits: Limits
@@ -235,6 +235,8 @@ class Machine:
     found_by: str = FOUND_BY_DEFAULT
     settings: dict = field(default_factory=dict, compare=False, repr=False)
     axis_limits: AxisLimits = field(default_factory=AxisLimits)
+    #: The dotted keys of ``settings`` the profile left out, filled with their defaults.
+    defaults: frozenset = field(default_factory=frozenset, compare=False, repr=False)
 
     @property
     def contour_check(self) -> bool:

@@ -61,6 +61,8 @@ from nurbscnc.machine.schema import (
     Reporter,
     apply_override,
     check_table,
+    default_max_pulses,
+    fill_defaults,
 )
 from nurbscnc.machine.show import profile_info as profile_info
 from nurbscnc.machine.show import profile_toml as profile_toml
@@ -111,6 +113,7 @@ def _with_origin(machine: Machine, found_by: str) -> Machine:
         found_by,
         machine.settings,
         machine.axis_limits,
+        machine.defaults,
     )
 
 
@@ -186,8 +189,10 @@ def _axis_servo(table: dict, key: str, rep: Reporter) -> AxisServo:
 
 
 def _build(data: dict, rep: Reporter) -> Machine:
+    defaults = fill_defaults(data)
     check_table(data, SCHEMA, "", rep)
     lim = data["limits"]
+    defaults |= {f"limits.{k}" for k in ("rapid_mm_min", "path_tolerance_um") if k not in lim}
     v_max_mm_s = lim["v_max_mm_min"] / S_PER_MIN
     # Rapids: no rate in the paper, so an omitted rapid_mm_min means "rapids at V_max".
     rapid_mm_s = lim.get("rapid_mm_min", lim["v_max_mm_min"]) / S_PER_MIN
@@ -212,15 +217,23 @@ def _build(data: dict, rep: Reporter) -> Machine:
     )
 
     st = data["steps"]
-    steps = Steps(
-        per_mm=tuple(float(st["per_mm"][a]) for a in AXES),
-        max_pulses_per_period=int(st["max_pulses_per_period"]),
-    )
     axis_limits = _axis_limits(data.get("axis_limits", {}))
     # A pulse-train card cannot emit more than max_pulses_per_period steps per period on an axis;
     # an axis moving alone at the fastest rate (max of V_max and the rapid rate, or that axis's
     # own velocity limit when lower) must fit.
     v_path_top_mm_s = max(limits.v_max_mm_s, limits.rapid_mm_s)
+    if "max_pulses_per_period" not in st:
+        st["max_pulses_per_period"] = default_max_pulses(
+            max(
+                min(v_path_top_mm_s, v_axis) * servo.period_s * float(st["per_mm"][a])
+                for a, v_axis in zip(AXES, axis_limits.v_max_mm_s, strict=True)
+            )
+        )
+        defaults.add("steps.max_pulses_per_period")
+    steps = Steps(
+        per_mm=tuple(float(st["per_mm"][a]) for a in AXES),
+        max_pulses_per_period=int(st["max_pulses_per_period"]),
+    )
     for a, per_mm, v_axis in zip(AXES, steps.per_mm, axis_limits.v_max_mm_s, strict=True):
         v_top_mm_s = min(v_path_top_mm_s, v_axis)
         need = v_top_mm_s * servo.period_s * per_mm
@@ -258,6 +271,7 @@ def _build(data: dict, rep: Reporter) -> Machine:
         source=rep.source,
         settings=settings,
         axis_limits=axis_limits,
+        defaults=frozenset(defaults),
     )
 
 

@@ -273,3 +273,54 @@ def _short(value: int) -> str:
     """An integer as text, its middle elided when it has more than 24 digits."""
     text = str(value)
     return text if len(text) <= 24 else f"{text[:10]}…{text[-6:]} ({len(text.lstrip('-'))} digits)"
+
+
+# ---------------------------------------------------------------------------------------------
+# Defaults. A profile of one's own needs only the path limits of [limits] (v_max_mm_min,
+# a_max_mm_s2, j_max_mm_s3): every other key has a documented default, which `profile show`
+# marks as such. Unknown keys stay errors.
+
+#: Default of ``steps.max_pulses_per_period`` (a signed byte, as the bundled card), raised to
+#: what the profile's fastest axis needs when that is more (see :func:`default_max_pulses`).
+DEFAULT_MAX_PULSES = 127
+#: The fixed defaults [the file's units]: the paper's tolerances (Table 3) and the bundled
+#: machine's servo period, resolution and travel. The derived ones (``limits.rapid_mm_min`` =
+#: ``v_max_mm_min``, ``limits.path_tolerance_um`` = ``contour_tolerance_um``,
+#: ``steps.max_pulses_per_period``) are filled where their sources are known.
+DEFAULTS: dict = {
+    "limits.chord_tolerance_um": 1.0,
+    "limits.kappa_ref_per_mm": 1.0,
+    "limits.contour_tolerance_um": 15.0,
+    "limits.ph_tolerance_um": 1.0,
+    "limits.max_points": DEFAULT_MAX_POINTS,
+    "servo.period_ms": DEFAULT_PERIOD_MS,
+    **{f"steps.per_mm.{a}": 1000.0 for a in AXES},
+    **{f"soft_limits.{a}.{k}": v for a in AXES for k, v in (("min_mm", -1e3), ("max_mm", 1e3))},
+}
+_OPTIONAL |= {"steps.max_pulses_per_period"}
+
+
+def fill_defaults(data: dict) -> set[str]:
+    """Fill every key of :data:`DEFAULTS` that ``data`` (a parsed profile) leaves out, in
+    place; returns the dotted keys filled. A table that is not a table is left alone (the
+    schema check reports it)."""
+    filled = set()
+    for key, value in DEFAULTS.items():
+        *tables, leaf = key.split(".")
+        table = data
+        for name in tables:
+            table = table.setdefault(name, {})
+            if not isinstance(table, dict):
+                break
+        else:
+            if leaf not in table:
+                table[leaf] = value
+                filled.add(key)
+    return filled
+
+
+def default_max_pulses(need_per_period: float) -> int:
+    """``steps.max_pulses_per_period`` when the profile gives none: :data:`DEFAULT_MAX_PULSES`,
+    or the steps per period the fastest axis needs at the profile's top speed (rounded up)
+    when that is more, so that the default never refuses the profile's own speeds."""
+    return int(min(max(DEFAULT_MAX_PULSES, math.ceil(need_per_period - 1e-9)), _COUNT_MAX))

@@ -32,10 +32,13 @@ def _pole_text(p: complex) -> str:
 
 def profile_toml(machine: Machine) -> str:
     """``machine.settings`` as TOML, in the template's key order, with a header saying where
-    the profile came from and, per servo axis, its poles (and ω_n for the simple form)."""
+    the profile came from, each key the profile left out marked ``# default``, and, per servo
+    axis, its poles (and ω_n for the simple form)."""
     lines = [f"# machine profile: {machine.describe()}"]
     if not machine.contour_check:
         lines.append("# no servo model: contour check off")
+    if machine.defaults:
+        lines.append("# keys marked '# default' are not in the profile: their default value")
 
     def emit(table: dict, schema, prefix: str) -> None:
         keys = _ordered(table, schema)
@@ -52,7 +55,11 @@ def profile_toml(machine: Machine) -> str:
                 wn = axis.natural_frequency_rad_s
                 extra = f"; wn = {wn:.6g} rad/s" if wn is not None else ""
                 lines.append(f"# poles [1/s]: {poles}{extra}")
-        lines.extend(f"{k} = {_toml_value(table[k])}" for k in leaves)
+        lines.extend(
+            f"{k} = {_toml_value(table[k])}"
+            + ("  # default" if (f"{prefix}.{k}" if prefix else k) in machine.defaults else "")
+            for k in leaves
+        )
         for k in keys:
             if isinstance(table[k], dict):
                 sub = schema.get(k, {}) if isinstance(schema, dict) else {}

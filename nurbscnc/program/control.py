@@ -28,6 +28,16 @@ _O_LINE = re.compile(
 )
 
 
+#: An M99 word (the end of a Fanuc subroutine), and comments to strip before looking for it.
+_M99 = re.compile(r"(?<![a-z])m\s*0*99(?![0-9.])", re.I)
+_COMMENT = re.compile(r"\([^)]*\)|;.*")
+
+
+def _code(line: str) -> str:
+    """A line without its comments."""
+    return _COMMENT.sub("", line) if ("(" in line or ";" in line) else line
+
+
 class Source:
     """One program file: its lines, blocks parsed on demand, and its label index."""
 
@@ -38,6 +48,7 @@ class Source:
         self.call_line = call_line
         self._blocks: list[Block | None] = [None] * len(lines)
         self._labels: dict[str, tuple[list[int], list[str]]] | None = None
+        self._scopes: tuple[list[int], list[int]] | None = None
         #: Lines with words that the fast lane ran (1), for the block count; None: none yet.
         self.worded: bytearray | None = None
         #: Memos of facts about O lines that do not change while running (loops re-ask them).
@@ -68,31 +79,78 @@ class Source:
             self._labels = labels
         return self._labels
 
+    def scope(self, index: int) -> int:
+        """The first line index of the subroutine whose definition holds line ``index``
+        (-1: the main program's body).
+
+        LinuxCNC names a control label (if, while, do, repeat and their tails) after the
+        subroutine being run, "<sub>#<label>" (interp_read.cc, read_o), so one label may head
+        a construct in each subroutine and once more in the main program. A subroutine is an
+        ``o<n> sub`` … ``o<n> endsub`` definition, or a Fanuc one: an ``O<n>`` line up to the
+        next M99 before any other ``O<n>`` line (an ``O<n>`` with no M99 after it is a
+        program number, a title).
+        """
+        if self._scopes is None:
+            self._scopes = self._scope_spans()
+        starts, ends = self._scopes
+        k = bisect.bisect_right(starts, index) - 1
+        return starts[k] if k >= 0 and index <= ends[k] else -1
+
+    def _scope_spans(self) -> tuple[list[int], list[int]]:
+        """(first, last) line indexes of every subroutine definition, sorted."""
+        spans = []
+        bare = sorted(
+            i
+            for indexes, kinds in self.labels().values()
+            for i, w in zip(indexes, kinds)
+            if w == ""
+        )
+        for indexes, kinds in self.labels().values():
+            for k, kind in enumerate(kinds):
+                if kind == "sub":
+                    tail = zip(indexes[k + 1 :], kinds[k + 1 :])
+                    spans.append(
+                        (indexes[k], next((i for i, w in tail if w == "endsub"), len(self.lines)))
+                    )
+        for k, head in enumerate(bare):
+            stop = bare[k + 1] if k + 1 < len(bare) else len(self.lines)
+            m99 = next(
+                (i for i in range(head + 1, stop) if _M99.search(_code(self.lines[i]))), None
+            )
+            if m99 is not None:
+                spans.append((head, m99))
+        spans.sort()
+        return [a for a, _ in spans], [b for _, b in spans]
+
     def find(self, label: str, after: int, keywords, stop=("sub", "endsub")) -> int | None:
         """The first line index > ``after`` carrying ``label`` with a keyword in ``keywords``.
 
-        The search stops (None) at a keyword in ``stop`` that is not wanted: constructs do
-        not reach across subroutine definitions.
+        Only lines in the same scope as ``after`` (:meth:`scope`) are found, and the search
+        stops (None) at a keyword in ``stop`` that is not wanted: constructs do not reach
+        across subroutine definitions.
         """
         entry = self.labels().get(label)
         if entry is None:
             return None
         indexes, kinds = entry
+        scope = self.scope(after)
         for k in range(bisect.bisect_right(indexes, after), len(indexes)):
-            if kinds[k] in keywords:
+            if kinds[k] in keywords and self.scope(indexes[k]) == scope:
                 return indexes[k]
             if kinds[k] in stop:
                 return None
         return None
 
     def find_before(self, label: str, before: int, keywords) -> int | None:
-        """The last line index < ``before`` carrying ``label`` with a keyword in ``keywords``."""
+        """The last line index < ``before`` carrying ``label`` with a keyword in ``keywords``,
+        in the same scope as ``before``."""
         entry = self.labels().get(label)
         if entry is None:
             return None
         indexes, kinds = entry
+        scope = self.scope(before)
         for k in range(bisect.bisect_left(indexes, before) - 1, -1, -1):
-            if kinds[k] in keywords:
+            if kinds[k] in keywords and self.scope(indexes[k]) == scope:
                 return indexes[k]
         return None
 
@@ -164,7 +222,8 @@ class ControlFlow:
         handler(label, args, column, frame, here)
 
     def _check_unique(self, label: str, here: int, column: int) -> None:
-        """LinuxCNC: one label, one construct ("duplicate O-word label")."""
+        """LinuxCNC: one label, one construct ("duplicate O-word label") per subroutine
+        (control labels) or per program (subroutine names)."""
         checked = self.source.checked
         if here in checked:
             return
@@ -176,8 +235,11 @@ class ControlFlow:
             if self.source.block(here).oword.keyword == "sub"
             else ("if", "while", "do", "repeat")
         )
+        scope = self.source.scope(here) if heads[0] != "sub" else None
         for index, kind in zip(indexes, kinds):
             if index >= here or kind not in heads:
+                continue
+            if scope is not None and self.source.scope(index) != scope:
                 continue
             if kind == "while" and self._is_do_tail(label, index):
                 continue

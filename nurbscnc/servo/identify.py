@@ -28,6 +28,7 @@ residual RMS, and for comparison the RMS of the following error u − y.
 from __future__ import annotations
 
 import math
+import re
 import warnings
 from dataclasses import dataclass
 
@@ -49,36 +50,147 @@ class TraceError(NurbsCncError):
 
 @dataclass(frozen=True)
 class Trace:
-    """Command and actual position [mm] at equally spaced samples, period ``period_s`` [s]."""
+    """Command and actual position [mm] at equally spaced samples, period ``period_s`` [s];
+    ``columns`` says which columns of the file they came from (for messages)."""
 
     command_mm: np.ndarray
     actual_mm: np.ndarray
     period_s: float
+    columns: str = ""
+
+
+#: Header names that mark a column's role (matched case-insensitively against the name's
+#: words: "Time (s)", "pos_cmd", "axis.0.motor-pos-fb" all match). A command word wins over
+#: a feedback word ("pos-cmd" is the command).
+COMMAND_WORDS = frozenset(
+    {"cmd", "command", "commanded", "ref", "reference", "setpoint", "sp", "demand", "target"}
+)
+ACTUAL_WORDS = frozenset(
+    {"fb", "feedback", "pos", "position", "actual", "act", "measured", "meas", "encoder", "enc"}
+)
+TIME_WORDS = frozenset({"t", "time", "timestamp", "sec", "secs", "seconds"})
+#: Unit words of a time column's name → seconds per unit (no unit word: seconds).
+TIME_UNITS = {"s": 1.0, "sec": 1.0, "secs": 1.0, "seconds": 1.0, "ms": 1e-3, "us": 1e-6}
+_WORD = re.compile(r"[^0-9a-z]+")
+
+
+def _words(name: str) -> set[str]:
+    return set(_WORD.split(name.lower().replace("µs", "us"))) - {""}
+
+
+def _role(name: str) -> str | None:
+    """ "cmd", "fb" or "time" for a header name with one of the role words, else None."""
+    words = _words(name)
+    if words & COMMAND_WORDS:
+        return "cmd"
+    if words & ACTUAL_WORDS:
+        return "fb"
+    if words & TIME_WORDS:
+        return "time"
+    return None
 
 
 def _column(spec: str, header: list[str] | None, width: int, what: str) -> int:
-    """0-based column index from a 1-based number or a header name."""
+    """0-based column index from a 1-based number or a header name (any case)."""
     if spec.isdigit():
         k = int(spec) - 1
         if not 0 <= k < width:
             raise TraceError(f"--{what} {spec}: the trace has {width} columns")
         return k
-    if header is None or spec not in header:
+    lowered = [h.lower() for h in header] if header is not None else []
+    if spec.lower() not in lowered:
         names = ", ".join(header) if header else "no header line"
         raise TraceError(f"--{what} {spec!r}: no such column ({names})")
-    return header.index(spec)
+    return lowered.index(spec.lower())
+
+
+def _find_columns(header, width: int, specs: dict) -> dict:
+    """Column index (or None for no time column) of "cmd", "fb" and "time": the ``specs``
+    given (numbers or names), else the header's names by role (:func:`_role`), else the
+    first two columns when that is unambiguous (no header, or a header of two columns)."""
+    roles: dict[str, list[int]] = {}
+    for k, name in enumerate(header or ()):
+        roles.setdefault(_role(name), []).append(k)
+    out: dict = {}
+    for role, fallback in (("cmd", 0), ("fb", 1), ("time", None)):
+        if specs[role] is not None:
+            out[role] = _column(specs[role], header, width, role)
+            continue
+        found = roles.get(role, [])
+        if len(found) > 1:
+            names = ", ".join(repr(header[k]) for k in found)
+            raise TraceError(f"columns {names} all look like --{role}: name one with --{role}")
+        if found:
+            out[role] = found[0]
+        elif header is not None and width > 2 and fallback is not None:
+            raise TraceError(
+                f"which column is --{role}? The header ({', '.join(header)}) names none "
+                f"(e.g. t, cmd, fb): give --cmd and --fb (and --time)"
+            )
+        else:
+            out[role] = fallback
+    return out
+
+
+def _period_of(t: np.ndarray, numbers: list[int], period_s: float | None) -> float:
+    """The sample period [s] of a time column ``t`` [s] (uniform within 1 %)."""
+    dt = np.diff(t)
+    period = float(np.median(dt))
+    if not period > 0:
+        raise TraceError("the time column does not increase")
+    bad = np.flatnonzero(np.abs(dt - period) > 0.01 * period)
+    if bad.size:
+        k = int(bad[0]) + 1
+        raise TraceError(
+            f"time step {dt[k - 1]:.6g} s, not the period {period:.6g} s (samples lost?)",
+            SourcePos(numbers[k], 1, ""),
+        )
+    if period_s is not None and abs(period - period_s) > 0.01 * period_s:
+        raise TraceError(
+            f"the time column's period {period:.6g} s disagrees with --period-ms {period_s * 1e3:g}"
+        )
+    return period
 
 
 def parse_trace(
-    text: str, cmd: str = "1", fb: str = "2", time: str | None = None, period_s: float | None = None
+    text: str,
+    cmd: str | None = None,
+    fb: str | None = None,
+    time: str | None = None,
+    period_s: float | None = None,
 ) -> Trace:
     """Read a trace: whitespace- or comma-separated numbers, one sample per line.
 
-    Blank lines and lines starting with ``#`` are skipped; a first line of names is a header
-    (columns may then be named). ``cmd``/``fb``/``time``: column numbers (1-based) or names.
-    The period comes from ``period_s`` or from the time column [s] (uniform within 1 %).
-    halsampler's ``overrun`` line (samples lost) is an error. Raises TraceError with the line.
+    Blank lines and lines starting with ``#`` are skipped; a first line of names is a header,
+    never a sample. ``cmd``/``fb``/``time``: column numbers (1-based) or names; not given,
+    they are found by the header's names (:data:`COMMAND_WORDS`, :data:`ACTUAL_WORDS`,
+    :data:`TIME_WORDS`), else columns 1 and 2 (no header: halsampler's order). The period
+    comes from ``period_s`` or from the time column (uniform within 1 %; seconds, or the
+    unit its name gives: ``time_ms``, ``t [us]``). halsampler's ``overrun`` line (samples
+    lost) is an error. Raises TraceError with the line.
     """
+    header, rows, numbers = _read_rows(text)
+    data = np.asarray(rows)
+    width = data.shape[1]
+    col = _find_columns(header, width, {"cmd": cmd, "fb": fb, "time": time})
+
+    def name(k: int) -> str:
+        return f"{header[k]!r} (column {k + 1})" if header else f"column {k + 1}"
+
+    columns = f"command {name(col['cmd'])}, actual {name(col['fb'])}"
+    if col["time"] is not None:
+        unit = next((TIME_UNITS[w] for w in _words(header[col["time"]]) if w in TIME_UNITS), 1.0)
+        period = _period_of(data[:, col["time"]] * (unit if header else 1.0), numbers, period_s)
+        columns += f", time {name(col['time'])}"
+    elif period_s is None:
+        raise TraceError("no sample period: give --period-ms, or a time column (--time)")
+    else:
+        period = float(period_s)
+    return Trace(data[:, col["cmd"]].copy(), data[:, col["fb"]].copy(), period, columns)
+
+
+def _read_rows(text: str) -> tuple[list[str] | None, list[list[float]], list[int]]:
+    """(header names or None, rows of numbers, their line numbers) of a trace's text."""
     header: list[str] | None = None
     rows: list[list[float]] = []
     numbers: list[int] = []
@@ -97,7 +209,8 @@ def parse_trace(
             values = [float(f) for f in fields]
         except ValueError:
             if header is None and not rows and not any(_is_float(f) for f in fields):
-                header = fields  # a first line of names only
+                # a first line of names only; in a CSV a name may hold spaces ("Time (s)")
+                header = [f.strip() for f in line.split(",")] if "," in line else fields
                 continue
             bad = next(f for f in fields if not _is_float(f))
             raise TraceError(
@@ -112,32 +225,7 @@ def parse_trace(
         numbers.append(number)
     if len(rows) < 20:
         raise TraceError(f"the trace has {len(rows)} samples; at least 20 are needed")
-    data = np.asarray(rows)
-    width = data.shape[1]
-    ic, ifb = _column(cmd, header, width, "cmd"), _column(fb, header, width, "fb")
-    if time is not None:
-        t = data[:, _column(time, header, width, "time")]
-        dt = np.diff(t)
-        period = float(np.median(dt))
-        if not period > 0:
-            raise TraceError("the time column does not increase")
-        bad = np.flatnonzero(np.abs(dt - period) > 0.01 * period)
-        if bad.size:
-            k = int(bad[0]) + 1
-            raise TraceError(
-                f"time step {dt[k - 1]:.6g} s, not the period {period:.6g} s (samples lost?)",
-                SourcePos(numbers[k], 1, ""),
-            )
-        if period_s is not None and abs(period - period_s) > 0.01 * period_s:
-            raise TraceError(
-                f"the time column's period {period:.6g} s disagrees with "
-                f"--period-ms {period_s * 1e3:g}"
-            )
-    elif period_s is None:
-        raise TraceError("no sample period: give --period-ms or --time COLUMN")
-    else:
-        period = float(period_s)
-    return Trace(data[:, ic].copy(), data[:, ifb].copy(), period)
+    return header, rows, numbers
 
 
 def _is_float(text: str) -> bool:
@@ -223,11 +311,17 @@ def simulate_model(num, den, command_mm: np.ndarray, period_s: float) -> np.ndar
 
 
 def _residual(theta, order, u, y, period_s):
-    # Far from the optimum a start point may overflow: a huge residual, never a crash.
-    with np.errstate(all="ignore"):
-        num, den = model_tf(theta, order)
-        r = simulate_model(num, den, u, period_s) + theta[-1] - y
-    return r if np.all(np.isfinite(r)) else np.full(y.size, 1e6 * (np.ptp(y) + 1.0))
+    # Far from the optimum a start point may overflow (ω = e^θ beyond a float, for a trace
+    # no model of the family describes): a huge residual, never a crash.
+    try:
+        with np.errstate(all="ignore"):
+            num, den = model_tf(theta, order)
+            r = simulate_model(num, den, u, period_s) + theta[-1] - y
+    except OverflowError:
+        r = None
+    if r is not None and np.all(np.isfinite(r)):
+        return r
+    return np.full(y.size, 1e6 * (np.ptp(y) + 1.0))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -383,12 +477,37 @@ def fit_axis(trace: Trace, order: int = 4, delay: int = 0) -> Fit:
     )
 
 
+#: The least fit (NRMSE, a fraction) a model is printed with (``identify --min-fit``). An axis
+#: that tracks its command scores close to 1 with any model near its own: even "no lag"
+#: (ŷ = u) scores 1 − RMS(u − y)/σ(y), over 0.99 for a trace that moves millimetres with a
+#: following error of tens of µm. Below 0.9 the model misses a tenth of the motion: it does
+#: not describe the axis (wrong columns or period, lost samples, another axis's feedback),
+#: and the contour check would trust it.
+MIN_FIT = 0.9
+
+
+def require_quality(fit: Fit, min_fit: float = MIN_FIT, columns: str = "") -> None:
+    """Refuse (TraceError, exit 2) a fit below ``min_fit`` (:data:`MIN_FIT`), saying why."""
+    if fit.fit >= min_fit:
+        return
+    used = f" ({columns})" if columns else ""
+    raise TraceError(
+        f"the fit is {fit.fit * 100:.2f} % (NRMSE), below the {min_fit * 100:g} % a servo "
+        f"model needs: its response misses the recorded position by "
+        f"{fit.residual_rms_mm * 1e3:.4g} um RMS, while the command itself is "
+        f"{fit.following_error_rms_mm * 1e3:.4g} um RMS from it. Check the columns{used}, "
+        f"the sample period ({fit.period_s * 1e3:g} ms) and that the trace is one axis's "
+        f"command and feedback; --min-fit lowers the bar"
+    )
+
+
 def _pole_text(p: complex) -> str:
     return f"{p.real:.5g}" if abs(p.imag) < 1e-12 * abs(p) else f"{p.real:.5g}{p.imag:+.5g}j"
 
 
-def profile_section(fit: Fit, axis: str = "x", source: str = "") -> str:
-    """The fit as a ``[servo.<axis>]`` profile section, with the quality in comments."""
+def profile_section(fit: Fit, axis: str = "x", source: str = "", columns: str = "") -> str:
+    """The fit as a ``[servo.<axis>]`` profile section, with the quality (and the trace's
+    ``columns`` used) in comments."""
     poles = ", ".join(_pole_text(p) for p in sorted(fit.poles, key=lambda p: (abs(p), p.imag)))
     head = [
         f"# nurbscnc identify{': ' + source if source else ''}: {fit.samples} samples at "
@@ -398,6 +517,7 @@ def profile_section(fit: Fit, axis: str = "x", source: str = "") -> str:
         f"{fit.residual_rms_mm * 1e3:.3g} um (following error RMS "
         f"{fit.following_error_rms_mm * 1e3:.3g} um)",
         f"# poles [1/s]: {poles}; DC gain {fit.dc_gain:.6g}; offset {fit.offset_mm * 1e3:.3g} um",
+        *([f"# columns: {columns}"] if columns else []),
         f"[servo.{axis}]",
     ]
     if fit.order == 2:

@@ -1,2 +1,2 @@
-; unknown M code M1.5 @ 2:1
-M1.5
+; M250 is not supported @ 2:1
+M250
