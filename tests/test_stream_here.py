@@ -157,3 +157,23 @@ def test_a_card_in_alarm_is_refused_and_zero_runs_from_machine_zero(here, setup_
     assert r.exit_code == 0, r.output
     # declared at machine (0, 0, 0), then moved to machine (2, 1, 0) by G53
     assert sim.positions_set == 1 and sim.position.tolist() == [1600, 1000, 0]
+
+
+def test_an_arc_valid_from_the_card_is_not_refused_from_machine_zero(here, setup_card):
+    """G2 X6 Y1 R2.5 from the card at work (2, 1): 4 mm to the end, less than 2R = 5 mm, so
+    the arc exists (from machine zero, 15 mm away, it would not): it runs and ends at work
+    (6, 1, 0). With R1.5 (2R = 3 mm < 4 mm) it is an error from the card too: exit 2, not
+    moved."""
+    sim, common = setup_card
+    (here / "bad_arc.nc").write_text("G21 G90 G17\nG2 X6 Y1 R1.5 F600\nM2\n")
+    r = stream("bad_arc.nc", common)
+    assert r.exit_code == 2 and "bad_arc.nc:2:" in r.stderr and "R1.5" in r.stderr, r.output
+    assert sim.position.tolist() == list(JOGGED_STEPS)
+    (here / "arc.nc").write_text("G21 G90 G17\nG2 X6 Y1 R2.5 F600\nM2\n")
+    r = stream("arc.nc", common)
+    assert r.exit_code == 0, r.output
+    want_mm = G54_MM + np.array([6.0, 1.0, 0.0])
+    assert sim.position.tolist() == np.rint(want_mm * PER_MM).astype(int).tolist()
+    # --zero: from machine zero, work (-15.43, 3) in G54, to work (6, 1): 21.5 mm > 5 mm
+    r = stream("arc.nc", common, "--zero")
+    assert r.exit_code == 2 and "arc.nc:2:" in r.stderr, r.output

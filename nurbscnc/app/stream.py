@@ -3,7 +3,7 @@ file or of a whole planned run, or the job of a program planned cut window by cu
 
 from __future__ import annotations
 
-from nurbscnc.errors import ConfigError, PlanningError
+from nurbscnc.errors import ConfigError, GeometryError, PlanningError
 
 #: The suffixes of reference-point files (``run -o``), streamed as they are.
 POINT_SUFFIXES = (".csv", ".npz")
@@ -235,7 +235,8 @@ class ProgramStream:
     :meth:`interpret`), and
     ``program``: the program interpreted from machine zero — every error of the text, the
     parameter file, the tool table or a subroutine raises before the card is asked where it
-    stands."""
+    stands; a GeometryError (an arc's radii, which depend on where the program starts) is
+    kept in ``error`` (``program`` None) and decided from the card's position."""
 
     def __init__(self, path: str, mach, settings: dict) -> None:
         from nurbscnc.app.load import read_tool_table
@@ -250,7 +251,14 @@ class ProgramStream:
         table = settings.get("tool_table")
         self.tools = read_tool_table(table) if table else None
         self.text = None
-        self.program = self.interpret(None)
+        self.error = None
+        try:
+            self.program = self.interpret(None)
+        except GeometryError as exc:
+            # An arc's radius check depends on where its first move starts (G2 X6 Y1 R2.5
+            # is fine from a card 4 mm away, not from machine zero): decided from the card's
+            # position, still before anything moves.
+            self.program, self.error = None, exc
 
     def interpret(self, start_mm):
         """The program interpreted from ``start_mm`` [mm, machine; None: machine zero]."""
@@ -284,8 +292,10 @@ class ProgramStream:
                     f"{len(self.mach.steps.per_mm)}"
                 )
             start_mm = position_mm(position_steps, self.mach)
-            if any(start_mm):  # from machine zero: the program checked already
+            if any(start_mm) or prog is None:  # from machine zero: interpreted already
                 prog = self.interpret(start_mm)
+        elif prog is None:
+            raise self.error
         job, pulses = stream_job(
             prog, self.mach, self.options, from_line, optional_stop, override, self.tools
         )
