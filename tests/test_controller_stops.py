@@ -21,7 +21,7 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
-import nurbscnc.cli.stream as cli_stream
+import nurbscnc.app.stream as app_stream
 from nurbscnc.cli.stream import stream
 from nurbscnc.controller.stops import Stop, describe_stop, is_user_m
 from nurbscnc.output.stream.card import CardConfig
@@ -42,9 +42,10 @@ def program_with_stop(**stop):
 
 
 def stream_with(monkeypatch, prog, args, when_at=None, timeout_s=30.0):
-    """``stream`` in-process with ``load_program`` giving ``prog``; ``when_at(card)`` runs
-    on a thread once the card is DONE at the stop (5000 steps; returns what it saw)."""
-    monkeypatch.setattr(cli_stream, "load_program", lambda *_a, **_k: prog)
+    """``stream`` in-process with the program's interpretation giving ``prog`` (the card
+    starts at machine zero); ``when_at(card)`` runs on a thread once the card is DONE at the
+    stop (5000 steps; returns what it saw)."""
+    monkeypatch.setattr(app_stream.ProgramStream, "interpret", lambda *_a, **_k: prog)
     seen = {}
     with card_on("pty", CardConfig(speed=None)) as (card, ep):
 

@@ -23,6 +23,7 @@ from click.testing import CliRunner
 
 from nurbscnc.cli.card import card_sim
 from nurbscnc.cli.stream import stream
+from nurbscnc.output.stream import protocol as p
 from nurbscnc.output.stream.card import CardConfig, PtyEndpoint
 from tests.stream_helpers import card_on
 
@@ -161,7 +162,14 @@ def test_errors_anywhere_in_the_input_send_zero_bytes(tmp_path, setup, args, mes
         time.sleep(0.05)
     assert result.exit_code == 2, result.output
     assert message in result.stderr
-    assert card.bytes_received == 0
+    if setup == "good":
+        # A plan error from where the card stands: the card was asked where it stands (one
+        # STATUS_REQUEST frame) and got nothing else; it is where it was, idle.
+        asked = len(p.encode_message(p.StatusRequest()))
+        assert card.bytes_received == asked and card.executed_periods == 0
+        assert card.position.tolist() == [0, 0, 0] and card.state is p.CardState.IDLE
+    else:
+        assert card.bytes_received == 0
 
 
 def test_port_trouble_exits_3(tmp_path):
@@ -180,10 +188,13 @@ def test_port_trouble_exits_3(tmp_path):
 
 
 def test_unfit_card_exits_3_before_sending_a_batch(tmp_path):
-    nc = tmp_path / "p.nc"
-    nc.write_text(GOOD)
+    # A points file starts where its first point is: a card elsewhere is refused (a program
+    # starts where the card stands instead).
+    pts = spiral(300)
+    csv = tmp_path / "p.csv"
+    write_points(csv, pts - pts[0])
     with card_on("pty", CardConfig(speed=None, position_steps=(0, 7, 0))) as (card, ep):
-        result = run_stream([nc, "--port", ep.path, "--timeout", "0.5"])
+        result = run_stream([csv, "--port", ep.path, "--timeout", "0.5"])
     assert result.exit_code == 3
     assert "the card is at [0, 7, 0] steps" in result.stderr
     assert card.frames_received == 1 and card.executed_periods == 0
@@ -274,12 +285,12 @@ def test_sigusr1_while_planning_is_kept_and_the_stream_waits_at_the_start(tmp_pa
     nc.write_text(GOOD)
     code = (
         "import os, signal, sys\n"
-        "import nurbscnc.cli.stream as s\n"
-        "plan = s.plan_job\n"
+        "import nurbscnc.app.stream as s\n"
+        "plan = s.ProgramStream.plan\n"
         "def planning(*a, **k):\n"
         "    os.kill(os.getpid(), signal.SIGUSR1)  # the hold arrives while planning\n"
         "    return plan(*a, **k)\n"
-        "s.plan_job = planning\n"
+        "s.ProgramStream.plan = planning\n"
         "from nurbscnc.cli.main import main\n"
         "main(prog_name='nurbscnc')\n"
     )
@@ -304,7 +315,7 @@ def test_sigusr1_while_planning_is_kept_and_the_stream_waits_at_the_start(tmp_pa
     assert proc.returncode == 0, stderr.decode()
     assert b"feed hold asked while planning" in first
     assert b"feed hold" in waiting and b"SIGUSR2 continues" in waiting
-    assert untouched == (0, 0)
+    assert untouched == (1, 0)  # only asked where it stands (STATUS_REQUEST) before planning
     assert card.state.name == "DONE" and card.position.tolist() == [8000, 0, 0]
 
 
@@ -356,26 +367,38 @@ def test_m0_waits_at_rest_until_sigusr2(tmp_path):
     assert b"in 2 part(s)" in out and card.position.tolist() == [8000, 0, 0]
 
 
-def test_a_second_stream_needs_card_position_or_zero_not_a_restart(tmp_path):
+def test_a_second_stream_starts_where_the_card_stands_or_at_zero_not_a_restart(tmp_path):
+    """A program starts where the card stands (as LinuxCNC's): GOOD again from X8 goes back
+    to X0 Y0 first (8 mm more travel than from X0), a relative program moves on from X8;
+    --zero declares the card at the program's start (machine zero) instead."""
     from nurbscnc.cli.card import card_position
 
     nc = tmp_path / "part.nc"
     nc.write_text(GOOD)
+    rel = tmp_path / "rel.nc"
+    rel.write_text("G21 G91 G17\nG1 X2 Y-1 F3000\nM2\n")
     with card_on("pty", CardConfig(speed=None)) as (card, ep):
-        assert run_stream([nc, "--port", ep.path, "--quiet"]).exit_code == 0
-        again = run_stream([nc, "--port", ep.path, "--quiet"])
-        assert again.exit_code == 3 and "the card is at [8000, 0, 0] steps" in again.stderr
+        first = run_stream([nc, "--port", ep.path, "--quiet", "--json"])
+        assert first.exit_code == 0, first.output
+        again = run_stream([nc, "--port", ep.path, "--quiet", "--json"])
+        assert again.exit_code == 0, again.output
+        assert card.positions_set == 0 and card.position.tolist() == [8000, 0, 0]
+        # the way back from X8 to X0 (G0) makes the second run longer than the first
+        periods = [json.loads(r.stdout)["executed_periods"] for r in (first, again)]
+        assert periods[1] > periods[0]
+        moved_on = run_stream([rel, "--port", ep.path, "--quiet"])
+        assert moved_on.exit_code == 0, moved_on.output
+        assert card.position.tolist() == [10000, -1000, 0]  # (8 + 2, 0 - 1) mm · 1000
         read = CliRunner().invoke(card_position, ["--port", ep.path])
-        # (the refused stream's HELLO opened a stream that accepted nothing: FILLING)
         assert read.exit_code == 0
         assert read.stdout == (
-            "card: FILLING, position [8000, 0, 0] steps "
-            "(8.0000, 0.0000, 0.0000 mm, machine coordinates)\n"
+            "card: DONE, position [10000, -1000, 0] steps "
+            "(10.0000, -1.0000, 0.0000 mm, machine coordinates)\n"
         )
         zeroed = run_stream([nc, "--port", ep.path, "--quiet", "--zero", "--json"])
         assert zeroed.exit_code == 0, zeroed.output
         assert json.loads(zeroed.stdout)["final_position_steps"] == [8000, 0, 0]
-        assert card.positions_set == 1
+        assert card.positions_set == 1  # declared at X0 Y0, then moved 8 mm
         moved = CliRunner().invoke(card_position, ["--port", ep.path, "--set", "0,0,0", "--json"])
         assert json.loads(moved.stdout) == {
             "ok": True,
@@ -383,8 +406,8 @@ def test_a_second_stream_needs_card_position_or_zero_not_a_restart(tmp_path):
             "position_steps": [0, 0, 0],
             "position_mm": [0.0, 0.0, 0.0],
         }
-        assert run_stream([nc, "--port", ep.path, "--quiet"]).exit_code == 0
-        assert card.position.tolist() == [8000, 0, 0] and card.positions_set == 2
+        assert run_stream([rel, "--port", ep.path, "--quiet"]).exit_code == 0
+        assert card.position.tolist() == [2000, -1000, 0] and card.positions_set == 2
 
 
 def test_feed_override_and_from_line_on_the_command_line(tmp_path):
@@ -437,7 +460,7 @@ NON_DEFAULT = {
     "lookahead": ["--lookahead", "7"],
     "precompensate": ["--precompensate"],
     "reference_tolerance": ["--reference-tolerance", "5"],
-    "smooth": ["--smooth"],
+    "smooth": ["--no-smooth"],
 }
 
 
@@ -452,7 +475,7 @@ def test_every_planning_option_reaches_the_streams_planner_as_runs(tmp_path, mon
     """`stream` and `run` given one planning option at a non-default value plan with equal
     RunOptions (each captured where it reaches its planner; nothing is planned or sent), and
     they differ from the defaults: no option is dropped on the way to the stream."""
-    import nurbscnc.cli.stream as cli_stream
+    import nurbscnc.app.stream as app_stream
     import nurbscnc.pipeline as pipeline
     from nurbscnc.cli.main import main
     from nurbscnc.pipeline import RunOptions
@@ -469,10 +492,11 @@ def test_every_planning_option_reaches_the_streams_planner_as_runs(tmp_path, mon
         return capture
 
     monkeypatch.setattr(pipeline, "run_program", planned("run"))
-    monkeypatch.setattr(cli_stream, "stream_job", planned("stream"))
+    monkeypatch.setattr(app_stream, "stream_job", planned("stream"))
     runner = CliRunner()
     runner.invoke(main, ["run", str(nc), "-o", str(tmp_path / "p.csv"), *NON_DEFAULT[key]])
-    runner.invoke(main, ["stream", str(nc), "--port", "/dev/null", *NON_DEFAULT[key]])
+    # --zero: planned from machine zero without asking a card where it stands
+    runner.invoke(main, ["stream", str(nc), "--port", "/dev/null", "--zero", *NON_DEFAULT[key]])
     assert seen["stream"] == seen["run"] != RunOptions()
 
 

@@ -39,6 +39,7 @@ def load_program(
     subroutine_path: tuple = (),
     text: str | None = None,
     inputs=None,
+    start_mm=None,
 ) -> Program:
     """Read, parse and interpret a program file.
 
@@ -47,7 +48,8 @@ def load_program(
     SUBROUTINE_PATH); the interpreter gets the reading as a callback and does no I/O itself.
     ``text``, when given, is the program already read (stdin that ``simulate -`` looked at).
     ``inputs``: the parameter file's values and the user M-code folders
-    (:class:`~nurbscnc.app.varfile.ProgramInputs`; None: neither).
+    (:class:`~nurbscnc.app.varfile.ProgramInputs`; None: neither). ``start_mm``: where the
+    program starts [mm, machine coordinates] (None: machine zero).
     """
     from nurbscnc.program.interpret import InterpretOptions, interpret_text
 
@@ -70,6 +72,7 @@ def load_program(
         tools=tools,
         name=display_name(path),
         load_subroutine=load_subroutine,
+        **({} if start_mm is None else {"start_mm": tuple(map(float, start_mm))}),
         **(inputs.interpret_options() if inputs is not None else {}),
     )
     return interpret_text(text, options)

@@ -3,7 +3,7 @@ file or of a whole planned run, or the job of a program planned cut window by cu
 
 from __future__ import annotations
 
-from nurbscnc.errors import ConfigError, PlanningError
+from nurbscnc.errors import ConfigError, GeometryError, PlanningError
 
 #: The suffixes of reference-point files (``run -o``), streamed as they are.
 POINT_SUFFIXES = (".csv", ".npz")
@@ -229,3 +229,86 @@ def _noted(extra: dict, reports: list) -> dict:
         f"{reports[-1].batch_periods} periods per frame at the end"
     )
     return {**extra, "notes": [*extra.get("notes", []), {"line": None, "message": note}]}
+
+
+class ProgramStream:
+    """A program checked for ``stream`` before any port is opened: the machine ``mach``, the
+    run ``options``, the parameter file and user M-code folders ``inputs``
+    (:class:`~nurbscnc.app.varfile.ProgramInputs`; the stream writes the file back, so a
+    missing one is all zeros), the tool table ``tools``, the program's ``text`` (read by the first
+    :meth:`interpret`), and
+    ``program``: the program interpreted from machine zero — every error of the text, the
+    parameter file, the tool table or a subroutine raises before the card is asked where it
+    stands; a GeometryError (an arc's radii, which depend on where the program starts) is
+    kept in ``error`` (``program`` None) and decided from the card's position."""
+
+    def __init__(self, path: str, mach, settings: dict) -> None:
+        from nurbscnc.app.load import read_tool_table
+        from nurbscnc.app.settings import run_options_of
+        from nurbscnc.app.varfile import program_inputs
+
+        self.path, self.mach, self.settings = path, mach, settings
+        self.options = run_options_of(settings)
+        self.inputs = program_inputs(
+            mach, settings.get("var"), settings.get("user_m_path", ()), writes=True
+        )
+        table = settings.get("tool_table")
+        self.tools = read_tool_table(table) if table else None
+        self.text = None
+        self.error = None
+        try:
+            self.program = self.interpret(None)
+        except GeometryError as exc:
+            # An arc's radius check depends on where its first move starts (G2 X6 Y1 R2.5
+            # is fine from a card 4 mm away, not from machine zero): decided from the card's
+            # position, still before anything moves.
+            self.program, self.error = None, exc
+
+    def interpret(self, start_mm):
+        """The program interpreted from ``start_mm`` [mm, machine; None: machine zero]."""
+        from nurbscnc.app.load import load_program, read_program_text
+
+        if self.text is None:  # read once: a second interpretation starts elsewhere
+            self.text = read_program_text(self.path)
+        s = self.settings
+        return load_program(
+            self.path,
+            not s.get("no_block_delete", False),
+            s.get("tool_table"),
+            s.get("subroutine_path", ()),
+            text=self.text,
+            inputs=self.inputs,
+            start_mm=start_mm,
+        )
+
+    def still(self) -> bool:
+        """Does the program make no motion (offsets, tool changes, dwells only)? Then
+        nothing is sent and the card is not asked where it stands."""
+        from nurbscnc.geometry.path import STOP_KINDS
+
+        prog = self.program
+        return prog is not None and all(s.kind in STOP_KINDS for s in prog.segments)
+
+    def plan(self, position_steps=None, from_line=None, optional_stop=False, override=1.0):
+        """``(job, pulses, program)`` (:func:`stream_job`) of the program started where the
+        card stands, ``position_steps`` [steps; machine mm = steps / steps per mm, as
+        ``mdi``]: its first move goes from there (a relative program runs relative to it, an
+        absolute one to its work positions; ``from_line``'s approach starts there too).
+        None: from the program's start at machine zero (``stream --zero`` declares the card
+        there). Every error of the plan raises here, before anything is sent."""
+        prog = self.program
+        if position_steps is not None:
+            if len(position_steps) != len(self.mach.steps.per_mm):
+                raise ConfigError(
+                    f"the card has {len(position_steps)} axes, the machine profile "
+                    f"{len(self.mach.steps.per_mm)}"
+                )
+            start_mm = position_mm(position_steps, self.mach)
+            if any(start_mm) or prog is None:  # from machine zero: interpreted already
+                prog = self.interpret(start_mm)
+        elif prog is None:
+            raise self.error
+        job, pulses = stream_job(
+            prog, self.mach, self.options, from_line, optional_stop, override, self.tools
+        )
+        return job, pulses, prog

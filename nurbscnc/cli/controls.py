@@ -200,3 +200,31 @@ def _wait_bounded(proc, timeout_s: float, aborted, poll_s: float) -> int | None:
                 proc.kill()
                 proc.wait()
                 return None
+
+
+def card_at_rest(link: dict) -> list[int]:
+    """The card's position [steps], read with the port of ``link`` (``port``, ``baud``,
+    ``allow_url``, ``timeout_s``) opened and closed again: where ``mdi``, ``jog`` and
+    ``stream`` start. StreamError (nothing sent) when a stream runs on the card (FILLING,
+    RUNNING, HOLD) or it is in ALARM."""
+    from nurbscnc.errors import StreamError
+    from nurbscnc.output.stream import protocol as p
+    from nurbscnc.output.stream.sender import card_position, open_port
+
+    ser = open_port(
+        link["port"],
+        baud=link["baud"],
+        allow_url=link["allow_url"],
+        write_timeout_s=link["timeout_s"],
+    )
+    try:
+        status = card_position(ser, None, link["timeout_s"])
+    finally:
+        with contextlib.suppress(Exception):
+            ser.close()
+    state = p.CardState(status.state)
+    if state in (p.CardState.FILLING, p.CardState.RUNNING, p.CardState.HOLD):
+        raise StreamError(f"the card is {state.name}: a stream runs on it; nothing was sent")
+    if state == p.CardState.ALARM:
+        raise StreamError("the card is in ALARM: clear it first; nothing was sent")
+    return list(status.position_steps)

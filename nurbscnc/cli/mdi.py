@@ -5,7 +5,6 @@ written back."""
 
 from __future__ import annotations
 
-import contextlib
 import json
 
 import click
@@ -106,6 +105,7 @@ def _run(program, blocks, jog, port, allow_url, baud, batch, timeout_s, **kwargs
     from nurbscnc.app.stream import progress_position
     from nurbscnc.app.varfile import program_inputs, user_m_timeout_s, write_back
     from nurbscnc.cli.common import load_machine_cli
+    from nurbscnc.cli.controls import card_at_rest
 
     settings = dict(kwargs)
     as_json, quiet = settings.pop("as_json"), settings.pop("quiet")
@@ -128,7 +128,7 @@ def _run(program, blocks, jog, port, allow_url, baud, batch, timeout_s, **kwargs
         "user_m_timeout_s": user_m_timeout_s(mach, timeout_m_s),
         "mach": mach,
     }
-    steps = _card_at_rest(link)
+    steps = card_at_rest(link)
     if jog is not None:
         blocks = [jog_block(jog[0], steps, mach, jog[1])]
     job = mdi_job(blocks, mach, inputs, steps, options, tools, optional_stop)
@@ -156,30 +156,6 @@ def _sets_offsets(prog) -> bool:
     return any(
         is_coordinate_parameter(k) and v != default.get(k, 0.0) for k, v in prog.parameters.items()
     )
-
-
-def _card_at_rest(link: dict) -> list[int]:
-    """The card's position [steps]; StreamError when a stream runs on it."""
-    from nurbscnc.output.stream import protocol as p
-    from nurbscnc.output.stream.sender import card_position, open_port
-
-    ser = open_port(
-        link["port"],
-        baud=link["baud"],
-        allow_url=link["allow_url"],
-        write_timeout_s=link["timeout_s"],
-    )
-    try:
-        status = card_position(ser, None, link["timeout_s"])
-    finally:
-        with contextlib.suppress(Exception):
-            ser.close()
-    state = p.CardState(status.state)
-    if state in (p.CardState.FILLING, p.CardState.RUNNING, p.CardState.HOLD):
-        raise StreamError(f"the card is {state.name}: a stream runs on it; nothing was sent")
-    if state == p.CardState.ALARM:
-        raise StreamError("the card is in ALARM: clear it first; nothing was sent")
-    return list(status.position_steps)
 
 
 def _execute(job, link: dict, quiet: bool, as_json: bool) -> list[int]:

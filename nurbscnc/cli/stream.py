@@ -10,23 +10,27 @@ import sys
 
 import click
 
-from nurbscnc.app.load import load_program, read_tool_table
-from nurbscnc.app.settings import run_options_of
 from nurbscnc.app.stream import (
+    ProgramStream,
     is_points_file,
     points_of_file,
     position_mm,
     progress_position,
     pulses_of_points,
-    stream_job,
     stream_report,
     work_text,
 )
-from nurbscnc.app.varfile import program_inputs, write_back
 from nurbscnc.app.varfile import user_m_timeout_s as user_m_timeout
+from nurbscnc.app.varfile import write_back
 from nurbscnc.cli import console
 from nurbscnc.cli.common import load_machine_cli, nothing_to_send
-from nurbscnc.cli.controls import Operator, key_reader, routed_signals, user_m_runner
+from nurbscnc.cli.controls import (
+    Operator,
+    card_at_rest,
+    key_reader,
+    routed_signals,
+    user_m_runner,
+)
 from nurbscnc.cli.handle import handle_errors
 from nurbscnc.cli.options import planning_options, stall_limit_option, user_m_timeout_option
 from nurbscnc.errors import ConfigError
@@ -40,41 +44,6 @@ def load_pulse_program(path: str, machine=None, overrides=(), **_settings):
     ``(PulseProgram, Machine)``."""
     mach = load_machine_cli(machine, overrides)
     return pulses_of_points(points_of_file(path, mach), mach), mach
-
-
-def plan_job(
-    path: str,
-    machine=None,
-    overrides=(),
-    from_line: int | None = None,
-    optional_stop: bool = False,
-    override: float = 1.0,
-    **settings,
-):
-    """Plan program ``path`` (from ``from_line`` on) for the stream with the options ``run``
-    builds from the same ``settings`` (:func:`~nurbscnc.app.settings.run_options_of`).
-    Returns ``(job, pulses, machine)`` (:func:`~nurbscnc.app.stream.stream_job`): a job
-    planned cut window by cut window, or the pulses of the whole run (a baseline
-    ``--algorithm``, ``--precompensate``). Everything that can be wrong with the input
-    raises here, before any port is touched (the pulse limit too). Returns ``(job, pulses,
-    machine, inputs, program)``: ``inputs`` the parameter file and user M-code folders
-    (:func:`~nurbscnc.app.varfile.program_inputs`; the stream writes the file back, so a
-    missing one is all zeros), ``program`` the interpreted program (its ``parameters``
-    are what is written back)."""
-    options = run_options_of(settings)
-    mach = load_machine_cli(machine, overrides)
-    inputs = program_inputs(mach, settings.get("var"), settings.get("user_m_path", ()), writes=True)
-    prog = load_program(
-        path,
-        not settings.get("no_block_delete", False),
-        settings.get("tool_table"),
-        settings.get("subroutine_path", ()),
-        inputs=inputs,
-    )
-    table = settings.get("tool_table")
-    tools = read_tool_table(table) if table else None
-    job, pulses = stream_job(prog, mach, options, from_line, optional_stop, override, tools)
-    return job, pulses, mach, inputs, prog
 
 
 @contextlib.contextmanager
@@ -184,8 +153,9 @@ def _progress_bar(enabled: bool, total: int, keys: bool = False, where=None):
 @click.option(
     "--zero",
     is_flag=True,
-    help="Declare that the card stands at the program's start (sets the card's "
-    "position; protocol version 3) instead of refusing a card elsewhere.",
+    help="Run the program from machine zero and declare that the card stands at its start "
+    "(sets the card's position; protocol version 3) instead of starting where the card "
+    "stands; for a points file, instead of refusing a card elsewhere.",
 )
 @click.option(
     "--from-line",
@@ -220,8 +190,11 @@ def stream(
 ):
     """Stream PROGRAM (.nc/.ngc, or reference points .csv/.npz) to a pulse-train card.
 
-    The program is parsed, interpreted and its geometry checked before the port is opened;
-    the motion is planned cut window by cut window while the card runs (each window checked
+    The program is parsed and interpreted before the port is opened; then the card's
+    position is read (refused while a stream runs on it or in ALARM) and the program runs
+    from there, as LinuxCNC's (its first move goes from where the card stands; --zero: from
+    machine zero instead). A points file's first point must be where the card stands. The
+    motion is planned cut window by cut window while the card runs (each window checked
     against the soft limits and the card's pulse limit before it is sent; the card waits at
     rest at the end of a cut if planning falls behind). At M0 / M60 (and M1 with
     --optional-stop) the card stops at rest and the stream waits: Enter (on a terminal) or
@@ -245,16 +218,27 @@ def stream(
                 "--from-line and --feed-override need a program (.nc/.ngc), "
                 "not a file of reference points"
             )
+        mach = load_machine_cli(settings.get("machine"), settings.get("overrides", ()))
+        link = {
+            "port": port,
+            "baud": baud,
+            "allow_url": allow_url,
+            "batch": batch,
+            "timeout_s": timeout_s,
+            "stall_limit_s": stall_limit_s,
+            "lead": lead,
+            "user_m_timeout_s": user_m_timeout(mach, user_m_timeout_s),
+            "mach": mach,
+        }
         if not points_file:
-            job, pulses, mach, inputs, prog = plan_job(
-                program,
-                from_line=from_line,
-                optional_stop=optional_stop,
-                override=feed_override / 100.0,
-                **settings,
-            )
-            if job is None and pulses is None:  # no motion: it ran, its parameters persist
-                return nothing_to_send(program, as_json, write_back(inputs, prog))
+            # Checked before the port; then planned from where the card stands (--zero:
+            # from machine zero, the card declared there).
+            setup = ProgramStream(program, mach, settings)
+            inputs = setup.inputs
+            if setup.still():  # no motion: it ran, its parameters persist
+                return nothing_to_send(program, as_json, write_back(inputs, setup.program))
+            here = None if zero else card_at_rest(link)
+            job, pulses, prog = setup.plan(here, from_line, optional_stop, feed_override / 100.0)
         try:
             if job is None:
                 if from_line is not None or feed_override != 100:
@@ -265,17 +249,6 @@ def stream(
             else:
                 total = int(round(job.plan.cycle_time_s / job.period_s / job.override))
             operator.attach_job(job)
-            link = {
-                "port": port,
-                "baud": baud,
-                "allow_url": allow_url,
-                "batch": batch,
-                "timeout_s": timeout_s,
-                "stall_limit_s": stall_limit_s,
-                "lead": lead,
-                "user_m_timeout_s": user_m_timeout(mach, user_m_timeout_s),
-            }
-            link["mach"] = mach
             link["where"] = progress_position(mach, inputs, prog)
             reports = _send(link, operator, job, pulses, total, zero, quiet, as_json)
             if inputs is not None:  # the program ran to its end: its offsets persist
