@@ -49,7 +49,7 @@ def write_plan_plots(run, plot_dir: str, prog, expl=None, mach=None) -> list[str
         eps = None if mach is None else mach.limits.contour_tolerance_mm * 1000.0
         written.append(
             plots.plot_contour_error(
-                {"predicted (true distance)": (t, contour * 1000.0)},
+                scoped_series("predicted (true distance)", t, contour * 1000.0, run.check.cutting),
                 os.path.join(plot_dir, "contour_error.png"),
                 title=f"{name}: predicted contour error",
                 eps_max_um=eps,
@@ -88,18 +88,39 @@ def _explained_plots(smp, pl, expl, plot_dir: str, name: str) -> list[str]:
     ]
 
 
-def write_simulate_plots(sim, contour, plot_dir: str, name: str, eps_max_um: float) -> None:
+def scoped_series(label: str, t_s, err_um, feed) -> dict:
+    """Time series ``{name: (t_s, err_um)}`` of a contour error [µm]: the feed samples
+    (``feed`` (M,) bool, :mod:`nurbscnc.plan.scope`) as ``label``, the others apart under
+    :data:`~nurbscnc.output.plots.RAPIDS_LABEL` (gaps where the other one is drawn);
+    ``feed`` None: every sample under ``label``."""
+    import numpy as np
+
+    from nurbscnc.output.plots import RAPIDS_LABEL
+
+    if feed is None:
+        return {label: (t_s, err_um)}
+    series = {f"{label}, feed moves": (t_s, np.where(feed, err_um, np.nan))}
+    if not feed.all():
+        series[RAPIDS_LABEL] = (t_s, np.where(feed, np.nan, err_um))
+    return series
+
+
+def write_simulate_plots(
+    sim, contour, plot_dir: str, name: str, eps_max_um: float, feed=None
+) -> None:
     """The simulated contour error (true distance and SPEC eq. 29, with ε_max
-    ``eps_max_um`` [µm]) and the axis errors of a servo simulation, in µm over time."""
+    ``eps_max_um`` [µm]; ``feed`` (M,) bool: the feed samples, the rapids' drawn apart) and
+    the axis errors of a servo simulation, in µm over time."""
     import numpy as np
 
     from nurbscnc.output import plots
 
     os.makedirs(plot_dir, exist_ok=True)
+    eq29_um = np.abs(contour.eq29_mm) * 1000.0
     plots.plot_contour_error(
         {
-            "contour (true)": (sim.t_s, contour.true_mm * 1000.0),
-            "contour (eq. 29)": (sim.t_s, np.abs(contour.eq29_mm) * 1000),
+            **scoped_series("true distance", sim.t_s, contour.true_mm * 1000.0, feed),
+            "eq. 29": (sim.t_s, eq29_um if feed is None else np.where(feed, eq29_um, np.nan)),
         },
         os.path.join(plot_dir, "contour_error.png"),
         title=f"{name}: simulated contour error",

@@ -10,7 +10,14 @@ import click
 from nurbscnc.app.load import display_name, read_program_text
 from nurbscnc.app.output import write_profile_dump
 from nurbscnc.app.plots import write_plan_plots
-from nurbscnc.app.summary import clock_suffix, precompensation_text, summary_json, summary_of
+from nurbscnc.app.summary import (
+    clock_suffix,
+    precompensation_text,
+    rapids_words,
+    scope_words,
+    summary_json,
+    summary_of,
+)
 from nurbscnc.cli.common import json_option, make_plan, plot_option, program_argument
 from nurbscnc.cli.console import echo_source_line, err, out, progress_display, show_progress
 from nurbscnc.cli.handle import handle_errors
@@ -220,10 +227,12 @@ def print_plan_summary(prog, mach, summary: dict, out: Console) -> None:
             else "no dynamics check: a baseline"
         )
         out.print(
-            f"  {'predicted' if 'pieces' in summary else 'simulated'} contour error: "
+            f"  {'predicted' if 'pieces' in summary else 'simulated'} contour error"
+            f"{scope_words(summary['contour_scope'])}: "
             f"max {summary['contour_true_max_um']:.2f} µm, RMS "
             f"{summary['contour_true_rms_um']:.2f} "
             f"µm (ε_max {mach.limits.contour_tolerance_mm * 1000:g} µm; {how})"
+            f"{rapids_words(summary.get('contour_rapids_true_max_um'))}"
         )
     if precompensation_text(summary):
         out.print(precompensation_text(summary), markup=False)

@@ -28,6 +28,10 @@ import numpy as np
 from nurbscnc.errors import ConfigError, OutputError
 from nurbscnc.output.files import atomic_output
 
+#: The legend name of a time series of samples on rapids (drawn grey, under the others): the
+#: contour error the guarantee does not cover (:mod:`nurbscnc.plan.scope`).
+RAPIDS_LABEL = "on rapids (not guaranteed)"
+
 #: Default figure size [inches] and resolution [dots per inch]: 800 x 500 pixels.
 FIGSIZE_IN = (8.0, 5.0)
 DPI = 100
@@ -329,7 +333,10 @@ def _time_series_figure(
     horizontal line (ε_max on the contour plot)."""
     fig, (ax,) = _figure(figsize_in)
     for name, (t, y) in _series(series, 2, what):
-        ax.plot(t, y, lw=lw, label=name)
+        if name == RAPIDS_LABEL:
+            ax.plot(t, y, lw=lw, label=name, color="0.65", zorder=1)
+        else:
+            ax.plot(t, y, lw=lw, label=name, zorder=2)
     if zero_line:
         ax.axhline(0.0, color="0.3", lw=0.5)
     if limit is not None:

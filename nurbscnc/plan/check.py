@@ -20,6 +20,7 @@ from nurbscnc.plan.dynamics import (
 from nurbscnc.plan.pieces import PieceList
 from nurbscnc.plan.profile import Profile, same_until_s
 from nurbscnc.plan.sampler import ReferenceSampler, as_sampler
+from nurbscnc.plan.scope import feed_samples
 from nurbscnc.plan.timing import (
     Reference,
     dwell_times,
@@ -98,7 +99,7 @@ class Checker:
         self.windowed = self.sampler.windowed and not keep
         self.rapid = pieces.rapid
         self.after_rapid = np.zeros(len(pieces), dtype=bool)  # first piece of a cut after a rapid
-        self.after_rapid[settle_rows + 1] = True
+        self.after_rapid[settle_rows + 1] = True  # the rows of after_rapid_rows(self.rapid)
         self.index = PathIndex(pieces)  # where the pieces are (built on first use)
         # The servo at rest, discretised once: every check starts from a copy.
         servo = machine.servo
@@ -425,10 +426,8 @@ class Checker:
         samples on rapids (air moves) and during the settle after a rapid (the reference
         waits at the cut's start) are not. The first cutting samples after a rapid are
         measured against the cut only (in ``resp``)."""
-        waiting = self.after_rapid[ref.piece] & (ref.tau_s <= profile.piece_start_time_s[ref.piece])
         index, rapid = (self.index, self.rapid) if head is None else (head[2], head[3])
-        _cut_distance_after_rapids(resp, ref, profile, self.after_rapid, waiting, rapid, index)
-        return ~self.rapid[ref.piece] & ~waiting
+        return feed_samples(ref, resp, profile, self.rapid, self.after_rapid, index, rapid)
 
 
 class _Head:
@@ -485,29 +484,3 @@ class _HeadProfile:
     def __init__(self, profile: Profile, end: int):
         self.piece_start_mm = profile.piece_start_mm[:end]
         self.total_length_mm = float(profile.piece_start_mm[end])
-
-
-def _cut_distance_after_rapids(
-    response: Response,
-    ref: Reference,
-    profile: Profile,
-    after_rapid: np.ndarray,
-    waiting: np.ndarray,
-    rapid: np.ndarray,
-    index: PathIndex,
-) -> None:
-    """Measure the first cutting samples after a rapid against the cut only (in place).
-
-    The path the contour error is measured against includes the rapids, so a tool still
-    arriving along a rapid looks on the path although the cut has moved off; it is 'on the
-    path' only if it is on the cut. Only samples whose distance window (module doc of
-    :mod:`~nurbscnc.plan.dynamics`: ±2|e| of arc length) reaches back across the rapid's
-    end are affected; their reference lies on the cut, so |e| bounds the distance."""
-    n = ref.t_s.size
-    lag = np.sqrt(np.einsum("ij,ij->i", response.axis_error_mm[:n], response.axis_error_mm[:n]))
-    start = profile.piece_start_mm[ref.piece]
-    fix = np.flatnonzero(after_rapid[ref.piece] & ~waiting & (ref.s_mm - 2.0 * lag <= start))
-    if fix.size:
-        response.contour_mm[fix] = index.distance_mm(
-            response.actual_mm[fix], lag[fix] + 1e-12, exclude=rapid
-        )
