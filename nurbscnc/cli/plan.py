@@ -121,7 +121,7 @@ def print_explanation(expl, out: Console, count: int | None, source: list[str]) 
     from rich.table import Table
     from rich.text import Text
 
-    from nurbscnc.plan.explain import LIMIT_OF_KEY, Limit
+    from nurbscnc.plan.explain import CORNER_WHY_TEXT, LIMIT_OF_KEY, CornerWhy, Limit
 
     total = expl.cycle_time_s if expl.cycle_time_s > 0 else 1.0
     shares = ", ".join(
@@ -166,17 +166,17 @@ def print_explanation(expl, out: Console, count: int | None, source: list[str]) 
     out.print(table)
     if count is not None and n > count:
         out.print(f"  … {n - count} more lines (plan --explain-all shows every line)", markup=False)
-    counts = expl.corner_counts()
+    counts = expl.corner_texts()
     if counts:
         out.print(
-            "  corners: " + ", ".join(f"{v} {k}" for k, v in sorted(counts.items())), markup=False
+            "  corners: " + "; ".join(f"{v} {k}" for k, v in sorted(counts.items())), markup=False
         )
     stops = expl.corner_dicts(stops_only=True)
     for c in stops[:EXPLAIN_CORNERS]:
         x, y, z = c["point_mm"]
         out.print(
-            f"  stop at line {c['line']} ({x:.3f}, {y:.3f}, {z:.3f}), turning "
-            f"{c['turning_deg']:.1f}°: {c['why'].replace('_', ' ')}",
+            f"  stop at line {c['line']} ({x:.3f}, {y:.3f}, {z:.3f}), a "
+            f"{c['turning_deg']:.1f}° turn: {CORNER_WHY_TEXT[CornerWhy[c['why'].upper()]]}",
             markup=False,
         )
     if len(stops) > EXPLAIN_CORNERS:
