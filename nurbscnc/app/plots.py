@@ -23,14 +23,19 @@ def write_plan_plots(run, plot_dir: str, prog, expl=None, mach=None) -> list[str
     rapid = None
     if pl is not None:
         rapid = np.asarray(pl.pieces.rapid)[smp.piece]
+    programmed = None
+    if expl is not None:
+        programmed = (smp.t_s, np.asarray(expl.piece_feed_mm_s)[smp.piece])
     written = [
         plots.plot_feed_profiles(
-            {"feed": (smp.t_s, smp.v_mm_s)},
+            {"planned feed": (smp.t_s, smp.v_mm_s)},
             os.path.join(plot_dir, "feed.png"),
             title=f"{name}: feed over time",
+            programmed=programmed,
         )
     ]
-    corners = corner_polylines(pl.pieces) if pl is not None else []
+    corners = corner_polylines(pl.pieces, CORNER_POINTS) if pl is not None else []
+    marks, label = slowest_corners(pl, smp) if pl is not None else (None, None)
     written.append(
         plots.plot_path(
             smp.points_mm,
@@ -39,6 +44,16 @@ def write_plan_plots(run, plot_dir: str, prog, expl=None, mach=None) -> list[str
             title=f"{name}: tool path",
             rapid=rapid,
             feed_mm_s=smp.v_mm_s,
+            marks_mm=marks,
+            marks_label=label,
+        )
+    )
+    written.append(
+        plots.plot_path_sides(
+            smp.points_mm,
+            os.path.join(plot_dir, "path_side.png"),
+            title=f"{name}: path",
+            rapid=rapid,
         )
     )
     if pl is not None and expl is not None:
@@ -56,6 +71,38 @@ def write_plan_plots(run, plot_dir: str, prog, expl=None, mach=None) -> list[str
             )
         )
     return written
+
+
+#: Points drawn per corner piece, and the most corners circled on the path figure.
+CORNER_POINTS = 12
+MARKED_CORNERS = 10
+
+
+def slowest_corners(plan, smp, count: int = MARKED_CORNERS):
+    """``(points (k, 3) [mm], legend)`` of the ``count`` corner pieces (PH) where the
+    planned feed is lowest (each piece's slowest sample of ``smp``), to circle on the path
+    figure: the corners that cost time, not every corner; ``(None, None)`` without corner
+    pieces."""
+    import numpy as np
+
+    from nurbscnc.geometry.path import Kind
+
+    ph = np.asarray(plan.pieces.kind) == Kind.PH
+    on = ph[smp.piece]
+    if not on.any():
+        return None, None
+    rows = np.flatnonzero(on)
+    piece = smp.piece[rows]
+    order = np.lexsort((smp.v_mm_s[rows], piece))  # by piece, slowest sample first
+    first = order[np.r_[True, piece[order][1:] != piece[order][:-1]]]
+    slowest = first[np.argsort(smp.v_mm_s[rows][first], kind="stable")][:count]
+    total = int(np.count_nonzero(ph))
+    label = (
+        f"the {slowest.size} slowest corners (of {total})"
+        if slowest.size < total
+        else f"corners ({total})"
+    )
+    return smp.points_mm[rows][slowest], label
 
 
 def _explained_plots(smp, pl, expl, plot_dir: str, name: str) -> list[str]:
