@@ -167,7 +167,10 @@ def write_simulate_plots(
     plots.plot_contour_error(
         {
             **scoped_series("true distance", sim.t_s, contour.true_mm * 1000.0, feed),
-            "eq. 29": (sim.t_s, eq29_um if feed is None else np.where(feed, eq29_um, np.nan)),
+            ("eq. 29" if feed is None else "eq. 29, feed moves"): (
+                sim.t_s,
+                eq29_um if feed is None else np.where(feed, eq29_um, np.nan),
+            ),
         },
         os.path.join(plot_dir, "contour_error.png"),
         title=f"{name}: simulated contour error",
