@@ -71,9 +71,11 @@ def test_side_views_show_the_plunges_and_z_rapids(figures):
         assert cut_z.min() == pytest.approx(-2.0, abs=1e-9)
         assert np.any(np.abs(cut_z + 1.0) < 1e-9)
         assert rapid_z.max() == pytest.approx(5.0, abs=1e-9)
-    # The XZ view spans the parts in x: 0 … 50 mm.
+    # The XZ view spans the parts in x: 0 … 50 mm, to the thinning's grid cell (the
+    # path's extent, 55 mm with Z, over PATH_GRID_PX cells).
     x = np.concatenate([s[:, 0] for c in xz.collections for s in c.get_segments()])
-    assert x.min() == pytest.approx(0.0, abs=1e-9) and x.max() == pytest.approx(50.0, abs=1e-9)
+    cell = 55.0 / plots.PATH_GRID_PX
+    assert x.min() == pytest.approx(0.0, abs=1e-9) and x.max() == pytest.approx(50.0, abs=cell)
 
 
 def test_feed_over_time_in_mm_min_with_the_programmed_f_dashed_above(figures):

@@ -92,7 +92,7 @@ def _segments_xy(xy: np.ndarray, mask: np.ndarray) -> np.ndarray:
 #: Samples kept per pixel column of a time series (its minimum and maximum in each column, so
 #: every peak stays visible) and the grid [px] a path's points are thinned to.
 PER_PIXEL = 2
-PATH_GRID_PX = 2000
+PATH_GRID_PX = 800
 
 
 def decimate_series(t, ys: Sequence[np.ndarray], width_px: int) -> np.ndarray:
