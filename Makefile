@@ -10,13 +10,16 @@ OUT    := out
 
 install: $(STAMP)
 
+# Quiet: pip at -qq prints errors only; PYTHONWARNINGS silences setuptools' advice on
+# editable installs (its BuildBackendWarning, a UserWarning) in the build's subprocess.
 # setup.py builds the compiled kernels (nurbscnc/plan/_kernels.c, nurbscnc/geometry/_kernels.c;
 # optional: without a C compiler the package installs and runs the same loops in Python).
 $(STAMP): pyproject.toml setup.py nurbscnc/plan/_kernels.c nurbscnc/plan/_kernels_math.h nurbscnc/geometry/_kernels.c
-	$(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[test,plot]'
-	touch $(STAMP)
+	@echo "installing nurbscnc and its dependencies into $(VENV) (1-2 minutes)"
+	@$(PYTHON) -m venv $(VENV)
+	@$(BIN)/python -m pip install --quiet --quiet --upgrade pip
+	@PYTHONWARNINGS=ignore::UserWarning $(BIN)/python -m pip install --quiet --quiet -e '.[test,plot]'
+	@touch $(STAMP)
 
 demo: $(STAMP)
 	@mkdir -p $(OUT)
@@ -31,8 +34,11 @@ lint: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
 
+# Two workers (pytest-xdist; -n auto: one per core), each test file on one worker so its
+# module fixtures (plans of whole programs) are made once. PYTEST_WORKERS=0: in-process.
+PYTEST_WORKERS ?= auto
 unit: $(STAMP)
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n $(PYTEST_WORKERS) --dist loadfile
 
 test: lint unit
 
@@ -53,6 +59,7 @@ bench: $(STAMP)
 	$(BIN)/python bench/scale_bench.py $(BENCH_FLAG) --out $(BENCH_OUT)/scale_results.json
 	$(BIN)/python bench/startup_bench.py $(BENCH_FLAG) --out $(BENCH_OUT)/startup_results.json
 	$(BIN)/python bench/optimum.py $(BENCH_FLAG) --out $(BENCH_OUT)/optimum_results.json
+	$(BIN)/python bench/table4.py $(BENCH_FLAG) --out $(BENCH_OUT)/table4_results.json
 
 # The fuzz tests with a large budget (make test runs them small): mutants of the corpus and
 # hypothesis programs through check/plan; counts in out/fuzz-report.json. Then the planner's

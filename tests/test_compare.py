@@ -206,4 +206,5 @@ def test_plan_plot_writes_path_feed_and_contour(tmp_path):
         "feed_along.png",
         "limits.png",
         "path.png",
+        "path_side.png",
     ]

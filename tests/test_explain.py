@@ -228,7 +228,7 @@ def test_plan_explain_text_lists_costliest_first(corner_program):
     res = CliRunner().invoke(main, ["plan", corner_program, "--explain", "--dynamics", "off"])
     assert res.exit_code == 0, res.output
     text = res.stdout
-    assert "time by limit:" in text and "corner stop" in text
+    assert "time by limit:" in text and "stop at a corner" in text
     # Line 2 (10 mm) and line 4 (10 mm) cost the most; the G-code is shown.
     body = text[text.index("costliest") :]
     assert body.index("G1 X10 F3000") < body.index("G1 Y1")

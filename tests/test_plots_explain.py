@@ -146,6 +146,7 @@ def test_plan_plots_show_rapids_limits_and_eps(tmp_path, captured):
     assert set(figs) == {
         "feed.png",
         "path.png",
+        "path_side.png",
         "feed_along.png",
         "limits.png",
         "contour_error.png",

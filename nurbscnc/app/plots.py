@@ -23,14 +23,19 @@ def write_plan_plots(run, plot_dir: str, prog, expl=None, mach=None) -> list[str
     rapid = None
     if pl is not None:
         rapid = np.asarray(pl.pieces.rapid)[smp.piece]
+    programmed = None
+    if expl is not None:
+        programmed = (smp.t_s, np.asarray(expl.piece_feed_mm_s)[smp.piece])
     written = [
         plots.plot_feed_profiles(
-            {"feed": (smp.t_s, smp.v_mm_s)},
+            {"planned feed": (smp.t_s, smp.v_mm_s)},
             os.path.join(plot_dir, "feed.png"),
             title=f"{name}: feed over time",
+            programmed=programmed,
         )
     ]
-    corners = corner_polylines(pl.pieces) if pl is not None else []
+    corners = corner_polylines(pl.pieces, CORNER_POINTS) if pl is not None else []
+    marks, label = slowest_corners(pl, smp) if pl is not None else (None, None)
     written.append(
         plots.plot_path(
             smp.points_mm,
@@ -39,6 +44,16 @@ def write_plan_plots(run, plot_dir: str, prog, expl=None, mach=None) -> list[str
             title=f"{name}: tool path",
             rapid=rapid,
             feed_mm_s=smp.v_mm_s,
+            marks_mm=marks,
+            marks_label=label,
+        )
+    )
+    written.append(
+        plots.plot_path_sides(
+            smp.points_mm,
+            os.path.join(plot_dir, "path_side.png"),
+            title=f"{name}: path",
+            rapid=rapid,
         )
     )
     if pl is not None and expl is not None:
@@ -49,13 +64,45 @@ def write_plan_plots(run, plot_dir: str, prog, expl=None, mach=None) -> list[str
         eps = None if mach is None else mach.limits.contour_tolerance_mm * 1000.0
         written.append(
             plots.plot_contour_error(
-                {"predicted (true distance)": (t, contour * 1000.0)},
+                scoped_series("predicted (true distance)", t, contour * 1000.0, run.check.cutting),
                 os.path.join(plot_dir, "contour_error.png"),
                 title=f"{name}: predicted contour error",
                 eps_max_um=eps,
             )
         )
     return written
+
+
+#: Points drawn per corner piece, and the most corners circled on the path figure.
+CORNER_POINTS = 12
+MARKED_CORNERS = 10
+
+
+def slowest_corners(plan, smp, count: int = MARKED_CORNERS):
+    """``(points (k, 3) [mm], legend)`` of the ``count`` corner pieces (PH) where the
+    planned feed is lowest (each piece's slowest sample of ``smp``), to circle on the path
+    figure: the corners that cost time, not every corner; ``(None, None)`` without corner
+    pieces."""
+    import numpy as np
+
+    from nurbscnc.geometry.path import Kind
+
+    ph = np.asarray(plan.pieces.kind) == Kind.PH
+    on = ph[smp.piece]
+    if not on.any():
+        return None, None
+    rows = np.flatnonzero(on)
+    piece = smp.piece[rows]
+    order = np.lexsort((smp.v_mm_s[rows], piece))  # by piece, slowest sample first
+    first = order[np.r_[True, piece[order][1:] != piece[order][:-1]]]
+    slowest = first[np.argsort(smp.v_mm_s[rows][first], kind="stable")][:count]
+    total = int(np.count_nonzero(ph))
+    label = (
+        f"the {slowest.size} slowest corners (of {total})"
+        if slowest.size < total
+        else f"corners ({total})"
+    )
+    return smp.points_mm[rows][slowest], label
 
 
 def _explained_plots(smp, pl, expl, plot_dir: str, name: str) -> list[str]:
@@ -88,18 +135,42 @@ def _explained_plots(smp, pl, expl, plot_dir: str, name: str) -> list[str]:
     ]
 
 
-def write_simulate_plots(sim, contour, plot_dir: str, name: str, eps_max_um: float) -> None:
+def scoped_series(label: str, t_s, err_um, feed) -> dict:
+    """Time series ``{name: (t_s, err_um)}`` of a contour error [µm]: the feed samples
+    (``feed`` (M,) bool, :mod:`nurbscnc.plan.scope`) as ``label``, the others apart under
+    :data:`~nurbscnc.output.plots.RAPIDS_LABEL` (gaps where the other one is drawn);
+    ``feed`` None: every sample under ``label``."""
+    import numpy as np
+
+    from nurbscnc.output.plots import RAPIDS_LABEL
+
+    if feed is None:
+        return {label: (t_s, err_um)}
+    series = {f"{label}, feed moves": (t_s, np.where(feed, err_um, np.nan))}
+    if not feed.all():
+        series[RAPIDS_LABEL] = (t_s, np.where(feed, np.nan, err_um))
+    return series
+
+
+def write_simulate_plots(
+    sim, contour, plot_dir: str, name: str, eps_max_um: float, feed=None
+) -> None:
     """The simulated contour error (true distance and SPEC eq. 29, with ε_max
-    ``eps_max_um`` [µm]) and the axis errors of a servo simulation, in µm over time."""
+    ``eps_max_um`` [µm]; ``feed`` (M,) bool: the feed samples, the rapids' drawn apart) and
+    the axis errors of a servo simulation, in µm over time."""
     import numpy as np
 
     from nurbscnc.output import plots
 
     os.makedirs(plot_dir, exist_ok=True)
+    eq29_um = np.abs(contour.eq29_mm) * 1000.0
     plots.plot_contour_error(
         {
-            "contour (true)": (sim.t_s, contour.true_mm * 1000.0),
-            "contour (eq. 29)": (sim.t_s, np.abs(contour.eq29_mm) * 1000),
+            **scoped_series("true distance", sim.t_s, contour.true_mm * 1000.0, feed),
+            ("eq. 29" if feed is None else "eq. 29, feed moves"): (
+                sim.t_s,
+                eq29_um if feed is None else np.where(feed, eq29_um, np.nan),
+            ),
         },
         os.path.join(plot_dir, "contour_error.png"),
         title=f"{name}: simulated contour error",

@@ -159,3 +159,17 @@ def precompensation_text(summary: dict) -> str | None:
         f"{pre['lead_s'] * 1000:g} ms for the inverse's look-ahead, reference settles "
         f"{pre['tail_s'] * 1000:g} ms after the stop"
     )
+
+
+def scope_words(scope: str) -> str:
+    """The words after "contour error" that say which samples it is over (``contour_scope``
+    of the JSON): the feed moves (:mod:`nurbscnc.plan.scope`), or every sample."""
+    return " on feed moves" if scope == "feed" else " (all samples)"
+
+
+def rapids_words(rapids_max_um: float | None) -> str:
+    """``"; rapids: max … µm (not guaranteed)"`` for the largest contour error [µm] of the
+    rapids (and the settle wait after each), or ``""`` without rapids (None or 0)."""
+    if not rapids_max_um:
+        return ""
+    return f"; on rapids: max {rapids_max_um:.2f} µm (not guaranteed)"

@@ -13,7 +13,9 @@ from nurbscnc.app.plots import write_plan_plots
 from nurbscnc.app.summary import (
     clock_suffix,
     precompensation_text,
+    rapids_words,
     rest_text,
+    scope_words,
     summary_json,
     summary_of,
 )
@@ -120,7 +122,7 @@ def print_explanation(expl, out: Console, count: int | None, source: list[str]) 
     from rich.table import Table
     from rich.text import Text
 
-    from nurbscnc.plan.explain import LIMIT_OF_KEY, Limit
+    from nurbscnc.plan.explain import CORNER_WHY_TEXT, LIMIT_OF_KEY, CornerWhy, Limit
 
     total = expl.cycle_time_s if expl.cycle_time_s > 0 else 1.0
     shares = ", ".join(
@@ -165,17 +167,17 @@ def print_explanation(expl, out: Console, count: int | None, source: list[str]) 
     out.print(table)
     if count is not None and n > count:
         out.print(f"  … {n - count} more lines (plan --explain-all shows every line)", markup=False)
-    counts = expl.corner_counts()
+    counts = expl.corner_texts()
     if counts:
         out.print(
-            "  corners: " + ", ".join(f"{v} {k}" for k, v in sorted(counts.items())), markup=False
+            "  corners: " + "; ".join(f"{v} {k}" for k, v in sorted(counts.items())), markup=False
         )
     stops = expl.corner_dicts(stops_only=True)
     for c in stops[:EXPLAIN_CORNERS]:
         x, y, z = c["point_mm"]
         out.print(
-            f"  stop at line {c['line']} ({x:.3f}, {y:.3f}, {z:.3f}), turning "
-            f"{c['turning_deg']:.1f}°: {c['why'].replace('_', ' ')}",
+            f"  stop at line {c['line']} ({x:.3f}, {y:.3f}, {z:.3f}), a "
+            f"{c['turning_deg']:.1f}° turn: {CORNER_WHY_TEXT[CornerWhy[c['why'].upper()]]}",
             markup=False,
         )
     if len(stops) > EXPLAIN_CORNERS:
@@ -236,10 +238,12 @@ def print_plan_summary(prog, mach, summary: dict, out: Console) -> None:
             else "no dynamics check: a baseline"
         )
         out.print(
-            f"  {'predicted' if 'pieces' in summary else 'simulated'} contour error: "
+            f"  {'predicted' if 'pieces' in summary else 'simulated'} contour error"
+            f"{scope_words(summary['contour_scope'])}: "
             f"max {summary['contour_true_max_um']:.2f} µm, RMS "
             f"{summary['contour_true_rms_um']:.2f} "
             f"µm (ε_max {mach.limits.contour_tolerance_mm * 1000:g} µm; {how})"
+            f"{rapids_words(summary.get('contour_rapids_true_max_um'))}"
         )
     if precompensation_text(summary):
         out.print(precompensation_text(summary), markup=False)

@@ -12,10 +12,12 @@ from nurbscnc.app.plots import write_simulate_plots
 from nurbscnc.app.simulation import (
     is_points_source,
     points_reference,
+    run_contour,
     run_reference,
+    scoped_metrics,
     simulate_points,
 )
-from nurbscnc.app.summary import machine_json
+from nurbscnc.app.summary import machine_json, rapids_words, scope_words
 from nurbscnc.cli.common import json_option, load_machine_cli, make_plan, plot_option
 from nurbscnc.cli.console import out
 from nurbscnc.cli.handle import handle_errors
@@ -45,15 +47,19 @@ def simulate(source, as_json, plot_dir, hold, **settings):
     if is_points_source(source, text):
         mach = load_machine_cli(settings["machine"], settings["overrides"])
         points, path = points_reference(source, text)
-        name = display_name(source)
+        name, run = display_name(source), None
     else:
         prog, mach, run = make_plan(source, **settings, text=text)
         points, path = run_reference(run)
         name = prog.name
     sim, contour, m = simulate_points(points, path, mach, hold)
+    feed = None
+    if run is not None:
+        contour, feed = run_contour(run, sim, contour, mach)
+    m = scoped_metrics(m, contour, feed)
     if plot_dir:
         write_simulate_plots(
-            sim, contour, plot_dir, name, mach.limits.contour_tolerance_mm * 1000.0
+            sim, contour, plot_dir, name, mach.limits.contour_tolerance_mm * 1000.0, feed
         )
     if as_json:
         from nurbscnc.plan.report import metrics_json
@@ -79,13 +85,15 @@ def simulate(source, as_json, plot_dir, hold, **settings):
         f" Y: max {m['axis_y_max_um']:.2f} µm, RMS {m['axis_y_rms_um']:.2f} µm",
         markup=False,
     )
+    scope = scope_words(m["contour_scope"])
     out.print(
-        f"  contour error (eq. 29): max {m['contour_max_um']:.2f} µm, RMS "
-        f"{m['contour_rms_um']:.2f} µm, mean {m['contour_mean_um']:.2f} µm",
+        f"  contour error{scope} (true distance): max {m['true_max_um']:.2f} µm, RMS "
+        f"{m['true_rms_um']:.2f} µm, mean {m['true_mean_um']:.2f} µm"
+        f"{rapids_words(m['rapids_true_max_um'])}",
         markup=False,
     )
     out.print(
-        f"  contour error (true distance): max {m['true_max_um']:.2f} µm, RMS "
-        f"{m['true_rms_um']:.2f} µm, mean {m['true_mean_um']:.2f} µm",
+        f"  contour error{scope} (eq. 29): max {m['contour_max_um']:.2f} µm, RMS "
+        f"{m['contour_rms_um']:.2f} µm, mean {m['contour_mean_um']:.2f} µm",
         markup=False,
     )

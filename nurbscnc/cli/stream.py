@@ -355,19 +355,24 @@ def _print_report(program: str, job, reports: list, as_json: bool, mach, paramet
 
 
 def _planning_text(planning: dict) -> str:
-    """The line on the planning of a stream planned while the card ran."""
+    """The line on the planning of a stream planned while the card ran, in plain words (the
+    JSON's ``windows`` are the parts the program is planned in, one per cut)."""
     margin = planning["plan_margin_min_s"]
+    parts = planning["windows"]
     return (
-        f"planning: {planning['windows']} cut window(s); the first planned after "
-        f"{planning['first_window_s']:.3f} s, all after "
+        f"planning: {parts} part{'' if parts == 1 else 's'} planned while the card ran; "
+        f"the first ready after {planning['first_window_s']:.3f} s, all "
         + (
-            f"{planning['planned_s']:.3f} s"
+            f"after {planning['planned_s']:.3f} s"
             if planning["planned_s"] is not None
-            else "(unfinished)"
+            else "not before the stream ended"
         )
         + (
-            "; least margin ahead of the card "
-            + (f"{margin:.3f} s" if margin is not None else "— (no window while moving)")
+            f"; the planner stayed at least {margin:.3f} s ahead of the card"
+            if margin is not None
+            else "; no part was planned while the card moved"
         )
-        + f"; {planning['holds']} planning hold(s), {planning['held_s']:.3f} s held"
+        + f"; the card waited for the planner {planning['holds']} time"
+        + ("" if planning["holds"] == 1 else "s")
+        + f", {planning['held_s']:.3f} s in all"
     )

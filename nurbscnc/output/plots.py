@@ -28,6 +28,13 @@ import numpy as np
 from nurbscnc.errors import ConfigError, OutputError
 from nurbscnc.output.files import atomic_output
 
+#: The legend name of a time series of samples on rapids (drawn grey, under the others): the
+#: contour error the guarantee does not cover (:mod:`nurbscnc.plan.scope`).
+RAPIDS_LABEL = "on rapids (not guaranteed)"
+
+#: The legend name of the programmed feed F over time (drawn dashed, above the planned feed).
+PROGRAMMED_LABEL = "programmed F"
+
 #: Default figure size [inches] and resolution [dots per inch]: 800 x 500 pixels.
 FIGSIZE_IN = (8.0, 5.0)
 DPI = 100
@@ -82,6 +89,65 @@ def _segments_xy(xy: np.ndarray, mask: np.ndarray) -> np.ndarray:
     return np.stack([xy[:-1][keep], xy[1:][keep]], axis=1)
 
 
+#: Samples kept per pixel column of a time series (its minimum and maximum in each column, so
+#: every peak stays visible) and the grid [px] a path's points are thinned to.
+PER_PIXEL = 2
+PATH_GRID_PX = 800
+
+
+def decimate_series(t, ys: Sequence[np.ndarray], width_px: int) -> np.ndarray:
+    """Indices of the samples of a time series ``t`` (N,) (with its value series ``ys``) to
+    draw at ``width_px`` pixels: all of them when there are at most :data:`PER_PIXEL` · 2
+    per pixel, else in each of ``width_px`` equal time columns the first, last, smallest and
+    largest sample of every series, in order (the pixels show the same: each column's line
+    spans its extremes), and both ends of every NaN gap (gaps stay gaps)."""
+    t = np.asarray(t, dtype=float)
+    n = t.size
+    if n <= 2 * PER_PIXEL * width_px:
+        return np.arange(n)
+    span = max(float(t[-1] - t[0]), 1e-300)
+    col = np.minimum(((t - t[0]) * (width_px / span)).astype(np.int64), width_px - 1)
+    new = np.r_[True, col[1:] != col[:-1]]
+    starts = np.flatnonzero(new)
+    seg = np.cumsum(new) - 1  # each sample's column, numbered among the non-empty ones
+    keep = [starts, np.append(starts[1:], n) - 1]
+    rows = np.arange(n)
+    for y in ys:
+        y = np.asarray(y, dtype=float)
+        nan = np.isnan(y)
+        for fill, reduce in ((np.inf, np.minimum), (-np.inf, np.maximum)):
+            v = np.where(nan, fill, y)
+            hit = v == reduce.reduceat(v, starts)[seg]
+            keep.append(np.minimum.reduceat(np.where(hit, rows, n - 1), starts))
+        keep.append(np.flatnonzero(nan != np.r_[False, nan[:-1]]))
+    return np.unique(np.concatenate(keep))
+
+
+def thin_path(xy: np.ndarray, keep_too: np.ndarray | None = None) -> np.ndarray:
+    """Indices of the points of a path ``xy`` (N, 2) to draw: the first and last, each point
+    that leaves the grid cell (:data:`PATH_GRID_PX` cells across the path's extent) of the
+    point before it, and every point where ``keep_too`` (N,) is set (a change of rapid or
+    feed colour). A 1 ms reference has ~10⁶ points where the figure has ~10³ pixels."""
+    n = xy.shape[0]
+    if n <= 2 * PATH_GRID_PX:
+        return np.arange(n)
+    lo, hi = xy.min(axis=0), xy.max(axis=0)
+    cell_mm = max(float(np.max(hi - lo)), 1e-9) / PATH_GRID_PX
+    cell = np.floor((xy - lo) / cell_mm).astype(np.int64)
+    moved = np.r_[True, np.any(cell[1:] != cell[:-1], axis=1)]
+    moved[-1] = True
+    if keep_too is not None:
+        moved |= keep_too
+    return np.flatnonzero(moved)
+
+
+def _changes(flags) -> np.ndarray:
+    """(N,) bool: where ``flags`` differs from the sample before or after it."""
+    f = np.asarray(flags)
+    d = np.r_[False, f[1:] != f[:-1]]
+    return d | np.r_[d[1:], False]
+
+
 def path_figure(
     path_mm,
     corner_pieces: Sequence,
@@ -89,6 +155,8 @@ def path_figure(
     figsize_in=FIGSIZE_IN,
     rapid=None,
     feed_mm_s=None,
+    marks_mm=None,
+    marks_label: str | None = None,
 ):
     """The Figure of :func:`plot_path` (not saved)."""
     from matplotlib.collections import LineCollection
@@ -100,6 +168,13 @@ def path_figure(
     rapid = np.zeros(n, dtype=bool) if rapid is None else np.asarray(rapid, dtype=bool)
     if rapid.shape != (n,):
         raise ConfigError(f"rapid must have one flag per point ({n}), got {rapid.shape}")
+    feed = None
+    if feed_mm_s is not None:
+        feed = np.asarray(feed_mm_s, dtype=float)
+        if feed.shape != (n,):
+            raise ConfigError(f"feed_mm_s must have one value per point ({n}), got {feed.shape}")
+    keep = thin_path(path, _changes(rapid))
+    path, rapid = path[keep], rapid[keep]
     if rapid.any():
         # A point is on a rapid when the move that reaches it is one: the segment between two
         # points is drawn as the later point's move.
@@ -108,32 +183,34 @@ def path_figure(
             LineCollection(segs, colors="0.55", linestyles="dashed", lw=0.9, label="rapid (G0)")
         )
     cut = np.concatenate(([True], ~rapid[1:]))
-    if feed_mm_s is not None:
-        feed = np.asarray(feed_mm_s, dtype=float)
-        if feed.shape != (n,):
-            raise ConfigError(f"feed_mm_s must have one value per point ({n}), got {feed.shape}")
-        keep = ~rapid[1:]
-        segs = np.stack([path[:-1], path[1:]], axis=1)[keep]
+    if feed is not None:
+        feed = feed[keep]
+        cutting = ~rapid[1:]
+        segs = np.stack([path[:-1], path[1:]], axis=1)[cutting]
         lc = LineCollection(segs, cmap="viridis", lw=1.4)
-        lc.set_array(feed[1:][keep] * 60.0)
+        lc.set_array(feed[1:][cutting] * 60.0)
         ax.add_collection(lc)
         fig.colorbar(lc, ax=ax, label="feed [mm/min]")
-        ax.autoscale_view()
     else:
         ax.add_collection(
             LineCollection(_segments_xy(path, cut), colors="0.45", lw=1.0, label="path")
         )
-        ax.autoscale_view()
-    for i, piece in enumerate(pieces):
-        ax.plot(
-            piece[:, 0],
-            piece[:, 1],
-            color="tab:red",
-            lw=2.2,
-            label="corner region (PH piece)" if i == 0 else None,
+    ax.autoscale_view()
+    if pieces:
+        # One collection for every corner piece (a 2.5-D part has hundreds).
+        ax.add_collection(
+            LineCollection(
+                [p for p in pieces if p.shape[0] > 1],
+                colors="tab:red",
+                lw=2.2,
+                label=f"corner pieces (PH): {len(pieces)}",
+            )
         )
-        ends = piece[[0, -1]]
-        ax.plot(ends[:, 0], ends[:, 1], "o", color="tab:red", ms=3.5, mfc="white")
+    if marks_mm is not None and len(marks_mm):
+        marks = _xy(marks_mm, "marks_mm")
+        ax.plot(
+            marks[:, 0], marks[:, 1], "o", color="tab:red", ms=5, mfc="white", label=marks_label
+        )
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("x [mm]")
     ax.set_ylabel("y [mm]")
@@ -141,8 +218,53 @@ def path_figure(
     ax.set_title(f"{title} ({count})")
     ax.grid(True, lw=0.4, alpha=0.5)
     if ax.get_legend_handles_labels()[0]:
-        ax.legend(loc="best")
+        ax.legend(loc="best", fontsize="small")
     return fig
+
+
+def side_figure(path_mm, title: str, figsize_in=FIGSIZE_IN, rapid=None):
+    """The Figure of :func:`plot_path_sides` (not saved): the path seen from the front (XZ)
+    and from the side (YZ), cuts solid, rapids dashed grey."""
+    from matplotlib.collections import LineCollection
+
+    p = np.asarray(path_mm, dtype=float)
+    if p.ndim != 2 or p.shape[1] != 3:
+        raise ConfigError(f"path_mm must be an (N, 3) array of points, got {p.shape}")
+    n = p.shape[0]
+    rapid = np.zeros(n, dtype=bool) if rapid is None else np.asarray(rapid, dtype=bool)
+    if rapid.shape != (n,):
+        raise ConfigError(f"rapid must have one flag per point ({n}), got {rapid.shape}")
+    fig, _ = _figure(figsize_in)
+    fig.clear()
+    axes = fig.subplots(1, 2, sharey=True)
+    for ax, (a, name) in zip(axes, ((0, "x"), (1, "y"))):
+        xz = p[:, [a, 2]]
+        keep = thin_path(xz, _changes(rapid))
+        xz, r = xz[keep], rapid[keep]
+        segs = np.stack([xz[:-1], xz[1:]], axis=1)
+        if (~r[1:]).any():
+            ax.add_collection(LineCollection(segs[~r[1:]], colors="tab:blue", lw=1.0, label="cut"))
+        if r[1:].any():
+            ax.add_collection(
+                LineCollection(
+                    segs[r[1:]], colors="0.55", linestyles="dashed", lw=0.9, label="rapid (G0)"
+                )
+            )
+        ax.autoscale_view()
+        ax.set_xlabel(f"{name} [mm]")
+        side = "from the front" if a == 0 else "from the side"
+        ax.set_title(f"{title}, {name.upper()}Z {side}", fontsize="medium")
+        ax.grid(True, lw=0.4, alpha=0.5)
+    axes[0].set_ylabel("z [mm]")
+    if axes[0].get_legend_handles_labels()[0]:
+        axes[0].legend(loc="best", fontsize="small")
+    return fig
+
+
+def plot_path_sides(path_mm, out_png: str, title: str, figsize_in=FIGSIZE_IN, rapid=None) -> str:
+    """The path (N, 3) [mm] from the front (XZ) and the side (YZ): plunges, depths and Z
+    rapids, which the XY view hides. ``rapid`` (N,): the points reached by a rapid."""
+    return _save(side_figure(path_mm, title, figsize_in, rapid), out_png)
 
 
 def plot_path(
@@ -153,16 +275,22 @@ def plot_path(
     figsize_in=FIGSIZE_IN,
     rapid=None,
     feed_mm_s=None,
+    marks_mm=None,
+    marks_label: str | None = None,
 ) -> str:
     """Fig. 1: the path (N, 2|3) [mm] in XY, with each corner piece (m, 2|3) highlighted.
 
     Corner pieces (the PH quintics replacing the sharp-corner regions, SPEC §5-§6) are drawn
     over the path in a second colour with their end points marked. ``rapid`` (N,) marks the
     points reached by a rapid move: those moves are drawn dashed; ``feed_mm_s`` (N,), when
-    given, colours the cutting moves by their feed (a colour bar in mm/min). Returns
-    ``out_png``.
+    given, colours the cutting moves by their feed (a colour bar in mm/min); ``marks_mm``
+    (k, 2|3) circles a few points (the slowest corners) under ``marks_label``. The path is
+    thinned to the figure's resolution (:func:`thin_path`). Returns ``out_png``.
     """
-    return _save(path_figure(path_mm, corner_pieces, title, figsize_in, rapid, feed_mm_s), out_png)
+    fig = path_figure(
+        path_mm, corner_pieces, title, figsize_in, rapid, feed_mm_s, marks_mm, marks_label
+    )
+    return _save(fig, out_png)
 
 
 #: Colours of the limiting factors (tab10 and tab20 entries; index = Limit code).
@@ -193,6 +321,8 @@ def limits_figure(path_mm, limit_code, names: Sequence[str], title: str, figsize
     if code.shape != (path.shape[0],):
         raise ConfigError(f"limit_code must have one code per point ({path.shape[0]})")
     fig, (ax,) = _figure(figsize_in)
+    keep = thin_path(path, _changes(code))
+    path, code = path[keep], code[keep]
     segs = np.stack([path[:-1], path[1:]], axis=1)
     seg_code = code[1:]
     for c in np.unique(seg_code).tolist():
@@ -252,7 +382,7 @@ def feed_along_figure(
         ys = np.column_stack([y, y, np.full(a.size, np.nan)]).ravel()
         return xs, ys * 60.0
 
-    ax.plot(*steps(f), color="tab:gray", lw=1.2, ls="--", label="programmed F")
+    ax.plot(*steps(f), color="black", lw=1.3, ls="--", label="programmed F", zorder=3)
     if cap_mm_s is not None:
         ax.plot(
             *steps(np.asarray(cap_mm_s, dtype=float)),
@@ -261,7 +391,8 @@ def feed_along_figure(
             ls=":",
             label="cap",
         )
-    ax.plot(s, v * 60.0, color="tab:blue", lw=1.0, label="planned feed")
+    k = decimate_series(s, [v], round(figsize_in[0] * DPI))
+    ax.plot(s[k], v[k] * 60.0, color="tab:blue", lw=1.0, label="planned feed", zorder=2)
     ax.set_ylim(bottom=0.0)
     ax.set_xlabel("path length [mm]")
     ax.set_ylabel("feed [mm/min]")
@@ -328,8 +459,15 @@ def _time_series_figure(
     """The Figure of :func:`_time_series_plot`; ``limit`` (value, label): a red dashed
     horizontal line (ε_max on the contour plot)."""
     fig, (ax,) = _figure(figsize_in)
+    width_px = round(figsize_in[0] * DPI)
     for name, (t, y) in _series(series, 2, what):
-        ax.plot(t, y, lw=lw, label=name)
+        k = decimate_series(t, [y], width_px)
+        if name == RAPIDS_LABEL:
+            ax.plot(t[k], y[k], lw=lw, label=name, color="0.65", zorder=1)
+        elif name == PROGRAMMED_LABEL:  # above the planned feed, dashed
+            ax.plot(t[k], y[k], lw=1.3, ls="--", color="black", label=name, zorder=3)
+        else:
+            ax.plot(t[k], y[k], lw=lw, label=name, zorder=2)
     if zero_line:
         ax.axhline(0.0, color="0.3", lw=0.5)
     if limit is not None:
@@ -349,13 +487,19 @@ def plot_feed_profiles(
     out_png: str,
     title: str = "Feed profiles",
     figsize_in=FIGSIZE_IN,
+    programmed=None,
 ) -> str:
-    """Fig. 2/4/6: feed v [mm/s] over time t [s], one line per ``{name: (t_s, v_mm_s)}``."""
+    """Fig. 2/4/6: feed over time t [s], one line per ``{name: (t_s, v_mm_s)}``, drawn in
+    mm/min (the unit of the program's F and of every other feed figure); ``programmed``
+    ``(t_s, F_mm_s)``: the programmed feed of each sample's move, dashed above them."""
+    series = {name: (t, np.asarray(v, dtype=float) * 60.0) for name, (t, v) in profiles.items()}
+    if programmed is not None:
+        series[PROGRAMMED_LABEL] = (programmed[0], np.asarray(programmed[1], dtype=float) * 60.0)
     return _time_series_plot(
-        profiles,
+        series,
         out_png,
         title,
-        "feed [mm/s]",
+        "feed [mm/min]",
         "feed profiles",
         1.0,
         figsize_in,

@@ -20,6 +20,7 @@ from nurbscnc.plan.dynamics import (
 from nurbscnc.plan.pieces import PieceList
 from nurbscnc.plan.profile import Profile, same_until_s
 from nurbscnc.plan.sampler import ReferenceSampler, as_sampler
+from nurbscnc.plan.scope import feed_samples
 from nurbscnc.plan.timing import (
     Reference,
     dwell_times,
@@ -98,7 +99,7 @@ class Checker:
         self.windowed = self.sampler.windowed and not keep
         self.rapid = pieces.rapid
         self.after_rapid = np.zeros(len(pieces), dtype=bool)  # first piece of a cut after a rapid
-        self.after_rapid[settle_rows + 1] = True
+        self.after_rapid[settle_rows + 1] = True  # the rows of after_rapid_rows(self.rapid)
         self.index = PathIndex(pieces)  # where the pieces are (built on first use)
         # The servo at rest, discretised once: every check starts from a copy.
         servo = machine.servo
@@ -424,12 +425,10 @@ class Checker:
         """Which reference samples are checked (N,): contour error matters while cutting
         and before it; samples on rapids (air moves) are not, those of the settle after a
         rapid are (the reference waits at the cut's start while the tool still rings from
-        the rapid's stop: the cut's first sample, written with the cut's line). The
-        settle's samples and the first cutting samples after a rapid are measured against
-        the cut only (in ``resp``)."""
+        the rapid's stop). The settle's samples and the first cutting samples after a
+        rapid are measured against the cut only (in ``resp``; :func:`feed_samples`)."""
         index, rapid = (self.index, self.rapid) if head is None else (head[2], head[3])
-        _cut_distance_after_rapids(resp, ref, profile, self.after_rapid, rapid, index)
-        return ~self.rapid[ref.piece]
+        return feed_samples(ref, resp, profile, self.rapid, self.after_rapid, index, rapid)
 
 
 class _Head:
@@ -486,31 +485,3 @@ class _HeadProfile:
     def __init__(self, profile: Profile, end: int):
         self.piece_start_mm = profile.piece_start_mm[:end]
         self.total_length_mm = float(profile.piece_start_mm[end])
-
-
-def _cut_distance_after_rapids(
-    response: Response,
-    ref: Reference,
-    profile: Profile,
-    after_rapid: np.ndarray,
-    rapid: np.ndarray,
-    index: PathIndex,
-) -> None:
-    """Measure the settle after a rapid and the first cutting samples after it against the
-    cut only (in place).
-
-    The path the contour error is measured against includes the rapids, so a tool still
-    arriving along a rapid (or overshooting its end along it) looks on the path although
-    the cut leaves in another direction; it is 'on the path' only if it is on the cut.
-    Only samples whose distance window (module doc of :mod:`~nurbscnc.plan.dynamics`: ±2|e|
-    of arc length) reaches back across the rapid's end are affected (all of the settle's:
-    its reference waits at the cut's start); their reference lies on the cut, so |e|
-    bounds the distance."""
-    n = ref.t_s.size
-    lag = np.sqrt(np.einsum("ij,ij->i", response.axis_error_mm[:n], response.axis_error_mm[:n]))
-    start = profile.piece_start_mm[ref.piece]
-    fix = np.flatnonzero(after_rapid[ref.piece] & (ref.s_mm - 2.0 * lag <= start))
-    if fix.size:
-        response.contour_mm[fix] = index.distance_mm(
-            response.actual_mm[fix], lag[fix] + 1e-12, exclude=rapid
-        )

@@ -63,25 +63,24 @@ class Check:
         return self.response.contour_mm[self.cutting] * 1000.0
 
     def contour_stats(self) -> dict:
-        """The check's contour error of the cutting samples [µm]: ``contour_true_max_um``,
-        ``contour_true_rms_um`` (true distance to the path) and ``contour_eq29_max_um`` (|ε|
-        of SPEC eq. 29); 0 when nothing is cut. The summaries use only these; a check that
-        keeps no per-sample arrays gives the same numbers from its running statistics (the
-        rms summed window by window: equal to rounding)."""
+        """The check's contour error of the cutting samples [µm] (the feed samples of
+        :mod:`nurbscnc.plan.scope`): ``contour_true_max_um``, ``contour_true_rms_um`` (true
+        distance to the path) and ``contour_eq29_max_um`` (|ε| of SPEC eq. 29), 0 when nothing
+        is cut; and ``contour_rapids_true_max_um``, the largest true distance of the other
+        samples (rapids and the settle wait after one; no guarantee), 0 when there are none.
+        The summaries use only these; a check that keeps no per-sample arrays gives the same
+        numbers from its running statistics (the rms summed window by window: equal to
+        rounding)."""
         if self.response is None:
             return dict(self.stats)
         c = self.contour_um()
         eq29 = np.abs(self.response.contour_eq29_mm[self.cutting]) * 1000.0
-        if not c.size:
-            return {
-                "contour_true_max_um": 0.0,
-                "contour_true_rms_um": 0.0,
-                "contour_eq29_max_um": 0.0,
-            }
+        rapids = self.response.contour_mm[~self.cutting] * 1000.0
         return {
-            "contour_true_max_um": float(c.max()),
-            "contour_true_rms_um": float(np.sqrt(np.mean(c * c))),
-            "contour_eq29_max_um": float(eq29.max()),
+            "contour_true_max_um": float(c.max()) if c.size else 0.0,
+            "contour_true_rms_um": float(np.sqrt(np.mean(c * c))) if c.size else 0.0,
+            "contour_eq29_max_um": float(eq29.max()) if c.size else 0.0,
+            "contour_rapids_true_max_um": float(rapids.max()) if rapids.size else 0.0,
         }
 
 
@@ -99,6 +98,7 @@ class Accumulator:
         self.restart = np.zeros(checker.settle_rows.size, dtype=np.int64)
         self.worst = 0.0
         self.c_max = self.c_sq = self.eq29_max = 0.0
+        self.rapids_max = 0.0  # [µm] the samples the guarantee does not cover (plan.scope)
         self.c_n = 0
         self.real = None  # (count, worst, restart, over count, run count) before a virtual tail
 
@@ -139,6 +139,8 @@ class Accumulator:
             self.eq29_max = max(
                 self.eq29_max, float(np.abs(resp.contour_eq29_mm[cutting]).max()) * 1000.0
             )
+        if not virtual and not cutting.all():
+            self.rapids_max = max(self.rapids_max, float(resp.contour_mm[~cutting].max()) * 1e3)
         self.count += cutting.size
 
     def check(self) -> Check:
@@ -151,6 +153,7 @@ class Accumulator:
             "contour_true_max_um": self.c_max,
             "contour_true_rms_um": rms,
             "contour_eq29_max_um": self.eq29_max,
+            "contour_rapids_true_max_um": self.rapids_max,
         }
         samples = overs
         if self.real is not None:
@@ -215,5 +218,6 @@ class JoinedChecks:
             "contour_true_max_um": max(s["contour_true_max_um"] for s in stats),
             "contour_true_rms_um": rms,
             "contour_eq29_max_um": max(s["contour_eq29_max_um"] for s in stats),
+            "contour_rapids_true_max_um": max(s["contour_rapids_true_max_um"] for s in stats),
         }
         return Check(None, None, None, overs, joined, overs, total)

@@ -101,21 +101,44 @@ _KEYS = {
     Limit.SETTLE: "settle",
     Limit.DWELL: "dwell",
 }
+# Plain words for the user (the paper's terms, V_max, V_af eq. 23, V_cf eq. 24, are in
+# docs/json.md beside the JSON keys).
 _TEXTS = {
     Limit.FEED: "programmed F",
-    Limit.V_MAX: "V_max",
+    Limit.V_MAX: "machine top speed",
     Limit.RAPID: "rapid rate",
-    Limit.CHORD: "chord error (eq. 23)",
-    Limit.NORMAL: "normal acceleration",
+    Limit.CHORD: "chord tolerance",
+    Limit.NORMAL: "acceleration on curves",
     Limit.AXIS: "axis limit",
-    Limit.CURVATURE: "curvature (eq. 24)",
-    Limit.BLEND: "corner blend",
+    Limit.CURVATURE: "tight curve",
+    Limit.BLEND: "rounded corner",
     Limit.CONTOUR: "contour error",
-    Limit.CORNER_STOP: "corner stop",
-    Limit.DISTANCE: "acceleration distance",
-    Limit.JERK: "jerk (too short)",
-    Limit.SETTLE: "settle",
+    Limit.CORNER_STOP: "stop at a corner",
+    Limit.DISTANCE: "too short to accelerate",
+    Limit.JERK: "too short (jerk limit)",
+    Limit.SETTLE: "settling after a rapid",
     Limit.DWELL: "dwell",
+}
+
+#: What the planner did at a corner, in plain words (:class:`CornerAction`).
+CORNER_ACTION_TEXT = {
+    CornerAction.BLEND: "rounded",
+    CornerAction.PASS: "passed at speed",
+    CornerAction.STOP: "stopped",
+}
+#: Why, in plain words (:class:`CornerWhy`; the JSON has the enum names).
+CORNER_WHY_TEXT = {
+    CornerWhy.BLENDED: "within the path tolerance (G64)",
+    CornerWhy.SMALL_BREAK: "the bend is small enough to pass at speed",
+    CornerWhy.EXACT_PATH: "exact path mode (G61)",
+    CornerWhy.EXACT_STOP: "exact stop mode (G61.1)",
+    CornerWhy.ZERO_TOLERANCE: "blend tolerance 0",
+    CornerWhy.NO_BLEND_FITS: "no rounding fits within the path tolerance",
+    CornerWhy.NOT_BLENDABLE: "a cusp, reversal or 3-D turn cannot be rounded",
+    CornerWhy.DWELL_OR_PAUSE: "a dwell, pause or program stop",
+    CornerWhy.RAPID_FEED: "a rapid meets a cutting move",
+    CornerWhy.PROGRAM_END: "start or end of the program",
+    CornerWhy.STOP_FASTER: "stopping is quicker than the tight rounding that fits",
 }
 N_LIMITS = len(Limit)
 #: The :class:`Limit` of each JSON name.
@@ -207,6 +230,17 @@ class Explanation:
                 c.why[rows].tolist(),
             )
         ]
+
+    def corner_texts(self) -> dict[str, int]:
+        """:meth:`corner_counts` in plain words: ``{"stopped: exact path mode (G61)": 3}``."""
+        c = self.corners
+        keys, counts = np.unique(
+            np.stack([c.action, c.why]).astype(np.int64), axis=1, return_counts=True
+        )
+        return {
+            f"{CORNER_ACTION_TEXT[CornerAction(a)]}: {CORNER_WHY_TEXT[CornerWhy(w)]}": int(n)
+            for (a, w), n in zip(keys.T.tolist(), counts.tolist())
+        }
 
     def corner_counts(self) -> dict[str, int]:
         """How many corners got each (action, why): ``{"stop/exact_path": 3, ...}``."""

@@ -358,6 +358,7 @@ def plan_summary(
             contour_true_max_um=m["true_max_um"],
             contour_true_rms_um=m["true_rms_um"],
             contour_eq29_max_um=m["contour_max_um"],
+            contour_scope="all",  # a baseline's samples do not tell rapids from cuts
         )
         return summary
     stats = samples if isinstance(samples, SampleStats) else SampleStats.of(samples, plan)
@@ -382,14 +383,16 @@ def plan_summary(
     if plan.pieces.smoothed is not None:
         summary["smoothed"] = dict(plan.pieces.smoothed)
     if check is not None:
-        summary.update(check.contour_stats())
+        summary.update(check.contour_stats(), contour_scope="feed")
     return summary
 
 
 #: The JSON names (docs/json.md) of the servo metrics
 #: (:class:`~nurbscnc.servo.simulate.Metrics` fields): the contour error is
 #: ``contour_true_*`` (the distance from the actual point to the path) or ``contour_eq29_*``
-#: (|ε| of SPEC eq. 29) in every command.
+#: (|ε| of SPEC eq. 29) in every command, over the samples ``contour_scope`` names ("feed":
+#: the feed samples of :mod:`nurbscnc.plan.scope`; "all"), the rapids' own apart as
+#: ``contour_rapids_*``.
 METRIC_KEYS = {
     "axis_x_max_um": "axis_x_max_um",
     "axis_x_rms_um": "axis_x_rms_um",
@@ -401,6 +404,9 @@ METRIC_KEYS = {
     "true_max_um": "contour_true_max_um",
     "true_rms_um": "contour_true_rms_um",
     "true_mean_um": "contour_true_mean_um",
+    "rapids_true_max_um": "contour_rapids_true_max_um",
+    "rapids_eq29_max_um": "contour_rapids_eq29_max_um",
+    "contour_scope": "contour_scope",
     "cycle_time_s": "cycle_time_s",
     "settle_time_s": "settle_time_s",
 }
