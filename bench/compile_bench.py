@@ -139,16 +139,21 @@ def main(argv=None) -> int:
             for dyn, key in (("local", "check"), ("off", "off")):
                 row[key] = plan_row(path, dyn, caps)
             chk, off = row["check"], row["off"]
-            row["pass"] = bool(
-                (chk.get("realtime_factor") or 0) >= GOALS["realtime_factor_check"]
-                and (off.get("realtime_factor") or 0) >= GOALS["realtime_factor_off"]
-            )
+            for suffix in ("", "_cpu"):  # wall time as the goal says; CPU time (a loaded
+                # shared machine stretches the wall time, not the CPU time)
+                row["pass" + suffix] = bool(
+                    (chk.get("realtime_factor" + suffix) or 0) >= GOALS["realtime_factor_check"]
+                    and (off.get("realtime_factor" + suffix) or 0) >= GOALS["realtime_factor_off"]
+                )
             report["rows"].append(row)
             print(
                 f"{name}: motion {chk.get('motion_s') or 0:.1f} s; check {chk['wall_s']:.2f} s "
-                f"(×{chk.get('realtime_factor') or 0:.0f}, {chk.get('contour_true_max_um')} µm); "
-                f"off {off['wall_s']:.2f} s (×{off.get('realtime_factor') or 0:.0f}); "
-                f"pass {row['pass']}",
+                f"wall, {chk['cpu_s']:.2f} s CPU (×{chk.get('realtime_factor') or 0:.0f}, "
+                f"×{chk.get('realtime_factor_cpu') or 0:.0f} CPU; "
+                f"{chk.get('contour_true_max_um')} µm); off {off['wall_s']:.2f} s wall, "
+                f"{off['cpu_s']:.2f} s CPU (×{off.get('realtime_factor') or 0:.0f}, "
+                f"×{off.get('realtime_factor_cpu') or 0:.0f} CPU); pass {row['pass']} "
+                f"(CPU: {row['pass_cpu']}) {chk.get('message', '')}",
                 flush=True,
             )
     if args.out:
