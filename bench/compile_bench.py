@@ -156,8 +156,8 @@ def main(argv=None) -> int:
                 f"(CPU: {row['pass_cpu']}) {chk.get('message', '')}",
                 flush=True,
             )
-    if args.out:
-        Path(args.out).write_text(json.dumps(report, indent=1, ensure_ascii=False) + "\n")
+            if args.out:  # after every row: a long run cut short keeps what it measured
+                Path(args.out).write_text(json.dumps(report, indent=1, ensure_ascii=False) + "\n")
     return 0
 
 

@@ -134,8 +134,9 @@ def test_a_recheck_reusing_rows_gives_the_fresh_checks_plan(name, monkeypatch):
 
 
 def test_a_window_of_several_chunks_keeps_nothing(monkeypatch):
-    """Memory: only a window checked in one chunk is kept; checked 64 samples at a time,
-    no rows are reused, and the plan is the same."""
+    """Memory: only a window checked in one chunk keeps its rows; checked 64 samples at a
+    time, no rows are reused (whole chunks left alike are resumed after instead: their
+    compact results and servo states, not their rows), and the plan is the same."""
     machine = load_machine()
     program = interpret_text(PROGRAMS["corners"])
     reused = _counting_reuse(monkeypatch)
