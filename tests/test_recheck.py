@@ -148,6 +148,13 @@ def test_a_window_of_several_chunks_keeps_nothing(monkeypatch):
     assert np.array_equal(small.profile.phase_start_time_s, whole.profile.phase_start_time_s)
 
 
+def _fresh_only(self, planned, profile, rows, *args):
+    """:meth:`Checker._resume` that never resumes: every chunk simulated afresh."""
+    self._chunks = None
+    n = la.sample_count(planned, profile, self.machine.servo.period_s)
+    return (n if rows is None else min(rows[1], n)), None, []
+
+
 def _assert_same_plan_and_check(plan, check, fresh, fresh_check) -> None:
     assert plan.cycle_time_s == fresh.cycle_time_s and plan.iterations == fresh.iterations
     assert np.array_equal(plan.caps_mm_s, fresh.caps_mm_s)
@@ -180,11 +187,28 @@ def test_a_recheck_resuming_after_alike_chunks_gives_the_fresh_checks_plan(name,
     plan, check = la.plan_checked(program, machine, keep_reference=False, window=97)
     assert sum(resumed) > 0 and plan.iterations > 0
 
-    def fresh_only(self, planned, profile, rows, *args):
-        self._chunks = None
-        n = la.sample_count(planned, profile, self.machine.servo.period_s)
-        return (n if rows is None else min(rows[1], n)), None, []
-
-    monkeypatch.setattr(Checker, "_resume", fresh_only)
+    monkeypatch.setattr(Checker, "_resume", _fresh_only)
     fresh, fresh_check = la.plan_checked(program, machine, keep_reference=False, window=97)
+    _assert_same_plan_and_check(plan, check, fresh, fresh_check)
+
+
+@pytest.mark.parametrize("name", ["cuts", "corners"])
+def test_a_precompensated_check_keeps_nothing_and_gives_the_fresh_checks_plan(name, monkeypatch):
+    """The pre-compensated reference inverts and optimises each cut window as a whole, so a
+    re-plan later in a window moves its earlier rows too (the sampler is not ``causal``):
+    no rows or chunks are kept, and the plan and check are those of fresh checks (a check
+    that kept the rows before the change planned "cuts" 10 re-plans into another plan)."""
+    from nurbscnc.plan.sampler import EXACT
+    from nurbscnc.precompensation import precompensated_sampler
+
+    machine = load_machine()
+    program = interpret_text(PROGRAMS[name])
+    sampler = precompensated_sampler(EXACT, machine)
+    assert not sampler.causal and EXACT.causal
+    reused = _counting_reuse(monkeypatch)
+    plan, check = la.plan_checked(program, machine, reference=sampler, keep_reference=False)
+    assert len(reused) > 1 and sum(reused) == 0 and plan.iterations > 0
+    monkeypatch.setattr(Checker, "_same_rows", lambda self, *args: 0)
+    monkeypatch.setattr(Checker, "_resume", _fresh_only)
+    fresh, fresh_check = la.plan_checked(program, machine, reference=sampler, keep_reference=False)
     _assert_same_plan_and_check(plan, check, fresh, fresh_check)

@@ -338,13 +338,15 @@ class Checker:
         on its reference, its neighbours' and the servo state). Its contribution to the
         accumulator is then the same: its over-limit samples, piece runs and statistics,
         and its counts before each restart (a restart time that differs lies at or after
-        the profile time where the profiles differ, after every row of the chunk in both)."""
+        the profile time where the profiles differ, after every row of the chunk in both).
+        Nothing is kept for a sampler that is not causal."""
         period = self.machine.servo.period_s
         n = sample_count(planned, profile, period)
         r1 = n if rows is None else min(rows[1], n)
         old, self._chunks = self._chunks, None
         if (
             not self.windowed
+            or not self.sampler.causal
             or old is None
             or old.key != key
             or old.stream is not stream
@@ -432,10 +434,12 @@ class Checker:
         row from its own wall time alone (any window of rows is those rows of the whole
         reference), and the response of a row depends on its reference, its neighbours'
         and the servo state only: so a re-plan that changed the profile from some point on
-        costs the samples from there on. 0 without a kept chunk."""
+        costs the samples from there on. 0 without a kept chunk, and for a sampler that is
+        not causal (:attr:`~nurbscnc.plan.sampler.ReferenceSampler.causal`)."""
         memo = self._memo
         if (
             memo is None
+            or not self.sampler.causal
             or memo.key != key
             or memo.stream is not stream
             or memo.path is not planned.path
