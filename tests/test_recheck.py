@@ -134,8 +134,9 @@ def test_a_recheck_reusing_rows_gives_the_fresh_checks_plan(name, monkeypatch):
 
 
 def test_a_window_of_several_chunks_keeps_nothing(monkeypatch):
-    """Memory: only a window checked in one chunk is kept; checked 64 samples at a time,
-    no rows are reused, and the plan is the same."""
+    """Memory: only a window checked in one chunk keeps its rows; checked 64 samples at a
+    time, no rows are reused (whole chunks left alike are resumed after instead: their
+    compact results and servo states, not their rows), and the plan is the same."""
     machine = load_machine()
     program = interpret_text(PROGRAMS["corners"])
     reused = _counting_reuse(monkeypatch)
@@ -145,3 +146,69 @@ def test_a_window_of_several_chunks_keeps_nothing(monkeypatch):
     assert sum(reused) > 0
     assert small.cycle_time_s == whole.cycle_time_s
     assert np.array_equal(small.profile.phase_start_time_s, whole.profile.phase_start_time_s)
+
+
+def _fresh_only(self, planned, profile, rows, *args):
+    """:meth:`Checker._resume` that never resumes: every chunk simulated afresh."""
+    self._chunks = None
+    n = la.sample_count(planned, profile, self.machine.servo.period_s)
+    return (n if rows is None else min(rows[1], n)), None, []
+
+
+def _assert_same_plan_and_check(plan, check, fresh, fresh_check) -> None:
+    assert plan.cycle_time_s == fresh.cycle_time_s and plan.iterations == fresh.iterations
+    assert np.array_equal(plan.caps_mm_s, fresh.caps_mm_s)
+    for f in ("phase_start_time_s", "phase_jerk_mm_s3", "piece_start_time_s"):
+        assert np.array_equal(getattr(plan.profile, f), getattr(fresh.profile, f))
+    assert check.stats == fresh_check.stats
+    for f in ("count", "index", "err_mm", "tau_s", "run_piece", "run_start", "restart_count"):
+        assert np.array_equal(getattr(check.overs, f), getattr(fresh_check.overs, f)), f
+    assert check.overs.worst_mm == fresh_check.overs.worst_mm
+
+
+@pytest.mark.parametrize("name", sorted(PROGRAMS))
+def test_a_recheck_resuming_after_alike_chunks_gives_the_fresh_checks_plan(name, monkeypatch):
+    """Checked 97 samples at a time, a re-plan resumes after the leading chunks it left
+    alike (their results and the servo state after them kept, :meth:`Checker._resume`):
+    the plan and its check (every over-limit sample, piece runs, restart counts,
+    statistics) are those of checks that simulate every chunk afresh — and chunks were
+    resumed after."""
+    machine = load_machine()
+    program = interpret_text(PROGRAMS[name])
+    resumed: list = []
+    real = Checker._resume
+
+    def counting(self, *args):
+        out = real(self, *args)
+        resumed.append(len(out[2]))
+        return out
+
+    monkeypatch.setattr(Checker, "_resume", counting)
+    plan, check = la.plan_checked(program, machine, keep_reference=False, window=97)
+    assert sum(resumed) > 0 and plan.iterations > 0
+
+    monkeypatch.setattr(Checker, "_resume", _fresh_only)
+    fresh, fresh_check = la.plan_checked(program, machine, keep_reference=False, window=97)
+    _assert_same_plan_and_check(plan, check, fresh, fresh_check)
+
+
+@pytest.mark.parametrize("name", ["cuts", "corners"])
+def test_a_precompensated_check_keeps_nothing_and_gives_the_fresh_checks_plan(name, monkeypatch):
+    """The pre-compensated reference inverts and optimises each cut window as a whole, so a
+    re-plan later in a window moves its earlier rows too (the sampler is not ``causal``):
+    no rows or chunks are kept, and the plan and check are those of fresh checks (a check
+    that kept the rows before the change planned "cuts" 10 re-plans into another plan)."""
+    from nurbscnc.plan.sampler import EXACT
+    from nurbscnc.precompensation import precompensated_sampler
+
+    machine = load_machine()
+    program = interpret_text(PROGRAMS[name])
+    sampler = precompensated_sampler(EXACT, machine)
+    assert not sampler.causal and EXACT.causal
+    reused = _counting_reuse(monkeypatch)
+    plan, check = la.plan_checked(program, machine, reference=sampler, keep_reference=False)
+    assert len(reused) > 1 and sum(reused) == 0 and plan.iterations > 0
+    monkeypatch.setattr(Checker, "_same_rows", lambda self, *args: 0)
+    monkeypatch.setattr(Checker, "_resume", _fresh_only)
+    fresh, fresh_check = la.plan_checked(program, machine, reference=sampler, keep_reference=False)
+    _assert_same_plan_and_check(plan, check, fresh, fresh_check)

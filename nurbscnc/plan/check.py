@@ -69,6 +69,26 @@ class _Memo:
     cutting: np.ndarray
 
 
+@dataclass(frozen=True, eq=False)
+class _Chunks:
+    """What :meth:`Checker.run` keeps of its last check of a window of several chunks, for
+    the next re-plan of that window (:meth:`Checker._resume`): the window (``key``, the servo
+    state it started from, the path), the profile and dwell schedule it sampled, and per
+    chunk but the last (``entries``): its first own row k0, the row after its own rows k1,
+    the wall and profile times [s] of the last reference row it read (row k1, the
+    direction of travel's neighbour), and the accumulator's state and the servo's state
+    after it (:meth:`~nurbscnc.plan.checkresult.Accumulator.state`, a copy of the
+    :class:`~nurbscnc.servo.model.AxesStream`). Memory: a servo state and the compact
+    results per chunk, never the samples."""
+
+    key: tuple | None
+    stream: AxesStream | None
+    path: object
+    profile: Profile
+    clock: tuple
+    entries: list
+
+
 class Checker:
     """The dynamics check of one program's plans (SPEC §8), a window of servo samples at a
     time: the reference of ``window`` samples (plus one on each side for the
@@ -105,16 +125,23 @@ class Checker:
         servo = machine.servo
         self._at_rest = AxesStream([servo.x, servo.y, servo.z], servo.period_s)
         self._memo: _Memo | None = None  # the last one-chunk check (:meth:`_same_rows`)
+        self._chunks: _Chunks | None = None  # the last many-chunk check (:meth:`_resume`)
 
     def _windows(
-        self, planned: PieceList, profile: Profile, rows: tuple | None = None, sample=None
+        self,
+        planned: PieceList,
+        profile: Profile,
+        rows: tuple | None = None,
+        sample=None,
+        from_k: int | None = None,
     ):
         """(reference rows, slice of the window's own rows in them, row of the virtual end
         or None): one row more on each side where there is one (the direction of travel is
         a central difference); with ``rows`` (k0, k1, last, …) only those samples, and
         unless ``last``, after k1 − 1 the row k1 of the program as if it ended with this
         window (:meth:`_end_row`: the next cut window's motion is not planned yet).
-        ``sample(a, b)``: rows a … b − 1 of the reference (default: the sampler's)."""
+        ``sample(a, b)``: rows a … b − 1 of the reference (default: the sampler's);
+        ``from_k``: the chunks from the one whose own rows start there (windowed only)."""
         period = self.machine.servo.period_s
         n = sample_count(planned, profile, period)
         r0, r1 = (0, n) if rows is None else (rows[0], min(rows[1], n))
@@ -135,7 +162,7 @@ class Checker:
                     k0,
                     min(k0 + self.window, r1),
                 )
-                for k0 in range(r0, r1, self.window)
+                for k0 in range(r0 if from_k is None else from_k, r1, self.window)
             )
         if sample is None:
 
@@ -205,6 +232,13 @@ class Checker:
         key = None if rows is None else (rows[0], rows[2], rows[4])
         memo, same = self._memo, self._same_rows(planned, profile, key, stream_in)
         self._memo = None
+        # The leading chunks a re-plan left alike: their results and the servo state after
+        # them taken from the last check (:meth:`_resume`), the check resumed after them.
+        r1, from_k, entries = self._resume(planned, profile, rows, key, stream_in)
+        if entries:
+            acc.restore(entries[-1][4])
+            stream = entries[-1][5].copy()
+            same = 0  # the one-chunk memo is for a check from the window's first chunk
         # The first chunk sampled, as (first row, rows): kept for the next re-plan if the
         # window is that one chunk. Memory: one chunk at most.
         sampled: list = []
@@ -222,9 +256,12 @@ class Checker:
             nonlocal chunks
             chunks += 1
             sampled[:] = [(a, ref)] if chunks == 1 else []
+            at[0] = a
             return ref
 
-        for ref, own, virt in self._windows(planned, profile, rows, sample):
+        at = [0]  # the first row of the chunk sampled last
+
+        for ref, own, virt in self._windows(planned, profile, rows, sample, from_k):
             d = (
                 np.gradient(ref.points_mm[:, :2], axis=0)
                 if ref.t_s.size > 1
@@ -232,6 +269,8 @@ class Checker:
             )
             if virt is not None:
                 end = (rows_of(ref, slice(virt, virt + 1)), d[virt : virt + 1])
+            # The chunk's first and next own rows, the times of the last row it reads.
+            span = (at[0] + own.start, at[0] + own.stop, float(ref.t_s[-1]), float(ref.tau_s[-1]))
             # Own rows whose response the last check computed: their reference rows and
             # the rows on each side (the direction of travel) are the same.
             kept = 0
@@ -246,8 +285,11 @@ class Checker:
                 ref, actual, d[own], on, prof, index, profile, head, memo, kept
             )
             acc.add(resp, cutting, ref.tau_s, ref.piece)
+            if self.windowed and virt is None and span[1] < r1:
+                # A chunk before the window's last: kept for the next re-plan (_resume).
+                entries.append((*span, acc.state(), stream.copy()))
             last = ref
-            if sampled:  # the first chunk: kept for the next re-plan of a one-chunk window
+            if sampled and from_k is None:  # kept for the next re-plan of a one-chunk window
                 self._memo = _Memo(
                     key,
                     stream_in,
@@ -263,8 +305,64 @@ class Checker:
                     cutting,
                 )
         self.stream_out = stream
+        if len(entries) > 0 and self.windowed:
+            self._chunks = _Chunks(
+                key,
+                stream_in,
+                planned.path,
+                profile,
+                dwell_times(planned.dwell_after_s, profile),
+                entries,
+            )
         self._finish(acc, stream, end, last, planned, profile, rows, head, (on, prof, index))
         return acc.check()
+
+    def _resume(
+        self,
+        planned: PieceList,
+        profile: Profile,
+        rows: tuple | None,
+        key: tuple | None,
+        stream: AxesStream | None,
+    ) -> tuple[int, int | None, list]:
+        """Where a check of this plan may resume (:class:`_Chunks`, the last check's): the
+        window's end row r1, the first own row of the first chunk to compute (None: the
+        window's first) and the kept chunks before it (each (k0, k1, t [s], τ [s], the
+        accumulator's state, the servo's state after it)).
+
+        A chunk is alike, bit for bit, when the window starts at the same row from the same
+        servo state on the same path, the chunk's own rows and its neighbour rows are the
+        same rows of the window (so it is not the window's last, whose end row moves with
+        the profile), and the last row it reads lies before the wall time where the dwell
+        schedules differ and the profile time where the profiles do (the reasoning of
+        :meth:`_same_rows`: a row's reference depends on its wall time alone, its response
+        on its reference, its neighbours' and the servo state). Its contribution to the
+        accumulator is then the same: its over-limit samples, piece runs and statistics,
+        and its counts before each restart (a restart time that differs lies at or after
+        the profile time where the profiles differ, after every row of the chunk in both).
+        Nothing is kept for a sampler that is not causal."""
+        period = self.machine.servo.period_s
+        n = sample_count(planned, profile, period)
+        r1 = n if rows is None else min(rows[1], n)
+        old, self._chunks = self._chunks, None
+        if (
+            not self.windowed
+            or not self.sampler.causal
+            or old is None
+            or old.key != key
+            or old.stream is not stream
+            or old.path is not planned.path
+        ):
+            return r1, None, []
+        t_wall = same_clock_until_s(old.clock, dwell_times(planned.dwell_after_s, profile))
+        t_tau = same_until_s(old.profile, profile)
+        kept = []
+        for entry in old.entries:
+            k0, k1, t_s, tau_s = entry[:4]
+            if k1 >= r1 or not (t_s < t_wall and tau_s < t_tau):
+                break
+            kept.append(entry)
+        return r1, (kept[-1][1] if kept else None), kept
 
     def _finish(
         self,
@@ -337,10 +435,12 @@ class Checker:
         row from its own wall time alone (any window of rows is those rows of the whole
         reference), and the response of a row depends on its reference, its neighbours'
         and the servo state only: so a re-plan that changed the profile from some point on
-        costs the samples from there on. 0 without a kept chunk."""
+        costs the samples from there on. 0 without a kept chunk, and for a sampler that is
+        not causal (:attr:`~nurbscnc.plan.sampler.ReferenceSampler.causal`)."""
         memo = self._memo
         if (
             memo is None
+            or not self.sampler.causal
             or memo.key != key
             or memo.stream is not stream
             or memo.path is not planned.path

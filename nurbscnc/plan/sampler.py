@@ -28,10 +28,16 @@ class ReferenceSampler:
     the whole reference, bit for bit), so the check may sample a plan window by window; a
     sampler that is not (a sequential recurrence, a non-causal filter) is called once per
     check with k0 = 0, k1 = None. ``interpolator``: how its NURBS points are made
-    (:class:`~nurbscnc.plan.options.Interpolator`; None: not an interpolator's)."""
+    (:class:`~nurbscnc.plan.options.Interpolator`; None: not an interpolator's).
+    ``causal``: a row depends on its own wall time and the plan up to it only (the plan's
+    profile and dwells before that time), so a re-plan that changed the plan from some
+    time on leaves the rows before it alike and the check may keep them; a sampler whose
+    rows see the plan after them (the pre-compensated reference: each cut window inverted
+    and optimised as a whole) is not."""
 
     windowed: bool = True
     interpolator: Interpolator | None = Interpolator.EXACT
+    causal: bool = True
 
     def __call__(
         self, pieces, profile, period_s: float, k0: int = 0, k1: int | None = None
@@ -50,18 +56,20 @@ EXACT = ReferenceSampler()
 
 class FunctionSampler(ReferenceSampler):
     """A function ``sample(pieces, profile, period_s, k0, k1)`` → Reference as a
-    :class:`ReferenceSampler` that says explicitly whether it is ``windowed`` and which
-    ``interpolator`` it samples with."""
+    :class:`ReferenceSampler` that says explicitly whether it is ``windowed``, which
+    ``interpolator`` it samples with and whether it is ``causal``."""
 
     def __init__(
         self,
         sample: Callable[..., Reference],
         windowed: bool,
         interpolator: Interpolator | None = None,
+        causal: bool = True,
     ):
         self.sample = sample
         self.windowed = bool(windowed)
         self.interpolator = interpolator
+        self.causal = bool(causal)
 
     def __call__(
         self, pieces, profile, period_s: float, k0: int = 0, k1: int | None = None
@@ -77,6 +85,7 @@ class ForwardingSampler(ReferenceSampler):
         self.inner = inner
         self.windowed = inner.windowed
         self.interpolator = inner.interpolator
+        self.causal = inner.causal
         self.hook = hook
 
     def __call__(

@@ -624,4 +624,5 @@ def precompensated_sampler(
 
         return _compensated_rows(ref_of, pieces, profile, machine, options, n, k0, hi)[0]
 
-    return FunctionSampler(sample, windowed, sampler.interpolator)
+    # Not causal: a segment's rows are inverted and optimised from all its planned samples.
+    return FunctionSampler(sample, windowed, sampler.interpolator, causal=False)
