@@ -81,7 +81,7 @@ def test_check_refuses_a_10_mb_plain_line_with_its_position(tmp_path, via):
         result = run(["check", "-"], input=LONG_PLAIN)
         name = "<stdin>"
     assert result.exit_code == 2
-    head, source, caret = result.stderr.splitlines()[:3]
+    head, source, caret = _error_lines(result.stderr)[:3]
     assert head == (
         f"{name}:2:{MAX_LINE_CHARS + 1}: error: line is too long "
         f"({len(LONG_PLAIN) - 8} characters; at most {MAX_LINE_CHARS})"
@@ -295,7 +295,7 @@ def test_error_source_line_escapes_controls(tmp_path):
     result = run(["check", path])
     assert result.exit_code == 2
     assert not any(c in result.stderr for c in RAW)
-    head, source, caret = result.stderr.splitlines()[:3]
+    head, source, caret = _error_lines(result.stderr)[:3]
     assert source == r"    G1 X1 F600 (\x1b[2J\x07) G33"
     assert source[caret.index("^") :].startswith("G33")
 
@@ -392,3 +392,8 @@ def test_console_escapes_text_objects_and_keeps_its_own_styles():
     assert r"line 3: \x1b]0;pwned\x1b[2J" in out and r"\x9b31m" in out  # (tabs: spaces)
     assert "\x1b[1m" in out  # bold, rich's own escape
     assert "\x1b]" not in out and "\x1b[2J" not in out and "\x9b" not in out
+
+
+def _error_lines(stderr: str) -> list:
+    """The error's lines of ``check``'s stderr (after the line naming the machine profile)."""
+    return [line for line in stderr.splitlines() if not line.startswith("machine: ")]

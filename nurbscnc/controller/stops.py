@@ -8,8 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-#: The user M-codes: LinuxCNC runs an executable named after the code (M100–M199).
-USER_M_FIRST, USER_M_LAST = 100, 199
+from nurbscnc.program.codes import USER_M_FIRST, USER_M_LAST
 
 
 @dataclass(frozen=True)

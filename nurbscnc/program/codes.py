@@ -137,8 +137,8 @@ M_98 = 98
 M_99 = 99
 #: User M-codes M100–M199: an executable of that name run at rest (LinuxCNC's
 #: USER_DEFINED_FUNCTION, found in PROGRAM_PREFIX and [RS274NGC]USER_M_PATH).
-M_USER_FIRST = 100
-M_USER_LAST = 199
+USER_M_FIRST = 100
+USER_M_LAST = 199
 
 # -- modal groups of G codes (LinuxCNC's numbers) ------------------------------------------
 GM_NONMODAL = 0  # G4, G10, G28, G30, G52, G53, G92 family
@@ -200,7 +200,7 @@ M_GROUP = {
     **dict.fromkeys((M_7, M_8, M_9), MM_COOLANT),
     **dict.fromkeys((M_48, M_49, M_50, M_51, M_52, M_53), MM_OVERRIDE),
     **dict.fromkeys((M_70, M_71, M_72, M_73), MM_MODAL_STATE),
-    **dict.fromkeys(range(M_USER_FIRST, M_USER_LAST + 1), MM_USER),
+    **dict.fromkeys(range(USER_M_FIRST, USER_M_LAST + 1), MM_USER),
 }
 
 #: Valid RS274/NGC codes nurbscnc refuses (the error names them and why).
