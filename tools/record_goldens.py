@@ -114,6 +114,8 @@ class Recorder:
         self.feed_mode = 940
         self.speed = 0.0
         self.plane = 1
+        self.rotary = False  # --rotary: also record the feed mode and the canon's rate
+        self.units = 210
         self.g5x = [0.0] * 9
         self.g92 = [0.0] * 9
         self.rotation_deg = 0.0
@@ -125,6 +127,7 @@ class Recorder:
         self.line = linecode.sequence_number
         self.feed_mode = linecode.feed_mode
         self.speed = linecode.speed
+        self.units = linecode.units
 
     def set_plane(self, plane):
         self.plane = plane
@@ -212,11 +215,23 @@ class Recorder:
             return self.feed_in_min * self.speed * INCH_MM / 60.0
         return self.feed_in_min * INCH_MM / 60.0
 
+    def feed_extra(self) -> dict:
+        """With --rotary: the feed mode and the rate LinuxCNC's canon receives (SET_FEED_RATE),
+        per minute in program units: mm or inch along XYZ when XYZ move, degrees when only
+        A B C move (emccanon.cc SET_FEED_RATE: FROM_PROG_ANG, no length conversion); under
+        G93 the interpreter's rate, the move's length times F."""
+        if not self.rotary:
+            return {}
+        mode = {930: "G93", 940: "G94", 950: "G95"}.get(self.feed_mode, str(self.feed_mode))
+        per_unit = INCH_MM if self.units == 210 else 1.0  # module rate in in/min → prog units
+        return {"feed_mode": mode, "feed_rate_prog_min": self.feed_in_min * per_unit}
+
     def _linear(self, kind, args):
         self.prog = list(args)
         move = {"kind": kind, "line": self.line, "end": self.machine(self.prog)}
         if kind != "traverse":
             move["feed_mm_s"] = self.feed_mm_s()
+            move.update(self.feed_extra())
         self.moves.append(move)
 
     def straight_traverse(self, *args):
@@ -258,6 +273,7 @@ class Recorder:
                 "normal": list(normal),
                 "rotation": rotation,
                 "feed_mm_s": self.feed_mm_s(),
+                **self.feed_extra(),
             }
         )
 
@@ -534,7 +550,7 @@ def load_tool_database(tools_path: str) -> None:
         raise SystemExit(f"LinuxCNC could not load the tool table {tools_path}")
 
 
-def record(path: str, tools: dict) -> dict:
+def record(path: str, tools: dict, rotary: bool = False) -> dict:
     """Run LinuxCNC on one program; the golden as a dict."""
     import gcode  # LinuxCNC's interpreter module (only in the system Python)
 
@@ -545,6 +561,7 @@ def record(path: str, tools: dict) -> dict:
         var = os.path.join(tmp, "params.var")
         shutil.copy(PARAMS, var)  # LinuxCNC rewrites its parameter file at the end
         canon = Recorder(tools, var)
+        canon.rotary = rotary
         cwd = os.getcwd()
         os.chdir(os.path.dirname(os.path.abspath(path)))
         try:
@@ -636,11 +653,14 @@ def main(argv=None) -> int:
         "--programs", metavar="DIR", help="record every *.ngc of DIR (not the manifest)"
     )
     ap.add_argument("--goldens", metavar="DIR", help="with --programs: where the goldens go")
+    ap.add_argument(
+        "--rotary", action="store_true", help="also record the feed mode and canon rate"
+    )
     args = ap.parse_args(argv)
     tools = read_tool_table(TOOLS)
     if args.stdout:
         load_tool_database(TOOLS)
-        golden = record(args.stdout, tools)
+        golden = record(args.stdout, tools, args.rotary)
         if args.json_out:  # the interpreter may print (PRINT, ...) comments on stdout
             with open(args.json_out, "w") as fh:
                 json.dump(golden, fh)
@@ -667,6 +687,7 @@ def main(argv=None) -> int:
                 os.path.join(program_dir, rel),
                 "--json-out",
                 out,
+                *(["--rotary"] if args.rotary else []),
             ],
             capture_output=True,
             text=True,
