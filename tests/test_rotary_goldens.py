@@ -256,3 +256,68 @@ def test_goldens_are_what_linuxcnc_says_now(name, tmp_path):
                 assert a[key] == pytest.approx(b[key], rel=1e-12), (key, a, b)
             else:
                 assert a[key] == b[key], (key, a, b)
+
+
+# -- wrapped rotary A ([AXIS_A]WRAPPED_ROTARY, rs274 -i only) ----------------------------------
+
+WRAPPED = PROGRAMS / "wrapped"
+WRAPPED_GOLDENS = GOLDENS / "wrapped"
+WRAPPED_NAMES = sorted(p.stem for p in WRAPPED.glob("*.ngc"))
+
+
+def wrapped_golden(name: str) -> dict:
+    return json.loads((WRAPPED_GOLDENS / f"{name}.json").read_text())
+
+
+def _unwrap_deg(word: str, current_deg: float) -> float:
+    """docs/rotary.md's rule for a G90 word on a wrapped axis: |word| in the current turn,
+    then one turn on in the word's sign's direction if it lies behind (the sign of "-0" too)."""
+    target = abs(float(word)) + 360.0 * math.floor(current_deg / 360.0)
+    if not word.startswith("-") and target < current_deg:
+        target += 360.0
+    if word.startswith("-") and target > current_deg:
+        target -= 360.0
+    return target
+
+
+def test_wrapped_goldens_exist_for_every_program():
+    assert sorted(p.stem for p in WRAPPED_GOLDENS.glob("*.json")) == WRAPPED_NAMES
+    for name in WRAPPED_NAMES:
+        digest = hashlib.sha256((WRAPPED / f"{name}.ngc").read_bytes()).hexdigest()
+        assert wrapped_golden(name)["sha256"] == digest, name
+
+
+def test_wrapped_a_follows_the_sign_rule():
+    a_deg = [m["end"][3] for m in wrapped_golden("wrapped_a")["moves"]]
+    expected, current = [], 0.0
+    for word in ["350", "10", "-350", "-0", "0"]:  # the program's G90 A words, in order
+        current = _unwrap_deg(word, current)
+        expected.append(current)
+    current += 400.0  # G91 A400: incremental moves are not wrapped
+    expected.append(current)
+    for word in ["90", "-80", "-270"]:
+        current = _unwrap_deg(word, current)
+        expected.append(current)
+    expected.append(current)  # G0 B400: B is not wrapped, A stays
+    assert a_deg == expected == [350, 370, 350, 0, 0, 400, 450, 440, 270, 270]
+    assert wrapped_golden("wrapped_a")["moves"][-1]["end"][4] == 400.0
+
+
+def test_wrapped_refusals():
+    for name, block in (("err_wrapped_360", "G0 A360"), ("err_wrapped_g92", "G92 A400")):
+        g = wrapped_golden(name)
+        value = block.split("A")[1]
+        message = f"Invalid absolute position {float(value):.2f} for wrapped rotary axis A"
+        assert not g["accepted"] and g["error"] == {"message": message, "block": block}
+
+
+@pytest.mark.parametrize("name", WRAPPED_NAMES)
+def test_wrapped_goldens_are_what_rs274_says_now(name, tmp_path):
+    missing = _linuxcnc_missing()
+    if missing:
+        pytest.skip(missing)
+    cmd = [SYSTEM_PYTHON, str(RECORDER), "--wrapped-ini", str(WRAPPED / "wrapped.ini")]
+    cmd += ["--programs", str(WRAPPED), "--goldens", str(tmp_path)]
+    res = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert json.loads((tmp_path / f"{name}.json").read_text()) == wrapped_golden(name)

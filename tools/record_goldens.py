@@ -624,6 +624,55 @@ def record(path: str, tools: dict, rotary: bool = False) -> dict:
     return golden
 
 
+def record_wrapped(path: str, ini: str) -> dict:
+    """``rs274 -g -i INI`` alone on ``path`` (the ``gcode`` module reads no ini file, so
+    ``[AXIS_A]WRAPPED_ROTARY`` reaches only rs274's interpreter): its moves as printed, in
+    program units and degrees to 4 decimals, and its refusal (message, refused block)."""
+    with open(path, "rb") as fh:
+        digest = hashlib.sha256(fh.read()).hexdigest()
+    tmp = tempfile.mkdtemp(prefix="goldens-")
+    try:
+        res = subprocess.run(
+            [RS274, "-g", "-i", os.path.abspath(ini), os.path.abspath(path)],
+            cwd=tmp,
+            capture_output=True,
+            text=True,
+            timeout=120,
+            stdin=subprocess.DEVNULL,
+            env=dict(os.environ, HOME=tmp),
+        )
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    moves = []
+    for raw in res.stdout.splitlines():
+        m = _CALL.match(raw)
+        if m and m.group(1) in ("STRAIGHT_TRAVERSE", "STRAIGHT_FEED"):
+            end = [float(v) for v in m.group(2).split(",")]
+            moves.append({"kind": _MOTION[m.group(1)], "end": end})
+    err = [t.strip() for t in res.stderr.splitlines() if t.strip()]
+    refused = len(err) >= 3  # "executing", the message, the refused block
+    return {
+        "program": os.path.relpath(os.path.abspath(path), ROOT),
+        "sha256": digest,
+        "linuxcnc": LINUXCNC_VERSION,
+        "ini": os.path.relpath(os.path.abspath(ini), ROOT),
+        "units": "rs274 -g as printed: program units (mm), degrees, 4 decimals",
+        "accepted": not refused,
+        "error": {"message": err[-2], "block": err[-1]} if refused else None,
+        "moves": moves,
+    }
+
+
+def record_wrapped_dir(program_dir: str, golden_dir: str, ini: str) -> None:
+    """Every *.ngc of ``program_dir`` through :func:`record_wrapped`, one golden each."""
+    os.makedirs(golden_dir, exist_ok=True)
+    for name in sorted(f for f in os.listdir(program_dir) if f.endswith(".ngc")):
+        golden = record_wrapped(os.path.join(program_dir, name), ini)
+        with open(os.path.join(golden_dir, golden_name(name) + ".json"), "w") as fh:
+            fh.write(golden_text(golden))
+        print(f"{'ok ' if golden['accepted'] else 'ERR'} {name}: {len(golden['moves'])} moves")
+
+
 def golden_text(golden: dict) -> str:
     """JSON with one compact move per line (diffable, and small enough to commit)."""
     head = json.dumps({k: v for k, v in golden.items() if k != "moves"}, indent=1)
@@ -656,7 +705,13 @@ def main(argv=None) -> int:
     ap.add_argument(
         "--rotary", action="store_true", help="also record the feed mode and canon rate"
     )
+    ap.add_argument(
+        "--wrapped-ini", metavar="INI", help="with --programs: rs274 -g -i INI only (wrapped A)"
+    )
     args = ap.parse_args(argv)
+    if args.wrapped_ini:
+        record_wrapped_dir(args.programs, args.goldens, args.wrapped_ini)
+        return 0
     tools = read_tool_table(TOOLS)
     if args.stdout:
         load_tool_database(TOOLS)
