@@ -103,6 +103,16 @@ def test_g20_scales_lengths_not_degrees():
     assert feeds[1]["feed_rate_prog_min"] == pytest.approx(20.0, rel=1e-12)
 
 
+def test_g20_with_f_in_one_block_sets_f_before_the_switch():
+    feeds = [m for m in motions("g20_f_same_block") if m["kind"] == "feed"]
+    # "G20 G1 X1 A20 F10": F10 is taken in mm/min (G21 still), and stays 10 mm/min (0.39
+    # in/min) after the switch; a rotary-only move then runs at 10 deg/min (FROM_PROG_ANG).
+    assert [m["feed_mm_s"] for m in feeds] == pytest.approx([5.0] + [10 / 60] * 3, rel=1e-12)
+    assert [m["feed_rate_prog_min"] for m in feeds] == [300.0, 10.0, 10.0, 10.0]
+    assert [m["end"][0] for m in feeds] == pytest.approx([10, 25.4, 50.8, 50.8], abs=TOL_MM)
+    assert [m["end"][3] for m in feeds] == [10.0, 20.0, 30.0, 40.0]
+
+
 def _xyz_length_mm(p, q) -> float:
     return math.dist(p[:3], q[:3])
 
@@ -188,6 +198,7 @@ REFUSED_AT = {
     "b_indexer": (9, 6, ROTARY + "(B90: B is at 0)"),
     "err_g93_no_f": (5, 4, ROTARY + "(A90: A is at 0)"),
     "err_two_a_words": (4, 11, "A word repeated in the block"),  # as LinuxCNC
+    "g20_f_same_block": (4, 8, ROTARY + "(A10: A is at 0)"),
     "g20_a": (6, 7, ROTARY + "(A90: A is at 0)"),
     "g28_g30_rotary": (3, 15, ROTARY + "(A90: A is at 0)"),
     "g93_inverse_time": (5, 8, ROTARY + "(A90: A is at 0)"),

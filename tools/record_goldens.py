@@ -116,6 +116,7 @@ class Recorder:
         self.plane = 1
         self.rotary = False  # --rotary: also record the feed mode and the canon's rate
         self.units = 210
+        self.feed_prog_min = 0.0
         self.g5x = [0.0] * 9
         self.g92 = [0.0] * 9
         self.rotation_deg = 0.0
@@ -134,6 +135,9 @@ class Recorder:
 
     def set_feed_rate(self, rate):
         self.feed_in_min = rate
+        # SET_FEED_RATE's own argument (rs274 prints it): the module's in/min back in the
+        # program units in effect now, not at the move (G20 F10 sets F before the switch).
+        self.feed_prog_min = rate * (INCH_MM if self.units == 210 else 1.0)
 
     def _reframe(self, change) -> None:
         """Apply ``change`` to the offsets, keeping the current point where it is on the
@@ -216,15 +220,14 @@ class Recorder:
         return self.feed_in_min * INCH_MM / 60.0
 
     def feed_extra(self) -> dict:
-        """With --rotary: the feed mode and the rate LinuxCNC's canon receives (SET_FEED_RATE),
-        per minute in program units: mm or inch along XYZ when XYZ move, degrees when only
-        A B C move (emccanon.cc SET_FEED_RATE: FROM_PROG_ANG, no length conversion); under
-        G93 the interpreter's rate, the move's length times F."""
+        """With --rotary: the feed mode and the argument of the last SET_FEED_RATE, per minute
+        in the program units in effect when it was set: the canon's rate along XYZ in those
+        units, and its rate in degrees/min when only A B C move (emccanon.cc SET_FEED_RATE:
+        FROM_PROG_ANG, no length conversion); under G93 the move's length times F."""
         if not self.rotary:
             return {}
         mode = {930: "G93", 940: "G94", 950: "G95"}.get(self.feed_mode, str(self.feed_mode))
-        per_unit = INCH_MM if self.units == 210 else 1.0  # module rate in in/min → prog units
-        return {"feed_mode": mode, "feed_rate_prog_min": self.feed_in_min * per_unit}
+        return {"feed_mode": mode, "feed_rate_prog_min": self.feed_prog_min}
 
     def _linear(self, kind, args):
         self.prog = list(args)
