@@ -83,6 +83,8 @@ goldens:
 	/usr/bin/python3 tools/record_goldens.py
 	/usr/bin/python3 tools/record_goldens.py --programs tests/programs/cycles --goldens tests/golden/linuxcnc_cycles
 	/usr/bin/python3 tools/record_goldens.py --programs tests/programs/comp --goldens tests/golden/linuxcnc_comp
+	/usr/bin/python3 tools/record_goldens.py --rotary --programs tests/programs/rotary --goldens tests/golden/linuxcnc_rotary
+	/usr/bin/python3 tools/record_goldens.py --wrapped-ini tests/programs/rotary/wrapped/wrapped.ini --programs tests/programs/rotary/wrapped --goldens tests/golden/linuxcnc_rotary/wrapped
 
 clean:
 	rm -rf $(VENV) $(OUT) .pytest_cache .ruff_cache

@@ -114,6 +114,9 @@ class Recorder:
         self.feed_mode = 940
         self.speed = 0.0
         self.plane = 1
+        self.rotary = False  # --rotary: also record the feed mode and the canon's rate
+        self.units = 210
+        self.feed_prog_min = 0.0
         self.g5x = [0.0] * 9
         self.g92 = [0.0] * 9
         self.rotation_deg = 0.0
@@ -125,12 +128,16 @@ class Recorder:
         self.line = linecode.sequence_number
         self.feed_mode = linecode.feed_mode
         self.speed = linecode.speed
+        self.units = linecode.units
 
     def set_plane(self, plane):
         self.plane = plane
 
     def set_feed_rate(self, rate):
         self.feed_in_min = rate
+        # SET_FEED_RATE's own argument (rs274 prints it): the module's in/min back in the
+        # program units in effect now, not at the move (G20 F10 sets F before the switch).
+        self.feed_prog_min = rate * (INCH_MM if self.units == 210 else 1.0)
 
     def _reframe(self, change) -> None:
         """Apply ``change`` to the offsets, keeping the current point where it is on the
@@ -212,11 +219,22 @@ class Recorder:
             return self.feed_in_min * self.speed * INCH_MM / 60.0
         return self.feed_in_min * INCH_MM / 60.0
 
+    def feed_extra(self) -> dict:
+        """With --rotary: the feed mode and the argument of the last SET_FEED_RATE, per minute
+        in the program units in effect when it was set: the canon's rate along XYZ in those
+        units, and its rate in degrees/min when only A B C move (emccanon.cc SET_FEED_RATE:
+        FROM_PROG_ANG, no length conversion); under G93 the move's length times F."""
+        if not self.rotary:
+            return {}
+        mode = {930: "G93", 940: "G94", 950: "G95"}.get(self.feed_mode, str(self.feed_mode))
+        return {"feed_mode": mode, "feed_rate_prog_min": self.feed_prog_min}
+
     def _linear(self, kind, args):
         self.prog = list(args)
         move = {"kind": kind, "line": self.line, "end": self.machine(self.prog)}
         if kind != "traverse":
             move["feed_mm_s"] = self.feed_mm_s()
+            move.update(self.feed_extra())
         self.moves.append(move)
 
     def straight_traverse(self, *args):
@@ -258,6 +276,7 @@ class Recorder:
                 "normal": list(normal),
                 "rotation": rotation,
                 "feed_mm_s": self.feed_mm_s(),
+                **self.feed_extra(),
             }
         )
 
@@ -534,7 +553,7 @@ def load_tool_database(tools_path: str) -> None:
         raise SystemExit(f"LinuxCNC could not load the tool table {tools_path}")
 
 
-def record(path: str, tools: dict) -> dict:
+def record(path: str, tools: dict, rotary: bool = False) -> dict:
     """Run LinuxCNC on one program; the golden as a dict."""
     import gcode  # LinuxCNC's interpreter module (only in the system Python)
 
@@ -545,6 +564,7 @@ def record(path: str, tools: dict) -> dict:
         var = os.path.join(tmp, "params.var")
         shutil.copy(PARAMS, var)  # LinuxCNC rewrites its parameter file at the end
         canon = Recorder(tools, var)
+        canon.rotary = rotary
         cwd = os.getcwd()
         os.chdir(os.path.dirname(os.path.abspath(path)))
         try:
@@ -607,6 +627,55 @@ def record(path: str, tools: dict) -> dict:
     return golden
 
 
+def record_wrapped(path: str, ini: str) -> dict:
+    """``rs274 -g -i INI`` alone on ``path`` (the ``gcode`` module reads no ini file, so
+    ``[AXIS_A]WRAPPED_ROTARY`` reaches only rs274's interpreter): its moves as printed, in
+    program units and degrees to 4 decimals, and its refusal (message, refused block)."""
+    with open(path, "rb") as fh:
+        digest = hashlib.sha256(fh.read()).hexdigest()
+    tmp = tempfile.mkdtemp(prefix="goldens-")
+    try:
+        res = subprocess.run(
+            [RS274, "-g", "-i", os.path.abspath(ini), os.path.abspath(path)],
+            cwd=tmp,
+            capture_output=True,
+            text=True,
+            timeout=120,
+            stdin=subprocess.DEVNULL,
+            env=dict(os.environ, HOME=tmp),
+        )
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    moves = []
+    for raw in res.stdout.splitlines():
+        m = _CALL.match(raw)
+        if m and m.group(1) in ("STRAIGHT_TRAVERSE", "STRAIGHT_FEED"):
+            end = [float(v) for v in m.group(2).split(",")]
+            moves.append({"kind": _MOTION[m.group(1)], "end": end})
+    err = [t.strip() for t in res.stderr.splitlines() if t.strip()]
+    refused = len(err) >= 3  # "executing", the message, the refused block
+    return {
+        "program": os.path.relpath(os.path.abspath(path), ROOT),
+        "sha256": digest,
+        "linuxcnc": LINUXCNC_VERSION,
+        "ini": os.path.relpath(os.path.abspath(ini), ROOT),
+        "units": "rs274 -g as printed: program units (mm), degrees, 4 decimals",
+        "accepted": not refused,
+        "error": {"message": err[-2], "block": err[-1]} if refused else None,
+        "moves": moves,
+    }
+
+
+def record_wrapped_dir(program_dir: str, golden_dir: str, ini: str) -> None:
+    """Every *.ngc of ``program_dir`` through :func:`record_wrapped`, one golden each."""
+    os.makedirs(golden_dir, exist_ok=True)
+    for name in sorted(f for f in os.listdir(program_dir) if f.endswith(".ngc")):
+        golden = record_wrapped(os.path.join(program_dir, name), ini)
+        with open(os.path.join(golden_dir, golden_name(name) + ".json"), "w") as fh:
+            fh.write(golden_text(golden))
+        print(f"{'ok ' if golden['accepted'] else 'ERR'} {name}: {len(golden['moves'])} moves")
+
+
 def golden_text(golden: dict) -> str:
     """JSON with one compact move per line (diffable, and small enough to commit)."""
     head = json.dumps({k: v for k, v in golden.items() if k != "moves"}, indent=1)
@@ -636,11 +705,20 @@ def main(argv=None) -> int:
         "--programs", metavar="DIR", help="record every *.ngc of DIR (not the manifest)"
     )
     ap.add_argument("--goldens", metavar="DIR", help="with --programs: where the goldens go")
+    ap.add_argument(
+        "--rotary", action="store_true", help="also record the feed mode and canon rate"
+    )
+    ap.add_argument(
+        "--wrapped-ini", metavar="INI", help="with --programs: rs274 -g -i INI only (wrapped A)"
+    )
     args = ap.parse_args(argv)
+    if args.wrapped_ini:
+        record_wrapped_dir(args.programs, args.goldens, args.wrapped_ini)
+        return 0
     tools = read_tool_table(TOOLS)
     if args.stdout:
         load_tool_database(TOOLS)
-        golden = record(args.stdout, tools)
+        golden = record(args.stdout, tools, args.rotary)
         if args.json_out:  # the interpreter may print (PRINT, ...) comments on stdout
             with open(args.json_out, "w") as fh:
                 json.dump(golden, fh)
@@ -667,6 +745,7 @@ def main(argv=None) -> int:
                 os.path.join(program_dir, rel),
                 "--json-out",
                 out,
+                *(["--rotary"] if args.rotary else []),
             ],
             capture_output=True,
             text=True,
