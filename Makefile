@@ -64,7 +64,8 @@ bench: $(STAMP)
 
 # The fuzz tests with a large budget (make test runs them small): mutants of the corpus and
 # hypothesis programs through check/plan; counts in out/fuzz-report.json. Then the planner's
-# honesty (bound below the plan, a higher F never slower) on FUZZ_EXAMPLES/200 random seeds.
+# honesty (bound below the plan, a higher F never slower) on FUZZ_EXAMPLES/200 random seeds;
+# the grammar's properties on FUZZ_EXAMPLES/40 programs and lines.
 FUZZ_EXAMPLES ?= 20000
 FUZZ_SECONDS  ?= 240
 fuzz: $(STAMP)
@@ -73,6 +74,7 @@ fuzz: $(STAMP)
 	NURBSCNC_FUZZ_REPORT=$(OUT)/fuzz-report.json \
 	$(BIN)/python -m pytest tests/test_fuzz_cli.py -q -s
 	NURBSCNC_FUZZ_EXAMPLES=$(FUZZ_EXAMPLES) $(BIN)/python -m pytest tests/test_plan_honesty.py -q
+	NURBSCNC_FUZZ_EXAMPLES=$(FUZZ_EXAMPLES) $(BIN)/python -m pytest tests/test_grammar_properties.py -q
 
 reproduce: $(STAMP)
 	$(BIN)/python docs/make_reproduction.py --out docs/reproduction.md

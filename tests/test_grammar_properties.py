@@ -17,6 +17,7 @@ Properties:
 
 from __future__ import annotations
 
+import os
 from decimal import Decimal
 
 import lark
@@ -30,9 +31,16 @@ from nurbscnc.program import parse
 from nurbscnc.program.interpret import InterpretOptions, interpret_text
 from nurbscnc.program.parse import Block, parse_text
 
-SETTINGS = settings(max_examples=250, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-# from_lark draws cost ~15 ms each: fewer of them keep the file well under 20 s.
-GRAMMAR_SETTINGS = settings(SETTINGS, max_examples=200)
+# Small budgets under ``make test`` (the file in a few seconds); ``make fuzz`` sets
+# NURBSCNC_FUZZ_EXAMPLES and draws a fortieth of it here (500 at its default 20000).
+FUZZ_EXAMPLES = int(os.environ.get("NURBSCNC_FUZZ_EXAMPLES") or 0)
+SETTINGS = settings(
+    max_examples=max(100, FUZZ_EXAMPLES // 40),
+    deadline=None,
+    suppress_health_check=[HealthCheck.too_slow],
+)
+# from_lark draws cost ~15 ms each: fewer of them.
+GRAMMAR_SETTINGS = settings(SETTINGS, max_examples=max(80, FUZZ_EXAMPLES // 50))
 
 
 def mixed_case(word: str):

@@ -52,12 +52,14 @@ def _random_flank(rng):
 
 
 def test_gated_rise_kernel_is_the_python_flank_bit_for_bit():
-    """1,000 random flanks (gates of 1–13 caps, rising or dipping, speeds that start below
+    """400 random flanks (gates of 1–13 caps, rising or dipping, speeds that start below
     or above the first cap, four accelerations and jerks, three time steps): the same
-    phase durations, jerks and distance (or None) from the kernel and from Python."""
+    phase durations, jerks and distance (or None) from the kernel and from Python. (With
+    this seed 320 flanks are found and 80 have none: both outcomes of every branch; the
+    planner's own flanks on the airfoil are compared below.)"""
     rng = np.random.default_rng(20261128)
     found = none = 0
-    for _ in range(1000):
+    for _ in range(400):
         v0, v_top, d, c, a, j, dt = _random_flank(rng)
         ref = gated.gated_rise_py(v0, v_top, d, c, a, j, dt)
         got = gated.gated_rise(v0, v_top, d, c, a, j, dt)
@@ -84,7 +86,7 @@ def test_gated_rise_kernel_is_the_python_flank_bit_for_bit():
         assert (merged[0], merged[1]) == gated.merged_phases(ref[0], ref[1])
         assert (merged[2], merged[3]) == gated.merged_phases(ref[0][::-1], ref[1][::-1])
         assert merged[4] == ref[2]
-    assert found > 500 and none > 10  # both outcomes exercised
+    assert found > 250 and none > 50  # both outcomes exercised
 
 
 def _profiles(rng):

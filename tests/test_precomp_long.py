@@ -3,8 +3,9 @@
 The compensated reference is made one segment per cut window
 (:mod:`nurbscnc.precompensation.apply`, "cut-window segments"), so the planner's check of a
 cut window costs that window, not the program. Speed is the benchmark's business (no timing
-here); this pins what must hold whatever the segments: on a generated program of four cuts
-(lines and half circles, rapids between the cuts: three joints) the written reference keeps the
+here); this pins what must hold whatever the segments: on a generated program of three cuts
+(lines and half circles, rapids between the cuts: two joints, so a middle cut has a joint on
+either side, the fewest that covers every kind of segment) the written reference keeps the
 machine's limits on its samples (tests/servo_reference.limits_excess, within the plan's own
 where the plan is above them), stays within 3 µm of the programmed path while cutting, and
 the tool simulated by ``scipy.signal.lsim`` from it stays within ε_max of the cuts — all
@@ -28,8 +29,8 @@ from nurbscnc.program.interpret import interpret_text
 from tests.servo_reference import limits_excess, lsim_actual_mm, segment_distance_mm
 
 MACHINE = load_machine()
-CUTS, PAIRS = 4, 1  # four cuts of one (line, half circle, line, half circle) each
-WIDTH_MM, RADIUS_MM = 2.0, 0.5
+CUTS, PAIRS = 3, 1  # three cuts of one (line, half circle, line, half circle) each
+WIDTH_MM, RADIUS_MM = 1.0, 0.5
 
 
 def _program() -> tuple[str, np.ndarray]:

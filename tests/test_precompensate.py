@@ -251,6 +251,13 @@ def airfoil():
     return prog, dense
 
 
+@pytest.fixture(scope="module")
+def airfoil_precompensated(airfoil):
+    """The airfoil run with ``precompensate`` (the default reference tolerance), once for
+    the module: the tests below only read it."""
+    return run_program(airfoil[0], MACHINE, RunOptions(precompensate=True))
+
+
 def _contour_um(points_mm, dense, first_cut):
     actual = lsim_actual_mm(points_mm, MACHINE)
     return distance_to_polyline_mm(actual[first_cut + 1 :], dense) * 1000.0
@@ -280,7 +287,7 @@ def test_airfoil_fully_compensated_tool_follows_the_plan(airfoil):
     assert run.cycle_time_s == pytest.approx(run.plan.cycle_time_s + PERIOD, abs=1e-12)
 
 
-def test_run_precompensate_on_the_airfoil_cli(airfoil, tmp_path):
+def test_run_precompensate_on_the_airfoil_cli(airfoil, airfoil_precompensated, tmp_path):
     """``run --precompensate`` (default: reference within 3 µm): the written points through
     lsim are within ε_max (+ e) of the curve, well below the uncompensated reference of the
     same plan; the summary reports the deviation (≤ 3 µm) and 8 model errors."""
@@ -307,7 +314,7 @@ def test_run_precompensate_on_the_airfoil_cli(airfoil, tmp_path):
     dev = distance_to_polyline_mm(pts[piece >= 1], dense) * 1000.0
     assert dev.max() <= 3.0 + 0.01
     # The same plan without compensation: the plan was made faster than that allows.
-    run = run_program(prog, MACHINE, RunOptions(precompensate=True))
+    run = airfoil_precompensated
     assert summary["cycle_time_s"] == pytest.approx(run.cycle_time_s, abs=1e-9)
     plain = sample_plan(run.plan.pieces, run.plan.profile, PERIOD)
     err_plain = _contour_um(plain.points_mm, dense, int(np.argmax(plain.piece >= 1)))
@@ -376,15 +383,17 @@ def test_precompensate_with_a_baseline_is_refused():
         run_program(prog, MACHINE, RunOptions(algorithm="adaptive", precompensate=True))
 
 
-def test_the_reference_tolerance_is_measured_from_the_programmed_curve(airfoil):
+def test_the_reference_tolerance_is_measured_from_the_programmed_curve(
+    airfoil, airfoil_precompensated
+):
     """On the PH corner pieces of the airfoil (a fit within e of the NURBS, not on it) the
     tube about each planned path point is the tolerance less that point's distance from the
     programmed curve: against the distance to the test's own dense NURBS polyline."""
     from nurbscnc.geometry.path import Kind
     from nurbscnc.precompensation import reference_tube_mm
 
-    prog, dense = airfoil
-    run = run_program(prog, MACHINE, RunOptions(precompensate=True))
+    dense = airfoil[1]
+    run = airfoil_precompensated
     pieces, profile = run.plan.pieces, run.plan.profile
     rows = np.flatnonzero(pieces.kind == Kind.PH)
     assert rows.size >= 2  # the nose is fitted by PH pieces

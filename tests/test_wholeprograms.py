@@ -196,8 +196,20 @@ def end_point(prog) -> np.ndarray:
 # --- the corpus ------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("rel", corpus_files() or ["(no corpus)"])
+def corpus_half(half: int) -> list[str]:
+    """Every other corpus program from ``half`` (0 or 1) on, sorted: this file runs half 0 and
+    tests/test_wholeprograms_corpus.py half 1, so that the suite's two workers (one test file
+    each) share the corpus's minutes."""
+    return corpus_files()[half::2] or ["(no corpus)"]
+
+
+@pytest.mark.parametrize("rel", corpus_half(0))
 def test_corpus_program_runs_end_to_end(rel):
+    check_corpus_program(rel)
+
+
+def check_corpus_program(rel: str) -> None:
+    """One corpus program planned end to end, checked against the independent references."""
     corpus = corpus_dir()
     if not corpus.is_dir():
         pytest.skip(f"conformance corpus not found at {corpus}; set NURBSCNC_CORPUS")
