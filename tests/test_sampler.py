@@ -70,9 +70,12 @@ def test_a_windowed_sampler_is_evaluated_window_by_window():
     )
     checks = rec.checks()
     assert len(checks) >= plan.iterations + 1
+    window_starts = {a for a, _ in checks[0][1]}
+    assert checks[0][1][0][0] == 0 and len(checks[0][1]) > 1
     for first, calls in checks:
-        assert first == 0 and len(calls) > 1
-        assert calls[0][0] == 0
+        # A re-check may resume after the windows a re-plan left alike (the check's memo):
+        # it then starts where one of the first check's windows starts.
+        assert first == 0 and calls and calls[0][0] in window_starts
         for (a0, b0), (a1, _) in zip(calls, calls[1:]):
             # A window of WINDOW own rows and one row more on each side.
             assert b0 - a0 <= WINDOW + 2 and a1 == b0 - 2

@@ -89,12 +89,23 @@ def _worker_exit(signum, _frame):
     sys.exit(128 + signum)
 
 
-def _worker_init() -> None:
-    """A batch worker ends quietly on SIGTERM/SIGHUP/SIGINT (the parent reports)."""
+def _worker_init(parent_pid: int) -> None:
+    """A batch worker ends quietly on SIGTERM/SIGHUP/SIGINT (the parent reports), and is
+    sent SIGTERM when the process that started it ends (Linux: ``PR_SET_PDEATHSIG``). The
+    pool replaces a worker that ends while tasks are pending, so a replacement can be
+    started between :func:`_stop_batch`'s terminations and the pool's own shutdown; the
+    parent's death then ends it instead of leaving it waiting on the task queue for ever."""
     import signal
 
     for sig in (signal.SIGTERM, signal.SIGHUP, signal.SIGINT):
         signal.signal(sig, _worker_exit)
+    if sys.platform.startswith("linux"):
+        import ctypes
+
+        pr_set_pdeathsig = 1
+        ctypes.CDLL(None, use_errno=True).prctl(pr_set_pdeathsig, int(signal.SIGTERM))
+    if os.getppid() != parent_pid:  # the parent ended before the request above took hold
+        _worker_exit(int(signal.SIGTERM), None)
 
 
 def run_batch(programs, output_dir, jobs, fmt, quiet, as_json, settings) -> None:
@@ -128,7 +139,7 @@ def _run_tasks(tasks: list, workers: int) -> list[dict]:
         return [_batch_one(t) for t in tasks]
     # Leaving the block for any reason (a signal, Ctrl-C) terminates the workers: each
     # removes its temporary file and exits; none goes on writing after we are gone.
-    with multiprocessing.Pool(workers, initializer=_worker_init) as pool:
+    with multiprocessing.Pool(workers, initializer=_worker_init, initargs=(os.getpid(),)) as pool:
         try:
             return pool.map(_batch_one, tasks, chunksize=1)
         except (Terminated, KeyboardInterrupt) as exc:
