@@ -23,3 +23,24 @@ def card_on(kind: str, config: CardConfig | None = None, seed: int = 1):
         stop.set()
         thread.join(5.0)
         endpoint.close()
+
+
+def write_mixed_steps_machine(folder, monkeypatch):
+    """The bundled machine profile with 800 / 1000 / 400 steps per mm on X / Y / Z (a
+    mixed-up axis or a steps-per-mm slip shows in the card's counters), written to
+    ``folder/m.toml``; the discovery variables cleared and ``folder`` made the working
+    directory. Returns ``folder``."""
+    from pathlib import Path
+
+    import nurbscnc
+
+    for name in ("NURBSCNC_MACHINE", "NURBSCNC_VAR", "XDG_CONFIG_HOME"):
+        monkeypatch.delenv(name, raising=False)
+    monkeypatch.chdir(folder)
+    bundled = Path(nurbscnc.__file__).parent / "data" / "default_machine.toml"
+    text = bundled.read_text()
+    steps = "[steps.per_mm]\n"
+    head, tail = text.split(steps)
+    tail = tail.replace("x = 1000.0", "x = 800.0", 1).replace("z = 1000.0", "z = 400.0", 1)
+    (Path(folder) / "m.toml").write_text(head + steps + tail)
+    return folder

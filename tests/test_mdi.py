@@ -16,17 +16,15 @@ import signal
 import sys
 import threading
 import time
-from pathlib import Path
 from types import SimpleNamespace
 
 import pytest
 from click.testing import CliRunner
 
-import nurbscnc
 from nurbscnc.cli.main import main
 from nurbscnc.output.stream.card import CardConfig
 from nurbscnc.program.varfile import parse_var_text
-from tests.stream_helpers import card_on
+from tests.stream_helpers import card_on, write_mixed_steps_machine
 
 MACHINE = ["--machine", "m.toml"]
 START_STEPS = (12345, -3000, -5000)  # machine (15.43125, -3, -12.5) mm
@@ -38,16 +36,7 @@ def run_cli(args):
 
 @pytest.fixture
 def here(tmp_path, monkeypatch):
-    for name in ("NURBSCNC_MACHINE", "NURBSCNC_VAR", "XDG_CONFIG_HOME"):
-        monkeypatch.delenv(name, raising=False)
-    monkeypatch.chdir(tmp_path)
-    bundled = Path(nurbscnc.__file__).parent / "data" / "default_machine.toml"
-    text = bundled.read_text()
-    steps = "[steps.per_mm]\n"
-    head, tail = text.split(steps)
-    tail = tail.replace("x = 1000.0", "x = 800.0", 1).replace("z = 1000.0", "z = 400.0", 1)
-    (tmp_path / "m.toml").write_text(head + steps + tail)
-    return tmp_path
+    return write_mixed_steps_machine(tmp_path, monkeypatch)
 
 
 @pytest.fixture

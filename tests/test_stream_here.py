@@ -11,18 +11,16 @@ moves, or G54 offset + work position), never taken from the code under test.
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
 from click.testing import CliRunner
 
-import nurbscnc
 from nurbscnc.cli.main import main
 from nurbscnc.output.stream import protocol as p
 from nurbscnc.output.stream.card import CardConfig
 from nurbscnc.program.varfile import parse_var_text
-from tests.stream_helpers import card_on
+from tests.stream_helpers import card_on, write_mixed_steps_machine
 
 MACHINE = ["--machine", "m.toml"]
 PER_MM = np.array([800.0, 1000.0, 400.0])
@@ -38,16 +36,7 @@ def run_cli(args):
 
 @pytest.fixture
 def here(tmp_path, monkeypatch):
-    for name in ("NURBSCNC_MACHINE", "NURBSCNC_VAR", "XDG_CONFIG_HOME"):
-        monkeypatch.delenv(name, raising=False)
-    monkeypatch.chdir(tmp_path)
-    bundled = Path(nurbscnc.__file__).parent / "data" / "default_machine.toml"
-    text = bundled.read_text()
-    steps = "[steps.per_mm]\n"
-    head, tail = text.split(steps)
-    tail = tail.replace("x = 1000.0", "x = 800.0", 1).replace("z = 1000.0", "z = 400.0", 1)
-    (tmp_path / "m.toml").write_text(head + steps + tail)
-    return tmp_path
+    return write_mixed_steps_machine(tmp_path, monkeypatch)
 
 
 @pytest.fixture

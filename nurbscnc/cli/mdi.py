@@ -11,7 +11,12 @@ import click
 
 from nurbscnc.cli import console
 from nurbscnc.cli.handle import handle_errors
-from nurbscnc.cli.options import planning_options, stall_limit_option, user_m_timeout_option
+from nurbscnc.cli.options import (
+    link_timeout_option,
+    planning_options,
+    stall_limit_option,
+    user_m_timeout_option,
+)
 from nurbscnc.errors import StreamError
 
 
@@ -29,14 +34,7 @@ def _link_options(func):
                 show_default=True,
                 help="Periods per frame.",
             ),
-            click.option(
-                "--timeout",
-                "timeout_s",
-                type=click.FloatRange(min=0.0, min_open=True),
-                default=2.0,
-                show_default=True,
-                help="Seconds without an answer from the card before giving up.",
-            ),
+            link_timeout_option,
             stall_limit_option,
             user_m_timeout_option,
             click.option("--quiet", is_flag=True, help="No progress bar."),

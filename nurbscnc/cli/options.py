@@ -177,6 +177,17 @@ def planning_options(func):
     return program_input_options(machine_options(func))
 
 
+#: ``--timeout`` of the commands that talk to the card (stream, mdi, jog).
+link_timeout_option = click.option(
+    "--timeout",
+    "timeout_s",
+    type=click.FloatRange(min=0.0, min_open=True),
+    default=2.0,
+    show_default=True,
+    help="Seconds without an answer from the card before giving up.",
+)
+
+
 #: ``stream --stall-limit``: the user's own limit on a live line that acknowledges nothing.
 stall_limit_option = click.option(
     "--stall-limit",

@@ -32,7 +32,12 @@ from nurbscnc.cli.controls import (
     user_m_runner,
 )
 from nurbscnc.cli.handle import handle_errors
-from nurbscnc.cli.options import planning_options, stall_limit_option, user_m_timeout_option
+from nurbscnc.cli.options import (
+    link_timeout_option,
+    planning_options,
+    stall_limit_option,
+    user_m_timeout_option,
+)
 from nurbscnc.errors import ConfigError
 
 
@@ -118,14 +123,7 @@ def _progress_bar(enabled: bool, total: int, keys: bool = False, where=None):
     show_default=True,
     help="Periods per frame (at most 80 with 3 axes).",
 )
-@click.option(
-    "--timeout",
-    "timeout_s",
-    type=click.FloatRange(min=0.0, min_open=True),
-    default=2.0,
-    show_default=True,
-    help="Seconds without an answer from the card before giving up.",
-)
+@link_timeout_option
 @stall_limit_option
 @click.option(
     "--lead",
