@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import signal
 import threading
 import time
 
@@ -150,3 +151,26 @@ def test_a_failed_making_leaves_no_file(tmp_path):
     with pytest.raises(RuntimeError, match="stop"):
         write_while_making(write, windows())
     assert os.listdir(out) == []
+
+
+@pytest.mark.skipif(not hasattr(signal, "pthread_sigmask"), reason="needs pthread_sigmask")
+def test_the_worker_threads_leave_the_operators_signals_to_the_main_thread():
+    """The kernel hands a process's SIGTERM, SIGHUP, SIGINT (and the stream's SIGUSR1/2) to
+    any thread not blocking it, and Python runs the handler only when the main thread next
+    executes: a writer waiting for the next window would not stop until the maker put one.
+    The making thread, the stream's planner thread and the key reader block them."""
+    from nurbscnc.controller.feed import WindowFeed
+
+    wanted = {signal.SIGINT, signal.SIGTERM, signal.SIGHUP, signal.SIGUSR1, signal.SIGUSR2}
+    masks = {}
+
+    def windows(name):
+        masks[name] = signal.pthread_sigmask(signal.SIG_BLOCK, [])
+        yield np.zeros(3)
+
+    write_while_making(lambda items: list(items), windows("making"))
+    feed = WindowFeed(windows("planner"))
+    feed._thread.join(5.0)
+    feed.close()
+    assert wanted <= masks["making"] and wanted <= masks["planner"]
+    assert not wanted & signal.pthread_sigmask(signal.SIG_BLOCK, [])  # the main thread's

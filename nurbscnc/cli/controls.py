@@ -9,6 +9,8 @@ import signal
 import sys
 import threading
 
+from nurbscnc.output.background import signals_to_main_thread
+
 
 class Operator:
     """What the operator asks, by signal or key: SIGUSR1 / space feed hold, SIGUSR2 / Enter
@@ -117,6 +119,7 @@ def key_reader(operator: Operator, enabled: bool):
     stop = threading.Event()
 
     def read_keys() -> None:
+        signals_to_main_thread()
         while not stop.is_set():
             ready, _, _ = select.select([fd], [], [], 0.1)
             if ready:

@@ -24,7 +24,7 @@ import threading
 import time
 from collections.abc import Callable, Iterable
 
-from nurbscnc.output.background import STOP_WAIT_S  # the wait for a thread inside numpy
+from nurbscnc.output.background import STOP_WAIT_S, signals_to_main_thread
 
 _END = object()
 
@@ -48,6 +48,7 @@ class WindowFeed:
         self._thread.start()
 
     def _plan(self, windows) -> None:
+        signals_to_main_thread()  # the operator's hold and stop reach the stream at once
         try:
             for w in windows:
                 if self._stop.is_set():

@@ -24,6 +24,7 @@ file), and then reaches the caller unchanged.
 from __future__ import annotations
 
 import queue
+import signal
 import threading
 
 #: Windows made ahead of the writer at most (each one window of points: 65,536 rows ×
@@ -38,6 +39,24 @@ POLL_S = 0.05
 #: interpreter ("terminate called without an active exception"). A worker stuck longer
 #: (a bug) is left behind.
 STOP_WAIT_S = 2.0
+
+
+#: The signals the main thread handles (stop, hang-up, Ctrl-C; the stream's hold and resume).
+OPERATOR_SIGNALS = frozenset(
+    getattr(signal, name)
+    for name in ("SIGINT", "SIGTERM", "SIGHUP", "SIGUSR1", "SIGUSR2")
+    if hasattr(signal, name)
+)
+
+
+def signals_to_main_thread() -> None:
+    """Block :data:`OPERATOR_SIGNALS` in the calling (worker) thread. The kernel hands a
+    process's signal to any thread that does not block it; Python runs the handler only in
+    the main thread, and only when that thread next executes: one blocked in a queue's
+    ``get`` would not wake until the worker put something there, a whole window's work
+    later. Blocked in the workers, the signal interrupts the main thread's wait at once."""
+    if hasattr(signal, "pthread_sigmask"):
+        signal.pthread_sigmask(signal.SIG_BLOCK, OPERATOR_SIGNALS)
 
 
 class _Stopped(Exception):
@@ -76,6 +95,7 @@ def write_while_making(write, windows, after=None):
         raise _Stopped
 
     def work() -> None:
+        signals_to_main_thread()
         try:
             try:
                 for window in windows:
