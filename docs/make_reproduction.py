@@ -33,6 +33,7 @@ from nurbscnc.program.interpret import interpret_text  # noqa: E402
 from nurbscnc.studies.compare import (  # noqa: E402
     PAPER_TABLE4,
     PAPER_TABLE5,
+    TABLE4_COLUMNS,
     compare_block,
     nurbs_block,
 )
@@ -130,16 +131,7 @@ def table4(runs) -> list[str]:
     return lines
 
 
-RESULT_COLS = (
-    "axis_x_max_um",
-    "axis_x_rms_um",
-    "axis_y_max_um",
-    "axis_y_rms_um",
-    "contour_eq29_max_um",
-    "contour_eq29_rms_um",
-    "contour_eq29_mean_um",
-    "contour_true_max_um",
-)
+RESULT_COLS = TABLE4_COLUMNS
 
 
 def results_table4(rows) -> list[str]:

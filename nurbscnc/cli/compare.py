@@ -50,7 +50,13 @@ def compare(program, as_json, plot_dir, angles, block, algorithms, machine, over
     """
     from rich.table import Table
 
-    from nurbscnc.studies.compare import ALGORITHMS, compare_block, nurbs_block, row
+    from nurbscnc.studies.compare import (
+        ALGORITHMS,
+        TABLE4_COLUMNS,
+        compare_block,
+        nurbs_block,
+        row,
+    )
 
     mach = load_machine_cli(machine, overrides)
     prog = load_program(program)
@@ -83,19 +89,7 @@ def compare(program, as_json, plot_dir, angles, block, algorithms, machine, over
         table.add_row(
             r["algorithm"],
             f"{r['angle_deg']:g}°",
-            *(
-                f"{r[k]:.2f}"
-                for k in (
-                    "axis_x_max_um",
-                    "axis_x_rms_um",
-                    "axis_y_max_um",
-                    "axis_y_rms_um",
-                    "contour_eq29_max_um",
-                    "contour_eq29_rms_um",
-                    "contour_eq29_mean_um",
-                    "contour_true_max_um",
-                )
-            ),
+            *(f"{r[k]:.2f}" for k in TABLE4_COLUMNS),
             f"{r['cycle_time_s']:.4f}",
         )
     out.print(table)

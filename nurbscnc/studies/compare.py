@@ -180,6 +180,21 @@ def compare_block(seg, machine: Machine, angles_deg=(0.0,), algorithms=ALGORITHM
     return runs
 
 
+#: The columns of the paper's Table 4 as the ``compare`` rows name them, in its order [µm]:
+#: axis errors (max, RMS) per axis, the eq. 29 contour error (max, RMS, mean), then ours,
+#: the true distance to the curve.
+TABLE4_COLUMNS = (
+    "axis_x_max_um",
+    "axis_x_rms_um",
+    "axis_y_max_um",
+    "axis_y_rms_um",
+    "contour_eq29_max_um",
+    "contour_eq29_rms_um",
+    "contour_eq29_mean_um",
+    "contour_true_max_um",
+)
+
+
 def row(run: Run) -> dict:
     """The JSON row of a run (``compare --json``)."""
     from nurbscnc.plan.report import metrics_json
