@@ -56,14 +56,24 @@ _COMMON_CODES = {
 }
 
 
+def _comment_body(text: str) -> str:
+    """A comment's text without its delimiters: ``(…)`` or ``; …``."""
+    return (text[1:-1] if text.startswith("(") else text[1:]).strip()
+
+
+def _msg_text(body: str) -> str | None:
+    """The operator's message of a comment body ``MSG, text`` (any case), else None."""
+    return body[4:].strip() if body[:4].upper() == "MSG," else None
+
+
 class BlockExecutor:
     """Reading a block's words and executing them (mixin of the interpreter)."""
 
     def block(self, block: Block) -> None:
         for _, text, _column in block.comments:
-            body = text[1:-1].strip() if text.startswith("(") else ""
-            if body[:4].upper() == "MSG,":
-                self.notes.append(Note(self.main_line(), f"message: {body[4:].strip()}"))
+            message = _msg_text(_comment_body(text)) if text.startswith("(") else None
+            if message is not None:
+                self.notes.append(Note(self.main_line(), f"message: {message}"))
         words, gcodes, mcodes = self.read_words(block)
         if block.assigns:
             self.assign(block)
@@ -79,9 +89,10 @@ class BlockExecutor:
         one LinuxCNC keeps when a line has several)."""
         message = ""
         for _, text, _column in block.comments:
-            body = (text[1:-1] if text.startswith("(") else text[1:]).strip()
-            if body[:4].upper() == "MSG,":
-                message = body[4:].strip()
+            body = _comment_body(text)
+            msg = _msg_text(body)
+            if msg is not None:
+                message = msg
                 break
             message = body
         if not message:
