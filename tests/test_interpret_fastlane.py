@@ -211,6 +211,7 @@ def test_make_lines_equals_the_constructor():
         "rapid": [True, False, False],
         "blend_mm": itertools.repeat(0.25),
         "naive_mm": itertools.repeat(0.0),
+        "abc_deg": itertools.repeat(None),
     }
     made = make_lines(cols)
     want = [

@@ -190,6 +190,10 @@ class Line:
     rapid: bool = False
     blend_mm: float = 0.0
     naive_mm: float = 0.0
+    #: The rotary axes A B C [deg, machine coordinates] at the start and the end,
+    #: ``(a0, b0, c0, a1, b1, c1)``, moving linearly along the move (trivkins); None when all
+    #: six are 0 (a program without rotary axes carries nothing).
+    abc_deg: tuple | None = None
 
     @property
     def kind(self) -> str:
@@ -222,6 +226,9 @@ class Arc:
     line: int
     plane: str = "XY"
     blend_mm: float = 0.0
+    #: A B C [deg] at the start and the end, ``(a0, b0, c0, a1, b1, c1)``, linear in the arc's
+    #: length (LinuxCNC's ARC_FEED); None when all six are 0.
+    abc_deg: tuple | None = None
 
     kind = "arc"
 
@@ -316,7 +323,31 @@ class Pause(_AtRest):
     seconds = 0.0
 
 
-Segment = Line | Arc | Nurbs | Dwell | Pause
+@dataclass(frozen=True, eq=False)
+class Rotate(_AtRest):
+    """A move of the rotary axes alone (X Y Z stand at ``position_mm``): A B C [deg] from
+    ``abc_start_deg`` to ``abc_end_deg`` (3-tuples, machine coordinates). ``feed_deg_s``
+    [deg/s] is the programmed rate along √(ΔA² + ΔB² + ΔC²) (LinuxCNC's canon: F in deg/min
+    for a rotary-only move; under G93 the interpreter's rate, the length times F), or 0 for a
+    G0 (the axes' own rapid rate). ``rapid`` marks G0.
+
+    XYZ stand still, so every stage treats it as a stop (:data:`STOP_KINDS`): the path comes to
+    rest, the rotary axes move by their own jerk-limited profile, then the path goes on. Its
+    duration is the planner's (the machine's rotary limits), not ``seconds`` (0 here).
+    """
+
+    position_mm: tuple
+    abc_start_deg: tuple
+    abc_end_deg: tuple
+    feed_deg_s: float
+    line: int
+    rapid: bool = False
+
+    kind = "rotate"
+    seconds = 0.0
+
+
+Segment = Line | Arc | Nurbs | Dwell | Pause | Rotate
 
 
 @dataclass(frozen=True)
@@ -344,3 +375,8 @@ class Program:
     #: ("G54"…), its origin, the G92 offset, the tool offset [mm, (x, y, z) each], the XY
     #: rotation [deg]) (program/coords.py); errors name them.
     frames: tuple = field(default=(), repr=False)
+    #: The rotary axes the program uses (moves, or holds away from 0), a subset of
+    #: ``("a", "b", "c")`` in that order: the columns the outputs add.
+    rotary_axes: tuple = ()
+    #: A B C [deg] at the program's start (machine coordinates).
+    start_abc_deg: tuple = (0.0, 0.0, 0.0)

@@ -196,6 +196,30 @@ class AxisLimits:
 
 
 @dataclass(frozen=True)
+class RotaryAxis:
+    """One rotary axis (A, B or C) of the profile's ``[axis_limits.<a|b|c>]`` table, in
+    degrees and seconds: an independent joint moving in step with X Y Z (LinuxCNC's trivial
+    kinematics). The table's presence declares the axis.
+
+    ``name`` "a", "b" or "c"; ``v_max_deg_s`` velocity [deg/s] (the profile's
+    ``v_max_deg_min`` / 60), ``a_max_deg_s2`` acceleration [deg/s²], ``j_max_deg_s3`` jerk
+    [deg/s³]; ``min_deg`` / ``max_deg`` the soft limits [deg] (machine coordinates; ±inf when
+    the profile sets none); ``wrapped``: LinuxCNC's ``WRAPPED_ROTARY`` (in G90 the word is a
+    position in [0, 360) reached the short way, its sign a direction); ``steps_per_deg`` the
+    card's steps per degree (0 where the profile gives none: the axis cannot be streamed).
+    """
+
+    name: str
+    v_max_deg_s: float
+    a_max_deg_s2: float
+    j_max_deg_s3: float
+    min_deg: float = -math.inf
+    max_deg: float = math.inf
+    wrapped: bool = False
+    steps_per_deg: float = 0.0
+
+
+@dataclass(frozen=True)
 class Steps:
     """Step (pulse) resolution per axis (x, y, z) and the card's per-period pulse ceiling."""
 
@@ -237,6 +261,9 @@ class Machine:
     axis_limits: AxisLimits = field(default_factory=AxisLimits)
     #: The dotted keys of ``settings`` the profile left out, filled with their defaults.
     defaults: frozenset = field(default_factory=frozenset, compare=False, repr=False)
+    #: The rotary axes the machine has, by name ("a", "b", "c"): :class:`RotaryAxis`. Empty:
+    #: a three-axis machine (a program that moves A B C is refused).
+    rotary_axes: dict = field(default_factory=dict, compare=False)
 
     @property
     def contour_check(self) -> bool:

@@ -5,7 +5,7 @@ of a check (:class:`Check`) and of a program's cut windows joined (:class:`Joine
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -24,6 +24,7 @@ from nurbscnc.plan.scope import feed_samples
 from nurbscnc.plan.timing import (
     Reference,
     dwell_times,
+    joined_rows,
     rows_of,
     same_clock_until_s,
     sample_count,
@@ -37,13 +38,7 @@ CHECK_WINDOW = 1 << 16
 
 def _joined(first: Reference, then: Reference) -> Reference:
     """The rows of ``first``, then those of ``then``."""
-    return replace(
-        first,
-        **{
-            f.name: np.concatenate((getattr(first, f.name), getattr(then, f.name)))
-            for f in fields(first)
-        },
-    )
+    return joined_rows((first, then))
 
 
 @dataclass(frozen=True, eq=False)

@@ -10,7 +10,7 @@ check sees exactly the points the interpolator will output (with ``interpolator=
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
@@ -118,6 +118,9 @@ class Reference:
     piece: np.ndarray
     points_mm: np.ndarray
     param: np.ndarray | None
+    #: (N, 3) the rotary axes A B C [deg] at each sample (machine coordinates), None for a
+    #: program without rotary axes.
+    abc_deg: np.ndarray | None = field(default=None, kw_only=True)
 
 
 @dataclass(frozen=True, eq=False)
@@ -129,6 +132,9 @@ class Samples(Reference):
 
     line: np.ndarray
     interpolator: str = "exact"
+    #: The rotary axes the program uses (:attr:`nurbscnc.geometry.segments.Program.rotary_axes`):
+    #: the columns of ``abc_deg`` the outputs write, e.g. ``("a",)``.
+    rotary_axes: tuple = field(default=(), kw_only=True)
 
 
 def rows_of(ref: Reference, sl: slice) -> Reference:
@@ -140,6 +146,20 @@ def rows_of(ref: Reference, sl: slice) -> Reference:
             f.name: getattr(ref, f.name)[sl]
             for f in fields(ref)
             if isinstance(getattr(ref, f.name), np.ndarray)
+        },
+    )
+
+
+def joined_rows(parts) -> Reference:
+    """The rows of every reference of ``parts`` in turn, column by column; a column that is
+    None in the first stays None (and the ``interpolator`` name is the first's)."""
+    first = parts[0]
+    return replace(
+        first,
+        **{
+            f.name: np.concatenate([getattr(p, f.name) for p in parts])
+            for f in fields(first)
+            if isinstance(getattr(first, f.name), np.ndarray)
         },
     )
 

@@ -19,7 +19,7 @@ from nurbscnc.geometry.nurbs import NurbsCurve
 from nurbscnc.geometry.path import Kind
 from nurbscnc.geometry.polyline import CHORD_MM
 from nurbscnc.machine.profile import Machine
-from nurbscnc.plan.timing import Reference, rows_of
+from nurbscnc.plan.timing import Reference, joined_rows, rows_of
 from nurbscnc.precompensation.limits import (
     PROJECT_MAX_WINDOW,
     limit_excess,
@@ -387,6 +387,8 @@ def _key(
     them so an identity is never reused while it is kept)."""
     h = hashlib.blake2b(digest_size=20)
     for f in fields(ref):
+        if getattr(ref, f.name) is None:
+            continue
         x = np.ascontiguousarray(getattr(ref, f.name))
         h.update(str(x.dtype).encode() + str(x.shape).encode())
         h.update(x.tobytes())
@@ -522,10 +524,7 @@ def _compensated_rows(
             seg = joined[1]
         parts.append(rows_of(seg, slice(max(lo - a, 0), min(hi, int(end[i])) - a)))
         comps.append(comp)
-    out = replace(
-        parts[0],
-        **{f.name: np.concatenate([getattr(p, f.name) for p in parts]) for f in fields(parts[0])},
-    )
+    out = joined_rows(parts)
     return replace(out, t_s=np.arange(lo, lo + out.t_s.size) * period), comps
 
 

@@ -346,6 +346,7 @@ class _Interpreter(
                     "rapid": run.rapid,
                     "blend_mm": itertools.repeat(blend_mm),
                     "naive_mm": itertools.repeat(m.naive_mm),
+                    "abc_deg": itertools.repeat(None),
                 }
             )
         new = run.state
