@@ -90,6 +90,8 @@ def samples_of(reference, pieces, interpolator="exact") -> Samples:
         r.param,
         np.take(pieces.line, r.piece),
         Interpolator.parse(interpolator).value,
+        abc_deg=r.abc_deg,
+        rotary_axes=pieces.rotary.axes if getattr(pieces, "rotary", None) is not None else (),
     )
 
 
