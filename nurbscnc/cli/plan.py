@@ -122,7 +122,7 @@ def print_explanation(expl, out: Console, count: int | None, source: list[str]) 
     from rich.table import Table
     from rich.text import Text
 
-    from nurbscnc.plan.explain import CORNER_WHY_TEXT, LIMIT_OF_KEY, CornerWhy, Limit
+    from nurbscnc.plan.explain import CORNER_WHY_TEXT, LIMIT_OF_KEY, CornerWhy
 
     total = expl.cycle_time_s if expl.cycle_time_s > 0 else 1.0
     shares = ", ".join(
@@ -151,7 +151,7 @@ def print_explanation(expl, out: Console, count: int | None, source: list[str]) 
         shown = echo_source_line(text.strip(), 1, 32)[0]
         t = float(expl.time_s[i] + expl.wait_s[i])
         row = expl.limit_time_s[i]
-        limit = Limit(int(expl.limit[i])).text
+        limit = expl.limit_text(i)
         if t > 0 and row.max() < t * 0.999:
             limit += f" ({row.max() / t:.0%})"
         table.add_row(
@@ -244,6 +244,14 @@ def print_plan_summary(prog, mach, summary: dict, out: Console) -> None:
             f"{summary['contour_true_rms_um']:.2f} "
             f"µm (ε_max {mach.limits.contour_tolerance_mm * 1000:g} µm; {how})"
             f"{rapids_words(summary.get('contour_rapids_true_max_um'))}"
+        )
+    if "rotary" in summary:
+        rot = summary["rotary"]
+        out.print(
+            f"  rotary axes {' '.join(a.upper() for a in rot['axes'])}: "
+            f"{rot['rotate_moves']} rotary-only moves, {rot['rotate_time_s']:.4f} s; "
+            f"{rot['note']}",
+            markup=False,
         )
     if precompensation_text(summary):
         out.print(precompensation_text(summary), markup=False)

@@ -47,6 +47,31 @@ def check_soft_limits(points_mm: np.ndarray, lines: np.ndarray, limits: SoftLimi
     )
 
 
+def check_rotary_limits(abc_deg, lines: np.ndarray, rotary_axes: dict) -> None:
+    """Refuse rotary positions ``abc_deg`` (N, 3) [deg] (None: a program without rotary axes)
+    outside an axis's soft limits (``rotary_axes``: the machine's
+    :class:`~nurbscnc.machine.model.RotaryAxis` by name): PlanningError at the first one, with
+    its source line (``lines`` (N,))."""
+    if abc_deg is None or not rotary_axes:
+        return
+    first, worst = None, None
+    for i, name in enumerate(("a", "b", "c")):
+        ax = rotary_axes.get(name)
+        if ax is None:
+            continue
+        bad = np.flatnonzero((abc_deg[:, i] < ax.min_deg) | (abc_deg[:, i] > ax.max_deg))
+        if bad.size and (first is None or bad[0] < first):
+            first, worst = int(bad[0]), (i, ax)
+    if first is None:
+        return
+    i, ax = worst
+    raise PlanningError(
+        f"the path leaves the soft limits: {'ABC'[i]} = {abc_deg[first, i]:.4f}° in machine "
+        f"coordinates, outside [{ax.min_deg:g}, {ax.max_deg:g}]°",
+        SourcePos(int(lines[first]), 1, ""),
+    )
+
+
 def segment_length_mm(seg) -> float:
     """Length of one segment [mm] (NURBS by Gauss–Legendre arc length)."""
     if seg.kind == "nurbs":
@@ -384,7 +409,28 @@ def plan_summary(
         summary["smoothed"] = dict(plan.pieces.smoothed)
     if check is not None:
         summary.update(check.contour_stats(), contour_scope="feed")
+    if plan.pieces.rotary is not None:
+        summary["rotary"] = rotary_summary(plan.pieces.rotary)
     return summary
+
+
+#: What the contour check does not see when A B C turn the part (``rotary.contour_check``).
+ROTARY_CONTOUR_NOTE = (
+    "the contour check covers X Y Z only: it does not see the tool's position on a rotated "
+    "part (an A error of δ° is r·δ·π/180 mm at radius r)"
+)
+
+
+def rotary_summary(rotary) -> dict:
+    """The ``rotary`` object of a plan's JSON (docs/json.md): the axes the program uses, its
+    rotary-only moves (count, time [s]) and what the contour check covers."""
+    return {
+        "axes": list(rotary.axes),
+        "rotate_moves": int(rotary.holds.duration_s.size),
+        "rotate_time_s": float(np.sum(rotary.holds.duration_s)),
+        "contour_check": "xyz",
+        "note": ROTARY_CONTOUR_NOTE,
+    }
 
 
 #: The JSON names (docs/json.md) of the servo metrics

@@ -266,3 +266,41 @@ def rotary_limits(pieces, machine):
     moving = np.flatnonzero(np.any(share > 0.0, axis=1))
     v_i, a_i, j_i = _axis_arrays(machine, share[moving] > 0.0, pieces.line[moving])
     return rotary_path_limits(share, v_i, a_i, j_i)
+
+
+def rotary_time_bounds_s(segments, machine) -> np.ndarray:
+    """A lower bound [s] (n,) of every segment's time from its rotary motion: each axis's
+    travel |ΔA_i| at its own velocity limit, and a rotary-only move's length at its
+    programmed rate (0 where nothing turns, or the machine lacks the axis: the planner
+    refuses that move)."""
+    abc0, abc1 = segment_abc(segments)
+    d = np.abs(abc1 - abc0)
+    v = np.array([getattr(machine.rotary_axes.get(n), "v_max_deg_s", np.inf) for n in AXES])
+    t = (d / v[None, :]).max(axis=1) if len(segments) else np.zeros(0)
+    for i, s in enumerate(segments):
+        if s.kind == "rotate" and not s.rapid and s.feed_deg_s > 0.0:
+            t[i] = max(t[i], float(np.sqrt(np.sum(d[i] * d[i]))) / float(s.feed_deg_s))
+    return t
+
+
+def check_rotary_travel(segments, machine) -> None:
+    """Refuse a move whose rotary axis leaves its soft limits (``min_deg``, ``max_deg``): A B C
+    move linearly along each move, so its ends bound it. PlanningError at its line, naming
+    the axis."""
+    abc0, abc1 = segment_abc(segments)
+    for i, name in enumerate(AXES):
+        ax = machine.rotary_axes.get(name)
+        if ax is None:
+            continue
+        lo = np.minimum(abc0[:, i], abc1[:, i])
+        hi = np.maximum(abc0[:, i], abc1[:, i])
+        bad = np.flatnonzero((lo < ax.min_deg) | (hi > ax.max_deg))
+        if bad.size:
+            r = int(bad[0])
+            value = lo[r] if lo[r] < ax.min_deg else hi[r]
+            raise PlanningError(
+                f"the {segments[r].kind} leaves the soft limits: {name.upper()} reaches "
+                f"{value:.6g}° in machine coordinates, outside [{ax.min_deg:g}, "
+                f"{ax.max_deg:g}]°",
+                SourcePos(int(segments[r].line), 1, ""),
+            )
