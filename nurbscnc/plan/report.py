@@ -25,7 +25,17 @@ import numpy as np
 from nurbscnc.errors import PlanningError, SourcePos
 from nurbscnc.geometry.segments import spiral_arc_length_mm
 from nurbscnc.machine.profile import Machine, SoftLimits
-from nurbscnc.program.columns import ARC, DWELL, KINDS, LINE, NURBS, PAUSE, RAPID, segment_columns
+from nurbscnc.program.columns import (
+    ARC,
+    DWELL,
+    KINDS,
+    LINE,
+    NURBS,
+    PAUSE,
+    RAPID,
+    ROTATE,
+    segment_columns,
+)
 
 if TYPE_CHECKING:  # the annotations only: no import at start-up
     from nurbscnc.plan.timing import Samples
@@ -177,6 +187,7 @@ def program_summary(prog, columns=None, per_segment: bool = True) -> dict:
     lengths = segment_lengths_mm(segments, cols)
     rapid = cols.kind == RAPID
     feeding = (cols.kind != RAPID) & (cols.kind != DWELL) & (cols.kind != PAUSE)
+    feeding &= cols.kind != ROTATE  # X Y Z at rest (its rate is in deg/s)
     feeds = cols.feeds_mm_s[feeding]
     names = cols.names
     shown = np.arange(len(segments)) if per_segment else cols.rows(NURBS)

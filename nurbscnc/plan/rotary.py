@@ -304,3 +304,41 @@ def check_rotary_travel(segments, machine) -> None:
                 f"{ax.max_deg:g}]°",
                 SourcePos(int(segments[r].line), 1, ""),
             )
+
+
+def rotate_bounds_s(segments, machine) -> np.ndarray:
+    """A lower bound [s] of every rotary-only move's time (m,), without the jerk limit: rest
+    to rest at the acceleration A and cruise V of its axes' shares (and its programmed rate),
+    L/V + V/A when it reaches V, else 2√(L/A) — never above the planned jerk-limited move."""
+    rot = [s for s in segments if s.kind == "rotate"]
+    if not rot:
+        return np.zeros(0)
+    d = np.array([s.abc_end_deg for s in rot], float) - np.array([s.abc_start_deg for s in rot])
+    length = np.sqrt(np.einsum("ij,ij->i", d, d))
+    share = np.abs(d) / np.where(length > 0.0, length, 1.0)[:, None]
+    lim = [[getattr(machine.rotary_axes.get(n), f, np.inf) for n in AXES] for f in _LIMITS]
+    v, a, _, _ = rotary_path_limits(share, *lim)
+    feed = np.array([np.inf if s.rapid else s.feed_deg_s for s in rot], dtype=float)
+    v = np.minimum(v, feed)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.where(length >= v * v / a, length / v + v / a, 2.0 * np.sqrt(length / a))
+    return np.where(length > 0.0, np.nan_to_num(t, nan=0.0, posinf=0.0), 0.0)
+
+
+#: The :class:`~nurbscnc.machine.model.RotaryAxis` limits, in the order of
+#: :func:`~nurbscnc.machine.caps.rotary_path_limits`.
+_LIMITS = ("v_max_deg_s", "a_max_deg_s2", "j_max_deg_s3")
+
+
+def rotary_feed_caps_mm_s(segments, machine) -> np.ndarray:
+    """Per segment (n,) the feed cap [mm/s] its rotary axes set along its XYZ path, the
+    smallest V_i / |ΔA_i / L| (inf where nothing turns or there is no XYZ length)."""
+    abc0, abc1 = segment_abc(segments)
+    length = np.array([float(getattr(s, "length_mm", 0.0) or 0.0) for s in segments])
+    moving = np.flatnonzero((length > 0.0) & np.any(abc0 != abc1, axis=1))
+    cap = np.full(len(segments), np.inf)
+    if moving.size:
+        rate = np.abs(abc1[moving] - abc0[moving]) / length[moving, None]
+        lim = [[getattr(machine.rotary_axes.get(n), f, np.inf) for n in AXES] for f in _LIMITS]
+        cap[moving] = rotary_path_limits(rate, *lim)[0]
+    return cap
