@@ -84,6 +84,15 @@ def assert_axis_within(x, period_s, v_max, a_max, j_max, rel=1e-6):
     return np.abs(v).max(), np.abs(acc).max(), np.abs(jerk).max()
 
 
+def assert_span(x, duration_s, period_s):
+    """The intervals in which ``x`` changes span the move's ``duration_s``: the first begins
+    at most a period before its start, the last ends at most a period after its end."""
+    moving = np.flatnonzero(np.diff(x) != 0.0)
+    span_s = (moving[-1] + 1 - moving[0]) * period_s
+    assert duration_s - 1e-9 <= span_s <= duration_s + 2.0 * period_s + 1e-9
+    return moving
+
+
 # -- rotary-only moves -----------------------------------------------------------------------
 @pytest.mark.parametrize(
     ("delta_deg", "f_deg_min"),
@@ -104,9 +113,7 @@ def test_rotary_only_move_takes_the_textbook_time(delta_deg, f_deg_min):
     s = run.samples
     a = s.abc_deg[:, 0]
     assert a[0] == 0.0 and a[-1] == pytest.approx(delta_deg, abs=1e-9)
-    moving = np.flatnonzero(np.diff(a) != 0.0)
-    # The samples from the first move to the last cover the planned time within a period.
-    assert (moving[-1] + 1 - moving[0]) * m.servo.period_s == pytest.approx(expected, abs=1e-3)
+    assert_span(a, expected, m.servo.period_s)
     peak_v, _, _ = assert_axis_within(
         a, m.servo.period_s, A_AXIS.v_max_deg_s, A_AXIS.a_max_deg_s2, A_AXIS.j_max_deg_s3
     )
@@ -361,3 +368,43 @@ def test_lower_bound_counts_rotary_moves_and_stays_below_the_plan():
     assert bound <= run.cycle_time_s
     # The rotary-only move alone (90° at 30 deg/s: at least 3 s) is in it.
     assert bound > 3.0
+
+
+# -- sampling: windows, Taylor, the settle after a rapid --------------------------------------
+def test_windows_and_taylor_give_the_whole_samples_a_b_c():
+    from nurbscnc.interpolate.sample import sample_chunks, sample_plan
+
+    m = machine()
+    run = run_program(mixed_program(), m, OFF)
+    pieces, profile = run.plan.pieces, run.plan.profile
+    whole = sample_plan(pieces, profile, m.servo.period_s)
+    parts = list(sample_chunks(pieces, profile, m.servo.period_s, chunk=997))
+    np.testing.assert_array_equal(np.concatenate([p.abc_deg for p in parts]), whole.abc_deg)
+    assert all(p.rotary_axes == ("a",) for p in parts)
+    taylor = sample_plan(pieces, profile, m.servo.period_s, interpolator="taylor")
+    np.testing.assert_array_equal(taylor.abc_deg, whole.abc_deg)
+
+
+def test_a_rotary_move_after_a_rapid_waits_for_the_settle_then_turns_in_full():
+    """G0, then A turns, then G1: with the contour check on, the planner settles after the
+    rapid; A turns for its whole planned time inside that stop and has arrived before X Y Z
+    move again."""
+    m = machine()
+    rot = Rotate((10.0, 0.0, 0.0), (0.0, 0.0, 0.0), (45.0, 0.0, 0.0), 20.0, 2)
+    prog = program(
+        line((0, 0, 0), (10, 0, 0), 0.0, 1, rapid=True),
+        rot,
+        line((10, 0, 0), (10, 5, 0), 10.0, 3, 45.0, 45.0),
+    )
+    run = run_program(prog, m)
+    s = run.samples
+    T = m.servo.period_s
+    turn = rest_to_rest_s(45.0, 20.0, A_AXIS.a_max_deg_s2, A_AXIS.j_max_deg_s3)
+    assert run.plan.pieces.rotary.holds.duration_s[0] == pytest.approx(turn, rel=1e-9)
+    a = s.abc_deg[:, 0]
+    moving = assert_span(a, turn, T)
+    # X Y Z rest while A turns; Y moves only once A is at 45°.
+    held = s.points_mm[moving[0] + 1 : moving[-1] + 1]  # A between its start and its end
+    assert np.all(held == held[0]) and held[0] == pytest.approx([10.0, 0.0, 0.0], abs=1e-12)
+    assert np.all(a[s.points_mm[:, 1] > 0.0] == 45.0)
+    assert_axis_within(a, T, 60.0, 400.0, 4000.0)
