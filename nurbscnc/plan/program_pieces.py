@@ -62,7 +62,9 @@ def segment_pieces(
     """
     options = options or PlanOptions()
     rotary = None
-    if uses_rotary(segments):  # A B C: their columns, the rotary-only moves planned
+    # A B C: their columns, the rotary-only moves planned. (A machine without rotary axes
+    # runs none: the interpreter refuses their words, so its programs are not read for them.)
+    if machine.rotary_axes and uses_rotary(segments):
         rotary = (segment_abc(segments), plan_holds(segments, machine))
     segs, source, columns = _prepared_segments(segments, machine, options, columns)
     n = len(segs)

@@ -26,6 +26,7 @@ Units: degrees, seconds; a hold's "path" is degrees along the move.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from itertools import repeat
 
 import numpy as np
 
@@ -51,7 +52,11 @@ def moves_rotary(segment) -> bool:
 def uses_rotary(segments) -> bool:
     """Does any segment carry rotary positions (a Line or Arc with ``abc_deg``, a Rotate)?
     A program without them is planned exactly as before (no rotary columns)."""
-    return any(getattr(s, "abc_deg", None) is not None or s.kind == "rotate" for s in segments)
+    # C-level passes (CAM programs hold millions of lines): the kinds by type, then any
+    # rotary position (a tuple; None is false).
+    if any(getattr(t, "kind", None) == "rotate" for t in set(map(type, segments))):
+        return True
+    return any(map(getattr, segments, repeat("abc_deg"), repeat(None)))
 
 
 def segment_abc(segments) -> tuple[np.ndarray, np.ndarray]:
