@@ -408,3 +408,11 @@ def test_a_rotary_move_after_a_rapid_waits_for_the_settle_then_turns_in_full():
     assert np.all(held == held[0]) and held[0] == pytest.approx([10.0, 0.0, 0.0], abs=1e-12)
     assert np.all(a[s.points_mm[:, 1] > 0.0] == 45.0)
     assert_axis_within(a, T, 60.0, 400.0, 4000.0)
+
+
+def test_a_program_at_rest_keeps_its_rotary_axes_where_they_start():
+    prog = program(Dwell(0.01, (0.0, 0.0, 0.0), 1), abc=(30.0, 0.0, 0.0))
+    run = run_program(prog, machine())
+    assert run.samples.rotary_axes == ("a",)
+    assert np.all(run.samples.abc_deg == [30.0, 0.0, 0.0])
+    assert run.samples.abc_deg.shape == (11, 3)
