@@ -416,3 +416,23 @@ def test_a_program_at_rest_keeps_its_rotary_axes_where_they_start():
     assert run.samples.rotary_axes == ("a",)
     assert np.all(run.samples.abc_deg == [30.0, 0.0, 0.0])
     assert run.samples.abc_deg.shape == (11, 3)
+
+
+def test_a_rotary_move_before_the_first_cut_turns_first():
+    m = machine()
+    prog = program(
+        Rotate((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (-60.0, 0.0, 0.0), 40.0, 1),
+        Dwell(0.05, (0.0, 0.0, 0.0), 2),
+        line((0, 0, 0), (5, 0, 0), 10.0, 3, -60.0, -60.0),
+    )
+    run = run_program(prog, m, OFF)
+    turn = rest_to_rest_s(60.0, 40.0, A_AXIS.a_max_deg_s2, A_AXIS.j_max_deg_s3)
+    cut = rest_to_rest_s(5.0, 10.0, m.limits.a_max_mm_s2, m.limits.j_max_mm_s3)
+    assert run.cycle_time_s == pytest.approx(turn + 0.05 + cut, rel=1e-9)
+    s = run.samples
+    moving = assert_span(s.abc_deg[:, 0], turn, m.servo.period_s)
+    assert moving[0] == 0  # from the first period
+    assert np.all(s.abc_deg[s.points_mm[:, 0] > 0.0, 0] == -60.0)
+    # X waits for the turn and the dwell after it: its first sample off 0 within a period.
+    first_x = int(np.flatnonzero(s.points_mm[:, 0] > 0.0)[0]) * m.servo.period_s
+    assert turn + 0.05 < first_x <= turn + 0.05 + m.servo.period_s + 1e-12
