@@ -436,3 +436,27 @@ def test_a_rotary_move_before_the_first_cut_turns_first():
     # X waits for the turn and the dwell after it: its first sample off 0 within a period.
     first_x = int(np.flatnonzero(s.points_mm[:, 0] > 0.0)[0]) * m.servo.period_s
     assert turn + 0.05 < first_x <= turn + 0.05 + m.servo.period_s + 1e-12
+
+
+def test_rotary_time_counts_against_max_points_before_work():
+    m = machine(**{"limits.max_points": 5000})
+    prog = program(
+        line((0, 0, 0), (1, 0, 0), 10.0, 1),
+        Rotate((1.0, 0.0, 0.0), (0.0, 0.0, 0.0), (90.0, 0.0, 0.0), 10.0, 2),  # ≥ 9 s
+    )
+    with pytest.raises(PlanningError, match="limits.max_points = 5000") as e:
+        check_before_work(prog.segments, m)
+    assert e.value.pos.line == 2
+
+
+def test_the_corner_log_names_the_rotary_reasons():
+    m = machine()
+    prog = mixed_program()
+    run = run_program(prog, m, OFF)
+    corners = explain_plan(prog, m, run.plan).corner_dicts()
+    assert [(c["line"], c["why"]) for c in corners] == [
+        (1, "a_rate"),  # 3 deg/mm → 0
+        (2, "rotate"),  # the rotary-only move (and the dwell) after line 2
+        (5, "a_rate"),  # −2 deg/mm → 90/(5π) deg/mm on the arc
+    ]
+    assert all(c["action"] == "stop" for c in corners)
