@@ -134,10 +134,6 @@ class Holds:
     profile: Profile | None
     axis: np.ndarray
 
-    def seconds_of(self) -> dict:
-        """Duration [s] by program index."""
-        return dict(zip(self.segment.tolist(), self.duration_s.tolist()))
-
     def at(self, h: np.ndarray, u_s: np.ndarray) -> np.ndarray:
         """A B C [deg] (N, 3) of holds ``h`` (N,) at times ``u_s`` (N,) [s] from their starts
         (clipped to the move: at rest before and after it)."""
