@@ -14,6 +14,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from nurbscnc.errors import ConfigError, PlanningError
 from nurbscnc.geometry.segments import Arc, Dwell, Line, Program, Rotate
@@ -77,11 +79,11 @@ def differences(x, period_s):
 
 
 def assert_axis_within(x, period_s, v_max, a_max, j_max, rel=1e-6):
-    v, acc, jerk = differences(x, period_s)
-    assert np.abs(v).max() <= v_max * (1.0 + rel)
-    assert np.abs(acc).max() <= a_max * (1.0 + rel)
-    assert np.abs(jerk).max() <= j_max * (1.0 + rel)
-    return np.abs(v).max(), np.abs(acc).max(), np.abs(jerk).max()
+    peaks = [np.abs(d).max(initial=0.0) for d in differences(x, period_s)]
+    assert peaks[0] <= v_max * (1.0 + rel)
+    assert peaks[1] <= a_max * (1.0 + rel)
+    assert peaks[2] <= j_max * (1.0 + rel)
+    return peaks
 
 
 def assert_span(x, duration_s, period_s):
@@ -460,3 +462,73 @@ def test_the_corner_log_names_the_rotary_reasons():
         (5, "a_rate"),  # −2 deg/mm → 90/(5π) deg/mm on the arc
     ]
     assert all(c["action"] == "stop" for c in corners)
+
+
+def test_lower_bound_counts_the_a_feed_cap():
+    """30 deg/mm at A's 60 deg/s caps X at 2 mm/s: 10 mm take at least 5 s."""
+    m = machine()
+    prog = program(line((0, 0, 0), (10, 0, 0), 20.0, 1, 0.0, 300.0))
+    bound = program_lower_bound_s(prog.segments, m)
+    assert 5.0 <= bound <= run_program(prog, m, OFF).cycle_time_s
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    st.lists(
+        st.tuples(
+            st.sampled_from(["line", "rotate", "dwell"]),
+            st.tuples(*(st.floats(-20.0, 20.0),) * 3),
+            st.tuples(st.floats(-200.0, 200.0), st.floats(-100.0, 100.0)),
+            st.floats(1.0, 60.0),
+        ),
+        min_size=1,
+        max_size=8,
+    )
+)
+def test_random_rotary_programs_keep_every_rotary_axis_within_its_limits(moves):
+    """Random mixes of moves with A and B, rotary-only moves and dwells: A and B within their
+    limits on the samples (finite differences), every programmed end reached, the plan no
+    faster than the lower bound."""
+    m = machine(A_AXIS, B_AXIS)
+    segs, p, ab, n = [], (0.0, 0.0, 0.0), (0.0, 0.0), 0
+    for kind, q, ab1, f in moves:
+        n += 1
+        if kind == "dwell":
+            segs.append(Dwell(0.01, p, n))
+            continue
+        if kind == "rotate" or math.dist(p, q) < 1e-3:
+            segs.append(Rotate(p, (*ab, 0.0), (*ab1, 0.0), f * 2.0, n))
+        else:
+            segs.append(Line(p, q, f, n, abc_deg=(*ab, 0.0, *ab1, 0.0)))
+            p = q
+        ab = ab1
+    prog = program(*segs, axes=("a", "b"))
+    run = run_program(prog, m, OFF)
+    s = run.samples
+    T = m.servo.period_s
+    for i, ax in enumerate((A_AXIS, B_AXIS)):
+        x = s.abc_deg[:, i]
+        assert_axis_within(x, T, ax.v_max_deg_s, ax.a_max_deg_s2, ax.j_max_deg_s3, rel=1e-5)
+    assert s.abc_deg[-1, :2] == pytest.approx(ab, abs=1e-6)
+    assert s.points_mm[-1] == pytest.approx(p, abs=1e-6)
+    assert program_lower_bound_s(prog.segments, m) <= run.cycle_time_s * (1.0 + 1e-9)
+
+
+def test_rotary_moves_before_any_cut_start_from_the_program_start():
+    """Rotary-only moves before the first cut (held on the zero-length marker row): at t = 0
+    A B C are where the first move starts them, not where the cut starts (found by the
+    random programs above: B jumped to 73° at the first sample)."""
+    m = machine(A_AXIS, B_AXIS)
+    prog = program(
+        Rotate((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (55.0, 0.0, 0.0), 4.0, 1),
+        Rotate((0.0, 0.0, 0.0), (55.0, 0.0, 0.0), (0.0, 0.0, 0.0), 2.0, 2),
+        Rotate((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 73.0, 0.0), 2.0, 3),
+        Line((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), 1.0, 4, abc_deg=(0.0, 73.0, 0.0, 0.0, 0.0, 0.0)),
+        axes=("a", "b"),
+    )
+    s = run_program(prog, m, OFF).samples
+    assert np.all(s.abc_deg[0] == 0.0)
+    for i, ax in enumerate((A_AXIS, B_AXIS)):
+        assert_axis_within(
+            s.abc_deg[:, i], m.servo.period_s, ax.v_max_deg_s, ax.a_max_deg_s2, ax.j_max_deg_s3
+        )

@@ -341,7 +341,7 @@ def rotary_path_limits(share, v_axis_deg_s, a_axis_deg_s2, j_axis_deg_s3):
     t = np.asarray(share, dtype=float)
     out = []
     for lim in (v_axis_deg_s, a_axis_deg_s2, j_axis_deg_s3):
-        with np.errstate(divide="ignore", invalid="ignore"):
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # tiny share: inf
             x = np.where(t > 0.0, np.asarray(lim, dtype=float)[None, :] / t, np.inf)
         out.append(x)
     v = out[0].min(axis=1) if t.shape[0] else np.zeros(0)

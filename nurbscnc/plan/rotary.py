@@ -228,6 +228,9 @@ def rotary_pieces(pieces, segments, abc, holds: Holds) -> RotaryPieces:
     k = len(pieces)
     seg = np.asarray(pieces.segment, dtype=np.int64)
     row = np.clip(np.searchsorted(seg, holds.segment, side="left") - 1, 0, k - 1)
+    before_all = np.flatnonzero(holds.segment < seg[0])
+    if before_all.size:  # row 0 is the zero-length marker of the stops before the first move
+        start[0], rate[0] = holds.abc0_deg[before_all[0]], 0.0
     # Programmed stop time after each hold up to the next piece's segment.
     stop_s = np.zeros(len(segments))
     for i, s in enumerate(segments):

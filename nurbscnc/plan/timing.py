@@ -225,7 +225,8 @@ def rotary_positions(pieces, profile: Profile, t_s, tau_s, s_mm) -> np.ndarray:
         elapsed = offsets[jj[w]] + (t_s[w] - wall_start[jj[w]])
         hr = rot.hold_row
         hold_start = before[hr] + dwell_after[hr] - rot.hold_back_s - rot.holds.duration_s
-        h = np.searchsorted(hold_start, elapsed, side="right") - 1
+        # (a hold that starts its row's stop starts at its elapsed time, up to rounding)
+        h = np.searchsorted(hold_start - 1e-9, elapsed, side="right") - 1
         mine = (h >= 0) & (hr[np.maximum(h, 0)] == r)
         abc[w[mine]] = rot.holds.at(h[mine], elapsed[mine] - hold_start[h[mine]])
     return abc
