@@ -532,3 +532,31 @@ def test_rotary_moves_before_any_cut_start_from_the_program_start():
         assert_axis_within(
             s.abc_deg[:, i], m.servo.period_s, ax.v_max_deg_s, ax.a_max_deg_s2, ax.j_max_deg_s3
         )
+
+
+def test_rotary_moves_of_no_time_before_the_first_cut_leave_its_a_alone():
+    """Rotary-only moves that go nowhere before the first cut take no time and have no row of
+    their own: the cut's A still runs 0 → 1° (it ended at 0°, the moves taken for holds
+    after it)."""
+    z = (0.0, 0.0, 0.0)
+    prog = program(
+        *(Rotate(z, z, z, 2.0, i + 1) for i in range(3)),
+        Line(z, (0.0, 0.0, 1.0), 1.0, 4, abc_deg=(0.0, 0.0, 0.0, 1.0, 0.0, 0.0)),
+    )
+    run = run_program(prog, machine(), OFF)
+    assert run.samples.abc_deg[-1] == pytest.approx([1.0, 0.0, 0.0], abs=1e-12)
+    assert run.plan.pieces.rotary.hold_row.size == 0
+
+
+def test_the_check_of_a_cut_window_joins_its_end_row_with_a_b_c():
+    """The dynamics check samples a cut window with a virtual end row at rest: it carries
+    A B C too (a join of a column with None raised ValueError)."""
+    z = (0.0, 0.0, 0.0)
+    prog = program(
+        Rotate(z, z, (10.0, 0.0, 0.0), 2.0, 1),
+        Line(z, (0.0, 0.0, 1.0), 1.0, 2, abc_deg=(10.0, 0.0, 0.0, 10.0, 0.0, 0.0)),
+        Line((0.0, 0.0, 1.0), z, 0.0, 3, rapid=True, abc_deg=(10.0, 0.0, 0.0, 10.0, 0.0, 0.0)),
+    )
+    run = run_program(prog, machine())  # the contour check on, cut at the rapid
+    assert run.samples.abc_deg[-1] == pytest.approx([10.0, 0.0, 0.0], abs=1e-12)
+    assert run.samples.points_mm[-1] == pytest.approx(z, abs=1e-12)

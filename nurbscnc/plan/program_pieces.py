@@ -84,15 +84,16 @@ def segment_pieces(
     objects = _put_blocks(cols, first_row, blocks)
     hold_s = {} if rotary is None else _hold_seconds(segments, rotary[1])
     pending = _put_stops(cols, first_row, segs, kinds, ~(straight | curved), hold_s)
-    if k and pending:
+    marker = bool(k and pending)
+    if marker:
         cols, objects = _with_dwell_marker(cols, objects, pending)
     elif not k and rotary is not None and rotary[1].segment.size:
-        cols = _rest_marker(segments, int(rotary[1].segment[0]), pending)
+        cols, marker = _rest_marker(segments, int(rotary[1].segment[0]), pending), True
     _mark_exact_stops(cols, source)
     if rotary is not None:
         rate_changes(cols, segments, rotary[0])
     pieces = PieceList(**cols, objects=objects)
-    pieces = _corners_decided(pieces, machine, options, segments, rotary)
+    pieces = _corners_decided(pieces, machine, options, segments, rotary, marker)
     if options.smooth:
         from nurbscnc.plan.smoothing import smoothing_summary
 
@@ -291,17 +292,18 @@ def _mark_exact_stops(cols: dict, source: np.ndarray) -> None:
 
 
 def _corners_decided(
-    pieces: PieceList, machine: Machine, options: PlanOptions, segments, rotary
+    pieces: PieceList, machine: Machine, options: PlanOptions, segments, rotary, marker: bool
 ) -> PieceList:
     """The pieces with their corners decided: small breaks passed, G64 corners blended,
     curvature jumps capped, the rotary columns on the final rows (``rotary``: the segments'
-    A B C and their holds, or None), every corner logged."""
+    A B C and their holds, or None; ``marker``: row 0 carries the stops before the first
+    move), every corner logged."""
     if len(pieces) >= 2:
         turning, regular = junction_turning(pieces)
         pieces.pass_after[:-1] = small_breaks(pieces, turning, regular, machine)
     pieces, tried = apply_blends(pieces, machine)
     if rotary is not None:
-        pieces = dc_replace(pieces, rotary=rotary_pieces(pieces, segments, *rotary))
+        pieces = dc_replace(pieces, rotary=rotary_pieces(pieces, segments, *rotary, marker))
     rows, dkn = curvature_jumps(pieces)
     cap = junction_jump_cap_mm_s(
         dkn, machine.servo.period_s, machine.limits.j_max_mm_s3, machine.axis_limits.as_arrays()[2]

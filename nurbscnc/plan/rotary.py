@@ -25,7 +25,7 @@ Units: degrees, seconds; a hold's "path" is degrees along the move.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from itertools import repeat
 
 import numpy as np
@@ -122,9 +122,9 @@ class Holds:
     """The Rotate moves of a program, (m,) each in program order: ``segment`` their program
     indices, ``line`` source lines, ``abc0_deg`` / ``abc1_deg`` (m, 3) start and end [deg],
     ``duration_s`` their planned times [s], ``profile`` the planned rest-to-rest moves (one
-    piece a move, in degrees along it; None when there is none) and ``axis`` (m,) the index
-    into :data:`AXES` of the axis whose limits set each move's cruise (-1: the programmed
-    rate)."""
+    piece a move, in degrees along it; None when there is none), ``piece`` (m,) each move's
+    piece of it, and ``axis`` (m,) the index into :data:`AXES` of the axis whose limits set
+    each move's cruise (-1: the programmed rate)."""
 
     segment: np.ndarray
     line: np.ndarray
@@ -132,14 +132,20 @@ class Holds:
     abc1_deg: np.ndarray
     duration_s: np.ndarray
     profile: Profile | None
+    piece: np.ndarray
     axis: np.ndarray
+
+    def subset(self, keep: np.ndarray) -> Holds:
+        """The moves ``keep`` (a mask), each keeping its piece of the profile."""
+        cols = ("segment", "line", "abc0_deg", "abc1_deg", "duration_s", "piece", "axis")
+        return replace(self, **{f: getattr(self, f)[keep] for f in cols})
 
     def at(self, h: np.ndarray, u_s: np.ndarray) -> np.ndarray:
         """A B C [deg] (N, 3) of holds ``h`` (N,) at times ``u_s`` (N,) [s] from their starts
         (clipped to the move: at rest before and after it)."""
         u = np.clip(u_s, 0.0, self.duration_s[h])
-        p = self.profile
-        along = p.sample(p.piece_start_time_s[h] + u)[0] - p.piece_start_mm[h]
+        p, piece = self.profile, self.piece[h]
+        along = p.sample(p.piece_start_time_s[piece] + u)[0] - p.piece_start_mm[piece]
         d = self.abc1_deg[h] - self.abc0_deg[h]
         total = np.sqrt(np.einsum("ij,ij->i", d, d))
         frac = np.clip(along / np.where(total > 0.0, total, 1.0), 0.0, 1.0)
@@ -181,7 +187,7 @@ def plan_holds(segments, machine) -> Holds:
     abc1 = np.array([s.abc_end_deg for s in rot], dtype=float).reshape(m, 3)
     if m == 0:
         z = np.zeros(0)
-        return Holds(idx, line, abc0, abc1, z, None, z.astype(np.int64))
+        return Holds(idx, line, abc0, abc1, z, None, idx, z.astype(np.int64))
     d = abc1 - abc0
     length = np.sqrt(np.einsum("ij,ij->i", d, d))
     share = np.abs(d) / np.where(length > 0.0, length, 1.0)[:, None]
@@ -200,7 +206,7 @@ def plan_holds(segments, machine) -> Holds:
     v, a, j = (np.where(still | ~np.isfinite(x), 1.0, x) for x in (v, a, j))
     profile = plan_profile(ProfileInput(length, v, np.zeros(m + 1), a, j))
     duration = np.where(length > 0.0, profile.piece_duration_s, 0.0)
-    return Holds(idx, line, abc0, abc1, duration, profile, axis.astype(np.int64))
+    return Holds(idx, line, abc0, abc1, duration, profile, np.arange(m), axis.astype(np.int64))
 
 
 @dataclass(frozen=True, eq=False)
@@ -221,16 +227,21 @@ class RotaryPieces:
     end_abc_deg: np.ndarray
 
 
-def rotary_pieces(pieces, segments, abc, holds: Holds) -> RotaryPieces:
+def rotary_pieces(pieces, segments, abc, holds: Holds, marker: bool) -> RotaryPieces:
     """The :class:`RotaryPieces` of the final ``pieces`` (rows after blending; ``segment``
-    the program's indices) of ``segments``; ``abc``: :func:`segment_abc`."""
+    the program's indices) of ``segments``; ``abc``: :func:`segment_abc`. ``marker``: row 0
+    is the zero-length row that carries the stops before the first move (their holds are
+    its own; without one, the moves before the first piece take no time and are left out)."""
     start, rate = row_rates(pieces.segment, pieces.length_mm, *abc)
     k = len(pieces)
     seg = np.asarray(pieces.segment, dtype=np.int64)
-    row = np.clip(np.searchsorted(seg, holds.segment, side="left") - 1, 0, k - 1)
-    before_all = np.flatnonzero(holds.segment < seg[0])
-    if before_all.size:  # row 0 is the zero-length marker of the stops before the first move
-        start[0], rate[0] = holds.abc0_deg[before_all[0]], 0.0
+    row = np.searchsorted(seg, holds.segment, side="left") - 1
+    if marker:
+        row = np.maximum(row, 0)
+        first = np.flatnonzero(row == 0)
+        if first.size:  # the marker holds A B C where the first of its moves starts
+            start[0], rate[0] = holds.abc0_deg[first[0]], 0.0
+    holds, row = holds.subset(row >= 0), row[row >= 0]
     # Programmed stop time after each hold up to the next piece's segment.
     stop_s = np.zeros(len(segments))
     for i, s in enumerate(segments):
