@@ -472,38 +472,44 @@ def test_lower_bound_counts_the_a_feed_cap():
     assert 5.0 <= bound <= run_program(prog, m, OFF).cycle_time_s
 
 
-@settings(max_examples=25, deadline=None)
+@pytest.mark.parametrize("options", [OFF, RunOptions()], ids=["check-off", "check-on"])
+@settings(max_examples=20, deadline=None)
 @given(
     st.lists(
         st.tuples(
-            st.sampled_from(["line", "rotate", "dwell"]),
+            st.sampled_from(["line", "line", "rotate", "dwell", "rapid"]),
             st.tuples(*(st.floats(-20.0, 20.0),) * 3),
             st.tuples(st.floats(-200.0, 200.0), st.floats(-100.0, 100.0)),
             st.floats(1.0, 60.0),
+            st.booleans(),
         ),
         min_size=1,
-        max_size=8,
+        max_size=10,
     )
 )
-def test_random_rotary_programs_keep_every_rotary_axis_within_its_limits(moves):
-    """Random mixes of moves with A and B, rotary-only moves and dwells: A and B within their
-    limits on the samples (finite differences), every programmed end reached, the plan no
-    faster than the lower bound."""
+def test_random_rotary_programs_keep_every_rotary_axis_within_its_limits(options, moves):
+    """Random mixes of moves (G64) with A and B moving or held, rapids, rotary-only moves and
+    dwells, with the contour check off and on: A and B within their limits on the samples
+    (finite differences), every programmed end reached, the plan no faster than the lower
+    bound."""
     m = machine(A_AXIS, B_AXIS)
     segs, p, ab, n = [], (0.0, 0.0, 0.0), (0.0, 0.0), 0
-    for kind, q, ab1, f in moves:
+    for kind, q, ab1, f, held in moves:
         n += 1
+        ab1 = ab if held else ab1
         if kind == "dwell":
             segs.append(Dwell(0.01, p, n))
             continue
+        rapid = kind == "rapid"
         if kind == "rotate" or math.dist(p, q) < 1e-3:
-            segs.append(Rotate(p, (*ab, 0.0), (*ab1, 0.0), f * 2.0, n))
+            segs.append(Rotate(p, (*ab, 0.0), (*ab1, 0.0), 0.0 if rapid else f * 2.0, n, rapid))
         else:
-            segs.append(Line(p, q, f, n, abc_deg=(*ab, 0.0, *ab1, 0.0)))
+            abc = (*ab, 0.0, *ab1, 0.0)
+            segs.append(Line(p, q, f, n, rapid, blend_mm=math.inf, abc_deg=abc))
             p = q
         ab = ab1
     prog = program(*segs, axes=("a", "b"))
-    run = run_program(prog, m, OFF)
+    run = run_program(prog, m, options)
     s = run.samples
     T = m.servo.period_s
     for i, ax in enumerate((A_AXIS, B_AXIS)):

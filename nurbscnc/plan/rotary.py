@@ -335,7 +335,7 @@ def rotate_bounds_s(segments, machine) -> np.ndarray:
     v, a, _, _ = rotary_path_limits(share, *lim)
     feed = np.array([np.inf if s.rapid else s.feed_deg_s for s in rot], dtype=float)
     v = np.minimum(v, feed)
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # a tiny share: inf
         t = np.where(length >= v * v / a, length / v + v / a, 2.0 * np.sqrt(length / a))
     return np.where(length > 0.0, np.nan_to_num(t, nan=0.0, posinf=0.0), 0.0)
 
