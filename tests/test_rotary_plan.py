@@ -566,3 +566,24 @@ def test_the_check_of_a_cut_window_joins_its_end_row_with_a_b_c():
     run = run_program(prog, machine())  # the contour check on, cut at the rapid
     assert run.samples.abc_deg[-1] == pytest.approx([10.0, 0.0, 0.0], abs=1e-12)
     assert run.samples.points_mm[-1] == pytest.approx(z, abs=1e-12)
+
+
+def test_plan_text_says_what_the_contour_check_covers():
+    import io
+
+    from rich.console import Console
+
+    from nurbscnc.app.summary import summary_of
+    from nurbscnc.cli.plan import print_plan_summary
+
+    m = machine()
+    prog = mixed_program()
+    summary = summary_of(prog, m, run_program(prog, m))
+    assert summary["rotary"]["axes"] == ["a"] and summary["rotary"]["rotate_moves"] == 1
+    turn = rest_to_rest_s(90.0, 30.0, A_AXIS.a_max_deg_s2, A_AXIS.j_max_deg_s3)
+    assert summary["rotary"]["rotate_time_s"] == pytest.approx(turn, rel=1e-9)
+    buf = io.StringIO()
+    print_plan_summary(prog, m, summary, Console(file=buf, width=400))
+    text = buf.getvalue()
+    assert "rotary axes A: 1 rotary-only move, " in text
+    assert "the contour check covers X Y Z only" in text

@@ -249,7 +249,8 @@ def print_plan_summary(prog, mach, summary: dict, out: Console) -> None:
         rot = summary["rotary"]
         out.print(
             f"  rotary axes {' '.join(a.upper() for a in rot['axes'])}: "
-            f"{rot['rotate_moves']} rotary-only moves, {rot['rotate_time_s']:.4f} s; "
+            f"{rot['rotate_moves']} rotary-only move{'' if rot['rotate_moves'] == 1 else 's'}, "
+            f"{rot['rotate_time_s']:.4f} s; "
             f"{rot['note']}",
             markup=False,
         )
