@@ -587,3 +587,18 @@ def test_plan_text_says_what_the_contour_check_covers():
     text = buf.getvalue()
     assert "rotary axes A: 1 rotary-only move, " in text
     assert "the contour check covers X Y Z only" in text
+
+
+def test_explain_names_an_xyz_axis_on_a_line():
+    """X at 600 mm/min under F1200 along X: the X axis sets the line's feed (10 mm/s)."""
+    m = load_machine(
+        overrides={
+            "axis_limits.x.v_max_mm_min": 600.0,
+            "axis_limits.x.a_max_mm_s2": 1000.0,
+            "axis_limits.x.j_max_mm_s3": 2e4,
+        }
+    )
+    prog = program(line((0, 0, 0), (30, 0, 0), 20.0, 1), axes=())
+    run = run_program(prog, m, OFF)
+    entry = explain_plan(prog, m, run.plan).line_dicts()[0]
+    assert entry["limit"] == "axis" and entry["axis"] == "x"
