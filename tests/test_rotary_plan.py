@@ -602,3 +602,27 @@ def test_explain_names_an_xyz_axis_on_a_line():
     run = run_program(prog, m, OFF)
     entry = explain_plan(prog, m, run.plan).line_dicts()[0]
     assert entry["limit"] == "axis" and entry["axis"] == "x"
+
+
+def test_a_full_circle_with_a_moves_a_in_step_with_the_angle():
+    """G2 full circle (R 5) with A 0 → 360°: A is linear in the arc length, so A = the
+    angle turned (in degrees) on every sample, however the arc is cut into pieces."""
+    m = machine()
+    start, centre = np.array([5.0, 0.0, 0.0]), np.zeros(3)
+    arc = Arc(
+        start,
+        start.copy(),
+        centre,
+        np.array([0.0, 0.0, 1.0]),
+        -2.0 * math.pi,
+        0.0,
+        5.0,
+        5.0,
+        10.0,
+        1,
+        abc_deg=(0.0, 0.0, 0.0, 360.0, 0.0, 0.0),
+    )
+    s = run_program(program(arc), m, OFF).samples
+    turned = -np.unwrap(np.arctan2(s.points_mm[:, 1], s.points_mm[:, 0]))
+    assert s.abc_deg[:, 0] == pytest.approx(np.degrees(turned), abs=1e-6)
+    assert s.abc_deg[-1, 0] == pytest.approx(360.0, abs=1e-9)
