@@ -429,10 +429,14 @@ def test_wrapped_goldens_are_what_rs274_says_now(name, tmp_path):
         compare_rotary(now, run_rotary(WRAPPED / f"{name}.ngc", WRAPPED_AXES))
 
 
-def test_nurbscnc_makes_the_wrapped_moves():
+@pytest.mark.parametrize("name", ["wrapped_a", "wrapped_offsets"])
+def test_nurbscnc_makes_the_wrapped_moves(name):
     """The wrapped axis A of wrapped.ini (B, C not wrapped), to rs274's printed precision."""
-    program = run_rotary(WRAPPED / "wrapped_a.ngc", WRAPPED_AXES)
-    compare_rotary(wrapped_golden("wrapped_a"), program)
+    program = run_rotary(WRAPPED / f"{name}.ngc", WRAPPED_AXES)
+    compare_rotary(wrapped_golden(name), program)
+
+
+def test_a_machine_whose_a_is_not_wrapped_goes_elsewhere():
     # The same program on a machine whose A is not wrapped goes elsewhere (A10 is 10).
     plain = run_rotary(WRAPPED / "wrapped_a.ngc")
     with pytest.raises(AssertionError):

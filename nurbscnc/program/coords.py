@@ -464,7 +464,7 @@ class OffsetCommands:
         machine = self.pos
         self.coords.set_g92(
             {i: words[a][0] * self.m.scale for i, a in enumerate(_AXES) if a in words}
-            | self.abc_offsets(words, wrapped_check=False)
+            | self.abc_offsets(words, wrapped_check=True)
         )
         used.update(_AXES)
         self.pos = machine

@@ -44,11 +44,13 @@ def wrapped_word_error(value: float, letter: str) -> str:
     return f"Invalid absolute position {value:5.2f} for wrapped rotary axis {letter}"
 
 
-def unwrap_deg(word: float, current_deg: float) -> float:
+def unwrap_deg(word: float, current_deg: float, angle: float | None = None) -> float:
     """The program position [deg] a G90 word takes a wrapped axis to from ``current_deg``:
-    |word| in the current turn, one turn on (off) when it lies behind (ahead) and the word's
-    sign is + (−); the sign of −0 counts (LinuxCNC's ``unwrap_rotary``)."""
-    result = abs(word) + TURN_DEG * math.floor(current_deg / TURN_DEG)
+    |angle| (the word, or for G53 the word less the offsets) in the current turn, one turn
+    on (off) when it lies behind (ahead) and the word's sign is + (−); the sign of −0 counts
+    (LinuxCNC's ``unwrap_rotary(result, sign_of, angle, current)``)."""
+    angle = word if angle is None else angle
+    result = abs(angle) + TURN_DEG * math.floor(current_deg / TURN_DEG)
     negative = math.copysign(1.0, word) < 0.0
     if not negative and result < current_deg:
         result += TURN_DEG
@@ -90,13 +92,18 @@ class RotaryAxes:
             value, col = words[letter]
             axis = self.rotary_axis(letter)
             current = out[i] - shift[i]
-            if machine_coords:
+            wrapped = axis is not None and axis.wrapped and (self.m.absolute or machine_coords)
+            if wrapped and not -TURN_DEG < value < TURN_DEG:
+                raise self.error(wrapped_word_error(value, letter), col)
+            if machine_coords and wrapped:
+                # LinuxCNC's find_ends for G53 unwraps |word − offsets| about the program
+                # position, the word's sign the direction (checked with rs274 -i).
+                machine = unwrap_deg(value, current, value - shift[i]) + shift[i]
+            elif machine_coords:
                 machine = value
             elif not self.m.absolute:
                 machine = current + value + shift[i]
-            elif axis is not None and axis.wrapped:
-                if not -TURN_DEG < value < TURN_DEG:
-                    raise self.error(wrapped_word_error(value, letter), col)
+            elif wrapped:
                 machine = unwrap_deg(value, current) + shift[i]
             else:
                 machine = value + shift[i]
@@ -211,7 +218,7 @@ class RotaryAxes:
         return out
 
     def home_abc_to_store(self, which: int):
-        """A B C [deg, machine] for G28.1 / G30.1, a wrapped axis's ``fmod``-ed into one turn
+        """A B C [deg, machine] for G28.1 / G30.1, a wrapped axis's taken into [0, 360)
         (LinuxCNC's convert_savehome); None when they and the stored ones are all 0 (nothing
         changes)."""
         if self.m.abc_hold is None:
@@ -219,7 +226,8 @@ class RotaryAxes:
         out = []
         for letter, value in zip(ROTARY_LETTERS, self.m.rotary, strict=True):
             axis = self.rotary_axis(letter)
-            out.append(math.fmod(value, TURN_DEG) if axis is not None and axis.wrapped else value)
+            # into [0, 360): LinuxCNC stores 350 for A at -370 (checked with rs274 -i)
+            out.append(value % TURN_DEG if axis is not None and axis.wrapped else value)
         return out
 
     def refuse_rotary_tool_offset(self, words: dict) -> None:
