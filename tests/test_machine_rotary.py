@@ -126,4 +126,4 @@ def test_the_app_hands_the_machines_axes_to_the_interpreter():
     assert res.exit_code == 2 and f"{program}:5:4: error: the machine has no A axis" in res.stderr
     interpreted = load_program(str(program), inputs=program_inputs(load_machine(str(BENCH_A))))
     assert interpreted.rotary_axes == ("a",)
-    assert interpreted.segments[-1].abc_deg == (270.0, 0.0, 0.0) * 2
+    assert interpreted.segments[-1].abc_deg == (360.0, 0.0, 0.0, 270.0, 0.0, 0.0)
