@@ -93,9 +93,24 @@ def expected_moves(golden: dict, start=(0.0,) * 6) -> list[dict]:
 
 
 def actual_segments(program) -> list:
-    """nurbscnc's segments that move (the 0 s dwells of M64–M68 dropped, as the XYZ
-    comparison does)."""
-    return [s for s in program.segments if not (s.kind == "dwell" and s.code != "G4")]
+    """nurbscnc's comparable segments: the 0 s dwells of M64–M68 and straight moves of none of
+    the six axes (within ``ZERO_MOVE``) dropped, as the XYZ comparison does (LinuxCNC's
+    program → machine round trip makes 1e-14 mm moves where nurbscnc, keeping the machine
+    where it is, makes none, and the other way round)."""
+    out = []
+    prev = (*map(float, program.start_mm), *program.start_abc_deg)
+    for seg in program.segments:
+        if seg.kind == "dwell" and seg.code != "G4":
+            continue
+        if seg.kind in ("rapid", "line", "rotate", "arc"):
+            end = six(seg)
+            if seg.kind != "arc" and all(
+                abs(a - b) <= ZERO_MOVE for a, b in zip(end, prev, strict=True)
+            ):
+                continue
+            prev = end
+        out.append(seg)
+    return out
 
 
 def _kind_of(seg) -> str:
@@ -117,6 +132,10 @@ def compare_rotary(golden: dict, program, tol: float | None = None, scale: float
         assert kind == m["kind"], f"{where}: LinuxCNC makes a {m['kind']}, nurbscnc a {kind}"
         if m.get("line"):
             assert seg.line == m["line"], f"{where}: source line differs"
+        if "end" not in m:  # a dwell or a pause: at rest
+            if m["kind"] == "dwell":
+                assert abs(seg.seconds - m["seconds"]) <= 1e-12, f"{where}: dwell differs"
+            continue
         end = np.array(m["end"], float)
         end[:3] *= scale
         start = np.array(m["start"], float)
