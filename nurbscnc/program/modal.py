@@ -116,11 +116,13 @@ class ModalState:
     # takes it from the F word as written (FROM_PROG_ANG), whatever G20/G21 says.
     rotary: tuple = (0.0, 0.0, 0.0)
     abc_hold: tuple | None = None
+    rotary_seen: bool = False  # some rotary axis has been away from 0
 
     def set_rotary(self, abc_deg: tuple) -> None:
         """The rotary axes are now at ``abc_deg`` [deg, machine]."""
         self.rotary = abc_deg
         self.abc_hold = None if abc_deg == (0.0, 0.0, 0.0) else abc_deg * 2
+        self.rotary_seen = self.rotary_seen or self.abc_hold is not None
 
     @property
     def inch(self) -> bool:

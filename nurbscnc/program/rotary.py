@@ -245,6 +245,8 @@ class RotaryAxes:
         """The axes ("a", "b", "c") the program moves or holds away from 0 (the segments'
         rotary columns, from ``start_abc`` [deg] on)."""
         used = [v != 0.0 for v in start_abc]
+        if not self.m.rotary_seen:
+            return ()
         for seg in self.segments:
             kind = seg.kind
             if kind == "rotate":
