@@ -39,7 +39,11 @@ def summary_of(prog, mach, run, stats=None, lower_bound: bool = True) -> dict:
     from nurbscnc.plan.report import SampleStats, plan_summary
 
     if run.rest_s is not None:  # no motion
-        return {**rest_summary(prog, mach, run), **machine_json(mach)}
+        return {
+            **rest_summary(prog, mach, run),
+            **rotary_json(prog.rotary_axes, final_abc_deg(prog)),
+            **machine_json(mach),
+        }
     samples = run.samples if run.plan is None else stats
     if samples is None:
         samples = SampleStats(run.plan)
@@ -58,7 +62,51 @@ def summary_of(prog, mach, run, stats=None, lower_bound: bool = True) -> dict:
     )
     if getattr(run, "precompensation", None) is not None:  # --precompensate
         summary["precompensation"] = run.precompensation.as_json()
-    return {**summary, **machine_json(mach)}
+    return {**summary, **rotary_json(prog.rotary_axes, final_abc_deg(prog)), **machine_json(mach)}
+
+
+def final_abc_deg(prog) -> tuple:
+    """A B C [deg, machine coordinates] at the end of the program ``prog``: the end of its
+    last line, arc or rotary-only move (a line or arc with no ``abc_deg`` ends at 0, the
+    segments' rule); the program's start A B C when none moves. Dwells and pauses hold the
+    axes where they are; a NURBS block carries no rotary position (the axes stand)."""
+    for seg in reversed(prog.segments):
+        kind = seg.kind
+        if kind == "rotate":
+            return tuple(float(v) for v in seg.abc_end_deg)
+        if kind in ("line", "rapid", "arc"):
+            abc = seg.abc_deg
+            return (0.0, 0.0, 0.0) if abc is None else tuple(float(v) for v in abc[3:])
+    return tuple(float(v) for v in prog.start_abc_deg)
+
+
+def rotary_json(rotary_axes, abc_deg) -> dict:
+    """``rotary_axes`` (the axes used, e.g. ``["a"]``) and ``final_abc_deg`` ([a, b, c]
+    [deg] at the end, ``abc_deg``) for a summary's JSON (docs/json.md); nothing for a
+    program without rotary axes (its summary is as it always was)."""
+    if not rotary_axes:
+        return {}
+    return {"rotary_axes": list(rotary_axes), "final_abc_deg": [float(v) for v in abc_deg]}
+
+
+def rotary_text(summary: dict) -> str | None:
+    """The human line of a summary whose program uses rotary axes (None without): the axes
+    and where they end, and what the contour check does not see. The check measures the
+    X Y Z reference against the X Y Z path; on a part the rotary axes turn, an error of δ
+    degrees on A moves the surface under the tool by r·δ·π/180 mm at radius r (the
+    tool's position on the rotated part is not checked)."""
+    axes = summary.get("rotary_axes")
+    if not axes:
+        return None
+    ends = " ".join(
+        f"{name.upper()}{summary['final_abc_deg']['abc'.index(name)]:g}°" for name in axes
+    )
+    first = axes[0].upper()
+    return (
+        f"  rotary axes {' '.join(a.upper() for a in axes)} (end at {ends}): the contour check "
+        f"covers X Y Z only, not the tool's position on the rotated part (an error of δ° on "
+        f"{first} is r·δ·π/180 mm at radius r)"
+    )
 
 
 def rest_summary(prog, mach, run) -> dict:

@@ -15,6 +15,7 @@ from nurbscnc.app.summary import (
     precompensation_text,
     rapids_words,
     rest_text,
+    rotary_text,
     scope_words,
     summary_json,
     summary_of,
@@ -193,6 +194,8 @@ def print_plan_summary(prog, mach, summary: dict, out: Console) -> None:
 
     if summary.get("motion") is False:
         out.print(Text.assemble((prog.name, "bold"), ": ", rest_text(summary)))
+        if rotary_text(summary):
+            out.print(rotary_text(summary), markup=False)
         return
     if "pieces" in summary:
         out.print(
@@ -247,3 +250,5 @@ def print_plan_summary(prog, mach, summary: dict, out: Console) -> None:
         )
     if precompensation_text(summary):
         out.print(precompensation_text(summary), markup=False)
+    if rotary_text(summary):
+        out.print(rotary_text(summary), markup=False)
