@@ -105,7 +105,7 @@ def rotary_printed(files, *args) -> dict:
     )
     prog = dataclasses.replace(prog, segments=segments, rotary_axes=("a",))
     summary = json.loads(summary_json(summary_of(prog, mach, run)))
-    assert summary["final_abc_deg"] == [90.0, 0.0, 0.0]
+    assert summary["rotary"]["final_abc_deg"] == {"a": 90.0}
     return summary
 
 

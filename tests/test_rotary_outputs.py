@@ -222,20 +222,21 @@ def test_simulate_reads_a_rotary_points_file(tmp_path, suffix):
     got = json.loads(with_rotary.stdout)
     plain = run(["simulate", _xyz_only(out, read_points(str(out))), "--json"])
     want = json.loads(plain.stdout)
-    assert got.pop("rotary_axes") == ["a", "c"]
-    final = got.pop("final_abc_deg")
-    assert final == pytest.approx(ABC_END_DEG, abs=5e-10)
+    rotary = got.pop("rotary")
+    assert rotary["axes"] == ["a", "c"] and rotary["contour_check"] == "xyz"
+    assert rotary["final_abc_deg"] == pytest.approx({"a": 12.0, "c": -7.0}, abs=5e-10)
+    assert "X Y Z only" in rotary["note"]
     for key in ("program", "machine_profile"):
         got.pop(key), want.pop(key)
     assert got == want
     text = run(["simulate", out])
     assert text.exit_code == 0
-    assert "rotary axes A C (end at A12° C-7°)" in text.stdout
+    assert "rotary axes A C (end at A12° C-7°): the contour check" in text.stdout
     assert "X Y Z only" in text.stdout and "r·δ·π/180 mm" in text.stdout
     if suffix == "csv":  # from standard input, recognised by its header
         piped = run(["simulate", "-", "--json"], input=out.read_text())
         assert piped.exit_code == 0, piped.output
-        assert json.loads(piped.stdout)["rotary_axes"] == ["a", "c"]
+        assert json.loads(piped.stdout)["rotary"]["axes"] == ["a", "c"]
 
 
 def _csv(path: Path, header: str, rows: list[str]) -> Path:
@@ -405,8 +406,9 @@ def test_final_abc_is_the_last_rotary_position_of_the_program():
 
 def test_summary_names_the_axes_and_what_the_contour_check_does_not_see():
     """The plan summary of a real run, its program given rotary axes: the summary gains
-    ``rotary_axes`` and ``final_abc_deg`` and nothing else changes; the text says the contour
-    check covers X Y Z only. Without rotary axes the summary is as before."""
+    the ``rotary`` object (axes, where they end, what the contour check covers) and nothing
+    else changes; the text says the contour check covers X Y Z only. Without rotary axes
+    the summary is as before."""
     from rich.console import Console
 
     from nurbscnc.app.planning import make_plan
@@ -416,7 +418,7 @@ def test_summary_names_the_axes_and_what_the_contour_check_does_not_see():
     root = Path(__file__).resolve().parents[1]
     prog, mach, run_ = make_plan(str(root / "programs" / "naca2415.nc"), dynamics="off")
     plain = summary_of(prog, mach, run_)
-    assert "rotary_axes" not in plain and rotary_text(plain) is None
+    assert "rotary" not in plain and rotary_text(plain) is None
     held = (0.0, 22.5, 0.0, 0.0, 22.5, 0.0)  # B held at 22.5° all along
     turned = dataclasses.replace(
         prog,
@@ -428,11 +430,33 @@ def test_summary_names_the_axes_and_what_the_contour_check_does_not_see():
         start_abc_deg=(0.0, 22.5, 0.0),
     )
     summary = summary_of(turned, mach, run_)
-    assert summary.pop("rotary_axes") == ["b"]
-    assert summary.pop("final_abc_deg") == [0.0, 22.5, 0.0]
+    rotary = summary.pop("rotary")
+    assert rotary == {"axes": ["b"], "final_abc_deg": {"b": 22.5}, **XYZ_ONLY}
     assert json.dumps(summary) == json.dumps(plain)
     buf = io.StringIO()
     print_plan_summary(turned, mach, summary_of(turned, mach, run_), Console(file=buf, width=200))
     text = buf.getvalue()
     assert "rotary axes B (end at B22.5°): the contour check covers X Y Z only" in text
-    assert "an error of δ° on B is r·δ·π/180 mm at radius r" in text
+    assert "an A error of δ° is r·δ·π/180 mm at radius r" in text
+
+
+#: The ``rotary`` object's words on the contour check.
+XYZ_ONLY = {
+    "contour_check": "xyz",
+    "note": "the contour check covers X Y Z only: it does not see the tool's position on a "
+    "rotated part (an A error of δ° is r·δ·π/180 mm at radius r)",
+}
+
+
+def test_the_planners_rotary_object_is_kept_and_completed():
+    """A summary whose planner made a ``rotary`` object (its rotary-only moves) keeps those
+    entries and gains the end position; the text names both."""
+    from nurbscnc.app.summary import rotary_text, with_rotary
+
+    planned = {"rotary": {"axes": ["a"], "rotate_moves": 2, "rotate_time_s": 1.25, **XYZ_ONLY}}
+    summary = with_rotary(planned, ("a",), (270.0, 0.0, 0.0))
+    assert summary["rotary"] == {**planned["rotary"], "final_abc_deg": {"a": 270.0}}
+    assert rotary_text(summary) == (
+        "  rotary axes A (end at A270°): 2 rotary-only moves, 1.2500 s; " + XYZ_ONLY["note"]
+    )
+    assert with_rotary({"ok": True}, (), (0.0, 0.0, 0.0)) == {"ok": True}

@@ -48,15 +48,16 @@ def run_rotary(samples) -> tuple:
 
 
 def rotary_summary(rotary) -> dict:
-    """The JSON keys of a simulated reference's rotary axes (docs/json.md, ``simulate``):
-    ``rotary_axes`` and the last sample's ``final_abc_deg``; nothing without rotary axes.
-    The servo simulation itself is of X Y Z (the rotary axes are not simulated)."""
-    from nurbscnc.app.summary import rotary_json
+    """The ``rotary`` object of a simulated reference (docs/json.md, ``simulate``) as a
+    summary: the axes of ``rotary`` (``(axes, abc_deg)``) and the last sample's A B C; an
+    empty dict without rotary axes. The servo simulation is of X Y Z only (the rotary axes
+    are not simulated)."""
+    from nurbscnc.app.summary import with_rotary
 
     axes, abc_deg = rotary
     if not axes:
         return {}
-    return rotary_json(axes, abc_deg[-1])
+    return with_rotary({}, axes, abc_deg[-1])
 
 
 def simulate_points(points, path, mach, hold: str):

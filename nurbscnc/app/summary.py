@@ -39,11 +39,8 @@ def summary_of(prog, mach, run, stats=None, lower_bound: bool = True) -> dict:
     from nurbscnc.plan.report import SampleStats, plan_summary
 
     if run.rest_s is not None:  # no motion
-        return {
-            **rest_summary(prog, mach, run),
-            **rotary_json(prog.rotary_axes, final_abc_deg(prog)),
-            **machine_json(mach),
-        }
+        rest = with_rotary(rest_summary(prog, mach, run), prog.rotary_axes, final_abc_deg(prog))
+        return {**rest, **machine_json(mach)}
     samples = run.samples if run.plan is None else stats
     if samples is None:
         samples = SampleStats(run.plan)
@@ -62,7 +59,8 @@ def summary_of(prog, mach, run, stats=None, lower_bound: bool = True) -> dict:
     )
     if getattr(run, "precompensation", None) is not None:  # --precompensate
         summary["precompensation"] = run.precompensation.as_json()
-    return {**summary, **rotary_json(prog.rotary_axes, final_abc_deg(prog)), **machine_json(mach)}
+    summary = with_rotary(summary, prog.rotary_axes, final_abc_deg(prog))
+    return {**summary, **machine_json(mach)}
 
 
 def final_abc_deg(prog) -> tuple:
@@ -80,33 +78,45 @@ def final_abc_deg(prog) -> tuple:
     return tuple(float(v) for v in prog.start_abc_deg)
 
 
-def rotary_json(rotary_axes, abc_deg) -> dict:
-    """``rotary_axes`` (the axes used, e.g. ``["a"]``) and ``final_abc_deg`` ([a, b, c]
-    [deg] at the end, ``abc_deg``) for a summary's JSON (docs/json.md); nothing for a
-    program without rotary axes (its summary is as it always was)."""
+#: What the contour check does not see when A B C turn the part (``rotary.note``).
+ROTARY_NOTE = (
+    "the contour check covers X Y Z only: it does not see the tool's position on a rotated "
+    "part (an A error of δ° is r·δ·π/180 mm at radius r)"
+)
+
+
+def with_rotary(summary: dict, rotary_axes, abc_deg) -> dict:
+    """``summary`` with its ``rotary`` object (docs/json.md) when the program uses rotary
+    axes: ``axes`` (e.g. ``["a"]``), ``final_abc_deg`` (``{"a": 90.0}``: each axis used at
+    the end [deg], ``abc_deg`` (3,) A B C), ``contour_check`` ``"xyz"`` and the ``note``
+    saying what that check does not see; the planner's own entries of the object, when it
+    made one, are kept. A program without rotary axes: ``summary`` as it is."""
     if not rotary_axes:
-        return {}
-    return {"rotary_axes": list(rotary_axes), "final_abc_deg": [float(v) for v in abc_deg]}
+        return summary
+    rotary = dict(summary.get("rotary") or {})
+    rotary.setdefault("axes", list(rotary_axes))
+    rotary["final_abc_deg"] = {a: float(abc_deg["abc".index(a)]) for a in rotary_axes}
+    rotary.setdefault("contour_check", "xyz")
+    rotary.setdefault("note", ROTARY_NOTE)
+    return {**summary, "rotary": rotary}
 
 
 def rotary_text(summary: dict) -> str | None:
-    """The human line of a summary whose program uses rotary axes (None without): the axes
-    and where they end, and what the contour check does not see. The check measures the
-    X Y Z reference against the X Y Z path; on a part the rotary axes turn, an error of δ
-    degrees on A moves the surface under the tool by r·δ·π/180 mm at radius r (the
-    tool's position on the rotated part is not checked)."""
-    axes = summary.get("rotary_axes")
-    if not axes:
+    """The human line of a summary with a ``rotary`` object (None without): the axes, where
+    they end, the rotary-only moves when the planner counted them, and what the contour
+    check does not see. The check measures the X Y Z reference against the X Y Z path; on
+    a part the rotary axes turn, an error of δ degrees on A moves the surface under the
+    tool by r·δ·π/180 mm at radius r (the tool's position on the rotated part is not
+    checked)."""
+    rotary = summary.get("rotary")
+    if not rotary:
         return None
-    ends = " ".join(
-        f"{name.upper()}{summary['final_abc_deg']['abc'.index(name)]:g}°" for name in axes
-    )
-    first = axes[0].upper()
-    return (
-        f"  rotary axes {' '.join(a.upper() for a in axes)} (end at {ends}): the contour check "
-        f"covers X Y Z only, not the tool's position on the rotated part (an error of δ° on "
-        f"{first} is r·δ·π/180 mm at radius r)"
-    )
+    ends = " ".join(f"{a.upper()}{v:g}°" for a, v in rotary["final_abc_deg"].items())
+    moves = ""
+    if "rotate_moves" in rotary:
+        moves = f"{rotary['rotate_moves']} rotary-only moves, {rotary['rotate_time_s']:.4f} s; "
+    names = " ".join(a.upper() for a in rotary["axes"])
+    return f"  rotary axes {names} (end at {ends}): {moves}{rotary['note']}"
 
 
 def rest_summary(prog, mach, run) -> dict:

@@ -248,7 +248,7 @@ def print_plan_summary(prog, mach, summary: dict, out: Console) -> None:
             f"µm (ε_max {mach.limits.contour_tolerance_mm * 1000:g} µm; {how})"
             f"{rapids_words(summary.get('contour_rapids_true_max_um'))}"
         )
-    if precompensation_text(summary):
-        out.print(precompensation_text(summary), markup=False)
     if rotary_text(summary):
         out.print(rotary_text(summary), markup=False)
+    if precompensation_text(summary):
+        out.print(precompensation_text(summary), markup=False)
