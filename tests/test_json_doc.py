@@ -95,6 +95,7 @@ def rotary_printed(files, *args) -> dict:
     res = CliRunner().invoke(main, [str(a) for a in args] + sets + ["--json"])
     if res.exit_code == 0:
         return json.loads(res.stdout.strip().splitlines()[-1])
+    assert res.exit_code == 2, res.output  # refused (no rotary support yet), not a crash
     prog, mach, run = make_plan(str(files / "rotary_xyz.nc"))
     mach = dataclasses.replace(mach, rotary_axes={"a": RotaryAxis("a", 60.0, 400.0, 4000.0)})
     ends = ((0.0, 0.0, 0.0, 90.0, 0.0, 0.0), (90.0, 0.0, 0.0, 90.0, 0.0, 0.0))
