@@ -87,7 +87,7 @@ def samples_of_move(start, end, abc_start, abc_end, duration_s: float, rotary=("
     )
 
 
-# -- the protocol ---------------------------------------------------------------------------------
+# -- the protocol ----------
 def test_axis_masks_name_x_y_z_a_b_c_in_order():
     assert mask_of("xyz") == 0b000111 == p.XYZ_MASK
     assert mask_of("xyza") == 0b001111 and mask_of("xyzabc") == 0b111111
@@ -138,7 +138,7 @@ def test_the_card_simulator_speaks_3_or_4():
         CardConfig(axis_names="xyaz")
 
 
-# -- quantisation -----------------------------------------------------------------------------------
+# -- quantisation ----------
 def test_rotary_steps_per_degree_with_the_same_rounding_as_xyz():
     """G1 X10 A90 from 0: X 10 × 800 = 8000 steps, A 90 × 250 = 22500 steps; every period's
     running sum is round(a_k · 250) (the remainder carried, no drift)."""
@@ -179,7 +179,7 @@ def test_samples_that_use_b_but_carry_no_column_are_refused():
         sample_points(s)
 
 
-# -- streaming to the simulated card ------------------------------------------------------------
+# -- streaming to the simulated card ----------
 def test_a_rotary_program_ends_at_the_steps_of_its_text():
     """G1 X10 Y-2 Z-1.25 A90 B-12.5 from the card's (0, 0, 0, A 10°, B 0): the card ends at
     (10·800, −2·1000, −1.25·400, 90·250, −12.5·40) = (8000, −2000, −500, 22500, −500)."""
@@ -268,7 +268,7 @@ def test_a_noisy_line_with_a_rotary_axis_still_runs_every_period_once():
     assert r.report.retransmits > 0
 
 
-# -- positions in degrees, jog ----------------------------------------------------------------------
+# -- positions in degrees, jog ----------
 def test_positions_split_into_mm_and_degrees():
     mach = rotary_machine()
     assert axes_of_position(3, mach) == "xyz" and axes_of_position(5, mach) == "xyzab"
