@@ -374,3 +374,145 @@ def test_card_sim_options_name_the_axes_and_the_protocol():
 
     r = CliRunner().invoke(main, ["card-sim", "--axes", "XYZA", "--protocol", "3"])
     assert r.exit_code == 2 and "protocol 3 drives X Y Z, not X Y Z A" in r.stderr
+
+
+# -- a rotary program streamed section by section -------------------------------------------------
+def _staged_parts(mach):
+    """Three moves with X, A (and a held B) split by M0 (waits), M1 (passes without
+    --optional-stop) and M6 T2 (waits): X 0→4 mm with A 0→30°, X 4→6 with A 30→−15°, then
+    X 6→9 with A −15→0°; B stands at 2.5° throughout."""
+    from nurbscnc.controller.staged import StagedSection, split_pulses
+    from nurbscnc.controller.stops import Stop
+
+    moves = [((0, 0, 0), (4, 0, 0), 0, 30), ((4, 0, 0), (6, 0, 0), 30, -15)]
+    moves.append(((6, 0, 0), (9, 0, 0), -15, 0))
+    parts = [
+        samples_of_move(p0, p1, (a0, 2.5, 0), (a1, 2.5, 0), 0.3, ("a", "b"))
+        for p0, p1, a0, a1 in moves
+    ]
+    rows = [sample_points(parts[0])[0]] + [sample_points(s)[0][1:] for s in parts[1:]]
+    pulses = pulses_of_points(np.vstack(rows), mach, None, "xyzab")
+    ends = np.cumsum([len(r) for r in rows]) - 1
+    stops = [Stop(0.0, 3, "M0", message="turn the part"), Stop(0.0, 5, "M1")]
+    stops.append(Stop(0.0, 8, "M6", tool=2))
+    split = split_pulses(pulses, [ends[0], ends[1], ends[1], ends[2]])
+    return pulses, [StagedSection(p, s) for p, s in zip(split, [*stops, None])]
+
+
+def test_a_program_planned_whole_waits_at_its_stops_and_ends_where_its_text_says():
+    """The card waits at M0 and M6 (the operator's continue after 1 s each), passes M1, and
+    ends at X 9 mm = 7200 steps, A 0, B 2.5° · 40 = 100 steps; it ran exactly the pulses of
+    the whole plan, in three sections, each starting where the one before ended."""
+    from nurbscnc.controller.simulate import simulate_job
+    from nurbscnc.controller.staged import StagedJob
+
+    mach = rotary_machine()
+    pulses, sections = _staged_parts(mach)
+    assert [None if s.pulses is None else s.pulses.periods for s in sections] == [
+        300,
+        300,
+        None,
+        300,
+    ]
+    for before, after in zip(sections[0:1] + sections[1:2], sections[1:2] + sections[3:4]):
+        np.testing.assert_array_equal(after.pulses.start_steps, before.pulses.end_steps)
+    job = StagedJob(sections, PERIOD_S, tools=None)
+    assert job.plan.cycle_time_s == pytest.approx(0.9)
+    cfg = CardConfig(speed=1.0, axis_names="xyzab", position_steps=(0, 0, 0, 0, 100))
+    resume = [(t, lambda j, _c: j.resume()) for t in (2.0, 4.0)]
+    r = simulate_job(job, cfg, events=resume)
+    assert r.completed, r.error
+    assert [w[2] for w in r.waits] == [
+        "M0 at line 3: turn the part",
+        "M6 at line 8: load tool 2 (not in the tool table)",
+    ]
+    assert r.reports[-1].final_position_steps == (7200, 0, 0, 0, 100)
+    np.testing.assert_array_equal(r.card.executed_pulses(), pulses.pulses)
+    assert job.report()["sections"] == 3 and job.finished
+
+
+def test_a_feed_hold_of_a_program_planned_whole_is_the_cards_hold():
+    """A hold 0.2 s into the first section: the card stops executing (HOLD) and the note
+    says so; the continue 1 s later lets it finish that section exactly."""
+    from nurbscnc.controller.simulate import simulate_job
+    from nurbscnc.controller.staged import StagedJob
+
+    mach = rotary_machine()
+    pulses, sections = _staged_parts(mach)
+    job = StagedJob([dataclasses.replace(sections[0], stop=None)], PERIOD_S)
+    seen = {}
+
+    def hold(j, c):
+        j.request_hold()
+
+    def look(j, c):
+        seen["state"], seen["note"], seen["ran"] = c.state, j.note(), c.executed_periods
+
+    def later(j, c):
+        seen["ran_later"] = c.executed_periods
+        j.resume()
+
+    cfg = CardConfig(speed=1.0, axis_names="xyzab", position_steps=(0, 0, 0, 0, 100))
+    r = simulate_job(job, cfg, events=[(0.3, hold), (0.5, look), (1.0, later)])
+    assert r.completed, r.error
+    assert seen["state"] is p.CardState.HOLD and seen["note"] == "waiting: feed hold"
+    assert seen["ran"] == seen["ran_later"] < 300  # nothing ran during the hold
+    np.testing.assert_array_equal(r.card.executed_pulses(), sections[0].pulses.pulses)
+
+
+def test_program_parts_start_where_the_part_before_ends():
+    """Segments cut at their stops: each part starts at the stop's X Y Z and at the A B C
+    the part before ends at (a Line's abc_deg end, a Rotate's end)."""
+    from nurbscnc.app.staged import abc_after, part_points, program_parts, turns
+    from nurbscnc.geometry.segments import Line, Pause, Program, Rotate
+
+    segs = (
+        Line((0, 0, 0), (4, 0, 0), 10.0, 1, abc_deg=(0, 0, 0, 30, 0, 0)),
+        Pause((4, 0, 0), 2, "M0"),
+        Rotate((4, 0, 0), (30, 0, 0), (30, 5, 0), 10.0, 3),
+        Pause((4, 0, 0), 4, "M6", tool=3),
+        Pause((4, 0, 0), 5, "M0"),
+        Line((4, 0, 0), (5, 1, 0), 10.0, 6, abc_deg=(30, 5, 0, 30, 5, 0)),
+    )
+    prog = Program(segs, np.zeros(3), rotary_axes=("a", "b"), start_abc_deg=(0.0, 0.0, 0.0))
+    parts = program_parts(prog)
+    assert [None if p is None else len(p.segments) for p, _ in parts] == [1, 1, None, 1]
+    assert [None if s is None else s.line for _, s in parts] == [2, 4, 5, None]
+    assert parts[1][0].start_abc_deg == (30.0, 0.0, 0.0)
+    assert parts[3][0].start_abc_deg == (30.0, 5.0, 0.0)
+    assert tuple(parts[3][0].start_mm) == (4.0, 0.0, 0.0)
+    assert abc_after(segs, (0, 0, 0)) == (30.0, 5.0, 0.0)
+    assert turns(segs[:1]) and turns(segs[2:3]) and not turns(segs[5:])
+    still = samples_of_move((0, 0, 0), (1, 0, 0), (0, 0, 0), (0, 0, 0), 0.01, ())
+    still = dataclasses.replace(still, abc_deg=None)
+    held = part_points(still, "xyzb", (30.0, 5.0, 0.0))
+    assert np.all(held[:, 3] == 5.0)
+    with pytest.raises(Exception, match="carry no A B C though the program moves B"):
+        part_points(still, "xyzb", (30.0, 5.0, 0.0), moves=True)
+
+
+def test_a_program_holding_a_away_from_zero_streams_in_sections(monkeypatch):
+    """A hand-built program with A held at 90° (it never moves: the planner of any version
+    can plan it) cut by an M0: two sections, A at 90 · 250 = 22500 steps throughout, X ends
+    at 6 mm = 4800 steps."""
+    from nurbscnc.app.stream import stream_job
+    from nurbscnc.controller.staged import StagedJob
+    from nurbscnc.geometry.segments import Line, Pause, Program
+    from nurbscnc.pipeline import RunOptions
+
+    mach = rotary_machine()
+    segs = (
+        Line((0, 0, 0), (4, 0, 0), 20.0, 1, abc_deg=(90, 0, 0, 90, 0, 0)),
+        Pause((4, 0, 0), 2, "M0"),
+        Line((4, 0, 0), (6, 0, 0), 20.0, 3, abc_deg=(90, 0, 0, 90, 0, 0)),
+    )
+    prog = Program(segs, np.zeros(3), rotary_axes=("a",), start_abc_deg=(90.0, 0.0, 0.0))
+    job, pulses = stream_job(prog, mach, RunOptions())
+    assert pulses is None and isinstance(job, StagedJob)
+    first, second = (s.pulses for s in job.parts)
+    assert first.axes == "xyza" and tuple(first.start_steps) == (0, 0, 0, 22500)
+    assert tuple(first.end_steps) == (3200, 0, 0, 22500) == tuple(second.start_steps)
+    assert tuple(second.end_steps) == (4800, 0, 0, 22500)
+    assert not first.pulses[:, 3].any() and not second.pulses[:, 3].any()
+    with pytest.raises(ConfigError, match="this program moves A"):
+        stream_job(prog, mach, RunOptions(), from_line=3)

@@ -137,11 +137,19 @@ def needs_whole_plan(options, prog=None) -> bool:
 
 def moves_rotary(prog) -> bool:
     """Whether the program uses a rotary axis (``Program.rotary_axes``). Such a program is
-    streamed planned whole, its samples' A B C beside X Y Z: the controller's re-planning
-    (a feed hold's stop along the path, an override above 100 %, run from line) follows the
+    streamed planned whole (:func:`~nurbscnc.app.staged.staged_job`: section by section,
+    waiting at its stops), its samples' A B C beside X Y Z: the controller's re-planning (a
+    feed hold's stop along the path, an override above 100 %, run from line) follows the
     XYZ path length, which stands still during a rotary-only move; this is the hook where
-    the controller takes rotary programs once its pieces carry A B C."""
+    the controller's :class:`~nurbscnc.controller.job.Job` takes rotary programs once its
+    pieces carry A B C."""
     return bool(getattr(prog, "rotary_axes", ()))
+
+
+def is_still(segments) -> bool:
+    """Whether ``segments`` make no motion: dwells and program stops only (a Rotate, though
+    a stop of the path, turns the rotary axes)."""
+    return all(s.kind in ("dwell", "pause") for s in segments)
 
 
 def stream_job(
@@ -165,7 +173,6 @@ def stream_job(
     from nurbscnc.controller.feed import WindowFeed
     from nurbscnc.controller.job import Job
     from nurbscnc.controller.stops import start_at_line
-    from nurbscnc.geometry.path import STOP_KINDS
     from nurbscnc.pipeline import run_program, window_plans
 
     if moves_rotary(prog) and (from_line is not None or override != 1.0):
@@ -179,8 +186,12 @@ def stream_job(
             prog = start_at_line(prog, from_line)
         except ValueError as exc:
             raise ConfigError(str(exc)) from None
-    if all(s.kind in STOP_KINDS for s in prog.segments):  # stops at the first move
+    if is_still(prog.segments):  # stops at the first move
         return None, None
+    if moves_rotary(prog):
+        from nurbscnc.app.staged import staged_job
+
+        return staged_job(prog, mach, options, optional_stop, tools), None
     if needs_whole_plan(options, prog):
         return None, pulses_of_samples(run_program(prog, mach, options).samples, mach)
 
@@ -388,10 +399,8 @@ class ProgramStream:
     def still(self) -> bool:
         """Does the program make no motion (offsets, tool changes, dwells only)? Then
         nothing is sent and the card is not asked where it stands."""
-        from nurbscnc.geometry.path import STOP_KINDS
-
         prog = self.program
-        return prog is not None and all(s.kind in STOP_KINDS for s in prog.segments)
+        return prog is not None and is_still(prog.segments)
 
     def plan(self, position_steps=None, from_line=None, optional_stop=False, override=1.0):
         """``(job, pulses, program)`` (:func:`stream_job`) of the program started where the
