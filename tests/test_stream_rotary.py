@@ -516,3 +516,42 @@ def test_a_program_holding_a_away_from_zero_streams_in_sections(monkeypatch):
     assert not first.pulses[:, 3].any() and not second.pulses[:, 3].any()
     with pytest.raises(ConfigError, match="this program moves A"):
         stream_job(prog, mach, RunOptions(), from_line=3)
+
+
+def test_a_rotary_program_over_a_pty_sections_and_all():
+    """The real sender on a pseudo-terminal: the staged sections of an X + A + B program to
+    a card driving X Y Z A B (the operator's continue at M0 and M6 given as soon as the job
+    waits), then the same first section to a version-3 card: refused, nothing executed."""
+    from nurbscnc.controller.run import run_job
+    from nurbscnc.controller.staged import StagedJob
+    from nurbscnc.output.stream.sender import Sender, SenderOptions, open_port
+    from tests.stream_helpers import card_on
+
+    mach = rotary_machine()
+    pulses, sections = _staged_parts(mach)
+    job = StagedJob(sections, PERIOD_S)
+
+    def wait(j, _reports):
+        assert j.waiting is not None
+        j.resume()
+
+    cfg = CardConfig(speed=None, axis_names="xyzab", position_steps=(0, 0, 0, 0, 100))
+    with card_on("pty", cfg) as (card, ep):
+        port = open_port(ep.path)
+        try:
+            reports = run_job(job, Sender(port, SenderOptions()), wait)
+        finally:
+            port.close()
+    assert [r.final_position_steps for r in reports][-1] == (7200, 0, 0, 0, 100)
+    np.testing.assert_array_equal(card.executed_pulses(), pulses.pulses)
+    first = sections[0].pulses
+    with card_on("pty", CardConfig(speed=None)) as (card, ep):
+        port = open_port(ep.path)
+        try:
+            with pytest.raises(
+                CardAxesError, match="protocol 3 \\(X Y Z only\\); this program moves A B"
+            ):
+                Sender(port, SenderOptions()).stream(first)
+        finally:
+            port.close()
+    assert card.executed_pulses().shape[0] == 0
