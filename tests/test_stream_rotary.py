@@ -555,3 +555,36 @@ def test_a_rotary_program_over_a_pty_sections_and_all():
         finally:
             port.close()
     assert card.executed_pulses().shape[0] == 0
+
+
+def test_an_xyz_job_replaced_chunk_by_chunk_on_a_card_with_a():
+    """The window-by-window job of an X Y Z program (its sections cut into chunks of 500
+    periods, each replacing the unsent rest of the link's program) to a version-4 card
+    driving A at 321 steps: every chunk gets the A column of zeros, the card runs exactly
+    ``run``'s X Y Z pulses and A stays at 321."""
+    from nurbscnc.controller import job as job_module
+    from nurbscnc.controller.feed import ScheduledFeed
+    from nurbscnc.controller.job import Job
+    from nurbscnc.controller.simulate import simulate_job
+    from nurbscnc.output.stream.quantise import quantise
+    from nurbscnc.pipeline import run_program
+    from nurbscnc.plan.lookahead import plan_windows
+    from nurbscnc.program.interpret import interpret_text
+
+    text = "G21 G90 G0 X0 Y0 Z1\nG1 Z0 F600\nG1 X10 F1200\nG2 X20 Y0 I5 J0\nG0 Z2\nM2\n"
+    prog, mach = interpret_text(text), load_machine()
+    run = run_program(prog, mach)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(job_module, "CHUNK_PERIODS", 500)
+        windows = list(plan_windows(prog, mach))
+        feed = ScheduledFeed(windows, [0.0] * len(windows))
+        job = Job(None, prog, mach, feed=feed)
+        cfg = CardConfig(speed=1.0, axis_names="xyza", position_steps=(0, 0, 0, 321))
+        r = simulate_job(job, cfg)
+    assert r.completed, r.error
+    plain = quantise(run.samples.points_mm, mach.steps.per_mm, mach.servo.period_s)
+    ran = r.card.executed_pulses()
+    assert ran.shape[1] == 4 and plain.periods > 1000
+    np.testing.assert_array_equal(ran[:, :3], plain.pulses)
+    assert not ran[:, 3].any() and r.card.position[3] == 321
+    assert r.reports[-1].axes == "xyza"
