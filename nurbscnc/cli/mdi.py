@@ -79,7 +79,8 @@ def mdi(blocks, **kwargs):
     type=click.FloatRange(min=0.0, min_open=True),
     default=None,
     metavar="MM_PER_MIN",
-    help="Move at this feed (G1) instead of the rapid rate (G0).",
+    help="Move at this feed (G1) instead of the rapid rate (G0); deg/min for a jog of "
+    "A, B or C alone (LinuxCNC's rate).",
 )
 @_link_options
 @planning_options
