@@ -80,11 +80,6 @@ def steps_per_unit(mach, axes: str) -> np.ndarray:
     return np.asarray(out, dtype=float)
 
 
-def units_of(axes: str) -> list[str]:
-    """The unit of each axis of ``axes``: "mm" (X Y Z) or "deg" (A B C)."""
-    return ["mm" if a in LINEAR_AXES else "deg" for a in axes]
-
-
 def position_units(steps, mach, axes: str) -> tuple[list[float], dict]:
     """``(xyz_mm, abc_deg)`` of a card position ``steps`` over the axes ``axes``: X Y Z in
     mm and ``{"a": deg, …}`` for the rotary ones the profile gives steps per degree (an
