@@ -491,12 +491,16 @@ def test_program_parts_start_where_the_part_before_ends():
         part_points(still, "xyzb", (30.0, 5.0, 0.0), moves=True)
 
 
-def test_a_program_holding_a_away_from_zero_streams_in_sections(monkeypatch):
-    """A hand-built program with A held at 90° (it never moves: the planner of any version
-    can plan it) cut by an M0: two sections, A at 90 · 250 = 22500 steps throughout, X ends
-    at 6 mm = 4800 steps."""
+def test_a_program_holding_a_away_from_zero(monkeypatch):
+    """A hand-built program with A held at 90° (the card's A: it never turns, so any
+    planner can plan it) cut by an M0. ``stream`` takes it window by window as an X Y Z
+    program, the card's A standing at 90 · 250 = 22500 steps; planned whole in sections
+    (:func:`staged_job`) it carries A at 22500 throughout; X ends at 6 mm = 4800 steps.
+    A program that turns A refuses --from-line before anything is planned."""
+    from nurbscnc.app.staged import staged_job
     from nurbscnc.app.stream import stream_job
-    from nurbscnc.controller.staged import StagedJob
+    from nurbscnc.controller.job import Job
+    from nurbscnc.controller.simulate import simulate_job
     from nurbscnc.geometry.segments import Line, Pause, Program
     from nurbscnc.pipeline import RunOptions
 
@@ -508,14 +512,26 @@ def test_a_program_holding_a_away_from_zero_streams_in_sections(monkeypatch):
     )
     prog = Program(segs, np.zeros(3), rotary_axes=("a",), start_abc_deg=(90.0, 0.0, 0.0))
     job, pulses = stream_job(prog, mach, RunOptions())
-    assert pulses is None and isinstance(job, StagedJob)
-    first, second = (s.pulses for s in job.parts)
+    assert pulses is None and isinstance(job, Job)
+    cfg = CardConfig(speed=None, axis_names="xyza", position_steps=(0, 0, 0, 22500))
+    r = simulate_job(job, cfg, events=[(3.0, lambda j, _c: j.resume())])
+    job.feed.close()
+    assert r.completed, r.error
+    assert r.reports[0].final_position_steps == (3200, 0, 0, 22500)
+    assert r.reports[-1].final_position_steps == (4800, 0, 0, 22500)
+
+    staged = staged_job(prog, mach, RunOptions())
+    first, second = (s.pulses for s in staged.parts)
     assert first.axes == "xyza" and tuple(first.start_steps) == (0, 0, 0, 22500)
     assert tuple(first.end_steps) == (3200, 0, 0, 22500) == tuple(second.start_steps)
     assert tuple(second.end_steps) == (4800, 0, 0, 22500)
     assert not first.pulses[:, 3].any() and not second.pulses[:, 3].any()
+
+    turning = dataclasses.replace(
+        prog, segments=(dataclasses.replace(segs[0], abc_deg=(90, 0, 0, 100, 0, 0)), *segs[1:])
+    )
     with pytest.raises(ConfigError, match="this program moves A"):
-        stream_job(prog, mach, RunOptions(), from_line=3)
+        stream_job(turning, mach, RunOptions(), from_line=3)
 
 
 def test_a_rotary_program_over_a_pty_sections_and_all():

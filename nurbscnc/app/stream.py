@@ -136,14 +136,17 @@ def needs_whole_plan(options, prog=None) -> bool:
 
 
 def moves_rotary(prog) -> bool:
-    """Whether the program uses a rotary axis (``Program.rotary_axes``). Such a program is
-    streamed planned whole (:func:`~nurbscnc.app.staged.staged_job`: section by section,
-    waiting at its stops), its samples' A B C beside X Y Z: the controller's re-planning (a
-    feed hold's stop along the path, an override above 100 %, run from line) follows the
-    XYZ path length, which stands still during a rotary-only move; this is the hook where
-    the controller's :class:`~nurbscnc.controller.job.Job` takes rotary programs once its
-    pieces carry A B C."""
-    return bool(getattr(prog, "rotary_axes", ()))
+    """Whether the program turns a rotary axis (a Rotate, or a move whose A B C change; one
+    that only holds them where the card stands streams as an X Y Z program, the card's
+    rotary axes standing still). Such a program is streamed planned whole
+    (:func:`~nurbscnc.app.staged.staged_job`: section by section, waiting at its stops),
+    its samples' A B C beside X Y Z: the controller's re-planning (a feed hold's stop along
+    the path, an override above 100 %, run from line) follows the XYZ path length, which
+    stands still during a rotary-only move; this is the hook where the controller's
+    :class:`~nurbscnc.controller.job.Job` takes rotary programs once its pieces carry A B C."""
+    from nurbscnc.app.staged import turns
+
+    return bool(getattr(prog, "rotary_axes", ())) and turns(prog.segments)
 
 
 def is_still(segments) -> bool:
