@@ -122,7 +122,7 @@ def _progress_bar(enabled: bool, total: int, keys: bool = False, where=None):
     type=click.IntRange(1, 80),
     default=16,
     show_default=True,
-    help="Periods per frame (at most 80 with 3 axes).",
+    help="Periods per frame (at most 80 with 3 axes, 59 with 4, 38 with 6).",
 )
 @link_timeout_option
 @stall_limit_option
