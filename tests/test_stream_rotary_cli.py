@@ -68,7 +68,8 @@ def _missing_rotary_layer() -> str | None:
 
 
 _MISSING = _missing_rotary_layer()
-pytestmark = pytest.mark.skipif(_MISSING is not None, reason=_MISSING or "")
+#: the program tests need the interpreter and the planner with rotary axes
+needs_rotary = pytest.mark.skipif(_MISSING is not None, reason=_MISSING or "")
 
 
 #: Mixed X Z A moves, an M0 after line 4 (the card at X20 Z-1 A90), then Y, Z, A and B.
@@ -96,6 +97,7 @@ def here(tmp_path, monkeypatch):
     return folder
 
 
+@needs_rotary
 def test_a_rotary_program_waits_at_m0_and_ends_at_the_steps_of_its_text(here):
     """From a card at A 10°: at M0 the card stands at X20 Z-1 A90 = (16000, 0, -400, 22500,
     0) while the stream waits; SIGUSR2 continues to X20 Y0 Z2 A180 B15 = (16000, 0, 800,
@@ -130,6 +132,7 @@ def test_a_rotary_program_waits_at_m0_and_ends_at_the_steps_of_its_text(here):
     assert body["sections"] == 2 and body["axes"] == "xyzab"
 
 
+@needs_rotary
 def test_a_version_3_card_is_refused_with_exit_2(here):
     (here / "part.nc").write_text(MIXED)
     with card_on("pty", CardConfig(speed=None)) as (sim, ep):
@@ -140,6 +143,7 @@ def test_a_version_3_card_is_refused_with_exit_2(here):
     assert "Traceback" not in r.output and executed == 0
 
 
+@needs_rotary
 def test_an_indexer_of_rotary_only_moves_ends_where_its_text_says(here):
     """LinuxCNC's B indexer (tests/programs/rotary/b_indexer.ngc): four G91 B90 rapids,
     then G0 B0; it ends at X0 Y0 Z20 B0, A held at the card's 10°: (0, 0, 8000, 2500, 0)."""
@@ -159,6 +163,7 @@ def test_an_indexer_of_rotary_only_moves_ends_where_its_text_says(here):
     assert int(ran[:, 4].clip(min=0).sum()) == 14400 == -int(ran[:, 4].clip(max=0).sum())
 
 
+@needs_rotary
 def test_card_position_and_jog_in_degrees(here):
     cfg = CardConfig(speed=None, axis_names="xyzab", position_steps=(800, 0, 0, 2500, -80))
     with card_on("pty", cfg) as (sim, ep):
@@ -172,3 +177,52 @@ def test_card_position_and_jog_in_degrees(here):
         r = run_cli(["jog", "C+1", "--port", ep.path, "--quiet", *MACHINE])
         assert r.exit_code == 2 and "jog: the machine has no C axis" in r.stderr
     assert final == [1600, 0, 0, 2500 + 20 * 250, -80]
+
+
+def _missing_rotary_files() -> str | None:
+    """Why a points file with an ``a`` column cannot be streamed here (None: it can): the
+    profile must read ``[axis_limits.a]`` and the points reader its rotary columns."""
+    from nurbscnc.output import files
+
+    if "start_abc_deg" not in {f.name for f in dataclasses.fields(InterpretOptions)}:
+        return "needs the profile's rotary tables ([axis_limits.a])"
+    if files.point_header("t,x,y,z,a\n") is None:
+        return "needs the points files' rotary columns (a, b, c)"
+    return None
+
+
+@pytest.mark.skipif(_missing_rotary_files() is not None, reason=_missing_rotary_files() or "")
+def test_a_points_file_with_an_a_column_streams_to_a_card_driving_a(tmp_path, monkeypatch):
+    """``t,x,y,z,a``: X 0 → 2 mm and A 0 → 30° on a smootherstep over 0.4 s. The card ends at
+    (2 · 800, 0, 0, 30 · 250) = (1600, 0, 0, 7500) steps, every period's running sum
+    round(value · steps per unit); a version-3 card refuses it (exit 2)."""
+    import numpy as np
+
+    folder = write_mixed_steps_machine(tmp_path, monkeypatch)
+    with open(folder / "m.toml", "a", encoding="utf-8") as fh:
+        fh.write(ROTARY_TABLES)
+    n = 401
+    t = np.arange(n) * 1e-3
+    x = t / t[-1]
+    u = x**3 * (10.0 + x * (-15.0 + 6.0 * x))
+    rows = np.column_stack([t, 2.0 * u, 0 * u, 0 * u, 30.0 * u])
+    lines = ["t,x,y,z,a"] + [f"{r[0]:.6f},{r[1]:.9f},0,0,{r[4]:.9f}" for r in rows]
+    (folder / "points.csv").write_text("\n".join(lines) + "\n")
+    cfg = CardConfig(speed=None, axis_names="xyza")
+    with card_on("pty", cfg) as (sim, ep):
+        r = run_cli(["stream", "points.csv", "--port", ep.path, "--json", *MACHINE])
+        final, ran = sim.position.tolist(), sim.executed_pulses()
+    assert r.exit_code == 0, r.output
+    assert final == [1600, 0, 0, 7500]
+    x_steps = np.rint(np.round(2.0 * u, 9) * 800.0)
+    a_steps = np.rint(np.round(30.0 * u, 9) * 250.0)
+    np.testing.assert_array_equal(np.cumsum(ran[:, 0]), x_steps[1:])
+    np.testing.assert_array_equal(np.cumsum(ran[:, 3]), a_steps[1:])
+    assert json.loads(r.stdout.strip().splitlines()[-1])["final_abc_deg"] == {"a": 30.0}
+    with card_on("pty", CardConfig(speed=None)) as (sim, ep):
+        r = run_cli(["stream", "points.csv", "--port", ep.path, *MACHINE])
+        assert sim.executed_pulses().shape[0] == 0
+    assert (
+        r.exit_code == 2
+        and "the card speaks protocol 3 (X Y Z only); this program moves A" in r.stderr
+    )
