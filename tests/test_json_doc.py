@@ -247,6 +247,7 @@ def test_errors_program_file_and_option(files):
 #: with the stream's.
 JOB_KEYS = {
     "final_position_mm",
+    "final_abc_deg",
     "coordinate_system",
     "final_work_position_mm",
     "sections",
