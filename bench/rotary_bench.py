@@ -42,6 +42,7 @@ import dataclasses
 import hashlib
 import json
 import math
+import re
 import subprocess
 import sys
 import tempfile
@@ -187,9 +188,12 @@ def nearest_on_polyline(points: np.ndarray, polyline: np.ndarray, chunk: int = 2
 
 def one_way(points_xyza: np.ndarray, path_xyza: np.ndarray, radius_mm: float) -> dict:
     """Largest distances from the points to the path, both (N, 4) [mm, deg]: X Y Z [mm],
-    A [deg] and on the part's surface [mm] (to the nearest point in that metric)."""
+    A [deg] and on the part's surface [mm] (to the nearest point of the path in that
+    metric)."""
     p = surface_coords(points_xyza, radius_mm)
-    feet = nearest_on_polyline(p, surface_coords(path_xyza, radius_mm))
+    # the path walked at DENSE_STEP_MM, so that the nearest vertices of a point lie on its
+    # nearest segments (a long straight segment has vertices near every point beside it)
+    feet = nearest_on_polyline(p, densify(surface_coords(path_xyza, radius_mm), DENSE_STEP_MM))
     diff = p - feet
     scale = radius_mm * math.pi / 180.0
     return {
@@ -224,6 +228,20 @@ def axis_peaks(xyza: np.ndarray) -> dict:
         "a_accel_max_deg_s2": float(np.abs(acc).max()) if acc.size else 0.0,
         "xyz_speed_max_mm_s": float(vxyz.max()) if vxyz.size else 0.0,
     }
+
+
+def g93_programmed_s(text: str) -> float:
+    """Sum of the programmed durations [s] of a program's inverse-time moves: 60 / F of
+    every G1 under G93 (the generated programs' literal words; F on every G93 move)."""
+    inverse, total = False, 0.0
+    for raw in text.splitlines():
+        words = re.findall(r"([A-Z])(-?[\d.]+)", re.sub(r"\(.*?\)", "", raw).upper())
+        codes = {v for k, v in words if k == "G"}
+        inverse = "93" in codes or (inverse and "94" not in codes)
+        feeds = [float(v) for k, v in words if k == "F"]
+        if inverse and "1" in codes and feeds:
+            total += 60.0 / feeds[-1]
+    return total
 
 
 # --------------------------------------------------------------------------- LinuxCNC
@@ -462,6 +480,9 @@ def main(argv=None) -> int:
                 "program_sha256": sha256(ROOT / case.program),
                 "linuxcnc": _linuxcnc_summary(case, golden),
             }
+            g93_s = g93_programmed_s((ROOT / case.program).read_text())
+            if g93_s:
+                entry["g93_programmed_s"] = g93_s
             if not args.linuxcnc_only:
                 usable = golden if golden and "stale" not in golden else None
                 entry["nurbscnc"] = nurbscnc_row(case, usable, tmp)
