@@ -442,7 +442,8 @@ def print_table(cases: dict) -> None:
         lc, nc = r.get("linuxcnc") or {}, r.get("nurbscnc") or {}
         lc_t = f"{lc['cycle_time_s']:.3f} s" if "cycle_time_s" in lc else "–"
         if "refused" in nc:
-            print(f"{name:24} {lc_t:>10} {'refused':>10} {'–':>7}  {nc['refused'][:60]}")
+            why = nc["refused"].split("error:", 1)[-1].strip()[:70]
+            print(f"{name:24} {lc_t:>10} {'refused':>10} {'–':>7}  {why}")
             continue
         nc_t = f"{nc['cycle_time_s']:.3f} s" if "cycle_time_s" in nc else "–"
         ratio = f"{nc['ratio']:.3f}" if "ratio" in nc else "–"
