@@ -23,7 +23,8 @@ committed golden is used (the runs need no LinuxCNC).
 
 **nurbscnc** runs through its CLI as a user runs it, ``nurbscnc run PROGRAM --machine
 bench/programs/linuxcnc_sim_a.toml --json -o points.csv`` (columns ``t,x,y,z,a,…``). A
-refusal (a nurbscnc without rotary support, exit 2) is recorded with its message.
+refusal (a nurbscnc without rotary support, exit 2) is recorded with its message, a crash
+(any other exit) as an error.
 
 **Compared**: the cycle-time ratio (motion spans: the last sample at rest before the first
 motion of any axis, A included, to the first at rest after the last) and the path agreement
@@ -32,7 +33,8 @@ path (a polyline) in the part-surface metric (x, y, z, r·a·π/180), r the work
 (an A difference of δ degrees is r·δ·π/180 mm on the part's surface); the largest X Y Z
 distance to that point [mm], the largest A difference [deg] and the largest surface distance
 [mm]. LinuxCNC's path is the golden's decimated polyline (within ``DECIMATE_TOL_MM`` of every
-sample), walked at ``DENSE_STEP_MM`` for the LinuxCNC → nurbscnc direction.
+sample), walked at ``DENSE_STEP_MM`` for the LinuxCNC → nurbscnc direction (so the figures
+are within ``DECIMATE_TOL_MM`` + ``DENSE_STEP_MM``/2 of those of the full 1 ms samples).
 """
 
 from __future__ import annotations
@@ -67,7 +69,8 @@ SERVO_PERIOD_S = 1e-3
 #: Largest distance [mm, part-surface metric] of a recorded sample from the golden's
 #: decimated path.
 DECIMATE_TOL_MM = 1e-3
-#: Step [mm] at which the decimated path is walked for the LinuxCNC → nurbscnc distances.
+#: Step [mm, part-surface metric] at which a path is walked: the vertices of the nearest-point
+#: search (both directions), and LinuxCNC's points in the LinuxCNC → nurbscnc direction.
 DENSE_STEP_MM = 0.01
 #: Nearest vertices whose adjacent segments are searched for a point's nearest segment.
 NEAREST_VERTICES = 12
@@ -367,11 +370,10 @@ def run_nurbscnc(case: Case, tmp: Path) -> dict:
     proc = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT, check=False)
     wall = time.perf_counter() - t0
     if proc.returncode != 0 or not out.is_file():
-        return {
-            "refused": (proc.stderr or proc.stdout).strip()[-2000:],
-            "exit": proc.returncode,
-            "wall_s": wall,
-        }
+        # exit 2: nurbscnc refused the program (bad input, or no rotary support); any other
+        # failure is a crash, recorded as an error
+        key = "refused" if proc.returncode == 2 else "error"
+        return {key: (proc.stderr or proc.stdout).strip()[-2000:], "exit": proc.returncode}
     try:
         summary = json.loads(proc.stdout)
     except json.JSONDecodeError:
@@ -383,7 +385,7 @@ def run_nurbscnc(case: Case, tmp: Path) -> dict:
 def nurbscnc_row(case: Case, golden: dict | None, tmp: Path) -> dict:
     """nurbscnc's figures on one case, with the comparison to LinuxCNC's golden."""
     res = run_nurbscnc(case, tmp)
-    if "refused" in res:
+    if "refused" in res or "error" in res:
         return res
     cols = res["columns"]
     if "a" not in cols:
@@ -441,9 +443,10 @@ def print_table(cases: dict) -> None:
     for name, r in cases.items():
         lc, nc = r.get("linuxcnc") or {}, r.get("nurbscnc") or {}
         lc_t = f"{lc['cycle_time_s']:.3f} s" if "cycle_time_s" in lc else "–"
-        if "refused" in nc:
-            why = nc["refused"].split("error:", 1)[-1].strip()[:70]
-            print(f"{name:24} {lc_t:>10} {'refused':>10} {'–':>7}  {why}")
+        failed = next((k for k in ("refused", "error") if k in nc), None)
+        if failed:
+            why = nc[failed].split("error:", 1)[-1].strip()[:70]
+            print(f"{name:24} {lc_t:>10} {failed:>10} {'–':>7}  {why}")
             continue
         nc_t = f"{nc['cycle_time_s']:.3f} s" if "cycle_time_s" in nc else "–"
         ratio = f"{nc['ratio']:.3f}" if "ratio" in nc else "–"
