@@ -344,6 +344,38 @@ def test_bench_runs_nurbscnc_without_crashing(tmp_path):
     assert set(agreement) >= {"nurbscnc_to_linuxcnc", "linuxcnc_to_nurbscnc"}
 
 
+def test_recorder_trims_to_the_motion_of_any_axis(tmp_path):
+    """bench/linuxcnc_sim_a/lcnc_raw2csv_a.py on a hand-made halsampler recording (tag,
+    line, x y z in µm, a in millidegrees): a move of A alone is motion; the CSV keeps the
+    last sample at rest before it and the first after it, in mm and degrees, t from 0."""
+    raw = tmp_path / "samples.raw"
+    a_mdeg = [0, 0, 0, 500, 1500, 2000, 2000, 2000]
+    raw.write_text("".join(f"{k} 7 1000 0 -5 {a}\n" for k, a in enumerate(a_mdeg, 40)))
+    status = tmp_path / "out.csv.status.json"
+    status.write_text(json.dumps({"errors": [], "overruns": 0}))
+    out = tmp_path / "out.csv"
+    script = ROOT / "bench" / "linuxcnc_sim_a" / "lcnc_raw2csv_a.py"
+    res = subprocess.run(
+        [sys.executable, str(script), str(raw), str(out), str(status)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert res.returncode == 0, res.stderr
+    lines = out.read_text().splitlines()
+    assert lines[0] == "t,x,y,z,a,line"
+    rows = np.array([[float(v) for v in r.split(",")] for r in lines[1:]])
+    np.testing.assert_allclose(rows[:, 4], [0.0, 0.5, 1.5, 2.0])
+    np.testing.assert_allclose(rows[:, 0], [0.0, 0.001, 0.002, 0.003])
+    np.testing.assert_allclose(rows[:, 1:4], [[1.0, 0.0, -0.005]] * 4)
+    recorded = json.loads(status.read_text())
+    assert (recorded["samples"], recorded["cycle_time_s"], recorded["sample_gaps"]) == (
+        4,
+        0.003,
+        0,
+    )
+
+
 # --------------------------------------------------------------------------- live
 
 
