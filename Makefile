@@ -61,6 +61,7 @@ bench: $(STAMP)
 	$(BIN)/python bench/optimum.py $(BENCH_FLAG) --out $(BENCH_OUT)/optimum_results.json
 	$(BIN)/python bench/table4.py $(BENCH_FLAG) --out $(BENCH_OUT)/table4_results.json
 	$(BIN)/python bench/compile_bench.py $(BENCH_FLAG) --out $(BENCH_OUT)/compile_results.json
+	$(BIN)/python bench/rotary_bench.py $(BENCH_FLAG) --out $(BENCH_OUT)/rotary_results.json
 
 # The fuzz tests with a large budget (make test runs them small): mutants of the corpus and
 # hypothesis programs through check/plan; counts in out/fuzz-report.json. Then the planner's

@@ -106,3 +106,11 @@ class StreamError(NurbsCncError):
     """Trouble talking to the motion card."""
 
     exit_code = EXIT_IO
+
+
+class CardAxesError(StreamError):
+    """The card does not drive an axis the program moves (a version-3 card and a rotary
+    axis): refused at the handshake, before anything is streamed; bad input, not port
+    trouble."""
+
+    exit_code = EXIT_INPUT

@@ -19,8 +19,9 @@ precision where the golden had to come from rs274):
 * kind: traverse ↔ rapid Line, feed ↔ Line, arc ↔ Arc, dwell ↔ Dwell, pause ↔ a segment of kind
   ``pause`` (probe and rigid-tap have no nurbscnc counterpart and fail the comparison);
 * the source line (where the golden knows it: LinuxCNC's line 0 means it does not);
-* end point (x, y, z) within tol; A/B/C must not move (nurbscnc is 3-axis: a program whose
-  golden moves A, B or C must be refused);
+* end point (x, y, z) within tol; a program whose golden moves A, B or C is refused on a
+  three-axis machine and compared, six coordinates a move, on one with A, B and C
+  (``tests/linuxcnc_rotary.py``);
 * arc: centre within tol, normal equal to 1e-12, and the turn: the sign of ``angle_rad`` is the
   sign of LinuxCNC's rotation and ``|angle_rad|`` equals the angle LinuxCNC's rotation count
   gives from start, centre and end (compared as an arc length: radius × Δangle within tol);
@@ -224,13 +225,19 @@ def check_golden(name: str, role: str, golden: dict, program_path: Path) -> None
       role ``program``: nurbscnc must accept it with the same moves;
     * LinuxCNC refuses it (other than for a lenient rule): nurbscnc must refuse it, at the same
       line;
-    * role ``refused`` (outside 3-axis milling) or LinuxCNC moves A/B/C: nurbscnc must refuse it.
+    * LinuxCNC moves A/B/C: refused on a three-axis machine, LinuxCNC's moves on one with A, B
+      and C (:func:`_check_rotary_golden`), whatever the role (the rotary programs the
+      manifest calls refused were refused for their rotary motion);
+    * role ``refused`` (outside 3-axis milling): nurbscnc must refuse it.
     """
     from nurbscnc.errors import ProgramError
 
     lenient = not golden["accepted"] and golden["error"]["message"].startswith(LENIENT_ERRORS)
     runs = golden["accepted"] or lenient
-    must_refuse = role == "refused" or (runs and moves_rotary(golden))
+    if runs and moves_rotary(golden):
+        _check_rotary_golden(golden, program_path)
+        return
+    must_refuse = role == "refused"
     if runs and not must_refuse:
         try:
             program = run_nurbscnc(program_path)
@@ -257,6 +264,22 @@ def check_golden(name: str, role: str, golden: dict, program_path: Path) -> None
         return
     why = "outside 3-axis milling" if must_refuse else golden["error"]["message"]
     raise AssertionError(f"nurbscnc accepts a program it must refuse ({why})")
+
+
+def _check_rotary_golden(golden: dict, program_path: Path) -> None:
+    """A program whose LinuxCNC run turns A, B or C: refused on a three-axis machine (at a
+    rotary word: "the machine has no A axis"), LinuxCNC's moves on one with A, B and C (six
+    coordinates and the feeds: tests/linuxcnc_rotary.py)."""
+    from nurbscnc.errors import ProgramError
+    from tests.linuxcnc_rotary import compare_rotary, run_rotary
+
+    try:
+        run_nurbscnc(program_path)
+    except ProgramError as exc:
+        assert "the machine has no" in exc.message, exc.message
+    else:
+        raise AssertionError("a three-axis machine accepts a program that turns A, B or C")
+    compare_rotary(golden, run_rotary(program_path), tol=golden["tolerance_mm"])
 
 
 def _has_comp(path: Path) -> bool:

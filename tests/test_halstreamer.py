@@ -91,32 +91,42 @@ def test_batch_writes_hs_files(tmp_path):
 
 # --- played by LinuxCNC ----------------------------------------------------------------------
 
-HAL = """loadrt threads name1=servo period1={period_ns} fp1=1
-loadrt streamer depth={depth} cfg={cfg}
-loadrt stepgen step_type=2,2,2
-loadrt sampler depth={depth} cfg=fffsss
-addf streamer.0 servo
-addf stepgen.make-pulses servo
-addf stepgen.capture-position servo
-addf stepgen.update-freq servo
-addf sampler.0 servo
-net x-cmd streamer.0.pin.0 => stepgen.0.position-cmd sampler.0.pin.0
-net y-cmd streamer.0.pin.1 => stepgen.1.position-cmd sampler.0.pin.1
-net z-cmd streamer.0.pin.2 => stepgen.2.position-cmd sampler.0.pin.2
-net x-counts stepgen.0.counts => sampler.0.pin.3
-net y-counts stepgen.1.counts => sampler.0.pin.4
-net z-counts stepgen.2.counts => sampler.0.pin.5
-setp stepgen.0.position-scale {scale[0]}
-setp stepgen.1.position-scale {scale[1]}
-setp stepgen.2.position-scale {scale[2]}
-setp stepgen.0.enable 1
-setp stepgen.1.enable 1
-setp stepgen.2.enable 1
-loadusr -w halstreamer {stream}
-start
-loadusr -w halsampler -n {count} {record}
-stop
-"""
+
+def hal_graph(pins: int, **values) -> str:
+    """The HAL file of :func:`play` for ``pins`` streamer pins (x y z, then the rotary
+    axes): each pin drives a step generator in position mode; the sampler records the pins,
+    then the generators' counts."""
+    names = "xyzabc"[:pins]
+    lines = [
+        "loadrt threads name1=servo period1={period_ns} fp1=1",
+        "loadrt streamer depth={depth} cfg={cfg}",
+        f"loadrt stepgen step_type={','.join(['2'] * pins)}",
+        f"loadrt sampler depth={{depth}} cfg={'f' * pins}{'s' * pins}",
+        "addf streamer.0 servo",
+        "addf stepgen.make-pulses servo",
+        "addf stepgen.capture-position servo",
+        "addf stepgen.update-freq servo",
+        "addf sampler.0 servo",
+    ]
+    lines += [
+        f"net {n}-cmd streamer.0.pin.{k} => stepgen.{k}.position-cmd sampler.0.pin.{k}"
+        for k, n in enumerate(names)
+    ]
+    lines += [
+        f"net {n}-counts stepgen.{k}.counts => sampler.0.pin.{pins + k}"
+        for k, n in enumerate(names)
+    ]
+    lines += [f"setp stepgen.{k}.position-scale {{scale[{k}]}}" for k in range(pins)]
+    lines += [f"setp stepgen.{k}.enable 1" for k in range(pins)]
+    lines += [
+        "loadusr -w halstreamer {stream}",
+        "start",
+        "loadusr -w halsampler -n {count} {record}",
+        "stop",
+    ]
+    return "\n".join(lines).format(**values) + "\n"
+
+
 # One LinuxCNC/HAL session at a time on a machine (fixed shared-memory keys): the same lock as
 # /work/shared/tools/linuxcnc-sim/run_linuxcnc.sh.
 LOCK = os.path.join(os.environ.get("TMPDIR", "/tmp"), "linuxcnc-sim.flock")
@@ -146,8 +156,10 @@ def hal_lock(wait_s: float = HAL_LOCK_WAIT_S):
             fcntl.flock(fh, fcntl.LOCK_UN)
 
 
-def play(stream_text: str, n_points: int, scale) -> np.ndarray:
-    """Run the HAL graph above under halrun; the sampler's rows (count, 6)."""
+def play(stream_text: str, n_points: int, scale, cfg: str = STREAMER_CFG) -> np.ndarray:
+    """Run :func:`hal_graph` (one step generator per pin of the streamer ``cfg``, at the
+    steps per unit ``scale``) under halrun; the sampler's rows (count, 2 × pins): the
+    streamed values, then the step counts."""
     work = tempfile.mkdtemp(prefix="nurbscnc-hal-")
     try:
         os.chmod(work, 0o755)
@@ -159,10 +171,11 @@ def play(stream_text: str, n_points: int, scale) -> np.ndarray:
         count = n_points + 50  # the end point held for 50 more periods
         hal = os.path.join(work, "play.hal")
         Path(hal).write_text(
-            HAL.format(
+            hal_graph(
+                len(cfg),
                 period_ns=1_000_000,
                 depth=count + 16,
-                cfg=STREAMER_CFG,
+                cfg=cfg,
                 scale=scale,
                 stream=stream,
                 record=record,

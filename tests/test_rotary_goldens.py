@@ -1,11 +1,11 @@
 """LinuxCNC's moves for the rotary programs (tests/programs/rotary): the goldens' own checks.
 
-nurbscnc does not run rotary programs yet (docs/rotary.md plans it). These tests check that
-the goldens the later work will be compared with are well-formed and say what LinuxCNC's
-semantics say (G91 A steps add up, G20 leaves degrees alone, a G93 move takes 1/F minutes,
-a rotary-only move's rate is the F word in degrees per minute), that LinuxCNC still says so
-(re-recorded live when it is installed), and pin today's refusal: ``nurbscnc check`` stops
-each program with exit 2 at its first rotary word that moves an axis.
+These tests check that the goldens are well-formed and say what LinuxCNC's semantics say (G91
+A steps add up, G20 leaves degrees alone, a G93 move takes 1/F minutes, a rotary-only move's
+rate is the F word in degrees per minute), that LinuxCNC still says so (re-recorded live when
+it is installed), and the differential: nurbscnc's segments are LinuxCNC's moves, six
+coordinates and the feed semantics each (tests/linuxcnc_rotary.py), with the refusals at the
+word's line and column.
 
 The expected numbers come from the programs' text (F words, increments, formulas), not from
 the goldens.
@@ -24,6 +24,7 @@ import pytest
 from click.testing import CliRunner
 
 from nurbscnc.cli.main import main
+from tests.linuxcnc_rotary import WRAPPED_AXES, block_line, compare_rotary, run_rotary
 
 ROOT = Path(__file__).resolve().parents[1]
 PROGRAMS = ROOT / "tests" / "programs" / "rotary"
@@ -184,52 +185,141 @@ def test_b_indexer_steps_a_quarter_turn():
     assert index == [90.0, 180.0, 270.0, 360.0]
 
 
-# -- today's behaviour: nurbscnc refuses rotary motion ---------------------------------------
+# -- the differential: nurbscnc makes LinuxCNC's moves, six coordinates each -----------------
 
-ROTARY = "rotary axis motion is not supported "
-#: The first rotary word that moves an axis (nurbscnc accepts A0 at A0), read off each
-#: program: (line, column, message); err_two_a_words is refused for the repeated word first
-#: (LinuxCNC too), probe_with_a for G38.2.
-REFUSED_AT = {
-    "a_incremental": (5, 4, ROTARY + "(A45: A is at 0)"),
-    "abc_absolute": (4, 4, ROTARY + "(A45: A is at 0)"),
-    "arc_full_circle_a": (4, 12, ROTARY + "(A90: A is at 0)"),
-    "arc_with_a": (5, 20, ROTARY + "(A90: A is at 0)"),
-    "b_indexer": (9, 6, ROTARY + "(B90: B is at 0)"),
-    "err_g93_no_f": (5, 4, ROTARY + "(A90: A is at 0)"),
-    "err_two_a_words": (4, 11, "A word repeated in the block"),  # as LinuxCNC
-    "g20_f_same_block": (4, 8, ROTARY + "(A10: A is at 0)"),
-    "g20_a": (6, 7, ROTARY + "(A90: A is at 0)"),
-    "g28_g30_rotary": (3, 15, ROTARY + "(A90: A is at 0)"),
-    "g93_inverse_time": (5, 8, ROTARY + "(A90: A is at 0)"),
-    "mixed_xyz_a": (5, 8, ROTARY + "(A90: A is at 0)"),
-    "offsets_g10_g92_a": (4, 11, ROTARY + "(A30: A is at 0)"),
-    "rotary_only": (4, 4, ROTARY + "(A90: A is at 0)"),
-    "wrapped_engraving": (9, 7, ROTARY + "(A57.2958: A is at 0)"),
-}
+ACCEPTED = [n for n in NAMES if golden(n)["accepted"] and n != "probe_with_a"]
 
 
-def test_every_program_has_an_expected_refusal():
-    assert sorted([*REFUSED_AT, "probe_with_a"]) == NAMES
+@pytest.mark.parametrize("name", ACCEPTED)
+def test_nurbscnc_makes_linuxcncs_moves(name):
+    compare_rotary(golden(name), run_rotary(PROGRAMS / f"{name}.ngc"))
 
 
-@pytest.mark.parametrize("name", sorted(REFUSED_AT))
-def test_check_refuses_rotary_motion_today(name):
-    line, col, message = REFUSED_AT[name]
-    path = PROGRAMS / f"{name}.ngc"
-    res = CliRunner().invoke(main, ["check", str(path)])
+def test_every_accepted_program_is_compared():
+    # probe_with_a: LinuxCNC accepts G38.2 with A; nurbscnc runs no probes (refused below).
+    assert sorted([*ACCEPTED, "probe_with_a"]) == sorted(n for n in NAMES if golden(n)["accepted"])
+    assert len(ACCEPTED) >= 12
+
+
+@pytest.mark.parametrize(
+    "name, index, change",
+    [
+        ("abc_absolute", 3, lambda m: m["end"].__setitem__(0, m["end"][0] + 2e-9)),
+        ("abc_absolute", 3, lambda m: m["end"].__setitem__(3, m["end"][3] + 2e-9)),
+        ("rotary_only", 2, lambda m: m["end"].__setitem__(5, m["end"][5] - 2e-9)),
+        ("mixed_xyz_a", 1, lambda m: m.__setitem__("feed_mm_s", m["feed_mm_s"] * (1 + 1e-10))),
+        ("rotary_only", 1, lambda m: m.__setitem__("feed_rate_prog_min", 3600.0 * (1 + 1e-10))),
+        ("abc_absolute", 1, lambda m: m.__setitem__("kind", "feed")),
+        ("mixed_xyz_a", 1, lambda m: m.__setitem__("line", 6)),
+        ("g93_inverse_time", 2, lambda m: m["end"].__setitem__(0, 10.0 + 2e-7)),
+    ],
+    ids=["x", "a", "c", "feed", "deg/min", "kind", "line", "x-of-a-rotate"],
+)
+def test_the_differential_catches_a_small_difference(name, index, change):
+    """It fails on a 2e-9 change of one coordinate (A B C included), a feed off by 1e-10,
+    a rapid read as a feed, a line number: it is not a test that cannot fail."""
+    g = golden(name)
+    program = run_rotary(PROGRAMS / f"{name}.ngc")
+    compare_rotary(g, program)  # agrees as recorded
+    moves = [m for m in g["moves"] if m["kind"] != "spindle"]
+    change(moves[index])
+    with pytest.raises(AssertionError):
+        compare_rotary(g, program)
+
+
+def test_g93_move_takes_its_inverse_time():
+    """Each G93 move's time, its length over its rate, is 1/F minutes (F from the text):
+    along XYZ when XYZ move, along √(ΔA²+ΔB²+ΔC²) degrees when only A B C turn."""
+    program = run_rotary(PROGRAMS / "g93_inverse_time.ngc")
+    moves = {s.line: s for s in program.segments if s.line in (5, 6, 7)}
+    for line, f_per_min in ((5, 6.0), (6, 2.0), (7, 0.5)):
+        seg = moves[line]
+        if seg.kind == "rotate":
+            time_s = math.dist(seg.abc_start_deg, seg.abc_end_deg) / seg.feed_deg_s
+        else:
+            time_s = seg.length_mm / seg.feed_mm_s
+        assert time_s == pytest.approx(60.0 / f_per_min, rel=1e-14), line
+    assert [moves[n].kind for n in (5, 6, 7)] == ["line", "rotate", "line"]
+
+
+def test_rotary_only_feed_is_f_in_degrees_per_minute():
+    program = run_rotary(PROGRAMS / "rotary_only.ngc")
+    rotates = [s for s in program.segments if s.kind == "rotate"]
+    # F3600, F1800, F900 deg/min; the G0 at the axes' own rate (0 here).
+    assert [s.feed_deg_s for s in rotates] == [60.0, 30.0, 15.0, 0.0]
+    assert [s.rapid for s in rotates] == [False, False, False, True]
+    assert all(s.position_mm == (0.0, 0.0, 5.0) for s in rotates)
+    assert program.rotary_axes == ("a", "b", "c")
+
+
+def test_g20_with_f_in_one_block_runs_the_next_rotary_move_at_f_deg_min():
+    program = run_rotary(PROGRAMS / "g20_f_same_block.ngc")
+    last = program.segments[-1]
+    # "G20 G1 X1 A20 F10" took F10 before the switch: 10 mm/min along XYZ, 10 deg/min for A.
+    assert last.kind == "rotate" and last.feed_deg_s == 10.0 / 60.0
+    assert [s.feed_mm_s for s in program.segments[2:4]] == [10.0 / 60.0] * 2
+
+
+# -- refusals at the word's line and column (exit 2) -------------------------------------------
+
+
+def _refusal(path: Path, *args: str):
+    res = CliRunner().invoke(main, ["check", *args, str(path)])
     assert res.exit_code == 2, res.output
-    text = res.stderr
-    assert f"{path}:{line}:{col}: error: {message}\n" in text, text
+    return res.stderr
+
+
+def _profile(tmp_path: Path, tables: str) -> Path:
+    """The bundled profile with rotary ``tables`` appended (a machine with those axes)."""
+    from nurbscnc.machine.discovery import default_profile_text
+
+    path = tmp_path / "rotary.toml"
+    path.write_text(default_profile_text() + "\n" + tables)
+    return path
+
+
+A_TABLE = "[axis_limits.a]\nv_max_deg_min = 3600.0\na_max_deg_s2 = 400.0\nj_max_deg_s3 = 4e3\n"
+
+
+@pytest.mark.parametrize(
+    "name, line, col",
+    [("err_g93_no_f", 6, 1), ("err_two_a_words", 4, 11)],
+)
+def test_refused_where_linuxcnc_refuses(name, line, col, tmp_path):
+    assert golden(name)["error"]["line"] == line
+    path = PROGRAMS / f"{name}.ngc"
+    text = _refusal(path, "--machine", str(_profile(tmp_path, A_TABLE)))
+    assert f"{path}:{line}:{col}: error: " in text, text
+
+
+@pytest.mark.parametrize(
+    "name, line, col, letter",
+    [("abc_absolute", 4, 4, "A"), ("b_indexer", 9, 6, "B"), ("mixed_xyz_a", 7, 12, "B")],
+)
+def test_a_machine_without_the_axis_refuses_its_word(name, line, col, letter, tmp_path):
+    """The bundled profile has no rotary axis; one with A alone refuses the first B word."""
+    path = PROGRAMS / f"{name}.ngc"
+    args = [] if letter == "A" else ["--machine", str(_profile(tmp_path, A_TABLE))]
+    text = _refusal(path, *args)
+    want = f"{path}:{line}:{col}: error: the machine has no {letter} axis ("
+    assert want in text and f"has no [axis_limits.{letter.lower()}])" in text, text
     source = path.read_text().splitlines()[line - 1]
     assert source in text and " " * (col - 1 + 4) + "^" in text  # the line and its caret
 
 
-def test_check_refuses_the_rotary_probe_for_the_probe():
+def test_a_word_that_keeps_a_missing_axis_is_carried():
+    """``A0`` from a 3-axis post, at A = 0: accepted, the segments carry no rotary axis."""
+    from nurbscnc.program.interpret import interpret_text
+
+    program = interpret_text("G0 X1 A0\nG1 X2 Y1 A0. F100\nG91 G1 X1 A0\nM2\n")
+    assert [s.end_mm for s in program.segments] == [(1, 0, 0), (2, 1, 0), (3, 1, 0)]
+    assert all(s.abc_deg is None for s in program.segments) and program.rotary_axes == ()
+
+
+def test_check_refuses_the_rotary_probe_for_the_probe(tmp_path):
     path = PROGRAMS / "probe_with_a.ngc"
-    res = CliRunner().invoke(main, ["check", str(path)])
-    assert res.exit_code == 2
-    assert f"{path}:4:1: error: G38.2" in res.stderr
+    text = _refusal(path, "--machine", str(_profile(tmp_path, A_TABLE)))
+    assert f"{path}:4:1: error: G38.2" in text
 
 
 # -- live: LinuxCNC says the same now ----------------------------------------------------------
@@ -256,6 +346,8 @@ def test_goldens_are_what_linuxcnc_says_now(name, tmp_path):
     res = subprocess.run([*cmd, "--json-out", str(out)], capture_output=True, timeout=300)
     assert res.returncode == 0 and out.exists(), res.stderr[-2000:]
     now, recorded = json.loads(out.read_text()), golden(name)
+    if now["accepted"] and name != "probe_with_a":  # the live differential
+        compare_rotary(now, run_rotary(PROGRAMS / f"{name}.ngc"))
     assert now["accepted"] == recorded["accepted"] and now["error"] == recorded["error"]
     assert len(now["moves"]) == len(recorded["moves"])
     for a, b in zip(now["moves"], recorded["moves"]):
@@ -331,4 +423,44 @@ def test_wrapped_goldens_are_what_rs274_says_now(name, tmp_path):
     cmd += ["--programs", str(WRAPPED), "--goldens", str(tmp_path)]
     res = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
     assert res.returncode == 0, res.stderr[-2000:]
-    assert json.loads((tmp_path / f"{name}.json").read_text()) == wrapped_golden(name)
+    now = json.loads((tmp_path / f"{name}.json").read_text())
+    assert now == wrapped_golden(name)
+    if now["accepted"]:  # the live differential
+        compare_rotary(now, run_rotary(WRAPPED / f"{name}.ngc", WRAPPED_AXES))
+
+
+@pytest.mark.parametrize("name", ["wrapped_a", "wrapped_offsets"])
+def test_nurbscnc_makes_the_wrapped_moves(name):
+    """The wrapped axis A of wrapped.ini (B, C not wrapped), to rs274's printed precision."""
+    program = run_rotary(WRAPPED / f"{name}.ngc", WRAPPED_AXES)
+    compare_rotary(wrapped_golden(name), program)
+
+
+def test_a_machine_whose_a_is_not_wrapped_goes_elsewhere():
+    # The same program on a machine whose A is not wrapped goes elsewhere (A10 is 10).
+    plain = run_rotary(WRAPPED / "wrapped_a.ngc")
+    with pytest.raises(AssertionError):
+        compare_rotary(wrapped_golden("wrapped_a"), plain)
+
+
+@pytest.mark.parametrize("name", ["err_wrapped_360", "err_wrapped_g92"])
+def test_wrapped_refusals_are_linuxcncs(name):
+    """LinuxCNC's message, at the block rs274 names, at its A word; the moves before it."""
+    from nurbscnc.errors import ProgramError
+
+    g = wrapped_golden(name)
+    path = WRAPPED / f"{name}.ngc"
+    with pytest.raises(ProgramError) as info:
+        run_rotary(path, WRAPPED_AXES)
+    line = block_line(path, g["error"]["block"])
+    assert info.value.message == g["error"]["message"]
+    assert (info.value.pos.line, info.value.pos.column) == (
+        line,
+        g["error"]["block"].index("A") + 1,
+    )
+    # Up to the refused line the moves are LinuxCNC's.
+    before = (WRAPPED / f"{name}.ngc").read_text().splitlines()[: line - 1]
+    from nurbscnc.program.interpret import InterpretOptions, interpret_text
+
+    program = interpret_text("\n".join(before), InterpretOptions(rotary_axes=WRAPPED_AXES))
+    compare_rotary(g, program)

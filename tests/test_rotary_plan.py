@@ -585,7 +585,7 @@ def test_plan_text_says_what_the_contour_check_covers():
     buf = io.StringIO()
     print_plan_summary(prog, m, summary, Console(file=buf, width=400))
     text = buf.getvalue()
-    assert "rotary axes A: 1 rotary-only move, " in text
+    assert "rotary axes A (end at A190°): 1 rotary-only moves, " in text
     assert "the contour check covers X Y Z only" in text
 
 

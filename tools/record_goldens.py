@@ -629,8 +629,11 @@ def record(path: str, tools: dict, rotary: bool = False) -> dict:
 
 def record_wrapped(path: str, ini: str) -> dict:
     """``rs274 -g -i INI`` alone on ``path`` (the ``gcode`` module reads no ini file, so
-    ``[AXIS_A]WRAPPED_ROTARY`` reaches only rs274's interpreter): its moves as printed, in
-    program units and degrees to 4 decimals, and its refusal (message, refused block)."""
+    ``[AXIS_A]WRAPPED_ROTARY`` reaches only rs274's interpreter): its moves, in program units
+    and degrees to 4 decimals, taken to machine coordinates by the G5x and G92 offsets it
+    prints before them (``SET_G5X_OFFSET``, ``SET_G92_OFFSET``: machine = printed + G92 +
+    G5x; a program with an XY rotation is not recorded), and its refusal (message, refused
+    block)."""
     with open(path, "rb") as fh:
         digest = hashlib.sha256(fh.read()).hexdigest()
     tmp = tempfile.mkdtemp(prefix="goldens-")
@@ -647,10 +650,18 @@ def record_wrapped(path: str, ini: str) -> dict:
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     moves = []
+    g5x, g92 = [0.0] * 6, [0.0] * 6
     for raw in res.stdout.splitlines():
         m = _CALL.match(raw)
-        if m and m.group(1) in ("STRAIGHT_TRAVERSE", "STRAIGHT_FEED"):
-            end = [float(v) for v in m.group(2).split(",")]
+        if m and m.group(1) == "SET_G5X_OFFSET":
+            g5x = [float(v) for v in m.group(2).split(",")[1:7]]
+        elif m and m.group(1) == "SET_G92_OFFSET":
+            g92 = [float(v) for v in m.group(2).split(",")[:6]]
+        elif m and m.group(1) == "SET_XY_ROTATION" and float(m.group(2)) != 0.0:
+            raise SystemExit(f"{path}: an XY rotation: not recorded (machine = printed + offsets)")
+        elif m and m.group(1) in ("STRAIGHT_TRAVERSE", "STRAIGHT_FEED"):
+            printed = [float(v) for v in m.group(2).split(",")]
+            end = [round(p + a + b, 4) for p, a, b in zip(printed, g92, g5x)]
             moves.append({"kind": _MOTION[m.group(1)], "end": end})
     err = [t.strip() for t in res.stderr.splitlines() if t.strip()]
     refused = len(err) >= 3  # "executing", the message, the refused block
@@ -659,7 +670,8 @@ def record_wrapped(path: str, ini: str) -> dict:
         "sha256": digest,
         "linuxcnc": LINUXCNC_VERSION,
         "ini": os.path.relpath(os.path.abspath(ini), ROOT),
-        "units": "rs274 -g as printed: program units (mm), degrees, 4 decimals",
+        "units": "rs274 -g as printed plus its offsets: machine coordinates, program units "
+        "(mm), degrees, 4 decimals",
         "accepted": not refused,
         "error": {"message": err[-2], "block": err[-1]} if refused else None,
         "moves": moves,

@@ -40,6 +40,7 @@ def load_program(
     text: str | None = None,
     inputs=None,
     start_mm=None,
+    start_abc_deg=None,
 ) -> Program:
     """Read, parse and interpret a program file.
 
@@ -49,7 +50,8 @@ def load_program(
     ``text``, when given, is the program already read (stdin that ``simulate -`` looked at).
     ``inputs``: the parameter file's values and the user M-code folders
     (:class:`~nurbscnc.app.varfile.ProgramInputs`; None: neither). ``start_mm``: where the
-    program starts [mm, machine coordinates] (None: machine zero).
+    program starts [mm, machine coordinates] (None: machine zero); ``start_abc_deg`` its
+    A B C [deg] (None: 0, :func:`start_abc_option`).
     """
     from nurbscnc.program.interpret import InterpretOptions, interpret_text
 
@@ -73,9 +75,30 @@ def load_program(
         name=display_name(path),
         load_subroutine=load_subroutine,
         **({} if start_mm is None else {"start_mm": tuple(map(float, start_mm))}),
+        **start_abc_option(start_abc_deg),
         **(inputs.interpret_options() if inputs is not None else {}),
     )
     return interpret_text(text, options)
+
+
+def start_abc_option(start_abc_deg) -> dict:
+    """The interpreter's option for a program started at A B C = ``start_abc_deg`` [deg]
+    (where the card stands): ``{"start_abc_deg": (a, b, c)}``, or ``{}`` for None or all 0.
+    An interpreter whose options take no start A B C cannot start a program elsewhere:
+    ConfigError then, rather than running it from A B C = 0."""
+    import dataclasses
+
+    from nurbscnc.program.interpret import InterpretOptions
+
+    if start_abc_deg is None or not any(start_abc_deg):
+        return {}
+    abc = tuple(float(v) for v in start_abc_deg)
+    if "start_abc_deg" not in {f.name for f in dataclasses.fields(InterpretOptions)}:
+        raise ConfigError(
+            f"the card stands at A B C = {', '.join(f'{v:g}' for v in abc)} deg and this "
+            "interpreter starts programs at A B C = 0 only: move the rotary axes to 0 first"
+        )
+    return {"start_abc_deg": abc}
 
 
 def read_tool_table(path: str) -> dict:

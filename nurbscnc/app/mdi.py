@@ -18,8 +18,8 @@ from nurbscnc.errors import ConfigError, NurbsCncError
 
 #: The name the blocks are reported under.
 MDI_NAME = "mdi"
-#: The axes a jog names, in the card's axis order.
-JOG_AXES = "XYZ"
+#: The axes a jog names, in the card's axis order (A B C when the machine has them).
+JOG_AXES = "XYZABC"
 #: The most blocks one call runs (they are typed on a command line).
 MAX_MDI_LINES = 1000
 
@@ -63,14 +63,13 @@ def mdi_job(
     them with the run ``options`` within the machine's limits and soft limits (machine
     coordinates). Every error — of the text, of the soft limits, of the card's pulse limit —
     raises here, before anything is sent, at ``mdi:LINE:COL`` with the block's text."""
-    from nurbscnc.app.stream import position_mm, stream_job
+    from nurbscnc.app.load import start_abc_option
+    from nurbscnc.app.stream import position_abc_deg, position_mm, start_abc, stream_job
     from nurbscnc.program.interpret import InterpretOptions, interpret_text
 
     lines = mdi_lines(blocks)
-    if len(position_steps) != len(mach.steps.per_mm):
-        raise ConfigError(
-            f"the card has {len(position_steps)} axes, the machine profile {len(mach.steps.per_mm)}"
-        )
+    # ConfigError when the card's axes are not the profile's X Y Z and rotary axes
+    abc = start_abc(position_abc_deg(position_steps, mach))
     start_mm = tuple(position_mm(position_steps, mach))
     try:
         prog = interpret_text(
@@ -79,6 +78,7 @@ def mdi_job(
                 start_mm=start_mm,
                 name=MDI_NAME,
                 tools=tools,
+                **start_abc_option(abc),
                 **(inputs.interpret_options() if inputs is not None else {}),
             ),
         )
@@ -99,22 +99,55 @@ def _with_text(exc: NurbsCncError, lines: list[str]) -> NurbsCncError:
 
 
 def jog_block(moves, position_steps, mach, feed_mm_min: float | None = None) -> str:
-    """The block of a jog: ``moves`` like ``("X+1.5", "Z-0.2")`` (axis, signed distance
-    [mm]; an axis at most once) from the card's position ``position_steps``, as one
-    absolute move in machine coordinates (``G53 G90``: no work offset, G92 or rotation
-    turns a jog), a rapid, or a feed at ``feed_mm_min`` [mm/min]."""
-    from nurbscnc.app.stream import position_mm
+    """The block of a jog: ``moves`` like ``("X+1.5", "Z-0.2", "A+10")`` (axis, signed
+    distance [mm; deg for A B C]; an axis at most once) from the card's position
+    ``position_steps``, as one absolute move in machine coordinates (``G53 G90``: no work
+    offset, G92 or rotation turns a jog), a rapid, or a feed at ``feed_mm_min`` [mm/min;
+    deg/min for a rotary-only jog, LinuxCNC's rate]. A rotary axis needs the machine to
+    have it and the card to drive it (ConfigError otherwise)."""
+    from nurbscnc.app.stream import position_abc_deg, position_mm
 
     deltas = parse_jog(moves)
     here = position_mm(position_steps, mach)
-    words = " ".join(f"{JOG_AXES[a]}{here[a] + d:.6f}" for a, d in sorted(deltas.items()))
+    abc = position_abc_deg(position_steps, mach)
+    rotary = getattr(mach, "rotary_axes", {}) or {}
+    words = []
+    for a, d in sorted(deltas.items()):
+        name = JOG_AXES[a]
+        if a < 3:
+            words.append(f"{name}{here[a] + d:.6f}")
+            continue
+        axis = rotary.get(name.lower())
+        if axis is None:
+            raise ConfigError(f"jog: the machine has no {name} axis ([axis_limits.{name.lower()}])")
+        if name.lower() not in abc:
+            raise ConfigError(f"jog: the card does not drive {name} (its position has no {name})")
+        at = abc[name.lower()]
+        words.append(name + (_wrapped_word(at, d) if axis.wrapped else f"{at + d:.6f}"))
     motion = "G0" if feed_mm_min is None else f"G1 F{feed_mm_min:g}"
-    return f"G90 G53 {motion} {words}"
+    return f"G90 G53 {motion} {' '.join(words)}"
+
+
+def _wrapped_word(at_deg: float, delta_deg: float) -> str:
+    """The G90 word that turns a wrapped axis from ``at_deg`` by ``delta_deg`` (|Δ| < 360):
+    LinuxCNC's ``unwrap_rotary`` reads a word v as the position |v| mod 360 reached
+    forwards for v ≥ 0 (−0 included: backwards) and backwards for v < 0, so the word is
+    (at + Δ) mod 360 with the sign of Δ."""
+    import math
+
+    if abs(delta_deg) >= 360.0:
+        raise ConfigError(
+            f"jog: a wrapped axis turns less than a full turn per jog, not {delta_deg:g}"
+        )
+    target = math.fmod(at_deg + delta_deg, 360.0)
+    target = target + 360.0 if target < 0.0 else target
+    target = 0.0 if target >= 360.0 - 5e-7 else target  # 359.9999999 is 0 at 6 decimals
+    return f"{'-' if delta_deg < 0.0 else ''}{target:.6f}"
 
 
 def parse_jog(moves) -> dict[int, float]:
-    """``{axis index: distance [mm]}`` of jog words ``X+1.5``, ``y-2``, ``Z3`` (ConfigError
-    naming a bad word)."""
+    """``{axis index: distance}`` of jog words ``X+1.5``, ``y-2``, ``Z3``, ``A+10`` (mm;
+    degrees for A B C; ConfigError naming a bad word)."""
     import math
 
     out: dict[int, float] = {}
@@ -127,8 +160,8 @@ def parse_jog(moves) -> dict[int, float]:
             distance = math.nan
         if axis < 0 or not math.isfinite(distance) or text[1:2] in ("", " "):
             raise ConfigError(
-                f"jog: {word!r} is not a move: an axis X, Y or Z and a distance in mm, "
-                "like X+1.5 or Z-0.2"
+                f"jog: {word!r} is not a move: an axis X, Y, Z (mm) or A, B, C (degrees) and "
+                "a distance, like X+1.5, Z-0.2 or A+10"
             )
         if axis in out:
             raise ConfigError(f"jog: axis {JOG_AXES[axis]} named twice")

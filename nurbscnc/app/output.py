@@ -13,8 +13,9 @@ SUFFIX_FORMATS = {".csv": "csv", ".npz": "npz", ".hs": "halstreamer"}
 
 def write_output(path: str, fmt: str, run, mach, name: str, then=None):
     """Write the reference points of ``run`` (:class:`~nurbscnc.pipeline.Run`) to ``path``:
-    a halstreamer file, or CSV/NPZ by suffix, window by window (:meth:`Run.chunks`), the
-    windows made in a worker thread while this one writes them
+    a halstreamer file, or CSV/NPZ by suffix (with the columns of the rotary axes the
+    program uses), window by window (:meth:`Run.chunks`), the windows made in a worker
+    thread while this one writes them
     (:func:`~nurbscnc.output.background.write_while_making`). ``then(stats)``: run in the
     worker once every window is made, while the writer finishes the file, with the
     :class:`~nurbscnc.plan.report.SampleStats` of the points (the summary). Returns its
@@ -24,12 +25,10 @@ def write_output(path: str, fmt: str, run, mach, name: str, then=None):
 
     count = run.sample_count
     if fmt == "halstreamer":
-        from nurbscnc.output.halstreamer import write_halstreamer_windows
+        from nurbscnc.output.halstreamer import write_halstreamer_samples
 
         def write(windows):
-            write_halstreamer_windows(
-                path, (w.points_mm for w in windows), count, mach.servo.period_s, name
-            )
+            write_halstreamer_samples(path, windows, count, mach.servo.period_s, name)
     else:
         from nurbscnc.output.files import write_point_windows
 

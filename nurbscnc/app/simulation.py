@@ -16,26 +16,48 @@ def is_points_source(source: str, text: str | None) -> bool:
 
 
 def points_reference(source: str, text: str | None):
-    """``(points, path)`` [mm] of a reference-point file (or of standard input's ``text``):
-    the commanded path is the reference polyline itself."""
+    """``(points, path, rotary)`` of a reference-point file (or of standard input's
+    ``text``): the points [mm], the commanded path (the reference polyline itself) and the
+    file's rotary axes with their positions, ``(axes, abc_deg (N, 3) [deg] or None)``
+    (:func:`~nurbscnc.output.files.rotary_of_points`)."""
     import numpy as np
 
-    from nurbscnc.output.files import read_points, read_points_text
+    from nurbscnc.output.files import read_points, read_points_text, rotary_of_points
 
     data = read_points(source) if text is None else read_points_text(text)
     points = np.column_stack([data["x"], data["y"], data["z"]])
-    return points, points
+    return points, points, rotary_of_points(data)
 
 
 def run_reference(run):
     """``(points, path)`` [mm] of a planned run: its reference points, and the planned path
     densely sampled (:func:`~nurbscnc.plan.dynamics.dense_path_mm`; a baseline's points are
-    its own path)."""
+    its own path). Its rotary axes: :func:`run_rotary`."""
     from nurbscnc.geometry.polyline import dense_path_mm
 
     points = run.samples.points_mm
     path = points if run.plan is None else dense_path_mm(run.plan.pieces, run.plan.profile)
     return points, path
+
+
+def run_rotary(samples) -> tuple:
+    """``(axes, abc_deg)`` of :class:`~nurbscnc.plan.timing.Samples`: the rotary axes the
+    program uses and the samples' A B C (N, 3) [deg]; ``((), None)`` without rotary axes."""
+    axes = tuple(samples.rotary_axes)
+    return (axes, samples.abc_deg) if axes else ((), None)
+
+
+def rotary_summary(rotary) -> dict:
+    """The ``rotary`` object of a simulated reference (docs/json.md, ``simulate``) as a
+    summary: the axes of ``rotary`` (``(axes, abc_deg)``) and the last sample's A B C; an
+    empty dict without rotary axes. The servo simulation is of X Y Z only (the rotary axes
+    are not simulated)."""
+    from nurbscnc.app.summary import with_rotary
+
+    axes, abc_deg = rotary
+    if not axes:
+        return {}
+    return with_rotary({}, axes, abc_deg[-1])
 
 
 def simulate_points(points, path, mach, hold: str):

@@ -3,7 +3,7 @@ file or of a whole planned run, or the job of a program planned cut window by cu
 
 from __future__ import annotations
 
-from nurbscnc.errors import ConfigError, GeometryError, PlanningError
+from nurbscnc.errors import ConfigError, GeometryError, NurbsCncError, PlanningError
 
 #: The suffixes of reference-point files (``run -o``), streamed as they are.
 POINT_SUFFIXES = (".csv", ".npz")
@@ -18,13 +18,24 @@ def points_of_file(path: str, mach):
     """The reference points [mm] (N × 3) of the file ``path`` (:data:`POINT_SUFFIXES`),
     checked for the machine ``mach``: not empty, finite, one point per servo period (the
     CSV's 1 µs rounding of t allowed), inside the soft limits (PlanningError or
-    ConfigError naming the first offending point)."""
+    ConfigError naming the first offending point). The rotary columns:
+    :func:`axes_points_of_file`."""
+    return axes_points_of_file(path, mach)[0][:, :3]
+
+
+def axes_points_of_file(path: str, mach):
+    """``(points, axes)``: the file's X Y Z [mm] and, when it has ``a``/``b``/``c`` columns,
+    the rotary axes [deg] beside them (N × (3 + k)), ``axes`` their names ("xyz", "xyza",
+    …), checked as :func:`points_of_file` and the rotary columns within the axes' soft
+    limits ``min_deg``/``max_deg``."""
     import numpy as np
 
     from nurbscnc.output.files import read_points
+    from nurbscnc.output.stream.axes import stream_axes
 
     data = read_points(path)
-    points = np.column_stack([data["x"], data["y"], data["z"]]).astype(float)
+    axes = stream_axes(a for a in "abc" if a in data)
+    points = np.column_stack([data[a] for a in axes]).astype(float)
     if points.shape[0] == 0:
         raise PlanningError(f"{path}: no reference points")
     if not np.all(np.isfinite(points)):
@@ -39,38 +50,109 @@ def points_of_file(path: str, mach):
             f"{path}: points {k + 1} and {k + 2} are {dt[k] * 1e3:.6g} ms apart; the "
             f"machine's servo period is {period_s * 1e3:g} ms (one point per period)"
         )
-    inside = mach.soft_limits.inside(points)
+    inside = mach.soft_limits.inside(points[:, :3])
     if not np.all(inside):
         k = int(np.flatnonzero(~inside)[0])
         raise PlanningError(
-            f"{path}: point {k + 1} ({', '.join(f'{v:.4f}' for v in points[k])}) mm is "
+            f"{path}: point {k + 1} ({', '.join(f'{v:.4f}' for v in points[k, :3])}) mm is "
             "outside the soft limits"
         )
-    return points
+    _check_rotary_limits(path, points, axes, mach)
+    return points, axes
 
 
-def pulses_of_points(points_mm, mach, lines=None):
-    """The :class:`~nurbscnc.output.stream.quantise.PulseProgram` of reference points [mm]
-    at the machine's steps per mm and servo period (``lines``: their source lines), checked
-    against the card's pulse limit per period (before any port is touched)."""
+def _check_rotary_limits(path: str, points, axes: str, mach) -> None:
+    """PlanningError at the first point whose rotary axis is outside its ``min_deg`` /
+    ``max_deg`` (or an axis the machine does not have)."""
+    import numpy as np
+
+    rotary = getattr(mach, "rotary_axes", {}) or {}
+    for j, name in enumerate(axes[3:], start=3):
+        axis = rotary.get(name)
+        if axis is None:
+            raise ConfigError(f"{path}: a column {name} but the machine has no {name.upper()} axis")
+        out = (points[:, j] < axis.min_deg) | (points[:, j] > axis.max_deg)
+        if out.any():
+            k = int(np.flatnonzero(out)[0])
+            raise PlanningError(
+                f"{path}: point {k + 1}: {name.upper()} {points[k, j]:.4f} deg is outside "
+                f"its soft limits [{axis.min_deg:g}, {axis.max_deg:g}] deg"
+            )
+
+
+def pulses_of_points(points_mm, mach, lines=None, axes: str = "xyz"):
+    """The :class:`~nurbscnc.output.stream.quantise.PulseProgram` of reference points
+    ``points_mm`` (N, len(``axes``)) [mm; deg for A B C] at the machine's steps per mm (and
+    per degree: ConfigError for a rotary axis without them) and servo period (``lines``:
+    their source lines), checked against the card's pulse limit per period and axis
+    (before any port is touched)."""
+    from nurbscnc.output.stream.axes import steps_per_unit
     from nurbscnc.output.stream.quantise import check_pulse_limit, quantise
 
-    if lines is None:
-        pulses = quantise(points_mm, mach.steps.per_mm, mach.servo.period_s)
-    else:
-        pulses = quantise(points_mm, mach.steps.per_mm, mach.servo.period_s, lines)
+    scale = steps_per_unit(mach, axes)
+    pulses = quantise(points_mm, scale, mach.servo.period_s, lines, axes)
     check_pulse_limit(pulses, mach.steps.max_pulses_per_period)
     return pulses
 
 
-def needs_whole_plan(options) -> bool:
+def sample_points(samples):
+    """``(points, axes)`` of planned samples: X Y Z [mm] and the rotary axes the program
+    uses (``samples.rotary_axes``, from ``samples.abc_deg``) [deg] beside them."""
+    import numpy as np
+
+    from nurbscnc.output.stream.axes import stream_axes
+
+    axes = stream_axes(getattr(samples, "rotary_axes", ()))
+    points = np.asarray(samples.points_mm, dtype=float)
+    if len(axes) == 3:
+        return points, axes
+    abc = getattr(samples, "abc_deg", None)
+    if abc is None:
+        raise PlanningError(f"the samples move {axes[3:].upper()} but carry no A B C column")
+    cols = [np.asarray(abc, dtype=float)[:, "abc".index(a)] for a in axes[3:]]
+    return np.column_stack([points, *cols]), axes
+
+
+def pulses_of_samples(samples, mach):
+    """:func:`pulses_of_points` of planned ``samples`` (:func:`sample_points`), each period
+    with its source line."""
+    points, axes = sample_points(samples)
+    return pulses_of_points(points, mach, samples.line, axes)
+
+
+def needs_whole_plan(options, prog=None) -> bool:
     """Whether a program is planned whole before it is streamed rather than cut window by
     cut window: a baseline ``algorithm`` has no look-ahead plan to cut, and the
     pre-compensated reference (ZPETC) is not causal: each of its samples depends on the
-    planned reference ahead of it, to the program's end."""
+    planned reference ahead of it, to the program's end. A program ``prog`` that moves a
+    rotary axis is planned whole too (:func:`moves_rotary`)."""
     from nurbscnc.plan.options import Algorithm
 
-    return options.algorithm != Algorithm.PH_LOOKAHEAD or options.precompensate
+    return (
+        options.algorithm != Algorithm.PH_LOOKAHEAD
+        or options.precompensate
+        or (prog is not None and moves_rotary(prog))
+    )
+
+
+def moves_rotary(prog) -> bool:
+    """Whether the program turns a rotary axis (a Rotate, or a move whose A B C change; one
+    that only holds them where the card stands streams as an X Y Z program, the card's
+    rotary axes standing still). Such a program is streamed planned whole
+    (:func:`~nurbscnc.app.staged.staged_job`: section by section, waiting at its stops),
+    its samples' A B C beside X Y Z: the controller's re-planning (a feed hold's stop along
+    the path, an override above 100 %, run from line) follows the XYZ path length, which
+    stands still during a rotary-only move; this is the hook where the controller's
+    :class:`~nurbscnc.controller.job.Job` takes rotary programs once its pieces carry A B C."""
+    from nurbscnc.app.staged import turns
+
+    return bool(getattr(prog, "rotary_axes", ())) and turns(prog.segments)
+
+
+def is_still(segments) -> bool:
+    """Whether ``segments`` make no motion: dwells and program stops only (a Rotate, though
+    a stop of the path, turns the rotary axes)."""
+    return all(s.kind in ("dwell", "pause") for s in segments)
 
 
 def stream_job(
@@ -94,19 +176,27 @@ def stream_job(
     from nurbscnc.controller.feed import WindowFeed
     from nurbscnc.controller.job import Job
     from nurbscnc.controller.stops import start_at_line
-    from nurbscnc.geometry.path import STOP_KINDS
     from nurbscnc.pipeline import run_program, window_plans
 
+    if moves_rotary(prog) and (from_line is not None or override != 1.0):
+        raise ConfigError(
+            f"--from-line and --feed-override: this program moves "
+            f"{' '.join(a.upper() for a in prog.rotary_axes)}, and a program with rotary "
+            "axes is streamed planned whole (no re-planning while it runs)"
+        )
     if from_line is not None:
         try:
             prog = start_at_line(prog, from_line)
         except ValueError as exc:
             raise ConfigError(str(exc)) from None
-    if all(s.kind in STOP_KINDS for s in prog.segments):  # stops at the first move
+    if is_still(prog.segments):  # stops at the first move
         return None, None
-    if needs_whole_plan(options):
-        samples = run_program(prog, mach, options).samples
-        return None, pulses_of_points(samples.points_mm, mach, samples.line)
+    if moves_rotary(prog):
+        from nurbscnc.app.staged import staged_job
+
+        return staged_job(prog, mach, options, optional_stop, tools), None
+    if needs_whole_plan(options, prog):
+        return None, pulses_of_samples(run_program(prog, mach, options).samples, mach)
 
     def pulse_limit(points_mm, lines) -> None:
         # The plan at 100 %: a lower override and a hold only slow down.
@@ -129,11 +219,30 @@ def stream_job(
 
 
 def position_mm(steps, mach) -> list[float]:
-    """The card's position ``steps`` (per axis) in mm, machine coordinates: steps over the
-    profile's steps per mm (exact: the steps are what the card counts; rounded to 1 nm)."""
+    """The card's position ``steps`` (per axis: X Y Z first, then its rotary axes) in mm,
+    X Y Z in machine coordinates: steps over the profile's steps per mm (exact: the steps
+    are what the card counts; rounded to 1 nm). The rotary axes: :func:`position_abc_deg`."""
     import numpy as np
 
-    return [round(v, 6) for v in (np.asarray(steps, dtype=float) / mach.steps.per_mm).tolist()]
+    xyz = np.asarray(steps, dtype=float)[: len(mach.steps.per_mm)]
+    return [round(v, 6) for v in (xyz / mach.steps.per_mm).tolist()]
+
+
+def position_abc_deg(steps, mach, axes: str | None = None) -> dict:
+    """The rotary axes of the card's position ``steps`` [deg]: ``{"a": 90.0}`` (empty for
+    a card of X Y Z), steps over the profile's steps per degree; ``axes`` the position's
+    axes ("xyza"; None: from the number of values and the profile,
+    :func:`~nurbscnc.output.stream.axes.axes_of_position`)."""
+    from nurbscnc.output.stream.axes import axes_of_position, position_units
+
+    if axes is None:
+        axes = axes_of_position(len(steps), mach)
+    return position_units(steps, mach, axes)[1]
+
+
+def start_abc(abc: dict) -> tuple[float, float, float]:
+    """``(a, b, c)`` [deg] of a :func:`position_abc_deg` (0 for an axis the card lacks)."""
+    return tuple(float(abc.get(a, 0.0)) for a in "abc")
 
 
 def stream_report(program: str, job, reports: list, mach=None, parameters=None) -> dict:
@@ -158,7 +267,11 @@ def stream_report(program: str, job, reports: list, mach=None, parameters=None) 
         **_noted(extra, reports),
     }
     if mach is not None:
-        body["final_position_mm"] = position_mm(reports[-1].final_position_steps, mach)
+        final = reports[-1].final_position_steps
+        body["final_position_mm"] = position_mm(final, mach)
+        abc = position_abc_deg(final, mach, getattr(reports[-1], "axes", None))
+        if abc:
+            body["final_abc_deg"] = abc
         if parameters is not None:
             from nurbscnc.app.varfile import work_report
 
@@ -197,11 +310,14 @@ def progress_position(mach, inputs=None, program=None):
             float(start_parameters.get(k, 0.0)) == float(end_parameters.get(k, 0.0)) for k in keys
         )
 
-    def where(steps) -> str:
-        if len(steps) != len(mach.steps.per_mm):
+    def where(steps, axes: str | None = None) -> str:
+        try:
+            abc = position_abc_deg(steps, mach, axes)
+        except NurbsCncError:
             return ""
         mm = position_mm(steps, mach)
         text = ", ".join(f"{v:.3f}" for v in mm) + " mm"
+        text += "".join(f", {a.upper()} {v:.3f}°" for a, v in abc.items())
         if same:
             work = work_report(start_parameters, mm)
             shown = ", ".join(f"{v:.3f}" for v in work["work_position_mm"])
@@ -264,8 +380,9 @@ class ProgramStream:
             # position, still before anything moves.
             self.program, self.error = None, exc
 
-    def interpret(self, start_mm):
-        """The program interpreted from ``start_mm`` [mm, machine; None: machine zero]."""
+    def interpret(self, start_mm, start_abc_deg=None):
+        """The program interpreted from ``start_mm`` [mm, machine; None: machine zero] and
+        A B C = ``start_abc_deg`` [deg; None: 0]."""
         from nurbscnc.app.load import load_program, read_program_text
 
         if self.text is None:  # read once: a second interpretation starts elsewhere
@@ -279,15 +396,14 @@ class ProgramStream:
             text=self.text,
             inputs=self.inputs,
             start_mm=start_mm,
+            start_abc_deg=start_abc_deg,
         )
 
     def still(self) -> bool:
         """Does the program make no motion (offsets, tool changes, dwells only)? Then
         nothing is sent and the card is not asked where it stands."""
-        from nurbscnc.geometry.path import STOP_KINDS
-
         prog = self.program
-        return prog is not None and all(s.kind in STOP_KINDS for s in prog.segments)
+        return prog is not None and is_still(prog.segments)
 
     def plan(self, position_steps=None, from_line=None, optional_stop=False, override=1.0):
         """``(job, pulses, program)`` (:func:`stream_job`) of the program started where the
@@ -298,14 +414,12 @@ class ProgramStream:
         there). Every error of the plan raises here, before anything is sent."""
         prog = self.program
         if position_steps is not None:
-            if len(position_steps) != len(self.mach.steps.per_mm):
-                raise ConfigError(
-                    f"the card has {len(position_steps)} axes, the machine profile "
-                    f"{len(self.mach.steps.per_mm)}"
-                )
+            # X Y Z [mm] and the card's rotary axes [deg] (ConfigError: the card's axes do
+            # not agree with the profile's)
+            abc = start_abc(position_abc_deg(position_steps, self.mach))
             start_mm = position_mm(position_steps, self.mach)
-            if any(start_mm) or prog is None:  # from machine zero: interpreted already
-                prog = self.interpret(start_mm)
+            if any(start_mm) or any(abc) or prog is None:  # from zero: interpreted already
+                prog = self.interpret(start_mm, abc)
         elif prog is None:
             raise self.error
         job, pulses = stream_job(

@@ -39,7 +39,8 @@ def summary_of(prog, mach, run, stats=None, lower_bound: bool = True) -> dict:
     from nurbscnc.plan.report import SampleStats, plan_summary
 
     if run.rest_s is not None:  # no motion
-        return {**rest_summary(prog, mach, run), **machine_json(mach)}
+        rest = with_rotary(rest_summary(prog, mach, run), prog.rotary_axes, final_abc_deg(prog))
+        return {**rest, **machine_json(mach)}
     samples = run.samples if run.plan is None else stats
     if samples is None:
         samples = SampleStats(run.plan)
@@ -58,7 +59,64 @@ def summary_of(prog, mach, run, stats=None, lower_bound: bool = True) -> dict:
     )
     if getattr(run, "precompensation", None) is not None:  # --precompensate
         summary["precompensation"] = run.precompensation.as_json()
+    summary = with_rotary(summary, prog.rotary_axes, final_abc_deg(prog))
     return {**summary, **machine_json(mach)}
+
+
+def final_abc_deg(prog) -> tuple:
+    """A B C [deg, machine coordinates] at the end of the program ``prog``: the end of its
+    last line, arc or rotary-only move (a line or arc with no ``abc_deg`` ends at 0, the
+    segments' rule); the program's start A B C when none moves. Dwells and pauses hold the
+    axes where they are; a NURBS block carries no rotary position (the axes stand)."""
+    for seg in reversed(prog.segments):
+        kind = seg.kind
+        if kind == "rotate":
+            return tuple(float(v) for v in seg.abc_end_deg)
+        if kind in ("line", "rapid", "arc"):
+            abc = seg.abc_deg
+            return (0.0, 0.0, 0.0) if abc is None else tuple(float(v) for v in abc[3:])
+    return tuple(float(v) for v in prog.start_abc_deg)
+
+
+#: What the contour check does not see when A B C turn the part (``rotary.note``).
+ROTARY_NOTE = (
+    "the contour check covers X Y Z only: it does not see the tool's position on a rotated "
+    "part (an A error of δ° is r·δ·π/180 mm at radius r)"
+)
+
+
+def with_rotary(summary: dict, rotary_axes, abc_deg) -> dict:
+    """``summary`` with its ``rotary`` object (docs/json.md) when the program uses rotary
+    axes: ``axes`` (e.g. ``["a"]``), ``final_abc_deg`` (``{"a": 90.0}``: each axis used at
+    the end [deg], ``abc_deg`` (3,) A B C), ``contour_check`` ``"xyz"`` and the ``note``
+    saying what that check does not see; the planner's own entries of the object, when it
+    made one, are kept. A program without rotary axes: ``summary`` as it is."""
+    if not rotary_axes:
+        return summary
+    rotary = dict(summary.get("rotary") or {})
+    rotary.setdefault("axes", list(rotary_axes))
+    rotary["final_abc_deg"] = {a: float(abc_deg["abc".index(a)]) for a in rotary_axes}
+    rotary.setdefault("contour_check", "xyz")
+    rotary.setdefault("note", ROTARY_NOTE)
+    return {**summary, "rotary": rotary}
+
+
+def rotary_text(summary: dict) -> str | None:
+    """The human line of a summary with a ``rotary`` object (None without): the axes, where
+    they end, the rotary-only moves when the planner counted them, and what the contour
+    check does not see. The check measures the X Y Z reference against the X Y Z path; on
+    a part the rotary axes turn, an error of δ degrees on A moves the surface under the
+    tool by r·δ·π/180 mm at radius r (the tool's position on the rotated part is not
+    checked)."""
+    rotary = summary.get("rotary")
+    if not rotary:
+        return None
+    ends = " ".join(f"{a.upper()}{v:g}°" for a, v in rotary["final_abc_deg"].items())
+    moves = ""
+    if "rotate_moves" in rotary:
+        moves = f"{rotary['rotate_moves']} rotary-only moves, {rotary['rotate_time_s']:.4f} s; "
+    names = " ".join(a.upper() for a in rotary["axes"])
+    return f"  rotary axes {names} (end at {ends}): {moves}{rotary['note']}"
 
 
 def rest_summary(prog, mach, run) -> dict:

@@ -34,12 +34,15 @@ FOUND_BY_PROFILE = "program.var_file"
 @dataclass(frozen=True)
 class ProgramInputs:
     """The parameter file (``var_path`` or None, ``found_by``; ``parameters`` as read,
-    lengths in mm) and the user M-code folders ``user_m_dirs``."""
+    lengths in mm), the user M-code folders ``user_m_dirs`` and the machine's rotary axes
+    ``rotary_axes`` (``Machine.rotary_axes``: which A B C exist, which are wrapped, their soft
+    limits; empty: a three-axis machine)."""
 
     var_path: str | None = None
     found_by: str = ""
     parameters: dict = field(default_factory=dict)
     user_m_dirs: tuple = ()
+    rotary_axes: dict = field(default_factory=dict)
 
     def find_user_m(self, code: int) -> str | None:
         """The absolute path of the executable of user M-code ``code`` (100..199), or None."""
@@ -55,7 +58,11 @@ class ProgramInputs:
 
     def interpret_options(self) -> dict:
         """The :class:`~nurbscnc.program.interpret.InterpretOptions` fields they give."""
-        return {"parameters": dict(self.parameters), "find_user_m": self.find_user_m}
+        return {
+            "parameters": dict(self.parameters),
+            "find_user_m": self.find_user_m,
+            "rotary_axes": dict(self.rotary_axes),
+        }
 
 
 def _profile_folder(machine) -> str:
@@ -139,7 +146,8 @@ def program_inputs(machine=None, var=None, user_m_path=(), writes: bool = False)
             os.path.exists(path) and not os.access(path, os.W_OK)
         ):
             raise OutputError(f"cannot write the parameter file {path}: Permission denied")
-    return ProgramInputs(path, how, values, user_m_dirs(machine, user_m_path))
+    rotary_axes = dict(getattr(machine, "rotary_axes", None) or {})
+    return ProgramInputs(path, how, values, user_m_dirs(machine, user_m_path), rotary_axes)
 
 
 def write_back(inputs: ProgramInputs, program) -> str | None:

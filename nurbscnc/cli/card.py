@@ -24,9 +24,9 @@ from nurbscnc.errors import ConfigError, NurbsCncError, OutputError
     "--set",
     "set_to",
     default=None,
-    metavar="X,Y,Z",
-    help="Set the card's position [steps] (protocol version 3; not while a stream "
-    "runs), e.g. 0,0,0 after homing.",
+    metavar="X,Y,Z[,A,B,C]",
+    help="Set the card's position [steps, one per axis it drives: X Y Z and its rotary "
+    "axes] (protocol version 3; not while a stream runs), e.g. 0,0,0 after homing.",
 )
 @click.option(
     "--timeout",
@@ -39,8 +39,9 @@ from nurbscnc.errors import ConfigError, NurbsCncError, OutputError
     "--machine",
     type=click.Path(),
     default=None,
-    help="Machine profile (TOML) whose steps per mm give the position in mm. Default: as "
-    "every command ($NURBSCNC_MACHINE, ./nurbscnc.toml, ...).",
+    help="Machine profile (TOML) whose steps per mm (and per degree: A B C) give the "
+    "position in mm (and degrees). Default: as every command ($NURBSCNC_MACHINE, "
+    "./nurbscnc.toml, ...).",
 )
 @click.option(
     "--var",
@@ -60,7 +61,7 @@ def card_position(port, allow_url, baud, set_to, timeout_s, machine, var, as_jso
 
     Example: nurbscnc card-position --port /dev/ttyUSB0 --set 0,0,0
     """
-    from nurbscnc.app.stream import position_mm
+    from nurbscnc.app.stream import position_abc_deg, position_mm
     from nurbscnc.app.varfile import find_var_file, read_var_file, work_report
     from nurbscnc.cli.common import load_machine_cli
     from nurbscnc.output.stream import protocol as p
@@ -79,20 +80,23 @@ def card_position(port, allow_url, baud, set_to, timeout_s, machine, var, as_jso
             ser.close()
     state = p.CardState(status.state).name
     steps = list(status.position_steps)
-    if len(steps) != len(mach.steps.per_mm):
-        raise ConfigError(
-            f"the card has {len(steps)} axes, the machine profile {len(mach.steps.per_mm)}: "
-            "no position in mm"
-        )
+    try:
+        abc = position_abc_deg(steps, mach)
+    except ConfigError as exc:
+        raise ConfigError(f"{exc.message}: no position in mm") from None
     mm = position_mm(steps, mach)
     work = work_report(values, mm) if values is not None else {}
     if as_json:
         body = {"ok": True, "state": state, "position_steps": steps, "position_mm": mm}
+        if abc:
+            body["position_abc_deg"] = abc
         if values is not None:
             body.update(work, var_file=var_path)
         click.echo(json.dumps(body))
         return
-    text = ", ".join(f"{v:.4f}" for v in mm) + " mm, machine coordinates"
+    text = ", ".join(f"{v:.4f}" for v in mm) + " mm"
+    text += "".join(f", {a.upper()} {v:.4f}°" for a, v in abc.items())
+    text += ", machine coordinates"
     if work:
         shown = ", ".join(f"{v:.4f}" for v in work["work_position_mm"])
         text += f"; {shown} mm in {work['coordinate_system']}"
@@ -126,6 +130,17 @@ def _parse_position(text: str, axes: int) -> tuple[int, ...]:
     if len(values) != axes:
         raise ConfigError(f"--position wants {axes} integers, got {len(values)}")
     return values
+
+
+def _card_axes(text: str) -> tuple[int, str]:
+    """``--axes``: ``(count, names)`` of "XYZA" (names) or "3" (a count, unnamed)."""
+    text = text.strip()
+    if text.isdigit():
+        count = int(text)
+        if not 1 <= count <= 15:
+            raise ConfigError(f"--axes must be 1..15 axes or names like XYZA, got {text}")
+        return count, ""
+    return len(text), text.lower()
 
 
 @click.command("card-sim")
@@ -172,9 +187,25 @@ def _parse_position(text: str, axes: int) -> tuple[int, ...]:
     show_default=True,
     help="The card's period.",
 )
-@click.option("--axes", type=click.IntRange(1, 15), default=3, show_default=True)
 @click.option(
-    "--position", default=None, metavar="X,Y,Z", help="Start position [steps] (default: all 0)."
+    "--axes",
+    default="XYZ",
+    show_default=True,
+    help="The axes the card drives, by name in the order XYZABC (e.g. XYZA: a 4th axis; "
+    "protocol 4), or their number (1-15).",
+)
+@click.option(
+    "--protocol",
+    type=click.Choice(["3", "4"]),
+    default=None,
+    help="The protocol version it speaks (default: 4 when it drives A, B or C, else 3; "
+    "a version-3 card drives X Y Z only).",
+)
+@click.option(
+    "--position",
+    default=None,
+    metavar="X,Y,Z[,A,B,C]",
+    help="Start position [steps, one per axis] (default: all 0).",
 )
 @click.option(
     "--baud",
@@ -205,7 +236,7 @@ def _parse_position(text: str, axes: int) -> tuple[int, ...]:
     "log_path",
     type=click.Path(dir_okay=False),
     default=None,
-    help="CSV of executed periods: period,x,y,z (pulses).",
+    help="CSV of executed periods: period,x,y,z (pulses; a column per axis).",
 )
 @click.option(
     "--report",
@@ -225,6 +256,7 @@ def card_sim(
     max_pulses,
     period_ms,
     axes,
+    protocol,
     position,
     baud,
     drop_rate,
@@ -262,14 +294,17 @@ def card_sim(
         reset_after_frames=reset_after_frames,
         stall_after_frames=stall_after_frames,
     )
+    count, names = _card_axes(axes)
     config = CardConfig(
-        axes=axes,
+        axes=count,
+        axis_names=names,
+        version=int(protocol or 0),
         buffer_periods=buffer_periods,
         max_pulses_per_period=max_pulses,
         period_s=period_ms * 1e-3,
         speed=None if fast else speed,
         start_fill_periods=start_fill,
-        position_steps=_parse_position(position, axes) if position else (0,) * axes,
+        position_steps=_parse_position(position, count) if position else (),
         faults=faults,
     )
     card = CardSim(config, seed=seed)

@@ -79,14 +79,16 @@ def mdi(blocks, **kwargs):
     type=click.FloatRange(min=0.0, min_open=True),
     default=None,
     metavar="MM_PER_MIN",
-    help="Move at this feed (G1) instead of the rapid rate (G0).",
+    help="Move at this feed (G1) instead of the rapid rate (G0); deg/min for a jog of "
+    "A, B or C alone (LinuxCNC's rate).",
 )
 @_link_options
 @planning_options
 def jog(moves, feed_mm_min, **kwargs):
-    """Move the card by MOVES (per axis, mm, machine axes: X+1.5 Y-2 Z0.5) from where it
-    stands: one straight move in machine coordinates (G53: work offsets, G92 and a rotated
-    system leave a jog alone), within the profile's limits and soft limits. The parameter
+    """Move the card by MOVES (per axis, machine axes: X+1.5 Y-2 Z0.5 in mm, A+10 in
+    degrees when the machine has an A axis and the card drives it) from where it stands:
+    one straight move in machine coordinates (G53: work offsets, G92 and a rotated system
+    leave a jog alone), within the profile's limits and soft limits. The parameter
     file is read (its G28/G30 positions are untouched) and written back like mdi's.
 
     Example: nurbscnc jog X+1.5 Z-0.2 --port /dev/ttyUSB0
@@ -199,10 +201,11 @@ def _run_stops(stops, link: dict) -> None:
 
 def _report(program: str, job, start_steps, final_steps, written, mach, as_json: bool) -> None:
     """What the call did: JSON on stdout, or a line."""
-    from nurbscnc.app.stream import position_mm
+    from nurbscnc.app.stream import position_abc_deg, position_mm
     from nurbscnc.app.varfile import work_report
 
     final_mm = position_mm(final_steps, mach)
+    final_abc = position_abc_deg(final_steps, mach)
     body = {
         "ok": True,
         "command": program,
@@ -214,10 +217,13 @@ def _report(program: str, job, start_steps, final_steps, written, mach, as_json:
         **work_report(job.program.parameters, final_mm),
         "var_file": written,
     }
+    if final_abc:
+        body["final_abc_deg"] = final_abc
     if as_json:
         click.echo(json.dumps(body))
         return
     mm = ", ".join(f"{v:.4f}" for v in final_mm)
+    mm += "".join(f", {a.upper()} {v:.4f}°" for a, v in final_abc.items())
     wk = ", ".join(f"{v:.4f}" for v in body["work_position_mm"])
     what = "moved to" if job.moves else "stands at"
     kept = f"; parameter file {written} written" if written else "; no parameter file"

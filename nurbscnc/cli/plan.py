@@ -15,6 +15,7 @@ from nurbscnc.app.summary import (
     precompensation_text,
     rapids_words,
     rest_text,
+    rotary_text,
     scope_words,
     summary_json,
     summary_of,
@@ -193,6 +194,8 @@ def print_plan_summary(prog, mach, summary: dict, out: Console) -> None:
 
     if summary.get("motion") is False:
         out.print(Text.assemble((prog.name, "bold"), ": ", rest_text(summary)))
+        if rotary_text(summary):
+            out.print(rotary_text(summary), markup=False)
         return
     if "pieces" in summary:
         out.print(
@@ -245,14 +248,7 @@ def print_plan_summary(prog, mach, summary: dict, out: Console) -> None:
             f"µm (ε_max {mach.limits.contour_tolerance_mm * 1000:g} µm; {how})"
             f"{rapids_words(summary.get('contour_rapids_true_max_um'))}"
         )
-    if "rotary" in summary:
-        rot = summary["rotary"]
-        out.print(
-            f"  rotary axes {' '.join(a.upper() for a in rot['axes'])}: "
-            f"{rot['rotate_moves']} rotary-only move{'' if rot['rotate_moves'] == 1 else 's'}, "
-            f"{rot['rotate_time_s']:.4f} s; "
-            f"{rot['note']}",
-            markup=False,
-        )
+    if rotary_text(summary):
+        out.print(rotary_text(summary), markup=False)
     if precompensation_text(summary):
         out.print(precompensation_text(summary), markup=False)

@@ -10,7 +10,13 @@ import click
 from nurbscnc.app.load import display_name
 from nurbscnc.app.output import SUFFIX_FORMATS, refuse_overwriting, write_output
 from nurbscnc.app.plots import write_plan_plots
-from nurbscnc.app.summary import clock_suffix, precompensation_text, summary_json, summary_of
+from nurbscnc.app.summary import (
+    clock_suffix,
+    precompensation_text,
+    rotary_text,
+    summary_json,
+    summary_of,
+)
 from nurbscnc.app.varfile import program_inputs, write_back
 from nurbscnc.cli.batch import run_batch
 from nurbscnc.cli.common import json_option, make_plan, plot_option
@@ -48,8 +54,8 @@ from nurbscnc.errors import ConfigError
     default=None,
     help="Output format (default: -o's suffix .npz/.hs, else csv; a "
     "format that contradicts the suffix is an error; npz never goes to stdout): "
-    "csv, npz, or halstreamer (LinuxCNC streamer text, x y z per servo period; "
-    "docs/linuxcnc.md).",
+    "csv, npz, or halstreamer (LinuxCNC streamer text, x y z and the rotary axes used "
+    "per servo period; docs/linuxcnc.md).",
 )
 @click.option("--quiet", is_flag=True, help="No summary on stderr.")
 @click.option(
@@ -68,7 +74,8 @@ def run(programs, output, output_dir, jobs, fmt, quiet, as_json, plot_dir, **set
     Example: nurbscnc run programs/naca2415.nc -o points.csv
 
     The CSV header is t,x,y,z,feed,piece,line (s, mm, mm, mm, mm/s, piece index, source
-    line); the first row is the start point at t = 0, the last the end point at rest.
+    line), with a, b, c [deg] after z for the rotary axes a program uses; the first row is
+    the start point at t = 0, the last the end point at rest.
     """
     if settings.get("write_var") and output_dir is not None:
         raise click.UsageError("--write-var writes one parameter file: give one program and -o")
@@ -101,6 +108,8 @@ def _run_one(programs, output, fmt, quiet: bool, as_json: bool, plot_dir, settin
         )
         if precompensation_text(summary):
             err.print(precompensation_text(summary), markup=False)
+        if rotary_text(summary):
+            err.print(rotary_text(summary), markup=False)
 
 
 def _write_points(program, output, fmt, as_json: bool, plot_dir, settings, say):

@@ -12,12 +12,14 @@ from nurbscnc.app.plots import write_simulate_plots
 from nurbscnc.app.simulation import (
     is_points_source,
     points_reference,
+    rotary_summary,
     run_contour,
     run_reference,
+    run_rotary,
     scoped_metrics,
     simulate_points,
 )
-from nurbscnc.app.summary import machine_json, rapids_words, scope_words
+from nurbscnc.app.summary import machine_json, rapids_words, rotary_text, scope_words
 from nurbscnc.cli.common import json_option, load_machine_cli, make_plan, plot_option
 from nurbscnc.cli.console import out
 from nurbscnc.cli.handle import handle_errors
@@ -46,11 +48,12 @@ def simulate(source, as_json, plot_dir, hold, **settings):
     text = read_program_text("-") if source == "-" else None
     if is_points_source(source, text):
         mach = load_machine_cli(settings["machine"], settings["overrides"])
-        points, path = points_reference(source, text)
+        points, path, rotary = points_reference(source, text)
         name, run = display_name(source), None
     else:
         prog, mach, run = make_plan(source, **settings, text=text)
         points, path = run_reference(run)
+        rotary = run_rotary(run.samples)
         name = prog.name
     sim, contour, m = simulate_points(points, path, mach, hold)
     feed = None
@@ -71,6 +74,7 @@ def simulate(source, as_json, plot_dir, hold, **settings):
                     "program": name,
                     "samples": int(points.shape[0]),
                     **metrics_json(m),
+                    **rotary_summary(rotary),
                     **machine_json(mach),
                 }
             )
@@ -97,3 +101,6 @@ def simulate(source, as_json, plot_dir, hold, **settings):
         f"{m['contour_rms_um']:.2f} µm, mean {m['contour_mean_um']:.2f} µm",
         markup=False,
     )
+    note = rotary_text(rotary_summary(rotary))
+    if note:
+        out.print(note, markup=False)

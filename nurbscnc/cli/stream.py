@@ -12,8 +12,8 @@ import click
 
 from nurbscnc.app.stream import (
     ProgramStream,
+    axes_points_of_file,
     is_points_file,
-    points_of_file,
     position_mm,
     progress_position,
     pulses_of_points,
@@ -48,7 +48,8 @@ def load_pulse_program(path: str, machine=None, overrides=(), **_settings):
     card's pulse limit — raises here, before any port is touched. Returns
     ``(PulseProgram, Machine)``."""
     mach = load_machine_cli(machine, overrides)
-    return pulses_of_points(points_of_file(path, mach), mach), mach
+    points, axes = axes_points_of_file(path, mach)
+    return pulses_of_points(points, mach, None, axes), mach
 
 
 @contextlib.contextmanager
@@ -88,7 +89,7 @@ def _progress_bar(enabled: bool, total: int, keys: bool = False, where=None):
         def update(pr) -> None:
             tell(pr)
             info = f"line {pr.line} · executed {pr.executed} · buffer {pr.fill}/{pr.buffer}"
-            at = where(pr.position_steps) if where is not None and pr.position_steps else ""
+            at = where(pr.position_steps, pr.axes) if where and pr.position_steps else ""
             info += (f" · {at}" if at else "") + (f" · {pr.note}" if pr.note else "")
             bar.update(
                 task,
@@ -121,7 +122,7 @@ def _progress_bar(enabled: bool, total: int, keys: bool = False, where=None):
     type=click.IntRange(1, 80),
     default=16,
     show_default=True,
-    help="Periods per frame (at most 80 with 3 axes).",
+    help="Periods per frame (at most 80 with 3 axes, 59 with 4, 38 with 6).",
 )
 @link_timeout_option
 @stall_limit_option
@@ -342,7 +343,8 @@ def _print_report(program: str, job, reports: list, as_json: bool, mach, paramet
         f"{report['retransmits']} retransmitted; the card ended at "
         f"{list(reports[-1].final_position_steps)} steps "
         f"({', '.join(f'{v:.4f}' for v in report['final_position_mm'])} mm"
-        f"{work_text(report)}){hold_text}",
+        + "".join(f", {a.upper()} {v:.4f}°" for a, v in report.get("final_abc_deg", {}).items())
+        + f"{work_text(report)}){hold_text}",
         markup=False,
     )
     planning = report.get("planning")

@@ -45,6 +45,7 @@ from nurbscnc.machine.model import (
     AxisServo,
     Limits,
     Machine,
+    RotaryAxis,
     Servo,
     SoftLimits,
     Steps,
@@ -54,6 +55,7 @@ from nurbscnc.machine.schema import (
     DEFAULT_MAX_POINTS,
     DEFAULT_PERIOD_MS,
     MM_PER_UM,
+    ROTARY_AXES,
     S_PER_MIN,
     S_PER_MS,
     SCHEMA,
@@ -114,6 +116,7 @@ def _with_origin(machine: Machine, found_by: str) -> Machine:
         machine.settings,
         machine.axis_limits,
         machine.defaults,
+        machine.rotary_axes,
     )
 
 
@@ -218,6 +221,7 @@ def _build(data: dict, rep: Reporter) -> Machine:
 
     st = data["steps"]
     axis_limits = _axis_limits(data.get("axis_limits", {}))
+    rotary_axes = _rotary_axes(data.get("axis_limits", {}), rep)
     # A pulse-train card cannot emit more than max_pulses_per_period steps per period on an axis;
     # an axis moving alone at the fastest rate (max of V_max and the rapid rate, or that axis's
     # own velocity limit when lower) must fit.
@@ -272,7 +276,36 @@ def _build(data: dict, rep: Reporter) -> Machine:
         settings=settings,
         axis_limits=axis_limits,
         defaults=frozenset(defaults),
+        rotary_axes=rotary_axes,
     )
+
+
+def _rotary_axes(tables: dict, rep: Reporter) -> dict:
+    """The rotary axes ``{name: RotaryAxis}`` the ``[axis_limits.<a|b|c>]`` tables declare
+    (schema-checked: v, a, j present), in internal units (deg/s, deg/s², deg/s³); soft limits
+    ±inf where the table gives none, and ``min_deg`` < ``max_deg`` when both are given."""
+    axes = {}
+    for name in ROTARY_AXES:
+        table = tables.get(name)
+        if table is None:
+            continue
+        lo, hi = table.get("min_deg", -math.inf), table.get("max_deg", math.inf)
+        if not lo < hi:
+            raise rep.error(
+                f"axis_limits.{name}.min_deg",
+                f"({lo!r}) must be < axis_limits.{name}.max_deg ({hi!r})",
+            )
+        axes[name] = RotaryAxis(
+            name,
+            v_max_deg_s=float(table["v_max_deg_min"]) / S_PER_MIN,
+            a_max_deg_s2=float(table["a_max_deg_s2"]),
+            j_max_deg_s3=float(table["j_max_deg_s3"]),
+            min_deg=float(lo),
+            max_deg=float(hi),
+            wrapped=bool(table.get("wrapped", False)),
+            steps_per_deg=float(table.get("steps_per_deg", 0.0)),
+        )
+    return axes
 
 
 def _axis_limits(tables: dict) -> AxisLimits:

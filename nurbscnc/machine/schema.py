@@ -11,6 +11,8 @@ from nurbscnc.errors import ConfigError
 
 #: The machine axes, in the order every per-axis tuple uses.
 AXES = ("x", "y", "z")
+#: The rotary axes a profile may declare (an ``[axis_limits.<a|b|c>]`` table each), degrees.
+ROTARY_AXES = ("a", "b", "c")
 #: Servo model coefficients of SPEC eq. 25, in the profile's key order.
 SERVO_COEFFICIENTS = ("a0", "a1", "a2", "a3", "a4", "b0", "b1", "b2")
 #: Keys of the simple (2nd-order) servo form.
@@ -20,6 +22,19 @@ MAX_DAMPING = 2.0
 #: Keys of an ``[axis_limits.<axis>]`` table: velocity [mm/min] (like ``limits.v_max_mm_min``),
 #: acceleration [mm/s²] and jerk [mm/s³] of that axis alone.
 AXIS_LIMIT_KEYS = ("v_max_mm_min", "a_max_mm_s2", "j_max_mm_s3")
+#: Keys of a rotary axis's ``[axis_limits.<a|b|c>]`` table: velocity [deg/min], acceleration
+#: [deg/s²], jerk [deg/s³] (required: the table declares the axis), then the optional soft
+#: limits [deg, machine coordinates], LinuxCNC's ``WRAPPED_ROTARY`` and the card's steps per
+#: degree.
+ROTARY_LIMIT_KEYS = ("v_max_deg_min", "a_max_deg_s2", "j_max_deg_s3")
+ROTARY_OPTIONAL_KEYS = ("min_deg", "max_deg", "wrapped", "steps_per_deg")
+_ROTARY_SCHEMA = {
+    **dict.fromkeys(ROTARY_LIMIT_KEYS, "pos"),
+    "min_deg": "finite",
+    "max_deg": "finite",
+    "wrapped": "bool",
+    "steps_per_deg": "pos",
+}
 #: Servo period when the profile gives none [ms] (SPEC §9).
 DEFAULT_PERIOD_MS = 1.0
 
@@ -27,6 +42,7 @@ DEFAULT_PERIOD_MS = 1.0
 # Schema. A table is a dict of key -> sub-schema; a leaf is the name of a value check:
 #   "pos"    a finite number > 0        "finite"  any finite number
 #   "count"  an integer >= 1          "text"    a string (a path)
+#   "bool"   true or false
 # Keys listed in _OPTIONAL may be absent; every other key is required, and unknown keys are
 # errors (a misspelt key must never silently fall back to a default).
 _COEFF_SCHEMA = {
@@ -60,7 +76,11 @@ SCHEMA: dict = {
     "soft_limits": {a: {"min_mm": "finite", "max_mm": "finite"} for a in AXES},
     # Per-axis limits, beside the path limits of [limits]: a table per axis, every
     # key optional (an absent key leaves that axis to the path limits alone).
-    "axis_limits": {a: dict.fromkeys(AXIS_LIMIT_KEYS, "pos") for a in AXES},
+    # A rotary axis's table (a, b, c) declares the axis: its v, a, j are required.
+    "axis_limits": {
+        **{a: dict.fromkeys(AXIS_LIMIT_KEYS, "pos") for a in AXES},
+        **{a: _ROTARY_SCHEMA for a in ROTARY_AXES},
+    },
     # How programs run on this machine: LinuxCNC's parameter file (work offsets, G92, G28/G30
     # positions) and its user M-code path ([RS274NGC]USER_M_PATH: colon-separated folders).
     # Relative paths are relative to the profile's folder. user_m_timeout_s: the longest a
@@ -85,6 +105,8 @@ _OPTIONAL |= {
     "axis_limits",
     *(f"axis_limits.{a}" for a in AXES),
     *(f"axis_limits.{a}.{k}" for a in AXES for k in AXIS_LIMIT_KEYS),
+    *(f"axis_limits.{a}" for a in ROTARY_AXES),
+    *(f"axis_limits.{a}.{k}" for a in ROTARY_AXES for k in ROTARY_OPTIONAL_KEYS),
 }
 
 # ---------------------------------------------------------------------------------------------
@@ -103,6 +125,15 @@ RANGES: dict[str, tuple[float, float]] = {
     # mm/s^3: 1 um/s^3 to 1e9 (a linear motor reaches 1e7)
     "limits.j_max_mm_s3": (1e-3, 1e9),
     "axis_limits.*.j_max_mm_s3": (1e-3, 1e9),
+    # rotary axes: 0.001 deg/min (a creep) to 1e8 deg/min (4600 rev/s, beyond any spindle
+    # run as an axis); deg/s^2 and deg/s^3 as wide; soft limits within the interpreter's
+    # coordinate bound; steps per degree as steps.per_mm
+    "axis_limits.*.v_max_deg_min": (1e-3, 1e8),
+    "axis_limits.*.a_max_deg_s2": (1e-3, 1e9),
+    "axis_limits.*.j_max_deg_s3": (1e-3, 1e12),
+    "axis_limits.*.min_deg": (-1e9, 1e9),
+    "axis_limits.*.max_deg": (-1e9, 1e9),
+    "axis_limits.*.steps_per_deg": (1e-3, 1e7),
     # um: 10 nm (ultra-precision) to 10 mm. The contour tolerance stops at 0.1 um, a tenth
     # of the default 1 um step: below it the check's re-plans grow without end (0.1 um takes
     # 4.5 s on programs/naca2415.nc, 0.01 um more than 120 s) for an error no pulse shows.
@@ -134,7 +165,7 @@ def range_of(key: str) -> tuple[float, float] | None:
     """The :data:`RANGES` entry of a dotted key (an axis name matches ``*``), or None."""
     parts = key.split(".")
     for i, part in enumerate(parts):
-        if part in AXES:
+        if part in AXES or part in ROTARY_AXES:
             wild = ".".join([*parts[:i], "*", *parts[i + 1 :]])
             if wild in RANGES:
                 return RANGES[wild]
@@ -227,6 +258,10 @@ def _check_leaf(value, kind: str, key: str, rep: Reporter) -> None:
     if kind == "text":
         if not isinstance(value, str) or "\0" in value:
             raise rep.error(key, f"must be a text (a path), got {value!r}")
+        return
+    if kind == "bool":
+        if not isinstance(value, bool):
+            raise rep.error(key, f"must be true or false, got {value!r}")
         return
     if kind == "count":
         if isinstance(value, bool) or not isinstance(value, int):

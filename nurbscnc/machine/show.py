@@ -4,6 +4,7 @@ from for every command's JSON."""
 from __future__ import annotations
 
 import json
+import math
 
 from nurbscnc.machine.discovery import FOUND_BY_DEFAULT
 from nurbscnc.machine.model import Machine
@@ -55,6 +56,9 @@ def profile_toml(machine: Machine) -> str:
                 wn = axis.natural_frequency_rad_s
                 extra = f"; wn = {wn:.6g} rad/s" if wn is not None else ""
                 lines.append(f"# poles [1/s]: {poles}{extra}")
+            rotary = machine.rotary_axes.get(prefix[12:]) if prefix[:12] == "axis_limits." else None
+            if rotary is not None:
+                lines.append(_rotary_comment(rotary))
         lines.extend(
             f"{k} = {_toml_value(table[k])}"
             + ("  # default" if (f"{prefix}.{k}" if prefix else k) in machine.defaults else "")
@@ -67,6 +71,19 @@ def profile_toml(machine: Machine) -> str:
 
     emit(machine.settings, SCHEMA, "")
     return "\n".join(lines) + "\n"
+
+
+def _rotary_comment(axis) -> str:
+    """A rotary axis's limits in internal units, for the comment above its table."""
+    text = (
+        f"# rotary axis {axis.name.upper()} [degrees]: v_max {axis.v_max_deg_s:.6g} deg/s, "
+        f"a_max {axis.a_max_deg_s2:.6g} deg/s^2, j_max {axis.j_max_deg_s3:.6g} deg/s^3"
+    )
+    if axis.min_deg != -math.inf or axis.max_deg != math.inf:
+        text += f", travel [{axis.min_deg:g}, {axis.max_deg:g}] deg"
+    if axis.wrapped:
+        text += ", wrapped (G90 words are positions in [0, 360), the sign the direction)"
+    return text
 
 
 def profile_info(machine: Machine) -> dict:

@@ -41,6 +41,11 @@ if TYPE_CHECKING:  # the annotations only: no import at start-up
 
 #: Column order of a reference-point file (units: s, mm, mm, mm, mm/s, index, source line).
 POINT_COLUMNS = ("t", "x", "y", "z", "feed", "piece", "line")
+#: The rotary axes' columns [deg, machine coordinates]: each one written only when the
+#: program uses that axis (:attr:`~nurbscnc.plan.timing.Samples.rotary_axes`), in this order,
+#: between ``z`` and ``feed`` (:func:`point_names`). A program without rotary axes writes
+#: exactly POINT_COLUMNS.
+ROTARY_COLUMNS = ("a", "b", "c")
 #: Column order of a profile dump (s, mm, mm/s, mm/s², mm/s³, index).
 PROFILE_COLUMNS = ("t", "s", "v", "a", "j", "piece")
 #: Largest magnitude accepted in a reference-point file (1e9 mm = 1000 km for a coordinate,
@@ -235,18 +240,86 @@ def write_table(path: str, names, columns, formats, npz: bool | None = None) -> 
 
 #: printf formats of the reference-point columns (POINT_COLUMNS).
 POINT_FORMATS = ["%.6f", "%.9f", "%.9f", "%.9f", "%.6f", "%d", "%d"]
+#: printf format of a rotary column [deg]: nine decimals, as x y z [mm].
+ROTARY_FORMAT = "%.9f"
+
+
+def checked_rotary_axes(axes) -> tuple:
+    """``axes`` as a tuple of distinct names of ROTARY_COLUMNS in their order (``("a",
+    "c")``); anything else is a ValueError (the writers' input is the program's
+    :attr:`~nurbscnc.geometry.segments.Program.rotary_axes`, never the user's)."""
+    axes = tuple(axes)
+    if axes != tuple(c for c in ROTARY_COLUMNS if c in axes):
+        raise ValueError(f"rotary axes must be distinct names of a, b, c in order, got {axes}")
+    return axes
+
+
+def point_names(rotary_axes=()) -> tuple:
+    """The column names of a reference-point file: ``t,x,y,z``, the rotary axes the program
+    uses (``a``, ``b``, ``c`` [deg], in that order), then ``feed,piece,line``."""
+    return POINT_COLUMNS[:4] + checked_rotary_axes(rotary_axes) + POINT_COLUMNS[4:]
+
+
+def point_formats(rotary_axes=()) -> list:
+    """The printf formats of :func:`point_names`'s columns."""
+    return POINT_FORMATS[:4] + [ROTARY_FORMAT] * len(rotary_axes) + POINT_FORMATS[4:]
+
+
+def rotary_columns(samples: Samples) -> tuple:
+    """The columns (N,) [deg] of the rotary axes ``samples`` uses
+    (:attr:`~nurbscnc.plan.timing.Samples.rotary_axes`), picked from its ``abc_deg`` (N, 3);
+    ``()`` for a program without rotary axes. Samples that name axes but carry no A B C
+    are a ValueError (a stage dropped them: writing zeros would move the part wrongly)."""
+    axes = checked_rotary_axes(samples.rotary_axes)
+    if not axes:
+        return ()
+    abc = samples.abc_deg
+    if abc is None or abc.ndim != 2 or abc.shape != (samples.t_s.size, 3):
+        got = None if abc is None else abc.shape
+        raise ValueError(f"samples of rotary axes {axes} need abc_deg (N, 3), got {got}")
+    return tuple(abc[:, ROTARY_COLUMNS.index(name)] for name in axes)
 
 
 def point_columns(samples: Samples) -> tuple:
-    """The POINT_COLUMNS of reference points (whole or one window): t, x, y, z, feed,
-    piece, line."""
+    """The columns of reference points (whole or one window), in :func:`point_names`'s
+    order: t, x, y, z, the rotary axes the program uses, feed, piece, line."""
     p = samples.points_mm
-    return (samples.t_s, p[:, 0], p[:, 1], p[:, 2], samples.v_mm_s, samples.piece, samples.line)
+    return (
+        samples.t_s,
+        p[:, 0],
+        p[:, 1],
+        p[:, 2],
+        *rotary_columns(samples),
+        samples.v_mm_s,
+        samples.piece,
+        samples.line,
+    )
+
+
+def windows_and_axes(windows: Iterable[Samples]) -> tuple[tuple, Iterable[Samples]]:
+    """The rotary axes of samples given window by window (the first window's; ``()`` when
+    there is none) and the same windows, each checked to name the same axes (ValueError:
+    one file has one set of columns)."""
+    windows = iter(windows)
+    first = next(windows, None)
+    if first is None:
+        return (), iter(())
+    axes = checked_rotary_axes(first.rotary_axes)
+
+    def all_windows():
+        yield first
+        for w in windows:
+            if tuple(w.rotary_axes) != axes:
+                raise ValueError(f"a window's rotary axes {w.rotary_axes} differ from {axes}")
+            yield w
+
+    return axes, all_windows()
 
 
 def write_points(path: str, samples: Samples, npz: bool | None = None) -> None:
-    """Reference points: ``t,x,y,z,feed,piece,line`` (s, mm, mm, mm, mm/s, index, line);
-    NPZ when ``npz`` (None: by the path's suffix)."""
+    """Reference points: ``t,x,y,z,feed,piece,line`` (s, mm, mm, mm, mm/s, index, line),
+    with the program's rotary axes (``a``, ``b``, ``c`` [deg]) after ``z``; NPZ when ``npz``
+    (None: by the path's suffix)."""
     write_point_windows(path, [samples], int(samples.t_s.size), npz)
 
 
@@ -254,9 +327,16 @@ def write_point_windows(
     path: str, windows: Iterable[Samples], count: int, npz: bool | None = None
 ) -> None:
     """:func:`write_points` of reference points given window by window (``count`` rows in
-    all, e.g. :meth:`nurbscnc.pipeline.Run.chunks`): the same bytes, one window of memory."""
+    all, e.g. :meth:`nurbscnc.pipeline.Run.chunks`): the same bytes, one window of memory.
+    The columns are the first window's (:func:`windows_and_axes`)."""
+    axes, windows = windows_and_axes(windows)
     write_table_windows(
-        path, POINT_COLUMNS, (point_columns(w) for w in windows), count, POINT_FORMATS, npz
+        path,
+        point_names(axes),
+        (point_columns(w) for w in windows),
+        count,
+        point_formats(axes),
+        npz,
     )
 
 
@@ -273,18 +353,41 @@ def write_profile(path: str, t_s, s_mm, v, a, j, piece) -> None:
 def point_header(text: str) -> tuple[str, ...] | None:
     """The columns of a reference-point CSV whose first line is ``text``'s: ``t,x,y``,
     ``t,x,y,z`` or the full ``t,x,y,z,feed,piece,line`` (any leading prefix of POINT_COLUMNS
-    from ``t,x,y`` on); None when the first line is not such a header (a program, say)."""
+    from ``t,x,y`` on), with after ``z`` any of the rotary columns ``a``, ``b``, ``c`` in
+    that order (:func:`point_names`); None when the first line is not such a header (a
+    program, say)."""
     first = text.lstrip("\ufeff").split("\n", 1)[0].rstrip("\r")
     names = tuple(f.strip() for f in first.split(","))
-    if len(names) >= 3 and names == POINT_COLUMNS[: len(names)]:
+    try:  # the rotary columns named after z, out of order or twice: not a header
+        full = point_names(c for c in names[4:] if c in ROTARY_COLUMNS)
+    except ValueError:
+        return None
+    if len(names) >= 3 and names == full[: len(names)]:
         return names
     return None
 
 
+def rotary_of_points(data: dict) -> tuple[tuple, np.ndarray | None]:
+    """The rotary axes of a points file read by :func:`read_points` (its ``a``, ``b``, ``c``
+    columns, in that order) and their positions ``abc_deg`` (N, 3) [deg] with every column
+    of A B C (0 for an axis the file does not have: a program leaves an unused axis at 0),
+    as :attr:`~nurbscnc.plan.timing.Reference.abc_deg`; ``((), None)`` without rotary
+    columns."""
+    axes = tuple(c for c in ROTARY_COLUMNS if c in data)
+    if not axes:
+        return (), None
+    n = data["x"].shape[0]
+    abc = np.zeros((n, 3))
+    for name in axes:
+        abc[:, ROTARY_COLUMNS.index(name)] = data[name]
+    return axes, abc
+
+
 def read_points(path: str) -> dict:
     """Read a reference-point file (CSV with a header as :func:`point_header` accepts, or NPZ;
-    ``-``: CSV from stdin) into arrays. A missing ``z`` column is 0 mm; missing ``feed``,
-    ``piece``, ``line`` are absent from the result.
+    ``-``: CSV from stdin) into arrays, by column name. A missing ``z`` column is 0 mm;
+    missing ``feed``, ``piece``, ``line`` and rotary ``a``, ``b``, ``c`` [deg] are absent
+    from the result (:func:`rotary_of_points` gathers the rotary ones).
 
     OSError → OutputError (exit 3). Bad content → DataError (exit 2) at its line and column
     where a CSV has them: the header, the column count, text that is not a number, a value
@@ -306,7 +409,8 @@ def read_points_text(text: str) -> dict:
     if names is None:
         header = lines[0] if lines else ""
         raise DataError(
-            f"expected the header {','.join(POINT_COLUMNS)} (or t,x,y / t,x,y,z)",
+            f"expected the header {','.join(POINT_COLUMNS)} (or t,x,y / t,x,y,z; rotary "
+            "columns a, b, c [deg] after z, in that order)",
             SourcePos(1, 1, header),
         )
     try:
@@ -319,7 +423,7 @@ def read_points_text(text: str) -> dict:
         raise DataError("no reference points after the header")
     if data.shape[1] != len(names):
         raise DataError(f"expected {len(names)} columns, got {data.shape[1]}")
-    _check_values(data, lambda row, col: _csv_position(lines, row, col))
+    _check_values(data, names, lambda row, col: _csv_position(lines, row, col))
     result = {c: data[:, i] for i, c in enumerate(names)}
     result.setdefault("z", np.zeros(data.shape[0]))  # a planar file: z = 0 mm
     return result
@@ -332,10 +436,11 @@ _NPY_MAGIC = b"\x93NUMPY"
 
 
 def _read_points_npz(path: str) -> dict:
-    """The arrays of a reference-point NPZ (``write_npz``'s layout), every malformed file a
-    DataError: not a zip (a .npy renamed), a damaged archive or member, a missing array, a
-    header declaring more data than the member holds (checked before numpy allocates it),
-    pickled objects, wrong shapes or types, values that are not finite."""
+    """The arrays of a reference-point NPZ (``write_npz``'s layout: POINT_COLUMNS, and the
+    rotary columns ``a``, ``b``, ``c`` it has), every malformed file a DataError: not a zip
+    (a .npy renamed), a damaged archive or member, a missing array, a header declaring more
+    data than the member holds (checked before numpy allocates it), pickled objects, wrong
+    shapes or types (a rotary column's too), values that are not finite."""
     with open(path, "rb") as fh:
         head = fh.read(len(_NPY_MAGIC))
     if head[:4] not in _ZIP_MAGIC:
@@ -343,14 +448,15 @@ def _read_points_npz(path: str) -> dict:
         raise DataError(f"not a reference-point NPZ file: {what} (expected a zip of .npy arrays)")
     try:
         with zipfile.ZipFile(path) as archive:
-            names = set(archive.namelist())
-            missing = [c for c in POINT_COLUMNS if f"{c}.npy" not in names]
+            members = set(archive.namelist())
+            missing = [c for c in POINT_COLUMNS if f"{c}.npy" not in members]
             if missing:
                 raise DataError(f"missing arrays {', '.join(missing)}")
-            for c in POINT_COLUMNS:
+            names = point_names(c for c in ROTARY_COLUMNS if f"{c}.npy" in members)
+            for c in names:
                 _check_npy_member(archive, f"{c}.npy")
         with np.load(path, allow_pickle=False) as npz:
-            arrays = [np.asarray(npz[c]) for c in POINT_COLUMNS]
+            arrays = [np.asarray(npz[c]) for c in names]
     except (ValueError, EOFError, zipfile.BadZipFile, zlib.error) as exc:
         # ValueError: a bad .npy header, pickled objects (refused); the others: a damaged zip
         raise DataError(f"not a reference-point NPZ file: {str(exc)[:200]}") from None
@@ -359,12 +465,11 @@ def _read_points_npz(path: str) -> dict:
         or arrays[0].size == 0
     ):
         raise DataError(
-            f"the arrays {', '.join(POINT_COLUMNS)} must be numeric, 1-D, "
-            "non-empty and of one length"
+            f"the arrays {', '.join(names)} must be numeric, 1-D, non-empty and of one length"
         )
     data = np.column_stack([a.astype(float) for a in arrays])
-    _check_values(data, lambda row, col: None, lambda row: f" (row {row + 1})")
-    return {c: data[:, i] for i, c in enumerate(POINT_COLUMNS)}
+    _check_values(data, names, lambda row, col: None, lambda row: f" (row {row + 1})")
+    return {c: data[:, i] for i, c in enumerate(names)}
 
 
 def _check_npy_member(archive: zipfile.ZipFile, name: str) -> None:
@@ -389,9 +494,10 @@ def _check_npy_member(archive: zipfile.ZipFile, name: str) -> None:
         )
 
 
-def _check_values(data: np.ndarray, position, where=lambda row: "") -> None:
-    """Refuse NaN, ±inf and magnitudes beyond POINT_VALUE_LIMIT, naming the first one;
-    ``position(row, col)`` gives its SourcePos (or None), ``where(row)`` a suffix."""
+def _check_values(data: np.ndarray, names, position, where=lambda row: "") -> None:
+    """Refuse NaN, ±inf and magnitudes beyond POINT_VALUE_LIMIT, naming the first one (its
+    column's name from ``names``); ``position(row, col)`` gives its SourcePos (or None),
+    ``where(row)`` a suffix."""
     with np.errstate(invalid="ignore"):
         bad = ~(np.abs(data) <= POINT_VALUE_LIMIT)  # NaN compares False: caught too
     if bad.any():
@@ -400,7 +506,7 @@ def _check_values(data: np.ndarray, position, where=lambda row: "") -> None:
         what = (
             "is not finite" if not math.isfinite(value) else (f"is beyond ±{POINT_VALUE_LIMIT:g}")
         )
-        raise DataError(f"{POINT_COLUMNS[col]} = {value!r} {what}{where(row)}", position(row, col))
+        raise DataError(f"{names[col]} = {value!r} {what}{where(row)}", position(row, col))
 
 
 def _csv_position(lines: list[str], row: int, col: int) -> SourcePos | None:

@@ -425,22 +425,14 @@ def plan_summary(
     return summary
 
 
-#: What the contour check does not see when A B C turn the part (``rotary.contour_check``).
-ROTARY_CONTOUR_NOTE = (
-    "the contour check covers X Y Z only: it does not see the tool's position on a rotated "
-    "part (an A error of δ° is r·δ·π/180 mm at radius r)"
-)
-
-
 def rotary_summary(rotary) -> dict:
-    """The ``rotary`` object of a plan's JSON (docs/json.md): the axes the program uses, its
-    rotary-only moves (count, time [s]) and what the contour check covers."""
+    """The planner's entries of a plan's ``rotary`` object (docs/json.md; the app adds where
+    the axes end and what the contour check covers): the axes the program uses and its
+    rotary-only moves (count, planned time [s])."""
     return {
         "axes": list(rotary.axes),
         "rotate_moves": int(rotary.holds.duration_s.size),
         "rotate_time_s": float(np.sum(rotary.holds.duration_s)),
-        "contour_check": "xyz",
-        "note": ROTARY_CONTOUR_NOTE,
     }
 
 

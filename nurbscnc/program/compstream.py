@@ -78,7 +78,10 @@ class CompStream:
             self.comp_exit = self.from_comp(comp.position_mm)
 
     def append_compensated(self, moves) -> None:
+        """The compensated moves as segments; the rotary axes stand where they are while
+        compensation is on (RotaryAxes.refuse_rotary_in_comp): each carries that."""
         blend_mm = self.m.blend_mm
+        abc_hold = self.m.abc_hold
         plane = self.comp_plane
         back = self.from_comp
         for mv in moves:
@@ -102,6 +105,7 @@ class CompStream:
                         line=mv.line,
                         plane=plane,
                         blend_mm=blend_mm,
+                        abc_deg=abc_hold,
                     )
                 )
             elif tuple(mv.start_mm) != tuple(mv.end_mm):
@@ -113,6 +117,7 @@ class CompStream:
                         mv.line,
                         mv.kind == "rapid",
                         blend_mm,
+                        abc_deg=abc_hold,
                     )
                 )
 
@@ -132,6 +137,7 @@ class CompStream:
                 segment.line,
                 segment.rapid,
                 segment.blend_mm,
+                abc_deg=segment.abc_deg,
             )
             self.comp_exit = None
             if segment.start_mm == segment.end_mm:

@@ -83,6 +83,11 @@ class Coordinates:
     rotation_deg: float = 0.0
     g92_mm: list = field(default_factory=lambda: [0.0, 0.0, 0.0])
     tool_mm: list = field(default_factory=lambda: [0.0, 0.0, 0.0])
+    #: The rotary axes' offsets [deg]: the active system's A B C (#5224–#5226 for G54) and
+    #: G92's (#5214–#5216). No rotation, no tool offset and no unit scaling act on them:
+    #: machine A = program A + G92 A + origin A (LinuxCNC, degrees whatever G20/G21).
+    origin_abc_deg: list = field(default_factory=lambda: [0.0, 0.0, 0.0])
+    g92_abc_deg: list = field(default_factory=lambda: [0.0, 0.0, 0.0])
 
     #: The interpreter's segment list: :attr:`frames` says from which segment on each
     #: set of offsets was in force.
@@ -144,6 +149,7 @@ class Coordinates:
         self._load(system if 1 <= system <= N_SYSTEMS else 1)
         if self.params.get(G92_FLAG, 0.0):
             self.g92_mm = [self.params.get(G92_BASE + k, 0.0) for k in range(3)]
+            self.g92_abc_deg = [self.params.get(G92_BASE + k, 0.0) for k in range(3, 6)]
         self._update_plain()
 
     # -- transforms --------------------------------------------------------------------------
@@ -194,6 +200,11 @@ class Coordinates:
             x, y = c * x + s * y, -s * x + c * y
         return [x - self.g92_mm[0], y - self.g92_mm[1], z - self.g92_mm[2]]
 
+    def abc_shift_deg(self) -> tuple:
+        """Machine A B C minus program A B C [deg]: the G92 and the active system's offsets."""
+        o, g = self.origin_abc_deg, self.g92_abc_deg
+        return (o[0] + g[0], o[1] + g[1], o[2] + g[2])
+
     def rotate_vector(self, v) -> list:
         """A direction (an arc normal) from program to machine axes."""
         if not self.rotation_deg:
@@ -214,11 +225,14 @@ class Coordinates:
         self.system = system
         self.params[SYSTEM_INDEX] = float(system)
         self.origin_mm = self.system_offset_mm(system)
+        base = SYSTEM_BASE + SYSTEM_STRIDE * (system - 1)
+        self.origin_abc_deg = [self.params.get(base + k, 0.0) for k in range(3, 6)]
         self.rotation_deg = self.system_rotation_deg(system)
         self._update_plain()
 
     def set_system(self, system: int, offsets: dict, rotation_deg: float | None) -> None:
-        """G10 L2 / L20: set axes (0..2 → mm) and the rotation of ``system`` (1..9)."""
+        """G10 L2 / L20: set axes (0..2 → mm, 3..5 → A B C [deg]) and the rotation of
+        ``system`` (1..9)."""
         base = SYSTEM_BASE + SYSTEM_STRIDE * (system - 1)
         for axis, value in offsets.items():
             self.params[base + axis] = value
@@ -228,15 +242,20 @@ class Coordinates:
             self._load(system)
 
     def set_g92(self, offsets: dict) -> None:
-        """G92: the offsets (axis → mm) of the given axes; the others keep theirs."""
+        """G92: the offsets (axis 0..2 → mm, 3..5 → A B C [deg]) of the given axes; the
+        others keep theirs."""
         for axis, value in offsets.items():
-            self.g92_mm[axis] = value
+            if axis < 3:
+                self.g92_mm[axis] = value
+            else:
+                self.g92_abc_deg[axis - 3] = value
         self._store_g92(1.0)
         self._update_plain()
 
     def clear_g92(self, keep_parameters: bool) -> None:
         """G92.1 (zero the parameters too) or G92.2 (keep them for G92.3)."""
         self.g92_mm = [0.0, 0.0, 0.0]
+        self.g92_abc_deg = [0.0, 0.0, 0.0]
         self._update_plain()
         if keep_parameters:
             self.params[G92_FLAG] = 0.0
@@ -248,12 +267,16 @@ class Coordinates:
     def restore_g92(self) -> None:
         """G92.3: the offsets from #5211–#5213."""
         self.g92_mm = [self.params.get(G92_BASE + k, 0.0) for k in range(3)]
+        self.g92_abc_deg = [self.params.get(G92_BASE + k, 0.0) for k in range(3, 6)]
         self.params[G92_FLAG] = 1.0
         self._update_plain()
 
     def _store_g92(self, flag: float) -> None:
         for k in range(3):
             self.params[G92_BASE + k] = self.g92_mm[k]
+        if any(self.g92_abc_deg) or any(self.params.get(G92_BASE + k) for k in range(3, 6)):
+            for k in range(3):
+                self.params[G92_BASE + 3 + k] = self.g92_abc_deg[k]
         self.params[G92_FLAG] = flag
 
     def home_mm(self, which: int) -> list:
@@ -261,11 +284,18 @@ class Coordinates:
         base = G28_BASE if which == 28 else G30_BASE
         return [self.params.get(base + k, 0.0) for k in range(3)]
 
-    def store_home(self, which: int, machine_mm) -> None:
-        """G28.1 / G30.1: store the current machine position."""
+    def home_abc_deg(self, which: int) -> list:
+        """The stored G28 (``which`` = 28) or G30 position of A B C [deg, machine]."""
+        base = (G28_BASE if which == 28 else G30_BASE) + 3
+        return [self.params.get(base + k, 0.0) for k in range(3)]
+
+    def store_home(self, which: int, machine_mm, abc_deg=None) -> None:
+        """G28.1 / G30.1: store the current machine position (and A B C [deg] when given)."""
         base = G28_BASE if which == 28 else G30_BASE
         for k in range(3):
             self.params[base + k] = float(machine_mm[k])
+        for k, value in enumerate(abc_deg or ()):
+            self.params[base + 3 + k] = float(value)
 
 
 def _cos_sin(angle_deg: float) -> tuple[float, float]:
@@ -291,7 +321,8 @@ class OffsetCommands:
             self.go_home(28 if code == G_28 else 30, words, used)
             return True
         if code in (G_28_1, G_30_1):
-            self.coords.store_home(28 if code == G_28_1 else 30, self.pos)
+            which = 28 if code == G_28_1 else 30
+            self.coords.store_home(which, self.pos, self.home_abc_to_store(which))
             return False
         if code == G_92:
             self.g92(words, used, col)
@@ -337,10 +368,17 @@ class OffsetCommands:
         given = {i: words[a][0] * scale for i, a in enumerate(_AXES) if a in words}
         rotation = words["R"][0] if "R" in words else None
         machine = self.pos
+        turned = self.abc_offsets(words, wrapped_check=level == 20.0)
         if level == 20.0:
             if rotation is not None:
                 raise self.error("R not allowed in G10 L20", words["R"][1])
             given = self._l20_offsets(system, given, machine)
+            # A B C: the offset that makes the current position read the word (no rotation,
+            # no tool offset on them): origin = machine − G92 − word.
+            g92 = self.coords.g92_abc_deg
+            for k, value in turned.items():
+                turned[k] = self.m.rotary[k - 3] - g92[k - 3] - value
+        given.update(turned)
         self.coords.set_system(system, given, rotation)
         self.pos = machine
 
@@ -360,6 +398,7 @@ class OffsetCommands:
         if p != int(p) or p < 0:
             raise self.error(f"G10 L{level} P{p:g}: P must be a tool number", pcol)
         used.update("LP" + "".join(a for a in "XYZRIJQ" if a in words))
+        self.refuse_rotary_tool_offset(words)
         number = int(p)
         scale = self.m.scale
         old = self.tools.get(number) or Tool(number)
@@ -425,12 +464,13 @@ class OffsetCommands:
         machine = self.pos
         self.coords.set_g92(
             {i: words[a][0] * self.m.scale for i, a in enumerate(_AXES) if a in words}
+            | self.abc_offsets(words, wrapped_check=True)
         )
         used.update(_AXES)
         self.pos = machine
 
     def g92(self, words: dict, used: set, col: int) -> None:
-        if not any(a in words for a in _AXES):
+        if not any(a in words for a in "XYZABC"):
             raise self.error("G92 needs at least one axis word", col)
         self.not_in_comp("Cannot change axis offsets with cutter radius comp", col)
         machine = self.pos
@@ -439,6 +479,9 @@ class OffsetCommands:
         offsets = {
             i: unshifted[i] - words[a][0] * self.m.scale for i, a in enumerate(_AXES) if a in words
         }
+        # A B C: the offset that makes the current position read the word (degrees).
+        for k, value in self.abc_offsets(words, wrapped_check=True).items():
+            offsets[k] = self.m.rotary[k - 3] - c.origin_abc_deg[k - 3] - value
         c.set_g92(offsets)
         self.pos = machine
         used.update(_AXES)
@@ -452,13 +495,22 @@ class OffsetCommands:
             raise self.error(f"G{which} with cutter compensation on")
         home = self.coords.home_mm(which)
         axes = [i for i, a in enumerate(_AXES) if a in words]
-        if axes:
+        turned = [i for i, a in enumerate("ABC") if a in words]
+        home_abc = self.coords.home_abc_deg(which)
+        abc = list(self.m.rotary)
+        if axes or turned:
             middle = self.target_program(words)
-            self.rapid_to_program(middle)
+            self.rapid_to_program(middle, self.target_abc(words))
             machine = self.pos
             for i in axes:
                 machine[i] = home[i]
+            abc = list(self.m.rotary)
+            for i in turned:
+                abc[i] = home_abc[i]
         else:
             machine = list(home)
-        self.rapid_to_program(self.coords.to_program(machine))
+            for i, letter in enumerate("ABC"):  # an axis the machine lacks stays
+                if self.rotary_axis(letter) is not None:
+                    abc[i] = home_abc[i]
+        self.rapid_to_program(self.coords.to_program(machine), tuple(abc))
         used.update(_AXES)

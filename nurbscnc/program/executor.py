@@ -48,6 +48,7 @@ from nurbscnc.program.codes import (
 )
 from nurbscnc.program.modes import ModeSetters
 from nurbscnc.program.parse import Block
+from nurbscnc.program.rotary import RotaryAxes
 from nurbscnc.program.words import unused_word_message
 
 _PLAIN_WORDS = frozenset("XYZF")
@@ -390,7 +391,7 @@ BEFORE_MOTION = (
     Step(ModeSetters.set_distance_modes, g_groups=(GM_DISTANCE, GM_IJK_DISTANCE)),
     Step(ModeSetters.set_retract_mode, g_groups=(GM_RETURN_MODE,)),  # G98, G99
     Step(BlockExecutor.check_cycle_axes, letters="ABC"),  # A B C with a canned cycle
-    Step(ModeSetters.check_rotary, letters="ABC"),  # A, B, C
+    Step(RotaryAxes.rotary_words, letters="ABC"),  # A, B, C
     Step(BlockExecutor.call_words, m_groups=(MM_STOP,)),  # M98's words
 )
 

@@ -46,6 +46,7 @@ from nurbscnc.program.motion import Motion
 from nurbscnc.program.nurbsblock import NurbsBlocks, Splines, g5_knot_vector
 from nurbscnc.program.params import ParameterStore
 from nurbscnc.program.parse import split_lines
+from nurbscnc.program.rotary import RotaryAxes
 from nurbscnc.program.tooltable import Tool
 from nurbscnc.program.words import MAX_COORD_MM, MAX_FEED_MM_MIN, MIN_FEED_MM_MIN
 
@@ -70,6 +71,10 @@ class InterpretOptions:
     the G28/G30 positions; the program's :attr:`~nurbscnc.geometry.segments.Program.parameters`
     are their values at its end. ``find_user_m(code)``: the executable's path of the user
     M-code ``code`` (100..199) or None (the CLI searches the user-M path; no I/O here).
+    ``rotary_axes``: the machine's rotary axes by name ("a", "b", "c":
+    :class:`~nurbscnc.machine.model.RotaryAxis`, the profile's ``Machine.rotary_axes``; None
+    or empty: a three-axis machine, which refuses a word that turns A, B or C; see rotary.py);
+    ``start_abc_deg`` their start position [deg, machine].
     """
 
     start_mm: tuple = (0.0, 0.0, 0.0)
@@ -88,6 +93,8 @@ class InterpretOptions:
     fast_lane: bool = True
     parameters: dict | None = None
     find_user_m: Callable[[int], str | None] | None = None
+    rotary_axes: dict | None = None
+    start_abc_deg: tuple = (0.0, 0.0, 0.0)
 
 
 def interpret_text(text: str, options: InterpretOptions | None = None) -> Program:
@@ -104,6 +111,7 @@ class _Interpreter(
     BlockExecutor,
     ModeSetters,
     Motion,
+    RotaryAxes,
     CompStream,
 ):
     """The interpreter's state; its jobs come from the mixins (see the module docstring).
@@ -128,6 +136,7 @@ class _Interpreter(
                     self.params[index] = float(value)
         # program position [mm] of the machine start point
         self.prog = self.coords.to_program(list(map(float, options.start_mm)))
+        self.m.set_rotary(tuple(map(float, options.start_abc_deg)))
         self.globals: dict[str, float] = {}
         self.frames = [Frame(self.main, 0)]
         self.source = self.main
@@ -346,7 +355,7 @@ class _Interpreter(
                     "rapid": run.rapid,
                     "blend_mm": itertools.repeat(blend_mm),
                     "naive_mm": itertools.repeat(m.naive_mm),
-                    "abc_deg": itertools.repeat(None),
+                    "abc_deg": itertools.repeat(m.abc_hold),
                 }
             )
         new = run.state
@@ -414,6 +423,7 @@ def interpret(blocks, lines, options: InterpretOptions) -> Program:
     :class:`ProgramError` subclasses carrying the line, column and source text.
     """
     state = _Interpreter(list(lines), options)
+    start_abc = tuple(map(float, options.start_abc_deg))
     state.run()
     parsed = state.main._blocks
     blocks = sum(1 for b in filter(None, parsed) if b.words or b.assigns)  # a Block is truthy
@@ -431,4 +441,6 @@ def interpret(blocks, lines, options: InterpretOptions) -> Program:
         name=options.name,
         parameters=state.final_parameters(),
         frames=tuple(state.coords.frames),
+        rotary_axes=state.used_rotary_axes(start_abc),
+        start_abc_deg=start_abc,
     )

@@ -109,8 +109,20 @@ class ModalState:
     comp_side: str | None = None
     comp_radius_mm: float = 0.0
     comp_d: float | None = None
-    # rotary axes: nurbscnc carries them only while they do not move
+    # Rotary axes (program/rotary.py): ``rotary`` the machine position of A B C [deg];
+    # ``abc_hold`` the ``abc_deg`` of a move that leaves them there, ``rotary * 2``, or None
+    # while all three are 0 (a program that never turns one carries nothing);
+    # The rate of a move of the rotary axes alone is ``feed`` in deg/min: LinuxCNC's canon
+    # takes it from the F word as written (FROM_PROG_ANG), whatever G20/G21 says.
     rotary: tuple = (0.0, 0.0, 0.0)
+    abc_hold: tuple | None = None
+    rotary_seen: bool = False  # some rotary axis has been away from 0
+
+    def set_rotary(self, abc_deg: tuple) -> None:
+        """The rotary axes are now at ``abc_deg`` [deg, machine]."""
+        self.rotary = abc_deg
+        self.abc_hold = None if abc_deg == (0.0, 0.0, 0.0) else abc_deg * 2
+        self.rotary_seen = self.rotary_seen or self.abc_hold is not None
 
     @property
     def inch(self) -> bool:

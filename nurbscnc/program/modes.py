@@ -340,6 +340,7 @@ class ModeSetters:
         if code == G_43:
             offset = self.table_tool_offset(words, used)
         elif code == G_43_1:
+            self.refuse_rotary_tool_offset(words)
             offset = [0.0, 0.0, 0.0]
             for i, letter in enumerate(AXES):
                 if letter in words:
@@ -417,19 +418,3 @@ class ModeSetters:
     def set_retract_mode(self, words: dict, gcodes: dict, mcodes: dict, used: set) -> None:
         if GM_RETURN_MODE in gcodes:
             self.m.retract_mode = gcodes[GM_RETURN_MODE][0]
-
-    def check_rotary(self, words: dict, gcodes: dict, mcodes: dict, used: set) -> None:
-        """A, B, C: carried while they do not move (``A0.`` in posts), refused when they do."""
-        for i, letter in enumerate("ABC"):
-            if letter in words:
-                value, col = words[letter]
-                current = self.m.rotary[i]
-                target = current + value if not self.m.absolute else value
-                if target != current:
-                    raise self.error(
-                        f"rotary axis motion is not supported ({letter}{value:g}: "
-                        f"{letter} is at {current:g})",
-                        col,
-                        UnsupportedError,
-                    )
-                used.add(letter)

@@ -33,6 +33,7 @@ from nurbscnc.program.codes import (
     fmt_code,
 )
 from nurbscnc.program.cycles import CycleState, TooManyMoves, expand_cycle
+from nurbscnc.program.rotary import ROTARY_LETTERS
 from nurbscnc.program.words import (
     AXES,
     CYCLE_WORDS,
@@ -42,6 +43,7 @@ from nurbscnc.program.words import (
 )
 
 _NORMAL_AXIS = {"XY": 2, "ZX": 1, "YZ": 0}
+AXES_ABC = (*AXES, *ROTARY_LETTERS)
 _CENTER_LETTER = {0: "I", 1: "J", 2: "K"}
 
 
@@ -81,7 +83,14 @@ class Motion:
             if letter in words:
                 used.add(letter)
         has_axes = not axes_consumed and (
-            "X" in words or "Y" in words or "Z" in words or "@" in words or "^" in words
+            "X" in words
+            or "Y" in words
+            or "Z" in words
+            or "@" in words
+            or "^" in words
+            or "A" in words
+            or "B" in words
+            or "C" in words
         )
         motion = self.m.motion
         if motion_code is not None and motion_code[0] in (G_5, G_5_1):
@@ -115,7 +124,7 @@ class Motion:
             self.finish_nurbs_by_other(code, col)
         if code == G_80:
             self.m.motion = None
-            if any(a in words for a in AXES) and not axes_consumed:
+            if any(a in words for a in AXES_ABC) and not axes_consumed:
                 raise self.error("axis words with G80 (motion cancelled)", col)
         elif code not in (G_5, G_5_1):
             self.m.motion = code
@@ -124,7 +133,7 @@ class Motion:
     def no_motion(self, motion, b: MotionWords) -> None:
         if b.has_axes:
             words = b.words
-            letter = next(a for a in (*AXES, "@", "^") if a in words)
+            letter = next(a for a in (*AXES_ABC, "@", "^") if a in words)
             raise self.error(
                 f"{letter} word with no motion mode in force (G0, G1, G2, G3, G5.2, G6.2)",
                 words[letter][1],
@@ -145,7 +154,17 @@ class Motion:
             self.arc(b.words, b.used)
 
     def refuse_in_comp(self, motion, b: MotionWords) -> None:
-        """Splines and NURBS are not compensated."""
+        """Splines and NURBS are not compensated, and carry no rotary axes (A B C words, or
+        A B C held away from 0)."""
+        turned = next((a for a in ROTARY_LETTERS if a in b.words), None)
+        if turned is not None or self.m.abc_hold is not None:
+            held = ", ".join(f"{a} {v:g}" for a, v in zip(ROTARY_LETTERS, self.m.rotary) if v)
+            raise self.error(
+                f"G{fmt_code(motion)} with rotary axes is not supported "
+                + (f"({turned} word)" if turned else f"(the rotary axes stand at {held})"),
+                b.words[turned][1] if turned else (b.motion_code[1] if b.motion_code else 1),
+                UnsupportedError,
+            )
         if self.comp is not None:
             raise self.error(
                 f"G{fmt_code(motion)} with cutter radius compensation is not supported",
@@ -241,7 +260,16 @@ class Motion:
                 end = tuple(to_machine(list(move.end_mm)))
                 if end != start:
                     self.segments.append(
-                        Line(start, end, move.feed_mm_s, line, move.kind == "rapid", blend_mm)
+                        Line(
+                            start,
+                            end,
+                            move.feed_mm_s,
+                            line,
+                            move.kind == "rapid",
+                            blend_mm,
+                            0.0,
+                            self.m.abc_hold,
+                        )
                     )
                 start = end
             elif move.kind == "dwell":
@@ -302,11 +330,27 @@ class Motion:
         prog_base = None if base is None else self.coords.to_program(base)
         return self.coords.to_machine(self.target_program(words, prog_base))
 
-    def rapid_to_program(self, end_prog) -> None:
+    def rapid_to_program(self, end_prog, abc_deg: tuple | None = None) -> None:
+        """A traverse to ``end_prog`` [mm, program], the rotary axes to ``abc_deg`` [deg,
+        machine] (None: they stay)."""
         start = self.pos
         end = self.coords.to_machine(end_prog)
-        if end != start or self.comp_exit is not None:
-            self.emit(Line(tuple(start), tuple(end), 0.0, self.main_line(), True, self.m.blend_mm))
+        if abc_deg is not None and abc_deg != self.m.rotary:
+            self.rotary_straight(start, end, abc_deg, {}, True)
+        elif end != start or self.comp_exit is not None:
+            m = self.m
+            self.emit(
+                Line(
+                    tuple(start),
+                    tuple(end),
+                    0.0,
+                    self.main_line(),
+                    True,
+                    m.blend_mm,
+                    0.0,
+                    m.abc_hold,
+                )
+            )
         self.prog = list(end_prog)
 
     def move_feed_mm_s(self, length_mm: float, words: dict) -> float:
@@ -334,6 +378,12 @@ class Motion:
             end = end_prog if plain else coords.to_machine(end_prog)
         m = self.m
         rapid = m.motion == G_0
+        if "A" in words or "B" in words or "C" in words:
+            abc1 = self.target_abc(words, machine_coords)
+            if abc1 != m.rotary:
+                self.rotary_straight(start, end, abc1, words, rapid)
+                self.prog = end_prog
+                return
         feed = 0.0
         if not rapid:
             if m.feed_mode == G_94:
@@ -344,7 +394,11 @@ class Motion:
                 raise self.error("G1 move with zero feed (set F first)", 1)
         if end != start or self.comp_exit is not None:  # the exit move may not be zero
             line = self.line_no if self.source is self.main else self.main_line()
-            self.emit(Line(tuple(start), tuple(end), feed, line, rapid, m.blend_mm, m.naive_mm))
+            self.emit(
+                Line(
+                    tuple(start), tuple(end), feed, line, rapid, m.blend_mm, m.naive_mm, m.abc_hold
+                )
+            )
         self.prog = end_prog
 
     def arc_turns(self, words: dict, used: set) -> int:
@@ -413,6 +467,11 @@ class Motion:
         feed = self.move_feed_mm_s(length, words)
         if feed <= 0.0:
             raise self.error("arc move with zero feed (set F first)", col0)
+        abc0 = self.m.rotary
+        abc1 = abc0
+        if "A" in words or "B" in words or "C" in words:
+            abc1 = self.target_abc(words)
+            self.refuse_rotary_in_comp(abc0, abc1)
         to_machine = self.coords.to_machine
         self.emit(
             Arc(
@@ -428,8 +487,10 @@ class Motion:
                 line=self.main_line(),
                 plane=plane,
                 blend_mm=self.m.blend_mm,
+                abc_deg=self.m.abc_hold if abc1 == abc0 else abc0 + abc1,
             )
         )
+        self.set_rotary_position(abc1, words)
         self.prog = end
 
 

@@ -11,9 +11,10 @@ from nurbscnc.program.expressions import MAX_PARAMETER, ExpressionError, evaluat
 from nurbscnc.program.modal import G_OF_PLANE
 from nurbscnc.program.parse import Block
 
-#: #5400: the tool in the spindle; #5420–#5422: the current X, Y, Z in program units.
+#: #5400: the tool in the spindle; #5420–#5425: the current X, Y, Z in program units, A, B,
+#: C in degrees (program coordinates).
 TOOL_IN_SPINDLE = 5400
-POSITION_FIRST, POSITION_LAST = 5420, 5422
+POSITION_FIRST, POSITION_LAST = 5420, 5425
 
 
 class ParameterStore:
@@ -29,7 +30,8 @@ class ParameterStore:
         if coords.is_coordinate_parameter(index):
             return self.coords.read(index)
         if POSITION_FIRST <= index <= POSITION_LAST:
-            return self.prog[index - POSITION_FIRST] / self.m.scale
+            k = index - POSITION_FIRST
+            return self.prog[k] / self.m.scale if k < 3 else self.program_abc_deg()[k - 3]
         return self.params.get(index, 0.0)
 
     def write_numbered(self, index: int, value: float) -> None:
@@ -78,6 +80,7 @@ class ParameterStore:
         milltask, which makes the motion, not the preview)."""
         m = self.m
         system = self.coords.system  # 1..9 for G54..G59.3
+        a, b, c = self.program_abc_deg()
         values = {
             "_x": self.prog[0] / m.scale,
             "_y": self.prog[1] / m.scale,
@@ -106,9 +109,9 @@ class ParameterStore:
             "_lathe_radius_mode": 1.0,
             "_spindle_on": float(m.spindle != "off"),
             "_spindle_cw": float(m.spindle == "cw"),
-            "_a": m.rotary[0],
-            "_b": m.rotary[1],
-            "_c": m.rotary[2],
+            "_a": a,
+            "_b": b,
+            "_c": c,
             "_u": 0.0,
             "_v": 0.0,
             "_w": 0.0,

@@ -26,6 +26,7 @@ import random
 import numpy as np
 
 from nurbscnc.output.stream import protocol as p
+from nurbscnc.output.stream.axes import mask_of
 from nurbscnc.output.stream.cardconfig import CardConfig as CardConfig
 from nurbscnc.output.stream.cardconfig import Faults as Faults
 from nurbscnc.output.stream.cardfaults import FaultInjection
@@ -146,7 +147,7 @@ class CardSim(FaultInjection, Execution):
     def caps(self) -> p.Caps:
         cfg = self.config
         return p.Caps(
-            p.PROTOCOL_VERSION,
+            cfg.version,
             cfg.axes,
             cfg.max_pulses_per_period,
             cfg.buffer_periods,
@@ -154,6 +155,7 @@ class CardSim(FaultInjection, Execution):
             self.session_id,
             int(self.state),
             tuple(int(v) for v in self.position),
+            mask_of(cfg.axis_names) if cfg.version >= p.MASK_VERSION else p.XYZ_MASK,
         )
 
     def status(self) -> p.Status:

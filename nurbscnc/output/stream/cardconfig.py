@@ -6,6 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from nurbscnc.errors import ConfigError
+from nurbscnc.output.stream.axes import AXIS_NAMES, LINEAR_AXES, mask_of
 
 
 @dataclass(frozen=True)
@@ -38,6 +39,9 @@ class CardConfig:
     executing when ``start_fill_periods`` are buffered (default: half the buffer) or END has
     arrived, and pushes a STATUS every ``status_every_periods`` executed periods.
     ``gap_s``: the receiver's limit on a stalled partial frame (see :class:`FrameDecoder`).
+    ``axis_names``: the axes it drives, e.g. "xyza" (sets ``axes``; empty: the first
+    ``axes`` of X Y Z A B C); ``version``: the protocol it speaks, 3 (X Y Z only, no axis
+    mask) or 4 (0: 4 when it drives a rotary axis, else 3); ``position_steps`` empty: zeros.
     """
 
     axes: int = 3
@@ -47,13 +51,16 @@ class CardConfig:
     speed: float | None = 1.0
     start_fill_periods: int | None = None
     status_every_periods: int = 16
-    position_steps: tuple[int, ...] = (0, 0, 0)
+    position_steps: tuple[int, ...] = ()
     faults: Faults = field(default_factory=Faults)
     #: an incomplete frame whose bytes stop arriving this long is abandoned [s]; 10 ms is
     #: about 115 byte times at 115200 baud, far more than a UART leaves between bytes
     gap_s: float = 0.01
+    axis_names: str = ""
+    version: int = 0
 
     def __post_init__(self) -> None:
+        self._set_axes()
         if not 1 <= self.axes <= 15:
             raise ConfigError(f"axes must be 1..15, got {self.axes}")
         if not 1 <= self.buffer_periods <= 0xFFFF:
@@ -66,6 +73,35 @@ class CardConfig:
             raise ConfigError(f"--speed must be > 0, got {self.speed}")
         if len(self.position_steps) != self.axes:
             raise ConfigError(f"the start position needs {self.axes} values")
+
+    def _set_axes(self) -> None:
+        """Axis names, count, start position and version from what was given."""
+        names = self.axis_names.lower()
+        if names:
+            try:
+                mask_of(names)
+            except ValueError as exc:
+                raise ConfigError(f"--axes: {exc}") from None
+            if len(set(names)) != len(names) or names != "".join(
+                a for a in AXIS_NAMES if a in names
+            ):
+                raise ConfigError(f"--axes {names.upper()}: each axis once, in the order XYZABC")
+            object.__setattr__(self, "axes", len(names))
+        if not names and self.axes <= len(AXIS_NAMES):
+            object.__setattr__(self, "axis_names", AXIS_NAMES[: self.axes])
+        if not self.position_steps:
+            object.__setattr__(self, "position_steps", (0,) * self.axes)
+        if not self.version:
+            rotary = any(a not in LINEAR_AXES for a in self.axis_names)
+            object.__setattr__(self, "version", 4 if rotary else 3)
+        if self.version not in (3, 4):
+            raise ConfigError(f"--protocol must be 3 or 4, got {self.version}")
+        if self.version == 4 and not self.axis_names:
+            raise ConfigError(f"a card speaking protocol 4 drives at most 6 axes, not {self.axes}")
+        if self.version == 3 and any(a not in LINEAR_AXES for a in self.axis_names):
+            raise ConfigError(
+                f"a card speaking protocol 3 drives X Y Z, not {' '.join(self.axis_names.upper())}"
+            )
 
     @property
     def start_fill(self) -> int:

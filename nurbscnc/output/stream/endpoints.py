@@ -175,7 +175,8 @@ def serve(
     wire_in, wire_out = Wire(baud), Wire(baud)
     logged = 0
     if log is not None:
-        log.write("period," + ",".join("xyzabcuvw"[: card.config.axes]) + "\n")
+        names = card.config.axis_names or "xyzabcuvw"[: card.config.axes]
+        log.write("period," + ",".join(names) + "\n")
     ended_at = None
     while not stop.is_set():
         now = time.monotonic()

@@ -86,6 +86,8 @@ class Link(HandshakeHandlers, StreamingHandlers, StoppingHandlers):
         zero: bool = False,
     ):
         self.program = program
+        #: (CAPS, positions of the axes the program does not carry) once the card answered
+        self.card_fit = None
         self.session_id = session_id
         self.zero = zero
         #: the most pulses per period a replacement may bring (sets the frame size)
@@ -233,6 +235,7 @@ class Link(HandshakeHandlers, StreamingHandlers, StoppingHandlers):
             st.caps.buffer_periods if st.caps else 0,
             line,
             position_steps=tuple(status.position_steps) if status else (),
+            axes=self.program.axes,
         )
 
     @property
@@ -258,6 +261,7 @@ class Link(HandshakeHandlers, StreamingHandlers, StoppingHandlers):
         sent). Raises StreamError when END was framed already or the prefix differs."""
         k = self.sent_periods
         old = self.program
+        program = self.fitted(program)
         if self.end_framed:
             raise StreamError("the stream's end has been sent already: nothing to replace")
         if (

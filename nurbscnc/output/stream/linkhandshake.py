@@ -9,7 +9,7 @@ import numpy as np
 
 from nurbscnc.errors import StreamError
 from nurbscnc.output.stream import protocol as p
-from nurbscnc.output.stream.cardcheck import check_caps
+from nurbscnc.output.stream.cardcheck import axes_problem, check_caps, fit_to_card
 from nurbscnc.output.stream.linkstate import Phase
 
 
@@ -51,8 +51,13 @@ class HandshakeHandlers:
                 )
             )
             return
-        start = tuple(int(v) for v in self.program.start_steps)
         try:
+            if axes_problem(caps, self.program) is None:
+                # The card's axes the program does not move stand still where the card
+                # stands (at zero with --zero): one count per driven axis in every frame.
+                fixed = [0] * len(caps.position_steps) if self.zero else caps.position_steps
+                self.card_fit = (caps, tuple(int(v) for v in fixed))
+                self.program = self.fitted(self.program)
             check_caps(caps, self.program, position=not self.zero)
             lead = self.options.lead_periods
             if lead is not None and lead < caps.buffer_periods // 2:
@@ -61,6 +66,7 @@ class HandshakeHandlers:
                     f"{caps.buffer_periods} periods: the card would wait for "
                     "periods the sender holds back"
                 )
+            start = tuple(int(v) for v in self.program.start_steps)
             if self.zero and tuple(caps.position_steps) != start and caps.version < 3:
                 raise StreamError(
                     f"--zero needs a card speaking protocol version 3; it speaks {caps.version}"
@@ -73,6 +79,14 @@ class HandshakeHandlers:
             st.zero_sent_s = now
             return
         self._start_streaming(now)
+
+    def fitted(self, program):
+        """``program`` widened to the axes the card drives (:func:`fit_to_card`), once the
+        card's CAPS is known."""
+        if self.card_fit is None:
+            return program
+        caps, fixed = self.card_fit
+        return fit_to_card(program, caps, fixed)
 
     def _start_streaming(self, now: float) -> None:
         st = self.state

@@ -59,7 +59,8 @@ class SenderOptions:
 class Progress:
     """A progress snapshot [periods]; ``line`` the source line of the period executing (0:
     unknown), ``note`` what the controller is doing (waiting at a pause, holding…),
-    ``position_steps`` the card's last reported position (empty before its first STATUS)."""
+    ``position_steps`` the card's last reported position (empty before its first STATUS),
+    ``axes`` its axes ("xyz", "xyza", …: the axes the card drives)."""
 
     periods: int
     sent: int
@@ -70,6 +71,7 @@ class Progress:
     line: int = 0
     note: str = ""
     position_steps: tuple = ()
+    axes: str = "xyz"
 
 
 @dataclass(frozen=True)
@@ -97,6 +99,8 @@ class StreamReport:
     frame_error_rate: float = 0.0
     #: periods per BATCH frame at the end (fewer than asked on a noisy line)
     batch_periods: int = 0
+    #: the axes of the positions, X Y Z then the rotary axes the card drives ("xyza")
+    axes: str = "xyz"
 
     def to_json(self) -> dict:
         out = {k: getattr(self, k) for k in self.__dataclass_fields__}

@@ -92,6 +92,7 @@ class StoppingHandlers:
             duration_s=now - st.started_s,
             frame_error_rate=c.frame_error_rate,
             batch_periods=self.per_frame,
+            axes=prog.axes,
         )
         st.error = None
         st.phase = Phase.FINISHED

@@ -1,4 +1,4 @@
-"""The card protocol (version 2): framing, header CRC-8, CRC-32, message types; one codec.
+"""The card protocol (versions 2 to 4): framing, header CRC-8, CRC-32, message types; one codec.
 
 A frame on the wire (multi-byte integers little-endian)::
 
@@ -40,9 +40,14 @@ import numpy as np
 from nurbscnc.errors import StreamError
 
 SYNC = 0xA5
-PROTOCOL_VERSION = 3
-#: Versions whose frames this codec reads: 3 adds SET_POSITION to version 2 (same frames).
-COMPATIBLE_VERSIONS = (2, 3)
+PROTOCOL_VERSION = 4
+#: Versions whose frames this codec reads: 3 adds SET_POSITION to version 2 (same frames);
+#: 4 adds the axis mask to CAPS (up to six axes X Y Z A B C; every other frame alike).
+COMPATIBLE_VERSIONS = (2, 3, 4)
+#: The first version whose CAPS carries an axis mask (the axes the card drives).
+MASK_VERSION = 4
+#: The axes of a card whose CAPS carries no mask (versions 2 and 3): X Y Z.
+XYZ_MASK = 0b000111
 #: SYNC (1) + LEN (1) + SEQ (2) + TYPE (1) + HCRC (1), before the payload.
 HEADER_BYTES = 6
 #: Header + CRC-32 (4).
@@ -288,6 +293,8 @@ class Caps:
 
     ``session_id`` changes every time the card powers up or resets: a CAPS with a new session
     id in the middle of a stream means the card lost its buffer and position.
+    ``axis_mask`` (version 4): the axes the card drives, bit i of X Y Z A B C; positions and
+    counts carry one value per driven axis in that order. Versions 2 and 3 send no mask: X Y Z.
     """
 
     version: int
@@ -298,6 +305,7 @@ class Caps:
     session_id: int
     state: int
     position_steps: tuple[int, ...]
+    axis_mask: int = XYZ_MASK
 
 
 @dataclass(frozen=True, eq=False)
@@ -483,6 +491,8 @@ def encode_message(msg: Message, seq: int = 0) -> bytes:
             msg.session_id,
             msg.state,
         )
+        if msg.version >= MASK_VERSION:
+            head += bytes((msg.axis_mask,))
         return encode_frame(MsgType.CAPS, head + _pack_position(msg.position_steps))
     if isinstance(msg, Ack):
         return encode_frame(MsgType.ACK, _ACK.pack(msg.next_seq % SEQ_MODULO, msg.free_periods))
@@ -548,8 +558,7 @@ def decode_message(frame: Frame) -> Message:
                 raise ProtocolError(f"HELLO carries 1 byte, got {len(data)}")
             return Hello(data[0])
         if kind is MsgType.CAPS:
-            head = _CAPS.unpack_from(data)
-            return Caps(*head, position_steps=_unpack_position(data[_CAPS.size :], "CAPS"))
+            return _caps(data)
         if kind is MsgType.ACK:
             return Ack(*_ACK.unpack(data))
         if kind is MsgType.NAK:
@@ -562,6 +571,20 @@ def decode_message(frame: Frame) -> Message:
         return Alarm(data[0], data[1:].decode("utf-8", errors="replace"))
     except struct.error as exc:
         raise ProtocolError(f"{kind.name}: payload of {len(data)} bytes: {exc}") from None
+
+
+def _caps(data: bytes) -> Caps:
+    """CAPS: the fixed head, from version 4 the axis mask, then the position."""
+    head = _CAPS.unpack_from(data)
+    at, mask = _CAPS.size, XYZ_MASK
+    if head[0] >= MASK_VERSION:
+        if len(data) <= at:
+            raise ProtocolError("CAPS of version 4 without its axis mask")
+        at, mask = at + 1, data[at]
+    position = _unpack_position(data[at:], "CAPS")
+    if head[0] >= MASK_VERSION and (mask >> 6 or bin(mask).count("1") != len(position)):
+        raise ProtocolError(f"CAPS axis mask 0x{mask:02x} does not fit {len(position)} positions")
+    return Caps(*head, position_steps=position, axis_mask=mask)
 
 
 def _batch(data: bytes) -> Batch:

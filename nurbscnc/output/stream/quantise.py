@@ -1,4 +1,4 @@
-"""Reference points [mm] → signed pulse counts per servo period and axis (pure numpy).
+"""Reference points [mm, deg] → signed pulse counts per servo period and axis (pure numpy).
 
 A pulse-train card moves an axis by one step per pulse. The card's position after period k is
 the sum of the pulses of periods 1 … k, so the pulses must be chosen such that this running sum
@@ -10,6 +10,7 @@ is the reference point rounded to whole steps, at *every* period:
 which is the same as emitting round(target − emitted so far) each period and carrying the
 rounding remainder to the next: the remainder never accumulates, so there is no drift however
 long the program. ``round`` is numpy's ``rint`` (half to even), the same rule every period.
+A rotary axis is quantised alike with its steps per degree: P_k = round(a_k · steps_per_deg).
 """
 
 from __future__ import annotations
@@ -27,7 +28,8 @@ class PulseProgram:
 
     ``pulses`` (N−1, axes) int64: period k (1-based) moves from point k−1 to point k;
     ``start_steps``/``end_steps`` (axes,) int64; ``period_s`` [s]; ``line`` (N−1,) source line
-    of each period (0 when unknown).
+    of each period (0 when unknown); ``axes`` the axis of each column, "xyz" and then the
+    rotary axes the program moves, in the order X Y Z A B C (:mod:`.axes`).
     """
 
     start_steps: np.ndarray
@@ -35,6 +37,7 @@ class PulseProgram:
     pulses: np.ndarray
     period_s: float
     line: np.ndarray
+    axes: str = "xyz"
 
     @property
     def periods(self) -> int:
@@ -67,10 +70,12 @@ def pulses_per_period(points_mm, steps_per_mm) -> tuple[np.ndarray, np.ndarray]:
     return steps[0].copy(), np.diff(steps, axis=0)
 
 
-def quantise(points_mm, steps_per_mm, period_s: float, line=None) -> PulseProgram:
-    """The :class:`PulseProgram` of reference points ``points_mm`` (N, axes) [mm].
+def quantise(points_mm, steps_per_mm, period_s: float, line=None, axes: str = "") -> PulseProgram:
+    """The :class:`PulseProgram` of reference points ``points_mm`` (N, axes) [mm; deg for a
+    rotary column] at ``steps_per_mm`` (per column: steps per mm or per degree).
 
-    ``line`` (N,) source line of each point (the period k gets the line of point k).
+    ``line`` (N,) source line of each point (the period k gets the line of point k);
+    ``axes`` the column names (default: the first of "xyzabc").
     """
     pts = np.atleast_2d(np.asarray(points_mm, dtype=float))
     if pts.shape[0] < 1:
@@ -83,15 +88,17 @@ def quantise(points_mm, steps_per_mm, period_s: float, line=None) -> PulseProgra
         pulses=pulses,
         period_s=float(period_s),
         line=lines[1:].astype(np.int64),
+        axes=axes or "xyzabc"[: pts.shape[1]],
     )
 
 
-def check_pulse_limit(program: PulseProgram, max_pulses_per_period: int, axes="XYZ") -> None:
+def check_pulse_limit(program: PulseProgram, max_pulses_per_period: int, axes: str = "") -> None:
     """PlanningError naming the first period that needs more than ``max_pulses_per_period``.
 
     The message gives the period, its time [s], the axis, the count and the source line; it is
     raised before anything is sent.
     """
+    axes = (axes or program.axes).upper()
     over = np.abs(program.pulses) > max_pulses_per_period
     bad = np.flatnonzero(over.any(axis=1))
     if bad.size == 0:
