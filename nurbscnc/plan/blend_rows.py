@@ -96,7 +96,7 @@ def blended_rows(pieces: PieceList, c: Corners, machine: Machine) -> PieceList:
     ok, corner = c.ok, c.row
     # Which rows survive, and where everything goes.
     has_blend = np.zeros(k, dtype=bool)
-    has_blend[corner[ok]] = True
+    has_blend[corner[ok & ~c.absorbed]] = True
     trim_start = np.zeros(k)
     trim_end = np.zeros(k)
     trim_start[corner[ok]] = c.trim_b_mm[ok]
