@@ -57,6 +57,8 @@ class Corners:
     #: the second ``absorbed`` (its trims are the first one's U's, it has no blend row).
     turn: np.ndarray = None
     absorbed: np.ndarray = None
+    #: Rows a turn-around's U takes (its cells).
+    cells: np.ndarray = None
 
     def __post_init__(self):
         m = self.row.size
@@ -65,6 +67,7 @@ class Corners:
         self.kappa_per_mm, self.length_mm = np.zeros(m), np.zeros(m)
         self.trim_a_mm, self.trim_b_mm = np.zeros(m), np.zeros(m)
         self.turn, self.absorbed = np.zeros(m, dtype=bool), np.zeros(m, dtype=bool)
+        self.cells = np.ones(m, dtype=np.int64)
 
 
 def tolerance_mm(blend_mm: np.ndarray, machine: Machine) -> np.ndarray:

@@ -28,6 +28,8 @@ MIN_REVERSAL_DEG = 120.0
 #: Share of ε_max the servo's steady curve error may take on a U (its ends are G2 with the
 #: lines: the error on it is the steady one, simulated within 3 % of c₂ v²κ).
 TURN_SERVO_SHARE = 0.9
+#: Cells a U is cut into, of equal length, each capped by its own peak curvature.
+TURN_CELLS = 24
 
 
 def stop_deceleration_mm_s2(machine: Machine, turning_rad) -> np.ndarray:
@@ -104,7 +106,6 @@ def turnaround_corners(pieces: PieceList, c: Corners, machine: Machine) -> None:
     from nurbscnc.geometry.turnaround import turn_blend
 
     m = c.row.size
-    c.turn, c.absorbed = np.zeros(m, dtype=bool), np.zeros(m, dtype=bool)
     if m < 2:
         return
     row = c.row
@@ -143,10 +144,10 @@ def _turn_cap_mm_s(machine: Machine, kappa_per_mm: float, feed_mm_s: float) -> f
     """The U's feed cap [mm/s]: the curvature caps of any curve at the feed, and the servo
     cap of :data:`TURN_SERVO_SHARE` of ε (module doc)."""
     cap = float(curvature_cap_mm_s(machine, kappa_per_mm, feed_mm_s))
-    return max(min(cap, _servo_cap_mm_s(machine, kappa_per_mm)), MIN_CAP_MM_S)
+    return max(min(cap, servo_cap_mm_s(machine, kappa_per_mm)), MIN_CAP_MM_S)
 
 
-def _servo_cap_mm_s(machine: Machine, kappa_per_mm: float) -> float:
+def servo_cap_mm_s(machine: Machine, kappa_per_mm: float) -> float:
     gain = servo_gain_s2(machine)
     if gain == 0.0 or not machine.contour_check:
         return np.inf
@@ -166,4 +167,20 @@ def _record(c: Corners, j: int, bl, middle_mm: float, machine: Machine) -> None:
     c.length_mm[j] = bl.length_mm
     c.trim_a_mm[j], c.trim_b_mm[j] = bl.trim_a_mm, middle_mm
     c.trim_a_mm[j + 1], c.trim_b_mm[j + 1] = 0.0, bl.trim_b_mm
-    c.cap_mm_s[j] = _servo_cap_mm_s(machine, bl.kappa_max_per_mm)
+    c.cap_mm_s[j] = servo_cap_mm_s(machine, bl.kappa_max_per_mm)
+    c.cells[j] = TURN_CELLS
+
+
+def turn_cells(bl, n: int) -> list[tuple[float, float, float, float, float]]:
+    """The U ``bl`` cut into ``n`` cells of equal length: (u_a, u_b, s_a [mm], length [mm],
+    peak curvature [1/mm]) each, the peak over 33 samples of the cell and its ends."""
+    curve = bl.curve
+    total = float(curve.arc_length(np.array([0.0, 1.0]))[1])
+    s = np.linspace(0.0, total, n + 1)
+    u = np.asarray(curve.param_at_length(s), dtype=float)
+    u[0], u[-1] = 0.0, 1.0
+    out = []
+    for a, b, s_a, s_b in zip(u[:-1], u[1:], s[:-1], s[1:]):
+        kappa = float(np.max(curve.curvature(np.linspace(a, b, 33))))
+        out.append((float(a), float(b), float(s_a), float(s_b - s_a), kappa))
+    return out
