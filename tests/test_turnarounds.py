@@ -149,15 +149,17 @@ def _raster_program(passes: int, length_mm: float, stepover_mm: float, tol_mm: f
 
 
 def _reversal_program(tol_mm: float) -> str:
-    """A pass along +X, a 0.4 mm middle line, the pass back at 170° from the first, G64 P."""
-    back = np.radians(170.0)
-    end = np.array([0.2, 0.35]) + 8.0 * np.array([np.cos(back), np.sin(back)])
+    """A pass along +X, a 0.5 mm middle line turning 85°, the pass back at 170° from the
+    first (another 85°), G64 P."""
+    back, side = np.radians(170.0), np.radians(85.0)
+    mid = 0.5 * np.array([np.cos(side), np.sin(side)])
+    end = mid + 8.0 * np.array([np.cos(back), np.sin(back)])
     return "\n".join(
         [
             f"G21 G17 G90 G64 P{tol_mm:g}",
             "G0 X-8 Y0 Z0",
             "G1 X0 F2000",
-            "G1 X0.2 Y0.35",
+            f"G1 X{mid[0]:.6f} Y{mid[1]:.6f}",
             f"G1 X{end[0]:.6f} Y{end[1]:.6f}",
             "M2",
             "",
@@ -176,7 +178,7 @@ def _feed_vertices(prog) -> np.ndarray:
     return np.array([feed[0].start_mm] + [s.end_mm for s in feed], dtype=float)
 
 
-CASES = [("raster", 0.1), ("raster", 0.05), ("reversal", 0.05)]
+CASES = [("raster", 0.1), ("raster", 0.05), ("reversal", 0.1)]
 
 
 @pytest.mark.parametrize("kind, tol_mm", CASES)

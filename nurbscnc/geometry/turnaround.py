@@ -88,7 +88,7 @@ def _measure(ctrl: np.ndarray, corner_path: np.ndarray):
     pts, d1, d2 = _bezier_batch(ctrl, xi)
     speed = np.sqrt(np.einsum("mij,mij->mi", d1, d1))
     regular = speed.min(axis=1) > MIN_SPEED_RATIO * speed.mean(axis=1)
-    kappa = np.linalg.norm(np.cross(d1, d2), axis=2) / np.maximum(speed, 1e-300) ** 3
+    kappa = np.linalg.norm(np.cross(d1, d2), axis=2) / np.maximum(speed**3, 1e-300)
     # Curve samples to the corner path's three segments.
     a, b = corner_path[:, None, :-1, :], corner_path[:, None, 1:, :]
     to_path = _segment_distance(pts[:, :, None, :], a, b).min(axis=2).max(axis=1)

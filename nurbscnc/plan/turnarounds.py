@@ -23,8 +23,14 @@ from nurbscnc.plan.blends import Corners, servo_gain_s2
 from nurbscnc.plan.pieces import PieceList
 
 #: Least reversal of the tangent across a turn-around [deg]: the angle between the incoming
-#: and the outgoing line (a raster's is 180°).
-MIN_REVERSAL_DEG = 120.0
+#: and the outgoing line (a raster's is 180°; a pocket's or an outline's 120–150° turns
+#: around a short line are two corners of their own).
+MIN_REVERSAL_DEG = 150.0
+#: Least time [s] the U must save on the estimate of both stops to be kept: what the estimates
+#: miss (the check's slow-downs around the U, a stop's real deceleration). Measured: on the
+#: raster (0.5 mm stepovers at F2000) 37 ms estimated, 46 ms saved; on the CamBam enclosure's
+#: 0.1 mm stepovers at F500 12 ms estimated, 15 ms lost.
+TURN_MARGIN_S = 0.015
 #: Share of ε_max the servo's steady curve error may take on a U (its ends are G2 with the
 #: lines: the error on it is the steady one, simulated within 3 % of c₂ v²κ).
 TURN_SERVO_SHARE = 0.9
@@ -99,12 +105,11 @@ def turnaround_corners(pieces: PieceList, c: Corners, machine: Machine) -> None:
     """Find the turn-arounds among corners ``c`` (two line–line corners around a middle line,
     the tangent reversed by at least :data:`MIN_REVERSAL_DEG` across them), fit each its U
     within the smaller tolerance, trims at most half of each outer line, and keep it where it
-    is quicker than both stops (:func:`turn_cost_s` against :func:`stops_cost_s`). A kept
+    is quicker than both stops by :data:`TURN_MARGIN_S` at least (:func:`turn_cost_s`
+    against :func:`stops_cost_s`). A kept
     one is recorded on ``c``: the first corner carries the U (trims: ``d`` of the incoming
     line and the whole middle line), the second is ``absorbed`` (trims: ``d`` of the outgoing
     line, no blend row of its own), both ``turn`` and no longer line–line corners."""
-    from nurbscnc.geometry.turnaround import turn_blend
-
     m = c.row.size
     if m < 2:
         return
@@ -119,25 +124,44 @@ def turnaround_corners(pieces: PieceList, c: Corners, machine: Machine) -> None:
         if j <= taken:  # its first corner is the last turn-around's second
             continue
         r = int(row[j])
-        tol = float(min(c.tol_mm[j], c.tol_mm[j + 1]))
-        # Half of each outer line, and no more than a U of the stepover's width needs.
-        max_trim = min(0.5 * float(min(length[r - 1], length[r + 1])), length[r] + 2.0 * tol)
-        bl = turn_blend(
-            c.vertex_mm[:, j], t_a[:, j], c.vertex_mm[:, j + 1], t_b[:, j], tol, max_trim
+        bl = turn_choice(
+            pieces.start_mm[:, r - 1 : r + 2].T,
+            pieces.end_mm[:, r - 1 : r + 2].T,
+            cap[r - 1 : r + 2],
+            float(min(c.tol_mm[j], c.tol_mm[j + 1])),
+            machine,
         )
-        if bl is None:
-            continue
-        v = float(min(cap[r - 1], cap[r], cap[r + 1]))
-        w = min(_turn_cap_mm_s(machine, bl.kappa_max_per_mm, float(max(cap[r - 1 : r + 2]))), v)
-        replaced = bl.trim_a_mm + float(length[r]) + bl.trim_b_mm
-        accel = line_accel_mm_s2(machine, pieces.tangent_start[:, r - 1 : r + 2])
-        quicker = turn_cost_s(v, w, bl.length_mm, replaced, accel, machine) <= stops_cost_s(
-            v, float(length[r]), c.turning_rad[j], c.turning_rad[j + 1], accel, machine
-        )
-        if not quicker:
-            continue
-        taken = j + 1
-        _record(c, j, bl, float(length[r]), machine)
+        if bl is not None:
+            taken = j + 1
+            _record(c, j, bl, float(length[r]), machine)
+
+
+def turn_choice(start_mm: np.ndarray, end_mm: np.ndarray, cap_mm_s, tol_mm: float, machine):
+    """The U of a turn-around of three lines (starts and ends (3, 3) [mm], feed caps (3,)
+    [mm/s]: incoming, middle, outgoing) within ``tol_mm``, trims at most half of each outer
+    line, if it is quicker than both stops by :data:`TURN_MARGIN_S` (:func:`turn_cost_s`
+    against :func:`stops_cost_s`); else None. The planner and smoothing (which keeps the
+    outer lines out of its runs where a U will be taken) decide alike."""
+    from nurbscnc.geometry.turnaround import turn_blend
+
+    d = end_mm - start_mm
+    length = np.sqrt(np.sum(d * d, axis=1))
+    unit = d / np.maximum(length, 1e-300)[:, None]
+    cos = np.clip(np.sum(unit[:-1] * unit[1:], axis=1), -1.0, 1.0)
+    turning = np.arccos(cos)
+    # Half of each outer line, and no more than a U of the stepover's width needs.
+    max_trim = min(0.5 * float(min(length[0], length[2])), float(length[1]) + 2.0 * tol_mm)
+    bl = turn_blend(end_mm[0], unit[0], end_mm[1], unit[2], tol_mm, max_trim)
+    if bl is None:
+        return None
+    cap = np.asarray(cap_mm_s, dtype=float)
+    v = float(cap.min())
+    w = min(_turn_cap_mm_s(machine, bl.kappa_max_per_mm, float(cap.max())), v)
+    replaced = bl.trim_a_mm + float(length[1]) + bl.trim_b_mm
+    accel = line_accel_mm_s2(machine, unit.T)
+    turn_s = turn_cost_s(v, w, bl.length_mm, replaced, accel, machine)
+    stops_s = stops_cost_s(v, float(length[1]), turning[0], turning[1], accel, machine)
+    return bl if turn_s + TURN_MARGIN_S <= stops_s else None
 
 
 def _turn_cap_mm_s(machine: Machine, kappa_per_mm: float, feed_mm_s: float) -> float:
