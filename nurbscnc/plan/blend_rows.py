@@ -205,31 +205,31 @@ def _object_blends(pieces: PieceList, c: Corners, machine: Machine, ok, first) -
         )
         of_j = i - 1 if cap_a[j] > cap_b[j] else i  # the faster move's
         if _cells(c, j) > 1:  # a turn-around's U, in cells capped by their own curvature
-            for n, (u_a, u_b, s_a, length, kappa) in enumerate(turn_cells(bl, _cells(c, j))):
-                cell_cap = max(
-                    min(
-                        float(curvature_cap_mm_s(machine, kappa, feed_j)),
-                        servo_cap_mm_s(machine, kappa),
-                    ),
-                    MIN_CAP_MM_S,
+            u_a, u_b, s_a, length, kappa = turn_cells(bl, _cells(c, j))
+            caps = np.maximum(
+                np.minimum(
+                    curvature_cap_mm_s(machine, kappa, feed_j), servo_cap_mm_s(machine, kappa)
+                ),
+                MIN_CAP_MM_S,
+            )
+            obj_rows.extend(range(int(first[i]), int(first[i]) + kappa.size))
+            obj_pieces.extend(
+                Piece(
+                    Kind.NURBS,
+                    bl.curve,
+                    float(length[n]),
+                    float(caps[n]),
+                    int(pieces.segment[of_j]),
+                    int(pieces.line[of_j]),
+                    float(u_a[n]),
+                    float(u_b[n]),
+                    float(s_a[n]),
+                    float(kappa[n]),
+                    blend_mm=float(pieces.blend_mm[i]),
+                    rapid=bool(pieces.rapid[i]),
                 )
-                obj_rows.append(int(first[i]) + n)
-                obj_pieces.append(
-                    Piece(
-                        Kind.NURBS,
-                        bl.curve,
-                        length,
-                        cell_cap,
-                        int(pieces.segment[of_j]),
-                        int(pieces.line[of_j]),
-                        u_a,
-                        u_b,
-                        s_a,
-                        kappa,
-                        blend_mm=float(pieces.blend_mm[i]),
-                        rapid=bool(pieces.rapid[i]),
-                    )
-                )
+                for n in range(kappa.size)
+            )
             continue
         obj_rows.append(int(first[i]))
         kind, geom = (Kind.PH, bl.ph) if hasattr(bl, "ph") else (Kind.NURBS, bl.curve)

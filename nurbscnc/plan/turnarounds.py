@@ -168,15 +168,17 @@ def _turn_cap_mm_s(machine: Machine, kappa_per_mm: float, feed_mm_s: float) -> f
     """The U's feed cap [mm/s]: the curvature caps of any curve at the feed, and the servo
     cap of :data:`TURN_SERVO_SHARE` of ε (module doc)."""
     cap = float(curvature_cap_mm_s(machine, kappa_per_mm, feed_mm_s))
-    return max(min(cap, servo_cap_mm_s(machine, kappa_per_mm)), MIN_CAP_MM_S)
+    return max(min(cap, float(servo_cap_mm_s(machine, kappa_per_mm))), MIN_CAP_MM_S)
 
 
-def servo_cap_mm_s(machine: Machine, kappa_per_mm: float) -> float:
+def servo_cap_mm_s(machine: Machine, kappa_per_mm):
+    """The servo cap [mm/s] of :data:`TURN_SERVO_SHARE` of ε at curvature κ (elementwise;
+    inf without a servo model or contour check)."""
     gain = servo_gain_s2(machine)
     if gain == 0.0 or not machine.contour_check:
-        return np.inf
+        return np.full(np.shape(kappa_per_mm), np.inf)
     eps = TURN_SERVO_SHARE * machine.limits.contour_tolerance_mm
-    return float(servo_curve_cap_mm_s(kappa_per_mm, eps, gain))
+    return servo_curve_cap_mm_s(kappa_per_mm, eps, gain)
 
 
 def _record(c: Corners, j: int, bl, middle_mm: float, machine: Machine) -> None:
@@ -191,20 +193,20 @@ def _record(c: Corners, j: int, bl, middle_mm: float, machine: Machine) -> None:
     c.length_mm[j] = bl.length_mm
     c.trim_a_mm[j], c.trim_b_mm[j] = bl.trim_a_mm, middle_mm
     c.trim_a_mm[j + 1], c.trim_b_mm[j + 1] = 0.0, bl.trim_b_mm
-    c.cap_mm_s[j] = servo_cap_mm_s(machine, bl.kappa_max_per_mm)
+    c.cap_mm_s[j] = float(servo_cap_mm_s(machine, bl.kappa_max_per_mm))
     c.cells[j] = TURN_CELLS
 
 
-def turn_cells(bl, n: int) -> list[tuple[float, float, float, float, float]]:
-    """The U ``bl`` cut into ``n`` cells of equal length: (u_a, u_b, s_a [mm], length [mm],
-    peak curvature [1/mm]) each, the peak over 33 samples of the cell and its ends."""
+def turn_cells(bl, n: int) -> tuple[np.ndarray, ...]:
+    """The U ``bl`` cut into ``n`` cells of equal length: arrays (n,) of u_a, u_b, s_a [mm],
+    length [mm] and peak curvature [1/mm] (the peak over 33 samples of each cell, ends
+    included)."""
     curve = bl.curve
     total = float(curve.arc_length(np.array([0.0, 1.0]))[1])
     s = np.linspace(0.0, total, n + 1)
     u = np.asarray(curve.param_at_length(s), dtype=float)
     u[0], u[-1] = 0.0, 1.0
-    out = []
-    for a, b, s_a, s_b in zip(u[:-1], u[1:], s[:-1], s[1:]):
-        kappa = float(np.max(curve.curvature(np.linspace(a, b, 33))))
-        out.append((float(a), float(b), float(s_a), float(s_b - s_a), kappa))
-    return out
+    frac = np.linspace(0.0, 1.0, 33)
+    samples = u[:-1, None] + frac[None, :] * np.diff(u)[:, None]
+    kappa = np.asarray(curve.curvature(samples.ravel()), dtype=float).reshape(n, -1).max(axis=1)
+    return u[:-1], u[1:], s[:-1], np.diff(s), kappa
