@@ -32,7 +32,8 @@ MIN_REVERSAL_DEG = 150.0
 #: 0.1 mm stepovers at F500 12 ms estimated, 15 ms lost.
 TURN_MARGIN_S = 0.015
 #: Share of ε_max the servo's steady curve error may take on a U (its ends are G2 with the
-#: lines: the error on it is the steady one, simulated within 3 % of c₂ v²κ).
+#: lines: the error on it is the steady one; lsim: 13.7 µm against c₂ v²κ = 14.2 µm on the
+#: raster's U at v²κ = 500 mm/s²).
 TURN_SERVO_SHARE = 0.9
 #: Cells a U is cut into, of equal length, each capped by its own peak curvature.
 TURN_CELLS = 24
@@ -41,7 +42,8 @@ TURN_CELLS = 24
 def stop_deceleration_mm_s2(machine: Machine, turning_rad) -> np.ndarray:
     """The deceleration [mm/s²] a stop at a corner turning by θ may end with so that the
     servo's overshoot past the vertex stays within the contour tolerance (module doc):
-    min(A, ε / (c₂ · min(1, sin θ)))· for θ > 90° (A without a servo model or check)."""
+    min(A, ε / (c₂ s)), s = 1 up to 90° and sin θ beyond (A without a servo model or
+    check)."""
     lim = machine.limits
     gain = servo_gain_s2(machine)
     th = np.asarray(turning_rad, dtype=float)
