@@ -161,7 +161,8 @@ def test_smoothed_plan_stays_within_the_path_tolerance(kind, dim, mode, seed):
     assert len(fitted) >= smoothed["runs"]
     worst_mm = max(_spline_distance_mm(g, polyline) for g in fitted)
     assert worst_mm <= (SHARE * tol_mm - reserve_mm) * (1 + 1e-9)
-    assert 1e-3 * smoothed["deviation_max_um"] >= worst_mm * (1 - 1e-6)
+    # (a straight pass is fitted exactly: both are then rounding, ~1e-16 mm)
+    assert 1e-3 * smoothed["deviation_max_um"] >= worst_mm * (1 - 1e-6) - 1e-12
 
 
 def test_g61_programs_stay_exact():

@@ -10,6 +10,7 @@ from nurbscnc.machine.profile import Machine
 from nurbscnc.plan.blend_rows import BLEND_FEED, blended_rows
 from nurbscnc.plan.blends import Corners, blend_line_corners, blend_object_corners, find_corners
 from nurbscnc.plan.pieces import PieceList
+from nurbscnc.plan.turnarounds import turnaround_corners
 
 
 def apply_blends(pieces: PieceList, machine: Machine) -> tuple[PieceList, Corners | None]:
@@ -35,9 +36,10 @@ def apply_blends(pieces: PieceList, machine: Machine) -> tuple[PieceList, Corner
     c = find_corners(pieces, machine)
     if c is None:
         return pieces, None
+    turnaround_corners(pieces, c, machine)
     blend_line_corners(pieces, c)
     blend_object_corners(pieces, c, machine)
-    faster = _blend_is_faster(pieces, c, machine)
+    faster = _blend_is_faster(pieces, c, machine) | c.turn
     c.slower = c.ok & ~faster
     c.ok &= faster
     if not c.ok.any():

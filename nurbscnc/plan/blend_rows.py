@@ -21,6 +21,7 @@ from nurbscnc.plan.pieces import (
     empty_columns,
     put_objects,
 )
+from nurbscnc.plan.turnarounds import servo_cap_mm_s, turn_cells
 
 #: What is left of a line or arc between two blends, if shorter than this [mm], is dropped:
 #: such a sliver (two blends that almost meet, e.g. 4e-9 mm) carries no motion worth a piece.
@@ -95,15 +96,16 @@ def blended_rows(pieces: PieceList, c: Corners, machine: Machine) -> PieceList:
     kind, length = pieces.kind, pieces.length_mm
     ok, corner = c.ok, c.row
     # Which rows survive, and where everything goes.
-    has_blend = np.zeros(k, dtype=bool)
-    has_blend[corner[ok]] = True
+    has_blend = np.zeros(k, dtype=np.int64)  # blend rows before each row
+    own = ok & ~c.absorbed
+    has_blend[corner[own]] = [_cells(c, j) for j in np.flatnonzero(own).tolist()]
     trim_start = np.zeros(k)
     trim_end = np.zeros(k)
     trim_start[corner[ok]] = c.trim_b_mm[ok]
     trim_end[corner[ok] - 1] = c.trim_a_mm[ok]
     trimmed = (trim_start > 0.0) | (trim_end > 0.0)
     keep = ~trimmed | (length - trim_start - trim_end >= MIN_REMAINDER_MM)
-    count = has_blend.astype(np.int64) + keep
+    count = has_blend + keep
     first = np.cumsum(count) - count
     new_row = first + has_blend  # new row of each kept piece
     c.blend_row = first[corner[ok]]
@@ -202,6 +204,33 @@ def _object_blends(pieces: PieceList, c: Corners, machine: Machine, ok, first) -
             MIN_CAP_MM_S,
         )
         of_j = i - 1 if cap_a[j] > cap_b[j] else i  # the faster move's
+        if _cells(c, j) > 1:  # a turn-around's U, in cells capped by their own curvature
+            u_a, u_b, s_a, length, kappa = turn_cells(bl, _cells(c, j))
+            caps = np.maximum(
+                np.minimum(
+                    curvature_cap_mm_s(machine, kappa, feed_j), servo_cap_mm_s(machine, kappa)
+                ),
+                MIN_CAP_MM_S,
+            )
+            obj_rows.extend(range(int(first[i]), int(first[i]) + kappa.size))
+            obj_pieces.extend(
+                Piece(
+                    Kind.NURBS,
+                    bl.curve,
+                    float(length[n]),
+                    float(caps[n]),
+                    int(pieces.segment[of_j]),
+                    int(pieces.line[of_j]),
+                    float(u_a[n]),
+                    float(u_b[n]),
+                    float(s_a[n]),
+                    float(kappa[n]),
+                    blend_mm=float(pieces.blend_mm[i]),
+                    rapid=bool(pieces.rapid[i]),
+                )
+                for n in range(kappa.size)
+            )
+            continue
         obj_rows.append(int(first[i]))
         kind, geom = (Kind.PH, bl.ph) if hasattr(bl, "ph") else (Kind.NURBS, bl.curve)
         obj_pieces.append(
@@ -221,3 +250,8 @@ def _object_blends(pieces: PieceList, c: Corners, machine: Machine, ok, first) -
             )
         )
     return obj_rows, obj_pieces
+
+
+def _cells(c: Corners, j: int) -> int:
+    """Rows the blend of corner ``j`` takes: a turn-around's U its cells, any other one."""
+    return int(c.cells[j]) if c.turn[j] else 1

@@ -53,6 +53,12 @@ class Corners:
     slower_junction: np.ndarray = None
     #: A further feed cap of each blend [mm/s] (inf: none): the servo's on space blends.
     cap_mm_s: np.ndarray = None
+    #: Corners of a turn-around (:mod:`nurbscnc.plan.turnarounds`): both corners ``turn``;
+    #: the second ``absorbed`` (its trims are the first one's U's, it has no blend row).
+    turn: np.ndarray = None
+    absorbed: np.ndarray = None
+    #: Rows a turn-around's U takes (its cells).
+    cells: np.ndarray = None
 
     def __post_init__(self):
         m = self.row.size
@@ -60,6 +66,8 @@ class Corners:
         self.ok = np.zeros(m, dtype=bool)
         self.kappa_per_mm, self.length_mm = np.zeros(m), np.zeros(m)
         self.trim_a_mm, self.trim_b_mm = np.zeros(m), np.zeros(m)
+        self.turn, self.absorbed = np.zeros(m, dtype=bool), np.zeros(m, dtype=bool)
+        self.cells = np.ones(m, dtype=np.int64)
 
 
 def tolerance_mm(blend_mm: np.ndarray, machine: Machine) -> np.ndarray:
@@ -158,7 +166,7 @@ def blend_object_corners(pieces: PieceList, c: Corners, machine: Machine) -> Non
     from nurbscnc.geometry.blend import blend_corner, blend_space_corners
 
     space = []
-    for j in np.flatnonzero(~c.lines).tolist():
+    for j in np.flatnonzero(~c.lines & ~c.turn).tolist():
         i = int(c.row[j])
         a, b = pieces[i - 1], pieces[i]
         args = (float(c.tol_mm[j]), 0.5 * a.length_mm, 0.5 * b.length_mm)

@@ -227,6 +227,38 @@ def split_spline(knots: np.ndarray, ctrl: np.ndarray, cuts: np.ndarray) -> list[
     return out
 
 
+def _turnaround_sides(
+    p0: np.ndarray, p1: np.ndarray, cap: np.ndarray, tol: np.ndarray, adjacent, machine
+) -> np.ndarray:
+    """Lines (indices into the columns) just before and after a turn-around's middle line
+    that the planner will round by one U curve: three adjacent lines whose outer two reverse
+    the tangent by at least :data:`~nurbscnc.plan.turnarounds.MIN_REVERSAL_DEG`, for which
+    :func:`~nurbscnc.plan.turnarounds.turn_choice` takes a U (``cap`` (m,) the lines' feed
+    caps [mm/s], ``tol`` (m,) their tolerances [mm]). They stay lines, out of every run:
+    the U trims lines, not splines."""
+    from nurbscnc.plan.turnarounds import MIN_REVERSAL_DEG, turn_choice
+
+    d = p1 - p0
+    unit = d / np.maximum(np.sqrt(np.einsum("ij,ij->i", d, d)), 1e-300)[:, None]
+    reversed_ = np.einsum("ij,ij->i", unit[:-2], unit[2:]) <= np.cos(np.radians(MIN_REVERSAL_DEG))
+    middle = np.flatnonzero(adjacent[:-1] & adjacent[1:] & reversed_) + 1
+    middle = middle[np.min([tol[middle - 1], tol[middle], tol[middle + 1]], axis=0) > 0.0]
+    taken = [
+        i
+        for i in middle.tolist()
+        if turn_choice(
+            p0[i - 1 : i + 2],
+            p1[i - 1 : i + 2],
+            cap[i - 1 : i + 2],
+            float(tol[i - 1 : i + 2].min()),
+            machine,
+        )
+        is not None
+    ]
+    taken = np.asarray(taken, dtype=np.int64)
+    return np.union1d(taken - 1, taken + 1)
+
+
 def smooth_runs(
     segments,
     source: np.ndarray,
@@ -270,6 +302,8 @@ def smooth_runs(
     length = np.sqrt(np.sum((p1 - p0) ** 2, axis=1))
     ok = (tol > 0.0) & (length > 0.0) & (length <= DENSE_MAX_MM)
     adjacent = (rows[1:] == rows[:-1] + 1) & np.all(p1[:-1] == p0[1:], axis=1)
+    cap = np.maximum(np.minimum(feed, machine.limits.v_max_mm_s), 1e-6)  # as the planner's
+    ok[_turnaround_sides(p0, p1, cap, tol, adjacent, machine)] = False
     replaced: dict[int, tuple[int, Nurbs]] = {}  # first row → (last row, spline)
     for a, b in _runs(p0, p1, ok, mode[:, None], adjacent):
         vertices = np.vstack((p0[a : a + 1], p1[a:b]))
