@@ -626,3 +626,34 @@ def test_a_full_circle_with_a_moves_a_in_step_with_the_angle():
     turned = -np.unwrap(np.arctan2(s.points_mm[:, 1], s.points_mm[:, 0]))
     assert s.abc_deg[:, 0] == pytest.approx(np.degrees(turned), abs=1e-6)
     assert s.abc_deg[-1, 0] == pytest.approx(360.0, abs=1e-9)
+
+
+# -- G-code end to end (the interpreter's A words, the benchmark's 4-axis profile) ------------
+BENCH = __import__("pathlib").Path(__file__).resolve().parents[1] / "bench" / "programs"
+
+
+@pytest.mark.parametrize("name", ["wrapped_engraving_g94.ngc", "wrapped_engraving_g93.ngc"])
+def test_wrapped_engravings_from_g_code_keep_a_within_its_limits(name):
+    """The benchmark's 4-axis engravings (G94 and G93) on LinuxCNC's sim profile with A
+    (30 deg/s, 400 deg/s²): A within them on the samples, every G93 line no faster than its
+    inverse time, A back at 360° at the end."""
+    from nurbscnc.app.planning import make_plan
+
+    path = BENCH / "rotary" / name
+    prog, mach, run = make_plan(str(path), machine=str(BENCH / "linuxcnc_sim_a.toml"))
+    ax = mach.rotary_axes["a"]
+    s = run.samples
+    assert s.rotary_axes == ("a",)
+    assert_axis_within(s.abc_deg[:, 0], mach.servo.period_s, ax.v_max_deg_s, ax.a_max_deg_s2, 1e9)
+    assert s.abc_deg[-1, 0] == pytest.approx(360.0, abs=1e-9)
+    if "g93" in name:
+        text = path.read_text().splitlines()
+        expl = explain_plan(prog, mach, run.plan)
+        checked = 0
+        for i, line in enumerate(expl.line.tolist()):
+            words = text[line - 1].upper().split()
+            f = [float(w[1:]) for w in words if w.startswith("F")]
+            if f and "G1" in words:  # a rotary-only move's time is its wait (the hold)
+                assert expl.time_s[i] + expl.wait_s[i] >= 60.0 / f[0] * (1.0 - 1e-9)
+                checked += 1
+        assert checked > 200
