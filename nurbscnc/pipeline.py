@@ -33,7 +33,7 @@ from nurbscnc.machine.profile import Machine, SoftLimits
 from nurbscnc.plan.limits import check_before_work
 from nurbscnc.plan.lookahead import Check, Plan, plan_checked, plan_windows
 from nurbscnc.plan.options import Algorithm, Dynamics, LookaheadOptions, parse_choice
-from nurbscnc.plan.report import check_soft_limits
+from nurbscnc.plan.report import check_rotary_limits, check_soft_limits
 from nurbscnc.plan.sampler import ForwardingSampler
 from nurbscnc.plan.timing import sample_count
 from nurbscnc.precompensation import (
@@ -104,6 +104,9 @@ class Run:
     #: A program with no motion: how long it holds the tool at rest [s] (its dwells; the
     #: points of ``whole`` last till the first servo period at or after it). None: it moves.
     rest_s: float | None = None
+    #: The machine's rotary axes (:attr:`~nurbscnc.machine.model.Machine.rotary_axes`): their
+    #: soft limits are checked on each window as the soft limits are.
+    rotary_axes: dict = field(default_factory=dict)
 
     @property
     def cycle_time_s(self) -> float:
@@ -142,6 +145,7 @@ class Run:
             self.plan.pieces, self.plan.profile, self.period_s, self.interpolator, chunk
         ):
             check_soft_limits(window.points_mm, window.line, self.soft_limits)
+            check_rotary_limits(window.abc_deg, window.line, self.rotary_axes)
             yield window
 
     @cached_property
@@ -152,6 +156,7 @@ class Run:
             return self.whole
         whole = sample_plan(self.plan.pieces, self.plan.profile, self.period_s, self.interpolator)
         check_soft_limits(whole.points_mm, whole.line, self.soft_limits)
+        check_rotary_limits(whole.abc_deg, whole.line, self.rotary_axes)
         return whole
 
 
@@ -194,6 +199,12 @@ def run_program(program, machine: Machine, options: RunOptions | None = None, pr
             raise ConfigError(
                 f"pre-compensation needs a servo model: the machine profile "
                 f"{machine.source} has no [servo.x], [servo.y] or [servo.z]"
+            )
+        if program.rotary_axes:  # the servo model and ZPETC inverse are X Y Z only
+            axes = " ".join(a.upper() for a in program.rotary_axes)
+            raise ConfigError(
+                f"pre-compensation models the X Y Z servos only; this program moves {axes} "
+                "(run it without --precompensate)"
             )
     # Checks before work: the geometry inside the soft limits, the motion short enough for
     # limits.max_points, before anything is planned or sampled.
@@ -247,7 +258,8 @@ def run_program(program, machine: Machine, options: RunOptions | None = None, pr
         run = Run(options.algorithm, samples)
     if run.whole is not None:  # made already: checked now (a lazy run checks each window)
         check_soft_limits(run.whole.points_mm, run.whole.line, machine.soft_limits)
-    return replace(run, columns=columns)
+        check_rotary_limits(run.whole.abc_deg, run.whole.line, machine.rotary_axes)
+    return replace(run, columns=columns, rotary_axes=machine.rotary_axes)
 
 
 def _run_precompensated(
@@ -303,6 +315,7 @@ def window_plans(program, machine: Machine, options: RunOptions | None = None, e
             ref = sampler(w.plan.pieces, w.plan.profile, period, w.k0, None if last else w.k1)
             lines = np.take(w.plan.pieces.line, ref.piece)
             check_soft_limits(ref.points_mm, lines, machine.soft_limits)
+            check_rotary_limits(ref.abc_deg, lines, machine.rotary_axes)
             if each is not None:
                 each(ref.points_mm, lines)
             yield w

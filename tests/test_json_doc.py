@@ -162,8 +162,9 @@ def test_plan_and_run(files, tmp_path):
         )
         expl = dataclasses.replace(explain_plan(prog, mach, run.plan), corners=log)
         explained["explain"].update(corners=expl.corner_dicts(), corner_counts=expl.corner_counts())
-    check("plan", [*outputs, explained])
+    check("plan", [*outputs, explained, rotary_plan_json(explain=True)])
     runs = [
+        rotary_plan_json(explain=False),
         printed("run", NACA, "-o", tmp_path / "p.csv", "--json"),
         printed("run", NACA, "-o", tmp_path / "b.csv", "--json", "--algorithm", "adaptive"),
         printed("run", files / "mixed.nc", "-o", tmp_path / "m.csv", "--json"),
@@ -172,6 +173,34 @@ def test_plan_and_run(files, tmp_path):
         rotary_printed(files, "run", files / "rotary.nc", "-o", tmp_path / "a.csv"),
     ]
     check("run", runs, skip="explain")  # --explain is plan's
+
+
+def rotary_plan_json(explain: bool) -> dict:
+    """The JSON of a plan that turns A (the interpreter reads A words in a later layer: the
+    program is built as it makes them), summary and explanation as ``plan --json`` prints."""
+    from nurbscnc.app.summary import summary_json, summary_of
+    from nurbscnc.geometry.segments import Line, Program, Rotate
+    from nurbscnc.machine.model import RotaryAxis
+    from nurbscnc.machine.profile import load_machine
+    from nurbscnc.pipeline import run_program
+    from nurbscnc.plan.explain import explain_plan
+
+    mach = dataclasses.replace(
+        load_machine(), rotary_axes={"a": RotaryAxis("a", 60.0, 400.0, 4000.0)}
+    )
+    prog = Program(
+        segments=(
+            Line((0.0, 0.0, 0.0), (10.0, 0.0, 0.0), 20.0, 1, abc_deg=(0.0, 0, 0, 300.0, 0, 0)),
+            Rotate((10.0, 0.0, 0.0), (300.0, 0.0, 0.0), (0.0, 0.0, 0.0), 30.0, 2),
+        ),
+        start_mm=(0.0, 0.0, 0.0),
+        rotary_axes=("a",),
+    )
+    run = run_program(prog, mach)
+    summary = summary_of(prog, mach, run)
+    if explain:
+        summary["explain"] = explain_plan(prog, mach, run.plan).as_dict()
+    return json.loads(summary_json(summary))
 
 
 def test_run_batch(files, tmp_path):

@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 
 from nurbscnc.geometry.nurbs import NurbsCurve
 from nurbscnc.geometry.paths import geometry_of
-from nurbscnc.geometry.segments import Line, Program
+from nurbscnc.geometry.segments import Line, Program, Rotate
 from nurbscnc.plan.report import program_summary
 from nurbscnc.program.columns import KINDS, segment_columns
 from nurbscnc.program.interpret import interpret_text
@@ -51,7 +51,7 @@ def reference_summary(prog) -> dict:
             points.append(geom.point(np.linspace(geom.u_start, geom.u_end, 65)))
         if seg.kind == "rapid":
             rapid_len += length
-        elif moving:
+        elif moving and seg.kind != "rotate":  # a rotary-only move: X Y Z at rest
             feed_len += length
             feeds.append(seg.feed_mm_s)
         segments.append(entry)
@@ -103,7 +103,9 @@ M2
 
 @pytest.fixture(scope="module")
 def pool():
-    segments = interpret_text(POOL_PROGRAM).segments
+    # A rotary-only move as the interpreter makes it for "G1 A90 F600" at X0 Y0 Z10.
+    rotate = Rotate((0.0, 0.0, 10.0), (0.0, 0.0, 0.0), (90.0, 0.0, 0.0), 10.0, 99)
+    segments = (*interpret_text(POOL_PROGRAM).segments, rotate)
     assert {s.kind for s in segments} == set(KINDS)
     return segments
 

@@ -123,7 +123,7 @@ def print_explanation(expl, out: Console, count: int | None, source: list[str]) 
     from rich.table import Table
     from rich.text import Text
 
-    from nurbscnc.plan.explain import CORNER_WHY_TEXT, LIMIT_OF_KEY, CornerWhy, Limit
+    from nurbscnc.plan.explain import CORNER_WHY_TEXT, LIMIT_OF_KEY, CornerWhy
 
     total = expl.cycle_time_s if expl.cycle_time_s > 0 else 1.0
     shares = ", ".join(
@@ -152,7 +152,7 @@ def print_explanation(expl, out: Console, count: int | None, source: list[str]) 
         shown = echo_source_line(text.strip(), 1, 32)[0]
         t = float(expl.time_s[i] + expl.wait_s[i])
         row = expl.limit_time_s[i]
-        limit = Limit(int(expl.limit[i])).text
+        limit = expl.limit_text(i)
         if t > 0 and row.max() < t * 0.999:
             limit += f" ({row.max() / t:.0%})"
         table.add_row(

@@ -35,9 +35,10 @@ from numpy.polynomial import polynomial as npoly
 from nurbscnc.geometry import segments
 from nurbscnc.geometry.powerform import BLOCK
 
-#: Program segment kinds that do not move: the tool stops at rest there (a dwell holds for
-#: its ``seconds``; a pause, M0/M1/M60, is a stop of zero duration that the operator ends).
-STOP_KINDS = ("dwell", "pause")
+#: Program segment kinds that do not move X Y Z: the tool stops at rest there (a dwell holds
+#: for its ``seconds``; a pause, M0/M1/M60, is a stop of zero duration that the operator ends;
+#: a rotate holds while the rotary axes turn, for the time the planner gives it).
+STOP_KINDS = ("dwell", "pause", "rotate")
 
 
 def stop_seconds(segment) -> float:

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from nurbscnc.errors import ConfigError
 from nurbscnc.geometry.nurbs import NurbsCurve
 from nurbscnc.geometry.path import STOP_KINDS, stop_seconds
 from nurbscnc.interpolate.taylor import taylor_increment
@@ -89,6 +90,12 @@ def baseline_program_samples(algorithm: str, program, machine: Machine) -> Sampl
     are simply where one segment's samples end and the next one's begin."""
     from nurbscnc.geometry.paths import geometry_of
 
+    if program.rotary_axes:  # the paper's baselines know X Y Z only
+        axes = " ".join(a.upper() for a in program.rotary_axes)
+        raise ConfigError(
+            f"the baseline {algorithm} interpolates X Y Z only; this program moves {axes} "
+            "(use the look-ahead planner, --algorithm ph-lookahead)"
+        )
     period = machine.servo.period_s
     lim = machine.limits
     points = [np.asarray(program.start_mm, dtype=float)[None, :]]

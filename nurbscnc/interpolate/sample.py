@@ -90,6 +90,8 @@ def samples_of(reference, pieces, interpolator="exact") -> Samples:
         r.param,
         np.take(pieces.line, r.piece),
         Interpolator.parse(interpolator).value,
+        abc_deg=r.abc_deg,
+        rotary_axes=pieces.rotary.axes if getattr(pieces, "rotary", None) is not None else (),
     )
 
 
@@ -251,7 +253,8 @@ def rest_samples(program, columns, period_s: float) -> Samples:
     Feed, acceleration and path length are 0; ``piece`` is 0 (there is none, as for a
     baseline); ``line`` is the source line of the dwell in progress at t_k (the last
     dwell's after the last one ends; the first segment's, or 0 for a program without
-    segments, at t = 0 before any dwell)."""
+    segments, at t = 0 before any dwell). A program that holds rotary axes keeps them at
+    ``program.start_abc_deg``."""
     dwells = columns.rows(DWELL)
     ends_s = np.cumsum(_dwell_seconds(program, dwells))
     total_s = float(ends_s[-1]) if ends_s.size else 0.0
@@ -274,7 +277,17 @@ def rest_samples(program, columns, period_s: float) -> Samples:
         points_mm=np.repeat(np.asarray(program.start_mm, dtype=float)[None, :], n, axis=0),
         param=None,
         line=lines.astype(np.int64),
+        abc_deg=_rest_abc_deg(program, n),
+        rotary_axes=tuple(getattr(program, "rotary_axes", ())),
     )
+
+
+def _rest_abc_deg(program, n: int) -> np.ndarray | None:
+    """A B C [deg] (n, 3) of a program at rest: where it starts them (None without rotary
+    axes)."""
+    if not getattr(program, "rotary_axes", ()):
+        return None
+    return np.repeat(np.asarray(program.start_abc_deg, dtype=float)[None, :], n, axis=0)
 
 
 def _dwell_seconds(program, dwells: np.ndarray) -> np.ndarray:

@@ -39,6 +39,7 @@ __all__ = [
     "junction_jump_cap_mm_s",
     "kappa_threshold_per_mm",
     "normal_feed_mm_s",
+    "rotary_path_limits",
     "servo_curve_cap_mm_s",
 ]
 
@@ -322,3 +323,27 @@ def junction_jump_cap_mm_s(
             per_axis = np.sqrt(4.0 * share * j_i * period_s / (3.0 * dkn))
             cap = np.minimum(cap, per_axis.min(axis=1))
     return cap
+
+
+def rotary_path_limits(share, v_axis_deg_s, a_axis_deg_s2, j_axis_deg_s3):
+    """Path limits of k pieces (or rotary-only moves) that keep every rotary axis within its
+    own limits, and the axis that sets the feed.
+
+    ``share`` (k, 3): |dA_i/ds| per piece [deg/mm] (A linear in the XYZ arc length along a
+    move, trivkins), or for a rotary-only move the axis's share |ΔA_i| / √(ΔA² + ΔB² + ΔC²)
+    of the move (the path then in degrees); the axis limits (3,) V_i [deg/s], A_i [deg/s²],
+    J_i [deg/s³]. A_i(s) is linear in s, so the axis's velocity, acceleration and jerk are
+    T_i v, T_i a, T_i j with T_i the share (no curvature term: K = G = 0 of
+    :func:`axis_path_limits`): v ≤ V_i/T_i, a ≤ A_i/T_i, j ≤ J_i/T_i, exact.
+    Returns (k,) each: the feed cap, the acceleration and the jerk (inf where no axis moves)
+    and the index (0, 1, 2 for A, B, C) of the axis whose velocity limit sets the feed cap
+    (-1 where none does)."""
+    t = np.asarray(share, dtype=float)
+    out = []
+    for lim in (v_axis_deg_s, a_axis_deg_s2, j_axis_deg_s3):
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # tiny share: inf
+            x = np.where(t > 0.0, np.asarray(lim, dtype=float)[None, :] / t, np.inf)
+        out.append(x)
+    v = out[0].min(axis=1) if t.shape[0] else np.zeros(0)
+    axis = np.where(np.isfinite(v), np.argmin(out[0], axis=1), -1) if t.shape[0] else v
+    return v, out[1].min(axis=1), out[2].min(axis=1), np.asarray(axis, dtype=np.int64)

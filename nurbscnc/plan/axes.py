@@ -27,7 +27,8 @@ tangential and the normal parts: :func:`nurbscnc.machine.caps.axis_path_limits`)
   their exact value (less on shorter arcs).
 
 With no per-axis limit in the profile the result is the path limits alone (the planner's
-behaviour without per-axis limits).
+behaviour without per-axis limits). Rotary axes A B C moving along a piece cap it by their
+share |dA/ds| (:func:`~nurbscnc.plan.rotary.rotary_limits`), exactly.
 
 A junction passed at speed where the curvature vector jumps (a line tangent into an arc)
 steps each axis's acceleration by v²|Δ(κn)_i| — a jerk impulse. The planner's junction caps
@@ -45,6 +46,7 @@ import numpy as np
 from nurbscnc.geometry.path import Kind
 from nurbscnc.machine.caps import JUNCTION_SHARE, axis_path_limits
 from nurbscnc.plan.junctions import junction_caps
+from nurbscnc.plan.rotary import rotary_limits
 
 #: Fewest samples per curved piece for its tangent and curvature-vector bounds (ends
 #: included); more on pieces that turn a lot (:data:`SAMPLES_PER_RADIUS`).
@@ -81,14 +83,20 @@ def piece_limits(pieces, machine) -> PieceLimits:
     lim = machine.limits
     a_path, j_path = float(lim.a_max_mm_s2), float(lim.j_max_mm_s3)
     axis = machine.axis_limits
-    if not axis.any:
+    rotary = rotary_limits(pieces, machine)
+    if not axis.any and rotary is None:
         return PieceLimits(np.full(k, np.inf), np.full(k, a_path), np.full(k, j_path))
-    t_bound, k_bound, g_bound, kappa = axis_geometry_bounds(pieces)
-    v_i, a_i, j_i = axis.as_arrays()
-    j_i = _jump_reserved(pieces, j_i)
-    v, a, j = axis_path_limits(
-        t_bound, k_bound, g_bound, kappa, pieces.v_cap_mm_s, v_i, a_i, j_i, a_path, j_path
-    )
+    if axis.any:
+        t_bound, k_bound, g_bound, kappa = axis_geometry_bounds(pieces)
+        v_i, a_i, j_i = axis.as_arrays()
+        j_i = _jump_reserved(pieces, j_i)
+        v, a, j = axis_path_limits(
+            t_bound, k_bound, g_bound, kappa, pieces.v_cap_mm_s, v_i, a_i, j_i, a_path, j_path
+        )
+    else:
+        v, a, j = np.full(k, np.inf), np.full(k, a_path), np.full(k, j_path)
+    if rotary is not None:  # A B C linear in s on every piece: their shares |dA/ds| (exact)
+        v, a, j = (np.minimum(x, r) for x, r in zip((v, a, j), rotary[:3]))
     a, j = _run_minimum(pieces, np.minimum(pieces.v_cap_mm_s, v), a, j)
     return PieceLimits(v, a, j)
 

@@ -196,7 +196,12 @@ class Checker:
         s = np.array([profile.piece_start_mm[end]])
         piece = np.array([end - 1], dtype=np.intp)
         points, param = planned.path.place(profile.piece_start_mm, s, piece)
-        return Reference(t, tau, s, np.zeros(1), np.zeros(1), piece, points, param)
+        abc = None
+        if planned.rotary is not None:  # A B C where that piece ends them
+            i = end - 1
+            rot = planned.rotary
+            abc = (rot.abc_start_deg[i] + rot.rate_deg_mm[i] * planned.length_mm[i])[None, :]
+        return Reference(t, tau, s, np.zeros(1), np.zeros(1), piece, points, param, abc_deg=abc)
 
     def run(
         self,

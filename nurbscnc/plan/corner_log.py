@@ -17,6 +17,7 @@ from nurbscnc.plan.junctions import (
 )
 from nurbscnc.plan.options import PlanOptions
 from nurbscnc.plan.pieces import PieceList
+from nurbscnc.plan.rotary import different_rates
 
 
 def corner_log(
@@ -31,7 +32,9 @@ def corner_log(
     ``--blend-tolerance 0`` (zero tolerance) where no tolerance allows a blend; a columnar
     blend meeting a break (not blendable); else no blend fitted within the tolerance (the
     pieces are too short for one, or its PH quintic has a loop or cusp), or one fitted but
-    stopping is faster (:func:`~nurbscnc.plan.blend_choice._blend_is_faster`)."""
+    stopping is faster (:func:`~nurbscnc.plan.blend_choice._blend_is_faster`). With rotary
+    axes: a rotary-only move between the pieces; else a rotary axis's rate dA/ds changing
+    (A first); and a corner between pieces along which A B C move is never rounded."""
     k = len(pieces)
     keys, lines, points, turns, acts, whys = [], [], [], [], [], []
     if tried is not None and tried.ok.any():
@@ -114,7 +117,18 @@ def _stop_reasons(
     objects[list(pieces.objects)] = True
     failed = np.flatnonzero((why == CornerWhy.NO_BLEND_FITS) & (objects[j] | objects[j + 1]))
     why[failed[out_of_plane(pieces, j[failed])]] = CornerWhy.NOT_BLENDABLE
+    rot = pieces.rotary
+    if rot is not None:  # A B C: no blends where they move, stops where a rate changes
+        rate = rot.rate_deg_mm
+        why[np.any(rate[j] != 0.0, axis=1) | np.any(rate[j + 1] != 0.0, axis=1)] = (
+            CornerWhy.ROTARY_MOVES
+        )
     why[stop_after[j]] = CornerWhy.DWELL_OR_PAUSE
+    if rot is not None:
+        changes = different_rates(rot.rate_deg_mm)[j]  # (m, 3)
+        for axis in (2, 1, 0):  # the first axis that changes names the stop
+            why[changes[:, axis]] = (CornerWhy.A_RATE, CornerWhy.B_RATE, CornerWhy.C_RATE)[axis]
+        why[np.isin(j, rot.hold_row)] = CornerWhy.ROTATE
     block_end = (
         stop_after[j] & (blend[j] < 0.0) & (seg[j] != seg[j + 1]) & (pieces.dwell_after_s[j] == 0.0)
     )

@@ -93,6 +93,11 @@ class CornerWhy(IntEnum):
     RAPID_FEED = 8  #: a rapid meets a feed move (the tool stops between them)
     PROGRAM_END = 9  #: start or end of the program
     STOP_FASTER = 10  #: a blend fits, but it is so tight that stopping is faster
+    A_RATE = 11  #: the rate dA/ds of rotary axis A changes: an exact stop
+    B_RATE = 12  #: likewise B
+    C_RATE = 13  #: likewise C
+    ROTARY_MOVES = 14  #: A B C move along the pieces: the corner is not rounded
+    ROTATE = 15  #: a rotary-only move (A B C turn, X Y Z at rest) between the pieces
 
 
 @dataclass(frozen=True, eq=False)

@@ -73,6 +73,7 @@ class Limit(IntEnum):
     JERK = 11  #: too short to reach its cap, A_max never reached (jerk-limited)
     SETTLE = 12  #: the in-position wait after a rapid (servo settling)
     DWELL = 13  #: a programmed dwell (G4) or pause
+    ROTATE = 14  #: a rotary-only move: X Y Z at rest while A B C turn
 
     @property
     def key(self) -> str:
@@ -100,6 +101,7 @@ _KEYS = {
     Limit.JERK: "jerk",
     Limit.SETTLE: "settle",
     Limit.DWELL: "dwell",
+    Limit.ROTATE: "rotate",
 }
 # Plain words for the user (the paper's terms, V_max, V_af eq. 23, V_cf eq. 24, are in
 # docs/json.md beside the JSON keys).
@@ -118,7 +120,11 @@ _TEXTS = {
     Limit.JERK: "too short (jerk limit)",
     Limit.SETTLE: "settling after a rapid",
     Limit.DWELL: "dwell",
+    Limit.ROTATE: "rotary-only move",
 }
+
+#: The axis names of :attr:`Explanation.piece_axis` and ``line_axis`` codes 0…5.
+AXIS_NAMES = ("x", "y", "z", "a", "b", "c")
 
 #: What the planner did at a corner, in plain words (:class:`CornerAction`).
 CORNER_ACTION_TEXT = {
@@ -139,6 +145,11 @@ CORNER_WHY_TEXT = {
     CornerWhy.RAPID_FEED: "a rapid meets a cutting move",
     CornerWhy.PROGRAM_END: "start or end of the program",
     CornerWhy.STOP_FASTER: "stopping is quicker than the tight rounding that fits",
+    CornerWhy.A_RATE: "A changes rate (the rotary axes move in step: exact stop)",
+    CornerWhy.B_RATE: "B changes rate (the rotary axes move in step: exact stop)",
+    CornerWhy.C_RATE: "C changes rate (the rotary axes move in step: exact stop)",
+    CornerWhy.ROTARY_MOVES: "A B C move along these moves (corners are not rounded)",
+    CornerWhy.ROTATE: "a rotary-only move (A B C turn with X Y Z at rest)",
 }
 N_LIMITS = len(Limit)
 #: The :class:`Limit` of each JSON name.
@@ -164,6 +175,11 @@ class Explanation:
 
     ``corners``: the plan's :class:`~nurbscnc.plan.corners.CornerLog`. ``cycle_time_s``
     the plan's cycle time [s].
+
+    ``piece_axis`` (k,) and ``line_axis`` (n,): where the limit is "axis", the axis whose
+    limit set the feed (an index into :data:`AXIS_NAMES`: X Y Z on lines, A B C wherever
+    they move); for a rotary-only move's line the axis that set its rate; -1 otherwise (or
+    an X Y Z limit on a curve, whose binding axis changes along it).
     """
 
     piece_limit: np.ndarray
@@ -184,6 +200,20 @@ class Explanation:
     limit: np.ndarray
     corners: CornerLog
     cycle_time_s: float
+    piece_axis: np.ndarray | None = None
+    line_axis: np.ndarray | None = None
+
+    def axis_of_line(self, i: int) -> str | None:
+        """The axis that set line ``i``'s feed ("x" … "c"), or None."""
+        if self.line_axis is None or self.line_axis[i] < 0:
+            return None
+        return AXIS_NAMES[int(self.line_axis[i])]
+
+    def limit_text(self, i: int) -> str:
+        """Line ``i``'s limit in plain words, naming the axis when one set it."""
+        text = Limit(int(self.limit[i])).text
+        axis = self.axis_of_line(i)
+        return text if axis is None else f"{text} ({axis.upper()})"
 
     def total_by_limit_s(self) -> dict[str, float]:
         """Time [s] the whole program spends under each limit (present ones), largest first."""
@@ -211,7 +241,13 @@ class Explanation:
             "feed_mean_mm_s": float(self.mean_mm_s[i]),
             "limit": Limit(int(self.limit[i])).key,
             "limit_time_s": {Limit(j).key: float(row[j]) for j in np.flatnonzero(row > 0.0)},
+            **self._axis_entry(i),
         }
+
+    def _axis_entry(self, i: int) -> dict:
+        """``{"axis": name}`` where an axis set line ``i``'s feed, else nothing."""
+        axis = self.axis_of_line(i)
+        return {} if axis is None else {"axis": axis}
 
     def corner_dicts(self, stops_only: bool = False) -> list[dict]:
         """The corners as JSON entries (docs/json.md, ``explain.corners``), from whole
@@ -275,18 +311,21 @@ class Explanation:
                 "feed_mean_mm_s": mn,
                 "limit": lim,
                 "limit_time_s": row,
+                **self._axis_entry(i),
             }
-            for ln, kd, le, t, w, f, pk, mn, lim, row in zip(
-                self.line.tolist(),
-                self.kind,
-                self.length_mm.tolist(),
-                self.time_s.tolist(),
-                self.wait_s.tolist(),
-                feed,
-                self.peak_mm_s.tolist(),
-                self.mean_mm_s.tolist(),
-                limit,
-                times,
+            for i, (ln, kd, le, t, w, f, pk, mn, lim, row) in enumerate(
+                zip(
+                    self.line.tolist(),
+                    self.kind,
+                    self.length_mm.tolist(),
+                    self.time_s.tolist(),
+                    self.wait_s.tolist(),
+                    feed,
+                    self.peak_mm_s.tolist(),
+                    self.mean_mm_s.tolist(),
+                    limit,
+                    times,
+                )
             )
         ]
 
@@ -338,12 +377,16 @@ class SegmentColumns:
     seconds: np.ndarray
 
     @classmethod
-    def of(cls, segments) -> SegmentColumns:
+    def of(cls, segments, holds=None) -> SegmentColumns:
+        """``holds``: the plan's rotary-only moves (:class:`~nurbscnc.plan.rotary.Holds`),
+        whose planned times are their seconds."""
         rows = [(s.kind, getattr(s, "feed_mm_s", 0.0), s.line) for s in segments]
         kind = np.array([r[0] for r in rows], dtype=object)
         stop = np.flatnonzero(np.isin(kind, STOP_KINDS))
         seconds = np.zeros(len(rows))
         seconds[stop] = [stop_seconds(segments[i]) for i in stop.tolist()]
+        if holds is not None:
+            seconds[holds.segment] = holds.duration_s
         return cls(
             kind,
             np.array([r[1] for r in rows], dtype=float),
@@ -360,7 +403,7 @@ def piece_feeds_mm_s(seg: SegmentColumns, pieces) -> np.ndarray:
 def cap_limits(seg: SegmentColumns, pieces, machine) -> tuple[np.ndarray, np.ndarray]:
     """What set each piece's cruise cap (k,) :class:`Limit` codes, and the cap [mm/s] before
     the dynamics check (the piece's own cap and its axis limit): candidates from
-    :mod:`nurbscnc.machine.caps` (module doc)."""
+    :mod:`nurbscnc.machine.caps` (module doc). :func:`axis_of_pieces` says which axis."""
     lim = machine.limits
     k = len(pieces)
     rapid = np.asarray(pieces.rapid, dtype=bool)
@@ -391,6 +434,34 @@ def cap_limits(seg: SegmentColumns, pieces, machine) -> tuple[np.ndarray, np.nda
     slowed = np.isin(code, (Limit.CHORD, Limit.NORMAL, Limit.CURVATURE))
     code = np.where(blend & slowed, Limit.BLEND, code)
     return code.astype(np.int8), before
+
+
+def axis_of_pieces(pieces, machine, code: np.ndarray) -> np.ndarray:
+    """Per piece (k,) the axis (index into :data:`AXIS_NAMES`) whose velocity limit set the
+    cap of the pieces whose ``code`` is :attr:`Limit.AXIS`: a rotary axis where its cap
+    (:func:`~nurbscnc.plan.rotary.rotary_limits`) is the lowest, else on a line the X Y Z
+    axis of the smallest V_i / |t_i| (direction cosines, exact); -1 elsewhere."""
+    from nurbscnc.plan.rotary import rotary_limits
+
+    k = len(pieces)
+    out = np.full(k, -1, dtype=np.int8)
+    axis = code == Limit.AXIS
+    if not axis.any():
+        return out
+    line = axis & (np.asarray(pieces.kind) == Kind.LINE)
+    v_xyz = np.full(k, np.inf)
+    if machine.axis_limits.any and line.any():
+        t = np.abs(np.asarray(pieces.tangent_start, dtype=float)[:, line].T)
+        with np.errstate(divide="ignore"):
+            per = np.where(t > 0.0, machine.axis_limits.as_arrays()[0][None, :] / t, np.inf)
+        out[line] = np.argmin(per, axis=1)
+        v_xyz[line] = per.min(axis=1)
+    rot = rotary_limits(pieces, machine)
+    if rot is not None:
+        v_rot, rot_axis = rot[0], rot[3]
+        mine = axis & (rot_axis >= 0) & (v_rot <= v_xyz * (1.0 + REL_TOL))
+        out[mine] = 3 + rot_axis[mine]
+    return out
 
 
 def profile_extremes(profile) -> tuple[np.ndarray, np.ndarray]:
@@ -450,9 +521,9 @@ def corner_stop_ends(pieces) -> np.ndarray:
 
 
 def waits_s(seg: SegmentColumns, pieces) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Programmed waits and settling: (dwell lines (m,), their seconds (m,), settle [s] after
-    each piece (k,)). A dwell or pause segment charges the piece before it (the planner's
-    rule: the last piece with a smaller segment index, else the first piece); what
+    """Programmed waits and settling: (stop lines (m,), their seconds (m,), settle [s] after
+    each piece (k,)). A dwell, pause or rotary-only move charges the piece before it (the
+    planner's rule: the last piece with a smaller segment index, else the first piece); what
     ``dwell_after_s`` holds beyond that is the planner's own settle time."""
     idx = np.flatnonzero(np.isin(seg.kind, STOP_KINDS))
     seconds = seg.seconds[idx]
@@ -468,8 +539,9 @@ def waits_s(seg: SegmentColumns, pieces) -> tuple[np.ndarray, np.ndarray, np.nda
 
 def explain_plan(program, machine, plan) -> Explanation:
     """Why ``plan`` (of ``program`` on ``machine``) runs at the feed it does (module doc)."""
-    seg = SegmentColumns.of(program.segments)
     pieces, profile = plan.pieces, plan.profile
+    rotary = getattr(pieces, "rotary", None)
+    seg = SegmentColumns.of(program.segments, None if rotary is None else rotary.holds)
     cap_code, before = cap_limits(seg, pieces, machine)
     final = np.asarray(plan.caps_mm_s, dtype=float)
     lowered, shaped = contour_limited(plan, before)
@@ -498,6 +570,9 @@ def explain_plan(program, machine, plan) -> Explanation:
         np.asarray(pieces.rapid), machine.limits.rapid_mm_s, piece_feeds_mm_s(seg, pieces)
     )
     dwell_lines, dwell_s, settle = waits_s(seg, pieces)
+    rotate = np.zeros(dwell_lines.size, dtype=bool)
+    if rotary is not None:
+        rotate = np.isin(dwell_lines, seg.line[rotary.holds.segment])
 
     # Per source line: every piece and every dwell of that line number.
     p_line = np.asarray(pieces.line, dtype=np.int64)
@@ -510,7 +585,8 @@ def explain_plan(program, machine, plan) -> Explanation:
     wait = np.bincount(pi, settle, n) + np.bincount(di, dwell_s, n)
     limit_time = np.bincount(pi * N_LIMITS + code, t_piece, n * N_LIMITS).reshape(n, N_LIMITS)
     limit_time[:, Limit.SETTLE] += np.bincount(pi, settle, n)
-    limit_time[:, Limit.DWELL] += np.bincount(di, dwell_s, n)
+    limit_time[:, Limit.DWELL] += np.bincount(di, np.where(rotate, 0.0, dwell_s), n)
+    limit_time[:, Limit.ROTATE] += np.bincount(di, np.where(rotate, dwell_s, 0.0), n)
     line_peak = np.zeros(n)
     np.maximum.at(line_peak, pi, peak)
     line_feed = np.full(n, -np.inf)
@@ -525,6 +601,13 @@ def explain_plan(program, machine, plan) -> Explanation:
         best,
         np.where(np.isin(lines, dwell_lines), Limit.DWELL, code_of_line(pi, code, n)),
     )
+    piece_axis = axis_of_pieces(pieces, machine, code)
+    line_axis = _line_axis(pi, code, t_piece, piece_axis, n)
+    line_axis[best != Limit.AXIS] = -1
+    if rotary is not None:  # a rotary-only move's line: the axis that set its rate
+        h = rotary.holds
+        mine = (h.axis >= 0) & (best[np.searchsorted(lines, h.line)] == Limit.ROTATE)
+        line_axis[np.searchsorted(lines, h.line[mine])] = 3 + h.axis[mine]
     # The kind of each line's first segment.
     order = np.argsort(seg.line, kind="stable")
     first = order[np.searchsorted(seg.line[order], lines, side="left")]
@@ -548,7 +631,22 @@ def explain_plan(program, machine, plan) -> Explanation:
         best.astype(np.int8),
         pieces.corners,
         float(plan.cycle_time_s),
+        piece_axis,
+        line_axis,
     )
+
+
+def _line_axis(pi: np.ndarray, code: np.ndarray, t_piece, piece_axis, n: int) -> np.ndarray:
+    """Per line (n,) the axis of its pieces limited by an axis, the one with the most time
+    under it (-1: none)."""
+    out = np.full(n, -1, dtype=np.int8)
+    has = (code == Limit.AXIS) & (piece_axis >= 0)
+    if has.any():
+        t = np.zeros((n, len(AXIS_NAMES)))
+        np.add.at(t, (pi[has], piece_axis[has]), np.asarray(t_piece)[has])
+        some = t.max(axis=1) > 0.0
+        out[some] = np.argmax(t[some], axis=1)
+    return out
 
 
 def code_of_line(piece_line_index: np.ndarray, code: np.ndarray, n: int) -> np.ndarray:

@@ -127,7 +127,8 @@ def check_geometry_limits(segments, soft_limits, columns=None, frames=()) -> Non
 def segment_time_bounds_s(segments, machine, columns=None) -> np.ndarray:
     """A lower bound [s] (n,) of each segment's motion time: its length (NURBS: the chord
     between its end points) over the fastest it may move, min(F, V_max) (G0: the rapid rate);
-    a stop its seconds. A feed too small for its length gives inf."""
+    a stop its seconds; at least the time its rotary axes need at their own velocity limits
+    (a rotary-only move's at its rate). A feed too small for its length gives inf."""
     lim = machine.limits
     cols = _columns(segments, columns)
     starts, stops = cols.starts_mm, cols.ends_mm
@@ -145,6 +146,10 @@ def segment_time_bounds_s(segments, machine, columns=None) -> np.ndarray:
 
         for i in stops:
             t[i] = stop_seconds(segments[i])
+    if machine.rotary_axes:  # A B C at their own limits (a rotary-only move's whole time)
+        from nurbscnc.plan.rotary import rotary_time_bounds_s
+
+        t = np.maximum(t, rotary_time_bounds_s(segments, machine))
     return t
 
 
@@ -203,6 +208,10 @@ def check_before_work(segments, machine, columns=None, frames=()) -> None:
         return
     cols = _columns(segments, columns)
     check_geometry_limits(segments, machine.soft_limits, cols, frames)
+    if machine.rotary_axes:
+        from nurbscnc.plan.rotary import check_rotary_travel
+
+        check_rotary_travel(segments, machine)
     check_motion_time(segments, machine, cols)
 
 

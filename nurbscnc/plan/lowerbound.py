@@ -58,7 +58,8 @@ from nurbscnc.geometry.paths import geometry_of
 from nurbscnc.geometry.segments import blend_tolerance_mm
 from nurbscnc.machine.caps import curvature_cap2_mm2_s2
 from nurbscnc.machine.profile import Machine
-from nurbscnc.program.columns import DWELL, LINE, PAUSE, RAPID, segment_columns
+from nurbscnc.plan.rotary import rotary_feed_caps_mm_s, rotate_bounds_s
+from nurbscnc.program.columns import DWELL, LINE, PAUSE, RAPID, ROTATE, segment_columns
 
 #: Default largest grid spacing [mm] (SPEC §10).
 DEFAULT_DS_MM = 0.01
@@ -466,9 +467,11 @@ def program_lower_bound_s(segments, machine: Machine, columns=None, curves=None)
     lim = machine.limits
     segments = segments if isinstance(segments, (list, tuple)) else list(segments)
     cols = columns if columns is not None else segment_columns(segments)
-    is_stop = (cols.kind == DWELL) | (cols.kind == PAUSE)
+    is_stop = (cols.kind == DWELL) | (cols.kind == PAUSE) | (cols.kind == ROTATE)
     stops = np.flatnonzero(is_stop).tolist()
     dwell = float(sum(stop_seconds(segments[i]) for i in stops))
+    if machine.rotary_axes:  # rotary-only moves rest to rest, A B C's feed caps (trivkins)
+        dwell += float(np.sum(rotate_bounds_s(segments, machine)))
     index = np.flatnonzero(~is_stop)
     m = int(index.size)
     if not m:
@@ -478,6 +481,8 @@ def program_lower_bound_s(segments, machine: Machine, columns=None, curves=None)
     straight = rapid | (kind == LINE)
     feed = np.where(rapid, 1.0, cols.feeds_mm_s[index])
     top = np.where(rapid, lim.rapid_mm_s, np.minimum(feed, lim.v_max_mm_s))
+    if machine.rotary_axes:
+        top = np.minimum(top, rotary_feed_caps_mm_s(segments, machine)[index])
     if not np.all(np.isfinite(top) & (top > 0.0)):
         raise PlanningError("every piece needs a finite speed ceiling > 0 [mm/s]")
     length, t_start, t_end = _straight_ends(cols, index, straight)

@@ -20,6 +20,8 @@ from itertools import chain
 
 import numpy as np
 
+from nurbscnc.plan.rotary import moves_rotary
+
 #: Most moves merged into one line, as LinuxCNC (emccanon.cc ``linkable``: a chain of more
 #: than 100 points takes no more); it also bounds the cost of the distance checks.
 MAX_CHAIN = 101
@@ -224,7 +226,10 @@ def merge_collinear(segments) -> tuple[list, np.ndarray]:
     # of most programs have none.
     mine = np.flatnonzero(
         np.fromiter(
-            (getattr(s, "naive_mm", 0.0) > 0.0 and s.kind == "line" for s in segs),
+            (
+                getattr(s, "naive_mm", 0.0) > 0.0 and s.kind == "line" and not moves_rotary(s)
+                for s in segs
+            ),
             dtype=bool,
             count=len(segs),
         )

@@ -161,6 +161,9 @@ class PieceList(Sequence):
     #: What smoothing fitted (:func:`~nurbscnc.plan.smoothing.smoothing_summary`: runs,
     #: lines, deviation bound [µm]), None when nothing was.
     smoothed: dict | None = None
+    #: The rotary axes A B C on every row and the rotary-only moves
+    #: (:class:`~nurbscnc.plan.rotary.RotaryPieces`), None for a program without them.
+    rotary: object | None = None
 
     @classmethod
     def of(cls, pieces: Sequence[Piece]) -> PieceList:

@@ -19,6 +19,13 @@ from nurbscnc.plan.moved_copies import Block, Repeats
 from nurbscnc.plan.naive import merge_collinear
 from nurbscnc.plan.options import PlanOptions
 from nurbscnc.plan.pieces import SCALAR_COLUMNS, VECTOR_COLUMNS, PieceList, empty_columns
+from nurbscnc.plan.rotary import (
+    plan_holds,
+    rate_changes,
+    rotary_pieces,
+    segment_abc,
+    uses_rotary,
+)
 from nurbscnc.program.columns import LINE as LINE_CODE
 from nurbscnc.program.columns import RAPID as RAPID_CODE
 from nurbscnc.program.columns import segment_columns
@@ -54,6 +61,11 @@ def segment_pieces(
     already (used where smoothing and G64 Q left the segments as they were).
     """
     options = options or PlanOptions()
+    rotary = None
+    # A B C: their columns, the rotary-only moves planned. (A machine without rotary axes
+    # runs none: the interpreter refuses their words, so its programs are not read for them.)
+    if machine.rotary_axes and uses_rotary(segments):
+        rotary = (segment_abc(segments), plan_holds(segments, machine))
     segs, source, columns = _prepared_segments(segments, machine, options, columns)
     n = len(segs)
     kinds = columns.names.tolist()
@@ -70,11 +82,18 @@ def segment_pieces(
     cols = empty_columns(k)
     _put_lines(cols, first_row, lines)
     objects = _put_blocks(cols, first_row, blocks)
-    pending = _put_stops(cols, first_row, segs, kinds, ~(straight | curved))
-    if k and pending:
+    hold_s = {} if rotary is None else _hold_seconds(segments, rotary[1])
+    pending = _put_stops(cols, first_row, segs, kinds, ~(straight | curved), hold_s)
+    marker = bool(k and pending)
+    if marker:
         cols, objects = _with_dwell_marker(cols, objects, pending)
+    elif not k and rotary is not None and rotary[1].segment.size:
+        cols, marker = _rest_marker(segments, int(rotary[1].segment[0]), pending), True
     _mark_exact_stops(cols, source)
-    pieces = _corners_decided(PieceList(**cols, objects=objects), machine, options)
+    if rotary is not None:
+        rate_changes(cols, segments, rotary[0])
+    pieces = PieceList(**cols, objects=objects)
+    pieces = _corners_decided(pieces, machine, options, segments, rotary, marker)
     if options.smooth:
         from nurbscnc.plan.smoothing import smoothing_summary
 
@@ -194,18 +213,30 @@ def _put_blocks(cols: dict, first_row: np.ndarray, blocks: dict[int, Block]) -> 
     return objects
 
 
+def _hold_seconds(segments, holds) -> dict:
+    """The planned duration [s] of every rotary-only move, by the segment's identity (the
+    planned segments are the program's own objects where they are not lines)."""
+    return {id(segments[i]): d for i, d in zip(holds.segment.tolist(), holds.duration_s.tolist())}
+
+
 def _put_stops(
-    cols: dict, first_row: np.ndarray, segs: list, kinds: list, other: np.ndarray
+    cols: dict,
+    first_row: np.ndarray,
+    segs: list,
+    kinds: list,
+    other: np.ndarray,
+    hold_s: dict,
 ) -> float:
-    """Dwells and pauses among the ``other`` segments (neither lines nor curves) as
-    ``stop_after`` and ``dwell_after_s`` of the piece before; returns the seconds [s] of
-    those before the first piece (for :func:`_with_dwell_marker`)."""
+    """Dwells, pauses and rotary-only moves (their planned times ``hold_s`` by identity)
+    among the ``other`` segments (neither lines nor curves) as ``stop_after`` and
+    ``dwell_after_s`` of the piece before; returns the seconds [s] of those before the
+    first piece (for :func:`_with_dwell_marker`)."""
     pending = 0.0
     for i in np.flatnonzero(other).tolist():
         if kinds[i] not in STOP_KINDS:
             continue
-        r = int(first_row[i]) - 1  # the last piece before the dwell or pause
-        seconds = stop_seconds(segs[i])
+        r = int(first_row[i]) - 1  # the last piece before the stop
+        seconds = stop_seconds(segs[i]) + hold_s.get(id(segs[i]), 0.0)
         if r >= 0:
             cols["dwell_after_s"][r] += seconds
             cols["stop_after"][r] = True
@@ -233,6 +264,20 @@ def _with_dwell_marker(cols: dict, objects: dict, pending: float) -> tuple[dict,
     return cols, {r + 1: v for r, v in objects.items()}
 
 
+def _rest_marker(segments, first: int, pending: float) -> dict:
+    """The columns of one zero-length row at the position of segment ``first`` (a program
+    whose only motion is of the rotary axes) carrying the ``pending`` stops [s]."""
+    cols = empty_columns(1)
+    cols["kind"][0] = Kind.LINE
+    cols["stop_after"][0] = True
+    cols["v_cap_mm_s"][0] = 1.0
+    cols["dwell_after_s"][0] = pending
+    cols["segment"][0] = first
+    cols["line"][0] = segments[first].line
+    cols["start_mm"][:, 0] = cols["end_mm"][:, 0] = segments[first].position_mm
+    return cols
+
+
 def _mark_exact_stops(cols: dict, source: np.ndarray) -> None:
     """A rapid followed by a feed move stops exactly, as does every G61.1 block end; the
     ``segment`` column becomes the program's indices (``source``)."""
@@ -246,13 +291,19 @@ def _mark_exact_stops(cols: dict, source: np.ndarray) -> None:
     cols["stop_after"][:-1] |= block_end
 
 
-def _corners_decided(pieces: PieceList, machine: Machine, options: PlanOptions) -> PieceList:
+def _corners_decided(
+    pieces: PieceList, machine: Machine, options: PlanOptions, segments, rotary, marker: bool
+) -> PieceList:
     """The pieces with their corners decided: small breaks passed, G64 corners blended,
-    curvature jumps capped, every corner logged."""
+    curvature jumps capped, the rotary columns on the final rows (``rotary``: the segments'
+    A B C and their holds, or None; ``marker``: row 0 carries the stops before the first
+    move), every corner logged."""
     if len(pieces) >= 2:
         turning, regular = junction_turning(pieces)
         pieces.pass_after[:-1] = small_breaks(pieces, turning, regular, machine)
     pieces, tried = apply_blends(pieces, machine)
+    if rotary is not None:
+        pieces = dc_replace(pieces, rotary=rotary_pieces(pieces, segments, *rotary, marker))
     rows, dkn = curvature_jumps(pieces)
     cap = junction_jump_cap_mm_s(
         dkn, machine.servo.period_s, machine.limits.j_max_mm_s3, machine.axis_limits.as_arrays()[2]

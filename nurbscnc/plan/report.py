@@ -25,7 +25,17 @@ import numpy as np
 from nurbscnc.errors import PlanningError, SourcePos
 from nurbscnc.geometry.segments import spiral_arc_length_mm
 from nurbscnc.machine.profile import Machine, SoftLimits
-from nurbscnc.program.columns import ARC, DWELL, KINDS, LINE, NURBS, PAUSE, RAPID, segment_columns
+from nurbscnc.program.columns import (
+    ARC,
+    DWELL,
+    KINDS,
+    LINE,
+    NURBS,
+    PAUSE,
+    RAPID,
+    ROTATE,
+    segment_columns,
+)
 
 if TYPE_CHECKING:  # the annotations only: no import at start-up
     from nurbscnc.plan.timing import Samples
@@ -44,6 +54,31 @@ def check_soft_limits(points_mm: np.ndarray, lines: np.ndarray, limits: SoftLimi
         f"the path leaves the soft limits: {'XYZ'[axis]} = {points_mm[k, axis]:.4f} mm in "
         f"machine coordinates, outside [{lo[axis]:g}, {hi[axis]:g}] mm",
         SourcePos(int(lines[k]), 1, ""),
+    )
+
+
+def check_rotary_limits(abc_deg, lines: np.ndarray, rotary_axes: dict) -> None:
+    """Refuse rotary positions ``abc_deg`` (N, 3) [deg] (None: a program without rotary axes)
+    outside an axis's soft limits (``rotary_axes``: the machine's
+    :class:`~nurbscnc.machine.model.RotaryAxis` by name): PlanningError at the first one, with
+    its source line (``lines`` (N,))."""
+    if abc_deg is None or not rotary_axes:
+        return
+    first, worst = None, None
+    for i, name in enumerate(("a", "b", "c")):
+        ax = rotary_axes.get(name)
+        if ax is None:
+            continue
+        bad = np.flatnonzero((abc_deg[:, i] < ax.min_deg) | (abc_deg[:, i] > ax.max_deg))
+        if bad.size and (first is None or bad[0] < first):
+            first, worst = int(bad[0]), (i, ax)
+    if first is None:
+        return
+    i, ax = worst
+    raise PlanningError(
+        f"the path leaves the soft limits: {'ABC'[i]} = {abc_deg[first, i]:.4f}° in machine "
+        f"coordinates, outside [{ax.min_deg:g}, {ax.max_deg:g}]°",
+        SourcePos(int(lines[first]), 1, ""),
     )
 
 
@@ -152,6 +187,7 @@ def program_summary(prog, columns=None, per_segment: bool = True) -> dict:
     lengths = segment_lengths_mm(segments, cols)
     rapid = cols.kind == RAPID
     feeding = (cols.kind != RAPID) & (cols.kind != DWELL) & (cols.kind != PAUSE)
+    feeding &= cols.kind != ROTATE  # X Y Z at rest (its rate is in deg/s)
     feeds = cols.feeds_mm_s[feeding]
     names = cols.names
     shown = np.arange(len(segments)) if per_segment else cols.rows(NURBS)
@@ -384,7 +420,20 @@ def plan_summary(
         summary["smoothed"] = dict(plan.pieces.smoothed)
     if check is not None:
         summary.update(check.contour_stats(), contour_scope="feed")
+    if plan.pieces.rotary is not None:
+        summary["rotary"] = rotary_summary(plan.pieces.rotary)
     return summary
+
+
+def rotary_summary(rotary) -> dict:
+    """The planner's entries of a plan's ``rotary`` object (docs/json.md; the app adds where
+    the axes end and what the contour check covers): the axes the program uses and its
+    rotary-only moves (count, planned time [s])."""
+    return {
+        "axes": list(rotary.axes),
+        "rotate_moves": int(rotary.holds.duration_s.size),
+        "rotate_time_s": float(np.sum(rotary.holds.duration_s)),
+    }
 
 
 #: The JSON names (docs/json.md) of the servo metrics

@@ -275,7 +275,15 @@ def smooth_runs(
     ``--blend-tolerance`` (it overrides every mode)."""
     segs = list(segments)
     is_line = np.fromiter(
-        (type(s) is Line and not s.rapid for s in segs), dtype=bool, count=len(segs)
+        # Lines that turn A B C are left alone: A moves linearly along each of them.
+        (
+            type(s) is Line
+            and not s.rapid
+            and (s.abc_deg is None or s.abc_deg[:3] == s.abc_deg[3:])
+            for s in segs
+        ),
+        dtype=bool,
+        count=len(segs),
     )
     rows = np.flatnonzero(is_line)
     if rows.size < MIN_RUN:

@@ -182,4 +182,51 @@ def exact_reference(
         b = slice(lo, min(lo + SLAB, n))
         s[b], v[b], a[b], _, piece[b] = profile.sample(tau[b])
         points[b], param[b] = path.place(profile.piece_start_mm, s[b], piece[b])
-    return Reference(t, tau, s, v, a, piece, points, param)
+    abc = None
+    if getattr(pieces, "rotary", None) is not None:
+        abc = rotary_positions(pieces, profile, t, tau, s)
+    return Reference(t, tau, s, v, a, piece, points, param, abc_deg=abc)
+
+
+def rotary_positions(pieces, profile: Profile, t_s, tau_s, s_mm) -> np.ndarray:
+    """A B C [deg] (N, 3) at wall times ``t_s`` (profile times ``tau_s``, path lengths
+    ``s_mm``) of pieces with rotary columns (:class:`~nurbscnc.plan.rotary.RotaryPieces`):
+    on a piece, linear in its arc length; inside a hold (a rotary-only move), the hold's
+    planned rest-to-rest move; through the rest of a stop, where the last move left them."""
+    rot = pieces.rotary
+    k = len(pieces)
+    length = np.asarray(pieces.length_mm, dtype=float)
+    # The row by profile time: at a junction the later row (a hold between two rows has
+    # ended once the profile time moves on).
+    i = np.searchsorted(profile.piece_start_time_s, tau_s, side="right") - 1
+    np.clip(i, 0, k - 1, out=i)
+    loc = np.clip(s_mm - profile.piece_start_mm[i], 0.0, length[i])
+    abc = rot.abc_start_deg[i] + rot.rate_deg_mm[i] * loc[:, None]
+    dwell_after = np.asarray(pieces.dwell_after_s, dtype=float)
+    at, dur = dwell_times(dwell_after, profile)
+    if dur.size == 0:
+        return abc
+    rows_d = np.flatnonzero(dwell_after > 0.0)
+    wall_start, offsets = _dwell_wall_starts(at, dur)
+    j = np.searchsorted(wall_start, t_s, side="right") - 1
+    jj = np.maximum(j, 0)
+    inside = (j >= 0) & (t_s < wall_start[jj] + dur[jj])
+    ended = (j >= 0) & ~inside & (rows_d[jj] == k - 1) & (tau_s >= profile.duration_s)
+    abc[ended] = rot.end_abc_deg  # after the stops that end the program
+    w = np.flatnonzero(inside)
+    if not w.size:
+        return abc
+    r = rows_d[jj[w]]
+    abc[w] = rot.abc_start_deg[r] + rot.rate_deg_mm[r] * length[r][:, None]  # the row's end
+    if rot.holds.duration_s.size:
+        # Stop time elapsed before each sample and before each hold's start (a settle the
+        # planner adds to a row's stop comes before the programmed stops).
+        before = np.cumsum(dwell_after) - dwell_after
+        elapsed = offsets[jj[w]] + (t_s[w] - wall_start[jj[w]])
+        hr = rot.hold_row
+        hold_start = before[hr] + dwell_after[hr] - rot.hold_back_s - rot.holds.duration_s
+        # (a hold that starts its row's stop starts at its elapsed time, up to rounding)
+        h = np.searchsorted(hold_start - 1e-9, elapsed, side="right") - 1
+        mine = (h >= 0) & (hr[np.maximum(h, 0)] == r)
+        abc[w[mine]] = rot.holds.at(h[mine], elapsed[mine] - hold_start[h[mine]])
+    return abc

@@ -17,8 +17,8 @@ import numpy as np
 from nurbscnc.geometry.segments import Line
 
 #: The segment kinds, in code order: ``SegmentColumns.kind`` holds indexes into this.
-KINDS = ("line", "rapid", "arc", "nurbs", "dwell", "pause")
-LINE, RAPID, ARC, NURBS, DWELL, PAUSE = range(len(KINDS))
+KINDS = ("line", "rapid", "arc", "nurbs", "dwell", "pause", "rotate")
+LINE, RAPID, ARC, NURBS, DWELL, PAUSE, ROTATE = range(len(KINDS))
 _KIND_NAMES = np.array(KINDS)
 
 
