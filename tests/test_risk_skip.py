@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from nurbscnc.geometry.polyline import dense_path_mm
+from nurbscnc.geometry.polyline import CHORD_MM, dense_path_mm
 from nurbscnc.machine.profile import load_machine
 from nurbscnc.plan import check as check_module
 from nurbscnc.plan.check import SKIP_MARGIN_MM, Checker
@@ -145,7 +145,10 @@ def test_the_bound_holds_against_the_check_and_an_independent_simulation(machine
         n = ref.t_s.size
         eligible = chk.cutting[:n] & ~_no_skip(plan.pieces)[ref.piece]
         bound = np.linalg.norm(ref.points_mm - resp.actual_mm[:n], axis=1) + SKIP_MARGIN_MM
-        assert np.all(resp.contour_mm[:n][eligible] <= bound[eligible])
+        # The margin is a hundred times what the chords use: the full check's distance
+        # exceeds the tracking error by at most the dense polyline's chord error.
+        lag = bound - SKIP_MARGIN_MM
+        assert np.all(resp.contour_mm[:n][eligible] - lag[eligible] <= 1.5 * CHORD_MM)
         actual = lsim_actual_mm(ref.points_mm, mach, settle_s=0.0)[:n]
         dense = dense_path_mm(plan.pieces, plan.profile, spacing_mm=5e-4)
         independent = distance_to_polyline_mm(actual[eligible], dense)
