@@ -300,7 +300,13 @@ class Checker:
             ref = rows_of(ref, own)
             actual = stream.step(ref.points_mm)
             resp, cutting, measured = self._respond(
-                ref, actual, d[own], (on, prof, index), profile, head, memo, kept, acc.worst
+                ref,
+                actual,
+                d[own],
+                (on, prof, index),
+                profile,
+                (head, memo, kept),
+                (acc.worst, acc.eq29_max),
             )
             acc.add(resp, cutting, ref.tau_s, ref.piece, measured=measured)
             if self.windowed and virt is None and span[1] < r1:
@@ -478,16 +484,15 @@ class Checker:
         direction: np.ndarray,
         path: tuple,
         profile: Profile,
-        head: tuple | None,
-        memo: _Memo | None,
-        kept: int,
-        worst_mm: float,
+        keeps: tuple,
+        so_far: tuple,
     ) -> tuple[Response, np.ndarray, np.ndarray]:
         """The response to the own reference rows ``ref`` (the servo's ``actual``
         positions, the directions of travel), which rows are checked (:meth:`_cutting`) and
         which contour errors were measured: those of the first ``kept`` rows from ``memo``
         (the same numbers) where it measured them, the others computed against ``path``
-        (pieces, profile, index).
+        (pieces, profile, index); ``keeps``: (head, memo, kept); ``so_far``: the check's
+        largest error so far [mm] and largest |eq. 29| [µm].
 
         The risk skip. The reference point r_k lies on the path (the exact sampler) at path
         length s_k, inside the stretch of path the distance is measured to
@@ -499,8 +504,12 @@ class Checker:
         measured first): the check's worst error, its over-limit samples and so every
         decision are those of the full measurement, bit for bit. A row left out keeps its
         bound b_k as its contour error (the statistics' rms is then an upper bound,
-        ``contour_bounded_samples`` counts them)."""
+        ``contour_bounded_samples`` counts them). Likewise |eq. 29| ≤ |r_k − a_k|: it is
+        computed only where that exceeds the largest |eq. 29| so far (the maximum, its only
+        use, is exact; the others keep the bound)."""
         on, prof, index = path
+        head, memo, kept = keeps
+        worst_mm, eq29_max_um = so_far
         n = ref.t_s.size
         axis_err = ref.points_mm - actual
         lag = np.sqrt(np.einsum("ij,ij->i", axis_err, axis_err))
@@ -537,7 +546,15 @@ class Checker:
             measured = ~skipped
         else:
             measure(todo)
-        resp = Response(actual, axis_err, contour, eq29_mm(axis_err, direction))
+        if RISK_SKIP:
+            eq29 = lag.copy()
+            # A margin of 1e-9 for the rounding of eq. 29 against |r − a| (µm from mm).
+            i = np.flatnonzero(lag * (1000.0 * (1.0 + 1e-9)) > eq29_max_um)
+            if i.size:
+                eq29[i] = eq29_mm(axis_err[i], direction[i])
+        else:
+            eq29 = eq29_mm(axis_err, direction)
+        resp = Response(actual, axis_err, contour, eq29)
         cutting = self._cutting(ref, resp, profile, head)
         return resp, cutting, measured
 
