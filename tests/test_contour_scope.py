@@ -47,6 +47,11 @@ def test_summary_and_simulate_report_the_same_contour_error(reports):
     plan, sim = reports["plan"], reports["simulate"]
     assert plan["contour_scope"] == sim["contour_scope"] == "feed"
     for key in KEYS:
+        if key == "contour_true_rms_um" and plan["contour_bounded_samples"]:
+            # The check's risk skip bounded some samples' errors by their tracking error
+            # (plan/check.py): the rms counts them at that bound, so it bounds simulate's.
+            assert plan[key] >= sim[key] * (1 - 1e-7), key
+            continue
         # Two simulations of the same servo (IIR and convolution): per sample they differ by
         # at most 1.2e-7 µm on this program (measured), so 1e-7 relative on ~15 µm.
         assert sim[key] == pytest.approx(plan[key], rel=1e-7, abs=1e-6), key

@@ -26,7 +26,7 @@ import numpy as np
 import pytest
 
 from nurbscnc.machine.profile import load_machine
-from nurbscnc.plan import converge, windows
+from nurbscnc.plan import check, converge, windows
 from nurbscnc.plan.lookahead import plan_checked
 from nurbscnc.plan.options import LookaheadOptions
 from nurbscnc.plan.program_pieces import segment_pieces
@@ -42,6 +42,15 @@ SLOW = _slow_servo_machine()
 TINY = 97  # samples per window: many windows, boundaries everywhere
 HUGE = 1 << 30  # one window for the whole program
 STATS_REL = 1e-9
+
+
+@pytest.fixture(autouse=True)
+def _every_distance_measured(monkeypatch):
+    """The contour statistics compared here are the fully measured ones: the risk skip
+    (plan/check.py) leaves the rows it bounds out of the measurement, so which rows those
+    are (and the rms, then a bound) depends on the check so far, hence on the window;
+    the plans with it on and off are compared in tests/test_risk_skip.py."""
+    monkeypatch.setattr(check, "RISK_SKIP", False)
 
 
 def _reference(n: int, rng) -> np.ndarray:

@@ -9,14 +9,18 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from nurbscnc.geometry.polyline import MAX_PIECE_POINTS, path_counts
 from nurbscnc.machine.profile import Machine
 from nurbscnc.plan.checkresult import Accumulator, Check
 from nurbscnc.plan.dynamics import (
     PathIndex,
     Response,
+    contour_near_mm,
+    eq29_mm,
     path_response,
     window_response,
 )
+from nurbscnc.plan.options import Interpolator
 from nurbscnc.plan.pieces import PieceList
 from nurbscnc.plan.profile import Profile, same_until_s
 from nurbscnc.plan.sampler import ReferenceSampler, as_sampler
@@ -34,6 +38,13 @@ from nurbscnc.servo.model import AxesStream
 #: Servo samples per window of the dynamics check: its memory grows with this, not with
 #: the motion time.
 CHECK_WINDOW = 1 << 16
+#: Whether the check leaves out the distance to the path where the servo's tracking error
+#: bounds it below ε_max (:meth:`Checker._respond`); the tests compare plans with it off.
+RISK_SKIP = True
+#: What the tracking-error bound adds for the dense polyline the distance is measured to
+#: [mm]: its chords stay within ``geometry.polyline.CHORD_MM`` (1e-5 mm) of the path; a
+#: hundred times that.
+SKIP_MARGIN_MM = 1e-3
 
 
 def _joined(first: Reference, then: Reference) -> Reference:
@@ -47,8 +58,9 @@ class _Memo:
     the next re-plan of that window (:meth:`Checker._same_rows`): the window (``key``: its
     first sample, whether it ends the program, its last piece; the servo state it started
     from; the path), the profile and dwell schedule it sampled, the chunk's sampled rows
-    (``ref``, from row ``a``), and per own row (from chunk row ``own``) the response's
-    axis errors, contour and eq. 29 errors and the cutting flags."""
+    (``ref``, from row ``a``), and per own row (from chunk row ``own``) the contour errors
+    and which of them were measured (the others: their bound, :meth:`Checker._respond`);
+    the rest of a row's response is recomputed (the servo runs on every row anyway)."""
 
     key: tuple
     stream: AxesStream | None
@@ -58,10 +70,8 @@ class _Memo:
     a: int
     ref: Reference
     own: int
-    axis_error_mm: np.ndarray
     contour_mm: np.ndarray
-    contour_eq29_mm: np.ndarray
-    cutting: np.ndarray
+    measured: np.ndarray
 
 
 @dataclass(frozen=True, eq=False)
@@ -116,6 +126,19 @@ class Checker:
         self.after_rapid = np.zeros(len(pieces), dtype=bool)  # first piece of a cut after a rapid
         self.after_rapid[settle_rows + 1] = True  # the rows of after_rapid_rows(self.rapid)
         self.index = PathIndex(pieces)  # where the pieces are (built on first use)
+        # The risk skip (:meth:`_respond`): only where the reference lies on the path (the
+        # exact points of a causal sampler; not the Taylor recurrence's nor a
+        # pre-compensated reference), and never on rapids, on the first piece of a cut
+        # after a rapid (measured against the cut alone) nor on a piece whose dense
+        # polyline was capped (its chords may miss the path by more than the margin).
+        self.skip = (
+            RISK_SKIP and self.sampler.causal and self.sampler.interpolator == Interpolator.EXACT
+        )
+        self.no_skip = (
+            self.rapid | self.after_rapid | (path_counts(pieces) >= MAX_PIECE_POINTS)
+            if self.skip
+            else None
+        )
         # The servo at rest, discretised once: every check starts from a copy.
         servo = machine.servo
         self._at_rest = AxesStream([servo.x, servo.y, servo.z], servo.period_s)
@@ -281,10 +304,16 @@ class Checker:
                 kept = min(kept, memo.contour_mm.size)
             ref = rows_of(ref, own)
             actual = stream.step(ref.points_mm)
-            resp, cutting = self._respond(
-                ref, actual, d[own], on, prof, index, profile, head, memo, kept
+            resp, cutting, measured = self._respond(
+                ref,
+                actual,
+                d[own],
+                (on, prof, index),
+                profile,
+                (head, memo, kept),
+                (acc.worst, acc.eq29_max),
             )
-            acc.add(resp, cutting, ref.tau_s, ref.piece)
+            acc.add(resp, cutting, ref.tau_s, ref.piece, measured=measured)
             if self.windowed and virt is None and span[1] < r1:
                 # A chunk before the window's last: kept for the next re-plan (_resume).
                 entries.append((*span, acc.state(), stream.copy()))
@@ -299,10 +328,8 @@ class Checker:
                     sampled[0][0],
                     sampled[0][1],
                     own.start,
-                    resp.axis_error_mm,
                     resp.contour_mm,
-                    resp.contour_eq29_mm,
-                    cutting,
+                    measured,
                 )
         self.stream_out = stream
         if len(entries) > 0 and self.windowed:
@@ -460,44 +487,81 @@ class Checker:
         ref: Reference,
         actual: np.ndarray,
         direction: np.ndarray,
-        on,
-        prof,
-        index,
+        path: tuple,
         profile: Profile,
-        head: tuple | None,
-        memo: _Memo | None,
-        kept: int,
-    ) -> tuple[Response, np.ndarray]:
+        keeps: tuple,
+        so_far: tuple,
+    ) -> tuple[Response, np.ndarray, np.ndarray]:
         """The response to the own reference rows ``ref`` (the servo's ``actual``
-        positions, the directions of travel) and which rows are checked (:meth:`_cutting`):
-        the first ``kept`` rows from ``memo`` (the same numbers), the others computed."""
-        new = slice(kept, None)
-        resp = window_response(
-            ref.points_mm[new],
-            ref.s_mm[new],
-            actual[new],
-            direction[new],
-            on,
-            prof,
-            self.eps_mm,
-            index,
-        )
-        cutting = self._cutting(rows_of(ref, new), resp, profile, head)
-        if not kept:
-            return resp, cutting
+        positions, the directions of travel), which rows are checked (:meth:`_cutting`) and
+        which contour errors were measured: those of the first ``kept`` rows from ``memo``
+        (the same numbers) where it measured them, the others computed against ``path``
+        (pieces, profile, index); ``keeps``: (head, memo, kept); ``so_far``: the check's
+        largest error so far [mm] and largest |eq. 29| [µm].
 
-        def joined(old: np.ndarray, now: np.ndarray) -> np.ndarray:
-            return np.concatenate((old[:kept], now))
+        The risk skip. The reference point r_k lies on the path (the exact sampler) at path
+        length s_k, inside the stretch of path the distance is measured to
+        (:func:`~nurbscnc.geometry.distance.windowed_contour_mm`: s_k ± 2|r_k − a_k|), so
+        the contour error is at most the tracking error |r_k − a_k| plus the dense
+        polyline's chord error (:data:`SKIP_MARGIN_MM`): b_k. A row whose b_k is within
+        ε_max is never over the limit, and its distance is measured only where b_k exceeds
+        the largest error of the check so far (``worst_mm``, then this chunk's rows
+        measured first): the check's worst error, its over-limit samples and so every
+        decision are those of the full measurement, bit for bit. A row left out keeps its
+        bound b_k as its contour error (the statistics' rms is then an upper bound,
+        ``contour_bounded_samples`` counts them). Likewise |eq. 29| ≤ |r_k − a_k|: it is
+        computed only where that exceeds the largest |eq. 29| so far (the maximum, its only
+        use, is exact; the others keep the bound)."""
+        on, prof, index = path
+        head, memo, kept = keeps
+        worst_mm, eq29_max_um = so_far
+        n = ref.t_s.size
+        axis_err = ref.points_mm - actual
+        lag = np.sqrt(np.einsum("ij,ij->i", axis_err, axis_err))
+        contour = np.empty(n)
+        todo = np.ones(n, dtype=bool)
+        if kept:
+            contour[:kept] = memo.contour_mm[:kept]
+            todo[:kept] = ~memo.measured[:kept]
 
-        return (
-            Response(
-                actual,
-                joined(memo.axis_error_mm, resp.axis_error_mm),
-                joined(memo.contour_mm, resp.contour_mm),
-                joined(memo.contour_eq29_mm, resp.contour_eq29_mm),
-            ),
-            joined(memo.cutting, cutting),
-        )
+        def measure(rows: np.ndarray) -> None:
+            i = np.flatnonzero(rows)
+            if i.size:
+                contour[i] = contour_near_mm(
+                    actual[i], lag[i], ref.s_mm[i], on, prof, self.eps_mm, index
+                )
+
+        measured = np.ones(n, dtype=bool)
+        if self.skip:
+            bound = lag + SKIP_MARGIN_MM
+            fixed = self.no_skip[ref.piece]
+            first = fixed | (bound > self.eps_mm)
+            measure(todo & first)
+            # The largest error so far: the rows after a rapid are measured again against
+            # the cut alone (:meth:`_cutting`), so they do not count here. Which rows are
+            # left out depends on the rows and the check so far only (a kept row counts as
+            # a fresh check would count it).
+            final = first & ~fixed
+            if final.any():
+                worst_mm = max(worst_mm, float(contour[final].max()))
+            second = ~first & (bound > worst_mm)
+            measure(todo & second)
+            skipped = ~first & ~second
+            contour[skipped] = bound[skipped]
+            measured = ~skipped
+        else:
+            measure(todo)
+        if RISK_SKIP:
+            eq29 = lag.copy()
+            # A margin of 1e-9 for the rounding of eq. 29 against |r − a| (µm from mm).
+            i = np.flatnonzero(lag * (1000.0 * (1.0 + 1e-9)) > eq29_max_um)
+            if i.size:
+                eq29[i] = eq29_mm(axis_err[i], direction[i])
+        else:
+            eq29 = eq29_mm(axis_err, direction)
+        resp = Response(actual, axis_err, contour, eq29)
+        cutting = self._cutting(ref, resp, profile, head)
+        return resp, cutting, measured
 
     def _run_whole(self, planned: PieceList, profile: Profile) -> Check:
         """The check on the whole reference at once (a sampler without windows, or the

@@ -70,7 +70,10 @@ class Check:
         samples (rapids and the settle wait after one; no guarantee), 0 when there are none.
         The summaries use only these; a check that keeps no per-sample arrays gives the same
         numbers from its running statistics (the rms summed window by window: equal to
-        rounding)."""
+        rounding), and ``contour_bounded_samples``: how many cutting samples' errors were
+        not measured but bounded (the risk skip of :class:`~nurbscnc.plan.check.Checker`:
+        the tracking error bounds them, and it is below the largest measured error, so the
+        maximum is exact; the rms counts them at their bound, an upper bound then)."""
         if self.response is None:
             return dict(self.stats)
         c = self.contour_um()
@@ -81,6 +84,7 @@ class Check:
             "contour_true_rms_um": float(np.sqrt(np.mean(c * c))) if c.size else 0.0,
             "contour_eq29_max_um": float(eq29.max()) if c.size else 0.0,
             "contour_rapids_true_max_um": float(rapids.max()) if rapids.size else 0.0,
+            "contour_bounded_samples": 0,
         }
 
 
@@ -100,6 +104,7 @@ class Accumulator:
         self.c_max = self.c_sq = self.eq29_max = 0.0
         self.rapids_max = 0.0  # [µm] the samples the guarantee does not cover (plan.scope)
         self.c_n = 0
+        self.bounded = 0  # cutting samples whose error is a bound (not measured)
         self.real = None  # (count, worst, restart, over count, run count) before a virtual tail
 
     def add(
@@ -109,11 +114,13 @@ class Accumulator:
         tau_s: np.ndarray,
         piece: np.ndarray,
         virtual: bool = False,
+        measured: np.ndarray | None = None,
     ):
         """The next samples: their response, which are checked (``cutting``), profile times
         [s] and pieces. ``virtual``: the held tail of a cut window that the program does not
         end with: it counts for the window's decisions, not in its statistics nor in
-        :attr:`Check.samples`."""
+        :attr:`Check.samples`. ``measured``: which contour errors were measured (None: all;
+        the others are bounds)."""
         if virtual and self.real is None:
             self.real = (
                 self.count,
@@ -136,6 +143,8 @@ class Accumulator:
             self.c_max = max(self.c_max, float(c.max()))
             self.c_sq += float(np.dot(c, c))
             self.c_n += c.size
+            if measured is not None:
+                self.bounded += int(np.count_nonzero(cutting & ~measured))
             self.eq29_max = max(
                 self.eq29_max, float(np.abs(resp.contour_eq29_mm[cutting]).max()) * 1000.0
             )
@@ -159,6 +168,7 @@ class Accumulator:
             self.eq29_max,
             self.rapids_max,
             self.c_n,
+            self.bounded,
             self.real,
         )
 
@@ -166,9 +176,16 @@ class Accumulator:
         """Back to a :meth:`state` (its lists and counts copied: the state stays reusable)."""
         (self.count, over, runs, self.last_piece, restart, *rest) = state
         self.over, self.runs, self.restart = list(over), list(runs), restart.copy()
-        (self.worst, self.c_max, self.c_sq, self.eq29_max, self.rapids_max, self.c_n, self.real) = (
-            rest
-        )
+        (
+            self.worst,
+            self.c_max,
+            self.c_sq,
+            self.eq29_max,
+            self.rapids_max,
+            self.c_n,
+            self.bounded,
+            self.real,
+        ) = rest
 
     def check(self) -> Check:
         """The :class:`Check` of everything added (no per-sample arrays)."""
@@ -181,6 +198,7 @@ class Accumulator:
             "contour_true_rms_um": rms,
             "contour_eq29_max_um": self.eq29_max,
             "contour_rapids_true_max_um": self.rapids_max,
+            "contour_bounded_samples": self.bounded,
         }
         samples = overs
         if self.real is not None:
@@ -246,5 +264,6 @@ class JoinedChecks:
             "contour_true_rms_um": rms,
             "contour_eq29_max_um": max(s["contour_eq29_max_um"] for s in stats),
             "contour_rapids_true_max_um": max(s["contour_rapids_true_max_um"] for s in stats),
+            "contour_bounded_samples": sum(s["contour_bounded_samples"] for s in stats),
         }
         return Check(None, None, None, overs, joined, overs, total)

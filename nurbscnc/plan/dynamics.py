@@ -105,14 +105,38 @@ def window_response(
     whole path above ``refine_above_mm``, and eq. 29 (SPEC §8) in the XY plane."""
     axis_err = points_mm - actual_mm
     lag = np.sqrt(np.einsum("ij,ij->i", axis_err, axis_err))
-    contour = windowed_contour_mm(actual_mm, lag, s_mm, pieces, profile, index)
+    contour = contour_near_mm(actual_mm, lag, s_mm, pieces, profile, refine_above_mm, index)
+    return Response(actual_mm, axis_err, contour, eq29_mm(axis_err, direction_xy))
+
+
+def contour_near_mm(
+    actual_mm: np.ndarray,
+    lag_mm: np.ndarray,
+    s_mm: np.ndarray,
+    pieces,
+    profile,
+    refine_above_mm: float | None = None,
+    index: PathIndex | None = None,
+) -> np.ndarray:
+    """The contour error [mm] of :func:`window_response` for the actual points ``actual_mm``
+    (w, 3) whose references lie ``lag_mm`` (w,) [mm] from them at path lengths ``s_mm``
+    (w,): the true distance near the reference point (:func:`windowed_contour_mm`), refined
+    to the whole path above ``refine_above_mm``. Per sample: any subset of a window's
+    samples gets their numbers bit for bit."""
+    contour = windowed_contour_mm(actual_mm, lag_mm, s_mm, pieces, profile, index)
     if refine_above_mm is not None:
         sel = np.flatnonzero(contour > refine_above_mm)
         if sel.size:
             index = index or PathIndex(pieces)
             contour[sel] = index.distance_mm(actual_mm[sel], contour[sel])
+    return contour
+
+
+def eq29_mm(axis_error_mm: np.ndarray, direction_xy: np.ndarray) -> np.ndarray:
+    """SPEC eq. 29 [mm] of the axis errors ``axis_error_mm`` (w, 3) [mm] with the tangent
+    angle of the reference's direction of travel ``direction_xy`` (w, 2); 0 where it does
+    not move."""
     d = direction_xy
     phi = np.arctan2(d[:, 1], d[:, 0])
-    eq29 = contour_error_eq29(axis_err[:, 0], axis_err[:, 1], phi)
-    eq29 = np.where(np.hypot(d[:, 0], d[:, 1]) > 0, eq29, 0.0)
-    return Response(actual_mm, axis_err, contour, eq29)
+    eq29 = contour_error_eq29(axis_error_mm[:, 0], axis_error_mm[:, 1], phi)
+    return np.where(np.hypot(d[:, 0], d[:, 1]) > 0, eq29, 0.0)
