@@ -244,6 +244,7 @@ def print_plan_summary(prog, mach, summary: dict, out: Console) -> None:
             f"  {'predicted' if 'pieces' in summary else 'simulated'} contour error"
             f"{scope_words(summary['contour_scope'])}: "
             f"max {summary['contour_true_max_um']:.2f} µm, RMS "
+            f"{'≤ ' if summary.get('contour_bounded_samples') else ''}"
             f"{summary['contour_true_rms_um']:.2f} "
             f"µm (ε_max {mach.limits.contour_tolerance_mm * 1000:g} µm; {how})"
             f"{rapids_words(summary.get('contour_rapids_true_max_um'))}"
