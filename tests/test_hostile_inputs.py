@@ -346,6 +346,9 @@ def test_profile_value_outside_its_range_names_key_and_range(key, value):
     )
 
 
+ROTARY_KEYS = ("_deg_min", "_deg_s2", "_deg_s3", "min_deg", "max_deg", "steps_per_deg")
+
+
 @pytest.mark.parametrize(
     "key", sorted(k for k in RANGES if k.startswith(("limits.", "axis_limits.", "steps.")))
 )
@@ -354,8 +357,16 @@ def test_the_range_ends_are_accepted(key):
     the default 127 steps per period do not suffice)."""
     low, high = RANGES[key]
     for value in (low, high):
+        if key.endswith(ROTARY_KEYS):  # a rotary axis's table: its required keys, then this one
+            leaf = key.rpartition(".")[2]
+            table = {"v_max_deg_min": 3600.0, "a_max_deg_s2": 100.0, "j_max_deg_s3": 1000.0}
+            table[leaf] = float(value)
+            rows = "".join(f"{k} = {v!r}\n" for k, v in table.items())
+            text = default_profile_text() + f"\n[axis_limits.a]\n{rows}"
+        else:
+            text = _profile_with(key.replace("*", "y"), repr(float(value)))
         try:
-            parse_machine(_profile_with(key.replace("*", "y"), repr(float(value))), "m.toml")
+            parse_machine(text, "m.toml")
         except ConfigError as exc:
             assert "max_pulses_per_period" in exc.message, exc.message
 

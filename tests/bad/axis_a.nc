@@ -1,2 +1,2 @@
-; rotary axis motion is not supported @ 2:9
+; the machine has no A axis @ 2:9
 G1 F100 A10

@@ -1,2 +1,2 @@
-; rotary axis motion is not supported @ 2:4
+; the machine has no B axis @ 2:4
 G0 B5

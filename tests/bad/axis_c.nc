@@ -1,3 +1,3 @@
-; rotary axis motion is not supported @ 3:8
+; the machine has no C axis @ 3:8
 G91 G0 C0
 G90 G0 C5
