@@ -57,27 +57,38 @@ def axes_points_of_file(path: str, mach):
             f"{path}: point {k + 1} ({', '.join(f'{v:.4f}' for v in points[k, :3])}) mm is "
             "outside the soft limits"
         )
-    _check_rotary_limits(path, points, axes, mach)
+    rotary_of_points_checked(path, data, mach)
     return points, axes
 
 
-def _check_rotary_limits(path: str, points, axes: str, mach) -> None:
-    """PlanningError at the first point whose rotary axis is outside its ``min_deg`` /
-    ``max_deg`` (or an axis the machine does not have)."""
+def rotary_of_points_checked(name: str, data: dict, mach) -> tuple:
+    """``(axes, abc_deg)`` of a points file read by :func:`~nurbscnc.output.files.read_points`
+    (``name`` its name in messages; :func:`~nurbscnc.output.files.rotary_of_points`), each
+    rotary column checked against the machine ``mach``: ConfigError for an axis the machine
+    does not have, PlanningError at the first point outside the axis's soft limits
+    ``min_deg`` / ``max_deg``. The one check of the rotary columns of ``stream`` and
+    ``simulate``."""
     import numpy as np
 
-    rotary = getattr(mach, "rotary_axes", {}) or {}
-    for j, name in enumerate(axes[3:], start=3):
-        axis = rotary.get(name)
+    from nurbscnc.output.files import ROTARY_COLUMNS, rotary_of_points
+
+    axes, abc_deg = rotary_of_points(data)
+    for letter in axes:
+        axis = mach.rotary_axes.get(letter)
         if axis is None:
-            raise ConfigError(f"{path}: a column {name} but the machine has no {name.upper()} axis")
-        out = (points[:, j] < axis.min_deg) | (points[:, j] > axis.max_deg)
+            raise ConfigError(
+                f"{name}: a column {letter} but the machine has no {letter.upper()} axis "
+                f"([axis_limits.{letter}])"
+            )
+        column = abc_deg[:, ROTARY_COLUMNS.index(letter)]
+        out = (column < axis.min_deg) | (column > axis.max_deg)
         if out.any():
             k = int(np.flatnonzero(out)[0])
             raise PlanningError(
-                f"{path}: point {k + 1}: {name.upper()} {points[k, j]:.4f} deg is outside "
+                f"{name}: point {k + 1}: {letter.upper()} {column[k]:.4f} deg is outside "
                 f"its soft limits [{axis.min_deg:g}, {axis.max_deg:g}] deg"
             )
+    return axes, abc_deg
 
 
 def pulses_of_points(points_mm, mach, lines=None, axes: str = "xyz"):
