@@ -350,17 +350,11 @@ def test_card_position_reports_a_in_degrees(monkeypatch):
 
 def test_the_start_a_b_c_is_passed_on_to_the_interpreter():
     """A program streamed from a card at A 90° starts there: the interpreter's option
-    ``start_abc_deg`` — or, with an interpreter that starts at A B C = 0 only, a clear
-    error instead of a program run from the wrong angle."""
+    ``start_abc_deg``."""
     from nurbscnc.app.load import start_abc_option
-    from nurbscnc.program.interpret import InterpretOptions
 
     assert start_abc_option(None) == {} and start_abc_option((0.0, 0.0, 0.0)) == {}
-    if "start_abc_deg" in {f.name for f in dataclasses.fields(InterpretOptions)}:
-        assert start_abc_option((90, 0, -5)) == {"start_abc_deg": (90.0, 0.0, -5.0)}
-    else:
-        with pytest.raises(ConfigError, match="A B C = 90, 0, -5 deg"):
-            start_abc_option((90, 0, -5))
+    assert start_abc_option((90, 0, -5)) == {"start_abc_deg": (90.0, 0.0, -5.0)}
 
 
 def test_jog_of_an_axis_the_machine_lacks_is_a_clear_error(tmp_path, monkeypatch):
@@ -476,8 +470,9 @@ def test_a_feed_hold_of_a_program_planned_whole_is_the_cards_hold():
 def test_program_parts_start_where_the_part_before_ends():
     """Segments cut at their stops: each part starts at the stop's X Y Z and at the A B C
     the part before ends at (a Line's abc_deg end, a Rotate's end)."""
-    from nurbscnc.app.staged import abc_after, part_points, program_parts, turns
+    from nurbscnc.app.staged import abc_after, part_points, program_parts
     from nurbscnc.geometry.segments import Line, Pause, Program, Rotate
+    from nurbscnc.plan.rotary import moves_rotary
 
     segs = (
         Line((0, 0, 0), (4, 0, 0), 10.0, 1, abc_deg=(0, 0, 0, 30, 0, 0)),
@@ -495,13 +490,11 @@ def test_program_parts_start_where_the_part_before_ends():
     assert parts[3][0].start_abc_deg == (30.0, 5.0, 0.0)
     assert tuple(parts[3][0].start_mm) == (4.0, 0.0, 0.0)
     assert abc_after(segs, (0, 0, 0)) == (30.0, 5.0, 0.0)
-    assert turns(segs[:1]) and turns(segs[2:3]) and not turns(segs[5:])
+    assert moves_rotary(segs[0]) and moves_rotary(segs[2]) and not moves_rotary(segs[5])
     still = samples_of_move((0, 0, 0), (1, 0, 0), (0, 0, 0), (0, 0, 0), 0.01, ())
     still = dataclasses.replace(still, abc_deg=None)
     held = part_points(still, "xyzb", (30.0, 5.0, 0.0))
     assert np.all(held[:, 3] == 5.0)
-    with pytest.raises(Exception, match="carry no A B C though the program moves B"):
-        part_points(still, "xyzb", (30.0, 5.0, 0.0), moves=True)
 
 
 def test_a_program_holding_a_away_from_zero(monkeypatch):

@@ -113,11 +113,11 @@ def sample_points(samples):
 
     from nurbscnc.output.stream.axes import stream_axes
 
-    axes = stream_axes(getattr(samples, "rotary_axes", ()))
+    axes = stream_axes(samples.rotary_axes)
     points = np.asarray(samples.points_mm, dtype=float)
     if len(axes) == 3:
         return points, axes
-    abc = getattr(samples, "abc_deg", None)
+    abc = samples.abc_deg
     if abc is None:
         raise PlanningError(f"the samples move {axes[3:].upper()} but carry no A B C column")
     cols = [np.asarray(abc, dtype=float)[:, "abc".index(a)] for a in axes[3:]]
@@ -136,28 +136,29 @@ def needs_whole_plan(options, prog=None) -> bool:
     cut window: a baseline ``algorithm`` has no look-ahead plan to cut, and the
     pre-compensated reference (ZPETC) is not causal: each of its samples depends on the
     planned reference ahead of it, to the program's end. A program ``prog`` that moves a
-    rotary axis is planned whole too (:func:`moves_rotary`)."""
+    rotary axis is planned whole too (:func:`program_turns_rotary`)."""
     from nurbscnc.plan.options import Algorithm
 
     return (
         options.algorithm != Algorithm.PH_LOOKAHEAD
         or options.precompensate
-        or (prog is not None and moves_rotary(prog))
+        or (prog is not None and program_turns_rotary(prog))
     )
 
 
-def moves_rotary(prog) -> bool:
-    """Whether the program turns a rotary axis (a Rotate, or a move whose A B C change; one
+def program_turns_rotary(prog) -> bool:
+    """Whether the program turns a rotary axis (any segment that
+    :func:`~nurbscnc.plan.rotary.moves_rotary`: a Rotate, or a move whose A B C change; one
     that only holds them where the card stands streams as an X Y Z program, the card's
     rotary axes standing still). Such a program is streamed planned whole
     (:func:`~nurbscnc.app.staged.staged_job`: section by section, waiting at its stops),
     its samples' A B C beside X Y Z: the controller's re-planning (a feed hold's stop along
     the path, an override above 100 %, run from line) follows the XYZ path length, which
-    stands still during a rotary-only move; this is the hook where the controller's
-    :class:`~nurbscnc.controller.job.Job` takes rotary programs once its pieces carry A B C."""
-    from nurbscnc.app.staged import turns
+    stands still during a rotary-only move, so a rotary program is not re-planned while it
+    runs (a feed hold is the card's own HOLD: :mod:`~nurbscnc.controller.staged`)."""
+    from nurbscnc.plan.rotary import moves_rotary
 
-    return bool(getattr(prog, "rotary_axes", ())) and turns(prog.segments)
+    return bool(prog.rotary_axes) and any(map(moves_rotary, prog.segments))
 
 
 def is_still(segments) -> bool:
@@ -189,7 +190,7 @@ def stream_job(
     from nurbscnc.controller.stops import start_at_line
     from nurbscnc.pipeline import run_program, window_plans
 
-    if moves_rotary(prog) and (from_line is not None or override != 1.0):
+    if program_turns_rotary(prog) and (from_line is not None or override != 1.0):
         raise ConfigError(
             f"--from-line and --feed-override: this program moves "
             f"{' '.join(a.upper() for a in prog.rotary_axes)}, and a program with rotary "
@@ -202,7 +203,7 @@ def stream_job(
             raise ConfigError(str(exc)) from None
     if is_still(prog.segments):  # stops at the first move
         return None, None
-    if moves_rotary(prog):
+    if program_turns_rotary(prog):
         from nurbscnc.app.staged import staged_job
 
         return staged_job(prog, mach, options, optional_stop, tools), None
