@@ -454,20 +454,21 @@ def test_summary_names_the_axes_and_what_the_contour_check_does_not_see():
     )
     summary = summary_of(turned, mach, run_)
     rotary = summary.pop("rotary")
-    assert rotary == {"axes": ["b"], "final_abc_deg": {"b": 22.5}, **XYZ_ONLY}
+    note_b = XYZ_ONLY["note"].replace("on A", "on B")
+    assert rotary == {"axes": ["b"], "final_abc_deg": {"b": 22.5}, **XYZ_ONLY, "note": note_b}
     assert json.dumps(summary) == json.dumps(plain)
     buf = io.StringIO()
     print_plan_summary(turned, mach, summary_of(turned, mach, run_), Console(file=buf, width=200))
     text = buf.getvalue()
     assert "rotary axes B (end at B22.5°): the contour check covers X Y Z only" in text
-    assert "an A error of δ° is r·δ·π/180 mm at radius r" in text
+    assert "an error of δ° on B is r·δ·π/180 mm at radius r" in text
 
 
 #: The ``rotary`` object's words on the contour check.
 XYZ_ONLY = {
     "contour_check": "xyz",
     "note": "the contour check covers X Y Z only: it does not see the tool's position on a "
-    "rotated part (an A error of δ° is r·δ·π/180 mm at radius r)",
+    "rotated part (an error of δ° on A is r·δ·π/180 mm at radius r)",
 }
 
 
