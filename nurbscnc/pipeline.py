@@ -203,7 +203,7 @@ def run_program(program, machine: Machine, options: RunOptions | None = None, pr
         if program.rotary_axes:  # the servo model and ZPETC inverse are X Y Z only
             axes = " ".join(a.upper() for a in program.rotary_axes)
             raise ConfigError(
-                f"pre-compensation models the X Y Z servos only; this program moves {axes} "
+                f"pre-compensation models the X Y Z servos only; this program uses {axes} "
                 "(run it without --precompensate)"
             )
     # Checks before work: the geometry inside the soft limits, the motion short enough for

@@ -127,3 +127,30 @@ def test_the_app_hands_the_machines_axes_to_the_interpreter():
     interpreted = load_program(str(program), inputs=program_inputs(load_machine(str(BENCH_A))))
     assert interpreted.rotary_axes == ("a",)
     assert interpreted.segments[-1].abc_deg == (360.0, 0.0, 0.0, 270.0, 0.0, 0.0)
+
+
+def _a_axis(steps_per_deg: float) -> str:
+    return (
+        "[axis_limits.a]\nv_max_deg_min = 3600.0\na_max_deg_s2 = 400.0\nj_max_deg_s3 = 4e3\n"
+        f"steps_per_deg = {steps_per_deg!r}\n"
+    )
+
+
+def test_a_rotary_axis_must_fit_the_pulse_budget():
+    """60 deg/s · 3000 steps/deg · 1 ms = 180 steps per period > 127: refused, naming the
+    axis; 2000 steps/deg needs 120 ≤ 127."""
+    assert with_tables(_a_axis(2000.0)).rotary_axes["a"].steps_per_deg == 2000.0
+    with pytest.raises(ConfigError) as exc:
+        with_tables(_a_axis(3000.0))
+    text = str(exc.value)
+    assert "steps.max_pulses_per_period" in text and "= 127 is too small: axis a" in text
+    assert "60 deg/s needs 180 steps per 1 ms period" in text
+    assert "axis_limits.a.steps_per_deg = 3000" in text
+
+
+def test_the_default_pulse_budget_covers_a_rotary_axis():
+    """Without max_pulses_per_period the default rounds up to the fastest axis's need,
+    a rotary axis included: 60 deg/s · 3000 steps/deg · 1 ms = 180."""
+    text = default_profile_text().replace("max_pulses_per_period = 127", "")
+    m = parse_machine(text + "\n" + _a_axis(3000.0), "<test>")
+    assert m.steps.max_pulses_per_period == 180

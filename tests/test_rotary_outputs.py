@@ -91,6 +91,13 @@ def run(args, **kwargs):
     return CliRunner().invoke(main, [str(a) for a in args], **kwargs)
 
 
+def axes_set(axes: str = "abc", **limits: str) -> list[str]:
+    """``--set`` options declaring the rotary ``axes`` on the bundled machine (``limits``:
+    extra keys of their tables, e.g. ``max_deg="5"``)."""
+    keys = {"v_max_deg_min": "600", "a_max_deg_s2": "100", "j_max_deg_s3": "1e4", **limits}
+    return [f"--set=axis_limits.{a}.{k}={v}" for a in axes for k, v in keys.items()]
+
+
 # ------------------------------------------------------------------ without rotary axes
 
 
@@ -217,7 +224,7 @@ def test_simulate_reads_a_rotary_points_file(tmp_path, suffix):
     smp = samples(("a", "c"))
     out = tmp_path / f"p.{suffix}"
     write_points(str(out), smp)
-    with_rotary = run(["simulate", out, "--json"])
+    with_rotary = run(["simulate", out, "--json", *axes_set("ac")])
     assert with_rotary.exit_code == 0, with_rotary.output
     got = json.loads(with_rotary.stdout)
     plain = run(["simulate", _xyz_only(out, read_points(str(out))), "--json"])
@@ -229,14 +236,30 @@ def test_simulate_reads_a_rotary_points_file(tmp_path, suffix):
     for key in ("program", "machine_profile"):
         got.pop(key), want.pop(key)
     assert got == want
-    text = run(["simulate", out])
+    text = run(["simulate", out, *axes_set("ac")])
     assert text.exit_code == 0
     assert "rotary axes A C (end at A12° C-7°): the contour check" in text.stdout
     assert "X Y Z only" in text.stdout and "r·δ·π/180 mm" in text.stdout
     if suffix == "csv":  # from standard input, recognised by its header
-        piped = run(["simulate", "-", "--json"], input=out.read_text())
+        piped = run(["simulate", "-", "--json", *axes_set("ac")], input=out.read_text())
         assert piped.exit_code == 0, piped.output
         assert json.loads(piped.stdout)["rotary"]["axes"] == ["a", "c"]
+
+
+@pytest.mark.parametrize("command", ["simulate", "stream"])
+def test_simulate_checks_the_rotary_columns_as_stream_does(tmp_path, command):
+    """A column of an axis the machine lacks, or beyond its soft limits, is refused by both
+    commands with the same words, before anything runs (``stream`` before any port)."""
+    out = tmp_path / "p.csv"
+    write_points(str(out), samples(("a", "c")))  # A ends at 12°, C at −7°
+    port = ["--port", str(tmp_path / "no-card")] if command == "stream" else []
+    lacking = run([command, out, *port, *axes_set("a")])
+    assert lacking.exit_code == 2, lacking.output
+    assert f"{out}: a column c but the machine has no C axis" in lacking.stderr
+    beyond = run([command, out, *port, *axes_set("a", max_deg="5"), *axes_set("c")])
+    assert beyond.exit_code == 2, beyond.output
+    assert "is outside its soft limits [-inf, 5] deg" in beyond.stderr
+    assert "Traceback" not in beyond.output
 
 
 def _csv(path: Path, header: str, rows: list[str]) -> Path:
@@ -431,20 +454,21 @@ def test_summary_names_the_axes_and_what_the_contour_check_does_not_see():
     )
     summary = summary_of(turned, mach, run_)
     rotary = summary.pop("rotary")
-    assert rotary == {"axes": ["b"], "final_abc_deg": {"b": 22.5}, **XYZ_ONLY}
+    note_b = XYZ_ONLY["note"].replace("on A", "on B")
+    assert rotary == {"axes": ["b"], "final_abc_deg": {"b": 22.5}, **XYZ_ONLY, "note": note_b}
     assert json.dumps(summary) == json.dumps(plain)
     buf = io.StringIO()
     print_plan_summary(turned, mach, summary_of(turned, mach, run_), Console(file=buf, width=200))
     text = buf.getvalue()
     assert "rotary axes B (end at B22.5°): the contour check covers X Y Z only" in text
-    assert "an A error of δ° is r·δ·π/180 mm at radius r" in text
+    assert "an error of δ° on B is r·δ·π/180 mm at radius r" in text
 
 
 #: The ``rotary`` object's words on the contour check.
 XYZ_ONLY = {
     "contour_check": "xyz",
     "note": "the contour check covers X Y Z only: it does not see the tool's position on a "
-    "rotated part (an A error of δ° is r·δ·π/180 mm at radius r)",
+    "rotated part (an error of δ° on A is r·δ·π/180 mm at radius r)",
 }
 
 

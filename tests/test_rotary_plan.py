@@ -358,8 +358,11 @@ def test_baselines_and_precompensation_refuse_rotary_programs():
     prog = program(line((0, 0, 0), (10, 0, 0), 20.0, 1, 0.0, 30.0))
     with pytest.raises(ConfigError, match="X Y Z only; this program moves A"):
         run_program(prog, machine(), RunOptions(algorithm="adaptive"))
-    with pytest.raises(ConfigError, match="pre-compensation models the X Y Z servos only"):
+    with pytest.raises(ConfigError, match="X Y Z servos only; this program uses A "):
         run_program(prog, machine(), RunOptions(precompensate=True))
+    held = program(line((0, 0, 0), (10, 0, 0), 20.0, 1, 30.0, 30.0), abc=(30.0, 0.0, 0.0))
+    with pytest.raises(ConfigError, match="X Y Z servos only; this program uses A "):
+        run_program(held, machine(), RunOptions(precompensate=True))
 
 
 def test_lower_bound_counts_rotary_moves_and_stays_below_the_plan():
@@ -585,7 +588,7 @@ def test_plan_text_says_what_the_contour_check_covers():
     buf = io.StringIO()
     print_plan_summary(prog, m, summary, Console(file=buf, width=400))
     text = buf.getvalue()
-    assert "rotary axes A (end at A190°): 1 rotary-only moves, " in text
+    assert "rotary axes A (end at A190°): 1 rotary-only move, " in text
     assert "the contour check covers X Y Z only" in text
 
 

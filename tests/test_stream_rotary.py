@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import math
 
 import numpy as np
 import pytest
@@ -278,30 +277,44 @@ def test_positions_split_into_mm_and_degrees():
         axes_of_position(4, mach)
 
 
-def _unwrap_rotary(word: float, current: float, negative_zero: bool = False) -> float:
-    """LinuxCNC 2.9's ``unwrap_rotary`` (docs/rotary.md): |A| + 360·floor(current/360),
-    then +360 if the word is ≥ 0 and that is behind, −360 if it is < 0 and ahead."""
-    result = abs(word) + 360.0 * math.floor(current / 360.0)
-    negative = word < 0.0 or negative_zero
-    if not negative and result < current:
-        result += 360.0
-    elif negative and result > current:
-        result -= 360.0
-    return result
+def _jog_end_abc_deg(block: str, mach, at_deg: float, parameters: dict) -> tuple:
+    """Where the interpreter takes A B C [deg, machine] with the jog ``block`` from A =
+    ``at_deg`` with the parameter file's ``parameters`` (its work offsets)."""
+    from nurbscnc.program.interpret import InterpretOptions, interpret_text
+
+    prog = interpret_text(
+        block,
+        InterpretOptions(
+            rotary_axes=mach.rotary_axes,
+            start_abc_deg=(at_deg, 0.0, 0.0),
+            parameters=parameters,
+        ),
+    )
+    return prog.segments[-1].abc_end_deg
 
 
 @pytest.mark.parametrize(
     ("at_deg", "delta_deg"), [(350.0, 20.0), (350.0, -20.0), (10.0, -10.0), (725.0, 359.5), (0, 90)]
 )
-def test_a_jog_of_a_wrapped_axis_turns_by_the_asked_amount(at_deg, delta_deg):
+@pytest.mark.parametrize("a_offset_deg", [0.0, 30.0, -200.0])
+def test_a_jog_of_a_wrapped_axis_turns_by_the_asked_amount(at_deg, delta_deg, a_offset_deg):
+    """The card's A + Δ whatever the A work offset (G54 A = parameter 5224): a G53 word of a
+    wrapped axis is unwrapped about the offsets, so A 10 + 10 with a 30° offset went to 40."""
     mach = rotary_machine(wrapped_a=True)
     steps = (0, 0, 0, round(at_deg * A_STEPS_DEG), 0)
     block = jog_block(["A" + f"{delta_deg:+g}"], steps, mach)
-    word = block.split()[-1]
-    assert block.startswith("G90 G53 G0 A")
-    value = float(word[1:])
-    got = _unwrap_rotary(value, at_deg, word[1:].startswith("-"))
-    assert got == pytest.approx(at_deg + delta_deg, abs=1e-6)
+    assert block == f"G91 G0 A{delta_deg:+.6f}"
+    end = _jog_end_abc_deg(block, mach, at_deg, {5224: a_offset_deg})
+    assert end == pytest.approx((at_deg + delta_deg, 0.0, 0.0), abs=1e-9)
+
+
+def test_a_jog_of_x_and_a_wrapped_axis_is_two_blocks():
+    mach = rotary_machine(wrapped_a=True)
+    steps = (8000, 0, 0, 2500, 40)  # X 10 mm, A 10°, B 1°
+    block = jog_block(["X-1", "A+10", "B+1"], steps, mach, 300.0)
+    assert block == "G90 G53 G1 F300 X9.000000 B2.000000\nG91 G1 F300 A+10.000000"
+    end = _jog_end_abc_deg(block, mach, 10.0, {5224: 30.0, 5225: 5.0})
+    assert end == pytest.approx((20.0, 2.0, 0.0), abs=1e-9)
 
 
 def test_jog_of_a_rotary_axis():
@@ -337,17 +350,11 @@ def test_card_position_reports_a_in_degrees(monkeypatch):
 
 def test_the_start_a_b_c_is_passed_on_to_the_interpreter():
     """A program streamed from a card at A 90° starts there: the interpreter's option
-    ``start_abc_deg`` — or, with an interpreter that starts at A B C = 0 only, a clear
-    error instead of a program run from the wrong angle."""
+    ``start_abc_deg``."""
     from nurbscnc.app.load import start_abc_option
-    from nurbscnc.program.interpret import InterpretOptions
 
     assert start_abc_option(None) == {} and start_abc_option((0.0, 0.0, 0.0)) == {}
-    if "start_abc_deg" in {f.name for f in dataclasses.fields(InterpretOptions)}:
-        assert start_abc_option((90, 0, -5)) == {"start_abc_deg": (90.0, 0.0, -5.0)}
-    else:
-        with pytest.raises(ConfigError, match="A B C = 90, 0, -5 deg"):
-            start_abc_option((90, 0, -5))
+    assert start_abc_option((90, 0, -5)) == {"start_abc_deg": (90.0, 0.0, -5.0)}
 
 
 def test_jog_of_an_axis_the_machine_lacks_is_a_clear_error(tmp_path, monkeypatch):
@@ -463,8 +470,9 @@ def test_a_feed_hold_of_a_program_planned_whole_is_the_cards_hold():
 def test_program_parts_start_where_the_part_before_ends():
     """Segments cut at their stops: each part starts at the stop's X Y Z and at the A B C
     the part before ends at (a Line's abc_deg end, a Rotate's end)."""
-    from nurbscnc.app.staged import abc_after, part_points, program_parts, turns
+    from nurbscnc.app.staged import abc_after, part_points, program_parts
     from nurbscnc.geometry.segments import Line, Pause, Program, Rotate
+    from nurbscnc.plan.rotary import moves_rotary
 
     segs = (
         Line((0, 0, 0), (4, 0, 0), 10.0, 1, abc_deg=(0, 0, 0, 30, 0, 0)),
@@ -482,13 +490,11 @@ def test_program_parts_start_where_the_part_before_ends():
     assert parts[3][0].start_abc_deg == (30.0, 5.0, 0.0)
     assert tuple(parts[3][0].start_mm) == (4.0, 0.0, 0.0)
     assert abc_after(segs, (0, 0, 0)) == (30.0, 5.0, 0.0)
-    assert turns(segs[:1]) and turns(segs[2:3]) and not turns(segs[5:])
+    assert moves_rotary(segs[0]) and moves_rotary(segs[2]) and not moves_rotary(segs[5])
     still = samples_of_move((0, 0, 0), (1, 0, 0), (0, 0, 0), (0, 0, 0), 0.01, ())
     still = dataclasses.replace(still, abc_deg=None)
     held = part_points(still, "xyzb", (30.0, 5.0, 0.0))
     assert np.all(held[:, 3] == 5.0)
-    with pytest.raises(Exception, match="carry no A B C though the program moves B"):
-        part_points(still, "xyzb", (30.0, 5.0, 0.0), moves=True)
 
 
 def test_a_program_holding_a_away_from_zero(monkeypatch):

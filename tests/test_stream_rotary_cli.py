@@ -12,7 +12,6 @@ layers): they skip, saying so, on a tree without them.
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import os
 import signal
@@ -24,7 +23,6 @@ from click.testing import CliRunner
 
 from nurbscnc.cli.main import main
 from nurbscnc.output.stream.card import CardConfig
-from nurbscnc.program.interpret import InterpretOptions
 from tests.stream_helpers import card_on, write_mixed_steps_machine
 
 ROTARY_TABLES = """
@@ -43,33 +41,6 @@ steps_per_deg = 40.0
 MACHINE = ["--machine", "m.toml"]
 A_DEG, B_DEG = 250.0, 40.0
 START = (0, 0, 0, 2500, 0)  # the card at A = 10°
-
-
-def _missing_rotary_layer() -> str | None:
-    """Why these tests cannot run here (None: they can): the interpreter must read A B C
-    words on a profile with ``[axis_limits.a]``, and the planner put A B C on the samples
-    of a mixed move and a rotary-only one."""
-    if "start_abc_deg" not in {f.name for f in dataclasses.fields(InterpretOptions)}:
-        return "needs the interpreter's rotary axes (A B C words, [axis_limits.a] profiles)"
-    try:
-        from nurbscnc.app.varfile import program_inputs
-        from nurbscnc.machine.profile import default_profile_text, parse_machine
-        from nurbscnc.pipeline import run_program
-        from nurbscnc.program.interpret import interpret_text
-
-        mach = parse_machine(default_profile_text() + ROTARY_TABLES, "probe")
-        options = InterpretOptions(**program_inputs(mach).interpret_options())
-        samples = run_program(interpret_text("G1 X1 A10 F600\nG0 B5\nM2\n", options), mach).samples
-        if samples.abc_deg is None:
-            return "needs the planner's rotary axes (A B C on the samples)"
-    except Exception as exc:  # noqa: BLE001 - any failure of the probe: the layer is missing
-        return f"needs the planner's rotary axes (a rotary probe failed: {exc})"
-    return None
-
-
-_MISSING = _missing_rotary_layer()
-#: the program tests need the interpreter and the planner with rotary axes
-needs_rotary = pytest.mark.skipif(_MISSING is not None, reason=_MISSING or "")
 
 
 #: Mixed X Z A moves, an M0 after line 4 (the card at X20 Z-1 A90), then Y, Z, A and B.
@@ -97,7 +68,6 @@ def here(tmp_path, monkeypatch):
     return folder
 
 
-@needs_rotary
 def test_a_rotary_program_waits_at_m0_and_ends_at_the_steps_of_its_text(here):
     """From a card at A 10°: at M0 the card stands at X20 Z-1 A90 = (16000, 0, -400, 22500,
     0) while the stream waits; SIGUSR2 continues to X20 Y0 Z2 A180 B15 = (16000, 0, 800,
@@ -132,7 +102,6 @@ def test_a_rotary_program_waits_at_m0_and_ends_at_the_steps_of_its_text(here):
     assert body["sections"] == 2 and body["axes"] == "xyzab"
 
 
-@needs_rotary
 def test_a_version_3_card_is_refused_with_exit_2(here):
     (here / "part.nc").write_text(MIXED)
     with card_on("pty", CardConfig(speed=None)) as (sim, ep):
@@ -143,7 +112,6 @@ def test_a_version_3_card_is_refused_with_exit_2(here):
     assert "Traceback" not in r.output and executed == 0
 
 
-@needs_rotary
 def test_an_indexer_of_rotary_only_moves_ends_where_its_text_says(here):
     """LinuxCNC's B indexer (tests/programs/rotary/b_indexer.ngc): four G91 B90 rapids,
     then G0 B0; it ends at X0 Y0 Z20 B0, A held at the card's 10°: (0, 0, 8000, 2500, 0)."""
@@ -163,7 +131,6 @@ def test_an_indexer_of_rotary_only_moves_ends_where_its_text_says(here):
     assert int(ran[:, 4].clip(min=0).sum()) == 14400 == -int(ran[:, 4].clip(max=0).sum())
 
 
-@needs_rotary
 def test_card_position_and_jog_in_degrees(here):
     cfg = CardConfig(speed=None, axis_names="xyzab", position_steps=(800, 0, 0, 2500, -80))
     with card_on("pty", cfg) as (sim, ep):
@@ -179,19 +146,6 @@ def test_card_position_and_jog_in_degrees(here):
     assert final == [1600, 0, 0, 2500 + 20 * 250, -80]
 
 
-def _missing_rotary_files() -> str | None:
-    """Why a points file with an ``a`` column cannot be streamed here (None: it can): the
-    profile must read ``[axis_limits.a]`` and the points reader its rotary columns."""
-    from nurbscnc.output import files
-
-    if "start_abc_deg" not in {f.name for f in dataclasses.fields(InterpretOptions)}:
-        return "needs the profile's rotary tables ([axis_limits.a])"
-    if files.point_header("t,x,y,z,a\n") is None:
-        return "needs the points files' rotary columns (a, b, c)"
-    return None
-
-
-@pytest.mark.skipif(_missing_rotary_files() is not None, reason=_missing_rotary_files() or "")
 def test_a_points_file_with_an_a_column_streams_to_a_card_driving_a(tmp_path, monkeypatch):
     """``t,x,y,z,a``: X 0 → 2 mm and A 0 → 30° on a smootherstep over 0.4 s. The card ends at
     (2 · 800, 0, 0, 30 · 250) = (1600, 0, 0, 7500) steps, every period's running sum

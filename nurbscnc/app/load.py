@@ -83,22 +83,10 @@ def load_program(
 
 def start_abc_option(start_abc_deg) -> dict:
     """The interpreter's option for a program started at A B C = ``start_abc_deg`` [deg]
-    (where the card stands): ``{"start_abc_deg": (a, b, c)}``, or ``{}`` for None or all 0.
-    An interpreter whose options take no start A B C cannot start a program elsewhere:
-    ConfigError then, rather than running it from A B C = 0."""
-    import dataclasses
-
-    from nurbscnc.program.interpret import InterpretOptions
-
+    (where the card stands): ``{"start_abc_deg": (a, b, c)}``, or ``{}`` for None or all 0."""
     if start_abc_deg is None or not any(start_abc_deg):
         return {}
-    abc = tuple(float(v) for v in start_abc_deg)
-    if "start_abc_deg" not in {f.name for f in dataclasses.fields(InterpretOptions)}:
-        raise ConfigError(
-            f"the card stands at A B C = {', '.join(f'{v:g}' for v in abc)} deg and this "
-            "interpreter starts programs at A B C = 0 only: move the rotary axes to 0 first"
-        )
-    return {"start_abc_deg": abc}
+    return {"start_abc_deg": tuple(float(v) for v in start_abc_deg)}
 
 
 def read_tool_table(path: str) -> dict:

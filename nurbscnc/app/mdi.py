@@ -101,48 +101,40 @@ def _with_text(exc: NurbsCncError, lines: list[str]) -> NurbsCncError:
 def jog_block(moves, position_steps, mach, feed_mm_min: float | None = None) -> str:
     """The block of a jog: ``moves`` like ``("X+1.5", "Z-0.2", "A+10")`` (axis, signed
     distance [mm; deg for A B C]; an axis at most once) from the card's position
-    ``position_steps``, as one absolute move in machine coordinates (``G53 G90``: no work
-    offset, G92 or rotation turns a jog), a rapid, or a feed at ``feed_mm_min`` [mm/min;
-    deg/min for a rotary-only jog, LinuxCNC's rate]. A rotary axis needs the machine to
-    have it and the card to drive it (ConfigError otherwise)."""
+    ``position_steps``, a rapid, or a feed at ``feed_mm_min`` [mm/min; deg/min for a
+    rotary-only jog, LinuxCNC's rate]. X Y Z and the unwrapped rotary axes move as one
+    absolute move in machine coordinates (``G53 G90``: no work offset, G92 or rotation
+    turns a jog). A wrapped axis moves by an incremental word (``G91``): a G53 word of a
+    wrapped axis is unwrapped about the program position less the offsets (LinuxCNC's
+    ``find_ends``), so with an A work offset it would not land at the card's A + Δ, while
+    G91 adds Δ whatever the offsets. A jog of both is two blocks, the G53 move first. A
+    rotary axis needs the machine to have it and the card to drive it (ConfigError
+    otherwise)."""
     from nurbscnc.app.stream import position_abc_deg, position_mm
 
     deltas = parse_jog(moves)
     here = position_mm(position_steps, mach)
     abc = position_abc_deg(position_steps, mach)
-    rotary = getattr(mach, "rotary_axes", {}) or {}
-    words = []
+    absolute, incremental = [], []
     for a, d in sorted(deltas.items()):
         name = JOG_AXES[a]
         if a < 3:
-            words.append(f"{name}{here[a] + d:.6f}")
+            absolute.append(f"{name}{here[a] + d:.6f}")
             continue
-        axis = rotary.get(name.lower())
+        axis = mach.rotary_axes.get(name.lower())
         if axis is None:
             raise ConfigError(f"jog: the machine has no {name} axis ([axis_limits.{name.lower()}])")
         if name.lower() not in abc:
             raise ConfigError(f"jog: the card does not drive {name} (its position has no {name})")
-        at = abc[name.lower()]
-        words.append(name + (_wrapped_word(at, d) if axis.wrapped else f"{at + d:.6f}"))
+        if axis.wrapped:
+            incremental.append(f"{name}{d:+.6f}")
+        else:
+            absolute.append(f"{name}{abc[name.lower()] + d:.6f}")
     motion = "G0" if feed_mm_min is None else f"G1 F{feed_mm_min:g}"
-    return f"G90 G53 {motion} {' '.join(words)}"
-
-
-def _wrapped_word(at_deg: float, delta_deg: float) -> str:
-    """The G90 word that turns a wrapped axis from ``at_deg`` by ``delta_deg`` (|Δ| < 360):
-    LinuxCNC's ``unwrap_rotary`` reads a word v as the position |v| mod 360 reached
-    forwards for v ≥ 0 (−0 included: backwards) and backwards for v < 0, so the word is
-    (at + Δ) mod 360 with the sign of Δ."""
-    import math
-
-    if abs(delta_deg) >= 360.0:
-        raise ConfigError(
-            f"jog: a wrapped axis turns less than a full turn per jog, not {delta_deg:g}"
-        )
-    target = math.fmod(at_deg + delta_deg, 360.0)
-    target = target + 360.0 if target < 0.0 else target
-    target = 0.0 if target >= 360.0 - 5e-7 else target  # 359.9999999 is 0 at 6 decimals
-    return f"{'-' if delta_deg < 0.0 else ''}{target:.6f}"
+    blocks = [f"G90 G53 {motion} {' '.join(absolute)}"] if absolute else []
+    if incremental:
+        blocks.append(f"G91 {motion} {' '.join(incremental)}")
+    return "\n".join(blocks)
 
 
 def parse_jog(moves) -> dict[int, float]:

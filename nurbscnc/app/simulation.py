@@ -15,18 +15,21 @@ def is_points_source(source: str, text: str | None) -> bool:
     )
 
 
-def points_reference(source: str, text: str | None):
+def points_reference(source: str, text: str | None, mach):
     """``(points, path, rotary)`` of a reference-point file (or of standard input's
     ``text``): the points [mm], the commanded path (the reference polyline itself) and the
-    file's rotary axes with their positions, ``(axes, abc_deg (N, 3) [deg] or None)``
-    (:func:`~nurbscnc.output.files.rotary_of_points`)."""
+    file's rotary axes with their positions, ``(axes, abc_deg (N, 3) [deg] or None)``,
+    checked against the machine ``mach`` as ``stream`` checks them
+    (:func:`~nurbscnc.app.stream.rotary_of_points_checked`)."""
     import numpy as np
 
-    from nurbscnc.output.files import read_points, read_points_text, rotary_of_points
+    from nurbscnc.app.stream import rotary_of_points_checked
+    from nurbscnc.output.files import read_points, read_points_text
 
     data = read_points(source) if text is None else read_points_text(text)
     points = np.column_stack([data["x"], data["y"], data["z"]])
-    return points, points, rotary_of_points(data)
+    name = "<stdin>" if text is not None else source
+    return points, points, rotary_of_points_checked(name, data, mach)
 
 
 def run_reference(run):

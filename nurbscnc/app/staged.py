@@ -29,16 +29,6 @@ def abc_after(segments, start_abc_deg) -> tuple[float, float, float]:
     return abc
 
 
-def turns(segments) -> bool:
-    """Whether any of ``segments`` moves a rotary axis (a Rotate, or a Line/Arc whose A B C
-    differ at its two ends)."""
-    for seg in segments:
-        abc = getattr(seg, "abc_deg", None)
-        if seg.kind == "rotate" or (abc is not None and tuple(abc[:3]) != tuple(abc[3:6])):
-            return True
-    return False
-
-
 def _frames_from(frames, first: int) -> tuple:
     """The program's offset rows (:attr:`Program.frames`) for its segments from ``first``
     on, renumbered from 0 (the row in force at ``first`` becomes the first)."""
@@ -55,19 +45,17 @@ def program_parts(prog) -> list[tuple[object, object]]:
     out = []
     first = 0
     start_mm = tuple(float(v) for v in prog.start_mm)
-    abc = tuple(float(v) for v in getattr(prog, "start_abc_deg", (0.0, 0.0, 0.0)))
+    abc = tuple(float(v) for v in prog.start_abc_deg)
     for i in [*(k for k, s in enumerate(segments) if s.kind == "pause"), len(segments)]:
         chunk = tuple(segments[first:i])
         part = None
         if chunk:
-            fields = {f.name for f in dataclasses.fields(prog)}
-            extra = {"start_abc_deg": abc} if "start_abc_deg" in fields else {}
             part = dataclasses.replace(
                 prog,
                 segments=chunk,
                 start_mm=np.asarray(start_mm, dtype=float),
                 frames=_frames_from(prog.frames, first),
-                **extra,
+                start_abc_deg=abc,
             )
         stop = segments[i] if i < len(segments) else None
         if stop is not None:
@@ -78,20 +66,15 @@ def program_parts(prog) -> list[tuple[object, object]]:
     return out
 
 
-def part_points(samples, axes: str, abc_deg, moves: bool = False) -> np.ndarray:
+def part_points(samples, axes: str, abc_deg) -> np.ndarray:
     """X Y Z [mm] of ``samples`` and the rotary axes of ``axes`` [deg] beside them; a part
-    whose samples carry no A B C holds them at ``abc_deg`` — unless it ``moves`` them
-    (PlanningError: the planner left out the column the card needs)."""
+    whose samples carry no A B C (its segments none: the axes stand at 0) holds them at
+    ``abc_deg``."""
     points = np.asarray(samples.points_mm, dtype=float)
     rotary = axes[3:]
     if not rotary:
         return points
-    abc = getattr(samples, "abc_deg", None)
-    if abc is None and moves:
-        raise PlanningError(
-            f"the planned samples carry no A B C though the program moves "
-            f"{' '.join(rotary.upper())}: nothing to stream for them"
-        )
+    abc = samples.abc_deg
     if abc is None:
         abc = np.broadcast_to(np.asarray(abc_deg, dtype=float), (points.shape[0], 3))
     cols = [np.asarray(abc, dtype=float)[:, "abc".index(a)] for a in rotary]
@@ -109,15 +92,15 @@ def staged_job(prog, mach, options, optional_stop: bool = False, tools: dict | N
     from nurbscnc.output.stream.quantise import check_pulse_limit, quantise
     from nurbscnc.pipeline import run_program
 
-    axes = stream_axes(getattr(prog, "rotary_axes", ()))
+    axes = stream_axes(prog.rotary_axes)
     scale = steps_per_unit(mach, axes)  # an axis without steps: said before any planning
     pieces, lines, ends, stops = [], [], [], []
-    abc = tuple(getattr(prog, "start_abc_deg", (0.0, 0.0, 0.0)))
+    abc = tuple(prog.start_abc_deg)
     total = 0
     for part, stop in program_parts(prog):
         if part is not None:
             samples = run_program(part, mach, options).samples
-            pts = part_points(samples, axes, abc, turns(part.segments))
+            pts = part_points(samples, axes, abc)
             line = np.asarray(samples.line, dtype=np.int64)
             if pieces:  # its first point is where the part before ends
                 pts, line = pts[1:], line[1:]

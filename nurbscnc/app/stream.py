@@ -57,27 +57,38 @@ def axes_points_of_file(path: str, mach):
             f"{path}: point {k + 1} ({', '.join(f'{v:.4f}' for v in points[k, :3])}) mm is "
             "outside the soft limits"
         )
-    _check_rotary_limits(path, points, axes, mach)
+    rotary_of_points_checked(path, data, mach)
     return points, axes
 
 
-def _check_rotary_limits(path: str, points, axes: str, mach) -> None:
-    """PlanningError at the first point whose rotary axis is outside its ``min_deg`` /
-    ``max_deg`` (or an axis the machine does not have)."""
+def rotary_of_points_checked(name: str, data: dict, mach) -> tuple:
+    """``(axes, abc_deg)`` of a points file read by :func:`~nurbscnc.output.files.read_points`
+    (``name`` its name in messages; :func:`~nurbscnc.output.files.rotary_of_points`), each
+    rotary column checked against the machine ``mach``: ConfigError for an axis the machine
+    does not have, PlanningError at the first point outside the axis's soft limits
+    ``min_deg`` / ``max_deg``. The one check of the rotary columns of ``stream`` and
+    ``simulate``."""
     import numpy as np
 
-    rotary = getattr(mach, "rotary_axes", {}) or {}
-    for j, name in enumerate(axes[3:], start=3):
-        axis = rotary.get(name)
+    from nurbscnc.output.files import ROTARY_COLUMNS, rotary_of_points
+
+    axes, abc_deg = rotary_of_points(data)
+    for letter in axes:
+        axis = mach.rotary_axes.get(letter)
         if axis is None:
-            raise ConfigError(f"{path}: a column {name} but the machine has no {name.upper()} axis")
-        out = (points[:, j] < axis.min_deg) | (points[:, j] > axis.max_deg)
+            raise ConfigError(
+                f"{name}: a column {letter} but the machine has no {letter.upper()} axis "
+                f"([axis_limits.{letter}])"
+            )
+        column = abc_deg[:, ROTARY_COLUMNS.index(letter)]
+        out = (column < axis.min_deg) | (column > axis.max_deg)
         if out.any():
             k = int(np.flatnonzero(out)[0])
             raise PlanningError(
-                f"{path}: point {k + 1}: {name.upper()} {points[k, j]:.4f} deg is outside "
+                f"{name}: point {k + 1}: {letter.upper()} {column[k]:.4f} deg is outside "
                 f"its soft limits [{axis.min_deg:g}, {axis.max_deg:g}] deg"
             )
+    return axes, abc_deg
 
 
 def pulses_of_points(points_mm, mach, lines=None, axes: str = "xyz"):
@@ -102,11 +113,11 @@ def sample_points(samples):
 
     from nurbscnc.output.stream.axes import stream_axes
 
-    axes = stream_axes(getattr(samples, "rotary_axes", ()))
+    axes = stream_axes(samples.rotary_axes)
     points = np.asarray(samples.points_mm, dtype=float)
     if len(axes) == 3:
         return points, axes
-    abc = getattr(samples, "abc_deg", None)
+    abc = samples.abc_deg
     if abc is None:
         raise PlanningError(f"the samples move {axes[3:].upper()} but carry no A B C column")
     cols = [np.asarray(abc, dtype=float)[:, "abc".index(a)] for a in axes[3:]]
@@ -125,28 +136,29 @@ def needs_whole_plan(options, prog=None) -> bool:
     cut window: a baseline ``algorithm`` has no look-ahead plan to cut, and the
     pre-compensated reference (ZPETC) is not causal: each of its samples depends on the
     planned reference ahead of it, to the program's end. A program ``prog`` that moves a
-    rotary axis is planned whole too (:func:`moves_rotary`)."""
+    rotary axis is planned whole too (:func:`program_turns_rotary`)."""
     from nurbscnc.plan.options import Algorithm
 
     return (
         options.algorithm != Algorithm.PH_LOOKAHEAD
         or options.precompensate
-        or (prog is not None and moves_rotary(prog))
+        or (prog is not None and program_turns_rotary(prog))
     )
 
 
-def moves_rotary(prog) -> bool:
-    """Whether the program turns a rotary axis (a Rotate, or a move whose A B C change; one
+def program_turns_rotary(prog) -> bool:
+    """Whether the program turns a rotary axis (any segment that
+    :func:`~nurbscnc.plan.rotary.moves_rotary`: a Rotate, or a move whose A B C change; one
     that only holds them where the card stands streams as an X Y Z program, the card's
     rotary axes standing still). Such a program is streamed planned whole
     (:func:`~nurbscnc.app.staged.staged_job`: section by section, waiting at its stops),
     its samples' A B C beside X Y Z: the controller's re-planning (a feed hold's stop along
     the path, an override above 100 %, run from line) follows the XYZ path length, which
-    stands still during a rotary-only move; this is the hook where the controller's
-    :class:`~nurbscnc.controller.job.Job` takes rotary programs once its pieces carry A B C."""
-    from nurbscnc.app.staged import turns
+    stands still during a rotary-only move, so a rotary program is not re-planned while it
+    runs (a feed hold is the card's own HOLD: :mod:`~nurbscnc.controller.staged`)."""
+    from nurbscnc.plan.rotary import moves_rotary
 
-    return bool(getattr(prog, "rotary_axes", ())) and turns(prog.segments)
+    return bool(prog.rotary_axes) and any(map(moves_rotary, prog.segments))
 
 
 def is_still(segments) -> bool:
@@ -178,7 +190,7 @@ def stream_job(
     from nurbscnc.controller.stops import start_at_line
     from nurbscnc.pipeline import run_program, window_plans
 
-    if moves_rotary(prog) and (from_line is not None or override != 1.0):
+    if program_turns_rotary(prog) and (from_line is not None or override != 1.0):
         raise ConfigError(
             f"--from-line and --feed-override: this program moves "
             f"{' '.join(a.upper() for a in prog.rotary_axes)}, and a program with rotary "
@@ -191,7 +203,7 @@ def stream_job(
             raise ConfigError(str(exc)) from None
     if is_still(prog.segments):  # stops at the first move
         return None, None
-    if moves_rotary(prog):
+    if program_turns_rotary(prog):
         from nurbscnc.app.staged import staged_job
 
         return staged_job(prog, mach, options, optional_stop, tools), None

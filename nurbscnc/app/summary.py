@@ -78,11 +78,15 @@ def final_abc_deg(prog) -> tuple:
     return tuple(float(v) for v in prog.start_abc_deg)
 
 
-#: What the contour check does not see when A B C turn the part (``rotary.note``).
-ROTARY_NOTE = (
-    "the contour check covers X Y Z only: it does not see the tool's position on a rotated "
-    "part (an A error of δ° is r·δ·π/180 mm at radius r)"
-)
+def rotary_note(rotary_axes) -> str:
+    """What the contour check does not see when the program's ``rotary_axes`` (e.g.
+    ``("b",)``) turn the part (``rotary.note``), in the words of its first axis: an error
+    of δ° on it is an arc of r·δ·π/180 mm at radius r."""
+    letter = rotary_axes[0].upper()
+    return (
+        "the contour check covers X Y Z only: it does not see the tool's position on a rotated "
+        f"part (an error of δ° on {letter} is r·δ·π/180 mm at radius r)"
+    )
 
 
 def with_rotary(summary: dict, rotary_axes, abc_deg) -> dict:
@@ -97,7 +101,7 @@ def with_rotary(summary: dict, rotary_axes, abc_deg) -> dict:
     rotary.setdefault("axes", list(rotary_axes))
     rotary["final_abc_deg"] = {a: float(abc_deg["abc".index(a)]) for a in rotary_axes}
     rotary.setdefault("contour_check", "xyz")
-    rotary.setdefault("note", ROTARY_NOTE)
+    rotary.setdefault("note", rotary_note(rotary_axes))
     return {**summary, "rotary": rotary}
 
 
@@ -105,7 +109,7 @@ def rotary_text(summary: dict) -> str | None:
     """The human line of a summary with a ``rotary`` object (None without): the axes, where
     they end, the rotary-only moves when the planner counted them, and what the contour
     check does not see. The check measures the X Y Z reference against the X Y Z path; on
-    a part the rotary axes turn, an error of δ degrees on A moves the surface under the
+    a part the rotary axes turn, an error of δ degrees on an axis moves the surface under the
     tool by r·δ·π/180 mm at radius r (the tool's position on the rotated part is not
     checked)."""
     rotary = summary.get("rotary")
@@ -114,7 +118,9 @@ def rotary_text(summary: dict) -> str | None:
     ends = " ".join(f"{a.upper()}{v:g}°" for a, v in rotary["final_abc_deg"].items())
     moves = ""
     if "rotate_moves" in rotary:
-        moves = f"{rotary['rotate_moves']} rotary-only moves, {rotary['rotate_time_s']:.4f} s; "
+        count = rotary["rotate_moves"]
+        noun = "move" if count == 1 else "moves"
+        moves = f"{count} rotary-only {noun}, {rotary['rotate_time_s']:.4f} s; "
     names = " ".join(a.upper() for a in rotary["axes"])
     return f"  rotary axes {names} (end at {ends}): {moves}{rotary['note']}"
 

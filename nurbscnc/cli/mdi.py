@@ -88,7 +88,8 @@ def jog(moves, feed_mm_min, **kwargs):
     """Move the card by MOVES (per axis, machine axes: X+1.5 Y-2 Z0.5 in mm, A+10 in
     degrees when the machine has an A axis and the card drives it) from where it stands:
     one straight move in machine coordinates (G53: work offsets, G92 and a rotated system
-    leave a jog alone), within the profile's limits and soft limits. The parameter
+    leave a jog alone; a wrapped rotary axis turns by an incremental G91 move, after the
+    X Y Z move when both are jogged), within the profile's limits and soft limits. The parameter
     file is read (its G28/G30 positions are untouched) and written back like mdi's.
 
     Example: nurbscnc jog X+1.5 Z-0.2 --port /dev/ttyUSB0

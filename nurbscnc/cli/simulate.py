@@ -48,7 +48,7 @@ def simulate(source, as_json, plot_dir, hold, **settings):
     text = read_program_text("-") if source == "-" else None
     if is_points_source(source, text):
         mach = load_machine_cli(settings["machine"], settings["overrides"])
-        points, path, rotary = points_reference(source, text)
+        points, path, rotary = points_reference(source, text, mach)
         name, run = display_name(source), None
     else:
         prog, mach, run = make_plan(source, **settings, text=text)

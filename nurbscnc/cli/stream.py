@@ -199,7 +199,11 @@ def stream(
     --optional-stop) the card stops at rest and the stream waits: Enter (on a terminal) or
     SIGUSR2 continues. SIGUSR1 or the space key is a feed hold: the tool decelerates along
     the path within the acceleration and jerk limits, stops, and continues on Enter /
-    SIGUSR2 (the rest re-planned from rest). + / - change the feed override. Ctrl-C or
+    SIGUSR2 (the rest re-planned from rest). A program that turns a rotary axis (A, B, C)
+    and a points file are not re-planned while they run: their feed hold is the card's own
+    HOLD, which stops the steps at the next servo period WITHOUT deceleration (the axes
+    stop at once, beyond their acceleration and jerk limits), and --from-line and
+    --feed-override are refused. + / - change the feed override. Ctrl-C or
     SIGTERM aborts the card at once and exits 130. Exit 0 only when the card reports DONE at
     the program's end position. The parameter file (--var) is read before and written back
     (atomically) once the card is DONE: G10 L2/L20, G92, G28.1/G30.1 persist.

@@ -224,13 +224,21 @@ def _build(data: dict, rep: Reporter) -> Machine:
     rotary_axes = _rotary_axes(data.get("axis_limits", {}), rep)
     # A pulse-train card cannot emit more than max_pulses_per_period steps per period on an axis;
     # an axis moving alone at the fastest rate (max of V_max and the rapid rate, or that axis's
-    # own velocity limit when lower) must fit.
+    # own velocity limit when lower) must fit; a rotary axis at its own v_max_deg_s (its rapid
+    # rate) must fit too: v_max_deg_s · steps_per_deg · T_s steps per period.
     v_path_top_mm_s = max(limits.v_max_mm_s, limits.rapid_mm_s)
+    rotary_steps = {
+        name: axis.v_max_deg_s * servo.period_s * axis.steps_per_deg
+        for name, axis in rotary_axes.items()
+    }
     if "max_pulses_per_period" not in st:
         st["max_pulses_per_period"] = default_max_pulses(
             max(
-                min(v_path_top_mm_s, v_axis) * servo.period_s * float(st["per_mm"][a])
-                for a, v_axis in zip(AXES, axis_limits.v_max_mm_s, strict=True)
+                *(
+                    min(v_path_top_mm_s, v_axis) * servo.period_s * float(st["per_mm"][a])
+                    for a, v_axis in zip(AXES, axis_limits.v_max_mm_s, strict=True)
+                ),
+                *rotary_steps.values(),
             )
         )
         defaults.add("steps.max_pulses_per_period")
@@ -247,6 +255,16 @@ def _build(data: dict, rep: Reporter) -> Machine:
                 f"= {steps.max_pulses_per_period} is too small: axis {a} at {v_top_mm_s:.6g} "
                 f"mm/s needs {need:.6g} steps per {servo.period_s * 1e3:.6g} ms period "
                 f"(steps.per_mm.{a} = {per_mm:.6g})",
+            )
+    for name, need in rotary_steps.items():
+        axis = rotary_axes[name]
+        if need > steps.max_pulses_per_period:
+            raise rep.error(
+                "steps.max_pulses_per_period",
+                f"= {steps.max_pulses_per_period} is too small: axis {name} at "
+                f"{axis.v_max_deg_s:.6g} deg/s needs {need:.6g} steps per "
+                f"{servo.period_s * 1e3:.6g} ms period (axis_limits.{name}.steps_per_deg = "
+                f"{axis.steps_per_deg:.6g})",
             )
 
     sl = data["soft_limits"]

@@ -49,6 +49,7 @@ from itertools import chain
 import numpy as np
 
 from nurbscnc.geometry.segments import Line, Nurbs, blend_tolerance_mm
+from nurbscnc.plan.rotary import moves_rotary
 
 #: Longest line [mm] a run may hold: a longer line is a straight the CAM system meant.
 DENSE_MAX_MM = 1.0
@@ -276,12 +277,7 @@ def smooth_runs(
     segs = list(segments)
     is_line = np.fromiter(
         # Lines that turn A B C are left alone: A moves linearly along each of them.
-        (
-            type(s) is Line
-            and not s.rapid
-            and (s.abc_deg is None or s.abc_deg[:3] == s.abc_deg[3:])
-            for s in segs
-        ),
+        (type(s) is Line and not s.rapid and not moves_rotary(s) for s in segs),
         dtype=bool,
         count=len(segs),
     )

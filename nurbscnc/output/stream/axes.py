@@ -49,7 +49,7 @@ def stream_axes(rotary_axes=()) -> str:
 def card_axes(mach) -> str:
     """The axes a card of the machine ``mach`` drives, as far as the profile tells: X Y Z
     and every rotary axis with steps per degree (the order of a card's positions)."""
-    rotary = getattr(mach, "rotary_axes", {}) or {}
+    rotary = mach.rotary_axes
     return LINEAR_AXES + "".join(
         a for a in AXIS_NAMES[3:] if a in rotary and rotary[a].steps_per_deg > 0.0
     )
@@ -60,7 +60,7 @@ def steps_per_unit(mach, axes: str) -> np.ndarray:
     ``mach``; ConfigError for a rotary axis the profile lacks or gives no steps per degree
     (it cannot be streamed: said before any port is opened)."""
     out = []
-    rotary = getattr(mach, "rotary_axes", {}) or {}
+    rotary = mach.rotary_axes
     for name in axes:
         if name in LINEAR_AXES:
             out.append(float(mach.steps.per_mm[LINEAR_AXES.index(name)]))
