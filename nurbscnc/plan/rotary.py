@@ -25,6 +25,7 @@ Units: degrees, seconds; a hold's "path" is degrees along the move.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 from itertools import repeat
 from operator import attrgetter
@@ -34,7 +35,7 @@ import numpy as np
 from nurbscnc.errors import PlanningError, SourcePos
 from nurbscnc.machine.caps import rotary_path_limits
 from nurbscnc.plan.profile import Profile, ProfileInput
-from nurbscnc.program.columns import ARC, DWELL, ROTATE
+from nurbscnc.program.columns import ARC, DWELL, RAPID, ROTATE
 
 #: The rotary axes, in column order.
 AXES = ("a", "b", "c")
@@ -325,11 +326,17 @@ def rotary_feed_caps_mm_s(segments, machine, cols) -> np.ndarray:
     abc0, abc1 = cols.abc_start_deg, cols.abc_end_deg
     turning = np.flatnonzero((cols.kind <= ARC) & np.any(abc0 != abc1, axis=1))
     cap = np.full(len(segments), np.inf)
+    # XYZ lengths: a line's by math.dist (its ``length_mm``, without a Python frame per
+    # line), an arc's its own.
+    moves = list(map(segments.__getitem__, turning.tolist()))
+    straight = cols.kind[turning] <= RAPID
     length = np.fromiter(
-        map(attrgetter("length_mm"), map(segments.__getitem__, turning.tolist())),
+        map(math.dist, map(attrgetter("end_mm"), moves), map(attrgetter("start_mm"), moves)),
         dtype=float,
         count=turning.size,
     )
+    arcs = np.flatnonzero(~straight)
+    length[arcs] = [moves[i].length_mm for i in arcs.tolist()]
     moving = turning[length > 0.0]
     if moving.size:
         rate = np.abs(abc1[moving] - abc0[moving]) / length[length > 0.0, None]

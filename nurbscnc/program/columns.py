@@ -94,7 +94,8 @@ def segment_abc_deg(segments, start_abc_deg=(0.0, 0.0, 0.0), kind=None):
     abc0, abc1 = np.zeros((n, 3)), np.zeros((n, 3))
     moves = np.flatnonzero(kind <= ARC)  # LINE, RAPID, ARC: they carry abc_deg
     if moves.size:
-        six = list(map(getattr, map(segments.__getitem__, moves.tolist()), repeat("abc_deg")))
+        carriers = segments if moves.size == n else map(segments.__getitem__, moves.tolist())
+        six = list(map(getattr, carriers, repeat("abc_deg")))
         has = np.fromiter(map(is_not, six, repeat(None)), dtype=bool, count=moves.size)
         if has.any():
             given = filter(partial(is_not, None), six)
