@@ -670,3 +670,13 @@ def test_explain_counts_a_dwell_on_a_rotary_line_as_a_dwell():
     move_s = rest_to_rest_s(10.0, 10.0, A_AXIS.a_max_deg_s2, A_AXIS.j_max_deg_s3)
     assert expl.limit_time_s[i, Limit.ROTATE] == pytest.approx(move_s, rel=1e-9)
     assert expl.limit_time_s[i, Limit.DWELL] == pytest.approx(2.0, rel=1e-12)
+
+
+def test_the_samples_name_the_programs_rotary_axes():
+    """The planner takes the program's ``rotary_axes`` (here A and C, C standing at 0 in
+    these segments) instead of reading them off the segments again: the samples name both."""
+    m = machine(A_AXIS, RotaryAxis("c", 60.0, 400.0, 4000.0))
+    prog = program(line((0, 0, 0), (10, 0, 0), 20.0, 1, 0.0, 30.0), axes=("a", "c"))
+    run = run_program(prog, m, OFF)
+    assert run.plan.pieces.rotary.axes == ("a", "c")
+    assert run.samples.rotary_axes == ("a", "c")
