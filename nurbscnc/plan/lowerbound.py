@@ -471,7 +471,7 @@ def program_lower_bound_s(segments, machine: Machine, columns=None, curves=None)
     stops = np.flatnonzero(is_stop).tolist()
     dwell = float(sum(stop_seconds(segments[i]) for i in stops))
     if machine.rotary_axes:  # rotary-only moves rest to rest, A B C's feed caps (trivkins)
-        dwell += float(np.sum(rotate_bounds_s(segments, machine)))
+        dwell += float(np.sum(rotate_bounds_s(segments, machine, cols)))
     index = np.flatnonzero(~is_stop)
     m = int(index.size)
     if not m:

@@ -295,14 +295,16 @@ def rotary_time_bounds_s(segments, machine, cols) -> np.ndarray:
     return t
 
 
-def rotate_bounds_s(segments, machine) -> np.ndarray:
+def rotate_bounds_s(segments, machine, cols) -> np.ndarray:
     """A lower bound [s] of every rotary-only move's time (m,), without the jerk limit: rest
     to rest at the acceleration A and cruise V of its axes' shares (and its programmed rate),
-    L/V + V/A when it reaches V, else 2√(L/A) — never above the planned jerk-limited move."""
-    rot = [s for s in segments if s.kind == "rotate"]
-    if not rot:
+    L/V + V/A when it reaches V, else 2√(L/A) — never above the planned jerk-limited move.
+    ``cols``: the segments' :class:`~nurbscnc.program.columns.SegmentColumns`."""
+    idx = cols.rows(ROTATE)
+    if not idx.size:
         return np.zeros(0)
-    d = np.array([s.abc_end_deg for s in rot], float) - np.array([s.abc_start_deg for s in rot])
+    rot = list(map(segments.__getitem__, idx.tolist()))
+    d = cols.abc_end_deg[idx] - cols.abc_start_deg[idx]
     length = np.sqrt(np.einsum("ij,ij->i", d, d))
     share = np.abs(d) / np.where(length > 0.0, length, 1.0)[:, None]
     lim = [[getattr(machine.rotary_axes.get(n), f, np.inf) for n in AXES] for f in _LIMITS]
