@@ -209,7 +209,7 @@ def run_program(program, machine: Machine, options: RunOptions | None = None, pr
     # Checks before work: the geometry inside the soft limits, the motion short enough for
     # limits.max_points, before anything is planned or sampled.
     say("checking limits")
-    columns = segment_columns(program.segments)
+    columns = segment_columns(program.segments, program.start_abc_deg)
     check_before_work(program.segments, machine, columns, program.frames)
     if not has_motion(columns):
         # Offsets, tool changes, dwells only (LinuxCNC runs such programs): nothing to plan;
@@ -301,7 +301,7 @@ def window_plans(program, machine: Machine, options: RunOptions | None = None, e
         raise ConfigError(
             "planning while streaming needs the look-ahead planner without pre-compensation"
         )
-    columns = segment_columns(program.segments)
+    columns = segment_columns(program.segments, program.start_abc_deg)
     check_before_work(program.segments, machine, columns, program.frames)
     lookahead = options.lookahead
     if not machine.contour_check:

@@ -412,8 +412,16 @@ def _program(segments, start_abc=(0.0, 0.0, 0.0), axes=("a",)):
 
 
 def test_final_abc_is_the_last_rotary_position_of_the_program():
-    from nurbscnc.app.summary import final_abc_deg
+    """The one rule (program/columns.py) read two ways: :func:`end_abc_deg` from the end
+    back, :func:`segment_abc_deg`'s last end row (whole-array), on the same programs."""
     from nurbscnc.geometry.segments import Dwell, Line, Pause, Rotate
+    from nurbscnc.program.columns import end_abc_deg, segment_abc_deg
+
+    def final_abc_deg(prog):
+        walked = end_abc_deg(prog.segments, prog.start_abc_deg)
+        columns = segment_abc_deg(prog.segments, prog.start_abc_deg)[1]
+        assert tuple(columns[-1]) == walked
+        return walked
 
     o, x = (0.0, 0.0, 0.0), (10.0, 0.0, 0.0)
     line = Line(o, x, 10.0, 1, abc_deg=(0.0, 0.0, 0.0, 30.0, 0.0, -5.0))
@@ -425,6 +433,18 @@ def test_final_abc_is_the_last_rotary_position_of_the_program():
     assert final_abc_deg(_program([line, turn, rest, stop])) == (95.5, 0.0, -5.0)
     assert final_abc_deg(_program([line, turn, back, rest])) == (0.0, 0.0, 0.0)
     assert final_abc_deg(_program([rest], start_abc=(45.0, 0.0, 0.0))) == (45.0, 0.0, 0.0)
+    # Every row: a stop holds the end before it (the start before the first move); a Line
+    # without abc_deg is at 0.
+    prog = _program([rest, line, rest, turn, stop, back, rest], start_abc=(7.0, 1.0, 2.0))
+    abc0, abc1 = segment_abc_deg(prog.segments, prog.start_abc_deg)
+    np.testing.assert_array_equal(
+        abc0,
+        [[7, 1, 2], [0, 0, 0], [30, 0, -5], [30, 0, -5], [95.5, 0, -5], [0, 0, 0], [0, 0, 0]],
+    )
+    np.testing.assert_array_equal(
+        abc1,
+        [[7, 1, 2], [30, 0, -5], [30, 0, -5], [95.5, 0, -5], [95.5, 0, -5], [0, 0, 0], [0, 0, 0]],
+    )
 
 
 def test_summary_names_the_axes_and_what_the_contour_check_does_not_see():

@@ -326,17 +326,8 @@ def test_pieces_of_a_program_without_rotary_carry_no_columns():
 
 
 # -- limits and refusals -----------------------------------------------------------------------
-def test_rotary_soft_limits_refused_before_work_at_the_line():
-    m = machine(RotaryAxis("a", 60.0, 400.0, 4000.0, min_deg=-10.0, max_deg=100.0))
-    prog = program(
-        line((0, 0, 0), (10, 0, 0), 20.0, 1, 0.0, 90.0),
-        Rotate((10.0, 0.0, 0.0), (90.0, 0.0, 0.0), (120.0, 0.0, 0.0), 10.0, 2),
-    )
-    with pytest.raises(PlanningError, match=r"A reaches 120° .* outside \[-10, 100\]°") as e:
-        check_before_work(prog.segments, m)
-    assert e.value.pos.line == 2
-
-
+# The soft limits of A B C: the interpreter refuses the word that leaves them
+# (tests/test_interpret_rotary.py), the samples are checked again here.
 def test_rotary_soft_limits_on_samples_name_the_axis_and_line():
     abc = np.zeros((4, 3))
     abc[2, 1] = -5.5
@@ -660,3 +651,35 @@ def test_wrapped_engravings_from_g_code_keep_a_within_its_limits(name):
                 assert expl.time_s[i] + expl.wait_s[i] >= 60.0 / f[0] * (1.0 - 1e-9)
                 checked += 1
         assert checked > 200
+
+
+def test_explain_counts_a_dwell_on_a_rotary_line_as_a_dwell():
+    """``G1 X5`` / ``G4 P2 G1 A10 F600`` / ``G1 X10``: line 2 holds a 2 s dwell and a
+    rotary-only move; the move's planned time alone is "rotary-only move", the 2 s "dwell"
+    (matched by segment, not by source line)."""
+    from nurbscnc.plan.explain import Limit
+
+    m = machine()
+    prog = program(
+        line((0, 0, 0), (5, 0, 0), 10.0, 1),
+        Dwell(2.0, (5.0, 0.0, 0.0), 2),
+        Rotate((5.0, 0.0, 0.0), (0.0, 0.0, 0.0), (10.0, 0.0, 0.0), 10.0, 2),
+        line((5, 0, 0), (10, 0, 0), 10.0, 3, 10.0, 10.0),
+    )
+    run = run_program(prog, m, OFF)
+    expl = explain_plan(prog, m, run.plan)
+    i = expl.line.tolist().index(2)
+    # The move: 10° at 10 deg/s under A's 400 deg/s², 4000 deg/s³ (rest to rest).
+    move_s = rest_to_rest_s(10.0, 10.0, A_AXIS.a_max_deg_s2, A_AXIS.j_max_deg_s3)
+    assert expl.limit_time_s[i, Limit.ROTATE] == pytest.approx(move_s, rel=1e-9)
+    assert expl.limit_time_s[i, Limit.DWELL] == pytest.approx(2.0, rel=1e-12)
+
+
+def test_the_samples_name_the_programs_rotary_axes():
+    """The planner takes the program's ``rotary_axes`` (here A and C, C standing at 0 in
+    these segments) instead of reading them off the segments again: the samples name both."""
+    m = machine(A_AXIS, RotaryAxis("c", 60.0, 400.0, 4000.0))
+    prog = program(line((0, 0, 0), (10, 0, 0), 20.0, 1, 0.0, 30.0), axes=("a", "c"))
+    run = run_program(prog, m, OFF)
+    assert run.plan.pieces.rotary.axes == ("a", "c")
+    assert run.samples.rotary_axes == ("a", "c")

@@ -470,9 +470,10 @@ def test_a_feed_hold_of_a_program_planned_whole_is_the_cards_hold():
 def test_program_parts_start_where_the_part_before_ends():
     """Segments cut at their stops: each part starts at the stop's X Y Z and at the A B C
     the part before ends at (a Line's abc_deg end, a Rotate's end)."""
-    from nurbscnc.app.staged import abc_after, part_points, program_parts
+    from nurbscnc.app.staged import part_points, program_parts
     from nurbscnc.geometry.segments import Line, Pause, Program, Rotate
     from nurbscnc.plan.rotary import moves_rotary
+    from nurbscnc.program.columns import end_abc_deg
 
     segs = (
         Line((0, 0, 0), (4, 0, 0), 10.0, 1, abc_deg=(0, 0, 0, 30, 0, 0)),
@@ -489,7 +490,7 @@ def test_program_parts_start_where_the_part_before_ends():
     assert parts[1][0].start_abc_deg == (30.0, 0.0, 0.0)
     assert parts[3][0].start_abc_deg == (30.0, 5.0, 0.0)
     assert tuple(parts[3][0].start_mm) == (4.0, 0.0, 0.0)
-    assert abc_after(segs, (0, 0, 0)) == (30.0, 5.0, 0.0)
+    assert end_abc_deg(segs, (0, 0, 0)) == (30.0, 5.0, 0.0)
     assert moves_rotary(segs[0]) and moves_rotary(segs[2]) and not moves_rotary(segs[5])
     still = samples_of_move((0, 0, 0), (1, 0, 0), (0, 0, 0), (0, 0, 0), 0.01, ())
     still = dataclasses.replace(still, abc_deg=None)

@@ -34,7 +34,8 @@ def check_program(
     inputs = program_inputs(mach, var, user_m_path)
     prog = load_program(program, block_delete, tool_table, subroutine_path, inputs=inputs)
     say(f"checking {len(prog.segments)} segments")
-    columns = segment_columns(prog.segments)  # read once for the checks and the summary
+    # Read once for the checks and the summary.
+    columns = segment_columns(prog.segments, prog.start_abc_deg)
     check_before_work(prog.segments, mach, columns, prog.frames)
     summary = program_summary(prog, columns, per_segment=per_segment)
     return prog, {**summary, "var_file": inputs.var_path}

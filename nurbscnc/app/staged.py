@@ -15,18 +15,7 @@ import dataclasses
 import numpy as np
 
 from nurbscnc.errors import PlanningError
-
-
-def abc_after(segments, start_abc_deg) -> tuple[float, float, float]:
-    """A B C [deg] after ``segments`` (from ``start_abc_deg``): the end of the last segment
-    that carries them (a Line's or Arc's ``abc_deg``, a Rotate's ``abc_end_deg``)."""
-    abc = tuple(float(v) for v in start_abc_deg)
-    for seg in segments:
-        if getattr(seg, "abc_end_deg", None) is not None:
-            abc = tuple(float(v) for v in seg.abc_end_deg)
-        elif getattr(seg, "abc_deg", None) is not None:
-            abc = tuple(float(v) for v in seg.abc_deg[3:6])
-    return abc
+from nurbscnc.program.columns import end_abc_deg
 
 
 def _frames_from(frames, first: int) -> tuple:
@@ -60,7 +49,7 @@ def program_parts(prog) -> list[tuple[object, object]]:
         stop = segments[i] if i < len(segments) else None
         if stop is not None:
             start_mm = tuple(float(v) for v in stop.position_mm)
-        abc = abc_after(chunk, abc)
+        abc = end_abc_deg(chunk, abc)
         out.append((part, stop))
         first = i + 1
     return out
@@ -107,7 +96,7 @@ def staged_job(prog, mach, options, optional_stop: bool = False, tools: dict | N
             pieces.append(pts)
             lines.append(line)
             total += pts.shape[0]
-            abc = abc_after(part.segments, abc)
+            abc = end_abc_deg(part.segments, abc)
         ends.append(max(total - 1, 0))
         stops.append(
             None

@@ -39,7 +39,11 @@ def summary_of(prog, mach, run, stats=None, lower_bound: bool = True) -> dict:
     from nurbscnc.plan.report import SampleStats, plan_summary
 
     if run.rest_s is not None:  # no motion
-        rest = with_rotary(rest_summary(prog, mach, run), prog.rotary_axes, final_abc_deg(prog))
+        rest = with_rotary(
+            rest_summary(prog, mach, run),
+            prog.rotary_axes,
+            _end_abc_deg(prog),
+        )
         return {**rest, **machine_json(mach)}
     samples = run.samples if run.plan is None else stats
     if samples is None:
@@ -59,23 +63,16 @@ def summary_of(prog, mach, run, stats=None, lower_bound: bool = True) -> dict:
     )
     if getattr(run, "precompensation", None) is not None:  # --precompensate
         summary["precompensation"] = run.precompensation.as_json()
-    summary = with_rotary(summary, prog.rotary_axes, final_abc_deg(prog))
+    summary = with_rotary(summary, prog.rotary_axes, _end_abc_deg(prog))
     return {**summary, **machine_json(mach)}
 
 
-def final_abc_deg(prog) -> tuple:
-    """A B C [deg, machine coordinates] at the end of the program ``prog``: the end of its
-    last line, arc or rotary-only move (a line or arc with no ``abc_deg`` ends at 0, the
-    segments' rule); the program's start A B C when none moves. Dwells and pauses hold the
-    axes where they are; a NURBS block carries no rotary position (the axes stand)."""
-    for seg in reversed(prog.segments):
-        kind = seg.kind
-        if kind == "rotate":
-            return tuple(float(v) for v in seg.abc_end_deg)
-        if kind in ("line", "rapid", "arc"):
-            abc = seg.abc_deg
-            return (0.0, 0.0, 0.0) if abc is None else tuple(float(v) for v in abc[3:])
-    return tuple(float(v) for v in prog.start_abc_deg)
+def _end_abc_deg(prog) -> tuple:
+    """Where the program leaves A B C [deg] (:func:`~nurbscnc.program.columns.end_abc_deg`;
+    imported here: the CLI loads this module without numpy)."""
+    from nurbscnc.program.columns import end_abc_deg
+
+    return end_abc_deg(prog.segments, prog.start_abc_deg)
 
 
 def rotary_note(rotary_axes) -> str:

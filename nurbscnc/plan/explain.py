@@ -521,10 +521,11 @@ def corner_stop_ends(pieces) -> np.ndarray:
 
 
 def waits_s(seg: SegmentColumns, pieces) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Programmed waits and settling: (stop lines (m,), their seconds (m,), settle [s] after
-    each piece (k,)). A dwell, pause or rotary-only move charges the piece before it (the
-    planner's rule: the last piece with a smaller segment index, else the first piece); what
-    ``dwell_after_s`` holds beyond that is the planner's own settle time."""
+    """Programmed waits and settling: (the stops' segment indices (m,), their seconds (m,),
+    settle [s] after each piece (k,)). A dwell, pause or rotary-only move charges the piece
+    before it (the planner's rule: the last piece with a smaller segment index, else the
+    first piece); what ``dwell_after_s`` holds beyond that is the planner's own settle
+    time."""
     idx = np.flatnonzero(np.isin(seg.kind, STOP_KINDS))
     seconds = seg.seconds[idx]
     k = len(pieces)
@@ -534,7 +535,7 @@ def waits_s(seg: SegmentColumns, pieces) -> tuple[np.ndarray, np.ndarray, np.nda
         np.add.at(programmed, row, seconds)
     settle = np.maximum(np.asarray(pieces.dwell_after_s, dtype=float) - programmed, 0.0)
     settle[settle < 1e-12] = 0.0
-    return seg.line[idx], seconds, settle
+    return idx, seconds, settle
 
 
 def explain_plan(program, machine, plan) -> Explanation:
@@ -569,10 +570,10 @@ def explain_plan(program, machine, plan) -> Explanation:
     feed = np.where(
         np.asarray(pieces.rapid), machine.limits.rapid_mm_s, piece_feeds_mm_s(seg, pieces)
     )
-    dwell_lines, dwell_s, settle = waits_s(seg, pieces)
-    rotate = np.zeros(dwell_lines.size, dtype=bool)
-    if rotary is not None:
-        rotate = np.isin(dwell_lines, seg.line[rotary.holds.segment])
+    stop_seg, dwell_s, settle = waits_s(seg, pieces)
+    dwell_lines = seg.line[stop_seg]
+    # A rotary-only move by its segment (a dwell on its source line is not one).
+    rotate = seg.kind[stop_seg] == "rotate"
 
     # Per source line: every piece and every dwell of that line number.
     p_line = np.asarray(pieces.line, dtype=np.int64)

@@ -149,7 +149,7 @@ def segment_time_bounds_s(segments, machine, columns=None) -> np.ndarray:
     if machine.rotary_axes:  # A B C at their own limits (a rotary-only move's whole time)
         from nurbscnc.plan.rotary import rotary_time_bounds_s
 
-        t = np.maximum(t, rotary_time_bounds_s(segments, machine))
+        t = np.maximum(t, rotary_time_bounds_s(segments, machine, cols))
     return t
 
 
@@ -208,10 +208,6 @@ def check_before_work(segments, machine, columns=None, frames=()) -> None:
         return
     cols = _columns(segments, columns)
     check_geometry_limits(segments, machine.soft_limits, cols, frames)
-    if machine.rotary_axes:
-        from nurbscnc.plan.rotary import check_rotary_travel
-
-        check_rotary_travel(segments, machine)
     check_motion_time(segments, machine, cols)
 
 

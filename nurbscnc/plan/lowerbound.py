@@ -471,7 +471,7 @@ def program_lower_bound_s(segments, machine: Machine, columns=None, curves=None)
     stops = np.flatnonzero(is_stop).tolist()
     dwell = float(sum(stop_seconds(segments[i]) for i in stops))
     if machine.rotary_axes:  # rotary-only moves rest to rest, A B C's feed caps (trivkins)
-        dwell += float(np.sum(rotate_bounds_s(segments, machine)))
+        dwell += float(np.sum(rotate_bounds_s(segments, machine, cols)))
     index = np.flatnonzero(~is_stop)
     m = int(index.size)
     if not m:
@@ -482,7 +482,7 @@ def program_lower_bound_s(segments, machine: Machine, columns=None, curves=None)
     feed = np.where(rapid, 1.0, cols.feeds_mm_s[index])
     top = np.where(rapid, lim.rapid_mm_s, np.minimum(feed, lim.v_max_mm_s))
     if machine.rotary_axes:
-        top = np.minimum(top, rotary_feed_caps_mm_s(segments, machine)[index])
+        top = np.minimum(top, rotary_feed_caps_mm_s(segments, machine, cols)[index])
     if not np.all(np.isfinite(top) & (top > 0.0)):
         raise PlanningError("every piece needs a finite speed ceiling > 0 [mm/s]")
     length, t_start, t_end = _straight_ends(cols, index, straight)

@@ -23,7 +23,6 @@ from nurbscnc.plan.rotary import (
     plan_holds,
     rate_changes,
     rotary_pieces,
-    segment_abc,
     uses_rotary,
 )
 from nurbscnc.program.columns import LINE as LINE_CODE
@@ -32,7 +31,11 @@ from nurbscnc.program.columns import segment_columns
 
 
 def segment_pieces(
-    segments, machine: Machine, options: PlanOptions | None = None, columns=None
+    segments,
+    machine: Machine,
+    options: PlanOptions | None = None,
+    columns=None,
+    rotary_axes: tuple | None = None,
 ) -> PieceList:
     """All pieces of a program, in order, as a :class:`PieceList`, with its corners decided
     (path-control modes, LinuxCNC 2.9's meaning) and logged in ``corners``.
@@ -58,14 +61,17 @@ def segment_pieces(
     :func:`~nurbscnc.plan.junctions.settle_time_s`, so a rapid's stop overshoot never shows
     up as contour error.
     ``columns``: the segments' :class:`~nurbscnc.program.columns.SegmentColumns` if read
-    already (used where smoothing and G64 Q left the segments as they were).
+    already (used where smoothing and G64 Q left the segments as they were; their A B C
+    columns always). ``rotary_axes``: the program's
+    (:attr:`~nurbscnc.geometry.segments.Program.rotary_axes`; None: read off the segments).
     """
     options = options or PlanOptions()
     rotary = None
     # A B C: their columns, the rotary-only moves planned. (A machine without rotary axes
     # runs none: the interpreter refuses their words, so its programs are not read for them.)
     if machine.rotary_axes and uses_rotary(segments):
-        rotary = (segment_abc(segments), plan_holds(segments, machine))
+        own = columns if columns is not None else segment_columns(segments)
+        rotary = (own, plan_holds(segments, machine, own), rotary_axes)
     segs, source, columns = _prepared_segments(segments, machine, options, columns)
     n = len(segs)
     kinds = columns.names.tolist()
@@ -91,7 +97,7 @@ def segment_pieces(
         cols, marker = _rest_marker(segments, int(rotary[1].segment[0]), pending), True
     _mark_exact_stops(cols, source)
     if rotary is not None:
-        rate_changes(cols, segments, rotary[0])
+        rate_changes(cols, segments, (rotary[0].abc_start_deg, rotary[0].abc_end_deg))
     pieces = PieceList(**cols, objects=objects)
     pieces = _corners_decided(pieces, machine, options, segments, rotary, marker)
     if options.smooth:
@@ -296,14 +302,16 @@ def _corners_decided(
 ) -> PieceList:
     """The pieces with their corners decided: small breaks passed, G64 corners blended,
     curvature jumps capped, the rotary columns on the final rows (``rotary``: the segments'
-    A B C and their holds, or None; ``marker``: row 0 carries the stops before the first
-    move), every corner logged."""
+    columns, their holds and the program's rotary axes, or None; ``marker``: row 0 carries
+    the stops before the first move), every corner logged."""
     if len(pieces) >= 2:
         turning, regular = junction_turning(pieces)
         pieces.pass_after[:-1] = small_breaks(pieces, turning, regular, machine)
     pieces, tried = apply_blends(pieces, machine)
     if rotary is not None:
-        pieces = dc_replace(pieces, rotary=rotary_pieces(pieces, segments, *rotary, marker))
+        pieces = dc_replace(
+            pieces, rotary=rotary_pieces(pieces, segments, *rotary[:2], marker, rotary[2])
+        )
     rows, dkn = curvature_jumps(pieces)
     cap = junction_jump_cap_mm_s(
         dkn, machine.servo.period_s, machine.limits.j_max_mm_s3, machine.axis_limits.as_arrays()[2]

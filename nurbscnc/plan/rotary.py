@@ -25,14 +25,17 @@ Units: degrees, seconds; a hold's "path" is degrees along the move.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 from itertools import repeat
+from operator import attrgetter
 
 import numpy as np
 
 from nurbscnc.errors import PlanningError, SourcePos
 from nurbscnc.machine.caps import rotary_path_limits
 from nurbscnc.plan.profile import Profile, ProfileInput
+from nurbscnc.program.columns import ARC, DWELL, RAPID, ROTATE
 
 #: The rotary axes, in column order.
 AXES = ("a", "b", "c")
@@ -57,27 +60,6 @@ def uses_rotary(segments) -> bool:
     if any(getattr(t, "kind", None) == "rotate" for t in set(map(type, segments))):
         return True
     return any(map(getattr, segments, repeat("abc_deg"), repeat(None)))
-
-
-def segment_abc(segments) -> tuple[np.ndarray, np.ndarray]:
-    """A B C [deg] at the start and the end of every segment, (n, 3) each: a Line's or
-    Arc's ``abc_deg`` (None: all 0), a Rotate's ``abc_start_deg`` / ``abc_end_deg``; the
-    segments without a rotary position (NURBS, dwells, pauses) hold the previous one's end."""
-    n = len(segments)
-    abc0, abc1 = np.zeros((n, 3)), np.zeros((n, 3))
-    cur = (0.0, 0.0, 0.0)
-    for i, s in enumerate(segments):
-        if s.kind == "rotate":
-            a0, a1 = tuple(s.abc_start_deg), tuple(s.abc_end_deg)
-        elif s.kind in ("line", "rapid", "arc"):
-            abc = getattr(s, "abc_deg", None)
-            abc = (0.0,) * 6 if abc is None else tuple(abc)
-            a0, a1 = abc[:3], abc[3:]
-        else:
-            a0 = a1 = cur
-        abc0[i], abc1[i] = a0, a1
-        cur = a1
-    return abc0, abc1
 
 
 def row_rates(segment_of_row, length_mm, abc0, abc1) -> tuple[np.ndarray, np.ndarray]:
@@ -109,7 +91,8 @@ def rate_changes(cols: dict, segments, abc) -> None:
     """Mark, in the piece columns ``cols`` (rows before the corners are decided; ``segment``
     the program's indices), every junction where some axis's rate changes as a stop
     (``stop_after``), and forbid blends on the rows where A B C move (``blend_mm`` at most
-    0: G61's exact path; a G61.1 row keeps its own). ``abc``: :func:`segment_abc`."""
+    0: G61's exact path; a G61.1 row keeps its own). ``abc``: the segments' A B C at start
+    and end (:func:`~nurbscnc.program.columns.segment_abc_deg`)."""
     _, rate = row_rates(cols["segment"], cols["length_mm"], *abc)
     if rate.shape[0] >= 2:
         cols["stop_after"][:-1] |= different_rates(rate).any(axis=1)
@@ -172,19 +155,19 @@ def _axis_arrays(machine, used: np.ndarray, lines: np.ndarray):
     return v, a, j
 
 
-def plan_holds(segments, machine) -> Holds:
+def plan_holds(segments, machine, cols) -> Holds:
     """The Rotate moves of ``segments`` planned (module doc): per move the share
     |ΔA_i| / L of each axis (L = √(ΔA² + ΔB² + ΔC²)), the path limits
     :func:`~nurbscnc.machine.caps.rotary_path_limits` of those shares, the cruise at most
-    ``feed_deg_s`` (G0: the axes' limits alone), one rest-to-rest profile per move."""
+    ``feed_deg_s`` (G0: the axes' limits alone), one rest-to-rest profile per move.
+    ``cols``: the segments' :class:`~nurbscnc.program.columns.SegmentColumns`."""
     from nurbscnc.plan.profile_plan import plan_profile
 
-    idx = np.array([i for i, s in enumerate(segments) if s.kind == "rotate"], dtype=np.int64)
+    idx = cols.rows(ROTATE).astype(np.int64)
     m = idx.size
     rot = [segments[i] for i in idx.tolist()]
     line = np.array([s.line for s in rot], dtype=np.int64)
-    abc0 = np.array([s.abc_start_deg for s in rot], dtype=float).reshape(m, 3)
-    abc1 = np.array([s.abc_end_deg for s in rot], dtype=float).reshape(m, 3)
+    abc0, abc1 = cols.abc_start_deg[idx], cols.abc_end_deg[idx]
     if m == 0:
         z = np.zeros(0)
         return Holds(idx, line, abc0, abc1, z, None, idx, z.astype(np.int64))
@@ -227,11 +210,17 @@ class RotaryPieces:
     end_abc_deg: np.ndarray
 
 
-def rotary_pieces(pieces, segments, abc, holds: Holds, marker: bool) -> RotaryPieces:
+def rotary_pieces(
+    pieces, segments, cols, holds: Holds, marker: bool, axes: tuple | None = None
+) -> RotaryPieces:
     """The :class:`RotaryPieces` of the final ``pieces`` (rows after blending; ``segment``
-    the program's indices) of ``segments``; ``abc``: :func:`segment_abc`. ``marker``: row 0
+    the program's indices) of ``segments``; ``cols``: their
+    :class:`~nurbscnc.program.columns.SegmentColumns` (kinds, A B C). ``marker``: row 0
     is the zero-length row that carries the stops before the first move (their holds are
-    its own; without one, the moves before the first piece take no time and are left out)."""
+    its own; without one, the moves before the first piece take no time and are left out).
+    ``axes``: the program's :attr:`~nurbscnc.geometry.segments.Program.rotary_axes` (None:
+    the axes whose position is ever away from 0, the same rule, for segments alone)."""
+    abc = (cols.abc_start_deg, cols.abc_end_deg)
     start, rate = row_rates(pieces.segment, pieces.length_mm, *abc)
     k = len(pieces)
     seg = np.asarray(pieces.segment, dtype=np.int64)
@@ -244,22 +233,25 @@ def rotary_pieces(pieces, segments, abc, holds: Holds, marker: bool) -> RotaryPi
     holds, row = holds.subset(row >= 0), row[row >= 0]
     # Programmed stop time after each hold up to the next piece's segment.
     stop_s = np.zeros(len(segments))
-    for i, s in enumerate(segments):
-        if s.kind == "dwell":
-            stop_s[i] = float(s.seconds)
+    dwells = cols.rows(DWELL)
+    stop_s[dwells] = np.fromiter(
+        map(attrgetter("seconds"), map(segments.__getitem__, dwells.tolist())),
+        dtype=float,
+        count=dwells.size,
+    )
     stop_s[holds.segment] = holds.duration_s
     cum = np.cumsum(stop_s)
     after = np.searchsorted(seg, holds.segment, side="right")
     next_seg = np.where(after < k, seg[np.minimum(after, k - 1)], len(segments))
     back = cum[np.maximum(next_seg - 1, 0)] - cum[holds.segment]
-    used = np.zeros(3, dtype=bool)
-    used |= np.any(abc[0] != 0.0, axis=0) | np.any(abc[1] != 0.0, axis=0)
-    end = start[-1] + rate[-1] * float(pieces.length_mm[-1])
-    last = np.flatnonzero(row == k - 1)
-    if last.size:
-        end = holds.abc1_deg[last[-1]]
+    if axes is None:
+        used = np.any(abc[0] != 0.0, axis=0) | np.any(abc[1] != 0.0, axis=0)
+        axes = tuple(name for name, u in zip(AXES, used.tolist()) if u)
+    # Where the program leaves A B C: its last segment's end (the stops after the last
+    # piece are this plan's too).
+    end = abc[1][-1]
     return RotaryPieces(
-        tuple(name for name, u in zip(AXES, used.tolist()) if u),
+        tuple(axes),
         start,
         rate,
         holds,
@@ -283,52 +275,36 @@ def rotary_limits(pieces, machine):
     return rotary_path_limits(share, v_i, a_i, j_i)
 
 
-def rotary_time_bounds_s(segments, machine) -> np.ndarray:
+def rotary_time_bounds_s(segments, machine, cols) -> np.ndarray:
     """A lower bound [s] (n,) of every segment's time from its rotary motion: each axis's
     travel |ΔA_i| at its own velocity limit, and a rotary-only move's length at its
     programmed rate (0 where nothing turns, or the machine lacks the axis: the planner
-    refuses that move)."""
-    abc0, abc1 = segment_abc(segments)
-    d = np.abs(abc1 - abc0)
+    refuses that move). ``cols``: the segments'
+    :class:`~nurbscnc.program.columns.SegmentColumns`."""
+    d = np.abs(cols.abc_end_deg - cols.abc_start_deg)
     v = np.array([getattr(machine.rotary_axes.get(n), "v_max_deg_s", np.inf) for n in AXES])
     t = (d / v[None, :]).max(axis=1) if len(segments) else np.zeros(0)
-    for i, s in enumerate(segments):
-        if s.kind == "rotate" and not s.rapid and s.feed_deg_s > 0.0:
-            t[i] = max(t[i], float(np.sqrt(np.sum(d[i] * d[i]))) / float(s.feed_deg_s))
+    rot = cols.rows(ROTATE)
+    if rot.size:
+        moves = list(map(segments.__getitem__, rot.tolist()))
+        feed = np.fromiter(map(attrgetter("feed_deg_s"), moves), dtype=float, count=rot.size)
+        rapid = np.fromiter(map(attrgetter("rapid"), moves), dtype=bool, count=rot.size)
+        fed = ~rapid & (feed > 0.0)
+        length = np.sqrt(np.einsum("ij,ij->i", d[rot], d[rot]))
+        t[rot[fed]] = np.maximum(t[rot[fed]], length[fed] / feed[fed])
     return t
 
 
-def check_rotary_travel(segments, machine) -> None:
-    """Refuse a move whose rotary axis leaves its soft limits (``min_deg``, ``max_deg``): A B C
-    move linearly along each move, so its ends bound it. PlanningError at its line, naming
-    the axis."""
-    abc0, abc1 = segment_abc(segments)
-    for i, name in enumerate(AXES):
-        ax = machine.rotary_axes.get(name)
-        if ax is None:
-            continue
-        lo = np.minimum(abc0[:, i], abc1[:, i])
-        hi = np.maximum(abc0[:, i], abc1[:, i])
-        bad = np.flatnonzero((lo < ax.min_deg) | (hi > ax.max_deg))
-        if bad.size:
-            r = int(bad[0])
-            value = lo[r] if lo[r] < ax.min_deg else hi[r]
-            raise PlanningError(
-                f"the {segments[r].kind} leaves the soft limits: {name.upper()} reaches "
-                f"{value:.6g}° in machine coordinates, outside [{ax.min_deg:g}, "
-                f"{ax.max_deg:g}]°",
-                SourcePos(int(segments[r].line), 1, ""),
-            )
-
-
-def rotate_bounds_s(segments, machine) -> np.ndarray:
+def rotate_bounds_s(segments, machine, cols) -> np.ndarray:
     """A lower bound [s] of every rotary-only move's time (m,), without the jerk limit: rest
     to rest at the acceleration A and cruise V of its axes' shares (and its programmed rate),
-    L/V + V/A when it reaches V, else 2√(L/A) — never above the planned jerk-limited move."""
-    rot = [s for s in segments if s.kind == "rotate"]
-    if not rot:
+    L/V + V/A when it reaches V, else 2√(L/A) — never above the planned jerk-limited move.
+    ``cols``: the segments' :class:`~nurbscnc.program.columns.SegmentColumns`."""
+    idx = cols.rows(ROTATE)
+    if not idx.size:
         return np.zeros(0)
-    d = np.array([s.abc_end_deg for s in rot], float) - np.array([s.abc_start_deg for s in rot])
+    rot = list(map(segments.__getitem__, idx.tolist()))
+    d = cols.abc_end_deg[idx] - cols.abc_start_deg[idx]
     length = np.sqrt(np.einsum("ij,ij->i", d, d))
     share = np.abs(d) / np.where(length > 0.0, length, 1.0)[:, None]
     lim = [[getattr(machine.rotary_axes.get(n), f, np.inf) for n in AXES] for f in _LIMITS]
@@ -345,15 +321,27 @@ def rotate_bounds_s(segments, machine) -> np.ndarray:
 _LIMITS = ("v_max_deg_s", "a_max_deg_s2", "j_max_deg_s3")
 
 
-def rotary_feed_caps_mm_s(segments, machine) -> np.ndarray:
+def rotary_feed_caps_mm_s(segments, machine, cols) -> np.ndarray:
     """Per segment (n,) the feed cap [mm/s] its rotary axes set along its XYZ path, the
-    smallest V_i / |ΔA_i / L| (inf where nothing turns or there is no XYZ length)."""
-    abc0, abc1 = segment_abc(segments)
-    length = np.array([float(getattr(s, "length_mm", 0.0) or 0.0) for s in segments])
-    moving = np.flatnonzero((length > 0.0) & np.any(abc0 != abc1, axis=1))
+    smallest V_i / |ΔA_i / L| (inf where nothing turns or there is no XYZ length).
+    ``cols``: the segments' :class:`~nurbscnc.program.columns.SegmentColumns`."""
+    abc0, abc1 = cols.abc_start_deg, cols.abc_end_deg
+    turning = np.flatnonzero((cols.kind <= ARC) & np.any(abc0 != abc1, axis=1))
     cap = np.full(len(segments), np.inf)
+    # XYZ lengths: a line's by math.dist (its ``length_mm``, without a Python frame per
+    # line), an arc's its own.
+    moves = list(map(segments.__getitem__, turning.tolist()))
+    straight = cols.kind[turning] <= RAPID
+    length = np.fromiter(
+        map(math.dist, map(attrgetter("end_mm"), moves), map(attrgetter("start_mm"), moves)),
+        dtype=float,
+        count=turning.size,
+    )
+    arcs = np.flatnonzero(~straight)
+    length[arcs] = [moves[i].length_mm for i in arcs.tolist()]
+    moving = turning[length > 0.0]
     if moving.size:
-        rate = np.abs(abc1[moving] - abc0[moving]) / length[moving, None]
+        rate = np.abs(abc1[moving] - abc0[moving]) / length[length > 0.0, None]
         lim = [[getattr(machine.rotary_axes.get(n), f, np.inf) for n in AXES] for f in _LIMITS]
         cap[moving] = rotary_path_limits(rate, *lim)[0]
     return cap

@@ -48,7 +48,9 @@ class Setup:
         columns=None,
     ):
         self.machine, self.options = machine, options
-        pieces = segment_pieces(program.segments, machine, options.plan, columns)
+        pieces = segment_pieces(
+            program.segments, machine, options.plan, columns, program.rotary_axes
+        )
         if not len(pieces):
             raise PlanningError("the program has no motion to plan")
         self.pieces = pieces
@@ -181,7 +183,12 @@ def _without_corner_feed(
     A/F²) and the fits do not depend on κ̄; None if the pieces came out otherwise than
     ``pieces`` (then nothing is raised)."""
     limits = replace(machine.limits, kappa_ref_per_mm=1e15)
-    free = segment_pieces(program.segments, replace(machine, limits=limits), options.plan)
+    free = segment_pieces(
+        program.segments,
+        replace(machine, limits=limits),
+        options.plan,
+        rotary_axes=program.rotary_axes,
+    )
     if len(free) != len(pieces) or not np.array_equal(free.length_mm, pieces.length_mm):
         return None
     if not np.array_equal(junction_caps(free) > 0.0, junction_caps(pieces) > 0.0):

@@ -29,7 +29,7 @@ from nurbscnc.errors import UnsupportedError
 from nurbscnc.geometry.segments import Line, Rotate
 from nurbscnc.program.codes import G_93, G_94, G_95
 from nurbscnc.program.coords import SYSTEM_NAMES
-from nurbscnc.program.words import MAX_COORD_MM
+from nurbscnc.program.words import MAX_ANGLE_DEG
 
 ROTARY_LETTERS = ("A", "B", "C")
 #: LinuxCNC's threshold below which a straight move has no XYZ motion [program units]
@@ -107,10 +107,10 @@ class RotaryAxes:
                 machine = unwrap_deg(value, current) + shift[i]
             else:
                 machine = value + shift[i]
-            if not abs(machine) <= MAX_COORD_MM:
+            if not abs(machine) <= MAX_ANGLE_DEG:
                 raise self.error(
                     f"{letter}{value:.6g} is out of range (the position would be beyond "
-                    f"±{MAX_COORD_MM:g} degrees)",
+                    f"±{MAX_ANGLE_DEG:g} degrees)",
                     col,
                 )
             if axis is None and machine != out[i]:

@@ -10,6 +10,7 @@ AXES = ("X", "Y", "Z")
 # Bounds on values that are finite but no machine can act on (1e20 mm, a 1e300 s dwell): the
 # error names the value instead of letting it overflow or stall a later stage.
 MAX_COORD_MM = 1e9  # 1000 km
+MAX_ANGLE_DEG = 1e9  # a rotary axis's position: ~2.8 million turns
 MAX_DWELL_S = 1e6  # 11.6 days
 MAX_FEED_MM_MIN = 1e9
 MIN_FEED_MM_MIN = 1e-9  # below: zero-like feeds (denormals such as 1e-321)
