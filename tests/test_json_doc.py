@@ -75,39 +75,15 @@ def files(tmp_path_factory):
     (d / "bad.nc").write_text("G1 X1 F600\nG1 Q\n")
     (d / "rest.nc").write_text("G10 L2 P1 X5\nG4 P0.5\n")  # no motion
     (d / "rotary.nc").write_text(ROTARY)
-    (d / "rotary_xyz.nc").write_text(ROTARY.replace(" A90", ""))
     return d
 
 
-def rotary_printed(files, *args) -> dict:
-    """The JSON of ``args`` (a ``plan`` or ``run`` command, the program last added) on the
-    program with an A axis. Where the interpreter or the planner does not move rotary axes
-    yet, the summary of the same moves with their A, made by the function the command
-    calls (:func:`nurbscnc.app.summary.summary_of`)."""
-    import dataclasses
-
-    from nurbscnc.app.planning import make_plan
-    from nurbscnc.app.summary import summary_json, summary_of
-    from nurbscnc.machine.model import RotaryAxis
-
-    axis = ("v_max_deg_min=3600", "a_max_deg_s2=400", "j_max_deg_s3=4000")  # 60°/s
+def rotary_printed(*args) -> dict:
+    """The JSON of ``args`` (a ``plan``, ``run`` or ``simulate`` command) on a machine with
+    an A axis (60°/s)."""
+    axis = ("v_max_deg_min=3600", "a_max_deg_s2=400", "j_max_deg_s3=4000")
     sets = [w for key in axis for w in ("--set", f"axis_limits.a.{key}")]
-    res = CliRunner().invoke(main, [str(a) for a in args] + sets + ["--json"])
-    if res.exit_code == 0:
-        return json.loads(res.stdout.strip().splitlines()[-1])
-    assert res.exit_code == 2, res.output  # refused (no rotary support yet), not a crash
-    prog, mach, run = make_plan(str(files / "rotary_xyz.nc"))
-    mach = dataclasses.replace(mach, rotary_axes={"a": RotaryAxis("a", 60.0, 400.0, 4000.0)})
-    ends = ((0.0, 0.0, 0.0, 90.0, 0.0, 0.0), (90.0, 0.0, 0.0, 90.0, 0.0, 0.0))
-    moves = iter(ends)
-    segments = tuple(
-        dataclasses.replace(seg, abc_deg=next(moves)) if seg.kind == "line" else seg
-        for seg in prog.segments
-    )
-    prog = dataclasses.replace(prog, segments=segments, rotary_axes=("a",))
-    summary = json.loads(summary_json(summary_of(prog, mach, run)))
-    assert summary["rotary"]["final_abc_deg"] == {"a": 90.0}
-    return summary
+    return printed(*args, *sets, "--json")
 
 
 def keys_of(command: str, outputs) -> set:
@@ -144,7 +120,7 @@ def test_plan_and_run(files, tmp_path):
         printed("plan", NACA, "--json", "--algorithm", "adaptive"),
         printed("plan", SPIRAL, "--json", "--dynamics", "off"),  # smoothed (the default)
         printed("plan", files / "rest.nc", "--json"),
-        rotary_printed(files, "plan", files / "rotary.nc"),
+        rotary_printed("plan", files / "rotary.nc"),
     ]
     explained = printed("plan", files / "corner.nc", "--json", "--explain")
     if not explained["explain"]["corners"]:
@@ -170,7 +146,7 @@ def test_plan_and_run(files, tmp_path):
         printed("run", files / "mixed.nc", "-o", tmp_path / "m.csv", "--json"),
         printed("run", SPIRAL, "-o", tmp_path / "s.csv", "--json", "--dynamics", "off"),
         printed("run", files / "rest.nc", "-o", tmp_path / "r.csv", "--json"),
-        rotary_printed(files, "run", files / "rotary.nc", "-o", tmp_path / "a.csv"),
+        rotary_printed("run", files / "rotary.nc", "-o", tmp_path / "a.csv"),
     ]
     check("run", runs, skip="explain")  # --explain is plan's
 
@@ -235,7 +211,7 @@ def test_simulate_and_compare(files, tmp_path):
         [
             printed("simulate", points, "--json"),
             printed("simulate", files / "mixed.nc", "--json"),
-            printed("simulate", turned, "--json"),
+            rotary_printed("simulate", turned),
         ],
     )
     check("compare", [printed("compare", NACA, "--json", "--algorithm", "ours")])
