@@ -1,7 +1,8 @@
-/* The compiled kernel of the geometry stage: the point-to-segments distance of
- * distance.py's _segment_distances_py, ported operation for operation from that Python
- * reference implementation, which remains the specification and the fallback where this
- * module was not built (setup.py: optional). Without its (pairs, 3) temporaries.
+/* The compiled kernels of the geometry stage: the point-to-segments distance of
+ * distance.py's _segment_distances_py and the bookkeeping of one safeguarded Newton step of
+ * ph.py's bracketed_newton (_newton_step_py), each ported operation for operation from its
+ * Python reference implementation, which remains the specification and the fallback where
+ * this module was not built (setup.py: optional). Without the numpy temporaries.
  *
  * Every result is bit for bit the Python one: IEEE double arithmetic in the same order,
  * each expression as numpy evaluates it (left to right, no reassociation), built with
@@ -10,8 +11,11 @@
  *
  *   segment_distances(q, a, d, lo, hi, out)
  *       -> None (out filled)                                   [distance._segment_distances_py]
+ *   newton_step(f, df, xa, a, b, idx, x, ftol)
+ *       -> the number still going (xa, a, b, idx compacted; x of the finished set)
+ *                                                                        [ph._newton_step_py]
  *
- * The arrays are C-contiguous float64 (lo, hi: int64) buffers (the caller makes them so).
+ * The arrays are C-contiguous float64 (lo, hi, idx: int64) buffers (the caller makes them so).
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -86,14 +90,87 @@ done:
     return result;
 }
 
+/* ------------------------------------------------------------------ bracketed Newton */
+
+/* numpy's maximum of two floats: NaN-propagating (the first argument wins ties). */
+static inline double np_maximum(double a, double b) { return (a >= b || isnan(a)) ? a : b; }
+
+/* ph._newton_step_py: one step of the safeguarded Newton iteration for the n active elements
+ * (f, df their function values at xa; [a, b] their brackets). The bracket side of f's sign
+ * moves to xa; the Newton point xa - f/df is kept if it lies strictly inside the bracket with
+ * df > 0, else the bracket's middle; an element is done when |f| <= ftol, when the kept Newton
+ * step is at rounding level (2 eps max(1, |xa|)) or when the bracket has collapsed
+ * (4 eps max(1, |xa|)). Every element takes its step (but where |f| <= ftol); the finished
+ * ones are written to x[idx], the others moved to the front of xa, a, b, idx in order. */
+static PyObject *newton_step(PyObject *self, PyObject *args)
+{
+    Py_buffer bf, bdf, bxa, ba, bb, bidx, bx;
+    double ftol;
+    if (!PyArg_ParseTuple(args, "y*y*w*w*w*w*w*d", &bf, &bdf, &bxa, &ba, &bb, &bidx, &bx, &ftol))
+        return NULL;
+    PyObject *result = NULL;
+    const Py_ssize_t n = bf.len / (Py_ssize_t)sizeof(double);
+    const Py_ssize_t nx = bx.len / (Py_ssize_t)sizeof(double);
+    if (bf.len != n * (Py_ssize_t)sizeof(double) || bdf.len != bf.len || bxa.len < bf.len ||
+        ba.len < bf.len || bb.len < bf.len || bidx.len < n * (Py_ssize_t)sizeof(long long)) {
+        PyErr_SetString(PyExc_ValueError, "newton_step: inconsistent buffers");
+        goto done;
+    }
+    const double *f = bf.buf, *df = bdf.buf;
+    double *xa = bxa.buf, *a = ba.buf, *b = bb.buf, *x = bx.buf;
+    long long *idx = bidx.buf;
+    for (Py_ssize_t i = 0; i < n; i++)
+        if (idx[i] < 0 || idx[i] >= nx) {
+            PyErr_SetString(PyExc_IndexError, "newton_step: an index outside x");
+            goto done;
+        }
+    const double eps = 2.220446049250313e-16; /* np.finfo(float).eps */
+    Py_ssize_t kept = 0;
+    for (Py_ssize_t i = 0; i < n; i++) {
+        const double xi = xa[i], fi = f[i], dfi = df[i];
+        const int neg = fi < 0.0;
+        const double ai = neg ? xi : a[i];
+        const double bi = neg ? b[i] : xi;
+        double xn = xi - fi / dfi;
+        const int inside = (xn > ai) && (xn < bi) && (dfi > 0.0);
+        if (!inside)
+            xn = 0.5 * (ai + bi);
+        const double scale = np_maximum(1.0, fabs(xi));
+        const int small = fabs(fi) <= ftol;
+        const int finished = small || (inside && fabs(xn - xi) <= (2.0 * eps) * scale) ||
+                             (bi - ai <= (4.0 * eps) * scale);
+        const double xnew = small ? xi : xn;
+        if (finished) {
+            x[idx[i]] = xnew;
+        } else {
+            xa[kept] = xnew;
+            a[kept] = ai;
+            b[kept] = bi;
+            idx[kept] = idx[i];
+            kept++;
+        }
+    }
+    result = PyLong_FromSsize_t(kept);
+done:
+    PyBuffer_Release(&bf);
+    PyBuffer_Release(&bdf);
+    PyBuffer_Release(&bxa);
+    PyBuffer_Release(&ba);
+    PyBuffer_Release(&bb);
+    PyBuffer_Release(&bidx);
+    PyBuffer_Release(&bx);
+    return result;
+}
+
 static PyMethodDef methods[] = {
     {"segment_distances", segment_distances, METH_VARARGS,
      "distance._segment_distances_py, compiled."},
+    {"newton_step", newton_step, METH_VARARGS, "ph._newton_step_py, compiled."},
     {NULL, NULL, 0, NULL},
 };
 
 static struct PyModuleDef module = {
-    PyModuleDef_HEAD_INIT, "_kernels", "Compiled kernel of the geometry stage (distance.py).",
+    PyModuleDef_HEAD_INIT, "_kernels", "Compiled kernels of the geometry stage (distance.py, ph.py).",
     -1, methods,
 };
 
