@@ -7,6 +7,8 @@ implementations, bit for bit:
 - the point-to-segments distance of the contour check
   (:func:`~nurbscnc.geometry.distance._segment_distances_py`),
 - a piece's peak speed (:func:`nurbscnc.plan.feedrate._peak_speed_py`),
+- the B-spline basis functions' derivatives
+  (:func:`nurbscnc.geometry.bspline._basis_derivatives_py`),
 - the step of the safeguarded Newton iteration of the PH quintics' foot points and arc-length
   inversion (:func:`nurbscnc.geometry.ph._newton_step_py`).
 
@@ -205,6 +207,34 @@ def test_newton_step_kernel_is_the_numpy_step_bit_for_bit():
             assert np.array_equal(_bits(g[:m_got]), _bits(r[:m_ref]))
         assert np.array_equal(got[3][:m_got], ref[3][:m_ref])
         assert np.array_equal(_bits(got[4]), _bits(ref[4]))
+
+
+@pytest.mark.skipif(distance._kernels is None, reason="nurbscnc.geometry._kernels was not built")
+def test_basis_derivatives_kernel_is_the_numpy_recurrence_bit_for_bit():
+    """400 random clamped knot vectors (degrees 0–7, repeated inner knots, spans from 1e-6 to
+    1e3 wide), parameters inside, on knots, at and beyond both ends, 0–8 derivatives: the
+    same spans and derivative tables (zeros above the degree included) from the kernel and
+    from numpy, in the same layout."""
+    from nurbscnc.geometry import bspline
+
+    rng = np.random.default_rng(37)
+    for _ in range(400):
+        p = int(rng.integers(0, 8))
+        inner = np.sort(rng.random(int(rng.integers(0, 12))))
+        if inner.size > 2 and rng.random() < 0.3:
+            inner[1] = inner[0]  # a repeated knot
+        scale = 10.0 ** rng.integers(-6, 4)
+        knots = np.concatenate((np.zeros(p + 1), inner, np.ones(p + 1))) * scale
+        m = int(rng.integers(1, 40))
+        u = rng.uniform(-0.1, 1.1, m) * scale
+        on_knot = rng.random(m) < 0.2
+        u[on_knot] = rng.choice(knots, int(on_knot.sum()))
+        n_ders = int(rng.integers(0, 9))
+        spans, got = bspline.basis_derivatives(knots, p, u, n_ders)
+        ref = bspline._basis_derivatives_py(knots, p, u, bspline.find_span(knots, p, u), n_ders)
+        assert np.array_equal(spans, bspline.find_span(knots, p, u))
+        assert got.shape == ref.shape and got.strides == ref.strides
+        assert np.array_equal(_bits(got), _bits(ref))
 
 
 @pytest.mark.skipif(distance._kernels is None, reason="nurbscnc.geometry._kernels was not built")

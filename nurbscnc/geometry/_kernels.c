@@ -1,6 +1,7 @@
 /* The compiled kernels of the geometry stage: the point-to-segments distance of
  * distance.py's _segment_distances_py and the bookkeeping of one safeguarded Newton step of
- * ph.py's bracketed_newton (_newton_step_py), each ported operation for operation from its
+ * ph.py's bracketed_newton (_newton_step_py) and the B-spline basis derivatives of bspline.py
+ * (_basis_derivatives_py), each ported operation for operation from its
  * Python reference implementation, which remains the specification and the fallback where
  * this module was not built (setup.py: optional). Without the numpy temporaries.
  *
@@ -11,6 +12,8 @@
  *
  *   segment_distances(q, a, d, lo, hi, out)
  *       -> None (out filled)                                   [distance._segment_distances_py]
+ *   basis_derivatives(knots, spans, u, degree, n_ders, out)
+ *       -> None (out (n_ders + 1, degree + 1, m) filled)       [bspline._basis_derivatives_py]
  *   newton_step(f, df, xa, a, b, idx, x, ftol)
  *       -> the number still going (xa, a, b, idx compacted; x of the finished set)
  *                                                                        [ph._newton_step_py]
@@ -90,6 +93,108 @@ done:
     return result;
 }
 
+/* ------------------------------------------------------------------ B-spline basis */
+
+/* Largest degree the compiled basis takes (its per-sample tables live on the stack); the
+ * caller runs the Python loops above it. */
+#define BASIS_MAX_DEGREE 15
+
+/* bspline._basis_derivatives_py (Piegl & Tiller A2.3) for each parameter u[s] in its knot
+ * span spans[s]: ndu (knot differences below the diagonal, basis functions of rising degree
+ * on and above it), then the derivatives by the a-table recurrence, each expression in the
+ * reference's order; out[k][r][s] = d^k N_{span-p+r, p}/du^k, times p!/(p-k)! as the
+ * reference scales them (k > min(n_ders, p): zero). */
+static PyObject *basis_derivatives(PyObject *self, PyObject *args)
+{
+    Py_buffer bk, bsp, bu, bout;
+    int p, n_ders;
+    if (!PyArg_ParseTuple(args, "y*y*y*iiw*", &bk, &bsp, &bu, &p, &n_ders, &bout))
+        return NULL;
+    PyObject *result = NULL;
+    const Py_ssize_t nk = bk.len / (Py_ssize_t)sizeof(double);
+    const Py_ssize_t m = bu.len / (Py_ssize_t)sizeof(double);
+    if (p < 0 || p > BASIS_MAX_DEGREE || n_ders < 0 ||
+        bu.len != m * (Py_ssize_t)sizeof(double) ||
+        bsp.len != m * (Py_ssize_t)sizeof(long long) ||
+        bout.len != (Py_ssize_t)(n_ders + 1) * (p + 1) * m * (Py_ssize_t)sizeof(double)) {
+        PyErr_SetString(PyExc_ValueError, "basis_derivatives: inconsistent buffers");
+        goto done;
+    }
+    const double *knots = bk.buf, *u = bu.buf;
+    const long long *spans = bsp.buf;
+    double *out = bout.buf;
+    for (Py_ssize_t s = 0; s < m; s++)
+        if (spans[s] + 1 - p < 0 || spans[s] + p >= nk) {
+            PyErr_SetString(PyExc_IndexError, "basis_derivatives: a span outside the knots");
+            goto done;
+        }
+    const int n_top = n_ders < p ? n_ders : p;
+    const Py_ssize_t plane = (Py_ssize_t)(p + 1) * m; /* one derivative order */
+    for (Py_ssize_t i = 0; i < (Py_ssize_t)(n_ders + 1) * plane; i++)
+        out[i] = 0.0;
+    double ndu[BASIS_MAX_DEGREE + 1][BASIS_MAX_DEGREE + 1];
+    double left[BASIS_MAX_DEGREE + 1], right[BASIS_MAX_DEGREE + 1];
+    double a[2][BASIS_MAX_DEGREE + 1];
+    for (Py_ssize_t s = 0; s < m; s++) {
+        const double us = u[s];
+        const long long span = spans[s];
+        ndu[0][0] = 1.0;
+        for (int j = 1; j <= p; j++) {
+            left[j] = us - knots[span + 1 - j];
+            right[j] = knots[span + j] - us;
+            double saved = 0.0;
+            for (int r = 0; r < j; r++) {
+                ndu[j][r] = right[r + 1] + left[j - r];
+                const double temp = ndu[r][j - 1] / ndu[j][r];
+                ndu[r][j] = saved + right[r + 1] * temp;
+                saved = left[j - r] * temp;
+            }
+            ndu[j][j] = saved;
+        }
+        for (int r = 0; r <= p; r++)
+            out[(Py_ssize_t)r * m + s] = ndu[r][p];
+        for (int r = 0; r <= p; r++) {
+            int s1 = 0, s2 = 1;
+            a[0][0] = 1.0;
+            for (int k = 1; k <= n_top; k++) {
+                double d = 0.0;
+                const int rk = r - k, pk = p - k;
+                if (r >= k) {
+                    a[s2][0] = a[s1][0] / ndu[pk + 1][rk];
+                    d = a[s2][0] * ndu[rk][pk];
+                }
+                const int j1 = rk >= -1 ? 1 : -rk;
+                const int j2 = r - 1 <= pk ? k - 1 : p - r;
+                for (int j = j1; j <= j2; j++) {
+                    a[s2][j] = (a[s1][j] - a[s1][j - 1]) / ndu[pk + 1][rk + j];
+                    d += a[s2][j] * ndu[rk + j][pk];
+                }
+                if (r <= pk) {
+                    a[s2][k] = -a[s1][k - 1] / ndu[pk + 1][r];
+                    d += a[s2][k] * ndu[r][pk];
+                }
+                out[k * plane + (Py_ssize_t)r * m + s] = d;
+                const int t = s1;
+                s1 = s2;
+                s2 = t;
+            }
+        }
+    }
+    double factor = (double)p;
+    for (int k = 1; k <= n_top; k++) {
+        for (Py_ssize_t i = 0; i < plane; i++)
+            out[k * plane + i] *= factor;
+        factor *= (double)(p - k);
+    }
+    result = Py_NewRef(Py_None);
+done:
+    PyBuffer_Release(&bk);
+    PyBuffer_Release(&bsp);
+    PyBuffer_Release(&bu);
+    PyBuffer_Release(&bout);
+    return result;
+}
+
 /* ------------------------------------------------------------------ bracketed Newton */
 
 /* numpy's maximum of two floats: NaN-propagating (the first argument wins ties). */
@@ -165,12 +270,14 @@ done:
 static PyMethodDef methods[] = {
     {"segment_distances", segment_distances, METH_VARARGS,
      "distance._segment_distances_py, compiled."},
+    {"basis_derivatives", basis_derivatives, METH_VARARGS,
+     "bspline._basis_derivatives_py, compiled."},
     {"newton_step", newton_step, METH_VARARGS, "ph._newton_step_py, compiled."},
     {NULL, NULL, 0, NULL},
 };
 
 static struct PyModuleDef module = {
-    PyModuleDef_HEAD_INIT, "_kernels", "Compiled kernels of the geometry stage (distance.py, ph.py).",
+    PyModuleDef_HEAD_INIT, "_kernels", "Compiled kernels of the geometry stage (distance.py, bspline.py, ph.py).",
     -1, methods,
 };
 
