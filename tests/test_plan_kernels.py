@@ -6,7 +6,11 @@ implementations, bit for bit:
 - the time at which a profile reaches a length (:func:`~nurbscnc.plan.profile._time_at_length_py`),
 - the point-to-segments distance of the contour check
   (:func:`~nurbscnc.geometry.distance._segment_distances_py`),
-- a piece's peak speed (:func:`nurbscnc.plan.feedrate._peak_speed_py`).
+- a piece's peak speed (:func:`nurbscnc.plan.feedrate._peak_speed_py`),
+- the B-spline basis functions' derivatives
+  (:func:`nurbscnc.geometry.bspline._basis_derivatives_py`),
+- the step of the safeguarded Newton iteration of the PH quintics' foot points and arc-length
+  inversion (:func:`nurbscnc.geometry.ph._newton_step_py`).
 
 The reference implementations are the specification (and what runs where no C compiler
 built the kernels); the kernels must give the same floats, so a plan never depends on
@@ -166,6 +170,101 @@ def test_peak_speed_kernel_is_the_python_bisection_bit_for_bit():
                 _bits(feedrate.peak_speed_unchecked(v_s, v_e, length, cap, *lims)),
                 _bits(feedrate._peak_speed_py(v_s, v_e, length, cap, *lims)),
             )
+
+
+@pytest.mark.skipif(distance._kernels is None, reason="nurbscnc.geometry._kernels was not built")
+def test_newton_step_kernel_is_the_numpy_step_bit_for_bit():
+    """500 random Newton steps (values of both signs, zero, NaN and within the tolerance;
+    derivatives positive, zero, negative and NaN; brackets wide, tight and collapsed; x near
+    0 and far from it): the same finished values in x, the same compacted x, brackets and
+    indices, and the same count from the kernel and from numpy."""
+    from nurbscnc.geometry import ph
+
+    rng = np.random.default_rng(35)
+    for _ in range(500):
+        n = int(rng.integers(1, 60))
+        total = n + int(rng.integers(0, 20))
+        scale = 10.0 ** rng.integers(-3, 4)
+        width = 10.0 ** rng.integers(-17, 0, n).astype(float) * scale
+        a = rng.uniform(-1.0, 1.0, n) * scale
+        b = a + width * (rng.random(n) < 0.95)
+        xa = a + (b - a) * rng.random(n)
+        f = rng.standard_normal(n) * 10.0 ** rng.integers(-16, 2, n)
+        f[rng.random(n) < 0.05] = 0.0
+        f[rng.random(n) < 0.03] = np.nan
+        df = rng.standard_normal(n) * 10.0 ** rng.integers(-3, 3, n)
+        df[rng.random(n) < 0.05] = 0.0
+        df[rng.random(n) < 0.03] = np.nan
+        ftol = float(rng.choice([0.0, 1e-13, 1e-6]))
+        idx = rng.permutation(total)[:n].astype(np.int64)
+        x0 = rng.standard_normal(total)
+        got = [xa.copy(), a.copy(), b.copy(), idx.copy(), x0.copy()]
+        ref = [xa.copy(), a.copy(), b.copy(), idx.copy(), x0.copy()]
+        m_got = distance._kernels.newton_step(f, df, *got, ftol)
+        m_ref = ph._newton_step_py(f, df, *ref, ftol)
+        assert m_got == m_ref
+        for g, r in zip(got[:3], ref[:3]):
+            assert np.array_equal(_bits(g[:m_got]), _bits(r[:m_ref]))
+        assert np.array_equal(got[3][:m_got], ref[3][:m_ref])
+        assert np.array_equal(_bits(got[4]), _bits(ref[4]))
+
+
+@pytest.mark.skipif(distance._kernels is None, reason="nurbscnc.geometry._kernels was not built")
+def test_basis_derivatives_kernel_is_the_numpy_recurrence_bit_for_bit():
+    """400 random clamped knot vectors (degrees 0–7, repeated inner knots, spans from 1e-6 to
+    1e3 wide), parameters inside, on knots, at and beyond both ends, 0–8 derivatives: the
+    same spans and derivative tables (zeros above the degree included) from the kernel and
+    from numpy, in the same layout."""
+    from nurbscnc.geometry import bspline
+
+    rng = np.random.default_rng(37)
+    for _ in range(400):
+        p = int(rng.integers(0, 8))
+        inner = np.sort(rng.random(int(rng.integers(0, 12))))
+        if inner.size > 2 and rng.random() < 0.3:
+            inner[1] = inner[0]  # a repeated knot
+        scale = 10.0 ** rng.integers(-6, 4)
+        knots = np.concatenate((np.zeros(p + 1), inner, np.ones(p + 1))) * scale
+        m = int(rng.integers(1, 40))
+        u = rng.uniform(-0.1, 1.1, m) * scale
+        on_knot = rng.random(m) < 0.2
+        u[on_knot] = rng.choice(knots, int(on_knot.sum()))
+        n_ders = int(rng.integers(0, 9))
+        spans, got = bspline.basis_derivatives(knots, p, u, n_ders)
+        ref = bspline._basis_derivatives_py(knots, p, u, bspline.find_span(knots, p, u), n_ders)
+        assert np.array_equal(spans, bspline.find_span(knots, p, u))
+        assert got.shape == ref.shape and got.strides == ref.strides
+        assert np.array_equal(_bits(got), _bits(ref))
+
+
+@pytest.mark.skipif(distance._kernels is None, reason="nurbscnc.geometry._kernels was not built")
+def test_ph_foot_points_and_inversion_same_with_and_without_the_kernel(monkeypatch):
+    """The PH quintics' foot points (:meth:`~nurbscnc.geometry.ph.PHQuintic.closest_param`)
+    and arc-length inversion of 100 random curves, points near them and far, the same
+    bits with the compiled Newton step and with numpy's."""
+    from nurbscnc.geometry import ph
+
+    rng = np.random.default_rng(36)
+    cases = []
+    for _ in range(100):
+        p0 = complex(*rng.standard_normal(2)) * 500.0
+        chord = complex(*rng.standard_normal(2)) * 10.0 ** rng.integers(-2, 2)
+        d0, d1 = (complex(*rng.standard_normal(2)) * abs(chord) for _ in range(2))
+        curve = ph.hermite_ph(p0, p0 + chord, d0, d1)
+        m = int(rng.integers(1, 300))
+        q = curve.point(np.sort(rng.random(m))) + (
+            rng.standard_normal(m) + 1j * rng.standard_normal(m)
+        ) * float(rng.choice([1e-7, 1e-3, 1.0])) * abs(chord)
+        cases.append((curve, q, rng.random(m) * curve.length_mm))
+
+    def run():
+        return [(c.closest_param(q), c.param_at_length(s)) for c, q, s in cases]
+
+    compiled = run()
+    monkeypatch.setattr(ph, "_kernels", None)
+    for got, ref in zip(compiled, run()):
+        for g, r in zip(got, ref):
+            assert np.array_equal(_bits(g), _bits(r))
 
 
 def test_segment_distance_is_the_closed_form():

@@ -1,7 +1,9 @@
-/* The compiled kernel of the geometry stage: the point-to-segments distance of
- * distance.py's _segment_distances_py, ported operation for operation from that Python
- * reference implementation, which remains the specification and the fallback where this
- * module was not built (setup.py: optional). Without its (pairs, 3) temporaries.
+/* The compiled kernels of the geometry stage: the point-to-segments distance of
+ * distance.py's _segment_distances_py and the bookkeeping of one safeguarded Newton step of
+ * ph.py's bracketed_newton (_newton_step_py) and the B-spline basis derivatives of bspline.py
+ * (_basis_derivatives_py), each ported operation for operation from its
+ * Python reference implementation, which remains the specification and the fallback where
+ * this module was not built (setup.py: optional). Without the numpy temporaries.
  *
  * Every result is bit for bit the Python one: IEEE double arithmetic in the same order,
  * each expression as numpy evaluates it (left to right, no reassociation), built with
@@ -10,8 +12,13 @@
  *
  *   segment_distances(q, a, d, lo, hi, out)
  *       -> None (out filled)                                   [distance._segment_distances_py]
+ *   basis_derivatives(knots, spans, u, degree, n_ders, out)
+ *       -> None (out (n_ders + 1, degree + 1, m) filled)       [bspline._basis_derivatives_py]
+ *   newton_step(f, df, xa, a, b, idx, x, ftol)
+ *       -> the number still going (xa, a, b, idx compacted; x of the finished set)
+ *                                                                        [ph._newton_step_py]
  *
- * The arrays are C-contiguous float64 (lo, hi: int64) buffers (the caller makes them so).
+ * The arrays are C-contiguous float64 (lo, hi, idx: int64) buffers (the caller makes them so).
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -86,14 +93,191 @@ done:
     return result;
 }
 
+/* ------------------------------------------------------------------ B-spline basis */
+
+/* Largest degree the compiled basis takes (its per-sample tables live on the stack); the
+ * caller runs the Python loops above it. */
+#define BASIS_MAX_DEGREE 15
+
+/* bspline._basis_derivatives_py (Piegl & Tiller A2.3) for each parameter u[s] in its knot
+ * span spans[s]: ndu (knot differences below the diagonal, basis functions of rising degree
+ * on and above it), then the derivatives by the a-table recurrence, each expression in the
+ * reference's order; out[k][r][s] = d^k N_{span-p+r, p}/du^k, times p!/(p-k)! as the
+ * reference scales them (k > min(n_ders, p): zero). */
+static PyObject *basis_derivatives(PyObject *self, PyObject *args)
+{
+    Py_buffer bk, bsp, bu, bout;
+    int p, n_ders;
+    if (!PyArg_ParseTuple(args, "y*y*y*iiw*", &bk, &bsp, &bu, &p, &n_ders, &bout))
+        return NULL;
+    PyObject *result = NULL;
+    const Py_ssize_t nk = bk.len / (Py_ssize_t)sizeof(double);
+    const Py_ssize_t m = bu.len / (Py_ssize_t)sizeof(double);
+    if (p < 0 || p > BASIS_MAX_DEGREE || n_ders < 0 ||
+        bu.len != m * (Py_ssize_t)sizeof(double) ||
+        bsp.len != m * (Py_ssize_t)sizeof(long long) ||
+        bout.len != (Py_ssize_t)(n_ders + 1) * (p + 1) * m * (Py_ssize_t)sizeof(double)) {
+        PyErr_SetString(PyExc_ValueError, "basis_derivatives: inconsistent buffers");
+        goto done;
+    }
+    const double *knots = bk.buf, *u = bu.buf;
+    const long long *spans = bsp.buf;
+    double *out = bout.buf;
+    for (Py_ssize_t s = 0; s < m; s++)
+        if (spans[s] + 1 - p < 0 || spans[s] + p >= nk) {
+            PyErr_SetString(PyExc_IndexError, "basis_derivatives: a span outside the knots");
+            goto done;
+        }
+    const int n_top = n_ders < p ? n_ders : p;
+    const Py_ssize_t plane = (Py_ssize_t)(p + 1) * m; /* one derivative order */
+    for (Py_ssize_t i = 0; i < (Py_ssize_t)(n_ders + 1) * plane; i++)
+        out[i] = 0.0;
+    double ndu[BASIS_MAX_DEGREE + 1][BASIS_MAX_DEGREE + 1];
+    double left[BASIS_MAX_DEGREE + 1], right[BASIS_MAX_DEGREE + 1];
+    double a[2][BASIS_MAX_DEGREE + 1];
+    for (Py_ssize_t s = 0; s < m; s++) {
+        const double us = u[s];
+        const long long span = spans[s];
+        ndu[0][0] = 1.0;
+        for (int j = 1; j <= p; j++) {
+            left[j] = us - knots[span + 1 - j];
+            right[j] = knots[span + j] - us;
+            double saved = 0.0;
+            for (int r = 0; r < j; r++) {
+                ndu[j][r] = right[r + 1] + left[j - r];
+                const double temp = ndu[r][j - 1] / ndu[j][r];
+                ndu[r][j] = saved + right[r + 1] * temp;
+                saved = left[j - r] * temp;
+            }
+            ndu[j][j] = saved;
+        }
+        for (int r = 0; r <= p; r++)
+            out[(Py_ssize_t)r * m + s] = ndu[r][p];
+        for (int r = 0; r <= p; r++) {
+            int s1 = 0, s2 = 1;
+            a[0][0] = 1.0;
+            for (int k = 1; k <= n_top; k++) {
+                double d = 0.0;
+                const int rk = r - k, pk = p - k;
+                if (r >= k) {
+                    a[s2][0] = a[s1][0] / ndu[pk + 1][rk];
+                    d = a[s2][0] * ndu[rk][pk];
+                }
+                const int j1 = rk >= -1 ? 1 : -rk;
+                const int j2 = r - 1 <= pk ? k - 1 : p - r;
+                for (int j = j1; j <= j2; j++) {
+                    a[s2][j] = (a[s1][j] - a[s1][j - 1]) / ndu[pk + 1][rk + j];
+                    d += a[s2][j] * ndu[rk + j][pk];
+                }
+                if (r <= pk) {
+                    a[s2][k] = -a[s1][k - 1] / ndu[pk + 1][r];
+                    d += a[s2][k] * ndu[r][pk];
+                }
+                out[k * plane + (Py_ssize_t)r * m + s] = d;
+                const int t = s1;
+                s1 = s2;
+                s2 = t;
+            }
+        }
+    }
+    double factor = (double)p;
+    for (int k = 1; k <= n_top; k++) {
+        for (Py_ssize_t i = 0; i < plane; i++)
+            out[k * plane + i] *= factor;
+        factor *= (double)(p - k);
+    }
+    result = Py_NewRef(Py_None);
+done:
+    PyBuffer_Release(&bk);
+    PyBuffer_Release(&bsp);
+    PyBuffer_Release(&bu);
+    PyBuffer_Release(&bout);
+    return result;
+}
+
+/* ------------------------------------------------------------------ bracketed Newton */
+
+/* numpy's maximum of two floats: NaN-propagating (the first argument wins ties). */
+static inline double np_maximum(double a, double b) { return (a >= b || isnan(a)) ? a : b; }
+
+/* ph._newton_step_py: one step of the safeguarded Newton iteration for the n active elements
+ * (f, df their function values at xa; [a, b] their brackets). The bracket side of f's sign
+ * moves to xa; the Newton point xa - f/df is kept if it lies strictly inside the bracket with
+ * df > 0, else the bracket's middle; an element is done when |f| <= ftol, when the kept Newton
+ * step is at rounding level (2 eps max(1, |xa|)) or when the bracket has collapsed
+ * (4 eps max(1, |xa|)). Every element takes its step (but where |f| <= ftol); the finished
+ * ones are written to x[idx], the others moved to the front of xa, a, b, idx in order. */
+static PyObject *newton_step(PyObject *self, PyObject *args)
+{
+    Py_buffer bf, bdf, bxa, ba, bb, bidx, bx;
+    double ftol;
+    if (!PyArg_ParseTuple(args, "y*y*w*w*w*w*w*d", &bf, &bdf, &bxa, &ba, &bb, &bidx, &bx, &ftol))
+        return NULL;
+    PyObject *result = NULL;
+    const Py_ssize_t n = bf.len / (Py_ssize_t)sizeof(double);
+    const Py_ssize_t nx = bx.len / (Py_ssize_t)sizeof(double);
+    if (bf.len != n * (Py_ssize_t)sizeof(double) || bdf.len != bf.len || bxa.len < bf.len ||
+        ba.len < bf.len || bb.len < bf.len || bidx.len < n * (Py_ssize_t)sizeof(long long)) {
+        PyErr_SetString(PyExc_ValueError, "newton_step: inconsistent buffers");
+        goto done;
+    }
+    const double *f = bf.buf, *df = bdf.buf;
+    double *xa = bxa.buf, *a = ba.buf, *b = bb.buf, *x = bx.buf;
+    long long *idx = bidx.buf;
+    for (Py_ssize_t i = 0; i < n; i++)
+        if (idx[i] < 0 || idx[i] >= nx) {
+            PyErr_SetString(PyExc_IndexError, "newton_step: an index outside x");
+            goto done;
+        }
+    const double eps = 2.220446049250313e-16; /* np.finfo(float).eps */
+    Py_ssize_t kept = 0;
+    for (Py_ssize_t i = 0; i < n; i++) {
+        const double xi = xa[i], fi = f[i], dfi = df[i];
+        const int neg = fi < 0.0;
+        const double ai = neg ? xi : a[i];
+        const double bi = neg ? b[i] : xi;
+        double xn = xi - fi / dfi;
+        const int inside = (xn > ai) && (xn < bi) && (dfi > 0.0);
+        if (!inside)
+            xn = 0.5 * (ai + bi);
+        const double scale = np_maximum(1.0, fabs(xi));
+        const int small = fabs(fi) <= ftol;
+        const int finished = small || (inside && fabs(xn - xi) <= (2.0 * eps) * scale) ||
+                             (bi - ai <= (4.0 * eps) * scale);
+        const double xnew = small ? xi : xn;
+        if (finished) {
+            x[idx[i]] = xnew;
+        } else {
+            xa[kept] = xnew;
+            a[kept] = ai;
+            b[kept] = bi;
+            idx[kept] = idx[i];
+            kept++;
+        }
+    }
+    result = PyLong_FromSsize_t(kept);
+done:
+    PyBuffer_Release(&bf);
+    PyBuffer_Release(&bdf);
+    PyBuffer_Release(&bxa);
+    PyBuffer_Release(&ba);
+    PyBuffer_Release(&bb);
+    PyBuffer_Release(&bidx);
+    PyBuffer_Release(&bx);
+    return result;
+}
+
 static PyMethodDef methods[] = {
     {"segment_distances", segment_distances, METH_VARARGS,
      "distance._segment_distances_py, compiled."},
+    {"basis_derivatives", basis_derivatives, METH_VARARGS,
+     "bspline._basis_derivatives_py, compiled."},
+    {"newton_step", newton_step, METH_VARARGS, "ph._newton_step_py, compiled."},
     {NULL, NULL, 0, NULL},
 };
 
 static struct PyModuleDef module = {
-    PyModuleDef_HEAD_INIT, "_kernels", "Compiled kernel of the geometry stage (distance.py).",
+    PyModuleDef_HEAD_INIT, "_kernels", "Compiled kernels of the geometry stage (distance.py, bspline.py, ph.py).",
     -1, methods,
 };
 

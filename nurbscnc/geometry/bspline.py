@@ -14,6 +14,12 @@ from math import comb
 
 import numpy as np
 
+from nurbscnc.geometry.compiled import kernels as _kernels
+
+#: Largest degree the compiled basis derivatives take (``BASIS_MAX_DEGREE`` of
+#: geometry/_kernels.c); above it the Python loops run.
+_KERNEL_MAX_DEGREE = 15
+
 
 def as_params(u) -> np.ndarray:
     """Parameters as a 1-D float64 array (a scalar becomes an array of length 1)."""
@@ -74,13 +80,34 @@ def basis_derivatives(
 
     Returns ``(spans, ders)``: ``spans`` (m,) from :func:`find_span`, and ``ders`` of shape
     (m, n_ders + 1, degree + 1) with ``ders[s, k, j]`` = d^k N_{spans[s]-p+j, p}/du^k (u_s).
-    Derivatives of order > p are zero.
+    Derivatives of order > p are zero. :func:`_basis_derivatives_py`, compiled where the
+    geometry's kernels were built (the same numbers bit for bit, without a Python loop per
+    (j, r) pair: most calls are for a few parameters).
     """
     knots = np.asarray(knots, dtype=float)
     u = as_params(u)
+    spans = find_span(knots, degree, u)
+    if _kernels is None or not 0 <= degree <= _KERNEL_MAX_DEGREE:
+        return spans, _basis_derivatives_py(knots, degree, u, spans, n_ders)
+    ders_t = np.empty((n_ders + 1, degree + 1, u.size))  # [k, r, sample], as the reference
+    _kernels.basis_derivatives(
+        np.ascontiguousarray(knots),
+        np.ascontiguousarray(spans, dtype=np.int64),
+        np.ascontiguousarray(u),
+        int(degree),
+        int(n_ders),
+        ders_t,
+    )
+    return spans, ders_t.transpose(2, 0, 1)
+
+
+def _basis_derivatives_py(
+    knots: np.ndarray, degree: int, u: np.ndarray, spans: np.ndarray, n_ders: int
+) -> np.ndarray:
+    """The ``ders`` of :func:`basis_derivatives` for parameters ``u`` in knot spans ``spans``
+    (P&T A2.3, vectorised over the samples)."""
     p = degree
     m = u.size
-    spans = find_span(knots, p, u)
 
     # Arrays keep the sample axis last so every per-(j, r) slice is contiguous.
     # ndu[j, r] (r < j): knot differences; ndu[r, j] (r <= j): basis functions of degree j.
@@ -127,8 +154,7 @@ def basis_derivatives(
     for k in range(1, n_top + 1):
         ders_t[k] *= factor  # p!/(p-k)!
         factor *= p - k
-    ders = ders_t.transpose(2, 0, 1)
-    return spans, ders
+    return ders_t.transpose(2, 0, 1)
 
 
 # ---------------------------------------------------------------------------------------------

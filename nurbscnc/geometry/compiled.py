@@ -1,10 +1,12 @@
 """The geometry stage's compiled kernel, or None.
 
 ``setup.py`` builds :mod:`nurbscnc.geometry._kernels` from ``_kernels.c`` where a C compiler
-is found (optional: without one the package installs anyway). Its one kernel, the
-point-to-segments distance (:func:`nurbscnc.geometry.distance.segment_distances`), keeps its
-Python reference implementation, which gives the same numbers bit for bit and runs where
-``kernels`` is None (tests/test_plan_kernels.py compares the two). A module of its own,
+is found (optional: without one the package installs anyway). Each of its kernels, the
+point-to-segments distance (:func:`nurbscnc.geometry.distance.segment_distances`), the
+B-spline basis derivatives (:func:`nurbscnc.geometry.bspline.basis_derivatives`) and the step
+of the PH quintics' safeguarded Newton iteration (:func:`nurbscnc.geometry.ph.bracketed_newton`),
+keeps its Python reference implementation, which gives the same numbers bit for bit and runs
+where ``kernels`` is None (tests/test_plan_kernels.py compares the two). A module of its own,
 apart from :mod:`nurbscnc.plan.compiled`, so that geometry imports nothing of the plan."""
 
 try:

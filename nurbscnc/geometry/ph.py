@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from nurbscnc.errors import GeometryError
+from nurbscnc.geometry.compiled import kernels as _kernels
 from nurbscnc.geometry.segments import PLANE_AXES, frozen_array, vec3
 
 _EPS = np.finfo(float).eps
@@ -31,6 +32,9 @@ def _binomials(n: int) -> np.ndarray:
 
 
 _BINOM = {4: frozen_array(_binomials(4)), 5: frozen_array(_binomials(5))}
+#: The exponents k and n − k of the Bernstein basis of degree n (made once: the basis is
+#: evaluated at every Newton step of the foot-point searches).
+_POWERS = {n: (frozen_array(np.arange(n + 1)), frozen_array(n - np.arange(n + 1))) for n in (4, 5)}
 #: 64-point Gauss–Legendre rule on [0, 1] (nodes, weights), for the bending energy.
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(64)
 _GL_X = frozen_array(0.5 * (_GL_X + 1.0))
@@ -40,8 +44,8 @@ _GL_W = frozen_array(0.5 * _GL_W)
 def _bernstein(xi: np.ndarray, n: int) -> np.ndarray:
     """Bernstein basis B_k^n(ξ), k = 0..n; shape ``xi.shape + (n + 1,)``."""
     x = xi[..., None]
-    k = np.arange(n + 1)
-    return _BINOM[n] * x**k * (1.0 - x) ** (n - k)
+    k, n_k = _POWERS[n]
+    return _BINOM[n] * x**k * (1.0 - x) ** n_k
 
 
 def _as_xi(xi) -> np.ndarray:
@@ -55,36 +59,59 @@ def bracketed_newton(fun, lo, hi, x0, ftol: float = 0.0, max_iter: int = 200) ->
     ≤ 0 at ``lo`` and ≥ 0 at ``hi`` (one sign change in the bracket). A Newton step that leaves
     the current bracket (or f′ ≤ 0) is replaced by the bisection of the bracket, so convergence
     never depends on the starting values ``x0``. An element stops when |f| ≤ ``ftol``, when the
-    Newton step is at rounding level, or when the bracket has collapsed.
+    Newton step is at rounding level, or when the bracket has collapsed (the step's
+    bookkeeping: :func:`_newton_step_py`, compiled where the geometry's kernels were built).
     """
     lo = np.array(lo, dtype=float)
     hi = np.array(hi, dtype=float)
     x = np.clip(np.array(x0, dtype=float), lo, hi)
-    idx = np.arange(x.size)
+    # The active elements (their first ``n`` entries): x, bracket and index, compacted as
+    # elements finish (each element's arithmetic is the same whichever others are active).
+    xa, a, b = x.copy(), np.ascontiguousarray(lo), np.ascontiguousarray(hi)
+    idx = np.arange(x.size, dtype=np.int64)
+    step = _newton_step_py if _kernels is None else _kernels.newton_step
+    n = x.size
     for _ in range(max_iter):
-        if idx.size == 0:
+        if n == 0:
             break
-        xa = x[idx]
-        f, df = fun(xa, idx)
-        neg = f < 0.0
-        lo[idx[neg]] = xa[neg]
-        hi[idx[~neg]] = xa[~neg]
-        a, b = lo[idx], hi[idx]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            xn = xa - f / df
-        inside = (xn > a) & (xn < b) & (df > 0.0)
-        xn = np.where(inside, xn, 0.5 * (a + b))
-        scale = np.maximum(1.0, np.abs(xa))
-        done = (
-            (np.abs(f) <= ftol)
-            | (inside & (np.abs(xn - xa) <= 2.0 * _EPS * scale))
-            | (b - a <= 4.0 * _EPS * scale)
-        )
-        # A Newton step at rounding level is still taken (it is the better value).
-        step = ~(np.abs(f) <= ftol)
-        x[idx[step]] = xn[step]
-        idx = idx[~done]
+        f, df = fun(xa[:n], idx[:n])
+        f = np.ascontiguousarray(f, dtype=np.float64)
+        df = np.ascontiguousarray(df, dtype=np.float64)
+        n = step(f, df, xa, a, b, idx, x, float(ftol))
+    x[idx[:n]] = xa[:n]
     return x
+
+
+def _newton_step_py(f, df, xa, a, b, idx, x, ftol: float) -> int:
+    """One step of :func:`bracketed_newton` for its ``f.size`` active elements (values ``f``,
+    ``df`` at ``xa``, brackets ``a``, ``b``): the bracket's side of f's sign moves to xa, the
+    Newton point xa − f/f′ is taken if strictly inside with f′ > 0, else the bracket's middle;
+    an element is done at |f| ≤ ``ftol``, at a Newton step of rounding level
+    (2 ε max(1, |xa|)) or a collapsed bracket (4 ε max(1, |xa|)). Every element takes its
+    step (but where |f| ≤ ``ftol``); the finished ones are written to ``x[idx]``, the others
+    moved to the front of ``xa``, ``a``, ``b``, ``idx`` in order. Returns their number."""
+    n = f.size
+    xs, lo, hi = xa[:n], a[:n], b[:n]
+    neg = f < 0.0
+    lo = np.where(neg, xs, lo)
+    hi = np.where(neg, hi, xs)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        xn = xs - f / df
+    inside = (xn > lo) & (xn < hi) & (df > 0.0)
+    xn = np.where(inside, xn, 0.5 * (lo + hi))
+    scale = np.maximum(1.0, np.abs(xs))
+    small = np.abs(f) <= ftol
+    done = (
+        small | (inside & (np.abs(xn - xs) <= 2.0 * _EPS * scale)) | (hi - lo <= 4.0 * _EPS * scale)
+    )
+    # A Newton step at rounding level is still taken (it is the better value).
+    xn = np.where(small, xs, xn)
+    x[idx[:n][done]] = xn[done]
+    going = ~done
+    m = int(np.count_nonzero(going))
+    idx[:m] = idx[:n][going]
+    xa[:m], a[:m], b[:m] = xn[going], lo[going], hi[going]
+    return m
 
 
 @dataclass(frozen=True, eq=False)
@@ -272,10 +299,12 @@ class PHQuintic:
             block = q[start : start + chunk]
             nearest[start : start + chunk] = np.argmin(np.abs(rs[None, :] - block[:, None]), axis=1)
 
-        def g(x, idx):
+        def g(x, idx, q=q):
+            # r′ = w² and r″ = 2ww′ (hodograph, second_derivative) from one w.
             d = self.point(x) - q[idx]
-            r1 = self.hodograph(x)
-            r2 = self.second_derivative(x)
+            w = self.preimage(x)
+            r1 = w**2
+            r2 = 2.0 * w * self.preimage_derivative(x)
             return (np.conj(d) * r1).real, np.abs(r1) ** 2 + (np.conj(d) * r2).real
 
         all_idx = np.arange(q.size)
@@ -292,9 +321,10 @@ class PHQuintic:
         xi = x_mid.copy()
         sel = np.flatnonzero((left | right) & (b > a))
         if sel.size:
+            q_sel = q[sel]
 
             def g_sel(x, idx):
-                return g(x, sel[idx])
+                return g(x, idx, q_sel)
 
             xi[sel] = bracketed_newton(g_sel, a[sel], b[sel], x_mid[sel])
         return xi.reshape(shape)
