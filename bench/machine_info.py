@@ -122,3 +122,16 @@ def corpus_program(relative: str) -> Path | None:
         p for p in corpus.rglob(Path(relative).name) if p.as_posix().endswith("/" + relative)
     )
     return found[0] if found else None
+
+
+def linuxcnc_version() -> str | None:
+    """The installed LinuxCNC package and version (``dpkg-query``), None without it."""
+    try:
+        return subprocess.run(
+            ["dpkg-query", "-W", "-f", "${Package} ${Version}", "linuxcnc-uspace"],
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return None

@@ -57,7 +57,7 @@ from contour import (  # noqa: E402
     settle_waits,
     slow_drops,
 )
-from machine_info import corpus_program, run_info, use_bytecode  # noqa: E402
+from machine_info import corpus_program, linuxcnc_version, run_info, use_bytecode  # noqa: E402
 
 LINUXCNC_SIM = Path(
     os.environ.get("LINUXCNC_SIM", "/work/shared/tools/linuxcnc-sim/run_linuxcnc.sh")
@@ -280,18 +280,6 @@ def nurbscnc_case(case: Case, path: Path, programmed, block, variant: list[str],
 
 def linuxcnc_available() -> bool:
     return LINUXCNC_SIM.is_file() and shutil.which("linuxcnc") is not None
-
-
-def linuxcnc_version() -> str | None:
-    try:
-        return subprocess.run(
-            ["dpkg-query", "-W", "-f", "${Package} ${Version}", "linuxcnc-uspace"],
-            capture_output=True,
-            text=True,
-            check=True,
-        ).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return None
 
 
 def linuxcnc_config() -> dict:

@@ -58,7 +58,7 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
 
-from machine_info import run_info, use_bytecode  # noqa: E402
+from machine_info import linuxcnc_version, run_info, use_bytecode  # noqa: E402
 
 SIM_DIR = HERE / "linuxcnc_sim_a"
 LINUXCNC_SIM_A = SIM_DIR / "run_linuxcnc_a.sh"
@@ -248,18 +248,6 @@ def g93_programmed_s(text: str) -> float:
 
 
 # --------------------------------------------------------------------------- LinuxCNC
-
-
-def linuxcnc_version() -> str | None:
-    try:
-        return subprocess.run(
-            ["dpkg-query", "-W", "-f", "${Package} ${Version}", "linuxcnc-uspace"],
-            capture_output=True,
-            text=True,
-            check=True,
-        ).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return None
 
 
 def linuxcnc_available() -> bool:

@@ -365,6 +365,21 @@ class Motion:
             raise self.error("G95 feed per revolution with spindle speed S0")
         return self.feed_mm_s
 
+    def straight_feed_mm_s(self, start, end, words: dict, rapid: bool) -> float:
+        """The feed [mm/s] along X Y Z of a straight move from machine ``start`` to ``end``
+        [mm]: 0 for a rapid, F under G94 (the mm/min set by the last F), else
+        :meth:`move_feed_mm_s` of its length; a feed move without a feed is refused."""
+        if rapid:
+            return 0.0
+        m = self.m
+        if m.feed_mode == G_94:
+            feed = m.feed_mm / 60.0
+        else:
+            feed = self.move_feed_mm_s(math.dist(start, end), words)
+        if feed <= 0.0:
+            raise self.error("G1 move with zero feed (set F first)", 1)
+        return feed
+
     # -- straight moves and arcs -------------------------------------------------------------
     def straight(self, words: dict, machine_coords: bool) -> None:
         coords = self.coords
@@ -384,14 +399,7 @@ class Motion:
                 self.rotary_straight(start, end, abc1, words, rapid)
                 self.prog = end_prog
                 return
-        feed = 0.0
-        if not rapid:
-            if m.feed_mode == G_94:
-                feed = m.feed_mm / 60.0
-            else:
-                feed = self.move_feed_mm_s(math.dist(start, end), words)
-            if feed <= 0.0:
-                raise self.error("G1 move with zero feed (set F first)", 1)
+        feed = self.straight_feed_mm_s(start, end, words, rapid)
         if end != start or self.comp_exit is not None:  # the exit move may not be zero
             line = self.line_no if self.source is self.main else self.main_line()
             self.emit(

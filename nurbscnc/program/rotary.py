@@ -27,7 +27,7 @@ import math
 
 from nurbscnc.errors import UnsupportedError
 from nurbscnc.geometry.segments import Line, Rotate
-from nurbscnc.program.codes import G_93, G_94, G_95
+from nurbscnc.program.codes import G_93, G_95
 from nurbscnc.program.coords import SYSTEM_NAMES
 from nurbscnc.program.words import MAX_ANGLE_DEG
 
@@ -188,14 +188,7 @@ class RotaryAxes:
             self.segments.append(Rotate(tuple(origin), abc0, abc1, feed, line, rapid))
             self.comp_exit = None
         else:
-            feed = 0.0
-            if not rapid:
-                if m.feed_mode == G_94:
-                    feed = m.feed_mm / 60.0
-                else:
-                    feed = self.move_feed_mm_s(math.dist(start, end), words)
-                if feed <= 0.0:
-                    raise self.error("G1 move with zero feed (set F first)", 1)
+            feed = self.straight_feed_mm_s(start, end, words, rapid)
             self.emit(
                 Line(
                     tuple(start), tuple(end), feed, line, rapid, m.blend_mm, m.naive_mm, abc0 + abc1
