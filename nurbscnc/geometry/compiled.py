@@ -13,3 +13,9 @@ try:
     from nurbscnc.geometry import _kernels as kernels
 except ImportError:  # pragma: no cover - a build without a C compiler
     kernels = None
+
+#: The kernels this source expects: a module built from an older ``_kernels.c`` (a checkout
+#: updated without ``make install``) lacks some, and is then not used at all.
+KERNELS = ("segment_distances", "basis_derivatives", "newton_step")
+if kernels is not None and not all(hasattr(kernels, name) for name in KERNELS):
+    kernels = None

@@ -152,40 +152,31 @@ class Accumulator:
             self.rapids_max = max(self.rapids_max, float(resp.contour_mm[~cutting].max()) * 1e3)
         self.count += cutting.size
 
+    #: The accumulator's scalars, as :meth:`state` keeps them after the lists.
+    SCALARS = (
+        "worst",
+        "c_max",
+        "c_sq",
+        "eq29_max",
+        "rapids_max",
+        "c_n",
+        "bounded",
+        "real",
+    )
+
     def state(self) -> tuple:
         """Everything :meth:`add` has gathered so far (the per-window arrays shared, not
         copied): what :meth:`restore` puts back, to resume a check after a prefix of its
         windows whose samples a re-plan left alike (:class:`~nurbscnc.plan.check.Checker`)."""
-        return (
-            self.count,
-            list(self.over),
-            list(self.runs),
-            self.last_piece,
-            self.restart.copy(),
-            self.worst,
-            self.c_max,
-            self.c_sq,
-            self.eq29_max,
-            self.rapids_max,
-            self.c_n,
-            self.bounded,
-            self.real,
-        )
+        lists = (self.count, list(self.over), list(self.runs), self.last_piece)
+        return (*lists, self.restart.copy(), *(getattr(self, k) for k in self.SCALARS))
 
     def restore(self, state: tuple) -> None:
         """Back to a :meth:`state` (its lists and counts copied: the state stays reusable)."""
         (self.count, over, runs, self.last_piece, restart, *rest) = state
         self.over, self.runs, self.restart = list(over), list(runs), restart.copy()
-        (
-            self.worst,
-            self.c_max,
-            self.c_sq,
-            self.eq29_max,
-            self.rapids_max,
-            self.c_n,
-            self.bounded,
-            self.real,
-        ) = rest
+        for key, value in zip(self.SCALARS, rest, strict=True):
+            setattr(self, key, value)
 
     def check(self) -> Check:
         """The :class:`Check` of everything added (no per-sample arrays)."""

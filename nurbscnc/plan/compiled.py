@@ -13,6 +13,12 @@ try:
 except ImportError:  # pragma: no cover - a build without a C compiler
     kernels = None
 
+#: The kernels this source expects: a module built from an older ``_kernels.c`` (a checkout
+#: updated without ``make install``) lacks some, and is then not used at all.
+KERNELS = ("peak_speeds", "gated_rise", "gated_rise_merged", "time_at_length")
+if kernels is not None and not all(hasattr(kernels, name) for name in KERNELS):
+    kernels = None
+
 
 def as_float64(x) -> np.ndarray:
     """``x`` as a C-contiguous float64 array (the compiled kernels read its bytes)."""
