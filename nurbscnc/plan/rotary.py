@@ -136,23 +136,36 @@ class Holds:
         return self.abc0_deg[h] + d * frac[:, None]
 
 
+def machine_limits(machine) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The machine's rotary limits (3,) each, in :data:`AXES` order: V [deg/s], A [deg/s²],
+    J [deg/s³]; inf for an axis the machine lacks."""
+    return tuple(
+        np.array([getattr(machine.rotary_axes.get(n), f, np.inf) for n in AXES]) for f in _LIMITS
+    )
+
+
+def rotate_shares(cols, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Of the rotary-only moves at rows ``idx`` of the segment columns ``cols``: their turn
+    ΔA ΔB ΔC (m, 3) [deg], length L = √(ΔA² + ΔB² + ΔC²) (m,) [deg] and each axis's share
+    |ΔA_i| / L (m, 3) (0 for a move of no length)."""
+    d = cols.abc_end_deg[idx] - cols.abc_start_deg[idx]
+    length = np.sqrt(np.einsum("ij,ij->i", d, d))
+    return d, length, np.abs(d) / np.where(length > 0.0, length, 1.0)[:, None]
+
+
 def _axis_arrays(machine, used: np.ndarray, lines: np.ndarray):
-    """The machine's rotary limits (3,) each: V [deg/s], A [deg/s²], J [deg/s³] (inf for an
-    axis the machine lacks); PlanningError at the first of the moves ``used`` (m, 3) (which
-    axes each turns; ``lines`` (m,) their source lines) that turns an axis it lacks."""
-    v, a, j = np.full(3, np.inf), np.full(3, np.inf), np.full(3, np.inf)
+    """:func:`machine_limits`; PlanningError at the first of the moves ``used`` (m, 3)
+    (which axes each turns; ``lines`` (m,) their source lines) that turns an axis the
+    machine lacks."""
     for i, name in enumerate(AXES):
-        ax = machine.rotary_axes.get(name)
-        if ax is not None:
-            v[i], a[i], j[i] = ax.v_max_deg_s, ax.a_max_deg_s2, ax.j_max_deg_s3
-        elif used[:, i].any():
+        if name not in machine.rotary_axes and used[:, i].any():
             r = int(np.argmax(used[:, i]))
             raise PlanningError(
                 f"the machine has no {name.upper()} axis (no [axis_limits.{name}] in its "
                 "profile); this move turns it",
                 SourcePos(int(lines[r]), 1, ""),
             )
-    return v, a, j
+    return machine_limits(machine)
 
 
 def plan_holds(segments, machine, cols) -> Holds:
@@ -171,9 +184,7 @@ def plan_holds(segments, machine, cols) -> Holds:
     if m == 0:
         z = np.zeros(0)
         return Holds(idx, line, abc0, abc1, z, None, idx, z.astype(np.int64))
-    d = abc1 - abc0
-    length = np.sqrt(np.einsum("ij,ij->i", d, d))
-    share = np.abs(d) / np.where(length > 0.0, length, 1.0)[:, None]
+    _, length, share = rotate_shares(cols, idx)
     v_i, a_i, j_i = _axis_arrays(machine, share > 0.0, line)
     v, a, j, axis = rotary_path_limits(share, v_i, a_i, j_i)
     feed = np.array([0.0 if s.rapid else float(s.feed_deg_s) for s in rot])
@@ -282,7 +293,7 @@ def rotary_time_bounds_s(segments, machine, cols) -> np.ndarray:
     refuses that move). ``cols``: the segments'
     :class:`~nurbscnc.program.columns.SegmentColumns`."""
     d = np.abs(cols.abc_end_deg - cols.abc_start_deg)
-    v = np.array([getattr(machine.rotary_axes.get(n), "v_max_deg_s", np.inf) for n in AXES])
+    v = machine_limits(machine)[0]
     t = (d / v[None, :]).max(axis=1) if len(segments) else np.zeros(0)
     rot = cols.rows(ROTATE)
     if rot.size:
@@ -304,11 +315,8 @@ def rotate_bounds_s(segments, machine, cols) -> np.ndarray:
     if not idx.size:
         return np.zeros(0)
     rot = list(map(segments.__getitem__, idx.tolist()))
-    d = cols.abc_end_deg[idx] - cols.abc_start_deg[idx]
-    length = np.sqrt(np.einsum("ij,ij->i", d, d))
-    share = np.abs(d) / np.where(length > 0.0, length, 1.0)[:, None]
-    lim = [[getattr(machine.rotary_axes.get(n), f, np.inf) for n in AXES] for f in _LIMITS]
-    v, a, _, _ = rotary_path_limits(share, *lim)
+    _, length, share = rotate_shares(cols, idx)
+    v, a, _, _ = rotary_path_limits(share, *machine_limits(machine))
     feed = np.array([np.inf if s.rapid else s.feed_deg_s for s in rot], dtype=float)
     v = np.minimum(v, feed)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # a tiny share: inf
@@ -342,6 +350,5 @@ def rotary_feed_caps_mm_s(segments, machine, cols) -> np.ndarray:
     moving = turning[length > 0.0]
     if moving.size:
         rate = np.abs(abc1[moving] - abc0[moving]) / length[length > 0.0, None]
-        lim = [[getattr(machine.rotary_axes.get(n), f, np.inf) for n in AXES] for f in _LIMITS]
-        cap[moving] = rotary_path_limits(rate, *lim)[0]
+        cap[moving] = rotary_path_limits(rate, *machine_limits(machine))[0]
     return cap
