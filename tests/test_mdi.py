@@ -291,3 +291,18 @@ def test_user_m_timeout_option_then_profile_then_default(here):
     assert user_m_timeout_s(keyed, 7.0) == 7.0
     r = run_cli(["profile", "show", *MACHINE, "--set", "program.user_m_timeout_s=0"])
     assert r.exit_code == 2 and "program.user_m_timeout_s" in r.stderr, r.output
+
+
+def test_mdi_opens_the_port_once(here, card, monkeypatch):
+    """The card's position is read and the move streamed on one opening of the port."""
+    from nurbscnc.output.stream import sender
+
+    sim, port = card
+    opened, real = [], sender.open_port
+    monkeypatch.setattr(
+        sender, "open_port", lambda p, *a, **k: opened.append(p) or real(p, *a, **k)
+    )
+    r = mdi(port, "G91 G0 X1")
+    assert r.exit_code == 0, r.output
+    assert opened == [port]
+    assert sim.position.tolist() == [START_STEPS[0] + 800, *START_STEPS[1:]]

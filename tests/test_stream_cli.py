@@ -495,8 +495,8 @@ def test_every_planning_option_reaches_the_streams_planner_as_runs(tmp_path, mon
     monkeypatch.setattr(app_stream, "stream_job", planned("stream"))
     runner = CliRunner()
     runner.invoke(main, ["run", str(nc), "-o", str(tmp_path / "p.csv"), *NON_DEFAULT[key]])
-    # --zero: planned from machine zero without asking a card where it stands
-    runner.invoke(main, ["stream", str(nc), "--port", "/dev/null", "--zero", *NON_DEFAULT[key]])
+    with card_on("pty") as (_card, ep):
+        runner.invoke(main, ["stream", str(nc), "--port", ep.path, *NON_DEFAULT[key]])
     assert seen["stream"] == seen["run"] != RunOptions()
 
 
@@ -522,3 +522,40 @@ def test_stream_precompensate_executes_the_compensated_reference(tmp_path):
     n = max(len(executed), len(uncompensated))
     pad = lambda steps: np.vstack([steps, np.repeat(steps[-1:], n - len(steps), axis=0)])  # noqa: E731
     assert np.abs(pad(executed) - pad(uncompensated)).max() > 1
+
+
+def _counting_opens(monkeypatch) -> list:
+    """Every port opened through the sender's ``open_port`` from now on (its path)."""
+    from nurbscnc.output.stream import sender
+
+    opened, real = [], sender.open_port
+
+    def counted(port, *args, **kwargs):
+        opened.append(port)
+        return real(port, *args, **kwargs)
+
+    monkeypatch.setattr(sender, "open_port", counted)
+    return opened
+
+
+def test_stream_opens_the_port_once_to_read_the_card_and_stream(tmp_path, monkeypatch):
+    """Reading where the card stands and streaming share one opening of the port: a port
+    opened anew may reset a card (DTR on open) or be taken by another program between."""
+    nc = tmp_path / "part.nc"
+    nc.write_text(GOOD)
+    opened = _counting_opens(monkeypatch)
+    with card_on("pty") as (card, ep):
+        result = run_stream([nc, "--port", ep.path, "--json"])
+    assert result.exit_code == 0, result.output
+    assert opened == [ep.path]
+    assert card.position.tolist() == [8000, 0, 0]
+
+
+def test_stream_of_a_bad_program_never_opens_the_port(tmp_path, monkeypatch):
+    nc = tmp_path / "part.nc"
+    nc.write_text(LATE_ERROR)
+    opened = _counting_opens(monkeypatch)
+    with card_on("pty") as (card, ep):
+        result = run_stream([nc, "--port", ep.path])
+    assert result.exit_code == 2, result.output
+    assert opened == [] and card.report()["executed_periods"] == 0

@@ -205,14 +205,14 @@ def _wait_bounded(proc, timeout_s: float, aborted, poll_s: float) -> int | None:
                 return None
 
 
-def card_at_rest(link: dict) -> list[int]:
-    """The card's position [steps], read with the port of ``link`` (``port``, ``baud``,
-    ``allow_url``, ``timeout_s``) opened and closed again: where ``mdi``, ``jog`` and
-    ``stream`` start. StreamError (nothing sent) when a stream runs on the card (FILLING,
-    RUNNING, HOLD) or it is in ALARM."""
-    from nurbscnc.errors import StreamError
-    from nurbscnc.output.stream import protocol as p
-    from nurbscnc.output.stream.sender import card_position, open_port
+@contextlib.contextmanager
+def card_port(link: dict):
+    """The card's port (``link``: ``port``, ``baud``, ``allow_url``, ``timeout_s``), opened
+    once for a whole command and closed at its end: reading where the card stands and
+    streaming share it, since a port opened anew may reset a card (an Arduino-style board
+    resets when the host asserts DTR on open) and another program could take the port
+    between two openings."""
+    from nurbscnc.output.stream.sender import open_port
 
     ser = open_port(
         link["port"],
@@ -221,10 +221,21 @@ def card_at_rest(link: dict) -> list[int]:
         write_timeout_s=link["timeout_s"],
     )
     try:
-        status = card_position(ser, None, link["timeout_s"])
+        yield ser
     finally:
         with contextlib.suppress(Exception):
             ser.close()
+
+
+def card_at_rest(ser, timeout_s: float) -> list[int]:
+    """The card's position [steps], read on the open port ``ser`` (replies awaited at most
+    ``timeout_s``): where ``mdi``, ``jog`` and ``stream`` start. StreamError (nothing sent)
+    when a stream runs on the card (FILLING, RUNNING, HOLD) or it is in ALARM."""
+    from nurbscnc.errors import StreamError
+    from nurbscnc.output.stream import protocol as p
+    from nurbscnc.output.stream.sender import card_position
+
+    status = card_position(ser, None, timeout_s)
     state = p.CardState(status.state)
     if state in (p.CardState.FILLING, p.CardState.RUNNING, p.CardState.HOLD):
         raise StreamError(f"the card is {state.name}: a stream runs on it; nothing was sent")

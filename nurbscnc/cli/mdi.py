@@ -106,7 +106,7 @@ def _run(program, blocks, jog, port, allow_url, baud, batch, timeout_s, **kwargs
     from nurbscnc.app.stream import progress_position
     from nurbscnc.app.varfile import program_inputs, user_m_timeout_s, write_back
     from nurbscnc.cli.common import load_machine_cli
-    from nurbscnc.cli.controls import card_at_rest
+    from nurbscnc.cli.controls import card_at_rest, card_port
 
     settings = dict(kwargs)
     as_json, quiet = settings.pop("as_json"), settings.pop("quiet")
@@ -129,12 +129,13 @@ def _run(program, blocks, jog, port, allow_url, baud, batch, timeout_s, **kwargs
         "user_m_timeout_s": user_m_timeout_s(mach, timeout_m_s),
         "mach": mach,
     }
-    steps = card_at_rest(link)
-    if jog is not None:
-        blocks = [jog_block(jog[0], steps, mach, jog[1])]
-    job = mdi_job(blocks, mach, inputs, steps, options, tools, optional_stop)
-    link["where"] = progress_position(mach, inputs, job.program)
-    final = _execute(job, link, quiet, as_json) if job.moves else list(steps)
+    with card_port(link) as link["ser"]:
+        steps = card_at_rest(link["ser"], timeout_s)
+        if jog is not None:
+            blocks = [jog_block(jog[0], steps, mach, jog[1])]
+        job = mdi_job(blocks, mach, inputs, steps, options, tools, optional_stop)
+        link["where"] = progress_position(mach, inputs, job.program)
+        final = _execute(job, link, quiet, as_json) if job.moves else list(steps)
     if not job.moves:
         _run_stops(job.stops, link)
     written = write_back(inputs, job.program)

@@ -27,6 +27,7 @@ from nurbscnc.cli.common import load_machine_cli, nothing_to_send
 from nurbscnc.cli.controls import (
     Operator,
     card_at_rest,
+    card_port,
     key_reader,
     routed_signals,
     user_m_runner,
@@ -240,25 +241,29 @@ def stream(
             inputs = setup.inputs
             if setup.still():  # no motion: it ran, its parameters persist
                 return nothing_to_send(program, as_json, write_back(inputs, setup.program))
-            here = None if zero else card_at_rest(link)
-            job, pulses, prog = setup.plan(here, from_line, optional_stop, feed_override / 100.0)
-        try:
-            if job is None:
-                if from_line is not None or feed_override != 100:
-                    raise ConfigError(_needs_the_job(settings))
-                if pulses is None:
-                    pulses, mach = load_pulse_program(program, **settings)
-                total = pulses.periods
-            else:
-                total = int(round(job.plan.cycle_time_s / job.period_s / job.override))
-            operator.attach_job(job)
-            link["where"] = progress_position(mach, inputs, prog)
-            reports = _send(link, operator, job, pulses, total, zero, quiet, as_json)
-            if inputs is not None:  # the program ran to its end: its offsets persist
-                write_back(inputs, prog)
-        finally:  # the planner thread stopped before the process may exit
-            if job is not None and job.feed is not None:
-                job.feed.close()
+        else:  # read and checked before the port
+            pulses, mach = load_pulse_program(program, **settings)
+        with card_port(link) as link["ser"]:
+            if not points_file:
+                here = None if zero else card_at_rest(link["ser"], timeout_s)
+                job, pulses, prog = setup.plan(
+                    here, from_line, optional_stop, feed_override / 100.0
+                )
+            try:
+                if job is None:
+                    if from_line is not None or feed_override != 100:
+                        raise ConfigError(_needs_the_job(settings))
+                    total = pulses.periods
+                else:
+                    total = int(round(job.plan.cycle_time_s / job.period_s / job.override))
+                operator.attach_job(job)
+                link["where"] = progress_position(mach, inputs, prog)
+                reports = _send(link, operator, job, pulses, total, zero, quiet, as_json)
+                if inputs is not None:  # the program ran to its end: its offsets persist
+                    write_back(inputs, prog)
+            finally:  # the planner thread stopped before the process may exit
+                if job is not None and job.feed is not None:
+                    job.feed.close()
     parameters = prog.parameters if inputs is not None and inputs.var_path else None
     _print_report(program, job, reports, as_json, mach, parameters)
 
@@ -278,13 +283,13 @@ def _needs_the_job(settings) -> str:
 def _send(
     link: dict, operator: Operator, job, pulses, total: int, zero: bool, quiet: bool, as_json: bool
 ) -> list:
-    """Open the card's port (``link``: the port options, the user M-codes' timeout
-    ``user_m_timeout_s`` and the machine ``mach``, for positions in mm), stream the ``job``
-    (through the controller's section loop) or the ``pulses`` without one, with the
-    operator's keys and signals routed, and close the port; returns the sender's reports (one
-    per part of the stream)."""
+    """Stream the ``job`` (through the controller's section loop) or the ``pulses`` without
+    one on the card's open port (``link``: ``ser``, the link options, the user M-codes'
+    timeout ``user_m_timeout_s`` and the machine ``mach``, for positions in mm), with the
+    operator's keys and signals routed; returns the sender's reports (one per part of the
+    stream)."""
     from nurbscnc.controller.run import run_job
-    from nurbscnc.output.stream.sender import Sender, SenderOptions, open_port
+    from nurbscnc.output.stream.sender import Sender, SenderOptions
 
     options = SenderOptions(
         batch_periods=link["batch"],
@@ -292,39 +297,29 @@ def _send(
         lead_periods=link["lead"],
         stall_limit_s=link["stall_limit_s"],
     )
-    ser = open_port(
-        link["port"],
-        baud=link["baud"],
-        allow_url=link["allow_url"],
-        write_timeout_s=link["timeout_s"],
-        read_wait_s=options.read_wait_s,
-    )
+    ser = link["ser"]
     show = not (quiet or as_json) and console.err.is_terminal
     keys = not as_json and sys.stdin is not None and sys.stdin.isatty()
-    try:
-        with (
-            _progress_bar(show, total, keys, link.get("where")) as progress,
-            key_reader(operator, keys),
-        ):
-            sender = Sender(ser, options, progress=progress)
-            operator.attach(sender)
-            with routed_signals(operator, ("SIGINT", "SIGTERM")):
-                if job is None:
-                    return [sender.stream(pulses, zero=zero)]
-                sender.job = job
-                return run_job(
-                    job,
-                    sender,
-                    sender.wait_idle,
-                    zero=zero,
-                    run_user_m=user_m_runner(
-                        link["user_m_timeout_s"], console.err, lambda: sender.abort_requested
-                    ),
-                    positions_mm=lambda steps: position_mm(steps, link["mach"]),
-                )
-    finally:
-        with contextlib.suppress(Exception):
-            ser.close()
+    with (
+        _progress_bar(show, total, keys, link.get("where")) as progress,
+        key_reader(operator, keys),
+    ):
+        sender = Sender(ser, options, progress=progress)
+        operator.attach(sender)
+        with routed_signals(operator, ("SIGINT", "SIGTERM")):
+            if job is None:
+                return [sender.stream(pulses, zero=zero)]
+            sender.job = job
+            return run_job(
+                job,
+                sender,
+                sender.wait_idle,
+                zero=zero,
+                run_user_m=user_m_runner(
+                    link["user_m_timeout_s"], console.err, lambda: sender.abort_requested
+                ),
+                positions_mm=lambda steps: position_mm(steps, link["mach"]),
+            )
 
 
 def _print_report(program: str, job, reports: list, as_json: bool, mach, parameters=None) -> None:
