@@ -108,7 +108,7 @@ def linuxcnc_from_csv(csv: Path, path: Path, programmed) -> dict:
         "recorded_from": "run_linuxcnc.sh CSV (bench/cam_bench.py --linuxcnc-csv)",
         "machine": run_info()["machine"],
         "recorder_cycle_time_s": status.get("cycle_time_s"),
-        "recorder_gaps": status.get("gaps"),
+        "recorder_gaps": status.get("sample_gaps"),
     }
     row.update(measure(data[:, 1:4], data[:, 4].astype(int), programmed, None))
     return row
