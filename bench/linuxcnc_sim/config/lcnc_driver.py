@@ -197,7 +197,8 @@ def main():
     with open(status_path, "w") as f:
         json.dump(status, f, indent=1)
     log(
-        f"done: {status['wall_s']:.2f} s wall, {len(status['errors'])} errors, overruns {status['overruns']}"
+        f"done: {status['wall_s']:.2f} s wall, {len(status['errors'])} errors, "
+        f"overruns {status['overruns']}"
     )
 
 
