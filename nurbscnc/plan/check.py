@@ -47,6 +47,23 @@ RISK_SKIP = True
 SKIP_MARGIN_MM = 1e-3
 
 
+def travel_xy(points_mm: np.ndarray, rows) -> np.ndarray:
+    """The reference's direction of travel in XY (k, 2) [mm per sample] at ``rows`` (k,)
+    of the points ``points_mm`` (n, 3) [mm]: ``np.gradient(points_mm[:, :2], axis=0)[rows]``
+    bit for bit — the central difference (p[i+1] − p[i−1]) / 2 inside, the one-sided
+    p[1] − p[0] and p[n−1] − p[n−2] at the ends, zeros for a single point — computed for
+    those rows only (eq. 29 needs it where the tracking error may raise its maximum)."""
+    rows = np.asarray(rows, dtype=np.intp)
+    n = points_mm.shape[0]
+    if n < 2:
+        return np.zeros((rows.size, 2))
+    xy = points_mm[:, :2]
+    out = xy[np.minimum(rows + 1, n - 1)] - xy[np.maximum(rows - 1, 0)]
+    inner = (rows > 0) & (rows < n - 1)
+    out[inner] /= 2.0
+    return out
+
+
 def _joined(first: Reference, then: Reference) -> Reference:
     """The rows of ``first``, then those of ``then``."""
     return joined_rows((first, then))
@@ -285,13 +302,10 @@ class Checker:
         at = [0]  # the first row of the chunk sampled last
 
         for ref, own, virt in self._windows(planned, profile, rows, sample, from_k):
-            d = (
-                np.gradient(ref.points_mm[:, :2], axis=0)
-                if ref.t_s.size > 1
-                else np.zeros((ref.t_s.size, 2))
-            )
+            # The direction of travel of the rows that need it (eq. 29), not of every row.
+            chunk_mm = ref.points_mm
             if virt is not None:
-                end = (rows_of(ref, slice(virt, virt + 1)), d[virt : virt + 1])
+                end = (rows_of(ref, slice(virt, virt + 1)), travel_xy(chunk_mm, [virt]))
             # The chunk's first and next own rows, the times of the last row it reads.
             span = (at[0] + own.start, at[0] + own.stop, float(ref.t_s[-1]), float(ref.tau_s[-1]))
             # Own rows whose response the last check computed: their reference rows and
@@ -307,7 +321,7 @@ class Checker:
             resp, cutting, measured = self._respond(
                 ref,
                 actual,
-                d[own],
+                lambda i, pts=chunk_mm, at=own.start: travel_xy(pts, at + i),
                 (on, prof, index),
                 profile,
                 (head, memo, kept),
@@ -486,14 +500,15 @@ class Checker:
         self,
         ref: Reference,
         actual: np.ndarray,
-        direction: np.ndarray,
+        direction,
         path: tuple,
         profile: Profile,
         keeps: tuple,
         so_far: tuple,
     ) -> tuple[Response, np.ndarray, np.ndarray]:
         """The response to the own reference rows ``ref`` (the servo's ``actual``
-        positions, the directions of travel), which rows are checked (:meth:`_cutting`) and
+        positions; ``direction(i)``: the directions of travel of rows i, :func:`travel_xy`),
+        which rows are checked (:meth:`_cutting`) and
         which contour errors were measured: those of the first ``kept`` rows from ``memo``
         (the same numbers) where it measured them, the others computed against ``path``
         (pieces, profile, index); ``keeps``: (head, memo, kept); ``so_far``: the check's
@@ -556,9 +571,9 @@ class Checker:
             # A margin of 1e-9 for the rounding of eq. 29 against |r − a| (µm from mm).
             i = np.flatnonzero(lag * (1000.0 * (1.0 + 1e-9)) > eq29_max_um)
             if i.size:
-                eq29[i] = eq29_mm(axis_err[i], direction[i])
+                eq29[i] = eq29_mm(axis_err[i], direction(i))
         else:
-            eq29 = eq29_mm(axis_err, direction)
+            eq29 = eq29_mm(axis_err, direction(np.arange(n)))
         resp = Response(actual, axis_err, contour, eq29)
         cutting = self._cutting(ref, resp, profile, head)
         return resp, cutting, measured
