@@ -409,6 +409,34 @@ def test_slowdown_after_a_long_arc_softens_the_transition_not_the_arc(monkeypatc
     assert run.cycle_time_s < before.cycle_time_s - 0.5  # measured 5.82 s against 6.79 s
 
 
+def test_long_pieces_blamed_at_their_ends_keep_their_feed(monkeypatch):
+    """A tangent chain of the corpus's Fusion 360 pocket at F1000 (LinuxCNC's limits): 20 mm
+    arcs and a 9.8 mm line turning through 0.24 mm arcs. The error is made where the servo's
+    lag meets those turns; the curve rule lowered every piece within its blame window, so
+    the long arcs and the line ran at F677 over all their length (the improvement phase
+    restores a few such caps per cut window, not the hundreds of a CAM pocket: it is off
+    here, as it is in effect there). The long pieces keep F1000, the short arcs take the
+    feed lever; the tool within ε_max (independent lsim); 4.83 s against 6.32 s."""
+    machine = load_machine(LINUXCNC_LIMITS)
+    path = PROGRAMS / "fusion_arc_turns.nc"
+    monkeypatch.setattr(converge, "IMPROVE_ITERATIONS", 0)
+    monkeypatch.setattr(converge, "RESTORE_PIECES", 0)
+    monkeypatch.setattr(converge, "SETTLE_HALVINGS", 0)
+    run, err_mm = _arc_program_check(path, machine)
+    monkeypatch.setattr(shaping, "LONG_PIECE_S", np.inf)
+    before, err_before_mm = _arc_program_check(path, machine)
+    eps = machine.limits.contour_tolerance_mm + 1e-6
+    assert err_mm <= eps and err_before_mm <= eps
+    line = run.plan.pieces.line
+    long = np.isin(line, [8, 10, 12])
+    tight = np.isin(line, [9, 11])
+    np.testing.assert_allclose(run.plan.caps_mm_s[long], 1000.0 / 60.0, rtol=1e-12)
+    assert not run.plan.contour_feed[long].any()
+    assert np.all(run.plan.caps_mm_s[tight] < 700.0 / 60.0)
+    assert np.all(before.plan.caps_mm_s[long] < 700.0 / 60.0)
+    assert run.cycle_time_s < before.cycle_time_s - 1.4  # measured 4.833 s against 6.320 s
+
+
 def test_a_failed_restore_is_shaped_again(monkeypatch):
     """The first rows of cds.ngc's pocket at F16 (inches), LinuxCNC's limits: restoring a
     row's feed alone fails at the stop that ends it, whose history sent it to the feed
