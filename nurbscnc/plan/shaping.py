@@ -487,6 +487,19 @@ def _long_edges(
     cand = (profile.piece_duration_s >= LONG_PIECE_S) & (factor < 1.0) & (own == 0.0)
     falls = cand & (after > 0.0) & (peak > v[1:] * SLOWDOWN_RATIO)
     rises = cand & (first > 0.0) & (peak > v[:-1] * SLOWDOWN_RATIO)
+    # Spared only if every sample that blames it is answered by another lever: a lowered
+    # feed in its window (pieces back…piece) other than a spared one, the rise of its own
+    # piece or the descent of the piece before (else the check would see it again: a
+    # ringing servo's error from further back is answered by nothing but the long feed).
+    lowered = np.concatenate(([0], np.cumsum((factor < 1.0) & ~cand)))
+    answered = lowered[piece + 1] > lowered[back]
+    answered |= (entry & rises[piece]) | (reach & falls[back])
+    unanswered = np.zeros(k + 1, dtype=np.int64)  # pieces back…piece of each: a difference
+    np.add.at(unanswered, back[~answered], 1)
+    np.add.at(unanswered, piece[~answered] + 1, -1)
+    cand &= np.cumsum(unanswered[:-1]) == 0
+    falls &= cand
+    rises &= cand
     factor[cand] = 1.0
     for sel, e, acc, jerk in (
         (falls, after, lev.a_dn, lev.j_dn),
