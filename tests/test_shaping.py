@@ -281,8 +281,11 @@ def test_restores_raise_a_feed_the_joint_tries_left_low(monkeypatch):
     tried alone at their upper brackets (RESTORE_PIECES; a joint try fails on any one lever,
     so a feed lowered where it did not help stayed low). A 2 mm square pocketed after a
     plunge (G64 P0.01, F1200): faster with them (measured 0.8592 → 0.8530 s), each kept
-    plan within ε_max by the independent simulation."""
+    plan within ε_max by the independent simulation. Its 2 mm edges take 0.1 s, so the
+    curve rule lowers their feed only with long pieces' cruise not spared
+    (``LONG_PIECE_S`` = inf; spared, 0.8544 s with or without the restores)."""
     path = PROGRAMS / "square_plunge_g64p.nc"
+    monkeypatch.setattr(shaping, "LONG_PIECE_S", np.inf)
     run, err_mm = _check_program(path)
     monkeypatch.setattr(converge, "RESTORE_PIECES", 0)
     before, err_before_mm = _check_program(path)
@@ -303,7 +306,9 @@ def test_restores_raise_a_feed_the_joint_tries_left_low(monkeypatch):
 def test_restores_in_each_cut_window(monkeypatch):
     """Two plunged squares, each a cut window of its own: the restores run in each window
     (feed caps raised in both, against RESTORE_PIECES = 0), the program is faster, and the
-    independently simulated tool stays within ε_max of each square while it is cut."""
+    independently simulated tool stays within ε_max of each square while it is cut (long
+    pieces' cruise not spared: ``LONG_PIECE_S`` = inf, as in the test above)."""
+    monkeypatch.setattr(shaping, "LONG_PIECE_S", np.inf)
     text = (
         "G21 G17 G90 G94\nG64 P0.01\nF1200\nG0 Z2\nG0 X0 Y0\nG1 Z-1\nG1 X2\nG1 Y2\n"
         "G1 X0\nG1 Y0\nG0 Z2\nG0 X6 Y0\nG1 Z-1\nG1 X9\nG1 Y3\nG1 X6\nG1 Y0\nM2\n"
@@ -399,6 +404,7 @@ def test_slowdown_after_a_long_arc_softens_the_transition_not_the_arc(monkeypatc
     path = PROGRAMS / "tort_arc_slowdown.nc"
     run, err_mm = _arc_program_check(path, machine)
     monkeypatch.setattr(shaping, "SLOWDOWN_PIECE_S", np.inf)
+    monkeypatch.setattr(shaping, "LONG_PIECE_S", np.inf)  # nor a long piece's cruise spared
     before, err_before_mm = _arc_program_check(path, machine)
     eps = machine.limits.contour_tolerance_mm + 1e-6
     assert err_mm <= eps and err_before_mm <= eps
