@@ -28,7 +28,12 @@ is answered where its error is caused, never by the cruise of a whole long piece
   not the cruise of the long piece before it;
 - else (a curve): the feed of the pieces in the blamed window
   (:func:`~nurbscnc.plan.shaping.local_factors`): NURBS cells and PH corners are short, so
-  this is the feed over that window only. A blamed piece whose jerk is above A·|p| gets that
+  this is the feed over that window only. A long piece (≥
+  :data:`~nurbscnc.plan.shaping.LONG_PIECE_S`) blamed only for samples at its ends keeps its
+  feed where another lever answers each of them (the feed of the short piece a sample lies
+  on, the long piece's descent into the junction or its rise out of it:
+  :func:`~nurbscnc.plan.shaping._long_edges`): a tight arc between two long tangent pieces
+  no longer costs their whole cruise. A blamed piece whose jerk is above A·|p| gets that
   jerk first. A piece whose lowered feed twice in a row hardly moved the error is no feed
   lever (a short piece crossed in transition, a ringing servo's error from further back):
   its acceleration and jerk are lowered instead, and the samples near it blame the servo's

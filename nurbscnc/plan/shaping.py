@@ -281,7 +281,7 @@ def shape(
     lev.stop_history = {**lev.stop_history, **settles}
     # 3. Curves: the feed of the pieces in the blamed window only.
     if not handled.all():
-        _lower_curves(lev, ov, handled, eps_mm, smooth, settle_max_s, period_s)
+        _lower_curves(lev, ov, handled, eps_mm, smooth, settle_max_s, period_s, profile)
 
 
 def _stop_entry(e_mm: float, prev, eps_mm: float):
@@ -398,11 +398,14 @@ def _lower_curves(
     smooth: np.ndarray,
     settle_max_s: float,
     period_s: float,
+    profile: Profile,
 ) -> None:
     """The curve rule (in place): the feed of the pieces blamed by the unhandled over-limit
-    samples (:func:`_curve_factors`); a blamed piece whose jerk the servo cannot follow
+    samples (:func:`_curve_factors`); a long piece blamed only at its ends its transition
+    there instead (:func:`_long_edges`); a blamed piece whose jerk the servo cannot follow
     gets that jerk instead, and a piece whose feed is no lever its transitions."""
     factor, blame = _curve_factors(lev, ov, handled, eps_mm, smooth, period_s)
+    _long_edges(lev, ov, handled, eps_mm, profile, factor, settle_max_s, period_s)
     # A blamed piece whose rise or descent jerk is above what the servo follows (A·|p|,
     # :func:`_servo_jerk`: a step of acceleration to it) gets that jerk first, its feed
     # kept this re-plan (with a jerk limit far above A·|p| the line before an arc lost a
@@ -427,6 +430,86 @@ def _lower_curves(
         lev.a_up[trans] *= f_t
         lev.a_dn[trans] *= f_t
         lev.shaped |= trans
+
+
+#: A piece whose motion takes at least this long [s] is *long*: lowering its cruise for an
+#: error made at one of its ends costs its whole length (a 25 mm arc at 1000 mm/min lost a
+#: third of its feed to the 90° turn of the 0.24 mm arc after it).
+LONG_PIECE_S = 0.1
+#: Over-limit samples this close [s] (profile time) to the start of a long piece are its
+#: entry's (the rise out of the junction while the servo still turns the corner).
+EDGE_S = BLAME_WINDOW_S
+
+
+def _long_edges(
+    lev: Levers,
+    ov: Overs,
+    handled: np.ndarray,
+    eps_mm: float,
+    profile: Profile,
+    factor: np.ndarray,
+    settle_max_s: float,
+    period_s: float,
+) -> None:
+    """Long pieces (:data:`LONG_PIECE_S`) that the curve rule blamed (``factor`` (k,) < 1)
+    only for over-limit samples at their ends keep their cruise (``factor`` set to 1, in
+    place) where their transition there is softened instead: the error is the
+    transition's where the servo's lag meets the turn (c₂·a along the old tangent, off the
+    path once it turns). The descent into the next piece answers the samples on later
+    pieces whose :data:`CURVE_BLAME_WINDOW_S` reaches back into the long piece, the rise out
+    of its start junction those within :data:`EDGE_S` of its start; each where the speed
+    changes there (:data:`SLOWDOWN_RATIO`), by 0.95 ε/e in [0.5, 0.9] (the transient's error
+    ∝ the acceleration), the jerk from the servo's (:func:`_servo_jerk`). A long piece with
+    an over-limit sample past its entry (its own curvature), or whose ends do not change
+    speed, keeps the feed lever, as do the pieces the samples lie on."""
+    keep = ~handled & (ov.err_mm > eps_mm)
+    if not (keep.any() and (factor < 1.0).any()):
+        return
+    idx, err, tau = ov.index[keep], ov.err_mm[keep], ov.tau_s[keep]
+    run = np.searchsorted(ov.run_start, idx, side="right") - 1
+    piece = ov.run_piece[run]
+    k = factor.size
+    start = profile.piece_start_time_s
+    entry = (tau - start[piece]) <= EDGE_S
+    own = np.zeros(k)  # samples inside a piece, past its entry: its own curvature
+    np.maximum.at(own, piece[~entry], err[~entry])
+    first = np.zeros(k)  # samples at a piece's entry
+    np.maximum.at(first, piece[entry], err[entry])
+    # Samples whose narrow window reaches back into the piece before theirs (one piece
+    # back: a long piece is longer than the window).
+    narrow = max(int(round(CURVE_BLAME_WINDOW_S / period_s)), 1)
+    back = ov.run_piece[np.searchsorted(ov.run_start, np.maximum(idx - narrow, 0), "right") - 1]
+    reach = back < piece
+    after = np.zeros(k)
+    np.maximum.at(after, back[reach], err[reach])
+    v = profile.junction_speeds_mm_s
+    peak = profile.piece_peak_speed_mm_s
+    cand = (profile.piece_duration_s >= LONG_PIECE_S) & (factor < 1.0) & (own == 0.0)
+    falls = cand & (after > 0.0) & (peak > v[1:] * SLOWDOWN_RATIO)
+    rises = cand & (first > 0.0) & (peak > v[:-1] * SLOWDOWN_RATIO)
+    # Spared only if every sample that blames it is answered by another lever: a lowered
+    # feed in its window (pieces back…piece) other than a spared one, the rise of its own
+    # piece or the descent of the piece before (else the check would see it again: a
+    # ringing servo's error from further back is answered by nothing but the long feed).
+    lowered = np.concatenate(([0], np.cumsum((factor < 1.0) & ~cand)))
+    answered = lowered[piece + 1] > lowered[back]
+    answered |= (entry & rises[piece]) | (reach & falls[back])
+    unanswered = np.zeros(k + 1, dtype=np.int64)  # pieces back…piece of each: a difference
+    np.add.at(unanswered, back[~answered], 1)
+    np.add.at(unanswered, piece[~answered] + 1, -1)
+    cand &= np.cumsum(unanswered[:-1]) == 0
+    falls &= cand
+    rises &= cand
+    factor[cand] = 1.0
+    for sel, e, acc, jerk in (
+        (falls, after, lev.a_dn, lev.j_dn),
+        (rises, first, lev.a_up, lev.j_up),
+    ):
+        if sel.any():
+            f = np.clip(0.95 * eps_mm / e[sel], 0.5, 0.9)
+            jerk[sel] = _servo_jerk(jerk[sel], acc[sel], settle_max_s) * f
+            acc[sel] *= f
+            lev.shaped |= sel
 
 
 def fallback(
