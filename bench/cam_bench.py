@@ -7,10 +7,10 @@
     .venv/bin/python bench/cam_bench.py --linuxcnc-csv DIR                  # runs made apart
 
 The programs: the corpus's real CAM output (``$NURBSCNC_CORPUS/cam/*.nc``: CamBam, Fusion 360,
-pcb2gcode, PyCut), LinuxCNC's ``general/3dtest.ngc`` and ``general/tort.ngc``, and two
+pcb2gcode, PyCut), LinuxCNC's ``general/3dtest.ngc`` and ``general/tort.ngc``, and three
 generated ones (bench/programs/make_cam_programs.py: a 3-D ball-nose raster under G64 P0.1,
-PCB isolation in inch under G64 P0.01, a Vectric-style 2.5-D profile under G64 without P). Corpus programs are skipped, saying so, when the
-corpus is absent.
+PCB isolation in inch under G64 P0.01, a Vectric-style 2.5-D profile under G64 without P).
+Corpus programs are skipped, saying so, when the corpus is absent.
 
 nurbscnc runs through its CLI as a user runs it, ``nurbscnc run PROGRAM -o points.npz --json
 --machine bench/programs/linuxcnc_limits.toml`` (LinuxCNC's per-axis limits, no jerk limit;
