@@ -1,10 +1,10 @@
-"""Generate the two CAM-like benchmark programs of the real-CAM set (bench/programs/*.nc).
+"""Generate the three CAM-like benchmark programs of the real-CAM set (bench/programs/*.nc).
 
 Run from the repository root::
 
     python bench/programs/make_cam_programs.py
 
-Both are what CAM output looks like where a planner suffers most: many short ``G1`` moves
+All three are what CAM output looks like where a planner suffers most: many short ``G1`` moves
 under a granted path tolerance. Rerunning the script reproduces the files byte for byte (the
 random segment lengths come from a fixed seed).
 
@@ -19,6 +19,14 @@ random segment lengths come from a fixed seed).
     pads and around trace outlines (rounded rectangles), each cut as chords of 0.1–0.5 mm
     (random lengths, as pcb2gcode's polygon offsets are), entered by a rapid at clearance
     height and a plunge; F30 in/min.
+``vectric_profile_g64.nc``
+    A 2.5-D profile as Vectric Aspire / VCarve's LinuxCNC (mm) post writes it: ``G21``,
+    ``G64`` without P, a star and the letters "V" and "W" traced as polylines (curved
+    strokes in random chords of 0.2–5 mm, straight strokes as single moves) with sharp
+    corners of 20–60°, V-carve spikes out of the star's inner corners and back (the tangent
+    reversed by about 170°), three depth passes each entered by a zig-zag ramp (reversals of
+    170–178° in 3-D) without retracting between them, a rounded border in ``G3`` arcs with a
+    lead-in arc and two ``G2`` counters; F1500, plunges F500.
 """
 
 from __future__ import annotations
@@ -176,7 +184,7 @@ def _letter_v(x0: float, y0: float) -> np.ndarray:
 
 def _letter_w(x0: float, y0: float, rng: np.random.Generator) -> np.ndarray:
     """The outline [mm] of a "W" 22 mm tall whose outer strokes curve (traced as chords)
-    and whose inner strokes are straight, 25–45° corners, closed."""
+    and whose inner strokes are straight, sharp corners of 20–60°, closed."""
     corners = np.array(
         [
             [0, 22],
