@@ -1,16 +1,16 @@
 """Real CAM output vs LinuxCNC 2.9 under LinuxCNC's limits (issue 35, "Expected results").
 
     .venv/bin/python bench/cam_bench.py --out bench/cam_results.json        # make bench
-    .venv/bin/python bench/cam_bench.py --quick        # the two generated programs only
+    .venv/bin/python bench/cam_bench.py --quick        # the generated programs only
     .venv/bin/python bench/cam_bench.py --only raster_ballnose --no-smooth-variant
     .venv/bin/python bench/cam_bench.py --record-linuxcnc                   # hours: real time
     .venv/bin/python bench/cam_bench.py --linuxcnc-csv DIR                  # runs made apart
 
 The programs: the corpus's real CAM output (``$NURBSCNC_CORPUS/cam/*.nc``: CamBam, Fusion 360,
-pcb2gcode, PyCut), LinuxCNC's ``general/3dtest.ngc`` and ``general/tort.ngc``, and two
+pcb2gcode, PyCut), LinuxCNC's ``general/3dtest.ngc`` and ``general/tort.ngc``, and three
 generated ones (bench/programs/make_cam_programs.py: a 3-D ball-nose raster under G64 P0.1,
-PCB isolation in inch under G64 P0.01). Corpus programs are skipped, saying so, when the
-corpus is absent.
+PCB isolation in inch under G64 P0.01, a Vectric-style 2.5-D profile under G64 without P).
+Corpus programs are skipped, saying so, when the corpus is absent.
 
 nurbscnc runs through its CLI as a user runs it, ``nurbscnc run PROGRAM -o points.npz --json
 --machine bench/programs/linuxcnc_limits.toml`` (LinuxCNC's per-axis limits, no jerk limit;
@@ -70,6 +70,7 @@ CASES = (
     ("tort", "general/tort.ngc", True),
     ("raster_ballnose", "bench/programs/raster_ballnose_g64p01.nc", False),
     ("pcb_isolation", "bench/programs/pcb_isolation_g64p001_inch.nc", False),
+    ("vectric_profile", "bench/programs/vectric_profile_g64.nc", False),
 )
 RATIO_MAX = 1.05
 

@@ -63,3 +63,40 @@ def test_pcb_isolation_at_linuxcncs_pace_within_the_tolerance():
     on_feed = np.isin(s.line, feed_lines)
     dev_mm = segment_distance_mm(s.points_mm[on_feed], _programmed_polyline(prog))
     assert dev_mm.max() <= 0.254 * (1 + 1e-9)
+
+
+def test_vectric_profile_is_the_generators_and_has_its_reversals():
+    """The Vectric-style profile (bench/programs/make_cam_programs.py) is what its generator
+    writes and what LinuxCNC's golden was recorded on, and it has what it stands for: G64
+    without P, chords of 0.2–5 mm among its moves, line–line corners reversing the tangent
+    by 150° or more (the zig-zag ramps' and the V-carve spikes' turns), sharp corners of
+    20–60° (turns of 120–160°: the letters' apices, the star's tips), arcs."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(
+        "make_cam_programs", ROOT / "bench" / "programs" / "make_cam_programs.py"
+    )
+    gen = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(gen)
+    golden = _golden("vectric_profile")
+    text = (ROOT / golden["program"]).read_text()
+    assert gen.vectric_program() == text
+    assert "G64\n" in text and "G64 P" not in text
+    prog = interpret_text(text)
+    kinds = [s.kind for s in prog.segments]
+    assert kinds.count("arc") >= 10
+    feed = [s for s in prog.segments if s.kind in ("line", "arc")]
+    lines = [s for s in feed if s.kind == "line"]
+    length = np.array([np.linalg.norm(np.subtract(s.end_mm, s.start_mm)) for s in lines])
+    assert np.count_nonzero((length >= 0.2) & (length <= 5.0)) >= 300
+    turns = []
+    for a, b in zip(feed, feed[1:]):
+        if a.kind == b.kind == "line" and np.allclose(a.end_mm, b.start_mm):
+            ta = np.subtract(a.end_mm, a.start_mm)
+            tb = np.subtract(b.end_mm, b.start_mm)
+            cos = np.dot(ta, tb) / (np.linalg.norm(ta) * np.linalg.norm(tb))
+            turns.append(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
+    turns = np.array(turns)
+    assert np.count_nonzero(turns >= 150.0) >= 60
+    assert np.count_nonzero((turns >= 120.0) & (turns <= 160.0)) >= 20
+    assert golden["cycle_time_s"] > 0.0 and golden["contour_max_um"] > 15.0

@@ -24,7 +24,7 @@ from nurbscnc.plan import turnarounds
 from nurbscnc.plan.corners import CornerAction, CornerWhy
 from nurbscnc.plan.options import LookaheadOptions, PlanOptions
 from nurbscnc.program.interpret import interpret_text
-from tests.servo_reference import lsim_actual_mm
+from tests.servo_reference import lsim_actual_mm, segment_distance_mm
 
 ROOT = Path(__file__).resolve().parent.parent
 LINUXCNC_LIMITS = ROOT / "bench" / "programs" / "linuxcnc_limits.toml"
@@ -117,24 +117,65 @@ def test_no_u_where_the_tolerance_cannot_hold_one():
 
 
 def test_stop_deceleration_is_the_servos_overshoot_bound():
-    """A_s = ε / (c₂ · min(1, sin θ)) with c₂ of the profile's servo in closed form
-    (1 − G(s) = c₁ s + c₂ s² + …: c₁ = (a1 − b1)/a0, c₂ = (a2 − b2 − a1 c₁)/a0), capped by A;
-    A without a servo model."""
+    """A_s = ε / (c₂ sin θ) below 90° and ε / c₂ from 90° to a full reversal, with c₂ of the
+    profile's servo in closed form (1 − G(s) = c₁ s + c₂ s² + …: c₁ = (a1 − b1)/a0,
+    c₂ = (a2 − b2 − a1 c₁)/a0), capped by A; A without a servo model. (It was the other way
+    round: ε / c₂ below 90°, ε / (c₂ sin θ) past it and A at a reversal, where the check's
+    stop takes ~41 ms, not the 6 ms of a stop at A.)"""
     machine = load_machine(LINUXCNC_LIMITS)
     lim = machine.limits
     c2 = 0.0
     for ax in (machine.servo.x, machine.servo.y):
         c1 = (ax.a1 - ax.b1) / ax.a0
         c2 = max(c2, abs((ax.a2 - ax.b2 - ax.a1 * c1) / ax.a0 + 0.5 * c1 * c1))
-    got = turnarounds.stop_deceleration_mm_s2(machine, np.radians([90.0, 45.0, 170.0, 180.0]))
+    turns = np.radians([90.0, 45.0, 120.0, 170.0, 180.0, 5.0])
+    got = turnarounds.stop_deceleration_mm_s2(machine, turns)
     eps = lim.contour_tolerance_mm
-    expected = [eps / c2, eps / c2, min(lim.a_max_mm_s2, eps / (c2 * np.sin(np.radians(170.0))))]
-    np.testing.assert_allclose(got[:3], expected, rtol=1e-9)
-    assert got[3] == lim.a_max_mm_s2  # a reversal on itself: the overshoot stays on the path
+    expected = [eps / c2, eps / (c2 * np.sin(turns[1])), eps / c2, eps / c2, eps / c2]
+    np.testing.assert_allclose(got[:5], expected, rtol=1e-9)
+    assert got[5] == lim.a_max_mm_s2  # ε / (c₂ sin 5°) is above A
     no_servo = replace(machine, servo=replace(machine.servo, x=None, y=None, z=None))
     np.testing.assert_array_equal(
         turnarounds.stop_deceleration_mm_s2(no_servo, np.radians([90.0])), [lim.a_max_mm_s2]
     )
+
+
+def _stop_overshoot_um(machine, decel_mm_s2: float, turn_deg: float) -> float:
+    """Largest distance [µm] of the tool (lsim, tests/servo_reference.py) to a two-segment
+    path turning by ``turn_deg`` at the origin, around a stop there: 0.3 s at 25 mm/s along
+    +X, a constant deceleration to rest at the vertex, the mirror image out along the
+    outgoing segment (1 ms samples, exact sums of the speeds)."""
+    period, v = machine.servo.period_s, 25.0
+    n = int(np.ceil(v / (decel_mm_s2 * period)))
+    ramp = np.maximum(v - decel_mm_s2 * period * np.arange(1, n + 1), 0.0)
+    down = np.concatenate([np.full(300, v), ramp])
+    x_in = np.cumsum(down) * period
+    x_in -= x_in[-1]
+    s_out = np.cumsum(np.concatenate([ramp[::-1][1:], np.full(300, v)])) * period
+    th = np.radians(turn_deg)
+    t_b = np.array([np.cos(th), np.sin(th), 0.0])
+    ref = np.vstack([np.column_stack([x_in, 0 * x_in, 0 * x_in]), s_out[:, None] * t_b])
+    act = lsim_actual_mm(ref, machine, settle_s=0.0)[200 : down.size + n + 100]
+    path = np.vstack([[x_in[0], 0.0, 0.0], [0.0, 0.0, 0.0], s_out[-1] * t_b])
+    f = np.linspace(0.0, 1.0, 4001)[:, None]
+    dense = np.vstack([path[0] + f * (path[1] - path[0]), path[1] + f[1:] * (path[2] - path[1])])
+    return 1000.0 * float(segment_distance_mm(act, dense).max())
+
+
+@pytest.mark.parametrize("turn_deg", [45.0, 60.0, 80.0, 100.0, 150.0, 176.0, 180.0])
+def test_stop_overshoot_bound_holds_in_an_independent_simulation(turn_deg):
+    """Independently of the planner: stopped at 25 mm/s, the tool overshoots the vertex by
+    c₂·a, sin θ of it off the path below 90° and all of it from 90° to a full reversal
+    (ended at A = 2450 mm/s²: 43.7 µm at 45°, 61.8 µm from 90° on, all beyond ε), and
+    stays within ε when the stop ends at A_s (14.7–14.9 µm)."""
+    machine = load_machine(LINUXCNC_LIMITS)
+    eps_um = 1000.0 * machine.limits.contour_tolerance_mm
+    a_s = float(turnarounds.stop_deceleration_mm_s2(machine, np.radians([turn_deg]))[0])
+    at_a = _stop_overshoot_um(machine, 2450.0, turn_deg)
+    assert at_a > 2.5 * eps_um
+    off = np.sin(np.radians(turn_deg)) if turn_deg < 90.0 else 1.0
+    np.testing.assert_allclose(at_a, 61.8 * off, rtol=0.02)
+    assert _stop_overshoot_um(machine, a_s, turn_deg) <= eps_um
 
 
 def _raster_program(passes: int, length_mm: float, stepover_mm: float, tol_mm: float) -> str:

@@ -1,10 +1,10 @@
-"""Generate the two CAM-like benchmark programs of the real-CAM set (bench/programs/*.nc).
+"""Generate the three CAM-like benchmark programs of the real-CAM set (bench/programs/*.nc).
 
 Run from the repository root::
 
     python bench/programs/make_cam_programs.py
 
-Both are what CAM output looks like where a planner suffers most: many short ``G1`` moves
+All three are what CAM output looks like where a planner suffers most: many short ``G1`` moves
 under a granted path tolerance. Rerunning the script reproduces the files byte for byte (the
 random segment lengths come from a fixed seed).
 
@@ -19,6 +19,14 @@ random segment lengths come from a fixed seed).
     pads and around trace outlines (rounded rectangles), each cut as chords of 0.1–0.5 mm
     (random lengths, as pcb2gcode's polygon offsets are), entered by a rapid at clearance
     height and a plunge; F30 in/min.
+``vectric_profile_g64.nc``
+    A 2.5-D profile as Vectric Aspire / VCarve's LinuxCNC (mm) post writes it: ``G21``,
+    ``G64`` without P, a star and the letters "V" and "W" traced as polylines (curved
+    strokes in random chords of 0.2–5 mm, straight strokes as single moves) with sharp
+    corners of 20–60°, V-carve spikes out of the star's inner corners and back (the tangent
+    reversed by about 170°), three depth passes each entered by a zig-zag ramp (reversals of
+    170–178° in 3-D) without retracting between them, a rounded border in ``G3`` arcs with a
+    lead-in arc and two ``G2`` counters; F1500, plunges F500.
 """
 
 from __future__ import annotations
@@ -129,9 +137,198 @@ def pcb_program() -> str:
     return "\n".join(out)
 
 
+VEC_FEED_MM_MIN = 1500.0
+VEC_PLUNGE_MM_MIN = 500.0
+VEC_SAFE_MM = 5.0
+VEC_DEPTHS_MM = (-1.0, -2.0, -3.0)
+VEC_RAMP_MM = 6.0
+VEC_SPIKE_MM = 1.2
+VEC_SEED = 21
+
+
+def _chords(points_mm: np.ndarray, rng: np.random.Generator, lo: float, hi: float):
+    """An open curve [mm] (dense samples, (n, 2)) as chords of ``lo``–``hi`` mm (random
+    lengths, the ends kept): a vector trace of a curved stroke."""
+    seg = np.hypot(*np.diff(points_mm, axis=0).T)
+    s = np.concatenate([[0.0], np.cumsum(seg)])
+    stations = np.cumsum(rng.uniform(lo, hi, size=int(s[-1] / lo) + 2))
+    stations = np.concatenate([[0.0], stations[stations < s[-1] - 0.5 * lo], [s[-1]]])
+    return np.column_stack([np.interp(stations, s, points_mm[:, i]) for i in range(2)])
+
+
+def _star(cx: float, cy: float, rng: np.random.Generator) -> tuple[np.ndarray, list[int]]:
+    """A five-pointed star [mm] (tips of about 40°) whose flanks bow slightly outward,
+    traced as chords, closed; and the indices of its inner (concave) corners."""
+    r_out, r_in, n = 16.0, 7.0, 5
+    pts, inner = [np.array([[cx + r_out, cy]])], []
+    t = np.linspace(0.0, 1.0, 80)[:, None]
+    for k in range(2 * n):
+        ra, rb = (r_out, r_in) if k % 2 == 0 else (r_in, r_out)
+        aa, ab = np.pi * k / n, np.pi * (k + 1) / n
+        p = np.array([cx + ra * np.cos(aa), cy + ra * np.sin(aa)])
+        q = np.array([cx + rb * np.cos(ab), cy + rb * np.sin(ab)])
+        normal = np.array([q[1] - p[1], p[0] - q[0]])
+        pts.append(_chords(p + t * (q - p) - 0.04 * np.sin(np.pi * t) * normal, rng, 0.2, 2.5)[1:])
+        if k % 2 == 0:
+            inner.append(sum(len(x) for x in pts) - 1)
+    return np.vstack(pts), inner
+
+
+def _letter_v(x0: float, y0: float) -> np.ndarray:
+    """The outline [mm] of a serif-less "V" 22 mm tall (straight strokes: single moves; a
+    30° apex outside, a 28° notch inside), closed."""
+    return np.array(
+        [[0, 22], [4, 22], [9, 5.5], [14, 22], [18, 22], [11, 0], [7, 0], [0, 22]], float
+    ) + [x0, y0]
+
+
+def _letter_w(x0: float, y0: float, rng: np.random.Generator) -> np.ndarray:
+    """The outline [mm] of a "W" 22 mm tall whose outer strokes curve (traced as chords)
+    and whose inner strokes are straight, sharp corners of 20–60°, closed."""
+    corners = np.array(
+        [
+            [0, 22],
+            [4, 22],
+            [8, 6],
+            [12, 18],
+            [16, 18],
+            [20, 6],
+            [24, 22],
+            [28, 22],
+            [22, 0],
+            [18, 0],
+            [14, 13],
+            [10, 0],
+            [6, 0],
+            [0, 22],
+        ],
+        float,
+    ) + [x0, y0]
+    out = [corners[:1]]
+    t = np.linspace(0.0, 1.0, 60)[:, None]
+    for k, (p, q) in enumerate(zip(corners[:-1], corners[1:])):
+        if k in (1, 5, 7, 12):  # the curved strokes
+            normal = np.array([q[1] - p[1], p[0] - q[0]])
+            out.append(
+                _chords(p + t * (q - p) + 0.06 * np.sin(np.pi * t) * normal, rng, 0.3, 5.0)[1:]
+            )
+        else:
+            out.append(q[None, :])
+    return np.vstack(out)
+
+
+def _xy(p) -> str:
+    return f"X{fmt(float(p[0]), 3)} Y{fmt(float(p[1]), 3)}"
+
+
+def _ramp_in(out: list, pts: np.ndarray, z_from: float, z_to: float) -> None:
+    """A zig-zag ramp from ``z_from`` to ``z_to`` along the outline's start: forward over
+    :data:`VEC_RAMP_MM` (its first moves) and back, twice, each leg a quarter of the
+    descent (the tangent reversed by about 170° in 3-D at each turn), ending at the start."""
+    s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(pts, axis=0).T))])
+    k = max(int(np.searchsorted(s, VEC_RAMP_MM)), 1)
+    leg = pts[: k + 1]
+    z = np.linspace(z_from, z_to, 5)
+    for n in range(4):
+        path = leg[1:] if n % 2 == 0 else leg[::-1][1:]
+        frac = s[1 : k + 1] / s[k]
+        zs = z[n] + (z[n + 1] - z[n]) * frac
+        out.extend(f"G1 {_xy(p)} Z{fmt(float(zz), 3)}" for p, zz in zip(path, zs))
+
+
+def _profile(out: list, pts: np.ndarray, spikes: list[int], label: str) -> None:
+    """One closed outline cut at every depth of :data:`VEC_DEPTHS_MM`, entered by a plunge
+    to the surface and a zig-zag ramp per pass, V-carve spikes at ``spikes`` (out of the
+    corner along the incoming direction and back, rising :data:`VEC_SPIKE_MM`/4)."""
+    out += [
+        f"( {label} )",
+        f"G0 Z{fmt(VEC_SAFE_MM)}",
+        f"G0 {_xy(pts[0])}",
+        "G0 Z1",
+        f"G1 Z0 F{fmt(VEC_PLUNGE_MM_MIN)}",
+        f"F{fmt(VEC_FEED_MM_MIN)}",
+    ]
+    z_prev = 0.0
+    for depth in VEC_DEPTHS_MM:
+        _ramp_in(out, pts, z_prev, depth)
+        for i in range(1, len(pts)):
+            out.append(f"G1 {_xy(pts[i])}")
+            if i in spikes and i + 1 < len(pts):
+                u = pts[i] - pts[i - 1]
+                u /= np.hypot(*u)
+                w = pts[i + 1] - pts[i]
+                w /= np.hypot(*w)
+                tip = pts[i] + VEC_SPIKE_MM * u
+                back = pts[i] + 0.2 * w
+                out.append(f"G1 {_xy(tip)} Z{fmt(depth + 0.25 * VEC_SPIKE_MM, 3)}")
+                out.append(f"G1 {_xy(back)} Z{fmt(depth, 3)}")
+        z_prev = depth
+    out.append(f"G0 Z{fmt(VEC_SAFE_MM)}")
+
+
+def _border(out: list) -> None:
+    """A rounded rectangle 100 × 40 mm (corner radius 5, ``G3`` arcs) entered by a lead-in
+    arc, two depth passes with a ramp along its bottom edge; and two round counters (``G2``
+    full circles in halves)."""
+    out += [
+        "( Profile border )",
+        f"G0 Z{fmt(VEC_SAFE_MM)}",
+        "G0 X50 Y-14",
+        "G0 Z1",
+        f"G1 Z0 F{fmt(VEC_PLUNGE_MM_MIN)}",
+    ]
+    for depth in VEC_DEPTHS_MM[:2]:
+        out += [f"G1 X56 Y-14 Z{fmt(depth)} F{fmt(VEC_FEED_MM_MIN)}", "G1 X50 Y-14"]
+        out += [
+            "G3 X55 Y-9 I0 J5",
+            "G1 X95",
+            "G3 X100 Y-4 I0 J5",
+            "G1 Y26",
+            "G3 X95 Y31 I-5 J0",
+            "G1 X5",
+            "G3 X0 Y26 I0 J-5",
+            "G1 Y-4",
+            "G3 X5 Y-9 I5 J0",
+            "G1 X55",
+            "G3 X50 Y-14 I0 J-5",
+        ]
+    out.append(f"G0 Z{fmt(VEC_SAFE_MM)}")
+    for cx in (78.0, 90.0):
+        out += [
+            f"( Counter X{fmt(cx)} )",
+            f"G0 X{fmt(cx + 3)} Y11",
+            "G0 Z1",
+            f"G1 Z-1.5 F{fmt(VEC_PLUNGE_MM_MIN)}",
+            f"G2 X{fmt(cx - 3)} Y11 I-3 J0 F{fmt(VEC_FEED_MM_MIN)}",
+            f"G2 X{fmt(cx + 3)} Y11 I3 J0",
+            f"G0 Z{fmt(VEC_SAFE_MM)}",
+        ]
+
+
+def vectric_program() -> str:
+    rng = np.random.default_rng(VEC_SEED)
+    star, inner = _star(18.0, 11.0, rng)
+    out = [
+        "( VECTRIC POST REVISION: a 2.5-D profile generated by make_cam_programs.py )",
+        "( Tool: End Mill 3 mm, Safe Z 5 mm )",
+        "G00 G21 G17 G90 G40 G49 G80",
+        "G64",
+        "T1 M06",
+        f"G00 Z{fmt(VEC_SAFE_MM)}",
+        "G00 X0 Y0 S16000 M03",
+    ]
+    _profile(out, star, inner, "Profile star")
+    _profile(out, _letter_v(38.0, 0.0), [], "Profile V")
+    _profile(out, _letter_w(60.0, 0.0, rng), [], "Profile W")
+    _border(out)
+    out += ["G00 X0 Y0", "M05", "M02", ""]
+    return "\n".join(out)
+
+
 def main() -> None:
     (HERE / "raster_ballnose_g64p01.nc").write_text(raster_program())
     (HERE / "pcb_isolation_g64p001_inch.nc").write_text(pcb_program())
+    (HERE / "vectric_profile_g64.nc").write_text(vectric_program())
 
 
 if __name__ == "__main__":
