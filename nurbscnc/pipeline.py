@@ -11,6 +11,7 @@ import itertools
 from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
 from functools import cached_property
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -36,14 +37,14 @@ from nurbscnc.plan.options import Algorithm, Dynamics, LookaheadOptions, parse_c
 from nurbscnc.plan.report import check_rotary_limits, check_soft_limits
 from nurbscnc.plan.sampler import ForwardingSampler
 from nurbscnc.plan.timing import sample_count
-from nurbscnc.precompensation import (
-    Precompensation,
-    precompensate_reference,
-    precompensated_sampler,
-    precompensation_report,
-)
 from nurbscnc.program.columns import SegmentColumns, segment_columns
 from nurbscnc.servo.precompensate import REFERENCE_TOLERANCE_MM
+
+if TYPE_CHECKING:
+    from nurbscnc.precompensation import Precompensation
+
+# Start-up: the pre-compensation stage (its modules and their scipy.sparse, scipy.optimize
+# and scipy.signal imports) is imported by the run that asks for it (_run_precompensated).
 
 
 @dataclass(frozen=True)
@@ -267,6 +268,12 @@ def _run_precompensated(
 ) -> Run:
     """Plan with the dynamics check on the pre-compensated reference, output that reference
     (the same transform on the interpolator's points) and report on it."""
+    from nurbscnc.precompensation import (
+        precompensate_reference,
+        precompensated_sampler,
+        precompensation_report,
+    )
+
     tol = options.reference_tolerance_mm
     fit = lookahead.plan.tolerance_mm  # the PH fit tolerance e (None: the profile's)
     # V_cf (SPEC eq. 24) stands in for the servo error of the plain reference: the check

@@ -323,6 +323,11 @@ def test_spiral_newton_gives_the_bits_of_the_reference_and_inverts_the_length():
             segments.spiral_t_at_length(r0[k], r1[k], ang[k], hel[k], sk, big[k]),
             _spiral_t_reference(*np.broadcast_arrays(r0[k], r1[k], ang[k], hel[k], sk, big[k])),
         )
+    # One sample of one arc (the corner searches' calls, a scalar path): the same bits.
+    for k in range(n):
+        args = (float(r0[k]), float(r1[k]), float(ang[k]), float(hel[k]))
+        one = segments.spiral_t_at_length(*args, np.array([s[k]]), float(big[k]))
+        assert one.shape == (1,) and one[0] == t[k], k
     # And s(t) = s: against the integral of the speed √(Δr² + H² + (Δθ r(t))²).
     for k in range(0, n, 2003):
 

@@ -256,8 +256,8 @@ def test_fit_run_is_within_its_bound_and_the_bound_is_conservative(
     measured, sp = _dense_spline_distance(knots, ctrl, v)
     assert measured <= tol * (1 + 1e-9)
     s = np.concatenate(([0.0], np.cumsum(np.linalg.norm(np.diff(v, axis=0), axis=1))))
-    assert spline_deviation_mm(sp, s / s[-1], v) >= measured * (1 - 1e-6)
-    assert bound_mm == spline_deviation_mm(sp, s / s[-1], v)  # what the summary reports
+    assert spline_deviation_mm(knots, ctrl, s / s[-1], v) >= measured * (1 - 1e-6)
+    assert bound_mm == spline_deviation_mm(knots, ctrl, s / s[-1], v)  # what the summary reports
     # the segment's end points are its end control points: exactly the run's (the curve
     # evaluated there by de Boor's recursion agrees to rounding)
     np.testing.assert_array_equal(ctrl[[0, -1]], v[[0, -1]])

@@ -202,6 +202,23 @@ def _segment_distance(q: np.ndarray, a: complex, b: complex) -> np.ndarray:
     return np.abs(q - a - t * ab)
 
 
+def polyline_distance(q: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """Distance [mm] from the points ``q`` (m,) to the polyline through ``pts`` (k,) (complex
+    plane): the least over its chords of :func:`_segment_distance`, all chords as one
+    (chords, points) array. Each chord's row is that function's arithmetic, operand for
+    operand (the chord's terms broadcast along the row as the scalar was, |ab|² as the real
+    part of ab·āb̄ is, a degenerate chord's foot at its start), so the same bits
+    (tests/test_phcorner_batch.py against the chord-by-chord loop)."""
+    a = pts[:-1, None]
+    ab = pts[1:] - pts[:-1]
+    ab2 = ab.real * ab.real + ab.imag * ab.imag
+    rel = q[None, :] - a
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.clip((np.conj(ab)[:, None] * rel).real / ab2[:, None], 0.0, 1.0)
+    t = np.where((ab2 > 0.0)[:, None], t, 0.0)
+    return np.abs(rel - t * ab[:, None]).min(axis=0)
+
+
 def _side(corner: Corner, geom, s_from: float, s_to: float, z_from: complex, z_to: complex):
     """One side of the corner path from arc length ``s_from`` to ``s_to`` of ``geom``
     (end points ``z_from``, ``z_to``): its sample points (complex) and a function giving
@@ -212,11 +229,7 @@ def _side(corner: Corner, geom, s_from: float, s_to: float, z_from: complex, z_t
     pts = _to_plane(corner, geom.point(geom.param_at_length(np.linspace(s_from, s_to, N_ARC))))
     pts[0], pts[-1] = z_from, z_to
     if geom.is_spiral:
-
-        def polyline(q):
-            return np.min([_segment_distance(q, a, b) for a, b in zip(pts[:-1], pts[1:])], axis=0)
-
-        return pts, polyline
+        return pts, lambda q: polyline_distance(q, pts)
     center = _to_plane(corner, geom.origin_mm[None, :])[0]
     radius = geom.radius_start_mm
     # Counter-clockwise in the corner plane when the arc's own sense agrees with its normal.

@@ -128,11 +128,17 @@ def spiral_t_at_length(
     all the spiral rows of a path table at once (PathTable) use this same arithmetic.
     The arcs' t-independent terms are computed once; the working set is compacted only when
     less than half of it still moves (per sample the same operations: the same bits)."""
+    scalars = (radius_start_mm, radius_end_mm, angle_rad, helix_mm, length_mm)
+    if (
+        isinstance(s_mm, np.ndarray)
+        and s_mm.shape == (1,)
+        and all(isinstance(x, float) for x in scalars)
+    ):
+        one = _spiral_t_one(*map(float, scalars), float(s_mm[0]), max_iter)
+        if one is not None:
+            return np.array([one])
     r0, r1, ang, hel, big, s_in = np.broadcast_arrays(
-        *(
-            np.asarray(x, dtype=float)
-            for x in (radius_start_mm, radius_end_mm, angle_rad, helix_mm, length_mm, s_mm)
-        )
+        *(np.asarray(x, dtype=float) for x in (*scalars, s_mm))
     )
     s = np.clip(s_in, 0.0, big)
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -166,6 +172,57 @@ def spiral_t_at_length(
             tola = np.where(done, np.inf, tola)
     t[active] = ta
     return t
+
+
+def _spiral_t_one(r0, r1, dtheta, h, big, s_in, max_iter) -> float | None:
+    """:func:`spiral_t_at_length` of one sample of one arc in Python floats (a corner's
+    search asks for one point at a time: ~15 numpy calls a Newton step on one-element
+    arrays cost 10× the arithmetic). The same operations in the same order as the array
+    code, each a correctly rounded IEEE operation on either side (+ − × ÷ √); arcsinh and
+    hypot are numpy's own on the scalar: the same bits (tests/test_paths.py compares the
+    two). None where the array code's special cases would matter (a value not finite, a
+    zero speed): the caller takes the array path."""
+    if not all(map(math.isfinite, (r0, r1, dtheta, h, big, s_in))):
+        return None
+    s = s_in if s_in > 0.0 else 0.0  # np.clip(s, 0, L): max(s, 0) then min(·, L)
+    s = s if s < big else big
+    t = s / big if big > 0.0 else 0.0
+    if not (s > 0.0 and s < big):
+        return t
+    eps = _EPS
+    tol = max(1e-12, 8.0 * eps * s)
+    dr = r1 - r0
+    a2 = dr * dr + h * h
+    w0 = dtheta * r0
+    s0 = math.sqrt(a2 + w0 * w0)
+    circle = float(np.hypot(w0, h))
+    for _ in range(max_iter):
+        w1 = dtheta * (r0 + t * dr)
+        s1 = math.sqrt(a2 + w1 * w1)
+        ssum, wsum = s0 + s1, w0 + w1
+        cross = w1 * s0 + w0 * s1
+        mean_speed = 0.25 * ssum + (wsum * wsum / (4.0 * ssum) if ssum > 0.0 else 0.0)
+        if cross != 0.0:
+            d = (w1 - w0) * wsum / cross
+            ratio = 1.0 if d == 0.0 else float(np.arcsinh(d)) / d
+            mean_speed = mean_speed + 0.5 * a2 * ratio * wsum / cross
+        else:
+            mean_speed = mean_speed + 0.5 * math.sqrt(a2)
+        f = t * (circle if dr == 0.0 else mean_speed) - s
+        if not s1 > 0.0:  # the speed √(a² + w²) is s1
+            return None
+        new_t = t - f / s1
+        new_t = new_t if new_t > 0.0 else 0.0
+        new_t = new_t if new_t < 1.0 else 1.0
+        if abs(f) <= tol:
+            return t
+        if abs(new_t - t) <= 2.0 * eps:
+            return new_t
+        t = new_t
+    return t
+
+
+_EPS = float(np.finfo(float).eps)
 
 
 @dataclass(frozen=True, eq=False, slots=True)

@@ -14,7 +14,8 @@ G64 (P, or the machine's path tolerance without P) with one path mode, turning
 by at most :data:`MAX_TURN_DEG` at each inner vertex (a sharper vertex is a corner the CAM
 system meant: the run ends there and the blend handles it), at least :data:`MIN_RUN` lines
 and at most :data:`MAX_RUN` (longer runs are cut into runs of that many). Each run becomes
-one cubic B-spline: least squares (``scipy.interpolate.make_lsq_spline``, a banded solve)
+one cubic B-spline: least squares (``scipy.interpolate.make_lsq_spline``'s QR, a banded solve:
+:mod:`nurbscnc.geometry.splinefit`)
 on the run's vertices at chord-length parameters, with a knot at every K-th vertex, the end
 vertices held exactly (weights 1e6, then the end control points set to the end vertices: a
 clamped spline starts and ends at them). K is tried from :data:`KNOT_STEPS` (fewest knots
@@ -49,6 +50,7 @@ from itertools import chain
 import numpy as np
 
 from nurbscnc.geometry.segments import Line, Nurbs, blend_tolerance_mm
+from nurbscnc.geometry.splinefit import evaluate, evaluate_derivative, insert_knot, lsq_spline
 from nurbscnc.plan.rotary import moves_rotary
 
 #: Longest line [mm] a run may hold: a longer line is a straight the CAM system meant.
@@ -146,17 +148,20 @@ def _windowed_distance_mm(q: np.ndarray, own: np.ndarray, poly: np.ndarray) -> n
     return _segment_distance_mm(q[:, None, :], poly[idx], poly[idx + 1]).min(axis=1)
 
 
-def spline_deviation_mm(spline, u: np.ndarray, vertices: np.ndarray) -> float:
-    """Upper bound [mm] on the two-way distance (Hausdorff) between the B-spline ``spline``
-    on [0, 1] and the polyline ``vertices`` (n + 1, 3) at chord-length parameters ``u``
-    (module doc: windowed chord distances plus the samples' sagitta bound)."""
+def spline_deviation_mm(
+    knots: np.ndarray, ctrl: np.ndarray, u: np.ndarray, vertices: np.ndarray
+) -> float:
+    """Upper bound [mm] on the two-way distance (Hausdorff) between the cubic B-spline
+    (``knots``, ``ctrl`` (n, 3) [mm]) on [0, 1] and the polyline ``vertices`` (n + 1, 3) at
+    chord-length parameters ``u`` (module doc: windowed chord distances plus the samples'
+    sagitta bound)."""
     n = vertices.shape[0] - 1
     per = SAMPLES_PER_CHORD
     # Spline samples: `per` per chord, each measured near its own chord.
     frac = np.arange(per) / per
     us = np.concatenate(((u[:-1, None] + frac[None, :] * np.diff(u)[:, None]).ravel(), [1.0]))
     own = np.minimum(np.arange(us.size) // per, n - 1)
-    pts = spline(us)
+    pts = evaluate(knots, ctrl, us)
     to_poly = _windowed_distance_mm(pts, own, vertices)
     # Vertices to the chords between spline samples near them (sample i·per is at u_i).
     to_curve = _windowed_distance_mm(vertices, np.minimum(np.arange(n + 1) * per, us.size - 2), pts)
@@ -164,7 +169,7 @@ def spline_deviation_mm(spline, u: np.ndarray, vertices: np.ndarray) -> float:
     # unit parameter), and the curve's distance to a chord line, whose second derivative is
     # at most M too, exceeds the interpolation of its sampled values by at most as much.
     du = float(np.max(np.diff(us)))
-    second = spline.derivative(2)(us)
+    second = evaluate_derivative(knots, ctrl, us, 2)
     sag = float(np.sqrt(np.einsum("ij,ij->i", second, second)).max()) * du * du / 8.0
     return float(max(to_poly.max(), to_curve.max()) + sag)
 
@@ -174,8 +179,6 @@ def fit_run(vertices: np.ndarray, tolerance_mm: float):
     parameters (k + 1,) and its deviation bound [mm]) of a run's ``vertices`` (k + 1, 3) [mm]
     within ``tolerance_mm`` both ways, ends exact; None when no knot spacing of
     :data:`KNOT_STEPS` fits (module doc)."""
-    from scipy.interpolate import BSpline, make_lsq_spline
-
     chord = np.sqrt(np.sum(np.diff(vertices, axis=0) ** 2, axis=1))
     s = np.concatenate(([0.0], np.cumsum(chord)))
     if not s[-1] > 0.0:
@@ -191,13 +194,12 @@ def fit_run(vertices: np.ndarray, tolerance_mm: float):
         inner = u[step : n - step // 2 : step]
         t = np.concatenate(([0.0] * 4, inner, [1.0] * 4))
         try:
-            sp = make_lsq_spline(u, vertices, t, k=3, w=w)
+            c = lsq_spline(u, vertices, t, w)
         except (ValueError, np.linalg.LinAlgError):
             continue
-        c = np.array(sp.c, dtype=float)
+        c = np.array(c, dtype=float)
         c[0], c[-1] = vertices[0], vertices[-1]  # clamped: the curve's ends
-        sp = BSpline(t, c, 3)
-        deviation_mm = spline_deviation_mm(sp, u, vertices)
+        deviation_mm = spline_deviation_mm(t, c, u, vertices)
         if deviation_mm <= tolerance_mm:
             return t, c, u, deviation_mm
     return None
@@ -207,16 +209,14 @@ def split_spline(knots: np.ndarray, ctrl: np.ndarray, cuts: np.ndarray) -> list[
     """The cubic B-spline (``knots`` on [0, 1], ``ctrl``) cut at the parameters ``cuts``
     (increasing, inside (0, 1)) into clamped pieces (knots rescaled to [0, 1], control
     points): each cut knot raised to multiplicity 4 by knot insertion (Boehm; scipy's
-    ``BSpline.insert_knot``), which leaves the curve as it is, so the pieces join with the
-    curve's own continuity (C2 where the cut was a simple knot or none)."""
-    from scipy.interpolate import BSpline
-
-    sp = BSpline(knots, ctrl, 3)
+    ``BSpline.insert_knot``, :func:`~nurbscnc.geometry.splinefit.insert_knot`), which leaves
+    the curve as it is, so the pieces join with the curve's own continuity (C2 where the cut
+    was a simple knot or none)."""
+    t, c = np.ascontiguousarray(knots, dtype=float), np.ascontiguousarray(ctrl, dtype=float)
     for u0 in np.asarray(cuts, dtype=float).tolist():
-        have = int(np.count_nonzero(sp.t == u0))
+        have = int(np.count_nonzero(t == u0))
         if have < 4:
-            sp = sp.insert_knot(u0, 4 - have)
-    t, c = sp.t, sp.c
+            t, c = insert_knot(t, c, u0, 4 - have)
     out, lo = [], 0.0
     for hi in [*np.asarray(cuts, dtype=float).tolist(), 1.0]:
         first = int(np.searchsorted(t, lo, side="left"))  # the four knots at lo
