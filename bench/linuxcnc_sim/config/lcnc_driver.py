@@ -7,6 +7,11 @@ Started by the `linuxcnc` script as the [DISPLAY] program (argv: -ini INIFILE). 
   LCNC_STATUS    where a small JSON status (errors, overruns, wall time) is written
   LCNC_TIMEOUT   seconds before giving up (default 1200)
 When this script exits, the `linuxcnc` script shuts LinuxCNC down.
+
+A copy of ../shared/tools/linuxcnc-sim/config/lcnc_driver.py for a machine with any number of
+joints (homing waits for every joint the stat reports), used by the 3-axis and the 4-axis
+simulations alike, whose run ends only after the machine stayed idle at rest for
+``IDLE_END_S`` (the README beside this folder).
 """
 
 import json
@@ -22,6 +27,9 @@ prog = os.environ["LCNC_PROGRAM"]
 raw_path = os.environ["LCNC_RAW"]
 status_path = os.environ["LCNC_STATUS"]
 timeout = float(os.environ.get("LCNC_TIMEOUT", "1200"))
+#: How long the machine must stay idle at rest (interpreter idle, queue empty, speed 0) for
+#: the run to end [s]: a single status poll saying so ended long runs mid-program.
+IDLE_END_S = 2.0
 status = {"program": prog, "errors": [], "messages": [], "resumes": 0}
 
 
@@ -85,21 +93,21 @@ def main():
             raise SystemExit("task did not come up")
         time.sleep(0.1)
 
-    c.state(linuxcnc.STATE_ESTOP_RESET)
-    c.wait_complete()
-    c.state(linuxcnc.STATE_ON)
-    c.wait_complete()
+    for state in (linuxcnc.STATE_ESTOP_RESET, linuxcnc.STATE_ON):
+        c.state(state)
+        c.wait_complete()
     c.mode(linuxcnc.MODE_MANUAL)
     c.wait_complete()
-    c.home(-1)
-    c.wait_complete()  # HOME_SEARCH_VEL = 0: homes in place at 0,0,0
+    c.home(-1)  # HOME_SEARCH_VEL = 0: every joint homes in place at 0
+    c.wait_complete()
     t1 = time.time()
     while True:
         s.poll()
-        if all(s.homed[:3]):
+        joints = s.joints
+        if all(s.homed[:joints]):
             break
         if time.time() - t1 > 20:
-            raise SystemExit(f"homing did not finish: {s.homed[:3]}")
+            raise SystemExit(f"homing did not finish: {s.homed[:joints]}")
         time.sleep(0.05)
     pid = task_pid(ini)
     c.mode(linuxcnc.MODE_AUTO)
@@ -161,7 +169,7 @@ def main():
         ):
             if idle_since is None:
                 idle_since = time.time()
-            if time.time() - idle_since >= 2.0:
+            if time.time() - idle_since >= IDLE_END_S:
                 break
         else:
             idle_since = None
