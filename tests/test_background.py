@@ -174,3 +174,44 @@ def test_the_worker_threads_leave_the_operators_signals_to_the_main_thread():
     feed.close()
     assert wanted <= masks["making"] and wanted <= masks["planner"]
     assert not wanted & signal.pthread_sigmask(signal.SIG_BLOCK, [])  # the main thread's
+
+
+class _Signalled(Exception):
+    pass
+
+
+def test_a_signal_another_thread_takes_still_stops_the_waiting_writer():
+    """A thread started before the workers (as a BLAS pool is, at numpy's import) does not
+    block signals, so the kernel may hand it a signal meant for the process. The writer,
+    waiting for the worker's next window, must still handle it at once, not when that
+    window comes: here the window never comes before the signal is handled."""
+    bystander_done = threading.Event()
+    bystander = threading.Thread(target=bystander_done.wait, args=(10.0,), daemon=True)
+    bystander.start()
+    gate = threading.Event()
+    second_made = []
+
+    def windows():
+        yield 1
+        gate.wait(10.0)
+        second_made.append(True)
+        yield 2
+
+    def write(items):
+        for item in items:
+            if item == 1:  # once this thread waits: the signal goes to the bystander
+                threading.Timer(0.3, signal.pthread_kill, (bystander.ident, signal.SIGUSR1)).start()
+
+    def raise_signalled(signum, frame):
+        raise _Signalled
+
+    previous = signal.signal(signal.SIGUSR1, raise_signalled)
+    try:
+        with pytest.raises(_Signalled):
+            write_while_making(write, windows())
+        assert not second_made  # handled while the worker still held its next window back
+    finally:
+        gate.set()
+        bystander_done.set()
+        signal.signal(signal.SIGUSR1, previous)
+    assert _worker_gone()

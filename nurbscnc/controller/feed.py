@@ -24,7 +24,7 @@ import threading
 import time
 from collections.abc import Callable, Iterable
 
-from nurbscnc.output.background import STOP_WAIT_S, signals_to_main_thread
+from nurbscnc.output.background import STOP_WAIT_S, signals_to_main_thread, waited
 
 _END = object()
 
@@ -81,7 +81,7 @@ class WindowFeed:
 
     def first(self):
         """The first window (blocks until it is planned; raises the planner's error)."""
-        out = self._take(self._queue.get())
+        out = self._take(waited(self._queue))
         if not out:
             raise ValueError("the planner yielded no window")
         return out[0][0]
@@ -104,7 +104,7 @@ class WindowFeed:
         """Block until the next window (or the end, or an error) is ready; returns
         ``now_s`` (real time passes, not the simulator's)."""
         if not self.done and self._waited is None:
-            self._waited = self._queue.get()
+            self._waited = waited(self._queue)
         return now_s
 
 

@@ -59,6 +59,19 @@ def signals_to_main_thread() -> None:
         signal.pthread_sigmask(signal.SIG_BLOCK, OPERATOR_SIGNALS)
 
 
+def waited(items: queue.Queue):
+    """The next item of ``items``, waited for in steps of :data:`POLL_S`. A signal is
+    handled by the main thread only when it runs Python again; an untimed wait wakes for it
+    only if the kernel handed the signal to this very thread, while threads started before
+    the workers blocked theirs (a BLAS library's pool, started when numpy is imported) may
+    take it instead. A timed wait returns to the interpreter at least every POLL_S."""
+    while True:
+        try:
+            return items.get(timeout=POLL_S)
+        except queue.Empty:
+            continue
+
+
 class _Stopped(Exception):
     """The writer stopped: unwinds the worker."""
 
@@ -117,7 +130,7 @@ def write_while_making(write, windows, after=None):
 
     def received():
         while True:
-            item = items.get()
+            item = waited(items)
             if isinstance(item, _End):
                 ended.append(True)
                 return
