@@ -312,6 +312,13 @@ main(["run", sys.argv[1], "-o", sys.argv[2]])
 """
 
 
+def _interruptible() -> None:
+    """In the child before it runs: Ctrl-C's default action, as at a terminal. A command
+    started in the background by a non-interactive shell (a CI script's ``cmd &``) inherits
+    SIGINT ignored, and Python then leaves it ignored."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 @pytest.mark.parametrize("slow", [_SLOW_WRITER, _SLOW_MAKER], ids=["writer", "maker"])
 @pytest.mark.parametrize(
     "sig, code", [(signal.SIGTERM, 143), (signal.SIGHUP, 129), (signal.SIGINT, 130)]
@@ -325,6 +332,7 @@ def test_signal_during_run_leaves_no_temp_file(tmp_path, program, sig, code, slo
         [sys.executable, "-c", slow, str(program), str(target)],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
+        preexec_fn=_interruptible,
     )
     try:
         assert proc.stdout.readline().strip() == b"WRITING"
