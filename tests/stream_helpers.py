@@ -44,3 +44,27 @@ def write_mixed_steps_machine(folder, monkeypatch):
     tail = tail.replace("x = 1000.0", "x = 800.0", 1).replace("z = 1000.0", "z = 400.0", 1)
     (Path(folder) / "m.toml").write_text(head + steps + tail)
     return folder
+
+
+def continue_when_at_rest(sim, position: list, seen: dict, timeout_s: float, settle_s: float):
+    """Start a thread that waits (at most ``timeout_s``) for the card ``sim`` to be DONE at
+    ``position`` (a program stop: the card at rest), watches it stay there ``settle_s``,
+    records what it saw as ``seen["still"]`` (state name, position) and then continues the
+    stream as the operator does (SIGUSR2). Returns the started thread."""
+    import os
+    import signal
+    import time
+
+    def watch() -> None:
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            if sim.state.name == "DONE" and sim.position.tolist() == position:
+                time.sleep(settle_s)
+                seen["still"] = (sim.state.name, sim.position.tolist())
+                os.kill(os.getpid(), signal.SIGUSR2)
+                return
+            time.sleep(0.01)
+
+    thread = threading.Thread(target=watch, daemon=True)
+    thread.start()
+    return thread

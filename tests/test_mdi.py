@@ -11,10 +11,7 @@ work position), never taken from the code under test.
 from __future__ import annotations
 
 import json
-import os
-import signal
 import sys
-import threading
 import time
 from types import SimpleNamespace
 
@@ -24,7 +21,7 @@ from click.testing import CliRunner
 from nurbscnc.cli.main import main
 from nurbscnc.output.stream.card import CardConfig
 from nurbscnc.program.varfile import parse_var_text
-from tests.stream_helpers import card_on, write_mixed_steps_machine
+from tests.stream_helpers import card_on, continue_when_at_rest, write_mixed_steps_machine
 
 MACHINE = ["--machine", "m.toml"]
 START_STEPS = (12345, -3000, -5000)  # machine (15.43125, -3, -12.5) mm
@@ -192,19 +189,7 @@ def test_interpreted_tool_change_pauses_at_rest_and_resumes_on_sigusr2(here):
     (here / "tools.tbl").write_text("T1 P1 Z10 D3 ;drill\nT2 P2 Z12.5 D6 ;6 mm end mill\n")
     seen = {}
     with card_on("pty", CardConfig(speed=None)) as (sim, ep):
-
-        def watch() -> None:
-            deadline = time.monotonic() + 30.0
-            while time.monotonic() < deadline:
-                if sim.state.name == "DONE" and sim.position.tolist() == [4000, 0, 0]:
-                    time.sleep(0.5)
-                    seen["still"] = (sim.state.name, sim.position.tolist())
-                    os.kill(os.getpid(), signal.SIGUSR2)
-                    return
-                time.sleep(0.01)
-
-        thread = threading.Thread(target=watch, daemon=True)
-        thread.start()
+        thread = continue_when_at_rest(sim, [4000, 0, 0], seen, 30.0, 0.5)
         args = ["stream", "part.nc", "--port", ep.path, "--tool-table", "tools.tbl", *MACHINE]
         r = run_cli(args)
         thread.join(30.0)

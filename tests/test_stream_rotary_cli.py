@@ -13,17 +13,13 @@ layers): they skip, saying so, on a tree without them.
 from __future__ import annotations
 
 import json
-import os
-import signal
-import threading
-import time
 
 import pytest
 from click.testing import CliRunner
 
 from nurbscnc.cli.main import main
 from nurbscnc.output.stream.card import CardConfig
-from tests.stream_helpers import card_on, write_mixed_steps_machine
+from tests.stream_helpers import card_on, continue_when_at_rest, write_mixed_steps_machine
 
 ROTARY_TABLES = """
 [axis_limits.a]
@@ -77,19 +73,7 @@ def test_a_rotary_program_waits_at_m0_and_ends_at_the_steps_of_its_text(here):
     at_m0 = [16000, 0, -400, 22500, 0]
     cfg = CardConfig(speed=None, axis_names="xyzab", position_steps=START)
     with card_on("pty", cfg) as (sim, ep):
-
-        def watch() -> None:
-            deadline = time.monotonic() + 60.0
-            while time.monotonic() < deadline:
-                if sim.state.name == "DONE" and sim.position.tolist() == at_m0:
-                    time.sleep(0.3)
-                    seen["still"] = (sim.state.name, sim.position.tolist())
-                    os.kill(os.getpid(), signal.SIGUSR2)
-                    return
-                time.sleep(0.01)
-
-        thread = threading.Thread(target=watch, daemon=True)
-        thread.start()
+        thread = continue_when_at_rest(sim, at_m0, seen, 60.0, 0.3)
         r = run_cli(["stream", "part.nc", "--port", ep.path, "--json", *MACHINE])
         thread.join(60.0)
         final = sim.position.tolist()
