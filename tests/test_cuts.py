@@ -31,6 +31,7 @@ from nurbscnc.plan.program_pieces import segment_pieces
 from nurbscnc.plan.timing import exact_reference
 from nurbscnc.plan.windows import cut_windows
 from nurbscnc.program.interpret import interpret_text
+from tests.plan_helpers import assert_same_levers
 from tests.test_shaping import _slow_servo_machine
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -71,10 +72,7 @@ def _truncated(text: str, machine, n: int) -> str:
 
 def _same_levers(a, b, k: int) -> None:
     """Caps, limits, settles and junction speeds of pieces 0 … k − 1 equal exactly."""
-    np.testing.assert_array_equal(a.caps_mm_s[:k], b.caps_mm_s[:k])
-    for f in ("a_up_mm_s2", "j_up_mm_s3", "a_down_mm_s2", "j_down_mm_s3"):
-        np.testing.assert_array_equal(getattr(a.limits, f)[:k], getattr(b.limits, f)[:k])
-    np.testing.assert_array_equal(a.settle_s[:k], b.settle_s[:k])
+    assert_same_levers(a, b, k)
     np.testing.assert_array_equal(
         a.profile.junction_speeds_mm_s[: k + 1], b.profile.junction_speeds_mm_s[: k + 1]
     )

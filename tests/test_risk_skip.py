@@ -32,6 +32,7 @@ from nurbscnc.plan import check as check_module
 from nurbscnc.plan.check import SKIP_MARGIN_MM, Checker
 from nurbscnc.plan.lookahead import plan_checked
 from nurbscnc.program.interpret import interpret_text
+from tests.plan_helpers import assert_same_levers
 from tests.servo_reference import distance_to_polyline_mm, lsim_actual_mm
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -84,10 +85,7 @@ def _assert_same_decisions(on, off) -> int:
     (plan, chk), (ref_plan, ref_chk) = on, off
     assert plan.iterations == ref_plan.iterations
     assert plan.cycle_time_s == ref_plan.cycle_time_s
-    np.testing.assert_array_equal(plan.caps_mm_s, ref_plan.caps_mm_s)
-    for f in ("a_up_mm_s2", "j_up_mm_s3", "a_down_mm_s2", "j_down_mm_s3"):
-        np.testing.assert_array_equal(getattr(plan.limits, f), getattr(ref_plan.limits, f))
-    np.testing.assert_array_equal(plan.settle_s, ref_plan.settle_s)
+    assert_same_levers(plan, ref_plan)
     for f in ("phase_start_time_s", "phase_jerk_mm_s3", "piece_start_time_s"):
         np.testing.assert_array_equal(getattr(plan.profile, f), getattr(ref_plan.profile, f))
     for f in ("count", "index", "err_mm", "tau_s", "run_piece", "run_start", "restart_count"):

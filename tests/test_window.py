@@ -32,6 +32,7 @@ from nurbscnc.plan.options import LookaheadOptions
 from nurbscnc.plan.program_pieces import segment_pieces
 from nurbscnc.program.interpret import interpret_text
 from nurbscnc.servo.model import AxesStream, simulate_axes
+from tests.plan_helpers import assert_same_levers
 from tests.servo_reference import lsim_actual_mm
 from tests.test_shaping import _slow_servo_machine
 
@@ -130,10 +131,7 @@ def _assert_same_plan(a, b, stats: bool = True):
     plan_b, check_b = b
     assert plan_a.iterations == plan_b.iterations
     assert plan_a.cycle_time_s == plan_b.cycle_time_s
-    np.testing.assert_array_equal(plan_a.caps_mm_s, plan_b.caps_mm_s)
-    for f in ("a_up_mm_s2", "j_up_mm_s3", "a_down_mm_s2", "j_down_mm_s3"):
-        np.testing.assert_array_equal(getattr(plan_a.limits, f), getattr(plan_b.limits, f))
-    np.testing.assert_array_equal(plan_a.settle_s, plan_b.settle_s)
+    assert_same_levers(plan_a, plan_b)
     np.testing.assert_array_equal(
         plan_a.profile.junction_speeds_mm_s, plan_b.profile.junction_speeds_mm_s
     )
