@@ -28,14 +28,8 @@ import sys
 import tempfile
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from record_goldens import (  # noqa: E402
-    _CALL,
-    _MOTION,
-    LINUXCNC_VERSION,
-    RS274,
-    RS274_TOL_MM,
-    replay_rs274,
-)
+from lcnc_rs274 import CALL, MOTION, RS274, RS274_TOL_MM, replay_rs274  # noqa: E402
+from record_goldens import LINUXCNC_VERSION  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 PROGRAMS = os.path.join(ROOT, "tests", "programs", "varfile")
@@ -47,7 +41,7 @@ def _calls(stdout: str) -> list:
     """rs274's canonical calls [(NAME, [numbers])] (as record_goldens.rs274_calls reads them)."""
     calls = []
     for raw in stdout.splitlines():
-        m = _CALL.match(raw)
+        m = CALL.match(raw)
         if not m:
             continue
         if m.group(1) == "SELECT_PLANE":
@@ -86,7 +80,7 @@ def record(name: str) -> dict:
         replay = replay_rs274(calls, {}).moves
         moves, k = [], 0
         for call, _ in calls:
-            if call in _MOTION:
+            if call in MOTION:
                 move = replay[k]
                 k += 1
                 moves.append({key: move[key] for key in ("kind", "end") if key in move})
