@@ -95,13 +95,6 @@ def _speed_regular(d1: np.ndarray):
     return speed, speed.min(axis=1) > MIN_SPEED_RATIO * speed.mean(axis=1)
 
 
-def _regular(ctrl: np.ndarray, n_curve=N_CURVE) -> np.ndarray:
-    """:func:`_measure`'s regularity (n,) of the Béziers ``ctrl`` (n, 6, 3) alone: the same
-    samples and arithmetic, without the distances."""
-    d1 = _bezier_batch(ctrl, np.linspace(0.0, 1.0, n_curve))[1]
-    return _speed_regular(d1)[1]
-
-
 def _measure(ctrl: np.ndarray, corner_path: np.ndarray, n_curve=N_CURVE, n_side=N_ARC):
     """Per candidate (n,): two-way sampled distance to ``corner_path`` (n, 4, 3) [mm], peak
     curvature [1/mm], length [mm] and regularity of the Béziers ``ctrl`` (n, 6, 3), on
@@ -162,11 +155,15 @@ def _best(c1, t_a, c2, t_b, d, alpha, tolerance_mm: float):
     dev, kmax, length, regular = _measure(ctrl, corner_path, COARSE_CURVE, COARSE_SIDE)
     near = regular & (dev <= tolerance_mm * (1.0 + COARSE_SLACK)) & np.isfinite(kmax)
     cost = np.where(near, length * np.sqrt(kmax), np.inf)
-    # Regularity first: it needs the derivatives alone, a tenth of the full measure, and
-    # decides most candidates (on raster turn-arounds whose U cannot fit, every one: a cusp
-    # between the coarse samples); the same test the full measure makes, so the same choice.
-    for i in np.argsort(cost)[: int(near.sum())].tolist():
-        if not _regular(ctrl[i : i + 1])[0]:
+    # Regularity first: it needs the derivatives alone, and decides most candidates (where
+    # no U fits, as on PCB paths retraced over a few µm, every one: a cusp between the coarse
+    # samples); the same test the full measure makes, so the same choice. The derivatives of
+    # all of them at once (elementwise Bernstein sums: each row is its candidate's own), the
+    # test on a copy of each row (the array the candidate's full measure makes).
+    order = np.argsort(cost)[: int(near.sum())].tolist()
+    d1 = _bezier_batch(ctrl[order], np.linspace(0.0, 1.0, N_CURVE))[1] if order else None
+    for k, i in enumerate(order):
+        if not _speed_regular(d1[k : k + 1].copy())[1][0]:
             continue
         dev_i, kmax_i, length_i, regular_i = _measure(ctrl[i : i + 1], corner_path[i : i + 1])
         if regular_i[0] and dev_i[0] <= tolerance_mm and np.isfinite(kmax_i[0]):
