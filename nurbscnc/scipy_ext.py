@@ -21,10 +21,13 @@ from pathlib import Path
 @functools.cache
 def extension(subpackage: str, name: str):
     """scipy's compiled module ``scipy.<subpackage>.<name>`` loaded by itself (its package's
-    ``__init__`` not run), or None when this scipy has no such file."""
-    import scipy
-
-    folder = Path(scipy.__file__).parent / subpackage
+    ``__init__`` not run), or None when this scipy has no such file. scipy's own
+    ``__init__`` is not run either (its version checks and configuration: 15 ms of CPU); an
+    extension that needs the package imports it itself."""
+    spec = importlib.util.find_spec("scipy")
+    if spec is None or not spec.submodule_search_locations:
+        return None  # pragma: no cover (no scipy: a dependency)
+    folder = Path(spec.submodule_search_locations[0]) / subpackage
     for suffix in importlib.machinery.EXTENSION_SUFFIXES:
         path = folder / f"{name}{suffix}"
         if path.is_file():

@@ -15,6 +15,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import click
 import numpy as np
 import pytest
 from click.testing import CliRunner
@@ -166,7 +167,7 @@ def test_version():
     assert result.stdout.strip() == f"nurbscnc, version {nurbscnc.__version__}"
 
 
-@pytest.mark.parametrize("command", [None, *sorted(main.commands)])
+@pytest.mark.parametrize("command", [None, *main.list_commands(None)])
 def test_help_of_every_subcommand(command):
     args = ["--help"] if command is None else [command, "--help"]
     result = run(args)
@@ -177,7 +178,16 @@ def test_help_of_every_subcommand(command):
 
 
 def test_expected_subcommands_exist():
-    assert {"check", "corners", "ph"} <= set(main.commands)
+    assert {"check", "corners", "ph"} <= set(main.list_commands(None))
+
+
+def test_each_command_is_found_under_its_own_name():
+    # The group imports a command's module when the command is looked up (cli/main.py
+    # COMMANDS): each name must lead to the command of that name, an unknown one to none.
+    for name in main.list_commands(None):
+        command = main.get_command(None, name)
+        assert isinstance(command, click.Command) and command.name == name
+    assert main.get_command(None, "no-such-command") is None
 
 
 # ------------------------------------------------------------------------------ error paths
@@ -719,9 +729,9 @@ def test_inputs_are_bounded(monkeypatch, tmp_path):
     the program, a tool table, a point file or a trace, or a machine profile past
     MAX_PROFILE_CHARS, is refused after reading that much, exit 2: each filled the memory
     until the OOM killer (exit 137) or a MemoryError (exit 1)."""
-    import nurbscnc.output.files as files
+    import nurbscnc.output.inputs as inputs
 
-    monkeypatch.setattr(files, "MAX_INPUT_BYTES", 1 << 16)
+    monkeypatch.setattr(inputs, "MAX_INPUT_BYTES", 1 << 16)
     result = run(["check", "/dev/urandom"])
     assert result.exit_code == 2
     assert (

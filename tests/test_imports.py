@@ -84,7 +84,7 @@ def test_importing_the_cli_loads_no_heavy_module(tmp_path):
 def test_help_of_the_group_and_of_every_command_loads_no_heavy_module(tmp_path):
     from nurbscnc.cli.main import main
 
-    names = sorted(main.commands)
+    names = main.list_commands(None)
     assert {"check", "plan", "run", "simulate", "stream", "profile", "identify"} <= set(names)
     runs = [["--help"], ["--version"]] + [[name, "--help"] for name in names]
     rows = loaded(tmp_path, runs)
@@ -115,9 +115,22 @@ def test_check_loads_neither_the_servo_nor_matplotlib(tmp_path, program):
     (row,) = loaded(tmp_path, [["check", str(path)]])
     assert row["code"] == 0
     mods = row["modules"]
-    assert "nurbscnc.program.interpret" in mods and "lark" in mods  # it did parse
+    assert "nurbscnc.program.interpret" in mods  # it did parse
     assert not {m for m in mods if m.startswith(("scipy.signal", "nurbscnc.servo"))}
     assert not {m for m in mods if m.split(".")[0] in ("matplotlib", "serial")}
+
+
+def test_plan_of_plain_words_loads_neither_lark_nor_the_other_commands(tmp_path):
+    # Plain words (the fast path's lines: most CAM output) need no lark parser; a line with a
+    # parameter or an expression builds it. Only the command that runs is imported.
+    (tmp_path / "tiny.nc").write_text(TINY)
+    (tmp_path / "expr.nc").write_text(TINY.replace("G1 X20 Y10", "#1=[5*2]\nG1 X20 Y#1"))
+    plain, expr = loaded(tmp_path, [["plan", "tiny.nc", "--json"], ["plan", "expr.nc", "--json"]])
+    assert plain["code"] == 0 and "nurbscnc.pipeline" in plain["modules"]  # it did plan
+    assert "lark" not in plain["modules"]
+    assert not {"nurbscnc.cli.stream", "nurbscnc.cli.card", "nurbscnc.cli.run"} & plain["modules"]
+    assert not {"nurbscnc.output.files", "importlib.resources"} & plain["modules"]
+    assert expr["code"] == 0 and "lark" in expr["modules"]
 
 
 def test_run_without_plots_loads_no_matplotlib(tmp_path):

@@ -103,6 +103,17 @@ EDGE_CASES = [
     "G0 X1\nG80\nX2\nM2",
     "G1 X1 F100\nX2\n/X3\nX4\nM2\nX5 garbage",
 ]
+# Runs longer than the first chunk that end inside a chunk: at a line of another kind, at a
+# number float() refuses, at an out-of-range value (the run's last chunk is cut there).
+_RUN = "".join(f"X{k * 0.1:.1f} Y{k % 3}\n" for k in range(45))
+EDGE_CASES += [
+    "G1 F100\n" + _RUN + "(MSG, hello)\n" + _RUN + "M2",
+    "G1 F100\n" + _RUN + "X1.2.3\n" + _RUN + "M2",
+    "G1 F100\n" + _RUN + "X1 Y.\n" + _RUN + "M2",
+    "G1 F100\n" + _RUN + "G2 X1 Y1 I0.5\n" + _RUN + "M2",
+    "G1 F100\n" + _RUN + "X2000000000\n" + _RUN + "M2",
+    "G1 F100\n" + _RUN + "\n\n" + _RUN + "#1=2\nX#1\n" + _RUN + "M2",
+]
 
 
 # G6.2 blocks: continuation lines the NURBS lane reads (points with knots, knot-only lines,

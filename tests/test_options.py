@@ -88,7 +88,7 @@ def test_valid_strings_become_members_and_lengths_are_mm():
 
 
 def _params(command: str) -> set[str]:
-    return {p.name for p in main.commands[command].params if isinstance(p, click.Option)}
+    return {p.name for p in main.get_command(None, command).params if isinstance(p, click.Option)}
 
 
 def test_every_planning_command_has_the_same_planning_options():

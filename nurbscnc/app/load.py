@@ -23,7 +23,7 @@ def read_program_text(path: str) -> str:
 
     Non-ASCII bytes are harmless in comments; elsewhere the parser reports them.
     """
-    from nurbscnc.output.files import read_input_bytes
+    from nurbscnc.output.inputs import read_input_bytes
 
     data = read_input_bytes(path, "the program", ProgramError)
     try:
@@ -91,7 +91,7 @@ def start_abc_option(start_abc_deg) -> dict:
 
 def read_tool_table(path: str) -> dict:
     """A LinuxCNC tool table file → ``{tool number: Tool}`` (see program/tooltable.py)."""
-    from nurbscnc.output.files import read_input_bytes
+    from nurbscnc.output.inputs import read_input_bytes
     from nurbscnc.program.tooltable import parse_tool_table
 
     data = read_input_bytes(path, f"the tool table {path}", ConfigError)

@@ -117,7 +117,7 @@ def read_var_file(path: str, must_exist: bool = True) -> dict:
     """The parameters of the parameter file ``path`` (:func:`~nurbscnc.program.varfile.
     parse_var_text`: ConfigError naming the file and line); ``{}`` for a file that does not
     exist when not ``must_exist``."""
-    from nurbscnc.output.files import read_input_bytes
+    from nurbscnc.output.inputs import read_input_bytes
     from nurbscnc.program.varfile import parse_var_text
 
     if not os.path.exists(path):

@@ -85,7 +85,7 @@ def identify(source, axis, order, cmd_col, fb_col, time_col, period_ms, delay, m
     refused (exit 2). The trace should start at rest and move the axis through steps or fast
     moves. Example: nurbscnc identify trace.txt --period-ms 1 --axis y
     """
-    from nurbscnc.output.files import read_input_bytes
+    from nurbscnc.output.inputs import read_input_bytes
     from nurbscnc.servo.identify import (
         MIN_FIT,
         fit_axis,

@@ -8,30 +8,40 @@ the commands are put together into :data:`main`, the console script ``nurbscnc``
 
 from __future__ import annotations
 
+import importlib
 import sys
 
 import click
 
 from nurbscnc import __version__
 from nurbscnc.app.runtime import tune_process
-from nurbscnc.cli.card import card_position, card_sim
-from nurbscnc.cli.check import check
-from nurbscnc.cli.compare import compare
 from nurbscnc.cli.console import err
-from nurbscnc.cli.corners import corners, ph
 from nurbscnc.cli.handle import echo_json_error
-from nurbscnc.cli.identify import identify
-from nurbscnc.cli.mdi import jog, mdi
-from nurbscnc.cli.plan import plan
-from nurbscnc.cli.profile import profile
-from nurbscnc.cli.run import run
-from nurbscnc.cli.simulate import simulate
-from nurbscnc.cli.stream import stream
 
 # Start-up: this module is imported by every command, by --help and by shell completion, so
 # it and the command modules import only click and the standard library at the top (and the
 # application layer's light modules); numpy, rich, the interpreter (lark) and the planner
-# (scipy) are imported by the functions that use them.
+# (scipy) are imported by the functions that use them. A command's own module is imported
+# when that command is looked up (:data:`COMMANDS`): ``plan`` does not load ``stream``'s
+# threads, ``card-sim``'s signals or the other commands' options.
+
+#: The commands: name → (module of :mod:`nurbscnc.cli`, the command's name in it).
+COMMANDS = {
+    "card-position": ("card", "card_position"),
+    "card-sim": ("card", "card_sim"),
+    "check": ("check", "check"),
+    "compare": ("compare", "compare"),
+    "corners": ("corners", "corners"),
+    "identify": ("identify", "identify"),
+    "jog": ("mdi", "jog"),
+    "mdi": ("mdi", "mdi"),
+    "ph": ("corners", "ph"),
+    "plan": ("plan", "plan"),
+    "profile": ("profile", "profile"),
+    "run": ("run", "run"),
+    "simulate": ("simulate", "simulate"),
+    "stream": ("stream", "stream"),
+}
 
 
 class _Group(click.Group):
@@ -39,6 +49,17 @@ class _Group(click.Group):
     usage error: unknown option, bad value, missing argument, two options that exclude each
     other) is also printed as JSON on stdout, as a program error is (docs/json.md); the usual
     message still goes to stderr and the exit code stays 2."""
+
+    def list_commands(self, ctx) -> list[str]:
+        return sorted(COMMANDS)
+
+    def get_command(self, ctx, cmd_name: str) -> click.Command | None:
+        """The command ``cmd_name``, its module imported now (None: no such command)."""
+        where = COMMANDS.get(cmd_name)
+        if where is None:
+            return None
+        module, name = where
+        return getattr(importlib.import_module(f"nurbscnc.cli.{module}"), name)
 
     def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
         tune_process()
@@ -66,22 +87,3 @@ def main():
     Exit codes: 0 ok, 1 internal error (a bug), 2 bad program or option, 3 file or port
     trouble, 130 interrupted (143 SIGTERM, 129 SIGHUP), 141 stdout closed by its reader.
     """
-
-
-for _command in (
-    check,
-    corners,
-    ph,
-    plan,
-    run,
-    simulate,
-    compare,
-    stream,
-    mdi,
-    jog,
-    card_sim,
-    card_position,
-    profile,
-    identify,
-):
-    main.add_command(_command)

@@ -88,14 +88,20 @@ def _segment_distance(q: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray
     return np.sqrt(np.einsum("...j,...j->...", r, r))
 
 
+def _speed_regular(d1: np.ndarray):
+    """Parametric speed (n, m) of curves whose first derivatives are ``d1`` (n, m, 3), and
+    whether each stays above :data:`MIN_SPEED_RATIO` of its mean (no cusp) (n,)."""
+    speed = np.sqrt(np.einsum("mij,mij->mi", d1, d1))
+    return speed, speed.min(axis=1) > MIN_SPEED_RATIO * speed.mean(axis=1)
+
+
 def _measure(ctrl: np.ndarray, corner_path: np.ndarray, n_curve=N_CURVE, n_side=N_ARC):
     """Per candidate (n,): two-way sampled distance to ``corner_path`` (n, 4, 3) [mm], peak
     curvature [1/mm], length [mm] and regularity of the Béziers ``ctrl`` (n, 6, 3), on
     ``n_curve`` samples of the curve and ``n_side`` of each side of the path."""
     xi = np.linspace(0.0, 1.0, n_curve)
     pts, d1, d2 = _bezier_batch(ctrl, xi)
-    speed = np.sqrt(np.einsum("mij,mij->mi", d1, d1))
-    regular = speed.min(axis=1) > MIN_SPEED_RATIO * speed.mean(axis=1)
+    speed, regular = _speed_regular(d1)
     kappa = np.linalg.norm(np.cross(d1, d2), axis=2) / np.maximum(speed**3, 1e-300)
     # Curve samples to the corner path's three segments.
     a, b = corner_path[:, None, :-1, :], corner_path[:, None, 1:, :]
@@ -149,7 +155,16 @@ def _best(c1, t_a, c2, t_b, d, alpha, tolerance_mm: float):
     dev, kmax, length, regular = _measure(ctrl, corner_path, COARSE_CURVE, COARSE_SIDE)
     near = regular & (dev <= tolerance_mm * (1.0 + COARSE_SLACK)) & np.isfinite(kmax)
     cost = np.where(near, length * np.sqrt(kmax), np.inf)
-    for i in np.argsort(cost)[: int(near.sum())].tolist():
+    # Regularity first: it needs the derivatives alone, and decides most candidates (where
+    # no U fits, as on PCB paths retraced over a few µm, every one: a cusp between the coarse
+    # samples); the same test the full measure makes, so the same choice. The derivatives of
+    # all of them at once (elementwise Bernstein sums: each row is its candidate's own), the
+    # test on a copy of each row (the array the candidate's full measure makes).
+    order = np.argsort(cost)[: int(near.sum())].tolist()
+    d1 = _bezier_batch(ctrl[order], np.linspace(0.0, 1.0, N_CURVE))[1] if order else None
+    for k, i in enumerate(order):
+        if not _speed_regular(d1[k : k + 1].copy())[1][0]:
+            continue
         dev_i, kmax_i, length_i, regular_i = _measure(ctrl[i : i + 1], corner_path[i : i + 1])
         if regular_i[0] and dev_i[0] <= tolerance_mm and np.isfinite(kmax_i[0]):
             return (

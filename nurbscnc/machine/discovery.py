@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Mapping
-from importlib import resources
+from pathlib import Path
 
 #: Environment variable naming a profile (discovery step 2).
 ENV_MACHINE = "NURBSCNC_MACHINE"
@@ -20,6 +20,10 @@ FOUND_BY_USER = "user config"
 FOUND_BY_DEFAULT = "bundled default"
 
 
+#: The package's data folder (a folder of the installed package: it has compiled modules, so
+#: it is never imported from a zip; ``importlib.resources`` and the ``tempfile`` it loads
+#: cost 6 ms of every command's start).
+PACKAGE_DATA = Path(__file__).resolve().parents[1] / "data"
 #: The templates of ``profile init --template``: name → packaged file.
 TEMPLATES = {"paper": "default_machine.toml", "router": "router_machine.toml"}
 
@@ -33,8 +37,7 @@ def template_text(name: str) -> str:
     """The text of the packaged profile template ``name`` (:data:`TEMPLATES`): ``paper``, the
     default profile (the paper's X-Y table with its 4th-order servo models), or ``router``, a
     stepper-motor router without a servo model."""
-    ref = resources.files("nurbscnc").joinpath("data", TEMPLATES[name])
-    return ref.read_text(encoding="utf-8")
+    return (PACKAGE_DATA / TEMPLATES[name]).read_text(encoding="utf-8")
 
 
 def user_profile_path(environ: Mapping[str, str] | None = None) -> str:

@@ -34,6 +34,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from nurbscnc.errors import DataError, OutputError, SourcePos
+from nurbscnc.output import inputs
+from nurbscnc.output.inputs import read_input_bytes
 from nurbscnc.output.npz import write_npz
 
 if TYPE_CHECKING:  # the annotations only: no import at start-up
@@ -54,29 +56,6 @@ PROFILE_COLUMNS = ("t", "s", "v", "a", "j", "piece")
 POINT_VALUE_LIMIT = 1e9
 #: Prefix and suffix of the temporary file beside a regular-file output.
 TEMP_PREFIX, TEMP_SUFFIX = ".nurbscnc-", ".tmp"
-#: The largest input read whole [bytes] (a program, a point CSV, a trace, a tool table):
-#: about 15 million lines of CAM output, whose moves would need some 5 GB to plan. A stream
-#: that never ends (/dev/urandom) is refused past it instead of filling the memory.
-MAX_INPUT_BYTES = 512 << 20
-
-
-def read_input_bytes(path: str, what: str, error=DataError) -> bytes:
-    """The bytes of ``path`` (``-``: stdin), at most :data:`MAX_INPUT_BYTES`. OSError →
-    OutputError (exit 3); a larger input → ``error`` (exit 2) naming it as ``what``."""
-    try:
-        if path == "-":
-            data = sys.stdin.buffer.read(MAX_INPUT_BYTES + 1)
-        else:
-            with open(path, "rb") as fh:
-                data = fh.read(MAX_INPUT_BYTES + 1)
-    except OSError as exc:
-        raise OutputError(f"cannot read {path}: {exc.strerror or exc}") from None
-    if len(data) > MAX_INPUT_BYTES:
-        raise error(
-            f"{what} is larger than {MAX_INPUT_BYTES:,} bytes "
-            f"({MAX_INPUT_BYTES / 2**20:g} MiB), the most nurbscnc reads"
-        )
-    return data
 
 
 def output_target(path: str) -> tuple[str, os.stat_result | None]:
@@ -475,7 +454,7 @@ def _read_points_npz(path: str) -> dict:
 def _check_npy_member(archive: zipfile.ZipFile, name: str) -> None:
     """Refuse a member whose .npy header declares more bytes than the member holds (numpy
     would allocate the declared array before reading: a 200-byte file could ask for
-    terabytes), or more than :data:`MAX_INPUT_BYTES`."""
+    terabytes), or more than :data:`~nurbscnc.output.inputs.MAX_INPUT_BYTES`."""
     size = archive.getinfo(name).file_size
     with archive.open(name) as member:
         version = np.lib.format.read_magic(member)
@@ -488,7 +467,7 @@ def _check_npy_member(archive: zipfile.ZipFile, name: str) -> None:
     if dtype.hasobject:
         raise DataError(f"array {name} holds Python objects (pickled data is refused)")
     declared = math.prod(shape) * dtype.itemsize
-    if declared > min(size, MAX_INPUT_BYTES):
+    if declared > min(size, inputs.MAX_INPUT_BYTES):
         raise DataError(
             f"array {name} declares {declared:,} bytes of data; the member holds {size:,}"
         )

@@ -95,10 +95,28 @@ def _rows(lines, start: int, n: int) -> list:
     chunk = lines[start : start + n]
     text = "\n".join(chunk)
     # A line over the limit is not plain: the general path refuses it (parse.MAX_LINE_CHARS).
-    rows = _PLAIN.findall(text) if len(text) <= MAX_LINE_CHARS else ()
+    if len(text) > MAX_LINE_CHARS:
+        return _strict_rows(chunk, len(chunk))
+    rows = _PLAIN.findall(text)
     if len(rows) == len(chunk):
         return rows  # (numbers float() refuses: plain_run checks them, see _strict_rows)
-    return _strict_rows(chunk, len(chunk))
+    return rows[: _leading_plain(text, chunk)]
+
+
+def _leading_plain(text: str, chunk) -> int:
+    """How many lines of ``chunk`` (``text`` their join) are plain before the first that is
+    not: each match of :data:`_PLAIN` is one whole line (it is anchored at both ends and takes
+    no line break), so the k-th match starts at the k-th line's start exactly while the lines
+    before are all plain. (The rows' numbers are checked as a whole chunk's are, by
+    plain_run's fallback; a line at a time they cost 5 µs each, and a run's last chunk may
+    hold 8,192 lines.)"""
+    starts = itertools.accumulate(map(len, chunk), lambda at, n: at + n + 1, initial=0)
+    count = 0
+    for match, at in zip(_PLAIN.finditer(text), starts):
+        if match.start() != at:
+            break
+        count += 1
+    return count
 
 
 def _strict_rows(lines, n: int) -> list:

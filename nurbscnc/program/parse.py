@@ -18,13 +18,17 @@ from __future__ import annotations
 import functools
 import math
 import re
-from importlib import resources
-from typing import NamedTuple
-
-from lark import Lark, Transformer, UnexpectedCharacters, UnexpectedInput, UnexpectedToken
-from lark.exceptions import VisitError
+from pathlib import Path
+from typing import TYPE_CHECKING, NamedTuple
 
 from nurbscnc.errors import GCodeSyntaxError, NurbsCncError, SourcePos
+
+if TYPE_CHECKING:
+    from lark import Lark, UnexpectedCharacters, UnexpectedToken
+
+# Start-up: lark (about 30 ms of CPU to import, and its parser built from the grammar) is
+# imported by the first line the plain-word fast path does not take (_parser): a program of
+# plain words, most CAM output, never loads it.
 
 
 class Word(NamedTuple):
@@ -85,8 +89,9 @@ def _number(token) -> float:
     return value
 
 
-class _ToBlocks(Transformer):
-    """Inline transformer: callbacks run as the LALR parser reduces, building plain data."""
+class _BlockCallbacks:
+    """The inline transformer's callbacks (mixed into lark's ``Transformer`` by
+    :func:`_parser`): they run as the LALR parser reduces, building plain data."""
 
     def start(self, lines):
         return lines
@@ -215,19 +220,21 @@ def _param_name(token) -> str:
 
 @functools.lru_cache(maxsize=1)
 def _parser() -> Lark:
-    grammar = resources.files("nurbscnc").joinpath("grammars/gcode.lark").read_text("utf-8")
+    from lark import Lark, Transformer
+
+    to_blocks = type("_ToBlocks", (_BlockCallbacks, Transformer), {})
     return Lark(
-        grammar,
+        grammar_text(),
         parser="lalr",
         lexer="contextual",
-        transformer=_ToBlocks(),
+        transformer=to_blocks(),
         maybe_placeholders=False,
     )
 
 
 def grammar_text() -> str:
     """The grammar source (for property tests and documentation)."""
-    return resources.files("nurbscnc").joinpath("grammars/gcode.lark").read_text("utf-8")
+    return (Path(__file__).resolve().parents[1] / "grammars" / "gcode.lark").read_text("utf-8")
 
 
 # Human names for the grammar's terminals in error messages.
@@ -416,8 +423,12 @@ def _parse_lark(text: str, line_offset: int) -> list[Block]:
 
 
 def _parse_lark_raw(text: str) -> list[Block]:
+    parser = _parser()  # lark is imported from here on
+    from lark import UnexpectedCharacters, UnexpectedInput, UnexpectedToken
+    from lark.exceptions import VisitError
+
     try:
-        return _parser().parse(text)
+        return parser.parse(text)
     except UnexpectedCharacters as exc:
         raise _character_error(text, exc) from None
     except UnexpectedToken as exc:
