@@ -25,6 +25,7 @@ from nurbscnc.geometry.blendrules import (
     TRIM_CAP_FACTOR,
     line_deviation_per_trim,
 )
+from nurbscnc.geometry.distance import segment_distances
 
 
 @dataclass(frozen=True, eq=False)
@@ -66,17 +67,6 @@ def space_bezier(p_a, t_a, k_a, p_b, t_b, k_b) -> np.ndarray:
         ],
         axis=1,
     )
-
-
-def _polyline_distance(q: np.ndarray, pts: np.ndarray) -> np.ndarray:
-    """Distance [mm] of each point of ``q`` (m, 3) to the polyline ``pts`` (n, 3)."""
-    a, ab = pts[:-1], np.diff(pts, axis=0)
-    ab2 = np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-300)
-    rel = q[:, None, :] - a[None, :, :]
-    f = np.clip(np.einsum("mnj,nj->mn", rel, ab) / ab2[None, :], 0.0, 1.0)
-    diff = rel - f[..., None] * ab[None, :, :]
-    # √ is monotone and correctly rounded: the root of the least square is the least root.
-    return np.sqrt(np.einsum("mnj,mnj->mn", diff, diff).min(axis=1))
 
 
 def blend_space_corner(
@@ -141,9 +131,23 @@ def _bezier_batch(ctrl: np.ndarray, xi: np.ndarray):
 
 def _polyline_distance_batch(q: np.ndarray, pts: np.ndarray) -> np.ndarray:
     """Distance [mm] (m, a) of each point of ``q`` (m, a, 3) to the polyline ``pts``
-    (m, b, 3) of its own row: :func:`_polyline_distance` row by row (one 4-D einsum over
-    all rows moved 30 MB per call and was slower than the rows' own small ones)."""
-    return np.stack([_polyline_distance(qi, pi) for qi, pi in zip(q, pts)])
+    (m, b, 3) of its own row: every row's chords in one table, each point's range of
+    chords its row's, one :func:`~nurbscnc.geometry.distance.segment_distances` call (the
+    compiled kernel where built: no (a, b, 3) temporaries per row). Its dot products are
+    summed in a fixed order, (x0 y0 + x1 y1) + x2 y2, so the distances do not depend on
+    numpy's SIMD path as einsum's do; the least distance is the root of the least square
+    (√ is monotone and correctly rounded)."""
+    m, a = q.shape[0], q.shape[1]
+    chords = pts.shape[1] - 1
+    lo = np.repeat(np.arange(m, dtype=np.int64) * chords, a)
+    dist = segment_distances(
+        q.reshape(m * a, 3),
+        pts[:, :-1].reshape(m * chords, 3),
+        np.diff(pts, axis=1).reshape(m * chords, 3),
+        lo,
+        lo + chords,
+    )
+    return dist.reshape(m, a)
 
 
 def blend_space_corners(

@@ -13,7 +13,9 @@ from nurbscnc.plan.pieces import PieceList
 from nurbscnc.plan.turnarounds import turnaround_corners
 
 
-def apply_blends(pieces: PieceList, machine: Machine) -> tuple[PieceList, Corners | None]:
+def apply_blends(
+    pieces: PieceList, machine: Machine, turns: dict | None = None
+) -> tuple[PieceList, Corners | None]:
     """Replace corners by PH quintic blends within their tolerance (G64).
 
     Every corner :func:`find_corners` admits is blended when a blend fits: as LinuxCNC
@@ -29,14 +31,15 @@ def apply_blends(pieces: PieceList, machine: Machine) -> tuple[PieceList, Corner
     dropped. The blends' end tangents are the pieces' own unit tangents (not recomputed from
     trimmed end points), so the junctions of a blended polyline are exactly smooth. The new
     rows are written by :func:`blended_rows`. Returns the pieces and the corners tried
-    (None if none).
+    (None if none). ``turns``: None, or the turn-arounds' answers smoothing found
+    (:func:`~nurbscnc.plan.turnarounds.remembered_turn_choice`).
     """
     if len(pieces) < 2:
         return pieces, None
     c = find_corners(pieces, machine)
     if c is None:
         return pieces, None
-    turnaround_corners(pieces, c, machine)
+    turnaround_corners(pieces, c, machine, turns)
     blend_line_corners(pieces, c)
     blend_object_corners(pieces, c, machine)
     faster = _blend_is_faster(pieces, c, machine) | c.turn

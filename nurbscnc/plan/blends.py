@@ -186,10 +186,11 @@ def blend_object_corners(pieces: PieceList, c: Corners, machine: Machine) -> Non
     blends = blend_space_corners(
         pieces.path, rows - 1, rows, c.tol_mm[js], 0.5 * length[rows - 1], 0.5 * length[rows]
     )
-    for j, bl in zip(js.tolist(), blends):
-        if bl is not None:
-            c.cap_mm_s[j] = servo_blend_cap_mm_s(machine, bl.kappa_max_per_mm)
-            _take_blend(c, j, bl)
+    found = [(j, bl) for j, bl in zip(js.tolist(), blends) if bl is not None]
+    kappa = np.array([bl.kappa_max_per_mm for _, bl in found])
+    for (j, bl), cap in zip(found, servo_blend_caps_mm_s(machine, kappa).tolist()):
+        c.cap_mm_s[j] = cap
+        _take_blend(c, j, bl)
 
 
 def _take_blend(c: Corners, j: int, bl) -> None:
@@ -214,12 +215,22 @@ def servo_blend_cap_mm_s(machine: Machine, kappa_per_mm: float) -> float:
     the contour check's lever on a short tight blend is the feed of the pieces around it
     (blends capped at √(A/κ) alone made the check slow the helices around them, costing
     far more than a stop)."""
+    return float(servo_blend_caps_mm_s(machine, np.array([float(kappa_per_mm)]))[0])
 
-    gain = servo_gain_s2(machine)
-    if gain == 0.0 or not machine.contour_check or kappa_per_mm <= 0.0:
-        return np.inf
+
+def servo_blend_caps_mm_s(machine: Machine, kappa_per_mm: np.ndarray) -> np.ndarray:
+    """:func:`servo_blend_cap_mm_s` of every peak curvature κ (m,) [1/mm] at once [mm/s]:
+    the servo's coefficient found once (its error series is the costly part), then one
+    elementwise √ (correctly rounded: the same values as one blend at a time)."""
+    kappa = np.asarray(kappa_per_mm, dtype=float)
+    out = np.full(kappa.shape, np.inf)
+    gain = servo_gain_s2(machine) if kappa.size and machine.contour_check else 0.0
+    live = kappa > 0.0
+    if gain == 0.0 or not live.any():
+        return out
     eps = SERVO_BLEND_SHARE * machine.limits.contour_tolerance_mm
-    return float(servo_curve_cap_mm_s(kappa_per_mm, eps, gain))
+    out[live] = servo_curve_cap_mm_s(kappa[live], eps, gain)
+    return out
 
 
 def servo_gain_s2(machine: Machine) -> float:

@@ -72,7 +72,9 @@ def segment_pieces(
     if machine.rotary_axes and uses_rotary(segments):
         own = columns if columns is not None else segment_columns(segments)
         rotary = (own, plan_holds(segments, machine, own), rotary_axes)
-    segs, source, columns = _prepared_segments(segments, machine, options, columns)
+    # The turn-arounds' U choices, found by smoothing and asked again by the blends.
+    turns: dict = {}
+    segs, source, columns = _prepared_segments(segments, machine, options, columns, turns)
     n = len(segs)
     kinds = columns.names.tolist()
     straight = (columns.kind == LINE_CODE) | (columns.kind == RAPID_CODE)
@@ -99,7 +101,7 @@ def segment_pieces(
     if rotary is not None:
         rate_changes(cols, segments, (rotary[0].abc_start_deg, rotary[0].abc_end_deg))
     pieces = PieceList(**cols, objects=objects)
-    pieces = _corners_decided(pieces, machine, options, segments, rotary, marker)
+    pieces = _corners_decided(pieces, machine, options, segments, rotary, marker, turns)
     if options.smooth:
         from nurbscnc.plan.smoothing import smoothing_summary
 
@@ -109,17 +111,19 @@ def segment_pieces(
     return pieces
 
 
-def _prepared_segments(segments, machine: Machine, options: PlanOptions, columns):
+def _prepared_segments(segments, machine: Machine, options: PlanOptions, columns, turns=None):
     """The segments planned (smoothed runs as splines, G64 Q runs merged), the program's
     index of each and their :class:`~nurbscnc.program.columns.SegmentColumns` (``columns``
-    when given and still theirs)."""
+    when given and still theirs); ``turns``: the memo of smoothing's turn-around answers."""
     lim = machine.limits
     segs, source = list(segments), np.arange(len(segments))
     if options.smooth:  # dense CAM polylines as splines, on the programmed vertices
         from nurbscnc.plan.smoothing import smooth_runs
 
         reserve = options.tolerance_mm or lim.ph_tolerance_mm  # a PH corner inside a spline
-        segs, source = smooth_runs(segs, source, machine, options.blend_tolerance_mm, reserve)
+        segs, source = smooth_runs(
+            segs, source, machine, options.blend_tolerance_mm, reserve, turns
+        )
     segs, merged = merge_collinear(segs)  # G64 Q, on the lines left
     source = source[merged]
     if columns is None or len(source) != len(columns.kind) or options.smooth:
@@ -298,16 +302,23 @@ def _mark_exact_stops(cols: dict, source: np.ndarray) -> None:
 
 
 def _corners_decided(
-    pieces: PieceList, machine: Machine, options: PlanOptions, segments, rotary, marker: bool
+    pieces: PieceList,
+    machine: Machine,
+    options: PlanOptions,
+    segments,
+    rotary,
+    marker: bool,
+    turns: dict | None = None,
 ) -> PieceList:
     """The pieces with their corners decided: small breaks passed, G64 corners blended,
     curvature jumps capped, the rotary columns on the final rows (``rotary``: the segments'
     columns, their holds and the program's rotary axes, or None; ``marker``: row 0 carries
-    the stops before the first move), every corner logged."""
+    the stops before the first move), every corner logged; ``turns``: smoothing's answers
+    at the turn-arounds."""
     if len(pieces) >= 2:
         turning, regular = junction_turning(pieces)
         pieces.pass_after[:-1] = small_breaks(pieces, turning, regular, machine)
-    pieces, tried = apply_blends(pieces, machine)
+    pieces, tried = apply_blends(pieces, machine, turns)
     if rotary is not None:
         pieces = dc_replace(
             pieces, rotary=rotary_pieces(pieces, segments, *rotary[:2], marker, rotary[2])

@@ -229,15 +229,16 @@ def split_spline(knots: np.ndarray, ctrl: np.ndarray, cuts: np.ndarray) -> list[
 
 
 def _turnaround_sides(
-    p0: np.ndarray, p1: np.ndarray, cap: np.ndarray, tol: np.ndarray, adjacent, machine
+    p0: np.ndarray, p1: np.ndarray, cap: np.ndarray, tol: np.ndarray, adjacent, machine, turns
 ) -> np.ndarray:
     """Lines (indices into the columns) just before and after a turn-around's middle line
     that the planner will round by one U curve: three adjacent lines whose outer two reverse
     the tangent by at least :data:`~nurbscnc.plan.turnarounds.MIN_REVERSAL_DEG`, for which
     :func:`~nurbscnc.plan.turnarounds.turn_choice` takes a U (``cap`` (m,) the lines' feed
     caps [mm/s], ``tol`` (m,) their tolerances [mm]). They stay lines, out of every run:
-    the U trims lines, not splines."""
-    from nurbscnc.plan.turnarounds import MIN_REVERSAL_DEG, turn_choice
+    the U trims lines, not splines. ``turns``: None or the memo of the answers
+    (:func:`~nurbscnc.plan.turnarounds.remembered_turn_choice`)."""
+    from nurbscnc.plan.turnarounds import MIN_REVERSAL_DEG, remembered_turn_choice
 
     d = p1 - p0
     unit = d / np.maximum(np.sqrt(np.einsum("ij,ij->i", d, d)), 1e-300)[:, None]
@@ -247,7 +248,8 @@ def _turnaround_sides(
     taken = [
         i
         for i in middle.tolist()
-        if turn_choice(
+        if remembered_turn_choice(
+            turns,
             p0[i - 1 : i + 2],
             p1[i - 1 : i + 2],
             cap[i - 1 : i + 2],
@@ -266,6 +268,7 @@ def smooth_runs(
     machine,
     blend_override_mm: float | None = None,
     reserve_mm: float = 0.0,
+    turns: dict | None = None,
 ) -> tuple[list, np.ndarray]:
     """The segments with every run of dense feed lines (module doc) replaced by a
     :class:`SmoothedRun` within SHARE × its path tolerance less ``reserve_mm`` (the PH fit
@@ -273,7 +276,9 @@ def smooth_runs(
     within the rest, and the program index of each result segment (``source`` carried: a
     spline takes its run's last line's). ``machine``: its path tolerance serves G64
     without P (:func:`~nurbscnc.geometry.segments.blend_tolerance_mm`); ``blend_override_mm``:
-    ``--blend-tolerance`` (it overrides every mode)."""
+    ``--blend-tolerance`` (it overrides every mode). ``turns``: None, or a dict that keeps
+    the turn-arounds' answers for the planner
+    (:func:`~nurbscnc.plan.turnarounds.remembered_turn_choice`)."""
     segs = list(segments)
     is_line = np.fromiter(
         # Lines that turn A B C are left alone: A moves linearly along each of them.
@@ -299,7 +304,7 @@ def smooth_runs(
     ok = (tol > 0.0) & (length > 0.0) & (length <= DENSE_MAX_MM)
     adjacent = (rows[1:] == rows[:-1] + 1) & np.all(p1[:-1] == p0[1:], axis=1)
     cap = np.maximum(np.minimum(feed, machine.limits.v_max_mm_s), 1e-6)  # as the planner's
-    ok[_turnaround_sides(p0, p1, cap, tol, adjacent, machine)] = False
+    ok[_turnaround_sides(p0, p1, cap, tol, adjacent, machine, turns)] = False
     replaced: dict[int, tuple[int, Nurbs]] = {}  # first row → (last row, spline)
     for a, b in _runs(p0, p1, ok, mode[:, None], adjacent):
         vertices = np.vstack((p0[a : a + 1], p1[a:b]))

@@ -109,7 +109,7 @@ def turn_cost_s(v, w, length_mm, replaced_mm, accel, machine: Machine) -> float:
     return float(0.5 * t * dv / v + length_mm / w - replaced_mm / v)
 
 
-def turnaround_corners(pieces: PieceList, c: Corners, machine: Machine) -> None:
+def turnaround_corners(pieces: PieceList, c: Corners, machine: Machine, memo=None) -> None:
     """Find the turn-arounds among corners ``c`` (two line–line corners around a middle line,
     the tangent reversed by at least :data:`MIN_REVERSAL_DEG` across them), fit each its U
     within the smaller tolerance, trims at most half of each outer line, and keep it where it
@@ -117,7 +117,9 @@ def turnaround_corners(pieces: PieceList, c: Corners, machine: Machine) -> None:
     against :func:`stops_cost_s`). A kept
     one is recorded on ``c``: the first corner carries the U (trims: ``d`` of the incoming
     line and the whole middle line), the second is ``absorbed`` (trims: ``d`` of the outgoing
-    line, no blend row of its own), both ``turn`` and no longer line–line corners."""
+    line, no blend row of its own), both ``turn`` and no longer line–line corners.
+    ``memo``: None, or the dict of :func:`turn_choice` answers smoothing already found for
+    this program (:func:`remembered_turn_choice`)."""
     m = c.row.size
     if m < 2:
         return
@@ -132,7 +134,8 @@ def turnaround_corners(pieces: PieceList, c: Corners, machine: Machine) -> None:
         if j <= taken:  # its first corner is the last turn-around's second
             continue
         r = int(row[j])
-        bl = turn_choice(
+        bl = remembered_turn_choice(
+            memo,
             pieces.start_mm[:, r - 1 : r + 2].T,
             pieces.end_mm[:, r - 1 : r + 2].T,
             cap[r - 1 : r + 2],
@@ -142,6 +145,22 @@ def turnaround_corners(pieces: PieceList, c: Corners, machine: Machine) -> None:
         if bl is not None:
             taken = j + 1
             _record(c, j, bl, float(length[r]), machine)
+
+
+def remembered_turn_choice(memo, start_mm, end_mm, cap_mm_s, tol_mm: float, machine):
+    """:func:`turn_choice`, its answer kept in ``memo`` (a dict, or None: not kept) under
+    the exact bytes of its inputs: smoothing (which keeps a U's outer lines out of its runs)
+    and the planner ask it of the same turn-arounds with the same numbers, so the second
+    question is a look-up (the same U object, the same bits). ``machine``: one per memo."""
+    if memo is None:
+        return turn_choice(start_mm, end_mm, cap_mm_s, tol_mm, machine)
+    key = b"".join(
+        np.ascontiguousarray(x, dtype=float).tobytes()
+        for x in (start_mm, end_mm, cap_mm_s, [tol_mm])
+    )
+    if key not in memo:
+        memo[key] = turn_choice(start_mm, end_mm, cap_mm_s, tol_mm, machine)
+    return memo[key]
 
 
 def turn_choice(start_mm: np.ndarray, end_mm: np.ndarray, cap_mm_s, tol_mm: float, machine):
