@@ -185,6 +185,39 @@ def test_the_bands_find_every_piece_whose_ball_is_near(monkeypatch, band_after):
     assert index._built is None
 
 
+@pytest.mark.parametrize("tree_min", [1, PathIndex.TREE_MIN])
+def test_the_trees_find_exactly_the_pieces_whose_ball_is_near(monkeypatch, tree_min):
+    """PathIndex.candidates through the k-d trees (one query about each block of points,
+    then every ball tested against every point) is exactly the set of pieces whose ball
+    (centre (A + B)/2, radius L/2) comes within u of some query point, brute force over all
+    pairs, sorted and once each, for blocks about the path and off it; and the distances
+    it gives are those of the direct way (every ball tested), bit for bit."""
+    monkeypatch.setattr(PathIndex, "TREE_MIN", tree_min)
+    run = run_program(interpret_text(_column_of_cuts(40)), MACHINE)
+    pieces = run.plan.pieces
+    centre = 0.5 * (pieces.start_mm + pieces.end_mm).T
+    radius = 0.5 * pieces.length_mm
+    rng = np.random.default_rng(5)
+    monkeypatch.setattr(PathIndex, "DIRECT_PAIRS", -1)  # the trees from the first query
+    trees = PathIndex(pieces)
+    blocks = []
+    for _ in range(80):
+        base = np.array([rng.uniform(-1.0, 3.0), rng.uniform(-1.0, 120.0), rng.uniform(-1, 3)])
+        q = base + rng.uniform(-0.5, 0.5, (int(rng.integers(1, 40)), 3))
+        u = rng.uniform(0.0, 1.5, q.shape[0])
+        gap = np.linalg.norm(q[:, None, :] - centre[None, :, :], axis=2) - radius[None, :]
+        want = np.flatnonzero(np.any(gap <= u[:, None], axis=0))
+        assert np.array_equal(trees.candidates(q, u), want)
+        blocks.append((q, u))
+    assert trees._built is not None
+    monkeypatch.setattr(PathIndex, "DIRECT_PAIRS", 10**12)
+    monkeypatch.setattr(PathIndex, "BAND_AFTER", 10**12)
+    direct = PathIndex(pieces)
+    for q, u in blocks:
+        assert np.array_equal(trees.distance_mm(q, u), direct.distance_mm(q, u))
+    assert direct._built is None and direct._bands is None
+
+
 def _chord_errors_mm(pieces) -> np.ndarray:
     """Distance [mm] from the true path to the check's dense polyline: at 1/4, 1/2 and 3/4
     of every chord's arc length, the exact point of its piece to the chord (the polyline's
