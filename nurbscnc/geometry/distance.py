@@ -379,8 +379,9 @@ class PathIndex:
         # rest of the distance.
         lows, highs = q.min(axis=0), q.max(axis=0)
         mid, half = 0.5 * (lows + highs), 0.5 * float(np.linalg.norm(highs - lows))
-        # (A relative 1e-9 for the rounding of the tree's distances and of this sum.)
-        reach_mm = (half + float(upper_mm.max())) * (1.0 + 1e-9)
+        # (A relative 1e-9 and 1e-6 mm for the rounding of the tree's distances, of the
+        # box's middle and of this sum: a wider query only finds more balls to test.)
+        reach_mm = (half + float(upper_mm.max())) * (1.0 + 1e-9) + 1e-6
         for idx, tree, r_max in self._built:
             if tree is None:
                 found.append(idx)
