@@ -224,6 +224,12 @@ def test_the_trees_find_exactly_the_pieces_whose_ball_is_near(monkeypatch, tree_
     for q, u in blocks:
         assert np.array_equal(trees.distance_mm(q, u), direct.distance_mm(q, u))
     assert direct._built is None and direct._bands is None
+    # Lines' ends kept once (PathIndex._line_ends) or placed for each block: the same bits.
+    monkeypatch.setattr(PathIndex, "LINE_ENDS_PIECES", 0)
+    placed = PathIndex(pieces)
+    for q, u in blocks:
+        assert np.array_equal(placed.distance_mm(q, u), direct.distance_mm(q, u))
+    assert placed._lines is None and direct._lines is not None
 
 
 def _plans_by(text: str, way: str, monkeypatch):

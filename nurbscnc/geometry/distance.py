@@ -178,6 +178,9 @@ class PathIndex:
     #: Candidates of one query block from which pieces repeating another's geometry are
     #: measured once (:meth:`_distinct`).
     DISTINCT_MIN = 64
+    #: Programs of at most this many pieces keep every line's two ends (:meth:`_line_ends`,
+    #: 48 bytes a piece: 12 MB at most); longer ones place them for each query block.
+    LINE_ENDS_PIECES = 1 << 18
 
     def __init__(self, pieces, short_mm: float = 1.0):
         self._pieces = pieces
@@ -496,11 +499,20 @@ class PathIndex:
         starts, dirs = [], []
         # Lines (a polyline of their points at fractions 0 and 1) all at once; the other
         # pieces through their kept polylines.
-        is_line, line_a, line_b = self._line_ends()
-        line = np.take(is_line, cand)
+        path = self._pieces.path
+        kept = len(self._counts) <= self.LINE_ENDS_PIECES
+        if kept:
+            is_line, line_a, line_b = self._line_ends()
+            line = np.take(is_line, cand)
+        else:
+            line = (np.take(path.kind, cand) == Kind.LINE) & (np.take(self._counts, cand) == 2)
         if line.any():
             i = cand[line]
-            a, b = line_a[i], line_b[i]
+            if kept:
+                a, b = line_a[i], line_b[i]
+            else:
+                ends = path.points_at_fraction(np.repeat(i, 2), np.tile([0.0, 1.0], i.size))
+                a, b = ends[0::2], ends[1::2]
             keep = np.all((np.maximum(a, b) >= lo_q) & (np.minimum(a, b) <= hi_q), axis=1)
             starts.append(a[keep])
             dirs.append(b[keep] - a[keep])
