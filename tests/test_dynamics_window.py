@@ -11,6 +11,9 @@ nurbscnc.geometry.distance.windowed_contour_mm).
 
 from __future__ import annotations
 
+import os
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -19,10 +22,15 @@ from nurbscnc.geometry.distance import PathIndex, windowed_contour_mm
 from nurbscnc.geometry.polyline import CHORD_MM, dense_path_mm
 from nurbscnc.machine.profile import load_machine
 from nurbscnc.pipeline import run_program
+from nurbscnc.plan.lookahead import plan_checked
 from nurbscnc.program.interpret import interpret_text
 from nurbscnc.servo.model import contour_error_true, simulate_axes
+from tests.plan_helpers import assert_same_levers
 
 MACHINE = load_machine()
+CORPUS = Path(
+    os.environ.get("NURBSCNC_CORPUS", Path(__file__).resolve().parents[2] / "shared" / "corpus")
+)
 
 # Blended lines (PH corners), arcs and a rapid: ~3 s of motion.
 PROGRAM = """G21 G17 G90 G94
@@ -183,6 +191,99 @@ def test_the_bands_find_every_piece_whose_ball_is_near(monkeypatch, band_after):
         assert np.all(np.diff(got) > 0)  # sorted, once each
     assert (index._bands is not None) == (band_after == 0)
     assert index._built is None
+
+
+@pytest.mark.parametrize("tree_min", [1, PathIndex.TREE_MIN])
+def test_the_trees_find_exactly_the_pieces_whose_ball_is_near(monkeypatch, tree_min):
+    """PathIndex.candidates through the k-d trees (one query about each block of points,
+    then every ball tested against every point) is exactly the set of pieces whose ball
+    (centre (A + B)/2, radius L/2) comes within u of some query point, brute force over all
+    pairs, sorted and once each, for blocks about the path and off it; and the distances
+    it gives are those of the direct way (every ball tested), bit for bit."""
+    monkeypatch.setattr(PathIndex, "TREE_MIN", tree_min)
+    run = run_program(interpret_text(_column_of_cuts(40)), MACHINE)
+    pieces = run.plan.pieces
+    centre = 0.5 * (pieces.start_mm + pieces.end_mm).T
+    radius = 0.5 * pieces.length_mm
+    rng = np.random.default_rng(5)
+    monkeypatch.setattr(PathIndex, "DIRECT_PAIRS", -1)  # the trees from the first query
+    trees = PathIndex(pieces)
+    blocks = []
+    for _ in range(80):
+        base = np.array([rng.uniform(-1.0, 3.0), rng.uniform(-1.0, 120.0), rng.uniform(-1, 3)])
+        q = base + rng.uniform(-0.5, 0.5, (int(rng.integers(1, 40)), 3))
+        u = rng.uniform(0.0, 1.5, q.shape[0])
+        gap = np.linalg.norm(q[:, None, :] - centre[None, :, :], axis=2) - radius[None, :]
+        want = np.flatnonzero(np.any(gap <= u[:, None], axis=0))
+        assert np.array_equal(trees.candidates(q, u), want)
+        blocks.append((q, u))
+    assert trees._built is not None
+    monkeypatch.setattr(PathIndex, "DIRECT_PAIRS", 10**12)
+    monkeypatch.setattr(PathIndex, "BAND_AFTER", 10**12)
+    direct = PathIndex(pieces)
+    for q, u in blocks:
+        assert np.array_equal(trees.distance_mm(q, u), direct.distance_mm(q, u))
+    assert direct._built is None and direct._bands is None
+    # Lines' ends kept once (PathIndex._line_ends) or placed for each block: the same bits.
+    monkeypatch.setattr(PathIndex, "LINE_ENDS_PIECES", 0)
+    placed = PathIndex(pieces)
+    for q, u in blocks:
+        assert np.array_equal(placed.distance_mm(q, u), direct.distance_mm(q, u))
+    assert placed._lines is None and direct._lines is not None
+
+
+def _plans_by(text: str, way: str, monkeypatch):
+    """(plan, check) of ``text`` with the check's refinement finding its candidates by the
+    k-d trees from the first query (every radius group a tree), or by testing every ball."""
+    huge = 10**15
+    trees = way == "trees"
+    monkeypatch.setattr(PathIndex, "DIRECT_PAIRS", -1 if trees else huge)
+    monkeypatch.setattr(PathIndex, "BAND_AFTER", PathIndex.BAND_AFTER if trees else huge)
+    monkeypatch.setattr(PathIndex, "DIRECT_BLOCK_PIECES", huge)
+    monkeypatch.setattr(PathIndex, "TREE_MIN", 1 if trees else PathIndex.TREE_MIN)
+    asked = []  # per candidates query: whether the trees answered it
+    real = PathIndex.candidates
+
+    def counting(self, q, upper_mm):
+        found = real(self, q, upper_mm)
+        asked.append(self._built is not None)
+        return found
+
+    monkeypatch.setattr(PathIndex, "candidates", counting)
+    plan, chk = plan_checked(interpret_text(text), MACHINE, keep_reference=False)
+    assert all(asked) if trees else not any(asked)
+    return plan, chk, len(asked)
+
+
+def _cam_heads() -> list:
+    cam = CORPUS / "cam"
+    return sorted(cam.glob("*.nc")) if cam.is_dir() else []
+
+
+def _assert_same_plans(text: str, monkeypatch) -> int:
+    (plan, chk, n), (ref, ref_chk, _) = (
+        _plans_by(text, w, monkeypatch) for w in ("trees", "direct")
+    )
+    assert plan.iterations == ref.iterations and plan.cycle_time_s == ref.cycle_time_s
+    assert_same_levers(plan, ref)
+    np.testing.assert_array_equal(plan.profile.phase_start_time_s, ref.profile.phase_start_time_s)
+    for f in ("count", "index", "err_mm", "tau_s", "run_piece", "run_start", "restart_count"):
+        np.testing.assert_array_equal(getattr(chk.overs, f), getattr(ref_chk.overs, f), f)
+    assert chk.contour_stats() == ref_chk.contour_stats()  # the rms too: the same distances
+    return n
+
+
+def test_plans_alike_with_the_trees_and_every_ball(monkeypatch):
+    """Forty stacked cuts 1 mm apart (the refinement finds the neighbouring cut): the plan
+    and its check with the trees' candidates equal those of testing every ball."""
+    assert _assert_same_plans(_column_of_cuts(40), monkeypatch) > 0  # the refinement ran
+
+
+@pytest.mark.skipif(not _cam_heads(), reason=f"no corpus CAM programs under {CORPUS}/cam")
+@pytest.mark.parametrize("path", _cam_heads(), ids=lambda p: p.name)
+def test_corpus_cam_plans_alike_with_the_trees_and_every_ball(path, monkeypatch):
+    """The first 400 lines of each corpus CAM program (then M2), as above."""
+    _assert_same_plans("\n".join(path.read_text().splitlines()[:400]) + "\nM2\n", monkeypatch)
 
 
 def _chord_errors_mm(pieces) -> np.ndarray:

@@ -178,6 +178,9 @@ class PathIndex:
     #: Candidates of one query block from which pieces repeating another's geometry are
     #: measured once (:meth:`_distinct`).
     DISTINCT_MIN = 64
+    #: Programs of at most this many pieces keep every line's two ends (:meth:`_line_ends`,
+    #: 48 bytes a piece: 12 MB at most); longer ones place them for each query block.
+    LINE_ENDS_PIECES = 1 << 18
 
     def __init__(self, pieces, short_mm: float = 1.0):
         self._pieces = pieces
@@ -188,6 +191,7 @@ class PathIndex:
         self._banded = 0  # (point, piece) pairs tested through the bands so far
         self._built = None
         self._counts = None
+        self._lines = None  # (line flags, start points, end points): :meth:`_line_ends`
         # The windowed check's dense polyline of pieces [0, filled): its points and
         # per-piece offsets.
         self._dense = None
@@ -358,8 +362,10 @@ class PathIndex:
         every rapid) makes the bands and tests the balls in the band about each block of
         points; only one whose bands hold more than :data:`DIRECT_PAIRS` pairs in all (a
         path dense along every axis) builds the k-d trees (importing scipy.spatial and
-        building them cost 0.2–0.3 s). Each finds every piece whose ball comes within
-        ``upper_mm`` (the tree some more), so the distances are the same."""
+        building them cost 0.2–0.3 s; one query about each block of points, the balls of
+        what it finds then tested against every point). Each finds every piece whose ball
+        comes within ``upper_mm`` of some point (the bands and trees exactly those), and a
+        piece's polyline lies in its ball, so the distances are the same."""
         k = self._pieces.length_mm.size
         direct = min(self.DIRECT_PAIRS, self.BAND_AFTER * k)
         if self._bands is None and self._built is None and self._direct + q.shape[0] * k <= direct:
@@ -370,13 +376,25 @@ class PathIndex:
         if self._built is None:
             self._build()
         found = []
+        # One tree query for the block: the centres within R + max(u) of the ball about
+        # the points' box (every centre a point's query would find), then each ball tested
+        # against every point (:meth:`_near_balls`); a query per point cost more than the
+        # rest of the distance.
+        lows, highs = q.min(axis=0), q.max(axis=0)
+        mid, half = 0.5 * (lows + highs), 0.5 * float(np.linalg.norm(highs - lows))
+        # (A relative 1e-9 and 1e-6 mm for the rounding of the tree's distances, of the
+        # box's middle and of this sum: a wider query only finds more balls to test.)
+        reach_mm = (half + float(upper_mm.max())) * (1.0 + 1e-9) + 1e-6
         for idx, tree, r_max in self._built:
-            if tree is not None:
-                for lst in tree.query_ball_point(q, upper_mm + r_max):
-                    found.append(idx[np.asarray(lst, dtype=np.int64)])
-            else:
-                found.append(self._near_balls(q, upper_mm, idx))
-        return np.unique(np.concatenate(found)) if found else np.zeros(0, dtype=np.int64)
+            if tree is None:
+                found.append(idx)
+                continue
+            near = tree.query_ball_point(mid, reach_mm + r_max * (1.0 + 1e-9), return_sorted=False)
+            if near:
+                found.append(idx[np.asarray(near)])
+        if not found:
+            return np.zeros(0, dtype=np.int64)
+        return np.unique(self._near_balls(q, upper_mm, np.concatenate(found)))
 
     def _candidates_banded(self, q: np.ndarray, upper_mm: np.ndarray) -> np.ndarray:
         """:meth:`candidates` through the bands (:meth:`_make_bands`): in each radius group
@@ -457,6 +475,22 @@ class PathIndex:
             self._cached_points += int(c.sum())
         return [cache[j] for j in cand.tolist()]
 
+    def _line_ends(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Which pieces are lines whose polyline is their two ends (k,), and those ends
+        (k, 3) [mm] (NaN for the others): every line's placed once
+        (:meth:`PathTable.points_at_fraction` at 0 and 1: the same numbers as placing them
+        for each query block, its formulas being elementwise)."""
+        if self._lines is None:
+            path = self._pieces.path
+            is_line = (np.asarray(path.kind) == Kind.LINE) & (self._counts == 2)
+            i = np.flatnonzero(is_line)
+            ends = path.points_at_fraction(np.repeat(i, 2), np.tile([0.0, 1.0], i.size))
+            a = np.full((is_line.size, 3), np.nan)
+            b = np.full((is_line.size, 3), np.nan)
+            a[i], b[i] = ends[0::2], ends[1::2]
+            self._lines = (is_line, a, b)
+        return self._lines
+
     def _near_segments(self, cand: np.ndarray, lo_q: np.ndarray, hi_q: np.ndarray):
         """Starts and directions (n, 3) [mm] of the polyline segments of pieces ``cand``
         whose bounding boxes meet the box [lo_q, hi_q]: boxes of :data:`CHUNK` segments
@@ -466,11 +500,19 @@ class PathIndex:
         # Lines (a polyline of their points at fractions 0 and 1) all at once; the other
         # pieces through their kept polylines.
         path = self._pieces.path
-        line = (np.take(path.kind, cand) == Kind.LINE) & (np.take(self._counts, cand) == 2)
+        kept = len(self._counts) <= self.LINE_ENDS_PIECES
+        if kept:
+            is_line, line_a, line_b = self._line_ends()
+            line = np.take(is_line, cand)
+        else:
+            line = (np.take(path.kind, cand) == Kind.LINE) & (np.take(self._counts, cand) == 2)
         if line.any():
             i = cand[line]
-            ends = path.points_at_fraction(np.repeat(i, 2), np.tile([0.0, 1.0], i.size))
-            a, b = ends[0::2], ends[1::2]
+            if kept:
+                a, b = line_a[i], line_b[i]
+            else:
+                ends = path.points_at_fraction(np.repeat(i, 2), np.tile([0.0, 1.0], i.size))
+                a, b = ends[0::2], ends[1::2]
             keep = np.all((np.maximum(a, b) >= lo_q) & (np.minimum(a, b) <= hi_q), axis=1)
             starts.append(a[keep])
             dirs.append(b[keep] - a[keep])
