@@ -218,3 +218,48 @@ def test_a_copy_one_tenth_of_a_nanometre_off_is_planned_afresh():
     assert copy.shape_key() == other.shape_key() == first.shape_key()
     assert copy.__dict__.get("arc_table") is first.arc_table  # taken
     assert other.arc_table is not first.arc_table  # built for itself
+
+
+def _pocket_passes(depths_mm) -> str:
+    """A circle of 64 chords (r = 4 mm) cut at each depth of ``depths_mm``: plunge, the
+    chords, lift (a pocket's passes, as PyCut writes them)."""
+    angle = np.linspace(0.0, 2.0 * np.pi, 65)
+    ring = [f"G1 X{4.0 * np.cos(a):.4f} Y{4.0 * np.sin(a):.4f}" for a in angle[1:]]
+    out = ["G21 G17 G90 G64 P0.02", "G0 Z2", "G0 X4 Y0"]
+    for z in depths_mm:
+        out += [f"G1 Z{z:.3f} F300", "F1200", *ring, "G0 Z2", "G0 X4 Y0"]
+    return "\n".join([*out, "M2", ""])
+
+
+def test_a_pocket_pass_one_depth_lower_gets_the_smoothed_pieces_it_would_get_alone():
+    """Each pass's chords become one smoothed spline; the passes below the first are moved
+    copies of it: planned from its pieces (sharing its arc-length tables), with the cells,
+    caps and lengths of the pass planned alone and each piece's own source line."""
+    machine = load_machine()
+    depths = (-0.1, -0.2, -0.3)
+    whole = segment_pieces(interpret_text(_pocket_passes(depths)).segments, machine)
+    nurbs = sorted({int(s) for s, k in zip(whole.segment, whole.kind) if k == 4})
+    assert len(nurbs) == len(depths)  # one spline a pass
+    cells = np.flatnonzero(np.asarray(whole.kind) == 4)
+    curves = {id(g): g for g in (whole.objects[int(r)][0] for r in cells) if g.degree == 3}
+    assert len(curves) == len(depths)  # the splines (the plunges' space blends: quintics)
+    tables = {id(c.__dict__.get("arc_table")) for c in curves.values()}
+    assert len(tables) == 1  # built once, for the first pass
+    for which, depth in enumerate(depths):
+        alone = segment_pieces(interpret_text(_pocket_passes([depth])).segments, machine)
+        mine = _nurbs_rows(whole, nurbs[which])
+        theirs = _nurbs_rows(alone, int(alone.segment[np.asarray(alone.kind) == 4][0]))
+        assert mine.size == theirs.size > 20
+        for name in COLUMNS:
+            np.testing.assert_allclose(
+                np.asarray(getattr(whole, name))[mine].astype(float),
+                np.asarray(getattr(alone, name))[theirs].astype(float),
+                rtol=1e-10,
+                atol=1e-12,
+                err_msg=name,
+            )
+        np.testing.assert_allclose(
+            _sample_points(whole, mine), _sample_points(alone, theirs), rtol=0, atol=1e-11
+        )
+        # The pass alone starts at line 4 (plunge), the whole program's pass k 68 lines later.
+        assert np.array_equal(whole.line[mine], alone.line[theirs] + 68 * which)

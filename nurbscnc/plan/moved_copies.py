@@ -75,8 +75,12 @@ class Repeats:
     of them moved (a part cut again at another place: ten airfoils along X) from that one's
     pieces instead of again (:meth:`Block.moved`): a moved copy
     (:class:`~nurbscnc.geometry.nurbs.MovedCopies`) at the same feed and blend tolerance.
-    Smoothed runs (a line per piece) are not remembered. Memory: the blocks, which the
-    program's pieces hold anyway."""
+    Smoothed runs (:class:`~nurbscnc.plan.smoothing.SmoothedRun`: the passes of a pocket
+    cut again one depth lower fit the same spline moved) are remembered apart from program
+    NURBS, and a moved copy's pieces take their source lines from its own run
+    (:meth:`~nurbscnc.plan.smoothing.SmoothedRun.line_at`, as
+    :func:`~nurbscnc.plan.curved_pieces.object_pieces` gives them). Memory: the blocks,
+    which the program's pieces hold anyway."""
 
     def __init__(self, machine: Machine, options: PlanOptions):
         self.machine, self.options = machine, options
@@ -84,8 +88,7 @@ class Repeats:
 
     def block(self, seg, index: int) -> Block:
         """The block of NURBS segment ``seg`` (number ``index``)."""
-        if getattr(seg, "line_at", None) is not None:
-            return Block.of(object_pieces(seg, index, self.machine, self.options))
+        line_at = getattr(seg, "line_at", None)
         try:
             curve = nurbs_curve(seg, self.machine)
         except NurbsCncError as exc:
@@ -93,11 +96,15 @@ class Repeats:
         same = (
             min(seg.feed_mm_s, self.machine.limits.v_max_mm_s),
             blend_override(seg, self.options),
+            line_at is not None,
         )
         hit = self.copies.find(curve, same)
         if hit is not None:
             (old, block), delta = hit
-            return block.moved(curve, old, delta, index, seg.line)
+            moved = block.moved(curve, old, delta, index, seg.line)
+            if line_at is not None:
+                moved.scalars["line"][:] = [line_at(ua) for _, ua, _, _ in moved.objects]
+            return moved
         block = Block.of(object_pieces(seg, index, self.machine, self.options, curve))
         self.copies.add(curve, (curve, block), same)
         return block
