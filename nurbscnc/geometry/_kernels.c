@@ -17,6 +17,8 @@
  *   newton_step(f, df, xa, a, b, idx, x, ftol)
  *       -> the number still going (xa, a, b, idx compacted; x of the finished set)
  *                                                                        [ph._newton_step_py]
+ *   ph_closest(cp_re, cp_im, w_re, w_im, xs, q_re, q_im, max_steps, out)
+ *       -> None (out: the foot parameters)                [phfoot._closest_params_py]
  *
  * The arrays are C-contiguous float64 (lo, hi, idx: int64) buffers (the caller makes them so).
  */
@@ -267,17 +269,154 @@ done:
     return result;
 }
 
+/* ------------------------------------------------------------------ PH foot points */
+
+/* phfoot._point_xy: r(x) of the PH quintic with control points (cr, ci), the Bernstein sum
+ * written out as there. */
+static inline void ph_point(const double *cr, const double *ci, double x, double *re, double *im)
+{
+    const double t = 1.0 - x;
+    const double t2 = t * t, t3 = t2 * t, t4 = t3 * t;
+    const double x2 = x * x, x3 = x2 * x, x4 = x3 * x;
+    const double bs[6] = {t4 * t, (5.0 * x) * t4, (10.0 * x2) * t3, (10.0 * x3) * t2,
+                          (5.0 * x4) * t, x4 * x};
+    double r = bs[0] * cr[0], i = bs[0] * ci[0];
+    for (int k = 1; k < 6; k++) {
+        r = r + bs[k] * cr[k];
+        i = i + bs[k] * ci[k];
+    }
+    *re = r;
+    *im = i;
+}
+
+/* phfoot._g_terms: g and g' at x for the point (qr, qi). */
+static inline void ph_g(const double *cr, const double *ci, const double *wr_, const double *wi_,
+                        double x, double qr, double qi, double *g, double *dg)
+{
+    const double t = 1.0 - x;
+    const double a0 = t * t, a1 = 2.0 * (t * x), a2 = x * x;
+    const double wr = (a0 * wr_[0] + a1 * wr_[1]) + a2 * wr_[2];
+    const double wi = (a0 * wi_[0] + a1 * wi_[1]) + a2 * wi_[2];
+    const double dwr = 2.0 * ((wr_[1] - wr_[0]) * t + (wr_[2] - wr_[1]) * x);
+    const double dwi = 2.0 * ((wi_[1] - wi_[0]) * t + (wi_[2] - wi_[1]) * x);
+    const double r1r = wr * wr - wi * wi, r1i = 2.0 * (wr * wi);
+    const double r2r = 2.0 * (wr * dwr - wi * dwi), r2i = 2.0 * (wr * dwi + wi * dwr);
+    double px, py;
+    ph_point(cr, ci, x, &px, &py);
+    const double dx = px - qr, dy = py - qi;
+    *g = dx * r1r + dy * r1i;
+    *dg = (r1r * r1r + r1i * r1i) + (dx * r2r + dy * r2i);
+}
+
+/* phfoot._closest_params_py: for each point q_j the nearest of the dense samples xs
+ * (squared distance, the first of equal ones), the bracket where g changes sign, then the
+ * safeguarded Newton of bracketed_newton (newton_step's arithmetic, ftol 0) to its end, at
+ * most max_steps steps; without a bracket the nearest sample. */
+static PyObject *ph_closest(PyObject *self, PyObject *args)
+{
+    Py_buffer bcr, bci, bwr, bwi, bxs, bqr, bqi, bout;
+    int max_steps;
+    if (!PyArg_ParseTuple(args, "y*y*y*y*y*y*y*iw*", &bcr, &bci, &bwr, &bwi, &bxs, &bqr, &bqi,
+                          &max_steps, &bout))
+        return NULL;
+    PyObject *result = NULL;
+    const Py_ssize_t nd = bxs.len / (Py_ssize_t)sizeof(double);
+    const Py_ssize_t m = bqr.len / (Py_ssize_t)sizeof(double);
+    double *rx = NULL, *ry = NULL;
+    if (bcr.len != 6 * (Py_ssize_t)sizeof(double) || bci.len != bcr.len ||
+        bwr.len != 3 * (Py_ssize_t)sizeof(double) || bwi.len != bwr.len || nd < 1 ||
+        bqi.len != bqr.len || bout.len != bqr.len) {
+        PyErr_SetString(PyExc_ValueError, "ph_closest: inconsistent buffers");
+        goto done;
+    }
+    const double *cr = bcr.buf, *ci = bci.buf, *wr = bwr.buf, *wi = bwi.buf, *xs = bxs.buf;
+    const double *qr = bqr.buf, *qi = bqi.buf;
+    double *out = bout.buf;
+    rx = PyMem_Malloc(2 * nd * sizeof(double));
+    if (rx == NULL) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    ry = rx + nd;
+    for (Py_ssize_t k = 0; k < nd; k++)
+        ph_point(cr, ci, xs[k], &rx[k], &ry[k]);
+    const double eps = 2.220446049250313e-16; /* np.finfo(float).eps */
+    for (Py_ssize_t j = 0; j < m; j++) {
+        Py_ssize_t near = 0;
+        double best = 0.0;
+        for (Py_ssize_t k = 0; k < nd; k++) {
+            const double dx = rx[k] - qr[j], dy = ry[k] - qi[j];
+            const double d2 = dx * dx + dy * dy;
+            /* np.argmin: the first minimum; a NaN is the minimum at once. */
+            if (k == 0 || d2 < best || (isnan(d2) && !isnan(best))) {
+                best = d2;
+                near = k;
+            }
+        }
+        const double x_mid = xs[near];
+        const double x_lo = xs[near > 0 ? near - 1 : 0];
+        const double x_hi = xs[near + 1 < nd ? near + 1 : nd - 1];
+        double g_lo, g_mid, g_hi, unused;
+        ph_g(cr, ci, wr, wi, x_lo, qr[j], qi[j], &g_lo, &unused);
+        ph_g(cr, ci, wr, wi, x_mid, qr[j], qi[j], &g_mid, &unused);
+        ph_g(cr, ci, wr, wi, x_hi, qr[j], qi[j], &g_hi, &unused);
+        const int left = (g_lo <= 0.0) && (g_mid >= 0.0);
+        const int right = !left && (g_mid <= 0.0) && (g_hi >= 0.0);
+        double a = left ? x_lo : x_mid;
+        double b = left ? x_mid : (right ? x_hi : x_mid);
+        if (!((left || right) && (b > a))) {
+            out[j] = x_mid;
+            continue;
+        }
+        double xa = np_clip(x_mid, a, b);
+        int finished = 0;
+        for (int it = 0; it < max_steps && !finished; it++) {
+            double fi, dfi;
+            ph_g(cr, ci, wr, wi, xa, qr[j], qi[j], &fi, &dfi);
+            const int neg = fi < 0.0;
+            const double ai = neg ? xa : a;
+            const double bi = neg ? b : xa;
+            double xn = xa - fi / dfi;
+            const int inside = (xn > ai) && (xn < bi) && (dfi > 0.0);
+            if (!inside)
+                xn = 0.5 * (ai + bi);
+            const double scale = np_maximum(1.0, fabs(xa));
+            const int small = fabs(fi) <= 0.0;
+            finished = small || (inside && fabs(xn - xa) <= (2.0 * eps) * scale) ||
+                       (bi - ai <= (4.0 * eps) * scale);
+            xa = small ? xa : xn;
+            a = ai;
+            b = bi;
+        }
+        out[j] = xa;
+    }
+    Py_INCREF(Py_None);
+    result = Py_None;
+done:
+    PyMem_Free(rx);
+    PyBuffer_Release(&bcr);
+    PyBuffer_Release(&bci);
+    PyBuffer_Release(&bwr);
+    PyBuffer_Release(&bwi);
+    PyBuffer_Release(&bxs);
+    PyBuffer_Release(&bqr);
+    PyBuffer_Release(&bqi);
+    PyBuffer_Release(&bout);
+    return result;
+}
+
 static PyMethodDef methods[] = {
     {"segment_distances", segment_distances, METH_VARARGS,
      "distance._segment_distances_py, compiled."},
     {"basis_derivatives", basis_derivatives, METH_VARARGS,
      "bspline._basis_derivatives_py, compiled."},
     {"newton_step", newton_step, METH_VARARGS, "ph._newton_step_py, compiled."},
+    {"ph_closest", ph_closest, METH_VARARGS, "phfoot._closest_params_py, compiled."},
     {NULL, NULL, 0, NULL},
 };
 
 static struct PyModuleDef module = {
-    PyModuleDef_HEAD_INIT, "_kernels", "Compiled kernels of the geometry stage (distance.py, bspline.py, ph.py).",
+    PyModuleDef_HEAD_INIT, "_kernels", "Compiled kernels of the geometry stage (distance.py, bspline.py, ph.py, phfoot.py).",
     -1, methods,
 };
 

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from nurbscnc.errors import GeometryError
+from nurbscnc.geometry import phfoot
 from nurbscnc.geometry.compiled import kernels as _kernels
 from nurbscnc.geometry.segments import PLANE_AXES, frozen_array, vec3
 
@@ -112,6 +113,44 @@ def _newton_step_py(f, df, xa, a, b, idx, x, ftol: float) -> int:
     idx[:m] = idx[:n][going]
     xa[:m], a[:m], b[:m] = xn[going], lo[going], hi[going]
     return m
+
+
+#: Newton steps at most per foot point (:func:`bracketed_newton`'s default).
+FOOT_STEPS = 200
+
+
+def _closest_param_py(coeffs, xs, q_re, q_im) -> np.ndarray:
+    """:meth:`PHQuintic.closest_param` in numpy (the reference of the compiled
+    ``ph_closest``): ``coeffs`` the control points' and preimage's real and imaginary parts,
+    ``xs`` the dense samples, ``q_re``, ``q_im`` the points."""
+    n_dense = xs.size
+    rx, ry = phfoot.point_xy(coeffs[0], coeffs[1], xs)
+    nearest = np.empty(q_re.size, dtype=np.int64)
+    chunk = max(1, 2_000_000 // n_dense)
+    for start in range(0, q_re.size, chunk):  # bounded memory; not a per-sample loop
+        dx = rx[None, :] - q_re[start : start + chunk, None]
+        dy = ry[None, :] - q_im[start : start + chunk, None]
+        nearest[start : start + chunk] = np.argmin(dx * dx + dy * dy, axis=1)
+    x_mid = xs[nearest]
+    x_lo = xs[np.maximum(nearest - 1, 0)]
+    x_hi = xs[np.minimum(nearest + 1, n_dense - 1)]
+    g_lo, _ = phfoot.g_terms(*coeffs, x_lo, q_re, q_im)
+    g_mid, _ = phfoot.g_terms(*coeffs, x_mid, q_re, q_im)
+    g_hi, _ = phfoot.g_terms(*coeffs, x_hi, q_re, q_im)
+    left = (g_lo <= 0.0) & (g_mid >= 0.0)
+    right = ~left & (g_mid <= 0.0) & (g_hi >= 0.0)
+    a = np.where(left, x_lo, x_mid)
+    b = np.where(left, x_mid, np.where(right, x_hi, x_mid))
+    xi = x_mid.copy()
+    sel = np.flatnonzero((left | right) & (b > a))
+    if sel.size:
+        qr, qi = q_re[sel], q_im[sel]
+
+        def g(x, idx):
+            return phfoot.g_terms(*coeffs, x, qr[idx], qi[idx])
+
+        xi[sel] = bracketed_newton(g, a[sel], b[sel], x_mid[sel], max_iter=FOOT_STEPS)
+    return xi
 
 
 @dataclass(frozen=True, eq=False)
@@ -286,48 +325,22 @@ class PHQuintic:
         The nearest of ``n_dense`` uniform samples gives a bracket [ξ_{i−1}, ξ_i] or
         [ξ_i, ξ_{i+1}] where g(ξ) = Re(conj(r − q) r′) = ½ d|r − q|²/dξ changes sign; the
         foot point is then refined by safeguarded Newton (g′ = |r′|² + Re(conj(r − q) r″)).
-        Without a sign change the minimum is at the end sample (ξ = 0 or 1).
+        Without a sign change the minimum is at the end sample (ξ = 0 or 1). The arithmetic is
+        :mod:`~nurbscnc.geometry.phfoot`'s; compiled (``ph_closest``) where the geometry's
+        kernels were built, the same bits.
         """
         q = np.asarray(q, dtype=complex)
         shape = q.shape
-        q = q.ravel()
+        q_re = np.ascontiguousarray(q.real, dtype=np.float64).ravel()
+        q_im = np.ascontiguousarray(q.imag, dtype=np.float64).ravel()
+        cp, w = self.control_points, self.w
+        coeffs = (cp.real.copy(), cp.imag.copy(), w.real.copy(), w.imag.copy())
         xs = np.linspace(0.0, 1.0, n_dense)
-        rs = self.point(xs)
-        nearest = np.empty(q.size, dtype=int)
-        chunk = max(1, 2_000_000 // n_dense)
-        for start in range(0, q.size, chunk):  # bounded memory; not a per-sample loop
-            block = q[start : start + chunk]
-            nearest[start : start + chunk] = np.argmin(np.abs(rs[None, :] - block[:, None]), axis=1)
-
-        def g(x, idx, q=q):
-            # r′ = w² and r″ = 2ww′ (hodograph, second_derivative) from one w.
-            d = self.point(x) - q[idx]
-            w = self.preimage(x)
-            r1 = w**2
-            r2 = 2.0 * w * self.preimage_derivative(x)
-            return (np.conj(d) * r1).real, np.abs(r1) ** 2 + (np.conj(d) * r2).real
-
-        all_idx = np.arange(q.size)
-        x_mid = xs[nearest]
-        x_lo = xs[np.maximum(nearest - 1, 0)]
-        x_hi = xs[np.minimum(nearest + 1, n_dense - 1)]
-        g_lo, _ = g(x_lo, all_idx)
-        g_mid, _ = g(x_mid, all_idx)
-        g_hi, _ = g(x_hi, all_idx)
-        left = (g_lo <= 0.0) & (g_mid >= 0.0)
-        right = ~left & (g_mid <= 0.0) & (g_hi >= 0.0)
-        a = np.where(left, x_lo, x_mid)
-        b = np.where(left, x_mid, np.where(right, x_hi, x_mid))
-        xi = x_mid.copy()
-        sel = np.flatnonzero((left | right) & (b > a))
-        if sel.size:
-            q_sel = q[sel]
-
-            def g_sel(x, idx):
-                return g(x, idx, q_sel)
-
-            xi[sel] = bracketed_newton(g_sel, a[sel], b[sel], x_mid[sel])
-        return xi.reshape(shape)
+        if _kernels is not None:
+            out = np.empty(q_re.size)
+            _kernels.ph_closest(*coeffs, xs, q_re, q_im, FOOT_STEPS, out)
+            return out.reshape(shape)
+        return _closest_param_py(coeffs, xs, q_re, q_im).reshape(shape)
 
     # --- 3-D embedding -----------------------------------------------------------------------
 
