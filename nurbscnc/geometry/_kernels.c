@@ -14,11 +14,13 @@
  *       -> None (out filled)                                   [distance._segment_distances_py]
  *   basis_derivatives(knots, spans, u, degree, n_ders, out)
  *       -> None (out (n_ders + 1, degree + 1, m) filled)       [bspline._basis_derivatives_py]
+ *   nurbs_derivatives(knots, spans, u, degree, order, pw, out)
+ *       -> None (out (order + 1, m, 3) filled)          [nurbs.NurbsCurve._derivatives_py]
  *   newton_step(f, df, xa, a, b, idx, x, ftol)
  *       -> the number still going (xa, a, b, idx compacted; x of the finished set)
  *                                                                        [ph._newton_step_py]
  *   ph_closest(cp_re, cp_im, w_re, w_im, xs, q_re, q_im, max_steps, out)
- *       -> None (out: the foot parameters)                [phfoot._closest_params_py]
+ *       -> None (out: the foot parameters)                [ph._closest_param_py]
  *
  * The arrays are C-contiguous float64 (lo, hi, idx: int64) buffers (the caller makes them so).
  */
@@ -197,6 +199,163 @@ done:
     return result;
 }
 
+/* ------------------------------------------------------------------ NURBS derivatives */
+
+/* bspline.basis_functions (P&T A2.2) at one parameter us in knot span span: n[0..p]. */
+static inline void basis_one(const double *knots, long long span, int p, double us, double *n)
+{
+    double left[BASIS_MAX_DEGREE + 1], right[BASIS_MAX_DEGREE + 1];
+    n[0] = 1.0;
+    for (int j = 1; j <= p; j++) {
+        left[j] = us - knots[span + 1 - j];
+        right[j] = knots[span + j] - us;
+        double saved = 0.0;
+        for (int r = 0; r < j; r++) {
+            const double temp = n[r] / (right[r + 1] + left[j - r]);
+            n[r] = saved + right[r + 1] * temp;
+            saved = left[j - r] * temp;
+        }
+        n[j] = saved;
+    }
+}
+
+/* nurbs.NurbsCurve._derivatives_py: C and its derivatives up to order at each u[s] (already
+ * clipped; spans[s] its knot span) from the homogeneous control points pw (4, n), components
+ * first. Order 0: the A2.2 basis, acc = sum_j N_j pw[:, first + j] left to right, C = acc / w.
+ * Order >= 1: the A2.3 derivatives (basis_derivatives' arithmetic, as it scales them), the
+ * homogeneous derivatives hom[k] = 0 + sum_j ders[k][j] pw[:, first + j] (zero above p), then
+ * the quotient rule of bspline.rational_derivatives. out (order + 1, m, 3). */
+static PyObject *nurbs_derivatives(PyObject *self, PyObject *args)
+{
+    Py_buffer bk, bsp, bu, bpw, bout;
+    int p, order;
+    if (!PyArg_ParseTuple(args, "y*y*y*iiy*w*", &bk, &bsp, &bu, &p, &order, &bpw, &bout))
+        return NULL;
+    PyObject *result = NULL;
+    const Py_ssize_t nk = bk.len / (Py_ssize_t)sizeof(double);
+    const Py_ssize_t m = bu.len / (Py_ssize_t)sizeof(double);
+    const Py_ssize_t n_ctrl = bpw.len / (4 * (Py_ssize_t)sizeof(double));
+    if (p < 0 || p > BASIS_MAX_DEGREE || order < 0 || order > 2 * BASIS_MAX_DEGREE ||
+        bu.len != m * (Py_ssize_t)sizeof(double) ||
+        bsp.len != m * (Py_ssize_t)sizeof(long long) ||
+        bpw.len != 4 * n_ctrl * (Py_ssize_t)sizeof(double) ||
+        bout.len != (Py_ssize_t)(order + 1) * m * 3 * (Py_ssize_t)sizeof(double)) {
+        PyErr_SetString(PyExc_ValueError, "nurbs_derivatives: inconsistent buffers");
+        goto done;
+    }
+    const double *knots = bk.buf, *u = bu.buf, *pw = bpw.buf;
+    const long long *spans = bsp.buf;
+    double *out = bout.buf;
+    for (Py_ssize_t s = 0; s < m; s++)
+        if (spans[s] + 1 - p < 0 || spans[s] + p >= nk || spans[s] - p < 0 ||
+            spans[s] >= n_ctrl) {
+            PyErr_SetString(PyExc_IndexError, "nurbs_derivatives: a span outside the knots");
+            goto done;
+        }
+    const int n_top = order < p ? order : p;
+    double ndu[BASIS_MAX_DEGREE + 1][BASIS_MAX_DEGREE + 1];
+    double left[BASIS_MAX_DEGREE + 1], right[BASIS_MAX_DEGREE + 1];
+    double a[2][BASIS_MAX_DEGREE + 1];
+    double ders[BASIS_MAX_DEGREE + 1][BASIS_MAX_DEGREE + 1]; /* [k][r], k <= n_top */
+    double hom[2 * BASIS_MAX_DEGREE + 1][4];
+    double cw[2 * BASIS_MAX_DEGREE + 1][3];
+    for (Py_ssize_t s = 0; s < m; s++) {
+        const double us = u[s];
+        const long long span = spans[s], first = span - p;
+        if (order == 0) {
+            double n[BASIS_MAX_DEGREE + 1];
+            basis_one(knots, span, p, us, n);
+            double acc[4];
+            for (int c = 0; c < 4; c++)
+                acc[c] = n[0] * pw[c * n_ctrl + first];
+            for (int j = 1; j <= p; j++)
+                for (int c = 0; c < 4; c++)
+                    acc[c] += n[j] * pw[c * n_ctrl + first + j];
+            for (int c = 0; c < 3; c++)
+                out[s * 3 + c] = acc[c] / acc[3];
+            continue;
+        }
+        /* basis_derivatives for this sample (its kernel's arithmetic) */
+        ndu[0][0] = 1.0;
+        for (int j = 1; j <= p; j++) {
+            left[j] = us - knots[span + 1 - j];
+            right[j] = knots[span + j] - us;
+            double saved = 0.0;
+            for (int r = 0; r < j; r++) {
+                ndu[j][r] = right[r + 1] + left[j - r];
+                const double temp = ndu[r][j - 1] / ndu[j][r];
+                ndu[r][j] = saved + right[r + 1] * temp;
+                saved = left[j - r] * temp;
+            }
+            ndu[j][j] = saved;
+        }
+        for (int r = 0; r <= p; r++)
+            ders[0][r] = ndu[r][p];
+        for (int r = 0; r <= p; r++) {
+            int s1 = 0, s2 = 1;
+            a[0][0] = 1.0;
+            for (int k = 1; k <= n_top; k++) {
+                double d = 0.0;
+                const int rk = r - k, pk = p - k;
+                if (r >= k) {
+                    a[s2][0] = a[s1][0] / ndu[pk + 1][rk];
+                    d = a[s2][0] * ndu[rk][pk];
+                }
+                const int j1 = rk >= -1 ? 1 : -rk;
+                const int j2 = r - 1 <= pk ? k - 1 : p - r;
+                for (int j = j1; j <= j2; j++) {
+                    a[s2][j] = (a[s1][j] - a[s1][j - 1]) / ndu[pk + 1][rk + j];
+                    d += a[s2][j] * ndu[rk + j][pk];
+                }
+                if (r <= pk) {
+                    a[s2][k] = -a[s1][k - 1] / ndu[pk + 1][r];
+                    d += a[s2][k] * ndu[r][pk];
+                }
+                ders[k][r] = d;
+                const int t = s1;
+                s1 = s2;
+                s2 = t;
+            }
+        }
+        double factor = (double)p;
+        for (int k = 1; k <= n_top; k++) {
+            for (int r = 0; r <= p; r++)
+                ders[k][r] *= factor;
+            factor *= (double)(p - k);
+        }
+        /* the homogeneous derivatives, then the quotient rule */
+        for (int k = 0; k <= order; k++)
+            for (int c = 0; c < 4; c++)
+                hom[k][c] = 0.0;
+        for (int j = 0; j <= p; j++)
+            for (int k = 0; k <= n_top; k++)
+                for (int c = 0; c < 4; c++)
+                    hom[k][c] += ders[k][j] * pw[c * n_ctrl + first + j];
+        for (int k = 0; k <= order; k++) {
+            double binom = 1.0; /* C(k, i), exact in doubles for these k */
+            double v[3] = {hom[k][0], hom[k][1], hom[k][2]};
+            for (int i = 1; i <= k; i++) {
+                binom = binom * (double)(k - i + 1) / (double)i;
+                const double bw = binom * hom[i][3];
+                for (int c = 0; c < 3; c++)
+                    v[c] -= bw * cw[k - i][c];
+            }
+            for (int c = 0; c < 3; c++) {
+                cw[k][c] = v[c] / hom[0][3];
+                out[((Py_ssize_t)k * m + s) * 3 + c] = cw[k][c];
+            }
+        }
+    }
+    result = Py_NewRef(Py_None);
+done:
+    PyBuffer_Release(&bk);
+    PyBuffer_Release(&bsp);
+    PyBuffer_Release(&bu);
+    PyBuffer_Release(&bpw);
+    PyBuffer_Release(&bout);
+    return result;
+}
+
 /* ------------------------------------------------------------------ bracketed Newton */
 
 /* numpy's maximum of two floats: NaN-propagating (the first argument wins ties). */
@@ -308,7 +467,7 @@ static inline void ph_g(const double *cr, const double *ci, const double *wr_, c
     *dg = (r1r * r1r + r1i * r1i) + (dx * r2r + dy * r2i);
 }
 
-/* phfoot._closest_params_py: for each point q_j the nearest of the dense samples xs
+/* ph._closest_param_py: for each point q_j the nearest of the dense samples xs
  * (squared distance, the first of equal ones), the bracket where g changes sign, then the
  * safeguarded Newton of bracketed_newton (newton_step's arithmetic, ftol 0) to its end, at
  * most max_steps steps; without a bracket the nearest sample. */
@@ -411,7 +570,9 @@ static PyMethodDef methods[] = {
     {"basis_derivatives", basis_derivatives, METH_VARARGS,
      "bspline._basis_derivatives_py, compiled."},
     {"newton_step", newton_step, METH_VARARGS, "ph._newton_step_py, compiled."},
-    {"ph_closest", ph_closest, METH_VARARGS, "phfoot._closest_params_py, compiled."},
+    {"ph_closest", ph_closest, METH_VARARGS, "ph._closest_param_py, compiled."},
+    {"nurbs_derivatives", nurbs_derivatives, METH_VARARGS,
+     "nurbs.NurbsCurve._derivatives_py, compiled."},
     {NULL, NULL, 0, NULL},
 };
 
