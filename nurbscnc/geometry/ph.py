@@ -267,15 +267,7 @@ class PHQuintic:
         |q| maximal) the two terms are Arg(1 − c2/q) and Arg(1 − q/c0), which stay finite as
         c2 → 0 (w linear). A root on [0, 1] (a cusp, σ = 0) is not a regular curve.
         """
-        w0, w1, w2 = self.w
-        c0, c1, c2 = w0, 2.0 * (w1 - w0), w0 - 2.0 * w1 + w2
-        if c1 == 0 and c2 == 0:
-            return 0.0
-        root = np.sqrt(c1 * c1 - 4.0 * c0 * c2)
-        qa, qb = -0.5 * (c1 + root), -0.5 * (c1 - root)
-        q = qa if abs(qa) >= abs(qb) else qb
-        darg_w = np.angle(1.0 - c2 / q) + np.angle(1.0 - q / c0)
-        return float(2.0 * darg_w)
+        return turning_angle_rad(self.w)
 
     def rotation_index(self) -> float:
         """Rotation index: total tangent turning / 2π (not rounded)."""
@@ -392,16 +384,8 @@ class PHQuintic:
         return self.derivatives_mm(xi, order)
 
 
-def hermite_solutions(
-    p0, p5, d0, d1, origin_mm=(0.0, 0.0, 0.0), e1=(1.0, 0.0, 0.0), e2=(0.0, 1.0, 0.0)
-) -> list[PHQuintic]:
-    """The four PH quintics with r(0) = p0, r(1) = p5, r′(0) = d0, r′(1) = d1 (SPEC §4, eq. 21).
-
-    All arguments complex plane coordinates [mm]; the frame is passed to each curve.
-    w0 = √d0 (the overall sign of w does not change the curve), w2 = ±√d1 and
-    w1 = −¾(w0 + w2) ± ¼√(120(p5 − p0) − 15w0² − 15w2² + 10w0w2). Taking both signs of both
-    square roots covers all solutions whatever branch the principal √ picks.
-    """
+def _hermite_preimages(p0, p5, d0, d1) -> list[np.ndarray]:
+    """The preimages w (3,) of :func:`hermite_solutions`' four curves, in its order."""
     p0, p5, d0, d1 = complex(p0), complex(p5), complex(d0), complex(d1)
     values = np.array([p0, p5, d0, d1])
     if not np.all(np.isfinite(values)):
@@ -415,21 +399,52 @@ def hermite_solutions(
         root = np.sqrt(120.0 * (p5 - p0) - 15.0 * w0 * w0 - 15.0 * w2 * w2 + 10.0 * w0 * w2)
         for sign1 in (1.0, -1.0):
             w1 = -0.75 * (w0 + w2) + sign1 * 0.25 * root
-            out.append(PHQuintic(np.array([w0, w1, w2]), p0, origin_mm, e1, e2))
+            out.append(np.array([w0, w1, w2]))
     return out
+
+
+def hermite_solutions(
+    p0, p5, d0, d1, origin_mm=(0.0, 0.0, 0.0), e1=(1.0, 0.0, 0.0), e2=(0.0, 1.0, 0.0)
+) -> list[PHQuintic]:
+    """The four PH quintics with r(0) = p0, r(1) = p5, r′(0) = d0, r′(1) = d1 (SPEC §4, eq. 21).
+
+    All arguments complex plane coordinates [mm]; the frame is passed to each curve.
+    w0 = √d0 (the overall sign of w does not change the curve), w2 = ±√d1 and
+    w1 = −¾(w0 + w2) ± ¼√(120(p5 − p0) − 15w0² − 15w2² + 10w0w2). Taking both signs of both
+    square roots covers all solutions whatever branch the principal √ picks.
+    """
+    p0 = complex(p0)
+    return [PHQuintic(w, p0, origin_mm, e1, e2) for w in _hermite_preimages(p0, p5, d0, d1)]
 
 
 def hermite_ph(
     p0, p5, d0, d1, origin_mm=(0.0, 0.0, 0.0), e1=(1.0, 0.0, 0.0), e2=(0.0, 1.0, 0.0)
 ) -> PHQuintic:
     """The "good" PH quintic Hermite interpolant (SPEC §4): of the four solutions the one with
-    the least absolute rotation index; ties (within 1e-9) go to the least bending energy."""
-    sols = hermite_solutions(p0, p5, d0, d1, origin_mm, e1, e2)
-    rot = np.array([abs(c.rotation_index()) for c in sols])
-    tied = [c for c, r in zip(sols, rot) if r <= rot.min() + 1e-9]
+    the least absolute rotation index; ties (within 1e-9) go to the least bending energy.
+    The index is a function of w alone: only the curves in the running are built."""
+    ws = _hermite_preimages(p0, p5, d0, d1)
+    rot = np.array([abs(turning_angle_rad(w) / (2.0 * np.pi)) for w in ws])
+    p0 = complex(p0)
+    tied = [PHQuintic(w, p0, origin_mm, e1, e2) for w, r in zip(ws, rot) if r <= rot.min() + 1e-9]
     if len(tied) == 1:
         return tied[0]
     return min(tied, key=lambda c: c.bending_energy())
+
+
+def turning_angle_rad(w) -> float:
+    """Total turning ∫κ ds [rad] of the PH quintic with preimage ``w`` (3,) complex: see
+    :meth:`PHQuintic.turning_angle_rad` (a function of w alone, so the Hermite solutions are
+    ranked before any curve is built)."""
+    w0, w1, w2 = np.array(w, dtype=complex).reshape(3)
+    c0, c1, c2 = w0, 2.0 * (w1 - w0), w0 - 2.0 * w1 + w2
+    if c1 == 0 and c2 == 0:
+        return 0.0
+    root = np.sqrt(c1 * c1 - 4.0 * c0 * c2)
+    qa, qb = -0.5 * (c1 + root), -0.5 * (c1 - root)
+    q = qa if abs(qa) >= abs(qb) else qb
+    darg_w = np.angle(1.0 - c2 / q) + np.angle(1.0 - q / c0)
+    return float(2.0 * darg_w)
 
 
 def plane_frame(points_mm, tol_mm: float = 1e-6) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
