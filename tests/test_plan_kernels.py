@@ -351,3 +351,24 @@ def test_nurbs_derivatives_kernel_is_the_numpy_evaluation_bit_for_bit():
             ref = curve._derivatives_py(clipped, order)
             assert got.shape == ref.shape == (order + 1, u.size, 3)
             assert np.array_equal(_bits(got), _bits(ref))
+
+
+@pytest.mark.skipif(distance._kernels is None, reason="nurbscnc.geometry._kernels was not built")
+def test_power_form_speed_kernel_is_the_numpy_horner_bit_for_bit():
+    """400 random rational curves (degrees 0–7, parameter ranges 1e-3 to 1e2), 1–60
+    parameters inside and beyond both ends: :meth:`PowerForm.speed` (compiled from two
+    samples on) gives :meth:`PowerForm._speed_py`'s bits, one sample included."""
+    from nurbscnc.geometry.nurbs import NurbsCurve
+
+    rng = np.random.default_rng(39)
+    for _ in range(400):
+        p = int(rng.integers(0, 8))
+        n = p + 1 + int(rng.integers(0, 12))
+        scale = 10.0 ** rng.integers(-3, 3)
+        inner = np.sort(rng.random(n - p - 1))
+        knots = np.concatenate((np.zeros(p + 1), inner, np.ones(p + 1))) * scale
+        curve = NurbsCurve(p, knots, rng.standard_normal((n, 3)) * 100.0, rng.uniform(0.2, 3.0, n))
+        form = curve.power_form
+        u = rng.uniform(-0.1, 1.1, int(rng.integers(1, 60))) * scale
+        spans = form.span_of(u)
+        assert np.array_equal(_bits(form.speed(u, spans)), _bits(form._speed_py(u, spans)))

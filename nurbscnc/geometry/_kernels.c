@@ -16,6 +16,8 @@
  *       -> None (out (n_ders + 1, degree + 1, m) filled)       [bspline._basis_derivatives_py]
  *   nurbs_derivatives(knots, spans, u, degree, order, pw, out)
  *       -> None (out (order + 1, m, 3) filled)          [nurbs.NurbsCurve._derivatives_py]
+ *   powerform_speed(coeffs, centers, u, spans, degree, out)
+ *       -> None (out: |C'(u)|)                              [powerform.PowerForm._speed_py]
  *   newton_step(f, df, xa, a, b, idx, x, ftol)
  *       -> the number still going (xa, a, b, idx compacted; x of the finished set)
  *                                                                        [ph._newton_step_py]
@@ -356,6 +358,65 @@ done:
     return result;
 }
 
+/* ------------------------------------------------------------------ power-form speed */
+
+/* powerform.PowerForm._speed_py: |C'(u)| = |A'w - Aw'| / w^2 at each u[s] on span spans[s],
+ * A and A' by Horner's rule with one derivative row (acc1 = acc1 x + acc0, then
+ * acc0 = acc0 x + c[k], from acc1 = 0), the squared norm summed over x, y, z in that order
+ * (numpy's einsum order for two samples or more; the caller runs numpy for one). */
+static PyObject *powerform_speed(PyObject *self, PyObject *args)
+{
+    Py_buffer bc, bctr, bu, bsp, bout;
+    int p;
+    if (!PyArg_ParseTuple(args, "y*y*y*y*iw*", &bc, &bctr, &bu, &bsp, &p, &bout))
+        return NULL;
+    PyObject *result = NULL;
+    const Py_ssize_t n_spans = bctr.len / (Py_ssize_t)sizeof(double);
+    const Py_ssize_t m = bu.len / (Py_ssize_t)sizeof(double);
+    if (p < 0 || bc.len != (Py_ssize_t)(p + 1) * 4 * n_spans * (Py_ssize_t)sizeof(double) ||
+        bsp.len != m * (Py_ssize_t)sizeof(long long) || bout.len != bu.len) {
+        PyErr_SetString(PyExc_ValueError, "powerform_speed: inconsistent buffers");
+        goto done;
+    }
+    const double *c = bc.buf, *centers = bctr.buf, *u = bu.buf;
+    const long long *spans = bsp.buf;
+    double *out = bout.buf;
+    for (Py_ssize_t s = 0; s < m; s++)
+        if (spans[s] < 0 || spans[s] >= n_spans) {
+            PyErr_SetString(PyExc_IndexError, "powerform_speed: a span outside the table");
+            goto done;
+        }
+    const Py_ssize_t row = 4 * n_spans; /* one power k: (4, n_spans) */
+    for (Py_ssize_t s = 0; s < m; s++) {
+        const long long j = spans[s];
+        const double x = u[s] - centers[j];
+        double a[4], da[4];
+        for (int i = 0; i < 4; i++) {
+            a[i] = c[(Py_ssize_t)p * row + i * n_spans + j];
+            da[i] = 0.0;
+        }
+        for (int k = p - 1; k >= 0; k--)
+            for (int i = 0; i < 4; i++) {
+                da[i] = da[i] * x + a[i];
+                a[i] = a[i] * x + c[(Py_ssize_t)k * row + i * n_spans + j];
+            }
+        double sum = 0.0;
+        for (int i = 0; i < 3; i++) {
+            const double num = da[i] * a[3] - a[i] * da[3];
+            sum += num * num;
+        }
+        out[s] = sqrt(sum) / (a[3] * a[3]);
+    }
+    result = Py_NewRef(Py_None);
+done:
+    PyBuffer_Release(&bc);
+    PyBuffer_Release(&bctr);
+    PyBuffer_Release(&bu);
+    PyBuffer_Release(&bsp);
+    PyBuffer_Release(&bout);
+    return result;
+}
+
 /* ------------------------------------------------------------------ bracketed Newton */
 
 /* numpy's maximum of two floats: NaN-propagating (the first argument wins ties). */
@@ -571,6 +632,7 @@ static PyMethodDef methods[] = {
      "bspline._basis_derivatives_py, compiled."},
     {"newton_step", newton_step, METH_VARARGS, "ph._newton_step_py, compiled."},
     {"ph_closest", ph_closest, METH_VARARGS, "ph._closest_param_py, compiled."},
+    {"powerform_speed", powerform_speed, METH_VARARGS, "powerform.PowerForm._speed_py, compiled."},
     {"nurbs_derivatives", nurbs_derivatives, METH_VARARGS,
      "nurbs.NurbsCurve._derivatives_py, compiled."},
     {NULL, NULL, 0, NULL},
