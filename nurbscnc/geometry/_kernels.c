@@ -16,6 +16,8 @@
  *       -> None (out (n_ders + 1, degree + 1, m) filled)       [bspline._basis_derivatives_py]
  *   nurbs_derivatives(knots, spans, u, degree, order, pw, out)
  *       -> None (out (order + 1, m, 3) filled)          [nurbs.NurbsCurve._derivatives_py]
+ *   nurbs_derivatives_at(knots, u, u_lo, u_hi, degree, order, pw, out)
+ *       -> None (the same, u clipped and spans found here)          [NurbsCurve.derivatives]
  *   powerform_speed(coeffs, centers, u, spans, degree, out)
  *       -> None (out: |C'(u)|)                              [powerform.PowerForm._speed_py]
  *   newton_step(f, df, xa, a, b, idx, x, ftol)
@@ -105,6 +107,59 @@ done:
  * caller runs the Python loops above it. */
 #define BASIS_MAX_DEGREE 15
 
+/* P&T A2.3 at one parameter us in knot span span: ders[k][r] = d^k N_{span-p+r, p}/du^k
+ * for k <= n_top, unscaled (the callers multiply row k by p!/(p-k)!): ndu (knot differences
+ * below the diagonal, basis functions of rising degree on and above it), then the a-table
+ * recurrence, each expression in bspline._basis_derivatives_py's order. */
+static void ders_one(const double *knots, long long span, int p, double us, int n_top,
+                     double ders[][BASIS_MAX_DEGREE + 1])
+{
+    double ndu[BASIS_MAX_DEGREE + 1][BASIS_MAX_DEGREE + 1];
+    double left[BASIS_MAX_DEGREE + 1], right[BASIS_MAX_DEGREE + 1];
+    double a[2][BASIS_MAX_DEGREE + 1];
+    ndu[0][0] = 1.0;
+    for (int j = 1; j <= p; j++) {
+        left[j] = us - knots[span + 1 - j];
+        right[j] = knots[span + j] - us;
+        double saved = 0.0;
+        for (int r = 0; r < j; r++) {
+            ndu[j][r] = right[r + 1] + left[j - r];
+            const double temp = ndu[r][j - 1] / ndu[j][r];
+            ndu[r][j] = saved + right[r + 1] * temp;
+            saved = left[j - r] * temp;
+        }
+        ndu[j][j] = saved;
+    }
+    for (int r = 0; r <= p; r++)
+        ders[0][r] = ndu[r][p];
+    for (int r = 0; r <= p; r++) {
+        int s1 = 0, s2 = 1;
+        a[0][0] = 1.0;
+        for (int k = 1; k <= n_top; k++) {
+            double d = 0.0;
+            const int rk = r - k, pk = p - k;
+            if (r >= k) {
+                a[s2][0] = a[s1][0] / ndu[pk + 1][rk];
+                d = a[s2][0] * ndu[rk][pk];
+            }
+            const int j1 = rk >= -1 ? 1 : -rk;
+            const int j2 = r - 1 <= pk ? k - 1 : p - r;
+            for (int j = j1; j <= j2; j++) {
+                a[s2][j] = (a[s1][j] - a[s1][j - 1]) / ndu[pk + 1][rk + j];
+                d += a[s2][j] * ndu[rk + j][pk];
+            }
+            if (r <= pk) {
+                a[s2][k] = -a[s1][k - 1] / ndu[pk + 1][r];
+                d += a[s2][k] * ndu[r][pk];
+            }
+            ders[k][r] = d;
+            const int t = s1;
+            s1 = s2;
+            s2 = t;
+        }
+    }
+}
+
 /* bspline._basis_derivatives_py (Piegl & Tiller A2.3) for each parameter u[s] in its knot
  * span spans[s]: ndu (knot differences below the diagonal, basis functions of rising degree
  * on and above it), then the derivatives by the a-table recurrence, each expression in the
@@ -138,53 +193,12 @@ static PyObject *basis_derivatives(PyObject *self, PyObject *args)
     const Py_ssize_t plane = (Py_ssize_t)(p + 1) * m; /* one derivative order */
     for (Py_ssize_t i = 0; i < (Py_ssize_t)(n_ders + 1) * plane; i++)
         out[i] = 0.0;
-    double ndu[BASIS_MAX_DEGREE + 1][BASIS_MAX_DEGREE + 1];
-    double left[BASIS_MAX_DEGREE + 1], right[BASIS_MAX_DEGREE + 1];
-    double a[2][BASIS_MAX_DEGREE + 1];
+    double ders[BASIS_MAX_DEGREE + 1][BASIS_MAX_DEGREE + 1];
     for (Py_ssize_t s = 0; s < m; s++) {
-        const double us = u[s];
-        const long long span = spans[s];
-        ndu[0][0] = 1.0;
-        for (int j = 1; j <= p; j++) {
-            left[j] = us - knots[span + 1 - j];
-            right[j] = knots[span + j] - us;
-            double saved = 0.0;
-            for (int r = 0; r < j; r++) {
-                ndu[j][r] = right[r + 1] + left[j - r];
-                const double temp = ndu[r][j - 1] / ndu[j][r];
-                ndu[r][j] = saved + right[r + 1] * temp;
-                saved = left[j - r] * temp;
-            }
-            ndu[j][j] = saved;
-        }
-        for (int r = 0; r <= p; r++)
-            out[(Py_ssize_t)r * m + s] = ndu[r][p];
-        for (int r = 0; r <= p; r++) {
-            int s1 = 0, s2 = 1;
-            a[0][0] = 1.0;
-            for (int k = 1; k <= n_top; k++) {
-                double d = 0.0;
-                const int rk = r - k, pk = p - k;
-                if (r >= k) {
-                    a[s2][0] = a[s1][0] / ndu[pk + 1][rk];
-                    d = a[s2][0] * ndu[rk][pk];
-                }
-                const int j1 = rk >= -1 ? 1 : -rk;
-                const int j2 = r - 1 <= pk ? k - 1 : p - r;
-                for (int j = j1; j <= j2; j++) {
-                    a[s2][j] = (a[s1][j] - a[s1][j - 1]) / ndu[pk + 1][rk + j];
-                    d += a[s2][j] * ndu[rk + j][pk];
-                }
-                if (r <= pk) {
-                    a[s2][k] = -a[s1][k - 1] / ndu[pk + 1][r];
-                    d += a[s2][k] * ndu[r][pk];
-                }
-                out[k * plane + (Py_ssize_t)r * m + s] = d;
-                const int t = s1;
-                s1 = s2;
-                s2 = t;
-            }
-        }
+        ders_one(knots, spans[s], p, u[s], n_top, ders);
+        for (int k = 0; k <= n_top; k++)
+            for (int r = 0; r <= p; r++)
+                out[k * plane + (Py_ssize_t)r * m + s] = ders[k][r];
     }
     double factor = (double)p;
     for (int k = 1; k <= n_top; k++) {
@@ -221,6 +235,70 @@ static inline void basis_one(const double *knots, long long span, int p, double 
     }
 }
 
+/* bspline.find_span of a clipped parameter: the last i with knots[i] <= u (numpy's
+ * searchsorted side="right", minus one; NaN sorts last), clipped to [p, n_ctrl - 1]. */
+static inline long long span_of(const double *knots, Py_ssize_t nk, int p, double u)
+{
+    const long long n_ctrl = (long long)nk - p - 1;
+    long long i;
+    if (isnan(u)) {
+        i = (long long)nk - 1;
+    } else {
+        Py_ssize_t lo = 0, hi = nk; /* the first index with knots[index] > u */
+        while (lo < hi) {
+            const Py_ssize_t mid = lo + (hi - lo) / 2;
+            if (knots[mid] <= u)
+                lo = mid + 1;
+            else
+                hi = mid;
+        }
+        i = (long long)lo - 1;
+    }
+    return i < p ? p : (i > n_ctrl - 1 ? n_ctrl - 1 : i);
+}
+
+/* NurbsCurve.derivatives without its numpy set-up: each u clipped to [u_lo, u_hi] as
+ * np.clip, its span by span_of, then nurbs_derivatives' arithmetic. */
+static PyObject *nurbs_derivatives(PyObject *self, PyObject *args);
+static PyObject *nurbs_derivatives_at(PyObject *self, PyObject *args)
+{
+    Py_buffer bk, bu;
+    double u_lo, u_hi;
+    int p, order;
+    PyObject *pw, *out;
+    if (!PyArg_ParseTuple(args, "y*y*ddiiOO", &bk, &bu, &u_lo, &u_hi, &p, &order, &pw, &out))
+        return NULL;
+    PyObject *result = NULL, *uc = NULL, *sp = NULL;
+    const Py_ssize_t nk = bk.len / (Py_ssize_t)sizeof(double);
+    const Py_ssize_t m = bu.len / (Py_ssize_t)sizeof(double);
+    if (p < 0 || p > BASIS_MAX_DEGREE || nk < 2 * (Py_ssize_t)p + 2) {
+        PyErr_SetString(PyExc_ValueError, "nurbs_derivatives_at: inconsistent knots");
+        goto done;
+    }
+    uc = PyBytes_FromStringAndSize(NULL, m * (Py_ssize_t)sizeof(double));
+    sp = PyBytes_FromStringAndSize(NULL, m * (Py_ssize_t)sizeof(long long));
+    if (uc == NULL || sp == NULL)
+        goto done;
+    double *ucv = (double *)PyBytes_AS_STRING(uc);
+    long long *spv = (long long *)PyBytes_AS_STRING(sp);
+    const double *knots = bk.buf, *u = bu.buf;
+    for (Py_ssize_t s = 0; s < m; s++) {
+        ucv[s] = np_clip(u[s], u_lo, u_hi);
+        spv[s] = span_of(knots, nk, p, ucv[s]);
+    }
+    PyObject *inner = Py_BuildValue("OOOiiOO", PyTuple_GET_ITEM(args, 0), sp, uc, p, order, pw, out);
+    if (inner == NULL)
+        goto done;
+    result = nurbs_derivatives(self, inner);
+    Py_DECREF(inner);
+done:
+    Py_XDECREF(uc);
+    Py_XDECREF(sp);
+    PyBuffer_Release(&bk);
+    PyBuffer_Release(&bu);
+    return result;
+}
+
 /* nurbs.NurbsCurve._derivatives_py: C and its derivatives up to order at each u[s] (already
  * clipped; spans[s] its knot span) from the homogeneous control points pw (4, n), components
  * first. Order 0: the A2.2 basis, acc = sum_j N_j pw[:, first + j] left to right, C = acc / w.
@@ -255,9 +333,6 @@ static PyObject *nurbs_derivatives(PyObject *self, PyObject *args)
             goto done;
         }
     const int n_top = order < p ? order : p;
-    double ndu[BASIS_MAX_DEGREE + 1][BASIS_MAX_DEGREE + 1];
-    double left[BASIS_MAX_DEGREE + 1], right[BASIS_MAX_DEGREE + 1];
-    double a[2][BASIS_MAX_DEGREE + 1];
     double ders[BASIS_MAX_DEGREE + 1][BASIS_MAX_DEGREE + 1]; /* [k][r], k <= n_top */
     double hom[2 * BASIS_MAX_DEGREE + 1][4];
     double cw[2 * BASIS_MAX_DEGREE + 1][3];
@@ -277,48 +352,7 @@ static PyObject *nurbs_derivatives(PyObject *self, PyObject *args)
                 out[s * 3 + c] = acc[c] / acc[3];
             continue;
         }
-        /* basis_derivatives for this sample (its kernel's arithmetic) */
-        ndu[0][0] = 1.0;
-        for (int j = 1; j <= p; j++) {
-            left[j] = us - knots[span + 1 - j];
-            right[j] = knots[span + j] - us;
-            double saved = 0.0;
-            for (int r = 0; r < j; r++) {
-                ndu[j][r] = right[r + 1] + left[j - r];
-                const double temp = ndu[r][j - 1] / ndu[j][r];
-                ndu[r][j] = saved + right[r + 1] * temp;
-                saved = left[j - r] * temp;
-            }
-            ndu[j][j] = saved;
-        }
-        for (int r = 0; r <= p; r++)
-            ders[0][r] = ndu[r][p];
-        for (int r = 0; r <= p; r++) {
-            int s1 = 0, s2 = 1;
-            a[0][0] = 1.0;
-            for (int k = 1; k <= n_top; k++) {
-                double d = 0.0;
-                const int rk = r - k, pk = p - k;
-                if (r >= k) {
-                    a[s2][0] = a[s1][0] / ndu[pk + 1][rk];
-                    d = a[s2][0] * ndu[rk][pk];
-                }
-                const int j1 = rk >= -1 ? 1 : -rk;
-                const int j2 = r - 1 <= pk ? k - 1 : p - r;
-                for (int j = j1; j <= j2; j++) {
-                    a[s2][j] = (a[s1][j] - a[s1][j - 1]) / ndu[pk + 1][rk + j];
-                    d += a[s2][j] * ndu[rk + j][pk];
-                }
-                if (r <= pk) {
-                    a[s2][k] = -a[s1][k - 1] / ndu[pk + 1][r];
-                    d += a[s2][k] * ndu[r][pk];
-                }
-                ders[k][r] = d;
-                const int t = s1;
-                s1 = s2;
-                s2 = t;
-            }
-        }
+        ders_one(knots, span, p, us, n_top, ders); /* basis_derivatives' arithmetic */
         double factor = (double)p;
         for (int k = 1; k <= n_top; k++) {
             for (int r = 0; r <= p; r++)
@@ -635,6 +669,8 @@ static PyMethodDef methods[] = {
     {"powerform_speed", powerform_speed, METH_VARARGS, "powerform.PowerForm._speed_py, compiled."},
     {"nurbs_derivatives", nurbs_derivatives, METH_VARARGS,
      "nurbs.NurbsCurve._derivatives_py, compiled."},
+    {"nurbs_derivatives_at", nurbs_derivatives_at, METH_VARARGS,
+     "nurbs.NurbsCurve.derivatives: clip, spans and nurbs_derivatives in one call."},
     {NULL, NULL, 0, NULL},
 };
 

@@ -24,6 +24,7 @@ KERNELS = (
     "newton_step",
     "ph_closest",
     "nurbs_derivatives",
+    "nurbs_derivatives_at",
     "powerform_speed",
 )
 if kernels is not None and not all(hasattr(kernels, name) for name in KERNELS):

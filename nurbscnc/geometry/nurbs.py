@@ -288,14 +288,13 @@ class NurbsCurve:
         numbers bit for bit, one parameter at a time without numpy's temporaries: most calls
         are for one to a few parameters, Brent's steps and the PH fits' ends).
         """
-        u = np.clip(as_params(u), self.u_start, self.u_end)
         p = self.degree
         if _kernels is None or not 0 <= p <= _KERNEL_MAX_DEGREE or order > 2 * _KERNEL_MAX_DEGREE:
-            return self._derivatives_py(u, order)
-        spans = find_span(self.knots, p, u)
+            return self._derivatives_py(np.clip(as_params(u), self.u_start, self.u_end), order)
+        u = np.ascontiguousarray(as_params(u))  # the clip and spans in the kernel
         out = np.empty((order + 1, u.size, 3))
-        _kernels.nurbs_derivatives(
-            self._knots_c, spans.astype(np.int64), u, p, int(order), self.homogeneous_t, out
+        _kernels.nurbs_derivatives_at(
+            self._knots_c, u, self.u_start, self.u_end, p, int(order), self.homogeneous_t, out
         )
         return out
 
