@@ -321,3 +321,54 @@ def test_airfoil_plan_is_the_same_without_the_kernels(monkeypatch):
         _bits(fast.plan.profile.junction_speeds_mm_s), _bits(slow.plan.profile.junction_speeds_mm_s)
     )
     assert fast.check.overs.worst_mm == slow.check.overs.worst_mm
+
+
+@pytest.mark.skipif(distance._kernels is None, reason="nurbscnc.geometry._kernels was not built")
+def test_nurbs_derivatives_kernel_is_the_numpy_evaluation_bit_for_bit():
+    """400 random NURBS curves (degrees 1–7, rational and not, repeated inner knots, parameter
+    ranges from 1e-3 to 1e2), parameters inside, on knots and beyond both ends, orders 0–5
+    (above the degree included): the compiled evaluation
+    (:meth:`~nurbscnc.geometry.nurbs.NurbsCurve.derivatives`) gives numpy's
+    (:meth:`~nurbscnc.geometry.nurbs.NurbsCurve._derivatives_py`) bit for bit."""
+    from nurbscnc.geometry.nurbs import NurbsCurve
+
+    rng = np.random.default_rng(38)
+    for _ in range(400):
+        p = int(rng.integers(1, 8))
+        n = p + 1 + int(rng.integers(0, 12))
+        inner = np.sort(rng.random(n - p - 1))
+        if inner.size > 2 and rng.random() < 0.3:
+            inner[1] = inner[0]  # a repeated knot
+        scale = 10.0 ** rng.integers(-3, 3)
+        knots = np.concatenate((np.zeros(p + 1), inner, np.ones(p + 1))) * scale
+        weights = rng.uniform(0.2, 3.0, n) if rng.random() < 0.7 else np.ones(n)
+        curve = NurbsCurve(p, knots, rng.standard_normal((n, 3)) * 100.0, weights)
+        m = int(rng.integers(1, 30))
+        u = np.concatenate((rng.uniform(-0.1, 1.1, m) * scale, knots[rng.integers(0, n, 3)]))
+        clipped = np.clip(u, curve.u_start, curve.u_end)
+        for order in range(6):
+            got = curve.derivatives(u, order)
+            ref = curve._derivatives_py(clipped, order)
+            assert got.shape == ref.shape == (order + 1, u.size, 3)
+            assert np.array_equal(_bits(got), _bits(ref))
+
+
+@pytest.mark.skipif(distance._kernels is None, reason="nurbscnc.geometry._kernels was not built")
+def test_power_form_speed_kernel_is_the_numpy_horner_bit_for_bit():
+    """400 random rational curves (degrees 0–7, parameter ranges 1e-3 to 1e2), 1–60
+    parameters inside and beyond both ends: :meth:`PowerForm.speed` (compiled from two
+    samples on) gives :meth:`PowerForm._speed_py`'s bits, one sample included."""
+    from nurbscnc.geometry.nurbs import NurbsCurve
+
+    rng = np.random.default_rng(39)
+    for _ in range(400):
+        p = int(rng.integers(0, 8))
+        n = p + 1 + int(rng.integers(0, 12))
+        scale = 10.0 ** rng.integers(-3, 3)
+        inner = np.sort(rng.random(n - p - 1))
+        knots = np.concatenate((np.zeros(p + 1), inner, np.ones(p + 1))) * scale
+        curve = NurbsCurve(p, knots, rng.standard_normal((n, 3)) * 100.0, rng.uniform(0.2, 3.0, n))
+        form = curve.power_form
+        u = rng.uniform(-0.1, 1.1, int(rng.integers(1, 60))) * scale
+        spans = form.span_of(u)
+        assert np.array_equal(_bits(form.speed(u, spans)), _bits(form._speed_py(u, spans)))

@@ -16,6 +16,7 @@ import numpy as np
 
 from nurbscnc.geometry.arclength import ArcLengthTable
 from nurbscnc.geometry.bspline import (
+    _KERNEL_MAX_DEGREE,
     as_params,
     basis_derivatives,
     basis_functions,
@@ -24,6 +25,7 @@ from nurbscnc.geometry.bspline import (
     find_span,
     rational_derivatives,
 )
+from nurbscnc.geometry.compiled import kernels as _kernels
 from nurbscnc.geometry.inverse import InverseArcTable
 from nurbscnc.geometry.powerform import PowerForm
 
@@ -282,8 +284,27 @@ class NurbsCurve:
 
         Homogeneous B-spline derivatives A^(k), w^(k) from :func:`basis_derivatives`, then the
         quotient rule (P&T A4.2): C^(k) = (A^(k) − Σ_{i=1..k} C(k,i) w^(i) C^(k−i)) / w.
+        :meth:`_derivatives_py`, compiled where the geometry's kernels were built (the same
+        numbers bit for bit, one parameter at a time without numpy's temporaries: most calls
+        are for one to a few parameters, Brent's steps and the PH fits' ends).
         """
-        u = np.clip(as_params(u), self.u_start, self.u_end)
+        p = self.degree
+        if _kernels is None or not 0 <= p <= _KERNEL_MAX_DEGREE or order > 2 * _KERNEL_MAX_DEGREE:
+            return self._derivatives_py(np.clip(as_params(u), self.u_start, self.u_end), order)
+        u = np.ascontiguousarray(as_params(u))  # the clip and spans in the kernel
+        out = np.empty((order + 1, u.size, 3))
+        _kernels.nurbs_derivatives_at(
+            self._knots_c, u, self.u_start, self.u_end, p, int(order), self.homogeneous_t, out
+        )
+        return out
+
+    @cached_property
+    def _knots_c(self) -> np.ndarray:
+        """The knot vector as a contiguous float64 array (the kernel's buffer)."""
+        return np.ascontiguousarray(self.knots, dtype=np.float64)
+
+    def _derivatives_py(self, u: np.ndarray, order: int) -> np.ndarray:
+        """:meth:`derivatives` at clipped parameters ``u`` in numpy (the reference)."""
         p = self.degree
         pw = self.homogeneous_t
         # Contract basis × control points one basis index j at a time, components first:

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from nurbscnc.errors import GeometryError
+from nurbscnc.geometry import phfoot
 from nurbscnc.geometry.compiled import kernels as _kernels
 from nurbscnc.geometry.segments import PLANE_AXES, frozen_array, vec3
 
@@ -112,6 +113,44 @@ def _newton_step_py(f, df, xa, a, b, idx, x, ftol: float) -> int:
     idx[:m] = idx[:n][going]
     xa[:m], a[:m], b[:m] = xn[going], lo[going], hi[going]
     return m
+
+
+#: Newton steps at most per foot point (:func:`bracketed_newton`'s default).
+FOOT_STEPS = 200
+
+
+def _closest_param_py(coeffs, xs, q_re, q_im) -> np.ndarray:
+    """:meth:`PHQuintic.closest_param` in numpy (the reference of the compiled
+    ``ph_closest``): ``coeffs`` the control points' and preimage's real and imaginary parts,
+    ``xs`` the dense samples, ``q_re``, ``q_im`` the points."""
+    n_dense = xs.size
+    rx, ry = phfoot.point_xy(coeffs[0], coeffs[1], xs)
+    nearest = np.empty(q_re.size, dtype=np.int64)
+    chunk = max(1, 2_000_000 // n_dense)
+    for start in range(0, q_re.size, chunk):  # bounded memory; not a per-sample loop
+        dx = rx[None, :] - q_re[start : start + chunk, None]
+        dy = ry[None, :] - q_im[start : start + chunk, None]
+        nearest[start : start + chunk] = np.argmin(dx * dx + dy * dy, axis=1)
+    x_mid = xs[nearest]
+    x_lo = xs[np.maximum(nearest - 1, 0)]
+    x_hi = xs[np.minimum(nearest + 1, n_dense - 1)]
+    g_lo, _ = phfoot.g_terms(*coeffs, x_lo, q_re, q_im)
+    g_mid, _ = phfoot.g_terms(*coeffs, x_mid, q_re, q_im)
+    g_hi, _ = phfoot.g_terms(*coeffs, x_hi, q_re, q_im)
+    left = (g_lo <= 0.0) & (g_mid >= 0.0)
+    right = ~left & (g_mid <= 0.0) & (g_hi >= 0.0)
+    a = np.where(left, x_lo, x_mid)
+    b = np.where(left, x_mid, np.where(right, x_hi, x_mid))
+    xi = x_mid.copy()
+    sel = np.flatnonzero((left | right) & (b > a))
+    if sel.size:
+        qr, qi = q_re[sel], q_im[sel]
+
+        def g(x, idx):
+            return phfoot.g_terms(*coeffs, x, qr[idx], qi[idx])
+
+        xi[sel] = bracketed_newton(g, a[sel], b[sel], x_mid[sel], max_iter=FOOT_STEPS)
+    return xi
 
 
 @dataclass(frozen=True, eq=False)
@@ -228,15 +267,7 @@ class PHQuintic:
         |q| maximal) the two terms are Arg(1 − c2/q) and Arg(1 − q/c0), which stay finite as
         c2 → 0 (w linear). A root on [0, 1] (a cusp, σ = 0) is not a regular curve.
         """
-        w0, w1, w2 = self.w
-        c0, c1, c2 = w0, 2.0 * (w1 - w0), w0 - 2.0 * w1 + w2
-        if c1 == 0 and c2 == 0:
-            return 0.0
-        root = np.sqrt(c1 * c1 - 4.0 * c0 * c2)
-        qa, qb = -0.5 * (c1 + root), -0.5 * (c1 - root)
-        q = qa if abs(qa) >= abs(qb) else qb
-        darg_w = np.angle(1.0 - c2 / q) + np.angle(1.0 - q / c0)
-        return float(2.0 * darg_w)
+        return turning_angle_rad(self.w)
 
     def rotation_index(self) -> float:
         """Rotation index: total tangent turning / 2π (not rounded)."""
@@ -286,48 +317,22 @@ class PHQuintic:
         The nearest of ``n_dense`` uniform samples gives a bracket [ξ_{i−1}, ξ_i] or
         [ξ_i, ξ_{i+1}] where g(ξ) = Re(conj(r − q) r′) = ½ d|r − q|²/dξ changes sign; the
         foot point is then refined by safeguarded Newton (g′ = |r′|² + Re(conj(r − q) r″)).
-        Without a sign change the minimum is at the end sample (ξ = 0 or 1).
+        Without a sign change the minimum is at the end sample (ξ = 0 or 1). The arithmetic is
+        :mod:`~nurbscnc.geometry.phfoot`'s; compiled (``ph_closest``) where the geometry's
+        kernels were built, the same bits.
         """
         q = np.asarray(q, dtype=complex)
         shape = q.shape
-        q = q.ravel()
+        q_re = np.ascontiguousarray(q.real, dtype=np.float64).ravel()
+        q_im = np.ascontiguousarray(q.imag, dtype=np.float64).ravel()
+        cp, w = self.control_points, self.w
+        coeffs = (cp.real.copy(), cp.imag.copy(), w.real.copy(), w.imag.copy())
         xs = np.linspace(0.0, 1.0, n_dense)
-        rs = self.point(xs)
-        nearest = np.empty(q.size, dtype=int)
-        chunk = max(1, 2_000_000 // n_dense)
-        for start in range(0, q.size, chunk):  # bounded memory; not a per-sample loop
-            block = q[start : start + chunk]
-            nearest[start : start + chunk] = np.argmin(np.abs(rs[None, :] - block[:, None]), axis=1)
-
-        def g(x, idx, q=q):
-            # r′ = w² and r″ = 2ww′ (hodograph, second_derivative) from one w.
-            d = self.point(x) - q[idx]
-            w = self.preimage(x)
-            r1 = w**2
-            r2 = 2.0 * w * self.preimage_derivative(x)
-            return (np.conj(d) * r1).real, np.abs(r1) ** 2 + (np.conj(d) * r2).real
-
-        all_idx = np.arange(q.size)
-        x_mid = xs[nearest]
-        x_lo = xs[np.maximum(nearest - 1, 0)]
-        x_hi = xs[np.minimum(nearest + 1, n_dense - 1)]
-        g_lo, _ = g(x_lo, all_idx)
-        g_mid, _ = g(x_mid, all_idx)
-        g_hi, _ = g(x_hi, all_idx)
-        left = (g_lo <= 0.0) & (g_mid >= 0.0)
-        right = ~left & (g_mid <= 0.0) & (g_hi >= 0.0)
-        a = np.where(left, x_lo, x_mid)
-        b = np.where(left, x_mid, np.where(right, x_hi, x_mid))
-        xi = x_mid.copy()
-        sel = np.flatnonzero((left | right) & (b > a))
-        if sel.size:
-            q_sel = q[sel]
-
-            def g_sel(x, idx):
-                return g(x, idx, q_sel)
-
-            xi[sel] = bracketed_newton(g_sel, a[sel], b[sel], x_mid[sel])
-        return xi.reshape(shape)
+        if _kernels is not None:
+            out = np.empty(q_re.size)
+            _kernels.ph_closest(*coeffs, xs, q_re, q_im, FOOT_STEPS, out)
+            return out.reshape(shape)
+        return _closest_param_py(coeffs, xs, q_re, q_im).reshape(shape)
 
     # --- 3-D embedding -----------------------------------------------------------------------
 
@@ -379,16 +384,8 @@ class PHQuintic:
         return self.derivatives_mm(xi, order)
 
 
-def hermite_solutions(
-    p0, p5, d0, d1, origin_mm=(0.0, 0.0, 0.0), e1=(1.0, 0.0, 0.0), e2=(0.0, 1.0, 0.0)
-) -> list[PHQuintic]:
-    """The four PH quintics with r(0) = p0, r(1) = p5, r′(0) = d0, r′(1) = d1 (SPEC §4, eq. 21).
-
-    All arguments complex plane coordinates [mm]; the frame is passed to each curve.
-    w0 = √d0 (the overall sign of w does not change the curve), w2 = ±√d1 and
-    w1 = −¾(w0 + w2) ± ¼√(120(p5 − p0) − 15w0² − 15w2² + 10w0w2). Taking both signs of both
-    square roots covers all solutions whatever branch the principal √ picks.
-    """
+def _hermite_preimages(p0, p5, d0, d1) -> list[np.ndarray]:
+    """The preimages w (3,) of :func:`hermite_solutions`' four curves, in its order."""
     p0, p5, d0, d1 = complex(p0), complex(p5), complex(d0), complex(d1)
     values = np.array([p0, p5, d0, d1])
     if not np.all(np.isfinite(values)):
@@ -402,21 +399,52 @@ def hermite_solutions(
         root = np.sqrt(120.0 * (p5 - p0) - 15.0 * w0 * w0 - 15.0 * w2 * w2 + 10.0 * w0 * w2)
         for sign1 in (1.0, -1.0):
             w1 = -0.75 * (w0 + w2) + sign1 * 0.25 * root
-            out.append(PHQuintic(np.array([w0, w1, w2]), p0, origin_mm, e1, e2))
+            out.append(np.array([w0, w1, w2]))
     return out
+
+
+def hermite_solutions(
+    p0, p5, d0, d1, origin_mm=(0.0, 0.0, 0.0), e1=(1.0, 0.0, 0.0), e2=(0.0, 1.0, 0.0)
+) -> list[PHQuintic]:
+    """The four PH quintics with r(0) = p0, r(1) = p5, r′(0) = d0, r′(1) = d1 (SPEC §4, eq. 21).
+
+    All arguments complex plane coordinates [mm]; the frame is passed to each curve.
+    w0 = √d0 (the overall sign of w does not change the curve), w2 = ±√d1 and
+    w1 = −¾(w0 + w2) ± ¼√(120(p5 − p0) − 15w0² − 15w2² + 10w0w2). Taking both signs of both
+    square roots covers all solutions whatever branch the principal √ picks.
+    """
+    p0 = complex(p0)
+    return [PHQuintic(w, p0, origin_mm, e1, e2) for w in _hermite_preimages(p0, p5, d0, d1)]
 
 
 def hermite_ph(
     p0, p5, d0, d1, origin_mm=(0.0, 0.0, 0.0), e1=(1.0, 0.0, 0.0), e2=(0.0, 1.0, 0.0)
 ) -> PHQuintic:
     """The "good" PH quintic Hermite interpolant (SPEC §4): of the four solutions the one with
-    the least absolute rotation index; ties (within 1e-9) go to the least bending energy."""
-    sols = hermite_solutions(p0, p5, d0, d1, origin_mm, e1, e2)
-    rot = np.array([abs(c.rotation_index()) for c in sols])
-    tied = [c for c, r in zip(sols, rot) if r <= rot.min() + 1e-9]
+    the least absolute rotation index; ties (within 1e-9) go to the least bending energy.
+    The index is a function of w alone: only the curves in the running are built."""
+    ws = _hermite_preimages(p0, p5, d0, d1)
+    rot = np.array([abs(turning_angle_rad(w) / (2.0 * np.pi)) for w in ws])
+    p0 = complex(p0)
+    tied = [PHQuintic(w, p0, origin_mm, e1, e2) for w, r in zip(ws, rot) if r <= rot.min() + 1e-9]
     if len(tied) == 1:
         return tied[0]
     return min(tied, key=lambda c: c.bending_energy())
+
+
+def turning_angle_rad(w) -> float:
+    """Total turning ∫κ ds [rad] of the PH quintic with preimage ``w`` (3,) complex: see
+    :meth:`PHQuintic.turning_angle_rad` (a function of w alone, so the Hermite solutions are
+    ranked before any curve is built)."""
+    w0, w1, w2 = np.array(w, dtype=complex).reshape(3)
+    c0, c1, c2 = w0, 2.0 * (w1 - w0), w0 - 2.0 * w1 + w2
+    if c1 == 0 and c2 == 0:
+        return 0.0
+    root = np.sqrt(c1 * c1 - 4.0 * c0 * c2)
+    qa, qb = -0.5 * (c1 + root), -0.5 * (c1 - root)
+    q = qa if abs(qa) >= abs(qb) else qb
+    darg_w = np.angle(1.0 - c2 / q) + np.angle(1.0 - q / c0)
+    return float(2.0 * darg_w)
 
 
 def plane_frame(points_mm, tol_mm: float = 1e-6) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

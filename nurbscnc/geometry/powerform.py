@@ -5,10 +5,12 @@ temporaries in cache."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
 from nurbscnc.geometry.bspline import as_params, basis_derivatives, rational_derivatives
+from nurbscnc.geometry.compiled import kernels as _kernels
 
 #: Samples per block in the fast whole-array evaluations: temporaries of a few hundred kB stay
 #: in cache, which makes million-sample evaluations 1.5–3× faster than one pass. The loop runs
@@ -112,9 +114,38 @@ class PowerForm:
         return rational_derivatives(self.homogeneous(u, spans, order))
 
     def speed(self, u, spans=None) -> np.ndarray:
-        """|C'(u)| [mm per unit u]: |A′w − Aw′| / w²."""
+        """|C'(u)| [mm per unit u]: |A′w − Aw′| / w². :meth:`_speed_py`, compiled where the
+        geometry's kernels were built (the same bits; the arc-length tables call it for a
+        few Gauss–Legendre nodes at a time)."""
         u = as_params(u)
         spans = self.span_of(u) if spans is None else spans
+        if _kernels is None or u.size < 2:
+            # One sample: numpy's einsum sums x² + y² + z² in another order for a single
+            # output ((x² + z²) + y², its vector loop), so the reference runs there.
+            return self._speed_py(u, spans)
+        out = np.empty(u.size)
+        _kernels.powerform_speed(
+            self.coeffs_c,
+            self.centers_c,
+            np.ascontiguousarray(u),
+            spans.astype(np.int64),
+            self.degree,
+            out,
+        )
+        return out
+
+    @cached_property
+    def coeffs_c(self) -> np.ndarray:
+        """``coeffs`` C-contiguous float64 (the kernel's buffer)."""
+        return np.ascontiguousarray(self.coeffs, dtype=np.float64)
+
+    @cached_property
+    def centers_c(self) -> np.ndarray:
+        """``centers`` C-contiguous float64 (the kernel's buffer)."""
+        return np.ascontiguousarray(self.centers, dtype=np.float64)
+
+    def _speed_py(self, u: np.ndarray, spans: np.ndarray) -> np.ndarray:
+        """:meth:`speed` in numpy (the reference)."""
         h = self.homogeneous(u, spans, 1)
         a, da = h[0], h[1]
         num = da[:3] * a[3] - a[:3] * da[3]

@@ -217,16 +217,15 @@ def _windows_of(st: Setup):
     own_profile = OwnProfiles(st)
     for w, (a, b) in enumerate(zip(starts.tolist(), ends.tolist())):
         is_last = b == st.k
-        scope = np.zeros(st.k, dtype=bool)
-        scope[a:b] = True
         later = None if is_last else placeholder(st.pieces, st.initial, b, stand_in)
         # What the re-plans splice around the window's own profile: the windows before and
         # the stand-in after, their phases outside the periods the check reads merged.
         around = (done, None if later is None else compacted(later, 0.0))
 
-        def confine(lv: Levers, scope=scope, final=final) -> None:
-            for f in Levers.PER_PIECE:
-                getattr(lv, f)[~scope] = getattr(final, f)[~scope]
+        def confine(lv: Levers, a=a, b=b, final=final) -> None:
+            for f in Levers.PER_PIECE:  # outside the window: the final levers (slices)
+                x, y = getattr(lv, f), getattr(final, f)
+                x[:a], x[b:] = y[:a], y[b:]
 
         warm, repeated_cut = seen.warm(final, a, b)
 

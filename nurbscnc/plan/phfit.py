@@ -16,6 +16,7 @@ import numpy as np
 
 from nurbscnc.errors import ConfigError, PlanningError
 from nurbscnc.geometry.ph import PHQuintic, hermite_ph, plane_frame
+from nurbscnc.geometry.phfoot import point_xy
 
 
 @dataclass(frozen=True, eq=False)
@@ -52,33 +53,43 @@ class PHFit:
         return self.pieces[-1].u_b
 
 
-def _to_plane(vectors_mm: np.ndarray, frame, translate: bool) -> tuple[np.ndarray, np.ndarray]:
-    """3-D points/vectors (m, 3) -> (complex plane coordinates, signed off-plane part) [mm]."""
-    origin, e1, e2 = frame
+def _to_plane(
+    vectors_mm: np.ndarray, frame, translate: bool, normal=None
+) -> tuple[np.ndarray, np.ndarray]:
+    """3-D points/vectors (m, 3) -> (complex plane coordinates, signed off-plane part) [mm];
+    ``normal`` e1 × e2 of ``frame`` (origin, e1, e2) if known."""
+    origin, e1, e2 = frame[:3]
     v = vectors_mm - origin if translate else vectors_mm
-    return v @ e1 + 1j * (v @ e2), v @ np.cross(e1, e2)
+    return v @ e1 + 1j * (v @ e2), v @ (np.cross(e1, e2) if normal is None else normal)
 
 
-def ph_deviation_um(ph: PHQuintic, points_mm: np.ndarray) -> np.ndarray:
+def ph_deviation_um(ph: PHQuintic, points_mm: np.ndarray, normal=None) -> np.ndarray:
     """Distance [µm] from each 3-D point (m, 3) to the PH curve (closest point on ξ ∈ [0, 1]).
 
-    In-plane distance to the foot point (:meth:`PHQuintic.closest_param`) combined with the
-    off-plane offset.
+    In-plane distance to the foot point (:meth:`PHQuintic.closest_param`; the point there by
+    :func:`~nurbscnc.geometry.phfoot.point_xy`, the foot search's own arithmetic) combined
+    with the off-plane offset; ``normal`` the curve's plane normal if known.
     """
-    q, off = _to_plane(np.asarray(points_mm, dtype=float), (ph.origin_mm, ph.e1, ph.e2), True)
+    q, off = _to_plane(
+        np.asarray(points_mm, dtype=float), (ph.origin_mm, ph.e1, ph.e2), True, normal
+    )
     xi = ph.closest_param(q)
-    return 1e3 * np.hypot(np.abs(ph.point(xi) - q), off)
+    cp = ph.control_points
+    px, py = point_xy(cp.real, cp.imag, xi)
+    return 1e3 * np.hypot(np.hypot(px - q.real, py - q.imag), off)
 
 
 def _fit_piece(curve, u_a: float, u_b: float, frame, n_samples: int):
-    """PH Hermite interpolant of C on [u_a, u_b] and its squared deviations [µm²]."""
+    """PH Hermite interpolant of C on [u_a, u_b] and its squared deviations [µm²]; ``frame``
+    (origin, e1, e2, e1 × e2)."""
     ends = curve.derivatives(np.array([u_a, u_b]), 1)
     width = u_b - u_a
-    (p0, p5), _ = _to_plane(ends[0], frame, True)
-    (d0, d1), _ = _to_plane(width * ends[1], frame, False)
-    ph = hermite_ph(p0, p5, d0, d1, *frame)
+    normal = frame[3]
+    (p0, p5), _ = _to_plane(ends[0], frame, True, normal)
+    (d0, d1), _ = _to_plane(width * ends[1], frame, False, normal)
+    ph = hermite_ph(p0, p5, d0, d1, *frame[:3])
     u = np.linspace(u_a, u_b, n_samples)
-    dev_um = ph_deviation_um(ph, curve.point(u))
+    dev_um = ph_deviation_um(ph, curve.point(u), normal)
     piece = PHPiece(
         ph, float(u_a), float(u_b), float(np.sqrt(np.mean(dev_um**2))), float(dev_um.max())
     )
@@ -116,6 +127,7 @@ def fit_region(
         raise PlanningError(f"empty corner region [{u_a}, {u_b}]")
     # One plane frame for the whole region, so all pieces share it.
     frame = plane_frame(curve.point(np.linspace(u_a, u_b, 4 * samples_per_piece + 1)))
+    frame = (*frame, np.cross(frame[1], frame[2]))
 
     pieces: list[PHPiece] = []
     sum_sq = 0.0

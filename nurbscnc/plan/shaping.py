@@ -102,21 +102,25 @@ def local_factors(blame: np.ndarray, eps_mm: float, history=None):
     is not the cause (a ringing servo's error from further back): it is reported, not
     lowered (halving it at every re-plan would make a slow servo's program crawl).
     """
-    hit = blame > 0.0
-    p = np.full(blame.size, 2.0)
+    # Only the pieces hit are worked on (a window's few among the program's k): elsewhere
+    # the factor is 1, no strike, not ineffective (each value the same as over all k).
+    hit = np.flatnonzero(blame > 0.0)
+    e = blame[hit]
+    p = np.full(hit.size, 2.0)
     strikes = np.zeros(blame.size, dtype=np.int8)
     if history is not None:
-        prev_blame, prev_factor, prev_strikes = history
-        again = hit & (prev_blame > 0.0) & (prev_factor < 1.0)
+        prev_blame, prev_factor, prev_strikes = (x[hit] for x in history)
+        again = (prev_blame > 0.0) & (prev_factor < 1.0)
         with np.errstate(divide="ignore", invalid="ignore"):
-            measured = np.log(blame / prev_blame) / np.log(prev_factor)
+            measured = np.log(e / prev_blame) / np.log(prev_factor)
         known = again & np.isfinite(measured)
         weak = known & (measured < STOP_INEFFECTIVE_P)
-        strikes = np.where(weak, np.minimum(prev_strikes, CURVE_STRIKES) + 1, 0).astype(np.int8)
+        strikes[hit] = np.where(weak, np.minimum(prev_strikes, CURVE_STRIKES) + 1, 0)
         p = np.where(known, np.clip(measured, 0.25, 2.0), p)
     ineffective = strikes >= CURVE_STRIKES
-    ratio = eps_mm / np.where(hit, blame, eps_mm)
-    factor = np.where(hit & ~ineffective, np.clip(0.97 * ratio ** (1.0 / p), 0.5, 0.97), 1.0)
+    factor = np.ones(blame.size)
+    lowered = ~ineffective[hit]
+    factor[hit[lowered]] = np.clip(0.97 * (eps_mm / e[lowered]) ** (1.0 / p[lowered]), 0.5, 0.97)
     return factor, (blame, factor, strikes), ineffective
 
 
