@@ -8,7 +8,7 @@ paper's axes), so a stop that ends at deceleration a overshoots the vertex by ab
 full reversal (the vertex is then the overshoot's nearest path point). Keeping it within the
 contour tolerance ε of the path, or within ε + P of the vertex of a G64 corner
 (:mod:`nurbscnc.plan.allowance`: the overshoot point lies c₂·a from the vertex whatever θ),
-costs a deceleration of at most A_s = max(ε/(c₂ · (sin θ below 90°, else 1)), (ε + P)/c₂)
+costs a deceleration of at most A_s = max(ε/(c₂ · (sin θ below 90°, else 1)), (ε + P)/(r c₂))
 into the stop (:func:`stop_deceleration_mm_s2`). The U is
 one curve of peak curvature κ crossed at w ≤ √(SHARE · ε / (c₂ κ)) (its steady servo error
 c₂ w²κ within :data:`TURN_SERVO_SHARE` of ε; zero curvature at its ends, so no transient
@@ -43,10 +43,18 @@ TURN_SERVO_SHARE = 0.9
 TURN_CELLS = 24
 
 
+#: The largest overshoot past the vertex of a stop ended at a constant deceleration a, over
+#: c₂·a: lsim of SPEC Table 2's axes (the paper's profile and LinuxCNC's limits), stops from
+#: 5–58 mm/s at 300–2450 mm/s²: 1.047 (where the deceleration lasts 16–24 ms its onset's
+#: ringing adds to the end's; 0.88 from 25 mm/s at 2450 mm/s², where it lasts 10 ms).
+STOP_OVERSHOOT_RATIO = 1.05
+
+
 def stop_deceleration_mm_s2(machine: Machine, turning_rad, tol_mm=0.0) -> np.ndarray:
     """The deceleration [mm/s²] a stop at a corner turning by θ, of path tolerance P =
     ``tol_mm`` [mm] (G64; 0: none), may end with so that the servo's overshoot past the
-    vertex stays within the guarantee (module doc): min(A, max(ε / (c₂ s), (ε + P) / c₂)),
+    vertex stays within the guarantee (module doc): min(A, max(ε / (c₂ s), (ε + P) / (r c₂))),
+    r = :data:`STOP_OVERSHOOT_RATIO`,
     s = sin θ below 90° and 1 from 90° on (A without a servo model or check).
 
     The tool overshoots the vertex C by δ ≈ c₂·a along the incoming tangent t_a (the lead
@@ -55,10 +63,10 @@ def stop_deceleration_mm_s2(machine: Machine, turning_rad, tol_mm=0.0) -> np.nda
     before the segment's start and past the incoming one's end, so the vertex is its
     nearest path point and all of δ is off the path, up to a full reversal. Its distance to
     the vertex is δ at any θ, so a G64 corner's allowance (within ε + P of the vertex,
-    :mod:`nurbscnc.plan.allowance`) holds it while δ ≤ ε + P. The sample is within the
-    guarantee if either holds: the larger bound. lsim of the paper's axes
+    :mod:`nurbscnc.plan.allowance`) holds it while δ ≤ ε + P; δ is at most r·c₂·a. The
+    sample is within the guarantee if either holds: the larger bound. lsim of the paper's axes
     (tests/test_turnarounds.py), a stop from 25 mm/s: ended at 2450 mm/s², 43.7 µm at 45°
-    and 61.8 µm from 90° to 180°; at ε / (c₂ s) 14.7–14.9 µm off the path; at (ε + P) / c₂
+    and 61.8 µm from 90° to 180°; at ε / (c₂ s) 14.7–14.9 µm off the path; at (ε + P) / (r c₂)
     within ε + P of the vertex (tests/test_corner_allowance.py)."""
     lim = machine.limits
     gain = servo_gain_s2(machine)
@@ -70,7 +78,8 @@ def stop_deceleration_mm_s2(machine: Machine, turning_rad, tol_mm=0.0) -> np.nda
     with np.errstate(divide="ignore"):
         a_s = eps / (gain * np.maximum(off, 0.0))
     if allowance.CORNER_ALLOWANCE:  # the vertex's ball (none where P = 0: ε/c₂ ≤ ε/(c₂ s))
-        a_s = np.maximum(a_s, (eps + np.maximum(np.asarray(tol_mm, dtype=float), 0.0)) / gain)
+        tol = np.maximum(np.asarray(tol_mm, dtype=float), 0.0)
+        a_s = np.maximum(a_s, (eps + tol) / (STOP_OVERSHOOT_RATIO * gain))
     return np.minimum(lim.a_max_mm_s2, a_s)
 
 
