@@ -96,8 +96,9 @@ def corner_allowance(
     """The corner allowances (:class:`CornerAllowance`) of ``pieces``, None where there are
     none (or :data:`CORNER_ALLOWANCE` is off): the junctions of the module doc.
     ``segment_tol_mm(segments)``: the programmed path tolerance [mm] of program segments
-    (an index array); default the pieces' own (``blend_mm``), which is less where smoothing
-    took a share of it for its spline (the spline still ends on the programmed vertex)."""
+    (an index array), read for the spline rows at a vertex only (a smoothed run's spline
+    keeps only the blends' share of P in its rows, but ends on the programmed vertex; every
+    other row's ``blend_mm`` is its segment's); None: the pieces' own throughout."""
     k = len(pieces)
     if not CORNER_ALLOWANCE or k < 2 or pieces.rotary is not None:
         return None
@@ -123,9 +124,13 @@ def corner_allowance(
     j = np.flatnonzero(vertex)
     if j.size == 0:
         return None
-    tol_j = tol[j]
-    if segment_tol_mm is not None:
-        tol_j = np.minimum(segment_tol_mm(seg[j]), segment_tol_mm(seg[j + 1]))
+    tol_a, tol_b = tol_row[j], tol_row[j + 1]
+    if segment_tol_mm is not None:  # spline rows (smoothing's among them): the program's P
+        for side, rows in ((tol_a, j), (tol_b, j + 1)):
+            spline = np.flatnonzero(pieces.kind[rows] == Kind.NURBS)
+            if spline.size:
+                side[spline] = segment_tol_mm(seg[rows[spline]])
+    tol_j = np.minimum(tol_a, tol_b)
     vertex_of = np.full(k - 1, -1, dtype=np.int64)
     vertex_of[j] = np.arange(j.size)
     return CornerAllowance(vertex_of, np.ascontiguousarray(pieces.end_mm[:, j].T), tol_j)
