@@ -11,7 +11,6 @@ import numpy as np
 
 from nurbscnc.geometry.polyline import MAX_PIECE_POINTS, path_counts
 from nurbscnc.machine.profile import Machine
-from nurbscnc.plan.allowance import corner_allowance
 from nurbscnc.plan.checkresult import Accumulator, Check
 from nurbscnc.plan.dynamics import (
     PathIndex,
@@ -146,7 +145,8 @@ class Checker:
         self.index = PathIndex(pieces)  # where the pieces are (built on first use)
         # Where a sample may leave the planned path by more than ε_max: within ε_max + P of
         # a G64 vertex (:mod:`nurbscnc.plan.allowance`; the accumulator decides with it).
-        self.allowance = corner_allowance(pieces, machine)
+        # :class:`~nurbscnc.plan.setup.Setup` sets it with the program's tolerances.
+        self.allowance = None
         # The risk skip (:meth:`_respond`): only where the reference lies on the path (the
         # exact points of a causal sampler; not the Taylor recurrence's nor a
         # pre-compensated reference), and never on rapids, on the first piece of a cut
@@ -528,8 +528,8 @@ class Checker:
         the largest error of the check so far (``worst_mm``, then this chunk's rows
         measured first; the effective error of :mod:`~nurbscnc.plan.allowance`, at most
         the largest measured distance): the check's worst error, its over-limit samples and
-        so every decision are those of the full measurement, bit for bit. A row left out keeps its
-        bound b_k as its contour error (the statistics' rms is then an upper bound,
+        so every decision are those of the full measurement, bit for bit. A row left out
+        keeps its bound b_k as its contour error (the statistics' rms is then an upper bound,
         ``contour_bounded_samples`` counts them). Likewise |eq. 29| ≤ |r_k − a_k|: it is
         computed only where that exceeds the largest |eq. 29| so far (the maximum, its only
         use, is exact; the others keep the bound)."""
