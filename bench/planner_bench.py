@@ -52,6 +52,7 @@ sys.path.insert(0, str(HERE))
 from contour import (  # noqa: E402
     block_leave_index,
     contour_errors_um,
+    g64_vertices,
     motion_span,
     path_polyline_mm,
     settle_waits,
@@ -207,6 +208,15 @@ def programmed_path(path: Path) -> tuple[np.ndarray, np.ndarray]:
     return path_polyline_mm(segments), np.array(rapid_lines, dtype=int)
 
 
+def programmed_corners(path: Path, path_tolerance_mm: float) -> tuple[np.ndarray, np.ndarray]:
+    """The program's G64 vertices and their path tolerances (:func:`contour.g64_vertices`;
+    ``path_tolerance_mm``: the machine's, under G64 without P)."""
+    from nurbscnc.program.interpret import interpret_text
+
+    segments = interpret_text(path.read_text(errors="replace")).segments
+    return g64_vertices(segments, path_tolerance_mm)
+
+
 def measure(points_mm: np.ndarray, lines: np.ndarray, path, block: int | None) -> dict:
     """Time (motion span, and the block's when ``block``) and contour errors of a stream.
 
@@ -216,7 +226,7 @@ def measure(points_mm: np.ndarray, lines: np.ndarray, path, block: int | None) -
     rest at a cut's start after a rapid (:func:`contour.settle_waits`: the samples of such a
     wait carry the cut's line in nurbscnc's output); the whole run's maximum is recorded
     beside it (``contour_max_all_um``)."""
-    polyline, rapid_lines = path
+    polyline, rapid_lines, *corners = path  # (V, P) of the G64 corners when given
     span = motion_span(points_mm)
     out = {
         "motion_s": span.seconds,
@@ -233,7 +243,8 @@ def measure(points_mm: np.ndarray, lines: np.ndarray, path, block: int | None) -
         out["time_s"] = (span.end_index - leave) * span.period_s
     cutting = ~np.isin(lines, rapid_lines)
     cutting &= ~settle_waits(points_mm, cutting)  # the wait at a cut's start after a rapid
-    out.update(contour_errors_um(points_mm, polyline, cutting=cutting))
+    corners = corners[0] if corners else None
+    out.update(contour_errors_um(points_mm, polyline, cutting=cutting, corners=corners))
     return out
 
 

@@ -84,3 +84,36 @@ def limits_excess(points_mm: np.ndarray, machine, planned_mm: np.ndarray | None 
         excess = np.abs(d) - cap * (1.0 + 1e-9) - 2.0**k * 1e-12 / t**k
         out[name] = float(np.max(np.where(np.isfinite(cap), excess, -np.inf), initial=-np.inf))
     return out
+
+
+def g64_vertices(segments, path_tolerance_mm: float) -> tuple[np.ndarray, np.ndarray]:
+    """The programmed vertices of G64 corners (m, 3) [mm] and their path tolerances P (m,)
+    [mm], read from a program's segments: the end of a feed move (line, arc, NURBS) that
+    the next segment, a feed move too, starts at, both under G64 (``blend_mm`` inf: G64
+    without P, ``path_tolerance_mm``; > 0: G64 P; ≤ 0: G61/G61.1, none); P the smaller."""
+    feed = ("line", "arc", "nurbs")
+    vertices, tols = [], []
+    for a, b in zip(segments[:-1], segments[1:]):
+        if getattr(a, "kind", None) not in feed or getattr(b, "kind", None) not in feed:
+            continue
+        p = min(
+            path_tolerance_mm if np.isinf(s.blend_mm) else max(float(s.blend_mm), 0.0)
+            for s in (a, b)
+        )
+        if p > 0.0 and np.allclose(a.end_mm, b.start_mm, rtol=0.0, atol=1e-9):
+            vertices.append(a.end_mm)
+            tols.append(p)
+    return np.array(vertices, dtype=float).reshape(-1, 3), np.array(tols)
+
+
+def beyond_vertex_mm(points_mm: np.ndarray, corners: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+    """min over the G64 vertices V (``corners``: :func:`g64_vertices`) of |p − V| − P [mm]
+    for each point (n, 3) (the 8 nearest by a k-d tree); inf without vertices. A sample with
+    this ≤ ε_max lies within a G64 corner's allowance (nurbscnc.plan.allowance)."""
+    vertices, tols = corners
+    if vertices.shape[0] == 0 or points_mm.shape[0] == 0:
+        return np.full(points_mm.shape[0], np.inf)
+    k = min(8, vertices.shape[0])
+    dist, idx = cKDTree(vertices).query(points_mm, k=k)
+    dist, idx = dist.reshape(-1, k), idx.reshape(-1, k)
+    return (dist - tols[idx]).min(axis=1)

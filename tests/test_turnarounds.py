@@ -20,7 +20,7 @@ from nurbscnc.geometry.blend import line_corner_blends
 from nurbscnc.geometry.turnaround import turn_blend
 from nurbscnc.machine.profile import load_machine
 from nurbscnc.pipeline import RunOptions, run_program
-from nurbscnc.plan import turnarounds
+from nurbscnc.plan import allowance, turnarounds
 from nurbscnc.plan.corners import CornerAction, CornerWhy
 from nurbscnc.plan.options import LookaheadOptions, PlanOptions
 from nurbscnc.program.interpret import interpret_text
@@ -225,13 +225,22 @@ def _feed_vertices(prog) -> np.ndarray:
 CASES = [("raster", 0.1), ("raster", 0.05), ("reversal", 0.1)]
 
 
+@pytest.fixture
+def no_corner_allowance(monkeypatch):
+    """The check and the stops' cost without the corner allowances
+    (nurbscnc.plan.allowance): a stop's overshoot held within ε_max of the path, as the U's
+    choice was made and measured before them (with them, a stop under G64 P0.1 may end at
+    A: tests/test_corner_allowance.py)."""
+    monkeypatch.setattr(allowance, "CORNER_ALLOWANCE", False)
+
+
 @pytest.mark.parametrize("kind, tol_mm", CASES)
-def test_turnaround_blended_within_tolerance_and_servo_bound(kind, tol_mm):
-    """Under LinuxCNC's limits with the contour check: every turn-around is rounded (the
-    corner log says BLEND at both its corners), every planned feed point within the path
-    tolerance of the programmed segments, and the tool of the independent servo simulation
-    within ε_max of the planned points' polyline and within ε_max + tolerance of the
-    programmed segments."""
+def test_turnaround_blended_within_tolerance_and_servo_bound(kind, tol_mm, no_corner_allowance):
+    """Under LinuxCNC's limits with the contour check (no corner allowance): every
+    turn-around is rounded (the corner log says BLEND at both its corners), every planned
+    feed point within the path tolerance of the programmed segments, and the tool of the
+    independent servo simulation within ε_max of the planned points' polyline and within
+    ε_max + tolerance of the programmed segments."""
     machine = load_machine(LINUXCNC_LIMITS)
     text = _raster_program(3, 9.0, 0.5, tol_mm) if kind == "raster" else _reversal_program(tol_mm)
     prog, run = _run(text, machine)
@@ -255,9 +264,10 @@ def test_turnaround_blended_within_tolerance_and_servo_bound(kind, tol_mm):
     assert _polyline_distance(actual[on_feed], vertices).max() <= eps + tol_mm
 
 
-def test_turnaround_is_quicker_than_stopping(monkeypatch):
-    """The same raster with turn-arounds found (U) and not (the corners stopped, as before):
-    the U saves at least 10 ms a turn-around of the checked plan's time (15 ms measured)."""
+def test_turnaround_is_quicker_than_stopping(monkeypatch, no_corner_allowance):
+    """The same raster with turn-arounds found (U) and not (the corners stopped, as before),
+    no corner allowance: the U saves at least 10 ms a turn-around of the checked plan's time
+    (15 ms measured)."""
     machine = load_machine(LINUXCNC_LIMITS)
     text = _raster_program(3, 9.0, 0.5, 0.1)
     _, with_u = _run(text, machine)

@@ -249,6 +249,12 @@ def print_plan_summary(prog, mach, summary: dict, out: Console) -> None:
             f"µm (ε_max {mach.limits.contour_tolerance_mm * 1000:g} µm; {how})"
             f"{rapids_words(summary.get('contour_rapids_true_max_um'))}"
         )
+    if summary.get("contour_corner_samples"):
+        out.print(
+            f"  within G64 corners' allowance: {summary['contour_corner_samples']} samples, up "
+            f"to {summary['contour_corner_max_um']:.2f} µm from the planned path (within "
+            "ε_max + P of the programmed vertex where the plan stops)"
+        )
     if rotary_text(summary):
         out.print(rotary_text(summary), markup=False)
     if precompensation_text(summary):

@@ -143,6 +143,10 @@ class Checker:
         self.after_rapid = np.zeros(len(pieces), dtype=bool)  # first piece of a cut after a rapid
         self.after_rapid[settle_rows + 1] = True  # the rows of after_rapid_rows(self.rapid)
         self.index = PathIndex(pieces)  # where the pieces are (built on first use)
+        # Where a sample may leave the planned path by more than ε_max: within ε_max + P of
+        # a G64 vertex (:mod:`nurbscnc.plan.allowance`; the accumulator decides with it).
+        # :class:`~nurbscnc.plan.setup.Setup` sets it with the program's tolerances.
+        self.allowance = None
         # The risk skip (:meth:`_respond`): only where the reference lies on the path (the
         # exact points of a causal sampler; not the Taylor recurrence's nor a
         # pre-compensated reference), and never on rapids, on the first piece of a cut
@@ -325,7 +329,7 @@ class Checker:
                 (on, prof, index),
                 profile,
                 (head, memo, kept),
-                (acc.worst, acc.eq29_max),
+                (acc.worst, acc.eq29_max, acc.effective_mm),
             )
             acc.add(resp, cutting, ref.tau_s, ref.piece, measured=measured)
             if self.windowed and virt is None and span[1] < r1:
@@ -463,6 +467,7 @@ class Checker:
                 np.full(m, tau_end),
                 np.full(m, piece_end),
                 virtual=virtual,
+                corner=virtual,  # no corner allowance after the program's end
             )
 
     def _same_rows(
@@ -521,15 +526,16 @@ class Checker:
         polyline's chord error (:data:`SKIP_MARGIN_MM`): b_k. A row whose b_k is within
         ε_max is never over the limit, and its distance is measured only where b_k exceeds
         the largest error of the check so far (``worst_mm``, then this chunk's rows
-        measured first): the check's worst error, its over-limit samples and so every
-        decision are those of the full measurement, bit for bit. A row left out keeps its
-        bound b_k as its contour error (the statistics' rms is then an upper bound,
+        measured first; the effective error of :mod:`~nurbscnc.plan.allowance`, at most
+        the largest measured distance): the check's worst error, its over-limit samples and
+        so every decision are those of the full measurement, bit for bit. A row left out
+        keeps its bound b_k as its contour error (the statistics' rms is then an upper bound,
         ``contour_bounded_samples`` counts them). Likewise |eq. 29| ≤ |r_k − a_k|: it is
         computed only where that exceeds the largest |eq. 29| so far (the maximum, its only
         use, is exact; the others keep the bound)."""
         on, prof, index = path
         head, memo, kept = keeps
-        worst_mm, eq29_max_um = so_far
+        worst_mm, eq29_max_um, effective = so_far
         n = ref.t_s.size
         axis_err = ref.points_mm - actual
         lag = np.sqrt(np.einsum("ij,ij->i", axis_err, axis_err))
@@ -557,8 +563,10 @@ class Checker:
             # left out depends on the rows and the check so far only (a kept row counts as
             # a fresh check would count it).
             final = first & ~fixed
-            if final.any():
-                worst_mm = max(worst_mm, float(contour[final].max()))
+            if final.any():  # the effective error (corner allowances), as the check decides
+                i = np.flatnonzero(final)
+                e = effective(contour[i], actual[i], ref.piece[i], ref.tau_s[i])
+                worst_mm = max(worst_mm, float(e.max()))
             second = ~first & (bound > worst_mm)
             measure(todo & second)
             skipped = ~first & ~second
@@ -593,6 +601,7 @@ class Checker:
             cutting,
             np.append(ref.tau_s, np.full(m - n, profile.duration_s)),
             np.append(ref.piece, np.full(m - n, len(planned) - 1)),
+            corner=np.arange(m) < n,  # none on the held tail after the program's end
         )
         if not self.keep:
             return acc.check()

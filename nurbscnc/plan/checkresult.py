@@ -73,9 +73,12 @@ class Check:
         rounding), and ``contour_bounded_samples``: how many cutting samples' errors were
         not measured but bounded (the risk skip of :class:`~nurbscnc.plan.check.Checker`:
         the tracking error bounds them, and it is below the largest measured error, so the
-        maximum is exact; the rms counts them at their bound, an upper bound then)."""
+        maximum is exact; the rms counts them at their bound, an upper bound then);
+        ``contour_corner_max_um`` and ``contour_corner_samples``: the samples over ε_max a
+        corner's allowance took (:meth:`Accumulator.corner_stats`)."""
         if self.response is None:
             return dict(self.stats)
+        corner = {k: v for k, v in (self.stats or {}).items() if k.startswith("contour_corner_")}
         c = self.contour_um()
         eq29 = np.abs(self.response.contour_eq29_mm[self.cutting]) * 1000.0
         rapids = self.response.contour_mm[~self.cutting] * 1000.0
@@ -85,6 +88,7 @@ class Check:
             "contour_eq29_max_um": float(eq29.max()) if c.size else 0.0,
             "contour_rapids_true_max_um": float(rapids.max()) if rapids.size else 0.0,
             "contour_bounded_samples": 0,
+            **corner,
         }
 
 
@@ -94,6 +98,13 @@ class Accumulator:
 
     def __init__(self, checker, profile: Profile):
         self.eps_mm = checker.eps_mm
+        # The corner allowances (:mod:`nurbscnc.plan.allowance`): what a sample may use
+        # beyond ε_max near a G64 vertex; none on rapids nor the settle after one.
+        self.allowance = getattr(checker, "allowance", None)
+        self.rapid, self.after_rapid = checker.rapid, checker.after_rapid
+        self.piece_start_s = profile.piece_start_time_s
+        self.corner_max = 0.0  # [µm] the largest contour error a corner's allowance took
+        self.corner_n = 0  # samples over ε_max within a corner's allowance
         self.t_restart = profile.piece_start_time_s[checker.settle_rows + 1]
         self.count = 0
         self.over: list = []  # (index, err, tau) per window
@@ -115,12 +126,15 @@ class Accumulator:
         piece: np.ndarray,
         virtual: bool = False,
         measured: np.ndarray | None = None,
+        corner=True,
     ):
         """The next samples: their response, which are checked (``cutting``), profile times
         [s] and pieces. ``virtual``: the held tail of a cut window that the program does not
         end with: it counts for the window's decisions, not in its statistics nor in
         :attr:`Check.samples`. ``measured``: which contour errors were measured (None: all;
-        the others are bounds)."""
+        the others are bounds). ``corner`` (bool or (n,)): which samples may use a corner's
+        allowance (not the held tail after the program's end). The over-limit samples and
+        the worst error are those of the effective error (:meth:`effective_mm`)."""
         if virtual and self.real is None:
             self.real = (
                 self.count,
@@ -130,6 +144,15 @@ class Accumulator:
                 len(self.runs),
             )
         err = np.where(cutting, resp.contour_mm, 0.0)
+        if self.allowance is not None:
+            contour = err
+            err = self.effective_mm(err, resp.actual_mm, piece, tau_s, corner)
+            if not virtual:
+                took = np.flatnonzero((contour > self.eps_mm) & (err <= self.eps_mm))
+                if took.size:
+                    self.corner_max = max(self.corner_max, float(contour[took].max()) * 1e3)
+                    self.corner_n += int(took.size)
+            del contour
         over = np.flatnonzero(err > self.eps_mm)
         self.over.append((over + self.count, err[over], tau_s[over]))
         self.worst = max(self.worst, float(err.max()))
@@ -152,6 +175,29 @@ class Accumulator:
             self.rapids_max = max(self.rapids_max, float(resp.contour_mm[~cutting].max()) * 1e3)
         self.count += cutting.size
 
+    def effective_mm(self, err_mm, actual_mm, piece, tau_s, corner=True) -> np.ndarray:
+        """The effective errors [mm] of samples whose checked contour errors are ``err_mm``
+        (n,) (:meth:`~nurbscnc.plan.allowance.CornerAllowance.effective_mm`: within ε_max
+        of the planned path, or within ε_max + P of a G64 vertex), the tool at
+        ``actual_mm`` (n, 3), the reference on pieces ``piece`` at profile times ``tau_s``
+        [s]; ``corner`` (bool or (n,)): which may use an allowance at all. No allowance on
+        a rapid's samples nor on the settle wait after one (the cut's first piece, until
+        its start time)."""
+        if self.allowance is None:
+            return err_mm
+        i = np.flatnonzero(err_mm > self.eps_mm)
+        if i.size == 0:
+            return err_mm
+        p = piece[i]
+        ok = ~self.rapid[p] & ~(self.after_rapid[p] & (tau_s[i] <= self.piece_start_s[p]))
+        ok &= np.broadcast_to(np.asarray(corner, dtype=bool), err_mm.shape)[i]
+        i = i[ok]
+        if i.size == 0:
+            return err_mm
+        out = np.array(err_mm, dtype=float, copy=True)
+        out[i] = self.allowance.effective_mm(out[i], actual_mm[i], piece[i], self.eps_mm)
+        return out
+
     #: The accumulator's scalars, as :meth:`state` keeps them after the lists.
     SCALARS = (
         "worst",
@@ -161,6 +207,8 @@ class Accumulator:
         "rapids_max",
         "c_n",
         "bounded",
+        "corner_max",
+        "corner_n",
         "real",
     )
 
@@ -178,6 +226,12 @@ class Accumulator:
         for key, value in zip(self.SCALARS, rest, strict=True):
             setattr(self, key, value)
 
+    def corner_stats(self) -> dict:
+        """``contour_corner_max_um``: the largest contour error to the planned path [µm] of
+        a cutting sample a corner's allowance took (over ε_max, within ε_max + P of a G64
+        vertex; 0: none), ``contour_corner_samples``: how many (:mod:`nurbscnc.plan.allowance`)."""
+        return {"contour_corner_max_um": self.corner_max, "contour_corner_samples": self.corner_n}
+
     def check(self) -> Check:
         """The :class:`Check` of everything added (no per-sample arrays)."""
         idx, err, tau = (np.concatenate(x) for x in zip(*self.over))
@@ -190,6 +244,7 @@ class Accumulator:
             "contour_eq29_max_um": self.eq29_max,
             "contour_rapids_true_max_um": self.rapids_max,
             "contour_bounded_samples": self.bounded,
+            **self.corner_stats(),
         }
         samples = overs
         if self.real is not None:
@@ -256,5 +311,7 @@ class JoinedChecks:
             "contour_eq29_max_um": max(s["contour_eq29_max_um"] for s in stats),
             "contour_rapids_true_max_um": max(s["contour_rapids_true_max_um"] for s in stats),
             "contour_bounded_samples": sum(s["contour_bounded_samples"] for s in stats),
+            "contour_corner_max_um": max(s["contour_corner_max_um"] for s in stats),
+            "contour_corner_samples": sum(s["contour_corner_samples"] for s in stats),
         }
         return Check(None, None, None, overs, joined, overs, total)

@@ -154,6 +154,7 @@ def plan_checked(
         return st.plan(lev, result, iterations), result[2]
     whole = st.checker
     st.checker = Checker(st.pieces, machine, reference, st.eps_mm, st.settle_rows, window, False)
+    st.checker.allowance = whole.allowance
     joined = JoinedChecks()
 
     def windows():

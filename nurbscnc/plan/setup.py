@@ -9,6 +9,7 @@ import numpy as np
 
 from nurbscnc.errors import PlanningError
 from nurbscnc.machine.profile import Machine
+from nurbscnc.plan.allowance import corner_allowance, program_tolerance
 from nurbscnc.plan.axes import piece_limits
 from nurbscnc.plan.check import Checker
 from nurbscnc.plan.junctions import junction_caps, settle_time_s
@@ -82,6 +83,11 @@ class Setup:
         self.base_dwell = pieces.dwell_after_s
         self.checker = Checker(
             pieces, machine, reference, self.eps_mm, self.settle_rows, window, keep_reference
+        )
+        # The corner allowances with the program's own path tolerances (a smoothed spline's
+        # rows keep only the blends' share of it; its ends are the programmed vertices).
+        self.checker.allowance = corner_allowance(
+            pieces, machine, program_tolerance(program, machine, options.plan.blend_tolerance_mm)
         )
         # The improvement phase's upper brackets: the kinematic levers, or with
         # ``raise_corner_caps`` the caps without the corner heuristic V_cf.

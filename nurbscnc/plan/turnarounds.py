@@ -6,7 +6,9 @@ tool leads its reference by c₂·a (SPEC §8: 1 − G(s) ≈ c₁s + c₂s², c
 paper's axes), so a stop that ends at deceleration a overshoots the vertex by about c₂·a
 (70 µm at 2450 mm/s²): sin θ of it off the path below a turn of 90°, all of it from 90° to a
 full reversal (the vertex is then the overshoot's nearest path point). Keeping it within the
-contour tolerance ε costs a deceleration of at most A_s = ε/(c₂ · (sin θ below 90°, else 1))
+contour tolerance ε of the path, or within ε + P of the vertex of a G64 corner
+(:mod:`nurbscnc.plan.allowance`: the overshoot point lies c₂·a from the vertex whatever θ),
+costs a deceleration of at most A_s = max(ε/(c₂ · (sin θ below 90°, else 1)), (ε + P)/(r c₂))
 into the stop (:func:`stop_deceleration_mm_s2`). The U is
 one curve of peak curvature κ crossed at w ≤ √(SHARE · ε / (c₂ κ)) (its steady servo error
 c₂ w²κ within :data:`TURN_SERVO_SHARE` of ε; zero curvature at its ends, so no transient
@@ -20,6 +22,7 @@ import numpy as np
 from nurbscnc.geometry.path import Kind
 from nurbscnc.machine.caps import MIN_CAP_MM_S, curvature_cap_mm_s, servo_curve_cap_mm_s
 from nurbscnc.machine.profile import Machine
+from nurbscnc.plan import allowance
 from nurbscnc.plan.blends import Corners, servo_gain_s2
 from nurbscnc.plan.pieces import PieceList
 
@@ -40,24 +43,43 @@ TURN_SERVO_SHARE = 0.9
 TURN_CELLS = 24
 
 
-def stop_deceleration_mm_s2(machine: Machine, turning_rad) -> np.ndarray:
-    """The deceleration [mm/s²] a stop at a corner turning by θ may end with so that the
-    servo's overshoot past the vertex stays within the contour tolerance (module doc):
-    min(A, ε / (c₂ s)), s = sin θ below 90° and 1 from 90° on (A without a servo model or
-    check). The overshoot point C + δ t_a lies δ sin θ from the outgoing segment while its
-    projection falls on it (θ < 90°); from 90° on it projects before the segment's start and
-    past the incoming one's end, so the vertex is its nearest path point and all of δ is off
-    the path, up to a full reversal. lsim of the paper's axes (tests/test_turnarounds.py),
-    a stop from 25 mm/s: ended at 2450 mm/s², 43.7 µm at 45° and 61.8 µm from 90° to 180°;
-    at this bound 14.7–14.9 µm."""
+#: The largest overshoot past the vertex of a stop ended at a constant deceleration a, over
+#: c₂·a: lsim of SPEC Table 2's axes (the paper's profile and LinuxCNC's limits), stops from
+#: 5–58 mm/s at 300–2450 mm/s²: 1.047 (where the deceleration lasts 16–24 ms its onset's
+#: ringing adds to the end's; 0.88 from 25 mm/s at 2450 mm/s², where it lasts 10 ms).
+STOP_OVERSHOOT_RATIO = 1.05
+
+
+def stop_deceleration_mm_s2(machine: Machine, turning_rad, tol_mm=0.0) -> np.ndarray:
+    """The deceleration [mm/s²] a stop at a corner turning by θ, of path tolerance P =
+    ``tol_mm`` [mm] (G64; 0: none), may end with so that the servo's overshoot past the
+    vertex stays within the guarantee (module doc): min(A, max(ε / (c₂ s), (ε + P) / (r c₂))),
+    r = :data:`STOP_OVERSHOOT_RATIO`,
+    s = sin θ below 90° and 1 from 90° on (A without a servo model or check).
+
+    The tool overshoots the vertex C by δ ≈ c₂·a along the incoming tangent t_a (the lead
+    of a deceleration a, SPEC §8), at C + δ t_a. Its distance to the path: δ sin θ from the
+    outgoing segment while its projection falls on it (θ < 90°); from 90° on it projects
+    before the segment's start and past the incoming one's end, so the vertex is its
+    nearest path point and all of δ is off the path, up to a full reversal. Its distance to
+    the vertex is δ at any θ, so a G64 corner's allowance (within ε + P of the vertex,
+    :mod:`nurbscnc.plan.allowance`) holds it while δ ≤ ε + P; δ is at most r·c₂·a. The
+    sample is within the guarantee if either holds: the larger bound. lsim of the paper's axes
+    (tests/test_turnarounds.py), a stop from 25 mm/s: ended at 2450 mm/s², 43.7 µm at 45°
+    and 61.8 µm from 90° to 180°; at ε / (c₂ s) 14.7–14.9 µm off the path; at (ε + P) / (r c₂)
+    within ε + P of the vertex (tests/test_corner_allowance.py)."""
     lim = machine.limits
     gain = servo_gain_s2(machine)
     th = np.asarray(turning_rad, dtype=float)
     if gain == 0.0 or not machine.contour_check:
         return np.full(th.shape, lim.a_max_mm_s2)
     off = np.where(th < 0.5 * np.pi, np.sin(th), 1.0)
+    eps = lim.contour_tolerance_mm
     with np.errstate(divide="ignore"):
-        a_s = lim.contour_tolerance_mm / (gain * np.maximum(off, 0.0))
+        a_s = eps / (gain * np.maximum(off, 0.0))
+    if allowance.CORNER_ALLOWANCE:  # the vertex's ball (none where P = 0: ε/c₂ ≤ ε/(c₂ s))
+        tol = np.maximum(np.asarray(tol_mm, dtype=float), 0.0)
+        a_s = np.maximum(a_s, (eps + tol) / (STOP_OVERSHOOT_RATIO * gain))
     return np.minimum(lim.a_max_mm_s2, a_s)
 
 
@@ -78,18 +100,19 @@ def line_accel_mm_s2(machine: Machine, unit) -> np.ndarray:
     return np.minimum(machine.limits.a_max_mm_s2, per_axis)
 
 
-def stops_cost_s(v, m_mm, theta1, theta2, accel, machine: Machine) -> float:
+def stops_cost_s(v, m_mm, theta1, theta2, accel, machine: Machine, tol_mm: float = 0.0) -> float:
     """Time [s] stopping at both corners adds to cruising at v [mm/s] over the middle line of
     length m [mm]. Each stop at a corner turning by θ is entered and left at A_s(θ) at most
-    (:func:`stop_deceleration_mm_s2`: the servo answers a jump of the acceleration alike at
-    either end of a stop, a linear system), each line at its own acceleration ``accel`` (3,):
+    (:func:`stop_deceleration_mm_s2` of the corners' path tolerance ``tol_mm`` [mm]: the
+    servo answers a jump of the acceleration alike at either end of a stop, a linear
+    system), each line at its own acceleration ``accel`` (3,):
     the incoming, middle and outgoing lines' [mm/s²] (:func:`line_accel_mm_s2`). A speed
     change covers half its time at v; the middle runs from rest to rest, peaking where its
     two changes meet or at v."""
     j = machine.limits.j_max_mm_s3
     a_in, a_mid, a_out = (float(x) for x in accel)
-    s1 = float(stop_deceleration_mm_s2(machine, theta1))
-    s2 = float(stop_deceleration_mm_s2(machine, theta2))
+    s1 = float(stop_deceleration_mm_s2(machine, theta1, tol_mm))
+    s2 = float(stop_deceleration_mm_s2(machine, theta2, tol_mm))
     up_a, down_a = min(a_mid, s1), min(a_mid, s2)
     peak = min(v, np.sqrt(2.0 * m_mm / (1.0 / up_a + 1.0 / down_a)))
     up, down = _change_s(peak, up_a, j), _change_s(peak, down_a, j)
@@ -187,7 +210,7 @@ def turn_choice(start_mm: np.ndarray, end_mm: np.ndarray, cap_mm_s, tol_mm: floa
     replaced = bl.trim_a_mm + float(length[1]) + bl.trim_b_mm
     accel = line_accel_mm_s2(machine, unit.T)
     turn_s = turn_cost_s(v, w, bl.length_mm, replaced, accel, machine)
-    stops_s = stops_cost_s(v, float(length[1]), turning[0], turning[1], accel, machine)
+    stops_s = stops_cost_s(v, float(length[1]), turning[0], turning[1], accel, machine, tol_mm)
     return bl if turn_s + TURN_MARGIN_S <= stops_s else None
 
 
