@@ -263,3 +263,36 @@ def test_a_pocket_pass_one_depth_lower_gets_the_smoothed_pieces_it_would_get_alo
         )
         # The pass alone starts at line 4 (plunge), the whole program's pass k 68 lines later.
         assert np.array_equal(whole.line[mine], alone.line[theirs] + 68 * which)
+
+
+def test_the_plunges_space_blends_one_depth_lower_share_the_first_ones_tables(monkeypatch):
+    """The 3-D blend from each pass's plunge into its ring is the first pass's moved down:
+    they share one arc-length table (built once), and the pieces and points along them are
+    those of every blend with its own tables (to rounding: a table of the copy's own would
+    be built on control points moved by 0.1 mm, equal to 1e-12 relative)."""
+    from nurbscnc.plan import blends as blends_module
+
+    machine = load_machine()
+    segments = interpret_text(_pocket_passes((-0.1, -0.2, -0.3))).segments
+    shared = segment_pieces(segments, machine)
+    quintics = {
+        id(g): g for g, *_ in shared.objects.values() if isinstance(g, NurbsCurve) and g.degree == 5
+    }
+    assert len(quintics) == 3  # one space blend a plunge
+    assert len({id(g.__dict__.get("arc_table")) for g in quintics.values()}) == 1
+    monkeypatch.setattr(blends_module, "_share_moved_tables", lambda blends: None)
+    own = segment_pieces(segments, machine)
+    theirs = {id(g): g for g, *_ in own.objects.values() if getattr(g, "degree", 0) == 5}
+    assert len({id(g.arc_table) for g in theirs.values()}) == 3  # each its own without
+    for name in COLUMNS:
+        np.testing.assert_allclose(
+            np.asarray(getattr(shared, name)).astype(float),
+            np.asarray(getattr(own, name)).astype(float),
+            rtol=1e-10,
+            atol=1e-12,
+            err_msg=name,
+        )
+    rows = np.arange(len(shared))
+    np.testing.assert_allclose(
+        _sample_points(shared, rows), _sample_points(own, rows), rtol=0, atol=1e-11
+    )

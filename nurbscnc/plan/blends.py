@@ -186,11 +186,30 @@ def blend_object_corners(pieces: PieceList, c: Corners, machine: Machine) -> Non
     blends = blend_space_corners(
         pieces.path, rows - 1, rows, c.tol_mm[js], 0.5 * length[rows - 1], 0.5 * length[rows]
     )
+    _share_moved_tables(blends)
     found = [(j, bl) for j, bl in zip(js.tolist(), blends) if bl is not None]
     kappa = np.array([bl.kappa_max_per_mm for _, bl in found])
     for (j, bl), cap in zip(found, servo_blend_caps_mm_s(machine, kappa).tolist()):
         c.cap_mm_s[j] = cap
         _take_blend(c, j, bl)
+
+
+def _share_moved_tables(blends: list) -> None:
+    """Space blends whose curve is an earlier one's moved (the plunge into each pass of a
+    pocket cut again one depth lower) take that curve's arc-length tables s(u) and u(s)
+    (:meth:`~nurbscnc.geometry.nurbs.NurbsCurve.sharing_tables`: arc length does not
+    depend on where a curve lies) instead of building their own, milliseconds a curve."""
+    from nurbscnc.geometry.nurbs import MovedCopies
+
+    copies = MovedCopies()
+    for bl in blends:
+        if bl is None:
+            continue
+        hit = copies.find(bl.curve)
+        if hit is None:
+            copies.add(bl.curve, bl.curve)
+        else:
+            bl.curve.sharing_tables(hit[0])
 
 
 def _take_blend(c: Corners, j: int, bl) -> None:
