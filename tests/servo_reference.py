@@ -117,3 +117,26 @@ def beyond_vertex_mm(points_mm: np.ndarray, corners: tuple[np.ndarray, np.ndarra
     dist, idx = cKDTree(vertices).query(points_mm, k=k)
     dist, idx = dist.reshape(-1, k), idx.reshape(-1, k)
     return (dist - tols[idx]).min(axis=1)
+
+
+def stop_at_vertex_mm(machine, decel_mm_s2: float, turn_deg: float) -> tuple:
+    """The tool (lsim, :func:`lsim_actual_mm`) around a stop at the vertex (the origin) of a
+    two-segment path turning by ``turn_deg``: 0.3 s at 25 mm/s along +X, a constant
+    deceleration ``decel_mm_s2`` to rest at the vertex, the mirror image out along the
+    outgoing segment (1 ms samples, exact sums of the speeds). Returns (tool points (n, 3),
+    the path as a dense polyline) [mm]."""
+    period, v = machine.servo.period_s, 25.0
+    n = int(np.ceil(v / (decel_mm_s2 * period)))
+    ramp = np.maximum(v - decel_mm_s2 * period * np.arange(1, n + 1), 0.0)
+    down = np.concatenate([np.full(300, v), ramp])
+    x_in = np.cumsum(down) * period
+    x_in -= x_in[-1]
+    s_out = np.cumsum(np.concatenate([ramp[::-1][1:], np.full(300, v)])) * period
+    th = np.radians(turn_deg)
+    t_b = np.array([np.cos(th), np.sin(th), 0.0])
+    ref = np.vstack([np.column_stack([x_in, 0 * x_in, 0 * x_in]), s_out[:, None] * t_b])
+    act = lsim_actual_mm(ref, machine, settle_s=0.0)[200 : down.size + n + 100]
+    path = np.vstack([[x_in[0], 0.0, 0.0], [0.0, 0.0, 0.0], s_out[-1] * t_b])
+    f = np.linspace(0.0, 1.0, 4001)[:, None]
+    dense = np.vstack([path[0] + f * (path[1] - path[0]), path[1] + f[1:] * (path[2] - path[1])])
+    return act, dense

@@ -23,7 +23,7 @@ from nurbscnc.plan import allowance, turnarounds
 from nurbscnc.plan.options import LookaheadOptions, PlanOptions
 from nurbscnc.plan.program_pieces import segment_pieces
 from nurbscnc.program.interpret import interpret_text
-from tests.servo_reference import lsim_actual_mm, segment_distance_mm
+from tests.servo_reference import lsim_actual_mm, segment_distance_mm, stop_at_vertex_mm
 from tests.test_turnarounds import _raster_program
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -89,20 +89,7 @@ def _stop_allowed_um(machine, decel_mm_s2: float, turn_deg: float, tol_mm: float
     0.3 s at 25 mm/s along +X, a constant deceleration to rest at the vertex, the mirror
     image out along the outgoing segment. Allowed error: min(distance to the path, distance
     to the vertex − P)."""
-    period, v = machine.servo.period_s, 25.0
-    n = int(np.ceil(v / (decel_mm_s2 * period)))
-    ramp = np.maximum(v - decel_mm_s2 * period * np.arange(1, n + 1), 0.0)
-    down = np.concatenate([np.full(300, v), ramp])
-    x_in = np.cumsum(down) * period
-    x_in -= x_in[-1]
-    s_out = np.cumsum(np.concatenate([ramp[::-1][1:], np.full(300, v)])) * period
-    th = np.radians(turn_deg)
-    t_b = np.array([np.cos(th), np.sin(th), 0.0])
-    ref = np.vstack([np.column_stack([x_in, 0 * x_in, 0 * x_in]), s_out[:, None] * t_b])
-    act = lsim_actual_mm(ref, machine, settle_s=0.0)[200 : down.size + n + 100]
-    path = np.vstack([[x_in[0], 0.0, 0.0], [0.0, 0.0, 0.0], s_out[-1] * t_b])
-    f = np.linspace(0.0, 1.0, 4001)[:, None]
-    dense = np.vstack([path[0] + f * (path[1] - path[0]), path[1] + f[1:] * (path[2] - path[1])])
+    act, dense = stop_at_vertex_mm(machine, decel_mm_s2, turn_deg)
     d_path = segment_distance_mm(act, dense)
     allowed = np.minimum(d_path, np.linalg.norm(act, axis=1) - tol_mm)
     return 1000.0 * float(allowed.max()), 1000.0 * float(d_path.max())

@@ -16,26 +16,14 @@ from nurbscnc.machine.profile import load_machine
 from nurbscnc.plan import turnarounds
 from nurbscnc.plan.blends import SERVO_BLEND_SHARE, servo_blend_caps_mm_s, servo_gain_s2
 from nurbscnc.plan.options import PlanOptions
+from nurbscnc.plan.pieces import SCALAR_COLUMNS, VECTOR_COLUMNS
 from nurbscnc.plan.program_pieces import segment_pieces
 from nurbscnc.program.interpret import interpret_text
 
 #: The PieceList columns compared bit for bit.
 COLUMNS = (
-    "kind",
-    "length_mm",
-    "v_cap_mm_s",
-    "segment",
-    "line",
-    "kappa_max_per_mm",
-    "dwell_after_s",
-    "blend_mm",
-    "rapid",
-    "stop_after",
-    "pass_after",
-    "start_mm",
-    "end_mm",
-    "tangent_start",
-    "tangent_end",
+    *SCALAR_COLUMNS,
+    *VECTOR_COLUMNS,
     "ph_rows",
     "ph_w",
     "ph_frame",

@@ -51,6 +51,24 @@ def _sample_points(pieces, rows: np.ndarray) -> np.ndarray:
     return pieces.path.points(idx, np.tile(frac, rows.size) * pieces.length_mm[idx])[0]
 
 
+def _assert_same_pieces(ours, mine: np.ndarray, theirs_list, theirs: np.ndarray) -> None:
+    """Rows ``mine`` of PieceList ``ours`` and rows ``theirs`` of ``theirs_list`` hold the
+    same cells, corners, caps and lengths (to 1e-10 relative: a curve's derivatives far from
+    the origin carry 1e-11 relative rounding, so do the caps they set) and the same points
+    along every piece (to 1e-11 mm)."""
+    for name in COLUMNS:
+        np.testing.assert_allclose(
+            np.asarray(getattr(ours, name))[mine].astype(float),
+            np.asarray(getattr(theirs_list, name))[theirs].astype(float),
+            rtol=1e-10,
+            atol=1e-12,
+            err_msg=name,
+        )
+    np.testing.assert_allclose(
+        _sample_points(ours, mine), _sample_points(theirs_list, theirs), rtol=0, atol=1e-11
+    )
+
+
 def test_a_moved_airfoil_gets_the_pieces_it_would_get_alone():
     machine = load_machine()
     text = airfoils_program(count=3, chord_mm=20.0, pitch_mm=35.0)
@@ -62,25 +80,12 @@ def test_a_moved_airfoil_gets_the_pieces_it_would_get_alone():
         mine = _nurbs_rows(whole, nurbs_segments[which])
         theirs = _nurbs_rows(alone, int(alone.segment[np.asarray(alone.kind) == 4][0]))
         assert mine.size == theirs.size > 100
-        # The same cells, corners, caps and lengths. The curvature of the copy planned alone
-        # differs from the original's by 1e-11 relative: derivatives of a curve 70 mm from
-        # the origin carry that much rounding (so do the caps it sets).
-        for name in COLUMNS:
-            np.testing.assert_allclose(
-                np.asarray(getattr(whole, name))[mine].astype(float),
-                np.asarray(getattr(alone, name))[theirs].astype(float),
-                rtol=1e-10,
-                atol=1e-12,
-                err_msg=name,
-            )
+        # (NURBS cells on the copy's own curve, PH corners moved)
+        _assert_same_pieces(whole, mine, alone, theirs)
         for name in ("start_mm", "end_mm", "tangent_start", "tangent_end"):
             np.testing.assert_allclose(
                 getattr(whole, name)[:, mine], getattr(alone, name)[:, theirs], rtol=0, atol=1e-11
             )
-        # Points along every piece (NURBS cells on the copy's own curve, PH corners moved).
-        np.testing.assert_allclose(
-            _sample_points(whole, mine), _sample_points(alone, theirs), rtol=0, atol=1e-11
-        )
         assert np.array_equal(
             whole.line[mine], alone.line[theirs] - alone.line[theirs][0] + whole.line[mine][0]
         )
@@ -250,17 +255,7 @@ def test_a_pocket_pass_one_depth_lower_gets_the_smoothed_pieces_it_would_get_alo
         mine = _nurbs_rows(whole, nurbs[which])
         theirs = _nurbs_rows(alone, int(alone.segment[np.asarray(alone.kind) == 4][0]))
         assert mine.size == theirs.size > 20
-        for name in COLUMNS:
-            np.testing.assert_allclose(
-                np.asarray(getattr(whole, name))[mine].astype(float),
-                np.asarray(getattr(alone, name))[theirs].astype(float),
-                rtol=1e-10,
-                atol=1e-12,
-                err_msg=name,
-            )
-        np.testing.assert_allclose(
-            _sample_points(whole, mine), _sample_points(alone, theirs), rtol=0, atol=1e-11
-        )
+        _assert_same_pieces(whole, mine, alone, theirs)
         # The pass alone starts at line 4 (plunge), the whole program's pass k 68 lines later.
         assert np.array_equal(whole.line[mine], alone.line[theirs] + 68 * which)
 
@@ -284,15 +279,5 @@ def test_the_plunges_space_blends_one_depth_lower_share_the_first_ones_tables(mo
     own = segment_pieces(segments, machine)
     theirs = {id(g): g for g, *_ in own.objects.values() if getattr(g, "degree", 0) == 5}
     assert len({id(g.arc_table) for g in theirs.values()}) == 3  # each its own without
-    for name in COLUMNS:
-        np.testing.assert_allclose(
-            np.asarray(getattr(shared, name)).astype(float),
-            np.asarray(getattr(own, name)).astype(float),
-            rtol=1e-10,
-            atol=1e-12,
-            err_msg=name,
-        )
     rows = np.arange(len(shared))
-    np.testing.assert_allclose(
-        _sample_points(shared, rows), _sample_points(own, rows), rtol=0, atol=1e-11
-    )
+    _assert_same_pieces(shared, rows, own, rows)

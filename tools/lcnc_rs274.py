@@ -37,6 +37,49 @@ _EVENTS = {
 }
 
 
+def parse_calls(stdout: str) -> list:
+    """rs274's canonical calls [(NAME, [numbers])] from its ``-g`` output: the plane as 1 XY,
+    2 YZ, 3 XZ, the length units as 1.0 mm / 0.0 inch, every other call's numbers."""
+    calls = []
+    for raw in stdout.splitlines():
+        m = CALL.match(raw)
+        if not m:
+            continue
+        if m.group(1) == "SELECT_PLANE":
+            planes = {"CANON_PLANE_XY": 1, "CANON_PLANE_YZ": 2, "CANON_PLANE_XZ": 3}
+            calls.append((m.group(1), [planes.get(m.group(2).strip(), 1)]))
+            continue
+        if m.group(1) == "USE_LENGTH_UNITS":
+            calls.append((m.group(1), [1.0 if "MM" in m.group(2) else 0.0]))
+            continue
+        nums = []
+        for item in m.group(2).replace(" ", ",").split(","):
+            try:
+                nums.append(float(item))
+            except ValueError:
+                pass
+        calls.append((m.group(1), nums))
+    return calls
+
+
+def run_rs274(path: str, tmp: str) -> subprocess.CompletedProcess:
+    """``rs274 -g -b`` on ``path`` (in its own directory, so ``o<name> call`` finds its
+    files) with the tool table ``tmp/rs274.tbl`` and parameter file ``tmp/rs274.var``; its
+    HOME is ``tmp``: rs274 creates its own tool database in $HOME, which must not overwrite
+    the one this process uses. TimeoutExpired after 120 s."""
+    return subprocess.run(
+        [RS274, "-g", "-b", "-t", os.path.join(tmp, "rs274.tbl"), "-v"]
+        + [os.path.join(tmp, "rs274.var"), os.path.abspath(path)],
+        cwd=os.path.dirname(os.path.abspath(path)),
+        capture_output=True,
+        text=True,
+        errors="replace",
+        timeout=120,
+        stdin=subprocess.DEVNULL,
+        env=dict(os.environ, HOME=tmp),
+    )
+
+
 def rs274_calls(path: str, tools: dict, params: str, tmp: str) -> tuple[list | None, str]:
     """The canonical calls of ``rs274 -g`` (block delete on): [(NAME, [numbers])], and the
     text of the block it stopped at with an error ("" if none)."""
@@ -47,49 +90,14 @@ def rs274_calls(path: str, tools: dict, params: str, tmp: str) -> tuple[list | N
     with open(tbl, "w") as fh:
         for t, (pocket, z_mm, d_mm) in tools.items():
             fh.write(f"T{t} P{pocket} Z{z_mm / INCH_MM!r} D{d_mm / INCH_MM!r}\n")
-    var = os.path.join(tmp, "rs274.var")
-    shutil.copy(params, var)
-    # rs274 creates its own tool database in $HOME: give it a HOME of its own, so that it
-    # does not overwrite the one this process uses.
-    env = dict(os.environ, HOME=tmp)
+    shutil.copy(params, os.path.join(tmp, "rs274.var"))
     try:
-        res = subprocess.run(
-            [RS274, "-g", "-b", "-t", tbl, "-v", var, os.path.abspath(path)],
-            cwd=os.path.dirname(os.path.abspath(path)),
-            capture_output=True,
-            text=True,
-            errors="replace",
-            timeout=120,
-            stdin=subprocess.DEVNULL,
-            env=env,
-        )
+        res = run_rs274(path, tmp)
     except subprocess.TimeoutExpired:
         return None, ""
     err_lines = [t for t in res.stderr.splitlines() if t.strip()]
     failed_block = err_lines[-1].strip() if len(err_lines) >= 3 else ""
-    calls = []
-    for raw in res.stdout.splitlines():
-        m = CALL.match(raw)
-        if m:
-            nums = []
-            if m.group(1) == "SELECT_PLANE":
-                nums = [
-                    {"CANON_PLANE_XY": 1, "CANON_PLANE_YZ": 2, "CANON_PLANE_XZ": 3}.get(
-                        m.group(2).strip(), 1
-                    )
-                ]
-                calls.append((m.group(1), nums))
-                continue
-            if m.group(1) == "USE_LENGTH_UNITS":
-                calls.append((m.group(1), [1.0 if "MM" in m.group(2) else 0.0]))
-                continue
-            for item in m.group(2).replace(" ", ",").split(","):
-                try:
-                    nums.append(float(item))
-                except ValueError:
-                    pass
-            calls.append((m.group(1), nums))
-    return calls, failed_block
+    return parse_calls(res.stdout), failed_block
 
 
 def replay_rs274(calls: list, tools: dict) -> Recorder:
@@ -215,19 +223,7 @@ def merge_events(moves: list, calls: list | None, tools: dict) -> tuple[list, st
 
 def rs274_error(path: str, tools: dict, tmp: str) -> str:
     """rs274's error message (the line before the failed block it prints on stderr)."""
-    env = dict(os.environ, HOME=tmp)
-    tbl = os.path.join(tmp, "rs274.tbl")
-    var = os.path.join(tmp, "rs274.var")
-    res = subprocess.run(
-        [RS274, "-g", "-b", "-t", tbl, "-v", var, os.path.abspath(path)],
-        cwd=os.path.dirname(os.path.abspath(path)),
-        capture_output=True,
-        text=True,
-        errors="replace",
-        timeout=120,
-        stdin=subprocess.DEVNULL,
-        env=env,
-    )
+    res = run_rs274(path, tmp)
     err_lines = [t for t in res.stderr.splitlines() if t.strip()]
     return err_lines[-2].strip() if len(err_lines) >= 2 else ""
 

@@ -28,37 +28,13 @@ import sys
 import tempfile
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from lcnc_rs274 import CALL, MOTION, RS274, RS274_TOL_MM, replay_rs274  # noqa: E402
+from lcnc_rs274 import MOTION, RS274, RS274_TOL_MM, parse_calls, replay_rs274  # noqa: E402
 from record_goldens import LINUXCNC_VERSION  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 PROGRAMS = os.path.join(ROOT, "tests", "programs", "varfile")
 GOLDEN = os.path.join(ROOT, "tests", "golden", "varfile")
 _STOPS = {"PROGRAM_STOP": "M0", "OPTIONAL_PROGRAM_STOP": "M1", "CHANGE_TOOL": "M6"}
-
-
-def _calls(stdout: str) -> list:
-    """rs274's canonical calls [(NAME, [numbers])] (as record_goldens.rs274_calls reads them)."""
-    calls = []
-    for raw in stdout.splitlines():
-        m = CALL.match(raw)
-        if not m:
-            continue
-        if m.group(1) == "SELECT_PLANE":
-            planes = {"CANON_PLANE_XY": 1, "CANON_PLANE_YZ": 2, "CANON_PLANE_XZ": 3}
-            calls.append((m.group(1), [planes.get(m.group(2).strip(), 1)]))
-            continue
-        if m.group(1) == "USE_LENGTH_UNITS":
-            calls.append((m.group(1), [1.0 if "MM" in m.group(2) else 0.0]))
-            continue
-        nums = []
-        for item in m.group(2).replace(" ", ",").split(","):
-            try:
-                nums.append(float(item))
-            except ValueError:
-                pass
-        calls.append((m.group(1), nums))
-    return calls
 
 
 def record(name: str) -> dict:
@@ -76,7 +52,7 @@ def record(name: str) -> dict:
             stdin=subprocess.DEVNULL,
             env=dict(os.environ, HOME=tmp),  # rs274's tool database of its own
         )
-        calls = _calls(res.stdout)
+        calls = parse_calls(res.stdout)
         replay = replay_rs274(calls, {}).moves
         moves, k = [], 0
         for call, _ in calls:
