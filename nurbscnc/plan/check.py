@@ -120,7 +120,8 @@ class Checker:
     piece runs and running statistics kept (:class:`Overs`), unless ``keep`` (the whole
     reference and response, as plots and reports need). A sampler that cannot give windows
     is evaluated whole (one window). Per sample everything is what the whole-array check
-    computes, so plans do not depend on the window."""
+    computes, so plans do not depend on the window. ``allowance``: the program's corner
+    allowances (:func:`~nurbscnc.plan.allowance.corner_allowance`, None: none)."""
 
     def __init__(
         self,
@@ -131,6 +132,7 @@ class Checker:
         settle_rows: np.ndarray,
         window: int,
         keep: bool,
+        allowance=None,
     ):
         self.pieces, self.machine = pieces, machine
         self.sampler = as_sampler(sampler)
@@ -144,9 +146,9 @@ class Checker:
         self.after_rapid[settle_rows + 1] = True  # the rows of after_rapid_rows(self.rapid)
         self.index = PathIndex(pieces)  # where the pieces are (built on first use)
         # Where a sample may leave the planned path by more than ε_max: within ε_max + P of
-        # a G64 vertex (:mod:`nurbscnc.plan.allowance`; the accumulator decides with it).
-        # :class:`~nurbscnc.plan.setup.Setup` sets it with the program's tolerances.
-        self.allowance = None
+        # a G64 vertex (:class:`~nurbscnc.plan.allowance.CornerAllowance` or None; the
+        # accumulator decides with it).
+        self.allowance = allowance
         # The risk skip (:meth:`_respond`): only where the reference lies on the path (the
         # exact points of a causal sampler; not the Taylor recurrence's nor a
         # pre-compensated reference), and never on rapids, on the first piece of a cut

@@ -100,7 +100,7 @@ class Accumulator:
         self.eps_mm = checker.eps_mm
         # The corner allowances (:mod:`nurbscnc.plan.allowance`): what a sample may use
         # beyond ε_max near a G64 vertex; none on rapids nor the settle after one.
-        self.allowance = getattr(checker, "allowance", None)
+        self.allowance = checker.allowance
         self.rapid, self.after_rapid = checker.rapid, checker.after_rapid
         self.piece_start_s = profile.piece_start_time_s
         self.corner_max = 0.0  # [µm] the largest contour error a corner's allowance took

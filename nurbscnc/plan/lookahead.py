@@ -153,8 +153,9 @@ def plan_checked(
         lev, result, iterations = converge(st, st.initial.copy(), st.evaluate)
         return st.plan(lev, result, iterations), result[2]
     whole = st.checker
-    st.checker = Checker(st.pieces, machine, reference, st.eps_mm, st.settle_rows, window, False)
-    st.checker.allowance = whole.allowance
+    st.checker = Checker(
+        st.pieces, machine, reference, st.eps_mm, st.settle_rows, window, False, whole.allowance
+    )
     joined = JoinedChecks()
 
     def windows():

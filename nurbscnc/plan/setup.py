@@ -81,13 +81,20 @@ class Setup:
         if options.dynamics == Dynamics.GLOBAL:
             self.initial.settle_s[self.settle_rows] = self.settle_max
         self.base_dwell = pieces.dwell_after_s
-        self.checker = Checker(
-            pieces, machine, reference, self.eps_mm, self.settle_rows, window, keep_reference
-        )
         # The corner allowances with the program's own path tolerances (a smoothed spline's
         # rows keep only the blends' share of it; its ends are the programmed vertices).
-        self.checker.allowance = corner_allowance(
+        allowance = corner_allowance(
             pieces, machine, program_tolerance(program, machine, options.plan.blend_tolerance_mm)
+        )
+        self.checker = Checker(
+            pieces,
+            machine,
+            reference,
+            self.eps_mm,
+            self.settle_rows,
+            window,
+            keep_reference,
+            allowance,
         )
         # The improvement phase's upper brackets: the kinematic levers, or with
         # ``raise_corner_caps`` the caps without the corner heuristic V_cf.
