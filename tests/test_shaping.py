@@ -448,6 +448,10 @@ def test_long_pieces_blamed_at_their_ends_keep_their_feed(monkeypatch):
     monkeypatch.setattr(converge, "SETTLE_HALVINGS", 0)
     run, err_mm = _arc_program_check(path, machine)
     monkeypatch.setattr(shaping, "LONG_PIECE_S", np.inf)
+    # Without the rule, and with the arcs sharing their blames whatever they are (the
+    # blames of the tight arcs and the long pieces beside them differ: SHARE_RATIO now
+    # keeps them apart, which alone takes the long pieces to F717–863).
+    monkeypatch.setattr(shaping, "SHARE_RATIO", np.inf)
     before, err_before_mm = _arc_program_check(path, machine)
     eps = machine.limits.contour_tolerance_mm + 1e-6
     assert err_mm <= eps and err_before_mm <= eps
