@@ -339,3 +339,54 @@ def test_spiral_newton_gives_the_bits_of_the_reference_and_inverts_the_length():
         assert quad(speed, 0.0, t[k], epsabs=1e-13, epsrel=1e-13)[0] == pytest.approx(
             s[k], rel=1e-10, abs=1e-9
         )
+
+
+def _arc_derivatives_reference(geom: ArcGeometry, u: np.ndarray, order: int) -> np.ndarray:
+    """The array arithmetic of ArcGeometry.derivatives, written out here (the one-point path
+    must give its bits)."""
+    scale = geom.length_mm if geom.length_mm > 0.0 else 1.0
+    t = np.clip(u / scale, 0.0, 1.0)
+    dtheta, dr = geom.angle_rad, geom.radius_end_mm - geom.radius_start_mm
+    theta, radius = t * dtheta, geom.radius_start_mm + t * dr
+    c, s = np.cos(theta), np.sin(theta)
+    turns = [(c, s), (-s, c), (-c, -s), (s, -c)]
+    out = np.empty((order + 1, t.size, 3))
+    for k in range(order + 1):
+        ck, sk = turns[k % 4]
+        term = (radius * dtheta**k)[:, None] * (ck[:, None] * geom.e1 + sk[:, None] * geom.e2)
+        if k >= 1:
+            cm, sm = turns[(k - 1) % 4]
+            term += (k * dr * dtheta ** (k - 1)) * (cm[:, None] * geom.e1 + sm[:, None] * geom.e2)
+        out[k] = term
+    out[0] += geom.origin_mm + (t * geom.helix_mm)[:, None] * geom.normal
+    if order >= 1:
+        out[1] += geom.helix_mm * geom.normal
+    for k in range(1, order + 1):
+        out[k] /= scale**k
+    return out
+
+
+def test_arc_derivatives_at_one_point_give_the_bits_of_the_array_code():
+    rng = np.random.default_rng(11)
+    for trial in range(3000):
+        normal = rng.normal(size=3) if trial % 3 else np.array([0.0, 0.0, rng.choice([-1, 1])])
+        center = rng.uniform(-500.0, 500.0, 3)
+        start = center + rng.uniform(-60.0, 60.0, 3)
+        r_end = None if trial % 4 else float(rng.uniform(0.5, 40.0))
+        helix = float(rng.choice([0.0, 0.0, 3.0, -11.0]))
+        try:
+            geom = ArcGeometry.from_segment(
+                make_arc(center, start, normal, float(rng.uniform(-9.0, 9.0)), helix, r_end)
+            )
+        except GeometryError:
+            continue
+        length = geom.length_mm
+        us = [rng.uniform(0.0, 1.0) * length, 0.0, -0.0, length, -1.0, 1.5 * length + 1.0]
+        for u in us:
+            for order in range(4):
+                one = geom.derivatives(np.array([u]), order)
+                ref = _arc_derivatives_reference(geom, np.array([u]), order)
+                assert one.shape == (order + 1, 1, 3)
+                assert one.tobytes() == ref.tobytes(), (trial, u, order)
+    # A parameter that is not finite takes the array path: NaN stays NaN.
+    assert np.isnan(geom.derivatives(np.array([np.nan]), 1)).all()
