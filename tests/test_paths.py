@@ -366,7 +366,7 @@ def _arc_derivatives_reference(geom: ArcGeometry, u: np.ndarray, order: int) -> 
     return out
 
 
-def test_arc_derivatives_at_one_point_give_the_bits_of_the_array_code():
+def test_arc_derivatives_at_a_few_points_give_the_bits_of_the_array_code():
     rng = np.random.default_rng(11)
     for trial in range(3000):
         normal = rng.normal(size=3) if trial % 3 else np.array([0.0, 0.0, rng.choice([-1, 1])])
@@ -382,11 +382,16 @@ def test_arc_derivatives_at_one_point_give_the_bits_of_the_array_code():
             continue
         length = geom.length_mm
         us = [rng.uniform(0.0, 1.0) * length, 0.0, -0.0, length, -1.0, 1.5 * length + 1.0]
-        for u in us:
+        sets = [[u] for u in us] + [us[:2], us[2:5], us[1:5], list(rng.uniform(0, length, 7))]
+        for u in sets:
             for order in range(4):
-                one = geom.derivatives(np.array([u]), order)
-                ref = _arc_derivatives_reference(geom, np.array([u]), order)
-                assert one.shape == (order + 1, 1, 3)
-                assert one.tobytes() == ref.tobytes(), (trial, u, order)
+                few = geom.derivatives(np.array(u), order)
+                ref = _arc_derivatives_reference(geom, np.array(u), order)
+                assert few.shape == (order + 1, len(u), 3)
+                assert few.tobytes() == ref.tobytes(), (trial, u, order)
+            assert (
+                geom.derivatives(u[0], 2).tobytes()
+                == geom.derivatives(np.array(u[:1]), 2).tobytes()
+            )
     # A parameter that is not finite takes the array path: NaN stays NaN.
     assert np.isnan(geom.derivatives(np.array([np.nan]), 1)).all()

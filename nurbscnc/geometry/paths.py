@@ -57,6 +57,10 @@ class PathGeometry(Protocol):
     def curvature_derivative(self, u) -> np.ndarray: ...
 
 
+#: Up to this many parameters, :meth:`ArcGeometry.derivatives` works in Python floats.
+FEW_POINTS = 4
+
+
 def _params(u) -> np.ndarray:
     return np.atleast_1d(np.asarray(u, dtype=float)).ravel()
 
@@ -213,55 +217,62 @@ class ArcGeometry:
 
     @cached_property
     def _frame_floats(self) -> tuple:
-        """(e1, e2, origin, normal) as tuples of Python floats (the one-point path)."""
+        """(e1, e2, origin, normal) as tuples of Python floats (the few-point path)."""
         return tuple(tuple(v.tolist()) for v in (self.e1, self.e2, self.origin_mm, self.normal))
 
-    def _derivatives_one(self, t: float, order: int, scale: float) -> np.ndarray | None:
-        """:meth:`derivatives` at one parameter, t = u/L, in Python floats: a corner's search
-        asks for one point at a time, where ~15 numpy calls on one-element arrays per order
-        cost 10× the arithmetic. The same operations in the same order as
-        :meth:`_derivatives_t` and ``np.clip`` (a value below 0 or above 1 replaced by it),
-        each a correctly rounded IEEE operation either way (+ − × ÷; a negation and the
-        quarter turns are exact); cos and sin are numpy's own on a one-element array, as
-        there: the same bits (tests/test_paths.py compares the two). None for a t that is
-        not finite (the array path's special cases)."""
-        if not math.isfinite(t):
-            return None
-        t = 0.0 if t < 0.0 else t  # np.clip keeps a value equal to a bound (−0.0 stays)
-        t = 1.0 if t > 1.0 else t
+    def _derivatives_few(self, u: list, order: int, scale: float) -> np.ndarray | None:
+        """:meth:`derivatives` at a few parameters ``u`` (Python floats) in Python floats: the
+        corner searches ask for one point at a time and the pieces for their two ends, where
+        ~15 numpy calls on one- or two-element arrays per order cost 10× the arithmetic. The
+        same operations in the same order as :meth:`derivatives` (t = u/L, ``np.clip``: a
+        value below 0 or above 1 replaced by it, −0.0 kept) and :meth:`_derivatives_t`, each
+        a correctly rounded IEEE operation either way (+ − × ÷; a negation and the quarter
+        turns are exact); cos and sin are numpy's own on the same array of θ: the same bits
+        (tests/test_paths.py compares the two). None for a u that is not finite (the array
+        path's special cases)."""
+        ts = []
+        for x in u:
+            t = x / scale
+            if not math.isfinite(t):
+                return None
+            t = 0.0 if t < 0.0 else t
+            ts.append(1.0 if t > 1.0 else t)
         dtheta = self.angle_rad
         dr = self.radius_end_mm - self.radius_start_mm
-        theta = np.array([t * dtheta])
-        radius = self.radius_start_mm + t * dr
-        c, s = float(np.cos(theta)[0]), float(np.sin(theta)[0])
-        rot = ((c, s), (-s, c), (-c, -s), (s, -c))  # E(θ + k π/2), k = 0 … 3
+        theta = np.array([t * dtheta for t in ts])
+        cos_t, sin_t = np.cos(theta).tolist(), np.sin(theta).tolist()
         (e1x, e1y, e1z), (e2x, e2y, e2z), origin, normal = self._frame_floats
-        rows = []
-        for k in range(order + 1):
-            ck, sk = rot[k % 4]
-            rk = radius * dtheta**k
-            term = [
-                rk * (ck * e1x + sk * e2x),
-                rk * (ck * e1y + sk * e2y),
-                rk * (ck * e1z + sk * e2z),
-            ]
-            if k >= 1:
-                cm, sm = rot[(k - 1) % 4]
-                q = k * dr * dtheta ** (k - 1)
-                term = [
-                    term[0] + q * (cm * e1x + sm * e2x),
-                    term[1] + q * (cm * e1y + sm * e2y),
-                    term[2] + q * (cm * e1z + sm * e2z),
+        helix = self.helix_mm
+        rows = [[] for _ in range(order + 1)]
+        for t, c, s in zip(ts, cos_t, sin_t):
+            radius = self.radius_start_mm + t * dr
+            rot = ((c, s), (-s, c), (-c, -s), (s, -c))  # E(θ + k π/2), k = 0 … 3
+            for k in range(order + 1):
+                ck, sk = rot[k % 4]
+                rk = radius * dtheta**k
+                v = [
+                    rk * (ck * e1x + sk * e2x),
+                    rk * (ck * e1y + sk * e2y),
+                    rk * (ck * e1z + sk * e2z),
                 ]
-            rows.append(term)
-        rise = t * self.helix_mm
-        rows[0] = [v + (o + rise * n) for v, o, n in zip(rows[0], origin, normal)]
-        if order >= 1:
-            rows[1] = [v + self.helix_mm * n for v, n in zip(rows[1], normal)]
-        for k in range(1, order + 1):
-            div = scale**k
-            rows[k] = [v / div for v in rows[k]]
-        return np.array(rows).reshape(order + 1, 1, 3)
+                if k >= 1:
+                    cm, sm = rot[(k - 1) % 4]
+                    q = k * dr * dtheta ** (k - 1)
+                    v = [
+                        v[0] + q * (cm * e1x + sm * e2x),
+                        v[1] + q * (cm * e1y + sm * e2y),
+                        v[2] + q * (cm * e1z + sm * e2z),
+                    ]
+                if k == 0:
+                    rise = t * helix
+                    v = [a + (o + rise * n) for a, o, n in zip(v, origin, normal)]
+                elif k == 1:
+                    v = [a + helix * n for a, n in zip(v, normal)]
+                if k >= 1:
+                    div = scale**k
+                    v = [a / div for a in v]
+                rows[k].append(v)
+        return np.array(rows)
 
     def _length_t(self, t) -> np.ndarray:
         """s(t) [mm] from the start, closed form (segments.spiral_arc_length_mm)."""
@@ -302,11 +313,12 @@ class ArcGeometry:
     def derivatives(self, u, order: int = 3) -> np.ndarray:
         """[C, C', ...] w.r.t. u = t L, shape (order+1, len(u), 3); u clamped to [0, L]."""
         scale = self._u_scale
-        if isinstance(u, np.ndarray) and u.shape == (1,) and u.dtype == np.float64:
-            one = self._derivatives_one(float(u[0]) / scale, order, scale)
-            if one is not None:
-                return one
-        t = np.clip(_params(u) / scale, 0.0, 1.0)
+        u = _params(u)
+        if 0 < u.size <= FEW_POINTS:
+            few = self._derivatives_few(u.tolist(), order, scale)
+            if few is not None:
+                return few
+        t = np.clip(u / scale, 0.0, 1.0)
         out = self._derivatives_t(t, order)
         for k in range(1, order + 1):
             out[k] /= scale**k
