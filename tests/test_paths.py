@@ -395,3 +395,40 @@ def test_arc_derivatives_at_a_few_points_give_the_bits_of_the_array_code():
             )
     # A parameter that is not finite takes the array path: NaN stays NaN.
     assert np.isnan(geom.derivatives(np.array([np.nan]), 1)).all()
+
+
+@pytest.mark.skipif(
+    segments._kernels is None, reason="the geometry kernels were not built (no C compiler)"
+)
+def test_compiled_spiral_inversion_gives_the_bits_of_the_array_code(monkeypatch):
+    rng = np.random.default_rng(8)
+    n = 4000
+    r0 = rng.uniform(0.5, 50.0, n)
+    r1 = r0 + rng.choice([0.0, 1e-6, 1e-3, 0.5, -0.3, 5.0], n) * rng.uniform(0.0, 1.0, n)
+    ang = rng.uniform(-12.0, 12.0, n)
+    ang[::50] = 0.0
+    hel = rng.choice([0.0, 0.0, 2.0, -7.0], n)
+    big = segments.spiral_arc_length_mm(r0, r1, ang, hel)
+    for k in range(n):
+        args = (float(r0[k]), float(r1[k]), float(ang[k]), float(hel[k]), float(big[k]))
+        s = np.linspace(rng.uniform(0.0, 0.5), rng.uniform(0.5, 1.0), 33) * big[k]
+        s[:4] = 0.0, -0.0, big[k], -1.0
+        s[4] = big[k] + 1.0
+        got = segments.spiral_t_at_length(*args[:4], s, args[4])
+        ref = segments._spiral_t_arrays(*args[:4], s, args[4])
+        assert got.tobytes() == ref.tobytes(), k
+        # few Newton steps: the cap on the iterations is the array code's too
+        short = segments.spiral_t_at_length(*args[:4], s, args[4], 2)
+        assert short.tobytes() == segments._spiral_t_arrays(*args[:4], s, args[4], 2).tobytes()
+    # The kernel takes the samples without −0.0 (those above went to the array code).
+    arrays = segments._spiral_t_arrays
+
+    def refuse(*_args):
+        raise AssertionError("array path taken")
+
+    monkeypatch.setattr(segments, "_spiral_t_arrays", refuse)
+    s = np.linspace(0.0, 1.2, 33) * big[1]
+    got = segments.spiral_t_at_length(
+        float(r0[1]), float(r1[1]), float(ang[1]), float(hel[1]), s, float(big[1])
+    )
+    assert got.tobytes() == arrays(r0[1], r1[1], ang[1], hel[1], s, big[1]).tobytes()
