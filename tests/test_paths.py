@@ -432,3 +432,35 @@ def test_compiled_spiral_inversion_gives_the_bits_of_the_array_code(monkeypatch)
         float(r0[1]), float(r1[1]), float(ang[1]), float(hel[1]), s, float(big[1])
     )
     assert got.tobytes() == arrays(r0[1], r1[1], ang[1], hel[1], s, big[1]).tobytes()
+
+
+def test_cross3_and_norm_give_numpys_bits():
+    from nurbscnc.geometry.paths import _norm, cross3
+
+    rng = np.random.default_rng(12)
+    for _ in range(20000):
+        a, b = rng.normal(size=(2, 3)) * 10.0 ** rng.uniform(-6, 6, (2, 1))
+        assert cross3(a, b).tobytes() == np.cross(a, b).tobytes()
+        assert _norm(a) == float(np.linalg.norm(a))
+    m = rng.normal(size=(3, 5))  # columns of a (3, n) table, as the pieces' tangents
+    assert cross3(m[:, 1], m[:, 2]).tobytes() == np.cross(m[:, 1], m[:, 2]).tobytes()
+
+
+def test_arc_frame_is_the_one_np_cross_and_norm_give():
+    rng = np.random.default_rng(13)
+    for trial in range(2000):
+        normal = rng.normal(size=3)
+        center = rng.uniform(-500.0, 500.0, 3)
+        start = center + rng.uniform(-60.0, 60.0, 3)
+        seg = make_arc(center, start, normal, float(rng.uniform(-9.0, 9.0)), 1.0)
+        geom = ArcGeometry.from_segment(seg)
+        n = np.asarray(seg.normal, dtype=float)
+        n = n / float(np.linalg.norm(n))
+        d = np.asarray(seg.start_mm, dtype=float) - np.asarray(seg.center_mm, dtype=float)
+        axial = float(d @ n)
+        d_in = d - axial * n
+        e1 = d_in / np.linalg.norm(d_in)
+        assert geom.e1.tobytes() == e1.tobytes(), trial
+        assert geom.e2.tobytes() == np.cross(n, e1).tobytes(), trial
+        assert geom.normal.tobytes() == n.tobytes()
+        assert geom.origin_mm.tobytes() == (np.asarray(seg.center_mm) + axial * n).tobytes()
