@@ -7,8 +7,8 @@
 /* ------------------------------------------------------------------ spiral arc length */
 
 /* numpy's clip of a float between scalar bounds (a value below lo or above hi replaced by
- * it, one equal to a bound kept, NaN propagated); its treatment of -0.0 depends on the
- * array's length, so the callers pass none. */
+ * it, one equal to a bound kept, NaN propagated); -0.0 is kept with a scalar lower bound
+ * but replaced with an array one (numpy's two loops), so the callers pass none. */
 static inline double np_clip_keep(double x, double lo, double hi)
 {
     double m = isnan(x) ? x : ((x < lo) ? lo : x);
@@ -36,7 +36,8 @@ static inline double spiral_length_at(double r0, double dr, double dtheta, doubl
 }
 
 /* segments._spiral_t_arrays for one arc (r0, r1, dtheta, h, its length big; all finite) and
- * the arc lengths s_in (m,), finite, none negative or -0.0: per sample the array code's Newton, t <- clip(t - f/|C'|, 0, 1)
+ * the arc lengths s_in (m,), finite, none negative or -0.0: per sample the array code's
+ * Newton, t <- clip(t - f/|C'|, 0, 1)
  * from t = s/big, stopped when |f| <= max(1e-12, 8 eps s) (t kept) or |t_new - t| <= 2 eps,
  * at most max_iter steps; samples at or beyond the ends keep t = s/big (0 when big = 0). */
 static PyObject *spiral_t(PyObject *self, PyObject *args)
@@ -61,8 +62,8 @@ static PyObject *spiral_t(PyObject *self, PyObject *args)
     const double s0 = sqrt(a2 + w0 * w0);
     const double circle = hypot(w0, h);
     for (Py_ssize_t i = 0; i < m; i++) {
-        /* the caller passes no s < 0 and no -0.0 (np.clip's treatment of -0.0 depends on
-         * the array's length), so only s > big is clipped */
+        /* the caller passes no s < 0 and no -0.0 (see np_clip_keep), so only s > big is
+         * clipped */
         const double s = np_clip_keep(s_in[i], 0.0, big);
         double t = (big > 0.0) ? s / big : 0.0;
         if (s > 0.0 && s < big) {

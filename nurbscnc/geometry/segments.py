@@ -146,7 +146,8 @@ def spiral_t_at_length(
         ):
             # One arc, many samples (a corner side's polyline): the compiled per-sample
             # Newton of _spiral_t_arrays (the same bits, tests/test_paths.py). Not for
-            # s < 0 or −0.0: numpy's clip keeps or replaces −0.0 depending on the length.
+            # s < 0 or −0.0: numpy's clip keeps −0.0 with a scalar lower bound and replaces
+            # it with an array one (two loops), so no sample rests on that.
             out = np.empty(s_mm.size)
             _kernels.spiral_t(*map(float, scalars), np.ascontiguousarray(s_mm), max_iter, out)
             return out
