@@ -14,7 +14,7 @@ install: $(STAMP)
 # editable installs (its BuildBackendWarning, a UserWarning) in the build's subprocess.
 # setup.py builds the compiled kernels (nurbscnc/plan/_kernels.c, nurbscnc/geometry/_kernels.c;
 # optional: without a C compiler the package installs and runs the same loops in Python).
-$(STAMP): pyproject.toml setup.py nurbscnc/plan/_kernels.c nurbscnc/plan/_kernels_math.h nurbscnc/geometry/_kernels.c
+$(STAMP): pyproject.toml setup.py nurbscnc/plan/_kernels.c nurbscnc/plan/_kernels_math.h nurbscnc/geometry/_kernels.c nurbscnc/geometry/_kernels_spiral.h
 	@echo "installing nurbscnc and its dependencies into $(VENV) (1-2 minutes)"
 	@$(PYTHON) -m venv $(VENV)
 	@$(BIN)/python -m pip install --quiet --quiet --upgrade pip

@@ -25,6 +25,7 @@ setup(
         Extension(
             "nurbscnc.geometry._kernels",
             ["nurbscnc/geometry/_kernels.c"],
+            depends=["nurbscnc/geometry/_kernels_spiral.h"],  # included by _kernels.c
             extra_compile_args=FLAGS,
             optional=True,
         ),

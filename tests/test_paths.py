@@ -339,3 +339,128 @@ def test_spiral_newton_gives_the_bits_of_the_reference_and_inverts_the_length():
         assert quad(speed, 0.0, t[k], epsabs=1e-13, epsrel=1e-13)[0] == pytest.approx(
             s[k], rel=1e-10, abs=1e-9
         )
+
+
+def _arc_derivatives_reference(geom: ArcGeometry, u: np.ndarray, order: int) -> np.ndarray:
+    """The array arithmetic of ArcGeometry.derivatives, written out here (the one-point path
+    must give its bits)."""
+    scale = geom.length_mm if geom.length_mm > 0.0 else 1.0
+    t = np.clip(u / scale, 0.0, 1.0)
+    dtheta, dr = geom.angle_rad, geom.radius_end_mm - geom.radius_start_mm
+    theta, radius = t * dtheta, geom.radius_start_mm + t * dr
+    c, s = np.cos(theta), np.sin(theta)
+    turns = [(c, s), (-s, c), (-c, -s), (s, -c)]
+    out = np.empty((order + 1, t.size, 3))
+    for k in range(order + 1):
+        ck, sk = turns[k % 4]
+        term = (radius * dtheta**k)[:, None] * (ck[:, None] * geom.e1 + sk[:, None] * geom.e2)
+        if k >= 1:
+            cm, sm = turns[(k - 1) % 4]
+            term += (k * dr * dtheta ** (k - 1)) * (cm[:, None] * geom.e1 + sm[:, None] * geom.e2)
+        out[k] = term
+    out[0] += geom.origin_mm + (t * geom.helix_mm)[:, None] * geom.normal
+    if order >= 1:
+        out[1] += geom.helix_mm * geom.normal
+    for k in range(1, order + 1):
+        out[k] /= scale**k
+    return out
+
+
+def test_arc_derivatives_at_a_few_points_give_the_bits_of_the_array_code():
+    rng = np.random.default_rng(11)
+    for trial in range(3000):
+        normal = rng.normal(size=3) if trial % 3 else np.array([0.0, 0.0, rng.choice([-1, 1])])
+        center = rng.uniform(-500.0, 500.0, 3)
+        start = center + rng.uniform(-60.0, 60.0, 3)
+        r_end = None if trial % 4 else float(rng.uniform(0.5, 40.0))
+        helix = float(rng.choice([0.0, 0.0, 3.0, -11.0]))
+        try:
+            geom = ArcGeometry.from_segment(
+                make_arc(center, start, normal, float(rng.uniform(-9.0, 9.0)), helix, r_end)
+            )
+        except GeometryError:
+            continue
+        length = geom.length_mm
+        us = [rng.uniform(0.0, 1.0) * length, 0.0, -0.0, length, -1.0, 1.5 * length + 1.0]
+        sets = [[u] for u in us] + [us[:2], us[2:5], us[1:5], list(rng.uniform(0, length, 7))]
+        for u in sets:
+            for order in range(4):
+                few = geom.derivatives(np.array(u), order)
+                ref = _arc_derivatives_reference(geom, np.array(u), order)
+                assert few.shape == (order + 1, len(u), 3)
+                assert few.tobytes() == ref.tobytes(), (trial, u, order)
+            assert (
+                geom.derivatives(u[0], 2).tobytes()
+                == geom.derivatives(np.array(u[:1]), 2).tobytes()
+            )
+    # A parameter that is not finite takes the array path: NaN stays NaN.
+    assert np.isnan(geom.derivatives(np.array([np.nan]), 1)).all()
+
+
+@pytest.mark.skipif(
+    segments._kernels is None, reason="the geometry kernels were not built (no C compiler)"
+)
+def test_compiled_spiral_inversion_gives_the_bits_of_the_array_code(monkeypatch):
+    rng = np.random.default_rng(8)
+    n = 4000
+    r0 = rng.uniform(0.5, 50.0, n)
+    r1 = r0 + rng.choice([0.0, 1e-6, 1e-3, 0.5, -0.3, 5.0], n) * rng.uniform(0.0, 1.0, n)
+    ang = rng.uniform(-12.0, 12.0, n)
+    ang[::50] = 0.0
+    hel = rng.choice([0.0, 0.0, 2.0, -7.0], n)
+    big = segments.spiral_arc_length_mm(r0, r1, ang, hel)
+    for k in range(n):
+        args = (float(r0[k]), float(r1[k]), float(ang[k]), float(hel[k]), float(big[k]))
+        s = np.linspace(rng.uniform(0.0, 0.5), rng.uniform(0.5, 1.0), 33) * big[k]
+        s[:4] = 0.0, -0.0, big[k], -1.0
+        s[4] = big[k] + 1.0
+        got = segments.spiral_t_at_length(*args[:4], s, args[4])
+        ref = segments._spiral_t_arrays(*args[:4], s, args[4])
+        assert got.tobytes() == ref.tobytes(), k
+        # few Newton steps: the cap on the iterations is the array code's too
+        short = segments.spiral_t_at_length(*args[:4], s, args[4], 2)
+        assert short.tobytes() == segments._spiral_t_arrays(*args[:4], s, args[4], 2).tobytes()
+    # The kernel takes the samples without −0.0 (those above went to the array code).
+    arrays = segments._spiral_t_arrays
+
+    def refuse(*_args):
+        raise AssertionError("array path taken")
+
+    monkeypatch.setattr(segments, "_spiral_t_arrays", refuse)
+    s = np.linspace(0.0, 1.2, 33) * big[1]
+    got = segments.spiral_t_at_length(
+        float(r0[1]), float(r1[1]), float(ang[1]), float(hel[1]), s, float(big[1])
+    )
+    assert got.tobytes() == arrays(r0[1], r1[1], ang[1], hel[1], s, big[1]).tobytes()
+
+
+def test_cross3_and_norm_give_numpys_bits():
+    from nurbscnc.geometry.paths import _norm, cross3
+
+    rng = np.random.default_rng(12)
+    for _ in range(20000):
+        a, b = rng.normal(size=(2, 3)) * 10.0 ** rng.uniform(-6, 6, (2, 1))
+        assert cross3(a, b).tobytes() == np.cross(a, b).tobytes()
+        assert _norm(a) == float(np.linalg.norm(a))
+    m = rng.normal(size=(3, 5))  # columns of a (3, n) table, as the pieces' tangents
+    assert cross3(m[:, 1], m[:, 2]).tobytes() == np.cross(m[:, 1], m[:, 2]).tobytes()
+
+
+def test_arc_frame_is_the_one_np_cross_and_norm_give():
+    rng = np.random.default_rng(13)
+    for trial in range(2000):
+        normal = rng.normal(size=3)
+        center = rng.uniform(-500.0, 500.0, 3)
+        start = center + rng.uniform(-60.0, 60.0, 3)
+        seg = make_arc(center, start, normal, float(rng.uniform(-9.0, 9.0)), 1.0)
+        geom = ArcGeometry.from_segment(seg)
+        n = np.asarray(seg.normal, dtype=float)
+        n = n / float(np.linalg.norm(n))
+        d = np.asarray(seg.start_mm, dtype=float) - np.asarray(seg.center_mm, dtype=float)
+        axial = float(d @ n)
+        d_in = d - axial * n
+        e1 = d_in / np.linalg.norm(d_in)
+        assert geom.e1.tobytes() == e1.tobytes(), trial
+        assert geom.e2.tobytes() == np.cross(n, e1).tobytes(), trial
+        assert geom.normal.tobytes() == n.tobytes()
+        assert geom.origin_mm.tobytes() == (np.asarray(seg.center_mm) + axial * n).tobytes()

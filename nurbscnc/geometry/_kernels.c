@@ -25,6 +25,8 @@
  *                                                                        [ph._newton_step_py]
  *   ph_closest(cp_re, cp_im, w_re, w_im, xs, q_re, q_im, max_steps, out)
  *       -> None (out: the foot parameters)                [ph._closest_param_py]
+ *   spiral_t(r0, r1, dtheta, h, length, s, max_iter, out)
+ *       -> None (out: fractions t of one arc at arc lengths s)  [segments._spiral_t_arrays]
  *
  * The arrays are C-contiguous float64 (lo, hi, idx: int64) buffers (the caller makes them so).
  */
@@ -659,6 +661,9 @@ done:
     return result;
 }
 
+
+#include "_kernels_spiral.h" /* spiral_t: needs np_maximum above */
+
 static PyMethodDef methods[] = {
     {"segment_distances", segment_distances, METH_VARARGS,
      "distance._segment_distances_py, compiled."},
@@ -671,6 +676,7 @@ static PyMethodDef methods[] = {
      "nurbs.NurbsCurve._derivatives_py, compiled."},
     {"nurbs_derivatives_at", nurbs_derivatives_at, METH_VARARGS,
      "nurbs.NurbsCurve.derivatives: clip, spans and nurbs_derivatives in one call."},
+    {"spiral_t", spiral_t, METH_VARARGS, "segments._spiral_t_arrays for one arc, compiled."},
     {NULL, NULL, 0, NULL},
 };
 

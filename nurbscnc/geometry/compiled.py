@@ -6,7 +6,8 @@ point-to-segments distance (:func:`nurbscnc.geometry.distance.segment_distances`
 B-spline basis derivatives (:func:`nurbscnc.geometry.bspline.basis_derivatives`), the step
 of the PH quintics' safeguarded Newton iteration (:func:`nurbscnc.geometry.ph.bracketed_newton`),
 the PH quintics' foot points (:meth:`nurbscnc.geometry.ph.PHQuintic.closest_param`) and the
-NURBS derivatives (:meth:`nurbscnc.geometry.nurbs.NurbsCurve.derivatives`),
+NURBS derivatives (:meth:`nurbscnc.geometry.nurbs.NurbsCurve.derivatives`) and the
+spiral arcs' arc-length inversion (:func:`nurbscnc.geometry.segments.spiral_t_at_length`),
 keeps its Python reference implementation, which gives the same numbers bit for bit and runs
 where ``kernels`` is None (tests/test_plan_kernels.py compares the two). A module of its own,
 apart from :mod:`nurbscnc.plan.compiled`, so that geometry imports nothing of the plan."""
@@ -26,6 +27,7 @@ KERNELS = (
     "nurbs_derivatives",
     "nurbs_derivatives_at",
     "powerform_speed",
+    "spiral_t",
 )
 if kernels is not None and not all(hasattr(kernels, name) for name in KERNELS):
     kernels = None

@@ -10,6 +10,7 @@ NURBS u is the knot parameter (:mod:`nurbscnc.geometry.nurbs`).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import cached_property
 from typing import Protocol, runtime_checkable
@@ -56,12 +57,26 @@ class PathGeometry(Protocol):
     def curvature_derivative(self, u) -> np.ndarray: ...
 
 
+#: Up to this many parameters, :meth:`ArcGeometry.derivatives` works in Python floats.
+FEW_POINTS = 4
+
+
 def _params(u) -> np.ndarray:
     return np.atleast_1d(np.asarray(u, dtype=float)).ravel()
 
 
-def _unit(v: np.ndarray) -> np.ndarray:
-    return v / np.linalg.norm(v)
+def _norm(v: np.ndarray) -> float:
+    """|v| of a 1-D vector as ``np.linalg.norm`` computes it (√ of ``v.dot(v)``), without its
+    argument handling (~4 µs a call)."""
+    return math.sqrt(float(v.dot(v)))
+
+
+def cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a × b of two 3-vectors: ``np.cross``'s products and differences (a1 b2 − a2 b1, …), so
+    its bits, in Python floats (np.cross costs ~30 µs a call on 3-vectors)."""
+    a0, a1, a2 = a.tolist()
+    b0, b1, b2 = b.tolist()
+    return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
 
 
 @dataclass(frozen=True, eq=False)
@@ -158,17 +173,18 @@ class ArcGeometry:
     def from_segment(cls, seg: segments.Arc) -> ArcGeometry:
         """Geometry of a ``segments.Arc`` (see its docstring for the conventions)."""
         n = np.asarray(seg.normal, dtype=float)
-        n_norm = float(np.linalg.norm(n))
+        n_norm = _norm(n)
         if not n_norm > 0.0:
             raise GeometryError(f"arc on line {seg.line} has a zero normal")
         n = n / n_norm
         d = np.asarray(seg.start_mm, dtype=float) - np.asarray(seg.center_mm, dtype=float)
         axial = float(d @ n)
         d_in = d - axial * n
-        if not np.linalg.norm(d_in) > 0.0:
+        d_in_norm = _norm(d_in)
+        if not d_in_norm > 0.0:
             raise GeometryError(f"arc on line {seg.line} starts at its center")
-        e1 = _unit(d_in)
-        e2 = np.cross(n, e1)
+        e1 = d_in / d_in_norm
+        e2 = cross3(n, e1)
         # The axis point in the start's plane: start = origin + r0 e1 when r0 = |d_in|.
         origin = np.asarray(seg.center_mm, dtype=float) + axial * n
         return cls(
@@ -210,6 +226,65 @@ class ArcGeometry:
             out[1] += self.helix_mm * self.normal
         return out
 
+    @cached_property
+    def _frame_floats(self) -> tuple:
+        """(e1, e2, origin, normal) as tuples of Python floats (the few-point path)."""
+        return tuple(tuple(v.tolist()) for v in (self.e1, self.e2, self.origin_mm, self.normal))
+
+    def _derivatives_few(self, u: list, order: int, scale: float) -> np.ndarray | None:
+        """:meth:`derivatives` at a few parameters ``u`` (Python floats) in Python floats: the
+        corner searches ask for one point at a time and the pieces for their two ends, where
+        ~15 numpy calls on one- or two-element arrays per order cost 10× the arithmetic. The
+        same operations in the same order as :meth:`derivatives` (t = u/L, ``np.clip``: a
+        value below 0 or above 1 replaced by it, −0.0 kept) and :meth:`_derivatives_t`, each
+        a correctly rounded IEEE operation either way (+ − × ÷; a negation and the quarter
+        turns are exact); cos and sin are numpy's own on the same array of θ: the same bits
+        (tests/test_paths.py compares the two). None for a u that is not finite (the array
+        path's special cases)."""
+        ts = []
+        for x in u:
+            t = x / scale
+            if not math.isfinite(t):
+                return None
+            t = 0.0 if t < 0.0 else t
+            ts.append(1.0 if t > 1.0 else t)
+        dtheta = self.angle_rad
+        dr = self.radius_end_mm - self.radius_start_mm
+        theta = np.array([t * dtheta for t in ts])
+        cos_t, sin_t = np.cos(theta).tolist(), np.sin(theta).tolist()
+        (e1x, e1y, e1z), (e2x, e2y, e2z), origin, normal = self._frame_floats
+        helix = self.helix_mm
+        rows = [[] for _ in range(order + 1)]
+        for t, c, s in zip(ts, cos_t, sin_t):
+            radius = self.radius_start_mm + t * dr
+            rot = ((c, s), (-s, c), (-c, -s), (s, -c))  # E(θ + k π/2), k = 0 … 3
+            for k in range(order + 1):
+                ck, sk = rot[k % 4]
+                rk = radius * dtheta**k
+                v = [
+                    rk * (ck * e1x + sk * e2x),
+                    rk * (ck * e1y + sk * e2y),
+                    rk * (ck * e1z + sk * e2z),
+                ]
+                if k >= 1:
+                    cm, sm = rot[(k - 1) % 4]
+                    q = k * dr * dtheta ** (k - 1)
+                    v = [
+                        v[0] + q * (cm * e1x + sm * e2x),
+                        v[1] + q * (cm * e1y + sm * e2y),
+                        v[2] + q * (cm * e1z + sm * e2z),
+                    ]
+                if k == 0:
+                    rise = t * helix
+                    v = [a + (o + rise * n) for a, o, n in zip(v, origin, normal)]
+                elif k == 1:
+                    v = [a + helix * n for a, n in zip(v, normal)]
+                if k >= 1:
+                    div = scale**k
+                    v = [a / div for a in v]
+                rows[k].append(v)
+        return np.array(rows)
+
     def _length_t(self, t) -> np.ndarray:
         """s(t) [mm] from the start, closed form (segments.spiral_arc_length_mm)."""
         return segments.spiral_arc_length_mm(
@@ -249,7 +324,12 @@ class ArcGeometry:
     def derivatives(self, u, order: int = 3) -> np.ndarray:
         """[C, C', ...] w.r.t. u = t L, shape (order+1, len(u), 3); u clamped to [0, L]."""
         scale = self._u_scale
-        t = np.clip(_params(u) / scale, 0.0, 1.0)
+        u = _params(u)
+        if 0 < u.size <= FEW_POINTS:
+            few = self._derivatives_few(u.tolist(), order, scale)
+            if few is not None:
+                return few
+        t = np.clip(u / scale, 0.0, 1.0)
         out = self._derivatives_t(t, order)
         for k in range(1, order + 1):
             out[k] /= scale**k

@@ -54,6 +54,7 @@ tolerance for any trim, and such blends would swallow the arc.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -137,27 +138,58 @@ def _w1(e0: complex, e2: complex, k0: float, k1: float, a: float, b: float) -> c
     return (0.25 * k0 * a**3 * e2 + 0.25 * k1 * b**3 * e0) / (e0.conjugate() * e2).imag
 
 
+def _cdiv_real(z: complex, d: float) -> complex:
+    """z / d as numpy divides a complex scalar by a real one (Smith's method on d + 0i: the
+    ratio 0/d and the scale 1/(d + 0·ratio) multiply, where Python's complex division
+    divides): numpy's bits for Python complex operands (d ≠ 0)."""
+    rat = 0.0 / d
+    scl = 1.0 / (d + 0.0 * rat)
+    return complex((z.real + z.imag * rat) * scl, (z.imag - z.real * rat) * scl)
+
+
 def _w_g2(dp, e0, e2, k0, k1, ab0, max_iter: int = 30):
     """(α, β) of the PH quintic with chord ``dp`` and end curvatures k0, k1, by damped
-    Newton from ``ab0``; None if it does not converge at α, β > 0."""
+    Newton from ``ab0``; None if it does not converge at α, β > 0.
+
+    In Python floats and complex numbers (a few thousand corners, each a few Newton steps on
+    scalars): the arithmetic of numpy's complex128 scalars operation for operation — + − ×
+    and |·| are the same formulas (a real operand is the complex (x, 0) on both sides), and
+    a division by a real takes numpy's form (:func:`_cdiv_real`) — so the same bits
+    (tests/test_phcorner_batch.py against the numpy-scalar version kept there)."""
+    dp, e0, e2 = complex(dp), complex(e0), complex(e2)
+    k0, k1 = float(k0), float(k1)
     s = (e0.conjugate() * e2).imag
     scale = 5.0 * abs(dp)
+    g0, g1 = 0.25 * k0, 0.25 * k1
 
     def residual(a, b):
-        w0, w1, w2 = a * e0, _w1(e0, e2, k0, k1, a, b), b * e2
-        f = w0 * w0 + w0 * w1 + (2.0 * w1 * w1 + w0 * w2) / 3.0 + w1 * w2 + w2 * w2 - 5.0 * dp
+        w0 = a * e0
+        w1 = _cdiv_real(g0 * a**3 * e2 + g1 * b**3 * e0, s)  # _w1
+        w2 = b * e2
+        f = (
+            w0 * w0
+            + w0 * w1
+            + _cdiv_real(2.0 * w1 * w1 + w0 * w2, 3.0)
+            + w1 * w2
+            + w2 * w2
+            - 5.0 * dp
+        )
         return f, w0, w1, w2
 
-    a, b = ab0
+    a, b = float(ab0[0]), float(ab0[1])
     f, w0, w1, w2 = residual(a, b)
     for _ in range(max_iter):
         if abs(f) <= 1e-14 * scale:
             return a, b
-        fw1 = w0 + 4.0 * w1 / 3.0 + w2  # ∂F/∂w1; ∂F/∂w0, ∂F/∂w2 below
-        dfa = (2.0 * w0 + w1 + w2 / 3.0) * e0 + fw1 * (0.75 * k0 * a * a * e2 / s)
-        dfb = (w0 / 3.0 + w1 + 2.0 * w2) * e2 + fw1 * (0.75 * k1 * b * b * e0 / s)
+        fw1 = w0 + _cdiv_real(4.0 * w1, 3.0) + w2  # ∂F/∂w1; ∂F/∂w0, ∂F/∂w2 below
+        dfa = (2.0 * w0 + w1 + _cdiv_real(w2, 3.0)) * e0 + fw1 * _cdiv_real(
+            0.75 * k0 * a * a * e2, s
+        )
+        dfb = (_cdiv_real(w0, 3.0) + w1 + 2.0 * w2) * e2 + fw1 * _cdiv_real(
+            0.75 * k1 * b * b * e0, s
+        )
         det = dfa.real * dfb.imag - dfb.real * dfa.imag
-        if not (np.isfinite(det) and det != 0.0):
+        if not (math.isfinite(det) and det != 0.0):
             return None
         da = -(f.real * dfb.imag - dfb.real * f.imag) / det
         db = -(dfa.real * f.imag - f.real * dfa.imag) / det

@@ -11,6 +11,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from nurbscnc.geometry.compiled import kernels as _kernels
+
 
 def vec3(values) -> np.ndarray:
     """A read-only float64 copy of a 3-vector [mm]."""
@@ -129,14 +131,35 @@ def spiral_t_at_length(
     The arcs' t-independent terms are computed once; the working set is compacted only when
     less than half of it still moves (per sample the same operations: the same bits)."""
     scalars = (radius_start_mm, radius_end_mm, angle_rad, helix_mm, length_mm)
-    if (
-        isinstance(s_mm, np.ndarray)
-        and s_mm.shape == (1,)
-        and all(isinstance(x, float) for x in scalars)
-    ):
-        one = _spiral_t_one(*map(float, scalars), float(s_mm[0]), max_iter)
-        if one is not None:
-            return np.array([one])
+    if isinstance(s_mm, np.ndarray) and all(isinstance(x, float) for x in scalars):
+        if s_mm.shape == (1,):
+            one = _spiral_t_one(*map(float, scalars), float(s_mm[0]), max_iter)
+            if one is not None:
+                return np.array([one])
+        elif (
+            _kernels is not None
+            and s_mm.ndim == 1
+            and s_mm.dtype == np.float64
+            and all(map(math.isfinite, scalars))
+            and np.isfinite(s_mm).all()
+            and not np.signbit(s_mm).any()
+        ):
+            # One arc, many samples (a corner side's polyline): the compiled per-sample
+            # Newton of _spiral_t_arrays (the same bits, tests/test_paths.py). Not for
+            # s < 0 or −0.0: numpy's clip keeps −0.0 with a scalar lower bound and replaces
+            # it with an array one (two loops), so no sample rests on that.
+            out = np.empty(s_mm.size)
+            _kernels.spiral_t(*map(float, scalars), np.ascontiguousarray(s_mm), max_iter, out)
+            return out
+    return _spiral_t_arrays(*scalars[:4], s_mm, length_mm, max_iter)
+
+
+def _spiral_t_arrays(
+    radius_start_mm, radius_end_mm, angle_rad, helix_mm, s_mm, length_mm, max_iter: int = 50
+) -> np.ndarray:
+    """:func:`spiral_t_at_length` on numpy arrays (every argument broadcast together): the
+    reference of the compiled ``spiral_t`` and the path of every call with arrays of arcs."""
+    scalars = (radius_start_mm, radius_end_mm, angle_rad, helix_mm, length_mm)
     r0, r1, ang, hel, big, s_in = np.broadcast_arrays(
         *(np.asarray(x, dtype=float) for x in (*scalars, s_mm))
     )

@@ -8,7 +8,7 @@ from dataclasses import replace as dc_replace
 import numpy as np
 
 from nurbscnc.geometry.path import Kind
-from nurbscnc.geometry.paths import ArcGeometry, LineGeometry
+from nurbscnc.geometry.paths import ArcGeometry, LineGeometry, cross3
 from nurbscnc.geometry.ph import PHQuintic
 from nurbscnc.machine.caps import MIN_CAP_MM_S, curvature_cap_mm_s
 from nurbscnc.machine.profile import Machine
@@ -53,7 +53,7 @@ def sub_geometry(piece: Piece, s0_mm: float, s1_mm: float):
         g,
         origin_mm=g.origin_mm + t0 * g.helix_mm * g.normal,
         e1=e1,
-        e2=np.cross(g.normal, e1),
+        e2=cross3(g.normal, e1),
         radius_start_mm=g.radius_start_mm + t0 * dr,
         radius_end_mm=g.radius_start_mm + t1 * dr,
         angle_rad=(t1 - t0) * g.angle_rad,

@@ -10,7 +10,7 @@ import numpy as np
 from nurbscnc.errors import GeometryError, SourcePos
 from nurbscnc.geometry.blend import ph_tables
 from nurbscnc.geometry.path import Kind
-from nurbscnc.geometry.paths import ArcGeometry, LineGeometry
+from nurbscnc.geometry.paths import ArcGeometry, LineGeometry, cross3
 from nurbscnc.geometry.segments import blend_tolerance_mm
 from nurbscnc.machine.caps import servo_curve_cap_mm_s
 from nurbscnc.machine.profile import Machine
@@ -283,7 +283,7 @@ def out_of_plane(pieces: PieceList, j: np.ndarray) -> np.ndarray:
 
     out = np.zeros(j.size, dtype=bool)
     for n, r in enumerate(j.tolist()):
-        normal = np.cross(pieces.tangent_end[:, r], pieces.tangent_start[:, r + 1])
+        normal = cross3(pieces.tangent_end[:, r], pieces.tangent_start[:, r + 1])
         size = float(np.linalg.norm(normal))
         if size == 0.0:
             continue
