@@ -82,7 +82,7 @@ def converge(st: Setup, lev: Levers, evaluate, confine=lambda lv: None, plan_of=
     shaped_s = cycle_time_s(result)
     if (
         options.dynamics == Dynamics.LOCAL
-        and lev.shaped.any()
+        and st.any_shaped(lev)
         and _may_gain(result, shaped_s, fastest_s)
     ):
         # Improvement: bisect every shaped lever between its feasible value and its value
@@ -272,7 +272,7 @@ class _Improvement:
         for _ in range(SETTLE_HALVINGS):
             trial = self.best.copy()
             long = trial.settle_s >= st.period
-            if not long.any():
+            if not (long.any() or st.settles_outside):
                 break
             trial.settle_s[long] *= 0.5
             self.confine(trial)
