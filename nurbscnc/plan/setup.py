@@ -110,10 +110,6 @@ class Setup:
                 # junctions): the profile takes the smaller of the levers' caps anyway.
                 self.smooth = np.maximum(self.smooth, junction_caps(free))
 
-    #: Reductions over all pieces that a cut window's loop makes for the program's levers
-    #: (:class:`~nurbscnc.plan.window_levers.WindowSetup`): here the levers are all of them.
-    settles_outside = False
-
     def planned(self, lv: Levers) -> PieceList:
         """The pieces with the settles of the levers ``lv`` in their dwells."""
         return self.planned_settles(lv.settle_s)

@@ -17,9 +17,9 @@ program's first junction excluded), and the runs of pieces planned as one. So lo
 junction more than that before every over-limit sample (or the program's start) and
 hi = b + 1 (b a rest: no sample is near a junction after it): :meth:`WindowSetup.shape`
 checks both on each call and, where they do not hold, applies the rules to the whole
-program's levers instead. Reductions over all k that the loop makes (whether any piece was
-shaped, whether any settle may be halved) count the pieces outside lo … hi − 1 from the
-final levers (:attr:`WindowSetup.shaped_outside`, :attr:`WindowSetup.settles_outside`);
+program's levers instead. The one reduction over all k that the loop makes (whether any piece
+was shaped) counts the pieces outside lo … hi − 1 from the final levers
+(:attr:`WindowSetup.shaped_outside`);
 the histories keep the program's junction and piece numbers."""
 
 from __future__ import annotations
@@ -133,9 +133,9 @@ class WindowSetup:
         self.settle_rows = rows[keep] - lo
         outside = np.ones(k, dtype=bool)
         outside[lo:hi] = False
-        #: Whether a piece outside lo … hi − 1 is shaped / has a settle of a period or more.
+        self._planned = None  # (settles, planned pieces) of the last plan
+        #: Whether a piece outside lo … hi − 1 is shaped.
         self.shaped_outside = bool(np.any(final.shaped & outside))
-        self.settles_outside = bool(np.any((final.settle_s >= st.period) & outside))
 
     @staticmethod
     def span(st, a: int, b: int, before) -> tuple[int, int]:
@@ -158,10 +158,16 @@ class WindowSetup:
 
     def planned(self, lv: Levers):
         """The program's pieces with the settles of the loop's ``lv`` (the final ones
-        elsewhere) in their dwells (:meth:`Setup.planned`)."""
+        elsewhere) in their dwells (:meth:`Setup.planned`); the last ones again while the
+        settles are the same (most re-plans change feeds and transitions only)."""
+        last = self._planned
+        if last is not None and np.array_equal(last[0], lv.settle_s):
+            return last[1]
         settle = self.final.settle_s.copy()
         settle[self.lo : self.hi] = lv.settle_s
-        return self.st.planned_settles(settle)
+        planned = self.st.planned_settles(settle)
+        self._planned = (lv.settle_s.copy(), planned)
+        return planned
 
     def confine(self, lv: Levers) -> None:
         """Undo changes outside the window a … b − 1 (the final levers there)."""
