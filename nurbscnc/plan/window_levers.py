@@ -28,12 +28,15 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from nurbscnc.plan import shaping
 from nurbscnc.plan.levers import Levers
-from nurbscnc.plan.shaping import BLAME_WINDOW_S, STOP_BEFORE_S, STOP_WINDOW_S, fallback, shape
 
-#: How far before an over-limit sample the stop rule looks for a stop [s]
-#: (:func:`~nurbscnc.plan.shaping._stop_events`: τ − STOP_WINDOW_S − period/2), with a margin.
-_REACH_S = max(STOP_WINDOW_S, STOP_BEFORE_S, BLAME_WINDOW_S)
+
+def _reach_s() -> float:
+    """How far before an over-limit sample the rules look back [s]: the stop rule for a stop
+    (:func:`~nurbscnc.plan.shaping._stop_events`: τ − STOP_WINDOW_S − period/2), the blame
+    over the servo's memory (read when called: the tests change them)."""
+    return max(shaping.STOP_WINDOW_S, shaping.STOP_BEFORE_S, shaping.BLAME_WINDOW_S)
 
 
 def cut_levers(lev: Levers, lo: int, hi: int) -> Levers:
@@ -143,7 +146,7 @@ class WindowSetup:
         (the program's start if none), and the piece after the window's (its end)."""
         lo = 0
         if before is not None and a > 0:
-            t_lo = float(before.duration_s) - 2.0 * _REACH_S - 4.0 * st.period
+            t_lo = float(before.duration_s) - 2.0 * _reach_s() - 4.0 * st.period
             j = int(np.searchsorted(before.piece_start_time_s[:a], t_lo, side="left")) - 1
             lo = max(j, 0)
         return lo, min(b + 1, st.k)
@@ -189,11 +192,11 @@ class WindowSetup:
             return True
         start = profile.piece_start_time_s
         if self.lo > 0:
-            x = float(tau.min()) - STOP_WINDOW_S - 0.5 * self.period
+            x = float(tau.min()) - shaping.STOP_WINDOW_S - 0.5 * self.period
             if not float(start[self.lo]) < x:
                 return False
         if self.hi < self.st.k:
-            x = float(tau.max()) - STOP_WINDOW_S - 0.5 * self.period
+            x = float(tau.max()) - shaping.STOP_WINDOW_S - 0.5 * self.period
             if not (profile.junction_speeds_mm_s[self.b] == 0.0 and float(start[self.b]) >= x):
                 return False
         return True
@@ -224,7 +227,7 @@ class WindowSetup:
             return
         prof, ov = self._cut(profile, overs)
         st = self.st
-        shape(
+        shaping.shape(
             lv,
             ov,
             self.eps_mm,
@@ -239,7 +242,7 @@ class WindowSetup:
     def fallback(self, lv: Levers, result, stage: int) -> None:
         """The fallback of ``stage`` on ``lv`` (in place; :meth:`Setup.fallback`)."""
         _, ov = self._cut(result[1], result[2].overs)
-        fallback(
+        shaping.fallback(
             lv,
             ov,
             self.eps_mm,
