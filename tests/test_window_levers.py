@@ -129,3 +129,39 @@ def test_levers_cut_and_joined_back():
     for x, y in zip(back.cap_history, lev.cap_history):
         assert x.dtype == y.dtype and np.array_equal(x, y)
     assert back.stop_history == lev.stop_history
+
+
+def test_no_settle_halving_is_tried_where_confine_leaves_none(monkeypatch):
+    """A settle of a period or more only outside the window (a margin piece of the span):
+    halving it is undone by ``confine``, so the improvement phase plans nothing (it had
+    re-planned the same plan once per window)."""
+    from types import SimpleNamespace
+
+    from nurbscnc.plan import converge
+
+    k = 5
+    lev = Levers(
+        *(np.ones(k) for _ in range(5)),
+        np.array([0.05, 0.0, 0.0, 0.0, 0.0]),
+        np.zeros(k, dtype=bool),
+        np.zeros(k, dtype=bool),
+    )
+    st = SimpleNamespace(period=0.001, eps_mm=0.015, checker=SimpleNamespace(keep=False))
+    check = SimpleNamespace(overs=SimpleNamespace(worst_mm=0.01))
+    monkeypatch.setattr(converge, "cycle_time_s", lambda result: 1.0)
+    calls = []
+
+    def evaluate(lv):
+        calls.append(lv.settle_s.copy())
+        return (None, None, check)
+
+    def confine(lv):
+        lv.settle_s[0] = 0.05  # outside the window: its final settle
+
+    run = converge._Improvement(st, lev, (None, None, check), evaluate, confine)
+    run.shorten_settles()
+    assert calls == []
+    lev.settle_s[2] = 0.004  # a settle of the window's own: halved and tried
+    run = converge._Improvement(st, lev, (None, None, check), evaluate, confine)
+    run.shorten_settles()
+    assert len(calls) == 1 and calls[0][2] == 0.002
