@@ -117,9 +117,9 @@ def test_a_window_profile_is_its_rapids_and_its_cut_planned_apart():
         if not remember:
             original = OwnProfiles.__call__
 
-            def afresh(self, lv, a, b, cut):
+            def afresh(self, lv, a, b, cut, base=0):
                 self.kept.clear()
-                return original(self, lv, a, b, cut)
+                return original(self, lv, a, b, cut, base)
 
             with pytest.MonkeyPatch.context() as mp:
                 mp.setattr(OwnProfiles, "__call__", afresh)

@@ -82,7 +82,7 @@ def converge(st: Setup, lev: Levers, evaluate, confine=lambda lv: None, plan_of=
     shaped_s = cycle_time_s(result)
     if (
         options.dynamics == Dynamics.LOCAL
-        and lev.shaped.any()
+        and st.any_shaped(lev)
         and _may_gain(result, shaped_s, fastest_s)
     ):
         # Improvement: bisect every shaped lever between its feasible value and its value
@@ -263,7 +263,8 @@ class _Improvement:
 
     def shorten_settles(self) -> None:
         """The settles after rapids alone, halved while that is within ε_max and faster (at
-        most :data:`SETTLE_HALVINGS` re-plans). A settle is extended past the last over-limit
+        most :data:`SETTLE_HALVINGS` re-plans; none when ``confine`` leaves no settle to
+        halve: a cut window's plan would be the same). A settle is extended past the last over-limit
         sample after its restart, as far as the cut's feed carries them, before the rapid's
         descent is softened; the joint tries raise every lever at once and fail on any one:
         so a higher F kept a longer settle than its softened descent needs (31 ms against
@@ -272,10 +273,10 @@ class _Improvement:
         for _ in range(SETTLE_HALVINGS):
             trial = self.best.copy()
             long = trial.settle_s >= st.period
-            if not long.any():
-                break
             trial.settle_s[long] *= 0.5
             self.confine(trial)
+            if not np.any(trial.settle_s != self.best.settle_s):  # none this plan may halve
+                break
             if self.attempt(trial) > st.eps_mm or cycle_time_s(self.result) >= self.best_time:
                 self.result = None
                 break

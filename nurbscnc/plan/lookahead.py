@@ -96,6 +96,7 @@ from nurbscnc.plan.plans import Plan
 from nurbscnc.plan.sampler import EXACT, ReferenceSampler
 from nurbscnc.plan.setup import Setup
 from nurbscnc.plan.timing import sample_count
+from nurbscnc.plan.window_levers import WindowSetup
 from nurbscnc.plan.windows import (
     WINDOW_KEEP_PERIODS,
     OwnProfiles,
@@ -224,16 +225,15 @@ def _windows_of(st: Setup):
         # the stand-in after, their phases outside the periods the check reads merged.
         around = (done, None if later is None else compacted(later, 0.0))
 
-        def confine(lv: Levers, a=a, b=b, final=final) -> None:
-            for f in Levers.PER_PIECE:  # outside the window: the final levers (slices)
-                x, y = getattr(lv, f), getattr(final, f)
-                x[:a], x[b:] = y[:a], y[b:]
-
+        # The loop works on the levers of the pieces around the window only (the same
+        # numbers as on all of them: :mod:`~nurbscnc.plan.window_levers`).
+        view = WindowSetup(st, a, b, final, done)
         warm, repeated_cut = seen.warm(final, a, b)
+        warm = view.levers(warm)
 
-        def plan_of(lv: Levers, a=a, b=b, around=around, cut=repeated_cut):
-            planned = st.planned(lv)
-            own = own_profile(lv, a, b, cut)
+        def plan_of(lv: Levers, a=a, b=b, around=around, cut=repeated_cut, view=view):
+            planned = view.planned(lv)
+            own = own_profile(lv, a, b, cut, view.lo)
             profile = spliced([x for x in (around[0], own, around[1]) if x is not None])
             check_point_count(planned, profile, st.machine)  # before anything is sampled
             return planned, profile, own
@@ -251,7 +251,8 @@ def _windows_of(st: Setup):
             check = st.checker.run(planned, profile, rows_of(planned, profile), stream)
             return planned, profile, check, own, st.checker.stream_out
 
-        lev, result, iterations = converge(st, warm, evaluate, confine, plan_of)
+        lev, result, iterations = converge(view, warm, evaluate, view.confine, plan_of)
+        lev = view.program_levers(lev)
         seen.add(lev, a, b)
         final = lev
         stream = result[4]  # the servo's state after this window's final plan

@@ -112,11 +112,19 @@ class Setup:
 
     def planned(self, lv: Levers) -> PieceList:
         """The pieces with the settles of the levers ``lv`` in their dwells."""
+        return self.planned_settles(lv.settle_s)
+
+    def planned_settles(self, settle_s: np.ndarray) -> PieceList:
+        """The pieces with the settles ``settle_s`` (k,) [s] in their dwells."""
         return (
-            _with_dwell(self.pieces, self.base_dwell + lv.settle_s)
+            _with_dwell(self.pieces, self.base_dwell + settle_s)
             if self.settle_rows.size
             else self.pieces
         )
+
+    def any_shaped(self, lv: Levers) -> bool:
+        """Whether the levers ``lv`` shaped any piece."""
+        return bool(lv.shaped.any())
 
     def plan_of(self, lv: Levers):
         """The planned pieces (settles in their dwells) and profile of the levers ``lv``."""

@@ -79,22 +79,24 @@ class OwnProfiles:
         self.st = st
         self.kept: dict[bytes, Profile] = {}
 
-    def __call__(self, lv: Levers, a: int, b: int, cut: int | None) -> Profile:
+    def __call__(self, lv: Levers, a: int, b: int, cut: int | None, base: int = 0) -> Profile:
         """The own profile of window a … b − 1; ``cut``: the first piece of its cut when the
-        cut repeats an earlier one (:meth:`SeenWindows.warm`), else None."""
+        cut repeats an earlier one (:meth:`SeenWindows.warm`), else None; ``base``: the
+        piece of the levers' first entry (a window's loop holds those around it only)."""
         st = self.st
         lim = lv.limits()
 
         def over(lo: int, hi: int) -> Profile:
+            m, n = lo - base, hi - base
             return profile_over(
                 st.pieces.length_mm[lo:hi],
-                lv.caps[lo:hi],
+                lv.caps[m:n],
                 st.smooth[lo : hi + 1],
                 Limits(
-                    lim.a_up_mm_s2[lo:hi],
-                    lim.j_up_mm_s3[lo:hi],
-                    lim.a_down_mm_s2[lo:hi],
-                    lim.j_down_mm_s3[lo:hi],
+                    lim.a_up_mm_s2[m:n],
+                    lim.j_up_mm_s3[m:n],
+                    lim.a_down_mm_s2[m:n],
+                    lim.j_down_mm_s3[m:n],
                 ),
                 st.options.lookahead_pieces,
             )
@@ -118,12 +120,12 @@ class OwnProfiles:
             np.ascontiguousarray(x).tobytes()
             for x in (
                 st.pieces.length_mm[c:b],
-                lv.caps[c:b],
+                lv.caps[c - base : b - base],
                 smooth,
-                lim.a_up_mm_s2[c:b],
-                lim.j_up_mm_s3[c:b],
-                lim.a_down_mm_s2[c:b],
-                lim.j_down_mm_s3[c:b],
+                lim.a_up_mm_s2[c - base : b - base],
+                lim.j_up_mm_s3[c - base : b - base],
+                lim.a_down_mm_s2[c - base : b - base],
+                lim.j_down_mm_s3[c - base : b - base],
             )
         )
         cut = self.kept.get(key)
