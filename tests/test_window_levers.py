@@ -5,6 +5,7 @@ the whole program's levers (where the stop rule may reach past the span)."""
 
 from __future__ import annotations
 
+import re
 import sys
 from pathlib import Path
 
@@ -165,3 +166,30 @@ def test_no_settle_halving_is_tried_where_confine_leaves_none(monkeypatch):
     run = converge._Improvement(st, lev, (None, None, check), evaluate, confine)
     run.shorten_settles()
     assert len(calls) == 1 and calls[0][2] == 0.002
+
+
+def _helices(copies: int) -> str:
+    """Fusion 360's arc into a helical ramp (tests/programs/planner), ``copies`` times, each
+    5 mm further along X, a G0 between: windows whose curve rule meets arcs (the junctions
+    between two curves, each lowered by its own error where their errors differ)."""
+    path = Path(__file__).resolve().parent / "programs" / "planner" / "fusion_arc_into_helix.nc"
+    moves = path.read_text().splitlines()[2:-2]  # from the first G0 to before the retract
+    out = ["G90 G94 G17 G21"]
+    for i in range(copies):
+        dx_mm = 5.0 * i
+        out.append("G0 Z2")
+        for line in moves:
+            out.append(re.sub(r"X([-0-9.]+)", lambda m, d=dx_mm: f"X{float(m[1]) + d:.3f}", line))
+    out += ["G0 Z5", "M2"]
+    return "\n".join(out)
+
+
+@pytest.mark.parametrize("view", [WindowSetup, _Tight])
+def test_arcs_curve_rule_on_a_span_gives_the_whole_programs_plan(monkeypatch, view):
+    text = _helices(3)
+    whole, _ = _windows(monkeypatch, _Whole, text)
+    monkeypatch.undo()
+    cut, _ = _windows(monkeypatch, view, text)
+    assert len(whole) >= 3
+    assert sum(w[2] for w in whole) > 6  # the loops re-planned
+    assert cut == whole

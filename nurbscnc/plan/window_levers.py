@@ -105,6 +105,10 @@ class _PiecesCut:
 
     rapid: np.ndarray
     length_mm: np.ndarray
+    #: The pieces' kinds and the junctions (within lo … hi − 1, from lo) where the
+    #: curvature vector jumps: the curve rule's junctions between two curves.
+    kind: np.ndarray
+    jump_rows: np.ndarray
 
     def __len__(self) -> int:
         return self.rapid.size
@@ -126,8 +130,12 @@ class WindowSetup:
         self.lo, self.hi = lo, hi
         self.initial = cut_levers(st.initial, lo, hi)
         self.upper = self.initial if st.upper is st.initial else cut_levers(st.upper, lo, hi)
+        jumps = np.asarray(st.pieces.jump_rows, dtype=np.int64)
         self.pieces = _PiecesCut(
-            np.asarray(st.pieces.rapid[lo:hi], dtype=bool), st.pieces.length_mm[lo:hi]
+            np.asarray(st.pieces.rapid[lo:hi], dtype=bool),
+            st.pieces.length_mm[lo:hi],
+            st.pieces.kind[lo:hi],
+            jumps[(jumps >= lo) & (jumps < hi - 1)] - lo,
         )
         self.smooth = st.smooth[lo : hi + 1]
         rows = st.settle_rows
