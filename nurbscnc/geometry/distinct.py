@@ -2,11 +2,11 @@
 import of ``numpy.ma``.
 
 ``np.unique(a)`` asks ``np.ma.is_masked(a)`` before its work when no index, inverse or count
-is asked for, and the first such call of a process imports ``numpy.ma`` (10–12 ms of CPU,
-a tenth of a short program's whole plan beyond numpy's own start); the planner calls it on
-its knots, breakpoints, piece kinds and index sets. These give the same values (sorted, each
-once, NaNs as one at the end, as ``np.unique``'s default ``equal_nan``), by its own sorting
-method: sort, then keep each value that differs from the one before.
+is asked for, and the first such call of a process imports ``numpy.ma`` (10–14 ms of CPU,
+paid by every ``plan`` process); the planner calls it on its knots, breakpoints, piece kinds
+and index sets. These give the same values (sorted, each once, NaNs as one at the end, as
+``np.unique``'s default ``equal_nan``), by its own sorting method: sort, then keep each value
+that differs from the one before.
 """
 
 from __future__ import annotations
