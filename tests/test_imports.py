@@ -133,6 +133,22 @@ def test_plan_of_plain_words_loads_neither_lark_nor_the_other_commands(tmp_path)
     assert expr["code"] == 0 and "lark" in expr["modules"]
 
 
+def test_plan_loads_no_numpy_ma(tmp_path):
+    # np.unique's first call without indices imports numpy.ma (10 ms) to ask whether its
+    # input is masked; the planner's distinct values come from geometry/distinct.py instead.
+    # A polyline the smoothing fits, a NURBS program with the check, and one without it.
+    poly = "G21 G90 G64 P0.01 F600\nG0 X0 Y0\nG1 Z-0.1\n" + "".join(
+        f"G1 X{k * 0.2:.2f} Y{(k % 7) * 0.05:.2f}\n" for k in range(1, 80)
+    )
+    (tmp_path / "poly.nc").write_text(poly + "M2\n")
+    runs = [["plan", "poly.nc", "--json"], ["plan", str(NACA), "--json"]]
+    runs.append(["plan", str(NACA), "--json", "--dynamics", "off"])
+    rows = loaded(tmp_path, runs)
+    assert [r["code"] for r in rows] == [0, 0, 0]
+    assert "nurbscnc.plan.smoothing" in rows[0]["modules"]  # it did smooth
+    assert "numpy" in rows[-1]["modules"] and "numpy.ma" not in rows[-1]["modules"]
+
+
 def test_run_without_plots_loads_no_matplotlib(tmp_path):
     (tmp_path / "tiny.nc").write_text(TINY)
     (row,) = loaded(tmp_path, [["run", "tiny.nc", "-o", "points.csv", "--quiet"]])

@@ -115,6 +115,18 @@ EDGE_CASES += [
     "G1 F100\n" + _RUN + "\n\n" + _RUN + "#1=2\nX#1\n" + _RUN + "M2",
 ]
 
+# Runs whose chunks are longer than parse.MAX_LINE_CHARS in all (8,192 lines of CAM output
+# are): read as chunks still; a line over the limit ends the run where it stands (the general
+# path reports it), at a chunk's start, inside a chunk, or as the run's first line.
+_LONG_RUN = "".join(f"X{k * 0.001:.4f} Y{math.sin(k / 40):.6f} Z-0.05\n" for k in range(9000))
+_TOO_LONG = "X1 (" + "c" * 70_000 + ")\n"
+EDGE_CASES += [
+    "G1 F100\n" + _LONG_RUN + "M2",
+    "G1 F100\n" + _LONG_RUN + _TOO_LONG + _LONG_RUN + "M2",
+    "G1 F100\n" + _LONG_RUN[: 32 * 40] + _TOO_LONG + "M2",
+    "G1 F100\n" + _TOO_LONG + _LONG_RUN + "M2",
+]
+
 
 # G6.2 blocks: continuation lines the NURBS lane reads (points with knots, knot-only lines,
 # N numbers, lower case, blanks, weights, G91, G20, offsets) and the lines it leaves to the
@@ -172,6 +184,23 @@ def test_fast_lane_runs_in_bulk():
     assert len(prog.segments) == 4999  # X0 Y0 from X0 Y0 goes nowhere
     assert len(calls) <= 3
     assert prog.blocks == 5002
+
+
+def test_long_chunks_are_matched_whole(monkeypatch):
+    """A run whose chunks exceed parse.MAX_LINE_CHARS in all (12,000 lines of 31 characters)
+    is still matched a chunk at a time: no line is checked alone (each such check costs
+    5 µs; pcb2gcode's output made 4,178 of them)."""
+    alone = []
+    real = fastlane._plain_row
+    monkeypatch.setattr(fastlane, "_plain_row", lambda line: alone.append(line) or real(line))
+    lines = ["G21 G90 G1 F600"] + [
+        f"X{k * 0.01:.6f} Y{math.sin(k / 50):.6f} Z-0.0500" for k in range(12000)
+    ]
+    # The chunks hold 32, 64, …, 4,096 lines, then the last 3,840 (119,000 characters).
+    assert sum(map(len, lines[-3840:])) > fastlane.MAX_LINE_CHARS
+    prog = interpret_text("\n".join(lines + ["M2"]))
+    assert len(prog.segments) == 12000
+    assert len(alone) <= 3  # the first line of each try: the header, the run, M2
 
 
 def test_g6_lane_reads_a_long_block_without_parsing(monkeypatch):

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from nurbscnc.geometry.bspline import as_params
+from nurbscnc.geometry.distinct import distinct
 
 #: 16-point Gauss–Legendre nodes and weights on [-1, 1] (exact for polynomials of degree 31).
 GL_NODES, GL_WEIGHTS = np.polynomial.legendre.leggauss(16)
@@ -120,7 +121,7 @@ class ArcLengthTable:
         ``max_pieces``; the finer split is kept. On smooth spans the error of the kept total is
         far below ``rel_tol`` (GL-16 converges like h^32).
         """
-        b = np.unique(np.asarray(breakpoints, dtype=float))
+        b = distinct(np.asarray(breakpoints, dtype=float))
         if b.size < 2:
             b = np.array([b[0], b[0]]) if b.size else np.zeros(2)
         lo, hi = b[:-1], b[1:]

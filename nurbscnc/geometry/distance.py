@@ -26,6 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from nurbscnc.geometry.compiled import kernels as _kernels  # None: the Python loops
+from nurbscnc.geometry.distinct import distinct, distinct_union
 from nurbscnc.geometry.nurbs import NurbsCurve
 from nurbscnc.geometry.path import Kind
 from nurbscnc.geometry.polyline import dense_local, dense_polyline, path_counts, path_lengths
@@ -259,7 +260,7 @@ class PathIndex:
         r0 = 0.5 * self._short_mm
         with np.errstate(divide="ignore"):
             cls = np.where(radius <= r0, 0, np.ceil(np.log2(radius / r0))).astype(np.int64)
-        return [np.flatnonzero(cls == c) for c in np.unique(cls).tolist()]
+        return [np.flatnonzero(cls == c) for c in distinct(cls).tolist()]
 
     def _build(self):
         """The k-d trees of :meth:`candidates`: a tree over the centres of each radius group
@@ -394,7 +395,7 @@ class PathIndex:
                 found.append(idx[np.asarray(near)])
         if not found:
             return np.zeros(0, dtype=np.int64)
-        return np.unique(self._near_balls(q, upper_mm, np.concatenate(found)))
+        return distinct(self._near_balls(q, upper_mm, np.concatenate(found)))
 
     def _candidates_banded(self, q: np.ndarray, upper_mm: np.ndarray) -> np.ndarray:
         """:meth:`candidates` through the bands (:meth:`_make_bands`): in each radius group
@@ -416,7 +417,7 @@ class PathIndex:
             return np.zeros(0, dtype=np.int64)
         band = np.concatenate(band)
         self._banded += q.shape[0] * band.size
-        return np.unique(self._near_balls(q, upper_mm, band))
+        return distinct(self._near_balls(q, upper_mm, band))
 
     def _candidates_direct(self, q: np.ndarray, upper_mm: np.ndarray) -> np.ndarray:
         """:meth:`candidates` by testing every piece's ball (centre c = (A + B)/2, radius
@@ -434,7 +435,7 @@ class PathIndex:
             rel = centre[band] - p
             gap = np.sqrt(np.einsum("kc,kc->k", rel, rel)) - radius[band]
             found.append(band[gap <= u])
-        return np.unique(np.concatenate(found)) if found else np.zeros(0, dtype=np.int64)
+        return distinct(np.concatenate(found)) if found else np.zeros(0, dtype=np.int64)
 
     def _piece_polylines(self, cand: np.ndarray) -> list[tuple]:
         """(points, box lows, box highs, None) of the dense polylines (:func:`path_counts`)
@@ -557,7 +558,7 @@ class PathIndex:
         # Blocks of consecutive points (in the caller's order: time) at most ``block`` long
         # and broken where the points jump by more than 1 mm, so each block is compact.
         jump = np.flatnonzero(np.sqrt(np.sum(np.diff(q, axis=0) ** 2, axis=1)) > 1.0) + 1
-        edges = np.union1d(np.union1d(jump, np.arange(0, q.shape[0], block)), [q.shape[0]])
+        edges = distinct_union(jump, np.arange(0, q.shape[0], block), [q.shape[0]])
         for lo, hi in zip(edges[:-1].tolist(), edges[1:].tolist()):
             sl = slice(lo, hi)
             cand = self.candidates(q[sl], out[sl])

@@ -26,6 +26,7 @@ from nurbscnc.geometry.bspline import (
     rational_derivatives,
 )
 from nurbscnc.geometry.compiled import kernels as _kernels
+from nurbscnc.geometry.distinct import distinct
 from nurbscnc.geometry.inverse import InverseArcTable
 from nurbscnc.geometry.powerform import PowerForm
 
@@ -256,7 +257,7 @@ class NurbsCurve:
     def breakpoints(self) -> np.ndarray:
         """Distinct knots in [u_start, u_end] (where derivatives may jump)."""
         k = self.knots[self.degree : self.knots.size - self.degree]
-        return np.unique(k)
+        return distinct(k)
 
     @cached_property
     def _homogeneous(self) -> np.ndarray:

@@ -33,6 +33,7 @@ import numpy as np
 from numpy.polynomial import polynomial as npoly
 
 from nurbscnc.geometry import segments
+from nurbscnc.geometry.distinct import distinct
 from nurbscnc.geometry.powerform import BLOCK
 
 #: Program segment kinds that do not move X Y Z: the tool stops at rest there (a dwell holds
@@ -364,7 +365,7 @@ class PathTable:
         """(kind, selection, idx[sel], *columns[sel]) per kind present; selection None when
         one kind only (no gather/scatter)."""
         kind = np.take(self.kind, idx)
-        present = np.unique(kind)
+        present = distinct(kind)
         for code in present.tolist():
             if present.size == 1:
                 yield (Kind(code), None, idx, *columns)

@@ -43,6 +43,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from nurbscnc.geometry.distinct import distinct
 from nurbscnc.geometry.path import Kind
 from nurbscnc.machine.caps import JUNCTION_SHARE, axis_path_limits
 from nurbscnc.plan.junctions import junction_caps
@@ -175,7 +176,7 @@ def axis_geometry_bounds(pieces) -> tuple[np.ndarray, np.ndarray, np.ndarray, np
         * SAMPLES_PER_RADIUS
     )
     level = np.ceil(np.log2(np.clip(want, SAMPLES - 1, MAX_SAMPLES - 1))).astype(int)
-    for lv in np.unique(level).tolist():
+    for lv in distinct(level).tolist():
         n = (1 << lv) + 1
         group = curved[level == lv]
         step = max(_CHUNK * SAMPLES // n, 1)

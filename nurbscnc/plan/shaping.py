@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from nurbscnc.geometry.distinct import distinct, distinct_union
 from nurbscnc.geometry.path import Kind
 from nurbscnc.plan.checkresult import Overs
 from nurbscnc.plan.levers import Levers
@@ -174,7 +175,7 @@ def _stop_events(tau_s: np.ndarray, profile: Profile, period_s: float):
     k = v.size - 1
     stops = np.flatnonzero(v == 0.0)
     stops = stops[stops > 0]  # the start at rest is no stop to soften
-    stops = np.union1d(stops, _slowdowns(profile))
+    stops = distinct_union(stops, _slowdowns(profile))
     t_stop = np.append(profile.piece_start_time_s, profile.duration_s)[stops]
     tau = tau_s
     if stops.size == 0:
@@ -394,7 +395,7 @@ def _soften_stops(
     runs = _runs(lev.caps, smooth, lev)
     stop_hist = lev.stop_history or {}
     new_hist = {}
-    for j in np.unique(near[(near > 0) & ~handled]).tolist():
+    for j in distinct(near[(near > 0) & ~handled]).tolist():
         hit = (near == j) & ~handled
         entry = new_hist[j] = _stop_entry(float(err[hit].max()), stop_hist.get(j), eps_mm)
         if entry == FEED_ONLY:

@@ -49,6 +49,7 @@ from itertools import chain
 
 import numpy as np
 
+from nurbscnc.geometry.distinct import distinct_union
 from nurbscnc.geometry.segments import Line, Nurbs, blend_tolerance_mm
 from nurbscnc.geometry.splinefit import evaluate, evaluate_derivative, insert_knot, lsq_spline
 from nurbscnc.plan.rotary import moves_rotary
@@ -259,7 +260,7 @@ def _turnaround_sides(
         is not None
     ]
     taken = np.asarray(taken, dtype=np.int64)
-    return np.union1d(taken - 1, taken + 1)
+    return distinct_union(taken - 1, taken + 1)
 
 
 def smooth_runs(
@@ -316,7 +317,7 @@ def smooth_runs(
         # One spline over the run, cut where the feed changes and every MAX_PIECE lines: the
         # cuts keep the spline's C2 (no blend, no break), each piece has its own feed.
         change = np.flatnonzero(feed[a + 1 : b] != feed[a : b - 1]) + 1
-        starts = np.union1d(change, np.arange(MAX_PIECE, b - a, MAX_PIECE)).astype(np.int64)
+        starts = distinct_union(change, np.arange(MAX_PIECE, b - a, MAX_PIECE)).astype(np.int64)
         bounds = [0, *starts.tolist(), b - a]
         numbers = np.fromiter((s.line for s in lines[a:b]), dtype=np.int64, count=b - a)
         for (la, lb), (tk, ck) in zip(

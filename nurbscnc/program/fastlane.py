@@ -95,8 +95,13 @@ def _rows(lines, start: int, n: int) -> list:
     chunk = lines[start : start + n]
     text = "\n".join(chunk)
     # A line over the limit is not plain: the general path refuses it (parse.MAX_LINE_CHARS).
-    if len(text) > MAX_LINE_CHARS:
-        return _strict_rows(chunk, len(chunk))
+    # Only a chunk that long can hold one (a chunk of 8,192 plain lines is often longer):
+    # the run ends before the first such line, and the lines before it are read as a chunk.
+    if len(text) > MAX_LINE_CHARS and max(map(len, chunk)) > MAX_LINE_CHARS:
+        chunk = chunk[: next(k for k, line in enumerate(chunk) if len(line) > MAX_LINE_CHARS)]
+        if not chunk:
+            return []
+        text = "\n".join(chunk)
     rows = _PLAIN.findall(text)
     if len(rows) == len(chunk):
         return rows  # (numbers float() refuses: plain_run checks them, see _strict_rows)
