@@ -76,6 +76,13 @@ def _programmed(prog) -> np.ndarray:
     return np.vstack(out)
 
 
+def _plunge_end(prog) -> np.ndarray:
+    """The programmed end of the plunge (the first feed move) [mm]."""
+    plunge = next(g for g in prog.segments if g.kind == "line")
+    assert plunge.start_mm[2] > plunge.end_mm[2] and plunge.start_mm[0] == plunge.end_mm[0]
+    return np.asarray(plunge.end_mm, dtype=float)
+
+
 @pytest.mark.parametrize("machine_name", list(MACHINES))
 def test_plunge_blend_reaches_across_cells_within_the_tolerance(machine_name):
     """Without the contour check: the plunge's blend leaves the plunge line more than one
@@ -95,10 +102,11 @@ def test_plunge_blend_reaches_across_cells_within_the_tolerance(machine_name):
     assert dist.max() <= P_MM * (1.0 + 1e-9)
     assert dist.max() >= 0.5 * P_MM  # the tolerance is used (not vacuous)
     # where the tool leaves the plunge's vertical (x, y of the pad's first vertex)
-    start = np.asarray(prog.segments[3].end_mm, dtype=float)
+    start = _plunge_end(prog)
     off_axis = np.hypot(pts[:, 0] - start[0], pts[:, 1] - start[1]) > 1e-6
+    assert not off_axis[0] and pts[0, 2] > 0.9  # the plunge starts on the vertical, at Z1
     z_leave = float(pts[np.argmax(off_axis), 2])
-    assert z_leave >= -0.05 + 0.3
+    assert z_leave >= start[2] + 0.3
     step = np.linalg.norm(np.diff(s.points_mm, axis=0), axis=1)
     assert step.max() <= machine.limits.v_max_mm_s * machine.servo.period_s * (1.0 + 1e-6)
 
@@ -121,3 +129,33 @@ def test_plunge_blend_across_cells_within_the_guarantee(machine_name):
     d_vertex = beyond_vertex_mm(tool, g64_vertices(prog.segments, machine.limits.path_tolerance_mm))
     assert np.minimum(d_plan, d_vertex).max() <= eps_mm + 1e-3
     assert d_prog.max() <= eps_mm + P_MM + 1e-3
+
+
+def test_blend_takes_whole_cells_and_meets_the_next_one():
+    """The pieces after blending (LinuxCNC's limits, smoothing on): the plunge is followed
+    by its blend, then by the spline's cells from an arc length past the first cell (the
+    cells the blend covers are dropped, the one it ends in trimmed); the blend starts on
+    the plunge line and ends on the spline's point there (the curve's own evaluation), and
+    every piece starts where the one before ends."""
+    from nurbscnc.geometry.path import Kind
+    from nurbscnc.plan.curved_pieces import CELL_MM
+    from nurbscnc.plan.program_pieces import segment_pieces
+
+    machine = load_machine(LINUXCNC_LIMITS)
+    prog = interpret_text(_pad())
+    pieces = segment_pieces(prog.segments, machine, PlanOptions())
+    plunge = next(
+        i for i in range(len(pieces)) if pieces.kind[i] == Kind.LINE and not pieces.rapid[i]
+    )
+    nurbs = next(i for i in range(plunge + 2, len(pieces)) if pieces.kind[i] == Kind.NURBS)
+    assert nurbs == plunge + 2  # one blend row between them
+    cell = pieces[nurbs]
+    assert cell.s_a_mm > 1.5 * CELL_MM
+    # the blend's ends on the plunge's vertical and on the spline (its own evaluation)
+    start, end = pieces.start_mm[:, plunge + 1], pieces.end_mm[:, plunge + 1]
+    vertex = _plunge_end(prog)
+    assert np.hypot(start[0] - vertex[0], start[1] - vertex[1]) <= 1e-9
+    on_curve = cell.geometry.derivatives(np.array([cell.u_a]), 0)[0][0]
+    np.testing.assert_allclose(end, on_curve, rtol=0, atol=1e-9)
+    gaps = np.linalg.norm(pieces.start_mm[:, 1:] - pieces.end_mm[:, :-1], axis=0)
+    assert gaps.max() <= 1e-6

@@ -101,7 +101,9 @@ def blended_rows(pieces: PieceList, c: Corners, machine: Machine) -> PieceList:
     own = ok & ~c.absorbed
     has_blend[corner[own]] = [_cells(c, j) for j in np.flatnonzero(own).tolist()]
     # a trim past its piece goes on into the cells of its span (plan/cell_spans.py)
-    trim_start, trim_end = row_trims(pieces, corner[ok], c.trim_a_mm[ok], c.trim_b_mm[ok])
+    trim_start, trim_end = row_trims(
+        pieces, corner[ok], c.trim_a_mm[ok], c.trim_b_mm[ok], ~c.turn[ok]
+    )
     trimmed = (trim_start > 0.0) | (trim_end > 0.0)
     keep = ~trimmed | (length - trim_start - trim_end >= MIN_REMAINDER_MM)
     count = has_blend + keep

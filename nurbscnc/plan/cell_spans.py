@@ -85,26 +85,31 @@ def span_table(pieces: PieceList, lo: np.ndarray, rows: np.ndarray, hi: np.ndarr
 
 
 def row_trims(
-    pieces: PieceList, rows: np.ndarray, trim_a_mm: np.ndarray, trim_b_mm: np.ndarray
+    pieces: PieceList,
+    rows: np.ndarray,
+    trim_a_mm: np.ndarray,
+    trim_b_mm: np.ndarray,
+    spread: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per piece (k,), the length [mm] trimmed off its start and off its end by the blends
-    of corners at ``rows`` with trims ``trim_a_mm`` (before) and ``trim_b_mm`` (after): a
-    trim longer than its piece covers it (trimmed whole, so the piece is dropped) and goes
-    on into the next cell of its span (:func:`corner_spans`; the trims never pass its end,
-    being at most half of it)."""
+    of corners at ``rows`` with trims ``trim_a_mm`` (before) and ``trim_b_mm`` (after): on
+    the corners ``spread`` (blends of :func:`corner_spans`' sides), a trim longer than its
+    piece covers it (trimmed whole, so the piece is dropped) and goes on into the next cell
+    of its span (the trims never pass its end, being at most half of it); elsewhere (a
+    turn-around's U, which takes its middle line whole) each trim stays on its piece."""
     k = len(pieces)
     length = pieces.length_mm
     trim_start, trim_end = np.zeros(k), np.zeros(k)
     trim_start[rows] = trim_b_mm
     trim_end[rows - 1] = trim_a_mm
-    for r in np.flatnonzero(trim_b_mm > length[rows]).tolist():
+    for r in np.flatnonzero(spread & (trim_b_mm > length[rows])).tolist():
         i, rest = int(rows[r]), float(trim_b_mm[r])
         while rest > length[i] and i + 1 < k:
             trim_start[i] = length[i]
             rest -= float(length[i])
             i += 1
         trim_start[i] = rest
-    for r in np.flatnonzero(trim_a_mm > length[rows - 1]).tolist():
+    for r in np.flatnonzero(spread & (trim_a_mm > length[rows - 1])).tolist():
         i, rest = int(rows[r]) - 1, float(trim_a_mm[r])
         while rest > length[i] and i > 0:
             trim_end[i] = length[i]
