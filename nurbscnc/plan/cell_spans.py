@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from nurbscnc.geometry.path import Kind, PathTable
+from nurbscnc.geometry.path import Kind
 from nurbscnc.plan.pieces import PieceList
 
 #: Largest tangent turning [rad] between two cells of one curve that still continue each
@@ -71,17 +71,6 @@ def span_row(pieces: PieceList, first: int, last: int) -> tuple:
     a, b = pieces.objects[first], pieces.objects[last]
     length = float(np.sum(pieces.length_mm[first : last + 1]))
     return (Kind.NURBS, a[0], length, a[1], b[2], a[3], int(pieces.line[first]))
-
-
-def span_table(pieces: PieceList, lo: np.ndarray, rows: np.ndarray, hi: np.ndarray):
-    """A :class:`~nurbscnc.geometry.path.PathTable` of 2m rows for m corners: row 2n the
-    span before corner n (rows ``lo[n]``..``rows[n] − 1``), row 2n + 1 the span after
-    (``rows[n]``..``hi[n]``)."""
-    out = []
-    for a, r, b in zip(lo.tolist(), rows.tolist(), hi.tolist()):
-        out.append(span_row(pieces, a, r - 1))
-        out.append(span_row(pieces, r, b))
-    return PathTable.of(out)
 
 
 def row_trims(
