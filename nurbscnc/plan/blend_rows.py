@@ -13,6 +13,7 @@ from nurbscnc.geometry.ph import PHQuintic
 from nurbscnc.machine.caps import MIN_CAP_MM_S, curvature_cap_mm_s
 from nurbscnc.machine.profile import Machine
 from nurbscnc.plan.blends import Corners
+from nurbscnc.plan.cell_spans import row_trims
 from nurbscnc.plan.pieces import (
     SCALAR_COLUMNS,
     VECTOR_COLUMNS,
@@ -99,10 +100,10 @@ def blended_rows(pieces: PieceList, c: Corners, machine: Machine) -> PieceList:
     has_blend = np.zeros(k, dtype=np.int64)  # blend rows before each row
     own = ok & ~c.absorbed
     has_blend[corner[own]] = [_cells(c, j) for j in np.flatnonzero(own).tolist()]
-    trim_start = np.zeros(k)
-    trim_end = np.zeros(k)
-    trim_start[corner[ok]] = c.trim_b_mm[ok]
-    trim_end[corner[ok] - 1] = c.trim_a_mm[ok]
+    # a trim past its piece goes on into the cells of its span (plan/cell_spans.py)
+    trim_start, trim_end = row_trims(
+        pieces, corner[ok], c.trim_a_mm[ok], c.trim_b_mm[ok], ~c.turn[ok]
+    )
     trimmed = (trim_start > 0.0) | (trim_end > 0.0)
     keep = ~trimmed | (length - trim_start - trim_end >= MIN_REMAINDER_MM)
     count = has_blend + keep

@@ -159,18 +159,30 @@ def blend_geometry(piece: Piece):
 
 
 def blend_object_corners(pieces: PieceList, c: Corners, machine: Machine) -> None:
-    """Corners with an arc, NURBS or PH piece (equal trims ≤ half the shorter piece): a
-    planar PH blend one corner at a time (:func:`~nurbscnc.geometry.blend.blend_corner`),
-    then every corner that has none and turns out of its plane at once, a G2 quintic
-    Bézier each (:func:`~nurbscnc.geometry.blend.blend_space_corners`)."""
+    """Corners with an arc, NURBS or PH piece (equal trims ≤ half the shorter side, a side
+    being the piece there with the cells of its curve it continues into:
+    :func:`~nurbscnc.plan.cell_spans.corner_spans`): a planar PH blend one corner at a time
+    (:func:`~nurbscnc.geometry.blend.blend_corner`), then every corner that has none and
+    turns out of its plane at once, a G2 quintic Bézier each
+    (:func:`~nurbscnc.geometry.blend.blend_space_corners`)."""
     from nurbscnc.geometry.blend import blend_corner, blend_space_corners
+    from nurbscnc.geometry.path import PathTable
+    from nurbscnc.plan.cell_spans import corner_spans, span_row
 
+    obj = np.flatnonzero(~c.lines & ~c.turn)
+    lo, hi = corner_spans(pieces, c.row[obj])
+    span = {j: (int(a), int(b)) for j, a, b in zip(obj.tolist(), lo, hi)}
+    length = pieces.length_mm
     space = []
-    for j in np.flatnonzero(~c.lines & ~c.turn).tolist():
+    for j in obj.tolist():
         i = int(c.row[j])
-        a, b = pieces[i - 1], pieces[i]
-        args = (float(c.tol_mm[j]), 0.5 * a.length_mm, 0.5 * b.length_mm)
-        bl = blend_corner(blend_geometry(a), blend_geometry(b), *args, measure=False)
+        a, b = span[j]
+        if a == i - 1 and b == i:
+            ga, gb = blend_geometry(pieces[i - 1]), blend_geometry(pieces[i])
+        else:
+            ga, gb = (_span_geometry(span_row(pieces, *rs)) for rs in ((a, i - 1), (i, b)))
+        half_a, half_b = 0.5 * length[a:i].sum(), 0.5 * length[i : b + 1].sum()
+        bl = blend_corner(ga, gb, float(c.tol_mm[j]), half_a, half_b, measure=False)
         if bl is None:
             space.append(j)
         else:
@@ -182,16 +194,42 @@ def blend_object_corners(pieces: PieceList, c: Corners, machine: Machine) -> Non
     if js.size == 0:
         return
     rows = c.row[js]
-    length = pieces.length_mm
-    blends = blend_space_corners(
-        pieces.path, rows - 1, rows, c.tol_mm[js], 0.5 * length[rows - 1], 0.5 * length[rows]
+    ends = np.array([span[j] for j in js.tolist()], dtype=np.int64).reshape(-1, 2)
+    half_a = 0.5 * np.array([length[a:i].sum() for i, (a, _) in zip(rows.tolist(), ends.tolist())])
+    half_b = 0.5 * np.array(
+        [length[i : b + 1].sum() for i, (_, b) in zip(rows.tolist(), ends.tolist())]
     )
+    if np.all((ends[:, 0] == rows - 1) & (ends[:, 1] == rows)):
+        path, rows_a, rows_b = pieces.path, rows - 1, rows
+    else:  # a table of the corners' sides, spans of cells as one row each
+        path = PathTable.of(
+            [
+                span_row(pieces, *rs)
+                for i, (a, b) in zip(rows.tolist(), ends.tolist())
+                for rs in ((a, i - 1), (i, b))
+            ]
+        )
+        rows_a = np.arange(0, 2 * rows.size, 2)
+        rows_b = rows_a + 1
+    blends = blend_space_corners(path, rows_a, rows_b, c.tol_mm[js], half_a, half_b)
     _share_moved_tables(blends)
     found = [(j, bl) for j, bl in zip(js.tolist(), blends) if bl is not None]
     kappa = np.array([bl.kappa_max_per_mm for _, bl in found])
     for (j, bl), cap in zip(found, servo_blend_caps_mm_s(machine, kappa).tolist()):
         c.cap_mm_s[j] = cap
         _take_blend(c, j, bl)
+
+
+def _span_geometry(row: tuple):
+    """The geometry :func:`~nurbscnc.geometry.blend.blend_corner` blends for a span's
+    path row (:func:`~nurbscnc.plan.cell_spans.span_row`): a line as it is, cells of a
+    curve as a :class:`~nurbscnc.geometry.blend.SubCurve` of their parameter range."""
+    from nurbscnc.geometry.blend import SubCurve
+
+    kind, geom, length, u_a, u_b, s_a, _ = row
+    if kind != Kind.NURBS:
+        return geom
+    return SubCurve(geom, u_a, u_b, s_a, length)
 
 
 def _share_moved_tables(blends: list) -> None:

@@ -29,9 +29,10 @@ within :data:`WINDOW` vertices of its own parameter (the distance to a subset of
 is at least the distance to the polyline), each vertex to the chords between spline samples
 near it, plus the samples' sagitta bound Δu²·max|C″|/8 (a chord of the spline is at most that
 far from the spline between its ends, and the spline's distance to a chord's line rises at
-most that far above the interpolation of its sampled values). The other ``1 − SHARE`` of the
-tolerance is left to the blends where a spline meets the lines or splines beside it: the path
-stays within the tolerance of the program, as G64 P promises.
+most that far above the interpolation of its sampled values). What the fit did not take
+(at least ``1 − SHARE`` of the tolerance: :func:`end_blend_tolerance_mm`) is left to the
+blends where a spline meets the lines or splines beside it: the path stays within the
+tolerance of the program, as G64 P promises.
 
 On by default wherever a tolerance is granted (G64, G64 P): G64 promises a path within the
 tolerance, not the chords, and industrial controls' compressors do the same (Fanuc's G5.1 Q3
@@ -173,6 +174,17 @@ def spline_deviation_mm(
     second = evaluate_derivative(knots, ctrl, us, 2)
     sag = float(np.sqrt(np.einsum("ij,ij->i", second, second)).max()) * du * du / 8.0
     return float(max(to_poly.max(), to_curve.max()) + sag)
+
+
+def end_blend_tolerance_mm(tolerance_mm: float, deviation_mm: float, reserve_mm: float) -> float:
+    """The tolerance [mm] a smoothed run leaves to the blends at its ends: its path
+    tolerance P less what the spline may already take, its fit's bound on the two-way
+    distance to the run's polyline (``deviation_mm``) and the PH fit tolerance of a corner
+    the planner may still find inside it (``reserve_mm``). A blend within the rest of the
+    spline and the line beside it is within P of the programmed path (triangle inequality:
+    each blend point within P − δ − r of a point of the pieces, those within δ + r of the
+    polyline). At least (1 − SHARE)·P, as the fit took at most SHARE·P − r."""
+    return tolerance_mm - deviation_mm - reserve_mm
 
 
 def fit_run(vertices: np.ndarray, tolerance_mm: float):
@@ -332,7 +344,7 @@ def smooth_runs(
                 float(feed[a + la]),
                 int(numbers[la]),
                 "XY",
-                (1.0 - SHARE) * float(tol[a]),
+                end_blend_tolerance_mm(float(tol[a]), deviation_mm, reserve_mm),
                 line_u=(u[la:lb] - lo) / (hi - lo),
                 line_numbers=numbers[la:lb],
                 deviation_mm=deviation_mm,
