@@ -374,6 +374,42 @@ def _soften(
         a_mm_s2[sel] *= f
 
 
+def _step_jerk(lev: Levers, i: int, settle_max_s: float) -> bool:
+    """Whether piece ``i``'s descent jerk is above what the servo follows (A·|p|,
+    :func:`_servo_jerk`): its end is a step of deceleration to the servo, whose overshoot
+    grows with the deceleration, so its acceleration is the lever. An independent servo
+    simulation of a rest-to-rest 90° G64 stop at 13.3 mm/s under LinuxCNC's limits (A 2450,
+    J 1e9; docs/benchmarks.md): the descent at a 1000 with no jerk limit stays within
+    13.5 µm and loses 9.4 ms, the jerk lowered to 1e5 instead 13.0 µm and 23.1 ms. Never the
+    case on the paper's machine (J < A·|p|)."""
+    j = lev.j_dn[i : i + 1]
+    return bool(_servo_jerk(j, lev.a_dn[i : i + 1], settle_max_s)[0] < j[0])
+
+
+def _final_descent(
+    lev: Levers, pieces: PieceList, profile: Profile, smooth: np.ndarray, j: int, f: float
+) -> np.ndarray:
+    """The pieces (k,) bool of the final descent into the stop junction ``j``: the last
+    pieces of the run that ends there (tangent-continuous junctions, equal caps; whatever
+    their limits), back to where the descent from their peak speed v at the stop's lowered
+    acceleration f·a begins: a piece is in it if the path from its end to the stop is
+    shorter than v²/(2 f a), v the largest peak speed from it to the stop. The pieces before
+    keep their braking (a run of tiny pieces brakes at each of its corners)."""
+    k = len(pieces)
+    joined = (smooth[1:-1] > 0) & (lev.caps[:-1] == lev.caps[1:])
+    run = np.concatenate(([0], np.cumsum(~joined)))
+    first = int(np.searchsorted(run, run[j - 1], side="left"))
+    idx = np.arange(first, j)[::-1]  # from the stop back to the run's start
+    length = pieces.length_mm[idx]
+    to_stop = np.cumsum(length) - length  # from each piece's end to the stop [mm]
+    v = np.maximum.accumulate(profile.piece_peak_speed_mm_s[idx])
+    need = v * v / (2.0 * f * lev.a_dn[j - 1])
+    n = int(np.flatnonzero(to_stop < need)[-1]) + 1 if (to_stop < need).any() else 1
+    sel = np.zeros(k, dtype=bool)
+    sel[idx[:n]] = True  # one stretch, from the farthest piece whose descent reaches the stop
+    return sel
+
+
 def _soften_stops(
     lev: Levers,
     ov: Overs,
@@ -389,7 +425,9 @@ def _soften_stops(
     unhandled over-limit samples are ``near`` (:func:`_stop_events`), the descent of the run
     of pieces that ends at j and, if a sample is after the restart, the rise of the run
     that leaves it, softened by the factor of :func:`_stop_entry` (none where the feed
-    lever answers the stop: those samples stay unhandled)."""
+    lever answers the stop: those samples stay unhandled). Between two cuts, where the
+    descent's jerk is above what the servo follows (:func:`_step_jerk`), the deceleration of
+    the final descent (:func:`_final_descent`) is lowered instead, and the rise by √f."""
     k = len(pieces)
     err, tau = ov.err_mm, ov.tau_s
     runs = _runs(lev.caps, smooth, lev)
@@ -402,14 +440,36 @@ def _soften_stops(
             continue
         f, accel = entry[1], entry[2]
         # A rapid's descent too where it ends at a cut: its overshoot is the settle's error.
+        # By its acceleration only at a G64 corner between two cuts (the lsim optimum's
+        # case: the overshoot may use the vertex's allowance): the overshoot into a rapid
+        # that follows is not checked (its samples are the rapid's), and at an exact stop
+        # (G61, G61.1) the jerk softening was the faster (G61 square at F3000, J 1e9:
+        # 1.859 against 1.858 s).
+        by_accel = 1 <= j < k and not (pieces.rapid[j - 1] or pieces.rapid[j])
+        by_accel = by_accel and not pieces.stop_after[j - 1]
+        by_accel = by_accel and pieces.blend_mm[j - 1] > 0.0 and pieces.blend_mm[j] > 0.0
+        by_accel = by_accel and _step_jerk(lev, j - 1, settle_max_s)
         if j - 1 >= 0 and (not pieces.rapid[j - 1] or j < k and not pieces.rapid[j]):
-            sel = runs == runs[j - 1]
-            _soften(lev.a_dn, lev.j_dn, sel, f, accel, settle_max_s)
+            if by_accel:
+                sel = _final_descent(lev, pieces, profile, smooth, j, f)
+                lev.a_dn[sel] = np.minimum(lev.a_dn[sel], f * lev.a_dn[j - 1])
+                if accel:
+                    lev.j_dn[sel] = _servo_jerk(lev.j_dn[sel], lev.a_dn[sel], settle_max_s) * f
+            else:
+                sel = runs == runs[j - 1]
+                _soften(lev.a_dn, lev.j_dn, sel, f, accel, settle_max_s)
             lev.shaped |= sel
         t_restart = profile.piece_start_time_s[j] if j < k else np.inf
+        # The rise after a descent softened by its acceleration by √f only: the overshoot
+        # is mostly the descent's (lsim: after a descent at 1000 mm/s² the rise at A with
+        # no jerk limit stays within ε_max), yet the servo still rings as the reference
+        # restarts. Measured (bench/cam_bench.py, lsim): the rise by f gave Vectric's
+        # profile 97.43 against 97.29 s; the rise left at its limits ended stops at the
+        # feed lever (3dtest 53.49 against 52.83 s).
         if j < k and (tau[hit] > t_restart).any() and not pieces.rapid[j]:
             sel = runs == runs[j]
-            _soften(lev.a_up, lev.j_up, sel, f, accel, settle_max_s)
+            f_up = f if accel or not by_accel else np.sqrt(f)
+            _soften(lev.a_up, lev.j_up, sel, f_up, accel, settle_max_s)
             lev.shaped |= sel
         handled |= hit
     lev.stop_history = new_hist
