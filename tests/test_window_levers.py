@@ -41,7 +41,7 @@ class _Tight(WindowSetup):
         return a, min(b + 1, st.k)
 
 
-def _windows(monkeypatch, view, text):
+def _windows(monkeypatch, view, text, machine=None):
     monkeypatch.setattr(lookahead, "WindowSetup", view)
     calls = {"whole": 0}
     original = WindowSetup._whole
@@ -52,7 +52,7 @@ def _windows(monkeypatch, view, text):
 
     monkeypatch.setattr(WindowSetup, "_whole", counted)
     out = []
-    for w in plan_windows(interpret_text(text), load_machine()):
+    for w in plan_windows(interpret_text(text), machine or load_machine()):
         plan = w.plan
         out.append(
             (
@@ -192,4 +192,36 @@ def test_arcs_curve_rule_on_a_span_gives_the_whole_programs_plan(monkeypatch, vi
     cut, _ = _windows(monkeypatch, view, text)
     assert len(whole) >= 3
     assert sum(w[2] for w in whole) > 6  # the loops re-planned
+    assert cut == whole
+
+
+def _stops(copies: int) -> str:
+    """tests/programs/planner's G64 stops between cuts (a star, 25 chords into a corner),
+    ``copies`` times each 40 mm further along X, a G0 between: windows where the stop rule
+    lowers the final descent's deceleration (LinuxCNC's limits: J above A·|p|)."""
+    here = Path(__file__).resolve().parent / "programs" / "planner"
+    out = ["G21 G17 G90 G64"]
+    for i in range(copies):
+        for name in ("stop_star_g64.nc", "stop_chords_g64.nc"):
+            moves = (here / name).read_text().splitlines()[1:-1]  # without modes and M2
+            dx_mm = 40.0 * i + (0.0 if name.startswith("stop_star") else 20.0)
+            for line in moves:
+                out.append(
+                    re.sub(r"X([-0-9.]+)", lambda m, d=dx_mm: f"X{float(m[1]) + d:.4f}", line)
+                )
+    out.append("M2")
+    return "\n".join(out)
+
+
+@pytest.mark.parametrize("view", [WindowSetup, _Tight])
+def test_the_stop_rules_final_descent_on_a_span_gives_the_whole_programs_plan(monkeypatch, view):
+    machine = load_machine(
+        Path(__file__).resolve().parents[1] / "bench" / "programs" / "linuxcnc_limits.toml"
+    )
+    text = _stops(2)
+    whole, _ = _windows(monkeypatch, _Whole, text, machine)
+    monkeypatch.undo()
+    cut, _ = _windows(monkeypatch, view, text, machine)
+    assert len(whole) >= 4
+    assert sum(w[2] for w in whole) > 8  # the loops re-planned
     assert cut == whole

@@ -109,6 +109,10 @@ class _PiecesCut:
     #: curvature vector jumps: the curve rule's junctions between two curves.
     kind: np.ndarray
     jump_rows: np.ndarray
+    #: Whether the tool stops exactly after each piece, and each piece's path tolerance
+    #: [mm]: the stop rule's G64 corners between two cuts.
+    stop_after: np.ndarray
+    blend_mm: np.ndarray
 
     def __len__(self) -> int:
         return self.rapid.size
@@ -136,6 +140,8 @@ class WindowSetup:
             st.pieces.length_mm[lo:hi],
             st.pieces.kind[lo:hi],
             jumps[(jumps >= lo) & (jumps < hi - 1)] - lo,
+            np.asarray(st.pieces.stop_after[lo:hi], dtype=bool),
+            np.asarray(st.pieces.blend_mm[lo:hi], dtype=float),
         )
         self.smooth = st.smooth[lo : hi + 1]
         rows = st.settle_rows
