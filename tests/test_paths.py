@@ -303,15 +303,22 @@ def _spiral_t_reference(r0, r1, ang, hel, s_in, big, max_iter=50):
     return t
 
 
-def test_spiral_newton_gives_the_bits_of_the_reference_and_inverts_the_length():
-    rng = np.random.default_rng(5)
-    n = 20000
+def _random_spirals(rng, n):
+    """``n`` spiral arcs (start and end radius [mm], swept angle [rad], helix rise [mm]) and
+    their lengths [mm]: circles, near-circles, growing and shrinking spirals, helices, and
+    every 50th of zero angle (a straight helix or a point)."""
     r0 = rng.uniform(0.5, 50.0, n)
     r1 = r0 + rng.choice([0.0, 1e-6, 1e-3, 0.5, -0.3, 5.0], n) * rng.uniform(0.0, 1.0, n)
     ang = rng.uniform(-12.0, 12.0, n)
     ang[::50] = 0.0
     hel = rng.choice([0.0, 0.0, 2.0, -7.0], n)
-    big = segments.spiral_arc_length_mm(r0, r1, ang, hel)
+    return r0, r1, ang, hel, segments.spiral_arc_length_mm(r0, r1, ang, hel)
+
+
+def test_spiral_newton_gives_the_bits_of_the_reference_and_inverts_the_length():
+    rng = np.random.default_rng(5)
+    n = 20000
+    r0, r1, ang, hel, big = _random_spirals(rng, n)
     s = rng.uniform(0.0, 1.0, n) * big
     s[::7], s[::9] = 0.0, big[::9]
     t = segments.spiral_t_at_length(r0, r1, ang, hel, s, big)
@@ -403,12 +410,7 @@ def test_arc_derivatives_at_a_few_points_give_the_bits_of_the_array_code():
 def test_compiled_spiral_inversion_gives_the_bits_of_the_array_code(monkeypatch):
     rng = np.random.default_rng(8)
     n = 4000
-    r0 = rng.uniform(0.5, 50.0, n)
-    r1 = r0 + rng.choice([0.0, 1e-6, 1e-3, 0.5, -0.3, 5.0], n) * rng.uniform(0.0, 1.0, n)
-    ang = rng.uniform(-12.0, 12.0, n)
-    ang[::50] = 0.0
-    hel = rng.choice([0.0, 0.0, 2.0, -7.0], n)
-    big = segments.spiral_arc_length_mm(r0, r1, ang, hel)
+    r0, r1, ang, hel, big = _random_spirals(rng, n)
     for k in range(n):
         args = (float(r0[k]), float(r1[k]), float(ang[k]), float(hel[k]), float(big[k]))
         s = np.linspace(rng.uniform(0.0, 0.5), rng.uniform(0.5, 1.0), 33) * big[k]
