@@ -457,3 +457,33 @@ def test_inverse_table_is_bounded_on_an_extreme_weight(monkeypatch):
     points, u = curve.points_at_length(s)
     np.testing.assert_allclose(curve.arc_length(u), s, rtol=0, atol=1e-9)
     np.testing.assert_allclose(points, curve.point(u), rtol=0, atol=1e-10)  # two evaluations
+
+
+@pytest.mark.parametrize("seed", [2, 7, 11])
+def test_inverse_table_node_data_equals_a_fresh_evaluation(seed, monkeypatch):
+    """The table evaluates each node's derivatives once (an interval's end is the next one's
+    start; a split's halves share the new node). Every interval's end data, at every level,
+    is bit for bit that of a fresh evaluation at its own ends on its own span (one-sided at
+    knots: the end of a span's last interval on that span), on curves with double and triple
+    knots and weights 0.2–5 that need several levels of splitting."""
+    curve = random_curve(np.random.default_rng(seed), 3)
+    pf = curve.power_form
+    seen = {"levels": 0, "spans": set()}
+    original = inverse._interval_hermite
+
+    def checked(lo, hi, width, d_lo, d_hi, floor):
+        span = pf.span_of(lo)  # lo < hi: lo is inside its own span
+        np.testing.assert_array_equal(d_lo, pf.derivatives(lo, span, 2))
+        np.testing.assert_array_equal(d_hi, pf.derivatives(hi, span, 2))
+        seen["levels"] += 1
+        seen["spans"].update(span.tolist())
+        return original(lo, hi, width, d_lo, d_hi, floor)
+
+    monkeypatch.setattr(inverse, "INVERSE_START_MM", 5.0)  # few first intervals: more levels
+    monkeypatch.setattr(inverse, "_interval_hermite", checked)
+    table = inverse.InverseArcTable.build(curve, start_mm=5.0)
+    assert seen["levels"] >= 3 and len(seen["spans"]) == pf.centers.size >= 2
+    assert not table.exact.any()
+    s = np.linspace(0.0, curve.length_mm, 2001)
+    u, _, _ = table.params(s)
+    np.testing.assert_allclose(curve.arc_length(u), s, rtol=0, atol=1e-9)

@@ -466,3 +466,48 @@ def test_arc_frame_is_the_one_np_cross_and_norm_give():
         assert geom.e2.tobytes() == np.cross(n, e1).tobytes(), trial
         assert geom.normal.tobytes() == n.tobytes()
         assert geom.origin_mm.tobytes() == (np.asarray(seg.center_mm) + axial * n).tobytes()
+
+
+def _assert_same_arc(a: ArcGeometry, b: ArcGeometry):
+    for name in ("origin_mm", "e1", "e2", "normal"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+    for name in ("radius_start_mm", "radius_end_mm", "angle_rad", "helix_mm", "length_mm"):
+        assert getattr(a, name) == getattr(b, name)
+
+
+def test_arc_geometry_is_built_once_per_segment_and_equals_a_fresh_build():
+    """geometry_of keeps an arc's geometry on its segment (the soft-limits box, the pieces and
+    the lower bound share it): the same object on every call, bit for bit a fresh build, its
+    own for each segment (a changed copy gets its own), and a degenerate arc still refused
+    on every call (nothing kept)."""
+    from dataclasses import replace
+
+    from nurbscnc.plan.limits import arc_box_mm
+
+    spiral = make_arc([1, 2, 3], [6, 2, 3], (0, 0, 1), 1.5 * np.pi, 0.7, radius_end_mm=5.2)
+    circle = make_arc([0, 0, 0], [2, 0, 0], (0, 0, 1), -0.5 * np.pi)
+    shared = geometry_of(spiral)
+    assert geometry_of(spiral) is shared and geometry_of(circle) is not shared
+    _assert_same_arc(shared, ArcGeometry.from_segment(spiral))
+    _assert_same_arc(geometry_of(circle), ArcGeometry.from_segment(circle))
+    lo, hi = arc_box_mm(spiral)
+    assert geometry_of(spiral) is shared
+    moved = replace(spiral, center_mm=np.asarray(spiral.center_mm) + 1.0)
+    assert geometry_of(moved) is not shared
+    _assert_same_arc(geometry_of(moved), ArcGeometry.from_segment(moved))
+    assert not np.array_equal(geometry_of(moved).origin_mm, shared.origin_mm)
+    # The boxes from the shared geometry against dense points of fresh builds.
+    fresh = ArcGeometry.from_segment(spiral)
+    pts = fresh.point(np.linspace(0.0, fresh.u_end, 20001))
+    assert np.all(pts >= lo - 1e-12) and np.all(pts <= hi + 1e-12)
+    c_lo, c_hi = arc_box_mm(circle)  # a circle's box is exact (a spiral's: the larger radius)
+    fresh = ArcGeometry.from_segment(circle)
+    pts = fresh.point(np.linspace(0.0, fresh.u_end, 20001))
+    np.testing.assert_allclose(pts.min(axis=0), c_lo, rtol=0, atol=1e-7)
+    np.testing.assert_allclose(pts.max(axis=0), c_hi, rtol=0, atol=1e-7)
+    bad = segments.Arc(
+        circle.start_mm, circle.end_mm, circle.start_mm, circle.normal, 1.0, 0.0, 0.0, 0.0, 1.0, 9
+    )
+    for _ in range(2):
+        with pytest.raises(GeometryError):
+            geometry_of(bad)

@@ -112,15 +112,17 @@ class InverseArcTable:
         floor = curve.speed_floor
         checks = np.array([0.25, 0.5, 0.75])
         budget = max(INVERSE_MAX_INTERVALS, 16 * span.size)
+        # Node data on the interval's own span (one-sided at knots), each node evaluated once:
+        # inside a span an interval's end is the next one's start (the same u, the same span;
+        # the derivatives are elementwise IEEE arithmetic, so the same bits as evaluated twice).
+        d_lo, d_hi = _first_level_derivatives(pf, lo, span, brk, count)
 
         done: list[tuple] = []
         kept = 0
         depth = 0
         worst = 0.0
         while span.size:
-            # Node data on the interval's own span (one-sided at knots): du/ds and d²u/ds².
-            d_lo = pf.derivatives(lo, span, 2)
-            d_hi = pf.derivatives(hi, span, 2)
+            # du/ds and d²u/ds² at both ends come from d_lo, d_hi.
             width = s_hi - s_lo
             coeffs, bad_data = _interval_hermite(lo, hi, width, d_lo, d_hi, floor)
             # Check points: exact s there, the quintic's u, error in mm along the curve.
@@ -153,6 +155,10 @@ class InverseArcTable:
             )
             split = ~keep
             mid_u, mid_s = uc[1, split], sc[1, split]
+            if np.any(split):  # the halves share their new node: its derivatives once
+                d_mid = pf.derivatives(mid_u, span[split], 2)
+                d_lo = np.concatenate((d_lo[:, split], d_mid), axis=1)
+                d_hi = np.concatenate((d_mid, d_hi[:, split]), axis=1)
             lo = np.concatenate((lo[split], mid_u))
             hi = np.concatenate((mid_u, hi[split]))
             s_lo = np.concatenate((s_lo[split], mid_s))
@@ -216,6 +222,18 @@ class InverseArcTable:
             spans[b] = np.take(self.spans, i)
             exact[b] = np.take(self.exact, i)
         return u, spans, exact
+
+
+def _first_level_derivatives(pf, lo, span, brk, count):
+    """Derivative arrays (3, m, 3) at the starts ``lo`` and the ends of the first-level
+    intervals (``count`` per knot span, in order): each start evaluated once, an end the next
+    interval's start but at a span's last interval, whose end is its own break (one-sided)."""
+    d_lo = pf.derivatives(lo, span, 2)
+    last = np.cumsum(count) - 1  # each span's last interval
+    d_hi = np.empty_like(d_lo)
+    d_hi[:, :-1] = d_lo[:, 1:]
+    d_hi[:, last] = pf.derivatives(brk[1:], span[last], 2)
+    return d_lo, d_hi
 
 
 def _interval_hermite(lo, hi, width, d_lo, d_hi, speed_floor):

@@ -358,11 +358,25 @@ class ArcGeometry:
 
 
 def geometry_of(segment) -> PathGeometry:
-    """The :class:`PathGeometry` of a Line, Arc or Nurbs segment."""
+    """The :class:`PathGeometry` of a Line, Arc or Nurbs segment. An arc's is built once per
+    segment object and kept on it (:func:`arc_geometry`)."""
     if isinstance(segment, segments.Line):
         return LineGeometry(segment.start_mm, segment.end_mm)
     if isinstance(segment, segments.Arc):
-        return ArcGeometry.from_segment(segment)
+        return arc_geometry(segment)
     if isinstance(segment, segments.Nurbs):
         return NurbsCurve.from_segment(segment)
     raise TypeError(f"no path geometry for a {type(segment).__name__}")
+
+
+def arc_geometry(segment: segments.Arc) -> ArcGeometry:
+    """The :class:`ArcGeometry` of an arc segment, built on the first call and kept on the
+    segment (both are immutable): the soft-limits box, the pieces and the lower bound ask for
+    the same arc, and the geometry's cached length (a closed-form integral on a spiral) is
+    then computed once. The same object as a fresh :meth:`ArcGeometry.from_segment`, value
+    for value (a deterministic function of the segment's fields)."""
+    memo = segment.__dict__
+    geom = memo.get("_arc_geometry")
+    if geom is None:
+        geom = memo["_arc_geometry"] = ArcGeometry.from_segment(segment)
+    return geom

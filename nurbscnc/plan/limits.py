@@ -34,9 +34,9 @@ def arc_box_mm(seg) -> tuple[np.ndarray, np.ndarray]:
     larger radius). Along axis a the planar part is r·A·cos(θ − φ) with A = |(e1_a, e2_a)|,
     φ = atan2(e2_a, e1_a): its extremes over the swept angles θ ∈ [0, Δθ] are at the ends and
     at θ = φ + kπ inside; the helical rise t·H·n_a adds [min(0, H n_a), max(0, H n_a)]."""
-    from nurbscnc.geometry.paths import ArcGeometry
+    from nurbscnc.geometry.paths import arc_geometry
 
-    g = ArcGeometry.from_segment(seg)
+    g = arc_geometry(seg)
     r = max(g.radius_start_mm, g.radius_end_mm)
     th0, th1 = sorted((0.0, g.angle_rad))
     lo, hi = np.empty(3), np.empty(3)
