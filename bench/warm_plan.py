@@ -3,7 +3,9 @@ figure): what a CAM engineer compiling many files meets when the planner stays r
 
     .venv/bin/python bench/warm_plan.py --dynamics off PROGRAM [PROGRAM ...]
 
-One process: Python starts, imports the ``plan`` command's modules (the CLI's command and the
+One process: Python starts, tunes itself as every command does
+(:func:`nurbscnc.app.runtime.tune_process`: one BLAS thread, malloc's reuse of freed memory),
+imports the ``plan`` command's modules (the CLI's command and the
 pipeline it calls), plans :data:`WARMUP_PROGRAM` (lines, an arc, a run of short G1 moves the
 smoothing fits: the modules a plan imports on first use, scipy's compiled kernels), then plans
 each PROGRAM once, in the given order, timing each with ``time.process_time`` (CPU seconds of
@@ -75,6 +77,11 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     t_python = T_START
     t0 = time.process_time()
+    # What every command does first (cli/main.py): one BLAS thread, the allocator's reuse of
+    # freed memory; set before numpy is imported, which reads the BLAS setting then.
+    from nurbscnc.app.runtime import tune_process
+
+    tune_process()
     import nurbscnc.pipeline  # noqa: F401  (what make_plan imports on its first call)
     from nurbscnc.cli.plan import plan as command
 
