@@ -30,6 +30,7 @@ import numpy as np
 
 from nurbscnc.plan import shaping
 from nurbscnc.plan.levers import Levers
+from nurbscnc.plan.pieces import SCALAR_COLUMNS
 
 
 def _reach_s() -> float:
@@ -99,23 +100,19 @@ class _ProfileCut:
         return np.diff(np.append(self.piece_start_time_s, self.duration_s))
 
 
-@dataclass(frozen=True, eq=False)
 class _PiecesCut:
-    """What the shaping rules and the improvement phase read of the pieces lo … hi − 1."""
+    """The program's pieces lo … hi − 1 as the shaping rules and the improvement phase read
+    them: every per-piece column (:data:`~nurbscnc.plan.pieces.SCALAR_COLUMNS`) cut to the
+    span, and the junctions where the curvature vector jumps (``jump_rows``, from lo)."""
 
-    rapid: np.ndarray
-    length_mm: np.ndarray
-    #: The pieces' kinds and the junctions (within lo … hi − 1, from lo) where the
-    #: curvature vector jumps: the curve rule's junctions between two curves.
-    kind: np.ndarray
-    jump_rows: np.ndarray
-    #: Whether the tool stops exactly after each piece, and each piece's path tolerance
-    #: [mm]: the stop rule's G64 corners between two cuts.
-    stop_after: np.ndarray
-    blend_mm: np.ndarray
+    def __init__(self, pieces, lo: int, hi: int):
+        for name in SCALAR_COLUMNS:
+            setattr(self, name, getattr(pieces, name)[lo:hi])
+        jumps = np.asarray(pieces.jump_rows, dtype=np.int64)
+        self.jump_rows = jumps[(jumps >= lo) & (jumps < hi - 1)] - lo
 
     def __len__(self) -> int:
-        return self.rapid.size
+        return self.length_mm.size
 
 
 class WindowSetup:
@@ -134,15 +131,7 @@ class WindowSetup:
         self.lo, self.hi = lo, hi
         self.initial = cut_levers(st.initial, lo, hi)
         self.upper = self.initial if st.upper is st.initial else cut_levers(st.upper, lo, hi)
-        jumps = np.asarray(st.pieces.jump_rows, dtype=np.int64)
-        self.pieces = _PiecesCut(
-            np.asarray(st.pieces.rapid[lo:hi], dtype=bool),
-            st.pieces.length_mm[lo:hi],
-            st.pieces.kind[lo:hi],
-            jumps[(jumps >= lo) & (jumps < hi - 1)] - lo,
-            np.asarray(st.pieces.stop_after[lo:hi], dtype=bool),
-            np.asarray(st.pieces.blend_mm[lo:hi], dtype=float),
-        )
+        self.pieces = _PiecesCut(st.pieces, lo, hi)
         self.smooth = st.smooth[lo : hi + 1]
         rows = st.settle_rows
         keep = (rows >= lo) & (rows + 1 < hi)
